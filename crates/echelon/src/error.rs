@@ -1,0 +1,192 @@
+//! Typed errors. Every message says what is wrong and why it is refused.
+
+use std::fmt;
+
+/// A physical or control parameter with an impossible value.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field} = {value}: {reason}")]
+pub struct ParamError {
+    /// The parameter's field name, as in the scenario file.
+    pub field: &'static str,
+    /// The refused value.
+    pub value: f64,
+    /// Why it is refused.
+    pub reason: &'static str,
+}
+
+impl ParamError {
+    /// A new error for `field = value`.
+    pub fn new(field: &'static str, value: f64, reason: &'static str) -> Self {
+        ParamError {
+            field,
+            value,
+            reason,
+        }
+    }
+}
+
+/// A reference trajectory that cannot be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ReferenceError {
+    /// A parameter out of its domain.
+    #[error(transparent)]
+    Param(#[from] ParamError),
+    /// Fewer than two waypoints.
+    #[error("a waypoint path needs at least 2 points, got {0}")]
+    TooFewWaypoints(usize),
+    /// Waypoint times not strictly increasing.
+    #[error("waypoint {index} (1-based) has time {t} s, not after the previous one ({previous} s)")]
+    TimesNotIncreasing {
+        /// 1-based index of the offending waypoint.
+        index: usize,
+        /// Its time.
+        t: f64,
+        /// The previous waypoint's time.
+        previous: f64,
+    },
+    /// A waypoint coordinate that is not a finite number.
+    #[error("waypoint {index} (1-based) is not finite")]
+    NonFiniteWaypoint {
+        /// 1-based index of the offending waypoint.
+        index: usize,
+    },
+}
+
+/// A leader graph that is not a forest rooted at the reference.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FormationError {
+    /// An agent follows an agent that does not exist.
+    #[error("agent {agent} follows agent {leader}, which does not exist (agents are 1..={count})")]
+    Dangling {
+        /// The follower (1-based).
+        agent: usize,
+        /// The missing leader (1-based).
+        leader: usize,
+        /// Number of agents.
+        count: usize,
+    },
+    /// An agent follows itself.
+    #[error("agent {0} follows itself")]
+    SelfLeader(usize),
+    /// The leader graph has a cycle: nobody in it is anchored to the reference.
+    #[error("agents {} form a cycle of leaders: none of them reaches the reference", fmt_cycle(.0))]
+    Cycle(Vec<usize>),
+    /// `L_X = L_Xoff + L ≤ 0` makes the law singular (eq. 13 divides by `L_X`).
+    #[error("agent {agent}: L_X = L_Xoff + L = {lx} m must be > 0 (eq. 13 divides by L_X)")]
+    NonPositiveLx {
+        /// The agent (1-based).
+        agent: usize,
+        /// Its `L_X`.
+        lx: f64,
+    },
+    /// Exact `L̇_Y`, `L̈_Y` need the leader's 3rd and 4th derivatives, which only
+    /// analytic references provide.
+    #[error(
+        "agent {agent} follows agent {leader}: exact L_Y derivatives need an analytic reference (use ly_derivatives = \"neglect\")"
+    )]
+    ExactDerivativesNeedReference {
+        /// The follower (1-based).
+        agent: usize,
+        /// Its robot leader (1-based).
+        leader: usize,
+    },
+}
+
+fn fmt_cycle(c: &[usize]) -> String {
+    let mut s = String::new();
+    for a in c.iter().chain(c.first()) {
+        if !s.is_empty() {
+            s.push_str(" → ");
+        }
+        s.push_str(&a.to_string());
+    }
+    s
+}
+
+/// Errors from building or running a simulation.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// A parameter of the run or of one agent is impossible.
+    #[error("{context}: {source}")]
+    Param {
+        /// Where: `sim`, `agent 3`, `agent 3 robot`, ...
+        context: String,
+        /// The parameter error.
+        source: ParamError,
+    },
+    /// The formation graph is invalid.
+    #[error(transparent)]
+    Formation(#[from] FormationError),
+    /// Timing parameters that do not fit together.
+    #[error("{0}")]
+    Timing(String),
+    /// The state left the finite numbers (e.g. a singular configuration).
+    #[error("agent {agent}: state is no longer finite at t = {t} s (the law met a singularity)")]
+    NonFinite {
+        /// The agent (1-based).
+        agent: usize,
+        /// Simulation time.
+        t: f64,
+    },
+    /// An observer failed (e.g. an I/O error while logging).
+    #[error("observer: {0}")]
+    Observer(String),
+}
+
+/// Where in a scenario file a problem is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Location {
+    /// File name as given by the user (or `<builtin NAME>`).
+    pub file: String,
+    /// 1-based line (0 if unknown).
+    pub line: usize,
+    /// 1-based column (0 if unknown).
+    pub column: usize,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.line == 0 {
+            write!(f, "{}", self.file)
+        } else {
+            write!(f, "{}:{}:{}", self.file, self.line, self.column)
+        }
+    }
+}
+
+/// A scenario that cannot be loaded: always names the file, line, column and field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub struct ScenarioError {
+    /// File, line and column.
+    pub location: Location,
+    /// Dotted path of the field, e.g. `agents[3].offset.x` (agents count from 1).
+    pub field: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.field.is_empty() {
+            write!(f, "{}: {}", self.location, self.message)
+        } else {
+            write!(f, "{}: {}: {}", self.location, self.field, self.message)
+        }
+    }
+}
+
+/// Errors while running a scenario and writing its outputs.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// Writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The simulation failed.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+}

@@ -1,0 +1,31 @@
+//! # echelon
+//!
+//! Leader-follower formation control of differential-drive robots, after
+//! *Leader-Follower Control with Odometry Error Analysis* (the paper), with the
+//! corrections of `docs/control-law.md`.
+//!
+//! - [`model`]: the plant, a unicycle with mass, inertia, viscous friction and
+//!   wheel torques (eqs. 1–3, Table I);
+//! - [`reference`]: reference trajectories with exact derivatives (eqs. 17–20,
+//!   lines, timed waypoints);
+//! - [`lycomp`]: where a follower holds its leader, `L_X`, `L_Y` and the curvature
+//!   compensation `L_Ycomp` (eqs. 4–6);
+//! - [`control`]: the backstepping law (eqs. 7–16);
+//! - [`formation`]: who follows whom;
+//! - [`sim`]: the RK4 simulator, observers and run statistics.
+//!
+//! Units are SI and angles radians throughout (ROS REP 103).
+
+pub mod control;
+pub mod error;
+pub mod formation;
+pub mod lycomp;
+pub mod model;
+pub mod reference;
+pub mod sim;
+mod spline;
+
+pub use control::{Gains, Variant};
+pub use error::{FormationError, ParamError, ReferenceError, SimError};
+pub use model::{Input, RobotParams, State, Torques};
+pub use sim::{AgentSpec, Frame, Observer, SimConfig, Simulation, Timing};

@@ -1,0 +1,365 @@
+//! The plant: a differential-drive (unicycle) robot with its dynamic extension.
+//!
+//! Kinematics (paper eq. 1 / 3a–b) and dynamics (eq. 2 / 3c–d):
+//!
+//! ```text
+//! ẋ = v cos θ     ẏ = v sin θ     θ̇ = ω
+//! m v̇ = −η v + u1                  u1 = (τr + τl) / r
+//! J ω̇ = −ψ ω + u2                  u2 = (l / r)(τr − τl)
+//! ```
+//!
+//! The factor `l` in `u2` comes from eq. 2b (eq. 3 drops it; see
+//! `docs/control-law.md`). All quantities are SI, angles in radians.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::ParamError;
+
+/// Physical parameters of one robot (paper Table I).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RobotParams {
+    /// Mass `m`, kg.
+    pub mass: f64,
+    /// Viscous friction on the linear speed `η`, kg/s.
+    pub linear_friction: f64,
+    /// Moment of inertia about the vertical axis `J`, kg m².
+    pub inertia: f64,
+    /// Viscous friction on the angular speed `ψ`, kg m²/s.
+    pub angular_friction: f64,
+    /// Half the distance between the driving wheels `l`, m.
+    pub half_wheelbase: f64,
+    /// Driving wheel radius `r`, m.
+    pub wheel_radius: f64,
+    /// Largest torque magnitude each wheel motor can produce, N m (`None`: unlimited).
+    pub torque_limit: Option<f64>,
+}
+
+impl RobotParams {
+    /// Table I, agent 1: `m = 27 kg, η = 180 kg/s, J = 1.42 kg m², ψ = 9.47 kg m²/s,
+    /// l = 0.23 m, r = 0.101 m`.
+    pub const AGENT1: RobotParams = RobotParams {
+        mass: 27.0,
+        linear_friction: 180.0,
+        inertia: 1.42,
+        angular_friction: 9.47,
+        half_wheelbase: 0.23,
+        wheel_radius: 0.101,
+        torque_limit: None,
+    };
+
+    /// Table I, agent 2: `m = 25 kg, η = 133.7 kg/s, J = 1.03 kg m², ψ = 5.51 kg m²/s,
+    /// l = 0.203 m, r = 0.10 m`.
+    pub const AGENT2: RobotParams = RobotParams {
+        mass: 25.0,
+        linear_friction: 133.7,
+        inertia: 1.03,
+        angular_friction: 5.51,
+        half_wheelbase: 0.203,
+        wheel_radius: 0.10,
+        torque_limit: None,
+    };
+
+    /// The named presets: `agent1` and `agent2` of Table I.
+    pub const PRESETS: [(&'static str, RobotParams); 2] =
+        [("agent1", Self::AGENT1), ("agent2", Self::AGENT2)];
+
+    /// A preset by name (`agent1`, `agent2`).
+    pub fn preset(name: &str) -> Option<RobotParams> {
+        Self::PRESETS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, p)| *p)
+    }
+
+    /// Checks that every parameter is physical: mass, inertia, wheel radius and
+    /// half wheelbase strictly positive, frictions non-negative, the torque limit
+    /// (if any) strictly positive, everything finite.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let positive = [
+            ("mass", self.mass),
+            ("inertia", self.inertia),
+            ("half_wheelbase", self.half_wheelbase),
+            ("wheel_radius", self.wheel_radius),
+        ];
+        for (field, value) in positive {
+            if !value.is_finite() {
+                return Err(ParamError::new(field, value, "must be a finite number"));
+            }
+            if value <= 0.0 {
+                return Err(ParamError::new(field, value, "must be > 0"));
+            }
+        }
+        for (field, value) in [
+            ("linear_friction", self.linear_friction),
+            ("angular_friction", self.angular_friction),
+        ] {
+            if !value.is_finite() {
+                return Err(ParamError::new(field, value, "must be a finite number"));
+            }
+            if value < 0.0 {
+                return Err(ParamError::new(field, value, "must be ≥ 0"));
+            }
+        }
+        if let Some(limit) = self.torque_limit
+            && !(limit.is_finite() && limit > 0.0)
+        {
+            return Err(ParamError::new(
+                "torque_limit",
+                limit,
+                "must be a finite number > 0",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Wheel torques from the generalised inputs: `τr = r(u1 + u2/l)/2`,
+    /// `τl = r(u1 − u2/l)/2` (eq. 2 inverted).
+    #[inline]
+    pub fn torques(&self, u: Input) -> Torques {
+        let r = self.wheel_radius;
+        let turn = u.u2 / self.half_wheelbase;
+        Torques {
+            right: 0.5 * r * (u.u1 + turn),
+            left: 0.5 * r * (u.u1 - turn),
+        }
+    }
+
+    /// Generalised inputs from wheel torques: `u1 = (τr + τl)/r`,
+    /// `u2 = (l/r)(τr − τl)` (eq. 2).
+    #[inline]
+    pub fn inputs(&self, tau: Torques) -> Input {
+        let r = self.wheel_radius;
+        Input {
+            u1: (tau.right + tau.left) / r,
+            u2: self.half_wheelbase * (tau.right - tau.left) / r,
+        }
+    }
+
+    /// What the motors actually deliver for the commanded input: each wheel torque
+    /// clamped to `±torque_limit` (identity without a limit).
+    #[inline]
+    pub fn actuate(&self, u: Input) -> (Input, Torques) {
+        let tau = self.torques(u);
+        match self.torque_limit {
+            None => (u, tau),
+            Some(limit) => {
+                let sat = Torques {
+                    right: tau.right.clamp(-limit, limit),
+                    left: tau.left.clamp(-limit, limit),
+                };
+                if sat == tau {
+                    (u, tau)
+                } else {
+                    (self.inputs(sat), sat)
+                }
+            }
+        }
+    }
+
+    /// Linear and angular accelerations `(v̇, ω̇)` for the applied input (eq. 3c–d).
+    #[inline]
+    pub fn accelerations(&self, s: &State, u: Input) -> (f64, f64) {
+        (
+            (u.u1 - self.linear_friction * s.v) / self.mass,
+            (u.u2 - self.angular_friction * s.omega) / self.inertia,
+        )
+    }
+
+    /// The state derivative for the applied input (eq. 3).
+    #[inline]
+    pub fn derivative(&self, s: &State, u: Input) -> State {
+        let (dv, dw) = self.accelerations(s, u);
+        let (sin, cos) = s.theta.sin_cos();
+        State {
+            x: s.v * cos,
+            y: s.v * sin,
+            theta: s.omega,
+            v: dv,
+            omega: dw,
+        }
+    }
+}
+
+/// Robot state `(x, y, θ, v, ω)` in the world frame {U}: position of the wheel
+/// axle centre (m), heading (rad), linear speed (m/s) and angular speed (rad/s).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct State {
+    /// x position, m.
+    pub x: f64,
+    /// y position, m.
+    pub y: f64,
+    /// Heading θ, rad (not wrapped: it is the integral of ω).
+    pub theta: f64,
+    /// Linear speed v, m/s.
+    pub v: f64,
+    /// Angular speed ω, rad/s.
+    pub omega: f64,
+}
+
+impl State {
+    /// A robot at rest at pose `(x, y, θ)`.
+    pub const fn at_rest(x: f64, y: f64, theta: f64) -> State {
+        State {
+            x,
+            y,
+            theta,
+            v: 0.0,
+            omega: 0.0,
+        }
+    }
+
+    /// Position `p = [x, y]`.
+    #[inline]
+    pub fn position(&self) -> [f64; 2] {
+        [self.x, self.y]
+    }
+
+    /// `self + k · d`, the RK4 stage update.
+    #[inline]
+    pub fn add_scaled(&self, d: &State, k: f64) -> State {
+        State {
+            x: self.x + k * d.x,
+            y: self.y + k * d.y,
+            theta: self.theta + k * d.theta,
+            v: self.v + k * d.v,
+            omega: self.omega + k * d.omega,
+        }
+    }
+
+    /// Whether every component is finite.
+    #[inline]
+    pub fn is_finite(&self) -> bool {
+        self.x.is_finite()
+            && self.y.is_finite()
+            && self.theta.is_finite()
+            && self.v.is_finite()
+            && self.omega.is_finite()
+    }
+}
+
+/// Generalised control inputs `u = [u1, u2]` of eq. 3: force (N) and torque (N m).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Input {
+    /// `u1 = (τr + τl)/r`, N.
+    pub u1: f64,
+    /// `u2 = (l/r)(τr − τl)`, N m.
+    pub u2: f64,
+}
+
+/// Wheel motor torques, N m.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Torques {
+    /// Right wheel torque `τr`.
+    pub right: f64,
+    /// Left wheel torque `τl`.
+    pub left: f64,
+}
+
+impl Torques {
+    /// `max(|τr|, |τl|)`.
+    #[inline]
+    pub fn peak(&self) -> f64 {
+        self.right.abs().max(self.left.abs())
+    }
+}
+
+/// Wraps an angle to `(−π, π]`.
+#[inline]
+pub fn wrap_angle(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    let w = a.rem_euclid(TAU);
+    if w > PI { w - TAU } else { w }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn torque_mapping_round_trips() {
+        for p in [RobotParams::AGENT1, RobotParams::AGENT2] {
+            let u = Input {
+                u1: 12.5,
+                u2: -3.25,
+            };
+            let back = p.inputs(p.torques(u));
+            assert!((back.u1 - u.u1).abs() < 1e-12 && (back.u2 - u.u2).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn torque_mapping_matches_eq_2() {
+        let p = RobotParams::AGENT1;
+        let tau = Torques {
+            right: 2.0,
+            left: 0.5,
+        };
+        let u = p.inputs(tau);
+        assert!((u.u1 - 2.5 / 0.101).abs() < 1e-12);
+        assert!((u.u2 - 0.23 * 1.5 / 0.101).abs() < 1e-12);
+    }
+
+    #[test]
+    fn saturation_clamps_each_wheel() {
+        let p = RobotParams {
+            torque_limit: Some(1.0),
+            ..RobotParams::AGENT1
+        };
+        let (u, tau) = p.actuate(p.inputs(Torques {
+            right: 3.0,
+            left: -0.5,
+        }));
+        assert_eq!(tau.right, 1.0);
+        assert!(
+            (tau.left + 0.5).abs() < 1e-12,
+            "the unsaturated wheel is untouched"
+        );
+        let back = p.torques(u);
+        assert!((back.right - 1.0).abs() < 1e-12 && (back.left + 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn steady_state_speed_is_u_over_friction() {
+        let p = RobotParams::AGENT2;
+        let s = State {
+            v: 0.5,
+            omega: 0.1,
+            ..State::default()
+        };
+        let u = Input {
+            u1: p.linear_friction * 0.5,
+            u2: p.angular_friction * 0.1,
+        };
+        let d = p.derivative(&s, u);
+        assert!(d.v.abs() < 1e-12 && d.omega.abs() < 1e-12);
+    }
+
+    #[test]
+    fn invalid_parameters_are_refused() {
+        let bad = RobotParams {
+            mass: -1.0,
+            ..RobotParams::AGENT1
+        };
+        assert_eq!(bad.validate().unwrap_err().field, "mass");
+        let nan = RobotParams {
+            inertia: f64::NAN,
+            ..RobotParams::AGENT1
+        };
+        assert_eq!(nan.validate().unwrap_err().field, "inertia");
+        let neg_friction = RobotParams {
+            angular_friction: -0.1,
+            ..RobotParams::AGENT1
+        };
+        assert!(neg_friction.validate().is_err());
+        assert!(RobotParams::AGENT1.validate().is_ok());
+    }
+
+    #[test]
+    fn wrap_angle_range() {
+        use std::f64::consts::PI;
+        assert!((wrap_angle(3.0 * PI) - PI).abs() < 1e-12);
+        assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
+        assert!((wrap_angle(0.5) - 0.5).abs() < 1e-15);
+        assert!((wrap_angle(-7.0) - (-7.0 + 2.0 * PI)).abs() < 1e-12);
+    }
+}

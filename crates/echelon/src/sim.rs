@@ -1,0 +1,609 @@
+//! The simulator: fixed-step RK4 over a formation of robots.
+//!
+//! The law is evaluated inside every RK4 stage (a continuous-time controller, as
+//! the paper simulates in Simulink), leaders before followers so that a follower
+//! sees its leader's state and acceleration at the same instant. Optionally the
+//! controller is sampled at a period `T_s` and its command held (zero-order hold)
+//! in between. Stepping is explicit ([`Simulation::step`]) over plain data; the
+//! same inputs give the same bits.
+
+use crate::control::{Gains, LawOutput, LeaderMotion, Variant, law};
+use crate::error::{FormationError, ParamError, SimError};
+use crate::formation::{Formation, Leader};
+use crate::lycomp::{FitCoefficients, LyComp, LyDerivatives, Placement};
+use crate::model::{Input, RobotParams, State, Torques};
+use crate::reference::{Jet, Order, Reference, Trajectory};
+
+/// One robot of a formation: its body, its leader, where it holds that leader,
+/// and its controller.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AgentSpec {
+    /// Display name (the scenario's, e.g. `agent 1`).
+    pub name: String,
+    /// Physical parameters.
+    pub robot: RobotParams,
+    /// Whom it follows.
+    pub leader: Leader,
+    /// `L_Xoff`, `L_Yoff`, `L` and the `L_Ycomp` options.
+    pub placement: Placement,
+    /// `K_e`, `K_z`.
+    pub gains: Gains,
+    /// Paper or complete law.
+    pub variant: Variant,
+    /// Initial state.
+    pub start: State,
+}
+
+/// When the controller runs.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Timing {
+    /// Continuous-time: the law is evaluated in every RK4 stage.
+    #[default]
+    Continuous,
+    /// Sampled every `period` seconds (a multiple of `dt`), command held in between.
+    Sampled {
+        /// `T_s`, s.
+        period: f64,
+    },
+}
+
+/// Integration settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimConfig {
+    /// RK4 step, s.
+    pub dt: f64,
+    /// Simulated time, s (the run ends at the first step at or after it).
+    pub duration: f64,
+    /// Continuous or sampled controller.
+    pub timing: Timing,
+}
+
+/// What one agent's controller and motors are doing at one instant.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AgentOutput {
+    /// Tracking error `e` (eq. 7), body frame, m.
+    pub e: [f64; 2],
+    /// Backstepping error `z` (eq. 10), body frame, m/s.
+    pub z: [f64; 2],
+    /// What the controller commands (held value in sampled mode).
+    pub command: Input,
+    /// What the plant receives after torque saturation.
+    pub u: Input,
+    /// Wheel torques applied.
+    pub tau: Torques,
+}
+
+/// The simulation at one step, as observers see it.
+#[derive(Debug, Clone, Copy)]
+pub struct Frame<'a> {
+    /// Time, s.
+    pub t: f64,
+    /// Step index (`t = step · dt`).
+    pub step: u64,
+    /// Whether this is the final frame of the run.
+    pub last: bool,
+    /// The agents' states.
+    pub states: &'a [State],
+    /// The agents' controller outputs at these states.
+    pub outputs: &'a [AgentOutput],
+}
+
+/// An error an observer may return (e.g. an I/O error while logging).
+pub type ObserverError = Box<dyn std::error::Error + Send + Sync>;
+
+/// Watches a run frame by frame: logging, statistics, progress.
+pub trait Observer {
+    /// Called once per step, at `t = 0, dt, …` and on the final frame.
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError>;
+}
+
+/// A closure is an observer.
+impl<F: FnMut(&Frame<'_>) -> Result<(), ObserverError>> Observer for F {
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        self(frame)
+    }
+}
+
+/// Immutable description of the system being simulated.
+#[derive(Debug, Clone)]
+struct System {
+    agents: Vec<AgentSpec>,
+    formation: Formation,
+    reference: Reference,
+    order: Order,
+    uses_reference: bool,
+}
+
+impl System {
+    /// Evaluates every agent at time `t` and states `x`: controller outputs into
+    /// `out` and state derivatives into `dx`. With `held`, the commands are held
+    /// values (sampled controller) instead of fresh law outputs.
+    #[inline]
+    fn evaluate(
+        &self,
+        t: f64,
+        x: &[State],
+        held: Option<&[Input]>,
+        out: &mut [AgentOutput],
+        dx: &mut [State],
+    ) {
+        let jet = if self.uses_reference {
+            self.reference.eval(t, self.order)
+        } else {
+            Jet::default()
+        };
+        for &i in self.formation.order() {
+            let a = &self.agents[i];
+            let (motion, offset) = match a.leader {
+                Leader::Reference => (
+                    LeaderMotion {
+                        p: jet.p,
+                        dp: jet.dp,
+                        ddp: jet.ddp,
+                    },
+                    a.placement.offset_for_reference(&jet),
+                ),
+                Leader::Agent(j) => (
+                    // The leader was evaluated first: dx[j].v is its v̇ now.
+                    LeaderMotion::of_robot(&x[j], dx[j].v),
+                    a.placement.offset_for_robot(x[j].v, x[j].omega),
+                ),
+            };
+            let LawOutput { u, e, z } = law(&a.robot, &x[i], &motion, &offset, a.gains, a.variant);
+            let command = held.map_or(u, |h| h[i]);
+            let (applied, tau) = a.robot.actuate(command);
+            dx[i] = a.robot.derivative(&x[i], applied);
+            out[i] = AgentOutput {
+                e,
+                z,
+                command,
+                u: applied,
+                tau,
+            };
+        }
+    }
+}
+
+/// A running simulation: plain state vectors stepped explicitly.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    sys: System,
+    config: SimConfig,
+    steps: u64,
+    hold_every: u64,
+    warnings: Vec<String>,
+    step: u64,
+    state: Vec<State>,
+    held: Vec<Input>,
+    /// Outputs and derivative (RK4's k1) at the current state, when `fresh`.
+    out: Vec<AgentOutput>,
+    k1: Vec<State>,
+    fresh: bool,
+    // Scratch for stages 2–4.
+    stage: Vec<State>,
+    k2: Vec<State>,
+    k3: Vec<State>,
+    k4: Vec<State>,
+    scratch_out: Vec<AgentOutput>,
+}
+
+fn param(context: String, field: &'static str, value: f64, reason: &'static str) -> SimError {
+    SimError::Param {
+        context,
+        source: ParamError::new(field, value, reason),
+    }
+}
+
+fn positive(context: &str, field: &'static str, value: f64) -> Result<(), SimError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(param(
+            context.into(),
+            field,
+            value,
+            "must be a finite number > 0",
+        ))
+    }
+}
+
+fn finite(context: &str, field: &'static str, value: f64) -> Result<(), SimError> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(param(
+            context.into(),
+            field,
+            value,
+            "must be a finite number",
+        ))
+    }
+}
+
+/// `a / b` as a whole number ≥ 1 when it is one (to 1e-9 relative), else `None`.
+pub(crate) fn whole_ratio(a: f64, b: f64) -> Option<u64> {
+    let r = (a / b).round();
+    ((a - r * b).abs() <= 1e-9 * a.abs().max(b) && r >= 1.0).then_some(r as u64)
+}
+
+impl Simulation {
+    /// Builds and validates a simulation. Refuses (naming agent and reason)
+    /// impossible robots, non-positive gains, `L ≤ 0` or `L_X ≤ 0`, non-finite
+    /// offsets or start states, an invalid leader graph, exact `L_Y` derivatives
+    /// behind a robot leader, and timings that do not fit together.
+    pub fn new(
+        agents: Vec<AgentSpec>,
+        reference: Reference,
+        config: SimConfig,
+    ) -> Result<Simulation, SimError> {
+        positive("sim", "dt", config.dt)?;
+        positive("sim", "duration", config.duration)?;
+        let steps = (config.duration / config.dt - 1e-9).ceil().max(1.0);
+        if steps > 1e12 {
+            return Err(SimError::Timing(format!(
+                "duration {} s at dt {} s is {steps:e} steps: too many",
+                config.duration, config.dt
+            )));
+        }
+        let hold_every = match config.timing {
+            Timing::Continuous => 0,
+            Timing::Sampled { period } => {
+                positive("sim", "controller_period", period)?;
+                whole_ratio(period, config.dt).ok_or_else(|| {
+                    SimError::Timing(format!(
+                        "controller period {period} s is not a whole multiple of dt = {} s",
+                        config.dt
+                    ))
+                })?
+            }
+        };
+        let mut warnings = Vec::new();
+        for (i, a) in agents.iter().enumerate() {
+            let ctx = format!("agent {}", i + 1);
+            a.robot.validate().map_err(|source| SimError::Param {
+                context: format!("{ctx} robot"),
+                source,
+            })?;
+            positive(&ctx, "ke", a.gains.ke)?;
+            positive(&ctx, "kz", a.gains.kz)?;
+            positive(&ctx, "l", a.placement.l)?;
+            finite(&ctx, "offset.x", a.placement.lx_off)?;
+            finite(&ctx, "offset.y", a.placement.ly_off)?;
+            let lx = a.placement.lx();
+            if lx <= 0.0 {
+                return Err(FormationError::NonPositiveLx { agent: i + 1, lx }.into());
+            }
+            for (field, v) in [
+                ("start.x", a.start.x),
+                ("start.y", a.start.y),
+                ("start.theta", a.start.theta),
+                ("start.v", a.start.v),
+                ("start.omega", a.start.omega),
+            ] {
+                finite(&ctx, field, v)?;
+            }
+            if let Leader::Agent(j) = a.leader
+                && a.placement.derivatives == LyDerivatives::Exact
+                && a.placement.comp != LyComp::None
+            {
+                return Err(FormationError::ExactDerivativesNeedReference {
+                    agent: i + 1,
+                    leader: j + 1,
+                }
+                .into());
+            }
+            if a.variant == Variant::Paper && a.gains.ke * a.gains.kz <= 0.25 {
+                warnings.push(format!(
+                    "{ctx}: K_e K_z = {} ≤ 1/4: Theorem 1 does not guarantee convergence for the paper law (use law = \"complete\")",
+                    a.gains.ke * a.gains.kz
+                ));
+            }
+            let (lo, hi) = FitCoefficients::PAPER_RANGE;
+            if a.placement.comp == LyComp::Fit && !(lo..=hi).contains(&a.placement.lx_off) {
+                warnings.push(format!(
+                    "{ctx}: L_Xoff = {} m is outside the range {lo}–{hi} m where the eq. 6 fit holds (use lycomp = \"exact\")",
+                    a.placement.lx_off
+                ));
+            }
+        }
+        let formation = Formation::new(agents.iter().map(|a| a.leader).collect())?;
+        let order = if agents.iter().any(|a| {
+            a.placement.derivatives == LyDerivatives::Exact && a.placement.comp != LyComp::None
+        }) {
+            Order::Four
+        } else {
+            Order::Two
+        };
+        let uses_reference = agents.iter().any(|a| a.leader == Leader::Reference);
+        let n = agents.len();
+        let state: Vec<State> = agents.iter().map(|a| a.start).collect();
+        Ok(Simulation {
+            sys: System {
+                agents,
+                formation,
+                reference,
+                order,
+                uses_reference,
+            },
+            config,
+            steps: steps as u64,
+            hold_every,
+            warnings,
+            step: 0,
+            state,
+            held: vec![Input::default(); n],
+            out: vec![AgentOutput::default(); n],
+            k1: vec![State::default(); n],
+            fresh: false,
+            stage: vec![State::default(); n],
+            k2: vec![State::default(); n],
+            k3: vec![State::default(); n],
+            k4: vec![State::default(); n],
+            scratch_out: vec![AgentOutput::default(); n],
+        })
+    }
+
+    /// The agents.
+    pub fn agents(&self) -> &[AgentSpec] {
+        &self.sys.agents
+    }
+
+    /// The leader graph.
+    pub fn formation(&self) -> &Formation {
+        &self.sys.formation
+    }
+
+    /// The reference the virtual leader follows.
+    pub fn reference(&self) -> &Reference {
+        &self.sys.reference
+    }
+
+    /// The integration settings.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// Things that are allowed but probably not what the user wants.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// Total number of steps of the run.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Current step index.
+    pub fn step_index(&self) -> u64 {
+        self.step
+    }
+
+    /// Current time, s.
+    pub fn time(&self) -> f64 {
+        self.step as f64 * self.config.dt
+    }
+
+    /// Whether the run has reached its duration.
+    pub fn is_done(&self) -> bool {
+        self.step >= self.steps
+    }
+
+    /// Current states.
+    pub fn states(&self) -> &[State] {
+        &self.state
+    }
+
+    /// Evaluates the controllers at the current state (RK4's first stage), once.
+    fn refresh(&mut self) {
+        if self.fresh {
+            return;
+        }
+        let sample = self.hold_every > 0 && self.step.is_multiple_of(self.hold_every);
+        let held = (self.hold_every > 0 && !sample).then_some(&self.held[..]);
+        self.sys
+            .evaluate(self.time(), &self.state, held, &mut self.out, &mut self.k1);
+        if sample {
+            for (h, o) in self.held.iter_mut().zip(&self.out) {
+                *h = o.command;
+            }
+        }
+        self.fresh = true;
+    }
+
+    /// The current frame (evaluating the controllers if needed).
+    pub fn frame(&mut self) -> Frame<'_> {
+        self.refresh();
+        Frame {
+            t: self.time(),
+            step: self.step,
+            last: self.is_done(),
+            states: &self.state,
+            outputs: &self.out,
+        }
+    }
+
+    /// Advances one RK4 step; the law is evaluated in each of the four stages.
+    /// Fails if a state stops being finite.
+    pub fn step(&mut self) -> Result<(), SimError> {
+        self.refresh();
+        let dt = self.config.dt;
+        let t = self.time();
+        let held = (self.hold_every > 0).then_some(&self.held[..]);
+        let sys = &self.sys;
+        for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k1)) {
+            *s = x.add_scaled(k, 0.5 * dt);
+        }
+        sys.evaluate(
+            t + 0.5 * dt,
+            &self.stage,
+            held,
+            &mut self.scratch_out,
+            &mut self.k2,
+        );
+        for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k2)) {
+            *s = x.add_scaled(k, 0.5 * dt);
+        }
+        sys.evaluate(
+            t + 0.5 * dt,
+            &self.stage,
+            held,
+            &mut self.scratch_out,
+            &mut self.k3,
+        );
+        for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k3)) {
+            *s = x.add_scaled(k, dt);
+        }
+        sys.evaluate(
+            t + dt,
+            &self.stage,
+            held,
+            &mut self.scratch_out,
+            &mut self.k4,
+        );
+        let h6 = dt / 6.0;
+        for (i, x) in self.state.iter_mut().enumerate() {
+            let (a, b, c, d) = (&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]);
+            *x = State {
+                x: x.x + h6 * (a.x + 2.0 * (b.x + c.x) + d.x),
+                y: x.y + h6 * (a.y + 2.0 * (b.y + c.y) + d.y),
+                theta: x.theta + h6 * (a.theta + 2.0 * (b.theta + c.theta) + d.theta),
+                v: x.v + h6 * (a.v + 2.0 * (b.v + c.v) + d.v),
+                omega: x.omega + h6 * (a.omega + 2.0 * (b.omega + c.omega) + d.omega),
+            };
+        }
+        self.step += 1;
+        self.fresh = false;
+        if let Some(i) = self.state.iter().position(|s| !s.is_finite()) {
+            return Err(SimError::NonFinite {
+                agent: i + 1,
+                t: self.time(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Runs to the end, showing every frame (`t = 0` to the last) to `observer`.
+    pub fn run(&mut self, observer: &mut dyn Observer) -> Result<(), SimError> {
+        loop {
+            let frame = self.frame();
+            let last = frame.last;
+            observer
+                .observe(&frame)
+                .map_err(|e| SimError::Observer(e.to_string()))?;
+            if last {
+                return Ok(());
+            }
+            self.step()?;
+        }
+    }
+}
+
+/// Several observers as one, called in order.
+impl<const N: usize> Observer for [&mut dyn Observer; N] {
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        for o in self.iter_mut() {
+            o.observe(frame)?;
+        }
+        Ok(())
+    }
+}
+
+/// Per-agent statistics of a run (what `summary.json` reports).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct AgentSummary {
+    /// 1-based agent number.
+    pub agent: usize,
+    /// Display name.
+    pub name: String,
+    /// Final pose `{x, y, theta}` (θ wrapped to (−π, π]).
+    pub final_pose: Pose,
+    /// Final ‖e‖, m.
+    pub final_error: f64,
+    /// RMS of ‖e‖ over every step of the run, m.
+    pub rms_error: f64,
+    /// Largest wheel torque magnitude applied at any step, N m.
+    pub peak_torque: f64,
+    /// Time after which ‖e‖ stays below the settling tolerance, s (`None`: never).
+    pub settle_time: Option<f64>,
+}
+
+/// A planar pose.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Pose {
+    /// x, m.
+    pub x: f64,
+    /// y, m.
+    pub y: f64,
+    /// Heading, rad.
+    pub theta: f64,
+}
+
+/// Accumulates [`AgentSummary`] statistics over every frame of a run.
+#[derive(Debug, Clone)]
+pub struct Summary {
+    tolerance: f64,
+    sum_sq: Vec<f64>,
+    count: u64,
+    peak: Vec<f64>,
+    settled_since: Vec<Option<f64>>,
+    last: Vec<(State, f64)>,
+}
+
+impl Summary {
+    /// The settling tolerance on ‖e‖ used by `summary.json`: 1 cm.
+    pub const SETTLE_TOLERANCE: f64 = 0.01;
+
+    /// A summary for `n` agents with the given settling tolerance on ‖e‖ (m).
+    pub fn new(n: usize, tolerance: f64) -> Summary {
+        Summary {
+            tolerance,
+            sum_sq: vec![0.0; n],
+            count: 0,
+            peak: vec![0.0; n],
+            settled_since: vec![None; n],
+            last: vec![(State::default(), f64::NAN); n],
+        }
+    }
+
+    /// The per-agent results, named after `agents`.
+    pub fn agents(&self, agents: &[AgentSpec]) -> Vec<AgentSummary> {
+        agents
+            .iter()
+            .enumerate()
+            .map(|(i, a)| {
+                let (s, err) = self.last[i];
+                AgentSummary {
+                    agent: i + 1,
+                    name: a.name.clone(),
+                    final_pose: Pose {
+                        x: s.x,
+                        y: s.y,
+                        theta: crate::model::wrap_angle(s.theta),
+                    },
+                    final_error: err,
+                    rms_error: (self.sum_sq[i] / self.count.max(1) as f64).sqrt(),
+                    peak_torque: self.peak[i],
+                    settle_time: self.settled_since[i],
+                }
+            })
+            .collect()
+    }
+}
+
+impl Observer for Summary {
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        self.count += 1;
+        for (i, (s, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
+            let ne = o.e[0].hypot(o.e[1]);
+            self.sum_sq[i] += ne * ne;
+            self.peak[i] = self.peak[i].max(o.tau.peak());
+            if ne >= self.tolerance {
+                self.settled_since[i] = None;
+            } else if self.settled_since[i].is_none() {
+                self.settled_since[i] = Some(frame.t);
+            }
+            self.last[i] = (*s, ne);
+        }
+        Ok(())
+    }
+}

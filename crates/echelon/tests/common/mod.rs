@@ -1,0 +1,74 @@
+//! Shared helpers for the integration tests.
+#![allow(dead_code, unreachable_pub)]
+
+use echelon::formation::Leader;
+use echelon::lycomp::{LyComp, LyDerivatives, Placement};
+use echelon::reference::Reference;
+use echelon::sim::{AgentOutput, Frame, ObserverError};
+use echelon::{AgentSpec, Gains, RobotParams, SimConfig, Simulation, State, Timing, Variant};
+
+/// An agent with Table I agent 1's body and the paper's gains.
+pub fn agent(leader: Leader, placement: Placement, start: State, variant: Variant) -> AgentSpec {
+    AgentSpec {
+        name: "test".into(),
+        robot: RobotParams::AGENT1,
+        leader,
+        placement,
+        gains: Gains::PAPER,
+        variant,
+        start,
+    }
+}
+
+/// A leader-follower placement with the paper's L = 0.05 m.
+pub fn placement(lx_off: f64, ly_off: f64, comp: LyComp, derivatives: LyDerivatives) -> Placement {
+    Placement::new(lx_off, ly_off, 0.05, comp, derivatives)
+}
+
+/// One recorded frame.
+#[derive(Clone, Debug)]
+pub struct Sample {
+    pub t: f64,
+    pub states: Vec<State>,
+    pub outputs: Vec<AgentOutput>,
+}
+
+/// Runs a continuous-time simulation and records every frame.
+pub fn record(agents: Vec<AgentSpec>, reference: Reference, dt: f64, duration: f64) -> Vec<Sample> {
+    record_with(agents, reference, dt, duration, Timing::Continuous)
+}
+
+/// Runs a simulation and records every frame.
+pub fn record_with(
+    agents: Vec<AgentSpec>,
+    reference: Reference,
+    dt: f64,
+    duration: f64,
+    timing: Timing,
+) -> Vec<Sample> {
+    let mut sim = Simulation::new(
+        agents,
+        reference,
+        SimConfig {
+            dt,
+            duration,
+            timing,
+        },
+    )
+    .expect("valid simulation");
+    let mut samples = Vec::new();
+    let mut obs = |f: &Frame<'_>| -> Result<(), ObserverError> {
+        samples.push(Sample {
+            t: f.t,
+            states: f.states.to_vec(),
+            outputs: f.outputs.to_vec(),
+        });
+        Ok(())
+    };
+    sim.run(&mut obs).expect("run succeeds");
+    samples
+}
+
+pub fn norm(v: [f64; 2]) -> f64 {
+    v[0].hypot(v[1])
+}

@@ -12,7 +12,9 @@
 //!   compensation `L_Ycomp` (eqs. 4–6);
 //! - [`control`]: the backstepping law (eqs. 7–16);
 //! - [`formation`]: who follows whom;
-//! - [`sim`]: the RK4 simulator, observers and run statistics.
+//! - [`sim`]: the RK4 simulator, observers and run statistics;
+//! - [`scenario`]: the TOML scenario format and the paper's built-in setups;
+//! - [`output`]: `trajectory.csv` and `summary.json`.
 //!
 //! Units are SI and angles radians throughout (ROS REP 103).
 
@@ -21,11 +23,14 @@ pub mod error;
 pub mod formation;
 pub mod lycomp;
 pub mod model;
+pub mod output;
 pub mod reference;
+pub mod scenario;
 pub mod sim;
 mod spline;
 
 pub use control::{Gains, Variant};
-pub use error::{FormationError, ParamError, ReferenceError, SimError};
+pub use error::{FormationError, OutputError, ParamError, ReferenceError, ScenarioError, SimError};
 pub use model::{Input, RobotParams, State, Torques};
+pub use scenario::{Overrides, Run, Scenario};
 pub use sim::{AgentSpec, Frame, Observer, SimConfig, Simulation, Timing};

@@ -1,0 +1,234 @@
+//! Run outputs: `trajectory.csv` and `summary.json`.
+//!
+//! Numbers are written in their shortest round-trip form (the same bits read
+//! back), so the same run gives the same bytes.
+
+use std::fmt::Write as _;
+use std::io::{self, Write};
+
+use serde::Serialize;
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use crate::error::OutputError;
+use crate::model::wrap_angle;
+use crate::scenario::Run;
+use crate::sim::{AgentSummary, Frame, Observer, ObserverError, Summary, Timing};
+
+/// The header of `trajectory.csv`: one row per agent per logged sample, SI units,
+/// radians, `e` and `z` in the follower's body frame, agents numbered from 1.
+pub const TRAJECTORY_HEADER: &str = "t,agent,x,y,theta,v,omega,ex,ey,zx,zy,u1,u2,tau_r,tau_l";
+
+/// Writes a time to at most nanosecond resolution without float noise
+/// (`0.03`, not `0.030000000000000002`).
+pub fn push_time(line: &mut String, t: f64) {
+    let start = line.len();
+    let _ = write!(line, "{t:.9}");
+    if line[start..].contains('.') {
+        while line.ends_with('0') {
+            line.pop();
+        }
+        if line.ends_with('.') {
+            line.pop();
+        }
+    }
+    if &line[start..] == "-0" {
+        line.truncate(start);
+        line.push('0');
+    }
+}
+
+/// Writes a float in shortest round-trip form.
+#[inline]
+pub fn push_f64(line: &mut String, v: f64, buf: &mut ryu::Buffer) {
+    if v.is_finite() {
+        line.push_str(buf.format_finite(v));
+    } else {
+        line.push_str(buf.format(v));
+    }
+}
+
+/// Streams `trajectory.csv` rows, every `every`-th step and the last one.
+#[derive(Debug)]
+pub struct TrajectoryCsv<W: Write> {
+    out: W,
+    every: u64,
+    line: String,
+    rows: u64,
+}
+
+impl<W: Write> TrajectoryCsv<W> {
+    /// Writes the header; then logs every `every`-th step (1: every step).
+    pub fn new(mut out: W, every: u64) -> io::Result<Self> {
+        writeln!(out, "{TRAJECTORY_HEADER}")?;
+        Ok(TrajectoryCsv {
+            out,
+            every: every.max(1),
+            line: String::with_capacity(512),
+            rows: 0,
+        })
+    }
+
+    /// Number of data rows written.
+    pub fn rows(&self) -> u64 {
+        self.rows
+    }
+
+    /// Flushes and returns the writer.
+    pub fn finish(mut self) -> io::Result<W> {
+        self.out.flush()?;
+        Ok(self.out)
+    }
+}
+
+impl<W: Write> Observer for TrajectoryCsv<W> {
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        if !(frame.step.is_multiple_of(self.every) || frame.last) {
+            return Ok(());
+        }
+        let mut buf = ryu::Buffer::new();
+        for (i, (s, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
+            let line = &mut self.line;
+            line.clear();
+            push_time(line, frame.t);
+            let _ = write!(line, ",{}", i + 1);
+            for v in [
+                s.x,
+                s.y,
+                wrap_angle(s.theta),
+                s.v,
+                s.omega,
+                o.e[0],
+                o.e[1],
+                o.z[0],
+                o.z[1],
+                o.u.u1,
+                o.u.u2,
+                o.tau.right,
+                o.tau.left,
+            ] {
+                line.push(',');
+                push_f64(line, v, &mut buf);
+            }
+            line.push('\n');
+            self.out.write_all(line.as_bytes())?;
+            self.rows += 1;
+        }
+        Ok(())
+    }
+}
+
+/// Everything `summary.json` holds.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunSummary {
+    /// Scenario name.
+    pub scenario: String,
+    /// Simulated time, s.
+    pub duration: f64,
+    /// RK4 step, s.
+    pub dt: f64,
+    /// Number of steps.
+    pub steps: u64,
+    /// Controller sampling period, s (`None`: continuous-time).
+    pub controller_period: Option<f64>,
+    /// Tolerance on ‖e‖ for `settle_time`, m.
+    pub settle_tolerance: f64,
+    /// Warnings raised when the scenario was built.
+    pub warnings: Vec<String>,
+    /// Per-agent results.
+    pub agents: Vec<AgentSummary>,
+}
+
+/// The files a run writes into its output directory.
+pub const TRAJECTORY_FILE: &str = "trajectory.csv";
+/// See [`TRAJECTORY_FILE`].
+pub const SUMMARY_FILE: &str = "summary.json";
+
+fn io_error(path: &Path) -> impl FnOnce(io::Error) -> OutputError + '_ {
+    move |source| OutputError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Runs `run` to its end, writing `dir/trajectory.csv` and `dir/summary.json`;
+/// `extra` sees every frame too (e.g. a progress bar). Files are written under
+/// temporary names and renamed only when the run succeeds, so a failed run
+/// leaves no half-written output.
+pub fn run_to_dir(
+    run: &mut Run,
+    dir: &Path,
+    extra: &mut dyn Observer,
+) -> Result<RunSummary, OutputError> {
+    std::fs::create_dir_all(dir).map_err(io_error(dir))?;
+    let part = |name: &str| -> PathBuf { dir.join(format!(".{name}.part")) };
+    let (traj_part, summary_part) = (part(TRAJECTORY_FILE), part(SUMMARY_FILE));
+    let file = File::create(&traj_part).map_err(io_error(&traj_part))?;
+    let mut csv = TrajectoryCsv::new(BufWriter::with_capacity(1 << 16, file), run.log_every)
+        .map_err(io_error(&traj_part))?;
+    let sim = &mut run.simulation;
+    let mut summary = Summary::new(sim.agents().len(), Summary::SETTLE_TOLERANCE);
+    let result = sim.run(&mut [&mut csv as &mut dyn Observer, &mut summary, extra]);
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&traj_part);
+        return Err(e.into());
+    }
+    csv.finish().map_err(io_error(&traj_part))?;
+    let config = *sim.config();
+    let report = RunSummary {
+        scenario: run.name.clone(),
+        duration: sim.time(),
+        dt: config.dt,
+        steps: sim.steps(),
+        controller_period: match config.timing {
+            Timing::Continuous => None,
+            Timing::Sampled { period } => Some(period),
+        },
+        settle_tolerance: Summary::SETTLE_TOLERANCE,
+        warnings: sim.warnings().to_vec(),
+        agents: summary.agents(sim.agents()),
+    };
+    let mut json = serde_json::to_string_pretty(&report).map_err(|e| OutputError::Io {
+        path: summary_part.clone(),
+        source: e.into(),
+    })?;
+    json.push('\n');
+    std::fs::write(&summary_part, json).map_err(io_error(&summary_part))?;
+    for (from, to) in [(traj_part, TRAJECTORY_FILE), (summary_part, SUMMARY_FILE)] {
+        let to = dir.join(to);
+        std::fs::rename(&from, &to).map_err(io_error(&to))?;
+    }
+    Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn times_are_written_without_noise() {
+        for (t, want) in [
+            (0.0, "0"),
+            (3.0 * 0.01, "0.03"),
+            (62.832, "62.832"),
+            (1.0, "1"),
+            (1e-4 * 7.0, "0.0007"),
+        ] {
+            let mut s = String::new();
+            push_time(&mut s, t);
+            assert_eq!(s, want);
+        }
+    }
+
+    #[test]
+    fn floats_round_trip() {
+        let mut buf = ryu::Buffer::new();
+        for v in [0.1, -1.0 / 3.0, 1e-20, 123456.789, 0.0] {
+            let mut s = String::new();
+            push_f64(&mut s, v, &mut buf);
+            assert_eq!(s.parse::<f64>().unwrap(), v);
+        }
+    }
+}

@@ -1,0 +1,181 @@
+//! From byte offsets to `line:column` and field paths, and back, over the
+//! spanned parse of a scenario file, so that every error names where it is.
+
+use std::fmt;
+use std::ops::Range;
+
+use toml::Spanned;
+use toml::de::{DeTable, DeValue};
+
+/// One step of a field path.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Seg {
+    /// A table key.
+    Key(String),
+    /// A 0-based array index (shown 1-based: agents count from 1).
+    Index(usize),
+}
+
+/// A dotted field path such as `agents[3].offset.x`.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub(crate) struct FieldPath(pub(crate) Vec<Seg>);
+
+impl FieldPath {
+    pub(crate) fn key(&self, k: &str) -> FieldPath {
+        let mut p = self.clone();
+        p.0.push(Seg::Key(k.to_owned()));
+        p
+    }
+
+    pub(crate) fn index(&self, i: usize) -> FieldPath {
+        let mut p = self.clone();
+        p.0.push(Seg::Index(i));
+        p
+    }
+}
+
+/// `FieldPath::from("agents").index(2).key("offset")`.
+impl From<&str> for FieldPath {
+    fn from(s: &str) -> FieldPath {
+        FieldPath(s.split('.').map(|k| Seg::Key(k.to_owned())).collect())
+    }
+}
+
+impl fmt::Display for FieldPath {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (n, seg) in self.0.iter().enumerate() {
+            match seg {
+                Seg::Key(k) if n == 0 => write!(f, "{k}")?,
+                Seg::Key(k) => write!(f, ".{k}")?,
+                Seg::Index(i) => write!(f, "[{}]", i + 1)?,
+            }
+        }
+        Ok(())
+    }
+}
+
+/// 1-based line and column (in characters) of a byte offset.
+pub(crate) fn line_col(src: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(src.len());
+    let before = &src[..src.floor_char_boundary(offset)];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+/// The spanned document of a scenario source.
+pub(crate) struct Spans<'a> {
+    root: Option<Spanned<DeTable<'a>>>,
+}
+
+impl<'a> Spans<'a> {
+    /// Parses what it can: even a file with a syntax error yields the spans of
+    /// the keys around it.
+    pub(crate) fn new(src: &'a str) -> Spans<'a> {
+        Spans {
+            root: Some(DeTable::parse_recoverable(src).0),
+        }
+    }
+
+    /// The span of the value at `path` (or of the deepest part of it that exists).
+    pub(crate) fn span_of(&self, path: &FieldPath) -> Option<Range<usize>> {
+        self.find(path).map(|(_, value)| value)
+    }
+
+    /// The span of the last key of `path`, if it exists in the file.
+    pub(crate) fn key_span_of(&self, path: &FieldPath) -> Option<Range<usize>> {
+        self.find(path).and_then(|(key, _)| key)
+    }
+
+    /// Key and value spans of the deepest existing part of `path`.
+    fn find(&self, path: &FieldPath) -> Option<(Option<Range<usize>>, Range<usize>)> {
+        let root = self.root.as_ref()?;
+        let mut table: &DeTable<'_> = root.get_ref();
+        let mut array: Option<&[Spanned<DeValue<'_>>]> = None;
+        let mut found = None;
+        for seg in &path.0 {
+            let (key, value) = match (seg, array) {
+                (Seg::Key(k), None) => match table.iter().find(|(key, _)| key.get_ref() == k) {
+                    Some((key, v)) => (Some(key.span()), v),
+                    None => break,
+                },
+                (Seg::Index(i), Some(items)) => match items.get(*i) {
+                    Some(v) => (None, v),
+                    None => break,
+                },
+                _ => break,
+            };
+            found = Some((key, value.span()));
+            array = None;
+            match value.get_ref() {
+                DeValue::Table(t) => table = t,
+                DeValue::Array(a) => array = Some(a),
+                _ => {}
+            }
+        }
+        found
+    }
+
+    /// The deepest field whose key or value contains `offset`.
+    pub(crate) fn path_at(&self, offset: usize) -> FieldPath {
+        let mut path = FieldPath::default();
+        if let Some(root) = &self.root {
+            search_table(root.get_ref(), offset, &mut path);
+        }
+        path
+    }
+}
+
+fn contains(span: &Range<usize>, offset: usize) -> bool {
+    span.start <= offset && offset < span.end.max(span.start + 1)
+}
+
+fn search_table(t: &DeTable<'_>, offset: usize, path: &mut FieldPath) -> bool {
+    for (k, v) in t.iter() {
+        path.0.push(Seg::Key(k.get_ref().to_string()));
+        if search_value(v.get_ref(), offset, path)
+            || contains(&k.span(), offset)
+            || contains(&v.span(), offset)
+        {
+            return true;
+        }
+        path.0.pop();
+    }
+    false
+}
+
+fn search_value(v: &DeValue<'_>, offset: usize, path: &mut FieldPath) -> bool {
+    match v {
+        DeValue::Table(t) => search_table(t, offset, path),
+        DeValue::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                path.0.push(Seg::Index(i));
+                if search_value(item.get_ref(), offset, path) || contains(&item.span(), offset) {
+                    return true;
+                }
+                path.0.pop();
+            }
+            false
+        }
+        _ => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SRC: &str = "[r.circle]\nspeed = 1\n\n[[agents]]\nname = \"a\"\nx = 1.0\n\n[[agents]]\nname = \"b\"\nx = \"bad\"\n";
+
+    #[test]
+    fn paths_and_spans_agree() {
+        let s = Spans::new(SRC);
+        let p = FieldPath::from("agents").index(1).key("x");
+        assert_eq!(p.to_string(), "agents[2].x");
+        let span = s.span_of(&p).unwrap();
+        assert_eq!(&SRC[span.clone()], "\"bad\"");
+        assert_eq!(s.path_at(span.start), p);
+        assert_eq!(line_col(SRC, span.start), (10, 5));
+        assert_eq!(s.path_at(14).to_string(), "r.circle.speed");
+    }
+}

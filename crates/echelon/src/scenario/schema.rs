@@ -1,0 +1,323 @@
+//! The scenario file format (TOML). Units are SI and angles radians; a field may
+//! take degrees only if its name ends in `_deg`. Unknown fields are errors.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use serde::de::{self, Visitor};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+/// A whole scenario file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile {
+    /// Short name (defaults to the file name).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// One line saying what the scenario shows.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub description: Option<String>,
+    /// Integration settings.
+    pub sim: SimSection,
+    /// Logging settings.
+    #[serde(default, skip_serializing_if = "LogSection::is_default")]
+    pub log: LogSection,
+    /// Controller defaults for every agent.
+    #[serde(default, skip_serializing_if = "ControlSection::is_empty")]
+    pub control: ControlSection,
+    /// Robot definitions by name, in addition to the presets `agent1`, `agent2`.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub robots: BTreeMap<String, RobotSection>,
+    /// The virtual leader's trajectory.
+    pub reference: ReferenceSection,
+    /// The robots of the formation, numbered from 1 in this order.
+    pub agents: Vec<AgentSection>,
+}
+
+/// `[sim]`: how long and how finely to integrate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimSection {
+    /// Simulated time, s.
+    pub duration: f64,
+    /// RK4 step, s.
+    pub dt: f64,
+    /// Sampled controller with zero-order hold at this period, s (a multiple of
+    /// `dt`). Absent: continuous-time controller, evaluated in every RK4 stage.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub controller_period: Option<f64>,
+}
+
+/// `[log]`: what goes to `trajectory.csv`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LogSection {
+    /// Logging period, s (0: every step; default 0.01).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dt: Option<f64>,
+}
+
+impl LogSection {
+    fn is_default(&self) -> bool {
+        self == &LogSection::default()
+    }
+}
+
+/// Which form of eq. 13.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LawName {
+    /// The paper's law (default).
+    Paper,
+    /// Cross term cancelled.
+    Complete,
+}
+
+/// How `L_Ycomp` is computed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LyCompName {
+    /// Eq. 5, curvature form.
+    Exact,
+    /// Eq. 6, the paper's fit (default).
+    Fit,
+    /// No compensation.
+    None,
+}
+
+/// Whether `L̇_Y`, `L̈_Y` enter the law.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LyDerivativesName {
+    /// Neglected, as in the paper (default).
+    Neglect,
+    /// Exact (analytic references only).
+    Exact,
+}
+
+/// `[control]` (defaults for all agents) or an agent's `control` (overrides).
+/// Every field is optional; unset fields fall back to `[control]`, then to the
+/// paper's values.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControlSection {
+    /// `paper` (default) or `complete`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub law: Option<LawName>,
+    /// `K_e` (default 1.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ke: Option<f64>,
+    /// `K_z` (default 10).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kz: Option<f64>,
+    /// `L`, m (default 0.05).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub l: Option<f64>,
+    /// `exact`, `fit` (default) or `none`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lycomp: Option<LyCompName>,
+    /// `neglect` (default) or `exact`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ly_derivatives: Option<LyDerivativesName>,
+}
+
+impl ControlSection {
+    fn is_empty(&self) -> bool {
+        self == &ControlSection::default()
+    }
+}
+
+/// `[robots.NAME]`: a robot's parameters, optionally starting from a preset.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotSection {
+    /// Start from this preset (`agent1`, `agent2`) and override the fields given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preset: Option<String>,
+    /// `m`, kg.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mass: Option<f64>,
+    /// `η`, kg/s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub linear_friction: Option<f64>,
+    /// `J`, kg m².
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inertia: Option<f64>,
+    /// `ψ`, kg m²/s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub angular_friction: Option<f64>,
+    /// `l` (half the wheel separation), m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub half_wheelbase: Option<f64>,
+    /// `r`, m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheel_radius: Option<f64>,
+    /// Per-wheel torque limit, N m (absent: unlimited).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub torque_limit: Option<f64>,
+}
+
+/// A pose, optionally with initial speeds. Exactly one of `theta` (rad) and
+/// `theta_deg` (degrees).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSpec {
+    /// x, m.
+    pub x: f64,
+    /// y, m.
+    pub y: f64,
+    /// Heading, rad.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub theta: Option<f64>,
+    /// Heading, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub theta_deg: Option<f64>,
+    /// Initial linear speed, m/s (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub v: Option<f64>,
+    /// Initial angular speed, rad/s (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub omega: Option<f64>,
+}
+
+/// `[reference.KIND]`: the virtual leader's trajectory.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ReferenceSection {
+    /// Eq. 18: constant speed and turn rate from a start pose.
+    Circle {
+        /// `V_d`, m/s.
+        speed: f64,
+        /// `ω_d`, rad/s.
+        turn_rate: f64,
+        /// Start pose (speeds not allowed).
+        start: PoseSpec,
+    },
+    /// A straight line at constant speed from a start pose.
+    Line {
+        /// `V_d`, m/s.
+        speed: f64,
+        /// Start pose (speeds not allowed).
+        start: PoseSpec,
+    },
+    /// Eq. 19.
+    Lemniscate {
+        /// Half-width `a`, m.
+        a: f64,
+        /// Rate `c`, rad/s.
+        c: f64,
+        /// Centre `[x, y]`, m (default origin).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        center: Option<[f64; 2]>,
+    },
+    /// Eqs. 17/20: the non-feasible cubic.
+    Cubic {
+        /// Scale `s`, m/s³ (eq. 20: 0.0625).
+        scale: f64,
+        /// Switch time `t₀`, s (eq. 20: 4).
+        t_switch: f64,
+    },
+    /// Timed waypoints through a septic spline (C³ over all time, C⁶ between
+    /// waypoints), at rest at the first and last.
+    Waypoints {
+        /// `[[t, x, y], …]` in s and m.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        points: Option<Vec<[f64; 3]>>,
+        /// A CSV file with header `t,x,y`, relative to the scenario file.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        file: Option<String>,
+    },
+}
+
+/// `[[agents]]`: one robot of the formation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentSection {
+    /// Display name (default `agent K`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// A preset (`agent1`, `agent2`) or a `[robots.NAME]` (default `agent1`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<String>,
+    /// Initial pose and speeds.
+    pub start: PoseSpec,
+    /// `"reference"` or the number of the agent it follows.
+    pub leader: LeaderSpec,
+    /// `formation` (default: hold the leader at `offset`) or `tracking`
+    /// (pure tracking, eqs. 14–16: no offset).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mode: Option<ModeName>,
+    /// `(L_Xoff, L_Yoff)`, m: where the follower holds its leader (formation mode).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset: Option<OffsetSpec>,
+    /// Controller settings for this agent only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub control: Option<ControlSection>,
+}
+
+/// What an agent's controller does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModeName {
+    /// Leader-follower at an offset (eq. 13).
+    Formation,
+    /// Pure tracking of the leader's position (eqs. 14–16).
+    Tracking,
+}
+
+/// `(L_Xoff, L_Yoff)`: the leader is `L_Xoff + L` ahead and `L_Yoff + L_Ycomp`
+/// to the left of the follower, in the follower's frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OffsetSpec {
+    /// `L_Xoff`, m.
+    pub x: f64,
+    /// `L_Yoff`, m.
+    pub y: f64,
+}
+
+/// An agent's leader: `"reference"` or an agent number (from 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LeaderSpec {
+    /// The virtual leader.
+    Reference,
+    /// Agent number (1-based).
+    Agent(i64),
+}
+
+impl Serialize for LeaderSpec {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            LeaderSpec::Reference => s.serialize_str("reference"),
+            LeaderSpec::Agent(k) => s.serialize_i64(*k),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for LeaderSpec {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl Visitor<'_> for V {
+            type Value = LeaderSpec;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("\"reference\" or the number of an agent (counting from 1)")
+            }
+            fn visit_str<E: de::Error>(self, v: &str) -> Result<LeaderSpec, E> {
+                if v == "reference" {
+                    Ok(LeaderSpec::Reference)
+                } else {
+                    Err(E::invalid_value(de::Unexpected::Str(v), &self))
+                }
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<LeaderSpec, E> {
+                Ok(LeaderSpec::Agent(v))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<LeaderSpec, E> {
+                i64::try_from(v)
+                    .map(LeaderSpec::Agent)
+                    .map_err(|_| E::invalid_value(de::Unexpected::Unsigned(v), &self))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}

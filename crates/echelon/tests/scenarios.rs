@@ -1,0 +1,460 @@
+//! The scenario format: built-ins, round trips, errors that say where, golden
+//! outputs and determinism.
+#![allow(clippy::unwrap_used)] // tests fail loudly by design
+
+use std::path::Path;
+
+use echelon::ScenarioError;
+use echelon::output::{self, SUMMARY_FILE, TRAJECTORY_FILE, TRAJECTORY_HEADER};
+use echelon::scenario::schema::ScenarioFile;
+use echelon::scenario::{self, Overrides, Scenario};
+use echelon::sim::{Frame, ObserverError};
+
+const NAMES: [&str; 5] = [
+    "circle-pentagon",
+    "experiment-circle",
+    "experiment-lemniscate",
+    "lemniscate-wedge",
+    "nonfeasible",
+];
+
+#[test]
+fn the_papers_five_setups_are_built_in() {
+    let names: Vec<&str> = scenario::builtin().iter().map(|(n, _)| *n).collect();
+    assert_eq!(names, NAMES);
+}
+
+#[test]
+fn every_scenario_file_parses_builds_and_round_trips() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        seen += 1;
+        let s = Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        let run = s
+            .build(&Overrides::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            run.simulation.warnings().is_empty(),
+            "{}: {:?}",
+            s.name(),
+            run.simulation.warnings()
+        );
+        assert!(
+            s.file.description.is_some(),
+            "{} has a description",
+            s.name()
+        );
+        // The file is the built-in of the same name.
+        let stem = path.file_stem().unwrap().to_str().unwrap();
+        assert_eq!(Scenario::builtin(stem).unwrap().source(), s.source());
+        // serialise → parse gives the same scenario.
+        let text = toml::to_string(&s.file).unwrap();
+        let back: ScenarioFile = toml::from_str(&text).unwrap();
+        assert_eq!(back, s.file, "{} round trip", s.name());
+    }
+    assert_eq!(seen, NAMES.len());
+}
+
+const BASE: &str = r#"name = "base"
+[sim]
+duration = 1.0
+dt = 0.01
+
+[reference.circle]
+speed = 0.5
+turn_rate = 0.1
+start = { x = 0.0, y = 0.0, theta_deg = 0.0 }
+
+[[agents]]
+start = { x = -0.3, y = -1.5, theta_deg = 0.0 }
+leader = "reference"
+offset = { x = 0.5, y = 0.8 }
+
+[[agents]]
+start = { x = -0.8, y = -0.2, theta = 0.0 }
+leader = 1
+offset = { x = 0.5, y = -0.4 }
+"#;
+
+fn build(src: &str) -> Result<echelon::Run, ScenarioError> {
+    Scenario::parse(src, "test.toml", None)?.build(&Overrides::default())
+}
+
+fn expect_error(src: &str, line: usize, field: &str, message: &str) {
+    let err = match build(src) {
+        Ok(_) => panic!("accepted:\n{src}"),
+        Err(e) => e,
+    };
+    let text = err.to_string();
+    assert_eq!(err.location.file, "test.toml", "{text}");
+    assert_eq!(err.location.line, line, "{text}");
+    assert!(err.location.column > 0, "{text}");
+    assert_eq!(err.field, field, "{text}");
+    assert!(err.message.contains(message), "{text}");
+    assert!(!text.contains('\n'), "one line: {text}");
+    assert!(text.starts_with(&format!("test.toml:{line}:")), "{text}");
+}
+
+#[test]
+fn the_base_scenario_is_valid() {
+    let run = build(BASE).unwrap();
+    assert_eq!(run.simulation.agents().len(), 2);
+    assert_eq!(run.simulation.agents()[1].name, "agent 2");
+    assert_eq!(run.log_every, 1);
+}
+
+#[test]
+fn syntax_and_type_errors_name_line_column_and_field() {
+    expect_error(&BASE.replace("[sim]", "[sim"), 2, "", "");
+    expect_error(
+        &BASE.replace("speed = 0.5", "speed = \"fast\""),
+        7,
+        "reference.circle.speed",
+        "invalid type",
+    );
+    expect_error(
+        &BASE.replace(
+            "offset = { x = 0.5, y = 0.8 }",
+            "ofset = { x = 0.5, y = 0.8 }",
+        ),
+        14,
+        "agents[1].ofset",
+        "unknown field",
+    );
+    expect_error(
+        &BASE.replace("dt = 0.01\n", ""),
+        2,
+        "sim.dt",
+        "missing field",
+    );
+    expect_error(
+        &BASE.replace("[reference.circle]", "[reference.square]"),
+        6,
+        "reference.square",
+        "unknown variant",
+    );
+    expect_error(
+        &BASE.replace("leader = 1", "leader = \"agent 1\""),
+        18,
+        "agents[2].leader",
+        "\"reference\" or the number",
+    );
+}
+
+#[test]
+fn impossible_values_are_refused_with_the_reason() {
+    // L ≤ 0
+    expect_error(
+        &format!("{BASE}\n[control]\nl = 0.0\n"),
+        22,
+        "control.l",
+        "must be a finite number > 0",
+    );
+    // L_X = L_Xoff + L ≤ 0
+    expect_error(
+        &BASE.replace("x = 0.5, y = 0.8", "x = -0.2, y = 0.8"),
+        14,
+        "agents[1].offset.x",
+        "L_X = L_Xoff + L",
+    );
+    // negative mass
+    let robot = BASE.replacen("[[agents]]\n", "[[agents]]\nrobot = \"heavy\"\n", 1)
+        + "\n[robots.heavy]\npreset = \"agent1\"\nmass = -27.0\n";
+    expect_error(&robot, 24, "robots.heavy.mass", "must be > 0");
+    // NaN
+    expect_error(
+        &format!("{BASE}\n[control]\nke = nan\n"),
+        22,
+        "control.ke",
+        "finite",
+    );
+    // a cycle in the leader graph
+    expect_error(
+        &BASE.replace("leader = \"reference\"", "leader = 2"),
+        13,
+        "agents[1].leader",
+        "agents 1 → 2 → 1 form a cycle",
+    );
+    // a dangling leader, and agent numbers from 1
+    expect_error(
+        &BASE.replace("leader = 1", "leader = 7"),
+        18,
+        "agents[2].leader",
+        "does not exist",
+    );
+    expect_error(
+        &BASE.replace("leader = 1", "leader = 0"),
+        18,
+        "agents[2].leader",
+        "numbered 1..=2",
+    );
+    // an agent following itself
+    expect_error(
+        &BASE.replace("leader = 1", "leader = 2"),
+        18,
+        "agents[2].leader",
+        "follows itself",
+    );
+    // negative speed for the virtual leader
+    expect_error(
+        &BASE.replace("speed = 0.5", "speed = -0.5"),
+        7,
+        "reference.circle.speed",
+        "≥ 0",
+    );
+    // non-positive gains
+    expect_error(
+        &format!("{BASE}\n[control]\nkz = -10.0\n"),
+        22,
+        "control.kz",
+        "> 0",
+    );
+}
+
+#[test]
+fn ambiguous_or_inconsistent_settings_are_refused() {
+    expect_error(
+        &BASE.replace(
+            "theta_deg = 0.0 }\nleader = \"reference\"",
+            "theta_deg = 0.0, theta = 0.0 }\nleader = \"reference\"",
+        ),
+        12,
+        "agents[1].start.theta_deg",
+        "not both",
+    );
+    expect_error(
+        &BASE.replacen("[[agents]]\n", "[[agents]]\nrobot = \"agent9\"\n", 1),
+        12,
+        "agents[1].robot",
+        "unknown robot `agent9`",
+    );
+    expect_error(
+        &format!("{BASE}\n[log]\ndt = 0.015\n"),
+        22,
+        "log.dt",
+        "whole multiple of dt",
+    );
+    expect_error(
+        &BASE.replace("dt = 0.01\n", "dt = 0.01\ncontroller_period = 0.025\n"),
+        5,
+        "sim.controller_period",
+        "whole multiple",
+    );
+    expect_error(
+        &format!("{BASE}\n[control]\nlycomp = \"exact\"\nly_derivatives = \"exact\"\n"),
+        23,
+        "control.ly_derivatives",
+        "analytic reference",
+    );
+    expect_error(
+        &BASE.replace(
+            "offset = { x = 0.5, y = -0.4 }",
+            "mode = \"tracking\"\noffset = { x = 0.5, y = -0.4 }",
+        ),
+        20,
+        "agents[2].offset",
+        "takes no offset",
+    );
+    expect_error(
+        &BASE.replace("offset = { x = 0.5, y = -0.4 }\n", ""),
+        16,
+        "agents[2]",
+        "missing field `offset`",
+    );
+    expect_error(
+        &BASE.replace(
+            "start = { x = 0.0, y = 0.0, theta_deg = 0.0 }",
+            "start = { x = 0.0, y = 0.0, theta_deg = 0.0, v = 1.0 }",
+        ),
+        9,
+        "reference.circle.start.v",
+        "takes no speed",
+    );
+}
+
+#[test]
+fn waypoint_errors_point_at_the_waypoint() {
+    let wp = BASE.replace(
+        "[reference.circle]\nspeed = 0.5\nturn_rate = 0.1\nstart = { x = 0.0, y = 0.0, theta_deg = 0.0 }",
+        "[reference.waypoints]\npoints = [\n  [0.0, 0.0, 0.0],\n  [2.0, 1.0, 0.0],\n  [1.0, 2.0, 1.0],\n]",
+    );
+    expect_error(
+        &wp,
+        10,
+        "reference.waypoints.points[3]",
+        "not after the previous one",
+    );
+}
+
+#[test]
+fn waypoints_load_from_a_csv_file_next_to_the_scenario() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("path.csv"), "t,x,y\n0,0,0\n5,2,1\n10,4,0\n").unwrap();
+    let src = BASE.replace(
+        "[reference.circle]\nspeed = 0.5\nturn_rate = 0.1\nstart = { x = 0.0, y = 0.0, theta_deg = 0.0 }",
+        "[reference.waypoints]\nfile = \"path.csv\"",
+    );
+    let file = dir.path().join("s.toml");
+    std::fs::write(&file, &src).unwrap();
+    let run = Scenario::load(&file)
+        .unwrap()
+        .build(&Overrides::default())
+        .unwrap();
+    assert!(
+        matches!(run.simulation.reference(), echelon::reference::Reference::Waypoints(w) if w.points().len() == 3)
+    );
+    // A bad cell names the CSV file, its line and the column.
+    std::fs::write(dir.path().join("path.csv"), "t,x,y\n0,0,0\n5,two,1\n").unwrap();
+    let err = Scenario::load(&file)
+        .unwrap()
+        .build(&Overrides::default())
+        .unwrap_err();
+    assert!(err.location.file.ends_with("path.csv"), "{err}");
+    assert_eq!((err.location.line, err.field.as_str()), (3, "x"), "{err}");
+}
+
+#[test]
+fn overrides_replace_the_files_timing_and_law() {
+    let s = Scenario::builtin("nonfeasible").unwrap();
+    let run = s
+        .build(&Overrides {
+            dt: Some(0.002),
+            duration: Some(3.0),
+            log_dt: Some(0.0),
+            law: Some(echelon::Variant::Complete),
+        })
+        .unwrap();
+    assert_eq!(run.simulation.steps(), 1500);
+    assert_eq!(run.log_every, 1);
+    assert_eq!(
+        run.simulation.agents()[0].variant,
+        echelon::Variant::Complete
+    );
+    let bad = s.build(&Overrides {
+        dt: Some(-1.0),
+        ..Overrides::default()
+    });
+    assert_eq!(bad.unwrap_err().field, "--dt");
+}
+
+fn run_into(dir: &Path, name: &str) -> output::RunSummary {
+    let mut run = Scenario::builtin(name)
+        .unwrap()
+        .build(&Overrides::default())
+        .unwrap();
+    let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
+    output::run_to_dir(&mut run, dir, &mut none).unwrap()
+}
+
+#[test]
+fn same_scenario_gives_the_same_bytes() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    run_into(a.path(), "circle-pentagon");
+    run_into(b.path(), "circle-pentagon");
+    for f in [TRAJECTORY_FILE, SUMMARY_FILE] {
+        let (x, y) = (
+            std::fs::read(a.path().join(f)).unwrap(),
+            std::fs::read(b.path().join(f)).unwrap(),
+        );
+        assert!(x == y, "{f} differs between two runs");
+    }
+    let csv = std::fs::read_to_string(a.path().join(TRAJECTORY_FILE)).unwrap();
+    assert_eq!(csv.lines().next(), Some(TRAJECTORY_HEADER));
+    // 0.00 … 62.83 every 10 ms, plus the final step at 62.832, for 4 agents.
+    assert_eq!(csv.lines().count() - 1, (6284 + 1) * 4);
+    let leftovers: Vec<_> = std::fs::read_dir(a.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        leftovers.len(),
+        2,
+        "only the two outputs remain: {leftovers:?}"
+    );
+}
+
+/// Golden summaries of every built-in scenario, compared with a relative
+/// tolerance of 1e-9 (plus 1e-11 absolute for quantities that converge to 0).
+/// Regenerate with `ECHELON_BLESS=1 cargo test --test scenarios golden`.
+#[test]
+fn golden_summaries() {
+    let golden_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden");
+    let bless = std::env::var_os("ECHELON_BLESS").is_some();
+    for name in NAMES {
+        let dir = tempfile::tempdir().unwrap();
+        run_into(dir.path(), name);
+        let got: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join(SUMMARY_FILE)).unwrap()).unwrap();
+        let file = golden_dir.join(format!("{name}.json"));
+        if bless {
+            std::fs::create_dir_all(&golden_dir).unwrap();
+            std::fs::write(&file, serde_json::to_string_pretty(&got).unwrap() + "\n").unwrap();
+            continue;
+        }
+        let want: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(&file)
+                .unwrap_or_else(|_| panic!("missing {}", file.display())),
+        )
+        .unwrap();
+        compare(&got, &want, name);
+    }
+}
+
+fn compare(got: &serde_json::Value, want: &serde_json::Value, path: &str) {
+    use serde_json::Value::*;
+    match (got, want) {
+        (Number(a), Number(b)) => {
+            let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
+            assert!(
+                (a - b).abs() <= 1e-9 * a.abs().max(b.abs()) + 1e-11,
+                "{path}: {a} vs golden {b}"
+            );
+        }
+        (Object(a), Object(b)) => {
+            assert_eq!(
+                a.keys().collect::<Vec<_>>(),
+                b.keys().collect::<Vec<_>>(),
+                "{path}"
+            );
+            for (k, v) in a {
+                compare(v, &b[k], &format!("{path}.{k}"));
+            }
+        }
+        (Array(a), Array(b)) => {
+            assert_eq!(a.len(), b.len(), "{path}");
+            for (i, (x, y)) in a.iter().zip(b).enumerate() {
+                compare(x, y, &format!("{path}[{i}]"));
+            }
+        }
+        _ => assert_eq!(got, want, "{path}"),
+    }
+}
+
+#[test]
+fn the_readme_example_scenario_builds_and_runs() {
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md"))
+            .unwrap();
+    let start = readme
+        .find("```toml\n")
+        .expect("a TOML example in the README")
+        + "```toml\n".len();
+    let len = readme[start..].find("```").unwrap();
+    let example = &readme[start..start + len];
+    let mut run = Scenario::parse(example, "README.md", None)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .build(&Overrides {
+            duration: Some(5.0),
+            ..Overrides::default()
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(run.simulation.agents().len(), 2);
+    assert_eq!(run.simulation.agents()[1].robot.torque_limit, Some(5.0));
+    let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
+    run.simulation.run(&mut none).unwrap();
+}

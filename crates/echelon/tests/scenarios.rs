@@ -327,9 +327,11 @@ fn overrides_replace_the_files_timing_and_law() {
             duration: Some(3.0),
             log_dt: Some(0.0),
             law: Some(echelon::Variant::Complete),
+            seed: Some(9),
         })
         .unwrap();
     assert_eq!(run.simulation.steps(), 1500);
+    assert_eq!(run.seed, 9);
     assert_eq!(run.log_every, 1);
     assert_eq!(
         run.simulation.agents()[0].variant,

@@ -34,10 +34,13 @@ enum Command {
     /// Print a built-in scenario's TOML, to copy and edit.
     Show(cmd::scenarios::ShowArgs),
     /// Theorem 2: the bound on ‖z‖ for a fix every N samples, or the largest N.
+    #[command(allow_negative_numbers = true)]
     Bound(cmd::bound::BoundArgs),
     /// Monte Carlo over odometry errors × fix intervals × seeds, on all cores.
+    #[command(allow_negative_numbers = true)]
     Sweep(cmd::sweep::SweepArgs),
     /// Borenstein's UMBmark: estimate E_d and E_b from a bidirectional square test.
+    #[command(allow_negative_numbers = true)]
     Umbmark(cmd::umbmark::UmbmarkArgs),
 }
 

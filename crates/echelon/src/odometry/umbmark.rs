@@ -9,7 +9,7 @@
 //! Slip and tick quantization add the run-to-run scatter of a real test.
 
 use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+pub use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use crate::error::ParamError;
@@ -95,8 +95,16 @@ impl SquareTest {
         Ok(out)
     }
 
-    /// One square: four legs, each followed by a 90° turn on the spot.
+    /// One square: four legs, each followed by a 90° turn on the spot; returns
+    /// the true and the believed end poses.
     fn drive(&self, direction: Direction, rng: &mut ChaCha8Rng) -> (Pose, Pose) {
+        let path = self.trace(direction, rng);
+        path[path.len() - 1]
+    }
+
+    /// The true and believed poses at the start and after each leg and turn of
+    /// one square (9 pairs), with slip drawn from `rng`.
+    pub fn trace(&self, direction: Direction, rng: &mut ChaCha8Rng) -> Vec<(Pose, Pose)> {
         let e = &self.errors;
         let (rr, rl) = e.wheel_radii(self.wheel_radius);
         let actual_l = self.half_wheelbase * e.wheelbase_ratio;
@@ -107,6 +115,8 @@ impl SquareTest {
         let turn = sign * self.half_wheelbase * std::f64::consts::FRAC_PI_2;
         let mut truth = Pose::default();
         let mut believed = Pose::default();
+        let mut path = Vec::with_capacity(9);
+        path.push((truth, believed));
         for _ in 0..4 {
             for (right, left) in [(self.side, self.side), (turn, -turn)] {
                 // The commanded wheel rotations, as the encoders count them.
@@ -135,9 +145,10 @@ impl SquareTest {
                     },
                     self.half_wheelbase,
                 );
+                path.push((truth, believed));
             }
         }
-        (truth, believed)
+        path
     }
 
     /// The wheel rotation (rad) at which the drive stops for a commanded

@@ -4,10 +4,11 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-const NAMES: [&str; 5] = [
+const NAMES: [&str; 6] = [
     "circle-pentagon",
     "experiment-circle",
     "experiment-lemniscate",
+    "fix-study",
     "lemniscate-wedge",
     "nonfeasible",
 ];
@@ -64,7 +65,10 @@ fn scenarios_lists_the_built_ins_with_a_line_each() {
         .map(|l| l.split_whitespace().next().unwrap())
         .collect();
     assert_eq!(names, NAMES);
-    assert!(text.lines().all(|l| l.contains("Fig")));
+    assert!(
+        text.lines()
+            .all(|l| l.contains("Fig") || l.contains("Theorem"))
+    );
 }
 
 #[test]

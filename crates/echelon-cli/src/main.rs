@@ -33,6 +33,15 @@ enum Command {
     Scenarios,
     /// Print a built-in scenario's TOML, to copy and edit.
     Show(cmd::scenarios::ShowArgs),
+    /// Theorem 2: the bound on ‖z‖ for a fix every N samples, or the largest N.
+    #[command(allow_negative_numbers = true)]
+    Bound(cmd::bound::BoundArgs),
+    /// Monte Carlo over odometry errors × fix intervals × seeds, on all cores.
+    #[command(allow_negative_numbers = true)]
+    Sweep(cmd::sweep::SweepArgs),
+    /// Borenstein's UMBmark: estimate E_d and E_b from a bidirectional square test.
+    #[command(allow_negative_numbers = true)]
+    Umbmark(cmd::umbmark::UmbmarkArgs),
 }
 
 /// Exit code for every refused input or failed run.
@@ -63,6 +72,9 @@ fn main() -> ExitCode {
         Command::Run(args) => cmd::run::run(args),
         Command::Scenarios => cmd::scenarios::list(),
         Command::Show(args) => cmd::scenarios::show(&args),
+        Command::Bound(args) => cmd::bound::bound(&args),
+        Command::Sweep(args) => cmd::sweep::sweep(&args),
+        Command::Umbmark(args) => cmd::umbmark::umbmark(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

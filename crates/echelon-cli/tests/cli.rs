@@ -4,10 +4,11 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-const NAMES: [&str; 5] = [
+const NAMES: [&str; 6] = [
     "circle-pentagon",
     "experiment-circle",
     "experiment-lemniscate",
+    "fix-study",
     "lemniscate-wedge",
     "nonfeasible",
 ];
@@ -64,7 +65,10 @@ fn scenarios_lists_the_built_ins_with_a_line_each() {
         .map(|l| l.split_whitespace().next().unwrap())
         .collect();
     assert_eq!(names, NAMES);
-    assert!(text.lines().all(|l| l.contains("Fig")));
+    assert!(
+        text.lines()
+            .all(|l| l.contains("Fig") || l.contains("Theorem"))
+    );
 }
 
 #[test]
@@ -296,4 +300,234 @@ fn bad_flags_exit_2() {
         "/nonexistent/never",
     ]);
     assert_refused(&o, &["log.dt", "--log-dt"]);
+}
+
+fn json(o: &Output) -> serde_json::Value {
+    assert!(o.status.success(), "{}", stderr(o));
+    serde_json::from_str(&stdout(o)).unwrap()
+}
+
+#[test]
+fn bound_forward_and_inverse_agree() {
+    let common = [
+        "bound",
+        "--ke",
+        "1.5",
+        "--kz",
+        "10",
+        "--zeta",
+        "1e-4",
+        "--omega-max",
+        "1",
+        "--gamma",
+        "0.5",
+    ];
+    let forward = json(&echelon(
+        &[&common[..], &["--steps", "1000", "--ts", "0.01", "--json"]].concat(),
+    ));
+    let z = forward["z_bound"].as_f64().unwrap();
+    let want = 2f64.sqrt() * 1.5 * 1000.0 * 1e-4 * 101f64.sqrt() / (10.0 * 0.5);
+    assert!((z - want).abs() < 1e-12 * want, "{forward}");
+    assert_eq!(forward["steps"], 1000);
+    assert!((forward["fix_period_s"].as_f64().unwrap() - 10.0).abs() < 1e-9);
+    // The inverse of that bound is N = 1000 again, and N + 1 would exceed it.
+    let z_text = format!("{z:e}");
+    let inverse = json(&echelon(
+        &[&common[..], &["--max-z", &z_text, "--ts", "0.01", "--json"]].concat(),
+    ));
+    assert_eq!(inverse["steps"], 1000, "{inverse}");
+    let inverse = json(&echelon(
+        &[&common[..], &["--max-z", "0.05", "--json"]].concat(),
+    ));
+    let n = inverse["steps"].as_u64().unwrap();
+    assert!(n as f64 * want / 1000.0 <= 0.05 && (n + 1) as f64 * want / 1000.0 > 0.05);
+    assert!(inverse["fix_period_s"].is_null());
+    // --max-e: ‖e‖ ≤ ‖z‖/K_e.
+    let by_e = json(&echelon(
+        &[&common[..], &["--max-e", "0.02", "--json"]].concat(),
+    ));
+    assert_eq!(
+        by_e["steps"],
+        json(&echelon(
+            &[&common[..], &["--max-z", "0.03", "--json"]].concat()
+        ))["steps"]
+    );
+    let text = stdout(&echelon(
+        &[&common[..], &["--max-z", "0.05", "--ts", "0.01"]].concat(),
+    ));
+    assert!(
+        text.contains(&format!("N = {n} samples")) && text.contains("fix at least every"),
+        "{text}"
+    );
+}
+
+#[test]
+fn bound_refuses_inputs_outside_the_theorem() {
+    for (args, needle) in [
+        (&["--gamma", "1"][..], "gamma"),
+        (&["--gamma", "0"], "gamma"),
+        (&["--ke", "-1"], "--ke"),
+        (&["--kz", "0"], "--kz"),
+        (&["--zeta", "0"], "--zeta"),
+    ] {
+        let mut all = vec![
+            "bound",
+            "--zeta",
+            "1e-4",
+            "--omega-max",
+            "1",
+            "--steps",
+            "10",
+        ];
+        all.extend_from_slice(args);
+        assert_refused(&echelon(&all), &[needle]);
+    }
+    assert_refused(
+        &echelon(&["bound", "--zeta", "1e-4", "--omega-max", "1"]),
+        &["--steps"],
+    );
+    assert_refused(
+        &echelon(&[
+            "bound",
+            "--zeta",
+            "1e-4",
+            "--omega-max",
+            "1",
+            "--steps",
+            "0",
+        ]),
+        &["--steps 0"],
+    );
+}
+
+const STUDY: &str = "[sim]\nduration = 4.0\ndt = 0.001\n[reference.circle]\nspeed = 0.5\nturn_rate = 0.2\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\n[[agents]]\nstart = { x = -0.6, y = -0.2, theta = 0.0 }\nleader = \"reference\"\noffset = { x = 0.5, y = 0.3 }\n[odometry]\nzeta = 1e-5\n";
+
+#[test]
+fn sweep_writes_one_row_per_run_the_same_on_any_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = scenario_file(dir.path(), STUDY);
+    let run = |threads: &str, out: &str| {
+        let out = dir.path().join(out);
+        let o = echelon(&[
+            "sweep",
+            &file,
+            "--zeta",
+            "1e-5,2e-5",
+            "--fix-every",
+            "0,100,500",
+            "--slip",
+            "0,1e-6",
+            "--seeds",
+            "2",
+            "--threads",
+            threads,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        (
+            stdout(&o),
+            std::fs::read_to_string(out.join("sweep.csv")).unwrap(),
+        )
+    };
+    let (text, one) = run("1", "a");
+    let (_, two) = run("2", "b");
+    assert_eq!(one, two, "sweep.csv depends on the thread count");
+    let mut lines = one.lines();
+    assert_eq!(lines.next().unwrap(), echelon::sweep::SWEEP_HEADER);
+    assert_eq!(lines.count(), 2 * 3 * 2 * 2, "ζ × N × slip × seeds");
+    assert!(text.contains("24 runs on 1 threads"), "{text}");
+    // Rows under Theorem 2's assumptions carry the bound, and respect it.
+    for row in one.lines().skip(1) {
+        let cells: Vec<&str> = row.split(',').collect();
+        let (slip, n, ratio) = (cells[4], cells[5], cells[14]);
+        if slip == "0.0" && n != "0" {
+            assert!(ratio.parse::<f64>().unwrap() < 1.0, "{row}");
+        } else {
+            assert!(ratio.is_empty(), "no bound outside the theorem: {row}");
+        }
+    }
+    assert_refused(&echelon(&["sweep", &file, "--gamma", "1"]), &["gamma"]);
+    assert_refused(&echelon(&["sweep", &file, "--ed", "0"]), &["--ed"]);
+}
+
+#[test]
+fn umbmark_estimates_and_writes_its_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("u");
+    let o = echelon(&[
+        "umbmark",
+        "--ed",
+        "1.004",
+        "--eb",
+        "1.015",
+        "--slip",
+        "1e-7",
+        "--seed",
+        "2",
+        "--json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let c = json(&o);
+    let ed = c["refined"]["ed"].as_f64().unwrap();
+    let eb = c["refined"]["eb"].as_f64().unwrap();
+    assert!(
+        (ed - 1.004).abs() < 0.1 * 0.004 && (eb - 1.015).abs() < 0.1 * 0.015,
+        "{c}"
+    );
+    let csv = std::fs::read_to_string(out.join("umbmark.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 10);
+    assert!(out.join("calibration.json").exists());
+    let text = stdout(&echelon(&["umbmark", "--ed", "1.004", "--eb", "1.015"]));
+    assert!(
+        text.contains("Borenstein") && text.contains("corrections: left wheel diameter ×"),
+        "{text}"
+    );
+    assert_refused(
+        &echelon(&["umbmark", "--robot", "agent9"]),
+        &["unknown robot"],
+    );
+    assert_refused(
+        &echelon(&["umbmark", "--from-log", "/no/such/run"]),
+        &["/no/such/run"],
+    );
+}
+
+#[test]
+fn run_writes_odometry_csv_when_agents_dead_reckon() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = scenario_file(dir.path(), STUDY);
+    let out = dir.path().join("r");
+    let o = echelon(&["run", &file, "--out", out.to_str().unwrap(), "--seed", "3"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("odometry.csv"));
+    let odo = std::fs::read_to_string(out.join("odometry.csv")).unwrap();
+    assert_eq!(
+        odo.lines().next(),
+        Some("t,agent,x_hat,y_hat,theta_hat,ex_hat,ey_hat,zx_hat,zy_hat,fix")
+    );
+    assert_eq!(
+        odo.lines().count(),
+        std::fs::read_to_string(out.join("trajectory.csv"))
+            .unwrap()
+            .lines()
+            .count()
+    );
+    // Without odometry no odometry.csv is written.
+    let plain = dir.path().join("p");
+    assert!(
+        echelon(&[
+            "run",
+            "nonfeasible",
+            "--duration",
+            "1",
+            "--out",
+            plain.to_str().unwrap(),
+            "-q"
+        ])
+        .status
+        .success()
+    );
+    assert!(!plain.join("odometry.csv").exists());
 }

@@ -189,4 +189,14 @@ pub enum OutputError {
     /// The simulation failed.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// A file that should hold a run's output does not parse.
+    #[error("{}:{line}: {message}", path.display())]
+    Parse {
+        /// The file.
+        path: std::path::PathBuf,
+        /// 1-based line (0: the whole file).
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
 }

@@ -13,6 +13,8 @@
 //! - [`control`]: the backstepping law (eqs. 7–16);
 //! - [`formation`]: who follows whom;
 //! - [`sim`]: the RK4 simulator, observers and run statistics;
+//! - [`odometry`]: encoders, dead reckoning, error models, fixes, Theorem 2, UMBmark;
+//! - [`sweep`]: Monte Carlo sweeps over odometry errors and fix intervals;
 //! - [`scenario`]: the TOML scenario format and the paper's built-in setups;
 //! - [`output`]: `trajectory.csv` and `summary.json`.
 //!
@@ -22,12 +24,15 @@ pub mod control;
 pub mod error;
 pub mod formation;
 pub mod lycomp;
+mod math;
 pub mod model;
+pub mod odometry;
 pub mod output;
 pub mod reference;
 pub mod scenario;
 pub mod sim;
 mod spline;
+pub mod sweep;
 
 pub use control::{Gains, Variant};
 pub use error::{FormationError, OutputError, ParamError, ReferenceError, ScenarioError, SimError};

@@ -208,6 +208,16 @@ impl State {
         }
     }
 
+    /// The pose part `(x, y, θ)`.
+    #[inline]
+    pub fn pose(&self) -> Pose {
+        Pose {
+            x: self.x,
+            y: self.y,
+            theta: self.theta,
+        }
+    }
+
     /// Position `p = [x, y]`.
     #[inline]
     pub fn position(&self) -> [f64; 2] {
@@ -234,6 +244,40 @@ impl State {
             && self.theta.is_finite()
             && self.v.is_finite()
             && self.omega.is_finite()
+    }
+}
+
+/// A planar pose `(x, y, θ)`: m, m, rad.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    /// x, m.
+    pub x: f64,
+    /// y, m.
+    pub y: f64,
+    /// Heading, rad.
+    pub theta: f64,
+}
+
+impl Pose {
+    /// `self ⊕ d`: the pose reached by moving `d` expressed in this pose's frame.
+    pub fn compose(&self, d: &Pose) -> Pose {
+        let (s, c) = self.theta.sin_cos();
+        Pose {
+            x: self.x + c * d.x - s * d.y,
+            y: self.y + s * d.x + c * d.y,
+            theta: self.theta + d.theta,
+        }
+    }
+
+    /// `self⁻¹ ⊕ other`: `other` expressed in this pose's frame.
+    pub fn between(&self, other: &Pose) -> Pose {
+        let (s, c) = self.theta.sin_cos();
+        let (dx, dy) = (other.x - self.x, other.y - self.y);
+        Pose {
+            x: c * dx + s * dy,
+            y: -s * dx + c * dy,
+            theta: other.theta - self.theta,
+        }
     }
 }
 

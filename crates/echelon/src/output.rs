@@ -120,6 +120,138 @@ impl<W: Write> Observer for TrajectoryCsv<W> {
     }
 }
 
+/// The header of `odometry.csv`: what each dead-reckoning agent's controller
+/// believed — its pose estimate and `ê`, `ẑ` (eqs. 33, 35) — and `fix`, the
+/// number of absolute fixes applied since the previous row. Only agents with
+/// odometry have rows.
+pub const ODOMETRY_HEADER: &str = "t,agent,x_hat,y_hat,theta_hat,ex_hat,ey_hat,zx_hat,zy_hat,fix";
+
+/// Streams `odometry.csv` rows on the same schedule as [`TrajectoryCsv`].
+#[derive(Debug)]
+pub struct OdometryCsv<W: Write> {
+    out: W,
+    every: u64,
+    line: String,
+    fixes: Vec<u64>,
+}
+
+impl<W: Write> OdometryCsv<W> {
+    /// Writes the header; then logs every `every`-th step (1: every step) and the last.
+    pub fn new(mut out: W, every: u64) -> io::Result<Self> {
+        writeln!(out, "{ODOMETRY_HEADER}")?;
+        Ok(OdometryCsv {
+            out,
+            every: every.max(1),
+            line: String::with_capacity(256),
+            fixes: Vec::new(),
+        })
+    }
+
+    /// Flushes and returns the writer.
+    pub fn finish(mut self) -> io::Result<W> {
+        self.out.flush()?;
+        Ok(self.out)
+    }
+}
+
+impl<W: Write> Observer for OdometryCsv<W> {
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        if !(frame.step.is_multiple_of(self.every) || frame.last) {
+            return Ok(());
+        }
+        self.fixes.resize(frame.odometers.len(), 0);
+        let mut buf = ryu::Buffer::new();
+        for (i, (odometer, o)) in frame.odometers.iter().zip(frame.outputs).enumerate() {
+            let Some(odometer) = odometer else { continue };
+            let est = odometer.believed(&frame.states[i]);
+            let line = &mut self.line;
+            line.clear();
+            push_time(line, frame.t);
+            let _ = write!(line, ",{}", i + 1);
+            for v in [
+                est.x,
+                est.y,
+                wrap_angle(est.theta),
+                o.e_hat[0],
+                o.e_hat[1],
+                o.z_hat[0],
+                o.z_hat[1],
+            ] {
+                line.push(',');
+                push_f64(line, v, &mut buf);
+            }
+            let applied = odometer.fixes_applied();
+            let _ = writeln!(line, ",{}", applied - self.fixes[i]);
+            self.fixes[i] = applied;
+            self.out.write_all(line.as_bytes())?;
+        }
+        Ok(())
+    }
+}
+
+/// A CSV of numbers with a header line, as echelon writes them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Table {
+    /// Column names.
+    pub header: Vec<String>,
+    /// Rows of numbers, one per line after the header.
+    pub rows: Vec<Vec<f64>>,
+}
+
+impl Table {
+    /// Reads a numeric CSV; every error names the file and line.
+    pub fn read(path: &Path) -> Result<Table, OutputError> {
+        let parse = |line: usize, message: String| OutputError::Parse {
+            path: path.to_path_buf(),
+            line,
+            message,
+        };
+        let text = std::fs::read_to_string(path).map_err(io_error(path))?;
+        let mut lines = text.lines();
+        let header: Vec<String> = lines
+            .next()
+            .ok_or_else(|| parse(1, "empty file: expected a header".into()))?
+            .split(',')
+            .map(|h| h.trim().to_owned())
+            .collect();
+        let mut rows = Vec::new();
+        for (k, line) in lines.enumerate() {
+            if line.trim().is_empty() {
+                continue;
+            }
+            let row = line
+                .split(',')
+                .map(|c| c.trim().parse::<f64>())
+                .collect::<Result<Vec<f64>, _>>()
+                .map_err(|e| parse(k + 2, format!("not a number: {e}")))?;
+            if row.len() != header.len() {
+                return Err(parse(
+                    k + 2,
+                    format!(
+                        "{} columns where the header has {}",
+                        row.len(),
+                        header.len()
+                    ),
+                ));
+            }
+            rows.push(row);
+        }
+        Ok(Table { header, rows })
+    }
+
+    /// The index of column `name`, or an error naming the file.
+    pub fn column(&self, name: &str, path: &Path) -> Result<usize, OutputError> {
+        self.header
+            .iter()
+            .position(|h| h == name)
+            .ok_or_else(|| OutputError::Parse {
+                path: path.to_path_buf(),
+                line: 1,
+                message: format!("no column `{name}` (found: {})", self.header.join(",")),
+            })
+    }
+}
+
 /// Everything `summary.json` holds.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunSummary {
@@ -145,6 +277,8 @@ pub struct RunSummary {
 pub const TRAJECTORY_FILE: &str = "trajectory.csv";
 /// See [`TRAJECTORY_FILE`].
 pub const SUMMARY_FILE: &str = "summary.json";
+/// Written when any agent dead-reckons; see [`ODOMETRY_HEADER`].
+pub const ODOMETRY_FILE: &str = "odometry.csv";
 
 fn io_error(path: &Path) -> impl FnOnce(io::Error) -> OutputError + '_ {
     move |source| OutputError::Io {
@@ -168,14 +302,40 @@ pub fn run_to_dir(
     let file = File::create(&traj_part).map_err(io_error(&traj_part))?;
     let mut csv = TrajectoryCsv::new(BufWriter::with_capacity(1 << 16, file), run.log_every)
         .map_err(io_error(&traj_part))?;
+    let odometry_part = part(ODOMETRY_FILE);
     let sim = &mut run.simulation;
+    let mut odometry = if sim.odometers().is_empty() {
+        None
+    } else {
+        let file = File::create(&odometry_part).map_err(io_error(&odometry_part))?;
+        Some(
+            OdometryCsv::new(BufWriter::with_capacity(1 << 16, file), run.log_every)
+                .map_err(io_error(&odometry_part))?,
+        )
+    };
     let mut summary = Summary::new(sim.agents().len(), Summary::SETTLE_TOLERANCE);
-    let result = sim.run(&mut [&mut csv as &mut dyn Observer, &mut summary, extra]);
+    let mut no_odometry = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
+    let odometry_observer: &mut dyn Observer = match &mut odometry {
+        Some(o) => o,
+        None => &mut no_odometry,
+    };
+    let result = sim.run(&mut [
+        &mut csv as &mut dyn Observer,
+        odometry_observer,
+        &mut summary,
+        extra,
+    ]);
     if let Err(e) = result {
         let _ = std::fs::remove_file(&traj_part);
+        let _ = std::fs::remove_file(&odometry_part);
         return Err(e.into());
     }
     csv.finish().map_err(io_error(&traj_part))?;
+    let mut renames = vec![(traj_part, TRAJECTORY_FILE)];
+    if let Some(o) = odometry {
+        o.finish().map_err(io_error(&odometry_part))?;
+        renames.push((odometry_part, ODOMETRY_FILE));
+    }
     let config = *sim.config();
     let report = RunSummary {
         scenario: run.name.clone(),
@@ -196,7 +356,8 @@ pub fn run_to_dir(
     })?;
     json.push('\n');
     std::fs::write(&summary_part, json).map_err(io_error(&summary_part))?;
-    for (from, to) in [(traj_part, TRAJECTORY_FILE), (summary_part, SUMMARY_FILE)] {
+    renames.push((summary_part, SUMMARY_FILE));
+    for (from, to) in renames {
         let to = dir.join(to);
         std::fs::rename(&from, &to).map_err(io_error(&to))?;
     }

@@ -11,6 +11,7 @@ use std::sync::Arc;
 use num_dual::{Dual2, DualNum};
 
 use crate::error::{ParamError, ReferenceError};
+use crate::math::sinc;
 use crate::spline::{Septic, check_waypoints};
 
 /// A planar position and its first four time derivatives.
@@ -87,15 +88,6 @@ pub struct Circle {
     pub speed: f64,
     /// `ω_d`, rad/s (0: straight line).
     pub turn_rate: f64,
-}
-
-/// `sin(x)/x`, accurate near 0.
-fn sinc(x: f64) -> f64 {
-    if x.abs() < 1e-4 {
-        1.0 - x * x / 6.0
-    } else {
-        x.sin() / x
-    }
 }
 
 impl Circle {

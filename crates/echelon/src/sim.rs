@@ -7,11 +7,13 @@
 //! in between. Stepping is explicit ([`Simulation::step`]) over plain data; the
 //! same inputs give the same bits.
 
-use crate::control::{Gains, LawOutput, LeaderMotion, Variant, law};
+use crate::control::{Gains, LawOutput, LeaderMotion, Variant, errors, law};
 use crate::error::{FormationError, ParamError, SimError};
 use crate::formation::{Formation, Leader};
 use crate::lycomp::{FitCoefficients, LyComp, LyDerivatives, Placement};
+pub use crate::model::Pose;
 use crate::model::{Input, RobotParams, State, Torques};
+use crate::odometry::{Odometer, OdometrySpec};
 use crate::reference::{Jet, Order, Reference, Trajectory};
 
 /// One robot of a formation: its body, its leader, where it holds that leader,
@@ -61,10 +63,16 @@ pub struct SimConfig {
 /// What one agent's controller and motors are doing at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct AgentOutput {
-    /// Tracking error `e` (eq. 7), body frame, m.
+    /// Tracking error `e` (eq. 7) of the true state, body frame, m.
     pub e: [f64; 2],
-    /// Backstepping error `z` (eq. 10), body frame, m/s.
+    /// Backstepping error `z` (eq. 10) of the true state, body frame, m/s.
     pub z: [f64; 2],
+    /// `ê` (eq. 35): the tracking error the controller sees (its estimated pose).
+    /// Equal to `e` without odometry.
+    pub e_hat: [f64; 2],
+    /// `ẑ` (eq. 33): the backstepping error the controller sees. Equal to `z`
+    /// without odometry.
+    pub z_hat: [f64; 2],
     /// What the controller commands (held value in sampled mode).
     pub command: Input,
     /// What the plant receives after torque saturation.
@@ -86,6 +94,8 @@ pub struct Frame<'a> {
     pub states: &'a [State],
     /// The agents' controller outputs at these states.
     pub outputs: &'a [AgentOutput],
+    /// Each agent's odometer, if it dead-reckons (empty without odometry).
+    pub odometers: &'a [Option<Odometer>],
 }
 
 /// An error an observer may return (e.g. an I/O error while logging).
@@ -117,13 +127,16 @@ struct System {
 impl System {
     /// Evaluates every agent at time `t` and states `x`: controller outputs into
     /// `out` and state derivatives into `dx`. With `held`, the commands are held
-    /// values (sampled controller) instead of fresh law outputs.
+    /// values (sampled controller) instead of fresh law outputs. With odometers,
+    /// the law acts on what they measure (eqs. 32–35) while `e`, `z` in `out` are
+    /// those of the true state.
     #[inline]
     fn evaluate(
         &self,
         t: f64,
         x: &[State],
         held: Option<&[Input]>,
+        odometers: &[Option<Odometer>],
         out: &mut [AgentOutput],
         dx: &mut [State],
     ) {
@@ -132,8 +145,20 @@ impl System {
         } else {
             Jet::default()
         };
+        let sensed = |j: usize| match odometers.get(j) {
+            Some(Some(o)) => o.measure(&x[j]),
+            _ => x[j],
+        };
         for &i in self.formation.order() {
             let a = &self.agents[i];
+            // What the law needs of the leader, from a state of robot j.
+            let leader_of = |s: &State, j: usize| {
+                // The leader was evaluated first: dx[j].v is its v̇ now.
+                (
+                    LeaderMotion::of_robot(s, dx[j].v),
+                    a.placement.offset_for_robot(s.v, s.omega),
+                )
+            };
             let (motion, offset) = match a.leader {
                 Leader::Reference => (
                     LeaderMotion {
@@ -143,19 +168,41 @@ impl System {
                     },
                     a.placement.offset_for_reference(&jet),
                 ),
-                Leader::Agent(j) => (
-                    // The leader was evaluated first: dx[j].v is its v̇ now.
-                    LeaderMotion::of_robot(&x[j], dx[j].v),
-                    a.placement.offset_for_robot(x[j].v, x[j].omega),
-                ),
+                Leader::Agent(j) => leader_of(&sensed(j), j),
             };
-            let LawOutput { u, e, z } = law(&a.robot, &x[i], &motion, &offset, a.gains, a.variant);
+            let me = sensed(i);
+            let LawOutput { u, e, z } = law(&a.robot, &me, &motion, &offset, a.gains, a.variant);
+            let (e_true, z_true) = if odometers.is_empty() {
+                (e, z)
+            } else {
+                // The same errors from the true states of the robot and its leader.
+                let (motion, offset) = match a.leader {
+                    Leader::Reference => (motion, offset),
+                    Leader::Agent(j) => leader_of(&x[j], j),
+                };
+                let s = &x[i];
+                errors(
+                    s.x,
+                    s.y,
+                    s.theta.sin_cos(),
+                    s.v,
+                    s.omega,
+                    motion.p,
+                    motion.dp,
+                    offset.lx,
+                    offset.ly,
+                    offset.dly,
+                    a.gains.ke,
+                )
+            };
             let command = held.map_or(u, |h| h[i]);
             let (applied, tau) = a.robot.actuate(command);
             dx[i] = a.robot.derivative(&x[i], applied);
             out[i] = AgentOutput {
-                e,
-                z,
+                e: e_true,
+                z: z_true,
+                e_hat: e,
+                z_hat: z,
                 command,
                 u: applied,
                 tau,
@@ -179,6 +226,12 @@ pub struct Simulation {
     out: Vec<AgentOutput>,
     k1: Vec<State>,
     fresh: bool,
+    /// Per-agent odometers (empty when no agent dead-reckons).
+    odometers: Vec<Option<Odometer>>,
+    /// Sample every this many steps, per agent.
+    odometry_every: Vec<u64>,
+    /// True distance travelled `∫v dt`, per agent (what the wheels turn through).
+    distance: Vec<f64>,
     // Scratch for stages 2–4.
     stage: Vec<State>,
     k2: Vec<State>,
@@ -335,12 +388,75 @@ impl Simulation {
             out: vec![AgentOutput::default(); n],
             k1: vec![State::default(); n],
             fresh: false,
+            odometers: Vec::new(),
+            odometry_every: Vec::new(),
+            distance: vec![0.0; n],
             stage: vec![State::default(); n],
             k2: vec![State::default(); n],
             k3: vec![State::default(); n],
             k4: vec![State::default(); n],
             scratch_out: vec![AgentOutput::default(); n],
         })
+    }
+
+    /// Gives agents odometers: `specs[i]` for agent `i` (`None`: it knows its true
+    /// pose). The controller then acts on the odometry estimate while the plant
+    /// moves truly. Random errors draw from `seed`, one stream per agent. Refuses
+    /// sampling periods that are not whole multiples of `dt` and invalid models.
+    pub fn with_odometry(
+        mut self,
+        specs: Vec<Option<OdometrySpec>>,
+        seed: u64,
+    ) -> Result<Simulation, SimError> {
+        let n = self.sys.agents.len();
+        if specs.len() != n {
+            return Err(SimError::Timing(format!(
+                "{} odometry specs for {n} agents",
+                specs.len()
+            )));
+        }
+        if specs.iter().all(Option::is_none) {
+            return Ok(self);
+        }
+        let dt = self.config.dt;
+        let mut odometers = Vec::with_capacity(n);
+        let mut every = Vec::with_capacity(n);
+        for (i, spec) in specs.into_iter().enumerate() {
+            let context = || format!("agent {} odometry", i + 1);
+            match spec {
+                None => {
+                    odometers.push(None);
+                    every.push(1);
+                }
+                Some(spec) => {
+                    let k = whole_ratio(spec.period, dt).ok_or_else(|| {
+                        SimError::Timing(format!(
+                            "{}: period {} s is not a whole multiple of dt = {dt} s",
+                            context(),
+                            spec.period
+                        ))
+                    })?;
+                    let a = &self.sys.agents[i];
+                    let o = Odometer::new(spec, &a.robot, &a.start, seed, i as u64).map_err(
+                        |source| SimError::Param {
+                            context: context(),
+                            source,
+                        },
+                    )?;
+                    odometers.push(Some(o));
+                    every.push(k);
+                }
+            }
+        }
+        self.odometers = odometers;
+        self.odometry_every = every;
+        self.fresh = false;
+        Ok(self)
+    }
+
+    /// Each agent's odometer (empty without odometry).
+    pub fn odometers(&self) -> &[Option<Odometer>] {
+        &self.odometers
     }
 
     /// The agents.
@@ -400,8 +516,14 @@ impl Simulation {
         }
         let sample = self.hold_every > 0 && self.step.is_multiple_of(self.hold_every);
         let held = (self.hold_every > 0 && !sample).then_some(&self.held[..]);
-        self.sys
-            .evaluate(self.time(), &self.state, held, &mut self.out, &mut self.k1);
+        self.sys.evaluate(
+            self.time(),
+            &self.state,
+            held,
+            &self.odometers,
+            &mut self.out,
+            &mut self.k1,
+        );
         if sample {
             for (h, o) in self.held.iter_mut().zip(&self.out) {
                 *h = o.command;
@@ -419,6 +541,7 @@ impl Simulation {
             last: self.is_done(),
             states: &self.state,
             outputs: &self.out,
+            odometers: &self.odometers,
         }
     }
 
@@ -430,6 +553,7 @@ impl Simulation {
         let t = self.time();
         let held = (self.hold_every > 0).then_some(&self.held[..]);
         let sys = &self.sys;
+        let odo = &self.odometers[..];
         for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k1)) {
             *s = x.add_scaled(k, 0.5 * dt);
         }
@@ -437,6 +561,7 @@ impl Simulation {
             t + 0.5 * dt,
             &self.stage,
             held,
+            odo,
             &mut self.scratch_out,
             &mut self.k2,
         );
@@ -447,6 +572,7 @@ impl Simulation {
             t + 0.5 * dt,
             &self.stage,
             held,
+            odo,
             &mut self.scratch_out,
             &mut self.k3,
         );
@@ -457,12 +583,16 @@ impl Simulation {
             t + dt,
             &self.stage,
             held,
+            odo,
             &mut self.scratch_out,
             &mut self.k4,
         );
         let h6 = dt / 6.0;
         for (i, x) in self.state.iter_mut().enumerate() {
             let (a, b, c, d) = (&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]);
+            // ṡ = v through the same RK4 stages: the stage speeds are
+            // v, v + dt/2 v̇₁, v + dt/2 v̇₂, v + dt v̇₃.
+            self.distance[i] += dt * x.v + dt * dt / 6.0 * (a.v + b.v + c.v);
             *x = State {
                 x: x.x + h6 * (a.x + 2.0 * (b.x + c.x) + d.x),
                 y: x.y + h6 * (a.y + 2.0 * (b.y + c.y) + d.y),
@@ -478,6 +608,14 @@ impl Simulation {
                 agent: i + 1,
                 t: self.time(),
             });
+        }
+        let now = self.time();
+        for (i, odometer) in self.odometers.iter_mut().enumerate() {
+            if let Some(o) = odometer
+                && self.step.is_multiple_of(self.odometry_every[i])
+            {
+                o.sample(now, &self.state[i], self.distance[i]);
+            }
         }
         Ok(())
     }
@@ -525,17 +663,6 @@ pub struct AgentSummary {
     pub peak_torque: f64,
     /// Time after which ‖e‖ stays below the settling tolerance, s (`None`: never).
     pub settle_time: Option<f64>,
-}
-
-/// A planar pose.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct Pose {
-    /// x, m.
-    pub x: f64,
-    /// y, m.
-    pub y: f64,
-    /// Heading, rad.
-    pub theta: f64,
 }
 
 /// Accumulates [`AgentSummary`] statistics over every frame of a run.

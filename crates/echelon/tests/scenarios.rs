@@ -10,16 +10,17 @@ use echelon::scenario::schema::ScenarioFile;
 use echelon::scenario::{self, Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 
-const NAMES: [&str; 5] = [
+const NAMES: [&str; 6] = [
     "circle-pentagon",
     "experiment-circle",
     "experiment-lemniscate",
+    "fix-study",
     "lemniscate-wedge",
     "nonfeasible",
 ];
 
 #[test]
-fn the_papers_five_setups_are_built_in() {
+fn the_papers_setups_and_the_fix_study_are_built_in() {
     let names: Vec<&str> = scenario::builtin().iter().map(|(n, _)| *n).collect();
     assert_eq!(names, NAMES);
 }
@@ -327,9 +328,11 @@ fn overrides_replace_the_files_timing_and_law() {
             duration: Some(3.0),
             log_dt: Some(0.0),
             law: Some(echelon::Variant::Complete),
+            seed: Some(9),
         })
         .unwrap();
     assert_eq!(run.simulation.steps(), 1500);
+    assert_eq!(run.seed, 9);
     assert_eq!(run.log_every, 1);
     assert_eq!(
         run.simulation.agents()[0].variant,

@@ -1,7 +1,10 @@
 //! One module per command.
 
+pub(crate) mod bound;
 pub(crate) mod run;
 pub(crate) mod scenarios;
+pub(crate) mod sweep;
+pub(crate) mod umbmark;
 
 /// A finite number, or a message saying why not.
 pub(crate) fn parse_number(s: &str) -> Result<f64, String> {

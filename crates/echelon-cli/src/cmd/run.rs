@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use clap::ValueEnum;
 
 use echelon::formation::Leader;
-use echelon::output::{self, RunSummary, SUMMARY_FILE, TRAJECTORY_FILE};
+use echelon::output::{self, ODOMETRY_FILE, RunSummary, SUMMARY_FILE, TRAJECTORY_FILE};
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 use echelon::{Simulation, Variant};
@@ -34,6 +34,9 @@ pub(crate) struct RunArgs {
     /// Law for every agent: `paper` (eq. 13) or `complete` (cross term cancelled).
     #[arg(long, value_enum, value_name = "LAW")]
     law: Option<LawArg>,
+    /// Seed of the random models (odometry noise, slip, fixes) [default: the scenario's, else 0].
+    #[arg(long, value_name = "N")]
+    seed: Option<u64>,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -58,6 +61,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
             LawArg::Paper => Variant::Paper,
             LawArg::Complete => Variant::Complete,
         }),
+        seed: args.seed,
     };
     let mut run = scenario.build(&overrides)?;
     let out = args
@@ -75,11 +79,16 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     let elapsed = started.elapsed().as_secs_f64();
     if !args.quiet {
         print_summary(&run.simulation, &summary, elapsed);
-        println!(
-            "wrote {}, {}",
-            out.join(TRAJECTORY_FILE).display(),
-            out.join(SUMMARY_FILE).display()
-        );
+        let mut files = vec![TRAJECTORY_FILE];
+        if !run.simulation.odometers().is_empty() {
+            files.push(ODOMETRY_FILE);
+        }
+        files.push(SUMMARY_FILE);
+        let shown: Vec<String> = files
+            .iter()
+            .map(|f| out.join(f).display().to_string())
+            .collect();
+        println!("wrote {}", shown.join(", "));
     }
     Ok(())
 }

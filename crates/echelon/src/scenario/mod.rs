@@ -16,13 +16,15 @@ use crate::error::{FormationError, Location, ParamError, ReferenceError, Scenari
 use crate::formation::Leader;
 use crate::lycomp::{LyComp, LyDerivatives, Placement};
 use crate::model::{RobotParams, State};
+use crate::odometry::{ErrorModel, FixSchedule, FixSpec, Fusion, OdometrySpec, ZetaModel};
 use crate::reference::{Circle, Cubic, Lemniscate, Reference, Waypoints};
 use crate::sim::{AgentSpec, SimConfig, Simulation, Timing, whole_ratio};
 
 use locate::{FieldPath, Spans, line_col};
 use schema::{
-    AgentSection, ControlSection, LawName, LeaderSpec, LyCompName, LyDerivativesName, ModeName,
-    PoseSpec, ReferenceSection, RobotSection, ScenarioFile,
+    AgentSection, ControlSection, FixesSection, FusionName, LawName, LeaderSpec, LyCompName,
+    LyDerivativesName, ModeName, OdometrySection, PoseSpec, ReferenceSection, RobotSection,
+    ScenarioFile, ZetaModelName,
 };
 
 include!(concat!(env!("OUT_DIR"), "/builtin.rs"));
@@ -57,6 +59,8 @@ pub struct Overrides {
     pub log_dt: Option<f64>,
     /// Law variant for every agent.
     pub law: Option<Variant>,
+    /// Seed of the random models.
+    pub seed: Option<u64>,
 }
 
 /// A scenario ready to run.
@@ -70,6 +74,8 @@ pub struct Run {
     pub simulation: Simulation,
     /// Log every this many steps (1: every step).
     pub log_every: u64,
+    /// Seed of the random models.
+    pub seed: u64,
 }
 
 impl Scenario {
@@ -268,13 +274,22 @@ impl Scenario {
             duration,
             timing,
         };
-        let simulation =
-            Simulation::new(agents, reference, config).map_err(|e| self.sim_error(e))?;
+        let odometry = f
+            .agents
+            .iter()
+            .enumerate()
+            .map(|(i, a)| self.odometry(i, a, dt, &timing))
+            .collect::<Result<Vec<_>, _>>()?;
+        let seed = ov.seed.or(f.seed).unwrap_or(0);
+        let simulation = Simulation::new(agents, reference, config)
+            .and_then(|s| s.with_odometry(odometry, seed))
+            .map_err(|e| self.sim_error(e))?;
         Ok(Run {
             name: self.name.clone(),
             description: f.description.clone(),
             simulation,
             log_every,
+            seed,
         })
     }
 
@@ -568,6 +583,142 @@ impl Scenario {
         Ok(params)
     }
 
+    /// Agent `i`'s odometry: its own `odometry`/`fixes` over the file's, field by
+    /// field; `None` when neither asks for odometry (or `enabled = false`).
+    fn odometry(
+        &self,
+        i: usize,
+        a: &AgentSection,
+        dt: f64,
+        timing: &Timing,
+    ) -> Result<Option<OdometrySpec>, ScenarioError> {
+        let f = &self.file;
+        let agent = FieldPath::from("agents").index(i);
+        let odo = Merge::new(
+            a.odometry.as_ref(),
+            f.odometry.as_ref(),
+            agent.key("odometry"),
+            FieldPath::from("odometry"),
+        );
+        let fix = Merge::new(
+            a.fixes.as_ref(),
+            f.fixes.as_ref(),
+            agent.key("fixes"),
+            FieldPath::from("fixes"),
+        );
+        let odometry_off = odo.get(|s| s.enabled, "enabled").filter(|(e, _)| !e);
+        let fixes_on = fix.any() && fix.get(|s| s.enabled, "enabled").is_none_or(|(e, _)| e);
+        if let Some((_, path)) = odometry_off {
+            // Global fixes simply do not apply; the agent's own would contradict.
+            if fixes_on && a.fixes.is_some() {
+                return Err(self.error(
+                    &path,
+                    "fixes correct an odometry estimate, but this agent's odometry is disabled",
+                ));
+            }
+            return Ok(None);
+        }
+        if !odo.any() && !fixes_on {
+            return Ok(None);
+        }
+        let period = match odo.get(|s| s.period, "period") {
+            None => match timing {
+                Timing::Sampled { period } => *period,
+                Timing::Continuous => dt,
+            },
+            Some((p, path)) => {
+                if !(p.is_finite() && p > 0.0) {
+                    return Err(self.error(&path, format!("{p} must be a finite number > 0")));
+                }
+                if whole_ratio(p, dt).is_none() {
+                    return Err(self.error(
+                        &path,
+                        format!("{p} s is not a whole multiple of dt = {dt} s"),
+                    ));
+                }
+                p
+            }
+        };
+        let num = |get: fn(&OdometrySection) -> Option<f64>, key: &str, default: f64| {
+            odo.get(get, key).map_or(default, |(v, _)| v)
+        };
+        let errors = ErrorModel {
+            zeta: num(|s| s.zeta, "zeta", 0.0),
+            zeta_model: match odo.get(|s| s.zeta_model, "zeta_model") {
+                Some((ZetaModelName::WorstCase, _)) => ZetaModel::WorstCase,
+                _ => ZetaModel::Wheels,
+            },
+            wheel_diameter_ratio: num(|s| s.wheel_diameter_ratio, "wheel_diameter_ratio", 1.0),
+            wheelbase_ratio: num(|s| s.wheelbase_ratio, "wheelbase_ratio", 1.0),
+            slip: num(|s| s.slip, "slip", 0.0),
+            ticks_per_rev: odo
+                .get(|s| s.ticks_per_rev, "ticks_per_rev")
+                .map(|(v, _)| v),
+            speed_noise: num(|s| s.speed_noise, "speed_noise", 0.0),
+            turn_rate_noise: num(|s| s.turn_rate_noise, "turn_rate_noise", 0.0),
+        };
+        errors
+            .validate()
+            .map_err(|e| self.error(&odo.path_of(e.field), format!("{} {}", e.value, e.reason)))?;
+        let fixes = if fixes_on {
+            let schedule = match (
+                fix.get(|s| s.every_steps, "every_steps"),
+                fix.get(|s| s.period, "period"),
+            ) {
+                (Some(_), Some((_, path))) => {
+                    return Err(self.error(&path, "give either every_steps or period, not both"));
+                }
+                (None, None) => {
+                    return Err(self.error(
+                        &fix.table_path(),
+                        "missing field `every_steps` (samples between fixes) or `period` (s)",
+                    ));
+                }
+                (Some((n, path)), None) => {
+                    if n == 0 {
+                        return Err(self.error(&path, "0 must be ≥ 1"));
+                    }
+                    FixSchedule::EverySamples(n)
+                }
+                (None, Some((p, path))) => {
+                    if !(p.is_finite() && p > 0.0) || whole_ratio(p, period).is_none() {
+                        return Err(self.error(
+                            &path,
+                            format!(
+                                "{p} s is not a whole multiple of the odometry period {period} s"
+                            ),
+                        ));
+                    }
+                    FixSchedule::Period(p)
+                }
+            };
+            let value = |get: fn(&FixesSection) -> Option<f64>, key: &str| {
+                fix.get(get, key).map(|(v, _)| v)
+            };
+            let spec = FixSpec {
+                schedule,
+                position_noise: value(|s| s.position_noise, "position_noise").unwrap_or(0.0),
+                heading_noise: value(|s| s.heading_noise, "heading_noise"),
+                latency: value(|s| s.latency, "latency").unwrap_or(0.0),
+                fusion: match fix.get(|s| s.fusion, "fusion") {
+                    Some((FusionName::Ekf, _)) => Fusion::Ekf,
+                    _ => Fusion::Reset,
+                },
+            };
+            spec.validate().map_err(|e| {
+                self.error(&fix.path_of(e.field), format!("{} {}", e.value, e.reason))
+            })?;
+            Some(spec)
+        } else {
+            None
+        };
+        Ok(Some(OdometrySpec {
+            period,
+            errors,
+            fixes,
+        }))
+    }
+
     fn agent(
         &self,
         i: usize,
@@ -699,5 +850,67 @@ impl Scenario {
             variant,
             start,
         })
+    }
+}
+
+/// An agent's table over the file's, field by field, remembering where each
+/// value came from.
+struct Merge<'a, S> {
+    own: Option<&'a S>,
+    global: Option<&'a S>,
+    own_path: FieldPath,
+    global_path: FieldPath,
+}
+
+impl<'a, S: serde::Serialize> Merge<'a, S> {
+    fn new(
+        own: Option<&'a S>,
+        global: Option<&'a S>,
+        own_path: FieldPath,
+        global_path: FieldPath,
+    ) -> Self {
+        Merge {
+            own,
+            global,
+            own_path,
+            global_path,
+        }
+    }
+
+    /// Whether either table exists.
+    fn any(&self) -> bool {
+        self.own.is_some() || self.global.is_some()
+    }
+
+    /// The value of `key` and the path it was set at.
+    fn get<T>(&self, get: fn(&S) -> Option<T>, key: &str) -> Option<(T, FieldPath)> {
+        if let Some(v) = self.own.and_then(get) {
+            return Some((v, self.own_path.key(key)));
+        }
+        self.global
+            .and_then(get)
+            .map(|v| (v, self.global_path.key(key)))
+    }
+
+    /// Where `key` is set: the agent's table if it sets it, else the file's.
+    fn path_of(&self, key: &str) -> FieldPath {
+        let sets = self
+            .own
+            .and_then(|s| toml::Table::try_from(s).ok())
+            .is_some_and(|t| t.contains_key(key));
+        if sets {
+            self.own_path.key(key)
+        } else {
+            self.global_path.key(key)
+        }
+    }
+
+    /// The table that applies (the agent's if it has one).
+    fn table_path(&self) -> FieldPath {
+        if self.own.is_some() {
+            self.own_path.clone()
+        } else {
+            self.global_path.clone()
+        }
     }
 }

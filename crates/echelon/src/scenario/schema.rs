@@ -32,6 +32,100 @@ pub struct ScenarioFile {
     pub reference: ReferenceSection,
     /// The robots of the formation, numbered from 1 in this order.
     pub agents: Vec<AgentSection>,
+    /// Seed of every random model (odometry noise, slip, fixes); default 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// Odometry for every agent (an agent's `odometry` overrides field by field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odometry: Option<OdometrySection>,
+    /// Absolute position fixes for every agent (an agent's `fixes` overrides).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fixes: Option<FixesSection>,
+}
+
+/// `[odometry]`: the robot dead-reckons from its wheel encoders (paper section 6)
+/// and the controller acts on that estimate. All fields optional.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OdometrySection {
+    /// `false` turns odometry off (for one agent, under a global `[odometry]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub enabled: Option<bool>,
+    /// Encoder sampling period, s (default: `sim.controller_period`, else `sim.dt`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub period: Option<f64>,
+    /// Encoder ticks per wheel revolution (default: ideal encoders).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ticks_per_rev: Option<u32>,
+    /// The paper's additive error `ζ`, m per sample (eq. 23; default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zeta: Option<f64>,
+    /// `wheels` (eq. 23, default) or `worst-case` (eq. 31).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zeta_model: Option<ZetaModelName>,
+    /// Borenstein's `E_d = D_R/D_L` (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheel_diameter_ratio: Option<f64>,
+    /// Borenstein's `E_b = b_actual/b_nominal` (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheelbase_ratio: Option<f64>,
+    /// Slip: variance of each wheel's displacement per metre travelled, m²/m (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slip: Option<f64>,
+    /// Standard deviation of the measured linear speed, m/s (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed_noise: Option<f64>,
+    /// Standard deviation of the measured angular speed, rad/s (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turn_rate_noise: Option<f64>,
+}
+
+/// How the paper's `ζ` enters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ZetaModelName {
+    /// Eq. 23: the same `ζ` on both wheels every sample.
+    Wheels,
+    /// Eq. 31: `ζ` on both world axes every sample.
+    WorstCase,
+}
+
+/// `[fixes]`: absolute position fixes. All fields optional, but exactly one of
+/// `every_steps` and `period` is needed.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FixesSection {
+    /// `false` turns fixes off (for one agent, under a global `[fixes]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub enabled: Option<bool>,
+    /// A fix every `N` odometry samples (the paper's `N`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub every_steps: Option<u64>,
+    /// A fix every `T` seconds (a whole number of odometry samples).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub period: Option<f64>,
+    /// Standard deviation of each fixed coordinate, m (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_noise: Option<f64>,
+    /// Standard deviation of the fixed heading, rad (absent: fixes carry no heading).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heading_noise: Option<f64>,
+    /// Delay from taking a fix to the robot using it, s (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latency: Option<f64>,
+    /// `reset` (the paper, default) or `ekf`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fusion: Option<FusionName>,
+}
+
+/// How fixes correct the estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FusionName {
+    /// Replace the estimate.
+    Reset,
+    /// Extended Kalman filter.
+    Ekf,
 }
 
 /// `[sim]`: how long and how finely to integrate.
@@ -253,6 +347,12 @@ pub struct AgentSection {
     /// Controller settings for this agent only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub control: Option<ControlSection>,
+    /// Odometry settings for this agent (over `[odometry]`, field by field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odometry: Option<OdometrySection>,
+    /// Fix settings for this agent (over `[fixes]`, field by field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fixes: Option<FixesSection>,
 }
 
 /// What an agent's controller does.

@@ -1,0 +1,212 @@
+//! `echelon sweep`: Monte Carlo over odometry error models × fix intervals ×
+//! seeds, in parallel on all cores, with Theorem 2's bound beside each run.
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::ValueEnum;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use echelon::odometry::ZetaModel;
+use echelon::scenario::{Overrides, Scenario};
+use echelon::sweep::{self, Grid, Row};
+
+use super::{non_negative, positive};
+
+/// Arguments of `echelon sweep`.
+#[derive(Debug, clap::Args)]
+pub(crate) struct SweepArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    scenario: String,
+    /// ζ values, m per odometry sample (comma-separated).
+    #[arg(long, value_name = "M,…", value_delimiter = ',', default_value = "1e-5", value_parser = non_negative)]
+    zeta: Vec<f64>,
+    /// How ζ enters: `wheels` (eq. 23) or `worst-case` (eq. 31, Theorem 2's case).
+    #[arg(long, value_enum, default_value_t = ZetaArg::Wheels)]
+    zeta_model: ZetaArg,
+    /// E_d values (wheel diameter ratio; 1 is perfect).
+    #[arg(long, value_name = "ED,…", value_delimiter = ',', default_value = "1", value_parser = positive)]
+    ed: Vec<f64>,
+    /// E_b values (wheelbase ratio; 1 is perfect).
+    #[arg(long, value_name = "EB,…", value_delimiter = ',', default_value = "1", value_parser = positive)]
+    eb: Vec<f64>,
+    /// Slip variances, m²/m.
+    #[arg(long, value_name = "V,…", value_delimiter = ',', default_value = "0", value_parser = non_negative)]
+    slip: Vec<f64>,
+    /// Odometry samples between absolute fixes, N (0: no fixes).
+    #[arg(
+        long,
+        value_name = "N,…",
+        value_delimiter = ',',
+        default_value = "10,20,50,100,200,500"
+    )]
+    fix_every: Vec<u64>,
+    /// Seeds per combination.
+    #[arg(long, value_name = "K", default_value_t = 4)]
+    seeds: u64,
+    /// First seed.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    seed: u64,
+    /// Theorem 2's γ ∈ (0, 1) for the bound column.
+    #[arg(long, default_value_t = 0.99)]
+    gamma: f64,
+    /// Statistics are taken after this time, s [default: half the duration].
+    #[arg(long, value_name = "S", value_parser = non_negative)]
+    transient: Option<f64>,
+    /// Simulated time of each run, s (overrides the scenario's).
+    #[arg(long, value_name = "S", value_parser = positive)]
+    duration: Option<f64>,
+    /// RK4 step, s (overrides the scenario's).
+    #[arg(long, value_name = "S", value_parser = positive)]
+    dt: Option<f64>,
+    /// Worker threads [default: all cores].
+    #[arg(long, value_name = "K")]
+    threads: Option<usize>,
+    /// Output directory [default: out/<scenario>-sweep].
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Print nothing but errors.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum ZetaArg {
+    /// Eq. 23: the same ζ on both wheels; the heading stays exact.
+    Wheels,
+    /// Eq. 31: ζ on both world axes every sample.
+    WorstCase,
+}
+
+/// Runs `echelon sweep`.
+pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
+    let scenario = Scenario::resolve(&a.scenario)?;
+    let overrides = Overrides {
+        dt: a.dt,
+        duration: a.duration,
+        ..Overrides::default()
+    };
+    let probe = scenario.build(&overrides)?;
+    let duration = probe.simulation.steps() as f64 * probe.simulation.config().dt;
+    let grid = Grid {
+        zeta: a.zeta.clone(),
+        zeta_model: match a.zeta_model {
+            ZetaArg::Wheels => ZetaModel::Wheels,
+            ZetaArg::WorstCase => ZetaModel::WorstCase,
+        },
+        wheel_diameter_ratio: a.ed.clone(),
+        wheelbase_ratio: a.eb.clone(),
+        slip: a.slip.clone(),
+        fix_every: a.fix_every.clone(),
+        seeds: (a.seed..a.seed.saturating_add(a.seeds)).collect(),
+        gamma: a.gamma,
+        transient: a.transient.unwrap_or(0.5 * duration),
+    };
+    grid.validate()?;
+    let total = grid.cases().len();
+    let pool = {
+        let mut b = rayon::ThreadPoolBuilder::new();
+        if let Some(k) = a.threads {
+            anyhow::ensure!(k >= 1, "--threads must be ≥ 1");
+            b = b.num_threads(k);
+        }
+        b.build()?
+    };
+    let bar = if a.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(total as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} runs, {eta} left")
+            .map_or_else(
+                |_| ProgressStyle::default_bar(),
+                |s| s.progress_chars("=> "),
+            ),
+    );
+    bar.set_prefix(scenario.name().to_owned());
+    let started = Instant::now();
+    let rows = pool.install(|| sweep::run(&scenario, &overrides, &grid, &|| bar.inc(1)))?;
+    bar.finish_and_clear();
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out").join(format!("{}-sweep", scenario.name())));
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let path = out.join("sweep.csv");
+    let file = File::create(&path).with_context(|| format!("writing {}", path.display()))?;
+    sweep::write_csv(BufWriter::new(file), &rows, grid.zeta_model)
+        .with_context(|| format!("writing {}", path.display()))?;
+    if !a.quiet {
+        print_summary(
+            &rows,
+            total,
+            pool.current_num_threads(),
+            started.elapsed().as_secs_f64(),
+        );
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) {
+    println!(
+        "{total} runs on {threads} threads in {seconds:.1} s; maxima over seeds, after the transient:"
+    );
+    println!(
+        "  {:>8}  {:>6}  {:>6}  {:>8}  {:>6}  {:>10}  {:>10}  {:>9}  {:>10}  {:>10}",
+        "ζ (m)",
+        "E_d",
+        "E_b",
+        "slip",
+        "N",
+        "‖z‖ (m/s)",
+        "bound",
+        "‖z‖/bound",
+        "‖e‖ (m)",
+        "drift (m)"
+    );
+    // Rows come in grid order with seeds varying fastest: group consecutive rows.
+    let same = |a: &Row, b: &Row| {
+        Row {
+            case: sweep::Case { seed: 0, ..a.case },
+            ..*a
+        }
+        .case
+            == sweep::Case { seed: 0, ..b.case }
+    };
+    let mut start = 0;
+    while start < rows.len() {
+        let end = (start..rows.len())
+            .find(|&k| !same(&rows[start], &rows[k]))
+            .unwrap_or(rows.len());
+        let group = &rows[start..end];
+        let max = |f: fn(&Row) -> f64| group.iter().map(f).fold(0.0, f64::max);
+        let opt_max = |f: fn(&Row) -> Option<f64>| group.iter().filter_map(f).reduce(f64::max);
+        let c = &group[0].case;
+        let n = if c.fix_every == 0 {
+            "never".to_owned()
+        } else {
+            c.fix_every.to_string()
+        };
+        let shown =
+            |v: Option<f64>, p: usize| v.map_or_else(|| "–".to_owned(), |v| format!("{v:.p$e}"));
+        println!(
+            "  {:>8.1e}  {:>6}  {:>6}  {:>8.1e}  {:>6}  {:>10.3e}  {:>10}  {:>9}  {:>10.3e}  {:>10.3e}",
+            c.zeta,
+            c.wheel_diameter_ratio,
+            c.wheelbase_ratio,
+            c.slip,
+            n,
+            max(|r| r.z_max),
+            shown(opt_max(|r| r.z_bound), 3),
+            opt_max(|r| r.z_over_bound).map_or_else(|| "–".to_owned(), |v| format!("{v:.3}")),
+            max(|r| r.e_max),
+            max(|r| r.drift_max),
+        );
+        start = end;
+    }
+}

@@ -1,0 +1,600 @@
+//! Odometry (paper section 6): wheel encoders, dead reckoning, error models,
+//! absolute position fixes and the estimate the controller acts on.
+//!
+//! Each sample the encoders give the wheels' displacements `Δr`, `Δl`; dead
+//! reckoning integrates them (eqs. 21–22). The robot's true motion comes from
+//! the plant, so everything that makes the encoders lie — the paper's additive
+//! `ζ` (Assumption 1, eq. 23), Borenstein's unequal wheel diameters `E_d` and
+//! wheelbase error `E_b`, random slip, tick quantization — makes the estimate
+//! drift from the truth. Absolute fixes (every `N` samples or `T` seconds, with
+//! noise and latency) reset the estimate (the paper) or feed an EKF.
+//!
+//! [`bound`] is Theorem 2, [`umbmark`] Borenstein's calibration test.
+
+pub mod bound;
+mod ekf;
+pub mod umbmark;
+
+use std::collections::VecDeque;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+use crate::error::ParamError;
+use crate::math::sinc;
+use crate::model::{Pose, RobotParams, State};
+
+pub use ekf::Ekf;
+
+/// Linear displacements of the two wheels over one sample, m.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct WheelDisplacement {
+    /// Right wheel `Δr`.
+    pub right: f64,
+    /// Left wheel `Δl`.
+    pub left: f64,
+}
+
+impl WheelDisplacement {
+    /// `Δ = (Δr + Δl)/2` and `Θ = (Δr − Δl)/(2l)` (eq. 21).
+    #[inline]
+    pub fn to_motion(self, half_wheelbase: f64) -> (f64, f64) {
+        (
+            0.5 * (self.right + self.left),
+            (self.right - self.left) / (2.0 * half_wheelbase),
+        )
+    }
+}
+
+/// One dead-reckoning update (eq. 22) by the linear displacement `Δ` and the
+/// heading change `Θ`, along the exact arc. Eq. 22's `(Δ/Θ)(sin θₙ − sin θₙ₋₁)` is
+/// computed as `Δ sinc(Θ/2) cos(θₙ₋₁ + Θ/2)`, which is the same number without the
+/// division (and is eq. 22's straight-line branch at `Θ = 0`).
+#[inline]
+pub fn arc_update(pose: &Pose, delta: f64, big_theta: f64) -> Pose {
+    let chord = delta * sinc(0.5 * big_theta);
+    let (s, c) = (pose.theta + 0.5 * big_theta).sin_cos();
+    Pose {
+        x: pose.x + chord * c,
+        y: pose.y + chord * s,
+        theta: pose.theta + big_theta,
+    }
+}
+
+/// Dead reckoning from wheel displacements: eq. 21 then eq. 22.
+#[inline]
+pub fn dead_reckon(pose: &Pose, d: WheelDisplacement, half_wheelbase: f64) -> Pose {
+    let (delta, big_theta) = d.to_motion(half_wheelbase);
+    arc_update(pose, delta, big_theta)
+}
+
+/// How the paper's additive error `ζ` enters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ZetaModel {
+    /// Assumption 1, eq. 23: each wheel's true displacement exceeds the measured
+    /// one by `ζ` every sample, so `Δ = Δ̂ + ζ`, `Θ = Θ̂` (eq. 24): the heading
+    /// stays exact and the position drifts by at most `ζ` per axis per sample.
+    #[default]
+    Wheels,
+    /// The worst case of eq. 31: the true position exceeds the estimate by `ζ`
+    /// on both world axes every sample (`x_N = x̂_N + Nζ`, `y_N = ŷ_N + Nζ`), the
+    /// case Theorem 2 is written for.
+    WorstCase,
+}
+
+/// The errors of one robot's odometry. All default to a perfect odometer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorModel {
+    /// The paper's additive error `ζ`, m per sample (eq. 23).
+    pub zeta: f64,
+    /// How `ζ` enters.
+    pub zeta_model: ZetaModel,
+    /// Borenstein's `E_d = D_R / D_L`, the ratio of the actual wheel diameters
+    /// (their mean is the nominal one). 1 is perfect.
+    pub wheel_diameter_ratio: f64,
+    /// Borenstein's `E_b = b_actual / b_nominal`, the actual over the nominal
+    /// wheelbase. 1 is perfect.
+    pub wheelbase_ratio: f64,
+    /// Random slip: each wheel's measured displacement gets Gaussian noise of
+    /// variance `slip · |Δ|`, m²/m (variance per metre travelled).
+    pub slip: f64,
+    /// Encoder resolution, ticks per wheel revolution (`None`: ideal encoders).
+    pub ticks_per_rev: Option<u32>,
+    /// Standard deviation of the measured linear speed, m/s (Assumption 2: speeds
+    /// are measured directly; 0 is exact).
+    pub speed_noise: f64,
+    /// Standard deviation of the measured angular speed, rad/s.
+    pub turn_rate_noise: f64,
+}
+
+impl Default for ErrorModel {
+    fn default() -> Self {
+        ErrorModel::PERFECT
+    }
+}
+
+impl ErrorModel {
+    /// Perfect encoders and speed measurements.
+    pub const PERFECT: ErrorModel = ErrorModel {
+        zeta: 0.0,
+        zeta_model: ZetaModel::Wheels,
+        wheel_diameter_ratio: 1.0,
+        wheelbase_ratio: 1.0,
+        slip: 0.0,
+        ticks_per_rev: None,
+        speed_noise: 0.0,
+        turn_rate_noise: 0.0,
+    };
+
+    /// Refuses non-finite values, negative variances and ratios ≤ 0.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let finite = [
+            ("zeta", self.zeta),
+            ("wheel_diameter_ratio", self.wheel_diameter_ratio),
+            ("wheelbase_ratio", self.wheelbase_ratio),
+            ("slip", self.slip),
+            ("speed_noise", self.speed_noise),
+            ("turn_rate_noise", self.turn_rate_noise),
+        ];
+        for (field, v) in finite {
+            if !v.is_finite() {
+                return Err(ParamError::new(field, v, "must be a finite number"));
+            }
+        }
+        for (field, v) in [
+            ("wheel_diameter_ratio", self.wheel_diameter_ratio),
+            ("wheelbase_ratio", self.wheelbase_ratio),
+        ] {
+            if v <= 0.0 {
+                return Err(ParamError::new(
+                    field,
+                    v,
+                    "must be > 0 (1 is a perfect robot)",
+                ));
+            }
+        }
+        for (field, v) in [
+            ("slip", self.slip),
+            ("speed_noise", self.speed_noise),
+            ("turn_rate_noise", self.turn_rate_noise),
+        ] {
+            if v < 0.0 {
+                return Err(ParamError::new(field, v, "must be ≥ 0"));
+            }
+        }
+        if self.ticks_per_rev == Some(0) {
+            return Err(ParamError::new("ticks_per_rev", 0.0, "must be ≥ 1"));
+        }
+        Ok(())
+    }
+
+    /// Actual right and left wheel radii for nominal radius `r` (Borenstein: the
+    /// mean diameter is nominal, `D_R/D_L = E_d`).
+    pub fn wheel_radii(&self, r: f64) -> (f64, f64) {
+        let e = self.wheel_diameter_ratio;
+        (r * 2.0 * e / (e + 1.0), r * 2.0 / (e + 1.0))
+    }
+}
+
+/// When absolute fixes are taken.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FixSchedule {
+    /// Every `N` odometry samples (the paper's `N`).
+    EverySamples(u64),
+    /// Every `T` seconds (a whole number of odometry samples).
+    Period(f64),
+}
+
+/// How a fix corrects the estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Fusion {
+    /// Replace the estimate by the fix (the paper's "recalibration").
+    #[default]
+    Reset,
+    /// Fuse odometry and fixes in an extended Kalman filter.
+    Ekf,
+}
+
+/// Absolute position fixes (a motion-capture system, GNSS, a beacon…).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FixSpec {
+    /// When.
+    pub schedule: FixSchedule,
+    /// Standard deviation of each position coordinate, m.
+    pub position_noise: f64,
+    /// Standard deviation of the heading, rad (`None`: fixes give no heading).
+    pub heading_noise: Option<f64>,
+    /// Delay between taking a fix and the robot receiving it, s.
+    pub latency: f64,
+    /// How the fix is used.
+    pub fusion: Fusion,
+}
+
+impl FixSpec {
+    /// Refuses an empty schedule and negative or non-finite noises and latency.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        match self.schedule {
+            FixSchedule::EverySamples(0) => {
+                return Err(ParamError::new("every_steps", 0.0, "must be ≥ 1"));
+            }
+            FixSchedule::Period(p) if !(p.is_finite() && p > 0.0) => {
+                return Err(ParamError::new("period", p, "must be a finite number > 0"));
+            }
+            _ => {}
+        }
+        for (field, v) in [
+            ("position_noise", self.position_noise),
+            ("heading_noise", self.heading_noise.unwrap_or(0.0)),
+            ("latency", self.latency),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(ParamError::new(field, v, "must be a finite number ≥ 0"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One robot's odometry: sampling period, errors and fixes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometrySpec {
+    /// Sampling period of the encoders, s (a whole multiple of the simulation step).
+    pub period: f64,
+    /// What makes the encoders lie.
+    pub errors: ErrorModel,
+    /// Absolute fixes, if any.
+    pub fixes: Option<FixSpec>,
+}
+
+/// A fix on its way to the robot.
+#[derive(Debug, Clone, Copy)]
+struct PendingFix {
+    arrives: f64,
+    fix: Pose,
+    estimate_then: Pose,
+}
+
+/// A robot's odometer and estimator, run at the sampling instants.
+///
+/// It reads the robot's true motion — the state and `s = ∫v dt` — turns it into
+/// encoder counts through the robot's actual wheels, and dead-reckons with the
+/// nominal ones.
+#[derive(Debug, Clone)]
+pub struct Odometer {
+    spec: OdometrySpec,
+    fix_every: u64,
+    nominal_radius: f64,
+    nominal_half_wheelbase: f64,
+    radii: (f64, f64),
+    actual_half_wheelbase: f64,
+    rng: ChaCha8Rng,
+    estimate: Pose,
+    /// The true pose at the last sample.
+    anchor: Pose,
+    ekf: Option<Ekf>,
+    origin: (f64, f64),
+    wheel_angle: [f64; 2],
+    wheel_travel: [f64; 2],
+    ticks: [i64; 2],
+    speed_noise: (f64, f64),
+    samples: u64,
+    fixes: u64,
+    pending: VecDeque<PendingFix>,
+}
+
+impl Odometer {
+    /// An odometer for `robot` starting at `start` (the start pose is known
+    /// exactly), sampling every `period` seconds. `seed` and `stream` choose the
+    /// random numbers (one stream per robot).
+    pub fn new(
+        spec: OdometrySpec,
+        robot: &RobotParams,
+        start: &State,
+        seed: u64,
+        stream: u64,
+    ) -> Result<Odometer, ParamError> {
+        spec.errors.validate()?;
+        if !(spec.period.is_finite() && spec.period > 0.0) {
+            return Err(ParamError::new(
+                "period",
+                spec.period,
+                "must be a finite number > 0",
+            ));
+        }
+        let fix_every = match spec.fixes {
+            None => 0,
+            Some(f) => {
+                f.validate()?;
+                match f.schedule {
+                    FixSchedule::EverySamples(n) => n,
+                    FixSchedule::Period(p) => {
+                        crate::sim::whole_ratio(p, spec.period).ok_or(ParamError::new(
+                            "period",
+                            p,
+                            "must be a whole multiple of the odometry period",
+                        ))?
+                    }
+                }
+            }
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(stream);
+        let estimate = start.pose();
+        let ekf = match spec.fixes {
+            Some(FixSpec {
+                fusion: Fusion::Ekf,
+                ..
+            }) => Some(Ekf::new()),
+            _ => None,
+        };
+        let capacity = match spec.fixes {
+            Some(f) if fix_every > 0 => {
+                (f.latency / (spec.period * fix_every as f64)).ceil() as usize + 2
+            }
+            _ => 0,
+        };
+        Ok(Odometer {
+            spec,
+            fix_every,
+            nominal_radius: robot.wheel_radius,
+            nominal_half_wheelbase: robot.half_wheelbase,
+            radii: spec.errors.wheel_radii(robot.wheel_radius),
+            actual_half_wheelbase: robot.half_wheelbase * spec.errors.wheelbase_ratio,
+            rng,
+            estimate,
+            anchor: estimate,
+            ekf,
+            origin: (0.0, start.theta),
+            wheel_angle: [0.0; 2],
+            wheel_travel: [0.0; 2],
+            ticks: [0; 2],
+            speed_noise: (0.0, 0.0),
+            samples: 0,
+            fixes: 0,
+            pending: VecDeque::with_capacity(capacity),
+        })
+    }
+
+    /// The pose estimate `(x̂, ŷ, θ̂)` of the last sample.
+    pub fn estimate(&self) -> Pose {
+        self.estimate
+    }
+
+    /// The pose the robot believes it has now, in true state `s`: the last
+    /// sample's estimate carried forward by the motion since (see [`Odometer::measure`]).
+    #[inline]
+    pub fn believed(&self, s: &State) -> Pose {
+        self.estimate.compose(&self.anchor.between(&s.pose()))
+    }
+
+    /// Number of fixes applied so far.
+    pub fn fixes_applied(&self) -> u64 {
+        self.fixes
+    }
+
+    /// Number of samples taken so far.
+    pub fn samples(&self) -> u64 {
+        self.samples
+    }
+
+    /// What the controller sees of a robot in true state `s`: the estimated pose
+    /// and the directly measured speeds (Assumption 2, with their noise).
+    ///
+    /// At a sampling instant that is the odometry estimate. Between samples (the
+    /// RK4 stages of a continuous-time controller) the estimate follows the
+    /// robot's motion since the last sample, its error frozen until the next one,
+    /// so the controller never acts on a pose that lags by a sample.
+    #[inline]
+    pub fn measure(&self, s: &State) -> State {
+        let pose = self.believed(s);
+        State {
+            x: pose.x,
+            y: pose.y,
+            theta: pose.theta,
+            v: s.v + self.speed_noise.0,
+            omega: s.omega + self.speed_noise.1,
+        }
+    }
+
+    fn normal(&mut self) -> f64 {
+        self.rng.sample(StandardNormal)
+    }
+
+    /// The encoders' measured wheel displacements since the last sample, given the
+    /// robot's total travel `distance = ∫v dt` and heading `theta` (unwrapped).
+    fn read_encoders(&mut self, distance: f64, theta: f64) -> (WheelDisplacement, [f64; 2]) {
+        let turn = self.actual_half_wheelbase * (theta - self.origin.1);
+        let travel = [distance + turn, distance - turn];
+        let radii = [self.radii.0, self.radii.1];
+        let mut measured = [0.0; 2];
+        let mut true_step = [0.0; 2];
+        for w in 0..2 {
+            let angle = travel[w] / radii[w];
+            true_step[w] = travel[w] - self.wheel_travel[w];
+            measured[w] = match self.spec.errors.ticks_per_rev {
+                None => (angle - self.wheel_angle[w]) * self.nominal_radius,
+                Some(n) => {
+                    let per_tick = std::f64::consts::TAU / f64::from(n);
+                    let count = (angle / per_tick).floor() as i64;
+                    let d = (count - self.ticks[w]) as f64 * per_tick * self.nominal_radius;
+                    self.ticks[w] = count;
+                    d
+                }
+            };
+            self.wheel_angle[w] = angle;
+            self.wheel_travel[w] = travel[w];
+        }
+        let slip = self.spec.errors.slip;
+        if slip > 0.0 {
+            for w in 0..2 {
+                measured[w] += self.normal() * (slip * true_step[w].abs()).sqrt();
+            }
+        }
+        (
+            WheelDisplacement {
+                right: measured[0],
+                left: measured[1],
+            },
+            true_step,
+        )
+    }
+
+    /// One sample at time `t`: the robot is now in true state `s` having travelled
+    /// `distance = ∫v dt` since the start. Updates the estimate, takes and applies
+    /// fixes.
+    pub fn sample(&mut self, t: f64, s: &State, distance: f64) {
+        let (measured, true_step) = self.read_encoders(distance, s.theta);
+        let l = self.nominal_half_wheelbase;
+        let (mut delta, big_theta) = measured.to_motion(l);
+        let errors = self.spec.errors;
+        if errors.zeta_model == ZetaModel::Wheels {
+            // Eq. 24: Δ̂ = Δ − ζ with Θ̂ = Θ (the same ζ on both wheels, eq. 23).
+            delta -= errors.zeta;
+        }
+        let previous = self.estimate;
+        self.estimate = arc_update(&previous, delta, big_theta);
+        if errors.zeta_model == ZetaModel::WorstCase {
+            // Eq. 31: the truth runs ahead of the estimate by ζ on both axes.
+            self.estimate.x -= errors.zeta;
+            self.estimate.y -= errors.zeta;
+        }
+        if let Some(ekf) = &mut self.ekf {
+            let var = wheel_variance(&errors, self.nominal_radius, true_step);
+            ekf.predict(&previous, delta, big_theta, l, var);
+        }
+        if errors.speed_noise > 0.0 || errors.turn_rate_noise > 0.0 {
+            self.speed_noise = (
+                self.normal() * errors.speed_noise,
+                self.normal() * errors.turn_rate_noise,
+            );
+        }
+        self.samples += 1;
+        self.anchor = s.pose();
+        if let Some(f) = self.spec.fixes {
+            if self.samples.is_multiple_of(self.fix_every) {
+                let mut fix = Pose {
+                    x: s.x + self.normal() * f.position_noise,
+                    y: s.y + self.normal() * f.position_noise,
+                    theta: self.estimate.theta,
+                };
+                if let Some(sd) = f.heading_noise {
+                    fix.theta = s.theta + self.normal() * sd;
+                }
+                self.pending.push_back(PendingFix {
+                    arrives: t + f.latency,
+                    fix,
+                    estimate_then: self.estimate,
+                });
+            }
+            // Half a sample of slack: arrival times are sums of floats.
+            while let Some(p) = self.pending.front().copied() {
+                if p.arrives > t + 0.5 * self.spec.period {
+                    break;
+                }
+                self.pending.pop_front();
+                self.apply(&p, &f);
+            }
+        }
+    }
+
+    fn apply(&mut self, p: &PendingFix, f: &FixSpec) {
+        // The fix is of the pose when it was taken: carry it to now with the
+        // motion dead-reckoned since then.
+        let since = p.estimate_then.between(&self.estimate);
+        let mut now = p.fix.compose(&since);
+        if f.heading_noise.is_none() {
+            now.theta = self.estimate.theta;
+        }
+        match &mut self.ekf {
+            None => self.estimate = now,
+            Some(ekf) => {
+                self.estimate = ekf.update(&self.estimate, &now, f.position_noise, f.heading_noise);
+            }
+        }
+        self.fixes += 1;
+    }
+}
+
+/// Variance of each wheel's measured displacement this sample: slip plus the
+/// quantization of the encoders (uniform over one tick), plus a floor that keeps
+/// the filter from trusting odometry absolutely.
+fn wheel_variance(e: &ErrorModel, r: f64, true_step: [f64; 2]) -> [f64; 2] {
+    let tick = e.ticks_per_rev.map_or(0.0, |n| {
+        (std::f64::consts::TAU * r / f64::from(n)).powi(2) / 6.0
+    });
+    let zeta = e.zeta * e.zeta;
+    let floor = 1e-12;
+    true_step.map(|d| e.slip * d.abs() + tick + zeta + floor)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn straight_and_turn_in_place() {
+        let p = Pose::default();
+        let q = dead_reckon(
+            &p,
+            WheelDisplacement {
+                right: 1.0,
+                left: 1.0,
+            },
+            0.2,
+        );
+        assert_eq!((q.x, q.y, q.theta), (1.0, 0.0, 0.0));
+        let q = dead_reckon(
+            &p,
+            WheelDisplacement {
+                right: 0.1,
+                left: -0.1,
+            },
+            0.2,
+        );
+        assert!(q.x.abs() < 1e-15 && q.y.abs() < 1e-15 && (q.theta - 0.5).abs() < 1e-15);
+    }
+
+    #[test]
+    fn arc_update_is_eq_22() {
+        let p = Pose {
+            x: 1.0,
+            y: -2.0,
+            theta: 0.7,
+        };
+        let (delta, th) = (0.3, 0.2);
+        let q = arc_update(&p, delta, th);
+        let r = delta / th;
+        assert!((q.x - (p.x + r * ((0.7f64 + th).sin() - 0.7f64.sin()))).abs() < 1e-15);
+        assert!((q.y - (p.y - r * ((0.7f64 + th).cos() - 0.7f64.cos()))).abs() < 1e-15);
+    }
+
+    #[test]
+    fn wheel_radii_keep_the_mean_and_the_ratio() {
+        let e = ErrorModel {
+            wheel_diameter_ratio: 1.02,
+            ..ErrorModel::PERFECT
+        };
+        let (r, l) = e.wheel_radii(0.1);
+        assert!((r / l - 1.02).abs() < 1e-15 && (0.5 * (r + l) - 0.1).abs() < 1e-15);
+    }
+
+    #[test]
+    fn invalid_error_models_are_refused() {
+        let bad = ErrorModel {
+            wheelbase_ratio: 0.0,
+            ..ErrorModel::PERFECT
+        };
+        assert_eq!(bad.validate().unwrap_err().field, "wheelbase_ratio");
+        let bad = ErrorModel {
+            slip: -1.0,
+            ..ErrorModel::PERFECT
+        };
+        assert_eq!(bad.validate().unwrap_err().field, "slip");
+        let bad = ErrorModel {
+            zeta: f64::NAN,
+            ..ErrorModel::PERFECT
+        };
+        assert_eq!(bad.validate().unwrap_err().field, "zeta");
+    }
+}

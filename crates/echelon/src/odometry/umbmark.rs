@@ -1,0 +1,551 @@
+//! Borenstein's UMBmark (Borenstein & Feng, 1996): the bidirectional square test
+//! that measures a robot's systematic odometry errors — unequal wheel diameters
+//! `E_d` and a wrong wheelbase `E_b` — from where it really ends after driving a
+//! square clockwise and counter-clockwise by its own odometry.
+//!
+//! The simulation here is exact kinematics: the robot drives each leg and each
+//! 90° turn until its encoders (read with the nominal wheel radius and
+//! wheelbase) say it is done; its true motion follows from the actual wheels.
+//! Slip and tick quantization add the run-to-run scatter of a real test.
+
+use rand::{Rng, SeedableRng};
+pub use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+use crate::error::ParamError;
+use crate::model::Pose;
+use crate::odometry::{ErrorModel, WheelDisplacement, dead_reckon};
+
+/// Direction of a square run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Direction {
+    /// Clockwise: every turn is to the right.
+    Cw,
+    /// Counter-clockwise: every turn is to the left.
+    Ccw,
+}
+
+/// One run's return position error: true end minus odometry's end, m, in the
+/// start frame (the robot starts at the origin heading along +x).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct ReturnError {
+    /// Direction of the run.
+    pub direction: Direction,
+    /// Run number within its direction (from 1).
+    pub run: usize,
+    /// `ε_x`, m.
+    pub ex: f64,
+    /// `ε_y`, m.
+    pub ey: f64,
+}
+
+/// A simulated UMBmark test.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SquareTest {
+    /// Side of the square `L`, m (Borenstein: 4 m).
+    pub side: f64,
+    /// Runs in each direction (Borenstein: 5).
+    pub runs: usize,
+    /// Nominal wheel radius `r`, m.
+    pub wheel_radius: f64,
+    /// Nominal half wheelbase `l`, m.
+    pub half_wheelbase: f64,
+    /// The robot's actual errors (`E_d`, `E_b`, slip, ticks; other fields unused).
+    pub errors: ErrorModel,
+    /// Random seed for slip.
+    pub seed: u64,
+}
+
+impl SquareTest {
+    /// Checks the test's parameters.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        self.errors.validate()?;
+        for (f, v) in [
+            ("side", self.side),
+            ("wheel_radius", self.wheel_radius),
+            ("half_wheelbase", self.half_wheelbase),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(ParamError::new(f, v, "must be a finite number > 0"));
+            }
+        }
+        if self.runs == 0 {
+            return Err(ParamError::new("runs", 0.0, "must be ≥ 1"));
+        }
+        Ok(())
+    }
+
+    /// Drives every run and returns the return errors, CW runs first.
+    pub fn simulate(&self) -> Result<Vec<ReturnError>, ParamError> {
+        self.validate()?;
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
+        let mut out = Vec::with_capacity(2 * self.runs);
+        for direction in [Direction::Cw, Direction::Ccw] {
+            for run in 1..=self.runs {
+                let (truth, believed) = self.drive(direction, &mut rng);
+                out.push(ReturnError {
+                    direction,
+                    run,
+                    ex: truth.x - believed.x,
+                    ey: truth.y - believed.y,
+                });
+            }
+        }
+        Ok(out)
+    }
+
+    /// One square: four legs, each followed by a 90° turn on the spot; returns
+    /// the true and the believed end poses.
+    fn drive(&self, direction: Direction, rng: &mut ChaCha8Rng) -> (Pose, Pose) {
+        let path = self.trace(direction, rng);
+        path[path.len() - 1]
+    }
+
+    /// The true and believed poses at the start and after each leg and turn of
+    /// one square (9 pairs), with slip drawn from `rng`.
+    pub fn trace(&self, direction: Direction, rng: &mut ChaCha8Rng) -> Vec<(Pose, Pose)> {
+        let e = &self.errors;
+        let (rr, rl) = e.wheel_radii(self.wheel_radius);
+        let actual_l = self.half_wheelbase * e.wheelbase_ratio;
+        let sign = match direction {
+            Direction::Ccw => 1.0,
+            Direction::Cw => -1.0,
+        };
+        let turn = sign * self.half_wheelbase * std::f64::consts::FRAC_PI_2;
+        let mut truth = Pose::default();
+        let mut believed = Pose::default();
+        let mut path = Vec::with_capacity(9);
+        path.push((truth, believed));
+        for _ in 0..4 {
+            for (right, left) in [(self.side, self.side), (turn, -turn)] {
+                // The commanded wheel rotations, as the encoders count them.
+                let angles = [right, left].map(|d| self.encoder_angle(d));
+                let measured = angles.map(|a| a * self.wheel_radius);
+                let mut travel = [angles[0] * rr, angles[1] * rl];
+                if e.slip > 0.0 {
+                    for t in &mut travel {
+                        let noise: f64 = rng.sample(StandardNormal);
+                        *t += noise * (e.slip * t.abs()).sqrt();
+                    }
+                }
+                truth = dead_reckon(
+                    &truth,
+                    WheelDisplacement {
+                        right: travel[0],
+                        left: travel[1],
+                    },
+                    actual_l,
+                );
+                believed = dead_reckon(
+                    &believed,
+                    WheelDisplacement {
+                        right: measured[0],
+                        left: measured[1],
+                    },
+                    self.half_wheelbase,
+                );
+                path.push((truth, believed));
+            }
+        }
+        path
+    }
+
+    /// The wheel rotation (rad) at which the drive stops for a commanded
+    /// displacement `d`: the nearest whole tick with real encoders.
+    fn encoder_angle(&self, d: f64) -> f64 {
+        let angle = d / self.wheel_radius;
+        match self.errors.ticks_per_rev {
+            None => angle,
+            Some(n) => {
+                let per_tick = std::f64::consts::TAU / f64::from(n);
+                (angle / per_tick).round() * per_tick
+            }
+        }
+    }
+}
+
+/// Estimated systematic errors.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Systematic {
+    /// `E_d = D_R / D_L`.
+    pub ed: f64,
+    /// `E_b = b_actual / b_nominal`.
+    pub eb: f64,
+}
+
+/// What a UMBmark test concludes.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Calibration {
+    /// Centre of gravity of the CW return errors `(x, y)`, m.
+    pub cg_cw: [f64; 2],
+    /// Centre of gravity of the CCW return errors `(x, y)`, m.
+    pub cg_ccw: [f64; 2],
+    /// Borenstein's type A error `α` (wheelbase), rad.
+    pub alpha: f64,
+    /// Borenstein's type B error `β` (wheel diameters), rad.
+    pub beta: f64,
+    /// Borenstein's closed-form estimate (first order in the errors).
+    pub borenstein: Systematic,
+    /// The estimate refined by fitting the exact square kinematics to the centres
+    /// of gravity (removes the formulas' cross-coupling between `E_d` and `E_b`).
+    pub refined: Systematic,
+    /// Correction factor for the left wheel's diameter, `c_L = 2/(E_d + 1)`.
+    pub c_left: f64,
+    /// Correction factor for the right wheel's diameter, `c_R = 2/(1/E_d + 1)`.
+    pub c_right: f64,
+    /// Corrected wheelbase `E_b b_nominal`, m.
+    pub wheelbase: f64,
+}
+
+/// Why the return errors cannot be turned into an estimate.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UmbmarkError {
+    /// A parameter is impossible.
+    #[error(transparent)]
+    Param(#[from] ParamError),
+    /// Runs in only one direction.
+    #[error("UMBmark needs runs in both directions (clockwise: {cw}, counter-clockwise: {ccw})")]
+    OneDirection {
+        /// Number of CW runs.
+        cw: usize,
+        /// Number of CCW runs.
+        ccw: usize,
+    },
+    /// Errors too large for the small-error formulas.
+    #[error("the return errors are too large for Borenstein's formulas (|β/2| = {0} rad ≥ π/2)")]
+    TooLarge(f64),
+}
+
+/// Borenstein's formulas (Borenstein & Feng 1996) for a square of side `L` and
+/// nominal wheelbase `b = 2l`, from the centres of gravity of the return errors:
+///
+/// ```text
+/// α = (x_cg,cw + x_cg,ccw) / (−4L)          β = (x_cg,cw − x_cg,ccw) / (−4L)
+/// R = (L/2) / sin(β/2)                      E_d = (R + b/2) / (R − b/2)
+/// E_b = (π/2) / (π/2 − α)
+/// ```
+fn borenstein(
+    cw: [f64; 2],
+    ccw: [f64; 2],
+    side: f64,
+    wheelbase: f64,
+) -> Result<(f64, f64, Systematic), UmbmarkError> {
+    let alpha = (cw[0] + ccw[0]) / (-4.0 * side);
+    let beta = (cw[0] - ccw[0]) / (-4.0 * side);
+    let half_b = 0.5 * wheelbase;
+    let ed = if beta == 0.0 {
+        1.0
+    } else {
+        if (0.5 * beta).abs() >= std::f64::consts::FRAC_PI_2 {
+            return Err(UmbmarkError::TooLarge((0.5 * beta).abs()));
+        }
+        let r = 0.5 * side / (0.5 * beta).sin();
+        (r + half_b) / (r - half_b)
+    };
+    let eb = std::f64::consts::FRAC_PI_2 / (std::f64::consts::FRAC_PI_2 - alpha);
+    Ok((alpha, beta, Systematic { ed, eb }))
+}
+
+/// The centres of gravity `[x_cw, y_cw, x_ccw, y_ccw]` an error-free-but-systematic
+/// robot would produce: the model the refinement inverts.
+fn model(geometry: &SquareTest, s: Systematic) -> [f64; 4] {
+    let t = SquareTest {
+        runs: 1,
+        errors: ErrorModel {
+            wheel_diameter_ratio: s.ed,
+            wheelbase_ratio: s.eb,
+            ..ErrorModel::PERFECT
+        },
+        ..*geometry
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let (a, b) = (
+        t.drive(Direction::Cw, &mut rng),
+        t.drive(Direction::Ccw, &mut rng),
+    );
+    [a.0.x - a.1.x, a.0.y - a.1.y, b.0.x - b.1.x, b.0.y - b.1.y]
+}
+
+/// Gauss-Newton on `(E_d, E_b)` so that the exact square kinematics reproduce
+/// the observed centres of gravity, from Borenstein's estimate.
+fn refine(geometry: &SquareTest, observed: [f64; 4], start: Systematic) -> Systematic {
+    let mut p = [start.ed, start.eb];
+    for _ in 0..20 {
+        let f = model(geometry, Systematic { ed: p[0], eb: p[1] });
+        let r: [f64; 4] = std::array::from_fn(|i| f[i] - observed[i]);
+        // Jacobian by central differences of the (smooth) kinematic model.
+        let h = 1e-6;
+        let mut j = [[0.0; 2]; 4];
+        for k in 0..2 {
+            let mut lo = p;
+            let mut hi = p;
+            lo[k] -= h;
+            hi[k] += h;
+            let (fl, fh) = (
+                model(
+                    geometry,
+                    Systematic {
+                        ed: lo[0],
+                        eb: lo[1],
+                    },
+                ),
+                model(
+                    geometry,
+                    Systematic {
+                        ed: hi[0],
+                        eb: hi[1],
+                    },
+                ),
+            );
+            for i in 0..4 {
+                j[i][k] = (fh[i] - fl[i]) / (2.0 * h);
+            }
+        }
+        // Normal equations (JᵀJ) δ = −Jᵀr.
+        let mut a = [[0.0; 2]; 2];
+        let mut g = [0.0; 2];
+        for i in 0..4 {
+            for k in 0..2 {
+                g[k] -= j[i][k] * r[i];
+                for m in 0..2 {
+                    a[k][m] += j[i][k] * j[i][m];
+                }
+            }
+        }
+        let det = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+        if det.abs() < 1e-300 {
+            break;
+        }
+        let d = [
+            (a[1][1] * g[0] - a[0][1] * g[1]) / det,
+            (a[0][0] * g[1] - a[1][0] * g[0]) / det,
+        ];
+        p = [p[0] + d[0], p[1] + d[1]];
+        if !(p[0] > 0.0 && p[1] > 0.0) {
+            return start;
+        }
+        if d[0].abs().max(d[1].abs()) < 1e-12 {
+            break;
+        }
+    }
+    Systematic { ed: p[0], eb: p[1] }
+}
+
+/// Estimates `E_d`, `E_b` and the corrections from the return errors of runs on
+/// the square of `geometry` (its side and the robot's nominal wheel radius and
+/// half wheelbase; its error fields are ignored).
+pub fn estimate(
+    errors: &[ReturnError],
+    geometry: &SquareTest,
+) -> Result<Calibration, UmbmarkError> {
+    let clean = SquareTest {
+        errors: ErrorModel::PERFECT,
+        runs: 1,
+        ..*geometry
+    };
+    clean.validate()?;
+    let centroid = |d: Direction| -> (usize, [f64; 2]) {
+        let (n, sum) = errors
+            .iter()
+            .filter(|e| e.direction == d)
+            .fold((0, [0.0, 0.0]), |(n, a), e| {
+                (n + 1, [a[0] + e.ex, a[1] + e.ey])
+            });
+        (n, [sum[0] / n.max(1) as f64, sum[1] / n.max(1) as f64])
+    };
+    let (ncw, cw) = centroid(Direction::Cw);
+    let (nccw, ccw) = centroid(Direction::Ccw);
+    if ncw == 0 || nccw == 0 {
+        return Err(UmbmarkError::OneDirection { cw: ncw, ccw: nccw });
+    }
+    let wheelbase = 2.0 * geometry.half_wheelbase;
+    let (alpha, beta, first) = borenstein(cw, ccw, geometry.side, wheelbase)?;
+    let refined = refine(&clean, [cw[0], cw[1], ccw[0], ccw[1]], first);
+    Ok(Calibration {
+        cg_cw: cw,
+        cg_ccw: ccw,
+        alpha,
+        beta,
+        borenstein: first,
+        refined,
+        c_left: 2.0 / (refined.ed + 1.0),
+        c_right: 2.0 / (1.0 / refined.ed + 1.0),
+        wheelbase: refined.eb * wheelbase,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn test(ed: f64, eb: f64) -> SquareTest {
+        SquareTest {
+            side: 4.0,
+            runs: 5,
+            wheel_radius: 0.101,
+            half_wheelbase: 0.23,
+            errors: ErrorModel {
+                wheel_diameter_ratio: ed,
+                wheelbase_ratio: eb,
+                ..ErrorModel::PERFECT
+            },
+            seed: 1,
+        }
+    }
+
+    #[test]
+    fn a_perfect_robot_returns_exactly() {
+        let errs = test(1.0, 1.0).simulate().unwrap();
+        assert!(
+            errs.iter()
+                .all(|e| e.ex.abs() < 1e-12 && e.ey.abs() < 1e-12)
+        );
+        let c = estimate(&errs, &test(1.0, 1.0)).unwrap();
+        assert!((c.refined.ed - 1.0).abs() < 1e-12 && (c.refined.eb - 1.0).abs() < 1e-12);
+        assert!((c.borenstein.ed - 1.0).abs() < 1e-12 && (c.borenstein.eb - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn one_direction_is_refused() {
+        let errs: Vec<ReturnError> = test(1.01, 1.0)
+            .simulate()
+            .unwrap()
+            .into_iter()
+            .filter(|e| e.direction == Direction::Cw)
+            .collect();
+        assert!(matches!(
+            estimate(&errs, &test(1.0, 1.0)),
+            Err(UmbmarkError::OneDirection { cw: 5, ccw: 0 })
+        ));
+    }
+}
+
+#[cfg(test)]
+mod recovery {
+    use super::*;
+
+    fn run(ed: f64, eb: f64, slip: f64, ticks: Option<u32>, seed: u64) -> Calibration {
+        let t = SquareTest {
+            side: 4.0,
+            runs: 5,
+            wheel_radius: 0.101,
+            half_wheelbase: 0.23,
+            errors: ErrorModel {
+                wheel_diameter_ratio: ed,
+                wheelbase_ratio: eb,
+                slip,
+                ticks_per_rev: ticks,
+                ..ErrorModel::PERFECT
+            },
+            seed,
+        };
+        estimate(&t.simulate().unwrap(), &t).unwrap()
+    }
+
+    /// The relative error of the estimated deviation from a perfect robot.
+    fn off(est: f64, truth: f64) -> f64 {
+        ((est - 1.0) - (truth - 1.0)).abs() / (truth - 1.0).abs()
+    }
+
+    #[test]
+    fn refined_estimate_recovers_systematic_errors_exactly_without_noise() {
+        for (ed, eb) in [
+            (1.01, 1.0),
+            (1.0, 1.02),
+            (0.99, 0.98),
+            (1.005, 1.01),
+            (0.996, 1.03),
+        ] {
+            let c = run(ed, eb, 0.0, None, 1);
+            if ed != 1.0 {
+                assert!(off(c.refined.ed, ed) < 1e-6, "E_d {ed}: {}", c.refined.ed);
+            }
+            if eb != 1.0 {
+                assert!(off(c.refined.eb, eb) < 1e-6, "E_b {eb}: {}", c.refined.eb);
+            }
+        }
+    }
+
+    #[test]
+    fn borensteins_formulas_are_first_order() {
+        // Small errors: the closed form is within 10 % of the injected deviations…
+        let c = run(1.002, 1.01, 0.0, None, 1);
+        assert!(
+            off(c.borenstein.ed, 1.002) < 0.1 && off(c.borenstein.eb, 1.01) < 0.1,
+            "{c:?}"
+        );
+        // …larger ones couple E_d into E_b, which the refinement removes.
+        let c = run(1.005, 1.01, 0.0, None, 1);
+        assert!(off(c.borenstein.eb, 1.01) > 0.1);
+        assert!(off(c.refined.eb, 1.01) < 1e-6);
+    }
+}
+
+/// Return errors from recorded runs: each directory holds a run's
+/// `trajectory.csv` (the truth) and `odometry.csv` (what the robot believed).
+/// Every dead-reckoning agent's run gives one return error — its true final
+/// position minus its estimated one, in its start frame — and its direction is
+/// the sign of its estimated total turn.
+pub fn from_logs(
+    dirs: &[std::path::PathBuf],
+) -> Result<Vec<ReturnError>, crate::error::OutputError> {
+    use crate::output::{ODOMETRY_FILE, TRAJECTORY_FILE, Table};
+    let mut out = Vec::new();
+    let (mut ncw, mut nccw) = (0, 0);
+    for dir in dirs {
+        let (tp, op) = (dir.join(TRAJECTORY_FILE), dir.join(ODOMETRY_FILE));
+        let (traj, odo) = (Table::read(&tp)?, Table::read(&op)?);
+        let ta = traj.column("agent", &tp)?;
+        let [tx, ty, tt] = ["x", "y", "theta"].map(|c| traj.column(c, &tp));
+        let (tx, ty, tt) = (tx?, ty?, tt?);
+        let oa = odo.column("agent", &op)?;
+        let [ox, oy, ot] = ["x_hat", "y_hat", "theta_hat"].map(|c| odo.column(c, &op));
+        let (ox, oy, ot) = (ox?, oy?, ot?);
+        let mut agents: Vec<f64> = odo.rows.iter().map(|r| r[oa]).collect();
+        agents.sort_by(f64::total_cmp);
+        agents.dedup();
+        for agent in agents {
+            let truth: Vec<&Vec<f64>> = traj.rows.iter().filter(|r| r[ta] == agent).collect();
+            let est: Vec<&Vec<f64>> = odo.rows.iter().filter(|r| r[oa] == agent).collect();
+            let (Some(first), Some(last), Some(last_est)) =
+                (truth.first(), truth.last(), est.last())
+            else {
+                return Err(crate::error::OutputError::Parse {
+                    path: tp.clone(),
+                    line: 0,
+                    message: format!("agent {agent} has odometry rows but no trajectory rows"),
+                });
+            };
+            // Total estimated turn, unwrapping the logged headings.
+            let turn: f64 = est
+                .windows(2)
+                .map(|w| crate::model::wrap_angle(w[1][ot] - w[0][ot]))
+                .sum();
+            let direction = if turn < 0.0 {
+                Direction::Cw
+            } else {
+                Direction::Ccw
+            };
+            let (s, c) = first[tt].sin_cos();
+            let (dx, dy) = (last[tx] - last_est[ox], last[ty] - last_est[oy]);
+            let run = match direction {
+                Direction::Cw => {
+                    ncw += 1;
+                    ncw
+                }
+                Direction::Ccw => {
+                    nccw += 1;
+                    nccw
+                }
+            };
+            out.push(ReturnError {
+                direction,
+                run,
+                ex: c * dx + s * dy,
+                ey: -s * dx + c * dy,
+            });
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,366 @@
+//! Monte Carlo sweeps: a scenario run over a grid of odometry error models ×
+//! fix intervals × seeds, in parallel, each run reduced to the numbers that
+//! answer "how often does this formation need an absolute fix?".
+//!
+//! Rows come back in grid order whatever the number of threads, so the same
+//! sweep gives the same bytes.
+
+use std::io::{self, Write};
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{ParamError, ScenarioError, SimError};
+use crate::odometry::ZetaModel;
+use crate::odometry::bound::Theorem2;
+use crate::scenario::schema::{FixesSection, OdometrySection, ZetaModelName};
+use crate::scenario::{Overrides, Scenario};
+use crate::sim::{Frame, ObserverError};
+
+/// The grid of a sweep: every combination of the lists, for every seed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grid {
+    /// The paper's `ζ`, m per sample.
+    pub zeta: Vec<f64>,
+    /// How `ζ` enters.
+    pub zeta_model: ZetaModel,
+    /// `E_d` values.
+    pub wheel_diameter_ratio: Vec<f64>,
+    /// `E_b` values.
+    pub wheelbase_ratio: Vec<f64>,
+    /// Slip variances, m²/m.
+    pub slip: Vec<f64>,
+    /// Odometry samples between fixes (`N`; 0: no fixes).
+    pub fix_every: Vec<u64>,
+    /// Seeds.
+    pub seeds: Vec<u64>,
+    /// Theorem 2's `γ ∈ (0, 1)` for the bound column.
+    pub gamma: f64,
+    /// Statistics are taken after this time, s (the "ultimate" behaviour).
+    pub transient: f64,
+}
+
+/// One run of a sweep.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Case {
+    /// `ζ`, m per sample.
+    pub zeta: f64,
+    /// `E_d`.
+    pub wheel_diameter_ratio: f64,
+    /// `E_b`.
+    pub wheelbase_ratio: f64,
+    /// Slip, m²/m.
+    pub slip: f64,
+    /// Samples between fixes (0: none).
+    pub fix_every: u64,
+    /// Seed.
+    pub seed: u64,
+}
+
+/// What one run shows. Maxima are over the agents that dead-reckon and over
+/// the time after the transient.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Row {
+    /// The run's parameters.
+    #[serde(flatten)]
+    pub case: Case,
+    /// Largest |ω|, rad/s (Theorem 2's `ω_M`).
+    pub omega_max: f64,
+    /// Ultimate max ‖z‖ of the true state, m/s.
+    pub z_max: f64,
+    /// Ultimate max ‖ẑ‖, what the controller saw, m/s.
+    pub z_hat_max: f64,
+    /// Ultimate max ‖e‖ of the true state, m.
+    pub e_max: f64,
+    /// ‖p − p̂‖ at the end, m.
+    pub final_drift: f64,
+    /// Ultimate max ‖p − p̂‖, m.
+    pub drift_max: f64,
+    /// Theorem 2's bound on ‖z‖ for this run (`None` when the run is outside its
+    /// assumptions: systematic errors, slip, noisy or late fixes, no fixes).
+    pub z_bound: Option<f64>,
+    /// max over agents of ‖z‖ / bound (`None` without a bound).
+    pub z_over_bound: Option<f64>,
+}
+
+/// The header of `sweep.csv`.
+pub const SWEEP_HEADER: &str = "zeta,zeta_model,wheel_diameter_ratio,wheelbase_ratio,slip,fix_every,seed,omega_max,z_max,z_hat_max,e_max,final_drift,drift_max,z_bound,z_over_bound";
+
+/// Why a sweep cannot run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SweepError {
+    /// A grid value is impossible.
+    #[error("sweep: {0}")]
+    Param(#[from] ParamError),
+    /// A run's scenario does not build.
+    #[error(transparent)]
+    Scenario(#[from] ScenarioError),
+    /// A run failed.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+}
+
+impl Grid {
+    /// Every case, in grid order: ζ, E_d, E_b, slip, N, then seed varies fastest.
+    pub fn cases(&self) -> Vec<Case> {
+        let mut out = Vec::new();
+        for &zeta in &self.zeta {
+            for &ed in &self.wheel_diameter_ratio {
+                for &eb in &self.wheelbase_ratio {
+                    for &slip in &self.slip {
+                        for &fix_every in &self.fix_every {
+                            for &seed in &self.seeds {
+                                out.push(Case {
+                                    zeta,
+                                    wheel_diameter_ratio: ed,
+                                    wheelbase_ratio: eb,
+                                    slip,
+                                    fix_every,
+                                    seed,
+                                });
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Refuses empty lists, impossible values and γ outside (0, 1).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let lists: [(&'static str, usize); 6] = [
+            ("zeta", self.zeta.len()),
+            ("wheel_diameter_ratio", self.wheel_diameter_ratio.len()),
+            ("wheelbase_ratio", self.wheelbase_ratio.len()),
+            ("slip", self.slip.len()),
+            ("fix_every", self.fix_every.len()),
+            ("seeds", self.seeds.len()),
+        ];
+        for (field, n) in lists {
+            if n == 0 {
+                return Err(ParamError::new(field, 0.0, "needs at least one value"));
+            }
+        }
+        for (field, values, min_ok) in [("zeta", &self.zeta, 0.0), ("slip", &self.slip, 0.0)] {
+            if let Some(&v) = values.iter().find(|v| !(v.is_finite() && **v >= min_ok)) {
+                return Err(ParamError::new(field, v, "must be a finite number ≥ 0"));
+            }
+        }
+        for (field, values) in [
+            ("wheel_diameter_ratio", &self.wheel_diameter_ratio),
+            ("wheelbase_ratio", &self.wheelbase_ratio),
+        ] {
+            if let Some(&v) = values.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
+                return Err(ParamError::new(field, v, "must be a finite number > 0"));
+            }
+        }
+        if !(self.gamma > 0.0 && self.gamma < 1.0) {
+            return Err(ParamError::new(
+                "gamma",
+                self.gamma,
+                "must be in (0, 1) (Theorem 2's γ)",
+            ));
+        }
+        if !(self.transient.is_finite() && self.transient >= 0.0) {
+            return Err(ParamError::new(
+                "transient",
+                self.transient,
+                "must be a finite number ≥ 0",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The scenario with a case's odometry and fixes applied to every agent (the
+/// file's other odometry settings — period, ticks, noise, fix noise — are kept).
+pub fn apply(scenario: &Scenario, case: &Case, zeta_model: ZetaModel) -> Scenario {
+    let mut s = scenario.clone();
+    let set_odometry = |o: &mut OdometrySection| {
+        o.zeta = Some(case.zeta);
+        o.zeta_model = Some(match zeta_model {
+            ZetaModel::Wheels => ZetaModelName::Wheels,
+            ZetaModel::WorstCase => ZetaModelName::WorstCase,
+        });
+        o.wheel_diameter_ratio = Some(case.wheel_diameter_ratio);
+        o.wheelbase_ratio = Some(case.wheelbase_ratio);
+        o.slip = Some(case.slip);
+    };
+    let set_fixes = |f: &mut FixesSection| {
+        if case.fix_every == 0 {
+            f.enabled = Some(false);
+        } else {
+            f.enabled = None;
+            f.every_steps = Some(case.fix_every);
+            f.period = None;
+        }
+    };
+    set_odometry(s.file.odometry.get_or_insert_with(Default::default));
+    set_fixes(s.file.fixes.get_or_insert_with(Default::default));
+    for a in &mut s.file.agents {
+        if let Some(o) = &mut a.odometry {
+            set_odometry(o);
+        }
+        if let Some(f) = &mut a.fixes {
+            set_fixes(f);
+        }
+    }
+    s
+}
+
+/// Runs one case and reduces it to a [`Row`].
+pub fn run_case(
+    scenario: &Scenario,
+    overrides: &Overrides,
+    grid: &Grid,
+    case: &Case,
+) -> Result<Row, SweepError> {
+    let s = apply(scenario, case, grid.zeta_model);
+    let mut run = s.build(&Overrides {
+        seed: Some(case.seed),
+        ..*overrides
+    })?;
+    let sim = &mut run.simulation;
+    let n = sim.agents().len();
+    let mut z_max = vec![0.0f64; n];
+    let (mut z_hat_max, mut e_max, mut drift, mut drift_max) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let mut omega_max = vec![0.0f64; n];
+    let transient = grid.transient;
+    let mut observe = |f: &Frame<'_>| -> Result<(), ObserverError> {
+        for (i, odometer) in f.odometers.iter().enumerate() {
+            let Some(odometer) = odometer else { continue };
+            let (s, o) = (&f.states[i], &f.outputs[i]);
+            let est = odometer.believed(s);
+            let d = (s.x - est.x).hypot(s.y - est.y);
+            if f.t >= transient {
+                drift_max = drift_max.max(d);
+                z_max[i] = z_max[i].max(o.z[0].hypot(o.z[1]));
+                z_hat_max = z_hat_max.max(o.z_hat[0].hypot(o.z_hat[1]));
+                e_max = e_max.max(o.e[0].hypot(o.e[1]));
+                omega_max[i] = omega_max[i].max(s.omega.abs());
+            }
+            if f.last {
+                drift = drift.max(d);
+            }
+        }
+        Ok(())
+    };
+    sim.run(&mut observe)?;
+    let theorem_applies = case.wheel_diameter_ratio == 1.0
+        && case.wheelbase_ratio == 1.0
+        && case.slip == 0.0
+        && case.zeta > 0.0
+        && case.fix_every > 0
+        && noise_free(&s);
+    let (mut z_bound, mut ratio) = (None, None);
+    if theorem_applies {
+        for (i, a) in sim.agents().iter().enumerate() {
+            if sim.odometers().get(i).is_none_or(Option::is_none) {
+                continue;
+            }
+            let t = Theorem2::new(a.gains.ke, a.gains.kz, case.zeta, omega_max[i], grid.gamma)?;
+            let b = t.z_bound(case.fix_every);
+            z_bound = Some(z_bound.map_or(b, |x: f64| x.max(b)));
+            let r = z_max[i] / b;
+            ratio = Some(ratio.map_or(r, |x: f64| x.max(r)));
+        }
+    }
+    Ok(Row {
+        case: *case,
+        omega_max: omega_max.iter().copied().fold(0.0, f64::max),
+        z_max: z_max.iter().copied().fold(0.0, f64::max),
+        z_hat_max,
+        e_max,
+        final_drift: drift,
+        drift_max,
+        z_bound,
+        z_over_bound: ratio,
+    })
+}
+
+/// Whether the file's other odometry settings keep Theorem 2's assumptions:
+/// ideal encoders, exact speeds, exact and immediate fixes.
+fn noise_free(s: &Scenario) -> bool {
+    let f = &s.file;
+    let odometry_ok = |o: &OdometrySection| {
+        o.ticks_per_rev.is_none()
+            && o.speed_noise.unwrap_or(0.0) == 0.0
+            && o.turn_rate_noise.unwrap_or(0.0) == 0.0
+    };
+    let fixes_ok = |x: &FixesSection| {
+        x.position_noise.unwrap_or(0.0) == 0.0
+            && x.heading_noise.unwrap_or(0.0) == 0.0
+            && x.latency.unwrap_or(0.0) == 0.0
+            && x.fusion
+                .is_none_or(|m| m == crate::scenario::schema::FusionName::Reset)
+    };
+    f.odometry.as_ref().is_none_or(odometry_ok)
+        && f.fixes.as_ref().is_none_or(fixes_ok)
+        && f.agents.iter().all(|a| {
+            a.odometry.as_ref().is_none_or(odometry_ok) && a.fixes.as_ref().is_none_or(fixes_ok)
+        })
+}
+
+/// Runs every case of `grid` in parallel on the current rayon pool; `progress`
+/// is called once per finished run. Rows are in grid order.
+pub fn run(
+    scenario: &Scenario,
+    overrides: &Overrides,
+    grid: &Grid,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Vec<Row>, SweepError> {
+    grid.validate()?;
+    // Build once up front so that a broken scenario fails before any work.
+    apply(scenario, &grid.cases()[0], grid.zeta_model).build(overrides)?;
+    grid.cases()
+        .par_iter()
+        .map(|case| {
+            let row = run_case(scenario, overrides, grid, case);
+            progress();
+            row
+        })
+        .collect()
+}
+
+/// Writes `sweep.csv`.
+pub fn write_csv<W: Write>(mut w: W, rows: &[Row], zeta_model: ZetaModel) -> io::Result<()> {
+    writeln!(w, "{SWEEP_HEADER}")?;
+    let model = match zeta_model {
+        ZetaModel::Wheels => "wheels",
+        ZetaModel::WorstCase => "worst-case",
+    };
+    let mut buf = ryu::Buffer::new();
+    let mut line = String::new();
+    for r in rows {
+        line.clear();
+        let c = &r.case;
+        crate::output::push_f64(&mut line, c.zeta, &mut buf);
+        line.push(',');
+        line.push_str(model);
+        for v in [c.wheel_diameter_ratio, c.wheelbase_ratio, c.slip] {
+            line.push(',');
+            crate::output::push_f64(&mut line, v, &mut buf);
+        }
+        line.push_str(&format!(",{},{}", c.fix_every, c.seed));
+        for v in [
+            r.omega_max,
+            r.z_max,
+            r.z_hat_max,
+            r.e_max,
+            r.final_drift,
+            r.drift_max,
+        ] {
+            line.push(',');
+            crate::output::push_f64(&mut line, v, &mut buf);
+        }
+        for v in [r.z_bound, r.z_over_bound] {
+            line.push(',');
+            if let Some(v) = v {
+                crate::output::push_f64(&mut line, v, &mut buf);
+            }
+        }
+        writeln!(w, "{line}")?;
+    }
+    w.flush()
+}

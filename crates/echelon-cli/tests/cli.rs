@@ -24,6 +24,11 @@ fn stdout(o: &Output) -> String {
     String::from_utf8(o.stdout.clone()).unwrap()
 }
 
+/// The `summary.json` a run wrote into `dir`.
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8(o.stderr.clone()).unwrap()
 }
@@ -132,8 +137,7 @@ fn run_writes_the_documented_files_and_summary() {
         ["0", "1", "-4.0", "0.4", "-1.5707963267948966"]
     );
     assert_eq!(csv.lines().count(), 1 + 1001, "every 10 ms from 0 to 10 s");
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = summary(&out);
     let agent = &summary["agents"][0];
     for key in [
         "final_pose",
@@ -168,8 +172,7 @@ fn overrides_change_the_run() {
         "-q",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = summary(&out);
     assert_eq!(summary["steps"], 1000);
     assert_eq!(summary["dt"], 0.002);
     let rows = std::fs::read_to_string(out.join("trajectory.csv"))
@@ -194,8 +197,7 @@ fn settle_time_is_null_when_never_within_a_centimetre() {
         "-q",
     ]);
     assert!(o.status.success());
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value = summary(&out);
     assert!(summary["agents"][1]["settle_time"].is_null(), "{summary}");
 }
 

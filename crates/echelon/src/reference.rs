@@ -34,6 +34,18 @@ pub struct Jet {
 pub const STANDSTILL: f64 = 1e-12;
 
 impl Jet {
+    /// A jet from each axis' value and derivatives 1–4.
+    #[inline]
+    pub fn from_axes(x: [f64; 5], y: [f64; 5]) -> Jet {
+        Jet {
+            p: [x[0], y[0]],
+            dp: [x[1], y[1]],
+            ddp: [x[2], y[2]],
+            d3p: [x[3], y[3]],
+            d4p: [x[4], y[4]],
+        }
+    }
+
     /// Speed along the path, `V_d = ‖ṗ_d‖`.
     #[inline]
     pub fn speed(&self) -> f64 {
@@ -244,13 +256,7 @@ impl Trajectory for Cubic {
         let d = t - self.t_switch;
         let x = [s * d * d * d, 3.0 * s * d * d, 6.0 * s * d, 6.0 * s, 0.0];
         let y = if t < self.t_switch { [0.0; 5] } else { x };
-        Jet {
-            p: [x[0], y[0]],
-            dp: [x[1], y[1]],
-            ddp: [x[2], y[2]],
-            d3p: [x[3], y[3]],
-            d4p: [x[4], y[4]],
-        }
+        Jet::from_axes(x, y)
     }
 }
 
@@ -287,14 +293,7 @@ impl Waypoints {
 
 impl Trajectory for Waypoints {
     fn eval(&self, t: f64, _order: Order) -> Jet {
-        let (x, y) = (self.x.eval(t), self.y.eval(t));
-        Jet {
-            p: [x[0], y[0]],
-            dp: [x[1], y[1]],
-            ddp: [x[2], y[2]],
-            d3p: [x[3], y[3]],
-            d4p: [x[4], y[4]],
-        }
+        Jet::from_axes(self.x.eval(t), self.y.eval(t))
     }
 }
 

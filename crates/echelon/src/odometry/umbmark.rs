@@ -375,113 +375,6 @@ pub fn estimate(
     })
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn test(ed: f64, eb: f64) -> SquareTest {
-        SquareTest {
-            side: 4.0,
-            runs: 5,
-            wheel_radius: 0.101,
-            half_wheelbase: 0.23,
-            errors: ErrorModel {
-                wheel_diameter_ratio: ed,
-                wheelbase_ratio: eb,
-                ..ErrorModel::PERFECT
-            },
-            seed: 1,
-        }
-    }
-
-    #[test]
-    fn a_perfect_robot_returns_exactly() {
-        let errs = test(1.0, 1.0).simulate().unwrap();
-        assert!(
-            errs.iter()
-                .all(|e| e.ex.abs() < 1e-12 && e.ey.abs() < 1e-12)
-        );
-        let c = estimate(&errs, &test(1.0, 1.0)).unwrap();
-        assert!((c.refined.ed - 1.0).abs() < 1e-12 && (c.refined.eb - 1.0).abs() < 1e-12);
-        assert!((c.borenstein.ed - 1.0).abs() < 1e-12 && (c.borenstein.eb - 1.0).abs() < 1e-12);
-    }
-
-    #[test]
-    fn one_direction_is_refused() {
-        let errs: Vec<ReturnError> = test(1.01, 1.0)
-            .simulate()
-            .unwrap()
-            .into_iter()
-            .filter(|e| e.direction == Direction::Cw)
-            .collect();
-        assert!(matches!(
-            estimate(&errs, &test(1.0, 1.0)),
-            Err(UmbmarkError::OneDirection { cw: 5, ccw: 0 })
-        ));
-    }
-}
-
-#[cfg(test)]
-mod recovery {
-    use super::*;
-
-    fn run(ed: f64, eb: f64, slip: f64, ticks: Option<u32>, seed: u64) -> Calibration {
-        let t = SquareTest {
-            side: 4.0,
-            runs: 5,
-            wheel_radius: 0.101,
-            half_wheelbase: 0.23,
-            errors: ErrorModel {
-                wheel_diameter_ratio: ed,
-                wheelbase_ratio: eb,
-                slip,
-                ticks_per_rev: ticks,
-                ..ErrorModel::PERFECT
-            },
-            seed,
-        };
-        estimate(&t.simulate().unwrap(), &t).unwrap()
-    }
-
-    /// The relative error of the estimated deviation from a perfect robot.
-    fn off(est: f64, truth: f64) -> f64 {
-        ((est - 1.0) - (truth - 1.0)).abs() / (truth - 1.0).abs()
-    }
-
-    #[test]
-    fn refined_estimate_recovers_systematic_errors_exactly_without_noise() {
-        for (ed, eb) in [
-            (1.01, 1.0),
-            (1.0, 1.02),
-            (0.99, 0.98),
-            (1.005, 1.01),
-            (0.996, 1.03),
-        ] {
-            let c = run(ed, eb, 0.0, None, 1);
-            if ed != 1.0 {
-                assert!(off(c.refined.ed, ed) < 1e-6, "E_d {ed}: {}", c.refined.ed);
-            }
-            if eb != 1.0 {
-                assert!(off(c.refined.eb, eb) < 1e-6, "E_b {eb}: {}", c.refined.eb);
-            }
-        }
-    }
-
-    #[test]
-    fn borensteins_formulas_are_first_order() {
-        // Small errors: the closed form is within 10 % of the injected deviations…
-        let c = run(1.002, 1.01, 0.0, None, 1);
-        assert!(
-            off(c.borenstein.ed, 1.002) < 0.1 && off(c.borenstein.eb, 1.01) < 0.1,
-            "{c:?}"
-        );
-        // …larger ones couple E_d into E_b, which the refinement removes.
-        let c = run(1.005, 1.01, 0.0, None, 1);
-        assert!(off(c.borenstein.eb, 1.01) > 0.1);
-        assert!(off(c.refined.eb, 1.01) < 1e-6);
-    }
-}
-
 /// Return errors from recorded runs: each directory holds a run's
 /// `trajectory.csv` (the truth) and `odometry.csv` (what the robot believed).
 /// Every dead-reckoning agent's run gives one return error — its true final
@@ -548,4 +441,100 @@ pub fn from_logs(
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 4 m square test of Table I agent 1's geometry.
+    fn square(ed: f64, eb: f64, slip: f64, ticks: Option<u32>, seed: u64) -> SquareTest {
+        SquareTest {
+            side: 4.0,
+            runs: 5,
+            wheel_radius: 0.101,
+            half_wheelbase: 0.23,
+            errors: ErrorModel {
+                wheel_diameter_ratio: ed,
+                wheelbase_ratio: eb,
+                slip,
+                ticks_per_rev: ticks,
+                ..ErrorModel::PERFECT
+            },
+            seed,
+        }
+    }
+
+    fn test(ed: f64, eb: f64) -> SquareTest {
+        square(ed, eb, 0.0, None, 1)
+    }
+
+    #[test]
+    fn a_perfect_robot_returns_exactly() {
+        let errs = test(1.0, 1.0).simulate().unwrap();
+        assert!(
+            errs.iter()
+                .all(|e| e.ex.abs() < 1e-12 && e.ey.abs() < 1e-12)
+        );
+        let c = estimate(&errs, &test(1.0, 1.0)).unwrap();
+        assert!((c.refined.ed - 1.0).abs() < 1e-12 && (c.refined.eb - 1.0).abs() < 1e-12);
+        assert!((c.borenstein.ed - 1.0).abs() < 1e-12 && (c.borenstein.eb - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn one_direction_is_refused() {
+        let errs: Vec<ReturnError> = test(1.01, 1.0)
+            .simulate()
+            .unwrap()
+            .into_iter()
+            .filter(|e| e.direction == Direction::Cw)
+            .collect();
+        assert!(matches!(
+            estimate(&errs, &test(1.0, 1.0)),
+            Err(UmbmarkError::OneDirection { cw: 5, ccw: 0 })
+        ));
+    }
+
+    fn run(ed: f64, eb: f64, slip: f64, ticks: Option<u32>, seed: u64) -> Calibration {
+        let t = square(ed, eb, slip, ticks, seed);
+        estimate(&t.simulate().unwrap(), &t).unwrap()
+    }
+
+    /// The relative error of the estimated deviation from a perfect robot.
+    fn off(est: f64, truth: f64) -> f64 {
+        ((est - 1.0) - (truth - 1.0)).abs() / (truth - 1.0).abs()
+    }
+
+    #[test]
+    fn refined_estimate_recovers_systematic_errors_exactly_without_noise() {
+        for (ed, eb) in [
+            (1.01, 1.0),
+            (1.0, 1.02),
+            (0.99, 0.98),
+            (1.005, 1.01),
+            (0.996, 1.03),
+        ] {
+            let c = run(ed, eb, 0.0, None, 1);
+            if ed != 1.0 {
+                assert!(off(c.refined.ed, ed) < 1e-6, "E_d {ed}: {}", c.refined.ed);
+            }
+            if eb != 1.0 {
+                assert!(off(c.refined.eb, eb) < 1e-6, "E_b {eb}: {}", c.refined.eb);
+            }
+        }
+    }
+
+    #[test]
+    fn borensteins_formulas_are_first_order() {
+        // Small errors: the closed form is within 10 % of the injected deviations…
+        let c = run(1.002, 1.01, 0.0, None, 1);
+        assert!(
+            off(c.borenstein.ed, 1.002) < 0.1 && off(c.borenstein.eb, 1.01) < 0.1,
+            "{c:?}"
+        );
+        // …larger ones couple E_d into E_b, which the refinement removes.
+        let c = run(1.005, 1.01, 0.0, None, 1);
+        assert!(off(c.borenstein.eb, 1.01) > 0.1);
+        assert!(off(c.refined.eb, 1.01) < 1e-6);
+    }
 }

@@ -242,19 +242,9 @@ impl Scenario {
         };
         let timing = match f.sim.controller_period {
             None => Timing::Continuous,
-            Some(p) => {
-                let path = sim.key("controller_period");
-                if !(p.is_finite() && p > 0.0) {
-                    return Err(self.error(&path, format!("{p} must be a finite number > 0")));
-                }
-                if whole_ratio(p, dt).is_none() {
-                    return Err(self.error(
-                        &path,
-                        format!("{p} s is not a whole multiple of dt = {dt} s"),
-                    ));
-                }
-                Timing::Sampled { period: p }
-            }
+            Some(p) => Timing::Sampled {
+                period: self.period(p, &sim.key("controller_period"), dt)?,
+            },
         };
         let reference = self.reference()?;
         let agents = f
@@ -291,6 +281,20 @@ impl Scenario {
             log_every,
             seed,
         })
+    }
+
+    /// A sampling period at `path`: finite, > 0 and a whole multiple of `dt`.
+    fn period(&self, p: f64, path: &FieldPath, dt: f64) -> Result<f64, ScenarioError> {
+        if !(p.is_finite() && p > 0.0) {
+            return Err(self.error(path, format!("{p} must be a finite number > 0")));
+        }
+        if whole_ratio(p, dt).is_none() {
+            return Err(self.error(
+                path,
+                format!("{p} s is not a whole multiple of dt = {dt} s"),
+            ));
+        }
+        Ok(p)
     }
 
     /// A timing value from the command line or the file, checked positive (or zero).
@@ -626,18 +630,7 @@ impl Scenario {
                 Timing::Sampled { period } => *period,
                 Timing::Continuous => dt,
             },
-            Some((p, path)) => {
-                if !(p.is_finite() && p > 0.0) {
-                    return Err(self.error(&path, format!("{p} must be a finite number > 0")));
-                }
-                if whole_ratio(p, dt).is_none() {
-                    return Err(self.error(
-                        &path,
-                        format!("{p} s is not a whole multiple of dt = {dt} s"),
-                    ));
-                }
-                p
-            }
+            Some((p, path)) => self.period(p, &path, dt)?,
         };
         let num = |get: fn(&OdometrySection) -> Option<f64>, key: &str, default: f64| {
             odo.get(get, key).map_or(default, |(v, _)| v)

@@ -1,5 +1,8 @@
 //! One module per command.
 
+pub(crate) mod lycomp;
+pub(crate) mod plot;
+pub(crate) mod progress;
 pub(crate) mod run;
 pub(crate) mod scenarios;
 

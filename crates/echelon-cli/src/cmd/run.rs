@@ -7,11 +7,13 @@ use anyhow::{Context, Result};
 use clap::ValueEnum;
 
 use echelon::formation::Leader;
-use echelon::output::{self, RunSummary, SUMMARY_FILE, TRAJECTORY_FILE};
+use echelon::output::{
+    self, REFERENCE_FILE, RunSummary, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE,
+};
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::{Frame, ObserverError};
 use echelon::{Simulation, Variant};
 
+use super::progress::Progress;
 use super::{non_negative, positive};
 
 /// Arguments of `echelon run`.
@@ -34,6 +36,9 @@ pub(crate) struct RunArgs {
     /// Law for every agent: `paper` (eq. 13) or `complete` (cross term cancelled).
     #[arg(long, value_enum, value_name = "LAW")]
     law: Option<LawArg>,
+    /// Also draw the figures (paths, errors, signals as SVG and PNG) and report.html.
+    #[arg(long)]
+    plot: bool,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -68,18 +73,22 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
     }
-    let mut nothing = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
     let started = Instant::now();
-    let summary = output::run_to_dir(&mut run, &out, &mut nothing)
-        .with_context(|| format!("running {}", run.name))?;
+    let mut progress = Progress::new(run.simulation.steps(), args.quiet);
+    let result = output::run_to_dir(&mut run, &out, &mut progress);
+    progress.finish();
+    let summary = result.with_context(|| format!("running {}", run.name))?;
     let elapsed = started.elapsed().as_secs_f64();
     if !args.quiet {
         print_summary(&run.simulation, &summary, elapsed);
-        println!(
-            "wrote {}, {}",
-            out.join(TRAJECTORY_FILE).display(),
-            out.join(SUMMARY_FILE).display()
-        );
+        let files: Vec<String> = [TRAJECTORY_FILE, REFERENCE_FILE, SUMMARY_FILE, SCENARIO_FILE]
+            .iter()
+            .map(|f| out.join(f).display().to_string())
+            .collect();
+        println!("wrote {}", files.join(", "));
+    }
+    if args.plot {
+        super::plot::draw(&out, args.quiet)?;
     }
     Ok(())
 }

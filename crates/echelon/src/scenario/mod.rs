@@ -70,6 +70,37 @@ pub struct Run {
     pub simulation: Simulation,
     /// Log every this many steps (1: every step).
     pub log_every: u64,
+    /// The scenario as run: a comment header naming where it came from and the
+    /// command-line overrides applied, then the exact TOML source.
+    /// [`crate::output::run_to_dir`] writes it as `scenario.toml`.
+    pub record: String,
+}
+
+impl std::fmt::Display for Overrides {
+    /// The overrides as `echelon run` flags (`--dt 0.002 --law complete`), or `none`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut flags = Vec::new();
+        for (flag, v) in [
+            ("--dt", self.dt),
+            ("--duration", self.duration),
+            ("--log-dt", self.log_dt),
+        ] {
+            if let Some(v) = v {
+                flags.push(format!("{flag} {v}"));
+            }
+        }
+        if let Some(law) = self.law {
+            flags.push(match law {
+                Variant::Paper => "--law paper".to_owned(),
+                Variant::Complete => "--law complete".to_owned(),
+            });
+        }
+        if flags.is_empty() {
+            f.write_str("none")
+        } else {
+            f.write_str(&flags.join(" "))
+        }
+    }
 }
 
 impl Scenario {
@@ -182,6 +213,21 @@ impl Scenario {
         &self.source
     }
 
+    /// The source with a header recording its origin and `ov` (see [`Run::record`]).
+    fn record(&self, ov: &Overrides) -> String {
+        let mut out = format!(
+            "# Written by echelon: the scenario this run used, verbatim below this header.\n\
+             # origin: {}\n\
+             # overrides: {ov}\n\n",
+            self.origin
+        );
+        out.push_str(&self.source);
+        if !out.ends_with('\n') {
+            out.push('\n');
+        }
+        out
+    }
+
     /// An error at `path` in this file.
     fn error(&self, path: &FieldPath, message: impl Display) -> ScenarioError {
         let spans = Spans::new(&self.source);
@@ -275,6 +321,7 @@ impl Scenario {
             description: f.description.clone(),
             simulation,
             log_every,
+            record: self.record(ov),
         })
     }
 

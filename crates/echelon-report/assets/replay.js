@@ -5,7 +5,7 @@
   const TRAIL_SECONDS = 12;
   const TRAIL_POINTS = 120;
   const ROBOT_PX = 9;
-  const state = { framesDrawn: 0, time: 0, playing: false, errors: [] };
+  const state = { framesDrawn: 0, drawMs: 0, time: 0, playing: false, errors: [] };
   window.echelonReplay = state;
   window.addEventListener("error", (e) => state.errors.push(String(e.message)));
 
@@ -106,6 +106,7 @@
   const Y = (y) => view.oy - view.s * y;
 
   function draw() {
+    const started = performance.now();
     const k = interpolate(state.time);
     ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
     ctx.clearRect(0, 0, cssW, cssH);
@@ -185,6 +186,7 @@
     ctx.font = "12px sans-serif"; ctx.fillStyle = ink; ctx.fillText(len + " m", 16, cssH - 22);
 
     state.framesDrawn += 1;
+    state.drawMs += performance.now() - started;
     ui.frames.textContent = String(state.framesDrawn);
     ui.clock.textContent = "t = " + state.time.toFixed(2) + " s";
     ui.time.value = String(Math.round(10000 * (state.time - t0) / Math.max(t1 - t0, 1e-9)));

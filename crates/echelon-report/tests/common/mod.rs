@@ -9,7 +9,7 @@ use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 
 /// Runs a scenario (TOML source) into `dir` with `overrides`.
-pub fn run_source(source: &str, dir: &Path, overrides: &Overrides) {
+pub(crate) fn run_source(source: &str, dir: &Path, overrides: &Overrides) {
     let scenario = Scenario::parse(source, "test.toml", None).unwrap();
     let mut run = scenario.build(overrides).unwrap();
     let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
@@ -17,7 +17,7 @@ pub fn run_source(source: &str, dir: &Path, overrides: &Overrides) {
 }
 
 /// Runs a built-in scenario into `dir`.
-pub fn run_builtin(name: &str, dir: &Path, overrides: &Overrides) {
+pub(crate) fn run_builtin(name: &str, dir: &Path, overrides: &Overrides) {
     let src = echelon::scenario::builtin()
         .iter()
         .find(|(n, _)| *n == name)
@@ -28,7 +28,7 @@ pub fn run_builtin(name: &str, dir: &Path, overrides: &Overrides) {
 
 /// A formation of `n` robots (a multiple of 20) behind a 20 m circle: 20 lanes
 /// following the reference, each with a column of followers, 70 s at 100 Hz.
-pub fn many_agents(n: usize) -> String {
+pub(crate) fn many_agents(n: usize) -> String {
     let mut s = String::from(
         "name = \"swarm\"\ndescription = \"many robots in columns behind a circle\"\n\
          [sim]\nduration = 70.0\ndt = 0.01\n[log]\ndt = 0.01\n\

@@ -51,7 +51,7 @@ pub(crate) fn lycomp(args: &LycompArgs) -> Result<()> {
         fits.push(("eq. 6, paper's G, δ, ε", paper));
     } else {
         eprintln!(
-            "warning: the paper's polynomials for G, δ, ε hold only for L_Xoff in {lo}–{hi} m; refitting (--fit)"
+            "warning: the paper's polynomials for G, δ, ε hold only for L_Xoff in {lo}–{hi} m: showing the least-squares refit"
         );
     }
     if args.fit || !in_range {

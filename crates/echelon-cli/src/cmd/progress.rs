@@ -6,11 +6,14 @@ use echelon::sim::{Frame, Observer, ObserverError};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Shows a bar on stderr once a run has taken [`Progress::DELAY`]; never when
-/// stderr is not a terminal (indicatif hides it) or with `--quiet`.
+/// stderr is not a terminal (indicatif hides it) or with `--quiet`. The
+/// environment variable `ECHELON_PROGRESS_DELAY_MS` changes the delay (the
+/// tests set it to 0).
 #[derive(Debug)]
 pub(crate) struct Progress {
     steps: u64,
     started: Instant,
+    delay: Duration,
     enabled: bool,
     bar: Option<ProgressBar>,
 }
@@ -23,9 +26,14 @@ impl Progress {
 
     /// A progress observer for a run of `steps` steps.
     pub(crate) fn new(steps: u64, quiet: bool) -> Progress {
+        let delay = std::env::var("ECHELON_PROGRESS_DELAY_MS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .map_or(Self::DELAY, Duration::from_millis);
         Progress {
             steps,
             started: Instant::now(),
+            delay,
             enabled: !quiet,
             bar: None,
         }
@@ -46,15 +54,16 @@ impl Observer for Progress {
         }
         match &self.bar {
             Some(bar) => bar.set_position(frame.step),
-            None if self.started.elapsed() >= Self::DELAY => {
+            None if self.started.elapsed() >= self.delay => {
                 let bar =
                     ProgressBar::with_draw_target(Some(self.steps), ProgressDrawTarget::stderr());
                 bar.set_style(
                     ProgressStyle::with_template(
-                        "{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}% t = {msg} s, ETA {eta}",
+                        "{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}%  t = {msg} s",
                     )
                     .unwrap_or_else(|_| ProgressStyle::default_bar()),
                 );
+                bar.set_message(format!("{:.1}", frame.t));
                 bar.set_position(frame.step);
                 self.bar = Some(bar);
             }

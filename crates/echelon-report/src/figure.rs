@@ -385,16 +385,13 @@ impl Panel {
         let mut xr = fit(x0, x1, self.x.range, &self.x);
         let mut yr = fit(y0, y1, self.y.range, &self.y);
         if self.equal_aspect && w > 0.0 && h > 0.0 {
-            // Widen the axis that has fewer units per pixel.
+            // Widen the axis that has fewer units per pixel; the room gained
+            // goes to the top (or right), where the legend prefers to sit.
             let (sx, sy) = ((xr.1 - xr.0) / w, (yr.1 - yr.0) / h);
             if sx > sy {
-                let c = 0.5 * (yr.0 + yr.1);
-                let half = 0.5 * sx * h;
-                yr = (c - half, c + half);
+                yr.1 = yr.0 + sx * h;
             } else {
-                let c = 0.5 * (xr.0 + xr.1);
-                let half = 0.5 * sy * w;
-                xr = (c - half, c + half);
+                xr.1 = xr.0 + sy * w;
             }
         }
         (xr, yr)

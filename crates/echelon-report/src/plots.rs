@@ -98,7 +98,41 @@ pub fn paths(data: &RunData) -> Figure {
         "{}: paths (open triangles: start poses; filled: formation at the link instants)",
         data.summary.scenario
     );
-    Figure::new(&title, 1000, 900).with_panel(panel)
+    // As tall as the paths need at 1000 px wide (equal scales), within reason.
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for a in &data.agents {
+        for (&x, &y) in a.get(Column::X).iter().zip(a.get(Column::Y)) {
+            if x.is_finite() && y.is_finite() {
+                (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+            }
+        }
+    }
+    let aspect = if x1 > x0 && y1 >= y0 {
+        (y1 - y0) / (x1 - x0)
+    } else {
+        1.0
+    };
+    // Room for the legend: above wide paths, right of tall ones.
+    let entries = data.agents.len().min(crate::figure::LEGEND_MAX) + 3;
+    let legend_h = 19.0 * entries as f64;
+    let (width, height) = if aspect < 0.6 {
+        (
+            1000,
+            (900.0 * aspect * 1.05 + 130.0 + legend_h).clamp(560.0, 1000.0) as u32,
+        )
+    } else {
+        let plot_h = 780.0;
+        (
+            ((plot_h / aspect) * 1.05 + 100.0 + 380.0).clamp(900.0, 1500.0) as u32,
+            900,
+        )
+    };
+    Figure::new(&title, width, height).with_panel(panel)
 }
 
 fn time_panel(data: &RunData, y: Axis, series: impl Fn(usize) -> Vec<f64>, legend: bool) -> Panel {

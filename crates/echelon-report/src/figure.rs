@@ -633,7 +633,15 @@ where
         .y_label_area_size(Y_LABEL_AREA)
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(draw_err)?;
-    let log_label = |v: &f64| format_tick(10f64.powf(*v));
+    let log_label = |v: &f64| {
+        // Never snapped to 0: on a log axis 1e-13 is a real tick.
+        let x = 10f64.powf(*v);
+        if (1e-3..1e5).contains(&x) {
+            format_tick(x)
+        } else {
+            format!("{x:.0e}")
+        }
+    };
     let lin_label = |v: &f64| format_tick(*v);
     let x_fmt: &dyn Fn(&f64) -> String = if panel.x.log { &log_label } else { &lin_label };
     let y_fmt: &dyn Fn(&f64) -> String = if panel.y.log { &log_label } else { &lin_label };
@@ -979,6 +987,31 @@ mod tests {
         let ((x0, x1), (y0, y1)) = p.ranges(800.0, 400.0);
         assert!(((x1 - x0) / 800.0 - (y1 - y0) / 400.0).abs() < 1e-12);
         assert!(x0 <= 0.0 && x1 >= 10.0 && y0 <= 0.0 && y1 >= 1.0);
+    }
+
+    #[test]
+    fn log_axes_label_powers_of_ten_and_drop_non_positive_values() {
+        let mut p = Panel::new(Axis::new("N", "").log(), Axis::new("‖z‖", "m/s").log());
+        p.line(
+            "bound",
+            (0..=40)
+                .map(|i| (10f64.powf(f64::from(i) / 10.0), 1e-3 * f64::from(i)))
+                .collect(),
+            Stroke::reference(),
+        );
+        let (x0, x1, y0, y1) = p.bounds();
+        // i = 0 gives ‖z‖ = 0, left out on a log axis (so x starts at 10^0.1).
+        assert!((x0 - 0.1).abs() < 1e-12 && x1 == 4.0, "{x0} {x1}");
+        assert!((y0 - (-3.0)).abs() < 1e-12 && (y1 - 0.04f64.log10()).abs() < 1e-12);
+        let svg = Figure::new("log", 600, 400).with_panel(p).svg().unwrap();
+        let texts: Vec<&str> = svg
+            .split("</text>")
+            .filter_map(|t| t.rsplit('>').next())
+            .map(str::trim)
+            .collect();
+        for want in ["1000", "10", "0.01", "‖z‖ [m/s]", "N"] {
+            assert!(texts.contains(&want), "no `{want}` in {texts:?}");
+        }
     }
 
     #[test]

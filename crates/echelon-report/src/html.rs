@@ -263,7 +263,9 @@ pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
     }
     let json = serde_json::to_string(&replay_data(data))
         .unwrap_or_else(|_| "null".to_owned())
-        .replace("</", "<\\/");
+        // `<` only occurs inside JSON strings: escaped, no `</script>` or
+        // `<!--` can end or confuse the data block.
+        .replace('<', "\\u003c");
     let _ = write!(
         html,
         "</main>\n<script type=\"application/json\" id=\"echelon-data\">{json}</script>\n<script>\n{SCRIPT}</script>\n</body>\n</html>\n"

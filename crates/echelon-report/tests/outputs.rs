@@ -287,3 +287,35 @@ fn broken_run_directories_are_refused_with_the_file_and_line() {
     assert!(!dir.path().join(REPORT_FILE).exists());
     assert!(!dir.path().join("paths.svg").exists());
 }
+
+#[test]
+fn names_cannot_break_the_page() {
+    let name = "a</script><!--b & \"c\"";
+    let src = echelon::scenario::builtin()
+        .iter()
+        .find(|(n, _)| *n == "nonfeasible")
+        .unwrap()
+        .1
+        .replacen("[[agents]]", &format!("[[agents]]\nname = '{name}'"), 1);
+    let src = if src.contains("name = \"robot\"") {
+        src.replace("name = \"robot\"\n", "")
+    } else {
+        src
+    };
+    let dir = tempfile::tempdir().unwrap();
+    common::run_source(
+        &src,
+        dir.path(),
+        &Overrides {
+            duration: Some(1.0),
+            ..Overrides::default()
+        },
+    );
+    write_all(dir.path()).unwrap();
+    let html = std::fs::read_to_string(dir.path().join(REPORT_FILE)).unwrap();
+    assert_eq!(embedded(&html)["agents"][0]["name"], name);
+    // One data block, one script, and the name only escaped elsewhere.
+    assert_eq!(html.matches("</script>").count(), 2);
+    assert!(!html.contains("<!--b"));
+    assert!(html.contains("a&lt;/script&gt;&lt;!--b &amp; &quot;c&quot;"));
+}

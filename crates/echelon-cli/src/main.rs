@@ -26,9 +26,14 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Simulate a scenario; write DIR/trajectory.csv and DIR/summary.json.
+    /// Simulate a scenario; write DIR/trajectory.csv, summary.json, reference.csv, scenario.toml.
     #[command(allow_negative_numbers = true)]
     Run(cmd::run::RunArgs),
+    /// Draw a run's figures (SVG + PNG) and DIR/report.html from its output directory.
+    Plot(cmd::plot::PlotArgs),
+    /// L_Ycomp exact (eq. 5) against the smooth fit (eq. 6), or refit eq. 6 for any L_Xoff.
+    #[command(allow_negative_numbers = true)]
+    Lycomp(cmd::lycomp::LycompArgs),
     /// List the built-in scenarios.
     Scenarios,
     /// Print a built-in scenario's TOML, to copy and edit.
@@ -70,6 +75,8 @@ fn main() -> ExitCode {
     };
     let result = match cli.command {
         Command::Run(args) => cmd::run::run(args),
+        Command::Plot(args) => cmd::plot::plot(&args),
+        Command::Lycomp(args) => cmd::lycomp::lycomp(&args),
         Command::Scenarios => cmd::scenarios::list(),
         Command::Show(args) => cmd::scenarios::show(&args),
         Command::Bound(args) => cmd::bound::bound(&args),

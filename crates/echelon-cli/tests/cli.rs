@@ -52,6 +52,8 @@ fn every_command_has_help() {
         &["run", "--help"],
         &["scenarios", "--help"],
         &["show", "--help"],
+        &["plot", "--help"],
+        &["lycomp", "--help"],
     ] {
         let o = echelon(args);
         assert!(o.status.success(), "{args:?}");
@@ -532,4 +534,152 @@ fn run_writes_odometry_csv_when_agents_dead_reckon() {
         .success()
     );
     assert!(!plain.join("odometry.csv").exists());
+}
+
+#[test]
+fn run_plot_writes_figures_and_report_and_plot_redraws_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cp");
+    let o = echelon(&[
+        "run",
+        "circle-pentagon",
+        "--duration",
+        "5",
+        "--out",
+        out.to_str().unwrap(),
+        "--plot",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    for f in [
+        "trajectory.csv",
+        "reference.csv",
+        "summary.json",
+        "scenario.toml",
+        "paths.svg",
+        "paths.png",
+        "errors.svg",
+        "errors.png",
+        "signals.svg",
+        "signals.png",
+        "report.html",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+        assert!(text.contains(f), "stdout does not name {f}: {text}");
+    }
+    // `plot` works from the directory alone, with the same result.
+    let before = std::fs::read(out.join("report.html")).unwrap();
+    std::fs::remove_file(out.join("paths.svg")).unwrap();
+    let o = echelon(&["plot", out.to_str().unwrap(), "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).is_empty());
+    assert!(out.join("paths.svg").is_file());
+    assert!(std::fs::read(out.join("report.html")).unwrap() == before);
+    // The recorded scenario names the overrides of the run.
+    let scenario = std::fs::read_to_string(out.join("scenario.toml")).unwrap();
+    assert!(scenario.contains("# overrides: --duration 5"), "{scenario}");
+}
+
+#[test]
+fn plot_refuses_a_directory_that_is_not_a_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = echelon(&["plot", dir.path().to_str().unwrap()]);
+    assert_refused(&o, &["summary.json"]);
+    std::fs::write(dir.path().join("summary.json"), "{").unwrap();
+    let o = echelon(&["plot", dir.path().to_str().unwrap()]);
+    assert_refused(&o, &["summary.json", "EOF"]);
+    assert!(!dir.path().join("report.html").exists());
+}
+
+#[test]
+fn lycomp_prints_the_largest_gap_and_writes_fig_5() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ly");
+    let o = echelon(&["lycomp", "--lxoff", "0.5", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    // docs/control-law.md: the largest gap is 0.23 m, near |R_C| = 0.7.
+    assert!(
+        text.contains("largest gap to eq. 5: 0.230 m at |R_C| = 0.705 m"),
+        "{text}"
+    );
+    assert!(!text.contains("least squares"));
+    assert!(out.join("lycomp.svg").is_file() && out.join("lycomp.png").is_file());
+    let svg = std::fs::read_to_string(out.join("lycomp.svg")).unwrap();
+    assert!(svg.contains("R_C [m]") && svg.contains("L_Ycomp [m]"));
+
+    let o = echelon(&[
+        "lycomp",
+        "--fit",
+        "--lxoff",
+        "0.5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(
+        text.contains("eq. 6, least squares   G = 0.213724  δ = 0.450806  ε = 0.702275  largest gap to eq. 5: 0.122 m"),
+        "{text}"
+    );
+    // Outside the paper's range: a warning and the refit.
+    let o = echelon(&["lycomp", "--lxoff", "2", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success());
+    assert!(stderr(&o).starts_with("warning: the paper's polynomials"));
+    assert!(stdout(&o).contains("least squares"));
+    for bad in ["0", "-1", "nan", "x"] {
+        assert_refused(&echelon(&["lycomp", "--lxoff", bad]), &["--lxoff"]);
+    }
+}
+
+/// The bar's delay, shortened so that any run of a few thousand steps is "long".
+const NO_DELAY: (&str, &str) = ("ECHELON_PROGRESS_DELAY_MS", "0");
+const LONG_RUN: [&str; 2] = ["run", "circle-pentagon"];
+
+#[test]
+fn no_progress_bar_when_stderr_is_not_a_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_echelon"))
+        .args(LONG_RUN)
+        .args(["--out", dir.path().to_str().unwrap()])
+        .env(NO_DELAY.0, NO_DELAY.1)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    assert_eq!(stderr(&o), "");
+}
+
+#[test]
+fn progress_bar_on_a_terminal_for_long_runs() {
+    // `script` (util-linux) runs the command on a pseudo-terminal.
+    let dir = tempfile::tempdir().unwrap();
+    let command = format!(
+        "{} {} --out {}",
+        env!("CARGO_BIN_EXE_echelon"),
+        LONG_RUN.join(" "),
+        dir.path().display()
+    );
+    let o = Command::new("script")
+        .args(["-qec", &command, "/dev/null"])
+        .env(NO_DELAY.0, NO_DELAY.1)
+        .output()
+        .expect("`script` (util-linux) runs");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let screen = stdout(&o);
+    assert!(
+        screen.contains("% ") && screen.contains(" t = "),
+        "{screen}"
+    );
+    assert!(screen.contains("circle-pentagon: 4 agents"));
+    // With the real delay (1 s), a short run shows none.
+    let command = format!(
+        "{} run nonfeasible --out {}",
+        env!("CARGO_BIN_EXE_echelon"),
+        dir.path().display()
+    );
+    let o = Command::new("script")
+        .args(["-qec", &command, "/dev/null"])
+        .output()
+        .unwrap();
+    assert!(!stdout(&o).contains(" t = "), "{}", stdout(&o));
 }

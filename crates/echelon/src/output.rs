@@ -1,4 +1,4 @@
-//! Run outputs: `trajectory.csv` and `summary.json`.
+//! Run outputs: `trajectory.csv`, `reference.csv`, `summary.json` and `scenario.toml`.
 //!
 //! Numbers are written in their shortest round-trip form (the same bits read
 //! back), so the same run gives the same bytes.
@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::OutputError;
 use crate::model::wrap_angle;
+use crate::reference::{Order, Reference, Trajectory};
 use crate::scenario::Run;
 use crate::sim::{AgentSummary, Frame, Observer, ObserverError, Summary, Timing};
 
@@ -116,6 +117,65 @@ impl<W: Write> Observer for TrajectoryCsv<W> {
             self.out.write_all(line.as_bytes())?;
             self.rows += 1;
         }
+        Ok(())
+    }
+}
+
+/// The header of `reference.csv`: the virtual leader `p_d(t)` at the same logged
+/// instants as `trajectory.csv`: position, heading `atan2(ẏ_d, ẋ_d)` (0 at
+/// standstill), speed `V_d` and turn rate `ω_d`.
+pub const REFERENCE_HEADER: &str = "t,x,y,theta,v,omega";
+
+/// Streams `reference.csv` rows at the same steps as [`TrajectoryCsv`].
+#[derive(Debug)]
+pub struct ReferenceCsv<W: Write> {
+    out: W,
+    every: u64,
+    reference: Reference,
+    line: String,
+}
+
+impl<W: Write> ReferenceCsv<W> {
+    /// Writes the header; then logs every `every`-th step (1: every step) and the last.
+    pub fn new(mut out: W, every: u64, reference: Reference) -> io::Result<Self> {
+        writeln!(out, "{REFERENCE_HEADER}")?;
+        Ok(ReferenceCsv {
+            out,
+            every: every.max(1),
+            reference,
+            line: String::with_capacity(128),
+        })
+    }
+
+    /// Flushes and returns the writer.
+    pub fn finish(mut self) -> io::Result<W> {
+        self.out.flush()?;
+        Ok(self.out)
+    }
+}
+
+impl<W: Write> Observer for ReferenceCsv<W> {
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        if !(frame.step.is_multiple_of(self.every) || frame.last) {
+            return Ok(());
+        }
+        let jet = self.reference.eval(frame.t, Order::Two);
+        let mut buf = ryu::Buffer::new();
+        let line = &mut self.line;
+        line.clear();
+        push_time(line, frame.t);
+        for v in [
+            jet.p[0],
+            jet.p[1],
+            jet.heading(),
+            jet.speed(),
+            jet.turn_rate(),
+        ] {
+            line.push(',');
+            push_f64(line, v, &mut buf);
+        }
+        line.push('\n');
+        self.out.write_all(line.as_bytes())?;
         Ok(())
     }
 }
@@ -277,6 +337,10 @@ pub struct RunSummary {
 pub const TRAJECTORY_FILE: &str = "trajectory.csv";
 /// See [`TRAJECTORY_FILE`].
 pub const SUMMARY_FILE: &str = "summary.json";
+/// See [`TRAJECTORY_FILE`]; header [`REFERENCE_HEADER`].
+pub const REFERENCE_FILE: &str = "reference.csv";
+/// See [`TRAJECTORY_FILE`]: the scenario source as run ([`Run::record`]).
+pub const SCENARIO_FILE: &str = "scenario.toml";
 /// Written when any agent dead-reckons; see [`ODOMETRY_HEADER`].
 pub const ODOMETRY_FILE: &str = "odometry.csv";
 
@@ -287,10 +351,10 @@ fn io_error(path: &Path) -> impl FnOnce(io::Error) -> OutputError + '_ {
     }
 }
 
-/// Runs `run` to its end, writing `dir/trajectory.csv` and `dir/summary.json`;
-/// `extra` sees every frame too (e.g. a progress bar). Files are written under
-/// temporary names and renamed only when the run succeeds, so a failed run
-/// leaves no half-written output.
+/// Runs `run` to its end, writing `dir/trajectory.csv`, `dir/reference.csv`,
+/// `dir/summary.json` and `dir/scenario.toml`; `extra` sees every frame too
+/// (e.g. a progress bar). Files are written under temporary names and renamed
+/// only when the run succeeds, so a failed run leaves no half-written output.
 pub fn run_to_dir(
     run: &mut Run,
     dir: &Path,
@@ -298,43 +362,53 @@ pub fn run_to_dir(
 ) -> Result<RunSummary, OutputError> {
     std::fs::create_dir_all(dir).map_err(io_error(dir))?;
     let part = |name: &str| -> PathBuf { dir.join(format!(".{name}.part")) };
-    let (traj_part, summary_part) = (part(TRAJECTORY_FILE), part(SUMMARY_FILE));
-    let file = File::create(&traj_part).map_err(io_error(&traj_part))?;
-    let mut csv = TrajectoryCsv::new(BufWriter::with_capacity(1 << 16, file), run.log_every)
-        .map_err(io_error(&traj_part))?;
-    let odometry_part = part(ODOMETRY_FILE);
-    let sim = &mut run.simulation;
-    let mut odometry = if sim.odometers().is_empty() {
-        None
-    } else {
-        let file = File::create(&odometry_part).map_err(io_error(&odometry_part))?;
-        Some(
-            OdometryCsv::new(BufWriter::with_capacity(1 << 16, file), run.log_every)
-                .map_err(io_error(&odometry_part))?,
-        )
+    let mut names = vec![TRAJECTORY_FILE, REFERENCE_FILE, SUMMARY_FILE, SCENARIO_FILE];
+    if !run.simulation.odometers().is_empty() {
+        names.push(ODOMETRY_FILE);
+    }
+    let parts: Vec<PathBuf> = names.iter().map(|n| part(n)).collect();
+    let (traj_part, ref_part, summary_part, scenario_part) =
+        (&parts[0], &parts[1], &parts[2], &parts[3]);
+    let remove_parts = || {
+        for p in &parts {
+            let _ = std::fs::remove_file(p);
+        }
     };
-    let mut summary = Summary::new(sim.agents().len(), Summary::SETTLE_TOLERANCE);
+    let create = |path: &Path| -> Result<BufWriter<File>, OutputError> {
+        let file = File::create(path).map_err(io_error(path))?;
+        Ok(BufWriter::with_capacity(1 << 16, file))
+    };
+    let mut csv =
+        TrajectoryCsv::new(create(traj_part)?, run.log_every).map_err(io_error(traj_part))?;
+    let sim = &mut run.simulation;
+    let mut reference =
+        ReferenceCsv::new(create(ref_part)?, run.log_every, sim.reference().clone())
+            .map_err(io_error(ref_part))?;
+    let mut odometry = match parts.get(4) {
+        Some(p) => Some(OdometryCsv::new(create(p)?, run.log_every).map_err(io_error(p))?),
+        None => None,
+    };
     let mut no_odometry = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
     let odometry_observer: &mut dyn Observer = match &mut odometry {
         Some(o) => o,
         None => &mut no_odometry,
     };
+    let mut summary = Summary::new(sim.agents().len(), Summary::SETTLE_TOLERANCE);
     let result = sim.run(&mut [
         &mut csv as &mut dyn Observer,
+        &mut reference,
         odometry_observer,
         &mut summary,
         extra,
     ]);
     if let Err(e) = result {
-        let _ = std::fs::remove_file(&traj_part);
-        let _ = std::fs::remove_file(&odometry_part);
+        remove_parts();
         return Err(e.into());
     }
-    csv.finish().map_err(io_error(&traj_part))?;
-    let mut renames = vec![(traj_part, TRAJECTORY_FILE)];
-    if let Some(o) = odometry {
-        o.finish().map_err(io_error(&odometry_part))?;
-        renames.push((odometry_part, ODOMETRY_FILE));
+    csv.finish().map_err(io_error(traj_part))?;
+    reference.finish().map_err(io_error(ref_part))?;
+    if let (Some(o), Some(p)) = (odometry, parts.get(4)) {
+        o.finish().map_err(io_error(p))?;
     }
     let config = *sim.config();
     let report = RunSummary {
@@ -355,11 +429,11 @@ pub fn run_to_dir(
         source: e.into(),
     })?;
     json.push('\n');
-    std::fs::write(&summary_part, json).map_err(io_error(&summary_part))?;
-    renames.push((summary_part, SUMMARY_FILE));
-    for (from, to) in renames {
+    std::fs::write(summary_part, json).map_err(io_error(summary_part))?;
+    std::fs::write(scenario_part, &run.record).map_err(io_error(scenario_part))?;
+    for (from, to) in parts.iter().zip(&names) {
         let to = dir.join(to);
-        std::fs::rename(&from, &to).map_err(io_error(&to))?;
+        std::fs::rename(from, &to).map_err(io_error(&to))?;
     }
     Ok(report)
 }

@@ -5,7 +5,9 @@
 use std::path::Path;
 
 use echelon::ScenarioError;
-use echelon::output::{self, SUMMARY_FILE, TRAJECTORY_FILE, TRAJECTORY_HEADER};
+use echelon::output::{
+    self, REFERENCE_FILE, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE, TRAJECTORY_HEADER,
+};
 use echelon::scenario::schema::ScenarioFile;
 use echelon::scenario::{self, Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
@@ -359,7 +361,7 @@ fn same_scenario_gives_the_same_bytes() {
     let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
     run_into(a.path(), "circle-pentagon");
     run_into(b.path(), "circle-pentagon");
-    for f in [TRAJECTORY_FILE, SUMMARY_FILE] {
+    for f in [TRAJECTORY_FILE, SUMMARY_FILE, REFERENCE_FILE, SCENARIO_FILE] {
         let (x, y) = (
             std::fs::read(a.path().join(f)).unwrap(),
             std::fs::read(b.path().join(f)).unwrap(),
@@ -376,9 +378,66 @@ fn same_scenario_gives_the_same_bytes() {
         .collect();
     assert_eq!(
         leftovers.len(),
-        2,
-        "only the two outputs remain: {leftovers:?}"
+        4,
+        "only the four outputs remain: {leftovers:?}"
     );
+}
+
+#[test]
+fn the_run_records_its_scenario_and_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = Scenario::builtin("circle-pentagon").unwrap();
+    let overrides = Overrides {
+        duration: Some(2.0),
+        law: Some(echelon::Variant::Complete),
+        ..Overrides::default()
+    };
+    let mut run = scenario.build(&overrides).unwrap();
+    let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
+    output::run_to_dir(&mut run, dir.path(), &mut none).unwrap();
+    // scenario.toml: a header naming origin and overrides, then the exact source,
+    // which parses back to the same scenario.
+    let text = std::fs::read_to_string(dir.path().join(SCENARIO_FILE)).unwrap();
+    let mut lines = text.lines();
+    assert!(lines.next().unwrap().starts_with("# Written by echelon"));
+    assert_eq!(lines.next(), Some("# origin: builtin:circle-pentagon"));
+    assert_eq!(
+        lines.next(),
+        Some("# overrides: --duration 2 --law complete")
+    );
+    assert!(text.ends_with(scenario.source()));
+    let back = Scenario::parse(&text, "scenario.toml", None).unwrap();
+    assert_eq!(back.file, scenario.file);
+    // reference.csv: the virtual leader at the logged instants (eq. 18: a circle
+    // of radius V_d/ω_d = 5 m through the origin, heading ω_d t).
+    let reference = std::fs::read_to_string(dir.path().join(REFERENCE_FILE)).unwrap();
+    let traj = std::fs::read_to_string(dir.path().join(TRAJECTORY_FILE)).unwrap();
+    let mut rows = reference.lines();
+    assert_eq!(rows.next(), Some(output::REFERENCE_HEADER));
+    let times: Vec<&str> = traj
+        .lines()
+        .skip(1)
+        .filter(|l| l.split(',').nth(1) == Some("1"))
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    let rows: Vec<Vec<f64>> = rows
+        .map(|l| l.split(',').map(|c| c.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), times.len());
+    for (row, t) in rows.iter().zip(&times) {
+        assert_eq!(row[0], t.parse::<f64>().unwrap());
+        let (x, y, th) = (
+            5.0 * (0.1 * row[0]).sin(),
+            5.0 - 5.0 * (0.1 * row[0]).cos(),
+            0.1 * row[0],
+        );
+        assert!(
+            (row[1] - x).abs() < 1e-12 && (row[2] - y).abs() < 1e-12,
+            "{row:?}"
+        );
+        assert!((row[3] - th).abs() < 1e-12 && (row[4] - 0.5).abs() < 1e-12);
+        assert!((row[5] - 0.1).abs() < 1e-12);
+    }
 }
 
 /// Golden summaries of every built-in scenario, compared with a relative

@@ -1,6 +1,9 @@
 //! One module per command.
 
 pub(crate) mod bound;
+pub(crate) mod lycomp;
+pub(crate) mod plot;
+pub(crate) mod progress;
 pub(crate) mod run;
 pub(crate) mod scenarios;
 pub(crate) mod sweep;

@@ -7,11 +7,13 @@ use anyhow::{Context, Result};
 use clap::ValueEnum;
 
 use echelon::formation::Leader;
-use echelon::output::{self, ODOMETRY_FILE, RunSummary, SUMMARY_FILE, TRAJECTORY_FILE};
+use echelon::output::{
+    self, ODOMETRY_FILE, REFERENCE_FILE, RunSummary, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE,
+};
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::{Frame, ObserverError};
 use echelon::{Simulation, Variant};
 
+use super::progress::Progress;
 use super::{non_negative, positive};
 
 /// Arguments of `echelon run`.
@@ -37,6 +39,9 @@ pub(crate) struct RunArgs {
     /// Seed of the random models (odometry noise, slip, fixes) [default: the scenario's, else 0].
     #[arg(long, value_name = "N")]
     seed: Option<u64>,
+    /// Also draw the figures (paths, errors, signals as SVG and PNG) and report.html.
+    #[arg(long)]
+    plot: bool,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -72,23 +77,27 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
     }
-    let mut nothing = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
     let started = Instant::now();
-    let summary = output::run_to_dir(&mut run, &out, &mut nothing)
-        .with_context(|| format!("running {}", run.name))?;
+    let mut progress = Progress::new(run.simulation.steps(), args.quiet);
+    let result = output::run_to_dir(&mut run, &out, &mut progress);
+    progress.finish();
+    let summary = result.with_context(|| format!("running {}", run.name))?;
     let elapsed = started.elapsed().as_secs_f64();
     if !args.quiet {
         print_summary(&run.simulation, &summary, elapsed);
-        let mut files = vec![TRAJECTORY_FILE];
+        let mut files = vec![TRAJECTORY_FILE, REFERENCE_FILE];
         if !run.simulation.odometers().is_empty() {
             files.push(ODOMETRY_FILE);
         }
-        files.push(SUMMARY_FILE);
+        files.extend([SUMMARY_FILE, SCENARIO_FILE]);
         let shown: Vec<String> = files
             .iter()
             .map(|f| out.join(f).display().to_string())
             .collect();
         println!("wrote {}", shown.join(", "));
+    }
+    if args.plot {
+        super::plot::draw(&out, args.quiet)?;
     }
     Ok(())
 }

@@ -76,6 +76,40 @@ pub struct Run {
     pub log_every: u64,
     /// Seed of the random models.
     pub seed: u64,
+    /// The scenario as run: a comment header naming where it came from and the
+    /// command-line overrides applied, then the exact TOML source.
+    /// [`crate::output::run_to_dir`] writes it as `scenario.toml`.
+    pub record: String,
+}
+
+impl std::fmt::Display for Overrides {
+    /// The overrides as `echelon run` flags (`--dt 0.002 --law complete`), or `none`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut flags = Vec::new();
+        for (flag, v) in [
+            ("--dt", self.dt),
+            ("--duration", self.duration),
+            ("--log-dt", self.log_dt),
+        ] {
+            if let Some(v) = v {
+                flags.push(format!("{flag} {v}"));
+            }
+        }
+        if let Some(seed) = self.seed {
+            flags.push(format!("--seed {seed}"));
+        }
+        if let Some(law) = self.law {
+            flags.push(match law {
+                Variant::Paper => "--law paper".to_owned(),
+                Variant::Complete => "--law complete".to_owned(),
+            });
+        }
+        if flags.is_empty() {
+            f.write_str("none")
+        } else {
+            f.write_str(&flags.join(" "))
+        }
+    }
 }
 
 impl Scenario {
@@ -188,6 +222,21 @@ impl Scenario {
         &self.source
     }
 
+    /// The source with a header recording its origin and `ov` (see [`Run::record`]).
+    fn record(&self, ov: &Overrides) -> String {
+        let mut out = format!(
+            "# Written by echelon: the scenario this run used, verbatim below this header.\n\
+             # origin: {}\n\
+             # overrides: {ov}\n\n",
+            self.origin
+        );
+        out.push_str(&self.source);
+        if !out.ends_with('\n') {
+            out.push('\n');
+        }
+        out
+    }
+
     /// An error at `path` in this file.
     fn error(&self, path: &FieldPath, message: impl Display) -> ScenarioError {
         let spans = Spans::new(&self.source);
@@ -280,6 +329,7 @@ impl Scenario {
             simulation,
             log_every,
             seed,
+            record: self.record(ov),
         })
     }
 

@@ -1,0 +1,77 @@
+//! A progress bar for runs that take more than about a second.
+
+use std::time::{Duration, Instant};
+
+use echelon::sim::{Frame, Observer, ObserverError};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// Shows a bar on stderr once a run has taken [`Progress::DELAY`]; never when
+/// stderr is not a terminal (indicatif hides it) or with `--quiet`. The
+/// environment variable `ECHELON_PROGRESS_DELAY_MS` changes the delay (the
+/// tests set it to 0).
+#[derive(Debug)]
+pub(crate) struct Progress {
+    steps: u64,
+    started: Instant,
+    delay: Duration,
+    enabled: bool,
+    bar: Option<ProgressBar>,
+}
+
+impl Progress {
+    /// Runs shorter than this show no bar.
+    pub(crate) const DELAY: Duration = Duration::from_secs(1);
+    /// Frames between two looks at the clock.
+    const CHECK_EVERY: u64 = 1024;
+
+    /// A progress observer for a run of `steps` steps.
+    pub(crate) fn new(steps: u64, quiet: bool) -> Progress {
+        let delay = std::env::var("ECHELON_PROGRESS_DELAY_MS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .map_or(Self::DELAY, Duration::from_millis);
+        Progress {
+            steps,
+            started: Instant::now(),
+            delay,
+            enabled: !quiet,
+            bar: None,
+        }
+    }
+
+    /// Clears the bar.
+    pub(crate) fn finish(&mut self) {
+        if let Some(bar) = self.bar.take() {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+impl Observer for Progress {
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        if !self.enabled || !frame.step.is_multiple_of(Self::CHECK_EVERY) {
+            return Ok(());
+        }
+        match &self.bar {
+            Some(bar) => bar.set_position(frame.step),
+            None if self.started.elapsed() >= self.delay => {
+                let bar =
+                    ProgressBar::with_draw_target(Some(self.steps), ProgressDrawTarget::stderr());
+                bar.set_style(
+                    ProgressStyle::with_template(
+                        "{spinner} [{elapsed_precise}] {wide_bar} {percent:>3}%  t = {msg} s",
+                    )
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                );
+                bar.set_message(format!("{:.1}", frame.t));
+                bar.set_position(frame.step);
+                self.bar = Some(bar);
+            }
+            None => {}
+        }
+        if let Some(bar) = &self.bar {
+            bar.set_message(format!("{:.1}", frame.t));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,303 @@
+//! `report.html`: one self-contained page (no network: styles, script, data and
+//! figures are inlined) with the scenario, the summary table, the figures and
+//! an animated replay on a canvas.
+//!
+//! # What the replay embeds
+//!
+//! A JSON block, `<script type="application/json" id="echelon-data">`, holds:
+//!
+//! - `times`: the embedded instants, s, as JSON numbers (the same `f64` as in
+//!   `trajectory.csv`);
+//! - `rows`: for each embedded instant, its index among the logged instants of
+//!   `trajectory.csv` (every `stride`-th, and always the last);
+//! - `poses`: base64 of little-endian `float32` `[instant][agent][x, y, θ]`,
+//!   each value the CSV's value rounded to the nearest `float32`;
+//! - `reference`: the same for the virtual leader `[instant][x, y]` (or `null`);
+//! - `agents`: names, leaders (0-based agent index, `-1` for the reference,
+//!   `null` if unknown) and colours.
+//!
+//! `stride` is 1 (every logged instant) unless the poses would exceed
+//! [`MAX_POSE_VALUES`] floats; then every `stride`-th instant is kept, so
+//! 200 agents over 70 s at 100 Hz embed ~33 instants per second (about 6 MB)
+//! and the replay interpolates between them.
+
+use std::fmt::Write as _;
+
+use base64::Engine as _;
+use serde::Serialize;
+
+use echelon::formation::Leader;
+
+use crate::figure::palette;
+use crate::run::{Column, RunData};
+
+/// The report's file name.
+pub const REPORT_FILE: &str = "report.html";
+
+/// At most this many `float32` pose values are embedded (≈ 8 MB of base64).
+pub const MAX_POSE_VALUES: usize = 1_500_000;
+
+const STYLE: &str = include_str!("../assets/report.css");
+const SCRIPT: &str = include_str!("../assets/replay.js");
+
+/// The embedded replay data (see the module doc).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReplayData {
+    /// Format tag.
+    pub format: &'static str,
+    /// Scenario name.
+    pub scenario: String,
+    /// Per agent.
+    pub agents: Vec<ReplayAgent>,
+    /// Every `stride`-th logged instant is embedded.
+    pub stride: usize,
+    /// Embedded instants, s.
+    pub times: Vec<f64>,
+    /// Index of each embedded instant among the logged ones.
+    pub rows: Vec<usize>,
+    /// Base64 little-endian `float32` `[instant][agent][x, y, θ]`.
+    pub poses: String,
+    /// Base64 little-endian `float32` `[instant][x, y]`, or `None`.
+    pub reference: Option<String>,
+}
+
+/// One agent in [`ReplayData`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReplayAgent {
+    /// Name.
+    pub name: String,
+    /// Leader: agent index (0-based), −1 for the reference, `None` if unknown.
+    pub leader: Option<i64>,
+    /// `#RRGGBB`.
+    pub color: String,
+}
+
+/// The embedded instants: every `stride`-th logged one and the last.
+pub fn embedded_rows(instants: usize, agents: usize) -> (usize, Vec<usize>) {
+    if instants == 0 {
+        return (1, Vec::new());
+    }
+    let per_instant = 3 * agents.max(1);
+    let stride = (instants * per_instant).div_ceil(MAX_POSE_VALUES).max(1);
+    let mut rows: Vec<usize> = (0..instants).step_by(stride).collect();
+    if rows.last() != Some(&(instants - 1)) {
+        rows.push(instants - 1);
+    }
+    (stride, rows)
+}
+
+fn base64_f32(values: impl Iterator<Item = f64>) -> String {
+    let mut bytes = Vec::new();
+    for v in values {
+        bytes.extend_from_slice(&(v as f32).to_le_bytes());
+    }
+    base64::engine::general_purpose::STANDARD.encode(bytes)
+}
+
+/// The replay data of a run.
+pub fn replay_data(data: &RunData) -> ReplayData {
+    let (stride, rows) = embedded_rows(data.times.len(), data.agents.len());
+    let poses = base64_f32(rows.iter().flat_map(|&k| {
+        data.agents.iter().flat_map(move |a| {
+            [
+                a.get(Column::X)[k],
+                a.get(Column::Y)[k],
+                a.get(Column::Theta)[k],
+            ]
+        })
+    }));
+    let reference = data
+        .reference
+        .as_ref()
+        .filter(|_| data.uses_reference())
+        .map(|r| base64_f32(rows.iter().flat_map(|&k| [r.x[k], r.y[k]])));
+    ReplayData {
+        format: "echelon-replay-1",
+        scenario: data.summary.scenario.clone(),
+        agents: data
+            .agents
+            .iter()
+            .enumerate()
+            .map(|(i, a)| ReplayAgent {
+                name: a.name.clone(),
+                leader: a.leader.map(|l| match l {
+                    Leader::Reference => -1,
+                    Leader::Agent(j) => j as i64,
+                }),
+                color: palette::series(i).hex(),
+            })
+            .collect(),
+        stride,
+        times: rows.iter().map(|&k| data.times[k]).collect(),
+        rows,
+        poses,
+        reference,
+    }
+}
+
+/// Escapes text for HTML.
+pub fn escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+fn opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
+    v.filter(|x| x.is_finite())
+        .map_or_else(|| "—".to_owned(), f)
+}
+
+fn summary_table(data: &RunData) -> String {
+    let mut t = String::from(
+        "<table class=\"summary\"><thead><tr><th>agent</th><th>leader</th><th>offset (L<sub>Xoff</sub>, L<sub>Yoff</sub>)</th>\
+         <th>final ‖e‖</th><th>RMS ‖e‖</th><th>peak |τ|</th><th>‖e‖ &lt; tolerance from</th></tr></thead><tbody>\n",
+    );
+    for (i, (a, r)) in data.agents.iter().zip(&data.summary.agents).enumerate() {
+        let offset = a
+            .offset
+            .map_or_else(|| "tracking".to_owned(), |(x, y)| format!("({x} m, {y} m)"));
+        let _ = writeln!(
+            t,
+            "<tr><td><span class=\"swatch\" style=\"background:{}\"></span>{}</td><td>{}</td><td>{}</td>\
+             <td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            palette::series(i).hex(),
+            escape(&a.name),
+            escape(&data.leader_name(i)),
+            escape(&offset),
+            opt(r.final_error, |v| format!("{v:.2e} m")),
+            opt(r.rms_error, |v| format!("{v:.3} m")),
+            opt(r.peak_torque, |v| format!("{v:.2} N·m")),
+            opt(r.settle_time, |v| format!("{v:.2} s")),
+        );
+    }
+    t.push_str("</tbody></table>\n");
+    t
+}
+
+/// The whole page; `svgs` are the figures as `(stem, SVG document)`.
+pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
+    let s = &data.summary;
+    let title = format!("echelon — {}", s.scenario);
+    let mut html = String::with_capacity(1 << 20);
+    let _ = write!(
+        html,
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
+         <title>{}</title>\n<style>\n{STYLE}</style>\n</head>\n<body>\n<main>\n",
+        escape(&title)
+    );
+    let _ = writeln!(html, "<header><h1>{}</h1>", escape(&s.scenario));
+    if let Some(d) = &data.description {
+        let _ = writeln!(html, "<p class=\"description\">{}</p>", escape(d));
+    }
+    let controller = s.controller_period.map_or_else(
+        || "continuous-time controller".to_owned(),
+        |p| format!("controller sampled every {p} s (zero-order hold)"),
+    );
+    let _ = writeln!(
+        html,
+        "<p class=\"meta\">{} agent{} · {} s simulated at dt = {} s ({} RK4 steps) · {controller} · {} logged instants</p></header>",
+        data.agents.len(),
+        if data.agents.len() == 1 { "" } else { "s" },
+        s.duration,
+        s.dt,
+        s.steps,
+        data.times.len()
+    );
+    html.push_str(
+        "<section id=\"replay\">\n<h2>Replay</h2>\n<div class=\"controls\">\
+         <button id=\"play\" type=\"button\" aria-label=\"play\">▶ Play</button>\
+         <label>speed <select id=\"speed\">\
+         <option value=\"0.25\">0.25×</option><option value=\"0.5\">0.5×</option>\
+         <option value=\"1\" selected>1×</option><option value=\"2\">2×</option>\
+         <option value=\"5\">5×</option><option value=\"10\">10×</option>\
+         <option value=\"20\">20×</option><option value=\"50\">50×</option></select></label>\
+         <input id=\"time\" type=\"range\" min=\"0\" max=\"10000\" value=\"0\" step=\"1\" aria-label=\"time\">\
+         <output id=\"clock\">t = 0.00 s</output>\
+         <button id=\"fit\" type=\"button\">Fit view</button>\
+         <label><input id=\"trails\" type=\"checkbox\" checked> trails</label>\
+         <label><input id=\"links\" type=\"checkbox\" checked> links</label>\
+         <span class=\"frames\"><span id=\"frames\">0</span> frames drawn</span></div>\n\
+         <canvas id=\"view\" width=\"960\" height=\"600\"></canvas>\n\
+         <p class=\"hint\">Wheel or pinch: zoom · drag: pan · double-click: fit · space: play/pause · ←/→: step. \
+         Triangles are the robots, dotted lines link each follower to its leader, the dashed line is the virtual leader's path.</p>\n</section>\n",
+    );
+    html.push_str("<section id=\"summary\">\n<h2>Summary</h2>\n");
+    html.push_str(&summary_table(data));
+    let _ = writeln!(
+        html,
+        "<p class=\"note\">‖e‖ (eq. 7) is the distance between where the leader should be, seen from the follower, and where it is; the tolerance is {} m.</p>",
+        s.settle_tolerance
+    );
+    if !s.warnings.is_empty() {
+        html.push_str("<ul class=\"warnings\">");
+        for w in &s.warnings {
+            let _ = write!(html, "<li>warning: {}</li>", escape(w));
+        }
+        html.push_str("</ul>\n");
+    }
+    html.push_str("</section>\n<section id=\"figures\">\n<h2>Figures</h2>\n");
+    for (stem, svg) in svgs {
+        let _ = writeln!(
+            html,
+            "<figure id=\"fig-{stem}\">{}<figcaption>{stem}.svg / {stem}.png</figcaption></figure>",
+            svg.trim()
+        );
+    }
+    html.push_str("</section>\n");
+    if let Some(text) = &data.scenario_text {
+        let _ = writeln!(
+            html,
+            "<section id=\"scenario\">\n<h2>Scenario</h2>\n<details><summary>scenario.toml</summary><pre>{}</pre></details>\n</section>",
+            escape(text)
+        );
+    }
+    let json = serde_json::to_string(&replay_data(data))
+        .unwrap_or_else(|_| "null".to_owned())
+        // `<` only occurs inside JSON strings: escaped, no `</script>` or
+        // `<!--` can end or confuse the data block.
+        .replace('<', "\\u003c");
+    let _ = write!(
+        html,
+        "</main>\n<script type=\"application/json\" id=\"echelon-data\">{json}</script>\n<script>\n{SCRIPT}</script>\n</body>\n</html>\n"
+    );
+    html
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn small_runs_embed_every_instant() {
+        let (stride, rows) = embedded_rows(7001, 4);
+        assert_eq!(stride, 1);
+        assert_eq!(rows, (0..7001).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn large_runs_are_thinned_to_the_budget_keeping_the_last_instant() {
+        let (stride, rows) = embedded_rows(7001, 200);
+        assert_eq!(stride, 3);
+        assert_eq!(rows.last(), Some(&7000));
+        assert!(rows.len() * 200 * 3 <= MAX_POSE_VALUES + 600);
+        assert!(rows.windows(2).all(|w| w[1] - w[0] <= stride));
+    }
+
+    #[test]
+    fn escape_escapes() {
+        assert_eq!(
+            escape("<a href=\"x\">&'"),
+            "&lt;a href=&quot;x&quot;&gt;&amp;&#39;"
+        );
+    }
+}

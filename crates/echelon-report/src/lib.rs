@@ -1,0 +1,98 @@
+//! Seeing an echelon run: the paper's figures as SVG and PNG, a self-contained
+//! HTML report with an animated replay, and the `L_Ycomp` fit (paper eqs. 5–6).
+//!
+//! Kept out of the core `echelon` crate so that it builds in seconds.
+//!
+//! - [`figure`]: a small figure builder (panels of lines, segments, robot
+//!   markers; one style; SVG + PNG with an embedded font) for any crate's figures;
+//! - [`run`]: an output directory of `echelon run`, read back;
+//! - [`plots`]: the run figures `paths`, `errors`, `signals` (paper Figs. 8–17);
+//! - [`html`]: `report.html`, with the replay;
+//! - [`lycomp`]: eq. 5 against eq. 6 (Fig. 5), and refitting eq. 6 for any `L_Xoff`.
+
+pub mod figure;
+pub mod html;
+pub mod lycomp;
+pub mod plots;
+pub mod run;
+
+use std::path::{Path, PathBuf};
+
+pub use run::RunData;
+
+/// Everything that can go wrong here.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A run directory's file is not what `echelon run` writes.
+    #[error("{path}: {message}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, and where (line).
+        message: String,
+    },
+    /// Drawing a figure failed.
+    #[error("drawing a figure: {0}")]
+    Draw(String),
+    /// A refused argument (e.g. `L_Xoff ≤ 0`).
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename, so a reader
+/// never sees half a file.
+pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
+    let io = |source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let name = path
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    let part = path.with_file_name(format!(".{name}.part"));
+    std::fs::write(&part, bytes).map_err(io)?;
+    std::fs::rename(&part, path).map_err(io)
+}
+
+/// What [`write_all`] wrote.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Written {
+    /// The figures, SVG and PNG each.
+    pub figures: Vec<figure::Saved>,
+    /// `DIR/report.html`.
+    pub report: PathBuf,
+}
+
+/// Reads the run in `dir` and writes its figures (`paths`, `errors`,
+/// `signals`, as SVG and PNG) and `report.html` next to `trajectory.csv`.
+pub fn write_all(dir: &Path) -> Result<Written, ReportError> {
+    let data = RunData::load(dir)?;
+    let figures = plots::run_figures(&data);
+    let mut saved = Vec::new();
+    let mut svgs = Vec::new();
+    for (stem, fig) in &figures {
+        let svg = fig.svg()?;
+        let files = figure::Saved {
+            svg: dir.join(format!("{stem}.svg")),
+            png: dir.join(format!("{stem}.png")),
+        };
+        write_file(&files.svg, svg.as_bytes())?;
+        write_file(&files.png, &fig.png()?)?;
+        saved.push(files);
+        svgs.push((*stem, svg));
+    }
+    let report = dir.join(html::REPORT_FILE);
+    write_file(&report, html::report(&data, &svgs).as_bytes())?;
+    Ok(Written {
+        figures: saved,
+        report,
+    })
+}

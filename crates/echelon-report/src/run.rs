@@ -1,0 +1,360 @@
+//! An output directory of `echelon run`, read back: `trajectory.csv`,
+//! `reference.csv`, `summary.json` and `scenario.toml`.
+//!
+//! Only `trajectory.csv` and `summary.json` are required: a directory written
+//! before `reference.csv` and `scenario.toml` existed still plots, without the
+//! reference path and the leader links.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use echelon::formation::Leader;
+use echelon::output::{
+    REFERENCE_FILE, REFERENCE_HEADER, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE,
+    TRAJECTORY_HEADER,
+};
+use echelon::scenario::Scenario;
+use echelon::scenario::schema::{LeaderSpec, ModeName};
+
+use crate::ReportError;
+
+/// The per-agent columns of `trajectory.csv` after `t` and `agent`, in order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Column {
+    /// x, m.
+    X,
+    /// y, m.
+    Y,
+    /// θ, rad, wrapped to (−π, π].
+    Theta,
+    /// v, m/s.
+    V,
+    /// ω, rad/s.
+    Omega,
+    /// e_x, m (eq. 7, body frame).
+    Ex,
+    /// e_y, m.
+    Ey,
+    /// z_x, m/s (eq. 10).
+    Zx,
+    /// z_y, m/s.
+    Zy,
+    /// u1, N.
+    U1,
+    /// u2, N·m.
+    U2,
+    /// τ_r, N·m.
+    TauR,
+    /// τ_l, N·m.
+    TauL,
+}
+
+/// Number of [`Column`]s.
+pub const COLUMNS: usize = 13;
+
+/// One agent's logged signals.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AgentTrack {
+    /// Name, as the scenario gives it.
+    pub name: String,
+    /// Whom it follows (`None`: unknown, no `scenario.toml`).
+    pub leader: Option<Leader>,
+    /// `(L_Xoff, L_Yoff)`, m (`None`: pure tracking or unknown).
+    pub offset: Option<(f64, f64)>,
+    columns: [Vec<f64>; COLUMNS],
+}
+
+impl AgentTrack {
+    /// A column, one value per logged instant.
+    pub fn get(&self, c: Column) -> &[f64] {
+        &self.columns[c as usize]
+    }
+
+    /// ‖e‖ at every logged instant, m.
+    pub fn error_norm(&self) -> Vec<f64> {
+        self.get(Column::Ex)
+            .iter()
+            .zip(self.get(Column::Ey))
+            .map(|(x, y)| x.hypot(*y))
+            .collect()
+    }
+}
+
+/// The virtual leader, from `reference.csv`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ReferenceTrack {
+    /// x, m.
+    pub x: Vec<f64>,
+    /// y, m.
+    pub y: Vec<f64>,
+    /// Heading, rad.
+    pub theta: Vec<f64>,
+}
+
+/// Per-agent results of `summary.json` (fields this crate shows; others are ignored).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct AgentResult {
+    /// 1-based number.
+    pub agent: usize,
+    /// Name.
+    pub name: String,
+    /// Final ‖e‖, m.
+    pub final_error: Option<f64>,
+    /// RMS ‖e‖, m.
+    pub rms_error: Option<f64>,
+    /// Peak |τ|, N·m.
+    pub peak_torque: Option<f64>,
+    /// Settling time, s.
+    pub settle_time: Option<f64>,
+}
+
+/// `summary.json` (fields this crate shows; others are ignored).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct SummaryFile {
+    /// Scenario name.
+    pub scenario: String,
+    /// Simulated time, s.
+    pub duration: f64,
+    /// RK4 step, s.
+    pub dt: f64,
+    /// Steps.
+    pub steps: u64,
+    /// Sampled controller period, s.
+    #[serde(default)]
+    pub controller_period: Option<f64>,
+    /// Settling tolerance, m.
+    pub settle_tolerance: f64,
+    /// Warnings.
+    #[serde(default)]
+    pub warnings: Vec<String>,
+    /// Per agent.
+    pub agents: Vec<AgentResult>,
+}
+
+/// A run directory, loaded.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunData {
+    /// The directory.
+    pub dir: PathBuf,
+    /// `summary.json`.
+    pub summary: SummaryFile,
+    /// The scenario's description, from `scenario.toml`.
+    pub description: Option<String>,
+    /// `scenario.toml` as written by the run (header and source).
+    pub scenario_text: Option<String>,
+    /// Logged instants, s.
+    pub times: Vec<f64>,
+    /// The agents, numbered from 1 in this order.
+    pub agents: Vec<AgentTrack>,
+    /// The virtual leader at the same instants (`None`: no `reference.csv`).
+    pub reference: Option<ReferenceTrack>,
+}
+
+fn read(path: &Path) -> Result<String, ReportError> {
+    std::fs::read_to_string(path).map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn read_optional(path: &Path) -> Result<Option<String>, ReportError> {
+    match std::fs::read_to_string(path) {
+        Ok(s) => Ok(Some(s)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(source) => Err(ReportError::Io {
+            path: path.to_path_buf(),
+            source,
+        }),
+    }
+}
+
+/// Parses a CSV of numbers with the given header: one `Vec` per row.
+fn numbers(path: &Path, text: &str, header: &str) -> Result<Vec<Vec<f64>>, ReportError> {
+    let bad = |line: usize, message: String| ReportError::Format {
+        path: path.to_path_buf(),
+        message: format!("line {line}: {message}"),
+    };
+    let mut lines = text.lines();
+    let first = lines.next().unwrap_or("");
+    if first.trim_end() != header {
+        return Err(bad(
+            1,
+            format!("expected the header `{header}`, found `{first}`"),
+        ));
+    }
+    let width = header.split(',').count();
+    let mut rows = Vec::new();
+    for (i, line) in lines.enumerate() {
+        if line.is_empty() {
+            continue;
+        }
+        let mut row = Vec::with_capacity(width);
+        for cell in line.split(',') {
+            row.push(
+                cell.parse::<f64>()
+                    .map_err(|_| bad(i + 2, format!("`{cell}` is not a number")))?,
+            );
+        }
+        if row.len() != width {
+            return Err(bad(
+                i + 2,
+                format!("{} fields, expected {width}", row.len()),
+            ));
+        }
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+impl RunData {
+    /// Reads `dir`.
+    pub fn load(dir: &Path) -> Result<RunData, ReportError> {
+        let summary_path = dir.join(SUMMARY_FILE);
+        let summary: SummaryFile =
+            serde_json::from_str(&read(&summary_path)?).map_err(|e| ReportError::Format {
+                path: summary_path.clone(),
+                message: e.to_string(),
+            })?;
+        let n = summary.agents.len();
+        let traj_path = dir.join(TRAJECTORY_FILE);
+        let rows = numbers(&traj_path, &read(&traj_path)?, TRAJECTORY_HEADER)?;
+        let mut agents: Vec<AgentTrack> = summary
+            .agents
+            .iter()
+            .map(|a| AgentTrack {
+                name: a.name.clone(),
+                leader: None,
+                offset: None,
+                columns: Default::default(),
+            })
+            .collect();
+        let mut times = Vec::new();
+        for (i, row) in rows.iter().enumerate() {
+            let bad = |message: String| ReportError::Format {
+                path: traj_path.clone(),
+                message: format!("line {}: {message}", i + 2),
+            };
+            let agent = row[1] as usize;
+            if row[1] != agent as f64 || agent == 0 || agent > n {
+                return Err(bad(format!(
+                    "agent {} is not one of the {n} agents of {SUMMARY_FILE}",
+                    row[1]
+                )));
+            }
+            if agent != i % n + 1 {
+                return Err(bad(format!(
+                    "agent {agent} out of order (rows go agent 1..{n} at each instant)"
+                )));
+            }
+            if agent == 1 {
+                times.push(row[0]);
+            } else if times.last() != Some(&row[0]) {
+                return Err(bad(format!("time {} differs from agent 1's", row[0])));
+            }
+            for (c, v) in agents[agent - 1].columns.iter_mut().zip(&row[2..]) {
+                c.push(*v);
+            }
+        }
+        if rows.len() % n.max(1) != 0 || times.is_empty() {
+            return Err(ReportError::Format {
+                path: traj_path,
+                message: format!(
+                    "{} rows is not a whole number of instants of {n} agents",
+                    rows.len()
+                ),
+            });
+        }
+        let ref_path = dir.join(REFERENCE_FILE);
+        let reference = match read_optional(&ref_path)? {
+            None => None,
+            Some(text) => {
+                let rows = numbers(&ref_path, &text, REFERENCE_HEADER)?;
+                if rows.len() != times.len() || rows.iter().zip(&times).any(|(r, t)| r[0] != *t) {
+                    return Err(ReportError::Format {
+                        path: ref_path,
+                        message: format!("its times are not those of {TRAJECTORY_FILE}"),
+                    });
+                }
+                Some(ReferenceTrack {
+                    x: rows.iter().map(|r| r[1]).collect(),
+                    y: rows.iter().map(|r| r[2]).collect(),
+                    theta: rows.iter().map(|r| r[3]).collect(),
+                })
+            }
+        };
+        let scenario_path = dir.join(SCENARIO_FILE);
+        let scenario_text = read_optional(&scenario_path)?;
+        let mut description = None;
+        if let Some(text) = &scenario_text {
+            let scenario = Scenario::parse(text, &scenario_path.display().to_string(), None)
+                .map_err(|e| ReportError::Format {
+                    path: scenario_path.clone(),
+                    message: e.to_string(),
+                })?;
+            if scenario.file.agents.len() != n {
+                return Err(ReportError::Format {
+                    path: scenario_path,
+                    message: format!(
+                        "{} agents, but {SUMMARY_FILE} has {n}",
+                        scenario.file.agents.len()
+                    ),
+                });
+            }
+            description = scenario.file.description.clone();
+            for (track, spec) in agents.iter_mut().zip(&scenario.file.agents) {
+                track.leader = match spec.leader {
+                    LeaderSpec::Reference => Some(Leader::Reference),
+                    LeaderSpec::Agent(k) if k >= 1 && (k as usize) <= n => {
+                        Some(Leader::Agent(k as usize - 1))
+                    }
+                    LeaderSpec::Agent(_) => None,
+                };
+                track.offset = match (spec.mode, spec.offset) {
+                    (Some(ModeName::Tracking), _) | (_, None) => None,
+                    (_, Some(o)) => Some((o.x, o.y)),
+                };
+            }
+        }
+        Ok(RunData {
+            dir: dir.to_path_buf(),
+            summary,
+            description,
+            scenario_text,
+            times,
+            agents,
+            reference,
+        })
+    }
+
+    /// Whether any agent follows the virtual leader (or that is unknown).
+    pub fn uses_reference(&self) -> bool {
+        self.agents
+            .iter()
+            .any(|a| matches!(a.leader, None | Some(Leader::Reference)))
+    }
+
+    /// Position of agent `i`'s leader at instant `k` (the reference point for
+    /// the virtual leader), if known.
+    pub fn leader_position(&self, i: usize, k: usize) -> Option<(f64, f64)> {
+        match self.agents[i].leader? {
+            Leader::Reference => {
+                let r = self.reference.as_ref()?;
+                Some((r.x[k], r.y[k]))
+            }
+            Leader::Agent(j) => {
+                let a = &self.agents[j];
+                Some((a.get(Column::X)[k], a.get(Column::Y)[k]))
+            }
+        }
+    }
+
+    /// The leader's display name for agent `i` (`reference`, a name, or `?`).
+    pub fn leader_name(&self, i: usize) -> String {
+        match self.agents[i].leader {
+            Some(Leader::Reference) => "reference".to_owned(),
+            Some(Leader::Agent(j)) => self.agents[j].name.clone(),
+            None => "?".to_owned(),
+        }
+    }
+}

@@ -435,6 +435,9 @@ fn sweep_writes_one_row_per_run_the_same_on_any_thread_count() {
         )
     };
     let (text, one) = run("1", "a");
+    for f in ["drift.csv", "sweep.svg", "sweep.png"] {
+        assert!(dir.path().join("a").join(f).exists(), "{f}");
+    }
     let (_, two) = run("2", "b");
     assert_eq!(one, two, "sweep.csv depends on the thread count");
     let mut lines = one.lines();

@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Once;
 
 use plotters::coord::Shift;
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
 use plotters::coord::types::RangedCoordf64;
 use plotters::element::{Circle, EmptyElement, PathElement, Polygon};
 use plotters::prelude::{
@@ -490,7 +491,90 @@ pub fn simplify(points: &[(f64, f64)], eps: f64) -> Vec<usize> {
     (0..n).filter(|&i| keep[i]).collect()
 }
 
-type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+/// An axis coordinate: plotters' `f64` mapping with the ticks we choose (see
+/// [`ticks`]); labels come from our own formatters.
+#[derive(Clone)]
+struct Coord {
+    inner: RangedCoordf64,
+    ticks: Vec<f64>,
+}
+
+impl std::fmt::Debug for Coord {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Coord")
+            .field("range", &self.inner.range())
+            .field("ticks", &self.ticks)
+            .finish()
+    }
+}
+
+impl Coord {
+    fn new(axis: &Axis, lo: f64, hi: f64, hint: usize) -> Coord {
+        Coord {
+            inner: RangedCoordf64::from(lo..hi),
+            ticks: ticks(axis, lo, hi, hint),
+        }
+    }
+}
+
+impl Ranged for Coord {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+
+    fn range(&self) -> std::ops::Range<f64> {
+        self.inner.range()
+    }
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        self.inner.map(value, limit)
+    }
+
+    fn key_points<Hint: KeyPointHint>(&self, hint: Hint) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            Vec::new()
+        } else {
+            self.ticks.clone()
+        }
+    }
+
+    fn axis_pixel_range(&self, limit: (i32, i32)) -> std::ops::Range<i32> {
+        self.inner.axis_pixel_range(limit)
+    }
+}
+
+type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<Coord, Coord>>;
+
+/// Tick positions (in axis coordinates) for `lo..hi`: plotters' own choice on
+/// a linear axis; 1, 2 and 5 × 10ᵏ on a log axis (whole decades only when they
+/// are many, every mantissa when the range is under one 1-2-5 step).
+fn ticks(axis: &Axis, lo: f64, hi: f64, hint: usize) -> Vec<f64> {
+    if !axis.log {
+        return RangedCoordf64::from(lo..hi).key_points(hint);
+    }
+    let in_range = |v: f64| v >= lo - 1e-9 && v <= hi + 1e-9;
+    let pick = |mantissas: &[f64]| -> Vec<f64> {
+        let mut out = Vec::new();
+        for k in (lo.floor() as i32)..=(hi.ceil() as i32) {
+            for m in mantissas {
+                let v = (m * 10f64.powi(k)).log10();
+                if in_range(v) {
+                    out.push(v);
+                }
+            }
+        }
+        out
+    };
+    let decades = pick(&[1.0]);
+    if decades.len() > hint {
+        let step = decades.len().div_ceil(hint);
+        return decades.into_iter().step_by(step).collect();
+    }
+    let nice = pick(&[1.0, 2.0, 5.0]);
+    if nice.len() >= 2 {
+        return nice;
+    }
+    pick(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])
+}
 
 impl Figure {
     /// An empty figure of `width × height` pixels, one panel per row.
@@ -631,7 +715,10 @@ where
         .margin(MARGIN)
         .x_label_area_size(X_LABEL_AREA)
         .y_label_area_size(Y_LABEL_AREA)
-        .build_cartesian_2d(x0..x1, y0..y1)
+        .build_cartesian_2d(
+            Coord::new(&panel.x, x0, x1, 8),
+            Coord::new(&panel.y, y0, y1, 7),
+        )
         .map_err(draw_err)?;
     let log_label = |v: &f64| {
         // Never snapped to 0: on a log axis 1e-13 is a real tick.
@@ -936,11 +1023,18 @@ where
                 }))
                 .map_err(draw_err)?;
             if let Some(l) = label {
+                // The legend shows the shape the panel draws: dots or robots.
                 let color = *color;
-                anno.label(l).legend(move |(x, y)| {
-                    EmptyElement::at((x + 11, y))
-                        + Polygon::new(robot_triangle(0.0, 8.0), color.rgb().filled())
-                });
+                if at.iter().all(|(_, m)| *m == Marker::Dot) {
+                    anno.label(l).legend(move |(x, y)| {
+                        EmptyElement::at((x + 11, y)) + Circle::new((0, 0), 4, color.rgb().filled())
+                    });
+                } else {
+                    anno.label(l).legend(move |(x, y)| {
+                        EmptyElement::at((x + 11, y))
+                            + Polygon::new(robot_triangle(0.0, 8.0), color.rgb().filled())
+                    });
+                }
             }
         }
     }

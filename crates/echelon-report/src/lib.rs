@@ -13,6 +13,7 @@
 pub mod figure;
 pub mod html;
 pub mod lycomp;
+pub mod odometry;
 pub mod plots;
 pub mod run;
 
@@ -39,6 +40,9 @@ pub enum ReportError {
         /// What is wrong, and where (line).
         message: String,
     },
+    /// A run file does not parse (the core's reader names file and line).
+    #[error(transparent)]
+    Output(#[from] echelon::OutputError),
     /// Drawing a figure failed.
     #[error("drawing a figure: {0}")]
     Draw(String),

@@ -226,11 +226,16 @@ pub fn signals(data: &RunData) -> Figure {
     ))
 }
 
-/// The three run figures with their file stems.
+/// The run figures with their file stems: `paths`, `errors`, `signals`, and
+/// `drift` when agents dead-reckon.
 pub fn run_figures(data: &RunData) -> Vec<(&'static str, Figure)> {
-    vec![
+    let mut figures = vec![
         ("paths", paths(data)),
         ("errors", errors(data)),
         ("signals", signals(data)),
-    ]
+    ];
+    if let Some(drift) = crate::odometry::drift(data) {
+        figures.push(("drift", drift));
+    }
+    figures
 }

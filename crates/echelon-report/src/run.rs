@@ -11,8 +11,8 @@ use serde::Deserialize;
 
 use echelon::formation::Leader;
 use echelon::output::{
-    REFERENCE_FILE, REFERENCE_HEADER, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE,
-    TRAJECTORY_HEADER,
+    ODOMETRY_FILE, ODOMETRY_HEADER, REFERENCE_FILE, REFERENCE_HEADER, SCENARIO_FILE, SUMMARY_FILE,
+    TRAJECTORY_FILE, TRAJECTORY_HEADER, Table,
 };
 use echelon::scenario::Scenario;
 use echelon::scenario::schema::{LeaderSpec, ModeName};
@@ -92,6 +92,23 @@ pub struct ReferenceTrack {
     pub theta: Vec<f64>,
 }
 
+/// What one dead-reckoning agent believed, from `odometry.csv`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct OdometryTrack {
+    /// x̂, m.
+    pub x: Vec<f64>,
+    /// ŷ, m.
+    pub y: Vec<f64>,
+    /// θ̂, rad.
+    pub theta: Vec<f64>,
+    /// ê, m (eq. 35).
+    pub ex: Vec<f64>,
+    /// ê_y, m.
+    pub ey: Vec<f64>,
+    /// Fixes applied since the previous instant.
+    pub fix: Vec<f64>,
+}
+
 /// Per-agent results of `summary.json` (fields this crate shows; others are ignored).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 pub struct AgentResult {
@@ -149,6 +166,8 @@ pub struct RunData {
     pub agents: Vec<AgentTrack>,
     /// The virtual leader at the same instants (`None`: no `reference.csv`).
     pub reference: Option<ReferenceTrack>,
+    /// Per agent, what its odometry believed (empty: no `odometry.csv`).
+    pub odometry: Vec<Option<OdometryTrack>>,
 }
 
 fn read(path: &Path) -> Result<String, ReportError> {
@@ -169,42 +188,65 @@ fn read_optional(path: &Path) -> Result<Option<String>, ReportError> {
     }
 }
 
-/// Parses a CSV of numbers with the given header: one `Vec` per row.
+/// Parses a CSV of numbers with exactly the given header: one `Vec` per row.
 fn numbers(path: &Path, text: &str, header: &str) -> Result<Vec<Vec<f64>>, ReportError> {
-    let bad = |line: usize, message: String| ReportError::Format {
-        path: path.to_path_buf(),
-        message: format!("line {line}: {message}"),
-    };
-    let mut lines = text.lines();
-    let first = lines.next().unwrap_or("");
-    if first.trim_end() != header {
-        return Err(bad(
-            1,
-            format!("expected the header `{header}`, found `{first}`"),
-        ));
+    let table = Table::parse(path, text)?;
+    table.expect_header(path, header)?;
+    Ok(table.rows)
+}
+
+/// `odometry.csv`, per agent: every dead-reckoning agent has one row at each
+/// of the run's logged instants.
+fn odometry_tracks(
+    path: &Path,
+    text: &str,
+    times: &[f64],
+    n: usize,
+) -> Result<Vec<Option<OdometryTrack>>, ReportError> {
+    let rows = numbers(path, text, ODOMETRY_HEADER)?;
+    let mut tracks: Vec<Option<OdometryTrack>> = vec![None; n];
+    let mut seen = vec![0usize; n];
+    for (i, row) in rows.iter().enumerate() {
+        let bad = |message: String| ReportError::Format {
+            path: path.to_path_buf(),
+            message: format!("line {}: {message}", i + 2),
+        };
+        let agent = row[1] as usize;
+        if row[1] != agent as f64 || agent == 0 || agent > n {
+            return Err(bad(format!(
+                "agent {} is not one of the {n} agents",
+                row[1]
+            )));
+        }
+        let k = seen[agent - 1];
+        if times.get(k) != Some(&row[0]) {
+            return Err(bad(format!("time {} is not the run's instant {k}", row[0])));
+        }
+        seen[agent - 1] += 1;
+        let t = tracks[agent - 1].get_or_insert_with(OdometryTrack::default);
+        for (column, v) in [
+            (&mut t.x, row[2]),
+            (&mut t.y, row[3]),
+            (&mut t.theta, row[4]),
+            (&mut t.ex, row[5]),
+            (&mut t.ey, row[6]),
+            (&mut t.fix, row[9]),
+        ] {
+            column.push(v);
+        }
     }
-    let width = header.split(',').count();
-    let mut rows = Vec::new();
-    for (i, line) in lines.enumerate() {
-        if line.is_empty() {
-            continue;
-        }
-        let mut row = Vec::with_capacity(width);
-        for cell in line.split(',') {
-            row.push(
-                cell.parse::<f64>()
-                    .map_err(|_| bad(i + 2, format!("`{cell}` is not a number")))?,
-            );
-        }
-        if row.len() != width {
-            return Err(bad(
-                i + 2,
-                format!("{} fields, expected {width}", row.len()),
-            ));
-        }
-        rows.push(row);
+    if let Some(a) = (0..n).find(|&a| seen[a] != 0 && seen[a] != times.len()) {
+        return Err(ReportError::Format {
+            path: path.to_path_buf(),
+            message: format!(
+                "agent {} has {} rows for the run's {} instants",
+                a + 1,
+                seen[a],
+                times.len()
+            ),
+        });
     }
-    Ok(rows)
+    Ok(tracks)
 }
 
 impl RunData {
@@ -283,6 +325,11 @@ impl RunData {
                 })
             }
         };
+        let odometry_path = dir.join(ODOMETRY_FILE);
+        let odometry = match read_optional(&odometry_path)? {
+            None => Vec::new(),
+            Some(text) => odometry_tracks(&odometry_path, &text, &times, n)?,
+        };
         let scenario_path = dir.join(SCENARIO_FILE);
         let scenario_text = read_optional(&scenario_path)?;
         let mut description = None;
@@ -324,6 +371,7 @@ impl RunData {
             times,
             agents,
             reference,
+            odometry,
         })
     }
 

@@ -275,10 +275,7 @@ fn broken_run_directories_are_refused_with_the_file_and_line() {
     lines[3] = lines[3].replacen(',', ",x", 2);
     std::fs::write(&csv, lines.join("\n")).unwrap();
     let err = RunData::load(dir.path()).unwrap_err().to_string();
-    assert!(
-        err.contains("trajectory.csv") && err.contains("line 4"),
-        "{err}"
-    );
+    assert!(err.contains("trajectory.csv:4:"), "{err}");
     std::fs::write(&csv, "t,x\n0,1\n").unwrap();
     let err = RunData::load(dir.path()).unwrap_err().to_string();
     assert!(err.contains("expected the header"), "{err}");

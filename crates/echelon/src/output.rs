@@ -261,12 +261,17 @@ pub struct Table {
 impl Table {
     /// Reads a numeric CSV; every error names the file and line.
     pub fn read(path: &Path) -> Result<Table, OutputError> {
+        let text = std::fs::read_to_string(path).map_err(io_error(path))?;
+        Table::parse(path, &text)
+    }
+
+    /// Parses the text of the numeric CSV `path` (named in errors).
+    pub fn parse(path: &Path, text: &str) -> Result<Table, OutputError> {
         let parse = |line: usize, message: String| OutputError::Parse {
             path: path.to_path_buf(),
             line,
             message,
         };
-        let text = std::fs::read_to_string(path).map_err(io_error(path))?;
         let mut lines = text.lines();
         let header: Vec<String> = lines
             .next()
@@ -297,6 +302,20 @@ impl Table {
             rows.push(row);
         }
         Ok(Table { header, rows })
+    }
+
+    /// Checks that the header is exactly `expected` (a file echelon wrote).
+    pub fn expect_header(&self, path: &Path, expected: &str) -> Result<(), OutputError> {
+        let found = self.header.join(",");
+        if found == expected {
+            Ok(())
+        } else {
+            Err(OutputError::Parse {
+                path: path.to_path_buf(),
+                line: 1,
+                message: format!("expected the header `{expected}`, found `{found}`"),
+            })
+        }
     }
 
     /// The index of column `name`, or an error naming the file.

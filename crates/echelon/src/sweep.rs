@@ -81,10 +81,12 @@ pub struct Row {
     pub z_bound: Option<f64>,
     /// max over agents of ‖z‖ / bound (`None` without a bound).
     pub z_over_bound: Option<f64>,
+    /// The matching bound on ‖e‖, `z_bound / K_e` (V̇₁ < 0 beyond it), m.
+    pub e_bound: Option<f64>,
 }
 
 /// The header of `sweep.csv`.
-pub const SWEEP_HEADER: &str = "zeta,zeta_model,wheel_diameter_ratio,wheelbase_ratio,slip,fix_every,seed,omega_max,z_max,z_hat_max,e_max,final_drift,drift_max,z_bound,z_over_bound";
+pub const SWEEP_HEADER: &str = "zeta,zeta_model,wheel_diameter_ratio,wheelbase_ratio,slip,fix_every,seed,omega_max,z_max,z_hat_max,e_max,final_drift,drift_max,z_bound,z_over_bound,e_bound";
 
 /// Why a sweep cannot run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -253,7 +255,7 @@ pub fn run_case(
         && case.zeta > 0.0
         && case.fix_every > 0
         && noise_free(&s);
-    let (mut z_bound, mut ratio) = (None, None);
+    let (mut z_bound, mut ratio, mut e_bound) = (None, None, None);
     if theorem_applies {
         for (i, a) in sim.agents().iter().enumerate() {
             if sim.odometers().get(i).is_none_or(Option::is_none) {
@@ -264,6 +266,8 @@ pub fn run_case(
             z_bound = Some(z_bound.map_or(b, |x: f64| x.max(b)));
             let r = z_max[i] / b;
             ratio = Some(ratio.map_or(r, |x: f64| x.max(r)));
+            let e = b / a.gains.ke;
+            e_bound = Some(e_bound.map_or(e, |x: f64| x.max(e)));
         }
     }
     Ok(Row {
@@ -276,6 +280,7 @@ pub fn run_case(
         drift_max,
         z_bound,
         z_over_bound: ratio,
+        e_bound,
     })
 }
 
@@ -323,6 +328,134 @@ pub fn run(
         .collect()
 }
 
+/// How an error model's drift grows without fixes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriftCurve {
+    /// The error model (its `fix_every` is 0; the grid's first seed).
+    pub case: Case,
+    /// Sample times, s.
+    pub times: Vec<f64>,
+    /// max over dead-reckoning agents of ‖p − p̂‖, m.
+    pub drift: Vec<f64>,
+    /// The paper's linear growth `√2 N ζ` (eqs. 30–31) after `N` samples, m.
+    pub paper: Vec<f64>,
+    /// The drift's own first second, extrapolated linearly, m: what a linear
+    /// model fitted early would predict.
+    pub early_slope: Vec<f64>,
+}
+
+/// The header of `drift.csv`.
+pub const DRIFT_HEADER: &str =
+    "zeta,wheel_diameter_ratio,wheelbase_ratio,slip,seed,t,drift,paper_linear,early_slope";
+
+/// For every distinct error model of `grid`, the drift without fixes over the
+/// run (about `points` samples), in parallel. Shows the paper's linear-growth
+/// assumption against what systematic errors do.
+pub fn drift_curves(
+    scenario: &Scenario,
+    overrides: &Overrides,
+    grid: &Grid,
+    points: usize,
+) -> Result<Vec<DriftCurve>, SweepError> {
+    grid.validate()?;
+    let mut models: Vec<Case> = Vec::new();
+    for c in grid.cases() {
+        let model = Case {
+            fix_every: 0,
+            seed: grid.seeds[0],
+            ..c
+        };
+        if !models.contains(&model) {
+            models.push(model);
+        }
+    }
+    models
+        .par_iter()
+        .map(|case| {
+            let s = apply(scenario, case, grid.zeta_model);
+            let mut run = s.build(&Overrides {
+                seed: Some(case.seed),
+                ..*overrides
+            })?;
+            let sim = &mut run.simulation;
+            let every = (sim.steps() / points.max(1) as u64).max(1);
+            let mut times = Vec::with_capacity(points + 2);
+            let mut drift = Vec::with_capacity(points + 2);
+            let mut samples = Vec::with_capacity(points + 2);
+            let mut observe = |f: &Frame<'_>| -> Result<(), ObserverError> {
+                if !(f.step.is_multiple_of(every) || f.last) {
+                    return Ok(());
+                }
+                let mut d: f64 = 0.0;
+                let mut n = 0;
+                for (i, odometer) in f.odometers.iter().enumerate() {
+                    if let Some(o) = odometer {
+                        let (s, b) = (&f.states[i], o.believed(&f.states[i]));
+                        d = d.max((s.x - b.x).hypot(s.y - b.y));
+                        n = n.max(o.samples());
+                    }
+                }
+                times.push(f.t);
+                drift.push(d);
+                samples.push(n);
+                Ok(())
+            };
+            sim.run(&mut observe)?;
+            let paper = samples
+                .iter()
+                .map(|&n| std::f64::consts::SQRT_2 * n as f64 * case.zeta)
+                .collect();
+            let k1 = times
+                .iter()
+                .position(|&t| t >= 1.0)
+                .unwrap_or(times.len() - 1);
+            let slope = if times[k1] > 0.0 {
+                drift[k1] / times[k1]
+            } else {
+                0.0
+            };
+            let early_slope = times.iter().map(|t| slope * t).collect();
+            Ok(DriftCurve {
+                case: *case,
+                times,
+                drift,
+                paper,
+                early_slope,
+            })
+        })
+        .collect()
+}
+
+/// Writes `drift.csv`: one row per curve per sample.
+pub fn write_drift_csv<W: Write>(mut w: W, curves: &[DriftCurve]) -> io::Result<()> {
+    writeln!(w, "{DRIFT_HEADER}")?;
+    let mut buf = ryu::Buffer::new();
+    let mut line = String::new();
+    for c in curves {
+        for k in 0..c.times.len() {
+            line.clear();
+            for v in [
+                c.case.zeta,
+                c.case.wheel_diameter_ratio,
+                c.case.wheelbase_ratio,
+                c.case.slip,
+            ] {
+                crate::output::push_f64(&mut line, v, &mut buf);
+                line.push(',');
+            }
+            line.push_str(&c.case.seed.to_string());
+            line.push(',');
+            crate::output::push_time(&mut line, c.times[k]);
+            for v in [c.drift[k], c.paper[k], c.early_slope[k]] {
+                line.push(',');
+                crate::output::push_f64(&mut line, v, &mut buf);
+            }
+            writeln!(w, "{line}")?;
+        }
+    }
+    w.flush()
+}
+
 /// Writes `sweep.csv`.
 pub fn write_csv<W: Write>(mut w: W, rows: &[Row], zeta_model: ZetaModel) -> io::Result<()> {
     writeln!(w, "{SWEEP_HEADER}")?;
@@ -354,7 +487,7 @@ pub fn write_csv<W: Write>(mut w: W, rows: &[Row], zeta_model: ZetaModel) -> io:
             line.push(',');
             crate::output::push_f64(&mut line, v, &mut buf);
         }
-        for v in [r.z_bound, r.z_over_bound] {
+        for v in [r.z_bound, r.z_over_bound, r.e_bound] {
             line.push(',');
             if let Some(v) = v {
                 crate::output::push_f64(&mut line, v, &mut buf);

@@ -129,7 +129,11 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
     );
     bar.set_prefix(scenario.name().to_owned());
     let started = Instant::now();
-    let rows = pool.install(|| sweep::run(&scenario, &overrides, &grid, &|| bar.inc(1)))?;
+    let (rows, curves) = pool.install(|| {
+        let rows = sweep::run(&scenario, &overrides, &grid, &|| bar.inc(1))?;
+        let curves = sweep::drift_curves(&scenario, &overrides, &grid, 300)?;
+        Ok::<_, sweep::SweepError>((rows, curves))
+    })?;
     bar.finish_and_clear();
     let out = a
         .out
@@ -140,6 +144,13 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
     let file = File::create(&path).with_context(|| format!("writing {}", path.display()))?;
     sweep::write_csv(BufWriter::new(file), &rows, grid.zeta_model)
         .with_context(|| format!("writing {}", path.display()))?;
+    let drift_path = out.join("drift.csv");
+    let file =
+        File::create(&drift_path).with_context(|| format!("writing {}", drift_path.display()))?;
+    sweep::write_drift_csv(BufWriter::new(file), &curves)
+        .with_context(|| format!("writing {}", drift_path.display()))?;
+    let figure =
+        echelon_report::odometry::sweep(scenario.name(), &rows, &curves).save(&out, "sweep")?;
     if !a.quiet {
         print_summary(
             &rows,
@@ -147,7 +158,13 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
             pool.current_num_threads(),
             started.elapsed().as_secs_f64(),
         );
-        println!("wrote {}", path.display());
+        println!(
+            "wrote {}, {}, {}, {}",
+            path.display(),
+            drift_path.display(),
+            figure.svg.display(),
+            figure.png.display()
+        );
     }
     Ok(())
 }

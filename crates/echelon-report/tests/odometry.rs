@@ -1,0 +1,170 @@
+//! Odometry figures: a run's `drift` figure (only when agents dead-reckon) and
+//! the sweep figure, parsed back with their names and units.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::path::Path;
+
+use echelon::odometry::ZetaModel;
+use echelon::scenario::{Overrides, Scenario};
+use echelon::sweep::{self, Grid};
+use echelon_report::{RunData, write_all};
+
+fn svg_texts(path: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let doc = roxmltree::Document::parse(&text).unwrap();
+    doc.descendants()
+        .filter(|n| n.has_tag_name("text"))
+        .filter_map(|n| n.text())
+        .map(|t| t.trim().to_owned())
+        .collect()
+}
+
+const DRIFTING: &str = r#"
+name = "drifting"
+seed = 4
+[sim]
+duration = 12.0
+dt = 0.001
+controller_period = 0.01
+[reference.circle]
+speed = 0.4
+turn_rate = 0.2
+start = { x = 0.0, y = 0.0, theta = 0.0 }
+[[agents]]
+name = "scout"
+start = { x = -0.5, y = -0.3, theta = 0.0 }
+leader = "reference"
+offset = { x = 0.5, y = 0.3 }
+[[agents]]
+name = "perfect"
+start = { x = -1.0, y = 0.3, theta = 0.0 }
+leader = 1
+offset = { x = 0.5, y = -0.3 }
+odometry = { enabled = false }
+[odometry]
+wheelbase_ratio = 1.02
+[fixes]
+period = 3.0
+"#;
+
+#[test]
+fn runs_with_odometry_get_a_drift_figure() {
+    let dir = tempfile::tempdir().unwrap();
+    common::run_source(DRIFTING, dir.path(), &Overrides::default());
+    let data = RunData::load(dir.path()).unwrap();
+    assert!(data.odometry[0].is_some() && data.odometry[1].is_none());
+    // Fixes every 3 s over 12 s: 4, counted in the fix column.
+    let fixes: f64 = data.odometry[0].as_ref().unwrap().fix.iter().sum();
+    assert_eq!(fixes, 4.0);
+    let written = write_all(dir.path()).unwrap();
+    let drift = written
+        .figures
+        .iter()
+        .find(|f| f.svg.ends_with("drift.svg"))
+        .unwrap();
+    let texts = svg_texts(&drift.svg);
+    for needle in [
+        "scout",
+        "scout (estimate)",
+        "x [m]",
+        "‖p − p̂‖ [m]",
+        "t [s]",
+        "‖e‖ [m]",
+    ] {
+        assert!(
+            texts.iter().any(|t| t == needle),
+            "`{needle}` not in {texts:?}"
+        );
+    }
+    assert!(
+        !texts.iter().any(|t| t.starts_with("perfect")),
+        "only dead-reckoning agents"
+    );
+    assert!(drift.png.exists());
+    let html = std::fs::read_to_string(&written.report).unwrap();
+    assert!(html.contains("odometry drift"));
+}
+
+#[test]
+fn runs_without_odometry_have_no_drift_figure() {
+    let dir = tempfile::tempdir().unwrap();
+    common::run_builtin(
+        "nonfeasible",
+        dir.path(),
+        &Overrides {
+            duration: Some(1.0),
+            ..Overrides::default()
+        },
+    );
+    let written = write_all(dir.path()).unwrap();
+    assert_eq!(written.figures.len(), 3);
+    assert!(!dir.path().join("drift.svg").exists());
+}
+
+#[test]
+fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
+    let s = Scenario::builtin("fix-study").unwrap();
+    let ov = Overrides {
+        duration: Some(6.0),
+        ..Overrides::default()
+    };
+    let grid = Grid {
+        zeta: vec![1e-5],
+        zeta_model: ZetaModel::WorstCase,
+        wheel_diameter_ratio: vec![1.0, 1.002],
+        wheelbase_ratio: vec![1.0],
+        slip: vec![0.0],
+        fix_every: vec![10, 50, 100],
+        seeds: vec![0],
+        gamma: 0.99,
+        transient: 3.0,
+    };
+    let rows = sweep::run(&s, &ov, &grid, &|| {}).unwrap();
+    let curves = sweep::drift_curves(&s, &ov, &grid, 100).unwrap();
+    assert_eq!(curves.len(), 2, "one curve per error model");
+    // The worst case drifts on the paper's line √2 N ζ, up to dead reckoning's
+    // own error (each sample is taken as an exact arc: ~1e-9 m per sample here).
+    let c = &curves[0];
+    let last = c.times.len() - 1;
+    assert!(
+        (c.drift[last] - c.paper[last]).abs() < 1e-3 * c.paper[last],
+        "{} vs {}",
+        c.drift[last],
+        c.paper[last]
+    );
+    // Systematic errors outgrow the linear extrapolation of their first second.
+    let sys = &curves[1];
+    let end = sys.times.len() - 1;
+    assert!(
+        sys.drift[end] > 2.0 * sys.early_slope[end],
+        "{} vs {}",
+        sys.drift[end],
+        sys.early_slope[end]
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let saved = echelon_report::odometry::sweep("fix-study", &rows, &curves)
+        .save(dir.path(), "sweep")
+        .unwrap();
+    let texts = svg_texts(&saved.svg);
+    for needle in [
+        "ultimate max ‖z‖ [m/s]",
+        "ultimate max ‖e‖ [m]",
+        "N (samples between fixes)",
+        "Theorem 2, ζ = 1e-5 m",
+        "ζ = 1e-5 m, E_d = 1.002",
+        "t [s]",
+    ] {
+        assert!(
+            texts.iter().any(|t| t == needle),
+            "`{needle}` not in {texts:?}"
+        );
+    }
+    // Log axes label 1-2-5 ticks, never fractional decades.
+    assert!(
+        texts.iter().any(|t| t == "50") && texts.iter().any(|t| t == "100"),
+        "{texts:?}"
+    );
+    assert!(!texts.iter().any(|t| t.contains("31.62")), "{texts:?}");
+}

@@ -69,7 +69,7 @@ fn main() -> ExitCode {
                 .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information"))
                 .filter(|l| !l.is_empty())
                 .collect();
-            eprintln!("{} (see --help)", parts.join(" "));
+            cmd::out::err_line(&format!("{} (see --help)", parts.join(" ")));
             return ExitCode::from(FAILURE);
         }
     };
@@ -85,8 +85,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        // `echelon … | head`: the reader has what it wanted.
+        Err(e) if e.downcast_ref::<cmd::out::Closed>().is_some() => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            cmd::out::err_line(&format!("error: {e:#}"));
             ExitCode::from(FAILURE)
         }
     }

@@ -686,3 +686,34 @@ fn progress_bar_on_a_terminal_for_long_runs() {
         .unwrap();
     assert!(!stdout(&o).contains(" t = "), "{}", stdout(&o));
 }
+
+#[test]
+fn a_closed_pipe_ends_quietly_instead_of_panicking() {
+    // `echelon … | head`: the reader goes away before echelon writes.
+    for args in [
+        &["show", "circle-pentagon"][..],
+        &["scenarios"],
+        &["umbmark"],
+        &[
+            "bound",
+            "--zeta",
+            "1e-4",
+            "--steps",
+            "10",
+            "--omega-max",
+            "1",
+        ],
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_echelon"))
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let o = child.wait_with_output().unwrap();
+        let err = stderr(&o);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+    }
+}

@@ -5,6 +5,7 @@ use anyhow::{Result, bail};
 
 use echelon::odometry::bound::Theorem2;
 
+use super::out::outln;
 use super::{non_negative, positive};
 
 /// Arguments of `echelon bound`.
@@ -58,37 +59,41 @@ pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
     if a.json {
         let mut v = serde_json::to_value(report)?;
         v["e_bound"] = serde_json::json!(e_bound);
-        println!("{v}");
+        outln!("{v}")?;
         return Ok(());
     }
-    println!("Theorem 2: ‖z‖ ≤ √2 K_e N ζ √(K_z² + ω_M²) / (K_z γ)");
-    println!(
+    outln!("Theorem 2: ‖z‖ ≤ √2 K_e N ζ √(K_z² + ω_M²) / (K_z γ)")?;
+    outln!(
         "  K_e = {}, K_z = {}, ζ = {} m, ω_M = {} rad/s, γ = {}",
-        a.ke, a.kz, a.zeta, a.omega_max, a.gamma
-    );
+        a.ke,
+        a.kz,
+        a.zeta,
+        a.omega_max,
+        a.gamma
+    )?;
     if a.steps.is_none() {
         let (what, target) = match (a.max_z, a.max_e) {
             (Some(z), _) => ("‖z‖", format!("{z} m/s")),
             (_, e) => ("‖e‖", format!("{} m", e.unwrap_or_default())),
         };
         if report.steps == 0 {
-            println!(
+            outln!(
                 "  no fix interval keeps {what} ≤ {target}: one sample of dead reckoning already exceeds it"
-            );
+            )?;
             return Ok(());
         }
-        println!(
+        outln!(
             "  largest N keeping {what} ≤ {target}: N = {} samples",
             report.steps
-        );
+        )?;
     } else {
-        println!("  N = {} samples between fixes", report.steps);
+        outln!("  N = {} samples between fixes", report.steps)?;
     }
-    println!("  ultimate ‖z‖ ≤ {:.6} m/s", report.z_bound);
-    println!("  ultimate ‖e‖ ≤ ‖z‖/K_e = {:.6} m", e_bound);
+    outln!("  ultimate ‖z‖ ≤ {:.6} m/s", report.z_bound)?;
+    outln!("  ultimate ‖e‖ ≤ ‖z‖/K_e = {:.6} m", e_bound)?;
     match (report.fix_period_s, a.ts) {
-        (Some(p), Some(ts)) => println!("  a fix at least every N·T_s = {p} s (T_s = {ts} s)"),
-        _ => println!("  (give --ts to turn N into a fix period)"),
+        (Some(p), Some(ts)) => outln!("  a fix at least every N·T_s = {p} s (T_s = {ts} s)")?,
+        _ => outln!("  (give --ts to turn N into a fix period)")?,
     }
     Ok(())
 }

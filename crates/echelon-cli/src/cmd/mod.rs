@@ -2,6 +2,7 @@
 
 pub(crate) mod bound;
 pub(crate) mod lycomp;
+pub(crate) mod out;
 pub(crate) mod plot;
 pub(crate) mod progress;
 pub(crate) mod run;

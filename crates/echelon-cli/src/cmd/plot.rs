@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::out::outln;
 use anyhow::{Context, Result};
 
 /// Arguments of `echelon plot`.
@@ -32,11 +33,11 @@ pub(crate) fn draw(dir: &Path, quiet: bool) -> Result<()> {
             .flat_map(|f| [f.svg.display().to_string(), f.png.display().to_string()])
             .collect();
         files.push(written.report.display().to_string());
-        println!(
+        outln!(
             "wrote {} in {:.2} s",
             files.join(", "),
             started.elapsed().as_secs_f64()
-        );
+        )?;
     }
     Ok(())
 }

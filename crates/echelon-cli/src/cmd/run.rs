@@ -13,6 +13,7 @@ use echelon::output::{
 use echelon::scenario::{Overrides, Scenario};
 use echelon::{Simulation, Variant};
 
+use super::out::outln;
 use super::progress::Progress;
 use super::{non_negative, positive};
 
@@ -74,7 +75,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
         .unwrap_or_else(|| PathBuf::from("out").join(&run.name));
     if !args.quiet {
         for w in run.simulation.warnings() {
-            eprintln!("warning: {w}");
+            super::out::err_line(&format!("warning: {w}"));
         }
     }
     let started = Instant::now();
@@ -84,7 +85,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     let summary = result.with_context(|| format!("running {}", run.name))?;
     let elapsed = started.elapsed().as_secs_f64();
     if !args.quiet {
-        print_summary(&run.simulation, &summary, elapsed);
+        print_summary(&run.simulation, &summary, elapsed)?;
         let mut files = vec![TRAJECTORY_FILE, REFERENCE_FILE];
         if !run.simulation.odometers().is_empty() {
             files.push(ODOMETRY_FILE);
@@ -94,7 +95,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
             .iter()
             .map(|f| out.join(f).display().to_string())
             .collect();
-        println!("wrote {}", shown.join(", "));
+        outln!("wrote {}", shown.join(", "))?;
     }
     if args.plot {
         super::plot::draw(&out, args.quiet)?;
@@ -102,9 +103,9 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     Ok(())
 }
 
-fn print_summary(sim: &Simulation, s: &RunSummary, elapsed: f64) {
+fn print_summary(sim: &Simulation, s: &RunSummary, elapsed: f64) -> anyhow::Result<()> {
     let agents = sim.agents();
-    println!(
+    outln!(
         "{}: {} agent{}, {} s at dt = {} s ({} steps) in {elapsed:.2} s",
         s.scenario,
         agents.len(),
@@ -112,7 +113,7 @@ fn print_summary(sim: &Simulation, s: &RunSummary, elapsed: f64) {
         s.duration,
         s.dt,
         s.steps
-    );
+    )?;
     let leaders: Vec<String> = (0..agents.len())
         .map(|i| match sim.formation().leader(i) {
             Leader::Reference => "reference".to_owned(),
@@ -131,17 +132,28 @@ fn print_summary(sim: &Simulation, s: &RunSummary, elapsed: f64) {
         .max()
         .unwrap_or(0)
         .max(6);
-    println!(
+    outln!(
         "  {:<name_w$}  {:<leader_w$}  {:>11}  {:>9}  {:>10}  {:>13}",
-        "agent", "leader", "final ‖e‖", "RMS ‖e‖", "peak |τ|", "‖e‖ < 1 cm at"
-    );
+        "agent",
+        "leader",
+        "final ‖e‖",
+        "RMS ‖e‖",
+        "peak |τ|",
+        "‖e‖ < 1 cm at"
+    )?;
     for (a, leader) in s.agents.iter().zip(&leaders) {
         let settle = a
             .settle_time
             .map_or_else(|| "never".to_owned(), |t| format!("{t:.2} s"));
-        println!(
+        outln!(
             "  {:<name_w$}  {:<leader_w$}  {:>9.2e} m  {:>7.3} m  {:>6.2} N·m  {:>13}",
-            a.name, leader, a.final_error, a.rms_error, a.peak_torque, settle
-        );
+            a.name,
+            leader,
+            a.final_error,
+            a.rms_error,
+            a.peak_torque,
+            settle
+        )?;
     }
+    Ok(())
 }

@@ -2,6 +2,7 @@
 
 use anyhow::{Result, bail};
 
+use super::out::{out, outln};
 use echelon::scenario::{self, Scenario};
 
 /// Arguments of `echelon show`.
@@ -17,7 +18,7 @@ pub(crate) fn list() -> Result<()> {
         let description = Scenario::builtin(name)
             .and_then(|s| s.file.description.clone())
             .unwrap_or_default();
-        println!("{name:<24} {description}");
+        outln!("{name:<24} {description}")?;
     }
     Ok(())
 }
@@ -26,7 +27,7 @@ pub(crate) fn list() -> Result<()> {
 pub(crate) fn show(args: &ShowArgs) -> Result<()> {
     match scenario::builtin().iter().find(|(n, _)| *n == args.name) {
         Some((_, src)) => {
-            print!("{src}");
+            out!("{src}")?;
             Ok(())
         }
         None => {

@@ -14,6 +14,7 @@ use echelon::odometry::ZetaModel;
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sweep::{self, Grid, Row};
 
+use super::out::outln;
 use super::{non_negative, positive};
 
 /// Arguments of `echelon sweep`.
@@ -157,23 +158,23 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
             total,
             pool.current_num_threads(),
             started.elapsed().as_secs_f64(),
-        );
-        println!(
+        )?;
+        outln!(
             "wrote {}, {}, {}, {}",
             path.display(),
             drift_path.display(),
             figure.svg.display(),
             figure.png.display()
-        );
+        )?;
     }
     Ok(())
 }
 
-fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) {
-    println!(
+fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) -> anyhow::Result<()> {
+    outln!(
         "{total} runs on {threads} threads in {seconds:.1} s; maxima over seeds, after the transient:"
-    );
-    println!(
+    )?;
+    outln!(
         "  {:>8}  {:>6}  {:>6}  {:>8}  {:>6}  {:>10}  {:>10}  {:>9}  {:>10}  {:>10}",
         "ζ (m)",
         "E_d",
@@ -185,7 +186,7 @@ fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) {
         "‖z‖/bound",
         "‖e‖ (m)",
         "drift (m)"
-    );
+    )?;
     // Rows come in grid order with seeds varying fastest: group consecutive rows.
     let same = |a: &Row, b: &Row| {
         Row {
@@ -211,7 +212,7 @@ fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) {
         };
         let shown =
             |v: Option<f64>, p: usize| v.map_or_else(|| "–".to_owned(), |v| format!("{v:.p$e}"));
-        println!(
+        outln!(
             "  {:>8.1e}  {:>6}  {:>6}  {:>8.1e}  {:>6}  {:>10.3e}  {:>10}  {:>9}  {:>10.3e}  {:>10.3e}",
             c.zeta,
             c.wheel_diameter_ratio,
@@ -223,7 +224,8 @@ fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) {
             opt_max(|r| r.z_over_bound).map_or_else(|| "–".to_owned(), |v| format!("{v:.3}")),
             max(|r| r.e_max),
             max(|r| r.drift_max),
-        );
+        )?;
         start = end;
     }
+    Ok(())
 }

@@ -9,6 +9,7 @@ use echelon::RobotParams;
 use echelon::odometry::ErrorModel;
 use echelon::odometry::umbmark::{self, Calibration, Direction, ReturnError, SquareTest};
 
+use super::out::outln;
 use super::{non_negative, positive};
 
 /// Arguments of `echelon umbmark`.
@@ -78,10 +79,10 @@ pub(crate) fn umbmark(a: &UmbmarkArgs) -> Result<()> {
         write(dir, &errors, &cal)?;
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&cal)?);
+        outln!("{}", serde_json::to_string_pretty(&cal)?)?;
         return Ok(());
     }
-    print(a, &robot, &errors, &cal);
+    print(a, &robot, &errors, &cal)?;
     Ok(())
 }
 
@@ -103,7 +104,12 @@ fn write(dir: &PathBuf, errors: &[ReturnError], cal: &Calibration) -> Result<()>
     Ok(())
 }
 
-fn print(a: &UmbmarkArgs, robot: &RobotParams, errors: &[ReturnError], c: &Calibration) {
+fn print(
+    a: &UmbmarkArgs,
+    robot: &RobotParams,
+    errors: &[ReturnError],
+    c: &Calibration,
+) -> anyhow::Result<()> {
     let source = if a.from_log.is_empty() {
         format!(
             "simulated robot with E_d = {}, E_b = {}{}",
@@ -118,35 +124,45 @@ fn print(a: &UmbmarkArgs, robot: &RobotParams, errors: &[ReturnError], c: &Calib
     } else {
         format!("{} recorded run(s)", errors.len())
     };
-    println!(
+    outln!(
         "UMBmark: {} m square, {source}; nominal r = {} m, b = {} m",
         a.side,
         robot.wheel_radius,
         2.0 * robot.half_wheelbase
-    );
-    println!("  run  dir        ε_x (m)      ε_y (m)");
+    )?;
+    outln!("  run  dir        ε_x (m)      ε_y (m)")?;
     for e in errors {
         let d = if e.direction == Direction::Cw {
             "cw "
         } else {
             "ccw"
         };
-        println!("  {:>3}  {d}  {:>12.5}  {:>12.5}", e.run, e.ex, e.ey);
+        outln!("  {:>3}  {d}  {:>12.5}  {:>12.5}", e.run, e.ex, e.ey)?;
     }
-    println!(
+    outln!(
         "centres of gravity: cw ({:.5}, {:.5}) m, ccw ({:.5}, {:.5}) m",
-        c.cg_cw[0], c.cg_cw[1], c.cg_ccw[0], c.cg_ccw[1]
-    );
-    println!(
+        c.cg_cw[0],
+        c.cg_cw[1],
+        c.cg_ccw[0],
+        c.cg_ccw[1]
+    )?;
+    outln!(
         "Borenstein:  α = {:.6} rad, β = {:.6} rad  →  E_d = {:.6}, E_b = {:.6}",
-        c.alpha, c.beta, c.borenstein.ed, c.borenstein.eb
-    );
-    println!(
+        c.alpha,
+        c.beta,
+        c.borenstein.ed,
+        c.borenstein.eb
+    )?;
+    outln!(
         "refined (exact square kinematics):  E_d = {:.6}, E_b = {:.6}",
-        c.refined.ed, c.refined.eb
-    );
-    println!(
+        c.refined.ed,
+        c.refined.eb
+    )?;
+    outln!(
         "corrections: left wheel diameter × {:.6}, right wheel diameter × {:.6}, wheelbase {:.6} m",
-        c.c_left, c.c_right, c.wheelbase
-    );
+        c.c_left,
+        c.c_right,
+        c.wheelbase
+    )?;
+    Ok(())
 }

@@ -33,6 +33,9 @@ enum Command {
     Scenarios,
     /// Print a built-in scenario's TOML, to copy and edit.
     Show(cmd::scenarios::ShowArgs),
+    /// Run a scenario as networked processes on Zenoh (leader, robots, collector).
+    #[command(subcommand)]
+    Fleet(cmd::fleet::FleetCommand),
 }
 
 /// Exit code for every refused input or failed run.
@@ -63,6 +66,7 @@ fn main() -> ExitCode {
         Command::Run(args) => cmd::run::run(args),
         Command::Scenarios => cmd::scenarios::list(),
         Command::Show(args) => cmd::scenarios::show(&args),
+        Command::Fleet(c) => cmd::fleet::run(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,5 +1,6 @@
 //! One module per command.
 
+pub(crate) mod fleet;
 pub(crate) mod run;
 pub(crate) mod scenarios;
 

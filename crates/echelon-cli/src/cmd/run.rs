@@ -1,5 +1,7 @@
 //! `echelon run`: simulate a scenario into an output directory.
 
+use std::fs::File;
+use std::io::BufWriter;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -9,10 +11,14 @@ use clap::ValueEnum;
 use echelon::formation::Leader;
 use echelon::output::{self, RunSummary, SUMMARY_FILE, TRAJECTORY_FILE};
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::{Frame, ObserverError};
+use echelon::sim::{Frame, Observer, ObserverError};
 use echelon::{Simulation, Variant};
+use echelon_mcap::McapObserver;
 
 use super::{non_negative, positive};
+
+/// The MCAP file `--mcap` writes next to trajectory.csv.
+pub(crate) const MCAP_FILE: &str = "run.mcap";
 
 /// Arguments of `echelon run`.
 #[derive(Debug, clap::Args)]
@@ -34,6 +40,9 @@ pub(crate) struct RunArgs {
     /// Law for every agent: `paper` (eq. 13) or `complete` (cross term cancelled).
     #[arg(long, value_enum, value_name = "LAW")]
     law: Option<LawArg>,
+    /// Also write DIR/run.mcap (JSON channels: /reference, /agent/K/state), like a fleet run.
+    #[arg(long)]
+    mcap: bool,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -70,15 +79,50 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     }
     let mut nothing = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
     let started = Instant::now();
-    let summary = output::run_to_dir(&mut run, &out, &mut nothing)
-        .with_context(|| format!("running {}", run.name))?;
+    let mcap_part = out.join(format!(".{MCAP_FILE}.part"));
+    let mut mcap = if args.mcap {
+        std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+        let file = File::create(&mcap_part)
+            .with_context(|| format!("creating {}", mcap_part.display()))?;
+        Some(McapObserver::new(
+            BufWriter::with_capacity(1 << 16, file),
+            run.simulation.reference().clone(),
+            run.simulation.agents().len(),
+            run.log_every,
+        )?)
+    } else {
+        None
+    };
+    let extra: &mut dyn Observer = match mcap.as_mut() {
+        Some(m) => m,
+        None => &mut nothing,
+    };
+    let result = output::run_to_dir(&mut run, &out, extra);
+    let summary = match result {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = std::fs::remove_file(&mcap_part);
+            return Err(e).with_context(|| format!("running {}", run.name));
+        }
+    };
+    if let Some(m) = mcap {
+        m.finish()
+            .with_context(|| format!("writing {}", mcap_part.display()))?;
+        std::fs::rename(&mcap_part, out.join(MCAP_FILE))
+            .with_context(|| format!("writing {}", out.join(MCAP_FILE).display()))?;
+    }
     let elapsed = started.elapsed().as_secs_f64();
     if !args.quiet {
         print_summary(&run.simulation, &summary, elapsed);
         println!(
-            "wrote {}, {}",
+            "wrote {}, {}{}",
             out.join(TRAJECTORY_FILE).display(),
-            out.join(SUMMARY_FILE).display()
+            out.join(SUMMARY_FILE).display(),
+            if args.mcap {
+                format!(", {}", out.join(MCAP_FILE).display())
+            } else {
+                String::new()
+            }
         );
     }
     Ok(())

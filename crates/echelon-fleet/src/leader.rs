@@ -142,9 +142,9 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
     let mut buf = Vec::with_capacity(wire::REFERENCE_LEN);
     let mut k: u64 = 0;
     let mut late: u64 = 0;
-    let mut t = 0.0;
+    let mut last_t = 0.0;
     while !stop.is_raised() {
-        t = k as f64 * period;
+        let t = k as f64 * period;
         if t > duration + 1e-9 {
             break;
         }
@@ -173,13 +173,14 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
             .wait()
             .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))?;
         k += 1;
+        last_t = t;
     }
     drop(publisher);
     let _ = session.close().wait();
     Ok(LeaderReport {
         role: "leader",
         published: k,
-        t,
+        t: last_t,
         late,
     })
 }

@@ -24,6 +24,8 @@ use crate::{FleetError, StopFlag};
 
 /// The summary `fleet up` writes.
 pub const UP_SUMMARY_FILE: &str = "fleet-summary.json";
+/// Each process's listening endpoint, written when `fleet up` starts them.
+pub const ENDPOINTS_FILE: &str = "endpoints.json";
 
 /// Options of `fleet up`.
 #[derive(Debug, Clone)]
@@ -205,6 +207,17 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         }
         a
     };
+    // Where each process listens, for tools (or tests) that want to join.
+    let mut endpoints = serde_json::Map::new();
+    endpoints.insert("collector".into(), endpoint(0).into());
+    for k in 1..=n {
+        endpoints.insert(format!("robot/{k}"), endpoint(k).into());
+    }
+    endpoints.insert("leader".into(), endpoint(n + 1).into());
+    let path = opts.out.join(ENDPOINTS_FILE);
+    let text =
+        serde_json::to_string_pretty(&endpoints).map_err(echelon_mcap::McapLogError::from)?;
+    std::fs::write(&path, text + "\n").map_err(FleetError::io(&path))?;
     let scale = opts.time_scale.to_string();
     let dur = duration.to_string();
     let started = Instant::now();

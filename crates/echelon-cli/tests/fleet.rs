@@ -751,3 +751,57 @@ fn run_mcap_matches_the_csv_and_is_deterministic() {
     }
     assert_eq!(python_mcap_counts(&files[0].join("run.mcap")), counts);
 }
+
+/// Bad fleet input: one `error:` line, exit code 2, nothing started.
+#[test]
+fn bad_fleet_input_is_one_line_and_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().display().to_string();
+    for args in [
+        vec!["fleet", "robot", "experiment-circle", "--agent", "9"],
+        vec![
+            "fleet",
+            "up",
+            "experiment-circle",
+            "--out",
+            &out,
+            "--loss",
+            "1.5",
+        ],
+        vec![
+            "fleet",
+            "up",
+            "experiment-circle",
+            "--out",
+            &out,
+            "--outage",
+            "3",
+        ],
+        vec![
+            "fleet",
+            "up",
+            "experiment-circle",
+            "--out",
+            &out,
+            "--time-scale",
+            "0",
+        ],
+        vec!["fleet", "collector", "--out", &out],
+        vec!["fleet", "leader", "experiment-circle", "--fleet", "a/b"],
+        vec![
+            "fleet",
+            "robot",
+            "experiment-circle",
+            "--agent",
+            "1",
+            "--secure",
+            &out,
+        ],
+    ] {
+        let o = Command::new(EXE).args(&args).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}

@@ -174,3 +174,85 @@ impl Scenario {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::builtin;
+
+    const BASE: &str = r#"
+[sim]
+duration = 1.0
+dt = 0.01
+
+[reference.circle]
+speed = 0.1
+turn_rate = 0.1
+start = { x = 0.0, y = 0.0, theta = 0.0 }
+
+[[agents]]
+start = { x = 0.0, y = 0.0, theta = 0.0 }
+leader = "reference"
+offset = { x = 0.3, y = 0.0 }
+"#;
+
+    fn parse(extra: &str) -> Result<FleetSettings, ScenarioError> {
+        Scenario::parse(&format!("{BASE}{extra}"), "t.toml", None)?.fleet()
+    }
+
+    #[test]
+    fn every_builtin_has_the_defaults() {
+        for (name, src) in builtin() {
+            let s = Scenario::parse(src, name, None).unwrap_or_else(|e| panic!("{e}"));
+            let f = s.fleet().unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(f.name, *name);
+            assert_eq!(f.reference_rate, DEFAULT_REFERENCE_RATE);
+            assert_eq!(f.control_rate, DEFAULT_CONTROL_RATE);
+            assert!(f.link_loss.iter().all(|l| *l == LinkLoss::default()));
+        }
+    }
+
+    #[test]
+    fn agent_settings_override_the_fleet_section() {
+        let f = parse(
+            "link_loss = { policy = \"stop\" }\n\n[fleet]\nname = \"lab.1\"\ncontrol_rate = 200\nlink_loss = { hold = 2.5 }\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(f.name, "lab.1");
+        assert_eq!(f.control_rate, 200.0);
+        assert_eq!(
+            f.link_loss[0],
+            LinkLoss {
+                policy: LinkPolicy::Stop,
+                hold: 2.5,
+                decel: DEFAULT_DECEL
+            }
+        );
+    }
+
+    #[test]
+    fn bad_values_are_located() {
+        let e = parse("\n[fleet]\nname = \"a/b\"\n")
+            .err()
+            .unwrap_or_else(|| panic!());
+        assert_eq!(e.field, "fleet.name");
+        assert!(
+            e.location.line > 0 && e.message.contains("fleet name"),
+            "{e}"
+        );
+        let e = parse("link_loss = { decel = -1.0 }\n")
+            .err()
+            .unwrap_or_else(|| panic!());
+        assert_eq!(e.field, "agents[1].link_loss.decel");
+        assert!(e.location.line > 0, "{e}");
+        let e = parse("\n[fleet]\ncontrol_rate = 0\n")
+            .err()
+            .unwrap_or_else(|| panic!());
+        assert_eq!(e.field, "fleet.control_rate");
+        let e = parse("\n[fleet]\nrate = 5\n")
+            .err()
+            .unwrap_or_else(|| panic!());
+        assert!(e.message.contains("unknown field"), "{e}");
+        assert!(!is_valid_fleet_name("") && is_valid_fleet_name("a-b_c.9"));
+    }
+}

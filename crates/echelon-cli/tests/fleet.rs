@@ -203,6 +203,18 @@ fn check_conservation(c: &Value) {
     }
 }
 
+/// The endpoints a running `fleet up` in `dir` listens on (waits for them).
+fn endpoints_of(dir: &Path) -> BTreeMap<String, String> {
+    let path = dir.join("endpoints.json");
+    let started = Instant::now();
+    while !path.exists() {
+        assert!(started.elapsed() < Duration::from_secs(30));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(50));
+    serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap()
+}
+
 fn counts_of(v: &Value) -> BTreeMap<String, u64> {
     v.as_object()
         .unwrap()
@@ -399,15 +411,8 @@ fn garbage_on_every_key_is_counted_and_crashes_nothing() {
         move || up(&scenario, &out, &["--time-scale", "10"])
     });
     // Join the fleet once its endpoints are known.
-    let endpoints_path = out.join("endpoints.json");
     let started = Instant::now();
-    while !endpoints_path.exists() {
-        assert!(started.elapsed() < Duration::from_secs(30));
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(Duration::from_millis(50));
-    let endpoints: BTreeMap<String, String> =
-        serde_json::from_str(&std::fs::read_to_string(&endpoints_path).unwrap()).unwrap();
+    let endpoints = endpoints_of(&out);
     let mut config = zenoh::Config::default();
     config.insert_json5("mode", "\"peer\"").unwrap();
     config
@@ -519,15 +524,7 @@ fn secure_mode_rogue_moves_no_robot() {
             )
         }
     });
-    let endpoints_path = fleet_dir.join("endpoints.json");
-    let started = Instant::now();
-    while !endpoints_path.exists() {
-        assert!(started.elapsed() < Duration::from_secs(30));
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(Duration::from_millis(50));
-    let endpoints: BTreeMap<String, String> =
-        serde_json::from_str(&std::fs::read_to_string(&endpoints_path).unwrap()).unwrap();
+    let endpoints = endpoints_of(&fleet_dir);
     assert!(endpoints.values().all(|e| e.starts_with("tls/")));
     // A fake reference far away: a line heading off at 1 m/s.
     let fake = dir.path().join("fake.toml");

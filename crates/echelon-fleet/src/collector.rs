@@ -251,23 +251,14 @@ impl Recorder {
             (KeyKind::State(k), Message::State(h, s)) if s.agent == k => {
                 let theta = wrap_angle(s.state.theta);
                 let ne = s.e[0].hypot(s.e[1]);
+                let output = echelon::sim::AgentOutput {
+                    e: s.e,
+                    z: s.z,
+                    command: s.u,
+                    u: s.u,
+                    tau: s.tau,
+                };
                 let rec = AgentStateRecord {
-                    t: s.t,
-                    agent: k,
-                    x: s.state.x,
-                    y: s.state.y,
-                    theta,
-                    v: s.state.v,
-                    omega: s.state.omega,
-                    ex: s.e[0],
-                    ey: s.e[1],
-                    zx: s.z[0],
-                    zy: s.z[1],
-                    u1: s.u.u1,
-                    u2: s.u.u2,
-                    tau_r: s.tau.right,
-                    tau_l: s.tau.left,
-                    error_norm: ne,
                     seq: Some(h.seq),
                     link: Some(s.link.name()),
                     leader: Some(LeaderRecord {
@@ -278,6 +269,7 @@ impl Recorder {
                         ax: s.leader.ddp[0],
                         ay: s.leader.ddp[1],
                     }),
+                    ..AgentStateRecord::new(s.t, k, &s.state, &output)
                 };
                 let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
                 self.channels.write(

@@ -25,9 +25,10 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+use echelon::model::State;
 use echelon::model::wrap_angle;
 use echelon::reference::{Order, Reference, Trajectory};
-use echelon::sim::{Frame, Observer, ObserverError};
+use echelon::sim::{AgentOutput, Frame, Observer, ObserverError};
 
 /// A failure while writing an MCAP file.
 #[derive(Debug, thiserror::Error)]
@@ -180,6 +181,34 @@ pub struct AgentStateRecord {
     /// Fleet: the leader motion used.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub leader: Option<LeaderRecord>,
+}
+
+impl AgentStateRecord {
+    /// The simulator's view of agent `agent` (from 1) at `t`: state, errors,
+    /// applied input and torques (θ wrapped); fleet fields empty.
+    pub fn new(t: f64, agent: u32, s: &State, o: &AgentOutput) -> AgentStateRecord {
+        AgentStateRecord {
+            t,
+            agent,
+            x: s.x,
+            y: s.y,
+            theta: wrap_angle(s.theta),
+            v: s.v,
+            omega: s.omega,
+            ex: o.e[0],
+            ey: o.e[1],
+            zx: o.z[0],
+            zy: o.z[1],
+            u1: o.u.u1,
+            u2: o.u.u2,
+            tau_r: o.tau.right,
+            tau_l: o.tau.left,
+            error_norm: o.e[0].hypot(o.e[1]),
+            seq: None,
+            link: None,
+            leader: None,
+        }
+    }
 }
 
 /// One `/reference` message.
@@ -422,27 +451,7 @@ impl<W: Write + Seek> Observer for McapObserver<W> {
         self.log
             .write_json(self.reference_channel, seq, time, time, &reference)?;
         for (i, (s, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
-            let record = AgentStateRecord {
-                t: frame.t,
-                agent: (i + 1) as u32,
-                x: s.x,
-                y: s.y,
-                theta: wrap_angle(s.theta),
-                v: s.v,
-                omega: s.omega,
-                ex: o.e[0],
-                ey: o.e[1],
-                zx: o.z[0],
-                zy: o.z[1],
-                u1: o.u.u1,
-                u2: o.u.u2,
-                tau_r: o.tau.right,
-                tau_l: o.tau.left,
-                error_norm: o.e[0].hypot(o.e[1]),
-                seq: None,
-                link: None,
-                leader: None,
-            };
+            let record = AgentStateRecord::new(frame.t, (i + 1) as u32, s, o);
             self.log
                 .write_json(self.agent_channels[i], seq, time, time, &record)?;
         }

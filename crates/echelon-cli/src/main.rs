@@ -47,6 +47,9 @@ enum Command {
     /// Borenstein's UMBmark: estimate E_d and E_b from a bidirectional square test.
     #[command(allow_negative_numbers = true)]
     Umbmark(cmd::umbmark::UmbmarkArgs),
+    /// Run a scenario as networked processes on Zenoh (leader, robots, collector).
+    #[command(subcommand)]
+    Fleet(cmd::fleet::FleetCommand),
 }
 
 /// Exit code for every refused input or failed run.
@@ -82,6 +85,7 @@ fn main() -> ExitCode {
         Command::Bound(args) => cmd::bound::bound(&args),
         Command::Sweep(args) => cmd::sweep::sweep(&args),
         Command::Umbmark(args) => cmd::umbmark::umbmark(&args),
+        Command::Fleet(c) => cmd::fleet::run(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

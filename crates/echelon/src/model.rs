@@ -180,6 +180,26 @@ impl RobotParams {
     }
 }
 
+impl RobotParams {
+    /// One classical RK4 step of eq. 3 over `dt` with the applied input `u` held
+    /// constant (zero-order hold): the plant between two controller samples.
+    #[inline]
+    pub fn rk4_step(&self, s: &State, u: Input, dt: f64) -> State {
+        let k1 = self.derivative(s, u);
+        let k2 = self.derivative(&s.add_scaled(&k1, 0.5 * dt), u);
+        let k3 = self.derivative(&s.add_scaled(&k2, 0.5 * dt), u);
+        let k4 = self.derivative(&s.add_scaled(&k3, dt), u);
+        let h6 = dt / 6.0;
+        State {
+            x: s.x + h6 * (k1.x + 2.0 * (k2.x + k3.x) + k4.x),
+            y: s.y + h6 * (k1.y + 2.0 * (k2.y + k3.y) + k4.y),
+            theta: s.theta + h6 * (k1.theta + 2.0 * (k2.theta + k3.theta) + k4.theta),
+            v: s.v + h6 * (k1.v + 2.0 * (k2.v + k3.v) + k4.v),
+            omega: s.omega + h6 * (k1.omega + 2.0 * (k2.omega + k3.omega) + k4.omega),
+        }
+    }
+}
+
 /// Robot state `(x, y, θ, v, ω)` in the world frame {U}: position of the wheel
 /// axle centre (m), heading (rad), linear speed (m/s) and angular speed (rad/s).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
@@ -376,6 +396,35 @@ mod tests {
         };
         let d = p.derivative(&s, u);
         assert!(d.v.abs() < 1e-12 && d.omega.abs() < 1e-12);
+    }
+
+    #[test]
+    fn rk4_step_with_held_input_matches_the_closed_form() {
+        // With u held, v(t) = u1/η + (v0 − u1/η) e^{−ηt/m} and likewise for ω
+        // (eq. 3c–d are linear); RK4 is O(dt⁵) per step.
+        let p = RobotParams::AGENT1;
+        let u = Input { u1: 40.0, u2: -3.0 };
+        let mut s = State {
+            v: 0.1,
+            omega: 0.2,
+            ..State::default()
+        };
+        let dt = 0.01;
+        for _ in 0..100 {
+            s = p.rk4_step(&s, u, dt);
+        }
+        let t = 1.0;
+        let v_inf = u.u1 / p.linear_friction;
+        let w_inf = u.u2 / p.angular_friction;
+        let v = v_inf + (0.1 - v_inf) * (-p.linear_friction * t / p.mass).exp();
+        let w = w_inf + (0.2 - w_inf) * (-p.angular_friction * t / p.inertia).exp();
+        assert!((s.v - v).abs() < 1e-8, "{} vs {v}", s.v);
+        assert!((s.omega - w).abs() < 1e-8, "{} vs {w}", s.omega);
+        // θ is the integral of ω.
+        let theta = w_inf * t
+            + (0.2 - w_inf) * p.inertia / p.angular_friction
+                * (1.0 - (-p.angular_friction * t / p.inertia).exp());
+        assert!((s.theta - theta).abs() < 1e-8);
     }
 
     #[test]

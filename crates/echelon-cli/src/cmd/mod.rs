@@ -1,6 +1,7 @@
 //! One module per command.
 
 pub(crate) mod bound;
+pub(crate) mod fleet;
 pub(crate) mod lycomp;
 pub(crate) mod out;
 pub(crate) mod plot;

@@ -1,5 +1,7 @@
 //! `echelon run`: simulate a scenario into an output directory.
 
+use std::fs::File;
+use std::io::BufWriter;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -11,11 +13,16 @@ use echelon::output::{
     self, ODOMETRY_FILE, REFERENCE_FILE, RunSummary, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE,
 };
 use echelon::scenario::{Overrides, Scenario};
+use echelon::sim::{Frame, Observer, ObserverError};
 use echelon::{Simulation, Variant};
+use echelon_mcap::McapObserver;
 
 use super::out::outln;
 use super::progress::Progress;
 use super::{non_negative, positive};
+
+/// The MCAP file `--mcap` writes next to trajectory.csv.
+pub(crate) const MCAP_FILE: &str = "run.mcap";
 
 /// Arguments of `echelon run`.
 #[derive(Debug, clap::Args)]
@@ -43,6 +50,9 @@ pub(crate) struct RunArgs {
     /// Also draw the figures (paths, errors, signals as SVG and PNG) and report.html.
     #[arg(long)]
     plot: bool,
+    /// Also write DIR/run.mcap (JSON channels: /reference, /agent/K/state), like a fleet run.
+    #[arg(long)]
+    mcap: bool,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -79,10 +89,45 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
         }
     }
     let started = Instant::now();
+    let mcap_part = out.join(format!(".{MCAP_FILE}.part"));
+    let mut mcap = if args.mcap {
+        std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+        let file = File::create(&mcap_part)
+            .with_context(|| format!("creating {}", mcap_part.display()))?;
+        Some(McapObserver::new(
+            BufWriter::with_capacity(1 << 16, file),
+            run.simulation.reference().clone(),
+            run.simulation.agents().len(),
+            run.log_every,
+        )?)
+    } else {
+        None
+    };
+    let mut nothing = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
+    let mcap_observer: &mut dyn Observer = match mcap.as_mut() {
+        Some(m) => m,
+        None => &mut nothing,
+    };
     let mut progress = Progress::new(run.simulation.steps(), args.quiet);
-    let result = output::run_to_dir(&mut run, &out, &mut progress);
+    let result = output::run_to_dir(
+        &mut run,
+        &out,
+        &mut [&mut progress as &mut dyn Observer, mcap_observer],
+    );
     progress.finish();
-    let summary = result.with_context(|| format!("running {}", run.name))?;
+    let summary = match result {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = std::fs::remove_file(&mcap_part);
+            return Err(e).with_context(|| format!("running {}", run.name));
+        }
+    };
+    if let Some(m) = mcap {
+        m.finish()
+            .with_context(|| format!("writing {}", mcap_part.display()))?;
+        std::fs::rename(&mcap_part, out.join(MCAP_FILE))
+            .with_context(|| format!("writing {}", out.join(MCAP_FILE).display()))?;
+    }
     let elapsed = started.elapsed().as_secs_f64();
     if !args.quiet {
         print_summary(&run.simulation, &summary, elapsed)?;
@@ -91,6 +136,9 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
             files.push(ODOMETRY_FILE);
         }
         files.extend([SUMMARY_FILE, SCENARIO_FILE]);
+        if args.mcap {
+            files.push(MCAP_FILE);
+        }
         let shown: Vec<String> = files
             .iter()
             .map(|f| out.join(f).display().to_string())

@@ -5,8 +5,15 @@
 //! Every problem is reported as a [`ScenarioError`] naming the file, line,
 //! column and field, and why the value is refused.
 
+mod fleet;
 mod locate;
 pub mod schema;
+
+pub use fleet::{
+    DEFAULT_CONTROL_RATE, DEFAULT_DECEL, DEFAULT_HOLD, DEFAULT_LINK_TIMEOUT,
+    DEFAULT_REFERENCE_RATE, DEFAULT_STALE_AFTER, FleetSettings, LinkLoss, LinkPolicy,
+    is_valid_fleet_name,
+};
 
 use std::fmt::Display;
 use std::path::{Path, PathBuf};

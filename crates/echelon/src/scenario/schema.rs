@@ -41,6 +41,9 @@ pub struct ScenarioFile {
     /// Absolute position fixes for every agent (an agent's `fixes` overrides).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fixes: Option<FixesSection>,
+    /// Settings for running the scenario as a networked fleet (`echelon fleet`).
+    #[serde(default, skip_serializing_if = "FleetSection::is_default")]
+    pub fleet: FleetSection,
 }
 
 /// `[odometry]`: the robot dead-reckons from its wheel encoders (paper section 6)
@@ -126,6 +129,66 @@ pub enum FusionName {
     Reset,
     /// Extended Kalman filter.
     Ekf,
+}
+
+/// `[fleet]`: how the scenario runs as separate processes (`echelon fleet`).
+/// Every field is optional; the simulator ignores this section.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FleetSection {
+    /// Fleet name, the second chunk of every key expression (default: the
+    /// scenario name).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Reference publication rate, Hz (default 50).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_rate: Option<f64>,
+    /// Robot controller rate, Hz (default 100).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub control_rate: Option<f64>,
+    /// A leader stream is lost when no fresh message arrived for this long, s
+    /// (default 0.2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link_timeout: Option<f64>,
+    /// Messages older than this on arrival are dropped as stale, s (default 0.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stale_after: Option<f64>,
+    /// Link-loss policy for every agent (an agent's own `link_loss` overrides it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link_loss: Option<LinkLossSection>,
+}
+
+impl FleetSection {
+    fn is_default(&self) -> bool {
+        self == &FleetSection::default()
+    }
+}
+
+/// What a robot does when its leader's stream is lost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LinkPolicyName {
+    /// Converge to the last received position (the paper's experiment).
+    Stop,
+    /// Advance the last reference with its last `V_d`, `ω_d` for `hold`
+    /// seconds, then decelerate smoothly to rest (default).
+    Extrapolate,
+}
+
+/// `[fleet.link_loss]` or an agent's `link_loss = { … }`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinkLossSection {
+    /// `stop` or `extrapolate` (default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub policy: Option<LinkPolicyName>,
+    /// How long `extrapolate` keeps the last speed after the last message, s
+    /// (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hold: Option<f64>,
+    /// Peak deceleration of `extrapolate`'s smooth stop, m/s² (default 0.1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decel: Option<f64>,
 }
 
 /// `[sim]`: how long and how finely to integrate.
@@ -353,6 +416,9 @@ pub struct AgentSection {
     /// Fix settings for this agent (over `[fixes]`, field by field).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fixes: Option<FixesSection>,
+    /// This agent's link-loss policy in a fleet (overrides `[fleet.link_loss]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link_loss: Option<LinkLossSection>,
 }
 
 /// What an agent's controller does.

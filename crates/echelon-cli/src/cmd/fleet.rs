@@ -1,0 +1,413 @@
+//! `echelon fleet …`: the scenario as networked processes on Zenoh (leader,
+//! robots, collector), `up` to run them all on loopback, `certs` for the
+//! secure mode. Each process prints one JSON report line on stdout when it
+//! stops; `up` prints a summary.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand};
+
+use echelon::scenario::{Overrides, Scenario, is_valid_fleet_name};
+use echelon_fleet::certs::{self, CertOptions};
+use echelon_fleet::collector::{self, CollectorOptions, MCAP_FILE};
+use echelon_fleet::faults::FaultSpec;
+use echelon_fleet::leader::{self, LeaderOptions};
+use echelon_fleet::net::{NetOptions, Secure};
+use echelon_fleet::robot::{self, RobotOptions};
+use echelon_fleet::up::{self, UP_SUMMARY_FILE, UpOptions};
+use echelon_fleet::{StopFlag, collector::SUMMARY_FILE};
+
+use super::{non_negative, parse_number, positive};
+
+/// `echelon fleet` subcommands.
+#[derive(Debug, Subcommand)]
+pub(crate) enum FleetCommand {
+    /// Publish the scenario's reference (the virtual leader).
+    Leader(LeaderArgs),
+    /// Run one agent of the scenario: control law on a simulated plant paced in real time.
+    Robot(RobotArgs),
+    /// Record everything to DIR/fleet.mcap and DIR/trajectory.csv.
+    Collector(CollectorArgs),
+    /// Start a leader, one process per robot and a collector on loopback; stop them; summarise.
+    #[command(allow_negative_numbers = true)]
+    Up(UpArgs),
+    /// Make a development CA and certificates for the secure mode.
+    Certs(CertsArgs),
+}
+
+/// How a process joins the fleet.
+#[derive(Debug, Args)]
+pub(crate) struct NetArgs {
+    /// Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable) [default: tcp/127.0.0.1:0, tls/… in secure mode].
+    #[arg(long, value_name = "ENDPOINT")]
+    listen: Vec<String>,
+    /// Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    connect: Vec<String>,
+    /// A Zenoh configuration file (JSON5) to start from instead of the default (peer, no multicast).
+    #[arg(long, value_name = "FILE")]
+    zenoh_config: Option<PathBuf>,
+    /// Fleet name, the second chunk of every key [default: the scenario's].
+    #[arg(long, value_name = "NAME")]
+    fleet: Option<String>,
+    /// Secure mode: mutual TLS and access control with the certificates in DIR (`echelon fleet certs`).
+    #[arg(long, value_name = "DIR")]
+    secure: Option<PathBuf>,
+    /// Certificate identity in secure mode [default: leader, robot-K or collector].
+    #[arg(long, value_name = "ID", requires = "secure")]
+    identity: Option<String>,
+    /// Number of robot identities the access control knows [default: the scenario's agents].
+    #[arg(long, value_name = "N", requires = "secure")]
+    robots: Option<u32>,
+}
+
+impl NetArgs {
+    fn options(&self, default_identity: &str, robots: Option<u32>) -> Result<NetOptions> {
+        if let Some(name) = &self.fleet
+            && !is_valid_fleet_name(name)
+        {
+            bail!("--fleet `{name}`: letters, digits, '-', '_' and '.' only");
+        }
+        let secure = match &self.secure {
+            None => None,
+            Some(dir) => Some(Secure {
+                dir: dir.clone(),
+                identity: self
+                    .identity
+                    .clone()
+                    .unwrap_or_else(|| default_identity.to_owned()),
+                robots: self
+                    .robots
+                    .or(robots)
+                    .context("--secure needs --robots N (or a scenario) for the access control")?,
+            }),
+        };
+        Ok(NetOptions {
+            listen: self.listen.clone(),
+            connect: self.connect.clone(),
+            zenoh_config: self.zenoh_config.clone(),
+            secure,
+        })
+    }
+}
+
+/// Fault injection on what robots receive.
+#[derive(Debug, Args)]
+pub(crate) struct FaultArgs {
+    /// Drop each received message with probability P (0–1).
+    #[arg(long, value_name = "P", value_parser = probability, default_value_t = 0.0)]
+    loss: f64,
+    /// Delay every received message by MS milliseconds of fleet time.
+    #[arg(long, value_name = "MS", value_parser = non_negative, default_value_t = 0.0)]
+    delay: f64,
+    /// Drop everything received in [START, START+LEN) s of fleet time.
+    #[arg(long, value_name = "START:LEN", value_parser = outage)]
+    outage: Option<(f64, f64)>,
+    /// Seed of the drop pattern.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    seed: u64,
+}
+
+impl FaultArgs {
+    fn spec(&self) -> FaultSpec {
+        FaultSpec {
+            loss: self.loss,
+            delay: self.delay * 1e-3,
+            outage: self.outage,
+            seed: self.seed,
+        }
+    }
+}
+
+fn probability(s: &str) -> Result<f64, String> {
+    let v = parse_number(s)?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{s} must be between 0 and 1"))
+    }
+}
+
+fn outage(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}` is not START:LEN (seconds)"))?;
+    Ok((non_negative(a)?, positive(b)?))
+}
+
+/// `echelon fleet leader`.
+#[derive(Debug, Args)]
+pub(crate) struct LeaderArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    scenario: String,
+    /// Publication rate, Hz [default: the scenario's [fleet] reference_rate, else 50].
+    #[arg(long, value_name = "HZ", value_parser = positive)]
+    rate: Option<f64>,
+    /// Fleet seconds to publish [default: the scenario's sim.duration].
+    #[arg(long, value_name = "S", value_parser = positive)]
+    duration: Option<f64>,
+    /// Run the clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    time_scale: f64,
+    /// Wait for this process (collector, robot/K) before starting the clock (repeatable).
+    #[arg(long, value_name = "ROLE")]
+    wait_for: Vec<String>,
+    /// Longest wait for --wait-for, s of real time.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    wait_timeout: f64,
+    #[command(flatten)]
+    net: NetArgs,
+}
+
+/// `echelon fleet robot`.
+#[derive(Debug, Args)]
+pub(crate) struct RobotArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    scenario: String,
+    /// Which agent of the scenario, from 1.
+    #[arg(long, value_name = "K")]
+    agent: u32,
+    /// Stop at this fleet time, s [default: run until SIGINT/SIGTERM].
+    #[arg(long, value_name = "S", value_parser = positive)]
+    duration: Option<f64>,
+    /// Run the clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    time_scale: f64,
+    #[command(flatten)]
+    faults: FaultArgs,
+    #[command(flatten)]
+    net: NetArgs,
+}
+
+/// `echelon fleet collector`.
+#[derive(Debug, Args)]
+pub(crate) struct CollectorArgs {
+    /// The scenario, for the fleet name and robot count (or give --fleet).
+    scenario: Option<String>,
+    /// Output directory.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    #[command(flatten)]
+    net: NetArgs,
+}
+
+/// `echelon fleet up`.
+#[derive(Debug, Args)]
+pub(crate) struct UpArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    scenario: String,
+    /// Output directory.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Fleet seconds to run [default: the scenario's sim.duration].
+    #[arg(long, value_name = "S", value_parser = positive)]
+    duration: Option<f64>,
+    /// Run every clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    time_scale: f64,
+    #[command(flatten)]
+    faults: FaultArgs,
+    /// Secure mode with the certificates in DIR (`echelon fleet certs DIR`).
+    #[arg(long, value_name = "DIR")]
+    secure: Option<PathBuf>,
+    /// Print nothing but errors.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+/// `echelon fleet certs`.
+#[derive(Debug, Args)]
+pub(crate) struct CertsArgs {
+    /// Output directory.
+    dir: PathBuf,
+    /// Number of robot identities (robot-1 … robot-N).
+    #[arg(long, value_name = "N", default_value_t = 4)]
+    robots: u32,
+    /// Another host name or IP address the fleet's processes listen on (repeatable).
+    #[arg(long, value_name = "HOST")]
+    host: Vec<String>,
+}
+
+fn agents_of(s: &Scenario) -> Result<u32> {
+    Ok(s.build(&Overrides::default())?.simulation.agents().len() as u32)
+}
+
+fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
+    println!("{}", serde_json::to_string(report)?);
+    Ok(())
+}
+
+/// Runs a fleet subcommand.
+pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
+    match cmd {
+        FleetCommand::Leader(a) => {
+            let scenario = Scenario::resolve(&a.scenario)?;
+            let robots = agents_of(&scenario)?;
+            let net = a.net.options("leader", Some(robots))?;
+            let stop = StopFlag::on_signals()?;
+            let report = leader::run(
+                LeaderOptions {
+                    scenario,
+                    rate: a.rate,
+                    time_scale: a.time_scale,
+                    duration: a.duration,
+                    wait_for: a.wait_for,
+                    wait_timeout: Duration::from_secs_f64(a.wait_timeout),
+                    net,
+                    fleet: a.net.fleet.clone(),
+                },
+                &stop,
+            )?;
+            print_report(&report)
+        }
+        FleetCommand::Robot(a) => {
+            let scenario = Scenario::resolve(&a.scenario)?;
+            let robots = agents_of(&scenario)?;
+            let net = a.net.options(&format!("robot-{}", a.agent), Some(robots))?;
+            let stop = StopFlag::on_signals()?;
+            let report = robot::run(
+                RobotOptions {
+                    scenario,
+                    agent: a.agent,
+                    time_scale: a.time_scale,
+                    duration: a.duration,
+                    faults: a.faults.spec(),
+                    net,
+                    fleet: a.net.fleet.clone(),
+                },
+                &stop,
+            )?;
+            print_report(&report)
+        }
+        FleetCommand::Collector(a) => {
+            let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
+            let fleet = match (&a.net.fleet, &scenario) {
+                (Some(f), _) => f.clone(),
+                (None, Some(s)) => s.fleet()?.name,
+                (None, None) => bail!("give the scenario or --fleet NAME"),
+            };
+            let robots = scenario.as_ref().map(agents_of).transpose()?;
+            let net = a.net.options("collector", robots)?;
+            let stop = StopFlag::on_signals()?;
+            let report = collector::run(
+                CollectorOptions {
+                    out: a.out,
+                    fleet,
+                    max_wall: None,
+                    net,
+                },
+                &stop,
+            )?;
+            print_report(&report)
+        }
+        FleetCommand::Up(a) => up_cmd(a),
+        FleetCommand::Certs(a) => {
+            if a.robots == 0 {
+                bail!("--robots must be ≥ 1");
+            }
+            let files = certs::generate(&CertOptions {
+                dir: a.dir.clone(),
+                robots: a.robots,
+                hosts: a.host,
+            })?;
+            println!(
+                "wrote {} files to {} (CA, leader, collector, robot-1…robot-{}); development use only",
+                files.len(),
+                a.dir.display(),
+                a.robots
+            );
+            Ok(())
+        }
+    }
+}
+
+fn up_cmd(a: UpArgs) -> Result<()> {
+    let stop = StopFlag::on_signals()?;
+    let exe = std::env::current_exe().context("locating the echelon binary")?;
+    let report = up::run(
+        &UpOptions {
+            scenario: a.scenario,
+            out: a.out.clone(),
+            duration: a.duration,
+            time_scale: a.time_scale,
+            faults: a.faults.spec(),
+            secure: a.secure,
+            exe,
+        },
+        &stop,
+    )?;
+    if a.quiet {
+        return Ok(());
+    }
+    let num = |v: &serde_json::Value, k: &str| v.get(k).and_then(serde_json::Value::as_f64);
+    let int = |v: &serde_json::Value, path: &[&str]| {
+        path.iter()
+            .try_fold(v, |v, k| v.get(*k))
+            .and_then(serde_json::Value::as_u64)
+            .unwrap_or(0)
+    };
+    println!(
+        "{}: fleet \"{}\", {} robot{}, {} s of fleet time at ×{} in {:.1} s",
+        report.scenario,
+        report.fleet,
+        report.robots.len(),
+        if report.robots.len() == 1 { "" } else { "s" },
+        report.duration,
+        report.time_scale,
+        report.wall
+    );
+    println!(
+        "  leader: {} reference samples published",
+        int(&report.leader, &["published"])
+    );
+    println!(
+        "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6}",
+        "agent",
+        "final ‖e‖",
+        "received",
+        "accepted",
+        "loss",
+        "outage",
+        "malform",
+        "wrong-ver",
+        "stale",
+        "reordered",
+        "losses"
+    );
+    for r in &report.robots {
+        let c = |k: &str| int(r, &["counters", k]);
+        println!(
+            "  {:<8} {:>9.2e} m {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6}",
+            format!("robot {}", int(r, &["agent"])),
+            num(r, "final_error").unwrap_or(f64::NAN),
+            c("received"),
+            c("accepted"),
+            c("injected_loss"),
+            c("injected_outage"),
+            c("malformed"),
+            c("wrong_version"),
+            c("stale"),
+            c("reordered"),
+            c("link_losses"),
+        );
+    }
+    let col = &report.collector;
+    println!(
+        "  collector: {} messages received, {} logged, {} rejected",
+        int(col, &["received"]),
+        int(col, &["logged"]),
+        col.get("rejected")
+            .and_then(|r| r.as_object())
+            .map_or(0, |m| m.values().filter_map(|v| v.as_u64()).sum::<u64>())
+    );
+    println!(
+        "wrote {}, {}, {}, {}",
+        a.out.join(MCAP_FILE).display(),
+        a.out.join(echelon::output::TRAJECTORY_FILE).display(),
+        a.out.join(SUMMARY_FILE).display(),
+        a.out.join(UP_SUMMARY_FILE).display()
+    );
+    Ok(())
+}

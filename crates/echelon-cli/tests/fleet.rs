@@ -1,0 +1,804 @@
+#![allow(clippy::unwrap_used)]
+//! The fleet as real processes on loopback (`echelon fleet …`), each test on
+//! its own free ports, sped up with `--time-scale` so that minutes of
+//! experiment take seconds. Child processes are killed if a test fails.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+use echelon::control::law;
+use echelon::model::State;
+use echelon::reference::{Order, Trajectory};
+use echelon::scenario::{Overrides, Scenario};
+
+const EXE: &str = env!("CARGO_BIN_EXE_echelon");
+
+fn fixture(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fleet")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+/// Kills the child if the test ends first.
+struct Guard(Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
+fn spawn(args: &[&str]) -> Guard {
+    Guard(
+        Command::new(EXE)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    )
+}
+
+fn check(out: &Output, what: &str) {
+    assert!(
+        out.status.success(),
+        "{what} failed: {}\nstdout: {}",
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
+    );
+}
+
+/// `echelon fleet up` into `dir`; returns fleet-summary.json.
+fn up(scenario: &str, dir: &Path, extra: &[&str]) -> Value {
+    let out_dir = dir.display().to_string();
+    let mut args = vec!["fleet", "up", scenario, "--out", &out_dir];
+    args.extend_from_slice(extra);
+    let out = Command::new(EXE).args(&args).output().unwrap();
+    check(&out, "fleet up");
+    serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
+}
+
+fn f(v: &Value, path: &[&str]) -> f64 {
+    path.iter()
+        .fold(v, |v, k| &v[*k])
+        .as_f64()
+        .unwrap_or_else(|| panic!("{path:?} in {v}"))
+}
+
+fn u(v: &Value, path: &[&str]) -> u64 {
+    path.iter()
+        .fold(v, |v, k| &v[*k])
+        .as_u64()
+        .unwrap_or_else(|| panic!("{path:?} in {v}"))
+}
+
+/// trajectory.csv rows: (t, agent, the 13 numbers).
+fn rows(path: &Path) -> Vec<(f64, usize, Vec<f64>)> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(echelon::output::TRAJECTORY_HEADER));
+    lines
+        .map(|l| {
+            let v: Vec<&str> = l.split(',').collect();
+            assert_eq!(v.len(), 15, "{l}");
+            (
+                v[0].parse().unwrap(),
+                v[1].parse().unwrap(),
+                v[2..].iter().map(|x| x.parse().unwrap()).collect(),
+            )
+        })
+        .collect()
+}
+
+/// ‖e‖ (eq. 7) of agent `k` (from 1) following the reference, at each CSV row,
+/// against the true reference: what the robot would see with a perfect link.
+fn true_errors(scenario: &str, csv: &Path, k: usize) -> Vec<(f64, f64)> {
+    let run = Scenario::resolve(scenario)
+        .unwrap()
+        .build(&Overrides::default())
+        .unwrap();
+    let spec = &run.simulation.agents()[k - 1];
+    let reference = run.simulation.reference();
+    rows(csv)
+        .into_iter()
+        .filter(|(_, a, _)| *a == k)
+        .map(|(t, _, v)| {
+            let s = State {
+                x: v[0],
+                y: v[1],
+                theta: v[2],
+                v: v[3],
+                omega: v[4],
+            };
+            let jet = reference.eval(t, Order::Two);
+            let motion = echelon::control::LeaderMotion {
+                p: jet.p,
+                dp: jet.dp,
+                ddp: jet.ddp,
+            };
+            let off = spec.placement.offset_for_reference(&jet);
+            let out = law(&spec.robot, &s, &motion, &off, spec.gains, spec.variant);
+            (t, out.e[0].hypot(out.e[1]))
+        })
+        .collect()
+}
+
+/// Message counts per topic, read with the mcap crate.
+fn mcap_counts(path: &Path) -> BTreeMap<String, u64> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut counts = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        assert_eq!(m.channel.message_encoding, "json");
+        let schema = m.channel.schema.as_ref().unwrap();
+        assert_eq!(schema.encoding, "jsonschema");
+        let _: Value = serde_json::from_slice(&m.data).unwrap();
+        *counts.entry(m.channel.topic.clone()).or_insert(0) += 1;
+    }
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    assert_eq!(
+        summary.stats.unwrap().message_count,
+        counts.values().sum::<u64>()
+    );
+    counts
+}
+
+/// Message counts per topic, read by Python's `mcap` package (an independent
+/// reader; `.ci/run` installs it).
+fn python_mcap_counts(path: &Path) -> BTreeMap<String, u64> {
+    let script = "import json, sys\n\
+        from mcap.reader import make_reader\n\
+        counts = {}\n\
+        with open(sys.argv[1], 'rb') as f:\n\
+        \x20   for schema, channel, message in make_reader(f).iter_messages():\n\
+        \x20       json.loads(message.data)\n\
+        \x20       counts[channel.topic] = counts.get(channel.topic, 0) + 1\n\
+        print(json.dumps(counts))\n";
+    let out = Command::new("python3")
+        .args(["-c", script, &path.display().to_string()])
+        .output()
+        .expect("python3 is needed for the independent MCAP check");
+    check(
+        &out,
+        "Python mcap reader (pip install mcap; .ci/run installs it)",
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Every message a robot received is counted in exactly one outcome; nothing
+/// but injected faults and (under a loaded machine at high time scales) a few
+/// stale messages is refused.
+fn check_conservation(c: &Value) {
+    let outcomes = [
+        "accepted",
+        "malformed",
+        "wrong_version",
+        "foreign",
+        "injected_loss",
+        "injected_outage",
+        "stale",
+        "reordered",
+    ];
+    let sum: u64 = outcomes.iter().map(|k| u(c, &[k])).sum::<u64>() + u(c, &["pending"]);
+    assert_eq!(sum, u(c, &["received"]), "{c}");
+    for k in ["malformed", "wrong_version", "reordered"] {
+        assert_eq!(u(c, &[k]), 0, "{k}: {c}");
+    }
+    // Stale: late under load at a high time scale; foreign: a leader robot's states while it waited.
+    for k in ["stale", "foreign"] {
+        assert!(
+            u(c, &[k]) * 20 <= u(c, &["received"]),
+            "more than 5 % {k}: {c}"
+        );
+    }
+}
+
+/// The endpoints a running `fleet up` in `dir` listens on (waits for them).
+fn endpoints_of(dir: &Path) -> BTreeMap<String, String> {
+    let path = dir.join("endpoints.json");
+    let started = Instant::now();
+    while !path.exists() {
+        assert!(started.elapsed() < Duration::from_secs(30));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(50));
+    serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap()
+}
+
+fn counts_of(v: &Value) -> BTreeMap<String, u64> {
+    v.as_object()
+        .unwrap()
+        .iter()
+        .map(|(k, v)| (k.clone(), v.as_u64().unwrap()))
+        .collect()
+}
+
+/// experiment-circle (Fig. 16) with two robot processes converges like the
+/// simulator; the collector logged every message it received, and two
+/// readers (the mcap crate and Python's mcap) agree with its counts.
+#[test]
+fn experiment_circle_converges_like_the_simulator() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim_dir = dir.path().join("sim");
+    let out = Command::new(EXE)
+        .args(["run", "experiment-circle", "--quiet", "--out"])
+        .arg(&sim_dir)
+        .output()
+        .unwrap();
+    check(&out, "echelon run");
+    let sim: Value =
+        serde_json::from_str(&std::fs::read_to_string(sim_dir.join("summary.json")).unwrap())
+            .unwrap();
+    let fleet_dir = dir.path().join("fleet");
+    let report = up("experiment-circle", &fleet_dir, &["--time-scale", "20"]);
+    let sim_rows = rows(&sim_dir.join("trajectory.csv"));
+    for k in 1..=2usize {
+        let robot = &report["robots"][k - 1];
+        let (fleet_e, sim_e) = (
+            f(robot, &["final_error"]),
+            f(&sim["agents"][k - 1], &["final_error"]),
+        );
+        // Stated tolerance: the final ‖e‖ of both is within 1 mm (the simulator
+        // reaches 1e-15 m, the 100 Hz sampled fleet ~1e-8 m).
+        assert!(
+            (fleet_e - sim_e).abs() < 1e-3,
+            "agent {k}: fleet {fleet_e} vs sim {sim_e}"
+        );
+        // And the robot is where the simulated one is at the same time (5 mm).
+        let t = f(robot, &["t"]);
+        let (_, _, near) = sim_rows
+            .iter()
+            .filter(|(_, a, _)| *a == k)
+            .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
+            .unwrap();
+        let pos = &robot["final_state"];
+        let (x, y) = (pos[0].as_f64().unwrap(), pos[1].as_f64().unwrap());
+        assert!(
+            (x - near[0]).hypot(y - near[1]) < 5e-3,
+            "agent {k} at t = {t}: fleet ({x}, {y}) vs sim ({}, {})",
+            near[0],
+            near[1]
+        );
+        // The whole transient: RMS ‖e‖ within 10 % of the simulator's.
+        let rms_sim = f(&sim["agents"][k - 1], &["rms_error"]);
+        let rms_fleet = f(&report["collector"]["agents"][k - 1], &["rms_error"]);
+        assert!(
+            (rms_fleet - rms_sim).abs() < 0.1 * rms_sim,
+            "agent {k}: RMS fleet {rms_fleet} vs sim {rms_sim}"
+        );
+        let mut c = robot["counters"].clone();
+        c["pending"] = robot["pending"].clone();
+        check_conservation(&c);
+    }
+    // Every reference sample reached both robots and the collector.
+    let published = u(&report["leader"], &["published"]);
+    assert!(published > 7800, "{published}");
+    let col = &report["collector"];
+    assert_eq!(
+        u(
+            col,
+            &["received_by_key", "echelon/experiment-circle/reference"]
+        ),
+        published
+    );
+    // Logged = received, and the file says so to two independent readers.
+    assert_eq!(u(col, &["logged"]), u(col, &["received"]));
+    let logged = counts_of(&col["logged_by_topic"]);
+    let mcap_path = fleet_dir.join("fleet.mcap");
+    assert_eq!(mcap_counts(&mcap_path), logged);
+    assert_eq!(python_mcap_counts(&mcap_path), logged);
+}
+
+/// A 3 s outage of everything the robots receive: under `stop` they come to
+/// rest near the last reference; under `extrapolate` (hold 4 s) the true
+/// tracking error stays small; both recover.
+#[test]
+fn outage_stop_rests_and_extrapolate_keeps_tracking() {
+    let dir = tempfile::tempdir().unwrap();
+    let (start, len) = (12.0, 3.0);
+    let outage = format!("{start}:{len}");
+    let common = ["--time-scale", "10", "--outage", &outage, "--seed", "1"];
+    let runs: Vec<(String, PathBuf)> = ["fast-circle-stop.toml", "fast-circle.toml"]
+        .iter()
+        .map(|s| (fixture(s), dir.path().join(s)))
+        .collect();
+    let reports: Vec<Value> = std::thread::scope(|scope| {
+        let handles: Vec<_> = runs
+            .iter()
+            .map(|(s, d)| scope.spawn(|| up(s, d, &common)))
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for (((scenario, out), report), policy) in
+        runs.iter().zip(&reports).zip(["stop", "extrapolate"])
+    {
+        let csv = out.join("trajectory.csv");
+        let all = rows(&csv);
+        for k in 1..=2usize {
+            let c = &report["robots"][k - 1]["counters"];
+            assert!(u(c, &["injected_outage"]) > 0);
+            assert!(u(c, &["link_losses"]) >= 1, "{policy}: {c}");
+            // Both recover: at the end ‖e‖ < 1 mm.
+            let final_e = f(&report["robots"][k - 1], &["final_error"]);
+            assert!(final_e < 1e-3, "{policy} agent {k}: final ‖e‖ = {final_e}");
+            // The last 0.5 s of the outage.
+            let late: Vec<&(f64, usize, Vec<f64>)> = all
+                .iter()
+                .filter(|(t, a, _)| *a == k && *t > start + len - 0.5 && *t < start + len - 0.02)
+                .collect();
+            assert!(late.len() > 20, "{policy}: {} rows", late.len());
+            if policy == "stop" {
+                for (t, _, v) in &late {
+                    // At rest (v < 2 cm/s) near the last reference (‖e‖ < 2 cm
+                    // against the held position).
+                    assert!(v[3].abs() < 0.02, "stop agent {k} at {t}: v = {}", v[3]);
+                    assert!(
+                        v[5].hypot(v[6]) < 0.02,
+                        "stop agent {k} at {t}: e = {:?}",
+                        &v[5..7]
+                    );
+                }
+            }
+        }
+        // Against the true reference (agent 1 follows it directly).
+        let errs = true_errors(scenario, &csv, 1);
+        let during = errs
+            .iter()
+            .filter(|(t, _)| *t >= start && *t < start + len)
+            .map(|(_, e)| *e)
+            .fold(0.0, f64::max);
+        let before = errs
+            .iter()
+            .filter(|(t, _)| *t > start - 2.0 && *t < start)
+            .map(|(_, e)| *e)
+            .fold(0.0, f64::max);
+        assert!(
+            before < 5e-3,
+            "{policy}: converged before the outage ({before})"
+        );
+        if policy == "extrapolate" {
+            // Stated bound: 1 cm (exact on a circle; the rest is sampling).
+            assert!(during < 0.01, "extrapolate: max true ‖e‖ {during}");
+        } else {
+            // The reference moves 0.2 m/s × 3 s on while the robot rests.
+            assert!(during > 0.3, "stop: max true ‖e‖ {during}");
+        }
+    }
+}
+
+/// 20 % of received messages dropped (seeded): the formation still converges.
+#[test]
+fn twenty_percent_loss_still_converges() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = up(
+        &fixture("fast-circle.toml"),
+        dir.path(),
+        &["--time-scale", "10", "--loss", "0.2", "--seed", "7"],
+    );
+    for k in 0..2 {
+        let r = &report["robots"][k];
+        let c = &r["counters"];
+        let (received, lost) = (u(c, &["received"]), u(c, &["injected_loss"]));
+        let rate = lost as f64 / received as f64;
+        assert!((rate - 0.2).abs() < 0.03, "loss rate {rate}");
+        let mut c = c.clone();
+        c["pending"] = r["pending"].clone();
+        check_conservation(&c);
+        assert!(f(r, &["final_error"]) < 1e-3, "{r}");
+    }
+}
+
+/// Garbage bytes and wrong-version messages on every key: nothing crashes,
+/// every one is counted, the robots still converge.
+#[test]
+fn garbage_on_every_key_is_counted_and_crashes_nothing() {
+    use zenoh::Wait;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_path_buf();
+    let scenario = fixture("fast-circle.toml");
+    let fleet = std::thread::spawn({
+        let out = out.clone();
+        move || up(&scenario, &out, &["--time-scale", "10"])
+    });
+    // Join the fleet once its endpoints are known.
+    let started = Instant::now();
+    let endpoints = endpoints_of(&out);
+    let mut config = zenoh::Config::default();
+    config.insert_json5("mode", "\"peer\"").unwrap();
+    config
+        .insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    config
+        .insert_json5("listen/endpoints", "[\"tcp/127.0.0.1:0\"]")
+        .unwrap();
+    let connect: Vec<&String> = endpoints.values().collect();
+    config
+        .insert_json5(
+            "connect/endpoints",
+            &serde_json::to_string(&connect).unwrap(),
+        )
+        .unwrap();
+    config.insert_json5("connect/timeout_ms", "30000").unwrap();
+    let session = zenoh::open(config).wait().unwrap();
+    // Wait until the robots are running (the collector has rows).
+    let csv = out.join("trajectory.csv");
+    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 10_000 {
+        assert!(started.elapsed() < Duration::from_secs(60));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let keys = [
+        "echelon/fast-circle/reference",
+        "echelon/fast-circle/robot/1/state",
+        "echelon/fast-circle/robot/2/state",
+        "echelon/fast-circle/robot/1/stats",
+        "echelon/fast-circle/robot/2/stats",
+        "echelon/fast-circle/alive/junk",
+    ];
+    let per_key = 20u64;
+    let mut wrong_version = vec![0xEC, 9, 1, 0];
+    wrong_version.resize(88, 0);
+    for i in 0..per_key {
+        for key in keys {
+            let payload: Vec<u8> = if i % 4 == 0 {
+                wrong_version.clone()
+            } else {
+                (0..(i * 13 % 300)).map(|b| (b * 31 + i) as u8).collect()
+            };
+            session
+                .put(key, payload)
+                .congestion_control(zenoh::qos::CongestionControl::Block)
+                .wait()
+                .unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    session.close().wait().unwrap();
+    let report = fleet.join().unwrap();
+    // Robot 1 listens to the reference, robot 2 to robot 1's state.
+    for k in 0..2 {
+        let r = &report["robots"][k];
+        let c = &r["counters"];
+        assert_eq!(
+            u(c, &["malformed"]) + u(c, &["wrong_version"]),
+            per_key,
+            "agent {}: {c}",
+            k + 1
+        );
+        assert_eq!(u(c, &["wrong_version"]), per_key / 4);
+        assert!(f(r, &["final_error"]) < 1e-3, "{r}");
+    }
+    // The collector received and logged every one, as rejected.
+    let col = &report["collector"];
+    let rejected: u64 = col["rejected"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_u64().unwrap())
+        .sum();
+    assert_eq!(rejected, per_key * keys.len() as u64, "{}", col["rejected"]);
+    assert_eq!(u(col, &["logged"]), u(col, &["received"]));
+    assert_eq!(
+        mcap_counts(&out.join("fleet.mcap")),
+        counts_of(&col["logged_by_topic"])
+    );
+}
+
+/// Secure mode: with mutual TLS and access control, a rogue that holds a
+/// valid robot certificate publishes a fake reference and no robot takes it;
+/// a rogue without credentials cannot even join.
+#[test]
+fn secure_mode_rogue_moves_no_robot() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    let out = Command::new(EXE)
+        .args(["fleet", "certs", "--robots", "2"])
+        .arg(&certs)
+        .output()
+        .unwrap();
+    check(&out, "fleet certs");
+    let fleet_dir = dir.path().join("fleet");
+    let scenario = fixture("fast-circle.toml");
+    let fleet = std::thread::spawn({
+        let (fleet_dir, certs) = (fleet_dir.clone(), certs.clone());
+        move || {
+            up(
+                &scenario,
+                &fleet_dir,
+                &[
+                    "--time-scale",
+                    "10",
+                    "--secure",
+                    &certs.display().to_string(),
+                ],
+            )
+        }
+    });
+    let endpoints = endpoints_of(&fleet_dir);
+    assert!(endpoints.values().all(|e| e.starts_with("tls/")));
+    // A fake reference far away: a line heading off at 1 m/s.
+    let fake = dir.path().join("fake.toml");
+    std::fs::write(
+        &fake,
+        std::fs::read_to_string(fixture("fast-circle.toml"))
+            .unwrap()
+            .replace(
+                "[reference.circle]\nspeed = 0.2\nturn_rate = 0.2\nstart = { x = 0.0, y = 0.0, theta_deg = 0.0 }",
+                "[reference.line]\nspeed = 1.0\nstart = { x = 5.0, y = 5.0, theta_deg = 90.0 }",
+            ),
+    )
+    .unwrap();
+    assert!(
+        std::fs::read_to_string(&fake)
+            .unwrap()
+            .contains("reference.line")
+    );
+    let connect: Vec<String> = endpoints.values().cloned().collect();
+    let path = |p: PathBuf| p.display().to_string();
+    // Rogue 1: robot 2's certificate, no access control of its own.
+    let stolen = dir.path().join("stolen.json5");
+    let tls = serde_json::json!({
+        "root_ca_certificate": path(certs.join("ca.pem")),
+        "listen_certificate": path(certs.join("robot-2.pem")),
+        "listen_private_key": path(certs.join("robot-2-key.pem")),
+        "connect_certificate": path(certs.join("robot-2.pem")),
+        "connect_private_key": path(certs.join("robot-2-key.pem")),
+        "enable_mtls": true,
+    });
+    let config = |tls: Value| {
+        serde_json::json!({
+            "mode": "peer",
+            "scouting": {"multicast": {"enabled": false}},
+            "listen": {"endpoints": ["tls/127.0.0.1:0"]},
+            "connect": {"endpoints": connect, "timeout_ms": 5000, "exit_on_failure": true},
+            "transport": {"link": {"tls": tls}},
+        })
+        .to_string()
+    };
+    std::fs::write(&stolen, config(tls)).unwrap();
+    // Rogue 2: trusts the CA but has no certificate of its own.
+    let anonymous = dir.path().join("anonymous.json5");
+    std::fs::write(
+        &anonymous,
+        config(serde_json::json!({"root_ca_certificate": path(certs.join("ca.pem"))})),
+    )
+    .unwrap();
+    let fake_s = fake.display().to_string();
+    let rogue_args = |cfg: &Path| -> Vec<String> {
+        [
+            "fleet",
+            "leader",
+            &fake_s,
+            "--fleet",
+            "fast-circle",
+            "--time-scale",
+            "10",
+            "--duration",
+            "25",
+            "--zenoh-config",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .chain([cfg.display().to_string()])
+        .collect()
+    };
+    let a = rogue_args(&stolen);
+    let mut stolen_rogue = spawn(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    let b = rogue_args(&anonymous);
+    let mut anonymous_rogue = spawn(&b.iter().map(String::as_str).collect::<Vec<_>>());
+    let report = fleet.join().unwrap();
+    // The rogue with a stolen robot certificate joined and published…
+    let status = stolen_rogue.0.wait().unwrap();
+    let mut text = String::new();
+    std::io::Read::read_to_string(stolen_rogue.0.stdout.as_mut().unwrap(), &mut text).unwrap();
+    let _ = status;
+    let rogue_report: Option<Value> = text
+        .lines()
+        .last()
+        .and_then(|l| serde_json::from_str(l).ok());
+    // …the anonymous one could not connect at all.
+    let anon_status = anonymous_rogue.0.wait().unwrap();
+    assert!(
+        !anon_status.success(),
+        "a rogue without a certificate joined"
+    );
+    let published = u(&report["leader"], &["published"]);
+    let rogue_report = rogue_report.expect("the rogue with a robot certificate did not run");
+    assert!(u(&rogue_report, &["published"]) > 1000, "{rogue_report}");
+    // No robot took a fake sample: one source, no more samples than the
+    // leader's (the last may arrive after the robot stopped).
+    let c = &report["robots"][0]["counters"];
+    assert_eq!(u(c, &["restarts"]), 0, "{c}");
+    let received = u(c, &["received"]);
+    assert!(
+        received <= published && received + 2 >= published,
+        "{c} vs {published}"
+    );
+    assert_eq!(
+        u(
+            &report["collector"],
+            &["received_by_key", "echelon/fast-circle/reference"]
+        ),
+        published
+    );
+    for k in 0..2 {
+        let r = &report["robots"][k];
+        assert!(f(r, &["final_error"]) < 1e-3, "{r}");
+    }
+    // And robot 1 really tracked the true circle.
+    let errs = true_errors(
+        &fixture("fast-circle.toml"),
+        &fleet_dir.join("trajectory.csv"),
+        1,
+    );
+    let late = errs
+        .iter()
+        .filter(|(t, _)| *t > 10.0)
+        .map(|(_, e)| *e)
+        .fold(0.0, f64::max);
+    assert!(late < 5e-3, "{late}");
+}
+
+/// SIGTERM to a collector in the middle of a run: it exits cleanly and its
+/// files read back.
+#[test]
+fn sigterm_leaves_valid_collector_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let ports: Vec<u16> = (0..2)
+        .map(|_| {
+            std::net::TcpListener::bind("127.0.0.1:0")
+                .unwrap()
+                .local_addr()
+                .unwrap()
+                .port()
+        })
+        .collect();
+    let (c_ep, l_ep) = (
+        format!("tcp/127.0.0.1:{}", ports[0]),
+        format!("tcp/127.0.0.1:{}", ports[1]),
+    );
+    let out = dir.path().display().to_string();
+    let mut collector = spawn(&[
+        "fleet",
+        "collector",
+        "experiment-circle",
+        "--out",
+        &out,
+        "--listen",
+        &c_ep,
+    ]);
+    let _leader = spawn(&[
+        "fleet",
+        "leader",
+        "experiment-circle",
+        "--time-scale",
+        "10",
+        "--listen",
+        &l_ep,
+        "--connect",
+        &c_ep,
+        "--wait-for",
+        "collector",
+    ]);
+    // Let it record for a while, then SIGTERM.
+    let mcap_path = dir.path().join("fleet.mcap");
+    std::thread::sleep(Duration::from_millis(1500));
+    let pid = collector.0.id().to_string();
+    let kill = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+    assert!(kill.success());
+    let status = collector.0.wait().unwrap();
+    assert!(status.success(), "{status}");
+    let mut text = String::new();
+    std::io::Read::read_to_string(collector.0.stdout.as_mut().unwrap(), &mut text).unwrap();
+    let report: Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+    let received = u(&report, &["received"]);
+    assert!(received > 10, "{report}");
+    assert_eq!(u(&report, &["logged"]), received);
+    let counts = mcap_counts(&mcap_path);
+    assert_eq!(counts.values().sum::<u64>(), received);
+    assert_eq!(python_mcap_counts(&mcap_path), counts);
+}
+
+/// `echelon run --mcap`: the same topics as a fleet, one message per logged
+/// step and agent, and the same bytes twice.
+#[test]
+fn run_mcap_matches_the_csv_and_is_deterministic() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut files = Vec::new();
+    for name in ["a", "b"] {
+        let out_dir = dir.path().join(name);
+        let out = Command::new(EXE)
+            .args([
+                "run",
+                "circle-pentagon",
+                "--duration",
+                "2",
+                "--mcap",
+                "--quiet",
+                "--out",
+            ])
+            .arg(&out_dir)
+            .output()
+            .unwrap();
+        check(&out, "run --mcap");
+        files.push(out_dir);
+    }
+    let (a, b) = (
+        std::fs::read(files[0].join("run.mcap")).unwrap(),
+        std::fs::read(files[1].join("run.mcap")).unwrap(),
+    );
+    assert_eq!(a, b, "run.mcap is not deterministic");
+    let csv = rows(&files[0].join("trajectory.csv"));
+    let counts = mcap_counts(&files[0].join("run.mcap"));
+    let agents = csv.iter().map(|r| r.1).max().unwrap();
+    let steps = (csv.len() / agents) as u64;
+    assert_eq!(counts["/reference"], steps);
+    for k in 1..=agents {
+        assert_eq!(counts[&format!("/agent/{k}/state")], steps);
+    }
+    assert_eq!(python_mcap_counts(&files[0].join("run.mcap")), counts);
+}
+
+/// Bad fleet input: one `error:` line, exit code 2, nothing started.
+#[test]
+fn bad_fleet_input_is_one_line_and_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().display().to_string();
+    for args in [
+        vec!["fleet", "robot", "experiment-circle", "--agent", "9"],
+        vec![
+            "fleet",
+            "up",
+            "experiment-circle",
+            "--out",
+            &out,
+            "--loss",
+            "1.5",
+        ],
+        vec![
+            "fleet",
+            "up",
+            "experiment-circle",
+            "--out",
+            &out,
+            "--outage",
+            "3",
+        ],
+        vec![
+            "fleet",
+            "up",
+            "experiment-circle",
+            "--out",
+            &out,
+            "--time-scale",
+            "0",
+        ],
+        vec!["fleet", "collector", "--out", &out],
+        vec!["fleet", "leader", "experiment-circle", "--fleet", "a/b"],
+        vec![
+            "fleet",
+            "robot",
+            "experiment-circle",
+            "--agent",
+            "1",
+            "--secure",
+            &out,
+        ],
+    ] {
+        let o = Command::new(EXE).args(&args).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}

@@ -1,0 +1,99 @@
+//! # echelon-fleet
+//!
+//! The paper's experiment (section 5) as networked processes on Zenoh: a
+//! leader publishing the virtual leader's reference, one process per robot
+//! running the control law (eq. 13) on a plant, and a collector recording
+//! everything to MCAP and `trajectory.csv`. `up` starts the whole fleet on
+//! loopback. See `docs/fleet.md` for key expressions, the wire format,
+//! counters and the link-loss policies.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+pub mod certs;
+pub mod clock;
+pub mod collector;
+pub mod faults;
+pub mod keys;
+pub mod leader;
+pub mod link;
+pub mod net;
+pub mod plant;
+pub mod robot;
+pub mod up;
+pub mod wire;
+
+/// Everything that can stop a fleet process.
+#[derive(Debug, thiserror::Error)]
+pub enum FleetError {
+    /// The scenario is invalid or does not fit the fleet.
+    #[error(transparent)]
+    Scenario(#[from] echelon::ScenarioError),
+    /// A setting is invalid.
+    #[error("{0}")]
+    Config(String),
+    /// Zenoh refused (configuration, connection, declaration).
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The MCAP log failed.
+    #[error(transparent)]
+    Mcap(#[from] echelon_mcap::McapLogError),
+    /// A child process of `fleet up` failed.
+    #[error("{0}")]
+    Child(String),
+}
+
+impl FleetError {
+    pub(crate) fn io(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> FleetError + '_ {
+        move |source| FleetError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
+
+/// A flag raised by SIGINT or SIGTERM (and SIGHUP): processes finish their
+/// loop, flush and exit cleanly.
+#[derive(Debug, Clone, Default)]
+pub struct StopFlag(Arc<AtomicBool>);
+
+impl StopFlag {
+    /// A flag no signal raises (for tests and embedding).
+    pub fn new() -> StopFlag {
+        StopFlag::default()
+    }
+
+    /// A flag raised by SIGINT/SIGTERM/SIGHUP. Only one per process.
+    pub fn on_signals() -> Result<StopFlag, FleetError> {
+        let flag = StopFlag::new();
+        let raised = flag.clone();
+        ctrlc::set_handler(move || raised.raise())
+            .map_err(|e| FleetError::Config(format!("cannot handle signals: {e}")))?;
+        Ok(flag)
+    }
+
+    /// Raises the flag.
+    pub fn raise(&self) {
+        self.0.store(true, Ordering::SeqCst);
+    }
+
+    /// Whether it was raised.
+    pub fn is_raised(&self) -> bool {
+        self.0.load(Ordering::SeqCst)
+    }
+}
+
+/// The wall-clock time now in UNIX nanoseconds (MCAP `log_time` of the collector).
+pub(crate) fn unix_nanos() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}

@@ -1,0 +1,216 @@
+//! Zenoh sessions: the default configuration (peer mode, no multicast
+//! scouting, explicit endpoints), a user's `--zenoh-config` file, and the
+//! secure mode (mutual TLS with access control by certificate common name).
+
+use std::path::{Path, PathBuf};
+
+use serde_json::json;
+use zenoh::{Config, Session, Wait};
+
+use crate::FleetError;
+
+/// How long `open` waits for every `connect` endpoint, s of real time.
+pub const CONNECT_TIMEOUT_MS: u64 = 30_000;
+
+/// Secure mode: this process's identity in a certificate directory made by
+/// `echelon fleet certs`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Secure {
+    /// Directory holding `ca.pem`, `<identity>.pem` and `<identity>-key.pem`.
+    pub dir: PathBuf,
+    /// `leader`, `collector` or `robot-<k>`.
+    pub identity: String,
+    /// Number of robots whose identities the access control knows.
+    pub robots: u32,
+}
+
+/// Where and how a process joins the fleet.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct NetOptions {
+    /// Endpoints to listen on, e.g. `tcp/127.0.0.1:7447` (`tls/…` in secure mode).
+    pub listen: Vec<String>,
+    /// Endpoints to connect to.
+    pub connect: Vec<String>,
+    /// A Zenoh configuration file (JSON5) to start from instead of the default.
+    pub zenoh_config: Option<PathBuf>,
+    /// Secure mode.
+    pub secure: Option<Secure>,
+}
+
+/// The certificate common name of an identity: `echelon-<identity>`.
+pub fn common_name(identity: &str) -> String {
+    format!("echelon-{identity}")
+}
+
+/// The certificate and key files of `identity` in `dir`.
+pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
+    (
+        dir.join(format!("{identity}.pem")),
+        dir.join(format!("{identity}-key.pem")),
+    )
+}
+
+/// The access-control section of the secure mode: every member may subscribe,
+/// declare liveliness and send; on arrival, references are accepted only from
+/// the leader's certificate and robot `k`'s keys only from robot `k`'s.
+pub fn access_control(robots: u32) -> serde_json::Value {
+    let everyone: Vec<String> = ["leader", "collector"]
+        .iter()
+        .map(|s| common_name(s))
+        .chain((1..=robots).map(|k| common_name(&format!("robot-{k}"))))
+        .collect();
+    let mut rules = vec![
+        json!({
+            "id": "declare", "permission": "allow", "flows": ["egress", "ingress"],
+            "messages": ["declare_subscriber", "liveliness_token", "liveliness_query",
+                          "declare_liveliness_subscriber", "query", "reply"],
+            "key_exprs": ["echelon/**"],
+        }),
+        json!({
+            "id": "send", "permission": "allow", "flows": ["egress"],
+            "messages": ["put"], "key_exprs": ["echelon/**"],
+        }),
+        json!({
+            "id": "reference-in", "permission": "allow", "flows": ["ingress"],
+            "messages": ["put"], "key_exprs": ["echelon/*/reference"],
+        }),
+    ];
+    let mut subjects = vec![
+        json!({"id": "members", "cert_common_names": everyone}),
+        json!({"id": "leader", "cert_common_names": [common_name("leader")]}),
+    ];
+    let mut policies = vec![
+        json!({"rules": ["declare", "send"], "subjects": ["members"]}),
+        json!({"rules": ["reference-in"], "subjects": ["leader"]}),
+    ];
+    for k in 1..=robots {
+        rules.push(json!({
+            "id": format!("robot-{k}-in"), "permission": "allow", "flows": ["ingress"],
+            "messages": ["put"], "key_exprs": [format!("echelon/*/robot/{k}/**")],
+        }));
+        subjects.push(json!({
+            "id": format!("robot-{k}"),
+            "cert_common_names": [common_name(&format!("robot-{k}"))],
+        }));
+        policies.push(json!({
+            "rules": [format!("robot-{k}-in")], "subjects": [format!("robot-{k}")],
+        }));
+    }
+    json!({
+        "enabled": true,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    })
+}
+
+fn set(config: &mut Config, key: &str, value: serde_json::Value) -> Result<(), FleetError> {
+    config
+        .insert_json5(key, &value.to_string())
+        .map_err(|e| FleetError::Zenoh(format!("config {key}: {e}")))
+}
+
+/// The Zenoh configuration for these options.
+pub fn config(opts: &NetOptions) -> Result<Config, FleetError> {
+    let mut config = match &opts.zenoh_config {
+        Some(path) => Config::from_file(path)
+            .map_err(|e| FleetError::Zenoh(format!("{}: {e}", path.display())))?,
+        None => {
+            let mut c = Config::default();
+            set(&mut c, "mode", json!("peer"))?;
+            set(&mut c, "scouting/multicast/enabled", json!(false))?;
+            if opts.listen.is_empty() {
+                let proto = if opts.secure.is_some() { "tls" } else { "tcp" };
+                set(
+                    &mut c,
+                    "listen/endpoints",
+                    json!([format!("{proto}/127.0.0.1:0")]),
+                )?;
+            }
+            c
+        }
+    };
+    if !opts.listen.is_empty() {
+        set(&mut config, "listen/endpoints", json!(opts.listen))?;
+    }
+    if !opts.connect.is_empty() {
+        set(&mut config, "connect/endpoints", json!(opts.connect))?;
+        set(&mut config, "connect/timeout_ms", json!(CONNECT_TIMEOUT_MS))?;
+        set(&mut config, "connect/exit_on_failure", json!(true))?;
+        set(
+            &mut config,
+            "connect/retry",
+            json!({"period_init_ms": 50, "period_max_ms": 500, "period_increase_factor": 2}),
+        )?;
+    }
+    if let Some(s) = &opts.secure {
+        let ca = s.dir.join("ca.pem");
+        let (cert, key) = identity_files(&s.dir, &s.identity);
+        for f in [&ca, &cert, &key] {
+            if !f.is_file() {
+                return Err(FleetError::Config(format!(
+                    "secure mode needs {} (make the certificates with `echelon fleet certs {}`)",
+                    f.display(),
+                    s.dir.display()
+                )));
+            }
+        }
+        let path = |p: &PathBuf| json!(p.display().to_string());
+        set(
+            &mut config,
+            "transport/link/tls",
+            json!({
+                "root_ca_certificate": path(&ca),
+                "listen_certificate": path(&cert),
+                "listen_private_key": path(&key),
+                "connect_certificate": path(&cert),
+                "connect_private_key": path(&key),
+                "enable_mtls": true,
+            }),
+        )?;
+        set(&mut config, "access_control", access_control(s.robots))?;
+    }
+    Ok(config)
+}
+
+/// Opens a session (blocks until every `connect` endpoint is reached, or fails).
+pub fn open(opts: &NetOptions) -> Result<Session, FleetError> {
+    let config = config(opts)?;
+    zenoh::open(config)
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("opening the session: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_config_is_peer_without_multicast() {
+        let c = config(&NetOptions {
+            listen: vec!["tcp/127.0.0.1:7999".into()],
+            connect: vec!["tcp/127.0.0.1:7998".into()],
+            ..NetOptions::default()
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(c.get_json("mode").ok().as_deref(), Some("\"peer\""));
+        assert_eq!(
+            c.get_json("scouting/multicast/enabled").ok().as_deref(),
+            Some("false")
+        );
+        assert!(
+            c.get_json("listen/endpoints")
+                .unwrap_or_default()
+                .contains("7999")
+        );
+    }
+
+    #[test]
+    fn access_control_is_accepted_by_zenoh() {
+        let mut c = Config::default();
+        set(&mut c, "access_control", access_control(3)).unwrap_or_else(|e| panic!("{e}"));
+        let acl = c.get_json("access_control").unwrap_or_default();
+        assert!(acl.contains("echelon-robot-3") && acl.contains("echelon/*/reference"));
+    }
+}

@@ -1,0 +1,373 @@
+//! `echelon fleet up`: the whole fleet on loopback, one OS process per role,
+//! started in order, stopped cleanly, summarised.
+//!
+//! The collector starts first, then robot 1 … N, then the leader; each
+//! listens on its own free loopback port and connects to every process
+//! started before it (a full mesh: Zenoh peers route nothing for others). The
+//! leader waits for every liveliness token before starting the clock. Robots
+//! and leader stop at `--duration`; the collector is then sent SIGTERM and
+//! closes its files. Each child's stderr goes to `DIR/logs/<role>.log`; its
+//! last stdout line is its JSON report.
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+use echelon::scenario::{Overrides, Scenario};
+
+use crate::faults::FaultSpec;
+use crate::{FleetError, StopFlag};
+
+/// The summary `fleet up` writes.
+pub const UP_SUMMARY_FILE: &str = "fleet-summary.json";
+/// Each process's listening endpoint, written when `fleet up` starts them.
+pub const ENDPOINTS_FILE: &str = "endpoints.json";
+
+/// Options of `fleet up`.
+#[derive(Debug, Clone)]
+pub struct UpOptions {
+    /// Scenario name or path, as the children will resolve it.
+    pub scenario: String,
+    /// Output directory.
+    pub out: PathBuf,
+    /// Fleet time to run, s (absent: the scenario's `sim.duration`).
+    pub duration: Option<f64>,
+    /// Clock speed-up `K`.
+    pub time_scale: f64,
+    /// Faults injected on what robots receive.
+    pub faults: FaultSpec,
+    /// Certificates directory: run in secure mode (mutual TLS + access control).
+    pub secure: Option<PathBuf>,
+    /// The `echelon` binary to start the children with.
+    pub exe: PathBuf,
+}
+
+/// Every process's final report.
+#[derive(Debug, Clone, Serialize)]
+pub struct UpReport {
+    /// Scenario name.
+    pub scenario: String,
+    /// Fleet name.
+    pub fleet: String,
+    /// Fleet time run, s.
+    pub duration: f64,
+    /// Time scale.
+    pub time_scale: f64,
+    /// Wall-clock time, s.
+    pub wall: f64,
+    /// The leader's report.
+    pub leader: serde_json::Value,
+    /// Each robot's report, agent 1 first.
+    pub robots: Vec<serde_json::Value>,
+    /// The collector's report.
+    pub collector: serde_json::Value,
+}
+
+/// A started child, killed if still running when dropped (a failing test or
+/// an error never leaves processes behind).
+struct Proc {
+    role: String,
+    child: Child,
+    log: PathBuf,
+    report: Option<serde_json::Value>,
+    status: Option<std::process::ExitStatus>,
+}
+
+impl Proc {
+    fn terminate(&self) {
+        let pid = rustix::process::Pid::from_child(&self.child);
+        let _ = rustix::process::kill_process(pid, rustix::process::Signal::TERM);
+    }
+
+    /// Polls; on exit reads the report line from stdout.
+    fn poll(&mut self) -> Result<bool, FleetError> {
+        if self.status.is_some() {
+            return Ok(true);
+        }
+        match self.child.try_wait() {
+            Ok(Some(status)) => {
+                self.status = Some(status);
+                if let Some(out) = self.child.stdout.take() {
+                    let last = BufReader::new(out)
+                        .lines()
+                        .map_while(Result::ok)
+                        .filter(|l| l.trim_start().starts_with('{'))
+                        .last();
+                    self.report = last.and_then(|l| serde_json::from_str(&l).ok());
+                }
+                Ok(true)
+            }
+            Ok(None) => Ok(false),
+            Err(e) => Err(FleetError::Child(format!("{}: {e}", self.role))),
+        }
+    }
+
+    fn failure(&self) -> Option<String> {
+        let status = self.status?;
+        if status.success() {
+            return None;
+        }
+        let tail = std::fs::read_to_string(&self.log)
+            .unwrap_or_default()
+            .lines()
+            .rev()
+            .find(|l| !l.trim().is_empty())
+            .unwrap_or("")
+            .to_owned();
+        Some(format!(
+            "{} exited with {status} ({}: {tail})",
+            self.role,
+            self.log.display()
+        ))
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if self.status.is_none() && matches!(self.child.try_wait(), Ok(None)) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Free loopback TCP ports (bound then released: each is free right now).
+pub fn free_ports(n: usize) -> Result<Vec<u16>, FleetError> {
+    let listeners = (0..n)
+        .map(|_| TcpListener::bind("127.0.0.1:0"))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| FleetError::Config(format!("no free loopback port: {e}")))?;
+    listeners
+        .iter()
+        .map(|l| {
+            l.local_addr()
+                .map(|a| a.port())
+                .map_err(|e| FleetError::Config(format!("no free loopback port: {e}")))
+        })
+        .collect()
+}
+
+fn spawn(exe: &Path, role: &str, args: &[String], logs: &Path) -> Result<Proc, FleetError> {
+    let log = logs.join(format!("{}.log", role.replace('/', "-")));
+    let file = std::fs::File::create(&log).map_err(FleetError::io(&log))?;
+    let child = Command::new(exe)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(file)
+        .spawn()
+        .map_err(|e| FleetError::Child(format!("starting {role} ({}): {e}", exe.display())))?;
+    Ok(Proc {
+        role: role.to_owned(),
+        child,
+        log,
+        report: None,
+        status: None,
+    })
+}
+
+/// Runs the fleet and returns every process's report.
+pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
+    let scenario = Scenario::resolve(&opts.scenario)?;
+    let fleet = scenario.fleet()?;
+    let built = scenario.build(&Overrides::default())?;
+    let n = built.simulation.agents().len();
+    for k in 1..=n as u32 {
+        crate::robot::agent_spec(&scenario, k)?;
+    }
+    let duration = opts.duration.unwrap_or(built.simulation.config().duration);
+    let logs = opts.out.join("logs");
+    std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
+
+    let proto = if opts.secure.is_some() { "tls" } else { "tcp" };
+    let ports = free_ports(n + 2)?;
+    let endpoint = |i: usize| format!("{proto}/127.0.0.1:{}", ports[i]);
+    let common = |i: usize, identity: &str| -> Vec<String> {
+        let mut a = vec![
+            "--fleet".to_owned(),
+            fleet.name.clone(),
+            "--listen".to_owned(),
+            endpoint(i),
+        ];
+        for j in 0..i {
+            a.push("--connect".to_owned());
+            a.push(endpoint(j));
+        }
+        if let Some(dir) = &opts.secure {
+            a.push("--secure".to_owned());
+            a.push(dir.display().to_string());
+            a.push("--identity".to_owned());
+            a.push(identity.to_owned());
+            a.push("--robots".to_owned());
+            a.push(n.to_string());
+        }
+        a
+    };
+    // Where each process listens, for tools (or tests) that want to join.
+    let mut endpoints = serde_json::Map::new();
+    endpoints.insert("collector".into(), endpoint(0).into());
+    for k in 1..=n {
+        endpoints.insert(format!("robot/{k}"), endpoint(k).into());
+    }
+    endpoints.insert("leader".into(), endpoint(n + 1).into());
+    let path = opts.out.join(ENDPOINTS_FILE);
+    let text =
+        serde_json::to_string_pretty(&endpoints).map_err(echelon_mcap::McapLogError::from)?;
+    std::fs::write(&path, text + "\n").map_err(FleetError::io(&path))?;
+    let scale = opts.time_scale.to_string();
+    let dur = duration.to_string();
+    let started = Instant::now();
+
+    let mut args = vec![
+        "fleet".to_owned(),
+        "collector".to_owned(),
+        "--out".to_owned(),
+        opts.out.display().to_string(),
+    ];
+    args.extend(common(0, "collector"));
+    let mut collector = spawn(&opts.exe, "collector", &args, &logs)?;
+
+    let mut robots = Vec::with_capacity(n);
+    for k in 1..=n {
+        let mut args = vec![
+            "fleet".to_owned(),
+            "robot".to_owned(),
+            opts.scenario.clone(),
+            "--agent".to_owned(),
+            k.to_string(),
+            "--duration".to_owned(),
+            dur.clone(),
+            "--time-scale".to_owned(),
+            scale.clone(),
+            "--seed".to_owned(),
+            opts.faults.seed.to_string(),
+        ];
+        if opts.faults.loss > 0.0 {
+            args.extend(["--loss".to_owned(), opts.faults.loss.to_string()]);
+        }
+        if opts.faults.delay > 0.0 {
+            args.extend(["--delay".to_owned(), (opts.faults.delay * 1e3).to_string()]);
+        }
+        if let Some((s, l)) = opts.faults.outage {
+            args.extend(["--outage".to_owned(), format!("{s}:{l}")]);
+        }
+        args.extend(common(k, &format!("robot-{k}")));
+        robots.push(spawn(&opts.exe, &format!("robot/{k}"), &args, &logs)?);
+    }
+
+    let mut args = vec![
+        "fleet".to_owned(),
+        "leader".to_owned(),
+        opts.scenario.clone(),
+        "--duration".to_owned(),
+        dur.clone(),
+        "--time-scale".to_owned(),
+        scale.clone(),
+        "--wait-for".to_owned(),
+        "collector".to_owned(),
+    ];
+    for k in 1..=n {
+        args.extend(["--wait-for".to_owned(), format!("robot/{k}")]);
+    }
+    args.extend(common(n + 1, "leader"));
+    let mut leader = spawn(&opts.exe, "leader", &args, &logs)?;
+
+    // Generous: connection set-up, then the run in real time, then the wind-down.
+    let deadline = Duration::from_secs_f64(60.0 + 2.0 * duration / opts.time_scale);
+    let nap = Duration::from_millis(25);
+    let mut interrupted = false;
+    let mut leader_done: Option<Instant> = None;
+    let mut robots_told = false;
+    // 1. Leader and robots run to the end (or a failure, or a signal).
+    loop {
+        leader.poll()?;
+        let mut all_done = leader.status.is_some();
+        for r in &mut robots {
+            all_done &= r.poll()?;
+        }
+        collector.poll()?;
+        let failed = std::iter::once(&leader)
+            .chain(&robots)
+            .chain(std::iter::once(&collector))
+            .find_map(Proc::failure);
+        if let Some(f) = failed {
+            for p in std::iter::once(&leader).chain(&robots) {
+                p.terminate();
+            }
+            collector.terminate();
+            return Err(FleetError::Child(f));
+        }
+        if all_done {
+            break;
+        }
+        if collector.status.is_some() {
+            return Err(FleetError::Child("the collector stopped early".into()));
+        }
+        if stop.is_raised() && !interrupted {
+            interrupted = true;
+            leader.terminate();
+            for r in &robots {
+                r.terminate();
+            }
+        }
+        if leader.status.is_some() && !interrupted {
+            // Robots stop by themselves at --duration; one that never heard
+            // the leader would not: give them a few seconds, then SIGTERM.
+            let done_at = *leader_done.get_or_insert_with(Instant::now);
+            if done_at.elapsed() > Duration::from_secs(5) && !robots_told {
+                robots_told = true;
+                for r in &robots {
+                    r.terminate();
+                }
+            }
+        }
+        if started.elapsed() > deadline {
+            return Err(FleetError::Child(format!(
+                "the fleet did not finish within {:.0} s",
+                deadline.as_secs_f64()
+            )));
+        }
+        std::thread::sleep(nap);
+    }
+    // 2. Let the last messages reach the collector, then stop it.
+    std::thread::sleep(Duration::from_millis(300));
+    collector.terminate();
+    let wind_down = Instant::now();
+    while !collector.poll()? {
+        if wind_down.elapsed() > Duration::from_secs(30) {
+            return Err(FleetError::Child("the collector did not stop".into()));
+        }
+        std::thread::sleep(nap);
+    }
+    if let Some(f) = collector.failure() {
+        return Err(FleetError::Child(f));
+    }
+    let report = |p: &Proc| -> Result<serde_json::Value, FleetError> {
+        p.report.clone().ok_or_else(|| {
+            FleetError::Child(format!(
+                "{} printed no report ({})",
+                p.role,
+                p.log.display()
+            ))
+        })
+    };
+    let up = UpReport {
+        scenario: scenario.name().to_owned(),
+        fleet: fleet.name.clone(),
+        duration,
+        time_scale: opts.time_scale,
+        wall: started.elapsed().as_secs_f64(),
+        leader: report(&leader)?,
+        robots: robots.iter().map(report).collect::<Result<_, _>>()?,
+        collector: report(&collector)?,
+    };
+    let path = opts.out.join(UP_SUMMARY_FILE);
+    let mut json = serde_json::to_string_pretty(&up).map_err(echelon_mcap::McapLogError::from)?;
+    json.push('\n');
+    std::fs::write(&path, json).map_err(FleetError::io(&path))?;
+    Ok(up)
+}

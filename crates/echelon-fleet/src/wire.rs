@@ -1,0 +1,433 @@
+//! The wire format: versioned, fixed-layout little-endian messages.
+//!
+//! Every message starts with the same 24-byte header:
+//!
+//! | offset | type | field |
+//! |---|---|---|
+//! | 0 | u8 | magic `0xEC` |
+//! | 1 | u8 | format version, [`VERSION`] |
+//! | 2 | u8 | kind: 1 reference, 2 robot state |
+//! | 3 | u8 | reference: 0; state: link status ([`LinkStatus`]) |
+//! | 4 | u32 | source: a random number drawn when the sender starts (a restart is a new source) |
+//! | 8 | u64 | sequence number, from 0, +1 per message of this source |
+//! | 16 | f64 | sender time `t`, fleet seconds |
+//!
+//! then the kind's payload of `f64`s (see [`Reference`] and [`RobotState`]).
+//! All floats must be finite. A message whose length, magic, kind or floats
+//! are wrong is *malformed*; a well-formed header with another version is
+//! *wrong-version*. Neither ever panics the receiver.
+
+use echelon::control::LeaderMotion;
+use echelon::model::{Input, State, Torques};
+
+/// First byte of every message.
+pub const MAGIC: u8 = 0xEC;
+/// Format version written and accepted.
+pub const VERSION: u8 = 1;
+/// Header length, bytes.
+pub const HEADER_LEN: usize = 24;
+/// A reference message's length, bytes (header + 8 f64).
+pub const REFERENCE_LEN: usize = HEADER_LEN + 8 * 8;
+/// A state message's length, bytes (header + agent u32 + 4 reserved + 21 f64).
+pub const STATE_LEN: usize = HEADER_LEN + 8 + 21 * 8;
+
+const KIND_REFERENCE: u8 = 1;
+const KIND_STATE: u8 = 2;
+
+/// Why a message was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum DecodeError {
+    /// Wrong length, magic, kind, agent or a non-finite number.
+    #[error("malformed message: {0}")]
+    Malformed(&'static str),
+    /// A well-formed header carrying another format version.
+    #[error("format version {0}, expected {VERSION}")]
+    WrongVersion(u8),
+}
+
+/// The common header.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Header {
+    /// Random per sender start.
+    pub source: u32,
+    /// Sequence number of this source.
+    pub seq: u64,
+}
+
+/// A robot's link to its leader, as it reports it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LinkStatus {
+    /// No leader message yet: the robot stands still and its clock is not synced.
+    #[default]
+    Waiting = 0,
+    /// Fresh leader messages: normal operation.
+    Tracking = 1,
+    /// Lost; `extrapolate` is advancing the last reference.
+    Extrapolating = 2,
+    /// Lost; the leader motion is brought to rest (`stop`, or `extrapolate`
+    /// past its hold time).
+    Stopping = 3,
+}
+
+impl LinkStatus {
+    /// Its name in logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            LinkStatus::Waiting => "waiting",
+            LinkStatus::Tracking => "tracking",
+            LinkStatus::Extrapolating => "extrapolating",
+            LinkStatus::Stopping => "stopping",
+        }
+    }
+
+    fn from_u8(b: u8) -> Option<LinkStatus> {
+        Some(match b {
+            0 => LinkStatus::Waiting,
+            1 => LinkStatus::Tracking,
+            2 => LinkStatus::Extrapolating,
+            3 => LinkStatus::Stopping,
+            _ => return None,
+        })
+    }
+}
+
+/// A reference sample: payload `p_d[2], ṗ_d[2], p̈_d[2], V_d, ω_d` (m, m/s,
+/// m/s², m/s, rad/s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reference {
+    /// Sender time, s.
+    pub t: f64,
+    /// `p_d`, `ṗ_d`, `p̈_d`.
+    pub motion: LeaderMotion,
+    /// `V_d`, m/s.
+    pub speed: f64,
+    /// `ω_d`, rad/s.
+    pub turn_rate: f64,
+}
+
+/// A robot's state with what its controller did. Payload after the header:
+/// `agent: u32` (from 1), 4 reserved bytes (0), then the f64s
+/// `x, y, θ, v, ω, v̇, ω̇, e_x, e_y, z_x, z_y, u1, u2, τ_r, τ_l,
+/// p_d[2], ṗ_d[2], p̈_d[2]`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RobotState {
+    /// Sender time, s.
+    pub t: f64,
+    /// Agent number, from 1.
+    pub agent: u32,
+    /// Link status when this state was published.
+    pub link: LinkStatus,
+    /// The state.
+    pub state: State,
+    /// `v̇`, m/s² (so followers form `p̈_d`, control-law.md).
+    pub dv: f64,
+    /// `ω̇`, rad/s².
+    pub domega: f64,
+    /// Tracking error `e` (eq. 7), m.
+    pub e: [f64; 2],
+    /// Backstepping error `z` (eq. 10), m/s.
+    pub z: [f64; 2],
+    /// Applied input.
+    pub u: Input,
+    /// Applied wheel torques.
+    pub tau: Torques,
+    /// The leader motion the law used.
+    pub leader: LeaderMotion,
+}
+
+/// A decoded message.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Message {
+    /// From the leader.
+    Reference(Header, Reference),
+    /// From a robot.
+    State(Header, RobotState),
+}
+
+fn put_header(buf: &mut Vec<u8>, kind: u8, flags: u8, h: Header, t: f64) {
+    buf.clear();
+    buf.extend_from_slice(&[MAGIC, VERSION, kind, flags]);
+    buf.extend_from_slice(&h.source.to_le_bytes());
+    buf.extend_from_slice(&h.seq.to_le_bytes());
+    buf.extend_from_slice(&t.to_le_bytes());
+}
+
+fn put_f64s(buf: &mut Vec<u8>, values: &[f64]) {
+    for v in values {
+        buf.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// Encodes a reference sample into `buf` (cleared first).
+pub fn encode_reference(buf: &mut Vec<u8>, h: Header, r: &Reference) {
+    put_header(buf, KIND_REFERENCE, 0, h, r.t);
+    let m = &r.motion;
+    put_f64s(
+        buf,
+        &[
+            m.p[0],
+            m.p[1],
+            m.dp[0],
+            m.dp[1],
+            m.ddp[0],
+            m.ddp[1],
+            r.speed,
+            r.turn_rate,
+        ],
+    );
+}
+
+/// Encodes a robot state into `buf` (cleared first).
+pub fn encode_state(buf: &mut Vec<u8>, h: Header, s: &RobotState) {
+    put_header(buf, KIND_STATE, s.link as u8, h, s.t);
+    buf.extend_from_slice(&s.agent.to_le_bytes());
+    buf.extend_from_slice(&[0; 4]);
+    let (x, l) = (&s.state, &s.leader);
+    put_f64s(
+        buf,
+        &[
+            x.x,
+            x.y,
+            x.theta,
+            x.v,
+            x.omega,
+            s.dv,
+            s.domega,
+            s.e[0],
+            s.e[1],
+            s.z[0],
+            s.z[1],
+            s.u.u1,
+            s.u.u2,
+            s.tau.right,
+            s.tau.left,
+            l.p[0],
+            l.p[1],
+            l.dp[0],
+            l.dp[1],
+            l.ddp[0],
+            l.ddp[1],
+        ],
+    );
+}
+
+/// Reads `N` finite little-endian f64s from `b` (which holds exactly `8N` bytes).
+fn f64s<const N: usize>(b: &[u8]) -> Result<[f64; N], DecodeError> {
+    let mut out = [0.0; N];
+    for (o, chunk) in out.iter_mut().zip(b.chunks_exact(8)) {
+        let mut a = [0u8; 8];
+        a.copy_from_slice(chunk);
+        *o = f64::from_le_bytes(a);
+        if !o.is_finite() {
+            return Err(DecodeError::Malformed("non-finite number"));
+        }
+    }
+    Ok(out)
+}
+
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    let mut a = [0u8; 4];
+    a.copy_from_slice(&b[at..at + 4]);
+    u32::from_le_bytes(a)
+}
+
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    let mut a = [0u8; 8];
+    a.copy_from_slice(&b[at..at + 8]);
+    u64::from_le_bytes(a)
+}
+
+/// Decodes one message, checking everything; never panics.
+pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
+    if b.len() < HEADER_LEN {
+        return Err(DecodeError::Malformed("shorter than the header"));
+    }
+    if b[0] != MAGIC {
+        return Err(DecodeError::Malformed("bad magic byte"));
+    }
+    if b[1] != VERSION {
+        return Err(DecodeError::WrongVersion(b[1]));
+    }
+    let header = Header {
+        source: u32_at(b, 4),
+        seq: u64_at(b, 8),
+    };
+    let [t] = f64s::<1>(&b[16..24])?;
+    match b[2] {
+        KIND_REFERENCE => {
+            if b.len() != REFERENCE_LEN {
+                return Err(DecodeError::Malformed("wrong length for a reference"));
+            }
+            if b[3] != 0 {
+                return Err(DecodeError::Malformed("reference flags must be 0"));
+            }
+            let v = f64s::<8>(&b[HEADER_LEN..])?;
+            Ok(Message::Reference(
+                header,
+                Reference {
+                    t,
+                    motion: LeaderMotion {
+                        p: [v[0], v[1]],
+                        dp: [v[2], v[3]],
+                        ddp: [v[4], v[5]],
+                    },
+                    speed: v[6],
+                    turn_rate: v[7],
+                },
+            ))
+        }
+        KIND_STATE => {
+            if b.len() != STATE_LEN {
+                return Err(DecodeError::Malformed("wrong length for a state"));
+            }
+            let link =
+                LinkStatus::from_u8(b[3]).ok_or(DecodeError::Malformed("unknown link status"))?;
+            let agent = u32_at(b, HEADER_LEN);
+            if agent == 0 {
+                return Err(DecodeError::Malformed("agent numbers start at 1"));
+            }
+            let v = f64s::<21>(&b[HEADER_LEN + 8..])?;
+            Ok(Message::State(
+                header,
+                RobotState {
+                    t,
+                    agent,
+                    link,
+                    state: State {
+                        x: v[0],
+                        y: v[1],
+                        theta: v[2],
+                        v: v[3],
+                        omega: v[4],
+                    },
+                    dv: v[5],
+                    domega: v[6],
+                    e: [v[7], v[8]],
+                    z: [v[9], v[10]],
+                    u: Input {
+                        u1: v[11],
+                        u2: v[12],
+                    },
+                    tau: Torques {
+                        right: v[13],
+                        left: v[14],
+                    },
+                    leader: LeaderMotion {
+                        p: [v[15], v[16]],
+                        dp: [v[17], v[18]],
+                        ddp: [v[19], v[20]],
+                    },
+                },
+            ))
+        }
+        _ => Err(DecodeError::Malformed("unknown kind")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn finite() -> impl Strategy<Value = f64> {
+        -1e6..1e6f64
+    }
+
+    proptest! {
+        #[test]
+        fn references_round_trip(
+            source in any::<u32>(), seq in any::<u64>(), t in finite(),
+            v in proptest::array::uniform8(finite()),
+        ) {
+            let r = Reference {
+                t,
+                motion: LeaderMotion { p: [v[0], v[1]], dp: [v[2], v[3]], ddp: [v[4], v[5]] },
+                speed: v[6],
+                turn_rate: v[7],
+            };
+            let h = Header { source, seq };
+            let mut buf = Vec::new();
+            encode_reference(&mut buf, h, &r);
+            prop_assert_eq!(buf.len(), REFERENCE_LEN);
+            prop_assert_eq!(decode(&buf), Ok(Message::Reference(h, r)));
+        }
+
+        #[test]
+        fn states_round_trip(
+            source in any::<u32>(), seq in any::<u64>(), agent in 1..1000u32, link in 0..4u8,
+            v in proptest::collection::vec(finite(), 22),
+        ) {
+            let s = RobotState {
+                t: v[21],
+                agent,
+                link: LinkStatus::from_u8(link).unwrap_or_default(),
+                state: State { x: v[0], y: v[1], theta: v[2], v: v[3], omega: v[4] },
+                dv: v[5],
+                domega: v[6],
+                e: [v[7], v[8]],
+                z: [v[9], v[10]],
+                u: Input { u1: v[11], u2: v[12] },
+                tau: Torques { right: v[13], left: v[14] },
+                leader: LeaderMotion { p: [v[15], v[16]], dp: [v[17], v[18]], ddp: [v[19], v[20]] },
+            };
+            let h = Header { source, seq };
+            let mut buf = Vec::new();
+            encode_state(&mut buf, h, &s);
+            prop_assert_eq!(buf.len(), STATE_LEN);
+            prop_assert_eq!(decode(&buf), Ok(Message::State(h, s)));
+        }
+
+        /// Arbitrary bytes decode to an error or a message, never a panic; a
+        /// message only if the bytes are exactly one valid encoding.
+        #[test]
+        fn garbage_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..256)) {
+            if let Ok(m) = decode(&bytes) {
+                let mut buf = Vec::new();
+                match m {
+                    Message::Reference(h, r) => encode_reference(&mut buf, h, &r),
+                    Message::State(h, s) => encode_state(&mut buf, h, &s),
+                }
+                // Reserved bytes are not checked; everything else must match.
+                if bytes.len() == STATE_LEN {
+                    buf[HEADER_LEN + 4..HEADER_LEN + 8].copy_from_slice(&bytes[HEADER_LEN + 4..HEADER_LEN + 8]);
+                }
+                prop_assert_eq!(buf, bytes);
+            }
+        }
+
+        /// A truncated message is malformed.
+        #[test]
+        fn truncation_is_malformed(cut in 0..REFERENCE_LEN) {
+            let mut buf = Vec::new();
+            encode_reference(&mut buf, Header { source: 1, seq: 2 }, &Reference {
+                t: 1.0, motion: LeaderMotion::default(), speed: 0.0, turn_rate: 0.0,
+            });
+            buf.truncate(cut);
+            prop_assert!(matches!(decode(&buf), Err(DecodeError::Malformed(_))));
+        }
+    }
+
+    #[test]
+    fn version_and_magic_are_checked() {
+        let mut buf = Vec::new();
+        let r = Reference {
+            t: 0.5,
+            motion: LeaderMotion::default(),
+            speed: 0.1,
+            turn_rate: 0.0,
+        };
+        encode_reference(&mut buf, Header { source: 7, seq: 3 }, &r);
+        let mut v2 = buf.clone();
+        v2[1] = 2;
+        assert_eq!(decode(&v2), Err(DecodeError::WrongVersion(2)));
+        let mut bad = buf.clone();
+        bad[0] = 0;
+        assert!(matches!(decode(&bad), Err(DecodeError::Malformed(_))));
+        let mut nan = buf.clone();
+        nan[HEADER_LEN..HEADER_LEN + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+        assert!(matches!(decode(&nan), Err(DecodeError::Malformed(_))));
+        let mut kind = buf;
+        kind[2] = 9;
+        assert!(matches!(decode(&kind), Err(DecodeError::Malformed(_))));
+    }
+}

@@ -649,6 +649,84 @@ fn secure_mode_rogue_moves_no_robot() {
     assert!(late < 5e-3, "{late}");
 }
 
+/// The control for `secure_mode_rogue_moves_no_robot`: the same rogue against
+/// a fleet without security does reach the robots, so it is the secure mode
+/// (certificates and access control) that stops it there.
+#[test]
+fn without_security_the_same_rogue_does_move_robots() {
+    let dir = tempfile::tempdir().unwrap();
+    let fleet_dir = dir.path().join("fleet");
+    let scenario = fixture("fast-circle.toml");
+    let fleet = std::thread::spawn({
+        let fleet_dir = fleet_dir.clone();
+        move || up(&scenario, &fleet_dir, &["--time-scale", "10"])
+    });
+    let endpoints = endpoints_of(&fleet_dir);
+    assert!(endpoints.values().all(|e| e.starts_with("tcp/")));
+    let fake = dir.path().join("fake.toml");
+    std::fs::write(
+        &fake,
+        std::fs::read_to_string(fixture("fast-circle.toml"))
+            .unwrap()
+            .replace(
+                "[reference.circle]\nspeed = 0.2\nturn_rate = 0.2\nstart = { x = 0.0, y = 0.0, theta_deg = 0.0 }",
+                "[reference.line]\nspeed = 1.0\nstart = { x = 5.0, y = 5.0, theta_deg = 90.0 }",
+            ),
+    )
+    .unwrap();
+    let connect: Vec<String> = endpoints.values().cloned().collect();
+    let plain = dir.path().join("plain.json5");
+    std::fs::write(
+        &plain,
+        serde_json::json!({
+            "mode": "peer",
+            "scouting": {"multicast": {"enabled": false}},
+            "listen": {"endpoints": ["tcp/127.0.0.1:0"]},
+            "connect": {"endpoints": connect, "timeout_ms": 5000, "exit_on_failure": true},
+        })
+        .to_string(),
+    )
+    .unwrap();
+    let (fake_s, plain_s) = (fake.display().to_string(), plain.display().to_string());
+    let mut rogue = spawn(&[
+        "fleet",
+        "leader",
+        &fake_s,
+        "--fleet",
+        "fast-circle",
+        "--time-scale",
+        "10",
+        "--duration",
+        "25",
+        "--zenoh-config",
+        &plain_s,
+    ]);
+    let report = fleet.join().unwrap();
+    let _ = rogue.0.wait();
+    let published = u(&report["leader"], &["published"]);
+    let c = &report["robots"][0]["counters"];
+    // A second sender on the reference key: the robot saw its samples.
+    assert!(
+        u(c, &["restarts"]) > 0 || u(c, &["received"]) > published + 2,
+        "the rogue never reached robot 1: {c} (leader published {published})"
+    );
+    // And it pulled robot 1 off the true circle.
+    let errs = true_errors(
+        &fixture("fast-circle.toml"),
+        &fleet_dir.join("trajectory.csv"),
+        1,
+    );
+    let late = errs
+        .iter()
+        .filter(|(t, _)| *t > 10.0)
+        .map(|(_, e)| *e)
+        .fold(0.0, f64::max);
+    assert!(
+        late > 0.05,
+        "robot 1 stayed on the circle ({late} m): the control shows nothing"
+    );
+}
+
 /// SIGTERM to a collector in the middle of a run: it exits cleanly and its
 /// files read back.
 #[test]

@@ -33,6 +33,8 @@ enum Command {
     Scenarios,
     /// Print a built-in scenario's TOML, to copy and edit.
     Show(cmd::scenarios::ShowArgs),
+    /// Time the batch engine on a random formation (agent-steps per second).
+    Bench(cmd::bench::BenchArgs),
 }
 
 /// Exit code for every refused input or failed run.
@@ -63,6 +65,7 @@ fn main() -> ExitCode {
         Command::Run(args) => cmd::run::run(args),
         Command::Scenarios => cmd::scenarios::list(),
         Command::Show(args) => cmd::scenarios::show(&args),
+        Command::Bench(args) => cmd::bench::bench(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -19,8 +19,10 @@
 //! Units are SI and angles radians throughout (ROS REP 103).
 
 pub mod control;
+pub mod engine;
 pub mod error;
 pub mod formation;
+pub mod lanes;
 pub mod lycomp;
 pub mod model;
 pub mod output;

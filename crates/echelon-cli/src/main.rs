@@ -34,6 +34,7 @@ enum Command {
     /// Print a built-in scenario's TOML, to copy and edit.
     Show(cmd::scenarios::ShowArgs),
     /// Time the batch engine on a random formation (agent-steps per second).
+    #[command(allow_negative_numbers = true)]
     Bench(cmd::bench::BenchArgs),
 }
 

@@ -15,7 +15,7 @@
 // polynomial coefficients are quoted as Cephes publishes them.
 #![allow(clippy::needless_range_loop, clippy::excessive_precision)]
 
-use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+use std::ops::{Add, BitAnd, BitOr, BitXor, Div, Mul, Neg, Not, Sub};
 
 /// What the generic parts of the law need of a number: field arithmetic with
 /// itself and with `f64` constants on the right. `f64`, every `num_dual`
@@ -146,7 +146,41 @@ impl<const W: usize> Not for Mask<W> {
     }
 }
 
+impl<const W: usize> BitXor for Mask<W> {
+    type Output = Mask<W>;
+    #[inline(always)]
+    fn bitxor(self, o: Mask<W>) -> Mask<W> {
+        let mut r = self.0;
+        for i in 0..W {
+            r[i] ^= o.0[i];
+        }
+        Mask(r)
+    }
+}
+
 impl<const W: usize> Mask<W> {
+    /// The bits as `f64`s.
+    #[inline(always)]
+    fn float(self) -> Lanes<W> {
+        Lanes(self.0.map(f64::from_bits))
+    }
+
+    /// Each lane's bits shifted left by `k`.
+    #[inline(always)]
+    fn shl(self, k: u32) -> Mask<W> {
+        Mask(self.0.map(|b| b << k))
+    }
+
+    /// Lane-wise wrapping sum of the bits as integers.
+    #[inline(always)]
+    fn add(self, o: Mask<W>) -> Mask<W> {
+        let mut r = self.0;
+        for i in 0..W {
+            r[i] = r[i].wrapping_add(o.0[i]);
+        }
+        Mask(r)
+    }
+
     /// Whether any lane is true.
     #[inline(always)]
     pub fn any(self) -> bool {
@@ -281,11 +315,13 @@ impl<const W: usize> Lanes<W> {
     /// `if m { a } else { b }` per lane, bitwise.
     #[inline(always)]
     pub fn select(m: Mask<W>, a: Lanes<W>, b: Lanes<W>) -> Lanes<W> {
-        let mut r = [0.0; W];
-        for i in 0..W {
-            r[i] = f64::from_bits((m.0[i] & a.0[i].to_bits()) | (!m.0[i] & b.0[i].to_bits()));
-        }
-        Lanes(r)
+        ((m & a.bits()) | (!m & b.bits())).float()
+    }
+
+    /// The bits of each lane.
+    #[inline(always)]
+    fn bits(self) -> Mask<W> {
+        Mask(self.0.map(f64::to_bits))
     }
 
     /// `|x|`.
@@ -310,6 +346,16 @@ impl<const W: usize> Lanes<W> {
     #[inline(always)]
     pub fn sqrt(self) -> Lanes<W> {
         self.map(f64::sqrt)
+    }
+
+    /// `self` with its bits xored with `m` (a sign flip where `m` is the sign bit).
+    #[inline(always)]
+    fn flip_signs(self, m: Mask<W>) -> Lanes<W> {
+        let mut r = self.0;
+        for i in 0..W {
+            r[i] = f64::from_bits(r[i].to_bits() ^ m.0[i]);
+        }
+        Lanes(r)
     }
 
     /// `sign(s) |self|`: `self` with the sign bit of `s`.
@@ -352,18 +398,11 @@ impl<const W: usize> Lanes<W> {
         let c = (-(z * 0.5) + 1.0) + z * z * z.poly(&COS_COEFFS);
         // n mod 4 from the low bits of the shifted value: bit 0 swaps sin and
         // cos; sin is negated for n ≡ 2, 3 and cos for n ≡ 1, 2.
-        let mut sin = [0.0; W];
-        let mut cos = [0.0; W];
-        for i in 0..W {
-            let q = shifted.0[i].to_bits();
-            let swap = 0u64.wrapping_sub(q & 1);
-            let (sb, cb) = (s.0[i].to_bits(), c.0[i].to_bits());
-            let sv = (swap & cb) | (!swap & sb);
-            let cv = (swap & sb) | (!swap & cb);
-            sin[i] = f64::from_bits(sv ^ ((q & 2) << 62));
-            cos[i] = f64::from_bits(cv ^ (((q + 1) & 2) << 62));
-        }
-        let (mut sin, mut cos) = (Lanes(sin), Lanes(cos));
+        let q = shifted.bits();
+        let swap = Mask((q & Mask([1; W])).0.map(|b| 0u64.wrapping_sub(b)));
+        let (mut sin, mut cos) = (Lanes::select(swap, c, s), Lanes::select(swap, s, c));
+        sin = sin.flip_signs((q & Mask([2; W])).shl(62));
+        cos = cos.flip_signs((q.add(Mask([1; W])) & Mask([2; W])).shl(62));
         let wild = !(x.abs().lt(Lanes::splat(SIN_COS_LIMIT)));
         if wild.any() {
             for i in 0..W {

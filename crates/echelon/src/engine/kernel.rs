@@ -215,14 +215,26 @@ fn compensation(mode: LyComp, vd: V, wd: V, c: &[V; 3]) -> V {
 /// `L̇_Y = L̈_Y = 0` (derivatives neglected).
 #[inline(always)]
 fn hold(c: &Consts, b: &Block, vd: V, wd: V) -> Hold<V> {
+    hold_ly(b, b.ly_off + compensation(c.comp, vd, wd, &b.comp))
+}
+
+/// [`hold`] with `L_Y` already known.
+#[inline(always)]
+fn hold_ly(b: &Block, ly: V) -> Hold<V> {
     let zero = V::splat(0.0);
     Hold {
         lx: b.lx,
         inv_lx: b.inv_lx,
-        ly: b.ly_off + compensation(c.comp, vd, wd, &b.comp),
+        ly,
         dly: zero,
         ddly: zero,
     }
+}
+
+/// `L_Y` of a star block's agents when the reference is `r`.
+#[inline(always)]
+fn star_ly(c: &Consts, b: &Block, r: &Carry) -> V {
+    b.ly_off + compensation(c.comp, V::splat(r.vd), V::splat(r.wd), &b.comp)
 }
 
 /// The motors: what the plant receives for the commanded `u`
@@ -278,10 +290,11 @@ pub(crate) struct StageOut {
     pub(crate) u: [V; 2],
 }
 
-/// One stage of a block following the reference `r`: the law (eqs. 7–13),
-/// the motors, and the plant's derivative (eq. 3).
+/// One stage of a block following the reference `r`, at which the agents
+/// hold it at `ly` ([`star_ly`]): the law (eqs. 7–13), the motors, and the
+/// plant's derivative (eq. 3).
 #[inline(always)]
-pub(crate) fn star_stage(c: &Consts, b: &Block, x: &[V; 5], r: &Carry) -> StageOut {
+pub(crate) fn star_stage(c: &Consts, b: &Block, x: &[V; 5], r: &Carry, ly: V) -> StageOut {
     let (sin, cos) = x[2].sin_cos();
     let body = Body {
         x: x[0],
@@ -291,7 +304,7 @@ pub(crate) fn star_stage(c: &Consts, b: &Block, x: &[V; 5], r: &Carry) -> StageO
         v: x[3],
         omega: x[4],
     };
-    let hold = hold(c, b, V::splat(r.vd), V::splat(r.wd));
+    let hold = hold_ly(b, ly);
     let splat2 = |a: [f64; 2]| [V::splat(a[0]), V::splat(a[1])];
     let p = law_partial(&c.law, &body, splat2(r.p), splat2(r.dp), &hold, b.ke);
     let u = law_finish(&c.law, &p, splat2(r.q), b.kz, c.variant);
@@ -321,10 +334,16 @@ pub(crate) fn star_tile(
     for (bi, b) in blocks.iter_mut().enumerate() {
         let mut x = b.x;
         for (n, r) in refs.iter().enumerate() {
-            let k1 = star_stage(c, b, &x, &r[0]).dx;
-            let k2 = star_stage(c, b, &add_scaled(&x, &k1, h), &r[1]).dx;
-            let k3 = star_stage(c, b, &add_scaled(&x, &k2, h), &r[2]).dx;
-            let k4 = star_stage(c, b, &add_scaled(&x, &k3, dt), &r[3]).dx;
+            // Stages 2 and 3 see the reference at the same instant: one L_Y.
+            let (ly1, ly23, ly4) = (
+                star_ly(c, b, &r[0]),
+                star_ly(c, b, &r[1]),
+                star_ly(c, b, &r[3]),
+            );
+            let k1 = star_stage(c, b, &x, &r[0], ly1).dx;
+            let k2 = star_stage(c, b, &add_scaled(&x, &k1, h), &r[1], ly23).dx;
+            let k3 = star_stage(c, b, &add_scaled(&x, &k2, h), &r[2], ly23).dx;
+            let k4 = star_stage(c, b, &add_scaled(&x, &k3, dt), &r[3], ly4).dx;
             let k23: [V; 5] = std::array::from_fn(|i| k2[i] + k3[i]);
             x = combine(&x, &k1, &k23, &k4, h6);
             let bad = broken(&x, b.live);
@@ -365,12 +384,18 @@ impl Default for Scratch {
     }
 }
 
-/// `[carry, own₀, …, own_{W−2}]`: each lane's leader is the lane before.
+/// `[prev_{W−1}, own₀, …, own_{W−2}]`: each lane's leader is the lane before.
+#[inline(always)]
+fn shift_from(own: V, prev: V) -> V {
+    Lanes(std::array::from_fn(|i| {
+        if i == 0 { prev.0[W - 1] } else { own.0[i - 1] }
+    }))
+}
+
+/// `[carry, own₀, …, own_{W−2}]`.
 #[inline(always)]
 fn shift_in(own: V, carry: f64) -> V {
-    let mut r = [carry; W];
-    r[1..].copy_from_slice(&own.0[..W - 1]);
-    Lanes(r)
+    shift_from(own, V::splat(carry))
 }
 
 /// A block's agents as leaders (their followers' [`Carry`]s), in lanes.
@@ -405,17 +430,32 @@ impl Leaders {
         }
     }
 
-    /// Each lane's leader: the lane before, the first lane's from `c`.
+    /// A carried leader in every lane.
     #[inline(always)]
-    fn shifted(&self, c: &Carry) -> Leaders {
-        let s2 = |v: [V; 2], k: [f64; 2]| [shift_in(v[0], k[0]), shift_in(v[1], k[1])];
+    fn splat(c: &Carry) -> Leaders {
+        let s2 = |k: [f64; 2]| [V::splat(k[0]), V::splat(k[1])];
         Leaders {
-            p: s2(self.p, c.p),
-            dp: s2(self.dp, c.dp),
-            q: s2(self.q, c.q),
-            g: s2(self.g, c.g),
-            vd: shift_in(self.vd, c.vd),
-            wd: shift_in(self.wd, c.wd),
+            p: s2(c.p),
+            dp: s2(c.dp),
+            q: s2(c.q),
+            g: s2(c.g),
+            vd: V::splat(c.vd),
+            wd: V::splat(c.wd),
+        }
+    }
+
+    /// Each lane's leader: the lane before, the first lane's the last lane
+    /// of `prev` (the block before).
+    #[inline(always)]
+    fn shifted(&self, prev: &Leaders) -> Leaders {
+        let s2 = |v: [V; 2], k: [V; 2]| [shift_from(v[0], k[0]), shift_from(v[1], k[1])];
+        Leaders {
+            p: s2(self.p, prev.p),
+            dp: s2(self.dp, prev.dp),
+            q: s2(self.q, prev.q),
+            g: s2(self.g, prev.g),
+            vd: shift_from(self.vd, prev.vd),
+            wd: shift_from(self.wd, prev.wd),
         }
     }
 
@@ -489,13 +529,13 @@ pub(crate) fn chain_stage(
     s: usize,
     cin: &Carry,
 ) -> Carry {
-    let mut carry = *cin;
+    let mut prev = Leaders::splat(cin);
     for (b, sc) in blocks.iter().zip(scratch.iter_mut()) {
         let x = stage_state(b, sc, s, c.dt);
         let (sin, cos) = x[2].sin_cos();
         let own = Leaders::of(&x, sin, cos);
-        let leaders = own.shifted(&carry);
-        carry = own.last();
+        let leaders = own.shifted(&prev);
+        prev = own;
         let (dv, dw) = chain_block(c, b, &x, sin, cos, &leaders);
         sc.k[0] = x[3] * cos;
         sc.k[1] = x[3] * sin;
@@ -516,6 +556,7 @@ pub(crate) fn chain_stage(
         sc.k[3] = dv;
         sc.k[4] = sc.dw.a + sc.dw.b * shift_in(dv, lead);
     }
+    let mut carry = prev.last();
     carry.dv = dvl;
     carry
 }
@@ -583,7 +624,7 @@ fn unpack(out: &mut Vec<Probe>, e: [V; 2], z: [V; 2], u: [V; 2]) {
 /// The star's controllers at the blocks' current state (reference `r`).
 pub(crate) fn star_probe(c: &Consts, blocks: &[Block], r: &Carry, out: &mut Vec<Probe>) {
     for b in blocks {
-        let o = star_stage(c, b, &b.x, r);
+        let o = star_stage(c, b, &b.x, r, star_ly(c, b, r));
         unpack(out, o.e, o.z, o.u);
     }
 }
@@ -598,12 +639,12 @@ pub(crate) fn chain_probe(
     out: &mut Vec<Probe>,
 ) {
     chain_stage(c, blocks, scratch, 0, r);
-    let (mut carry, mut lead_dv) = (*r, r.dv);
+    let (mut prev, mut lead_dv) = (Leaders::splat(r), r.dv);
     for (b, sc) in blocks.iter().zip(scratch.iter()) {
         let (sin, cos) = b.x[2].sin_cos();
         let own = Leaders::of(&b.x, sin, cos);
-        let l = own.shifted(&carry);
-        carry = own.last();
+        let l = own.shifted(&prev);
+        prev = own;
         let dvl = shift_in(sc.k[3], lead_dv);
         lead_dv = sc.k[3].0[W - 1];
         let body = Body {

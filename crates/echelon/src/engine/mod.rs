@@ -588,3 +588,32 @@ fn chain(
     }
     first
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The AVX2 kernels (when this CPU has AVX2) and the baseline SSE2 ones
+    /// compute the same bits: no fused multiply-add, same operations.
+    #[test]
+    fn every_instruction_set_gives_the_same_bits() {
+        for topology in [Topology::Star, Topology::Chain] {
+            let f = BenchFormation {
+                agents: 37,
+                topology,
+                seed: 5,
+            };
+            let mut best = f.engine(0.01).unwrap_or_else(|e| panic!("{e}"));
+            let mut baseline = best.clone();
+            baseline.arch = Arch::Scalar;
+            assert!(best.run(300).is_ok() && baseline.run(300).is_ok());
+            let bits = |e: &Engine| -> Vec<u64> {
+                e.states()
+                    .iter()
+                    .flat_map(|s| [s.x, s.y, s.theta, s.v, s.omega].map(f64::to_bits))
+                    .collect()
+            };
+            assert_eq!(bits(&best), bits(&baseline), "{topology:?}");
+        }
+    }
+}

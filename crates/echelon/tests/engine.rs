@@ -111,9 +111,10 @@ fn chain_matches_the_scalar_simulator() {
         assert!(worst < 1e-9, "{worst}");
     }
     // Columns that start near formation: 50 agents for 20 s; 270 (across the
-    // boundary between two of the engine's 256-agent segments) for 0.5 s,
-    // before the long column's own sensitivity reaches 1e-9 (see below).
-    for (n, seed, steps) in [(50, 3, 2000), (270, 4, 50)] {
+    // boundary between two of the engine's 256-agent segments) for 0.5 s and
+    // 600 (two halves on two threads when the pool has two) for 0.1 s, before
+    // a long column's own sensitivity reaches 1e-9 (see below).
+    for (n, seed, steps) in [(50, 3, 2000), (270, 4, 50), (600, 5, 10)] {
         let f = formation(n, Topology::Chain, seed);
         let worst = compare(near_formation(&f), f.reference(), 0.01, steps);
         assert!(worst < 1e-9, "{worst}");
@@ -232,31 +233,53 @@ fn other_laws_placements_and_references_match() {
     }
 }
 
+fn bits(s: &[State]) -> Vec<u64> {
+    s.iter()
+        .flat_map(|s| [s.x, s.y, s.theta, s.v, s.omega].map(f64::to_bits))
+        .collect()
+}
+
+fn on_threads_in_place(e: &mut Engine, threads: usize, steps: u64) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| e.run(steps)).unwrap();
+}
+
+/// `steps` steps of `e` on a pool of `threads`, at once.
+fn on_threads(mut e: Engine, threads: usize, steps: u64) -> Vec<State> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| e.run(steps)).unwrap();
+    e.states()
+}
+
 #[test]
 fn results_do_not_depend_on_threads_or_on_how_steps_are_grouped() {
-    let f = formation(203, Topology::Star, 99);
-    let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let mut e = f.engine(0.002).unwrap();
-        pool.install(|| e.run(500)).unwrap();
-        e.states()
-    };
-    let one = run(1);
-    let two = run(2);
-    let bits = |s: &[State]| -> Vec<u64> {
-        s.iter()
-            .flat_map(|s| [s.x, s.y, s.theta, s.v, s.omega].map(f64::to_bits))
-            .collect()
-    };
-    assert_eq!(bits(&one), bits(&two));
-    let mut stepped = f.engine(0.002).unwrap();
-    for _ in 0..500 {
-        stepped.step().unwrap();
+    // A star spread over blocks; a chain long enough (≥ 512 agents) to run
+    // as two halves one tile apart on two threads.
+    for (f, steps) in [
+        (formation(203, Topology::Star, 99), 500),
+        (formation(1100, Topology::Chain, 98), 150),
+    ] {
+        let one = on_threads(f.engine(0.002).unwrap(), 1, steps);
+        let two = on_threads(f.engine(0.002).unwrap(), 2, steps);
+        assert_eq!(bits(&one), bits(&two), "{:?}", f.topology);
+        let mut stepped = f.engine(0.002).unwrap();
+        for _ in 0..steps {
+            stepped.step().unwrap();
+        }
+        assert_eq!(bits(&one), bits(&stepped.states()), "{:?}", f.topology);
+        let mut uneven = f.engine(0.002).unwrap();
+        for k in [1, 100, steps - 101] {
+            on_threads_in_place(&mut uneven, 2, k);
+        }
+        assert_eq!(bits(&one), bits(&uneven.states()), "{:?}", f.topology);
     }
-    assert_eq!(bits(&one), bits(&stepped.states()));
+    let f = formation(203, Topology::Star, 99);
     // The formation converges: the benchmark simulates something real.
     let e = f.engine(0.002).unwrap();
     let start_err = e
@@ -308,27 +331,33 @@ fn what_the_engine_cannot_do_is_refused() {
 #[test]
 fn a_blow_up_is_reported_like_the_scalar_simulator_does() {
     // L_X barely positive and huge gains with a large step: the law diverges.
-    let f = formation(6, Topology::Star, 3);
-    let mut specs = f.agent_specs();
-    specs[4].placement = Placement::new(-0.049_999, 0.0, 0.05, LyComp::Fit, LyDerivatives::Neglect);
-    specs[4].gains = Gains {
-        ke: 50.0,
-        kz: 500.0,
-    };
-    let dt = 0.05;
-    let config = SimConfig {
-        dt,
-        duration: 100.0,
-        timing: Timing::Continuous,
-    };
-    let mut sim = Simulation::new(specs.clone(), f.reference(), config).unwrap();
-    let want = loop {
-        if let Err(e) = sim.step() {
-            break e;
-        }
-    };
-    let mut engine = Engine::from_agents(&specs, f.reference(), dt).unwrap();
-    let got = engine.run(2000).unwrap_err();
-    assert_eq!(got, want);
-    assert_eq!(engine.run(1).unwrap_err(), want, "the engine stays failed");
+    // In a star; and in the second half of a chain that runs on two threads.
+    for (f, bad) in [
+        (formation(6, Topology::Star, 3), 4),
+        (formation(600, Topology::Chain, 3), 400),
+    ] {
+        let mut specs = f.agent_specs();
+        specs[bad].placement =
+            Placement::new(-0.049_999, 0.0, 0.05, LyComp::Fit, LyDerivatives::Neglect);
+        specs[bad].gains = Gains {
+            ke: 50.0,
+            kz: 500.0,
+        };
+        let dt = 0.05;
+        let config = SimConfig {
+            dt,
+            duration: 100.0,
+            timing: Timing::Continuous,
+        };
+        let mut sim = Simulation::new(specs.clone(), f.reference(), config).unwrap();
+        let want = loop {
+            if let Err(e) = sim.step() {
+                break e;
+            }
+        };
+        let mut engine = Engine::from_agents(&specs, f.reference(), dt).unwrap();
+        let got = engine.run(2000).unwrap_err();
+        assert_eq!(got, want);
+        assert_eq!(engine.run(1).unwrap_err(), want, "the engine stays failed");
+    }
 }

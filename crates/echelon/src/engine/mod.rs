@@ -8,8 +8,9 @@
 //! every stage, leaders first; unlike it, it keeps the agents in blocks of
 //! four lanes (structure of arrays), evaluates the reference once per stage
 //! for everyone, never allocates while stepping, runs each block through a
-//! tile of 64 steps in registers, and spreads a star's blocks over the rayon
-//! pool it runs in. Results do not depend on the number of threads (each
+//! tile of 64 steps in registers, and spreads the work over the rayon pool
+//! it runs in: a star's blocks, or a long chain's two halves, one tile
+//! apart. Results do not depend on the number of threads (each
 //! block is computed the same way wherever it runs) and match the scalar
 //! simulator to a relative 10⁻⁹ (`tests/engine.rs`).
 //!
@@ -104,6 +105,8 @@ pub struct Engine {
     step: u64,
     blocks: Vec<Block>,
     carries: Vec<[Carry; 4]>,
+    /// A chain's second tile buffer (two halves of a chain run one tile apart).
+    carries_b: Vec<[Carry; 4]>,
     scratch: Vec<Scratch>,
     failed: Option<SimError>,
     /// The widest instruction set this CPU has (AVX2 on x86-64 when present).
@@ -199,9 +202,12 @@ impl Engine {
             limit,
             dt: batch.dt,
         };
-        let scratch = match batch.topology {
-            Topology::Star => Vec::new(),
-            Topology::Chain => vec![Scratch::default(); blocks.len().min(SEGMENT)],
+        let (scratch, carries_b) = match batch.topology {
+            Topology::Star => (Vec::new(), Vec::new()),
+            Topology::Chain => (
+                vec![Scratch::default(); blocks.len().min(2 * SEGMENT)],
+                vec![[Carry::default(); 4]; TILE],
+            ),
         };
         Ok(Engine {
             consts,
@@ -211,6 +217,7 @@ impl Engine {
             step: 0,
             blocks,
             carries: vec![[Carry::default(); 4]; TILE],
+            carries_b,
             scratch,
             failed: None,
             arch: Arch::new(),
@@ -320,7 +327,7 @@ impl Engine {
     /// work space spread over the agents.
     pub fn bytes_per_agent(&self) -> f64 {
         let bytes = self.blocks.capacity() * size_of::<Block>()
-            + self.carries.capacity() * size_of::<[Carry; 4]>()
+            + (self.carries.capacity() + self.carries_b.capacity()) * size_of::<[Carry; 4]>()
             + self.scratch.capacity() * size_of::<Scratch>();
         bytes as f64 / self.n as f64
     }
@@ -367,14 +374,21 @@ impl Engine {
         self.run(1)
     }
 
-    /// `steps` RK4 steps, the law in every stage. A star spreads its blocks
-    /// over the current rayon pool (`pool.install(|| engine.run(n))`); the
+    /// `steps` RK4 steps, the law in every stage. A star spreads its blocks,
+    /// a chain of 512 agents or more its two halves, over the current rayon
+    /// pool (`pool.install(|| engine.run(n))`); the
     /// result is the same bits on any number of threads, and the same as
     /// `steps` calls of [`Engine::step`]. Fails like the scalar simulator
     /// when a state stops being finite; the engine then stays failed.
     pub fn run(&mut self, steps: u64) -> Result<(), SimError> {
         if let Some(e) = &self.failed {
             return Err(e.clone());
+        }
+        if self.topology == Topology::Chain
+            && rayon::current_num_threads() >= 2
+            && self.blocks.len() >= 2 * SEGMENT
+        {
+            return self.run_chain_on_two_cores(steps);
         }
         let mut left = steps;
         while left > 0 {
@@ -402,6 +416,69 @@ impl Engine {
             self.step += len as u64;
             left -= len as u64;
         }
+        Ok(())
+    }
+}
+
+impl Engine {
+    /// A chain on two cores: the first half of the agents runs tile `m` while
+    /// the second half runs tile `m − 1`, led by the first half's last agent
+    /// as recorded in the previous tile (a wavefront; the two carry buffers
+    /// swap each tile). Every agent computes exactly what it would on one
+    /// core.
+    fn run_chain_on_two_cores(&mut self, steps: u64) -> Result<(), SimError> {
+        let split = self.blocks.len() / 2;
+        let (arch, c, dt) = (self.arch, &self.consts, self.consts.dt);
+        let reference = &self.reference;
+        let (front, back) = self.blocks.split_at_mut(split);
+        let (scratch_a, scratch_b) = self.scratch.split_at_mut(SEGMENT);
+        let (mut x, mut y) = (&mut self.carries, &mut self.carries_b);
+        // The tile waiting in `y` for the back half: (first step, length).
+        let mut pending: Option<(u64, usize)> = None;
+        let (mut step, mut left) = (self.step, steps);
+        let mut broke: Option<(u64, usize)> = None;
+        fn note(broke: &mut Option<(u64, usize)>, at: (u64, usize)) {
+            *broke = Some(broke.map_or(at, |b| b.min(at)));
+        }
+        while left > 0 || pending.is_some() {
+            let next = (left > 0).then(|| {
+                let len = left.min(TILE as u64) as usize;
+                fill_reference(&mut x[..len], reference, step, dt);
+                (step, len)
+            });
+            let (a, b) = rayon::join(
+                || next.and_then(|(_, len)| chain(arch, c, front, scratch_a, &mut x[..len])),
+                || pending.and_then(|(_, len)| chain(arch, c, back, scratch_b, &mut y[..len])),
+            );
+            if let (Some((n, agent)), Some((s0, _))) = (b, pending) {
+                note(&mut broke, (s0 + n as u64, split * W + agent));
+            }
+            if let (Some((n, agent)), Some((s0, _))) = (a, next) {
+                note(&mut broke, (s0 + n as u64, agent));
+                // The back half may break earlier within this tile.
+                if let Some((m, agent)) = chain(arch, c, back, scratch_b, &mut x[..=n]) {
+                    note(&mut broke, (s0 + m as u64, split * W + agent));
+                }
+            }
+            if broke.is_some() {
+                break;
+            }
+            std::mem::swap(&mut x, &mut y);
+            pending = next;
+            if let Some((_, len)) = next {
+                step += len as u64;
+                left -= len as u64;
+            }
+        }
+        if let Some((n, agent)) = broke {
+            let e = SimError::NonFinite {
+                agent: agent + 1,
+                t: (n + 1) as f64 * dt,
+            };
+            self.failed = Some(e.clone());
+            return Err(e);
+        }
+        self.step += steps;
         Ok(())
     }
 }

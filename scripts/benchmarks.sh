@@ -31,6 +31,7 @@ for n in 1000 10000 100000 1000000; do
     done
 done
 run "chain N=10000, 1 thread" --agents 10000 --topology chain --duration 5 --dt 0.001 --threads 1
+run "chain N=10000, 2 threads (two halves)" --agents 10000 --topology chain --duration 5 --dt 0.001 --threads 2
 run "chain N=10000 x 2 runs, 2 threads" --agents 10000 --runs 2 --topology chain --duration 5 --dt 0.001 --threads 2
 run "sweep: 256 runs of N=4, 2 threads" --agents 4 --runs 256 --duration 10 --dt 0.001 --threads 2
 uptime

@@ -88,6 +88,15 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         })
         .collect::<Result<Vec<Engine>, _>>()?;
 
+    if !args.json {
+        // Before the clock starts: long runs say what they are doing.
+        eprintln!(
+            "stepping {} × {} agents for {steps} steps on {threads} thread{}…",
+            args.runs,
+            args.agents,
+            if threads == 1 { "" } else { "s" }
+        );
+    }
     let started = Instant::now();
     let results = pool.install(|| match engines.as_mut_slice() {
         [one] => vec![one.run(steps)],

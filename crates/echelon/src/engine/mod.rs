@@ -190,6 +190,7 @@ impl Engine {
             }
             blocks.push(block(&lanes, live));
         }
+        blocks.shrink_to_fit();
         let r = &batch.robot;
         let consts = Consts {
             law: LawRobot::new(r),

@@ -662,3 +662,151 @@ pub(crate) fn chain_probe(
         unpack(out, p.e, p.z, u);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lycomp::{self, FitCoefficients};
+    use proptest::prelude::*;
+
+    fn lanes(v: [f64; W]) -> V {
+        Lanes(v)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+
+        /// Eq. 6 as one angle equals eq. 6 as three: within 1e-12 of the
+        /// scale `2|G|` (the three-angle form itself cancels angles near ±π/2),
+        /// for every `L_Xoff` of the paper's range, any speed and turn rate.
+        #[test]
+        fn fit_as_one_angle_is_eq_6(
+            lambda in 0.1..0.9f64,
+            speed in prop::array::uniform4(0.0..5.0f64),
+            turn in prop::array::uniform4(-3.0..3.0f64),
+            tiny in any::<bool>(),
+        ) {
+            let turn = if tiny { turn.map(|w| w * 1e-9) } else { turn };
+            let f = FitCoefficients::paper(lambda);
+            let k = f.epsilon / f.delta;
+            let c = [V::splat(2.0 * f.g), V::splat(1.0 / f.delta), V::splat(k * k)];
+            let got = fit(lanes(speed), lanes(turn), &c);
+            for l in 0..W {
+                let want: f64 = lycomp::fit(speed[l], turn[l], &f);
+                prop_assert!(
+                    (got.0[l] - want).abs() <= 1e-12 * (2.0 * f.g.abs()).max(1.0),
+                    "λ = {lambda}, V = {}, ω = {}: {} vs {want}", speed[l], turn[l], got.0[l]
+                );
+            }
+        }
+
+        /// Eq. 5 in lanes is `lycomp::exact` bit for bit, in both branches and
+        /// for straight lines.
+        #[test]
+        fn exact_in_lanes_is_eq_5_bit_for_bit(
+            lambda in 0.05..2.0f64,
+            speed in prop::array::uniform4(0.0..5.0f64),
+            turn in prop::array::uniform4(-20.0..20.0f64),
+            straight in 0..W,
+        ) {
+            let mut turn = turn;
+            turn[straight] = 0.0;
+            let c = [V::splat(lambda), V::splat(lambda * lambda), V::splat(0.0)];
+            let got = exact(lanes(speed), lanes(turn), &c);
+            for l in 0..W {
+                let want: f64 = lycomp::exact(speed[l], turn[l], lambda);
+                prop_assert_eq!(got.0[l].to_bits(), want.to_bits(), "V = {}, ω = {}", speed[l], turn[l]);
+            }
+        }
+    }
+
+    proptest! {
+        /// Eqs. 7–13 in lanes are `control::law` bit for bit in every lane
+        /// (given the same sines: the law is generic over the number type and
+        /// lanes have no fused multiply-add).
+        #[test]
+        fn the_law_in_lanes_is_the_scalar_law(
+            st in prop::array::uniform4(prop::array::uniform5(-3.0..3.0f64)),
+            leader in prop::array::uniform4(prop::array::uniform6(-2.0..2.0f64)),
+            hold in prop::array::uniform4((0.06..1.0f64, -1.0..1.0f64)),
+            gains in prop::array::uniform4((0.1..5.0f64, 0.1..20.0f64)),
+            complete in any::<bool>(),
+        ) {
+            use crate::control::{Gains, LeaderMotion, Offset, law};
+            let variant = if complete { Variant::Complete } else { Variant::Paper };
+            let robot = crate::model::RobotParams::AGENT2;
+            let lr = LawRobot::new(&robot);
+            let col = |f: &dyn Fn(usize) -> f64| Lanes(std::array::from_fn(f));
+            let body = Body {
+                x: col(&|i| st[i][0]),
+                y: col(&|i| st[i][1]),
+                sin: col(&|i| st[i][2].sin()),
+                cos: col(&|i| st[i][2].cos()),
+                v: col(&|i| st[i][3]),
+                omega: col(&|i| st[i][4]),
+            };
+            let zero = V::splat(0.0);
+            let h = Hold {
+                lx: col(&|i| hold[i].0),
+                inv_lx: col(&|i| 1.0 / hold[i].0),
+                ly: col(&|i| hold[i].1),
+                dly: zero,
+                ddly: zero,
+            };
+            let pd = [col(&|i| leader[i][0]), col(&|i| leader[i][1])];
+            let dpd = [col(&|i| leader[i][2]), col(&|i| leader[i][3])];
+            let ddpd = [col(&|i| leader[i][4]), col(&|i| leader[i][5])];
+            let p = law_partial(&lr, &body, pd, dpd, &h, col(&|i| gains[i].0));
+            let u = law_finish(&lr, &p, ddpd, col(&|i| gains[i].1), variant);
+            for i in 0..W {
+                let s = crate::model::State {
+                    x: st[i][0], y: st[i][1], theta: st[i][2], v: st[i][3], omega: st[i][4],
+                };
+                let m = LeaderMotion {
+                    p: [leader[i][0], leader[i][1]],
+                    dp: [leader[i][2], leader[i][3]],
+                    ddp: [leader[i][4], leader[i][5]],
+                };
+                let off = Offset { lx: hold[i].0, ly: hold[i].1, dly: 0.0, ddly: 0.0 };
+                let g = Gains { ke: gains[i].0, kz: gains[i].1 };
+                let want = law(&robot, &s, &m, &off, g, variant);
+                prop_assert_eq!(want.u.u1.to_bits(), u[0].0[i].to_bits());
+                prop_assert_eq!(want.u.u2.to_bits(), u[1].0[i].to_bits());
+                prop_assert_eq!(want.e.map(f64::to_bits), [p.e[0].0[i], p.e[1].0[i]].map(f64::to_bits));
+                prop_assert_eq!(want.z.map(f64::to_bits), [p.z[0].0[i], p.z[1].0[i]].map(f64::to_bits));
+            }
+        }
+    }
+
+    /// The leader's motion in lanes is `LeaderMotion::of_robot` bit for bit.
+    #[test]
+    fn leaders_are_of_robot() {
+        let x = [
+            lanes([0.3, -1.0, 2.0, 0.0]),
+            lanes([1.0, 0.5, -0.2, 0.0]),
+            lanes([0.7, -2.5, 3.1, 0.0]),
+            lanes([0.4, 0.0, 1.2, -0.1]),
+            lanes([0.05, -0.3, 0.0, 0.2]),
+        ];
+        let (sin, cos) = (x[2].0.map(f64::sin), x[2].0.map(f64::cos));
+        let l = Leaders::of(&x, lanes(sin), lanes(cos));
+        for i in 0..W {
+            let s = crate::model::State {
+                x: x[0].0[i],
+                y: x[1].0[i],
+                theta: x[2].0[i],
+                v: x[3].0[i],
+                omega: x[4].0[i],
+            };
+            let dv = 0.37;
+            let m = crate::control::LeaderMotion::of_robot(&s, dv);
+            assert_eq!(m.p, [l.p[0].0[i], l.p[1].0[i]]);
+            assert_eq!(m.dp, [l.dp[0].0[i], l.dp[1].0[i]]);
+            let ddp = [
+                l.q[0].0[i] + l.g[0].0[i] * dv,
+                l.q[1].0[i] + l.g[1].0[i] * dv,
+            ];
+            assert_eq!(m.ddp, ddp);
+        }
+    }
+}

@@ -62,11 +62,11 @@ fn law_evaluation(c: &mut Criterion) {
 
 fn rk4_agent_step(c: &mut Criterion) {
     let mut g = c.benchmark_group("rk4 agent-step");
-    // One block of four agents, 64 steps (one tile) per iteration.
-    g.throughput(Throughput::Elements(4 * 64));
-    g.bench_function("engine, star of 4", |b| {
+    // One block of eight agents, 64 steps (one tile) per iteration.
+    g.throughput(Throughput::Elements(8 * 64));
+    g.bench_function("engine, star of 8 (one block)", |b| {
         b.iter_batched_ref(
-            || formation(4, Topology::Star),
+            || formation(8, Topology::Star),
             |e| e.run(64),
             BatchSize::SmallInput,
         )

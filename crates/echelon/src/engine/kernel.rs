@@ -16,7 +16,7 @@ use crate::lycomp::LyComp;
 use crate::reference::Jet;
 
 /// Agents per block (lanes per vector).
-pub(crate) const W: usize = 4;
+pub(crate) const W: usize = 8;
 /// `W` agents' values of one quantity.
 pub(crate) type V = Lanes<W>;
 
@@ -669,8 +669,12 @@ mod tests {
     use crate::lycomp::{self, FitCoefficients};
     use proptest::prelude::*;
 
-    fn lanes(v: [f64; W]) -> V {
-        Lanes(v)
+    fn lanes(v: &[f64]) -> V {
+        V::from_slice(v)
+    }
+
+    fn w_of<T: std::fmt::Debug>(s: impl Strategy<Value = T>) -> impl Strategy<Value = Vec<T>> {
+        prop::collection::vec(s, W)
     }
 
     proptest! {
@@ -682,15 +686,15 @@ mod tests {
         #[test]
         fn fit_as_one_angle_is_eq_6(
             lambda in 0.1..0.9f64,
-            speed in prop::array::uniform4(0.0..5.0f64),
-            turn in prop::array::uniform4(-3.0..3.0f64),
+            speed in w_of(0.0..5.0f64),
+            turn in w_of(-3.0..3.0f64),
             tiny in any::<bool>(),
         ) {
-            let turn = if tiny { turn.map(|w| w * 1e-9) } else { turn };
+            let turn: Vec<f64> = turn.iter().map(|w| if tiny { w * 1e-9 } else { *w }).collect();
             let f = FitCoefficients::paper(lambda);
             let k = f.epsilon / f.delta;
             let c = [V::splat(2.0 * f.g), V::splat(1.0 / f.delta), V::splat(k * k)];
-            let got = fit(lanes(speed), lanes(turn), &c);
+            let got = fit(lanes(&speed), lanes(&turn), &c);
             for l in 0..W {
                 let want: f64 = lycomp::fit(speed[l], turn[l], &f);
                 prop_assert!(
@@ -705,14 +709,14 @@ mod tests {
         #[test]
         fn exact_in_lanes_is_eq_5_bit_for_bit(
             lambda in 0.05..2.0f64,
-            speed in prop::array::uniform4(0.0..5.0f64),
-            turn in prop::array::uniform4(-20.0..20.0f64),
+            speed in w_of(0.0..5.0f64),
+            turn in w_of(-20.0..20.0f64),
             straight in 0..W,
         ) {
             let mut turn = turn;
             turn[straight] = 0.0;
             let c = [V::splat(lambda), V::splat(lambda * lambda), V::splat(0.0)];
-            let got = exact(lanes(speed), lanes(turn), &c);
+            let got = exact(lanes(&speed), lanes(&turn), &c);
             for l in 0..W {
                 let want: f64 = lycomp::exact(speed[l], turn[l], lambda);
                 prop_assert_eq!(got.0[l].to_bits(), want.to_bits(), "V = {}, ω = {}", speed[l], turn[l]);
@@ -726,10 +730,10 @@ mod tests {
         /// lanes have no fused multiply-add).
         #[test]
         fn the_law_in_lanes_is_the_scalar_law(
-            st in prop::array::uniform4(prop::array::uniform5(-3.0..3.0f64)),
-            leader in prop::array::uniform4(prop::array::uniform6(-2.0..2.0f64)),
-            hold in prop::array::uniform4((0.06..1.0f64, -1.0..1.0f64)),
-            gains in prop::array::uniform4((0.1..5.0f64, 0.1..20.0f64)),
+            st in w_of(prop::array::uniform5(-3.0..3.0f64)),
+            leader in w_of(prop::array::uniform6(-2.0..2.0f64)),
+            hold in w_of((0.06..1.0f64, -1.0..1.0f64)),
+            gains in w_of((0.1..5.0f64, 0.1..20.0f64)),
             complete in any::<bool>(),
         ) {
             use crate::control::{Gains, LeaderMotion, Offset, law};
@@ -781,15 +785,13 @@ mod tests {
     /// The leader's motion in lanes is `LeaderMotion::of_robot` bit for bit.
     #[test]
     fn leaders_are_of_robot() {
-        let x = [
-            lanes([0.3, -1.0, 2.0, 0.0]),
-            lanes([1.0, 0.5, -0.2, 0.0]),
-            lanes([0.7, -2.5, 3.1, 0.0]),
-            lanes([0.4, 0.0, 1.2, -0.1]),
-            lanes([0.05, -0.3, 0.0, 0.2]),
-        ];
+        let x: [V; 5] = std::array::from_fn(|k| {
+            Lanes(std::array::from_fn(|i| {
+                ((k * W + i) as f64 * 0.77).sin() * 2.0
+            }))
+        });
         let (sin, cos) = (x[2].0.map(f64::sin), x[2].0.map(f64::cos));
-        let l = Leaders::of(&x, lanes(sin), lanes(cos));
+        let l = Leaders::of(&x, lanes(&sin), lanes(&cos));
         for i in 0..W {
             let s = crate::model::State {
                 x: x[0].0[i],

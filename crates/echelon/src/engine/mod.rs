@@ -6,7 +6,7 @@
 //! or one behind the other (a [`Topology::Chain`]). Like the scalar simulator it
 //! integrates with fixed-step RK4 and evaluates the continuous-time law in
 //! every stage, leaders first; unlike it, it keeps the agents in blocks of
-//! four lanes (structure of arrays), evaluates the reference once per stage
+//! eight lanes (structure of arrays), evaluates the reference once per stage
 //! for everyone, never allocates while stepping, runs each block through a
 //! tile of 64 steps in registers, and spreads the work over the rayon pool
 //! it runs in: a star's blocks, or a long chain's two halves, one tile
@@ -45,9 +45,9 @@ use kernel::{Block, Carry, Consts, Limit, Scratch, V, W};
 const TILE: usize = 64;
 /// Blocks of a chain processed together, all stages of a tile, before the
 /// next segment (their work space stays in cache).
-const SEGMENT: usize = 64;
+const SEGMENT: usize = 32;
 /// Blocks per parallel task of a star.
-const PAR_BLOCKS: usize = 8;
+const PAR_BLOCKS: usize = 4;
 
 /// Who follows whom.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

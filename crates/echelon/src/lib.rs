@@ -13,6 +13,9 @@
 //! - [`control`]: the backstepping law (eqs. 7–16);
 //! - [`formation`]: who follows whom;
 //! - [`sim`]: the RK4 simulator, observers and run statistics;
+//! - [`engine`]: the batch engine, the same system for thousands of agents at
+//!   a time (SIMD lanes, all cores), and `echelon bench`'s formation;
+//! - [`lanes`]: the number types the law is written for, and SIMD lanes;
 //! - [`scenario`]: the TOML scenario format and the paper's built-in setups;
 //! - [`output`]: `trajectory.csv` and `summary.json`.
 //!

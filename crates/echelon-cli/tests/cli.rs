@@ -386,6 +386,10 @@ fn bench_refuses_bad_input_in_one_line() {
         (&["bench", "--agents", "many"], "whole number"),
         (&["bench", "--dt", "-1"], "> 0"),
         (&["bench", "--topology", "ring"], "ring"),
+        (
+            &["bench", "--agents", "1000000", "--runs", "256"],
+            "at most",
+        ),
     ] {
         assert_refused(&echelon(args), &[needle]);
     }

@@ -46,6 +46,9 @@ pub(crate) enum TopologyArg {
     Chain,
 }
 
+/// The most agents `echelon bench` builds in all (≈ 11 GB of state).
+const MAX_AGENTS: u128 = 100_000_000;
+
 /// A whole number ≥ 1 (clap value parser).
 fn at_least_one(s: &str) -> Result<usize, String> {
     match s.parse::<usize>() {
@@ -70,6 +73,15 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         );
     }
     let steps = steps as u64;
+    let total = args.agents as u128 * args.runs as u128;
+    if total > MAX_AGENTS {
+        bail!(
+            "{} agents × {} runs is {total} agents (≈ {} GB): at most {MAX_AGENTS} in all",
+            args.agents,
+            args.runs,
+            total * Engine::BLOCK_BYTES_PER_AGENT as u128 / 1_000_000_000
+        );
+    }
     let threads = args
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));

@@ -50,6 +50,9 @@ enum Command {
     /// Run a scenario as networked processes on Zenoh (leader, robots, collector).
     #[command(subcommand)]
     Fleet(cmd::fleet::FleetCommand),
+    /// Time the batch engine on a random formation (agent-steps per second).
+    #[command(allow_negative_numbers = true)]
+    Bench(cmd::bench::BenchArgs),
 }
 
 /// Exit code for every refused input or failed run.
@@ -86,6 +89,7 @@ fn main() -> ExitCode {
         Command::Sweep(args) => cmd::sweep::sweep(&args),
         Command::Umbmark(args) => cmd::umbmark::umbmark(&args),
         Command::Fleet(c) => cmd::fleet::run(c),
+        Command::Bench(args) => cmd::bench::bench(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -54,6 +54,7 @@ fn every_command_has_help() {
         &["show", "--help"],
         &["plot", "--help"],
         &["lycomp", "--help"],
+        &["bench", "--help"],
     ] {
         let o = echelon(args);
         assert!(o.status.success(), "{args:?}");
@@ -715,5 +716,101 @@ fn a_closed_pipe_ends_quietly_instead_of_panicking() {
         let err = stderr(&o);
         assert!(!err.contains("panicked"), "{args:?}: {err}");
         assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn bench_reports_agent_steps_per_second_as_json_and_text() {
+    for topology in ["star", "chain"] {
+        let o = echelon(&[
+            "bench",
+            "--agents",
+            "9",
+            "--topology",
+            topology,
+            "--duration",
+            "0.5",
+            "--dt",
+            "0.01",
+            "--threads",
+            "2",
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        assert_eq!(v["agents"], 9);
+        assert_eq!(v["steps"], 50);
+        assert_eq!(v["topology"], topology);
+        assert_eq!(v["threads"], 2);
+        let (seconds, rate) = (
+            v["seconds"].as_f64().unwrap(),
+            v["agent_steps_per_s"].as_f64().unwrap(),
+        );
+        assert!(seconds > 0.0);
+        assert!(
+            (rate * seconds - 9.0 * 50.0).abs() < 1e-6 * rate * seconds,
+            "rate = N steps / s"
+        );
+        assert!(v["bytes_per_agent"].as_f64().unwrap() > 0.0);
+    }
+    let o = echelon(&[
+        "bench",
+        "--agents",
+        "5",
+        "--duration",
+        "0.1",
+        "--dt",
+        "0.01",
+        "--runs",
+        "3",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    for needle in [
+        "5 agents × 3 runs",
+        "10 steps",
+        "M agent-steps/s",
+        "B per agent",
+        "‖e‖ max",
+    ] {
+        assert!(text.contains(needle), "`{needle}` not in {text}");
+    }
+}
+
+#[test]
+fn bench_results_do_not_depend_on_the_thread_count() {
+    let run = |threads: &str| {
+        let o = echelon(&[
+            "bench",
+            "--agents",
+            "21",
+            "--duration",
+            "1",
+            "--dt",
+            "0.01",
+            "--threads",
+            threads,
+            "--json",
+        ]);
+        let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        v["max_error"].as_f64().unwrap().to_bits()
+    };
+    assert_eq!(run("1"), run("2"));
+}
+
+#[test]
+fn bench_refuses_bad_input_in_one_line() {
+    for (args, needle) in [
+        (&["bench", "--agents", "0"][..], "≥ 1"),
+        (&["bench", "--threads", "0"], "≥ 1"),
+        (&["bench", "--agents", "many"], "whole number"),
+        (&["bench", "--dt", "-1"], "> 0"),
+        (&["bench", "--topology", "ring"], "ring"),
+        (
+            &["bench", "--agents", "1000000", "--runs", "256"],
+            "at most",
+        ),
+    ] {
+        assert_refused(&echelon(args), &[needle]);
     }
 }

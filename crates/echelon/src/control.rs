@@ -19,8 +19,11 @@
 //! `V̇₂ = −K_e‖e‖² + eᵀz − K_z‖z‖²` (paper) or `−K_e‖e‖² − K_z‖z‖²` (complete).
 //! Pure tracking is the same law with `L_X = L`, `L_Y = 0` ([`crate::lycomp::Placement::tracking`]).
 
+use std::ops::{Add, Mul, Neg, Sub};
+
 use num_dual::DualNum;
 
+use crate::lanes::Real;
 use crate::model::{Input, RobotParams, State};
 
 /// The backstepping gains.
@@ -80,15 +83,29 @@ impl LeaderMotion {
     #[inline]
     pub fn of_robot(s: &State, dv: f64) -> LeaderMotion {
         let (sin, cos) = s.theta.sin_cos();
+        let (dp, ddp) = robot_leader(sin, cos, s.v, s.omega, dv);
         LeaderMotion {
             p: [s.x, s.y],
-            dp: [s.v * cos, s.v * sin],
-            ddp: [
-                dv * cos - s.v * s.omega * sin,
-                dv * sin + s.v * s.omega * cos,
-            ],
+            dp,
+            ddp,
         }
     }
+}
+
+/// `ṗ_d` and `p̈_d` of a robot leader moving at `v, ω` with heading `(sin, cos)`
+/// and accelerating at `dv` ([`LeaderMotion::of_robot`]). `p̈_d` is affine in
+/// `dv`; `A` may be a number type that carries that dependence (a chain of
+/// followers solves for every `v̇` at once that way).
+#[inline(always)]
+pub(crate) fn robot_leader<V: Real, A>(sin: V, cos: V, v: V, omega: V, dv: A) -> ([V; 2], [A; 2])
+where
+    A: Copy + Mul<V, Output = A> + Add<V, Output = A> + Sub<V, Output = A>,
+{
+    let vw = v * omega;
+    (
+        [v * cos, v * sin],
+        [dv * cos - vw * sin, dv * sin + vw * cos],
+    )
 }
 
 /// The law's output at one instant.
@@ -103,8 +120,8 @@ pub struct LawOutput {
 }
 
 /// `R(θ) a`: a world-frame vector in the robot's body frame.
-#[inline]
-fn rotate<D: DualNum<Primitive = f64> + Copy>(sin: D, cos: D, a: [D; 2]) -> [D; 2] {
+#[inline(always)]
+fn rotate<V: Real>(sin: V, cos: V, a: [V; 2]) -> [V; 2] {
     [cos * a[0] + sin * a[1], -sin * a[0] + cos * a[1]]
 }
 
@@ -112,7 +129,7 @@ fn rotate<D: DualNum<Primitive = f64> + Copy>(sin: D, cos: D, a: [D; 2]) -> [D; 
 ///
 /// `(sin, cos)` are those of the heading θ. Generic over dual numbers so that tests
 /// can differentiate `e`, `z` and `V₂` along the plant's motion exactly; the law
-/// uses it with `f64`.
+/// uses the same formulas ([`law`]).
 #[inline]
 #[allow(clippy::too_many_arguments)]
 pub fn errors<D: DualNum<Primitive = f64> + Copy>(
@@ -128,12 +145,176 @@ pub fn errors<D: DualNum<Primitive = f64> + Copy>(
     dly: D,
     ke: f64,
 ) -> ([D; 2], [D; 2]) {
-    let d = rotate(sin, cos, [x - pd[0], y - pd[1]]);
+    let body = Body {
+        x,
+        y,
+        sin,
+        cos,
+        v,
+        omega,
+    };
+    errors_of(&body, pd, dpd, D::from(lx), ly, dly, D::from(ke))
+}
+
+/// Eqs. 7 and 10 in any number type (`f64`, duals, SIMD lanes).
+#[inline(always)]
+fn errors_of<V: Real>(
+    s: &Body<V>,
+    pd: [V; 2],
+    dpd: [V; 2],
+    lx: V,
+    ly: V,
+    dly: V,
+    ke: V,
+) -> ([V; 2], [V; 2]) {
+    let (sin, cos) = (s.sin, s.cos);
+    let d = rotate(sin, cos, [s.x - pd[0], s.y - pd[1]]);
     let e = [d[0] + lx, d[1] + ly];
     let rdp = rotate(sin, cos, dpd);
-    let xi = [v - omega * ly, omega * lx];
+    let xi = [s.v - s.omega * ly, s.omega * lx];
     let z = [xi[0] - rdp[0] + e[0] * ke, xi[1] - rdp[1] + dly + e[1] * ke];
     (e, z)
+}
+
+/// The robot constants of eq. 3 as the law uses them, with its ratios
+/// precomputed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct LawRobot {
+    /// `m`, kg.
+    pub(crate) m: f64,
+    /// `J`, kg m².
+    pub(crate) j: f64,
+    /// `η/m`, 1/s.
+    pub(crate) eta_m: f64,
+    /// `ψ/J`, 1/s.
+    pub(crate) psi_j: f64,
+}
+
+impl LawRobot {
+    #[inline]
+    pub(crate) fn new(r: &RobotParams) -> LawRobot {
+        LawRobot {
+            m: r.mass,
+            j: r.inertia,
+            eta_m: r.linear_friction / r.mass,
+            psi_j: r.angular_friction / r.inertia,
+        }
+    }
+}
+
+/// A robot's state with its heading as `(sin θ, cos θ)`, in any number type.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Body<V> {
+    pub(crate) x: V,
+    pub(crate) y: V,
+    pub(crate) sin: V,
+    pub(crate) cos: V,
+    pub(crate) v: V,
+    pub(crate) omega: V,
+}
+
+/// Where the follower holds its leader at one instant: `L_X` (and `1/L_X`),
+/// `L_Y`, `L̇_Y`, `L̈_Y` ([`Offset`] in any number type).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Hold<V> {
+    pub(crate) lx: V,
+    pub(crate) inv_lx: V,
+    pub(crate) ly: V,
+    pub(crate) dly: V,
+    pub(crate) ddly: V,
+}
+
+/// Everything of eqs. 7–13 that comes before the leader's acceleration `p̈_d`
+/// enters: `e`, `z`, and `h` without its `−R p̈_d` term.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LawPartial<V> {
+    /// `e` (eq. 7).
+    pub(crate) e: [V; 2],
+    /// `z` (eq. 10).
+    pub(crate) z: [V; 2],
+    /// `h + R p̈_d` (eq. 12).
+    h_pre: [V; 2],
+    sin: V,
+    cos: V,
+    /// `J/L_X` and `L_Y/L_X`, the entries of `B⁻¹` that vary.
+    j_lx: V,
+    ly_lx: V,
+}
+
+/// Eqs. 7, 8, 10 and 12 up to the leader's acceleration, in any number type.
+#[inline(always)]
+pub(crate) fn law_partial<V: Real>(
+    robot: &LawRobot,
+    s: &Body<V>,
+    pd: [V; 2],
+    dpd: [V; 2],
+    hold: &Hold<V>,
+    ke: V,
+) -> LawPartial<V> {
+    let Hold {
+        lx,
+        inv_lx,
+        ly,
+        dly,
+        ddly,
+    } = *hold;
+    let (v, w) = (s.v, s.omega);
+    // eqs. 7 and 10
+    let (e, z) = errors_of(s, pd, dpd, lx, ly, dly, ke);
+    let rdp = rotate(s.sin, s.cos, dpd);
+    // ė (eq. 8, with L̇_Y) = −S e + ξ − R ṗ_d + [0, L̇_Y] = −S e + z − K_e e
+    let de = [w * e[1] + z[0] - ke * e[0], -w * e[0] + z[1] - ke * e[1]];
+    // eq. 12 without −R p̈_d (S R ṗ_d = [−ω (Rṗ_d)₂, ω (Rṗ_d)₁])
+    let h_pre = [
+        -w * dly + ly * robot.psi_j * w - v * robot.eta_m - w * rdp[1] + ke * de[0],
+        -lx * robot.psi_j * w + w * rdp[0] + ddly + ke * de[1],
+    ];
+    LawPartial {
+        e,
+        z,
+        h_pre,
+        sin: s.sin,
+        cos: s.cos,
+        j_lx: inv_lx * robot.j,
+        ly_lx: ly * inv_lx,
+    }
+}
+
+/// The rest of eq. 12 and eq. 13: `h = h_pre − R p̈_d`, `w = −h − K_z z (− e)`,
+/// `u = B⁻¹ w` with `B⁻¹ = [[m, m L_Y/L_X], [0, J/L_X]]`.
+///
+/// `u` is affine in `p̈_d`: `A` may be the plain number type or one that
+/// carries the dependence on a leader's unknown acceleration.
+#[inline(always)]
+pub(crate) fn law_finish<V: Real, A>(
+    robot: &LawRobot,
+    p: &LawPartial<V>,
+    ddp: [A; 2],
+    kz: V,
+    variant: Variant,
+) -> [A; 2]
+where
+    A: Copy
+        + Add<Output = A>
+        + Add<V, Output = A>
+        + Sub<V, Output = A>
+        + Mul<V, Output = A>
+        + Mul<f64, Output = A>
+        + Neg<Output = A>,
+{
+    // R p̈_d
+    let rddp = [
+        ddp[0] * p.cos + ddp[1] * p.sin,
+        ddp[1] * p.cos + -(ddp[0] * p.sin),
+    ];
+    let h = [-rddp[0] + p.h_pre[0], -rddp[1] + p.h_pre[1]];
+    let mut wv = [-h[0] - kz * p.z[0], -h[1] - kz * p.z[1]];
+    if variant == Variant::Complete {
+        wv[0] = wv[0] - p.e[0];
+        wv[1] = wv[1] - p.e[1];
+    }
+    // eq. 13: u = B⁻¹ w
+    [(wv[0] + wv[1] * p.ly_lx) * robot.m, wv[1] * p.j_lx]
 }
 
 /// The leader-follower law, eqs. 7–13 (pure tracking, eqs. 14–16, when
@@ -147,48 +328,29 @@ pub fn law(
     gains: Gains,
     variant: Variant,
 ) -> LawOutput {
-    let (m, j) = (robot.mass, robot.inertia);
-    let (eta, psi) = (robot.linear_friction, robot.angular_friction);
-    let Offset { lx, ly, dly, ddly } = *off;
-    let Gains { ke, kz } = gains;
-    let (v, w) = (s.v, s.omega);
-
     let (sin, cos) = s.theta.sin_cos();
-    // eqs. 7 and 10
-    let (e, z) = errors(
-        s.x,
-        s.y,
-        (sin, cos),
-        v,
-        w,
-        leader.p,
-        leader.dp,
-        lx,
-        ly,
-        dly,
-        ke,
-    );
-    let rdp = rotate(sin, cos, leader.dp);
-    let rddp = rotate(sin, cos, leader.ddp);
-    // ė (eq. 8, with L̇_Y) = −S e + ξ − R ṗ_d + [0, L̇_Y] = −S e + z − K_e e
-    let de = [w * e[1] + z[0] - ke * e[0], -w * e[0] + z[1] - ke * e[1]];
-    // eq. 12 (S R ṗ_d = [−ω (Rṗ_d)₂, ω (Rṗ_d)₁])
-    let h = [
-        -w * dly + (ly / j) * psi * w - (eta / m) * v - w * rdp[1] - rddp[0] + ke * de[0],
-        -(lx / j) * psi * w + w * rdp[0] - rddp[1] + ddly + ke * de[1],
-    ];
-    // eq. 13: u = B⁻¹ w
-    let mut wv = [-h[0] - kz * z[0], -h[1] - kz * z[1]];
-    if variant == Variant::Complete {
-        wv[0] -= e[0];
-        wv[1] -= e[1];
-    }
-    let u2 = (j / lx) * wv[1];
-    let u1 = m * (wv[0] + (ly / lx) * wv[1]);
+    let body = Body {
+        x: s.x,
+        y: s.y,
+        sin,
+        cos,
+        v: s.v,
+        omega: s.omega,
+    };
+    let hold = Hold {
+        lx: off.lx,
+        inv_lx: 1.0 / off.lx,
+        ly: off.ly,
+        dly: off.dly,
+        ddly: off.ddly,
+    };
+    let lr = LawRobot::new(robot);
+    let p = law_partial(&lr, &body, leader.p, leader.dp, &hold, gains.ke);
+    let [u1, u2] = law_finish(&lr, &p, leader.ddp, gains.kz, variant);
     LawOutput {
         u: Input { u1, u2 },
-        e,
-        z,
+        e: p.e,
+        z: p.z,
     }
 }
 

@@ -15,14 +15,19 @@
 //! - [`sim`]: the RK4 simulator, observers and run statistics;
 //! - [`odometry`]: encoders, dead reckoning, error models, fixes, Theorem 2, UMBmark;
 //! - [`sweep`]: Monte Carlo sweeps over odometry errors and fix intervals;
+//! - [`engine`]: the batch engine, the same system for thousands of agents at
+//!   a time (SIMD lanes, all cores), and `echelon bench`'s formation;
+//! - [`lanes`]: the number types the law is written for, and SIMD lanes;
 //! - [`scenario`]: the TOML scenario format and the paper's built-in setups;
 //! - [`output`]: `trajectory.csv` and `summary.json`.
 //!
 //! Units are SI and angles radians throughout (ROS REP 103).
 
 pub mod control;
+pub mod engine;
 pub mod error;
 pub mod formation;
+pub mod lanes;
 pub mod lycomp;
 mod math;
 pub mod model;

@@ -1,5 +1,6 @@
 //! One module per command.
 
+pub(crate) mod bench;
 pub(crate) mod bound;
 pub(crate) mod fleet;
 pub(crate) mod lycomp;

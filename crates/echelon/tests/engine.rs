@@ -1,0 +1,379 @@
+#![allow(clippy::unwrap_used)]
+//! The batch engine against the scalar simulator (the reference
+//! implementation): same states and same `e`, `z`, `u` to a relative 1e-9 after
+//! many steps, for stars and chains of several sizes and seeds; the same bits
+//! on one thread or two, stepped at once or one step at a time.
+
+use echelon::control::{Gains, Variant};
+use echelon::engine::{BenchFormation, Engine, EngineError, SplitMix64, Topology};
+use echelon::formation::Leader;
+use echelon::lycomp::{LyComp, LyDerivatives, Placement};
+use echelon::model::{RobotParams, State};
+use echelon::reference::{Lemniscate, Reference};
+use echelon::sim::{AgentSpec, SimConfig, Simulation, Timing};
+
+/// The relative difference, against at least 1 in SI units (1 m, 1 m/s,
+/// 1 rad, 1 N): errors and speeds that converge to zero are compared to the
+/// scale of the positions they are differences of.
+fn relative(a: f64, b: f64) -> f64 {
+    (a - b).abs() / a.abs().max(b.abs()).max(1.0)
+}
+
+/// Steps both `steps` times and compares states and controller outputs;
+/// returns the largest relative difference seen.
+fn compare(agents: Vec<AgentSpec>, reference: Reference, dt: f64, steps: u64) -> f64 {
+    let config = SimConfig {
+        dt,
+        duration: steps as f64 * dt,
+        timing: Timing::Continuous,
+    };
+    let mut sim = Simulation::new(agents, reference, config).unwrap();
+    let mut engine = Engine::from_simulation(&sim).unwrap();
+    let mut worst = 0.0f64;
+    let mut check = |sim: &mut Simulation, engine: &Engine| {
+        let probes = engine.probes();
+        let frame = sim.frame();
+        assert_eq!(engine.step_index(), frame.step);
+        assert_eq!(probes.len(), frame.states.len());
+        for (i, ((s, o), p)) in frame
+            .states
+            .iter()
+            .zip(frame.outputs)
+            .zip(&probes)
+            .enumerate()
+        {
+            let e = engine.state(i);
+            let pairs = [
+                (e.x, s.x),
+                (e.y, s.y),
+                (e.theta, s.theta),
+                (e.v, s.v),
+                (e.omega, s.omega),
+                (p.e[0], o.e[0]),
+                (p.e[1], o.e[1]),
+                (p.z[0], o.z[0]),
+                (p.z[1], o.z[1]),
+                (p.u[0], o.command.u1),
+                (p.u[1], o.command.u2),
+            ];
+            for (k, (a, b)) in pairs.into_iter().enumerate() {
+                assert!(
+                    relative(a, b) <= 1e-9,
+                    "agent {} quantity {k} at t = {}: engine {a} vs scalar {b}",
+                    i + 1,
+                    frame.t
+                );
+                worst = worst.max(relative(a, b));
+            }
+        }
+    };
+    check(&mut sim, &engine);
+    // Step in uneven pieces so that tiles and single steps both occur.
+    let mut done = 0;
+    for chunk in [1, 63, 64, 65, 200].iter().cycle() {
+        let k = (*chunk).min(steps - done);
+        for _ in 0..k {
+            sim.step().unwrap();
+        }
+        engine.run(k).unwrap();
+        done += k;
+        check(&mut sim, &engine);
+        if done == steps {
+            break;
+        }
+    }
+    worst
+}
+
+fn formation(agents: usize, topology: Topology, seed: u64) -> BenchFormation {
+    BenchFormation {
+        agents,
+        topology,
+        seed,
+    }
+}
+
+#[test]
+fn star_matches_the_scalar_simulator() {
+    for (n, seed) in [(1, 1), (3, 2), (4, 3), (9, 4), (37, 5)] {
+        let f = formation(n, Topology::Star, seed);
+        let worst = compare(f.agent_specs(), f.reference(), 0.01, 2000);
+        assert!(worst < 1e-9, "{worst}");
+    }
+}
+
+#[test]
+fn chain_matches_the_scalar_simulator() {
+    // Random chains (the benchmark's column, random start poses).
+    for (n, seed) in [(1, 11), (2, 12), (5, 13), (8, 14)] {
+        let f = formation(n, Topology::Chain, seed);
+        let worst = compare(f.agent_specs(), f.reference(), 0.01, 2000);
+        assert!(worst < 1e-9, "{worst}");
+    }
+    // Columns that start near formation: 50 agents for 20 s; 270 (across the
+    // boundary between two of the engine's 256-agent segments) for 0.5 s and
+    // 600 (two halves on two threads when the pool has two) for 0.1 s, before
+    // a long column's own sensitivity reaches 1e-9 (see below).
+    for (n, seed, steps) in [(50, 3, 2000), (270, 4, 50), (600, 5, 10)] {
+        let f = formation(n, Topology::Chain, seed);
+        let worst = compare(near_formation(&f), f.reference(), 0.01, steps);
+        assert!(worst < 1e-9, "{worst}");
+    }
+}
+
+/// The column of `f` placed almost in formation: each robot `L_X` behind the
+/// one before, within 0.1 m and 0.1 rad.
+fn near_formation(f: &BenchFormation) -> Vec<AgentSpec> {
+    let mut rng = SplitMix64::new(f.seed + 100);
+    let mut x = 0.0;
+    let mut specs = f.agent_specs();
+    for s in &mut specs {
+        x -= s.placement.lx();
+        s.start.x = x + rng.uniform(-0.1, 0.1);
+        s.start.y = rng.uniform(-0.1, 0.1);
+        s.start.theta = rng.uniform(-0.1, 0.1);
+    }
+    specs
+}
+
+/// Long chains are chaotic: a change of one unit in the last place of one
+/// start coordinate grows to order one within seconds, in the scalar
+/// simulator alone. No implementation that rounds differently can agree with
+/// it to 1e-9 there; the engine agrees as well as that physics allows: its
+/// distance from the scalar run stays within 100 times the distance between
+/// two scalar runs one ulp apart, at every checkpoint.
+#[test]
+fn long_chains_agree_as_well_as_their_sensitivity_allows() {
+    let f = formation(300, Topology::Chain, 21);
+    let config = SimConfig {
+        dt: 0.01,
+        duration: 20.0,
+        timing: Timing::Continuous,
+    };
+    let mut specs = f.agent_specs();
+    let mut sim = Simulation::new(specs.clone(), f.reference(), config).unwrap();
+    let mut engine = Engine::from_simulation(&sim).unwrap();
+    specs[0].start.x = specs[0].start.x.next_up();
+    let mut nudged = Simulation::new(specs, f.reference(), config).unwrap();
+    let distance = |a: &[State], b: &[State]| {
+        a.iter()
+            .zip(b)
+            .flat_map(|(a, b)| [(a.x, b.x), (a.y, b.y), (a.theta, b.theta), (a.v, b.v)])
+            .map(|(a, b)| (a - b).abs() / a.abs().max(b.abs()).max(1.0))
+            .fold(0.0, f64::max)
+    };
+    let mut grew = false;
+    for _ in 0..40 {
+        for _ in 0..50 {
+            sim.step().unwrap();
+            nudged.step().unwrap();
+        }
+        engine.run(50).unwrap();
+        let ours = distance(&engine.states(), sim.states());
+        let physics = distance(nudged.states(), sim.states());
+        grew |= physics > 1e-3;
+        assert!(
+            ours <= 100.0 * physics.max(1e-13),
+            "t = {}: engine {ours:e} vs one ulp {physics:e}",
+            sim.time()
+        );
+    }
+    assert!(grew, "the chain is chaotic (one ulp grows past 1e-3)");
+}
+
+/// A variety the bench does not exercise: exact eq. 5, no compensation, the
+/// complete law, torque limits, a lemniscate, agents not at rest.
+#[test]
+fn other_laws_placements_and_references_match() {
+    let lemniscate = Reference::Lemniscate(Lemniscate::new(2.0, 0.2, [0.0, 0.0]).unwrap());
+    let limited = RobotParams {
+        torque_limit: Some(4.0),
+        ..RobotParams::AGENT2
+    };
+    for (comp, variant, robot, leader_of) in [
+        (LyComp::Exact, Variant::Paper, RobotParams::AGENT2, false),
+        (LyComp::Exact, Variant::Complete, RobotParams::AGENT2, true),
+        (LyComp::None, Variant::Complete, RobotParams::AGENT1, true),
+        (LyComp::Fit, Variant::Paper, limited, false),
+    ] {
+        let agents: Vec<AgentSpec> = (0..6)
+            .map(|i| {
+                let k = i as f64;
+                AgentSpec {
+                    name: format!("agent {}", i + 1),
+                    robot,
+                    leader: if leader_of && i > 0 {
+                        Leader::Agent(i - 1)
+                    } else {
+                        Leader::Reference
+                    },
+                    placement: Placement::new(
+                        0.3 + 0.1 * k,
+                        0.5 - 0.2 * k,
+                        0.05,
+                        comp,
+                        LyDerivatives::Neglect,
+                    ),
+                    gains: Gains {
+                        ke: 1.0 + 0.2 * k,
+                        kz: 8.0 + k,
+                    },
+                    variant,
+                    start: State {
+                        x: 1.5 - k,
+                        y: -0.5 * k,
+                        theta: 0.3 * k,
+                        v: 0.1 * k,
+                        omega: -0.05 * k,
+                    },
+                }
+            })
+            .collect();
+        compare(agents, lemniscate.clone(), 0.005, 1500);
+    }
+}
+
+fn bits(s: &[State]) -> Vec<u64> {
+    s.iter()
+        .flat_map(|s| [s.x, s.y, s.theta, s.v, s.omega].map(f64::to_bits))
+        .collect()
+}
+
+fn on_threads_in_place(e: &mut Engine, threads: usize, steps: u64) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| e.run(steps)).unwrap();
+}
+
+/// `steps` steps of `e` on a pool of `threads`, at once.
+fn on_threads(mut e: Engine, threads: usize, steps: u64) -> Vec<State> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| e.run(steps)).unwrap();
+    e.states()
+}
+
+#[test]
+fn results_do_not_depend_on_threads_or_on_how_steps_are_grouped() {
+    // A star spread over blocks; a chain long enough (≥ 512 agents) to run
+    // as two halves one tile apart on two threads.
+    for (f, steps) in [
+        (formation(203, Topology::Star, 99), 500),
+        (formation(1100, Topology::Chain, 98), 150),
+    ] {
+        let one = on_threads(f.engine(0.002).unwrap(), 1, steps);
+        let two = on_threads(f.engine(0.002).unwrap(), 2, steps);
+        assert_eq!(bits(&one), bits(&two), "{:?}", f.topology);
+        let mut stepped = f.engine(0.002).unwrap();
+        for _ in 0..steps {
+            stepped.step().unwrap();
+        }
+        assert_eq!(bits(&one), bits(&stepped.states()), "{:?}", f.topology);
+        let mut uneven = f.engine(0.002).unwrap();
+        for k in [1, 100, steps - 101] {
+            on_threads_in_place(&mut uneven, 2, k);
+        }
+        assert_eq!(bits(&one), bits(&uneven.states()), "{:?}", f.topology);
+    }
+    let f = formation(203, Topology::Star, 99);
+    // The formation converges: the benchmark simulates something real.
+    let e = f.engine(0.002).unwrap();
+    let start_err = e
+        .probes()
+        .iter()
+        .map(|p| p.e[0].hypot(p.e[1]))
+        .fold(0.0, f64::max);
+    let mut e = e;
+    e.run(10_000).unwrap();
+    let end_err = e
+        .probes()
+        .iter()
+        .map(|p| p.e[0].hypot(p.e[1]))
+        .fold(0.0, f64::max);
+    assert!(start_err > 0.5 && end_err < 1e-3, "{start_err} → {end_err}");
+}
+
+#[test]
+fn what_the_engine_cannot_do_is_refused() {
+    let f = formation(4, Topology::Chain, 1);
+    let mut specs = f.agent_specs();
+    specs[2].leader = Leader::Reference;
+    let err = Engine::from_agents(&specs, f.reference(), 0.01).unwrap_err();
+    assert!(matches!(err, EngineError::Unsupported(_)), "{err}");
+    let mut specs = f.agent_specs();
+    specs[1].robot = RobotParams::AGENT2;
+    assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
+    let mut specs = f.agent_specs();
+    specs[3].placement.derivatives = LyDerivatives::Exact;
+    assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
+    let mut specs = f.agent_specs();
+    specs[1].gains.kz = -1.0;
+    let err = Engine::from_agents(&specs, f.reference(), 0.01).unwrap_err();
+    assert!(
+        err.to_string().contains("agent 2") && err.to_string().contains("kz"),
+        "{err}"
+    );
+    assert!(Engine::from_agents(&[], f.reference(), 0.01).is_err());
+    assert!(f.engine(0.0).is_err());
+    let config = SimConfig {
+        dt: 0.01,
+        duration: 1.0,
+        timing: Timing::Sampled { period: 0.02 },
+    };
+    let sim = Simulation::new(f.agent_specs(), f.reference(), config).unwrap();
+    assert!(Engine::from_simulation(&sim).is_err());
+    // Odometry: the controllers act on estimates, which the engine does not model.
+    let config = SimConfig {
+        timing: Timing::Continuous,
+        ..config
+    };
+    let spec = echelon::odometry::OdometrySpec {
+        period: 0.01,
+        errors: echelon::odometry::ErrorModel::PERFECT,
+        fixes: None,
+    };
+    let sim = Simulation::new(f.agent_specs(), f.reference(), config)
+        .unwrap()
+        .with_odometry(vec![Some(spec), None, None, None], 0)
+        .unwrap();
+    let err = Engine::from_simulation(&sim).unwrap_err();
+    assert!(err.to_string().contains("odometry"), "{err}");
+}
+
+#[test]
+fn a_blow_up_is_reported_like_the_scalar_simulator_does() {
+    // L_X barely positive and huge gains with a large step: the law diverges.
+    // In a star; and in the second half of a chain that runs on two threads.
+    for (f, bad) in [
+        (formation(6, Topology::Star, 3), 4),
+        (formation(600, Topology::Chain, 3), 400),
+    ] {
+        let mut specs = f.agent_specs();
+        specs[bad].placement =
+            Placement::new(-0.049_999, 0.0, 0.05, LyComp::Fit, LyDerivatives::Neglect);
+        specs[bad].gains = Gains {
+            ke: 50.0,
+            kz: 500.0,
+        };
+        let dt = 0.05;
+        let config = SimConfig {
+            dt,
+            duration: 100.0,
+            timing: Timing::Continuous,
+        };
+        let mut sim = Simulation::new(specs.clone(), f.reference(), config).unwrap();
+        let want = loop {
+            if let Err(e) = sim.step() {
+                break e;
+            }
+        };
+        let mut engine = Engine::from_agents(&specs, f.reference(), dt).unwrap();
+        let got = engine.run(2000).unwrap_err();
+        assert_eq!(got, want);
+        assert_eq!(engine.run(1).unwrap_err(), want, "the engine stays failed");
+    }
+}

@@ -292,10 +292,16 @@ pub(crate) struct StageOut {
 
 /// One stage of a block following the reference `r`, at which the agents
 /// hold it at `ly` ([`star_ly`]): the law (eqs. 7–13), the motors, and the
-/// plant's derivative (eq. 3).
+/// plant's derivative (eq. 3). `sin`, `cos` are those of the heading `x[2]`.
 #[inline(always)]
-pub(crate) fn star_stage(c: &Consts, b: &Block, x: &[V; 5], r: &Carry, ly: V) -> StageOut {
-    let (sin, cos) = x[2].sin_cos();
+pub(crate) fn star_stage(
+    c: &Consts,
+    b: &Block,
+    x: &[V; 5],
+    (sin, cos): (V, V),
+    r: &Carry,
+    ly: V,
+) -> StageOut {
     let body = Body {
         x: x[0],
         y: x[1],
@@ -319,10 +325,26 @@ pub(crate) fn star_stage(c: &Consts, b: &Block, x: &[V; 5], r: &Carry, ly: V) ->
     }
 }
 
+/// `x + d k` and the sines and cosines of its heading, from those of `x`
+/// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`).
+#[inline(always)]
+fn turned_state(x: &[V; 5], (sin, cos): (V, V), d: &[V; 5], k: f64) -> ([V; 5], (V, V)) {
+    let next = add_scaled(x, d, k);
+    let turned = (d[2] * k)
+        .sin_cos_turned(sin, cos)
+        .unwrap_or_else(|| next[2].sin_cos());
+    (next, turned)
+}
+
 /// Advances star blocks by `refs.len()` steps; `refs[n]` is the reference at
-/// `t_n`, `t_n + dt/2` (twice) and `t_n + dt`. Each block runs all its steps in
+/// `t_n`, `t_n + dt/2` (twice) and `t_{n+1}`. Each block runs all its steps in
 /// registers. Returns the first step (within this call) and agent (within
 /// `blocks`) whose state stopped being finite, if any.
+///
+/// Per step and agent: one `sin_cos` (stage 1; stages 2–4 turn it by their
+/// small `δθ`), and two `L_Y`, since stages 2 and 3 see the reference at the
+/// same instant and stage 4's instant is the next step's stage 1
+/// (`refs[n][3] == refs[n + 1][0]`, as `fill_reference` makes them).
 #[inline(always)]
 pub(crate) fn star_tile(
     c: &Consts,
@@ -333,19 +355,20 @@ pub(crate) fn star_tile(
     let mut first: Option<(usize, usize)> = None;
     for (bi, b) in blocks.iter_mut().enumerate() {
         let mut x = b.x;
+        let mut ly1 = refs.first().map_or(b.ly_off, |r| star_ly(c, b, &r[0]));
         for (n, r) in refs.iter().enumerate() {
-            // Stages 2 and 3 see the reference at the same instant: one L_Y.
-            let (ly1, ly23, ly4) = (
-                star_ly(c, b, &r[0]),
-                star_ly(c, b, &r[1]),
-                star_ly(c, b, &r[3]),
-            );
-            let k1 = star_stage(c, b, &x, &r[0], ly1).dx;
-            let k2 = star_stage(c, b, &add_scaled(&x, &k1, h), &r[1], ly23).dx;
-            let k3 = star_stage(c, b, &add_scaled(&x, &k2, h), &r[2], ly23).dx;
-            let k4 = star_stage(c, b, &add_scaled(&x, &k3, dt), &r[3], ly4).dx;
+            let (ly23, ly4) = (star_ly(c, b, &r[1]), star_ly(c, b, &r[3]));
+            let sc1 = x[2].sin_cos();
+            let k1 = star_stage(c, b, &x, sc1, &r[0], ly1).dx;
+            let (x2, sc2) = turned_state(&x, sc1, &k1, h);
+            let k2 = star_stage(c, b, &x2, sc2, &r[1], ly23).dx;
+            let (x3, sc3) = turned_state(&x, sc1, &k2, h);
+            let k3 = star_stage(c, b, &x3, sc3, &r[2], ly23).dx;
+            let (x4, sc4) = turned_state(&x, sc1, &k3, dt);
+            let k4 = star_stage(c, b, &x4, sc4, &r[3], ly4).dx;
             let k23: [V; 5] = std::array::from_fn(|i| k2[i] + k3[i]);
             x = combine(&x, &k1, &k23, &k4, h6);
+            ly1 = ly4;
             let bad = broken(&x, b.live);
             if bad.any() {
                 let at = (n, bi * W + first_lane(bad));
@@ -624,7 +647,7 @@ fn unpack(out: &mut Vec<Probe>, e: [V; 2], z: [V; 2], u: [V; 2]) {
 /// The star's controllers at the blocks' current state (reference `r`).
 pub(crate) fn star_probe(c: &Consts, blocks: &[Block], r: &Carry, out: &mut Vec<Probe>) {
     for b in blocks {
-        let o = star_stage(c, b, &b.x, r, star_ly(c, b, r));
+        let o = star_stage(c, b, &b.x, b.x[2].sin_cos(), r, star_ly(c, b, r));
         unpack(out, o.e, o.z, o.u);
     }
 }

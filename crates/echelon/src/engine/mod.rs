@@ -18,7 +18,10 @@
 //!
 //! Where the two differ: sines, cosines and `atan2` come from branch-free
 //! polynomials ([`crate::lanes`]), eq. 6 is evaluated as one angle
-//! (an exact identity, `engine/kernel.rs`), `1/m`, `1/J`, `1/L_X` are precomputed, and a chain's
+//! (an exact identity, `engine/kernel.rs`), a star's RK4 stages 2–4 turn
+//! stage 1's `sin θ`, `cos θ` by their small `δθ` (angle-sum formulas) and
+//! take stage 4's reference at `t_{n+1}` rather than `t_n + dt` (so that its
+//! `L_Y` serves the next step's stage 1), `1/m`, `1/J`, `1/L_X` are precomputed, and a chain's
 //! accelerations are solved as a recurrence `v̇ᵢ = αᵢ + βᵢ v̇ᵢ₋₁` (the law is
 //! affine in the leader's acceleration). Not supported: sampled controllers,
 //! exact `L̇_Y`, `L̈_Y`, mixed robots or laws, other leader graphs, and torque
@@ -575,16 +578,20 @@ fn block(m: &[Member], live: usize) -> Block {
     }
 }
 
-/// The reference at every stage of the tile's steps: `t`, `t + dt/2` (stages
-/// 2 and 3 share it), `t + dt`, with `t = step · dt` as the scalar simulator
-/// computes it.
+/// The reference at every stage of the tile's steps: `t_n`, `t_n + dt/2`
+/// (stages 2 and 3 share it), `t_{n+1}`, with `t_n = n · dt` as the scalar
+/// simulator computes it. Stage 4 is at `t_{n+1}`, not `t_n + dt` (the scalar
+/// simulator's, an ulp of `t` away): one reference value, and one `L_Y` per
+/// agent, serve stage 4 of a step and stage 1 of the next.
 fn fill_reference(carries: &mut [[Carry; 4]], reference: &Reference, step0: u64, dt: f64) {
-    for (n, c) in carries.iter_mut().enumerate() {
-        let t = (step0 + n as u64) as f64 * dt;
-        let a = Carry::reference(&reference.eval(t, Order::Two));
+    let at = |n: u64| Carry::reference(&reference.eval(n as f64 * dt, Order::Two));
+    let mut a = at(step0);
+    for (n, c) in (step0..).zip(carries.iter_mut()) {
+        let t = n as f64 * dt;
         let b = Carry::reference(&reference.eval(t + 0.5 * dt, Order::Two));
-        let d = Carry::reference(&reference.eval(t + dt, Order::Two));
+        let d = at(n + 1);
         *c = [a, b, b, d];
+        a = d;
     }
 }
 

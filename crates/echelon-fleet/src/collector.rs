@@ -19,8 +19,7 @@ use std::time::Duration;
 use serde::Serialize;
 use zenoh::Wait;
 
-use echelon::model::wrap_angle;
-use echelon::output::{TRAJECTORY_FILE, TRAJECTORY_HEADER, push_f64, push_time};
+use echelon::output::{TRAJECTORY_FILE, TRAJECTORY_HEADER, TrajectoryRow};
 use echelon_mcap::{
     AGENT_STATE, AgentStateRecord, JsonSchema, LeaderRecord, McapLog, REFERENCE, REFERENCE_TOPIC,
     ReferenceRecord, agent_topic, nanos,
@@ -249,7 +248,6 @@ impl Recorder {
                 )
             }
             (KeyKind::State(k), Message::State(h, s)) if s.agent == k => {
-                let theta = wrap_angle(s.state.theta);
                 let ne = s.e[0].hypot(s.e[1]);
                 // A fleet robot acts on its true state (no odometry model in
                 // the fleet): what it saw is what it is.
@@ -307,27 +305,13 @@ impl Recorder {
                 a.peak_torque = a.peak_torque.max(s.tau.peak());
                 let csv = &mut self.csv;
                 csv.line.clear();
-                push_time(&mut csv.line, s.t);
-                let _ = write!(csv.line, ",{k}");
-                for v in [
-                    s.state.x,
-                    s.state.y,
-                    theta,
-                    s.state.v,
-                    s.state.omega,
-                    s.e[0],
-                    s.e[1],
-                    s.z[0],
-                    s.z[1],
-                    s.u.u1,
-                    s.u.u2,
-                    s.tau.right,
-                    s.tau.left,
-                ] {
-                    csv.line.push(',');
-                    push_f64(&mut csv.line, v, &mut csv.ryu);
-                }
-                csv.line.push('\n');
+                let row = TrajectoryRow {
+                    t: s.t,
+                    agent: k as usize,
+                    state: &s.state,
+                    output: &output,
+                };
+                row.push(&mut csv.line, &mut csv.ryu);
                 csv.out
                     .write_all(csv.line.as_bytes())
                     .map_err(FleetError::io(&self.csv_path))

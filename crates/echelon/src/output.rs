@@ -13,10 +13,10 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use crate::error::OutputError;
-use crate::model::wrap_angle;
+use crate::model::{State, wrap_angle};
 use crate::reference::{Order, Reference, Trajectory};
 use crate::scenario::Run;
-use crate::sim::{AgentSummary, Frame, Observer, ObserverError, Summary, Timing};
+use crate::sim::{AgentOutput, AgentSummary, Frame, Observer, ObserverError, Summary, Timing};
 
 /// The header of `trajectory.csv`: one row per agent per logged sample, SI units,
 /// radians, `e` and `z` in the follower's body frame, agents numbered from 1.
@@ -48,6 +48,49 @@ pub fn push_f64(line: &mut String, v: f64, buf: &mut ryu::Buffer) {
         line.push_str(buf.format_finite(v));
     } else {
         line.push_str(buf.format(v));
+    }
+}
+
+/// One row of `trajectory.csv`, as [`TrajectoryCsv`] and the fleet's data
+/// collector write it.
+#[derive(Debug, Clone, Copy)]
+pub struct TrajectoryRow<'a> {
+    /// Time, s.
+    pub t: f64,
+    /// Agent number, from 1.
+    pub agent: usize,
+    /// True state; the heading is written wrapped to `(−π, π]`.
+    pub state: &'a State,
+    /// `e`, `z` of the true state, the inputs the plant received and the
+    /// wheel torques.
+    pub output: &'a AgentOutput,
+}
+
+impl TrajectoryRow<'_> {
+    /// Appends the row, the columns of [`TRAJECTORY_HEADER`] and a newline.
+    pub fn push(&self, line: &mut String, buf: &mut ryu::Buffer) {
+        let (s, o) = (self.state, self.output);
+        push_time(line, self.t);
+        let _ = write!(line, ",{}", self.agent);
+        for v in [
+            s.x,
+            s.y,
+            wrap_angle(s.theta),
+            s.v,
+            s.omega,
+            o.e[0],
+            o.e[1],
+            o.z[0],
+            o.z[1],
+            o.u.u1,
+            o.u.u2,
+            o.tau.right,
+            o.tau.left,
+        ] {
+            line.push(',');
+            push_f64(line, v, buf);
+        }
+        line.push('\n');
     }
 }
 
@@ -91,30 +134,15 @@ impl<W: Write> Observer for TrajectoryCsv<W> {
         }
         let mut buf = ryu::Buffer::new();
         for (i, (s, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
-            let line = &mut self.line;
-            line.clear();
-            push_time(line, frame.t);
-            let _ = write!(line, ",{}", i + 1);
-            for v in [
-                s.x,
-                s.y,
-                wrap_angle(s.theta),
-                s.v,
-                s.omega,
-                o.e[0],
-                o.e[1],
-                o.z[0],
-                o.z[1],
-                o.u.u1,
-                o.u.u2,
-                o.tau.right,
-                o.tau.left,
-            ] {
-                line.push(',');
-                push_f64(line, v, &mut buf);
-            }
-            line.push('\n');
-            self.out.write_all(line.as_bytes())?;
+            self.line.clear();
+            let row = TrajectoryRow {
+                t: frame.t,
+                agent: i + 1,
+                state: s,
+                output: o,
+            };
+            row.push(&mut self.line, &mut buf);
+            self.out.write_all(self.line.as_bytes())?;
             self.rows += 1;
         }
         Ok(())

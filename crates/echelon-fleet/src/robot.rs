@@ -275,12 +275,7 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
                 state: plant.state(),
                 ..RobotState::default()
             };
-            wire::encode_state(&mut buf, Header { source, seq }, &last);
-            publisher
-                .put(buf.clone())
-                .wait()
-                .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))?;
-            seq += 1;
+            publish_state(&publisher, &mut buf, source, &mut seq, &last)?;
             next_tick = now + WAITING_PERIOD.min(period * 10.0);
             continue;
         };
@@ -317,12 +312,7 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
             tau: act.tau,
             leader: motion,
         };
-        wire::encode_state(&mut buf, Header { source, seq }, &last);
-        publisher
-            .put(buf.clone())
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))?;
-        seq += 1;
+        publish_state(&publisher, &mut buf, source, &mut seq, &last)?;
         ticks += 1;
 
         if now >= next_stats {
@@ -362,6 +352,23 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         final_error: last.e[0].hypot(last.e[1]),
         link: last.link.name(),
     })
+}
+
+/// Publishes `state` under the robot's next sequence number.
+fn publish_state(
+    publisher: &zenoh::pubsub::Publisher<'_>,
+    buf: &mut Vec<u8>,
+    source: u32,
+    seq: &mut u64,
+    state: &RobotState,
+) -> Result<(), FleetError> {
+    wire::encode_state(buf, Header { source, seq: *seq }, state);
+    publisher
+        .put(buf.clone())
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))?;
+    *seq += 1;
+    Ok(())
 }
 
 #[allow(clippy::too_many_arguments)]

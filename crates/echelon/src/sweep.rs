@@ -14,7 +14,7 @@ use crate::error::{ParamError, ScenarioError, SimError};
 use crate::odometry::ZetaModel;
 use crate::odometry::bound::Theorem2;
 use crate::scenario::schema::{FixesSection, OdometrySection, ZetaModelName};
-use crate::scenario::{Overrides, Scenario};
+use crate::scenario::{Overrides, Run, Scenario};
 use crate::sim::{Frame, ObserverError};
 
 /// The grid of a sweep: every combination of the lists, for every seed.
@@ -211,6 +211,20 @@ pub fn apply(scenario: &Scenario, case: &Case, zeta_model: ZetaModel) -> Scenari
     s
 }
 
+/// The scenario of one case ([`apply`]), built with the case's seed.
+fn build_case(
+    scenario: &Scenario,
+    overrides: &Overrides,
+    grid: &Grid,
+    case: &Case,
+) -> Result<Run, SweepError> {
+    let s = apply(scenario, case, grid.zeta_model);
+    Ok(s.build(&Overrides {
+        seed: Some(case.seed),
+        ..*overrides
+    })?)
+}
+
 /// Runs one case and reduces it to a [`Row`].
 pub fn run_case(
     scenario: &Scenario,
@@ -218,11 +232,7 @@ pub fn run_case(
     grid: &Grid,
     case: &Case,
 ) -> Result<Row, SweepError> {
-    let s = apply(scenario, case, grid.zeta_model);
-    let mut run = s.build(&Overrides {
-        seed: Some(case.seed),
-        ..*overrides
-    })?;
+    let mut run = build_case(scenario, overrides, grid, case)?;
     let sim = &mut run.simulation;
     let n = sim.agents().len();
     let mut z_max = vec![0.0f64; n];
@@ -254,7 +264,8 @@ pub fn run_case(
         && case.slip == 0.0
         && case.zeta > 0.0
         && case.fix_every > 0
-        && noise_free(&s);
+        // `apply` keeps the noise settings, so the file's are the case's.
+        && noise_free(scenario);
     let (mut z_bound, mut ratio, mut e_bound) = (None, None, None);
     if theorem_applies {
         for (i, a) in sim.agents().iter().enumerate() {
@@ -372,11 +383,7 @@ pub fn drift_curves(
     models
         .par_iter()
         .map(|case| {
-            let s = apply(scenario, case, grid.zeta_model);
-            let mut run = s.build(&Overrides {
-                seed: Some(case.seed),
-                ..*overrides
-            })?;
+            let mut run = build_case(scenario, overrides, grid, case)?;
             let sim = &mut run.simulation;
             let every = (sim.steps() / points.max(1) as u64).max(1);
             let mut times = Vec::with_capacity(points + 2);

@@ -159,11 +159,7 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
         let jet = reference.eval(t, Order::Two);
         let sample = Reference {
             t,
-            motion: LeaderMotion {
-                p: jet.p,
-                dp: jet.dp,
-                ddp: jet.ddp,
-            },
+            motion: LeaderMotion::of_jet(&jet),
             speed: jet.speed(),
             turn_rate: jet.turn_rate(),
         };

@@ -15,7 +15,6 @@ use zenoh::Wait;
 
 use echelon::control::{LeaderMotion, law};
 use echelon::formation::Leader;
-use echelon::lycomp::{LyComp, LyDerivatives};
 use echelon::model::State;
 use echelon::scenario::{FleetSettings, Overrides, Scenario};
 use echelon::sim::AgentSpec;
@@ -107,7 +106,7 @@ pub fn agent_spec(scenario: &Scenario, agent: u32) -> Result<AgentSpec, FleetErr
             "--agent {agent}: the scenario has agents 1..={n}"
         )));
     };
-    if spec.placement.derivatives == LyDerivatives::Exact && spec.placement.comp != LyComp::None {
+    if spec.placement.uses_exact_derivatives() {
         return Err(FleetError::Config(format!(
             "agent {agent}: ly_derivatives = \"exact\" needs the reference's 3rd and 4th derivatives, which the fleet does not send; use \"neglect\""
         )));

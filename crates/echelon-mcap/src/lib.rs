@@ -408,7 +408,7 @@ impl<W: Write + Seek> McapObserver<W> {
             .collect::<Result<Vec<_>, _>>()?;
         Ok(McapObserver {
             log,
-            every: every.max(1),
+            every,
             reference,
             reference_channel,
             agent_channels,
@@ -429,7 +429,7 @@ impl<W: Write + Seek> McapObserver<W> {
 
 impl<W: Write + Seek> Observer for McapObserver<W> {
     fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        if !(frame.step.is_multiple_of(self.every) || frame.last) {
+        if !frame.is_logged(self.every) {
             return Ok(());
         }
         let time = nanos(frame.t);

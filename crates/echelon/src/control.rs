@@ -25,6 +25,7 @@ use num_dual::DualNum;
 
 use crate::lanes::Real;
 use crate::model::{Input, RobotParams, State};
+use crate::reference::Jet;
 
 /// The backstepping gains.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -77,6 +78,16 @@ pub struct LeaderMotion {
 }
 
 impl LeaderMotion {
+    /// A virtual leader: the reference's `p_d`, `ṗ_d`, `p̈_d` at one instant.
+    #[inline]
+    pub fn of_jet(jet: &Jet) -> LeaderMotion {
+        LeaderMotion {
+            p: jet.p,
+            dp: jet.dp,
+            ddp: jet.ddp,
+        }
+    }
+
     /// A leader that is itself a robot in state `s`, accelerating at `dv`
     /// (control-law.md, "Leader velocity and curvature"):
     /// `ṗ_d = v [cos θ, sin θ]`, `p̈_d = v̇ [cos θ, sin θ] + v ω [−sin θ, cos θ]`.

@@ -127,6 +127,13 @@ pub struct Placement {
 }
 
 impl Placement {
+    /// Whether `L̇_Y`, `L̈_Y` are computed exactly (and so needed): exact
+    /// derivatives asked for and some `L_Ycomp` to differentiate.
+    #[inline]
+    pub fn uses_exact_derivatives(&self) -> bool {
+        self.derivatives == LyDerivatives::Exact && self.comp != LyComp::None
+    }
+
     /// A leader-follower placement (Definition 1).
     pub fn new(
         lx_off: f64,

@@ -189,14 +189,7 @@ impl RobotParams {
         let k2 = self.derivative(&s.add_scaled(&k1, 0.5 * dt), u);
         let k3 = self.derivative(&s.add_scaled(&k2, 0.5 * dt), u);
         let k4 = self.derivative(&s.add_scaled(&k3, dt), u);
-        let h6 = dt / 6.0;
-        State {
-            x: s.x + h6 * (k1.x + 2.0 * (k2.x + k3.x) + k4.x),
-            y: s.y + h6 * (k1.y + 2.0 * (k2.y + k3.y) + k4.y),
-            theta: s.theta + h6 * (k1.theta + 2.0 * (k2.theta + k3.theta) + k4.theta),
-            v: s.v + h6 * (k1.v + 2.0 * (k2.v + k3.v) + k4.v),
-            omega: s.omega + h6 * (k1.omega + 2.0 * (k2.omega + k3.omega) + k4.omega),
-        }
+        s.rk4_combine([&k1, &k2, &k3, &k4], dt / 6.0)
     }
 }
 
@@ -253,6 +246,19 @@ impl State {
             theta: self.theta + k * d.theta,
             v: self.v + k * d.v,
             omega: self.omega + k * d.omega,
+        }
+    }
+
+    /// `self + h6 (k₁ + 2 (k₂ + k₃) + k₄)`, the RK4 update from the four stage
+    /// derivatives, with `h6 = dt/6`.
+    #[inline]
+    pub fn rk4_combine(&self, [a, b, c, d]: [&State; 4], h6: f64) -> State {
+        State {
+            x: self.x + h6 * (a.x + 2.0 * (b.x + c.x) + d.x),
+            y: self.y + h6 * (a.y + 2.0 * (b.y + c.y) + d.y),
+            theta: self.theta + h6 * (a.theta + 2.0 * (b.theta + c.theta) + d.theta),
+            v: self.v + h6 * (a.v + 2.0 * (b.v + c.v) + d.v),
+            omega: self.omega + h6 * (a.omega + 2.0 * (b.omega + c.omega) + d.omega),
         }
     }
 

@@ -109,7 +109,7 @@ impl<W: Write> TrajectoryCsv<W> {
         writeln!(out, "{TRAJECTORY_HEADER}")?;
         Ok(TrajectoryCsv {
             out,
-            every: every.max(1),
+            every,
             line: String::with_capacity(512),
             rows: 0,
         })
@@ -129,7 +129,7 @@ impl<W: Write> TrajectoryCsv<W> {
 
 impl<W: Write> Observer for TrajectoryCsv<W> {
     fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        if !(frame.step.is_multiple_of(self.every) || frame.last) {
+        if !frame.is_logged(self.every) {
             return Ok(());
         }
         let mut buf = ryu::Buffer::new();
@@ -169,7 +169,7 @@ impl<W: Write> ReferenceCsv<W> {
         writeln!(out, "{REFERENCE_HEADER}")?;
         Ok(ReferenceCsv {
             out,
-            every: every.max(1),
+            every,
             reference,
             line: String::with_capacity(128),
         })
@@ -184,7 +184,7 @@ impl<W: Write> ReferenceCsv<W> {
 
 impl<W: Write> Observer for ReferenceCsv<W> {
     fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        if !(frame.step.is_multiple_of(self.every) || frame.last) {
+        if !frame.is_logged(self.every) {
             return Ok(());
         }
         let jet = self.reference.eval(frame.t, Order::Two);
@@ -229,7 +229,7 @@ impl<W: Write> OdometryCsv<W> {
         writeln!(out, "{ODOMETRY_HEADER}")?;
         Ok(OdometryCsv {
             out,
-            every: every.max(1),
+            every,
             line: String::with_capacity(256),
             fixes: Vec::new(),
         })
@@ -244,7 +244,7 @@ impl<W: Write> OdometryCsv<W> {
 
 impl<W: Write> Observer for OdometryCsv<W> {
     fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        if !(frame.step.is_multiple_of(self.every) || frame.last) {
+        if !frame.is_logged(self.every) {
             return Ok(());
         }
         self.fixes.resize(frame.odometers.len(), 0);

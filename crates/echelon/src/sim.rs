@@ -10,7 +10,7 @@
 use crate::control::{Gains, LawOutput, LeaderMotion, Variant, errors, law};
 use crate::error::{FormationError, ParamError, SimError};
 use crate::formation::{Formation, Leader};
-use crate::lycomp::{FitCoefficients, LyComp, LyDerivatives, Placement};
+use crate::lycomp::{FitCoefficients, LyComp, Placement};
 pub use crate::model::Pose;
 use crate::model::{Input, RobotParams, State, Torques};
 use crate::odometry::{Odometer, OdometrySpec};
@@ -98,6 +98,15 @@ pub struct Frame<'a> {
     pub odometers: &'a [Option<Odometer>],
 }
 
+impl Frame<'_> {
+    /// Whether a log that keeps every `every`-th step (0 or 1: every step)
+    /// keeps this frame: those steps and the final frame.
+    #[inline]
+    pub fn is_logged(&self, every: u64) -> bool {
+        self.step.is_multiple_of(every.max(1)) || self.last
+    }
+}
+
 /// An error an observer may return (e.g. an I/O error while logging).
 pub type ObserverError = Box<dyn std::error::Error + Send + Sync>;
 
@@ -125,10 +134,11 @@ struct System {
 }
 
 impl System {
-    /// Evaluates every agent at time `t` and states `x`: controller outputs into
-    /// `out` and state derivatives into `dx`. With `held`, the commands are held
-    /// values (sampled controller) instead of fresh law outputs. With odometers,
-    /// the law acts on what they measure (eqs. 32–35) while `e`, `z` in `out` are
+    /// Evaluates every agent at time `t` and states `x`: state derivatives into
+    /// `dx` and, when `out` is given (RK4's first stage, which observers see),
+    /// controller outputs into it. With `held`, the commands are held values
+    /// (sampled controller) instead of fresh law outputs. With odometers, the
+    /// law acts on what they measure (eqs. 32–35) while `e`, `z` in `out` are
     /// those of the true state.
     #[inline]
     fn evaluate(
@@ -137,9 +147,17 @@ impl System {
         x: &[State],
         held: Option<&[Input]>,
         odometers: &[Option<Odometer>],
-        out: &mut [AgentOutput],
+        mut out: Option<&mut [AgentOutput]>,
         dx: &mut [State],
     ) {
+        if let (None, Some(h)) = (&out, held) {
+            // Between samples of a sampled controller, with nobody looking at
+            // the law's outputs: only the plant moves.
+            for (i, a) in self.agents.iter().enumerate() {
+                dx[i] = a.robot.derivative(&x[i], a.robot.actuate(h[i]).0);
+            }
+            return;
+        }
         let jet = if self.uses_reference {
             self.reference.eval(t, self.order)
         } else {
@@ -161,18 +179,14 @@ impl System {
             };
             let (motion, offset) = match a.leader {
                 Leader::Reference => (
-                    LeaderMotion {
-                        p: jet.p,
-                        dp: jet.dp,
-                        ddp: jet.ddp,
-                    },
+                    LeaderMotion::of_jet(&jet),
                     a.placement.offset_for_reference(&jet),
                 ),
                 Leader::Agent(j) => leader_of(&sensed(j), j),
             };
             let me = sensed(i);
             let LawOutput { u, e, z } = law(&a.robot, &me, &motion, &offset, a.gains, a.variant);
-            let (e_true, z_true) = if odometers.is_empty() {
+            let (e_true, z_true) = if out.is_none() || odometers.is_empty() {
                 (e, z)
             } else {
                 // The same errors from the true states of the robot and its leader.
@@ -198,6 +212,9 @@ impl System {
             let command = held.map_or(u, |h| h[i]);
             let (applied, tau) = a.robot.actuate(command);
             dx[i] = a.robot.derivative(&x[i], applied);
+            let Some(out) = out.as_deref_mut() else {
+                continue;
+            };
             out[i] = AgentOutput {
                 e: e_true,
                 z: z_true,
@@ -237,7 +254,6 @@ pub struct Simulation {
     k2: Vec<State>,
     k3: Vec<State>,
     k4: Vec<State>,
-    scratch_out: Vec<AgentOutput>,
 }
 
 fn param(context: String, field: &'static str, value: f64, reason: &'static str) -> SimError {
@@ -336,8 +352,7 @@ impl Simulation {
                 finite(&ctx, field, v)?;
             }
             if let Leader::Agent(j) = a.leader
-                && a.placement.derivatives == LyDerivatives::Exact
-                && a.placement.comp != LyComp::None
+                && a.placement.uses_exact_derivatives()
             {
                 return Err(FormationError::ExactDerivativesNeedReference {
                     agent: i + 1,
@@ -360,9 +375,7 @@ impl Simulation {
             }
         }
         let formation = Formation::new(agents.iter().map(|a| a.leader).collect())?;
-        let order = if agents.iter().any(|a| {
-            a.placement.derivatives == LyDerivatives::Exact && a.placement.comp != LyComp::None
-        }) {
+        let order = if agents.iter().any(|a| a.placement.uses_exact_derivatives()) {
             Order::Four
         } else {
             Order::Two
@@ -395,7 +408,6 @@ impl Simulation {
             k2: vec![State::default(); n],
             k3: vec![State::default(); n],
             k4: vec![State::default(); n],
-            scratch_out: vec![AgentOutput::default(); n],
         })
     }
 
@@ -521,7 +533,7 @@ impl Simulation {
             &self.state,
             held,
             &self.odometers,
-            &mut self.out,
+            Some(&mut self.out),
             &mut self.k1,
         );
         if sample {
@@ -557,49 +569,22 @@ impl Simulation {
         for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k1)) {
             *s = x.add_scaled(k, 0.5 * dt);
         }
-        sys.evaluate(
-            t + 0.5 * dt,
-            &self.stage,
-            held,
-            odo,
-            &mut self.scratch_out,
-            &mut self.k2,
-        );
+        sys.evaluate(t + 0.5 * dt, &self.stage, held, odo, None, &mut self.k2);
         for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k2)) {
             *s = x.add_scaled(k, 0.5 * dt);
         }
-        sys.evaluate(
-            t + 0.5 * dt,
-            &self.stage,
-            held,
-            odo,
-            &mut self.scratch_out,
-            &mut self.k3,
-        );
+        sys.evaluate(t + 0.5 * dt, &self.stage, held, odo, None, &mut self.k3);
         for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k3)) {
             *s = x.add_scaled(k, dt);
         }
-        sys.evaluate(
-            t + dt,
-            &self.stage,
-            held,
-            odo,
-            &mut self.scratch_out,
-            &mut self.k4,
-        );
+        sys.evaluate(t + dt, &self.stage, held, odo, None, &mut self.k4);
         let h6 = dt / 6.0;
         for (i, x) in self.state.iter_mut().enumerate() {
-            let (a, b, c, d) = (&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]);
+            let k = [&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]];
             // ṡ = v through the same RK4 stages: the stage speeds are
             // v, v + dt/2 v̇₁, v + dt/2 v̇₂, v + dt v̇₃.
-            self.distance[i] += dt * x.v + dt * dt / 6.0 * (a.v + b.v + c.v);
-            *x = State {
-                x: x.x + h6 * (a.x + 2.0 * (b.x + c.x) + d.x),
-                y: x.y + h6 * (a.y + 2.0 * (b.y + c.y) + d.y),
-                theta: x.theta + h6 * (a.theta + 2.0 * (b.theta + c.theta) + d.theta),
-                v: x.v + h6 * (a.v + 2.0 * (b.v + c.v) + d.v),
-                omega: x.omega + h6 * (a.omega + 2.0 * (b.omega + c.omega) + d.omega),
-            };
+            self.distance[i] += dt * x.v + dt * dt / 6.0 * (k[0].v + k[1].v + k[2].v);
+            *x = x.rk4_combine(k, h6);
         }
         self.step += 1;
         self.fresh = false;

@@ -390,7 +390,7 @@ pub fn drift_curves(
             let mut drift = Vec::with_capacity(points + 2);
             let mut samples = Vec::with_capacity(points + 2);
             let mut observe = |f: &Frame<'_>| -> Result<(), ObserverError> {
-                if !(f.step.is_multiple_of(every) || f.last) {
+                if !f.is_logged(every) {
                     return Ok(());
                 }
                 let mut d: f64 = 0.0;

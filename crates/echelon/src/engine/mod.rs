@@ -37,7 +37,7 @@ use crate::control::{Gains, LawRobot, Variant};
 use crate::error::{FormationError, ParamError, SimError};
 use crate::formation::Leader;
 use crate::lanes::{Lanes, Mask};
-use crate::lycomp::{LyComp, LyDerivatives, Placement};
+use crate::lycomp::{LyComp, Placement};
 use crate::model::{RobotParams, State};
 use crate::reference::{Order, Reference, Trajectory};
 use crate::sim::{AgentSpec, Simulation, Timing};
@@ -526,7 +526,7 @@ fn validate(i: usize, m: &Member) -> Result<(), EngineError> {
     ] {
         check(ctx, field, v, false)?;
     }
-    if p.derivatives == LyDerivatives::Exact && p.comp != LyComp::None {
+    if p.uses_exact_derivatives() {
         return Err(EngineError::Unsupported(format!(
             "exact L_Y derivatives (agent {i}; use ly_derivatives = \"neglect\")"
         )));

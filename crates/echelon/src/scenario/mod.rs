@@ -880,8 +880,7 @@ impl Scenario {
             }
         };
         if let Leader::Agent(j) = leader
-            && placement.derivatives == LyDerivatives::Exact
-            && placement.comp != LyComp::None
+            && placement.uses_exact_derivatives()
         {
             return Err(self.error(
                 &deriv_path,

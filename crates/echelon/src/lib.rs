@@ -34,6 +34,7 @@ pub mod model;
 pub mod odometry;
 pub mod output;
 pub mod reference;
+pub mod rng;
 pub mod scenario;
 pub mod sim;
 mod spline;

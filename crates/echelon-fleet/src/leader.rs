@@ -16,7 +16,6 @@ use echelon::scenario::{Overrides, Scenario};
 use crate::clock::FleetClock;
 use crate::keys::Keys;
 use crate::net::{self, NetOptions};
-use crate::robot::rand_source;
 use crate::wire::{self, Header, Reference};
 use crate::{FleetError, StopFlag};
 
@@ -137,7 +136,7 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
     wait_for_roles(&session, &keys, &opts.wait_for, opts.wait_timeout, stop)?;
 
     let clock = FleetClock::new(opts.time_scale);
-    let source = rand_source();
+    let source = net::rand_source();
     let period = 1.0 / rate;
     let mut buf = Vec::with_capacity(wire::REFERENCE_LEN);
     let mut k: u64 = 0;
@@ -164,10 +163,7 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
             turn_rate: jet.turn_rate(),
         };
         wire::encode_reference(&mut buf, Header { source, seq: k }, &sample);
-        publisher
-            .put(buf.clone())
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))?;
+        net::publish(&publisher, &buf)?;
         k += 1;
         last_t = t;
     }

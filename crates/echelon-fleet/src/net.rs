@@ -182,6 +182,26 @@ pub fn open(opts: &NetOptions) -> Result<Session, FleetError> {
         .map_err(|e| FleetError::Zenoh(format!("opening the session: {e}")))
 }
 
+/// Publishes one encoded message.
+pub(crate) fn publish(
+    publisher: &zenoh::pubsub::Publisher<'_>,
+    bytes: &[u8],
+) -> Result<(), FleetError> {
+    publisher
+        .put(bytes.to_vec())
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))
+}
+
+/// A random source id: the low bits of a hash of the process id and the time.
+pub(crate) fn rand_source() -> u32 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u32(std::process::id());
+    h.write_u64(crate::unix_nanos());
+    h.finish() as u32
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -175,7 +175,7 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         .wait()
         .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
 
-    let source: u32 = rand_source();
+    let source: u32 = net::rand_source();
     let period = 1.0 / fleet.control_rate;
     let mut clock = FleetClock::new(opts.time_scale);
     let mut synced = false;
@@ -362,10 +362,7 @@ fn publish_state(
     state: &RobotState,
 ) -> Result<(), FleetError> {
     wire::encode_state(buf, Header { source, seq: *seq }, state);
-    publisher
-        .put(buf.clone())
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))?;
+    net::publish(publisher, buf)?;
     *seq += 1;
     Ok(())
 }
@@ -392,13 +389,4 @@ fn publish_stats(
     if let Ok(json) = serde_json::to_vec(&stats) {
         let _ = session.put(key, json).wait();
     }
-}
-
-/// A random source id: the low bits of a hash of the process id and the time.
-pub(crate) fn rand_source() -> u32 {
-    use std::hash::{BuildHasher, Hasher};
-    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
-    h.write_u32(std::process::id());
-    h.write_u64(crate::unix_nanos());
-    h.finish() as u32
 }

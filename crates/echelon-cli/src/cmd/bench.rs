@@ -7,6 +7,7 @@ use clap::ValueEnum;
 
 use echelon::engine::{self, BenchFormation, Engine, Topology};
 
+use super::out::{err_line, outln};
 use super::positive;
 
 /// Arguments of `echelon bench`.
@@ -102,12 +103,12 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
 
     if !args.json {
         // Before the clock starts: long runs say what they are doing.
-        eprintln!(
+        err_line(&format!(
             "stepping {} × {} agents for {steps} steps on {threads} thread{}…",
             args.runs,
             args.agents,
             if threads == 1 { "" } else { "s" }
-        );
+        ));
     }
     let started = Instant::now();
     let results = pool.install(|| match engines.as_mut_slice() {
@@ -148,9 +149,9 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             "bytes_per_agent": bytes,
             "max_error": max_error,
         });
-        println!("{out}");
+        outln!("{out}")?;
     } else {
-        println!(
+        outln!(
             "{name}: {} agents{}, {steps} steps of {} s ({} s), {threads} thread{}",
             args.agents,
             if args.runs > 1 {
@@ -161,20 +162,20 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             args.dt,
             steps as f64 * args.dt,
             if threads == 1 { "" } else { "s" },
-        );
-        println!(
+        )?;
+        outln!(
             "  {agent_steps:.3e} agent-steps in {seconds:.3} s: {:.1} M agent-steps/s ({:.1} ns per agent-step)",
             rate / 1e6,
             1e9 / rate
-        );
-        println!(
+        )?;
+        outln!(
             "  memory: {} B per agent of state and constants, {bytes:.0} B with work space",
             Engine::BLOCK_BYTES_PER_AGENT
-        );
-        println!(
+        )?;
+        outln!(
             "  at t = {} s: ‖e‖ max {max_error:.2e} m, mean {mean_error:.2e} m",
             steps as f64 * args.dt
-        );
+        )?;
     }
     Ok(())
 }

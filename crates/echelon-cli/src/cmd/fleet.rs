@@ -19,6 +19,7 @@ use echelon_fleet::robot::{self, RobotOptions};
 use echelon_fleet::up::{self, UP_SUMMARY_FILE, UpOptions};
 use echelon_fleet::{StopFlag, collector::SUMMARY_FILE};
 
+use super::out::outln;
 use super::{non_negative, parse_number, positive};
 
 /// `echelon fleet` subcommands.
@@ -235,7 +236,7 @@ fn agents_of(s: &Scenario) -> Result<u32> {
 }
 
 fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
-    println!("{}", serde_json::to_string(report)?);
+    outln!("{}", serde_json::to_string(report)?)?;
     Ok(())
 }
 
@@ -312,12 +313,12 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 robots: a.robots,
                 hosts: a.host,
             })?;
-            println!(
+            outln!(
                 "wrote {} files to {} (CA, leader, collector, robot-1…robot-{}); development use only",
                 files.len(),
                 a.dir.display(),
                 a.robots
-            );
+            )?;
             Ok(())
         }
     }
@@ -348,7 +349,7 @@ fn up_cmd(a: UpArgs) -> Result<()> {
             .and_then(serde_json::Value::as_u64)
             .unwrap_or(0)
     };
-    println!(
+    outln!(
         "{}: fleet \"{}\", {} robot{}, {} s of fleet time at ×{} in {:.1} s",
         report.scenario,
         report.fleet,
@@ -357,12 +358,12 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         report.duration,
         report.time_scale,
         report.wall
-    );
-    println!(
+    )?;
+    outln!(
         "  leader: {} reference samples published",
         int(&report.leader, &["published"])
-    );
-    println!(
+    )?;
+    outln!(
         "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6}",
         "agent",
         "final ‖e‖",
@@ -375,10 +376,10 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         "stale",
         "reordered",
         "losses"
-    );
+    )?;
     for r in &report.robots {
         let c = |k: &str| int(r, &["counters", k]);
-        println!(
+        outln!(
             "  {:<8} {:>9.2e} m {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6}",
             format!("robot {}", int(r, &["agent"])),
             num(r, "final_error").unwrap_or(f64::NAN),
@@ -391,23 +392,23 @@ fn up_cmd(a: UpArgs) -> Result<()> {
             c("stale"),
             c("reordered"),
             c("link_losses"),
-        );
+        )?;
     }
     let col = &report.collector;
-    println!(
+    outln!(
         "  collector: {} messages received, {} logged, {} rejected",
         int(col, &["received"]),
         int(col, &["logged"]),
         col.get("rejected")
             .and_then(|r| r.as_object())
             .map_or(0, |m| m.values().filter_map(|v| v.as_u64()).sum::<u64>())
-    );
-    println!(
+    )?;
+    outln!(
         "wrote {}, {}, {}, {}",
         a.out.join(MCAP_FILE).display(),
         a.out.join(echelon::output::TRAJECTORY_FILE).display(),
         a.out.join(SUMMARY_FILE).display(),
         a.out.join(UP_SUMMARY_FILE).display()
-    );
+    )?;
     Ok(())
 }

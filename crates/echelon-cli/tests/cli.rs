@@ -704,8 +704,25 @@ fn a_closed_pipe_ends_quietly_instead_of_panicking() {
             "--omega-max",
             "1",
         ],
-        &["bench", "--agents", "9", "--duration", "0.1", "--dt", "0.01"],
-        &["bench", "--agents", "9", "--duration", "0.1", "--dt", "0.01", "--json"],
+        &[
+            "bench",
+            "--agents",
+            "9",
+            "--duration",
+            "0.1",
+            "--dt",
+            "0.01",
+        ],
+        &[
+            "bench",
+            "--agents",
+            "9",
+            "--duration",
+            "0.1",
+            "--dt",
+            "0.01",
+            "--json",
+        ],
     ] {
         let mut child = Command::new(env!("CARGO_BIN_EXE_echelon"))
             .args(args)

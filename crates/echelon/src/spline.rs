@@ -41,39 +41,11 @@ fn falling(j: usize, k: usize) -> f64 {
 
 /// Inverse of the `(M+1)×(M+1)` matrix `A[k][i] = falling(M+1+i, k)` that maps
 /// the upper coefficients of the unit-interval polynomial to its derivatives at
-/// `s = 1`. Gauss-Jordan with partial pivoting (the matrix is fixed and small).
+/// `s = 1` (the matrix is fixed and small).
 fn upper_inverse() -> [[f64; M + 1]; M + 1] {
-    let mut a = [[0.0; 2 * (M + 1)]; M + 1];
-    for (k, row) in a.iter_mut().enumerate() {
-        for (i, v) in row.iter_mut().take(M + 1).enumerate() {
-            *v = falling(M + 1 + i, k);
-        }
-        row[M + 1 + k] = 1.0;
-    }
-    for col in 0..=M {
-        let p = (col..=M)
-            .max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs()))
-            .unwrap_or(col);
-        a.swap(col, p);
-        let d = a[col][col];
-        for v in a[col].iter_mut() {
-            *v /= d;
-        }
-        for r in 0..=M {
-            if r != col {
-                let f = a[r][col];
-                let pivot = a[col];
-                for (v, pv) in a[r].iter_mut().zip(pivot) {
-                    *v -= f * pv;
-                }
-            }
-        }
-    }
-    let mut inv = [[0.0; M + 1]; M + 1];
-    for (k, row) in inv.iter_mut().enumerate() {
-        row.copy_from_slice(&a[k][M + 1..]);
-    }
-    inv
+    let a: [[f64; M + 1]; M + 1] =
+        std::array::from_fn(|k| std::array::from_fn(|i| falling(M + 1 + i, k)));
+    crate::math::invert(&a, M + 1)
 }
 
 /// Coefficients in `τ ∈ [0, h]` of the Hermite polynomial with derivatives

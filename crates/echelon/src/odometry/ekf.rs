@@ -126,7 +126,7 @@ impl Ekf {
                 s[a][b] = self.p[i][j] + if a == b { var[i].max(1e-18) } else { 0.0 };
             }
         }
-        let s_inv = invert(&s, m);
+        let s_inv = crate::math::invert(&s, m);
         // K = P Hᵀ S⁻¹ (3 × m).
         let mut k = [[0.0; 3]; 3];
         for (i, row) in k.iter_mut().enumerate() {
@@ -160,35 +160,6 @@ impl Ekf {
             theta: mean[2],
         }
     }
-}
-
-/// Inverse of the leading `m × m` block of `a` (symmetric positive definite).
-fn invert(a: &M3, m: usize) -> M3 {
-    let mut w = [[0.0; 6]; 3];
-    for i in 0..m {
-        w[i][..m].copy_from_slice(&a[i][..m]);
-        w[i][3 + i] = 1.0;
-    }
-    for c in 0..m {
-        let p = (c..m)
-            .max_by(|&x, &y| w[x][c].abs().total_cmp(&w[y][c].abs()))
-            .unwrap_or(c);
-        w.swap(c, p);
-        let d = w[c][c];
-        for v in w[c].iter_mut() {
-            *v /= d;
-        }
-        for r in 0..m {
-            if r != c {
-                let f = w[r][c];
-                let pivot = w[c];
-                for (v, pv) in w[r].iter_mut().zip(pivot) {
-                    *v -= f * pv;
-                }
-            }
-        }
-    }
-    std::array::from_fn(|i| std::array::from_fn(|j| if i < m && j < m { w[i][3 + j] } else { 0.0 }))
 }
 
 #[cfg(test)]

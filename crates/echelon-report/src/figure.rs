@@ -639,11 +639,17 @@ impl Figure {
 
     /// Writes `dir/stem.svg` and `dir/stem.png`.
     pub fn save(&self, dir: &Path, stem: &str) -> Result<Saved, ReportError> {
+        self.save_with_svg(dir, stem, &self.svg()?)
+    }
+
+    /// [`Figure::save`] with the figure's SVG already drawn ([`Figure::svg`]),
+    /// for a caller that also keeps it.
+    pub fn save_with_svg(&self, dir: &Path, stem: &str, svg: &str) -> Result<Saved, ReportError> {
         let saved = Saved {
             svg: dir.join(format!("{stem}.svg")),
             png: dir.join(format!("{stem}.png")),
         };
-        crate::write_file(&saved.svg, self.svg()?.as_bytes())?;
+        crate::write_file(&saved.svg, svg.as_bytes())?;
         crate::write_file(&saved.png, &self.png()?)?;
         Ok(saved)
     }

@@ -84,13 +84,7 @@ pub fn write_all(dir: &Path) -> Result<Written, ReportError> {
     let mut svgs = Vec::new();
     for (stem, fig) in &figures {
         let svg = fig.svg()?;
-        let files = figure::Saved {
-            svg: dir.join(format!("{stem}.svg")),
-            png: dir.join(format!("{stem}.png")),
-        };
-        write_file(&files.svg, svg.as_bytes())?;
-        write_file(&files.png, &fig.png()?)?;
-        saved.push(files);
+        saved.push(fig.save_with_svg(dir, stem, &svg)?);
         svgs.push((*stem, svg));
     }
     let report = dir.join(html::REPORT_FILE);

@@ -243,8 +243,7 @@ pub fn run_case(
         for (i, odometer) in f.odometers.iter().enumerate() {
             let Some(odometer) = odometer else { continue };
             let (s, o) = (&f.states[i], &f.outputs[i]);
-            let est = odometer.believed(s);
-            let d = (s.x - est.x).hypot(s.y - est.y);
+            let d = odometer.drift(s);
             if f.t >= transient {
                 drift_max = drift_max.max(d);
                 z_max[i] = z_max[i].max(o.z[0].hypot(o.z[1]));
@@ -397,8 +396,7 @@ pub fn drift_curves(
                 let mut n = 0;
                 for (i, odometer) in f.odometers.iter().enumerate() {
                     if let Some(o) = odometer {
-                        let (s, b) = (&f.states[i], o.believed(&f.states[i]));
-                        d = d.max((s.x - b.x).hypot(s.y - b.y));
+                        d = d.max(o.drift(&f.states[i]));
                         n = n.max(o.samples());
                     }
                 }

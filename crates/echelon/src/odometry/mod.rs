@@ -368,6 +368,14 @@ impl Odometer {
         self.estimate.compose(&self.anchor.between(&s.pose()))
     }
 
+    /// The drift in true state `s`: how far the believed position
+    /// ([`Odometer::believed`]) is from the true one, m.
+    #[inline]
+    pub fn drift(&self, s: &State) -> f64 {
+        let b = self.believed(s);
+        (s.x - b.x).hypot(s.y - b.y)
+    }
+
     /// Number of fixes applied so far.
     pub fn fixes_applied(&self) -> u64 {
         self.fixes

@@ -134,7 +134,6 @@ pub struct CollectorReport {
 
 struct Channels {
     log: McapLog<BufWriter<File>>,
-    ids: BTreeMap<String, u16>,
     seq: BTreeMap<u16, u32>,
 }
 
@@ -147,14 +146,7 @@ impl Channels {
         data: &[u8],
         report: &mut CollectorReport,
     ) -> Result<(), FleetError> {
-        let id = match self.ids.get(topic) {
-            Some(&id) => id,
-            None => {
-                let id = self.log.channel(topic, schema)?;
-                self.ids.insert(topic.to_owned(), id);
-                id
-            }
-        };
+        let id = self.log.channel(topic, schema)?;
         let seq = self.seq.entry(id).or_insert(0);
         self.log.write(id, *seq, unix_nanos(), publish_time, data)?;
         *seq = seq.wrapping_add(1);
@@ -351,7 +343,6 @@ pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, F
         keys: keys.clone(),
         channels: Channels {
             log,
-            ids: BTreeMap::new(),
             seq: BTreeMap::new(),
         },
         csv: Csv {

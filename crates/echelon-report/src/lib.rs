@@ -58,10 +58,7 @@ pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
         path: path.to_path_buf(),
         source,
     };
-    let name = path
-        .file_name()
-        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-    let part = path.with_file_name(format!(".{name}.part"));
+    let part = echelon::output::part_path(path);
     std::fs::write(&part, bytes).map_err(io)?;
     std::fs::rename(&part, path).map_err(io)
 }

@@ -398,6 +398,15 @@ fn io_error(path: &Path) -> impl FnOnce(io::Error) -> OutputError + '_ {
     }
 }
 
+/// Where a file is written before it is renamed to `path` when complete
+/// (`dir/.name.part`), so that a reader never sees half a file.
+pub fn part_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    path.with_file_name(format!(".{name}.part"))
+}
+
 /// Runs `run` to its end, writing `dir/trajectory.csv`, `dir/reference.csv`,
 /// `dir/summary.json` and `dir/scenario.toml`; `extra` sees every frame too
 /// (e.g. a progress bar). Files are written under temporary names and renamed
@@ -408,12 +417,11 @@ pub fn run_to_dir(
     extra: &mut dyn Observer,
 ) -> Result<RunSummary, OutputError> {
     std::fs::create_dir_all(dir).map_err(io_error(dir))?;
-    let part = |name: &str| -> PathBuf { dir.join(format!(".{name}.part")) };
     let mut names = vec![TRAJECTORY_FILE, REFERENCE_FILE, SUMMARY_FILE, SCENARIO_FILE];
     if !run.simulation.odometers().is_empty() {
         names.push(ODOMETRY_FILE);
     }
-    let parts: Vec<PathBuf> = names.iter().map(|n| part(n)).collect();
+    let parts: Vec<PathBuf> = names.iter().map(|n| part_path(&dir.join(n))).collect();
     let (traj_part, ref_part, summary_part, scenario_part) =
         (&parts[0], &parts[1], &parts[2], &parts[3]);
     let remove_parts = || {
@@ -435,16 +443,11 @@ pub fn run_to_dir(
         Some(p) => Some(OdometryCsv::new(create(p)?, run.log_every).map_err(io_error(p))?),
         None => None,
     };
-    let mut no_odometry = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
-    let odometry_observer: &mut dyn Observer = match &mut odometry {
-        Some(o) => o,
-        None => &mut no_odometry,
-    };
     let mut summary = Summary::new(sim.agents().len(), Summary::SETTLE_TOLERANCE);
     let result = sim.run(&mut [
         &mut csv as &mut dyn Observer,
         &mut reference,
-        odometry_observer,
+        &mut odometry,
         &mut summary,
         extra,
     ]);

@@ -631,6 +631,13 @@ impl<const N: usize> Observer for [&mut dyn Observer; N] {
     }
 }
 
+/// An observer that may be absent (`None` sees nothing).
+impl<O: Observer> Observer for Option<O> {
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        self.as_mut().map_or(Ok(()), |o| o.observe(frame))
+    }
+}
+
 /// Per-agent statistics of a run (what `summary.json` reports).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct AgentSummary {

@@ -13,7 +13,7 @@ use echelon::output::{
     self, ODOMETRY_FILE, REFERENCE_FILE, RunSummary, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE,
 };
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::{Frame, Observer, ObserverError};
+use echelon::sim::Observer;
 use echelon::{Simulation, Variant};
 use echelon_mcap::McapObserver;
 
@@ -89,7 +89,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
         }
     }
     let started = Instant::now();
-    let mcap_part = out.join(format!(".{MCAP_FILE}.part"));
+    let mcap_part = output::part_path(&out.join(MCAP_FILE));
     let mut mcap = if args.mcap {
         std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
         let file = File::create(&mcap_part)
@@ -103,16 +103,11 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     } else {
         None
     };
-    let mut nothing = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
-    let mcap_observer: &mut dyn Observer = match mcap.as_mut() {
-        Some(m) => m,
-        None => &mut nothing,
-    };
     let mut progress = Progress::new(run.simulation.steps(), args.quiet);
     let result = output::run_to_dir(
         &mut run,
         &out,
-        &mut [&mut progress as &mut dyn Observer, mcap_observer],
+        &mut [&mut progress as &mut dyn Observer, &mut mcap],
     );
     progress.finish();
     let summary = match result {

@@ -232,7 +232,10 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
                 plant.set_time(s.t);
                 next_tick = s.t;
                 next_stats = s.t;
+                // The old leader's samples are on the old timeline: at the
+                // new clock they would look fresh, even from the future.
                 delayed.clear();
+                sample = None;
                 synced = true;
             }
             match injector.admit(clock.at(arrival)) {

@@ -320,11 +320,7 @@ impl Recorder {
             .flush()
             .map_err(FleetError::io(&self.csv_path))?;
         self.report.agents = self.agents.into_values().collect();
-        let path = out.join(SUMMARY_FILE);
-        let mut json =
-            serde_json::to_string_pretty(&self.report).map_err(echelon_mcap::McapLogError::from)?;
-        json.push('\n');
-        std::fs::write(&path, json).map_err(FleetError::io(&path))?;
+        crate::write_json_file(&out.join(SUMMARY_FILE), &self.report)?;
         Ok(self.report)
     }
 }

@@ -60,6 +60,16 @@ impl FleetError {
     }
 }
 
+/// Writes `value` to `path` as pretty JSON with a final newline.
+pub(crate) fn write_json_file<T: serde::Serialize>(
+    path: &std::path::Path,
+    value: &T,
+) -> Result<(), FleetError> {
+    let mut json = serde_json::to_string_pretty(value).map_err(echelon_mcap::McapLogError::from)?;
+    json.push('\n');
+    std::fs::write(path, json).map_err(FleetError::io(path))
+}
+
 /// A flag raised by SIGINT or SIGTERM (and SIGHUP): processes finish their
 /// loop, flush and exit cleanly.
 #[derive(Debug, Clone, Default)]

@@ -214,10 +214,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         endpoints.insert(format!("robot/{k}"), endpoint(k).into());
     }
     endpoints.insert("leader".into(), endpoint(n + 1).into());
-    let path = opts.out.join(ENDPOINTS_FILE);
-    let text =
-        serde_json::to_string_pretty(&endpoints).map_err(echelon_mcap::McapLogError::from)?;
-    std::fs::write(&path, text + "\n").map_err(FleetError::io(&path))?;
+    crate::write_json_file(&opts.out.join(ENDPOINTS_FILE), &endpoints)?;
     let scale = opts.time_scale.to_string();
     let dur = duration.to_string();
     let started = Instant::now();
@@ -365,9 +362,6 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         robots: robots.iter().map(report).collect::<Result<_, _>>()?,
         collector: report(&collector)?,
     };
-    let path = opts.out.join(UP_SUMMARY_FILE);
-    let mut json = serde_json::to_string_pretty(&up).map_err(echelon_mcap::McapLogError::from)?;
-    json.push('\n');
-    std::fs::write(&path, json).map_err(FleetError::io(&path))?;
+    crate::write_json_file(&opts.out.join(UP_SUMMARY_FILE), &up)?;
     Ok(up)
 }

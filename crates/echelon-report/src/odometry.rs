@@ -97,11 +97,7 @@ fn model_label(c: &Case) -> String {
 fn models(rows: &[Row]) -> Vec<Case> {
     let mut out: Vec<Case> = Vec::new();
     for r in rows {
-        let m = Case {
-            fix_every: 0,
-            seed: 0,
-            ..r.case
-        };
+        let m = r.case.error_model();
         if !out.contains(&m) {
             out.push(m);
         }
@@ -123,14 +119,7 @@ fn against_n(
     for (i, m) in models(rows).iter().enumerate() {
         let of_model: Vec<&Row> = rows
             .iter()
-            .filter(|r| {
-                r.case.fix_every > 0
-                    && Case {
-                        fix_every: 0,
-                        seed: 0,
-                        ..r.case
-                    } == *m
-            })
+            .filter(|r| r.case.fix_every > 0 && r.case.error_model() == *m)
             .collect();
         let dots: Vec<((f64, f64), Marker)> = of_model
             .iter()
@@ -199,8 +188,7 @@ pub fn sweep(name: &str, rows: &[Row], curves: &[DriftCurve]) -> Figure {
                 Stroke::reference(),
             );
         }
-        if c.case.wheel_diameter_ratio != 1.0 || c.case.wheelbase_ratio != 1.0 || c.case.slip != 0.0
-        {
+        if c.case.outside_assumption_1() {
             growth.line(
                 &format!("linear from 1 s, {label}"),
                 series(&c.early_slope),

@@ -57,6 +57,23 @@ pub struct Case {
     pub seed: u64,
 }
 
+impl Case {
+    /// The error model alone: this case without its fix interval and seed.
+    pub fn error_model(&self) -> Case {
+        Case {
+            fix_every: 0,
+            seed: 0,
+            ..*self
+        }
+    }
+
+    /// Whether the case has errors outside the paper's Assumption 1 (which
+    /// keeps the heading exact): unequal wheels, a wrong wheelbase or slip.
+    pub fn outside_assumption_1(&self) -> bool {
+        self.wheel_diameter_ratio != 1.0 || self.wheelbase_ratio != 1.0 || self.slip != 0.0
+    }
+}
+
 /// What one run shows. Maxima are over the agents that dead-reckon and over
 /// the time after the transient.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -258,9 +275,7 @@ pub fn run_case(
         Ok(())
     };
     sim.run(&mut observe)?;
-    let theorem_applies = case.wheel_diameter_ratio == 1.0
-        && case.wheelbase_ratio == 1.0
-        && case.slip == 0.0
+    let theorem_applies = !case.outside_assumption_1()
         && case.zeta > 0.0
         && case.fix_every > 0
         // `apply` keeps the noise settings, so the file's are the case's.
@@ -371,9 +386,8 @@ pub fn drift_curves(
     let mut models: Vec<Case> = Vec::new();
     for c in grid.cases() {
         let model = Case {
-            fix_every: 0,
             seed: grid.seeds[0],
-            ..c
+            ..c.error_model()
         };
         if !models.contains(&model) {
             models.push(model);

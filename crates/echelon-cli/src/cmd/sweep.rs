@@ -188,14 +188,8 @@ fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) -> an
         "drift (m)"
     )?;
     // Rows come in grid order with seeds varying fastest: group consecutive rows.
-    let same = |a: &Row, b: &Row| {
-        Row {
-            case: sweep::Case { seed: 0, ..a.case },
-            ..*a
-        }
-        .case
-            == sweep::Case { seed: 0, ..b.case }
-    };
+    let same =
+        |a: &Row, b: &Row| sweep::Case { seed: 0, ..a.case } == sweep::Case { seed: 0, ..b.case };
     let mut start = 0;
     while start < rows.len() {
         let end = (start..rows.len())

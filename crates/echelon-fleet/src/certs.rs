@@ -37,14 +37,6 @@ fn write(path: &Path, text: &str) -> Result<(), FleetError> {
     std::fs::write(path, text).map_err(FleetError::io(path))
 }
 
-/// The identities a fleet of `robots` robots uses.
-pub fn identities(robots: u32) -> Vec<String> {
-    ["leader".to_owned(), "collector".to_owned()]
-        .into_iter()
-        .chain((1..=robots).map(|k| format!("robot-{k}")))
-        .collect()
-}
-
 /// Writes the CA and every identity's certificate and key; returns the files.
 pub fn generate(opts: &CertOptions) -> Result<Vec<PathBuf>, FleetError> {
     std::fs::create_dir_all(&opts.dir).map_err(FleetError::io(&opts.dir))?;
@@ -71,7 +63,7 @@ pub fn generate(opts: &CertOptions) -> Result<Vec<PathBuf>, FleetError> {
         "::1".to_owned(),
     ];
     sans.extend(opts.hosts.iter().cloned());
-    for id in identities(opts.robots) {
+    for id in crate::net::identities(opts.robots) {
         let key = KeyPair::generate().map_err(rc)?;
         let mut params = CertificateParams::new(sans.clone()).map_err(rc)?;
         params

@@ -9,6 +9,11 @@
 //!
 //! The collector subscribes to `echelon/<fleet>/**`.
 
+/// Robot `k`'s role in liveliness tokens and `--wait-for`: `robot/<k>`.
+pub fn robot_role(k: impl std::fmt::Display) -> String {
+    format!("robot/{k}")
+}
+
 /// First chunk of every key.
 pub const ROOT: &str = "echelon";
 

@@ -37,6 +37,19 @@ pub struct NetOptions {
     pub secure: Option<Secure>,
 }
 
+/// Robot `k`'s identity (certificate and access-control subject).
+pub fn robot_identity(k: impl std::fmt::Display) -> String {
+    format!("robot-{k}")
+}
+
+/// The identities a fleet of `robots` robots uses.
+pub fn identities(robots: u32) -> Vec<String> {
+    ["leader".to_owned(), "collector".to_owned()]
+        .into_iter()
+        .chain((1..=robots).map(robot_identity))
+        .collect()
+}
+
 /// The certificate common name of an identity: `echelon-<identity>`.
 pub fn common_name(identity: &str) -> String {
     format!("echelon-{identity}")
@@ -54,11 +67,7 @@ pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
 /// declare liveliness and send; on arrival, references are accepted only from
 /// the leader's certificate and robot `k`'s keys only from robot `k`'s.
 pub fn access_control(robots: u32) -> serde_json::Value {
-    let everyone: Vec<String> = ["leader", "collector"]
-        .iter()
-        .map(|s| common_name(s))
-        .chain((1..=robots).map(|k| common_name(&format!("robot-{k}"))))
-        .collect();
+    let everyone: Vec<String> = identities(robots).iter().map(|i| common_name(i)).collect();
     let mut rules = vec![
         json!({
             "id": "declare", "permission": "allow", "flows": ["egress", "ingress"],
@@ -84,16 +93,18 @@ pub fn access_control(robots: u32) -> serde_json::Value {
         json!({"rules": ["reference-in"], "subjects": ["leader"]}),
     ];
     for k in 1..=robots {
+        let id = robot_identity(k);
+        let rule = format!("{id}-in");
         rules.push(json!({
-            "id": format!("robot-{k}-in"), "permission": "allow", "flows": ["ingress"],
+            "id": rule, "permission": "allow", "flows": ["ingress"],
             "messages": ["put"], "key_exprs": [format!("echelon/*/robot/{k}/**")],
         }));
         subjects.push(json!({
-            "id": format!("robot-{k}"),
-            "cert_common_names": [common_name(&format!("robot-{k}"))],
+            "id": id,
+            "cert_common_names": [common_name(&id)],
         }));
         policies.push(json!({
-            "rules": [format!("robot-{k}-in")], "subjects": [format!("robot-{k}")],
+            "rules": [rule], "subjects": [id],
         }));
     }
     json!({

@@ -21,7 +21,7 @@ use echelon::sim::AgentSpec;
 
 use crate::clock::FleetClock;
 use crate::faults::{FaultInjector, FaultSpec, Verdict};
-use crate::keys::Keys;
+use crate::keys::{Keys, robot_role};
 use crate::link::{Counters, LeaderSample, Predicted, StreamTracker, predict};
 use crate::net::{self, NetOptions};
 use crate::plant::{Plant, SimulatedPlant};
@@ -171,7 +171,7 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     let stats_key = keys.stats(opts.agent);
     let _token = session
         .liveliness()
-        .declare_token(keys.alive(&format!("robot/{}", opts.agent)))
+        .declare_token(keys.alive(&robot_role(opts.agent)))
         .wait()
         .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
 

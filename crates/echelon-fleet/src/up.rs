@@ -20,6 +20,8 @@ use serde::Serialize;
 use echelon::scenario::{Overrides, Scenario};
 
 use crate::faults::FaultSpec;
+use crate::keys::robot_role;
+use crate::net::robot_identity;
 use crate::{FleetError, StopFlag};
 
 /// The summary `fleet up` writes.
@@ -211,7 +213,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let mut endpoints = serde_json::Map::new();
     endpoints.insert("collector".into(), endpoint(0).into());
     for k in 1..=n {
-        endpoints.insert(format!("robot/{k}"), endpoint(k).into());
+        endpoints.insert(robot_role(k), endpoint(k).into());
     }
     endpoints.insert("leader".into(), endpoint(n + 1).into());
     crate::write_json_file(&opts.out.join(ENDPOINTS_FILE), &endpoints)?;
@@ -252,8 +254,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         if let Some((s, l)) = opts.faults.outage {
             args.extend(["--outage".to_owned(), format!("{s}:{l}")]);
         }
-        args.extend(common(k, &format!("robot-{k}")));
-        robots.push(spawn(&opts.exe, &format!("robot/{k}"), &args, &logs)?);
+        args.extend(common(k, &robot_identity(k)));
+        robots.push(spawn(&opts.exe, &robot_role(k), &args, &logs)?);
     }
 
     let mut args = vec![
@@ -268,7 +270,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         "collector".to_owned(),
     ];
     for k in 1..=n {
-        args.extend(["--wait-for".to_owned(), format!("robot/{k}")]);
+        args.extend(["--wait-for".to_owned(), robot_role(k)]);
     }
     args.extend(common(n + 1, "leader"));
     let mut leader = spawn(&opts.exe, "leader", &args, &logs)?;

@@ -14,7 +14,7 @@ use echelon_fleet::certs::{self, CertOptions};
 use echelon_fleet::collector::{self, CollectorOptions, MCAP_FILE};
 use echelon_fleet::faults::FaultSpec;
 use echelon_fleet::leader::{self, LeaderOptions};
-use echelon_fleet::net::{NetOptions, Secure};
+use echelon_fleet::net::{self, NetOptions, Secure};
 use echelon_fleet::robot::{self, RobotOptions};
 use echelon_fleet::up::{self, UP_SUMMARY_FILE, UpOptions};
 use echelon_fleet::{StopFlag, collector::SUMMARY_FILE};
@@ -266,7 +266,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
         FleetCommand::Robot(a) => {
             let scenario = Scenario::resolve(&a.scenario)?;
             let robots = agents_of(&scenario)?;
-            let net = a.net.options(&format!("robot-{}", a.agent), Some(robots))?;
+            let net = a.net.options(&net::robot_identity(a.agent), Some(robots))?;
             let stop = StopFlag::on_signals()?;
             let report = robot::run(
                 RobotOptions {

@@ -38,6 +38,8 @@ use crate::figure::{Axis, Figure, Panel, Stroke};
 pub const TAIL_WEIGHT: f64 = 0.1;
 /// [`refit`] samples `R_C` on `(0, FIT_SPAN · λ]`.
 pub const FIT_SPAN: f64 = 3.0;
+/// [`largest_gap`] looks at `0 < |R_C| ≤ GAP_SPAN · λ`.
+pub const GAP_SPAN: f64 = 20.0;
 /// Number of `R_C` samples in [`refit`].
 pub const FIT_POINTS: usize = 600;
 
@@ -60,7 +62,7 @@ pub struct Gap {
     pub rms: f64,
 }
 
-/// The largest gap between eq. 6 (`c`) and eq. 5 over `0 < |R_C| ≤ 20 λ`,
+/// The largest gap between eq. 6 (`c`) and eq. 5 over `0 < |R_C| ≤ 20 λ` ([`GAP_SPAN`]),
 /// sampled every `λ/2000` (the curves are odd, so `R_C > 0` covers both signs).
 pub fn largest_gap(c: &FitCoefficients, lambda: f64) -> Gap {
     let n = 40_000;
@@ -71,7 +73,7 @@ pub fn largest_gap(c: &FitCoefficients, lambda: f64) -> Gap {
     };
     let mut sum = 0.0;
     for i in 1..=n {
-        let rc = 20.0 * lambda * i as f64 / n as f64;
+        let rc = GAP_SPAN * lambda * i as f64 / n as f64;
         let d = fit_rc(rc, c) - eq5(rc, lambda);
         sum += d * d;
         if d.abs() > g.gap {
@@ -106,9 +108,14 @@ pub struct Refit {
 
 /// The weighted least-squares cost of `c` (see the module doc).
 pub fn fit_cost(c: &FitCoefficients, lambda: f64) -> f64 {
-    samples(lambda)
+    weighted_cost(samples(lambda), |rc| fit_rc(rc, c))
+}
+
+/// `Σ w (eq6(R_C) − eq. 5)²` over the samples `(R_C, w, eq. 5)`.
+fn weighted_cost(samples: impl Iterator<Item = (f64, f64, f64)>, eq6: impl Fn(f64) -> f64) -> f64 {
+    samples
         .map(|(rc, w, y)| {
-            let r = fit_rc(rc, c) - y;
+            let r = eq6(rc) - y;
             w * r * r
         })
         .sum()
@@ -158,14 +165,7 @@ pub fn refit_from(lambda: f64, start: FitCoefficients) -> Result<Refit, ReportEr
         )));
     }
     let pts: Vec<(f64, f64, f64)> = samples(lambda).collect();
-    let cost_of = |p: [f64; 3]| -> f64 {
-        pts.iter()
-            .map(|&(rc, w, y)| {
-                let r = eq6_with_gradient(rc, p).0 - y;
-                w * r * r
-            })
-            .sum()
-    };
+    let cost_of = |p: [f64; 3]| weighted_cost(pts.iter().copied(), |rc| eq6_with_gradient(rc, p).0);
     let mut p = [start.g, start.delta, start.epsilon];
     let mut cost = cost_of(p);
     let mut mu = 1e-3;

@@ -46,7 +46,7 @@ pub(crate) fn lycomp(args: &LycompArgs) -> Result<()> {
     let mut fits: Vec<(&str, FitCoefficients)> = Vec::new();
     outln!(
         "L_Ycomp for L_Xoff = {lambda} m, |R_C| ≤ {} m:",
-        20.0 * lambda
+        lycomp::GAP_SPAN * lambda
     )?;
     if in_range {
         let paper = FitCoefficients::paper(lambda);

@@ -176,6 +176,13 @@ fn impossible_values_are_refused_with_the_reason() {
         "control.ke",
         "finite",
     );
+    // an agent's own control table is named, not the file's
+    expect_error(
+        &BASE.replacen("[[agents]]\n", "[[agents]]\ncontrol = { kz = -1.0 }\n", 1),
+        12,
+        "agents[1].control.kz",
+        "must be a finite number > 0",
+    );
     // a cycle in the leader graph
     expect_error(
         &BASE.replace("leader = \"reference\"", "leader = 2"),

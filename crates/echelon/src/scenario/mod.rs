@@ -29,9 +29,9 @@ use crate::sim::{AgentSpec, SimConfig, Simulation, Timing, whole_ratio};
 
 use locate::{FieldPath, Spans, line_col};
 use schema::{
-    AgentSection, ControlSection, FixesSection, FusionName, LawName, LeaderSpec, LyCompName,
-    LyDerivativesName, ModeName, OdometrySection, PoseSpec, ReferenceSection, RobotSection,
-    ScenarioFile, ZetaModelName,
+    AgentSection, FixesSection, FusionName, LawName, LeaderSpec, LyCompName, LyDerivativesName,
+    ModeName, OdometrySection, PoseSpec, ReferenceSection, RobotSection, ScenarioFile,
+    ZetaModelName,
 };
 
 include!(concat!(env!("OUT_DIR"), "/builtin.rs"));
@@ -794,17 +794,12 @@ impl Scenario {
             }
         };
         // Each control setting: the agent's own, else [control], else the paper's.
-        let global = &self.file.control;
-        let own = a.control.as_ref();
-        let pick = |get: fn(&ControlSection) -> Option<f64>, key: &str, default: f64| match own
-            .and_then(get)
-        {
-            Some(v) => (v, at.key("control").key(key)),
-            None => match get(global) {
-                Some(v) => (v, FieldPath::from("control").key(key)),
-                None => (default, FieldPath::from("control").key(key)),
-            },
-        };
+        let control = Merge::new(
+            a.control.as_ref(),
+            Some(&self.file.control),
+            at.key("control"),
+            FieldPath::from("control"),
+        );
         let check_positive = |(v, path): (f64, FieldPath)| -> Result<f64, ScenarioError> {
             if v.is_finite() && v > 0.0 {
                 Ok(v)
@@ -812,34 +807,24 @@ impl Scenario {
                 Err(self.error(&path, format!("{v} must be a finite number > 0")))
             }
         };
-        let ke = check_positive(pick(|c| c.ke, "ke", Gains::PAPER.ke))?;
-        let kz = check_positive(pick(|c| c.kz, "kz", Gains::PAPER.kz))?;
-        let (l, l_path) = pick(|c| c.l, "l", 0.05);
-        let l = check_positive((l, l_path))?;
-        let law = own
-            .and_then(|c| c.law)
-            .or(global.law)
-            .unwrap_or(LawName::Paper);
+        let ke = check_positive(control.get_or(|c| c.ke, "ke", Gains::PAPER.ke))?;
+        let kz = check_positive(control.get_or(|c| c.kz, "kz", Gains::PAPER.kz))?;
+        let l = check_positive(control.get_or(|c| c.l, "l", 0.05))?;
+        let (law, _) = control.get_or(|c| c.law, "law", LawName::Paper);
         let variant = ov.law.unwrap_or(match law {
             LawName::Paper => Variant::Paper,
             LawName::Complete => Variant::Complete,
         });
-        let comp = match own
-            .and_then(|c| c.lycomp)
-            .or(global.lycomp)
-            .unwrap_or(LyCompName::Fit)
-        {
+        let comp = match control.get_or(|c| c.lycomp, "lycomp", LyCompName::Fit).0 {
             LyCompName::Exact => LyComp::Exact,
             LyCompName::Fit => LyComp::Fit,
             LyCompName::None => LyComp::None,
         };
-        let (derivatives, deriv_path) = match own.and_then(|c| c.ly_derivatives) {
-            Some(d) => (d, at.key("control").key("ly_derivatives")),
-            None => (
-                global.ly_derivatives.unwrap_or(LyDerivativesName::Neglect),
-                FieldPath::from("control").key("ly_derivatives"),
-            ),
-        };
+        let (derivatives, deriv_path) = control.get_or(
+            |c| c.ly_derivatives,
+            "ly_derivatives",
+            LyDerivativesName::Neglect,
+        );
         let derivatives = match derivatives {
             LyDerivativesName::Neglect => LyDerivatives::Neglect,
             LyDerivativesName::Exact => LyDerivatives::Exact,
@@ -939,6 +924,12 @@ impl<'a, S: serde::Serialize> Merge<'a, S> {
         self.global
             .and_then(get)
             .map(|v| (v, self.global_path.key(key)))
+    }
+
+    /// [`Merge::get`], else `default` (at the file's path, where it would be set).
+    fn get_or<T>(&self, get: fn(&S) -> Option<T>, key: &str, default: T) -> (T, FieldPath) {
+        self.get(get, key)
+            .unwrap_or_else(|| (default, self.global_path.key(key)))
     }
 
     /// Where `key` is set: the agent's table if it sets it, else the file's.

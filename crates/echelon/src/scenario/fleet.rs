@@ -1,9 +1,9 @@
 //! The `[fleet]` section resolved: what `echelon fleet` needs beyond the
 //! simulation (fleet name, rates, link-loss policies).
 
-use super::Scenario;
 use super::locate::FieldPath;
 use super::schema::LinkPolicyName;
+use super::{Merge, Scenario};
 use crate::error::ScenarioError;
 
 /// Default reference publication rate, Hz.
@@ -121,41 +121,38 @@ impl Scenario {
         let control_rate = positive(f.control_rate, "control_rate", DEFAULT_CONTROL_RATE)?;
         let link_timeout = positive(f.link_timeout, "link_timeout", DEFAULT_LINK_TIMEOUT)?;
         let stale_after = positive(f.stale_after, "stale_after", DEFAULT_STALE_AFTER)?;
-        let global = f.link_loss.unwrap_or_default();
         let link_loss = self
             .file
             .agents
             .iter()
             .enumerate()
             .map(|(i, a)| {
-                let own = a.link_loss.unwrap_or_default();
-                let own_at = FieldPath::from("agents").index(i).key("link_loss");
-                let global_at = at.key("link_loss");
-                let pick = |o: Option<f64>, g: Option<f64>, key: &str, default: f64| {
-                    let (v, path) = match (o, g) {
-                        (Some(v), _) => (v, own_at.key(key)),
-                        (None, Some(v)) => (v, global_at.key(key)),
-                        (None, None) => (default, global_at.key(key)),
-                    };
+                let links = Merge::new(
+                    a.link_loss.as_ref(),
+                    f.link_loss.as_ref(),
+                    FieldPath::from("agents").index(i).key("link_loss"),
+                    at.key("link_loss"),
+                );
+                let pick = |get, key: &str, default: f64| {
+                    let (v, path) = links.get_or(get, key, default);
                     if v.is_finite() && v >= 0.0 {
                         Ok(v)
                     } else {
                         Err(self.error(&path, format!("{v} must be a finite number ≥ 0")))
                     }
                 };
-                let hold = pick(own.hold, global.hold, "hold", DEFAULT_HOLD)?;
-                let decel = pick(own.decel, global.decel, "decel", DEFAULT_DECEL)?;
+                let hold = pick(|l| l.hold, "hold", DEFAULT_HOLD)?;
+                let decel = pick(|l| l.decel, "decel", DEFAULT_DECEL)?;
                 if decel == 0.0 {
-                    let path = if own.decel.is_some() {
-                        own_at.key("decel")
-                    } else {
-                        global_at.key("decel")
-                    };
+                    let (_, path) = links.get_or(|l| l.decel, "decel", decel);
                     return Err(self.error(&path, "0 must be > 0 (a robot must be able to stop)"));
                 }
-                let policy = match own.policy.or(global.policy) {
-                    Some(LinkPolicyName::Stop) => LinkPolicy::Stop,
-                    Some(LinkPolicyName::Extrapolate) | None => LinkPolicy::Extrapolate,
+                let policy = match links
+                    .get_or(|l| l.policy, "policy", LinkPolicyName::Extrapolate)
+                    .0
+                {
+                    LinkPolicyName::Stop => LinkPolicy::Stop,
+                    LinkPolicyName::Extrapolate => LinkPolicy::Extrapolate,
                 };
                 Ok(LinkLoss {
                     policy,
@@ -245,6 +242,21 @@ offset = { x = 0.3, y = 0.0 }
             .unwrap_or_else(|| panic!());
         assert_eq!(e.field, "agents[1].link_loss.decel");
         assert!(e.location.line > 0, "{e}");
+        // A robot that cannot stop, set by the agent or by the file.
+        let e = parse("link_loss = { decel = 0.0 }\n")
+            .err()
+            .unwrap_or_else(|| panic!());
+        assert_eq!(e.field, "agents[1].link_loss.decel");
+        assert!(e.message.contains("able to stop"), "{e}");
+        let e = parse("\n[fleet.link_loss]\ndecel = 0.0\n")
+            .err()
+            .unwrap_or_else(|| panic!());
+        assert_eq!(e.field, "fleet.link_loss.decel");
+        assert!(e.message.contains("able to stop"), "{e}");
+        let e = parse("\n[fleet.link_loss]\nhold = -1.0\n")
+            .err()
+            .unwrap_or_else(|| panic!());
+        assert_eq!(e.field, "fleet.link_loss.hold");
         let e = parse("\n[fleet]\ncontrol_rate = 0\n")
             .err()
             .unwrap_or_else(|| panic!());

@@ -77,11 +77,7 @@ fn rk4_agent_step(c: &mut Criterion) {
         topology: Topology::Star,
         seed: 1,
     };
-    let config = SimConfig {
-        dt: DT,
-        duration: 1e6,
-        timing: Timing::Continuous,
-    };
+    let config = SimConfig::new(DT, 1e6, Timing::Continuous).expect("valid settings");
     let mut sim = match Simulation::new(f.agent_specs(), f.reference(), config) {
         Ok(s) => s,
         Err(e) => panic!("{e}"),

@@ -23,6 +23,8 @@ use std::ops::{Add, Mul, Neg, Sub};
 
 use num_dual::DualNum;
 
+use crate::check;
+use crate::error::ParamError;
 use crate::lanes::Real;
 use crate::model::{Input, RobotParams, State};
 use crate::reference::Jet;
@@ -39,10 +41,25 @@ pub struct Gains {
 impl Gains {
     /// The paper's gains: `K_e = 1.5`, `K_z = 10`.
     pub const PAPER: Gains = Gains { ke: 1.5, kz: 10.0 };
+
+    /// Gains for a simulation: both finite and > 0 (eq. 13's `K_e`, `K_z`).
+    pub fn new(ke: f64, kz: f64) -> Result<Gains, ParamError> {
+        let gains = Gains { ke, kz };
+        gains.validate()?;
+        Ok(gains)
+    }
+
+    /// [`Gains::new`]'s checks.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check::positive("ke", self.ke)?;
+        check::positive("kz", self.kz)?;
+        Ok(())
+    }
 }
 
-/// Which form of eq. 13.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// Which form of eq. 13 (`law = "paper"` or `"complete"` in a scenario).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Variant {
     /// The paper's `u = B⁻¹(−h − K_z z)`: leaves the cross term `eᵀz` in `V̇₂`, so
     /// Theorem 1 needs `K_e K_z > 1/4`.

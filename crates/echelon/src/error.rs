@@ -1,5 +1,6 @@
 //! Typed errors. Every message says what is wrong and why it is refused.
 
+use std::borrow::Cow;
 use std::fmt;
 
 /// A physical or control parameter with an impossible value.
@@ -10,17 +11,17 @@ pub struct ParamError {
     pub field: &'static str,
     /// The refused value.
     pub value: f64,
-    /// Why it is refused.
-    pub reason: &'static str,
+    /// Why it is refused (`must be a finite number > 0`).
+    pub reason: Cow<'static, str>,
 }
 
 impl ParamError {
     /// A new error for `field = value`.
-    pub fn new(field: &'static str, value: f64, reason: &'static str) -> Self {
+    pub fn new(field: &'static str, value: f64, reason: impl Into<Cow<'static, str>>) -> Self {
         ParamError {
             field,
             value,
-            reason,
+            reason: reason.into(),
         }
     }
 }
@@ -71,14 +72,6 @@ pub enum FormationError {
     /// The leader graph has a cycle: nobody in it is anchored to the reference.
     #[error("agents {} form a cycle of leaders: none of them reaches the reference", fmt_cycle(.0))]
     Cycle(Vec<usize>),
-    /// `L_X = L_Xoff + L ≤ 0` makes the law singular (eq. 13 divides by `L_X`).
-    #[error("agent {agent}: L_X = L_Xoff + L = {lx} m must be > 0 (eq. 13 divides by L_X)")]
-    NonPositiveLx {
-        /// The agent (1-based).
-        agent: usize,
-        /// Its `L_X`.
-        lx: f64,
-    },
     /// Exact `L̇_Y`, `L̈_Y` need the leader's 3rd and 4th derivatives, which only
     /// analytic references provide.
     #[error(

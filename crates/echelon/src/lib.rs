@@ -23,6 +23,7 @@
 //!
 //! Units are SI and angles radians throughout (ROS REP 103).
 
+pub mod check;
 pub mod control;
 pub mod engine;
 pub mod error;

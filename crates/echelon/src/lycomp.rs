@@ -9,11 +9,14 @@
 
 use num_dual::{Dual2, DualNum};
 
+use crate::check;
 use crate::control::Offset;
+use crate::error::ParamError;
 use crate::reference::{Jet, STANDSTILL};
 
-/// How `L_Ycomp` is computed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// How `L_Ycomp` is computed (`lycomp = "exact"`, `"fit"` or `"none"` in a scenario).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum LyComp {
     /// Eq. 5 in curvature form: exact, smooth except where `|κ| L_Xoff = 1`.
     Exact,
@@ -23,8 +26,10 @@ pub enum LyComp {
     None,
 }
 
-/// Whether `L̇_Y` and `L̈_Y` enter the law.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Whether `L̇_Y` and `L̈_Y` enter the law (`ly_derivatives = "neglect"` or
+/// `"exact"` in a scenario).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum LyDerivatives {
     /// Neglected (`L̇_Y = L̈_Y = 0`), as the paper's simulations and experiments do (Remark 3).
     Neglect,
@@ -134,27 +139,55 @@ impl Placement {
         self.derivatives == LyDerivatives::Exact && self.comp != LyComp::None
     }
 
-    /// A leader-follower placement (Definition 1).
+    /// A leader-follower placement (Definition 1). Refuses non-finite offsets,
+    /// `L` that is not a finite number > 0 and `L_X = L_Xoff + L ≤ 0` (eq. 13
+    /// divides by `L_X`); errors name `offset.x`, `offset.y` or `l`.
     pub fn new(
         lx_off: f64,
         ly_off: f64,
         l: f64,
         comp: LyComp,
         derivatives: LyDerivatives,
-    ) -> Placement {
-        Placement {
+    ) -> Result<Placement, ParamError> {
+        let p = Placement {
             lx_off,
             ly_off,
             l,
             comp,
             derivatives,
             fit: FitCoefficients::paper(lx_off),
+        };
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// [`Placement::new`]'s checks.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check::positive("l", self.l)?;
+        check::finite("offset.x", self.lx_off)?;
+        check::finite("offset.y", self.ly_off)?;
+        let lx = self.lx();
+        check::require(
+            "offset.x",
+            self.lx_off,
+            lx > 0.0,
+            format!("makes L_X = L_Xoff + L = {lx} m, which must be > 0 (eq. 13 divides by L_X)"),
+        )?;
+        if self.comp == LyComp::Fit {
+            let FitCoefficients { g, epsilon, delta } = self.fit;
+            check::require(
+                "offset.x",
+                self.lx_off,
+                g.is_finite() && epsilon.is_finite() && delta.is_finite() && delta != 0.0,
+                "is too far outside the range of the eq. 6 fit (use lycomp = \"exact\")",
+            )?;
         }
+        Ok(())
     }
 
     /// Pure tracking (eqs. 14–16): `L_X = L`, `L_Y = 0`; the point `L` ahead of
-    /// the robot tracks `p_d`.
-    pub fn tracking(l: f64) -> Placement {
+    /// the robot tracks `p_d`. Refuses `L` that is not a finite number > 0.
+    pub fn tracking(l: f64) -> Result<Placement, ParamError> {
         Placement::new(0.0, 0.0, l, LyComp::None, LyDerivatives::Neglect)
     }
 
@@ -301,7 +334,7 @@ mod tests {
 
     #[test]
     fn tracking_placement_is_l_ahead() {
-        let p = Placement::tracking(0.05);
+        let p = Placement::tracking(0.05).unwrap();
         let o = p.offset_for_robot(1.0, 0.5);
         assert_eq!((o.lx, o.ly, o.dly, o.ddly), (0.05, 0.0, 0.0, 0.0));
     }

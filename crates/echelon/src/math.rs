@@ -1,4 +1,5 @@
-//! Small numerical helpers shared by the references and the odometry.
+//! Small numerical helpers shared by the references, the odometry and the
+//! simulator.
 
 /// `sin(x)/x`, accurate near 0 (where it uses its Taylor series).
 #[inline]
@@ -45,6 +46,12 @@ pub(crate) fn invert<const N: usize>(a: &[[f64; N]; N], m: usize) -> [[f64; N]; 
         }
     }
     r
+}
+
+/// `a / b` as a whole number ≥ 1 when it is one (to 1e-9 relative), else `None`.
+pub(crate) fn whole_ratio(a: f64, b: f64) -> Option<u64> {
+    let r = (a / b).round();
+    ((a - r * b).abs() <= 1e-9 * a.abs().max(b) && r >= 1.0).then_some(r as u64)
 }
 
 #[cfg(test)]

@@ -75,39 +75,23 @@ impl RobotParams {
     /// half wheelbase strictly positive, frictions non-negative, the torque limit
     /// (if any) strictly positive, everything finite.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let positive = [
+        use crate::check::{finite, positive, require};
+        for (field, value) in [
             ("mass", self.mass),
             ("inertia", self.inertia),
             ("half_wheelbase", self.half_wheelbase),
             ("wheel_radius", self.wheel_radius),
-        ];
-        for (field, value) in positive {
-            if !value.is_finite() {
-                return Err(ParamError::new(field, value, "must be a finite number"));
-            }
-            if value <= 0.0 {
-                return Err(ParamError::new(field, value, "must be > 0"));
-            }
+        ] {
+            require(field, finite(field, value)?, value > 0.0, "must be > 0")?;
         }
         for (field, value) in [
             ("linear_friction", self.linear_friction),
             ("angular_friction", self.angular_friction),
         ] {
-            if !value.is_finite() {
-                return Err(ParamError::new(field, value, "must be a finite number"));
-            }
-            if value < 0.0 {
-                return Err(ParamError::new(field, value, "must be ≥ 0"));
-            }
+            require(field, finite(field, value)?, value >= 0.0, "must be ≥ 0")?;
         }
-        if let Some(limit) = self.torque_limit
-            && !(limit.is_finite() && limit > 0.0)
-        {
-            return Err(ParamError::new(
-                "torque_limit",
-                limit,
-                "must be a finite number > 0",
-            ));
+        if let Some(limit) = self.torque_limit {
+            positive("torque_limit", limit)?;
         }
         Ok(())
     }
@@ -210,6 +194,20 @@ pub struct State {
 }
 
 impl State {
+    /// Refuses a start state that is not finite (errors name `start.x`, …).
+    pub fn validate_start(&self) -> Result<(), ParamError> {
+        for (field, v) in [
+            ("start.x", self.x),
+            ("start.y", self.y),
+            ("start.theta", self.theta),
+            ("start.v", self.v),
+            ("start.omega", self.omega),
+        ] {
+            crate::check::finite(field, v)?;
+        }
+        Ok(())
+    }
+
     /// A robot at rest at pose `(x, y, θ)`.
     pub const fn at_rest(x: f64, y: f64, theta: f64) -> State {
         State {

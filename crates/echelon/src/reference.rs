@@ -10,7 +10,8 @@ use std::sync::Arc;
 
 use num_dual::{Dual2, DualNum};
 
-use crate::error::{ParamError, ReferenceError};
+use crate::check::{finite, require};
+use crate::error::ReferenceError;
 use crate::math::sinc;
 use crate::spline::{Septic, check_waypoints};
 
@@ -115,11 +116,12 @@ impl Circle {
         finite("start.theta", heading)?;
         finite("speed", speed)?;
         finite("turn_rate", turn_rate)?;
-        if speed < 0.0 {
-            return Err(
-                ParamError::new("speed", speed, "must be ≥ 0 (the leader moves forward)").into(),
-            );
-        }
+        require(
+            "speed",
+            speed,
+            speed >= 0.0,
+            "must be ≥ 0 (the leader moves forward)",
+        )?;
         Ok(Circle {
             start,
             heading,
@@ -173,12 +175,8 @@ impl Lemniscate {
         finite("c", c)?;
         finite("center.x", center[0])?;
         finite("center.y", center[1])?;
-        if a <= 0.0 {
-            return Err(ParamError::new("a", a, "must be > 0").into());
-        }
-        if c == 0.0 {
-            return Err(ParamError::new("c", c, "must be non-zero").into());
-        }
+        require("a", a, a > 0.0, "must be > 0")?;
+        require("c", c, c != 0.0, "must be non-zero")?;
         Ok(Lemniscate { a, c, center })
     }
 
@@ -322,14 +320,6 @@ impl Trajectory for Reference {
             Reference::Waypoints(r) => r.eval(t, order),
             Reference::Custom(r) => r.eval(t, order),
         }
-    }
-}
-
-fn finite(field: &'static str, v: f64) -> Result<(), ParamError> {
-    if v.is_finite() {
-        Ok(())
-    } else {
-        Err(ParamError::new(field, v, "must be a finite number"))
     }
 }
 

@@ -7,18 +7,22 @@
 //! in between. Stepping is explicit ([`Simulation::step`]) over plain data; the
 //! same inputs give the same bits.
 
+use crate::check;
 use crate::control::{Gains, LawOutput, LeaderMotion, Variant, errors, law};
 use crate::error::{FormationError, ParamError, SimError};
 use crate::formation::{Formation, Leader};
 use crate::lycomp::{FitCoefficients, LyComp, Placement};
+use crate::math::whole_ratio;
 pub use crate::model::Pose;
 use crate::model::{Input, RobotParams, State, Torques};
 use crate::odometry::{Odometer, OdometrySpec};
 use crate::reference::{Jet, Order, Reference, Trajectory};
 
 /// One robot of a formation: its body, its leader, where it holds that leader,
-/// and its controller.
+/// and its controller. Built by [`AgentSpec::new`], which refuses impossible
+/// values; the fields are public to read.
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub struct AgentSpec {
     /// Display name (the scenario's, e.g. `agent 1`).
     pub name: String,
@@ -36,6 +40,36 @@ pub struct AgentSpec {
     pub start: State,
 }
 
+impl AgentSpec {
+    /// An agent, refusing an impossible robot ([`RobotParams::validate`]),
+    /// gains ([`Gains::new`]), placement ([`Placement::new`]) or a start state
+    /// that is not finite. Whether its leader exists is the formation's business
+    /// ([`Simulation::new`]).
+    pub fn new(
+        name: impl Into<String>,
+        robot: RobotParams,
+        leader: Leader,
+        placement: Placement,
+        gains: Gains,
+        variant: Variant,
+        start: State,
+    ) -> Result<AgentSpec, ParamError> {
+        robot.validate()?;
+        gains.validate()?;
+        placement.validate()?;
+        start.validate_start()?;
+        Ok(AgentSpec {
+            name: name.into(),
+            robot,
+            leader,
+            placement,
+            gains,
+            variant,
+            start,
+        })
+    }
+}
+
 /// When the controller runs.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum Timing {
@@ -49,8 +83,9 @@ pub enum Timing {
     },
 }
 
-/// Integration settings.
+/// Integration settings, built by [`SimConfig::new`] (the fields are public to read).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
 pub struct SimConfig {
     /// RK4 step, s.
     pub dt: f64,
@@ -58,6 +93,51 @@ pub struct SimConfig {
     pub duration: f64,
     /// Continuous or sampled controller.
     pub timing: Timing,
+}
+
+/// At most this many steps in a run.
+const MAX_STEPS: f64 = 1e12;
+
+impl SimConfig {
+    /// Integration settings, refusing a step or duration that is not a finite
+    /// number > 0, more than 10¹² steps and a controller period that is not a
+    /// whole multiple of `dt`. Errors name `dt`, `duration` or `controller_period`.
+    pub fn new(dt: f64, duration: f64, timing: Timing) -> Result<SimConfig, ParamError> {
+        check::positive("dt", dt)?;
+        check::positive("duration", duration)?;
+        let steps = Self::steps_for(dt, duration);
+        check::require(
+            "duration",
+            duration,
+            steps <= MAX_STEPS,
+            format!("s at dt {dt} s is {steps:e} steps: too many"),
+        )?;
+        if let Timing::Sampled { period } = timing {
+            check::multiple_of("controller_period", period, dt, &format!("dt = {dt} s"))?;
+        }
+        Ok(SimConfig {
+            dt,
+            duration,
+            timing,
+        })
+    }
+
+    fn steps_for(dt: f64, duration: f64) -> f64 {
+        (duration / dt - 1e-9).ceil().max(1.0)
+    }
+
+    /// Steps of the run (it ends at the first step at or after `duration`).
+    fn steps(&self) -> u64 {
+        Self::steps_for(self.dt, self.duration) as u64
+    }
+
+    /// Steps between controller samples (0: continuous).
+    fn hold_every(&self) -> u64 {
+        match self.timing {
+            Timing::Continuous => 0,
+            Timing::Sampled { period } => whole_ratio(period, self.dt).unwrap_or(1),
+        }
+    }
 }
 
 /// What one agent's controller and motors are doing at one instant.
@@ -256,110 +336,65 @@ pub struct Simulation {
     k4: Vec<State>,
 }
 
-fn param(context: String, field: &'static str, value: f64, reason: &'static str) -> SimError {
-    SimError::Param {
-        context,
-        source: ParamError::new(field, value, reason),
-    }
+/// The agents of a formation, checked together: their leader graph is a
+/// forest rooted at the reference ([`Formation::new`]) and no agent behind a
+/// robot leader asks for exact `L_Y` derivatives (they need the leader's 3rd
+/// and 4th derivatives, which only analytic references provide).
+#[derive(Debug, Clone)]
+pub struct Agents {
+    specs: Vec<AgentSpec>,
+    formation: Formation,
 }
 
-fn positive(context: &str, field: &'static str, value: f64) -> Result<(), SimError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(param(
-            context.into(),
-            field,
-            value,
-            "must be a finite number > 0",
-        ))
-    }
-}
-
-fn finite(context: &str, field: &'static str, value: f64) -> Result<(), SimError> {
-    if value.is_finite() {
-        Ok(())
-    } else {
-        Err(param(
-            context.into(),
-            field,
-            value,
-            "must be a finite number",
-        ))
-    }
-}
-
-/// `a / b` as a whole number ≥ 1 when it is one (to 1e-9 relative), else `None`.
-pub(crate) fn whole_ratio(a: f64, b: f64) -> Option<u64> {
-    let r = (a / b).round();
-    ((a - r * b).abs() <= 1e-9 * a.abs().max(b) && r >= 1.0).then_some(r as u64)
-}
-
-impl Simulation {
-    /// Builds and validates a simulation. Refuses (naming agent and reason)
-    /// impossible robots, non-positive gains, `L ≤ 0` or `L_X ≤ 0`, non-finite
-    /// offsets or start states, an invalid leader graph, exact `L_Y` derivatives
-    /// behind a robot leader, and timings that do not fit together.
-    pub fn new(
-        agents: Vec<AgentSpec>,
-        reference: Reference,
-        config: SimConfig,
-    ) -> Result<Simulation, SimError> {
-        positive("sim", "dt", config.dt)?;
-        positive("sim", "duration", config.duration)?;
-        let steps = (config.duration / config.dt - 1e-9).ceil().max(1.0);
-        if steps > 1e12 {
-            return Err(SimError::Timing(format!(
-                "duration {} s at dt {} s is {steps:e} steps: too many",
-                config.duration, config.dt
-            )));
-        }
-        let hold_every = match config.timing {
-            Timing::Continuous => 0,
-            Timing::Sampled { period } => {
-                positive("sim", "controller_period", period)?;
-                whole_ratio(period, config.dt).ok_or_else(|| {
-                    SimError::Timing(format!(
-                        "controller period {period} s is not a whole multiple of dt = {} s",
-                        config.dt
-                    ))
-                })?
-            }
-        };
-        let mut warnings = Vec::new();
-        for (i, a) in agents.iter().enumerate() {
-            let ctx = format!("agent {}", i + 1);
-            a.robot.validate().map_err(|source| SimError::Param {
-                context: format!("{ctx} robot"),
-                source,
-            })?;
-            positive(&ctx, "ke", a.gains.ke)?;
-            positive(&ctx, "kz", a.gains.kz)?;
-            positive(&ctx, "l", a.placement.l)?;
-            finite(&ctx, "offset.x", a.placement.lx_off)?;
-            finite(&ctx, "offset.y", a.placement.ly_off)?;
-            let lx = a.placement.lx();
-            if lx <= 0.0 {
-                return Err(FormationError::NonPositiveLx { agent: i + 1, lx }.into());
-            }
-            for (field, v) in [
-                ("start.x", a.start.x),
-                ("start.y", a.start.y),
-                ("start.theta", a.start.theta),
-                ("start.v", a.start.v),
-                ("start.omega", a.start.omega),
-            ] {
-                finite(&ctx, field, v)?;
-            }
+impl Agents {
+    /// Checks the agents together (each is valid by [`AgentSpec::new`]).
+    pub fn new(specs: Vec<AgentSpec>) -> Result<Agents, FormationError> {
+        let formation = Formation::new(specs.iter().map(|a| a.leader).collect())?;
+        for (i, a) in specs.iter().enumerate() {
             if let Leader::Agent(j) = a.leader
                 && a.placement.uses_exact_derivatives()
             {
                 return Err(FormationError::ExactDerivativesNeedReference {
                     agent: i + 1,
                     leader: j + 1,
-                }
-                .into());
+                });
             }
+        }
+        Ok(Agents { specs, formation })
+    }
+
+    /// The agents.
+    pub fn specs(&self) -> &[AgentSpec] {
+        &self.specs
+    }
+
+    /// Their leader graph.
+    pub fn formation(&self) -> &Formation {
+        &self.formation
+    }
+}
+
+impl Simulation {
+    /// Builds a simulation from agents and settings that are valid by
+    /// construction ([`AgentSpec::new`], [`SimConfig::new`]), refusing what
+    /// only exists at the level of the formation ([`Agents::new`]).
+    pub fn new(
+        agents: Vec<AgentSpec>,
+        reference: Reference,
+        config: SimConfig,
+    ) -> Result<Simulation, SimError> {
+        Ok(Simulation::of(Agents::new(agents)?, reference, config))
+    }
+
+    /// [`Simulation::new`] for agents already checked together: checks nothing.
+    pub fn of(agents: Agents, reference: Reference, config: SimConfig) -> Simulation {
+        let Agents {
+            specs: agents,
+            formation,
+        } = agents;
+        let mut warnings = Vec::new();
+        for (i, a) in agents.iter().enumerate() {
+            let ctx = format!("agent {}", i + 1);
             if a.variant == Variant::Paper && a.gains.ke * a.gains.kz <= 0.25 {
                 warnings.push(format!(
                     "{ctx}: K_e K_z = {} ≤ 1/4: Theorem 1 does not guarantee convergence for the paper law (use law = \"complete\")",
@@ -374,7 +409,7 @@ impl Simulation {
                 ));
             }
         }
-        let formation = Formation::new(agents.iter().map(|a| a.leader).collect())?;
+
         let order = if agents.iter().any(|a| a.placement.uses_exact_derivatives()) {
             Order::Four
         } else {
@@ -383,7 +418,7 @@ impl Simulation {
         let uses_reference = agents.iter().any(|a| a.leader == Leader::Reference);
         let n = agents.len();
         let state: Vec<State> = agents.iter().map(|a| a.start).collect();
-        Ok(Simulation {
+        Simulation {
             sys: System {
                 agents,
                 formation,
@@ -392,8 +427,8 @@ impl Simulation {
                 uses_reference,
             },
             config,
-            steps: steps as u64,
-            hold_every,
+            steps: config.steps(),
+            hold_every: config.hold_every(),
             warnings,
             step: 0,
             state,
@@ -408,7 +443,7 @@ impl Simulation {
             k2: vec![State::default(); n],
             k3: vec![State::default(); n],
             k4: vec![State::default(); n],
-        })
+        }
     }
 
     /// Gives agents odometers: `specs[i]` for agent `i` (`None`: it knows its true
@@ -441,20 +476,15 @@ impl Simulation {
                     every.push(1);
                 }
                 Some(spec) => {
-                    let k = whole_ratio(spec.period, dt).ok_or_else(|| {
-                        SimError::Timing(format!(
-                            "{}: period {} s is not a whole multiple of dt = {dt} s",
-                            context(),
-                            spec.period
-                        ))
-                    })?;
                     let a = &self.sys.agents[i];
-                    let o = Odometer::new(spec, &a.robot, &a.start, seed, i as u64).map_err(
-                        |source| SimError::Param {
-                            context: context(),
-                            source,
-                        },
-                    )?;
+                    let param = |source| SimError::Param {
+                        context: context(),
+                        source,
+                    };
+                    let k = check::multiple_of("period", spec.period, dt, &format!("dt = {dt} s"))
+                        .map_err(param)?;
+                    let o =
+                        Odometer::new(spec, &a.robot, &a.start, seed, i as u64).map_err(param)?;
                     odometers.push(Some(o));
                     every.push(k);
                 }

@@ -10,10 +10,11 @@ use std::io::{self, Write};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::check;
 use crate::error::{ParamError, ScenarioError, SimError};
 use crate::odometry::ZetaModel;
 use crate::odometry::bound::Theorem2;
-use crate::scenario::schema::{FixesSection, OdometrySection, ZetaModelName};
+use crate::scenario::schema::{FixesSection, Fusion, OdometrySection};
 use crate::scenario::{Overrides, Run, Scenario};
 use crate::sim::{Frame, ObserverError};
 
@@ -161,17 +162,17 @@ impl Grid {
                 return Err(ParamError::new(field, 0.0, "needs at least one value"));
             }
         }
-        for (field, values, min_ok) in [("zeta", &self.zeta, 0.0), ("slip", &self.slip, 0.0)] {
-            if let Some(&v) = values.iter().find(|v| !(v.is_finite() && **v >= min_ok)) {
-                return Err(ParamError::new(field, v, "must be a finite number ≥ 0"));
+        for (field, values) in [("zeta", &self.zeta), ("slip", &self.slip)] {
+            for &v in values {
+                check::non_negative(field, v)?;
             }
         }
         for (field, values) in [
             ("wheel_diameter_ratio", &self.wheel_diameter_ratio),
             ("wheelbase_ratio", &self.wheelbase_ratio),
         ] {
-            if let Some(&v) = values.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
-                return Err(ParamError::new(field, v, "must be a finite number > 0"));
+            for &v in values {
+                check::positive(field, v)?;
             }
         }
         if !(self.gamma > 0.0 && self.gamma < 1.0) {
@@ -181,13 +182,7 @@ impl Grid {
                 "must be in (0, 1) (Theorem 2's γ)",
             ));
         }
-        if !(self.transient.is_finite() && self.transient >= 0.0) {
-            return Err(ParamError::new(
-                "transient",
-                self.transient,
-                "must be a finite number ≥ 0",
-            ));
-        }
+        check::non_negative("transient", self.transient)?;
         Ok(())
     }
 }
@@ -198,10 +193,7 @@ pub fn apply(scenario: &Scenario, case: &Case, zeta_model: ZetaModel) -> Scenari
     let mut s = scenario.clone();
     let set_odometry = |o: &mut OdometrySection| {
         o.zeta = Some(case.zeta);
-        o.zeta_model = Some(match zeta_model {
-            ZetaModel::Wheels => ZetaModelName::Wheels,
-            ZetaModel::WorstCase => ZetaModelName::WorstCase,
-        });
+        o.zeta_model = Some(zeta_model);
         o.wheel_diameter_ratio = Some(case.wheel_diameter_ratio);
         o.wheelbase_ratio = Some(case.wheelbase_ratio);
         o.slip = Some(case.slip);
@@ -322,8 +314,7 @@ fn noise_free(s: &Scenario) -> bool {
         x.position_noise.unwrap_or(0.0) == 0.0
             && x.heading_noise.unwrap_or(0.0) == 0.0
             && x.latency.unwrap_or(0.0) == 0.0
-            && x.fusion
-                .is_none_or(|m| m == crate::scenario::schema::FusionName::Reset)
+            && x.fusion.is_none_or(|m| m == Fusion::Reset)
     };
     f.odometry.as_ref().is_none_or(odometry_ok)
         && f.fixes.as_ref().is_none_or(fixes_ok)

@@ -22,11 +22,7 @@ fn relative(a: f64, b: f64) -> f64 {
 /// Steps both `steps` times and compares states and controller outputs;
 /// returns the largest relative difference seen.
 fn compare(agents: Vec<AgentSpec>, reference: Reference, dt: f64, steps: u64) -> f64 {
-    let config = SimConfig {
-        dt,
-        duration: steps as f64 * dt,
-        timing: Timing::Continuous,
-    };
+    let config = SimConfig::new(dt, steps as f64 * dt, Timing::Continuous).unwrap();
     let mut sim = Simulation::new(agents, reference, config).unwrap();
     let mut engine = Engine::from_simulation(&sim).unwrap();
     let mut worst = 0.0f64;
@@ -145,11 +141,7 @@ fn near_formation(f: &BenchFormation) -> Vec<AgentSpec> {
 #[test]
 fn long_chains_agree_as_well_as_their_sensitivity_allows() {
     let f = formation(300, Topology::Chain, 21);
-    let config = SimConfig {
-        dt: 0.01,
-        duration: 20.0,
-        timing: Timing::Continuous,
-    };
+    let config = SimConfig::new(0.01, 20.0, Timing::Continuous).unwrap();
     let mut specs = f.agent_specs();
     let mut sim = Simulation::new(specs.clone(), f.reference(), config).unwrap();
     let mut engine = Engine::from_simulation(&sim).unwrap();
@@ -199,34 +191,33 @@ fn other_laws_placements_and_references_match() {
         let agents: Vec<AgentSpec> = (0..6)
             .map(|i| {
                 let k = i as f64;
-                AgentSpec {
-                    name: format!("agent {}", i + 1),
+                AgentSpec::new(
+                    format!("agent {}", i + 1),
                     robot,
-                    leader: if leader_of && i > 0 {
+                    if leader_of && i > 0 {
                         Leader::Agent(i - 1)
                     } else {
                         Leader::Reference
                     },
-                    placement: Placement::new(
+                    Placement::new(
                         0.3 + 0.1 * k,
                         0.5 - 0.2 * k,
                         0.05,
                         comp,
                         LyDerivatives::Neglect,
-                    ),
-                    gains: Gains {
-                        ke: 1.0 + 0.2 * k,
-                        kz: 8.0 + k,
-                    },
+                    )
+                    .unwrap(),
+                    Gains::new(1.0 + 0.2 * k, 8.0 + k).unwrap(),
                     variant,
-                    start: State {
+                    State {
                         x: 1.5 - k,
                         y: -0.5 * k,
                         theta: 0.3 * k,
                         v: 0.1 * k,
                         omega: -0.05 * k,
                     },
-                }
+                )
+                .unwrap()
             })
             .collect();
         compare(agents, lemniscate.clone(), 0.005, 1500);
@@ -310,27 +301,16 @@ fn what_the_engine_cannot_do_is_refused() {
     let mut specs = f.agent_specs();
     specs[3].placement.derivatives = LyDerivatives::Exact;
     assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
-    let mut specs = f.agent_specs();
-    specs[1].gains.kz = -1.0;
-    let err = Engine::from_agents(&specs, f.reference(), 0.01).unwrap_err();
-    assert!(
-        err.to_string().contains("agent 2") && err.to_string().contains("kz"),
-        "{err}"
-    );
+    // Impossible values cannot reach the engine: the constructors refuse them.
+    let err = Gains::new(1.5, -1.0).unwrap_err();
+    assert_eq!(err.field, "kz", "{err}");
     assert!(Engine::from_agents(&[], f.reference(), 0.01).is_err());
     assert!(f.engine(0.0).is_err());
-    let config = SimConfig {
-        dt: 0.01,
-        duration: 1.0,
-        timing: Timing::Sampled { period: 0.02 },
-    };
+    let config = SimConfig::new(0.01, 1.0, Timing::Sampled { period: 0.02 }).unwrap();
     let sim = Simulation::new(f.agent_specs(), f.reference(), config).unwrap();
     assert!(Engine::from_simulation(&sim).is_err());
     // Odometry: the controllers act on estimates, which the engine does not model.
-    let config = SimConfig {
-        timing: Timing::Continuous,
-        ..config
-    };
+    let config = SimConfig::new(0.01, 1.0, Timing::Continuous).unwrap();
     let spec = echelon::odometry::OdometrySpec {
         period: 0.01,
         errors: echelon::odometry::ErrorModel::PERFECT,
@@ -354,17 +334,10 @@ fn a_blow_up_is_reported_like_the_scalar_simulator_does() {
     ] {
         let mut specs = f.agent_specs();
         specs[bad].placement =
-            Placement::new(-0.049_999, 0.0, 0.05, LyComp::Fit, LyDerivatives::Neglect);
-        specs[bad].gains = Gains {
-            ke: 50.0,
-            kz: 500.0,
-        };
+            Placement::new(-0.049_999, 0.0, 0.05, LyComp::Fit, LyDerivatives::Neglect).unwrap();
+        specs[bad].gains = Gains::new(50.0, 500.0).unwrap();
         let dt = 0.05;
-        let config = SimConfig {
-            dt,
-            duration: 100.0,
-            timing: Timing::Continuous,
-        };
+        let config = SimConfig::new(dt, 100.0, Timing::Continuous).unwrap();
         let mut sim = Simulation::new(specs.clone(), f.reference(), config).unwrap();
         let want = loop {
             if let Err(e) = sim.step() {

@@ -207,7 +207,7 @@ fn torque_saturation_limits_every_wheel() {
 
 #[test]
 fn tracking_placement_ignores_curvature() {
-    let p = Placement::tracking(0.05);
+    let p = Placement::tracking(0.05).unwrap();
     assert_eq!(p.lx(), 0.05);
     assert_eq!(p.offset_for_robot(0.5, 3.0).ly, 0.0);
 }

@@ -351,7 +351,38 @@ fn overrides_replace_the_files_timing_and_law() {
         dt: Some(-1.0),
         ..Overrides::default()
     });
-    assert_eq!(bad.unwrap_err().field, "--dt");
+    let err = bad.unwrap_err();
+    assert_eq!(err.field, "--dt");
+    assert_eq!(
+        err.to_string(),
+        "command line: --dt: -1 must be a finite number > 0"
+    );
+    // The law flag wins over an agent's own law, as over the file's.
+    let own = BASE.replacen(
+        "[[agents]]\n",
+        "[[agents]]\ncontrol = { law = \"paper\" }\n",
+        1,
+    );
+    let run = Scenario::parse(&own, "test.toml", None)
+        .unwrap()
+        .build(&Overrides {
+            law: Some(echelon::Variant::Complete),
+            ..Overrides::default()
+        })
+        .unwrap();
+    assert!(
+        run.simulation
+            .agents()
+            .iter()
+            .all(|a| a.variant == echelon::Variant::Complete)
+    );
+    // A value from the file is still located in the file.
+    let err = build(&BASE.replace("dt = 0.01\n", "dt = -0.01\n")).unwrap_err();
+    assert_eq!(
+        (err.location.line, err.field.as_str()),
+        (4, "sim.dt"),
+        "{err}"
+    );
 }
 
 fn run_into(dir: &Path, name: &str) -> output::RunSummary {

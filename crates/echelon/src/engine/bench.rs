@@ -68,15 +68,13 @@ impl BenchFormation {
                     0.0
                 }
             };
+            // 0.2 ≤ L_Xoff ≤ 0.8 and L > 0: valid, in the range of the eq. 6 fit.
+            let placement =
+                Placement::new(lx_off, ly_off, Self::L, LyComp::Fit, LyDerivatives::Neglect)
+                    .expect("a placement in the fit's range is valid");
             Member {
                 start: State::at_rest(x, y, theta),
-                placement: Placement::new(
-                    lx_off,
-                    ly_off,
-                    Self::L,
-                    LyComp::Fit,
-                    LyDerivatives::Neglect,
-                ),
+                placement,
                 gains: Gains::PAPER,
             }
         })
@@ -103,13 +101,13 @@ impl BenchFormation {
 
     /// The batch engine for this formation at step `dt`.
     pub fn engine(&self, dt: f64) -> Result<Engine, EngineError> {
-        let batch = Batch {
-            robot: Self::ROBOT,
-            variant: Variant::Paper,
-            topology: self.topology,
-            reference: self.reference(),
+        let batch = Batch::new(
+            Self::ROBOT,
+            Variant::Paper,
+            self.topology,
+            self.reference(),
             dt,
-        };
+        )?;
         Engine::new(batch, self.members())
     }
 }

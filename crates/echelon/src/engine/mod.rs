@@ -33,8 +33,9 @@ mod kernel;
 use pulp::{Arch, Simd, WithSimd};
 use rayon::prelude::*;
 
+use crate::check;
 use crate::control::{Gains, LawRobot, Variant};
-use crate::error::{FormationError, ParamError, SimError};
+use crate::error::{ParamError, SimError};
 use crate::formation::Leader;
 use crate::lanes::{Lanes, Mask};
 use crate::lycomp::{LyComp, Placement};
@@ -64,8 +65,9 @@ pub enum Topology {
     Chain,
 }
 
-/// What the agents of a batch share.
+/// What the agents of a batch share. Built by [`Batch::new`].
 #[derive(Debug, Clone)]
+#[non_exhaustive]
 pub struct Batch {
     /// Every agent's body.
     pub robot: RobotParams,
@@ -79,8 +81,9 @@ pub struct Batch {
     pub dt: f64,
 }
 
-/// One agent of a batch.
+/// One agent of a batch. Built by [`Member::new`].
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
 pub struct Member {
     /// Initial state.
     pub start: State,
@@ -119,40 +122,54 @@ pub struct Engine {
     arch: Arch,
 }
 
-fn param(context: String, field: &'static str, value: f64, reason: &'static str) -> SimError {
-    SimError::Param {
-        context,
-        source: ParamError::new(field, value, reason),
+impl Batch {
+    /// What a batch's agents share, refusing an impossible robot
+    /// ([`RobotParams::validate`]) or a step that is not a finite number > 0.
+    pub fn new(
+        robot: RobotParams,
+        variant: Variant,
+        topology: Topology,
+        reference: Reference,
+        dt: f64,
+    ) -> Result<Batch, SimError> {
+        let param = |context: &str| {
+            let context = context.to_owned();
+            move |source| SimError::Param { context, source }
+        };
+        check::positive("dt", dt).map_err(param("sim"))?;
+        robot.validate().map_err(param("robot"))?;
+        Ok(Batch {
+            robot,
+            variant,
+            topology,
+            reference,
+            dt,
+        })
     }
 }
 
-fn check(
-    ctx: impl FnOnce() -> String,
-    field: &'static str,
-    v: f64,
-    positive: bool,
-) -> Result<(), SimError> {
-    if !v.is_finite() {
-        return Err(param(ctx(), field, v, "must be a finite number"));
+impl Member {
+    /// One agent, refusing a start state that is not finite and what
+    /// [`Placement::new`] and [`Gains::new`] refuse.
+    pub fn new(start: State, placement: Placement, gains: Gains) -> Result<Member, ParamError> {
+        start.validate_start()?;
+        placement.validate()?;
+        gains.validate()?;
+        Ok(Member {
+            start,
+            placement,
+            gains,
+        })
     }
-    if positive && v <= 0.0 {
-        return Err(param(ctx(), field, v, "must be a finite number > 0"));
-    }
-    Ok(())
 }
 
 impl Engine {
-    /// Builds a batch, refusing what [`Simulation::new`] refuses (naming the
-    /// 1-based agent) and what the engine does not do.
+    /// Builds a batch from values valid by construction ([`Batch::new`],
+    /// [`Member::new`]), refusing what the engine does not do.
     pub fn new(
         batch: Batch,
         members: impl IntoIterator<Item = Member>,
     ) -> Result<Engine, EngineError> {
-        check(|| "sim".into(), "dt", batch.dt, true)?;
-        batch.robot.validate().map_err(|source| SimError::Param {
-            context: "robot".into(),
-            source,
-        })?;
         let limit = batch.robot.torque_limit.map(|tau| Limit {
             tau,
             r: batch.robot.wheel_radius,
@@ -170,7 +187,11 @@ impl Engine {
         let mut n = 0usize;
         for m in members {
             n += 1;
-            validate(n, &m)?;
+            if m.placement.uses_exact_derivatives() {
+                return Err(EngineError::Unsupported(format!(
+                    "exact L_Y derivatives (agent {n}; use ly_derivatives = \"neglect\")"
+                )));
+            }
             match comp {
                 None => comp = Some(m.placement.comp),
                 Some(c) if c != m.placement.comp => {
@@ -274,13 +295,8 @@ impl Engine {
                 )));
             }
         }
-        let batch = Batch {
-            robot: first.robot,
-            variant: first.variant,
-            topology,
-            reference,
-            dt,
-        };
+        let batch = Batch::new(first.robot, first.variant, topology, reference, dt)?;
+        // Each agent is valid by construction (`AgentSpec::new`).
         Engine::new(
             batch,
             agents.iter().map(|a| Member {
@@ -499,46 +515,6 @@ impl Engine {
 /// (Monte Carlo sweeps: independent runs).
 pub fn sweep(engines: &mut [Engine], steps: u64) -> Vec<Result<(), SimError>> {
     engines.par_iter_mut().map(|e| e.run(steps)).collect()
-}
-
-/// [`Simulation::new`]'s checks on one agent, and the engine's own.
-fn validate(i: usize, m: &Member) -> Result<(), EngineError> {
-    let ctx = || format!("agent {i}");
-    let p = &m.placement;
-    check(ctx, "ke", m.gains.ke, true)?;
-    check(ctx, "kz", m.gains.kz, true)?;
-    check(ctx, "l", p.l, true)?;
-    check(ctx, "offset.x", p.lx_off, false)?;
-    check(ctx, "offset.y", p.ly_off, false)?;
-    if p.lx() <= 0.0 {
-        return Err(SimError::from(FormationError::NonPositiveLx {
-            agent: i,
-            lx: p.lx(),
-        })
-        .into());
-    }
-    let s = &m.start;
-    for (field, v) in [
-        ("start.x", s.x),
-        ("start.y", s.y),
-        ("start.theta", s.theta),
-        ("start.v", s.v),
-        ("start.omega", s.omega),
-    ] {
-        check(ctx, field, v, false)?;
-    }
-    if p.uses_exact_derivatives() {
-        return Err(EngineError::Unsupported(format!(
-            "exact L_Y derivatives (agent {i}; use ly_derivatives = \"neglect\")"
-        )));
-    }
-    if p.comp == LyComp::Fit {
-        for (field, v) in [("fit.g", p.fit.g), ("fit.epsilon", p.fit.epsilon)] {
-            check(ctx, field, v, false)?;
-        }
-        check(ctx, "fit.delta", p.fit.delta.abs(), true)?;
-    }
-    Ok(())
 }
 
 /// Packs up to `W` members (padded by the caller) into a block; the first

@@ -21,6 +21,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
+use crate::check;
 use crate::error::ParamError;
 use crate::math::sinc;
 use crate::model::{Pose, RobotParams, State};
@@ -69,8 +70,10 @@ pub fn dead_reckon(pose: &Pose, d: WheelDisplacement, half_wheelbase: f64) -> Po
     arc_update(pose, delta, big_theta)
 }
 
-/// How the paper's additive error `ζ` enters.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How the paper's additive error `ζ` enters (`zeta_model = "wheels"` or
+/// `"worst-case"` in a scenario).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum ZetaModel {
     /// Assumption 1, eq. 23: each wheel's true displacement exceeds the measured
     /// one by `ζ` every sample, so `Δ = Δ̂ + ζ`, `Θ = Θ̂` (eq. 24): the heading
@@ -129,42 +132,31 @@ impl ErrorModel {
 
     /// Refuses non-finite values, negative variances and ratios ≤ 0.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let finite = [
+        for (field, v) in [
             ("zeta", self.zeta),
             ("wheel_diameter_ratio", self.wheel_diameter_ratio),
             ("wheelbase_ratio", self.wheelbase_ratio),
             ("slip", self.slip),
             ("speed_noise", self.speed_noise),
             ("turn_rate_noise", self.turn_rate_noise),
-        ];
-        for (field, v) in finite {
-            if !v.is_finite() {
-                return Err(ParamError::new(field, v, "must be a finite number"));
-            }
+        ] {
+            check::finite(field, v)?;
         }
         for (field, v) in [
             ("wheel_diameter_ratio", self.wheel_diameter_ratio),
             ("wheelbase_ratio", self.wheelbase_ratio),
         ] {
-            if v <= 0.0 {
-                return Err(ParamError::new(
-                    field,
-                    v,
-                    "must be > 0 (1 is a perfect robot)",
-                ));
-            }
+            check::require(field, v, v > 0.0, "must be > 0 (1 is a perfect robot)")?;
         }
         for (field, v) in [
             ("slip", self.slip),
             ("speed_noise", self.speed_noise),
             ("turn_rate_noise", self.turn_rate_noise),
         ] {
-            if v < 0.0 {
-                return Err(ParamError::new(field, v, "must be ≥ 0"));
-            }
+            check::require(field, v, v >= 0.0, "must be ≥ 0")?;
         }
-        if self.ticks_per_rev == Some(0) {
-            return Err(ParamError::new("ticks_per_rev", 0.0, "must be ≥ 1"));
+        if let Some(n) = self.ticks_per_rev {
+            check::at_least_one("ticks_per_rev", n.into())?;
         }
         Ok(())
     }
@@ -186,8 +178,9 @@ pub enum FixSchedule {
     Period(f64),
 }
 
-/// How a fix corrects the estimate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How a fix corrects the estimate (`fusion = "reset"` or `"ekf"` in a scenario).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Fusion {
     /// Replace the estimate by the fix (the paper's "recalibration").
     #[default]
@@ -215,24 +208,32 @@ impl FixSpec {
     /// Refuses an empty schedule and negative or non-finite noises and latency.
     pub fn validate(&self) -> Result<(), ParamError> {
         match self.schedule {
-            FixSchedule::EverySamples(0) => {
-                return Err(ParamError::new("every_steps", 0.0, "must be ≥ 1"));
+            FixSchedule::EverySamples(n) => {
+                check::at_least_one("every_steps", n)?;
             }
-            FixSchedule::Period(p) if !(p.is_finite() && p > 0.0) => {
-                return Err(ParamError::new("period", p, "must be a finite number > 0"));
-            }
-            _ => {}
-        }
-        for (field, v) in [
-            ("position_noise", self.position_noise),
-            ("heading_noise", self.heading_noise.unwrap_or(0.0)),
-            ("latency", self.latency),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(ParamError::new(field, v, "must be a finite number ≥ 0"));
+            FixSchedule::Period(p) => {
+                check::positive("period", p)?;
             }
         }
+        check::non_negative("position_noise", self.position_noise)?;
+        if let Some(v) = self.heading_noise {
+            check::non_negative("heading_noise", v)?;
+        }
+        check::non_negative("latency", self.latency)?;
         Ok(())
+    }
+
+    /// Odometry samples between fixes, for sampling every `period` seconds.
+    pub fn samples_between(&self, period: f64) -> Result<u64, ParamError> {
+        match self.schedule {
+            FixSchedule::EverySamples(n) => check::at_least_one("every_steps", n),
+            FixSchedule::Period(p) => check::multiple_of(
+                "period",
+                p,
+                period,
+                &format!("the odometry period {period} s"),
+            ),
+        }
     }
 }
 
@@ -245,6 +246,38 @@ pub struct OdometrySpec {
     pub errors: ErrorModel,
     /// Absolute fixes, if any.
     pub fixes: Option<FixSpec>,
+}
+
+impl OdometrySpec {
+    /// A robot's odometry, refusing a period that is not a finite number > 0,
+    /// an invalid error model or fixes ([`ErrorModel::validate`],
+    /// [`FixSpec::validate`]) and fixes that are not a whole number of samples apart.
+    pub fn new(
+        period: f64,
+        errors: ErrorModel,
+        fixes: Option<FixSpec>,
+    ) -> Result<OdometrySpec, ParamError> {
+        let spec = OdometrySpec {
+            period,
+            errors,
+            fixes,
+        };
+        spec.validate()?;
+        Ok(spec)
+    }
+
+    /// [`OdometrySpec::new`]'s checks; the samples between fixes (0: no fixes).
+    fn validate(&self) -> Result<u64, ParamError> {
+        check::positive("period", self.period)?;
+        self.errors.validate()?;
+        match &self.fixes {
+            None => Ok(0),
+            Some(f) => {
+                f.validate()?;
+                f.samples_between(self.period)
+            }
+        }
+    }
 }
 
 /// A fix on its way to the robot.
@@ -294,30 +327,7 @@ impl Odometer {
         seed: u64,
         stream: u64,
     ) -> Result<Odometer, ParamError> {
-        spec.errors.validate()?;
-        if !(spec.period.is_finite() && spec.period > 0.0) {
-            return Err(ParamError::new(
-                "period",
-                spec.period,
-                "must be a finite number > 0",
-            ));
-        }
-        let fix_every = match spec.fixes {
-            None => 0,
-            Some(f) => {
-                f.validate()?;
-                match f.schedule {
-                    FixSchedule::EverySamples(n) => n,
-                    FixSchedule::Period(p) => {
-                        crate::sim::whole_ratio(p, spec.period).ok_or(ParamError::new(
-                            "period",
-                            p,
-                            "must be a whole multiple of the odometry period",
-                        ))?
-                    }
-                }
-            }
-        };
+        let fix_every = spec.validate()?;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(stream);
         let estimate = start.pose();

@@ -66,13 +66,9 @@ impl SquareTest {
             ("wheel_radius", self.wheel_radius),
             ("half_wheelbase", self.half_wheelbase),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(ParamError::new(f, v, "must be a finite number > 0"));
-            }
+            crate::check::positive(f, v)?;
         }
-        if self.runs == 0 {
-            return Err(ParamError::new("runs", 0.0, "must be ≥ 1"));
-        }
+        crate::check::at_least_one("runs", self.runs as u64)?;
         Ok(())
     }
 

@@ -2,8 +2,8 @@
 //! simulation (fleet name, rates, link-loss policies).
 
 use super::locate::FieldPath;
-use super::schema::LinkPolicyName;
 use super::{Merge, Scenario};
+use crate::check;
 use crate::error::ScenarioError;
 
 /// Default reference publication rate, Hz.
@@ -19,8 +19,10 @@ pub const DEFAULT_HOLD: f64 = 1.0;
 /// Default peak deceleration of `extrapolate`'s stop, m/s².
 pub const DEFAULT_DECEL: f64 = 0.1;
 
-/// What a robot does when its leader's stream is lost.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// What a robot does when its leader's stream is lost (`policy = "stop"` or
+/// `"extrapolate"` in a scenario).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum LinkPolicy {
     /// Converge to the last received position (the paper's experiment).
     Stop,
@@ -110,12 +112,8 @@ impl Scenario {
             }
         };
         let positive = |v: Option<f64>, key: &str, default: f64| -> Result<f64, ScenarioError> {
-            let v = v.unwrap_or(default);
-            if v.is_finite() && v > 0.0 {
-                Ok(v)
-            } else {
-                Err(self.error(&at.key(key), format!("{v} must be a finite number > 0")))
-            }
+            check::positive("", v.unwrap_or(default))
+                .map_err(|e| self.locator().param(&at.key(key), &e))
         };
         let reference_rate = positive(f.reference_rate, "reference_rate", DEFAULT_REFERENCE_RATE)?;
         let control_rate = positive(f.control_rate, "control_rate", DEFAULT_CONTROL_RATE)?;
@@ -135,11 +133,7 @@ impl Scenario {
                 );
                 let pick = |get, key: &str, default: f64| {
                     let (v, path) = links.get_or(get, key, default);
-                    if v.is_finite() && v >= 0.0 {
-                        Ok(v)
-                    } else {
-                        Err(self.error(&path, format!("{v} must be a finite number ≥ 0")))
-                    }
+                    check::non_negative("", v).map_err(|e| self.locator().param(&path, &e))
                 };
                 let hold = pick(|l| l.hold, "hold", DEFAULT_HOLD)?;
                 let decel = pick(|l| l.decel, "decel", DEFAULT_DECEL)?;
@@ -147,13 +141,7 @@ impl Scenario {
                     let (_, path) = links.get_or(|l| l.decel, "decel", decel);
                     return Err(self.error(&path, "0 must be > 0 (a robot must be able to stop)"));
                 }
-                let policy = match links
-                    .get_or(|l| l.policy, "policy", LinkPolicyName::Extrapolate)
-                    .0
-                {
-                    LinkPolicyName::Stop => LinkPolicy::Stop,
-                    LinkPolicyName::Extrapolate => LinkPolicy::Extrapolate,
-                };
+                let (policy, _) = links.get_or(|l| l.policy, "policy", LinkPolicy::Extrapolate);
                 Ok(LinkLoss {
                     policy,
                     hold,

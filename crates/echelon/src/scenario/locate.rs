@@ -1,11 +1,15 @@
 //! From byte offsets to `line:column` and field paths, and back, over the
 //! spanned parse of a scenario file, so that every error names where it is.
+//! [`Locator`] is the one place that turns a field path into a location: the
+//! file's `line:column`, or the command line for a value a flag set.
 
-use std::fmt;
+use std::fmt::{self, Display};
 use std::ops::Range;
 
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
+
+use crate::error::{Location, ParamError, ScenarioError};
 
 /// One step of a field path.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -31,6 +35,119 @@ impl FieldPath {
         let mut p = self.clone();
         p.0.push(Seg::Index(i));
         p
+    }
+
+    /// This path followed by a dotted relative one (`start.x`).
+    pub(crate) fn join(&self, rel: &str) -> FieldPath {
+        let mut p = self.clone();
+        p.0.extend(rel.split('.').map(|k| Seg::Key(k.to_owned())));
+        p
+    }
+}
+
+/// Which fields the command line set, and by which flag (`sim.dt` ← `--dt`).
+pub(crate) type Origins = Vec<(FieldPath, &'static str)>;
+
+/// Turns field paths into locations in one scenario source.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Locator<'a> {
+    source: &'a str,
+    origin: &'a str,
+    flags: &'a [(FieldPath, &'static str)],
+}
+
+impl<'a> Locator<'a> {
+    /// Errors in `source`, named `origin`; `flags` are the fields the command line set.
+    pub(crate) fn new(
+        source: &'a str,
+        origin: &'a str,
+        flags: &'a [(FieldPath, &'static str)],
+    ) -> Locator<'a> {
+        Locator {
+            source,
+            origin,
+            flags,
+        }
+    }
+
+    /// An error at `path`: `file:line:column: path: message`, or
+    /// `command line: --flag: message` when a flag set the value.
+    pub(crate) fn error(&self, path: &FieldPath, message: impl Display) -> ScenarioError {
+        if let Some((_, flag)) = self.flags.iter().find(|(p, _)| p == path) {
+            return ScenarioError {
+                location: Location {
+                    file: "command line".into(),
+                    line: 0,
+                    column: 0,
+                },
+                field: (*flag).to_owned(),
+                message: message.to_string(),
+            };
+        }
+        let (line, column) = Spans::new(self.source)
+            .span_of(path)
+            .map_or((0, 0), |s| line_col(self.source, s.start));
+        ScenarioError {
+            location: Location {
+                file: self.origin.to_owned(),
+                line,
+                column,
+            },
+            field: path.to_string(),
+            message: message.to_string(),
+        }
+    }
+
+    /// A refused value at `path`: `value reason`.
+    pub(crate) fn param(&self, path: &FieldPath, e: &ParamError) -> ScenarioError {
+        self.error(path, format!("{} {}", e.value, e.reason))
+    }
+
+    /// A TOML syntax or type error, at the field it is in.
+    pub(crate) fn parse_error(&self, e: &toml::de::Error) -> ScenarioError {
+        let source = self.source;
+        let offset = e.span().map_or(0, |s| s.start);
+        let spans = Spans::new(source);
+        let mut field = spans.path_at(offset);
+        // After a syntax error the recovered spans are only trusted when the
+        // field's key is on the error's own line.
+        let syntax_error = DeTable::parse(source).is_err();
+        let key_on_error_line = spans
+            .key_span_of(&field)
+            .is_some_and(|s| line_col(source, s.start).0 == line_col(source, offset).0);
+        if syntax_error && !key_on_error_line {
+            field = FieldPath::default();
+        }
+        let message = e.message().trim().to_owned();
+        if let Some(missing) = message
+            .strip_prefix("missing field `")
+            .and_then(|m| m.strip_suffix('`'))
+        {
+            field = field.key(missing);
+        }
+        let (line, column) = e.span().map_or((0, 0), |s| line_col(source, s.start));
+        ScenarioError {
+            location: Location {
+                file: self.origin.to_owned(),
+                line,
+                column,
+            },
+            field: field.to_string(),
+            message,
+        }
+    }
+}
+
+/// An error that is not at a field of the file: reading it, finding it.
+pub(crate) fn whole_file_error(file: &str, message: impl Display) -> ScenarioError {
+    ScenarioError {
+        location: Location {
+            file: file.to_owned(),
+            line: 0,
+            column: 0,
+        },
+        field: String::new(),
+        message: message.to_string(),
     }
 }
 

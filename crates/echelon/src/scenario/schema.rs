@@ -7,6 +7,11 @@ use std::fmt;
 use serde::de::{self, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
+pub use super::fleet::LinkPolicy;
+pub use crate::control::Variant;
+pub use crate::lycomp::{LyComp, LyDerivatives};
+pub use crate::odometry::{Fusion, ZetaModel};
+
 /// A whole scenario file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -65,7 +70,7 @@ pub struct OdometrySection {
     pub zeta: Option<f64>,
     /// `wheels` (eq. 23, default) or `worst-case` (eq. 31).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub zeta_model: Option<ZetaModelName>,
+    pub zeta_model: Option<ZetaModel>,
     /// Borenstein's `E_d = D_R/D_L` (default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wheel_diameter_ratio: Option<f64>,
@@ -81,16 +86,6 @@ pub struct OdometrySection {
     /// Standard deviation of the measured angular speed, rad/s (default 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub turn_rate_noise: Option<f64>,
-}
-
-/// How the paper's `ζ` enters.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ZetaModelName {
-    /// Eq. 23: the same `ζ` on both wheels every sample.
-    Wheels,
-    /// Eq. 31: `ζ` on both world axes every sample.
-    WorstCase,
 }
 
 /// `[fixes]`: absolute position fixes. All fields optional, but exactly one of
@@ -118,17 +113,7 @@ pub struct FixesSection {
     pub latency: Option<f64>,
     /// `reset` (the paper, default) or `ekf`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub fusion: Option<FusionName>,
-}
-
-/// How fixes correct the estimate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum FusionName {
-    /// Replace the estimate.
-    Reset,
-    /// Extended Kalman filter.
-    Ekf,
+    pub fusion: Option<Fusion>,
 }
 
 /// `[fleet]`: how the scenario runs as separate processes (`echelon fleet`).
@@ -164,24 +149,13 @@ impl FleetSection {
     }
 }
 
-/// What a robot does when its leader's stream is lost.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum LinkPolicyName {
-    /// Converge to the last received position (the paper's experiment).
-    Stop,
-    /// Advance the last reference with its last `V_d`, `ω_d` for `hold`
-    /// seconds, then decelerate smoothly to rest (default).
-    Extrapolate,
-}
-
 /// `[fleet.link_loss]` or an agent's `link_loss = { … }`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LinkLossSection {
     /// `stop` or `extrapolate` (default).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub policy: Option<LinkPolicyName>,
+    pub policy: Option<LinkPolicy>,
     /// How long `extrapolate` keeps the last speed after the last message, s
     /// (default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -220,38 +194,6 @@ impl LogSection {
     }
 }
 
-/// Which form of eq. 13.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum LawName {
-    /// The paper's law (default).
-    Paper,
-    /// Cross term cancelled.
-    Complete,
-}
-
-/// How `L_Ycomp` is computed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum LyCompName {
-    /// Eq. 5, curvature form.
-    Exact,
-    /// Eq. 6, the paper's fit (default).
-    Fit,
-    /// No compensation.
-    None,
-}
-
-/// Whether `L̇_Y`, `L̈_Y` enter the law.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum LyDerivativesName {
-    /// Neglected, as in the paper (default).
-    Neglect,
-    /// Exact (analytic references only).
-    Exact,
-}
-
 /// `[control]` (defaults for all agents) or an agent's `control` (overrides).
 /// Every field is optional; unset fields fall back to `[control]`, then to the
 /// paper's values.
@@ -260,7 +202,7 @@ pub enum LyDerivativesName {
 pub struct ControlSection {
     /// `paper` (default) or `complete`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub law: Option<LawName>,
+    pub law: Option<Variant>,
     /// `K_e` (default 1.5).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ke: Option<f64>,
@@ -272,10 +214,10 @@ pub struct ControlSection {
     pub l: Option<f64>,
     /// `exact`, `fit` (default) or `none`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub lycomp: Option<LyCompName>,
+    pub lycomp: Option<LyComp>,
     /// `neglect` (default) or `exact`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub ly_derivatives: Option<LyDerivativesName>,
+    pub ly_derivatives: Option<LyDerivatives>,
 }
 
 impl ControlSection {

@@ -9,20 +9,21 @@ use echelon::{AgentSpec, Gains, RobotParams, SimConfig, Simulation, State, Timin
 
 /// An agent with Table I agent 1's body and the paper's gains.
 pub fn agent(leader: Leader, placement: Placement, start: State, variant: Variant) -> AgentSpec {
-    AgentSpec {
-        name: "test".into(),
-        robot: RobotParams::AGENT1,
+    AgentSpec::new(
+        "test",
+        RobotParams::AGENT1,
         leader,
         placement,
-        gains: Gains::PAPER,
+        Gains::PAPER,
         variant,
         start,
-    }
+    )
+    .expect("a valid agent")
 }
 
 /// A leader-follower placement with the paper's L = 0.05 m.
 pub fn placement(lx_off: f64, ly_off: f64, comp: LyComp, derivatives: LyDerivatives) -> Placement {
-    Placement::new(lx_off, ly_off, 0.05, comp, derivatives)
+    Placement::new(lx_off, ly_off, 0.05, comp, derivatives).expect("a valid placement")
 }
 
 /// One recorded frame.
@@ -49,11 +50,7 @@ pub fn record_with(
     let mut sim = Simulation::new(
         agents,
         reference,
-        SimConfig {
-            dt,
-            duration,
-            timing,
-        },
+        SimConfig::new(dt, duration, timing).expect("valid settings"),
     )
     .expect("valid simulation");
     let mut samples = Vec::new();

@@ -1,0 +1,498 @@
+//! The parsed document turned into a [`Simulation`]: defaults resolved, each
+//! value given to its domain type's validating constructor, and each refusal
+//! attached to the field it came from as it happens.
+
+use std::path::{Path, PathBuf};
+
+use super::locate::{FieldPath, Locator};
+use super::merge::Merge;
+use super::overrides::Overrides;
+use super::schema::{
+    AgentSection, FixesSection, LeaderSpec, ModeName, OdometrySection, PoseSpec, ReferenceSection,
+    RobotSection, ScenarioFile,
+};
+use super::waypoints::{self, ReadError};
+use super::{DEFAULT_LOG_DT, Run, Scenario};
+use crate::check;
+use crate::control::{Gains, Variant};
+use crate::error::{FormationError, ParamError, ReferenceError, ScenarioError};
+use crate::formation::Leader;
+use crate::lycomp::{LyComp, LyDerivatives, Placement};
+use crate::math::whole_ratio;
+use crate::model::{RobotParams, State};
+use crate::odometry::{ErrorModel, FixSchedule, FixSpec, Fusion, OdometrySpec, ZetaModel};
+use crate::reference::{Circle, Cubic, Lemniscate, Reference, Waypoints};
+use crate::sim::{AgentSpec, Agents, SimConfig, Simulation, Timing};
+
+/// `L`, m, when neither the agent nor `[control]` sets it.
+const DEFAULT_L: f64 = 0.05;
+
+impl Scenario {
+    /// Applies the command-line overrides to the document, resolves defaults,
+    /// validates every value and builds the simulation.
+    pub fn build(&self, ov: &Overrides) -> Result<Run, ScenarioError> {
+        let mut file = self.file.clone();
+        let flags = ov.apply(&mut file);
+        let builder = Builder {
+            file: &file,
+            at: Locator::new(&self.source, &self.origin, &flags),
+            base_dir: self.base_dir.as_deref(),
+        };
+        let (simulation, log_every, seed) = builder.build()?;
+        Ok(Run {
+            name: self.name.clone(),
+            description: file.description.clone(),
+            simulation,
+            log_every,
+            seed,
+            record: self.record(ov),
+        })
+    }
+}
+
+/// One build of a document (with the overrides applied).
+struct Builder<'a> {
+    file: &'a ScenarioFile,
+    at: Locator<'a>,
+    base_dir: Option<&'a Path>,
+}
+
+impl Builder<'_> {
+    /// `r`, or its refusal at `path`.
+    fn at<T>(&self, path: &FieldPath, r: Result<T, ParamError>) -> Result<T, ScenarioError> {
+        r.map_err(|e| self.at.param(path, &e))
+    }
+
+    /// `r`, or its refusal at the field it names under `section`.
+    fn within<T>(&self, section: &FieldPath, r: Result<T, ParamError>) -> Result<T, ScenarioError> {
+        r.map_err(|e| self.at.param(&section.join(e.field), &e))
+    }
+
+    fn build(&self) -> Result<(Simulation, u64, u64), ScenarioError> {
+        let f = self.file;
+        let sim = FieldPath::from("sim");
+        let timing = match f.sim.controller_period {
+            None => Timing::Continuous,
+            Some(period) => Timing::Sampled { period },
+        };
+        let config = self.within(&sim, SimConfig::new(f.sim.dt, f.sim.duration, timing))?;
+        let dt = config.dt;
+        let log = FieldPath::from("log.dt");
+        let log_dt = self.at(
+            &log,
+            check::non_negative("dt", f.log.dt.unwrap_or(DEFAULT_LOG_DT)),
+        )?;
+        let log_every = if log_dt == 0.0 {
+            1
+        } else {
+            whole_ratio(log_dt, dt).ok_or_else(|| {
+                self.at.error(
+                    &log,
+                    format!(
+                        "{log_dt} s is not 0 (every step) or a whole multiple of dt = {dt} s (on the command line: --log-dt)"
+                    ),
+                )
+            })?
+        };
+        let reference = self.reference()?;
+        let specs = f
+            .agents
+            .iter()
+            .enumerate()
+            .map(|(i, a)| self.agent(i, a))
+            .collect::<Result<Vec<_>, _>>()?;
+        if specs.is_empty() {
+            return Err(self.at.error(
+                &FieldPath::from("agents"),
+                "a scenario needs at least one agent",
+            ));
+        }
+        let agents = Agents::new(specs).map_err(|e| self.formation_error(&e))?;
+        let odometry = f
+            .agents
+            .iter()
+            .enumerate()
+            .map(|(i, a)| self.odometry(i, a, dt, &timing))
+            .collect::<Result<Vec<_>, _>>()?;
+        let seed = f.seed.unwrap_or(0);
+        let simulation = Simulation::of(agents, reference, config)
+            .with_odometry(odometry, seed)
+            .map_err(|e| self.at.error(&FieldPath::from("odometry"), e))?;
+        Ok((simulation, log_every, seed))
+    }
+
+    /// Where a formation-level refusal belongs: the leader that breaks the
+    /// graph, or the setting that needs an analytic reference.
+    fn formation_error(&self, e: &FormationError) -> ScenarioError {
+        let agent = |k: usize| FieldPath::from("agents").index(k - 1);
+        let path = match e {
+            FormationError::Cycle(c) => agent(c[0]).key("leader"),
+            FormationError::Dangling { agent: a, .. } | FormationError::SelfLeader(a) => {
+                agent(*a).key("leader")
+            }
+            FormationError::ExactDerivativesNeedReference { agent: a, .. } => {
+                self.control(*a - 1).path_of("ly_derivatives")
+            }
+        };
+        self.at.error(&path, e)
+    }
+
+    /// Agent `i`'s control settings: its own, else `[control]`.
+    fn control(&self, i: usize) -> Merge<'_, super::schema::ControlSection> {
+        Merge::new(
+            self.file.agents[i].control.as_ref(),
+            Some(&self.file.control),
+            FieldPath::from("agents").index(i).key("control"),
+            FieldPath::from("control"),
+        )
+    }
+
+    fn pose(&self, p: &PoseSpec, path: &FieldPath, speeds: bool) -> Result<State, ScenarioError> {
+        let (theta, theta_key) = match (p.theta, p.theta_deg) {
+            (Some(_), Some(_)) => {
+                return Err(self.at.error(
+                    &path.key("theta_deg"),
+                    "give either theta (radians) or theta_deg (degrees), not both",
+                ));
+            }
+            (Some(t), None) => (t, "theta"),
+            (None, Some(d)) => (d.to_radians(), "theta_deg"),
+            (None, None) => {
+                return Err(self.at.error(
+                    path,
+                    "missing field `theta` (radians) or `theta_deg` (degrees)",
+                ));
+            }
+        };
+        if !speeds && (p.v.is_some() || p.omega.is_some()) {
+            let which = if p.v.is_some() { "v" } else { "omega" };
+            return Err(self.at.error(
+                &path.key(which),
+                "a reference's start pose takes no speed: its motion comes from the reference",
+            ));
+        }
+        let (v, omega) = (p.v.unwrap_or(0.0), p.omega.unwrap_or(0.0));
+        for (k, value) in [
+            ("x", p.x),
+            ("y", p.y),
+            (theta_key, theta),
+            ("v", v),
+            ("omega", omega),
+        ] {
+            self.at(&path.key(k), check::finite(k, value))?;
+        }
+        Ok(State {
+            x: p.x,
+            y: p.y,
+            theta,
+            v,
+            omega,
+        })
+    }
+
+    fn reference(&self) -> Result<Reference, ScenarioError> {
+        let at = |kind: &str| FieldPath::from("reference").key(kind);
+        // A reference's refusal at its field (`start.x`, `points[3]`, …).
+        let located = |section: FieldPath, e: ReferenceError| -> ScenarioError {
+            match e {
+                ReferenceError::Param(p) => self.at.param(&section.join(p.field), &p),
+                ReferenceError::TimesNotIncreasing { index, .. }
+                | ReferenceError::NonFiniteWaypoint { index } => {
+                    self.at.error(&section.key("points").index(index - 1), e)
+                }
+                ReferenceError::TooFewWaypoints(_) => self.at.error(&section.key("points"), e),
+            }
+        };
+        Ok(match &self.file.reference {
+            ReferenceSection::Circle {
+                speed,
+                turn_rate,
+                start,
+            } => {
+                let s = self.pose(start, &at("circle").key("start"), false)?;
+                Reference::Circle(
+                    Circle::new([s.x, s.y], s.theta, *speed, *turn_rate)
+                        .map_err(|e| located(at("circle"), e))?,
+                )
+            }
+            ReferenceSection::Line { speed, start } => {
+                let s = self.pose(start, &at("line").key("start"), false)?;
+                Reference::Circle(
+                    Circle::new([s.x, s.y], s.theta, *speed, 0.0)
+                        .map_err(|e| located(at("line"), e))?,
+                )
+            }
+            ReferenceSection::Lemniscate { a, c, center } => Reference::Lemniscate(
+                Lemniscate::new(*a, *c, center.unwrap_or([0.0, 0.0]))
+                    .map_err(|e| located(at("lemniscate"), e))?,
+            ),
+            ReferenceSection::Cubic { scale, t_switch } => Reference::Cubic(
+                Cubic::new(*scale, *t_switch).map_err(|e| located(at("cubic"), e))?,
+            ),
+            ReferenceSection::Waypoints { points, file } => {
+                let at = at("waypoints");
+                let pts = match (points, file) {
+                    (Some(p), None) => p.clone(),
+                    (None, Some(f)) => self.waypoint_file(f, &at.key("file"))?,
+                    (Some(_), Some(_)) => {
+                        return Err(self
+                            .at
+                            .error(&at.key("file"), "give either points or file, not both"));
+                    }
+                    (None, None) => {
+                        return Err(self.at.error(&at, "missing field `points` (or `file`)"));
+                    }
+                };
+                let via_file = file.is_some();
+                Reference::Waypoints(Waypoints::new(pts).map_err(|e| {
+                    if via_file {
+                        self.at.error(&at.key("file"), e)
+                    } else {
+                        located(at.clone(), e)
+                    }
+                })?)
+            }
+        })
+    }
+
+    /// Reads `t,x,y` rows from a CSV file next to the scenario.
+    fn waypoint_file(&self, name: &str, path: &FieldPath) -> Result<Vec<[f64; 3]>, ScenarioError> {
+        let full = match self.base_dir {
+            Some(d) => d.join(name),
+            None => PathBuf::from(name),
+        };
+        waypoints::read(&full).map_err(|e| match e {
+            ReadError::Unreadable(message) => self.at.error(path, message),
+            ReadError::Csv(e) => e,
+        })
+    }
+
+    fn robot(&self, name: &str, path: &FieldPath) -> Result<RobotParams, ScenarioError> {
+        if let Some(r) = self.file.robots.get(name) {
+            return self.robot_section(name, r);
+        }
+        RobotParams::preset(name).ok_or_else(|| {
+            let mut known: Vec<&str> = RobotParams::PRESETS.iter().map(|(n, _)| *n).collect();
+            known.extend(self.file.robots.keys().map(String::as_str));
+            self.at.error(
+                path,
+                format!("unknown robot `{name}` (known: {})", known.join(", ")),
+            )
+        })
+    }
+
+    fn robot_section(&self, name: &str, r: &RobotSection) -> Result<RobotParams, ScenarioError> {
+        let at = FieldPath::from("robots").key(name);
+        let base = match &r.preset {
+            Some(p) => Some(RobotParams::preset(p).ok_or_else(|| {
+                self.at.error(
+                    &at.key("preset"),
+                    format!("unknown preset `{p}` (presets: agent1, agent2)"),
+                )
+            })?),
+            None => None,
+        };
+        let field = |v: Option<f64>, from: Option<f64>, key: &str| -> Result<f64, ScenarioError> {
+            v.or(from).ok_or_else(|| {
+                self.at.error(
+                    &at,
+                    format!(
+                        "missing field `{key}` (or start from a preset with `preset = \"agent1\"`)"
+                    ),
+                )
+            })
+        };
+        let params = RobotParams {
+            mass: field(r.mass, base.map(|b| b.mass), "mass")?,
+            linear_friction: field(
+                r.linear_friction,
+                base.map(|b| b.linear_friction),
+                "linear_friction",
+            )?,
+            inertia: field(r.inertia, base.map(|b| b.inertia), "inertia")?,
+            angular_friction: field(
+                r.angular_friction,
+                base.map(|b| b.angular_friction),
+                "angular_friction",
+            )?,
+            half_wheelbase: field(
+                r.half_wheelbase,
+                base.map(|b| b.half_wheelbase),
+                "half_wheelbase",
+            )?,
+            wheel_radius: field(r.wheel_radius, base.map(|b| b.wheel_radius), "wheel_radius")?,
+            torque_limit: r.torque_limit.or(base.and_then(|b| b.torque_limit)),
+        };
+        self.within(&at, params.validate())?;
+        Ok(params)
+    }
+
+    /// Agent `i`'s odometry: its own `odometry`/`fixes` over the file's, field by
+    /// field; `None` when neither asks for odometry (or `enabled = false`).
+    fn odometry(
+        &self,
+        i: usize,
+        a: &AgentSection,
+        dt: f64,
+        timing: &Timing,
+    ) -> Result<Option<OdometrySpec>, ScenarioError> {
+        let f = self.file;
+        let agent = FieldPath::from("agents").index(i);
+        let odo = Merge::new(
+            a.odometry.as_ref(),
+            f.odometry.as_ref(),
+            agent.key("odometry"),
+            FieldPath::from("odometry"),
+        );
+        let fix = Merge::new(
+            a.fixes.as_ref(),
+            f.fixes.as_ref(),
+            agent.key("fixes"),
+            FieldPath::from("fixes"),
+        );
+        let odometry_off = odo.get(|s| s.enabled, "enabled").filter(|(e, _)| !e);
+        let fixes_on = fix.any() && fix.get(|s| s.enabled, "enabled").is_none_or(|(e, _)| e);
+        if let Some((_, path)) = odometry_off {
+            // Global fixes simply do not apply; the agent's own would contradict.
+            if fixes_on && a.fixes.is_some() {
+                return Err(self.at.error(
+                    &path,
+                    "fixes correct an odometry estimate, but this agent's odometry is disabled",
+                ));
+            }
+            return Ok(None);
+        }
+        if !odo.any() && !fixes_on {
+            return Ok(None);
+        }
+        let period = match odo.get(|s| s.period, "period") {
+            None => match timing {
+                Timing::Sampled { period } => *period,
+                Timing::Continuous => dt,
+            },
+            Some((p, path)) => {
+                let whole = check::multiple_of("period", p, dt, &format!("dt = {dt} s"));
+                self.at(&path, whole)?;
+                p
+            }
+        };
+        let num = |get: fn(&OdometrySection) -> Option<f64>, key: &str, default: f64| {
+            odo.get(get, key).map_or(default, |(v, _)| v)
+        };
+        let errors = ErrorModel {
+            zeta: num(|s| s.zeta, "zeta", 0.0),
+            zeta_model: odo
+                .get(|s| s.zeta_model, "zeta_model")
+                .map_or(ZetaModel::Wheels, |(m, _)| m),
+            wheel_diameter_ratio: num(|s| s.wheel_diameter_ratio, "wheel_diameter_ratio", 1.0),
+            wheelbase_ratio: num(|s| s.wheelbase_ratio, "wheelbase_ratio", 1.0),
+            slip: num(|s| s.slip, "slip", 0.0),
+            ticks_per_rev: odo
+                .get(|s| s.ticks_per_rev, "ticks_per_rev")
+                .map(|(v, _)| v),
+            speed_noise: num(|s| s.speed_noise, "speed_noise", 0.0),
+            turn_rate_noise: num(|s| s.turn_rate_noise, "turn_rate_noise", 0.0),
+        };
+        errors
+            .validate()
+            .map_err(|e| self.at.param(&odo.path_of(e.field), &e))?;
+        let fixes = if fixes_on {
+            Some(self.fixes(&fix, period)?)
+        } else {
+            None
+        };
+        let spec = OdometrySpec::new(period, errors, fixes);
+        Ok(Some(self.at(&odo.table_path(), spec)?))
+    }
+
+    /// The fixes that apply to one agent, sampled every `period` seconds.
+    fn fixes(&self, fix: &Merge<'_, FixesSection>, period: f64) -> Result<FixSpec, ScenarioError> {
+        let schedule = match (
+            fix.get(|s| s.every_steps, "every_steps"),
+            fix.get(|s| s.period, "period"),
+        ) {
+            (Some(_), Some((_, path))) => {
+                return Err(self
+                    .at
+                    .error(&path, "give either every_steps or period, not both"));
+            }
+            (None, None) => {
+                return Err(self.at.error(
+                    &fix.table_path(),
+                    "missing field `every_steps` (samples between fixes) or `period` (s)",
+                ));
+            }
+            (Some((n, _)), None) => FixSchedule::EverySamples(n),
+            (None, Some((p, _))) => FixSchedule::Period(p),
+        };
+        let value =
+            |get: fn(&FixesSection) -> Option<f64>, key: &str| fix.get(get, key).map(|(v, _)| v);
+        let spec = FixSpec {
+            schedule,
+            position_noise: value(|s| s.position_noise, "position_noise").unwrap_or(0.0),
+            heading_noise: value(|s| s.heading_noise, "heading_noise"),
+            latency: value(|s| s.latency, "latency").unwrap_or(0.0),
+            fusion: fix
+                .get(|s| s.fusion, "fusion")
+                .map_or(Fusion::Reset, |(f, _)| f),
+        };
+        spec.validate()
+            .and_then(|()| spec.samples_between(period))
+            .map_err(|e| self.at.param(&fix.path_of(e.field), &e))?;
+        Ok(spec)
+    }
+
+    fn agent(&self, i: usize, a: &AgentSection) -> Result<AgentSpec, ScenarioError> {
+        let at = FieldPath::from("agents").index(i);
+        let n = self.file.agents.len();
+        let name = a.name.clone().unwrap_or_else(|| format!("agent {}", i + 1));
+        let robot = self.robot(a.robot.as_deref().unwrap_or("agent1"), &at.key("robot"))?;
+        let start = self.pose(&a.start, &at.key("start"), true)?;
+        let leader = match a.leader {
+            LeaderSpec::Reference => Leader::Reference,
+            LeaderSpec::Agent(k) if k >= 1 && (k as usize) <= n => Leader::Agent(k as usize - 1),
+            LeaderSpec::Agent(k) => {
+                return Err(self.at.error(
+                    &at.key("leader"),
+                    format!(
+                        "agent {} follows agent {k}, which does not exist (agents are numbered 1..={n}, or \"reference\")",
+                        i + 1
+                    ),
+                ));
+            }
+        };
+        // Each control setting: the agent's own, else [control], else the paper's.
+        let control = self.control(i);
+        let (ke, _) = control.get_or(|c| c.ke, "ke", Gains::PAPER.ke);
+        let (kz, _) = control.get_or(|c| c.kz, "kz", Gains::PAPER.kz);
+        let gains = Gains::new(ke, kz).map_err(|e| self.at.param(&control.path_of(e.field), &e))?;
+        let (l, l_path) = control.get_or(|c| c.l, "l", DEFAULT_L);
+        self.at(&l_path, check::positive("l", l))?;
+        let (variant, _) = control.get_or(|c| c.law, "law", Variant::Paper);
+        let (comp, _) = control.get_or(|c| c.lycomp, "lycomp", LyComp::Fit);
+        let (derivatives, _) = control.get_or(
+            |c| c.ly_derivatives,
+            "ly_derivatives",
+            LyDerivatives::Neglect,
+        );
+        let placement = match (a.mode.unwrap_or(ModeName::Formation), a.offset) {
+            (ModeName::Tracking, None) => Placement::tracking(l),
+            (ModeName::Tracking, Some(_)) => {
+                return Err(self.at.error(
+                    &at.key("offset"),
+                    "pure tracking (mode = \"tracking\") takes no offset: the point L ahead of the robot tracks the leader",
+                ));
+            }
+            (ModeName::Formation, None) => {
+                return Err(self.at.error(
+                    &at,
+                    "missing field `offset` = { x = L_Xoff, y = L_Yoff } (or mode = \"tracking\")",
+                ));
+            }
+            (ModeName::Formation, Some(o)) => Placement::new(o.x, o.y, l, comp, derivatives),
+        };
+        let placement = self.within(&at, placement)?;
+        let spec = AgentSpec::new(name, robot, leader, placement, gains, variant, start);
+        self.within(&at, spec)
+    }
+}

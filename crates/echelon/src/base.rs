@@ -225,8 +225,7 @@ impl VelocityBase {
             ("a_max", self.a_max),
             ("alpha_max", self.alpha_max),
         ] {
-            // `!(max > 0)` also refuses NaN.
-            if !(max > 0.0) {
+            if max.is_nan() || max <= 0.0 {
                 return Err(ParamError::new(
                     field,
                     max,

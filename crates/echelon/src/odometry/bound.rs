@@ -50,6 +50,23 @@ fn check(field: &'static str, v: f64, ok: bool, reason: &'static str) -> Result<
     }
 }
 
+/// The hypotheses both forms of Theorem 2 share: `K_e, ζ > 0`, `γ ∈ (0, 1)`.
+fn shared_hypotheses(ke: f64, zeta: f64, gamma: f64) -> Result<(), ParamError> {
+    check("ke", ke, ke > 0.0, "must be > 0 (Theorem 2 needs K_e > 0)")?;
+    check(
+        "zeta",
+        zeta,
+        zeta > 0.0,
+        "must be > 0 (the odometry error per sample)",
+    )?;
+    check(
+        "gamma",
+        gamma,
+        gamma > 0.0 && gamma < 1.0,
+        "must be in (0, 1) (Theorem 2's γ)",
+    )
+}
+
 /// The largest `N` with `N · per ≤ max` (the inverse of a bound linear in `N`).
 fn max_multiple(field: &'static str, max: f64, per: f64) -> Result<u64, ParamError> {
     check(field, max, max > 0.0, "must be > 0")?;
@@ -80,21 +97,9 @@ impl Theorem2 {
         omega_max: f64,
         gamma: f64,
     ) -> Result<Theorem2, ParamError> {
-        check("ke", ke, ke > 0.0, "must be > 0 (Theorem 2 needs K_e > 0)")?;
+        shared_hypotheses(ke, zeta, gamma)?;
         check("kz", kz, kz > 0.0, "must be > 0 (Theorem 2 needs K_z > 0)")?;
-        check(
-            "zeta",
-            zeta,
-            zeta > 0.0,
-            "must be > 0 (the odometry error per sample)",
-        )?;
         check("omega_max", omega_max, omega_max >= 0.0, "must be ≥ 0")?;
-        check(
-            "gamma",
-            gamma,
-            gamma > 0.0 && gamma < 1.0,
-            "must be in (0, 1) (Theorem 2's γ)",
-        )?;
         Ok(Theorem2 {
             ke,
             kz,
@@ -164,19 +169,7 @@ pub struct KinematicTheorem2 {
 impl KinematicTheorem2 {
     /// Checks the hypotheses: `K_e, ζ > 0`, `γ ∈ (0, 1)`.
     pub fn new(ke: f64, zeta: f64, gamma: f64) -> Result<KinematicTheorem2, ParamError> {
-        check("ke", ke, ke > 0.0, "must be > 0 (Theorem 2 needs K_e > 0)")?;
-        check(
-            "zeta",
-            zeta,
-            zeta > 0.0,
-            "must be > 0 (the odometry error per sample)",
-        )?;
-        check(
-            "gamma",
-            gamma,
-            gamma > 0.0 && gamma < 1.0,
-            "must be in (0, 1) (Theorem 2's γ)",
-        )?;
+        shared_hypotheses(ke, zeta, gamma)?;
         Ok(KinematicTheorem2 { ke, zeta, gamma })
     }
 

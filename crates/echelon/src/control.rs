@@ -400,3 +400,16 @@ pub fn lyapunov_rate(e: [f64; 2], z: [f64; 2], gains: Gains, variant: Variant) -
     };
     -gains.ke * ee + cross - gains.kz * zz
 }
+
+/// Eqs. 7 and 10 for the crate's other laws ([`crate::kinematic`], their SIMD
+/// kernels): `e` and `z` of a body holding its leader at `hold`.
+#[inline(always)]
+pub(crate) fn errors_at<V: Real>(
+    s: &Body<V>,
+    pd: [V; 2],
+    dpd: [V; 2],
+    hold: &Hold<V>,
+    ke: V,
+) -> ([V; 2], [V; 2]) {
+    errors_of(s, pd, dpd, hold.lx, hold.ly, hold.dly, ke)
+}

@@ -11,6 +11,10 @@
 //! - [`lycomp`]: where a follower holds its leader, `L_X`, `L_Y` and the curvature
 //!   compensation `L_Ycomp` (eqs. 4–6);
 //! - [`control`]: the backstepping law (eqs. 7–16);
+//! - [`kinematic`]: the kinematic law, its first step used as a velocity
+//!   command, for velocity-controlled bases;
+//! - [`base`]: a velocity-controlled base (lags, speed and acceleration
+//!   limits, presets for real robots);
 //! - [`formation`]: who follows whom;
 //! - [`sim`]: the RK4 simulator, observers and run statistics;
 //! - [`odometry`]: encoders, dead reckoning, error models, fixes, Theorem 2, UMBmark;
@@ -23,11 +27,13 @@
 //!
 //! Units are SI and angles radians throughout (ROS REP 103).
 
+pub mod base;
 pub mod check;
 pub mod control;
 pub mod engine;
 pub mod error;
 pub mod formation;
+pub mod kinematic;
 pub mod lanes;
 pub mod lycomp;
 mod math;

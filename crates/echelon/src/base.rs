@@ -1,0 +1,551 @@
+//! A velocity-controlled base: a differential-drive robot that takes a
+//! velocity command `(v, ω)` and runs its own motor loops, as almost every
+//! robot people own does (TurtleBot 3/4, Clearpath Jackal, any base under
+//! ros2_control's `diff_drive_controller`).
+//!
+//! The base is modelled as the unicycle kinematics (eq. 1) driven through a
+//! first-order lag per axis, with limits on speed and acceleration:
+//!
+//! ```text
+//! ẋ = v cos θ     ẏ = v sin θ     θ̇ = ω
+//! (v_c, ω_c) = limit(command)                       speed limits, curvature kept
+//! v̇ = (v_c − v) / τ_v      ω̇ = (ω_c − ω) / τ_ω      then acceleration limits
+//! ```
+//!
+//! - **Speed limits** (`v_max`, `ω_max`, like `diff_drive_controller`'s
+//!   `linear.x.max_velocity` and `angular.z.max_velocity`): [`VelocityBase::limit`]
+//!   scales `v` and `ω` *together* by the one factor that brings both within
+//!   their limits, so the commanded curvature `ω/v` (the path) is kept; only the
+//!   speed along it drops. `diff_drive_controller` clamps each axis on its own,
+//!   which bends the path when one axis saturates.
+//! - **Acceleration limits** (`a_max`, `α_max`, like `max_acceleration`): on the
+//!   lag's response, [`AccelLimit::Joint`] (the default) scales `(v̇, ω̇)`
+//!   together, so that a base starting on the command's ray (from rest, say)
+//!   moves along it and keeps the curvature during the transient too;
+//!   [`AccelLimit::PerAxis`] clamps each axis as `diff_drive_controller`'s
+//!   `SpeedLimiter` does (its `limit_acceleration` clamps `v − v₀` to
+//!   `[min_acceleration, max_acceleration]·dt` per axis), which turns a
+//!   start from rest into a spin first when `ω` reaches its target sooner.
+//!   Speed limiting comes first: the lag then moves each velocity monotonically
+//!   towards a target inside the limits, so the actual velocity never leaves the
+//!   box `|v| ≤ v_max, |ω| ≤ ω_max` it started in; and a lagged velocity never
+//!   accelerates faster than its limit.
+//! - **Lags of 0 give an ideal base**: that axis's velocity is algebraic, equal
+//!   to the (limited) command at every instant. The kinematics then use the
+//!   command directly ([`VelocityBase::derivative`] gives `v̇ = 0` for that axis,
+//!   and [`VelocityBase::settle`] writes the command into the state after each
+//!   step). An axis without lag cannot have an acceleration limit (there is no
+//!   acceleration to limit; a rate limit is a lag): [`VelocityBase::validate`]
+//!   refuses a finite `a_max` with `τ_v = 0` and likewise for `ω`.
+//!
+//! Integration: classical RK4 with the command held or re-evaluated per stage,
+//! like the torque plant ([`crate::model::RobotParams::rk4_step`]). A lag needs
+//! `dt ≤ τ` to be resolved (RK4 on a lag stays monotone, no overshoot, up to
+//! `dt ≈ 2.7 τ` and is unstable beyond): [`VelocityBase::check_step`].
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::ParamError;
+use crate::model::State;
+
+/// A velocity command to a base (a ROS `Twist`'s `linear.x`, `angular.z`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct VelocityCommand {
+    /// Linear speed `v`, m/s.
+    pub v: f64,
+    /// Angular speed `ω`, rad/s.
+    pub omega: f64,
+}
+
+/// How the acceleration limits act on the two axes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AccelLimit {
+    /// `(v̇, ω̇)` scaled together by the one factor that brings both within
+    /// their limits: the velocity moves in the direction the lags ask for, so
+    /// the path is kept during transients that start on the command's ray.
+    #[default]
+    Joint,
+    /// Each axis clamped on its own, as `diff_drive_controller`'s
+    /// `SpeedLimiter` does.
+    PerAxis,
+}
+
+/// A velocity-controlled base: first-order lags and limits on speed and
+/// acceleration (see the [module docs](self)).
+///
+/// An unlimited speed or acceleration is `f64::INFINITY`. There is no
+/// `Default`: [`VelocityBase::IDEAL`] is the base the kinematic law's theory
+/// assumes, not a robot; the presets are real ones.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VelocityBase {
+    /// Lag of the linear speed `τ_v ≥ 0`, s (0: ideal, `v` follows the command).
+    pub tau_v: f64,
+    /// Lag of the angular speed `τ_ω ≥ 0`, s (0: ideal).
+    pub tau_omega: f64,
+    /// Largest `|v|`, m/s (`> 0`, may be infinite).
+    pub v_max: f64,
+    /// Largest `|ω|`, rad/s (`> 0`, may be infinite).
+    pub omega_max: f64,
+    /// Largest `|v̇|`, m/s² (`> 0`; finite only with `τ_v > 0`).
+    pub a_max: f64,
+    /// Largest `|ω̇|`, rad/s² (`> 0`; finite only with `τ_ω > 0`).
+    pub alpha_max: f64,
+    /// Joint (path-keeping, the default) or per-axis acceleration limits.
+    pub accel: AccelLimit,
+}
+
+impl VelocityBase {
+    /// The ideal base: no lag, no limits; `v`, `ω` equal the command. With it
+    /// the kinematic law gives `V̇₁ = −K_e‖e‖²` exactly (control-law.md).
+    pub const IDEAL: VelocityBase = VelocityBase {
+        tau_v: 0.0,
+        tau_omega: 0.0,
+        v_max: f64::INFINITY,
+        omega_max: f64::INFINITY,
+        a_max: f64::INFINITY,
+        alpha_max: f64::INFINITY,
+        accel: AccelLimit::Joint,
+    };
+
+    /// ROBOTIS TurtleBot 3 Burger.
+    ///
+    /// - `v_max = 0.22 m/s`, `ω_max = 2.84 rad/s`: the ROBOTIS e-Manual,
+    ///   TurtleBot3 "Specifications" (maximum translational / rotational
+    ///   velocity), also `BURGER_MAX_LIN_VEL`/`BURGER_MAX_ANG_VEL` of
+    ///   `turtlebot3_teleop`.
+    /// - `a_max = 2.5 m/s²`, `α_max = 3.2 rad/s²`: `acc_lim_x`, `acc_lim_theta`
+    ///   of `turtlebot3_navigation2/param/burger.yaml` (the Nav2 planner's
+    ///   limits; ROBOTIS publishes no motor acceleration limit).
+    /// - `τ_v = τ_ω = 0.1 s`: an estimate (Dynamixel XL430 velocity loop behind
+    ///   the OpenCR board; no published time constant).
+    pub const TURTLEBOT3_BURGER: VelocityBase = VelocityBase {
+        tau_v: 0.1,
+        tau_omega: 0.1,
+        v_max: 0.22,
+        omega_max: 2.84,
+        a_max: 2.5,
+        alpha_max: 3.2,
+        accel: AccelLimit::Joint,
+    };
+
+    /// Clearpath TurtleBot 4 (iRobot Create 3 base).
+    ///
+    /// - `v_max = 0.31 m/s` (the Create 3 in safe mode; 0.46 m/s with safe mode
+    ///   off), `ω_max = 1.90 rad/s`: the TurtleBot 4 User Manual, "Features",
+    ///   hardware specifications (quoted from the manual, not re-checked here).
+    /// - `a_max = 2.5 m/s²`, `α_max = 3.2 rad/s²`: `acc_lim_x`, `acc_lim_theta`
+    ///   of `turtlebot4_navigation/config/nav2.yaml` (the Nav2 planner's
+    ///   limits, not the base's).
+    /// - `τ_v = τ_ω = 0.1 s`: an estimate (no published time constant).
+    pub const TURTLEBOT4: VelocityBase = VelocityBase {
+        tau_v: 0.1,
+        tau_omega: 0.1,
+        v_max: 0.31,
+        omega_max: 1.90,
+        a_max: 2.5,
+        alpha_max: 3.2,
+        accel: AccelLimit::Joint,
+    };
+
+    /// Clearpath Jackal.
+    ///
+    /// - `v_max = 2.0 m/s`, `ω_max = 4.0 rad/s`, `a_max = 20 m/s²`,
+    ///   `α_max = 25 rad/s²`: `linear.x.max_velocity`, `angular.z.max_velocity`
+    ///   and their `max_acceleration` in `jackal_control/config/control.yaml`
+    ///   (the `diff_drive_controller` configuration Clearpath ships).
+    /// - `τ_v = τ_ω = 0.05 s`: an estimate (no published time constant).
+    pub const JACKAL: VelocityBase = VelocityBase {
+        tau_v: 0.05,
+        tau_omega: 0.05,
+        v_max: 2.0,
+        omega_max: 4.0,
+        a_max: 20.0,
+        alpha_max: 25.0,
+        accel: AccelLimit::Joint,
+    };
+
+    /// The named presets: `ideal`, `turtlebot3-burger`, `turtlebot4`, `jackal`.
+    pub const PRESETS: [(&'static str, VelocityBase); 4] = [
+        ("ideal", Self::IDEAL),
+        ("turtlebot3-burger", Self::TURTLEBOT3_BURGER),
+        ("turtlebot4", Self::TURTLEBOT4),
+        ("jackal", Self::JACKAL),
+    ];
+
+    /// A preset by name (see [`VelocityBase::PRESETS`]).
+    pub fn preset(name: &str) -> Option<VelocityBase> {
+        Self::PRESETS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, p)| *p)
+    }
+
+    /// A base with joint acceleration limits, checked ([`VelocityBase::validate`]).
+    pub fn new(
+        tau_v: f64,
+        tau_omega: f64,
+        v_max: f64,
+        omega_max: f64,
+        a_max: f64,
+        alpha_max: f64,
+    ) -> Result<VelocityBase, ParamError> {
+        let base = VelocityBase {
+            tau_v,
+            tau_omega,
+            v_max,
+            omega_max,
+            a_max,
+            alpha_max,
+            accel: AccelLimit::Joint,
+        };
+        base.validate()?;
+        Ok(base)
+    }
+
+    /// Checks every parameter: lags finite and `≥ 0`; limits `> 0` (infinite:
+    /// unlimited, NaN refused); no finite acceleration limit on an axis without
+    /// lag.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        for (field, tau) in [("tau_v", self.tau_v), ("tau_omega", self.tau_omega)] {
+            if !tau.is_finite() {
+                return Err(ParamError::new(field, tau, "must be a finite number"));
+            }
+            if tau < 0.0 {
+                return Err(ParamError::new(
+                    field,
+                    tau,
+                    "must be ≥ 0 (a lag in seconds; 0 is an ideal base)",
+                ));
+            }
+        }
+        for (field, max) in [
+            ("v_max", self.v_max),
+            ("omega_max", self.omega_max),
+            ("a_max", self.a_max),
+            ("alpha_max", self.alpha_max),
+        ] {
+            if max.is_nan() || max <= 0.0 {
+                return Err(ParamError::new(
+                    field,
+                    max,
+                    "must be > 0 (leave it out for no limit)",
+                ));
+            }
+        }
+        if self.tau_v == 0.0 && self.a_max.is_finite() {
+            return Err(ParamError::new(
+                "a_max",
+                self.a_max,
+                "needs tau_v > 0: a base that follows its speed command instantly has no acceleration to limit",
+            ));
+        }
+        if self.tau_omega == 0.0 && self.alpha_max.is_finite() {
+            return Err(ParamError::new(
+                "alpha_max",
+                self.alpha_max,
+                "needs tau_omega > 0: a base that follows its turn-rate command instantly has no acceleration to limit",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks that an RK4 step `dt` resolves the lags: every non-zero lag must
+    /// be at least `dt` (a shorter one is better modelled as 0).
+    pub fn check_step(&self, dt: f64) -> Result<(), ParamError> {
+        for (field, tau) in [("tau_v", self.tau_v), ("tau_omega", self.tau_omega)] {
+            if tau > 0.0 && tau < dt {
+                return Err(ParamError::new(
+                    field,
+                    tau,
+                    "is shorter than the integration step dt: use 0 (an ideal axis) or a smaller dt",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether both axes follow the command without lag or limits (`V̇₁ = −K_e‖e‖²`
+    /// holds exactly under the kinematic law).
+    pub fn is_ideal(&self) -> bool {
+        self.tau_v == 0.0
+            && self.tau_omega == 0.0
+            && self.v_max == f64::INFINITY
+            && self.omega_max == f64::INFINITY
+    }
+
+    /// The speed limits, keeping the path: `(v, ω)` scaled by
+    /// `k = min(1, v_max/|v|, ω_max/|ω|)`, so `ω/v` (the curvature) is kept and
+    /// both limits hold exactly. Returns the command the base follows and
+    /// whether it was saturated (`k < 1`). Identity within the limits.
+    ///
+    /// Acceleration limits act later, on how fast the base's velocity moves
+    /// towards this command ([`VelocityBase::accelerations`]).
+    #[inline]
+    pub fn limit(&self, cmd: VelocityCommand) -> (VelocityCommand, bool) {
+        let (av, aw) = (cmd.v.abs(), cmd.omega.abs());
+        if av <= self.v_max && aw <= self.omega_max {
+            return (cmd, false);
+        }
+        let k = (self.v_max / av).min(self.omega_max / aw);
+        // The binding axis lands on its limit exactly; the clamps guard the
+        // last bit of rounding in the product.
+        let limited = VelocityCommand {
+            v: (cmd.v * k).clamp(-self.v_max, self.v_max),
+            omega: (cmd.omega * k).clamp(-self.omega_max, self.omega_max),
+        };
+        (limited, true)
+    }
+
+    /// The accelerations `(v̇, ω̇)` of the lagged axes towards the (limited)
+    /// command `cmd`, after the acceleration limits (0 on an axis without lag,
+    /// whose velocity is the command itself).
+    #[inline]
+    pub fn accelerations(&self, s: &State, cmd: VelocityCommand) -> (f64, f64) {
+        let (dv, dw) = self.lag_rates(s, cmd);
+        match self.accel {
+            AccelLimit::Joint => {
+                let k = 1f64
+                    .min(self.a_max / dv.abs())
+                    .min(self.alpha_max / dw.abs());
+                (
+                    (dv * k).clamp(-self.a_max, self.a_max),
+                    (dw * k).clamp(-self.alpha_max, self.alpha_max),
+                )
+            }
+            AccelLimit::PerAxis => (
+                dv.clamp(-self.a_max, self.a_max),
+                dw.clamp(-self.alpha_max, self.alpha_max),
+            ),
+        }
+    }
+
+    /// Whether the acceleration limits cut the lags' response at this instant.
+    #[inline]
+    pub fn accel_limited(&self, s: &State, cmd: VelocityCommand) -> bool {
+        let (dv, dw) = self.lag_rates(s, cmd);
+        dv.abs() > self.a_max || dw.abs() > self.alpha_max
+    }
+
+    /// `(v_c − v)/τ_v` and `(ω_c − ω)/τ_ω`, 0 on an axis without lag.
+    #[inline]
+    fn lag_rates(&self, s: &State, cmd: VelocityCommand) -> (f64, f64) {
+        let rate = |target: f64, now: f64, tau: f64| {
+            if tau > 0.0 { (target - now) / tau } else { 0.0 }
+        };
+        (
+            rate(cmd.v, s.v, self.tau_v),
+            rate(cmd.omega, s.omega, self.tau_omega),
+        )
+    }
+
+    /// The velocities the base moves at: the state's on a lagged axis, the
+    /// command's on an axis without lag.
+    #[inline]
+    pub fn speeds(&self, s: &State, cmd: VelocityCommand) -> (f64, f64) {
+        (
+            if self.tau_v > 0.0 { s.v } else { cmd.v },
+            if self.tau_omega > 0.0 {
+                s.omega
+            } else {
+                cmd.omega
+            },
+        )
+    }
+
+    /// The state derivative `(ẋ, ẏ, θ̇, v̇, ω̇)` for the applied (already
+    /// [limited](VelocityBase::limit)) command: eq. 1 at the base's
+    /// [speeds](VelocityBase::speeds), and the lags' limited accelerations.
+    #[inline]
+    pub fn derivative(&self, s: &State, cmd: VelocityCommand) -> State {
+        let (v, w) = self.speeds(s, cmd);
+        let (dv, dw) = self.accelerations(s, cmd);
+        let (sin, cos) = s.theta.sin_cos();
+        State {
+            x: v * cos,
+            y: v * sin,
+            theta: w,
+            v: dv,
+            omega: dw,
+        }
+    }
+
+    /// The state after a step, made consistent with the command applied at
+    /// its end: an axis without lag takes the command's velocity; a lagged
+    /// velocity is kept within the speed limits (RK4 stays inside them when
+    /// `dt ≤ τ`; this guards rounding).
+    #[inline]
+    pub fn settle(&self, s: &State, cmd: VelocityCommand) -> State {
+        let (v, w) = self.speeds(s, cmd);
+        State {
+            v: v.clamp(-self.v_max, self.v_max),
+            omega: w.clamp(-self.omega_max, self.omega_max),
+            ..*s
+        }
+    }
+
+    /// One RK4 step over `dt` with the applied command held (zero-order hold),
+    /// then [settled](VelocityBase::settle).
+    #[inline]
+    pub fn rk4_step(&self, s: &State, cmd: VelocityCommand, dt: f64) -> State {
+        let k1 = self.derivative(s, cmd);
+        let k2 = self.derivative(&s.add_scaled(&k1, 0.5 * dt), cmd);
+        let k3 = self.derivative(&s.add_scaled(&k2, 0.5 * dt), cmd);
+        let k4 = self.derivative(&s.add_scaled(&k3, dt), cmd);
+        self.settle(&s.rk4_combine([&k1, &k2, &k3, &k4], dt / 6.0), cmd)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_are_valid_and_named() {
+        for (name, base) in VelocityBase::PRESETS {
+            assert!(base.validate().is_ok(), "{name}");
+            assert_eq!(VelocityBase::preset(name), Some(base));
+        }
+        assert!(VelocityBase::IDEAL.is_ideal());
+        assert!(!VelocityBase::TURTLEBOT3_BURGER.is_ideal());
+        assert_eq!(VelocityBase::preset("husky"), None);
+    }
+
+    #[test]
+    fn invalid_parameters_are_refused_by_name() {
+        let field = |b: VelocityBase| b.validate().unwrap_err().field;
+        let tb3 = VelocityBase::TURTLEBOT3_BURGER;
+        assert_eq!(field(VelocityBase { tau_v: -0.1, ..tb3 }), "tau_v");
+        assert_eq!(
+            field(VelocityBase {
+                tau_omega: f64::NAN,
+                ..tb3
+            }),
+            "tau_omega"
+        );
+        assert_eq!(field(VelocityBase { v_max: 0.0, ..tb3 }), "v_max");
+        assert_eq!(
+            field(VelocityBase {
+                omega_max: -1.0,
+                ..tb3
+            }),
+            "omega_max"
+        );
+        assert_eq!(
+            field(VelocityBase {
+                a_max: f64::NAN,
+                ..tb3
+            }),
+            "a_max"
+        );
+        assert_eq!(
+            field(VelocityBase {
+                alpha_max: 0.0,
+                ..tb3
+            }),
+            "alpha_max"
+        );
+        // An acceleration limit without a lag is refused on its own axis.
+        assert_eq!(field(VelocityBase { tau_v: 0.0, ..tb3 }), "a_max");
+        assert_eq!(
+            field(VelocityBase {
+                tau_omega: 0.0,
+                ..tb3
+            }),
+            "alpha_max"
+        );
+        assert!(VelocityBase::new(0.0, 0.0, 0.22, 2.84, f64::INFINITY, f64::INFINITY).is_ok());
+        assert_eq!(
+            VelocityBase::new(-1.0, 0.1, 1.0, 1.0, 1.0, 1.0)
+                .unwrap_err()
+                .field,
+            "tau_v"
+        );
+        // Steps longer than a lag are refused; ideal axes take any step.
+        assert_eq!(tb3.check_step(0.2).unwrap_err().field, "tau_v");
+        assert!(tb3.check_step(0.01).is_ok());
+        assert!(VelocityBase::IDEAL.check_step(10.0).is_ok());
+    }
+
+    #[test]
+    fn limit_scales_both_axes_by_the_binding_one() {
+        let tb3 = VelocityBase::TURTLEBOT3_BURGER;
+        // v binds: 0.44 → 0.22 halves ω too.
+        let (c, sat) = tb3.limit(VelocityCommand {
+            v: 0.44,
+            omega: 1.0,
+        });
+        assert!(sat);
+        assert_eq!(c.v, 0.22);
+        assert!((c.omega - 0.5).abs() < 1e-15);
+        // ω binds.
+        let (c, sat) = tb3.limit(VelocityCommand {
+            v: -0.1,
+            omega: -5.68,
+        });
+        assert!(sat);
+        assert_eq!(c.omega, -2.84);
+        assert!((c.v + 0.05).abs() < 1e-15);
+        // Within limits: untouched.
+        let cmd = VelocityCommand {
+            v: 0.2,
+            omega: -2.0,
+        };
+        assert_eq!(tb3.limit(cmd), (cmd, false));
+    }
+
+    #[test]
+    fn ideal_base_moves_at_the_command() {
+        let b = VelocityBase::IDEAL;
+        let cmd = VelocityCommand {
+            v: 0.5,
+            omega: 0.25,
+        };
+        let mut s = State::at_rest(0.0, 0.0, 0.0);
+        let dt = 0.01;
+        for _ in 0..400 {
+            s = b.rk4_step(&s, cmd, dt);
+        }
+        // An arc of radius 2 for 4 s: θ = 1, p = 2 (sin 1, 1 − cos 1).
+        assert_eq!((s.v, s.omega), (0.5, 0.25));
+        assert!((s.theta - 1.0).abs() < 1e-12);
+        assert!((s.x - 2.0 * 1f64.sin()).abs() < 1e-10);
+        assert!((s.y - 2.0 * (1.0 - 1f64.cos())).abs() < 1e-10);
+    }
+
+    #[test]
+    fn lagged_base_matches_the_closed_form_below_the_acceleration_limit() {
+        // v(t) = v_c (1 − e^{−t/τ}) while |v̇| = (v_c − v)/τ stays ≤ a_max.
+        let b = VelocityBase::new(0.2, 0.1, 1.0, 2.0, 5.0, 10.0).unwrap();
+        let cmd = VelocityCommand {
+            v: 0.5,
+            omega: -0.8,
+        };
+        let mut s = State::default();
+        let dt = 0.001;
+        for _ in 0..1000 {
+            s = b.rk4_step(&s, cmd, dt);
+        }
+        assert!((s.v - 0.5 * (1.0 - (-1.0f64 / 0.2).exp())).abs() < 1e-12);
+        assert!((s.omega + 0.8 * (1.0 - (-1.0f64 / 0.1).exp())).abs() < 1e-12);
+    }
+
+    #[test]
+    fn acceleration_limit_gives_a_ramp_and_joint_keeps_the_direction() {
+        // From rest to a command far beyond what a_max allows in the lag: the
+        // lag asks for (v_c/τ, ω_c/τ) = (5, 10); joint limits scale both by
+        // min(1/5, 4/10) = 0.2, so the base ramps at (1, 2) and ω/v = 2 = ω_c/v_c.
+        let b = VelocityBase::new(0.1, 0.1, 1.0, 2.0, 1.0, 4.0).unwrap();
+        let cmd = VelocityCommand { v: 0.5, omega: 1.0 };
+        let s = b.rk4_step(&State::default(), cmd, 0.01);
+        assert!((s.v - 0.01).abs() < 1e-15 && (s.omega - 0.02).abs() < 1e-15);
+        assert!(b.accel_limited(&State::default(), cmd));
+        // Per-axis: ω ramps at 4 rad/s² (its own limit), v at 1: the path bends.
+        let p = VelocityBase {
+            accel: AccelLimit::PerAxis,
+            ..b
+        };
+        let s = p.rk4_step(&State::default(), cmd, 0.01);
+        assert!((s.v - 0.01).abs() < 1e-15 && (s.omega - 0.04).abs() < 1e-15);
+    }
+}

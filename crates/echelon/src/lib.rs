@@ -11,6 +11,7 @@
 //! - [`lycomp`]: where a follower holds its leader, `L_X`, `L_Y` and the curvature
 //!   compensation `L_Ycomp` (eqs. 4–6);
 //! - [`control`]: the backstepping law (eqs. 7–16);
+//! - [`follow`]: one agent's law evaluation behind what it knows of its leader;
 //! - [`formation`]: who follows whom;
 //! - [`sim`]: the RK4 simulator, observers and run statistics;
 //! - [`odometry`]: encoders, dead reckoning, error models, fixes, Theorem 2, UMBmark;
@@ -26,6 +27,7 @@
 pub mod control;
 pub mod engine;
 pub mod error;
+pub mod follow;
 pub mod formation;
 pub mod lanes;
 pub mod lycomp;

@@ -477,3 +477,126 @@ pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, F
     crate::write_json_file(&opts.out.join(SUMMARY_FILE), &report)?;
     Ok(report)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::{Header, Reference};
+    use echelon::control::LeaderMotion;
+
+    /// Records in memory.
+    #[derive(Debug, Default)]
+    struct Memory {
+        logged: Vec<(String, u64, u64, Vec<u8>)>,
+        rows: Vec<String>,
+    }
+
+    impl RecordSink for Memory {
+        fn log(
+            &mut self,
+            topic: &str,
+            _schema: &JsonSchema,
+            log_time: u64,
+            publish_time: u64,
+            data: &[u8],
+        ) -> Result<(), FleetError> {
+            self.logged
+                .push((topic.to_owned(), log_time, publish_time, data.to_vec()));
+            Ok(())
+        }
+
+        fn row(&mut self, line: &str) -> Result<(), FleetError> {
+            self.rows.push(line.to_owned());
+            Ok(())
+        }
+    }
+
+    /// Valid messages go to their typed topic, a started robot's state also to
+    /// the CSV; garbage, wrong versions, unknown keys and messages of the
+    /// wrong kind go to `/rejected` with their reason: every sample is logged
+    /// exactly once.
+    #[test]
+    fn every_sample_is_logged_once_and_garbage_is_rejected_with_its_reason() {
+        let keys = Keys::new("f");
+        let mut c = Collector::new(keys.clone());
+        let mut sink = Memory::default();
+        let mut reference = Vec::new();
+        wire::encode_reference(
+            &mut reference,
+            Header { source: 1, seq: 4 },
+            &Reference {
+                t: 2.0,
+                motion: LeaderMotion::default(),
+                speed: 0.2,
+                turn_rate: 0.2,
+            },
+        );
+        let state = |link| {
+            let mut b = Vec::new();
+            let s = RobotState {
+                t: 2.5,
+                agent: 1,
+                link,
+                e: [3e-3, 4e-3],
+                ..RobotState::default()
+            };
+            wire::encode_state(&mut b, Header { source: 2, seq: 0 }, &s);
+            b
+        };
+        let (tracking, waiting) = (state(LinkStatus::Tracking), state(LinkStatus::Waiting));
+        let mut wrong_version = reference.clone();
+        wrong_version[1] = 9;
+        let stats = br#"{"agent":1,"t":3.0}"#;
+        let k = |s: &str| s.to_owned();
+        let inputs: Vec<(String, &[u8])> = vec![
+            (keys.reference(), &reference),
+            (keys.state(1), &tracking),
+            (keys.state(1), &waiting),
+            (keys.stats(1), stats),
+            (keys.stats(2), stats),
+            (keys.stats(1), b"{"),
+            (keys.reference(), &[1, 2, 3]),
+            (keys.state(1), &wrong_version),
+            (keys.state(2), &tracking),
+            (keys.state(1), &reference),
+            (k("echelon/f/alive/junk"), &reference),
+        ];
+        for (i, (key, bytes)) in inputs.iter().enumerate() {
+            c.on_message(key, bytes, 1000 + i as u64, &mut sink)
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        let report = c.finish();
+        assert_eq!(report.received, inputs.len() as u64);
+        assert_eq!(report.logged, report.received);
+        assert_eq!(sink.logged.len() as u64, report.logged);
+        let rejected: Vec<(&str, u64)> = report
+            .rejected
+            .iter()
+            .map(|(r, n)| (r.as_str(), *n))
+            .collect();
+        assert_eq!(
+            rejected,
+            [
+                ("malformed", 1),
+                ("malformed stats JSON", 1),
+                ("message of the wrong kind for its key", 2),
+                ("stats of another agent", 1),
+                ("unknown key", 1),
+                ("wrong version", 1),
+            ]
+        );
+        assert_eq!(report.logged_by_topic[REFERENCE_TOPIC], 1);
+        assert_eq!(report.logged_by_topic["/agent/1/state"], 2);
+        assert_eq!(report.logged_by_topic["/agent/1/stats"], 1);
+        assert_eq!(report.logged_by_topic[REJECTED_TOPIC], 7);
+        // log_time is the arrival time given, publish_time the sender's.
+        assert_eq!((sink.logged[0].1, sink.logged[0].2), (1000, nanos(2.0)));
+        // One CSV row: the tracking state, not the waiting one.
+        assert_eq!(sink.rows.len(), 1);
+        assert!(sink.rows[0].starts_with("2.5,1,"), "{}", sink.rows[0]);
+        let a = &report.agents[0];
+        assert_eq!((a.agent, a.messages, a.rows), (1, 2, 1));
+        assert!((a.final_error - 5e-3).abs() < 1e-15);
+        assert_eq!(a.link, "waiting");
+    }
+}

@@ -2,6 +2,13 @@
 //! The fleet as real processes on loopback (`echelon fleet …`), each test on
 //! its own free ports, sped up with `--time-scale` so that minutes of
 //! experiment take seconds. Child processes are killed if a test fails.
+//!
+//! Only the end-to-end lives here (convergence against the simulator, an
+//! outage, the secure mode, SIGTERM, bad input). What a robot does with what
+//! it receives (loss and delay injection, stale, reordered and garbage
+//! messages, restarts, link-loss policies, chained followers) and what the
+//! collector logs are tested on a fake clock in `echelon-fleet`'s unit tests
+//! (`robot::tests`, `collector::tests`).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -269,9 +276,21 @@ fn experiment_circle_converges_like_the_simulator() {
             near[0],
             near[1]
         );
-        // The whole transient: RMS ‖e‖ within 10 % of the simulator's.
+        // The whole transient: RMS ‖e‖ over time within 10 % of the
+        // simulator's. Over time, not per row: a robot starved of CPU (tests
+        // run fleets in parallel) skips ticks, and fewer rows of a transient
+        // would bias a per-row RMS (the collector's `rms_error`) low.
         let rms_sim = f(&sim["agents"][k - 1], &["rms_error"]);
-        let rms_fleet = f(&report["collector"]["agents"][k - 1], &["rms_error"]);
+        let fleet_rows: Vec<(f64, f64)> = rows(&fleet_dir.join("trajectory.csv"))
+            .into_iter()
+            .filter(|(_, a, _)| *a == k)
+            .map(|(t, _, v)| (t, v[5].hypot(v[6])))
+            .collect();
+        let (sum, span) = fleet_rows.windows(2).fold((0.0, 0.0), |(s, d), w| {
+            let dt = w[1].0 - w[0].0;
+            (s + w[0].1 * w[0].1 * dt, d + dt)
+        });
+        let rms_fleet = (sum / span).sqrt();
         assert!(
             (rms_fleet - rms_sim).abs() < 0.1 * rms_sim,
             "agent {k}: RMS fleet {rms_fleet} vs sim {rms_sim}"
@@ -374,124 +393,6 @@ fn outage_stop_rests_and_extrapolate_keeps_tracking() {
             assert!(during > 0.3, "stop: max true ‖e‖ {during}");
         }
     }
-}
-
-/// 20 % of received messages dropped (seeded): the formation still converges.
-#[test]
-fn twenty_percent_loss_still_converges() {
-    let dir = tempfile::tempdir().unwrap();
-    let report = up(
-        &fixture("fast-circle.toml"),
-        dir.path(),
-        &["--time-scale", "10", "--loss", "0.2", "--seed", "7"],
-    );
-    for k in 0..2 {
-        let r = &report["robots"][k];
-        let c = &r["counters"];
-        let (received, lost) = (u(c, &["received"]), u(c, &["injected_loss"]));
-        let rate = lost as f64 / received as f64;
-        assert!((rate - 0.2).abs() < 0.03, "loss rate {rate}");
-        let mut c = c.clone();
-        c["pending"] = r["pending"].clone();
-        check_conservation(&c);
-        assert!(f(r, &["final_error"]) < 1e-3, "{r}");
-    }
-}
-
-/// Garbage bytes and wrong-version messages on every key: nothing crashes,
-/// every one is counted, the robots still converge.
-#[test]
-fn garbage_on_every_key_is_counted_and_crashes_nothing() {
-    use zenoh::Wait;
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().to_path_buf();
-    let scenario = fixture("fast-circle.toml");
-    let fleet = std::thread::spawn({
-        let out = out.clone();
-        move || up(&scenario, &out, &["--time-scale", "10"])
-    });
-    // Join the fleet once its endpoints are known.
-    let started = Instant::now();
-    let endpoints = endpoints_of(&out);
-    let mut config = zenoh::Config::default();
-    config.insert_json5("mode", "\"peer\"").unwrap();
-    config
-        .insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    config
-        .insert_json5("listen/endpoints", "[\"tcp/127.0.0.1:0\"]")
-        .unwrap();
-    let connect: Vec<&String> = endpoints.values().collect();
-    config
-        .insert_json5(
-            "connect/endpoints",
-            &serde_json::to_string(&connect).unwrap(),
-        )
-        .unwrap();
-    config.insert_json5("connect/timeout_ms", "30000").unwrap();
-    let session = zenoh::open(config).wait().unwrap();
-    // Wait until the robots are running (the collector has rows).
-    let csv = out.join("trajectory.csv");
-    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 10_000 {
-        assert!(started.elapsed() < Duration::from_secs(60));
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let keys = [
-        "echelon/fast-circle/reference",
-        "echelon/fast-circle/robot/1/state",
-        "echelon/fast-circle/robot/2/state",
-        "echelon/fast-circle/robot/1/stats",
-        "echelon/fast-circle/robot/2/stats",
-        "echelon/fast-circle/alive/junk",
-    ];
-    let per_key = 20u64;
-    let mut wrong_version = vec![0xEC, 9, 1, 0];
-    wrong_version.resize(88, 0);
-    for i in 0..per_key {
-        for key in keys {
-            let payload: Vec<u8> = if i % 4 == 0 {
-                wrong_version.clone()
-            } else {
-                (0..(i * 13 % 300)).map(|b| (b * 31 + i) as u8).collect()
-            };
-            session
-                .put(key, payload)
-                .congestion_control(zenoh::qos::CongestionControl::Block)
-                .wait()
-                .unwrap();
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    std::thread::sleep(Duration::from_millis(200));
-    session.close().wait().unwrap();
-    let report = fleet.join().unwrap();
-    // Robot 1 listens to the reference, robot 2 to robot 1's state.
-    for k in 0..2 {
-        let r = &report["robots"][k];
-        let c = &r["counters"];
-        assert_eq!(
-            u(c, &["malformed"]) + u(c, &["wrong_version"]),
-            per_key,
-            "agent {}: {c}",
-            k + 1
-        );
-        assert_eq!(u(c, &["wrong_version"]), per_key / 4);
-        assert!(f(r, &["final_error"]) < 1e-3, "{r}");
-    }
-    // The collector received and logged every one, as rejected.
-    let col = &report["collector"];
-    let rejected: u64 = col["rejected"]
-        .as_object()
-        .unwrap()
-        .values()
-        .map(|v| v.as_u64().unwrap())
-        .sum();
-    assert_eq!(rejected, per_key * keys.len() as u64, "{}", col["rejected"]);
-    assert_eq!(u(col, &["logged"]), u(col, &["received"]));
-    assert_eq!(
-        mcap_counts(&out.join("fleet.mcap")),
-        counts_of(&col["logged_by_topic"])
-    );
 }
 
 /// Secure mode: with mutual TLS and access control, a rogue that holds a

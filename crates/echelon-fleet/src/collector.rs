@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -27,7 +27,7 @@ use echelon_mcap::{
 
 use crate::keys::{KeyKind, Keys};
 use crate::net::{self, NetOptions};
-use crate::wire::{self, DecodeError, LinkStatus, Message};
+use crate::wire::{self, DecodeError, LinkStatus, Message, RobotState};
 use crate::{FleetError, StopFlag, unix_nanos};
 
 /// The MCAP file the collector writes.
@@ -132,44 +132,32 @@ pub struct CollectorReport {
     pub agents: Vec<AgentRecord>,
 }
 
-struct Channels {
-    log: McapLog<BufWriter<File>>,
-    seq: BTreeMap<u16, u32>,
-}
-
-impl Channels {
-    fn write(
+/// Where the collector's records go: the files ([`run`]), or memory in tests.
+pub trait RecordSink {
+    /// Logs one MCAP message on `topic` (received at UNIX ns `log_time`, sent
+    /// at `publish_time`).
+    fn log(
         &mut self,
         topic: &str,
         schema: &JsonSchema,
+        log_time: u64,
         publish_time: u64,
         data: &[u8],
-        report: &mut CollectorReport,
-    ) -> Result<(), FleetError> {
-        let id = self.log.channel(topic, schema)?;
-        let seq = self.seq.entry(id).or_insert(0);
-        self.log.write(id, *seq, unix_nanos(), publish_time, data)?;
-        *seq = seq.wrapping_add(1);
-        report.logged += 1;
-        *report.logged_by_topic.entry(topic.to_owned()).or_insert(0) += 1;
-        Ok(())
-    }
+    ) -> Result<(), FleetError>;
+    /// Appends one `trajectory.csv` line (with its newline).
+    fn row(&mut self, line: &str) -> Result<(), FleetError>;
 }
 
-struct Csv {
-    out: BufWriter<File>,
-    line: String,
-    ryu: ryu::Buffer,
-}
-
-/// The collector at work: files open, counters running.
-struct Recorder {
+/// The collector as a state machine: every sample received goes in through
+/// [`Collector::on_message`] with the time it arrived, and comes out as
+/// records in a [`RecordSink`]; it counts everything. It reads no clock and
+/// opens no file.
+pub struct Collector {
     keys: Keys,
-    channels: Channels,
-    csv: Csv,
     report: CollectorReport,
     agents: BTreeMap<u32, AgentRecord>,
-    csv_path: PathBuf,
+    line: String,
+    ryu: ryu::Buffer,
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -180,18 +168,80 @@ fn hex(bytes: &[u8]) -> String {
     s
 }
 
-impl Recorder {
-    fn reject(&mut self, key: &str, reason: &str, bytes: &[u8]) -> Result<(), FleetError> {
+impl std::fmt::Debug for Collector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Collector")
+            .field("keys", &self.keys)
+            .field("report", &self.report)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Collector {
+    /// A collector of fleet `keys`.
+    pub fn new(keys: Keys) -> Collector {
+        Collector {
+            keys,
+            report: CollectorReport {
+                role: "collector",
+                ..CollectorReport::default()
+            },
+            agents: BTreeMap::new(),
+            line: String::with_capacity(512),
+            ryu: ryu::Buffer::new(),
+        }
+    }
+
+    /// What it counted so far (`agents` is filled by [`Collector::finish`]).
+    pub fn report(&self) -> &CollectorReport {
+        &self.report
+    }
+
+    fn log(
+        &mut self,
+        sink: &mut impl RecordSink,
+        topic: &str,
+        schema: &JsonSchema,
+        now: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        sink.log(topic, schema, now, publish_time, data)?;
+        self.report.logged += 1;
+        *self
+            .report
+            .logged_by_topic
+            .entry(topic.to_owned())
+            .or_insert(0) += 1;
+        Ok(())
+    }
+
+    fn reject(
+        &mut self,
+        sink: &mut impl RecordSink,
+        key: &str,
+        reason: &str,
+        bytes: &[u8],
+        now: u64,
+    ) -> Result<(), FleetError> {
         *self.report.rejected.entry(reason.to_owned()).or_insert(0) += 1;
         let record = serde_json::json!({
             "key": key, "reason": reason, "size": bytes.len(), "hex": hex(bytes),
         });
         let data = serde_json::to_vec(&record).map_err(echelon_mcap::McapLogError::from)?;
-        self.channels
-            .write(REJECTED_TOPIC, &REJECTED, 0, &data, &mut self.report)
+        self.log(sink, REJECTED_TOPIC, &REJECTED, now, 0, &data)
     }
 
-    fn record(&mut self, key: &str, bytes: &[u8]) -> Result<(), FleetError> {
+    /// Records a sample that arrived on `key` at UNIX ns `now`: exactly one
+    /// MCAP message (typed, or on `/rejected`), and a CSV row for a started
+    /// robot's state.
+    pub fn on_message(
+        &mut self,
+        key: &str,
+        bytes: &[u8],
+        now: u64,
+        sink: &mut impl RecordSink,
+    ) -> Result<(), FleetError> {
         self.report.received += 1;
         *self
             .report
@@ -204,17 +254,20 @@ impl Recorder {
                 Ok(v) if v.get("agent").and_then(|a| a.as_u64()) == Some(u64::from(k)) => {
                     let t = v.get("t").and_then(|t| t.as_f64()).unwrap_or(0.0);
                     let topic = format!("/agent/{k}/stats");
-                    self.channels
-                        .write(&topic, &STATS, nanos(t), bytes, &mut self.report)
+                    self.log(sink, &topic, &STATS, now, nanos(t), bytes)
                 }
-                Ok(_) => self.reject(key, "stats of another agent", bytes),
-                Err(_) => self.reject(key, "malformed stats JSON", bytes),
+                Ok(_) => self.reject(sink, key, "stats of another agent", bytes, now),
+                Err(_) => self.reject(sink, key, "malformed stats JSON", bytes, now),
             };
         }
         let msg = match wire::decode(bytes) {
             Ok(m) => m,
-            Err(DecodeError::Malformed(_)) => return self.reject(key, "malformed", bytes),
-            Err(DecodeError::WrongVersion(_)) => return self.reject(key, "wrong version", bytes),
+            Err(DecodeError::Malformed(_)) => {
+                return self.reject(sink, key, "malformed", bytes, now);
+            }
+            Err(DecodeError::WrongVersion(_)) => {
+                return self.reject(sink, key, "wrong version", bytes, now);
+            }
         };
         match (kind, msg) {
             (KeyKind::Reference, Message::Reference(h, r)) => {
@@ -231,101 +284,144 @@ impl Recorder {
                     turn_rate: r.turn_rate,
                 };
                 let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
-                self.channels.write(
-                    REFERENCE_TOPIC,
-                    &REFERENCE,
-                    nanos(r.t),
-                    &data,
-                    &mut self.report,
-                )
+                self.log(sink, REFERENCE_TOPIC, &REFERENCE, now, nanos(r.t), &data)
             }
             (KeyKind::State(k), Message::State(h, s)) if s.agent == k => {
-                let ne = s.e[0].hypot(s.e[1]);
-                // A fleet robot acts on its true state (no odometry model in
-                // the fleet): what it saw is what it is.
-                let output = echelon::sim::AgentOutput {
-                    e: s.e,
-                    z: s.z,
-                    e_hat: s.e,
-                    z_hat: s.z,
-                    command: s.u,
-                    u: s.u,
-                    tau: s.tau,
-                };
-                let rec = AgentStateRecord {
-                    seq: Some(h.seq),
-                    link: Some(s.link.name()),
-                    leader: Some(LeaderRecord {
-                        x: s.leader.p[0],
-                        y: s.leader.p[1],
-                        vx: s.leader.dp[0],
-                        vy: s.leader.dp[1],
-                        ax: s.leader.ddp[0],
-                        ay: s.leader.ddp[1],
-                    }),
-                    ..AgentStateRecord::new(s.t, k, &s.state, &output)
-                };
-                let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
-                self.channels.write(
-                    &agent_topic(k as usize),
-                    &AGENT_STATE,
-                    nanos(s.t),
-                    &data,
-                    &mut self.report,
-                )?;
-                let a = self.agents.entry(k).or_insert_with(|| AgentRecord {
-                    agent: k,
-                    ..AgentRecord::default()
-                });
-                a.messages += 1;
-                a.link = s.link.name().to_owned();
-                if s.link == LinkStatus::Waiting {
-                    return Ok(());
-                }
-                a.rows += 1;
-                a.t = s.t;
-                a.final_state = [
-                    s.state.x,
-                    s.state.y,
-                    s.state.theta,
-                    s.state.v,
-                    s.state.omega,
-                ];
-                a.final_error = ne;
-                a.sum_sq += ne * ne;
-                a.rms_error = (a.sum_sq / a.rows as f64).sqrt();
-                a.peak_torque = a.peak_torque.max(s.tau.peak());
-                let csv = &mut self.csv;
-                csv.line.clear();
-                let row = TrajectoryRow {
-                    t: s.t,
-                    agent: k as usize,
-                    state: &s.state,
-                    output: &output,
-                };
-                row.push(&mut csv.line, &mut csv.ryu);
-                csv.out
-                    .write_all(csv.line.as_bytes())
-                    .map_err(FleetError::io(&self.csv_path))
+                self.state(k, h.seq, &s, now, sink)
             }
-            (KeyKind::Other, _) => self.reject(key, "unknown key", bytes),
-            _ => self.reject(key, "message of the wrong kind for its key", bytes),
+            (KeyKind::Other, _) => self.reject(sink, key, "unknown key", bytes, now),
+            _ => self.reject(
+                sink,
+                key,
+                "message of the wrong kind for its key",
+                bytes,
+                now,
+            ),
         }
     }
 
-    fn finish(mut self, out: &Path) -> Result<CollectorReport, FleetError> {
-        self.channels.log.finish()?;
-        self.csv
-            .out
-            .flush()
-            .map_err(FleetError::io(&self.csv_path))?;
+    fn state(
+        &mut self,
+        k: u32,
+        seq: u64,
+        s: &RobotState,
+        now: u64,
+        sink: &mut impl RecordSink,
+    ) -> Result<(), FleetError> {
+        let ne = s.e[0].hypot(s.e[1]);
+        // A fleet robot acts on its true state (no odometry model in
+        // the fleet): what it saw is what it is.
+        let output = echelon::sim::AgentOutput {
+            e: s.e,
+            z: s.z,
+            e_hat: s.e,
+            z_hat: s.z,
+            command: s.u,
+            u: s.u,
+            tau: s.tau,
+        };
+        let rec = AgentStateRecord {
+            seq: Some(seq),
+            link: Some(s.link.name()),
+            leader: Some(LeaderRecord {
+                x: s.leader.p[0],
+                y: s.leader.p[1],
+                vx: s.leader.dp[0],
+                vy: s.leader.dp[1],
+                ax: s.leader.ddp[0],
+                ay: s.leader.ddp[1],
+            }),
+            ..AgentStateRecord::new(s.t, k, &s.state, &output)
+        };
+        let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
+        self.log(
+            sink,
+            &agent_topic(k as usize),
+            &AGENT_STATE,
+            now,
+            nanos(s.t),
+            &data,
+        )?;
+        let a = self.agents.entry(k).or_insert_with(|| AgentRecord {
+            agent: k,
+            ..AgentRecord::default()
+        });
+        a.messages += 1;
+        a.link = s.link.name().to_owned();
+        if s.link == LinkStatus::Waiting {
+            return Ok(());
+        }
+        a.rows += 1;
+        a.t = s.t;
+        a.final_state = [
+            s.state.x,
+            s.state.y,
+            s.state.theta,
+            s.state.v,
+            s.state.omega,
+        ];
+        a.final_error = ne;
+        a.sum_sq += ne * ne;
+        a.rms_error = (a.sum_sq / a.rows as f64).sqrt();
+        a.peak_torque = a.peak_torque.max(s.tau.peak());
+        self.line.clear();
+        let row = TrajectoryRow {
+            t: s.t,
+            agent: k as usize,
+            state: &s.state,
+            output: &output,
+        };
+        row.push(&mut self.line, &mut self.ryu);
+        sink.row(&self.line)
+    }
+
+    /// The final report, with the per-agent records.
+    pub fn finish(mut self) -> CollectorReport {
         self.report.agents = self.agents.into_values().collect();
-        crate::write_json_file(&out.join(SUMMARY_FILE), &self.report)?;
-        Ok(self.report)
+        self.report
     }
 }
 
-/// Records until the stop flag (or `max_wall`), then closes the files.
+/// The collector's files: `fleet.mcap` and `trajectory.csv`.
+struct FileSink {
+    log: McapLog<BufWriter<File>>,
+    seq: BTreeMap<u16, u32>,
+    csv: BufWriter<File>,
+    csv_path: PathBuf,
+}
+
+impl RecordSink for FileSink {
+    fn log(
+        &mut self,
+        topic: &str,
+        schema: &JsonSchema,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        let id = self.log.channel(topic, schema)?;
+        let seq = self.seq.entry(id).or_insert(0);
+        self.log.write(id, *seq, log_time, publish_time, data)?;
+        *seq = seq.wrapping_add(1);
+        Ok(())
+    }
+
+    fn row(&mut self, line: &str) -> Result<(), FleetError> {
+        self.csv
+            .write_all(line.as_bytes())
+            .map_err(FleetError::io(&self.csv_path))
+    }
+}
+
+impl FileSink {
+    fn finish(mut self) -> Result<(), FleetError> {
+        self.log.finish()?;
+        self.csv.flush().map_err(FleetError::io(&self.csv_path))
+    }
+}
+
+/// Records until the stop flag (or `max_wall`), then closes the files: the
+/// Zenoh driver of [`Collector`].
 pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, FleetError> {
     std::fs::create_dir_all(&opts.out).map_err(FleetError::io(&opts.out))?;
     let keys = Keys::new(&opts.fleet);
@@ -333,26 +429,15 @@ pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, F
     let csv_path = opts.out.join(TRAJECTORY_FILE);
     let log = McapLog::create(&mcap_path)?;
     let file = File::create(&csv_path).map_err(FleetError::io(&csv_path))?;
-    let mut out = BufWriter::with_capacity(1 << 16, file);
-    writeln!(out, "{TRAJECTORY_HEADER}").map_err(FleetError::io(&csv_path))?;
-    let mut rec = Recorder {
-        keys: keys.clone(),
-        channels: Channels {
-            log,
-            seq: BTreeMap::new(),
-        },
-        csv: Csv {
-            out,
-            line: String::with_capacity(512),
-            ryu: ryu::Buffer::new(),
-        },
-        report: CollectorReport {
-            role: "collector",
-            ..CollectorReport::default()
-        },
-        agents: BTreeMap::new(),
+    let mut csv = BufWriter::with_capacity(1 << 16, file);
+    writeln!(csv, "{TRAJECTORY_HEADER}").map_err(FleetError::io(&csv_path))?;
+    let mut sink = FileSink {
+        log,
+        seq: BTreeMap::new(),
+        csv,
         csv_path,
     };
+    let mut collector = Collector::new(keys.clone());
 
     let session = net::open(&opts.net)?;
     let (tx, rx) = mpsc::channel::<(String, Vec<u8>)>();
@@ -375,7 +460,7 @@ pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, F
     let started = std::time::Instant::now();
     while !stop.is_raised() && opts.max_wall.is_none_or(|m| started.elapsed() < m) {
         match rx.recv_timeout(Duration::from_millis(50)) {
-            Ok((key, bytes)) => rec.record(&key, &bytes)?,
+            Ok((key, bytes)) => collector.on_message(&key, &bytes, unix_nanos(), &mut sink)?,
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
         }
@@ -385,7 +470,133 @@ pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, F
     let _ = subscriber.undeclare().wait();
     let _ = session.close().wait();
     while let Ok((key, bytes)) = rx.try_recv() {
-        rec.record(&key, &bytes)?;
+        collector.on_message(&key, &bytes, unix_nanos(), &mut sink)?;
     }
-    rec.finish(&opts.out)
+    sink.finish()?;
+    let report = collector.finish();
+    crate::write_json_file(&opts.out.join(SUMMARY_FILE), &report)?;
+    Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::{Header, Reference};
+    use echelon::control::LeaderMotion;
+
+    /// Records in memory.
+    #[derive(Debug, Default)]
+    struct Memory {
+        logged: Vec<(String, u64, u64, Vec<u8>)>,
+        rows: Vec<String>,
+    }
+
+    impl RecordSink for Memory {
+        fn log(
+            &mut self,
+            topic: &str,
+            _schema: &JsonSchema,
+            log_time: u64,
+            publish_time: u64,
+            data: &[u8],
+        ) -> Result<(), FleetError> {
+            self.logged
+                .push((topic.to_owned(), log_time, publish_time, data.to_vec()));
+            Ok(())
+        }
+
+        fn row(&mut self, line: &str) -> Result<(), FleetError> {
+            self.rows.push(line.to_owned());
+            Ok(())
+        }
+    }
+
+    /// Valid messages go to their typed topic, a started robot's state also to
+    /// the CSV; garbage, wrong versions, unknown keys and messages of the
+    /// wrong kind go to `/rejected` with their reason: every sample is logged
+    /// exactly once.
+    #[test]
+    fn every_sample_is_logged_once_and_garbage_is_rejected_with_its_reason() {
+        let keys = Keys::new("f");
+        let mut c = Collector::new(keys.clone());
+        let mut sink = Memory::default();
+        let mut reference = Vec::new();
+        wire::encode_reference(
+            &mut reference,
+            Header { source: 1, seq: 4 },
+            &Reference {
+                t: 2.0,
+                motion: LeaderMotion::default(),
+                speed: 0.2,
+                turn_rate: 0.2,
+            },
+        );
+        let state = |link| {
+            let mut b = Vec::new();
+            let s = RobotState {
+                t: 2.5,
+                agent: 1,
+                link,
+                e: [3e-3, 4e-3],
+                ..RobotState::default()
+            };
+            wire::encode_state(&mut b, Header { source: 2, seq: 0 }, &s);
+            b
+        };
+        let (tracking, waiting) = (state(LinkStatus::Tracking), state(LinkStatus::Waiting));
+        let mut wrong_version = reference.clone();
+        wrong_version[1] = 9;
+        let stats = br#"{"agent":1,"t":3.0}"#;
+        let k = |s: &str| s.to_owned();
+        let inputs: Vec<(String, &[u8])> = vec![
+            (keys.reference(), &reference),
+            (keys.state(1), &tracking),
+            (keys.state(1), &waiting),
+            (keys.stats(1), stats),
+            (keys.stats(2), stats),
+            (keys.stats(1), b"{"),
+            (keys.reference(), &[1, 2, 3]),
+            (keys.state(1), &wrong_version),
+            (keys.state(2), &tracking),
+            (keys.state(1), &reference),
+            (k("echelon/f/alive/junk"), &reference),
+        ];
+        for (i, (key, bytes)) in inputs.iter().enumerate() {
+            c.on_message(key, bytes, 1000 + i as u64, &mut sink)
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        let report = c.finish();
+        assert_eq!(report.received, inputs.len() as u64);
+        assert_eq!(report.logged, report.received);
+        assert_eq!(sink.logged.len() as u64, report.logged);
+        let rejected: Vec<(&str, u64)> = report
+            .rejected
+            .iter()
+            .map(|(r, n)| (r.as_str(), *n))
+            .collect();
+        assert_eq!(
+            rejected,
+            [
+                ("malformed", 1),
+                ("malformed stats JSON", 1),
+                ("message of the wrong kind for its key", 2),
+                ("stats of another agent", 1),
+                ("unknown key", 1),
+                ("wrong version", 1),
+            ]
+        );
+        assert_eq!(report.logged_by_topic[REFERENCE_TOPIC], 1);
+        assert_eq!(report.logged_by_topic["/agent/1/state"], 2);
+        assert_eq!(report.logged_by_topic["/agent/1/stats"], 1);
+        assert_eq!(report.logged_by_topic[REJECTED_TOPIC], 7);
+        // log_time is the arrival time given, publish_time the sender's.
+        assert_eq!((sink.logged[0].1, sink.logged[0].2), (1000, nanos(2.0)));
+        // One CSV row: the tracking state, not the waiting one.
+        assert_eq!(sink.rows.len(), 1);
+        assert!(sink.rows[0].starts_with("2.5,1,"), "{}", sink.rows[0]);
+        let a = &report.agents[0];
+        assert_eq!((a.agent, a.messages, a.rows), (1, 2, 1));
+        assert!((a.final_error - 5e-3).abs() < 1e-15);
+        assert_eq!(a.link, "waiting");
+    }
 }

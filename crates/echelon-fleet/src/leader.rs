@@ -10,13 +10,13 @@ use zenoh::Wait;
 use zenoh::sample::SampleKind;
 
 use echelon::control::LeaderMotion;
-use echelon::reference::{Order, Trajectory};
+use echelon::reference::{Order, Reference, Trajectory};
 use echelon::scenario::{Overrides, Scenario};
 
 use crate::clock::FleetClock;
 use crate::keys::Keys;
 use crate::net::{self, NetOptions};
-use crate::wire::{self, Header, Reference};
+use crate::wire::{self, Header, Reference as WireReference};
 use crate::{FleetError, StopFlag};
 
 /// Options of the leader process.
@@ -114,7 +114,81 @@ fn wait_for_roles(
     }
 }
 
-/// Publishes the reference until `duration` or the stop flag.
+/// The virtual leader as a state machine: sample `k` of the reference is due
+/// at fleet time `k / rate`, up to `duration`. It has no inputs; the caller
+/// ticks it with the time it reads and publishes what it returns.
+#[derive(Debug, Clone)]
+pub struct Leader {
+    reference: Reference,
+    period: f64,
+    duration: f64,
+    source: u32,
+    k: u64,
+    late: u64,
+    last_t: f64,
+}
+
+impl Leader {
+    /// A leader publishing `reference` at `rate` Hz until fleet time
+    /// `duration`, under the random `source`.
+    pub fn new(reference: Reference, rate: f64, duration: f64, source: u32) -> Leader {
+        Leader {
+            reference,
+            period: 1.0 / rate,
+            duration,
+            source,
+            k: 0,
+            late: 0,
+            last_t: 0.0,
+        }
+    }
+
+    /// Fleet time of the next sample, or `None` once past `duration`.
+    pub fn next_due(&self) -> Option<f64> {
+        let t = self.k as f64 * self.period;
+        (t <= self.duration + 1e-9).then_some(t)
+    }
+
+    /// At fleet time `now`: the sample due, with its header (`None` before it
+    /// is due, or after the end). A sample sent more than a period late is
+    /// counted.
+    pub fn tick(&mut self, now: f64) -> Option<(Header, WireReference)> {
+        let t = self.next_due()?;
+        if now < t {
+            return None;
+        }
+        if now - t > self.period {
+            self.late += 1;
+        }
+        let jet = self.reference.eval(t, Order::Two);
+        let sample = WireReference {
+            t,
+            motion: LeaderMotion::of_jet(&jet),
+            speed: jet.speed(),
+            turn_rate: jet.turn_rate(),
+        };
+        let h = Header {
+            source: self.source,
+            seq: self.k,
+        };
+        self.k += 1;
+        self.last_t = t;
+        Some((h, sample))
+    }
+
+    /// What the leader reports when it stops.
+    pub fn report(&self) -> LeaderReport {
+        LeaderReport {
+            role: "leader",
+            published: self.k,
+            t: self.last_t,
+            late: self.late,
+        }
+    }
+}
+
+/// Publishes the reference until `duration` or the stop flag: the Zenoh
+/// driver of [`Leader`].
 pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetError> {
     let fleet = opts.scenario.fleet()?;
     let built = opts.scenario.build(&Overrides::default())?;
@@ -136,43 +210,56 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
     wait_for_roles(&session, &keys, &opts.wait_for, opts.wait_timeout, stop)?;
 
     let clock = FleetClock::new(opts.time_scale);
-    let source = net::rand_source();
-    let period = 1.0 / rate;
+    let mut leader = Leader::new(reference, rate, duration, net::rand_source());
     let mut buf = Vec::with_capacity(wire::REFERENCE_LEN);
-    let mut k: u64 = 0;
-    let mut late: u64 = 0;
-    let mut last_t = 0.0;
     while !stop.is_raised() {
-        let t = k as f64 * period;
-        if t > duration + 1e-9 {
+        let Some(t) = leader.next_due() else {
             break;
-        }
-        clock.sleep_until(t, Duration::from_millis(20));
-        let now = clock.now();
-        if now < t {
-            continue;
-        }
-        if now - t > period {
-            late += 1;
-        }
-        let jet = reference.eval(t, Order::Two);
-        let sample = Reference {
-            t,
-            motion: LeaderMotion::of_jet(&jet),
-            speed: jet.speed(),
-            turn_rate: jet.turn_rate(),
         };
-        wire::encode_reference(&mut buf, Header { source, seq: k }, &sample);
-        net::publish(&publisher, &buf)?;
-        k += 1;
-        last_t = t;
+        clock.sleep_until(t, Duration::from_millis(20));
+        if let Some((h, sample)) = leader.tick(clock.now()) {
+            wire::encode_reference(&mut buf, h, &sample);
+            net::publish(&publisher, &buf)?;
+        }
     }
     drop(publisher);
     let _ = session.close().wait();
-    Ok(LeaderReport {
-        role: "leader",
-        published: k,
-        t: last_t,
-        late,
-    })
+    Ok(leader.report())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use echelon::reference::Circle;
+
+    #[test]
+    fn samples_are_due_on_the_rate_grid_and_late_ones_are_counted() {
+        let c = Circle {
+            start: [0.0, 0.0],
+            heading: 0.0,
+            speed: 0.2,
+            turn_rate: 0.2,
+        };
+        let mut l = Leader::new(Reference::Circle(c), 50.0, 0.1, 7);
+        assert_eq!(l.next_due(), Some(0.0));
+        assert!(l.tick(-0.001).is_none());
+        let (h, r) = l.tick(0.0).unwrap_or_else(|| panic!("due"));
+        assert_eq!((h.source, h.seq, r.t), (7, 0, 0.0));
+        assert_eq!(r.motion, LeaderMotion::of_jet(&c.eval(0.0, Order::Two)));
+        assert!(l.tick(0.019).is_none());
+        // Sample 1 (t = 0.02) sent at 0.05: more than a period late.
+        let (h, r) = l.tick(0.05).unwrap_or_else(|| panic!("due"));
+        assert_eq!((h.seq, r.t), (1, 0.02));
+        let mut n = 2;
+        while let Some(t) = l.next_due() {
+            assert!(l.tick(t).is_some());
+            n += 1;
+        }
+        // 0, 0.02, …, 0.1: six samples, then nothing.
+        assert_eq!(n, 6);
+        assert!(l.tick(10.0).is_none());
+        let rep = l.report();
+        assert_eq!((rep.published, rep.late), (6, 1));
+        assert!((rep.t - 0.1).abs() < 1e-12);
+    }
 }

@@ -1,9 +1,8 @@
 //! The robot a fleet process drives: the [`Plant`] trait, and the simulated
 //! dynamic model (eq. 3) paced by the fleet clock.
 //!
-//! A real drive implements [`Plant`] by reading its odometry in `state`,
-//! ignoring `advance` (it moves by itself) and sending wheel torques in
-//! `command`.
+//! A real drive implements [`Plant`] by reading its odometry in `advance` and
+//! `state` (it moves by itself) and sending wheel torques in `command`.
 
 use echelon::model::{Input, RobotParams, State, Torques};
 
@@ -16,16 +15,27 @@ pub struct Actuation {
     pub tau: Torques,
 }
 
-/// A differential-drive robot under the fleet controller.
+/// A differential-drive robot under the fleet controller: what the robot's
+/// state machine ([`crate::robot::Robot`]) drives, injected. The simulated
+/// model is one; a real drive (wheel torques out, odometry in) or a
+/// velocity-controlled base (its `cmd_vel` formed from `u`) is another.
 pub trait Plant {
-    /// The robot's state now (measured or simulated).
-    fn state(&self) -> State;
-    /// Brings the robot to fleet time `t`, the last command held in between.
+    /// The robot's state now (measured or simulated); `None` when the plant
+    /// has no valid state (odometry lost), upon which the robot commands zero.
+    fn state(&self) -> Option<State>;
+    /// Brings the robot to fleet time `t`, the last command held in between
+    /// (a real drive, which moves by itself, reads its odometry here).
     fn advance(&mut self, t: f64);
     /// Sends a command; it is held until the next one. Returns what the motors apply.
     fn command(&mut self, u: Input) -> Actuation;
     /// `(v̇, ω̇)` now.
     fn accelerations(&self) -> (f64, f64);
+    /// The fleet clock was set to `t` (the leader's timeline began or
+    /// restarted): the plant's time jumps there without moving. A real drive
+    /// ignores it.
+    fn set_time(&mut self, t: f64) {
+        let _ = t;
+    }
 }
 
 /// Eq. 3 integrated with RK4 over the real elapsed fleet time, in sub-steps
@@ -51,15 +61,15 @@ impl SimulatedPlant {
         }
     }
 
-    /// Restarts the clock at `t` without moving the robot.
-    pub fn set_time(&mut self, t: f64) {
-        self.t = t;
+    /// The simulated state (never lost).
+    pub fn true_state(&self) -> State {
+        self.state
     }
 }
 
 impl Plant for SimulatedPlant {
-    fn state(&self) -> State {
-        self.state
+    fn state(&self) -> Option<State> {
+        Some(self.state)
     }
 
     fn advance(&mut self, t: f64) {
@@ -84,6 +94,10 @@ impl Plant for SimulatedPlant {
     fn accelerations(&self) -> (f64, f64) {
         self.params.accelerations(&self.state, self.applied)
     }
+
+    fn set_time(&mut self, t: f64) {
+        self.t = t;
+    }
 }
 
 #[cfg(test)]
@@ -102,11 +116,11 @@ mod tests {
         for k in 1..=10 {
             b.advance(0.01 * k as f64);
         }
-        let (sa, sb) = (a.state(), b.state());
+        let (sa, sb) = (a.true_state(), b.true_state());
         assert!((sa.x - sb.x).abs() < 1e-12 && (sa.theta - sb.theta).abs() < 1e-12);
         assert!(sa.v > 0.0 && sa.omega > 0.0);
         // Going back in time does nothing.
         a.advance(0.05);
-        assert_eq!(a.state(), sa);
+        assert_eq!(a.true_state(), sa);
     }
 }

@@ -15,6 +15,7 @@
 //!   command, for velocity-controlled bases;
 //! - [`base`]: a velocity-controlled base (lags, speed and acceleration
 //!   limits, presets for real robots);
+//! - [`follow`]: one agent's law evaluation behind what it knows of its leader;
 //! - [`formation`]: who follows whom;
 //! - [`sim`]: the RK4 simulator, observers and run statistics;
 //! - [`odometry`]: encoders, dead reckoning, error models, fixes, Theorem 2, UMBmark;
@@ -32,6 +33,7 @@ pub mod check;
 pub mod control;
 pub mod engine;
 pub mod error;
+pub mod follow;
 pub mod formation;
 pub mod kinematic;
 pub mod lanes;

@@ -8,8 +8,9 @@
 //! same inputs give the same bits.
 
 use crate::check;
-use crate::control::{Gains, LawOutput, LeaderMotion, Variant, errors, law};
+use crate::control::{Gains, LawOutput, Variant, errors};
 use crate::error::{FormationError, ParamError, SimError};
+use crate::follow::{Follow, LeaderView, follow};
 use crate::formation::{Formation, Leader};
 use crate::lycomp::{FitCoefficients, LyComp, Placement};
 use crate::math::whole_ratio;
@@ -249,30 +250,25 @@ impl System {
         };
         for &i in self.formation.order() {
             let a = &self.agents[i];
-            // What the law needs of the leader, from a state of robot j.
-            let leader_of = |s: &State, j: usize| {
-                // The leader was evaluated first: dx[j].v is its v̇ now.
-                (
-                    LeaderMotion::of_robot(s, dx[j].v),
-                    a.placement.offset_for_robot(s.v, s.omega),
-                )
+            // What the law knows of the leader, from a state of robot j: the
+            // leader was evaluated first, so dx[j].v is its v̇ now.
+            let view = |state: State, j: usize| LeaderView::Robot { state, dv: dx[j].v };
+            let leader = match a.leader {
+                Leader::Reference => LeaderView::Reference(&jet),
+                Leader::Agent(j) => view(sensed(j), j),
             };
-            let (motion, offset) = match a.leader {
-                Leader::Reference => (
-                    LeaderMotion::of_jet(&jet),
-                    a.placement.offset_for_reference(&jet),
-                ),
-                Leader::Agent(j) => leader_of(&sensed(j), j),
-            };
-            let me = sensed(i);
-            let LawOutput { u, e, z } = law(&a.robot, &me, &motion, &offset, a.gains, a.variant);
+            let Follow {
+                law: LawOutput { u, e, z },
+                leader: motion,
+                offset,
+            } = follow(a, &sensed(i), leader);
             let (e_true, z_true) = if out.is_none() || odometers.is_empty() {
                 (e, z)
             } else {
                 // The same errors from the true states of the robot and its leader.
                 let (motion, offset) = match a.leader {
                     Leader::Reference => (motion, offset),
-                    Leader::Agent(j) => leader_of(&x[j], j),
+                    Leader::Agent(j) => view(x[j], j).resolve(&a.placement),
                 };
                 let s = &x[i];
                 errors(

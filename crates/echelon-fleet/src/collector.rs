@@ -8,10 +8,11 @@
 //! simulator's header. On SIGINT/SIGTERM it stops listening, logs what is still
 //! queued, and closes valid files.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
@@ -19,7 +20,7 @@ use std::time::Duration;
 use serde::Serialize;
 use zenoh::Wait;
 
-use echelon::output::{TRAJECTORY_FILE, TRAJECTORY_HEADER, TrajectoryRow};
+use echelon::output::{CsvWriter, TRAJECTORY_FILE, TRAJECTORY_HEADER, TrajectoryRow};
 use echelon_mcap::{
     AGENT_STATE, AgentStateRecord, JsonSchema, LeaderRecord, McapLog, REFERENCE, REFERENCE_TOPIC,
     ReferenceRecord, agent_topic, nanos,
@@ -40,7 +41,8 @@ pub const REJECTED_TOPIC: &str = "/rejected";
 /// Schema of `/rejected`.
 pub const REJECTED: JsonSchema = JsonSchema {
     name: "echelon.Rejected",
-    schema: r#"{
+    schema: Cow::Borrowed(
+        r#"{
   "$schema": "http://json-schema.org/draft-07/schema#",
   "title": "echelon.Rejected",
   "description": "A sample received under the fleet's keys that was not a valid message for its key.",
@@ -53,12 +55,14 @@ pub const REJECTED: JsonSchema = JsonSchema {
   },
   "required": ["key", "reason", "size", "hex"]
 }"#,
+    ),
 };
 
 /// Schema of `/agent/K/stats` (a robot's counters, as it published them).
 pub const STATS: JsonSchema = JsonSchema {
     name: "echelon.RobotStats",
-    schema: r#"{
+    schema: Cow::Borrowed(
+        r#"{
   "$schema": "http://json-schema.org/draft-07/schema#",
   "title": "echelon.RobotStats",
   "description": "A robot's receive counters and link status (docs/fleet.md).",
@@ -73,6 +77,7 @@ pub const STATS: JsonSchema = JsonSchema {
   },
   "required": ["agent", "t", "link", "counters"]
 }"#,
+    ),
 };
 
 /// Options of the collector.
@@ -156,17 +161,11 @@ impl Channels {
     }
 }
 
-struct Csv {
-    out: BufWriter<File>,
-    line: String,
-    ryu: ryu::Buffer,
-}
-
 /// The collector at work: files open, counters running.
 struct Recorder {
     keys: Keys,
     channels: Channels,
-    csv: Csv,
+    csv: CsvWriter<BufWriter<File>>,
     report: CollectorReport,
     agents: BTreeMap<u32, AgentRecord>,
     csv_path: PathBuf,
@@ -295,18 +294,14 @@ impl Recorder {
                 a.sum_sq += ne * ne;
                 a.rms_error = (a.sum_sq / a.rows as f64).sqrt();
                 a.peak_torque = a.peak_torque.max(s.tau.peak());
-                let csv = &mut self.csv;
-                csv.line.clear();
-                let row = TrajectoryRow {
+                TrajectoryRow {
                     t: s.t,
                     agent: k as usize,
                     state: &s.state,
                     output: &output,
-                };
-                row.push(&mut csv.line, &mut csv.ryu);
-                csv.out
-                    .write_all(csv.line.as_bytes())
-                    .map_err(FleetError::io(&self.csv_path))
+                }
+                .write(&mut self.csv)
+                .map_err(FleetError::io(&self.csv_path))
             }
             (KeyKind::Other, _) => self.reject(key, "unknown key", bytes),
             _ => self.reject(key, "message of the wrong kind for its key", bytes),
@@ -315,10 +310,7 @@ impl Recorder {
 
     fn finish(mut self, out: &Path) -> Result<CollectorReport, FleetError> {
         self.channels.log.finish()?;
-        self.csv
-            .out
-            .flush()
-            .map_err(FleetError::io(&self.csv_path))?;
+        self.csv.flush().map_err(FleetError::io(&self.csv_path))?;
         self.report.agents = self.agents.into_values().collect();
         crate::write_json_file(&out.join(SUMMARY_FILE), &self.report)?;
         Ok(self.report)
@@ -333,19 +325,15 @@ pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, F
     let csv_path = opts.out.join(TRAJECTORY_FILE);
     let log = McapLog::create(&mcap_path)?;
     let file = File::create(&csv_path).map_err(FleetError::io(&csv_path))?;
-    let mut out = BufWriter::with_capacity(1 << 16, file);
-    writeln!(out, "{TRAJECTORY_HEADER}").map_err(FleetError::io(&csv_path))?;
+    let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), TRAJECTORY_HEADER)
+        .map_err(FleetError::io(&csv_path))?;
     let mut rec = Recorder {
         keys: keys.clone(),
         channels: Channels {
             log,
             seq: BTreeMap::new(),
         },
-        csv: Csv {
-            out,
-            line: String::with_capacity(512),
-            ryu: ryu::Buffer::new(),
-        },
+        csv,
         report: CollectorReport {
             role: "collector",
             ..CollectorReport::default()

@@ -414,12 +414,25 @@ impl Table {
     /// line, then rows of numbers with as many cells; blank lines are skipped
     /// and cells trimmed.
     pub fn parse(path: &Path, text: &str) -> Result<Table, OutputError> {
-        let parse = |line: u64, message: String| OutputError::Parse {
+        let parse = |line: usize, message: String| OutputError::Parse {
             path: path.to_path_buf(),
-            line: line as usize,
+            line,
             message,
         };
-        let line_of = |e: &csv::Error| e.position().map_or(0, csv::Position::line);
+        // The line of a record from its byte offset: the reader's own line
+        // count leaves out the empty lines it skips, and its offset is where
+        // they begin.
+        let line_at = |pos: Option<&csv::Position>| {
+            pos.map_or(0, |p| {
+                let bytes = text.as_bytes();
+                let mut end = (p.byte() as usize).min(bytes.len());
+                while end < bytes.len() && matches!(bytes[end], b'\n' | b'\r') {
+                    end += 1;
+                }
+                1 + bytes[..end].iter().filter(|&&b| b == b'\n').count()
+            })
+        };
+        let line_of = |e: &csv::Error| line_at(e.position());
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
             .flexible(true)
@@ -436,18 +449,18 @@ impl Table {
         let mut rows = Vec::new();
         for record in reader.records() {
             let record = record.map_err(|e| parse(line_of(&e), e.to_string()))?;
-            let line = record.position().map_or(0, csv::Position::line);
             if record.iter().all(str::is_empty) {
                 continue;
             }
+            let line = || line_at(record.position());
             let row = record
                 .iter()
                 .map(str::parse::<f64>)
                 .collect::<Result<Vec<f64>, _>>()
-                .map_err(|e| parse(line, format!("not a number: {e}")))?;
+                .map_err(|e| parse(line(), format!("not a number: {e}")))?;
             if row.len() != header.len() {
                 return Err(parse(
-                    line,
+                    line(),
                     format!(
                         "{} columns where the header has {}",
                         row.len(),
@@ -625,6 +638,40 @@ mod tests {
             push_time(&mut s, t);
             assert_eq!(s, want);
         }
+    }
+
+    #[test]
+    fn tables_parse_and_errors_name_the_line() {
+        let path = Path::new("t.csv");
+        let t = Table::parse(path, "t, x\n0,1.5\n\n  \n0.5 , -2e-3\n").unwrap();
+        assert_eq!(t.header, ["t", "x"]);
+        assert_eq!(t.rows, [vec![0.0, 1.5], vec![0.5, -2e-3]]);
+        let err = |text: &str| Table::parse(path, text).unwrap_err().to_string();
+        assert_eq!(err(""), "t.csv:1: empty file: expected a header");
+        let e = err("t,x\n0,1\n0,nope\n");
+        assert!(e.starts_with("t.csv:3: not a number"), "{e}");
+        assert_eq!(
+            err("t,x\n0,1\n\n1\n"),
+            "t.csv:4: 1 columns where the header has 2"
+        );
+    }
+
+    /// What the CSV writer writes for each kind of cell.
+    #[test]
+    fn the_csv_writer_writes_each_cell_kind() {
+        let mut csv = CsvWriter::new(Vec::new(), "a,b,c,d,e,f").unwrap();
+        csv.time(0.030000000000000002)
+            .int(7)
+            .num(0.1)
+            .opt(None)
+            .text("wheels")
+            .opt(Some(-1.0));
+        csv.end_row().unwrap();
+        csv.opt(None).nums([1.0, 2.5]);
+        csv.end_row().unwrap();
+        assert_eq!(csv.rows(), 2);
+        let text = String::from_utf8(csv.into_inner().unwrap()).unwrap();
+        assert_eq!(text, "a,b,c,d,e,f\n0.03,7,0.1,,wheels,-1.0\n,1.0,2.5\n");
     }
 
     #[test]

@@ -1,11 +1,4 @@
-//! Small numerical helpers shared by the references, the odometry and the
-//! simulator.
-
-/// `a / b` as a whole number ≥ 1 when it is one (to 1e-9 relative), else `None`.
-pub(crate) fn whole_ratio(a: f64, b: f64) -> Option<u64> {
-    let r = (a / b).round();
-    ((a - r * b).abs() <= 1e-9 * a.abs().max(b) && r >= 1.0).then_some(r as u64)
-}
+//! Small numerical helpers shared by the references and the odometry.
 
 /// `sin(x)/x`, accurate near 0 (where it uses its Taylor series).
 #[inline]

@@ -386,7 +386,11 @@ fn finite(context: &str, field: &'static str, value: f64) -> Result<(), SimError
     }
 }
 
-pub(crate) use crate::math::whole_ratio;
+/// `a / b` as a whole number ≥ 1 when it is one (to 1e-9 relative), else `None`.
+pub(crate) fn whole_ratio(a: f64, b: f64) -> Option<u64> {
+    let r = (a / b).round();
+    ((a - r * b).abs() <= 1e-9 * a.abs().max(b) && r >= 1.0).then_some(r as u64)
+}
 
 impl Simulation {
     /// Builds and validates a simulation. Refuses (naming agent and reason)

@@ -309,7 +309,7 @@ impl Odometer {
                 match f.schedule {
                     FixSchedule::EverySamples(n) => n,
                     FixSchedule::Period(p) => {
-                        crate::math::whole_ratio(p, spec.period).ok_or(ParamError::new(
+                        crate::sim::whole_ratio(p, spec.period).ok_or(ParamError::new(
                             "period",
                             p,
                             "must be a whole multiple of the odometry period",

@@ -160,9 +160,33 @@ fn mcap_counts(path: &Path) -> BTreeMap<String, u64> {
     counts
 }
 
+/// Fails the test at once, saying what to install, when `python3` cannot
+/// import Python's `mcap` package (the independent MCAP reader).
+fn require_python_mcap() {
+    let found = Command::new("python3")
+        .args(["-c", "import mcap.reader"])
+        .output();
+    match found {
+        Ok(out) if out.status.success() => {}
+        Ok(out) => panic!(
+            "Python's `mcap` package is missing ({}): run `scripts/test`, which installs \
+             it, or `python3 -m pip install -r scripts/requirements-test.txt`",
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        ),
+        Err(e) => panic!(
+            "python3 is missing ({e}): install Python 3, then run `scripts/test`, which \
+             installs Python's `mcap` package"
+        ),
+    }
+}
+
 /// Message counts per topic, read by Python's `mcap` package (an independent
-/// reader; `.ci/run` installs it).
+/// reader; `scripts/test` installs it).
 fn python_mcap_counts(path: &Path) -> BTreeMap<String, u64> {
+    require_python_mcap();
     let script = "import json, sys\n\
         from mcap.reader import make_reader\n\
         counts = {}\n\
@@ -174,11 +198,8 @@ fn python_mcap_counts(path: &Path) -> BTreeMap<String, u64> {
     let out = Command::new("python3")
         .args(["-c", script, &path.display().to_string()])
         .output()
-        .expect("python3 is needed for the independent MCAP check");
-    check(
-        &out,
-        "Python mcap reader (pip install mcap; .ci/run installs it)",
-    );
+        .expect("python3 ran before");
+    check(&out, "Python mcap reader");
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
@@ -235,6 +256,7 @@ fn counts_of(v: &Value) -> BTreeMap<String, u64> {
 /// readers (the mcap crate and Python's mcap) agree with its counts.
 #[test]
 fn experiment_circle_converges_like_the_simulator() {
+    require_python_mcap();
     let dir = tempfile::tempdir().unwrap();
     let sim_dir = dir.path().join("sim");
     let out = Command::new(EXE)
@@ -632,6 +654,7 @@ fn without_security_the_same_rogue_does_move_robots() {
 /// files read back.
 #[test]
 fn sigterm_leaves_valid_collector_files() {
+    require_python_mcap();
     let dir = tempfile::tempdir().unwrap();
     let ports: Vec<u16> = (0..2)
         .map(|_| {
@@ -692,6 +715,7 @@ fn sigterm_leaves_valid_collector_files() {
 /// step and agent, and the same bytes twice.
 #[test]
 fn run_mcap_matches_the_csv_and_is_deterministic() {
+    require_python_mcap();
     let dir = tempfile::tempdir().unwrap();
     let mut files = Vec::new();
     for name in ["a", "b"] {

@@ -8,10 +8,11 @@
 //! simulator's header. On SIGINT/SIGTERM it stops listening, logs what is still
 //! queued, and closes valid files.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::BufWriter;
 use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -19,7 +20,7 @@ use std::time::Duration;
 use serde::Serialize;
 use zenoh::Wait;
 
-use echelon::output::{TRAJECTORY_FILE, TRAJECTORY_HEADER, TrajectoryRow};
+use echelon::output::{CsvWriter, TRAJECTORY_FILE, TRAJECTORY_HEADER, TrajectoryRow};
 use echelon_mcap::{
     AGENT_STATE, AgentStateRecord, JsonSchema, LeaderRecord, McapLog, REFERENCE, REFERENCE_TOPIC,
     ReferenceRecord, agent_topic, nanos,
@@ -40,7 +41,8 @@ pub const REJECTED_TOPIC: &str = "/rejected";
 /// Schema of `/rejected`.
 pub const REJECTED: JsonSchema = JsonSchema {
     name: "echelon.Rejected",
-    schema: r#"{
+    schema: Cow::Borrowed(
+        r#"{
   "$schema": "http://json-schema.org/draft-07/schema#",
   "title": "echelon.Rejected",
   "description": "A sample received under the fleet's keys that was not a valid message for its key.",
@@ -53,12 +55,14 @@ pub const REJECTED: JsonSchema = JsonSchema {
   },
   "required": ["key", "reason", "size", "hex"]
 }"#,
+    ),
 };
 
 /// Schema of `/agent/K/stats` (a robot's counters, as it published them).
 pub const STATS: JsonSchema = JsonSchema {
     name: "echelon.RobotStats",
-    schema: r#"{
+    schema: Cow::Borrowed(
+        r#"{
   "$schema": "http://json-schema.org/draft-07/schema#",
   "title": "echelon.RobotStats",
   "description": "A robot's receive counters and link status (docs/fleet.md).",
@@ -73,6 +77,7 @@ pub const STATS: JsonSchema = JsonSchema {
   },
   "required": ["agent", "t", "link", "counters"]
 }"#,
+    ),
 };
 
 /// Options of the collector.
@@ -144,8 +149,8 @@ pub trait RecordSink {
         publish_time: u64,
         data: &[u8],
     ) -> Result<(), FleetError>;
-    /// Appends one `trajectory.csv` line (with its newline).
-    fn row(&mut self, line: &str) -> Result<(), FleetError>;
+    /// Appends one `trajectory.csv` row.
+    fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError>;
 }
 
 /// The collector as a state machine: every sample received goes in through
@@ -156,8 +161,6 @@ pub struct Collector {
     keys: Keys,
     report: CollectorReport,
     agents: BTreeMap<u32, AgentRecord>,
-    line: String,
-    ryu: ryu::Buffer,
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -187,8 +190,6 @@ impl Collector {
                 ..CollectorReport::default()
             },
             agents: BTreeMap::new(),
-            line: String::with_capacity(512),
-            ryu: ryu::Buffer::new(),
         }
     }
 
@@ -364,15 +365,13 @@ impl Collector {
         a.sum_sq += ne * ne;
         a.rms_error = (a.sum_sq / a.rows as f64).sqrt();
         a.peak_torque = a.peak_torque.max(s.tau.peak());
-        self.line.clear();
         let row = TrajectoryRow {
             t: s.t,
             agent: k as usize,
             state: &s.state,
             output: &output,
         };
-        row.push(&mut self.line, &mut self.ryu);
-        sink.row(&self.line)
+        sink.row(&row)
     }
 
     /// The final report, with the per-agent records.
@@ -386,7 +385,7 @@ impl Collector {
 struct FileSink {
     log: McapLog<BufWriter<File>>,
     seq: BTreeMap<u16, u32>,
-    csv: BufWriter<File>,
+    csv: CsvWriter<BufWriter<File>>,
     csv_path: PathBuf,
 }
 
@@ -406,9 +405,8 @@ impl RecordSink for FileSink {
         Ok(())
     }
 
-    fn row(&mut self, line: &str) -> Result<(), FleetError> {
-        self.csv
-            .write_all(line.as_bytes())
+    fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError> {
+        row.write(&mut self.csv)
             .map_err(FleetError::io(&self.csv_path))
     }
 }
@@ -429,8 +427,8 @@ pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, F
     let csv_path = opts.out.join(TRAJECTORY_FILE);
     let log = McapLog::create(&mcap_path)?;
     let file = File::create(&csv_path).map_err(FleetError::io(&csv_path))?;
-    let mut csv = BufWriter::with_capacity(1 << 16, file);
-    writeln!(csv, "{TRAJECTORY_HEADER}").map_err(FleetError::io(&csv_path))?;
+    let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), TRAJECTORY_HEADER)
+        .map_err(FleetError::io(&csv_path))?;
     let mut sink = FileSink {
         log,
         seq: BTreeMap::new(),
@@ -505,8 +503,17 @@ mod tests {
             Ok(())
         }
 
-        fn row(&mut self, line: &str) -> Result<(), FleetError> {
-            self.rows.push(line.to_owned());
+        fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError> {
+            // One row on its own, without the header line.
+            let mut csv = CsvWriter::new(Vec::new(), "")
+                .map_err(FleetError::io(std::path::Path::new("row")))?;
+            row.write(&mut csv)
+                .map_err(FleetError::io(std::path::Path::new("row")))?;
+            let bytes = csv
+                .into_inner()
+                .map_err(FleetError::io(std::path::Path::new("row")))?;
+            let text = String::from_utf8_lossy(&bytes);
+            self.rows.push(text.trim_start_matches('\n').to_owned());
             Ok(())
         }
     }

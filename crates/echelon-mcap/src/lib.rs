@@ -18,17 +18,19 @@
 //! `log_time` is `t` too for a simulation, the collector's UNIX receive time for
 //! a fleet.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{self, BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
+use std::sync::LazyLock;
 
 use serde::Serialize;
 
 use echelon::model::State;
 use echelon::model::wrap_angle;
 use echelon::reference::{Order, Reference, Trajectory};
-use echelon::sim::{AgentOutput, Frame, Observer, ObserverError};
+use echelon::sim::{AgentOutput, Frame, Observer, ObserverError, Simulation};
 
 /// A failure while writing an MCAP file.
 #[derive(Debug, thiserror::Error)]
@@ -50,135 +52,100 @@ pub enum McapLogError {
 }
 
 /// A named JSON Schema for a channel.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct JsonSchema {
     /// Schema name, e.g. `echelon.AgentState`.
     pub name: &'static str,
     /// The JSON Schema document.
-    pub schema: &'static str,
+    pub schema: Cow<'static, str>,
 }
 
-/// Schema of `/agent/K/state` messages ([`AgentStateRecord`]).
-pub const AGENT_STATE: JsonSchema = JsonSchema {
-    name: "echelon.AgentState",
-    schema: r#"{
-  "$schema": "http://json-schema.org/draft-07/schema#",
-  "title": "echelon.AgentState",
-  "description": "One robot at one instant: state, tracking error e (eq. 7) and backstepping error z (eq. 10) in the robot's body frame, generalised input u and wheel torques. SI units, radians.",
-  "type": "object",
-  "properties": {
-    "t": {"type": "number", "description": "time, s"},
-    "agent": {"type": "integer", "description": "agent number, from 1"},
-    "x": {"type": "number", "description": "m"},
-    "y": {"type": "number", "description": "m"},
-    "theta": {"type": "number", "description": "heading, rad, wrapped to (-pi, pi]"},
-    "v": {"type": "number", "description": "linear speed, m/s"},
-    "omega": {"type": "number", "description": "angular speed, rad/s"},
-    "ex": {"type": "number", "description": "tracking error e_x, m"},
-    "ey": {"type": "number", "description": "tracking error e_y, m"},
-    "zx": {"type": "number", "description": "backstepping error z_x, m/s"},
-    "zy": {"type": "number", "description": "backstepping error z_y, m/s"},
-    "u1": {"type": "number", "description": "force, N"},
-    "u2": {"type": "number", "description": "torque, N m"},
-    "tau_r": {"type": "number", "description": "right wheel torque, N m"},
-    "tau_l": {"type": "number", "description": "left wheel torque, N m"},
-    "error_norm": {"type": "number", "description": "|e|, m"},
-    "seq": {"type": "integer", "description": "fleet only: the robot's message sequence number"},
-    "link": {"type": "string", "description": "fleet only: waiting, tracking, extrapolating, stopping or stopped"},
-    "leader": {
-      "type": "object",
-      "description": "fleet only: the leader motion the law used",
-      "properties": {
-        "x": {"type": "number"}, "y": {"type": "number"},
-        "vx": {"type": "number"}, "vy": {"type": "number"},
-        "ax": {"type": "number"}, "ay": {"type": "number"}
-      }
+impl JsonSchema {
+    /// The schema of the record type `T`, derived from its serialised form
+    /// (draft 07, nested records inlined): it names exactly the fields `T`
+    /// serialises, with their doc comments as descriptions.
+    pub fn of<T: schemars::JsonSchema>(name: &'static str) -> JsonSchema {
+        let schema = schemars::generate::SchemaSettings::draft07()
+            .with(|s| s.inline_subschemas = true)
+            .into_generator()
+            .into_root_schema_for::<T>();
+        JsonSchema {
+            name,
+            schema: Cow::Owned(format!("{:#}", schema.as_value())),
+        }
     }
-  },
-  "required": ["t", "agent", "x", "y", "theta", "v", "omega", "ex", "ey", "zx", "zy", "u1", "u2", "tau_r", "tau_l"]
-}"#,
-};
+}
 
-/// Schema of `/reference` messages ([`ReferenceRecord`]).
-pub const REFERENCE: JsonSchema = JsonSchema {
-    name: "echelon.Reference",
-    schema: r#"{
-  "$schema": "http://json-schema.org/draft-07/schema#",
-  "title": "echelon.Reference",
-  "description": "The virtual leader at one instant: position p_d, velocity and acceleration, speed V_d and turn rate omega_d. SI units.",
-  "type": "object",
-  "properties": {
-    "t": {"type": "number", "description": "time, s"},
-    "seq": {"type": "integer", "description": "fleet only: the leader's sequence number"},
-    "x": {"type": "number"}, "y": {"type": "number"},
-    "vx": {"type": "number"}, "vy": {"type": "number"},
-    "ax": {"type": "number"}, "ay": {"type": "number"},
-    "speed": {"type": "number", "description": "V_d, m/s"},
-    "turn_rate": {"type": "number", "description": "omega_d, rad/s"}
-  },
-  "required": ["t", "x", "y", "vx", "vy", "ax", "ay", "speed", "turn_rate"]
-}"#,
-};
+/// Schema of `/agent/K/state` messages, derived from [`AgentStateRecord`].
+pub static AGENT_STATE: LazyLock<JsonSchema> =
+    LazyLock::new(|| JsonSchema::of::<AgentStateRecord>("echelon.AgentState"));
+
+/// Schema of `/reference` messages, derived from [`ReferenceRecord`].
+pub static REFERENCE: LazyLock<JsonSchema> =
+    LazyLock::new(|| JsonSchema::of::<ReferenceRecord>("echelon.Reference"));
 
 /// The leader motion a fleet robot's law used.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct LeaderRecord {
-    /// `p_d`, m.
+    /// `p_d` x, m.
     pub x: f64,
-    /// `p_d`, m.
+    /// `p_d` y, m.
     pub y: f64,
-    /// `ṗ_d`, m/s.
+    /// `ṗ_d` x, m/s.
     pub vx: f64,
-    /// `ṗ_d`, m/s.
+    /// `ṗ_d` y, m/s.
     pub vy: f64,
-    /// `p̈_d`, m/s².
+    /// `p̈_d` x, m/s².
     pub ax: f64,
-    /// `p̈_d`, m/s².
+    /// `p̈_d` y, m/s².
     pub ay: f64,
 }
 
-/// One `/agent/K/state` message.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// One robot at one instant (an `/agent/K/state` message): state, tracking
+/// error `e` (eq. 7) and backstepping error `z` (eq. 10) in the robot's body
+/// frame, generalised input `u` and wheel torques. SI units, radians.
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
+#[schemars(title = "echelon.AgentState")]
 pub struct AgentStateRecord {
     /// Time, s.
     pub t: f64,
-    /// Agent number from 1.
+    /// Agent number, from 1.
     pub agent: u32,
-    /// m.
+    /// Position x, m.
     pub x: f64,
-    /// m.
+    /// Position y, m.
     pub y: f64,
     /// Heading, rad, wrapped to (−π, π].
     pub theta: f64,
-    /// m/s.
+    /// Linear speed, m/s.
     pub v: f64,
-    /// rad/s.
+    /// Angular speed, rad/s.
     pub omega: f64,
-    /// `e_x`, m.
+    /// Tracking error `e_x`, m.
     pub ex: f64,
-    /// `e_y`, m.
+    /// Tracking error `e_y`, m.
     pub ey: f64,
-    /// `z_x`, m/s.
+    /// Backstepping error `z_x`, m/s.
     pub zx: f64,
-    /// `z_y`, m/s.
+    /// Backstepping error `z_y`, m/s.
     pub zy: f64,
-    /// N.
+    /// Force `u1`, N.
     pub u1: f64,
-    /// N m.
+    /// Torque `u2`, N m.
     pub u2: f64,
-    /// N m.
+    /// Right wheel torque, N m.
     pub tau_r: f64,
-    /// N m.
+    /// Left wheel torque, N m.
     pub tau_l: f64,
     /// ‖e‖, m.
     pub error_norm: f64,
-    /// Fleet: the robot's sequence number.
+    /// Fleet only: the robot's message sequence number.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seq: Option<u64>,
-    /// Fleet: link status.
+    /// Fleet only: link status (waiting, tracking, extrapolating, stopping or stopped).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub link: Option<&'static str>,
-    /// Fleet: the leader motion used.
+    /// Fleet only: the leader motion the law used.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub leader: Option<LeaderRecord>,
 }
@@ -211,30 +178,51 @@ impl AgentStateRecord {
     }
 }
 
-/// One `/reference` message.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+/// The virtual leader at one instant (a `/reference` message): position
+/// `p_d`, velocity and acceleration, speed `V_d` and turn rate `ω_d`. SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, schemars::JsonSchema)]
+#[schemars(title = "echelon.Reference")]
 pub struct ReferenceRecord {
     /// Time, s.
     pub t: f64,
-    /// Fleet: the leader's sequence number.
+    /// Fleet only: the leader's sequence number.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seq: Option<u64>,
-    /// `p_d`, m.
+    /// `p_d` x, m.
     pub x: f64,
-    /// `p_d`, m.
+    /// `p_d` y, m.
     pub y: f64,
-    /// `ṗ_d`, m/s.
+    /// `ṗ_d` x, m/s.
     pub vx: f64,
-    /// `ṗ_d`, m/s.
+    /// `ṗ_d` y, m/s.
     pub vy: f64,
-    /// `p̈_d`, m/s².
+    /// `p̈_d` x, m/s².
     pub ax: f64,
-    /// `p̈_d`, m/s².
+    /// `p̈_d` y, m/s².
     pub ay: f64,
     /// `V_d`, m/s.
     pub speed: f64,
     /// `ω_d`, rad/s.
     pub turn_rate: f64,
+}
+
+impl ReferenceRecord {
+    /// The reference `reference` at `t` (simulation: no sequence number).
+    pub fn at(reference: &Reference, t: f64) -> ReferenceRecord {
+        let jet = reference.eval(t, Order::Two);
+        ReferenceRecord {
+            t,
+            seq: None,
+            x: jet.p[0],
+            y: jet.p[1],
+            vx: jet.dp[0],
+            vy: jet.dp[1],
+            ax: jet.ddp[0],
+            ay: jet.ddp[1],
+            speed: jet.speed(),
+            turn_rate: jet.turn_rate(),
+        }
+    }
 }
 
 /// The topic of agent `k` (from 1).
@@ -373,12 +361,15 @@ impl<W: Write + Seek> McapLog<W> {
 }
 
 /// An [`Observer`] writing a simulation to MCAP (`echelon run --mcap`): the
-/// reference and every agent, every `every`-th step and the last, like
-/// `trajectory.csv`.
+/// reference and every agent at each frame it is shown (attach it with
+/// [`Every`](echelon::sim::Every)`(log_every, …)` to log like `trajectory.csv`).
+/// Its channels are registered when the run starts; the file's summary and
+/// footer are written when the run finishes ([`McapObserver::into_inner`]
+/// then returns the sink).
 pub struct McapObserver<W: Write + Seek> {
-    log: McapLog<W>,
-    every: u64,
-    reference: Reference,
+    log: Option<McapLog<W>>,
+    done: Option<W>,
+    reference: Option<Reference>,
     reference_channel: u16,
     agent_channels: Vec<u16>,
     sequence: u32,
@@ -388,73 +379,274 @@ impl<W: Write + Seek> std::fmt::Debug for McapObserver<W> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("McapObserver")
             .field("log", &self.log)
-            .field("every", &self.every)
+            .field("agents", &self.agent_channels.len())
             .finish_non_exhaustive()
     }
 }
 
 impl<W: Write + Seek> McapObserver<W> {
-    /// Logs `agents` robots following `reference`, every `every` steps.
-    pub fn new(
-        w: W,
-        reference: Reference,
-        agents: usize,
-        every: u64,
-    ) -> Result<Self, McapLogError> {
-        let mut log = McapLog::new(w)?;
-        let reference_channel = log.channel(REFERENCE_TOPIC, &REFERENCE)?;
-        let agent_channels = (1..=agents)
-            .map(|k| log.channel(&agent_topic(k), &AGENT_STATE))
-            .collect::<Result<Vec<_>, _>>()?;
+    /// Starts an MCAP stream on `w`.
+    pub fn new(w: W) -> Result<Self, McapLogError> {
         Ok(McapObserver {
-            log,
-            every,
-            reference,
-            reference_channel,
-            agent_channels,
+            log: Some(McapLog::new(w)?),
+            done: None,
+            reference: None,
+            reference_channel: 0,
+            agent_channels: Vec::new(),
             sequence: 0,
         })
     }
 
-    /// Finishes the file and returns the sink.
-    pub fn finish(self) -> Result<W, McapLogError> {
-        self.log.finish()
+    /// The sink of a finished file (`None` until the run has finished).
+    pub fn into_inner(self) -> Option<W> {
+        self.done
     }
 
     /// Messages written so far.
     pub fn messages(&self) -> u64 {
-        self.log.messages()
+        self.log.as_ref().map_or(0, McapLog::messages)
+    }
+
+    fn log(&mut self) -> Result<&mut McapLog<W>, ObserverError> {
+        self.log
+            .as_mut()
+            .ok_or_else(|| "MCAP: the file was already finished".into())
     }
 }
 
 impl<W: Write + Seek> Observer for McapObserver<W> {
+    fn start(&mut self, sim: &Simulation) -> Result<(), ObserverError> {
+        let log = self.log()?;
+        let reference_channel = log.channel(REFERENCE_TOPIC, &REFERENCE)?;
+        let agent_channels = (1..=sim.agents().len())
+            .map(|k| log.channel(&agent_topic(k), &AGENT_STATE))
+            .collect::<Result<Vec<_>, _>>()?;
+        self.reference_channel = reference_channel;
+        self.agent_channels = agent_channels;
+        self.reference = Some(sim.reference().clone());
+        Ok(())
+    }
+
     fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        if !frame.is_logged(self.every) {
-            return Ok(());
-        }
         let time = nanos(frame.t);
         let seq = self.sequence;
         self.sequence = self.sequence.wrapping_add(1);
-        let jet = self.reference.eval(frame.t, Order::Two);
-        let reference = ReferenceRecord {
-            t: frame.t,
-            seq: None,
-            x: jet.p[0],
-            y: jet.p[1],
-            vx: jet.dp[0],
-            vy: jet.dp[1],
-            ax: jet.ddp[0],
-            ay: jet.ddp[1],
-            speed: jet.speed(),
-            turn_rate: jet.turn_rate(),
-        };
-        self.log
-            .write_json(self.reference_channel, seq, time, time, &reference)?;
+        let reference = self
+            .reference
+            .as_ref()
+            .ok_or("MCAP: shown a frame before the run started")?;
+        let record = ReferenceRecord::at(reference, frame.t);
+        let reference_channel = self.reference_channel;
+        let log = self
+            .log
+            .as_mut()
+            .ok_or("MCAP: the file was already finished")?;
+        log.write_json(reference_channel, seq, time, time, &record)?;
         for (i, (s, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
             let record = AgentStateRecord::new(frame.t, (i + 1) as u32, s, o);
-            self.log
-                .write_json(self.agent_channels[i], seq, time, time, &record)?;
+            log.write_json(self.agent_channels[i], seq, time, time, &record)?;
         }
         Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), ObserverError> {
+        if let Some(log) = self.log.take() {
+            self.done = Some(log.finish()?);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use std::collections::BTreeSet;
+    use std::io::Cursor;
+
+    use echelon::scenario::{Overrides, Scenario};
+    use echelon::sim::Every;
+    use serde_json::Value;
+
+    use super::*;
+
+    /// The JSON type names `value` may carry (a whole number is also a number).
+    fn types_of(value: &Value) -> Vec<&'static str> {
+        match value {
+            Value::Null => vec!["null"],
+            Value::Bool(_) => vec!["boolean"],
+            Value::Number(n) if n.is_f64() => vec!["number"],
+            Value::Number(_) => vec!["integer", "number"],
+            Value::String(_) => vec!["string"],
+            Value::Array(_) => vec!["array"],
+            Value::Object(_) => vec!["object"],
+        }
+    }
+
+    /// Checks `value` against the subset of JSON Schema the derived schemas
+    /// use (`type`, `properties`, `required`, `minimum`); names where it fails.
+    fn conforms(value: &Value, schema: &Value, at: &str) -> Result<(), String> {
+        let allowed: Vec<&str> = match &schema["type"] {
+            Value::String(t) => vec![t.as_str()],
+            Value::Array(ts) => ts.iter().filter_map(Value::as_str).collect(),
+            other => return Err(format!("{at}: schema without a type: {other}")),
+        };
+        if !types_of(value).iter().any(|t| allowed.contains(t)) {
+            return Err(format!("{at}: {value} is not of type {allowed:?}"));
+        }
+        if let (Some(min), Some(v)) = (schema["minimum"].as_f64(), value.as_f64())
+            && v < min
+        {
+            return Err(format!("{at}: {v} < minimum {min}"));
+        }
+        if let Value::Object(fields) = value {
+            let properties = schema["properties"]
+                .as_object()
+                .ok_or_else(|| format!("{at}: an object schema without properties"))?;
+            for (k, v) in fields {
+                let sub = properties
+                    .get(k)
+                    .ok_or_else(|| format!("{at}: field `{k}` is not in the schema"))?;
+                conforms(v, sub, &format!("{at}.{k}"))?;
+            }
+            for r in schema["required"].as_array().into_iter().flatten() {
+                let r = r.as_str().unwrap();
+                if !fields.contains_key(r) {
+                    return Err(format!("{at}: required field `{r}` missing"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The paper's circle experiment, `duration` s long.
+    fn circle(duration: f64) -> echelon::Run {
+        Scenario::builtin("experiment-circle")
+            .unwrap()
+            .build(&Overrides {
+                duration: Some(duration),
+                ..Overrides::default()
+            })
+            .unwrap()
+    }
+
+    fn keys(v: &Value) -> BTreeSet<String> {
+        v.as_object().unwrap().keys().cloned().collect()
+    }
+
+    fn schema(s: &JsonSchema) -> Value {
+        serde_json::from_str(&s.schema).unwrap()
+    }
+
+    fn fleet_state() -> AgentStateRecord {
+        AgentStateRecord {
+            seq: Some(7),
+            link: Some("tracking"),
+            leader: Some(LeaderRecord {
+                x: 1.0,
+                y: 2.0,
+                vx: 0.5,
+                vy: -0.5,
+                ax: 0.0,
+                ay: 0.25,
+            }),
+            ..AgentStateRecord::new(
+                1.5,
+                2,
+                &State {
+                    x: 1.0,
+                    y: -1.0,
+                    theta: 4.0,
+                    v: 0.3,
+                    omega: -0.1,
+                },
+                &AgentOutput::default(),
+            )
+        }
+    }
+
+    #[test]
+    fn schemas_have_exactly_the_serialised_fields() {
+        let agent = schema(&AGENT_STATE);
+        let full = serde_json::to_value(fleet_state()).unwrap();
+        assert_eq!(keys(&agent["properties"]), keys(&full));
+        assert_eq!(
+            keys(&agent["properties"]["leader"]["properties"]),
+            keys(&full["leader"])
+        );
+        // The fields a simulated run always writes are the required ones.
+        let sim = serde_json::to_value(AgentStateRecord {
+            seq: None,
+            link: None,
+            leader: None,
+            ..fleet_state()
+        })
+        .unwrap();
+        let required: BTreeSet<String> = agent["required"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r.as_str().unwrap().to_owned())
+            .collect();
+        assert_eq!(required, keys(&sim));
+        for record in [&full, &sim] {
+            conforms(record, &agent, "AgentState").unwrap();
+        }
+        assert_eq!(agent["title"], "echelon.AgentState");
+
+        let reference = schema(&REFERENCE);
+        let fleet = ReferenceRecord {
+            seq: Some(3),
+            ..ReferenceRecord::at(circle(0.5).simulation.reference(), 0.5)
+        };
+        let full = serde_json::to_value(fleet).unwrap();
+        assert_eq!(keys(&reference["properties"]), keys(&full));
+        conforms(&full, &reference, "Reference").unwrap();
+        assert_eq!(reference["title"], "echelon.Reference");
+    }
+
+    #[test]
+    fn the_checker_refuses_what_the_schema_does_not_describe() {
+        let agent = schema(&AGENT_STATE);
+        let mut record = serde_json::to_value(fleet_state()).unwrap();
+        record["extra"] = Value::from(1.0);
+        assert!(conforms(&record, &agent, "a").is_err());
+        let mut record = serde_json::to_value(fleet_state()).unwrap();
+        record["agent"] = Value::from("one");
+        assert!(conforms(&record, &agent, "a").is_err());
+        let mut record = serde_json::to_value(fleet_state()).unwrap();
+        record.as_object_mut().unwrap().remove("t");
+        assert!(conforms(&record, &agent, "a").is_err());
+    }
+
+    /// A simulated run through the observer: every message conforms to its
+    /// channel's schema, one message per channel per logged frame, and the
+    /// file is finished (readable summary).
+    #[test]
+    fn every_message_of_a_run_conforms_to_its_channel_schema() {
+        let mut run = circle(0.5);
+        let every = 7;
+        let mut mcap = Every::new(every, McapObserver::new(Cursor::new(Vec::new())).unwrap());
+        run.simulation.run(&mut mcap).unwrap();
+        let bytes = mcap.into_inner().into_inner().unwrap().into_inner();
+        let steps = run.simulation.steps();
+        let frames = steps / every + 1 + u64::from(!steps.is_multiple_of(every));
+        let mut counts: BTreeMap<String, u64> = BTreeMap::new();
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            let schema = m.channel.schema.as_ref().unwrap();
+            let schema: Value = serde_json::from_slice(&schema.data).unwrap();
+            let record: Value = serde_json::from_slice(&m.data).unwrap();
+            conforms(&record, &schema, &m.channel.topic).unwrap();
+            *counts.entry(m.channel.topic.clone()).or_default() += 1;
+        }
+        let agents = run.simulation.agents().len();
+        assert_eq!(counts.len(), agents + 1);
+        assert!(counts.values().all(|&n| n == frames), "{counts:?}");
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        assert_eq!(
+            summary.stats.unwrap().message_count,
+            frames * (agents as u64 + 1)
+        );
     }
 }

@@ -5,8 +5,8 @@
 //! that the page logged no console errors or exceptions.
 //!
 //! Needs Debian's `chromium` (`/usr/bin/chromium`, or the path in
-//! `ECHELON_CHROMIUM`); `.ci/run` installs it. Without it the test fails and
-//! says how to install it.
+//! `ECHELON_CHROMIUM`); `scripts/test` installs it. Without it each test fails
+//! at once and says how to install it.
 #![allow(clippy::unwrap_used)]
 
 mod common;
@@ -28,8 +28,9 @@ fn chromium() -> PathBuf {
         .map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from);
     assert!(
         path.exists(),
-        "Chromium not found at {}: install it with `apt-get install -y chromium` \
-         (Debian; .ci/run does this), or set ECHELON_CHROMIUM to a Chromium binary",
+        "Chromium not found at {}: run `scripts/test`, which installs Debian's \
+         `chromium`, or `apt-get install -y chromium`, or set ECHELON_CHROMIUM \
+         to a Chromium binary",
         path.display()
     );
     path
@@ -343,6 +344,7 @@ fn play_and_check(report: &Path) -> (f64, f64) {
 
 #[test]
 fn replay_plays_in_headless_chromium() {
+    chromium();
     let dir = tempfile::tempdir().unwrap();
     // A 4-agent run of 70 s logged at 100 Hz.
     common::run_builtin(
@@ -362,6 +364,7 @@ fn replay_plays_in_headless_chromium() {
 
 #[test]
 fn replay_of_two_hundred_agents_plays_in_headless_chromium() {
+    chromium();
     let dir = tempfile::tempdir().unwrap();
     common::run_source(
         &common::many_agents(200),

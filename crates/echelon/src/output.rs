@@ -16,7 +16,9 @@ use crate::error::OutputError;
 use crate::model::{State, wrap_angle};
 use crate::reference::{Order, Reference, Trajectory};
 use crate::scenario::Run;
-use crate::sim::{AgentOutput, AgentSummary, Frame, Observer, ObserverError, Summary, Timing};
+use crate::sim::{
+    AgentOutput, AgentSummary, Every, Frame, Observer, ObserverError, Simulation, Summary, Timing,
+};
 
 /// The header of `trajectory.csv`: one row per agent per logged sample, SI units,
 /// radians, `e` and `z` in the follower's body frame, agents numbered from 1.
@@ -51,7 +53,121 @@ pub fn push_f64(line: &mut String, v: f64, buf: &mut ryu::Buffer) {
     }
 }
 
-/// One row of `trajectory.csv`, as [`TrajectoryCsv`] and the fleet's data
+/// The one CSV writer: a header line, then rows of cells in echelon's number
+/// formats (times without float noise, other numbers in shortest round-trip
+/// form, an empty cell for a missing value). Every CSV echelon writes goes
+/// through it: the run logs ([`CsvLog`]), the fleet collector's
+/// `trajectory.csv`, `sweep.csv` and `drift.csv`.
+pub struct CsvWriter<W: Write> {
+    out: W,
+    line: String,
+    cells: usize,
+    buf: ryu::Buffer,
+    rows: u64,
+}
+
+impl<W: Write> std::fmt::Debug for CsvWriter<W> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CsvWriter")
+            .field("rows", &self.rows)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<W: Write> CsvWriter<W> {
+    /// Writes `header` (comma-separated column names) as the first line.
+    pub fn new(mut out: W, header: &str) -> io::Result<Self> {
+        writeln!(out, "{header}")?;
+        Ok(CsvWriter {
+            out,
+            line: String::with_capacity(512),
+            cells: 0,
+            buf: ryu::Buffer::new(),
+            rows: 0,
+        })
+    }
+
+    fn cell(&mut self) -> &mut String {
+        if self.cells > 0 {
+            self.line.push(',');
+        }
+        self.cells += 1;
+        &mut self.line
+    }
+
+    /// A time, s, to at most nanosecond resolution ([`push_time`]).
+    pub fn time(&mut self, t: f64) -> &mut Self {
+        push_time(self.cell(), t);
+        self
+    }
+
+    /// A number in shortest round-trip form ([`push_f64`]).
+    pub fn num(&mut self, v: f64) -> &mut Self {
+        self.cell();
+        push_f64(&mut self.line, v, &mut self.buf);
+        self
+    }
+
+    /// Numbers, one cell each.
+    pub fn nums(&mut self, values: impl IntoIterator<Item = f64>) -> &mut Self {
+        for v in values {
+            self.num(v);
+        }
+        self
+    }
+
+    /// A number, or an empty cell for `None`.
+    pub fn opt(&mut self, v: Option<f64>) -> &mut Self {
+        match v {
+            Some(v) => self.num(v),
+            None => {
+                self.cell();
+                self
+            }
+        }
+    }
+
+    /// An integer (agent numbers, counts, seeds).
+    pub fn int(&mut self, v: u64) -> &mut Self {
+        let _ = write!(self.cell(), "{v}");
+        self
+    }
+
+    /// A text cell, written as given (echelon's texts hold no comma or quote).
+    pub fn text(&mut self, s: &str) -> &mut Self {
+        self.cell().push_str(s);
+        self
+    }
+
+    /// Ends the row: writes it and a newline.
+    pub fn end_row(&mut self) -> io::Result<()> {
+        self.line.push('\n');
+        let written = self.out.write_all(self.line.as_bytes());
+        self.line.clear();
+        self.cells = 0;
+        written?;
+        self.rows += 1;
+        Ok(())
+    }
+
+    /// Number of data rows written.
+    pub fn rows(&self) -> u64 {
+        self.rows
+    }
+
+    /// Flushes the writer.
+    pub fn flush(&mut self) -> io::Result<()> {
+        self.out.flush()
+    }
+
+    /// Flushes and returns the writer.
+    pub fn into_inner(mut self) -> io::Result<W> {
+        self.out.flush()?;
+        Ok(self.out)
+    }
+}
+
+/// One row of `trajectory.csv`, as [`TrajectoryRows`] and the fleet's data
 /// collector write it.
 #[derive(Debug, Clone, Copy)]
 pub struct TrajectoryRow<'a> {
@@ -67,12 +183,10 @@ pub struct TrajectoryRow<'a> {
 }
 
 impl TrajectoryRow<'_> {
-    /// Appends the row, the columns of [`TRAJECTORY_HEADER`] and a newline.
-    pub fn push(&self, line: &mut String, buf: &mut ryu::Buffer) {
+    /// Writes the row: the columns of [`TRAJECTORY_HEADER`].
+    pub fn write<W: Write>(&self, csv: &mut CsvWriter<W>) -> io::Result<()> {
         let (s, o) = (self.state, self.output);
-        push_time(line, self.t);
-        let _ = write!(line, ",{}", self.agent);
-        for v in [
+        csv.time(self.t).int(self.agent as u64).nums([
             s.x,
             s.y,
             wrap_angle(s.theta),
@@ -86,64 +200,41 @@ impl TrajectoryRow<'_> {
             o.u.u2,
             o.tau.right,
             o.tau.left,
-        ] {
-            line.push(',');
-            push_f64(line, v, buf);
-        }
-        line.push('\n');
+        ]);
+        csv.end_row()
     }
 }
 
-/// Streams `trajectory.csv` rows, every `every`-th step and the last one.
-#[derive(Debug)]
-pub struct TrajectoryCsv<W: Write> {
-    out: W,
-    every: u64,
-    line: String,
-    rows: u64,
+/// What a [`CsvLog`] writes: a header and, for each frame it is shown, its rows.
+pub trait FrameRows {
+    /// The header line.
+    fn header(&self) -> &'static str;
+
+    /// Called when the run starts (e.g. to take the run's reference).
+    fn start(&mut self, _sim: &Simulation) {}
+
+    /// Writes the rows of one frame.
+    fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()>;
 }
 
-impl<W: Write> TrajectoryCsv<W> {
-    /// Writes the header; then logs every `every`-th step (1: every step).
-    pub fn new(mut out: W, every: u64) -> io::Result<Self> {
-        writeln!(out, "{TRAJECTORY_HEADER}")?;
-        Ok(TrajectoryCsv {
-            out,
-            every,
-            line: String::with_capacity(512),
-            rows: 0,
-        })
+/// `trajectory.csv`: one [`TrajectoryRow`] per agent per frame.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct TrajectoryRows;
+
+impl FrameRows for TrajectoryRows {
+    fn header(&self) -> &'static str {
+        TRAJECTORY_HEADER
     }
 
-    /// Number of data rows written.
-    pub fn rows(&self) -> u64 {
-        self.rows
-    }
-
-    /// Flushes and returns the writer.
-    pub fn finish(mut self) -> io::Result<W> {
-        self.out.flush()?;
-        Ok(self.out)
-    }
-}
-
-impl<W: Write> Observer for TrajectoryCsv<W> {
-    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        if !frame.is_logged(self.every) {
-            return Ok(());
-        }
-        let mut buf = ryu::Buffer::new();
-        for (i, (s, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
-            self.line.clear();
-            let row = TrajectoryRow {
+    fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()> {
+        for (i, (state, output)) in frame.states.iter().zip(frame.outputs).enumerate() {
+            TrajectoryRow {
                 t: frame.t,
                 agent: i + 1,
-                state: s,
-                output: o,
-            };
-            row.push(&mut self.line, &mut buf);
-            self.out.write_all(self.line.as_bytes())?;
-            self.rows += 1;
+                state,
+                output,
+            }
+            .write(csv)?;
         }
         Ok(())
     }
@@ -154,57 +245,34 @@ impl<W: Write> Observer for TrajectoryCsv<W> {
 /// standstill), speed `V_d` and turn rate `ω_d`.
 pub const REFERENCE_HEADER: &str = "t,x,y,theta,v,omega";
 
-/// Streams `reference.csv` rows at the same steps as [`TrajectoryCsv`].
-#[derive(Debug)]
-pub struct ReferenceCsv<W: Write> {
-    out: W,
-    every: u64,
-    reference: Reference,
-    line: String,
+/// `reference.csv`: the run's reference (taken when the run starts) at each frame.
+#[derive(Debug, Clone, Default)]
+pub struct ReferenceRows {
+    reference: Option<Reference>,
 }
 
-impl<W: Write> ReferenceCsv<W> {
-    /// Writes the header; then logs every `every`-th step (1: every step) and the last.
-    pub fn new(mut out: W, every: u64, reference: Reference) -> io::Result<Self> {
-        writeln!(out, "{REFERENCE_HEADER}")?;
-        Ok(ReferenceCsv {
-            out,
-            every,
-            reference,
-            line: String::with_capacity(128),
-        })
+impl FrameRows for ReferenceRows {
+    fn header(&self) -> &'static str {
+        REFERENCE_HEADER
     }
 
-    /// Flushes and returns the writer.
-    pub fn finish(mut self) -> io::Result<W> {
-        self.out.flush()?;
-        Ok(self.out)
+    fn start(&mut self, sim: &Simulation) {
+        self.reference = Some(sim.reference().clone());
     }
-}
 
-impl<W: Write> Observer for ReferenceCsv<W> {
-    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        if !frame.is_logged(self.every) {
-            return Ok(());
-        }
-        let jet = self.reference.eval(frame.t, Order::Two);
-        let mut buf = ryu::Buffer::new();
-        let line = &mut self.line;
-        line.clear();
-        push_time(line, frame.t);
-        for v in [
+    fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()> {
+        let reference = self.reference.as_ref().ok_or_else(|| {
+            io::Error::other("reference.csv: shown a frame before the run started")
+        })?;
+        let jet = reference.eval(frame.t, Order::Two);
+        csv.time(frame.t).nums([
             jet.p[0],
             jet.p[1],
             jet.heading(),
             jet.speed(),
             jet.turn_rate(),
-        ] {
-            line.push(',');
-            push_f64(line, v, &mut buf);
-        }
-        line.push('\n');
-        self.out.write_all(line.as_bytes())?;
-        Ok(())
+        ]);
+        csv.end_row()
     }
 }
 
@@ -214,66 +282,115 @@ impl<W: Write> Observer for ReferenceCsv<W> {
 /// odometry have rows.
 pub const ODOMETRY_HEADER: &str = "t,agent,x_hat,y_hat,theta_hat,ex_hat,ey_hat,zx_hat,zy_hat,fix";
 
-/// Streams `odometry.csv` rows on the same schedule as [`TrajectoryCsv`].
-#[derive(Debug)]
-pub struct OdometryCsv<W: Write> {
-    out: W,
-    every: u64,
-    line: String,
+/// `odometry.csv`: one row per dead-reckoning agent per frame.
+#[derive(Debug, Clone, Default)]
+pub struct OdometryRows {
     fixes: Vec<u64>,
 }
 
-impl<W: Write> OdometryCsv<W> {
-    /// Writes the header; then logs every `every`-th step (1: every step) and the last.
-    pub fn new(mut out: W, every: u64) -> io::Result<Self> {
-        writeln!(out, "{ODOMETRY_HEADER}")?;
-        Ok(OdometryCsv {
-            out,
-            every,
-            line: String::with_capacity(256),
-            fixes: Vec::new(),
-        })
+impl FrameRows for OdometryRows {
+    fn header(&self) -> &'static str {
+        ODOMETRY_HEADER
     }
 
-    /// Flushes and returns the writer.
-    pub fn finish(mut self) -> io::Result<W> {
-        self.out.flush()?;
-        Ok(self.out)
-    }
-}
-
-impl<W: Write> Observer for OdometryCsv<W> {
-    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        if !frame.is_logged(self.every) {
-            return Ok(());
-        }
+    fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()> {
         self.fixes.resize(frame.odometers.len(), 0);
-        let mut buf = ryu::Buffer::new();
         for (i, (odometer, o)) in frame.odometers.iter().zip(frame.outputs).enumerate() {
             let Some(odometer) = odometer else { continue };
             let est = odometer.believed(&frame.states[i]);
-            let line = &mut self.line;
-            line.clear();
-            push_time(line, frame.t);
-            let _ = write!(line, ",{}", i + 1);
-            for v in [
-                est.x,
-                est.y,
-                wrap_angle(est.theta),
-                o.e_hat[0],
-                o.e_hat[1],
-                o.z_hat[0],
-                o.z_hat[1],
-            ] {
-                line.push(',');
-                push_f64(line, v, &mut buf);
-            }
             let applied = odometer.fixes_applied();
-            let _ = writeln!(line, ",{}", applied - self.fixes[i]);
+            csv.time(frame.t)
+                .int((i + 1) as u64)
+                .nums([
+                    est.x,
+                    est.y,
+                    wrap_angle(est.theta),
+                    o.e_hat[0],
+                    o.e_hat[1],
+                    o.z_hat[0],
+                    o.z_hat[1],
+                ])
+                .int(applied - self.fixes[i]);
             self.fixes[i] = applied;
-            self.out.write_all(line.as_bytes())?;
+            csv.end_row()?;
         }
         Ok(())
+    }
+}
+
+/// An [`Observer`] writing a CSV log of the frames it is shown (attach it
+/// with [`Every`](crate::sim::Every) for a logging period): the header when
+/// created, [`FrameRows`] for each frame, a flush when the run finishes.
+#[derive(Debug)]
+pub struct CsvLog<W: Write, R> {
+    csv: CsvWriter<W>,
+    table: R,
+    path: Option<PathBuf>,
+}
+
+/// The `trajectory.csv` log.
+pub type TrajectoryCsv<W> = CsvLog<W, TrajectoryRows>;
+/// The `reference.csv` log.
+pub type ReferenceCsv<W> = CsvLog<W, ReferenceRows>;
+/// The `odometry.csv` log.
+pub type OdometryCsv<W> = CsvLog<W, OdometryRows>;
+
+impl<W: Write, R: FrameRows> CsvLog<W, R> {
+    /// Writes the header of `table` to `out`.
+    pub fn new(out: W, table: R) -> io::Result<Self> {
+        Ok(CsvLog {
+            csv: CsvWriter::new(out, table.header())?,
+            table,
+            path: None,
+        })
+    }
+
+    /// Number of data rows written.
+    pub fn rows(&self) -> u64 {
+        self.csv.rows()
+    }
+
+    /// Flushes and returns the writer.
+    pub fn into_inner(self) -> io::Result<W> {
+        self.csv.into_inner()
+    }
+
+    fn failed(&self, source: io::Error) -> ObserverError {
+        match &self.path {
+            Some(path) => Box::new(OutputError::Io {
+                path: path.clone(),
+                source,
+            }),
+            None => Box::new(source),
+        }
+    }
+}
+
+impl<R: FrameRows> CsvLog<BufWriter<File>, R> {
+    /// Creates (truncates) the file `path`, named in every error, and writes the header.
+    pub fn create(path: &Path, table: R) -> Result<Self, OutputError> {
+        let file = File::create(path).map_err(io_error(path))?;
+        let mut log =
+            CsvLog::new(BufWriter::with_capacity(1 << 16, file), table).map_err(io_error(path))?;
+        log.path = Some(path.to_path_buf());
+        Ok(log)
+    }
+}
+
+impl<W: Write, R: FrameRows> Observer for CsvLog<W, R> {
+    fn start(&mut self, sim: &Simulation) -> Result<(), ObserverError> {
+        self.table.start(sim);
+        Ok(())
+    }
+
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        self.table
+            .write(frame, &mut self.csv)
+            .map_err(|e| self.failed(e))
+    }
+
+    fn finish(&mut self) -> Result<(), ObserverError> {
+        self.csv.flush().map_err(|e| self.failed(e))
     }
 }
 
@@ -293,33 +410,57 @@ impl Table {
         Table::parse(path, &text)
     }
 
-    /// Parses the text of the numeric CSV `path` (named in errors).
+    /// Parses the text of the numeric CSV `path` (named in errors): a header
+    /// line, then rows of numbers with as many cells; blank lines are skipped
+    /// and cells trimmed.
     pub fn parse(path: &Path, text: &str) -> Result<Table, OutputError> {
         let parse = |line: usize, message: String| OutputError::Parse {
             path: path.to_path_buf(),
             line,
             message,
         };
-        let mut lines = text.lines();
-        let header: Vec<String> = lines
-            .next()
-            .ok_or_else(|| parse(1, "empty file: expected a header".into()))?
-            .split(',')
-            .map(|h| h.trim().to_owned())
+        // The line of a record from its byte offset: the reader's own line
+        // count leaves out the empty lines it skips, and its offset is where
+        // they begin.
+        let line_at = |pos: Option<&csv::Position>| {
+            pos.map_or(0, |p| {
+                let bytes = text.as_bytes();
+                let mut end = (p.byte() as usize).min(bytes.len());
+                while end < bytes.len() && matches!(bytes[end], b'\n' | b'\r') {
+                    end += 1;
+                }
+                1 + bytes[..end].iter().filter(|&&b| b == b'\n').count()
+            })
+        };
+        let line_of = |e: &csv::Error| line_at(e.position());
+        let mut reader = csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .flexible(true)
+            .from_reader(text.as_bytes());
+        let header: Vec<String> = reader
+            .headers()
+            .map_err(|e| parse(line_of(&e), e.to_string()))?
+            .iter()
+            .map(str::to_owned)
             .collect();
+        if header.is_empty() {
+            return Err(parse(1, "empty file: expected a header".into()));
+        }
         let mut rows = Vec::new();
-        for (k, line) in lines.enumerate() {
-            if line.trim().is_empty() {
+        for record in reader.records() {
+            let record = record.map_err(|e| parse(line_of(&e), e.to_string()))?;
+            if record.iter().all(str::is_empty) {
                 continue;
             }
-            let row = line
-                .split(',')
-                .map(|c| c.trim().parse::<f64>())
+            let line = || line_at(record.position());
+            let row = record
+                .iter()
+                .map(str::parse::<f64>)
                 .collect::<Result<Vec<f64>, _>>()
-                .map_err(|e| parse(k + 2, format!("not a number: {e}")))?;
+                .map_err(|e| parse(line(), format!("not a number: {e}")))?;
             if row.len() != header.len() {
                 return Err(parse(
-                    k + 2,
+                    line(),
                     format!(
                         "{} columns where the header has {}",
                         row.len(),
@@ -422,43 +563,35 @@ pub fn run_to_dir(
         names.push(ODOMETRY_FILE);
     }
     let parts: Vec<PathBuf> = names.iter().map(|n| part_path(&dir.join(n))).collect();
-    let (traj_part, ref_part, summary_part, scenario_part) =
-        (&parts[0], &parts[1], &parts[2], &parts[3]);
+    let (summary_part, scenario_part) = (&parts[2], &parts[3]);
     let remove_parts = || {
         for p in &parts {
             let _ = std::fs::remove_file(p);
         }
     };
-    let create = |path: &Path| -> Result<BufWriter<File>, OutputError> {
-        let file = File::create(path).map_err(io_error(path))?;
-        Ok(BufWriter::with_capacity(1 << 16, file))
-    };
-    let mut csv =
-        TrajectoryCsv::new(create(traj_part)?, run.log_every).map_err(io_error(traj_part))?;
-    let sim = &mut run.simulation;
-    let mut reference =
-        ReferenceCsv::new(create(ref_part)?, run.log_every, sim.reference().clone())
-            .map_err(io_error(ref_part))?;
+    let mut trajectory = CsvLog::create(&parts[0], TrajectoryRows)?;
+    let mut reference = CsvLog::create(&parts[1], ReferenceRows::default())?;
     let mut odometry = match parts.get(4) {
-        Some(p) => Some(OdometryCsv::new(create(p)?, run.log_every).map_err(io_error(p))?),
+        Some(p) => Some(CsvLog::create(p, OdometryRows::default())?),
         None => None,
     };
-    let mut summary = Summary::new(sim.agents().len(), Summary::SETTLE_TOLERANCE);
+    let mut summary = Summary::new(run.simulation.agents().len(), Summary::SETTLE_TOLERANCE);
+    let sim = &mut run.simulation;
     let result = sim.run(&mut [
-        &mut csv as &mut dyn Observer,
-        &mut reference,
-        &mut odometry,
+        &mut Every::new(
+            run.log_every,
+            [
+                &mut trajectory as &mut dyn Observer,
+                &mut reference,
+                &mut odometry,
+            ],
+        ) as &mut dyn Observer,
         &mut summary,
         extra,
     ]);
     if let Err(e) = result {
         remove_parts();
         return Err(e.into());
-    }
-    csv.finish().map_err(io_error(traj_part))?;
-    reference.finish().map_err(io_error(ref_part))?;
-    if let (Some(o), Some(p)) = (odometry, parts.get(4)) {
-        o.finish().map_err(io_error(p))?;
     }
     let config = *sim.config();
     let report = RunSummary {
@@ -505,6 +638,40 @@ mod tests {
             push_time(&mut s, t);
             assert_eq!(s, want);
         }
+    }
+
+    #[test]
+    fn tables_parse_and_errors_name_the_line() {
+        let path = Path::new("t.csv");
+        let t = Table::parse(path, "t, x\n0,1.5\n\n  \n0.5 , -2e-3\n").unwrap();
+        assert_eq!(t.header, ["t", "x"]);
+        assert_eq!(t.rows, [vec![0.0, 1.5], vec![0.5, -2e-3]]);
+        let err = |text: &str| Table::parse(path, text).unwrap_err().to_string();
+        assert_eq!(err(""), "t.csv:1: empty file: expected a header");
+        let e = err("t,x\n0,1\n0,nope\n");
+        assert!(e.starts_with("t.csv:3: not a number"), "{e}");
+        assert_eq!(
+            err("t,x\n0,1\n\n1\n"),
+            "t.csv:4: 1 columns where the header has 2"
+        );
+    }
+
+    /// What the CSV writer writes for each kind of cell.
+    #[test]
+    fn the_csv_writer_writes_each_cell_kind() {
+        let mut csv = CsvWriter::new(Vec::new(), "a,b,c,d,e,f").unwrap();
+        csv.time(0.030000000000000002)
+            .int(7)
+            .num(0.1)
+            .opt(None)
+            .text("wheels")
+            .opt(Some(-1.0));
+        csv.end_row().unwrap();
+        csv.opt(None).nums([1.0, 2.5]);
+        csv.end_row().unwrap();
+        assert_eq!(csv.rows(), 2);
+        let text = String::from_utf8(csv.into_inner().unwrap()).unwrap();
+        assert_eq!(text, "a,b,c,d,e,f\n0.03,7,0.1,,wheels,-1.0\n,1.0,2.5\n");
     }
 
     #[test]

@@ -179,28 +179,125 @@ pub struct Frame<'a> {
     pub odometers: &'a [Option<Odometer>],
 }
 
-impl Frame<'_> {
-    /// Whether a log that keeps every `every`-th step (0 or 1: every step)
-    /// keeps this frame: those steps and the final frame.
-    #[inline]
-    pub fn is_logged(&self, every: u64) -> bool {
-        self.step.is_multiple_of(every.max(1)) || self.last
-    }
-}
-
 /// An error an observer may return (e.g. an I/O error while logging).
 pub type ObserverError = Box<dyn std::error::Error + Send + Sync>;
 
-/// Watches a run frame by frame: logging, statistics, progress.
+/// Watches a run from its beginning to its end: logging, statistics, progress
+/// (argmin's observers, ripgrep's `Sink`). [`Simulation::run`] calls
+/// [`start`](Observer::start) once, [`observe`](Observer::observe) for every
+/// frame it is shown and [`finish`](Observer::finish) once after the final
+/// frame. How often an observer sees frames is chosen where it is attached
+/// ([`Every`]), not inside it.
+///
+/// When the run fails (a non-finite state, an observer's error) `finish` is not
+/// called: an observer that holds a resource releases it when dropped, and a
+/// file writer leaves its file incomplete for the caller to remove.
 pub trait Observer {
-    /// Called once per step, at `t = 0, dt, …` and on the final frame.
+    /// Called once before the first frame, with the simulation about to run
+    /// (its agents, reference, configuration and number of steps).
+    fn start(&mut self, _sim: &Simulation) -> Result<(), ObserverError> {
+        Ok(())
+    }
+
+    /// Called for each frame shown to the observer, in order; the final frame
+    /// has [`Frame::last`] set.
     fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError>;
+
+    /// Called once after the final frame of a run that succeeded: flush,
+    /// write footers, close.
+    fn finish(&mut self) -> Result<(), ObserverError> {
+        Ok(())
+    }
 }
 
-/// A closure is an observer.
+/// A closure is an observer of every frame (no start or finish work).
 impl<F: FnMut(&Frame<'_>) -> Result<(), ObserverError>> Observer for F {
     fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
         self(frame)
+    }
+}
+
+/// An observer shown every `every`-th step (`t = 0, every·dt, …`) and the
+/// final frame; `every` of 0 or 1 shows every step. This is the schedule of
+/// `trajectory.csv` (`log.dt`): a log's rate is set where it is attached
+/// (argmin's `ObserverMode::Every`), and `start`/`finish` pass through.
+#[derive(Debug, Clone)]
+pub struct Every<O> {
+    every: u64,
+    observer: O,
+}
+
+impl<O> Every<O> {
+    /// Shows `observer` every `every`-th step and the final frame.
+    pub fn new(every: u64, observer: O) -> Every<O> {
+        Every {
+            every: every.max(1),
+            observer,
+        }
+    }
+
+    /// Whether this schedule shows `frame`.
+    #[inline]
+    pub fn shows(&self, frame: &Frame<'_>) -> bool {
+        frame.step.is_multiple_of(self.every) || frame.last
+    }
+
+    /// The observer, e.g. to read what it gathered.
+    pub fn get_ref(&self) -> &O {
+        &self.observer
+    }
+
+    /// The observer, released from its schedule.
+    pub fn into_inner(self) -> O {
+        self.observer
+    }
+}
+
+impl<O: Observer> Observer for Every<O> {
+    fn start(&mut self, sim: &Simulation) -> Result<(), ObserverError> {
+        self.observer.start(sim)
+    }
+
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        if self.shows(frame) {
+            self.observer.observe(frame)
+        } else {
+            Ok(())
+        }
+    }
+
+    fn finish(&mut self) -> Result<(), ObserverError> {
+        self.observer.finish()
+    }
+}
+
+/// Several observers as one, each hook called on each in order.
+impl<const N: usize> Observer for [&mut dyn Observer; N] {
+    fn start(&mut self, sim: &Simulation) -> Result<(), ObserverError> {
+        self.iter_mut().try_for_each(|o| o.start(sim))
+    }
+
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        self.iter_mut().try_for_each(|o| o.observe(frame))
+    }
+
+    fn finish(&mut self) -> Result<(), ObserverError> {
+        self.iter_mut().try_for_each(|o| o.finish())
+    }
+}
+
+/// An observer that may be absent (`None` sees nothing).
+impl<O: Observer> Observer for Option<O> {
+    fn start(&mut self, sim: &Simulation) -> Result<(), ObserverError> {
+        self.as_mut().map_or(Ok(()), |o| o.start(sim))
+    }
+
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        self.as_mut().map_or(Ok(()), |o| o.observe(frame))
+    }
+
+    fn finish(&mut self) -> Result<(), ObserverError> {
+        self.as_mut().map_or(Ok(()), |o| o.finish())
     }
 }
 
@@ -631,36 +728,21 @@ impl Simulation {
         Ok(())
     }
 
-    /// Runs to the end, showing every frame (`t = 0` to the last) to `observer`.
+    /// Runs to the end: `observer` is started, shown every frame (`t = 0` to
+    /// the last) and finished ([`Observer`]).
     pub fn run(&mut self, observer: &mut dyn Observer) -> Result<(), SimError> {
+        let failed = |e: ObserverError| SimError::Observer(e.to_string());
+        observer.start(self).map_err(failed)?;
         loop {
             let frame = self.frame();
             let last = frame.last;
-            observer
-                .observe(&frame)
-                .map_err(|e| SimError::Observer(e.to_string()))?;
+            observer.observe(&frame).map_err(failed)?;
             if last {
-                return Ok(());
+                break;
             }
             self.step()?;
         }
-    }
-}
-
-/// Several observers as one, called in order.
-impl<const N: usize> Observer for [&mut dyn Observer; N] {
-    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        for o in self.iter_mut() {
-            o.observe(frame)?;
-        }
-        Ok(())
-    }
-}
-
-/// An observer that may be absent (`None` sees nothing).
-impl<O: Observer> Observer for Option<O> {
-    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        self.as_mut().map_or(Ok(()), |o| o.observe(frame))
+        observer.finish().map_err(failed)
     }
 }
 
@@ -750,5 +832,100 @@ impl Observer for Summary {
             self.last[i] = (*s, ne);
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod observer_tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use crate::scenario::{Overrides, Scenario};
+
+    /// Records which hooks it saw, in order.
+    #[derive(Debug, Default)]
+    struct Hooks {
+        events: Vec<String>,
+        fail_at: Option<u64>,
+    }
+
+    impl Observer for Hooks {
+        fn start(&mut self, sim: &Simulation) -> Result<(), ObserverError> {
+            self.events.push(format!("start {}", sim.steps()));
+            Ok(())
+        }
+
+        fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+            if self.fail_at == Some(frame.step) {
+                return Err("stop here".into());
+            }
+            self.events.push(format!(
+                "{}{}",
+                frame.step,
+                if frame.last { "!" } else { "" }
+            ));
+            Ok(())
+        }
+
+        fn finish(&mut self) -> Result<(), ObserverError> {
+            self.events.push("finish".into());
+            Ok(())
+        }
+    }
+
+    /// A short run of the paper's circle: `steps` steps of 1 ms.
+    fn circle(steps: u64) -> Simulation {
+        Scenario::builtin("experiment-circle")
+            .unwrap()
+            .build(&Overrides {
+                dt: Some(0.001),
+                duration: Some(steps as f64 * 0.001),
+                ..Overrides::default()
+            })
+            .unwrap()
+            .simulation
+    }
+
+    #[test]
+    fn hooks_run_once_around_the_frames_every_shows() {
+        let mut sim = circle(10);
+        let mut every = Every::new(4, Hooks::default());
+        sim.run(&mut every).unwrap();
+        let events = every.into_inner().events;
+        assert_eq!(
+            events,
+            ["start 10", "0", "4", "8", "10!", "finish"].map(String::from)
+        );
+        // 0 and 1 show every frame; a multiple of the run shows no extra last.
+        for (k, want) in [(0, 11), (1, 11), (5, 3), (10, 2), (20, 2)] {
+            let mut sim = circle(10);
+            let mut every = Every::new(k, Hooks::default());
+            sim.run(&mut every).unwrap();
+            assert_eq!(every.get_ref().events.len() - 2, want, "every {k}");
+        }
+    }
+
+    #[test]
+    fn a_failed_run_is_not_finished() {
+        let mut sim = circle(10);
+        let mut hooks = Hooks {
+            fail_at: Some(3),
+            ..Hooks::default()
+        };
+        let err = sim.run(&mut hooks).unwrap_err();
+        assert!(err.to_string().contains("stop here"), "{err}");
+        assert_eq!(hooks.events, ["start 10", "0", "1", "2"].map(String::from));
+    }
+
+    #[test]
+    fn observers_in_an_array_each_see_every_hook_in_order() {
+        let mut sim = circle(3);
+        let (mut a, mut b) = (Hooks::default(), Some(Hooks::default()));
+        let mut none: Option<Hooks> = None;
+        sim.run(&mut [&mut a as &mut dyn Observer, &mut b, &mut none])
+            .unwrap();
+        let want = ["start 3", "0", "1", "2", "3!", "finish"].map(String::from);
+        assert_eq!(a.events, want);
+        assert_eq!(b.unwrap().events, want);
     }
 }

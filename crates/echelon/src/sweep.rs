@@ -14,9 +14,10 @@ use crate::check;
 use crate::error::{ParamError, ScenarioError, SimError};
 use crate::odometry::ZetaModel;
 use crate::odometry::bound::Theorem2;
+use crate::output::CsvWriter;
 use crate::scenario::schema::{FixesSection, Fusion, OdometrySection};
 use crate::scenario::{Overrides, Run, Scenario};
-use crate::sim::{Frame, ObserverError};
+use crate::sim::{Every, Frame, ObserverError};
 
 /// The grid of a sweep: every combination of the lists, for every seed.
 #[derive(Debug, Clone, PartialEq)]
@@ -394,9 +395,6 @@ pub fn drift_curves(
             let mut drift = Vec::with_capacity(points + 2);
             let mut samples = Vec::with_capacity(points + 2);
             let mut observe = |f: &Frame<'_>| -> Result<(), ObserverError> {
-                if !f.is_logged(every) {
-                    return Ok(());
-                }
                 let mut d: f64 = 0.0;
                 let mut n = 0;
                 for (i, odometer) in f.odometers.iter().enumerate() {
@@ -410,7 +408,7 @@ pub fn drift_curves(
                 samples.push(n);
                 Ok(())
             };
-            sim.run(&mut observe)?;
+            sim.run(&mut Every::new(every, &mut observe))?;
             let paper = samples
                 .iter()
                 .map(|&n| std::f64::consts::SQRT_2 * n as f64 * case.zeta)
@@ -437,73 +435,51 @@ pub fn drift_curves(
 }
 
 /// Writes `drift.csv`: one row per curve per sample.
-pub fn write_drift_csv<W: Write>(mut w: W, curves: &[DriftCurve]) -> io::Result<()> {
-    writeln!(w, "{DRIFT_HEADER}")?;
-    let mut buf = ryu::Buffer::new();
-    let mut line = String::new();
+pub fn write_drift_csv<W: Write>(w: W, curves: &[DriftCurve]) -> io::Result<()> {
+    let mut csv = CsvWriter::new(w, DRIFT_HEADER)?;
     for c in curves {
         for k in 0..c.times.len() {
-            line.clear();
-            for v in [
+            csv.nums([
                 c.case.zeta,
                 c.case.wheel_diameter_ratio,
                 c.case.wheelbase_ratio,
                 c.case.slip,
-            ] {
-                crate::output::push_f64(&mut line, v, &mut buf);
-                line.push(',');
-            }
-            line.push_str(&c.case.seed.to_string());
-            line.push(',');
-            crate::output::push_time(&mut line, c.times[k]);
-            for v in [c.drift[k], c.paper[k], c.early_slope[k]] {
-                line.push(',');
-                crate::output::push_f64(&mut line, v, &mut buf);
-            }
-            writeln!(w, "{line}")?;
+            ])
+            .int(c.case.seed)
+            .time(c.times[k])
+            .nums([c.drift[k], c.paper[k], c.early_slope[k]]);
+            csv.end_row()?;
         }
     }
-    w.flush()
+    csv.flush()
 }
 
 /// Writes `sweep.csv`.
-pub fn write_csv<W: Write>(mut w: W, rows: &[Row], zeta_model: ZetaModel) -> io::Result<()> {
-    writeln!(w, "{SWEEP_HEADER}")?;
+pub fn write_csv<W: Write>(w: W, rows: &[Row], zeta_model: ZetaModel) -> io::Result<()> {
+    let mut csv = CsvWriter::new(w, SWEEP_HEADER)?;
     let model = match zeta_model {
         ZetaModel::Wheels => "wheels",
         ZetaModel::WorstCase => "worst-case",
     };
-    let mut buf = ryu::Buffer::new();
-    let mut line = String::new();
     for r in rows {
-        line.clear();
         let c = &r.case;
-        crate::output::push_f64(&mut line, c.zeta, &mut buf);
-        line.push(',');
-        line.push_str(model);
-        for v in [c.wheel_diameter_ratio, c.wheelbase_ratio, c.slip] {
-            line.push(',');
-            crate::output::push_f64(&mut line, v, &mut buf);
-        }
-        line.push_str(&format!(",{},{}", c.fix_every, c.seed));
-        for v in [
-            r.omega_max,
-            r.z_max,
-            r.z_hat_max,
-            r.e_max,
-            r.final_drift,
-            r.drift_max,
-        ] {
-            line.push(',');
-            crate::output::push_f64(&mut line, v, &mut buf);
-        }
-        for v in [r.z_bound, r.z_over_bound, r.e_bound] {
-            line.push(',');
-            if let Some(v) = v {
-                crate::output::push_f64(&mut line, v, &mut buf);
-            }
-        }
-        writeln!(w, "{line}")?;
+        csv.num(c.zeta)
+            .text(model)
+            .nums([c.wheel_diameter_ratio, c.wheelbase_ratio, c.slip])
+            .int(c.fix_every)
+            .int(c.seed)
+            .nums([
+                r.omega_max,
+                r.z_max,
+                r.z_hat_max,
+                r.e_max,
+                r.final_drift,
+                r.drift_max,
+            ])
+            .opt(r.z_bound)
+            .opt(r.z_over_bound)
+            .opt(r.e_bound);
+        csv.end_row()?;
     }
-    w.flush()
+    csv.flush()
 }

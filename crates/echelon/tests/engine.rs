@@ -5,11 +5,12 @@
 //! on one thread or two, stepped at once or one step at a time.
 
 use echelon::control::{Gains, Variant};
-use echelon::engine::{BenchFormation, Engine, EngineError, SplitMix64, Topology};
+use echelon::engine::{BenchFormation, Engine, EngineError, Topology};
 use echelon::formation::Leader;
 use echelon::lycomp::{LyComp, LyDerivatives, Placement};
 use echelon::model::{RobotParams, State};
 use echelon::reference::{Lemniscate, Reference};
+use echelon::rng::SplitMix64;
 use echelon::sim::{AgentSpec, SimConfig, Simulation, Timing};
 
 /// The relative difference, against at least 1 in SI units (1 m, 1 m/s,

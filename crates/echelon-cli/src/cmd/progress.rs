@@ -21,8 +21,9 @@ pub(crate) struct Progress {
 impl Progress {
     /// Runs shorter than this show no bar.
     pub(crate) const DELAY: Duration = Duration::from_secs(1);
-    /// Frames between two looks at the clock.
-    const CHECK_EVERY: u64 = 1024;
+    /// Steps between two looks at the clock: attach it with
+    /// `Every::new(Progress::CHECK_EVERY, …)`.
+    pub(crate) const CHECK_EVERY: u64 = 1024;
 
     /// A progress observer for a run of `steps` steps.
     pub(crate) fn new(steps: u64, quiet: bool) -> Progress {
@@ -40,16 +41,24 @@ impl Progress {
     }
 
     /// Clears the bar.
-    pub(crate) fn finish(&mut self) {
+    fn clear(&mut self) {
         if let Some(bar) = self.bar.take() {
             bar.finish_and_clear();
         }
     }
 }
 
+/// A run that fails ends without `finish`: the bar is cleared all the same
+/// before the error is printed.
+impl Drop for Progress {
+    fn drop(&mut self) {
+        self.clear();
+    }
+}
+
 impl Observer for Progress {
     fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        if !self.enabled || !frame.step.is_multiple_of(Self::CHECK_EVERY) {
+        if !self.enabled {
             return Ok(());
         }
         match &self.bar {
@@ -72,6 +81,11 @@ impl Observer for Progress {
         if let Some(bar) = &self.bar {
             bar.set_message(format!("{:.1}", frame.t));
         }
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), ObserverError> {
+        self.clear();
         Ok(())
     }
 }

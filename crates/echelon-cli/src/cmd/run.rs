@@ -13,7 +13,7 @@ use echelon::output::{
     self, ODOMETRY_FILE, REFERENCE_FILE, RunSummary, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE,
 };
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::Observer;
+use echelon::sim::{Every, Observer};
 use echelon::{Simulation, Variant};
 use echelon_mcap::McapObserver;
 
@@ -90,26 +90,27 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     }
     let started = Instant::now();
     let mcap_part = output::part_path(&out.join(MCAP_FILE));
-    let mut mcap = if args.mcap {
+    let mcap = if args.mcap {
         std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
         let file = File::create(&mcap_part)
             .with_context(|| format!("creating {}", mcap_part.display()))?;
-        Some(McapObserver::new(
-            BufWriter::with_capacity(1 << 16, file),
-            run.simulation.reference().clone(),
-            run.simulation.agents().len(),
-            run.log_every,
-        )?)
+        Some(McapObserver::new(BufWriter::with_capacity(1 << 16, file))?)
     } else {
         None
     };
-    let mut progress = Progress::new(run.simulation.steps(), args.quiet);
+    // The MCAP log keeps the CSV logs' schedule; the bar looks at the clock
+    // every so many steps.
+    let mut mcap = Every::new(run.log_every, mcap);
+    let mut progress = Every::new(
+        Progress::CHECK_EVERY,
+        Progress::new(run.simulation.steps(), args.quiet),
+    );
     let result = output::run_to_dir(
         &mut run,
         &out,
         &mut [&mut progress as &mut dyn Observer, &mut mcap],
     );
-    progress.finish();
+    drop(progress);
     let summary = match result {
         Ok(s) => s,
         Err(e) => {
@@ -117,9 +118,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
             return Err(e).with_context(|| format!("running {}", run.name));
         }
     };
-    if let Some(m) = mcap {
-        m.finish()
-            .with_context(|| format!("writing {}", mcap_part.display()))?;
+    if args.mcap {
         std::fs::rename(&mcap_part, out.join(MCAP_FILE))
             .with_context(|| format!("writing {}", out.join(MCAP_FILE).display()))?;
     }

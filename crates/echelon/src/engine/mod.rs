@@ -43,7 +43,6 @@ use crate::model::{RobotParams, State};
 use crate::reference::{Order, Reference, Trajectory};
 use crate::sim::{AgentSpec, Simulation, Timing};
 
-pub use crate::rng::SplitMix64;
 pub use bench::BenchFormation;
 pub use kernel::Probe;
 use kernel::{Block, Carry, Consts, Limit, Scratch, V, W};

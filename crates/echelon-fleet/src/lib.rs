@@ -20,6 +20,7 @@ pub mod link;
 pub mod net;
 pub mod plant;
 pub mod robot;
+pub mod ros2;
 pub mod up;
 pub mod wire;
 

@@ -1,0 +1,265 @@
+//! ROS 2 names and the Zenoh key expressions that carry a topic.
+//!
+//! - `rmw_zenoh` (ROS 2's Zenoh middleware, Jazzy 0.2.x): the data key is
+//!   `<domain id>/<fully qualified topic without the leading slash>/<DDS type
+//!   name>/<RIHS01 type hash>`, e.g.
+//!   `0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/RIHS01_5f0f…`
+//!   (`TopicInfo` in rmw_zenoh's `liveliness_utils.cpp`).
+//! - `bridge` (zenoh-bridge-ros2dds for a robot left on DDS): the key is the
+//!   topic without the leading slash, `robot1/cmd_vel`; no domain, type or
+//!   hash (the bridge's own `namespace` setting, if any, is part of the
+//!   namespace given here).
+
+use super::msgs::MessageType;
+
+/// How topics map onto Zenoh keys.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KeyScheme {
+    /// rmw_zenoh's `<domain>/<topic>/<type>/<hash>`.
+    #[default]
+    RmwZenoh,
+    /// zenoh-bridge-ros2dds's plain `<topic>`.
+    Bridge,
+}
+
+/// A ROS name that is not valid.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("ROS name `{name}`: {reason}")]
+pub struct NameError {
+    /// The name as given.
+    pub name: String,
+    /// Why it is refused.
+    pub reason: &'static str,
+}
+
+fn check_tokens(name: &str, path: &str) -> Result<(), NameError> {
+    let refuse = |reason| {
+        Err(NameError {
+            name: name.to_owned(),
+            reason,
+        })
+    };
+    if path.ends_with('/') {
+        return refuse("ends with `/`");
+    }
+    for token in path.split('/') {
+        if token.is_empty() {
+            return refuse("has an empty segment (`//`)");
+        }
+        if token.starts_with(|c: char| c.is_ascii_digit()) {
+            return refuse("a segment starts with a digit");
+        }
+        if !token.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return refuse(
+                "only letters, digits, `_` and `/` are allowed (no `~` or `{}` substitutions)",
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The fully qualified topic name (`/ns/topic`) of `topic` in `namespace`,
+/// by the ROS 2 rules: an absolute topic (leading `/`) ignores the
+/// namespace; a relative one is appended to it. The namespace may be empty,
+/// `/`, `/robot1` or `robot1`. Private names (`~`) and substitutions (`{}`)
+/// are refused.
+pub fn fully_qualified_topic(namespace: &str, topic: &str) -> Result<String, NameError> {
+    if topic.is_empty() {
+        return Err(NameError {
+            name: topic.to_owned(),
+            reason: "is empty",
+        });
+    }
+    if let Some(absolute) = topic.strip_prefix('/') {
+        check_tokens(topic, absolute)?;
+        return Ok(topic.to_owned());
+    }
+    check_tokens(topic, topic)?;
+    let ns = normalize_namespace(namespace)?;
+    Ok(if ns == "/" {
+        format!("/{topic}")
+    } else {
+        format!("{ns}/{topic}")
+    })
+}
+
+/// A namespace in its canonical form: `/` for the root, else `/a/b` (no
+/// trailing slash).
+pub fn normalize_namespace(namespace: &str) -> Result<String, NameError> {
+    let inner = namespace.trim_start_matches('/');
+    if inner.is_empty() {
+        return Ok("/".to_owned());
+    }
+    if namespace.starts_with("//") {
+        return Err(NameError {
+            name: namespace.to_owned(),
+            reason: "has an empty segment (`//`)",
+        });
+    }
+    check_tokens(namespace, inner)?;
+    Ok(format!("/{inner}"))
+}
+
+/// A node name: one segment of letters, digits and `_`, not starting with a digit.
+pub fn check_node_name(name: &str) -> Result<(), NameError> {
+    if name.is_empty() || name.contains('/') {
+        return Err(NameError {
+            name: name.to_owned(),
+            reason: "a node name is one non-empty segment",
+        });
+    }
+    check_tokens(name, name)
+}
+
+/// The key of `fq_topic` (a fully qualified name, see
+/// [`fully_qualified_topic`]) carrying messages of type `ty`.
+pub fn topic_key(scheme: KeyScheme, domain_id: u32, fq_topic: &str, ty: &MessageType) -> String {
+    let topic = fq_topic.trim_matches('/');
+    match scheme {
+        KeyScheme::RmwZenoh => format!("{domain_id}/{topic}/{}/{}", ty.dds_name(), ty.hash),
+        KeyScheme::Bridge => topic.to_owned(),
+    }
+}
+
+/// The key to subscribe to for `fq_topic` whatever type is published on it
+/// (`<domain>/<topic>/*/*` for rmw_zenoh), so that a publisher of the wrong
+/// type is seen, counted and refused ([`check_topic_key`]) rather than
+/// silently never heard.
+pub fn topic_key_any_type(scheme: KeyScheme, domain_id: u32, fq_topic: &str) -> String {
+    let topic = fq_topic.trim_matches('/');
+    match scheme {
+        KeyScheme::RmwZenoh => format!("{domain_id}/{topic}/*/*"),
+        KeyScheme::Bridge => topic.to_owned(),
+    }
+}
+
+/// A sample's key does not carry the expected type.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum KeyMismatch {
+    /// Not of the form `<domain>/<topic>/<type>/<hash>`.
+    #[error("key `{0}` is not an rmw_zenoh topic key")]
+    NotATopicKey(String),
+    /// Another message type.
+    #[error("type `{found}` on the key, expected `{expected}`")]
+    WrongType {
+        /// The type on the key.
+        found: String,
+        /// The expected DDS type name.
+        expected: String,
+    },
+    /// The right type name but another type hash (another ROS distribution
+    /// or a changed definition).
+    #[error("type hash `{found}` on the key, expected `{expected}`")]
+    WrongHash {
+        /// The hash on the key.
+        found: String,
+        /// The expected hash.
+        expected: &'static str,
+    },
+}
+
+/// Checks that an rmw_zenoh sample key names type `ty` with its hash. Under
+/// the `bridge` scheme keys carry no type and every key passes.
+pub fn check_topic_key(scheme: KeyScheme, key: &str, ty: &MessageType) -> Result<(), KeyMismatch> {
+    if scheme == KeyScheme::Bridge {
+        return Ok(());
+    }
+    let mut parts = key.rsplitn(3, '/');
+    // `<domain>/<topic…>/<type>/<hash>`: at least a domain and a topic before the type.
+    let (hash, type_name) = match (parts.next(), parts.next(), parts.next()) {
+        (Some(h), Some(t), Some(rest)) if rest.contains('/') => (h, t),
+        _ => return Err(KeyMismatch::NotATopicKey(key.to_owned())),
+    };
+    let expected = ty.dds_name();
+    if type_name != expected {
+        return Err(KeyMismatch::WrongType {
+            found: type_name.to_owned(),
+            expected,
+        });
+    }
+    if hash != ty.hash {
+        return Err(KeyMismatch::WrongHash {
+            found: hash.to_owned(),
+            expected: ty.hash,
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ros2::msgs::{ODOMETRY, TWIST, TWIST_STAMPED};
+
+    #[test]
+    fn names_qualify_by_the_ros_rules() {
+        let fq = |ns, t| fully_qualified_topic(ns, t).map_err(|e| e.reason);
+        assert_eq!(fq("", "cmd_vel"), Ok("/cmd_vel".to_owned()));
+        assert_eq!(fq("/", "cmd_vel"), Ok("/cmd_vel".to_owned()));
+        assert_eq!(fq("/robot1", "cmd_vel"), Ok("/robot1/cmd_vel".to_owned()));
+        assert!(fq("robot1/", "cmd_vel").is_err());
+        assert_eq!(
+            fq("robot1", "diff/cmd_vel"),
+            Ok("/robot1/diff/cmd_vel".to_owned())
+        );
+        assert_eq!(fq("/robot1", "/odom"), Ok("/odom".to_owned()));
+        assert!(fq("/robot1", "~/odom").is_err());
+        assert!(fq("/robot1", "{node}/odom").is_err());
+        assert!(fq("/robot1", "a//b").is_err());
+        assert!(fq("/robot1", "odom/").is_err());
+        assert!(fq("/robot1", "1odom").is_err());
+        assert!(fq("/robot1", "").is_err());
+        assert!(fq("/1robot", "odom").is_err());
+        assert!(check_node_name("echelon_robot_1").is_ok());
+        assert!(check_node_name("a/b").is_err());
+    }
+
+    #[test]
+    fn keys_follow_each_scheme() {
+        assert_eq!(
+            topic_key(KeyScheme::RmwZenoh, 0, "/robot1/cmd_vel", &TWIST_STAMPED),
+            "0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/\
+             RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64"
+        );
+        assert_eq!(
+            topic_key(KeyScheme::RmwZenoh, 42, "/cmd_vel", &TWIST),
+            "42/cmd_vel/geometry_msgs::msg::dds_::Twist_/\
+             RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
+        );
+        assert_eq!(
+            topic_key(KeyScheme::Bridge, 0, "/robot1/odom", &ODOMETRY),
+            "robot1/odom"
+        );
+        assert_eq!(
+            topic_key_any_type(KeyScheme::RmwZenoh, 3, "/robot1/odom"),
+            "3/robot1/odom/*/*"
+        );
+    }
+
+    #[test]
+    fn sample_keys_are_checked_for_type_and_hash() {
+        let key = topic_key(KeyScheme::RmwZenoh, 0, "/robot1/odom", &ODOMETRY);
+        assert_eq!(
+            check_topic_key(KeyScheme::RmwZenoh, &key, &ODOMETRY),
+            Ok(())
+        );
+        assert!(matches!(
+            check_topic_key(KeyScheme::RmwZenoh, &key, &TWIST),
+            Err(KeyMismatch::WrongType { .. })
+        ));
+        let other_hash = format!("0/robot1/odom/{}/RIHS01_00", ODOMETRY.dds_name());
+        assert!(matches!(
+            check_topic_key(KeyScheme::RmwZenoh, &other_hash, &ODOMETRY),
+            Err(KeyMismatch::WrongHash { .. })
+        ));
+        assert!(matches!(
+            check_topic_key(KeyScheme::RmwZenoh, "odom", &ODOMETRY),
+            Err(KeyMismatch::NotATopicKey(_))
+        ));
+        assert_eq!(
+            check_topic_key(KeyScheme::Bridge, "robot1/odom", &ODOMETRY),
+            Ok(())
+        );
+    }
+}

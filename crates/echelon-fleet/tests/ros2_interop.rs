@@ -131,7 +131,7 @@ fn spread(k: usize) -> f64 {
         std::f64::consts::PI,
         -123_456.789,
     ];
-    if k % 3 == 0 {
+    if k.is_multiple_of(3) {
         SPECIAL[(k / 3) % SPECIAL.len()]
     } else {
         (k as f64 * 0.731 - 7.3) * 10f64.powi((k % 7) as i32 - 3)

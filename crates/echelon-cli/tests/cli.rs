@@ -4,20 +4,23 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-const NAMES: [&str; 6] = [
-    "circle-pentagon",
-    "experiment-circle",
-    "experiment-lemniscate",
-    "fix-study",
-    "lemniscate-wedge",
-    "nonfeasible",
-];
+/// The built-in scenarios' names (`echelon`'s scenario tests pin the list).
+fn names() -> impl Iterator<Item = &'static str> {
+    echelon::scenario::builtin().iter().map(|(n, _)| *n)
+}
 
 fn echelon(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_echelon"))
         .args(args)
         .output()
         .expect("the echelon binary runs")
+}
+
+/// `echelon run SCENARIO --out OUT EXTRA…`.
+fn run(scenario: &str, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["run", scenario, "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    echelon(&args)
 }
 
 fn stdout(o: &Output) -> String {
@@ -68,11 +71,11 @@ fn scenarios_lists_the_built_ins_with_a_line_each() {
     let o = echelon(&["scenarios"]);
     assert!(o.status.success());
     let text = stdout(&o);
-    let names: Vec<&str> = text
+    let listed: Vec<&str> = text
         .lines()
         .map(|l| l.split_whitespace().next().unwrap())
         .collect();
-    assert_eq!(names, NAMES);
+    assert_eq!(listed, names().collect::<Vec<_>>());
     assert!(
         text.lines()
             .all(|l| l.contains("Fig") || l.contains("Theorem"))
@@ -82,7 +85,7 @@ fn scenarios_lists_the_built_ins_with_a_line_each() {
 #[test]
 fn show_round_trips_into_run() {
     let dir = tempfile::tempdir().unwrap();
-    for name in NAMES {
+    for name in names() {
         let shown = echelon(&["show", name]);
         assert!(shown.status.success());
         let file = dir.path().join(format!("{name}.toml"));
@@ -93,15 +96,7 @@ fn show_round_trips_into_run() {
         );
         // A shorter run keeps the test fast; the golden tests run the full durations.
         for (scenario, out) in [(name, &a), (file.to_str().unwrap(), &b)] {
-            let o = echelon(&[
-                "run",
-                scenario,
-                "--out",
-                out.to_str().unwrap(),
-                "--duration",
-                "8",
-                "-q",
-            ]);
+            let o = run(scenario, out, &["--duration", "8", "-q"]);
             assert!(o.status.success(), "{}", stderr(&o));
             assert!(stdout(&o).is_empty(), "--quiet prints nothing");
         }
@@ -118,7 +113,7 @@ fn show_round_trips_into_run() {
 fn run_writes_the_documented_files_and_summary() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
-    let o = echelon(&["run", "nonfeasible", "--out", out.to_str().unwrap()]);
+    let o = run("nonfeasible", &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = stdout(&o);
     assert!(
@@ -159,21 +154,21 @@ fn run_writes_the_documented_files_and_summary() {
 fn overrides_change_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("o");
-    let o = echelon(&[
-        "run",
+    let o = run(
         "circle-pentagon",
-        "--out",
-        out.to_str().unwrap(),
-        "--duration",
-        "2",
-        "--dt",
-        "0.002",
-        "--log-dt",
-        "0",
-        "--law",
-        "complete",
-        "-q",
-    ]);
+        &out,
+        &[
+            "--duration",
+            "2",
+            "--dt",
+            "0.002",
+            "--log-dt",
+            "0",
+            "--law",
+            "complete",
+            "-q",
+        ],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let summary: serde_json::Value = summary(&out);
     assert_eq!(summary["steps"], 1000);
@@ -190,15 +185,7 @@ fn overrides_change_the_run() {
 fn settle_time_is_null_when_never_within_a_centimetre() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("short");
-    let o = echelon(&[
-        "run",
-        "lemniscate-wedge",
-        "--out",
-        out.to_str().unwrap(),
-        "--duration",
-        "0.5",
-        "-q",
-    ]);
+    let o = run("lemniscate-wedge", &out, &["--duration", "0.5", "-q"]);
     assert!(o.status.success());
     let summary: serde_json::Value = summary(&out);
     assert!(summary["agents"][1]["settle_time"].is_null(), "{summary}");
@@ -507,7 +494,7 @@ fn run_writes_odometry_csv_when_agents_dead_reckon() {
     let dir = tempfile::tempdir().unwrap();
     let file = scenario_file(dir.path(), STUDY);
     let out = dir.path().join("r");
-    let o = echelon(&["run", &file, "--out", out.to_str().unwrap(), "--seed", "3"]);
+    let o = run(&file, &out, &["--seed", "3"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stdout(&o).contains("odometry.csv"));
     let odo = std::fs::read_to_string(out.join("odometry.csv")).unwrap();
@@ -525,17 +512,9 @@ fn run_writes_odometry_csv_when_agents_dead_reckon() {
     // Without odometry no odometry.csv is written.
     let plain = dir.path().join("p");
     assert!(
-        echelon(&[
-            "run",
-            "nonfeasible",
-            "--duration",
-            "1",
-            "--out",
-            plain.to_str().unwrap(),
-            "-q"
-        ])
-        .status
-        .success()
+        run("nonfeasible", &plain, &["--duration", "1", "-q"])
+            .status
+            .success()
     );
     assert!(!plain.join("odometry.csv").exists());
 }
@@ -544,15 +523,7 @@ fn run_writes_odometry_csv_when_agents_dead_reckon() {
 fn run_plot_writes_figures_and_report_and_plot_redraws_them() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cp");
-    let o = echelon(&[
-        "run",
-        "circle-pentagon",
-        "--duration",
-        "5",
-        "--out",
-        out.to_str().unwrap(),
-        "--plot",
-    ]);
+    let o = run("circle-pentagon", &out, &["--duration", "5", "--plot"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = stdout(&o);
     for f in [

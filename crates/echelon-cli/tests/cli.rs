@@ -32,6 +32,12 @@ fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
 }
 
+/// The standard output of a command that succeeded.
+fn succeeded(o: &Output) -> String {
+    assert!(o.status.success(), "{}", stderr(o));
+    stdout(o)
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8(o.stderr.clone()).unwrap()
 }
@@ -97,8 +103,7 @@ fn show_round_trips_into_run() {
         // A shorter run keeps the test fast; the golden tests run the full durations.
         for (scenario, out) in [(name, &a), (file.to_str().unwrap(), &b)] {
             let o = run(scenario, out, &["--duration", "8", "-q"]);
-            assert!(o.status.success(), "{}", stderr(&o));
-            assert!(stdout(&o).is_empty(), "--quiet prints nothing");
+            assert!(succeeded(&o).is_empty(), "--quiet prints nothing");
         }
         for f in ["trajectory.csv", "summary.json"] {
             assert!(
@@ -114,8 +119,7 @@ fn run_writes_the_documented_files_and_summary() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
     let o = run("nonfeasible", &out, &[]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let text = succeeded(&o);
     assert!(
         text.contains("nonfeasible: 1 agent, 10 s at dt = 0.001 s (10000 steps)"),
         "{text}"
@@ -295,8 +299,7 @@ fn bad_flags_exit_2() {
 }
 
 fn json(o: &Output) -> serde_json::Value {
-    assert!(o.status.success(), "{}", stderr(o));
-    serde_json::from_str(&stdout(o)).unwrap()
+    serde_json::from_str(&succeeded(o)).unwrap()
 }
 
 #[test]
@@ -355,6 +358,7 @@ fn bound_forward_and_inverse_agree() {
 
 #[test]
 fn bound_refuses_inputs_outside_the_theorem() {
+    let bound = ["bound", "--zeta", "1e-4", "--omega-max", "1"];
     for (args, needle) in [
         (&["--gamma", "1"][..], "gamma"),
         (&["--gamma", "0"], "gamma"),
@@ -362,32 +366,12 @@ fn bound_refuses_inputs_outside_the_theorem() {
         (&["--kz", "0"], "--kz"),
         (&["--zeta", "0"], "--zeta"),
     ] {
-        let mut all = vec![
-            "bound",
-            "--zeta",
-            "1e-4",
-            "--omega-max",
-            "1",
-            "--steps",
-            "10",
-        ];
-        all.extend_from_slice(args);
+        let all = [&bound[..], &["--steps", "10"], args].concat();
         assert_refused(&echelon(&all), &[needle]);
     }
+    assert_refused(&echelon(&bound), &["--steps"]);
     assert_refused(
-        &echelon(&["bound", "--zeta", "1e-4", "--omega-max", "1"]),
-        &["--steps"],
-    );
-    assert_refused(
-        &echelon(&[
-            "bound",
-            "--zeta",
-            "1e-4",
-            "--omega-max",
-            "1",
-            "--steps",
-            "0",
-        ]),
+        &echelon(&[&bound[..], &["--steps", "0"]].concat()),
         &["--steps 0"],
     );
 }
@@ -495,8 +479,7 @@ fn run_writes_odometry_csv_when_agents_dead_reckon() {
     let file = scenario_file(dir.path(), STUDY);
     let out = dir.path().join("r");
     let o = run(&file, &out, &["--seed", "3"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stdout(&o).contains("odometry.csv"));
+    assert!(succeeded(&o).contains("odometry.csv"));
     let odo = std::fs::read_to_string(out.join("odometry.csv")).unwrap();
     assert_eq!(
         odo.lines().next(),
@@ -524,8 +507,7 @@ fn run_plot_writes_figures_and_report_and_plot_redraws_them() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cp");
     let o = run("circle-pentagon", &out, &["--duration", "5", "--plot"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let text = succeeded(&o);
     for f in [
         "trajectory.csv",
         "reference.csv",
@@ -546,8 +528,7 @@ fn run_plot_writes_figures_and_report_and_plot_redraws_them() {
     let before = std::fs::read(out.join("report.html")).unwrap();
     std::fs::remove_file(out.join("paths.svg")).unwrap();
     let o = echelon(&["plot", out.to_str().unwrap(), "--quiet"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stdout(&o).is_empty());
+    assert!(succeeded(&o).is_empty());
     assert!(out.join("paths.svg").is_file());
     assert!(std::fs::read(out.join("report.html")).unwrap() == before);
     // The recorded scenario names the overrides of the run.
@@ -571,8 +552,7 @@ fn lycomp_prints_the_largest_gap_and_writes_fig_5() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ly");
     let o = echelon(&["lycomp", "--lxoff", "0.5", "--out", out.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let text = succeeded(&o);
     // docs/control-law.md: the largest gap is 0.23 m, near |R_C| = 0.7.
     assert!(
         text.contains("largest gap to eq. 5: 0.230 m at |R_C| = 0.705 m"),
@@ -591,8 +571,7 @@ fn lycomp_prints_the_largest_gap_and_writes_fig_5() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let text = succeeded(&o);
     assert!(
         text.contains("eq. 6, least squares   G = 0.213724  δ = 0.450806  ε = 0.702275  largest gap to eq. 5: 0.122 m"),
         "{text}"
@@ -639,8 +618,7 @@ fn progress_bar_on_a_terminal_for_long_runs() {
         .env(NO_DELAY.0, NO_DELAY.1)
         .output()
         .expect("`script` (util-linux) runs");
-    assert!(o.status.success(), "{}", stderr(&o));
-    let screen = stdout(&o);
+    let screen = succeeded(&o);
     assert!(
         screen.contains("% ") && screen.contains(" t = "),
         "{screen}"
@@ -662,6 +640,16 @@ fn progress_bar_on_a_terminal_for_long_runs() {
 #[test]
 fn a_closed_pipe_ends_quietly_instead_of_panicking() {
     // `echelon … | head`: the reader goes away before echelon writes.
+    let bench = [
+        "bench",
+        "--agents",
+        "9",
+        "--duration",
+        "0.1",
+        "--dt",
+        "0.01",
+    ];
+    let bench_json = [&bench[..], &["--json"]].concat();
     for args in [
         &["show", "circle-pentagon"][..],
         &["scenarios"],
@@ -675,25 +663,8 @@ fn a_closed_pipe_ends_quietly_instead_of_panicking() {
             "--omega-max",
             "1",
         ],
-        &[
-            "bench",
-            "--agents",
-            "9",
-            "--duration",
-            "0.1",
-            "--dt",
-            "0.01",
-        ],
-        &[
-            "bench",
-            "--agents",
-            "9",
-            "--duration",
-            "0.1",
-            "--dt",
-            "0.01",
-            "--json",
-        ],
+        &bench,
+        &bench_json,
     ] {
         let mut child = Command::new(env!("CARGO_BIN_EXE_echelon"))
             .args(args)
@@ -726,8 +697,7 @@ fn bench_reports_agent_steps_per_second_as_json_and_text() {
             "2",
             "--json",
         ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        let v: serde_json::Value = serde_json::from_str(succeeded(&o).trim()).unwrap();
         assert_eq!(v["agents"], 9);
         assert_eq!(v["steps"], 50);
         assert_eq!(v["topology"], topology);
@@ -754,8 +724,7 @@ fn bench_reports_agent_steps_per_second_as_json_and_text() {
         "--runs",
         "3",
     ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let text = succeeded(&o);
     for needle in [
         "5 agents × 3 runs",
         "10 steps",

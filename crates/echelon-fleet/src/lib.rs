@@ -23,6 +23,9 @@ pub mod robot;
 pub mod up;
 pub mod wire;
 
+#[cfg(test)]
+mod testing;
+
 /// Everything that can stop a fleet process.
 #[derive(Debug, thiserror::Error)]
 pub enum FleetError {

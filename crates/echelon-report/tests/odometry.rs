@@ -90,14 +90,7 @@ fn runs_with_odometry_get_a_drift_figure() {
 #[test]
 fn runs_without_odometry_have_no_drift_figure() {
     let dir = tempfile::tempdir().unwrap();
-    common::run_builtin(
-        "nonfeasible",
-        dir.path(),
-        &Overrides {
-            duration: Some(1.0),
-            ..Overrides::default()
-        },
-    );
+    common::run_builtin("nonfeasible", dir.path(), &common::for_seconds(1.0));
     let written = write_all(dir.path()).unwrap();
     assert_eq!(written.figures.len(), 3);
     assert!(!dir.path().join("drift.svg").exists());
@@ -106,10 +99,7 @@ fn runs_without_odometry_have_no_drift_figure() {
 #[test]
 fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
     let s = Scenario::builtin("fix-study").unwrap();
-    let ov = Overrides {
-        duration: Some(6.0),
-        ..Overrides::default()
-    };
+    let ov = common::for_seconds(6.0);
     let grid = Grid {
         zeta: vec![1e-5],
         zeta_model: ZetaModel::WorstCase,

@@ -21,6 +21,18 @@ fn svg_texts(path: &Path) -> Vec<String> {
         .collect()
 }
 
+/// The texts of the SVG at `path`, which show every one of `needles`.
+fn svg_texts_showing(path: &Path, needles: &[&str]) -> Vec<String> {
+    let texts = svg_texts(path);
+    for needle in needles {
+        assert!(
+            texts.iter().any(|t| t == needle),
+            "`{needle}` not in {texts:?}"
+        );
+    }
+    texts
+}
+
 const DRIFTING: &str = r#"
 name = "drifting"
 seed = 4
@@ -64,20 +76,17 @@ fn runs_with_odometry_get_a_drift_figure() {
         .iter()
         .find(|f| f.svg.ends_with("drift.svg"))
         .unwrap();
-    let texts = svg_texts(&drift.svg);
-    for needle in [
-        "scout",
-        "scout (estimate)",
-        "x [m]",
-        "‖p − p̂‖ [m]",
-        "t [s]",
-        "‖e‖ [m]",
-    ] {
-        assert!(
-            texts.iter().any(|t| t == needle),
-            "`{needle}` not in {texts:?}"
-        );
-    }
+    let texts = svg_texts_showing(
+        &drift.svg,
+        &[
+            "scout",
+            "scout (estimate)",
+            "x [m]",
+            "‖p − p̂‖ [m]",
+            "t [s]",
+            "‖e‖ [m]",
+        ],
+    );
     assert!(
         !texts.iter().any(|t| t.starts_with("perfect")),
         "only dead-reckoning agents"
@@ -137,20 +146,17 @@ fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
     let saved = echelon_report::odometry::sweep("fix-study", &rows, &curves)
         .save(dir.path(), "sweep")
         .unwrap();
-    let texts = svg_texts(&saved.svg);
-    for needle in [
-        "ultimate max ‖z‖ [m/s]",
-        "ultimate max ‖e‖ [m]",
-        "N (samples between fixes)",
-        "Theorem 2, ζ = 1e-5 m",
-        "ζ = 1e-5 m, E_d = 1.002",
-        "t [s]",
-    ] {
-        assert!(
-            texts.iter().any(|t| t == needle),
-            "`{needle}` not in {texts:?}"
-        );
-    }
+    let texts = svg_texts_showing(
+        &saved.svg,
+        &[
+            "ultimate max ‖z‖ [m/s]",
+            "ultimate max ‖e‖ [m]",
+            "N (samples between fixes)",
+            "Theorem 2, ζ = 1e-5 m",
+            "ζ = 1e-5 m, E_d = 1.002",
+            "t [s]",
+        ],
+    );
     // Log axes label 1-2-5 ticks, never fractional decades.
     assert!(
         texts.iter().any(|t| t == "50") && texts.iter().any(|t| t == "100"),

@@ -4,20 +4,23 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-const NAMES: [&str; 6] = [
-    "circle-pentagon",
-    "experiment-circle",
-    "experiment-lemniscate",
-    "fix-study",
-    "lemniscate-wedge",
-    "nonfeasible",
-];
+/// The built-in scenarios' names (`echelon`'s scenario tests pin the list).
+fn names() -> impl Iterator<Item = &'static str> {
+    echelon::scenario::builtin().iter().map(|(n, _)| *n)
+}
 
 fn echelon(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_echelon"))
         .args(args)
         .output()
         .expect("the echelon binary runs")
+}
+
+/// `echelon run SCENARIO --out OUT EXTRA…`.
+fn run(scenario: &str, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["run", scenario, "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    echelon(&args)
 }
 
 fn stdout(o: &Output) -> String {
@@ -27,6 +30,12 @@ fn stdout(o: &Output) -> String {
 /// The `summary.json` a run wrote into `dir`.
 fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+/// The standard output of a command that succeeded.
+fn succeeded(o: &Output) -> String {
+    assert!(o.status.success(), "{}", stderr(o));
+    stdout(o)
 }
 
 fn stderr(o: &Output) -> String {
@@ -68,11 +77,11 @@ fn scenarios_lists_the_built_ins_with_a_line_each() {
     let o = echelon(&["scenarios"]);
     assert!(o.status.success());
     let text = stdout(&o);
-    let names: Vec<&str> = text
+    let listed: Vec<&str> = text
         .lines()
         .map(|l| l.split_whitespace().next().unwrap())
         .collect();
-    assert_eq!(names, NAMES);
+    assert_eq!(listed, names().collect::<Vec<_>>());
     assert!(
         text.lines()
             .all(|l| l.contains("Fig") || l.contains("Theorem"))
@@ -82,7 +91,7 @@ fn scenarios_lists_the_built_ins_with_a_line_each() {
 #[test]
 fn show_round_trips_into_run() {
     let dir = tempfile::tempdir().unwrap();
-    for name in NAMES {
+    for name in names() {
         let shown = echelon(&["show", name]);
         assert!(shown.status.success());
         let file = dir.path().join(format!("{name}.toml"));
@@ -93,17 +102,8 @@ fn show_round_trips_into_run() {
         );
         // A shorter run keeps the test fast; the golden tests run the full durations.
         for (scenario, out) in [(name, &a), (file.to_str().unwrap(), &b)] {
-            let o = echelon(&[
-                "run",
-                scenario,
-                "--out",
-                out.to_str().unwrap(),
-                "--duration",
-                "8",
-                "-q",
-            ]);
-            assert!(o.status.success(), "{}", stderr(&o));
-            assert!(stdout(&o).is_empty(), "--quiet prints nothing");
+            let o = run(scenario, out, &["--duration", "8", "-q"]);
+            assert!(succeeded(&o).is_empty(), "--quiet prints nothing");
         }
         for f in ["trajectory.csv", "summary.json"] {
             assert!(
@@ -118,9 +118,8 @@ fn show_round_trips_into_run() {
 fn run_writes_the_documented_files_and_summary() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
-    let o = echelon(&["run", "nonfeasible", "--out", out.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let o = run("nonfeasible", &out, &[]);
+    let text = succeeded(&o);
     assert!(
         text.contains("nonfeasible: 1 agent, 10 s at dt = 0.001 s (10000 steps)"),
         "{text}"
@@ -159,21 +158,21 @@ fn run_writes_the_documented_files_and_summary() {
 fn overrides_change_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("o");
-    let o = echelon(&[
-        "run",
+    let o = run(
         "circle-pentagon",
-        "--out",
-        out.to_str().unwrap(),
-        "--duration",
-        "2",
-        "--dt",
-        "0.002",
-        "--log-dt",
-        "0",
-        "--law",
-        "complete",
-        "-q",
-    ]);
+        &out,
+        &[
+            "--duration",
+            "2",
+            "--dt",
+            "0.002",
+            "--log-dt",
+            "0",
+            "--law",
+            "complete",
+            "-q",
+        ],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let summary: serde_json::Value = summary(&out);
     assert_eq!(summary["steps"], 1000);
@@ -190,15 +189,7 @@ fn overrides_change_the_run() {
 fn settle_time_is_null_when_never_within_a_centimetre() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("short");
-    let o = echelon(&[
-        "run",
-        "lemniscate-wedge",
-        "--out",
-        out.to_str().unwrap(),
-        "--duration",
-        "0.5",
-        "-q",
-    ]);
+    let o = run("lemniscate-wedge", &out, &["--duration", "0.5", "-q"]);
     assert!(o.status.success());
     let summary: serde_json::Value = summary(&out);
     assert!(summary["agents"][1]["settle_time"].is_null(), "{summary}");
@@ -308,8 +299,7 @@ fn bad_flags_exit_2() {
 }
 
 fn json(o: &Output) -> serde_json::Value {
-    assert!(o.status.success(), "{}", stderr(o));
-    serde_json::from_str(&stdout(o)).unwrap()
+    serde_json::from_str(&succeeded(o)).unwrap()
 }
 
 #[test]
@@ -368,6 +358,7 @@ fn bound_forward_and_inverse_agree() {
 
 #[test]
 fn bound_refuses_inputs_outside_the_theorem() {
+    let bound = ["bound", "--zeta", "1e-4", "--omega-max", "1"];
     for (args, needle) in [
         (&["--gamma", "1"][..], "gamma"),
         (&["--gamma", "0"], "gamma"),
@@ -375,32 +366,12 @@ fn bound_refuses_inputs_outside_the_theorem() {
         (&["--kz", "0"], "--kz"),
         (&["--zeta", "0"], "--zeta"),
     ] {
-        let mut all = vec![
-            "bound",
-            "--zeta",
-            "1e-4",
-            "--omega-max",
-            "1",
-            "--steps",
-            "10",
-        ];
-        all.extend_from_slice(args);
+        let all = [&bound[..], &["--steps", "10"], args].concat();
         assert_refused(&echelon(&all), &[needle]);
     }
+    assert_refused(&echelon(&bound), &["--steps"]);
     assert_refused(
-        &echelon(&["bound", "--zeta", "1e-4", "--omega-max", "1"]),
-        &["--steps"],
-    );
-    assert_refused(
-        &echelon(&[
-            "bound",
-            "--zeta",
-            "1e-4",
-            "--omega-max",
-            "1",
-            "--steps",
-            "0",
-        ]),
+        &echelon(&[&bound[..], &["--steps", "0"]].concat()),
         &["--steps 0"],
     );
 }
@@ -507,9 +478,8 @@ fn run_writes_odometry_csv_when_agents_dead_reckon() {
     let dir = tempfile::tempdir().unwrap();
     let file = scenario_file(dir.path(), STUDY);
     let out = dir.path().join("r");
-    let o = echelon(&["run", &file, "--out", out.to_str().unwrap(), "--seed", "3"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stdout(&o).contains("odometry.csv"));
+    let o = run(&file, &out, &["--seed", "3"]);
+    assert!(succeeded(&o).contains("odometry.csv"));
     let odo = std::fs::read_to_string(out.join("odometry.csv")).unwrap();
     assert_eq!(
         odo.lines().next(),
@@ -525,17 +495,9 @@ fn run_writes_odometry_csv_when_agents_dead_reckon() {
     // Without odometry no odometry.csv is written.
     let plain = dir.path().join("p");
     assert!(
-        echelon(&[
-            "run",
-            "nonfeasible",
-            "--duration",
-            "1",
-            "--out",
-            plain.to_str().unwrap(),
-            "-q"
-        ])
-        .status
-        .success()
+        run("nonfeasible", &plain, &["--duration", "1", "-q"])
+            .status
+            .success()
     );
     assert!(!plain.join("odometry.csv").exists());
 }
@@ -544,17 +506,8 @@ fn run_writes_odometry_csv_when_agents_dead_reckon() {
 fn run_plot_writes_figures_and_report_and_plot_redraws_them() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cp");
-    let o = echelon(&[
-        "run",
-        "circle-pentagon",
-        "--duration",
-        "5",
-        "--out",
-        out.to_str().unwrap(),
-        "--plot",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let o = run("circle-pentagon", &out, &["--duration", "5", "--plot"]);
+    let text = succeeded(&o);
     for f in [
         "trajectory.csv",
         "reference.csv",
@@ -575,8 +528,7 @@ fn run_plot_writes_figures_and_report_and_plot_redraws_them() {
     let before = std::fs::read(out.join("report.html")).unwrap();
     std::fs::remove_file(out.join("paths.svg")).unwrap();
     let o = echelon(&["plot", out.to_str().unwrap(), "--quiet"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stdout(&o).is_empty());
+    assert!(succeeded(&o).is_empty());
     assert!(out.join("paths.svg").is_file());
     assert!(std::fs::read(out.join("report.html")).unwrap() == before);
     // The recorded scenario names the overrides of the run.
@@ -600,8 +552,7 @@ fn lycomp_prints_the_largest_gap_and_writes_fig_5() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ly");
     let o = echelon(&["lycomp", "--lxoff", "0.5", "--out", out.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let text = succeeded(&o);
     // docs/control-law.md: the largest gap is 0.23 m, near |R_C| = 0.7.
     assert!(
         text.contains("largest gap to eq. 5: 0.230 m at |R_C| = 0.705 m"),
@@ -620,8 +571,7 @@ fn lycomp_prints_the_largest_gap_and_writes_fig_5() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let text = succeeded(&o);
     assert!(
         text.contains("eq. 6, least squares   G = 0.213724  δ = 0.450806  ε = 0.702275  largest gap to eq. 5: 0.122 m"),
         "{text}"
@@ -668,8 +618,7 @@ fn progress_bar_on_a_terminal_for_long_runs() {
         .env(NO_DELAY.0, NO_DELAY.1)
         .output()
         .expect("`script` (util-linux) runs");
-    assert!(o.status.success(), "{}", stderr(&o));
-    let screen = stdout(&o);
+    let screen = succeeded(&o);
     assert!(
         screen.contains("% ") && screen.contains(" t = "),
         "{screen}"
@@ -691,6 +640,16 @@ fn progress_bar_on_a_terminal_for_long_runs() {
 #[test]
 fn a_closed_pipe_ends_quietly_instead_of_panicking() {
     // `echelon … | head`: the reader goes away before echelon writes.
+    let bench = [
+        "bench",
+        "--agents",
+        "9",
+        "--duration",
+        "0.1",
+        "--dt",
+        "0.01",
+    ];
+    let bench_json = [&bench[..], &["--json"]].concat();
     for args in [
         &["show", "circle-pentagon"][..],
         &["scenarios"],
@@ -704,25 +663,8 @@ fn a_closed_pipe_ends_quietly_instead_of_panicking() {
             "--omega-max",
             "1",
         ],
-        &[
-            "bench",
-            "--agents",
-            "9",
-            "--duration",
-            "0.1",
-            "--dt",
-            "0.01",
-        ],
-        &[
-            "bench",
-            "--agents",
-            "9",
-            "--duration",
-            "0.1",
-            "--dt",
-            "0.01",
-            "--json",
-        ],
+        &bench,
+        &bench_json,
     ] {
         let mut child = Command::new(env!("CARGO_BIN_EXE_echelon"))
             .args(args)
@@ -755,8 +697,7 @@ fn bench_reports_agent_steps_per_second_as_json_and_text() {
             "2",
             "--json",
         ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+        let v: serde_json::Value = serde_json::from_str(succeeded(&o).trim()).unwrap();
         assert_eq!(v["agents"], 9);
         assert_eq!(v["steps"], 50);
         assert_eq!(v["topology"], topology);
@@ -783,8 +724,7 @@ fn bench_reports_agent_steps_per_second_as_json_and_text() {
         "--runs",
         "3",
     ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let text = succeeded(&o);
     for needle in [
         "5 agents × 3 runs",
         "10 steps",

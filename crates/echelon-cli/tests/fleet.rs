@@ -65,13 +65,18 @@ fn check(out: &Output, what: &str) {
     );
 }
 
+/// Runs `echelon ARGS… LAST` to its end and checks that it succeeded.
+fn echelon_ok(args: &[&str], last: &Path) {
+    let out = Command::new(EXE).args(args).arg(last).output().unwrap();
+    check(&out, &args.join(" "));
+}
+
 /// `echelon fleet up` into `dir`; returns fleet-summary.json.
 fn up(scenario: &str, dir: &Path, extra: &[&str]) -> Value {
-    let out_dir = dir.display().to_string();
-    let mut args = vec!["fleet", "up", scenario, "--out", &out_dir];
-    args.extend_from_slice(extra);
-    let out = Command::new(EXE).args(&args).output().unwrap();
-    check(&out, "fleet up");
+    echelon_ok(
+        &[&["fleet", "up", scenario], extra, &["--out"]].concat(),
+        dir,
+    );
     serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
 }
 
@@ -259,12 +264,7 @@ fn experiment_circle_converges_like_the_simulator() {
     require_python_mcap();
     let dir = tempfile::tempdir().unwrap();
     let sim_dir = dir.path().join("sim");
-    let out = Command::new(EXE)
-        .args(["run", "experiment-circle", "--quiet", "--out"])
-        .arg(&sim_dir)
-        .output()
-        .unwrap();
-    check(&out, "echelon run");
+    echelon_ok(&["run", "experiment-circle", "--quiet", "--out"], &sim_dir);
     let sim: Value =
         serde_json::from_str(&std::fs::read_to_string(sim_dir.join("summary.json")).unwrap())
             .unwrap();
@@ -417,6 +417,56 @@ fn outage_stop_rests_and_extrapolate_keeps_tracking() {
     }
 }
 
+/// A rogue's scenario: `fast-circle.toml` with its reference swapped for a
+/// line heading off at 1 m/s far away, written into `dir`.
+fn fake_reference(dir: &Path) -> PathBuf {
+    let fake = dir.join("fake.toml");
+    std::fs::write(
+        &fake,
+        std::fs::read_to_string(fixture("fast-circle.toml"))
+            .unwrap()
+            .replace(
+                "[reference.circle]\nspeed = 0.2\nturn_rate = 0.2\nstart = { x = 0.0, y = 0.0, theta_deg = 0.0 }",
+                "[reference.line]\nspeed = 1.0\nstart = { x = 5.0, y = 5.0, theta_deg = 90.0 }",
+            ),
+    )
+    .unwrap();
+    fake
+}
+
+/// A rogue leader publishing `fake` on the `fast-circle` fleet through the
+/// Zenoh configuration `config`.
+fn rogue_leader(fake: &Path, config: &Path) -> Guard {
+    let (fake, config) = (fake.display().to_string(), config.display().to_string());
+    spawn(&[
+        "fleet",
+        "leader",
+        &fake,
+        "--fleet",
+        "fast-circle",
+        "--time-scale",
+        "10",
+        "--duration",
+        "25",
+        "--zenoh-config",
+        &config,
+    ])
+}
+
+/// Robot 1's largest true ‖e‖ after t = 10 s of a `fast-circle.toml` fleet
+/// run into `fleet_dir`, m.
+fn late_error_of_robot_1(fleet_dir: &Path) -> f64 {
+    true_errors(
+        &fixture("fast-circle.toml"),
+        &fleet_dir.join("trajectory.csv"),
+        1,
+    )
+    .iter()
+    .filter(|(t, _)| *t > 10.0)
+    .map(|(_, e)| *e)
+    .fold(0.0, f64::max)
+}
+
 /// Secure mode: with mutual TLS and access control, a rogue that holds a
 /// valid robot certificate publishes a fake reference and no robot takes it;
 /// a rogue without credentials cannot even join.
@@ -424,12 +474,7 @@ fn outage_stop_rests_and_extrapolate_keeps_tracking() {
 fn secure_mode_rogue_moves_no_robot() {
     let dir = tempfile::tempdir().unwrap();
     let certs = dir.path().join("certs");
-    let out = Command::new(EXE)
-        .args(["fleet", "certs", "--robots", "2"])
-        .arg(&certs)
-        .output()
-        .unwrap();
-    check(&out, "fleet certs");
+    echelon_ok(&["fleet", "certs", "--robots", "2"], &certs);
     let fleet_dir = dir.path().join("fleet");
     let scenario = fixture("fast-circle.toml");
     let fleet = std::thread::spawn({
@@ -450,17 +495,7 @@ fn secure_mode_rogue_moves_no_robot() {
     let endpoints = endpoints_of(&fleet_dir);
     assert!(endpoints.values().all(|e| e.starts_with("tls/")));
     // A fake reference far away: a line heading off at 1 m/s.
-    let fake = dir.path().join("fake.toml");
-    std::fs::write(
-        &fake,
-        std::fs::read_to_string(fixture("fast-circle.toml"))
-            .unwrap()
-            .replace(
-                "[reference.circle]\nspeed = 0.2\nturn_rate = 0.2\nstart = { x = 0.0, y = 0.0, theta_deg = 0.0 }",
-                "[reference.line]\nspeed = 1.0\nstart = { x = 5.0, y = 5.0, theta_deg = 90.0 }",
-            ),
-    )
-    .unwrap();
+    let fake = fake_reference(dir.path());
     assert!(
         std::fs::read_to_string(&fake)
             .unwrap()
@@ -496,29 +531,8 @@ fn secure_mode_rogue_moves_no_robot() {
         config(serde_json::json!({"root_ca_certificate": path(certs.join("ca.pem"))})),
     )
     .unwrap();
-    let fake_s = fake.display().to_string();
-    let rogue_args = |cfg: &Path| -> Vec<String> {
-        [
-            "fleet",
-            "leader",
-            &fake_s,
-            "--fleet",
-            "fast-circle",
-            "--time-scale",
-            "10",
-            "--duration",
-            "25",
-            "--zenoh-config",
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .chain([cfg.display().to_string()])
-        .collect()
-    };
-    let a = rogue_args(&stolen);
-    let mut stolen_rogue = spawn(&a.iter().map(String::as_str).collect::<Vec<_>>());
-    let b = rogue_args(&anonymous);
-    let mut anonymous_rogue = spawn(&b.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut stolen_rogue = rogue_leader(&fake, &stolen);
+    let mut anonymous_rogue = rogue_leader(&fake, &anonymous);
     let report = fleet.join().unwrap();
     // The rogue with a stolen robot certificate joined and published…
     let status = stolen_rogue.0.wait().unwrap();
@@ -559,16 +573,7 @@ fn secure_mode_rogue_moves_no_robot() {
         assert!(f(r, &["final_error"]) < 1e-3, "{r}");
     }
     // And robot 1 really tracked the true circle.
-    let errs = true_errors(
-        &fixture("fast-circle.toml"),
-        &fleet_dir.join("trajectory.csv"),
-        1,
-    );
-    let late = errs
-        .iter()
-        .filter(|(t, _)| *t > 10.0)
-        .map(|(_, e)| *e)
-        .fold(0.0, f64::max);
+    let late = late_error_of_robot_1(&fleet_dir);
     assert!(late < 5e-3, "{late}");
 }
 
@@ -586,17 +591,7 @@ fn without_security_the_same_rogue_does_move_robots() {
     });
     let endpoints = endpoints_of(&fleet_dir);
     assert!(endpoints.values().all(|e| e.starts_with("tcp/")));
-    let fake = dir.path().join("fake.toml");
-    std::fs::write(
-        &fake,
-        std::fs::read_to_string(fixture("fast-circle.toml"))
-            .unwrap()
-            .replace(
-                "[reference.circle]\nspeed = 0.2\nturn_rate = 0.2\nstart = { x = 0.0, y = 0.0, theta_deg = 0.0 }",
-                "[reference.line]\nspeed = 1.0\nstart = { x = 5.0, y = 5.0, theta_deg = 90.0 }",
-            ),
-    )
-    .unwrap();
+    let fake = fake_reference(dir.path());
     let connect: Vec<String> = endpoints.values().cloned().collect();
     let plain = dir.path().join("plain.json5");
     std::fs::write(
@@ -610,20 +605,7 @@ fn without_security_the_same_rogue_does_move_robots() {
         .to_string(),
     )
     .unwrap();
-    let (fake_s, plain_s) = (fake.display().to_string(), plain.display().to_string());
-    let mut rogue = spawn(&[
-        "fleet",
-        "leader",
-        &fake_s,
-        "--fleet",
-        "fast-circle",
-        "--time-scale",
-        "10",
-        "--duration",
-        "25",
-        "--zenoh-config",
-        &plain_s,
-    ]);
+    let mut rogue = rogue_leader(&fake, &plain);
     let report = fleet.join().unwrap();
     let _ = rogue.0.wait();
     let published = u(&report["leader"], &["published"]);
@@ -634,16 +616,7 @@ fn without_security_the_same_rogue_does_move_robots() {
         "the rogue never reached robot 1: {c} (leader published {published})"
     );
     // And it pulled robot 1 off the true circle.
-    let errs = true_errors(
-        &fixture("fast-circle.toml"),
-        &fleet_dir.join("trajectory.csv"),
-        1,
-    );
-    let late = errs
-        .iter()
-        .filter(|(t, _)| *t > 10.0)
-        .map(|(_, e)| *e)
-        .fold(0.0, f64::max);
+    let late = late_error_of_robot_1(&fleet_dir);
     assert!(
         late > 0.05,
         "robot 1 stayed on the circle ({late} m): the control shows nothing"
@@ -720,8 +693,8 @@ fn run_mcap_matches_the_csv_and_is_deterministic() {
     let mut files = Vec::new();
     for name in ["a", "b"] {
         let out_dir = dir.path().join(name);
-        let out = Command::new(EXE)
-            .args([
+        echelon_ok(
+            &[
                 "run",
                 "circle-pentagon",
                 "--duration",
@@ -729,11 +702,9 @@ fn run_mcap_matches_the_csv_and_is_deterministic() {
                 "--mcap",
                 "--quiet",
                 "--out",
-            ])
-            .arg(&out_dir)
-            .output()
-            .unwrap();
-        check(&out, "run --mcap");
+            ],
+            &out_dir,
+        );
         files.push(out_dir);
     }
     let (a, b) = (
@@ -757,35 +728,12 @@ fn run_mcap_matches_the_csv_and_is_deterministic() {
 fn bad_fleet_input_is_one_line_and_exit_2() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().display().to_string();
+    let up = ["fleet", "up", "experiment-circle", "--out", &out];
     for args in [
         vec!["fleet", "robot", "experiment-circle", "--agent", "9"],
-        vec![
-            "fleet",
-            "up",
-            "experiment-circle",
-            "--out",
-            &out,
-            "--loss",
-            "1.5",
-        ],
-        vec![
-            "fleet",
-            "up",
-            "experiment-circle",
-            "--out",
-            &out,
-            "--outage",
-            "3",
-        ],
-        vec![
-            "fleet",
-            "up",
-            "experiment-circle",
-            "--out",
-            &out,
-            "--time-scale",
-            "0",
-        ],
+        [&up[..], &["--loss", "1.5"]].concat(),
+        [&up[..], &["--outage", "3"]].concat(),
+        [&up[..], &["--time-scale", "0"]].concat(),
         vec!["fleet", "collector", "--out", &out],
         vec!["fleet", "leader", "experiment-circle", "--fleet", "a/b"],
         vec![

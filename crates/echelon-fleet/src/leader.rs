@@ -230,16 +230,11 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use echelon::reference::Circle;
+    use crate::testing::circle;
 
     #[test]
     fn samples_are_due_on_the_rate_grid_and_late_ones_are_counted() {
-        let c = Circle {
-            start: [0.0, 0.0],
-            heading: 0.0,
-            speed: 0.2,
-            turn_rate: 0.2,
-        };
+        let c = circle([0.0, 0.0], 0.0, 0.2, 0.2);
         let mut l = Leader::new(Reference::Circle(c), 50.0, 0.1, 7);
         assert_eq!(l.next_due(), Some(0.0));
         assert!(l.tick(-0.001).is_none());

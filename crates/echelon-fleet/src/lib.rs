@@ -24,6 +24,9 @@ pub mod ros2;
 pub mod up;
 pub mod wire;
 
+#[cfg(test)]
+mod testing;
+
 /// Everything that can stop a fleet process.
 #[derive(Debug, thiserror::Error)]
 pub enum FleetError {

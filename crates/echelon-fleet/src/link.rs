@@ -246,19 +246,25 @@ pub fn predict(sample: &LeaderSample, now: f64, timeout: f64, loss: &LinkLoss) -
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::circle;
     use echelon::reference::{Circle, Order, Trajectory};
 
     fn sample_of(c: &Circle, t: f64) -> LeaderSample {
         let j = c.eval(t, Order::Two);
         LeaderSample {
             t,
-            motion: LeaderMotion {
-                p: j.p,
-                dp: j.dp,
-                ddp: j.ddp,
-            },
+            motion: LeaderMotion::of_jet(&j),
             speed: j.speed(),
             turn_rate: j.turn_rate(),
+        }
+    }
+
+    /// `extrapolate` for `hold` seconds, then stop decelerating at `decel`.
+    const fn extrapolate(hold: f64, decel: f64) -> LinkLoss {
+        LinkLoss {
+            policy: LinkPolicy::Extrapolate,
+            hold,
+            decel,
         }
     }
 
@@ -266,21 +272,12 @@ mod tests {
         (a[0] - b[0]).abs() < tol && (a[1] - b[1]).abs() < tol
     }
 
-    const EXTRAPOLATE: LinkLoss = LinkLoss {
-        policy: LinkPolicy::Extrapolate,
-        hold: 5.0,
-        decel: 0.1,
-    };
+    const EXTRAPOLATE: LinkLoss = extrapolate(5.0, 0.1);
 
     #[test]
     fn extrapolation_of_a_circle_is_the_circle() {
         // Eq. 18: advancing with the last V_d, ω_d is exact on a circle.
-        let c = Circle {
-            start: [1.0, -2.0],
-            heading: 0.3,
-            speed: 0.4,
-            turn_rate: 0.25,
-        };
+        let c = circle([1.0, -2.0], 0.3, 0.4, 0.25);
         let s = sample_of(&c, 2.0);
         for now in [2.5, 3.0, 6.9] {
             let p = predict(&s, now, 0.2, &EXTRAPOLATE);
@@ -299,12 +296,7 @@ mod tests {
 
     #[test]
     fn fresh_samples_are_advanced_by_their_age() {
-        let c = Circle {
-            start: [0.0, 0.0],
-            heading: 0.0,
-            speed: 0.5,
-            turn_rate: 0.5,
-        };
+        let c = circle([0.0, 0.0], 0.0, 0.5, 0.5);
         let s = sample_of(&c, 1.0);
         let p = predict(&s, 1.01, 0.2, &EXTRAPOLATE);
         assert_eq!(p.status, LinkStatus::Tracking);
@@ -314,12 +306,7 @@ mod tests {
 
     #[test]
     fn stop_holds_the_last_position() {
-        let c = Circle {
-            start: [0.0, 0.0],
-            heading: 0.0,
-            speed: 0.5,
-            turn_rate: 0.5,
-        };
+        let c = circle([0.0, 0.0], 0.0, 0.5, 0.5);
         let s = sample_of(&c, 1.0);
         let stop = LinkLoss {
             policy: LinkPolicy::Stop,
@@ -334,18 +321,9 @@ mod tests {
 
     #[test]
     fn extrapolation_decelerates_smoothly_to_rest() {
-        let c = Circle {
-            start: [0.0, 0.0],
-            heading: 0.0,
-            speed: 0.4,
-            turn_rate: 0.1,
-        };
+        let c = circle([0.0, 0.0], 0.0, 0.4, 0.1);
         let s = sample_of(&c, 0.0);
-        let loss = LinkLoss {
-            policy: LinkPolicy::Extrapolate,
-            hold: 1.0,
-            decel: 0.2,
-        };
+        let loss = extrapolate(1.0, 0.2);
         // T = π V / (2a) = π 0.4 / 0.4 = π s.
         let big_t = std::f64::consts::PI;
         let mut last = predict(&s, 1.0, 0.2, &loss);
@@ -379,18 +357,9 @@ mod tests {
 
     #[test]
     fn velocity_is_the_derivative_of_position_while_stopping() {
-        let c = Circle {
-            start: [0.0, 0.0],
-            heading: 0.3,
-            speed: 0.4,
-            turn_rate: 0.1,
-        };
+        let c = circle([0.0, 0.0], 0.3, 0.4, 0.1);
         let s = sample_of(&c, 0.0);
-        let loss = LinkLoss {
-            policy: LinkPolicy::Extrapolate,
-            hold: 0.5,
-            decel: 0.2,
-        };
+        let loss = extrapolate(0.5, 0.2);
         for t in [0.7, 1.3, 2.0, 3.1] {
             let h = 1e-5;
             let a = predict(&s, t - h, 0.2, &loss).motion;

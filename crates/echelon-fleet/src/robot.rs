@@ -654,40 +654,19 @@ mod tests {
     use echelon::model::State;
     use echelon::reference::{Order, Reference, Trajectory};
 
-    /// `tests/fleet/fast-circle.toml` of the CLI's process tests, with the
-    /// link-loss policy left open.
-    const FAST_CIRCLE: &str = r#"
-name = "fast-circle"
-[sim]
-duration = 30.0
-dt = 0.001
-[reference.circle]
-speed = 0.2
-turn_rate = 0.2
-start = { x = 0.0, y = 0.0, theta_deg = 0.0 }
-[fleet]
-link_timeout = 0.5
-stale_after = 1.0
-link_loss = LINK_LOSS
-[[agents]]
-name = "robot 1"
-robot = "agent1"
-start = { x = -0.4, y = 0.3, theta_deg = 0.0 }
-leader = "reference"
-offset = { x = 0.30, y = 0.35 }
-[[agents]]
-name = "robot 2"
-robot = "agent2"
-start = { x = -0.4, y = -0.3, theta_deg = 0.0 }
-leader = 1
-offset = { x = 0.30, y = 0.0 }
-"#;
+    /// The CLI's process-test fleet (`echelon-cli/tests/fleet/fast-circle.toml`),
+    /// whose link-loss policy is [`EXTRAPOLATE`].
+    const FAST_CIRCLE: &str = include_str!("../../echelon-cli/tests/fleet/fast-circle.toml");
 
     const STOP: &str = r#"{ policy = "stop" }"#;
     const EXTRAPOLATE: &str = r#"{ policy = "extrapolate", hold = 4.0, decel = 0.2 }"#;
 
     fn scenario(link_loss: &str) -> Scenario {
-        Scenario::parse(&FAST_CIRCLE.replace("LINK_LOSS", link_loss), "test", None)
+        assert!(
+            FAST_CIRCLE.contains(EXTRAPOLATE),
+            "the fixture's policy moved"
+        );
+        Scenario::parse(&FAST_CIRCLE.replace(EXTRAPOLATE, link_loss), "test", None)
             .unwrap_or_else(|e| panic!("{e}"))
     }
 

@@ -18,7 +18,6 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use base64::Engine as _;
-use echelon::scenario::Overrides;
 use serde_json::{Value, json};
 use tungstenite::stream::MaybeTlsStream;
 use tungstenite::{Message, WebSocket};
@@ -347,14 +346,7 @@ fn replay_plays_in_headless_chromium() {
     chromium();
     let dir = tempfile::tempdir().unwrap();
     // A 4-agent run of 70 s logged at 100 Hz.
-    common::run_builtin(
-        "circle-pentagon",
-        dir.path(),
-        &Overrides {
-            duration: Some(70.0),
-            ..Overrides::default()
-        },
-    );
+    common::run_builtin("circle-pentagon", dir.path(), &common::for_seconds(70.0));
     echelon_report::write_all(dir.path()).unwrap();
     let (fps, ms) = play_and_check(&dir.path().join("report.html"));
     eprintln!(
@@ -369,10 +361,7 @@ fn replay_of_two_hundred_agents_plays_in_headless_chromium() {
     common::run_source(
         &common::many_agents(200),
         dir.path(),
-        &Overrides {
-            duration: Some(15.0),
-            ..Overrides::default()
-        },
+        &common::for_seconds(15.0),
     );
     echelon_report::write_all(dir.path()).unwrap();
     let (fps, ms) = play_and_check(&dir.path().join("report.html"));

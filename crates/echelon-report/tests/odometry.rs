@@ -21,6 +21,18 @@ fn svg_texts(path: &Path) -> Vec<String> {
         .collect()
 }
 
+/// The texts of the SVG at `path`, which show every one of `needles`.
+fn svg_texts_showing(path: &Path, needles: &[&str]) -> Vec<String> {
+    let texts = svg_texts(path);
+    for needle in needles {
+        assert!(
+            texts.iter().any(|t| t == needle),
+            "`{needle}` not in {texts:?}"
+        );
+    }
+    texts
+}
+
 const DRIFTING: &str = r#"
 name = "drifting"
 seed = 4
@@ -64,20 +76,17 @@ fn runs_with_odometry_get_a_drift_figure() {
         .iter()
         .find(|f| f.svg.ends_with("drift.svg"))
         .unwrap();
-    let texts = svg_texts(&drift.svg);
-    for needle in [
-        "scout",
-        "scout (estimate)",
-        "x [m]",
-        "‖p − p̂‖ [m]",
-        "t [s]",
-        "‖e‖ [m]",
-    ] {
-        assert!(
-            texts.iter().any(|t| t == needle),
-            "`{needle}` not in {texts:?}"
-        );
-    }
+    let texts = svg_texts_showing(
+        &drift.svg,
+        &[
+            "scout",
+            "scout (estimate)",
+            "x [m]",
+            "‖p − p̂‖ [m]",
+            "t [s]",
+            "‖e‖ [m]",
+        ],
+    );
     assert!(
         !texts.iter().any(|t| t.starts_with("perfect")),
         "only dead-reckoning agents"
@@ -90,14 +99,7 @@ fn runs_with_odometry_get_a_drift_figure() {
 #[test]
 fn runs_without_odometry_have_no_drift_figure() {
     let dir = tempfile::tempdir().unwrap();
-    common::run_builtin(
-        "nonfeasible",
-        dir.path(),
-        &Overrides {
-            duration: Some(1.0),
-            ..Overrides::default()
-        },
-    );
+    common::run_builtin("nonfeasible", dir.path(), &common::for_seconds(1.0));
     let written = write_all(dir.path()).unwrap();
     assert_eq!(written.figures.len(), 3);
     assert!(!dir.path().join("drift.svg").exists());
@@ -106,10 +108,7 @@ fn runs_without_odometry_have_no_drift_figure() {
 #[test]
 fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
     let s = Scenario::builtin("fix-study").unwrap();
-    let ov = Overrides {
-        duration: Some(6.0),
-        ..Overrides::default()
-    };
+    let ov = common::for_seconds(6.0);
     let grid = Grid {
         zeta: vec![1e-5],
         zeta_model: ZetaModel::WorstCase,
@@ -147,20 +146,17 @@ fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
     let saved = echelon_report::odometry::sweep("fix-study", &rows, &curves)
         .save(dir.path(), "sweep")
         .unwrap();
-    let texts = svg_texts(&saved.svg);
-    for needle in [
-        "ultimate max ‖z‖ [m/s]",
-        "ultimate max ‖e‖ [m]",
-        "N (samples between fixes)",
-        "Theorem 2, ζ = 1e-5 m",
-        "ζ = 1e-5 m, E_d = 1.002",
-        "t [s]",
-    ] {
-        assert!(
-            texts.iter().any(|t| t == needle),
-            "`{needle}` not in {texts:?}"
-        );
-    }
+    let texts = svg_texts_showing(
+        &saved.svg,
+        &[
+            "ultimate max ‖z‖ [m/s]",
+            "ultimate max ‖e‖ [m]",
+            "N (samples between fixes)",
+            "Theorem 2, ζ = 1e-5 m",
+            "ζ = 1e-5 m, E_d = 1.002",
+            "t [s]",
+        ],
+    );
     // Log axes label 1-2-5 ticks, never fractional decades.
     assert!(
         texts.iter().any(|t| t == "50") && texts.iter().any(|t| t == "100"),

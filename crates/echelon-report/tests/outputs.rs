@@ -235,14 +235,7 @@ fn same_run_gives_the_same_figures_and_report() {
 fn a_run_without_the_newer_files_still_plots() {
     // Runs written before reference.csv and scenario.toml existed.
     let dir = tempfile::tempdir().unwrap();
-    common::run_builtin(
-        "circle-pentagon",
-        dir.path(),
-        &Overrides {
-            duration: Some(3.0),
-            ..Overrides::default()
-        },
-    );
+    common::run_builtin("circle-pentagon", dir.path(), &common::for_seconds(3.0));
     std::fs::remove_file(dir.path().join("reference.csv")).unwrap();
     std::fs::remove_file(dir.path().join("scenario.toml")).unwrap();
     let data = RunData::load(dir.path()).unwrap();
@@ -261,14 +254,7 @@ fn broken_run_directories_are_refused_with_the_file_and_line() {
     let missing = RunData::load(dir.path()).unwrap_err();
     assert!(matches!(missing, ReportError::Io { .. }), "{missing}");
     assert!(missing.to_string().contains("summary.json"));
-    common::run_builtin(
-        "nonfeasible",
-        dir.path(),
-        &Overrides {
-            duration: Some(1.0),
-            ..Overrides::default()
-        },
-    );
+    common::run_builtin("nonfeasible", dir.path(), &common::for_seconds(1.0));
     let csv = dir.path().join(TRAJECTORY_FILE);
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
@@ -300,14 +286,7 @@ fn names_cannot_break_the_page() {
         src
     };
     let dir = tempfile::tempdir().unwrap();
-    common::run_source(
-        &src,
-        dir.path(),
-        &Overrides {
-            duration: Some(1.0),
-            ..Overrides::default()
-        },
-    );
+    common::run_source(&src, dir.path(), &common::for_seconds(1.0));
     write_all(dir.path()).unwrap();
     let html = std::fs::read_to_string(dir.path().join(REPORT_FILE)).unwrap();
     assert_eq!(embedded(&html)["agents"][0]["name"], name);

@@ -399,20 +399,12 @@ fn umbmark_recovers_injected_systematic_errors_within_ten_percent() {
         (1.002, 0.99, 3),
         (1.006, 1.03, 4),
     ] {
-        let t = SquareTest {
-            side: 4.0,
-            runs: 5,
-            wheel_radius: 0.101,
-            half_wheelbase: 0.23,
-            errors: ErrorModel {
-                wheel_diameter_ratio: ed,
-                wheelbase_ratio: eb,
-                slip: 1e-7,
-                ticks_per_rev: Some(2000),
-                ..ErrorModel::PERFECT
-            },
-            seed,
+        let errors = ErrorModel {
+            slip: 1e-7,
+            ticks_per_rev: Some(2000),
+            ..ErrorModel::systematic(ed, eb)
         };
+        let t = SquareTest::borenstein(&RobotParams::AGENT1, errors, seed);
         let errors = t.simulate().unwrap();
         // Slip scatters the runs: they are not all alike.
         assert!(errors.windows(2).any(|w| (w[0].ex - w[1].ex).abs() > 1e-3));
@@ -554,16 +546,8 @@ fn umbmark_from_logs_reproduces_the_simulated_return_errors() {
     use echelon::odometry::umbmark::{ChaCha8Rng, Direction};
     use rand::SeedableRng;
     let t = SquareTest {
-        side: 4.0,
         runs: 1,
-        wheel_radius: 0.101,
-        half_wheelbase: 0.23,
-        errors: ErrorModel {
-            wheel_diameter_ratio: 1.003,
-            wheelbase_ratio: 1.02,
-            ..ErrorModel::PERFECT
-        },
-        seed: 0,
+        ..SquareTest::borenstein(&RobotParams::AGENT1, ErrorModel::systematic(1.003, 1.02), 0)
     };
     // The same test written as run logs, with the whole run moved rigidly
     // (start at (5, −2) heading 30°): the errors are read in the start frame.

@@ -103,6 +103,15 @@ fn expect_error(src: &str, line: usize, field: &str, message: &str) {
     assert!(text.starts_with(&format!("test.toml:{line}:")), "{text}");
 }
 
+/// [`expect_error`] for each `(from, to, line, field, message)`: `BASE` with
+/// `from` replaced by `to`.
+fn expect_errors_in_base(cases: &[(&str, &str, usize, &str, &str)]) {
+    for &(from, to, line, field, message) in cases {
+        assert!(BASE.contains(from), "`{from}` is not in BASE");
+        expect_error(&BASE.replace(from, to), line, field, message);
+    }
+}
+
 #[test]
 fn the_base_scenario_is_valid() {
     let run = build(BASE).unwrap();
@@ -113,57 +122,97 @@ fn the_base_scenario_is_valid() {
 
 #[test]
 fn syntax_and_type_errors_name_line_column_and_field() {
-    expect_error(&BASE.replace("[sim]", "[sim"), 2, "", "");
-    expect_error(
-        &BASE.replace("speed = 0.5", "speed = \"fast\""),
-        7,
-        "reference.circle.speed",
-        "invalid type",
-    );
-    expect_error(
-        &BASE.replace(
+    expect_errors_in_base(&[
+        ("[sim]", "[sim", 2, "", ""),
+        (
+            "speed = 0.5",
+            "speed = \"fast\"",
+            7,
+            "reference.circle.speed",
+            "invalid type",
+        ),
+        (
             "offset = { x = 0.5, y = 0.8 }",
             "ofset = { x = 0.5, y = 0.8 }",
+            14,
+            "agents[1].ofset",
+            "unknown field",
         ),
-        14,
-        "agents[1].ofset",
-        "unknown field",
-    );
-    expect_error(
-        &BASE.replace("dt = 0.01\n", ""),
-        2,
-        "sim.dt",
-        "missing field",
-    );
-    expect_error(
-        &BASE.replace("[reference.circle]", "[reference.square]"),
-        6,
-        "reference.square",
-        "unknown variant",
-    );
-    expect_error(
-        &BASE.replace("leader = 1", "leader = \"agent 1\""),
-        18,
-        "agents[2].leader",
-        "\"reference\" or the number",
-    );
+        ("dt = 0.01\n", "", 2, "sim.dt", "missing field"),
+        (
+            "[reference.circle]",
+            "[reference.square]",
+            6,
+            "reference.square",
+            "unknown variant",
+        ),
+        (
+            "leader = 1",
+            "leader = \"agent 1\"",
+            18,
+            "agents[2].leader",
+            "\"reference\" or the number",
+        ),
+    ]);
 }
 
 #[test]
 fn impossible_values_are_refused_with_the_reason() {
+    expect_errors_in_base(&[
+        // L_X = L_Xoff + L ≤ 0
+        (
+            "x = 0.5, y = 0.8",
+            "x = -0.2, y = 0.8",
+            14,
+            "agents[1].offset.x",
+            "L_X = L_Xoff + L",
+        ),
+        // a cycle in the leader graph
+        (
+            "leader = \"reference\"",
+            "leader = 2",
+            13,
+            "agents[1].leader",
+            "agents 1 → 2 → 1 form a cycle",
+        ),
+        // a dangling leader, and agent numbers from 1
+        (
+            "leader = 1",
+            "leader = 7",
+            18,
+            "agents[2].leader",
+            "does not exist",
+        ),
+        (
+            "leader = 1",
+            "leader = 0",
+            18,
+            "agents[2].leader",
+            "numbered 1..=2",
+        ),
+        // an agent following itself
+        (
+            "leader = 1",
+            "leader = 2",
+            18,
+            "agents[2].leader",
+            "follows itself",
+        ),
+        // negative speed for the virtual leader
+        (
+            "speed = 0.5",
+            "speed = -0.5",
+            7,
+            "reference.circle.speed",
+            "≥ 0",
+        ),
+    ]);
     // L ≤ 0
     expect_error(
         &format!("{BASE}\n[control]\nl = 0.0\n"),
         22,
         "control.l",
         "must be a finite number > 0",
-    );
-    // L_X = L_Xoff + L ≤ 0
-    expect_error(
-        &BASE.replace("x = 0.5, y = 0.8", "x = -0.2, y = 0.8"),
-        14,
-        "agents[1].offset.x",
-        "L_X = L_Xoff + L",
     );
     // negative mass
     let robot = BASE.replacen("[[agents]]\n", "[[agents]]\nrobot = \"heavy\"\n", 1)
@@ -183,40 +232,6 @@ fn impossible_values_are_refused_with_the_reason() {
         "agents[1].control.kz",
         "must be a finite number > 0",
     );
-    // a cycle in the leader graph
-    expect_error(
-        &BASE.replace("leader = \"reference\"", "leader = 2"),
-        13,
-        "agents[1].leader",
-        "agents 1 → 2 → 1 form a cycle",
-    );
-    // a dangling leader, and agent numbers from 1
-    expect_error(
-        &BASE.replace("leader = 1", "leader = 7"),
-        18,
-        "agents[2].leader",
-        "does not exist",
-    );
-    expect_error(
-        &BASE.replace("leader = 1", "leader = 0"),
-        18,
-        "agents[2].leader",
-        "numbered 1..=2",
-    );
-    // an agent following itself
-    expect_error(
-        &BASE.replace("leader = 1", "leader = 2"),
-        18,
-        "agents[2].leader",
-        "follows itself",
-    );
-    // negative speed for the virtual leader
-    expect_error(
-        &BASE.replace("speed = 0.5", "speed = -0.5"),
-        7,
-        "reference.circle.speed",
-        "≥ 0",
-    );
     // non-positive gains
     expect_error(
         &format!("{BASE}\n[control]\nkz = -10.0\n"),
@@ -228,15 +243,36 @@ fn impossible_values_are_refused_with_the_reason() {
 
 #[test]
 fn ambiguous_or_inconsistent_settings_are_refused() {
-    expect_error(
-        &BASE.replace(
+    expect_errors_in_base(&[
+        (
             "theta_deg = 0.0 }\nleader = \"reference\"",
             "theta_deg = 0.0, theta = 0.0 }\nleader = \"reference\"",
+            12,
+            "agents[1].start.theta_deg",
+            "not both",
         ),
-        12,
-        "agents[1].start.theta_deg",
-        "not both",
-    );
+        (
+            "dt = 0.01\n",
+            "dt = 0.01\ncontroller_period = 0.025\n",
+            5,
+            "sim.controller_period",
+            "whole multiple",
+        ),
+        (
+            "offset = { x = 0.5, y = -0.4 }",
+            "mode = \"tracking\"\noffset = { x = 0.5, y = -0.4 }",
+            20,
+            "agents[2].offset",
+            "takes no offset",
+        ),
+        (
+            "offset = { x = 0.5, y = -0.4 }\n",
+            "",
+            16,
+            "agents[2]",
+            "missing field `offset`",
+        ),
+    ]);
     expect_error(
         &BASE.replacen("[[agents]]\n", "[[agents]]\nrobot = \"agent9\"\n", 1),
         12,
@@ -250,31 +286,10 @@ fn ambiguous_or_inconsistent_settings_are_refused() {
         "whole multiple of dt",
     );
     expect_error(
-        &BASE.replace("dt = 0.01\n", "dt = 0.01\ncontroller_period = 0.025\n"),
-        5,
-        "sim.controller_period",
-        "whole multiple",
-    );
-    expect_error(
         &format!("{BASE}\n[control]\nlycomp = \"exact\"\nly_derivatives = \"exact\"\n"),
         23,
         "control.ly_derivatives",
         "analytic reference",
-    );
-    expect_error(
-        &BASE.replace(
-            "offset = { x = 0.5, y = -0.4 }",
-            "mode = \"tracking\"\noffset = { x = 0.5, y = -0.4 }",
-        ),
-        20,
-        "agents[2].offset",
-        "takes no offset",
-    );
-    expect_error(
-        &BASE.replace("offset = { x = 0.5, y = -0.4 }\n", ""),
-        16,
-        "agents[2]",
-        "missing field `offset`",
     );
     expect_error(
         &BASE.replace(

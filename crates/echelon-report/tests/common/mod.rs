@@ -16,6 +16,14 @@ pub(crate) fn run_source(source: &str, dir: &Path, overrides: &Overrides) {
     output::run_to_dir(&mut run, dir, &mut none).unwrap();
 }
 
+/// Overrides that shorten a run to `duration` seconds.
+pub(crate) fn for_seconds(duration: f64) -> Overrides {
+    Overrides {
+        duration: Some(duration),
+        ..Overrides::default()
+    }
+}
+
 /// Runs a built-in scenario into `dir`.
 pub(crate) fn run_builtin(name: &str, dir: &Path, overrides: &Overrides) {
     let src = echelon::scenario::builtin()

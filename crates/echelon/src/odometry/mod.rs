@@ -130,6 +130,16 @@ impl ErrorModel {
         turn_rate_noise: 0.0,
     };
 
+    /// Only Borenstein's systematic errors: the wheel diameter ratio `E_d`
+    /// and the wheelbase ratio `E_b`, everything else perfect.
+    pub const fn systematic(ed: f64, eb: f64) -> ErrorModel {
+        ErrorModel {
+            wheel_diameter_ratio: ed,
+            wheelbase_ratio: eb,
+            ..ErrorModel::PERFECT
+        }
+    }
+
     /// Refuses non-finite values, negative variances and ratios ≤ 0.
     pub fn validate(&self) -> Result<(), ParamError> {
         for (field, v) in [

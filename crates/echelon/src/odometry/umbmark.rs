@@ -13,7 +13,7 @@ pub use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use crate::error::ParamError;
-use crate::model::Pose;
+use crate::model::{Pose, RobotParams};
 use crate::odometry::{ErrorModel, WheelDisplacement, dead_reckon};
 
 /// Direction of a square run.
@@ -58,6 +58,19 @@ pub struct SquareTest {
 }
 
 impl SquareTest {
+    /// Borenstein's test (a 4 m square, 5 runs each way) of a robot with the
+    /// nominal wheels of `robot` and the actual `errors`.
+    pub const fn borenstein(robot: &RobotParams, errors: ErrorModel, seed: u64) -> SquareTest {
+        SquareTest {
+            side: 4.0,
+            runs: 5,
+            wheel_radius: robot.wheel_radius,
+            half_wheelbase: robot.half_wheelbase,
+            errors,
+            seed,
+        }
+    }
+
     /// Checks the test's parameters.
     pub fn validate(&self) -> Result<(), ParamError> {
         self.errors.validate()?;
@@ -248,11 +261,7 @@ fn borenstein(
 fn model(geometry: &SquareTest, s: Systematic) -> [f64; 4] {
     let t = SquareTest {
         runs: 1,
-        errors: ErrorModel {
-            wheel_diameter_ratio: s.ed,
-            wheelbase_ratio: s.eb,
-            ..ErrorModel::PERFECT
-        },
+        errors: ErrorModel::systematic(s.ed, s.eb),
         ..*geometry
     };
     let mut rng = ChaCha8Rng::seed_from_u64(0);
@@ -445,20 +454,12 @@ mod tests {
 
     /// A 4 m square test of Table I agent 1's geometry.
     fn square(ed: f64, eb: f64, slip: f64, ticks: Option<u32>, seed: u64) -> SquareTest {
-        SquareTest {
-            side: 4.0,
-            runs: 5,
-            wheel_radius: 0.101,
-            half_wheelbase: 0.23,
-            errors: ErrorModel {
-                wheel_diameter_ratio: ed,
-                wheelbase_ratio: eb,
-                slip,
-                ticks_per_rev: ticks,
-                ..ErrorModel::PERFECT
-            },
-            seed,
-        }
+        let errors = ErrorModel {
+            slip,
+            ticks_per_rev: ticks,
+            ..ErrorModel::systematic(ed, eb)
+        };
+        SquareTest::borenstein(&RobotParams::AGENT1, errors, seed)
     }
 
     fn test(ed: f64, eb: f64) -> SquareTest {

@@ -26,6 +26,13 @@
 //! affine in the leader's acceleration). Not supported: sampled controllers,
 //! exact `L̇_Y`, `L̈_Y`, mixed robots or laws, other leader graphs, and torque
 //! limits in a chain ([`EngineError::Unsupported`]).
+//!
+//! [`VelocityEngine`] does the same for velocity-controlled bases
+//! ([`crate::base::VelocityBase`]) under the kinematic law
+//! ([`crate::kinematic`]), built from a [`VelocityBatch`] and the same
+//! [`Member`]s (`K_z` unused): the speed limiter, lags, acceleration limits
+//! and `settle` of `base.rs` in lanes, saturated ticks counted per agent, a
+//! robot leader's `ṗ_d` from the speeds its base moves at (`engine/velocity.rs`).
 
 mod bench;
 mod kernel;

@@ -338,10 +338,21 @@ fn broken(x: &[V; 5], live: Mask<W>) -> Mask<W> {
 
 /// How a block sees its leaders.
 pub(crate) trait Leaders {
+    /// `L_Y` when it depends on `lead` alone (a star: every agent follows
+    /// it), to be shared by the stages that see the same leader.
+    fn ly(c: &VConsts, own: &Own<W>, lead: &Lead) -> Option<V>;
+
     /// The block's command at state `x` (heading `sc`) when the first lane's
-    /// leader is `lead`, and the block's own last agent as a leader (a star's
-    /// agents lead nobody: any value).
-    fn command(c: &VConsts, own: &Own<W>, x: &[V; 5], sc: (V, V), lead: &Lead) -> (Cmd<W>, Lead);
+    /// leader is `lead` (at `L_Y = ly` when given), and the block's own last
+    /// agent as a leader (a star's agents lead nobody: any value).
+    fn command(
+        c: &VConsts,
+        own: &Own<W>,
+        x: &[V; 5],
+        sc: (V, V),
+        lead: &Lead,
+        ly: Option<V>,
+    ) -> (Cmd<W>, Lead);
 }
 
 /// Every agent follows the virtual leader.
@@ -354,15 +365,40 @@ pub(crate) struct Chain;
 
 impl Leaders for Star {
     #[inline(always)]
-    fn command(c: &VConsts, own: &Own<W>, x: &[V; 5], sc: (V, V), lead: &Lead) -> (Cmd<W>, Lead) {
+    fn ly(c: &VConsts, own: &Own<W>, lead: &Lead) -> Option<V> {
+        Some(ly_of(c, own, &Leads::splat(lead)))
+    }
+
+    #[inline(always)]
+    fn command(
+        c: &VConsts,
+        own: &Own<W>,
+        x: &[V; 5],
+        sc: (V, V),
+        lead: &Lead,
+        ly: Option<V>,
+    ) -> (Cmd<W>, Lead) {
         let l = Leads::splat(lead);
-        (command(c, own, x, sc, &l, ly_of(c, own, &l)), *lead)
+        let ly = ly.unwrap_or_else(|| ly_of(c, own, &l));
+        (command(c, own, x, sc, &l, ly), *lead)
     }
 }
 
 impl Leaders for Chain {
     #[inline(always)]
-    fn command(c: &VConsts, own: &Own<W>, x: &[V; 5], sc: (V, V), lead: &Lead) -> (Cmd<W>, Lead) {
+    fn ly(_: &VConsts, _: &Own<W>, _: &Lead) -> Option<V> {
+        None
+    }
+
+    #[inline(always)]
+    fn command(
+        c: &VConsts,
+        own: &Own<W>,
+        x: &[V; 5],
+        sc: (V, V),
+        lead: &Lead,
+        _: Option<V>,
+    ) -> (Cmd<W>, Lead) {
         if c.lag[0] && c.lag[1] {
             // The leaders move at their states' speeds: one vector evaluation.
             let mine = Leads::robots(x, sc, [x[3], x[4]]);
@@ -466,28 +502,32 @@ pub(crate) fn tile<L: Leaders, R: Record>(
         let own = &b.own;
         let mut x = b.x;
         let mut sc = x[2].sin_cos();
-        let (mut cur, me) = L::command(c, own, &x, sc, first);
+        let (mut cur, me) = L::command(c, own, &x, sc, first, L::ly(c, own, first));
         rec.first(me);
         for (n, leads) in steps.iter().enumerate() {
+            // A star's leader is the same at stages 2 and 3, and at stage 4
+            // and the step's end (`fill`): one `L_Y` each.
+            let ly23 = L::ly(c, own, &leads[0]);
+            let ly4 = L::ly(c, own, &leads[2]);
             for (s, m) in b.saturated.iter_mut().zip(cur.saturated.0) {
                 *s += m & 1;
             }
             let k1 = derivative(c, &x, sc, &cur.cmd);
             let (x2, sc2) = turned(&x, sc, &k1, h);
-            let (c2, me) = L::command(c, own, &x2, sc2, &leads[0]);
+            let (c2, me) = L::command(c, own, &x2, sc2, &leads[0], ly23);
             rec.put(n, 0, me);
             let k2 = derivative(c, &x2, sc2, &c2.cmd);
             let (x3, sc3) = turned(&x, sc, &k2, h);
-            let (c3, me) = L::command(c, own, &x3, sc3, &leads[1]);
+            let (c3, me) = L::command(c, own, &x3, sc3, &leads[1], ly23);
             rec.put(n, 1, me);
             let k3 = derivative(c, &x3, sc3, &c3.cmd);
             let (x4, sc4) = turned(&x, sc, &k3, dt);
-            let (c4, me) = L::command(c, own, &x4, sc4, &leads[2]);
+            let (c4, me) = L::command(c, own, &x4, sc4, &leads[2], ly4);
             rec.put(n, 2, me);
             let k4 = derivative(c, &x4, sc4, &c4.cmd);
             x = std::array::from_fn(|i| x[i] + (k1[i] + (k2[i] + k3[i]) * 2.0 + k4[i]) * h6);
             sc = x[2].sin_cos();
-            let (next, me) = L::command(c, own, &x, sc, &leads[3]);
+            let (next, me) = L::command(c, own, &x, sc, &leads[3], ly4);
             rec.put(n, 3, me);
             cur = next;
             settle(c, &mut x, &cur.cmd);
@@ -513,7 +553,7 @@ pub(crate) fn probe<L: Leaders>(
     out: &mut Vec<Cmd<W>>,
 ) {
     for b in blocks {
-        let (cmd, me) = L::command(c, &b.own, &b.x, b.x[2].sin_cos(), &first);
+        let (cmd, me) = L::command(c, &b.own, &b.x, b.x[2].sin_cos(), &first, None);
         out.push(cmd);
         first = me;
     }

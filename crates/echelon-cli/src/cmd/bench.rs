@@ -166,10 +166,10 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         .num_threads(threads)
         .build()
         .context("starting the worker threads")?;
-    if args.drive == DriveArg::Velocity {
-        if let Err(e) = BenchFormation::BASE.check_step(args.dt) {
-            bail!("--dt {} s: the velocity base's {e}", args.dt);
-        }
+    if args.drive == DriveArg::Velocity
+        && let Err(e) = BenchFormation::BASE.check_step(args.dt)
+    {
+        bail!("--dt {} s: the velocity base's {e}", args.dt);
     }
     let formation = |r: usize| BenchFormation {
         agents: args.agents,

@@ -34,4 +34,8 @@ run "chain N=10000, 1 thread" --agents 10000 --topology chain --duration 5 --dt 
 run "chain N=10000, 2 threads (two halves)" --agents 10000 --topology chain --duration 5 --dt 0.001 --threads 2
 run "chain N=10000 x 2 runs, 2 threads" --agents 10000 --runs 2 --topology chain --duration 5 --dt 0.001 --threads 2
 run "sweep: 256 runs of N=4, 2 threads" --agents 4 --runs 256 --duration 10 --dt 0.001 --threads 2
+for k in 1 2; do
+    run "velocity star N=10000, $k thread(s)" --drive velocity --agents 10000 --duration 10 --dt 0.001 --threads "$k"
+done
+run "velocity chain N=10000, 1 thread" --drive velocity --agents 10000 --topology chain --duration 5 --dt 0.001 --threads 1
 uptime

@@ -1,5 +1,6 @@
 //! The speed suite: one law evaluation, one RK4 agent-step, stars and chains
-//! of 4, 1 000 and 100 000 agents, a sweep of 256 runs. `cargo bench -p echelon`;
+//! of 4, 1 000 and 100 000 agents, a sweep of 256 runs, and the velocity-base
+//! kernel (Jackal bases, kinematic law) on stars and chains. `cargo bench -p echelon`;
 //! BENCHMARKS.md has the figures. Throughputs are in agent-steps (elements).
 
 use std::hint::black_box;
@@ -124,5 +125,33 @@ fn sweep(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, law_evaluation, rk4_agent_step, formations, sweep);
+fn velocity_formations(c: &mut Criterion) {
+    for topology in [Topology::Star, Topology::Chain] {
+        let mut g = c.benchmark_group(format!("velocity {topology:?}").to_lowercase());
+        g.sample_size(10).measurement_time(Duration::from_secs(3));
+        for (agents, steps) in [(1000usize, 64u64), (100_000, 2)] {
+            g.throughput(Throughput::Elements(agents as u64 * steps));
+            let f = BenchFormation {
+                agents,
+                topology,
+                seed: 1,
+            };
+            let mut e = match f.velocity_engine(BenchFormation::BASE, DT) {
+                Ok(e) => e,
+                Err(e) => panic!("{e}"),
+            };
+            g.bench_function(format!("N = {agents}"), |b| b.iter(|| e.run(steps)));
+        }
+        g.finish();
+    }
+}
+
+criterion_group!(
+    benches,
+    law_evaluation,
+    rk4_agent_step,
+    formations,
+    sweep,
+    velocity_formations
+);
 criterion_main!(benches);

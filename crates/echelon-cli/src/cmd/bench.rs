@@ -5,7 +5,9 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
 
-use echelon::engine::{self, BenchFormation, Engine, Topology};
+use rayon::prelude::*;
+
+use echelon::engine::{self, BenchFormation, Engine, Topology, VelocityEngine};
 
 use super::out::{err_line, outln};
 use super::positive;
@@ -19,6 +21,11 @@ pub(crate) struct BenchArgs {
     /// `star`: every robot follows the virtual leader; `chain`: each follows the one before.
     #[arg(long, value_enum, default_value = "star")]
     topology: TopologyArg,
+    /// `torque`: the paper's robots under the dynamic law; `velocity`:
+    /// velocity-controlled bases (a Clearpath Jackal's lags and limits) under
+    /// the kinematic law.
+    #[arg(long, value_enum, default_value = "torque")]
+    drive: DriveArg,
     /// Simulated time, s.
     #[arg(long, value_name = "S", default_value_t = 10.0, value_parser = positive)]
     duration: f64,
@@ -45,6 +52,73 @@ pub(crate) enum TopologyArg {
     Star,
     /// Robot 1 follows the virtual leader, robot i follows robot i − 1.
     Chain,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub(crate) enum DriveArg {
+    /// Wheel torques, the paper's plant (Table I, agent 1) and law.
+    Torque,
+    /// Velocity commands to a base with lags and limits, the kinematic law.
+    Velocity,
+}
+
+/// The engines of the runs, of one drive.
+enum Runs {
+    Torque(Vec<Engine>),
+    Velocity(Vec<VelocityEngine>),
+}
+
+impl Runs {
+    /// Steps every run, spread over the current rayon pool.
+    fn run(&mut self, steps: u64) -> Vec<Result<(), echelon::SimError>> {
+        match self {
+            Runs::Torque(e) => match e.as_mut_slice() {
+                [one] => vec![one.run(steps)],
+                many => engine::sweep(many, steps),
+            },
+            Runs::Velocity(e) => match e.as_mut_slice() {
+                [one] => vec![one.run(steps)],
+                many => many.par_iter_mut().map(|e| e.run(steps)).collect(),
+            },
+        }
+    }
+
+    /// Every agent's `‖e‖` at the current state.
+    fn errors(&self) -> Vec<f64> {
+        let norm = |e: [f64; 2]| e[0].hypot(e[1]);
+        match self {
+            Runs::Torque(e) => e
+                .iter()
+                .flat_map(|e| e.probes())
+                .map(|p| norm(p.e))
+                .collect(),
+            Runs::Velocity(e) => e
+                .iter()
+                .flat_map(|e| e.probes())
+                .map(|p| norm(p.e))
+                .collect(),
+        }
+    }
+
+    /// Heap bytes per agent of the first run.
+    fn bytes_per_agent(&self) -> f64 {
+        match self {
+            Runs::Torque(e) => e[0].bytes_per_agent(),
+            Runs::Velocity(e) => e[0].bytes_per_agent(),
+        }
+    }
+
+    /// Saturated ticks of every agent of every run (velocity bases).
+    fn saturated_ticks(&self) -> Option<u64> {
+        match self {
+            Runs::Torque(_) => None,
+            Runs::Velocity(e) => Some(
+                e.iter()
+                    .map(|e| (0..e.len()).map(|i| e.saturated_ticks(i)).sum::<u64>())
+                    .sum(),
+            ),
+        }
+    }
 }
 
 /// The most agents `echelon bench` builds in all (≈ 11 GB of state).
@@ -80,7 +154,9 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             "{} agents × {} runs is {total} agents (≈ {} GB): at most {MAX_AGENTS} in all",
             args.agents,
             args.runs,
-            total * Engine::BLOCK_BYTES_PER_AGENT as u128 / 1_000_000_000
+            total
+                * Engine::BLOCK_BYTES_PER_AGENT.max(VelocityEngine::BLOCK_BYTES_PER_AGENT) as u128
+                / 1_000_000_000
         );
     }
     let threads = args
@@ -90,16 +166,32 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         .num_threads(threads)
         .build()
         .context("starting the worker threads")?;
-    let mut engines = (0..args.runs)
-        .map(|r| {
-            BenchFormation {
-                agents: args.agents,
-                topology,
-                seed: args.seed.wrapping_add(r as u64),
-            }
-            .engine(args.dt)
-        })
-        .collect::<Result<Vec<Engine>, _>>()?;
+    if args.drive == DriveArg::Velocity
+        && let Err(e) = BenchFormation::BASE.check_step(args.dt)
+    {
+        bail!("--dt {} s: the velocity base's {e}", args.dt);
+    }
+    let formation = |r: usize| BenchFormation {
+        agents: args.agents,
+        topology,
+        seed: args.seed.wrapping_add(r as u64),
+    };
+    let mut engines = match args.drive {
+        DriveArg::Torque => Runs::Torque(
+            (0..args.runs)
+                .map(|r| formation(r).engine(args.dt))
+                .collect::<Result<_, _>>()?,
+        ),
+        DriveArg::Velocity => Runs::Velocity(
+            (0..args.runs)
+                .map(|r| formation(r).velocity_engine(BenchFormation::BASE, args.dt))
+                .collect::<Result<_, _>>()?,
+        ),
+    };
+    let block_bytes = match args.drive {
+        DriveArg::Torque => Engine::BLOCK_BYTES_PER_AGENT,
+        DriveArg::Velocity => VelocityEngine::BLOCK_BYTES_PER_AGENT,
+    };
 
     if !args.json {
         // Before the clock starts: long runs say what they are doing.
@@ -111,10 +203,7 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         ));
     }
     let started = Instant::now();
-    let results = pool.install(|| match engines.as_mut_slice() {
-        [one] => vec![one.run(steps)],
-        many => engine::sweep(many, steps),
-    });
+    let results = pool.install(|| engines.run(steps));
     let seconds = started.elapsed().as_secs_f64();
     for r in results {
         r.context("the formation diverged")?;
@@ -122,25 +211,27 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
 
     let agent_steps = (args.agents * args.runs) as f64 * steps as f64;
     let rate = agent_steps / seconds;
-    let errors: Vec<f64> = engines
-        .iter()
-        .flat_map(|e| e.probes())
-        .map(|p| p.e[0].hypot(p.e[1]))
-        .collect();
+    let errors = engines.errors();
     let max_error = errors.iter().copied().fold(0.0, f64::max);
     let mean_error = errors.iter().sum::<f64>() / errors.len() as f64;
-    let bytes = engines[0].bytes_per_agent();
+    let bytes = engines.bytes_per_agent();
+    let saturated = engines.saturated_ticks();
+    let drive = match args.drive {
+        DriveArg::Torque => "torque",
+        DriveArg::Velocity => "velocity",
+    };
     let name = match topology {
         Topology::Star => "star",
         Topology::Chain => "chain",
     };
     if args.json {
-        let out = serde_json::json!({
+        let mut out = serde_json::json!({
             "agents": args.agents,
             "steps": steps,
             "seconds": seconds,
             "agent_steps_per_s": rate,
             "topology": name,
+            "drive": drive,
             "runs": args.runs,
             "threads": threads,
             "dt": args.dt,
@@ -149,10 +240,13 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             "bytes_per_agent": bytes,
             "max_error": max_error,
         });
+        if let (Some(n), Some(map)) = (saturated, out.as_object_mut()) {
+            map.insert("saturated_ticks".into(), n.into());
+        }
         outln!("{out}")?;
     } else {
         outln!(
-            "{name}: {} agents{}, {steps} steps of {} s ({} s), {threads} thread{}",
+            "{name} ({drive} drive): {} agents{}, {steps} steps of {} s ({} s), {threads} thread{}",
             args.agents,
             if args.runs > 1 {
                 format!(" × {} runs", args.runs)
@@ -169,13 +263,15 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
             1e9 / rate
         )?;
         outln!(
-            "  memory: {} B per agent of state and constants, {bytes:.0} B with work space",
-            Engine::BLOCK_BYTES_PER_AGENT
+            "  memory: {block_bytes} B per agent of state and constants, {bytes:.0} B with work space"
         )?;
         outln!(
             "  at t = {} s: ‖e‖ max {max_error:.2e} m, mean {mean_error:.2e} m",
             steps as f64 * args.dt
         )?;
+        if let Some(n) = saturated {
+            outln!("  saturated ticks (command beyond a speed limit): {n} of {agent_steps:.3e}")?;
+        }
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! The benchmark formation of `echelon bench`: seeded, random, reproducible.
 
-use super::{Batch, Engine, EngineError, Member, Topology};
+use super::{Batch, Engine, EngineError, Member, Topology, VelocityBatch, VelocityEngine};
+use crate::base::VelocityBase;
 use crate::control::{Gains, Variant};
 use crate::formation::Leader;
 use crate::lycomp::{LyComp, LyDerivatives, Placement};
@@ -109,6 +110,23 @@ impl BenchFormation {
             dt,
         )?;
         Engine::new(batch, self.members())
+    }
+
+    /// `echelon bench --drive velocity`'s base: a Clearpath Jackal
+    /// ([`VelocityBase::JACKAL`]: lags of 0.05 s, 2 m/s, 4 rad/s, 20 m/s²,
+    /// 25 rad/s²), fast enough for the circle, limited enough that the random
+    /// starts saturate it.
+    pub const BASE: VelocityBase = VelocityBase::JACKAL;
+
+    /// The same robots on velocity bases under the kinematic law (`K_e = 1.5`;
+    /// `K_z` is not used), at step `dt`.
+    pub fn velocity_engine(
+        &self,
+        base: VelocityBase,
+        dt: f64,
+    ) -> Result<VelocityEngine, EngineError> {
+        let batch = VelocityBatch::new(base, self.topology, self.reference(), dt)?;
+        VelocityEngine::new(batch, self.members())
     }
 }
 

@@ -174,40 +174,45 @@ impl Neg for Aff {
 /// and no cancellation between angles near `±π/2`. (`|a|` is capped at 10⁵⁰,
 /// where the value is below 10⁻¹⁰⁰, to keep `(1 + a²)²` finite.)
 #[inline(always)]
-pub(crate) fn fit(vd: V, wd: V, c: &[V; 3]) -> V {
-    let zero = V::splat(0.0);
+pub(crate) fn fit<const N: usize>(vd: Lanes<N>, wd: Lanes<N>, c: &[Lanes<N>; 3]) -> Lanes<N> {
+    let zero = Lanes::splat(0.0);
     let straight = wd.eq_lanes(zero);
     let rc = vd / wd;
-    let a = (rc * c[1]).max(V::splat(-1e50)).min(V::splat(1e50));
+    let a = (rc * c[1]).max(Lanes::splat(-1e50)).min(Lanes::splat(1e50));
     let a2 = a * a;
     let s = a2 + 1.0;
     let k2 = c[2];
-    let angle = V::atan2(a * k2 * 2.0, s * s + k2 * (-a2 + 1.0));
-    V::select(straight, zero, angle * c[0])
+    let angle = Lanes::atan2(a * k2 * 2.0, s * s + k2 * (-a2 + 1.0));
+    Lanes::select(straight, zero, angle * c[0])
 }
 
 /// Eq. 5 per lane, exactly [`crate::lycomp::exact`] in `f64`:
 /// `κλ²/(1 + √(1 − κ²λ²))` with `κ = ω_d/V_d`, `R_C` where `|κ|λ ≥ 1`, 0 where
 /// `ω_d = 0`; `c = [λ, λ², 0]`.
 #[inline(always)]
-pub(crate) fn exact(vd: V, wd: V, c: &[V; 3]) -> V {
-    let zero = V::splat(0.0);
+pub(crate) fn exact<const N: usize>(vd: Lanes<N>, wd: Lanes<N>, c: &[Lanes<N>; 3]) -> Lanes<N> {
+    let zero = Lanes::splat(0.0);
     let (lambda, lambda2) = (c[0], c[1]);
     let straight = wd.eq_lanes(zero);
     let tight = !(wd.abs() * lambda).lt(vd);
     let k = wd / vd;
     let kl = k * lambda;
-    let smooth = k * lambda2 / ((V::splat(1.0) - kl * kl).sqrt() + 1.0);
-    V::select(straight, zero, V::select(tight, vd / wd, smooth))
+    let smooth = k * lambda2 / ((Lanes::splat(1.0) - kl * kl).sqrt() + 1.0);
+    Lanes::select(straight, zero, Lanes::select(tight, vd / wd, smooth))
 }
 
-/// `L_Ycomp` for leaders moving at `(V_d, ω_d)`.
+/// `L_Ycomp` for leaders moving at `(V_d, ω_d)`, in any number of lanes.
 #[inline(always)]
-fn compensation(mode: LyComp, vd: V, wd: V, c: &[V; 3]) -> V {
+pub(crate) fn compensation<const N: usize>(
+    mode: LyComp,
+    vd: Lanes<N>,
+    wd: Lanes<N>,
+    c: &[Lanes<N>; 3],
+) -> Lanes<N> {
     match mode {
         LyComp::Fit => fit(vd, wd, c),
         LyComp::Exact => exact(vd, wd, c),
-        LyComp::None => V::splat(0.0),
+        LyComp::None => Lanes::splat(0.0),
     }
 }
 

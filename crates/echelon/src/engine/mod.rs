@@ -26,9 +26,17 @@
 //! affine in the leader's acceleration). Not supported: sampled controllers,
 //! exact `L̇_Y`, `L̈_Y`, mixed robots or laws, other leader graphs, and torque
 //! limits in a chain ([`EngineError::Unsupported`]).
+//!
+//! [`VelocityEngine`] does the same for velocity-controlled bases
+//! ([`crate::base::VelocityBase`]) under the kinematic law
+//! ([`crate::kinematic`]), built from a [`VelocityBatch`] and the same
+//! [`Member`]s (`K_z` unused): the speed limiter, lags, acceleration limits
+//! and `settle` of `base.rs` in lanes, saturated ticks counted per agent, a
+//! robot leader's `ṗ_d` from the speeds its base moves at (`engine/velocity.rs`).
 
 mod bench;
 mod kernel;
+mod velocity;
 
 use pulp::{Arch, Simd, WithSimd};
 use rayon::prelude::*;
@@ -46,6 +54,7 @@ use crate::sim::{AgentSpec, Simulation, Timing};
 pub use bench::BenchFormation;
 pub use kernel::Probe;
 use kernel::{Block, Carry, Consts, Limit, Scratch, V, W};
+pub use velocity::{VelocityBatch, VelocityEngine, VelocityProbe};
 
 /// Steps each block runs in registers before the next block's turn.
 const TILE: usize = 64;
@@ -180,43 +189,7 @@ impl Engine {
                     .into(),
             ));
         }
-        let mut comp = None;
-        let mut blocks: Vec<Block> = Vec::new();
-        let mut lanes: Vec<Member> = Vec::with_capacity(W);
-        let mut n = 0usize;
-        for m in members {
-            n += 1;
-            if m.placement.uses_exact_derivatives() {
-                return Err(EngineError::Unsupported(format!(
-                    "exact L_Y derivatives (agent {n}; use ly_derivatives = \"neglect\")"
-                )));
-            }
-            match comp {
-                None => comp = Some(m.placement.comp),
-                Some(c) if c != m.placement.comp => {
-                    return Err(EngineError::Unsupported(format!(
-                        "mixed L_Ycomp modes (agent {n} differs from agent 1)"
-                    )));
-                }
-                Some(_) => {}
-            }
-            lanes.push(m);
-            if lanes.len() == W {
-                blocks.push(block(&lanes, W));
-                lanes.clear();
-            }
-        }
-        let Some(comp) = comp else {
-            return Err(EngineError::Unsupported("an empty formation".into()));
-        };
-        if !lanes.is_empty() {
-            let live = lanes.len();
-            while lanes.len() < W {
-                lanes.push(lanes[live - 1]);
-            }
-            blocks.push(block(&lanes, live));
-        }
-        blocks.shrink_to_fit();
+        let (blocks, comp, n) = pack(members)?;
         let r = &batch.robot;
         let consts = Consts {
             law: LawRobot::new(r),
@@ -514,6 +487,52 @@ impl Engine {
 /// (Monte Carlo sweeps: independent runs).
 pub fn sweep(engines: &mut [Engine], steps: u64) -> Vec<Result<(), SimError>> {
     engines.par_iter_mut().map(|e| e.run(steps)).collect()
+}
+
+/// Packs members into blocks of `W` lanes (the last one padded with copies of
+/// the last member), refusing what neither kernel does. Returns the blocks,
+/// the shared `L_Ycomp` mode and the number of agents.
+fn pack(
+    members: impl IntoIterator<Item = Member>,
+) -> Result<(Vec<Block>, LyComp, usize), EngineError> {
+    let mut comp = None;
+    let mut blocks: Vec<Block> = Vec::new();
+    let mut lanes: Vec<Member> = Vec::with_capacity(W);
+    let mut n = 0usize;
+    for m in members {
+        n += 1;
+        if m.placement.uses_exact_derivatives() {
+            return Err(EngineError::Unsupported(format!(
+                "exact L_Y derivatives (agent {n}; use ly_derivatives = \"neglect\")"
+            )));
+        }
+        match comp {
+            None => comp = Some(m.placement.comp),
+            Some(c) if c != m.placement.comp => {
+                return Err(EngineError::Unsupported(format!(
+                    "mixed L_Ycomp modes (agent {n} differs from agent 1)"
+                )));
+            }
+            Some(_) => {}
+        }
+        lanes.push(m);
+        if lanes.len() == W {
+            blocks.push(block(&lanes, W));
+            lanes.clear();
+        }
+    }
+    let Some(comp) = comp else {
+        return Err(EngineError::Unsupported("an empty formation".into()));
+    };
+    if !lanes.is_empty() {
+        let live = lanes.len();
+        while lanes.len() < W {
+            lanes.push(lanes[live - 1]);
+        }
+        blocks.push(block(&lanes, live));
+    }
+    blocks.shrink_to_fit();
+    Ok((blocks, comp, n))
 }
 
 /// Packs up to `W` members (padded by the caller) into a block; the first

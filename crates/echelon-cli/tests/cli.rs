@@ -300,7 +300,7 @@ fn bad_velocity_base_input_exits_2() {
     let cases: [(String, &[&str]); 3] = [
         (
             velocity("mass = 1.0\n"),
-            &["s.toml:11:1: robots.b.mass", "torque-driven robot's field"],
+            &["s.toml:11:8: robots.b.mass", "torque-driven robot's field"],
         ),
         (
             velocity("v_max = 0.0\n"),

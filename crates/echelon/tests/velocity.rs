@@ -181,3 +181,34 @@ fn lagged_limited_bases_hold_their_limits_and_converge() {
         }
     }
 }
+
+/// Odometry on a velocity base: the odometer reads the base's wheels, the law
+/// acts on the estimate (so `ê` differs from the true `e`), and the formation
+/// still holds to within the drift.
+#[test]
+fn velocity_bases_dead_reckon() {
+    let base = Scenario::builtin("experiment-circle-velocity").unwrap();
+    let text = toml::to_string(&base.file).unwrap()
+        + "\n[odometry]\nperiod = 0.01\nwheel_diameter_ratio = 1.002\n";
+    let mut run = Scenario::parse(&text, "test.toml", None)
+        .unwrap()
+        .build(&Overrides {
+            duration: Some(30.0),
+            ..Overrides::default()
+        })
+        .unwrap();
+    assert!(run.simulation.odometers().iter().all(Option::is_some));
+    let mut last = Vec::new();
+    let mut log = |f: &Frame<'_>| -> Result<(), ObserverError> {
+        last = f.outputs.to_vec();
+        Ok(())
+    };
+    run.simulation.run(&mut log).unwrap();
+    for o in last {
+        let (e, e_hat) = (o.e[0].hypot(o.e[1]), o.e_hat[0].hypot(o.e_hat[1]));
+        // The controller holds its estimate near the formation (up to the
+        // sampling of the odometry); the truth is off by the drift.
+        assert!(e_hat < 1e-3, "ê = {e_hat}");
+        assert!(e < 0.05 && (e - e_hat).abs() > 1e-6, "e = {e}, ê = {e_hat}");
+    }
+}

@@ -676,12 +676,24 @@ impl Agents {
 impl Simulation {
     /// Builds a simulation from agents and settings that are valid by
     /// construction ([`AgentSpec::new`], [`SimConfig::new`]), refusing what
-    /// only exists at the level of the formation ([`Agents::new`]).
+    /// only exists at the level of the formation ([`Agents::new`]) and a
+    /// velocity base's lag the step cannot resolve
+    /// ([`crate::base::VelocityBase::check_step`]).
     pub fn new(
         agents: Vec<AgentSpec>,
         reference: Reference,
         config: SimConfig,
     ) -> Result<Simulation, SimError> {
+        for (i, a) in agents.iter().enumerate() {
+            if let Some(r) = a.velocity_robot() {
+                r.base
+                    .check_step(config.dt)
+                    .map_err(|source| SimError::Param {
+                        context: format!("agent {} robot", i + 1),
+                        source,
+                    })?;
+            }
+        }
         Ok(Simulation::of(Agents::new(agents)?, reference, config))
     }
 

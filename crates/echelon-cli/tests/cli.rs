@@ -272,6 +272,42 @@ fn bad_input_exits_2_with_one_line_and_writes_nothing() {
     assert!(!out.exists());
 }
 
+/// Velocity bases (issue 11): a torque-only field on one, or the kinematic
+/// law on a torque-driven robot, is refused at its field with exit 2.
+#[test]
+fn bad_velocity_base_input_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    let out_s = out.to_str().unwrap();
+    let velocity = |fields: &str| {
+        GOOD.replace(
+            "[[agents]]",
+            &format!("[robots.b]\ndrive = \"velocity\"\n{fields}\n[[agents]]\nrobot = \"b\""),
+        )
+    };
+    let cases: [(String, &[&str]); 3] = [
+        (
+            velocity("mass = 1.0\n"),
+            &["s.toml:11:8: robots.b.mass", "torque-driven robot's field"],
+        ),
+        (
+            velocity("v_max = 0.0\n"),
+            &["robots.b.v_max", "must be > 0"],
+        ),
+        (
+            GOOD.to_owned() + "[control]\nlaw = \"kinematic\"\n",
+            &["s.toml:14:7: control.law", "torque-driven"],
+        ),
+    ];
+    for (text, needles) in cases {
+        let f = scenario_file(dir.path(), &text);
+        assert_refused(&echelon(&["run", &f, "--out", out_s]), needles);
+        assert!(!out.exists(), "a refused run creates no output");
+    }
+    let f = scenario_file(dir.path(), &velocity(""));
+    assert!(echelon(&["run", &f, "--out", out_s, "-q"]).status.success());
+}
+
 #[test]
 fn bad_flags_exit_2() {
     for args in [

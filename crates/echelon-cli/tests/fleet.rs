@@ -139,7 +139,14 @@ fn true_errors(scenario: &str, csv: &Path, k: usize) -> Vec<(f64, f64)> {
                 ddp: jet.ddp,
             };
             let off = spec.placement.offset_for_reference(&jet);
-            let out = law(&spec.robot, &s, &motion, &off, spec.gains, spec.variant);
+            let out = law(
+                spec.torque_robot().expect("a torque-driven fleet agent"),
+                &s,
+                &motion,
+                &off,
+                spec.gains,
+                spec.variant().expect("a torque-driven fleet agent"),
+            );
             (t, out.e[0].hypot(out.e[1]))
         })
         .collect()

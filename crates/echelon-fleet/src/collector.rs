@@ -320,6 +320,7 @@ impl Collector {
             command: s.u,
             u: s.u,
             tau: s.tau,
+            velocity: None,
         };
         let rec = AgentStateRecord {
             seq: Some(seq),

@@ -261,7 +261,14 @@ pub struct Robot<P: Plant = SimulatedPlant> {
 impl Robot<SimulatedPlant> {
     /// A robot on the simulated plant (eq. 3) starting at its spec's start.
     pub fn simulated(config: RobotConfig, source: u32) -> Self {
-        let plant = SimulatedPlant::new(config.spec.robot, config.spec.start, 0.0, PLANT_STEP);
+        // `Scenario::fleet` refuses velocity bases, so every fleet agent has a
+        // torque plant.
+        let robot = config
+            .spec
+            .torque_robot()
+            .copied()
+            .unwrap_or(echelon::RobotParams::AGENT1);
+        let plant = SimulatedPlant::new(robot, config.spec.start, 0.0, PLANT_STEP);
         Robot::new(config, plant, source)
     }
 }
@@ -1244,7 +1251,12 @@ mod tests {
         let config = RobotConfig::from_scenario(&s, &fleet, 1, FaultSpec::default(), None)
             .unwrap_or_else(|e| panic!("{e}"));
         let plant = Flaky {
-            inner: SimulatedPlant::new(config.spec.robot, config.spec.start, 0.0, PLANT_STEP),
+            inner: SimulatedPlant::new(
+                *config.spec.torque_robot().unwrap(),
+                config.spec.start,
+                0.0,
+                PLANT_STEP,
+            ),
             lost: false,
             commanded: Input::default(),
         };

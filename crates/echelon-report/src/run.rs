@@ -12,7 +12,7 @@ use serde::Deserialize;
 use echelon::formation::Leader;
 use echelon::output::{
     ODOMETRY_FILE, ODOMETRY_HEADER, REFERENCE_FILE, REFERENCE_HEADER, SCENARIO_FILE, SUMMARY_FILE,
-    TRAJECTORY_FILE, TRAJECTORY_HEADER, Table,
+    TRAJECTORY_FILE, TRAJECTORY_HEADER, TRAJECTORY_HEADER_VELOCITY, Table,
 };
 use echelon::scenario::Scenario;
 use echelon::scenario::schema::{LeaderSpec, ModeName};
@@ -260,7 +260,16 @@ impl RunData {
             })?;
         let n = summary.agents.len();
         let traj_path = dir.join(TRAJECTORY_FILE);
-        let rows = numbers(&traj_path, &read(&traj_path)?, TRAJECTORY_HEADER)?;
+        // A run with velocity bases has five more columns after the torque
+        // ones (commands and saturation, not drawn yet); the first ones are
+        // the same.
+        let text = read(&traj_path)?;
+        let header = if text.starts_with(&format!("{TRAJECTORY_HEADER_VELOCITY}\n")) {
+            TRAJECTORY_HEADER_VELOCITY
+        } else {
+            TRAJECTORY_HEADER
+        };
+        let rows = numbers(&traj_path, &text, header)?;
         let mut agents: Vec<AgentTrack> = summary
             .agents
             .iter()

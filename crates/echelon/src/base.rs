@@ -396,6 +396,84 @@ impl VelocityBase {
     }
 }
 
+/// A velocity-controlled robot: its [`VelocityBase`] and the wheel geometry its
+/// odometry needs (eq. 2). No mass or inertia: the base's own motor loops hide
+/// them behind the lags.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VelocityRobot {
+    /// Lags and limits.
+    pub base: VelocityBase,
+    /// `l`, half the wheel separation, m.
+    pub half_wheelbase: f64,
+    /// `r`, m.
+    pub wheel_radius: f64,
+}
+
+impl VelocityRobot {
+    /// The ideal base on Table I's wheels (agent 1: `r = 0.05 m`, `l = 0.15 m`):
+    /// the paper's robots with their motor loops closed.
+    pub const IDEAL: VelocityRobot = VelocityRobot {
+        base: VelocityBase::IDEAL,
+        half_wheelbase: crate::model::RobotParams::AGENT1.half_wheelbase,
+        wheel_radius: crate::model::RobotParams::AGENT1.wheel_radius,
+    };
+
+    /// TurtleBot 3 Burger: `r = 0.033 m`, `l = 0.080 m` (`WHEEL_RADIUS`,
+    /// `WHEEL_SEPARATION = 0.160` of `turtlebot3_node`'s burger parameters;
+    /// the e-Manual's specifications agree).
+    pub const TURTLEBOT3_BURGER: VelocityRobot = VelocityRobot {
+        base: VelocityBase::TURTLEBOT3_BURGER,
+        half_wheelbase: 0.080,
+        wheel_radius: 0.033,
+    };
+
+    /// TurtleBot 4 (iRobot Create 3): `r = 0.036 m`, `l = 0.1175 m` (Create 3
+    /// wheel diameter 72 mm, wheel separation 235 mm: iRobot's Create 3
+    /// hardware overview; quoted, not re-measured).
+    pub const TURTLEBOT4: VelocityRobot = VelocityRobot {
+        base: VelocityBase::TURTLEBOT4,
+        half_wheelbase: 0.1175,
+        wheel_radius: 0.036,
+    };
+
+    /// Clearpath Jackal: `r = 0.098 m`, `l = 0.1875 m` (`wheel_radius`,
+    /// `wheel_separation = 0.375` of `jackal_control/config/control.yaml`).
+    pub const JACKAL: VelocityRobot = VelocityRobot {
+        base: VelocityBase::JACKAL,
+        half_wheelbase: 0.1875,
+        wheel_radius: 0.098,
+    };
+
+    /// The named presets, as [`VelocityBase::PRESETS`].
+    pub const PRESETS: [(&'static str, VelocityRobot); 4] = [
+        ("ideal", Self::IDEAL),
+        ("turtlebot3-burger", Self::TURTLEBOT3_BURGER),
+        ("turtlebot4", Self::TURTLEBOT4),
+        ("jackal", Self::JACKAL),
+    ];
+
+    /// A preset by name.
+    pub fn preset(name: &str) -> Option<VelocityRobot> {
+        Self::PRESETS
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, p)| *p)
+    }
+
+    /// Checks the base ([`VelocityBase::validate`]) and the wheels (finite, `> 0`).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        use crate::check::{finite, require};
+        self.base.validate()?;
+        for (field, value) in [
+            ("half_wheelbase", self.half_wheelbase),
+            ("wheel_radius", self.wheel_radius),
+        ] {
+            require(field, finite(field, value)?, value > 0.0, "must be > 0")?;
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -70,6 +70,48 @@ pub enum Variant {
     Complete,
 }
 
+/// A scenario's `law`: one of the two forms of eq. 13 for a torque-driven
+/// robot, or the kinematic law ([`crate::kinematic`]) for a velocity base.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Law {
+    /// [`Variant::Paper`].
+    Paper,
+    /// [`Variant::Complete`].
+    Complete,
+    /// `(v*, ω*)` of the first backstepping step (control-law.md, "Kinematic law").
+    Kinematic,
+}
+
+impl Law {
+    /// The form of eq. 13, `None` for the kinematic law.
+    pub fn variant(self) -> Option<Variant> {
+        match self {
+            Law::Paper => Some(Variant::Paper),
+            Law::Complete => Some(Variant::Complete),
+            Law::Kinematic => None,
+        }
+    }
+
+    /// The scenario's name for it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Law::Paper => "paper",
+            Law::Complete => "complete",
+            Law::Kinematic => "kinematic",
+        }
+    }
+}
+
+impl From<Variant> for Law {
+    fn from(v: Variant) -> Law {
+        match v {
+            Variant::Paper => Law::Paper,
+            Variant::Complete => Law::Complete,
+        }
+    }
+}
+
 /// `L_X, L_Y` and the time derivatives of `L_Y` at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Offset {

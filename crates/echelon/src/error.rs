@@ -83,6 +83,18 @@ pub enum FormationError {
         /// Its robot leader (1-based).
         leader: usize,
     },
+    /// A torque-driven follower needs its leader's `v̇` (`p̈_d`, eq. 13), which a
+    /// velocity base without a speed lag does not have (its speed jumps with
+    /// the command).
+    #[error(
+        "agent {agent} is torque-driven and follows agent {leader}, a velocity base with tau_v = 0 whose acceleration is undefined (give the leader tau_v > 0 or the follower a velocity base)"
+    )]
+    NoLeaderAcceleration {
+        /// The follower (1-based).
+        agent: usize,
+        /// Its robot leader (1-based).
+        leader: usize,
+    },
 }
 
 fn fmt_cycle(c: &[usize]) -> String {

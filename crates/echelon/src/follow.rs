@@ -3,11 +3,14 @@
 //! agent knows of its leader to the leader motion `p_d, ṗ_d, p̈_d`, the offsets
 //! `L_X, L_Y` (eqs. 4–6) and the law's output (eq. 13).
 
+use crate::base::VelocityCommand;
 use crate::control::{LawOutput, LeaderMotion, Offset, law};
+use crate::kinematic::kinematic_law;
 use crate::lycomp::Placement;
+use crate::model::Input;
 use crate::model::State;
 use crate::reference::Jet;
-use crate::sim::AgentSpec;
+use crate::sim::{AgentSpec, Drive};
 
 /// What a follower knows of its leader at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -67,23 +70,39 @@ pub struct Follow {
     pub leader: LeaderMotion,
     /// The offsets used.
     pub offset: Offset,
+    /// For a velocity base, the kinematic law's `(v*, ω*)` before the base's
+    /// limits; `law.u` is then zero and `law.e`, `law.z` are the kinematic
+    /// law's ([`crate::kinematic::KinematicOutput`]).
+    pub velocity: Option<VelocityCommand>,
 }
 
-/// The law (eqs. 7–13) of agent `spec` in `sensed` state behind `leader`.
+/// The law of agent `spec` in `sensed` state behind `leader`: eqs. 7–13 for a
+/// torque-driven robot, the kinematic law for a velocity base. A robot leader
+/// on a velocity base is seen at the speeds its base moves at
+/// ([`crate::base::VelocityBase::speeds`]): the caller puts them in its state.
 #[inline]
 pub fn follow(spec: &AgentSpec, sensed: &State, leader: LeaderView<'_>) -> Follow {
     let (motion, offset) = leader.resolve(&spec.placement);
-    Follow {
-        law: law(
-            &spec.robot,
-            sensed,
-            &motion,
-            &offset,
-            spec.gains,
-            spec.variant,
-        ),
-        leader: motion,
-        offset,
+    match &spec.drive {
+        Drive::Torque { robot, variant } => Follow {
+            law: law(robot, sensed, &motion, &offset, spec.gains, *variant),
+            leader: motion,
+            offset,
+            velocity: None,
+        },
+        Drive::Velocity(_) => {
+            let k = kinematic_law(sensed, &motion, &offset, spec.gains.ke);
+            Follow {
+                law: LawOutput {
+                    u: Input::default(),
+                    e: k.e,
+                    z: k.z,
+                },
+                leader: motion,
+                offset,
+                velocity: Some(k.cmd),
+            }
+        }
     }
 }
 
@@ -168,7 +187,14 @@ mod tests {
         assert_eq!(a, b);
         assert_eq!(
             a.law,
-            law(&s.robot, &me, &a.leader, &a.offset, s.gains, s.variant)
+            law(
+                &RobotParams::AGENT1,
+                &me,
+                &a.leader,
+                &a.offset,
+                s.gains,
+                Variant::Complete
+            )
         );
     }
 }

@@ -24,6 +24,12 @@ use crate::sim::{
 /// radians, `e` and `z` in the follower's body frame, agents numbered from 1.
 pub const TRAJECTORY_HEADER: &str = "t,agent,x,y,theta,v,omega,ex,ey,zx,zy,u1,u2,tau_r,tau_l";
 
+/// The header of `trajectory.csv` when some agent is on a velocity base:
+/// [`TRAJECTORY_HEADER`] and the commanded `(v*, ω*)`, the command after the
+/// base's speed limits and whether they cut it (`sat`, 0 or 1). A velocity
+/// agent's `u1,u2,tau_r,tau_l` are `NaN`, a torque agent's five new cells too.
+pub const TRAJECTORY_HEADER_VELOCITY: &str = "t,agent,x,y,theta,v,omega,ex,ey,zx,zy,u1,u2,tau_r,tau_l,v_cmd,omega_cmd,v_applied,omega_applied,sat";
+
 /// Writes a time to at most nanosecond resolution without float noise
 /// (`0.03`, not `0.030000000000000002`).
 pub fn push_time(line: &mut String, t: f64) {
@@ -185,7 +191,30 @@ pub struct TrajectoryRow<'a> {
 impl TrajectoryRow<'_> {
     /// Writes the row: the columns of [`TRAJECTORY_HEADER`].
     pub fn write<W: Write>(&self, csv: &mut CsvWriter<W>) -> io::Result<()> {
+        self.cells(csv);
+        csv.end_row()
+    }
+
+    /// Writes the row with the velocity-base columns of
+    /// [`TRAJECTORY_HEADER_VELOCITY`].
+    pub fn write_velocity<W: Write>(&self, csv: &mut CsvWriter<W>) -> io::Result<()> {
+        self.cells(csv);
+        match self.output.velocity {
+            Some(v) => csv.nums([
+                v.command.v,
+                v.command.omega,
+                v.applied.v,
+                v.applied.omega,
+                f64::from(u8::from(v.saturated)),
+            ]),
+            None => csv.nums([f64::NAN; 5]),
+        };
+        csv.end_row()
+    }
+
+    fn cells<W: Write>(&self, csv: &mut CsvWriter<W>) {
         let (s, o) = (self.state, self.output);
+        let torque = |x: f64| if o.velocity.is_some() { f64::NAN } else { x };
         csv.time(self.t).int(self.agent as u64).nums([
             s.x,
             s.y,
@@ -196,12 +225,11 @@ impl TrajectoryRow<'_> {
             o.e[1],
             o.z[0],
             o.z[1],
-            o.u.u1,
-            o.u.u2,
-            o.tau.right,
-            o.tau.left,
+            torque(o.u.u1),
+            torque(o.u.u2),
+            torque(o.tau.right),
+            torque(o.tau.left),
         ]);
-        csv.end_row()
     }
 }
 
@@ -217,24 +245,46 @@ pub trait FrameRows {
     fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()>;
 }
 
-/// `trajectory.csv`: one [`TrajectoryRow`] per agent per frame.
+/// `trajectory.csv`: one [`TrajectoryRow`] per agent per frame; with the
+/// velocity-base columns when `velocity` ([`TRAJECTORY_HEADER_VELOCITY`]).
 #[derive(Debug, Clone, Copy, Default)]
-pub struct TrajectoryRows;
+pub struct TrajectoryRows {
+    /// Whether to write the velocity-base columns.
+    pub velocity: bool,
+}
+
+impl TrajectoryRows {
+    /// The table for `sim`: with the velocity-base columns when some agent is
+    /// on a velocity base, else exactly [`TRAJECTORY_HEADER`].
+    pub fn for_simulation(sim: &Simulation) -> TrajectoryRows {
+        TrajectoryRows {
+            velocity: sim.agents().iter().any(|a| a.velocity_robot().is_some()),
+        }
+    }
+}
 
 impl FrameRows for TrajectoryRows {
     fn header(&self) -> &'static str {
-        TRAJECTORY_HEADER
+        if self.velocity {
+            TRAJECTORY_HEADER_VELOCITY
+        } else {
+            TRAJECTORY_HEADER
+        }
     }
 
     fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()> {
         for (i, (state, output)) in frame.states.iter().zip(frame.outputs).enumerate() {
-            TrajectoryRow {
+            let row = TrajectoryRow {
                 t: frame.t,
                 agent: i + 1,
                 state,
                 output,
+            };
+            if self.velocity {
+                row.write_velocity(csv)?;
+            } else {
+                row.write(csv)?;
             }
-            .write(csv)?;
         }
         Ok(())
     }
@@ -569,7 +619,8 @@ pub fn run_to_dir(
             let _ = std::fs::remove_file(p);
         }
     };
-    let mut trajectory = CsvLog::create(&parts[0], TrajectoryRows)?;
+    let mut trajectory =
+        CsvLog::create(&parts[0], TrajectoryRows::for_simulation(&run.simulation))?;
     let mut reference = CsvLog::create(&parts[1], ReferenceRows::default())?;
     let mut odometry = match parts.get(4) {
         Some(p) => Some(CsvLog::create(p, OdometryRows::default())?),

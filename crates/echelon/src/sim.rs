@@ -7,11 +7,13 @@
 //! in between. Stepping is explicit ([`Simulation::step`]) over plain data; the
 //! same inputs give the same bits.
 
+use crate::base::{VelocityCommand, VelocityRobot};
 use crate::check;
-use crate::control::{Gains, LawOutput, Variant, errors};
+use crate::control::{Gains, Law, LawOutput, Variant, errors};
 use crate::error::{FormationError, ParamError, SimError};
 use crate::follow::{Follow, LeaderView, follow};
 use crate::formation::{Formation, Leader};
+use crate::kinematic::kinematic_law;
 use crate::lycomp::{FitCoefficients, LyComp, Placement};
 use crate::math::whole_ratio;
 pub use crate::model::Pose;
@@ -19,33 +21,65 @@ use crate::model::{Input, RobotParams, State, Torques};
 use crate::odometry::{Odometer, OdometrySpec};
 use crate::reference::{Jet, Order, Reference, Trajectory};
 
+/// How a robot is driven, and so which law drives it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Drive {
+    /// Wheel torques (eq. 3, the paper's plant) under the dynamic law (eq. 13).
+    Torque {
+        /// Physical parameters.
+        robot: RobotParams,
+        /// Paper or complete law.
+        variant: Variant,
+    },
+    /// A velocity-controlled base under the kinematic law ([`crate::kinematic`]).
+    Velocity(VelocityRobot),
+}
+
+impl Drive {
+    /// `(l, r)`: half the wheel separation and the wheel radius, m (what
+    /// odometry needs).
+    pub fn wheels(&self) -> (f64, f64) {
+        match self {
+            Drive::Torque { robot, .. } => (robot.half_wheelbase, robot.wheel_radius),
+            Drive::Velocity(r) => (r.half_wheelbase, r.wheel_radius),
+        }
+    }
+
+    /// The law this drive runs.
+    pub fn law(&self) -> Law {
+        match self {
+            Drive::Torque { variant, .. } => Law::from(*variant),
+            Drive::Velocity(_) => Law::Kinematic,
+        }
+    }
+}
+
 /// One robot of a formation: its body, its leader, where it holds that leader,
-/// and its controller. Built by [`AgentSpec::new`], which refuses impossible
-/// values; the fields are public to read.
+/// and its controller. Built by [`AgentSpec::new`] (torque-driven) or
+/// [`AgentSpec::velocity`], which refuse impossible values; the fields are
+/// public to read.
 #[derive(Debug, Clone, PartialEq)]
 #[non_exhaustive]
 pub struct AgentSpec {
     /// Display name (the scenario's, e.g. `agent 1`).
     pub name: String,
-    /// Physical parameters.
-    pub robot: RobotParams,
+    /// The body and the law that drives it.
+    pub drive: Drive,
     /// Whom it follows.
     pub leader: Leader,
     /// `L_Xoff`, `L_Yoff`, `L` and the `L_Ycomp` options.
     pub placement: Placement,
-    /// `K_e`, `K_z`.
+    /// `K_e`, `K_z` (`K_z` unused by the kinematic law).
     pub gains: Gains,
-    /// Paper or complete law.
-    pub variant: Variant,
     /// Initial state.
     pub start: State,
 }
 
 impl AgentSpec {
-    /// An agent, refusing an impossible robot ([`RobotParams::validate`]),
-    /// gains ([`Gains::new`]), placement ([`Placement::new`]) or a start state
-    /// that is not finite. Whether its leader exists is the formation's business
-    /// ([`Simulation::new`]).
+    /// A torque-driven agent, refusing an impossible robot
+    /// ([`RobotParams::validate`]), gains ([`Gains::new`]), placement
+    /// ([`Placement::new`]) or a start state that is not finite. Whether its
+    /// leader exists is the formation's business ([`Simulation::new`]).
     pub fn new(
         name: impl Into<String>,
         robot: RobotParams,
@@ -56,18 +90,96 @@ impl AgentSpec {
         start: State,
     ) -> Result<AgentSpec, ParamError> {
         robot.validate()?;
+        AgentSpec::checked(
+            name.into(),
+            Drive::Torque { robot, variant },
+            leader,
+            placement,
+            gains,
+            start,
+        )
+    }
+
+    /// An agent on a velocity-controlled base under the kinematic law,
+    /// refusing an impossible base ([`VelocityRobot::validate`]) and the rest
+    /// as [`AgentSpec::new`]. A start speed outside the base's limits is refused.
+    pub fn velocity(
+        name: impl Into<String>,
+        robot: VelocityRobot,
+        leader: Leader,
+        placement: Placement,
+        gains: Gains,
+        start: State,
+    ) -> Result<AgentSpec, ParamError> {
+        robot.validate()?;
+        let b = &robot.base;
+        check::require(
+            "v",
+            start.v,
+            start.v.abs() <= b.v_max,
+            format!("exceeds the base's v_max = {} m/s", b.v_max),
+        )?;
+        check::require(
+            "omega",
+            start.omega,
+            start.omega.abs() <= b.omega_max,
+            format!("exceeds the base's omega_max = {} rad/s", b.omega_max),
+        )?;
+        AgentSpec::checked(
+            name.into(),
+            Drive::Velocity(robot),
+            leader,
+            placement,
+            gains,
+            start,
+        )
+    }
+
+    fn checked(
+        name: String,
+        drive: Drive,
+        leader: Leader,
+        placement: Placement,
+        gains: Gains,
+        start: State,
+    ) -> Result<AgentSpec, ParamError> {
         gains.validate()?;
         placement.validate()?;
         start.validate_start()?;
         Ok(AgentSpec {
-            name: name.into(),
-            robot,
+            name,
+            drive,
             leader,
             placement,
             gains,
-            variant,
             start,
         })
+    }
+
+    /// The torque plant (eq. 3), `None` for a velocity base.
+    pub fn torque_robot(&self) -> Option<&RobotParams> {
+        match &self.drive {
+            Drive::Torque { robot, .. } => Some(robot),
+            Drive::Velocity(_) => None,
+        }
+    }
+
+    /// The velocity base, `None` for a torque-driven robot.
+    pub fn velocity_robot(&self) -> Option<&VelocityRobot> {
+        match &self.drive {
+            Drive::Velocity(r) => Some(r),
+            Drive::Torque { .. } => None,
+        }
+    }
+
+    /// The form of eq. 13, `None` under the kinematic law.
+    pub fn variant(&self) -> Option<Variant> {
+        self.drive.law().variant()
+    }
+
+    /// The law that drives it.
+    pub fn law(&self) -> Law {
+        self.drive.law()
     }
 }
 
@@ -160,6 +272,27 @@ pub struct AgentOutput {
     pub u: Input,
     /// Wheel torques applied.
     pub tau: Torques,
+    /// For a velocity base: the command and what the base follows; `command`,
+    /// `u`, `tau` are then zero. `None` for a torque-driven robot.
+    pub velocity: Option<VelocityOutput>,
+}
+
+/// What a velocity base is commanded and what it follows at one instant.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct VelocityOutput {
+    /// The kinematic law's `(v*, ω*)` (held value in sampled mode).
+    pub command: VelocityCommand,
+    /// The command after the base's speed limits ([`crate::base::VelocityBase::limit`]).
+    pub applied: VelocityCommand,
+    /// Whether the speed limits cut the command.
+    pub saturated: bool,
+}
+
+/// A sampled controller's held command: torques' inputs or a velocity command.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct Held {
+    u: Input,
+    c: VelocityCommand,
 }
 
 /// The simulation at one step, as observers see it.
@@ -313,26 +446,41 @@ struct System {
 
 impl System {
     /// Evaluates every agent at time `t` and states `x`: state derivatives into
-    /// `dx` and, when `out` is given (RK4's first stage, which observers see),
-    /// controller outputs into it. With `held`, the commands are held values
-    /// (sampled controller) instead of fresh law outputs. With odometers, the
-    /// law acts on what they measure (eqs. 32–35) while `e`, `z` in `out` are
-    /// those of the true state.
+    /// `dx`, the velocities each robot moves at into `speeds` and, when `out`
+    /// is given (RK4's first stage, which observers see), controller outputs
+    /// into it. With `held`, the commands are held values (sampled controller)
+    /// instead of fresh law outputs. With odometers, the law acts on what they
+    /// measure (eqs. 32–35) while `e`, `z` in `out` are those of the true state.
+    /// A velocity base's command is limited ([`crate::base::VelocityBase::limit`])
+    /// before it drives the base.
     #[inline]
+    #[allow(clippy::too_many_arguments)]
     fn evaluate(
         &self,
         t: f64,
         x: &[State],
-        held: Option<&[Input]>,
+        held: Option<&[Held]>,
         odometers: &[Option<Odometer>],
         mut out: Option<&mut [AgentOutput]>,
         dx: &mut [State],
+        speeds: &mut [[f64; 2]],
     ) {
         if let (None, Some(h)) = (&out, held) {
             // Between samples of a sampled controller, with nobody looking at
             // the law's outputs: only the plant moves.
             for (i, a) in self.agents.iter().enumerate() {
-                dx[i] = a.robot.derivative(&x[i], a.robot.actuate(h[i]).0);
+                match &a.drive {
+                    Drive::Torque { robot, .. } => {
+                        dx[i] = robot.derivative(&x[i], robot.actuate(h[i].u).0);
+                        speeds[i] = [x[i].v, x[i].omega];
+                    }
+                    Drive::Velocity(r) => {
+                        let c = r.base.limit(h[i].c).0;
+                        dx[i] = r.base.derivative(&x[i], c);
+                        let (v, w) = r.base.speeds(&x[i], c);
+                        speeds[i] = [v, w];
+                    }
+                }
             }
             return;
         }
@@ -348,8 +496,19 @@ impl System {
         for &i in self.formation.order() {
             let a = &self.agents[i];
             // What the law knows of the leader, from a state of robot j: the
-            // leader was evaluated first, so dx[j].v is its v̇ now.
-            let view = |state: State, j: usize| LeaderView::Robot { state, dv: dx[j].v };
+            // leader was evaluated first, so dx[j].v is its v̇ now and
+            // speeds[j] the velocities its base moves at.
+            let view = |state: State, j: usize| {
+                let state = match self.agents[j].drive {
+                    Drive::Torque { .. } => state,
+                    Drive::Velocity(_) => State {
+                        v: speeds[j][0],
+                        omega: speeds[j][1],
+                        ..state
+                    },
+                };
+                LeaderView::Robot { state, dv: dx[j].v }
+            };
             let leader = match a.leader {
                 Leader::Reference => LeaderView::Reference(&jet),
                 Leader::Agent(j) => view(sensed(j), j),
@@ -358,6 +517,7 @@ impl System {
                 law: LawOutput { u, e, z },
                 leader: motion,
                 offset,
+                velocity,
             } = follow(a, &sensed(i), leader);
             let (e_true, z_true) = if out.is_none() || odometers.is_empty() {
                 (e, z)
@@ -368,35 +528,66 @@ impl System {
                     Leader::Agent(j) => view(x[j], j).resolve(&a.placement),
                 };
                 let s = &x[i];
-                errors(
-                    s.x,
-                    s.y,
-                    s.theta.sin_cos(),
-                    s.v,
-                    s.omega,
-                    motion.p,
-                    motion.dp,
-                    offset.lx,
-                    offset.ly,
-                    offset.dly,
-                    a.gains.ke,
-                )
+                match a.drive {
+                    Drive::Torque { .. } => errors(
+                        s.x,
+                        s.y,
+                        s.theta.sin_cos(),
+                        s.v,
+                        s.omega,
+                        motion.p,
+                        motion.dp,
+                        offset.lx,
+                        offset.ly,
+                        offset.dly,
+                        a.gains.ke,
+                    ),
+                    Drive::Velocity(_) => {
+                        let k = kinematic_law(s, &motion, &offset, a.gains.ke);
+                        (k.e, k.z)
+                    }
+                }
             };
-            let command = held.map_or(u, |h| h[i]);
-            let (applied, tau) = a.robot.actuate(command);
-            dx[i] = a.robot.derivative(&x[i], applied);
-            let Some(out) = out.as_deref_mut() else {
-                continue;
+            let output = match &a.drive {
+                Drive::Torque { robot, .. } => {
+                    let command = held.map_or(u, |h| h[i].u);
+                    let (applied, tau) = robot.actuate(command);
+                    dx[i] = robot.derivative(&x[i], applied);
+                    speeds[i] = [x[i].v, x[i].omega];
+                    AgentOutput {
+                        e: e_true,
+                        z: z_true,
+                        e_hat: e,
+                        z_hat: z,
+                        command,
+                        u: applied,
+                        tau,
+                        velocity: None,
+                    }
+                }
+                Drive::Velocity(r) => {
+                    let command = held.map_or(velocity.unwrap_or_default(), |h| h[i].c);
+                    let (c, saturated) = r.base.limit(command);
+                    dx[i] = r.base.derivative(&x[i], c);
+                    let (v, w) = r.base.speeds(&x[i], c);
+                    speeds[i] = [v, w];
+                    AgentOutput {
+                        e: e_true,
+                        z: z_true,
+                        e_hat: e,
+                        z_hat: z,
+                        velocity: Some(VelocityOutput {
+                            command,
+                            applied: c,
+                            saturated,
+                        }),
+                        ..AgentOutput::default()
+                    }
+                }
             };
-            out[i] = AgentOutput {
-                e: e_true,
-                z: z_true,
-                e_hat: e,
-                z_hat: z,
-                command,
-                u: applied,
-                tau,
-            };
+            if let Some(out) = out.as_deref_mut() {
+                out[i] = output;
+            }
         }
     }
 }
@@ -411,7 +602,11 @@ pub struct Simulation {
     warnings: Vec<String>,
     step: u64,
     state: Vec<State>,
-    held: Vec<Input>,
+    held: Vec<Held>,
+    /// Whether any agent is on a velocity base (its state is settled after each step).
+    velocity_agents: bool,
+    /// Velocities each robot moves at in RK4's four stages.
+    speeds: [Vec<[f64; 2]>; 4],
     /// Outputs and derivative (RK4's k1) at the current state, when `fresh`.
     out: Vec<AgentOutput>,
     k1: Vec<State>,
@@ -452,6 +647,17 @@ impl Agents {
                     leader: j + 1,
                 });
             }
+            if let Leader::Agent(j) = a.leader
+                && a.torque_robot().is_some()
+                && specs[j]
+                    .velocity_robot()
+                    .is_some_and(|r| r.base.tau_v == 0.0)
+            {
+                return Err(FormationError::NoLeaderAcceleration {
+                    agent: i + 1,
+                    leader: j + 1,
+                });
+            }
         }
         Ok(Agents { specs, formation })
     }
@@ -470,12 +676,24 @@ impl Agents {
 impl Simulation {
     /// Builds a simulation from agents and settings that are valid by
     /// construction ([`AgentSpec::new`], [`SimConfig::new`]), refusing what
-    /// only exists at the level of the formation ([`Agents::new`]).
+    /// only exists at the level of the formation ([`Agents::new`]) and a
+    /// velocity base's lag the step cannot resolve
+    /// ([`crate::base::VelocityBase::check_step`]).
     pub fn new(
         agents: Vec<AgentSpec>,
         reference: Reference,
         config: SimConfig,
     ) -> Result<Simulation, SimError> {
+        for (i, a) in agents.iter().enumerate() {
+            if let Some(r) = a.velocity_robot() {
+                r.base
+                    .check_step(config.dt)
+                    .map_err(|source| SimError::Param {
+                        context: format!("agent {} robot", i + 1),
+                        source,
+                    })?;
+            }
+        }
         Ok(Simulation::of(Agents::new(agents)?, reference, config))
     }
 
@@ -488,7 +706,7 @@ impl Simulation {
         let mut warnings = Vec::new();
         for (i, a) in agents.iter().enumerate() {
             let ctx = format!("agent {}", i + 1);
-            if a.variant == Variant::Paper && a.gains.ke * a.gains.kz <= 0.25 {
+            if a.variant() == Some(Variant::Paper) && a.gains.ke * a.gains.kz <= 0.25 {
                 warnings.push(format!(
                     "{ctx}: K_e K_z = {} ≤ 1/4: Theorem 1 does not guarantee convergence for the paper law (use law = \"complete\")",
                     a.gains.ke * a.gains.kz
@@ -511,6 +729,7 @@ impl Simulation {
         let uses_reference = agents.iter().any(|a| a.leader == Leader::Reference);
         let n = agents.len();
         let state: Vec<State> = agents.iter().map(|a| a.start).collect();
+        let velocity_agents = agents.iter().any(|a| a.velocity_robot().is_some());
         Simulation {
             sys: System {
                 agents,
@@ -525,7 +744,9 @@ impl Simulation {
             warnings,
             step: 0,
             state,
-            held: vec![Input::default(); n],
+            held: vec![Held::default(); n],
+            velocity_agents,
+            speeds: std::array::from_fn(|_| vec![[0.0; 2]; n]),
             out: vec![AgentOutput::default(); n],
             k1: vec![State::default(); n],
             fresh: false,
@@ -576,8 +797,9 @@ impl Simulation {
                     };
                     let k = check::multiple_of("period", spec.period, dt, &format!("dt = {dt} s"))
                         .map_err(param)?;
-                    let o =
-                        Odometer::new(spec, &a.robot, &a.start, seed, i as u64).map_err(param)?;
+                    let (l, r) = a.drive.wheels();
+                    let o = Odometer::with_wheels(spec, l, r, &a.start, seed, i as u64)
+                        .map_err(param)?;
                     odometers.push(Some(o));
                     every.push(k);
                 }
@@ -658,10 +880,14 @@ impl Simulation {
             &self.odometers,
             Some(&mut self.out),
             &mut self.k1,
+            &mut self.speeds[0],
         );
         if sample {
             for (h, o) in self.held.iter_mut().zip(&self.out) {
-                *h = o.command;
+                h.u = o.command;
+                if let Some(v) = o.velocity {
+                    h.c = v.command;
+                }
             }
         }
         self.fresh = true;
@@ -692,21 +918,44 @@ impl Simulation {
         for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k1)) {
             *s = x.add_scaled(k, 0.5 * dt);
         }
-        sys.evaluate(t + 0.5 * dt, &self.stage, held, odo, None, &mut self.k2);
+        let [_, sp2, sp3, sp4] = &mut self.speeds;
+        sys.evaluate(
+            t + 0.5 * dt,
+            &self.stage,
+            held,
+            odo,
+            None,
+            &mut self.k2,
+            sp2,
+        );
         for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k2)) {
             *s = x.add_scaled(k, 0.5 * dt);
         }
-        sys.evaluate(t + 0.5 * dt, &self.stage, held, odo, None, &mut self.k3);
+        sys.evaluate(
+            t + 0.5 * dt,
+            &self.stage,
+            held,
+            odo,
+            None,
+            &mut self.k3,
+            sp3,
+        );
         for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k3)) {
             *s = x.add_scaled(k, dt);
         }
-        sys.evaluate(t + dt, &self.stage, held, odo, None, &mut self.k4);
+        sys.evaluate(t + dt, &self.stage, held, odo, None, &mut self.k4, sp4);
         let h6 = dt / 6.0;
         for (i, x) in self.state.iter_mut().enumerate() {
             let k = [&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]];
             // ṡ = v through the same RK4 stages: the stage speeds are
             // v, v + dt/2 v̇₁, v + dt/2 v̇₂, v + dt v̇₃.
-            self.distance[i] += dt * x.v + dt * dt / 6.0 * (k[0].v + k[1].v + k[2].v);
+            if let Drive::Velocity(_) = sys.agents[i].drive {
+                // ṡ = the speed the base moves at, stage by stage.
+                let s = |k: usize| self.speeds[k][i][0];
+                self.distance[i] += h6 * (s(0) + 2.0 * s(1) + 2.0 * s(2) + s(3));
+            } else {
+                self.distance[i] += dt * x.v + dt * dt / 6.0 * (k[0].v + k[1].v + k[2].v);
+            }
             *x = x.rk4_combine(k, h6);
         }
         self.step += 1;
@@ -725,7 +974,24 @@ impl Simulation {
                 o.sample(now, &self.state[i], self.distance[i]);
             }
         }
+        if self.velocity_agents {
+            self.settle();
+        }
         Ok(())
+    }
+
+    /// Makes each velocity base's state consistent with the command at the new
+    /// state ([`crate::base::VelocityBase::settle`]: an axis without lag takes
+    /// the command's velocity), evaluating the controllers there (in sampled
+    /// mode, the held command or the new sample).
+    fn settle(&mut self) {
+        self.refresh();
+        for (i, a) in self.sys.agents.iter().enumerate() {
+            if let (Drive::Velocity(r), Some(v)) = (&a.drive, self.out[i].velocity) {
+                self.state[i] = r.base.settle(&self.state[i], v.applied);
+            }
+        }
+        self.fresh = false;
     }
 
     /// Runs to the end: `observer` is started, shown every frame (`t = 0` to
@@ -763,6 +1029,10 @@ pub struct AgentSummary {
     pub peak_torque: f64,
     /// Time after which ‖e‖ stays below the settling tolerance, s (`None`: never).
     pub settle_time: Option<f64>,
+    /// Steps at which a velocity base's speed limits cut the command (only
+    /// for velocity agents; absent for torque-driven ones).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub saturated_ticks: Option<u64>,
 }
 
 /// Accumulates [`AgentSummary`] statistics over every frame of a run.
@@ -774,6 +1044,7 @@ pub struct Summary {
     peak: Vec<f64>,
     settled_since: Vec<Option<f64>>,
     last: Vec<(State, f64)>,
+    saturated: Vec<Option<u64>>,
 }
 
 impl Summary {
@@ -789,6 +1060,7 @@ impl Summary {
             peak: vec![0.0; n],
             settled_since: vec![None; n],
             last: vec![(State::default(), f64::NAN); n],
+            saturated: vec![None; n],
         }
     }
 
@@ -811,6 +1083,7 @@ impl Summary {
                     rms_error: (self.sum_sq[i] / self.count.max(1) as f64).sqrt(),
                     peak_torque: self.peak[i],
                     settle_time: self.settled_since[i],
+                    saturated_ticks: self.saturated[i],
                 }
             })
             .collect()
@@ -830,6 +1103,9 @@ impl Observer for Summary {
                 self.settled_since[i] = Some(frame.t);
             }
             self.last[i] = (*s, ne);
+            if let Some(v) = o.velocity {
+                *self.saturated[i].get_or_insert(0) += u64::from(v.saturated);
+            }
         }
         Ok(())
     }

@@ -297,7 +297,10 @@ fn what_the_engine_cannot_do_is_refused() {
     let err = Engine::from_agents(&specs, f.reference(), 0.01).unwrap_err();
     assert!(matches!(err, EngineError::Unsupported(_)), "{err}");
     let mut specs = f.agent_specs();
-    specs[1].robot = RobotParams::AGENT2;
+    specs[1].drive = echelon::sim::Drive::Torque {
+        robot: RobotParams::AGENT2,
+        variant: echelon::Variant::Paper,
+    };
     assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
     let mut specs = f.agent_specs();
     specs[3].placement.derivatives = LyDerivatives::Exact;

@@ -12,13 +12,16 @@ use echelon::scenario::schema::ScenarioFile;
 use echelon::scenario::{self, Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 
-const NAMES: [&str; 6] = [
+const NAMES: [&str; 9] = [
+    "circle-pentagon-velocity",
     "circle-pentagon",
+    "experiment-circle-velocity",
     "experiment-circle",
     "experiment-lemniscate",
     "fix-study",
     "lemniscate-wedge",
     "nonfeasible",
+    "turtlebot-circle",
 ];
 
 #[test]
@@ -359,8 +362,8 @@ fn overrides_replace_the_files_timing_and_law() {
     assert_eq!(run.seed, 9);
     assert_eq!(run.log_every, 1);
     assert_eq!(
-        run.simulation.agents()[0].variant,
-        echelon::Variant::Complete
+        run.simulation.agents()[0].variant(),
+        Some(echelon::Variant::Complete)
     );
     let bad = s.build(&Overrides {
         dt: Some(-1.0),
@@ -389,7 +392,7 @@ fn overrides_replace_the_files_timing_and_law() {
         run.simulation
             .agents()
             .iter()
-            .all(|a| a.variant == echelon::Variant::Complete)
+            .all(|a| a.variant() == Some(echelon::Variant::Complete))
     );
     // A value from the file is still located in the file.
     let err = build(&BASE.replace("dt = 0.01\n", "dt = -0.01\n")).unwrap_err();
@@ -569,7 +572,145 @@ fn the_readme_example_scenario_builds_and_runs() {
         })
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(run.simulation.agents().len(), 2);
-    assert_eq!(run.simulation.agents()[1].robot.torque_limit, Some(5.0));
+    assert_eq!(
+        run.simulation.agents()[1]
+            .torque_robot()
+            .and_then(|r| r.torque_limit),
+        Some(5.0)
+    );
     let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
     run.simulation.run(&mut none).unwrap();
+}
+
+/// `BASE` with both agents on the robot `[robots.b]` given by `fields`.
+fn on_velocity_base(fields: &str) -> String {
+    format!(
+        "{}\n[robots.b]\n{fields}",
+        BASE.replace("[[agents]]\n", "[[agents]]\nrobot = \"b\"\n")
+    )
+}
+
+#[test]
+fn velocity_bases_refuse_impossible_and_foreign_fields() {
+    expect_error(
+        &on_velocity_base("drive = \"velocity\"\ntau_v = -0.1\n"),
+        25,
+        "robots.b.tau_v",
+        "must be ≥ 0",
+    );
+    expect_error(
+        &on_velocity_base("drive = \"velocity\"\nv_max = 0.0\n"),
+        25,
+        "robots.b.v_max",
+        "must be > 0",
+    );
+    expect_error(
+        &on_velocity_base("drive = \"velocity\"\nmass = 1.0\n"),
+        25,
+        "robots.b.mass",
+        "torque-driven robot's field",
+    );
+    expect_error(
+        &on_velocity_base("preset = \"turtlebot3-burger\"\ntorque_limit = 1.0\n"),
+        25,
+        "robots.b.torque_limit",
+        "torque-driven robot's field",
+    );
+    expect_error(
+        &on_velocity_base("preset = \"agent1\"\ntau_omega = 0.1\n"),
+        25,
+        "robots.b.tau_omega",
+        "velocity base's field",
+    );
+    // A lag the step cannot resolve (check_step): dt = 0.01 s.
+    expect_error(
+        &on_velocity_base("drive = \"velocity\"\ntau_v = 0.005\n"),
+        25,
+        "robots.b.tau_v",
+        "shorter than the integration step",
+    );
+    expect_error(
+        &on_velocity_base("drive = \"velocity\"\ntau_v = 0.0\na_max = 1.0\n"),
+        26,
+        "robots.b.a_max",
+        "needs tau_v > 0",
+    );
+}
+
+#[test]
+fn the_law_must_suit_the_drive() {
+    expect_error(
+        &format!("{BASE}\n[control]\nlaw = \"kinematic\"\n"),
+        22,
+        "control.law",
+        "is torque-driven",
+    );
+    expect_error(
+        &format!(
+            "{}\n[control]\nlaw = \"paper\"\n",
+            on_velocity_base("drive = \"velocity\"\n")
+        ),
+        27,
+        "control.law",
+        "is a velocity base",
+    );
+    // A torque-driven follower needs its leader's v̇, which a base without a
+    // speed lag does not have.
+    let src = format!(
+        "{}\n[robots.b]\ndrive = \"velocity\"\n",
+        BASE.replacen("[[agents]]\n", "[[agents]]\nrobot = \"b\"\n", 1)
+    );
+    expect_error(&src, 19, "agents[2].leader", "acceleration is undefined");
+    // With a lag, it has one; and the default law of a velocity base is kinematic.
+    let run = build(&src.replace(
+        "drive = \"velocity\"\n",
+        "drive = \"velocity\"\ntau_v = 0.05\n",
+    ))
+    .unwrap();
+    assert_eq!(
+        run.simulation.agents()[0].law(),
+        echelon::control::Law::Kinematic
+    );
+    assert_eq!(
+        run.simulation.agents()[1].law(),
+        echelon::control::Law::Paper
+    );
+}
+
+/// A velocity scenario's trajectory has the velocity columns, a torque agent's
+/// are NaN, and the summary counts saturated ticks for velocity agents only.
+#[test]
+fn velocity_runs_log_commands_and_saturation() {
+    let dir = tempfile::tempdir().unwrap();
+    let summary = run_into(dir.path(), "turtlebot-circle");
+    let text = std::fs::read_to_string(dir.path().join(TRAJECTORY_FILE)).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some(output::TRAJECTORY_HEADER_VELOCITY));
+    let (v_max, omega_max) = (0.22, 2.84);
+    let mut saturated_rows = 0;
+    for line in lines {
+        let cells: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
+        assert_eq!(cells.len(), 20, "{line}");
+        assert!(cells[11..15].iter().all(|c| c.is_nan()), "{line}");
+        // The state's and the applied command's speeds never leave the limits.
+        for (v, w) in [(cells[5], cells[6]), (cells[17], cells[18])] {
+            assert!(v.abs() <= v_max && w.abs() <= omega_max, "{line}");
+        }
+        if cells[19] == 1.0 {
+            saturated_rows += 1;
+            // Saturation keeps the commanded curvature.
+            let (cmd, app) = ((cells[15], cells[16]), (cells[17], cells[18]));
+            assert!(
+                (cmd.0 * app.1 - cmd.1 * app.0).abs() <= 1e-12 * cmd.0.hypot(cmd.1),
+                "{line}"
+            );
+        }
+    }
+    assert!(saturated_rows > 0);
+    for a in &summary.agents {
+        assert!(a.saturated_ticks.unwrap() > 0, "{}", a.name);
+        assert!(a.final_error < 1e-3, "{}: {}", a.name, a.final_error);
+    }
+    let torque = run_into(dir.path(), "circle-pentagon");
+    assert!(torque.agents.iter().all(|a| a.saturated_ticks.is_none()));
 }

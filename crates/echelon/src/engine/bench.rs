@@ -87,14 +87,16 @@ impl BenchFormation {
             .enumerate()
             .map(|(i, m)| AgentSpec {
                 name: format!("agent {}", i + 1),
-                robot: Self::ROBOT,
+                drive: crate::sim::Drive::Torque {
+                    robot: Self::ROBOT,
+                    variant: Variant::Paper,
+                },
                 leader: match (self.topology, i) {
                     (Topology::Chain, 1..) => Leader::Agent(i - 1),
                     _ => Leader::Reference,
                 },
                 placement: m.placement,
                 gains: m.gains,
-                variant: Variant::Paper,
                 start: m.start,
             })
             .collect()

@@ -253,21 +253,30 @@ impl Engine {
                 ));
             }
         };
+        let torque = |i: usize, a: &AgentSpec| match a.drive {
+            crate::sim::Drive::Torque { robot, variant } => Ok((robot, variant)),
+            crate::sim::Drive::Velocity(_) => Err(EngineError::Unsupported(format!(
+                "velocity bases (agent {} is one)",
+                i + 1
+            ))),
+        };
+        let (robot, variant) = torque(0, first)?;
         for (i, a) in agents.iter().enumerate() {
-            if a.robot != first.robot {
+            let (a_robot, a_variant) = torque(i, a)?;
+            if a_robot != robot {
                 return Err(EngineError::Unsupported(format!(
                     "mixed robots (agent {} differs from agent 1)",
                     i + 1
                 )));
             }
-            if a.variant != first.variant {
+            if a_variant != variant {
                 return Err(EngineError::Unsupported(format!(
                     "mixed laws (agent {} differs from agent 1)",
                     i + 1
                 )));
             }
         }
-        let batch = Batch::new(first.robot, first.variant, topology, reference, dt)?;
+        let batch = Batch::new(robot, variant, topology, reference, dt)?;
         // Each agent is valid by construction (`AgentSpec::new`).
         Engine::new(
             batch,

@@ -337,6 +337,27 @@ impl Odometer {
         seed: u64,
         stream: u64,
     ) -> Result<Odometer, ParamError> {
+        Odometer::with_wheels(
+            spec,
+            robot.half_wheelbase,
+            robot.wheel_radius,
+            start,
+            seed,
+            stream,
+        )
+    }
+
+    /// [`Odometer::new`] for any robot with half wheel separation
+    /// `half_wheelbase` and wheel radius `wheel_radius` (m), e.g. a velocity
+    /// base ([`crate::base::VelocityRobot`]).
+    pub fn with_wheels(
+        spec: OdometrySpec,
+        half_wheelbase: f64,
+        wheel_radius: f64,
+        start: &State,
+        seed: u64,
+        stream: u64,
+    ) -> Result<Odometer, ParamError> {
         let fix_every = spec.validate()?;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(stream);
@@ -357,10 +378,10 @@ impl Odometer {
         Ok(Odometer {
             spec,
             fix_every,
-            nominal_radius: robot.wheel_radius,
-            nominal_half_wheelbase: robot.half_wheelbase,
-            radii: spec.errors.wheel_radii(robot.wheel_radius),
-            actual_half_wheelbase: robot.half_wheelbase * spec.errors.wheelbase_ratio,
+            nominal_radius: wheel_radius,
+            nominal_half_wheelbase: half_wheelbase,
+            radii: spec.errors.wheel_radii(wheel_radius),
+            actual_half_wheelbase: half_wheelbase * spec.errors.wheelbase_ratio,
             rng,
             estimate,
             anchor: estimate,

@@ -8,13 +8,14 @@ use super::locate::{FieldPath, Locator};
 use super::merge::Merge;
 use super::overrides::Overrides;
 use super::schema::{
-    AgentSection, FixesSection, LeaderSpec, ModeName, OdometrySection, PoseSpec, ReferenceSection,
-    RobotSection, ScenarioFile,
+    AgentSection, DriveName, FixesSection, LeaderSpec, ModeName, OdometrySection, PoseSpec,
+    ReferenceSection, RobotSection, ScenarioFile,
 };
 use super::waypoints::{self, ReadError};
 use super::{DEFAULT_LOG_DT, Run, Scenario};
+use crate::base::{VelocityBase, VelocityRobot};
 use crate::check;
-use crate::control::{Gains, Variant};
+use crate::control::{Gains, Law, Variant};
 use crate::error::{FormationError, ParamError, ReferenceError, ScenarioError};
 use crate::formation::Leader;
 use crate::lycomp::{LyComp, LyDerivatives, Placement};
@@ -22,7 +23,7 @@ use crate::math::whole_ratio;
 use crate::model::{RobotParams, State};
 use crate::odometry::{ErrorModel, FixSchedule, FixSpec, Fusion, OdometrySpec, ZetaModel};
 use crate::reference::{Circle, Cubic, Lemniscate, Reference, Waypoints};
-use crate::sim::{AgentSpec, Agents, SimConfig, Simulation, Timing};
+use crate::sim::{AgentSpec, Agents, Drive, SimConfig, Simulation, Timing};
 
 /// `L`, m, when neither the agent nor `[control]` sets it.
 const DEFAULT_L: f64 = 0.05;
@@ -99,7 +100,7 @@ impl Builder<'_> {
             .agents
             .iter()
             .enumerate()
-            .map(|(i, a)| self.agent(i, a))
+            .map(|(i, a)| self.agent(i, a, dt))
             .collect::<Result<Vec<_>, _>>()?;
         if specs.is_empty() {
             return Err(self.at.error(
@@ -133,6 +134,7 @@ impl Builder<'_> {
             FormationError::ExactDerivativesNeedReference { agent: a, .. } => {
                 self.control(*a - 1).path_of("ly_derivatives")
             }
+            FormationError::NoLeaderAcceleration { agent: a, .. } => agent(*a).key("leader"),
         };
         self.at.error(&path, e)
     }
@@ -267,22 +269,70 @@ impl Builder<'_> {
         })
     }
 
-    fn robot(&self, name: &str, path: &FieldPath) -> Result<RobotParams, ScenarioError> {
+    /// A robot by name: a `[robots.NAME]`, else a preset (torque: `agent1`,
+    /// `agent2`; velocity: [`VelocityRobot::PRESETS`]).
+    fn robot(&self, name: &str, path: &FieldPath) -> Result<Body, ScenarioError> {
         if let Some(r) = self.file.robots.get(name) {
             return self.robot_section(name, r);
         }
-        RobotParams::preset(name).ok_or_else(|| {
-            let mut known: Vec<&str> = RobotParams::PRESETS.iter().map(|(n, _)| *n).collect();
-            known.extend(self.file.robots.keys().map(String::as_str));
-            self.at.error(
-                path,
-                format!("unknown robot `{name}` (known: {})", known.join(", ")),
-            )
-        })
+        if let Some(p) = RobotParams::preset(name) {
+            return Ok(Body::Torque(p));
+        }
+        VelocityRobot::preset(name)
+            .map(Body::Velocity)
+            .ok_or_else(|| {
+                let mut known: Vec<&str> = RobotParams::PRESETS.iter().map(|(n, _)| *n).collect();
+                known.extend(VelocityRobot::PRESETS.iter().map(|(n, _)| *n));
+                known.extend(self.file.robots.keys().map(String::as_str));
+                self.at.error(
+                    path,
+                    format!("unknown robot `{name}` (known: {})", known.join(", ")),
+                )
+            })
     }
 
-    fn robot_section(&self, name: &str, r: &RobotSection) -> Result<RobotParams, ScenarioError> {
+    fn robot_section(&self, name: &str, r: &RobotSection) -> Result<Body, ScenarioError> {
         let at = FieldPath::from("robots").key(name);
+        let velocity_preset = r.preset.as_deref().and_then(VelocityRobot::preset);
+        let drive = r.drive.unwrap_or(if velocity_preset.is_some() {
+            DriveName::Velocity
+        } else {
+            DriveName::Torque
+        });
+        let torque_only = [
+            ("mass", r.mass.is_some()),
+            ("linear_friction", r.linear_friction.is_some()),
+            ("inertia", r.inertia.is_some()),
+            ("angular_friction", r.angular_friction.is_some()),
+            ("torque_limit", r.torque_limit.is_some()),
+        ];
+        let velocity_only = [
+            ("tau_v", r.tau_v.is_some()),
+            ("tau_omega", r.tau_omega.is_some()),
+            ("v_max", r.v_max.is_some()),
+            ("omega_max", r.omega_max.is_some()),
+            ("a_max", r.a_max.is_some()),
+            ("alpha_max", r.alpha_max.is_some()),
+            ("accel", r.accel.is_some()),
+        ];
+        let (foreign, why): (&[(&str, bool)], _) = match drive {
+            DriveName::Torque => (
+                &velocity_only,
+                "is a velocity base's field: this robot is torque-driven (set drive = \"velocity\")",
+            ),
+            DriveName::Velocity => (
+                &torque_only,
+                "is a torque-driven robot's field: a velocity base (drive = \"velocity\") runs its own motor loops and takes lags and limits instead",
+            ),
+        };
+        if let Some((key, _)) = foreign.iter().find(|(_, set)| *set) {
+            return Err(self.at.error(&at.key(key), format!("`{key}` {why}")));
+        }
+        if drive == DriveName::Velocity {
+            return self
+                .velocity_section(&at, r, velocity_preset)
+                .map(Body::Velocity);
+        }
         let base = match &r.preset {
             Some(p) => Some(RobotParams::preset(p).ok_or_else(|| {
                 self.at.error(
@@ -324,7 +374,47 @@ impl Builder<'_> {
             torque_limit: r.torque_limit.or(base.and_then(|b| b.torque_limit)),
         };
         self.within(&at, params.validate())?;
-        Ok(params)
+        Ok(Body::Torque(params))
+    }
+
+    /// A `[robots.NAME]` with `drive = "velocity"`: a preset's values (or an
+    /// ideal base) overridden field by field; an absent limit is no limit.
+    fn velocity_section(
+        &self,
+        at: &FieldPath,
+        r: &RobotSection,
+        preset: Option<VelocityRobot>,
+    ) -> Result<VelocityRobot, ScenarioError> {
+        let from = match (&r.preset, preset) {
+            (Some(p), None) => {
+                let known: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
+                return Err(self.at.error(
+                    &at.key("preset"),
+                    format!(
+                        "unknown velocity-base preset `{p}` (presets: {})",
+                        known.join(", ")
+                    ),
+                ));
+            }
+            (_, Some(p)) => p,
+            (None, None) => VelocityRobot::IDEAL,
+        };
+        let b = from.base;
+        let robot = VelocityRobot {
+            base: VelocityBase {
+                tau_v: r.tau_v.unwrap_or(b.tau_v),
+                tau_omega: r.tau_omega.unwrap_or(b.tau_omega),
+                v_max: r.v_max.unwrap_or(b.v_max),
+                omega_max: r.omega_max.unwrap_or(b.omega_max),
+                a_max: r.a_max.unwrap_or(b.a_max),
+                alpha_max: r.alpha_max.unwrap_or(b.alpha_max),
+                accel: r.accel.unwrap_or(b.accel),
+            },
+            half_wheelbase: r.half_wheelbase.unwrap_or(from.half_wheelbase),
+            wheel_radius: r.wheel_radius.unwrap_or(from.wheel_radius),
+        };
+        self.within(at, robot.validate())?;
+        Ok(robot)
     }
 
     /// Agent `i`'s odometry: its own `odometry`/`fixes` over the file's, field by
@@ -442,11 +532,12 @@ impl Builder<'_> {
         Ok(spec)
     }
 
-    fn agent(&self, i: usize, a: &AgentSection) -> Result<AgentSpec, ScenarioError> {
+    fn agent(&self, i: usize, a: &AgentSection, dt: f64) -> Result<AgentSpec, ScenarioError> {
         let at = FieldPath::from("agents").index(i);
         let n = self.file.agents.len();
         let name = a.name.clone().unwrap_or_else(|| format!("agent {}", i + 1));
-        let robot = self.robot(a.robot.as_deref().unwrap_or("agent1"), &at.key("robot"))?;
+        let robot_name = a.robot.as_deref().unwrap_or("agent1");
+        let robot = self.robot(robot_name, &at.key("robot"))?;
         let start = self.pose(&a.start, &at.key("start"), true)?;
         let leader = match a.leader {
             LeaderSpec::Reference => Leader::Reference,
@@ -468,7 +559,45 @@ impl Builder<'_> {
         let gains = Gains::new(ke, kz).map_err(|e| self.at.param(&control.path_of(e.field), &e))?;
         let (l, l_path) = control.get_or(|c| c.l, "l", DEFAULT_L);
         self.at(&l_path, check::positive("l", l))?;
-        let (variant, _) = control.get_or(|c| c.law, "law", Variant::Paper);
+        let law = control.get(|c| c.law, "law");
+        let drive = match (robot, law) {
+            (Body::Torque(robot), None) => Drive::Torque {
+                robot,
+                variant: Variant::Paper,
+            },
+            (Body::Velocity(r), None | Some((Law::Kinematic, _))) => {
+                // Where the robot is defined: its section, else the agent's `robot`.
+                let path = if self.file.robots.contains_key(robot_name) {
+                    FieldPath::from("robots").key(robot_name)
+                } else {
+                    at.key("robot")
+                };
+                self.within(&path, r.base.check_step(dt))?;
+                Drive::Velocity(r)
+            }
+            (Body::Torque(robot), Some((law, path))) => match law.variant() {
+                Some(variant) => Drive::Torque { robot, variant },
+                None => {
+                    return Err(self.at.error(
+                        &path,
+                        format!(
+                            "law = \"kinematic\" commands velocities, but agent {}'s robot `{robot_name}` is torque-driven (use a robot with drive = \"velocity\", or law = \"paper\" / \"complete\")",
+                            i + 1
+                        ),
+                    ));
+                }
+            },
+            (Body::Velocity(_), Some((law, path))) => {
+                return Err(self.at.error(
+                    &path,
+                    format!(
+                        "law = \"{}\" commands wheel torques, but agent {}'s robot `{robot_name}` is a velocity base (use law = \"kinematic\", its default)",
+                        law.name(),
+                        i + 1
+                    ),
+                ));
+            }
+        };
         let (comp, _) = control.get_or(|c| c.lycomp, "lycomp", LyComp::Fit);
         let (derivatives, _) = control.get_or(
             |c| c.ly_derivatives,
@@ -492,7 +621,19 @@ impl Builder<'_> {
             (ModeName::Formation, Some(o)) => Placement::new(o.x, o.y, l, comp, derivatives),
         };
         let placement = self.within(&at, placement)?;
-        let spec = AgentSpec::new(name, robot, leader, placement, gains, variant, start);
+        let spec = match drive {
+            Drive::Torque { robot, variant } => {
+                AgentSpec::new(name, robot, leader, placement, gains, variant, start)
+            }
+            Drive::Velocity(r) => AgentSpec::velocity(name, r, leader, placement, gains, start),
+        };
         self.within(&at, spec)
     }
+}
+
+/// A robot's body as the scenario defines it, before its law is chosen.
+#[derive(Debug, Clone, Copy)]
+enum Body {
+    Torque(RobotParams),
+    Velocity(VelocityRobot),
 }

@@ -82,6 +82,27 @@ impl Scenario {
     pub fn fleet(&self) -> Result<FleetSettings, ScenarioError> {
         let f = &self.file.fleet;
         let at = FieldPath::from("fleet");
+        for (i, a) in self.file.agents.iter().enumerate() {
+            let name = a.robot.as_deref().unwrap_or("agent1");
+            let velocity = match self.file.robots.get(name) {
+                Some(r) => match r.drive {
+                    Some(d) => d == super::schema::DriveName::Velocity,
+                    None => r
+                        .preset
+                        .as_deref()
+                        .is_some_and(|p| crate::base::VelocityRobot::preset(p).is_some()),
+                },
+                None => crate::base::VelocityRobot::preset(name).is_some(),
+            };
+            if velocity {
+                return Err(self.error(
+                    &FieldPath::from("agents").index(i).key("robot"),
+                    format!(
+                        "`{name}` is a velocity base: fleet robots drive the torque plant (eq. 3) only so far"
+                    ),
+                ));
+            }
+        }
         let name = match &f.name {
             Some(n) => {
                 if !is_valid_fleet_name(n) {
@@ -189,6 +210,12 @@ offset = { x = 0.3, y = 0.0 }
     fn every_builtin_has_the_defaults() {
         for (name, src) in builtin() {
             let s = Scenario::parse(src, name, None).unwrap_or_else(|e| panic!("{e}"));
+            if name.ends_with("-velocity") || name.starts_with("turtlebot") {
+                // Velocity bases are refused by the fleet so far.
+                let e = s.fleet().expect_err("a velocity base in the fleet");
+                assert!(e.message.contains("velocity base"), "{e}");
+                continue;
+            }
             let f = s.fleet().unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(f.name, *name);
             assert_eq!(f.reference_rate, DEFAULT_REFERENCE_RATE);

@@ -41,7 +41,7 @@ impl Overrides {
             set("log.dt", "--log-dt");
         }
         if let Some(law) = self.law {
-            file.control.law = Some(law);
+            file.control.law = Some(law.into());
             for a in &mut file.agents {
                 if let Some(c) = &mut a.control {
                     c.law = None;

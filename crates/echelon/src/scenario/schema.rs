@@ -8,7 +8,8 @@ use serde::de::{self, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 pub use super::fleet::LinkPolicy;
-pub use crate::control::Variant;
+pub use crate::base::AccelLimit;
+pub use crate::control::{Law, Variant};
 pub use crate::lycomp::{LyComp, LyDerivatives};
 pub use crate::odometry::{Fusion, ZetaModel};
 
@@ -200,9 +201,10 @@ impl LogSection {
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ControlSection {
-    /// `paper` (default) or `complete`.
+    /// `paper` (default for torque-driven robots), `complete`, or `kinematic`
+    /// (the only law of a velocity base, and its default).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub law: Option<Variant>,
+    pub law: Option<Law>,
     /// `K_e` (default 1.5).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ke: Option<f64>,
@@ -226,13 +228,51 @@ impl ControlSection {
     }
 }
 
+/// How a `[robots.NAME]` is driven.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DriveName {
+    /// Wheel torques: the paper's plant (eq. 3).
+    Torque,
+    /// A velocity-controlled base (`crate::base`).
+    Velocity,
+}
+
 /// `[robots.NAME]`: a robot's parameters, optionally starting from a preset.
+/// A torque-driven robot (the default) takes the fields from `mass` to
+/// `torque_limit`; a velocity base (`drive = "velocity"`) takes `tau_v` to
+/// `accel`; both take the wheel geometry.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotSection {
-    /// Start from this preset (`agent1`, `agent2`) and override the fields given.
+    /// `torque` (default; `velocity` when `preset` names a velocity base).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drive: Option<DriveName>,
+    /// Start from this preset (`agent1`, `agent2`; velocity bases: `ideal`,
+    /// `turtlebot3-burger`, `turtlebot4`, `jackal`) and override the fields given.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preset: Option<String>,
+    /// Speed lag `τ_v`, s (velocity base; 0: ideal).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tau_v: Option<f64>,
+    /// Turn-rate lag `τ_ω`, s (velocity base; 0: ideal).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tau_omega: Option<f64>,
+    /// Largest `|v|`, m/s (velocity base; absent: unlimited).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub v_max: Option<f64>,
+    /// Largest `|ω|`, rad/s (velocity base; absent: unlimited).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub omega_max: Option<f64>,
+    /// Largest `|v̇|`, m/s² (velocity base with `tau_v > 0`; absent: unlimited).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub a_max: Option<f64>,
+    /// Largest `|ω̇|`, rad/s² (velocity base with `tau_omega > 0`; absent: unlimited).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha_max: Option<f64>,
+    /// `joint` (default: keeps the path) or `per-axis` acceleration limits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accel: Option<AccelLimit>,
     /// `m`, kg.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mass: Option<f64>,

@@ -89,7 +89,9 @@ impl Builder<'_> {
             whole_ratio(log_dt, dt).ok_or_else(|| {
                 self.at.error(
                     &log,
-                    format!("{log_dt} s is not 0 (every step) or a whole multiple of dt = {dt} s"),
+                    format!(
+                        "{log_dt} s is not 0 (every step) or a whole multiple of dt = {dt} s (on the command line: --log-dt)"
+                    ),
                 )
             })?
         };

@@ -169,7 +169,7 @@ def main():
             if sample.kind == zenoh.SampleKind.PUT:
                 state["tokens"].append(str(sample.key_expr))
 
-    session.declare_subscriber(cmd_key, on_cmd)
+    cmd_sub = session.declare_subscriber(cmd_key, on_cmd)  # kept alive for the whole run
     publisher = session.declare_publisher(odom_key)
     tokens = []
     gid = bytes(range(0xB0, 0xC0))

@@ -44,6 +44,7 @@ pub mod odometry;
 pub mod output;
 pub mod reference;
 pub mod rng;
+pub mod ros_names;
 pub mod scenario;
 pub mod sim;
 mod spline;

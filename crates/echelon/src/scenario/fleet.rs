@@ -2,9 +2,11 @@
 //! simulation (fleet name, rates, link-loss policies).
 
 use super::locate::FieldPath;
+use super::schema::{CmdVelType, Ros2Section};
 use super::{Merge, Scenario};
 use crate::check;
 use crate::error::ScenarioError;
+use crate::ros_names::{self, KeyScheme};
 
 /// Default reference publication rate, Hz.
 pub const DEFAULT_REFERENCE_RATE: f64 = 50.0;
@@ -14,6 +16,19 @@ pub const DEFAULT_CONTROL_RATE: f64 = 100.0;
 pub const DEFAULT_LINK_TIMEOUT: f64 = 0.2;
 /// Default age on arrival beyond which a message is stale, s.
 pub const DEFAULT_STALE_AFTER: f64 = 0.5;
+/// Default ROS 2 odometry timeout, s.
+pub const DEFAULT_ODOM_TIMEOUT: f64 = 0.5;
+/// Default `cmd_vel` timeout of the simulated ROS 2 base, s (as
+/// `diff_drive_controller`'s `cmd_vel_timeout`).
+pub const DEFAULT_CMD_VEL_TIMEOUT: f64 = 0.5;
+/// Default odometry rate of the simulated ROS 2 base, Hz.
+pub const DEFAULT_ODOM_RATE: f64 = 50.0;
+/// Default ROS 2 namespace of agent `k` (`{k}` is its number).
+pub const DEFAULT_NAMESPACE: &str = "/robot{k}";
+/// Largest ROS 2 domain id (rmw's limit for the default DDS port mapping,
+/// kept by rmw_zenoh).
+pub const MAX_DOMAIN_ID: u32 = 232;
+
 /// Default `extrapolate` hold time, s.
 pub const DEFAULT_HOLD: f64 = 1.0;
 /// Default peak deceleration of `extrapolate`'s stop, m/s².
@@ -67,6 +82,35 @@ pub struct FleetSettings {
     pub stale_after: f64,
     /// Per agent (0-based), its link-loss policy.
     pub link_loss: Vec<LinkLoss>,
+    /// Per agent (0-based), where its robot is when driven through ROS 2.
+    pub ros2: Vec<Ros2Link>,
+}
+
+/// One agent's ROS 2 robot, resolved (`[fleet.ros2]` under the agent's `ros2`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ros2Link {
+    /// ROS domain id.
+    pub domain_id: u32,
+    /// The robot's namespace, canonical (`/robot1`).
+    pub namespace: String,
+    /// The fully qualified `cmd_vel` topic (`/robot1/cmd_vel`).
+    pub cmd_vel: String,
+    /// The fully qualified odometry topic (`/robot1/odom`).
+    pub odom: String,
+    /// `cmd_vel`'s message type.
+    pub cmd_vel_type: CmdVelType,
+    /// How topics map onto Zenoh keys.
+    pub key_scheme: KeyScheme,
+    /// The body frame (`cmd_vel`'s `frame_id`, odometry's `child_frame_id`).
+    pub base_frame: String,
+    /// The odometry frame.
+    pub odom_frame: String,
+    /// Odometry older than this is lost, s.
+    pub odom_timeout: f64,
+    /// The simulated base stops after this long without a command, s.
+    pub cmd_vel_timeout: f64,
+    /// The simulated base's odometry rate, Hz.
+    pub odom_rate: f64,
 }
 
 /// Whether `s` can be one chunk of a Zenoh key expression as echelon uses it:
@@ -82,27 +126,6 @@ impl Scenario {
     pub fn fleet(&self) -> Result<FleetSettings, ScenarioError> {
         let f = &self.file.fleet;
         let at = FieldPath::from("fleet");
-        for (i, a) in self.file.agents.iter().enumerate() {
-            let name = a.robot.as_deref().unwrap_or("agent1");
-            let velocity = match self.file.robots.get(name) {
-                Some(r) => match r.drive {
-                    Some(d) => d == super::schema::DriveName::Velocity,
-                    None => r
-                        .preset
-                        .as_deref()
-                        .is_some_and(|p| crate::base::VelocityRobot::preset(p).is_some()),
-                },
-                None => crate::base::VelocityRobot::preset(name).is_some(),
-            };
-            if velocity {
-                return Err(self.error(
-                    &FieldPath::from("agents").index(i).key("robot"),
-                    format!(
-                        "`{name}` is a velocity base: fleet robots drive the torque plant (eq. 3) only so far"
-                    ),
-                ));
-            }
-        }
         let name = match &f.name {
             Some(n) => {
                 if !is_valid_fleet_name(n) {
@@ -170,6 +193,33 @@ impl Scenario {
                 })
             })
             .collect::<Result<Vec<_>, ScenarioError>>()?;
+        let ros2 = (0..self.file.agents.len())
+            .map(|i| self.ros2_link(i))
+            .collect::<Result<Vec<_>, ScenarioError>>()?;
+        for (i, a) in ros2.iter().enumerate() {
+            if let Some(j) = ros2[..i].iter().position(|b| {
+                b.domain_id == a.domain_id && (b.cmd_vel == a.cmd_vel || b.odom == a.odom)
+            }) {
+                let path = Merge::new(
+                    self.file.agents[i].ros2.as_ref(),
+                    f.ros2.as_ref(),
+                    FieldPath::from("agents").index(i).key("ros2"),
+                    at.key("ros2"),
+                )
+                .path_of("namespace");
+                return Err(self.error(
+                    &path,
+                    format!(
+                        "agents {} and {} would share `{}`/`{}` in domain {}: each robot needs its own namespace (use `{{k}}`)",
+                        j + 1,
+                        i + 1,
+                        a.cmd_vel,
+                        a.odom,
+                        a.domain_id
+                    ),
+                ));
+            }
+        }
         Ok(FleetSettings {
             name,
             reference_rate,
@@ -177,6 +227,75 @@ impl Scenario {
             link_timeout,
             stale_after,
             link_loss,
+            ros2,
+        })
+    }
+
+    /// Agent `i`'s (0-based) ROS 2 robot, names checked by ROS 2's rules.
+    fn ros2_link(&self, i: usize) -> Result<Ros2Link, ScenarioError> {
+        let links = Merge::new(
+            self.file.agents[i].ros2.as_ref(),
+            self.file.fleet.ros2.as_ref(),
+            FieldPath::from("agents").index(i).key("ros2"),
+            FieldPath::from("fleet").key("ros2"),
+        );
+        let named = |get: fn(&Ros2Section) -> Option<String>, key: &str, default: &str| {
+            links.get_or(get, key, default.to_owned())
+        };
+        let (template, ns_path) = named(|r| r.namespace.clone(), "namespace", DEFAULT_NAMESPACE);
+        let namespace =
+            ros_names::normalize_namespace(&template.replace("{k}", &(i + 1).to_string()))
+                .map_err(|e| self.error(&ns_path, e.to_string()))?;
+        let topic = |get: fn(&Ros2Section) -> Option<String>, key: &str, default: &str| {
+            let (name, path) = named(get, key, default);
+            ros_names::fully_qualified_topic(&namespace, &name)
+                .map_err(|e| self.error(&path, e.to_string()))
+        };
+        let cmd_vel = topic(|r| r.cmd_vel.clone(), "cmd_vel", "cmd_vel")?;
+        let odom = topic(|r| r.odom.clone(), "odom", "odom")?;
+        let frame = |get: fn(&Ros2Section) -> Option<String>, key: &str, default: &str| {
+            let (name, path) = named(get, key, default);
+            if name.is_empty() || name.chars().any(|c| c.is_whitespace() || c.is_control()) {
+                return Err(self.error(
+                    &path,
+                    format!("frame id `{name}` must be non-empty, without spaces"),
+                ));
+            }
+            Ok(name)
+        };
+        let base_frame = frame(|r| r.base_frame.clone(), "base_frame", "base_link")?;
+        let odom_frame = frame(|r| r.odom_frame.clone(), "odom_frame", "odom")?;
+        let (domain_id, path) = links.get_or(|r| r.domain_id, "domain_id", 0);
+        if domain_id > MAX_DOMAIN_ID {
+            return Err(self.error(
+                &path,
+                format!("{domain_id} is not a ROS domain id (0 to {MAX_DOMAIN_ID})"),
+            ));
+        }
+        let positive = |get: fn(&Ros2Section) -> Option<f64>, key: &str, default: f64| {
+            let (v, path) = links.get_or(get, key, default);
+            check::positive("", v).map_err(|e| self.locator().param(&path, &e))
+        };
+        Ok(Ros2Link {
+            domain_id,
+            cmd_vel,
+            odom,
+            cmd_vel_type: links
+                .get_or(|r| r.cmd_vel_type, "cmd_vel_type", CmdVelType::default())
+                .0,
+            key_scheme: links
+                .get_or(|r| r.key_scheme, "key_scheme", KeyScheme::default())
+                .0,
+            base_frame,
+            odom_frame,
+            odom_timeout: positive(|r| r.odom_timeout, "odom_timeout", DEFAULT_ODOM_TIMEOUT)?,
+            cmd_vel_timeout: positive(
+                |r| r.cmd_vel_timeout,
+                "cmd_vel_timeout",
+                DEFAULT_CMD_VEL_TIMEOUT,
+            )?,
+            odom_rate: positive(|r| r.odom_rate, "odom_rate", DEFAULT_ODOM_RATE)?,
+            namespace,
         })
     }
 }

@@ -26,9 +26,10 @@ mod waypoints;
 
 pub use builtin::builtin;
 pub use fleet::{
-    DEFAULT_CONTROL_RATE, DEFAULT_DECEL, DEFAULT_HOLD, DEFAULT_LINK_TIMEOUT,
+    DEFAULT_CMD_VEL_TIMEOUT, DEFAULT_CONTROL_RATE, DEFAULT_DECEL, DEFAULT_HOLD,
+    DEFAULT_LINK_TIMEOUT, DEFAULT_NAMESPACE, DEFAULT_ODOM_RATE, DEFAULT_ODOM_TIMEOUT,
     DEFAULT_REFERENCE_RATE, DEFAULT_STALE_AFTER, FleetSettings, LinkLoss, LinkPolicy,
-    is_valid_fleet_name,
+    MAX_DOMAIN_ID, Ros2Link, is_valid_fleet_name,
 };
 pub use overrides::Overrides;
 

@@ -12,6 +12,7 @@ pub use crate::base::AccelLimit;
 pub use crate::control::{Law, Variant};
 pub use crate::lycomp::{LyComp, LyDerivatives};
 pub use crate::odometry::{Fusion, ZetaModel};
+pub use crate::ros_names::KeyScheme;
 
 /// A whole scenario file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -142,12 +143,74 @@ pub struct FleetSection {
     /// Link-loss policy for every agent (an agent's own `link_loss` overrides it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link_loss: Option<LinkLossSection>,
+    /// How robots driven through ROS 2 (`fleet robot --ros2`) are reached, for
+    /// every agent (an agent's own `ros2` overrides it field by field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<Ros2Section>,
 }
 
 impl FleetSection {
     fn is_default(&self) -> bool {
         self == &FleetSection::default()
     }
+}
+
+/// `[fleet.ros2]` or an agent's `ros2 = { … }`: where a ROS 2 robot's
+/// `cmd_vel` and `odom` are (docs/ros2.md).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ros2Section {
+    /// The robot's namespace; `{k}` is replaced by the agent number
+    /// (default `/robot{k}`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub namespace: Option<String>,
+    /// ROS domain id, 0–232 (default 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub domain_id: Option<u32>,
+    /// `twist-stamped` (default; `diff_drive_controller` since Jazzy) or `twist`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cmd_vel_type: Option<CmdVelType>,
+    /// The velocity command topic, relative to the namespace or absolute
+    /// (default `cmd_vel`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cmd_vel: Option<String>,
+    /// The odometry topic (default `odom`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odom: Option<String>,
+    /// The robot's body frame, `cmd_vel`'s `frame_id` and odometry's
+    /// `child_frame_id` (default `base_link`, REP 105).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base_frame: Option<String>,
+    /// The odometry frame (default `odom`, REP 105).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odom_frame: Option<String>,
+    /// `rmw_zenoh` (default: ROS 2's Zenoh middleware) or `bridge`
+    /// (zenoh-bridge-ros2dds's plain keys, a robot left on DDS).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub key_scheme: Option<KeyScheme>,
+    /// Odometry older than this is lost: the robot commands zero, s (default 0.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odom_timeout: Option<f64>,
+    /// The simulated base (`fleet base --ros2`) stops when no `cmd_vel`
+    /// arrived for this long, s (default 0.5, as `diff_drive_controller`'s
+    /// `cmd_vel_timeout`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cmd_vel_timeout: Option<f64>,
+    /// The simulated base publishes odometry at this rate, Hz (default 50).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odom_rate: Option<f64>,
+}
+
+/// The `cmd_vel` message type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CmdVelType {
+    /// `geometry_msgs/msg/TwistStamped` (what `diff_drive_controller` takes
+    /// since Jazzy).
+    #[default]
+    TwistStamped,
+    /// `geometry_msgs/msg/Twist`.
+    Twist,
 }
 
 /// `[fleet.link_loss]` or an agent's `link_loss = { … }`.
@@ -401,6 +464,9 @@ pub struct AgentSection {
     /// This agent's link-loss policy in a fleet (overrides `[fleet.link_loss]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link_loss: Option<LinkLossSection>,
+    /// This agent's ROS 2 robot (overrides `[fleet.ros2]` field by field).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<Ros2Section>,
 }
 
 /// What an agent's controller does.

@@ -1,38 +1,59 @@
-//! The robot a fleet process drives: the [`Plant`] trait, and the simulated
-//! dynamic model (eq. 3) paced by the fleet clock.
+//! The robot a fleet process drives: the [`Plant`] trait, the simulated
+//! dynamic model (eq. 3) and the simulated velocity base
+//! ([`echelon::base::VelocityBase`]), both paced by the fleet clock.
 //!
 //! A real drive implements [`Plant`] by reading its odometry in `advance` and
-//! `state` (it moves by itself) and sending wheel torques in `command`.
+//! `state` (it moves by itself) and sending its command in `command`: the ROS
+//! 2 drive ([`crate::ros2::drive::Ros2Drive`]) publishes `cmd_vel`.
 
+use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::model::{Input, RobotParams, State, Torques};
+use echelon::sim::{AgentSpec, Drive};
+
+/// What the law asks of a drive: wheel torques' inputs (eq. 13, a
+/// torque-driven robot) or a velocity command (the kinematic law, a velocity
+/// base).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command {
+    /// `u = (u1, u2)` (eq. 3c–3d).
+    Torque(Input),
+    /// `(v*, ω*)`.
+    Velocity(VelocityCommand),
+}
 
 /// What the motors apply for a command.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Actuation {
-    /// Applied generalised input (after torque saturation).
+    /// Applied generalised input (after torque saturation); zero on a
+    /// velocity base.
     pub u: Input,
-    /// Applied wheel torques.
+    /// Applied wheel torques; zero on a velocity base.
     pub tau: Torques,
+    /// On a velocity base, the command after its speed limits
+    /// ([`VelocityBase::limit`]) and whether they cut it.
+    pub velocity: Option<(VelocityCommand, bool)>,
 }
 
 /// A differential-drive robot under the fleet controller: what the robot's
 /// state machine ([`crate::robot::Robot`]) drives, injected. The simulated
-/// model is one; a real drive (wheel torques out, odometry in) or a
-/// velocity-controlled base (its `cmd_vel` formed from `u`) is another.
+/// models are two; a real drive (ROS 2 `cmd_vel` out, odometry in) is another.
 pub trait Plant {
     /// The robot's state now (measured or simulated); `None` when the plant
     /// has no valid state (odometry lost), upon which the robot commands zero.
     fn state(&self) -> Option<State>;
     /// Brings the robot to fleet time `t`, the last command held in between
-    /// (a real drive, which moves by itself, reads its odometry here).
+    /// (a real drive, which moves by itself, notes the time here).
     fn advance(&mut self, t: f64);
     /// Sends a command; it is held until the next one. Returns what the motors apply.
-    fn command(&mut self, u: Input) -> Actuation;
+    fn command(&mut self, cmd: Command) -> Actuation;
+    /// Commands zero in the drive's own terms (zero torques, or a zero
+    /// velocity command sent now): losing the leader, the odometry or the
+    /// process.
+    fn stop(&mut self);
     /// `(v̇, ω̇)` now.
     fn accelerations(&self) -> (f64, f64);
     /// The fleet clock was set to `t` (the leader's timeline began or
-    /// restarted): the plant's time jumps there without moving. A real drive
-    /// ignores it.
+    /// restarted): the plant's time jumps there without moving.
     fn set_time(&mut self, t: f64) {
         let _ = t;
     }
@@ -85,10 +106,24 @@ impl Plant for SimulatedPlant {
         self.t = t;
     }
 
-    fn command(&mut self, u: Input) -> Actuation {
+    fn command(&mut self, cmd: Command) -> Actuation {
+        // A velocity command cannot drive wheel torques: the robot never
+        // sends one to a torque plant (its law is chosen by its drive); zero.
+        let u = match cmd {
+            Command::Torque(u) => u,
+            Command::Velocity(_) => Input::default(),
+        };
         let (applied, tau) = self.params.actuate(u);
         self.applied = applied;
-        Actuation { u: applied, tau }
+        Actuation {
+            u: applied,
+            tau,
+            velocity: None,
+        }
+    }
+
+    fn stop(&mut self) {
+        self.command(Command::Torque(Input::default()));
     }
 
     fn accelerations(&self) -> (f64, f64) {
@@ -97,6 +132,163 @@ impl Plant for SimulatedPlant {
 
     fn set_time(&mut self, t: f64) {
         self.t = t;
+    }
+}
+
+/// A velocity-controlled base ([`VelocityBase`]: first-order lags, speed and
+/// acceleration limits) integrated with RK4 over the real elapsed fleet
+/// time, in sub-steps of at most `max_step`, the last command held; the
+/// command is limited as the simulator limits it
+/// ([`echelon::sim::Simulation`]), so the fleet and the simulator move the
+/// same base.
+#[derive(Debug, Clone)]
+pub struct SimulatedVelocityBase {
+    base: VelocityBase,
+    state: State,
+    applied: VelocityCommand,
+    t: f64,
+    max_step: f64,
+}
+
+impl SimulatedVelocityBase {
+    /// A base in state `start` at fleet time `t0`.
+    pub fn new(base: VelocityBase, start: State, t0: f64, max_step: f64) -> Self {
+        SimulatedVelocityBase {
+            base,
+            state: start,
+            applied: VelocityCommand::default(),
+            t: t0,
+            max_step,
+        }
+    }
+
+    /// The simulated state (never lost): pose, and the speeds the base moves at.
+    pub fn true_state(&self) -> State {
+        self.state
+    }
+
+    /// The command it follows (after the speed limits).
+    pub fn applied(&self) -> VelocityCommand {
+        self.applied
+    }
+
+    /// Follows `cmd` from now on; returns it after the speed limits and
+    /// whether they cut it.
+    pub fn follow(&mut self, cmd: VelocityCommand) -> (VelocityCommand, bool) {
+        let (applied, saturated) = self.base.limit(cmd);
+        self.applied = applied;
+        self.state = self.base.settle(&self.state, applied);
+        (applied, saturated)
+    }
+}
+
+impl Plant for SimulatedVelocityBase {
+    fn state(&self) -> Option<State> {
+        Some(self.state)
+    }
+
+    fn advance(&mut self, t: f64) {
+        let span = t - self.t;
+        if span <= 0.0 {
+            return;
+        }
+        let n = (span / self.max_step).ceil().max(1.0) as u64;
+        let h = span / n as f64;
+        for _ in 0..n {
+            self.state = self.base.rk4_step(&self.state, self.applied, h);
+        }
+        self.t = t;
+    }
+
+    fn command(&mut self, cmd: Command) -> Actuation {
+        // Wheel torques cannot drive a velocity base: zero (never sent).
+        let cmd = match cmd {
+            Command::Velocity(c) => c,
+            Command::Torque(_) => VelocityCommand::default(),
+        };
+        Actuation {
+            velocity: Some(self.follow(cmd)),
+            ..Actuation::default()
+        }
+    }
+
+    fn stop(&mut self) {
+        self.follow(VelocityCommand::default());
+    }
+
+    fn accelerations(&self) -> (f64, f64) {
+        self.base.accelerations(&self.state, self.applied)
+    }
+
+    fn set_time(&mut self, t: f64) {
+        self.t = t;
+    }
+}
+
+/// The simulated robot of an agent: eq. 3 for a torque-driven one, its
+/// velocity base for the others.
+#[derive(Debug, Clone)]
+pub enum SimulatedDrive {
+    /// Eq. 3.
+    Torque(SimulatedPlant),
+    /// A velocity base.
+    Velocity(SimulatedVelocityBase),
+}
+
+impl SimulatedDrive {
+    /// Agent `spec`'s robot at its start, at fleet time `t0`.
+    pub fn of(spec: &AgentSpec, t0: f64, max_step: f64) -> Self {
+        match &spec.drive {
+            Drive::Torque { robot, .. } => {
+                SimulatedDrive::Torque(SimulatedPlant::new(*robot, spec.start, t0, max_step))
+            }
+            Drive::Velocity(r) => SimulatedDrive::Velocity(SimulatedVelocityBase::new(
+                r.base, spec.start, t0, max_step,
+            )),
+        }
+    }
+
+    /// The simulated state.
+    pub fn true_state(&self) -> State {
+        match self {
+            SimulatedDrive::Torque(p) => p.true_state(),
+            SimulatedDrive::Velocity(b) => b.true_state(),
+        }
+    }
+
+    fn plant(&mut self) -> &mut dyn Plant {
+        match self {
+            SimulatedDrive::Torque(p) => p,
+            SimulatedDrive::Velocity(b) => b,
+        }
+    }
+
+    fn plant_ref(&self) -> &dyn Plant {
+        match self {
+            SimulatedDrive::Torque(p) => p,
+            SimulatedDrive::Velocity(b) => b,
+        }
+    }
+}
+
+impl Plant for SimulatedDrive {
+    fn state(&self) -> Option<State> {
+        self.plant_ref().state()
+    }
+    fn advance(&mut self, t: f64) {
+        self.plant().advance(t);
+    }
+    fn command(&mut self, cmd: Command) -> Actuation {
+        self.plant().command(cmd)
+    }
+    fn stop(&mut self) {
+        self.plant().stop();
+    }
+    fn accelerations(&self) -> (f64, f64) {
+        self.plant_ref().accelerations()
+    }
+    fn set_time(&mut self, t: f64) {
+        self.plant().set_time(t);
     }
 }
 
@@ -109,7 +301,7 @@ mod tests {
         let p = RobotParams::AGENT2;
         let mut a = SimulatedPlant::new(p, State::at_rest(0.0, 0.0, 0.5), 0.0, 1e-3);
         let mut b = a.clone();
-        let u = Input { u1: 30.0, u2: 1.0 };
+        let u = Command::Torque(Input { u1: 30.0, u2: 1.0 });
         a.command(u);
         b.command(u);
         a.advance(0.1);
@@ -122,5 +314,57 @@ mod tests {
         // Going back in time does nothing.
         a.advance(0.05);
         assert_eq!(a.true_state(), sa);
+    }
+
+    /// The fleet's base is the simulator's: an ideal base turns exactly on
+    /// the commanded circle; a lagged one approaches the command as
+    /// `1 − e^{−t/τ}` (its closed form) while staying within its limits.
+    #[test]
+    fn a_velocity_base_follows_its_command_as_the_model_says() {
+        let ideal = VelocityBase::IDEAL;
+        let mut b = SimulatedVelocityBase::new(ideal, State::at_rest(0.0, 0.0, 0.0), 0.0, 1e-3);
+        let c = VelocityCommand { v: 0.4, omega: 0.5 };
+        let act = b.command(Command::Velocity(c));
+        assert_eq!(act.velocity, Some((c, false)));
+        b.advance(1.0);
+        let s = b.true_state();
+        let r = 0.4 / 0.5;
+        assert!((s.x - r * 0.5f64.sin()).abs() < 1e-9, "{s:?}");
+        assert!((s.y - r * (1.0 - 0.5f64.cos())).abs() < 1e-9, "{s:?}");
+        assert_eq!((s.v, s.omega), (0.4, 0.5));
+
+        let lagged = VelocityBase {
+            tau_v: 0.2,
+            tau_omega: 0.1,
+            ..VelocityBase::IDEAL
+        };
+        let mut b = SimulatedVelocityBase::new(lagged, State::at_rest(0.0, 0.0, 0.0), 0.0, 1e-3);
+        b.command(Command::Velocity(c));
+        b.advance(0.3);
+        let s = b.true_state();
+        assert!(
+            (s.v - 0.4 * (1.0 - (-0.3f64 / 0.2).exp())).abs() < 1e-9,
+            "{s:?}"
+        );
+        assert!(
+            (s.omega - 0.5 * (1.0 - (-0.3f64 / 0.1).exp())).abs() < 1e-9,
+            "{s:?}"
+        );
+        // Beyond the limits: scaled together (curvature kept), and held.
+        let limited = VelocityBase {
+            v_max: 0.2,
+            omega_max: 1.0,
+            ..lagged
+        };
+        let mut b = SimulatedVelocityBase::new(limited, State::at_rest(0.0, 0.0, 0.0), 0.0, 1e-3);
+        let act = b.command(Command::Velocity(c));
+        let (applied, saturated) = act.velocity.expect("a velocity base");
+        assert!(saturated);
+        assert_eq!(applied.v, 0.2);
+        assert!((applied.omega / applied.v - c.omega / c.v).abs() < 1e-12);
+        b.advance(5.0);
+        assert!(b.true_state().v <= 0.2);
+        b.stop();
+        assert_eq!(b.applied(), VelocityCommand::default());
     }
 }

@@ -28,7 +28,6 @@ use zenoh::Wait;
 use echelon::control::LeaderMotion;
 use echelon::follow::{LeaderView, follow};
 use echelon::formation::Leader;
-use echelon::model::Input;
 use echelon::scenario::{FleetSettings, LinkLoss, Overrides, Scenario};
 use echelon::sim::AgentSpec;
 
@@ -37,7 +36,7 @@ use crate::faults::{FaultInjector, FaultSpec, Verdict};
 use crate::keys::{Keys, robot_role};
 use crate::link::{Counters, LeaderSample, StreamTracker, predict};
 use crate::net::{self, NetOptions};
-use crate::plant::{Plant, SimulatedPlant};
+use crate::plant::{Command, Plant, SimulatedDrive};
 use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
 use crate::{FleetError, StopFlag};
 
@@ -238,7 +237,7 @@ fn sample_of(msg: &Message, leader: Leader) -> Option<(Header, LeaderSample)> {
 /// into fleet time, which is the leader's: the first message of the leader
 /// stream (or a restarted leader's) sets it.
 #[derive(Debug, Clone)]
-pub struct Robot<P: Plant = SimulatedPlant> {
+pub struct Robot<P: Plant = SimulatedDrive> {
     config: RobotConfig,
     plant: P,
     source: u32,
@@ -258,17 +257,11 @@ pub struct Robot<P: Plant = SimulatedPlant> {
     last: RobotState,
 }
 
-impl Robot<SimulatedPlant> {
-    /// A robot on the simulated plant (eq. 3) starting at its spec's start.
+impl Robot<SimulatedDrive> {
+    /// A robot on its simulated drive (eq. 3, or its velocity base) starting
+    /// at its spec's start.
     pub fn simulated(config: RobotConfig, source: u32) -> Self {
-        // `Scenario::fleet` refuses velocity bases, so every fleet agent has a
-        // torque plant.
-        let robot = config
-            .spec
-            .torque_robot()
-            .copied()
-            .unwrap_or(echelon::RobotParams::AGENT1);
-        let plant = SimulatedPlant::new(robot, config.spec.start, 0.0, PLANT_STEP);
+        let plant = SimulatedDrive::of(&config.spec, 0.0, PLANT_STEP);
         Robot::new(config, plant, source)
     }
 }
@@ -466,7 +459,10 @@ impl<P: Plant> Robot<P> {
                         turn_rate: p.turn_rate,
                     },
                 );
-                let act = self.plant.command(out.law.u);
+                let act = self.plant.command(match out.velocity {
+                    Some(c) => Command::Velocity(c),
+                    None => Command::Torque(out.law.u),
+                });
                 let (dv, domega) = self.plant.accelerations();
                 self.last = RobotState {
                     t: now,
@@ -513,11 +509,11 @@ impl<P: Plant> Robot<P> {
     }
 
     /// Commands zero: the one place where losing the leader, the odometry or
-    /// the process stops the drive. (On the simulated plant the command is
-    /// held until the next one.)
+    /// the process stops the drive ([`Plant::stop`]: zero torques, or a zero
+    /// `cmd_vel` sent at once). The command is held until the next one.
     pub fn halt(&mut self, why: Halt) {
         let _ = why;
-        self.plant.command(Input::default());
+        self.plant.stop();
     }
 
     /// The process is stopping: commands zero and returns the final counters.
@@ -657,7 +653,9 @@ mod tests {
     use super::*;
     use crate::leader::Leader as LeaderTask;
     use crate::link::predict;
+    use crate::plant::SimulatedPlant;
     use echelon::follow::LeaderView;
+    use echelon::model::Input;
     use echelon::model::State;
     use echelon::reference::{Order, Reference, Trajectory};
 
@@ -845,6 +843,46 @@ mod tests {
             // 100 Hz for 30 s.
             assert!((2990..=3001).contains(&rep.ticks), "{rep:?}");
             conserved(r);
+        }
+    }
+
+    /// Velocity bases in the fleet: both robots on a lagged, limited base
+    /// under the kinematic law converge, and end where the simulator's
+    /// continuous-time run of the same scenario ends (the fleet samples the
+    /// law at 100 Hz and sees the reference at 50 Hz).
+    #[test]
+    fn velocity_bases_converge_where_the_simulator_does() {
+        let src = FAST_CIRCLE
+            .replace("robot = \"agent1\"", "robot = \"base\"")
+            .replace("robot = \"agent2\"", "robot = \"base\"")
+            + "\n[robots.base]\ndrive = \"velocity\"\ntau_v = 0.05\ntau_omega = 0.04\nv_max = 0.5\nomega_max = 2.0\na_max = 1.0\nalpha_max = 4.0\n";
+        let s = Scenario::parse(&src, "test", None).unwrap_or_else(|e| panic!("{e}"));
+        let mut w = World::new(
+            &s,
+            vec![
+                robot(&s, 1, FaultSpec::default()),
+                robot(&s, 2, FaultSpec::default()),
+            ],
+        );
+        w.run_until(30.0);
+        let mut sim = s
+            .build(&Overrides::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .simulation;
+        sim.run(&mut |_: &echelon::sim::Frame<'_>| Ok(()))
+            .unwrap_or_else(|e| panic!("{e}"));
+        for (i, r) in w.robots.iter().enumerate() {
+            let rep = r.report();
+            assert!(rep.final_error < 1e-3, "agent {}: {rep:?}", i + 1);
+            let end = r.plant().true_state();
+            let want = sim.states()[i];
+            assert!(
+                dist(&end, &want) < 5e-3,
+                "agent {}: {end:?} vs {want:?}",
+                i + 1
+            );
+            assert!(end.v.abs() <= 0.5 && end.omega.abs() <= 2.0);
+            assert!(r.last().u == Input::default() && r.last().tau == Default::default());
         }
     }
 
@@ -1223,6 +1261,13 @@ mod tests {
         commanded: Input,
     }
 
+    fn torque(cmd: Command) -> Input {
+        match cmd {
+            Command::Torque(u) => u,
+            Command::Velocity(_) => panic!("a torque-driven robot got a velocity command"),
+        }
+    }
+
     impl Plant for Flaky {
         fn state(&self) -> Option<State> {
             (!self.lost).then(|| self.inner.true_state())
@@ -1230,9 +1275,13 @@ mod tests {
         fn advance(&mut self, t: f64) {
             self.inner.advance(t);
         }
-        fn command(&mut self, u: Input) -> crate::plant::Actuation {
-            self.commanded = u;
-            self.inner.command(u)
+        fn command(&mut self, cmd: Command) -> crate::plant::Actuation {
+            self.commanded = torque(cmd);
+            self.inner.command(cmd)
+        }
+        fn stop(&mut self) {
+            self.commanded = Input::default();
+            self.inner.stop();
         }
         fn accelerations(&self) -> (f64, f64) {
             self.inner.accelerations()

@@ -44,6 +44,8 @@ def plain(value):
         return struct.unpack("<Q", struct.pack("<d", value))[0]
     if isinstance(value, (bool, int, str)) or value is None:
         return value
+    if hasattr(value, "tolist"):
+        value = value.tolist()
     if isinstance(value, (list, tuple)):
         return [plain(v) for v in value]
     if hasattr(value, "__slots__"):

@@ -188,6 +188,10 @@ pub struct Collector {
     agents: BTreeMap<u32, AgentRecord>,
 }
 
+fn bump(counts: &mut BTreeMap<String, u64>, name: &str) {
+    *counts.entry(name.to_owned()).or_insert(0) += 1;
+}
+
 fn hex(bytes: &[u8]) -> String {
     let mut s = String::with_capacity(2 * bytes.len().min(1024));
     for b in bytes.iter().take(1024) {
@@ -250,12 +254,7 @@ impl Collector {
         now: u64,
         sink: &mut impl RecordSink,
     ) -> Result<(), FleetError> {
-        self.report.received += 1;
-        *self
-            .report
-            .received_by_key
-            .entry(key.to_owned())
-            .or_insert(0) += 1;
+        self.count_received(key);
         let Some(i) = self.ros.iter().position(|t| t.owns(key)) else {
             self.report.ros_refused += 1;
             return self.reject(sink, key, "ROS: key of no recorded topic", bytes, now);
@@ -266,13 +265,9 @@ impl Collector {
         }
         let topic = &self.ros[i];
         sink.log_ros(topic, now, record::publish_time(attachment, now), bytes)?;
+        let name = topic.topic().to_owned();
         self.report.ros_recorded += 1;
-        self.report.logged += 1;
-        *self
-            .report
-            .logged_by_topic
-            .entry(topic.topic().to_owned())
-            .or_insert(0) += 1;
+        self.count_logged(&name);
         Ok(())
     }
 
@@ -291,13 +286,18 @@ impl Collector {
         data: &[u8],
     ) -> Result<(), FleetError> {
         sink.log(topic, schema, now, publish_time, data)?;
-        self.report.logged += 1;
-        *self
-            .report
-            .logged_by_topic
-            .entry(topic.to_owned())
-            .or_insert(0) += 1;
+        self.count_logged(topic);
         Ok(())
+    }
+
+    fn count_logged(&mut self, topic: &str) {
+        self.report.logged += 1;
+        bump(&mut self.report.logged_by_topic, topic);
+    }
+
+    fn count_received(&mut self, key: &str) {
+        self.report.received += 1;
+        bump(&mut self.report.received_by_key, key);
     }
 
     fn reject(
@@ -308,7 +308,7 @@ impl Collector {
         bytes: &[u8],
         now: u64,
     ) -> Result<(), FleetError> {
-        *self.report.rejected.entry(reason.to_owned()).or_insert(0) += 1;
+        bump(&mut self.report.rejected, reason);
         let record = serde_json::json!({
             "key": key, "reason": reason, "size": bytes.len(), "hex": hex(bytes),
         });
@@ -326,12 +326,7 @@ impl Collector {
         now: u64,
         sink: &mut impl RecordSink,
     ) -> Result<(), FleetError> {
-        self.report.received += 1;
-        *self
-            .report
-            .received_by_key
-            .entry(key.to_owned())
-            .or_insert(0) += 1;
+        self.count_received(key);
         let kind = self.keys.classify(key);
         if let KeyKind::Stats(k) = kind {
             return match serde_json::from_slice::<serde_json::Value>(bytes) {
@@ -492,10 +487,7 @@ impl RecordSink for FileSink {
         data: &[u8],
     ) -> Result<(), FleetError> {
         let id = self.log.channel(topic, schema)?;
-        let seq = self.seq.entry(id).or_insert(0);
-        self.log.write(id, *seq, log_time, publish_time, data)?;
-        *seq = seq.wrapping_add(1);
-        Ok(())
+        self.write(id, log_time, publish_time, data)
     }
 
     fn log_ros(
@@ -508,10 +500,7 @@ impl RecordSink for FileSink {
         let id =
             self.log
                 .ros2_channel(topic.topic(), &topic.schema(), topic.offered_qos_profiles())?;
-        let seq = self.seq.entry(id).or_insert(0);
-        self.log.write(id, *seq, log_time, publish_time, data)?;
-        *seq = seq.wrapping_add(1);
-        Ok(())
+        self.write(id, log_time, publish_time, data)
     }
 
     fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError> {
@@ -521,6 +510,20 @@ impl RecordSink for FileSink {
 }
 
 impl FileSink {
+    /// Writes one message on channel `id` with the channel's next sequence number.
+    fn write(
+        &mut self,
+        id: u16,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        let seq = self.seq.entry(id).or_insert(0);
+        self.log.write(id, *seq, log_time, publish_time, data)?;
+        *seq = seq.wrapping_add(1);
+        Ok(())
+    }
+
     /// Creates `out` if needed and the files [`MCAP_FILE`] and
     /// [`TRAJECTORY_FILE`] in it (truncated).
     pub fn create(out: &std::path::Path) -> Result<FileSink, FleetError> {

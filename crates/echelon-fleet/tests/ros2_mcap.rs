@@ -34,12 +34,14 @@ use echelon_fleet::ros2::definitions::{
 use echelon_fleet::ros2::keys::{KeyScheme, topic_key};
 use echelon_fleet::ros2::liveliness::{History, Qos};
 use echelon_fleet::ros2::msgs::{
-    Header, ODOMETRY, Odometry, Quaternion, RosMessage, TWIST, TWIST_STAMPED, Time, Twist,
-    TwistStamped, Vector3,
+    ODOMETRY, Odometry, RosMessage, TWIST, TWIST_STAMPED, Time, Twist, TwistStamped,
 };
 use echelon_fleet::ros2::record::RosTopic;
 use echelon_fleet::wire;
-use serde_json::{Value, json};
+use serde_json::Value;
+
+mod common;
+use common::{odometry, twist, twist_stamped};
 use zenoh::Wait;
 
 const INSTALL_HINT: &str = "the ROS 2 MCAP tests need python3 (3.11) with mcap-ros2-support \
@@ -109,45 +111,6 @@ fn a_missing_interpreter_is_reported_with_what_to_install() {
     let err = try_run_script(&python(), "read_mcap.py", &["/nonexistent.mcap"])
         .expect_err("no such file");
     assert!(err.contains("nonexistent.mcap"), "{err}");
-}
-
-// Values as read_mcap.py writes them: every float64 as its bit pattern.
-
-fn f(x: f64) -> Value {
-    Value::from(x.to_bits())
-}
-
-fn vec3(v: &Vector3) -> Value {
-    json!({"x": f(v.x), "y": f(v.y), "z": f(v.z)})
-}
-
-fn quat(q: &Quaternion) -> Value {
-    json!({"x": f(q.x), "y": f(q.y), "z": f(q.z), "w": f(q.w)})
-}
-
-fn header(h: &Header) -> Value {
-    json!({"stamp": {"sec": h.stamp.sec, "nanosec": h.stamp.nanosec}, "frame_id": h.frame_id})
-}
-
-fn twist(t: &Twist) -> Value {
-    json!({"linear": vec3(&t.linear), "angular": vec3(&t.angular)})
-}
-
-fn twist_stamped(t: &TwistStamped) -> Value {
-    json!({"header": header(&t.header), "twist": twist(&t.twist)})
-}
-
-fn odometry(o: &Odometry) -> Value {
-    let cov = |c: &[f64; 36]| Value::from(c.iter().map(|&x| f(x)).collect::<Vec<_>>());
-    json!({
-        "header": header(&o.header),
-        "child_frame_id": o.child_frame_id,
-        "pose": {
-            "pose": {"position": vec3(&o.pose.pose.position), "orientation": quat(&o.pose.pose.orientation)},
-            "covariance": cov(&o.pose.covariance),
-        },
-        "twist": {"twist": twist(&o.twist.twist), "covariance": cov(&o.twist.covariance)},
-    })
 }
 
 /// One message the test expects on a ROS channel.
@@ -305,30 +268,18 @@ fn collector_ros_channels_decode_in_mcap_ros2_support() {
         });
         // Refused on the way: a Twist on robot1's TwistStamped topic,
         // truncated odometry, garbage.
-        feed(
-            &mut c,
-            &mut sink,
-            &mut now,
-            &key("/robot1", "cmd_vel", &TWIST),
-            &Twist::planar(1.0, 1.0).to_cdr(),
-            None,
-        );
-        feed(
-            &mut c,
-            &mut sink,
-            &mut now,
-            &key("/robot1", "odom", &ODOMETRY),
-            &odom.to_cdr()[..100],
-            None,
-        );
-        feed(
-            &mut c,
-            &mut sink,
-            &mut now,
-            &key("/robot1", "odom", &ODOMETRY),
-            b"junk",
-            None,
-        );
+        let odom_cdr = odom.to_cdr();
+        let refused: [(String, &[u8]); 3] = [
+            (
+                key("/robot1", "cmd_vel", &TWIST),
+                &Twist::planar(1.0, 1.0).to_cdr(),
+            ),
+            (key("/robot1", "odom", &ODOMETRY), &odom_cdr[..100]),
+            (key("/robot1", "odom", &ODOMETRY), b"junk"),
+        ];
+        for (k, bytes) in &refused {
+            feed(&mut c, &mut sink, &mut now, k, bytes, None);
+        }
         // The fleet's own traffic goes on as before.
         let mut reference = Vec::new();
         wire::encode_reference(

@@ -7,6 +7,15 @@
 //! the bytes. Robot states (once started) also go to `trajectory.csv` with the
 //! simulator's header. On SIGINT/SIGTERM it stops listening, logs what is still
 //! queued, and closes valid files.
+//!
+//! Given ROS 2 topics ([`RosTopic`], e.g. every robot's `cmd_vel` and
+//! `odom`), it also records them as `ros2 bag record -s mcap` does: one
+//! channel per topic named like it (`/robot1/cmd_vel`), the raw CDR bytes as
+//! received, schema `ros2msg` with the full message definition, `log_time`
+//! the receipt time and `publish_time` the rmw_zenoh attachment's source
+//! timestamp. Whoever published them (echelon or a real robot), a sample of
+//! the wrong type (key) or with an invalid CDR payload is refused: counted
+//! and logged on `/rejected` instead.
 
 use std::borrow::Cow;
 use std::collections::BTreeMap;
@@ -28,6 +37,7 @@ use echelon_mcap::{
 
 use crate::keys::{KeyKind, Keys};
 use crate::net::{self, NetOptions};
+use crate::ros2::record::{self, RosTopic, RosTopicError};
 use crate::wire::{self, DecodeError, LinkStatus, Message, RobotState};
 use crate::{FleetError, StopFlag, unix_nanos};
 
@@ -133,6 +143,11 @@ pub struct CollectorReport {
     pub logged_by_topic: BTreeMap<String, u64>,
     /// Rejected samples per reason.
     pub rejected: BTreeMap<String, u64>,
+    /// ROS 2 samples recorded on their topic's channel.
+    pub ros_recorded: u64,
+    /// ROS 2 samples refused (wrong type or hash on the key, invalid CDR,
+    /// a key of no recorded topic); also counted in `rejected` by reason.
+    pub ros_refused: u64,
     /// Per agent.
     pub agents: Vec<AgentRecord>,
 }
@@ -149,6 +164,15 @@ pub trait RecordSink {
         publish_time: u64,
         data: &[u8],
     ) -> Result<(), FleetError>;
+    /// Logs one ROS 2 message (CDR bytes as received) on the channel of
+    /// `topic` (received at UNIX ns `log_time`, published at `publish_time`).
+    fn log_ros(
+        &mut self,
+        topic: &RosTopic,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError>;
     /// Appends one `trajectory.csv` row.
     fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError>;
 }
@@ -159,8 +183,13 @@ pub trait RecordSink {
 /// opens no file.
 pub struct Collector {
     keys: Keys,
+    ros: Vec<RosTopic>,
     report: CollectorReport,
     agents: BTreeMap<u32, AgentRecord>,
+}
+
+fn bump(counts: &mut BTreeMap<String, u64>, name: &str) {
+    *counts.entry(name.to_owned()).or_insert(0) += 1;
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -175,6 +204,7 @@ impl std::fmt::Debug for Collector {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Collector")
             .field("keys", &self.keys)
+            .field("ros", &self.ros)
             .field("report", &self.report)
             .finish_non_exhaustive()
     }
@@ -185,12 +215,60 @@ impl Collector {
     pub fn new(keys: Keys) -> Collector {
         Collector {
             keys,
+            ros: Vec::new(),
             report: CollectorReport {
                 role: "collector",
                 ..CollectorReport::default()
             },
             agents: BTreeMap::new(),
         }
+    }
+
+    /// A collector of fleet `keys` that also records the ROS 2 topics
+    /// `ros` ([`Collector::on_ros_sample`]). Refused: a topic listed twice,
+    /// or named like one of echelon's channels.
+    pub fn with_ros2(keys: Keys, ros: Vec<RosTopic>) -> Result<Collector, RosTopicError> {
+        record::check_topics(&ros)?;
+        Ok(Collector {
+            ros,
+            ..Collector::new(keys)
+        })
+    }
+
+    /// The ROS 2 topics it records.
+    pub fn ros_topics(&self) -> &[RosTopic] {
+        &self.ros
+    }
+
+    /// Records a ROS 2 sample that arrived on `key` at UNIX ns `now`, with
+    /// its Zenoh attachment if any: exactly one MCAP message, on the
+    /// channel of the topic that owns `key` if the key names the topic's
+    /// type and hash and the payload is a valid CDR message of that type
+    /// (logged as received, `publish_time` the attachment's source
+    /// timestamp, else `now`), otherwise on `/rejected` with the reason.
+    pub fn on_ros_sample(
+        &mut self,
+        key: &str,
+        bytes: &[u8],
+        attachment: Option<&[u8]>,
+        now: u64,
+        sink: &mut impl RecordSink,
+    ) -> Result<(), FleetError> {
+        self.count_received(key);
+        let Some(i) = self.ros.iter().position(|t| t.owns(key)) else {
+            self.report.ros_refused += 1;
+            return self.reject(sink, key, "ROS: key of no recorded topic", bytes, now);
+        };
+        if let Err(refusal) = self.ros[i].check(key, bytes) {
+            self.report.ros_refused += 1;
+            return self.reject(sink, key, refusal.reason(), bytes, now);
+        }
+        let topic = &self.ros[i];
+        sink.log_ros(topic, now, record::publish_time(attachment, now), bytes)?;
+        let name = topic.topic().to_owned();
+        self.report.ros_recorded += 1;
+        self.count_logged(&name);
+        Ok(())
     }
 
     /// What it counted so far (`agents` is filled by [`Collector::finish`]).
@@ -208,13 +286,18 @@ impl Collector {
         data: &[u8],
     ) -> Result<(), FleetError> {
         sink.log(topic, schema, now, publish_time, data)?;
-        self.report.logged += 1;
-        *self
-            .report
-            .logged_by_topic
-            .entry(topic.to_owned())
-            .or_insert(0) += 1;
+        self.count_logged(topic);
         Ok(())
+    }
+
+    fn count_logged(&mut self, topic: &str) {
+        self.report.logged += 1;
+        bump(&mut self.report.logged_by_topic, topic);
+    }
+
+    fn count_received(&mut self, key: &str) {
+        self.report.received += 1;
+        bump(&mut self.report.received_by_key, key);
     }
 
     fn reject(
@@ -225,7 +308,7 @@ impl Collector {
         bytes: &[u8],
         now: u64,
     ) -> Result<(), FleetError> {
-        *self.report.rejected.entry(reason.to_owned()).or_insert(0) += 1;
+        bump(&mut self.report.rejected, reason);
         let record = serde_json::json!({
             "key": key, "reason": reason, "size": bytes.len(), "hex": hex(bytes),
         });
@@ -243,12 +326,7 @@ impl Collector {
         now: u64,
         sink: &mut impl RecordSink,
     ) -> Result<(), FleetError> {
-        self.report.received += 1;
-        *self
-            .report
-            .received_by_key
-            .entry(key.to_owned())
-            .or_insert(0) += 1;
+        self.count_received(key);
         let kind = self.keys.classify(key);
         if let KeyKind::Stats(k) = kind {
             return match serde_json::from_slice::<serde_json::Value>(bytes) {
@@ -382,12 +460,21 @@ impl Collector {
     }
 }
 
-/// The collector's files: `fleet.mcap` and `trajectory.csv`.
-struct FileSink {
+/// The collector's files: `fleet.mcap` and `trajectory.csv` in a directory.
+pub struct FileSink {
     log: McapLog<BufWriter<File>>,
     seq: BTreeMap<u16, u32>,
     csv: CsvWriter<BufWriter<File>>,
     csv_path: PathBuf,
+}
+
+impl std::fmt::Debug for FileSink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FileSink")
+            .field("log", &self.log)
+            .field("csv_path", &self.csv_path)
+            .finish_non_exhaustive()
+    }
 }
 
 impl RecordSink for FileSink {
@@ -400,10 +487,20 @@ impl RecordSink for FileSink {
         data: &[u8],
     ) -> Result<(), FleetError> {
         let id = self.log.channel(topic, schema)?;
-        let seq = self.seq.entry(id).or_insert(0);
-        self.log.write(id, *seq, log_time, publish_time, data)?;
-        *seq = seq.wrapping_add(1);
-        Ok(())
+        self.write(id, log_time, publish_time, data)
+    }
+
+    fn log_ros(
+        &mut self,
+        topic: &RosTopic,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        let id =
+            self.log
+                .ros2_channel(topic.topic(), &topic.schema(), topic.offered_qos_profiles())?;
+        self.write(id, log_time, publish_time, data)
     }
 
     fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError> {
@@ -413,43 +510,119 @@ impl RecordSink for FileSink {
 }
 
 impl FileSink {
-    fn finish(mut self) -> Result<(), FleetError> {
+    /// Writes one message on channel `id` with the channel's next sequence number.
+    fn write(
+        &mut self,
+        id: u16,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        let seq = self.seq.entry(id).or_insert(0);
+        self.log.write(id, *seq, log_time, publish_time, data)?;
+        *seq = seq.wrapping_add(1);
+        Ok(())
+    }
+
+    /// Creates `out` if needed and the files [`MCAP_FILE`] and
+    /// [`TRAJECTORY_FILE`] in it (truncated).
+    pub fn create(out: &std::path::Path) -> Result<FileSink, FleetError> {
+        std::fs::create_dir_all(out).map_err(FleetError::io(out))?;
+        let mcap_path = out.join(MCAP_FILE);
+        let csv_path = out.join(TRAJECTORY_FILE);
+        let log = McapLog::create(&mcap_path)?;
+        let file = File::create(&csv_path).map_err(FleetError::io(&csv_path))?;
+        let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), TRAJECTORY_HEADER)
+            .map_err(FleetError::io(&csv_path))?;
+        Ok(FileSink {
+            log,
+            seq: BTreeMap::new(),
+            csv,
+            csv_path,
+        })
+    }
+
+    /// Closes both files (MCAP summary and footer written).
+    pub fn finish(mut self) -> Result<(), FleetError> {
         self.log.finish()?;
         self.csv.flush().map_err(FleetError::io(&self.csv_path))
     }
 }
 
+/// One sample as the driver's subscriptions hand it over.
+struct Received {
+    key: String,
+    payload: Vec<u8>,
+    /// `Some` for a sample of a ROS 2 subscription: its attachment, if any.
+    ros: Option<Option<Vec<u8>>>,
+}
+
+impl Received {
+    fn record(
+        &self,
+        collector: &mut Collector,
+        sink: &mut FileSink,
+        now: u64,
+    ) -> Result<(), FleetError> {
+        match &self.ros {
+            None => collector.on_message(&self.key, &self.payload, now, sink),
+            Some(attachment) => {
+                collector.on_ros_sample(&self.key, &self.payload, attachment.as_deref(), now, sink)
+            }
+        }
+    }
+}
+
 /// Records until the stop flag (or `max_wall`), then closes the files: the
-/// Zenoh driver of [`Collector`].
+/// Zenoh driver of [`Collector`] (no ROS 2 topics; see [`run_with_ros2`]).
 pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, FleetError> {
-    std::fs::create_dir_all(&opts.out).map_err(FleetError::io(&opts.out))?;
+    run_with_ros2(opts, Vec::new(), stop)
+}
+
+/// [`run`], also recording the ROS 2 topics `ros` (one Zenoh subscription
+/// per topic, on [`RosTopic::key_expr`]).
+pub fn run_with_ros2(
+    opts: CollectorOptions,
+    ros: Vec<RosTopic>,
+    stop: &StopFlag,
+) -> Result<CollectorReport, FleetError> {
     let keys = Keys::new(&opts.fleet);
-    let mcap_path = opts.out.join(MCAP_FILE);
-    let csv_path = opts.out.join(TRAJECTORY_FILE);
-    let log = McapLog::create(&mcap_path)?;
-    let file = File::create(&csv_path).map_err(FleetError::io(&csv_path))?;
-    let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), TRAJECTORY_HEADER)
-        .map_err(FleetError::io(&csv_path))?;
-    let mut sink = FileSink {
-        log,
-        seq: BTreeMap::new(),
-        csv,
-        csv_path,
-    };
-    let mut collector = Collector::new(keys.clone());
+    let mut collector =
+        Collector::with_ros2(keys.clone(), ros).map_err(|e| FleetError::Config(e.to_string()))?;
+    let mut sink = FileSink::create(&opts.out)?;
 
     let session = net::open(&opts.net)?;
-    let (tx, rx) = mpsc::channel::<(String, Vec<u8>)>();
+    let (tx, rx) = mpsc::channel::<Received>();
+    let fleet_tx = tx.clone();
     let subscriber = session
         .declare_subscriber(keys.everything())
         .callback(move |s| {
-            let _ = tx.send((
-                s.key_expr().as_str().to_owned(),
-                s.payload().to_bytes().into_owned(),
-            ));
+            let _ = fleet_tx.send(Received {
+                key: s.key_expr().as_str().to_owned(),
+                payload: s.payload().to_bytes().into_owned(),
+                ros: None,
+            });
         })
         .wait()
         .map_err(|e| FleetError::Zenoh(format!("subscribing: {e}")))?;
+    let mut ros_subscribers = Vec::with_capacity(collector.ros_topics().len());
+    for topic in collector.ros_topics() {
+        let tx = tx.clone();
+        let key_expr = topic.key_expr();
+        let sub = session
+            .declare_subscriber(key_expr.clone())
+            .callback(move |s| {
+                let _ = tx.send(Received {
+                    key: s.key_expr().as_str().to_owned(),
+                    payload: s.payload().to_bytes().into_owned(),
+                    ros: Some(s.attachment().map(|a| a.to_bytes().into_owned())),
+                });
+            })
+            .wait()
+            .map_err(|e| FleetError::Zenoh(format!("subscribing to {key_expr}: {e}")))?;
+        ros_subscribers.push(sub);
+    }
+    drop(tx);
     let token = session
         .liveliness()
         .declare_token(keys.alive("collector"))
@@ -459,7 +632,7 @@ pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, F
     let started = std::time::Instant::now();
     while !stop.is_raised() && opts.max_wall.is_none_or(|m| started.elapsed() < m) {
         match rx.recv_timeout(Duration::from_millis(50)) {
-            Ok((key, bytes)) => collector.on_message(&key, &bytes, unix_nanos(), &mut sink)?,
+            Ok(sample) => sample.record(&mut collector, &mut sink, unix_nanos())?,
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
         }
@@ -467,9 +640,12 @@ pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, F
     // Stop listening, then log everything that had already arrived.
     drop(token);
     let _ = subscriber.undeclare().wait();
+    for sub in ros_subscribers {
+        let _ = sub.undeclare().wait();
+    }
     let _ = session.close().wait();
-    while let Ok((key, bytes)) = rx.try_recv() {
-        collector.on_message(&key, &bytes, unix_nanos(), &mut sink)?;
+    while let Ok(sample) = rx.try_recv() {
+        sample.record(&mut collector, &mut sink, unix_nanos())?;
     }
     sink.finish()?;
     let report = collector.finish();
@@ -501,6 +677,22 @@ mod tests {
         ) -> Result<(), FleetError> {
             self.logged
                 .push((topic.to_owned(), log_time, publish_time, data.to_vec()));
+            Ok(())
+        }
+
+        fn log_ros(
+            &mut self,
+            topic: &RosTopic,
+            log_time: u64,
+            publish_time: u64,
+            data: &[u8],
+        ) -> Result<(), FleetError> {
+            self.logged.push((
+                topic.topic().to_owned(),
+                log_time,
+                publish_time,
+                data.to_vec(),
+            ));
             Ok(())
         }
 
@@ -606,5 +798,89 @@ mod tests {
         assert_eq!((a.agent, a.messages, a.rows), (1, 2, 1));
         assert!((a.final_error - 5e-3).abs() < 1e-15);
         assert_eq!(a.link, "waiting");
+    }
+
+    /// ROS samples of the recorded topics are logged as received on their
+    /// topic's channel; a wrong type, a wrong hash, bad CDR or a foreign key
+    /// goes to `/rejected`, counted as refused; every sample once.
+    #[test]
+    fn ros_samples_are_recorded_as_received_or_refused_with_their_reason() {
+        use crate::ros2::attachment::Attachment;
+        use crate::ros2::keys::{KeyScheme, topic_key};
+        use crate::ros2::msgs::{ODOMETRY, TWIST, TWIST_STAMPED, Time, TwistStamped};
+        use crate::ros2::{Odometry, RosMessage};
+
+        let scheme = KeyScheme::RmwZenoh;
+        let mut topics = RosTopic::robot(scheme, 0, "/robot1", TWIST_STAMPED)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .to_vec();
+        let mut c =
+            Collector::with_ros2(Keys::new("f"), topics.clone()).unwrap_or_else(|e| panic!("{e}"));
+        let mut sink = Memory::default();
+        let cmd_key = topic_key(scheme, 0, "/robot1/cmd_vel", &TWIST_STAMPED);
+        let odom_key = topic_key(scheme, 0, "/robot1/odom", &ODOMETRY);
+        let cmd = TwistStamped::planar(0.3, 0.1, Time::from_nanos(5), "base_link").to_cdr();
+        let odom = Odometry::planar(
+            1.0,
+            2.0,
+            0.5,
+            0.3,
+            0.1,
+            Time::default(),
+            "odom",
+            "base_link",
+        )
+        .to_cdr();
+        let attachment = Attachment {
+            sequence_number: 1,
+            source_timestamp_ns: 777,
+            gid: [0; 16],
+        }
+        .encode();
+        let wrong_type = topic_key(scheme, 0, "/robot1/cmd_vel", &TWIST);
+        let wrong_hash = format!("0/robot1/odom/{}/RIHS01_00", ODOMETRY.dds_name());
+        // (key, payload, attachment)
+        type Sample<'a> = (String, &'a [u8], Option<&'a [u8]>);
+        let inputs: Vec<Sample<'_>> = vec![
+            (cmd_key.clone(), &cmd, Some(&attachment)),
+            (odom_key.clone(), &odom, None),
+            (odom_key.clone(), &odom[..odom.len() - 3], None),
+            (wrong_type, &cmd, None),
+            (wrong_hash, &odom, None),
+            (cmd_key.clone(), &[0xff; 8], None),
+            ("0/robot2/odom/x/y".to_owned(), &odom, None),
+        ];
+        for (i, (key, bytes, att)) in inputs.iter().enumerate() {
+            c.on_ros_sample(key, bytes, *att, 100 + i as u64, &mut sink)
+                .unwrap_or_else(|e| panic!("{e}"));
+        }
+        let report = c.finish();
+        assert_eq!(report.received, inputs.len() as u64);
+        assert_eq!(report.logged, report.received);
+        assert_eq!((report.ros_recorded, report.ros_refused), (2, 5));
+        assert_eq!(
+            sink.logged[0],
+            ("/robot1/cmd_vel".to_owned(), 100, 777, cmd.clone())
+        );
+        assert_eq!(sink.logged[1], ("/robot1/odom".to_owned(), 101, 101, odom));
+        let rejected: Vec<(&str, u64)> = report
+            .rejected
+            .iter()
+            .map(|(r, n)| (r.as_str(), *n))
+            .collect();
+        assert_eq!(
+            rejected,
+            [
+                ("ROS: key of no recorded topic", 1),
+                ("ROS: malformed CDR for the topic's type", 1),
+                ("ROS: not CDR little-endian", 1),
+                ("ROS: wrong message type on the key", 1),
+                ("ROS: wrong type hash on the key", 1),
+            ]
+        );
+        assert_eq!(report.logged_by_topic[REJECTED_TOPIC], 5);
+        // A topic twice is refused.
+        topics.push(topics[0].clone());
+        assert!(Collector::with_ros2(Keys::new("f"), topics).is_err());
     }
 }

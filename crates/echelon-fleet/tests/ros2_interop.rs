@@ -24,6 +24,9 @@ use echelon_fleet::ros2::msgs::{
 };
 use serde_json::{Value, json};
 
+mod common;
+use common::{odometry, twist, twist_stamped};
+
 const INSTALL_HINT: &str = "the ROS 2 interop tests need python3 (3.11) with the ROS 2 Jazzy \
     wheels: run `scripts/test` (it installs scripts/requirements-ros2.txt), or \
     `python3 -m pip install -r scripts/requirements-ros2.txt` (ros-jazzy-rclpy[fastrtps], \
@@ -74,48 +77,6 @@ fn rclpy(command: &str, input: Option<&Value>) -> Value {
         Ok(v) => v,
         Err(e) => panic!("{e}"),
     }
-}
-
-// Values as the helper writes them: every float64 as its bit pattern.
-
-fn f(x: f64) -> Value {
-    Value::from(x.to_bits())
-}
-
-fn vec3(v: &Vector3) -> Value {
-    json!({"x": f(v.x), "y": f(v.y), "z": f(v.z)})
-}
-
-fn quat(q: &Quaternion) -> Value {
-    json!({"x": f(q.x), "y": f(q.y), "z": f(q.z), "w": f(q.w)})
-}
-
-fn header(h: &Header) -> Value {
-    json!({"stamp": {"sec": h.stamp.sec, "nanosec": h.stamp.nanosec}, "frame_id": h.frame_id})
-}
-
-fn twist(t: &Twist) -> Value {
-    json!({"linear": vec3(&t.linear), "angular": vec3(&t.angular)})
-}
-
-fn twist_stamped(t: &TwistStamped) -> Value {
-    json!({"header": header(&t.header), "twist": twist(&t.twist)})
-}
-
-fn covariance(c: &[f64; 36]) -> Value {
-    Value::from(c.iter().map(|&x| f(x)).collect::<Vec<_>>())
-}
-
-fn odometry(o: &Odometry) -> Value {
-    json!({
-        "header": header(&o.header),
-        "child_frame_id": o.child_frame_id,
-        "pose": {
-            "pose": {"position": vec3(&o.pose.pose.position), "orientation": quat(&o.pose.pose.orientation)},
-            "covariance": covariance(&o.pose.covariance),
-        },
-        "twist": {"twist": twist(&o.twist.twist), "covariance": covariance(&o.twist.covariance)},
-    })
 }
 
 /// A float from a few parameters that covers signs, magnitudes and the

@@ -17,6 +17,12 @@
 //! Times: `publish_time` is the run's (or fleet's) time `t` in nanoseconds;
 //! `log_time` is `t` too for a simulation, the collector's UNIX receive time for
 //! a fleet.
+//!
+//! A fleet log may also hold ROS 2 channels ([`McapLog::ros2_channel`]):
+//! the raw CDR messages of ROS topics, written as `ros2 bag record -s mcap`
+//! writes them (schema encoding `ros2msg` with the full message definition,
+//! message encoding `cdr`, channel metadata `offered_qos_profiles` and
+//! `topic_type_hash`), so ROS 2 tools and Foxglove decode them.
 
 use std::borrow::Cow;
 use std::collections::BTreeMap;
@@ -49,6 +55,35 @@ pub enum McapLogError {
     /// A record could not be serialised.
     #[error("JSON: {0}")]
     Json(#[from] serde_json::Error),
+    /// A topic already has a channel of another schema.
+    #[error("topic `{topic}` already has schema `{registered}`, not `{requested}`")]
+    TopicSchema {
+        /// The topic.
+        topic: String,
+        /// The schema it was registered with.
+        registered: String,
+        /// The schema asked for now.
+        requested: String,
+    },
+}
+
+/// Schema encoding of ROS 2 message definitions (`.msg` text).
+pub const ROS2MSG: &str = "ros2msg";
+/// Message encoding of ROS 2 messages (CDR with its encapsulation header).
+pub const CDR: &str = "cdr";
+
+/// A ROS 2 message type as rosbag2's MCAP storage records it: the schema
+/// (name `pkg/msg/Type`, encoding [`ROS2MSG`], data the full definition
+/// text) and the type hash it puts in each channel's `topic_type_hash`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Ros2Schema {
+    /// `package/msg/Type`.
+    pub name: &'static str,
+    /// The type's `.msg` text followed by every nested type's, each after a
+    /// line of 80 `=` and a `MSG: package/Type` line.
+    pub definition: &'static str,
+    /// The RIHS01 type hash, `RIHS01_` and 64 hex digits.
+    pub type_hash: &'static str,
 }
 
 /// A named JSON Schema for a channel.
@@ -242,11 +277,13 @@ pub fn nanos(t: f64) -> u64 {
     }
 }
 
-/// An MCAP file being written: JSON channels registered by topic.
+/// An MCAP file being written: JSON and ROS 2 channels registered by topic.
 pub struct McapLog<W: Write + Seek> {
     writer: mcap::Writer<W>,
-    schemas: BTreeMap<&'static str, u16>,
-    channels: BTreeMap<String, u16>,
+    /// By (schema encoding, name).
+    schemas: BTreeMap<(&'static str, &'static str), u16>,
+    /// By topic: channel id and schema name.
+    channels: BTreeMap<String, (u16, &'static str)>,
     messages: u64,
 }
 
@@ -287,28 +324,84 @@ impl<W: Write + Seek> McapLog<W> {
     }
 
     /// The channel id of `topic` with `schema`, registering both on first use.
+    /// A topic already registered with another schema is refused.
     pub fn channel(&mut self, topic: &str, schema: &JsonSchema) -> Result<u16, McapLogError> {
-        if let Some(&id) = self.channels.get(topic) {
+        if let Some(id) = self.existing(topic, schema.name)? {
             return Ok(id);
         }
-        let schema_id = match self.schemas.get(schema.name) {
-            Some(&id) => id,
-            None => {
-                let id =
-                    self.writer
-                        .add_schema(schema.name, "jsonschema", schema.schema.as_bytes())?;
-                self.schemas.insert(schema.name, id);
-                id
-            }
-        };
-        let id = self
-            .writer
-            .add_channel(schema_id, topic, "json", &BTreeMap::new())?;
-        self.channels.insert(topic.to_owned(), id);
+        let schema_id = self.schema("jsonschema", schema.name, schema.schema.as_bytes())?;
+        self.add_channel(topic, schema.name, schema_id, "json", BTreeMap::new())
+    }
+
+    /// The channel id of the ROS 2 topic `topic` (e.g. `/robot1/cmd_vel`)
+    /// carrying `schema`, registering both on first use exactly as rosbag2's
+    /// MCAP storage does: schema `schema.name` of encoding [`ROS2MSG`] whose
+    /// data is the full definition, channel of message encoding [`CDR`] with
+    /// metadata `offered_qos_profiles` (rosbag2's YAML list of QoS profiles)
+    /// and `topic_type_hash`. A topic already registered with another schema
+    /// is refused.
+    pub fn ros2_channel(
+        &mut self,
+        topic: &str,
+        schema: &Ros2Schema,
+        offered_qos_profiles: &str,
+    ) -> Result<u16, McapLogError> {
+        if let Some(id) = self.existing(topic, schema.name)? {
+            return Ok(id);
+        }
+        let schema_id = self.schema(ROS2MSG, schema.name, schema.definition.as_bytes())?;
+        let metadata = BTreeMap::from([
+            (
+                "offered_qos_profiles".to_owned(),
+                offered_qos_profiles.to_owned(),
+            ),
+            ("topic_type_hash".to_owned(), schema.type_hash.to_owned()),
+        ]);
+        self.add_channel(topic, schema.name, schema_id, CDR, metadata)
+    }
+
+    fn existing(&self, topic: &str, schema: &str) -> Result<Option<u16>, McapLogError> {
+        match self.channels.get(topic) {
+            Some(&(id, registered)) if registered == schema => Ok(Some(id)),
+            Some(&(_, registered)) => Err(McapLogError::TopicSchema {
+                topic: topic.to_owned(),
+                registered: registered.to_owned(),
+                requested: schema.to_owned(),
+            }),
+            None => Ok(None),
+        }
+    }
+
+    fn schema(
+        &mut self,
+        encoding: &'static str,
+        name: &'static str,
+        data: &[u8],
+    ) -> Result<u16, McapLogError> {
+        if let Some(&id) = self.schemas.get(&(encoding, name)) {
+            return Ok(id);
+        }
+        let id = self.writer.add_schema(name, encoding, data)?;
+        self.schemas.insert((encoding, name), id);
         Ok(id)
     }
 
-    /// Writes one message (already JSON) on a channel.
+    fn add_channel(
+        &mut self,
+        topic: &str,
+        schema_name: &'static str,
+        schema_id: u16,
+        message_encoding: &str,
+        metadata: BTreeMap<String, String>,
+    ) -> Result<u16, McapLogError> {
+        let id = self
+            .writer
+            .add_channel(schema_id, topic, message_encoding, &metadata)?;
+        self.channels.insert(topic.to_owned(), (id, schema_name));
+        Ok(id)
+    }
+
+    /// Writes one message (already encoded: JSON, or CDR on a ROS 2 channel).
     pub fn write(
         &mut self,
         channel: u16,
@@ -648,5 +741,73 @@ mod tests {
             summary.stats.unwrap().message_count,
             frames * (agents as u64 + 1)
         );
+    }
+
+    /// A ROS 2 channel as rosbag2 writes it, next to a JSON one: schema
+    /// `ros2msg` with the definition, channel `cdr` with its metadata, the
+    /// bytes as given; one schema for two topics of a type; a topic cannot
+    /// change schema.
+    #[test]
+    fn ros2_channels_are_written_as_rosbag2_writes_them() {
+        const TWIST: Ros2Schema = Ros2Schema {
+            name: "geometry_msgs/msg/Twist",
+            definition: "Vector3  linear\nVector3  angular\n\n\
+                ================================================================================\n\
+                MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n",
+            type_hash: "RIHS01_00",
+        };
+        let mut log = McapLog::new(Cursor::new(Vec::new())).unwrap();
+        let json = log.channel(REFERENCE_TOPIC, &REFERENCE).unwrap();
+        let a = log
+            .ros2_channel("/a/cmd_vel", &TWIST, "- depth: 10")
+            .unwrap();
+        let b = log.ros2_channel("/b/cmd_vel", &TWIST, "[]").unwrap();
+        assert_eq!(log.ros2_channel("/a/cmd_vel", &TWIST, "x").unwrap(), a);
+        let clash = log.ros2_channel(REFERENCE_TOPIC, &TWIST, "[]").unwrap_err();
+        assert!(
+            matches!(&clash, McapLogError::TopicSchema { registered, .. } if registered == "echelon.Reference"),
+            "{clash}"
+        );
+        assert!(log.channel("/a/cmd_vel", &REFERENCE).is_err());
+        let payload = [0u8, 1, 0, 0, 0xaa, 0xbb];
+        log.write(a, 0, 10, 5, &payload).unwrap();
+        log.write(b, 0, 11, 6, &payload[..4]).unwrap();
+        log.write_json(json, 0, 12, 12, &serde_json::json!({}))
+            .unwrap();
+        let bytes = log.finish().unwrap().into_inner();
+
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        assert_eq!(summary.schemas.len(), 2);
+        let mut seen = 0;
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            let schema = m.channel.schema.as_ref().unwrap();
+            if m.channel.topic == REFERENCE_TOPIC {
+                assert_eq!(
+                    (
+                        m.channel.message_encoding.as_str(),
+                        schema.encoding.as_str()
+                    ),
+                    ("json", "jsonschema")
+                );
+                assert!(m.channel.metadata.is_empty());
+                continue;
+            }
+            seen += 1;
+            assert_eq!(m.channel.message_encoding, CDR);
+            assert_eq!(schema.encoding, ROS2MSG);
+            assert_eq!(schema.name, TWIST.name);
+            assert_eq!(&schema.data[..], TWIST.definition.as_bytes());
+            assert_eq!(m.channel.metadata["topic_type_hash"], "RIHS01_00");
+            let (qos, len, times) = if m.channel.topic == "/a/cmd_vel" {
+                ("- depth: 10", 6, (10, 5))
+            } else {
+                ("[]", 4, (11, 6))
+            };
+            assert_eq!(m.channel.metadata["offered_qos_profiles"], qos);
+            assert_eq!(&m.data[..], &payload[..len]);
+            assert_eq!((m.log_time, m.publish_time), times);
+        }
+        assert_eq!(seen, 2);
     }
 }

@@ -106,7 +106,7 @@ impl Qos {
 /// `RMW_DURATION_INFINITE` as `rmw_time_t` {sec, nsec}.
 const INFINITE: (u64, u64) = (9_223_372_036, 854_775_807);
 
-fn rmw_time(d: Option<Duration>) -> (u64, u64) {
+pub(crate) fn rmw_time(d: Option<Duration>) -> (u64, u64) {
     match d {
         Some(d) if !d.is_zero() => (d.as_secs(), u64::from(d.subsec_nanos())),
         _ => INFINITE,

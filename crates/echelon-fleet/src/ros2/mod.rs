@@ -12,6 +12,10 @@
 //!   `ros2 node list` / `ros2 topic list` see echelon.
 //! - [`attachment`]: the 33-byte attachment (sequence number, timestamp,
 //!   publisher GID) rmw_zenoh subscriptions require.
+//! - [`definitions`]: the full message definitions (`ros2msg` schemas) of
+//!   the three messages, as `ros2 bag record -s mcap` stores them.
+//! - [`record`]: the topics the fleet collector records into `fleet.mcap`
+//!   as ROS 2 channels, and the checks a sample passes first.
 //!
 //! Everything here is plain data and pure functions; the Zenoh session, the
 //! publishers and the subscriptions belong to the robot and the simulated
@@ -20,12 +24,15 @@
 
 pub mod attachment;
 pub mod cdr;
+pub mod definitions;
 pub mod keys;
 pub mod liveliness;
 pub mod msgs;
+pub mod record;
 
 pub use attachment::{Attachment, AttachmentError, Gid};
 pub use cdr::CdrError;
 pub use keys::{KeyMismatch, KeyScheme, NameError};
 pub use liveliness::{NodeInfo, Qos};
 pub use msgs::{MessageType, Odometry, RosMessage, Time, Twist, TwistStamped, YawUnwrapper};
+pub use record::{RosRefusal, RosTopic, RosTopicError};

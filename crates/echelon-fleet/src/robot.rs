@@ -28,7 +28,7 @@ use zenoh::Wait;
 use echelon::control::LeaderMotion;
 use echelon::follow::{LeaderView, follow};
 use echelon::formation::Leader;
-use echelon::scenario::{FleetSettings, LinkLoss, Overrides, Scenario};
+use echelon::scenario::{FleetSettings, LinkLoss, Overrides, Ros2Link, Scenario};
 use echelon::sim::AgentSpec;
 
 use crate::clock::FleetClock;
@@ -37,6 +37,11 @@ use crate::keys::{Keys, robot_role};
 use crate::link::{Counters, LeaderSample, StreamTracker, predict};
 use crate::net::{self, NetOptions};
 use crate::plant::{Command, Plant, SimulatedDrive};
+use crate::ros2::attachment::{Gid, gid_from_token};
+use crate::ros2::drive::{CmdSink, Ros2Counters, Ros2Drive, cmd_vel_type};
+use crate::ros2::keys::{topic_key, topic_key_any_type};
+use crate::ros2::liveliness::{NodeInfo, Qos};
+use crate::ros2::msgs::ODOMETRY;
 use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
 use crate::{FleetError, StopFlag};
 
@@ -62,6 +67,8 @@ pub struct RobotOptions {
     pub net: NetOptions,
     /// Fleet name (absent: the scenario's).
     pub fleet: Option<String>,
+    /// Drive the agent's ROS 2 robot (`[fleet.ros2]`) instead of a simulated one.
+    pub ros2: bool,
 }
 
 /// What a robot reports when it stops (one JSON line on stdout).
@@ -91,6 +98,9 @@ pub struct RobotReport {
     pub final_error: f64,
     /// Final link status.
     pub link: &'static str,
+    /// With `--ros2`: the drive's odometry and command counters.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<Ros2Counters>,
 }
 
 /// The stats message published on `echelon/<fleet>/robot/<k>/stats`.
@@ -538,6 +548,7 @@ impl<P: Plant> Robot<P> {
             final_state: [s.x, s.y, s.theta, s.v, s.omega],
             final_error: self.last.e[0].hypot(self.last.e[1]),
             link: self.last.link.name(),
+            ros2: None,
         }
     }
 
@@ -593,50 +604,194 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         .declare_publisher(keys.state(opts.agent))
         .wait()
         .map_err(|e| FleetError::Zenoh(format!("declaring the state publisher: {e}")))?;
-    let stats_key = keys.stats(opts.agent);
     let _token = session
         .liveliness()
         .declare_token(keys.alive(&robot_role(opts.agent)))
         .wait()
         .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
 
-    // The local clock: never synced, the robot keeps the offset to fleet time.
-    let clock = FleetClock::new(opts.time_scale);
-    let mut robot = Robot::simulated(config, net::rand_source());
-    let mut buf = Vec::with_capacity(wire::STATE_LEN);
-    let nap = Duration::from_millis(20);
-    let mut failure = None;
-    while !stop.is_raised() {
-        clock.sleep_until(robot.next_wake(), nap);
-        if !robot.is_due(clock.now()) {
-            continue;
+    let driver = Driver {
+        clock: FleetClock::new(opts.time_scale),
+        rx,
+        publisher,
+        session: &session,
+        stats_key: keys.stats(opts.agent),
+    };
+    let report = if opts.ros2 {
+        let link = fleet.ros2[opts.agent as usize - 1].clone();
+        let Some(robot) = config.spec.velocity_robot() else {
+            return Err(FleetError::Config(format!(
+                "agent {}: a ROS 2 robot takes velocity commands: give it a velocity base (drive = \"velocity\") and the kinematic law",
+                opts.agent
+            )));
+        };
+        let ros = Ros2Endpoint::declare(&session, &link, opts.agent)?;
+        let drive = Ros2Drive::new(link, robot.base, ros.gid, ZenohCmdSink(&ros.publisher));
+        let robot = Robot::new(config, drive, net::rand_source());
+        let clock = driver.clock;
+        let (robot, result) = driver.run(robot, stop, |robot| {
+            while let Ok((arrival, key, bytes)) = ros.odom.try_recv() {
+                let t = robot.fleet_time(clock.at(arrival));
+                // Refusals are counted in the drive's report.
+                let _ = robot.plant_mut().on_odom(&key, &bytes, t);
+            }
+        });
+        result?;
+        RobotReport {
+            ros2: Some(*robot.plant().counters()),
+            ..robot.report()
         }
-        while let Ok((arrival, bytes)) = rx.try_recv() {
-            robot.on_message(&bytes, clock.at(arrival));
-        }
-        let out = robot.tick(clock.now());
-        if let Some((h, state)) = out.publish {
-            wire::encode_state(&mut buf, h, &state);
-            if let Err(e) = net::publish(&publisher, &buf) {
-                failure = Some(e);
+    } else {
+        let (robot, result) =
+            driver.run(Robot::simulated(config, net::rand_source()), stop, |_| {});
+        result?;
+        robot.report()
+    };
+    let _ = session.close().wait();
+    Ok(report)
+}
+
+/// The Zenoh side of [`run`] for any plant.
+struct Driver<'a> {
+    clock: FleetClock,
+    rx: mpsc::Receiver<(Instant, Vec<u8>)>,
+    publisher: zenoh::pubsub::Publisher<'a>,
+    session: &'a zenoh::Session,
+    stats_key: String,
+}
+
+impl Driver<'_> {
+    /// Ticks `robot` until its duration or the stop flag; `feed` hands the
+    /// plant what arrived for it before each tick. The robot has been
+    /// [finished](Robot::finish) (zero commanded) when this returns.
+    fn run<P: Plant>(
+        self,
+        mut robot: Robot<P>,
+        stop: &StopFlag,
+        mut feed: impl FnMut(&mut Robot<P>),
+    ) -> (Robot<P>, Result<(), FleetError>) {
+        let clock = self.clock;
+        let mut buf = Vec::with_capacity(wire::STATE_LEN);
+        let nap = Duration::from_millis(20);
+        let mut failure = None;
+        while !stop.is_raised() {
+            clock.sleep_until(robot.next_wake(), nap);
+            if !robot.is_due(clock.now()) {
+                continue;
+            }
+            while let Ok((arrival, bytes)) = self.rx.try_recv() {
+                robot.on_message(&bytes, clock.at(arrival));
+            }
+            feed(&mut robot);
+            let out = robot.tick(clock.now());
+            if let Some((h, state)) = out.publish {
+                wire::encode_state(&mut buf, h, &state);
+                if let Err(e) = net::publish(&self.publisher, &buf) {
+                    failure = Some(e);
+                    break;
+                }
+            }
+            if let Some(stats) = out.stats {
+                publish_stats(self.session, &self.stats_key, &stats);
+            }
+            if out.done {
                 break;
             }
         }
-        if let Some(stats) = out.stats {
-            publish_stats(&session, &stats_key, &stats);
+        let stats = robot.finish();
+        if failure.is_none() {
+            publish_stats(self.session, &self.stats_key, &stats);
         }
-        if out.done {
-            break;
-        }
+        (robot, failure.map_or(Ok(()), Err))
     }
-    let stats = robot.finish();
-    if let Some(e) = failure {
-        return Err(e);
+}
+
+/// Agent `k`'s ROS 2 presence: a node `<namespace>/echelon_robot` with a
+/// `cmd_vel` publisher and an `odom` subscription, as rmw_zenoh declares
+/// them (liveliness tokens), and the odometry that arrives.
+struct Ros2Endpoint<'a> {
+    publisher: zenoh::pubsub::Publisher<'a>,
+    gid: Gid,
+    odom: mpsc::Receiver<(Instant, String, Vec<u8>)>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+    _tokens: Vec<zenoh::liveliness::LivelinessToken>,
+}
+
+impl<'a> Ros2Endpoint<'a> {
+    fn declare(
+        session: &'a zenoh::Session,
+        link: &Ros2Link,
+        agent: u32,
+    ) -> Result<Ros2Endpoint<'a>, FleetError> {
+        let zid = session.zid().to_string();
+        let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, "echelon_robot")
+            .map_err(|e| FleetError::Config(format!("agent {agent}: {e}")))?;
+        let cmd_type = cmd_vel_type(link);
+        let pub_token = node.publisher_token(1, &link.cmd_vel, &cmd_type, &Qos::default());
+        let tokens = [
+            node.node_token(),
+            pub_token.clone(),
+            node.subscription_token(2, &link.odom, &ODOMETRY, &Qos::default()),
+        ]
+        .iter()
+        .map(|t| {
+            session
+                .liveliness()
+                .declare_token(t.clone())
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("liveliness {t}: {e}")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+        let (tx, odom) = mpsc::channel();
+        // Any type on the odom topic, so a publisher of the wrong type is
+        // seen, counted and refused rather than never heard.
+        let odom_key = topic_key_any_type(link.key_scheme, link.domain_id, &link.odom);
+        let subscriber = session
+            .declare_subscriber(&odom_key)
+            .callback(move |s| {
+                let _ = tx.send((
+                    Instant::now(),
+                    s.key_expr().as_str().to_owned(),
+                    s.payload().to_bytes().into_owned(),
+                ));
+            })
+            .wait()
+            .map_err(|e| FleetError::Zenoh(format!("subscribing to {odom_key}: {e}")))?;
+        let cmd_key = topic_key(link.key_scheme, link.domain_id, &link.cmd_vel, &cmd_type);
+        let publisher = session
+            .declare_publisher(cmd_key.clone())
+            .wait()
+            .map_err(|e| FleetError::Zenoh(format!("declaring {cmd_key}: {e}")))?;
+        Ok(Ros2Endpoint {
+            publisher,
+            gid: gid_from_token(&pub_token),
+            odom,
+            _subscriber: subscriber,
+            _tokens: tokens,
+        })
     }
-    publish_stats(&session, &stats_key, &stats);
-    drop(publisher);
-    let _ = session.close().wait();
-    Ok(robot.report())
+}
+
+/// `cmd_vel` through a Zenoh publisher, stamped by the system clock.
+struct ZenohCmdSink<'a, 'b>(&'a zenoh::pubsub::Publisher<'b>);
+
+impl std::fmt::Debug for ZenohCmdSink<'_, '_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ZenohCmdSink")
+    }
+}
+
+impl CmdSink for ZenohCmdSink<'_, '_> {
+    fn now_ns(&self) -> i64 {
+        crate::unix_nanos() as i64
+    }
+    fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
+        self.0
+            .put(payload.to_vec())
+            .attachment(attachment.to_vec())
+            .wait()
+            .map_err(|e| e.to_string())
+    }
 }
 
 fn publish_stats(session: &zenoh::Session, key: &str, stats: &RobotStats) {

@@ -23,8 +23,10 @@
 //! `tests/ros2_interop.rs` against the ROS 2 Jazzy Python wheels.
 
 pub mod attachment;
+pub mod base;
 pub mod cdr;
 pub mod definitions;
+pub mod drive;
 pub mod keys;
 pub mod liveliness;
 pub mod msgs;

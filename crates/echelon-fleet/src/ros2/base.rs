@@ -1,0 +1,441 @@
+//! `echelon fleet base --ros2`: a simulated ROS 2 differential-drive base,
+//! what `diff_drive_controller` and the motors do on a robot, for tests and
+//! demos without hardware.
+//!
+//! [`SimBase`] (sans-IO) takes `cmd_vel` samples ([`SimBase::on_cmd`]: the
+//! key's type and hash, the rmw_zenoh attachment, CDR and finiteness checked;
+//! anything else counted and refused), follows them through the agent's
+//! velocity-base model ([`SimulatedVelocityBase`]: lags, speed and
+//! acceleration limits), stops when no command arrived for `cmd_vel_timeout`,
+//! and publishes `nav_msgs/Odometry` (pose in the odom frame, twist in the
+//! body frame) at `odom_rate` ([`SimBase::tick`]). [`run`] is its Zenoh
+//! driver: rmw_zenoh keys, attachments and liveliness tokens, as a ROS 2 node
+//! `/robotK/echelon_base` would show.
+
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use zenoh::Wait;
+
+use echelon::base::VelocityCommand;
+use echelon::scenario::{Ros2Link, Scenario};
+use echelon::sim::Drive;
+
+use super::attachment::{Attachment, Gid, gid_from_token};
+use super::drive::{SampleRefusal, cmd_vel_type, decode_cmd_vel};
+use super::keys::{topic_key, topic_key_any_type};
+use super::liveliness::{NodeInfo, Qos};
+use super::msgs::{ODOMETRY, Odometry, RosMessage, Time};
+use crate::clock::FleetClock;
+use crate::keys::Keys;
+use crate::net::{self, NetOptions};
+use crate::plant::{Plant, SimulatedVelocityBase};
+use crate::robot::{PLANT_STEP, agent_spec};
+use crate::{FleetError, StopFlag};
+
+/// What a simulated base counted (its report and its stats).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct BaseCounters {
+    /// `cmd_vel` samples received.
+    pub cmd_received: u64,
+    /// Followed.
+    pub cmd_accepted: u64,
+    /// Refused: another type or hash on the key.
+    pub cmd_wrong_type: u64,
+    /// Refused: not CDR of the `cmd_vel` type.
+    pub cmd_malformed: u64,
+    /// Refused: a NaN or an infinity.
+    pub cmd_non_finite: u64,
+    /// Refused: no valid rmw_zenoh attachment (rmw_zenoh drops these).
+    pub cmd_no_attachment: u64,
+    /// Times the base stopped because no command came for `cmd_vel_timeout`.
+    pub cmd_timeouts: u64,
+    /// Odometry messages published.
+    pub odom_published: u64,
+}
+
+/// One odometry message to publish.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OdomOut {
+    /// The CDR payload.
+    pub payload: Vec<u8>,
+    /// Its rmw_zenoh attachment.
+    pub attachment: [u8; 33],
+}
+
+/// A simulated ROS 2 base on the local clock.
+#[derive(Debug, Clone)]
+pub struct SimBase {
+    link: Ros2Link,
+    base: SimulatedVelocityBase,
+    gid: Gid,
+    seq: i64,
+    last_cmd: Option<f64>,
+    timed_out: bool,
+    next_odom: f64,
+    counters: BaseCounters,
+    /// The last command followed (after the base's speed limits).
+    followed: VelocityCommand,
+}
+
+impl SimBase {
+    /// A base for `link` moving as `base`, publishing odometry as `gid`.
+    pub fn new(link: Ros2Link, base: SimulatedVelocityBase, gid: Gid) -> Self {
+        SimBase {
+            link,
+            base,
+            gid,
+            seq: 0,
+            last_cmd: None,
+            timed_out: false,
+            next_odom: 0.0,
+            counters: BaseCounters::default(),
+            followed: VelocityCommand::default(),
+        }
+    }
+
+    /// What it counted.
+    pub fn counters(&self) -> &BaseCounters {
+        &self.counters
+    }
+
+    /// The simulated base.
+    pub fn base(&self) -> &SimulatedVelocityBase {
+        &self.base
+    }
+
+    /// The last command it followed.
+    pub fn followed(&self) -> VelocityCommand {
+        self.followed
+    }
+
+    /// A `cmd_vel` sample that arrived at local time `now`: checked and
+    /// followed from now on, or counted and refused.
+    pub fn on_cmd(
+        &mut self,
+        key: &str,
+        payload: &[u8],
+        attachment: Option<&[u8]>,
+        now: f64,
+    ) -> Result<(), SampleRefusal> {
+        self.counters.cmd_received += 1;
+        let checked = self.check(key, payload, attachment);
+        match checked {
+            Ok(cmd) => {
+                self.base.advance(now);
+                self.followed = self.base.follow(cmd).0;
+                self.last_cmd = Some(now);
+                self.timed_out = false;
+                self.counters.cmd_accepted += 1;
+                Ok(())
+            }
+            Err(e) => {
+                match e {
+                    SampleRefusal::WrongType(_) => self.counters.cmd_wrong_type += 1,
+                    SampleRefusal::NonFinite(_) => self.counters.cmd_non_finite += 1,
+                    SampleRefusal::NoAttachment => self.counters.cmd_no_attachment += 1,
+                    SampleRefusal::Malformed(_) | SampleRefusal::WrongFrames(..) => {
+                        self.counters.cmd_malformed += 1;
+                    }
+                }
+                Err(e)
+            }
+        }
+    }
+
+    fn check(
+        &self,
+        key: &str,
+        payload: &[u8],
+        attachment: Option<&[u8]>,
+    ) -> Result<VelocityCommand, SampleRefusal> {
+        if self.link.key_scheme == echelon::ros_names::KeyScheme::RmwZenoh
+            && attachment.is_none_or(|a| Attachment::decode(a).is_err())
+        {
+            return Err(SampleRefusal::NoAttachment);
+        }
+        decode_cmd_vel(&self.link, key, payload)
+    }
+
+    /// Local time of the next odometry.
+    pub fn next_wake(&self) -> f64 {
+        self.next_odom
+    }
+
+    /// Brings the base to local time `now` (stopping it if its command timed
+    /// out) and returns the odometry to publish when it is due, stamped
+    /// `stamp_ns` (wall clock).
+    pub fn tick(&mut self, now: f64, stamp_ns: i64) -> Option<OdomOut> {
+        if let Some(at) = self.last_cmd
+            && !self.timed_out
+            && now - at > self.link.cmd_vel_timeout
+        {
+            // diff_drive_controller's cmd_vel_timeout: brake to zero, from
+            // the moment the timeout expired.
+            self.base.advance(at + self.link.cmd_vel_timeout);
+            self.followed = self.base.follow(VelocityCommand::default()).0;
+            self.timed_out = true;
+            self.counters.cmd_timeouts += 1;
+        }
+        self.base.advance(now);
+        if now < self.next_odom {
+            return None;
+        }
+        let period = 1.0 / self.link.odom_rate;
+        self.next_odom = (self.next_odom + period).max(now);
+        let s = self.base.true_state();
+        let odom = Odometry::planar(
+            s.x,
+            s.y,
+            s.theta,
+            s.v,
+            s.omega,
+            Time::from_nanos(stamp_ns),
+            &self.link.odom_frame,
+            &self.link.base_frame,
+        );
+        self.seq += 1;
+        self.counters.odom_published += 1;
+        Some(OdomOut {
+            payload: odom.to_cdr(),
+            attachment: Attachment {
+                sequence_number: self.seq,
+                source_timestamp_ns: stamp_ns,
+                gid: self.gid,
+            }
+            .encode(),
+        })
+    }
+}
+
+/// Options of `fleet base --ros2`.
+#[derive(Debug, Clone)]
+pub struct BaseOptions {
+    /// The scenario (the agent's start pose, its base model and `ros2` link).
+    pub scenario: Scenario,
+    /// Agent number, from 1.
+    pub agent: u32,
+    /// Clock speed-up `K`.
+    pub time_scale: f64,
+    /// Stop after this much (scaled) time (absent: at a signal).
+    pub duration: Option<f64>,
+    /// Network.
+    pub net: NetOptions,
+    /// Fleet name for its echelon liveliness token (absent: the scenario's).
+    pub fleet: Option<String>,
+}
+
+/// What a base reports when it stops.
+#[derive(Debug, Clone, Serialize)]
+pub struct BaseReport {
+    /// `base`.
+    pub role: &'static str,
+    /// Agent number.
+    pub agent: u32,
+    /// Its `cmd_vel` and `odom` topics.
+    pub topics: [String; 2],
+    /// What it counted.
+    pub counters: BaseCounters,
+    /// Final pose and speeds `[x, y, θ, v, ω]`.
+    pub final_state: [f64; 5],
+    /// The last command it followed `[v, ω]`.
+    pub last_command: [f64; 2],
+}
+
+/// The role name of agent `k`'s simulated base (its echelon liveliness token).
+pub fn base_role(k: impl std::fmt::Display) -> String {
+    format!("base/{k}")
+}
+
+/// Runs a simulated ROS 2 base until `duration` or the stop flag.
+pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError> {
+    let fleet = opts.scenario.fleet()?;
+    let spec = agent_spec(&opts.scenario, opts.agent)?;
+    let Drive::Velocity(robot) = &spec.drive else {
+        return Err(FleetError::Config(format!(
+            "agent {}: a ROS 2 base is a velocity base (set drive = \"velocity\" on its robot)",
+            opts.agent
+        )));
+    };
+    let link = fleet.ros2[opts.agent as usize - 1].clone();
+    let session = net::open(&opts.net)?;
+    let zid = session.zid().to_string();
+    let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, "echelon_base")
+        .map_err(|e| FleetError::Config(e.to_string()))?;
+    let cmd_type = cmd_vel_type(&link);
+    let odom_token = node.publisher_token(1, &link.odom, &ODOMETRY, &Qos::default());
+    let tokens = [
+        node.node_token(),
+        odom_token.clone(),
+        node.subscription_token(2, &link.cmd_vel, &cmd_type, &Qos::default()),
+        Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name)).alive(&base_role(opts.agent)),
+    ];
+    let _tokens = tokens
+        .iter()
+        .map(|t| {
+            session
+                .liveliness()
+                .declare_token(t.clone())
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("liveliness {t}: {e}")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    type CmdSample = (Instant, String, Vec<u8>, Option<Vec<u8>>);
+    let (tx, rx) = mpsc::channel::<CmdSample>();
+    let cmd_key = topic_key_any_type(link.key_scheme, link.domain_id, &link.cmd_vel);
+    let _sub = session
+        .declare_subscriber(&cmd_key)
+        .callback(move |s| {
+            let _ = tx.send((
+                Instant::now(),
+                s.key_expr().as_str().to_owned(),
+                s.payload().to_bytes().into_owned(),
+                s.attachment().map(|a| a.to_bytes().into_owned()),
+            ));
+        })
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("subscribing to {cmd_key}: {e}")))?;
+    let odom_key = topic_key(link.key_scheme, link.domain_id, &link.odom, &ODOMETRY);
+    let publisher = session
+        .declare_publisher(odom_key.clone())
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("declaring {odom_key}: {e}")))?;
+
+    let clock = FleetClock::new(opts.time_scale);
+    let model = SimulatedVelocityBase::new(robot.base, spec.start, 0.0, PLANT_STEP);
+    let mut base = SimBase::new(link.clone(), model, gid_from_token(&odom_token));
+    let nap = Duration::from_millis(20);
+    while !stop.is_raised() {
+        clock.sleep_until(base.next_wake(), nap);
+        while let Ok((at, key, payload, attachment)) = rx.try_recv() {
+            // Refusals are counted in the report.
+            let _ = base.on_cmd(&key, &payload, attachment.as_deref(), clock.at(at));
+        }
+        let now = clock.now();
+        if opts.duration.is_some_and(|d| now >= d) {
+            break;
+        }
+        if let Some(out) = base.tick(now, crate::unix_nanos() as i64) {
+            publisher
+                .put(out.payload)
+                .attachment(out.attachment.to_vec())
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("publishing odometry: {e}")))?;
+        }
+    }
+    drop(publisher);
+    let _ = session.close().wait();
+    let s = base.base().true_state();
+    Ok(BaseReport {
+        role: "base",
+        agent: opts.agent,
+        topics: [link.cmd_vel, link.odom],
+        counters: *base.counters(),
+        final_state: [s.x, s.y, s.theta, s.v, s.omega],
+        last_command: [base.followed().v, base.followed().omega],
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ros2::drive::encode_cmd_vel;
+    use crate::ros2::msgs::{TWIST, TWIST_STAMPED};
+    use echelon::base::VelocityBase;
+    use echelon::model::State;
+    use echelon::ros_names::KeyScheme;
+
+    fn link() -> Ros2Link {
+        let src = "[sim]\nduration = 1.0\ndt = 0.01\n[reference.circle]\nspeed = 0.1\nturn_rate = 0.1\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\n[fleet.ros2]\nodom_rate = 10.0\ncmd_vel_timeout = 0.5\n[[agents]]\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\nleader = \"reference\"\n";
+        let s = Scenario::parse(src, "t", None).unwrap_or_else(|e| panic!("{e}"));
+        s.fleet().unwrap_or_else(|e| panic!("{e}")).ros2[0].clone()
+    }
+
+    fn base() -> SimBase {
+        let model = SimulatedVelocityBase::new(
+            VelocityBase::IDEAL,
+            State::at_rest(0.0, 0.0, 0.0),
+            0.0,
+            1e-3,
+        );
+        SimBase::new(link(), model, [3; 16])
+    }
+
+    fn cmd(v: f64, omega: f64) -> Vec<u8> {
+        let mut buf = Vec::new();
+        encode_cmd_vel(&link(), VelocityCommand { v, omega }, 1, &mut buf);
+        buf
+    }
+
+    fn attachment() -> [u8; 33] {
+        Attachment {
+            sequence_number: 1,
+            source_timestamp_ns: 1,
+            gid: [1; 16],
+        }
+        .encode()
+    }
+
+    #[test]
+    fn it_follows_commands_publishes_odometry_and_stops_on_timeout() {
+        let l = link();
+        let key = topic_key(KeyScheme::RmwZenoh, 0, &l.cmd_vel, &TWIST_STAMPED);
+        let mut b = base();
+        assert!(b.tick(0.0, 1).is_some(), "odometry at once");
+        b.on_cmd(&key, &cmd(0.2, 0.0), Some(&attachment()), 0.0)
+            .expect("a valid command");
+        let mut last = None;
+        let mut published = 0;
+        for k in 1..=40 {
+            if let Some(o) = b.tick(f64::from(k) * 0.025, 1) {
+                published += 1;
+                last = Some(o);
+            }
+        }
+        // 10 Hz for 1 s; the command timed out at 0.5 s: 0.2 m/s × 0.5 s.
+        assert_eq!(published, 10);
+        let odom = Odometry::from_cdr_finite(&last.expect("odometry").payload).expect("valid");
+        assert!((odom.pose.pose.position.x - 0.1).abs() < 1e-9, "{odom:?}");
+        assert_eq!(odom.twist.twist.linear.x, 0.0);
+        assert_eq!(
+            (odom.header.frame_id.as_str(), odom.child_frame_id.as_str()),
+            ("odom", "base_link")
+        );
+        assert_eq!(b.counters().cmd_timeouts, 1);
+    }
+
+    #[test]
+    fn bad_commands_are_counted_and_refused() {
+        let l = link();
+        let key = topic_key(KeyScheme::RmwZenoh, 0, &l.cmd_vel, &TWIST_STAMPED);
+        let twist_key = topic_key(KeyScheme::RmwZenoh, 0, &l.cmd_vel, &TWIST);
+        let mut b = base();
+        let att = attachment();
+        assert!(b.on_cmd(&key, &cmd(0.2, 0.0), None, 0.0).is_err());
+        assert!(
+            b.on_cmd(&key, b"\x00\x01\x00\x00junk", Some(&att), 0.0)
+                .is_err()
+        );
+        assert!(
+            b.on_cmd(&key, &cmd(f64::INFINITY, 0.0), Some(&att), 0.0)
+                .is_err()
+        );
+        assert!(
+            b.on_cmd(&twist_key, &cmd(0.2, 0.0), Some(&att), 0.0)
+                .is_err()
+        );
+        assert_eq!(b.followed(), VelocityCommand::default());
+        let c = b.counters();
+        assert_eq!(
+            (
+                c.cmd_received,
+                c.cmd_accepted,
+                c.cmd_no_attachment,
+                c.cmd_malformed
+            ),
+            (4, 0, 1, 1)
+        );
+        assert_eq!((c.cmd_non_finite, c.cmd_wrong_type), (1, 1));
+    }
+}

@@ -1,0 +1,458 @@
+//! A ROS 2 robot as a fleet [`Plant`]: the robot's odometry in, `cmd_vel`
+//! out, over rmw_zenoh (or zenoh-bridge-ros2dds's keys).
+//!
+//! [`Ros2Drive`] is sans-IO like the robot it serves: the driver hands it the
+//! odometry samples that arrived ([`Ros2Drive::on_odom`], with the fleet time
+//! of arrival) and it sends its commands through an injected [`CmdSink`] (a
+//! Zenoh publisher in the process, a `Vec` in tests). What it guarantees:
+//!
+//! - the state is the last valid odometry (pose in the odom frame, yaw
+//!   unwrapped, twist in the body frame, REP 103/105), and there is none
+//!   once it is older than `odom_timeout`, so the robot commands zero;
+//! - odometry that is not CDR of `nav_msgs/msg/Odometry`, carries the wrong
+//!   type or hash on its key, holds a NaN or an infinity, or is in other
+//!   frames than configured is counted and refused, never a crash;
+//! - no command it sends is non-finite or beyond the base's speed limits
+//!   (scaled together, keeping the curvature, [`VelocityBase::limit`]);
+//! - [`Plant::stop`] sends a zero command at once (leader or odometry lost,
+//!   the process stopping).
+
+use serde::Serialize;
+
+use echelon::base::{VelocityBase, VelocityCommand};
+use echelon::model::State;
+use echelon::scenario::Ros2Link;
+use echelon::scenario::schema::CmdVelType;
+
+use super::CdrError;
+use super::attachment::{Attachment, Gid};
+use super::keys::check_topic_key;
+use super::msgs::{
+    MessageType, ODOMETRY, Odometry, RosMessage, TWIST, TWIST_STAMPED, Time, Twist, TwistStamped,
+    YawUnwrapper,
+};
+use crate::plant::{Actuation, Command, Plant};
+
+/// The message type a link's `cmd_vel` carries.
+pub fn cmd_vel_type(link: &Ros2Link) -> MessageType {
+    match link.cmd_vel_type {
+        CmdVelType::TwistStamped => TWIST_STAMPED,
+        CmdVelType::Twist => TWIST,
+    }
+}
+
+/// Encodes a velocity command as `link`'s `cmd_vel` type into `buf`.
+pub fn encode_cmd_vel(link: &Ros2Link, cmd: VelocityCommand, stamp_ns: i64, buf: &mut Vec<u8>) {
+    match link.cmd_vel_type {
+        CmdVelType::TwistStamped => TwistStamped::planar(
+            cmd.v,
+            cmd.omega,
+            Time::from_nanos(stamp_ns),
+            &link.base_frame,
+        )
+        .encode_into(buf),
+        CmdVelType::Twist => Twist::planar(cmd.v, cmd.omega).encode_into(buf),
+    }
+}
+
+/// Why a ROS 2 sample was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SampleRefusal {
+    /// The key carries another type or hash.
+    #[error("wrong type on the key: {0}")]
+    WrongType(String),
+    /// Not CDR of the expected type.
+    #[error("malformed CDR: {0}")]
+    Malformed(CdrError),
+    /// A NaN or an infinity.
+    #[error("non-finite {0}")]
+    NonFinite(&'static str),
+    /// Frames other than configured.
+    #[error("frames `{0}` → `{1}`, expected the configured ones")]
+    WrongFrames(String, String),
+    /// rmw_zenoh subscribers drop a sample without its attachment.
+    #[error("no valid rmw_zenoh attachment")]
+    NoAttachment,
+}
+
+/// A `cmd_vel` payload decoded to a velocity command, refusing the wrong
+/// type on the key, bad CDR and non-finite values.
+pub fn decode_cmd_vel(
+    link: &Ros2Link,
+    key: &str,
+    payload: &[u8],
+) -> Result<VelocityCommand, SampleRefusal> {
+    check_topic_key(link.key_scheme, key, &cmd_vel_type(link))
+        .map_err(|e| SampleRefusal::WrongType(e.to_string()))?;
+    let twist = match link.cmd_vel_type {
+        CmdVelType::TwistStamped => TwistStamped::from_cdr_finite(payload).map(|t| t.twist),
+        CmdVelType::Twist => Twist::from_cdr_finite(payload),
+    }
+    .map_err(refusal)?;
+    Ok(VelocityCommand {
+        v: twist.linear.x,
+        omega: twist.angular.z,
+    })
+}
+
+fn refusal(e: CdrError) -> SampleRefusal {
+    match e {
+        CdrError::NonFinite { field } => SampleRefusal::NonFinite(field),
+        e => SampleRefusal::Malformed(e),
+    }
+}
+
+/// Where a drive's commands go: the `cmd_vel` publisher, and the wall clock
+/// that stamps them (injected, so tests are deterministic).
+pub trait CmdSink {
+    /// Wall-clock time, ns since the UNIX epoch (header stamps, attachments).
+    fn now_ns(&self) -> i64;
+    /// Publishes one `cmd_vel` payload with its rmw_zenoh attachment.
+    fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String>;
+}
+
+/// What a ROS 2 drive counted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct Ros2Counters {
+    /// Odometry samples received.
+    pub odom_received: u64,
+    /// Accepted as the robot's state.
+    pub odom_accepted: u64,
+    /// Refused: another type or hash on the key.
+    pub odom_wrong_type: u64,
+    /// Refused: not CDR of `nav_msgs/msg/Odometry`.
+    pub odom_malformed: u64,
+    /// Refused: a NaN or an infinity.
+    pub odom_non_finite: u64,
+    /// Refused: frames other than the configured odom → base frames.
+    pub odom_wrong_frames: u64,
+    /// `cmd_vel` messages sent.
+    pub cmd_sent: u64,
+    /// Zero commands sent by [`Plant::stop`].
+    pub cmd_zero: u64,
+    /// Commands cut by the speed limits.
+    pub cmd_saturated: u64,
+    /// Non-finite commands from the law, replaced by zero.
+    pub cmd_non_finite: u64,
+    /// Sends that failed.
+    pub send_errors: u64,
+}
+
+/// A ROS 2 robot driven through its `cmd_vel`, its state read from `odom`.
+#[derive(Debug)]
+pub struct Ros2Drive<S: CmdSink> {
+    link: Ros2Link,
+    base: VelocityBase,
+    sink: S,
+    gid: Gid,
+    seq: i64,
+    buf: Vec<u8>,
+    yaw: YawUnwrapper,
+    /// The last valid odometry and its fleet time of arrival.
+    odom: Option<(State, f64)>,
+    t: f64,
+    last_sent: VelocityCommand,
+    counters: Ros2Counters,
+}
+
+impl<S: CmdSink> Ros2Drive<S> {
+    /// A drive for the robot at `link`, within the limits of `base`,
+    /// publishing as the publisher `gid` through `sink`.
+    pub fn new(link: Ros2Link, base: VelocityBase, gid: Gid, sink: S) -> Self {
+        Ros2Drive {
+            link,
+            base,
+            sink,
+            gid,
+            seq: 0,
+            buf: Vec::with_capacity(128),
+            yaw: YawUnwrapper::new(),
+            odom: None,
+            t: 0.0,
+            last_sent: VelocityCommand::default(),
+            counters: Ros2Counters::default(),
+        }
+    }
+
+    /// What it counted.
+    pub fn counters(&self) -> &Ros2Counters {
+        &self.counters
+    }
+
+    /// The sink (a test reads what was sent).
+    pub fn sink(&self) -> &S {
+        &self.sink
+    }
+
+    /// The last command sent.
+    pub fn last_sent(&self) -> VelocityCommand {
+        self.last_sent
+    }
+
+    /// An odometry sample on `key` that arrived at fleet time `t`: checked,
+    /// decoded and kept as the state, or counted and refused.
+    pub fn on_odom(&mut self, key: &str, payload: &[u8], t: f64) -> Result<(), SampleRefusal> {
+        self.counters.odom_received += 1;
+        let checked = self.check_odom(key, payload);
+        match &checked {
+            Ok(odom) => {
+                let p = odom.pose.pose.position;
+                let state = State {
+                    x: p.x,
+                    y: p.y,
+                    theta: self.yaw.unwrap(odom.yaw()),
+                    v: odom.twist.twist.linear.x,
+                    omega: odom.twist.twist.angular.z,
+                };
+                self.odom = Some((state, t));
+                self.counters.odom_accepted += 1;
+            }
+            Err(SampleRefusal::WrongType(_)) => self.counters.odom_wrong_type += 1,
+            Err(SampleRefusal::NonFinite(_)) => self.counters.odom_non_finite += 1,
+            Err(SampleRefusal::WrongFrames(..)) => self.counters.odom_wrong_frames += 1,
+            Err(SampleRefusal::Malformed(_) | SampleRefusal::NoAttachment) => {
+                self.counters.odom_malformed += 1;
+            }
+        }
+        checked.map(|_| ())
+    }
+
+    fn check_odom(&self, key: &str, payload: &[u8]) -> Result<Odometry, SampleRefusal> {
+        check_topic_key(self.link.key_scheme, key, &ODOMETRY)
+            .map_err(|e| SampleRefusal::WrongType(e.to_string()))?;
+        let odom = Odometry::from_cdr_finite(payload).map_err(refusal)?;
+        if odom.header.frame_id != self.link.odom_frame
+            || odom.child_frame_id != self.link.base_frame
+        {
+            return Err(SampleRefusal::WrongFrames(
+                odom.header.frame_id,
+                odom.child_frame_id,
+            ));
+        }
+        Ok(odom)
+    }
+
+    /// Sends `cmd` (already finite and within the limits).
+    fn send(&mut self, cmd: VelocityCommand) {
+        let now = self.sink.now_ns();
+        encode_cmd_vel(&self.link, cmd, now, &mut self.buf);
+        self.seq += 1;
+        let attachment = Attachment {
+            sequence_number: self.seq,
+            source_timestamp_ns: now,
+            gid: self.gid,
+        }
+        .encode();
+        match self.sink.send(&self.buf, &attachment) {
+            Ok(()) => self.counters.cmd_sent += 1,
+            Err(_) => self.counters.send_errors += 1,
+        }
+        self.last_sent = cmd;
+    }
+}
+
+impl<S: CmdSink> Plant for Ros2Drive<S> {
+    fn state(&self) -> Option<State> {
+        self.odom
+            .filter(|&(_, at)| self.t - at <= self.link.odom_timeout)
+            .map(|(s, _)| s)
+    }
+
+    fn advance(&mut self, t: f64) {
+        self.t = self.t.max(t);
+    }
+
+    fn command(&mut self, cmd: Command) -> Actuation {
+        let wanted = match cmd {
+            Command::Velocity(c) => c,
+            // The robot's law follows its drive: a ROS 2 robot is a velocity
+            // base, never sent torques.
+            Command::Torque(_) => VelocityCommand::default(),
+        };
+        let (cmd, saturated) = if wanted.v.is_finite() && wanted.omega.is_finite() {
+            self.base.limit(wanted)
+        } else {
+            self.counters.cmd_non_finite += 1;
+            (VelocityCommand::default(), false)
+        };
+        self.counters.cmd_saturated += u64::from(saturated);
+        self.send(cmd);
+        Actuation {
+            velocity: Some((cmd, saturated)),
+            ..Actuation::default()
+        }
+    }
+
+    fn stop(&mut self) {
+        self.counters.cmd_zero += 1;
+        self.send(VelocityCommand::default());
+    }
+
+    fn accelerations(&self) -> (f64, f64) {
+        // The base model's prediction for the command it follows (a real
+        // base's own loops are not observed directly).
+        self.state()
+            .map_or((0.0, 0.0), |s| self.base.accelerations(&s, self.last_sent))
+    }
+
+    fn set_time(&mut self, t: f64) {
+        // The fleet clock jumped (a leader's timeline began or restarted):
+        // odometry received before is on the old timeline; wait for the next.
+        self.t = t;
+        self.odom = None;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ros2::keys::topic_key;
+    use echelon::ros_names::KeyScheme;
+    use echelon::scenario::Scenario;
+
+    /// Records what was sent; time advances 1 ms per read.
+    #[derive(Debug, Default)]
+    pub(crate) struct Recorder {
+        pub(crate) sent: Vec<(Vec<u8>, Vec<u8>)>,
+        pub(crate) now: std::cell::Cell<i64>,
+    }
+
+    impl CmdSink for Recorder {
+        fn now_ns(&self) -> i64 {
+            self.now.set(self.now.get() + 1_000_000);
+            self.now.get()
+        }
+        fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
+            self.sent.push((payload.to_vec(), attachment.to_vec()));
+            Ok(())
+        }
+    }
+
+    fn link() -> Ros2Link {
+        let src = "[sim]\nduration = 1.0\ndt = 0.01\n[reference.circle]\nspeed = 0.1\nturn_rate = 0.1\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\n[[agents]]\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\nleader = \"reference\"\n";
+        let s = Scenario::parse(src, "t", None).unwrap_or_else(|e| panic!("{e}"));
+        s.fleet().unwrap_or_else(|e| panic!("{e}")).ros2[0].clone()
+    }
+
+    fn drive(base: VelocityBase) -> Ros2Drive<Recorder> {
+        Ros2Drive::new(link(), base, [7; 16], Recorder::default())
+    }
+
+    fn odom_key(l: &Ros2Link) -> String {
+        topic_key(KeyScheme::RmwZenoh, l.domain_id, &l.odom, &ODOMETRY)
+    }
+
+    fn odom(x: f64, yaw: f64, v: f64) -> Vec<u8> {
+        Odometry::planar(
+            x,
+            0.0,
+            yaw,
+            v,
+            0.1,
+            Time::from_nanos(5),
+            "odom",
+            "base_link",
+        )
+        .to_cdr()
+    }
+
+    fn last_cmd(d: &Ros2Drive<Recorder>) -> (TwistStamped, Attachment) {
+        let (payload, attachment) = d.sink().sent.last().expect("a command sent");
+        (
+            TwistStamped::from_cdr_finite(payload).expect("valid TwistStamped"),
+            Attachment::decode(attachment).expect("valid attachment"),
+        )
+    }
+
+    #[test]
+    fn odometry_is_the_state_until_it_goes_stale() {
+        let mut d = drive(VelocityBase::IDEAL);
+        let l = link();
+        assert_eq!(
+            (l.namespace.as_str(), l.odom.as_str()),
+            ("/robot1", "/robot1/odom")
+        );
+        assert_eq!(d.state(), None);
+        d.on_odom(&odom_key(&l), &odom(1.0, 3.0, 0.2), 0.0)
+            .expect("valid odometry");
+        // Across ±π the heading keeps counting.
+        d.on_odom(&odom_key(&l), &odom(1.1, -3.0, 0.2), 0.02)
+            .expect("valid odometry");
+        d.advance(0.02);
+        let s = d.state().expect("fresh");
+        assert_eq!((s.x, s.v, s.omega), (1.1, 0.2, 0.1));
+        assert!((s.theta - (2.0 * std::f64::consts::PI - 3.0)).abs() < 1e-12);
+        d.advance(0.02 + l.odom_timeout);
+        assert!(d.state().is_some());
+        d.advance(0.03 + l.odom_timeout);
+        assert_eq!(d.state(), None, "stale odometry is no state");
+        assert_eq!(d.counters().odom_accepted, 2);
+    }
+
+    #[test]
+    fn bad_odometry_is_counted_and_refused() {
+        let mut d = drive(VelocityBase::IDEAL);
+        let l = link();
+        let key = odom_key(&l);
+        d.on_odom(&key, &odom(1.0, 0.0, 0.0), 0.0).expect("valid");
+        let before = d.state();
+        let mut truncated = odom(2.0, 0.0, 0.0);
+        truncated.truncate(40);
+        assert!(d.on_odom(&key, &truncated, 0.01).is_err());
+        assert!(d.on_odom(&key, b"garbage", 0.01).is_err());
+        assert!(d.on_odom(&key, &odom(f64::NAN, 0.0, 0.0), 0.01).is_err());
+        let twist_key = topic_key(KeyScheme::RmwZenoh, 0, &l.odom, &TWIST);
+        assert!(d.on_odom(&twist_key, &odom(2.0, 0.0, 0.0), 0.01).is_err());
+        let other_frames =
+            Odometry::planar(2.0, 0.0, 0.0, 0.0, 0.0, Time::default(), "map", "base_link").to_cdr();
+        assert!(d.on_odom(&key, &other_frames, 0.01).is_err());
+        assert_eq!(d.state(), before, "refused samples change nothing");
+        let c = d.counters();
+        assert_eq!(
+            (
+                c.odom_received,
+                c.odom_accepted,
+                c.odom_malformed,
+                c.odom_non_finite
+            ),
+            (6, 1, 2, 1)
+        );
+        assert_eq!((c.odom_wrong_type, c.odom_wrong_frames), (1, 1));
+    }
+
+    #[test]
+    fn commands_are_limited_finite_stamped_and_attached() {
+        let base = VelocityBase {
+            v_max: 0.2,
+            omega_max: 1.0,
+            ..VelocityBase::IDEAL
+        };
+        let mut d = drive(base);
+        let act = d.command(Command::Velocity(VelocityCommand { v: 0.4, omega: 0.5 }));
+        let (applied, saturated) = act.velocity.expect("velocity");
+        assert!(saturated);
+        let (msg, att) = last_cmd(&d);
+        assert_eq!(msg.twist.linear.x, 0.2);
+        assert!((msg.twist.angular.z - 0.25).abs() < 1e-15);
+        assert_eq!(msg.twist.angular.z, applied.omega);
+        assert_eq!(msg.header.frame_id, "base_link");
+        assert_eq!(att.sequence_number, 1);
+        assert_eq!(att.gid, [7; 16]);
+        assert_eq!(att.source_timestamp_ns, msg.header.stamp.to_nanos());
+        d.command(Command::Velocity(VelocityCommand {
+            v: f64::NAN,
+            omega: 0.1,
+        }));
+        let (msg, att) = last_cmd(&d);
+        assert_eq!((msg.twist.linear.x, msg.twist.angular.z), (0.0, 0.0));
+        assert_eq!(att.sequence_number, 2);
+        d.stop();
+        let (msg, _) = last_cmd(&d);
+        assert_eq!((msg.twist.linear.x, msg.twist.angular.z), (0.0, 0.0));
+        let c = d.counters();
+        assert_eq!(
+            (c.cmd_sent, c.cmd_saturated, c.cmd_non_finite, c.cmd_zero),
+            (3, 1, 1, 1)
+        );
+    }
+}

@@ -602,3 +602,48 @@ fn umbmark_from_logs_reproduces_the_simulated_return_errors() {
         "{c:?}"
     );
 }
+
+/// A torque sweep's `sweep.csv` and `drift.csv`, byte for byte: the paper law's
+/// Theorem 2 columns (and everything else a torque sweep writes) must not move
+/// when other laws get their bounds. Both ζ models, a systematic error (no
+/// bound), no fixes (no bound), two seeds.
+/// Regenerate with `ECHELON_BLESS=1 cargo test --test odometry golden`.
+#[test]
+fn torque_sweep_outputs_match_their_golden_bytes() {
+    let s = Scenario::resolve("fix-study").unwrap();
+    let ov = Overrides {
+        duration: Some(4.0),
+        ..Overrides::default()
+    };
+    let mut out = Vec::new();
+    for model in [ZetaModel::Wheels, ZetaModel::WorstCase] {
+        let g = Grid {
+            zeta: vec![1e-5, 4e-5],
+            zeta_model: model,
+            wheel_diameter_ratio: vec![1.0, 1.002],
+            wheelbase_ratio: vec![1.0],
+            slip: vec![0.0],
+            fix_every: vec![0, 20, 100],
+            seeds: vec![0, 1],
+            gamma: 0.9,
+            transient: 2.0,
+        };
+        let rows = sweep::run(&s, &ov, &g, &|| {}).unwrap();
+        assert!(rows.iter().any(|r| r.z_bound.is_some()));
+        sweep::write_csv(&mut out, &rows, model).unwrap();
+        let curves = sweep::drift_curves(&s, &ov, &g, 50).unwrap();
+        sweep::write_drift_csv(&mut out, &curves).unwrap();
+    }
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sweep-fix-study.csv");
+    if std::env::var_os("ECHELON_BLESS").is_some() {
+        std::fs::write(&file, &out).unwrap();
+        return;
+    }
+    let want = std::fs::read(&file).unwrap_or_else(|_| panic!("missing {}", file.display()));
+    assert!(
+        out == want,
+        "{} differs:\n{}",
+        file.display(),
+        String::from_utf8_lossy(&out)
+    );
+}

@@ -32,6 +32,23 @@ fn csv_column(dir: &Path, agent: usize, name: &str) -> Vec<f64> {
         .collect()
 }
 
+/// `(t, value)` of one column of trajectory.csv for agent `agent` (from 1).
+fn csv_series(dir: &Path, agent: usize, name: &str) -> Vec<(f64, f64)> {
+    csv_column(dir, agent, "t")
+        .into_iter()
+        .zip(csv_column(dir, agent, name))
+        .collect()
+}
+
+/// The quantities of the figure's panels (their y axes), in order.
+fn quantities(figure: &Figure) -> Vec<&str> {
+    figure
+        .panels
+        .iter()
+        .map(|p| p.y.quantity.as_str())
+        .collect()
+}
+
 fn panel<'a>(figure: &'a Figure, quantity: &str) -> &'a Panel {
     figure
         .panels
@@ -127,15 +144,8 @@ fn a_velocity_runs_signals_show_command_against_actual_with_limits_and_saturatio
     assert!(data.agents.iter().all(|a| a.is_velocity()));
     let figure = plots::signals(&data);
     assert!(figure.title.contains("commanded and actual speeds"));
-    assert_eq!(
-        figure
-            .panels
-            .iter()
-            .map(|p| p.y.quantity.as_str())
-            .collect::<Vec<_>>(),
-        ["v", "ω", "‖e‖", "‖z‖", "agent"],
-        "no torque panels for velocity bases"
-    );
+    // No torque panels for velocity bases.
+    assert_eq!(quantities(&figure), ["v", "ω", "‖e‖", "‖z‖", "agent"]);
     let times = csv_column(dir.path(), 1, "t");
     let mut saturated_anywhere = 0;
     for i in 0..3 {
@@ -296,37 +306,21 @@ fn a_mixed_run_shows_torques_for_the_torque_agent_and_commands_for_the_base() {
     assert!(data.agents[0].limits.is_none());
     let figure = plots::signals(&data);
     assert_eq!(
-        figure
-            .panels
-            .iter()
-            .map(|p| p.y.quantity.as_str())
-            .collect::<Vec<_>>(),
+        quantities(&figure),
         ["v", "ω", "‖e‖", "‖z‖", "τ_r", "τ_l", "agent"]
     );
     let times = csv_column(dir.path(), 1, "t");
     let v = panel(&figure, "v");
     // The torque agent: its actual speed, no command.
-    let v1: Vec<(f64, f64)> = times
-        .iter()
-        .copied()
-        .zip(csv_column(dir.path(), 1, "v"))
-        .collect();
+    let v1 = csv_series(dir.path(), 1, "v");
     assert_eq!(line_with(v, Stroke::series(0)), v1);
     assert!(!has_line_with(v, Stroke::series(0).dashed(Dash::Dashed)));
     // The base: its command.
-    let c2: Vec<(f64, f64)> = times
-        .iter()
-        .copied()
-        .zip(csv_column(dir.path(), 2, "v_cmd"))
-        .collect();
+    let c2 = csv_series(dir.path(), 2, "v_cmd");
     assert_eq!(line_with(v, Stroke::series(1).dashed(Dash::Dashed)), c2);
     // Torques: the torque agent's numbers; the base's are NaN (not drawn).
     let tau = panel(&figure, "τ_r");
-    let t1: Vec<(f64, f64)> = times
-        .iter()
-        .copied()
-        .zip(csv_column(dir.path(), 1, "tau_r"))
-        .collect();
+    let t1 = csv_series(dir.path(), 1, "tau_r");
     assert_eq!(line_with(tau, Stroke::series(0)), t1);
     assert!(bars(&figure, 0).is_empty(), "a torque agent has no bars");
     assert_bars_match_sat(&figure, &times, &csv_column(dir.path(), 2, "sat"), 1);

@@ -164,12 +164,18 @@ fn has_saturation(data: &RunData) -> bool {
         .any(|a| a.saturated_ticks.is_some())
 }
 
-/// `n` of the run's `steps` as a count and a percentage: `6177 (6.9 %)`.
+/// `n` of the run's `steps` as a count and a percentage: `6177 (20.6 %)`.
 fn share(n: u64, steps: u64) -> String {
-    if steps == 0 {
-        return n.to_string();
-    }
-    format!("{n} ({:.1} %)", 100.0 * n as f64 / steps as f64)
+    format!("{n} ({:.1} %)", percent(n, steps))
+}
+
+/// `6177 of 30000 steps (20.6 %)`.
+fn of_steps(n: u64, steps: u64) -> String {
+    format!("{n} of {steps} steps ({:.1} %)", percent(n, steps))
+}
+
+fn percent(n: u64, steps: u64) -> f64 {
+    100.0 * n as f64 / steps.max(1) as f64
 }
 
 fn summary_table(data: &RunData) -> String {
@@ -226,14 +232,14 @@ fn saturation_note(data: &RunData) -> Option<String> {
         .iter()
         .filter_map(|r| {
             r.saturated_ticks
-                .map(|n| format!("{}: {} of {steps} steps", escape(&r.name), share(n, steps)))
+                .map(|n| format!("{}: {}", escape(&r.name), of_steps(n, steps)))
         })
         .collect();
     if parts.is_empty() {
         return None;
     }
     Some(format!(
-        "<p class=\"note\" id=\"saturation\">Velocity bases: the speed limits cut the kinematic law's command (scaling v and ω together, so the path's curvature is kept) at {}. \
+        "<p class=\"note\" id=\"saturation\">Velocity bases, steps at which the speed limits cut the kinematic law's command (v and ω scaled together, keeping the path's curvature): {}. \
          The signals figure draws each command dashed over the speed the base actually moved at (solid), the limits ±v<sub>max</sub>, ±ω<sub>max</sub> dotted, and bars where the command was cut.</p>",
         parts.join("; ")
     ))

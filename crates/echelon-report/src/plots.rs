@@ -341,7 +341,7 @@ fn saturation_panel(data: &RunData) -> Panel {
     let margin = 0.05 * (t1 - t0).max(1e-9);
     let mut panel = Panel::new(
         Axis::new("t", "s").range(t0 - margin, t1 + margin),
-        Axis::new("agent", "").range(0.0, n as f64 + 1.0),
+        Axis::new("agent", "").range(0.0, n as f64 + 1.0).integer(),
     )
     .titled(title)
     .without_legend();

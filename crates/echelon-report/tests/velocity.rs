@@ -217,7 +217,7 @@ fn a_velocity_runs_signals_show_command_against_actual_with_limits_and_saturatio
         let n = a["saturated_ticks"].as_u64().unwrap();
         assert!(n > 0);
         let want = format!(
-            "{}: {n} ({:.1} %) of {steps} steps",
+            "{}: {n} of {steps} steps ({:.1} %)",
             a["name"].as_str().unwrap(),
             100.0 * n as f64 / steps as f64
         );

@@ -467,6 +467,50 @@ fn sweep_writes_one_row_per_run_the_same_on_any_thread_count() {
 }
 
 #[test]
+fn a_velocity_sweep_fills_the_bound_columns_with_the_kinematic_form() {
+    // The ideal velocity bases of circle-pentagon-velocity under the kinematic
+    // law: z_bound = √2 K_e N ζ, e_bound = √2 N ζ / γ, ratio ‖e‖/e_bound.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("v");
+    let o = echelon(&[
+        "sweep",
+        "circle-pentagon-velocity",
+        "--zeta-model",
+        "worst-case",
+        "--fix-every",
+        "0,100",
+        "--seeds",
+        "1",
+        "--duration",
+        "14",
+        "--transient",
+        "10",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("‖e‖/e bound"), "{}", stdout(&o));
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 2);
+    assert!(rows[0][13].is_empty(), "no fixes, no bound");
+    let num = |c: &str| c.parse::<f64>().unwrap();
+    let r = &rows[1];
+    let (e_max, z_bound, ratio, e_bound) = (num(r[10]), num(r[13]), num(r[14]), num(r[15]));
+    let sqrt2 = std::f64::consts::SQRT_2;
+    assert!((z_bound - sqrt2 * 1.5 * 100.0 * 1e-5).abs() < 1e-15);
+    assert!((e_bound - sqrt2 * 100.0 * 1e-5 / 0.99).abs() < 1e-15);
+    assert!(
+        (ratio - e_max / e_bound).abs() < 1e-12 && ratio < 1.0,
+        "{r:?}"
+    );
+}
+
+#[test]
 fn umbmark_estimates_and_writes_its_results() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("u");

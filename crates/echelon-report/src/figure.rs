@@ -174,6 +174,8 @@ pub struct Axis {
     pub range: Option<(f64, f64)>,
     /// Base-10 logarithmic scale (non-positive values are left out).
     pub log: bool,
+    /// Ticks on whole numbers only (counts, agent numbers; linear axes).
+    pub integer: bool,
 }
 
 impl Axis {
@@ -184,7 +186,14 @@ impl Axis {
             unit: unit.to_owned(),
             range: None,
             log: false,
+            integer: false,
         }
+    }
+
+    /// With ticks on whole numbers only (a linear axis of counts or numbers).
+    pub fn integer(mut self) -> Axis {
+        self.integer = true;
+        self
     }
 
     /// With a fixed range.
@@ -548,6 +557,18 @@ type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<Coord, Coord>>;
 /// a linear axis; 1, 2 and 5 × 10ᵏ on a log axis (whole decades only when they
 /// are many, every mantissa when the range is under one 1-2-5 step).
 fn ticks(axis: &Axis, lo: f64, hi: f64, hint: usize) -> Vec<f64> {
+    if !axis.log && axis.integer {
+        // Whole numbers, every `step`-th, at most `hint` of them.
+        let (first, last) = (lo.ceil(), hi.floor());
+        let step = ((last - first) / hint.max(1) as f64).ceil().max(1.0);
+        let mut out = Vec::new();
+        let mut v = first;
+        while v <= last {
+            out.push(v);
+            v += step;
+        }
+        return out;
+    }
     if !axis.log {
         return RangedCoordf64::from(lo..hi).key_points(hint);
     }
@@ -1112,6 +1133,18 @@ mod tests {
         for want in ["1000", "10", "0.01", "‖z‖ [m/s]", "N"] {
             assert!(texts.contains(&want), "no `{want}` in {texts:?}");
         }
+    }
+
+    #[test]
+    fn integer_axes_tick_whole_numbers_only() {
+        let axis = Axis::new("agent", "").integer();
+        assert_eq!(ticks(&axis, 0.0, 3.0, 7), [0.0, 1.0, 2.0, 3.0]);
+        assert_eq!(ticks(&axis, 0.5, 4.5, 7), [1.0, 2.0, 3.0, 4.0]);
+        let many = ticks(&axis, 0.0, 201.0, 7);
+        assert!(
+            many.len() <= 8 && many.iter().all(|t| t.fract() == 0.0),
+            "{many:?}"
+        );
     }
 
     #[test]

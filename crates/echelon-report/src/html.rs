@@ -156,31 +156,93 @@ fn opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
         .map_or_else(|| "—".to_owned(), f)
 }
 
+/// Whether the summary has a velocity agent (its `saturated_ticks` column).
+fn has_saturation(data: &RunData) -> bool {
+    data.summary
+        .agents
+        .iter()
+        .any(|a| a.saturated_ticks.is_some())
+}
+
+/// `n` of the run's `steps` as a count and a percentage: `6177 (20.6 %)`.
+fn share(n: u64, steps: u64) -> String {
+    format!("{n} ({:.1} %)", percent(n, steps))
+}
+
+/// `6177 of 30000 steps (20.6 %)`.
+fn of_steps(n: u64, steps: u64) -> String {
+    format!("{n} of {steps} steps ({:.1} %)", percent(n, steps))
+}
+
+fn percent(n: u64, steps: u64) -> f64 {
+    100.0 * n as f64 / steps.max(1) as f64
+}
+
 fn summary_table(data: &RunData) -> String {
+    let saturation = has_saturation(data);
     let mut t = String::from(
         "<table class=\"summary\"><thead><tr><th>agent</th><th>leader</th><th>offset (L<sub>Xoff</sub>, L<sub>Yoff</sub>)</th>\
-         <th>final ‖e‖</th><th>RMS ‖e‖</th><th>peak |τ|</th><th>‖e‖ &lt; tolerance from</th></tr></thead><tbody>\n",
+         <th>final ‖e‖</th><th>RMS ‖e‖</th><th>peak |τ|</th><th>‖e‖ &lt; tolerance from</th>",
     );
+    if saturation {
+        t.push_str("<th>saturated steps</th>");
+    }
+    t.push_str("</tr></thead><tbody>\n");
     for (i, (a, r)) in data.agents.iter().zip(&data.summary.agents).enumerate() {
         let offset = a
             .offset
             .map_or_else(|| "tracking".to_owned(), |(x, y)| format!("({x} m, {y} m)"));
-        let _ = writeln!(
+        // A velocity base has no wheel torques to show.
+        let peak = r.peak_torque.filter(|_| r.saturated_ticks.is_none());
+        let _ = write!(
             t,
             "<tr><td><span class=\"swatch\" style=\"background:{}\"></span>{}</td><td>{}</td><td>{}</td>\
-             <td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+             <td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
             palette::series(i).hex(),
             escape(&a.name),
             escape(&data.leader_name(i)),
             escape(&offset),
             opt(r.final_error, |v| format!("{v:.2e} m")),
             opt(r.rms_error, |v| format!("{v:.3} m")),
-            opt(r.peak_torque, |v| format!("{v:.2} N·m")),
+            opt(peak, |v| format!("{v:.2} N·m")),
             opt(r.settle_time, |v| format!("{v:.2} s")),
         );
+        if saturation {
+            let _ = write!(
+                t,
+                "<td>{}</td>",
+                r.saturated_ticks
+                    .map_or_else(|| "— (torque)".to_owned(), |n| share(n, data.summary.steps))
+            );
+        }
+        t.push_str("</tr>\n");
     }
     t.push_str("</tbody></table>\n");
     t
+}
+
+/// One sentence per velocity agent: how many steps its base's speed limits
+/// cut the command (`summary.json`'s `saturated_ticks`), and what the signals
+/// figure shows of it.
+fn saturation_note(data: &RunData) -> Option<String> {
+    let steps = data.summary.steps;
+    let parts: Vec<String> = data
+        .summary
+        .agents
+        .iter()
+        .filter_map(|r| {
+            r.saturated_ticks
+                .map(|n| format!("{}: {}", escape(&r.name), of_steps(n, steps)))
+        })
+        .collect();
+    if parts.is_empty() {
+        return None;
+    }
+    Some(format!(
+        "<p class=\"note\" id=\"saturation\">Velocity bases, steps at which the speed limits cut the kinematic law's command (v and ω scaled together, keeping the path's curvature): {}. \
+         The signals figure draws each command dashed over the speed the base actually moved at (solid), the limits ±v<sub>max</sub>, ±ω<sub>max</sub> dotted, and bars where the command was cut.</p>",
+        parts.join("; ")
+    ))
 }
 
 /// The whole page; `svgs` are the figures as `(stem, SVG document)`.
@@ -238,6 +300,10 @@ pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
         "<p class=\"note\">‖e‖ (eq. 7) is the distance between where the leader should be, seen from the follower, and where it is; the tolerance is {} m.</p>",
         s.settle_tolerance
     );
+    if let Some(note) = saturation_note(data) {
+        html.push_str(&note);
+        html.push('\n');
+    }
     if !s.warnings.is_empty() {
         html.push_str("<ul class=\"warnings\">");
         for w in &s.warnings {

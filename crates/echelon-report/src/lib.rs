@@ -6,7 +6,8 @@
 //! - [`figure`]: a small figure builder (panels of lines, segments, robot
 //!   markers; one style; SVG + PNG with an embedded font) for any crate's figures;
 //! - [`run`]: an output directory of `echelon run`, read back;
-//! - [`plots`]: the run figures `paths`, `errors`, `signals` (paper Figs. 8–17);
+//! - [`plots`]: the run figures `paths`, `errors`, `signals` (paper Figs. 8–17;
+//!   for velocity bases, commanded against actual `v`, `ω` and saturation);
 //! - [`html`]: `report.html`, with the replay;
 //! - [`lycomp`]: eq. 5 against eq. 6 (Fig. 5), and refitting eq. 6 for any `L_Xoff`.
 

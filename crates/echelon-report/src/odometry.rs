@@ -1,8 +1,10 @@
 //! Odometry figures (paper section 6): a run's drift — true against estimated
 //! paths, drift with its resets at fixes, the error the controller saw against
-//! the true one — and a sweep's empirical ‖z‖, ‖e‖ against Theorem 2.
+//! the true one — and a sweep's empirical ‖z‖, ‖e‖ against Theorem 2 (in the
+//! form of each run's law: the paper's, or the kinematic law's, see
+//! [`echelon::sweep`]).
 
-use echelon::sweep::{Case, DriftCurve, Row};
+use echelon::sweep::{Case, DriftCurve, Laws, Row};
 
 use crate::figure::{Axis, Dash, Figure, Marker, Panel, Stroke, palette};
 use crate::run::{Column, RunData};
@@ -105,6 +107,35 @@ fn models(rows: &[Row]) -> Vec<Case> {
     out
 }
 
+/// The laws of a set of rows (of those with a bound; of all if none has one):
+/// one form when they agree, else [`Laws::Mixed`].
+fn laws_of(rows: &[&Row]) -> Laws {
+    let bounded: Vec<Laws> = rows
+        .iter()
+        .filter(|r| r.z_bound.is_some())
+        .map(|r| r.laws)
+        .collect();
+    let laws = if bounded.is_empty() {
+        rows.iter().map(|r| r.laws).collect()
+    } else {
+        bounded
+    };
+    match laws.first() {
+        Some(&first) if laws.iter().all(|l| *l == first) => first,
+        Some(_) => Laws::Mixed,
+        None => Laws::Dynamic,
+    }
+}
+
+/// The bound line's legend entry for an error model.
+fn bound_label(laws: Laws, model: &str) -> String {
+    match laws {
+        Laws::Dynamic => format!("Theorem 2, {model}"),
+        Laws::Kinematic => format!("Theorem 2 (kinematic law), {model}"),
+        Laws::Mixed => format!("Theorem 2 (both laws), {model}"),
+    }
+}
+
 /// One panel of a quantity against the fix interval `N`, log-log: every run as
 /// a dot, and the theoretical bound as a dashed line per error model.
 fn against_n(
@@ -146,7 +177,7 @@ fn against_n(
             .collect();
         if line.len() >= 2 {
             panel.line(
-                &format!("Theorem 2, {}", model_label(m)),
+                &bound_label(laws_of(&of_model), &model_label(m)),
                 line,
                 Stroke::series(i).dashed(Dash::Dashed),
             );
@@ -157,20 +188,39 @@ fn against_n(
 
 /// The sweep figure: empirical ultimate ‖z‖ and ‖e‖ against `N` with Theorem 2's
 /// bounds, and drift without fixes against the paper's linear growth.
+///
+/// Each run's bound is in the form of its law ([`echelon::sweep`]'s module
+/// docs): for the paper's law the ultimate bound on ‖z‖ and `‖z‖/K_e`; for the
+/// kinematic law `√2 K_e N ζ` on ‖z‖ and its ultimate bound `√2 N ζ / γ` on ‖e‖.
 pub fn sweep(name: &str, rows: &[Row], curves: &[DriftCurve]) -> Figure {
+    let all: Vec<&Row> = rows.iter().collect();
+    let (z_title, e_title) = match laws_of(&all) {
+        Laws::Dynamic => (
+            "true ‖z‖ of every run (dots) under Theorem 2's bound (dashed)",
+            "true ‖e‖ of every run (dots) under the bound ‖z‖/K_e (dashed)",
+        ),
+        Laws::Kinematic => (
+            "true ‖z‖ of every run (dots) under the kinematic law's bound √2 K_e N ζ (dashed)",
+            "true ‖e‖ of every run (dots) under the kinematic law's ultimate bound √2 N ζ / γ (dashed)",
+        ),
+        Laws::Mixed => (
+            "true ‖z‖ of every run (dots) under Theorem 2's bound for its law (dashed)",
+            "true ‖e‖ of every run (dots) under ‖z‖/K_e (paper law) or √2 N ζ / γ (kinematic law) (dashed)",
+        ),
+    };
     let z = against_n(
         rows,
         Axis::new("ultimate max ‖z‖", "m/s"),
         |r| r.z_max,
         |r| r.z_bound,
-        "true ‖z‖ of every run (dots) under Theorem 2's bound (dashed)",
+        z_title,
     );
     let e = against_n(
         rows,
         Axis::new("ultimate max ‖e‖", "m"),
         |r| r.e_max,
         |r| r.e_bound,
-        "true ‖e‖ of every run (dots) under the bound ‖z‖/K_e (dashed)",
+        e_title,
     );
     let mut growth = Panel::new(Axis::new("t", "s"), Axis::new("‖p − p̂‖ without fixes", "m"))
         .titled("drift: actual (solid), the paper's √2 N ζ (dashed), linear from the first second (dotted)");

@@ -1,8 +1,9 @@
 //! The run figures, as in the paper: `paths` (Figs. 8, 10, 12, 16, 17),
-//! `errors` (Figs. 9, 11) and `signals` (Fig. 14).
+//! `errors` (Figs. 9, 11) and `signals` (Fig. 14; for velocity bases,
+//! commanded against actual `v`, `ω` and saturation).
 
-use crate::figure::{Axis, Figure, Marker, Panel, Stroke, palette};
-use crate::run::{Column, RunData};
+use crate::figure::{Axis, Dash, Figure, Marker, Panel, Stroke, palette};
+use crate::run::{AgentTrack, Column, RunData, SpeedLimits};
 
 /// How many instants the `paths` figure shows the formation at.
 pub const LINK_INSTANTS: usize = 5;
@@ -177,17 +178,15 @@ pub fn errors(data: &RunData) -> Figure {
 }
 
 /// v, ω, ‖e‖, ‖z‖ and the wheel torques against time (Fig. 14).
+///
+/// A run with velocity bases ([`RunData::has_velocity_agents`]) gets
+/// [`velocity_signals`] instead; a torque-only run gets the paper's figure.
 pub fn signals(data: &RunData) -> Figure {
+    if data.has_velocity_agents() {
+        return velocity_signals(data);
+    }
     let col = |c: Column| move |i: usize| data.agents[i].get(c).to_vec();
-    let z_norm = |i: usize| {
-        let a = &data.agents[i];
-        a.get(Column::Zx)
-            .iter()
-            .zip(a.get(Column::Zy))
-            .map(|(x, y)| x.hypot(*y))
-            .collect()
-    };
-    Figure::new(
+    let figure = Figure::new(
         &format!("{}: speeds, errors and torques", data.summary.scenario),
         1200,
         1050,
@@ -205,25 +204,200 @@ pub fn signals(data: &RunData) -> Figure {
         col(Column::Omega),
         false,
     ))
-    .with_panel(time_panel(
+    .with_panel(error_norm_panel(data))
+    .with_panel(z_norm_panel(data));
+    let [tau_r, tau_l] = torque_panels(data);
+    figure.with_panel(tau_r).with_panel(tau_l)
+}
+
+fn error_norm_panel(data: &RunData) -> Panel {
+    time_panel(
         data,
         Axis::new("‖e‖", "m"),
         |i| data.agents[i].error_norm(),
         false,
-    ))
-    .with_panel(time_panel(data, Axis::new("‖z‖", "m/s"), z_norm, false))
-    .with_panel(time_panel(
+    )
+}
+
+fn z_norm_panel(data: &RunData) -> Panel {
+    let z_norm = |i: usize| {
+        let a = &data.agents[i];
+        a.get(Column::Zx)
+            .iter()
+            .zip(a.get(Column::Zy))
+            .map(|(x, y)| x.hypot(*y))
+            .collect()
+    };
+    time_panel(data, Axis::new("‖z‖", "m/s"), z_norm, false)
+}
+
+fn torque_panels(data: &RunData) -> [Panel; 2] {
+    let col = |c: Column| move |i: usize| data.agents[i].get(c).to_vec();
+    [
+        time_panel(data, Axis::new("τ_r", "N·m"), col(Column::TauR), false),
+        time_panel(data, Axis::new("τ_l", "N·m"), col(Column::TauL), false),
+    ]
+}
+
+/// The legend entry for the commanded lines of [`velocity_signals`].
+pub const COMMANDED_LABEL: &str = "commanded (dashed)";
+
+/// Commanded against actual speed: every agent's actual `actual` solid, and a
+/// velocity agent's command `commanded` dashed in the same colour, with the
+/// bases' limits `±limit` as dotted lines (one pair per distinct finite limit).
+fn command_panel(
+    data: &RunData,
+    y: Axis,
+    (actual, commanded): (Column, Column),
+    limit: fn(&SpeedLimits) -> f64,
+    limit_name: &str,
+    names: bool,
+) -> Panel {
+    let unit = y.unit.clone();
+    let mut panel = Panel::new(Axis::new("t", "s"), y);
+    let series = |a: &AgentTrack, c: Column| -> Vec<(f64, f64)> {
+        data.times
+            .iter()
+            .copied()
+            .zip(a.get(c).iter().copied())
+            .collect()
+    };
+    for (i, a) in data.agents.iter().enumerate() {
+        let label = if names { a.name.as_str() } else { "" };
+        panel.line(label, series(a, actual), Stroke::series(i));
+    }
+    for (i, a) in data.agents.iter().enumerate() {
+        if a.is_velocity() {
+            panel.line(
+                "",
+                series(a, commanded),
+                Stroke::series(i).dashed(Dash::Dashed),
+            );
+        }
+    }
+    // A legend line only (no points): what the dashes mean.
+    panel.line(COMMANDED_LABEL, Vec::new(), Stroke::reference());
+    let mut limits: Vec<f64> = Vec::new();
+    for l in data.agents.iter().filter_map(|a| a.limits.as_ref()) {
+        let m = limit(l);
+        if m.is_finite() && !limits.contains(&m) {
+            limits.push(m);
+        }
+    }
+    let (t0, t1) = (
+        data.times.first().copied().unwrap_or(0.0),
+        data.times.last().copied().unwrap_or(0.0),
+    );
+    for m in limits {
+        panel.segments(
+            &format!("±{limit_name} = {m} {unit}"),
+            vec![[(t0, m), (t1, m)], [(t0, -m), (t1, -m)]],
+            Stroke::link(),
+        );
+    }
+    panel
+}
+
+/// The maximal runs of saturated logged instants of agent `a`, as time spans:
+/// instant `k` covers `[t_k, t_{k+1}]` (the last one, `[t_k, t_k]`).
+pub fn saturated_spans(data: &RunData, a: &AgentTrack) -> Vec<(f64, f64)> {
+    let sat = a.get(Column::Sat);
+    let n = data.times.len().min(sat.len());
+    let mut spans = Vec::new();
+    let mut k = 0;
+    while k < n {
+        if sat[k] == 1.0 {
+            let start = k;
+            while k < n && sat[k] == 1.0 {
+                k += 1;
+            }
+            spans.push((data.times[start], data.times[k.min(n - 1)]));
+        } else {
+            k += 1;
+        }
+    }
+    spans
+}
+
+/// When the speed limits cut each velocity agent's command: a bar at the
+/// agent's number over every saturated span ([`saturated_spans`]).
+fn saturation_panel(data: &RunData) -> Panel {
+    let n = data.agents.len();
+    let spans: Vec<(usize, Vec<(f64, f64)>)> = (0..n)
+        .filter(|&i| data.agents[i].is_velocity())
+        .map(|i| (i, saturated_spans(data, &data.agents[i])))
+        .collect();
+    let title = if spans.iter().any(|(_, s)| !s.is_empty()) {
+        "speed limits cutting the command (bars: saturated spans)"
+    } else {
+        "speed limits cutting the command: never"
+    };
+    let (t0, t1) = (
+        data.times.first().copied().unwrap_or(0.0),
+        data.times.last().copied().unwrap_or(1.0),
+    );
+    // The time axis of the other panels (their 5 % margin), and whole agent
+    // numbers on the other axis.
+    let margin = 0.05 * (t1 - t0).max(1e-9);
+    let mut panel = Panel::new(
+        Axis::new("t", "s").range(t0 - margin, t1 + margin),
+        Axis::new("agent", "").range(0.0, n as f64 + 1.0).integer(),
+    )
+    .titled(title)
+    .without_legend();
+    for (i, spans) in spans {
+        let y = (i + 1) as f64;
+        panel.segments(
+            "",
+            spans.into_iter().map(|(a, b)| [(a, y), (b, y)]).collect(),
+            Stroke {
+                width: 8,
+                ..Stroke::series(i)
+            },
+        );
+    }
+    panel
+}
+
+/// The signals of a run with velocity bases: commanded (dashed) against
+/// actual (solid) `v` and `ω` with the bases' limits (dotted), ‖e‖, ‖z‖, the
+/// wheel torques when some agents are torque-driven (a mixed run), and when
+/// the speed limits cut each velocity agent's command.
+pub fn velocity_signals(data: &RunData) -> Figure {
+    let torque_agents = data.agents.iter().any(|a| !a.is_velocity());
+    let mut figure = Figure::new(
+        &format!(
+            "{}: commanded and actual speeds, errors{} and saturation",
+            data.summary.scenario,
+            if torque_agents { ", torques" } else { "" }
+        ),
+        1200,
+        if torque_agents { 1400 } else { 1050 },
+    )
+    .with_columns(2)
+    .with_panel(command_panel(
         data,
-        Axis::new("τ_r", "N·m"),
-        col(Column::TauR),
+        Axis::new("v", "m/s"),
+        (Column::V, Column::VCmd),
+        |l| l.v_max,
+        "v_max",
+        true,
+    ))
+    .with_panel(command_panel(
+        data,
+        Axis::new("ω", "rad/s"),
+        (Column::Omega, Column::OmegaCmd),
+        |l| l.omega_max,
+        "ω_max",
         false,
     ))
-    .with_panel(time_panel(
-        data,
-        Axis::new("τ_l", "N·m"),
-        col(Column::TauL),
-        false,
-    ))
+    .with_panel(error_norm_panel(data))
+    .with_panel(z_norm_panel(data));
+    if torque_agents {
+        let [tau_r, tau_l] = torque_panels(data);
+        figure = figure.with_panel(tau_r).with_panel(tau_l);
+    }
+    figure.with_panel(saturation_panel(data))
 }
 
 /// The run figures with their file stems: `paths`, `errors`, `signals`, and

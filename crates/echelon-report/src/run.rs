@@ -14,8 +14,8 @@ use echelon::output::{
     ODOMETRY_FILE, ODOMETRY_HEADER, REFERENCE_FILE, REFERENCE_HEADER, SCENARIO_FILE, SUMMARY_FILE,
     TRAJECTORY_FILE, TRAJECTORY_HEADER, TRAJECTORY_HEADER_VELOCITY, Table,
 };
-use echelon::scenario::Scenario;
 use echelon::scenario::schema::{LeaderSpec, ModeName};
+use echelon::scenario::{Overrides, Scenario};
 
 use crate::ReportError;
 
@@ -48,10 +48,39 @@ pub enum Column {
     TauR,
     /// τ_l, N·m.
     TauL,
+    /// The kinematic law's commanded `v*`, m/s (velocity runs only; `NaN` for
+    /// a torque-driven agent).
+    VCmd,
+    /// Commanded `ω*`, rad/s.
+    OmegaCmd,
+    /// `v` after the base's speed limits, m/s.
+    VApplied,
+    /// `ω` after the base's speed limits, rad/s.
+    OmegaApplied,
+    /// 1 when the speed limits cut the command at this instant, else 0.
+    Sat,
 }
 
 /// Number of [`Column`]s.
-pub const COLUMNS: usize = 13;
+pub const COLUMNS: usize = 18;
+
+/// The columns a run with velocity bases adds after [`Column::TauL`].
+pub const VELOCITY_COLUMNS: [Column; 5] = [
+    Column::VCmd,
+    Column::OmegaCmd,
+    Column::VApplied,
+    Column::OmegaApplied,
+    Column::Sat,
+];
+
+/// A velocity base's speed limits (`f64::INFINITY`: unlimited).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedLimits {
+    /// Largest `|v|`, m/s.
+    pub v_max: f64,
+    /// Largest `|ω|`, rad/s.
+    pub omega_max: f64,
+}
 
 /// One agent's logged signals.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,13 +91,23 @@ pub struct AgentTrack {
     pub leader: Option<Leader>,
     /// `(L_Xoff, L_Yoff)`, m (`None`: pure tracking or unknown).
     pub offset: Option<(f64, f64)>,
+    /// A velocity base's speed limits (`None`: torque-driven, or unknown
+    /// without a `scenario.toml` that builds).
+    pub limits: Option<SpeedLimits>,
     columns: [Vec<f64>; COLUMNS],
 }
 
 impl AgentTrack {
-    /// A column, one value per logged instant.
+    /// A column, one value per logged instant (the [`VELOCITY_COLUMNS`] are
+    /// empty in a run without velocity bases).
     pub fn get(&self, c: Column) -> &[f64] {
         &self.columns[c as usize]
+    }
+
+    /// Whether the agent is on a velocity base: its `sat` column is logged
+    /// (a torque-driven agent's is `NaN`, or absent in a torque-only run).
+    pub fn is_velocity(&self) -> bool {
+        self.get(Column::Sat).first().is_some_and(|s| s.is_finite())
     }
 
     /// ‖e‖ at every logged instant, m.
@@ -124,6 +163,10 @@ pub struct AgentResult {
     pub peak_torque: Option<f64>,
     /// Settling time, s.
     pub settle_time: Option<f64>,
+    /// Steps at which a velocity base's speed limits cut the command (`None`:
+    /// a torque-driven agent).
+    #[serde(default)]
+    pub saturated_ticks: Option<u64>,
 }
 
 /// `summary.json` (fields this crate shows; others are ignored).
@@ -249,6 +292,32 @@ fn odometry_tracks(
     Ok(tracks)
 }
 
+/// Each agent's speed limits, from the scenario built as the run was (its
+/// step `dt`; the other overrides do not touch the robots). Empty when the
+/// scenario does not build here (e.g. a waypoint file next to the original):
+/// the figures then draw no limit lines.
+fn speed_limits(scenario: &Scenario, dt: f64) -> Vec<Option<SpeedLimits>> {
+    let overrides = Overrides {
+        dt: Some(dt),
+        ..Overrides::default()
+    };
+    scenario.build(&overrides).map_or_else(
+        |_| Vec::new(),
+        |run| {
+            run.simulation
+                .agents()
+                .iter()
+                .map(|a| {
+                    a.velocity_robot().map(|r| SpeedLimits {
+                        v_max: r.base.v_max,
+                        omega_max: r.base.omega_max,
+                    })
+                })
+                .collect()
+        },
+    )
+}
+
 impl RunData {
     /// Reads `dir`.
     pub fn load(dir: &Path) -> Result<RunData, ReportError> {
@@ -261,8 +330,8 @@ impl RunData {
         let n = summary.agents.len();
         let traj_path = dir.join(TRAJECTORY_FILE);
         // A run with velocity bases has five more columns after the torque
-        // ones (commands and saturation, not drawn yet); the first ones are
-        // the same.
+        // ones (commands and saturation, [`VELOCITY_COLUMNS`]); the first
+        // ones are the same.
         let text = read(&traj_path)?;
         let header = if text.starts_with(&format!("{TRAJECTORY_HEADER_VELOCITY}\n")) {
             TRAJECTORY_HEADER_VELOCITY
@@ -277,6 +346,7 @@ impl RunData {
                 name: a.name.clone(),
                 leader: None,
                 offset: None,
+                limits: None,
                 columns: Default::default(),
             })
             .collect();
@@ -371,6 +441,11 @@ impl RunData {
                     (_, Some(o)) => Some((o.x, o.y)),
                 };
             }
+            if agents.iter().any(AgentTrack::is_velocity) {
+                for (track, limits) in agents.iter_mut().zip(speed_limits(&scenario, summary.dt)) {
+                    track.limits = limits;
+                }
+            }
         }
         Ok(RunData {
             dir: dir.to_path_buf(),
@@ -382,6 +457,11 @@ impl RunData {
             reference,
             odometry,
         })
+    }
+
+    /// Whether any agent is on a velocity base ([`AgentTrack::is_velocity`]).
+    pub fn has_velocity_agents(&self) -> bool {
+        self.agents.iter().any(AgentTrack::is_velocity)
     }
 
     /// Whether any agent follows the virtual leader (or that is unknown).

@@ -9,6 +9,7 @@ use std::path::Path;
 use echelon::odometry::ZetaModel;
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sweep::{self, Grid};
+use echelon_report::figure::Item;
 use echelon_report::{RunData, write_all};
 
 fn svg_texts(path: &Path) -> Vec<String> {
@@ -163,4 +164,73 @@ fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
         "{texts:?}"
     );
     assert!(!texts.iter().any(|t| t.contains("31.62")), "{texts:?}");
+}
+
+/// The sweep figure of a velocity scenario overlays the kinematic law's bound:
+/// `√2 K_e N ζ` on ‖z‖ and `√2 N ζ / γ` on ‖e‖, labelled and titled as such,
+/// with every run's ‖e‖ under it.
+#[test]
+fn a_velocity_sweep_figure_overlays_the_kinematic_bound() {
+    let s = Scenario::builtin("circle-pentagon-velocity").unwrap();
+    let ov = common::for_seconds(14.0);
+    let grid = Grid {
+        zeta: vec![1e-5],
+        zeta_model: ZetaModel::WorstCase,
+        wheel_diameter_ratio: vec![1.0],
+        wheelbase_ratio: vec![1.0],
+        slip: vec![0.0],
+        fix_every: vec![20, 100, 400],
+        seeds: vec![0],
+        gamma: 0.9,
+        transient: 10.0,
+    };
+    let rows = sweep::run(&s, &ov, &grid, &|| {}).unwrap();
+    let curves = sweep::drift_curves(&s, &ov, &grid, 50).unwrap();
+    let figure = echelon_report::odometry::sweep("circle-pentagon-velocity", &rows, &curves);
+    let label = "Theorem 2 (kinematic law), ζ = 1e-5 m";
+    let bound_line = |panel: usize| -> Vec<(f64, f64)> {
+        figure.panels[panel]
+            .items
+            .iter()
+            .find_map(|i| match i {
+                Item::Line {
+                    label: Some(l),
+                    points,
+                    ..
+                } if l == label => Some(points.clone()),
+                _ => None,
+            })
+            .unwrap_or_else(|| panic!("no `{label}` line in panel {panel}"))
+    };
+    let sqrt2 = std::f64::consts::SQRT_2;
+    let z_want: Vec<(f64, f64)> = [20.0, 100.0, 400.0]
+        .iter()
+        .map(|&n| (n, sqrt2 * 1.5 * n * 1e-5))
+        .collect();
+    let e_want: Vec<(f64, f64)> = [20.0, 100.0, 400.0]
+        .iter()
+        .map(|&n| (n, sqrt2 * n * 1e-5 / 0.9))
+        .collect();
+    for (got, want) in [(bound_line(0), z_want), (bound_line(1), e_want)] {
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(&want) {
+            assert!(
+                g.0 == w.0 && (g.1 - w.1).abs() <= 1e-15 * w.1,
+                "{g:?} vs {w:?}"
+            );
+        }
+    }
+    for r in &rows {
+        assert_eq!(r.laws, sweep::Laws::Kinematic);
+        assert!(r.e_max < r.e_bound.unwrap(), "{r:?}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let saved = figure.save(dir.path(), "sweep").unwrap();
+    let texts = svg_texts_showing(&saved.svg, &["ultimate max ‖e‖ [m]", label]);
+    assert!(
+        texts
+            .iter()
+            .any(|t| t.contains("kinematic law's ultimate bound √2 N ζ / γ")),
+        "{texts:?}"
+    );
 }

@@ -4,6 +4,24 @@
 //!
 //! Rows come back in grid order whatever the number of threads, so the same
 //! sweep gives the same bytes.
+//!
+//! # The bound columns, per law
+//!
+//! `z_bound`, `z_over_bound` and `e_bound` hold Theorem 2 in the form that
+//! fits each dead-reckoning agent's law (maxima over the agents when several
+//! dead-reckon; a run mixing both laws mixes both forms, see [`Laws`]):
+//!
+//! | column         | paper / complete law (eq. 13, [`Theorem2`])          | kinematic law ([`KinematicTheorem2`])            |
+//! |----------------|------------------------------------------------------|--------------------------------------------------|
+//! | `z_bound`      | ultimate bound on ‖z‖: `√2 K_e N ζ √(K_z² + ω_M²)/(K_z γ)` | bound on ‖z‖ at every instant: `√2 K_e N ζ`   |
+//! | `e_bound`      | `z_bound / K_e` (V̇₁ < 0 beyond it)                  | ultimate bound on ‖e‖: `√2 N ζ / γ`, the theorem's claim |
+//! | `z_over_bound` | ultimate max ‖z‖ / `z_bound`                         | ultimate max ‖e‖ / `e_bound`                     |
+//!
+//! So `z_over_bound < 1` says, for either law, that the run kept the
+//! theorem's main bound. The kinematic form holds for an ideal base
+//! (control-law.md, "Theorem 2 for the kinematic law"): a base with a lag, or
+//! whose speed limits cut the command after the transient, gets no bound (its
+//! own `z` is outside the theorem), like any run outside Assumption 1.
 
 use std::io::{self, Write};
 
@@ -11,9 +29,10 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::check;
+use crate::control::Law;
 use crate::error::{ParamError, ScenarioError, SimError};
 use crate::odometry::ZetaModel;
-use crate::odometry::bound::Theorem2;
+use crate::odometry::bound::{KinematicTheorem2, Theorem2};
 use crate::output::CsvWriter;
 use crate::scenario::schema::{FixesSection, Fusion, OdometrySection};
 use crate::scenario::{Overrides, Run, Scenario};
@@ -95,13 +114,53 @@ pub struct Row {
     pub final_drift: f64,
     /// Ultimate max ‖p − p̂‖, m.
     pub drift_max: f64,
-    /// Theorem 2's bound on ‖z‖ for this run (`None` when the run is outside its
-    /// assumptions: systematic errors, slip, noisy or late fixes, no fixes).
+    /// Theorem 2's bound on ‖z‖ for this run, m/s (`None` when the run is
+    /// outside its assumptions: systematic errors, slip, noisy or late fixes,
+    /// no fixes; for the kinematic law also a lagging or saturating base).
+    /// See the [module docs](self) for each law's form.
     pub z_bound: Option<f64>,
-    /// max over agents of ‖z‖ / bound (`None` without a bound).
+    /// max over agents of the theorem's main ratio (`None` without a bound):
+    /// ‖z‖ / `z_bound` under the paper's law, ‖e‖ / `e_bound` under the
+    /// kinematic law.
     pub z_over_bound: Option<f64>,
-    /// The matching bound on ‖e‖, `z_bound / K_e` (V̇₁ < 0 beyond it), m.
+    /// The bound on ‖e‖, m: `z_bound / K_e` (V̇₁ < 0 beyond it) under the
+    /// paper's law, the ultimate `√2 N ζ / γ` under the kinematic law.
     pub e_bound: Option<f64>,
+    /// The laws of the agents that dead-reckon: which form of Theorem 2 the
+    /// bound columns hold (not written to `sweep.csv`).
+    #[serde(skip)]
+    pub laws: Laws,
+}
+
+/// The laws of a run's dead-reckoning agents, and so the form of Theorem 2 in
+/// a [`Row`]'s bound columns (see the [module docs](self)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Laws {
+    /// The paper's or the complete law (eq. 13) only, or no agent dead-reckons.
+    #[default]
+    Dynamic,
+    /// The kinematic law only.
+    Kinematic,
+    /// Both: each agent's bound in its own form, maxima over them.
+    Mixed,
+}
+
+impl Laws {
+    /// The laws of the agents `laws` (`Dynamic` for none).
+    pub fn of(laws: impl IntoIterator<Item = Law>) -> Laws {
+        let (mut dynamic, mut kinematic) = (false, false);
+        for law in laws {
+            match law {
+                Law::Kinematic => kinematic = true,
+                Law::Paper | Law::Complete => dynamic = true,
+            }
+        }
+        match (dynamic, kinematic) {
+            (true, true) => Laws::Mixed,
+            (false, true) => Laws::Kinematic,
+            _ => Laws::Dynamic,
+        }
+    }
 }
 
 /// The header of `sweep.csv`.
@@ -246,8 +305,11 @@ pub fn run_case(
     let sim = &mut run.simulation;
     let n = sim.agents().len();
     let mut z_max = vec![0.0f64; n];
-    let (mut z_hat_max, mut e_max, mut drift, mut drift_max) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let (mut z_hat_max, mut drift, mut drift_max) = (0.0f64, 0.0f64, 0.0f64);
+    let mut e_max = vec![0.0f64; n];
     let mut omega_max = vec![0.0f64; n];
+    // Whether a velocity base's speed limits cut its command after the transient.
+    let mut saturated = vec![false; n];
     let transient = grid.transient;
     let mut observe = |f: &Frame<'_>| -> Result<(), ObserverError> {
         for (i, odometer) in f.odometers.iter().enumerate() {
@@ -258,8 +320,9 @@ pub fn run_case(
                 drift_max = drift_max.max(d);
                 z_max[i] = z_max[i].max(o.z[0].hypot(o.z[1]));
                 z_hat_max = z_hat_max.max(o.z_hat[0].hypot(o.z_hat[1]));
-                e_max = e_max.max(o.e[0].hypot(o.e[1]));
+                e_max[i] = e_max[i].max(o.e[0].hypot(o.e[1]));
                 omega_max[i] = omega_max[i].max(s.omega.abs());
+                saturated[i] |= o.velocity.is_some_and(|v| v.saturated);
             }
             if f.last {
                 drift = drift.max(d);
@@ -274,31 +337,54 @@ pub fn run_case(
         // `apply` keeps the noise settings, so the file's are the case's.
         && noise_free(scenario);
     let (mut z_bound, mut ratio, mut e_bound) = (None, None, None);
+    let mut widen = |z: f64, r: f64, e: f64| {
+        z_bound = Some(z_bound.map_or(z, |x: f64| x.max(z)));
+        ratio = Some(ratio.map_or(r, |x: f64| x.max(r)));
+        e_bound = Some(e_bound.map_or(e, |x: f64| x.max(e)));
+    };
+    let dead_reckoning = |i: usize| sim.odometers().get(i).is_some_and(Option::is_some);
     if theorem_applies {
         for (i, a) in sim.agents().iter().enumerate() {
-            if sim.odometers().get(i).is_none_or(Option::is_none) {
+            if !dead_reckoning(i) {
                 continue;
             }
-            let t = Theorem2::new(a.gains.ke, a.gains.kz, case.zeta, omega_max[i], grid.gamma)?;
-            let b = t.z_bound(case.fix_every);
-            z_bound = Some(z_bound.map_or(b, |x: f64| x.max(b)));
-            let r = z_max[i] / b;
-            ratio = Some(ratio.map_or(r, |x: f64| x.max(r)));
-            let e = b / a.gains.ke;
-            e_bound = Some(e_bound.map_or(e, |x: f64| x.max(e)));
+            match a.velocity_robot() {
+                None => {
+                    let t =
+                        Theorem2::new(a.gains.ke, a.gains.kz, case.zeta, omega_max[i], grid.gamma)?;
+                    let b = t.z_bound(case.fix_every);
+                    widen(b, z_max[i] / b, b / a.gains.ke);
+                }
+                // The kinematic form is for an ideal base: no lag, and no
+                // speed limit cutting the command once the transient is over.
+                Some(r) if r.base.tau_v == 0.0 && r.base.tau_omega == 0.0 && !saturated[i] => {
+                    let t = KinematicTheorem2::new(a.gains.ke, case.zeta, grid.gamma)?;
+                    let e = t.e_bound(case.fix_every);
+                    widen(t.z_bound(case.fix_every), e_max[i] / e, e);
+                }
+                Some(_) => {}
+            }
         }
     }
+    let laws = Laws::of(
+        sim.agents()
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| dead_reckoning(i))
+            .map(|(_, a)| a.law()),
+    );
     Ok(Row {
         case: *case,
         omega_max: omega_max.iter().copied().fold(0.0, f64::max),
         z_max: z_max.iter().copied().fold(0.0, f64::max),
         z_hat_max,
-        e_max,
+        e_max: e_max.iter().copied().fold(0.0, f64::max),
         final_drift: drift,
         drift_max,
         z_bound,
         z_over_bound: ratio,
         e_bound,
+        laws,
     })
 }
 

@@ -602,3 +602,185 @@ fn umbmark_from_logs_reproduces_the_simulated_return_errors() {
         "{c:?}"
     );
 }
+
+/// A torque sweep's `sweep.csv` and `drift.csv`, byte for byte: the paper law's
+/// Theorem 2 columns (and everything else a torque sweep writes) must not move
+/// when other laws get their bounds. Both ζ models, a systematic error (no
+/// bound), no fixes (no bound), two seeds.
+/// Regenerate with `ECHELON_BLESS=1 cargo test --test odometry golden`.
+#[test]
+fn torque_sweep_outputs_match_their_golden_bytes() {
+    let s = Scenario::resolve("fix-study").unwrap();
+    let ov = Overrides {
+        duration: Some(4.0),
+        ..Overrides::default()
+    };
+    let mut out = Vec::new();
+    for model in [ZetaModel::Wheels, ZetaModel::WorstCase] {
+        let g = Grid {
+            zeta: vec![1e-5, 4e-5],
+            zeta_model: model,
+            wheel_diameter_ratio: vec![1.0, 1.002],
+            wheelbase_ratio: vec![1.0],
+            slip: vec![0.0],
+            fix_every: vec![0, 20, 100],
+            seeds: vec![0, 1],
+            gamma: 0.9,
+            transient: 2.0,
+        };
+        let rows = sweep::run(&s, &ov, &g, &|| {}).unwrap();
+        assert!(rows.iter().any(|r| r.z_bound.is_some()));
+        sweep::write_csv(&mut out, &rows, model).unwrap();
+        let curves = sweep::drift_curves(&s, &ov, &g, 50).unwrap();
+        sweep::write_drift_csv(&mut out, &curves).unwrap();
+    }
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sweep-fix-study.csv");
+    if std::env::var_os("ECHELON_BLESS").is_some() {
+        std::fs::write(&file, &out).unwrap();
+        return;
+    }
+    let want = std::fs::read(&file).unwrap_or_else(|_| panic!("missing {}", file.display()));
+    assert!(
+        out == want,
+        "{} differs:\n{}",
+        file.display(),
+        String::from_utf8_lossy(&out)
+    );
+}
+
+/// Theorem 2's study on an ideal velocity base under the kinematic law (two
+/// robots holding places behind the reference, both dead-reckoning).
+const KINEMATIC_STUDY: &str = r#"
+name = "kinematic-study"
+[sim]
+duration = 30.0
+dt = 0.001
+[control]
+law = "kinematic"
+ke = 1.5
+l = 0.05
+lycomp = "exact"
+[robots.base]
+drive = "velocity"
+preset = "ideal"
+[reference.circle]
+speed = 0.5
+turn_rate = 0.2
+start = { x = 0.0, y = 0.0, theta_deg = 0.0 }
+[[agents]]
+robot = "base"
+start = { x = -0.6, y = -0.2, theta_deg = 0.0 }
+leader = "reference"
+offset = { x = 0.5, y = 0.3 }
+[[agents]]
+robot = "base"
+start = { x = -0.9, y = 0.5, theta_deg = 20.0 }
+leader = "reference"
+offset = { x = 0.8, y = -0.4 }
+[odometry]
+zeta = 1e-6
+"#;
+
+/// The kinematic law's Theorem 2 (control-law.md) along simulated runs: on an
+/// ideal base the true `z = K_e ẽ`, so ‖z‖ ≤ √2 K_e N ζ at every instant and
+/// the worst case (eq. 31) reaches it at the last sample before each fix;
+/// ‖e‖ ends up under √2 N ζ / γ, and the worst case comes close to it.
+#[test]
+fn the_kinematic_theorem_2_bounds_every_run_of_a_velocity_sweep() {
+    let s = Scenario::parse(KINEMATIC_STUDY, "kinematic.toml", None).unwrap();
+    for model in [ZetaModel::Wheels, ZetaModel::WorstCase] {
+        let g = grid(model, vec![100, 1000, 3000], vec![0]);
+        let rows = sweep::run(&s, &Overrides::default(), &g, &|| {}).unwrap();
+        assert_eq!(rows.len(), 6);
+        let mut tightest_z: f64 = 0.0;
+        for r in &rows {
+            assert_eq!(r.laws, sweep::Laws::Kinematic);
+            let (n, zeta) = (r.case.fix_every as f64, r.case.zeta);
+            let e_bound = r.e_bound.expect("the theorem applies on an ideal base");
+            let z_bound = r.z_bound.unwrap();
+            // The columns are the kinematic form's closed forms.
+            let sqrt2 = std::f64::consts::SQRT_2;
+            assert!((e_bound - sqrt2 * n * zeta / g.gamma).abs() <= 1e-15 * e_bound);
+            assert!((z_bound - sqrt2 * 1.5 * n * zeta).abs() <= 1e-15 * z_bound);
+            let ratio = r.z_over_bound.unwrap();
+            assert!(
+                (ratio - r.e_max / e_bound).abs() <= 1e-15 * ratio,
+                "z_over_bound is ‖e‖/e_bound for the kinematic law"
+            );
+            assert!(
+                r.e_max < e_bound,
+                "{model:?}, N = {n}, ζ = {zeta}: ‖e‖ = {} > bound {e_bound}",
+                r.e_max
+            );
+            // z = K_e ẽ exactly: never above √2 K_e N ζ (dead reckoning's own
+            // arc error, ~1e-9 relative, aside).
+            assert!(
+                r.z_max <= z_bound * (1.0 + 1e-6),
+                "{model:?}, N = {n}: ‖z‖ = {} > {z_bound}",
+                r.z_max
+            );
+            tightest_z = tightest_z.max(r.z_max / z_bound);
+        }
+        if model == ZetaModel::WorstCase {
+            assert!(
+                tightest_z > 0.999,
+                "worst case reaches {tightest_z} of √2 K_e N ζ"
+            );
+            for r in &rows {
+                // ‖ẽ‖ = √2 n ζ ramps over the N samples between fixes and ė =
+                // −S e − K_e (e − ẽ) filters it; S only turns e. The periodic
+                // steady state peaks at the last sample before a fix, at
+                // √2 N ζ (1 − (1 − q)/(K_e T)) / (1 − q), T = N T_s, q = e^{−K_e T}:
+                // the bound's 1/γ is the margin that covers any such lag.
+                let t = r.case.fix_every as f64 * 0.001;
+                let q = (-1.5 * t).exp();
+                let peak = (1.0 - (1.0 - q) / (1.5 * t)) / (1.0 - q);
+                let ratio = r.z_over_bound.unwrap() / g.gamma;
+                assert!(
+                    (ratio - peak).abs() < 0.02 * peak,
+                    "N = {}: ‖e‖ reaches {ratio} of √2 N ζ, the filtered ramp {peak}",
+                    r.case.fix_every
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_lagging_base_or_a_mixed_formation_gets_the_bound_its_theory_gives() {
+    // A lag adds the base's own z: outside the kinematic theorem, no bound.
+    let lagged = KINEMATIC_STUDY.replace(
+        "preset = \"ideal\"",
+        "tau_v = 0.05\ntau_omega = 0.05\nhalf_wheelbase = 0.15\nwheel_radius = 0.05",
+    );
+    let s = Scenario::parse(&lagged, "lagged.toml", None).unwrap();
+    let mut g = grid(ZetaModel::WorstCase, vec![1000], vec![0]);
+    g.zeta = vec![1e-6];
+    let ov = Overrides {
+        duration: Some(10.0),
+        ..Overrides::default()
+    };
+    g.transient = 5.0;
+    let rows = sweep::run(&s, &ov, &g, &|| {}).unwrap();
+    assert_eq!(rows[0].laws, sweep::Laws::Kinematic);
+    assert_eq!((rows[0].z_bound, rows[0].e_bound), (None, None));
+    // A torque robot on the paper's law beside an ideal base: each its own form,
+    // maxima over both.
+    let mixed = KINEMATIC_STUDY
+        .replace("law = \"kinematic\"\n", "kz = 10.0\n")
+        .replacen(
+            "[[agents]]\nrobot = \"base\"",
+            "[[agents]]\nrobot = \"agent1\"",
+            1,
+        );
+    let s = Scenario::parse(&mixed, "mixed.toml", None).unwrap();
+    let rows = sweep::run(&s, &ov, &g, &|| {}).unwrap();
+    let r = &rows[0];
+    assert_eq!(r.laws, sweep::Laws::Mixed);
+    let (n, zeta) = (1000.0, 1e-6);
+    let kinematic = echelon::odometry::bound::KinematicTheorem2::new(1.5, zeta, g.gamma).unwrap();
+    assert!(r.z_bound.unwrap() >= kinematic.z_bound(1000));
+    assert!(r.e_bound.unwrap() >= kinematic.e_bound(1000));
+    assert!(r.e_bound.unwrap() >= std::f64::consts::SQRT_2 * n * zeta / g.gamma);
+    assert!(r.z_over_bound.unwrap() < 1.0, "{r:?}");
+}

@@ -22,6 +22,7 @@ use echelon::scenario::{Overrides, Scenario};
 use crate::faults::FaultSpec;
 use crate::keys::robot_role;
 use crate::net::robot_identity;
+use crate::ros2::base::base_role;
 use crate::{FleetError, StopFlag};
 
 /// The summary `fleet up` writes.
@@ -46,6 +47,9 @@ pub struct UpOptions {
     pub secure: Option<PathBuf>,
     /// The `echelon` binary to start the children with.
     pub exe: PathBuf,
+    /// Robots drive ROS 2 bases: one simulated base per robot
+    /// (`fleet base --ros2`), all robot↔base traffic in ROS 2's format.
+    pub ros2: bool,
 }
 
 /// Every process's final report.
@@ -67,6 +71,9 @@ pub struct UpReport {
     pub robots: Vec<serde_json::Value>,
     /// The collector's report.
     pub collector: serde_json::Value,
+    /// With `--ros2`: each simulated base's report.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub bases: Vec<serde_json::Value>,
 }
 
 /// A started child, killed if still running when dropped (a failing test or
@@ -185,8 +192,18 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
 
+    if opts.ros2 && opts.secure.is_some() {
+        return Err(FleetError::Config(
+            "--ros2 with --secure: the access rules for ROS 2 keys are not written yet (docs/ros2.md)".into(),
+        ));
+    }
     let proto = if opts.secure.is_some() { "tls" } else { "tcp" };
-    let ports = free_ports(n + 2)?;
+    // Start order, which is also the port order: the collector, the ROS 2
+    // bases (with --ros2), the robots, the leader.
+    let bases = if opts.ros2 { n } else { 0 };
+    let robot_at = |k: usize| bases + k;
+    let leader_at = bases + n + 1;
+    let ports = free_ports(leader_at + 1)?;
     let endpoint = |i: usize| format!("{proto}/127.0.0.1:{}", ports[i]);
     let common = |i: usize, identity: &str| -> Vec<String> {
         let mut a = vec![
@@ -213,9 +230,12 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let mut endpoints = serde_json::Map::new();
     endpoints.insert("collector".into(), endpoint(0).into());
     for k in 1..=n {
-        endpoints.insert(robot_role(k), endpoint(k).into());
+        endpoints.insert(robot_role(k), endpoint(robot_at(k)).into());
     }
-    endpoints.insert("leader".into(), endpoint(n + 1).into());
+    for k in 1..=bases {
+        endpoints.insert(base_role(k), endpoint(k).into());
+    }
+    endpoints.insert("leader".into(), endpoint(leader_at).into());
     crate::write_json_file(&opts.out.join(ENDPOINTS_FILE), &endpoints)?;
     let scale = opts.time_scale.to_string();
     let dur = duration.to_string();
@@ -227,8 +247,27 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         "--out".to_owned(),
         opts.out.display().to_string(),
     ];
+    if opts.ros2 {
+        args.extend([opts.scenario.clone(), "--ros2".to_owned()]);
+    }
     args.extend(common(0, "collector"));
     let mut collector = spawn(&opts.exe, "collector", &args, &logs)?;
+
+    let mut base_procs = Vec::with_capacity(bases);
+    for k in 1..=bases {
+        let mut args = vec![
+            "fleet".to_owned(),
+            "base".to_owned(),
+            opts.scenario.clone(),
+            "--ros2".to_owned(),
+            "--agent".to_owned(),
+            k.to_string(),
+            "--time-scale".to_owned(),
+            scale.clone(),
+        ];
+        args.extend(common(k, &base_role(k)));
+        base_procs.push(spawn(&opts.exe, &base_role(k), &args, &logs)?);
+    }
 
     let mut robots = Vec::with_capacity(n);
     for k in 1..=n {
@@ -254,7 +293,10 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         if let Some((s, l)) = opts.faults.outage {
             args.extend(["--outage".to_owned(), format!("{s}:{l}")]);
         }
-        args.extend(common(k, &robot_identity(k)));
+        if opts.ros2 {
+            args.push("--ros2".to_owned());
+        }
+        args.extend(common(robot_at(k), &robot_identity(k)));
         robots.push(spawn(&opts.exe, &robot_role(k), &args, &logs)?);
     }
 
@@ -272,7 +314,10 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     for k in 1..=n {
         args.extend(["--wait-for".to_owned(), robot_role(k)]);
     }
-    args.extend(common(n + 1, "leader"));
+    for k in 1..=bases {
+        args.extend(["--wait-for".to_owned(), base_role(k)]);
+    }
+    args.extend(common(leader_at, "leader"));
     let mut leader = spawn(&opts.exe, "leader", &args, &logs)?;
 
     // Generous: connection set-up, then the run in real time, then the wind-down.
@@ -289,12 +334,16 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             all_done &= r.poll()?;
         }
         collector.poll()?;
+        for b in &mut base_procs {
+            b.poll()?;
+        }
         let failed = std::iter::once(&leader)
             .chain(&robots)
+            .chain(&base_procs)
             .chain(std::iter::once(&collector))
             .find_map(Proc::failure);
         if let Some(f) = failed {
-            for p in std::iter::once(&leader).chain(&robots) {
+            for p in std::iter::once(&leader).chain(&robots).chain(&base_procs) {
                 p.terminate();
             }
             collector.terminate();
@@ -332,17 +381,28 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         }
         std::thread::sleep(nap);
     }
-    // 2. Let the last messages reach the collector, then stop it.
+    // 2. Let the last messages reach the collector, then stop it and the
+    // bases (after the robots' last, zero, command).
     std::thread::sleep(Duration::from_millis(300));
     collector.terminate();
+    for b in &base_procs {
+        b.terminate();
+    }
     let wind_down = Instant::now();
-    while !collector.poll()? {
+    while !collector.poll()?
+        | !base_procs
+            .iter_mut()
+            .try_fold(true, |all, b| Ok::<_, FleetError>(b.poll()? & all))?
+    {
         if wind_down.elapsed() > Duration::from_secs(30) {
             return Err(FleetError::Child("the collector did not stop".into()));
         }
         std::thread::sleep(nap);
     }
-    if let Some(f) = collector.failure() {
+    if let Some(f) = std::iter::once(&collector)
+        .chain(&base_procs)
+        .find_map(Proc::failure)
+    {
         return Err(FleetError::Child(f));
     }
     let report = |p: &Proc| -> Result<serde_json::Value, FleetError> {
@@ -363,6 +423,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         leader: report(&leader)?,
         robots: robots.iter().map(report).collect::<Result<_, _>>()?,
         collector: report(&collector)?,
+        bases: base_procs.iter().map(report).collect::<Result<_, _>>()?,
     };
     crate::write_json_file(&opts.out.join(UP_SUMMARY_FILE), &up)?;
     Ok(up)

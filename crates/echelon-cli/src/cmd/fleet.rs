@@ -16,6 +16,9 @@ use echelon_fleet::faults::FaultSpec;
 use echelon_fleet::leader::{self, LeaderOptions};
 use echelon_fleet::net::{self, NetOptions, Secure};
 use echelon_fleet::robot::{self, RobotOptions};
+use echelon_fleet::ros2::RosTopic;
+use echelon_fleet::ros2::base::{self, BaseOptions};
+use echelon_fleet::ros2::msgs::ODOMETRY;
 use echelon_fleet::up::{self, UP_SUMMARY_FILE, UpOptions};
 use echelon_fleet::{StopFlag, collector::SUMMARY_FILE};
 
@@ -27,8 +30,10 @@ use super::{non_negative, parse_number, positive};
 pub(crate) enum FleetCommand {
     /// Publish the scenario's reference (the virtual leader).
     Leader(LeaderArgs),
-    /// Run one agent of the scenario: control law on a simulated plant paced in real time.
+    /// Run one agent of the scenario: control law on a simulated plant paced in real time, or on a ROS 2 robot (--ros2).
     Robot(RobotArgs),
+    /// A simulated ROS 2 base (--ros2): cmd_vel in, odom out over rmw_zenoh, as diff_drive_controller on a robot.
+    Base(BaseArgs),
     /// Record everything to DIR/fleet.mcap and DIR/trajectory.csv.
     Collector(CollectorArgs),
     /// Start a leader, one process per robot and a collector on loopback; stop them; summarise.
@@ -176,8 +181,32 @@ pub(crate) struct RobotArgs {
     /// Run the clock K times faster than real time.
     #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
     time_scale: f64,
+    /// Drive the agent's ROS 2 robot ([fleet.ros2]): odom in, cmd_vel out over rmw_zenoh.
+    #[arg(long)]
+    ros2: bool,
     #[command(flatten)]
     faults: FaultArgs,
+    #[command(flatten)]
+    net: NetArgs,
+}
+
+/// `echelon fleet base`.
+#[derive(Debug, Args)]
+pub(crate) struct BaseArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    scenario: String,
+    /// Simulate a ROS 2 base (the only kind so far; required).
+    #[arg(long)]
+    ros2: bool,
+    /// Which agent's base, from 1.
+    #[arg(long, value_name = "K")]
+    agent: u32,
+    /// Stop after this many (scaled) seconds [default: run until SIGINT/SIGTERM].
+    #[arg(long, value_name = "S", value_parser = positive)]
+    duration: Option<f64>,
+    /// Run the clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    time_scale: f64,
     #[command(flatten)]
     net: NetArgs,
 }
@@ -190,6 +219,9 @@ pub(crate) struct CollectorArgs {
     /// Output directory.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Also record every agent's ROS 2 cmd_vel and odom ([fleet.ros2]) as ROS 2 channels.
+    #[arg(long, requires = "scenario")]
+    ros2: bool,
     #[command(flatten)]
     net: NetArgs,
 }
@@ -213,6 +245,9 @@ pub(crate) struct UpArgs {
     /// Secure mode with the certificates in DIR (`echelon fleet certs DIR`).
     #[arg(long, value_name = "DIR")]
     secure: Option<PathBuf>,
+    /// Robots drive simulated ROS 2 bases (one `fleet base --ros2` each), all robot↔base traffic in ROS 2's format.
+    #[arg(long)]
+    ros2: bool,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -233,6 +268,24 @@ pub(crate) struct CertsArgs {
 
 fn agents_of(s: &Scenario) -> Result<u32> {
     Ok(s.build(&Overrides::default())?.simulation.agents().len() as u32)
+}
+
+/// Every agent's `cmd_vel` and `odom` as `[fleet.ros2]` places them.
+fn ros_topics(s: &Scenario) -> Result<Vec<RosTopic>> {
+    let mut topics = Vec::new();
+    for link in s.fleet()?.ros2 {
+        let cmd = echelon_fleet::ros2::drive::cmd_vel_type(&link);
+        for (topic, ty) in [(&link.cmd_vel, cmd), (&link.odom, ODOMETRY)] {
+            topics.push(RosTopic::new(
+                link.key_scheme,
+                link.domain_id,
+                &link.namespace,
+                topic,
+                ty,
+            )?);
+        }
+    }
+    Ok(topics)
 }
 
 fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
@@ -277,6 +330,28 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     faults: a.faults.spec(),
                     net,
                     fleet: a.net.fleet.clone(),
+                    ros2: a.ros2,
+                },
+                &stop,
+            )?;
+            print_report(&report)
+        }
+        FleetCommand::Base(a) => {
+            if !a.ros2 {
+                bail!("fleet base simulates a ROS 2 base: give --ros2");
+            }
+            let scenario = Scenario::resolve(&a.scenario)?;
+            let robots = agents_of(&scenario)?;
+            let net = a.net.options(&base::base_role(a.agent), Some(robots))?;
+            let stop = StopFlag::on_signals()?;
+            let report = base::run(
+                BaseOptions {
+                    scenario,
+                    agent: a.agent,
+                    time_scale: a.time_scale,
+                    duration: a.duration,
+                    net,
+                    fleet: a.net.fleet.clone(),
                 },
                 &stop,
             )?;
@@ -292,13 +367,18 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             let robots = scenario.as_ref().map(agents_of).transpose()?;
             let net = a.net.options("collector", robots)?;
             let stop = StopFlag::on_signals()?;
-            let report = collector::run(
+            let ros = match (&scenario, a.ros2) {
+                (Some(s), true) => ros_topics(s)?,
+                _ => Vec::new(),
+            };
+            let report = collector::run_with_ros2(
                 CollectorOptions {
                     out: a.out,
                     fleet,
                     max_wall: None,
                     net,
                 },
+                ros,
                 &stop,
             )?;
             print_report(&report)
@@ -336,6 +416,7 @@ fn up_cmd(a: UpArgs) -> Result<()> {
             faults: a.faults.spec(),
             secure: a.secure,
             exe,
+            ros2: a.ros2,
         },
         &stop,
     )?;

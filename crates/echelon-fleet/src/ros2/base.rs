@@ -49,7 +49,7 @@ pub struct BaseCounters {
     pub cmd_non_finite: u64,
     /// Refused: no valid rmw_zenoh attachment (rmw_zenoh drops these).
     pub cmd_no_attachment: u64,
-    /// Times the base stopped because no command came for `cmd_vel_timeout`.
+    /// Times the moving base stopped because no command came for `cmd_vel_timeout`.
     pub cmd_timeouts: u64,
     /// Odometry messages published.
     pub odom_published: u64,
@@ -174,9 +174,10 @@ impl SimBase {
             // diff_drive_controller's cmd_vel_timeout: brake to zero, from
             // the moment the timeout expired.
             self.base.advance(at + self.link.cmd_vel_timeout);
-            self.followed = self.base.follow(VelocityCommand::default()).0;
             self.timed_out = true;
-            self.counters.cmd_timeouts += 1;
+            // A base already commanded to rest is not stopped by a timeout.
+            self.counters.cmd_timeouts += u64::from(self.followed != VelocityCommand::default());
+            self.followed = self.base.follow(VelocityCommand::default()).0;
         }
         self.base.advance(now);
         if now < self.next_odom {

@@ -1,0 +1,433 @@
+//! The fleet driving ROS 2 bases over rmw_zenoh, as processes:
+//!
+//! - `fleet up --ros2`: leader, robots, simulated ROS 2 bases and collector;
+//!   the robots end where the simulator ends;
+//! - a robot whose base dies and whose odometry topic then carries garbage
+//!   counts and refuses it and commands zero; SIGTERM leaves a zero
+//!   `cmd_vel` as the last message on its key;
+//! - a robot process driving an independent ROS 2 base written in Python
+//!   (eclipse-zenoh, rclpy serialization: `scripts/ros2/fake_base.py`)
+//!   converges to its slot.
+
+#![allow(clippy::unwrap_used)]
+
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use zenoh::Wait;
+
+use echelon_fleet::ros2::keys::topic_key;
+use echelon_fleet::ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST, Time, TwistStamped};
+
+const EXE: &str = env!("CARGO_BIN_EXE_echelon");
+const SCENARIO: &str = "experiment-circle-velocity";
+
+struct Guard(Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
+impl Guard {
+    fn terminate(&self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+    }
+
+    /// Waits for the process to exit; its last JSON line.
+    fn report(mut self) -> Value {
+        let status = self.0.wait().unwrap();
+        let mut out = String::new();
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut self.0.stdout.take().unwrap(), &mut out).unwrap();
+        std::io::Read::read_to_string(&mut self.0.stderr.take().unwrap(), &mut err).unwrap();
+        assert!(status.success(), "{status}: {err}");
+        let line = out
+            .lines()
+            .rfind(|l| l.starts_with('{'))
+            .unwrap_or_else(|| panic!("no report: {out} {err}"));
+        serde_json::from_str(line).unwrap()
+    }
+}
+
+fn spawn(args: &[&str]) -> Guard {
+    Guard(
+        Command::new(EXE)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    )
+}
+
+fn ports(n: usize) -> Vec<String> {
+    let l: Vec<_> = (0..n)
+        .map(|_| TcpListener::bind("127.0.0.1:0").unwrap())
+        .collect();
+    l.iter()
+        .map(|l| format!("tcp/127.0.0.1:{}", l.local_addr().unwrap().port()))
+        .collect()
+}
+
+/// `--listen mine --connect each of before` (a full mesh of peers).
+fn mesh(mine: &str, before: &[String]) -> Vec<String> {
+    let mut a = vec!["--listen".to_owned(), mine.to_owned()];
+    for e in before {
+        a.push("--connect".to_owned());
+        a.push(e.clone());
+    }
+    a
+}
+
+fn args<'a>(fixed: &[&'a str], more: &'a [String]) -> Vec<&'a str> {
+    fixed
+        .iter()
+        .copied()
+        .chain(more.iter().map(String::as_str))
+        .collect()
+}
+
+fn f(v: &Value, path: &[&str]) -> f64 {
+    path.iter()
+        .fold(v, |v, k| &v[*k])
+        .as_f64()
+        .unwrap_or_else(|| panic!("{path:?} in {v}"))
+}
+
+/// The simulator's final poses of the scenario run for `duration`.
+fn simulated_final(duration: &str, dir: &Path) -> Vec<(f64, f64)> {
+    let out = Command::new(EXE)
+        .args(["run", SCENARIO, "--duration", duration, "--out"])
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    s["agents"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| (f(a, &["final_pose", "x"]), f(a, &["final_pose", "y"])))
+        .collect()
+}
+
+/// `fleet up --ros2`: every robot↔base message in ROS 2's format; the
+/// robots end within 5 mm of the simulator's final positions (measured:
+/// 0.25 mm at 30 s), and the collector recorded the ROS topics.
+#[test]
+fn fleet_up_ros2_ends_where_the_simulator_ends() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(EXE)
+        .args([
+            "fleet",
+            "up",
+            SCENARIO,
+            "--ros2",
+            "--time-scale",
+            "10",
+            "--duration",
+            "30",
+            "--quiet",
+            "--out",
+        ])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let up: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("fleet-summary.json")).unwrap(),
+    )
+    .unwrap();
+    let sim = simulated_final("30", &dir.path().join("sim"));
+    let robots = up["robots"].as_array().unwrap();
+    assert_eq!(robots.len(), sim.len());
+    for (r, (x, y)) in robots.iter().zip(&sim) {
+        let st = r["final_state"].as_array().unwrap();
+        let (rx, ry) = (st[0].as_f64().unwrap(), st[1].as_f64().unwrap());
+        let d = (rx - x).hypot(ry - y);
+        assert!(d < 5e-3, "robot {}: {d} m from the simulator", r["agent"]);
+        assert!(f(r, &["final_error"]) < 5e-3, "{r}");
+        let ros = &r["ros2"];
+        assert!(
+            f(ros, &["cmd_sent"]) > 1000.0 && f(ros, &["odom_accepted"]) > 500.0,
+            "{ros}"
+        );
+        for k in [
+            "odom_malformed",
+            "odom_non_finite",
+            "odom_wrong_type",
+            "odom_wrong_frames",
+        ] {
+            assert_eq!(f(ros, &[k]), 0.0, "{k}: {ros}");
+        }
+    }
+    for b in up["bases"].as_array().unwrap() {
+        let c = &b["counters"];
+        assert_eq!(f(c, &["cmd_received"]), f(c, &["cmd_accepted"]), "{b}");
+        assert_eq!(b["last_command"], serde_json::json!([0.0, 0.0]), "{b}");
+    }
+    let col = &up["collector"];
+    assert!(f(col, &["ros_recorded"]) > 1000.0, "{col}");
+    assert_eq!(f(col, &["ros_refused"]), 0.0, "{col}");
+}
+
+/// What the test session heard on robot 1's `cmd_vel`: `(v, ω)` in order.
+type Heard = Arc<Mutex<Vec<(f64, f64)>>>;
+
+/// Robot 1 drives a simulated base; the base dies and the test then puts
+/// garbage, truncated CDR, NaN poses and a wrong type hash on the odom
+/// topic: each is counted and refused and the robot commands zero and holds.
+/// SIGTERM then leaves a zero `cmd_vel` as the last message on its key.
+#[test]
+fn bad_odometry_is_refused_and_sigterm_leaves_zero_on_cmd_vel() {
+    let e = ports(4);
+    let session = echelon_fleet::net::open(&echelon_fleet::net::NetOptions {
+        listen: vec![e[0].clone()],
+        ..Default::default()
+    })
+    .unwrap();
+    let heard: Heard = Arc::default();
+    let h = heard.clone();
+    let cmd_key = "0/robot1/cmd_vel/**";
+    let _sub = session
+        .declare_subscriber(cmd_key)
+        .callback(move |s| {
+            let m = TwistStamped::from_cdr_finite(&s.payload().to_bytes()).unwrap();
+            h.lock()
+                .unwrap()
+                .push((m.twist.linear.x, m.twist.angular.z));
+        })
+        .wait()
+        .unwrap();
+    let base_net = mesh(&e[1], &e[..1]);
+    let base = spawn(&args(
+        &["fleet", "base", SCENARIO, "--ros2", "--agent", "1"],
+        &base_net,
+    ));
+    let robot_net = mesh(&e[2], &e[..2]);
+    let robot = spawn(&args(
+        &["fleet", "robot", SCENARIO, "--ros2", "--agent", "1"],
+        &robot_net,
+    ));
+    let leader_net = mesh(&e[3], &e[..3]);
+    let _leader = spawn(&args(
+        &[
+            "fleet",
+            "leader",
+            SCENARIO,
+            "--wait-for",
+            "robot/1",
+            "--wait-for",
+            "base/1",
+        ],
+        &leader_net,
+    ));
+    // Until the robot drives (a non-zero command).
+    let start = Instant::now();
+    while !heard
+        .lock()
+        .unwrap()
+        .iter()
+        .any(|&(v, w)| v != 0.0 || w != 0.0)
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "robot 1 never moved"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    base.terminate();
+    let base_report = base.report();
+    assert!(
+        f(&base_report, &["counters", "cmd_accepted"]) > 10.0,
+        "{base_report}"
+    );
+
+    // Only bad odometry from now on.
+    let odom_key = topic_key(
+        echelon_fleet::ros2::KeyScheme::RmwZenoh,
+        0,
+        "/robot1/odom",
+        &ODOMETRY,
+    );
+    let good = Odometry::planar(
+        0.0,
+        -0.6,
+        1.5,
+        0.0,
+        0.0,
+        Time::default(),
+        "odom",
+        "base_link",
+    )
+    .to_cdr();
+    let nan = Odometry::planar(
+        f64::NAN,
+        -0.6,
+        1.5,
+        0.0,
+        0.0,
+        Time::default(),
+        "odom",
+        "base_link",
+    )
+    .to_cdr();
+    let wrong_type = topic_key(
+        echelon_fleet::ros2::KeyScheme::RmwZenoh,
+        0,
+        "/robot1/odom",
+        &TWIST,
+    );
+    let mut sent = 0;
+    let garbage_from = heard.lock().unwrap().len();
+    for _ in 0..20 {
+        session.put(&odom_key, b"garbage".to_vec()).wait().unwrap();
+        session.put(&odom_key, good[..40].to_vec()).wait().unwrap();
+        session.put(&odom_key, nan.clone()).wait().unwrap();
+        session.put(&wrong_type, good.clone()).wait().unwrap();
+        sent += 1;
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // The odometry went stale 0.5 s after the base died: zero ever since
+    // (allowing the in-flight commands of that half second).
+    let after: Vec<_> = heard.lock().unwrap()[garbage_from..].to_vec();
+    let tail = &after[after.len() / 2..];
+    assert!(
+        !tail.is_empty() && tail.iter().all(|&c| c == (0.0, 0.0)),
+        "{tail:?}"
+    );
+
+    robot.terminate();
+    let report = robot.report();
+    std::thread::sleep(Duration::from_millis(300));
+    let ros = &report["ros2"];
+    for k in ["odom_malformed", "odom_non_finite", "odom_wrong_type"] {
+        assert!(
+            f(ros, &[k]) >= f64::from(sent) * if k == "odom_malformed" { 2.0 } else { 1.0 } - 2.0,
+            "{k}: {ros}"
+        );
+    }
+    assert!(f(ros, &["cmd_zero"]) > 0.0);
+    let last = *heard.lock().unwrap().last().unwrap();
+    assert_eq!(last, (0.0, 0.0), "the last cmd_vel after SIGTERM");
+}
+
+fn fake_base() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/ros2/fake_base.py")
+}
+
+/// The robot process against an independent ROS 2 base (eclipse-zenoh and
+/// rclpy serialization, `scripts/ros2/fake_base.py`, an ideal unicycle):
+/// the base decodes every command with its attachment and sees the robot's
+/// rmw_zenoh tokens, and the robot converges to its slot (final ‖e‖ < 5 mm
+/// after 10 s; the transient settles in about 2.3 s).
+#[test]
+fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
+    let e = ports(3);
+    let dir = tempfile::tempdir().unwrap();
+    let report_path = dir.path().join("base.json");
+    let python = std::env::var("ECHELON_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let mut child = Command::new(&python)
+        .arg(fake_base())
+        .args(["--listen", &e[0], "--namespace", "/robot1", "--duration", "25"])
+        .args(["--x", "0.0", "--y", "-0.6", "--yaw", &std::f64::consts::FRAC_PI_2.to_string()])
+        .arg("--report")
+        .arg(&report_path)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| {
+            panic!("cannot run `{python}`: {e}; run `scripts/test` (it installs scripts/requirements-test.txt)")
+        });
+    let robot_net = mesh(&e[1], &e[..1]);
+    let robot = spawn(&args(
+        &[
+            "fleet",
+            "robot",
+            SCENARIO,
+            "--ros2",
+            "--agent",
+            "1",
+            "--duration",
+            "10",
+        ],
+        &robot_net,
+    ));
+    let leader_net = mesh(&e[2], &e[..2]);
+    let leader = spawn(&args(
+        &[
+            "fleet",
+            "leader",
+            SCENARIO,
+            "--duration",
+            "10",
+            "--wait-for",
+            "robot/1",
+            "--wait-timeout",
+            "60",
+        ],
+        &leader_net,
+    ));
+    let report = robot.report();
+    leader.report();
+    let _ = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status();
+    let status = child.wait().unwrap();
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+    assert!(status.success(), "fake_base.py: {status}: {err}");
+    assert!(f(&report, &["final_error"]) < 5e-3, "{report}");
+    assert_eq!(f(&report, &["ros2", "odom_wrong_type"]), 0.0, "{report}");
+    let base: Value =
+        serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    let commands = f(&base, &["commands"]);
+    assert!(commands > 300.0, "{base}");
+    assert_eq!(f(&base, &["attachments_valid"]), commands, "{base}");
+    assert_eq!(f(&base, &["undecodable"]), 0.0);
+    assert_eq!(
+        base["last_command"]["v"], 0.0,
+        "the robot stopped with zero"
+    );
+    assert_eq!(base["last_command"]["frame_id"], "base_link");
+    let tokens: Vec<&str> = base["tokens"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    assert!(
+        tokens
+            .iter()
+            .any(|t| t.ends_with("/NN/%/%robot1/echelon_robot")),
+        "{tokens:?}"
+    );
+    assert!(
+        tokens.iter().any(|t| t.contains(
+            "/MP/%/%robot1/echelon_robot/%robot1%cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/"
+        )),
+        "{tokens:?}"
+    );
+}

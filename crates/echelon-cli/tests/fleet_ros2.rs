@@ -431,3 +431,117 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
         "{tokens:?}"
     );
 }
+
+/// Secure mode with ROS 2: every link is mutual TLS, and a rogue holding a
+/// valid certificate (robot 2's) that floods robot 1's `cmd_vel` with a
+/// full-speed command reaches no base: base 1 heard exactly what robot 1
+/// sent, and robot 1 converged.
+#[test]
+fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    let out = Command::new(EXE)
+        .args(["fleet", "certs", "--robots", "2"])
+        .arg(&certs)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let fleet_dir = dir.path().join("fleet");
+    let fleet = std::thread::spawn({
+        let (fleet_dir, certs) = (fleet_dir.clone(), certs.clone());
+        move || {
+            Command::new(EXE)
+                .args(["fleet", "up", SCENARIO, "--ros2", "--time-scale", "10"])
+                .args(["--duration", "30", "--quiet", "--secure"])
+                .arg(&certs)
+                .arg("--out")
+                .arg(&fleet_dir)
+                .output()
+                .unwrap()
+        }
+    });
+    let endpoints = fleet_dir.join("endpoints.json");
+    let started = Instant::now();
+    while !endpoints.exists() {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no endpoints.json"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(100));
+    let endpoints: Value =
+        serde_json::from_str(&std::fs::read_to_string(&endpoints).unwrap()).unwrap();
+    let connect: Vec<&str> = endpoints
+        .as_object()
+        .unwrap()
+        .values()
+        .filter_map(Value::as_str)
+        .collect();
+    assert!(connect.iter().all(|e| e.starts_with("tls/")), "{connect:?}");
+    let path = |p: PathBuf| p.display().to_string();
+    let config = serde_json::json!({
+        "mode": "peer",
+        "scouting": {"multicast": {"enabled": false}},
+        "listen": {"endpoints": ["tls/127.0.0.1:0"]},
+        "connect": {"endpoints": connect, "timeout_ms": 10000, "exit_on_failure": false},
+        "transport": {"link": {"tls": {
+            "root_ca_certificate": path(certs.join("ca.pem")),
+            "listen_certificate": path(certs.join("robot-2.pem")),
+            "listen_private_key": path(certs.join("robot-2-key.pem")),
+            "connect_certificate": path(certs.join("robot-2.pem")),
+            "connect_private_key": path(certs.join("robot-2-key.pem")),
+            "enable_mtls": true,
+        }}},
+    });
+    let rogue = zenoh::open(zenoh::Config::from_json5(&config.to_string()).unwrap())
+        .wait()
+        .unwrap();
+    let key = topic_key(
+        echelon_fleet::ros2::KeyScheme::RmwZenoh,
+        0,
+        "/robot1/cmd_vel",
+        &echelon_fleet::ros2::msgs::TWIST_STAMPED,
+    );
+    let attachment = echelon_fleet::ros2::Attachment {
+        sequence_number: 1,
+        source_timestamp_ns: 1,
+        gid: [9; 16],
+    }
+    .encode();
+    let payload = TwistStamped::planar(1.0, 2.0, Time::default(), "base_link").to_cdr();
+    let mut puts = 0;
+    while !fleet.is_finished() {
+        rogue
+            .put(&key, payload.clone())
+            .attachment(attachment.to_vec())
+            .wait()
+            .unwrap();
+        puts += 1;
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let out = fleet.join().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(puts > 100, "the rogue published {puts}");
+    let up: Value = serde_json::from_str(
+        &std::fs::read_to_string(fleet_dir.join("fleet-summary.json")).unwrap(),
+    )
+    .unwrap();
+    let robot = &up["robots"][0];
+    let base = &up["bases"][0];
+    let sent = f(robot, &["ros2", "cmd_sent"]);
+    let heard = f(base, &["counters", "cmd_received"]);
+    assert!(
+        heard <= sent && heard + 3.0 >= sent,
+        "base 1 heard {heard}, robot 1 sent {sent}"
+    );
+    assert!(f(robot, &["final_error"]) < 5e-3, "{robot}");
+}

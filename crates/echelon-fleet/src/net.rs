@@ -22,6 +22,32 @@ pub struct Secure {
     pub identity: String,
     /// Number of robots whose identities the access control knows.
     pub robots: u32,
+    /// Per agent (from 1), the key expressions of its ROS 2 `cmd_vel` and
+    /// `odom` ([`ros_acl`]), which only robot K and base K may publish.
+    pub ros2: Vec<RosAcl>,
+}
+
+/// Agent K's ROS 2 keys in the access control: `cmd_vel` accepted only from
+/// `robot-K`, `odom` only from `base-K` (its simulated base; a real robot
+/// behind its own router, see docs/ros2.md).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RosAcl {
+    /// Key expression of its `cmd_vel`, any type (`0/robot1/cmd_vel/*/*`).
+    pub cmd_vel: String,
+    /// Key expression of its `odom`, any type.
+    pub odom: String,
+}
+
+/// The access-control keys of each agent's ROS 2 link.
+pub fn ros_acl(links: &[echelon::scenario::Ros2Link]) -> Vec<RosAcl> {
+    use crate::ros2::keys::topic_key_any_type;
+    links
+        .iter()
+        .map(|l| RosAcl {
+            cmd_vel: topic_key_any_type(l.key_scheme, l.domain_id, &l.cmd_vel),
+            odom: topic_key_any_type(l.key_scheme, l.domain_id, &l.odom),
+        })
+        .collect()
 }
 
 /// Where and how a process joins the fleet.
@@ -42,11 +68,18 @@ pub fn robot_identity(k: impl std::fmt::Display) -> String {
     format!("robot-{k}")
 }
 
-/// The identities a fleet of `robots` robots uses.
+/// Agent `k`'s simulated ROS 2 base's identity (`fleet base --ros2`).
+pub fn base_identity(k: impl std::fmt::Display) -> String {
+    format!("base-{k}")
+}
+
+/// The identities a fleet of `robots` robots uses (with a simulated ROS 2
+/// base per robot).
 pub fn identities(robots: u32) -> Vec<String> {
     ["leader".to_owned(), "collector".to_owned()]
         .into_iter()
         .chain((1..=robots).map(robot_identity))
+        .chain((1..=robots).map(base_identity))
         .collect()
 }
 
@@ -65,8 +98,11 @@ pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
 
 /// The access-control section of the secure mode: every member may subscribe,
 /// declare liveliness and send; on arrival, references are accepted only from
-/// the leader's certificate and robot `k`'s keys only from robot `k`'s.
-pub fn access_control(robots: u32) -> serde_json::Value {
+/// the leader's certificate and robot `k`'s keys only from robot `k`'s; with
+/// ROS 2 links, agent `k`'s `cmd_vel` only from robot `k` and its `odom` only
+/// from base `k`, and rmw_zenoh's liveliness tokens (`@ros2_lv/**`) from
+/// every member.
+pub fn access_control(robots: u32, ros2: &[RosAcl]) -> serde_json::Value {
     let everyone: Vec<String> = identities(robots).iter().map(|i| common_name(i)).collect();
     let mut rules = vec![
         json!({
@@ -92,12 +128,34 @@ pub fn access_control(robots: u32) -> serde_json::Value {
         json!({"rules": ["declare", "send"], "subjects": ["members"]}),
         json!({"rules": ["reference-in"], "subjects": ["leader"]}),
     ];
+    if !ros2.is_empty() {
+        let ros_keys: Vec<&str> = ros2
+            .iter()
+            .flat_map(|r| [r.cmd_vel.as_str(), r.odom.as_str()])
+            .collect();
+        let mut declared = vec!["@ros2_lv/**"];
+        declared.extend(&ros_keys);
+        rules.push(json!({
+            "id": "ros-declare", "permission": "allow", "flows": ["egress", "ingress"],
+            "messages": ["declare_subscriber", "liveliness_token", "liveliness_query",
+                          "declare_liveliness_subscriber", "query", "reply"],
+            "key_exprs": declared,
+        }));
+        rules.push(json!({
+            "id": "ros-send", "permission": "allow", "flows": ["egress"],
+            "messages": ["put"], "key_exprs": ros_keys,
+        }));
+        policies.push(json!({"rules": ["ros-declare", "ros-send"], "subjects": ["members"]}));
+    }
     for k in 1..=robots {
         let id = robot_identity(k);
         let rule = format!("{id}-in");
+        let mut own = vec![format!("echelon/*/robot/{k}/**")];
+        let ros = ros2.get(k as usize - 1);
+        own.extend(ros.map(|r| r.cmd_vel.clone()));
         rules.push(json!({
             "id": rule, "permission": "allow", "flows": ["ingress"],
-            "messages": ["put"], "key_exprs": [format!("echelon/*/robot/{k}/**")],
+            "messages": ["put"], "key_exprs": own,
         }));
         subjects.push(json!({
             "id": id,
@@ -106,6 +164,16 @@ pub fn access_control(robots: u32) -> serde_json::Value {
         policies.push(json!({
             "rules": [rule], "subjects": [id],
         }));
+        if let Some(r) = ros {
+            let base = base_identity(k);
+            let rule = format!("{base}-in");
+            rules.push(json!({
+                "id": rule, "permission": "allow", "flows": ["ingress"],
+                "messages": ["put"], "key_exprs": [r.odom],
+            }));
+            subjects.push(json!({"id": base, "cert_common_names": [common_name(&base)]}));
+            policies.push(json!({"rules": [rule], "subjects": [base]}));
+        }
     }
     json!({
         "enabled": true,
@@ -180,7 +248,11 @@ pub fn config(opts: &NetOptions) -> Result<Config, FleetError> {
                 "enable_mtls": true,
             }),
         )?;
-        set(&mut config, "access_control", access_control(s.robots))?;
+        set(
+            &mut config,
+            "access_control",
+            access_control(s.robots, &s.ros2),
+        )?;
     }
     Ok(config)
 }
@@ -240,7 +312,11 @@ mod tests {
     #[test]
     fn access_control_is_accepted_by_zenoh() {
         let mut c = Config::default();
-        set(&mut c, "access_control", access_control(3)).unwrap_or_else(|e| panic!("{e}"));
+        let ros = vec![RosAcl {
+            cmd_vel: "0/robot1/cmd_vel/*/*".into(),
+            odom: "0/robot1/odom/*/*".into(),
+        }];
+        set(&mut c, "access_control", access_control(3, &ros)).unwrap_or_else(|e| panic!("{e}"));
         let acl = c.get_json("access_control").unwrap_or_default();
         assert!(acl.contains("echelon-robot-3") && acl.contains("echelon/*/reference"));
     }

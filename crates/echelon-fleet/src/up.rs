@@ -21,7 +21,7 @@ use echelon::scenario::{Overrides, Scenario};
 
 use crate::faults::FaultSpec;
 use crate::keys::robot_role;
-use crate::net::robot_identity;
+use crate::net::{base_identity, robot_identity};
 use crate::ros2::base::base_role;
 use crate::{FleetError, StopFlag};
 
@@ -192,11 +192,6 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
 
-    if opts.ros2 && opts.secure.is_some() {
-        return Err(FleetError::Config(
-            "--ros2 with --secure: the access rules for ROS 2 keys are not written yet (docs/ros2.md)".into(),
-        ));
-    }
     let proto = if opts.secure.is_some() { "tls" } else { "tcp" };
     // Start order, which is also the port order: the collector, the ROS 2
     // bases (with --ros2), the robots, the leader.
@@ -265,7 +260,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             "--time-scale".to_owned(),
             scale.clone(),
         ];
-        args.extend(common(k, &base_role(k)));
+        args.extend(common(k, &base_identity(k)));
         base_procs.push(spawn(&opts.exe, &base_role(k), &args, &logs)?);
     }
 

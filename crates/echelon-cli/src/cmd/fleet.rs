@@ -70,7 +70,12 @@ pub(crate) struct NetArgs {
 }
 
 impl NetArgs {
-    fn options(&self, default_identity: &str, robots: Option<u32>) -> Result<NetOptions> {
+    fn options(
+        &self,
+        default_identity: &str,
+        robots: Option<u32>,
+        scenario: Option<&Scenario>,
+    ) -> Result<NetOptions> {
         if let Some(name) = &self.fleet
             && !is_valid_fleet_name(name)
         {
@@ -88,6 +93,10 @@ impl NetArgs {
                     .robots
                     .or(robots)
                     .context("--secure needs --robots N (or a scenario) for the access control")?,
+                ros2: match scenario {
+                    Some(s) => net::ros_acl(&s.fleet()?.ros2),
+                    None => Vec::new(),
+                },
             }),
         };
         Ok(NetOptions {
@@ -299,7 +308,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
         FleetCommand::Leader(a) => {
             let scenario = Scenario::resolve(&a.scenario)?;
             let robots = agents_of(&scenario)?;
-            let net = a.net.options("leader", Some(robots))?;
+            let net = a.net.options("leader", Some(robots), Some(&scenario))?;
             let stop = StopFlag::on_signals()?;
             let report = leader::run(
                 LeaderOptions {
@@ -319,7 +328,9 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
         FleetCommand::Robot(a) => {
             let scenario = Scenario::resolve(&a.scenario)?;
             let robots = agents_of(&scenario)?;
-            let net = a.net.options(&net::robot_identity(a.agent), Some(robots))?;
+            let net =
+                a.net
+                    .options(&net::robot_identity(a.agent), Some(robots), Some(&scenario))?;
             let stop = StopFlag::on_signals()?;
             let report = robot::run(
                 RobotOptions {
@@ -342,7 +353,9 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             }
             let scenario = Scenario::resolve(&a.scenario)?;
             let robots = agents_of(&scenario)?;
-            let net = a.net.options(&base::base_role(a.agent), Some(robots))?;
+            let net = a
+                .net
+                .options(&net::base_identity(a.agent), Some(robots), Some(&scenario))?;
             let stop = StopFlag::on_signals()?;
             let report = base::run(
                 BaseOptions {
@@ -365,7 +378,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 (None, None) => bail!("give the scenario or --fleet NAME"),
             };
             let robots = scenario.as_ref().map(agents_of).transpose()?;
-            let net = a.net.options("collector", robots)?;
+            let net = a.net.options("collector", robots, scenario.as_ref())?;
             let stop = StopFlag::on_signals()?;
             let ros = match (&scenario, a.ros2) {
                 (Some(s), true) => ros_topics(s)?,
@@ -394,10 +407,10 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 hosts: a.host,
             })?;
             outln!(
-                "wrote {} files to {} (CA, leader, collector, robot-1…robot-{}); development use only",
+                "wrote {} files to {} (CA, leader, collector, robot-1…robot-{n}, base-1…base-{n}); development use only",
                 files.len(),
                 a.dir.display(),
-                a.robots
+                n = a.robots
             )?;
             Ok(())
         }

@@ -539,8 +539,10 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
     let base = &up["bases"][0];
     let sent = f(robot, &["ros2", "cmd_sent"]);
     let heard = f(base, &["counters", "cmd_received"]);
+    // At most what robot 1 sent (a few of its first, waiting, zeros may go
+    // before the links are up); the rogue's hundreds of puts would show.
     assert!(
-        heard <= sent && heard + 3.0 >= sent,
+        heard <= sent && heard > 0.9 * sent,
         "base 1 heard {heard}, robot 1 sent {sent}"
     );
     assert!(f(robot, &["final_error"]) < 5e-3, "{robot}");

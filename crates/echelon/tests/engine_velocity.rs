@@ -14,6 +14,9 @@
 //! at the step's end. A tick is saturated when the command at the step's start
 //! exceeds a speed limit.
 
+mod common;
+use common::relative;
+
 use echelon::base::{AccelLimit, VelocityBase, VelocityCommand};
 use echelon::control::LeaderMotion;
 use echelon::engine::{
@@ -122,11 +125,6 @@ impl Scalar {
             .collect();
         self.step += 1;
     }
-}
-
-/// The relative difference, against at least 1 in SI units.
-fn relative(a: f64, b: f64) -> f64 {
-    (a - b).abs() / a.abs().max(b.abs()).max(1.0)
 }
 
 /// Steps both `steps` times in uneven pieces, comparing states, `e`,

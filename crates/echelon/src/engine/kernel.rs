@@ -264,31 +264,41 @@ fn actuate(limit: Option<Limit>, u: [V; 2]) -> [V; 2] {
 
 /// `state + k d` (the RK4 stage update, `State::add_scaled`).
 #[inline(always)]
-pub(crate) fn add_scaled(x: &[V; 5], d: &[V; 5], k: f64) -> [V; 5] {
+pub(crate) fn add_scaled<const N: usize>(
+    x: &[Lanes<N>; 5],
+    d: &[Lanes<N>; 5],
+    k: f64,
+) -> [Lanes<N>; 5] {
     each(|i| x[i] + d[i] * k)
 }
 
 /// `[f(0), …, f(4)]`.
 #[inline(always)]
-pub(crate) fn each(f: impl Fn(usize) -> V) -> [V; 5] {
+pub(crate) fn each<const N: usize>(f: impl Fn(usize) -> Lanes<N>) -> [Lanes<N>; 5] {
     std::array::from_fn(f)
 }
 
 /// `x + h/6 (k₁ + 2 (k₂ + k₃) + k₄)`, with `k23 = k₂ + k₃`.
 #[inline(always)]
-pub(crate) fn combine(x: &[V; 5], k1: &[V; 5], k23: &[V; 5], k4: &[V; 5], h6: f64) -> [V; 5] {
+pub(crate) fn combine<const N: usize>(
+    x: &[Lanes<N>; 5],
+    k1: &[Lanes<N>; 5],
+    k23: &[Lanes<N>; 5],
+    k4: &[Lanes<N>; 5],
+    h6: f64,
+) -> [Lanes<N>; 5] {
     each(|i| x[i] + (k1[i] + k23[i] * 2.0 + k4[i]) * h6)
 }
 
 /// Lanes whose state is no longer finite.
 #[inline(always)]
-pub(crate) fn broken(x: &[V; 5], live: Mask<W>) -> Mask<W> {
+pub(crate) fn broken<const N: usize>(x: &[Lanes<N>; 5], live: Mask<N>) -> Mask<N> {
     let ok = x[0].finite() & x[1].finite() & x[2].finite() & x[3].finite() & x[4].finite();
     !ok & live
 }
 
 #[inline(always)]
-pub(crate) fn first_lane(m: Mask<W>) -> usize {
+pub(crate) fn first_lane<const N: usize>(m: Mask<N>) -> usize {
     m.0.iter().position(|&b| b != 0).unwrap_or(0)
 }
 
@@ -339,7 +349,13 @@ pub(crate) fn star_stage(
 /// `x + d k` and the sines and cosines of its heading, from those of `x`
 /// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`).
 #[inline(always)]
-pub(crate) fn turned_state(x: &[V; 5], (sin, cos): (V, V), d: &[V; 5], k: f64) -> ([V; 5], (V, V)) {
+#[allow(clippy::type_complexity)]
+pub(crate) fn turned_state<const N: usize>(
+    x: &[Lanes<N>; 5],
+    (sin, cos): (Lanes<N>, Lanes<N>),
+    d: &[Lanes<N>; 5],
+    k: f64,
+) -> ([Lanes<N>; 5], (Lanes<N>, Lanes<N>)) {
     let next = add_scaled(x, d, k);
     let turned = (d[2] * k)
         .sin_cos_turned(sin, cos)
@@ -420,9 +436,9 @@ impl Default for Scratch {
 
 /// `[prev_{W−1}, own₀, …, own_{W−2}]`: each lane's leader is the lane before.
 #[inline(always)]
-pub(crate) fn shift_from(own: V, prev: V) -> V {
-    let mut r = [prev.0[W - 1]; W];
-    r[1..].copy_from_slice(&own.0[..W - 1]);
+pub(crate) fn shift_from<const N: usize>(own: Lanes<N>, prev: Lanes<N>) -> Lanes<N> {
+    let mut r = [prev.0[N - 1]; N];
+    r[1..].copy_from_slice(&own.0[..N - 1]);
     Lanes(r)
 }
 
@@ -647,7 +663,7 @@ pub struct Probe {
 
 /// Lane `l` of a block's state.
 #[inline]
-pub(crate) fn state_of(x: &[V; 5], l: usize) -> crate::model::State {
+pub(crate) fn state_of<const N: usize>(x: &[Lanes<N>; 5], l: usize) -> crate::model::State {
     crate::model::State {
         x: x[0].0[l],
         y: x[1].0[l],

@@ -136,6 +136,9 @@ pub trait Kernel: sealed::Sealed + Sized {
     type Scratch: Clone + Debug + Default + Send + Sync;
     #[doc(hidden)]
     type Tile: Clone + Debug + Send + Sync;
+    /// Agents per block.
+    #[doc(hidden)]
+    const LANES: usize;
     /// Blocks of a chain walked together (one dispatch, one scratch).
     #[doc(hidden)]
     const SEGMENT: usize;
@@ -444,11 +447,11 @@ impl<K: Kernel> BatchEngine<K> {
     }
 
     /// Bytes per agent of state and constants alone (what grows with `N`).
-    pub const BLOCK_BYTES_PER_AGENT: usize = size_of::<K::Block>() / W;
+    pub const BLOCK_BYTES_PER_AGENT: usize = size_of::<K::Block>() / K::LANES;
 
     /// Agent `i`'s state.
     pub fn state(&self, i: usize) -> State {
-        K::state(&self.blocks[i / W], i % W)
+        K::state(&self.blocks[i / K::LANES], i % K::LANES)
     }
 
     /// Every agent's state.
@@ -487,7 +490,7 @@ impl<K: Kernel> BatchEngine<K> {
         }
         let broke = if self.topology == Topology::Chain
             && rayon::current_num_threads() >= 2
-            && self.blocks.len() >= 2 * SEGMENT
+            && self.blocks.len() * K::LANES >= 2 * SEGMENT * W
         {
             self.run_chain_on_two_cores(steps)
         } else {
@@ -559,13 +562,13 @@ impl<K: Kernel> BatchEngine<K> {
                 || pending.and_then(|(_, len)| chain::<K>(arch, c, back, scratch_b, y, len)),
             );
             if let (Some((n, agent)), Some((s0, _))) = (b, pending) {
-                note(&mut broke, (s0 + n as u64, split * W + agent));
+                note(&mut broke, (s0 + n as u64, split * K::LANES + agent));
             }
             if let (Some((n, agent)), Some((s0, _))) = (a, next) {
                 note(&mut broke, (s0 + n as u64, agent));
                 // The back half may break earlier within this tile.
                 if let Some((m, agent)) = chain::<K>(arch, c, back, scratch_b, x, n + 1) {
-                    note(&mut broke, (s0 + m as u64, split * W + agent));
+                    note(&mut broke, (s0 + m as u64, split * K::LANES + agent));
                 }
             }
             if broke.is_some() {
@@ -731,6 +734,7 @@ impl Kernel for Torque {
     type Scratch = Scratch;
     /// Per step, the leader at the four stages.
     type Tile = Vec<[Carry; 4]>;
+    const LANES: usize = W;
     const SEGMENT: usize = SEGMENT;
 
     fn dt(c: &Consts) -> f64 {
@@ -820,7 +824,7 @@ fn star<K: Kernel>(
         .par_chunks_mut(PAR_BLOCKS)
         .enumerate()
         .filter_map(|(i, chunk)| {
-            K::star(arch, c, chunk, t, len).map(|(n, a)| (n, i * PAR_BLOCKS * W + a))
+            K::star(arch, c, chunk, t, len).map(|(n, a)| (n, i * PAR_BLOCKS * K::LANES + a))
         })
         .min()
 }
@@ -840,7 +844,7 @@ fn chain<K: Kernel>(
     for (si, seg) in blocks.chunks_mut(K::SEGMENT).enumerate() {
         if let Some((n, a)) = K::chain(arch, c, seg, scratch, t, steps) {
             // Later agents may break earlier: run them up to this step.
-            let at = (n, si * K::SEGMENT * W + a);
+            let at = (n, si * K::SEGMENT * K::LANES + a);
             first = Some(first.map_or(at, |f| f.min(at)));
             steps = n + 1;
         }

@@ -33,6 +33,14 @@
 //! [`Member`]s (`K_z` unused): the speed limiter, lags, acceleration limits
 //! and `settle` of `base.rs` in lanes, saturated ticks counted per agent, a
 //! robot leader's `ṗ_d` from the speeds its base moves at (`engine/velocity.rs`).
+//!
+//! Both are one [`BatchEngine`] driver over a [`Kernel`]: the driver owns
+//! the tile loop (the reference filled once per tile of 64 steps), spreads a
+//! star's blocks over the pool, walks a chain segment by segment (a long
+//! chain as two halves on two threads, one tile apart), and turns the first
+//! non-finite state into the scalar simulator's error; a kernel ([`Torque`],
+//! [`Velocity`]) supplies its blocks, its tile of leaders and the work of one
+//! tile on them.
 
 mod bench;
 mod kernel;

@@ -487,22 +487,25 @@ pub struct Tile {
 
 /// A tile of leaders as a block uses it.
 trait Stages {
-    fn first(&self) -> Lead;
-    fn at(&self, n: usize) -> [Lead; 4];
+    fn tile(&self) -> &Tile;
     /// The block's last agent in place of the leader just read (a chain).
     fn put_first(&mut self, l: Lead);
     fn put(&mut self, n: usize, s: usize, l: Lead);
+    #[inline(always)]
+    fn first(&self) -> Lead {
+        self.tile().first
+    }
+    #[inline(always)]
+    fn at(&self, n: usize) -> [Lead; 4] {
+        self.tile().steps[n]
+    }
 }
 
 /// A star's tile: read by every block, written by none.
 impl Stages for &Tile {
     #[inline(always)]
-    fn first(&self) -> Lead {
-        self.first
-    }
-    #[inline(always)]
-    fn at(&self, n: usize) -> [Lead; 4] {
-        self.steps[n]
+    fn tile(&self) -> &Tile {
+        self
     }
     #[inline(always)]
     fn put_first(&mut self, _: Lead) {}
@@ -513,12 +516,8 @@ impl Stages for &Tile {
 /// A chain's tile: each block replaces its leader by its own last agent.
 impl Stages for &mut Tile {
     #[inline(always)]
-    fn first(&self) -> Lead {
-        self.first
-    }
-    #[inline(always)]
-    fn at(&self, n: usize) -> [Lead; 4] {
-        self.steps[n]
+    fn tile(&self) -> &Tile {
+        self
     }
     #[inline(always)]
     fn put_first(&mut self, l: Lead) {

@@ -4,6 +4,9 @@
 //! many steps, for stars and chains of several sizes and seeds; the same bits
 //! on one thread or two, stepped at once or one step at a time.
 
+mod common;
+use common::relative;
+
 use echelon::control::{Gains, Variant};
 use echelon::engine::{BenchFormation, Engine, EngineError, Topology};
 use echelon::formation::Leader;
@@ -12,13 +15,6 @@ use echelon::model::{RobotParams, State};
 use echelon::reference::{Lemniscate, Reference};
 use echelon::rng::SplitMix64;
 use echelon::sim::{AgentSpec, SimConfig, Simulation, Timing};
-
-/// The relative difference, against at least 1 in SI units (1 m, 1 m/s,
-/// 1 rad, 1 N): errors and speeds that converge to zero are compared to the
-/// scale of the positions they are differences of.
-fn relative(a: f64, b: f64) -> f64 {
-    (a - b).abs() / a.abs().max(b.abs()).max(1.0)
-}
 
 /// Steps both `steps` times and compares states and controller outputs;
 /// returns the largest relative difference seen.

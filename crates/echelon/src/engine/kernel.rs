@@ -23,7 +23,7 @@ pub(crate) type V = Lanes<W>;
 /// `W` agents: their states and their own constants, each quantity a vector
 /// (structure of arrays, `W` at a time).
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct Block {
+pub struct Block {
     /// `x, y, θ, v, ω`.
     pub(crate) x: [V; 5],
     /// `L_X = L_Xoff + L`.
@@ -52,7 +52,7 @@ pub(crate) struct Limit {
 
 /// What every agent of the batch shares.
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct Consts {
+pub struct Consts {
     pub(crate) law: LawRobot,
     /// `η`, `ψ`, `1/m`, `1/J`.
     pub(crate) eta: f64,
@@ -69,7 +69,7 @@ pub(crate) struct Consts {
 /// `p̈_d = q + v̇ g` (a robot: `g = [cos θ, sin θ]`; the reference: `g = 0`),
 /// the `(V_d, ω_d)` that `L_Ycomp` reads, and `v̇` once known.
 #[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct Carry {
+pub struct Carry {
     pub(crate) p: [f64; 2],
     pub(crate) dp: [f64; 2],
     pub(crate) q: [f64; 2],
@@ -264,25 +264,41 @@ fn actuate(limit: Option<Limit>, u: [V; 2]) -> [V; 2] {
 
 /// `state + k d` (the RK4 stage update, `State::add_scaled`).
 #[inline(always)]
-fn add_scaled(x: &[V; 5], d: &[V; 5], k: f64) -> [V; 5] {
-    std::array::from_fn(|i| x[i] + d[i] * k)
+pub(crate) fn add_scaled<const N: usize>(
+    x: &[Lanes<N>; 5],
+    d: &[Lanes<N>; 5],
+    k: f64,
+) -> [Lanes<N>; 5] {
+    each(|i| x[i] + d[i] * k)
+}
+
+/// `[f(0), …, f(4)]`.
+#[inline(always)]
+pub(crate) fn each<const N: usize>(f: impl Fn(usize) -> Lanes<N>) -> [Lanes<N>; 5] {
+    std::array::from_fn(f)
 }
 
 /// `x + h/6 (k₁ + 2 (k₂ + k₃) + k₄)`, with `k23 = k₂ + k₃`.
 #[inline(always)]
-fn combine(x: &[V; 5], k1: &[V; 5], k23: &[V; 5], k4: &[V; 5], h6: f64) -> [V; 5] {
-    std::array::from_fn(|i| x[i] + (k1[i] + k23[i] * 2.0 + k4[i]) * h6)
+pub(crate) fn combine<const N: usize>(
+    x: &[Lanes<N>; 5],
+    k1: &[Lanes<N>; 5],
+    k23: &[Lanes<N>; 5],
+    k4: &[Lanes<N>; 5],
+    h6: f64,
+) -> [Lanes<N>; 5] {
+    each(|i| x[i] + (k1[i] + k23[i] * 2.0 + k4[i]) * h6)
 }
 
 /// Lanes whose state is no longer finite.
 #[inline(always)]
-fn broken(x: &[V; 5], live: Mask<W>) -> Mask<W> {
+pub(crate) fn broken<const N: usize>(x: &[Lanes<N>; 5], live: Mask<N>) -> Mask<N> {
     let ok = x[0].finite() & x[1].finite() & x[2].finite() & x[3].finite() & x[4].finite();
     !ok & live
 }
 
 #[inline(always)]
-fn first_lane(m: Mask<W>) -> usize {
+pub(crate) fn first_lane<const N: usize>(m: Mask<N>) -> usize {
     m.0.iter().position(|&b| b != 0).unwrap_or(0)
 }
 
@@ -333,7 +349,13 @@ pub(crate) fn star_stage(
 /// `x + d k` and the sines and cosines of its heading, from those of `x`
 /// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`).
 #[inline(always)]
-fn turned_state(x: &[V; 5], (sin, cos): (V, V), d: &[V; 5], k: f64) -> ([V; 5], (V, V)) {
+#[allow(clippy::type_complexity)]
+pub(crate) fn turned_state<const N: usize>(
+    x: &[Lanes<N>; 5],
+    (sin, cos): (Lanes<N>, Lanes<N>),
+    d: &[Lanes<N>; 5],
+    k: f64,
+) -> ([Lanes<N>; 5], (Lanes<N>, Lanes<N>)) {
     let next = add_scaled(x, d, k);
     let turned = (d[2] * k)
         .sin_cos_turned(sin, cos)
@@ -371,7 +393,7 @@ pub(crate) fn star_tile(
             let k3 = star_stage(c, b, &x3, sc3, &r[2], ly23).dx;
             let (x4, sc4) = turned_state(&x, sc1, &k3, dt);
             let k4 = star_stage(c, b, &x4, sc4, &r[3], ly4).dx;
-            let k23: [V; 5] = std::array::from_fn(|i| k2[i] + k3[i]);
+            let k23 = each(|i| k2[i] + k3[i]);
             x = combine(&x, &k1, &k23, &k4, h6);
             ly1 = ly4;
             let bad = broken(&x, b.live);
@@ -388,7 +410,7 @@ pub(crate) fn star_tile(
 
 /// Per-block work space of a chain stage.
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct Scratch {
+pub struct Scratch {
     /// This stage's derivative (the previous stage's until overwritten).
     k: [V; 5],
     k1: [V; 5],
@@ -414,15 +436,15 @@ impl Default for Scratch {
 
 /// `[prev_{W−1}, own₀, …, own_{W−2}]`: each lane's leader is the lane before.
 #[inline(always)]
-fn shift_from(own: V, prev: V) -> V {
-    Lanes(std::array::from_fn(|i| {
-        if i == 0 { prev.0[W - 1] } else { own.0[i - 1] }
-    }))
+pub(crate) fn shift_from<const N: usize>(own: Lanes<N>, prev: Lanes<N>) -> Lanes<N> {
+    let mut r = [prev.0[N - 1]; N];
+    r[1..].copy_from_slice(&own.0[..N - 1]);
+    Lanes(r)
 }
 
 /// `[carry, own₀, …, own_{W−2}]`.
 #[inline(always)]
-fn shift_in(own: V, carry: f64) -> V {
+pub(crate) fn shift_in(own: V, carry: f64) -> V {
     shift_from(own, V::splat(carry))
 }
 
@@ -608,7 +630,7 @@ pub(crate) fn chain_tile(
                 match s {
                     0 => sc.k1 = sc.k,
                     1 => sc.k23 = sc.k,
-                    2 => sc.k23 = std::array::from_fn(|i| sc.k23[i] + sc.k[i]),
+                    2 => sc.k23 = each(|i| sc.k23[i] + sc.k[i]),
                     _ => {}
                 }
             }
@@ -637,6 +659,18 @@ pub struct Probe {
     pub z: [f64; 2],
     /// The commanded input `u` (eq. 13), before any torque saturation.
     pub u: [f64; 2],
+}
+
+/// Lane `l` of a block's state.
+#[inline]
+pub(crate) fn state_of<const N: usize>(x: &[Lanes<N>; 5], l: usize) -> crate::model::State {
+    crate::model::State {
+        x: x[0].0[l],
+        y: x[1].0[l],
+        theta: x[2].0[l],
+        v: x[3].0[l],
+        omega: x[4].0[l],
+    }
 }
 
 fn unpack(out: &mut Vec<Probe>, e: [V; 2], z: [V; 2], u: [V; 2]) {

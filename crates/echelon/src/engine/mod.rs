@@ -33,10 +33,20 @@
 //! [`Member`]s (`K_z` unused): the speed limiter, lags, acceleration limits
 //! and `settle` of `base.rs` in lanes, saturated ticks counted per agent, a
 //! robot leader's `ṗ_d` from the speeds its base moves at (`engine/velocity.rs`).
+//!
+//! Both are one [`BatchEngine`] driver over a [`Kernel`]: the driver owns
+//! the tile loop (the reference filled once per tile of 64 steps), spreads a
+//! star's blocks over the pool, walks a chain segment by segment (a long
+//! chain as two halves on two threads, one tile apart), and turns the first
+//! non-finite state into the scalar simulator's error; a kernel ([`Torque`],
+//! [`Velocity`]) supplies its blocks, its tile of leaders and the work of one
+//! tile on them.
 
 mod bench;
 mod kernel;
 mod velocity;
+
+use std::fmt::Debug;
 
 use pulp::{Arch, Simd, WithSimd};
 use rayon::prelude::*;
@@ -54,7 +64,7 @@ use crate::sim::{AgentSpec, Simulation, Timing};
 pub use bench::BenchFormation;
 pub use kernel::Probe;
 use kernel::{Block, Carry, Consts, Limit, Scratch, V, W};
-pub use velocity::{VelocityBatch, VelocityEngine, VelocityProbe};
+pub use velocity::{Velocity, VelocityBatch, VelocityProbe};
 
 /// Steps each block runs in registers before the next block's turn.
 const TILE: usize = 64;
@@ -112,23 +122,110 @@ pub enum EngineError {
     Unsupported(String),
 }
 
-/// A formation stepped in blocks of lanes; see the [module docs](self).
+mod sealed {
+    /// Only this crate's kernels are [`super::Kernel`]s.
+    pub trait Sealed {}
+}
+
+/// What a [`BatchEngine`] steps: the [`Torque`] kernel (the paper's plant
+/// under the dynamic law) or the [`Velocity`] kernel (velocity-controlled
+/// bases under the kinematic law). The engine's driver (the tile loop, a
+/// star's blocks over the rayon pool, a chain's segments and its two halves
+/// on two cores, failures) is shared; a kernel supplies its blocks, its tile
+/// of leaders and the work of one tile. Implemented by this crate only.
+pub trait Kernel: sealed::Sealed + Sized {
+    /// What [`BatchEngine::probes`] reports for one agent.
+    type Probe;
+    #[doc(hidden)]
+    type Consts: Clone + Debug + Send + Sync;
+    #[doc(hidden)]
+    type Block: Clone + Debug + Send + Sync;
+    #[doc(hidden)]
+    type Scratch: Clone + Debug + Default + Send + Sync;
+    #[doc(hidden)]
+    type Tile: Clone + Debug + Send + Sync;
+    /// Agents per block.
+    #[doc(hidden)]
+    const LANES: usize;
+    /// Blocks of a chain walked together (one dispatch, one scratch).
+    #[doc(hidden)]
+    const SEGMENT: usize;
+    #[doc(hidden)]
+    fn dt(c: &Self::Consts) -> f64;
+    /// Lane `l` of a block's state.
+    #[doc(hidden)]
+    fn state(b: &Self::Block, l: usize) -> State;
+    /// A tile of leaders for `steps` steps.
+    #[doc(hidden)]
+    fn tile(steps: usize) -> Self::Tile;
+    #[doc(hidden)]
+    fn tile_bytes(t: &Self::Tile) -> usize;
+    /// The reference over the `len` steps from `step0` (the leader of a
+    /// star's agents, of a chain's first).
+    #[doc(hidden)]
+    fn fill(t: &mut Self::Tile, len: usize, reference: &Reference, step0: u64, dt: f64);
+    /// `len` steps of star blocks led by `t`; the earliest broken `(step,
+    /// agent)` within `blocks`.
+    #[doc(hidden)]
+    fn star(
+        arch: Arch,
+        c: &Self::Consts,
+        blocks: &mut [Self::Block],
+        t: &Self::Tile,
+        len: usize,
+    ) -> Option<(usize, usize)>;
+    /// `len` steps of a chain segment whose first agent is led by `t`, which
+    /// is replaced by the segment's last agent (the next segment's leader).
+    #[doc(hidden)]
+    fn chain(
+        arch: Arch,
+        c: &Self::Consts,
+        blocks: &mut [Self::Block],
+        scratch: &mut [Self::Scratch],
+        t: &mut Self::Tile,
+        len: usize,
+    ) -> Option<(usize, usize)>;
+    /// Every lane's probe at the blocks' current state (padding included).
+    #[doc(hidden)]
+    fn probes(
+        c: &Self::Consts,
+        topology: Topology,
+        blocks: &[Self::Block],
+        reference: &Reference,
+        t: f64,
+    ) -> Vec<Self::Probe>;
+}
+
+/// The torque kernel: robots of eq. 3 under the dynamic law (eqs. 7–13).
+#[derive(Debug, Clone, Copy)]
+pub enum Torque {}
+
+/// A formation stepped in blocks of lanes by kernel `K`; see the
+/// [module docs](self). [`Engine`] and [`VelocityEngine`] name its two kinds.
 #[derive(Debug, Clone)]
-pub struct Engine {
-    consts: Consts,
+pub struct BatchEngine<K: Kernel> {
+    consts: K::Consts,
     topology: Topology,
     reference: Reference,
     n: usize,
     step: u64,
-    blocks: Vec<Block>,
-    carries: Vec<[Carry; 4]>,
-    /// A chain's second tile buffer (two halves of a chain run one tile apart).
-    carries_b: Vec<[Carry; 4]>,
-    scratch: Vec<Scratch>,
+    blocks: Vec<K::Block>,
+    /// The leaders over a tile, and a chain's second tile buffer (two halves
+    /// of a chain run one tile apart; empty in a star).
+    tiles: [K::Tile; 2],
+    /// A chain's per-segment work space (two segments: one per half).
+    scratch: Vec<K::Scratch>,
     failed: Option<SimError>,
     /// The widest instruction set this CPU has (AVX2 on x86-64 when present).
     arch: Arch,
 }
+
+/// The batch engine of torque-driven robots (the paper's plant and law).
+pub type Engine = BatchEngine<Torque>;
+
+/// The batch engine of velocity-controlled bases under the kinematic law
+/// (`engine/velocity.rs`).
+pub type VelocityEngine = BatchEngine<Velocity>;
 
 impl Batch {
     /// What a batch's agents share, refusing an impossible robot
@@ -202,26 +299,13 @@ impl Engine {
             limit,
             dt: batch.dt,
         };
-        let (scratch, carries_b) = match batch.topology {
-            Topology::Star => (Vec::new(), Vec::new()),
-            Topology::Chain => (
-                vec![Scratch::default(); blocks.len().min(2 * SEGMENT)],
-                vec![[Carry::default(); 4]; TILE],
-            ),
-        };
-        Ok(Engine {
+        Ok(Engine::assemble(
             consts,
-            topology: batch.topology,
-            reference: batch.reference,
-            n,
-            step: 0,
+            batch.topology,
+            batch.reference,
             blocks,
-            carries: vec![[Carry::default(); 4]; TILE],
-            carries_b,
-            scratch,
-            failed: None,
-            arch: Arch::new(),
-        })
+            n,
+        ))
     }
 
     /// The engine for agents given as the scalar simulator takes them: they
@@ -301,6 +385,35 @@ impl Engine {
         }
         Engine::from_agents(sim.agents(), sim.reference().clone(), sim.config().dt)
     }
+}
+
+impl<K: Kernel> BatchEngine<K> {
+    /// An engine at step 0 with its work space.
+    fn assemble(
+        consts: K::Consts,
+        topology: Topology,
+        reference: Reference,
+        blocks: Vec<K::Block>,
+        n: usize,
+    ) -> BatchEngine<K> {
+        let chain = topology == Topology::Chain;
+        let scratch = match chain {
+            true => vec![K::Scratch::default(); blocks.len().min(2 * K::SEGMENT)],
+            false => Vec::new(),
+        };
+        BatchEngine {
+            consts,
+            topology,
+            reference,
+            n,
+            step: 0,
+            blocks,
+            tiles: [K::tile(TILE), K::tile(if chain { TILE } else { 0 })],
+            scratch,
+            failed: None,
+            arch: Arch::new(),
+        }
+    }
 
     /// Number of agents.
     pub fn len(&self) -> usize {
@@ -319,7 +432,7 @@ impl Engine {
 
     /// RK4 step, s.
     pub fn dt(&self) -> f64 {
-        self.consts.dt
+        K::dt(&self.consts)
     }
 
     /// Steps taken.
@@ -329,32 +442,24 @@ impl Engine {
 
     /// Current time, s (`step · dt`, as the scalar simulator counts).
     pub fn time(&self) -> f64 {
-        self.step as f64 * self.consts.dt
+        self.step as f64 * self.dt()
     }
 
     /// Heap bytes per agent: states and per-agent constants, plus the fixed
     /// work space spread over the agents.
     pub fn bytes_per_agent(&self) -> f64 {
-        let bytes = self.blocks.capacity() * size_of::<Block>()
-            + (self.carries.capacity() + self.carries_b.capacity()) * size_of::<[Carry; 4]>()
-            + self.scratch.capacity() * size_of::<Scratch>();
+        let bytes = self.blocks.capacity() * size_of::<K::Block>()
+            + self.tiles.iter().map(K::tile_bytes).sum::<usize>()
+            + self.scratch.capacity() * size_of::<K::Scratch>();
         bytes as f64 / self.n as f64
     }
 
     /// Bytes per agent of state and constants alone (what grows with `N`).
-    pub const BLOCK_BYTES_PER_AGENT: usize = size_of::<Block>() / W;
+    pub const BLOCK_BYTES_PER_AGENT: usize = size_of::<K::Block>() / K::LANES;
 
     /// Agent `i`'s state.
     pub fn state(&self, i: usize) -> State {
-        let b = &self.blocks[i / W];
-        let l = i % W;
-        State {
-            x: b.x[0].0[l],
-            y: b.x[1].0[l],
-            theta: b.x[2].0[l],
-            v: b.x[3].0[l],
-            omega: b.x[4].0[l],
-        }
+        K::state(&self.blocks[i / K::LANES], i % K::LANES)
     }
 
     /// Every agent's state.
@@ -362,18 +467,16 @@ impl Engine {
         (0..self.n).map(|i| self.state(i)).collect()
     }
 
-    /// Every agent's controller at the current state (`e`, `z`, `u`), computed
-    /// by the engine's own kernels.
-    pub fn probes(&self) -> Vec<Probe> {
-        let r = Carry::reference(&self.reference.eval(self.time(), Order::Two));
-        let mut out = Vec::with_capacity(self.blocks.len() * W);
-        match self.topology {
-            Topology::Star => kernel::star_probe(&self.consts, &self.blocks, &r, &mut out),
-            Topology::Chain => {
-                let mut scratch = vec![Scratch::default(); self.blocks.len()];
-                kernel::chain_probe(&self.consts, &self.blocks, &mut scratch, &r, &mut out);
-            }
-        }
+    /// Every agent's controller at the current state, computed by the
+    /// engine's own kernels.
+    pub fn probes(&self) -> Vec<K::Probe> {
+        let mut out = K::probes(
+            &self.consts,
+            self.topology,
+            &self.blocks,
+            &self.reference,
+            self.time(),
+        );
         out.truncate(self.n);
         out
     }
@@ -387,61 +490,68 @@ impl Engine {
     /// a chain of 512 agents or more its two halves, over the current rayon
     /// pool (`pool.install(|| engine.run(n))`); the
     /// result is the same bits on any number of threads, and the same as
-    /// `steps` calls of [`Engine::step`]. Fails like the scalar simulator
+    /// `steps` calls of [`BatchEngine::step`]. Fails like the scalar simulator
     /// when a state stops being finite; the engine then stays failed.
     pub fn run(&mut self, steps: u64) -> Result<(), SimError> {
         if let Some(e) = &self.failed {
             return Err(e.clone());
         }
-        if self.topology == Topology::Chain
+        let broke = if self.topology == Topology::Chain
             && rayon::current_num_threads() >= 2
-            && self.blocks.len() >= 2 * SEGMENT
+            && self.blocks.len() * K::LANES >= 2 * SEGMENT * W
         {
-            return self.run_chain_on_two_cores(steps);
+            self.run_chain_on_two_cores(steps)
+        } else {
+            self.run_tiles(steps)
+        };
+        if let Some((n, agent)) = broke {
+            let e = SimError::NonFinite {
+                agent: agent + 1,
+                t: (n + 1) as f64 * self.dt(),
+            };
+            self.failed = Some(e.clone());
+            return Err(e);
         }
+        Ok(())
+    }
+
+    /// `steps` steps a tile at a time; the first broken `(step, agent)`.
+    fn run_tiles(&mut self, steps: u64) -> Option<(u64, usize)> {
+        let (arch, dt) = (self.arch, self.dt());
         let mut left = steps;
         while left > 0 {
             let len = left.min(TILE as u64) as usize;
-            let carries = &mut self.carries[..len];
-            fill_reference(carries, &self.reference, self.step, self.consts.dt);
+            let tile = &mut self.tiles[0];
+            K::fill(tile, len, &self.reference, self.step, dt);
+            let c = &self.consts;
             let broke = match self.topology {
-                Topology::Star => star(self.arch, &self.consts, &mut self.blocks, carries),
-                Topology::Chain => chain(
-                    self.arch,
-                    &self.consts,
-                    &mut self.blocks,
-                    &mut self.scratch,
-                    carries,
-                ),
+                Topology::Star => star::<K>(arch, c, &mut self.blocks, tile, len),
+                Topology::Chain => {
+                    chain::<K>(arch, c, &mut self.blocks, &mut self.scratch, tile, len)
+                }
             };
             if let Some((n, agent)) = broke {
-                let e = SimError::NonFinite {
-                    agent: agent + 1,
-                    t: (self.step + n as u64 + 1) as f64 * self.consts.dt,
-                };
-                self.failed = Some(e.clone());
-                return Err(e);
+                return Some((self.step + n as u64, agent));
             }
             self.step += len as u64;
             left -= len as u64;
         }
-        Ok(())
+        None
     }
-}
 
-impl Engine {
     /// A chain on two cores: the first half of the agents runs tile `m` while
     /// the second half runs tile `m − 1`, led by the first half's last agent
-    /// as recorded in the previous tile (a wavefront; the two carry buffers
+    /// as recorded in the previous tile (a wavefront; the two tile buffers
     /// swap each tile). Every agent computes exactly what it would on one
     /// core.
-    fn run_chain_on_two_cores(&mut self, steps: u64) -> Result<(), SimError> {
+    fn run_chain_on_two_cores(&mut self, steps: u64) -> Option<(u64, usize)> {
         let split = self.blocks.len() / 2;
-        let (arch, c, dt) = (self.arch, &self.consts, self.consts.dt);
-        let reference = &self.reference;
+        let (arch, dt) = (self.arch, self.dt());
+        let (c, reference) = (&self.consts, &self.reference);
         let (front, back) = self.blocks.split_at_mut(split);
-        let (scratch_a, scratch_b) = self.scratch.split_at_mut(SEGMENT);
-        let (mut x, mut y) = (&mut self.carries, &mut self.carries_b);
+        let (scratch_a, scratch_b) = self.scratch.split_at_mut(K::SEGMENT);
+        let [x, y] = &mut self.tiles;
+        let (mut x, mut y) = (x, y);
         // The tile waiting in `y` for the back half: (first step, length).
         let mut pending: Option<(u64, usize)> = None;
         let (mut step, mut left) = (self.step, steps);
@@ -452,25 +562,25 @@ impl Engine {
         while left > 0 || pending.is_some() {
             let next = (left > 0).then(|| {
                 let len = left.min(TILE as u64) as usize;
-                fill_reference(&mut x[..len], reference, step, dt);
+                K::fill(x, len, reference, step, dt);
                 (step, len)
             });
             let (a, b) = rayon::join(
-                || next.and_then(|(_, len)| chain(arch, c, front, scratch_a, &mut x[..len])),
-                || pending.and_then(|(_, len)| chain(arch, c, back, scratch_b, &mut y[..len])),
+                || next.and_then(|(_, len)| chain::<K>(arch, c, front, scratch_a, x, len)),
+                || pending.and_then(|(_, len)| chain::<K>(arch, c, back, scratch_b, y, len)),
             );
             if let (Some((n, agent)), Some((s0, _))) = (b, pending) {
-                note(&mut broke, (s0 + n as u64, split * W + agent));
+                note(&mut broke, (s0 + n as u64, split * K::LANES + agent));
             }
             if let (Some((n, agent)), Some((s0, _))) = (a, next) {
                 note(&mut broke, (s0 + n as u64, agent));
                 // The back half may break earlier within this tile.
-                if let Some((m, agent)) = chain(arch, c, back, scratch_b, &mut x[..=n]) {
-                    note(&mut broke, (s0 + m as u64, split * W + agent));
+                if let Some((m, agent)) = chain::<K>(arch, c, back, scratch_b, x, n + 1) {
+                    note(&mut broke, (s0 + m as u64, split * K::LANES + agent));
                 }
             }
             if broke.is_some() {
-                break;
+                return broke;
             }
             std::mem::swap(&mut x, &mut y);
             pending = next;
@@ -479,22 +589,14 @@ impl Engine {
                 left -= len as u64;
             }
         }
-        if let Some((n, agent)) = broke {
-            let e = SimError::NonFinite {
-                agent: agent + 1,
-                t: (n + 1) as f64 * dt,
-            };
-            self.failed = Some(e.clone());
-            return Err(e);
-        }
         self.step += steps;
-        Ok(())
+        None
     }
 }
 
 /// Runs every engine `steps` steps, in parallel on the current rayon pool
 /// (Monte Carlo sweeps: independent runs).
-pub fn sweep(engines: &mut [Engine], steps: u64) -> Vec<Result<(), SimError>> {
+pub fn sweep<K: Kernel>(engines: &mut [BatchEngine<K>], steps: u64) -> Vec<Result<(), SimError>> {
     engines.par_iter_mut().map(|e| e.run(steps)).collect()
 }
 
@@ -631,53 +733,126 @@ impl WithSimd for ChainTile<'_> {
     }
 }
 
-/// A star's tile, over the current rayon pool; the earliest broken
-/// `(step, agent)`.
-fn star(
+impl sealed::Sealed for Torque {}
+
+impl Kernel for Torque {
+    type Probe = Probe;
+    type Consts = Consts;
+    type Block = Block;
+    type Scratch = Scratch;
+    /// Per step, the leader at the four stages.
+    type Tile = Vec<[Carry; 4]>;
+    const LANES: usize = W;
+    const SEGMENT: usize = SEGMENT;
+
+    fn dt(c: &Consts) -> f64 {
+        c.dt
+    }
+
+    fn state(b: &Block, l: usize) -> State {
+        kernel::state_of(&b.x, l)
+    }
+
+    fn tile(steps: usize) -> Vec<[Carry; 4]> {
+        vec![[Carry::default(); 4]; steps]
+    }
+
+    fn tile_bytes(t: &Vec<[Carry; 4]>) -> usize {
+        t.capacity() * size_of::<[Carry; 4]>()
+    }
+
+    fn fill(t: &mut Vec<[Carry; 4]>, len: usize, reference: &Reference, step0: u64, dt: f64) {
+        fill_reference(&mut t[..len], reference, step0, dt);
+    }
+
+    fn star(
+        arch: Arch,
+        c: &Consts,
+        blocks: &mut [Block],
+        t: &Vec<[Carry; 4]>,
+        len: usize,
+    ) -> Option<(usize, usize)> {
+        arch.dispatch(StarTile {
+            c,
+            blocks,
+            refs: &t[..len],
+        })
+    }
+
+    fn chain(
+        arch: Arch,
+        c: &Consts,
+        blocks: &mut [Block],
+        scratch: &mut [Scratch],
+        t: &mut Vec<[Carry; 4]>,
+        len: usize,
+    ) -> Option<(usize, usize)> {
+        let scratch = &mut scratch[..blocks.len()];
+        arch.dispatch(ChainTile {
+            c,
+            blocks,
+            scratch,
+            carries: &mut t[..len],
+        })
+    }
+
+    fn probes(
+        c: &Consts,
+        topology: Topology,
+        blocks: &[Block],
+        reference: &Reference,
+        t: f64,
+    ) -> Vec<Probe> {
+        let r = Carry::reference(&reference.eval(t, Order::Two));
+        let mut out = Vec::with_capacity(blocks.len() * W);
+        match topology {
+            Topology::Star => kernel::star_probe(c, blocks, &r, &mut out),
+            Topology::Chain => {
+                let mut scratch = vec![Scratch::default(); blocks.len()];
+                kernel::chain_probe(c, blocks, &mut scratch, &r, &mut out);
+            }
+        }
+        out
+    }
+}
+
+/// A star's tile, its blocks spread over the current rayon pool; the
+/// earliest broken `(step, agent)`.
+fn star<K: Kernel>(
     arch: Arch,
-    c: &Consts,
-    blocks: &mut [Block],
-    refs: &[[Carry; 4]],
+    c: &K::Consts,
+    blocks: &mut [K::Block],
+    t: &K::Tile,
+    len: usize,
 ) -> Option<(usize, usize)> {
     if rayon::current_num_threads() <= 1 || blocks.len() <= PAR_BLOCKS {
-        return arch.dispatch(StarTile { c, blocks, refs });
+        return K::star(arch, c, blocks, t, len);
     }
     blocks
         .par_chunks_mut(PAR_BLOCKS)
         .enumerate()
         .filter_map(|(i, chunk)| {
-            let tile = StarTile {
-                c,
-                blocks: chunk,
-                refs,
-            };
-            arch.dispatch(tile)
-                .map(|(n, a)| (n, i * PAR_BLOCKS * W + a))
+            K::star(arch, c, chunk, t, len).map(|(n, a)| (n, i * PAR_BLOCKS * K::LANES + a))
         })
         .min()
 }
 
-/// A chain's tile, segment after segment; the earliest broken `(step, agent)`.
-fn chain(
+/// A chain's tile, segment after segment, each led by the one before
+/// through `t`; the earliest broken `(step, agent)`.
+fn chain<K: Kernel>(
     arch: Arch,
-    c: &Consts,
-    blocks: &mut [Block],
-    scratch: &mut [Scratch],
-    carries: &mut [[Carry; 4]],
+    c: &K::Consts,
+    blocks: &mut [K::Block],
+    scratch: &mut [K::Scratch],
+    t: &mut K::Tile,
+    len: usize,
 ) -> Option<(usize, usize)> {
     let mut first: Option<(usize, usize)> = None;
-    let mut steps = carries.len();
-    for (si, seg) in blocks.chunks_mut(SEGMENT).enumerate() {
-        let sc = &mut scratch[..seg.len()];
-        let broke = arch.dispatch(ChainTile {
-            c,
-            blocks: seg,
-            scratch: sc,
-            carries: &mut carries[..steps],
-        });
-        if let Some((n, a)) = broke {
+    let mut steps = len;
+    for (si, seg) in blocks.chunks_mut(K::SEGMENT).enumerate() {
+        if let Some((n, a)) = K::chain(arch, c, seg, scratch, t, steps) {
             // Later agents may break earlier: run them up to this step.
-            let at = (n, si * SEGMENT * W + a);
+            let at = (n, si * K::SEGMENT * K::LANES + a);
             first = Some(first.map_or(at, |f| f.min(at)));
             steps = n + 1;
         }

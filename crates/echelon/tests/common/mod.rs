@@ -69,3 +69,10 @@ pub fn record_with(
 pub fn norm(v: [f64; 2]) -> f64 {
     v[0].hypot(v[1])
 }
+
+/// The relative difference, against at least 1 in SI units (1 m, 1 m/s,
+/// 1 rad, 1 N): errors and speeds that converge to zero are compared to the
+/// scale of the positions they are differences of.
+pub fn relative(a: f64, b: f64) -> f64 {
+    (a - b).abs() / a.abs().max(b.abs()).max(1.0)
+}

@@ -714,3 +714,104 @@ fn velocity_runs_log_commands_and_saturation() {
     let torque = run_into(dir.path(), "circle-pentagon");
     assert!(torque.agents.iter().all(|a| a.saturated_ticks.is_none()));
 }
+
+/// `[fleet.ros2]` (and an agent's `ros2`): names by ROS 2's rules, frames,
+/// domain ids, timeouts, and one namespace per robot, each refused with its
+/// place in the file.
+#[test]
+fn ros2_links_are_checked_where_they_are_written() {
+    let fleet_error = |extra: &str, line: usize, field: &str, message: &str| {
+        let src = format!("{BASE}{extra}");
+        let err = Scenario::parse(&src, "test.toml", None)
+            .unwrap()
+            .fleet()
+            .map(|_| ())
+            .expect_err(extra);
+        let text = err.to_string();
+        assert_eq!(err.location.line, line, "{text}");
+        assert_eq!(err.field, field, "{text}");
+        assert!(err.message.contains(message), "{text}");
+        assert!(
+            !text.contains('\n') && text.starts_with(&format!("test.toml:{line}:")),
+            "{text}"
+        );
+    };
+    fleet_error(
+        "[fleet.ros2]\nnamespace = \"/robot{k}/\"\n",
+        21,
+        "fleet.ros2.namespace",
+        "ends with `/`",
+    );
+    fleet_error(
+        "[fleet.ros2]\ncmd_vel = \"~/cmd_vel\"\n",
+        21,
+        "fleet.ros2.cmd_vel",
+        "no `~`",
+    );
+    fleet_error(
+        "[fleet.ros2]\nodom = \"1odom\"\n",
+        21,
+        "fleet.ros2.odom",
+        "starts with a digit",
+    );
+    fleet_error(
+        "[fleet.ros2]\nbase_frame = \"base link\"\n",
+        21,
+        "fleet.ros2.base_frame",
+        "without spaces",
+    );
+    fleet_error(
+        "[fleet.ros2]\ndomain_id = 300\n",
+        21,
+        "fleet.ros2.domain_id",
+        "0 to 232",
+    );
+    fleet_error(
+        "[fleet.ros2]\nodom_timeout = 0.0\n",
+        21,
+        "fleet.ros2.odom_timeout",
+        "> 0",
+    );
+    fleet_error(
+        "[fleet.ros2]\nnamespace = \"/bot\"\n",
+        21,
+        "fleet.ros2.namespace",
+        "own namespace",
+    );
+    // An agent's own table over the file's: the error is at the agent's.
+    let agent = BASE.replacen(
+        "leader = 1\n",
+        "leader = 1\nros2 = { namespace = \"/robot1\" }\n",
+        1,
+    );
+    let err = Scenario::parse(&agent, "test.toml", None)
+        .unwrap()
+        .fleet()
+        .unwrap_err();
+    assert_eq!(
+        (err.location.line, err.field.as_str()),
+        (19, "agents[2].ros2.namespace"),
+        "{err}"
+    );
+
+    // The defaults: `/robot{k}`, `cmd_vel`/`odom` in it, REP 105 frames.
+    let ok = Scenario::parse(
+        &format!("{BASE}[fleet.ros2]\ncmd_vel_type = \"twist\"\nkey_scheme = \"bridge\"\n"),
+        "test.toml",
+        None,
+    )
+    .unwrap()
+    .fleet()
+    .unwrap();
+    let l = &ok.ros2[1];
+    assert_eq!(
+        (l.namespace.as_str(), l.cmd_vel.as_str(), l.odom.as_str()),
+        ("/robot2", "/robot2/cmd_vel", "/robot2/odom")
+    );
+    assert_eq!(
+        (l.base_frame.as_str(), l.odom_frame.as_str(), l.domain_id),
+        ("base_link", "odom", 0)
+    );
+    assert_eq!(l.cmd_vel_type, echelon::scenario::schema::CmdVelType::Twist);
+    assert_eq!(l.key_scheme, echelon::ros_names::KeyScheme::Bridge);
+}

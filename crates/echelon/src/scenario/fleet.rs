@@ -329,13 +329,11 @@ offset = { x = 0.3, y = 0.0 }
     fn every_builtin_has_the_defaults() {
         for (name, src) in builtin() {
             let s = Scenario::parse(src, name, None).unwrap_or_else(|e| panic!("{e}"));
-            if name.ends_with("-velocity") || name.starts_with("turtlebot") {
-                // Velocity bases are refused by the fleet so far.
-                let e = s.fleet().expect_err("a velocity base in the fleet");
-                assert!(e.message.contains("velocity base"), "{e}");
-                continue;
-            }
             let f = s.fleet().unwrap_or_else(|e| panic!("{e}"));
+            for (k, l) in f.ros2.iter().enumerate() {
+                assert_eq!(l.namespace, format!("/robot{}", k + 1));
+                assert_eq!(l.odom_timeout, DEFAULT_ODOM_TIMEOUT);
+            }
             assert_eq!(f.name, *name);
             assert_eq!(f.reference_rate, DEFAULT_REFERENCE_RATE);
             assert_eq!(f.control_rate, DEFAULT_CONTROL_RATE);

@@ -338,13 +338,9 @@ fn fake_base() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/ros2/fake_base.py")
 }
 
-/// The robot process against an independent ROS 2 base (eclipse-zenoh and
-/// rclpy serialization, `scripts/ros2/fake_base.py`, an ideal unicycle):
-/// the base decodes every command with its attachment and sees the robot's
-/// rmw_zenoh tokens, and the robot converges to its slot (final ‖e‖ < 5 mm
-/// after 10 s; the transient settles in about 2.3 s).
-#[test]
-fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
+/// Robot 1 of `scenario` (and a leader) against `fake_base.py` with
+/// `base_args`, 10 s of fleet time; the robot's and the base's reports.
+fn drive_python_base(scenario: &str, base_args: &[&str]) -> (Value, Value) {
     let e = ports(3);
     let dir = tempfile::tempdir().unwrap();
     let report_path = dir.path().join("base.json");
@@ -353,6 +349,7 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
         .arg(fake_base())
         .args(["--listen", &e[0], "--namespace", "/robot1", "--duration", "25"])
         .args(["--x", "0.0", "--y", "-0.6", "--yaw", &std::f64::consts::FRAC_PI_2.to_string()])
+        .args(base_args)
         .arg("--report")
         .arg(&report_path)
         .stdout(Stdio::null())
@@ -366,7 +363,7 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
         &[
             "fleet",
             "robot",
-            SCENARIO,
+            scenario,
             "--ros2",
             "--agent",
             "1",
@@ -380,7 +377,7 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
         &[
             "fleet",
             "leader",
-            SCENARIO,
+            scenario,
             "--duration",
             "10",
             "--wait-for",
@@ -400,9 +397,20 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
     std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
     assert!(status.success(), "fake_base.py: {status}: {err}");
     assert!(f(&report, &["final_error"]) < 5e-3, "{report}");
-    assert_eq!(f(&report, &["ros2", "odom_wrong_type"]), 0.0, "{report}");
     let base: Value =
         serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    (report, base)
+}
+
+/// The robot process against an independent ROS 2 base (eclipse-zenoh and
+/// rclpy serialization, `scripts/ros2/fake_base.py`, an ideal unicycle):
+/// the base decodes every command with its attachment and sees the robot's
+/// rmw_zenoh tokens, and the robot converges to its slot (final ‖e‖ < 5 mm
+/// after 10 s; the transient settles in about 2.3 s).
+#[test]
+fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
+    let (report, base) = drive_python_base(SCENARIO, &[]);
+    assert_eq!(f(&report, &["ros2", "odom_wrong_type"]), 0.0, "{report}");
     let commands = f(&base, &["commands"]);
     assert!(commands > 300.0, "{base}");
     assert_eq!(f(&base, &["attachments_valid"]), commands, "{base}");
@@ -546,4 +554,31 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
         "base 1 heard {heard}, robot 1 sent {sent}"
     );
     assert!(f(robot, &["final_error"]) < 5e-3, "{robot}");
+}
+
+/// The other wire options against the same independent base: plain
+/// `geometry_msgs/Twist` commands and zenoh-bridge-ros2dds's keys (no type,
+/// hash or attachment on the key).
+#[test]
+fn twist_commands_over_bridge_keys_drive_the_python_base_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenarios/experiment-circle-velocity.toml"),
+    )
+    .unwrap();
+    let scenario = dir.path().join("bridge.toml");
+    std::fs::write(
+        &scenario,
+        format!("{src}\n[fleet.ros2]\ncmd_vel_type = \"twist\"\nkey_scheme = \"bridge\"\n"),
+    )
+    .unwrap();
+    let (_, base) = drive_python_base(
+        scenario.to_str().unwrap(),
+        &["--cmd-type", "twist", "--scheme", "bridge"],
+    );
+    assert_eq!(base["cmd_key"], "robot1/cmd_vel", "{base}");
+    assert!(f(&base, &["commands"]) > 300.0, "{base}");
+    assert_eq!(f(&base, &["undecodable"]), 0.0);
+    assert_eq!(base["last_command"]["v"], 0.0);
 }

@@ -488,6 +488,37 @@ fn up_cmd(a: UpArgs) -> Result<()> {
             c("link_losses"),
         )?;
     }
+    for (b, r) in report.bases.iter().zip(&report.robots) {
+        let c = |k: &str| int(b, &["counters", k]);
+        let refused: u64 = [
+            "cmd_wrong_type",
+            "cmd_malformed",
+            "cmd_non_finite",
+            "cmd_no_attachment",
+        ]
+        .iter()
+        .map(|k| c(k))
+        .sum();
+        let odom_refused: u64 = [
+            "odom_wrong_type",
+            "odom_malformed",
+            "odom_non_finite",
+            "odom_wrong_frames",
+        ]
+        .iter()
+        .map(|k| int(r, &["ros2", k]))
+        .sum();
+        outln!(
+            "  ROS 2 base {}: {} cmd_vel received, {} refused, {} odom published; robot: {} odom accepted, {} refused, {} commands saturated",
+            int(b, &["agent"]),
+            c("cmd_received"),
+            refused,
+            c("odom_published"),
+            int(r, &["ros2", "odom_accepted"]),
+            odom_refused,
+            int(r, &["ros2", "cmd_saturated"]),
+        )?;
+    }
     let col = &report.collector;
     outln!(
         "  collector: {} messages received, {} logged, {} rejected",

@@ -59,6 +59,27 @@ pub trait Plant {
     }
 }
 
+/// Steps `state` from `from` to `to` in equal steps of at most `max_step`
+/// (`step(state, h)`); returns the new time (`from` when `to` is not later).
+fn integrate(
+    state: &mut State,
+    from: f64,
+    to: f64,
+    max_step: f64,
+    step: impl Fn(&State, f64) -> State,
+) -> f64 {
+    let span = to - from;
+    if span <= 0.0 {
+        return from;
+    }
+    let n = (span / max_step).ceil().max(1.0) as u64;
+    let h = span / n as f64;
+    for _ in 0..n {
+        *state = step(state, h);
+    }
+    to
+}
+
 /// Eq. 3 integrated with RK4 over the real elapsed fleet time, in sub-steps
 /// of at most `max_step`, with the last command held (zero-order hold).
 #[derive(Debug, Clone)]
@@ -94,16 +115,10 @@ impl Plant for SimulatedPlant {
     }
 
     fn advance(&mut self, t: f64) {
-        let span = t - self.t;
-        if span <= 0.0 {
-            return;
-        }
-        let n = (span / self.max_step).ceil().max(1.0) as u64;
-        let h = span / n as f64;
-        for _ in 0..n {
-            self.state = self.params.rk4_step(&self.state, self.applied, h);
-        }
-        self.t = t;
+        let (params, applied) = (self.params, self.applied);
+        self.t = integrate(&mut self.state, self.t, t, self.max_step, |s, h| {
+            params.rk4_step(s, applied, h)
+        });
     }
 
     fn command(&mut self, cmd: Command) -> Actuation {
@@ -188,16 +203,10 @@ impl Plant for SimulatedVelocityBase {
     }
 
     fn advance(&mut self, t: f64) {
-        let span = t - self.t;
-        if span <= 0.0 {
-            return;
-        }
-        let n = (span / self.max_step).ceil().max(1.0) as u64;
-        let h = span / n as f64;
-        for _ in 0..n {
-            self.state = self.base.rk4_step(&self.state, self.applied, h);
-        }
-        self.t = t;
+        let (base, applied) = (self.base, self.applied);
+        self.t = integrate(&mut self.state, self.t, t, self.max_step, |s, h| {
+            base.rk4_step(s, applied, h)
+        });
     }
 
     fn command(&mut self, cmd: Command) -> Actuation {

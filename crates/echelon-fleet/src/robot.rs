@@ -40,7 +40,7 @@ use crate::plant::{Command, Plant, SimulatedDrive};
 use crate::ros2::attachment::{Gid, gid_from_token};
 use crate::ros2::drive::{CmdSink, Ros2Counters, Ros2Drive, cmd_vel_type};
 use crate::ros2::keys::{topic_key, topic_key_any_type};
-use crate::ros2::liveliness::{NodeInfo, Qos};
+use crate::ros2::liveliness::{NodeInfo, Qos, declare_tokens};
 use crate::ros2::msgs::ODOMETRY;
 use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
 use crate::{FleetError, StopFlag};
@@ -728,20 +728,14 @@ impl<'a> Ros2Endpoint<'a> {
             .map_err(|e| FleetError::Config(format!("agent {agent}: {e}")))?;
         let cmd_type = cmd_vel_type(link);
         let pub_token = node.publisher_token(1, &link.cmd_vel, &cmd_type, &Qos::default());
-        let tokens = [
-            node.node_token(),
-            pub_token.clone(),
-            node.subscription_token(2, &link.odom, &ODOMETRY, &Qos::default()),
-        ]
-        .iter()
-        .map(|t| {
-            session
-                .liveliness()
-                .declare_token(t.clone())
-                .wait()
-                .map_err(|e| FleetError::Zenoh(format!("liveliness {t}: {e}")))
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+        let tokens = declare_tokens(
+            session,
+            &[
+                node.node_token(),
+                pub_token.clone(),
+                node.subscription_token(2, &link.odom, &ODOMETRY, &Qos::default()),
+            ],
+        )?;
         let (tx, odom) = mpsc::channel();
         // Any type on the odom topic, so a publisher of the wrong type is
         // seen, counted and refused rather than never heard.

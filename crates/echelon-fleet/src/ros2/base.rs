@@ -25,7 +25,7 @@ use echelon::sim::Drive;
 use super::attachment::{Attachment, Gid, gid_from_token};
 use super::drive::{SampleRefusal, cmd_vel_type, decode_cmd_vel};
 use super::keys::{topic_key, topic_key_any_type};
-use super::liveliness::{NodeInfo, Qos};
+use super::liveliness::{NodeInfo, Qos, declare_tokens};
 use super::msgs::{ODOMETRY, Odometry, RosMessage, Time};
 use crate::clock::FleetClock;
 use crate::keys::Keys;
@@ -272,16 +272,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         node.subscription_token(2, &link.cmd_vel, &cmd_type, &Qos::default()),
         Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name)).alive(&base_role(opts.agent)),
     ];
-    let _tokens = tokens
-        .iter()
-        .map(|t| {
-            session
-                .liveliness()
-                .declare_token(t.clone())
-                .wait()
-                .map_err(|e| FleetError::Zenoh(format!("liveliness {t}: {e}")))
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+    let _tokens = declare_tokens(&session, &tokens)?;
     type CmdSample = (Instant, String, Vec<u8>, Option<Vec<u8>>);
     let (tx, rx) = mpsc::channel::<CmdSample>();
     let cmd_key = topic_key_any_type(link.key_scheme, link.domain_id, &link.cmd_vel);

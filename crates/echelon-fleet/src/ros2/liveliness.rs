@@ -271,6 +271,25 @@ pub fn domain_tokens(domain_id: u32) -> String {
     format!("{ADMIN_SPACE}/{domain_id}/**")
 }
 
+/// Declares each of `tokens` on `session`; they live as long as the returned
+/// handles.
+pub fn declare_tokens(
+    session: &zenoh::Session,
+    tokens: &[String],
+) -> Result<Vec<zenoh::liveliness::LivelinessToken>, crate::FleetError> {
+    use zenoh::Wait;
+    tokens
+        .iter()
+        .map(|t| {
+            session
+                .liveliness()
+                .declare_token(t.clone())
+                .wait()
+                .map_err(|e| crate::FleetError::Zenoh(format!("liveliness {t}: {e}")))
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

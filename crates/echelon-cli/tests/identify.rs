@@ -46,7 +46,7 @@ fn refused(o: &Output, needles: &[&str]) {
 fn identify_writes_a_block_a_scenario_accepts_with_its_summary_and_figure() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    excitation_run(&run, "30");
+    excitation_run(&run, "45");
     let out = dir.path().join("id");
     let o = echelon(&[
         "identify",

@@ -381,3 +381,47 @@ fn bad_logs_are_refused_with_the_file_and_what_is_wrong() {
     let e = identify::identify(&log, Model::Torque).unwrap_err();
     assert!(matches!(e, IdentifyError::NoExcitation { .. }), "{e}");
 }
+
+#[test]
+fn a_velocity_base_run_gives_its_lags_within_5_percent_and_the_speed_limit_it_hit() {
+    let (tau_v, tau_w, v_max) = (0.1, 0.08, 0.6);
+    let src = Scenario::builtin("identify-excitation")
+        .unwrap()
+        .source()
+        .replace("law = \"paper\"", "law = \"kinematic\"")
+        .replace("robot = \"agent1\"", "robot = \"lab\"")
+        .replace("robot = \"agent2\"", "robot = \"lab\"")
+        + &format!(
+            "\n[robots.lab]\ndrive = \"velocity\"\ntau_v = {tau_v}\ntau_omega = {tau_w}\n\
+             v_max = {v_max}\nomega_max = 3.0\n"
+        );
+    let mut run = Scenario::parse(&src, "lab.toml", None)
+        .unwrap()
+        .build(&Overrides::default())
+        .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
+    output::run_to_dir(&mut run, dir.path(), &mut none).unwrap();
+    let mut log = Log::read_run(dir.path(), 1).unwrap();
+    assert_eq!(log.detect(), Some(Model::Velocity));
+    add_noise(&mut log, 5);
+    let id = identify::identify(&log, Model::Velocity).unwrap();
+    for (field, want) in [("tau_v", tau_v), ("tau_omega", tau_w)] {
+        let e = id.get(field).unwrap();
+        eprintln!("{field}: {e:?} (truth {want})");
+        assert!((e.value - want).abs() / want < 0.05, "{field}: {e:?}");
+    }
+    let v = id.limits.iter().find(|l| l.field == "v_max").unwrap();
+    assert!(v.reached && (v.observed - v_max).abs() < 1e-12, "{v:?}");
+    let w = id.limits.iter().find(|l| l.field == "omega_max").unwrap();
+    assert!(!w.reached && w.observed < 3.0, "{w:?}");
+    let block = id.robot_toml("lab");
+    assert!(block.contains("v_max = 0.6 "), "{block}");
+    assert!(block.contains("# omega_max: observed"), "{block}");
+    // The block is a valid velocity robot.
+    let reuse = src.replace("[robots.lab]", "[robots.old]") + &block;
+    Scenario::parse(&reuse, "reuse.toml", None)
+        .unwrap()
+        .build(&Overrides::default())
+        .unwrap();
+}

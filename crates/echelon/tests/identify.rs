@@ -408,19 +408,17 @@ fn bad_logs_are_refused_with_the_file_and_what_is_wrong() {
     assert!(matches!(e, IdentifyError::NoExcitation { .. }), "{e}");
 }
 
-#[test]
-fn a_velocity_base_run_gives_its_lags_within_5_percent_and_the_speed_limit_it_hit() {
-    let (tau_v, tau_w, v_max) = (0.1, 0.08, 0.6);
+/// The excitation manoeuvre on velocity bases `[robots.lab]` (`base` holds
+/// its fields) under the kinematic law, run into a temporary directory.
+fn velocity_run(base: &str) -> (String, tempfile::TempDir) {
     let src = Scenario::builtin("identify-excitation")
         .unwrap()
         .source()
         .replace("law = \"paper\"", "law = \"kinematic\"")
         .replace("robot = \"agent1\"", "robot = \"lab\"")
         .replace("robot = \"agent2\"", "robot = \"lab\"")
-        + &format!(
-            "\n[robots.lab]\ndrive = \"velocity\"\ntau_v = {tau_v}\ntau_omega = {tau_w}\n\
-             v_max = {v_max}\nomega_max = 3.0\n"
-        );
+        + "\n[robots.lab]\ndrive = \"velocity\"\n"
+        + base;
     let mut run = Scenario::parse(&src, "lab.toml", None)
         .unwrap()
         .build(&Overrides::default())
@@ -428,6 +426,15 @@ fn a_velocity_base_run_gives_its_lags_within_5_percent_and_the_speed_limit_it_hi
     let dir = tempfile::tempdir().unwrap();
     let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
     output::run_to_dir(&mut run, dir.path(), &mut none).unwrap();
+    (src, dir)
+}
+
+#[test]
+fn a_velocity_base_run_gives_its_lags_within_5_percent_and_the_speed_limit_it_hit() {
+    let (tau_v, tau_w, v_max) = (0.1, 0.08, 0.6);
+    let (src, dir) = velocity_run(&format!(
+        "tau_v = {tau_v}\ntau_omega = {tau_w}\nv_max = {v_max}\nomega_max = 3.0\n"
+    ));
     let mut log = Log::read_run(dir.path(), 1).unwrap();
     assert_eq!(log.detect(), Some(Model::Velocity));
     add_noise(&mut log, 5);
@@ -437,10 +444,12 @@ fn a_velocity_base_run_gives_its_lags_within_5_percent_and_the_speed_limit_it_hi
         eprintln!("{field}: {e:?} (truth {want})");
         assert!((e.value - want).abs() / want < 0.05, "{field}: {e:?}");
     }
-    let v = id.limits.iter().find(|l| l.field == "v_max").unwrap();
+    let limit = |f: &str| id.limits.iter().find(|l| l.field == f).unwrap().clone();
+    let v = limit("v_max");
     assert!(v.reached && (v.observed - v_max).abs() < 1e-12, "{v:?}");
-    let w = id.limits.iter().find(|l| l.field == "omega_max").unwrap();
+    let w = limit("omega_max");
     assert!(!w.reached && w.observed < 3.0, "{w:?}");
+    assert!(!limit("a_max").reached && !limit("alpha_max").reached);
     let block = id.robot_toml("lab");
     assert!(block.contains("v_max = 0.6 "), "{block}");
     assert!(block.contains("# omega_max: observed"), "{block}");
@@ -450,4 +459,29 @@ fn a_velocity_base_run_gives_its_lags_within_5_percent_and_the_speed_limit_it_hi
         .unwrap()
         .build(&Overrides::default())
         .unwrap();
+}
+
+#[test]
+fn an_acceleration_limit_that_acted_is_found_and_said_to_bias_the_lag() {
+    let (_, dir) = velocity_run("tau_v = 0.1\ntau_omega = 0.1\nalpha_max = 4.0\n");
+    let id = identify::identify(&Log::read_run(dir.path(), 1).unwrap(), Model::Velocity).unwrap();
+    let alpha = id.limits.iter().find(|l| l.field == "alpha_max").unwrap();
+    assert!(
+        alpha.reached && (alpha.observed - 4.0).abs() < 1e-6,
+        "{alpha:?}"
+    );
+    assert!(
+        id.warnings
+            .iter()
+            .any(|w| w.contains("alpha_max = 4.0000 acted") && w.contains("tau_omega is biased")),
+        "{:?}",
+        id.warnings
+    );
+    assert!(
+        !id.limits
+            .iter()
+            .find(|l| l.field == "a_max")
+            .unwrap()
+            .reached
+    );
 }

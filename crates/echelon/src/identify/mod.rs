@@ -570,14 +570,14 @@ impl Identified {
             if l.reached {
                 let _ = writeln!(
                     s,
-                    "{} = {}    # the base cut the command here",
+                    "{} = {}    # the log shows the base held here",
                     l.field,
                     sig(l.observed)
                 );
             } else {
                 let _ = writeln!(
                     s,
-                    "# {}: observed {}, not necessarily the limit (the command never exceeded it)",
+                    "# {}: observed {}, not necessarily the limit",
                     l.field,
                     sig(l.observed)
                 );
@@ -860,21 +860,33 @@ fn velocity_limits(log: &Log, applied: &[Vec<f64>; 2], warnings: &mut Vec<String
             ));
         }
         // Acceleration: the largest |Δv/Δt| of the measurement over 5-sample
-        // spans (noise averaged), only observed.
+        // spans (noise averaged). It is the limit when the rate sits on it
+        // (within 0.5 %) for at least 10 samples: a lag's rate only touches
+        // its peak, a limited one rides it.
         let w = 5;
-        let mut acc = 0.0_f64;
-        for i in 0..log.t.len().saturating_sub(w) {
-            let r = (measured[axis][i + w] - measured[axis][i]) / (log.t[i + w] - log.t[i]);
-            acc = acc.max(r.abs());
-        }
+        let rates: Vec<f64> = (0..log.t.len().saturating_sub(w))
+            .map(|i| {
+                ((measured[axis][i + w] - measured[axis][i]) / (log.t[i + w] - log.t[i])).abs()
+            })
+            .collect();
+        let acc = rates.iter().fold(0.0_f64, |m, r| m.max(*r));
+        let riding = rates.iter().filter(|r| **r >= 0.995 * acc).count();
+        let reached = acc > 0.0 && riding >= 10;
         out.push(Limit {
             field: accel,
             observed: acc,
-            reached: false,
+            reached,
         });
-        warnings.push(format!(
-            "{accel}: observed {acc:.4}, not necessarily the limit"
-        ));
+        if reached {
+            warnings.push(format!(
+                "{accel} = {acc:.4} acted during the log ({riding} samples on it): the first-order lag ignores it, so {} is biased; log gentler steps to identify the lag",
+                ["tau_v", "tau_omega"][axis]
+            ));
+        } else {
+            warnings.push(format!(
+                "{accel}: observed {acc:.4}, not necessarily the limit"
+            ));
+        }
     }
     out
 }

@@ -47,6 +47,8 @@ enum Command {
     /// Borenstein's UMBmark: estimate E_d and E_b from a bidirectional square test.
     #[command(allow_negative_numbers = true)]
     Umbmark(cmd::umbmark::UmbmarkArgs),
+    /// Identify a robot from a logged run: eq. 3's m, η, J, ψ or a velocity base's lags and limits.
+    Identify(cmd::identify::IdentifyArgs),
     /// Run a scenario as networked processes on Zenoh (leader, robots, collector).
     #[command(subcommand)]
     Fleet(cmd::fleet::FleetCommand),
@@ -88,6 +90,7 @@ fn main() -> ExitCode {
         Command::Bound(args) => cmd::bound::bound(&args),
         Command::Sweep(args) => cmd::sweep::sweep(&args),
         Command::Umbmark(args) => cmd::umbmark::umbmark(&args),
+        Command::Identify(args) => cmd::identify::identify(&args),
         Command::Fleet(c) => cmd::fleet::run(c),
         Command::Bench(args) => cmd::bench::bench(&args),
     };

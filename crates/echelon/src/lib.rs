@@ -24,7 +24,8 @@
 //!   a time (SIMD lanes, all cores), and `echelon bench`'s formation;
 //! - [`lanes`]: the number types the law is written for, and SIMD lanes;
 //! - [`scenario`]: the TOML scenario format and the paper's built-in setups;
-//! - [`output`]: `trajectory.csv` and `summary.json`.
+//! - [`output`]: `trajectory.csv` and `summary.json`;
+//! - [`identify`]: a robot's eq. 3 parameters or velocity-base lags from its logs.
 //!
 //! Units are SI and angles radians throughout (ROS REP 103).
 
@@ -35,6 +36,7 @@ pub mod engine;
 pub mod error;
 pub mod follow;
 pub mod formation;
+pub mod identify;
 pub mod kinematic;
 pub mod lanes;
 pub mod lycomp;

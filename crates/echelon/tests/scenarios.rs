@@ -12,13 +12,14 @@ use echelon::scenario::schema::ScenarioFile;
 use echelon::scenario::{self, Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 
-const NAMES: [&str; 9] = [
+const NAMES: [&str; 10] = [
     "circle-pentagon-velocity",
     "circle-pentagon",
     "experiment-circle-velocity",
     "experiment-circle",
     "experiment-lemniscate",
     "fix-study",
+    "identify-excitation",
     "lemniscate-wedge",
     "nonfeasible",
     "turtlebot-circle",

@@ -3,6 +3,7 @@
 pub(crate) mod bench;
 pub(crate) mod bound;
 pub(crate) mod fleet;
+pub(crate) mod identify;
 pub(crate) mod lycomp;
 pub(crate) mod out;
 pub(crate) mod plot;

@@ -1,0 +1,163 @@
+//! `echelon identify` as a user runs it: a run of the excitation manoeuvre
+//! gives a `[robots.NAME]` block that a scenario accepts, the files, and bad
+//! logs are refused in one line with exit code 2.
+#![allow(clippy::unwrap_used)] // tests fail loudly by design
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn echelon(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_echelon"))
+        .args(args)
+        .output()
+        .expect("the echelon binary runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8(b.to_vec()).unwrap()
+}
+
+/// `echelon run identify-excitation` for `duration` s into `dir`.
+fn excitation_run(dir: &Path, duration: &str) {
+    let o = echelon(&[
+        "run",
+        "identify-excitation",
+        "--out",
+        dir.to_str().unwrap(),
+        "--duration",
+        duration,
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+}
+
+/// A refused input: exit 2, one line on stderr containing every `needle`.
+fn refused(o: &Output, needles: &[&str]) {
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    let err = text(&o.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    for n in needles {
+        assert!(err.contains(n), "{err} lacks {n}");
+    }
+    assert!(o.stdout.is_empty());
+}
+
+#[test]
+fn identify_writes_a_block_a_scenario_accepts_with_its_summary_and_figure() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    excitation_run(&run, "45");
+    let out = dir.path().join("id");
+    let o = echelon(&[
+        "identify",
+        run.to_str().unwrap(),
+        "--agent",
+        "2",
+        "--name",
+        "lab2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    assert!(stdout.contains("[robots.lab2]"), "{stdout}");
+    assert!(stdout.contains("torque model, agent 2"), "{stdout}");
+    let block = std::fs::read_to_string(out.join("robot.toml")).unwrap();
+    assert!(stdout.contains(block.trim_end()));
+    for f in ["identify.json", "identify.svg", "identify.png"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("identify.json")).unwrap()).unwrap();
+    // Noise-free simulated log: agent 2 of Table I to 6 digits.
+    let mass = json["params"][0]["estimate"]["value"].as_f64().unwrap();
+    assert_eq!(json["params"][0]["field"], "mass");
+    assert!((mass - 25.0).abs() < 1e-4, "{mass}");
+    let psi = json["params"][3]["estimate"]["value"].as_f64().unwrap();
+    assert!((psi - 5.51).abs() < 1e-4, "{psi}");
+
+    // The block pasted into a scenario runs.
+    let show = echelon(&["show", "experiment-circle"]);
+    let scenario =
+        text(&show.stdout).replace("robot = \"agent2\"", "robot = \"lab2\"") + "\n" + &block;
+    let file = dir.path().join("with-lab2.toml");
+    std::fs::write(&file, scenario).unwrap();
+    let o = echelon(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        dir.path().join("run2").to_str().unwrap(),
+        "--duration",
+        "2",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+}
+
+#[test]
+fn bad_logs_exit_2_with_one_line_naming_the_file_and_what_is_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    excitation_run(&run, "0.2");
+    let path = run.to_str().unwrap();
+    let csv = run.join("trajectory.csv");
+    let csv_name = csv.display().to_string();
+
+    // Too short (21 samples per agent).
+    refused(
+        &echelon(&["identify", path]),
+        &[&csv_name, "log too short", "at least 50"],
+    );
+    // A torque run has no velocity-base columns.
+    refused(
+        &echelon(&["identify", path, "--model", "velocity"]),
+        &[&csv_name, "missing column(s) v_applied, omega_applied"],
+    );
+    // No such directory.
+    let missing = dir.path().join("nowhere");
+    refused(
+        &echelon(&["identify", missing.to_str().unwrap()]),
+        &["nowhere", "cannot read"],
+    );
+    // A CSV without u1, u2 (cut after the first 11 columns).
+    let cut = dir.path().join("cut.csv");
+    let body: Vec<String> = std::fs::read_to_string(&csv)
+        .unwrap()
+        .lines()
+        .map(|l| l.split(',').take(11).collect::<Vec<_>>().join(","))
+        .collect();
+    std::fs::write(&cut, body.join("\n")).unwrap();
+    refused(
+        &echelon(&["identify", cut.to_str().unwrap()]),
+        &["cut.csv", "neither u1, u2"],
+    );
+    // A non-finite value.
+    let nan = dir.path().join("nan.csv");
+    let mut long = String::new();
+    let src = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = src.lines();
+    long.push_str(lines.next().unwrap());
+    long.push('\n');
+    for i in 0..100 {
+        let mut cells: Vec<String> = "0,1,0,0,0,0.1,0.2,0,0,0,0,1,2,0,0"
+            .split(',')
+            .map(str::to_owned)
+            .collect();
+        cells[0] = format!("{}", f64::from(i) * 0.01);
+        if i == 60 {
+            cells[5] = "inf".into();
+        }
+        long.push_str(&cells.join(","));
+        long.push('\n');
+    }
+    std::fs::write(&nan, long).unwrap();
+    refused(
+        &echelon(&["identify", nan.to_str().unwrap()]),
+        &["nan.csv", "non-finite v = inf at t = 0.6 s"],
+    );
+    // MCAP is not read yet: said so.
+    refused(
+        &echelon(&["identify", "fleet.mcap"]),
+        &["fleet.mcap", "MCAP logs are not read yet"],
+    );
+}

@@ -13,7 +13,7 @@
 
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -23,54 +23,10 @@ use zenoh::Wait;
 use echelon_fleet::ros2::keys::topic_key;
 use echelon_fleet::ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST, Time, TwistStamped};
 
-const EXE: &str = env!("CARGO_BIN_EXE_echelon");
+mod common;
+
+use common::{EXE, spawn};
 const SCENARIO: &str = "experiment-circle-velocity";
-
-struct Guard(Child);
-
-impl Drop for Guard {
-    fn drop(&mut self) {
-        if matches!(self.0.try_wait(), Ok(None)) {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
-}
-
-impl Guard {
-    fn terminate(&self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-    }
-
-    /// Waits for the process to exit; its last JSON line.
-    fn report(mut self) -> Value {
-        let status = self.0.wait().unwrap();
-        let mut out = String::new();
-        let mut err = String::new();
-        std::io::Read::read_to_string(&mut self.0.stdout.take().unwrap(), &mut out).unwrap();
-        std::io::Read::read_to_string(&mut self.0.stderr.take().unwrap(), &mut err).unwrap();
-        assert!(status.success(), "{status}: {err}");
-        let line = out
-            .lines()
-            .rfind(|l| l.starts_with('{'))
-            .unwrap_or_else(|| panic!("no report: {out} {err}"));
-        serde_json::from_str(line).unwrap()
-    }
-}
-
-fn spawn(args: &[&str]) -> Guard {
-    Guard(
-        Command::new(EXE)
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap(),
-    )
-}
 
 fn ports(n: usize) -> Vec<String> {
     let l: Vec<_> = (0..n)

@@ -144,6 +144,15 @@ impl Drop for Proc {
     }
 }
 
+/// Polls every one of `procs` (none skipped); whether all have exited.
+fn poll_all<'a>(procs: impl IntoIterator<Item = &'a mut Proc>) -> Result<bool, FleetError> {
+    let mut all = true;
+    for p in procs {
+        all &= p.poll()?;
+    }
+    Ok(all)
+}
+
 /// Free loopback TCP ports (bound then released: each is free right now).
 pub fn free_ports(n: usize) -> Result<Vec<u16>, FleetError> {
     let listeners = (0..n)
@@ -323,15 +332,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let mut robots_told = false;
     // 1. Leader and robots run to the end (or a failure, or a signal).
     loop {
-        leader.poll()?;
-        let mut all_done = leader.status.is_some();
-        for r in &mut robots {
-            all_done &= r.poll()?;
-        }
-        collector.poll()?;
-        for b in &mut base_procs {
-            b.poll()?;
-        }
+        let all_done = poll_all(std::iter::once(&mut leader).chain(&mut robots))?;
+        poll_all(std::iter::once(&mut collector).chain(&mut base_procs))?;
         let failed = std::iter::once(&leader)
             .chain(&robots)
             .chain(&base_procs)
@@ -384,13 +386,11 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         b.terminate();
     }
     let wind_down = Instant::now();
-    while !collector.poll()?
-        | !base_procs
-            .iter_mut()
-            .try_fold(true, |all, b| Ok::<_, FleetError>(b.poll()? & all))?
-    {
+    while !poll_all(std::iter::once(&mut collector).chain(&mut base_procs))? {
         if wind_down.elapsed() > Duration::from_secs(30) {
-            return Err(FleetError::Child("the collector did not stop".into()));
+            return Err(FleetError::Child(
+                "the collector or a ROS 2 base did not stop".into(),
+            ));
         }
         std::thread::sleep(nap);
     }

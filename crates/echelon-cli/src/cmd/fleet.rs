@@ -18,7 +18,6 @@ use echelon_fleet::net::{self, NetOptions, Secure};
 use echelon_fleet::robot::{self, RobotOptions};
 use echelon_fleet::ros2::RosTopic;
 use echelon_fleet::ros2::base::{self, BaseOptions};
-use echelon_fleet::ros2::msgs::ODOMETRY;
 use echelon_fleet::up::{self, UP_SUMMARY_FILE, UpOptions};
 use echelon_fleet::{StopFlag, collector::SUMMARY_FILE};
 
@@ -283,16 +282,7 @@ fn agents_of(s: &Scenario) -> Result<u32> {
 fn ros_topics(s: &Scenario) -> Result<Vec<RosTopic>> {
     let mut topics = Vec::new();
     for link in s.fleet()?.ros2 {
-        let cmd = echelon_fleet::ros2::drive::cmd_vel_type(&link);
-        for (topic, ty) in [(&link.cmd_vel, cmd), (&link.odom, ODOMETRY)] {
-            topics.push(RosTopic::new(
-                link.key_scheme,
-                link.domain_id,
-                &link.namespace,
-                topic,
-                ty,
-            )?);
-        }
+        topics.extend(RosTopic::of_link(&link)?);
     }
     Ok(topics)
 }

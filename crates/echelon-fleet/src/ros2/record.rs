@@ -142,6 +142,18 @@ impl RosTopic {
         ])
     }
 
+    /// The `cmd_vel` and `odom` topics of an agent's resolved `[fleet.ros2]`
+    /// link (its own topic names, types and key scheme).
+    pub fn of_link(link: &echelon::scenario::Ros2Link) -> Result<[RosTopic; 2], RosTopicError> {
+        let topic = |name: &str, ty| {
+            RosTopic::new(link.key_scheme, link.domain_id, &link.namespace, name, ty)
+        };
+        Ok([
+            topic(&link.cmd_vel, super::drive::cmd_vel_type(link))?,
+            topic(&link.odom, ODOMETRY)?,
+        ])
+    }
+
     /// The same topic, its publishers offering `qos` (recorded as the
     /// channel's `offered_qos_profiles`).
     pub fn with_qos(mut self, qos: Qos) -> RosTopic {

@@ -1,0 +1,60 @@
+//! What the CLI's process tests share: the binary, and a child process
+//! that is killed if the test ends first.
+
+#![allow(dead_code, clippy::unwrap_used)]
+
+use std::process::{Child, Command, Stdio};
+
+use serde_json::Value;
+
+/// The `echelon` binary under test.
+pub(crate) const EXE: &str = env!("CARGO_BIN_EXE_echelon");
+
+/// Kills the child if the test ends first.
+pub(crate) struct Guard(pub(crate) Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        if matches!(self.0.try_wait(), Ok(None)) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
+impl Guard {
+    /// Sends SIGTERM.
+    pub(crate) fn terminate(&self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+    }
+
+    /// Waits for the process to exit; its last JSON line.
+    pub(crate) fn report(mut self) -> Value {
+        let status = self.0.wait().unwrap();
+        let mut out = String::new();
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut self.0.stdout.take().unwrap(), &mut out).unwrap();
+        std::io::Read::read_to_string(&mut self.0.stderr.take().unwrap(), &mut err).unwrap();
+        assert!(status.success(), "{status}: {err}");
+        let line = out
+            .lines()
+            .rfind(|l| l.starts_with('{'))
+            .unwrap_or_else(|| panic!("no report: {out} {err}"));
+        serde_json::from_str(line).unwrap()
+    }
+}
+
+/// Starts `echelon ARGS` with piped output.
+pub(crate) fn spawn(args: &[&str]) -> Guard {
+    Guard(
+        Command::new(EXE)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    )
+}

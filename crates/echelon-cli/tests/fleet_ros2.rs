@@ -400,7 +400,15 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
 /// valid certificate (robot 2's) that floods robot 1's `cmd_vel` with a
 /// full-speed command reaches no base: base 1 heard exactly what robot 1
 /// sent, and robot 1 converged.
+///
+/// Ignored: zenoh-link-tls reads and writes one rustls stream from two tasks
+/// through an `UnsafeCell` (eclipse-zenoh/zenoh#2557, open), and under this
+/// test a fleet process dies with SIGILL inside `rustls::Error::clone` about
+/// one run in six (core dump, 1 Dec 2026). The access control itself passed
+/// every run that did not crash, and failed when loosened. Run it with
+/// `cargo test -p echelon-cli --test fleet_ros2 -- --ignored`.
 #[test]
+#[ignore = "zenoh-link-tls is unsound under concurrent TLS reads and writes (eclipse-zenoh/zenoh#2557): a process may die with SIGILL"]
 fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
     let dir = tempfile::tempdir().unwrap();
     let certs = dir.path().join("certs");

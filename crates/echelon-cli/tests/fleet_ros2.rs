@@ -546,3 +546,43 @@ fn twist_commands_over_bridge_keys_drive_the_python_base_too() {
     assert_eq!(f(&base, &["undecodable"]), 0.0);
     assert_eq!(base["last_command"]["v"], 0.0);
 }
+
+/// A bad `[fleet.ros2]` value stops `fleet robot --ros2` and `fleet up
+/// --ros2` before anything starts: one line naming file, line, column and
+/// field, exit 2.
+#[test]
+fn a_bad_ros2_setting_is_refused_with_its_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenarios/experiment-circle-velocity.toml"),
+    )
+    .unwrap();
+    let line = src.lines().count() + 3;
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, format!("{src}\n[fleet.ros2]\ndomain_id = 300\n")).unwrap();
+    let bad = bad.to_str().unwrap();
+    let out_dir = dir.path().join("out");
+    for args in [
+        vec!["fleet", "robot", bad, "--agent", "1", "--ros2"],
+        vec![
+            "fleet",
+            "up",
+            bad,
+            "--ros2",
+            "--out",
+            out_dir.to_str().unwrap(),
+        ],
+    ] {
+        let out = Command::new(EXE).args(&args).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(
+            err.contains(&format!(
+                "{bad}:{line}:13: fleet.ros2.domain_id: 300 is not a ROS domain id"
+            )),
+            "{err}"
+        );
+    }
+}

@@ -15,6 +15,7 @@ pub mod clock;
 pub mod collector;
 pub mod faults;
 pub mod keys;
+pub mod latency;
 pub mod leader;
 pub mod link;
 pub mod net;

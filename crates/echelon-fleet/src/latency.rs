@@ -302,6 +302,60 @@ impl Latency {
     }
 }
 
+/// The robot with the largest p99 delay.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WorstRobot {
+    /// Agent number, from 1.
+    pub agent: u64,
+    /// Its delays (without buckets).
+    pub latency: LatencyReport,
+}
+
+/// The delays of a whole fleet (`fleet-summary.json`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct FleetLatency {
+    /// Every robot's leader-stream delays merged (reference → robot and
+    /// robot → follower), without buckets.
+    pub robots: LatencyReport,
+    /// The robot with the largest p99.
+    pub worst_robot: Option<WorstRobot>,
+    /// The collector's (every sample it received).
+    pub collector: LatencyReport,
+}
+
+impl FleetLatency {
+    /// From the robots' and the collector's JSON reports (a report without
+    /// a valid `latency` counts as none).
+    pub fn of(robots: &[serde_json::Value], collector: &serde_json::Value) -> FleetLatency {
+        let parse = |v: &serde_json::Value| -> Option<LatencyReport> {
+            serde_json::from_value(v.get("latency")?.clone()).ok()
+        };
+        let per_robot: Vec<(u64, LatencyReport)> = robots
+            .iter()
+            .filter_map(|r| {
+                let agent = r.get("agent").and_then(serde_json::Value::as_u64)?;
+                Some((agent, parse(r)?))
+            })
+            .collect();
+        let worst_robot = per_robot
+            .iter()
+            .filter(|(_, l)| l.count > 0)
+            .max_by(|a, b| a.1.p99.total_cmp(&b.1.p99))
+            .map(|(agent, l)| WorstRobot {
+                agent: *agent,
+                latency: LatencyReport {
+                    buckets: Vec::new(),
+                    ..l.clone()
+                },
+            });
+        FleetLatency {
+            robots: Latency::of_reports(per_robot.iter().map(|(_, l)| l)).report(false),
+            worst_robot,
+            collector: parse(collector).unwrap_or_default(),
+        }
+    }
+}
+
 /// The delay in ns from a sample's sender timestamp to `received_ns` (UNIX
 /// ns, [`CLOCK_REALTIME`](std::time::SystemTime)), or `None` without a
 /// timestamp.

@@ -13,6 +13,7 @@ use echelon::scenario::{Overrides, Scenario, is_valid_fleet_name};
 use echelon_fleet::certs::{self, CertOptions};
 use echelon_fleet::collector::{self, CollectorOptions, MCAP_FILE};
 use echelon_fleet::faults::FaultSpec;
+use echelon_fleet::latency::LatencyReport;
 use echelon_fleet::leader::{self, LeaderOptions};
 use echelon_fleet::net::{self, NetOptions, Secure};
 use echelon_fleet::robot::{self, RobotOptions};
@@ -427,6 +428,11 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         return Ok(());
     }
     let num = |v: &serde_json::Value, k: &str| v.get(k).and_then(serde_json::Value::as_f64);
+    let ms = |v: &serde_json::Value, k: &str| {
+        v.get("latency")
+            .and_then(|l| num(l, k))
+            .map_or(f64::NAN, |s| s * 1e3)
+    };
     let int = |v: &serde_json::Value, path: &[&str]| {
         path.iter()
             .try_fold(v, |v, k| v.get(*k))
@@ -443,12 +449,15 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         report.time_scale,
         report.wall
     )?;
+    if let (Some(startup), Some(run)) = (report.startup, report.run) {
+        outln!("  startup (all joined) {startup:.2} s, then run {run:.2} s")?;
+    }
     outln!(
         "  leader: {} reference samples published",
         int(&report.leader, &["published"])
     )?;
     outln!(
-        "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6}",
+        "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8} {:>8}",
         "agent",
         "final ‖e‖",
         "received",
@@ -459,12 +468,14 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         "wrong-ver",
         "stale",
         "reordered",
-        "losses"
+        "losses",
+        "p50 ms",
+        "p99 ms"
     )?;
     for r in &report.robots {
         let c = |k: &str| int(r, &["counters", k]);
         outln!(
-            "  {:<8} {:>9.2e} m {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6}",
+            "  {:<8} {:>9.2e} m {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8.3} {:>8.3}",
             format!("robot {}", int(r, &["agent"])),
             num(r, "final_error").unwrap_or(f64::NAN),
             c("received"),
@@ -476,6 +487,8 @@ fn up_cmd(a: UpArgs) -> Result<()> {
             c("stale"),
             c("reordered"),
             c("link_losses"),
+            ms(r, "p50"),
+            ms(r, "p99"),
         )?;
     }
     for (b, r) in report.bases.iter().zip(&report.robots) {
@@ -517,6 +530,51 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         col.get("rejected")
             .and_then(|r| r.as_object())
             .map_or(0, |m| m.values().filter_map(|v| v.as_u64()).sum::<u64>())
+    )?;
+    let lat = |l: &LatencyReport| {
+        format!(
+            "{} samples, p50 {:.3} ms, p95 {:.3} ms, p99 {:.3} ms, max {:.3} ms",
+            l.count,
+            l.p50 * 1e3,
+            l.p95 * 1e3,
+            l.p99 * 1e3,
+            l.max * 1e3
+        )
+    };
+    let worst = report
+        .latency
+        .worst_robot
+        .as_ref()
+        .map_or(String::new(), |w| {
+            format!(
+                " (worst: robot {}, p99 {:.3} ms)",
+                w.agent,
+                w.latency.p99 * 1e3
+            )
+        });
+    outln!(
+        "  latency, leader → robot: {}{worst}",
+        lat(&report.latency.robots)
+    )?;
+    outln!("  latency, → collector: {}", lat(&report.latency.collector))?;
+    let mb = |b: u64| b as f64 / (1u64 << 20) as f64;
+    let c = &report.cost;
+    outln!(
+        "  CPU: robots {:.2} s ({:.3} s per robot, max {:.3}), leader {:.2} s, collector {:.2} s, total {:.2} s",
+        c.robots.cpu,
+        c.robots.cpu_mean,
+        c.robots.cpu_max,
+        c.leader.cpu,
+        c.collector.cpu,
+        c.total.cpu
+    )?;
+    outln!(
+        "  peak RSS: robot {:.1} MiB (mean; max {:.1}), leader {:.1} MiB, collector {:.1} MiB, sum {:.1} MiB",
+        mb(c.robots.max_rss_mean),
+        mb(c.robots.max_rss_max),
+        mb(c.leader.max_rss_max),
+        mb(c.collector.max_rss_max),
+        mb(c.total.max_rss_sum)
     )?;
     outln!(
         "wrote {}, {}, {}, {}",

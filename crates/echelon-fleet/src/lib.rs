@@ -10,6 +10,7 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+pub mod bench;
 pub mod certs;
 pub mod clock;
 pub mod collector;

@@ -10,6 +10,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 
 use echelon::scenario::{Overrides, Scenario, is_valid_fleet_name};
+use echelon_fleet::bench::{self, BenchOptions, Progress};
 use echelon_fleet::certs::{self, CertOptions};
 use echelon_fleet::collector::{self, CollectorOptions, MCAP_FILE};
 use echelon_fleet::faults::FaultSpec;
@@ -41,6 +42,8 @@ pub(crate) enum FleetCommand {
     Up(UpArgs),
     /// Make a development CA and certificates for the secure mode.
     Certs(CertsArgs),
+    /// Run `fleet up` for several fleet sizes on loopback at time scale 1 and tabulate startup, CPU, messages/s, latency, losses and final error.
+    Bench(BenchArgs),
 }
 
 /// How a process joins the fleet.
@@ -262,6 +265,23 @@ pub(crate) struct UpArgs {
     quiet: bool,
 }
 
+/// `echelon fleet bench`.
+#[derive(Debug, Args)]
+pub(crate) struct BenchArgs {
+    /// Output directory: DIR/nNNN/ per size, DIR/bench.json and DIR/bench.md.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Fleet sizes to run, in order (robots behind a circle, generated).
+    #[arg(long, value_name = "N,…", value_delimiter = ',', default_values_t = [10, 50, 100, 200])]
+    robots: Vec<usize>,
+    /// Fleet seconds each size runs (real seconds: time scale 1).
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    duration: f64,
+    /// Print only the table.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
 /// `echelon fleet certs`.
 #[derive(Debug, Args)]
 pub(crate) struct CertsArgs {
@@ -388,6 +408,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             print_report(&report)
         }
         FleetCommand::Up(a) => up_cmd(a),
+        FleetCommand::Bench(a) => bench_cmd(a),
         FleetCommand::Certs(a) => {
             if a.robots == 0 {
                 bail!("--robots must be ≥ 1");
@@ -406,6 +427,54 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn bench_cmd(a: BenchArgs) -> Result<()> {
+    if a.robots.contains(&0) {
+        bail!("--robots: every fleet size must be ≥ 1");
+    }
+    let stop = StopFlag::on_signals()?;
+    let exe = std::env::current_exe().context("locating the echelon binary")?;
+    let quiet = a.quiet;
+    let duration = a.duration;
+    let report = bench::run(
+        &BenchOptions {
+            robots: a.robots,
+            duration,
+            out: a.out.clone(),
+            exe,
+        },
+        &stop,
+        |p| {
+            if quiet {
+                return;
+            }
+            match p {
+                Progress::Start { robots, index, of } => eprintln!(
+                    "[{index}/{of}] {robots} robots: fleet up for {duration} s of fleet time…"
+                ),
+                Progress::Done(row) => match &row.error {
+                    Some(e) => eprintln!("      failed: {e}"),
+                    None => eprintln!(
+                        "      done in {:.1} s ({}/{} converged)",
+                        row.wall, row.converged, row.robots
+                    ),
+                },
+            }
+        },
+    )?;
+    outln!("{}", bench::markdown(&report).trim_end())?;
+    if !quiet {
+        outln!(
+            "wrote {}, {}",
+            a.out.join(bench::BENCH_JSON).display(),
+            a.out.join(bench::BENCH_MD).display()
+        )?;
+    }
+    if report.rows.iter().any(|r| r.error.is_some()) {
+        bail!("some fleet sizes failed (see the table)");
+    }
+    Ok(())
 }
 
 fn up_cmd(a: UpArgs) -> Result<()> {

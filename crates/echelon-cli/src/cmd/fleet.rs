@@ -43,6 +43,7 @@ pub(crate) enum FleetCommand {
     /// Make a development CA and certificates for the secure mode.
     Certs(CertsArgs),
     /// Run `fleet up` for several fleet sizes on loopback at time scale 1 and tabulate startup, CPU, messages/s, latency, losses and final error.
+    #[command(allow_negative_numbers = true)]
     Bench(BenchArgs),
 }
 

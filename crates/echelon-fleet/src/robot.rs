@@ -1258,6 +1258,33 @@ mod tests {
         wire::encode_reference(buf, Header { source: 5, seq }, &r);
     }
 
+    /// Every message taken in has its delay recorded (garbage too: the
+    /// delay is the transport's), unstamped ones counted apart, and the
+    /// report's latency counts add up to `counters.received`.
+    #[test]
+    fn every_received_message_has_its_delay_recorded() {
+        let s = scenario(EXTRAPOLATE);
+        let reference = reference(&s);
+        let mut r = robot(&s, 1, FaultSpec::default());
+        let mut buf = Vec::new();
+        for (k, delay) in [Some(200_000), Some(400_000), None, Some(-3)]
+            .into_iter()
+            .enumerate()
+        {
+            reference_message(&mut buf, k as u64, 0.02 * k as f64, &reference);
+            r.on_stamped_message(&buf, 0.02 * k as f64, delay);
+        }
+        r.on_stamped_message(&[0xEC], 0.1, Some(1_000_000));
+        let rep = r.report();
+        assert_eq!(rep.counters.received, 5);
+        let l = &rep.latency;
+        assert_eq!((l.count, l.unstamped, l.early), (4, 1, 1));
+        assert_eq!(l.count + l.unstamped, rep.counters.received);
+        assert!((l.max - 1e-3).abs() < 1e-15);
+        assert!((l.p50 - 2e-4).abs() <= 2e-4 * crate::latency::RELATIVE_ERROR);
+        assert_eq!(l.buckets.iter().map(|b| b.1).sum::<u64>(), 4);
+    }
+
     /// Out-of-order, duplicate, stale (old or from the future) and garbage
     /// messages are counted and refused; the law keeps the newest accepted
     /// sample, advanced by its age.

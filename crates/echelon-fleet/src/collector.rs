@@ -36,6 +36,7 @@ use echelon_mcap::{
 };
 
 use crate::keys::{KeyKind, Keys};
+use crate::latency::{self, Latency, LatencyReport};
 use crate::net::{self, NetOptions};
 use crate::ros2::record::{self, RosTopic, RosTopicError};
 use crate::wire::{self, DecodeError, LinkStatus, Message, RobotState};
@@ -45,6 +46,9 @@ use crate::{FleetError, StopFlag, unix_nanos};
 pub const MCAP_FILE: &str = "fleet.mcap";
 /// The collector's summary.
 pub const SUMMARY_FILE: &str = "collector.json";
+/// Name of the MCAP metadata record holding the per-key latency summaries
+/// (each key's value: its [`LatencyReport`] as JSON).
+pub const LATENCY_METADATA: &str = "echelon.latency";
 /// Topic of everything that was not a valid message of its key.
 pub const REJECTED_TOPIC: &str = "/rejected";
 
@@ -148,6 +152,13 @@ pub struct CollectorReport {
     /// ROS 2 samples refused (wrong type or hash on the key, invalid CDR,
     /// a key of no recorded topic); also counted in `rejected` by reason.
     pub ros_refused: u64,
+    /// Delay from the sender's timestamp to receipt of every sample
+    /// received, s (`count + unstamped` equals `received`): the Zenoh sample
+    /// timestamp, or for a ROS 2 sample without one its rmw_zenoh
+    /// attachment's source timestamp.
+    pub latency: LatencyReport,
+    /// The same per key.
+    pub latency_by_key: BTreeMap<String, LatencyReport>,
     /// Per agent.
     pub agents: Vec<AgentRecord>,
 }
@@ -186,6 +197,8 @@ pub struct Collector {
     ros: Vec<RosTopic>,
     report: CollectorReport,
     agents: BTreeMap<u32, AgentRecord>,
+    latency: Latency,
+    latency_by_key: BTreeMap<String, Latency>,
 }
 
 fn bump(counts: &mut BTreeMap<String, u64>, name: &str) {
@@ -221,6 +234,8 @@ impl Collector {
                 ..CollectorReport::default()
             },
             agents: BTreeMap::new(),
+            latency: Latency::new(),
+            latency_by_key: BTreeMap::new(),
         }
     }
 
@@ -271,7 +286,23 @@ impl Collector {
         Ok(())
     }
 
-    /// What it counted so far (`agents` is filled by [`Collector::finish`]).
+    /// Records the delay of a sample received on `key` (call once per sample
+    /// with [`Collector::on_message`] or [`Collector::on_ros_sample`];
+    /// `None`: it was not stamped). Allocates only for a key's first sample.
+    pub fn record_delay(&mut self, key: &str, delay: Option<i64>) {
+        self.latency.record(delay);
+        match self.latency_by_key.get_mut(key) {
+            Some(l) => l.record(delay),
+            None => {
+                let mut l = Latency::new();
+                l.record(delay);
+                self.latency_by_key.insert(key.to_owned(), l);
+            }
+        }
+    }
+
+    /// What it counted so far (`agents` and the latencies are filled by
+    /// [`Collector::finish`]).
     pub fn report(&self) -> &CollectorReport {
         &self.report
     }
@@ -456,6 +487,12 @@ impl Collector {
     /// The final report, with the per-agent records.
     pub fn finish(mut self) -> CollectorReport {
         self.report.agents = self.agents.into_values().collect();
+        self.report.latency = self.latency.report(false);
+        self.report.latency_by_key = self
+            .latency_by_key
+            .iter()
+            .map(|(k, l)| (k.clone(), l.report(false)))
+            .collect();
         self.report
     }
 }
@@ -542,6 +579,18 @@ impl FileSink {
         })
     }
 
+    /// Writes the per-key latency summaries of `report` as the MCAP
+    /// metadata record [`LATENCY_METADATA`].
+    pub fn latency_metadata(&mut self, report: &CollectorReport) -> Result<(), FleetError> {
+        let mut map = BTreeMap::new();
+        for (key, l) in &report.latency_by_key {
+            let json = serde_json::to_string(l).map_err(echelon_mcap::McapLogError::from)?;
+            map.insert(key.clone(), json);
+        }
+        self.log.metadata(LATENCY_METADATA, map)?;
+        Ok(())
+    }
+
     /// Closes both files (MCAP summary and footer written).
     pub fn finish(mut self) -> Result<(), FleetError> {
         self.log.finish()?;
@@ -553,6 +602,8 @@ impl FileSink {
 struct Received {
     key: String,
     payload: Vec<u8>,
+    /// Its delay since the sender's stamp, ns (`None`: not stamped).
+    delay: Option<i64>,
     /// `Some` for a sample of a ROS 2 subscription: its attachment, if any.
     ros: Option<Option<Vec<u8>>>,
 }
@@ -564,6 +615,7 @@ impl Received {
         sink: &mut FileSink,
         now: u64,
     ) -> Result<(), FleetError> {
+        collector.record_delay(&self.key, self.delay);
         match &self.ros {
             None => collector.on_message(&self.key, &self.payload, now, sink),
             Some(attachment) => {
@@ -597,9 +649,11 @@ pub fn run_with_ros2(
     let subscriber = session
         .declare_subscriber(keys.everything())
         .callback(move |s| {
+            let delay = latency::delay_ns(s.timestamp(), unix_nanos());
             let _ = fleet_tx.send(Received {
                 key: s.key_expr().as_str().to_owned(),
                 payload: s.payload().to_bytes().into_owned(),
+                delay,
                 ros: None,
             });
         })
@@ -612,10 +666,18 @@ pub fn run_with_ros2(
         let sub = session
             .declare_subscriber(key_expr.clone())
             .callback(move |s| {
+                let now = unix_nanos();
+                let attachment = s.attachment().map(|a| a.to_bytes().into_owned());
+                // A ROS 2 publisher stamps its attachment, not the sample.
+                let delay = latency::delay_ns(s.timestamp(), now).or_else(|| {
+                    let sent = record::publish_time(attachment.as_deref(), 0);
+                    (sent > 0).then(|| now as i64 - sent as i64)
+                });
                 let _ = tx.send(Received {
                     key: s.key_expr().as_str().to_owned(),
                     payload: s.payload().to_bytes().into_owned(),
-                    ros: Some(s.attachment().map(|a| a.to_bytes().into_owned())),
+                    delay,
+                    ros: Some(attachment),
                 });
             })
             .wait()
@@ -647,8 +709,9 @@ pub fn run_with_ros2(
     while let Ok(sample) = rx.try_recv() {
         sample.record(&mut collector, &mut sink, unix_nanos())?;
     }
-    sink.finish()?;
     let report = collector.finish();
+    sink.latency_metadata(&report)?;
+    sink.finish()?;
     crate::write_json_file(&opts.out.join(SUMMARY_FILE), &report)?;
     Ok(report)
 }
@@ -798,6 +861,28 @@ mod tests {
         assert_eq!((a.agent, a.messages, a.rows), (1, 2, 1));
         assert!((a.final_error - 5e-3).abs() < 1e-15);
         assert_eq!(a.link, "waiting");
+    }
+
+    /// Delays are recorded per key and in total, unstamped samples counted
+    /// apart, and the quantiles come out in seconds.
+    #[test]
+    fn delays_are_summarised_per_key_and_in_total() {
+        let keys = Keys::new("f");
+        let mut c = Collector::new(keys.clone());
+        for d in [1_000_000, 2_000_000, 3_000_000] {
+            c.record_delay(&keys.reference(), Some(d));
+        }
+        c.record_delay(&keys.state(1), Some(5_000_000));
+        c.record_delay(&keys.state(1), None);
+        let r = c.finish();
+        assert_eq!((r.latency.count, r.latency.unstamped), (4, 1));
+        assert!((r.latency.max - 5e-3).abs() < 1e-12);
+        let reference = &r.latency_by_key[&keys.reference()];
+        assert_eq!(reference.count, 3);
+        assert!((reference.p50 - 2e-3).abs() <= 2e-3 * crate::latency::RELATIVE_ERROR);
+        assert!((reference.max - 3e-3).abs() < 1e-12);
+        assert_eq!(r.latency_by_key[&keys.state(1)].unstamped, 1);
+        assert!(reference.buckets.is_empty());
     }
 
     /// ROS samples of the recorded topics are logged as received on their

@@ -52,6 +52,9 @@ pub struct LeaderReport {
     pub t: f64,
     /// Samples published more than a period late.
     pub late: u64,
+    /// When every `--wait-for` role had joined and the clock started, UNIX
+    /// ns (`fleet up`'s startup time ends here).
+    pub clock_start_unix_ns: u64,
 }
 
 /// Waits until every role of `roles` has a liveliness token under
@@ -183,6 +186,7 @@ impl Leader {
             published: self.k,
             t: self.last_t,
             late: self.late,
+            clock_start_unix_ns: 0,
         }
     }
 }
@@ -210,6 +214,7 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
     wait_for_roles(&session, &keys, &opts.wait_for, opts.wait_timeout, stop)?;
 
     let clock = FleetClock::new(opts.time_scale);
+    let clock_start_unix_ns = crate::unix_nanos();
     let mut leader = Leader::new(reference, rate, duration, net::rand_source());
     let mut buf = Vec::with_capacity(wire::REFERENCE_LEN);
     while !stop.is_raised() {
@@ -219,12 +224,15 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
         clock.sleep_until(t, Duration::from_millis(20));
         if let Some((h, sample)) = leader.tick(clock.now()) {
             wire::encode_reference(&mut buf, h, &sample);
-            net::publish(&publisher, &buf)?;
+            net::publish(&session, &publisher, &buf)?;
         }
     }
     drop(publisher);
     let _ = session.close().wait();
-    Ok(leader.report())
+    Ok(LeaderReport {
+        clock_start_unix_ns,
+        ..leader.report()
+    })
 }
 
 #[cfg(test)]

@@ -10,11 +10,14 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+pub mod bench;
 pub mod certs;
 pub mod clock;
 pub mod collector;
+pub mod cost;
 pub mod faults;
 pub mod keys;
+pub mod latency;
 pub mod leader;
 pub mod link;
 pub mod net;

@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use serde_json::json;
+use zenoh::bytes::ZBytes;
 use zenoh::{Config, Session, Wait};
 
 use crate::FleetError;
@@ -265,15 +266,27 @@ pub fn open(opts: &NetOptions) -> Result<Session, FleetError> {
         .map_err(|e| FleetError::Zenoh(format!("opening the session: {e}")))
 }
 
-/// Publishes one encoded message.
+/// Publishes one encoded message, stamped with the session's timestamp
+/// (the receivers' latency measure, [`crate::latency`]).
 pub(crate) fn publish(
+    session: &Session,
     publisher: &zenoh::pubsub::Publisher<'_>,
     bytes: &[u8],
 ) -> Result<(), FleetError> {
     publisher
         .put(bytes.to_vec())
+        .timestamp(session.new_timestamp())
         .wait()
         .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))
+}
+
+/// Puts `payload` on `key` (a non-declared publication, e.g. a robot's
+/// stats), stamped like [`publish`]; errors are ignored (best effort).
+pub(crate) fn put_stamped(session: &Session, key: &str, payload: impl Into<ZBytes>) {
+    let _ = session
+        .put(key, payload)
+        .timestamp(session.new_timestamp())
+        .wait();
 }
 
 /// A random source id: the low bits of a hash of the process id and the time.

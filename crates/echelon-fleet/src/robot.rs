@@ -34,6 +34,7 @@ use echelon::sim::AgentSpec;
 use crate::clock::FleetClock;
 use crate::faults::{FaultInjector, FaultSpec, Verdict};
 use crate::keys::{Keys, robot_role};
+use crate::latency::{self, Latency, LatencyReport};
 use crate::link::{Counters, LeaderSample, StreamTracker, predict};
 use crate::net::{self, NetOptions};
 use crate::plant::{Command, Plant, SimulatedDrive};
@@ -98,6 +99,10 @@ pub struct RobotReport {
     pub final_error: f64,
     /// Final link status.
     pub link: &'static str,
+    /// Delay from the sender's timestamp to receipt of every sample on the
+    /// leader stream (reference or leader robot's state), s; `count +
+    /// unstamped` equals `counters.received`.
+    pub latency: LatencyReport,
     /// With `--ros2`: the drive's odometry and command counters.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ros2: Option<Ros2Counters>,
@@ -265,6 +270,7 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     ticks: u64,
     overruns: u64,
     last: RobotState,
+    latency: Latency,
 }
 
 impl Robot<SimulatedDrive> {
@@ -303,6 +309,7 @@ impl<P: Plant> Robot<P> {
             ticks: 0,
             overruns: 0,
             last,
+            latency: Latency::new(),
         }
     }
 
@@ -399,6 +406,18 @@ impl<P: Plant> Robot<P> {
             Verdict::Outage => self.tracker.counters.injected_outage += 1,
             Verdict::DeliverAt(at) => self.delayed.push_back((at, h, s)),
         }
+    }
+
+    /// [`Robot::on_message`] for a sample that arrived `delay` ns after its
+    /// sender stamped it ([`latency::delay_ns`]; `None`: not stamped).
+    pub fn on_stamped_message(&mut self, bytes: &[u8], now: f64, delay: Option<i64>) {
+        self.latency.record(delay);
+        self.on_message(bytes, now);
+    }
+
+    /// The delays measured on the leader stream.
+    pub fn latency(&self) -> &Latency {
+        &self.latency
     }
 
     /// Runs one controller tick at local time `now` (call when [`is_due`]):
@@ -548,6 +567,7 @@ impl<P: Plant> Robot<P> {
             final_state: [s.x, s.y, s.theta, s.v, s.omega],
             final_error: self.last.e[0].hypot(self.last.e[1]),
             link: self.last.link.name(),
+            latency: self.latency.report(true),
             ros2: None,
         }
     }
@@ -592,11 +612,16 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     };
 
     let session = net::open(&opts.net)?;
-    let (tx, rx) = mpsc::channel::<(Instant, Vec<u8>)>();
+    let (tx, rx) = mpsc::channel::<Arrival>();
     let _subscriber = session
         .declare_subscriber(&leader_key)
         .callback(move |sample| {
-            let _ = tx.send((Instant::now(), sample.payload().to_bytes().into_owned()));
+            let delay = latency::delay_ns(sample.timestamp(), crate::unix_nanos());
+            let _ = tx.send((
+                Instant::now(),
+                delay,
+                sample.payload().to_bytes().into_owned(),
+            ));
         })
         .wait()
         .map_err(|e| FleetError::Zenoh(format!("subscribing to {leader_key}: {e}")))?;
@@ -651,10 +676,14 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     Ok(report)
 }
 
+/// A leader-stream sample as the subscription hands it over: when it
+/// arrived, its delay since the sender's stamp (ns), its bytes.
+type Arrival = (Instant, Option<i64>, Vec<u8>);
+
 /// The Zenoh side of [`run`] for any plant.
 struct Driver<'a> {
     clock: FleetClock,
-    rx: mpsc::Receiver<(Instant, Vec<u8>)>,
+    rx: mpsc::Receiver<Arrival>,
     publisher: zenoh::pubsub::Publisher<'a>,
     session: &'a zenoh::Session,
     stats_key: String,
@@ -679,14 +708,14 @@ impl Driver<'_> {
             if !robot.is_due(clock.now()) {
                 continue;
             }
-            while let Ok((arrival, bytes)) = self.rx.try_recv() {
-                robot.on_message(&bytes, clock.at(arrival));
+            while let Ok((arrival, delay, bytes)) = self.rx.try_recv() {
+                robot.on_stamped_message(&bytes, clock.at(arrival), delay);
             }
             feed(&mut robot);
             let out = robot.tick(clock.now());
             if let Some((h, state)) = out.publish {
                 wire::encode_state(&mut buf, h, &state);
-                if let Err(e) = net::publish(&self.publisher, &buf) {
+                if let Err(e) = net::publish(self.session, &self.publisher, &buf) {
                     failure = Some(e);
                     break;
                 }
@@ -790,7 +819,7 @@ impl CmdSink for ZenohCmdSink<'_, '_> {
 
 fn publish_stats(session: &zenoh::Session, key: &str, stats: &RobotStats) {
     if let Ok(json) = serde_json::to_vec(stats) {
-        let _ = session.put(key, json).wait();
+        net::put_stamped(session, key, json);
     }
 }
 
@@ -1227,6 +1256,33 @@ mod tests {
             turn_rate: jet.turn_rate(),
         };
         wire::encode_reference(buf, Header { source: 5, seq }, &r);
+    }
+
+    /// Every message taken in has its delay recorded (garbage too: the
+    /// delay is the transport's), unstamped ones counted apart, and the
+    /// report's latency counts add up to `counters.received`.
+    #[test]
+    fn every_received_message_has_its_delay_recorded() {
+        let s = scenario(EXTRAPOLATE);
+        let reference = reference(&s);
+        let mut r = robot(&s, 1, FaultSpec::default());
+        let mut buf = Vec::new();
+        for (k, delay) in [Some(200_000), Some(400_000), None, Some(-3)]
+            .into_iter()
+            .enumerate()
+        {
+            reference_message(&mut buf, k as u64, 0.02 * k as f64, &reference);
+            r.on_stamped_message(&buf, 0.02 * k as f64, delay);
+        }
+        r.on_stamped_message(&[0xEC], 0.1, Some(1_000_000));
+        let rep = r.report();
+        assert_eq!(rep.counters.received, 5);
+        let l = &rep.latency;
+        assert_eq!((l.count, l.unstamped, l.early), (4, 1, 1));
+        assert_eq!(l.count + l.unstamped, rep.counters.received);
+        assert!((l.max - 1e-3).abs() < 1e-15);
+        assert!((l.p50 - 2e-4).abs() <= 2e-4 * crate::latency::RELATIVE_ERROR);
+        assert_eq!(l.buckets.iter().map(|b| b.1).sum::<u64>(), 4);
     }
 
     /// Out-of-order, duplicate, stale (old or from the future) and garbage

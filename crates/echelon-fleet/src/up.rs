@@ -19,8 +19,10 @@ use serde::Serialize;
 
 use echelon::scenario::{Overrides, Scenario};
 
+use crate::cost::{self, ProcessCost, RoleCost};
 use crate::faults::FaultSpec;
 use crate::keys::robot_role;
+use crate::latency::FleetLatency;
 use crate::net::{base_identity, robot_identity};
 use crate::ros2::base::base_role;
 use crate::{FleetError, StopFlag};
@@ -65,6 +67,17 @@ pub struct UpReport {
     pub time_scale: f64,
     /// Wall-clock time, s.
     pub wall: f64,
+    /// Startup: from the first process started until every process had
+    /// joined and the leader started the clock, s (absent if the leader did
+    /// not say when).
+    pub startup: Option<f64>,
+    /// The rest of `wall`: the run and the wind-down, s.
+    pub run: Option<f64>,
+    /// What the processes cost (CPU, peak memory), per process and per role.
+    pub cost: UpCost,
+    /// Delays measured by the robots (merged, and the worst robot) and the
+    /// collector.
+    pub latency: FleetLatency,
     /// The leader's report.
     pub leader: serde_json::Value,
     /// Each robot's report, agent 1 first.
@@ -76,6 +89,24 @@ pub struct UpReport {
     pub bases: Vec<serde_json::Value>,
 }
 
+/// CPU and peak memory of every process of `fleet up` ([`crate::cost`]).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct UpCost {
+    /// The leader.
+    pub leader: RoleCost,
+    /// The collector.
+    pub collector: RoleCost,
+    /// The robots (`cpu_mean`: CPU seconds per robot).
+    pub robots: RoleCost,
+    /// With `--ros2`: the simulated bases.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bases: Option<RoleCost>,
+    /// Every process.
+    pub total: RoleCost,
+    /// Each process, in start order.
+    pub processes: Vec<ProcessCost>,
+}
+
 /// A started child, killed if still running when dropped (a failing test or
 /// an error never leaves processes behind).
 struct Proc {
@@ -84,6 +115,11 @@ struct Proc {
     log: PathBuf,
     report: Option<serde_json::Value>,
     status: Option<std::process::ExitStatus>,
+    /// CPU seconds, read when it exited (before it was reaped).
+    cpu: Option<f64>,
+    /// Peak RSS so far, bytes, and when it was last sampled.
+    max_rss: Option<u64>,
+    rss_sampled: Option<Instant>,
 }
 
 impl Proc {
@@ -92,10 +128,44 @@ impl Proc {
         let _ = rustix::process::kill_process(pid, rustix::process::Signal::TERM);
     }
 
-    /// Polls; on exit reads the report line from stdout.
+    /// Whether it has exited, not reaping it (so that `/proc` still holds
+    /// its CPU time); `true` if that cannot be told.
+    fn exited(&self) -> bool {
+        use rustix::process::{Pid, WaitId, WaitIdOptions, waitid};
+        let pid = Pid::from_child(&self.child);
+        let options = WaitIdOptions::EXITED | WaitIdOptions::NOWAIT | WaitIdOptions::NOHANG;
+        !matches!(waitid(WaitId::Pid(pid), options), Ok(None))
+    }
+
+    /// Its cost so far.
+    fn cost(&self) -> ProcessCost {
+        ProcessCost {
+            role: self.role.clone(),
+            cpu: self.cpu,
+            max_rss: self.max_rss,
+        }
+    }
+
+    /// Polls; samples its peak memory while it runs, reads its CPU time
+    /// when it exits, then reaps it and reads the report line from stdout.
     fn poll(&mut self) -> Result<bool, FleetError> {
         if self.status.is_some() {
             return Ok(true);
+        }
+        if !self.exited() {
+            if self
+                .rss_sampled
+                .is_none_or(|t| t.elapsed() >= cost::MEMORY_PERIOD)
+            {
+                self.rss_sampled = Some(Instant::now());
+                if let Some(m) = cost::peak_rss(self.child.id()) {
+                    self.max_rss = Some(self.max_rss.unwrap_or(0).max(m));
+                }
+            }
+            return Ok(false);
+        }
+        if self.cpu.is_none() {
+            self.cpu = cost::cpu_seconds(self.child.id());
         }
         match self.child.try_wait() {
             Ok(Some(status)) => {
@@ -144,6 +214,28 @@ impl Drop for Proc {
     }
 }
 
+/// The cost of every process, per role and in all.
+fn up_cost(leader: &Proc, collector: &Proc, robots: &[Proc], bases: &[Proc]) -> UpCost {
+    let of = |procs: &[Proc]| procs.iter().map(Proc::cost).collect::<Vec<_>>();
+    let (leader, collector) = (vec![leader.cost()], vec![collector.cost()]);
+    let (robots, bases) = (of(robots), of(bases));
+    let processes: Vec<ProcessCost> = collector
+        .iter()
+        .chain(&bases)
+        .chain(&robots)
+        .chain(&leader)
+        .cloned()
+        .collect();
+    UpCost {
+        leader: RoleCost::of(&leader),
+        collector: RoleCost::of(&collector),
+        robots: RoleCost::of(&robots),
+        bases: (!bases.is_empty()).then(|| RoleCost::of(&bases)),
+        total: RoleCost::of(&processes),
+        processes,
+    }
+}
+
 /// Polls every one of `procs` (none skipped); whether all have exited.
 fn poll_all<'a>(procs: impl IntoIterator<Item = &'a mut Proc>) -> Result<bool, FleetError> {
     let mut all = true;
@@ -185,6 +277,9 @@ fn spawn(exe: &Path, role: &str, args: &[String], logs: &Path) -> Result<Proc, F
         log,
         report: None,
         status: None,
+        cpu: None,
+        max_rss: None,
+        rss_sampled: None,
     })
 }
 
@@ -244,6 +339,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let scale = opts.time_scale.to_string();
     let dur = duration.to_string();
     let started = Instant::now();
+    let started_unix_ns = crate::unix_nanos();
 
     let mut args = vec![
         "fleet".to_owned(),
@@ -409,15 +505,29 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             ))
         })
     };
+    let wall = started.elapsed().as_secs_f64();
+    let leader_report = report(&leader)?;
+    let startup = leader_report
+        .get("clock_start_unix_ns")
+        .and_then(serde_json::Value::as_u64)
+        .filter(|&t| t > 0)
+        .map(|t| t.saturating_sub(started_unix_ns) as f64 * 1e-9);
+    let robot_reports: Vec<serde_json::Value> =
+        robots.iter().map(report).collect::<Result<_, _>>()?;
+    let collector_report = report(&collector)?;
     let up = UpReport {
         scenario: scenario.name().to_owned(),
         fleet: fleet.name.clone(),
         duration,
         time_scale: opts.time_scale,
-        wall: started.elapsed().as_secs_f64(),
-        leader: report(&leader)?,
-        robots: robots.iter().map(report).collect::<Result<_, _>>()?,
-        collector: report(&collector)?,
+        wall,
+        startup,
+        run: startup.map(|s| wall - s),
+        cost: up_cost(&leader, &collector, &robots, &base_procs),
+        latency: FleetLatency::of(&robot_reports, &collector_report),
+        leader: leader_report,
+        robots: robot_reports,
+        collector: collector_report,
         bases: base_procs.iter().map(report).collect::<Result<_, _>>()?,
     };
     crate::write_json_file(&opts.out.join(UP_SUMMARY_FILE), &up)?;

@@ -436,6 +436,19 @@ impl<W: Write + Seek> McapLog<W> {
         self.write(channel, sequence, log_time, publish_time, &data)
     }
 
+    /// Writes a metadata record `name` holding `map`.
+    pub fn metadata(
+        &mut self,
+        name: &str,
+        map: BTreeMap<String, String>,
+    ) -> Result<(), McapLogError> {
+        self.writer.write_metadata(&mcap::records::Metadata {
+            name: name.to_owned(),
+            metadata: map,
+        })?;
+        Ok(())
+    }
+
     /// Messages written so far.
     pub fn messages(&self) -> u64 {
         self.messages

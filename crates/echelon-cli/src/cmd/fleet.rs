@@ -10,9 +10,11 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 
 use echelon::scenario::{Overrides, Scenario, is_valid_fleet_name};
+use echelon_fleet::bench::{self, BenchOptions, Progress};
 use echelon_fleet::certs::{self, CertOptions};
 use echelon_fleet::collector::{self, CollectorOptions, MCAP_FILE};
 use echelon_fleet::faults::FaultSpec;
+use echelon_fleet::latency::LatencyReport;
 use echelon_fleet::leader::{self, LeaderOptions};
 use echelon_fleet::net::{self, NetOptions, Secure};
 use echelon_fleet::robot::{self, RobotOptions};
@@ -40,6 +42,9 @@ pub(crate) enum FleetCommand {
     Up(UpArgs),
     /// Make a development CA and certificates for the secure mode.
     Certs(CertsArgs),
+    /// Run `fleet up` for several fleet sizes on loopback at time scale 1 and tabulate startup, CPU, messages/s, latency, losses and final error.
+    #[command(allow_negative_numbers = true)]
+    Bench(BenchArgs),
 }
 
 /// How a process joins the fleet.
@@ -261,6 +266,23 @@ pub(crate) struct UpArgs {
     quiet: bool,
 }
 
+/// `echelon fleet bench`.
+#[derive(Debug, Args)]
+pub(crate) struct BenchArgs {
+    /// Output directory: DIR/nNNN/ per size, DIR/bench.json and DIR/bench.md.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Fleet sizes to run, in order (robots behind a circle, generated).
+    #[arg(long, value_name = "N,…", value_delimiter = ',', default_values_t = [10, 50, 100, 200])]
+    robots: Vec<usize>,
+    /// Fleet seconds each size runs (real seconds: time scale 1).
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    duration: f64,
+    /// Print only the table.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
 /// `echelon fleet certs`.
 #[derive(Debug, Args)]
 pub(crate) struct CertsArgs {
@@ -387,6 +409,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             print_report(&report)
         }
         FleetCommand::Up(a) => up_cmd(a),
+        FleetCommand::Bench(a) => bench_cmd(a),
         FleetCommand::Certs(a) => {
             if a.robots == 0 {
                 bail!("--robots must be ≥ 1");
@@ -405,6 +428,54 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn bench_cmd(a: BenchArgs) -> Result<()> {
+    if a.robots.contains(&0) {
+        bail!("--robots: every fleet size must be ≥ 1");
+    }
+    let stop = StopFlag::on_signals()?;
+    let exe = std::env::current_exe().context("locating the echelon binary")?;
+    let quiet = a.quiet;
+    let duration = a.duration;
+    let report = bench::run(
+        &BenchOptions {
+            robots: a.robots,
+            duration,
+            out: a.out.clone(),
+            exe,
+        },
+        &stop,
+        |p| {
+            if quiet {
+                return;
+            }
+            match p {
+                Progress::Start { robots, index, of } => eprintln!(
+                    "[{index}/{of}] {robots} robots: fleet up for {duration} s of fleet time…"
+                ),
+                Progress::Done(row) => match &row.error {
+                    Some(e) => eprintln!("      failed: {e}"),
+                    None => eprintln!(
+                        "      done in {:.1} s ({}/{} converged)",
+                        row.wall, row.converged, row.robots
+                    ),
+                },
+            }
+        },
+    )?;
+    outln!("{}", bench::markdown(&report).trim_end())?;
+    if !quiet {
+        outln!(
+            "wrote {}, {}",
+            a.out.join(bench::BENCH_JSON).display(),
+            a.out.join(bench::BENCH_MD).display()
+        )?;
+    }
+    if report.rows.iter().any(|r| r.error.is_some()) {
+        bail!("some fleet sizes failed (see the table)");
+    }
+    Ok(())
 }
 
 fn up_cmd(a: UpArgs) -> Result<()> {
@@ -427,6 +498,11 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         return Ok(());
     }
     let num = |v: &serde_json::Value, k: &str| v.get(k).and_then(serde_json::Value::as_f64);
+    let ms = |v: &serde_json::Value, k: &str| {
+        v.get("latency")
+            .and_then(|l| num(l, k))
+            .map_or(f64::NAN, |s| s * 1e3)
+    };
     let int = |v: &serde_json::Value, path: &[&str]| {
         path.iter()
             .try_fold(v, |v, k| v.get(*k))
@@ -443,12 +519,15 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         report.time_scale,
         report.wall
     )?;
+    if let (Some(startup), Some(run)) = (report.startup, report.run) {
+        outln!("  startup (all joined) {startup:.2} s, then run {run:.2} s")?;
+    }
     outln!(
         "  leader: {} reference samples published",
         int(&report.leader, &["published"])
     )?;
     outln!(
-        "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6}",
+        "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8} {:>8}",
         "agent",
         "final ‖e‖",
         "received",
@@ -459,12 +538,14 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         "wrong-ver",
         "stale",
         "reordered",
-        "losses"
+        "losses",
+        "p50 ms",
+        "p99 ms"
     )?;
     for r in &report.robots {
         let c = |k: &str| int(r, &["counters", k]);
         outln!(
-            "  {:<8} {:>9.2e} m {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6}",
+            "  {:<8} {:>9.2e} m {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8.3} {:>8.3}",
             format!("robot {}", int(r, &["agent"])),
             num(r, "final_error").unwrap_or(f64::NAN),
             c("received"),
@@ -476,6 +557,8 @@ fn up_cmd(a: UpArgs) -> Result<()> {
             c("stale"),
             c("reordered"),
             c("link_losses"),
+            ms(r, "p50"),
+            ms(r, "p99"),
         )?;
     }
     for (b, r) in report.bases.iter().zip(&report.robots) {
@@ -517,6 +600,51 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         col.get("rejected")
             .and_then(|r| r.as_object())
             .map_or(0, |m| m.values().filter_map(|v| v.as_u64()).sum::<u64>())
+    )?;
+    let lat = |l: &LatencyReport| {
+        format!(
+            "{} samples, p50 {:.3} ms, p95 {:.3} ms, p99 {:.3} ms, max {:.3} ms",
+            l.count,
+            l.p50 * 1e3,
+            l.p95 * 1e3,
+            l.p99 * 1e3,
+            l.max * 1e3
+        )
+    };
+    let worst = report
+        .latency
+        .worst_robot
+        .as_ref()
+        .map_or(String::new(), |w| {
+            format!(
+                " (worst: robot {}, p99 {:.3} ms)",
+                w.agent,
+                w.latency.p99 * 1e3
+            )
+        });
+    outln!(
+        "  latency, leader → robot: {}{worst}",
+        lat(&report.latency.robots)
+    )?;
+    outln!("  latency, → collector: {}", lat(&report.latency.collector))?;
+    let mb = |b: u64| b as f64 / (1u64 << 20) as f64;
+    let c = &report.cost;
+    outln!(
+        "  CPU: robots {:.2} s ({:.3} s per robot, max {:.3}), leader {:.2} s, collector {:.2} s, total {:.2} s",
+        c.robots.cpu,
+        c.robots.cpu_mean,
+        c.robots.cpu_max,
+        c.leader.cpu,
+        c.collector.cpu,
+        c.total.cpu
+    )?;
+    outln!(
+        "  peak RSS: robot {:.1} MiB (mean; max {:.1}), leader {:.1} MiB, collector {:.1} MiB, sum {:.1} MiB",
+        mb(c.robots.max_rss_mean),
+        mb(c.robots.max_rss_max),
+        mb(c.leader.max_rss_max),
+        mb(c.collector.max_rss_max),
+        mb(c.total.max_rss_sum)
     )?;
     outln!(
         "wrote {}, {}, {}, {}",

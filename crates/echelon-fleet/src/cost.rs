@@ -1,0 +1,153 @@
+//! What each process of `fleet up` cost: CPU seconds (user + system, every
+//! thread) and peak memory (peak resident set, `VmHWM`), read from Linux's
+//! `/proc/<pid>/` by the parent.
+//!
+//! The CPU time is read once the child has exited but before it is reaped
+//! (`waitid(WNOWAIT)`): the zombie's `/proc/<pid>/stat` still holds its final
+//! `utime + stime`, all threads included. The peak RSS is gone by then (the
+//! kernel frees the memory map on exit), so `VmHWM` (a high-water mark) is
+//! sampled while the child runs, at most every [`MEMORY_PERIOD`]: growth in
+//! its last period before exit would be missed. Elsewhere than Linux both read
+//! as absent.
+
+use std::time::Duration;
+
+use serde::Serialize;
+
+/// How often a running child's peak RSS is sampled.
+pub const MEMORY_PERIOD: Duration = Duration::from_millis(500);
+
+/// `utime + stime` of `/proc/<pid>/stat` text, in clock ticks.
+pub fn parse_stat_ticks(stat: &str) -> Option<u64> {
+    // The command name (field 2) is in parentheses and may hold anything:
+    // fields are counted from the last ')'. Field 3 (state) comes first.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let mut fields = rest.split_whitespace();
+    let utime: u64 = fields.nth(11)?.parse().ok()?;
+    let stime: u64 = fields.next()?.parse().ok()?;
+    Some(utime + stime)
+}
+
+/// `VmHWM` of `/proc/<pid>/status` text, bytes.
+pub fn parse_status_hwm(status: &str) -> Option<u64> {
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let mut it = line["VmHWM:".len()..].split_whitespace();
+    let kb: u64 = it.next()?.parse().ok()?;
+    (it.next() == Some("kB")).then_some(kb * 1024)
+}
+
+/// CPU seconds (user + system) of process `pid` so far (or, for a zombie,
+/// in all).
+pub fn cpu_seconds(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let ticks = parse_stat_ticks(&stat)?;
+    Some(ticks as f64 / rustix::param::clock_ticks_per_second() as f64)
+}
+
+/// Peak resident set of the running process `pid` so far, bytes.
+pub fn peak_rss(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    parse_status_hwm(&status)
+}
+
+/// One process's cost.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ProcessCost {
+    /// Its role (`leader`, `collector`, `robot/K`, `base/K`).
+    pub role: String,
+    /// CPU seconds, user + system (absent if it could not be read).
+    pub cpu: Option<f64>,
+    /// Peak resident set, bytes (absent if never sampled).
+    pub max_rss: Option<u64>,
+}
+
+/// The cost of a set of processes (one role, or all).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct RoleCost {
+    /// Processes counted.
+    pub processes: usize,
+    /// CPU seconds, all of them.
+    pub cpu: f64,
+    /// CPU seconds per process, mean.
+    pub cpu_mean: f64,
+    /// CPU seconds of the costliest process.
+    pub cpu_max: f64,
+    /// Peak RSS per process, mean, bytes.
+    pub max_rss_mean: u64,
+    /// Largest peak RSS, bytes.
+    pub max_rss_max: u64,
+    /// Peak RSS summed over the processes, bytes (an upper bound on their
+    /// memory at any one time).
+    pub max_rss_sum: u64,
+}
+
+impl RoleCost {
+    /// The sums, means and maxima over `costs` (missing readings count as 0).
+    pub fn of<'a>(costs: impl IntoIterator<Item = &'a ProcessCost>) -> RoleCost {
+        let mut r = RoleCost::default();
+        for c in costs {
+            let cpu = c.cpu.unwrap_or(0.0);
+            let rss = c.max_rss.unwrap_or(0);
+            r.processes += 1;
+            r.cpu += cpu;
+            r.cpu_max = r.cpu_max.max(cpu);
+            r.max_rss_sum += rss;
+            r.max_rss_max = r.max_rss_max.max(rss);
+        }
+        if r.processes > 0 {
+            r.cpu_mean = r.cpu / r.processes as f64;
+            r.max_rss_mean = r.max_rss_sum / r.processes as u64;
+        }
+        r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stat_and_status_are_parsed() {
+        // A command name with spaces and a ')' in it.
+        let stat = "4242 (echelon (x) y) S 1 4242 4242 0 -1 4194560 100 0 0 0 \
+                    250 31 0 0 20 0 12 0 1000 123456 789 18446744073709551615";
+        assert_eq!(parse_stat_ticks(stat), Some(281));
+        assert_eq!(parse_stat_ticks("garbage"), None);
+        let status = "Name:\techelon\nVmPeak:\t  2000 kB\nVmHWM:\t   1536 kB\nVmRSS:\t 1000 kB\n";
+        assert_eq!(parse_status_hwm(status), Some(1536 * 1024));
+        assert_eq!(parse_status_hwm("Name: x\n"), None);
+    }
+
+    #[test]
+    fn this_process_has_a_cost() {
+        let pid = std::process::id();
+        // Burn a little CPU so that at least one tick is counted.
+        let mut x = 0u64;
+        let start = std::time::Instant::now();
+        while start.elapsed() < Duration::from_millis(30) {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1);
+        }
+        std::hint::black_box(x);
+        assert!(cpu_seconds(pid).is_some_and(|c| c > 0.0));
+        assert!(peak_rss(pid).is_some_and(|m| m > 1 << 20));
+    }
+
+    #[test]
+    fn role_cost_sums_and_means() {
+        let p = |cpu, rss| ProcessCost {
+            role: "robot/1".into(),
+            cpu: Some(cpu),
+            max_rss: Some(rss),
+        };
+        let r = RoleCost::of(&[p(1.0, 100), p(3.0, 300)]);
+        assert_eq!(
+            (r.processes, r.cpu, r.cpu_mean, r.cpu_max),
+            (2, 4.0, 2.0, 3.0)
+        );
+        assert_eq!(
+            (r.max_rss_mean, r.max_rss_max, r.max_rss_sum),
+            (200, 300, 400)
+        );
+        assert_eq!(RoleCost::of(&[]), RoleCost::default());
+    }
+}

@@ -134,6 +134,16 @@ pub enum IdentifyError {
         /// The agent.
         agent: usize,
     },
+    /// An MCAP log lacks the channels the model needs.
+    #[error("{file}: missing {what} (topics in the file: {present})")]
+    MissingTopics {
+        /// The log.
+        file: String,
+        /// What is missing.
+        what: String,
+        /// The topics it has, comma-separated.
+        present: String,
+    },
     /// Neither axis was excited: nothing can be identified.
     #[error("{file}: no excitation: {reason}")]
     NoExcitation {

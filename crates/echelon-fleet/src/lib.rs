@@ -13,6 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 pub mod certs;
 pub mod clock;
 pub mod collector;
+pub mod excite;
 pub mod faults;
 pub mod keys;
 pub mod leader;

@@ -17,7 +17,7 @@ fn text(b: &[u8]) -> String {
     String::from_utf8(b.to_vec()).unwrap()
 }
 
-/// `echelon run identify-excitation` for `duration` s into `dir`.
+/// `echelon run identify-excitation --mcap` for `duration` s into `dir`.
 fn excitation_run(dir: &Path, duration: &str) {
     let o = echelon(&[
         "run",
@@ -26,6 +26,7 @@ fn excitation_run(dir: &Path, duration: &str) {
         dir.to_str().unwrap(),
         "--duration",
         duration,
+        "--mcap",
         "-q",
     ]);
     assert!(o.status.success(), "{}", text(&o.stderr));
@@ -75,6 +76,27 @@ fn identify_writes_a_block_a_scenario_accepts_with_its_summary_and_figure() {
     assert!((mass - 25.0).abs() < 1e-4, "{mass}");
     let psi = json["params"][3]["estimate"]["value"].as_f64().unwrap();
     assert!((psi - 5.51).abs() < 1e-4, "{psi}");
+
+    // The same run's run.mcap (/agent/2/state JSON records, as in a
+    // fleet.mcap) gives the same block but for its source line.
+    let mcap = run.join("run.mcap");
+    let o = echelon(&[
+        "identify",
+        mcap.to_str().unwrap(),
+        "--agent",
+        "2",
+        "--name",
+        "lab2",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let from_mcap = text(&o.stdout);
+    let body = |s: &str| -> String {
+        s.lines()
+            .filter(|l| l.starts_with('[') || l.contains(" = "))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    assert_eq!(body(&from_mcap), body(&stdout), "{from_mcap}");
 
     // The block pasted into a scenario runs.
     let show = echelon(&["show", "experiment-circle"]);
@@ -155,9 +177,121 @@ fn bad_logs_exit_2_with_one_line_naming_the_file_and_what_is_missing() {
         &echelon(&["identify", nan.to_str().unwrap()]),
         &["nan.csv", "non-finite v = inf at t = 0.6 s"],
     );
-    // MCAP is not read yet: said so.
+    // An MCAP without the ROS 2 channels a velocity base needs.
+    let mcap = run.join("run.mcap");
+    let mcap_name = mcap.display().to_string();
     refused(
-        &echelon(&["identify", "fleet.mcap"]),
-        &["fleet.mcap", "MCAP logs are not read yet"],
+        &echelon(&["identify", &mcap_name, "--model", "velocity"]),
+        &[
+            &mcap_name,
+            "missing a command channel of type geometry_msgs/msg/TwistStamped or geometry_msgs/msg/Twist",
+            "topics in the file: /reference, /agent/1/state",
+        ],
+    );
+    // Nor the agent asked for.
+    refused(
+        &echelon(&["identify", &mcap_name, "--agent", "7"]),
+        &[
+            &mcap_name,
+            "missing a ROS 2 cmd_vel channel",
+            "/agent/7/state",
+        ],
+    );
+    // Not an MCAP file.
+    let fake = dir.path().join("fake.mcap");
+    std::fs::write(&fake, "not mcap").unwrap();
+    refused(
+        &echelon(&["identify", fake.to_str().unwrap()]),
+        &["fake.mcap", "not a readable MCAP file"],
+    );
+}
+
+/// `python3 scripts/ros2/lagged_base_bag.py OUT args…`: a ROS 2 bag of a
+/// lagged velocity base serialized by rclpy (ROS 2 Jazzy wheels, see
+/// scripts/requirements-test.txt; `ECHELON_PYTHON` picks the interpreter).
+fn lagged_base_bag(out: &Path, args: &[&str]) {
+    let python = std::env::var("ECHELON_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/ros2/lagged_base_bag.py");
+    let o = Command::new(&python)
+        .arg(script)
+        .arg(out)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("cannot run {python}: {e}; run scripts/test to install the ROS 2 wheels")
+        });
+    assert!(
+        o.status.success(),
+        "lagged_base_bag.py failed: {}; run scripts/test (it installs scripts/requirements-test.txt)",
+        text(&o.stderr)
+    );
+}
+
+/// `echelon identify BAG --out DIR` and the identified `(τ_v, τ_ω)`.
+fn identified_lags(bag: &Path, out: &Path, extra: &[&str]) -> [f64; 2] {
+    let mut args = vec![
+        "identify",
+        bag.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let o = echelon(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    assert!(stdout.contains("velocity model"), "{stdout}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("identify.json")).unwrap()).unwrap();
+    let get = |i: usize, field: &str| {
+        assert_eq!(json["params"][i]["field"], field, "{json}");
+        json["params"][i]["estimate"]["value"].as_f64().unwrap()
+    };
+    [get(0, "tau_v"), get(1, "tau_omega")]
+}
+
+/// A ROS 2 bag written with the ROS 2 serializer (TwistStamped commands at
+/// 20 Hz, odometry at 50 Hz offset by 7 ms, noise σ = 0.01 m/s and
+/// 0.02 rad/s on the measured twist) of a base with τ_v = 0.1 s,
+/// τ_ω = 0.15 s: both lags within 5 %; the same with plain Twist commands
+/// (log times instead of stamps) and with other lags.
+#[test]
+fn a_ros2_bag_of_a_lagged_base_gives_its_lags_within_5_percent() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, [f64; 2], &[&str]); 3] = [
+        ("stamped", [0.1, 0.15], &[]),
+        ("twist", [0.1, 0.15], &["--twist", "--seed", "2"]),
+        (
+            "slow",
+            [0.3, 0.2],
+            &["--tau-v", "0.3", "--tau-omega", "0.2", "--seed", "3"],
+        ),
+    ];
+    for (name, truth, args) in cases {
+        let bag = dir.path().join(format!("{name}.mcap"));
+        lagged_base_bag(&bag, args);
+        let lags = identified_lags(&bag, &dir.path().join(name), &[]);
+        for (got, want) in lags.iter().zip(truth) {
+            assert!(
+                (got / want - 1.0).abs() < 0.05,
+                "{name}: {lags:?} against {truth:?}"
+            );
+        }
+    }
+    // Topics named explicitly; a wrong one is refused naming what exists.
+    let bag = dir.path().join("stamped.mcap");
+    let lags = identified_lags(
+        &bag,
+        &dir.path().join("named"),
+        &["--cmd-vel", "/robot1/cmd_vel", "--odom", "/robot1/odom"],
+    );
+    assert!((lags[0] / 0.1 - 1.0).abs() < 0.05, "{lags:?}");
+    refused(
+        &echelon(&["identify", bag.to_str().unwrap(), "--odom", "/robot2/odom"]),
+        &[
+            "stamped.mcap",
+            "odometry topic /robot2/odom (--odom)",
+            "odometry channels: /robot1/odom",
+        ],
     );
 }

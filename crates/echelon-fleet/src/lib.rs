@@ -15,6 +15,7 @@ pub mod certs;
 pub mod clock;
 pub mod collector;
 pub mod cost;
+pub mod excite;
 pub mod faults;
 pub mod keys;
 pub mod latency;

@@ -738,16 +738,16 @@ impl Driver<'_> {
 /// Agent `k`'s ROS 2 presence: a node `<namespace>/echelon_robot` with a
 /// `cmd_vel` publisher and an `odom` subscription, as rmw_zenoh declares
 /// them (liveliness tokens), and the odometry that arrives.
-struct Ros2Endpoint<'a> {
-    publisher: zenoh::pubsub::Publisher<'a>,
-    gid: Gid,
-    odom: mpsc::Receiver<(Instant, String, Vec<u8>)>,
+pub(crate) struct Ros2Endpoint<'a> {
+    pub(crate) publisher: zenoh::pubsub::Publisher<'a>,
+    pub(crate) gid: Gid,
+    pub(crate) odom: mpsc::Receiver<(Instant, String, Vec<u8>)>,
     _subscriber: zenoh::pubsub::Subscriber<()>,
     _tokens: Vec<zenoh::liveliness::LivelinessToken>,
 }
 
 impl<'a> Ros2Endpoint<'a> {
-    fn declare(
+    pub(crate) fn declare(
         session: &'a zenoh::Session,
         link: &Ros2Link,
         agent: u32,
@@ -796,7 +796,7 @@ impl<'a> Ros2Endpoint<'a> {
 }
 
 /// `cmd_vel` through a Zenoh publisher, stamped by the system clock.
-struct ZenohCmdSink<'a, 'b>(&'a zenoh::pubsub::Publisher<'b>);
+pub(crate) struct ZenohCmdSink<'a, 'b>(pub(crate) &'a zenoh::pubsub::Publisher<'b>);
 
 impl std::fmt::Debug for ZenohCmdSink<'_, '_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

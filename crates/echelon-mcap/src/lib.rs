@@ -24,6 +24,9 @@
 //! message encoding `cdr`, channel metadata `offered_qos_profiles` and
 //! `topic_type_hash`), so ROS 2 tools and Foxglove decode them.
 
+pub mod bag;
+pub mod ros2;
+
 use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fs::File;

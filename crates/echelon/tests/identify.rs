@@ -485,3 +485,38 @@ fn an_acceleration_limit_that_acted_is_found_and_said_to_bias_the_lag() {
             .reached
     );
 }
+
+#[test]
+fn a_noise_free_log_says_its_intervals_mean_nothing_and_a_noisy_one_does_not() {
+    let robot = RobotParams::PRESETS[0].1;
+    let mut clean = torque_log(&robot, 0, true);
+    // torque_log adds noise: take it off again by re-simulating.
+    let (t, u1, u2) = excitation(&robot);
+    let [v, omega] = identify::simulate_torque(&robot, &t, &u1, &u2);
+    clean.v = v;
+    clean.omega = omega;
+    let id = identify::identify(&clean, Model::Torque).unwrap();
+    assert!(id.axes.iter().all(|a| a.noise_free), "{:?}", id.axes);
+    assert!(id.params.iter().all(|p| p.noise_free));
+    assert!(
+        id.warnings
+            .iter()
+            .any(|w| w.contains("noise-free log on the linear axis")),
+        "{:?}",
+        id.warnings
+    );
+    let block = id.robot_toml("x");
+    assert_eq!(
+        block.matches("interval not meaningful").count(),
+        4,
+        "{block}"
+    );
+    assert!(!block.contains("95 % interval"), "{block}");
+    // Exact to rounding.
+    let m = id.get("mass").unwrap().value;
+    assert!((m / robot.mass - 1.0).abs() < 1e-9, "{m}");
+
+    let noisy = identify::identify(&torque_log(&robot, 1, true), Model::Torque).unwrap();
+    assert!(noisy.axes.iter().all(|a| !a.noise_free));
+    assert_eq!(noisy.robot_toml("x").matches("95 % interval").count(), 4);
+}

@@ -13,6 +13,7 @@ use echelon::scenario::{Overrides, Scenario, is_valid_fleet_name};
 use echelon_fleet::bench::{self, BenchOptions, Progress};
 use echelon_fleet::certs::{self, CertOptions};
 use echelon_fleet::collector::{self, CollectorOptions, MCAP_FILE};
+use echelon_fleet::excite::{self, ExciteOptions};
 use echelon_fleet::faults::FaultSpec;
 use echelon_fleet::latency::LatencyReport;
 use echelon_fleet::leader::{self, LeaderOptions};
@@ -35,6 +36,8 @@ pub(crate) enum FleetCommand {
     Robot(RobotArgs),
     /// A simulated ROS 2 base (--ros2): cmd_vel in, odom out over rmw_zenoh, as diff_drive_controller on a robot.
     Base(BaseArgs),
+    /// Drive one ROS 2 robot's cmd_vel with steps and chirps within its limits (--ros2) and record cmd_vel and odom to a bag for `echelon identify`.
+    Excite(ExciteArgs),
     /// Record everything to DIR/fleet.mcap and DIR/trajectory.csv.
     Collector(CollectorArgs),
     /// Start a leader, one process per robot and a collector on loopback; stop them; summarise.
@@ -224,6 +227,36 @@ pub(crate) struct BaseArgs {
     net: NetArgs,
 }
 
+/// `echelon fleet excite`.
+#[derive(Debug, Args)]
+pub(crate) struct ExciteArgs {
+    /// A built-in scenario name or a path to a .toml file (the agent's velocity base and [fleet.ros2] link).
+    scenario: String,
+    /// Drive a ROS 2 robot (the only kind; required).
+    #[arg(long)]
+    ros2: bool,
+    /// Which agent's robot, from 1.
+    #[arg(long, value_name = "K")]
+    agent: u32,
+    /// The MCAP bag to write (cmd_vel and odom as ROS 2 channels).
+    #[arg(long, value_name = "FILE")]
+    out: PathBuf,
+    /// Length of the manoeuvre, s.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    duration: f64,
+    /// Stop with zero when odometry puts the robot farther than this from its start, m.
+    #[arg(long, value_name = "M", value_parser = positive, default_value_t = 1.0)]
+    radius: f64,
+    /// Command rate, Hz.
+    #[arg(long, value_name = "HZ", value_parser = positive, default_value_t = 20.0)]
+    rate: f64,
+    /// Seconds to wait for the first odometry.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 10.0)]
+    wait: f64,
+    #[command(flatten)]
+    net: NetArgs,
+}
+
 /// `echelon fleet collector`.
 #[derive(Debug, Args)]
 pub(crate) struct CollectorArgs {
@@ -377,6 +410,31 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     duration: a.duration,
                     net,
                     fleet: a.net.fleet.clone(),
+                },
+                &stop,
+            )?;
+            print_report(&report)
+        }
+        FleetCommand::Excite(a) => {
+            if !a.ros2 {
+                bail!("fleet excite drives a ROS 2 robot: give --ros2");
+            }
+            let scenario = Scenario::resolve(&a.scenario)?;
+            let robots = agents_of(&scenario)?;
+            let net =
+                a.net
+                    .options(&net::robot_identity(a.agent), Some(robots), Some(&scenario))?;
+            let stop = StopFlag::on_signals()?;
+            let report = excite::run(
+                ExciteOptions {
+                    scenario,
+                    agent: a.agent,
+                    duration: a.duration,
+                    radius: a.radius,
+                    rate: a.rate,
+                    wait: a.wait,
+                    out: a.out,
+                    net,
                 },
                 &stop,
             )?;

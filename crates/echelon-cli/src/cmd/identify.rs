@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 
 use echelon::identify::{self, Identified, Log, Model};
+use echelon_mcap::bag::BagOptions;
 use echelon_report::figure::{Axis, Figure, Panel, Stroke};
 
 use super::out::outln;
@@ -24,7 +25,8 @@ pub(crate) enum ModelArg {
 /// Arguments of `echelon identify`.
 #[derive(Debug, clap::Args)]
 pub(crate) struct IdentifyArgs {
-    /// A run directory written by `echelon run` (or its trajectory.csv).
+    /// A run directory written by `echelon run` (or its trajectory.csv), or an
+    /// MCAP file: a ROS 2 bag with cmd_vel and odom, fleet.mcap or run.mcap.
     #[arg(value_name = "LOG")]
     log: PathBuf,
     /// The model to identify (default: torque if the log has u1, u2, else velocity).
@@ -33,6 +35,12 @@ pub(crate) struct IdentifyArgs {
     /// The agent whose rows to use (numbered from 1).
     #[arg(long, value_name = "K", default_value_t = 1)]
     agent: usize,
+    /// MCAP: the command topic (TwistStamped or Twist), when the file has several.
+    #[arg(long, value_name = "TOPIC")]
+    cmd_vel: Option<String>,
+    /// MCAP: the odometry topic (nav_msgs/msg/Odometry), when the file has several.
+    #[arg(long, value_name = "TOPIC")]
+    odom: Option<String>,
     /// Name of the `[robots.NAME]` block.
     #[arg(long, default_value = "identified")]
     name: String,
@@ -47,6 +55,8 @@ struct Config {
     log: PathBuf,
     model: Option<Model>,
     agent: usize,
+    /// `Some` for an MCAP log.
+    bag: Option<BagOptions>,
     name: String,
     out: Option<PathBuf>,
 }
@@ -62,19 +72,26 @@ impl Config {
             "--name `{}` cannot name a [robots.NAME] table",
             a.name
         );
-        if a.log.extension().is_some_and(|e| e == "mcap") {
-            anyhow::bail!(
-                "{}: MCAP logs are not read yet; identify reads a run directory's trajectory.csv",
-                a.log.display()
-            );
-        }
+        let model = a.model.map(|m| match m {
+            ModelArg::Torque => Model::Torque,
+            ModelArg::Velocity => Model::Velocity,
+        });
+        let is_mcap = a.log.extension().is_some_and(|e| e == "mcap");
+        anyhow::ensure!(
+            is_mcap || (a.cmd_vel.is_none() && a.odom.is_none()),
+            "--cmd-vel and --odom choose topics of an MCAP log; {} is not one",
+            a.log.display()
+        );
         Ok(Config {
             log: a.log.clone(),
-            model: a.model.map(|m| match m {
-                ModelArg::Torque => Model::Torque,
-                ModelArg::Velocity => Model::Velocity,
-            }),
+            model,
             agent: a.agent,
+            bag: is_mcap.then(|| BagOptions {
+                agent: a.agent,
+                model,
+                cmd_vel: a.cmd_vel.clone(),
+                odom: a.odom.clone(),
+            }),
             name: a.name.clone(),
             out: a.out.clone(),
         })
@@ -84,7 +101,10 @@ impl Config {
 /// Runs `echelon identify`.
 pub(crate) fn identify(a: &IdentifyArgs) -> Result<()> {
     let c = Config::from_args(a)?;
-    let log = Log::read_run(&c.log, c.agent)?;
+    let log = match &c.bag {
+        Some(opts) => echelon_mcap::bag::read_log(&c.log, opts)?,
+        None => Log::read_run(&c.log, c.agent)?,
+    };
     let model = match c.model.or_else(|| log.detect()) {
         Some(m) => m,
         None => anyhow::bail!(

@@ -184,6 +184,11 @@ impl<S: CmdSink> Ros2Drive<S> {
         &self.sink
     }
 
+    /// The sink, mutably (`fleet excite` drains what it recorded).
+    pub fn sink_mut(&mut self) -> &mut S {
+        &mut self.sink
+    }
+
     /// The last command sent.
     pub fn last_sent(&self) -> VelocityCommand {
         self.last_sent

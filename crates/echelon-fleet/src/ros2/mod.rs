@@ -2,9 +2,9 @@
 //! Jazzy) or behind zenoh-bridge-ros2dds exchanges, with no ROS installation
 //! on echelon's side.
 //!
-//! - [`cdr`]: the CDR little-endian codec (4-byte encapsulation header,
+//! - [`cdr`] (from echelon-mcap): the CDR little-endian codec (4-byte encapsulation header,
 //!   alignment after it, padding content ignored).
-//! - [`msgs`]: `Twist`, `TwistStamped` and `Odometry` with their RIHS01
+//! - [`msgs`] (from echelon-mcap): `Twist`, `TwistStamped` and `Odometry` with their RIHS01
 //!   type hashes, quaternion yaw and a yaw unwrapper.
 //! - [`keys`]: ROS names and the topic key expressions of the `rmw_zenoh`
 //!   and `bridge` schemes.
@@ -12,7 +12,7 @@
 //!   `ros2 node list` / `ros2 topic list` see echelon.
 //! - [`attachment`]: the 33-byte attachment (sequence number, timestamp,
 //!   publisher GID) rmw_zenoh subscriptions require.
-//! - [`definitions`]: the full message definitions (`ros2msg` schemas) of
+//! - [`definitions`] (from echelon-mcap): the full message definitions (`ros2msg` schemas) of
 //!   the three messages, as `ros2 bag record -s mcap` stores them.
 //! - [`record`]: the topics the fleet collector records into `fleet.mcap`
 //!   as ROS 2 channels, and the checks a sample passes first.
@@ -24,13 +24,14 @@
 
 pub mod attachment;
 pub mod base;
-pub mod cdr;
-pub mod definitions;
 pub mod drive;
 pub mod keys;
 pub mod liveliness;
-pub mod msgs;
 pub mod record;
+
+// Moved to echelon-mcap (pure, no Zenoh) so that `echelon identify` reads
+// ROS 2 bags with them; re-exported here under their old paths.
+pub use echelon_mcap::ros2::{cdr, definitions, msgs};
 
 pub use attachment::{Attachment, AttachmentError, Gid};
 pub use cdr::CdrError;

@@ -43,6 +43,11 @@ pub const MIN_SAMPLES: usize = 50;
 /// parameter is reported as not identifiable.
 pub const MAX_REL_HALF_WIDTH: f64 = 0.1;
 
+/// Residual RMS, relative to the RMS of the measured velocity, below which a
+/// log counts as noise-free: the residuals are rounding, `σ²` means nothing
+/// and neither do the intervals built on it.
+pub const NOISE_FREE_RELATIVE_RMS: f64 = 1e-9;
+
 /// Smallest reciprocal condition number of the (scaled) information matrix.
 const MIN_RCOND: f64 = 1e-9;
 
@@ -133,6 +138,16 @@ pub enum IdentifyError {
         t: f64,
         /// The agent.
         agent: usize,
+    },
+    /// An MCAP log lacks the channels the model needs.
+    #[error("{file}: missing {what} (topics in the file: {present})")]
+    MissingTopics {
+        /// The log.
+        file: String,
+        /// What is missing.
+        what: String,
+        /// The topics it has, comma-separated.
+        present: String,
     },
     /// Neither axis was excited: nothing can be identified.
     #[error("{file}: no excitation: {reason}")]
@@ -418,6 +433,10 @@ pub struct Param {
     /// Why it is not identifiable.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub not_identifiable: Option<String>,
+    /// The log is noise-free on this parameter's axis: its interval is not
+    /// meaningful (the estimate is exact to rounding).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub noise_free: bool,
 }
 
 /// The fit of one axis.
@@ -433,6 +452,9 @@ pub struct AxisSummary {
     pub rcond: f64,
     /// Whether its parameters were identified.
     pub identifiable: bool,
+    /// Residuals at rounding level ([`NOISE_FREE_RELATIVE_RMS`]): a
+    /// simulated, noise-free log; the intervals are not meaningful.
+    pub noise_free: bool,
 }
 
 /// A speed or acceleration limit seen in the log.
@@ -543,6 +565,16 @@ impl Identified {
         }
         for p in &self.params {
             match (&p.estimate, &p.not_identifiable) {
+                (Some(e), _) if p.noise_free => {
+                    let _ = writeln!(
+                        s,
+                        "{} = {}    # {}, {}: noise-free log, interval not meaningful",
+                        p.field,
+                        sig(e.value),
+                        p.symbol,
+                        p.unit
+                    );
+                }
                 (Some(e), _) => {
                     let _ = writeln!(
                         s,
@@ -643,7 +675,10 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             y: measured[axis],
         };
         let f = fit::fit(&d, fixed_gain);
+        let y_rms = (d.y.iter().map(|y| y * y).sum::<f64>() / d.y.len() as f64).sqrt();
+        let noise_free = f.rms <= NOISE_FREE_RELATIVE_RMS * y_rms;
         let summary = |identifiable| AxisSummary {
+            noise_free,
             axis: ["linear", "angular"][axis],
             residual_rms: f.rms,
             residual_max: d
@@ -665,7 +700,17 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
                 ));
                 reasons.push(format!("{} axis: {reason}", ["linear", "angular"][axis]));
             }
-            None => predicted[axis].clone_from(&f.predicted),
+            None => {
+                predicted[axis].clone_from(&f.predicted);
+                if noise_free {
+                    warnings.push(format!(
+                        "noise-free log on the {} axis (residual RMS {:.1e}): {} exact to rounding, intervals not meaningful",
+                        ["linear", "angular"][axis],
+                        f.rms,
+                        symbols.iter().map(|s| s.1).collect::<Vec<_>>().join(", ")
+                    ));
+                }
+            }
         }
         for ((field, symbol, unit), e) in symbols.iter().zip(estimates) {
             params.push(Param {
@@ -674,6 +719,7 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
                 unit,
                 estimate: why.is_none().then_some(e),
                 not_identifiable: why.clone(),
+                noise_free: noise_free && why.is_none(),
             });
         }
         if why.is_some() {

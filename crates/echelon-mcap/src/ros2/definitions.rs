@@ -6,7 +6,7 @@
 //! sorted order of their names as the `.msg` files spell them.
 //!
 //! The `.msg` files are verbatim copies of ROS 2 Jazzy's (under
-//! `definitions/`); `tests/ros2_mcap.rs` checks every constant against the
+//! `definitions/`); echelon-fleet's `tests/ros2_mcap.rs` checks every constant against the
 //! text rebuilt from the installed wheels by `scripts/ros2/msg_definitions.py`.
 
 use super::msgs::{MessageType, ODOMETRY, TWIST, TWIST_STAMPED};

@@ -244,8 +244,8 @@ fn counts_of(v: &Value) -> BTreeMap<String, u64> {
         .collect()
 }
 
-/// experiment-circle (Fig. 16) with two robot processes converges like the
-/// simulator; the collector logged every message it received, and two
+/// experiment-circle (Fig. 16) with two robot processes in a peer mesh
+/// converges like the simulator; the collector logged every message it received, and two
 /// readers (the mcap crate and Python's mcap) agree with its counts.
 #[test]
 fn experiment_circle_converges_like_the_simulator() {
@@ -257,7 +257,13 @@ fn experiment_circle_converges_like_the_simulator() {
         serde_json::from_str(&std::fs::read_to_string(sim_dir.join("summary.json")).unwrap())
             .unwrap();
     let fleet_dir = dir.path().join("fleet");
-    let report = up("experiment-circle", &fleet_dir, &["--time-scale", "20"]);
+    // The peer mesh (the other tests go through the default router).
+    let report = up(
+        "experiment-circle",
+        &fleet_dir,
+        &["--time-scale", "20", "--topology", "mesh"],
+    );
+    assert_eq!(report["topology"], "mesh");
     let sim_rows = rows(&sim_dir.join("trajectory.csv"));
     for k in 1..=2usize {
         let robot = &report["robots"][k - 1];

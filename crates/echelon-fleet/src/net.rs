@@ -386,6 +386,39 @@ mod tests {
     }
 
     #[test]
+    fn a_client_does_not_listen_and_a_router_outlives_its_connects() {
+        let client = config(&NetOptions {
+            mode: Some(Mode::Client),
+            connect: vec!["tcp/127.0.0.1:7998".into()],
+            ..NetOptions::default()
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(client.get_json("mode").ok().as_deref(), Some("\"client\""));
+        assert!(
+            !client
+                .get_json("listen/endpoints")
+                .unwrap_or_default()
+                .contains("127.0.0.1:0")
+        );
+        assert_eq!(
+            client.get_json("connect/exit_on_failure").ok().as_deref(),
+            Some("true")
+        );
+        let router = config(&NetOptions {
+            mode: Some(Mode::Router),
+            listen: vec!["tcp/127.0.0.1:7999".into()],
+            connect: vec!["tcp/127.0.0.1:7998".into()],
+            ..NetOptions::default()
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(router.get_json("mode").ok().as_deref(), Some("\"router\""));
+        assert_eq!(
+            router.get_json("connect/exit_on_failure").ok().as_deref(),
+            Some("false")
+        );
+    }
+
+    #[test]
     fn access_control_is_accepted_by_zenoh() {
         let mut c = Config::default();
         let ros = vec![RosAcl {
@@ -395,5 +428,6 @@ mod tests {
         set(&mut c, "access_control", access_control(3, &ros)).unwrap_or_else(|e| panic!("{e}"));
         let acl = c.get_json("access_control").unwrap_or_default();
         assert!(acl.contains("echelon-robot-3") && acl.contains("echelon/*/reference"));
+        assert!(acl.contains("echelon-router") && acl.contains("router-in"));
     }
 }

@@ -75,7 +75,7 @@ pub(crate) struct NetArgs {
     /// Secure mode: mutual TLS and access control with the certificates in DIR (`echelon fleet certs`).
     #[arg(long, value_name = "DIR")]
     secure: Option<PathBuf>,
-    /// Certificate identity in secure mode [default: leader, robot-K or collector].
+    /// Certificate identity in secure mode [default: leader, robot-K, base-K, collector or router].
     #[arg(long, value_name = "ID", requires = "secure")]
     identity: Option<String>,
     /// Number of robot identities the access control knows [default: the scenario's agents].
@@ -258,24 +258,9 @@ pub(crate) struct CollectorArgs {
 pub(crate) struct RouterArgs {
     /// The scenario, for the access control's robot count and ROS 2 keys in secure mode (or give --robots).
     scenario: Option<String>,
-    /// Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable) [default: tcp/127.0.0.1:0, tls/… in secure mode].
-    #[arg(long, value_name = "ENDPOINT")]
-    listen: Vec<String>,
-    /// Another site's router to link to, e.g. tcp/10.0.0.2:7447 (repeatable; retried until it answers).
-    #[arg(long, value_name = "ENDPOINT")]
-    connect: Vec<String>,
-    /// A Zenoh configuration file (JSON5) to start from; the mode is set to router.
-    #[arg(long, value_name = "FILE")]
-    zenoh_config: Option<PathBuf>,
-    /// Secure mode: mutual TLS and access control with the certificates in DIR (`echelon fleet certs`).
-    #[arg(long, value_name = "DIR")]
-    secure: Option<PathBuf>,
-    /// Certificate identity in secure mode.
-    #[arg(long, value_name = "ID", requires = "secure", default_value = net::ROUTER_IDENTITY)]
-    identity: String,
-    /// Number of robot identities the access control knows [default: the scenario's agents].
-    #[arg(long, value_name = "N", requires = "secure")]
-    robots: Option<u32>,
+    /// `--listen` its endpoints, `--connect` other sites' routers (retried until they answer).
+    #[command(flatten)]
+    net: NetArgs,
 }
 
 /// How `fleet up` links its processes.
@@ -446,35 +431,18 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             print_report(&report)
         }
         FleetCommand::Router(a) => {
+            if a.net.mode.is_some() || a.net.fleet.is_some() {
+                bail!("fleet router is always a router, for every fleet: no --mode or --fleet");
+            }
             let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
-            let secure = match &a.secure {
-                None => None,
-                Some(dir) => Some(Secure {
-                    dir: dir.clone(),
-                    identity: a.identity.clone(),
-                    robots: match (a.robots, &scenario) {
-                        (Some(n), _) => n,
-                        (None, Some(s)) => agents_of(s)?,
-                        (None, None) => bail!(
-                            "--secure needs --robots N (or a scenario) for the access control"
-                        ),
-                    },
-                    ros2: match &scenario {
-                        Some(s) => net::ros_acl(&s.fleet()?.ros2),
-                        None => Vec::new(),
-                    },
-                }),
-            };
+            let robots = scenario.as_ref().map(agents_of).transpose()?;
+            let net = a
+                .net
+                .options(net::ROUTER_IDENTITY, robots, scenario.as_ref())?;
             let stop = StopFlag::on_signals()?;
             let report = router::run(
                 &RouterOptions {
-                    net: NetOptions {
-                        mode: Some(Mode::Router),
-                        listen: a.listen,
-                        connect: a.connect,
-                        zenoh_config: a.zenoh_config,
-                        secure,
-                    },
+                    net,
                     max_wall: None,
                 },
                 &stop,

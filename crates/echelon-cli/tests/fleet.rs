@@ -856,6 +856,11 @@ fn bad_fleet_input_is_one_line_and_exit_2() {
         [&up[..], &["--loss", "1.5"]].concat(),
         [&up[..], &["--outage", "3"]].concat(),
         [&up[..], &["--time-scale", "0"]].concat(),
+        [&up[..], &["--sites", "3"]].concat(),
+        [&up[..], &["--sites", "2", "--topology", "mesh"]].concat(),
+        [&up[..], &["--topology", "star"]].concat(),
+        vec!["fleet", "router", "--mode", "client"],
+        vec!["fleet", "router", "--secure", &out],
         vec!["fleet", "collector", "--out", &out],
         vec!["fleet", "leader", "experiment-circle", "--fleet", "a/b"],
         vec![
@@ -874,4 +879,6 @@ fn bad_fleet_input_is_one_line_and_exit_2() {
         assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
         assert!(!err.contains("panicked"), "{err}");
     }
+    // Nothing written.
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }

@@ -218,20 +218,9 @@ struct Links {
 }
 
 impl Links {
-    fn new(
-        opts: &UpOptions,
-        proto: &'static str,
-        processes: usize,
-        robots: usize,
-    ) -> Result<Links, FleetError> {
+    fn new(opts: &UpOptions, proto: &'static str, processes: usize) -> Result<Links, FleetError> {
         let (routers, ports) = match opts.topology {
             Topology::Router => {
-                if opts.sites == 0 || opts.sites > robots.max(1) {
-                    return Err(FleetError::Config(format!(
-                        "--sites {}: between 1 and the number of robots ({robots})",
-                        opts.sites
-                    )));
-                }
                 let ports = free_ports(opts.sites)?;
                 let routers = ports
                     .iter()
@@ -239,14 +228,7 @@ impl Links {
                     .collect();
                 (routers, Vec::new())
             }
-            Topology::Mesh => {
-                if opts.sites != 1 {
-                    return Err(FleetError::Config(
-                        "--sites needs the router topology".into(),
-                    ));
-                }
-                (Vec::new(), free_ports(processes)?)
-            }
+            Topology::Mesh => (Vec::new(), free_ports(processes)?),
         };
         Ok(Links {
             topology: opts.topology,
@@ -309,6 +291,20 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     for k in 1..=n as u32 {
         crate::robot::agent_spec(&scenario, k)?;
     }
+    match opts.topology {
+        Topology::Router if opts.sites == 0 || opts.sites > n.max(1) => {
+            return Err(FleetError::Config(format!(
+                "--sites {}: between 1 and the number of robots ({n})",
+                opts.sites
+            )));
+        }
+        Topology::Mesh if opts.sites != 1 => {
+            return Err(FleetError::Config(
+                "--sites needs the router topology".into(),
+            ));
+        }
+        _ => {}
+    }
     let duration = opts.duration.unwrap_or(built.simulation.config().duration);
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
@@ -320,7 +316,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let bases = if opts.ros2 { n } else { 0 };
     let robot_at = |k: usize| bases + k;
     let leader_at = bases + n + 1;
-    let net = Links::new(opts, proto, leader_at + 1, n)?;
+    let net = Links::new(opts, proto, leader_at + 1)?;
     let secure_args = |identity: &str| -> Vec<String> {
         match &opts.secure {
             Some(dir) => vec![

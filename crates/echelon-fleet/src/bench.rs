@@ -326,6 +326,8 @@ pub fn run(
                 secure: None,
                 exe: opts.exe.clone(),
                 ros2: false,
+                topology: up::Topology::Router,
+                sites: 1,
             },
             stop,
         );

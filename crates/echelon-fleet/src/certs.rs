@@ -99,8 +99,8 @@ mod tests {
             hosts: vec!["robot1.local".into()],
         })
         .unwrap_or_else(|e| panic!("{e}"));
-        // CA + leader, collector, robot-1, robot-2, base-1, base-2, each cert + key.
-        assert_eq!(files.len(), 14);
+        // CA + leader, collector, router, robot-1, robot-2, base-1, base-2, each cert + key.
+        assert_eq!(files.len(), 16);
         let pem = std::fs::read_to_string(dir.path().join("robot-2.pem")).unwrap_or_default();
         assert!(pem.starts_with("-----BEGIN CERTIFICATE-----"));
         let key = std::fs::read_to_string(dir.path().join("robot-2-key.pem")).unwrap_or_default();

@@ -25,6 +25,7 @@ pub mod net;
 pub mod plant;
 pub mod robot;
 pub mod ros2;
+pub mod router;
 pub mod up;
 pub mod wire;
 

@@ -1,9 +1,12 @@
 //! Zenoh sessions: the default configuration (peer mode, no multicast
-//! scouting, explicit endpoints), a user's `--zenoh-config` file, and the
-//! secure mode (mutual TLS with access control by certificate common name).
+//! scouting, explicit endpoints), client mode (one link to a router), router
+//! mode (`fleet router`), a user's `--zenoh-config` file, and the secure mode
+//! (mutual TLS with access control by certificate common name). Every
+//! process's session, the router's included, is configured here.
 
 use std::path::{Path, PathBuf};
 
+use serde::Serialize;
 use serde_json::json;
 use zenoh::bytes::ZBytes;
 use zenoh::{Config, Session, Wait};
@@ -51,9 +54,44 @@ pub fn ros_acl(links: &[echelon::scenario::Ros2Link]) -> Vec<RosAcl> {
         .collect()
 }
 
+/// A session's Zenoh mode.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Links to the peers it connects to (and, by gossip, to the peers they
+    /// know); routes nothing for others.
+    #[default]
+    Peer,
+    /// Exactly one link, to a router, which routes everything for it; when the
+    /// router goes away it keeps reconnecting.
+    Client,
+    /// Routes for its clients and peers and links to other routers
+    /// (`fleet router`, the engine of `zenohd`).
+    Router,
+}
+
+impl Mode {
+    /// Zenoh's name of the mode.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Peer => "peer",
+            Mode::Client => "client",
+            Mode::Router => "router",
+        }
+    }
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 /// Where and how a process joins the fleet.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct NetOptions {
+    /// Zenoh mode; `None`: peer, or the `zenoh_config` file's mode.
+    pub mode: Option<Mode>,
     /// Endpoints to listen on, e.g. `tcp/127.0.0.1:7447` (`tls/…` in secure mode).
     pub listen: Vec<String>,
     /// Endpoints to connect to.
@@ -74,14 +112,22 @@ pub fn base_identity(k: impl std::fmt::Display) -> String {
     format!("base-{k}")
 }
 
+/// Every router's identity (`fleet router`): the access control treats all
+/// routers alike, so the sites of a fleet may share one certificate.
+pub const ROUTER_IDENTITY: &str = "router";
+
 /// The identities a fleet of `robots` robots uses (with a simulated ROS 2
-/// base per robot).
+/// base per robot, and its routers).
 pub fn identities(robots: u32) -> Vec<String> {
-    ["leader".to_owned(), "collector".to_owned()]
-        .into_iter()
-        .chain((1..=robots).map(robot_identity))
-        .chain((1..=robots).map(base_identity))
-        .collect()
+    [
+        "leader".to_owned(),
+        "collector".to_owned(),
+        ROUTER_IDENTITY.to_owned(),
+    ]
+    .into_iter()
+    .chain((1..=robots).map(robot_identity))
+    .chain((1..=robots).map(base_identity))
+    .collect()
 }
 
 /// The certificate common name of an identity: `echelon-<identity>`.
@@ -103,6 +149,14 @@ pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
 /// ROS 2 links, agent `k`'s `cmd_vel` only from robot `k` and its `odom` only
 /// from base `k`, and rmw_zenoh's liveliness tokens (`@ros2_lv/**`) from
 /// every member.
+///
+/// The subject of a message is the certificate of the link it arrives on, so
+/// the origin is known only at its first hop: a router enforces these rules
+/// on its clients' and peers' links, and accepts every fleet key from other
+/// routers (`router-in`); a client, whose only link is its router, accepts
+/// what the router forwards. Through routers the access control is therefore
+/// enforced at the router the sender is linked to; in a peer mesh, at every
+/// receiver.
 pub fn access_control(robots: u32, ros2: &[RosAcl]) -> serde_json::Value {
     let everyone: Vec<String> = identities(robots).iter().map(|i| common_name(i)).collect();
     let mut rules = vec![
@@ -124,11 +178,23 @@ pub fn access_control(robots: u32, ros2: &[RosAcl]) -> serde_json::Value {
     let mut subjects = vec![
         json!({"id": "members", "cert_common_names": everyone}),
         json!({"id": "leader", "cert_common_names": [common_name("leader")]}),
+        json!({"id": "routers", "cert_common_names": [common_name(ROUTER_IDENTITY)]}),
     ];
     let mut policies = vec![
         json!({"rules": ["declare", "send"], "subjects": ["members"]}),
         json!({"rules": ["reference-in"], "subjects": ["leader"]}),
     ];
+    // What a router forwards: every fleet key and, with ROS 2 links, theirs.
+    let mut routed = vec!["echelon/**".to_owned()];
+    routed.extend(
+        ros2.iter()
+            .flat_map(|r| [r.cmd_vel.clone(), r.odom.clone()]),
+    );
+    rules.push(json!({
+        "id": "router-in", "permission": "allow", "flows": ["ingress"],
+        "messages": ["put"], "key_exprs": routed,
+    }));
+    policies.push(json!({"rules": ["router-in"], "subjects": ["routers"]}));
     if !ros2.is_empty() {
         let ros_keys: Vec<&str> = ros2
             .iter()
@@ -198,9 +264,9 @@ pub fn config(opts: &NetOptions) -> Result<Config, FleetError> {
             .map_err(|e| FleetError::Zenoh(format!("{}: {e}", path.display())))?,
         None => {
             let mut c = Config::default();
-            set(&mut c, "mode", json!("peer"))?;
+            set(&mut c, "mode", json!(Mode::Peer.as_str()))?;
             set(&mut c, "scouting/multicast/enabled", json!(false))?;
-            if opts.listen.is_empty() {
+            if opts.listen.is_empty() && opts.mode != Some(Mode::Client) {
                 let proto = if opts.secure.is_some() { "tls" } else { "tcp" };
                 set(
                     &mut c,
@@ -211,13 +277,21 @@ pub fn config(opts: &NetOptions) -> Result<Config, FleetError> {
             c
         }
     };
+    if let Some(mode) = opts.mode {
+        set(&mut config, "mode", json!(mode.as_str()))?;
+    }
     if !opts.listen.is_empty() {
         set(&mut config, "listen/endpoints", json!(opts.listen))?;
     }
     if !opts.connect.is_empty() {
         set(&mut config, "connect/endpoints", json!(opts.connect))?;
         set(&mut config, "connect/timeout_ms", json!(CONNECT_TIMEOUT_MS))?;
-        set(&mut config, "connect/exit_on_failure", json!(true))?;
+        // A process needs its links to start; a router comes up alone and
+        // links to the other sites' routers when they appear. Either way a
+        // link lost later is retried for ever (a client re-opens its session
+        // with its router, its subscriptions and tokens included).
+        let router = opts.mode == Some(Mode::Router);
+        set(&mut config, "connect/exit_on_failure", json!(!router))?;
         set(
             &mut config,
             "connect/retry",
@@ -225,30 +299,7 @@ pub fn config(opts: &NetOptions) -> Result<Config, FleetError> {
         )?;
     }
     if let Some(s) = &opts.secure {
-        let ca = s.dir.join("ca.pem");
-        let (cert, key) = identity_files(&s.dir, &s.identity);
-        for f in [&ca, &cert, &key] {
-            if !f.is_file() {
-                return Err(FleetError::Config(format!(
-                    "secure mode needs {} (make the certificates with `echelon fleet certs {}`)",
-                    f.display(),
-                    s.dir.display()
-                )));
-            }
-        }
-        let path = |p: &PathBuf| json!(p.display().to_string());
-        set(
-            &mut config,
-            "transport/link/tls",
-            json!({
-                "root_ca_certificate": path(&ca),
-                "listen_certificate": path(&cert),
-                "listen_private_key": path(&key),
-                "connect_certificate": path(&cert),
-                "connect_private_key": path(&key),
-                "enable_mtls": true,
-            }),
-        )?;
+        set(&mut config, "transport/link/tls", tls(s)?)?;
         set(
             &mut config,
             "access_control",
@@ -256,6 +307,31 @@ pub fn config(opts: &NetOptions) -> Result<Config, FleetError> {
         )?;
     }
     Ok(config)
+}
+
+/// The TLS section of the secure mode: `s.identity`'s certificate on both
+/// sides of every link, the fleet CA as the only root, mutual authentication.
+fn tls(s: &Secure) -> Result<serde_json::Value, FleetError> {
+    let ca = s.dir.join("ca.pem");
+    let (cert, key) = identity_files(&s.dir, &s.identity);
+    for f in [&ca, &cert, &key] {
+        if !f.is_file() {
+            return Err(FleetError::Config(format!(
+                "secure mode needs {} (make the certificates with `echelon fleet certs {}`)",
+                f.display(),
+                s.dir.display()
+            )));
+        }
+    }
+    let path = |p: &PathBuf| json!(p.display().to_string());
+    Ok(json!({
+        "root_ca_certificate": path(&ca),
+        "listen_certificate": path(&cert),
+        "listen_private_key": path(&key),
+        "connect_certificate": path(&cert),
+        "connect_private_key": path(&key),
+        "enable_mtls": true,
+    }))
 }
 
 /// Opens a session (blocks until every `connect` endpoint is reached, or fails).
@@ -323,6 +399,39 @@ mod tests {
     }
 
     #[test]
+    fn a_client_does_not_listen_and_a_router_outlives_its_connects() {
+        let client = config(&NetOptions {
+            mode: Some(Mode::Client),
+            connect: vec!["tcp/127.0.0.1:7998".into()],
+            ..NetOptions::default()
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(client.get_json("mode").ok().as_deref(), Some("\"client\""));
+        assert!(
+            !client
+                .get_json("listen/endpoints")
+                .unwrap_or_default()
+                .contains("127.0.0.1:0")
+        );
+        assert_eq!(
+            client.get_json("connect/exit_on_failure").ok().as_deref(),
+            Some("true")
+        );
+        let router = config(&NetOptions {
+            mode: Some(Mode::Router),
+            listen: vec!["tcp/127.0.0.1:7999".into()],
+            connect: vec!["tcp/127.0.0.1:7998".into()],
+            ..NetOptions::default()
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(router.get_json("mode").ok().as_deref(), Some("\"router\""));
+        assert_eq!(
+            router.get_json("connect/exit_on_failure").ok().as_deref(),
+            Some("false")
+        );
+    }
+
+    #[test]
     fn access_control_is_accepted_by_zenoh() {
         let mut c = Config::default();
         let ros = vec![RosAcl {
@@ -332,5 +441,6 @@ mod tests {
         set(&mut c, "access_control", access_control(3, &ros)).unwrap_or_else(|e| panic!("{e}"));
         let acl = c.get_json("access_control").unwrap_or_default();
         assert!(acl.contains("echelon-robot-3") && acl.contains("echelon/*/reference"));
+        assert!(acl.contains("echelon-router") && acl.contains("router-in"));
     }
 }

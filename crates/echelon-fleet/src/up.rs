@@ -1,9 +1,14 @@
 //! `echelon fleet up`: the whole fleet on loopback, one OS process per role,
 //! started in order, stopped cleanly, summarised.
 //!
-//! The collector starts first, then robot 1 … N, then the leader; each
-//! listens on its own free loopback port and connects to every process
-//! started before it (a full mesh: Zenoh peers route nothing for others). The
+//! With the router topology (the default) a router (`fleet router`) starts
+//! first on a free loopback port (with `--sites S`, S routers, each linked to
+//! the ones before it, robots spread over them round-robin, the collector and
+//! the leader on site 1's); every other process is a Zenoh client with
+//! exactly one link, to its site's router. With the mesh topology every
+//! process is a peer that listens on its own free loopback port and connects
+//! to every process started before it (N² links: a handful of robots only).
+//! The collector starts first, then robot 1 … N, then the leader; the
 //! leader waits for every liveliness token before starting the clock. Robots
 //! and leader stop at `--duration`; the collector is then sent SIGTERM and
 //! closes its files. Each child's stderr goes to `DIR/logs/<role>.log`; its
@@ -23,7 +28,7 @@ use crate::cost::{self, ProcessCost, RoleCost};
 use crate::faults::FaultSpec;
 use crate::keys::robot_role;
 use crate::latency::FleetLatency;
-use crate::net::{base_identity, robot_identity};
+use crate::net::{ROUTER_IDENTITY, base_identity, robot_identity};
 use crate::ros2::base::base_role;
 use crate::{FleetError, StopFlag};
 
@@ -31,6 +36,23 @@ use crate::{FleetError, StopFlag};
 pub const UP_SUMMARY_FILE: &str = "fleet-summary.json";
 /// Each process's listening endpoint, written when `fleet up` starts them.
 pub const ENDPOINTS_FILE: &str = "endpoints.json";
+
+/// How `fleet up` links its processes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Topology {
+    /// One router per site; every process a client with one link to it.
+    #[default]
+    Router,
+    /// Every process a peer linked to every other (N² links).
+    Mesh,
+}
+
+/// The role name of site `s`'s router (from 1) in logs, reports and
+/// `endpoints.json`: `router/<s>`.
+pub fn router_role(site: usize) -> String {
+    format!("router/{site}")
+}
 
 /// Options of `fleet up`.
 #[derive(Debug, Clone)]
@@ -52,6 +74,10 @@ pub struct UpOptions {
     /// Robots drive ROS 2 bases: one simulated base per robot
     /// (`fleet base --ros2`), all robot↔base traffic in ROS 2's format.
     pub ros2: bool,
+    /// Through routers (default) or a peer mesh.
+    pub topology: Topology,
+    /// Router topology: the number of sites (routers), ≥ 1.
+    pub sites: usize,
 }
 
 /// Every process's final report.
@@ -87,6 +113,17 @@ pub struct UpReport {
     /// With `--ros2`: each simulated base's report.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub bases: Vec<serde_json::Value>,
+    /// How the processes were linked.
+    pub topology: Topology,
+    /// Router topology: each router's endpoint, site 1 first.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub router_endpoints: Vec<String>,
+    /// Router topology: the roles linked to each router, site 1 first.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sites: Vec<Vec<String>>,
+    /// Router topology: each router's report, site 1 first.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub routers: Vec<serde_json::Value>,
 }
 
 /// CPU and peak memory of every process of `fleet up` ([`crate::cost`]).
@@ -261,6 +298,63 @@ pub fn free_ports(n: usize) -> Result<Vec<u16>, FleetError> {
         .collect()
 }
 
+/// How `fleet up`'s processes link: the routers' endpoints (router topology)
+/// or every process's own port (mesh).
+struct Links {
+    topology: Topology,
+    proto: &'static str,
+    /// Router topology: site `s`'s router endpoint at `s`.
+    routers: Vec<String>,
+    /// Mesh: process `i`'s port at `i`.
+    ports: Vec<u16>,
+}
+
+impl Links {
+    fn new(opts: &UpOptions, proto: &'static str, processes: usize) -> Result<Links, FleetError> {
+        let (routers, ports) = match opts.topology {
+            Topology::Router => {
+                let ports = free_ports(opts.sites)?;
+                let routers = ports
+                    .iter()
+                    .map(|p| format!("{proto}/127.0.0.1:{p}"))
+                    .collect();
+                (routers, Vec::new())
+            }
+            Topology::Mesh => (Vec::new(), free_ports(processes)?),
+        };
+        Ok(Links {
+            topology: opts.topology,
+            proto,
+            routers,
+            ports,
+        })
+    }
+
+    /// Mesh: process `i`'s endpoint.
+    fn peer(&self, i: usize) -> String {
+        format!("{}/127.0.0.1:{}", self.proto, self.ports[i])
+    }
+
+    /// The Zenoh arguments of process `i` (of site `site`, from 0).
+    fn args(&self, i: usize, site: usize) -> Vec<String> {
+        match self.topology {
+            Topology::Router => vec![
+                "--mode".to_owned(),
+                "client".to_owned(),
+                "--connect".to_owned(),
+                self.routers[site].clone(),
+            ],
+            Topology::Mesh => {
+                let mut a = vec!["--listen".to_owned(), self.peer(i)];
+                for j in 0..i {
+                    a.extend(["--connect".to_owned(), self.peer(j)]);
+                }
+                a
+            }
+        }
+    }
+}
+
 fn spawn(exe: &Path, role: &str, args: &[String], logs: &Path) -> Result<Proc, FleetError> {
     let log = logs.join(format!("{}.log", role.replace('/', "-")));
     let file = std::fs::File::create(&log).map_err(FleetError::io(&log))?;
@@ -292,50 +386,107 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     for k in 1..=n as u32 {
         crate::robot::agent_spec(&scenario, k)?;
     }
+    match opts.topology {
+        Topology::Router if opts.sites == 0 || opts.sites > n.max(1) => {
+            return Err(FleetError::Config(format!(
+                "--sites {}: between 1 and the number of robots ({n})",
+                opts.sites
+            )));
+        }
+        Topology::Mesh if opts.sites != 1 => {
+            return Err(FleetError::Config(
+                "--sites needs the router topology".into(),
+            ));
+        }
+        _ => {}
+    }
     let duration = opts.duration.unwrap_or(built.simulation.config().duration);
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
 
     let proto = if opts.secure.is_some() { "tls" } else { "tcp" };
-    // Start order, which is also the port order: the collector, the ROS 2
-    // bases (with --ros2), the robots, the leader.
+    // Start order: the routers (router topology), the collector, the ROS 2
+    // bases (with --ros2), the robots, the leader; in a mesh also the order
+    // of their ports.
     let bases = if opts.ros2 { n } else { 0 };
     let robot_at = |k: usize| bases + k;
     let leader_at = bases + n + 1;
-    let ports = free_ports(leader_at + 1)?;
-    let endpoint = |i: usize| format!("{proto}/127.0.0.1:{}", ports[i]);
+    let net = Links::new(opts, proto, leader_at + 1)?;
+    let secure_args = |identity: &str| -> Vec<String> {
+        match &opts.secure {
+            Some(dir) => vec![
+                "--secure".to_owned(),
+                dir.display().to_string(),
+                "--identity".to_owned(),
+                identity.to_owned(),
+                "--robots".to_owned(),
+                n.to_string(),
+            ],
+            None => Vec::new(),
+        }
+    };
+    // Process `i`'s site (router topology): robots and their bases round-robin,
+    // the collector and the leader on site 1.
+    let site_of = |i: usize| match i {
+        0 => 0,
+        i if i == leader_at => 0,
+        i => ((i - 1) % n) % net.routers.len().max(1),
+    };
     let common = |i: usize, identity: &str| -> Vec<String> {
-        let mut a = vec![
-            "--fleet".to_owned(),
-            fleet.name.clone(),
-            "--listen".to_owned(),
-            endpoint(i),
-        ];
-        for j in 0..i {
-            a.push("--connect".to_owned());
-            a.push(endpoint(j));
-        }
-        if let Some(dir) = &opts.secure {
-            a.push("--secure".to_owned());
-            a.push(dir.display().to_string());
-            a.push("--identity".to_owned());
-            a.push(identity.to_owned());
-            a.push("--robots".to_owned());
-            a.push(n.to_string());
-        }
+        let mut a = vec!["--fleet".to_owned(), fleet.name.clone()];
+        a.extend(net.args(i, site_of(i)));
+        a.extend(secure_args(identity));
         a
     };
     // Where each process listens, for tools (or tests) that want to join.
     let mut endpoints = serde_json::Map::new();
-    endpoints.insert("collector".into(), endpoint(0).into());
-    for k in 1..=n {
-        endpoints.insert(robot_role(k), endpoint(robot_at(k)).into());
+    endpoints.insert(
+        "topology".into(),
+        serde_json::to_value(opts.topology).map_err(echelon_mcap::McapLogError::from)?,
+    );
+    match opts.topology {
+        Topology::Router => {
+            for (s, e) in net.routers.iter().enumerate() {
+                endpoints.insert(router_role(s + 1), e.clone().into());
+            }
+        }
+        Topology::Mesh => {
+            endpoints.insert("collector".into(), net.peer(0).into());
+            for k in 1..=n {
+                endpoints.insert(robot_role(k), net.peer(robot_at(k)).into());
+            }
+            for k in 1..=bases {
+                endpoints.insert(base_role(k), net.peer(k).into());
+            }
+            endpoints.insert("leader".into(), net.peer(leader_at).into());
+        }
     }
-    for k in 1..=bases {
-        endpoints.insert(base_role(k), endpoint(k).into());
-    }
-    endpoints.insert("leader".into(), endpoint(leader_at).into());
     crate::write_json_file(&opts.out.join(ENDPOINTS_FILE), &endpoints)?;
+    let mut sites = vec![Vec::new(); net.routers.len()];
+    for i in 0..=leader_at {
+        let role = match i {
+            0 => "collector".to_owned(),
+            i if i == leader_at => "leader".to_owned(),
+            i if i <= bases => base_role(i),
+            i => robot_role(i - bases),
+        };
+        if let Some(site) = sites.get_mut(site_of(i)) {
+            site.push(role);
+        }
+    }
+    let mut routers = Vec::with_capacity(net.routers.len());
+    for (s, e) in net.routers.iter().enumerate() {
+        let mut args = vec!["fleet".to_owned(), "router".to_owned()];
+        if opts.ros2 {
+            args.push(opts.scenario.clone());
+        }
+        args.extend(["--listen".to_owned(), e.clone()]);
+        for other in &net.routers[..s] {
+            args.extend(["--connect".to_owned(), other.clone()]);
+        }
+        args.extend(secure_args(ROUTER_IDENTITY));
+        routers.push(spawn(&opts.exe, &router_role(s + 1), &args, &logs)?);
+    }
     let scale = opts.time_scale.to_string();
     let dur = duration.to_string();
     let started = Instant::now();
@@ -429,11 +580,16 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // 1. Leader and robots run to the end (or a failure, or a signal).
     loop {
         let all_done = poll_all(std::iter::once(&mut leader).chain(&mut robots))?;
-        poll_all(std::iter::once(&mut collector).chain(&mut base_procs))?;
+        poll_all(
+            std::iter::once(&mut collector)
+                .chain(&mut base_procs)
+                .chain(&mut routers),
+        )?;
         let failed = std::iter::once(&leader)
             .chain(&robots)
             .chain(&base_procs)
             .chain(std::iter::once(&collector))
+            .chain(&routers)
             .find_map(Proc::failure);
         if let Some(f) = failed {
             for p in std::iter::once(&leader).chain(&robots).chain(&base_procs) {
@@ -441,6 +597,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             }
             collector.terminate();
             return Err(FleetError::Child(f));
+        }
+        if let Some(r) = routers.iter().find(|r| r.status.is_some()) {
+            return Err(FleetError::Child(format!("{} stopped early", r.role)));
         }
         if all_done {
             break;
@@ -496,6 +655,20 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     {
         return Err(FleetError::Child(f));
     }
+    // The routers last, once nothing is linked to them any more.
+    for r in &routers {
+        r.terminate();
+    }
+    let wind_down = Instant::now();
+    while !poll_all(&mut routers)? {
+        if wind_down.elapsed() > Duration::from_secs(30) {
+            return Err(FleetError::Child("a router did not stop".into()));
+        }
+        std::thread::sleep(nap);
+    }
+    if let Some(f) = routers.iter().find_map(Proc::failure) {
+        return Err(FleetError::Child(f));
+    }
     let report = |p: &Proc| -> Result<serde_json::Value, FleetError> {
         p.report.clone().ok_or_else(|| {
             FleetError::Child(format!(
@@ -529,6 +702,10 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         robots: robot_reports,
         collector: collector_report,
         bases: base_procs.iter().map(report).collect::<Result<_, _>>()?,
+        topology: opts.topology,
+        router_endpoints: net.routers.clone(),
+        sites,
+        routers: routers.iter().map(report).collect::<Result<_, _>>()?,
     };
     crate::write_json_file(&opts.out.join(UP_SUMMARY_FILE), &up)?;
     Ok(up)

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, Subcommand};
+use clap::{Args, Subcommand, ValueEnum};
 
 use echelon::scenario::{Overrides, Scenario, is_valid_fleet_name};
 use echelon_fleet::bench::{self, BenchOptions, Progress};
@@ -17,11 +17,12 @@ use echelon_fleet::excite::{self, ExciteOptions};
 use echelon_fleet::faults::FaultSpec;
 use echelon_fleet::latency::LatencyReport;
 use echelon_fleet::leader::{self, LeaderOptions};
-use echelon_fleet::net::{self, NetOptions, Secure};
+use echelon_fleet::net::{self, Mode, NetOptions, Secure};
 use echelon_fleet::robot::{self, RobotOptions};
 use echelon_fleet::ros2::RosTopic;
 use echelon_fleet::ros2::base::{self, BaseOptions};
-use echelon_fleet::up::{self, UP_SUMMARY_FILE, UpOptions};
+use echelon_fleet::router::{self, RouterOptions};
+use echelon_fleet::up::{self, Topology, UP_SUMMARY_FILE, UpOptions};
 use echelon_fleet::{StopFlag, collector::SUMMARY_FILE};
 
 use super::out::outln;
@@ -40,7 +41,9 @@ pub(crate) enum FleetCommand {
     Excite(ExciteArgs),
     /// Record everything to DIR/fleet.mcap and DIR/trajectory.csv.
     Collector(CollectorArgs),
-    /// Start a leader, one process per robot and a collector on loopback; stop them; summarise.
+    /// A Zenoh router (the engine of zenohd) for the fleet's processes to link to; runs until SIGINT/SIGTERM.
+    Router(RouterArgs),
+    /// Start a router, a leader, one process per robot and a collector on loopback; stop them; summarise.
     #[command(allow_negative_numbers = true)]
     Up(UpArgs),
     /// Make a development CA and certificates for the secure mode.
@@ -50,9 +53,21 @@ pub(crate) enum FleetCommand {
     Bench(BenchArgs),
 }
 
+/// Zenoh mode of a fleet process.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum ModeArg {
+    /// Links to every endpoint it connects to (and, by gossip, to their peers).
+    Peer,
+    /// Exactly one link, to a router (`fleet router`), which it reconnects to if lost.
+    Client,
+}
+
 /// How a process joins the fleet.
 #[derive(Debug, Args)]
 pub(crate) struct NetArgs {
+    /// Zenoh mode [default: peer, or the --zenoh-config file's].
+    #[arg(long, value_enum)]
+    mode: Option<ModeArg>,
     /// Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable) [default: tcp/127.0.0.1:0, tls/… in secure mode].
     #[arg(long, value_name = "ENDPOINT")]
     listen: Vec<String>,
@@ -68,7 +83,7 @@ pub(crate) struct NetArgs {
     /// Secure mode: mutual TLS and access control with the certificates in DIR (`echelon fleet certs`).
     #[arg(long, value_name = "DIR")]
     secure: Option<PathBuf>,
-    /// Certificate identity in secure mode [default: leader, robot-K or collector].
+    /// Certificate identity in secure mode [default: leader, robot-K, base-K, collector or router].
     #[arg(long, value_name = "ID", requires = "secure")]
     identity: Option<String>,
     /// Number of robot identities the access control knows [default: the scenario's agents].
@@ -107,6 +122,10 @@ impl NetArgs {
             }),
         };
         Ok(NetOptions {
+            mode: self.mode.map(|m| match m {
+                ModeArg::Peer => Mode::Peer,
+                ModeArg::Client => Mode::Client,
+            }),
             listen: self.listen.clone(),
             connect: self.connect.clone(),
             zenoh_config: self.zenoh_config.clone(),
@@ -272,6 +291,25 @@ pub(crate) struct CollectorArgs {
     net: NetArgs,
 }
 
+/// `echelon fleet router`.
+#[derive(Debug, Args)]
+pub(crate) struct RouterArgs {
+    /// The scenario, for the access control's robot count and ROS 2 keys in secure mode (or give --robots).
+    scenario: Option<String>,
+    /// `--listen` its endpoints, `--connect` other sites' routers (retried until they answer).
+    #[command(flatten)]
+    net: NetArgs,
+}
+
+/// How `fleet up` links its processes.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum TopologyArg {
+    /// A router per site; every process a Zenoh client with one link to its site's router.
+    Router,
+    /// Every process a peer linked to every other (N² links; a handful of robots).
+    Mesh,
+}
+
 /// `echelon fleet up`.
 #[derive(Debug, Args)]
 pub(crate) struct UpArgs {
@@ -294,6 +332,12 @@ pub(crate) struct UpArgs {
     /// Robots drive simulated ROS 2 bases (one `fleet base --ros2` each), all robot↔base traffic in ROS 2's format.
     #[arg(long)]
     ros2: bool,
+    /// How the processes link.
+    #[arg(long, value_enum, default_value = "router")]
+    topology: TopologyArg,
+    /// Router topology: S routers linked to each other (sites on loopback), robots spread over them.
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    sites: usize,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -466,6 +510,25 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             )?;
             print_report(&report)
         }
+        FleetCommand::Router(a) => {
+            if a.net.mode.is_some() || a.net.fleet.is_some() {
+                bail!("fleet router is always a router, for every fleet: no --mode or --fleet");
+            }
+            let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
+            let robots = scenario.as_ref().map(agents_of).transpose()?;
+            let net = a
+                .net
+                .options(net::ROUTER_IDENTITY, robots, scenario.as_ref())?;
+            let stop = StopFlag::on_signals()?;
+            let report = router::run(
+                &RouterOptions {
+                    net,
+                    max_wall: None,
+                },
+                &stop,
+            )?;
+            print_report(&report)
+        }
         FleetCommand::Up(a) => up_cmd(a),
         FleetCommand::Bench(a) => bench_cmd(a),
         FleetCommand::Certs(a) => {
@@ -478,7 +541,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 hosts: a.host,
             })?;
             outln!(
-                "wrote {} files to {} (CA, leader, collector, robot-1…robot-{n}, base-1…base-{n}); development use only",
+                "wrote {} files to {} (CA, leader, collector, router, robot-1…robot-{n}, base-1…base-{n}); development use only",
                 files.len(),
                 a.dir.display(),
                 n = a.robots
@@ -549,6 +612,11 @@ fn up_cmd(a: UpArgs) -> Result<()> {
             secure: a.secure,
             exe,
             ros2: a.ros2,
+            topology: match a.topology {
+                TopologyArg::Router => Topology::Router,
+                TopologyArg::Mesh => Topology::Mesh,
+            },
+            sites: a.sites,
         },
         &stop,
     )?;
@@ -579,6 +647,24 @@ fn up_cmd(a: UpArgs) -> Result<()> {
     )?;
     if let (Some(startup), Some(run)) = (report.startup, report.run) {
         outln!("  startup (all joined) {startup:.2} s, then run {run:.2} s")?;
+    }
+    match report.topology {
+        Topology::Router => outln!(
+            "  through {} router{} at {}",
+            report.routers.len(),
+            if report.routers.len() == 1 { "" } else { "s" },
+            report.router_endpoints.join(", ")
+        )?,
+        Topology::Mesh => outln!("  peer mesh (every process linked to every other)")?,
+    }
+    for (s, r) in report.routers.iter().enumerate() {
+        outln!(
+            "  router {}: {} processes at most at once, {} in all, up {:.1} s",
+            s + 1,
+            int(r, &["members_peak"]),
+            int(r, &["members_joined"]),
+            num(r, "uptime").unwrap_or(f64::NAN)
+        )?;
     }
     outln!(
         "  leader: {} reference samples published",

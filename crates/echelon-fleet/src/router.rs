@@ -1,0 +1,182 @@
+//! `echelon fleet router`: a Zenoh router (the engine of `zenohd`, from the
+//! `zenoh` crate) for a fleet's processes to link to: each keeps one link to
+//! its site's router, which routes every sample for it; routers of several
+//! sites link to each other. Runs until SIGINT/SIGTERM, then reports.
+//!
+//! The router also watches the fleets' liveliness tokens
+//! (`echelon/*/alive/**`), so its report says how many processes were linked
+//! through the router network at once (`members_peak`) and in all.
+
+use std::collections::BTreeSet;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use zenoh::Wait;
+use zenoh::sample::SampleKind;
+
+use crate::net::{self, Mode, NetOptions};
+use crate::{FleetError, StopFlag};
+
+/// Options of `fleet router`.
+#[derive(Debug, Clone, Default)]
+pub struct RouterOptions {
+    /// Listen and connect endpoints (other routers), secure mode; the mode is
+    /// set to router.
+    pub net: NetOptions,
+    /// Stop after this much real time (tests); `None`: until the stop flag.
+    pub max_wall: Option<Duration>,
+}
+
+/// What `fleet router` prints when it stops.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct RouterReport {
+    /// The router's Zenoh id.
+    pub zid: String,
+    /// The endpoints it listened on, as given.
+    pub listen: Vec<String>,
+    /// Real time it ran, s.
+    pub uptime: f64,
+    /// Fleet processes (liveliness tokens, any fleet) ever seen.
+    pub members_joined: usize,
+    /// Most fleet processes present at once.
+    pub members_peak: usize,
+    /// Fleet processes present when it stopped.
+    pub members_at_exit: usize,
+    /// Other routers linked to it when it stopped.
+    pub routers_at_exit: usize,
+}
+
+#[derive(Debug, Default)]
+struct Members {
+    live: BTreeSet<String>,
+    joined: BTreeSet<String>,
+    peak: usize,
+}
+
+/// Runs a router until `stop` is raised (or `max_wall` passes).
+pub fn run(opts: &RouterOptions, stop: &StopFlag) -> Result<RouterReport, FleetError> {
+    let started = Instant::now();
+    let net = NetOptions {
+        mode: Some(Mode::Router),
+        ..opts.net.clone()
+    };
+    let session = net::open(&net)?;
+    let members: Arc<Mutex<Members>> = Arc::default();
+    let sink = members.clone();
+    let _sub = session
+        .liveliness()
+        .declare_subscriber("echelon/*/alive/**")
+        .history(true)
+        .callback(move |s| {
+            if let Ok(mut m) = sink.lock() {
+                let key = s.key_expr().as_str().to_owned();
+                if s.kind() == SampleKind::Put {
+                    m.joined.insert(key.clone());
+                    m.live.insert(key);
+                    m.peak = m.peak.max(m.live.len());
+                } else {
+                    m.live.remove(&key);
+                }
+            }
+        })
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
+    let listen = net.listen.clone();
+    eprintln!("fleet router {} listening on {listen:?}", session.zid());
+    while !stop.is_raised() && opts.max_wall.is_none_or(|m| started.elapsed() < m) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let routers_at_exit = session.info().routers_zid().wait().count();
+    let (members_joined, members_peak, members_at_exit) = {
+        let m = members
+            .lock()
+            .map_err(|_| FleetError::Config("poisoned".into()))?;
+        (m.joined.len(), m.peak, m.live.len())
+    };
+    Ok(RouterReport {
+        zid: session.zid().to_string(),
+        listen,
+        uptime: started.elapsed().as_secs_f64(),
+        members_joined,
+        members_peak,
+        members_at_exit,
+        routers_at_exit,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::up::free_ports;
+
+    /// Two clients that know only the router exchange a sample through it,
+    /// and the router counts their liveliness tokens.
+    #[test]
+    fn clients_talk_through_the_router() {
+        let port = free_ports(1).unwrap_or_else(|e| panic!("{e}"))[0];
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let stop = StopFlag::new();
+        let router = {
+            let (stop, endpoint) = (stop.clone(), endpoint.clone());
+            std::thread::spawn(move || {
+                run(
+                    &RouterOptions {
+                        net: NetOptions {
+                            listen: vec![endpoint],
+                            ..NetOptions::default()
+                        },
+                        max_wall: Some(Duration::from_secs(30)),
+                    },
+                    &stop,
+                )
+            })
+        };
+        let client = || {
+            net::open(&NetOptions {
+                mode: Some(Mode::Client),
+                connect: vec![endpoint.clone()],
+                ..NetOptions::default()
+            })
+            .unwrap_or_else(|e| panic!("{e}"))
+        };
+        let (a, b) = (client(), client());
+        let _ta = a
+            .liveliness()
+            .declare_token("echelon/t/alive/a")
+            .wait()
+            .unwrap_or_else(|e| panic!("{e}"));
+        let _tb = b
+            .liveliness()
+            .declare_token("echelon/t/alive/b")
+            .wait()
+            .unwrap_or_else(|e| panic!("{e}"));
+        let sub = b
+            .declare_subscriber("echelon/t/x")
+            .wait()
+            .unwrap_or_else(|e| panic!("{e}"));
+        let started = Instant::now();
+        let got = loop {
+            a.put("echelon/t/x", vec![7u8])
+                .wait()
+                .unwrap_or_else(|e| panic!("{e}"));
+            if let Ok(Some(s)) = sub.recv_timeout(Duration::from_millis(100)) {
+                break s.payload().to_bytes().to_vec();
+            }
+            assert!(started.elapsed() < Duration::from_secs(20), "no sample");
+        };
+        assert_eq!(got, vec![7u8]);
+        // The only link of each client is to the router.
+        assert_eq!(a.info().routers_zid().wait().count(), 1);
+        assert_eq!(a.info().peers_zid().wait().count(), 0);
+        std::thread::sleep(Duration::from_millis(200));
+        stop.raise();
+        let report = router
+            .join()
+            .unwrap_or_else(|_| panic!("router thread"))
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(report.members_joined, 2, "{report:?}");
+        assert_eq!(report.members_peak, 2, "{report:?}");
+        assert_eq!(report.listen, vec![endpoint]);
+    }
+}

@@ -54,6 +54,8 @@ pub struct BenchRow {
     pub cpu_per_robot: f64,
     /// CPU seconds of every process together.
     pub cpu_total: f64,
+    /// CPU seconds of the router(s) (zero in the mesh).
+    pub cpu_router: f64,
     /// Peak RSS per robot process (mean), bytes.
     pub rss_per_robot: u64,
     /// Samples delivered (collector and robots received) per second of
@@ -192,6 +194,7 @@ pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
         wall: up.wall,
         cpu_per_robot: up.cost.robots.cpu_mean,
         cpu_total: up.cost.total.cpu,
+        cpu_router: up.cost.routers.as_ref().map_or(0.0, |r| r.cpu),
         rss_per_robot: up.cost.robots.max_rss_mean,
         messages_per_s: (collector_received + robots_received) as f64 / up.duration,
         collector_received,
@@ -217,20 +220,21 @@ pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
 /// The table in Markdown (one line per size, then the machine).
 pub fn markdown(report: &BenchReport) -> String {
     let mut s = String::from(
-        "| N | startup s | CPU/robot s | RSS/robot MiB | msg/s | latency p50 ms | p99 ms | max ms | stale | link losses | final max ‖e‖ m | converged |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| N | startup s | CPU/robot s | router CPU s | RSS/robot MiB | msg/s | latency p50 ms | p99 ms | max ms | stale | link losses | final max ‖e‖ m | converged |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in &report.rows {
         if let Some(e) = &r.error {
-            let _ = writeln!(s, "| {} | failed: {} |||||||||||", r.robots, e);
+            let _ = writeln!(s, "| {} | failed: {} ||||||||||||", r.robots, e);
             continue;
         }
         let _ = writeln!(
             s,
-            "| {} | {} | {:.3} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {:.2e} | {}/{} |",
+            "| {} | {} | {:.3} | {:.2} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {:.2e} | {}/{} |",
             r.robots,
             r.startup.map_or("—".to_owned(), |v| format!("{v:.2}")),
             r.cpu_per_robot,
+            r.cpu_router,
             r.rss_per_robot as f64 / (1u64 << 20) as f64,
             r.messages_per_s,
             r.latency_p50 * 1e3,

@@ -138,6 +138,9 @@ pub struct UpCost {
     /// With `--ros2`: the simulated bases.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bases: Option<RoleCost>,
+    /// Router topology: the routers.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub routers: Option<RoleCost>,
     /// Every process.
     pub total: RoleCost,
     /// Each process, in start order.
@@ -252,12 +255,19 @@ impl Drop for Proc {
 }
 
 /// The cost of every process, per role and in all.
-fn up_cost(leader: &Proc, collector: &Proc, robots: &[Proc], bases: &[Proc]) -> UpCost {
+fn up_cost(
+    leader: &Proc,
+    collector: &Proc,
+    robots: &[Proc],
+    bases: &[Proc],
+    routers: &[Proc],
+) -> UpCost {
     let of = |procs: &[Proc]| procs.iter().map(Proc::cost).collect::<Vec<_>>();
     let (leader, collector) = (vec![leader.cost()], vec![collector.cost()]);
-    let (robots, bases) = (of(robots), of(bases));
-    let processes: Vec<ProcessCost> = collector
+    let (robots, bases, routers) = (of(robots), of(bases), of(routers));
+    let processes: Vec<ProcessCost> = routers
         .iter()
+        .chain(&collector)
         .chain(&bases)
         .chain(&robots)
         .chain(&leader)
@@ -268,6 +278,7 @@ fn up_cost(leader: &Proc, collector: &Proc, robots: &[Proc], bases: &[Proc]) -> 
         collector: RoleCost::of(&collector),
         robots: RoleCost::of(&robots),
         bases: (!bases.is_empty()).then(|| RoleCost::of(&bases)),
+        routers: (!routers.is_empty()).then(|| RoleCost::of(&routers)),
         total: RoleCost::of(&processes),
         processes,
     }
@@ -696,7 +707,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         wall,
         startup,
         run: startup.map(|s| wall - s),
-        cost: up_cost(&leader, &collector, &robots, &base_procs),
+        cost: up_cost(&leader, &collector, &robots, &base_procs, &routers),
         latency: FleetLatency::of(&robot_reports, &collector_report),
         leader: leader_report,
         robots: robot_reports,

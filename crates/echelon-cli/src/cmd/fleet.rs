@@ -790,6 +790,13 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         mb(c.collector.max_rss_max),
         mb(c.total.max_rss_sum)
     )?;
+    if let Some(r) = &c.routers {
+        outln!(
+            "  routers: CPU {:.2} s, peak RSS {:.1} MiB (max)",
+            r.cpu,
+            mb(r.max_rss_max)
+        )?;
+    }
     outln!(
         "wrote {}, {}, {}, {}",
         a.out.join(MCAP_FILE).display(),

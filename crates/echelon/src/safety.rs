@@ -24,19 +24,26 @@
 //!
 //! **Decentralised responsibility.** A *cooperative* neighbour (one that runs
 //! this filter too, [`Neighbour::cooperative`]) takes half of the pair's
-//! constraint, as in the Robotarium's barrier certificates:
+//! constraint, reciprocally: with `ṗ_i⁰`, `ṗ_j⁰` the velocities both robots
+//! measure now (the same numbers for both),
 //!
 //! ```text
-//! robot i:  2 dᵀ ṗ_i        ≥ −(γ/2) h_ij
-//! robot j:  2 (−d)ᵀ ṗ_j     ≥ −(γ/2) h_ij
+//! robot i:  2 dᵀ ṗ_i     ≥ −(γ/2) h_ij + dᵀ(ṗ_i⁰ + ṗ_j⁰)
+//! robot j:  2 (−d)ᵀ ṗ_j  ≥ −(γ/2) h_ij + (−d)ᵀ(ṗ_i⁰ + ṗ_j⁰)
 //! sum:      ḣ_ij = 2 dᵀ(ṗ_i − ṗ_j) ≥ −γ h_ij
 //! ```
 //!
-//! so when both filter at the same instants the pair satisfies the whole
-//! constraint and, by the comparison lemma, `h_ij(t) ≥ h_ij(0) e^{−γ t} ≥ 0`;
-//! neither needs the other's velocity. A neighbour that does not filter is
-//! given the whole constraint, using its measured velocity `ṗ_j`:
-//! `2 dᵀ ṗ_i ≥ −γ h_ij + 2 dᵀ ṗ_j`. Obstacles do not move: `2 dᵀ ṗ_i ≥ −γ h_io`.
+//! The shared term cancels in the sum whatever its value, so when both robots
+//! filter at the same instants from the same measurements the pair satisfies
+//! the whole constraint and, by the comparison lemma,
+//! `h_ij(t) ≥ h_ij(0) e^{−γ t} ≥ 0`. Each robot's share is half of the change
+//! the pair needs from its measured motion (`2 dᵀ(ṗ_i − ṗ_i⁰) ≥ ½(−γ h − ḣ⁰)`),
+//! so a follower can keep pace behind a robot that drives away from it; with
+//! the shared term set to zero this is the Robotarium's split, which makes a
+//! robot that follows another at a distance `ρ` slower than `γ (ρ² − radius²)/(4ρ)`.
+//! A neighbour that does not filter is given the whole constraint, using its
+//! measured velocity `ṗ_j`: `2 dᵀ ṗ_i ≥ −γ h_ij + 2 dᵀ ṗ_j`. Obstacles do not
+//! move: `2 dᵀ ṗ_i ≥ −γ h_io`.
 //!
 //! ## Torque-driven robots: exponential CBF of relative degree two
 //!
@@ -52,10 +59,10 @@
 //! The constraint is `ḧ + 2γ ḣ + γ² h ≥ 0`: both poles of
 //! `(d/dt + γ)² h ≥ 0` at `−γ` (`k1 = 2γ`, `k0 = γ²`), so with
 //! `ψ₁ = ḣ + γ h`, `ψ̇₁ + γ ψ₁ ≥ 0` keeps `ψ₁ ≥ 0` (when it starts so, e.g.
-//! robots at rest outside the radius) and then `h ≥ 0`. The same split applies:
-//! a cooperative neighbour's robot takes `2 dᵀ p̈_i ≥ −½(2‖Δṗ‖² + 2γ ḣ + γ² h)`
-//! and leaves `−2 dᵀ p̈_j` to its neighbour; a non-cooperative one's measured
-//! `p̈_j` enters.
+//! robots at rest outside the radius) and then `h ≥ 0`. The same split applies
+//! (with the shared term zero): toward a cooperative neighbour a robot takes
+//! `2 dᵀ p̈_i ≥ −½(2‖Δṗ‖² + 2γ ḣ + γ² h)` and leaves `−2 dᵀ p̈_j` to its
+//! neighbour; a non-cooperative one's measured `p̈_j` enters.
 //!
 //! ## The quadratic program
 //!
@@ -79,9 +86,11 @@
 //! ## Deadlock
 //!
 //! Two robots meeting head-on in perfect symmetry can stop nose to nose: each
-//! QP answer is the nominal projected onto its half-plane, which is zero. A
-//! robot is *stuck* while the filter acts, its filtered point speed is below
-//! a fifth of the nominal's and the nominal asks for at least 1 cm/s; after
+//! QP answer is the nominal projected onto its half-plane, which is zero; two
+//! robots that must swap sides while both move forward can likewise slide
+//! along side by side. A robot is *stuck* while the filter acts, less than half
+//! of the point motion the nominal asks for survives (`x·x₀ < ½‖x₀‖²`) and the
+//! nominal asks for at least 1 cm/s (or 1 cm/s²); after
 //! [`STUCK_TIME`] stuck it starts *breaking* the deadlock: the desired point
 //! velocity (or acceleration) is turned clockwise by [`BIAS_ANGLE`] before the
 //! QP (keep right: both robots turn the same way, so they slide past each
@@ -205,6 +214,59 @@ impl Neighbour {
 pub fn point(s: &State, l: f64) -> [f64; 2] {
     let (sin, cos) = s.theta.sin_cos();
     [s.x + l * cos, s.y + l * sin]
+}
+
+/// The first robot (index) whose point `L` ahead starts inside the safe
+/// set's complement, and why: within `radius` of another robot's point
+/// (`points[i]`, the larger radius of the two robots that filter) or of an
+/// obstacle's edge. `configs[i]` is `None` for a robot that does not filter
+/// (it is checked only against robots that do).
+pub fn start_conflict(
+    points: &[[f64; 2]],
+    configs: &[Option<SafetyConfig>],
+    obstacles: &[Obstacle],
+) -> Option<(usize, ParamError)> {
+    let radius = |i: usize| configs.get(i).copied().flatten().map(|c| c.radius);
+    for (i, p) in points.iter().enumerate() {
+        for (j, q) in points.iter().enumerate().take(i) {
+            let r = match (radius(i), radius(j)) {
+                (None, None) => continue,
+                (a, b) => a.unwrap_or(0.0).max(b.unwrap_or(0.0)),
+            };
+            let d = (p[0] - q[0]).hypot(p[1] - q[1]);
+            if d < r {
+                return Some((
+                    i,
+                    ParamError::new(
+                        "start",
+                        d,
+                        format!(
+                            "m from agent {}'s point L ahead: closer than the safety radius {r} m",
+                            j + 1
+                        ),
+                    ),
+                ));
+            }
+        }
+        let Some(r) = radius(i) else { continue };
+        for (k, o) in obstacles.iter().enumerate() {
+            let clear = (p[0] - o.x).hypot(p[1] - o.y) - o.r;
+            if clear < r {
+                return Some((
+                    i,
+                    ParamError::new(
+                        "start",
+                        clear,
+                        format!(
+                            "m from obstacle {}'s edge (its point L ahead): closer than the safety radius {r} m",
+                            k + 1
+                        ),
+                    ),
+                ));
+            }
+        }
+    }
+    None
 }
 
 /// One constraint given to the QP: `a · x ≥ b` in the QP's variables
@@ -340,7 +402,10 @@ impl SafetyFilter {
                 2.0 * (-d[0] * own.sin + d[1] * own.cos),
             ];
             let b = match n {
-                Some(n) if n.cooperative => -0.5 * gamma * h,
+                Some(n) if n.cooperative => {
+                    let shared = [own.dp[0] + n.dp[0], own.dp[1] + n.dp[1]];
+                    -0.5 * gamma * h + d[0] * shared[0] + d[1] * shared[1]
+                }
                 Some(n) => -gamma * h + 2.0 * (d[0] * n.dp[0] + d[1] * n.dp[1]),
                 None => -gamma * h,
             };
@@ -501,10 +566,12 @@ impl SafetyFilter {
             Some(x) => (x, Outcome::Filtered),
             None => ([0.0; 2], Outcome::Braked),
         };
-        // Stuck: the point barely moves although the nominal asks it to.
-        let speed = |x: [f64; 2]| (x[0] + drift[0]).hypot(x[1] + drift[1]);
-        let asked = speed(x0);
-        let stuck = asked >= 0.01 && speed(x) < 0.2 * asked;
+        // Stuck: less than half of the motion the nominal asks for survives
+        // (the point stops, or slides alongside a neighbour it should pass).
+        let moved = [x[0] + drift[0], x[1] + drift[1]];
+        let asked = [x0[0] + drift[0], x0[1] + drift[1]];
+        let asked_sq = asked[0] * asked[0] + asked[1] * asked[1];
+        let stuck = asked_sq >= 1e-4 && moved[0] * asked[0] + moved[1] * asked[1] < 0.5 * asked_sq;
         if stuck {
             let since = *self.deadlock.stuck_since.get_or_insert(t);
             if !self.deadlock.breaking && t - since >= STUCK_TIME {

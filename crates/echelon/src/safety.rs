@@ -735,4 +735,137 @@ mod tests {
         assert!(SafetyConfig::new(0.2, 1.0, f64::INFINITY).is_ok());
         assert_eq!(Obstacle::new(0.0, 0.0, 0.0).unwrap_err().field, "r");
     }
+
+    mod properties {
+        use super::*;
+        use proptest::prelude::*;
+
+        fn state() -> impl Strategy<Value = State> {
+            (
+                -2.0..2.0f64,
+                -2.0..2.0f64,
+                -3.2..3.2f64,
+                -0.5..0.5f64,
+                -2.0..2.0f64,
+            )
+                .prop_map(|(x, y, theta, v, omega)| State {
+                    x,
+                    y,
+                    theta,
+                    v,
+                    omega,
+                })
+        }
+
+        fn neighbours() -> impl Strategy<Value = Vec<Neighbour>> {
+            prop::collection::vec((state(), any::<bool>()), 0..6).prop_map(|v| {
+                v.into_iter()
+                    .map(|(s, coop)| Neighbour::of_state(&s, 0.05, Some([0.3, -0.2]), coop))
+                    .collect()
+            })
+        }
+
+        /// Drops neighbours whose point is inside the radius (`h < 0`: the
+        /// filter starts outside the unsafe set).
+        fn outside(me: &State, l: f64, ns: Vec<Neighbour>, radius: f64) -> Vec<Neighbour> {
+            let p = point(me, l);
+            ns.into_iter()
+                .filter(|n| (p[0] - n.p[0]).hypot(p[1] - n.p[1]) > radius)
+                .collect()
+        }
+
+        /// `x` of the QP for a velocity command.
+        fn x_of(c: VelocityCommand, l: f64) -> [f64; 2] {
+            [c.v, l * c.omega]
+        }
+
+        proptest! {
+            /// The filtered command satisfies every constraint given to the
+            /// QP (within [`TOLERANCE`], clarabel's default tolerances 1e-8),
+            /// or the robot brakes; a nominal that satisfies them all comes
+            /// back bit for bit.
+            #[test]
+            fn velocity_filter_satisfies_its_constraints(
+                me in state(),
+                ns in neighbours(),
+                v in -0.8..0.8f64,
+                omega in -3.0..3.0f64,
+                gain in 0.2..5.0f64,
+            ) {
+                let l = 0.05;
+                let config = SafetyConfig::new(0.3, gain, 1.5).unwrap();
+                let ns = outside(&me, l, ns, 0.3);
+                let obstacles = [Obstacle::new(1.5, -1.5, 0.2).unwrap()];
+                let mut f = SafetyFilter::new(config);
+                let base = ideal();
+                let nominal = VelocityCommand { v, omega };
+                let out = f.velocity(0.0, &me, l, nominal, &base, &ns, &obstacles);
+                let limited = base.limit(nominal).0;
+                let rows = f.constraints().to_vec();
+                let nominal_ok = rows.iter().all(|c| c.slack(x_of(limited, l)) >= 0.0);
+                match out.outcome {
+                    Outcome::Nominal => {
+                        prop_assert!(nominal_ok);
+                        prop_assert_eq!(out.command, limited);
+                    }
+                    Outcome::Filtered => {
+                        prop_assert!(!nominal_ok);
+                        let x = x_of(out.command, l);
+                        for c in &rows {
+                            prop_assert!(c.slack(x) >= -TOLERANCE, "{c:?} at {x:?}");
+                        }
+                    }
+                    Outcome::Braked => {
+                        prop_assert_eq!(out.command, VelocityCommand::default());
+                    }
+                }
+                if nominal_ok {
+                    prop_assert_eq!(out.outcome, Outcome::Nominal);
+                }
+            }
+
+            /// The same for the torque filter's exponential barriers and the
+            /// wheel torque limit.
+            #[test]
+            fn torque_filter_satisfies_its_constraints(
+                me in state(),
+                ns in neighbours(),
+                u1 in -60.0..60.0f64,
+                u2 in -10.0..10.0f64,
+                gain in 0.2..5.0f64,
+            ) {
+                let l = 0.05;
+                let robot = RobotParams { torque_limit: Some(3.0), ..RobotParams::AGENT1 };
+                let config = SafetyConfig::new(0.3, gain, 1.5).unwrap();
+                let ns = outside(&me, l, ns, 0.3);
+                let mut f = SafetyFilter::new(config);
+                let nominal = Input { u1, u2 };
+                let out = f.torque(0.0, &me, l, &robot, nominal, &ns, &[]);
+                let rows = f.constraints().to_vec();
+                let x_of = |u: Input| [u.u1 / robot.mass, l * u.u2 / robot.inertia];
+                let barriers = rows.len() - 4;
+                let nominal_ok = rows[..barriers].iter().all(|c| c.slack(x_of(nominal)) >= 0.0);
+                match out.outcome {
+                    Outcome::Nominal => {
+                        prop_assert!(nominal_ok);
+                        prop_assert_eq!(out.command, nominal);
+                    }
+                    Outcome::Filtered => {
+                        let x = x_of(out.command);
+                        for c in &rows {
+                            // relative to the row's bound (the torque rows are in N)
+                            let scale = 1.0 + c.b.abs();
+                            prop_assert!(c.slack(x) >= -TOLERANCE * scale, "{c:?} at {x:?}");
+                        }
+                    }
+                    Outcome::Braked => {
+                        prop_assert_eq!(out.command, Input { u1: -robot.linear_friction * me.v, u2: -robot.angular_friction * me.omega });
+                    }
+                }
+                if nominal_ok {
+                    prop_assert_eq!(out.outcome, Outcome::Nominal);
+                }
+            }
+        }
+    }
 }

@@ -380,6 +380,7 @@ impl SafetyFilter {
     /// Filters a velocity base's command `nominal` at time `t` (s) for a robot
     /// in state `me` (its point `l` ahead): `ḣ ≥ −γ h` for every neighbour in
     /// range and every obstacle, and the base's speed limits.
+    #[allow(clippy::too_many_arguments)]
     pub fn velocity(
         &mut self,
         t: f64,
@@ -430,6 +431,7 @@ impl SafetyFilter {
     /// Filters a torque-driven robot's inputs `nominal` (eq. 3) at time `t`:
     /// `ḧ + 2γ ḣ + γ² h ≥ 0` for every neighbour in range and every obstacle,
     /// and the wheel torque limit if `robot` has one.
+    #[allow(clippy::too_many_arguments)]
     pub fn torque(
         &mut self,
         t: f64,

@@ -308,6 +308,45 @@ fn bad_velocity_base_input_exits_2() {
     assert!(echelon(&["run", &f, "--out", out_s, "-q"]).status.success());
 }
 
+/// Safety filter (issue 15): impossible `[safety]` values and a robot that
+/// starts inside an obstacle are refused at their field with exit 2; a good
+/// one writes `safety.csv` and a `safety` block in `summary.json`.
+#[test]
+fn bad_safety_input_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    let out_s = out.to_str().unwrap();
+    let safety = |table: &str| format!("{GOOD}[safety]\n{table}");
+    let cases: [(String, &[&str]); 4] = [
+        (
+            safety("radius = 0.0\n"),
+            &["s.toml:14:10: safety.radius", "> 0"],
+        ),
+        (
+            safety("radius = 0.2\ngain = -1.0\n"),
+            &["s.toml:15:8: safety.gain"],
+        ),
+        (
+            safety("radius = 0.2\nobstacles = [{ x = 3.0, y = 0.0, r = 0.0 }]\n"),
+            &["s.toml:15:", "safety.obstacles[1].r", "> 0"],
+        ),
+        (
+            safety("radius = 0.2\nobstacles = [{ x = -0.95, y = 0.0, r = 0.1 }]\n"),
+            &["s.toml:10:", "agents[1].start", "obstacle 1"],
+        ),
+    ];
+    for (text, needles) in cases {
+        let f = scenario_file(dir.path(), &text);
+        assert_refused(&echelon(&["run", &f, "--out", out_s]), needles);
+        assert!(!out.exists(), "a refused run creates no output");
+    }
+    let f = scenario_file(dir.path(), &safety("radius = 0.2\n"));
+    assert!(echelon(&["run", &f, "--out", out_s, "-q"]).status.success());
+    assert!(out.join("safety.csv").exists());
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(summary.contains("\"safety\""), "{summary}");
+}
+
 #[test]
 fn bad_flags_exit_2() {
     for args in [

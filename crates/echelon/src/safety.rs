@@ -380,6 +380,7 @@ impl SafetyFilter {
     /// Filters a velocity base's command `nominal` at time `t` (s) for a robot
     /// in state `me` (its point `l` ahead): `ḣ ≥ −γ h` for every neighbour in
     /// range and every obstacle, and the base's speed limits.
+    #[allow(clippy::too_many_arguments)]
     pub fn velocity(
         &mut self,
         t: f64,
@@ -396,11 +397,7 @@ impl SafetyFilter {
         let gamma = self.config.gain;
         self.rows.clear();
         let min_distance = self.barriers(&own, neighbours, obstacles, |d, h, n| {
-            // 2 dᵀ ṗ_i with ṗ_i = R(θ) x: a = 2 R(θ)ᵀ d.
-            let a = [
-                2.0 * (d[0] * own.cos + d[1] * own.sin),
-                2.0 * (-d[0] * own.sin + d[1] * own.cos),
-            ];
+            let a = own.row(d);
             let b = match n {
                 Some(n) if n.cooperative => {
                     let shared = [own.dp[0] + n.dp[0], own.dp[1] + n.dp[1]];
@@ -434,6 +431,7 @@ impl SafetyFilter {
     /// Filters a torque-driven robot's inputs `nominal` (eq. 3) at time `t`:
     /// `ḧ + 2γ ḣ + γ² h ≥ 0` for every neighbour in range and every obstacle,
     /// and the wheel torque limit if `robot` has one.
+    #[allow(clippy::too_many_arguments)]
     pub fn torque(
         &mut self,
         t: f64,
@@ -459,10 +457,7 @@ impl SafetyFilter {
         let gamma = self.config.gain;
         self.rows.clear();
         let min_distance = self.barriers(&own, neighbours, obstacles, |d, h, n| {
-            let a = [
-                2.0 * (d[0] * own.cos + d[1] * own.sin),
-                2.0 * (-d[0] * own.sin + d[1] * own.cos),
-            ];
+            let a = own.row(d);
             let (dpj, ddpj) = n.map_or(([0.0; 2], [0.0; 2]), |n| (n.dp, n.ddp));
             let rel = [own.dp[0] - dpj[0], own.dp[1] - dpj[1]];
             let dh = 2.0 * (d[0] * rel[0] + d[1] * rel[1]);
@@ -587,14 +582,17 @@ impl SafetyFilter {
 
 fn own(me: &State, l: f64) -> Own {
     let (sin, cos) = me.theta.sin_cos();
-    Own {
-        p: [me.x + l * cos, me.y + l * sin],
-        dp: [
-            me.v * cos - l * me.omega * sin,
-            me.v * sin + l * me.omega * cos,
-        ],
-        cos,
-        sin,
+    let Neighbour { p, dp, .. } = Neighbour::of_state(me, l, None, true);
+    Own { p, dp, cos, sin }
+}
+
+impl Own {
+    /// `2 dᵀ R(θ) x = a · x`: `a = 2 R(θ)ᵀ d` (the point moves at `R(θ) x`).
+    fn row(&self, d: [f64; 2]) -> [f64; 2] {
+        [
+            2.0 * (d[0] * self.cos + d[1] * self.sin),
+            2.0 * (-d[0] * self.sin + d[1] * self.cos),
+        ]
     }
 }
 

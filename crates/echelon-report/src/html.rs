@@ -14,7 +14,16 @@
 //!   each value the CSV's value rounded to the nearest `float32`;
 //! - `reference`: the same for the virtual leader `[instant][x, y]` (or `null`);
 //! - `agents`: names, leaders (0-based agent index, `-1` for the reference,
-//!   `null` if unknown) and colours.
+//!   `null` if unknown) and colours;
+//! - `safety` (only for a run with a safety filter, [`ReplaySafety`]):
+//!   `radius`, each agent's `L`, the obstacles `[x, y, r]` and, per embedded
+//!   instant and agent, what its filter did. The replay then draws each
+//!   robot's point `L` ahead with a disc of radius `radius/2` (two discs touch
+//!   exactly when the points are `radius` apart, the filter's limit), each
+//!   obstacle with a dashed ring at `r + radius/2` (a robot's disc touches it
+//!   exactly when its point is `radius` from the edge), and highlights a
+//!   robot while its filter acts. A run without one embeds, and draws, exactly
+//!   what it did before.
 //!
 //! `stride` is 1 (every logged instant) unless the poses would exceed
 //! [`MAX_POSE_VALUES`] floats; then every `stride`-th instant is kept, so
@@ -39,6 +48,29 @@ pub const MAX_POSE_VALUES: usize = 1_500_000;
 
 const STYLE: &str = include_str!("../assets/report.css");
 const SCRIPT: &str = include_str!("../assets/replay.js");
+/// Drawing the safety discs: inserted into [`SCRIPT`] for runs with a safety
+/// filter, before [`SAFETY_FN_ANCHOR`], and called before [`SAFETY_CALL_ANCHOR`].
+const SAFETY_SCRIPT: &str = include_str!("../assets/replay-safety.js");
+const SAFETY_FN_ANCHOR: &str = "  function draw() {\n";
+const SAFETY_CALL_ANCHOR: &str = "    // Robots: oriented triangles, one filled path per colour.\n";
+
+/// The replay's script: [`SCRIPT`], with the safety drawing when `safety`.
+fn script(safety: bool) -> String {
+    if !safety {
+        return SCRIPT.to_owned();
+    }
+    SCRIPT
+        .replacen(
+            SAFETY_FN_ANCHOR,
+            &format!("{SAFETY_SCRIPT}{SAFETY_FN_ANCHOR}"),
+            1,
+        )
+        .replacen(
+            SAFETY_CALL_ANCHOR,
+            &format!("    drawSafety(k, muted);\n{SAFETY_CALL_ANCHOR}"),
+            1,
+        )
+}
 
 /// The embedded replay data (see the module doc).
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -59,6 +91,47 @@ pub struct ReplayData {
     pub poses: String,
     /// Base64 little-endian `float32` `[instant][x, y]`, or `None`.
     pub reference: Option<String>,
+    /// The safety filter (absent without one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safety: Option<ReplaySafety>,
+}
+
+/// The safety filter in [`ReplayData`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReplaySafety {
+    /// Smallest distance between two robots' points, m.
+    pub radius: f64,
+    /// Each agent's `L`, m.
+    pub l: Vec<f64>,
+    /// Obstacles, `[x, y, r]`, m.
+    pub obstacles: Vec<[f64; 3]>,
+    /// One digit per embedded instant per agent (`[instant][agent]`):
+    /// outcome (0 nominal or no filter, 1 filtered, 2 braked) + 3 while
+    /// breaking a deadlock.
+    pub actions: String,
+}
+
+/// The safety part of the replay data (`None`: no filter, or `L` unknown).
+fn replay_safety(data: &RunData, rows: &[usize]) -> Option<ReplaySafety> {
+    let s = data.safety.as_ref()?;
+    if s.l.len() != data.agents.len() {
+        return None;
+    }
+    let mut actions = String::with_capacity(rows.len() * data.agents.len());
+    for &k in rows {
+        for t in &s.tracks {
+            let a = t.as_ref().map_or(0, |t| {
+                t.outcome[k].min(2) + if t.deadlock[k] { 3 } else { 0 }
+            });
+            actions.push(char::from(b'0' + a));
+        }
+    }
+    Some(ReplaySafety {
+        radius: s.radius,
+        l: s.l.clone(),
+        obstacles: s.obstacles.iter().map(|o| [o.x, o.y, o.r]).collect(),
+        actions,
+    })
 }
 
 /// One agent in [`ReplayData`].
@@ -129,6 +202,7 @@ pub fn replay_data(data: &RunData) -> ReplayData {
             .collect(),
         stride,
         times: rows.iter().map(|&k| data.times[k]).collect(),
+        safety: replay_safety(data, &rows),
         rows,
         poses,
         reference,
@@ -245,6 +319,99 @@ fn saturation_note(data: &RunData) -> Option<String> {
     ))
 }
 
+/// What the replay draws of the safety filter, under its hint.
+fn replay_safety_legend(data: &RunData) -> Option<String> {
+    let s = data.safety.as_ref()?;
+    replay_safety(data, &[])?;
+    Some(format!(
+        "<p class=\"hint\" id=\"safety-legend\">Safety filter: the circle around each robot's point L ahead has radius radius/2 = {} m, \
+         so two circles touch exactly when two points are radius = {} m apart, the closest the filter allows. \
+         Grey discs are obstacles; a robot's circle touches an obstacle's dashed ring (r + radius/2) exactly when its point is radius from the edge. \
+         A filled circle: that robot's filter is changing its command; orange outline: braking (QP infeasible); dashed: breaking a deadlock.</p>\n",
+        s.radius / 2.0,
+        s.radius
+    ))
+}
+
+fn metres(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v} m")
+    } else {
+        "∞".to_owned()
+    }
+}
+
+/// The safety section: the filter's settings and `summary.json`'s `safety`.
+fn safety_section(data: &RunData) -> Option<String> {
+    let r = data.summary.safety.as_ref()?;
+    let s = data.safety.as_ref()?;
+    let name = |k: usize| {
+        data.agents
+            .get(k.wrapping_sub(1))
+            .map_or_else(|| format!("agent {k}"), |a| a.name.clone())
+    };
+    let mut html = String::from("<section id=\"safety\">\n<h2>Safety</h2>\n");
+    let _ = writeln!(
+        html,
+        "<p class=\"note\">Barrier-certificate filter (docs/safety.md) between the law and the base: radius = {} m between two robots' points L ahead and from an obstacle's edge; {} obstacle{}.</p>",
+        r.radius,
+        s.obstacles.len(),
+        if s.obstacles.len() == 1 { "" } else { "s" }
+    );
+    let [a, b] = r.min_distance_agents;
+    let _ = write!(
+        html,
+        "<p id=\"safety-closest\">Closest pair of points over every step: <strong>{:.4} m</strong> ({} and {}) at t = {} s",
+        r.min_distance,
+        escape(&name(a)),
+        escape(&name(b)),
+        r.min_distance_t
+    );
+    if let Some(c) = r.min_obstacle_clearance {
+        let _ = write!(
+            html,
+            "; closest to an obstacle's edge: <strong>{c:.4} m</strong>"
+        );
+    }
+    let _ = writeln!(
+        html,
+        ". Filters changed the command at {} controller samples, braked at {}, broke {} deadlock{}.</p>",
+        r.active,
+        r.infeasible,
+        r.deadlock_breaks,
+        if r.deadlock_breaks == 1 { "" } else { "s" }
+    );
+    html.push_str(
+        "<table class=\"summary\"><thead><tr><th>agent</th><th>gain γ</th><th>range</th>\
+         <th>command changed</th><th>braked</th><th>deadlock breaks</th></tr></thead><tbody>\n",
+    );
+    for a in &r.agents {
+        let i = a.agent.wrapping_sub(1);
+        let setting = s.settings.get(i).copied().flatten();
+        let filters = s.tracks.get(i).is_some_and(Option::is_some) || setting.is_some();
+        let (gain, range) = match (filters, setting) {
+            (_, Some((g, range))) => (format!("{g} 1/s"), metres(range)),
+            (true, None) => ("?".to_owned(), "?".to_owned()),
+            (false, None) => ("— (no filter)".to_owned(), "—".to_owned()),
+        };
+        let _ = writeln!(
+            html,
+            "<tr><td><span class=\"swatch\" style=\"background:{}\"></span>{}</td><td>{gain}</td><td>{range}</td>\
+             <td>{}</td><td>{}</td><td>{}</td></tr>",
+            palette::series(i).hex(),
+            escape(&name(a.agent)),
+            a.active,
+            a.infeasible,
+            a.deadlock_breaks
+        );
+    }
+    html.push_str("</tbody></table>\n");
+    html.push_str(
+        "<p class=\"note\">Counts are controller samples. The safety figure plots the closest pair at every logged instant against radius, each obstacle's clearance, and when each filter acted; the replay draws each robot's safety circle.</p>\n</section>\n",
+    );
+    Some(html)
+}
+
 /// The whole page; `svgs` are the figures as `(stem, SVG document)`.
 pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
     let s = &data.summary;
@@ -291,8 +458,12 @@ pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
          <span class=\"frames\"><span id=\"frames\">0</span> frames drawn</span></div>\n\
          <canvas id=\"view\" width=\"960\" height=\"600\"></canvas>\n\
          <p class=\"hint\">Wheel or pinch: zoom · drag: pan · double-click: fit · space: play/pause · ←/→: step. \
-         Triangles are the robots, dotted lines link each follower to its leader, the dashed line is the virtual leader's path.</p>\n</section>\n",
+         Triangles are the robots, dotted lines link each follower to its leader, the dashed line is the virtual leader's path.</p>\n",
     );
+    if let Some(legend) = replay_safety_legend(data) {
+        html.push_str(&legend);
+    }
+    html.push_str("</section>\n");
     html.push_str("<section id=\"summary\">\n<h2>Summary</h2>\n");
     html.push_str(&summary_table(data));
     let _ = writeln!(
@@ -311,7 +482,11 @@ pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
         }
         html.push_str("</ul>\n");
     }
-    html.push_str("</section>\n<section id=\"figures\">\n<h2>Figures</h2>\n");
+    html.push_str("</section>\n");
+    if let Some(section) = safety_section(data) {
+        html.push_str(&section);
+    }
+    html.push_str("<section id=\"figures\">\n<h2>Figures</h2>\n");
     for (stem, svg) in svgs {
         let _ = writeln!(
             html,
@@ -334,7 +509,8 @@ pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
         .replace('<', "\\u003c");
     let _ = write!(
         html,
-        "</main>\n<script type=\"application/json\" id=\"echelon-data\">{json}</script>\n<script>\n{SCRIPT}</script>\n</body>\n</html>\n"
+        "</main>\n<script type=\"application/json\" id=\"echelon-data\">{json}</script>\n<script>\n{}</script>\n</body>\n</html>\n",
+        script(replay_safety(data, &[]).is_some())
     );
     html
 }
@@ -357,6 +533,20 @@ mod tests {
         assert_eq!(rows.last(), Some(&7000));
         assert!(rows.len() * 200 * 3 <= MAX_POSE_VALUES + 600);
         assert!(rows.windows(2).all(|w| w[1] - w[0] <= stride));
+    }
+
+    #[test]
+    fn the_safety_script_finds_its_anchors_once() {
+        assert_eq!(SCRIPT.matches(SAFETY_FN_ANCHOR).count(), 1);
+        assert_eq!(SCRIPT.matches(SAFETY_CALL_ANCHOR).count(), 1);
+        assert_eq!(script(false), SCRIPT);
+        let with = script(true);
+        assert_eq!(with.matches("function drawSafety(").count(), 1);
+        assert_eq!(with.matches("drawSafety(k, muted);").count(), 1);
+        assert!(
+            with.find("function drawSafety(") < with.find("function draw() {")
+                && with.find("drawSafety(k, muted);") < with.find(SAFETY_CALL_ANCHOR)
+        );
     }
 
     #[test]

@@ -8,6 +8,8 @@
 //! - [`run`]: an output directory of `echelon run`, read back;
 //! - [`plots`]: the run figures `paths`, `errors`, `signals` (paper Figs. 8–17;
 //!   for velocity bases, commanded against actual `v`, `ω` and saturation);
+//! - [`safety`]: the `safety` figure of a run with a safety filter (closest
+//!   pair, obstacle clearance, when the filters acted);
 //! - [`html`]: `report.html`, with the replay;
 //! - [`lycomp`]: eq. 5 against eq. 6 (Fig. 5), and refitting eq. 6 for any `L_Xoff`.
 
@@ -17,6 +19,7 @@ pub mod lycomp;
 pub mod odometry;
 pub mod plots;
 pub mod run;
+pub mod safety;
 
 use std::path::{Path, PathBuf};
 

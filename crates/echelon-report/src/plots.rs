@@ -302,16 +302,23 @@ fn command_panel(
 /// instant `k` covers `[t_k, t_{k+1}]` (the last one, `[t_k, t_k]`).
 pub fn saturated_spans(data: &RunData, a: &AgentTrack) -> Vec<(f64, f64)> {
     let sat = a.get(Column::Sat);
-    let n = data.times.len().min(sat.len());
+    spans_where(&data.times, sat.len(), |k| sat[k] == 1.0)
+}
+
+/// The maximal runs of the first `len` instants of `times` at which `flag`
+/// holds, as time spans: instant `k` covers `[t_k, t_{k+1}]` (the last one,
+/// `[t_k, t_k]`).
+pub fn spans_where(times: &[f64], len: usize, flag: impl Fn(usize) -> bool) -> Vec<(f64, f64)> {
+    let n = times.len().min(len);
     let mut spans = Vec::new();
     let mut k = 0;
     while k < n {
-        if sat[k] == 1.0 {
+        if flag(k) {
             let start = k;
-            while k < n && sat[k] == 1.0 {
+            while k < n && flag(k) {
                 k += 1;
             }
-            spans.push((data.times[start], data.times[k.min(n - 1)]));
+            spans.push((times[start], times[k.min(n - 1)]));
         } else {
             k += 1;
         }
@@ -400,8 +407,8 @@ pub fn velocity_signals(data: &RunData) -> Figure {
     figure.with_panel(saturation_panel(data))
 }
 
-/// The run figures with their file stems: `paths`, `errors`, `signals`, and
-/// `drift` when agents dead-reckon.
+/// The run figures with their file stems: `paths`, `errors`, `signals`,
+/// `drift` when agents dead-reckon, and `safety` when a safety filter ran.
 pub fn run_figures(data: &RunData) -> Vec<(&'static str, Figure)> {
     let mut figures = vec![
         ("paths", paths(data)),
@@ -410,6 +417,9 @@ pub fn run_figures(data: &RunData) -> Vec<(&'static str, Figure)> {
     ];
     if let Some(drift) = crate::odometry::drift(data) {
         figures.push(("drift", drift));
+    }
+    if let Some(safety) = crate::safety::figure(data) {
+        figures.push(("safety", safety));
     }
     figures
 }

@@ -1,5 +1,6 @@
 //! An output directory of `echelon run`, read back: `trajectory.csv`,
-//! `reference.csv`, `summary.json` and `scenario.toml`.
+//! `reference.csv`, `summary.json`, `scenario.toml`, and `odometry.csv`,
+//! `safety.csv` when the run wrote them.
 //!
 //! Only `trajectory.csv` and `summary.json` are required: a directory written
 //! before `reference.csv` and `scenario.toml` existed still plots, without the
@@ -11,9 +12,11 @@ use serde::Deserialize;
 
 use echelon::formation::Leader;
 use echelon::output::{
-    ODOMETRY_FILE, ODOMETRY_HEADER, REFERENCE_FILE, REFERENCE_HEADER, SCENARIO_FILE, SUMMARY_FILE,
-    TRAJECTORY_FILE, TRAJECTORY_HEADER, TRAJECTORY_HEADER_VELOCITY, Table,
+    ODOMETRY_FILE, ODOMETRY_HEADER, REFERENCE_FILE, REFERENCE_HEADER, SAFETY_FILE, SAFETY_HEADER,
+    SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE, TRAJECTORY_HEADER, TRAJECTORY_HEADER_VELOCITY,
+    Table,
 };
+use echelon::safety::Obstacle;
 use echelon::scenario::schema::{LeaderSpec, ModeName};
 use echelon::scenario::{Overrides, Scenario};
 
@@ -190,6 +193,86 @@ pub struct SummaryFile {
     pub warnings: Vec<String>,
     /// Per agent.
     pub agents: Vec<AgentResult>,
+    /// The safety filter's statistics (`None`: no `[safety]`).
+    #[serde(default)]
+    pub safety: Option<SafetySummary>,
+}
+
+/// `summary.json`'s `safety` (see `echelon::sim::SafetyReport`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct SafetySummary {
+    /// The smallest `radius` among the agents that filter, m.
+    pub radius: f64,
+    /// Smallest distance between two robots' points `L` ahead over the run
+    /// (every step), m.
+    pub min_distance: f64,
+    /// When, s.
+    pub min_distance_t: f64,
+    /// Between which agents (1-based).
+    pub min_distance_agents: [usize; 2],
+    /// Smallest distance from a robot's point to an obstacle's edge, m.
+    #[serde(default)]
+    pub min_obstacle_clearance: Option<f64>,
+    /// Controller samples at which a filter changed the command (all agents).
+    pub active: u64,
+    /// Samples at which a robot braked (QP infeasible).
+    pub infeasible: u64,
+    /// Deadlocks broken.
+    pub deadlock_breaks: u64,
+    /// Per agent.
+    pub agents: Vec<AgentSafetySummary>,
+}
+
+/// One agent's line of [`SafetySummary`].
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct AgentSafetySummary {
+    /// 1-based number.
+    pub agent: usize,
+    /// Samples at which its filter changed the command.
+    pub active: u64,
+    /// Samples at which it braked.
+    pub infeasible: u64,
+    /// Deadlocks it started breaking.
+    pub deadlock_breaks: u64,
+}
+
+/// What one filtering agent's filter did at each logged instant (`safety.csv`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SafetyTrack {
+    /// 0: nominal command, 1: filtered, 2: braked (QP infeasible).
+    pub outcome: Vec<u8>,
+    /// Whether it was breaking a deadlock.
+    pub deadlock: Vec<bool>,
+}
+
+/// A run's safety settings and what its filters did.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SafetyData {
+    /// Smallest distance between two robots' points, m ([`SafetySummary::radius`]).
+    pub radius: f64,
+    /// `L` of each agent: the point kept apart is `L` ahead of the axle, m
+    /// (empty when the scenario does not build here).
+    pub l: Vec<f64>,
+    /// Known obstacles.
+    pub obstacles: Vec<Obstacle>,
+    /// Per agent, `(gain γ 1/s, range m)` of its filter, `None`: it does not
+    /// filter (or `scenario.toml` is missing).
+    pub settings: Vec<Option<(f64, f64)>>,
+    /// Per agent, from `safety.csv` (`None`: no rows, it does not filter).
+    pub tracks: Vec<Option<SafetyTrack>>,
+}
+
+impl SafetyData {
+    /// Agent `i`'s point `L` ahead at instant `k` of `data`.
+    pub fn point(&self, data: &RunData, i: usize, k: usize) -> Option<(f64, f64)> {
+        let l = *self.l.get(i)?;
+        let a = &data.agents[i];
+        let th = a.get(Column::Theta)[k];
+        Some((
+            a.get(Column::X)[k] + l * th.cos(),
+            a.get(Column::Y)[k] + l * th.sin(),
+        ))
+    }
 }
 
 /// A run directory, loaded.
@@ -211,6 +294,8 @@ pub struct RunData {
     pub reference: Option<ReferenceTrack>,
     /// Per agent, what its odometry believed (empty: no `odometry.csv`).
     pub odometry: Vec<Option<OdometryTrack>>,
+    /// The safety filter (`None`: the run had none).
+    pub safety: Option<SafetyData>,
 }
 
 fn read(path: &Path) -> Result<String, ReportError> {
@@ -238,17 +323,15 @@ fn numbers(path: &Path, text: &str, header: &str) -> Result<Vec<Vec<f64>>, Repor
     Ok(table.rows)
 }
 
-/// `odometry.csv`, per agent: every dead-reckoning agent has one row at each
-/// of the run's logged instants.
-fn odometry_tracks(
+/// The rows of a per-agent file (`odometry.csv`, `safety.csv`), grouped by
+/// agent: an agent with rows has one at each of the run's logged instants, in order.
+fn agent_rows<'a>(
     path: &Path,
-    text: &str,
+    rows: &'a [Vec<f64>],
     times: &[f64],
     n: usize,
-) -> Result<Vec<Option<OdometryTrack>>, ReportError> {
-    let rows = numbers(path, text, ODOMETRY_HEADER)?;
-    let mut tracks: Vec<Option<OdometryTrack>> = vec![None; n];
-    let mut seen = vec![0usize; n];
+) -> Result<Vec<Vec<&'a [f64]>>, ReportError> {
+    let mut out: Vec<Vec<&[f64]>> = vec![Vec::new(); n];
     for (i, row) in rows.iter().enumerate() {
         let bad = |message: String| ReportError::Format {
             path: path.to_path_buf(),
@@ -261,59 +344,141 @@ fn odometry_tracks(
                 row[1]
             )));
         }
-        let k = seen[agent - 1];
+        let k = out[agent - 1].len();
         if times.get(k) != Some(&row[0]) {
             return Err(bad(format!("time {} is not the run's instant {k}", row[0])));
         }
-        seen[agent - 1] += 1;
-        let t = tracks[agent - 1].get_or_insert_with(OdometryTrack::default);
-        for (column, v) in [
-            (&mut t.x, row[2]),
-            (&mut t.y, row[3]),
-            (&mut t.theta, row[4]),
-            (&mut t.ex, row[5]),
-            (&mut t.ey, row[6]),
-            (&mut t.fix, row[9]),
-        ] {
-            column.push(v);
-        }
+        out[agent - 1].push(row);
     }
-    if let Some(a) = (0..n).find(|&a| seen[a] != 0 && seen[a] != times.len()) {
+    if let Some(a) = (0..n).find(|&a| !out[a].is_empty() && out[a].len() != times.len()) {
         return Err(ReportError::Format {
             path: path.to_path_buf(),
             message: format!(
                 "agent {} has {} rows for the run's {} instants",
                 a + 1,
-                seen[a],
+                out[a].len(),
                 times.len()
             ),
         });
     }
-    Ok(tracks)
+    Ok(out)
 }
 
-/// Each agent's speed limits, from the scenario built as the run was (its
-/// step `dt`; the other overrides do not touch the robots). Empty when the
-/// scenario does not build here (e.g. a waypoint file next to the original):
-/// the figures then draw no limit lines.
-fn speed_limits(scenario: &Scenario, dt: f64) -> Vec<Option<SpeedLimits>> {
+/// `odometry.csv`, per agent: every dead-reckoning agent has one row at each
+/// of the run's logged instants.
+fn odometry_tracks(
+    path: &Path,
+    text: &str,
+    times: &[f64],
+    n: usize,
+) -> Result<Vec<Option<OdometryTrack>>, ReportError> {
+    let rows = numbers(path, text, ODOMETRY_HEADER)?;
+    Ok(agent_rows(path, &rows, times, n)?
+        .into_iter()
+        .map(|rows| {
+            (!rows.is_empty()).then(|| {
+                let mut t = OdometryTrack::default();
+                for row in rows {
+                    for (column, v) in [
+                        (&mut t.x, row[2]),
+                        (&mut t.y, row[3]),
+                        (&mut t.theta, row[4]),
+                        (&mut t.ex, row[5]),
+                        (&mut t.ey, row[6]),
+                        (&mut t.fix, row[9]),
+                    ] {
+                        column.push(v);
+                    }
+                }
+                t
+            })
+        })
+        .collect())
+}
+
+/// `safety.csv`, per agent: every filtering agent has one row at each of the
+/// run's logged instants.
+fn safety_tracks(
+    path: &Path,
+    text: &str,
+    times: &[f64],
+    n: usize,
+) -> Result<Vec<Option<SafetyTrack>>, ReportError> {
+    let rows = numbers(path, text, SAFETY_HEADER)?;
+    Ok(agent_rows(path, &rows, times, n)?
+        .into_iter()
+        .map(|rows| {
+            (!rows.is_empty()).then(|| SafetyTrack {
+                outcome: rows.iter().map(|r| r[2] as u8).collect(),
+                deadlock: rows.iter().map(|r| r[3] != 0.0).collect(),
+            })
+        })
+        .collect())
+}
+
+/// Each agent's filter settings from the scenario file: its own `safety`
+/// over `[safety]`, defaults `gain = 1`, `range = ∞` (as the scenario builds them).
+fn safety_settings(scenario: &Scenario) -> Vec<Option<(f64, f64)>> {
+    let f = &scenario.file;
+    f.agents
+        .iter()
+        .map(|a| {
+            let get = |field: fn(&echelon::scenario::schema::SafetySection) -> Option<f64>| {
+                a.safety
+                    .as_ref()
+                    .and_then(field)
+                    .or_else(|| f.safety.as_ref().and_then(field))
+            };
+            let enabled = a
+                .safety
+                .as_ref()
+                .and_then(|s| s.enabled)
+                .or_else(|| f.safety.as_ref().and_then(|s| s.enabled))
+                .unwrap_or(true);
+            enabled.then(|| {
+                (
+                    get(|s| s.gain).unwrap_or(1.0),
+                    get(|s| s.range).unwrap_or(f64::INFINITY),
+                )
+            })
+        })
+        .collect()
+}
+
+/// What the figures take from the scenario built as the run was (its step
+/// `dt`; the other overrides do not touch the robots): each agent's speed
+/// limits, `L`, and the obstacles. Empty when the scenario does not build here
+/// (e.g. a waypoint file next to the original): the figures then draw no
+/// limit lines, distances or obstacles.
+#[derive(Debug, Default)]
+struct Built {
+    limits: Vec<Option<SpeedLimits>>,
+    l: Vec<f64>,
+    obstacles: Vec<Obstacle>,
+}
+
+fn built(scenario: &Scenario, dt: f64) -> Built {
     let overrides = Overrides {
         dt: Some(dt),
         ..Overrides::default()
     };
     scenario.build(&overrides).map_or_else(
-        |_| Vec::new(),
+        |_| Built::default(),
         |run| {
-            run.simulation
-                .agents()
-                .iter()
-                .map(|a| {
-                    a.velocity_robot().map(|r| SpeedLimits {
-                        v_max: r.base.v_max,
-                        omega_max: r.base.omega_max,
+            let agents = run.simulation.agents();
+            Built {
+                limits: agents
+                    .iter()
+                    .map(|a| {
+                        a.velocity_robot().map(|r| SpeedLimits {
+                            v_max: r.base.v_max,
+                            omega_max: r.base.omega_max,
+                        })
                     })
-                })
-                .collect()
+                    .collect(),
+                l: agents.iter().map(|a| a.placement.l).collect(),
+                obstacles: run.simulation.obstacles().to_vec(),
+            }
         },
     )
 }
@@ -409,6 +574,21 @@ impl RunData {
             None => Vec::new(),
             Some(text) => odometry_tracks(&odometry_path, &text, &times, n)?,
         };
+        let mut safety = match &summary.safety {
+            None => None,
+            Some(report) => {
+                let path = dir.join(SAFETY_FILE);
+                let tracks = match read_optional(&path)? {
+                    None => vec![None; n],
+                    Some(text) => safety_tracks(&path, &text, &times, n)?,
+                };
+                Some(SafetyData {
+                    radius: report.radius,
+                    tracks,
+                    ..SafetyData::default()
+                })
+            }
+        };
         let scenario_path = dir.join(SCENARIO_FILE);
         let scenario_text = read_optional(&scenario_path)?;
         let mut description = None;
@@ -441,9 +621,15 @@ impl RunData {
                     (_, Some(o)) => Some((o.x, o.y)),
                 };
             }
-            if agents.iter().any(AgentTrack::is_velocity) {
-                for (track, limits) in agents.iter_mut().zip(speed_limits(&scenario, summary.dt)) {
+            if agents.iter().any(AgentTrack::is_velocity) || safety.is_some() {
+                let built = built(&scenario, summary.dt);
+                for (track, limits) in agents.iter_mut().zip(built.limits) {
                     track.limits = limits;
+                }
+                if let Some(s) = safety.as_mut() {
+                    s.l = built.l;
+                    s.obstacles = built.obstacles;
+                    s.settings = safety_settings(&scenario);
                 }
             }
         }
@@ -456,6 +642,7 @@ impl RunData {
             agents,
             reference,
             odometry,
+            safety,
         })
     }
 

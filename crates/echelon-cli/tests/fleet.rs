@@ -954,7 +954,9 @@ fn latency_and_cost_are_reported() {
     }
     // Cost: every process used CPU and memory; startup ends before the run.
     let procs = report["cost"]["processes"].as_array().unwrap();
-    assert_eq!(procs.len(), 4 + 2);
+    // 4 robots, leader, collector and the router.
+    assert_eq!(procs.len(), 4 + 2 + 1);
+    assert_eq!(u(&report["cost"]["routers"], &["processes"]), 1);
     for p in procs {
         assert!(f(p, &["cpu"]) > 0.0, "{p}");
         assert!(u(p, &["max_rss"]) > 1 << 20, "{p}");

@@ -24,6 +24,7 @@
 //!   a time (SIMD lanes, all cores), and `echelon bench`'s formation;
 //! - [`lanes`]: the number types the law is written for, and SIMD lanes;
 //! - [`scenario`]: the TOML scenario format and the paper's built-in setups;
+//! - [`safety`]: barrier-certificate safety filter between robots and around obstacles;
 //! - [`output`]: `trajectory.csv` and `summary.json`;
 //! - [`identify`]: a robot's eq. 3 parameters or velocity-base lags from its logs.
 //!
@@ -47,6 +48,7 @@ pub mod output;
 pub mod reference;
 pub mod rng;
 pub mod ros_names;
+pub mod safety;
 pub mod scenario;
 pub mod sim;
 mod spline;

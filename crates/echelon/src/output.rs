@@ -15,9 +15,11 @@ use std::path::{Path, PathBuf};
 use crate::error::OutputError;
 use crate::model::{State, wrap_angle};
 use crate::reference::{Order, Reference, Trajectory};
+use crate::safety::Outcome;
 use crate::scenario::Run;
 use crate::sim::{
-    AgentOutput, AgentSummary, Every, Frame, Observer, ObserverError, Simulation, Summary, Timing,
+    AgentOutput, AgentSummary, Every, Frame, Observer, ObserverError, SafetyReport, SafetyWatch,
+    Simulation, Summary, Timing,
 };
 
 /// The header of `trajectory.csv`: one row per agent per logged sample, SI units,
@@ -368,6 +370,74 @@ impl FrameRows for OdometryRows {
     }
 }
 
+/// The header of `safety.csv` (written when a safety filter runs): per
+/// filtering agent per logged frame, `outcome` (0 nominal command, 1
+/// filtered, 2 braked: the QP was infeasible), `deadlock` (0 or 1: breaking a
+/// deadlock), the law's command and the filtered one (`(v, ω)` for a velocity
+/// base, `(u1, u2)` for a torque-driven robot), `min_distance`: the true
+/// distance from this robot's point `L` ahead to the nearest other robot's
+/// point, and `radius`.
+pub const SAFETY_HEADER: &str =
+    "t,agent,outcome,deadlock,nominal_1,nominal_2,command_1,command_2,min_distance,radius";
+
+/// `safety.csv`: one row per filtering agent per frame.
+#[derive(Debug, Clone, Default)]
+pub struct SafetyRows {
+    l: Vec<f64>,
+    radius: f64,
+    points: Vec<[f64; 2]>,
+}
+
+impl FrameRows for SafetyRows {
+    fn header(&self) -> &'static str {
+        SAFETY_HEADER
+    }
+
+    fn start(&mut self, sim: &Simulation) {
+        self.l = sim.agents().iter().map(|a| a.placement.l).collect();
+        self.radius = sim.safety_radius().unwrap_or(f64::NAN);
+    }
+
+    fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()> {
+        self.points.clear();
+        self.points.extend(
+            frame
+                .states
+                .iter()
+                .zip(&self.l)
+                .map(|(s, &l)| crate::safety::point(s, l)),
+        );
+        for (i, o) in frame.safety.iter().enumerate() {
+            if !o.enabled {
+                continue;
+            }
+            let p = self.points[i];
+            let nearest = self
+                .points
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, q)| (p[0] - q[0]).hypot(p[1] - q[1]))
+                .fold(f64::INFINITY, f64::min);
+            let outcome = match o.outcome {
+                Outcome::Nominal => 0,
+                Outcome::Filtered => 1,
+                Outcome::Braked => 2,
+            };
+            csv.time(frame.t)
+                .int((i + 1) as u64)
+                .int(outcome)
+                .int(u64::from(o.deadlock))
+                .nums(o.nominal)
+                .nums(o.filtered)
+                .opt(nearest.is_finite().then_some(nearest))
+                .num(self.radius);
+            csv.end_row()?;
+        }
+        Ok(())
+    }
+}
+
 /// An [`Observer`] writing a CSV log of the frames it is shown (attach it
 /// with [`Every`](crate::sim::Every) for a logging period): the header when
 /// created, [`FrameRows`] for each frame, a flush when the run finishes.
@@ -569,6 +639,9 @@ pub struct RunSummary {
     pub warnings: Vec<String>,
     /// Per-agent results.
     pub agents: Vec<AgentSummary>,
+    /// The safety filter's statistics (absent without `[safety]`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safety: Option<SafetyReport>,
 }
 
 /// The files a run writes into its output directory.
@@ -581,6 +654,8 @@ pub const REFERENCE_FILE: &str = "reference.csv";
 pub const SCENARIO_FILE: &str = "scenario.toml";
 /// Written when any agent dead-reckons; see [`ODOMETRY_HEADER`].
 pub const ODOMETRY_FILE: &str = "odometry.csv";
+/// Written when a safety filter runs; see [`SAFETY_HEADER`].
+pub const SAFETY_FILE: &str = "safety.csv";
 
 fn io_error(path: &Path) -> impl FnOnce(io::Error) -> OutputError + '_ {
     move |source| OutputError::Io {
@@ -609,9 +684,14 @@ pub fn run_to_dir(
 ) -> Result<RunSummary, OutputError> {
     std::fs::create_dir_all(dir).map_err(io_error(dir))?;
     let mut names = vec![TRAJECTORY_FILE, REFERENCE_FILE, SUMMARY_FILE, SCENARIO_FILE];
-    if !run.simulation.odometers().is_empty() {
+    let odometry_at = (!run.simulation.odometers().is_empty()).then(|| {
         names.push(ODOMETRY_FILE);
-    }
+        names.len() - 1
+    });
+    let safety_at = run.simulation.has_safety().then(|| {
+        names.push(SAFETY_FILE);
+        names.len() - 1
+    });
     let parts: Vec<PathBuf> = names.iter().map(|n| part_path(&dir.join(n))).collect();
     let (summary_part, scenario_part) = (&parts[2], &parts[3]);
     let remove_parts = || {
@@ -622,11 +702,16 @@ pub fn run_to_dir(
     let mut trajectory =
         CsvLog::create(&parts[0], TrajectoryRows::for_simulation(&run.simulation))?;
     let mut reference = CsvLog::create(&parts[1], ReferenceRows::default())?;
-    let mut odometry = match parts.get(4) {
-        Some(p) => Some(CsvLog::create(p, OdometryRows::default())?),
+    let mut odometry = match odometry_at {
+        Some(k) => Some(CsvLog::create(&parts[k], OdometryRows::default())?),
+        None => None,
+    };
+    let mut safety = match safety_at {
+        Some(k) => Some(CsvLog::create(&parts[k], SafetyRows::default())?),
         None => None,
     };
     let mut summary = Summary::new(run.simulation.agents().len(), Summary::SETTLE_TOLERANCE);
+    let mut watch = SafetyWatch::default();
     let sim = &mut run.simulation;
     let result = sim.run(&mut [
         &mut Every::new(
@@ -635,9 +720,11 @@ pub fn run_to_dir(
                 &mut trajectory as &mut dyn Observer,
                 &mut reference,
                 &mut odometry,
+                &mut safety,
             ],
         ) as &mut dyn Observer,
         &mut summary,
+        &mut watch,
         extra,
     ]);
     if let Err(e) = result {
@@ -657,6 +744,7 @@ pub fn run_to_dir(
         settle_tolerance: Summary::SETTLE_TOLERANCE,
         warnings: sim.warnings().to_vec(),
         agents: summary.agents(sim.agents()),
+        safety: watch.report().cloned(),
     };
     let mut json = serde_json::to_string_pretty(&report).map_err(|e| OutputError::Io {
         path: summary_part.clone(),

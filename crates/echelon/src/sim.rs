@@ -20,6 +20,7 @@ pub use crate::model::Pose;
 use crate::model::{Input, RobotParams, State, Torques};
 use crate::odometry::{Odometer, OdometrySpec};
 use crate::reference::{Jet, Order, Reference, Trajectory};
+use crate::safety::{Neighbour, Obstacle, Outcome, SafetyConfig, SafetyFilter};
 
 /// How a robot is driven, and so which law drives it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -288,6 +289,52 @@ pub struct VelocityOutput {
     pub saturated: bool,
 }
 
+/// What an agent's safety filter did at the last controller sample
+/// ([`crate::safety`]). The commands are `(v, ω)` for a velocity base and
+/// `(u1, u2)` for a torque-driven robot.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SafetyOutput {
+    /// Whether this agent runs the filter.
+    pub enabled: bool,
+    /// Whether the filter ran at this frame (a controller sample).
+    pub sampled: bool,
+    /// What the filter did.
+    pub outcome: Outcome,
+    /// Whether the agent is breaking a deadlock.
+    pub deadlock: bool,
+    /// Deadlocks this agent has started breaking so far.
+    pub deadlock_breaks: u64,
+    /// The law's command.
+    pub nominal: [f64; 2],
+    /// The command sent to the base.
+    pub filtered: [f64; 2],
+    /// Distance from the agent's point to the nearest neighbour's point it
+    /// sees (within `range`), m; infinite when it sees none.
+    pub min_distance: f64,
+}
+
+/// Safety settings of a simulation: each agent's filter (`None`: it does
+/// not filter) and the known obstacles.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SafetySpec {
+    /// Per agent.
+    pub agents: Vec<Option<SafetyConfig>>,
+    /// Static obstacles every agent knows.
+    pub obstacles: Vec<Obstacle>,
+}
+
+/// The filters of a running simulation and their scratch.
+#[derive(Debug, Clone)]
+struct SafetyState {
+    filters: Vec<Option<SafetyFilter>>,
+    obstacles: Vec<Obstacle>,
+    /// `L` of each agent (the point kept apart).
+    l: Vec<f64>,
+    out: Vec<SafetyOutput>,
+    seen: Vec<State>,
+    neighbours: Vec<Neighbour>,
+}
+
 /// A sampled controller's held command: torques' inputs or a velocity command.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 struct Held {
@@ -310,6 +357,8 @@ pub struct Frame<'a> {
     pub outputs: &'a [AgentOutput],
     /// Each agent's odometer, if it dead-reckons (empty without odometry).
     pub odometers: &'a [Option<Odometer>],
+    /// Each agent's safety filter output (empty without a safety filter).
+    pub safety: &'a [SafetyOutput],
 }
 
 /// An error an observer may return (e.g. an I/O error while logging).
@@ -617,6 +666,8 @@ pub struct Simulation {
     odometry_every: Vec<u64>,
     /// True distance travelled `∫v dt`, per agent (what the wheels turn through).
     distance: Vec<f64>,
+    /// Safety filters, when any agent filters.
+    safety: Option<Box<SafetyState>>,
     // Scratch for stages 2–4.
     stage: Vec<State>,
     k2: Vec<State>,
@@ -753,6 +804,7 @@ impl Simulation {
             odometers: Vec::new(),
             odometry_every: Vec::new(),
             distance: vec![0.0; n],
+            safety: None,
             stage: vec![State::default(); n],
             k2: vec![State::default(); n],
             k3: vec![State::default(); n],
@@ -889,8 +941,179 @@ impl Simulation {
                     h.c = v.command;
                 }
             }
+            if self.safety.is_some() {
+                self.filter();
+            }
+        } else if let Some(safety) = self.safety.as_deref_mut() {
+            for o in &mut safety.out {
+                o.sampled = false;
+            }
         }
         self.fresh = true;
+    }
+
+    /// Runs each agent's safety filter on the held (just sampled) commands,
+    /// with the neighbours' states its controller sees (its odometry estimate
+    /// when it dead-reckons, as a neighbour would broadcast it), and
+    /// re-evaluates the plant's derivative for the filtered commands.
+    fn filter(&mut self) {
+        let t = self.time();
+        let Some(safety) = self.safety.as_deref_mut() else {
+            return;
+        };
+        let n = self.state.len();
+        for (j, seen) in safety.seen.iter_mut().enumerate() {
+            *seen = match self.odometers.get(j) {
+                Some(Some(o)) => o.measure(&self.state[j]),
+                _ => self.state[j],
+            };
+        }
+        for i in 0..n {
+            if safety.filters[i].is_none() {
+                continue;
+            }
+            safety.neighbours.clear();
+            for j in (0..n).filter(|&j| j != i) {
+                let dv = [self.k1[j].v, self.k1[j].omega];
+                safety.neighbours.push(Neighbour::of_state(
+                    &safety.seen[j],
+                    safety.l[j],
+                    Some(dv),
+                    safety.filters[j].is_some(),
+                ));
+            }
+            let Some(filter) = safety.filters[i].as_mut() else {
+                continue;
+            };
+            let (me, l) = (&safety.seen[i], safety.l[i]);
+            let (nb, obs) = (&safety.neighbours[..], &safety.obstacles[..]);
+            let h = &mut self.held[i];
+            let o = &mut safety.out[i];
+            match &self.sys.agents[i].drive {
+                Drive::Velocity(r) => {
+                    let f = filter.velocity(t, me, l, h.c, &r.base, nb, obs);
+                    h.c = f.command;
+                    o.nominal = [f.nominal.v, f.nominal.omega];
+                    o.filtered = [f.command.v, f.command.omega];
+                    (o.outcome, o.deadlock, o.min_distance) =
+                        (f.outcome, f.deadlock, f.min_distance);
+                }
+                Drive::Torque { robot, .. } => {
+                    let f = filter.torque(t, me, l, robot, h.u, nb, obs);
+                    h.u = f.command;
+                    o.nominal = [f.nominal.u1, f.nominal.u2];
+                    o.filtered = [f.command.u1, f.command.u2];
+                    (o.outcome, o.deadlock, o.min_distance) =
+                        (f.outcome, f.deadlock, f.min_distance);
+                }
+            }
+            o.sampled = true;
+            o.deadlock_breaks = filter.deadlock_breaks();
+        }
+        // The plant moves under the filtered commands from this instant on.
+        self.sys.evaluate(
+            t,
+            &self.state,
+            Some(&self.held),
+            &self.odometers,
+            None,
+            &mut self.k1,
+            &mut self.speeds[0],
+        );
+        for (i, a) in self.sys.agents.iter().enumerate() {
+            let (h, o) = (&self.held[i], &mut self.out[i]);
+            match &a.drive {
+                Drive::Torque { robot, .. } => {
+                    (o.u, o.tau) = robot.actuate(h.u);
+                }
+                Drive::Velocity(r) => {
+                    if let Some(v) = o.velocity.as_mut() {
+                        v.applied = r.base.limit(h.c).0;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Puts a safety filter between each agent's law and its base
+    /// ([`crate::safety`]); `spec.agents[i]` for agent `i` (`None`: it does
+    /// not filter). The law and the filter then run once per controller
+    /// period (once per step `dt` for a continuous-time controller) and the
+    /// filtered command is held in between. Refuses a spec of the wrong
+    /// length, and a robot whose point starts within `radius` of another's
+    /// or of an obstacle's edge.
+    pub fn with_safety(mut self, spec: SafetySpec) -> Result<Simulation, SimError> {
+        let n = self.sys.agents.len();
+        if spec.agents.len() != n {
+            return Err(SimError::Timing(format!(
+                "{} safety configs for {n} agents",
+                spec.agents.len()
+            )));
+        }
+        if spec.agents.iter().all(Option::is_none) {
+            return Ok(self);
+        }
+        let l: Vec<f64> = self.sys.agents.iter().map(|a| a.placement.l).collect();
+        let points: Vec<[f64; 2]> = self
+            .sys
+            .agents
+            .iter()
+            .zip(&l)
+            .map(|(a, &l)| crate::safety::point(&a.start, l))
+            .collect();
+        if let Some((agent, source)) =
+            crate::safety::start_conflict(&points, &spec.agents, &spec.obstacles)
+        {
+            return Err(SimError::Param {
+                context: format!("agent {} start", agent + 1),
+                source,
+            });
+        }
+        if self.hold_every == 0 {
+            self.hold_every = 1;
+        }
+        self.safety = Some(Box::new(SafetyState {
+            filters: spec
+                .agents
+                .iter()
+                .map(|c| c.map(SafetyFilter::new))
+                .collect(),
+            obstacles: spec.obstacles,
+            l,
+            out: spec
+                .agents
+                .iter()
+                .map(|c| SafetyOutput {
+                    enabled: c.is_some(),
+                    min_distance: f64::INFINITY,
+                    ..SafetyOutput::default()
+                })
+                .collect(),
+            seen: vec![State::default(); n],
+            neighbours: Vec::with_capacity(n),
+        }));
+        self.fresh = false;
+        Ok(self)
+    }
+
+    /// The obstacles every agent knows (empty without a safety filter).
+    pub fn obstacles(&self) -> &[Obstacle] {
+        self.safety.as_ref().map_or(&[], |s| &s.obstacles[..])
+    }
+
+    /// Whether a safety filter runs.
+    pub fn has_safety(&self) -> bool {
+        self.safety.is_some()
+    }
+
+    /// The smallest `radius` among the agents that filter (`None`: none does).
+    pub fn safety_radius(&self) -> Option<f64> {
+        let s = self.safety.as_deref()?;
+        s.filters
+            .iter()
+            .flatten()
+            .map(|f| f.config().radius)
+            .reduce(f64::min)
     }
 
     /// The current frame (evaluating the controllers if needed).
@@ -903,6 +1126,7 @@ impl Simulation {
             states: &self.state,
             outputs: &self.out,
             odometers: &self.odometers,
+            safety: self.safety.as_ref().map_or(&[], |s| &s.out[..]),
         }
     }
 
@@ -1106,6 +1330,147 @@ impl Observer for Summary {
             if let Some(v) = o.velocity {
                 *self.saturated[i].get_or_insert(0) += u64::from(v.saturated);
             }
+        }
+        Ok(())
+    }
+}
+
+/// One agent's safety statistics over a run.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct AgentSafety {
+    /// 1-based agent number.
+    pub agent: usize,
+    /// Controller samples at which the filter changed the command.
+    pub active: u64,
+    /// Controller samples at which the QP was infeasible (or failed) and the
+    /// robot braked.
+    pub infeasible: u64,
+    /// Deadlocks it started breaking.
+    pub deadlock_breaks: u64,
+}
+
+/// Safety statistics of a run (`summary.json`'s `safety`), from the true
+/// states of every frame it is shown (every step in `run_to_dir`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct SafetyReport {
+    /// The smallest `radius` among the agents that filter, m.
+    pub radius: f64,
+    /// Smallest distance between two robots' points `L` ahead, m.
+    pub min_distance: f64,
+    /// When it happened, s.
+    pub min_distance_t: f64,
+    /// Between which agents (1-based).
+    pub min_distance_agents: [usize; 2],
+    /// Smallest distance from a robot's point to an obstacle's edge, m
+    /// (absent without obstacles).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_obstacle_clearance: Option<f64>,
+    /// Sum over agents of [`AgentSafety::active`].
+    pub active: u64,
+    /// Sum over agents of [`AgentSafety::infeasible`].
+    pub infeasible: u64,
+    /// Sum over agents of [`AgentSafety::deadlock_breaks`].
+    pub deadlock_breaks: u64,
+    /// Per agent.
+    pub agents: Vec<AgentSafety>,
+}
+
+/// Gathers a [`SafetyReport`] over a run (nothing without a safety filter).
+#[derive(Debug, Clone, Default)]
+pub struct SafetyWatch {
+    l: Vec<f64>,
+    obstacles: Vec<Obstacle>,
+    report: Option<SafetyReport>,
+}
+
+impl SafetyWatch {
+    /// The report, `None` when the run had no safety filter.
+    pub fn report(&self) -> Option<&SafetyReport> {
+        self.report.as_ref()
+    }
+
+    /// Smallest distance between two robots' points in `states`, and which.
+    pub fn closest_pair(states: &[State], l: &[f64]) -> Option<(f64, [usize; 2])> {
+        let points: Vec<[f64; 2]> = states
+            .iter()
+            .zip(l)
+            .map(|(s, &l)| crate::safety::point(s, l))
+            .collect();
+        let mut best = None;
+        for i in 0..points.len() {
+            for j in 0..i {
+                let d = (points[i][0] - points[j][0]).hypot(points[i][1] - points[j][1]);
+                if best.is_none_or(|(b, _)| d < b) {
+                    best = Some((d, [j + 1, i + 1]));
+                }
+            }
+        }
+        best
+    }
+}
+
+impl Observer for SafetyWatch {
+    fn start(&mut self, sim: &Simulation) -> Result<(), ObserverError> {
+        let Some(safety) = sim.safety.as_deref() else {
+            return Ok(());
+        };
+        self.l.clone_from(&safety.l);
+        self.obstacles.clone_from(&safety.obstacles);
+        let radius = safety
+            .filters
+            .iter()
+            .flatten()
+            .map(|f| f.config().radius)
+            .fold(f64::INFINITY, f64::min);
+        self.report = Some(SafetyReport {
+            radius,
+            min_distance: f64::INFINITY,
+            min_distance_t: 0.0,
+            min_distance_agents: [0, 0],
+            min_obstacle_clearance: (!self.obstacles.is_empty()).then_some(f64::INFINITY),
+            active: 0,
+            infeasible: 0,
+            deadlock_breaks: 0,
+            agents: (1..=safety.l.len())
+                .map(|agent| AgentSafety {
+                    agent,
+                    active: 0,
+                    infeasible: 0,
+                    deadlock_breaks: 0,
+                })
+                .collect(),
+        });
+        Ok(())
+    }
+
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        let Some(r) = self.report.as_mut() else {
+            return Ok(());
+        };
+        if let Some((d, pair)) = SafetyWatch::closest_pair(frame.states, &self.l)
+            && d < r.min_distance
+        {
+            (r.min_distance, r.min_distance_t, r.min_distance_agents) = (d, frame.t, pair);
+        }
+        if let Some(clear) = r.min_obstacle_clearance.as_mut() {
+            for (s, &l) in frame.states.iter().zip(&self.l) {
+                let p = crate::safety::point(s, l);
+                for o in &self.obstacles {
+                    *clear = clear.min((p[0] - o.x).hypot(p[1] - o.y) - o.r);
+                }
+            }
+        }
+        for (a, o) in r.agents.iter_mut().zip(frame.safety) {
+            if o.sampled {
+                a.active += u64::from(o.outcome != Outcome::Nominal);
+                a.infeasible += u64::from(o.outcome == Outcome::Braked);
+            }
+            a.deadlock_breaks = o.deadlock_breaks;
+        }
+        if frame.last {
+            r.active = r.agents.iter().map(|a| a.active).sum();
+            r.infeasible = r.agents.iter().map(|a| a.infeasible).sum();
+            r.deadlock_breaks = r.agents.iter().map(|a| a.deadlock_breaks).sum();
         }
         Ok(())
     }

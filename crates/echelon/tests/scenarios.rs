@@ -12,9 +12,10 @@ use echelon::scenario::schema::ScenarioFile;
 use echelon::scenario::{self, Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 
-const NAMES: [&str; 10] = [
+const NAMES: [&str; 12] = [
     "circle-pentagon-velocity",
     "circle-pentagon",
+    "crossing",
     "experiment-circle-velocity",
     "experiment-circle",
     "experiment-lemniscate",
@@ -22,6 +23,7 @@ const NAMES: [&str; 10] = [
     "identify-excitation",
     "lemniscate-wedge",
     "nonfeasible",
+    "obstacle-slalom",
     "turtlebot-circle",
 ];
 

@@ -51,6 +51,46 @@ pub struct ScenarioFile {
     /// Settings for running the scenario as a networked fleet (`echelon fleet`).
     #[serde(default, skip_serializing_if = "FleetSection::is_default")]
     pub fleet: FleetSection,
+    /// Barrier-certificate safety filter for every agent (`docs/safety.md`;
+    /// an agent's `safety` overrides `enabled`, `gain`, `range`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safety: Option<SafetySection>,
+}
+
+/// `[safety]` or an agent's `safety = { … }`: keep each robot's point `L`
+/// ahead at least `radius` from the others' and from obstacles' edges.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SafetySection {
+    /// `false` turns the filter off (for one agent, under `[safety]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub enabled: Option<bool>,
+    /// Smallest distance between two robots' points `L` ahead, and a
+    /// point's clearance from an obstacle's edge, m (`[safety]` only; required).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
+    /// `γ`, 1/s (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain: Option<f64>,
+    /// Sensing range: robots whose point is farther are ignored, m (default:
+    /// every robot).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range: Option<f64>,
+    /// Static disc obstacles (`[safety]` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obstacles: Option<Vec<ObstacleSpec>>,
+}
+
+/// A disc obstacle `{ x, y, r }`, m.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObstacleSpec {
+    /// Centre, m.
+    pub x: f64,
+    /// Centre, m.
+    pub y: f64,
+    /// Radius, m.
+    pub r: f64,
 }
 
 /// `[odometry]`: the robot dead-reckons from its wheel encoders (paper section 6)
@@ -467,6 +507,9 @@ pub struct AgentSection {
     /// This agent's ROS 2 robot (overrides `[fleet.ros2]` field by field).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros2: Option<Ros2Section>,
+    /// This agent's safety filter (over `[safety]`: `enabled`, `gain`, `range`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safety: Option<SafetySection>,
 }
 
 /// What an agent's controller does.

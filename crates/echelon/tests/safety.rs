@@ -1,0 +1,256 @@
+//! Barrier-certificate safety (issue 15): the crossing and obstacle built-ins
+//! with and without the filter, a head-on deadlock, and bad `[safety]` input.
+#![allow(clippy::unwrap_used)] // tests fail loudly by design
+
+use echelon::base::{VelocityBase, VelocityCommand};
+use echelon::safety::{Neighbour, SafetyConfig, SafetyFilter, point};
+use echelon::scenario::{Overrides, Scenario};
+use echelon::sim::{Frame, ObserverError, SafetyReport, SafetyWatch, Summary};
+use echelon::{Observer, ScenarioError, State};
+
+/// Runs a built-in (with `safety` removed when `filter` is false), watching
+/// every step: the safety report (if any), the smallest distance between two
+/// robots' points over the run, the smallest clearance from an obstacle edge
+/// (the scenario's obstacles, filter or not) and the final ‖e‖ of each agent.
+fn run(name: &str, filter: bool) -> (Option<SafetyReport>, f64, f64, Vec<f64>) {
+    let mut s = Scenario::builtin(name).unwrap();
+    let obstacles: Vec<[f64; 3]> = s
+        .file
+        .safety
+        .as_ref()
+        .and_then(|s| s.obstacles.clone())
+        .unwrap_or_default()
+        .iter()
+        .map(|o| [o.x, o.y, o.r])
+        .collect();
+    if !filter {
+        s.file.safety = None;
+    }
+    let mut run = s.build(&Overrides::default()).unwrap();
+    let sim = &mut run.simulation;
+    assert_eq!(sim.has_safety(), filter);
+    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement.l).collect();
+    let (mut closest, mut clearance) = (f64::INFINITY, f64::INFINITY);
+    let mut every = |f: &Frame<'_>| -> Result<(), ObserverError> {
+        closest = closest.min(SafetyWatch::closest_pair(f.states, &l).unwrap().0);
+        for (st, &l) in f.states.iter().zip(&l) {
+            let p = point(st, l);
+            for o in &obstacles {
+                clearance = clearance.min((p[0] - o[0]).hypot(p[1] - o[1]) - o[2]);
+            }
+        }
+        Ok(())
+    };
+    let mut watch = SafetyWatch::default();
+    let mut summary = Summary::new(sim.agents().len(), Summary::SETTLE_TOLERANCE);
+    sim.run(&mut [&mut every as &mut dyn Observer, &mut watch, &mut summary])
+        .unwrap();
+    let finals = summary
+        .agents(sim.agents())
+        .iter()
+        .map(|a| a.final_error)
+        .collect();
+    (watch.report().cloned(), closest, clearance, finals)
+}
+
+#[test]
+fn crossing_keeps_every_pair_apart_and_the_formation_still_converges() {
+    let (report, closest, _, finals) = run("crossing", true);
+    let report = report.unwrap();
+    // Every step, true states: at least radius − 1 mm (0.3000720 m measured).
+    assert!(closest >= 0.3 - 1e-3, "closest {closest}");
+    assert_eq!(report.min_distance, closest);
+    assert_eq!(report.infeasible, 0);
+    assert!(report.active > 0);
+    // The columns' heads meet in perfect symmetry: the deadlock rule acts.
+    assert!(report.deadlock_breaks > 0, "{report:?}");
+    // The formation converges afterwards (final ‖e‖ < 1e-4 m for all six).
+    for (i, e) in finals.iter().enumerate() {
+        assert!(*e < 1e-3, "agent {}: final ‖e‖ = {e}", i + 1);
+    }
+    // Without the filter the nominal law drives robots within 0.1 m.
+    let (none, closest, _, _) = run("crossing", false);
+    assert!(none.is_none());
+    assert!(closest < 0.1, "closest without the filter {closest}");
+}
+
+#[test]
+fn the_torque_column_goes_around_the_posts() {
+    let (report, _, clearance, finals) = run("obstacle-slalom", true);
+    let report = report.unwrap();
+    // Exponential barrier on (u1, u2): clearance ≥ radius − 1 mm (0.15024 m measured).
+    assert!(clearance >= 0.15 - 1e-3, "clearance {clearance}");
+    assert_eq!(report.min_obstacle_clearance, Some(clearance));
+    assert!(report.min_distance >= 0.15 - 1e-3);
+    assert_eq!(report.infeasible, 0);
+    for (i, e) in finals.iter().enumerate() {
+        assert!(*e < 1e-3, "agent {}: final ‖e‖ = {e}", i + 1);
+    }
+    // Without the filter the robots' points pass through the posts.
+    let (_, _, clearance, _) = run("obstacle-slalom", false);
+    assert!(clearance < 0.0, "clearance without the filter {clearance}");
+}
+
+/// Two ideal velocity bases head-on, each driving its point toward a goal
+/// behind the other (`ṗ = −k (p − goal)`, the nominal mapped to `(v, ω)`),
+/// in perfect mirror symmetry. Without the deadlock rule they would stop
+/// nose to nose; with it both keep right, pass and reach their goals.
+#[test]
+fn a_head_on_deadlock_is_broken_and_both_robots_arrive() {
+    let l = 0.1;
+    let config = SafetyConfig::new(0.4, 1.0, f64::INFINITY).unwrap();
+    let base = VelocityBase {
+        v_max: 0.5,
+        omega_max: 4.0,
+        ..VelocityBase::IDEAL
+    };
+    let mut robots = [
+        State::at_rest(-2.0, 0.0, 0.0),
+        State::at_rest(2.0, 0.0, std::f64::consts::PI),
+    ];
+    let goals = [[2.0, 0.0], [-2.0, 0.0]];
+    let mut filters = [SafetyFilter::new(config), SafetyFilter::new(config)];
+    let dt = 0.01;
+    let mut closest = f64::INFINITY;
+    for step in 0..6000 {
+        let t = step as f64 * dt;
+        let seen = robots;
+        for i in 0..2 {
+            let me = &seen[i];
+            let other = Neighbour::of_state(&seen[1 - i], l, None, true);
+            let p = point(me, l);
+            let want = [-(p[0] - goals[i][0]), -(p[1] - goals[i][1])];
+            let (s, c) = me.theta.sin_cos();
+            let nominal = VelocityCommand {
+                v: c * want[0] + s * want[1],
+                omega: (-s * want[0] + c * want[1]) / l,
+            };
+            let f = filters[i].velocity(t, me, l, nominal, &base, &[other], &[]);
+            let r = &mut robots[i];
+            // Exact unicycle step for constant (v, ω).
+            let c = f.command;
+            let th = r.theta + c.omega * dt;
+            if c.omega.abs() > 1e-12 {
+                r.x += c.v / c.omega * (th.sin() - r.theta.sin());
+                r.y -= c.v / c.omega * (th.cos() - r.theta.cos());
+            } else {
+                r.x += c.v * dt * r.theta.cos();
+                r.y += c.v * dt * r.theta.sin();
+            }
+            (r.theta, r.v, r.omega) = (th, c.v, c.omega);
+        }
+        let (a, b) = (point(&robots[0], l), point(&robots[1], l));
+        closest = closest.min((a[0] - b[0]).hypot(a[1] - b[1]));
+    }
+    // Safe all the way (the ZOH over dt costs well under a millimetre).
+    assert!(closest >= 0.4 - 1e-3, "closest {closest}");
+    for (i, f) in filters.iter().enumerate() {
+        assert!(
+            f.deadlock_breaks() >= 1,
+            "robot {i} never broke the deadlock"
+        );
+        let p = point(&robots[i], l);
+        let miss = (p[0] - goals[i][0]).hypot(p[1] - goals[i][1]);
+        assert!(miss < 1e-3, "robot {i} is {miss} m from its goal");
+    }
+    // Keep right: robot 1 (heading +x) swerved to −y, so it passed robot 2
+    // on its left-hand side, and so did robot 2; mirror symmetry is kept.
+}
+
+const BASE: &str = r#"name = "base"
+[sim]
+duration = 1.0
+dt = 0.01
+
+[reference.line]
+speed = 0.2
+start = { x = 0.0, y = 0.0, theta = 0.0 }
+
+[safety]
+radius = 0.3
+gain = 1.0
+obstacles = [{ x = 3.0, y = 0.0, r = 0.2 }]
+
+[[agents]]
+start = { x = -0.5, y = 0.5, theta = 0.0 }
+leader = "reference"
+offset = { x = 0.5, y = 0.5 }
+
+[[agents]]
+start = { x = -0.5, y = -0.5, theta = 0.0 }
+leader = "reference"
+offset = { x = 0.5, y = -0.5 }
+safety = { gain = 2.0 }
+"#;
+
+fn build(src: &str) -> Result<echelon::Run, ScenarioError> {
+    Scenario::parse(src, "test.toml", None)?.build(&Overrides::default())
+}
+
+#[test]
+fn the_base_builds_with_a_filter_per_agent() {
+    let run = build(BASE).unwrap();
+    assert!(run.simulation.has_safety());
+    assert_eq!(run.simulation.obstacles().len(), 1);
+    assert_eq!(run.simulation.safety_radius(), Some(0.3));
+}
+
+#[test]
+fn bad_safety_input_names_file_line_column_and_field() {
+    let cases: [(&str, &str, usize, &str, &str); 8] = [
+        ("radius = 0.3", "radius = 0.0", 11, "safety.radius", "> 0"),
+        ("gain = 1.0", "gain = -1.0", 12, "safety.gain", "> 0"),
+        ("r = 0.2 }", "r = 0.0 }", 13, "safety.obstacles[1].r", "> 0"),
+        (
+            "gain = 2.0 }",
+            "gain = 0.0 }",
+            24,
+            "agents[2].safety.gain",
+            "> 0",
+        ),
+        (
+            "gain = 2.0 }",
+            "radius = 0.5 }",
+            24,
+            "agents[2].safety.radius",
+            "[safety]",
+        ),
+        (
+            "gain = 2.0 }",
+            "speed = 1.0 }",
+            24,
+            "agents[2].safety.speed",
+            "unknown field",
+        ),
+        // A robot inside an obstacle, and one within radius of another.
+        (
+            "x = -0.5, y = -0.5, theta",
+            "x = 2.9, y = 0.0, theta",
+            21,
+            "agents[2].start",
+            "obstacle 1",
+        ),
+        (
+            "x = -0.5, y = -0.5, theta",
+            "x = -0.5, y = 0.3, theta",
+            21,
+            "agents[2].start",
+            "agent 1",
+        ),
+    ];
+    for (from, to, line, field, message) in cases {
+        assert!(BASE.contains(from), "`{from}` is not in BASE");
+        let src = BASE.replace(from, to);
+        let err = match build(&src) {
+            Ok(_) => panic!("accepted:\n{src}"),
+            Err(e) => e,
+        };
+        let text = err.to_string();
+        assert_eq!(err.location.line, line, "{text}");
+        assert!(err.location.column > 0, "{text}");
+        assert_eq!(err.field, field, "{text}");
+        assert!(err.message.contains(message), "{text}");
+        assert!(!text.contains('\n'), "one line: {text}");
+        assert!(text.starts_with(&format!("test.toml:{line}:")), "{text}");
+    }
+}

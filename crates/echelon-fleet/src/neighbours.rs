@@ -102,13 +102,15 @@ impl NeighbourTable {
     }
 
     /// Takes a decoded state message that arrived at local time `now`; its
-    /// own, unknown agents and older messages of the same stream are refused
-    /// (counted).
+    /// own are ignored, unknown agents and older messages of the same stream
+    /// are refused (counted).
     pub fn on_state(&mut self, h: Header, s: &RobotState, now: f64) {
+        if s.agent == self.me {
+            return;
+        }
         let Some(e) = (s.agent as usize)
             .checked_sub(1)
             .and_then(|i| self.entries.get_mut(i))
-            .filter(|_| s.agent != self.me)
         else {
             self.refused += 1;
             return;
@@ -292,7 +294,7 @@ mod tests {
     }
 
     #[test]
-    fn own_unknown_and_reordered_messages_are_refused() {
+    fn own_messages_are_ignored_unknown_and_reordered_ones_refused() {
         let mut n = table();
         let (h, s) = msg(1, 0, 0.0, 3.0, 0.0);
         n.on_state(h, &s, 0.0);
@@ -302,7 +304,7 @@ mod tests {
         n.on_state(h, &s, 0.0);
         let (h, s) = msg(2, 4, 0.0, 2.0, 0.0);
         n.on_state(h, &s, 0.0);
-        assert_eq!(n.refused(), 3);
+        assert_eq!(n.refused(), 2);
         let got = list(n.build(0.0, 0.0, [0.0, 0.0], 5.0));
         assert_eq!(got.len(), 1);
         assert!((got[0].p[0] - 1.05).abs() < 1e-12);

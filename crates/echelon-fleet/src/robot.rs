@@ -131,11 +131,37 @@ pub struct SafetyCounts {
     pub deadlock_breaks: u64,
     /// Neighbours within range whose stream went stale (once per episode).
     pub stale_neighbours: u64,
-    /// Neighbour messages refused (its own, reordered, malformed).
+    /// Neighbour messages refused (unknown agent, reordered, malformed; its
+    /// own are ignored).
     pub refused: u64,
     /// Smallest distance from its point to a neighbour's point it saw within
     /// range, m (`null`: none seen).
     pub min_distance: Option<f64>,
+}
+
+impl SafetyCounts {
+    /// The fleet's total over robot reports (JSON, as `fleet up` reads
+    /// them): counters summed, the smallest `min_distance`; `None` when no
+    /// robot filters.
+    pub fn total(robots: &[serde_json::Value]) -> Option<SafetyCounts> {
+        let mut any = false;
+        let mut t = SafetyCounts::default();
+        for s in robots.iter().filter_map(|r| r.get("safety")) {
+            any = true;
+            let n = |k: &str| s.get(k).and_then(serde_json::Value::as_u64).unwrap_or(0);
+            t.steps += n("steps");
+            t.active += n("active");
+            t.infeasible += n("infeasible");
+            t.stale_brakes += n("stale_brakes");
+            t.deadlock_breaks += n("deadlock_breaks");
+            t.stale_neighbours += n("stale_neighbours");
+            t.refused += n("refused");
+            if let Some(d) = s.get("min_distance").and_then(serde_json::Value::as_f64) {
+                t.min_distance = Some(t.min_distance.map_or(d, |m| m.min(d)));
+            }
+        }
+        any.then_some(t)
+    }
 }
 
 /// A robot's safety settings, from the scenario's `[safety]`.

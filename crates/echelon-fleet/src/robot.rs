@@ -1773,4 +1773,66 @@ mod tests {
         assert_eq!(r.plant().commanded, Input::default());
         assert_eq!((stats.published, stats.counters.accepted), (2, 1));
     }
+
+    /// `crossing`'s agent 1 hears its neighbour (agent 4, 1.2 m away: in
+    /// range) once, then never again while the reference keeps coming: it
+    /// moves while the neighbour is fresh and held stopped, then brakes to
+    /// rest once the hold is over (docs/fleet.md, "Safety filter between
+    /// robots"), counting one stale episode.
+    #[test]
+    fn a_neighbour_stale_past_the_hold_brakes_the_robot() {
+        let s = Scenario::resolve("crossing").unwrap_or_else(|e| panic!("{e}"));
+        let mut r = robot(&s, 1, FaultSpec::default());
+        assert!(r.has_safety());
+        let mut buf = Vec::new();
+        let b1 = RobotState {
+            t: 0.0,
+            agent: 4,
+            link: LinkStatus::Tracking,
+            state: State {
+                x: -0.5,
+                y: -0.6,
+                ..State::default()
+            },
+            ..RobotState::default()
+        };
+        wire::encode_state(&mut buf, Header { source: 9, seq: 0 }, &b1);
+        r.on_neighbour(wire::decode(&buf), 0.0);
+        let timeout = r.config().link_timeout;
+        let mut moved = false;
+        let mut seq = 0;
+        let mut t = 0.0;
+        while t < 2.0 {
+            if t >= 0.02 * seq as f64 {
+                let tr = 0.02 * seq as f64;
+                let r0 = wire::Reference {
+                    t: tr,
+                    motion: LeaderMotion {
+                        p: [0.15 * tr, 0.0],
+                        dp: [0.15, 0.0],
+                        ddp: [0.0, 0.0],
+                    },
+                    speed: 0.15,
+                    turn_rate: 0.0,
+                };
+                wire::encode_reference(&mut buf, Header { source: 1, seq }, &r0);
+                r.on_message(&buf, t);
+                seq += 1;
+            }
+            if r.is_due(t) {
+                let _ = r.tick(t);
+                let v = r.last().state.v;
+                if t < timeout + STALE_HOLD - 0.05 && v.abs() > 1e-3 {
+                    moved = true;
+                }
+            }
+            t += 0.001;
+        }
+        let c = r.safety_counts().unwrap_or_default();
+        assert!(moved, "it should move while the neighbour is fresh or held");
+        assert_eq!(c.stale_neighbours, 1, "{c:?}");
+        assert!(c.stale_brakes > 100, "{c:?}");
+        let last = r.last().state;
+        assert!(last.v.abs() < 1e-9 && last.omega.abs() < 1e-9, "{last:?}");
+    }
 }

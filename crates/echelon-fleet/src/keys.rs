@@ -3,7 +3,7 @@
 //! | key | publisher | payload |
 //! |---|---|---|
 //! | `echelon/<fleet>/reference` | leader | reference sample ([`crate::wire`], binary) |
-//! | `echelon/<fleet>/robot/<k>/state` | robot `k` (from 1) | robot state ([`crate::wire`], binary) |
+//! | `echelon/<fleet>/robot/<k>/state` | robot `k` (from 1) | robot state ([`crate::wire`], binary); read by the collector, robot `k`'s followers and, with `[safety]`, every other robot |
 //! | `echelon/<fleet>/robot/<k>/stats` | robot `k` | its counters, JSON, once per fleet second and at exit |
 //! | `echelon/<fleet>/alive/<role>` | every process | liveliness token (`leader`, `collector`, `robot/<k>`) |
 //!
@@ -57,6 +57,12 @@ impl Keys {
     /// `echelon/<fleet>/robot/<k>/state`.
     pub fn state(&self, k: u32) -> String {
         format!("{ROOT}/{}/robot/{k}/state", self.fleet)
+    }
+
+    /// `echelon/<fleet>/robot/*/state`: every robot's state (neighbours for
+    /// the safety filter).
+    pub fn states(&self) -> String {
+        format!("{ROOT}/{}/robot/*/state", self.fleet)
     }
 
     /// `echelon/<fleet>/robot/<k>/stats`.

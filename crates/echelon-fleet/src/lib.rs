@@ -21,6 +21,7 @@ pub mod keys;
 pub mod latency;
 pub mod leader;
 pub mod link;
+pub mod neighbours;
 pub mod net;
 pub mod plant;
 pub mod robot;

@@ -25,9 +25,12 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 use zenoh::Wait;
 
+use echelon::base::VelocityCommand;
 use echelon::control::LeaderMotion;
 use echelon::follow::{LeaderView, follow};
 use echelon::formation::Leader;
+use echelon::model::{Input, State};
+use echelon::safety::{Obstacle, Outcome, SafetyConfig, SafetyFilter, point};
 use echelon::scenario::{FleetSettings, LinkLoss, Overrides, Ros2Link, Scenario};
 use echelon::sim::AgentSpec;
 
@@ -36,6 +39,7 @@ use crate::faults::{FaultInjector, FaultSpec, Verdict};
 use crate::keys::{Keys, robot_role};
 use crate::latency::{self, Latency, LatencyReport};
 use crate::link::{Counters, LeaderSample, StreamTracker, predict};
+use crate::neighbours::{NeighbourTable, STALE_HOLD, Sight};
 use crate::net::{self, NetOptions};
 use crate::plant::{Command, Plant, SimulatedDrive};
 use crate::ros2::attachment::{Gid, gid_from_token};
@@ -106,6 +110,71 @@ pub struct RobotReport {
     /// With `--ros2`: the drive's odometry and command counters.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ros2: Option<Ros2Counters>,
+    /// With `[safety]`: what its safety filter did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safety: Option<SafetyCounts>,
+}
+
+/// What a robot's safety filter did over its run (`docs/safety.md`, "In the
+/// fleet").
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct SafetyCounts {
+    /// Control steps that went through the filter.
+    pub steps: u64,
+    /// Steps whose command the filter changed (filtered or braked).
+    pub active: u64,
+    /// Steps braked because the QP was infeasible (or the solver failed).
+    pub infeasible: u64,
+    /// Steps braked because a neighbour within range stayed stale past the hold.
+    pub stale_brakes: u64,
+    /// Deadlocks it started breaking (keep right).
+    pub deadlock_breaks: u64,
+    /// Neighbours within range whose stream went stale (once per episode).
+    pub stale_neighbours: u64,
+    /// Neighbour messages refused (unknown agent, reordered, malformed; its
+    /// own are ignored).
+    pub refused: u64,
+    /// Smallest distance from its point to a neighbour's point it saw within
+    /// range, m (`null`: none seen).
+    pub min_distance: Option<f64>,
+}
+
+impl SafetyCounts {
+    /// The fleet's total over robot reports (JSON, as `fleet up` reads
+    /// them): counters summed, the smallest `min_distance`; `None` when no
+    /// robot filters.
+    pub fn total(robots: &[serde_json::Value]) -> Option<SafetyCounts> {
+        let mut any = false;
+        let mut t = SafetyCounts::default();
+        for s in robots.iter().filter_map(|r| r.get("safety")) {
+            any = true;
+            let n = |k: &str| s.get(k).and_then(serde_json::Value::as_u64).unwrap_or(0);
+            t.steps += n("steps");
+            t.active += n("active");
+            t.infeasible += n("infeasible");
+            t.stale_brakes += n("stale_brakes");
+            t.deadlock_breaks += n("deadlock_breaks");
+            t.stale_neighbours += n("stale_neighbours");
+            t.refused += n("refused");
+            if let Some(d) = s.get("min_distance").and_then(serde_json::Value::as_f64) {
+                t.min_distance = Some(t.min_distance.map_or(d, |m| m.min(d)));
+            }
+        }
+        any.then_some(t)
+    }
+}
+
+/// A robot's safety settings, from the scenario's `[safety]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotSafety {
+    /// Its filter's settings.
+    pub config: SafetyConfig,
+    /// The known obstacles.
+    pub obstacles: Vec<Obstacle>,
+    /// `L` of every agent (index agent − 1).
+    pub l: Vec<f64>,
+    /// Whether every agent filters (a cooperative neighbour).
+    pub cooperative: Vec<bool>,
 }
 
 /// The stats message published on `echelon/<fleet>/robot/<k>/stats`.
@@ -166,6 +235,24 @@ pub struct RobotConfig {
     pub faults: FaultSpec,
     /// Stop at this fleet time (absent: never).
     pub duration: Option<f64>,
+    /// Its safety filter (absent: none).
+    pub safety: Option<RobotSafety>,
+}
+
+/// Agent `agent`'s safety settings (`None`: it does not filter).
+pub fn safety_of(scenario: &Scenario, agent: u32) -> Result<Option<RobotSafety>, FleetError> {
+    let run = scenario.build(&Overrides::default())?;
+    let sim = &run.simulation;
+    let configs = sim.safety_configs();
+    let Some(config) = configs.get(agent as usize - 1).copied().flatten() else {
+        return Ok(None);
+    };
+    Ok(Some(RobotSafety {
+        config,
+        obstacles: sim.obstacles().to_vec(),
+        l: sim.agents().iter().map(|a| a.placement.l).collect(),
+        cooperative: configs.iter().map(Option::is_some).collect(),
+    }))
 }
 
 impl RobotConfig {
@@ -179,6 +266,7 @@ impl RobotConfig {
     ) -> Result<RobotConfig, FleetError> {
         let spec = agent_spec(scenario, agent)?;
         let loss = fleet.link_loss[agent as usize - 1];
+        let safety = safety_of(scenario, agent)?;
         Ok(RobotConfig {
             agent,
             spec,
@@ -188,6 +276,7 @@ impl RobotConfig {
             loss,
             faults,
             duration,
+            safety,
         })
     }
 }
@@ -271,6 +360,15 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     overruns: u64,
     last: RobotState,
     latency: Latency,
+    safety: Option<Safety>,
+}
+
+/// A robot's safety filter and what it knows of its neighbours.
+#[derive(Debug, Clone)]
+struct Safety {
+    filter: SafetyFilter,
+    table: NeighbourTable,
+    counts: SafetyCounts,
 }
 
 impl Robot<SimulatedDrive> {
@@ -292,6 +390,17 @@ impl<P: Plant> Robot<P> {
             state: config.spec.start,
             ..RobotState::default()
         };
+        let safety = config.safety.as_ref().map(|s| Safety {
+            filter: SafetyFilter::new(s.config),
+            table: NeighbourTable::new(
+                config.agent,
+                s.l.clone(),
+                s.cooperative.clone(),
+                config.link_timeout,
+                STALE_HOLD,
+            ),
+            counts: SafetyCounts::default(),
+        });
         Robot {
             config,
             plant,
@@ -310,6 +419,35 @@ impl<P: Plant> Robot<P> {
             overruns: 0,
             last,
             latency: Latency::new(),
+            safety,
+        }
+    }
+
+    /// Whether it runs a safety filter (and so listens to every robot's state).
+    pub fn has_safety(&self) -> bool {
+        self.safety.is_some()
+    }
+
+    /// What its safety filter did so far (`None`: it has none).
+    pub fn safety_counts(&self) -> Option<SafetyCounts> {
+        self.safety.as_ref().map(|s| SafetyCounts {
+            refused: s.table.refused(),
+            stale_neighbours: s.table.stale_events(),
+            deadlock_breaks: s.filter.deadlock_breaks(),
+            ..s.counts
+        })
+    }
+
+    /// Takes a message that arrived on another robot's state stream at local
+    /// time `now` (decoded by the caller) for the safety filter; ignored
+    /// without one.
+    pub fn on_neighbour(&mut self, msg: Result<Message, DecodeError>, now: f64) {
+        let Some(s) = self.safety.as_mut() else {
+            return;
+        };
+        match msg {
+            Ok(Message::State(h, state)) => s.table.on_state(h, &state, now),
+            _ => s.table.refuse(),
         }
     }
 
@@ -426,6 +564,7 @@ impl<P: Plant> Robot<P> {
     ///
     /// [`is_due`]: Robot::is_due
     pub fn tick(&mut self, now: f64) -> RobotTick {
+        let local = now;
         let now = self.fleet_time(now);
         while let Some(&(at, h, s)) = self.delayed.front() {
             if at > now {
@@ -488,10 +627,15 @@ impl<P: Plant> Robot<P> {
                         turn_rate: p.turn_rate,
                     },
                 );
-                let act = self.plant.command(match out.velocity {
+                let nominal = match out.velocity {
                     Some(c) => Command::Velocity(c),
                     None => Command::Torque(out.law.u),
-                });
+                };
+                let cmd = match self.safety.as_mut() {
+                    Some(s) => s.filter(&self.config, local, now, &state, nominal),
+                    None => nominal,
+                };
+                let act = self.plant.command(cmd);
                 let (dv, domega) = self.plant.accelerations();
                 self.last = RobotState {
                     t: now,
@@ -569,6 +713,7 @@ impl<P: Plant> Robot<P> {
             link: self.last.link.name(),
             latency: self.latency.report(true),
             ros2: None,
+            safety: self.safety_counts(),
         }
     }
 
@@ -591,6 +736,75 @@ impl<P: Plant> Robot<P> {
         };
         self.seq += 1;
         (h, state)
+    }
+}
+
+impl Safety {
+    /// Filters the law's command `nominal` at local time `local` (fleet time
+    /// `t`) for a robot in state `me` (`docs/safety.md`, "In the fleet").
+    fn filter(
+        &mut self,
+        config: &RobotConfig,
+        local: f64,
+        t: f64,
+        me: &State,
+        nominal: Command,
+    ) -> Command {
+        let Some(settings) = config.safety.as_ref() else {
+            return nominal;
+        };
+        let spec = &config.spec;
+        let l = spec.placement.l;
+        let c = &mut self.counts;
+        c.steps += 1;
+        let neighbours = match self
+            .table
+            .build(local, t, point(me, l), settings.config.range)
+        {
+            Sight::Filter(n) => n,
+            Sight::Brake => {
+                c.stale_brakes += 1;
+                c.active += 1;
+                return brake(spec, me, nominal);
+            }
+        };
+        let obstacles = &settings.obstacles[..];
+        let (outcome, min_distance, cmd) =
+            match (nominal, spec.velocity_robot(), spec.torque_robot()) {
+                (Command::Velocity(v), Some(r), _) => {
+                    let f = self
+                        .filter
+                        .velocity(t, me, l, v, &r.base, neighbours, obstacles);
+                    (f.outcome, f.min_distance, Command::Velocity(f.command))
+                }
+                (Command::Torque(u), _, Some(r)) => {
+                    let f = self.filter.torque(t, me, l, r, u, neighbours, obstacles);
+                    (f.outcome, f.min_distance, Command::Torque(f.command))
+                }
+                _ => return nominal,
+            };
+        if outcome != Outcome::Nominal {
+            c.active += 1;
+        }
+        if outcome == Outcome::Braked {
+            c.infeasible += 1;
+        }
+        if min_distance.is_finite() {
+            c.min_distance = Some(c.min_distance.map_or(min_distance, |d| d.min(min_distance)));
+        }
+        cmd
+    }
+}
+
+/// The safety filter's braking command (`echelon::safety`): zero velocity,
+/// or `u = (−η v, −ψ ω)`.
+fn brake(spec: &AgentSpec, me: &State, nominal: Command) -> Command {
+    match (nominal, spec.torque_robot()) {
+        (Command::Torque(_), Some(r)) => Command::Torque(Input {
+            u1: -r.linear_friction * me.v,
+            u2: -r.angular_friction * me.omega,
+        }),
+        _ => Command::Velocity(VelocityCommand::default()),
     }
 }
 
@@ -625,6 +839,25 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         })
         .wait()
         .map_err(|e| FleetError::Zenoh(format!("subscribing to {leader_key}: {e}")))?;
+    // With a safety filter: every robot's state, decoded where it arrives
+    // (the bytes are not copied; the table keeps one slot per agent).
+    let (ntx, nrx) = mpsc::channel::<NeighbourArrival>();
+    let _neighbours = match config.safety {
+        Some(_) => {
+            let key = keys.states();
+            Some(
+                session
+                    .declare_subscriber(&key)
+                    .callback(move |sample| {
+                        let msg = wire::decode(&sample.payload().to_bytes());
+                        let _ = ntx.send((Instant::now(), msg));
+                    })
+                    .wait()
+                    .map_err(|e| FleetError::Zenoh(format!("subscribing to {key}: {e}")))?,
+            )
+        }
+        None => None,
+    };
     let publisher = session
         .declare_publisher(keys.state(opts.agent))
         .wait()
@@ -638,6 +871,7 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     let driver = Driver {
         clock: FleetClock::new(opts.time_scale),
         rx,
+        neighbours: nrx,
         publisher,
         session: &session,
         stats_key: keys.stats(opts.agent),
@@ -680,10 +914,14 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
 /// arrived, its delay since the sender's stamp (ns), its bytes.
 type Arrival = (Instant, Option<i64>, Vec<u8>);
 
+/// Another robot's state as the neighbour subscription hands it over.
+type NeighbourArrival = (Instant, Result<Message, DecodeError>);
+
 /// The Zenoh side of [`run`] for any plant.
 struct Driver<'a> {
     clock: FleetClock,
     rx: mpsc::Receiver<Arrival>,
+    neighbours: mpsc::Receiver<NeighbourArrival>,
     publisher: zenoh::pubsub::Publisher<'a>,
     session: &'a zenoh::Session,
     stats_key: String,
@@ -710,6 +948,9 @@ impl Driver<'_> {
             }
             while let Ok((arrival, delay, bytes)) = self.rx.try_recv() {
                 robot.on_stamped_message(&bytes, clock.at(arrival), delay);
+            }
+            while let Ok((arrival, msg)) = self.neighbours.try_recv() {
+                robot.on_neighbour(msg, clock.at(arrival));
             }
             feed(&mut robot);
             let out = robot.tick(clock.now());
@@ -1531,5 +1772,67 @@ mod tests {
         let stats = r.finish();
         assert_eq!(r.plant().commanded, Input::default());
         assert_eq!((stats.published, stats.counters.accepted), (2, 1));
+    }
+
+    /// `crossing`'s agent 1 hears its neighbour (agent 4, 1.2 m away: in
+    /// range) once, then never again while the reference keeps coming: it
+    /// moves while the neighbour is fresh and held stopped, then brakes to
+    /// rest once the hold is over (docs/fleet.md, "Safety filter between
+    /// robots"), counting one stale episode.
+    #[test]
+    fn a_neighbour_stale_past_the_hold_brakes_the_robot() {
+        let s = Scenario::resolve("crossing").unwrap_or_else(|e| panic!("{e}"));
+        let mut r = robot(&s, 1, FaultSpec::default());
+        assert!(r.has_safety());
+        let mut buf = Vec::new();
+        let b1 = RobotState {
+            t: 0.0,
+            agent: 4,
+            link: LinkStatus::Tracking,
+            state: State {
+                x: -0.5,
+                y: -0.6,
+                ..State::default()
+            },
+            ..RobotState::default()
+        };
+        wire::encode_state(&mut buf, Header { source: 9, seq: 0 }, &b1);
+        r.on_neighbour(wire::decode(&buf), 0.0);
+        let timeout = r.config().link_timeout;
+        let mut moved = false;
+        let mut seq = 0;
+        let mut t = 0.0;
+        while t < 2.0 {
+            if t >= 0.02 * seq as f64 {
+                let tr = 0.02 * seq as f64;
+                let r0 = wire::Reference {
+                    t: tr,
+                    motion: LeaderMotion {
+                        p: [0.15 * tr, 0.0],
+                        dp: [0.15, 0.0],
+                        ddp: [0.0, 0.0],
+                    },
+                    speed: 0.15,
+                    turn_rate: 0.0,
+                };
+                wire::encode_reference(&mut buf, Header { source: 1, seq }, &r0);
+                r.on_message(&buf, t);
+                seq += 1;
+            }
+            if r.is_due(t) {
+                let _ = r.tick(t);
+                let v = r.last().state.v;
+                if t < timeout + STALE_HOLD - 0.05 && v.abs() > 1e-3 {
+                    moved = true;
+                }
+            }
+            t += 0.001;
+        }
+        let c = r.safety_counts().unwrap_or_default();
+        assert!(moved, "it should move while the neighbour is fresh or held");
+        assert_eq!(c.stale_neighbours, 1, "{c:?}");
+        assert!(c.stale_brakes > 100, "{c:?}");
+        let last = r.last().state;
+        assert!(last.v.abs() < 1e-9 && last.omega.abs() < 1e-9, "{last:?}");
     }
 }

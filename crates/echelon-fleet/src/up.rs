@@ -104,6 +104,10 @@ pub struct UpReport {
     /// Delays measured by the robots (merged, and the worst robot) and the
     /// collector.
     pub latency: FleetLatency,
+    /// With `[safety]`: the robots' safety counters summed (the smallest
+    /// `min_distance`), each robot's under `robots[k].safety`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safety: Option<crate::robot::SafetyCounts>,
     /// The leader's report.
     pub leader: serde_json::Value,
     /// Each robot's report, agent 1 first.
@@ -709,6 +713,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         run: startup.map(|s| wall - s),
         cost: up_cost(&leader, &collector, &robots, &base_procs, &routers),
         latency: FleetLatency::of(&robot_reports, &collector_report),
+        safety: crate::robot::SafetyCounts::total(&robot_reports),
         leader: leader_report,
         robots: robot_reports,
         collector: collector_report,

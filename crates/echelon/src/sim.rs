@@ -1101,6 +1101,17 @@ impl Simulation {
         self.safety.as_ref().map_or(&[], |s| &s.obstacles[..])
     }
 
+    /// Each agent's safety settings (`None`: it does not filter); empty
+    /// without a safety filter.
+    pub fn safety_configs(&self) -> Vec<Option<SafetyConfig>> {
+        self.safety.as_deref().map_or_else(Vec::new, |s| {
+            s.filters
+                .iter()
+                .map(|f| f.as_ref().map(|f| *f.config()))
+                .collect()
+        })
+    }
+
     /// Whether a safety filter runs.
     pub fn has_safety(&self) -> bool {
         self.safety.is_some()

@@ -736,6 +736,32 @@ fn up_cmd(a: UpArgs) -> Result<()> {
             int(r, &["ros2", "cmd_saturated"]),
         )?;
     }
+    if let Some(t) = &report.safety {
+        for r in &report.robots {
+            let s = |k: &str| int(r, &["safety", k]);
+            let d = r["safety"]["min_distance"].as_f64();
+            outln!(
+                "  safety, robot {}: filter acted {} of {} steps, {} infeasible (braked), {} deadlock breaks, {} stale neighbours ({} steps braked), nearest point {}",
+                int(r, &["agent"]),
+                s("active"),
+                s("steps"),
+                s("infeasible"),
+                s("deadlock_breaks"),
+                s("stale_neighbours"),
+                s("stale_brakes"),
+                d.map_or("none in range".to_owned(), |d| format!("{d:.4} m")),
+            )?;
+        }
+        outln!(
+            "  safety, fleet: acted {} steps, {} infeasible, {} deadlock breaks, {} stale neighbours, nearest points {}",
+            t.active,
+            t.infeasible,
+            t.deadlock_breaks,
+            t.stale_neighbours,
+            t.min_distance
+                .map_or("none in range".to_owned(), |d| format!("{d:.4} m")),
+        )?;
+    }
     let col = &report.collector;
     outln!(
         "  collector: {} messages received, {} logged, {} rejected",

@@ -1,0 +1,361 @@
+//! What a fleet robot knows of the other robots for its safety filter
+//! (`docs/safety.md`, "In the fleet"): the latest state each one published on
+//! `echelon/<fleet>/robot/<k>/state`, kept in one fixed slot per agent (no
+//! allocation per message), and the neighbour list built from it at each
+//! control step.
+//!
+//! ## Freshness and the stale policy
+//!
+//! A neighbour's entry is *fresh* while its last message arrived at most
+//! `timeout` ago (the robot's local clock, so a neighbour that is not synced
+//! yet, whose states carry `t = 0`, is still seen). A fresh neighbour is
+//! brought to the robot's instant (its pose advanced along the arc of its
+//! `(v, ω)`, its speeds by its `(v̇, ω̇)`, over the age of its sample, at most
+//! `timeout`) and enters the filter with its measured motion, cooperative if
+//! the scenario gives it a filter.
+//!
+//! A neighbour whose stream went stale **while its last point was within
+//! `range`**:
+//!
+//! 1. for `hold` more seconds enters as a *non-cooperative, stopped* disc at
+//!    its last point: the robot alone keeps the whole pair constraint, against
+//!    a neighbour assumed at rest (a neighbour that lost its own leader or
+//!    odometry, or whose process died, commands zero: the project's rule);
+//! 2. after that, if it is still stale, the robot **brakes** (zero velocity,
+//!    or the filter's braking torques) until the neighbour is heard again:
+//!    its position is then unknown, and standing still is the one command
+//!    that cannot drive the robot into it.
+//!
+//! A stale neighbour whose last point was beyond `range` is ignored (as a
+//! fresh one would be). Each fresh → stale transition within range is counted
+//! ([`NeighbourTable::stale_events`]).
+
+use echelon::model::State;
+use echelon::safety::{Neighbour, point};
+
+use crate::wire::{Header, LinkStatus, RobotState};
+
+/// How long a stale neighbour within range is taken as stopped at its last
+/// point before the robot brakes, fleet s.
+pub const STALE_HOLD: f64 = 0.5;
+
+/// One agent's slot.
+#[derive(Debug, Clone, Copy, Default)]
+struct Entry {
+    /// Whether anything was received from it.
+    known: bool,
+    /// Its last accepted state.
+    state: RobotState,
+    /// Its stream: the source and sequence number of the last accepted message.
+    source: u32,
+    seq: u64,
+    /// Local time of receipt, s.
+    received: f64,
+    /// Whether it was stale within range at the last build.
+    stale: bool,
+}
+
+/// What the robot may do this step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Sight<'a> {
+    /// Filter the nominal command against these neighbours.
+    Filter(&'a [Neighbour]),
+    /// A neighbour within range has been stale for longer than the hold: brake.
+    Brake,
+}
+
+/// The latest state of every other robot of the fleet.
+#[derive(Debug, Clone)]
+pub struct NeighbourTable {
+    /// This robot's agent number, from 1.
+    me: u32,
+    /// `L` of every agent (index agent − 1).
+    l: Vec<f64>,
+    /// Whether every agent runs the filter.
+    cooperative: Vec<bool>,
+    entries: Vec<Entry>,
+    list: Vec<Neighbour>,
+    /// A message older than this (on the local clock) is stale, s.
+    timeout: f64,
+    /// How long a stale neighbour within range is taken as stopped, s.
+    hold: f64,
+    stale_events: u64,
+    refused: u64,
+}
+
+impl NeighbourTable {
+    /// The table of agent `me` (from 1) in a fleet whose agents have points
+    /// `l[k − 1]` ahead and filter (`cooperative[k − 1]`).
+    pub fn new(me: u32, l: Vec<f64>, cooperative: Vec<bool>, timeout: f64, hold: f64) -> Self {
+        let n = l.len();
+        NeighbourTable {
+            me,
+            l,
+            cooperative,
+            entries: vec![Entry::default(); n],
+            list: Vec::with_capacity(n),
+            timeout,
+            hold,
+            stale_events: 0,
+            refused: 0,
+        }
+    }
+
+    /// Takes a decoded state message that arrived at local time `now`; its
+    /// own are ignored, unknown agents and older messages of the same stream
+    /// are refused (counted).
+    pub fn on_state(&mut self, h: Header, s: &RobotState, now: f64) {
+        if s.agent == self.me {
+            return;
+        }
+        let Some(e) = (s.agent as usize)
+            .checked_sub(1)
+            .and_then(|i| self.entries.get_mut(i))
+        else {
+            self.refused += 1;
+            return;
+        };
+        if e.known && e.source == h.source && h.seq <= e.seq {
+            self.refused += 1;
+            return;
+        }
+        *e = Entry {
+            known: true,
+            state: *s,
+            source: h.source,
+            seq: h.seq,
+            received: now,
+            stale: e.stale,
+        };
+    }
+
+    /// Neighbour stale events: a neighbour within range whose stream went
+    /// stale (once per episode).
+    pub fn stale_events(&self) -> u64 {
+        self.stale_events
+    }
+
+    /// Counts a message refused by the caller (malformed, not a state).
+    pub fn refuse(&mut self) {
+        self.refused += 1;
+    }
+
+    /// Messages refused (own, unknown agent, reordered or duplicated).
+    pub fn refused(&self) -> u64 {
+        self.refused
+    }
+
+    /// The neighbours for a control step at local time `local` (fleet time
+    /// `t`) of a robot whose point is `p`, seeing `range` far.
+    pub fn build(&mut self, local: f64, t: f64, p: [f64; 2], range: f64) -> Sight<'_> {
+        self.list.clear();
+        let mut brake = false;
+        for (i, e) in self.entries.iter_mut().enumerate() {
+            if !e.known || i + 1 == self.me as usize {
+                continue;
+            }
+            let l = self.l[i];
+            let age = local - e.received;
+            if age <= self.timeout {
+                e.stale = false;
+                let dt = if e.state.link == LinkStatus::Waiting {
+                    0.0
+                } else {
+                    (t - e.state.t).clamp(0.0, self.timeout)
+                };
+                let (s, dv) = advance(&e.state, dt);
+                self.list
+                    .push(Neighbour::of_state(&s, l, Some(dv), self.cooperative[i]));
+                continue;
+            }
+            let q = point(&e.state.state, l);
+            if (q[0] - p[0]).hypot(q[1] - p[1]) > range {
+                e.stale = false;
+                continue;
+            }
+            if !e.stale {
+                e.stale = true;
+                self.stale_events += 1;
+            }
+            if age > self.timeout + self.hold {
+                brake = true;
+            }
+            self.list.push(Neighbour {
+                p: q,
+                cooperative: false,
+                ..Neighbour::default()
+            });
+        }
+        if brake {
+            Sight::Brake
+        } else {
+            Sight::Filter(&self.list)
+        }
+    }
+}
+
+/// A neighbour's state `dt` after its sample: the arc of constant `(v, ω)`,
+/// speeds advanced by `(v̇, ω̇)`; and `(v̇, ω̇)`.
+fn advance(s: &RobotState, dt: f64) -> (State, [f64; 2]) {
+    let x = &s.state;
+    let dth = x.omega * dt;
+    // sinc-weighted chord of the arc: exact for constant (v, ω).
+    let (sin, cos) = (x.theta + 0.5 * dth).sin_cos();
+    let chord = if dth.abs() < 1e-9 {
+        x.v * dt
+    } else {
+        2.0 * x.v / x.omega * (0.5 * dth).sin()
+    };
+    (
+        State {
+            x: x.x + chord * cos,
+            y: x.y + chord * sin,
+            theta: x.theta + dth,
+            v: x.v + s.dv * dt,
+            omega: x.omega + s.domega * dt,
+        },
+        [s.dv, s.domega],
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TIMEOUT: f64 = 0.2;
+
+    fn table() -> NeighbourTable {
+        NeighbourTable::new(
+            1,
+            vec![0.05; 3],
+            vec![true, true, false],
+            TIMEOUT,
+            STALE_HOLD,
+        )
+    }
+
+    fn msg(agent: u32, seq: u64, t: f64, x: f64, v: f64) -> (Header, RobotState) {
+        (
+            Header { source: 7, seq },
+            RobotState {
+                t,
+                agent,
+                link: LinkStatus::Tracking,
+                state: State {
+                    x,
+                    v,
+                    ..State::default()
+                },
+                ..RobotState::default()
+            },
+        )
+    }
+
+    fn list(v: Sight<'_>) -> Vec<Neighbour> {
+        match v {
+            Sight::Filter(n) => n.to_vec(),
+            Sight::Brake => panic!("braking"),
+        }
+    }
+
+    #[test]
+    fn fresh_neighbours_are_advanced_to_now_and_keep_their_cooperation() {
+        let mut n = table();
+        let (h, s) = msg(2, 0, 1.0, 1.0, 0.5);
+        n.on_state(h, &s, 10.0);
+        let (h, s) = msg(3, 0, 1.0, -1.0, 0.0);
+        n.on_state(h, &s, 10.0);
+        // 0.1 s later (both clocks): agent 2 moved 5 cm along x.
+        let got = list(n.build(10.1, 1.1, [0.0, 0.0], 5.0));
+        assert_eq!(got.len(), 2);
+        assert!((got[0].p[0] - (1.0 + 0.05 + 0.05)).abs() < 1e-12, "{got:?}");
+        assert!((got[0].dp[0] - 0.5).abs() < 1e-12);
+        assert!(got[0].cooperative);
+        assert!(!got[1].cooperative);
+        assert_eq!(n.stale_events(), 0);
+    }
+
+    #[test]
+    fn an_arc_is_advanced_exactly() {
+        let s = RobotState {
+            state: State {
+                v: 1.0,
+                omega: 1.0,
+                ..State::default()
+            },
+            ..RobotState::default()
+        };
+        let (a, _) = advance(&s, std::f64::consts::FRAC_PI_2);
+        // A quarter of the unit circle centred at (0, 1).
+        assert!(
+            (a.x - 1.0).abs() < 1e-12 && (a.y - 1.0).abs() < 1e-12,
+            "{a:?}"
+        );
+    }
+
+    #[test]
+    fn own_messages_are_ignored_unknown_and_reordered_ones_refused() {
+        let mut n = table();
+        let (h, s) = msg(1, 0, 0.0, 3.0, 0.0);
+        n.on_state(h, &s, 0.0);
+        let (h, s) = msg(4, 0, 0.0, 3.0, 0.0);
+        n.on_state(h, &s, 0.0);
+        let (h, s) = msg(2, 5, 0.0, 1.0, 0.0);
+        n.on_state(h, &s, 0.0);
+        let (h, s) = msg(2, 4, 0.0, 2.0, 0.0);
+        n.on_state(h, &s, 0.0);
+        assert_eq!(n.refused(), 2);
+        let got = list(n.build(0.0, 0.0, [0.0, 0.0], 5.0));
+        assert_eq!(got.len(), 1);
+        assert!((got[0].p[0] - 1.05).abs() < 1e-12);
+        // A restarted neighbour (new source) starts again from seq 0.
+        let (mut h, s) = msg(2, 0, 0.0, 2.0, 0.0);
+        h.source = 8;
+        n.on_state(h, &s, 0.0);
+        let got = list(n.build(0.0, 0.0, [0.0, 0.0], 5.0));
+        assert!((got[0].p[0] - 2.05).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_stale_neighbour_in_range_is_held_stopped_then_brakes_then_recovers() {
+        let mut n = table();
+        let (h, s) = msg(2, 0, 1.0, 1.0, 0.5);
+        n.on_state(h, &s, 10.0);
+        // Stale (older than the timeout): non-cooperative, at rest, at its
+        // last point (not advanced).
+        let t = 10.0 + TIMEOUT + 0.1;
+        let got = list(n.build(t, 1.3, [0.0, 0.0], 1.5));
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].p, [1.05, 0.0]);
+        assert_eq!((got[0].dp, got[0].cooperative), ([0.0; 2], false));
+        assert_eq!(n.stale_events(), 1);
+        // Still within the hold: one episode, counted once.
+        let _ = list(n.build(t + STALE_HOLD - 0.2, 1.6, [0.0, 0.0], 1.5));
+        assert_eq!(n.stale_events(), 1);
+        // Past the hold: brake.
+        assert_eq!(
+            n.build(10.0 + TIMEOUT + STALE_HOLD + 0.01, 1.8, [0.0, 0.0], 1.5),
+            Sight::Brake
+        );
+        // Heard again: fresh, cooperative; a later loss is a new episode.
+        let (h, s) = msg(2, 1, 2.0, 1.0, 0.0);
+        n.on_state(h, &s, 11.0);
+        assert!(list(n.build(11.0, 2.0, [0.0, 0.0], 1.5))[0].cooperative);
+        let _ = n.build(11.0 + TIMEOUT + 0.01, 2.3, [0.0, 0.0], 1.5);
+        assert_eq!(n.stale_events(), 2);
+    }
+
+    #[test]
+    fn a_stale_neighbour_out_of_range_is_ignored() {
+        let mut n = table();
+        let (h, s) = msg(3, 0, 0.0, 4.0, 0.0);
+        n.on_state(h, &s, 0.0);
+        // In range while fresh: seen (the filter itself ignores it beyond range).
+        assert_eq!(list(n.build(0.1, 0.1, [0.0, 0.0], 1.5)).len(), 1);
+        // Stale beyond range, however long: neither seen, nor counted, nor braking.
+        assert!(list(n.build(100.0, 100.0, [0.0, 0.0], 1.5)).is_empty());
+        assert_eq!(n.stale_events(), 0);
+        // Never heard of: nothing.
+        assert!(list(table().build(0.0, 0.0, [0.0, 0.0], 1.5)).is_empty());
+    }
+}

@@ -83,7 +83,10 @@ fn scenarios_lists_the_built_ins_with_a_line_each() {
         .collect();
     assert_eq!(listed, names().collect::<Vec<_>>());
     // Each line: the name, then a description of several words.
-    assert!(text.lines().all(|l| l.split_whitespace().count() > 4), "{text}");
+    assert!(
+        text.lines().all(|l| l.split_whitespace().count() > 4),
+        "{text}"
+    );
 }
 
 #[test]

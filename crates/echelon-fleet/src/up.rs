@@ -12,7 +12,7 @@
 //! leader waits for every liveliness token before starting the clock. Robots
 //! and leader stop at `--duration`; the collector is then sent SIGTERM and
 //! closes its files. Each child's stderr goes to `DIR/logs/<role>.log`; its
-//! last stdout line is its JSON report.
+//! last stdout line (kept in `DIR/logs/<role>.out`) is its JSON report.
 
 use std::io::{BufRead, BufReader};
 use std::net::TcpListener;
@@ -157,6 +157,8 @@ struct Proc {
     role: String,
     child: Child,
     log: PathBuf,
+    /// Where its stdout goes; its last JSON line is its report.
+    stdout: PathBuf,
     report: Option<serde_json::Value>,
     status: Option<std::process::ExitStatus>,
     /// CPU seconds, read when it exited (before it was reaped).
@@ -214,14 +216,14 @@ impl Proc {
         match self.child.try_wait() {
             Ok(Some(status)) => {
                 self.status = Some(status);
-                if let Some(out) = self.child.stdout.take() {
-                    let last = BufReader::new(out)
+                let last = std::fs::File::open(&self.stdout).ok().and_then(|out| {
+                    BufReader::new(out)
                         .lines()
                         .map_while(Result::ok)
                         .filter(|l| l.trim_start().starts_with('{'))
-                        .last();
-                    self.report = last.and_then(|l| serde_json::from_str(&l).ok());
-                }
+                        .last()
+                });
+                self.report = last.and_then(|l| serde_json::from_str(&l).ok());
                 Ok(true)
             }
             Ok(None) => Ok(false),
@@ -373,10 +375,15 @@ impl Links {
 fn spawn(exe: &Path, role: &str, args: &[String], logs: &Path) -> Result<Proc, FleetError> {
     let log = logs.join(format!("{}.log", role.replace('/', "-")));
     let file = std::fs::File::create(&log).map_err(FleetError::io(&log))?;
+    // Stdout goes to a file, not a pipe: a report longer than the pipe's
+    // buffer (the collector's, with a hundred robots) would block the child
+    // in its last write while `fleet up` waits for it to exit.
+    let stdout = logs.join(format!("{}.out", role.replace('/', "-")));
+    let out = std::fs::File::create(&stdout).map_err(FleetError::io(&stdout))?;
     let child = Command::new(exe)
         .args(args)
         .stdin(Stdio::null())
-        .stdout(Stdio::piped())
+        .stdout(out)
         .stderr(file)
         .spawn()
         .map_err(|e| FleetError::Child(format!("starting {role} ({}): {e}", exe.display())))?;
@@ -384,6 +391,7 @@ fn spawn(exe: &Path, role: &str, args: &[String], logs: &Path) -> Result<Proc, F
         role: role.to_owned(),
         child,
         log,
+        stdout,
         report: None,
         status: None,
         cpu: None,

@@ -377,6 +377,19 @@ fn agents_of(s: &Scenario) -> Result<u32> {
     Ok(s.build(&Overrides::default())?.simulation.agents().len() as u32)
 }
 
+/// What every agent process (robot, base, excite) sets up first: its
+/// scenario, its session options under `identity`, and the signal flag.
+fn agent_process(
+    scenario: &str,
+    net: &NetArgs,
+    identity: &str,
+) -> Result<(Scenario, NetOptions, StopFlag)> {
+    let scenario = Scenario::resolve(scenario)?;
+    let robots = agents_of(&scenario)?;
+    let net = net.options(identity, Some(robots), Some(&scenario))?;
+    Ok((scenario, net, StopFlag::on_signals()?))
+}
+
 /// Every agent's `cmd_vel` and `odom` as `[fleet.ros2]` places them.
 fn ros_topics(s: &Scenario) -> Result<Vec<RosTopic>> {
     let mut topics = Vec::new();
@@ -415,12 +428,8 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             print_report(&report)
         }
         FleetCommand::Robot(a) => {
-            let scenario = Scenario::resolve(&a.scenario)?;
-            let robots = agents_of(&scenario)?;
-            let net =
-                a.net
-                    .options(&net::robot_identity(a.agent), Some(robots), Some(&scenario))?;
-            let stop = StopFlag::on_signals()?;
+            let (scenario, net, stop) =
+                agent_process(&a.scenario, &a.net, &net::robot_identity(a.agent))?;
             let report = robot::run(
                 RobotOptions {
                     scenario,
@@ -440,12 +449,8 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             if !a.ros2 {
                 bail!("fleet base simulates a ROS 2 base: give --ros2");
             }
-            let scenario = Scenario::resolve(&a.scenario)?;
-            let robots = agents_of(&scenario)?;
-            let net = a
-                .net
-                .options(&net::base_identity(a.agent), Some(robots), Some(&scenario))?;
-            let stop = StopFlag::on_signals()?;
+            let (scenario, net, stop) =
+                agent_process(&a.scenario, &a.net, &net::base_identity(a.agent))?;
             let report = base::run(
                 BaseOptions {
                     scenario,
@@ -463,12 +468,8 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             if !a.ros2 {
                 bail!("fleet excite drives a ROS 2 robot: give --ros2");
             }
-            let scenario = Scenario::resolve(&a.scenario)?;
-            let robots = agents_of(&scenario)?;
-            let net =
-                a.net
-                    .options(&net::robot_identity(a.agent), Some(robots), Some(&scenario))?;
-            let stop = StopFlag::on_signals()?;
+            let (scenario, net, stop) =
+                agent_process(&a.scenario, &a.net, &net::robot_identity(a.agent))?;
             let report = excite::run(
                 ExciteOptions {
                     scenario,

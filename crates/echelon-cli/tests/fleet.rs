@@ -249,6 +249,7 @@ fn counts_of(v: &Value) -> BTreeMap<String, u64> {
 /// readers (the mcap crate and Python's mcap) agree with its counts.
 #[test]
 fn experiment_circle_converges_like_the_simulator() {
+    let _fleet = common::one_fleet_at_a_time();
     require_python_mcap();
     let dir = tempfile::tempdir().unwrap();
     let sim_dir = dir.path().join("sim");
@@ -339,6 +340,7 @@ fn experiment_circle_converges_like_the_simulator() {
 /// tracking error stays small; both recover.
 #[test]
 fn outage_stop_rests_and_extrapolate_keeps_tracking() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let (start, len) = (12.0, 3.0);
     let outage = format!("{start}:{len}");
@@ -466,6 +468,7 @@ fn late_error_of_robot_1(fleet_dir: &Path) -> f64 {
 /// a rogue without credentials cannot even join.
 #[test]
 fn secure_mode_rogue_moves_no_robot() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let certs = dir.path().join("certs");
     echelon_ok(&["fleet", "certs", "--robots", "2"], &certs);
@@ -489,7 +492,7 @@ fn secure_mode_rogue_moves_no_robot() {
     let endpoints = endpoints_of(&fleet_dir);
     // Through the router (the default): it is the only process listening.
     assert_eq!(endpoints.keys().collect::<Vec<_>>(), ["router/1"]);
-    assert!(endpoints.values().all(|e| e.starts_with("tls/")));
+    assert!(endpoints.values().all(|e| e.starts_with("quic/")));
     // A fake reference far away: a line heading off at 1 m/s.
     let fake = fake_reference(dir.path());
     assert!(
@@ -513,7 +516,7 @@ fn secure_mode_rogue_moves_no_robot() {
         serde_json::json!({
             "mode": "peer",
             "scouting": {"multicast": {"enabled": false}},
-            "listen": {"endpoints": ["tls/127.0.0.1:0"]},
+            "listen": {"endpoints": ["quic/127.0.0.1:0"]},
             "connect": {"endpoints": connect, "timeout_ms": 5000, "exit_on_failure": true},
             "transport": {"link": {"tls": tls}},
         })
@@ -549,15 +552,15 @@ fn secure_mode_rogue_moves_no_robot() {
     let rogue_report = rogue_report.expect("the rogue with a robot certificate did not run");
     assert!(u(&rogue_report, &["published"]) > 1000, "{rogue_report}");
     // No robot took a fake sample: one source, nothing foreign, no more
-    // samples than the leader's. (Through the router with TLS at ×10 on a
-    // loaded 2-core machine a few per cent of the samples are dropped on the
-    // way: 1472 of 1501 measured.)
+    // samples than the leader's. (Over QUIC, through the router, the robot
+    // heard 1499 to 1501 of the 1501, also with two CPU hogs running: the
+    // last one or two may come after it stopped.)
     let c = &report["robots"][0]["counters"];
     assert_eq!(u(c, &["restarts"]), 0, "{c}");
     assert_eq!(u(c, &["foreign"]), 0, "{c}");
     let received = u(c, &["received"]);
     assert!(
-        received <= published && received * 10 >= published * 9,
+        received <= published && received * 100 >= published * 99,
         "{c} vs {published}"
     );
     assert_eq!(
@@ -581,6 +584,7 @@ fn secure_mode_rogue_moves_no_robot() {
 /// (certificates and access control) that stops it there.
 #[test]
 fn without_security_the_same_rogue_does_move_robots() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let fleet_dir = dir.path().join("fleet");
     let scenario = fixture("fast-circle.toml");
@@ -635,6 +639,7 @@ fn free_endpoint() -> String {
 /// robots resume and converge; the collector records again.
 #[test]
 fn robots_lose_the_link_when_the_router_dies_and_resume_when_it_returns() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let ep = free_endpoint();
     let scenario = fixture("fast-circle-stop.toml");
@@ -715,6 +720,7 @@ fn robots_lose_the_link_when_the_router_dies_and_resume_when_it_returns() {
 /// records robot 2: both converge.
 #[test]
 fn two_sites_two_routers_converge() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let report = up(
         &fixture("fast-circle.toml"),
@@ -749,6 +755,7 @@ fn two_sites_two_routers_converge() {
 /// files read back.
 #[test]
 fn sigterm_leaves_valid_collector_files() {
+    let _fleet = common::one_fleet_at_a_time();
     require_python_mcap();
     let dir = tempfile::tempdir().unwrap();
     let ports: Vec<u16> = (0..2)
@@ -810,6 +817,7 @@ fn sigterm_leaves_valid_collector_files() {
 /// step and agent, and the same bytes twice.
 #[test]
 fn run_mcap_matches_the_csv_and_is_deterministic() {
+    let _fleet = common::one_fleet_at_a_time();
     require_python_mcap();
     let dir = tempfile::tempdir().unwrap();
     let mut files = Vec::new();
@@ -910,6 +918,7 @@ fn check_latency(l: &Value, samples: u64, what: &str) {
 /// process's CPU seconds and peak memory, and tells startup from run.
 #[test]
 fn latency_and_cost_are_reported() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let fleet_dir = dir.path().join("fleet");
     let report = up(
@@ -978,6 +987,7 @@ fn latency_and_cost_are_reported() {
 /// converged, ordered latencies, and the table in bench.json and bench.md.
 #[test]
 fn bench_smoke() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let out = Command::new(EXE)
         .args([
@@ -1087,6 +1097,7 @@ fn min_pair_distance(csv: &Path, l: &[f64], gap: f64) -> (f64, usize) {
 /// within 0.1 m of each other (its log, every 0.05 s).
 #[test]
 fn crossing_keeps_robots_apart_in_the_fleet() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let scenario = Scenario::resolve("crossing").unwrap();
     let run = scenario.build(&Overrides::default()).unwrap();

@@ -89,6 +89,7 @@ fn simulated_final(duration: &str, dir: &Path) -> Vec<(f64, f64)> {
 /// 0.25 mm at 30 s), and the collector recorded the ROS topics.
 #[test]
 fn fleet_up_ros2_ends_where_the_simulator_ends() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let out = Command::new(EXE)
         .args([
@@ -157,6 +158,7 @@ type Heard = Arc<Mutex<Vec<(f64, f64)>>>;
 /// SIGTERM then leaves a zero `cmd_vel` as the last message on its key.
 #[test]
 fn bad_odometry_is_refused_and_sigterm_leaves_zero_on_cmd_vel() {
+    let _fleet = common::one_fleet_at_a_time();
     let e = ports(4);
     let session = echelon_fleet::net::open(&echelon_fleet::net::NetOptions {
         listen: vec![e[0].clone()],
@@ -365,6 +367,7 @@ fn drive_python_base(scenario: &str, base_args: &[&str]) -> (Value, Value) {
 /// after 10 s; the transient settles in about 2.3 s).
 #[test]
 fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
+    let _fleet = common::one_fleet_at_a_time();
     let (report, base) = drive_python_base(SCENARIO, &[]);
     assert_eq!(f(&report, &["ros2", "odom_wrong_type"]), 0.0, "{report}");
     let commands = f(&base, &["commands"]);
@@ -396,20 +399,18 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
     );
 }
 
-/// Secure mode with ROS 2: every link is mutual TLS, and a rogue holding a
-/// valid certificate (robot 2's) that floods robot 1's `cmd_vel` with a
-/// full-speed command reaches no base: base 1 heard exactly what robot 1
-/// sent, and robot 1 converged.
+/// Secure mode with ROS 2: every link is mutual TLS (QUIC), and a rogue
+/// holding a valid certificate (robot 2's) that floods robot 1's `cmd_vel`
+/// with a full-speed command reaches no base: base 1 heard exactly what
+/// robot 1 sent, and robot 1 converged.
 ///
-/// Ignored: zenoh-link-tls reads and writes one rustls stream from two tasks
-/// through an `UnsafeCell` (eclipse-zenoh/zenoh#2557, open), and under this
-/// test a fleet process dies with SIGILL inside `rustls::Error::clone` about
-/// one run in six (core dump, 1 Dec 2026). The access control itself passed
-/// every run that did not crash, and failed when loosened. Run it with
-/// `cargo test -p echelon-cli --test fleet_ros2 -- --ignored`.
+/// Over Zenoh's `tls` link this test was ignored: zenoh-link-tls reads and
+/// writes one rustls stream from two tasks through an `UnsafeCell`
+/// (eclipse-zenoh/zenoh#2557, open), and a fleet process died with SIGILL
+/// inside rustls about one run in six. The secure mode now runs over QUIC.
 #[test]
-#[ignore = "zenoh-link-tls is unsound under concurrent TLS reads and writes (eclipse-zenoh/zenoh#2557): a process may die with SIGILL"]
 fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let certs = dir.path().join("certs");
     let out = Command::new(EXE)
@@ -455,12 +456,15 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
         .filter(|(k, _)| *k != "topology")
         .filter_map(|(_, v)| v.as_str())
         .collect();
-    assert!(connect.iter().all(|e| e.starts_with("tls/")), "{connect:?}");
+    assert!(
+        connect.iter().all(|e| e.starts_with("quic/")),
+        "{connect:?}"
+    );
     let path = |p: PathBuf| p.display().to_string();
     let config = serde_json::json!({
         "mode": "peer",
         "scouting": {"multicast": {"enabled": false}},
-        "listen": {"endpoints": ["tls/127.0.0.1:0"]},
+        "listen": {"endpoints": ["quic/127.0.0.1:0"]},
         "connect": {"endpoints": connect, "timeout_ms": 10000, "exit_on_failure": false},
         "transport": {"link": {"tls": {
             "root_ca_certificate": path(certs.join("ca.pem")),
@@ -526,6 +530,7 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
 /// hash or attachment on the key).
 #[test]
 fn twist_commands_over_bridge_keys_drive_the_python_base_too() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let src = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -595,6 +600,7 @@ fn a_bad_ros2_setting_is_refused_with_its_place() {
 /// the bag it wrote.
 #[test]
 fn fleet_excite_records_a_bag_that_identify_turns_into_the_base_lags() {
+    let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let bag = dir.path().join("excite.mcap");
     let e = ports(2);

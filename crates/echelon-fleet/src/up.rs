@@ -299,6 +299,26 @@ fn poll_all<'a>(procs: impl IntoIterator<Item = &'a mut Proc>) -> Result<bool, F
     Ok(all)
 }
 
+/// Free loopback ports for a Zenoh link protocol: UDP ports for QUIC, else
+/// TCP ports.
+pub fn free_ports_for(proto: &str, n: usize) -> Result<Vec<u16>, FleetError> {
+    if proto != "quic" {
+        return free_ports(n);
+    }
+    let sockets = (0..n)
+        .map(|_| std::net::UdpSocket::bind("127.0.0.1:0"))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| FleetError::Config(format!("no free loopback UDP port: {e}")))?;
+    sockets
+        .iter()
+        .map(|s| {
+            s.local_addr()
+                .map(|a| a.port())
+                .map_err(|e| FleetError::Config(format!("no free loopback UDP port: {e}")))
+        })
+        .collect()
+}
+
 /// Free loopback TCP ports (bound then released: each is free right now).
 pub fn free_ports(n: usize) -> Result<Vec<u16>, FleetError> {
     let listeners = (0..n)
@@ -330,14 +350,14 @@ impl Links {
     fn new(opts: &UpOptions, proto: &'static str, processes: usize) -> Result<Links, FleetError> {
         let (routers, ports) = match opts.topology {
             Topology::Router => {
-                let ports = free_ports(opts.sites)?;
+                let ports = free_ports_for(proto, opts.sites)?;
                 let routers = ports
                     .iter()
                     .map(|p| format!("{proto}/127.0.0.1:{p}"))
                     .collect();
                 (routers, Vec::new())
             }
-            Topology::Mesh => (Vec::new(), free_ports(processes)?),
+            Topology::Mesh => (Vec::new(), free_ports_for(proto, processes)?),
         };
         Ok(Links {
             topology: opts.topology,
@@ -427,7 +447,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
 
-    let proto = if opts.secure.is_some() { "tls" } else { "tcp" };
+    let proto = crate::net::link_protocol(opts.secure.is_some());
     // Start order: the routers (router topology), the collector, the ROS 2
     // bases (with --ros2), the robots, the leader; in a mesh also the order
     // of their ports.

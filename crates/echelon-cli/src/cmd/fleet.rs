@@ -68,7 +68,7 @@ pub(crate) struct NetArgs {
     /// Zenoh mode [default: peer, or the --zenoh-config file's].
     #[arg(long, value_enum)]
     mode: Option<ModeArg>,
-    /// Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable) [default: tcp/127.0.0.1:0, tls/… in secure mode].
+    /// Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable) [default: tcp/127.0.0.1:0, quic/127.0.0.1:0 in secure mode].
     #[arg(long, value_name = "ENDPOINT")]
     listen: Vec<String>,
     /// Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).

@@ -10,6 +10,18 @@ use serde_json::Value;
 /// The `echelon` binary under test.
 pub(crate) const EXE: &str = env!("CARGO_BIN_EXE_echelon");
 
+/// Holds the test binary's one fleet slot: a test that runs fleet
+/// processes takes it first, so fleets run one at a time. Each fleet is a
+/// handful of real-time processes at ×10 whose convergence, latency and
+/// sample counts depend on getting the CPU when their ticks come; two fleets
+/// at once on a 2-core machine starve each other (the test threads default
+/// to the core count).
+pub(crate) fn one_fleet_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static SLOT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    SLOT.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// Kills the child if the test ends first.
 pub(crate) struct Guard(pub(crate) Child);
 

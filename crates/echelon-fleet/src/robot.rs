@@ -192,6 +192,9 @@ pub struct RobotStats {
     pub published: u64,
     /// Ticks started more than a period late.
     pub overruns: u64,
+    /// With `[safety]`: what its safety filter did so far.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safety: Option<SafetyCounts>,
 }
 
 /// The agent's spec from the scenario, checked for the fleet.
@@ -725,6 +728,7 @@ impl<P: Plant> Robot<P> {
             counters: self.tracker.counters,
             published: self.seq,
             overruns: self.overruns,
+            safety: self.safety_counts(),
         }
     }
 
@@ -1772,6 +1776,7 @@ mod tests {
         let stats = r.finish();
         assert_eq!(r.plant().commanded, Input::default());
         assert_eq!((stats.published, stats.counters.accepted), (2, 1));
+        assert_eq!(stats.safety, None);
     }
 
     /// `crossing`'s agent 1 hears its neighbour (agent 4, 1.2 m away: in
@@ -1834,5 +1839,7 @@ mod tests {
         assert!(c.stale_brakes > 100, "{c:?}");
         let last = r.last().state;
         assert!(last.v.abs() < 1e-9 && last.omega.abs() < 1e-9, "{last:?}");
+        // The stats message carries the same counters.
+        assert_eq!(r.finish().safety, Some(c));
     }
 }

@@ -568,7 +568,8 @@ fn secure_mode_rogue_moves_no_robot() {
             &report["collector"],
             &["received_by_key", "echelon/fast-circle/reference"]
         ),
-        published
+        published,
+        "the collector's reference samples against the leader's"
     );
     for k in 0..2 {
         let r = &report["robots"][k];

@@ -15,7 +15,7 @@
 //! last stdout line (kept in `DIR/logs/<role>.out`) is its JSON report.
 
 use std::io::{BufRead, BufReader};
-use std::net::TcpListener;
+use std::net::{TcpListener, UdpSocket};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -302,37 +302,35 @@ fn poll_all<'a>(procs: impl IntoIterator<Item = &'a mut Proc>) -> Result<bool, F
 /// Free loopback ports for a Zenoh link protocol: UDP ports for QUIC, else
 /// TCP ports.
 pub fn free_ports_for(proto: &str, n: usize) -> Result<Vec<u16>, FleetError> {
-    if proto != "quic" {
-        return free_ports(n);
+    match proto {
+        "quic" => held_ports(n, "UDP", || {
+            let socket = UdpSocket::bind("127.0.0.1:0")?;
+            Ok((socket.local_addr()?.port(), socket))
+        }),
+        _ => free_ports(n),
     }
-    let sockets = (0..n)
-        .map(|_| std::net::UdpSocket::bind("127.0.0.1:0"))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| FleetError::Config(format!("no free loopback UDP port: {e}")))?;
-    sockets
-        .iter()
-        .map(|s| {
-            s.local_addr()
-                .map(|a| a.port())
-                .map_err(|e| FleetError::Config(format!("no free loopback UDP port: {e}")))
-        })
-        .collect()
 }
 
 /// Free loopback TCP ports (bound then released: each is free right now).
 pub fn free_ports(n: usize) -> Result<Vec<u16>, FleetError> {
-    let listeners = (0..n)
-        .map(|_| TcpListener::bind("127.0.0.1:0"))
+    held_ports(n, "TCP", || {
+        let listener = TcpListener::bind("127.0.0.1:0")?;
+        Ok((listener.local_addr()?.port(), listener))
+    })
+}
+
+/// `n` ports from `bind`, all bound at once (so they differ), released on
+/// return.
+fn held_ports<S>(
+    n: usize,
+    kind: &str,
+    bind: impl Fn() -> std::io::Result<(u16, S)>,
+) -> Result<Vec<u16>, FleetError> {
+    let held = (0..n)
+        .map(|_| bind())
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| FleetError::Config(format!("no free loopback port: {e}")))?;
-    listeners
-        .iter()
-        .map(|l| {
-            l.local_addr()
-                .map(|a| a.port())
-                .map_err(|e| FleetError::Config(format!("no free loopback port: {e}")))
-        })
-        .collect()
+        .map_err(|e| FleetError::Config(format!("no free loopback {kind} port: {e}")))?;
+    Ok(held.into_iter().map(|(port, _)| port).collect())
 }
 
 /// How `fleet up`'s processes link: the routers' endpoints (router topology)

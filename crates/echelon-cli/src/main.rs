@@ -60,6 +60,9 @@ enum Command {
 /// Exit code for every refused input or failed run.
 const FAILURE: u8 = 2;
 
+/// Exit code of a run that diverged (`echelon run`).
+const DIVERGED: u8 = 1;
+
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
@@ -98,6 +101,17 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         // `echelon … | head`: the reader has what it wanted.
         Err(e) if e.downcast_ref::<cmd::out::Closed>().is_some() => ExitCode::SUCCESS,
+        // A run that diverged: it says where, and fails with 1.
+        Err(e)
+            if e.downcast_ref::<cmd::out::Diverged>().is_some()
+                || matches!(
+                    e.downcast_ref::<echelon_fleet::FleetError>(),
+                    Some(echelon_fleet::FleetError::Diverged(_))
+                ) =>
+        {
+            cmd::out::err_line(&format!("error: {e}"));
+            ExitCode::from(DIVERGED)
+        }
         Err(e) => {
             cmd::out::err_line(&format!("error: {e:#}"));
             ExitCode::from(FAILURE)

@@ -275,6 +275,53 @@ fn bad_input_exits_2_with_one_line_and_writes_nothing() {
 
 /// Velocity bases (issue 11): a torque-only field on one, or the kinematic
 /// law on a torque-driven robot, is refused at its field with exit 2.
+/// The divergence guard (issue 20): a run whose state blows up stops at once
+/// with one line naming the agent, the time and the quantity, exits 1 (not
+/// 2: the input was valid), keeps what it wrote up to then, and its summary
+/// says it diverged. The same in the torque crossing of issue 20, which used
+/// to blow up silently and now converges (exit 0).
+#[test]
+fn a_diverging_run_exits_1_naming_agent_time_and_quantity() {
+    let dir = tempfile::tempdir().unwrap();
+    let source = echelon::scenario::Scenario::builtin("nonfeasible")
+        .unwrap()
+        .source()
+        .replace("ke = 1.5", "ke = 1e12");
+    let file = scenario_file(dir.path(), &source);
+    let out = dir.path().join("out");
+    let o = run(&file, &out, &["--mcap"]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "stderr: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(err.lines().count(), 1, "one line: {err}");
+    for needle in [
+        "error: ",
+        "agent 1 (robot) diverged at t = ",
+        "left its bound 100 m/s",
+    ] {
+        assert!(err.contains(needle), "`{needle}` not in: {err}");
+    }
+    assert!(stdout(&o).is_empty(), "no summary table: {}", stdout(&o));
+    let s = summary(&out);
+    assert_eq!(s["diverged"]["agent"], 1);
+    assert_eq!(s["diverged"]["quantity"], "|v|");
+    assert_eq!(s["diverged"]["bound"], 100.0);
+    for f in [
+        "trajectory.csv",
+        "reference.csv",
+        "scenario.toml",
+        "run.mcap",
+    ] {
+        assert!(out.join(f).exists(), "{f} written");
+    }
+    // Every row written is within bounds.
+    let rows = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
+    for line in rows.lines().skip(1) {
+        let v: f64 = line.split(',').nth(5).unwrap().parse().unwrap();
+        assert!(v.abs() <= 100.0, "{line}");
+    }
+}
+
 #[test]
 fn bad_velocity_base_input_exits_2() {
     let dir = tempfile::tempdir().unwrap();

@@ -59,6 +59,10 @@ pub enum FleetError {
     /// A child process of `fleet up` failed.
     #[error("{0}")]
     Child(String),
+    /// A robot's state stopped being finite or left its bounds
+    /// ([`echelon::guard::Bounds`]): it commanded zero and stopped.
+    #[error("{0}")]
+    Diverged(String),
 }
 
 impl FleetError {

@@ -107,6 +107,11 @@ impl SimulatedPlant {
     pub fn true_state(&self) -> State {
         self.state
     }
+
+    /// The input applied now (after the torque limit).
+    pub fn applied_input(&self) -> Input {
+        self.applied
+    }
 }
 
 impl Plant for SimulatedPlant {

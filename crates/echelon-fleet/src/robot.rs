@@ -29,6 +29,7 @@ use echelon::base::VelocityCommand;
 use echelon::control::LeaderMotion;
 use echelon::follow::{LeaderView, follow};
 use echelon::formation::Leader;
+use echelon::guard::Bounds;
 use echelon::model::{Input, State};
 use echelon::safety::{Obstacle, Outcome, SafetyConfig, SafetyFilter, point};
 use echelon::scenario::{FleetSettings, LinkLoss, Overrides, Ros2Link, Scenario};
@@ -294,6 +295,8 @@ pub enum Halt {
     NoOdometry,
     /// The process is stopping.
     Shutdown,
+    /// The plant's state left the divergence guard's bounds.
+    Diverged,
 }
 
 /// What one tick asks the driver to do.
@@ -364,6 +367,10 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     last: RobotState,
     latency: Latency,
     safety: Option<Safety>,
+    /// The divergence guard's bounds on the plant's state.
+    bounds: Bounds,
+    /// Set when the plant's state left `bounds`: the robot has stopped.
+    diverged: Option<String>,
 }
 
 /// A robot's safety filter and what it knows of its neighbours.
@@ -423,7 +430,21 @@ impl<P: Plant> Robot<P> {
             last,
             latency: Latency::new(),
             safety,
+            bounds: Bounds::DEFAULT,
+            diverged: None,
         }
+    }
+
+    /// The same robot with the divergence guard's `bounds`.
+    pub fn with_bounds(self, bounds: Bounds) -> Self {
+        Robot { bounds, ..self }
+    }
+
+    /// Why it stopped for good, if its plant's state stopped being finite or
+    /// left its bounds ([`echelon::guard::Bounds`]): one line naming the
+    /// agent, the fleet time and the quantity.
+    pub fn diverged(&self) -> Option<&str> {
+        self.diverged.as_deref()
     }
 
     /// Whether it runs a safety filter (and so listens to every robot's state).
@@ -619,6 +640,22 @@ impl<P: Plant> Robot<P> {
         }
 
         self.plant.advance(now);
+        if let Some(state) = self.plant.state()
+            && let Some(breach) = self.bounds.check(&state)
+        {
+            // Diverged: zero first, then say so and stop for good.
+            self.halt(Halt::Diverged);
+            self.diverged = Some(format!(
+                "agent {} diverged at t = {now} s: {breach}",
+                self.config.agent
+            ));
+            self.next_tick = f64::INFINITY;
+            return RobotTick {
+                publish: None,
+                stats: None,
+                done: true,
+            };
+        }
         let publish = match self.plant.state() {
             Some(state) => {
                 let out = follow(
@@ -973,6 +1010,11 @@ impl Driver<'_> {
             }
         }
         let stats = robot.finish();
+        if failure.is_none()
+            && let Some(why) = robot.diverged()
+        {
+            failure = Some(FleetError::Diverged(why.to_owned()));
+        }
         if failure.is_none() {
             publish_stats(self.session, &self.stats_key, &stats);
         }
@@ -1239,6 +1281,32 @@ mod tests {
                 + r.pending() as u64,
             "{c:?}"
         );
+    }
+
+    /// The divergence guard: with a gain of 1e12 the plant's state leaves
+    /// its bounds within a tick; the robot commands zero, stops for good and
+    /// says which agent, when and what.
+    #[test]
+    fn a_diverging_robot_stops_at_zero_and_says_why() {
+        let src = FAST_CIRCLE.replace("[sim]", "[control]\nke = 1e12\n\n[sim]");
+        let s = Scenario::parse(&src, "test", None).unwrap_or_else(|e| panic!("{e}"));
+        let mut w = World::new(&s, vec![robot(&s, 1, FaultSpec::default())]);
+        w.run_until(2.0);
+        let r = &w.robots[0];
+        let why = r.diverged().unwrap_or_else(|| panic!("{:?}", r.report()));
+        assert!(why.starts_with("agent 1 diverged at t = "), "{why}");
+        assert!(
+            why.contains("left its bound") || why.contains("not finite"),
+            "{why}"
+        );
+        // Stopped: due never again, zero commanded, nothing published after.
+        let SimulatedDrive::Torque(p) = r.plant() else {
+            panic!("a torque robot")
+        };
+        assert_eq!(p.applied_input(), Input::default());
+        let last = w.log[0].last().map_or(0.0, |p| p.local);
+        w.run_until(3.0);
+        assert_eq!(w.log[0].last().map_or(0.0, |p| p.local), last);
     }
 
     #[test]

@@ -125,13 +125,18 @@ pub enum SimError {
     /// Timing parameters that do not fit together.
     #[error("{0}")]
     Timing(String),
-    /// The state left the finite numbers (e.g. a singular configuration).
-    #[error("agent {agent}: state is no longer finite at t = {t} s (the law met a singularity)")]
-    NonFinite {
+    /// An agent's state stopped being finite or left its physical bounds
+    /// ([`crate::guard::Bounds`]): the run is stopped there.
+    #[error("agent {agent} ({name}) diverged at t = {t} s: {breach}")]
+    Diverged {
         /// The agent (1-based).
         agent: usize,
-        /// Simulation time.
+        /// Its name.
+        name: String,
+        /// Simulation time, s.
         t: f64,
+        /// What left its bound.
+        breach: crate::guard::Breach,
     },
     /// An observer failed (e.g. an I/O error while logging).
     #[error("observer: {0}")]
@@ -194,6 +199,17 @@ pub enum OutputError {
     /// The simulation failed.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// The run diverged ([`SimError::Diverged`]); its outputs up to the last
+    /// state within bounds are written, `summary.json` says so.
+    #[error("{error} (outputs up to t = {until} s in {})", dir.display())]
+    Diverged {
+        /// What diverged.
+        error: SimError,
+        /// The last time written, s.
+        until: f64,
+        /// The output directory.
+        dir: std::path::PathBuf,
+    },
     /// A file that should hold a run's output does not parse.
     #[error("{}:{line}: {message}", path.display())]
     Parse {

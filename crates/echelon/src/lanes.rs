@@ -282,7 +282,7 @@ impl<const W: usize> Lanes<W> {
     }
 
     #[inline(always)]
-    fn compare(self, o: Lanes<W>, f: impl Fn(f64, f64) -> bool) -> Mask<W> {
+    pub(crate) fn compare(self, o: Lanes<W>, f: impl Fn(f64, f64) -> bool) -> Mask<W> {
         let mut r = [0u64; W];
         for i in 0..W {
             r[i] = if f(self.0[i], o.0[i]) { u64::MAX } else { 0 };

@@ -37,6 +37,7 @@ pub mod engine;
 pub mod error;
 pub mod follow;
 pub mod formation;
+pub mod guard;
 pub mod identify;
 pub mod kinematic;
 pub mod lanes;

@@ -140,6 +140,35 @@ impl RobotParams {
         }
     }
 
+    /// A command the motors can deliver, keeping its turn: the wheel torques
+    /// `τ_r,l = r (u1 ± u2/l)/2` (eq. 2) stay within `±torque_limit` by first
+    /// limiting `u2` to what both wheels can give, then `u1` to what is left
+    /// (identity without a limit, or when the command is within it). Clamping
+    /// each wheel alone ([`RobotParams::actuate`]) drops the turn of a command
+    /// that saturates both wheels the same way, and a robot driving away from
+    /// its goal at full torque never turns back; the safety filter limits its
+    /// nominal command with this first (as a velocity base's nominal goes
+    /// through [`crate::base::VelocityBase::limit`]). Returns the command and
+    /// whether it was cut.
+    pub fn limit(&self, u: Input) -> (Input, bool) {
+        let Some(limit) = self.torque_limit else {
+            return (u, false);
+        };
+        // |u1 ± u2/l| ≤ b
+        let b = 2.0 * limit / self.wheel_radius;
+        let turn = u.u2 / self.half_wheelbase;
+        if u.u1.abs() + turn.abs() <= b {
+            return (u, false);
+        }
+        let turn = turn.clamp(-b, b);
+        let room = b - turn.abs();
+        let out = Input {
+            u1: u.u1.clamp(-room, room),
+            u2: turn * self.half_wheelbase,
+        };
+        (out, true)
+    }
+
     /// Linear and angular accelerations `(v̇, ω̇)` for the applied input (eq. 3c–d).
     #[inline]
     pub fn accelerations(&self, s: &State, u: Input) -> (f64, f64) {
@@ -342,6 +371,50 @@ pub fn wrap_angle(a: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    mod limit {
+        use super::*;
+        use proptest::prelude::*;
+
+        proptest! {
+            /// The limited command's wheel torques are within the limit, a
+            /// command within it is returned as it is, the turn survives
+            /// whenever the wheels can give it (and keeps its sign), and the
+            /// drive never changes sign.
+            #[test]
+            fn wheels_within_turn_kept(
+                u1 in -2000.0..2000.0f64,
+                u2 in -300.0..300.0f64,
+                limit in 0.5..50.0f64,
+                agent2 in any::<bool>(),
+            ) {
+                let base = if agent2 { RobotParams::AGENT2 } else { RobotParams::AGENT1 };
+                let p = RobotParams { torque_limit: Some(limit), ..base };
+                let u = Input { u1, u2 };
+                let (out, cut) = p.limit(u);
+                let tau = p.torques(out);
+                prop_assert!(tau.right.abs() <= limit * (1.0 + 1e-12));
+                prop_assert!(tau.left.abs() <= limit * (1.0 + 1e-12));
+                let inside = p.actuate(u).0 == u;
+                prop_assert_eq!(!cut, inside);
+                if !cut {
+                    prop_assert_eq!(out, u);
+                }
+                let b = 2.0 * limit / p.wheel_radius;
+                if (u2 / p.half_wheelbase).abs() <= b {
+                    prop_assert!((out.u2 - u2).abs() <= 1e-9 * u2.abs().max(1.0));
+                }
+                prop_assert!(out.u2 * u2 >= 0.0 && out.u1 * u1 >= 0.0);
+                prop_assert!(out.u1.abs() <= u1.abs() && out.u2.abs() <= u2.abs() + 1e-9);
+            }
+        }
+
+        #[test]
+        fn without_a_limit_nothing_changes() {
+            let u = Input { u1: 1e6, u2: -1e6 };
+            assert_eq!(RobotParams::AGENT1.limit(u), (u, false));
+        }
+    }
 
     #[test]
     fn torque_mapping_round_trips() {

@@ -12,14 +12,14 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use crate::error::OutputError;
+use crate::error::{OutputError, SimError};
 use crate::model::{State, wrap_angle};
 use crate::reference::{Order, Reference, Trajectory};
 use crate::safety::Outcome;
 use crate::scenario::Run;
 use crate::sim::{
-    AgentOutput, AgentSummary, Every, Frame, Observer, ObserverError, SafetyReport, SafetyWatch,
-    Simulation, Summary, Timing,
+    AgentOutput, AgentSummary, Divergence, Every, Frame, Observer, ObserverError, SafetyReport,
+    SafetyWatch, Simulation, Summary, Timing,
 };
 
 /// The header of `trajectory.csv`: one row per agent per logged sample, SI units,
@@ -642,6 +642,10 @@ pub struct RunSummary {
     /// The safety filter's statistics (absent without `[safety]`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetyReport>,
+    /// Present when the run diverged: it stopped there, and `agents` hold
+    /// statistics up to the last state within bounds, not results.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub diverged: Option<Divergence>,
 }
 
 /// The files a run writes into its output directory.
@@ -727,10 +731,31 @@ pub fn run_to_dir(
         &mut watch,
         extra,
     ]);
-    if let Err(e) = result {
-        remove_parts();
-        return Err(e.into());
-    }
+    // A diverged run keeps what it wrote up to its last state within bounds
+    // (the observers were not finished: flush them here), and says so.
+    let diverged = match result {
+        Ok(()) => None,
+        Err(e) => match Divergence::of(&e) {
+            Some(d) => {
+                let flushed = [
+                    &mut trajectory as &mut dyn Observer,
+                    &mut reference,
+                    &mut odometry,
+                    &mut safety,
+                ]
+                .finish();
+                if let Err(f) = flushed {
+                    remove_parts();
+                    return Err(SimError::Observer(f.to_string()).into());
+                }
+                Some((d, e))
+            }
+            None => {
+                remove_parts();
+                return Err(e.into());
+            }
+        },
+    };
     let config = *sim.config();
     let report = RunSummary {
         scenario: run.name.clone(),
@@ -745,6 +770,7 @@ pub fn run_to_dir(
         warnings: sim.warnings().to_vec(),
         agents: summary.agents(sim.agents()),
         safety: watch.report().cloned(),
+        diverged: diverged.as_ref().map(|(d, _)| d.clone()),
     };
     let mut json = serde_json::to_string_pretty(&report).map_err(|e| OutputError::Io {
         path: summary_part.clone(),
@@ -757,7 +783,14 @@ pub fn run_to_dir(
         let to = dir.join(to);
         std::fs::rename(from, &to).map_err(io_error(&to))?;
     }
-    Ok(report)
+    match diverged {
+        None => Ok(report),
+        Some((_, error)) => Err(OutputError::Diverged {
+            error,
+            until: sim.time() - config.dt,
+            dir: dir.to_path_buf(),
+        }),
+    }
 }
 
 #[cfg(test)]

@@ -56,13 +56,21 @@
 //! ḧ_ij = 2‖ṗ_i − ṗ_j‖² + 2 dᵀ(p̈_i − p̈_j)
 //! ```
 //!
-//! The constraint is `ḧ + 2γ ḣ + γ² h ≥ 0`: both poles of
-//! `(d/dt + γ)² h ≥ 0` at `−γ` (`k1 = 2γ`, `k0 = γ²`), so with
-//! `ψ₁ = ḣ + γ h`, `ψ̇₁ + γ ψ₁ ≥ 0` keeps `ψ₁ ≥ 0` (when it starts so, e.g.
-//! robots at rest outside the radius) and then `h ≥ 0`. The same split applies
-//! (with the shared term zero): toward a cooperative neighbour a robot takes
-//! `2 dᵀ p̈_i ≥ −½(2‖Δṗ‖² + 2γ ḣ + γ² h)` and leaves `−2 dᵀ p̈_j` to its
-//! neighbour; a non-cooperative one's measured `p̈_j` enters.
+//! The constraint is `ḧ + (γ + p) ḣ + γ p h ≥ 0`, `p = max(γ, `[`INNER_RATE`]`)`:
+//! with `ψ₁ = ḣ + γ h` it reads `ψ̇₁ + p ψ₁ ≥ 0`, which keeps `ψ₁ ≥ 0` if it
+//! starts so (robots at rest outside the radius) and then `h ≥ 0`. The same
+//! split applies (with the shared term zero): toward a cooperative neighbour
+//! a robot takes `2 dᵀ p̈_i ≥ −½(2‖Δṗ‖² + (γ + p) ḣ + γ p h)` and leaves
+//! `−2 dᵀ p̈_j` to its neighbour; a non-cooperative one's measured `p̈_j`
+//! enters.
+//!
+//! The point `L` ahead has relative degree two, but the heading is its
+//! internal dynamics, unstable in reverse; the QP's answer is therefore held
+//! to a speed envelope ([`Envelope`]: no reverse, `|ω|` and `v` bounded), and
+//! a robot with a `torque_limit` has its nominal limited first with its turn
+//! kept ([`RobotParams::limit`]), so a command that saturates both wheels
+//! still steers. Issue 20 found a crossing of two Table I robots that
+//! diverged (‖e‖ ≈ 1e213 m) without these.
 //!
 //! ## The quadratic program
 //!
@@ -108,6 +116,17 @@ use crate::model::{Input, RobotParams, State};
 /// How far (in the QP's units: m²/s for velocity bases, m²/s² for torques)
 /// the solver's answer may break a constraint before it is refused.
 pub const TOLERANCE: f64 = 1e-6;
+
+/// `p`, 1/s: the inner pole of the torque barrier, `ψ̇₁ + p ψ₁ ≥ 0` with
+/// `ψ₁ = ḣ + γ h` (`p = max(γ, INNER_RATE)`). With both poles at `−γ` (the
+/// filter before issue 20) `ψ₁` could fall no faster than `γ ψ₁`, and since
+/// `ḧ` carries `2 dᵀp̈`, which grows with the distance `d`, a robot moving
+/// away from a neighbour metres off was forbidden to brake (friction alone
+/// decelerates Table I's robots at `η v/m ≈ 6 m/s²` at 1 m/s): the filter
+/// kept it driving away, the law's braking refused. `ψ₁ ≥ 0` still keeps
+/// `h ≥ 0`; the inner loop, on the robot's acceleration, is just allowed to
+/// be faster than the outer one.
+pub const INNER_RATE: f64 = 5.0;
 
 /// How long a robot must be stuck before it breaks a deadlock, s.
 pub const STUCK_TIME: f64 = 1.0;
@@ -330,6 +349,79 @@ struct Deadlock {
     breaks: u64,
 }
 
+/// The speed envelope a torque-driven robot's filtered command keeps it in:
+/// `−v_reverse ≤ v ≤ v_max`, `|ω| ≤ omega_max`, each as a first-order barrier
+/// `ḣ ≥ −κ h` on `(u1, u2)` (`v̇ = (u1 − η v)/m`, `ω̇ = (u2 − ψ ω)/J`, eq. 3),
+/// rows of the QP like the torque limit (a nominal command that satisfies
+/// every barrier is not held to them).
+///
+/// Why (issue 20): the filter steers the point `L` ahead, whose acceleration
+/// `(u1/m, L u2/J)` the QP changes as little as possible. The heading is that
+/// output's internal (zero) dynamics: holding the point's lateral
+/// acceleration needs `ω̇ ≈ −(v/L) ω`, unstable at rate `|v|/L` whenever
+/// `v < 0` (20/s per m/s at `L = 0.05 m`), and a lateral correction of the
+/// point costs the QP `L` times less than the angular acceleration it
+/// demands. Unbounded, a filter that pushed a robot backwards made it spin
+/// up (12 rad/s in 3 s) and the run diverge (‖e‖ ≈ 1e213 m). The envelope
+/// bounds the state the filter may create, and with no reverse (the default)
+/// the heading stays on the stable side of its zero dynamics: the filter may
+/// slow a robot to a stop, never drive it backwards. When the envelope and
+/// the barriers conflict the QP is infeasible and the robot brakes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Envelope {
+    /// Largest forward speed, m/s.
+    pub v_max: f64,
+    /// Largest reverse speed, m/s (`v ≥ −v_reverse`).
+    pub v_reverse: f64,
+    /// Largest turn rate, rad/s.
+    pub omega_max: f64,
+    /// `κ`, 1/s: how fast the state is brought back inside.
+    pub rate: f64,
+}
+
+impl Envelope {
+    /// The default envelope: 1.5 m/s forward, no reverse, 4 rad/s, κ = 5/s.
+    pub const DEFAULT: Envelope = Envelope {
+        v_max: 1.5,
+        v_reverse: 0.0,
+        omega_max: 4.0,
+        rate: 5.0,
+    };
+
+    /// The envelope of `robot` (the default; the limits of a robot with a
+    /// `torque_limit` bound it anyway).
+    pub fn for_robot(_robot: &RobotParams) -> Envelope {
+        Envelope::DEFAULT
+    }
+
+    /// The four rows in the QP's variables `x = (u1/m, L u2/J)` at speeds
+    /// `(v, w)`: `v̇ = x₁ − η v/m`, `ω̇ = x₂/L − ψ ω/J`.
+    fn push_rows(&self, rows: &mut Vec<Constraint>, robot: &RobotParams, l: f64, v: f64, w: f64) {
+        let k = self.rate;
+        let dv = robot.linear_friction * v / robot.mass;
+        let dw = robot.angular_friction * w / robot.inertia;
+        // v_max − v ≥ 0:      −v̇ ≥ −κ (v_max − v)
+        rows.push(Constraint {
+            a: [-1.0, 0.0],
+            b: -k * (self.v_max - v) - dv,
+        });
+        // v + v_reverse ≥ 0:   v̇ ≥ −κ (v + v_reverse)
+        rows.push(Constraint {
+            a: [1.0, 0.0],
+            b: -k * (v + self.v_reverse) + dv,
+        });
+        // omega_max ∓ ω ≥ 0
+        rows.push(Constraint {
+            a: [0.0, -1.0 / l],
+            b: -k * (self.omega_max - w) - dw,
+        });
+        rows.push(Constraint {
+            a: [0.0, 1.0 / l],
+            b: -k * (self.omega_max + w) + dw,
+        });
+    }
+}
+
 /// One robot's safety filter: its settings, the QP's buffers and the deadlock
 /// monitor. Call [`velocity`](SafetyFilter::velocity) or
 /// [`torque`](SafetyFilter::torque) once per controller period with the
@@ -370,6 +462,12 @@ impl SafetyFilter {
     /// QP's variables.
     pub fn constraints(&self) -> &[Constraint] {
         &self.rows
+    }
+
+    /// Whether the robot is deadlocked now: stuck (the filter keeps less than
+    /// half of the motion its nominal asks for) or breaking a deadlock.
+    pub fn deadlocked(&self) -> bool {
+        self.deadlock.stuck_since.is_some() || self.deadlock.breaking
     }
 
     /// How many deadlocks it has started breaking.
@@ -453,7 +551,8 @@ impl SafetyFilter {
             along * own.cos - across * own.sin,
             along * own.sin + across * own.cos,
         ];
-        let x0 = [nominal.u1 / m, l * nominal.u2 / j];
+        let limited = robot.limit(nominal).0;
+        let x0 = [limited.u1 / m, l * limited.u2 / j];
         let gamma = self.config.gain;
         self.rows.clear();
         let min_distance = self.barriers(&own, neighbours, obstacles, |d, h, n| {
@@ -462,8 +561,10 @@ impl SafetyFilter {
             let rel = [own.dp[0] - dpj[0], own.dp[1] - dpj[1]];
             let dh = 2.0 * (d[0] * rel[0] + d[1] * rel[1]);
             // Everything in ḧ + 2γ ḣ + γ² h that u does not move.
+            // ψ₁ = ḣ + γ h,  ψ̇₁ + p ψ₁ ≥ 0:  ḧ + (γ + p) ḣ + γ p h ≥ 0.
+            let p = INNER_RATE.max(gamma);
             let drift =
-                2.0 * (rel[0] * rel[0] + rel[1] * rel[1]) + 2.0 * gamma * dh + gamma * gamma * h;
+                2.0 * (rel[0] * rel[0] + rel[1] * rel[1]) + (gamma + p) * dh + gamma * p * h;
             let df = 2.0 * (d[0] * f[0] + d[1] * f[1]);
             let b = match n {
                 Some(n) if n.cooperative => -df - 0.5 * drift,
@@ -471,7 +572,10 @@ impl SafetyFilter {
             };
             Constraint { a, b }
         });
+        // The speed envelope ([`Envelope`]) bounds what the QP may answer; a
+        // nominal that satisfies every barrier passes as it is.
         let barriers = self.rows.len();
+        Envelope::for_robot(robot).push_rows(&mut self.rows, robot, l, v, w);
         if let Some(limit) = robot.torque_limit {
             // τ_r,l = r (u1 ± u2/l_w)/2, |τ| ≤ limit:
             // |m x₁ ± J x₂ /(L l_w)| ≤ 2 limit / r.
@@ -488,7 +592,7 @@ impl SafetyFilter {
         }
         let (x, outcome, deadlock) = self.decide(t, x0, barriers, f);
         let command = match outcome {
-            Outcome::Nominal => nominal,
+            Outcome::Nominal => limited,
             Outcome::Braked => Input {
                 u1: -eta * v,
                 u2: -psi * w,
@@ -841,12 +945,15 @@ mod tests {
                 let out = f.torque(0.0, &me, l, &robot, nominal, &ns, &[]);
                 let rows = f.constraints().to_vec();
                 let x_of = |u: Input| [u.u1 / robot.mass, l * u.u2 / robot.inertia];
-                let barriers = rows.len() - 4;
-                let nominal_ok = rows[..barriers].iter().all(|c| c.slack(x_of(nominal)) >= 0.0);
+                // Barriers, then the speed envelope (4 rows), then the torque limit (4).
+                let barriers = rows.len() - 8;
+                // The nominal is first limited with its turn kept.
+                let limited = robot.limit(nominal).0;
+                let nominal_ok = rows[..barriers].iter().all(|c| c.slack(x_of(limited)) >= 0.0);
                 match out.outcome {
                     Outcome::Nominal => {
                         prop_assert!(nominal_ok);
-                        prop_assert_eq!(out.command, nominal);
+                        prop_assert_eq!(out.command, limited);
                     }
                     Outcome::Filtered => {
                         let x = x_of(out.command);

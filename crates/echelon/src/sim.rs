@@ -13,6 +13,7 @@ use crate::control::{Gains, Law, LawOutput, Variant, errors};
 use crate::error::{FormationError, ParamError, SimError};
 use crate::follow::{Follow, LeaderView, follow};
 use crate::formation::{Formation, Leader};
+use crate::guard::Bounds;
 use crate::kinematic::kinematic_law;
 use crate::lycomp::{FitCoefficients, LyComp, Placement};
 use crate::math::whole_ratio;
@@ -207,6 +208,9 @@ pub struct SimConfig {
     pub duration: f64,
     /// Continuous or sampled controller.
     pub timing: Timing,
+    /// The divergence guard: a state outside stops the run
+    /// ([`SimError::Diverged`]).
+    pub bounds: Bounds,
 }
 
 /// At most this many steps in a run.
@@ -233,7 +237,13 @@ impl SimConfig {
             dt,
             duration,
             timing,
+            bounds: Bounds::DEFAULT,
         })
+    }
+
+    /// The same settings with the divergence guard's `bounds`.
+    pub fn with_bounds(self, bounds: Bounds) -> SimConfig {
+        SimConfig { bounds, ..self }
     }
 
     fn steps_for(dt: f64, duration: f64) -> f64 {
@@ -304,6 +314,9 @@ pub struct SafetyOutput {
     pub deadlock: bool,
     /// Deadlocks this agent has started breaking so far.
     pub deadlock_breaks: u64,
+    /// Whether the agent is deadlocked now: stuck behind its barriers or
+    /// breaking a deadlock ([`SafetyFilter::deadlocked`]).
+    pub deadlocked: bool,
     /// The law's command.
     pub nominal: [f64; 2],
     /// The command sent to the base.
@@ -1009,6 +1022,7 @@ impl Simulation {
             }
             o.sampled = true;
             o.deadlock_breaks = filter.deadlock_breaks();
+            o.deadlocked = filter.deadlocked();
         }
         // The plant moves under the filtered commands from this instant on.
         self.sys.evaluate(
@@ -1142,7 +1156,8 @@ impl Simulation {
     }
 
     /// Advances one RK4 step; the law is evaluated in each of the four stages.
-    /// Fails if a state stops being finite.
+    /// Fails ([`SimError::Diverged`]) if a state stops being finite or leaves
+    /// the configuration's [`Bounds`]; the simulation then stays at that state.
     pub fn step(&mut self) -> Result<(), SimError> {
         self.refresh();
         let dt = self.config.dt;
@@ -1195,11 +1210,16 @@ impl Simulation {
         }
         self.step += 1;
         self.fresh = false;
-        if let Some(i) = self.state.iter().position(|s| !s.is_finite()) {
-            return Err(SimError::NonFinite {
-                agent: i + 1,
-                t: self.time(),
-            });
+        let bounds = self.config.bounds;
+        for (i, s) in self.state.iter().enumerate() {
+            if let Some(breach) = bounds.check(s) {
+                return Err(SimError::Diverged {
+                    agent: i + 1,
+                    name: self.sys.agents[i].name.clone(),
+                    t: self.time(),
+                    breach,
+                });
+            }
         }
         let now = self.time();
         for (i, odometer) in self.odometers.iter_mut().enumerate() {
@@ -1268,6 +1288,50 @@ pub struct AgentSummary {
     /// for velocity agents; absent for torque-driven ones).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub saturated_ticks: Option<u64>,
+}
+
+/// Where and how a run diverged (`summary.json`'s `diverged`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Divergence {
+    /// 1-based agent number.
+    pub agent: usize,
+    /// Its name.
+    pub name: String,
+    /// When, s.
+    pub t: f64,
+    /// What left its bound (`|v|`, `|omega|`, `‖(x, y)‖`, or a component
+    /// that is not finite).
+    pub quantity: String,
+    /// Its value (`null` when not finite).
+    pub value: Option<f64>,
+    /// Its bound (`null` for a value that must only be finite).
+    pub bound: Option<f64>,
+    /// The one-line message.
+    pub message: String,
+}
+
+impl Divergence {
+    /// From a [`SimError::Diverged`]; `None` for any other error.
+    pub fn of(e: &SimError) -> Option<Divergence> {
+        let SimError::Diverged {
+            agent,
+            name,
+            t,
+            breach,
+        } = e
+        else {
+            return None;
+        };
+        Some(Divergence {
+            agent: *agent,
+            name: name.clone(),
+            t: *t,
+            quantity: breach.quantity.to_owned(),
+            value: breach.value.is_finite().then_some(breach.value),
+            bound: breach.bound.is_finite().then_some(breach.bound),
+            message: e.to_string(),
+        })
+    }
 }
 
 /// Accumulates [`AgentSummary`] statistics over every frame of a run.
@@ -1358,6 +1422,10 @@ pub struct AgentSafety {
     pub infeasible: u64,
     /// Deadlocks it started breaking.
     pub deadlock_breaks: u64,
+    /// Whether it was deadlocked at the end of the run (stuck behind its
+    /// barriers or breaking a deadlock): a robot that did not reach its slot
+    /// because the filter held it is reported here, never silently.
+    pub deadlocked_at_end: bool,
 }
 
 /// Safety statistics of a run (`summary.json`'s `safety`), from the true
@@ -1382,6 +1450,8 @@ pub struct SafetyReport {
     pub infeasible: u64,
     /// Sum over agents of [`AgentSafety::deadlock_breaks`].
     pub deadlock_breaks: u64,
+    /// Agents deadlocked at the end of the run (1-based).
+    pub deadlocked_at_end: Vec<usize>,
     /// Per agent.
     pub agents: Vec<AgentSafety>,
 }
@@ -1442,12 +1512,14 @@ impl Observer for SafetyWatch {
             active: 0,
             infeasible: 0,
             deadlock_breaks: 0,
+            deadlocked_at_end: Vec::new(),
             agents: (1..=safety.l.len())
                 .map(|agent| AgentSafety {
                     agent,
                     active: 0,
                     infeasible: 0,
                     deadlock_breaks: 0,
+                    deadlocked_at_end: false,
                 })
                 .collect(),
         });
@@ -1477,11 +1549,18 @@ impl Observer for SafetyWatch {
                 a.infeasible += u64::from(o.outcome == Outcome::Braked);
             }
             a.deadlock_breaks = o.deadlock_breaks;
+            a.deadlocked_at_end = o.enabled && o.deadlocked;
         }
         if frame.last {
             r.active = r.agents.iter().map(|a| a.active).sum();
             r.infeasible = r.agents.iter().map(|a| a.infeasible).sum();
             r.deadlock_breaks = r.agents.iter().map(|a| a.deadlock_breaks).sum();
+            r.deadlocked_at_end = r
+                .agents
+                .iter()
+                .filter(|a| a.deadlocked_at_end)
+                .map(|a| a.agent)
+                .collect();
         }
         Ok(())
     }

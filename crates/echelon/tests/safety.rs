@@ -80,7 +80,7 @@ fn crossing_keeps_every_pair_apart_and_the_formation_still_converges() {
 fn the_torque_column_goes_around_the_posts() {
     let (report, _, clearance, finals) = run("obstacle-slalom", true);
     let report = report.unwrap();
-    // Exponential barrier on (u1, u2): clearance ≥ radius − 1 mm (0.15024 m measured).
+    // Exponential barrier on (u1, u2): clearance ≥ radius − 1 mm (0.15002 m measured).
     assert!(clearance >= 0.15 - 1e-3, "clearance {clearance}");
     assert_eq!(report.min_obstacle_clearance, Some(clearance));
     assert!(report.min_distance >= 0.15 - 1e-3);

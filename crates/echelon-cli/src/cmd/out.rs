@@ -8,6 +8,19 @@ use std::io::{self, Write};
 #[derive(Debug)]
 pub(crate) struct Closed;
 
+/// A run that diverged (`echelon run`): its one-line message; exit code 1
+/// (a refused input is 2).
+#[derive(Debug)]
+pub(crate) struct Diverged(pub(crate) String);
+
+impl fmt::Display for Diverged {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Diverged {}
+
 impl fmt::Display for Closed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("standard output was closed")

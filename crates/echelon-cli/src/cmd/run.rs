@@ -113,6 +113,20 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     drop(progress);
     let summary = match result {
         Ok(s) => s,
+        Err(e @ echelon::OutputError::Diverged { .. }) => {
+            // The MCAP log holds the same frames as the CSV logs: close it
+            // (the run did not) and keep it.
+            if args.mcap {
+                match mcap.finish() {
+                    Ok(()) => std::fs::rename(&mcap_part, out.join(MCAP_FILE))
+                        .with_context(|| format!("writing {}", out.join(MCAP_FILE).display()))?,
+                    Err(_) => {
+                        let _ = std::fs::remove_file(&mcap_part);
+                    }
+                }
+            }
+            return Err(super::out::Diverged(format!("{}: {e}", run.name)).into());
+        }
         Err(e) => {
             let _ = std::fs::remove_file(&mcap_part);
             return Err(e).with_context(|| format!("running {}", run.name));

@@ -290,10 +290,17 @@ pub(crate) fn combine<const N: usize>(
     each(|i| x[i] + (k1[i] + k23[i] * 2.0 + k4[i]) * h6)
 }
 
-/// Lanes whose state is no longer finite.
+/// Lanes whose state is no longer finite or has left the divergence guard's
+/// default bounds ([`crate::guard::Bounds::DEFAULT`]: `|v|`, `|ω|`,
+/// `‖(x, y)‖`); a NaN fails every comparison, so it is caught too.
 #[inline(always)]
 pub(crate) fn broken<const N: usize>(x: &[Lanes<N>; 5], live: Mask<N>) -> Mask<N> {
-    let ok = x[0].finite() & x[1].finite() & x[2].finite() & x[3].finite() & x[4].finite();
+    let b = crate::guard::Bounds::DEFAULT;
+    let r2 = x[0] * x[0] + x[1] * x[1];
+    let ok = r2.compare(Lanes::splat(b.distance * b.distance), |a, c| a <= c)
+        & x[2].finite()
+        & x[3].abs().compare(Lanes::splat(b.speed), |a, c| a <= c)
+        & x[4].abs().compare(Lanes::splat(b.turn_rate), |a, c| a <= c);
     !ok & live
 }
 

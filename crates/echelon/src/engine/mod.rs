@@ -55,6 +55,7 @@ use crate::check;
 use crate::control::{Gains, LawRobot, Variant};
 use crate::error::{ParamError, SimError};
 use crate::formation::Leader;
+use crate::guard::{Bounds, Breach};
 use crate::lanes::{Lanes, Mask};
 use crate::lycomp::{LyComp, Placement};
 use crate::model::{RobotParams, State};
@@ -505,9 +506,17 @@ impl<K: Kernel> BatchEngine<K> {
             self.run_tiles(steps)
         };
         if let Some((n, agent)) = broke {
-            let e = SimError::NonFinite {
+            let state = self.state(agent);
+            let e = SimError::Diverged {
                 agent: agent + 1,
+                name: format!("agent {}", agent + 1),
                 t: (n + 1) as f64 * self.dt(),
+                breach: Bounds::DEFAULT.check(&state).unwrap_or(Breach {
+                    quantity: "state",
+                    value: f64::NAN,
+                    bound: f64::INFINITY,
+                    unit: "",
+                }),
             };
             self.failed = Some(e.clone());
             return Err(e);

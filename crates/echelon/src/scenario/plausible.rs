@@ -289,6 +289,8 @@ pub(super) fn num(v: f64) -> String {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)] // tests fail loudly by design
+
     use super::*;
 
     fn path(s: &str) -> FieldPath {
@@ -335,6 +337,129 @@ mod tests {
             // Each pattern is reachable: no earlier row shadows it.
             let first = PLAUSIBLE.iter().find(|q| q.pattern == p.pattern);
             assert_eq!(first, Some(p), "{} twice", p.pattern);
+        }
+    }
+
+    /// Every number a scenario can hold, each field set at least once.
+    const EVERY_FIELD: &str = r#"
+[sim]
+duration = 1.0
+dt = 0.01
+controller_period = 0.01
+[log]
+dt = 0.01
+[control]
+ke = 1.5
+kz = 10.0
+l = 0.05
+[robots.t]
+preset = "agent1"
+mass = 27.0
+linear_friction = 180.0
+inertia = 1.42
+angular_friction = 9.47
+half_wheelbase = 0.23
+wheel_radius = 0.101
+torque_limit = 5.0
+[robots.v]
+drive = "velocity"
+tau_v = 0.1
+tau_omega = 0.1
+v_max = 0.5
+omega_max = 3.0
+a_max = 1.0
+alpha_max = 5.0
+[reference.lemniscate]
+a = 2.0
+c = 0.1
+center = [0.0, 0.0]
+[[agents]]
+robot = "t"
+start = { x = 0.0, y = 0.0, theta = 0.0, v = 0.0, omega = 0.0 }
+leader = "reference"
+offset = { x = 0.5, y = 0.0 }
+control = { ke = 1.5, kz = 10.0, l = 0.05 }
+odometry = { period = 0.01, zeta = 0.0 }
+fixes = { period = 1.0 }
+safety = { gain = 1.0, range = 2.0 }
+link_loss = { hold = 1.0, decel = 0.1 }
+ros2 = { odom_timeout = 0.5, cmd_vel_timeout = 0.5, odom_rate = 50.0 }
+[[agents]]
+robot = "v"
+start = { x = 0.0, y = 1.0, theta_deg = 0.0 }
+leader = "reference"
+mode = "tracking"
+[odometry]
+period = 0.01
+ticks_per_rev = 1024
+zeta = 1e-5
+wheel_diameter_ratio = 1.0
+wheelbase_ratio = 1.0
+slip = 0.0
+speed_noise = 0.0
+turn_rate_noise = 0.0
+[fixes]
+every_steps = 100
+position_noise = 0.0
+heading_noise = 0.0
+latency = 0.0
+[safety]
+radius = 0.2
+gain = 1.0
+range = 2.0
+obstacles = [{ x = 5.0, y = 5.0, r = 0.2 }]
+[fleet]
+reference_rate = 50.0
+control_rate = 100.0
+link_timeout = 0.2
+stale_after = 0.5
+[fleet.link_loss]
+hold = 1.0
+decel = 0.1
+[fleet.ros2]
+odom_timeout = 0.5
+cmd_vel_timeout = 0.5
+odom_rate = 50.0
+"#;
+
+    /// The other references' numbers.
+    const REFERENCES: [&str; 4] = [
+        "[reference.circle]\nspeed = 0.5\nturn_rate = 0.1\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\n",
+        "[reference.line]\nspeed = 0.5\nstart = { x = 0.0, y = 0.0, theta_deg = 0.0 }\n",
+        "[reference.cubic]\nscale = 0.0625\nt_switch = 4.0\n",
+        "[reference.waypoints]\npoints = [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]]\n",
+    ];
+
+    /// Integers that are names or seeds, not quantities.
+    const NOT_QUANTITIES: [&str; 3] = ["seed", "leader", "domain_id"];
+
+    #[test]
+    fn every_number_a_scenario_can_hold_has_a_row() {
+        let lemniscate = "[reference.lemniscate]\na = 2.0\nc = 0.1\ncenter = [0.0, 0.0]\n";
+        let mut sources = vec![EVERY_FIELD.to_owned()];
+        for r in REFERENCES {
+            sources.push(EVERY_FIELD.replace(lemniscate, r));
+        }
+        let mut seen = Vec::new();
+        for src in &sources {
+            let file: ScenarioFile = toml::from_str(src).unwrap();
+            let doc = toml::Table::try_from(&file).unwrap();
+            let mut numbers = Vec::new();
+            numbers_in_table(&doc, &mut FieldPath::default(), &mut numbers);
+            for (path, v) in numbers {
+                let last = path.to_string();
+                if NOT_QUANTITIES.iter().any(|k| last.ends_with(k)) {
+                    continue;
+                }
+                let row = row_of(&path).unwrap_or_else(|| panic!("{path} has no row"));
+                let (lo, hi) = row.refuse;
+                assert!((lo..=hi).contains(&v), "{path} = {v}");
+                seen.push(row.pattern);
+            }
+        }
+        // And every row is used by some field.
+        for p in PLAUSIBLE {
+            assert!(seen.contains(&p.pattern), "{} matches no field", p.pattern);
         }
     }
 

@@ -156,15 +156,36 @@ pub struct Location {
 
 impl fmt::Display for Location {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let file = one_line(&self.file);
         if self.line == 0 {
-            write!(f, "{}", self.file)
+            write!(f, "{file}")
         } else {
-            write!(f, "{}:{}:{}", self.file, self.line, self.column)
+            write!(f, "{file}:{}:{}", self.line, self.column)
         }
     }
 }
 
-/// A scenario that cannot be loaded: always names the file, line, column and field.
+/// `s` with its control characters escaped (`\n`, `\t`, `\u{1b}`), so that
+/// a value quoted in a message (`robot = "a\nb"`) cannot break it over lines
+/// or drive the terminal.
+fn one_line(s: &str) -> Cow<'_, str> {
+    if s.chars().any(char::is_control) {
+        let mut out = String::with_capacity(s.len() + 8);
+        for c in s.chars() {
+            if c.is_control() {
+                out.extend(c.escape_default());
+            } else {
+                out.push(c);
+            }
+        }
+        Cow::Owned(out)
+    } else {
+        Cow::Borrowed(s)
+    }
+}
+
+/// A scenario that cannot be loaded: always names the file, line, column and
+/// field. Shown on one line: control characters of a quoted value are escaped.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub struct ScenarioError {
     /// File, line and column.
@@ -177,10 +198,12 @@ pub struct ScenarioError {
 
 impl fmt::Display for ScenarioError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let message = one_line(&self.message);
         if self.field.is_empty() {
-            write!(f, "{}: {}", self.location, self.message)
+            write!(f, "{}: {message}", self.location)
         } else {
-            write!(f, "{}: {}: {}", self.location, self.field, self.message)
+            let field = one_line(&self.field);
+            write!(f, "{}: {field}: {message}", self.location)
         }
     }
 }
@@ -220,4 +243,26 @@ pub enum OutputError {
         /// What is wrong.
         message: String,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scenario_error_is_one_line() {
+        let e = ScenarioError {
+            location: Location {
+                file: "s.toml".into(),
+                line: 3,
+                column: 9,
+            },
+            field: "robots.a\nb.preset".into(),
+            message: "unknown robot `two\nlines\t\u{1b}[31m` (known: ω)".into(),
+        };
+        assert_eq!(
+            e.to_string(),
+            "s.toml:3:9: robots.a\\nb.preset: unknown robot `two\\nlines\\t\\u{1b}[31m` (known: ω)"
+        );
+    }
 }

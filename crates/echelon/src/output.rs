@@ -767,7 +767,7 @@ pub fn run_to_dir(
             Timing::Sampled { period } => Some(period),
         },
         settle_tolerance: Summary::SETTLE_TOLERANCE,
-        warnings: sim.warnings().to_vec(),
+        warnings: run.warnings.iter().chain(sim.warnings()).cloned().collect(),
         agents: summary.agents(sim.agents()),
         safety: watch.report().cloned(),
         diverged: diverged.as_ref().map(|(d, _)| d.clone()),

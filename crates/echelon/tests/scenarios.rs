@@ -48,10 +48,11 @@ fn every_scenario_file_parses_builds_and_round_trips() {
             .build(&Overrides::default())
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(
-            run.simulation.warnings().is_empty(),
-            "{}: {:?}",
+            run.simulation.warnings().is_empty() && run.warnings.is_empty(),
+            "{}: {:?} {:?}",
             s.name(),
-            run.simulation.warnings()
+            run.simulation.warnings(),
+            run.warnings
         );
         assert!(
             s.file.description.is_some(),
@@ -817,4 +818,99 @@ fn ros2_links_are_checked_where_they_are_written() {
     );
     assert_eq!(l.cmd_vel_type, echelon::scenario::schema::CmdVelType::Twist);
     assert_eq!(l.key_scheme, echelon::ros_names::KeyScheme::Bridge);
+}
+
+/// Values the field's own rules accept but no differential-drive robot would
+/// have are refused with their plausible range (`scenario::PLAUSIBLE`); gains
+/// that are only unusual are run with a warning at their place.
+#[test]
+fn absurd_values_are_refused_with_their_plausible_range() {
+    expect_error(
+        &format!("{BASE}\n[control]\nl = 1e9\n"),
+        22,
+        "control.l",
+        "1e9 m is outside the plausible range 1e-4 to 10 m",
+    );
+    let robot = BASE.replacen("[[agents]]\n", "[[agents]]\nrobot = \"heavy\"\n", 1)
+        + "\n[robots.heavy]\npreset = \"agent1\"\nmass = 1e30\n";
+    expect_error(
+        &robot,
+        24,
+        "robots.heavy.mass",
+        "1e30 kg is outside the plausible range 0.05 to 5000 kg",
+    );
+    expect_errors_in_base(&[
+        (
+            "speed = 0.5",
+            "speed = 1e5",
+            7,
+            "reference.circle.speed",
+            "plausible range 0 to 100 m/s",
+        ),
+        (
+            "x = -0.3, y = -1.5",
+            "x = -0.3, y = -1e7",
+            12,
+            "agents[1].start.y",
+            "plausible range -1e6 to 1e6 m",
+        ),
+        (
+            "duration = 1.0",
+            "duration = 1e7",
+            3,
+            "sim.duration",
+            "plausible range 0 to 1e6 s",
+        ),
+    ]);
+    // An agent's own table is named, not the file's.
+    expect_error(
+        &BASE.replacen("[[agents]]\n", "[[agents]]\ncontrol = { kz = 1e16 }\n", 1),
+        12,
+        "agents[1].control.kz",
+        "plausible range 1e-15 to 1e15",
+    );
+    // A flag's value is refused as the flag.
+    let err = Scenario::parse(BASE, "test.toml", None)
+        .unwrap()
+        .build(&Overrides {
+            dt: Some(2.0),
+            duration: Some(10.0),
+            log_dt: Some(0.0),
+            ..Overrides::default()
+        })
+        .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "command line: --dt: 2 s is outside the plausible range 1e-6 to 1 s"
+    );
+    // A step the default logging period is not a multiple of: the step is
+    // named (the default is nowhere in the file).
+    expect_error(
+        &BASE.replace("dt = 0.01\n", "dt = 0.03\n"),
+        4,
+        "sim.dt",
+        "default logging period log.dt = 0.01 s",
+    );
+    // A huge gain is runnable (a divergence is the run's to stop), with a warning.
+    let run = build(&format!("{BASE}\n[control]\nke = 1e12\n")).unwrap();
+    assert_eq!(
+        run.warnings,
+        [
+            "test.toml:22:6: control.ke: 1e12 is outside the usual range 0.001 to 10000 (allowed; the run may be stiff or diverge)",
+            "test.toml:22:6: control.ke: agent 1: K_e dt = 1e10 > 2: the step 0.01 s cannot follow the time scale 1/K_e = 1e-12 s and the run will oscillate and diverge (use dt < 2e-12 s)",
+            "test.toml:22:6: control.ke: agent 2: K_e dt = 1e10 > 2: the step 0.01 s cannot follow the time scale 1/K_e = 1e-12 s and the run will oscillate and diverge (use dt < 2e-12 s)",
+        ]
+    );
+    // A gain the step cannot follow, though usual.
+    let run = build(&format!("{BASE}\n[control]\nkz = 1000.0\n")).unwrap();
+    assert_eq!(run.warnings.len(), 2, "{:?}", run.warnings);
+    assert!(
+        run.warnings[0].starts_with("test.toml:22:6: control.kz: agent 1: K_z dt = 10 > 2:"),
+        "{:?}",
+        run.warnings
+    );
+    assert!(build(BASE).unwrap().warnings.is_empty());
+    // Infinity keeps its meaning where a field allows it.
+    let unlimited = on_velocity_base("drive = \"velocity\"\nv_max = inf\n");
+    assert!(build(&unlimited).is_ok());
 }

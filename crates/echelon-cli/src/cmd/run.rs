@@ -84,7 +84,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
         .out
         .unwrap_or_else(|| PathBuf::from("out").join(&run.name));
     if !args.quiet {
-        for w in run.simulation.warnings() {
+        for w in run.warnings.iter().chain(run.simulation.warnings()) {
             super::out::err_line(&format!("warning: {w}"));
         }
     }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use super::locate::{FieldPath, Locator};
 use super::merge::Merge;
 use super::overrides::Overrides;
+use super::plausible::{self, Part};
 use super::schema::{
     AgentSection, DriveName, FixesSection, LeaderSpec, ModeName, OdometrySection, PoseSpec,
     ReferenceSection, RobotSection, ScenarioFile,
@@ -40,13 +41,17 @@ impl Scenario {
             at: Locator::new(&self.source, &self.origin, &flags),
             base_dir: self.base_dir.as_deref(),
         };
-        let (simulation, log_every, seed) = builder.build()?;
+        let (simulation, log_every, seed, stiff) = builder.build()?;
+        // Each value passed its own rules; now its plausible range.
+        let mut warnings = plausible::check(&file, &builder.at, Part::Simulation)?;
+        warnings.extend(stiff);
         Ok(Run {
             name: self.name.clone(),
             description: file.description.clone(),
             simulation,
             log_every,
             seed,
+            warnings,
             record: self.record(ov),
         })
     }
@@ -70,7 +75,9 @@ impl Builder<'_> {
         r.map_err(|e| self.at.param(&section.join(e.field), &e))
     }
 
-    fn build(&self) -> Result<(Simulation, u64, u64), ScenarioError> {
+    /// The simulation, the logging interval in steps, the seed and the
+    /// warnings about gains the step cannot resolve.
+    fn build(&self) -> Result<(Simulation, u64, u64, Vec<String>), ScenarioError> {
         let f = self.file;
         let sim = FieldPath::from("sim");
         let timing = match f.sim.controller_period {
@@ -87,13 +94,20 @@ impl Builder<'_> {
         let log_every = if log_dt == 0.0 {
             1
         } else {
-            whole_ratio(log_dt, dt).ok_or_else(|| {
-                self.at.error(
+            whole_ratio(log_dt, dt).ok_or_else(|| match f.log.dt {
+                Some(_) => self.at.error(
                     &log,
                     format!(
                         "{log_dt} s is not 0 (every step) or a whole multiple of dt = {dt} s (on the command line: --log-dt)"
                     ),
-                )
+                ),
+                // The default period is nowhere in the file: the step is.
+                None => self.at.error(
+                    &sim.key("dt"),
+                    format!(
+                        "{dt} s: the default logging period log.dt = {log_dt} s is not a whole multiple of it (set [log] dt = 0 to log every step, or a multiple of dt; on the command line: --log-dt)"
+                    ),
+                ),
             })?
         };
         let reference = self.reference()?;
@@ -109,6 +123,7 @@ impl Builder<'_> {
                 "a scenario needs at least one agent",
             ));
         }
+        let stiff = self.stiff_gains(&specs, &timing, dt);
         let agents = Agents::new(specs).map_err(|e| self.formation_error(&e))?;
         let odometry = f
             .agents
@@ -127,7 +142,49 @@ impl Builder<'_> {
                 .with_safety(spec)
                 .map_err(|e| self.at.error(&FieldPath::from("safety"), e))?,
         };
-        Ok((simulation, log_every, seed))
+        Ok((simulation, log_every, seed, stiff))
+    }
+
+    /// A warning for each agent whose gain `K` makes `K h > 2`, `h` the
+    /// controller's period (`dt` for a continuous one): the error then decays
+    /// faster than the step can follow (`1 − K h < −1` for a held command, and
+    /// RK4 is stable on `ė = −K e` only up to `K h ≈ 2.8`), and the run
+    /// oscillates and diverges. Allowed: a run may be meant to diverge.
+    fn stiff_gains(&self, specs: &[AgentSpec], timing: &Timing, dt: f64) -> Vec<String> {
+        let h = match timing {
+            Timing::Sampled { period } => *period,
+            Timing::Continuous => dt,
+        };
+        let step = match timing {
+            Timing::Sampled { .. } => "controller_period",
+            Timing::Continuous => "dt",
+        };
+        let mut warnings = Vec::new();
+        for (i, a) in specs.iter().enumerate() {
+            let mut gains = vec![("ke", "K_e", a.gains.ke)];
+            if a.law() != Law::Kinematic {
+                gains.push(("kz", "K_z", a.gains.kz));
+            }
+            let Some((key, symbol, k)) = gains
+                .into_iter()
+                .filter(|(_, _, k)| k * h > 2.0)
+                .max_by(|a, b| a.2.total_cmp(&b.2))
+            else {
+                continue;
+            };
+            let e = self.at.error(
+                &self.control(i).path_of(key),
+                format!(
+                    "agent {}: {symbol} {step} = {} > 2: the step {h} s cannot follow the time scale 1/{symbol} = {} s and the run will oscillate and diverge (use {step} < {} s)",
+                    i + 1,
+                    plausible::num(k * h),
+                    plausible::num(1.0 / k),
+                    plausible::num(2.0 / k),
+                ),
+            );
+            warnings.push(e.to_string());
+        }
+        warnings
     }
 
     /// Where a formation-level refusal belongs: the leader that breaks the

@@ -2,6 +2,7 @@
 //! simulation (fleet name, rates, link-loss policies).
 
 use super::locate::FieldPath;
+use super::plausible::{self, Part};
 use super::schema::{CmdVelType, Ros2Section};
 use super::{Merge, Scenario};
 use crate::check;
@@ -220,6 +221,9 @@ impl Scenario {
                 ));
             }
         }
+        // Each value passed its own rules; now its plausible range (the fleet
+        // has no value that is only unusual: nothing to warn about).
+        plausible::check(&self.file, &self.locator(), Part::Fleet)?;
         Ok(FleetSettings {
             name,
             reference_rate,

@@ -13,6 +13,7 @@
 //! - `merge`: per-agent tables over the file's;
 //! - `waypoints`: the waypoint CSV reader;
 //! - `locate`: field paths to `file:line:column`;
+//! - `plausible`: the plausible range of every number ([`PLAUSIBLE`]);
 //! - `fleet`: the `[fleet]` section.
 
 mod build;
@@ -21,6 +22,7 @@ mod fleet;
 mod locate;
 mod merge;
 mod overrides;
+mod plausible;
 pub mod schema;
 mod waypoints;
 
@@ -32,6 +34,7 @@ pub use fleet::{
     MAX_DOMAIN_ID, Ros2Link, is_valid_fleet_name,
 };
 pub use overrides::Overrides;
+pub use plausible::{PLAUSIBLE, Plausible};
 
 use std::fmt::Display;
 use std::path::{Path, PathBuf};
@@ -70,6 +73,10 @@ pub struct Run {
     pub log_every: u64,
     /// Seed of the random models.
     pub seed: u64,
+    /// Values that are allowed but outside their usual range ([`PLAUSIBLE`]),
+    /// one line each: `file:line:column: field: message`. The simulation's
+    /// own warnings are [`Simulation::warnings`].
+    pub warnings: Vec<String>,
     /// The scenario as run: a comment header naming where it came from and the
     /// command-line overrides applied, then the exact TOML source.
     /// [`crate::output::run_to_dir`] writes it as `scenario.toml`.

@@ -1,0 +1,604 @@
+//! Mutated built-in scenarios fed to the parser, the builder and a short run
+//! (issue 20, item 4): numbers replaced by NaN, ±∞, 0, negatives, huge values
+//! and values of the wrong type, strings replaced (some with newlines and
+//! escape sequences), lines deleted or duplicated, tables deleted, unknown
+//! keys added. Whatever the input:
+//!
+//! - nothing panics;
+//! - every refusal is one line starting `fuzz.toml:LINE:COLUMN: ` (a real
+//!   position: line and column ≥ 1) without control characters, and so is
+//!   every warning;
+//! - a run that ends `Ok` has a sane summary: final error, RMS error and peak
+//!   torque finite and bounded (`SANE_ERROR`, `SANE_TORQUE`), final pose
+//!   finite. A run that ends in an error (`SimError`: a state no longer
+//!   finite, a divergence) is a proper refusal. Until the simulator stops a
+//!   diverging run, the single mutations known to diverge are listed
+//!   (`DIVERGING_TODAY`).
+//!
+//! Runs are capped to 0.5 s of simulated time and 2000 steps. Two corpus
+//! runs: every single mutation of every built-in (about 19 000, 8 s in the
+//! test profile), and 4000 random combinations of one to three (1.5 s).
+#![allow(clippy::unwrap_used)] // tests fail loudly by design
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+
+use echelon::scenario::{self, Overrides, Scenario};
+use echelon::sim::Summary;
+use proptest::prelude::*;
+
+/// What the mutated source is called in errors.
+const ORIGIN: &str = "fuzz.toml";
+/// Longest run, simulated seconds.
+const MAX_DURATION: f64 = 0.5;
+/// Most steps of a run.
+const MAX_STEPS: f64 = 2000.0;
+/// Largest final and RMS error a sane run ends with, m: ten times the
+/// largest plausible position (`start.x`, …, 1e6 m).
+const SANE_ERROR: f64 = 1e7;
+/// Largest peak wheel torque of a sane run, N m. The paper's law has no
+/// torque limit and its torque grows with `K_e`, `K_z`, the error and the
+/// mass: a Table I robot (27 kg) starting 1 km from its place in the
+/// formation honestly asks for 1.4e6 N m. A run that diverges passes any
+/// bound within a few steps.
+const SANE_TORQUE: f64 = 1e12;
+
+/// What a number is replaced by.
+const NUMBERS: &[&str] = &[
+    "nan",
+    "+nan",
+    "-nan",
+    "inf",
+    "+inf",
+    "-inf",
+    "0",
+    "0.0",
+    "-0.0",
+    "-1",
+    "-1.0",
+    "-0.001",
+    "1e-300",
+    "5e-324",
+    "1e-9",
+    "1e9",
+    "1e12",
+    "1e15",
+    "1e16",
+    "1e30",
+    "1e300",
+    "-1e300",
+    "1.7976931348623157e308",
+    "9223372036854775807",
+    "-9223372036854775808",
+    "4294967296",
+    "2",
+    "1000",
+    "\"1.0\"",
+    "\"\"",
+    "true",
+    "{ a = 1 }",
+    "{}",
+    "[1.0, 2.0]",
+    "[]",
+    "1979-05-27",
+];
+
+/// What a string is replaced by.
+const STRINGS: &[&str] = &[
+    "\"\"",
+    "\"x\"",
+    "\"two\\nlines\"",
+    "\"tab\\there\"",
+    "\"\\u001b[31mred\"",
+    "'''multi\nline'''",
+    "\"agent1\"",
+    "\"reference\"",
+    "\"velocity\"",
+    "\"ideal\"",
+    "\"kinematic\"",
+    "\"complete\"",
+    "\"exact\"",
+    "\"tracking\"",
+    "0",
+    "1",
+    "-1",
+    "nan",
+    "[\"a\"]",
+    "{ x = 1 }",
+];
+
+/// What an added key is.
+const KEYS: &[&str] = &[
+    "bogus = 1",
+    "\"odd\\nkey\" = 1",
+    "x = 1.0",
+    "robot = \"agent2\"",
+    "enabled = false",
+    "name = \"n\"",
+    "l = 0.1",
+];
+
+#[derive(Debug, Clone)]
+enum Mutation {
+    /// The n-th number literal replaced (n modulo their count, as for the others).
+    Number(usize, &'static str),
+    /// The n-th string literal replaced.
+    String(usize, &'static str),
+    /// The n-th line deleted.
+    DeleteLine(usize),
+    /// The n-th line written twice.
+    DuplicateLine(usize),
+    /// The n-th table deleted: its header line and every line to the next header.
+    DeleteTable(usize),
+    /// A key added after the n-th line that opens a table.
+    AddKey(usize, &'static str),
+    /// A key added at the start of the n-th inline table.
+    AddInlineKey(usize, &'static str),
+}
+
+/// Where the literals of a source are (comments skipped).
+#[derive(Debug, Default)]
+struct Literals {
+    /// Byte ranges of the numbers.
+    numbers: Vec<(usize, usize)>,
+    /// Byte ranges of the strings, quotes included.
+    strings: Vec<(usize, usize)>,
+    /// Byte offsets just inside each inline table's `{`.
+    inline: Vec<usize>,
+}
+
+fn literals(src: &str) -> Literals {
+    let b = src.as_bytes();
+    let Literals {
+        mut numbers,
+        mut strings,
+        mut inline,
+    } = Literals::default();
+    let mut i = 0;
+    while i < b.len() {
+        let c = b[i];
+        if c == b'#' {
+            while i < b.len() && b[i] != b'\n' {
+                i += 1;
+            }
+        } else if c == b'"' {
+            let start = i;
+            i += 1;
+            while i < b.len() && b[i] != b'"' && b[i] != b'\n' {
+                i += if b[i] == b'\\' { 2 } else { 1 };
+            }
+            i = (i + 1).min(b.len());
+            strings.push((start, i));
+        } else if c == b'{' {
+            inline.push(i + 1);
+            i += 1;
+        } else if (c.is_ascii_digit()
+            || ((c == b'-' || c == b'+') && b.get(i + 1).is_some_and(u8::is_ascii_digit)))
+            && (i == 0 || !(b[i - 1].is_ascii_alphanumeric() || b[i - 1] == b'_'))
+        {
+            let start = i;
+            i += 1;
+            while i < b.len()
+                && (b[i].is_ascii_digit()
+                    || matches!(b[i], b'.' | b'_' | b'e' | b'E')
+                    || (matches!(b[i], b'+' | b'-') && matches!(b[i - 1], b'e' | b'E')))
+            {
+                i += 1;
+            }
+            numbers.push((start, i));
+        } else {
+            i += 1;
+        }
+    }
+    Literals {
+        numbers,
+        strings,
+        inline,
+    }
+}
+
+fn apply(src: &str, m: &Mutation) -> String {
+    let Literals {
+        numbers,
+        strings,
+        inline,
+    } = literals(src);
+    let replace = |spans: &[(usize, usize)], n: usize, to: &str| {
+        if spans.is_empty() {
+            return src.to_owned();
+        }
+        let (a, b) = spans[n % spans.len()];
+        format!("{}{to}{}", &src[..a], &src[b..])
+    };
+    let lines: Vec<&str> = src.split_inclusive('\n').collect();
+    match m {
+        Mutation::Number(n, to) => replace(&numbers, *n, to),
+        Mutation::String(n, to) => replace(&strings, *n, to),
+        Mutation::DeleteLine(n) => {
+            let k = n % lines.len();
+            lines
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != k)
+                .map(|(_, l)| *l)
+                .collect()
+        }
+        Mutation::DuplicateLine(n) => {
+            let k = n % lines.len();
+            let mut out = String::new();
+            for (i, l) in lines.iter().enumerate() {
+                out.push_str(l);
+                if i == k {
+                    if !l.ends_with('\n') {
+                        out.push('\n');
+                    }
+                    out.push_str(l);
+                }
+            }
+            out
+        }
+        Mutation::DeleteTable(n) => {
+            let headers = headers(&lines);
+            if headers.is_empty() {
+                return src.to_owned();
+            }
+            let k = n % headers.len();
+            let end = headers.get(k + 1).copied().unwrap_or(lines.len());
+            let (a, b) = (headers[k], end);
+            lines
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| !(a..b).contains(i))
+                .map(|(_, l)| *l)
+                .collect()
+        }
+        Mutation::AddKey(n, key) => {
+            let headers = headers(&lines);
+            if headers.is_empty() {
+                return src.to_owned();
+            }
+            let k = headers[n % headers.len()];
+            let mut out = String::new();
+            for (i, l) in lines.iter().enumerate() {
+                out.push_str(l);
+                if i == k {
+                    out.push_str(key);
+                    out.push('\n');
+                }
+            }
+            out
+        }
+        Mutation::AddInlineKey(n, key) => {
+            if inline.is_empty() {
+                return src.to_owned();
+            }
+            let at = inline[n % inline.len()];
+            format!("{} {key},{}", &src[..at], &src[at..])
+        }
+    }
+}
+
+/// Indices of the lines that open a table (`[…]`, `[[…]]`).
+fn headers(lines: &[&str]) -> Vec<usize> {
+    lines
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.starts_with('['))
+        .map(|(i, _)| i)
+        .collect()
+}
+
+fn mutation() -> impl Strategy<Value = Mutation> {
+    prop_oneof![
+        6 => (any::<usize>(), prop::sample::select(NUMBERS)).prop_map(|(n, t)| Mutation::Number(n, t)),
+        2 => (any::<usize>(), prop::sample::select(STRINGS)).prop_map(|(n, t)| Mutation::String(n, t)),
+        2 => any::<usize>().prop_map(Mutation::DeleteLine),
+        1 => any::<usize>().prop_map(Mutation::DuplicateLine),
+        1 => any::<usize>().prop_map(Mutation::DeleteTable),
+        1 => (any::<usize>(), prop::sample::select(KEYS)).prop_map(|(n, k)| Mutation::AddKey(n, k)),
+        1 => (any::<usize>(), prop::sample::select(KEYS)).prop_map(|(n, k)| Mutation::AddInlineKey(n, k)),
+    ]
+}
+
+/// The first line of `new` that differs from `old`'s: its number and text.
+fn first_change(old: &str, new: &str) -> (usize, String) {
+    let mut a = old.lines();
+    for (i, line) in new.lines().enumerate() {
+        if a.next() != Some(line) {
+            return (i + 1, line.to_owned());
+        }
+    }
+    (new.lines().count() + 1, String::new())
+}
+
+/// `text` is one line starting `fuzz.toml:LINE:COLUMN: ` with LINE, COLUMN ≥ 1,
+/// and has no control character.
+fn located(text: &str) -> Result<(), String> {
+    let ok = !text.chars().any(char::is_control)
+        && text
+            .strip_prefix(ORIGIN)
+            .and_then(|r| r.strip_prefix(':'))
+            .and_then(|r| {
+                let mut parts = r.splitn(3, ':');
+                let line: usize = parts.next()?.parse().ok()?;
+                let column: usize = parts.next()?.parse().ok()?;
+                let rest = parts.next()?;
+                (line >= 1 && column >= 1 && rest.starts_with(' ')).then_some(())
+            })
+            .is_some();
+    if ok {
+        Ok(())
+    } else {
+        Err(format!("not one line at {ORIGIN}:LINE:COLUMN: {text:?}"))
+    }
+}
+
+/// How a source that breaks no other property ended.
+#[derive(Debug, Clone, PartialEq)]
+enum Outcome {
+    /// Refused by the parser or the builder, or its run stopped with an error.
+    Refused,
+    /// Ran to its end with a sane summary.
+    Sane,
+    /// Ran to its end `Ok` with an absurd summary (what): a divergence that
+    /// nothing stopped.
+    Absurd(String),
+}
+
+/// Parses, builds and briefly runs `src`; `Err` says which property failed
+/// (an absurd summary is left to the caller: [`Outcome::Absurd`]).
+fn check(src: &str) -> Result<Outcome, String> {
+    let scenario = match Scenario::parse(src, ORIGIN, None) {
+        Ok(s) => s,
+        Err(e) => return located(&e.to_string()).map(|()| Outcome::Refused),
+    };
+    let run = match scenario.build(&Overrides::default()) {
+        Ok(r) => r,
+        Err(e) => return located(&e.to_string()).map(|()| Outcome::Refused),
+    };
+    for w in &run.warnings {
+        located(w).map_err(|e| format!("warning: {e}"))?;
+    }
+    // The fleet's settings: refused or accepted, never a panic.
+    if let Err(e) = scenario.fleet() {
+        located(&e.to_string())?;
+    }
+    let config = run.simulation.config();
+    let duration = config.duration.min(MAX_DURATION).min(MAX_STEPS * config.dt);
+    let mut run = scenario
+        .build(&Overrides {
+            duration: Some(duration),
+            ..Overrides::default()
+        })
+        .map_err(|e| format!("built, then refused with --duration {duration}: {e}"))?;
+    let mut summary = Summary::new(run.simulation.agents().len(), Summary::SETTLE_TOLERANCE);
+    if run.simulation.run(&mut summary).is_err() {
+        // A run stopped with a reason (a state no longer finite, a divergence).
+        return Ok(Outcome::Refused);
+    }
+    for a in summary.agents(run.simulation.agents()) {
+        let pose = [a.final_pose.x, a.final_pose.y, a.final_pose.theta];
+        let sane = |v: f64, bound: f64| v.is_finite() && v.abs() < bound;
+        if !(sane(a.final_error, SANE_ERROR)
+            && sane(a.rms_error, SANE_ERROR)
+            && sane(a.peak_torque, SANE_TORQUE)
+            && pose.iter().all(|v| v.is_finite()))
+        {
+            return Ok(Outcome::Absurd(format!(
+                "the run ended Ok with an absurd summary for agent {} after {} s: final error {} m, RMS {} m, peak torque {} N m, final pose {pose:?}",
+                a.agent,
+                run.simulation.time(),
+                a.final_error,
+                a.rms_error,
+                a.peak_torque
+            )));
+        }
+    }
+    Ok(Outcome::Sane)
+}
+
+/// [`check`], with a panic turned into its message.
+fn check_no_panic(src: &str) -> Result<Outcome, String> {
+    catch_unwind(AssertUnwindSafe(|| check(src))).unwrap_or_else(|p| {
+        let what = p
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| p.downcast_ref::<&str>().map(|s| (*s).to_owned()))
+            .unwrap_or_default();
+        Err(format!("panicked: {what}"))
+    })
+}
+
+/// Single mutations of the built-ins that run to their end `Ok` with an
+/// absurd summary today, as `(scenario, the mutated line)`: divergences that
+/// nothing stops while the simulator has no divergence guard (a
+/// `SimError::Diverged`, being added to sim.rs). Gains the step cannot follow
+/// (`K h > 2`, which the scenario warns about) and robots starting 1 km from
+/// their place, both under a sampled controller (fix-study: h = 10 ms) or the
+/// safety filter (obstacle-slalom); and obstacle-slalom with robot 1 held 2 m
+/// to the side of the line (`offset.y = 2`), a plausible formation: robots 2
+/// and 3 back away at up to 10 m/s, the filter's torques reach 3.6e4 N m at
+/// 0.4 s and the states 1e46 at 0.5 s, while with `[safety] enabled = false`
+/// the same column settles (a problem of the safety filter, safety.rs).
+///
+/// Once the simulator stops a diverging run ([`divergence_is_stopped`]) the
+/// list no longer applies: every absurd summary is a failure. Delete it then.
+const DIVERGING_TODAY: &[(&str, &str)] = &[
+    ("fix-study", "ke = 1000"),
+    ("fix-study", "kz = 1000"),
+    (
+        "fix-study",
+        "start = { x = 1000, y = 0.0, theta_deg = 0.0 }",
+    ),
+    (
+        "fix-study",
+        "start = { x = 0.0, y = 1000, theta_deg = 0.0 }",
+    ),
+    (
+        "fix-study",
+        "start = { x = 1000, y = -0.2, theta_deg = 0.0 }",
+    ),
+    (
+        "fix-study",
+        "start = { x = -0.6, y = 1000, theta_deg = 0.0 }",
+    ),
+    ("fix-study", "offset = { x = 0.5, y = 1000 }"),
+    ("obstacle-slalom", "ke = 1000"),
+    ("obstacle-slalom", "ke = 4294967296"),
+    ("obstacle-slalom", "ke = 1e9"),
+    ("obstacle-slalom", "ke = 1e12"),
+    ("obstacle-slalom", "kz = 1000"),
+    ("obstacle-slalom", "kz = 4294967296"),
+    ("obstacle-slalom", "kz = 1e9"),
+    (
+        "obstacle-slalom",
+        "start = { x = 1000, y = 0.0, theta = 0.0 }",
+    ),
+    (
+        "obstacle-slalom",
+        "start = { x = 0.0, y = 1000, theta = 0.0 }",
+    ),
+    (
+        "obstacle-slalom",
+        "start = { x = -0.3, y = 1000, theta = 0.0 }",
+    ),
+    (
+        "obstacle-slalom",
+        "start = { x = -0.9, y = 1000, theta = 0.0 }",
+    ),
+    (
+        "obstacle-slalom",
+        "start = { x = -1.5, y = 1000, theta = 0.0 }",
+    ),
+    ("obstacle-slalom", "offset = { x = 1000, y = 0.0 }"),
+    ("obstacle-slalom", "offset = { x = 0.3, y = 1000 }"),
+    ("obstacle-slalom", "offset = { x = 0.4, y = 1000 }"),
+    ("obstacle-slalom", "offset = { x = 0.3, y = 2 }"),
+];
+
+/// Whether the simulator stops a diverging run with an error: the first of
+/// [`DIVERGING_TODAY`] (obstacle-slalom with `K_z dt = 5`) ends in `Err`.
+/// Until then an absurd summary is a failure only outside that list (and in
+/// the random test, not at all: it cannot tell a known divergence from a new
+/// one). Panics if the probe ends sane: then choose another.
+fn divergence_is_stopped() -> bool {
+    static STOPPED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *STOPPED.get_or_init(|| {
+        let (_, src) = scenario::builtin()
+            .iter()
+            .find(|(n, _)| *n == "obstacle-slalom")
+            .unwrap();
+        assert!(src.contains("kz = 10.0\n"));
+        match check_no_panic(&src.replace("kz = 10.0\n", "kz = 1000\n")) {
+            Ok(Outcome::Refused) => true,
+            Ok(Outcome::Absurd(_)) => false,
+            other => panic!("the divergence probe no longer diverges ({other:?}): choose another"),
+        }
+    })
+}
+
+#[test]
+fn every_builtin_passes_unmutated() {
+    for (name, src) in scenario::builtin() {
+        let outcome = check_no_panic(src).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(outcome, Outcome::Sane, "{name}");
+    }
+}
+
+/// Every single mutation of every built-in: each number replaced by each of
+/// [`NUMBERS`], each string by each of [`STRINGS`], each line deleted and
+/// written twice, each table deleted, each of [`KEYS`] added to each table
+/// and inline table. About 19 000 checks, 8 s in the test profile.
+#[test]
+fn every_single_mutation_of_every_builtin() {
+    let stopped = divergence_is_stopped();
+    let mut failures = Vec::new();
+    let mut diverging = Vec::new();
+    let mut count = 0;
+    for (name, src) in scenario::builtin() {
+        let Literals {
+            numbers,
+            strings,
+            inline,
+        } = literals(src);
+        let lines = src.split_inclusive('\n').count();
+        let headers = src.lines().filter(|l| l.starts_with('[')).count();
+        let mut mutations = Vec::new();
+        for k in 0..numbers.len() {
+            mutations.extend(NUMBERS.iter().map(|t| Mutation::Number(k, t)));
+        }
+        for k in 0..strings.len() {
+            mutations.extend(STRINGS.iter().map(|t| Mutation::String(k, t)));
+        }
+        for k in 0..lines {
+            mutations.push(Mutation::DeleteLine(k));
+            mutations.push(Mutation::DuplicateLine(k));
+        }
+        for k in 0..headers {
+            mutations.push(Mutation::DeleteTable(k));
+            mutations.extend(KEYS.iter().map(|key| Mutation::AddKey(k, key)));
+        }
+        for k in 0..inline.len() {
+            mutations.extend(KEYS.iter().map(|key| Mutation::AddInlineKey(k, key)));
+        }
+        for m in &mutations {
+            count += 1;
+            let text = apply(src, m);
+            let (line, changed) = first_change(src, &text);
+            let failure = match check_no_panic(&text) {
+                Err(e) => e,
+                Ok(Outcome::Absurd(e)) => {
+                    let known = DIVERGING_TODAY
+                        .iter()
+                        .any(|(n, l)| *n == *name && *l == changed.trim());
+                    diverging.push(format!("{name} line {line}: `{changed}`"));
+                    if known && !stopped {
+                        continue;
+                    }
+                    e
+                }
+                Ok(_) => continue,
+            };
+            failures.push(format!(
+                "{name} with {m:?} (line {line}: `{changed}`): {failure}"
+            ));
+        }
+    }
+    eprintln!(
+        "{count} single mutations checked; {} ran Ok to an absurd summary:\n{}",
+        diverging.len(),
+        diverging.join("\n")
+    );
+    assert!(
+        failures.is_empty(),
+        "{} of {count} failed:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}
+
+proptest! {
+    // 4000 cases of one to three mutations: about 1.5 s in the test profile
+    // (100 000 cases, 25 s, found nothing more when this test was written).
+    #![proptest_config(ProptestConfig::with_cases(4000))]
+
+    #[test]
+    fn mutated_builtins_are_refused_with_a_place_or_run_sanely(
+        which in any::<prop::sample::Index>(),
+        mutations in prop::collection::vec(mutation(), 1..=3),
+    ) {
+        let builtins = scenario::builtin();
+        let (name, src) = builtins[which.index(builtins.len())];
+        let mut text = src.to_owned();
+        for m in &mutations {
+            text = apply(&text, m);
+        }
+        let failure = match check_no_panic(&text) {
+            Err(e) => Some(e),
+            Ok(Outcome::Absurd(e)) if divergence_is_stopped() => Some(e),
+            Ok(_) => None,
+        };
+        if let Some(e) = failure {
+            prop_assert!(false, "{name} with {mutations:?}: {e}\n--- source ---\n{text}");
+        }
+    }
+}

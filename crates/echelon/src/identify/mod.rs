@@ -41,7 +41,7 @@ pub const MIN_SAMPLES: usize = 50;
 
 /// Largest relative 95 % half-width of an identified parameter; wider, the
 /// parameter is reported as not identifiable.
-pub const MAX_REL_HALF_WIDTH: f64 = 0.1;
+pub const MAX_REL_HALF_WIDTH: f64 = 0.01;
 
 /// Residual RMS, relative to the RMS of the measured velocity, below which a
 /// log counts as noise-free: the residuals are rounding, `σ²` means nothing
@@ -181,6 +181,40 @@ pub struct Log {
     pub cmd: Option<[Vec<f64>; 2]>,
     /// The command after the base's speed limits, if logged.
     pub applied: Option<[Vec<f64>; 2]>,
+    /// The running integrals at the sample times (a run's `integrals.csv`),
+    /// if logged: with them the fit is exact whatever the input did between
+    /// samples.
+    pub integrals: Option<Integrals>,
+    /// What reading the log found worth saying (copied into the warnings).
+    pub notes: Vec<String>,
+    /// The inputs' own zero-order hold when it is known apart from the
+    /// samples (a ROS 2 bag's command messages): the output-error fit then
+    /// integrates the model exactly on it, instead of holding the inputs'
+    /// per-sample values (`cmd`, `applied`, `u`) over each interval.
+    pub hold: Option<Hold>,
+}
+
+/// Inputs held from each switch time to the next.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Hold {
+    /// Switch times, s, on the clock of [`Log::t`], increasing; the first at
+    /// or before the first sample.
+    pub t: Vec<f64>,
+    /// The two inputs' values held from each switch time.
+    pub u: [Vec<f64>; 2],
+}
+
+/// Running integrals of one agent at the sample times
+/// ([`crate::output::INTEGRALS_HEADER`]); only their differences are used.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Integrals {
+    /// Distance travelled `∫v dt`, m.
+    pub s: Vec<f64>,
+    /// Heading, not wrapped (`θ₀ + ∫ω dt`), rad.
+    pub theta: Vec<f64>,
+    /// `∫ input dt` of the plant's inputs: `u1, u2` (torque) or the applied
+    /// `v, ω` command (velocity base).
+    pub input: [Vec<f64>; 2],
 }
 
 /// Reads a CSV column set into per-agent series.
@@ -202,7 +236,71 @@ impl Log {
             file: origin.clone(),
             reason: format!("cannot read: {e}"),
         })?;
-        Log::parse_csv(&text, &origin, agent)
+        let mut log = Log::parse_csv(&text, &origin, agent)?;
+        let beside = file.parent().map(|d| d.join(crate::output::INTEGRALS_FILE));
+        if let Some(path) = beside.filter(|p| p.is_file()) {
+            match std::fs::read_to_string(&path)
+                .map_err(|e| e.to_string())
+                .and_then(|text| log.attach_integrals(&text))
+            {
+                Ok(()) => {}
+                Err(why) => log.notes.push(format!(
+                    "{} not used: {why}; the fit falls back to the sampled inputs",
+                    path.display()
+                )),
+            }
+        }
+        Ok(log)
+    }
+
+    /// Attaches this agent's rows of an `integrals.csv` (header
+    /// [`crate::output::INTEGRALS_HEADER`]); they must be at the log's
+    /// sample times.
+    pub fn attach_integrals(&mut self, text: &str) -> Result<(), String> {
+        let mut rdr = csv::ReaderBuilder::new().from_reader(text.as_bytes());
+        let header = rdr.headers().map_err(|e| e.to_string())?.clone();
+        let names = ["t", "agent", "s", "theta", "int_1", "int_2"];
+        let idx: Vec<usize> = names
+            .iter()
+            .map(|c| column(&header, c).ok_or_else(|| format!("no column {c}")))
+            .collect::<Result<_, _>>()?;
+        let mut cols: [Vec<f64>; 5] = Default::default();
+        for (line, rec) in rdr.records().enumerate() {
+            let rec = rec.map_err(|e| format!("line {}: {e}", line + 2))?;
+            let num = |k: usize| -> Result<f64, String> {
+                let cell = rec.get(idx[k]).unwrap_or("");
+                cell.trim()
+                    .parse::<f64>()
+                    .map_err(|_| format!("line {}: {} = `{cell}`", line + 2, names[k]))
+            };
+            if num(1)? != self.agent as f64 {
+                continue;
+            }
+            for (k, c) in [0, 2, 3, 4, 5].into_iter().zip(cols.iter_mut()) {
+                c.push(num(k)?);
+            }
+        }
+        let [t, s, theta, i1, i2] = cols;
+        if t.len() != self.t.len() || t.iter().zip(&self.t).any(|(a, b)| (a - b).abs() > 1e-9) {
+            return Err(format!(
+                "its {} rows of agent {} are not at the log's {} sample times",
+                t.len(),
+                self.agent,
+                self.t.len()
+            ));
+        }
+        if [&s, &theta, &i1, &i2]
+            .iter()
+            .any(|c| c.iter().any(|x| !x.is_finite()))
+        {
+            return Err("non-finite values".to_owned());
+        }
+        self.integrals = Some(Integrals {
+            s,
+            theta,
+            input: [i1, i2],
+        });
+        Ok(())
     }
 
     /// Parses a `trajectory.csv` (header with `t, agent, v, omega` and some of
@@ -664,19 +762,40 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
         Model::Velocity => ["v_applied", "omega_applied"],
     };
     let mut params = Vec::new();
-    let mut warnings = Vec::new();
+    let mut warnings = log.notes.clone();
     let mut axes = Vec::new();
     let mut predicted: [Vec<f64>; 2] = Default::default();
     let mut reasons = Vec::new();
+    // Whether an excited axis was withheld for misfit (then the log is
+    // answered, with the reasons, rather than refused as unexcited).
+    let mut misfits = false;
     for axis in 0..2 {
         let d = AxisData {
             t: &log.t,
             u: &inputs[axis],
             y: measured[axis],
+            hold: log.hold.as_ref().map(|h| (&h.t[..], &h.u[axis][..])),
         };
-        let f = fit::fit(&d, fixed_gain);
+        let integrals = log.integrals.as_ref().map(|w| fit::AxisIntegrals {
+            s: [&w.s, &w.theta][axis],
+            i: &w.input[axis],
+        });
+        let f = match &integrals {
+            Some(w) => fit::fit_integral(&d, w, fixed_gain),
+            None => fit::fit(&d, fixed_gain),
+        };
         let y_rms = (d.y.iter().map(|y| y * y).sum::<f64>() / d.y.len() as f64).sqrt();
         let noise_free = f.rms <= NOISE_FREE_RELATIVE_RMS * y_rms;
+        if let Some(b) = f.between {
+            let rel = |i: usize| (f.theta[i] - b.held[i]).abs() / f.theta[i].abs();
+            warnings.push(format!(
+                "the {} axis's inputs between samples are not in the log (no integrals.csv, and holding the logged values does not fit better than interpolating them, cost ratio {:.3}): the fit interpolates them linearly and its intervals include the difference to holding them ({:.2} % on τ, {:.2} % on the gain)",
+                ["linear", "angular"][axis],
+                b.cost_ratio,
+                100.0 * rel(0),
+                100.0 * rel(1)
+            ));
+        }
         let summary = |identifiable| AxisSummary {
             noise_free,
             axis: ["linear", "angular"][axis],
@@ -691,7 +810,13 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             identifiable,
         };
         let (estimates, symbols) = axis_params(model, axis, &f);
-        let why = excitation(&d, &f, &estimates, input_names[axis]);
+        let unexcited = excitation(&d, &f, &estimates, input_names[axis]);
+        let why = unexcited.clone().or_else(|| {
+            (!noise_free)
+                .then(|| misfit(&d, &f, integrals.is_some() || d.hold.is_some()))
+                .flatten()
+        });
+        misfits |= unexcited.is_none() && why.is_some();
         match &why {
             Some(reason) => {
                 warnings.push(format!(
@@ -727,7 +852,7 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
         }
         axes.push(summary(why.is_none()));
     }
-    if axes.iter().all(|a| !a.identifiable) {
+    if axes.iter().all(|a| !a.identifiable) && !misfits {
         return Err(IdentifyError::NoExcitation {
             file: log.source.clone(),
             reason: reasons.join("; "),
@@ -844,11 +969,64 @@ fn excitation(
         }
         let rel = e.relative_half_width();
         if rel > MAX_REL_HALF_WIDTH {
-            return Some(format!(
-                "the input did not excite it enough: 95 % interval ±{:.0} % of the value",
-                100.0 * rel
-            ));
+            return Some(if f.between.is_some() {
+                format!(
+                    "95 % interval ±{:.1} % of the value, more than ±{:.0} %: it includes the difference between holding and interpolating the inputs between samples, which the log does not have (log every control step, or identify from a run directory with its integrals.csv)",
+                    100.0 * rel,
+                    100.0 * MAX_REL_HALF_WIDTH
+                )
+            } else {
+                format!(
+                    "the input did not excite it enough: 95 % interval ±{:.1} % of the value, more than ±{:.0} %",
+                    100.0 * rel,
+                    100.0 * MAX_REL_HALF_WIDTH
+                )
+            });
         }
+    }
+    None
+}
+
+/// Lags of the Ljung–Box whiteness test.
+pub const WHITENESS_LAGS: usize = 10;
+
+/// Largest ratio of the residual RMS to the noise the measurement shows by
+/// itself (RMS of its second differences over `√6`, an upper bound of white
+/// noise's RMS); larger, the residuals are not noise but misfit.
+pub const MAX_RESIDUAL_OVER_NOISE: f64 = 1.5;
+
+/// Why the model misfits the log (its residuals are not the measurement's
+/// white noise), or `None`. Called on logs that are not noise-free: a
+/// noise-free log whose residuals are not at rounding level is misfit, and
+/// shows as residuals far above the (rounding-level) noise and not white.
+fn misfit(d: &AxisData<'_>, f: &AxisFit, exact: bool) -> Option<String> {
+    let r: Vec<f64> = d.y.iter().zip(&f.predicted).map(|(y, p)| y - p).collect();
+    let (q, crit, rho1) = fit::ljung_box(&r, WHITENESS_LAGS);
+    let noise = fit::noise_from_differences(d.y);
+    let hint = if exact {
+        " (the model does not describe this plant)"
+    } else {
+        " (the input varies between samples and the log holds only its sampled values: \
+         log every control step, or identify from a run directory with its integrals.csv)"
+    };
+    if q > crit {
+        return Some(format!(
+            "the model misfits this log: its residuals are not white (Ljung–Box Q = {q:.0} over {WHITENESS_LAGS} lags, 99.9 % bound {crit:.1}; lag-1 autocorrelation {rho1:.2}){hint}"
+        ));
+    }
+    let (z, bound, [a, b]) = fit::scan(&r);
+    if z > bound {
+        return Some(format!(
+            "the model misfits this log: its residuals keep one sign from t = {:.3} s to {:.3} s (local mean {z:.1} standard errors, 99.9 % bound {bound:.1}){hint}",
+            d.t[a], d.t[b]
+        ));
+    }
+    if f.rms > MAX_RESIDUAL_OVER_NOISE * noise {
+        return Some(format!(
+            "the model misfits this log: its residual RMS {:.2e} is {:.1} times the noise the measurement shows by itself ({noise:.2e}){hint}",
+            f.rms,
+            f.rms / noise
+        ));
     }
     None
 }

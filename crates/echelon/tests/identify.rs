@@ -857,3 +857,164 @@ fn nonfeasible_agent2_logged_every_10_ms_is_exact_with_its_integrals_and_withhel
         id.warnings
     );
 }
+
+/// A ROS 2 bag's velocity-base log as `echelon identify` builds it
+/// (echelon-mcap's `velocity_log`, rebuilt here on the same rules): a base
+/// with lags `taus` integrated exactly on a 1 ms grid, commands published
+/// every `cmd_ms` (random steps held 0.3–1.5 s, a chirp of ω in the middle
+/// third, a stop for the last second, as `scripts/ros2/lagged_base_bag.py`),
+/// odometry every `odom_ms` offset by `offset_ms` with noise σ_v = 0.01 m/s,
+/// σ_ω = 0.02 rad/s (noise-free when `seed` is `None`). The grid is the
+/// odometry's times, the input of each interval the commands' hold averaged
+/// over it, and `hold` the command messages themselves.
+fn bag_log(
+    taus: [f64; 2],
+    cmd_ms: usize,
+    odom_ms: usize,
+    offset_ms: usize,
+    profile_seed: u64,
+    seed: Option<u64>,
+) -> Log {
+    use rand::Rng;
+    let duration_ms = 40_000;
+    let mut rng = ChaCha8Rng::seed_from_u64(profile_seed);
+    let (mut pv, mut pw) = (vec![0.0; duration_ms], vec![0.0; duration_ms]);
+    let mut t = 500;
+    while t < duration_ms {
+        let hold = rng.random_range(300..=1500);
+        let (vs, ws) = (rng.random_range(-0.5..0.5), rng.random_range(-1.2..1.2));
+        for k in t..(t + hold).min(duration_ms) {
+            (pv[k], pw[k]) = (vs, ws);
+        }
+        t += hold;
+    }
+    let third = duration_ms / 3;
+    for (k, w) in pw.iter_mut().enumerate().take(2 * third).skip(third) {
+        let s = (k - third) as f64 / 1000.0;
+        *w = 0.8 * (2.0 * std::f64::consts::PI * (0.2 * s + 0.05 * s * s)).sin();
+    }
+    for k in duration_ms - 1000..duration_ms {
+        (pv[k], pw[k]) = (0.0, 0.0);
+    }
+    let mut noise = seed.map(ChaCha8Rng::seed_from_u64);
+    let (nv, nw) = (
+        Normal::new(0.0, 0.01).unwrap(),
+        Normal::new(0.0, 0.02).unwrap(),
+    );
+    let a = taus.map(|tau| (-0.001 / tau).exp());
+    let (mut x, mut held) = ([0.0; 2], [0.0; 2]);
+    let mut cmd: Vec<(usize, [f64; 2])> = Vec::new();
+    let mut odom: Vec<(usize, [f64; 2])> = Vec::new();
+    for k in 0..duration_ms {
+        if k % cmd_ms == 0 {
+            held = [pv[k], pw[k]];
+            cmd.push((k, held));
+        }
+        if k % odom_ms == offset_ms {
+            let m = match &mut noise {
+                Some(r) => [x[0] + nv.sample(r), x[1] + nw.sample(r)],
+                None => x,
+            };
+            odom.push((k, m));
+        }
+        for i in 0..2 {
+            x[i] = a[i] * x[i] + (1.0 - a[i]) * held[i];
+        }
+    }
+    // The log: odometry from the first command on (the last is a stop).
+    let t0 = odom[0].0;
+    let last_at = |t: usize| cmd.partition_point(|c| c.0 <= t) - 1;
+    let average = |from: usize, to: usize| -> [f64; 2] {
+        let mut acc = [0.0; 2];
+        for k in from..to {
+            let c = cmd[last_at(k)].1;
+            acc[0] += c[0];
+            acc[1] += c[1];
+        }
+        acc.map(|a| a / (to - from) as f64)
+    };
+    let mut log = Log {
+        source: "in-memory bag".into(),
+        agent: 1,
+        ..Log::default()
+    };
+    let mut u: [Vec<f64>; 2] = Default::default();
+    for (i, (k, m)) in odom.iter().enumerate() {
+        log.t.push((k - t0) as f64 * 1e-3);
+        log.v.push(m[0]);
+        log.omega.push(m[1]);
+        let avg = match odom.get(i + 1) {
+            Some((next, _)) => average(*k, *next),
+            None => cmd[last_at(*k)].1,
+        };
+        u[0].push(avg[0]);
+        u[1].push(avg[1]);
+    }
+    log.cmd = Some(u);
+    let mut hold = identify::Hold::default();
+    for (k, c) in &cmd[last_at(t0)..] {
+        hold.t.push((*k as f64 - t0 as f64) * 1e-3);
+        hold.u[0].push(c[0]);
+        hold.u[1].push(c[1]);
+    }
+    log.hold = Some(hold);
+    log
+}
+
+proptest! {
+    // 6 cases × (noise-free + 50 seeds): ROS 2 bags at 20 and 50 Hz
+    // odometry, 20 Hz commands, lags 0.05–0.4 s.
+    #![proptest_config(ProptestConfig {
+        cases: 6,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(22),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
+    #[test]
+    fn ros2_bag_lags_at_20_and_50_hz_within_2_percent_and_covered(
+        tau_v in 0.05_f64..0.4,
+        tau_w in 0.05_f64..0.4,
+        fifty in any::<bool>(),
+        offset in 1_usize..20,
+        profile in 0_u64..1000,
+    ) {
+        let odom_ms = if fifty { 20 } else { 50 };
+        let offset = offset % odom_ms;
+        let truth = [("tau_v", tau_v), ("tau_omega", tau_w)];
+        let case = format!("τ = {tau_v:.3}, {tau_w:.3} s, odometry every {odom_ms} ms + {offset}");
+        // Noise-free: exact, through the hold.
+        let clean = bag_log([tau_v, tau_w], 50, odom_ms, offset, profile, None);
+        let id = identify::identify(&clean, Model::Velocity).unwrap();
+        let mut tallies: Vec<(&'static str, Tally)> =
+            truth.iter().map(|(f, _)| (*f, Tally::default())).collect();
+        for ((field, want), (_, t)) in truth.iter().zip(tallies.iter_mut()) {
+            let e = id.get(field).unwrap_or_else(|| panic!("{case}: {field} {:?}", id.warnings));
+            prop_assert!((e.value / want - 1.0).abs() < 1e-6, "{case}: {field} {e:?}");
+            t.clean = Some((e.value / want - 1.0).abs());
+        }
+        for seed in 0..SEEDS {
+            let log = bag_log([tau_v, tau_w], 50, odom_ms, offset, profile, Some(profile * 100 + seed));
+            let id = identify::identify(&log, Model::Velocity);
+            for ((field, want), (_, t)) in truth.iter().zip(tallies.iter_mut()) {
+                let Ok(id) = &id else {
+                    t.why.get_or_insert_with(|| format!("{:?}", id.as_ref().err()));
+                    continue;
+                };
+                let p = id.params.iter().find(|p| p.field == *field).unwrap();
+                match p.estimate {
+                    Some(e) => {
+                        t.printed += 1;
+                        t.covered += usize::from(e.contains(*want));
+                        t.worst = t.worst.max((e.value / want - 1.0).abs());
+                    }
+                    None => {
+                        t.why.get_or_insert_with(|| p.not_identifiable.clone().unwrap_or_default());
+                    }
+                }
+            }
+        }
+        eprintln!("{case}: {tallies:?}");
+        let pooled = assert_tallies(&case, 1, &tallies);
+        assert_pooled(&case, pooled);
+    }
+}

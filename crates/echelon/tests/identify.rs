@@ -782,11 +782,11 @@ fn check_case(name: &str, swap: bool, log_ms: u32, torque: bool) {
 }
 
 proptest! {
-    // 6 cases × every torque agent of the run (1–4) × 51 logs (noise-free
+    // 24 cases × every torque agent of the run (1–4) × 51 logs (noise-free
     // and 50 seeds) × with and without integrals.csv; fixed RNG seed so CI
     // reruns the same sample.
     #![proptest_config(ProptestConfig {
-        cases: 6,
+        cases: 24,
         rng_seed: proptest::test_runner::RngSeed::Fixed(20),
         failure_persistence: None,
         ..ProptestConfig::default()
@@ -800,9 +800,9 @@ proptest! {
 }
 
 proptest! {
-    // 4 cases × every velocity agent × 51 logs.
+    // 12 cases × every velocity agent (2–6) × 51 logs.
     #![proptest_config(ProptestConfig {
-        cases: 4,
+        cases: 12,
         rng_seed: proptest::test_runner::RngSeed::Fixed(21),
         failure_persistence: None,
         ..ProptestConfig::default()
@@ -834,6 +834,7 @@ fn nonfeasible_agent2_logged_every_10_ms_is_exact_with_its_integrals_and_withhel
     // noise, what is printed interpolates the inputs and its interval
     // includes the difference to holding them.
     let without = tally(dir.path(), 1, &specs[0], false, (0, SEEDS));
+    eprintln!("with integrals: {with:?}\nwithout: {without:?}");
     for (field, t) in &without {
         assert!(t.clean.is_none(), "{field}: {t:?}");
         let why = t.why.as_deref().unwrap();
@@ -962,10 +963,10 @@ fn bag_log(
 }
 
 proptest! {
-    // 6 cases × (noise-free + 50 seeds): ROS 2 bags at 20 and 50 Hz
+    // 12 cases × (noise-free + 50 seeds): ROS 2 bags at 20 and 50 Hz
     // odometry, 20 Hz commands, lags 0.05–0.4 s.
     #![proptest_config(ProptestConfig {
-        cases: 6,
+        cases: 12,
         rng_seed: proptest::test_runner::RngSeed::Fixed(22),
         failure_persistence: None,
         ..ProptestConfig::default()

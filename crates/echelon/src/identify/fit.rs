@@ -8,10 +8,15 @@
 //! - eq. 3d `J ω̇ + ψ ω = u2` is `τ = J/ψ`, `k = 1/ψ`;
 //! - a velocity base's lag `τ_v v̇ + v = v_c` is `k = 1` (fixed).
 //!
-//! The input is held between samples (zero-order hold, as a sampled controller
-//! applies it), so the exact discretisation over a step `h` is
-//! `x⁺ = a x + (1 − a) k u` with `a = e^{−h/τ}`: the model simulated here is
-//! exact for such a plant, whatever the sample spacing.
+//! The output-error model holds the input between samples (zero-order hold,
+//! as a sampled controller applies it: `x⁺ = a x + (1 − a) k u` with
+//! `a = e^{−h/τ}`, exact for such a plant whatever the sample spacing) or
+//! interpolates it linearly (`x⁺ = a x + (1 − a) k u + k Δu b`,
+//! `b = 1 − (τ/h)(1 − a)`, exact for a ramp); [`fit`] decides which the log
+//! supports. With the input's own hold grid (`AxisData::hold`) it is
+//! integrated through every switch. With the running integrals of the input
+//! and the output ([`fit_integral`]) no assumption on the input between
+//! samples is needed at all.
 
 // Small dense linear algebra (n ≤ 3) reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]

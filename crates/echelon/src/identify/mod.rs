@@ -8,18 +8,30 @@
 //! velocity: τ_v v̇ + v = v_c       τ_ω ω̇ + ω = ω_c        (crate::base)
 //! ```
 //!
-//! Each axis is fitted in two steps (`fit`): an equation-error
-//! least-squares first guess on the equation integrated over short windows
-//! (no numerical differentiation of noisy velocities), then an output-error
-//! Levenberg–Marquardt refinement that simulates the axis from the logged
-//! input (held between samples) and fits the measured velocity; the
-//! output-error estimate stays unbiased when the measured velocities are
-//! noisy. Each parameter gets a 95 % interval from `σ² (JᵀJ)⁻¹` (σ² the
-//! residual variance, J the output's sensitivities), mapped to `m, η` (or
-//! `J, ψ`) by the delta method. A parameter the input did not excite (no
-//! input, a badly conditioned information matrix or an interval wider than
-//! ±[`MAX_REL_HALF_WIDTH`]) is reported as not identifiable, with the
-//! reason, and given no number.
+//! With the run's running integrals ([`Log::integrals`], a run directory's
+//! `integrals.csv`: `∫v dt` or the heading, and `∫u dt`) each axis is fitted
+//! exactly: the equation integrated from the first sample,
+//! `x_k = x₀ + (k ΔI_k − ΔS_k)/τ`, holds whatever the input did between
+//! samples, and is solved by linear least squares (`fit::fit_integral`).
+//! Without them, in two steps (`fit::fit`): an equation-error least-squares
+//! first guess on the equation integrated over short windows, then an
+//! output-error Levenberg–Marquardt refinement that simulates the axis from
+//! the logged input and fits the measured velocity. The input between samples
+//! is then unknown: the axis is fitted with the input held and linearly
+//! interpolated, and unless holding fits significantly better, the
+//! interpolated fit is taken with the difference of the two added to its
+//! covariance (a ROS 2 bag's command messages, [`Log::hold`], are integrated
+//! exactly instead). Each parameter gets a 95 % interval from `σ² (XᵀX)⁻¹`
+//! (σ² the residual variance, X the regressors or the output's
+//! sensitivities), mapped to `m, η` (or `J, ψ`) by the delta method.
+//!
+//! A parameter is given no number, and the reason instead, when the input did
+//! not excite it (no input, a badly conditioned information matrix or an
+//! interval wider than ±[`MAX_REL_HALF_WIDTH`]) or when the model misfits the
+//! log: on a log that is not noise-free, residuals that are not white
+//! (Ljung–Box), that keep one sign over a stretch (a multi-scale scan of
+//! their local means) or that exceed the noise the measurement shows by
+//! itself (`misfit`).
 //!
 //! Input: a run directory's `trajectory.csv` ([`Log::read_run`]) or a log
 //! built in memory ([`Log`]); output: [`Identified`], with
@@ -40,7 +52,8 @@ use crate::model::RobotParams;
 pub const MIN_SAMPLES: usize = 50;
 
 /// Largest relative 95 % half-width of an identified parameter; wider, the
-/// parameter is reported as not identifiable.
+/// parameter is reported as not identifiable. At ±1 %, a printed value more
+/// than 2 % off the truth is a 4σ event.
 pub const MAX_REL_HALF_WIDTH: f64 = 0.01;
 
 /// Residual RMS, relative to the RMS of the measured velocity, below which a
@@ -810,7 +823,26 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             identifiable,
         };
         let (estimates, symbols) = axis_params(model, axis, &f);
-        let unexcited = excitation(&d, &f, &estimates, input_names[axis]);
+        // A velocity base without lag on this axis moves at its command:
+        // the integrals of both agree throughout and there is no τ.
+        let no_lag = match (&integrals, fixed_gain) {
+            (Some(w), true) => {
+                let top = w.i.iter().map(|x| (x - w.i[0]).abs()).fold(0.0, f64::max);
+                let gap =
+                    w.i.iter()
+                        .zip(w.s)
+                        .map(|(i, s)| ((i - w.i[0]) - (s - w.s[0])).abs())
+                        .fold(0.0, f64::max);
+                (top > 0.0 && gap <= 1e-9 * top).then(|| {
+                    format!(
+                        "the base moves at its {} throughout (∫ of the command equals ∫ of the velocity): no lag on this axis",
+                        input_names[axis]
+                    )
+                })
+            }
+            _ => None,
+        };
+        let unexcited = no_lag.or_else(|| excitation(&d, &f, &estimates, input_names[axis]));
         let why = unexcited.clone().or_else(|| {
             (!noise_free)
                 .then(|| misfit(&d, &f, integrals.is_some() || d.hold.is_some()))

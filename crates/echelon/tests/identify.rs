@@ -100,7 +100,9 @@ fn table_i_robots_within_2_percent_and_intervals_cover_the_truth_in_90_percent_o
                 );
                 covered[i] += usize::from(e.contains(*want));
             }
-            // Residuals are the measurement noise.
+            // Held inputs (a zero-order hold logged at its period), found
+            // as such; residuals are the measurement noise.
+            assert!(id.axes.iter().all(|a| a.method == "held inputs"));
             assert!((id.axes[0].residual_rms / SIGMA_V - 1.0).abs() < 0.1);
             assert!((id.axes[1].residual_rms / SIGMA_OMEGA - 1.0).abs() < 0.1);
         }
@@ -847,9 +849,12 @@ fn nonfeasible_agent2_logged_every_10_ms_is_exact_with_its_integrals_and_withhel
     let pooled = assert_tallies("nonfeasible agent2 10 ms, no integrals", 1, &without);
     assert_pooled("nonfeasible agent2 10 ms, no integrals", pooled);
     let mut log = Log::read_run(dir.path(), 1).unwrap();
+    let exact = identify::identify(&log, Model::Torque).unwrap();
+    assert!(exact.axes.iter().all(|a| a.method == "integrals"));
     log.integrals = None;
     add_noise(&mut log, 7);
     let id = identify::identify(&log, Model::Torque).unwrap();
+    assert_eq!(id.axes[1].method, "interpolated inputs", "{:?}", id.axes);
     assert!(
         id.warnings
             .iter()
@@ -1046,6 +1051,7 @@ fn a_base_that_applies_its_commands_late_is_a_misfit_when_the_log_is_noise_free(
         Model::Velocity,
     )
     .unwrap();
+    assert!(id.axes.iter().all(|a| a.method == "command hold"));
     assert!((id.get("tau_v").unwrap().value / 0.1 - 1.0).abs() < 1e-9);
     assert!((id.get("tau_omega").unwrap().value / 0.15 - 1.0).abs() < 1e-9);
 }

@@ -566,6 +566,14 @@ pub struct AxisSummary {
     /// Residuals at rounding level ([`NOISE_FREE_RELATIVE_RMS`]): a
     /// simulated, noise-free log; the intervals are not meaningful.
     pub noise_free: bool,
+    /// How the axis was fitted: `integrals` (exact, from `integrals.csv`),
+    /// `command hold` (through the command messages of a ROS 2 bag),
+    /// `held inputs` (the logged inputs held between samples: holding fitted
+    /// significantly better) or `interpolated inputs` (linearly, the
+    /// difference to holding them added to the covariance).
+    pub method: &'static str,
+    /// The residual checks (whiteness, runs, size against the noise).
+    pub checks: ResidualChecks,
 }
 
 /// A speed or acceleration limit seen in the log.
@@ -809,8 +817,17 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
                 100.0 * rel(1)
             ));
         }
+        let checks = ResidualChecks::new(&d, &f);
+        let method = match (&integrals, d.hold.is_some(), f.between.is_some()) {
+            (Some(_), _, _) => "integrals",
+            (None, true, _) => "command hold",
+            (None, false, true) => "interpolated inputs",
+            (None, false, false) => "held inputs",
+        };
         let summary = |identifiable| AxisSummary {
             noise_free,
+            method,
+            checks,
             axis: ["linear", "angular"][axis],
             residual_rms: f.rms,
             residual_max: d
@@ -845,7 +862,7 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
         let unexcited = no_lag.or_else(|| excitation(&d, &f, &estimates, input_names[axis]));
         let why = unexcited.clone().or_else(|| {
             (!noise_free)
-                .then(|| misfit(&d, &f, integrals.is_some() || d.hold.is_some()))
+                .then(|| misfit(&f, &checks, integrals.is_some() || d.hold.is_some()))
                 .flatten()
         });
         misfits |= unexcited.is_none() && why.is_some();
@@ -1027,14 +1044,51 @@ pub const WHITENESS_LAGS: usize = 10;
 /// noise's RMS); larger, the residuals are not noise but misfit.
 pub const MAX_RESIDUAL_OVER_NOISE: f64 = 1.5;
 
+/// The residual checks of one axis ([`misfit`]), as `identify.json`
+/// reports them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ResidualChecks {
+    /// Ljung–Box statistic over [`WHITENESS_LAGS`] lags.
+    pub ljung_box_q: f64,
+    /// Its 99.9 % bound (χ², Wilson–Hilferty).
+    pub ljung_box_bound: f64,
+    /// Lag-1 autocorrelation of the residuals.
+    pub lag1_autocorrelation: f64,
+    /// Largest local mean of the residuals, in standard errors.
+    pub scan_z: f64,
+    /// Its 99.9 % bound (Bonferroni over the windows).
+    pub scan_bound: f64,
+    /// Where it was found, `[from, to]` s.
+    pub scan_window: [f64; 2],
+    /// The noise the measurement shows by itself (second differences).
+    pub noise_from_differences: f64,
+}
+
+impl ResidualChecks {
+    fn new(d: &AxisData<'_>, f: &AxisFit) -> ResidualChecks {
+        let r: Vec<f64> = d.y.iter().zip(&f.predicted).map(|(y, p)| y - p).collect();
+        let (ljung_box_q, ljung_box_bound, lag1_autocorrelation) =
+            fit::ljung_box(&r, WHITENESS_LAGS);
+        let (scan_z, scan_bound, [a, b]) = fit::scan(&r);
+        ResidualChecks {
+            ljung_box_q,
+            ljung_box_bound,
+            lag1_autocorrelation,
+            scan_z,
+            scan_bound,
+            scan_window: [d.t[a], d.t[b]],
+            noise_from_differences: fit::noise_from_differences(d.y),
+        }
+    }
+}
+
 /// Why the model misfits the log (its residuals are not the measurement's
 /// white noise), or `None`. Called on logs that are not noise-free: a
 /// noise-free log whose residuals are not at rounding level is misfit, and
 /// shows as residuals far above the (rounding-level) noise and not white.
-fn misfit(d: &AxisData<'_>, f: &AxisFit, exact: bool) -> Option<String> {
-    let r: Vec<f64> = d.y.iter().zip(&f.predicted).map(|(y, p)| y - p).collect();
-    let (q, crit, rho1) = fit::ljung_box(&r, WHITENESS_LAGS);
-    let noise = fit::noise_from_differences(d.y);
+fn misfit(f: &AxisFit, c: &ResidualChecks, exact: bool) -> Option<String> {
+    let (q, crit, rho1) = (c.ljung_box_q, c.ljung_box_bound, c.lag1_autocorrelation);
+    let noise = c.noise_from_differences;
     let hint = if exact {
         " (the model does not describe this plant)"
     } else {
@@ -1046,11 +1100,10 @@ fn misfit(d: &AxisData<'_>, f: &AxisFit, exact: bool) -> Option<String> {
             "the model misfits this log: its residuals are not white (Ljung–Box Q = {q:.0} over {WHITENESS_LAGS} lags, 99.9 % bound {crit:.1}; lag-1 autocorrelation {rho1:.2}){hint}"
         ));
     }
-    let (z, bound, [a, b]) = fit::scan(&r);
+    let (z, bound, [a, b]) = (c.scan_z, c.scan_bound, c.scan_window);
     if z > bound {
         return Some(format!(
-            "the model misfits this log: its residuals keep one sign from t = {:.3} s to {:.3} s (local mean {z:.1} standard errors, 99.9 % bound {bound:.1}){hint}",
-            d.t[a], d.t[b]
+            "the model misfits this log: its residuals keep one sign from t = {a:.3} s to {b:.3} s (local mean {z:.1} standard errors, 99.9 % bound {bound:.1}){hint}"
         ));
     }
     if f.rms > MAX_RESIDUAL_OVER_NOISE * noise {

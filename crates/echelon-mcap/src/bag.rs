@@ -27,7 +27,10 @@
 //! it — is that hold's *time average* over the interval. A command that
 //! arrives inside an interval then counts for the part of the interval it
 //! acted, instead of being moved to either end (half an odometry period of
-//! timing error, a bias of that size on the lags). The log keeps the odometry
+//! timing error, a bias of that size on the lags). The command messages
+//! themselves are kept too ([`echelon::identify::Log::hold`]): the
+//! output-error fit integrates the lag exactly through each command change,
+//! so the average only serves the first guess. The log keeps the odometry
 //! from the first command on, up to the last command, or to the end when the
 //! last command is a stop (a zero command holds however long it lasts; any
 //! other would run into the base's `cmd_vel_timeout`).
@@ -312,6 +315,17 @@ fn velocity_log(
         u[1].push(held[1]);
     }
     log.cmd = Some(u);
+    // The hold itself, from the command in force at the first sample on:
+    // the fit integrates the lag exactly through each command change.
+    let from = last_at(&cmd, t0);
+    let mut hold = echelon::identify::Hold::default();
+    for c in &cmd[from..] {
+        hold.t
+            .push((i128::from(c.0) - i128::from(t0)) as f64 * 1e-9);
+        hold.u[0].push(c.1);
+        hold.u[1].push(c.2);
+    }
+    log.hold = Some(hold);
     Ok(log)
 }
 
@@ -379,8 +393,7 @@ fn torque_log(states: &[serde_json::Value], origin: &str, agent: usize) -> Log {
         omega: col(2),
         u: present(&u1).then_some([u1, u2]),
         tau: present(&tr).then_some([tr, tl]),
-        cmd: None,
-        applied: None,
+        ..Log::default()
     }
 }
 

@@ -328,6 +328,45 @@ impl FrameRows for ReferenceRows {
     }
 }
 
+/// The header of `integrals.csv`: per agent, at the same logged instants as
+/// `trajectory.csv`, the running integrals since `t = 0` that make a log
+/// exact for identification whatever its logging period
+/// ([`crate::identify`]): `s = ∫v dt` (m, the true distance travelled),
+/// `theta` the true heading not wrapped (`θ(0) + ∫ω dt`, rad), and
+/// `int_1, int_2` the integral of the input the plant received: `∫u1 dt`
+/// (N s) and `∫u2 dt` (N m s) for a torque robot, `∫v dt` (m) and `∫ω dt`
+/// (rad) of the applied command for a velocity base. They are summed with
+/// RK4's weights ([`Frame::input_integral`]), so between any two rows of a
+/// torque robot `m Δv + η Δs = Δint_1` and `J Δω + ψ Δθ = Δint_2` hold to
+/// rounding, however the input varied in between.
+pub const INTEGRALS_HEADER: &str = "t,agent,s,theta,int_1,int_2";
+
+/// `integrals.csv`: one row per agent per frame ([`INTEGRALS_HEADER`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct IntegralRows;
+
+impl FrameRows for IntegralRows {
+    fn header(&self) -> &'static str {
+        INTEGRALS_HEADER
+    }
+
+    fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()> {
+        for (i, state) in frame.states.iter().enumerate() {
+            let s = frame.distance.get(i).copied().unwrap_or(f64::NAN);
+            let [i1, i2] = frame
+                .input_integral
+                .get(i)
+                .copied()
+                .unwrap_or([f64::NAN; 2]);
+            csv.time(frame.t)
+                .int(i as u64 + 1)
+                .nums([s, state.theta, i1, i2]);
+            csv.end_row()?;
+        }
+        Ok(())
+    }
+}
+
 /// The header of `odometry.csv`: what each dead-reckoning agent's controller
 /// believed — its pose estimate and `ê`, `ẑ` (eqs. 33, 35) — and `fix`, the
 /// number of absolute fixes applied since the previous row. Only agents with
@@ -656,6 +695,8 @@ pub const SUMMARY_FILE: &str = "summary.json";
 pub const REFERENCE_FILE: &str = "reference.csv";
 /// See [`TRAJECTORY_FILE`]: the scenario source as run ([`Run::record`]).
 pub const SCENARIO_FILE: &str = "scenario.toml";
+/// See [`TRAJECTORY_FILE`]; header [`INTEGRALS_HEADER`].
+pub const INTEGRALS_FILE: &str = "integrals.csv";
 /// Written when any agent dead-reckons; see [`ODOMETRY_HEADER`].
 pub const ODOMETRY_FILE: &str = "odometry.csv";
 /// Written when a safety filter runs; see [`SAFETY_HEADER`].
@@ -678,7 +719,7 @@ pub fn part_path(path: &Path) -> PathBuf {
 }
 
 /// Runs `run` to its end, writing `dir/trajectory.csv`, `dir/reference.csv`,
-/// `dir/summary.json` and `dir/scenario.toml`; `extra` sees every frame too
+/// `dir/integrals.csv`, `dir/summary.json` and `dir/scenario.toml`; `extra` sees every frame too
 /// (e.g. a progress bar). Files are written under temporary names and renamed
 /// only when the run succeeds, so a failed run leaves no half-written output.
 pub fn run_to_dir(
@@ -687,7 +728,13 @@ pub fn run_to_dir(
     extra: &mut dyn Observer,
 ) -> Result<RunSummary, OutputError> {
     std::fs::create_dir_all(dir).map_err(io_error(dir))?;
-    let mut names = vec![TRAJECTORY_FILE, REFERENCE_FILE, SUMMARY_FILE, SCENARIO_FILE];
+    let mut names = vec![
+        TRAJECTORY_FILE,
+        REFERENCE_FILE,
+        SUMMARY_FILE,
+        SCENARIO_FILE,
+        INTEGRALS_FILE,
+    ];
     let odometry_at = (!run.simulation.odometers().is_empty()).then(|| {
         names.push(ODOMETRY_FILE);
         names.len() - 1
@@ -706,6 +753,7 @@ pub fn run_to_dir(
     let mut trajectory =
         CsvLog::create(&parts[0], TrajectoryRows::for_simulation(&run.simulation))?;
     let mut reference = CsvLog::create(&parts[1], ReferenceRows::default())?;
+    let mut integrals = CsvLog::create(&parts[4], IntegralRows)?;
     let mut odometry = match odometry_at {
         Some(k) => Some(CsvLog::create(&parts[k], OdometryRows::default())?),
         None => None,
@@ -723,6 +771,7 @@ pub fn run_to_dir(
             [
                 &mut trajectory as &mut dyn Observer,
                 &mut reference,
+                &mut integrals,
                 &mut odometry,
                 &mut safety,
             ],

@@ -372,6 +372,15 @@ pub struct Frame<'a> {
     pub odometers: &'a [Option<Odometer>],
     /// Each agent's safety filter output (empty without a safety filter).
     pub safety: &'a [SafetyOutput],
+    /// Each agent's true distance travelled `∫v dt` since `t = 0`, m.
+    pub distance: &'a [f64],
+    /// Each agent's integral since `t = 0` of the input its plant received:
+    /// `∫u1 dt, ∫u2 dt` (N s, N m s) for a torque robot, `∫v dt, ∫ω dt` of
+    /// the applied command (m, rad) for a velocity base. Summed with RK4's
+    /// weights over the stages, as `distance` and the state are: for a torque
+    /// robot `m Δv + η Δs = Δ∫u1` and `J Δω + ψ Δθ = Δ∫u2` hold to rounding
+    /// between any two frames.
+    pub input_integral: &'a [[f64; 2]],
 }
 
 /// An error an observer may return (e.g. an I/O error while logging).
@@ -525,7 +534,7 @@ impl System {
         odometers: &[Option<Odometer>],
         mut out: Option<&mut [AgentOutput]>,
         dx: &mut [State],
-        speeds: &mut [[f64; 2]],
+        speeds: &mut [[f64; 4]],
     ) {
         if let (None, Some(h)) = (&out, held) {
             // Between samples of a sampled controller, with nobody looking at
@@ -533,14 +542,15 @@ impl System {
             for (i, a) in self.agents.iter().enumerate() {
                 match &a.drive {
                     Drive::Torque { robot, .. } => {
-                        dx[i] = robot.derivative(&x[i], robot.actuate(h[i].u).0);
-                        speeds[i] = [x[i].v, x[i].omega];
+                        let u = robot.actuate(h[i].u).0;
+                        dx[i] = robot.derivative(&x[i], u);
+                        speeds[i] = [x[i].v, x[i].omega, u.u1, u.u2];
                     }
                     Drive::Velocity(r) => {
                         let c = r.base.limit(h[i].c).0;
                         dx[i] = r.base.derivative(&x[i], c);
                         let (v, w) = r.base.speeds(&x[i], c);
-                        speeds[i] = [v, w];
+                        speeds[i] = [v, w, c.v, c.omega];
                     }
                 }
             }
@@ -615,7 +625,7 @@ impl System {
                     let command = held.map_or(u, |h| h[i].u);
                     let (applied, tau) = robot.actuate(command);
                     dx[i] = robot.derivative(&x[i], applied);
-                    speeds[i] = [x[i].v, x[i].omega];
+                    speeds[i] = [x[i].v, x[i].omega, applied.u1, applied.u2];
                     AgentOutput {
                         e: e_true,
                         z: z_true,
@@ -632,7 +642,7 @@ impl System {
                     let (c, saturated) = r.base.limit(command);
                     dx[i] = r.base.derivative(&x[i], c);
                     let (v, w) = r.base.speeds(&x[i], c);
-                    speeds[i] = [v, w];
+                    speeds[i] = [v, w, c.v, c.omega];
                     AgentOutput {
                         e: e_true,
                         z: z_true,
@@ -667,8 +677,9 @@ pub struct Simulation {
     held: Vec<Held>,
     /// Whether any agent is on a velocity base (its state is settled after each step).
     velocity_agents: bool,
-    /// Velocities each robot moves at in RK4's four stages.
-    speeds: [Vec<[f64; 2]>; 4],
+    /// Velocities each robot moves at in RK4's four stages, and the inputs
+    /// its plant receives there (`u1, u2` or the applied `v, ω` command).
+    speeds: [Vec<[f64; 4]>; 4],
     /// Outputs and derivative (RK4's k1) at the current state, when `fresh`.
     out: Vec<AgentOutput>,
     k1: Vec<State>,
@@ -679,6 +690,8 @@ pub struct Simulation {
     odometry_every: Vec<u64>,
     /// True distance travelled `∫v dt`, per agent (what the wheels turn through).
     distance: Vec<f64>,
+    /// `∫ input dt` per agent, RK4-weighted over the stages ([`Frame::input_integral`]).
+    input_integral: Vec<[f64; 2]>,
     /// Safety filters, when any agent filters.
     safety: Option<Box<SafetyState>>,
     // Scratch for stages 2–4.
@@ -810,13 +823,14 @@ impl Simulation {
             state,
             held: vec![Held::default(); n],
             velocity_agents,
-            speeds: std::array::from_fn(|_| vec![[0.0; 2]; n]),
+            speeds: std::array::from_fn(|_| vec![[0.0; 4]; n]),
             out: vec![AgentOutput::default(); n],
             k1: vec![State::default(); n],
             fresh: false,
             odometers: Vec::new(),
             odometry_every: Vec::new(),
             distance: vec![0.0; n],
+            input_integral: vec![[0.0; 2]; n],
             safety: None,
             stage: vec![State::default(); n],
             k2: vec![State::default(); n],
@@ -1152,6 +1166,8 @@ impl Simulation {
             outputs: &self.out,
             odometers: &self.odometers,
             safety: self.safety.as_ref().map_or(&[], |s| &s.out[..]),
+            distance: &self.distance,
+            input_integral: &self.input_integral,
         }
     }
 
@@ -1205,6 +1221,10 @@ impl Simulation {
                 self.distance[i] += h6 * (s(0) + 2.0 * s(1) + 2.0 * s(2) + s(3));
             } else {
                 self.distance[i] += dt * x.v + dt * dt / 6.0 * (k[0].v + k[1].v + k[2].v);
+            }
+            for (j, acc) in self.input_integral[i].iter_mut().enumerate() {
+                let u = |k: usize| self.speeds[k][i][2 + j];
+                *acc += h6 * (u(0) + 2.0 * u(1) + 2.0 * u(2) + u(3));
             }
             *x = x.rk4_combine(k, h6);
         }

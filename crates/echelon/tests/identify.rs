@@ -14,6 +14,7 @@ use echelon::output;
 use echelon::reference::{Order, Trajectory};
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{AgentSpec, Frame, ObserverError, Simulation};
+use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -99,7 +100,9 @@ fn table_i_robots_within_2_percent_and_intervals_cover_the_truth_in_90_percent_o
                 );
                 covered[i] += usize::from(e.contains(*want));
             }
-            // Residuals are the measurement noise.
+            // Held inputs (a zero-order hold logged at its period), found
+            // as such; residuals are the measurement noise.
+            assert!(id.axes.iter().all(|a| a.method == "held inputs"));
             assert!((id.axes[0].residual_rms / SIGMA_V - 1.0).abs() < 0.1);
             assert!((id.axes[1].residual_rms / SIGMA_OMEGA - 1.0).abs() < 0.1);
         }
@@ -477,6 +480,19 @@ fn an_acceleration_limit_that_acted_is_found_and_said_to_bias_the_lag() {
         "{:?}",
         id.warnings
     );
+    // The limit scales both axes together (joint limit): neither is a
+    // first-order lag then, the residuals show it, and no lag is printed.
+    for field in ["tau_v", "tau_omega"] {
+        let p = id.params.iter().find(|p| p.field == field).unwrap();
+        assert!(p.estimate.is_none(), "{p:?}");
+        assert!(
+            p.not_identifiable
+                .as_deref()
+                .is_some_and(|w| w.contains("misfits") && w.contains("not white")),
+            "{p:?}"
+        );
+    }
+    assert!(!id.robot_toml("lab").contains("\ntau_omega ="));
     assert!(
         !id.limits
             .iter()
@@ -519,4 +535,523 @@ fn a_noise_free_log_says_its_intervals_mean_nothing_and_a_noisy_one_does_not() {
     let noisy = identify::identify(&torque_log(&robot, 1, true), Model::Torque).unwrap();
     assert!(noisy.axes.iter().all(|a| !a.noise_free));
     assert_eq!(noisy.robot_toml("x").matches("95 % interval").count(), 4);
+}
+
+// ---------------------------------------------------------------------------
+// Issue 20 item 3: the built-ins, every agent, robots swapped, logged every
+// 1–20 ms, noise-free and noisy.
+
+/// Built-in `name`, its torque robots' presets swapped (`agent1` ↔ `agent2`)
+/// when `swap`, run for at most `max_duration` s and logged every `log_dt` s
+/// into a temporary directory; with the truth of each agent (`None` for a
+/// velocity base).
+fn builtin_run(
+    name: &str,
+    swap: bool,
+    log_dt: f64,
+    max_duration: f64,
+) -> (tempfile::TempDir, Vec<AgentSpec>) {
+    let scenario = Scenario::builtin(name).unwrap();
+    let mut src = scenario.source().to_owned();
+    if swap {
+        src = src
+            .replace("robot = \"agent1\"", "robot = \"@swap@\"")
+            .replace("robot = \"agent2\"", "robot = \"agent1\"")
+            .replace("robot = \"@swap@\"", "robot = \"agent2\"");
+    }
+    let parsed = Scenario::parse(&src, &format!("{name}.toml"), None).unwrap();
+    let full = parsed
+        .build(&Overrides::default())
+        .unwrap()
+        .simulation
+        .config()
+        .duration;
+    let mut run = parsed
+        .build(&Overrides {
+            duration: Some(full.min(max_duration)),
+            log_dt: Some(log_dt),
+            ..Overrides::default()
+        })
+        .unwrap();
+    let specs = run.simulation.agents().to_vec();
+    let dir = tempfile::tempdir().unwrap();
+    let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
+    output::run_to_dir(&mut run, dir.path(), &mut none).unwrap();
+    (dir, specs)
+}
+
+/// The built-ins whose agents include torque robots (`torque`) or velocity
+/// bases (`!torque`).
+fn builtins(torque: bool) -> Vec<&'static str> {
+    echelon::scenario::builtin()
+        .iter()
+        .map(|(n, _)| *n)
+        .filter(|n| {
+            let run = Scenario::builtin(n)
+                .unwrap()
+                .build(&Overrides::default())
+                .unwrap();
+            run.simulation.agents().iter().any(|a| {
+                if torque {
+                    a.torque_robot().is_some()
+                } else {
+                    a.velocity_robot().is_some()
+                }
+            })
+        })
+        .collect()
+}
+
+/// The truth an identification of `spec` is checked against.
+fn truth_of(spec: &AgentSpec) -> Vec<(&'static str, f64)> {
+    match (spec.torque_robot(), spec.velocity_robot()) {
+        (Some(r), _) => vec![
+            ("mass", r.mass),
+            ("linear_friction", r.linear_friction),
+            ("inertia", r.inertia),
+            ("angular_friction", r.angular_friction),
+        ],
+        (None, Some(b)) => vec![("tau_v", b.base.tau_v), ("tau_omega", b.base.tau_omega)],
+        (None, None) => unreachable!(),
+    }
+}
+
+/// What 50 noise seeds (and the noise-free log) gave for one agent's
+/// parameter: printed in how many seeds, covered in how many of those, the
+/// worst relative error printed, the noise-free log's relative error (`None`
+/// when withheld) and a reason it was withheld.
+#[derive(Debug, Default, Clone)]
+struct Tally {
+    printed: usize,
+    covered: usize,
+    worst: f64,
+    clean: Option<f64>,
+    why: Option<String>,
+}
+
+/// Identifies agent `agent` of the run in `dir` noise-free and with `seeds`
+/// noise seeds (`seed0`, `seed0 + 1`, …), with or without its integrals;
+/// one tally per parameter.
+fn tally(
+    dir: &std::path::Path,
+    agent: usize,
+    spec: &AgentSpec,
+    integrals: bool,
+    (seed0, seeds): (u64, u64),
+) -> Vec<(&'static str, Tally)> {
+    let model = if spec.torque_robot().is_some() {
+        Model::Torque
+    } else {
+        Model::Velocity
+    };
+    let mut log = Log::read_run(dir, agent).unwrap();
+    assert!(log.integrals.is_some(), "integrals.csv read");
+    if !integrals {
+        log.integrals = None;
+    }
+    let truth = truth_of(spec);
+    let mut out: Vec<(&'static str, Tally)> =
+        truth.iter().map(|(f, _)| (*f, Tally::default())).collect();
+    let record = |id: &Result<identify::Identified, IdentifyError>,
+                  out: &mut Vec<(&'static str, Tally)>,
+                  clean: bool| {
+        for ((field, want), (_, t)) in truth.iter().zip(out.iter_mut()) {
+            let Ok(id) = id else {
+                t.why
+                    .get_or_insert_with(|| format!("{:?}", id.as_ref().err()));
+                continue;
+            };
+            let p = id.params.iter().find(|p| p.field == *field).unwrap();
+            match p.estimate {
+                Some(e) => {
+                    let rel = (e.value - want).abs() / want;
+                    if clean {
+                        t.clean = Some(rel);
+                    } else {
+                        t.printed += 1;
+                        t.covered += usize::from(e.contains(*want));
+                        t.worst = t.worst.max(rel);
+                    }
+                }
+                None => {
+                    t.why
+                        .get_or_insert_with(|| p.not_identifiable.clone().unwrap_or_default());
+                }
+            }
+        }
+    };
+    record(&identify::identify(&log, model), &mut out, true);
+    for seed in seed0..seed0 + seeds {
+        let mut noisy = log.clone();
+        add_noise(&mut noisy, seed);
+        record(&identify::identify(&noisy, model), &mut out, false);
+    }
+    out
+}
+
+/// Checks one run's tallies: every printed parameter within 2 % of the truth
+/// (noise-free and in every noise seed), every parameter not printed has a
+/// reason, and each interval covers the truth in at least 80 % of the seeds
+/// it was printed in (when printed in at least 20). Returns the seeds
+/// printed and covered, summed, for the 90 % check over a whole case.
+///
+/// Why 80 % per parameter and 90 % pooled: a calibrated 95 % interval
+/// covers in fewer than 45 of 50 seeds with probability 3.8 % (binomial),
+/// so asserting 45 / 50 for each of the hundreds of parameters a run of
+/// this file checks would fail by chance; fewer than 40 of 50 has
+/// probability 2·10⁻⁵. Pooled over a case (200–800 intervals) 90 % is
+/// 4–7 standard deviations below 95 %: a systematic under-coverage fails it.
+fn assert_tallies(case: &str, agent: usize, tallies: &[(&'static str, Tally)]) -> [usize; 2] {
+    let mut sum = [0, 0];
+    for (field, t) in tallies {
+        let what = format!("{case} agent {agent} {field}: {t:?}");
+        if let Some(rel) = t.clean {
+            assert!(rel < 0.02, "noise-free: {what}");
+        }
+        assert!(t.worst < 0.02, "noisy: {what}");
+        if t.printed >= 20 {
+            assert!(5 * t.covered >= 4 * t.printed, "coverage: {what}");
+        }
+        if t.clean.is_none() || t.printed < 50 {
+            assert!(t.why.as_deref().is_some_and(|w| !w.is_empty()), "{what}");
+        }
+        sum[0] += t.printed;
+        sum[1] += t.covered;
+    }
+    sum
+}
+
+/// The pooled 90 % coverage of a case ([`assert_tallies`]), when it printed
+/// at least 100 intervals.
+fn assert_pooled(case: &str, [printed, covered]: [usize; 2]) {
+    eprintln!("{case}: {covered} of {printed} intervals cover the truth");
+    if printed >= 100 {
+        assert!(
+            10 * covered >= 9 * printed,
+            "{case}: {covered} of {printed}"
+        );
+    }
+}
+
+/// Noise seeds per agent and log, as the issue asks.
+const SEEDS: u64 = 50;
+
+/// The runs a property case draws: built-in, robots swapped, log interval
+/// in whole ms from 1 to 20 (a multiple of the built-in's step).
+fn run_case(torque: bool) -> impl Strategy<Value = (&'static str, bool, u32)> {
+    let names = builtins(torque);
+    (proptest::sample::select(names), any::<bool>(), 1_u32..=20)
+}
+
+/// Runs a case and checks every agent of the model asked for, with and (for
+/// the torque model) without the integrals. Durations are capped at 20 s
+/// (the transients that excite the robots; the experiments run 157–314 s).
+fn check_case(name: &str, swap: bool, log_ms: u32, torque: bool) {
+    let scenario = Scenario::builtin(name).unwrap();
+    let step = scenario
+        .build(&Overrides::default())
+        .unwrap()
+        .simulation
+        .config()
+        .dt;
+    // The log interval is a whole multiple of the step.
+    let k = ((f64::from(log_ms) * 1e-3 / step).round() as u32).max(1);
+    let log_dt = f64::from(k) * step;
+    let (dir, specs) = builtin_run(name, swap, log_dt, 20.0);
+    let case = format!("{name} (swapped {swap}) logged every {log_dt} s");
+    let mut pooled = [0, 0];
+    for (i, spec) in specs.iter().enumerate() {
+        if spec.torque_robot().is_some() != torque {
+            continue;
+        }
+        for integrals in [true, false] {
+            if !integrals && !torque {
+                continue;
+            }
+            // Noise seeds of their own per run and agent, so that a case's
+            // pooled coverage counts independent draws.
+            let seed0 = (u64::from(log_ms) << 32)
+                + (u64::from(swap) << 31)
+                + ((i as u64) << 24)
+                + name.len() as u64 * 1000;
+            let t = tally(dir.path(), i + 1, spec, integrals, (seed0, SEEDS));
+            eprintln!("{case} agent {} integrals {integrals}: {t:?}", i + 1);
+            let [p, c] = assert_tallies(&format!("{case} integrals {integrals}"), i + 1, &t);
+            pooled = [pooled[0] + p, pooled[1] + c];
+        }
+    }
+    assert_pooled(&case, pooled);
+}
+
+proptest! {
+    // 24 cases × every torque agent of the run (1–4) × 51 logs (noise-free
+    // and 50 seeds) × with and without integrals.csv; fixed RNG seed so CI
+    // reruns the same sample.
+    #![proptest_config(ProptestConfig {
+        cases: 24,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(20),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
+    #[test]
+    fn torque_builtins_every_agent_any_log_interval_within_2_percent_or_withheld(
+        (name, swap, log_ms) in run_case(true)
+    ) {
+        check_case(name, swap, log_ms, true);
+    }
+}
+
+proptest! {
+    // 12 cases × every velocity agent (2–6) × 51 logs.
+    #![proptest_config(ProptestConfig {
+        cases: 12,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(21),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
+    #[test]
+    fn velocity_builtins_every_agent_any_log_interval_within_2_percent_or_withheld(
+        (name, swap, log_ms) in run_case(false)
+    ) {
+        check_case(name, swap, log_ms, false);
+    }
+}
+
+#[test]
+fn nonfeasible_agent2_logged_every_10_ms_is_exact_with_its_integrals_and_withheld_without() {
+    // The issue's case: the on-the-spot turn at t = 4 s under the
+    // continuous-time law; agent2's truth.
+    let (dir, specs) = builtin_run("nonfeasible", true, 0.01, 1e9);
+    assert_eq!(specs[0].torque_robot(), Some(&RobotParams::AGENT2));
+    let with = tally(dir.path(), 1, &specs[0], true, (0, SEEDS));
+    for (field, t) in &with {
+        // Exact to rounding noise-free, printed in every seed.
+        assert!(t.clean.is_some_and(|r| r < 1e-9), "{field}: {t:?}");
+        assert_eq!(t.printed, 50, "{field}: {t:?}");
+    }
+    let pooled = assert_tallies("nonfeasible agent2 10 ms", 1, &with);
+    assert_pooled("nonfeasible agent2 10 ms", pooled);
+    // Without integrals.csv (an older or a fleet log) the sampled inputs
+    // misfit: noise-free, every parameter is withheld with the reason; with
+    // noise, what is printed interpolates the inputs and its interval
+    // includes the difference to holding them.
+    let without = tally(dir.path(), 1, &specs[0], false, (0, SEEDS));
+    eprintln!("with integrals: {with:?}\nwithout: {without:?}");
+    for (field, t) in &without {
+        assert!(t.clean.is_none(), "{field}: {t:?}");
+        let why = t.why.as_deref().unwrap();
+        assert!(
+            (why.contains("misfits") || why.contains("between samples"))
+                && why.contains("integrals.csv"),
+            "{field}: {why}"
+        );
+    }
+    let pooled = assert_tallies("nonfeasible agent2 10 ms, no integrals", 1, &without);
+    assert_pooled("nonfeasible agent2 10 ms, no integrals", pooled);
+    let mut log = Log::read_run(dir.path(), 1).unwrap();
+    let exact = identify::identify(&log, Model::Torque).unwrap();
+    assert!(exact.axes.iter().all(|a| a.method == "integrals"));
+    log.integrals = None;
+    add_noise(&mut log, 7);
+    let id = identify::identify(&log, Model::Torque).unwrap();
+    assert_eq!(id.axes[1].method, "interpolated inputs", "{:?}", id.axes);
+    assert!(
+        id.warnings
+            .iter()
+            .any(|w| w.contains("angular axis's inputs between samples are not in the log")),
+        "{:?}",
+        id.warnings
+    );
+}
+
+/// A ROS 2 bag's velocity-base log as `echelon identify` builds it
+/// (echelon-mcap's `velocity_log`, rebuilt here on the same rules): a base
+/// with lags `taus` integrated exactly on a 1 ms grid, commands published
+/// every `cmd_ms` (random steps held 0.3–1.5 s, a chirp of ω in the middle
+/// third, a stop for the last second, as `scripts/ros2/lagged_base_bag.py`),
+/// odometry every `odom_ms` offset by `offset_ms` with noise σ_v = 0.01 m/s,
+/// σ_ω = 0.02 rad/s (noise-free when `seed` is `None`); the base applies
+/// each command `late_ms` after its stamp (latency). The grid is the
+/// odometry's times, the input of each interval the commands' hold averaged
+/// over it, and `hold` the command messages themselves.
+fn bag_log(
+    taus: [f64; 2],
+    cmd_ms: usize,
+    odom_ms: usize,
+    offset_ms: usize,
+    profile_seed: u64,
+    seed: Option<u64>,
+    late_ms: usize,
+) -> Log {
+    use rand::Rng;
+    let duration_ms = 40_000;
+    let mut rng = ChaCha8Rng::seed_from_u64(profile_seed);
+    let (mut pv, mut pw) = (vec![0.0; duration_ms], vec![0.0; duration_ms]);
+    let mut t = 500;
+    while t < duration_ms {
+        let hold = rng.random_range(300..=1500);
+        let (vs, ws) = (rng.random_range(-0.5..0.5), rng.random_range(-1.2..1.2));
+        for k in t..(t + hold).min(duration_ms) {
+            (pv[k], pw[k]) = (vs, ws);
+        }
+        t += hold;
+    }
+    let third = duration_ms / 3;
+    for (k, w) in pw.iter_mut().enumerate().take(2 * third).skip(third) {
+        let s = (k - third) as f64 / 1000.0;
+        *w = 0.8 * (2.0 * std::f64::consts::PI * (0.2 * s + 0.05 * s * s)).sin();
+    }
+    for k in duration_ms - 1000..duration_ms {
+        (pv[k], pw[k]) = (0.0, 0.0);
+    }
+    let mut noise = seed.map(ChaCha8Rng::seed_from_u64);
+    let (nv, nw) = (
+        Normal::new(0.0, 0.01).unwrap(),
+        Normal::new(0.0, 0.02).unwrap(),
+    );
+    let a = taus.map(|tau| (-0.001 / tau).exp());
+    let (mut x, mut held) = ([0.0; 2], [0.0; 2]);
+    let mut cmd: Vec<(usize, [f64; 2])> = Vec::new();
+    let mut odom: Vec<(usize, [f64; 2])> = Vec::new();
+    for k in 0..duration_ms {
+        if k % cmd_ms == 0 {
+            cmd.push((k, [pv[k], pw[k]]));
+        }
+        if k >= late_ms && (k - late_ms).is_multiple_of(cmd_ms) {
+            held = [pv[k - late_ms], pw[k - late_ms]];
+        }
+        if k % odom_ms == offset_ms {
+            let m = match &mut noise {
+                Some(r) => [x[0] + nv.sample(r), x[1] + nw.sample(r)],
+                None => x,
+            };
+            odom.push((k, m));
+        }
+        for i in 0..2 {
+            x[i] = a[i] * x[i] + (1.0 - a[i]) * held[i];
+        }
+    }
+    // The log: odometry from the first command on (the last is a stop).
+    let t0 = odom[0].0;
+    let last_at = |t: usize| cmd.partition_point(|c| c.0 <= t) - 1;
+    let average = |from: usize, to: usize| -> [f64; 2] {
+        let mut acc = [0.0; 2];
+        for k in from..to {
+            let c = cmd[last_at(k)].1;
+            acc[0] += c[0];
+            acc[1] += c[1];
+        }
+        acc.map(|a| a / (to - from) as f64)
+    };
+    let mut log = Log {
+        source: "in-memory bag".into(),
+        agent: 1,
+        ..Log::default()
+    };
+    let mut u: [Vec<f64>; 2] = Default::default();
+    for (i, (k, m)) in odom.iter().enumerate() {
+        log.t.push((k - t0) as f64 * 1e-3);
+        log.v.push(m[0]);
+        log.omega.push(m[1]);
+        let avg = match odom.get(i + 1) {
+            Some((next, _)) => average(*k, *next),
+            None => cmd[last_at(*k)].1,
+        };
+        u[0].push(avg[0]);
+        u[1].push(avg[1]);
+    }
+    log.cmd = Some(u);
+    let mut hold = identify::Hold::default();
+    for (k, c) in &cmd[last_at(t0)..] {
+        hold.t.push((*k as f64 - t0 as f64) * 1e-3);
+        hold.u[0].push(c[0]);
+        hold.u[1].push(c[1]);
+    }
+    log.hold = Some(hold);
+    log
+}
+
+proptest! {
+    // 12 cases × (noise-free + 50 seeds): ROS 2 bags at 20 and 50 Hz
+    // odometry, 20 Hz commands, lags 0.05–0.4 s.
+    #![proptest_config(ProptestConfig {
+        cases: 12,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(22),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
+    #[test]
+    fn ros2_bag_lags_at_20_and_50_hz_within_2_percent_and_covered(
+        tau_v in 0.05_f64..0.4,
+        tau_w in 0.05_f64..0.4,
+        fifty in any::<bool>(),
+        offset in 1_usize..20,
+        profile in 0_u64..1000,
+    ) {
+        let odom_ms = if fifty { 20 } else { 50 };
+        let offset = offset % odom_ms;
+        let truth = [("tau_v", tau_v), ("tau_omega", tau_w)];
+        let case = format!("τ = {tau_v:.3}, {tau_w:.3} s, odometry every {odom_ms} ms + {offset}");
+        // Noise-free: exact, through the hold.
+        let clean = bag_log([tau_v, tau_w], 50, odom_ms, offset, profile, None, 0);
+        let id = identify::identify(&clean, Model::Velocity).unwrap();
+        let mut tallies: Vec<(&'static str, Tally)> =
+            truth.iter().map(|(f, _)| (*f, Tally::default())).collect();
+        for ((field, want), (_, t)) in truth.iter().zip(tallies.iter_mut()) {
+            let e = id.get(field).unwrap_or_else(|| panic!("{case}: {field} {:?}", id.warnings));
+            prop_assert!((e.value / want - 1.0).abs() < 1e-6, "{case}: {field} {e:?}");
+            t.clean = Some((e.value / want - 1.0).abs());
+        }
+        for seed in 0..SEEDS {
+            let log = bag_log([tau_v, tau_w], 50, odom_ms, offset, profile, Some(profile * 100 + seed), 0);
+            let id = identify::identify(&log, Model::Velocity);
+            for ((field, want), (_, t)) in truth.iter().zip(tallies.iter_mut()) {
+                let Ok(id) = &id else {
+                    t.why.get_or_insert_with(|| format!("{:?}", id.as_ref().err()));
+                    continue;
+                };
+                let p = id.params.iter().find(|p| p.field == *field).unwrap();
+                match p.estimate {
+                    Some(e) => {
+                        t.printed += 1;
+                        t.covered += usize::from(e.contains(*want));
+                        t.worst = t.worst.max((e.value / want - 1.0).abs());
+                    }
+                    None => {
+                        t.why.get_or_insert_with(|| p.not_identifiable.clone().unwrap_or_default());
+                    }
+                }
+            }
+        }
+        eprintln!("{case}: {tallies:?}");
+        let pooled = assert_tallies(&case, 1, &tallies);
+        assert_pooled(&case, pooled);
+    }
+}
+
+#[test]
+fn a_base_that_applies_its_commands_late_is_a_misfit_when_the_log_is_noise_free() {
+    // The base acts on each command 1–5 ms after its stamp: a delay the
+    // first-order lag does not have. Noise-free, the residuals are not
+    // rounding and not white: both lags are withheld, with the reason.
+    // (With the tests' noise a 1–2 ms delay goes unseen and shows as a lag
+    // longer by about the delay, docs/identify.md.)
+    for late in [1, 2, 5] {
+        let log = bag_log([0.1, 0.15], 50, 20, 7, 1, None, late);
+        let id = identify::identify(&log, Model::Velocity).unwrap();
+        for p in &id.params {
+            assert!(p.estimate.is_none(), "late {late} ms: {p:?}");
+            let why = p.not_identifiable.as_deref().unwrap();
+            assert!(why.contains("misfits"), "late {late} ms: {why}");
+        }
+    }
+    // On time, the same log gives both lags exactly.
+    let id = identify::identify(
+        &bag_log([0.1, 0.15], 50, 20, 7, 1, None, 0),
+        Model::Velocity,
+    )
+    .unwrap();
+    assert!(id.axes.iter().all(|a| a.method == "command hold"));
+    assert!((id.get("tau_v").unwrap().value / 0.1 - 1.0).abs() < 1e-9);
+    assert!((id.get("tau_omega").unwrap().value / 0.15 - 1.0).abs() < 1e-9);
 }

@@ -421,7 +421,13 @@ fn same_scenario_gives_the_same_bytes() {
     let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
     run_into(a.path(), "circle-pentagon");
     run_into(b.path(), "circle-pentagon");
-    for f in [TRAJECTORY_FILE, SUMMARY_FILE, REFERENCE_FILE, SCENARIO_FILE] {
+    for f in [
+        TRAJECTORY_FILE,
+        SUMMARY_FILE,
+        REFERENCE_FILE,
+        SCENARIO_FILE,
+        output::INTEGRALS_FILE,
+    ] {
         let (x, y) = (
             std::fs::read(a.path().join(f)).unwrap(),
             std::fs::read(b.path().join(f)).unwrap(),
@@ -438,8 +444,8 @@ fn same_scenario_gives_the_same_bytes() {
         .collect();
     assert_eq!(
         leftovers.len(),
-        4,
-        "only the four outputs remain: {leftovers:?}"
+        5,
+        "only the five outputs (with integrals.csv) remain: {leftovers:?}"
     );
 }
 

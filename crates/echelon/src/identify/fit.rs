@@ -8,10 +8,15 @@
 //! - eq. 3d `J ω̇ + ψ ω = u2` is `τ = J/ψ`, `k = 1/ψ`;
 //! - a velocity base's lag `τ_v v̇ + v = v_c` is `k = 1` (fixed).
 //!
-//! The input is held between samples (zero-order hold, as a sampled controller
-//! applies it), so the exact discretisation over a step `h` is
-//! `x⁺ = a x + (1 − a) k u` with `a = e^{−h/τ}`: the model simulated here is
-//! exact for such a plant, whatever the sample spacing.
+//! The output-error model holds the input between samples (zero-order hold,
+//! as a sampled controller applies it: `x⁺ = a x + (1 − a) k u` with
+//! `a = e^{−h/τ}`, exact for such a plant whatever the sample spacing) or
+//! interpolates it linearly (`x⁺ = a x + (1 − a) k u + k Δu b`,
+//! `b = 1 − (τ/h)(1 − a)`, exact for a ramp); [`fit`] decides which the log
+//! supports. With the input's own hold grid (`AxisData::hold`) it is
+//! integrated through every switch. With the running integrals of the input
+//! and the output ([`fit_integral`]) no assumption on the input between
+//! samples is needed at all.
 
 // Small dense linear algebra (n ≤ 3) reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
@@ -30,6 +35,57 @@ pub(crate) struct AxisData<'a> {
     pub(crate) t: &'a [f64],
     pub(crate) u: &'a [f64],
     pub(crate) y: &'a [f64],
+    /// The input's own zero-order hold (switch times, values), when known
+    /// apart from the samples: the output error is then integrated on it.
+    pub(crate) hold: Option<(&'a [f64], &'a [f64])>,
+}
+
+/// The grid the output-error model is integrated on: the sample times and,
+/// with a hold, its switch times between them; the input held over each
+/// step, and where each sample sits on the grid.
+struct Grid {
+    t: Vec<f64>,
+    u: Vec<f64>,
+    at: Vec<usize>,
+}
+
+impl Grid {
+    fn new(d: &AxisData<'_>) -> Grid {
+        let Some((ht, hu)) = d.hold else {
+            return Grid {
+                t: d.t.to_vec(),
+                u: d.u.to_vec(),
+                at: (0..d.t.len()).collect(),
+            };
+        };
+        let n = d.t.len();
+        let mut g = Grid {
+            t: Vec::with_capacity(n + ht.len()),
+            u: Vec::with_capacity(n + ht.len()),
+            at: Vec::with_capacity(n),
+        };
+        // The hold's value at time t: the last switch at or before it.
+        let value = |t: f64| -> f64 {
+            let j = ht.partition_point(|s| *s <= t);
+            hu[j.saturating_sub(1)]
+        };
+        let mut j = ht.partition_point(|s| *s <= d.t[0]);
+        for k in 0..n {
+            g.at.push(g.t.len());
+            g.t.push(d.t[k]);
+            g.u.push(value(d.t[k]));
+            if k + 1 < n {
+                while j < ht.len() && ht[j] < d.t[k + 1] {
+                    if ht[j] > d.t[k] {
+                        g.t.push(ht[j]);
+                        g.u.push(hu[j]);
+                    }
+                    j += 1;
+                }
+            }
+        }
+        g
+    }
 }
 
 /// The fit of one axis.
@@ -50,25 +106,41 @@ pub(crate) struct AxisFit {
     pub(crate) predicted: Vec<f64>,
     /// Reciprocal condition number of the normalised information matrix.
     pub(crate) rcond: f64,
+    /// Set when the inputs between samples were unknown ([`fit`]).
+    pub(crate) between: Option<Between>,
 }
 
-/// Simulates the axis from `x0` for parameters `(tau, k)`, and the
-/// sensitivities of the output to `(τ, k, x₀)`.
-fn simulate(d: &AxisData<'_>, tau: f64, k: f64, x0: f64, x: &mut [f64], s: &mut [[f64; 3]]) {
-    x[0] = x0;
-    s[0] = [0.0, 0.0, 1.0];
-    for i in 0..d.t.len() - 1 {
-        let h = d.t[i + 1] - d.t[i];
+/// Simulates the axis on `g` from `x0` for parameters `(tau, k)`, and the
+/// sensitivities of the output to `(τ, k, x₀)`, at the samples.
+///
+/// With `foh` the input is instead interpolated linearly from each grid
+/// point's value to the next's (first-order hold), exactly integrated.
+#[allow(clippy::too_many_arguments)]
+fn simulate(g: &Grid, foh: bool, tau: f64, k: f64, x0: f64, x: &mut [f64], s: &mut [[f64; 3]]) {
+    let (mut xi, mut si) = (x0, [0.0, 0.0, 1.0]);
+    let mut next = 0;
+    for i in 0..g.t.len() {
+        if g.at.get(next) == Some(&i) {
+            x[next] = xi;
+            s[next] = si;
+            next += 1;
+        }
+        if i + 1 == g.t.len() {
+            break;
+        }
+        let h = g.t[i + 1] - g.t[i];
         let a = (-h / tau).exp();
         let da_dtau = a * h / (tau * tau);
-        let xi = x[i];
-        x[i + 1] = a * xi + (1.0 - a) * k * d.u[i];
-        let si = s[i];
-        s[i + 1] = [
-            a * si[0] + da_dtau * (xi - k * d.u[i]),
-            a * si[1] + (1.0 - a) * d.u[i],
+        // The ramp's share: x⁺ gains k Δu b, b = 1 − (τ/h)(1 − a).
+        let du = if foh { g.u[i + 1] - g.u[i] } else { 0.0 };
+        let b = 1.0 - tau / h * (1.0 - a);
+        let db_dtau = a / tau - (1.0 - a) / h;
+        si = [
+            a * si[0] + da_dtau * (xi - k * g.u[i]) + k * du * db_dtau,
+            a * si[1] + (1.0 - a) * g.u[i] + du * b,
             a * si[2],
         ];
+        xi = a * xi + (1.0 - a) * k * g.u[i] + k * du * b;
     }
 }
 
@@ -226,6 +298,52 @@ pub(crate) fn equation_error(d: &AxisData<'_>, fixed_gain: bool) -> ([f64; 2], f
 /// smallest sample spacing, used to fall back when the first guess is not
 /// physical.
 pub(crate) fn fit(d: &AxisData<'_>, fixed_gain: bool) -> AxisFit {
+    let held = fit_with(d, fixed_gain, false);
+    if d.hold.is_some() {
+        return held;
+    }
+    // The log has the inputs' values at the samples only. Held between
+    // samples (a sampled controller logged at its period) or varying (a
+    // continuous-time one, or logged slower than it runs)? Fit both a hold
+    // and a linear interpolation: unless the hold fits significantly better,
+    // the interpolated fit is taken and the difference between the two is
+    // added to its covariance (the input between samples is unknown).
+    let ramp = fit_with(d, fixed_gain, true);
+    let n = d.t.len();
+    let dof = n.saturating_sub(if fixed_gain { 2 } else { 3 }).max(1) as f64;
+    let (cz, cf) = (held.rms.powi(2) * n as f64, ramp.rms.powi(2) * n as f64);
+    let sigma2 = cz.min(cf) / dof;
+    let hold_fits_better = cf - cz > CHI2_1_999 * sigma2;
+    if !hold_fits_better && ramp.theta.iter().all(|x| x.is_finite()) {
+        let delta = [ramp.theta[0] - held.theta[0], ramp.theta[1] - held.theta[1]];
+        let mut f = ramp;
+        for p in 0..2 {
+            for q in 0..2 {
+                f.cov[p][q] += delta[p] * delta[q];
+            }
+        }
+        f.between = Some(Between {
+            held: held.theta,
+            cost_ratio: cz / cf.max(f64::MIN_POSITIVE),
+        });
+        return f;
+    }
+    held
+}
+
+/// The 99.9 % quantile of χ² with one degree of freedom.
+const CHI2_1_999: f64 = 10.828;
+
+/// When the inputs between samples are unknown and the fit interpolated
+/// them: the held-input fit `[τ, k]` whose difference was added to the
+/// covariance, and the held fit's cost over the interpolated one's.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Between {
+    pub(crate) held: [f64; 2],
+    pub(crate) cost_ratio: f64,
+}
+
+fn fit_with(d: &AxisData<'_>, fixed_gain: bool, foh: bool) -> AxisFit {
     let n = d.t.len();
     let (guess, _) = equation_error(d, fixed_gain);
     let span = d.t[n - 1] - d.t[0];
@@ -243,11 +361,12 @@ pub(crate) fn fit(d: &AxisData<'_>, fixed_gain: bool) -> AxisFit {
         1.0
     };
     let mut x0 = d.y[0];
+    let grid = Grid::new(d);
     let mut x = vec![0.0; n];
     let mut s = vec![[0.0; 3]; n];
     let mut x_try = vec![0.0; n];
     let mut s_try = vec![[0.0; 3]; n];
-    simulate(d, tau, k, x0, &mut x, &mut s);
+    simulate(&grid, foh, tau, k, x0, &mut x, &mut s);
     let mut c = cost(d.y, &x);
     let mut lambda = 1e-3;
     // Free parameters: [τ, k, x₀] or [τ, x₀].
@@ -288,7 +407,7 @@ pub(crate) fn fit(d: &AxisData<'_>, fixed_gain: bool) -> AxisFit {
                 lambda *= 10.0;
                 continue;
             }
-            simulate(d, t2, k2, x2, &mut x_try, &mut s_try);
+            simulate(&grid, foh, t2, k2, x2, &mut x_try, &mut s_try);
             let c2 = cost(d.y, &x_try);
             if c2 <= c {
                 let rel = (c - c2) / c.max(f64::MIN_POSITIVE);
@@ -341,7 +460,234 @@ pub(crate) fn fit(d: &AxisData<'_>, fixed_gain: bool) -> AxisFit {
         rms: (c / n as f64).sqrt(),
         predicted: x,
         rcond: rc,
+        between: None,
     }
+}
+
+/// The integrals of one axis over the log, from `integrals.csv`: the
+/// output's own integral `S` (distance `∫v dt` or heading `∫ω dt`) and the
+/// input's `I = ∫u dt`, at the sample times.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct AxisIntegrals<'a> {
+    pub(crate) s: &'a [f64],
+    pub(crate) i: &'a [f64],
+}
+
+/// Fits the axis from its integrals: `τ ẋ + x = k u` integrated from the
+/// first sample is `x_k = x₀ + (k I_k − S_k)/τ` (`I`, `S` counted from the
+/// first sample), exact whatever the input did between samples. Linear least
+/// squares in `(x₀, k/τ, 1/τ)` (or `(x₀, 1/τ)` with `k = 1`), by
+/// Householder-free modified Gram–Schmidt on unit-scaled columns; the
+/// measured output's noise is the residual, white, so `σ² (XᵀX)⁻¹` is the
+/// covariance. `(τ, k)` and their covariance follow by the delta method.
+pub(crate) fn fit_integral(d: &AxisData<'_>, w: &AxisIntegrals<'_>, fixed_gain: bool) -> AxisFit {
+    let n = d.t.len();
+    let (i0, s0) = (w.i[0], w.s[0]);
+    // Columns: 1, I − I₀, −(S − S₀)   or   1, (I − I₀) − (S − S₀).
+    let cols: Vec<Vec<f64>> = if fixed_gain {
+        vec![
+            vec![1.0; n],
+            (0..n).map(|k| (w.i[k] - i0) - (w.s[k] - s0)).collect(),
+        ]
+    } else {
+        vec![
+            vec![1.0; n],
+            (0..n).map(|k| w.i[k] - i0).collect(),
+            (0..n).map(|k| -(w.s[k] - s0)).collect(),
+        ]
+    };
+    let (beta, cov_b, rc) = least_squares(&cols, d.y);
+    let predicted: Vec<f64> = (0..n)
+        .map(|k| cols.iter().zip(&beta).map(|(c, b)| c[k] * b).sum())
+        .collect();
+    let c = cost(d.y, &predicted);
+    let sigma2 = c / n.saturating_sub(cols.len()).max(1) as f64;
+    let (theta, cov) = if fixed_gain {
+        // τ = 1/γ.
+        let g = beta[1];
+        let var = sigma2 * cov_b[1][1] / g.powi(4);
+        ([1.0 / g, 1.0], [[var, 0.0], [0.0, 0.0]])
+    } else {
+        // α = k/τ, β = 1/τ: τ = 1/β, k = α/β.
+        let (a, b) = (beta[1], beta[2]);
+        let jac = [[0.0, -1.0 / (b * b)], [1.0 / b, -a / (b * b)]];
+        let cb = [[cov_b[1][1], cov_b[1][2]], [cov_b[2][1], cov_b[2][2]]];
+        let mut cov = [[0.0; 2]; 2];
+        for p in 0..2 {
+            for q in 0..2 {
+                for r in 0..2 {
+                    for t in 0..2 {
+                        cov[p][q] += sigma2 * jac[p][r] * cb[r][t] * jac[q][t];
+                    }
+                }
+            }
+        }
+        ([1.0 / b, a / b], cov)
+    };
+    AxisFit {
+        theta,
+        cov,
+        x0: beta[0],
+        first_guess: theta,
+        rms: (c / n as f64).sqrt(),
+        predicted,
+        rcond: rc,
+        between: None,
+    }
+}
+
+/// Least squares `y ≈ Σ βⱼ colsⱼ` by modified Gram–Schmidt on unit-scaled
+/// columns: `β`, `(XᵀX)⁻¹` (3 × 3, the unused part zero) and the estimate
+/// `(min Rᵢᵢ / max Rᵢᵢ)²` of the reciprocal condition number of the scaled
+/// `XᵀX` (NaN coefficients when a column is degenerate).
+fn least_squares(cols: &[Vec<f64>], y: &[f64]) -> ([f64; 3], [[f64; 3]; 3], f64) {
+    let p = cols.len();
+    let degenerate = ([f64::NAN; 3], [[f64::NAN; 3]; 3], 0.0);
+    let scale: Vec<f64> = cols
+        .iter()
+        .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt())
+        .collect();
+    if scale.iter().any(|s| s.is_nan() || *s <= 0.0) {
+        return degenerate;
+    }
+    let mut q: Vec<Vec<f64>> = cols
+        .iter()
+        .zip(&scale)
+        .map(|(c, s)| c.iter().map(|x| x / s).collect())
+        .collect();
+    let mut r = [[0.0; 3]; 3];
+    for j in 0..p {
+        for i in 0..j {
+            let dot: f64 = q[i].iter().zip(&q[j]).map(|(a, b)| a * b).sum();
+            r[i][j] = dot;
+            let (done, rest) = q.split_at_mut(j);
+            rest[0]
+                .iter_mut()
+                .zip(&done[i])
+                .for_each(|(x, a)| *x -= dot * a);
+        }
+        let norm = q[j].iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm.is_nan() || norm <= 1e-15 {
+            return degenerate;
+        }
+        r[j][j] = norm;
+        q[j].iter_mut().for_each(|x| *x /= norm);
+    }
+    let diag: Vec<f64> = (0..p).map(|i| r[i][i]).collect();
+    let (lo, hi) = diag.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), d| {
+        (lo.min(*d), hi.max(*d))
+    });
+    let rc = if hi > 0.0 { (lo / hi).powi(2) } else { 0.0 };
+    // Back substitution: R b = Qᵀ y; R⁻¹ for the covariance.
+    let qty: Vec<f64> = q
+        .iter()
+        .map(|qj| qj.iter().zip(y).map(|(a, b)| a * b).sum())
+        .collect();
+    let mut rinv = [[0.0; 3]; 3];
+    for j in 0..p {
+        let mut e = [0.0; 3];
+        e[j] = 1.0;
+        for i in (0..p).rev() {
+            let mut sum = e[i];
+            for k in i + 1..p {
+                sum -= r[i][k] * rinv[k][j];
+            }
+            rinv[i][j] = sum / r[i][i];
+        }
+    }
+    let mut beta = [0.0; 3];
+    let mut cov = [[0.0; 3]; 3];
+    for i in 0..p {
+        beta[i] = (0..p).map(|k| rinv[i][k] * qty[k]).sum::<f64>() / scale[i];
+        for j in 0..p {
+            cov[i][j] =
+                (0..p).map(|k| rinv[i][k] * rinv[j][k]).sum::<f64>() / (scale[i] * scale[j]);
+        }
+    }
+    (beta, cov, rc)
+}
+
+/// Whiteness of residuals: the Ljung–Box statistic over `lags` lags, its
+/// 99.9 % critical value (χ² with `lags` degrees of freedom, Wilson–Hilferty)
+/// and the lag-1 autocorrelation.
+pub(crate) fn ljung_box(r: &[f64], lags: usize) -> (f64, f64, f64) {
+    let n = r.len();
+    let mean = r.iter().sum::<f64>() / n as f64;
+    let c0: f64 = r.iter().map(|x| (x - mean) * (x - mean)).sum();
+    let rho = |j: usize| -> f64 {
+        if c0 <= 0.0 {
+            return 0.0;
+        }
+        (0..n - j)
+            .map(|k| (r[k] - mean) * (r[k + j] - mean))
+            .sum::<f64>()
+            / c0
+    };
+    let nf = n as f64;
+    let q = nf
+        * (nf + 2.0)
+        * (1..=lags)
+            .map(|j| rho(j).powi(2) / (nf - j as f64))
+            .sum::<f64>();
+    let h = lags as f64;
+    // z for a 0.1 % upper tail.
+    let z = 3.090_232_306_167_813;
+    let a = 2.0 / (9.0 * h);
+    let crit = h * (1.0 - a + z * a.sqrt()).powi(3);
+    (q, crit, rho(1))
+}
+
+/// A multi-scale scan of the residuals' local means: the largest
+/// `|Σ r| / (σ √L)` over windows of `L = 8, 16, …` samples (up to half the
+/// log) at strides of `L/2`, `σ` the residual RMS; with its 99.9 % bound
+/// (Bonferroni over the windows: `√(2 ln(2M/0.001))` for `M` windows) and
+/// the window `[first, last]` sample it was found in. White residuals stay
+/// under the bound; a misfit confined to a transient (which a whiteness test
+/// over the whole log dilutes) shows as a run of residuals of one sign.
+pub(crate) fn scan(r: &[f64]) -> (f64, f64, [usize; 2]) {
+    let n = r.len();
+    let sigma = (r.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
+    let mut prefix = Vec::with_capacity(n + 1);
+    prefix.push(0.0);
+    for x in r {
+        prefix.push(prefix[prefix.len() - 1] + x);
+    }
+    let (mut best, mut at, mut windows) = (0.0_f64, [0, 0], 0_usize);
+    let mut len = 8;
+    while len <= n / 2 {
+        let stride = len / 2;
+        let mut start = 0;
+        while start + len <= n {
+            windows += 1;
+            let z = (prefix[start + len] - prefix[start]).abs() / (sigma * (len as f64).sqrt());
+            if z > best {
+                (best, at) = (z, [start, start + len - 1]);
+            }
+            start += stride;
+        }
+        len *= 2;
+    }
+    let bound = (2.0 * (2.0 * windows.max(1) as f64 / 1e-3).ln()).sqrt();
+    if sigma > 0.0 {
+        (best, bound, at)
+    } else {
+        (0.0, bound, at)
+    }
+}
+
+/// The measurement noise the output shows by itself, model-free: the RMS of
+/// its second differences over `√6` (white noise of RMS σ gives
+/// `E[(y₊ − 2y + y₋)²] = 6σ²`; a smooth signal adds its curvature, so this
+/// is an upper bound).
+pub(crate) fn noise_from_differences(y: &[f64]) -> f64 {
+    let n = y.len();
+    if n < 3 {
+        return f64::NAN;
+    }
+    let s: f64 = (1..n - 1)
+        .map(|k| (y[k + 1] - 2.0 * y[k] + y[k - 1]).powi(2))
+        .sum();
+    (s / (6.0 * (n - 2) as f64)).sqrt()
 }
 
 #[cfg(test)]
@@ -383,8 +729,9 @@ mod tests {
             t: &t,
             u: &u,
             y: &[],
+            hold: None,
         };
-        simulate(&d, tau, k, x0, &mut y, &mut s);
+        simulate(&Grid::new(&d), false, tau, k, x0, &mut y, &mut s);
         let f = fit(&AxisData { y: &y, ..d }, false);
         assert!((f.theta[0] - tau).abs() < 1e-8 * tau, "{:?}", f.theta);
         assert!((f.theta[1] - k).abs() < 1e-8 * k, "{:?}", f.theta);

@@ -8,18 +8,30 @@
 //! velocity: τ_v v̇ + v = v_c       τ_ω ω̇ + ω = ω_c        (crate::base)
 //! ```
 //!
-//! Each axis is fitted in two steps (`fit`): an equation-error
-//! least-squares first guess on the equation integrated over short windows
-//! (no numerical differentiation of noisy velocities), then an output-error
-//! Levenberg–Marquardt refinement that simulates the axis from the logged
-//! input (held between samples) and fits the measured velocity; the
-//! output-error estimate stays unbiased when the measured velocities are
-//! noisy. Each parameter gets a 95 % interval from `σ² (JᵀJ)⁻¹` (σ² the
-//! residual variance, J the output's sensitivities), mapped to `m, η` (or
-//! `J, ψ`) by the delta method. A parameter the input did not excite (no
-//! input, a badly conditioned information matrix or an interval wider than
-//! ±[`MAX_REL_HALF_WIDTH`]) is reported as not identifiable, with the
-//! reason, and given no number.
+//! With the run's running integrals ([`Log::integrals`], a run directory's
+//! `integrals.csv`: `∫v dt` or the heading, and `∫u dt`) each axis is fitted
+//! exactly: the equation integrated from the first sample,
+//! `x_k = x₀ + (k ΔI_k − ΔS_k)/τ`, holds whatever the input did between
+//! samples, and is solved by linear least squares (`fit::fit_integral`).
+//! Without them, in two steps (`fit::fit`): an equation-error least-squares
+//! first guess on the equation integrated over short windows, then an
+//! output-error Levenberg–Marquardt refinement that simulates the axis from
+//! the logged input and fits the measured velocity. The input between samples
+//! is then unknown: the axis is fitted with the input held and linearly
+//! interpolated, and unless holding fits significantly better, the
+//! interpolated fit is taken with the difference of the two added to its
+//! covariance (a ROS 2 bag's command messages, [`Log::hold`], are integrated
+//! exactly instead). Each parameter gets a 95 % interval from `σ² (XᵀX)⁻¹`
+//! (σ² the residual variance, X the regressors or the output's
+//! sensitivities), mapped to `m, η` (or `J, ψ`) by the delta method.
+//!
+//! A parameter is given no number, and the reason instead, when the input did
+//! not excite it (no input, a badly conditioned information matrix or an
+//! interval wider than ±[`MAX_REL_HALF_WIDTH`]) or when the model misfits the
+//! log: on a log that is not noise-free, residuals that are not white
+//! (Ljung–Box), that keep one sign over a stretch (a multi-scale scan of
+//! their local means) or that exceed the noise the measurement shows by
+//! itself (`misfit`).
 //!
 //! Input: a run directory's `trajectory.csv` ([`Log::read_run`]) or a log
 //! built in memory ([`Log`]); output: [`Identified`], with
@@ -40,8 +52,9 @@ use crate::model::RobotParams;
 pub const MIN_SAMPLES: usize = 50;
 
 /// Largest relative 95 % half-width of an identified parameter; wider, the
-/// parameter is reported as not identifiable.
-pub const MAX_REL_HALF_WIDTH: f64 = 0.1;
+/// parameter is reported as not identifiable. At ±1 %, a printed value more
+/// than 2 % off the truth is a 4σ event.
+pub const MAX_REL_HALF_WIDTH: f64 = 0.01;
 
 /// Residual RMS, relative to the RMS of the measured velocity, below which a
 /// log counts as noise-free: the residuals are rounding, `σ²` means nothing
@@ -181,6 +194,40 @@ pub struct Log {
     pub cmd: Option<[Vec<f64>; 2]>,
     /// The command after the base's speed limits, if logged.
     pub applied: Option<[Vec<f64>; 2]>,
+    /// The running integrals at the sample times (a run's `integrals.csv`),
+    /// if logged: with them the fit is exact whatever the input did between
+    /// samples.
+    pub integrals: Option<Integrals>,
+    /// What reading the log found worth saying (copied into the warnings).
+    pub notes: Vec<String>,
+    /// The inputs' own zero-order hold when it is known apart from the
+    /// samples (a ROS 2 bag's command messages): the output-error fit then
+    /// integrates the model exactly on it, instead of holding the inputs'
+    /// per-sample values (`cmd`, `applied`, `u`) over each interval.
+    pub hold: Option<Hold>,
+}
+
+/// Inputs held from each switch time to the next.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Hold {
+    /// Switch times, s, on the clock of [`Log::t`], increasing; the first at
+    /// or before the first sample.
+    pub t: Vec<f64>,
+    /// The two inputs' values held from each switch time.
+    pub u: [Vec<f64>; 2],
+}
+
+/// Running integrals of one agent at the sample times
+/// ([`crate::output::INTEGRALS_HEADER`]); only their differences are used.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Integrals {
+    /// Distance travelled `∫v dt`, m.
+    pub s: Vec<f64>,
+    /// Heading, not wrapped (`θ₀ + ∫ω dt`), rad.
+    pub theta: Vec<f64>,
+    /// `∫ input dt` of the plant's inputs: `u1, u2` (torque) or the applied
+    /// `v, ω` command (velocity base).
+    pub input: [Vec<f64>; 2],
 }
 
 /// Reads a CSV column set into per-agent series.
@@ -202,7 +249,71 @@ impl Log {
             file: origin.clone(),
             reason: format!("cannot read: {e}"),
         })?;
-        Log::parse_csv(&text, &origin, agent)
+        let mut log = Log::parse_csv(&text, &origin, agent)?;
+        let beside = file.parent().map(|d| d.join(crate::output::INTEGRALS_FILE));
+        if let Some(path) = beside.filter(|p| p.is_file()) {
+            match std::fs::read_to_string(&path)
+                .map_err(|e| e.to_string())
+                .and_then(|text| log.attach_integrals(&text))
+            {
+                Ok(()) => {}
+                Err(why) => log.notes.push(format!(
+                    "{} not used: {why}; the fit falls back to the sampled inputs",
+                    path.display()
+                )),
+            }
+        }
+        Ok(log)
+    }
+
+    /// Attaches this agent's rows of an `integrals.csv` (header
+    /// [`crate::output::INTEGRALS_HEADER`]); they must be at the log's
+    /// sample times.
+    pub fn attach_integrals(&mut self, text: &str) -> Result<(), String> {
+        let mut rdr = csv::ReaderBuilder::new().from_reader(text.as_bytes());
+        let header = rdr.headers().map_err(|e| e.to_string())?.clone();
+        let names = ["t", "agent", "s", "theta", "int_1", "int_2"];
+        let idx: Vec<usize> = names
+            .iter()
+            .map(|c| column(&header, c).ok_or_else(|| format!("no column {c}")))
+            .collect::<Result<_, _>>()?;
+        let mut cols: [Vec<f64>; 5] = Default::default();
+        for (line, rec) in rdr.records().enumerate() {
+            let rec = rec.map_err(|e| format!("line {}: {e}", line + 2))?;
+            let num = |k: usize| -> Result<f64, String> {
+                let cell = rec.get(idx[k]).unwrap_or("");
+                cell.trim()
+                    .parse::<f64>()
+                    .map_err(|_| format!("line {}: {} = `{cell}`", line + 2, names[k]))
+            };
+            if num(1)? != self.agent as f64 {
+                continue;
+            }
+            for (k, c) in [0, 2, 3, 4, 5].into_iter().zip(cols.iter_mut()) {
+                c.push(num(k)?);
+            }
+        }
+        let [t, s, theta, i1, i2] = cols;
+        if t.len() != self.t.len() || t.iter().zip(&self.t).any(|(a, b)| (a - b).abs() > 1e-9) {
+            return Err(format!(
+                "its {} rows of agent {} are not at the log's {} sample times",
+                t.len(),
+                self.agent,
+                self.t.len()
+            ));
+        }
+        if [&s, &theta, &i1, &i2]
+            .iter()
+            .any(|c| c.iter().any(|x| !x.is_finite()))
+        {
+            return Err("non-finite values".to_owned());
+        }
+        self.integrals = Some(Integrals {
+            s,
+            theta,
+            input: [i1, i2],
+        });
+        Ok(())
     }
 
     /// Parses a `trajectory.csv` (header with `t, agent, v, omega` and some of
@@ -455,6 +566,14 @@ pub struct AxisSummary {
     /// Residuals at rounding level ([`NOISE_FREE_RELATIVE_RMS`]): a
     /// simulated, noise-free log; the intervals are not meaningful.
     pub noise_free: bool,
+    /// How the axis was fitted: `integrals` (exact, from `integrals.csv`),
+    /// `command hold` (through the command messages of a ROS 2 bag),
+    /// `held inputs` (the logged inputs held between samples: holding fitted
+    /// significantly better) or `interpolated inputs` (linearly, the
+    /// difference to holding them added to the covariance).
+    pub method: &'static str,
+    /// The residual checks (whiteness, runs, size against the noise).
+    pub checks: ResidualChecks,
 }
 
 /// A speed or acceleration limit seen in the log.
@@ -664,21 +783,51 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
         Model::Velocity => ["v_applied", "omega_applied"],
     };
     let mut params = Vec::new();
-    let mut warnings = Vec::new();
+    let mut warnings = log.notes.clone();
     let mut axes = Vec::new();
     let mut predicted: [Vec<f64>; 2] = Default::default();
     let mut reasons = Vec::new();
+    // Whether an excited axis was withheld for misfit (then the log is
+    // answered, with the reasons, rather than refused as unexcited).
+    let mut misfits = false;
     for axis in 0..2 {
         let d = AxisData {
             t: &log.t,
             u: &inputs[axis],
             y: measured[axis],
+            hold: log.hold.as_ref().map(|h| (&h.t[..], &h.u[axis][..])),
         };
-        let f = fit::fit(&d, fixed_gain);
+        let integrals = log.integrals.as_ref().map(|w| fit::AxisIntegrals {
+            s: [&w.s, &w.theta][axis],
+            i: &w.input[axis],
+        });
+        let f = match &integrals {
+            Some(w) => fit::fit_integral(&d, w, fixed_gain),
+            None => fit::fit(&d, fixed_gain),
+        };
         let y_rms = (d.y.iter().map(|y| y * y).sum::<f64>() / d.y.len() as f64).sqrt();
         let noise_free = f.rms <= NOISE_FREE_RELATIVE_RMS * y_rms;
+        if let Some(b) = f.between {
+            let rel = |i: usize| (f.theta[i] - b.held[i]).abs() / f.theta[i].abs();
+            warnings.push(format!(
+                "the {} axis's inputs between samples are not in the log (no integrals.csv, and holding the logged values does not fit better than interpolating them, cost ratio {:.3}): the fit interpolates them linearly and its intervals include the difference to holding them ({:.2} % on τ, {:.2} % on the gain)",
+                ["linear", "angular"][axis],
+                b.cost_ratio,
+                100.0 * rel(0),
+                100.0 * rel(1)
+            ));
+        }
+        let checks = ResidualChecks::new(&d, &f);
+        let method = match (&integrals, d.hold.is_some(), f.between.is_some()) {
+            (Some(_), _, _) => "integrals",
+            (None, true, _) => "command hold",
+            (None, false, true) => "interpolated inputs",
+            (None, false, false) => "held inputs",
+        };
         let summary = |identifiable| AxisSummary {
             noise_free,
+            method,
+            checks,
             axis: ["linear", "angular"][axis],
             residual_rms: f.rms,
             residual_max: d
@@ -691,7 +840,32 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             identifiable,
         };
         let (estimates, symbols) = axis_params(model, axis, &f);
-        let why = excitation(&d, &f, &estimates, input_names[axis]);
+        // A velocity base without lag on this axis moves at its command:
+        // the integrals of both agree throughout and there is no τ.
+        let no_lag = match (&integrals, fixed_gain) {
+            (Some(w), true) => {
+                let top = w.i.iter().map(|x| (x - w.i[0]).abs()).fold(0.0, f64::max);
+                let gap =
+                    w.i.iter()
+                        .zip(w.s)
+                        .map(|(i, s)| ((i - w.i[0]) - (s - w.s[0])).abs())
+                        .fold(0.0, f64::max);
+                (top > 0.0 && gap <= 1e-9 * top).then(|| {
+                    format!(
+                        "the base moves at its {} throughout (∫ of the command equals ∫ of the velocity): no lag on this axis",
+                        input_names[axis]
+                    )
+                })
+            }
+            _ => None,
+        };
+        let unexcited = no_lag.or_else(|| excitation(&d, &f, &estimates, input_names[axis]));
+        let why = unexcited.clone().or_else(|| {
+            (!noise_free)
+                .then(|| misfit(&f, &checks, integrals.is_some() || d.hold.is_some()))
+                .flatten()
+        });
+        misfits |= unexcited.is_none() && why.is_some();
         match &why {
             Some(reason) => {
                 warnings.push(format!(
@@ -727,7 +901,7 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
         }
         axes.push(summary(why.is_none()));
     }
-    if axes.iter().all(|a| !a.identifiable) {
+    if axes.iter().all(|a| !a.identifiable) && !misfits {
         return Err(IdentifyError::NoExcitation {
             file: log.source.clone(),
             reason: reasons.join("; "),
@@ -844,11 +1018,100 @@ fn excitation(
         }
         let rel = e.relative_half_width();
         if rel > MAX_REL_HALF_WIDTH {
-            return Some(format!(
-                "the input did not excite it enough: 95 % interval ±{:.0} % of the value",
-                100.0 * rel
-            ));
+            return Some(if f.between.is_some() {
+                format!(
+                    "95 % interval ±{:.1} % of the value, more than ±{:.0} %: it includes the difference between holding and interpolating the inputs between samples, which the log does not have (log every control step, or identify from a run directory with its integrals.csv)",
+                    100.0 * rel,
+                    100.0 * MAX_REL_HALF_WIDTH
+                )
+            } else {
+                format!(
+                    "the input did not excite it enough: 95 % interval ±{:.1} % of the value, more than ±{:.0} %",
+                    100.0 * rel,
+                    100.0 * MAX_REL_HALF_WIDTH
+                )
+            });
         }
+    }
+    None
+}
+
+/// Lags of the Ljung–Box whiteness test.
+pub const WHITENESS_LAGS: usize = 10;
+
+/// Largest ratio of the residual RMS to the noise the measurement shows by
+/// itself (RMS of its second differences over `√6`, an upper bound of white
+/// noise's RMS); larger, the residuals are not noise but misfit.
+pub const MAX_RESIDUAL_OVER_NOISE: f64 = 1.5;
+
+/// The residual checks of one axis ([`misfit`]), as `identify.json`
+/// reports them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ResidualChecks {
+    /// Ljung–Box statistic over [`WHITENESS_LAGS`] lags.
+    pub ljung_box_q: f64,
+    /// Its 99.9 % bound (χ², Wilson–Hilferty).
+    pub ljung_box_bound: f64,
+    /// Lag-1 autocorrelation of the residuals.
+    pub lag1_autocorrelation: f64,
+    /// Largest local mean of the residuals, in standard errors.
+    pub scan_z: f64,
+    /// Its 99.9 % bound (Bonferroni over the windows).
+    pub scan_bound: f64,
+    /// Where it was found, `[from, to]` s.
+    pub scan_window: [f64; 2],
+    /// The noise the measurement shows by itself (second differences).
+    pub noise_from_differences: f64,
+}
+
+impl ResidualChecks {
+    fn new(d: &AxisData<'_>, f: &AxisFit) -> ResidualChecks {
+        let r: Vec<f64> = d.y.iter().zip(&f.predicted).map(|(y, p)| y - p).collect();
+        let (ljung_box_q, ljung_box_bound, lag1_autocorrelation) =
+            fit::ljung_box(&r, WHITENESS_LAGS);
+        let (scan_z, scan_bound, [a, b]) = fit::scan(&r);
+        ResidualChecks {
+            ljung_box_q,
+            ljung_box_bound,
+            lag1_autocorrelation,
+            scan_z,
+            scan_bound,
+            scan_window: [d.t[a], d.t[b]],
+            noise_from_differences: fit::noise_from_differences(d.y),
+        }
+    }
+}
+
+/// Why the model misfits the log (its residuals are not the measurement's
+/// white noise), or `None`. Called on logs that are not noise-free: a
+/// noise-free log whose residuals are not at rounding level is misfit, and
+/// shows as residuals far above the (rounding-level) noise and not white.
+fn misfit(f: &AxisFit, c: &ResidualChecks, exact: bool) -> Option<String> {
+    let (q, crit, rho1) = (c.ljung_box_q, c.ljung_box_bound, c.lag1_autocorrelation);
+    let noise = c.noise_from_differences;
+    let hint = if exact {
+        " (the model does not describe this plant)"
+    } else {
+        " (the input varies between samples and the log holds only its sampled values: \
+         log every control step, or identify from a run directory with its integrals.csv)"
+    };
+    if q > crit {
+        return Some(format!(
+            "the model misfits this log: its residuals are not white (Ljung–Box Q = {q:.0} over {WHITENESS_LAGS} lags, 99.9 % bound {crit:.1}; lag-1 autocorrelation {rho1:.2}){hint}"
+        ));
+    }
+    let (z, bound, [a, b]) = (c.scan_z, c.scan_bound, c.scan_window);
+    if z > bound {
+        return Some(format!(
+            "the model misfits this log: its residuals keep one sign from t = {a:.3} s to {b:.3} s (local mean {z:.1} standard errors, 99.9 % bound {bound:.1}){hint}"
+        ));
+    }
+    if f.rms > MAX_RESIDUAL_OVER_NOISE * noise {
+        return Some(format!(
+            "the model misfits this log: its residual RMS {:.2e} is {:.1} times the noise the measurement shows by itself ({noise:.2e}){hint}",
+            f.rms,
+            f.rms / noise
+        ));
     }
     None
 }

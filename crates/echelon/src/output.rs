@@ -789,6 +789,7 @@ pub fn run_to_dir(
                 let flushed = [
                     &mut trajectory as &mut dyn Observer,
                     &mut reference,
+                    &mut integrals,
                     &mut odometry,
                     &mut safety,
                 ]

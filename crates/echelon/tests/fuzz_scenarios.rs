@@ -10,10 +10,9 @@
 //!   every warning;
 //! - a run that ends `Ok` has a sane summary: final error, RMS error and peak
 //!   torque finite and bounded (`SANE_ERROR`, `SANE_TORQUE`), final pose
-//!   finite. A run that ends in an error (`SimError`: a state no longer
-//!   finite, a divergence) is a proper refusal. Until the simulator stops a
-//!   diverging run, the single mutations known to diverge are listed
-//!   (`DIVERGING_TODAY`).
+//!   finite. A run that ends in an error (`SimError::Diverged`: a state no
+//!   longer finite or out of its bounds, stopped by the divergence guard) is
+//!   a proper refusal.
 //!
 //! Runs are capped to 0.5 s of simulated time and 2000 steps. Two corpus
 //! runs: every single mutation of every built-in (about 19 000, 8 s in the
@@ -408,94 +407,6 @@ fn check_no_panic(src: &str) -> Result<Outcome, String> {
     })
 }
 
-/// Single mutations of the built-ins that run to their end `Ok` with an
-/// absurd summary today, as `(scenario, the mutated line)`: divergences that
-/// nothing stops while the simulator has no divergence guard (a
-/// `SimError::Diverged`, being added to sim.rs). Gains the step cannot follow
-/// (`K h > 2`, which the scenario warns about) and robots starting 1 km from
-/// their place, both under a sampled controller (fix-study: h = 10 ms) or the
-/// safety filter (obstacle-slalom); and obstacle-slalom with robot 1 held 2 m
-/// to the side of the line (`offset.y = 2`), a plausible formation: robots 2
-/// and 3 back away at up to 10 m/s, the filter's torques reach 3.6e4 N m at
-/// 0.4 s and the states 1e46 at 0.5 s, while with `[safety] enabled = false`
-/// the same column settles (a problem of the safety filter, safety.rs).
-///
-/// Once the simulator stops a diverging run ([`divergence_is_stopped`]) the
-/// list no longer applies: every absurd summary is a failure. Delete it then.
-const DIVERGING_TODAY: &[(&str, &str)] = &[
-    ("fix-study", "ke = 1000"),
-    ("fix-study", "kz = 1000"),
-    (
-        "fix-study",
-        "start = { x = 1000, y = 0.0, theta_deg = 0.0 }",
-    ),
-    (
-        "fix-study",
-        "start = { x = 0.0, y = 1000, theta_deg = 0.0 }",
-    ),
-    (
-        "fix-study",
-        "start = { x = 1000, y = -0.2, theta_deg = 0.0 }",
-    ),
-    (
-        "fix-study",
-        "start = { x = -0.6, y = 1000, theta_deg = 0.0 }",
-    ),
-    ("fix-study", "offset = { x = 0.5, y = 1000 }"),
-    ("obstacle-slalom", "ke = 1000"),
-    ("obstacle-slalom", "ke = 4294967296"),
-    ("obstacle-slalom", "ke = 1e9"),
-    ("obstacle-slalom", "ke = 1e12"),
-    ("obstacle-slalom", "kz = 1000"),
-    ("obstacle-slalom", "kz = 4294967296"),
-    ("obstacle-slalom", "kz = 1e9"),
-    (
-        "obstacle-slalom",
-        "start = { x = 1000, y = 0.0, theta = 0.0 }",
-    ),
-    (
-        "obstacle-slalom",
-        "start = { x = 0.0, y = 1000, theta = 0.0 }",
-    ),
-    (
-        "obstacle-slalom",
-        "start = { x = -0.3, y = 1000, theta = 0.0 }",
-    ),
-    (
-        "obstacle-slalom",
-        "start = { x = -0.9, y = 1000, theta = 0.0 }",
-    ),
-    (
-        "obstacle-slalom",
-        "start = { x = -1.5, y = 1000, theta = 0.0 }",
-    ),
-    ("obstacle-slalom", "offset = { x = 1000, y = 0.0 }"),
-    ("obstacle-slalom", "offset = { x = 0.3, y = 1000 }"),
-    ("obstacle-slalom", "offset = { x = 0.4, y = 1000 }"),
-    ("obstacle-slalom", "offset = { x = 0.3, y = 2 }"),
-];
-
-/// Whether the simulator stops a diverging run with an error: the first of
-/// [`DIVERGING_TODAY`] (obstacle-slalom with `K_z dt = 5`) ends in `Err`.
-/// Until then an absurd summary is a failure only outside that list (and in
-/// the random test, not at all: it cannot tell a known divergence from a new
-/// one). Panics if the probe ends sane: then choose another.
-fn divergence_is_stopped() -> bool {
-    static STOPPED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *STOPPED.get_or_init(|| {
-        let (_, src) = scenario::builtin()
-            .iter()
-            .find(|(n, _)| *n == "obstacle-slalom")
-            .unwrap();
-        assert!(src.contains("kz = 10.0\n"));
-        match check_no_panic(&src.replace("kz = 10.0\n", "kz = 1000\n")) {
-            Ok(Outcome::Refused) => true,
-            Ok(Outcome::Absurd(_)) => false,
-            other => panic!("the divergence probe no longer diverges ({other:?}): choose another"),
-        }
-    })
-}
-
 #[test]
 fn every_builtin_passes_unmutated() {
     for (name, src) in scenario::builtin() {
@@ -510,7 +421,6 @@ fn every_builtin_passes_unmutated() {
 /// and inline table. About 19 000 checks, 8 s in the test profile.
 #[test]
 fn every_single_mutation_of_every_builtin() {
-    let stopped = divergence_is_stopped();
     let mut failures = Vec::new();
     let mut diverging = Vec::new();
     let mut count = 0;
@@ -547,13 +457,7 @@ fn every_single_mutation_of_every_builtin() {
             let failure = match check_no_panic(&text) {
                 Err(e) => e,
                 Ok(Outcome::Absurd(e)) => {
-                    let known = DIVERGING_TODAY
-                        .iter()
-                        .any(|(n, l)| *n == *name && *l == changed.trim());
                     diverging.push(format!("{name} line {line}: `{changed}`"));
-                    if known && !stopped {
-                        continue;
-                    }
                     e
                 }
                 Ok(_) => continue,
@@ -594,7 +498,7 @@ proptest! {
         }
         let failure = match check_no_panic(&text) {
             Err(e) => Some(e),
-            Ok(Outcome::Absurd(e)) if divergence_is_stopped() => Some(e),
+            Ok(Outcome::Absurd(e)) => Some(e),
             Ok(_) => None,
         };
         if let Some(e) = failure {

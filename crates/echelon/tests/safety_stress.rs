@@ -238,11 +238,11 @@ fn check(case: &Case) -> Result<(), TestCaseError> {
 }
 
 proptest! {
-    // 16 cases each (STRESS_CASES=N for more; `survey` lists every failure
+    // 48 cases each (STRESS_CASES=N for more; `survey` lists every failure
     // of many): a 60 s run of up to four robots is ~0.5 s in release, a few
     // seconds in the test profile.
     #![proptest_config(ProptestConfig {
-        cases: std::env::var("STRESS_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(16),
+        cases: std::env::var("STRESS_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(48),
         failure_persistence: None,
         ..ProptestConfig::default()
     })]

@@ -10,7 +10,8 @@ use clap::ValueEnum;
 
 use echelon::formation::Leader;
 use echelon::output::{
-    self, ODOMETRY_FILE, REFERENCE_FILE, RunSummary, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE,
+    self, INTEGRALS_FILE, ODOMETRY_FILE, REFERENCE_FILE, RunSummary, SAFETY_FILE, SCENARIO_FILE,
+    SUMMARY_FILE, TRAJECTORY_FILE,
 };
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Every, Observer};
@@ -139,9 +140,12 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     let elapsed = started.elapsed().as_secs_f64();
     if !args.quiet {
         print_summary(&run.simulation, &summary, elapsed)?;
-        let mut files = vec![TRAJECTORY_FILE, REFERENCE_FILE];
+        let mut files = vec![TRAJECTORY_FILE, REFERENCE_FILE, INTEGRALS_FILE];
         if !run.simulation.odometers().is_empty() {
             files.push(ODOMETRY_FILE);
+        }
+        if run.simulation.has_safety() {
+            files.push(SAFETY_FILE);
         }
         files.extend([SUMMARY_FILE, SCENARIO_FILE]);
         if args.mcap {

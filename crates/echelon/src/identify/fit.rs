@@ -297,10 +297,13 @@ pub(crate) fn equation_error(d: &AxisData<'_>, fixed_gain: bool) -> ([f64; 2], f
 /// on `(τ, k, x₀)` (`k` fixed at 1 when `fixed_gain`). `h_min` is the
 /// smallest sample spacing, used to fall back when the first guess is not
 /// physical.
-pub(crate) fn fit(d: &AxisData<'_>, fixed_gain: bool) -> AxisFit {
+pub(crate) fn fit(d: &AxisData<'_>, fixed_gain: bool, slower_than_hold: bool) -> AxisFit {
     let held = fit_with(d, fixed_gain, false);
     if d.hold.is_some() {
         return held;
+    }
+    if slower_than_hold {
+        return unknown_between(d, fixed_gain, held);
     }
     // The log has the inputs' values at the samples only. Held between
     // samples (a sampled controller logged at its period) or varying (a
@@ -329,6 +332,45 @@ pub(crate) fn fit(d: &AxisData<'_>, fixed_gain: bool) -> AxisFit {
         return f;
     }
     held
+}
+
+/// The inputs between samples are unknown and not held over them (the log
+/// is slower than the plant's input hold): the ramp's fit, with the spread
+/// of the forward hold's and the backward hold's (each sampled value held
+/// over the interval before it) around it joined to its covariance.
+fn unknown_between(d: &AxisData<'_>, fixed_gain: bool, held: AxisFit) -> AxisFit {
+    let n = d.t.len();
+    let ramp = fit_with(d, fixed_gain, true);
+    let ahead: Vec<f64> = (0..n).map(|i| d.u[(i + 1).min(n - 1)]).collect();
+    let back = fit_with(
+        &AxisData {
+            u: &ahead,
+            hold: None,
+            ..*d
+        },
+        fixed_gain,
+        false,
+    );
+    let (cz, cf) = (held.rms.powi(2), ramp.rms.powi(2));
+    let mut f = ramp;
+    for other in [held.theta, back.theta] {
+        let delta = [f.theta[0] - other[0], f.theta[1] - other[1]];
+        if !delta.iter().all(|x| x.is_finite()) {
+            // A variant that does not fit at all: nothing is known.
+            f.cov = [[f64::INFINITY; 2]; 2];
+            continue;
+        }
+        for p in 0..2 {
+            for q in 0..2 {
+                f.cov[p][q] += delta[p] * delta[q];
+            }
+        }
+    }
+    f.between = Some(Between {
+        held: held.theta,
+        cost_ratio: cz / cf.max(f64::MIN_POSITIVE),
+    });
+    f
 }
 
 /// The 99.9 % quantile of χ² with one degree of freedom.
@@ -732,7 +774,7 @@ mod tests {
             hold: None,
         };
         simulate(&Grid::new(&d), false, tau, k, x0, &mut y, &mut s);
-        let f = fit(&AxisData { y: &y, ..d }, false);
+        let f = fit(&AxisData { y: &y, ..d }, false, false);
         assert!((f.theta[0] - tau).abs() < 1e-8 * tau, "{:?}", f.theta);
         assert!((f.theta[1] - k).abs() < 1e-8 * k, "{:?}", f.theta);
         assert!((f.x0 - x0).abs() < 1e-9);

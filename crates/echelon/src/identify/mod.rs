@@ -205,6 +205,15 @@ pub struct Log {
     /// integrates the model exactly on it, instead of holding the inputs'
     /// per-sample values (`cmd`, `applied`, `u`) over each interval.
     pub hold: Option<Hold>,
+    /// The period over which the plant's input was held, s, when the log
+    /// says (a run directory's `summary.json`: the controller period, or
+    /// `dt` when a safety filter holds each step's command; `None` for a
+    /// continuous-time law or an unknown source). A log slower than this
+    /// hold, without integrals, cannot know the input between its samples:
+    /// holding the sampled values is then not taken as exact
+    /// ([`fit`](self)), and the spread of the hold, the backward hold and
+    /// the ramp joins each interval.
+    pub input_period: Option<f64>,
 }
 
 /// Inputs held from each switch time to the next.
@@ -250,6 +259,16 @@ impl Log {
             reason: format!("cannot read: {e}"),
         })?;
         let mut log = Log::parse_csv(&text, &origin, agent)?;
+        log.input_period = file
+            .parent()
+            .and_then(|d| std::fs::read_to_string(d.join(crate::output::SUMMARY_FILE)).ok())
+            .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+            .and_then(|s| {
+                let dt = s["dt"].as_f64();
+                s["controller_period"]
+                    .as_f64()
+                    .or_else(|| s.get("safety").and(dt))
+            });
         let beside = file.parent().map(|d| d.join(crate::output::INTEGRALS_FILE));
         if let Some(path) = beside.filter(|p| p.is_file()) {
             match std::fs::read_to_string(&path)
@@ -801,17 +820,28 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             s: [&w.s, &w.theta][axis],
             i: &w.input[axis],
         });
+        // Samples farther apart than the plant's own input hold: the
+        // sampled values do not hold over the intervals.
+        let slower = log.input_period.is_some_and(|p| {
+            let n = log.t.len();
+            n > 1 && (log.t[n - 1] - log.t[0]) / (n - 1) as f64 > 1.5 * p
+        });
         let f = match &integrals {
             Some(w) => fit::fit_integral(&d, w, fixed_gain),
-            None => fit::fit(&d, fixed_gain),
+            None => fit::fit(&d, fixed_gain, slower),
         };
         let y_rms = (d.y.iter().map(|y| y * y).sum::<f64>() / d.y.len() as f64).sqrt();
         let noise_free = f.rms <= NOISE_FREE_RELATIVE_RMS * y_rms;
         if let Some(b) = f.between {
             let rel = |i: usize| (f.theta[i] - b.held[i]).abs() / f.theta[i].abs();
             warnings.push(format!(
-                "the {} axis's inputs between samples are not in the log (no integrals.csv, and holding the logged values does not fit better than interpolating them, cost ratio {:.3}): the fit interpolates them linearly and its intervals include the difference to holding them ({:.2} % on τ, {:.2} % on the gain)",
+                "the {} axis's inputs between samples are not in the log (no integrals.csv, and {}, cost ratio {:.3}): the fit interpolates them linearly and its intervals include the difference to holding them ({:.2} % on τ, {:.2} % on the gain)",
                 ["linear", "angular"][axis],
+                if slower {
+                    "the samples are farther apart than the plant's input hold in summary.json"
+                } else {
+                    "holding the logged values does not fit better than interpolating them"
+                },
                 b.cost_ratio,
                 100.0 * rel(0),
                 100.0 * rel(1)

@@ -401,7 +401,7 @@ impl<P: Plant> Robot<P> {
             ..RobotState::default()
         };
         let safety = config.safety.as_ref().map(|s| Safety {
-            filter: SafetyFilter::new(s.config),
+            filter: SafetyFilter::new(s.config).with_period(config.period),
             table: NeighbourTable::new(
                 config.agent,
                 s.l.clone(),

@@ -88,8 +88,10 @@
 //! constraint it is returned unchanged (no solve). When the solver reports
 //! anything but a solution, or its answer breaks a constraint by more than
 //! [`TOLERANCE`], the robot brakes ([`Outcome::Braked`]): zero velocity for a
-//! velocity base, `u = (−η v, −ψ ω)` (twice the friction's deceleration) for a
-//! torque-driven one.
+//! velocity base; for a torque-driven robot with a `torque_limit`, the command
+//! that breaks the barriers and the envelope least within its wheel-torque
+//! limits (`solve_relaxed`), else `u = (−η v, −ψ ω)` (twice the friction's
+//! deceleration).
 //!
 //! ## Deadlock
 //!
@@ -127,6 +129,10 @@ pub const TOLERANCE: f64 = 1e-6;
 /// `h ≥ 0`; the inner loop, on the robot's acceleration, is just allowed to
 /// be faster than the outer one.
 pub const INNER_RATE: f64 = 5.0;
+
+/// How long after it was last stuck or breaking a deadlock a robot still
+/// counts as deadlocked ([`SafetyFilter::deadlocked`]), s.
+pub const DEADLOCK_MEMORY: f64 = 10.0;
 
 /// How long a robot must be stuck before it breaks a deadlock, s.
 pub const STUCK_TIME: f64 = 1.0;
@@ -347,6 +353,10 @@ struct Deadlock {
     stuck_since: Option<f64>,
     breaking: bool,
     breaks: u64,
+    /// The last time (s) the robot was stuck or breaking a deadlock.
+    last: Option<f64>,
+    /// The time of the last call.
+    now: f64,
 }
 
 /// The speed envelope a torque-driven robot's filtered command keeps it in:
@@ -432,6 +442,8 @@ pub struct SafetyFilter {
     config: SafetyConfig,
     rows: Vec<Constraint>,
     deadlock: Deadlock,
+    /// How long each command is held, s (0: continuous).
+    period: f64,
 }
 
 /// The robot's own geometry at one instant.
@@ -450,6 +462,25 @@ impl SafetyFilter {
             config,
             rows: Vec::with_capacity(16),
             deadlock: Deadlock::default(),
+            period: 0.0,
+        }
+    }
+
+    /// The same filter for commands held `period` seconds (the controller's
+    /// period): a velocity base's barrier rows then use the heading half a
+    /// period ahead at the current turn rate. A command `(v, ω)` held for
+    /// `T` from heading `θ` moves the point on average along
+    /// `R(θ + ωT/2) (v, Lω) sinc(ωT/2)`, not `R(θ) (v, Lω)`; with a 10 ms
+    /// period at 4 rad/s the difference let two points come 1–2 mm inside
+    /// the radius (issue 20's survey).
+    pub fn with_period(self, period: f64) -> SafetyFilter {
+        SafetyFilter {
+            period: if period.is_finite() && period > 0.0 {
+                period
+            } else {
+                0.0
+            },
+            ..self
         }
     }
 
@@ -464,10 +495,14 @@ impl SafetyFilter {
         &self.rows
     }
 
-    /// Whether the robot is deadlocked now: stuck (the filter keeps less than
-    /// half of the motion its nominal asks for) or breaking a deadlock.
+    /// Whether the robot is deadlocked: stuck (the filter keeps less than
+    /// half of the motion its nominal asks for) or breaking a deadlock at
+    /// its last call, or at any call within [`DEADLOCK_MEMORY`] before it (a
+    /// robot that keeps falling back into the same stand-off between
+    /// breaks is deadlocked too).
     pub fn deadlocked(&self) -> bool {
-        self.deadlock.stuck_since.is_some() || self.deadlock.breaking
+        let d = &self.deadlock;
+        d.last.is_some_and(|t| d.now - t <= DEADLOCK_MEMORY)
     }
 
     /// How many deadlocks it has started breaking.
@@ -489,7 +524,7 @@ impl SafetyFilter {
         neighbours: &[Neighbour],
         obstacles: &[Obstacle],
     ) -> Filtered<VelocityCommand> {
-        let own = own(me, l);
+        let own = Own::ahead(me, l, 0.5 * self.period);
         let limited = base.limit(nominal).0;
         let x0 = [limited.v, l * limited.omega];
         let gamma = self.config.gain;
@@ -590,12 +625,29 @@ impl SafetyFilter {
                 }
             }
         }
+        // Barriers and the envelope may give way in an emergency; the wheel
+        // torque rows may not.
+        let soft_end = barriers + 4;
         let (x, outcome, deadlock) = self.decide(t, x0, barriers, f);
         let command = match outcome {
             Outcome::Nominal => limited,
-            Outcome::Braked => Input {
-                u1: -eta * v,
-                u2: -psi * w,
+            // No command satisfies every row. With wheel-torque limits:
+            // the command that breaks the barriers and the envelope least
+            // within them (the brake is the torque the robot has, not a
+            // fixed law). Without (the relaxed answer would be unbounded):
+            // friction's brake.
+            Outcome::Braked => match robot
+                .torque_limit
+                .and_then(|_| solve_relaxed(&self.rows, soft_end, x0))
+            {
+                Some(x) => Input {
+                    u1: m * x[0],
+                    u2: j * x[1] / l,
+                },
+                None => Input {
+                    u1: -eta * v,
+                    u2: -psi * w,
+                },
             },
             Outcome::Filtered => Input {
                 u1: m * x[0],
@@ -654,6 +706,7 @@ impl SafetyFilter {
         drift: [f64; 2],
     ) -> ([f64; 2], Outcome, bool) {
         let satisfied = |rows: &[Constraint], x: [f64; 2]| rows.iter().all(|c| c.slack(x) >= 0.0);
+        self.deadlock.now = t;
         if satisfied(&self.rows[..barriers], x0) {
             self.deadlock.stuck_since = None;
             self.deadlock.breaking = false;
@@ -680,17 +733,26 @@ impl SafetyFilter {
         } else {
             self.deadlock.stuck_since = None;
         }
+        if stuck || self.deadlock.breaking {
+            self.deadlock.last = Some(t);
+        }
         (x, outcome, breaking)
     }
 }
 
 fn own(me: &State, l: f64) -> Own {
-    let (sin, cos) = me.theta.sin_cos();
-    let Neighbour { p, dp, .. } = Neighbour::of_state(me, l, None, true);
-    Own { p, dp, cos, sin }
+    Own::ahead(me, l, 0.0)
 }
 
 impl Own {
+    /// The geometry of `me`, its rows turned to the heading `ahead` seconds
+    /// on at its turn rate (0: now).
+    fn ahead(me: &State, l: f64, ahead: f64) -> Own {
+        let (sin, cos) = (me.theta + me.omega * ahead).sin_cos();
+        let Neighbour { p, dp, .. } = Neighbour::of_state(me, l, None, true);
+        Own { p, dp, cos, sin }
+    }
+
     /// `2 dᵀ R(θ) x = a · x`: `a = 2 R(θ)ᵀ d` (the point moves at `R(θ) x`).
     fn row(&self, d: [f64; 2]) -> [f64; 2] {
         [
@@ -698,6 +760,45 @@ impl Own {
             2.0 * (-d[0] * self.sin + d[1] * self.cos),
         ]
     }
+}
+
+/// `argmin ½‖x − want‖² + ½ W s²` s.t. `a_k·x + s ≥ b_k` for the rows before
+/// `soft_end` (one shared slack `s ≥ 0`, `W` = 10⁶) and `a_k·x ≥ b_k` for the
+/// rest: the command that breaks the soft rows least, within the hard ones.
+/// `None` when even the hard rows cannot be met or the solver fails.
+fn solve_relaxed(rows: &[Constraint], soft_end: usize, want: [f64; 2]) -> Option<[f64; 2]> {
+    const W: f64 = 1e6;
+    let m = rows.len() + 1;
+    let p = CscMatrix::new(3, 3, vec![0, 1, 2, 3], vec![0, 1, 2], vec![1.0, 1.0, W]);
+    let q = [-want[0], -want[1], 0.0];
+    // Columns x₁, x₂, s; rows: −a·x − s ≤ −b (soft), −a·x ≤ −b (hard), −s ≤ 0.
+    let mut colptr = vec![0, rows.len(), 2 * rows.len()];
+    let mut rowval: Vec<usize> = (0..rows.len()).chain(0..rows.len()).collect();
+    let mut nz: Vec<f64> = rows.iter().map(|c| -c.a[0]).collect();
+    nz.extend(rows.iter().map(|c| -c.a[1]));
+    rowval.extend(0..soft_end);
+    nz.extend(std::iter::repeat_n(-1.0, soft_end));
+    rowval.push(rows.len());
+    nz.push(-1.0);
+    colptr.push(nz.len());
+    let a = CscMatrix::new(m, 3, colptr, rowval, nz);
+    let mut b: Vec<f64> = rows.iter().map(|c| -c.b).collect();
+    b.push(0.0);
+    let settings = DefaultSettings {
+        verbose: false,
+        ..DefaultSettings::default()
+    };
+    let mut solver = DefaultSolver::new(&p, &q, &a, &b, &[NonnegativeConeT(m)], settings).ok()?;
+    solver.solve();
+    match solver.solution.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+        _ => return None,
+    }
+    let x = [solver.solution.x[0], solver.solution.x[1]];
+    let hard_ok = rows[soft_end..]
+        .iter()
+        .all(|c| c.slack(x) >= -TOLERANCE * (1.0 + c.b.abs()));
+    (x.iter().all(|v| v.is_finite()) && hard_ok).then_some(x)
 }
 
 /// `|x_k| ≤ bound_k` as four rows (an infinite bound adds none).
@@ -964,7 +1065,17 @@ mod tests {
                         }
                     }
                     Outcome::Braked => {
-                        prop_assert_eq!(out.command, Input { u1: -robot.linear_friction * me.v, u2: -robot.angular_friction * me.omega });
+                        // The least-violating command within the wheel
+                        // torque limits (the last four rows), else
+                        // friction's brake.
+                        let brake = Input { u1: -robot.linear_friction * me.v, u2: -robot.angular_friction * me.omega };
+                        if out.command != brake {
+                            let x = x_of(out.command);
+                            for c in &rows[rows.len() - 4..] {
+                                let scale = 1.0 + c.b.abs();
+                                prop_assert!(c.slack(x) >= -TOLERANCE * scale, "{c:?} at {x:?}");
+                            }
+                        }
                     }
                 }
                 if nominal_ok {

@@ -314,8 +314,10 @@ pub struct SafetyOutput {
     pub deadlock: bool,
     /// Deadlocks this agent has started breaking so far.
     pub deadlock_breaks: u64,
-    /// Whether the agent is deadlocked now: stuck behind its barriers or
-    /// breaking a deadlock ([`SafetyFilter::deadlocked`]).
+    /// Whether its filter holds the agent: stuck behind its barriers or
+    /// breaking a deadlock ([`SafetyFilter::deadlocked`]), or its command
+    /// changed by the filter, now or within
+    /// [`crate::safety::DEADLOCK_MEMORY`] before.
     pub deadlocked: bool,
     /// The law's command.
     pub nominal: [f64; 2],
@@ -345,6 +347,8 @@ struct SafetyState {
     l: Vec<f64>,
     out: Vec<SafetyOutput>,
     seen: Vec<State>,
+    /// When each agent's filter last changed its command, s.
+    last_active: Vec<f64>,
     neighbours: Vec<Neighbour>,
 }
 
@@ -1036,7 +1040,13 @@ impl Simulation {
             }
             o.sampled = true;
             o.deadlock_breaks = filter.deadlock_breaks();
-            o.deadlocked = filter.deadlocked();
+            if o.outcome != Outcome::Nominal {
+                safety.last_active[i] = t;
+            }
+            // Held by its filter: stuck or breaking a deadlock, or its
+            // command changed by the filter, now or lately.
+            o.deadlocked =
+                filter.deadlocked() || t - safety.last_active[i] <= crate::safety::DEADLOCK_MEMORY;
         }
         // The plant moves under the filtered commands from this instant on.
         self.sys.evaluate(
@@ -1100,11 +1110,12 @@ impl Simulation {
         if self.hold_every == 0 {
             self.hold_every = 1;
         }
+        let period = self.hold_every as f64 * self.config.dt;
         self.safety = Some(Box::new(SafetyState {
             filters: spec
                 .agents
                 .iter()
-                .map(|c| c.map(SafetyFilter::new))
+                .map(|c| c.map(|c| SafetyFilter::new(c).with_period(period)))
                 .collect(),
             obstacles: spec.obstacles,
             l,
@@ -1118,6 +1129,7 @@ impl Simulation {
                 })
                 .collect(),
             seen: vec![State::default(); n],
+            last_active: vec![f64::NEG_INFINITY; n],
             neighbours: Vec::with_capacity(n),
         }));
         self.fresh = false;
@@ -1442,8 +1454,9 @@ pub struct AgentSafety {
     pub infeasible: u64,
     /// Deadlocks it started breaking.
     pub deadlock_breaks: u64,
-    /// Whether it was deadlocked at the end of the run (stuck behind its
-    /// barriers or breaking a deadlock): a robot that did not reach its slot
+    /// Whether, at the end of the run, it was not within the settling
+    /// tolerance of its slot and its filter held it ([`SafetyOutput::deadlocked`]):
+    /// a robot that did not reach its slot
     /// because the filter held it is reported here, never silently.
     pub deadlocked_at_end: bool,
 }
@@ -1563,13 +1576,14 @@ impl Observer for SafetyWatch {
                 }
             }
         }
-        for (a, o) in r.agents.iter_mut().zip(frame.safety) {
+        for ((a, o), out) in r.agents.iter_mut().zip(frame.safety).zip(frame.outputs) {
             if o.sampled {
                 a.active += u64::from(o.outcome != Outcome::Nominal);
                 a.infeasible += u64::from(o.outcome == Outcome::Braked);
             }
             a.deadlock_breaks = o.deadlock_breaks;
-            a.deadlocked_at_end = o.enabled && o.deadlocked;
+            let e = out.e[0].hypot(out.e[1]);
+            a.deadlocked_at_end = o.enabled && o.deadlocked && e >= Summary::SETTLE_TOLERANCE;
         }
         if frame.last {
             r.active = r.agents.iter().map(|a| a.active).sum();

@@ -59,7 +59,7 @@ fn run(name: &str, filter: bool) -> (Option<SafetyReport>, f64, f64, Vec<f64>) {
 fn crossing_keeps_every_pair_apart_and_the_formation_still_converges() {
     let (report, closest, _, finals) = run("crossing", true);
     let report = report.unwrap();
-    // Every step, true states: at least radius − 1 mm (0.3000720 m measured).
+    // Every step, true states: at least radius − 1 mm (0.3000528 m measured).
     assert!(closest >= 0.3 - 1e-3, "closest {closest}");
     assert_eq!(report.min_distance, closest);
     assert_eq!(report.infeasible, 0);

@@ -920,3 +920,35 @@ fn absurd_values_are_refused_with_their_plausible_range() {
     let unlimited = on_velocity_base("drive = \"velocity\"\nv_max = inf\n");
     assert!(build(&unlimited).is_ok());
 }
+
+/// `[sim] bounds`: the divergence guard's bounds, each optional. A run
+/// whose state leaves them stops there naming agent, time and quantity; bad
+/// bounds are refused at their field.
+#[test]
+fn sim_bounds_set_the_divergence_guard() {
+    let base = BASE.replace("[sim]\n", "[sim]\nbounds = { speed = 0.05 }\n");
+    let mut run = build(&base).unwrap();
+    let b = run.simulation.config().bounds;
+    assert_eq!((b.speed, b.turn_rate, b.distance), (0.05, 100.0, 1e6));
+    let err = loop {
+        if let Err(e) = run.simulation.step() {
+            break e;
+        }
+        assert!(!run.simulation.is_done(), "no robot reached 0.05 m/s");
+    };
+    match &err {
+        echelon::SimError::Diverged { breach, t, .. } => {
+            assert_eq!(breach.quantity, "|v|");
+            assert!(breach.value > 0.05 && *t > 0.0, "{err}");
+        }
+        other => panic!("{other}"),
+    }
+    assert!(err.to_string().contains("left its bound 0.05 m/s"), "{err}");
+    let line = BASE.lines().position(|l| l == "[sim]").unwrap() + 2;
+    expect_error(
+        &BASE.replace("[sim]\n", "[sim]\nbounds = { turn_rate = -1.0 }\n"),
+        line,
+        "sim.bounds.turn_rate",
+        "",
+    );
+}

@@ -19,6 +19,7 @@ use crate::check;
 use crate::control::{Gains, Law, Variant};
 use crate::error::{FormationError, ParamError, ReferenceError, ScenarioError};
 use crate::formation::Leader;
+use crate::guard::Bounds;
 use crate::lycomp::{LyComp, LyDerivatives, Placement};
 use crate::math::whole_ratio;
 use crate::model::{RobotParams, State};
@@ -84,7 +85,16 @@ impl Builder<'_> {
             None => Timing::Continuous,
             Some(period) => Timing::Sampled { period },
         };
-        let config = self.within(&sim, SimConfig::new(f.sim.dt, f.sim.duration, timing))?;
+        let mut config = self.within(&sim, SimConfig::new(f.sim.dt, f.sim.duration, timing))?;
+        if let Some(b) = f.sim.bounds {
+            let d = Bounds::DEFAULT;
+            let bounds = Bounds::new(
+                b.speed.unwrap_or(d.speed),
+                b.turn_rate.unwrap_or(d.turn_rate),
+                b.distance.unwrap_or(d.distance),
+            );
+            config = config.with_bounds(self.within(&sim.key("bounds"), bounds)?);
+        }
         let dt = config.dt;
         let log = FieldPath::from("log.dt");
         let log_dt = self.at(

@@ -69,6 +69,9 @@ pub const PLAUSIBLE: &[Plausible] = &[
     warned("sim.dt", "s", (1e-6, 1.0), (1e-6, 0.1)),
     row("sim.duration", "s", 0.0, 1e6),
     row("sim.controller_period", "s", 1e-6, 1.0),
+    row("sim.bounds.speed", "m/s", 1e-3, 1e4),
+    row("sim.bounds.turn_rate", "rad/s", 1e-3, 1e5),
+    row("sim.bounds.distance", "m", 1e-3, 1e9),
     row("log.dt", "s", 0.0, 1e6),
     // [control] and an agent's control: gains are only warned about below
     // 1e15, so that a run meant to diverge (`ke = 1e12`) can be run.
@@ -346,6 +349,7 @@ mod tests {
 duration = 1.0
 dt = 0.01
 controller_period = 0.01
+bounds = { speed = 100.0, turn_rate = 100.0, distance = 1e6 }
 [log]
 dt = 0.01
 [control]

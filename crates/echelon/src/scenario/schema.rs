@@ -281,6 +281,26 @@ pub struct SimSection {
     /// `dt`). Absent: continuous-time controller, evaluated in every RK4 stage.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub controller_period: Option<f64>,
+    /// The divergence guard's bounds on every robot's state (default
+    /// `|v| ≤ 100 m/s`, `|ω| ≤ 100 rad/s`, `‖(x, y)‖ ≤ 1e6 m`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bounds: Option<BoundsSpec>,
+}
+
+/// `[sim] bounds = { speed, turn_rate, distance }`: the divergence guard
+/// ([`crate::guard::Bounds`]); each field optional.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoundsSpec {
+    /// Largest `|v|`, m/s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed: Option<f64>,
+    /// Largest `|ω|`, rad/s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turn_rate: Option<f64>,
+    /// Largest distance from the world origin, m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distance: Option<f64>,
 }
 
 /// `[log]`: what goes to `trajectory.csv`.

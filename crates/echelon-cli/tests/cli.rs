@@ -293,14 +293,23 @@ fn a_diverging_run_exits_1_naming_agent_time_and_quantity() {
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "stderr: {err}");
     assert!(!err.contains("panicked"), "{err}");
-    assert_eq!(err.lines().count(), 1, "one line: {err}");
+    // The scenario's warnings about the gain (a line each), then one error line.
+    let errors: Vec<&str> = err
+        .lines()
+        .filter(|l| !l.starts_with("warning: "))
+        .collect();
+    assert_eq!(errors.len(), 1, "one error line: {err}");
     for needle in [
         "error: ",
         "agent 1 (robot) diverged at t = ",
         "left its bound 100 m/s",
     ] {
-        assert!(err.contains(needle), "`{needle}` not in: {err}");
+        assert!(errors[0].contains(needle), "`{needle}` not in: {err}");
     }
+    assert!(
+        err.contains("control.ke"),
+        "the gain is warned about: {err}"
+    );
     assert!(stdout(&o).is_empty(), "no summary table: {}", stdout(&o));
     let s = summary(&out);
     assert_eq!(s["diverged"]["agent"], 1);

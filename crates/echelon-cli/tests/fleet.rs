@@ -589,9 +589,18 @@ fn without_security_the_same_rogue_does_move_robots() {
     let dir = tempfile::tempdir().unwrap();
     let fleet_dir = dir.path().join("fleet");
     let scenario = fixture("fast-circle.toml");
+    // The rogue's reference jumps 5 m at 1 m/s: robot 1, between two
+    // leaders, may spin past the divergence guard's 100 rad/s, command zero
+    // and exit 1 (then `fleet up` fails naming it): that is moving it too.
     let fleet = std::thread::spawn({
         let fleet_dir = fleet_dir.clone();
-        move || up(&scenario, &fleet_dir, &["--time-scale", "10"])
+        move || {
+            Command::new(EXE)
+                .args(["fleet", "up", &scenario, "--time-scale", "10", "--out"])
+                .arg(&fleet_dir)
+                .output()
+                .unwrap()
+        }
     });
     let endpoints = endpoints_of(&fleet_dir);
     assert!(endpoints.values().all(|e| e.starts_with("tcp/")));
@@ -610,8 +619,20 @@ fn without_security_the_same_rogue_does_move_robots() {
     )
     .unwrap();
     let mut rogue = rogue_leader(&fake, &plain);
-    let report = fleet.join().unwrap();
+    let out = fleet.join().unwrap();
     let _ = rogue.0.wait();
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("robot/1 exited") && err.contains("agent 1 diverged at t = "),
+            "fleet up failed otherwise: {err}"
+        );
+        return;
+    }
+    let report: Value = serde_json::from_str(
+        &std::fs::read_to_string(fleet_dir.join("fleet-summary.json")).unwrap(),
+    )
+    .unwrap();
     let published = u(&report["leader"], &["published"]);
     let c = &report["robots"][0]["counters"];
     // A second sender on the reference key: the robot saw its samples.

@@ -645,9 +645,20 @@ fn fleet_excite_records_a_bag_that_identify_turns_into_the_base_lags() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let json: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("identify.json")).unwrap()).unwrap();
+    // `fleet base` publishes noise-free odometry and applies each command
+    // when it arrives: the processes' timing jitter is then the only
+    // residual, which the misfit check (issue 20) must name rather than print
+    // a lag it cannot vouch for. Either a lag within 5 % of the base's 0.1 s,
+    // or no number and the misfit said.
     for (i, field) in ["tau_v", "tau_omega"].into_iter().enumerate() {
-        assert_eq!(json["params"][i]["field"], field);
-        let tau = f(&json["params"][i], &["estimate", "value"]);
-        assert!((tau / 0.1 - 1.0).abs() < 0.05, "{field} = {tau}: {json}");
+        let p = &json["params"][i];
+        assert_eq!(p["field"], field);
+        match p["estimate"]["value"].as_f64() {
+            Some(tau) => assert!((tau / 0.1 - 1.0).abs() < 0.05, "{field} = {tau}: {json}"),
+            None => {
+                let why = p["not_identifiable"].as_str().unwrap_or_default();
+                assert!(why.contains("misfits this log"), "{field}: {json}");
+            }
+        }
     }
 }

@@ -784,17 +784,7 @@ fn solve_relaxed(rows: &[Constraint], soft_end: usize, want: [f64; 2]) -> Option
     let a = CscMatrix::new(m, 3, colptr, rowval, nz);
     let mut b: Vec<f64> = rows.iter().map(|c| -c.b).collect();
     b.push(0.0);
-    let settings = DefaultSettings {
-        verbose: false,
-        ..DefaultSettings::default()
-    };
-    let mut solver = DefaultSolver::new(&p, &q, &a, &b, &[NonnegativeConeT(m)], settings).ok()?;
-    solver.solve();
-    match solver.solution.status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-        _ => return None,
-    }
-    let x = [solver.solution.x[0], solver.solution.x[1]];
+    let x = clarabel_solve(&p, &q, &a, &b)?;
     let hard_ok = rows[soft_end..]
         .iter()
         .all(|c| c.slack(x) >= -TOLERANCE * (1.0 + c.b.abs()));
@@ -837,18 +827,31 @@ fn solve(rows: &[Constraint], want: [f64; 2]) -> Option<[f64; 2]> {
     let rowval: Vec<usize> = (0..m).chain(0..m).collect();
     let a = CscMatrix::new(m, 2, vec![0, m, 2 * m], rowval, nz);
     let b: Vec<f64> = rows.iter().map(|c| -c.b).collect();
+    let x = clarabel_solve(&p, &q, &a, &b)?;
+    (x.iter().all(|v| v.is_finite()) && rows.iter().all(|c| c.slack(x) >= -TOLERANCE)).then_some(x)
+}
+
+/// `argmin ½zᵀPz + qᵀz` s.t. `A z ≤ b` by clarabel (default tolerances, quiet):
+/// the first two components of `z`, `None` unless solved.
+fn clarabel_solve(
+    p: &CscMatrix<f64>,
+    q: &[f64],
+    a: &CscMatrix<f64>,
+    b: &[f64],
+) -> Option<[f64; 2]> {
     let settings = DefaultSettings {
         verbose: false,
         ..DefaultSettings::default()
     };
-    let mut solver = DefaultSolver::new(&p, &q, &a, &b, &[NonnegativeConeT(m)], settings).ok()?;
+    let cones = [NonnegativeConeT(b.len())];
+    let mut solver = DefaultSolver::new(p, q, a, b, &cones, settings).ok()?;
     solver.solve();
     match solver.solution.status {
-        SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-        _ => return None,
+        SolverStatus::Solved | SolverStatus::AlmostSolved => {
+            Some([solver.solution.x[0], solver.solution.x[1]])
+        }
+        _ => None,
     }
-    let x = [solver.solution.x[0], solver.solution.x[1]];
-    (x.iter().all(|v| v.is_finite()) && rows.iter().all(|c| c.slack(x) >= -TOLERANCE)).then_some(x)
 }
 
 #[cfg(test)]

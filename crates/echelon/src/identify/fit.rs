@@ -318,13 +318,8 @@ pub(crate) fn fit(d: &AxisData<'_>, fixed_gain: bool, slower_than_hold: bool) ->
     let sigma2 = cz.min(cf) / dof;
     let hold_fits_better = cf - cz > CHI2_1_999 * sigma2;
     if !hold_fits_better && ramp.theta.iter().all(|x| x.is_finite()) {
-        let delta = [ramp.theta[0] - held.theta[0], ramp.theta[1] - held.theta[1]];
         let mut f = ramp;
-        for p in 0..2 {
-            for q in 0..2 {
-                f.cov[p][q] += delta[p] * delta[q];
-            }
-        }
+        widen(&mut f, held.theta);
         f.between = Some(Between {
             held: held.theta,
             cost_ratio: cz / cf.max(f64::MIN_POSITIVE),
@@ -332,6 +327,17 @@ pub(crate) fn fit(d: &AxisData<'_>, fixed_gain: bool, slower_than_hold: bool) ->
         return f;
     }
     held
+}
+
+/// Adds to `f`'s covariance the outer product of its distance to `other`
+/// (another fit of the same axis under another assumption on the input).
+fn widen(f: &mut AxisFit, other: [f64; 2]) {
+    let delta = [f.theta[0] - other[0], f.theta[1] - other[1]];
+    for p in 0..2 {
+        for q in 0..2 {
+            f.cov[p][q] += delta[p] * delta[q];
+        }
+    }
 }
 
 /// The inputs between samples are unknown and not held over them (the log
@@ -354,16 +360,11 @@ fn unknown_between(d: &AxisData<'_>, fixed_gain: bool, held: AxisFit) -> AxisFit
     let (cz, cf) = (held.rms.powi(2), ramp.rms.powi(2));
     let mut f = ramp;
     for other in [held.theta, back.theta] {
-        let delta = [f.theta[0] - other[0], f.theta[1] - other[1]];
-        if !delta.iter().all(|x| x.is_finite()) {
+        if other.iter().all(|x| x.is_finite()) {
+            widen(&mut f, other);
+        } else {
             // A variant that does not fit at all: nothing is known.
             f.cov = [[f64::INFINITY; 2]; 2];
-            continue;
-        }
-        for p in 0..2 {
-            for q in 0..2 {
-                f.cov[p][q] += delta[p] * delta[q];
-            }
         }
     }
     f.between = Some(Between {

@@ -636,10 +636,13 @@ impl SafetyFilter {
             // within them (the brake is the torque the robot has, not a
             // fixed law). Without (the relaxed answer would be unbounded):
             // friction's brake.
-            Outcome::Braked => match robot
-                .torque_limit
-                .and_then(|_| solve_relaxed(&self.rows, soft_end, x0))
-            {
+            Outcome::Braked => match robot.torque_limit.and_then(|_| {
+                // The barriers within the wheel limits, the envelope given up
+                // first; else the least violation of both.
+                let mut keep: Vec<Constraint> = self.rows[..barriers].to_vec();
+                keep.extend_from_slice(&self.rows[soft_end..]);
+                solve(&keep, x0).or_else(|| solve_relaxed(&self.rows, soft_end, x0))
+            }) {
                 Some(x) => Input {
                     u1: m * x[0],
                     u2: j * x[1] / l,

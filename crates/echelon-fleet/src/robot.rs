@@ -33,7 +33,7 @@ use echelon::guard::Bounds;
 use echelon::model::{Input, State};
 use echelon::safety::{Obstacle, Outcome, SafetyConfig, SafetyFilter, point};
 use echelon::scenario::{FleetSettings, LinkLoss, Overrides, Ros2Link, Scenario};
-use echelon::sim::AgentSpec;
+use echelon::sim::{AgentSpec, Simulation};
 
 use crate::clock::FleetClock;
 use crate::faults::{FaultInjector, FaultSpec, Verdict};
@@ -200,8 +200,12 @@ pub struct RobotStats {
 
 /// The agent's spec from the scenario, checked for the fleet.
 pub fn agent_spec(scenario: &Scenario, agent: u32) -> Result<AgentSpec, FleetError> {
-    let run = scenario.build(&Overrides::default())?;
-    let agents = run.simulation.agents();
+    spec_in(&scenario.build(&Overrides::default())?.simulation, agent)
+}
+
+/// [`agent_spec`] from the scenario's built simulation.
+fn spec_in(sim: &Simulation, agent: u32) -> Result<AgentSpec, FleetError> {
+    let agents = sim.agents();
     let n = agents.len();
     let Some(spec) = (agent as usize)
         .checked_sub(1)
@@ -241,22 +245,28 @@ pub struct RobotConfig {
     pub duration: Option<f64>,
     /// Its safety filter (absent: none).
     pub safety: Option<RobotSafety>,
+    /// The divergence guard's bounds on its plant's state (`[sim] bounds`).
+    pub bounds: Bounds,
 }
 
 /// Agent `agent`'s safety settings (`None`: it does not filter).
 pub fn safety_of(scenario: &Scenario, agent: u32) -> Result<Option<RobotSafety>, FleetError> {
-    let run = scenario.build(&Overrides::default())?;
-    let sim = &run.simulation;
+    Ok(safety_in(
+        &scenario.build(&Overrides::default())?.simulation,
+        agent,
+    ))
+}
+
+/// [`safety_of`] from the scenario's built simulation.
+fn safety_in(sim: &Simulation, agent: u32) -> Option<RobotSafety> {
     let configs = sim.safety_configs();
-    let Some(config) = configs.get(agent as usize - 1).copied().flatten() else {
-        return Ok(None);
-    };
-    Ok(Some(RobotSafety {
+    let config = configs.get(agent as usize - 1).copied().flatten()?;
+    Some(RobotSafety {
         config,
         obstacles: sim.obstacles().to_vec(),
         l: sim.agents().iter().map(|a| a.placement.l).collect(),
         cooperative: configs.iter().map(Option::is_some).collect(),
-    }))
+    })
 }
 
 impl RobotConfig {
@@ -268,9 +278,11 @@ impl RobotConfig {
         faults: FaultSpec,
         duration: Option<f64>,
     ) -> Result<RobotConfig, FleetError> {
-        let spec = agent_spec(scenario, agent)?;
+        let run = scenario.build(&Overrides::default())?;
+        let sim = &run.simulation;
+        let spec = spec_in(sim, agent)?;
         let loss = fleet.link_loss[agent as usize - 1];
-        let safety = safety_of(scenario, agent)?;
+        let safety = safety_in(sim, agent);
         Ok(RobotConfig {
             agent,
             spec,
@@ -281,6 +293,7 @@ impl RobotConfig {
             faults,
             duration,
             safety,
+            bounds: sim.config().bounds,
         })
     }
 }
@@ -367,9 +380,7 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     last: RobotState,
     latency: Latency,
     safety: Option<Safety>,
-    /// The divergence guard's bounds on the plant's state.
-    bounds: Bounds,
-    /// Set when the plant's state left `bounds`: the robot has stopped.
+    /// Set when the plant's state left its bounds: the robot has stopped.
     diverged: Option<String>,
 }
 
@@ -430,14 +441,8 @@ impl<P: Plant> Robot<P> {
             last,
             latency: Latency::new(),
             safety,
-            bounds: Bounds::DEFAULT,
             diverged: None,
         }
-    }
-
-    /// The same robot with the divergence guard's `bounds`.
-    pub fn with_bounds(self, bounds: Bounds) -> Self {
-        Robot { bounds, ..self }
     }
 
     /// Why it stopped for good, if its plant's state stopped being finite or
@@ -640,9 +645,8 @@ impl<P: Plant> Robot<P> {
         }
 
         self.plant.advance(now);
-        if let Some(state) = self.plant.state()
-            && let Some(breach) = self.bounds.check(&state)
-        {
+        let state = self.plant.state();
+        if let Some(breach) = state.and_then(|s| self.config.bounds.check(&s)) {
             // Diverged: zero first, then say so and stop for good.
             self.halt(Halt::Diverged);
             self.diverged = Some(format!(
@@ -656,7 +660,7 @@ impl<P: Plant> Robot<P> {
                 done: true,
             };
         }
-        let publish = match self.plant.state() {
+        let publish = match state {
             Some(state) => {
                 let out = follow(
                     &self.config.spec,
@@ -1307,6 +1311,25 @@ mod tests {
         let last = w.log[0].last().map_or(0.0, |p| p.local);
         w.run_until(3.0);
         assert_eq!(w.log[0].last().map_or(0.0, |p| p.local), last);
+    }
+
+    /// `[sim] bounds` reaches the fleet robot: a bound of 0.05 m/s stops a
+    /// robot that follows a 0.2 m/s circle, naming `|v|`.
+    #[test]
+    fn the_scenarios_bounds_stop_the_fleet_robot() {
+        let src = FAST_CIRCLE.replace("[sim]\n", "[sim]\nbounds = { speed = 0.05 }\n");
+        let s = Scenario::parse(&src, "test", None).unwrap_or_else(|e| panic!("{e}"));
+        let r = robot(&s, 1, FaultSpec::default());
+        assert_eq!(r.config().bounds.speed, 0.05);
+        let mut w = World::new(&s, vec![r]);
+        w.run_until(10.0);
+        let why = w.robots[0]
+            .diverged()
+            .unwrap_or_else(|| panic!("never stopped"));
+        assert!(
+            why.contains("|v| = ") && why.contains("left its bound 0.05 m/s"),
+            "{why}"
+        );
     }
 
     #[test]

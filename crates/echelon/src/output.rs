@@ -765,17 +765,18 @@ pub fn run_to_dir(
     let mut summary = Summary::new(run.simulation.agents().len(), Summary::SETTLE_TOLERANCE);
     let mut watch = SafetyWatch::default();
     let sim = &mut run.simulation;
+    let mut logs = Every::new(
+        run.log_every,
+        [
+            &mut trajectory as &mut dyn Observer,
+            &mut reference,
+            &mut integrals,
+            &mut odometry,
+            &mut safety,
+        ],
+    );
     let result = sim.run(&mut [
-        &mut Every::new(
-            run.log_every,
-            [
-                &mut trajectory as &mut dyn Observer,
-                &mut reference,
-                &mut integrals,
-                &mut odometry,
-                &mut safety,
-            ],
-        ) as &mut dyn Observer,
+        &mut logs as &mut dyn Observer,
         &mut summary,
         &mut watch,
         extra,
@@ -786,15 +787,7 @@ pub fn run_to_dir(
         Ok(()) => None,
         Err(e) => match Divergence::of(&e) {
             Some(d) => {
-                let flushed = [
-                    &mut trajectory as &mut dyn Observer,
-                    &mut reference,
-                    &mut integrals,
-                    &mut odometry,
-                    &mut safety,
-                ]
-                .finish();
-                if let Err(f) = flushed {
+                if let Err(f) = logs.finish() {
                     remove_parts();
                     return Err(SimError::Observer(f.to_string()).into());
                 }

@@ -130,8 +130,8 @@ pub const TOLERANCE: f64 = 1e-6;
 /// be faster than the outer one.
 pub const INNER_RATE: f64 = 5.0;
 
-/// How long after it was last stuck or breaking a deadlock a robot still
-/// counts as deadlocked ([`SafetyFilter::deadlocked`]), s.
+/// How long after its filter last changed its command a robot still counts
+/// as held by it ([`SafetyFilter::deadlocked`]), s.
 pub const DEADLOCK_MEMORY: f64 = 10.0;
 
 /// How long a robot must be stuck before it breaks a deadlock, s.
@@ -353,7 +353,8 @@ struct Deadlock {
     stuck_since: Option<f64>,
     breaking: bool,
     breaks: u64,
-    /// The last time (s) the robot was stuck or breaking a deadlock.
+    /// The last time (s) the filter changed the command (stuck and breaking
+    /// a deadlock only happen then).
     last: Option<f64>,
     /// The time of the last call.
     now: f64,
@@ -397,12 +398,6 @@ impl Envelope {
         omega_max: 4.0,
         rate: 5.0,
     };
-
-    /// The envelope of `robot` (the default; the limits of a robot with a
-    /// `torque_limit` bound it anyway).
-    pub fn for_robot(_robot: &RobotParams) -> Envelope {
-        Envelope::DEFAULT
-    }
 
     /// The four rows in the QP's variables `x = (u1/m, L u2/J)` at speeds
     /// `(v, w)`: `v̇ = x₁ − η v/m`, `ω̇ = x₂/L − ψ ω/J`.
@@ -495,11 +490,11 @@ impl SafetyFilter {
         &self.rows
     }
 
-    /// Whether the robot is deadlocked: stuck (the filter keeps less than
-    /// half of the motion its nominal asks for) or breaking a deadlock at
-    /// its last call, or at any call within [`DEADLOCK_MEMORY`] before it (a
-    /// robot that keeps falling back into the same stand-off between
-    /// breaks is deadlocked too).
+    /// Whether the filter holds the robot: it changed the command (and so
+    /// may be stuck or breaking a deadlock) at its last call or at any call
+    /// within [`DEADLOCK_MEMORY`] before it (a robot that keeps falling back
+    /// into the same stand-off between breaks, or rides along a neighbour's
+    /// barrier beside its slot, is held too).
     pub fn deadlocked(&self) -> bool {
         let d = &self.deadlock;
         d.last.is_some_and(|t| d.now - t <= DEADLOCK_MEMORY)
@@ -575,7 +570,7 @@ impl SafetyFilter {
         neighbours: &[Neighbour],
         obstacles: &[Obstacle],
     ) -> Filtered<Input> {
-        let own = own(me, l);
+        let own = Own::ahead(me, l, 0.0);
         let (m, j) = (robot.mass, robot.inertia);
         let (eta, psi) = (robot.linear_friction, robot.angular_friction);
         let (v, w) = (me.v, me.omega);
@@ -595,8 +590,8 @@ impl SafetyFilter {
             let (dpj, ddpj) = n.map_or(([0.0; 2], [0.0; 2]), |n| (n.dp, n.ddp));
             let rel = [own.dp[0] - dpj[0], own.dp[1] - dpj[1]];
             let dh = 2.0 * (d[0] * rel[0] + d[1] * rel[1]);
-            // Everything in ḧ + 2γ ḣ + γ² h that u does not move.
-            // ψ₁ = ḣ + γ h,  ψ̇₁ + p ψ₁ ≥ 0:  ḧ + (γ + p) ḣ + γ p h ≥ 0.
+            // Everything in ḧ + (γ + p) ḣ + γ p h that u does not move
+            // (ψ₁ = ḣ + γ h, ψ̇₁ + p ψ₁ ≥ 0).
             let p = INNER_RATE.max(gamma);
             let drift =
                 2.0 * (rel[0] * rel[0] + rel[1] * rel[1]) + (gamma + p) * dh + gamma * p * h;
@@ -610,7 +605,10 @@ impl SafetyFilter {
         // The speed envelope ([`Envelope`]) bounds what the QP may answer; a
         // nominal that satisfies every barrier passes as it is.
         let barriers = self.rows.len();
-        Envelope::for_robot(robot).push_rows(&mut self.rows, robot, l, v, w);
+        Envelope::DEFAULT.push_rows(&mut self.rows, robot, l, v, w);
+        // Barriers and the envelope may give way in an emergency; the wheel
+        // torque rows below may not.
+        let soft_end = self.rows.len();
         if let Some(limit) = robot.torque_limit {
             // τ_r,l = r (u1 ± u2/l_w)/2, |τ| ≤ limit:
             // |m x₁ ± J x₂ /(L l_w)| ≤ 2 limit / r.
@@ -625,9 +623,6 @@ impl SafetyFilter {
                 }
             }
         }
-        // Barriers and the envelope may give way in an emergency; the wheel
-        // torque rows may not.
-        let soft_end = barriers + 4;
         let (x, outcome, deadlock) = self.decide(t, x0, barriers, f);
         let command = match outcome {
             Outcome::Nominal => limited,
@@ -736,15 +731,9 @@ impl SafetyFilter {
         } else {
             self.deadlock.stuck_since = None;
         }
-        if stuck || self.deadlock.breaking {
-            self.deadlock.last = Some(t);
-        }
+        self.deadlock.last = Some(t);
         (x, outcome, breaking)
     }
-}
-
-fn own(me: &State, l: f64) -> Own {
-    Own::ahead(me, l, 0.0)
 }
 
 impl Own {

@@ -314,10 +314,9 @@ pub struct SafetyOutput {
     pub deadlock: bool,
     /// Deadlocks this agent has started breaking so far.
     pub deadlock_breaks: u64,
-    /// Whether its filter holds the agent: stuck behind its barriers or
-    /// breaking a deadlock ([`SafetyFilter::deadlocked`]), or its command
-    /// changed by the filter, now or within
-    /// [`crate::safety::DEADLOCK_MEMORY`] before.
+    /// Whether its filter holds the agent: it changed its command (stuck
+    /// behind its barriers, breaking a deadlock, or filtering) now or within
+    /// [`crate::safety::DEADLOCK_MEMORY`] before ([`SafetyFilter::deadlocked`]).
     pub deadlocked: bool,
     /// The law's command.
     pub nominal: [f64; 2],
@@ -347,8 +346,6 @@ struct SafetyState {
     l: Vec<f64>,
     out: Vec<SafetyOutput>,
     seen: Vec<State>,
-    /// When each agent's filter last changed its command, s.
-    last_active: Vec<f64>,
     neighbours: Vec<Neighbour>,
 }
 
@@ -1040,13 +1037,7 @@ impl Simulation {
             }
             o.sampled = true;
             o.deadlock_breaks = filter.deadlock_breaks();
-            if o.outcome != Outcome::Nominal {
-                safety.last_active[i] = t;
-            }
-            // Held by its filter: stuck or breaking a deadlock, or its
-            // command changed by the filter, now or lately.
-            o.deadlocked =
-                filter.deadlocked() || t - safety.last_active[i] <= crate::safety::DEADLOCK_MEMORY;
+            o.deadlocked = filter.deadlocked();
         }
         // The plant moves under the filtered commands from this instant on.
         self.sys.evaluate(
@@ -1129,7 +1120,6 @@ impl Simulation {
                 })
                 .collect(),
             seen: vec![State::default(); n],
-            last_active: vec![f64::NEG_INFINITY; n],
             neighbours: Vec::with_capacity(n),
         }));
         self.fresh = false;

@@ -216,7 +216,7 @@ fn bad_input_exits_2_with_one_line_and_writes_nothing() {
             .success()
     );
     std::fs::remove_dir_all(&out).unwrap();
-    let cases: [(String, &[&str]); 7] = [
+    let cases: [(String, &[&str]); 8] = [
         (GOOD.replace("[sim]", "[sim"), &["s.toml:1:"]),
         (
             GOOD.replace("dt = 0.01", "dt = \"small\""),
@@ -244,6 +244,10 @@ fn bad_input_exits_2_with_one_line_and_writes_nothing() {
                 "[robots.r]\npreset = \"agent2\"\nmass = -1.0\n\n[[agents]]\nrobot = \"r\"",
             ),
             &["robots.r.mass", "must be > 0"],
+        ),
+        (
+            GOOD.replace("dt = 0.01", "dt = 0.01\nbounds = { speed = 0.0 }"),
+            &["s.toml:4:", "sim.bounds.speed", "> 0"],
         ),
     ];
     for (text, needles) in cases {

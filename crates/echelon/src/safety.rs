@@ -87,8 +87,11 @@
 //! first limited by the base ([`VelocityBase::limit`]); if it satisfies every
 //! constraint it is returned unchanged (no solve). When the solver reports
 //! anything but a solution, or its answer breaks a constraint by more than
-//! [`TOLERANCE`], the robot brakes ([`Outcome::Braked`]): zero velocity for a
-//! velocity base; for a torque-driven robot with a `torque_limit`, the command
+//! [`TOLERANCE`], the robot brakes ([`Outcome::Braked`]): a velocity base
+//! takes the command that breaks the barriers least (one shared slack)
+//! within its speed limits, zero if even that fails (before issue 20's last
+//! survey it stopped dead, which left a cooperative neighbour's half of their
+//! pair untaken: 1.6 cm inside the radius); for a torque-driven robot with a `torque_limit`, the command
 //! that breaks the barriers and the envelope least within its wheel-torque
 //! limits (`solve_relaxed`), else `u = (−η v, −ψ ω)` (twice the friction's
 //! deceleration).
@@ -320,7 +323,8 @@ pub enum Outcome {
     Nominal,
     /// Replaced by the QP's answer.
     Filtered,
-    /// The QP was infeasible or the solver failed: braking.
+    /// The QP was infeasible or the solver failed: the least violation
+    /// within the actuator limits, or a brake.
     Braked,
 }
 
@@ -541,7 +545,18 @@ impl SafetyFilter {
         let (x, outcome, deadlock) = self.decide(t, x0, barriers, [0.0, 0.0]);
         let command = match outcome {
             Outcome::Nominal => limited,
-            Outcome::Braked => VelocityCommand::default(),
+            // No command satisfies every barrier within the box: the one
+            // that breaks them least (one shared slack) within the base's
+            // limits, so its neighbours' shares are missed as little as
+            // possible; zero if even that fails.
+            Outcome::Braked => {
+                solve_relaxed(&self.rows, barriers, x0).map_or(VelocityCommand::default(), |x| {
+                    VelocityCommand {
+                        v: x[0],
+                        omega: x[1] / l,
+                    }
+                })
+            }
             Outcome::Filtered => VelocityCommand {
                 v: x[0],
                 omega: x[1] / l,
@@ -901,7 +916,7 @@ mod tests {
     }
 
     #[test]
-    fn boxed_in_it_brakes() {
+    fn boxed_in_it_flees_as_fast_as_its_base_allows() {
         // A non-cooperative neighbour rushing in faster than the base can flee.
         let mut f = SafetyFilter::new(config());
         let l = 0.05;
@@ -919,7 +934,9 @@ mod tests {
             &[],
         );
         assert_eq!(out.outcome, Outcome::Braked);
-        assert_eq!(out.command, VelocityCommand::default());
+        // The least violation within |v| ≤ 0.5: full speed straight back.
+        assert!((out.command.v + 0.5).abs() < 1e-6, "{out:?}");
+        assert!(out.command.omega.abs() < 1e-4, "{out:?}");
     }
 
     #[test]
@@ -1014,7 +1031,16 @@ mod tests {
                         }
                     }
                     Outcome::Braked => {
-                        prop_assert_eq!(out.command, VelocityCommand::default());
+                        // Within the base's limits, and breaking the
+                        // barriers no more than standing still would.
+                        let x = x_of(out.command, l);
+                        // (clarabel's tolerance, in x = (v, L ω))
+                        prop_assert!(out.command.v.abs() <= base.v_max + TOLERANCE);
+                        prop_assert!(l * out.command.omega.abs() <= l * base.omega_max + TOLERANCE);
+                        let worst = |x: [f64; 2]| {
+                            rows.iter().map(|c| -c.slack(x)).fold(0.0f64, f64::max)
+                        };
+                        prop_assert!(worst(x) <= worst([0.0; 2]) + 1e-6, "{x:?}");
                     }
                 }
                 if nominal_ok {

@@ -97,8 +97,8 @@ fn true_errors(scenario: &str, csv: &Path, k: usize) -> Vec<(f64, f64)> {
         .unwrap()
         .build(&Overrides::default())
         .unwrap();
-    let spec = &run.simulation.agents()[k - 1];
-    let reference = run.simulation.reference();
+    let spec = &run.plan.agents()[k - 1];
+    let reference = run.plan.reference();
     rows(csv)
         .into_iter()
         .filter(|(_, a, _)| *a == k)
@@ -1124,13 +1124,8 @@ fn crossing_keeps_robots_apart_in_the_fleet() {
     let dir = tempfile::tempdir().unwrap();
     let scenario = Scenario::resolve("crossing").unwrap();
     let run = scenario.build(&Overrides::default()).unwrap();
-    let l: Vec<f64> = run
-        .simulation
-        .agents()
-        .iter()
-        .map(|a| a.placement.l)
-        .collect();
-    let radius = run.simulation.safety_radius().unwrap();
+    let l: Vec<f64> = run.plan.agents().iter().map(|a| a.placement.l).collect();
+    let radius = run.plan.safety_radius().unwrap();
     let fleet_dir = dir.path().join("fleet");
     let report = up(
         "crossing",

@@ -370,7 +370,7 @@ mod tests {
             let built = s
                 .build(&Overrides::default())
                 .unwrap_or_else(|e| panic!("{e}"));
-            let agents = built.simulation.agents();
+            let agents = built.plan.agents();
             assert_eq!(agents.len(), n);
             for k in 1..=n as u32 {
                 crate::robot::agent_spec(&s, k).unwrap_or_else(|e| panic!("{e}"));

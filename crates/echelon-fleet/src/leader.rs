@@ -196,9 +196,9 @@ impl Leader {
 pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetError> {
     let fleet = opts.scenario.fleet()?;
     let built = opts.scenario.build(&Overrides::default())?;
-    let reference = built.simulation.reference().clone();
+    let reference = built.plan.reference().clone();
     let rate = opts.rate.unwrap_or(fleet.reference_rate);
-    let duration = opts.duration.unwrap_or(built.simulation.config().duration);
+    let duration = opts.duration.unwrap_or(built.plan.config().duration);
     let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name));
 
     let session = net::open(&opts.net)?;

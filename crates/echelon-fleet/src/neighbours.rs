@@ -30,6 +30,7 @@
 //! fresh one would be). Each fresh → stale transition within range is counted
 //! ([`NeighbourTable::stale_events`]).
 
+use echelon::agent::Sight;
 use echelon::model::State;
 use echelon::safety::{Neighbour, point};
 
@@ -53,15 +54,6 @@ struct Entry {
     received: f64,
     /// Whether it was stale within range at the last build.
     stale: bool,
-}
-
-/// What the robot may do this step.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Sight<'a> {
-    /// Filter the nominal command against these neighbours.
-    Filter(&'a [Neighbour]),
-    /// A neighbour within range has been stale for longer than the hold: brake.
-    Brake,
 }
 
 /// The latest state of every other robot of the fleet.
@@ -187,9 +179,9 @@ impl NeighbourTable {
             });
         }
         if brake {
-            Sight::Brake
+            Sight::Stale
         } else {
-            Sight::Filter(&self.list)
+            Sight::Neighbours(&self.list)
         }
     }
 }
@@ -253,8 +245,8 @@ mod tests {
 
     fn list(v: Sight<'_>) -> Vec<Neighbour> {
         match v {
-            Sight::Filter(n) => n.to_vec(),
-            Sight::Brake => panic!("braking"),
+            Sight::Neighbours(n) => n.to_vec(),
+            Sight::Stale => panic!("braking"),
         }
     }
 
@@ -335,7 +327,7 @@ mod tests {
         // Past the hold: brake.
         assert_eq!(
             n.build(10.0 + TIMEOUT + STALE_HOLD + 0.01, 1.8, [0.0, 0.0], 1.5),
-            Sight::Brake
+            Sight::Stale
         );
         // Heard again: fresh, cooperative; a later loss is a new episode.
         let (h, s) = msg(2, 1, 2.0, 1.0, 0.0);

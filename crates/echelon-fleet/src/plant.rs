@@ -6,33 +6,10 @@
 //! `state` (it moves by itself) and sending its command in `command`: the ROS
 //! 2 drive ([`crate::ros2::drive::Ros2Drive`]) publishes `cmd_vel`.
 
+pub use echelon::agent::{Actuation, Command};
+use echelon::agent::{AgentSpec, Drive};
 use echelon::base::{VelocityBase, VelocityCommand};
-use echelon::model::{Input, RobotParams, State, Torques};
-use echelon::sim::{AgentSpec, Drive};
-
-/// What the law asks of a drive: wheel torques' inputs (eq. 13, a
-/// torque-driven robot) or a velocity command (the kinematic law, a velocity
-/// base).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Command {
-    /// `u = (u1, u2)` (eq. 3c–3d).
-    Torque(Input),
-    /// `(v*, ω*)`.
-    Velocity(VelocityCommand),
-}
-
-/// What the motors apply for a command.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Actuation {
-    /// Applied generalised input (after torque saturation); zero on a
-    /// velocity base.
-    pub u: Input,
-    /// Applied wheel torques; zero on a velocity base.
-    pub tau: Torques,
-    /// On a velocity base, the command after its speed limits
-    /// ([`VelocityBase::limit`]) and whether they cut it.
-    pub velocity: Option<(VelocityCommand, bool)>,
-}
+use echelon::model::{Input, RobotParams, State};
 
 /// A differential-drive robot under the fleet controller: what the robot's
 /// state machine ([`crate::robot::Robot`]) drives, injected. The simulated

@@ -25,24 +25,24 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 use zenoh::Wait;
 
-use echelon::base::VelocityCommand;
+use echelon::agent::{AgentSpec, Command, Guard};
 use echelon::control::LeaderMotion;
 use echelon::follow::{LeaderView, follow};
 use echelon::formation::Leader;
 use echelon::guard::Bounds;
-use echelon::model::{Input, State};
+use echelon::model::State;
+use echelon::plan::Plan;
 use echelon::safety::{Obstacle, Outcome, SafetyConfig, SafetyFilter, point};
 use echelon::scenario::{FleetSettings, LinkLoss, Overrides, Ros2Link, Scenario};
-use echelon::sim::{AgentSpec, Simulation};
 
 use crate::clock::FleetClock;
 use crate::faults::{FaultInjector, FaultSpec, Verdict};
 use crate::keys::{Keys, robot_role};
 use crate::latency::{self, Latency, LatencyReport};
 use crate::link::{Counters, LeaderSample, StreamTracker, predict};
-use crate::neighbours::{NeighbourTable, STALE_HOLD, Sight};
+use crate::neighbours::{NeighbourTable, STALE_HOLD};
 use crate::net::{self, NetOptions};
-use crate::plant::{Command, Plant, SimulatedDrive};
+use crate::plant::{Plant, SimulatedDrive};
 use crate::ros2::attachment::{Gid, gid_from_token};
 use crate::ros2::drive::{CmdSink, Ros2Counters, Ros2Drive, cmd_vel_type};
 use crate::ros2::keys::{topic_key, topic_key_any_type};
@@ -200,12 +200,12 @@ pub struct RobotStats {
 
 /// The agent's spec from the scenario, checked for the fleet.
 pub fn agent_spec(scenario: &Scenario, agent: u32) -> Result<AgentSpec, FleetError> {
-    spec_in(&scenario.build(&Overrides::default())?.simulation, agent)
+    spec_in(&scenario.build(&Overrides::default())?.plan, agent)
 }
 
-/// [`agent_spec`] from the scenario's built simulation.
-fn spec_in(sim: &Simulation, agent: u32) -> Result<AgentSpec, FleetError> {
-    let agents = sim.agents();
+/// [`agent_spec`] from the scenario's plan.
+fn spec_in(plan: &Plan, agent: u32) -> Result<AgentSpec, FleetError> {
+    let agents = plan.agents();
     let n = agents.len();
     let Some(spec) = (agent as usize)
         .checked_sub(1)
@@ -252,20 +252,20 @@ pub struct RobotConfig {
 /// Agent `agent`'s safety settings (`None`: it does not filter).
 pub fn safety_of(scenario: &Scenario, agent: u32) -> Result<Option<RobotSafety>, FleetError> {
     Ok(safety_in(
-        &scenario.build(&Overrides::default())?.simulation,
+        &scenario.build(&Overrides::default())?.plan,
         agent,
     ))
 }
 
-/// [`safety_of`] from the scenario's built simulation.
-fn safety_in(sim: &Simulation, agent: u32) -> Option<RobotSafety> {
-    let configs = sim.safety_configs();
-    let config = configs.get(agent as usize - 1).copied().flatten()?;
+/// [`safety_of`] from the scenario's plan.
+fn safety_in(plan: &Plan, agent: u32) -> Option<RobotSafety> {
+    let config = plan.safety_of(agent as usize - 1)?;
+    let n = plan.agents().len();
     Some(RobotSafety {
         config,
-        obstacles: sim.obstacles().to_vec(),
-        l: sim.agents().iter().map(|a| a.placement.l).collect(),
-        cooperative: configs.iter().map(Option::is_some).collect(),
+        obstacles: plan.obstacles().to_vec(),
+        l: plan.agents().iter().map(|a| a.placement.l).collect(),
+        cooperative: (0..n).map(|i| plan.safety_of(i).is_some()).collect(),
     })
 }
 
@@ -278,11 +278,10 @@ impl RobotConfig {
         faults: FaultSpec,
         duration: Option<f64>,
     ) -> Result<RobotConfig, FleetError> {
-        let run = scenario.build(&Overrides::default())?;
-        let sim = &run.simulation;
-        let spec = spec_in(sim, agent)?;
+        let plan = scenario.build(&Overrides::default())?.plan;
+        let spec = spec_in(&plan, agent)?;
         let loss = fleet.link_loss[agent as usize - 1];
-        let safety = safety_in(sim, agent);
+        let safety = safety_in(&plan, agent);
         Ok(RobotConfig {
             agent,
             spec,
@@ -293,7 +292,7 @@ impl RobotConfig {
             faults,
             duration,
             safety,
-            bounds: sim.config().bounds,
+            bounds: plan.config().bounds,
         })
     }
 }
@@ -671,13 +670,10 @@ impl<P: Plant> Robot<P> {
                         turn_rate: p.turn_rate,
                     },
                 );
-                let nominal = match out.velocity {
-                    Some(c) => Command::Velocity(c),
-                    None => Command::Torque(out.law.u),
-                };
+                let nominal = out.command();
                 let cmd = match self.safety.as_mut() {
-                    Some(s) => s.filter(&self.config, local, now, &state, nominal),
-                    None => nominal,
+                    Some(s) => s.act(&self.config, local, now, &state, nominal),
+                    None => self.config.spec.act(now, &state, nominal, None).command,
                 };
                 let act = self.plant.command(cmd);
                 let (dv, domega) = self.plant.accelerations();
@@ -785,9 +781,10 @@ impl<P: Plant> Robot<P> {
 }
 
 impl Safety {
-    /// Filters the law's command `nominal` at local time `local` (fleet time
-    /// `t`) for a robot in state `me` (`docs/safety.md`, "In the fleet").
-    fn filter(
+    /// The act step ([`AgentSpec::act`]) through this robot's filter at
+    /// local time `local` (fleet time `t`) for a robot in state `me`: the
+    /// command for its plant, counted (`docs/safety.md`, "In the fleet").
+    fn act(
         &mut self,
         config: &RobotConfig,
         local: f64,
@@ -796,60 +793,35 @@ impl Safety {
         nominal: Command,
     ) -> Command {
         let Some(settings) = config.safety.as_ref() else {
-            return nominal;
+            return config.spec.act(t, me, nominal, None).command;
         };
-        let spec = &config.spec;
-        let l = spec.placement.l;
+        let l = config.spec.placement.l;
+        let sight = self
+            .table
+            .build(local, t, point(me, l), settings.config.range);
+        let guard = Guard {
+            filter: &mut self.filter,
+            sight,
+            obstacles: &settings.obstacles,
+        };
+        let act = config.spec.act(t, me, nominal, Some(guard));
         let c = &mut self.counts;
         c.steps += 1;
-        let neighbours = match self
-            .table
-            .build(local, t, point(me, l), settings.config.range)
-        {
-            Sight::Filter(n) => n,
-            Sight::Brake => {
-                c.stale_brakes += 1;
+        if let Some(g) = act.safety {
+            if g.outcome != Outcome::Nominal {
                 c.active += 1;
-                return brake(spec, me, nominal);
             }
-        };
-        let obstacles = &settings.obstacles[..];
-        let (outcome, min_distance, cmd) =
-            match (nominal, spec.velocity_robot(), spec.torque_robot()) {
-                (Command::Velocity(v), Some(r), _) => {
-                    let f = self
-                        .filter
-                        .velocity(t, me, l, v, &r.base, neighbours, obstacles);
-                    (f.outcome, f.min_distance, Command::Velocity(f.command))
-                }
-                (Command::Torque(u), _, Some(r)) => {
-                    let f = self.filter.torque(t, me, l, r, u, neighbours, obstacles);
-                    (f.outcome, f.min_distance, Command::Torque(f.command))
-                }
-                _ => return nominal,
-            };
-        if outcome != Outcome::Nominal {
-            c.active += 1;
+            if g.stale {
+                c.stale_brakes += 1;
+            } else if g.outcome == Outcome::Braked {
+                c.infeasible += 1;
+            }
+            if g.min_distance.is_finite() {
+                let d = g.min_distance;
+                c.min_distance = Some(c.min_distance.map_or(d, |m| m.min(d)));
+            }
         }
-        if outcome == Outcome::Braked {
-            c.infeasible += 1;
-        }
-        if min_distance.is_finite() {
-            c.min_distance = Some(c.min_distance.map_or(min_distance, |d| d.min(min_distance)));
-        }
-        cmd
-    }
-}
-
-/// The safety filter's braking command (`echelon::safety`): zero velocity,
-/// or `u = (−η v, −ψ ω)`.
-fn brake(spec: &AgentSpec, me: &State, nominal: Command) -> Command {
-    match (nominal, spec.torque_robot()) {
-        (Command::Torque(_), Some(r)) => Command::Torque(Input {
-            u1: -r.linear_friction * me.v,
-            u2: -r.angular_friction * me.omega,
-        }),
-        _ => Command::Velocity(VelocityCommand::default()),
+        act.command
     }
 }
 
@@ -1154,7 +1126,7 @@ mod tests {
     fn reference(s: &Scenario) -> Reference {
         s.build(&Overrides::default())
             .unwrap_or_else(|e| panic!("{e}"))
-            .simulation
+            .plan
             .reference()
             .clone()
     }
@@ -1382,7 +1354,7 @@ mod tests {
         let mut sim = s
             .build(&Overrides::default())
             .unwrap_or_else(|e| panic!("{e}"))
-            .simulation;
+            .simulation();
         sim.run(&mut |_: &echelon::sim::Frame<'_>| Ok(()))
             .unwrap_or_else(|e| panic!("{e}"));
         for (i, r) in w.robots.iter().enumerate() {

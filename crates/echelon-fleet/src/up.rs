@@ -423,7 +423,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let scenario = Scenario::resolve(&opts.scenario)?;
     let fleet = scenario.fleet()?;
     let built = scenario.build(&Overrides::default())?;
-    let n = built.simulation.agents().len();
+    let n = built.plan.agents().len();
     for k in 1..=n as u32 {
         crate::robot::agent_spec(&scenario, k)?;
     }
@@ -441,7 +441,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         }
         _ => {}
     }
-    let duration = opts.duration.unwrap_or(built.simulation.config().duration);
+    let duration = opts.duration.unwrap_or(built.plan.config().duration);
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
 

@@ -706,7 +706,7 @@ mod tests {
         let reference = schema(&REFERENCE);
         let fleet = ReferenceRecord {
             seq: Some(3),
-            ..ReferenceRecord::at(circle(0.5).simulation.reference(), 0.5)
+            ..ReferenceRecord::at(circle(0.5).plan.reference(), 0.5)
         };
         let full = serde_json::to_value(fleet).unwrap();
         assert_eq!(keys(&reference["properties"]), keys(&full));
@@ -733,12 +733,12 @@ mod tests {
     /// file is finished (readable summary).
     #[test]
     fn every_message_of_a_run_conforms_to_its_channel_schema() {
-        let mut run = circle(0.5);
+        let run = circle(0.5);
         let every = 7;
         let mut mcap = Every::new(every, McapObserver::new(Cursor::new(Vec::new())).unwrap());
-        run.simulation.run(&mut mcap).unwrap();
+        run.simulation().run(&mut mcap).unwrap();
         let bytes = mcap.into_inner().into_inner().unwrap().into_inner();
-        let steps = run.simulation.steps();
+        let steps = run.plan.steps();
         let frames = steps / every + 1 + u64::from(!steps.is_multiple_of(every));
         let mut counts: BTreeMap<String, u64> = BTreeMap::new();
         for m in mcap::MessageStream::new(&bytes).unwrap() {
@@ -749,7 +749,7 @@ mod tests {
             conforms(&record, &schema, &m.channel.topic).unwrap();
             *counts.entry(m.channel.topic.clone()).or_default() += 1;
         }
-        let agents = run.simulation.agents().len();
+        let agents = run.plan.agents().len();
         assert_eq!(counts.len(), agents + 1);
         assert!(counts.values().all(|&n| n == frames), "{counts:?}");
         let summary = mcap::Summary::read(&bytes).unwrap().unwrap();

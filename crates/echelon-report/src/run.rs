@@ -465,7 +465,7 @@ fn built(scenario: &Scenario, dt: f64) -> Built {
     scenario.build(&overrides).map_or_else(
         |_| Built::default(),
         |run| {
-            let agents = run.simulation.agents();
+            let agents = run.plan.agents();
             Built {
                 limits: agents
                     .iter()
@@ -477,7 +477,7 @@ fn built(scenario: &Scenario, dt: f64) -> Built {
                     })
                     .collect(),
                 l: agents.iter().map(|a| a.placement.l).collect(),
-                obstacles: run.simulation.obstacles().to_vec(),
+                obstacles: run.plan.obstacles().to_vec(),
             }
         },
     )

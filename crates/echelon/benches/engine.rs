@@ -11,7 +11,7 @@ use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_mai
 use echelon::control::{Gains, LeaderMotion, Offset, Variant, law};
 use echelon::engine::{self, BenchFormation, Engine, Topology};
 use echelon::model::{RobotParams, State};
-use echelon::sim::{SimConfig, Simulation, Timing};
+use echelon::{Plan, SimConfig, Simulation, Timing};
 
 const DT: f64 = 0.001;
 
@@ -79,10 +79,11 @@ fn rk4_agent_step(c: &mut Criterion) {
         seed: 1,
     };
     let config = SimConfig::new(DT, 1e6, Timing::Continuous).expect("valid settings");
-    let mut sim = match Simulation::new(f.agent_specs(), f.reference(), config) {
-        Ok(s) => s,
-        Err(e) => panic!("{e}"),
-    };
+    let mut sim =
+        match Plan::new(f.agent_specs(), f.reference(), config).map(|p| Simulation::new(&p)) {
+            Ok(s) => s,
+            Err(e) => panic!("{e}"),
+        };
     g.throughput(Throughput::Elements(1));
     g.bench_function("scalar Simulation, 1 agent", |b| b.iter(|| sim.step()));
     g.finish();

@@ -3,6 +3,7 @@
 //! agent knows of its leader to the leader motion `p_d, ṗ_d, p̈_d`, the offsets
 //! `L_X, L_Y` (eqs. 4–6) and the law's output (eq. 13).
 
+use crate::agent::{AgentSpec, Command, Drive};
 use crate::base::VelocityCommand;
 use crate::control::{LawOutput, LeaderMotion, Offset, law};
 use crate::kinematic::kinematic_law;
@@ -10,7 +11,6 @@ use crate::lycomp::Placement;
 use crate::model::Input;
 use crate::model::State;
 use crate::reference::Jet;
-use crate::sim::{AgentSpec, Drive};
 
 /// What a follower knows of its leader at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -74,6 +74,17 @@ pub struct Follow {
     /// limits; `law.u` is then zero and `law.e`, `law.z` are the kinematic
     /// law's ([`crate::kinematic::KinematicOutput`]).
     pub velocity: Option<VelocityCommand>,
+}
+
+impl Follow {
+    /// The law's command: `(v*, ω*)` for a velocity base, `u` otherwise.
+    #[inline]
+    pub fn command(&self) -> Command {
+        match self.velocity {
+            Some(c) => Command::Velocity(c),
+            None => Command::Torque(self.law.u),
+        }
+    }
 }
 
 /// The law of agent `spec` in `sensed` state behind `leader`: eqs. 7–13 for a

@@ -30,6 +30,7 @@
 //!
 //! Units are SI and angles radians throughout (ROS REP 103).
 
+pub mod agent;
 pub mod base;
 pub mod check;
 pub mod control;
@@ -46,6 +47,7 @@ mod math;
 pub mod model;
 pub mod odometry;
 pub mod output;
+pub mod plan;
 pub mod reference;
 pub mod rng;
 pub mod ros_names;
@@ -55,8 +57,10 @@ pub mod sim;
 mod spline;
 pub mod sweep;
 
+pub use agent::{AgentSpec, Command};
 pub use control::{Gains, Variant};
 pub use error::{FormationError, OutputError, ParamError, ReferenceError, ScenarioError, SimError};
 pub use model::{Input, RobotParams, State, Torques};
+pub use plan::{Plan, SimConfig, Timing};
 pub use scenario::{Overrides, Run, Scenario};
-pub use sim::{AgentSpec, Frame, Observer, SimConfig, Simulation, Timing};
+pub use sim::{Frame, Observer, Simulation};

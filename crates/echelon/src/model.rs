@@ -169,6 +169,16 @@ impl RobotParams {
         (out, true)
     }
 
+    /// The safety filter's friction brake in `s`: `u = (−η v, −ψ ω)`, twice
+    /// friction's own deceleration.
+    #[inline]
+    pub fn brake(&self, s: &State) -> Input {
+        Input {
+            u1: -self.linear_friction * s.v,
+            u2: -self.angular_friction * s.omega,
+        }
+    }
+
     /// Linear and angular accelerations `(v̇, ω̇)` for the applied input (eq. 3c–d).
     #[inline]
     pub fn accelerations(&self, s: &State, u: Input) -> (f64, f64) {

@@ -728,6 +728,7 @@ pub fn run_to_dir(
     extra: &mut dyn Observer,
 ) -> Result<RunSummary, OutputError> {
     std::fs::create_dir_all(dir).map_err(io_error(dir))?;
+    let mut simulation = run.simulation();
     let mut names = vec![
         TRAJECTORY_FILE,
         REFERENCE_FILE,
@@ -735,11 +736,11 @@ pub fn run_to_dir(
         SCENARIO_FILE,
         INTEGRALS_FILE,
     ];
-    let odometry_at = (!run.simulation.odometers().is_empty()).then(|| {
+    let odometry_at = (!simulation.odometers().is_empty()).then(|| {
         names.push(ODOMETRY_FILE);
         names.len() - 1
     });
-    let safety_at = run.simulation.has_safety().then(|| {
+    let safety_at = simulation.has_safety().then(|| {
         names.push(SAFETY_FILE);
         names.len() - 1
     });
@@ -750,8 +751,7 @@ pub fn run_to_dir(
             let _ = std::fs::remove_file(p);
         }
     };
-    let mut trajectory =
-        CsvLog::create(&parts[0], TrajectoryRows::for_simulation(&run.simulation))?;
+    let mut trajectory = CsvLog::create(&parts[0], TrajectoryRows::for_simulation(&simulation))?;
     let mut reference = CsvLog::create(&parts[1], ReferenceRows::default())?;
     let mut integrals = CsvLog::create(&parts[4], IntegralRows)?;
     let mut odometry = match odometry_at {
@@ -762,9 +762,9 @@ pub fn run_to_dir(
         Some(k) => Some(CsvLog::create(&parts[k], SafetyRows::default())?),
         None => None,
     };
-    let mut summary = Summary::new(run.simulation.agents().len(), Summary::SETTLE_TOLERANCE);
+    let mut summary = Summary::new(simulation.agents().len(), Summary::SETTLE_TOLERANCE);
     let mut watch = SafetyWatch::default();
-    let sim = &mut run.simulation;
+    let sim = &mut simulation;
     let mut logs = Every::new(
         run.log_every,
         [

@@ -657,10 +657,7 @@ impl SafetyFilter {
                     u1: m * x[0],
                     u2: j * x[1] / l,
                 },
-                None => Input {
-                    u1: -eta * v,
-                    u2: -psi * w,
-                },
+                None => robot.brake(me),
             },
             Outcome::Filtered => Input {
                 u1: m * x[0],

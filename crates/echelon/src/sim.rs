@@ -7,262 +7,20 @@
 //! in between. Stepping is explicit ([`Simulation::step`]) over plain data; the
 //! same inputs give the same bits.
 
-use crate::base::{VelocityCommand, VelocityRobot};
-use crate::check;
-use crate::control::{Gains, Law, LawOutput, Variant, errors};
-use crate::error::{FormationError, ParamError, SimError};
-use crate::follow::{Follow, LeaderView, follow};
+use crate::agent::{Actuation, Command, Guard, Sight};
+pub use crate::agent::{AgentSpec, Drive};
+use crate::base::VelocityCommand;
+use crate::control::{LawOutput, errors};
+use crate::error::SimError;
+use crate::follow::{LeaderView, follow};
 use crate::formation::{Formation, Leader};
-use crate::guard::Bounds;
 use crate::kinematic::kinematic_law;
-use crate::lycomp::{FitCoefficients, LyComp, Placement};
-use crate::math::whole_ratio;
 pub use crate::model::Pose;
-use crate::model::{Input, RobotParams, State, Torques};
-use crate::odometry::{Odometer, OdometrySpec};
+use crate::model::{Input, State, Torques};
+use crate::odometry::Odometer;
+pub use crate::plan::{Agents, Plan, SafetySpec, SimConfig, Timing};
 use crate::reference::{Jet, Order, Reference, Trajectory};
-use crate::safety::{Neighbour, Obstacle, Outcome, SafetyConfig, SafetyFilter};
-
-/// How a robot is driven, and so which law drives it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Drive {
-    /// Wheel torques (eq. 3, the paper's plant) under the dynamic law (eq. 13).
-    Torque {
-        /// Physical parameters.
-        robot: RobotParams,
-        /// Paper or complete law.
-        variant: Variant,
-    },
-    /// A velocity-controlled base under the kinematic law ([`crate::kinematic`]).
-    Velocity(VelocityRobot),
-}
-
-impl Drive {
-    /// `(l, r)`: half the wheel separation and the wheel radius, m (what
-    /// odometry needs).
-    pub fn wheels(&self) -> (f64, f64) {
-        match self {
-            Drive::Torque { robot, .. } => (robot.half_wheelbase, robot.wheel_radius),
-            Drive::Velocity(r) => (r.half_wheelbase, r.wheel_radius),
-        }
-    }
-
-    /// The law this drive runs.
-    pub fn law(&self) -> Law {
-        match self {
-            Drive::Torque { variant, .. } => Law::from(*variant),
-            Drive::Velocity(_) => Law::Kinematic,
-        }
-    }
-}
-
-/// One robot of a formation: its body, its leader, where it holds that leader,
-/// and its controller. Built by [`AgentSpec::new`] (torque-driven) or
-/// [`AgentSpec::velocity`], which refuse impossible values; the fields are
-/// public to read.
-#[derive(Debug, Clone, PartialEq)]
-#[non_exhaustive]
-pub struct AgentSpec {
-    /// Display name (the scenario's, e.g. `agent 1`).
-    pub name: String,
-    /// The body and the law that drives it.
-    pub drive: Drive,
-    /// Whom it follows.
-    pub leader: Leader,
-    /// `L_Xoff`, `L_Yoff`, `L` and the `L_Ycomp` options.
-    pub placement: Placement,
-    /// `K_e`, `K_z` (`K_z` unused by the kinematic law).
-    pub gains: Gains,
-    /// Initial state.
-    pub start: State,
-}
-
-impl AgentSpec {
-    /// A torque-driven agent, refusing an impossible robot
-    /// ([`RobotParams::validate`]), gains ([`Gains::new`]), placement
-    /// ([`Placement::new`]) or a start state that is not finite. Whether its
-    /// leader exists is the formation's business ([`Simulation::new`]).
-    pub fn new(
-        name: impl Into<String>,
-        robot: RobotParams,
-        leader: Leader,
-        placement: Placement,
-        gains: Gains,
-        variant: Variant,
-        start: State,
-    ) -> Result<AgentSpec, ParamError> {
-        robot.validate()?;
-        AgentSpec::checked(
-            name.into(),
-            Drive::Torque { robot, variant },
-            leader,
-            placement,
-            gains,
-            start,
-        )
-    }
-
-    /// An agent on a velocity-controlled base under the kinematic law,
-    /// refusing an impossible base ([`VelocityRobot::validate`]) and the rest
-    /// as [`AgentSpec::new`]. A start speed outside the base's limits is refused.
-    pub fn velocity(
-        name: impl Into<String>,
-        robot: VelocityRobot,
-        leader: Leader,
-        placement: Placement,
-        gains: Gains,
-        start: State,
-    ) -> Result<AgentSpec, ParamError> {
-        robot.validate()?;
-        let b = &robot.base;
-        check::require(
-            "v",
-            start.v,
-            start.v.abs() <= b.v_max,
-            format!("exceeds the base's v_max = {} m/s", b.v_max),
-        )?;
-        check::require(
-            "omega",
-            start.omega,
-            start.omega.abs() <= b.omega_max,
-            format!("exceeds the base's omega_max = {} rad/s", b.omega_max),
-        )?;
-        AgentSpec::checked(
-            name.into(),
-            Drive::Velocity(robot),
-            leader,
-            placement,
-            gains,
-            start,
-        )
-    }
-
-    fn checked(
-        name: String,
-        drive: Drive,
-        leader: Leader,
-        placement: Placement,
-        gains: Gains,
-        start: State,
-    ) -> Result<AgentSpec, ParamError> {
-        gains.validate()?;
-        placement.validate()?;
-        start.validate_start()?;
-        Ok(AgentSpec {
-            name,
-            drive,
-            leader,
-            placement,
-            gains,
-            start,
-        })
-    }
-
-    /// The torque plant (eq. 3), `None` for a velocity base.
-    pub fn torque_robot(&self) -> Option<&RobotParams> {
-        match &self.drive {
-            Drive::Torque { robot, .. } => Some(robot),
-            Drive::Velocity(_) => None,
-        }
-    }
-
-    /// The velocity base, `None` for a torque-driven robot.
-    pub fn velocity_robot(&self) -> Option<&VelocityRobot> {
-        match &self.drive {
-            Drive::Velocity(r) => Some(r),
-            Drive::Torque { .. } => None,
-        }
-    }
-
-    /// The form of eq. 13, `None` under the kinematic law.
-    pub fn variant(&self) -> Option<Variant> {
-        self.drive.law().variant()
-    }
-
-    /// The law that drives it.
-    pub fn law(&self) -> Law {
-        self.drive.law()
-    }
-}
-
-/// When the controller runs.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum Timing {
-    /// Continuous-time: the law is evaluated in every RK4 stage.
-    #[default]
-    Continuous,
-    /// Sampled every `period` seconds (a multiple of `dt`), command held in between.
-    Sampled {
-        /// `T_s`, s.
-        period: f64,
-    },
-}
-
-/// Integration settings, built by [`SimConfig::new`] (the fields are public to read).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[non_exhaustive]
-pub struct SimConfig {
-    /// RK4 step, s.
-    pub dt: f64,
-    /// Simulated time, s (the run ends at the first step at or after it).
-    pub duration: f64,
-    /// Continuous or sampled controller.
-    pub timing: Timing,
-    /// The divergence guard: a state outside stops the run
-    /// ([`SimError::Diverged`]).
-    pub bounds: Bounds,
-}
-
-/// At most this many steps in a run.
-const MAX_STEPS: f64 = 1e12;
-
-impl SimConfig {
-    /// Integration settings, refusing a step or duration that is not a finite
-    /// number > 0, more than 10¹² steps and a controller period that is not a
-    /// whole multiple of `dt`. Errors name `dt`, `duration` or `controller_period`.
-    pub fn new(dt: f64, duration: f64, timing: Timing) -> Result<SimConfig, ParamError> {
-        check::positive("dt", dt)?;
-        check::positive("duration", duration)?;
-        let steps = Self::steps_for(dt, duration);
-        check::require(
-            "duration",
-            duration,
-            steps <= MAX_STEPS,
-            format!("s at dt {dt} s is {steps:e} steps: too many"),
-        )?;
-        if let Timing::Sampled { period } = timing {
-            check::multiple_of("controller_period", period, dt, &format!("dt = {dt} s"))?;
-        }
-        Ok(SimConfig {
-            dt,
-            duration,
-            timing,
-            bounds: Bounds::DEFAULT,
-        })
-    }
-
-    /// The same settings with the divergence guard's `bounds`.
-    pub fn with_bounds(self, bounds: Bounds) -> SimConfig {
-        SimConfig { bounds, ..self }
-    }
-
-    fn steps_for(dt: f64, duration: f64) -> f64 {
-        (duration / dt - 1e-9).ceil().max(1.0)
-    }
-
-    /// Steps of the run (it ends at the first step at or after `duration`).
-    fn steps(&self) -> u64 {
-        Self::steps_for(self.dt, self.duration) as u64
-    }
-
-    /// Steps between controller samples (0: continuous).
-    fn hold_every(&self) -> u64 {
-        match self.timing {
-            Timing::Continuous => 0,
-            Timing::Sampled { period } => whole_ratio(period, self.dt).unwrap_or(1),
-        }
-    }
-}
+use crate::safety::{Neighbour, Obstacle, Outcome, SafetyFilter};
 
 /// What one agent's controller and motors are doing at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -286,6 +44,56 @@ pub struct AgentOutput {
     /// For a velocity base: the command and what the base follows; `command`,
     /// `u`, `tau` are then zero. `None` for a torque-driven robot.
     pub velocity: Option<VelocityOutput>,
+}
+
+impl AgentOutput {
+    /// The command the controller gave: `(v*, ω*)` on a velocity base,
+    /// `command` otherwise.
+    fn commanded(&self) -> Command {
+        match self.velocity {
+            Some(v) => Command::Velocity(v.command),
+            None => Command::Torque(self.command),
+        }
+    }
+
+    /// The outputs of an agent whose true errors are `e`, `z`, whose
+    /// controller sees `e_hat`, `z_hat`, commanding `command` of which its
+    /// motors apply `applied`.
+    fn of(
+        e: [f64; 2],
+        z: [f64; 2],
+        e_hat: [f64; 2],
+        z_hat: [f64; 2],
+        command: Command,
+        applied: &Actuation,
+    ) -> AgentOutput {
+        let out = AgentOutput {
+            e,
+            z,
+            e_hat,
+            z_hat,
+            ..AgentOutput::default()
+        };
+        match (command, applied.velocity) {
+            (Command::Velocity(command), Some((applied, saturated))) => AgentOutput {
+                velocity: Some(VelocityOutput {
+                    command,
+                    applied,
+                    saturated,
+                }),
+                ..out
+            },
+            (command, _) => AgentOutput {
+                command: match command {
+                    Command::Torque(u) => u,
+                    Command::Velocity(_) => Input::default(),
+                },
+                u: applied.u,
+                tau: applied.tau,
+                ..out
+            },
+        }
+    }
 }
 
 /// What a velocity base is commanded and what it follows at one instant.
@@ -327,16 +135,6 @@ pub struct SafetyOutput {
     pub min_distance: f64,
 }
 
-/// Safety settings of a simulation: each agent's filter (`None`: it does
-/// not filter) and the known obstacles.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct SafetySpec {
-    /// Per agent.
-    pub agents: Vec<Option<SafetyConfig>>,
-    /// Static obstacles every agent knows.
-    pub obstacles: Vec<Obstacle>,
-}
-
 /// The filters of a running simulation and their scratch.
 #[derive(Debug, Clone)]
 struct SafetyState {
@@ -347,13 +145,6 @@ struct SafetyState {
     out: Vec<SafetyOutput>,
     seen: Vec<State>,
     neighbours: Vec<Neighbour>,
-}
-
-/// A sampled controller's held command: torques' inputs or a velocity command.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-struct Held {
-    u: Input,
-    c: VelocityCommand,
 }
 
 /// The simulation at one step, as observers see it.
@@ -531,7 +322,7 @@ impl System {
         &self,
         t: f64,
         x: &[State],
-        held: Option<&[Held]>,
+        held: Option<&[Command]>,
         odometers: &[Option<Odometer>],
         mut out: Option<&mut [AgentOutput]>,
         dx: &mut [State],
@@ -541,19 +332,9 @@ impl System {
             // Between samples of a sampled controller, with nobody looking at
             // the law's outputs: only the plant moves.
             for (i, a) in self.agents.iter().enumerate() {
-                match &a.drive {
-                    Drive::Torque { robot, .. } => {
-                        let u = robot.actuate(h[i].u).0;
-                        dx[i] = robot.derivative(&x[i], u);
-                        speeds[i] = [x[i].v, x[i].omega, u.u1, u.u2];
-                    }
-                    Drive::Velocity(r) => {
-                        let c = r.base.limit(h[i].c).0;
-                        dx[i] = r.base.derivative(&x[i], c);
-                        let (v, w) = r.base.speeds(&x[i], c);
-                        speeds[i] = [v, w, c.v, c.omega];
-                    }
-                }
+                let applied = a.drive.actuate(h[i]);
+                dx[i] = a.drive.derivative(&x[i], &applied);
+                speeds[i] = a.drive.speeds(&x[i], &applied);
             }
             return;
         }
@@ -586,12 +367,8 @@ impl System {
                 Leader::Reference => LeaderView::Reference(&jet),
                 Leader::Agent(j) => view(sensed(j), j),
             };
-            let Follow {
-                law: LawOutput { u, e, z },
-                leader: motion,
-                offset,
-                velocity,
-            } = follow(a, &sensed(i), leader);
+            let law = follow(a, &sensed(i), leader);
+            let (LawOutput { e, z, .. }, motion, offset) = (law.law, law.leader, law.offset);
             let (e_true, z_true) = if out.is_none() || odometers.is_empty() {
                 (e, z)
             } else {
@@ -621,43 +398,11 @@ impl System {
                     }
                 }
             };
-            let output = match &a.drive {
-                Drive::Torque { robot, .. } => {
-                    let command = held.map_or(u, |h| h[i].u);
-                    let (applied, tau) = robot.actuate(command);
-                    dx[i] = robot.derivative(&x[i], applied);
-                    speeds[i] = [x[i].v, x[i].omega, applied.u1, applied.u2];
-                    AgentOutput {
-                        e: e_true,
-                        z: z_true,
-                        e_hat: e,
-                        z_hat: z,
-                        command,
-                        u: applied,
-                        tau,
-                        velocity: None,
-                    }
-                }
-                Drive::Velocity(r) => {
-                    let command = held.map_or(velocity.unwrap_or_default(), |h| h[i].c);
-                    let (c, saturated) = r.base.limit(command);
-                    dx[i] = r.base.derivative(&x[i], c);
-                    let (v, w) = r.base.speeds(&x[i], c);
-                    speeds[i] = [v, w, c.v, c.omega];
-                    AgentOutput {
-                        e: e_true,
-                        z: z_true,
-                        e_hat: e,
-                        z_hat: z,
-                        velocity: Some(VelocityOutput {
-                            command,
-                            applied: c,
-                            saturated,
-                        }),
-                        ..AgentOutput::default()
-                    }
-                }
-            };
+            let command = held.map_or_else(|| law.command(), |h| h[i]);
+            let applied = a.drive.actuate(command);
+            dx[i] = a.drive.derivative(&x[i], &applied);
+            speeds[i] = a.drive.speeds(&x[i], &applied);
+            let output = AgentOutput::of(e_true, z_true, e, z, command, &applied);
             if let Some(out) = out.as_deref_mut() {
                 out[i] = output;
             }
@@ -669,13 +414,14 @@ impl System {
 #[derive(Debug, Clone)]
 pub struct Simulation {
     sys: System,
+    plan: Plan,
     config: SimConfig,
     steps: u64,
     hold_every: u64,
-    warnings: Vec<String>,
     step: u64,
     state: Vec<State>,
-    held: Vec<Held>,
+    /// The commands held between controller samples (the law's, filtered).
+    held: Vec<Command>,
     /// Whether any agent is on a velocity base (its state is settled after each step).
     velocity_agents: bool,
     /// Velocities each robot moves at in RK4's four stages, and the inputs
@@ -702,103 +448,11 @@ pub struct Simulation {
     k4: Vec<State>,
 }
 
-/// The agents of a formation, checked together: their leader graph is a
-/// forest rooted at the reference ([`Formation::new`]) and no agent behind a
-/// robot leader asks for exact `L_Y` derivatives (they need the leader's 3rd
-/// and 4th derivatives, which only analytic references provide).
-#[derive(Debug, Clone)]
-pub struct Agents {
-    specs: Vec<AgentSpec>,
-    formation: Formation,
-}
-
-impl Agents {
-    /// Checks the agents together (each is valid by [`AgentSpec::new`]).
-    pub fn new(specs: Vec<AgentSpec>) -> Result<Agents, FormationError> {
-        let formation = Formation::new(specs.iter().map(|a| a.leader).collect())?;
-        for (i, a) in specs.iter().enumerate() {
-            if let Leader::Agent(j) = a.leader
-                && a.placement.uses_exact_derivatives()
-            {
-                return Err(FormationError::ExactDerivativesNeedReference {
-                    agent: i + 1,
-                    leader: j + 1,
-                });
-            }
-            if let Leader::Agent(j) = a.leader
-                && a.torque_robot().is_some()
-                && specs[j]
-                    .velocity_robot()
-                    .is_some_and(|r| r.base.tau_v == 0.0)
-            {
-                return Err(FormationError::NoLeaderAcceleration {
-                    agent: i + 1,
-                    leader: j + 1,
-                });
-            }
-        }
-        Ok(Agents { specs, formation })
-    }
-
-    /// The agents.
-    pub fn specs(&self) -> &[AgentSpec] {
-        &self.specs
-    }
-
-    /// Their leader graph.
-    pub fn formation(&self) -> &Formation {
-        &self.formation
-    }
-}
-
 impl Simulation {
-    /// Builds a simulation from agents and settings that are valid by
-    /// construction ([`AgentSpec::new`], [`SimConfig::new`]), refusing what
-    /// only exists at the level of the formation ([`Agents::new`]) and a
-    /// velocity base's lag the step cannot resolve
-    /// ([`crate::base::VelocityBase::check_step`]).
-    pub fn new(
-        agents: Vec<AgentSpec>,
-        reference: Reference,
-        config: SimConfig,
-    ) -> Result<Simulation, SimError> {
-        for (i, a) in agents.iter().enumerate() {
-            if let Some(r) = a.velocity_robot() {
-                r.base
-                    .check_step(config.dt)
-                    .map_err(|source| SimError::Param {
-                        context: format!("agent {} robot", i + 1),
-                        source,
-                    })?;
-            }
-        }
-        Ok(Simulation::of(Agents::new(agents)?, reference, config))
-    }
-
-    /// [`Simulation::new`] for agents already checked together: checks nothing.
-    pub fn of(agents: Agents, reference: Reference, config: SimConfig) -> Simulation {
-        let Agents {
-            specs: agents,
-            formation,
-        } = agents;
-        let mut warnings = Vec::new();
-        for (i, a) in agents.iter().enumerate() {
-            let ctx = format!("agent {}", i + 1);
-            if a.variant() == Some(Variant::Paper) && a.gains.ke * a.gains.kz <= 0.25 {
-                warnings.push(format!(
-                    "{ctx}: K_e K_z = {} ≤ 1/4: Theorem 1 does not guarantee convergence for the paper law (use law = \"complete\")",
-                    a.gains.ke * a.gains.kz
-                ));
-            }
-            let (lo, hi) = FitCoefficients::PAPER_RANGE;
-            if a.placement.comp == LyComp::Fit && !(lo..=hi).contains(&a.placement.lx_off) {
-                warnings.push(format!(
-                    "{ctx}: L_Xoff = {} m is outside the range {lo}–{hi} m where the eq. 6 fit holds (use lycomp = \"exact\")",
-                    a.placement.lx_off
-                ));
-            }
-        }
-
+    /// The simulation of `plan` at `t = 0`.
+    pub fn new(plan: &Plan) -> Simulation {
+        let agents = plan.agents().to_vec();
+        let config = *plan.config();
         let order = if agents.iter().any(|a| a.placement.uses_exact_derivatives()) {
             Order::Four
         } else {
@@ -808,31 +462,59 @@ impl Simulation {
         let n = agents.len();
         let state: Vec<State> = agents.iter().map(|a| a.start).collect();
         let velocity_agents = agents.iter().any(|a| a.velocity_robot().is_some());
+        let held = agents.iter().map(|a| a.drive.zero()).collect();
+        let mut hold_every = config.hold_every();
+        let safety = plan.safety().map(|spec| {
+            if hold_every == 0 {
+                hold_every = 1;
+            }
+            let period = hold_every as f64 * config.dt;
+            Box::new(SafetyState {
+                filters: spec
+                    .agents
+                    .iter()
+                    .map(|c| c.map(|c| SafetyFilter::new(c).with_period(period)))
+                    .collect(),
+                obstacles: spec.obstacles.clone(),
+                l: agents.iter().map(|a| a.placement.l).collect(),
+                out: spec
+                    .agents
+                    .iter()
+                    .map(|c| SafetyOutput {
+                        enabled: c.is_some(),
+                        min_distance: f64::INFINITY,
+                        ..SafetyOutput::default()
+                    })
+                    .collect(),
+                seen: vec![State::default(); n],
+                neighbours: Vec::with_capacity(n),
+            })
+        });
         Simulation {
             sys: System {
                 agents,
-                formation,
-                reference,
+                formation: plan.formation().clone(),
+                reference: plan.reference().clone(),
                 order,
                 uses_reference,
             },
+            plan: plan.clone(),
             config,
             steps: config.steps(),
-            hold_every: config.hold_every(),
-            warnings,
+            hold_every,
             step: 0,
             state,
-            held: vec![Held::default(); n],
+            held,
             velocity_agents,
             speeds: std::array::from_fn(|_| vec![[0.0; 4]; n]),
             out: vec![AgentOutput::default(); n],
             k1: vec![State::default(); n],
             fresh: false,
-            odometers: Vec::new(),
-            odometry_every: Vec::new(),
+            odometers: plan.odometers().to_vec(),
+            odometry_every: plan.odometry_every().to_vec(),
             distance: vec![0.0; n],
             input_integral: vec![[0.0; 2]; n],
-            safety: None,
+            safety,
             stage: vec![State::default(); n],
             k2: vec![State::default(); n],
             k3: vec![State::default(); n],
@@ -840,55 +522,9 @@ impl Simulation {
         }
     }
 
-    /// Gives agents odometers: `specs[i]` for agent `i` (`None`: it knows its true
-    /// pose). The controller then acts on the odometry estimate while the plant
-    /// moves truly. Random errors draw from `seed`, one stream per agent. Refuses
-    /// sampling periods that are not whole multiples of `dt` and invalid models.
-    pub fn with_odometry(
-        mut self,
-        specs: Vec<Option<OdometrySpec>>,
-        seed: u64,
-    ) -> Result<Simulation, SimError> {
-        let n = self.sys.agents.len();
-        if specs.len() != n {
-            return Err(SimError::Timing(format!(
-                "{} odometry specs for {n} agents",
-                specs.len()
-            )));
-        }
-        if specs.iter().all(Option::is_none) {
-            return Ok(self);
-        }
-        let dt = self.config.dt;
-        let mut odometers = Vec::with_capacity(n);
-        let mut every = Vec::with_capacity(n);
-        for (i, spec) in specs.into_iter().enumerate() {
-            let context = || format!("agent {} odometry", i + 1);
-            match spec {
-                None => {
-                    odometers.push(None);
-                    every.push(1);
-                }
-                Some(spec) => {
-                    let a = &self.sys.agents[i];
-                    let param = |source| SimError::Param {
-                        context: context(),
-                        source,
-                    };
-                    let k = check::multiple_of("period", spec.period, dt, &format!("dt = {dt} s"))
-                        .map_err(param)?;
-                    let (l, r) = a.drive.wheels();
-                    let o = Odometer::with_wheels(spec, l, r, &a.start, seed, i as u64)
-                        .map_err(param)?;
-                    odometers.push(Some(o));
-                    every.push(k);
-                }
-            }
-        }
-        self.odometers = odometers;
-        self.odometry_every = every;
-        self.fresh = false;
-        Ok(self)
+    /// The plan it runs.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
     }
 
     /// Each agent's odometer (empty without odometry).
@@ -918,7 +554,7 @@ impl Simulation {
 
     /// Things that are allowed but probably not what the user wants.
     pub fn warnings(&self) -> &[String] {
-        &self.warnings
+        self.plan.warnings()
     }
 
     /// Total number of steps of the run.
@@ -964,10 +600,7 @@ impl Simulation {
         );
         if sample {
             for (h, o) in self.held.iter_mut().zip(&self.out) {
-                h.u = o.command;
-                if let Some(v) = o.velocity {
-                    h.c = v.command;
-                }
+                *h = o.commanded();
             }
             if self.safety.is_some() {
                 self.filter();
@@ -1013,28 +646,22 @@ impl Simulation {
             let Some(filter) = safety.filters[i].as_mut() else {
                 continue;
             };
-            let (me, l) = (&safety.seen[i], safety.l[i]);
-            let (nb, obs) = (&safety.neighbours[..], &safety.obstacles[..]);
-            let h = &mut self.held[i];
+            let guard = Guard {
+                filter,
+                sight: Sight::Neighbours(&safety.neighbours),
+                obstacles: &safety.obstacles,
+            };
+            let act = self.sys.agents[i].act(t, &safety.seen[i], self.held[i], Some(guard));
+            self.held[i] = act.command;
             let o = &mut safety.out[i];
-            match &self.sys.agents[i].drive {
-                Drive::Velocity(r) => {
-                    let f = filter.velocity(t, me, l, h.c, &r.base, nb, obs);
-                    h.c = f.command;
-                    o.nominal = [f.nominal.v, f.nominal.omega];
-                    o.filtered = [f.command.v, f.command.omega];
-                    (o.outcome, o.deadlock, o.min_distance) =
-                        (f.outcome, f.deadlock, f.min_distance);
-                }
-                Drive::Torque { robot, .. } => {
-                    let f = filter.torque(t, me, l, robot, h.u, nb, obs);
-                    h.u = f.command;
-                    o.nominal = [f.nominal.u1, f.nominal.u2];
-                    o.filtered = [f.command.u1, f.command.u2];
-                    (o.outcome, o.deadlock, o.min_distance) =
-                        (f.outcome, f.deadlock, f.min_distance);
-                }
+            o.nominal = act.nominal.values();
+            o.filtered = act.command.values();
+            if let Some(g) = act.safety {
+                (o.outcome, o.deadlock, o.min_distance) = (g.outcome, g.deadlock, g.min_distance);
             }
+            let Some(filter) = safety.filters[i].as_ref() else {
+                continue;
+            };
             o.sampled = true;
             o.deadlock_breaks = filter.deadlock_breaks();
             o.deadlocked = filter.deadlocked();
@@ -1050,96 +677,18 @@ impl Simulation {
             &mut self.speeds[0],
         );
         for (i, a) in self.sys.agents.iter().enumerate() {
-            let (h, o) = (&self.held[i], &mut self.out[i]);
-            match &a.drive {
-                Drive::Torque { robot, .. } => {
-                    (o.u, o.tau) = robot.actuate(h.u);
-                }
-                Drive::Velocity(r) => {
-                    if let Some(v) = o.velocity.as_mut() {
-                        v.applied = r.base.limit(h.c).0;
-                    }
-                }
+            let applied = a.drive.actuate(self.held[i]);
+            let o = &mut self.out[i];
+            (o.u, o.tau) = (applied.u, applied.tau);
+            if let (Some(v), Some((c, _))) = (o.velocity.as_mut(), applied.velocity) {
+                v.applied = c;
             }
         }
     }
 
-    /// Puts a safety filter between each agent's law and its base
-    /// ([`crate::safety`]); `spec.agents[i]` for agent `i` (`None`: it does
-    /// not filter). The law and the filter then run once per controller
-    /// period (once per step `dt` for a continuous-time controller) and the
-    /// filtered command is held in between. Refuses a spec of the wrong
-    /// length, and a robot whose point starts within `radius` of another's
-    /// or of an obstacle's edge.
-    pub fn with_safety(mut self, spec: SafetySpec) -> Result<Simulation, SimError> {
-        let n = self.sys.agents.len();
-        if spec.agents.len() != n {
-            return Err(SimError::Timing(format!(
-                "{} safety configs for {n} agents",
-                spec.agents.len()
-            )));
-        }
-        if spec.agents.iter().all(Option::is_none) {
-            return Ok(self);
-        }
-        let l: Vec<f64> = self.sys.agents.iter().map(|a| a.placement.l).collect();
-        let points: Vec<[f64; 2]> = self
-            .sys
-            .agents
-            .iter()
-            .zip(&l)
-            .map(|(a, &l)| crate::safety::point(&a.start, l))
-            .collect();
-        if let Some((agent, source)) =
-            crate::safety::start_conflict(&points, &spec.agents, &spec.obstacles)
-        {
-            return Err(SimError::Param {
-                context: format!("agent {} start", agent + 1),
-                source,
-            });
-        }
-        if self.hold_every == 0 {
-            self.hold_every = 1;
-        }
-        let period = self.hold_every as f64 * self.config.dt;
-        self.safety = Some(Box::new(SafetyState {
-            filters: spec
-                .agents
-                .iter()
-                .map(|c| c.map(|c| SafetyFilter::new(c).with_period(period)))
-                .collect(),
-            obstacles: spec.obstacles,
-            l,
-            out: spec
-                .agents
-                .iter()
-                .map(|c| SafetyOutput {
-                    enabled: c.is_some(),
-                    min_distance: f64::INFINITY,
-                    ..SafetyOutput::default()
-                })
-                .collect(),
-            seen: vec![State::default(); n],
-            neighbours: Vec::with_capacity(n),
-        }));
-        self.fresh = false;
-        Ok(self)
-    }
-
     /// The obstacles every agent knows (empty without a safety filter).
     pub fn obstacles(&self) -> &[Obstacle] {
-        self.safety.as_ref().map_or(&[], |s| &s.obstacles[..])
-    }
-
-    /// Each agent's safety settings (`None`: it does not filter); empty
-    /// without a safety filter.
-    pub fn safety_configs(&self) -> Vec<Option<SafetyConfig>> {
-        self.safety.as_deref().map_or_else(Vec::new, |s| {
-            s.filters
-                .iter()
-                .map(|f| f.as_ref().map(|f| *f.config()))
-                .collect()
-        })
+        self.plan.obstacles()
     }
 
     /// Whether a safety filter runs.
@@ -1149,12 +698,7 @@ impl Simulation {
 
     /// The smallest `radius` among the agents that filter (`None`: none does).
     pub fn safety_radius(&self) -> Option<f64> {
-        let s = self.safety.as_deref()?;
-        s.filters
-            .iter()
-            .flatten()
-            .map(|f| f.config().radius)
-            .reduce(f64::min)
+        self.plan.safety_radius()
     }
 
     /// The current frame (evaluating the controllers if needed).
@@ -1638,7 +1182,7 @@ mod observer_tests {
                 ..Overrides::default()
             })
             .unwrap()
-            .simulation
+            .simulation()
     }
 
     #[test]

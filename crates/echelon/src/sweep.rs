@@ -301,8 +301,8 @@ pub fn run_case(
     grid: &Grid,
     case: &Case,
 ) -> Result<Row, SweepError> {
-    let mut run = build_case(scenario, overrides, grid, case)?;
-    let sim = &mut run.simulation;
+    let run = build_case(scenario, overrides, grid, case)?;
+    let sim = &mut run.simulation();
     let n = sim.agents().len();
     let mut z_max = vec![0.0f64; n];
     let (mut z_hat_max, mut drift, mut drift_max) = (0.0f64, 0.0f64, 0.0f64);
@@ -474,8 +474,8 @@ pub fn drift_curves(
     models
         .par_iter()
         .map(|case| {
-            let mut run = build_case(scenario, overrides, grid, case)?;
-            let sim = &mut run.simulation;
+            let run = build_case(scenario, overrides, grid, case)?;
+            let sim = &mut run.simulation();
             let every = (sim.steps() / points.max(1) as u64).max(1);
             let mut times = Vec::with_capacity(points + 2);
             let mut drift = Vec::with_capacity(points + 2);

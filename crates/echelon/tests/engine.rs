@@ -15,14 +15,15 @@ use echelon::lycomp::{LyComp, LyDerivatives, Placement};
 use echelon::model::{RobotParams, State};
 use echelon::reference::{Lemniscate, Reference};
 use echelon::rng::SplitMix64;
-use echelon::sim::{AgentSpec, SimConfig, Simulation, Timing};
+use echelon::{AgentSpec, Plan, SimConfig, Simulation, Timing};
 
 /// Steps both `steps` times and compares states and controller outputs;
 /// returns the largest relative difference seen.
 fn compare(agents: Vec<AgentSpec>, reference: Reference, dt: f64, steps: u64) -> f64 {
     let config = SimConfig::new(dt, steps as f64 * dt, Timing::Continuous).unwrap();
-    let mut sim = Simulation::new(agents, reference, config).unwrap();
-    let mut engine = Engine::from_simulation(&sim).unwrap();
+    let plan = Plan::new(agents, reference, config).unwrap();
+    let mut sim = Simulation::new(&plan);
+    let mut engine = Engine::from_plan(&plan).unwrap();
     let mut worst = 0.0f64;
     let mut check = |sim: &mut Simulation, engine: &Engine| {
         let probes = engine.probes();
@@ -141,10 +142,11 @@ fn long_chains_agree_as_well_as_their_sensitivity_allows() {
     let f = formation(300, Topology::Chain, 21);
     let config = SimConfig::new(0.01, 20.0, Timing::Continuous).unwrap();
     let mut specs = f.agent_specs();
-    let mut sim = Simulation::new(specs.clone(), f.reference(), config).unwrap();
-    let mut engine = Engine::from_simulation(&sim).unwrap();
+    let plan = Plan::new(specs.clone(), f.reference(), config).unwrap();
+    let mut sim = Simulation::new(&plan);
+    let mut engine = Engine::from_plan(&plan).unwrap();
     specs[0].start.x = specs[0].start.x.next_up();
-    let mut nudged = Simulation::new(specs, f.reference(), config).unwrap();
+    let mut nudged = Simulation::new(&Plan::new(specs, f.reference(), config).unwrap());
     let distance = |a: &[State], b: &[State]| {
         a.iter()
             .zip(b)
@@ -308,8 +310,8 @@ fn what_the_engine_cannot_do_is_refused() {
     assert!(Engine::from_agents(&[], f.reference(), 0.01).is_err());
     assert!(f.engine(0.0).is_err());
     let config = SimConfig::new(0.01, 1.0, Timing::Sampled { period: 0.02 }).unwrap();
-    let sim = Simulation::new(f.agent_specs(), f.reference(), config).unwrap();
-    assert!(Engine::from_simulation(&sim).is_err());
+    let plan = Plan::new(f.agent_specs(), f.reference(), config).unwrap();
+    assert!(Engine::from_plan(&plan).is_err());
     // Odometry: the controllers act on estimates, which the engine does not model.
     let config = SimConfig::new(0.01, 1.0, Timing::Continuous).unwrap();
     let spec = echelon::odometry::OdometrySpec {
@@ -317,12 +319,20 @@ fn what_the_engine_cannot_do_is_refused() {
         errors: echelon::odometry::ErrorModel::PERFECT,
         fixes: None,
     };
-    let sim = Simulation::new(f.agent_specs(), f.reference(), config)
-        .unwrap()
+    let plan = Plan::new(f.agent_specs(), f.reference(), config).unwrap();
+    let with_odometry = plan
+        .clone()
         .with_odometry(vec![Some(spec), None, None, None], 0)
         .unwrap();
-    let err = Engine::from_simulation(&sim).unwrap_err();
+    let err = Engine::from_plan(&with_odometry).unwrap_err();
     assert!(err.to_string().contains("odometry"), "{err}");
+    // Safety filters: the engine has none.
+    let safety = echelon::sim::SafetySpec {
+        agents: vec![Some(echelon::safety::SafetyConfig::new(0.01, 1.0, 1.0).unwrap()); 4],
+        obstacles: Vec::new(),
+    };
+    let err = Engine::from_plan(&plan.with_safety(safety).unwrap()).unwrap_err();
+    assert!(err.to_string().contains("safety"), "{err}");
 }
 
 #[test]
@@ -339,7 +349,7 @@ fn a_blow_up_is_reported_like_the_scalar_simulator_does() {
         specs[bad].gains = Gains::new(50.0, 500.0).unwrap();
         let dt = 0.05;
         let config = SimConfig::new(dt, 100.0, Timing::Continuous).unwrap();
-        let mut sim = Simulation::new(specs.clone(), f.reference(), config).unwrap();
+        let mut sim = Simulation::new(&Plan::new(specs.clone(), f.reference(), config).unwrap());
         let want = loop {
             if let Err(e) = sim.step() {
                 break e;

@@ -424,7 +424,7 @@ fn a_diverging_formation_fails_like_the_torque_engine() {
 fn the_engine_agrees_with_the_simulator() {
     use echelon::base::VelocityRobot;
     use echelon::formation::Leader;
-    use echelon::sim::{AgentSpec, SimConfig, Simulation, Timing};
+    use echelon::{AgentSpec, Plan, SimConfig, Simulation, Timing};
     let (dt, steps) = (0.01, 1500);
     for (name, base) in bases() {
         let mut ticks = 0;
@@ -458,7 +458,7 @@ fn the_engine_agrees_with_the_simulator() {
                 })
                 .collect();
             let config = SimConfig::new(dt, steps as f64 * dt, Timing::Continuous).unwrap();
-            let mut sim = Simulation::new(agents, f.reference(), config).unwrap();
+            let mut sim = Simulation::new(&Plan::new(agents, f.reference(), config).unwrap());
             let batch = VelocityBatch::new(base, topology, f.reference(), dt).unwrap();
             let mut engine = VelocityEngine::new(batch, members).unwrap();
             let mut worst = 0.0f64;

@@ -361,20 +361,21 @@ fn check(src: &str) -> Result<Outcome, String> {
     if let Err(e) = scenario.fleet() {
         located(&e.to_string())?;
     }
-    let config = run.simulation.config();
+    let config = run.plan.config();
     let duration = config.duration.min(MAX_DURATION).min(MAX_STEPS * config.dt);
-    let mut run = scenario
+    let run = scenario
         .build(&Overrides {
             duration: Some(duration),
             ..Overrides::default()
         })
         .map_err(|e| format!("built, then refused with --duration {duration}: {e}"))?;
-    let mut summary = Summary::new(run.simulation.agents().len(), Summary::SETTLE_TOLERANCE);
-    if run.simulation.run(&mut summary).is_err() {
+    let mut summary = Summary::new(run.plan.agents().len(), Summary::SETTLE_TOLERANCE);
+    let mut sim = run.simulation();
+    if sim.run(&mut summary).is_err() {
         // A run stopped with a reason (a state no longer finite, a divergence).
         return Ok(Outcome::Refused);
     }
-    for a in summary.agents(run.simulation.agents()) {
+    for a in summary.agents(run.plan.agents()) {
         let pose = [a.final_pose.x, a.final_pose.y, a.final_pose.theta];
         let sane = |v: f64, bound: f64| v.is_finite() && v.abs() < bound;
         if !(sane(a.final_error, SANE_ERROR)
@@ -385,7 +386,7 @@ fn check(src: &str) -> Result<Outcome, String> {
             return Ok(Outcome::Absurd(format!(
                 "the run ended Ok with an absurd summary for agent {} after {} s: final error {} m, RMS {} m, peak torque {} N m, final pose {pose:?}",
                 a.agent,
-                run.simulation.time(),
+                sim.time(),
                 a.final_error,
                 a.rms_error,
                 a.peak_torque

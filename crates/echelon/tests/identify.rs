@@ -269,13 +269,13 @@ fn an_echelon_run_log_gives_table_i_and_the_identified_robot_reproduces_a_scenar
             .unwrap()
             .build(&Overrides::default())
             .unwrap();
-        let spec = &identified.simulation.agents()[agent - 1];
+        let spec = &identified.plan.agents()[agent - 1];
         assert_ne!(spec.torque_robot(), Some(&truth), "the block is in use");
-        let with_identified = closed_loop_error(&identified.simulation, spec, &truth, 3.0);
+        let with_identified = closed_loop_error(&identified.simulation(), spec, &truth, 3.0);
         let reference = circle.build(&Overrides::default()).unwrap();
         let with_truth = closed_loop_error(
-            &reference.simulation,
-            &reference.simulation.agents()[agent - 1],
+            &reference.simulation(),
+            &reference.plan.agents()[agent - 1],
             &truth,
             3.0,
         );
@@ -307,8 +307,8 @@ fn an_echelon_run_log_gives_table_i_and_the_identified_robot_reproduces_a_scenar
         .build(&Overrides::default())
         .unwrap();
         let with_wrong = closed_loop_error(
-            &wrong.simulation,
-            &wrong.simulation.agents()[agent - 1],
+            &wrong.simulation(),
+            &wrong.plan.agents()[agent - 1],
             &truth,
             3.0,
         );
@@ -563,7 +563,7 @@ fn builtin_run(
     let full = parsed
         .build(&Overrides::default())
         .unwrap()
-        .simulation
+        .plan
         .config()
         .duration;
     let mut run = parsed
@@ -573,7 +573,7 @@ fn builtin_run(
             ..Overrides::default()
         })
         .unwrap();
-    let specs = run.simulation.agents().to_vec();
+    let specs = run.plan.agents().to_vec();
     let dir = tempfile::tempdir().unwrap();
     let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
     output::run_to_dir(&mut run, dir.path(), &mut none).unwrap();
@@ -591,7 +591,7 @@ fn builtins(torque: bool) -> Vec<&'static str> {
                 .unwrap()
                 .build(&Overrides::default())
                 .unwrap();
-            run.simulation.agents().iter().any(|a| {
+            run.plan.agents().iter().any(|a| {
                 if torque {
                     a.torque_robot().is_some()
                 } else {
@@ -751,7 +751,7 @@ fn check_case(name: &str, swap: bool, log_ms: u32, torque: bool) {
     let step = scenario
         .build(&Overrides::default())
         .unwrap()
-        .simulation
+        .plan
         .config()
         .dt;
     // The log interval is a whole multiple of the step.

@@ -89,7 +89,7 @@ fn dead_reckoning_is_exact_on_lines_and_arcs_with_perfect_encoders() {
 /// Drives the closed loop of `scenario` and, at every odometry sample, calls
 /// `check(samples, true state, estimate)`.
 fn at_samples(scenario: &str, check: &mut dyn FnMut(u64, &State, Pose)) {
-    let mut run = Scenario::parse(scenario, "test.toml", None)
+    let run = Scenario::parse(scenario, "test.toml", None)
         .unwrap()
         .build(&Overrides::default())
         .unwrap();
@@ -101,7 +101,7 @@ fn at_samples(scenario: &str, check: &mut dyn FnMut(u64, &State, Pose)) {
         }
         Ok(())
     };
-    run.simulation.run(&mut obs).unwrap();
+    run.simulation().run(&mut obs).unwrap();
 }
 
 const LEMNISCATE: &str = r#"

@@ -16,7 +16,7 @@ fn built(name: &str) -> Simulation {
         .unwrap_or_else(|| panic!("built-in {name}"))
         .build(&Overrides::default())
         .expect("built-in scenarios build")
-        .simulation
+        .simulation()
 }
 
 /// Runs to the end, returning the largest ‖e‖ per agent after `after` seconds.
@@ -151,8 +151,8 @@ fn built_in_durations_cover_the_whole_manoeuvre() {
 fn sampled_controller_holds_its_command_between_samples() {
     let scenario = Scenario::builtin("nonfeasible").unwrap();
     let run = scenario.build(&Overrides::default()).unwrap();
-    let agents = run.simulation.agents().to_vec();
-    let reference = run.simulation.reference().clone();
+    let agents = run.plan.agents().to_vec();
+    let reference = run.plan.reference().clone();
     let period = 0.01;
     let held = record_with(
         agents.clone(),
@@ -194,13 +194,13 @@ fn torque_saturation_limits_every_wheel() {
         },
     );
     scenario.file.agents[0].robot = Some("weak".into());
-    let mut run = scenario.build(&Overrides::default()).unwrap();
+    let run = scenario.build(&Overrides::default()).unwrap();
     let mut peak = 0.0f64;
     let mut obs = |f: &Frame<'_>| -> Result<(), ObserverError> {
         peak = peak.max(f.outputs[0].tau.peak());
         Ok(())
     };
-    run.simulation.run(&mut obs).unwrap();
+    run.simulation().run(&mut obs).unwrap();
     assert!(peak <= 5.0 + 1e-12, "peak torque {peak}");
     assert!(peak > 4.99, "the limit is reached in this manoeuvre");
 }

@@ -28,8 +28,8 @@ fn run(name: &str, filter: bool) -> (Option<SafetyReport>, f64, f64, Vec<f64>) {
     if !filter {
         s.file.safety = None;
     }
-    let mut run = s.build(&Overrides::default()).unwrap();
-    let sim = &mut run.simulation;
+    let run = s.build(&Overrides::default()).unwrap();
+    let sim = &mut run.simulation();
     assert_eq!(sim.has_safety(), filter);
     let l: Vec<f64> = sim.agents().iter().map(|a| a.placement.l).collect();
     let (mut closest, mut clearance) = (f64::INFINITY, f64::INFINITY);
@@ -265,9 +265,9 @@ fn build(src: &str) -> Result<echelon::Run, ScenarioError> {
 #[test]
 fn the_base_builds_with_a_filter_per_agent() {
     let run = build(BASE).unwrap();
-    assert!(run.simulation.has_safety());
-    assert_eq!(run.simulation.obstacles().len(), 1);
-    assert_eq!(run.simulation.safety_radius(), Some(0.3));
+    assert!(run.plan.safety().is_some());
+    assert_eq!(run.plan.obstacles().len(), 1);
+    assert_eq!(run.plan.safety_radius(), Some(0.3));
 }
 
 #[test]

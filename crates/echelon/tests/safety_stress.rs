@@ -135,14 +135,14 @@ const LONGEST: f64 = 180.0;
 fn run(case: &Case) -> Option<Seen> {
     let src = case.toml();
     let scenario = Scenario::parse(&src, "stress.toml", None).unwrap();
-    let mut run = match scenario.build(&Overrides::default()) {
+    let run = match scenario.build(&Overrides::default()) {
         Ok(r) => r,
         Err(e) => {
             assert!(e.to_string().contains("safety radius"), "{e}\n{src}");
             return None;
         }
     };
-    let sim = &mut run.simulation;
+    let sim = &mut run.simulation();
     let l: Vec<f64> = sim.agents().iter().map(|a| a.placement.l).collect();
     let mut seen = Seen {
         closest: f64::INFINITY,

@@ -48,10 +48,10 @@ fn every_scenario_file_parses_builds_and_round_trips() {
             .build(&Overrides::default())
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(
-            run.simulation.warnings().is_empty() && run.warnings.is_empty(),
+            run.plan.warnings().is_empty() && run.warnings.is_empty(),
             "{}: {:?} {:?}",
             s.name(),
-            run.simulation.warnings(),
+            run.plan.warnings(),
             run.warnings
         );
         assert!(
@@ -122,8 +122,8 @@ fn expect_errors_in_base(cases: &[(&str, &str, usize, &str, &str)]) {
 #[test]
 fn the_base_scenario_is_valid() {
     let run = build(BASE).unwrap();
-    assert_eq!(run.simulation.agents().len(), 2);
-    assert_eq!(run.simulation.agents()[1].name, "agent 2");
+    assert_eq!(run.plan.agents().len(), 2);
+    assert_eq!(run.plan.agents()[1].name, "agent 2");
     assert_eq!(run.log_every, 1);
 }
 
@@ -338,7 +338,7 @@ fn waypoints_load_from_a_csv_file_next_to_the_scenario() {
         .build(&Overrides::default())
         .unwrap();
     assert!(
-        matches!(run.simulation.reference(), echelon::reference::Reference::Waypoints(w) if w.points().len() == 3)
+        matches!(run.plan.reference(), echelon::reference::Reference::Waypoints(w) if w.points().len() == 3)
     );
     // A bad cell names the CSV file, its line and the column.
     std::fs::write(dir.path().join("path.csv"), "t,x,y\n0,0,0\n5,two,1\n").unwrap();
@@ -362,11 +362,11 @@ fn overrides_replace_the_files_timing_and_law() {
             seed: Some(9),
         })
         .unwrap();
-    assert_eq!(run.simulation.steps(), 1500);
+    assert_eq!(run.plan.steps(), 1500);
     assert_eq!(run.seed, 9);
     assert_eq!(run.log_every, 1);
     assert_eq!(
-        run.simulation.agents()[0].variant(),
+        run.plan.agents()[0].variant(),
         Some(echelon::Variant::Complete)
     );
     let bad = s.build(&Overrides {
@@ -393,7 +393,7 @@ fn overrides_replace_the_files_timing_and_law() {
         })
         .unwrap();
     assert!(
-        run.simulation
+        run.plan
             .agents()
             .iter()
             .all(|a| a.variant() == Some(echelon::Variant::Complete))
@@ -574,22 +574,22 @@ fn the_readme_example_scenario_builds_and_runs() {
         + "```toml\n".len();
     let len = readme[start..].find("```").unwrap();
     let example = &readme[start..start + len];
-    let mut run = Scenario::parse(example, "README.md", None)
+    let run = Scenario::parse(example, "README.md", None)
         .unwrap_or_else(|e| panic!("{e}"))
         .build(&Overrides {
             duration: Some(5.0),
             ..Overrides::default()
         })
         .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(run.simulation.agents().len(), 2);
+    assert_eq!(run.plan.agents().len(), 2);
     assert_eq!(
-        run.simulation.agents()[1]
+        run.plan.agents()[1]
             .torque_robot()
             .and_then(|r| r.torque_limit),
         Some(5.0)
     );
     let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
-    run.simulation.run(&mut none).unwrap();
+    run.simulation().run(&mut none).unwrap();
 }
 
 /// `BASE` with both agents on the robot `[robots.b]` given by `fields`.
@@ -677,14 +677,8 @@ fn the_law_must_suit_the_drive() {
         "drive = \"velocity\"\ntau_v = 0.05\n",
     ))
     .unwrap();
-    assert_eq!(
-        run.simulation.agents()[0].law(),
-        echelon::control::Law::Kinematic
-    );
-    assert_eq!(
-        run.simulation.agents()[1].law(),
-        echelon::control::Law::Paper
-    );
+    assert_eq!(run.plan.agents()[0].law(), echelon::control::Law::Kinematic);
+    assert_eq!(run.plan.agents()[1].law(), echelon::control::Law::Paper);
 }
 
 /// A velocity scenario's trajectory has the velocity columns, a torque agent's
@@ -927,14 +921,15 @@ fn absurd_values_are_refused_with_their_plausible_range() {
 #[test]
 fn sim_bounds_set_the_divergence_guard() {
     let base = BASE.replace("[sim]\n", "[sim]\nbounds = { speed = 0.05 }\n");
-    let mut run = build(&base).unwrap();
-    let b = run.simulation.config().bounds;
+    let run = build(&base).unwrap();
+    let b = run.plan.config().bounds;
     assert_eq!((b.speed, b.turn_rate, b.distance), (0.05, 100.0, 1e6));
+    let mut sim = run.simulation();
     let err = loop {
-        if let Err(e) = run.simulation.step() {
+        if let Err(e) = sim.step() {
             break e;
         }
-        assert!(!run.simulation.is_done(), "no robot reached 0.05 m/s");
+        assert!(!sim.is_done(), "no robot reached 0.05 m/s");
     };
     match &err {
         echelon::SimError::Diverged { breach, t, .. } => {

@@ -9,13 +9,13 @@ use echelon::sim::{Frame, ObserverError};
 /// Runs `src` and returns, per agent, the logged `(t, e)` of every step, and
 /// `K_e` of each agent.
 fn logged_errors(src: &str) -> (Vec<Vec<[f64; 2]>>, Vec<f64>, f64) {
-    let mut run = Scenario::parse(src, "test.toml", None)
+    let run = Scenario::parse(src, "test.toml", None)
         .unwrap()
         .build(&Overrides::default())
         .unwrap();
-    let n = run.simulation.agents().len();
-    let ke: Vec<f64> = run.simulation.agents().iter().map(|a| a.gains.ke).collect();
-    let dt = run.simulation.config().dt;
+    let n = run.plan.agents().len();
+    let ke: Vec<f64> = run.plan.agents().iter().map(|a| a.gains.ke).collect();
+    let dt = run.plan.config().dt;
     let mut e = vec![Vec::new(); n];
     let mut log = |f: &Frame<'_>| -> Result<(), ObserverError> {
         for (i, o) in f.outputs.iter().enumerate() {
@@ -23,7 +23,7 @@ fn logged_errors(src: &str) -> (Vec<Vec<[f64; 2]>>, Vec<f64>, f64) {
         }
         Ok(())
     };
-    run.simulation.run(&mut log).unwrap();
+    run.simulation().run(&mut log).unwrap();
     (e, ke, dt)
 }
 
@@ -145,15 +145,15 @@ fn lagged_limited_bases_hold_their_limits_and_converge() {
                 robot.accel = Some(echelon::scenario::schema::AccelLimit::PerAxis);
             }
             let text = toml::to_string(&file).unwrap();
-            let mut run = Scenario::parse(&text, "test.toml", None)
+            let run = Scenario::parse(&text, "test.toml", None)
                 .unwrap()
                 .build(&Overrides {
                     duration: Some(60.0),
                     ..Overrides::default()
                 })
                 .unwrap();
-            let dt = run.simulation.config().dt;
-            let b = run.simulation.agents()[0].velocity_robot().unwrap().base;
+            let dt = run.plan.config().dt;
+            let b = run.plan.agents()[0].velocity_robot().unwrap().base;
             let tol = 1e-12;
             let mut prev: Option<Vec<(f64, f64)>> = None;
             let mut last_e = Vec::new();
@@ -174,7 +174,7 @@ fn lagged_limited_bases_hold_their_limits_and_converge() {
                 last_e = f.outputs.iter().map(|o| o.e[0].hypot(o.e[1])).collect();
                 Ok(())
             };
-            run.simulation.run(&mut log).unwrap();
+            run.simulation().run(&mut log).unwrap();
             for e in last_e {
                 assert!(e < 5e-3, "{label} {period:?}: final ‖e‖ = {e}");
             }
@@ -190,20 +190,20 @@ fn velocity_bases_dead_reckon() {
     let base = Scenario::builtin("experiment-circle-velocity").unwrap();
     let text = toml::to_string(&base.file).unwrap()
         + "\n[odometry]\nperiod = 0.01\nwheel_diameter_ratio = 1.002\n";
-    let mut run = Scenario::parse(&text, "test.toml", None)
+    let run = Scenario::parse(&text, "test.toml", None)
         .unwrap()
         .build(&Overrides {
             duration: Some(30.0),
             ..Overrides::default()
         })
         .unwrap();
-    assert!(run.simulation.odometers().iter().all(Option::is_some));
+    assert!(run.plan.odometers().iter().all(Option::is_some));
     let mut last = Vec::new();
     let mut log = |f: &Frame<'_>| -> Result<(), ObserverError> {
         last = f.outputs.to_vec();
         Ok(())
     };
-    run.simulation.run(&mut log).unwrap();
+    run.simulation().run(&mut log).unwrap();
     for o in last {
         let (e, e_hat) = (o.e[0].hypot(o.e[1]), o.e_hat[0].hypot(o.e_hat[1]));
         // The controller holds its estimate near the formation (up to the

@@ -374,7 +374,7 @@ pub(crate) struct CertsArgs {
 }
 
 fn agents_of(s: &Scenario) -> Result<u32> {
-    Ok(s.build(&Overrides::default())?.simulation.agents().len() as u32)
+    Ok(s.build(&Overrides::default())?.plan.agents().len() as u32)
 }
 
 /// What every agent process (robot, base, excite) sets up first: its

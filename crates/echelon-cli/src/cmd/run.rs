@@ -85,7 +85,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
         .out
         .unwrap_or_else(|| PathBuf::from("out").join(&run.name));
     if !args.quiet {
-        for w in run.warnings.iter().chain(run.simulation.warnings()) {
+        for w in run.warnings.iter().chain(run.plan.warnings()) {
             super::out::err_line(&format!("warning: {w}"));
         }
     }
@@ -104,7 +104,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     let mut mcap = Every::new(run.log_every, mcap);
     let mut progress = Every::new(
         Progress::CHECK_EVERY,
-        Progress::new(run.simulation.steps(), args.quiet),
+        Progress::new(run.plan.steps(), args.quiet),
     );
     let result = output::run_to_dir(
         &mut run,
@@ -139,12 +139,12 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
     }
     let elapsed = started.elapsed().as_secs_f64();
     if !args.quiet {
-        print_summary(&run.simulation, &summary, elapsed)?;
+        print_summary(&run.simulation(), &summary, elapsed)?;
         let mut files = vec![TRAJECTORY_FILE, REFERENCE_FILE, INTEGRALS_FILE];
-        if !run.simulation.odometers().is_empty() {
+        if !run.plan.odometers().is_empty() {
             files.push(ODOMETRY_FILE);
         }
-        if run.simulation.has_safety() {
+        if run.plan.safety().is_some() {
             files.push(SAFETY_FILE);
         }
         files.extend([SUMMARY_FILE, SCENARIO_FILE]);

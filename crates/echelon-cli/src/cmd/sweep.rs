@@ -91,7 +91,7 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         ..Overrides::default()
     };
     let probe = scenario.build(&overrides)?;
-    let duration = probe.simulation.steps() as f64 * probe.simulation.config().dt;
+    let duration = probe.plan.steps() as f64 * probe.plan.config().dt;
     let grid = Grid {
         zeta: a.zeta.clone(),
         zeta_model: match a.zeta_model {

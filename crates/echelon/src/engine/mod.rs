@@ -1,5 +1,5 @@
 //! A batch engine for large formations: the same system as
-//! [`Simulation`], many agents at a time.
+//! [`crate::sim::Simulation`], many agents at a time.
 //!
 //! [`Engine`] steps formations of agents that share one robot model and one
 //! law variant, following one reference either all directly (a [`Topology::Star`])
@@ -51,6 +51,7 @@ use std::fmt::Debug;
 use pulp::{Arch, Simd, WithSimd};
 use rayon::prelude::*;
 
+use crate::agent::AgentSpec;
 use crate::check;
 use crate::control::{Gains, LawRobot, Variant};
 use crate::error::{ParamError, SimError};
@@ -59,8 +60,8 @@ use crate::guard::{Bounds, Breach};
 use crate::lanes::{Lanes, Mask};
 use crate::lycomp::{LyComp, Placement};
 use crate::model::{RobotParams, State};
+use crate::plan::{Plan, Timing};
 use crate::reference::{Order, Reference, Trajectory};
-use crate::sim::{AgentSpec, Simulation, Timing};
 
 pub use bench::BenchFormation;
 pub use kernel::Probe;
@@ -373,18 +374,22 @@ impl Engine {
         )
     }
 
-    /// The engine for a (not yet stepped) scalar simulation: same agents,
-    /// reference and step. The controller must be continuous.
-    pub fn from_simulation(sim: &Simulation) -> Result<Engine, EngineError> {
-        if sim.config().timing != Timing::Continuous {
+    /// The engine for a plan (what [`crate::sim::Simulation::new`] runs):
+    /// same agents, reference and step. The controller must be continuous,
+    /// without odometry or safety filters.
+    pub fn from_plan(plan: &Plan) -> Result<Engine, EngineError> {
+        if plan.config().timing != Timing::Continuous {
             return Err(EngineError::Unsupported("sampled controllers".into()));
         }
-        if sim.odometers().iter().any(Option::is_some) {
+        if plan.odometers().iter().any(Option::is_some) {
             return Err(EngineError::Unsupported(
                 "odometry (controllers acting on estimated poses)".into(),
             ));
         }
-        Engine::from_agents(sim.agents(), sim.reference().clone(), sim.config().dt)
+        if plan.safety().is_some() {
+            return Err(EngineError::Unsupported("safety filters".into()));
+        }
+        Engine::from_agents(plan.agents(), plan.reference().clone(), plan.config().dt)
     }
 }
 

@@ -14,6 +14,7 @@ use super::schema::{
 };
 use super::waypoints::{self, ReadError};
 use super::{DEFAULT_LOG_DT, Run, Scenario};
+use crate::agent::{AgentSpec, Drive};
 use crate::base::{VelocityBase, VelocityRobot};
 use crate::check;
 use crate::control::{Gains, Law, Variant};
@@ -24,16 +25,16 @@ use crate::lycomp::{LyComp, LyDerivatives, Placement};
 use crate::math::whole_ratio;
 use crate::model::{RobotParams, State};
 use crate::odometry::{ErrorModel, FixSchedule, FixSpec, Fusion, OdometrySpec, ZetaModel};
+use crate::plan::{Agents, Plan, SafetySpec, SimConfig, Timing};
 use crate::reference::{Circle, Cubic, Lemniscate, Reference, Waypoints};
 use crate::safety::{Obstacle, SafetyConfig};
-use crate::sim::{AgentSpec, Agents, Drive, SafetySpec, SimConfig, Simulation, Timing};
 
 /// `L`, m, when neither the agent nor `[control]` sets it.
 const DEFAULT_L: f64 = 0.05;
 
 impl Scenario {
     /// Applies the command-line overrides to the document, resolves defaults,
-    /// validates every value and builds the simulation.
+    /// validates every value and resolves the [`Plan`].
     pub fn build(&self, ov: &Overrides) -> Result<Run, ScenarioError> {
         let mut file = self.file.clone();
         let flags = ov.apply(&mut file);
@@ -42,14 +43,14 @@ impl Scenario {
             at: Locator::new(&self.source, &self.origin, &flags),
             base_dir: self.base_dir.as_deref(),
         };
-        let (simulation, log_every, seed, stiff) = builder.build()?;
+        let (plan, log_every, seed, stiff) = builder.build()?;
         // Each value passed its own rules; now its plausible range.
         let mut warnings = plausible::check(&file, &builder.at, Part::Simulation)?;
         warnings.extend(stiff);
         Ok(Run {
             name: self.name.clone(),
             description: file.description.clone(),
-            simulation,
+            plan,
             log_every,
             seed,
             warnings,
@@ -76,9 +77,9 @@ impl Builder<'_> {
         r.map_err(|e| self.at.param(&section.join(e.field), &e))
     }
 
-    /// The simulation, the logging interval in steps, the seed and the
+    /// The plan, the logging interval in steps, the seed and the
     /// warnings about gains the step cannot resolve.
-    fn build(&self) -> Result<(Simulation, u64, u64, Vec<String>), ScenarioError> {
+    fn build(&self) -> Result<(Plan, u64, u64, Vec<String>), ScenarioError> {
         let f = self.file;
         let sim = FieldPath::from("sim");
         let timing = match f.sim.controller_period {
@@ -143,16 +144,16 @@ impl Builder<'_> {
             .collect::<Result<Vec<_>, _>>()?;
         let seed = f.seed.unwrap_or(0);
         let safety = self.safety(&agents)?;
-        let simulation = Simulation::of(agents, reference, config)
+        let plan = Plan::of(agents, reference, config)
             .with_odometry(odometry, seed)
             .map_err(|e| self.at.error(&FieldPath::from("odometry"), e))?;
-        let simulation = match safety {
-            None => simulation,
-            Some(spec) => simulation
+        let plan = match safety {
+            None => plan,
+            Some(spec) => plan
                 .with_safety(spec)
                 .map_err(|e| self.at.error(&FieldPath::from("safety"), e))?,
         };
-        Ok((simulation, log_every, seed, stiff))
+        Ok((plan, log_every, seed, stiff))
     }
 
     /// A warning for each agent whose gain `K` makes `K h > 2`, `h` the

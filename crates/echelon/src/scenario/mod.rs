@@ -40,6 +40,7 @@ use std::fmt::Display;
 use std::path::{Path, PathBuf};
 
 use crate::error::ScenarioError;
+use crate::plan::Plan;
 use crate::sim::Simulation;
 
 use locate::{FieldPath, Locator, whole_file_error};
@@ -67,20 +68,27 @@ pub struct Run {
     pub name: String,
     /// Its one-line description.
     pub description: Option<String>,
-    /// The simulation, at `t = 0`.
-    pub simulation: Simulation,
+    /// What to run, resolved and checked.
+    pub plan: Plan,
     /// Log every this many steps (1: every step).
     pub log_every: u64,
     /// Seed of the random models.
     pub seed: u64,
     /// Values that are allowed but outside their usual range ([`PLAUSIBLE`]),
     /// one line each: `file:line:column: field: message`. The simulation's
-    /// own warnings are [`Simulation::warnings`].
+    /// own warnings are [`Plan::warnings`].
     pub warnings: Vec<String>,
     /// The scenario as run: a comment header naming where it came from and the
     /// command-line overrides applied, then the exact TOML source.
     /// [`crate::output::run_to_dir`] writes it as `scenario.toml`.
     pub record: String,
+}
+
+impl Run {
+    /// A new simulation of the plan, at `t = 0`.
+    pub fn simulation(&self) -> Simulation {
+        Simulation::new(&self.plan)
+    }
 }
 
 impl Scenario {

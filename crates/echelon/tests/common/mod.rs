@@ -5,7 +5,7 @@ use echelon::formation::Leader;
 use echelon::lycomp::{LyComp, LyDerivatives, Placement};
 use echelon::reference::Reference;
 use echelon::sim::{AgentOutput, Frame, ObserverError};
-use echelon::{AgentSpec, Gains, RobotParams, SimConfig, Simulation, State, Timing, Variant};
+use echelon::{AgentSpec, Gains, Plan, RobotParams, SimConfig, Simulation, State, Timing, Variant};
 
 /// An agent with Table I agent 1's body and the paper's gains.
 pub fn agent(leader: Leader, placement: Placement, start: State, variant: Variant) -> AgentSpec {
@@ -48,11 +48,13 @@ pub fn record_with(
     timing: Timing,
 ) -> Vec<Sample> {
     let mut sim = Simulation::new(
-        agents,
-        reference,
-        SimConfig::new(dt, duration, timing).expect("valid settings"),
-    )
-    .expect("valid simulation");
+        &Plan::new(
+            agents,
+            reference,
+            SimConfig::new(dt, duration, timing).expect("valid settings"),
+        )
+        .expect("valid simulation"),
+    );
     let mut samples = Vec::new();
     let mut obs = |f: &Frame<'_>| -> Result<(), ObserverError> {
         samples.push(Sample {

@@ -3,7 +3,7 @@
 //! commanded against actual `v`, `ω` and saturation).
 
 use crate::figure::{Axis, Dash, Figure, Marker, Panel, Stroke, palette};
-use crate::run::{AgentTrack, Column, RunData, SpeedLimits};
+use crate::run::{AgentTrack, Column, RunData, SpeedLimits, spans_where};
 
 /// How many instants the `paths` figure shows the formation at.
 pub const LINK_INSTANTS: usize = 5;
@@ -303,27 +303,6 @@ fn command_panel(
 pub fn saturated_spans(data: &RunData, a: &AgentTrack) -> Vec<(f64, f64)> {
     let sat = a.get(Column::Sat);
     spans_where(&data.times, sat.len(), |k| sat[k] == 1.0)
-}
-
-/// The maximal runs of the first `len` instants of `times` at which `flag`
-/// holds, as time spans: instant `k` covers `[t_k, t_{k+1}]` (the last one,
-/// `[t_k, t_k]`).
-pub fn spans_where(times: &[f64], len: usize, flag: impl Fn(usize) -> bool) -> Vec<(f64, f64)> {
-    let n = times.len().min(len);
-    let mut spans = Vec::new();
-    let mut k = 0;
-    while k < n {
-        if flag(k) {
-            let start = k;
-            while k < n && flag(k) {
-                k += 1;
-            }
-            spans.push((times[start], times[k.min(n - 1)]));
-        } else {
-            k += 1;
-        }
-    }
-    spans
 }
 
 /// When the speed limits cut each velocity agent's command: a bar at the

@@ -682,3 +682,24 @@ impl RunData {
         }
     }
 }
+
+/// The maximal runs of the first `len` instants of `times` at which `flag`
+/// holds, as time spans: instant `k` covers `[t_k, t_{k+1}]` (the last one,
+/// `[t_k, t_k]`).
+pub fn spans_where(times: &[f64], len: usize, flag: impl Fn(usize) -> bool) -> Vec<(f64, f64)> {
+    let n = times.len().min(len);
+    let mut spans = Vec::new();
+    let mut k = 0;
+    while k < n {
+        if flag(k) {
+            let start = k;
+            while k < n && flag(k) {
+                k += 1;
+            }
+            spans.push((times[start], times[k.min(n - 1)]));
+        } else {
+            k += 1;
+        }
+    }
+    spans
+}

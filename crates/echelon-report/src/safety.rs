@@ -5,8 +5,7 @@
 //! command, braked (QP infeasible) or broke a deadlock.
 
 use crate::figure::{Axis, Dash, Figure, Marker, Panel, Stroke, palette};
-use crate::plots::spans_where;
-use crate::run::{RunData, SafetyData};
+use crate::run::{RunData, SafetyData, spans_where};
 
 /// At each logged instant, the smallest distance between two robots' points
 /// `L` ahead, m (`None`: no safety filter, `L` unknown, or fewer than two robots).

@@ -136,7 +136,7 @@ pub enum SimError {
         /// Simulation time, s.
         t: f64,
         /// What left its bound.
-        breach: crate::guard::Breach,
+        breach: Breach,
     },
     /// An observer failed (e.g. an I/O error while logging).
     #[error("observer: {0}")]
@@ -264,5 +264,33 @@ mod tests {
             e.to_string(),
             "s.toml:3:9: robots.a\\nb.preset: unknown robot `two\\nlines\\t\\u{1b}[31m` (known: ω)"
         );
+    }
+}
+
+/// What left its bound ([`crate::guard::Bounds::check`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Breach {
+    /// The quantity: `x`, `y`, `theta`, `v`, `omega` (not finite), `|v|`,
+    /// `|omega|`, `‖(x, y)‖`.
+    pub quantity: &'static str,
+    /// Its value.
+    pub value: f64,
+    /// Its bound (infinite for a value that is not finite).
+    pub bound: f64,
+    /// Its unit.
+    pub unit: &'static str,
+}
+
+impl std::fmt::Display for Breach {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.value.is_finite() {
+            write!(
+                f,
+                "{} = {:.3e} {} left its bound {} {}",
+                self.quantity, self.value, self.unit, self.bound, self.unit
+            )
+        } else {
+            write!(f, "{} is {} (not finite)", self.quantity, self.value)
+        }
     }
 }

@@ -5,7 +5,7 @@
 //! as a result.
 
 use crate::check;
-use crate::error::ParamError;
+use crate::error::{Breach, ParamError};
 use crate::model::State;
 
 /// Bounds on a robot's state: `|v| ≤ speed`, `|ω| ≤ turn_rate`,
@@ -26,34 +26,6 @@ pub struct Bounds {
 impl Default for Bounds {
     fn default() -> Bounds {
         Bounds::DEFAULT
-    }
-}
-
-/// What left its bound.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Breach {
-    /// The quantity: `x`, `y`, `theta`, `v`, `omega` (not finite), `|v|`,
-    /// `|omega|`, `‖(x, y)‖`.
-    pub quantity: &'static str,
-    /// Its value.
-    pub value: f64,
-    /// Its bound (infinite for a value that is not finite).
-    pub bound: f64,
-    /// Its unit.
-    pub unit: &'static str,
-}
-
-impl std::fmt::Display for Breach {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        if self.value.is_finite() {
-            write!(
-                f,
-                "{} = {:.3e} {} left its bound {} {}",
-                self.quantity, self.value, self.unit, self.bound, self.unit
-            )
-        } else {
-            write!(f, "{} is {} (not finite)", self.quantity, self.value)
-        }
     }
 }
 

@@ -1135,11 +1135,12 @@ fn crossing_keeps_robots_apart_in_the_fleet() {
     let (min, pairs) = min_pair_distance(&fleet_dir.join("trajectory.csv"), &l, 0.05);
     // 6 robots × 5 others × ~8000 states.
     assert!(pairs > 200_000, "{pairs} pairs compared");
+    let safety = &report["safety"];
     assert!(
         min >= radius - 1e-3,
-        "nearest points {min} m < radius {radius} m − 1 mm"
+        "nearest points {min} m < radius {radius} m − 1 mm (filters: {safety}; robots: {})",
+        report["robots"]
     );
-    let safety = &report["safety"];
     assert!(u(safety, &["active"]) > 0, "{safety}");
     assert_eq!(u(safety, &["stale_brakes"]), 0, "{safety}");
     for r in report["robots"].as_array().unwrap() {

@@ -17,8 +17,8 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
-use echelon_fleet::ros2::cdr::CdrError;
-use echelon_fleet::ros2::msgs::{
+use echelon_ros2::cdr::CdrError;
+use echelon_ros2::msgs::{
     HEADER, Header, ODOMETRY, Odometry, Pose, PoseWithCovariance, Quaternion, RosMessage, TWIST,
     TWIST_STAMPED, Time, Twist, TwistStamped, TwistWithCovariance, Vector3,
 };

@@ -48,7 +48,6 @@ pub mod odometry;
 pub mod output;
 pub mod reference;
 pub mod rng;
-pub mod ros_names;
 pub mod safety;
 pub mod scenario;
 pub mod sim;

@@ -4,7 +4,7 @@
 
 #![allow(dead_code)]
 
-use echelon_fleet::ros2::msgs::{Header, Odometry, Quaternion, Twist, TwistStamped, Vector3};
+use echelon_ros2::msgs::{Header, Odometry, Quaternion, Twist, TwistStamped, Vector3};
 use serde_json::{Value, json};
 
 pub(crate) fn f(x: f64) -> Value {

@@ -9,7 +9,7 @@
 
 use std::f64::consts::{PI, TAU};
 
-use super::cdr::{CdrError, CdrReader, CdrWriter};
+use crate::cdr::{CdrError, CdrReader, CdrWriter};
 
 /// A ROS 2 message type: its name and its RIHS01 type hash (the hash
 /// rmw_zenoh puts in key expressions and liveliness tokens).

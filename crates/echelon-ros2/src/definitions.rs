@@ -9,12 +9,12 @@
 //! `definitions/`); echelon-fleet's `tests/ros2_mcap.rs` checks every constant against the
 //! text rebuilt from the installed wheels by `scripts/ros2/msg_definitions.py`.
 
-use super::msgs::{MessageType, ODOMETRY, TWIST, TWIST_STAMPED};
+use crate::msgs::{MessageType, ODOMETRY, TWIST, TWIST_STAMPED};
 
 /// One `.msg` file of `definitions/`.
 macro_rules! msg {
     ($pkg:literal, $ty:literal) => {
-        include_str!(concat!("definitions/", $pkg, "/", $ty, ".msg"))
+        include_str!(concat!("../msg/", $pkg, "/", $ty, ".msg"))
     };
 }
 
@@ -132,6 +132,6 @@ mod tests {
         }
         assert!(TWIST_STAMPED_DEFINITION.starts_with("# A twist with reference"));
         assert_eq!(definition(&TWIST_STAMPED), Some(TWIST_STAMPED_DEFINITION));
-        assert_eq!(definition(&super::super::msgs::HEADER), None);
+        assert_eq!(definition(&crate::msgs::HEADER), None);
     }
 }

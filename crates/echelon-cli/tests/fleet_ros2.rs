@@ -20,8 +20,8 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 use zenoh::Wait;
 
-use echelon_fleet::ros2::keys::topic_key;
-use echelon_fleet::ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST, Time, TwistStamped};
+use echelon_ros2::keys::topic_key;
+use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST, Time, TwistStamped};
 
 mod common;
 
@@ -225,7 +225,7 @@ fn bad_odometry_is_refused_and_sigterm_leaves_zero_on_cmd_vel() {
 
     // Only bad odometry from now on.
     let odom_key = topic_key(
-        echelon_fleet::ros2::KeyScheme::RmwZenoh,
+        echelon_ros2::KeyScheme::RmwZenoh,
         0,
         "/robot1/odom",
         &ODOMETRY,
@@ -252,12 +252,7 @@ fn bad_odometry_is_refused_and_sigterm_leaves_zero_on_cmd_vel() {
         "base_link",
     )
     .to_cdr();
-    let wrong_type = topic_key(
-        echelon_fleet::ros2::KeyScheme::RmwZenoh,
-        0,
-        "/robot1/odom",
-        &TWIST,
-    );
+    let wrong_type = topic_key(echelon_ros2::KeyScheme::RmwZenoh, 0, "/robot1/odom", &TWIST);
     let mut sent = 0;
     let garbage_from = heard.lock().unwrap().len();
     for _ in 0..20 {
@@ -479,12 +474,12 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
         .wait()
         .unwrap();
     let key = topic_key(
-        echelon_fleet::ros2::KeyScheme::RmwZenoh,
+        echelon_ros2::KeyScheme::RmwZenoh,
         0,
         "/robot1/cmd_vel",
-        &echelon_fleet::ros2::msgs::TWIST_STAMPED,
+        &echelon_ros2::msgs::TWIST_STAMPED,
     );
-    let attachment = echelon_fleet::ros2::Attachment {
+    let attachment = echelon_ros2::Attachment {
         sequence_number: 1,
         source_timestamp_ns: 1,
         gid: [9; 16],

@@ -891,10 +891,11 @@ mod tests {
     /// goes to `/rejected`, counted as refused; every sample once.
     #[test]
     fn ros_samples_are_recorded_as_received_or_refused_with_their_reason() {
-        use crate::ros2::attachment::Attachment;
-        use crate::ros2::keys::{KeyScheme, topic_key};
-        use crate::ros2::msgs::{ODOMETRY, TWIST, TWIST_STAMPED, Time, TwistStamped};
-        use crate::ros2::{Odometry, RosMessage};
+        use echelon_ros2::KeyScheme;
+        use echelon_ros2::attachment::Attachment;
+        use echelon_ros2::keys::topic_key;
+        use echelon_ros2::msgs::{ODOMETRY, TWIST, TWIST_STAMPED, Time, TwistStamped};
+        use echelon_ros2::{Odometry, RosMessage};
 
         let scheme = KeyScheme::RmwZenoh;
         let mut topics = RosTopic::robot(scheme, 0, "/robot1", TWIST_STAMPED)

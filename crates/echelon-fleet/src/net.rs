@@ -44,7 +44,7 @@ pub struct RosAcl {
 
 /// The access-control keys of each agent's ROS 2 link.
 pub fn ros_acl(links: &[echelon::scenario::Ros2Link]) -> Vec<RosAcl> {
-    use crate::ros2::keys::topic_key_any_type;
+    use echelon_ros2::keys::topic_key_any_type;
     links
         .iter()
         .map(|l| RosAcl {

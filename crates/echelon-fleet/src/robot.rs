@@ -43,13 +43,14 @@ use crate::link::{Counters, LeaderSample, StreamTracker, predict};
 use crate::neighbours::{NeighbourTable, STALE_HOLD};
 use crate::net::{self, NetOptions};
 use crate::plant::{Plant, SimulatedDrive};
-use crate::ros2::attachment::{Gid, gid_from_token};
+use crate::ros2::declare_tokens;
 use crate::ros2::drive::{CmdSink, Ros2Counters, Ros2Drive, cmd_vel_type};
-use crate::ros2::keys::{topic_key, topic_key_any_type};
-use crate::ros2::liveliness::{NodeInfo, Qos, declare_tokens};
-use crate::ros2::msgs::ODOMETRY;
 use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
 use crate::{FleetError, StopFlag};
+use echelon_ros2::attachment::{Gid, gid_from_token};
+use echelon_ros2::keys::{topic_key, topic_key_any_type};
+use echelon_ros2::liveliness::{NodeInfo, Qos};
+use echelon_ros2::msgs::ODOMETRY;
 
 /// Longest plant integration sub-step, fleet s (the simulator's default `dt`).
 pub const PLANT_STEP: f64 = 1e-3;

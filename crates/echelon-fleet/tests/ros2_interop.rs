@@ -17,10 +17,10 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
-use echelon_fleet::ros2::cdr::CdrError;
-use echelon_fleet::ros2::msgs::{
-    HEADER, Header, ODOMETRY, Odometry, Pose, PoseWithCovariance, Quaternion, RosMessage, TWIST,
-    TWIST_STAMPED, Time, Twist, TwistStamped, TwistWithCovariance, Vector3,
+use echelon_ros2::cdr::CdrError;
+use echelon_ros2::msgs::{
+    HEADER, Header, ODOMETRY, Odometry, Point, Pose, PoseWithCovariance, Quaternion, RosMessage,
+    TWIST, TWIST_STAMPED, Time, Twist, TwistStamped, TwistWithCovariance, Vector3,
 };
 use serde_json::{Value, json};
 
@@ -122,6 +122,11 @@ fn vector(k: usize) -> Vector3 {
     }
 }
 
+fn point(k: usize) -> Point {
+    let Vector3 { x, y, z } = vector(k);
+    Point { x, y, z }
+}
+
 fn twists() -> Vec<Twist> {
     let mut v: Vec<Twist> = (0..12)
         .map(|k| Twist {
@@ -158,7 +163,7 @@ fn odometries() -> Vec<Odometry> {
             child_frame_id: frame(k),
             pose: PoseWithCovariance {
                 pose: Pose {
-                    position: vector(k),
+                    position: point(k),
                     orientation: Quaternion::from_yaw(spread(k + 5)),
                 },
                 covariance: std::array::from_fn(|i| spread(i + k)),

@@ -27,17 +27,16 @@ use echelon_fleet::collector::{
 };
 use echelon_fleet::keys::Keys;
 use echelon_fleet::net::{self, NetOptions};
-use echelon_fleet::ros2::attachment::Attachment;
-use echelon_fleet::ros2::definitions::{
-    ODOMETRY_DEFINITION, TWIST_DEFINITION, TWIST_STAMPED_DEFINITION,
-};
-use echelon_fleet::ros2::keys::{KeyScheme, topic_key};
-use echelon_fleet::ros2::liveliness::{History, Qos};
-use echelon_fleet::ros2::msgs::{
-    ODOMETRY, Odometry, RosMessage, TWIST, TWIST_STAMPED, Time, Twist, TwistStamped,
-};
 use echelon_fleet::ros2::record::RosTopic;
 use echelon_fleet::wire;
+use echelon_ros2::KeyScheme;
+use echelon_ros2::attachment::Attachment;
+use echelon_ros2::definitions::{ODOMETRY_DEFINITION, TWIST_DEFINITION, TWIST_STAMPED_DEFINITION};
+use echelon_ros2::keys::topic_key;
+use echelon_ros2::liveliness::{History, Qos};
+use echelon_ros2::msgs::{
+    ODOMETRY, Odometry, RosMessage, TWIST, TWIST_STAMPED, Time, Twist, TwistStamped,
+};
 use serde_json::Value;
 
 mod common;

@@ -5,14 +5,16 @@
 
 use std::f64::consts::{PI, TAU};
 
-use echelon_fleet::ros2::attachment::{ATTACHMENT_LEN, Attachment};
-use echelon_fleet::ros2::cdr::CdrError;
-use echelon_fleet::ros2::keys::{KeyScheme, check_topic_key, fully_qualified_topic, topic_key};
-use echelon_fleet::ros2::liveliness::{NodeInfo, Qos};
-use echelon_fleet::ros2::msgs::{
-    Header, ODOMETRY, Odometry, Pose, PoseWithCovariance, Quaternion, RosMessage, TWIST_STAMPED,
-    Time, Twist, TwistStamped, TwistWithCovariance, Vector3, YawUnwrapper, wrap_angle,
+use echelon_ros2::attachment::{ATTACHMENT_LEN, Attachment};
+use echelon_ros2::cdr::CdrError;
+use echelon_ros2::keys::{check_topic_key, topic_key};
+use echelon_ros2::liveliness::{NodeInfo, Qos};
+use echelon_ros2::msgs::{
+    Header, ODOMETRY, Odometry, Point, Pose, PoseWithCovariance, Quaternion, RosMessage,
+    TWIST_STAMPED, Time, Twist, TwistStamped, TwistWithCovariance, Vector3, YawUnwrapper,
+    wrap_angle,
 };
+use echelon_ros2::names::{KeyScheme, fully_qualified_topic};
 use proptest::prelude::*;
 
 /// Any f64 bit pattern: NaNs, infinities, subnormals, -0.
@@ -67,7 +69,7 @@ fn odometry(x: impl Strategy<Value = f64> + Clone) -> impl Strategy<Value = Odom
     (
         header(),
         frame_id(),
-        vector3(x.clone()),
+        vector3(x.clone()).prop_map(|Vector3 { x, y, z }| Point { x, y, z }),
         (x.clone(), x.clone(), x.clone(), x.clone()),
         covariance(x.clone()),
         twist(x.clone()),

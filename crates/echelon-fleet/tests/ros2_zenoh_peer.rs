@@ -21,14 +21,11 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use echelon_fleet::net::{self, NetOptions};
-use echelon_fleet::ros2::attachment::{Attachment, gid_from_token};
-use echelon_fleet::ros2::keys::{
-    KeyScheme, check_topic_key, fully_qualified_topic, topic_key, topic_key_any_type,
-};
-use echelon_fleet::ros2::liveliness::{NodeInfo, Qos};
-use echelon_fleet::ros2::msgs::{
-    ODOMETRY, Odometry, RosMessage, TWIST_STAMPED, Time, TwistStamped,
-};
+use echelon_ros2::attachment::{Attachment, gid_from_token};
+use echelon_ros2::keys::{check_topic_key, topic_key, topic_key_any_type};
+use echelon_ros2::liveliness::{NodeInfo, Qos};
+use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST_STAMPED, Time, TwistStamped};
+use echelon_ros2::names::{KeyScheme, fully_qualified_topic};
 use zenoh::Wait;
 
 const INSTALL_HINT: &str = "this test needs python3 (3.11) with the ROS 2 Jazzy wheels and \

@@ -42,10 +42,10 @@ use std::path::Path;
 
 use echelon::identify::{IdentifyError, Log, Model};
 
-use crate::ros2::msgs::{
+use crate::{CDR, agent_topic};
+use echelon_ros2::msgs::{
     ODOMETRY, Odometry, RosMessage, TWIST, TWIST_STAMPED, Twist, TwistStamped,
 };
-use crate::{CDR, agent_topic};
 
 /// Which series to read from an MCAP.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -402,9 +402,9 @@ mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
-    use crate::ros2::definitions::definition;
-    use crate::ros2::msgs::{MessageType, Time};
     use crate::{McapLog, Ros2Schema};
+    use echelon_ros2::definitions::definition;
+    use echelon_ros2::msgs::{MessageType, Time};
 
     fn schema(ty: &MessageType) -> Ros2Schema {
         Ros2Schema {

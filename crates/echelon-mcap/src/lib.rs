@@ -25,7 +25,6 @@
 //! `topic_type_hash`), so ROS 2 tools and Foxglove decode them.
 
 pub mod bag;
-pub mod ros2;
 
 use std::borrow::Cow;
 use std::collections::BTreeMap;

@@ -50,7 +50,6 @@ pub mod output;
 pub mod plan;
 pub mod reference;
 pub mod rng;
-pub mod ros_names;
 pub mod safety;
 pub mod scenario;
 pub mod sim;

@@ -817,7 +817,7 @@ fn ros2_links_are_checked_where_they_are_written() {
         ("base_link", "odom", 0)
     );
     assert_eq!(l.cmd_vel_type, echelon::scenario::schema::CmdVelType::Twist);
-    assert_eq!(l.key_scheme, echelon::ros_names::KeyScheme::Bridge);
+    assert_eq!(l.key_scheme, echelon::scenario::schema::KeyScheme::Bridge);
 }
 
 /// Values the field's own rules accept but no differential-drive robot would

@@ -22,17 +22,18 @@ use echelon::base::VelocityCommand;
 use echelon::scenario::{Ros2Link, Scenario};
 use echelon::sim::Drive;
 
-use super::attachment::{Attachment, Gid, gid_from_token};
+use super::declare_tokens;
 use super::drive::{SampleRefusal, cmd_vel_type, decode_cmd_vel};
-use super::keys::{topic_key, topic_key_any_type};
-use super::liveliness::{NodeInfo, Qos, declare_tokens};
-use super::msgs::{ODOMETRY, Odometry, RosMessage, Time};
 use crate::clock::FleetClock;
 use crate::keys::Keys;
 use crate::net::{self, NetOptions};
 use crate::plant::{Plant, SimulatedVelocityBase};
 use crate::robot::{PLANT_STEP, agent_spec};
 use crate::{FleetError, StopFlag};
+use echelon_ros2::attachment::{Attachment, Gid, gid_from_token};
+use echelon_ros2::keys::{topic_key, topic_key_any_type};
+use echelon_ros2::liveliness::{NodeInfo, Qos};
+use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, Time};
 
 /// What a simulated base counted (its report and its stats).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
@@ -150,7 +151,7 @@ impl SimBase {
         payload: &[u8],
         attachment: Option<&[u8]>,
     ) -> Result<VelocityCommand, SampleRefusal> {
-        if self.link.key_scheme == echelon::ros_names::KeyScheme::RmwZenoh
+        if self.link.key_scheme == echelon_ros2::KeyScheme::RmwZenoh
             && attachment.is_none_or(|a| Attachment::decode(a).is_err())
         {
             return Err(SampleRefusal::NoAttachment);
@@ -333,10 +334,10 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
 mod tests {
     use super::*;
     use crate::ros2::drive::encode_cmd_vel;
-    use crate::ros2::msgs::{TWIST, TWIST_STAMPED};
     use echelon::base::VelocityBase;
     use echelon::model::State;
-    use echelon::ros_names::KeyScheme;
+    use echelon_ros2::KeyScheme;
+    use echelon_ros2::msgs::{TWIST, TWIST_STAMPED};
 
     fn link() -> Ros2Link {
         let src = "[sim]\nduration = 1.0\ndt = 0.01\n[reference.circle]\nspeed = 0.1\nturn_rate = 0.1\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\n[fleet.ros2]\nodom_rate = 10.0\ncmd_vel_timeout = 0.5\n[[agents]]\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\nleader = \"reference\"\n";

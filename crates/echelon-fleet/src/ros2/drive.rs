@@ -24,14 +24,14 @@ use echelon::model::State;
 use echelon::scenario::Ros2Link;
 use echelon::scenario::schema::CmdVelType;
 
-use super::CdrError;
-use super::attachment::{Attachment, Gid};
-use super::keys::check_topic_key;
-use super::msgs::{
+use crate::plant::{Actuation, Command, Plant};
+use echelon_ros2::CdrError;
+use echelon_ros2::attachment::{Attachment, Gid};
+use echelon_ros2::keys::check_topic_key;
+use echelon_ros2::msgs::{
     MessageType, ODOMETRY, Odometry, RosMessage, TWIST, TWIST_STAMPED, Time, Twist, TwistStamped,
     YawUnwrapper,
 };
-use crate::plant::{Actuation, Command, Plant};
 
 /// The message type a link's `cmd_vel` carries.
 pub fn cmd_vel_type(link: &Ros2Link) -> MessageType {
@@ -311,9 +311,9 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ros2::keys::topic_key;
-    use echelon::ros_names::KeyScheme;
     use echelon::scenario::Scenario;
+    use echelon_ros2::KeyScheme;
+    use echelon_ros2::keys::topic_key;
 
     /// Records what was sent; time advances 1 ms per read.
     #[derive(Debug, Default)]

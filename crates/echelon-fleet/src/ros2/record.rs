@@ -2,7 +2,7 @@
 //! the fleet collector listens to ([`RosTopic`]), how a received sample is
 //! checked before it is recorded as its topic's type ([`RosTopic::check`]),
 //! and what rosbag2 writes about a topic in an MCAP file (the
-//! [`Ros2Schema`] with the full definition from [`super::definitions`], and
+//! [`Ros2Schema`] with the full definition from [`echelon_ros2::definitions`], and
 //! the `offered_qos_profiles` YAML of [`offered_qos_profiles`]).
 //!
 //! The collector records the bytes as they were received; it decodes them
@@ -12,16 +12,15 @@
 
 use echelon_mcap::Ros2Schema;
 
-use super::attachment::Attachment;
-use super::cdr::CdrError;
-use super::definitions::definition;
-use super::keys::{
-    KeyMismatch, KeyScheme, NameError, check_topic_key, fully_qualified_topic, topic_key_any_type,
-};
-use super::liveliness::{Durability, History, Liveliness, Qos, Reliability, rmw_time};
-use super::msgs::{
+use echelon_ros2::attachment::Attachment;
+use echelon_ros2::cdr::CdrError;
+use echelon_ros2::definitions::definition;
+use echelon_ros2::keys::{KeyMismatch, check_topic_key, topic_key_any_type};
+use echelon_ros2::liveliness::{Durability, History, Liveliness, Qos, Reliability, rmw_time};
+use echelon_ros2::msgs::{
     MessageType, ODOMETRY, Odometry, RosMessage, TWIST, TWIST_STAMPED, Twist, TwistStamped,
 };
+use echelon_ros2::names::{KeyScheme, NameError, fully_qualified_topic};
 
 /// A ROS 2 topic the fleet collector records into `fleet.mcap`, on a channel
 /// named by its fully qualified name (`/robot1/cmd_vel`).
@@ -322,8 +321,8 @@ mod tests {
     use std::time::Duration;
 
     use super::*;
-    use crate::ros2::keys::topic_key;
-    use crate::ros2::msgs::{HEADER, Time};
+    use echelon_ros2::keys::topic_key;
+    use echelon_ros2::msgs::{HEADER, Time};
 
     fn cmd_vel() -> RosTopic {
         RosTopic::new(KeyScheme::RmwZenoh, 0, "/robot1", "cmd_vel", TWIST_STAMPED).expect("valid")

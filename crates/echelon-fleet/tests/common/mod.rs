@@ -4,7 +4,7 @@
 
 #![allow(dead_code)]
 
-use echelon_fleet::ros2::msgs::{Header, Odometry, Quaternion, Twist, TwistStamped, Vector3};
+use echelon_ros2::msgs::{Header, Odometry, Point, Quaternion, Twist, TwistStamped, Vector3};
 use serde_json::{Value, json};
 
 pub(crate) fn f(x: f64) -> Value {
@@ -13,6 +13,10 @@ pub(crate) fn f(x: f64) -> Value {
 
 pub(crate) fn vec3(v: &Vector3) -> Value {
     json!({"x": f(v.x), "y": f(v.y), "z": f(v.z)})
+}
+
+pub(crate) fn point(&Point { x, y, z }: &Point) -> Value {
+    vec3(&Vector3 { x, y, z })
 }
 
 pub(crate) fn quat(q: &Quaternion) -> Value {
@@ -40,7 +44,7 @@ pub(crate) fn odometry(o: &Odometry) -> Value {
         "header": header(&o.header),
         "child_frame_id": o.child_frame_id,
         "pose": {
-            "pose": {"position": vec3(&o.pose.pose.position), "orientation": quat(&o.pose.pose.orientation)},
+            "pose": {"position": point(&o.pose.pose.position), "orientation": quat(&o.pose.pose.orientation)},
             "covariance": covariance(&o.pose.covariance),
         },
         "twist": {"twist": twist(&o.twist.twist), "covariance": covariance(&o.twist.covariance)},

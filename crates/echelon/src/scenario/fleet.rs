@@ -7,7 +7,7 @@ use super::schema::{CmdVelType, Ros2Section};
 use super::{Merge, Scenario};
 use crate::check;
 use crate::error::ScenarioError;
-use crate::ros_names::{self, KeyScheme};
+use echelon_ros2::names::{self as ros_names, KeyScheme};
 
 /// Default reference publication rate, Hz.
 pub const DEFAULT_REFERENCE_RATE: f64 = 50.0;

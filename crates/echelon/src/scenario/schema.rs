@@ -12,7 +12,7 @@ pub use crate::base::AccelLimit;
 pub use crate::control::{Law, Variant};
 pub use crate::lycomp::{LyComp, LyDerivatives};
 pub use crate::odometry::{Fusion, ZetaModel};
-pub use crate::ros_names::KeyScheme;
+pub use echelon_ros2::KeyScheme;
 
 /// A whole scenario file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -18,8 +18,8 @@
 
 use std::time::Duration;
 
-use super::keys::{NameError, check_node_name, normalize_namespace};
-use super::msgs::MessageType;
+use crate::msgs::MessageType;
+use crate::names::{NameError, check_node_name, normalize_namespace};
 
 /// The key prefix of every rmw_zenoh liveliness token.
 pub const ADMIN_SPACE: &str = "@ros2_lv";
@@ -106,7 +106,9 @@ impl Qos {
 /// `RMW_DURATION_INFINITE` as `rmw_time_t` {sec, nsec}.
 const INFINITE: (u64, u64) = (9_223_372_036, 854_775_807);
 
-pub(crate) fn rmw_time(d: Option<Duration>) -> (u64, u64) {
+/// A QoS duration as rmw's `rmw_time_t` {sec, nsec}: `None` and zero are
+/// infinite (`RMW_DURATION_INFINITE`).
+pub fn rmw_time(d: Option<Duration>) -> (u64, u64) {
     match d {
         Some(d) if !d.is_zero() => (d.as_secs(), u64::from(d.subsec_nanos())),
         _ => INFINITE,
@@ -271,29 +273,10 @@ pub fn domain_tokens(domain_id: u32) -> String {
     format!("{ADMIN_SPACE}/{domain_id}/**")
 }
 
-/// Declares each of `tokens` on `session`; they live as long as the returned
-/// handles.
-pub fn declare_tokens(
-    session: &zenoh::Session,
-    tokens: &[String],
-) -> Result<Vec<zenoh::liveliness::LivelinessToken>, crate::FleetError> {
-    use zenoh::Wait;
-    tokens
-        .iter()
-        .map(|t| {
-            session
-                .liveliness()
-                .declare_token(t.clone())
-                .wait()
-                .map_err(|e| crate::FleetError::Zenoh(format!("liveliness {t}: {e}")))
-        })
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ros2::msgs::{ODOMETRY, TWIST_STAMPED};
+    use crate::msgs::{ODOMETRY, TWIST_STAMPED};
 
     #[test]
     fn qos_strings_match_rmw_zenoh() {

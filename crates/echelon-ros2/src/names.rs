@@ -1,7 +1,8 @@
 //! ROS 2 names (topics, namespaces, nodes) by the rules of ROS 2's
 //! `rcl` name validation, and how a topic maps onto Zenoh keys
-//! ([`KeyScheme`]). Used by the scenario's `[fleet.ros2]` section (to refuse a
-//! bad name with its place in the file) and by `echelon-fleet`'s ROS 2 drive.
+//! ([`KeyScheme`]). Used by the scenario's `[fleet.ros2]` section (crate `echelon`, to refuse a
+//! bad name with its place in the file), by [`crate::keys`] and
+//! [`crate::liveliness`].
 
 /// How topics map onto Zenoh keys.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -101,4 +102,32 @@ pub fn check_node_name(name: &str) -> Result<(), NameError> {
         });
     }
     check_tokens(name, name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_qualify_by_the_ros_rules() {
+        let fq = |ns, t| fully_qualified_topic(ns, t).map_err(|e| e.reason);
+        assert_eq!(fq("", "cmd_vel"), Ok("/cmd_vel".to_owned()));
+        assert_eq!(fq("/", "cmd_vel"), Ok("/cmd_vel".to_owned()));
+        assert_eq!(fq("/robot1", "cmd_vel"), Ok("/robot1/cmd_vel".to_owned()));
+        assert!(fq("robot1/", "cmd_vel").is_err());
+        assert_eq!(
+            fq("robot1", "diff/cmd_vel"),
+            Ok("/robot1/diff/cmd_vel".to_owned())
+        );
+        assert_eq!(fq("/robot1", "/odom"), Ok("/odom".to_owned()));
+        assert!(fq("/robot1", "~/odom").is_err());
+        assert!(fq("/robot1", "{node}/odom").is_err());
+        assert!(fq("/robot1", "a//b").is_err());
+        assert!(fq("/robot1", "odom/").is_err());
+        assert!(fq("/robot1", "1odom").is_err());
+        assert!(fq("/robot1", "").is_err());
+        assert!(fq("/1robot", "odom").is_err());
+        assert!(check_node_name("echelon_robot_1").is_ok());
+        assert!(check_node_name("a/b").is_err());
+    }
 }

@@ -623,10 +623,13 @@ fn without_security_the_same_rogue_does_move_robots() {
     let _ = rogue.0.wait();
     if !out.status.success() {
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            err.contains("robot/1 exited") && err.contains("agent 1 diverged at t = "),
-            "fleet up failed otherwise: {err}"
-        );
+        // Whichever robot the rogue's jump spins past the guard's bound
+        // first (robot 1 behind the reference, or robot 2 behind it).
+        let diverged = (1..=3).any(|k| {
+            err.contains(&format!("robot/{k} exited"))
+                && err.contains(&format!("agent {k} diverged at t = "))
+        });
+        assert!(diverged, "fleet up failed otherwise: {err}");
         return;
     }
     let report: Value = serde_json::from_str(

@@ -166,27 +166,9 @@ pub fn scenario_toml(n: usize) -> String {
 
 /// The row of a finished run.
 pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
-    let int = |v: &serde_json::Value, path: &[&str]| {
-        path.iter()
-            .try_fold(v, |v, k| v.get(*k))
-            .and_then(serde_json::Value::as_u64)
-            .unwrap_or(0)
-    };
-    let final_errors: Vec<f64> = up
-        .robots
-        .iter()
-        .map(|r| {
-            r.get("final_error")
-                .and_then(serde_json::Value::as_f64)
-                .unwrap_or(f64::INFINITY)
-        })
-        .collect();
-    let robots_received: u64 = up
-        .robots
-        .iter()
-        .map(|r| int(r, &["counters", "received"]))
-        .sum();
-    let collector_received = int(&up.collector, &["received"]);
+    let final_errors: Vec<f64> = up.robots.iter().map(|r| r.final_error).collect();
+    let robots_received: u64 = up.robots.iter().map(|r| r.counters.received).sum();
+    let collector_received = up.collector.received;
     BenchRow {
         robots: n,
         error: None,
@@ -202,16 +184,8 @@ pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
         latency_p99: up.latency.robots.p99,
         latency_max: up.latency.robots.max,
         collector_p99: up.latency.collector.p99,
-        stale: up
-            .robots
-            .iter()
-            .map(|r| int(r, &["counters", "stale"]))
-            .sum(),
-        link_losses: up
-            .robots
-            .iter()
-            .map(|r| int(r, &["counters", "link_losses"]))
-            .sum(),
+        stale: up.robots.iter().map(|r| r.counters.stale).sum(),
+        link_losses: up.robots.iter().map(|r| r.counters.link_losses).sum(),
         final_max_error: final_errors.iter().copied().fold(0.0, f64::max),
         converged: final_errors.iter().filter(|&&e| e < 0.01).count(),
     }

@@ -109,7 +109,8 @@ pub struct CollectorOptions {
 }
 
 /// Per-agent statistics of the recorded states.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct AgentRecord {
     /// Agent number, from 1.
     pub agent: u32,
@@ -134,10 +135,11 @@ pub struct AgentRecord {
 }
 
 /// What the collector reports (`collector.json`, and one JSON line on stdout).
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CollectorReport {
-    /// `collector`.
-    pub role: &'static str,
+    /// [`crate::role::Role::Collector`].
+    pub role: crate::role::Role,
     /// Samples received, total.
     pub received: u64,
     /// Messages logged to the MCAP file, total (equals `received`).
@@ -231,8 +233,17 @@ impl Collector {
             keys,
             ros: Vec::new(),
             report: CollectorReport {
-                role: "collector",
-                ..CollectorReport::default()
+                role: crate::role::Role::Collector,
+                received: 0,
+                logged: 0,
+                received_by_key: BTreeMap::new(),
+                logged_by_topic: BTreeMap::new(),
+                rejected: BTreeMap::new(),
+                ros_recorded: 0,
+                ros_refused: 0,
+                latency: LatencyReport::default(),
+                latency_by_key: BTreeMap::new(),
+                agents: Vec::new(),
             },
             agents: BTreeMap::new(),
             latency: Latency::new(),

@@ -209,8 +209,8 @@ pub enum ExciteEnd {
 /// What `fleet excite` reports when it stops.
 #[derive(Debug, Clone, Serialize)]
 pub struct ExciteReport {
-    /// `excite`.
-    pub role: &'static str,
+    /// [`crate::role::Role::Excite`].
+    pub role: crate::role::Role,
     /// Agent number.
     pub agent: u32,
     /// Why it ended.
@@ -399,7 +399,7 @@ pub fn run(opts: ExciteOptions, stop: &StopFlag) -> Result<ExciteReport, FleetEr
     bag.log.finish()?;
     let _ = session.close().wait();
     Ok(ExciteReport {
-        role: "excite",
+        role: crate::role::Role::Excite,
         agent: opts.agent,
         ended,
         bag: opts.out.display().to_string(),

@@ -324,18 +324,14 @@ pub struct FleetLatency {
 }
 
 impl FleetLatency {
-    /// From the robots' and the collector's JSON reports (a report without
-    /// a valid `latency` counts as none).
-    pub fn of(robots: &[serde_json::Value], collector: &serde_json::Value) -> FleetLatency {
-        let parse = |v: &serde_json::Value| -> Option<LatencyReport> {
-            serde_json::from_value(v.get("latency")?.clone()).ok()
-        };
-        let per_robot: Vec<(u64, LatencyReport)> = robots
-            .iter()
-            .filter_map(|r| {
-                let agent = r.get("agent").and_then(serde_json::Value::as_u64)?;
-                Some((agent, parse(r)?))
-            })
+    /// From each robot's `(agent, latency)` and the collector's latency.
+    pub fn of<'a>(
+        robots: impl IntoIterator<Item = (u32, &'a LatencyReport)>,
+        collector: &LatencyReport,
+    ) -> FleetLatency {
+        let per_robot: Vec<(u64, &LatencyReport)> = robots
+            .into_iter()
+            .map(|(agent, l)| (u64::from(agent), l))
             .collect();
         let worst_robot = per_robot
             .iter()
@@ -345,13 +341,13 @@ impl FleetLatency {
                 agent: *agent,
                 latency: LatencyReport {
                     buckets: Vec::new(),
-                    ..l.clone()
+                    ..(*l).clone()
                 },
             });
         FleetLatency {
-            robots: Latency::of_reports(per_robot.iter().map(|(_, l)| l)).report(false),
+            robots: Latency::of_reports(per_robot.iter().map(|(_, l)| *l)).report(false),
             worst_robot,
-            collector: parse(collector).unwrap_or_default(),
+            collector: collector.clone(),
         }
     }
 }

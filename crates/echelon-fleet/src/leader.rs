@@ -42,10 +42,11 @@ pub struct LeaderOptions {
 }
 
 /// What the leader reports when it stops (one JSON line on stdout).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct LeaderReport {
-    /// `leader`.
-    pub role: &'static str,
+    /// [`crate::role::Role::Leader`].
+    pub role: crate::role::Role,
     /// Reference samples published.
     pub published: u64,
     /// Fleet time of the last sample, s.
@@ -182,7 +183,7 @@ impl Leader {
     /// What the leader reports when it stops.
     pub fn report(&self) -> LeaderReport {
         LeaderReport {
-            role: "leader",
+            role: crate::role::Role::Leader,
             published: self.k,
             t: self.last_t,
             late: self.late,

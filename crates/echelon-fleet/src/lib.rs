@@ -25,6 +25,7 @@ pub mod neighbours;
 pub mod net;
 pub mod plant;
 pub mod robot;
+pub mod role;
 pub mod ros2;
 pub mod router;
 pub mod up;

@@ -2,7 +2,7 @@
 //! staleness, counters) and what leader motion the law sees, fresh or lost
 //! (the link-loss policy).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use echelon::control::LeaderMotion;
 use echelon::scenario::{LinkLoss, LinkPolicy};
@@ -13,7 +13,8 @@ use crate::wire::{Header, LinkStatus};
 /// lands in exactly one of `accepted`, `malformed`, `wrong_version`, `foreign`,
 /// `injected_loss`, `injected_outage`, `stale`, `reordered` (or is still
 /// delayed when the process stops).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Counters {
     /// Samples that reached the process on the stream's key.
     pub received: u64,

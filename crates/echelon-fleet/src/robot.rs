@@ -22,7 +22,7 @@ use std::collections::VecDeque;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use zenoh::Wait;
 
 use echelon::agent::{AgentSpec, Command, Guard};
@@ -43,6 +43,7 @@ use crate::link::{Counters, LeaderSample, StreamTracker, predict};
 use crate::neighbours::{NeighbourTable, STALE_HOLD};
 use crate::net::{self, NetOptions};
 use crate::plant::{Plant, SimulatedDrive};
+use crate::role::Role;
 use crate::ros2::declare_tokens;
 use crate::ros2::drive::{CmdSink, Ros2Counters, Ros2Drive, cmd_vel_type};
 use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
@@ -78,11 +79,13 @@ pub struct RobotOptions {
     pub ros2: bool,
 }
 
-/// What a robot reports when it stops (one JSON line on stdout).
-#[derive(Debug, Clone, Serialize)]
+/// What a robot reports when it stops (one JSON line on stdout; `fleet
+/// up` reads it back as this type, so a renamed field is an error, never a 0).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RobotReport {
-    /// `robot`.
-    pub role: &'static str,
+    /// [`Role::Robot`].
+    pub role: Role,
     /// Agent number, from 1.
     pub agent: u32,
     /// Display name.
@@ -104,7 +107,7 @@ pub struct RobotReport {
     /// Final ‖e‖ against the leader motion used, m.
     pub final_error: f64,
     /// Final link status.
-    pub link: &'static str,
+    pub link: String,
     /// Delay from the sender's timestamp to receipt of every sample on the
     /// leader stream (reference or leader robot's state), s; `count +
     /// unstamped` equals `counters.received`.
@@ -119,7 +122,8 @@ pub struct RobotReport {
 
 /// What a robot's safety filter did over its run (`docs/safety.md`, "In the
 /// fleet").
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SafetyCounts {
     /// Control steps that went through the filter.
     pub steps: u64,
@@ -142,23 +146,21 @@ pub struct SafetyCounts {
 }
 
 impl SafetyCounts {
-    /// The fleet's total over robot reports (JSON, as `fleet up` reads
-    /// them): counters summed, the smallest `min_distance`; `None` when no
-    /// robot filters.
-    pub fn total(robots: &[serde_json::Value]) -> Option<SafetyCounts> {
+    /// The fleet's total over the robots' counters: summed, the smallest
+    /// `min_distance`; `None` when no robot filters.
+    pub fn total<'a>(robots: impl IntoIterator<Item = &'a SafetyCounts>) -> Option<SafetyCounts> {
         let mut any = false;
         let mut t = SafetyCounts::default();
-        for s in robots.iter().filter_map(|r| r.get("safety")) {
+        for s in robots {
             any = true;
-            let n = |k: &str| s.get(k).and_then(serde_json::Value::as_u64).unwrap_or(0);
-            t.steps += n("steps");
-            t.active += n("active");
-            t.infeasible += n("infeasible");
-            t.stale_brakes += n("stale_brakes");
-            t.deadlock_breaks += n("deadlock_breaks");
-            t.stale_neighbours += n("stale_neighbours");
-            t.refused += n("refused");
-            if let Some(d) = s.get("min_distance").and_then(serde_json::Value::as_f64) {
+            t.steps += s.steps;
+            t.active += s.active;
+            t.infeasible += s.infeasible;
+            t.stale_brakes += s.stale_brakes;
+            t.deadlock_breaks += s.deadlock_breaks;
+            t.stale_neighbours += s.stale_neighbours;
+            t.refused += s.refused;
+            if let Some(d) = s.min_distance {
                 t.min_distance = Some(t.min_distance.map_or(d, |m| m.min(d)));
             }
         }
@@ -740,7 +742,7 @@ impl<P: Plant> Robot<P> {
     pub fn report(&self) -> RobotReport {
         let s = self.last.state;
         RobotReport {
-            role: "robot",
+            role: Role::Robot,
             agent: self.config.agent,
             name: self.config.spec.name.clone(),
             counters: self.tracker.counters,
@@ -751,7 +753,7 @@ impl<P: Plant> Robot<P> {
             t: self.last.t,
             final_state: [s.x, s.y, s.theta, s.v, s.omega],
             final_error: self.last.e[0].hypot(self.last.e[1]),
-            link: self.last.link.name(),
+            link: self.last.link.name().to_owned(),
             latency: self.latency.report(true),
             ros2: None,
             safety: self.safety_counts(),

@@ -29,7 +29,8 @@ pub struct RouterOptions {
 }
 
 /// What `fleet router` prints when it stops.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RouterReport {
     /// The router's Zenoh id.
     pub zid: String,

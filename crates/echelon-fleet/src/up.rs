@@ -24,12 +24,17 @@ use serde::Serialize;
 
 use echelon::scenario::{Overrides, Scenario};
 
+use crate::collector::CollectorReport;
 use crate::cost::{self, ProcessCost, RoleCost};
 use crate::faults::FaultSpec;
 use crate::keys::robot_role;
 use crate::latency::FleetLatency;
+use crate::leader::LeaderReport;
 use crate::net::{ROUTER_IDENTITY, base_identity, robot_identity};
+use crate::robot::RobotReport;
+use crate::ros2::base::BaseReport;
 use crate::ros2::base::base_role;
+use crate::router::RouterReport;
 use crate::{FleetError, StopFlag};
 
 /// The summary `fleet up` writes.
@@ -109,14 +114,14 @@ pub struct UpReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety: Option<crate::robot::SafetyCounts>,
     /// The leader's report.
-    pub leader: serde_json::Value,
+    pub leader: LeaderReport,
     /// Each robot's report, agent 1 first.
-    pub robots: Vec<serde_json::Value>,
+    pub robots: Vec<RobotReport>,
     /// The collector's report.
-    pub collector: serde_json::Value,
+    pub collector: CollectorReport,
     /// With `--ros2`: each simulated base's report.
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub bases: Vec<serde_json::Value>,
+    pub bases: Vec<BaseReport>,
     /// How the processes were linked.
     pub topology: Topology,
     /// Router topology: each router's endpoint, site 1 first.
@@ -127,7 +132,7 @@ pub struct UpReport {
     pub sites: Vec<Vec<String>>,
     /// Router topology: each router's report, site 1 first.
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub routers: Vec<serde_json::Value>,
+    pub routers: Vec<RouterReport>,
 }
 
 /// CPU and peak memory of every process of `fleet up` ([`crate::cost`]).
@@ -710,25 +715,13 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     if let Some(f) = routers.iter().find_map(Proc::failure) {
         return Err(FleetError::Child(f));
     }
-    let report = |p: &Proc| -> Result<serde_json::Value, FleetError> {
-        p.report.clone().ok_or_else(|| {
-            FleetError::Child(format!(
-                "{} printed no report ({})",
-                p.role,
-                p.log.display()
-            ))
-        })
-    };
     let wall = started.elapsed().as_secs_f64();
-    let leader_report = report(&leader)?;
-    let startup = leader_report
-        .get("clock_start_unix_ns")
-        .and_then(serde_json::Value::as_u64)
+    let leader_report: LeaderReport = report(&leader)?;
+    let startup = Some(leader_report.clock_start_unix_ns)
         .filter(|&t| t > 0)
         .map(|t| t.saturating_sub(started_unix_ns) as f64 * 1e-9);
-    let robot_reports: Vec<serde_json::Value> =
-        robots.iter().map(report).collect::<Result<_, _>>()?;
-    let collector_report = report(&collector)?;
+    let robot_reports: Vec<RobotReport> = robots.iter().map(report).collect::<Result<_, _>>()?;
+    let collector_report: CollectorReport = report(&collector)?;
     let up = UpReport {
         scenario: scenario.name().to_owned(),
         fleet: fleet.name.clone(),
@@ -738,8 +731,13 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         startup,
         run: startup.map(|s| wall - s),
         cost: up_cost(&leader, &collector, &robots, &base_procs, &routers),
-        latency: FleetLatency::of(&robot_reports, &collector_report),
-        safety: crate::robot::SafetyCounts::total(&robot_reports),
+        latency: FleetLatency::of(
+            robot_reports.iter().map(|r| (r.agent, &r.latency)),
+            &collector_report.latency,
+        ),
+        safety: crate::robot::SafetyCounts::total(
+            robot_reports.iter().filter_map(|r| r.safety.as_ref()),
+        ),
         leader: leader_report,
         robots: robot_reports,
         collector: collector_report,
@@ -751,4 +749,24 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     };
     crate::write_json_file(&opts.out.join(UP_SUMMARY_FILE), &up)?;
     Ok(up)
+}
+
+/// A process's report read back as its role's type: an error naming the
+/// process when it printed none or one that does not parse (a renamed or
+/// missing field is refused, never read as 0).
+fn report<T: serde::de::DeserializeOwned>(p: &Proc) -> Result<T, FleetError> {
+    let value = p.report.clone().ok_or_else(|| {
+        FleetError::Child(format!(
+            "{} printed no report ({})",
+            p.role,
+            p.log.display()
+        ))
+    })?;
+    serde_json::from_value(value).map_err(|e| {
+        FleetError::Child(format!(
+            "{} printed a report that does not parse as its role's: {e} ({})",
+            p.role,
+            p.log.display()
+        ))
+    })
 }

@@ -624,18 +624,6 @@ fn up_cmd(a: UpArgs) -> Result<()> {
     if a.quiet {
         return Ok(());
     }
-    let num = |v: &serde_json::Value, k: &str| v.get(k).and_then(serde_json::Value::as_f64);
-    let ms = |v: &serde_json::Value, k: &str| {
-        v.get("latency")
-            .and_then(|l| num(l, k))
-            .map_or(f64::NAN, |s| s * 1e3)
-    };
-    let int = |v: &serde_json::Value, path: &[&str]| {
-        path.iter()
-            .try_fold(v, |v, k| v.get(*k))
-            .and_then(serde_json::Value::as_u64)
-            .unwrap_or(0)
-    };
     outln!(
         "{}: fleet \"{}\", {} robot{}, {} s of fleet time at ×{} in {:.1} s",
         report.scenario,
@@ -662,14 +650,14 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         outln!(
             "  router {}: {} processes at most at once, {} in all, up {:.1} s",
             s + 1,
-            int(r, &["members_peak"]),
-            int(r, &["members_joined"]),
-            num(r, "uptime").unwrap_or(f64::NAN)
+            r.members_peak,
+            r.members_joined,
+            r.uptime
         )?;
     }
     outln!(
         "  leader: {} reference samples published",
-        int(&report.leader, &["published"])
+        report.leader.published
     )?;
     outln!(
         "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8} {:>8}",
@@ -688,68 +676,54 @@ fn up_cmd(a: UpArgs) -> Result<()> {
         "p99 ms"
     )?;
     for r in &report.robots {
-        let c = |k: &str| int(r, &["counters", k]);
+        let c = &r.counters;
         outln!(
             "  {:<8} {:>9.2e} m {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8.3} {:>8.3}",
-            format!("robot {}", int(r, &["agent"])),
-            num(r, "final_error").unwrap_or(f64::NAN),
-            c("received"),
-            c("accepted"),
-            c("injected_loss"),
-            c("injected_outage"),
-            c("malformed"),
-            c("wrong_version"),
-            c("stale"),
-            c("reordered"),
-            c("link_losses"),
-            ms(r, "p50"),
-            ms(r, "p99"),
+            format!("robot {}", r.agent),
+            r.final_error,
+            c.received,
+            c.accepted,
+            c.injected_loss,
+            c.injected_outage,
+            c.malformed,
+            c.wrong_version,
+            c.stale,
+            c.reordered,
+            c.link_losses,
+            r.latency.p50 * 1e3,
+            r.latency.p99 * 1e3,
         )?;
     }
     for (b, r) in report.bases.iter().zip(&report.robots) {
-        let c = |k: &str| int(b, &["counters", k]);
-        let refused: u64 = [
-            "cmd_wrong_type",
-            "cmd_malformed",
-            "cmd_non_finite",
-            "cmd_no_attachment",
-        ]
-        .iter()
-        .map(|k| c(k))
-        .sum();
-        let odom_refused: u64 = [
-            "odom_wrong_type",
-            "odom_malformed",
-            "odom_non_finite",
-            "odom_wrong_frames",
-        ]
-        .iter()
-        .map(|k| int(r, &["ros2", k]))
-        .sum();
+        let c = &b.counters;
+        let refused = c.cmd_wrong_type + c.cmd_malformed + c.cmd_non_finite + c.cmd_no_attachment;
+        let ros = r.ros2.unwrap_or_default();
+        let odom_refused =
+            ros.odom_wrong_type + ros.odom_malformed + ros.odom_non_finite + ros.odom_wrong_frames;
         outln!(
             "  ROS 2 base {}: {} cmd_vel received, {} refused, {} odom published; robot: {} odom accepted, {} refused, {} commands saturated",
-            int(b, &["agent"]),
-            c("cmd_received"),
+            b.agent,
+            c.cmd_received,
             refused,
-            c("odom_published"),
-            int(r, &["ros2", "odom_accepted"]),
+            c.odom_published,
+            ros.odom_accepted,
             odom_refused,
-            int(r, &["ros2", "cmd_saturated"]),
+            ros.cmd_saturated,
         )?;
     }
     if let Some(t) = &report.safety {
         for r in &report.robots {
-            let s = |k: &str| int(r, &["safety", k]);
-            let d = r["safety"]["min_distance"].as_f64();
+            let s = r.safety.unwrap_or_default();
+            let d = s.min_distance;
             outln!(
                 "  safety, robot {}: filter acted {} of {} steps, {} infeasible (braked), {} deadlock breaks, {} stale neighbours ({} steps braked), nearest point {}",
-                int(r, &["agent"]),
-                s("active"),
-                s("steps"),
-                s("infeasible"),
-                s("deadlock_breaks"),
-                s("stale_neighbours"),
-                s("stale_brakes"),
+                r.agent,
+                s.active,
+                s.steps,
+                s.infeasible,
+                s.deadlock_breaks,
+                s.stale_neighbours,
+                s.stale_brakes,
                 d.map_or("none in range".to_owned(), |d| format!("{d:.4} m")),
             )?;
         }
@@ -766,11 +740,9 @@ fn up_cmd(a: UpArgs) -> Result<()> {
     let col = &report.collector;
     outln!(
         "  collector: {} messages received, {} logged, {} rejected",
-        int(col, &["received"]),
-        int(col, &["logged"]),
-        col.get("rejected")
-            .and_then(|r| r.as_object())
-            .map_or(0, |m| m.values().filter_map(|v| v.as_u64()).sum::<u64>())
+        col.received,
+        col.logged,
+        col.rejected.values().sum::<u64>()
     )?;
     let lat = |l: &LatencyReport| {
         format!(

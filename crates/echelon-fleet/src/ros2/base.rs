@@ -36,7 +36,8 @@ use echelon_ros2::liveliness::{NodeInfo, Qos};
 use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, Time};
 
 /// What a simulated base counted (its report and its stats).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct BaseCounters {
     /// `cmd_vel` samples received.
     pub cmd_received: u64,
@@ -229,10 +230,11 @@ pub struct BaseOptions {
 }
 
 /// What a base reports when it stops.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct BaseReport {
-    /// `base`.
-    pub role: &'static str,
+    /// [`crate::role::Role::Base`].
+    pub role: crate::role::Role,
     /// Agent number.
     pub agent: u32,
     /// Its `cmd_vel` and `odom` topics.
@@ -321,7 +323,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
     let _ = session.close().wait();
     let s = base.base().true_state();
     Ok(BaseReport {
-        role: "base",
+        role: crate::role::Role::Base,
         agent: opts.agent,
         topics: [link.cmd_vel, link.odom],
         counters: *base.counters(),

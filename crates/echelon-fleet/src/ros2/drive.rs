@@ -112,7 +112,8 @@ pub trait CmdSink {
 }
 
 /// What a ROS 2 drive counted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Ros2Counters {
     /// Odometry samples received.
     pub odom_received: u64,

@@ -29,7 +29,9 @@ use std::time::Duration;
 use serde::Serialize;
 use zenoh::Wait;
 
-use echelon::output::{CsvWriter, TRAJECTORY_FILE, TRAJECTORY_HEADER, TrajectoryRow};
+use echelon::output::{CsvWriter, FrameRows, TRAJECTORY_FILE, TrajectoryRows};
+use echelon::sample::AgentSample;
+use echelon::stats::{AgentStats, Summary};
 use echelon_mcap::{
     AGENT_STATE, AgentStateRecord, JsonSchema, LeaderRecord, McapLog, REFERENCE, REFERENCE_TOPIC,
     ReferenceRecord, agent_topic, nanos,
@@ -108,7 +110,8 @@ pub struct CollectorOptions {
     pub net: NetOptions,
 }
 
-/// Per-agent statistics of the recorded states.
+/// Per-agent statistics of the recorded states (once started), from the
+/// simulator's accumulator ([`AgentStats`]).
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct AgentRecord {
     /// Agent number, from 1.
@@ -119,7 +122,7 @@ pub struct AgentRecord {
     pub rows: u64,
     /// Fleet time of the last state, s.
     pub t: f64,
-    /// Last state `[x, y, θ, v, ω]`.
+    /// Last state `[x, y, θ, v, ω]` (θ wrapped to (−π, π]).
     pub final_state: [f64; 5],
     /// Last ‖e‖, m.
     pub final_error: f64,
@@ -130,7 +133,20 @@ pub struct AgentRecord {
     /// Last link status.
     pub link: String,
     #[serde(skip)]
-    sum_sq: f64,
+    stats: AgentStats,
+}
+
+impl AgentRecord {
+    /// Adds a started robot's sample: a row, and the statistics.
+    fn add(&mut self, s: &AgentSample) {
+        self.stats.add(s, Summary::SETTLE_TOLERANCE);
+        self.rows = self.stats.samples();
+        self.t = s.t;
+        self.final_state = [s.x, s.y, s.theta, s.v, s.omega];
+        self.final_error = self.stats.final_error();
+        self.rms_error = self.stats.rms_error();
+        self.peak_torque = self.stats.peak_torque();
+    }
 }
 
 /// What the collector reports (`collector.json`, and one JSON line on stdout).
@@ -186,7 +202,7 @@ pub trait RecordSink {
         data: &[u8],
     ) -> Result<(), FleetError>;
     /// Appends one `trajectory.csv` row.
-    fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError>;
+    fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError>;
 }
 
 /// The collector as a state machine: every sample received goes in through
@@ -419,19 +435,7 @@ impl Collector {
         now: u64,
         sink: &mut impl RecordSink,
     ) -> Result<(), FleetError> {
-        let ne = s.e[0].hypot(s.e[1]);
-        // A fleet robot acts on its true state (no odometry model in
-        // the fleet): what it saw is what it is.
-        let output = echelon::sim::AgentOutput {
-            e: s.e,
-            z: s.z,
-            e_hat: s.e,
-            z_hat: s.z,
-            command: s.u,
-            u: s.u,
-            tau: s.tau,
-            velocity: None,
-        };
+        let sample = s.sample();
         let rec = AgentStateRecord {
             seq: Some(seq),
             link: Some(s.link.name()),
@@ -443,7 +447,7 @@ impl Collector {
                 ax: s.leader.ddp[0],
                 ay: s.leader.ddp[1],
             }),
-            ..AgentStateRecord::new(s.t, k, &s.state, &output)
+            ..AgentStateRecord::new(sample)
         };
         let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
         self.log(
@@ -463,26 +467,8 @@ impl Collector {
         if s.link == LinkStatus::Waiting {
             return Ok(());
         }
-        a.rows += 1;
-        a.t = s.t;
-        a.final_state = [
-            s.state.x,
-            s.state.y,
-            s.state.theta,
-            s.state.v,
-            s.state.omega,
-        ];
-        a.final_error = ne;
-        a.sum_sq += ne * ne;
-        a.rms_error = (a.sum_sq / a.rows as f64).sqrt();
-        a.peak_torque = a.peak_torque.max(s.tau.peak());
-        let row = TrajectoryRow {
-            t: s.t,
-            agent: k as usize,
-            state: &s.state,
-            output: &output,
-        };
-        sink.row(&row)
+        a.add(&sample);
+        sink.row(&sample)
     }
 
     /// The final report, with the per-agent records.
@@ -503,6 +489,7 @@ pub struct FileSink {
     log: McapLog<BufWriter<File>>,
     seq: BTreeMap<u16, u32>,
     csv: CsvWriter<BufWriter<File>>,
+    trajectory: TrajectoryRows,
     csv_path: PathBuf,
 }
 
@@ -541,8 +528,9 @@ impl RecordSink for FileSink {
         self.write(id, log_time, publish_time, data)
     }
 
-    fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError> {
-        row.write(&mut self.csv)
+    fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError> {
+        self.trajectory
+            .row(sample, &mut self.csv)
             .map_err(FleetError::io(&self.csv_path))
     }
 }
@@ -563,19 +551,31 @@ impl FileSink {
     }
 
     /// Creates `out` if needed and the files [`MCAP_FILE`] and
-    /// [`TRAJECTORY_FILE`] in it (truncated).
+    /// [`TRAJECTORY_FILE`] in it (truncated), the latter with the columns of
+    /// a fleet of torque-driven robots ([`FileSink::with_trajectory`]).
     pub fn create(out: &std::path::Path) -> Result<FileSink, FleetError> {
+        FileSink::with_trajectory(out, TrajectoryRows::default())
+    }
+
+    /// [`FileSink::create`], `trajectory.csv` with the columns of
+    /// `trajectory` (those `echelon run` writes for the same scenario:
+    /// [`TrajectoryRows::for_agents`]).
+    pub fn with_trajectory(
+        out: &std::path::Path,
+        trajectory: TrajectoryRows,
+    ) -> Result<FileSink, FleetError> {
         std::fs::create_dir_all(out).map_err(FleetError::io(out))?;
         let mcap_path = out.join(MCAP_FILE);
         let csv_path = out.join(TRAJECTORY_FILE);
         let log = McapLog::create(&mcap_path)?;
         let file = File::create(&csv_path).map_err(FleetError::io(&csv_path))?;
-        let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), TRAJECTORY_HEADER)
+        let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), trajectory.header())
             .map_err(FleetError::io(&csv_path))?;
         Ok(FileSink {
             log,
             seq: BTreeMap::new(),
             csv,
+            trajectory,
             csv_path,
         })
     }
@@ -639,10 +639,21 @@ pub fn run_with_ros2(
     ros: Vec<RosTopic>,
     stop: &StopFlag,
 ) -> Result<CollectorReport, FleetError> {
+    run_recording(opts, ros, TrajectoryRows::default(), stop)
+}
+
+/// [`run_with_ros2`], writing `trajectory.csv` with the columns of
+/// `trajectory` ([`FileSink::with_trajectory`]).
+pub fn run_recording(
+    opts: CollectorOptions,
+    ros: Vec<RosTopic>,
+    trajectory: TrajectoryRows,
+    stop: &StopFlag,
+) -> Result<CollectorReport, FleetError> {
     let keys = Keys::new(&opts.fleet);
     let mut collector =
         Collector::with_ros2(keys.clone(), ros).map_err(|e| FleetError::Config(e.to_string()))?;
-    let mut sink = FileSink::create(&opts.out)?;
+    let mut sink = FileSink::with_trajectory(&opts.out, trajectory)?;
 
     let session = net::open(&opts.net)?;
     let (tx, rx) = mpsc::channel::<Received>();
@@ -760,11 +771,12 @@ mod tests {
             Ok(())
         }
 
-        fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError> {
+        fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError> {
             // One row on its own, without the header line.
             let mut csv = CsvWriter::new(Vec::new(), "")
                 .map_err(FleetError::io(std::path::Path::new("row")))?;
-            row.write(&mut csv)
+            TrajectoryRows::default()
+                .row(sample, &mut csv)
                 .map_err(FleetError::io(std::path::Path::new("row")))?;
             let bytes = csv
                 .into_inner()

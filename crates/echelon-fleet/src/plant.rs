@@ -8,6 +8,7 @@
 
 use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::model::{Input, RobotParams, State, Torques};
+use echelon::sample::VelocitySample;
 use echelon::sim::{AgentSpec, Drive};
 
 /// What the law asks of a drive: wheel torques' inputs (eq. 13, a
@@ -32,6 +33,19 @@ pub struct Actuation {
     /// On a velocity base, the command after its speed limits
     /// ([`VelocityBase::limit`]) and whether they cut it.
     pub velocity: Option<(VelocityCommand, bool)>,
+}
+
+impl Actuation {
+    /// A velocity base's sample of `cmd`, the command it was sent, and this
+    /// actuation (`None` on a torque-driven robot).
+    pub fn velocity_sample(&self, cmd: Command) -> Option<VelocitySample> {
+        let (applied, saturated) = self.velocity?;
+        let command = match cmd {
+            Command::Velocity(c) => c,
+            Command::Torque(_) => VelocityCommand::default(),
+        };
+        Some(VelocitySample::new(command, applied, saturated))
+    }
 }
 
 /// A differential-drive robot under the fleet controller: what the robot's

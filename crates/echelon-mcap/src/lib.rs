@@ -36,10 +36,9 @@ use std::sync::LazyLock;
 
 use serde::Serialize;
 
-use echelon::model::State;
-use echelon::model::wrap_angle;
 use echelon::reference::{Order, Reference, Trajectory};
-use echelon::sim::{AgentOutput, Frame, Observer, ObserverError, Simulation};
+use echelon::sample::AgentSample;
+use echelon::sim::{Frame, Observer, ObserverError, Simulation};
 
 /// A failure while writing an MCAP file.
 #[derive(Debug, thiserror::Error)]
@@ -139,42 +138,16 @@ pub struct LeaderRecord {
     pub ay: f64,
 }
 
-/// One robot at one instant (an `/agent/K/state` message): state, tracking
-/// error `e` (eq. 7) and backstepping error `z` (eq. 10) in the robot's body
-/// frame, generalised input `u` and wheel torques. SI units, radians.
+/// One robot at one instant (an `/agent/K/state` message): the
+/// [`AgentSample`] (the `trajectory.csv` row, velocity-base fields included
+/// for a velocity base), ‖e‖, and in a fleet the robot's sequence number,
+/// link status and the leader motion it used. SI units, radians.
 #[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 #[schemars(title = "echelon.AgentState")]
 pub struct AgentStateRecord {
-    /// Time, s.
-    pub t: f64,
-    /// Agent number, from 1.
-    pub agent: u32,
-    /// Position x, m.
-    pub x: f64,
-    /// Position y, m.
-    pub y: f64,
-    /// Heading, rad, wrapped to (−π, π].
-    pub theta: f64,
-    /// Linear speed, m/s.
-    pub v: f64,
-    /// Angular speed, rad/s.
-    pub omega: f64,
-    /// Tracking error `e_x`, m.
-    pub ex: f64,
-    /// Tracking error `e_y`, m.
-    pub ey: f64,
-    /// Backstepping error `z_x`, m/s.
-    pub zx: f64,
-    /// Backstepping error `z_y`, m/s.
-    pub zy: f64,
-    /// Force `u1`, N.
-    pub u1: f64,
-    /// Torque `u2`, N m.
-    pub u2: f64,
-    /// Right wheel torque, N m.
-    pub tau_r: f64,
-    /// Left wheel torque, N m.
-    pub tau_l: f64,
+    /// The sample.
+    #[serde(flatten)]
+    pub sample: AgentSample,
     /// ‖e‖, m.
     pub error_norm: f64,
     /// Fleet only: the robot's message sequence number.
@@ -189,26 +162,11 @@ pub struct AgentStateRecord {
 }
 
 impl AgentStateRecord {
-    /// The simulator's view of agent `agent` (from 1) at `t`: state, errors,
-    /// applied input and torques (θ wrapped); fleet fields empty.
-    pub fn new(t: f64, agent: u32, s: &State, o: &AgentOutput) -> AgentStateRecord {
+    /// The record of `sample`; fleet fields empty.
+    pub fn new(sample: AgentSample) -> AgentStateRecord {
         AgentStateRecord {
-            t,
-            agent,
-            x: s.x,
-            y: s.y,
-            theta: wrap_angle(s.theta),
-            v: s.v,
-            omega: s.omega,
-            ex: o.e[0],
-            ey: o.e[1],
-            zx: o.z[0],
-            zy: o.z[1],
-            u1: o.u.u1,
-            u2: o.u.u2,
-            tau_r: o.tau.right,
-            tau_l: o.tau.left,
-            error_norm: o.e[0].hypot(o.e[1]),
+            error_norm: sample.error_norm(),
+            sample,
             seq: None,
             link: None,
             leader: None,
@@ -551,9 +509,8 @@ impl<W: Write + Seek> Observer for McapObserver<W> {
             .as_mut()
             .ok_or("MCAP: the file was already finished")?;
         log.write_json(reference_channel, seq, time, time, &record)?;
-        for (i, (s, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
-            let record = AgentStateRecord::new(frame.t, (i + 1) as u32, s, o);
-            log.write_json(self.agent_channels[i], seq, time, time, &record)?;
+        for (sample, &channel) in AgentSample::all(frame).zip(&self.agent_channels) {
+            log.write_json(channel, seq, time, time, &AgentStateRecord::new(sample))?;
         }
         Ok(())
     }
@@ -647,8 +604,9 @@ mod tests {
         serde_json::from_str(&s.schema).unwrap()
     }
 
+    /// A fleet record of a velocity base: every field there is.
     fn fleet_state() -> AgentStateRecord {
-        AgentStateRecord {
+        let mut record = AgentStateRecord {
             seq: Some(7),
             link: Some("tracking"),
             leader: Some(LeaderRecord {
@@ -659,19 +617,21 @@ mod tests {
                 ax: 0.0,
                 ay: 0.25,
             }),
-            ..AgentStateRecord::new(
+            ..AgentStateRecord::new(AgentSample::new(
                 1.5,
                 2,
-                &State {
+                &echelon::State {
                     x: 1.0,
                     y: -1.0,
                     theta: 4.0,
                     v: 0.3,
                     omega: -0.1,
                 },
-                &AgentOutput::default(),
-            )
-        }
+                &echelon::sim::AgentOutput::default(),
+            ))
+        };
+        record.sample.velocity = Some(echelon::sample::VelocitySample::default());
+        record
     }
 
     #[test]
@@ -688,6 +648,10 @@ mod tests {
             seq: None,
             link: None,
             leader: None,
+            sample: AgentSample {
+                velocity: None,
+                ..fleet_state().sample
+            },
             ..fleet_state()
         })
         .unwrap();

@@ -401,12 +401,7 @@ impl Collector {
                 let rec = ReferenceRecord {
                     t: r.t,
                     seq: Some(h.seq),
-                    x: r.motion.p[0],
-                    y: r.motion.p[1],
-                    vx: r.motion.dp[0],
-                    vy: r.motion.dp[1],
-                    ax: r.motion.ddp[0],
-                    ay: r.motion.ddp[1],
+                    motion: LeaderRecord::from(&r.motion),
                     speed: r.speed,
                     turn_rate: r.turn_rate,
                 };
@@ -439,14 +434,7 @@ impl Collector {
         let rec = AgentStateRecord {
             seq: Some(seq),
             link: Some(s.link.name()),
-            leader: Some(LeaderRecord {
-                x: s.leader.p[0],
-                y: s.leader.p[1],
-                vx: s.leader.dp[0],
-                vy: s.leader.dp[1],
-                ax: s.leader.ddp[0],
-                ay: s.leader.ddp[1],
-            }),
+            leader: Some(LeaderRecord::from(&s.leader)),
             ..AgentStateRecord::new(sample)
         };
         let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;

@@ -36,6 +36,7 @@ use std::sync::LazyLock;
 
 use serde::Serialize;
 
+use echelon::control::LeaderMotion;
 use echelon::reference::{Order, Reference, Trajectory};
 use echelon::sample::AgentSample;
 use echelon::sim::{Frame, Observer, ObserverError, Simulation};
@@ -121,7 +122,8 @@ pub static AGENT_STATE: LazyLock<JsonSchema> =
 pub static REFERENCE: LazyLock<JsonSchema> =
     LazyLock::new(|| JsonSchema::of::<ReferenceRecord>("echelon.Reference"));
 
-/// The leader motion a fleet robot's law used.
+/// A leader motion `p_d`, `ṗ_d`, `p̈_d`: the one a fleet robot's law used,
+/// or the virtual leader's (in [`ReferenceRecord`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct LeaderRecord {
     /// `p_d` x, m.
@@ -136,6 +138,19 @@ pub struct LeaderRecord {
     pub ax: f64,
     /// `p̈_d` y, m/s².
     pub ay: f64,
+}
+
+impl From<&LeaderMotion> for LeaderRecord {
+    fn from(m: &LeaderMotion) -> Self {
+        LeaderRecord {
+            x: m.p[0],
+            y: m.p[1],
+            vx: m.dp[0],
+            vy: m.dp[1],
+            ax: m.ddp[0],
+            ay: m.ddp[1],
+        }
+    }
 }
 
 /// One robot at one instant (an `/agent/K/state` message): the
@@ -184,18 +199,9 @@ pub struct ReferenceRecord {
     /// Fleet only: the leader's sequence number.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seq: Option<u64>,
-    /// `p_d` x, m.
-    pub x: f64,
-    /// `p_d` y, m.
-    pub y: f64,
-    /// `ṗ_d` x, m/s.
-    pub vx: f64,
-    /// `ṗ_d` y, m/s.
-    pub vy: f64,
-    /// `p̈_d` x, m/s².
-    pub ax: f64,
-    /// `p̈_d` y, m/s².
-    pub ay: f64,
+    /// `p_d`, `ṗ_d`, `p̈_d`.
+    #[serde(flatten)]
+    pub motion: LeaderRecord,
     /// `V_d`, m/s.
     pub speed: f64,
     /// `ω_d`, rad/s.
@@ -209,12 +215,11 @@ impl ReferenceRecord {
         ReferenceRecord {
             t,
             seq: None,
-            x: jet.p[0],
-            y: jet.p[1],
-            vx: jet.dp[0],
-            vy: jet.dp[1],
-            ax: jet.ddp[0],
-            ay: jet.ddp[1],
+            motion: LeaderRecord::from(&LeaderMotion {
+                p: jet.p,
+                dp: jet.dp,
+                ddp: jet.ddp,
+            }),
             speed: jet.speed(),
             turn_rate: jet.turn_rate(),
         }
@@ -587,7 +592,12 @@ mod tests {
 
     /// The paper's circle experiment, `duration` s long.
     fn circle(duration: f64) -> echelon::Run {
-        Scenario::builtin("experiment-circle")
+        scenario("experiment-circle", duration)
+    }
+
+    /// The built-in scenario `name`, `duration` s long.
+    fn scenario(name: &str, duration: f64) -> echelon::Run {
+        Scenario::builtin(name)
             .unwrap()
             .build(&Overrides {
                 duration: Some(duration),
@@ -692,12 +702,20 @@ mod tests {
         assert!(conforms(&record, &agent, "a").is_err());
     }
 
-    /// A simulated run through the observer: every message conforms to its
-    /// channel's schema, one message per channel per logged frame, and the
-    /// file is finished (readable summary).
+    /// A simulated run through the observer, torque-driven or on velocity
+    /// bases: every message conforms to its channel's schema, one message
+    /// per channel per logged frame, and the file is finished (readable
+    /// summary).
     #[test]
     fn every_message_of_a_run_conforms_to_its_channel_schema() {
-        let mut run = circle(0.5);
+        for name in ["experiment-circle", "experiment-circle-velocity"] {
+            a_run_conforms(name);
+        }
+    }
+
+    fn a_run_conforms(name: &str) {
+        let mut run = scenario(name, 0.5);
+        let velocity = run.simulation.agents()[0].velocity_robot().is_some();
         let every = 7;
         let mut mcap = Every::new(every, McapObserver::new(Cursor::new(Vec::new())).unwrap());
         run.simulation.run(&mut mcap).unwrap();
@@ -711,6 +729,9 @@ mod tests {
             let schema: Value = serde_json::from_slice(&schema.data).unwrap();
             let record: Value = serde_json::from_slice(&m.data).unwrap();
             conforms(&record, &schema, &m.channel.topic).unwrap();
+            if m.channel.topic != REFERENCE_TOPIC {
+                assert_eq!(record.get("v_cmd").is_some(), velocity, "{record}");
+            }
             *counts.entry(m.channel.topic.clone()).or_default() += 1;
         }
         let agents = run.simulation.agents().len();

@@ -727,6 +727,7 @@ mod tests {
     struct Memory {
         logged: Vec<(String, u64, u64, Vec<u8>)>,
         rows: Vec<String>,
+        trajectory: TrajectoryRows,
     }
 
     impl RecordSink for Memory {
@@ -763,7 +764,7 @@ mod tests {
             // One row on its own, without the header line.
             let mut csv = CsvWriter::new(Vec::new(), "")
                 .map_err(FleetError::io(std::path::Path::new("row")))?;
-            TrajectoryRows::default()
+            self.trajectory
                 .row(sample, &mut csv)
                 .map_err(FleetError::io(std::path::Path::new("row")))?;
             let bytes = csv
@@ -862,6 +863,87 @@ mod tests {
         assert_eq!((a.agent, a.messages, a.rows), (1, 2, 1));
         assert!((a.final_error - 5e-3).abs() < 1e-15);
         assert_eq!(a.link, "waiting");
+    }
+
+    /// The states of a simulated run of velocity bases, sent as robots send
+    /// them, give the collector the simulator's statistics (the same
+    /// accumulator, the same samples) and the simulator's rows, velocity
+    /// columns included.
+    #[test]
+    fn the_collector_s_statistics_and_rows_are_the_simulator_s() {
+        use echelon::output::{FrameRows, TRAJECTORY_HEADER_VELOCITY};
+        use echelon::scenario::{Overrides, Scenario};
+        use echelon::sim::{Frame, Observer, ObserverError};
+
+        let mut run = Scenario::builtin("experiment-circle-velocity")
+            .unwrap_or_else(|| panic!("a built-in"))
+            .build(&Overrides {
+                duration: Some(2.0),
+                ..Overrides::default()
+            })
+            .unwrap_or_else(|e| panic!("{e}"));
+        let trajectory = TrajectoryRows::for_simulation(&run.simulation);
+        assert_eq!(trajectory.header(), TRAJECTORY_HEADER_VELOCITY);
+        let keys = Keys::new("f");
+        let mut c = Collector::new(keys.clone());
+        let mut sink = Memory {
+            trajectory,
+            ..Memory::default()
+        };
+        let mut sim_rows = Memory {
+            trajectory,
+            ..Memory::default()
+        };
+        let mut summary = Summary::new(run.simulation.agents().len(), Summary::SETTLE_TOLERANCE);
+        let mut send = |frame: &Frame<'_>| -> Result<(), ObserverError> {
+            for (i, (state, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
+                let s = RobotState {
+                    t: frame.t,
+                    agent: i as u32 + 1,
+                    link: LinkStatus::Tracking,
+                    state: *state,
+                    e: o.e,
+                    z: o.z,
+                    u: o.u,
+                    tau: o.tau,
+                    velocity: o.velocity.as_ref().map(Into::into),
+                    ..RobotState::default()
+                };
+                let mut b = Vec::new();
+                wire::encode_state(
+                    &mut b,
+                    Header {
+                        source: 1,
+                        seq: frame.step,
+                    },
+                    &s,
+                );
+                c.on_message(&keys.state(s.agent), &b, 0, &mut sink)?;
+            }
+            for sample in AgentSample::all(frame) {
+                sim_rows.row(&sample)?;
+            }
+            Ok(())
+        };
+        run.simulation
+            .run(&mut [&mut send as &mut dyn Observer, &mut summary])
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(sink.rows, sim_rows.rows);
+        assert!(sink.rows[0].split(',').count() == 20, "{}", sink.rows[0]);
+        let report = c.finish();
+        let agents = summary.agents(run.simulation.agents());
+        assert_eq!(report.agents.len(), agents.len());
+        for (a, s) in report.agents.iter().zip(&agents) {
+            assert_eq!(a.rows, run.simulation.steps() + 1);
+            assert_eq!(
+                (a.final_error, a.rms_error, a.peak_torque),
+                (s.final_error, s.rms_error, s.peak_torque)
+            );
+            assert_eq!(
+                [a.final_state[0], a.final_state[1], a.final_state[2]],
+                [s.final_pose.x, s.final_pose.y, s.final_pose.theta]
+            );
+        }
     }
 
     /// Delays are recorded per key and in total, unstamped samples counted

@@ -335,6 +335,50 @@ fn experiment_circle_converges_like_the_simulator() {
     assert_eq!(python_mcap_counts(&mcap_path), logged);
 }
 
+/// Issue 21: the fleet's `trajectory.csv` for a scenario of velocity bases
+/// has exactly the header `echelon run` writes for it, velocity-base
+/// columns included, and the robots' rows fill them (their commands, what
+/// the base followed, whether its limits cut it; `u1…tau_l` `NaN` as in the
+/// simulator's).
+#[test]
+fn the_fleet_trajectory_of_velocity_bases_has_the_simulator_s_header() {
+    let _fleet = common::one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = "experiment-circle-velocity";
+    let sim_dir = dir.path().join("sim");
+    echelon_ok(&["run", scenario, "--quiet", "--out"], &sim_dir);
+    let fleet_dir = dir.path().join("fleet");
+    up(
+        scenario,
+        &fleet_dir,
+        &["--time-scale", "20", "--duration", "10"],
+    );
+    let header = |dir: &Path| {
+        let text = std::fs::read_to_string(dir.join("trajectory.csv")).unwrap();
+        text.lines().next().unwrap().to_owned()
+    };
+    assert_eq!(header(&fleet_dir), header(&sim_dir));
+    assert_eq!(
+        header(&fleet_dir),
+        echelon::output::TRAJECTORY_HEADER_VELOCITY
+    );
+    let text = std::fs::read_to_string(fleet_dir.join("trajectory.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert!(rows.len() > 100, "{} rows", rows.len());
+    for r in &rows {
+        assert_eq!(r.len(), 20);
+        assert!(r[11..15].iter().all(|x| x.is_nan()), "{r:?}");
+        assert!(r[15..19].iter().all(|x| x.is_finite()), "{r:?}");
+        assert!(r[19] == 0.0 || r[19] == 1.0, "{r:?}");
+    }
+    // The robots move under their commands: some are not zero.
+    assert!(rows.iter().any(|r| r[15] != 0.0 && r[17] != 0.0));
+}
+
 /// A 3 s outage of everything the robots receive: under `stop` they come to
 /// rest near the last reference; under `extrapolate` (hold 4 s) the true
 /// tracking error stays small; both recover.

@@ -29,7 +29,9 @@ use std::time::Duration;
 use serde::Serialize;
 use zenoh::Wait;
 
-use echelon::output::{CsvWriter, TRAJECTORY_FILE, TRAJECTORY_HEADER, TrajectoryRow};
+use echelon::output::{CsvWriter, FrameRows, TRAJECTORY_FILE, TrajectoryRows};
+use echelon::sample::AgentSample;
+use echelon::stats::{AgentStats, Summary};
 use echelon_mcap::{
     AGENT_STATE, AgentStateRecord, JsonSchema, LeaderRecord, McapLog, REFERENCE, REFERENCE_TOPIC,
     ReferenceRecord, agent_topic, nanos,
@@ -108,7 +110,8 @@ pub struct CollectorOptions {
     pub net: NetOptions,
 }
 
-/// Per-agent statistics of the recorded states.
+/// Per-agent statistics of the recorded states (once started), from the
+/// simulator's accumulator ([`AgentStats`]).
 #[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AgentRecord {
@@ -120,7 +123,7 @@ pub struct AgentRecord {
     pub rows: u64,
     /// Fleet time of the last state, s.
     pub t: f64,
-    /// Last state `[x, y, θ, v, ω]`.
+    /// Last state `[x, y, θ, v, ω]` (θ wrapped to (−π, π]).
     pub final_state: [f64; 5],
     /// Last ‖e‖, m.
     pub final_error: f64,
@@ -131,7 +134,20 @@ pub struct AgentRecord {
     /// Last link status.
     pub link: String,
     #[serde(skip)]
-    sum_sq: f64,
+    stats: AgentStats,
+}
+
+impl AgentRecord {
+    /// Adds a started robot's sample: a row, and the statistics.
+    fn add(&mut self, s: &AgentSample) {
+        self.stats.add(s, Summary::SETTLE_TOLERANCE);
+        self.rows = self.stats.samples();
+        self.t = s.t;
+        self.final_state = [s.x, s.y, s.theta, s.v, s.omega];
+        self.final_error = self.stats.final_error();
+        self.rms_error = self.stats.rms_error();
+        self.peak_torque = self.stats.peak_torque();
+    }
 }
 
 /// What the collector reports (`collector.json`, and one JSON line on stdout).
@@ -188,7 +204,7 @@ pub trait RecordSink {
         data: &[u8],
     ) -> Result<(), FleetError>;
     /// Appends one `trajectory.csv` row.
-    fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError>;
+    fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError>;
 }
 
 /// The collector as a state machine: every sample received goes in through
@@ -396,12 +412,7 @@ impl Collector {
                 let rec = ReferenceRecord {
                     t: r.t,
                     seq: Some(h.seq),
-                    x: r.motion.p[0],
-                    y: r.motion.p[1],
-                    vx: r.motion.dp[0],
-                    vy: r.motion.dp[1],
-                    ax: r.motion.ddp[0],
-                    ay: r.motion.ddp[1],
+                    motion: LeaderRecord::from(&r.motion),
                     speed: r.speed,
                     turn_rate: r.turn_rate,
                 };
@@ -430,31 +441,12 @@ impl Collector {
         now: u64,
         sink: &mut impl RecordSink,
     ) -> Result<(), FleetError> {
-        let ne = s.e[0].hypot(s.e[1]);
-        // A fleet robot acts on its true state (no odometry model in
-        // the fleet): what it saw is what it is.
-        let output = echelon::sim::AgentOutput {
-            e: s.e,
-            z: s.z,
-            e_hat: s.e,
-            z_hat: s.z,
-            command: s.u,
-            u: s.u,
-            tau: s.tau,
-            velocity: None,
-        };
+        let sample = s.sample();
         let rec = AgentStateRecord {
             seq: Some(seq),
             link: Some(s.link.name()),
-            leader: Some(LeaderRecord {
-                x: s.leader.p[0],
-                y: s.leader.p[1],
-                vx: s.leader.dp[0],
-                vy: s.leader.dp[1],
-                ax: s.leader.ddp[0],
-                ay: s.leader.ddp[1],
-            }),
-            ..AgentStateRecord::new(s.t, k, &s.state, &output)
+            leader: Some(LeaderRecord::from(&s.leader)),
+            ..AgentStateRecord::new(sample)
         };
         let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
         self.log(
@@ -474,26 +466,8 @@ impl Collector {
         if s.link == LinkStatus::Waiting {
             return Ok(());
         }
-        a.rows += 1;
-        a.t = s.t;
-        a.final_state = [
-            s.state.x,
-            s.state.y,
-            s.state.theta,
-            s.state.v,
-            s.state.omega,
-        ];
-        a.final_error = ne;
-        a.sum_sq += ne * ne;
-        a.rms_error = (a.sum_sq / a.rows as f64).sqrt();
-        a.peak_torque = a.peak_torque.max(s.tau.peak());
-        let row = TrajectoryRow {
-            t: s.t,
-            agent: k as usize,
-            state: &s.state,
-            output: &output,
-        };
-        sink.row(&row)
+        a.add(&sample);
+        sink.row(&sample)
     }
 
     /// The final report, with the per-agent records.
@@ -514,6 +488,7 @@ pub struct FileSink {
     log: McapLog<BufWriter<File>>,
     seq: BTreeMap<u16, u32>,
     csv: CsvWriter<BufWriter<File>>,
+    trajectory: TrajectoryRows,
     csv_path: PathBuf,
 }
 
@@ -552,8 +527,9 @@ impl RecordSink for FileSink {
         self.write(id, log_time, publish_time, data)
     }
 
-    fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError> {
-        row.write(&mut self.csv)
+    fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError> {
+        self.trajectory
+            .row(sample, &mut self.csv)
             .map_err(FleetError::io(&self.csv_path))
     }
 }
@@ -574,19 +550,31 @@ impl FileSink {
     }
 
     /// Creates `out` if needed and the files [`MCAP_FILE`] and
-    /// [`TRAJECTORY_FILE`] in it (truncated).
+    /// [`TRAJECTORY_FILE`] in it (truncated), the latter with the columns of
+    /// a fleet of torque-driven robots ([`FileSink::with_trajectory`]).
     pub fn create(out: &std::path::Path) -> Result<FileSink, FleetError> {
+        FileSink::with_trajectory(out, TrajectoryRows::default())
+    }
+
+    /// [`FileSink::create`], `trajectory.csv` with the columns of
+    /// `trajectory` (those `echelon run` writes for the same scenario:
+    /// [`TrajectoryRows::for_agents`]).
+    pub fn with_trajectory(
+        out: &std::path::Path,
+        trajectory: TrajectoryRows,
+    ) -> Result<FileSink, FleetError> {
         std::fs::create_dir_all(out).map_err(FleetError::io(out))?;
         let mcap_path = out.join(MCAP_FILE);
         let csv_path = out.join(TRAJECTORY_FILE);
         let log = McapLog::create(&mcap_path)?;
         let file = File::create(&csv_path).map_err(FleetError::io(&csv_path))?;
-        let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), TRAJECTORY_HEADER)
+        let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), trajectory.header())
             .map_err(FleetError::io(&csv_path))?;
         Ok(FileSink {
             log,
             seq: BTreeMap::new(),
             csv,
+            trajectory,
             csv_path,
         })
     }
@@ -650,10 +638,21 @@ pub fn run_with_ros2(
     ros: Vec<RosTopic>,
     stop: &StopFlag,
 ) -> Result<CollectorReport, FleetError> {
+    run_recording(opts, ros, TrajectoryRows::default(), stop)
+}
+
+/// [`run_with_ros2`], writing `trajectory.csv` with the columns of
+/// `trajectory` ([`FileSink::with_trajectory`]).
+pub fn run_recording(
+    opts: CollectorOptions,
+    ros: Vec<RosTopic>,
+    trajectory: TrajectoryRows,
+    stop: &StopFlag,
+) -> Result<CollectorReport, FleetError> {
     let keys = Keys::new(&opts.fleet);
     let mut collector =
         Collector::with_ros2(keys.clone(), ros).map_err(|e| FleetError::Config(e.to_string()))?;
-    let mut sink = FileSink::create(&opts.out)?;
+    let mut sink = FileSink::with_trajectory(&opts.out, trajectory)?;
 
     let session = net::open(&opts.net)?;
     let (tx, rx) = mpsc::channel::<Received>();
@@ -739,6 +738,7 @@ mod tests {
     struct Memory {
         logged: Vec<(String, u64, u64, Vec<u8>)>,
         rows: Vec<String>,
+        trajectory: TrajectoryRows,
     }
 
     impl RecordSink for Memory {
@@ -771,11 +771,12 @@ mod tests {
             Ok(())
         }
 
-        fn row(&mut self, row: &TrajectoryRow<'_>) -> Result<(), FleetError> {
+        fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError> {
             // One row on its own, without the header line.
             let mut csv = CsvWriter::new(Vec::new(), "")
                 .map_err(FleetError::io(std::path::Path::new("row")))?;
-            row.write(&mut csv)
+            self.trajectory
+                .row(sample, &mut csv)
                 .map_err(FleetError::io(std::path::Path::new("row")))?;
             let bytes = csv
                 .into_inner()
@@ -873,6 +874,88 @@ mod tests {
         assert_eq!((a.agent, a.messages, a.rows), (1, 2, 1));
         assert!((a.final_error - 5e-3).abs() < 1e-15);
         assert_eq!(a.link, "waiting");
+    }
+
+    /// The states of a simulated run of velocity bases, sent as robots send
+    /// them, give the collector the simulator's statistics (the same
+    /// accumulator, the same samples) and the simulator's rows, velocity
+    /// columns included.
+    #[test]
+    fn the_collector_s_statistics_and_rows_are_the_simulator_s() {
+        use echelon::output::{FrameRows, TRAJECTORY_HEADER_VELOCITY};
+        use echelon::scenario::{Overrides, Scenario};
+        use echelon::sim::{Frame, Observer, ObserverError};
+
+        let run = Scenario::builtin("experiment-circle-velocity")
+            .unwrap_or_else(|| panic!("a built-in"))
+            .build(&Overrides {
+                duration: Some(2.0),
+                ..Overrides::default()
+            })
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut simulation = run.simulation();
+        let trajectory = TrajectoryRows::for_agents(run.plan.agents());
+        assert_eq!(trajectory.header(), TRAJECTORY_HEADER_VELOCITY);
+        let keys = Keys::new("f");
+        let mut c = Collector::new(keys.clone());
+        let mut sink = Memory {
+            trajectory,
+            ..Memory::default()
+        };
+        let mut sim_rows = Memory {
+            trajectory,
+            ..Memory::default()
+        };
+        let mut summary = Summary::new(run.plan.agents().len(), Summary::SETTLE_TOLERANCE);
+        let mut send = |frame: &Frame<'_>| -> Result<(), ObserverError> {
+            for (i, (state, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
+                let s = RobotState {
+                    t: frame.t,
+                    agent: i as u32 + 1,
+                    link: LinkStatus::Tracking,
+                    state: *state,
+                    e: o.e,
+                    z: o.z,
+                    u: o.u,
+                    tau: o.tau,
+                    velocity: o.velocity.as_ref().map(Into::into),
+                    ..RobotState::default()
+                };
+                let mut b = Vec::new();
+                wire::encode_state(
+                    &mut b,
+                    Header {
+                        source: 1,
+                        seq: frame.step,
+                    },
+                    &s,
+                );
+                c.on_message(&keys.state(s.agent), &b, 0, &mut sink)?;
+            }
+            for sample in AgentSample::all(frame) {
+                sim_rows.row(&sample)?;
+            }
+            Ok(())
+        };
+        simulation
+            .run(&mut [&mut send as &mut dyn Observer, &mut summary])
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(sink.rows, sim_rows.rows);
+        assert!(sink.rows[0].split(',').count() == 20, "{}", sink.rows[0]);
+        let report = c.finish();
+        let agents = summary.agents(run.plan.agents());
+        assert_eq!(report.agents.len(), agents.len());
+        for (a, s) in report.agents.iter().zip(&agents) {
+            assert_eq!(a.rows, run.plan.steps() + 1);
+            assert_eq!(
+                (a.final_error, a.rms_error, a.peak_torque),
+                (s.final_error, s.rms_error, s.peak_torque)
+            );
+            assert_eq!(
+                [a.final_state[0], a.final_state[1], a.final_state[2]],
+                [s.final_pose.x, s.final_pose.y, s.final_pose.theta]
+            );
+        }
     }
 
     /// Delays are recorded per key and in total, unstamped samples counted

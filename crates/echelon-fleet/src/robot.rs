@@ -692,6 +692,7 @@ impl<P: Plant> Robot<P> {
                     u: act.u,
                     tau: act.tau,
                     leader: out.leader,
+                    velocity: act.velocity_sample(cmd),
                 };
                 self.ticks += 1;
                 Some(self.header_for(self.last))

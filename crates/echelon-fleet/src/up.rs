@@ -543,9 +543,11 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         "collector".to_owned(),
         "--out".to_owned(),
         opts.out.display().to_string(),
+        // For its trajectory.csv's columns (and, with --ros2, its topics).
+        opts.scenario.clone(),
     ];
     if opts.ros2 {
-        args.extend([opts.scenario.clone(), "--ros2".to_owned()]);
+        args.push("--ros2".to_owned());
     }
     args.extend(common(0, "collector"));
     let mut collector = spawn(&opts.exe, "collector", &args, &logs)?;

@@ -12,24 +12,33 @@
 //! | 8 | u64 | sequence number, from 0, +1 per message of this source |
 //! | 16 | f64 | sender time `t`, fleet seconds |
 //!
-//! then the kind's payload of `f64`s (see [`Reference`] and [`RobotState`]).
+//! then the kind's payload (see [`Reference`] and [`RobotState`]).
 //! All floats must be finite. A message whose length, magic, kind or floats
 //! are wrong is *malformed*; a well-formed header with another version is
 //! *wrong-version*. Neither ever panics the receiver.
 
 use echelon::control::LeaderMotion;
 use echelon::model::{Input, State, Torques};
+use echelon::sample::{AgentSample, VelocitySample};
+use echelon::sim::AgentOutput;
 
 /// First byte of every message.
 pub const MAGIC: u8 = 0xEC;
-/// Format version written and accepted.
-pub const VERSION: u8 = 1;
+/// Format version written and accepted (2: a state carries its velocity
+/// base's command).
+pub const VERSION: u8 = 2;
 /// Header length, bytes.
 pub const HEADER_LEN: usize = 24;
 /// A reference message's length, bytes (header + 8 f64).
 pub const REFERENCE_LEN: usize = HEADER_LEN + 8 * 8;
-/// A state message's length, bytes (header + agent u32 + 4 reserved + 21 f64).
-pub const STATE_LEN: usize = HEADER_LEN + 8 + 21 * 8;
+/// A state message's length, bytes (header + agent u32 + drive flags u8 +
+/// 3 reserved + 25 f64).
+pub const STATE_LEN: usize = HEADER_LEN + 8 + 25 * 8;
+
+/// Drive flags of a state: a velocity base's state.
+const FLAG_VELOCITY: u8 = 1;
+/// Drive flags of a state: the base's speed limits cut the command.
+const FLAG_SATURATED: u8 = 2;
 
 const KIND_REFERENCE: u8 = 1;
 const KIND_STATE: u8 = 2;
@@ -105,10 +114,14 @@ pub struct Reference {
     pub turn_rate: f64,
 }
 
-/// A robot's state with what its controller did. Payload after the header:
-/// `agent: u32` (from 1), 4 reserved bytes (0), then the f64s
+/// A robot's state with what its controller did: its [`AgentSample`]
+/// ([`RobotState::sample`]) and what the wire adds (link status,
+/// accelerations, the leader motion used). Payload after the header:
+/// `agent: u32` (from 1), drive flags `u8` (bit 0: a velocity base, bit 1:
+/// its speed limits cut the command), 3 reserved bytes (0), then the f64s
 /// `x, y, θ, v, ω, v̇, ω̇, e_x, e_y, z_x, z_y, u1, u2, τ_r, τ_l,
-/// p_d[2], ṗ_d[2], p̈_d[2]`.
+/// p_d[2], ṗ_d[2], p̈_d[2], v*, ω*, v_applied, ω_applied` (the last four 0
+/// for a torque-driven robot).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RobotState {
     /// Sender time, s.
@@ -133,6 +146,29 @@ pub struct RobotState {
     pub tau: Torques,
     /// The leader motion the law used.
     pub leader: LeaderMotion,
+    /// A velocity base's command (`None`: a torque-driven robot).
+    pub velocity: Option<VelocitySample>,
+}
+
+impl RobotState {
+    /// The sample it carries (heading wrapped). A fleet robot acts on its
+    /// true state (no odometry model in the fleet): what it saw is what it is.
+    pub fn sample(&self) -> AgentSample {
+        let output = AgentOutput {
+            e: self.e,
+            z: self.z,
+            e_hat: self.e,
+            z_hat: self.z,
+            command: self.u,
+            u: self.u,
+            tau: self.tau,
+            velocity: None,
+        };
+        AgentSample {
+            velocity: self.velocity,
+            ..AgentSample::new(self.t, self.agent, &self.state, &output)
+        }
+    }
 }
 
 /// A decoded message.
@@ -181,8 +217,12 @@ pub fn encode_reference(buf: &mut Vec<u8>, h: Header, r: &Reference) {
 pub fn encode_state(buf: &mut Vec<u8>, h: Header, s: &RobotState) {
     put_header(buf, KIND_STATE, s.link as u8, h, s.t);
     buf.extend_from_slice(&s.agent.to_le_bytes());
-    buf.extend_from_slice(&[0; 4]);
+    let flags = s.velocity.map_or(0, |v| {
+        FLAG_VELOCITY | if v.sat { FLAG_SATURATED } else { 0 }
+    });
+    buf.extend_from_slice(&[flags, 0, 0, 0]);
     let (x, l) = (&s.state, &s.leader);
+    let c = s.velocity.unwrap_or_default();
     put_f64s(
         buf,
         &[
@@ -207,6 +247,10 @@ pub fn encode_state(buf: &mut Vec<u8>, h: Header, s: &RobotState) {
             l.dp[1],
             l.ddp[0],
             l.ddp[1],
+            c.v_cmd,
+            c.omega_cmd,
+            c.v_applied,
+            c.omega_applied,
         ],
     );
 }
@@ -286,7 +330,25 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
             if agent == 0 {
                 return Err(DecodeError::Malformed("agent numbers start at 1"));
             }
-            let v = f64s::<21>(&b[HEADER_LEN + 8..])?;
+            let v = f64s::<25>(&b[HEADER_LEN + 8..])?;
+            let velocity = match b[HEADER_LEN + 4] {
+                0 if v[21..] == [0.0; 4] => None,
+                0 => {
+                    return Err(DecodeError::Malformed(
+                        "a torque state with a velocity command",
+                    ));
+                }
+                f if f & FLAG_VELOCITY != 0 && f & !(FLAG_VELOCITY | FLAG_SATURATED) == 0 => {
+                    Some(VelocitySample {
+                        v_cmd: v[21],
+                        omega_cmd: v[22],
+                        v_applied: v[23],
+                        omega_applied: v[24],
+                        sat: f & FLAG_SATURATED != 0,
+                    })
+                }
+                _ => return Err(DecodeError::Malformed("unknown drive flags")),
+            };
             Ok(Message::State(
                 header,
                 RobotState {
@@ -317,6 +379,7 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
                         dp: [v[17], v[18]],
                         ddp: [v[19], v[20]],
                     },
+                    velocity,
                 },
             ))
         }
@@ -355,7 +418,7 @@ mod tests {
         #[test]
         fn states_round_trip(
             source in any::<u32>(), seq in any::<u64>(), agent in 1..1000u32, link in 0..4u8,
-            v in proptest::collection::vec(finite(), 22),
+            drive in 0..3u8, v in proptest::collection::vec(finite(), 26),
         ) {
             let s = RobotState {
                 t: v[21],
@@ -369,6 +432,14 @@ mod tests {
                 u: Input { u1: v[11], u2: v[12] },
                 tau: Torques { right: v[13], left: v[14] },
                 leader: LeaderMotion { p: [v[15], v[16]], dp: [v[17], v[18]], ddp: [v[19], v[20]] },
+                // 0: torque-driven; 1, 2: a velocity base, its limits cutting or not.
+                velocity: (drive > 0).then_some(VelocitySample {
+                    v_cmd: v[22],
+                    omega_cmd: v[23],
+                    v_applied: v[24],
+                    omega_applied: v[25],
+                    sat: drive == 2,
+                }),
             };
             let h = Header { source, seq };
             let mut buf = Vec::new();
@@ -389,7 +460,7 @@ mod tests {
                 }
                 // Reserved bytes are not checked; everything else must match.
                 if bytes.len() == STATE_LEN {
-                    buf[HEADER_LEN + 4..HEADER_LEN + 8].copy_from_slice(&bytes[HEADER_LEN + 4..HEADER_LEN + 8]);
+                    buf[HEADER_LEN + 5..HEADER_LEN + 8].copy_from_slice(&bytes[HEADER_LEN + 5..HEADER_LEN + 8]);
                 }
                 prop_assert_eq!(buf, bytes);
             }
@@ -417,9 +488,9 @@ mod tests {
             turn_rate: 0.0,
         };
         encode_reference(&mut buf, Header { source: 7, seq: 3 }, &r);
-        let mut v2 = buf.clone();
-        v2[1] = 2;
-        assert_eq!(decode(&v2), Err(DecodeError::WrongVersion(2)));
+        let mut v1 = buf.clone();
+        v1[1] = 1;
+        assert_eq!(decode(&v1), Err(DecodeError::WrongVersion(1)));
         let mut bad = buf.clone();
         bad[0] = 0;
         assert!(matches!(decode(&bad), Err(DecodeError::Malformed(_))));

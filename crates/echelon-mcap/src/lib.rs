@@ -35,10 +35,10 @@ use std::sync::LazyLock;
 
 use serde::Serialize;
 
-use echelon::model::State;
-use echelon::model::wrap_angle;
+use echelon::control::LeaderMotion;
 use echelon::reference::{Order, Reference, Trajectory};
-use echelon::sim::{AgentOutput, Frame, Observer, ObserverError, Simulation};
+use echelon::sample::AgentSample;
+use echelon::sim::{Frame, Observer, ObserverError, Simulation};
 
 /// A failure while writing an MCAP file.
 #[derive(Debug, thiserror::Error)]
@@ -121,7 +121,8 @@ pub static AGENT_STATE: LazyLock<JsonSchema> =
 pub static REFERENCE: LazyLock<JsonSchema> =
     LazyLock::new(|| JsonSchema::of::<ReferenceRecord>("echelon.Reference"));
 
-/// The leader motion a fleet robot's law used.
+/// A leader motion `p_d`, `ṗ_d`, `p̈_d`: the one a fleet robot's law used,
+/// or the virtual leader's (in [`ReferenceRecord`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct LeaderRecord {
     /// `p_d` x, m.
@@ -138,42 +139,29 @@ pub struct LeaderRecord {
     pub ay: f64,
 }
 
-/// One robot at one instant (an `/agent/K/state` message): state, tracking
-/// error `e` (eq. 7) and backstepping error `z` (eq. 10) in the robot's body
-/// frame, generalised input `u` and wheel torques. SI units, radians.
+impl From<&LeaderMotion> for LeaderRecord {
+    fn from(m: &LeaderMotion) -> Self {
+        LeaderRecord {
+            x: m.p[0],
+            y: m.p[1],
+            vx: m.dp[0],
+            vy: m.dp[1],
+            ax: m.ddp[0],
+            ay: m.ddp[1],
+        }
+    }
+}
+
+/// One robot at one instant (an `/agent/K/state` message): the
+/// [`AgentSample`] (the `trajectory.csv` row, velocity-base fields included
+/// for a velocity base), ‖e‖, and in a fleet the robot's sequence number,
+/// link status and the leader motion it used. SI units, radians.
 #[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 #[schemars(title = "echelon.AgentState")]
 pub struct AgentStateRecord {
-    /// Time, s.
-    pub t: f64,
-    /// Agent number, from 1.
-    pub agent: u32,
-    /// Position x, m.
-    pub x: f64,
-    /// Position y, m.
-    pub y: f64,
-    /// Heading, rad, wrapped to (−π, π].
-    pub theta: f64,
-    /// Linear speed, m/s.
-    pub v: f64,
-    /// Angular speed, rad/s.
-    pub omega: f64,
-    /// Tracking error `e_x`, m.
-    pub ex: f64,
-    /// Tracking error `e_y`, m.
-    pub ey: f64,
-    /// Backstepping error `z_x`, m/s.
-    pub zx: f64,
-    /// Backstepping error `z_y`, m/s.
-    pub zy: f64,
-    /// Force `u1`, N.
-    pub u1: f64,
-    /// Torque `u2`, N m.
-    pub u2: f64,
-    /// Right wheel torque, N m.
-    pub tau_r: f64,
-    /// Left wheel torque, N m.
-    pub tau_l: f64,
+    /// The sample.
+    #[serde(flatten)]
+    pub sample: AgentSample,
     /// ‖e‖, m.
     pub error_norm: f64,
     /// Fleet only: the robot's message sequence number.
@@ -188,26 +176,11 @@ pub struct AgentStateRecord {
 }
 
 impl AgentStateRecord {
-    /// The simulator's view of agent `agent` (from 1) at `t`: state, errors,
-    /// applied input and torques (θ wrapped); fleet fields empty.
-    pub fn new(t: f64, agent: u32, s: &State, o: &AgentOutput) -> AgentStateRecord {
+    /// The record of `sample`; fleet fields empty.
+    pub fn new(sample: AgentSample) -> AgentStateRecord {
         AgentStateRecord {
-            t,
-            agent,
-            x: s.x,
-            y: s.y,
-            theta: wrap_angle(s.theta),
-            v: s.v,
-            omega: s.omega,
-            ex: o.e[0],
-            ey: o.e[1],
-            zx: o.z[0],
-            zy: o.z[1],
-            u1: o.u.u1,
-            u2: o.u.u2,
-            tau_r: o.tau.right,
-            tau_l: o.tau.left,
-            error_norm: o.e[0].hypot(o.e[1]),
+            error_norm: sample.error_norm(),
+            sample,
             seq: None,
             link: None,
             leader: None,
@@ -225,18 +198,9 @@ pub struct ReferenceRecord {
     /// Fleet only: the leader's sequence number.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seq: Option<u64>,
-    /// `p_d` x, m.
-    pub x: f64,
-    /// `p_d` y, m.
-    pub y: f64,
-    /// `ṗ_d` x, m/s.
-    pub vx: f64,
-    /// `ṗ_d` y, m/s.
-    pub vy: f64,
-    /// `p̈_d` x, m/s².
-    pub ax: f64,
-    /// `p̈_d` y, m/s².
-    pub ay: f64,
+    /// `p_d`, `ṗ_d`, `p̈_d`.
+    #[serde(flatten)]
+    pub motion: LeaderRecord,
     /// `V_d`, m/s.
     pub speed: f64,
     /// `ω_d`, rad/s.
@@ -250,12 +214,11 @@ impl ReferenceRecord {
         ReferenceRecord {
             t,
             seq: None,
-            x: jet.p[0],
-            y: jet.p[1],
-            vx: jet.dp[0],
-            vy: jet.dp[1],
-            ax: jet.ddp[0],
-            ay: jet.ddp[1],
+            motion: LeaderRecord::from(&LeaderMotion {
+                p: jet.p,
+                dp: jet.dp,
+                ddp: jet.ddp,
+            }),
             speed: jet.speed(),
             turn_rate: jet.turn_rate(),
         }
@@ -550,9 +513,8 @@ impl<W: Write + Seek> Observer for McapObserver<W> {
             .as_mut()
             .ok_or("MCAP: the file was already finished")?;
         log.write_json(reference_channel, seq, time, time, &record)?;
-        for (i, (s, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
-            let record = AgentStateRecord::new(frame.t, (i + 1) as u32, s, o);
-            log.write_json(self.agent_channels[i], seq, time, time, &record)?;
+        for (sample, &channel) in AgentSample::all(frame).zip(&self.agent_channels) {
+            log.write_json(channel, seq, time, time, &AgentStateRecord::new(sample))?;
         }
         Ok(())
     }
@@ -629,7 +591,12 @@ mod tests {
 
     /// The paper's circle experiment, `duration` s long.
     fn circle(duration: f64) -> echelon::Run {
-        Scenario::builtin("experiment-circle")
+        scenario("experiment-circle", duration)
+    }
+
+    /// The built-in scenario `name`, `duration` s long.
+    fn scenario(name: &str, duration: f64) -> echelon::Run {
+        Scenario::builtin(name)
             .unwrap()
             .build(&Overrides {
                 duration: Some(duration),
@@ -646,8 +613,9 @@ mod tests {
         serde_json::from_str(&s.schema).unwrap()
     }
 
+    /// A fleet record of a velocity base: every field there is.
     fn fleet_state() -> AgentStateRecord {
-        AgentStateRecord {
+        let mut record = AgentStateRecord {
             seq: Some(7),
             link: Some("tracking"),
             leader: Some(LeaderRecord {
@@ -658,19 +626,21 @@ mod tests {
                 ax: 0.0,
                 ay: 0.25,
             }),
-            ..AgentStateRecord::new(
+            ..AgentStateRecord::new(AgentSample::new(
                 1.5,
                 2,
-                &State {
+                &echelon::State {
                     x: 1.0,
                     y: -1.0,
                     theta: 4.0,
                     v: 0.3,
                     omega: -0.1,
                 },
-                &AgentOutput::default(),
-            )
-        }
+                &echelon::sim::AgentOutput::default(),
+            ))
+        };
+        record.sample.velocity = Some(echelon::sample::VelocitySample::default());
+        record
     }
 
     #[test]
@@ -687,6 +657,10 @@ mod tests {
             seq: None,
             link: None,
             leader: None,
+            sample: AgentSample {
+                velocity: None,
+                ..fleet_state().sample
+            },
             ..fleet_state()
         })
         .unwrap();
@@ -727,12 +701,20 @@ mod tests {
         assert!(conforms(&record, &agent, "a").is_err());
     }
 
-    /// A simulated run through the observer: every message conforms to its
-    /// channel's schema, one message per channel per logged frame, and the
-    /// file is finished (readable summary).
+    /// A simulated run through the observer, torque-driven or on velocity
+    /// bases: every message conforms to its channel's schema, one message
+    /// per channel per logged frame, and the file is finished (readable
+    /// summary).
     #[test]
     fn every_message_of_a_run_conforms_to_its_channel_schema() {
-        let run = circle(0.5);
+        for name in ["experiment-circle", "experiment-circle-velocity"] {
+            a_run_conforms(name);
+        }
+    }
+
+    fn a_run_conforms(name: &str) {
+        let run = scenario(name, 0.5);
+        let velocity = run.plan.agents()[0].velocity_robot().is_some();
         let every = 7;
         let mut mcap = Every::new(every, McapObserver::new(Cursor::new(Vec::new())).unwrap());
         run.simulation().run(&mut mcap).unwrap();
@@ -746,6 +728,9 @@ mod tests {
             let schema: Value = serde_json::from_slice(&schema.data).unwrap();
             let record: Value = serde_json::from_slice(&m.data).unwrap();
             conforms(&record, &schema, &m.channel.topic).unwrap();
+            if m.channel.topic != REFERENCE_TOPIC {
+                assert_eq!(record.get("v_cmd").is_some(), velocity, "{record}");
+            }
             *counts.entry(m.channel.topic.clone()).or_default() += 1;
         }
         let agents = run.plan.agents().len();

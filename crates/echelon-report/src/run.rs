@@ -64,8 +64,10 @@ pub enum Column {
     Sat,
 }
 
-/// Number of [`Column`]s.
-pub const COLUMNS: usize = 18;
+/// Number of [`Column`]s: the sample's columns after `t` and `agent`
+/// ([`echelon::sample::COLUMNS`], [`echelon::sample::VELOCITY_COLUMNS`]).
+pub const COLUMNS: usize =
+    echelon::sample::COLUMNS.len() - 2 + echelon::sample::VELOCITY_COLUMNS.len();
 
 /// The columns a run with velocity bases adds after [`Column::TauL`].
 pub const VELOCITY_COLUMNS: [Column; 5] = [

@@ -18,6 +18,7 @@ use crate::formation::Leader;
 use crate::lycomp::Placement;
 use crate::model::{Input, RobotParams, State, Torques};
 use crate::safety::{Neighbour, Obstacle, Outcome, SafetyFilter};
+use crate::sample::VelocitySample;
 
 /// How a robot is driven, and so which law drives it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -285,6 +286,17 @@ impl Drive {
 }
 
 impl Actuation {
+    /// A velocity base's sample of `cmd`, the command it was sent, and this
+    /// actuation (`None` on a torque-driven robot).
+    pub fn velocity_sample(&self, cmd: Command) -> Option<VelocitySample> {
+        let (applied, saturated) = self.velocity?;
+        let command = match cmd {
+            Command::Velocity(c) => c,
+            Command::Torque(_) => VelocityCommand::default(),
+        };
+        Some(VelocitySample::new(command, applied, saturated))
+    }
+
     /// The velocity command the base follows (zero on a torque robot).
     #[inline]
     fn applied_velocity(&self) -> VelocityCommand {

@@ -17,7 +17,9 @@
 //!   limits, presets for real robots);
 //! - [`follow`]: one agent's law evaluation behind what it knows of its leader;
 //! - [`formation`]: who follows whom;
-//! - [`sim`]: the RK4 simulator, observers and run statistics;
+//! - [`sim`]: the RK4 simulator and its observers;
+//! - [`sample`]: one agent at one instant, what every log and the fleet carry;
+//! - [`stats`]: run statistics (per agent, safety, divergence);
 //! - [`odometry`]: encoders, dead reckoning, error models, fixes, Theorem 2, UMBmark;
 //! - [`sweep`]: Monte Carlo sweeps over odometry errors and fix intervals;
 //! - [`engine`]: the batch engine, the same system for thousands of agents at
@@ -51,9 +53,11 @@ pub mod plan;
 pub mod reference;
 pub mod rng;
 pub mod safety;
+pub mod sample;
 pub mod scenario;
 pub mod sim;
 mod spline;
+pub mod stats;
 pub mod sweep;
 
 pub use agent::{AgentSpec, Command};

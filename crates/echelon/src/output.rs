@@ -13,23 +13,25 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use crate::error::{OutputError, SimError};
-use crate::model::{State, wrap_angle};
+use crate::model::wrap_angle;
 use crate::reference::{Order, Reference, Trajectory};
 use crate::safety::Outcome;
+use crate::sample::AgentSample;
 use crate::scenario::Run;
-use crate::sim::{
-    AgentOutput, AgentSummary, Divergence, Every, Frame, Observer, ObserverError, SafetyReport,
-    SafetyWatch, Simulation, Summary, Timing,
-};
+use crate::sim::{AgentSpec, Every, Frame, Observer, ObserverError, Simulation, Timing};
+use crate::stats::{AgentSummary, Divergence, SafetyReport, SafetyWatch, Summary};
 
-/// The header of `trajectory.csv`: one row per agent per logged sample, SI units,
-/// radians, `e` and `z` in the follower's body frame, agents numbered from 1.
+/// The header of `trajectory.csv`: one row per agent per logged sample
+/// ([`AgentSample`], its fields [`sample::COLUMNS`](crate::sample::COLUMNS)),
+/// SI units, radians, `e` and `z` in the follower's body frame, agents
+/// numbered from 1.
 pub const TRAJECTORY_HEADER: &str = "t,agent,x,y,theta,v,omega,ex,ey,zx,zy,u1,u2,tau_r,tau_l";
 
 /// The header of `trajectory.csv` when some agent is on a velocity base:
 /// [`TRAJECTORY_HEADER`] and the commanded `(v*, ω*)`, the command after the
-/// base's speed limits and whether they cut it (`sat`, 0 or 1). A velocity
-/// agent's `u1,u2,tau_r,tau_l` are `NaN`, a torque agent's five new cells too.
+/// base's speed limits and whether they cut it (`sat`, 0 or 1): the fields
+/// of [`VelocitySample`](crate::sample::VelocitySample). A velocity agent's
+/// `u1,u2,tau_r,tau_l` are `NaN`, a torque agent's five new cells too.
 pub const TRAJECTORY_HEADER_VELOCITY: &str = "t,agent,x,y,theta,v,omega,ex,ey,zx,zy,u1,u2,tau_r,tau_l,v_cmd,omega_cmd,v_applied,omega_applied,sat";
 
 /// Writes a time to at most nanosecond resolution without float noise
@@ -175,66 +177,6 @@ impl<W: Write> CsvWriter<W> {
     }
 }
 
-/// One row of `trajectory.csv`, as [`TrajectoryRows`] and the fleet's data
-/// collector write it.
-#[derive(Debug, Clone, Copy)]
-pub struct TrajectoryRow<'a> {
-    /// Time, s.
-    pub t: f64,
-    /// Agent number, from 1.
-    pub agent: usize,
-    /// True state; the heading is written wrapped to `(−π, π]`.
-    pub state: &'a State,
-    /// `e`, `z` of the true state, the inputs the plant received and the
-    /// wheel torques.
-    pub output: &'a AgentOutput,
-}
-
-impl TrajectoryRow<'_> {
-    /// Writes the row: the columns of [`TRAJECTORY_HEADER`].
-    pub fn write<W: Write>(&self, csv: &mut CsvWriter<W>) -> io::Result<()> {
-        self.cells(csv);
-        csv.end_row()
-    }
-
-    /// Writes the row with the velocity-base columns of
-    /// [`TRAJECTORY_HEADER_VELOCITY`].
-    pub fn write_velocity<W: Write>(&self, csv: &mut CsvWriter<W>) -> io::Result<()> {
-        self.cells(csv);
-        match self.output.velocity {
-            Some(v) => csv.nums([
-                v.command.v,
-                v.command.omega,
-                v.applied.v,
-                v.applied.omega,
-                f64::from(u8::from(v.saturated)),
-            ]),
-            None => csv.nums([f64::NAN; 5]),
-        };
-        csv.end_row()
-    }
-
-    fn cells<W: Write>(&self, csv: &mut CsvWriter<W>) {
-        let (s, o) = (self.state, self.output);
-        let torque = |x: f64| if o.velocity.is_some() { f64::NAN } else { x };
-        csv.time(self.t).int(self.agent as u64).nums([
-            s.x,
-            s.y,
-            wrap_angle(s.theta),
-            s.v,
-            s.omega,
-            o.e[0],
-            o.e[1],
-            o.z[0],
-            o.z[1],
-            torque(o.u.u1),
-            torque(o.u.u2),
-            torque(o.tau.right),
-            torque(o.tau.left),
-        ]);
-    }
-}
-
 /// What a [`CsvLog`] writes: a header and, for each frame it is shown, its rows.
 pub trait FrameRows {
     /// The header line.
@@ -247,21 +189,27 @@ pub trait FrameRows {
     fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()>;
 }
 
-/// `trajectory.csv`: one [`TrajectoryRow`] per agent per frame; with the
+/// `trajectory.csv`: one [`AgentSample`] per agent per frame; with the
 /// velocity-base columns when `velocity` ([`TRAJECTORY_HEADER_VELOCITY`]).
-#[derive(Debug, Clone, Copy, Default)]
+/// The simulator and the fleet collector write it alike.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct TrajectoryRows {
     /// Whether to write the velocity-base columns.
     pub velocity: bool,
 }
 
 impl TrajectoryRows {
-    /// The table for `sim`: with the velocity-base columns when some agent is
-    /// on a velocity base, else exactly [`TRAJECTORY_HEADER`].
-    pub fn for_simulation(sim: &Simulation) -> TrajectoryRows {
+    /// The table for `agents`: with the velocity-base columns when some
+    /// agent is on a velocity base, else exactly [`TRAJECTORY_HEADER`].
+    pub fn for_agents(agents: &[AgentSpec]) -> TrajectoryRows {
         TrajectoryRows {
-            velocity: sim.agents().iter().any(|a| a.velocity_robot().is_some()),
+            velocity: agents.iter().any(|a| a.velocity_robot().is_some()),
         }
+    }
+
+    /// Writes one sample's row.
+    pub fn row<W: Write>(&self, sample: &AgentSample, csv: &mut CsvWriter<W>) -> io::Result<()> {
+        sample.write_csv(csv, self.velocity)
     }
 }
 
@@ -275,18 +223,8 @@ impl FrameRows for TrajectoryRows {
     }
 
     fn write<W: Write>(&mut self, frame: &Frame<'_>, csv: &mut CsvWriter<W>) -> io::Result<()> {
-        for (i, (state, output)) in frame.states.iter().zip(frame.outputs).enumerate() {
-            let row = TrajectoryRow {
-                t: frame.t,
-                agent: i + 1,
-                state,
-                output,
-            };
-            if self.velocity {
-                row.write_velocity(csv)?;
-            } else {
-                row.write(csv)?;
-            }
+        for sample in AgentSample::all(frame) {
+            self.row(&sample, csv)?;
         }
         Ok(())
     }
@@ -751,7 +689,8 @@ pub fn run_to_dir(
             let _ = std::fs::remove_file(p);
         }
     };
-    let mut trajectory = CsvLog::create(&parts[0], TrajectoryRows::for_simulation(&simulation))?;
+    let mut trajectory =
+        CsvLog::create(&parts[0], TrajectoryRows::for_agents(simulation.agents()))?;
     let mut reference = CsvLog::create(&parts[1], ReferenceRows::default())?;
     let mut integrals = CsvLog::create(&parts[4], IntegralRows)?;
     let mut odometry = match odometry_at {

@@ -9,6 +9,7 @@ use std::time::Duration;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand, ValueEnum};
 
+use echelon::output::TrajectoryRows;
 use echelon::scenario::{Overrides, Scenario, is_valid_fleet_name};
 use echelon_fleet::bench::{self, BenchOptions, Progress};
 use echelon_fleet::certs::{self, CertOptions};
@@ -492,14 +493,22 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 (None, Some(s)) => s.fleet()?.name,
                 (None, None) => bail!("give the scenario or --fleet NAME"),
             };
-            let robots = scenario.as_ref().map(agents_of).transpose()?;
+            let run = scenario
+                .as_ref()
+                .map(|s| s.build(&Overrides::default()))
+                .transpose()?;
+            let robots = run.as_ref().map(|r| r.plan.agents().len() as u32);
             let net = a.net.options("collector", robots, scenario.as_ref())?;
             let stop = StopFlag::on_signals()?;
             let ros = match (&scenario, a.ros2) {
                 (Some(s), true) => ros_topics(s)?,
                 _ => Vec::new(),
             };
-            let report = collector::run_with_ros2(
+            // The columns `echelon run` writes for the same scenario.
+            let trajectory = run.as_ref().map_or_else(TrajectoryRows::default, |r| {
+                TrajectoryRows::for_agents(r.plan.agents())
+            });
+            let report = collector::run_recording(
                 CollectorOptions {
                     out: a.out,
                     fleet,
@@ -507,6 +516,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     net,
                 },
                 ros,
+                trajectory,
                 &stop,
             )?;
             print_report(&report)

@@ -41,8 +41,9 @@ use echelon_mcap::McapLog;
 use crate::clock::FleetClock;
 use crate::net::{self, NetOptions};
 use crate::plant::{Command, Plant};
-use crate::robot::{Ros2Endpoint, ZenohCmdSink, agent_spec};
+use crate::robot::agent_spec;
 use crate::ros2::drive::{CmdSink, Ros2Counters, Ros2Drive};
+use crate::ros2::endpoint::{Ros2Endpoint, ZenohCmdSink};
 use crate::ros2::record::RosTopic;
 use crate::{FleetError, StopFlag};
 

@@ -17,6 +17,7 @@
 
 pub mod base;
 pub mod drive;
+pub mod endpoint;
 pub mod record;
 
 pub use record::{RosRefusal, RosTopic, RosTopicError};

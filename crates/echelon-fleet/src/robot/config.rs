@@ -1,0 +1,122 @@
+//! A robot's fixed configuration, from the scenario's plan and `[fleet]`.
+
+use echelon::agent::AgentSpec;
+use echelon::guard::Bounds;
+use echelon::plan::Plan;
+use echelon::safety::{Obstacle, SafetyConfig};
+use echelon::scenario::{FleetSettings, LinkLoss, Overrides, Scenario};
+
+use crate::FleetError;
+use crate::faults::FaultSpec;
+
+/// A robot's safety settings, from the scenario's `[safety]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotSafety {
+    /// Its filter's settings.
+    pub config: SafetyConfig,
+    /// The known obstacles.
+    pub obstacles: Vec<Obstacle>,
+    /// `L` of every agent (index agent − 1).
+    pub l: Vec<f64>,
+    /// Whether every agent filters (a cooperative neighbour).
+    pub cooperative: Vec<bool>,
+}
+
+/// The agent's spec from the scenario, checked for the fleet.
+pub fn agent_spec(scenario: &Scenario, agent: u32) -> Result<AgentSpec, FleetError> {
+    spec_in(&scenario.build(&Overrides::default())?.plan, agent)
+}
+
+/// [`agent_spec`] from the scenario's plan.
+fn spec_in(plan: &Plan, agent: u32) -> Result<AgentSpec, FleetError> {
+    let agents = plan.agents();
+    let n = agents.len();
+    let Some(spec) = (agent as usize)
+        .checked_sub(1)
+        .and_then(|i| agents.get(i))
+        .cloned()
+    else {
+        return Err(FleetError::Config(format!(
+            "--agent {agent}: the scenario has agents 1..={n}"
+        )));
+    };
+    if spec.placement.uses_exact_derivatives() {
+        return Err(FleetError::Config(format!(
+            "agent {agent}: ly_derivatives = \"exact\" needs the reference's 3rd and 4th derivatives, which the fleet does not send; use \"neglect\""
+        )));
+    }
+    Ok(spec)
+}
+
+/// Everything a robot's state machine needs to know, fixed for its life.
+#[derive(Debug, Clone)]
+pub struct RobotConfig {
+    /// Agent number, from 1.
+    pub agent: u32,
+    /// Its body, leader, placement and controller.
+    pub spec: AgentSpec,
+    /// Controller period `1 / control_rate`, fleet s.
+    pub period: f64,
+    /// A sample older than this is no longer fresh, fleet s.
+    pub link_timeout: f64,
+    /// A sample older (or as far in the future) on delivery is refused, fleet s.
+    pub stale_after: f64,
+    /// What the law sees once the link is lost.
+    pub loss: LinkLoss,
+    /// Faults injected on what it receives.
+    pub faults: FaultSpec,
+    /// Stop at this fleet time (absent: never).
+    pub duration: Option<f64>,
+    /// Its safety filter (absent: none).
+    pub safety: Option<RobotSafety>,
+    /// The divergence guard's bounds on its plant's state (`[sim] bounds`).
+    pub bounds: Bounds,
+}
+
+/// Agent `agent`'s safety settings (`None`: it does not filter).
+pub fn safety_of(scenario: &Scenario, agent: u32) -> Result<Option<RobotSafety>, FleetError> {
+    Ok(safety_in(
+        &scenario.build(&Overrides::default())?.plan,
+        agent,
+    ))
+}
+
+/// [`safety_of`] from the scenario's plan.
+fn safety_in(plan: &Plan, agent: u32) -> Option<RobotSafety> {
+    let config = plan.safety_of(agent as usize - 1)?;
+    let n = plan.agents().len();
+    Some(RobotSafety {
+        config,
+        obstacles: plan.obstacles().to_vec(),
+        l: plan.agents().iter().map(|a| a.placement.l).collect(),
+        cooperative: (0..n).map(|i| plan.safety_of(i).is_some()).collect(),
+    })
+}
+
+impl RobotConfig {
+    /// Agent `agent`'s configuration from a scenario and its `[fleet]` settings.
+    pub fn from_scenario(
+        scenario: &Scenario,
+        fleet: &FleetSettings,
+        agent: u32,
+        faults: FaultSpec,
+        duration: Option<f64>,
+    ) -> Result<RobotConfig, FleetError> {
+        let plan = scenario.build(&Overrides::default())?.plan;
+        let spec = spec_in(&plan, agent)?;
+        let loss = fleet.link_loss[agent as usize - 1];
+        let safety = safety_in(&plan, agent);
+        Ok(RobotConfig {
+            agent,
+            spec,
+            period: 1.0 / fleet.control_rate,
+            link_timeout: fleet.link_timeout,
+            stale_after: fleet.stale_after,
+            loss,
+            faults,
+            duration,
+            safety,
+            bounds: plan.config().bounds,
+        })
+    }
+}

@@ -1,0 +1,581 @@
+//! `echelon fleet robot`: one agent of a scenario as its own process.
+//!
+//! [`Robot`] is the agent as a state machine (sans-IO, after copper-rs tasks
+//! and sans-IO protocol crates): it is fed the bytes that arrive on its leader
+//! stream ([`Robot::on_message`]) and ticked ([`Robot::tick`]), both with the
+//! time read by the caller, and it drives an injected [`Plant`]. It reads no
+//! clock, opens no socket and sleeps nowhere, so every behaviour (link loss,
+//! restarts, faults) is tested with a fake clock. [`run`] is the thin driver:
+//! Zenoh in and out, the [`FleetClock`], and a sleep until the next tick.
+//!
+//! Every tick (the `[fleet] control_rate`): take what arrived from the leader
+//! stream (through fault injection, decoding and the sequence/staleness
+//! checks), bring the plant to now, predict the leader motion (fresh, or the
+//! link-loss policy), run the law (eq. 13, [`echelon::follow::follow`]) and
+//! publish the state with the leader motion used.
+//!
+//! Whenever the robot has nothing to follow (no leader sample, no odometry,
+//! the process stopping) it goes through one place, [`Robot::halt`], which
+//! commands zero.
+
+use std::collections::VecDeque;
+
+use echelon::agent::{Command, Guard};
+use echelon::control::LeaderMotion;
+use echelon::follow::{LeaderView, follow};
+use echelon::formation::Leader;
+use echelon::model::State;
+use echelon::safety::{Outcome, SafetyFilter, point};
+
+use crate::faults::{FaultInjector, Verdict};
+use crate::latency::Latency;
+use crate::link::{Counters, LeaderSample, StreamTracker, predict};
+use crate::neighbours::{NeighbourTable, STALE_HOLD};
+use crate::plant::{Plant, SimulatedDrive};
+use crate::role::Role;
+use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
+
+mod config;
+mod driver;
+mod report;
+
+pub use config::{RobotConfig, RobotSafety, agent_spec, safety_of};
+pub use driver::{RobotOptions, run};
+pub use report::{RobotReport, RobotStats, SafetyCounts};
+
+/// Longest plant integration sub-step, fleet s (the simulator's default `dt`).
+pub const PLANT_STEP: f64 = 1e-3;
+/// Period of the state messages while waiting for the leader, fleet s.
+const WAITING_PERIOD: f64 = 0.1;
+
+/// Why a robot commands zero.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Halt {
+    /// No leader sample to follow (not synced yet, or the leader restarted
+    /// and nothing of the new timeline is delivered yet).
+    NoLeader,
+    /// The plant has no valid state (odometry lost).
+    NoOdometry,
+    /// The process is stopping.
+    Shutdown,
+    /// The plant's state left the divergence guard's bounds.
+    Diverged,
+}
+
+/// What one tick asks the driver to do.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobotTick {
+    /// The state message to publish on `robot/<k>/state`, with its header.
+    pub publish: Option<(Header, RobotState)>,
+    /// The counters to publish on `robot/<k>/stats` (once per fleet second).
+    pub stats: Option<RobotStats>,
+    /// `duration` reached: the process stops.
+    pub done: bool,
+}
+
+/// A leader sample from a decoded message of the expected stream, or `None`
+/// (counted as foreign) for anything else.
+fn sample_of(msg: &Message, leader: Leader) -> Option<(Header, LeaderSample)> {
+    match (msg, leader) {
+        (Message::Reference(h, r), Leader::Reference) => Some((
+            *h,
+            LeaderSample {
+                t: r.t,
+                motion: r.motion,
+                speed: r.speed,
+                turn_rate: r.turn_rate,
+            },
+        )),
+        (Message::State(h, s), Leader::Agent(j))
+            if s.agent as usize == j + 1 && s.link != LinkStatus::Waiting =>
+        {
+            Some((
+                *h,
+                LeaderSample {
+                    t: s.t,
+                    motion: LeaderMotion::of_robot(&s.state, s.dv),
+                    speed: s.state.v,
+                    turn_rate: s.state.omega,
+                },
+            ))
+        }
+        _ => None,
+    }
+}
+
+/// One fleet robot as a state machine over an injected [`Plant`].
+///
+/// Times passed in are the caller's *local* clock (monotonic, scaled, e.g.
+/// [`FleetClock`] never synced); the robot keeps the offset that turns them
+/// into fleet time, which is the leader's: the first message of the leader
+/// stream (or a restarted leader's) sets it.
+#[derive(Debug, Clone)]
+pub struct Robot<P: Plant = SimulatedDrive> {
+    config: RobotConfig,
+    plant: P,
+    source: u32,
+    /// Fleet time = local time + `offset`.
+    offset: f64,
+    synced: bool,
+    tracker: StreamTracker,
+    injector: FaultInjector,
+    delayed: VecDeque<(f64, Header, LeaderSample)>,
+    sample: Option<LeaderSample>,
+    fresh: bool,
+    next_tick: f64,
+    next_stats: f64,
+    seq: u64,
+    ticks: u64,
+    overruns: u64,
+    last: RobotState,
+    latency: Latency,
+    safety: Option<Safety>,
+    /// Set when the plant's state left its bounds: the robot has stopped.
+    diverged: Option<String>,
+}
+
+/// A robot's safety filter and what it knows of its neighbours.
+#[derive(Debug, Clone)]
+struct Safety {
+    filter: SafetyFilter,
+    table: NeighbourTable,
+    counts: SafetyCounts,
+}
+
+impl Robot<SimulatedDrive> {
+    /// A robot on its simulated drive (eq. 3, or its velocity base) starting
+    /// at its spec's start.
+    pub fn simulated(config: RobotConfig, source: u32) -> Self {
+        let plant = SimulatedDrive::of(&config.spec, 0.0, PLANT_STEP);
+        Robot::new(config, plant, source)
+    }
+}
+
+impl<P: Plant> Robot<P> {
+    /// A robot driving `plant`, publishing under the random `source`.
+    pub fn new(config: RobotConfig, plant: P, source: u32) -> Self {
+        let tracker = StreamTracker::new(config.stale_after);
+        let injector = FaultInjector::new(config.faults, u64::from(config.agent));
+        let last = RobotState {
+            agent: config.agent,
+            state: config.spec.start,
+            ..RobotState::default()
+        };
+        let safety = config.safety.as_ref().map(|s| Safety {
+            filter: SafetyFilter::new(s.config).with_period(config.period),
+            table: NeighbourTable::new(
+                config.agent,
+                s.l.clone(),
+                s.cooperative.clone(),
+                config.link_timeout,
+                STALE_HOLD,
+            ),
+            counts: SafetyCounts::default(),
+        });
+        Robot {
+            config,
+            plant,
+            source,
+            offset: 0.0,
+            synced: false,
+            tracker,
+            injector,
+            delayed: VecDeque::with_capacity(64),
+            sample: None,
+            fresh: false,
+            next_tick: 0.0,
+            next_stats: 0.0,
+            seq: 0,
+            ticks: 0,
+            overruns: 0,
+            last,
+            latency: Latency::new(),
+            safety,
+            diverged: None,
+        }
+    }
+
+    /// Why it stopped for good, if its plant's state stopped being finite or
+    /// left its bounds ([`echelon::guard::Bounds`]): one line naming the
+    /// agent, the fleet time and the quantity.
+    pub fn diverged(&self) -> Option<&str> {
+        self.diverged.as_deref()
+    }
+
+    /// Whether it runs a safety filter (and so listens to every robot's state).
+    pub fn has_safety(&self) -> bool {
+        self.safety.is_some()
+    }
+
+    /// What its safety filter did so far (`None`: it has none).
+    pub fn safety_counts(&self) -> Option<SafetyCounts> {
+        self.safety.as_ref().map(|s| SafetyCounts {
+            refused: s.table.refused(),
+            stale_neighbours: s.table.stale_events(),
+            deadlock_breaks: s.filter.deadlock_breaks(),
+            ..s.counts
+        })
+    }
+
+    /// Takes a message that arrived on another robot's state stream at local
+    /// time `now` (decoded by the caller) for the safety filter; ignored
+    /// without one.
+    pub fn on_neighbour(&mut self, msg: Result<Message, DecodeError>, now: f64) {
+        let Some(s) = self.safety.as_mut() else {
+            return;
+        };
+        match msg {
+            Ok(Message::State(h, state)) => s.table.on_state(h, &state, now),
+            _ => s.table.refuse(),
+        }
+    }
+
+    /// Its configuration.
+    pub fn config(&self) -> &RobotConfig {
+        &self.config
+    }
+
+    /// The plant it drives.
+    pub fn plant(&self) -> &P {
+        &self.plant
+    }
+
+    /// The plant it drives, to change (e.g. a test's fault).
+    pub fn plant_mut(&mut self) -> &mut P {
+        &mut self.plant
+    }
+
+    /// The leader stream's counters.
+    pub fn counters(&self) -> &Counters {
+        &self.tracker.counters
+    }
+
+    /// The last state it published (or its start).
+    pub fn last(&self) -> &RobotState {
+        &self.last
+    }
+
+    /// Whether its clock follows a leader.
+    pub fn is_synced(&self) -> bool {
+        self.synced
+    }
+
+    /// Fleet time at local time `now`.
+    pub fn fleet_time(&self, now: f64) -> f64 {
+        self.offset + now
+    }
+
+    /// Local time at which the next tick is due.
+    pub fn next_wake(&self) -> f64 {
+        self.next_tick - self.offset
+    }
+
+    /// Whether a tick is due at local time `now`.
+    pub fn is_due(&self, now: f64) -> bool {
+        self.fleet_time(now) >= self.next_tick
+    }
+
+    /// Messages still delayed by fault injection.
+    pub fn pending(&self) -> usize {
+        self.delayed.len()
+    }
+
+    /// Takes bytes that arrived on the leader stream at local time `now`:
+    /// decodes, syncs the clock to the leader, injects faults and queues the
+    /// sample for delivery. Counts whatever happens.
+    pub fn on_message(&mut self, bytes: &[u8], now: f64) {
+        self.tracker.counters.received += 1;
+        let msg = match wire::decode(bytes) {
+            Ok(m) => m,
+            Err(DecodeError::Malformed(_)) => {
+                self.tracker.counters.malformed += 1;
+                return;
+            }
+            Err(DecodeError::WrongVersion(_)) => {
+                self.tracker.counters.wrong_version += 1;
+                return;
+            }
+        };
+        let Some((h, s)) = sample_of(&msg, self.config.spec.leader) else {
+            self.tracker.counters.foreign += 1;
+            return;
+        };
+        let arrived = self.fleet_time(now);
+        let resync = !self.synced
+            || (self.tracker.is_new_source(&h) && (arrived - s.t).abs() > self.config.stale_after);
+        if resync {
+            // Fleet time is the leader's: the first message (or a restarted
+            // leader's) sets the clock.
+            self.offset = s.t - now;
+            self.plant.set_time(s.t);
+            self.next_tick = s.t;
+            self.next_stats = s.t;
+            // The old leader's samples are on the old timeline: at the new
+            // clock they would look fresh, even from the future. Refused as
+            // stale (every message lands in one counter).
+            self.tracker.counters.stale += self.delayed.len() as u64;
+            self.delayed.clear();
+            self.sample = None;
+            self.synced = true;
+        }
+        match self.injector.admit(self.fleet_time(now)) {
+            Verdict::Lost => self.tracker.counters.injected_loss += 1,
+            Verdict::Outage => self.tracker.counters.injected_outage += 1,
+            Verdict::DeliverAt(at) => self.delayed.push_back((at, h, s)),
+        }
+    }
+
+    /// [`Robot::on_message`] for a sample that arrived `delay` ns after its
+    /// sender stamped it ([`latency::delay_ns`]; `None`: not stamped).
+    pub fn on_stamped_message(&mut self, bytes: &[u8], now: f64, delay: Option<i64>) {
+        self.latency.record(delay);
+        self.on_message(bytes, now);
+    }
+
+    /// The delays measured on the leader stream.
+    pub fn latency(&self) -> &Latency {
+        &self.latency
+    }
+
+    /// Runs one controller tick at local time `now` (call when [`is_due`]):
+    /// delivers what is due, brings the plant to now, runs the law on the
+    /// leader motion (fresh or the link-loss policy's) and commands the plant.
+    ///
+    /// [`is_due`]: Robot::is_due
+    pub fn tick(&mut self, now: f64) -> RobotTick {
+        let local = now;
+        let now = self.fleet_time(now);
+        while let Some(&(at, h, s)) = self.delayed.front() {
+            if at > now {
+                break;
+            }
+            self.delayed.pop_front();
+            if self.tracker.check(h, s.t, at).is_ok() {
+                self.sample = Some(s);
+            }
+        }
+        let prediction = match (self.synced, self.sample) {
+            (true, Some(s)) => Some(predict(
+                &s,
+                now,
+                self.config.link_timeout,
+                &self.config.loss,
+            )),
+            _ => None,
+        };
+        let Some(p) = prediction else {
+            // Waiting for the leader: stand still, say so now and then.
+            if self.synced {
+                self.plant.advance(now);
+            }
+            self.halt(Halt::NoLeader);
+            let t = if self.synced { now } else { 0.0 };
+            let publish = self.plant.state().map(|state| {
+                self.last = RobotState {
+                    t,
+                    agent: self.config.agent,
+                    link: LinkStatus::Waiting,
+                    state,
+                    ..RobotState::default()
+                };
+                self.header_for(self.last)
+            });
+            self.next_tick = now + WAITING_PERIOD.min(self.config.period * 10.0);
+            return RobotTick {
+                publish,
+                stats: None,
+                done: false,
+            };
+        };
+        if p.status == LinkStatus::Tracking {
+            self.fresh = true;
+        } else if self.fresh {
+            self.fresh = false;
+            self.tracker.counters.link_losses += 1;
+        }
+
+        self.plant.advance(now);
+        let state = self.plant.state();
+        if let Some(breach) = state.and_then(|s| self.config.bounds.check(&s)) {
+            // Diverged: zero first, then say so and stop for good.
+            self.halt(Halt::Diverged);
+            self.diverged = Some(format!(
+                "agent {} diverged at t = {now} s: {breach}",
+                self.config.agent
+            ));
+            self.next_tick = f64::INFINITY;
+            return RobotTick {
+                publish: None,
+                stats: None,
+                done: true,
+            };
+        }
+        let publish = match state {
+            Some(state) => {
+                let out = follow(
+                    &self.config.spec,
+                    &state,
+                    LeaderView::Motion {
+                        motion: p.motion,
+                        speed: p.speed,
+                        turn_rate: p.turn_rate,
+                    },
+                );
+                let nominal = out.command();
+                let cmd = match self.safety.as_mut() {
+                    Some(s) => s.act(&self.config, local, now, &state, nominal),
+                    None => self.config.spec.act(now, &state, nominal, None).command,
+                };
+                let act = self.plant.command(cmd);
+                let (dv, domega) = self.plant.accelerations();
+                self.last = RobotState {
+                    t: now,
+                    agent: self.config.agent,
+                    link: p.status,
+                    state,
+                    dv,
+                    domega,
+                    e: out.law.e,
+                    z: out.law.z,
+                    u: act.u,
+                    tau: act.tau,
+                    leader: out.leader,
+                    velocity: act.velocity_sample(cmd),
+                };
+                self.ticks += 1;
+                Some(self.header_for(self.last))
+            }
+            None => {
+                self.halt(Halt::NoOdometry);
+                None
+            }
+        };
+
+        let stats = (now >= self.next_stats).then(|| {
+            self.next_stats += 1.0;
+            self.stats_at(now, p.status)
+        });
+        let done = self.config.duration.is_some_and(|d| now >= d);
+        if !done {
+            let period = self.config.period;
+            self.next_tick += period;
+            if now - self.next_tick > period {
+                // Late by more than a period: the plant keeps moving in real
+                // time; the controller resumes on the next tick from now.
+                self.overruns += 1;
+                self.next_tick = now + period;
+            }
+        }
+        RobotTick {
+            publish,
+            stats,
+            done,
+        }
+    }
+
+    /// Commands zero: the one place where losing the leader, the odometry or
+    /// the process stops the drive ([`Plant::stop`]: zero torques, or a zero
+    /// `cmd_vel` sent at once). The command is held until the next one.
+    pub fn halt(&mut self, why: Halt) {
+        let _ = why;
+        self.plant.stop();
+    }
+
+    /// The process is stopping: commands zero and returns the final counters.
+    pub fn finish(&mut self) -> RobotStats {
+        self.halt(Halt::Shutdown);
+        self.stats_at(self.last.t, self.last.link)
+    }
+
+    /// What the robot reports when it stops.
+    pub fn report(&self) -> RobotReport {
+        let s = self.last.state;
+        RobotReport {
+            role: Role::Robot,
+            agent: self.config.agent,
+            name: self.config.spec.name.clone(),
+            counters: self.tracker.counters,
+            pending: self.delayed.len() as u64,
+            published: self.seq,
+            ticks: self.ticks,
+            overruns: self.overruns,
+            t: self.last.t,
+            final_state: [s.x, s.y, s.theta, s.v, s.omega],
+            final_error: self.last.e[0].hypot(self.last.e[1]),
+            link: self.last.link.name().to_owned(),
+            latency: self.latency.report(true),
+            ros2: None,
+            safety: self.safety_counts(),
+        }
+    }
+
+    fn stats_at(&self, t: f64, link: LinkStatus) -> RobotStats {
+        RobotStats {
+            agent: self.config.agent,
+            t,
+            link: link.name(),
+            counters: self.tracker.counters,
+            published: self.seq,
+            overruns: self.overruns,
+            safety: self.safety_counts(),
+        }
+    }
+
+    /// The next header of its stream, for `state`.
+    fn header_for(&mut self, state: RobotState) -> (Header, RobotState) {
+        let h = Header {
+            source: self.source,
+            seq: self.seq,
+        };
+        self.seq += 1;
+        (h, state)
+    }
+}
+
+impl Safety {
+    /// The act step ([`AgentSpec::act`]) through this robot's filter at
+    /// local time `local` (fleet time `t`) for a robot in state `me`: the
+    /// command for its plant, counted (`docs/safety.md`, "In the fleet").
+    fn act(
+        &mut self,
+        config: &RobotConfig,
+        local: f64,
+        t: f64,
+        me: &State,
+        nominal: Command,
+    ) -> Command {
+        let Some(settings) = config.safety.as_ref() else {
+            return config.spec.act(t, me, nominal, None).command;
+        };
+        let l = config.spec.placement.l;
+        let sight = self
+            .table
+            .build(local, t, point(me, l), settings.config.range);
+        let guard = Guard {
+            filter: &mut self.filter,
+            sight,
+            obstacles: &settings.obstacles,
+        };
+        let act = config.spec.act(t, me, nominal, Some(guard));
+        let c = &mut self.counts;
+        c.steps += 1;
+        if let Some(g) = act.safety {
+            if g.outcome != Outcome::Nominal {
+                c.active += 1;
+            }
+            if g.stale {
+                c.stale_brakes += 1;
+            } else if g.outcome == Outcome::Braked {
+                c.infeasible += 1;
+            }
+            if g.min_distance.is_finite() {
+                let d = g.min_distance;
+                c.min_distance = Some(c.min_distance.map_or(d, |m| m.min(d)));
+            }
+        }
+        act.command
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,464 @@
+//! The simulator: fixed-step RK4 over a formation of robots.
+//!
+//! The law is evaluated inside every RK4 stage (a continuous-time controller, as
+//! the paper simulates in Simulink), leaders before followers so that a follower
+//! sees its leader's state and acceleration at the same instant. Optionally the
+//! controller is sampled at a period `T_s` and its command held (zero-order hold)
+//! in between. Stepping is explicit ([`Simulation::step`]) over plain data; the
+//! same inputs give the same bits.
+
+pub use crate::agent::{AgentSpec, Drive};
+use crate::agent::{Command, Guard, Sight};
+use crate::error::SimError;
+use crate::formation::{Formation, Leader};
+pub use crate::model::Pose;
+use crate::model::State;
+use crate::odometry::Odometer;
+pub use crate::plan::{Agents, Plan, SafetySpec, SimConfig, Timing};
+use crate::reference::{Order, Reference};
+use crate::safety::{Neighbour, Obstacle, SafetyFilter};
+
+mod observe;
+mod outputs;
+mod system;
+
+pub use observe::{Every, Frame, Observer, ObserverError};
+pub use outputs::{AgentOutput, SafetyOutput, VelocityOutput};
+use system::System;
+
+/// The filters of a running simulation and their scratch.
+#[derive(Debug, Clone)]
+struct SafetyState {
+    filters: Vec<Option<SafetyFilter>>,
+    obstacles: Vec<Obstacle>,
+    /// `L` of each agent (the point kept apart).
+    l: Vec<f64>,
+    out: Vec<SafetyOutput>,
+    seen: Vec<State>,
+    neighbours: Vec<Neighbour>,
+}
+
+/// A running simulation: plain state vectors stepped explicitly.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    sys: System,
+    plan: Plan,
+    config: SimConfig,
+    steps: u64,
+    hold_every: u64,
+    step: u64,
+    state: Vec<State>,
+    /// The commands held between controller samples (the law's, filtered).
+    held: Vec<Command>,
+    /// Whether any agent is on a velocity base (its state is settled after each step).
+    velocity_agents: bool,
+    /// Velocities each robot moves at in RK4's four stages, and the inputs
+    /// its plant receives there (`u1, u2` or the applied `v, ω` command).
+    speeds: [Vec<[f64; 4]>; 4],
+    /// Outputs and derivative (RK4's k1) at the current state, when `fresh`.
+    out: Vec<AgentOutput>,
+    k1: Vec<State>,
+    fresh: bool,
+    /// Per-agent odometers (empty when no agent dead-reckons).
+    odometers: Vec<Option<Odometer>>,
+    /// Sample every this many steps, per agent.
+    odometry_every: Vec<u64>,
+    /// True distance travelled `∫v dt`, per agent (what the wheels turn through).
+    distance: Vec<f64>,
+    /// `∫ input dt` per agent, RK4-weighted over the stages ([`Frame::input_integral`]).
+    input_integral: Vec<[f64; 2]>,
+    /// Safety filters, when any agent filters.
+    safety: Option<Box<SafetyState>>,
+    // Scratch for stages 2–4.
+    stage: Vec<State>,
+    k2: Vec<State>,
+    k3: Vec<State>,
+    k4: Vec<State>,
+}
+
+impl Simulation {
+    /// The simulation of `plan` at `t = 0`.
+    pub fn new(plan: &Plan) -> Simulation {
+        let agents = plan.agents().to_vec();
+        let config = *plan.config();
+        let order = if agents.iter().any(|a| a.placement.uses_exact_derivatives()) {
+            Order::Four
+        } else {
+            Order::Two
+        };
+        let uses_reference = agents.iter().any(|a| a.leader == Leader::Reference);
+        let n = agents.len();
+        let state: Vec<State> = agents.iter().map(|a| a.start).collect();
+        let velocity_agents = agents.iter().any(|a| a.velocity_robot().is_some());
+        let held = agents.iter().map(|a| a.drive.zero()).collect();
+        let mut hold_every = config.hold_every();
+        let safety = plan.safety().map(|spec| {
+            if hold_every == 0 {
+                hold_every = 1;
+            }
+            let period = hold_every as f64 * config.dt;
+            Box::new(SafetyState {
+                filters: spec
+                    .agents
+                    .iter()
+                    .map(|c| c.map(|c| SafetyFilter::new(c).with_period(period)))
+                    .collect(),
+                obstacles: spec.obstacles.clone(),
+                l: agents.iter().map(|a| a.placement.l).collect(),
+                out: spec
+                    .agents
+                    .iter()
+                    .map(|c| SafetyOutput {
+                        enabled: c.is_some(),
+                        min_distance: f64::INFINITY,
+                        ..SafetyOutput::default()
+                    })
+                    .collect(),
+                seen: vec![State::default(); n],
+                neighbours: Vec::with_capacity(n),
+            })
+        });
+        Simulation {
+            sys: System {
+                agents,
+                formation: plan.formation().clone(),
+                reference: plan.reference().clone(),
+                order,
+                uses_reference,
+            },
+            plan: plan.clone(),
+            config,
+            steps: config.steps(),
+            hold_every,
+            step: 0,
+            state,
+            held,
+            velocity_agents,
+            speeds: std::array::from_fn(|_| vec![[0.0; 4]; n]),
+            out: vec![AgentOutput::default(); n],
+            k1: vec![State::default(); n],
+            fresh: false,
+            odometers: plan.odometers().to_vec(),
+            odometry_every: plan.odometry_every().to_vec(),
+            distance: vec![0.0; n],
+            input_integral: vec![[0.0; 2]; n],
+            safety,
+            stage: vec![State::default(); n],
+            k2: vec![State::default(); n],
+            k3: vec![State::default(); n],
+            k4: vec![State::default(); n],
+        }
+    }
+
+    /// The plan it runs.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    /// Each agent's odometer (empty without odometry).
+    pub fn odometers(&self) -> &[Option<Odometer>] {
+        &self.odometers
+    }
+
+    /// The agents.
+    pub fn agents(&self) -> &[AgentSpec] {
+        &self.sys.agents
+    }
+
+    /// The leader graph.
+    pub fn formation(&self) -> &Formation {
+        &self.sys.formation
+    }
+
+    /// The reference the virtual leader follows.
+    pub fn reference(&self) -> &Reference {
+        &self.sys.reference
+    }
+
+    /// The integration settings.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// Things that are allowed but probably not what the user wants.
+    pub fn warnings(&self) -> &[String] {
+        self.plan.warnings()
+    }
+
+    /// Total number of steps of the run.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Current step index.
+    pub fn step_index(&self) -> u64 {
+        self.step
+    }
+
+    /// Current time, s.
+    pub fn time(&self) -> f64 {
+        self.step as f64 * self.config.dt
+    }
+
+    /// Whether the run has reached its duration.
+    pub fn is_done(&self) -> bool {
+        self.step >= self.steps
+    }
+
+    /// Current states.
+    pub fn states(&self) -> &[State] {
+        &self.state
+    }
+
+    /// Evaluates the controllers at the current state (RK4's first stage), once.
+    fn refresh(&mut self) {
+        if self.fresh {
+            return;
+        }
+        let sample = self.hold_every > 0 && self.step.is_multiple_of(self.hold_every);
+        let held = (self.hold_every > 0 && !sample).then_some(&self.held[..]);
+        self.sys.evaluate(
+            self.time(),
+            &self.state,
+            held,
+            &self.odometers,
+            Some(&mut self.out),
+            &mut self.k1,
+            &mut self.speeds[0],
+        );
+        if sample {
+            for (h, o) in self.held.iter_mut().zip(&self.out) {
+                *h = o.commanded();
+            }
+            if self.safety.is_some() {
+                self.filter();
+            }
+        } else if let Some(safety) = self.safety.as_deref_mut() {
+            for o in &mut safety.out {
+                o.sampled = false;
+            }
+        }
+        self.fresh = true;
+    }
+
+    /// Runs each agent's safety filter on the held (just sampled) commands,
+    /// with the neighbours' states its controller sees (its odometry estimate
+    /// when it dead-reckons, as a neighbour would broadcast it), and
+    /// re-evaluates the plant's derivative for the filtered commands.
+    fn filter(&mut self) {
+        let t = self.time();
+        let Some(safety) = self.safety.as_deref_mut() else {
+            return;
+        };
+        let n = self.state.len();
+        for (j, seen) in safety.seen.iter_mut().enumerate() {
+            *seen = match self.odometers.get(j) {
+                Some(Some(o)) => o.measure(&self.state[j]),
+                _ => self.state[j],
+            };
+        }
+        for i in 0..n {
+            if safety.filters[i].is_none() {
+                continue;
+            }
+            safety.neighbours.clear();
+            for j in (0..n).filter(|&j| j != i) {
+                let dv = [self.k1[j].v, self.k1[j].omega];
+                safety.neighbours.push(Neighbour::of_state(
+                    &safety.seen[j],
+                    safety.l[j],
+                    Some(dv),
+                    safety.filters[j].is_some(),
+                ));
+            }
+            let Some(filter) = safety.filters[i].as_mut() else {
+                continue;
+            };
+            let guard = Guard {
+                filter,
+                sight: Sight::Neighbours(&safety.neighbours),
+                obstacles: &safety.obstacles,
+            };
+            let act = self.sys.agents[i].act(t, &safety.seen[i], self.held[i], Some(guard));
+            self.held[i] = act.command;
+            let o = &mut safety.out[i];
+            o.nominal = act.nominal.values();
+            o.filtered = act.command.values();
+            if let Some(g) = act.safety {
+                (o.outcome, o.deadlock, o.min_distance) = (g.outcome, g.deadlock, g.min_distance);
+            }
+            let Some(filter) = safety.filters[i].as_ref() else {
+                continue;
+            };
+            o.sampled = true;
+            o.deadlock_breaks = filter.deadlock_breaks();
+            o.deadlocked = filter.deadlocked();
+        }
+        // The plant moves under the filtered commands from this instant on.
+        self.sys.evaluate(
+            t,
+            &self.state,
+            Some(&self.held),
+            &self.odometers,
+            None,
+            &mut self.k1,
+            &mut self.speeds[0],
+        );
+        for (i, a) in self.sys.agents.iter().enumerate() {
+            let applied = a.drive.actuate(self.held[i]);
+            let o = &mut self.out[i];
+            (o.u, o.tau) = (applied.u, applied.tau);
+            if let (Some(v), Some((c, _))) = (o.velocity.as_mut(), applied.velocity) {
+                v.applied = c;
+            }
+        }
+    }
+
+    /// The obstacles every agent knows (empty without a safety filter).
+    pub fn obstacles(&self) -> &[Obstacle] {
+        self.plan.obstacles()
+    }
+
+    /// Whether a safety filter runs.
+    pub fn has_safety(&self) -> bool {
+        self.safety.is_some()
+    }
+
+    /// The smallest `radius` among the agents that filter (`None`: none does).
+    pub fn safety_radius(&self) -> Option<f64> {
+        self.plan.safety_radius()
+    }
+
+    /// The current frame (evaluating the controllers if needed).
+    pub fn frame(&mut self) -> Frame<'_> {
+        self.refresh();
+        Frame {
+            t: self.time(),
+            step: self.step,
+            last: self.is_done(),
+            states: &self.state,
+            outputs: &self.out,
+            odometers: &self.odometers,
+            safety: self.safety.as_ref().map_or(&[], |s| &s.out[..]),
+            distance: &self.distance,
+            input_integral: &self.input_integral,
+        }
+    }
+
+    /// Advances one RK4 step; the law is evaluated in each of the four stages.
+    /// Fails ([`SimError::Diverged`]) if a state stops being finite or leaves
+    /// the configuration's [`Bounds`]; the simulation then stays at that state.
+    pub fn step(&mut self) -> Result<(), SimError> {
+        self.refresh();
+        let dt = self.config.dt;
+        let t = self.time();
+        let held = (self.hold_every > 0).then_some(&self.held[..]);
+        let sys = &self.sys;
+        let odo = &self.odometers[..];
+        for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k1)) {
+            *s = x.add_scaled(k, 0.5 * dt);
+        }
+        let [_, sp2, sp3, sp4] = &mut self.speeds;
+        sys.evaluate(
+            t + 0.5 * dt,
+            &self.stage,
+            held,
+            odo,
+            None,
+            &mut self.k2,
+            sp2,
+        );
+        for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k2)) {
+            *s = x.add_scaled(k, 0.5 * dt);
+        }
+        sys.evaluate(
+            t + 0.5 * dt,
+            &self.stage,
+            held,
+            odo,
+            None,
+            &mut self.k3,
+            sp3,
+        );
+        for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k3)) {
+            *s = x.add_scaled(k, dt);
+        }
+        sys.evaluate(t + dt, &self.stage, held, odo, None, &mut self.k4, sp4);
+        let h6 = dt / 6.0;
+        for (i, x) in self.state.iter_mut().enumerate() {
+            let k = [&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]];
+            // ṡ = v through the same RK4 stages: the stage speeds are
+            // v, v + dt/2 v̇₁, v + dt/2 v̇₂, v + dt v̇₃.
+            if let Drive::Velocity(_) = sys.agents[i].drive {
+                // ṡ = the speed the base moves at, stage by stage.
+                let s = |k: usize| self.speeds[k][i][0];
+                self.distance[i] += h6 * (s(0) + 2.0 * s(1) + 2.0 * s(2) + s(3));
+            } else {
+                self.distance[i] += dt * x.v + dt * dt / 6.0 * (k[0].v + k[1].v + k[2].v);
+            }
+            for (j, acc) in self.input_integral[i].iter_mut().enumerate() {
+                let u = |k: usize| self.speeds[k][i][2 + j];
+                *acc += h6 * (u(0) + 2.0 * u(1) + 2.0 * u(2) + u(3));
+            }
+            *x = x.rk4_combine(k, h6);
+        }
+        self.step += 1;
+        self.fresh = false;
+        let bounds = self.config.bounds;
+        for (i, s) in self.state.iter().enumerate() {
+            if let Some(breach) = bounds.check(s) {
+                return Err(SimError::Diverged {
+                    agent: i + 1,
+                    name: self.sys.agents[i].name.clone(),
+                    t: self.time(),
+                    breach,
+                });
+            }
+        }
+        let now = self.time();
+        for (i, odometer) in self.odometers.iter_mut().enumerate() {
+            if let Some(o) = odometer
+                && self.step.is_multiple_of(self.odometry_every[i])
+            {
+                o.sample(now, &self.state[i], self.distance[i]);
+            }
+        }
+        if self.velocity_agents {
+            self.settle();
+        }
+        Ok(())
+    }
+
+    /// Makes each velocity base's state consistent with the command at the new
+    /// state ([`crate::base::VelocityBase::settle`]: an axis without lag takes
+    /// the command's velocity), evaluating the controllers there (in sampled
+    /// mode, the held command or the new sample).
+    fn settle(&mut self) {
+        self.refresh();
+        for (i, a) in self.sys.agents.iter().enumerate() {
+            if let (Drive::Velocity(r), Some(v)) = (&a.drive, self.out[i].velocity) {
+                self.state[i] = r.base.settle(&self.state[i], v.applied);
+            }
+        }
+        self.fresh = false;
+    }
+
+    /// Runs to the end: `observer` is started, shown every frame (`t = 0` to
+    /// the last) and finished ([`Observer`]).
+    pub fn run(&mut self, observer: &mut dyn Observer) -> Result<(), SimError> {
+        let failed = |e: ObserverError| SimError::Observer(e.to_string());
+        observer.start(self).map_err(failed)?;
+        loop {
+            let frame = self.frame();
+            let last = frame.last;
+            observer.observe(&frame).map_err(failed)?;
+            if last {
+                break;
+            }
+            self.step()?;
+        }
+        observer.finish().map_err(failed)
+    }
+}
+
+pub use crate::stats::{AgentSafety, AgentSummary, Divergence, SafetyReport, SafetyWatch, Summary};

@@ -1,0 +1,125 @@
+//! The formation evaluated at one instant: each agent's law, in leader
+//! order, and its plant's derivative under the command.
+
+use super::AgentOutput;
+use crate::agent::{AgentSpec, Command, Drive};
+use crate::control::{LawOutput, errors};
+use crate::follow::{LeaderView, follow};
+use crate::formation::{Formation, Leader};
+use crate::kinematic::kinematic_law;
+use crate::model::State;
+use crate::odometry::Odometer;
+use crate::reference::{Jet, Order, Reference, Trajectory};
+
+/// Immutable description of the system being simulated.
+#[derive(Debug, Clone)]
+pub(super) struct System {
+    pub(super) agents: Vec<AgentSpec>,
+    pub(super) formation: Formation,
+    pub(super) reference: Reference,
+    pub(super) order: Order,
+    pub(super) uses_reference: bool,
+}
+
+impl System {
+    /// Evaluates every agent at time `t` and states `x`: state derivatives into
+    /// `dx`, the velocities each robot moves at into `speeds` and, when `out`
+    /// is given (RK4's first stage, which observers see), controller outputs
+    /// into it. With `held`, the commands are held values (sampled controller)
+    /// instead of fresh law outputs. With odometers, the law acts on what they
+    /// measure (eqs. 32–35) while `e`, `z` in `out` are those of the true state.
+    /// A velocity base's command is limited ([`crate::base::VelocityBase::limit`])
+    /// before it drives the base.
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn evaluate(
+        &self,
+        t: f64,
+        x: &[State],
+        held: Option<&[Command]>,
+        odometers: &[Option<Odometer>],
+        mut out: Option<&mut [AgentOutput]>,
+        dx: &mut [State],
+        speeds: &mut [[f64; 4]],
+    ) {
+        if let (None, Some(h)) = (&out, held) {
+            // Between samples of a sampled controller, with nobody looking at
+            // the law's outputs: only the plant moves.
+            for (i, a) in self.agents.iter().enumerate() {
+                let applied = a.drive.actuate(h[i]);
+                dx[i] = a.drive.derivative(&x[i], &applied);
+                speeds[i] = a.drive.speeds(&x[i], &applied);
+            }
+            return;
+        }
+        let jet = if self.uses_reference {
+            self.reference.eval(t, self.order)
+        } else {
+            Jet::default()
+        };
+        let sensed = |j: usize| match odometers.get(j) {
+            Some(Some(o)) => o.measure(&x[j]),
+            _ => x[j],
+        };
+        for &i in self.formation.order() {
+            let a = &self.agents[i];
+            // What the law knows of the leader, from a state of robot j: the
+            // leader was evaluated first, so dx[j].v is its v̇ now and
+            // speeds[j] the velocities its base moves at.
+            let view = |state: State, j: usize| {
+                let state = match self.agents[j].drive {
+                    Drive::Torque { .. } => state,
+                    Drive::Velocity(_) => State {
+                        v: speeds[j][0],
+                        omega: speeds[j][1],
+                        ..state
+                    },
+                };
+                LeaderView::Robot { state, dv: dx[j].v }
+            };
+            let leader = match a.leader {
+                Leader::Reference => LeaderView::Reference(&jet),
+                Leader::Agent(j) => view(sensed(j), j),
+            };
+            let law = follow(a, &sensed(i), leader);
+            let (LawOutput { e, z, .. }, motion, offset) = (law.law, law.leader, law.offset);
+            let (e_true, z_true) = if out.is_none() || odometers.is_empty() {
+                (e, z)
+            } else {
+                // The same errors from the true states of the robot and its leader.
+                let (motion, offset) = match a.leader {
+                    Leader::Reference => (motion, offset),
+                    Leader::Agent(j) => view(x[j], j).resolve(&a.placement),
+                };
+                let s = &x[i];
+                match a.drive {
+                    Drive::Torque { .. } => errors(
+                        s.x,
+                        s.y,
+                        s.theta.sin_cos(),
+                        s.v,
+                        s.omega,
+                        motion.p,
+                        motion.dp,
+                        offset.lx,
+                        offset.ly,
+                        offset.dly,
+                        a.gains.ke,
+                    ),
+                    Drive::Velocity(_) => {
+                        let k = kinematic_law(s, &motion, &offset, a.gains.ke);
+                        (k.e, k.z)
+                    }
+                }
+            };
+            let command = held.map_or_else(|| law.command(), |h| h[i]);
+            let applied = a.drive.actuate(command);
+            dx[i] = a.drive.derivative(&x[i], &applied);
+            speeds[i] = a.drive.speeds(&x[i], &applied);
+            let output = AgentOutput::of(e_true, z_true, e, z, command, &applied);
+            if let Some(out) = out.as_deref_mut() {
+                out[i] = output;
+            }
+        }
+    }
+}

@@ -33,9 +33,9 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 use zenoh::Wait;
 
+use echelon::agent::Drive;
 use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::scenario::Scenario;
-use echelon::sim::Drive;
 use echelon_mcap::McapLog;
 
 use crate::clock::FleetClock;

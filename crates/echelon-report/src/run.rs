@@ -200,7 +200,7 @@ pub struct SummaryFile {
     pub safety: Option<SafetySummary>,
 }
 
-/// `summary.json`'s `safety` (see `echelon::sim::SafetyReport`).
+/// `summary.json`'s `safety` (see `echelon::stats::SafetyReport`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 pub struct SafetySummary {
     /// The smallest `radius` among the agents that filter, m.

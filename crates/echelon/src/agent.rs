@@ -78,7 +78,7 @@ impl AgentSpec {
     /// A torque-driven agent, refusing an impossible robot
     /// ([`RobotParams::validate`]), gains ([`Gains::new`]), placement
     /// ([`Placement::new`]) or a start state that is not finite. Whether its
-    /// leader exists is the formation's business ([`Simulation::new`]).
+    /// leader exists is the formation's business ([`crate::plan::Plan::new`]).
     pub fn new(
         name: impl Into<String>,
         robot: RobotParams,

@@ -12,13 +12,15 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
+use crate::agent::AgentSpec;
 use crate::error::{OutputError, SimError};
 use crate::model::wrap_angle;
+use crate::plan::Timing;
 use crate::reference::{Order, Reference, Trajectory};
 use crate::safety::Outcome;
 use crate::sample::AgentSample;
 use crate::scenario::Run;
-use crate::sim::{AgentSpec, Every, Frame, Observer, ObserverError, Simulation, Timing};
+use crate::sim::{Every, Frame, Observer, ObserverError, Simulation};
 use crate::stats::{AgentSummary, Divergence, SafetyReport, SafetyWatch, Summary};
 
 /// The header of `trajectory.csv`: one row per agent per logged sample

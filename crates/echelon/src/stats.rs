@@ -3,11 +3,12 @@
 //! filter's ([`SafetyWatch`]: `summary.json`'s `safety`) and where a run
 //! diverged ([`Divergence`]).
 
+use crate::agent::AgentSpec;
 use crate::error::SimError;
 use crate::model::{Pose, State};
 use crate::safety::{Obstacle, Outcome};
 use crate::sample::AgentSample;
-use crate::sim::{AgentSpec, Frame, Observer, ObserverError, Simulation};
+use crate::sim::{Frame, Observer, ObserverError, Simulation};
 
 /// Per-agent statistics of a run (what `summary.json` reports).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]

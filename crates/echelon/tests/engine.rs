@@ -296,7 +296,7 @@ fn what_the_engine_cannot_do_is_refused() {
     let err = Engine::from_agents(&specs, f.reference(), 0.01).unwrap_err();
     assert!(matches!(err, EngineError::Unsupported(_)), "{err}");
     let mut specs = f.agent_specs();
-    specs[1].drive = echelon::sim::Drive::Torque {
+    specs[1].drive = echelon::agent::Drive::Torque {
         robot: RobotParams::AGENT2,
         variant: echelon::Variant::Paper,
     };
@@ -327,7 +327,7 @@ fn what_the_engine_cannot_do_is_refused() {
     let err = Engine::from_plan(&with_odometry).unwrap_err();
     assert!(err.to_string().contains("odometry"), "{err}");
     // Safety filters: the engine has none.
-    let safety = echelon::sim::SafetySpec {
+    let safety = echelon::plan::SafetySpec {
         agents: vec![Some(echelon::safety::SafetyConfig::new(0.01, 1.0, 1.0).unwrap()); 4],
         obstacles: Vec::new(),
     };

@@ -22,7 +22,7 @@
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use echelon::scenario::{self, Overrides, Scenario};
-use echelon::sim::Summary;
+use echelon::stats::Summary;
 use proptest::prelude::*;
 
 /// What the mutated source is called in errors.

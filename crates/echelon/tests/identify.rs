@@ -7,13 +7,14 @@
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
 use echelon::RobotParams;
+use echelon::agent::AgentSpec;
 use echelon::follow::{LeaderView, follow};
 use echelon::identify::{self, IdentifyError, Log, Model};
 use echelon::model::{Input, State};
 use echelon::output;
 use echelon::reference::{Order, Trajectory};
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::{AgentSpec, Frame, ObserverError, Simulation};
+use echelon::sim::{Frame, ObserverError, Simulation};
 use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

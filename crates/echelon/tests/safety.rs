@@ -7,7 +7,8 @@ use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::model::{Input, RobotParams};
 use echelon::safety::{Neighbour, SafetyConfig, SafetyFilter, point};
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::{Frame, ObserverError, SafetyReport, SafetyWatch, Summary};
+use echelon::sim::{Frame, ObserverError};
+use echelon::stats::{SafetyReport, SafetyWatch, Summary};
 use echelon::{Observer, ScenarioError, State};
 
 /// Runs a built-in (with `safety` removed when `filter` is false), watching

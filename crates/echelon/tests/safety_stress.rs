@@ -7,7 +7,8 @@
 #![allow(clippy::unwrap_used)]
 
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::{Frame, ObserverError, SafetyWatch};
+use echelon::sim::{Frame, ObserverError};
+use echelon::stats::SafetyWatch;
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 

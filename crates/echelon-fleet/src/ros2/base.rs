@@ -18,9 +18,9 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 use zenoh::Wait;
 
+use echelon::agent::Drive;
 use echelon::base::VelocityCommand;
 use echelon::scenario::{Ros2Link, Scenario};
-use echelon::sim::Drive;
 
 use super::declare_tokens;
 use super::drive::{SampleRefusal, cmd_vel_type, decode_cmd_vel};

@@ -1,6 +1,7 @@
 //! The benchmark formation of `echelon bench`: seeded, random, reproducible.
 
 use super::{Batch, Engine, EngineError, Member, Topology, VelocityBatch, VelocityEngine};
+use crate::agent::AgentSpec;
 use crate::base::VelocityBase;
 use crate::control::{Gains, Variant};
 use crate::formation::Leader;
@@ -8,7 +9,6 @@ use crate::lycomp::{LyComp, LyDerivatives, Placement};
 use crate::model::{RobotParams, State};
 use crate::reference::{Circle, Reference};
 use crate::rng::SplitMix64;
-use crate::sim::AgentSpec;
 
 /// `echelon bench`'s formation: `agents` robots of Table I (agent 1), paper
 /// law with `K_e = 1.5`, `K_z = 10`, `L = 0.05 m` and `L_Ycomp` by eq. 6, behind a
@@ -87,7 +87,7 @@ impl BenchFormation {
             .enumerate()
             .map(|(i, m)| AgentSpec {
                 name: format!("agent {}", i + 1),
-                drive: crate::sim::Drive::Torque {
+                drive: crate::agent::Drive::Torque {
                     robot: Self::ROBOT,
                     variant: Variant::Paper,
                 },

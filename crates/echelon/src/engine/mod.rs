@@ -341,8 +341,8 @@ impl Engine {
             }
         };
         let torque = |i: usize, a: &AgentSpec| match a.drive {
-            crate::sim::Drive::Torque { robot, variant } => Ok((robot, variant)),
-            crate::sim::Drive::Velocity(_) => Err(EngineError::Unsupported(format!(
+            crate::agent::Drive::Torque { robot, variant } => Ok((robot, variant)),
+            crate::agent::Drive::Velocity(_) => Err(EngineError::Unsupported(format!(
                 "velocity bases (agent {} is one)",
                 i + 1
             ))),

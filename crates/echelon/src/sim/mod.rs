@@ -7,14 +7,13 @@
 //! in between. Stepping is explicit ([`Simulation::step`]) over plain data; the
 //! same inputs give the same bits.
 
-pub use crate::agent::{AgentSpec, Drive};
+use crate::agent::{AgentSpec, Drive};
 use crate::agent::{Command, Guard, Sight};
 use crate::error::SimError;
 use crate::formation::{Formation, Leader};
-pub use crate::model::Pose;
 use crate::model::State;
 use crate::odometry::Odometer;
-pub use crate::plan::{Agents, Plan, SafetySpec, SimConfig, Timing};
+use crate::plan::{Plan, SimConfig};
 use crate::reference::{Order, Reference};
 use crate::safety::{Neighbour, Obstacle, SafetyFilter};
 
@@ -347,7 +346,7 @@ impl Simulation {
 
     /// Advances one RK4 step; the law is evaluated in each of the four stages.
     /// Fails ([`SimError::Diverged`]) if a state stops being finite or leaves
-    /// the configuration's [`Bounds`]; the simulation then stays at that state.
+    /// the configuration's [`crate::guard::Bounds`]; the simulation then stays at that state.
     pub fn step(&mut self) -> Result<(), SimError> {
         self.refresh();
         let dt = self.config.dt;
@@ -460,5 +459,3 @@ impl Simulation {
         observer.finish().map_err(failed)
     }
 }
-
-pub use crate::stats::{AgentSafety, AgentSummary, Divergence, SafetyReport, SafetyWatch, Summary};

@@ -107,7 +107,7 @@ pub struct SafetyOutput {
     pub deadlock_breaks: u64,
     /// Whether its filter holds the agent: it changed its command (stuck
     /// behind its barriers, breaking a deadlock, or filtering) now or within
-    /// [`crate::safety::DEADLOCK_MEMORY`] before ([`SafetyFilter::deadlocked`]).
+    /// [`crate::safety::DEADLOCK_MEMORY`] before ([`crate::safety::SafetyFilter::deadlocked`]).
     pub deadlocked: bool,
     /// The law's command.
     pub nominal: [f64; 2],

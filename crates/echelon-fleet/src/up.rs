@@ -32,6 +32,7 @@ use crate::latency::FleetLatency;
 use crate::leader::LeaderReport;
 use crate::net::{ROUTER_IDENTITY, base_identity, robot_identity};
 use crate::robot::RobotReport;
+use crate::role::Role;
 use crate::ros2::base::BaseReport;
 use crate::ros2::base::base_role;
 use crate::router::RouterReport;
@@ -497,22 +498,22 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             }
         }
         Topology::Mesh => {
-            endpoints.insert("collector".into(), net.peer(0).into());
+            endpoints.insert(Role::Collector.name().into(), net.peer(0).into());
             for k in 1..=n {
                 endpoints.insert(robot_role(k), net.peer(robot_at(k)).into());
             }
             for k in 1..=bases {
                 endpoints.insert(base_role(k), net.peer(k).into());
             }
-            endpoints.insert("leader".into(), net.peer(leader_at).into());
+            endpoints.insert(Role::Leader.name().into(), net.peer(leader_at).into());
         }
     }
     crate::write_json_file(&opts.out.join(ENDPOINTS_FILE), &endpoints)?;
     let mut sites = vec![Vec::new(); net.routers.len()];
     for i in 0..=leader_at {
         let role = match i {
-            0 => "collector".to_owned(),
-            i if i == leader_at => "leader".to_owned(),
+            0 => Role::Collector.name().to_owned(),
+            i if i == leader_at => Role::Leader.name().to_owned(),
             i if i <= bases => base_role(i),
             i => robot_role(i - bases),
         };
@@ -522,7 +523,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     }
     let mut routers = Vec::with_capacity(net.routers.len());
     for (s, e) in net.routers.iter().enumerate() {
-        let mut args = vec!["fleet".to_owned(), "router".to_owned()];
+        let mut args = vec!["fleet".to_owned(), Role::Router.name().to_owned()];
         if opts.ros2 {
             args.push(opts.scenario.clone());
         }
@@ -540,7 +541,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
 
     let mut args = vec![
         "fleet".to_owned(),
-        "collector".to_owned(),
+        Role::Collector.name().to_owned(),
         "--out".to_owned(),
         opts.out.display().to_string(),
         // For its trajectory.csv's columns (and, with --ros2, its topics).
@@ -549,14 +550,14 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     if opts.ros2 {
         args.push("--ros2".to_owned());
     }
-    args.extend(common(0, "collector"));
-    let mut collector = spawn(&opts.exe, "collector", &args, &logs)?;
+    args.extend(common(0, Role::Collector.name()));
+    let mut collector = spawn(&opts.exe, Role::Collector.name(), &args, &logs)?;
 
     let mut base_procs = Vec::with_capacity(bases);
     for k in 1..=bases {
         let mut args = vec![
             "fleet".to_owned(),
-            "base".to_owned(),
+            Role::Base.name().to_owned(),
             opts.scenario.clone(),
             "--ros2".to_owned(),
             "--agent".to_owned(),
@@ -572,7 +573,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     for k in 1..=n {
         let mut args = vec![
             "fleet".to_owned(),
-            "robot".to_owned(),
+            Role::Robot.name().to_owned(),
             opts.scenario.clone(),
             "--agent".to_owned(),
             k.to_string(),
@@ -601,14 +602,14 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
 
     let mut args = vec![
         "fleet".to_owned(),
-        "leader".to_owned(),
+        Role::Leader.name().to_owned(),
         opts.scenario.clone(),
         "--duration".to_owned(),
         dur.clone(),
         "--time-scale".to_owned(),
         scale.clone(),
         "--wait-for".to_owned(),
-        "collector".to_owned(),
+        Role::Collector.name().to_owned(),
     ];
     for k in 1..=n {
         args.extend(["--wait-for".to_owned(), robot_role(k)]);
@@ -616,8 +617,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     for k in 1..=bases {
         args.extend(["--wait-for".to_owned(), base_role(k)]);
     }
-    args.extend(common(leader_at, "leader"));
-    let mut leader = spawn(&opts.exe, "leader", &args, &logs)?;
+    args.extend(common(leader_at, Role::Leader.name()));
+    let mut leader = spawn(&opts.exe, Role::Leader.name(), &args, &logs)?;
 
     // Generous: connection set-up, then the run in real time, then the wind-down.
     let deadline = Duration::from_secs_f64(60.0 + 2.0 * duration / opts.time_scale);

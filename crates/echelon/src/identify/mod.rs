@@ -662,12 +662,14 @@ impl Identified {
 
     /// The identified torque-driven robot, when every parameter it needs is
     /// known (`m, η, J, ψ` and the geometry, taken from `geometry` or else
-    /// `fallback`).
+    /// `fallback`) and the robot they make is a valid one
+    /// ([`RobotParams::validate`]: a fit that gives a mass or a friction
+    /// that is not > 0 gives no robot).
     pub fn robot_params(&self, fallback: Option<&RobotParams>) -> Option<RobotParams> {
         let [l, r] = self
             .geometry
             .or_else(|| fallback.map(|p| [p.half_wheelbase, p.wheel_radius]))?;
-        Some(RobotParams {
+        let robot = RobotParams {
             mass: self.get("mass")?.value,
             linear_friction: self.get("linear_friction")?.value,
             inertia: self.get("inertia")?.value,
@@ -675,7 +677,8 @@ impl Identified {
             half_wheelbase: l,
             wheel_radius: r,
             torque_limit: None,
-        })
+        };
+        robot.validate().ok().map(|()| robot)
     }
 
     /// The `[robots.NAME]` block: identified parameters as fields, each with

@@ -41,7 +41,6 @@ struct SafetyState {
 #[derive(Debug, Clone)]
 pub struct Simulation {
     sys: System,
-    plan: Plan,
     config: SimConfig,
     steps: u64,
     hold_every: u64,
@@ -78,7 +77,7 @@ pub struct Simulation {
 impl Simulation {
     /// The simulation of `plan` at `t = 0`.
     pub fn new(plan: &Plan) -> Simulation {
-        let agents = plan.agents().to_vec();
+        let agents = plan.agents();
         let config = *plan.config();
         let order = if agents.iter().any(|a| a.placement.uses_exact_derivatives()) {
             Order::Four
@@ -119,13 +118,10 @@ impl Simulation {
         });
         Simulation {
             sys: System {
-                agents,
-                formation: plan.formation().clone(),
-                reference: plan.reference().clone(),
+                plan: plan.clone(),
                 order,
                 uses_reference,
             },
-            plan: plan.clone(),
             config,
             steps: config.steps(),
             hold_every,
@@ -151,7 +147,7 @@ impl Simulation {
 
     /// The plan it runs.
     pub fn plan(&self) -> &Plan {
-        &self.plan
+        &self.sys.plan
     }
 
     /// Each agent's odometer (empty without odometry).
@@ -161,17 +157,17 @@ impl Simulation {
 
     /// The agents.
     pub fn agents(&self) -> &[AgentSpec] {
-        &self.sys.agents
+        self.sys.plan.agents()
     }
 
     /// The leader graph.
     pub fn formation(&self) -> &Formation {
-        &self.sys.formation
+        self.sys.plan.formation()
     }
 
     /// The reference the virtual leader follows.
     pub fn reference(&self) -> &Reference {
-        &self.sys.reference
+        self.sys.plan.reference()
     }
 
     /// The integration settings.
@@ -181,7 +177,7 @@ impl Simulation {
 
     /// Things that are allowed but probably not what the user wants.
     pub fn warnings(&self) -> &[String] {
-        self.plan.warnings()
+        self.sys.plan.warnings()
     }
 
     /// Total number of steps of the run.
@@ -278,7 +274,7 @@ impl Simulation {
                 sight: Sight::Neighbours(&safety.neighbours),
                 obstacles: &safety.obstacles,
             };
-            let act = self.sys.agents[i].act(t, &safety.seen[i], self.held[i], Some(guard));
+            let act = self.sys.plan.agents()[i].act(t, &safety.seen[i], self.held[i], Some(guard));
             self.held[i] = act.command;
             let o = &mut safety.out[i];
             o.nominal = act.nominal.values();
@@ -303,7 +299,7 @@ impl Simulation {
             &mut self.k1,
             &mut self.speeds[0],
         );
-        for (i, a) in self.sys.agents.iter().enumerate() {
+        for (i, a) in self.sys.plan.agents().iter().enumerate() {
             let applied = a.drive.actuate(self.held[i]);
             let o = &mut self.out[i];
             (o.u, o.tau) = (applied.u, applied.tau);
@@ -315,7 +311,7 @@ impl Simulation {
 
     /// The obstacles every agent knows (empty without a safety filter).
     pub fn obstacles(&self) -> &[Obstacle] {
-        self.plan.obstacles()
+        self.sys.plan.obstacles()
     }
 
     /// Whether a safety filter runs.
@@ -325,7 +321,7 @@ impl Simulation {
 
     /// The smallest `radius` among the agents that filter (`None`: none does).
     pub fn safety_radius(&self) -> Option<f64> {
-        self.plan.safety_radius()
+        self.sys.plan.safety_radius()
     }
 
     /// The current frame (evaluating the controllers if needed).
@@ -388,7 +384,7 @@ impl Simulation {
             let k = [&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]];
             // ṡ = v through the same RK4 stages: the stage speeds are
             // v, v + dt/2 v̇₁, v + dt/2 v̇₂, v + dt v̇₃.
-            if let Drive::Velocity(_) = sys.agents[i].drive {
+            if let Drive::Velocity(_) = sys.plan.agents()[i].drive {
                 // ṡ = the speed the base moves at, stage by stage.
                 let s = |k: usize| self.speeds[k][i][0];
                 self.distance[i] += h6 * (s(0) + 2.0 * s(1) + 2.0 * s(2) + s(3));
@@ -408,7 +404,7 @@ impl Simulation {
             if let Some(breach) = bounds.check(s) {
                 return Err(SimError::Diverged {
                     agent: i + 1,
-                    name: self.sys.agents[i].name.clone(),
+                    name: self.sys.plan.agents()[i].name.clone(),
                     t: self.time(),
                     breach,
                 });
@@ -434,7 +430,7 @@ impl Simulation {
     /// mode, the held command or the new sample).
     fn settle(&mut self) {
         self.refresh();
-        for (i, a) in self.sys.agents.iter().enumerate() {
+        for (i, a) in self.sys.plan.agents().iter().enumerate() {
             if let (Drive::Velocity(r), Some(v)) = (&a.drive, self.out[i].velocity) {
                 self.state[i] = r.base.settle(&self.state[i], v.applied);
             }

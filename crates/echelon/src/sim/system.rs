@@ -2,21 +2,21 @@
 //! order, and its plant's derivative under the command.
 
 use super::AgentOutput;
-use crate::agent::{AgentSpec, Command, Drive};
+use crate::agent::{Command, Drive};
 use crate::control::{LawOutput, errors};
 use crate::follow::{LeaderView, follow};
-use crate::formation::{Formation, Leader};
+use crate::formation::Leader;
 use crate::kinematic::kinematic_law;
 use crate::model::State;
 use crate::odometry::Odometer;
-use crate::reference::{Jet, Order, Reference, Trajectory};
+use crate::plan::Plan;
+use crate::reference::{Jet, Order, Trajectory};
 
 /// Immutable description of the system being simulated.
 #[derive(Debug, Clone)]
 pub(super) struct System {
-    pub(super) agents: Vec<AgentSpec>,
-    pub(super) formation: Formation,
-    pub(super) reference: Reference,
+    /// The plan it runs (agents, formation, reference).
+    pub(super) plan: Plan,
     pub(super) order: Order,
     pub(super) uses_reference: bool,
 }
@@ -45,7 +45,7 @@ impl System {
         if let (None, Some(h)) = (&out, held) {
             // Between samples of a sampled controller, with nobody looking at
             // the law's outputs: only the plant moves.
-            for (i, a) in self.agents.iter().enumerate() {
+            for (i, a) in self.plan.agents().iter().enumerate() {
                 let applied = a.drive.actuate(h[i]);
                 dx[i] = a.drive.derivative(&x[i], &applied);
                 speeds[i] = a.drive.speeds(&x[i], &applied);
@@ -53,7 +53,7 @@ impl System {
             return;
         }
         let jet = if self.uses_reference {
-            self.reference.eval(t, self.order)
+            self.plan.reference().eval(t, self.order)
         } else {
             Jet::default()
         };
@@ -61,13 +61,13 @@ impl System {
             Some(Some(o)) => o.measure(&x[j]),
             _ => x[j],
         };
-        for &i in self.formation.order() {
-            let a = &self.agents[i];
+        for &i in self.plan.formation().order() {
+            let a = &self.plan.agents()[i];
             // What the law knows of the leader, from a state of robot j: the
             // leader was evaluated first, so dx[j].v is its v̇ now and
             // speeds[j] the velocities its base moves at.
             let view = |state: State, j: usize| {
-                let state = match self.agents[j].drive {
+                let state = match self.plan.agents()[j].drive {
                     Drive::Torque { .. } => state,
                     Drive::Velocity(_) => State {
                         v: speeds[j][0],

@@ -12,7 +12,13 @@
 //! brought to the robot's instant (its pose advanced along the arc of its
 //! `(v, ω)`, its speeds by its `(v̇, ω̇)`, over the age of its sample, at most
 //! `timeout`) and enters the filter with its measured motion, cooperative if
-//! the scenario gives it a filter.
+//! the scenario gives it a filter **and its sample is at most `lag` old**
+//! (two control periods). The pair split (each robot takes half of the pair
+//! constraint) holds only if both act on the same situation at about the same
+//! instant; a neighbour whose last state is older than that has not acted on
+//! anything since (its process stalled, or its messages are late) while its
+//! plant keeps moving under its held command, so this robot keeps the whole
+//! pair constraint against the neighbour's extrapolated motion.
 //!
 //! A neighbour whose stream went stale **while its last point was within
 //! `range`**:
@@ -39,6 +45,10 @@ use crate::wire::{Header, LinkStatus, RobotState};
 /// How long a stale neighbour within range is taken as stopped at its last
 /// point before the robot brakes, fleet s.
 pub const STALE_HOLD: f64 = 0.5;
+
+/// How old (in control periods) a fresh neighbour's sample may be and the
+/// neighbour still be trusted to take its half of a pair constraint.
+pub const LAG_PERIODS: f64 = 2.0;
 
 /// One agent's slot.
 #[derive(Debug, Clone, Copy, Default)]
@@ -71,14 +81,27 @@ pub struct NeighbourTable {
     timeout: f64,
     /// How long a stale neighbour within range is taken as stopped, s.
     hold: f64,
+    /// A fresh neighbour whose sample is older than this (fleet time) is
+    /// taken as non-cooperative, s.
+    lag: f64,
+    /// Fresh neighbours taken as non-cooperative for their sample's age.
+    lagging: u64,
     stale_events: u64,
     refused: u64,
 }
 
 impl NeighbourTable {
     /// The table of agent `me` (from 1) in a fleet whose agents have points
-    /// `l[k − 1]` ahead and filter (`cooperative[k − 1]`).
-    pub fn new(me: u32, l: Vec<f64>, cooperative: Vec<bool>, timeout: f64, hold: f64) -> Self {
+    /// `l[k − 1]` ahead and filter (`cooperative[k − 1]`); `timeout`, `hold`
+    /// and `lag` as in the module's docs.
+    pub fn new(
+        me: u32,
+        l: Vec<f64>,
+        cooperative: Vec<bool>,
+        timeout: f64,
+        hold: f64,
+        lag: f64,
+    ) -> Self {
         let n = l.len();
         NeighbourTable {
             me,
@@ -88,6 +111,8 @@ impl NeighbourTable {
             list: Vec::with_capacity(n),
             timeout,
             hold,
+            lag,
+            lagging: 0,
             stale_events: 0,
             refused: 0,
         }
@@ -127,6 +152,12 @@ impl NeighbourTable {
         self.stale_events
     }
 
+    /// Neighbour entries (one per neighbour per step) taken as
+    /// non-cooperative because their sample was older than `lag`.
+    pub fn lagging(&self) -> u64 {
+        self.lagging
+    }
+
     /// Counts a message refused by the caller (malformed, not a state).
     pub fn refuse(&mut self) {
         self.refused += 1;
@@ -156,8 +187,14 @@ impl NeighbourTable {
                     (t - e.state.t).clamp(0.0, self.timeout)
                 };
                 let (s, dv) = advance(&e.state, dt);
-                self.list
-                    .push(Neighbour::of_state(&s, l, Some(dv), self.cooperative[i]));
+                let lagging = dt > self.lag;
+                self.lagging += u64::from(lagging && self.cooperative[i]);
+                self.list.push(Neighbour::of_state(
+                    &s,
+                    l,
+                    Some(dv),
+                    self.cooperative[i] && !lagging,
+                ));
                 continue;
             }
             let q = point(&e.state.state, l);
@@ -215,6 +252,7 @@ mod tests {
     use super::*;
 
     const TIMEOUT: f64 = 0.2;
+    const LAG: f64 = 0.02;
 
     fn table() -> NeighbourTable {
         NeighbourTable::new(
@@ -223,6 +261,7 @@ mod tests {
             vec![true, true, false],
             TIMEOUT,
             STALE_HOLD,
+            LAG,
         )
     }
 
@@ -257,13 +296,24 @@ mod tests {
         n.on_state(h, &s, 10.0);
         let (h, s) = msg(3, 0, 1.0, -1.0, 0.0);
         n.on_state(h, &s, 10.0);
-        // 0.1 s later (both clocks): agent 2 moved 5 cm along x.
-        let got = list(n.build(10.1, 1.1, [0.0, 0.0], 5.0));
+        // 10 ms later (both clocks): agent 2 moved 5 mm along x; within the
+        // lag it still takes its half of the pair constraint.
+        let got = list(n.build(10.01, 1.01, [0.0, 0.0], 5.0));
         assert_eq!(got.len(), 2);
-        assert!((got[0].p[0] - (1.0 + 0.05 + 0.05)).abs() < 1e-12, "{got:?}");
+        assert!(
+            (got[0].p[0] - (1.0 + 0.05 + 0.005)).abs() < 1e-12,
+            "{got:?}"
+        );
         assert!((got[0].dp[0] - 0.5).abs() < 1e-12);
         assert!(got[0].cooperative);
         assert!(!got[1].cooperative);
+        assert_eq!(n.lagging(), 0);
+        // 0.1 s later, nothing new heard: advanced 5 cm, and no longer trusted
+        // to act (its sample is older than the lag): non-cooperative.
+        let got = list(n.build(10.1, 1.1, [0.0, 0.0], 5.0));
+        assert!((got[0].p[0] - (1.0 + 0.05 + 0.05)).abs() < 1e-12, "{got:?}");
+        assert!(!got[0].cooperative && !got[1].cooperative);
+        assert_eq!(n.lagging(), 1);
         assert_eq!(n.stale_events(), 0);
     }
 

@@ -114,6 +114,9 @@ pub struct UpReport {
     /// `min_distance`), each robot's under `robots[k].safety`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety: Option<crate::robot::SafetyCounts>,
+    /// Robots (agent numbers) their filter kept from their slot at the end
+    /// (each robot's `deadlocked_at_end`).
+    pub deadlocked_at_end: Vec<u32>,
     /// The leader's report.
     pub leader: LeaderReport,
     /// Each robot's report, agent 1 first.
@@ -741,6 +744,11 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         safety: crate::robot::SafetyCounts::total(
             robot_reports.iter().filter_map(|r| r.safety.as_ref()),
         ),
+        deadlocked_at_end: robot_reports
+            .iter()
+            .filter(|r| r.deadlocked_at_end)
+            .map(|r| r.agent)
+            .collect(),
         leader: leader_report,
         robots: robot_reports,
         collector: collector_report,

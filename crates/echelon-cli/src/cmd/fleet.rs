@@ -746,6 +746,12 @@ fn up_cmd(a: UpArgs) -> Result<()> {
             t.min_distance
                 .map_or("none in range".to_owned(), |d| format!("{d:.4} m")),
         )?;
+        if !report.deadlocked_at_end.is_empty() {
+            outln!(
+                "  safety: robots {:?} ended away from their slots, held by their filters (deadlocked)",
+                report.deadlocked_at_end
+            )?;
+        }
     }
     let col = &report.collector;
     outln!(

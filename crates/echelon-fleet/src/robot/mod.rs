@@ -30,7 +30,7 @@ use echelon::safety::{Outcome, SafetyFilter, point};
 use crate::faults::{FaultInjector, Verdict};
 use crate::latency::Latency;
 use crate::link::{Counters, LeaderSample, StreamTracker, predict};
-use crate::neighbours::{NeighbourTable, STALE_HOLD};
+use crate::neighbours::{LAG_PERIODS, NeighbourTable, STALE_HOLD};
 use crate::plant::{Plant, SimulatedDrive};
 use crate::role::Role;
 use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
@@ -169,6 +169,7 @@ impl<P: Plant> Robot<P> {
                 s.cooperative.clone(),
                 config.link_timeout,
                 STALE_HOLD,
+                LAG_PERIODS * config.period,
             ),
             counts: SafetyCounts::default(),
         });
@@ -212,6 +213,7 @@ impl<P: Plant> Robot<P> {
         self.safety.as_ref().map(|s| SafetyCounts {
             refused: s.table.refused(),
             stale_neighbours: s.table.stale_events(),
+            lagging: s.table.lagging(),
             deadlock_breaks: s.filter.deadlock_breaks(),
             ..s.counts
         })
@@ -502,11 +504,20 @@ impl<P: Plant> Robot<P> {
             t: self.last.t,
             final_state: [s.x, s.y, s.theta, s.v, s.omega],
             final_error: self.last.e[0].hypot(self.last.e[1]),
+            deadlocked_at_end: self.deadlocked_at_end(),
             link: self.last.link.name().to_owned(),
             latency: self.latency.report(true),
             ros2: None,
             safety: self.safety_counts(),
         }
+    }
+
+    /// Whether its filter kept it from its slot at the end (the
+    /// simulator's rule, [`echelon::stats::Summary::SETTLE_TOLERANCE`]).
+    fn deadlocked_at_end(&self) -> bool {
+        let e = self.last.e[0].hypot(self.last.e[1]);
+        self.safety.as_ref().is_some_and(|s| s.filter.deadlocked())
+            && e >= echelon::stats::Summary::SETTLE_TOLERANCE
     }
 
     fn stats_at(&self, t: f64, link: LinkStatus) -> RobotStats {

@@ -34,6 +34,12 @@ pub struct RobotReport {
     pub final_state: [f64; 5],
     /// Final ‖e‖ against the leader motion used, m.
     pub final_error: f64,
+    /// Whether it ended more than `Summary::SETTLE_TOLERANCE` from its slot
+    /// while its safety filter held it (stuck, breaking a deadlock or
+    /// changing its command in the last `DEADLOCK_MEMORY` seconds): the
+    /// simulator's `deadlocked_at_end`, so a robot its filter kept from its
+    /// slot is reported, never silent (`docs/safety.md`, "Deadlock").
+    pub deadlocked_at_end: bool,
     /// Final link status.
     pub link: String,
     /// Delay from the sender's timestamp to receipt of every sample on the
@@ -65,6 +71,10 @@ pub struct SafetyCounts {
     pub deadlock_breaks: u64,
     /// Neighbours within range whose stream went stale (once per episode).
     pub stale_neighbours: u64,
+    /// Neighbour entries (one per neighbour and step) whose sample was more
+    /// than two control periods old, so the robot kept the whole pair
+    /// constraint itself (`neighbours.rs`).
+    pub lagging: u64,
     /// Neighbour messages refused (unknown agent, reordered, malformed; its
     /// own are ignored).
     pub refused: u64,
@@ -87,6 +97,7 @@ impl SafetyCounts {
             t.stale_brakes += s.stale_brakes;
             t.deadlock_breaks += s.deadlock_breaks;
             t.stale_neighbours += s.stale_neighbours;
+            t.lagging += s.lagging;
             t.refused += s.refused;
             if let Some(d) = s.min_distance {
                 t.min_distance = Some(t.min_distance.map_or(d, |m| m.min(d)));

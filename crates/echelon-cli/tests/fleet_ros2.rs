@@ -27,6 +27,8 @@ mod common;
 
 use common::{EXE, spawn};
 const SCENARIO: &str = "experiment-circle-velocity";
+/// Agent 1's start pose in [`SCENARIO`], world `[x, y, θ]`.
+const START: [f64; 3] = [0.0, -0.6, std::f64::consts::FRAC_PI_2];
 
 fn ports(n: usize) -> Vec<String> {
     let l: Vec<_> = (0..n)
@@ -293,7 +295,21 @@ fn fake_base() -> PathBuf {
 
 /// Robot 1 of `scenario` (and a leader) against `fake_base.py` with
 /// `base_args`, 10 s of fleet time; the robot's and the base's reports.
-fn drive_python_base(scenario: &str, base_args: &[&str]) -> (Value, Value) {
+///
+/// The base is a robot switched on at `origin` (world `[x, y, θ]`): its
+/// odometry starts at zero there, so it starts at `origin⁻¹ ⊕ start` in its
+/// odom frame; the scenario must say so (`odom_origin`, or nothing when
+/// `origin` is agent 1's start). At the end the robot's world pose is the
+/// base's odometry carried by `origin`.
+fn drive_python_base(scenario: &str, base_args: &[&str], origin: [f64; 3]) -> (Value, Value) {
+    let (sin, cos) = origin[2].sin_cos();
+    let (dx, dy) = (START[0] - origin[0], START[1] - origin[1]);
+    let odom_start = [
+        cos * dx + sin * dy,
+        -sin * dx + cos * dy,
+        START[2] - origin[2],
+    ]
+    .map(|v| v.to_string());
     let e = ports(3);
     let dir = tempfile::tempdir().unwrap();
     let report_path = dir.path().join("base.json");
@@ -301,7 +317,7 @@ fn drive_python_base(scenario: &str, base_args: &[&str]) -> (Value, Value) {
     let mut child = Command::new(&python)
         .arg(fake_base())
         .args(["--listen", &e[0], "--namespace", "/robot1", "--duration", "25"])
-        .args(["--x", "0.0", "--y", "-0.6", "--yaw", &std::f64::consts::FRAC_PI_2.to_string()])
+        .args(["--x", &odom_start[0], "--y", &odom_start[1], "--yaw", &odom_start[2]])
         .args(base_args)
         .arg("--report")
         .arg(&report_path)
@@ -352,6 +368,19 @@ fn drive_python_base(scenario: &str, base_args: &[&str]) -> (Value, Value) {
     assert!(f(&report, &["final_error"]) < 5e-3, "{report}");
     let base: Value =
         serde_json::from_str(&std::fs::read_to_string(&report_path).unwrap()).unwrap();
+    let odom = [
+        f(&base, &["final_pose", "x"]),
+        f(&base, &["final_pose", "y"]),
+    ];
+    let world = [
+        origin[0] + cos * odom[0] - sin * odom[1],
+        origin[1] + sin * odom[0] + cos * odom[1],
+    ];
+    let robot = [0, 1].map(|k| report["final_state"][k].as_f64().unwrap());
+    assert!(
+        (world[0] - robot[0]).hypot(world[1] - robot[1]) < 1e-2,
+        "the base's odometry {odom:?} carried by {origin:?} is {world:?}, the robot ended at {robot:?}"
+    );
     (report, base)
 }
 
@@ -363,7 +392,8 @@ fn drive_python_base(scenario: &str, base_args: &[&str]) -> (Value, Value) {
 #[test]
 fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
     let _fleet = common::one_fleet_at_a_time();
-    let (report, base) = drive_python_base(SCENARIO, &[]);
+    // Switched on at its start mark: its odometry starts at zero.
+    let (report, base) = drive_python_base(SCENARIO, &[], START);
     assert_eq!(f(&report, &["ros2", "odom_wrong_type"]), 0.0, "{report}");
     let commands = f(&base, &["commands"]);
     assert!(commands > 300.0, "{base}");
@@ -533,6 +563,18 @@ fn twist_commands_over_bridge_keys_drive_the_python_base_too() {
     )
     .unwrap();
     let scenario = dir.path().join("bridge.toml");
+    // And a robot switched on elsewhere than its start mark: its odometry
+    // origin is given in the world.
+    let origin = [1.0, 2.0, 0.3];
+    let src = src.replacen(
+        "[[agents]]\n",
+        &format!(
+            "[[agents]]\nodom_origin = {{ x = {}, y = {}, theta = {} }}\n",
+            origin[0], origin[1], origin[2]
+        ),
+        1,
+    );
+    assert!(src.contains("odom_origin"));
     std::fs::write(
         &scenario,
         format!("{src}\n[fleet.ros2]\ncmd_vel_type = \"twist\"\nkey_scheme = \"bridge\"\n"),
@@ -541,6 +583,7 @@ fn twist_commands_over_bridge_keys_drive_the_python_base_too() {
     let (_, base) = drive_python_base(
         scenario.to_str().unwrap(),
         &["--cmd-type", "twist", "--scheme", "bridge"],
+        origin,
     );
     assert_eq!(base["cmd_key"], "robot1/cmd_vel", "{base}");
     assert!(f(&base, &["commands"]) > 300.0, "{base}");

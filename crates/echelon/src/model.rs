@@ -258,6 +258,32 @@ impl State {
         }
     }
 
+    /// This state, given in a frame whose pose in the world is `origin`
+    /// (REP 105: an `odom` frame's pose in `map`), in the world: the pose
+    /// composed (`origin ⊕ pose`, heading continuous, unwrapped), the
+    /// speeds (body frame) unchanged.
+    pub fn carried_by(&self, origin: &Pose) -> State {
+        let p = origin.compose(&self.pose());
+        State {
+            x: p.x,
+            y: p.y,
+            theta: p.theta,
+            ..*self
+        }
+    }
+
+    /// This world state in the frame whose world pose is `origin` (the
+    /// inverse of [`State::carried_by`]).
+    pub fn seen_from(&self, origin: &Pose) -> State {
+        let p = origin.between(&self.pose());
+        State {
+            x: p.x,
+            y: p.y,
+            theta: p.theta,
+            ..*self
+        }
+    }
+
     /// The pose part `(x, y, θ)`.
     #[inline]
     pub fn pose(&self) -> Pose {
@@ -541,5 +567,59 @@ mod tests {
         assert!((wrap_angle(-PI) - PI).abs() < 1e-12);
         assert!((wrap_angle(0.5) - 0.5).abs() < 1e-15);
         assert!((wrap_angle(-7.0) - (-7.0 + 2.0 * PI)).abs() < 1e-12);
+    }
+}
+
+#[cfg(test)]
+mod frame_tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn pose() -> impl Strategy<Value = Pose> {
+        (-50.0..50.0f64, -50.0..50.0f64, -20.0..20.0f64).prop_map(|(x, y, theta)| Pose {
+            x,
+            y,
+            theta,
+        })
+    }
+
+    fn state() -> impl Strategy<Value = State> {
+        (pose(), -2.0..2.0f64, -5.0..5.0f64).prop_map(|(p, v, omega)| State {
+            x: p.x,
+            y: p.y,
+            theta: p.theta,
+            v,
+            omega,
+        })
+    }
+
+    proptest! {
+        /// `seen_from` undoes `carried_by`, and the speeds (body frame) are
+        /// never touched.
+        #[test]
+        fn odom_to_world_round_trips(origin in pose(), s in state()) {
+            let w = s.carried_by(&origin);
+            prop_assert_eq!((w.v, w.omega), (s.v, s.omega));
+            let back = w.seen_from(&origin);
+            for (a, b) in [(back.x, s.x), (back.y, s.y), (back.theta, s.theta)] {
+                prop_assert!((a - b).abs() < 1e-9 * (1.0 + b.abs() + origin.x.abs() + origin.y.abs()), "{back:?} vs {s:?}");
+            }
+        }
+
+        /// The map is rigid: distances between two states and their
+        /// relative heading are the same in both frames, and the heading
+        /// turns by exactly the origin's (no wrapping: unwrapped headings
+        /// stay continuous).
+        #[test]
+        fn odom_to_world_is_rigid(origin in pose(), a in state(), b in state()) {
+            let (wa, wb) = (a.carried_by(&origin), b.carried_by(&origin));
+            let d = (a.x - b.x).hypot(a.y - b.y);
+            let wd = (wa.x - wb.x).hypot(wa.y - wb.y);
+            prop_assert!((d - wd).abs() < 1e-9 * (1.0 + d), "{d} vs {wd}");
+            prop_assert!((wa.theta - a.theta - origin.theta).abs() < 1e-12 * (1.0 + a.theta.abs() + origin.theta.abs()));
+            // The odom frame's origin lands on the origin's position.
+            let o = State::default().carried_by(&origin);
+            prop_assert!((o.x - origin.x).abs() < 1e-12 && (o.y - origin.y).abs() < 1e-12);
+        }
     }
 }

@@ -8,7 +8,10 @@
 //! velocity-base model ([`SimulatedVelocityBase`]: lags, speed and
 //! acceleration limits), stops when no command arrived for `cmd_vel_timeout`,
 //! and publishes `nav_msgs/Odometry` (pose in the odom frame, twist in the
-//! body frame) at `odom_rate` ([`SimBase::tick`]). [`run`] is its Zenoh
+//! body frame) at `odom_rate` ([`SimBase::tick`]). Like a real robot's, its
+//! odometry starts where it was switched on: its world pose is the agent's
+//! `start`, its odom frame lies at the link's `odom_origin` (by default the
+//! start pose, so the odometry starts at zero). [`run`] is its Zenoh
 //! driver: rmw_zenoh keys, attachments and liveliness tokens, as a ROS 2 node
 //! `/robotK/echelon_base` would show.
 
@@ -187,7 +190,7 @@ impl SimBase {
         }
         let period = 1.0 / self.link.odom_rate;
         self.next_odom = (self.next_odom + period).max(now);
-        let s = self.base.true_state();
+        let s = self.base.true_state().seen_from(&self.link.odom_origin);
         let odom = Odometry::planar(
             s.x,
             s.y,
@@ -241,7 +244,7 @@ pub struct BaseReport {
     pub topics: [String; 2],
     /// What it counted.
     pub counters: BaseCounters,
-    /// Final pose and speeds `[x, y, θ, v, ω]`.
+    /// Final pose (world) and speeds `[x, y, θ, v, ω]`.
     pub final_state: [f64; 5],
     /// The last command it followed `[v, ω]`.
     pub last_command: [f64; 2],

@@ -6,9 +6,12 @@
 //! of arrival) and it sends its commands through an injected [`CmdSink`] (a
 //! Zenoh publisher in the process, a `Vec` in tests). What it guarantees:
 //!
-//! - the state is the last valid odometry (pose in the odom frame, yaw
-//!   unwrapped, twist in the body frame, REP 103/105), and there is none
-//!   once it is older than `odom_timeout`, so the robot commands zero;
+//! - the state is the last valid odometry mapped into the world (REP 105:
+//!   the pose in the odom frame, yaw unwrapped, carried by the link's
+//!   `odom_origin`, the odom frame's pose in the world; the twist stays in
+//!   the body frame, REP 103), and there is none once it is older than
+//!   `odom_timeout`, so the robot commands zero; the raw odometry is kept
+//!   ([`Ros2Drive::odometry`]);
 //! - odometry that is not CDR of `nav_msgs/msg/Odometry`, carries the wrong
 //!   type or hash on its key, holds a NaN or an infinity, or is in other
 //!   frames than configured is counted and refused, never a crash;
@@ -149,8 +152,10 @@ pub struct Ros2Drive<S: CmdSink> {
     seq: i64,
     buf: Vec<u8>,
     yaw: YawUnwrapper,
-    /// The last valid odometry and its fleet time of arrival.
+    /// The last valid odometry in the world, and its fleet time of arrival.
     odom: Option<(State, f64)>,
+    /// The last valid odometry as received (odom frame).
+    raw: Option<State>,
     t: f64,
     last_sent: VelocityCommand,
     counters: Ros2Counters,
@@ -169,10 +174,17 @@ impl<S: CmdSink> Ros2Drive<S> {
             buf: Vec::with_capacity(128),
             yaw: YawUnwrapper::new(),
             odom: None,
+            raw: None,
             t: 0.0,
             last_sent: VelocityCommand::default(),
             counters: Ros2Counters::default(),
         }
+    }
+
+    /// The last valid odometry as the robot sent it, in its odom frame
+    /// (the state is this mapped into the world).
+    pub fn odometry(&self) -> Option<State> {
+        self.raw
     }
 
     /// What it counted.
@@ -203,14 +215,15 @@ impl<S: CmdSink> Ros2Drive<S> {
         match &checked {
             Ok(odom) => {
                 let p = odom.pose.pose.position;
-                let state = State {
+                let raw = State {
                     x: p.x,
                     y: p.y,
                     theta: self.yaw.unwrap(odom.yaw()),
                     v: odom.twist.twist.linear.x,
                     omega: odom.twist.twist.angular.z,
                 };
-                self.odom = Some((state, t));
+                self.odom = Some((raw.carried_by(&self.link.odom_origin), t));
+                self.raw = Some(raw);
                 self.counters.odom_accepted += 1;
             }
             Err(SampleRefusal::WrongType(_)) => self.counters.odom_wrong_type += 1,

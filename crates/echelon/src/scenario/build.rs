@@ -9,8 +9,8 @@ use super::merge::Merge;
 use super::overrides::Overrides;
 use super::plausible::{self, Part};
 use super::schema::{
-    AgentSection, DriveName, FixesSection, LeaderSpec, ModeName, OdometrySection, PoseSpec,
-    ReferenceSection, RobotSection, ScenarioFile,
+    AgentSection, DriveName, FixesSection, LeaderSpec, ModeName, OdometrySection, ReferenceSection,
+    RobotSection, ScenarioFile,
 };
 use super::waypoints::{self, ReadError};
 use super::{DEFAULT_LOG_DT, Run, Scenario};
@@ -23,7 +23,7 @@ use crate::formation::Leader;
 use crate::guard::Bounds;
 use crate::lycomp::{LyComp, LyDerivatives, Placement};
 use crate::math::whole_ratio;
-use crate::model::{RobotParams, State};
+use crate::model::RobotParams;
 use crate::odometry::{ErrorModel, FixSchedule, FixSpec, Fusion, OdometrySpec, ZetaModel};
 use crate::plan::{Agents, Plan, SafetySpec, SimConfig, Timing};
 use crate::reference::{Circle, Cubic, Lemniscate, Reference, Waypoints};
@@ -308,49 +308,6 @@ impl Builder<'_> {
         )
     }
 
-    fn pose(&self, p: &PoseSpec, path: &FieldPath, speeds: bool) -> Result<State, ScenarioError> {
-        let (theta, theta_key) = match (p.theta, p.theta_deg) {
-            (Some(_), Some(_)) => {
-                return Err(self.at.error(
-                    &path.key("theta_deg"),
-                    "give either theta (radians) or theta_deg (degrees), not both",
-                ));
-            }
-            (Some(t), None) => (t, "theta"),
-            (None, Some(d)) => (d.to_radians(), "theta_deg"),
-            (None, None) => {
-                return Err(self.at.error(
-                    path,
-                    "missing field `theta` (radians) or `theta_deg` (degrees)",
-                ));
-            }
-        };
-        if !speeds && (p.v.is_some() || p.omega.is_some()) {
-            let which = if p.v.is_some() { "v" } else { "omega" };
-            return Err(self.at.error(
-                &path.key(which),
-                "a reference's start pose takes no speed: its motion comes from the reference",
-            ));
-        }
-        let (v, omega) = (p.v.unwrap_or(0.0), p.omega.unwrap_or(0.0));
-        for (k, value) in [
-            ("x", p.x),
-            ("y", p.y),
-            (theta_key, theta),
-            ("v", v),
-            ("omega", omega),
-        ] {
-            self.at(&path.key(k), check::finite(k, value))?;
-        }
-        Ok(State {
-            x: p.x,
-            y: p.y,
-            theta,
-            v,
-            omega,
-        })
-    }
-
     fn reference(&self) -> Result<Reference, ScenarioError> {
         let at = |kind: &str| FieldPath::from("reference").key(kind);
         // A reference's refusal at its field (`start.x`, `points[3]`, …).
@@ -370,14 +327,14 @@ impl Builder<'_> {
                 turn_rate,
                 start,
             } => {
-                let s = self.pose(start, &at("circle").key("start"), false)?;
+                let s = self.at.pose(start, &at("circle").key("start"), false)?;
                 Reference::Circle(
                     Circle::new([s.x, s.y], s.theta, *speed, *turn_rate)
                         .map_err(|e| located(at("circle"), e))?,
                 )
             }
             ReferenceSection::Line { speed, start } => {
-                let s = self.pose(start, &at("line").key("start"), false)?;
+                let s = self.at.pose(start, &at("line").key("start"), false)?;
                 Reference::Circle(
                     Circle::new([s.x, s.y], s.theta, *speed, 0.0)
                         .map_err(|e| located(at("line"), e))?,
@@ -697,7 +654,7 @@ impl Builder<'_> {
         let name = a.name.clone().unwrap_or_else(|| format!("agent {}", i + 1));
         let robot_name = a.robot.as_deref().unwrap_or("agent1");
         let robot = self.robot(robot_name, &at.key("robot"))?;
-        let start = self.pose(&a.start, &at.key("start"), true)?;
+        let start = self.at.pose(&a.start, &at.key("start"), true)?;
         let leader = match a.leader {
             LeaderSpec::Reference => Leader::Reference,
             LeaderSpec::Agent(k) if k >= 1 && (k as usize) <= n => Leader::Agent(k as usize - 1),

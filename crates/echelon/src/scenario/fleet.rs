@@ -7,6 +7,7 @@ use super::schema::{CmdVelType, Ros2Section};
 use super::{Merge, Scenario};
 use crate::check;
 use crate::error::ScenarioError;
+use crate::model::Pose;
 use echelon_ros2::names::{self as ros_names, KeyScheme};
 
 /// Default reference publication rate, Hz.
@@ -112,6 +113,9 @@ pub struct Ros2Link {
     pub cmd_vel_timeout: f64,
     /// The simulated base's odometry rate, Hz.
     pub odom_rate: f64,
+    /// The odometry frame's pose in the world (`odom_origin`, default the
+    /// agent's start pose): a world pose is `odom_origin ⊕ odometry pose`.
+    pub odom_origin: Pose,
 }
 
 /// Whether `s` can be one chunk of a Zenoh key expression as echelon uses it:
@@ -235,6 +239,18 @@ impl Scenario {
         })
     }
 
+    /// Agent `i`'s (0-based) odometry origin in the world: its
+    /// `odom_origin`, else its `start` pose.
+    fn odom_origin(&self, i: usize) -> Result<Pose, ScenarioError> {
+        let a = &self.file.agents[i];
+        let at = FieldPath::from("agents").index(i);
+        let pose = match &a.odom_origin {
+            Some(p) => self.locator().pose(p, &at.key("odom_origin"), false)?,
+            None => self.locator().pose(&a.start, &at.key("start"), true)?,
+        };
+        Ok(pose.pose())
+    }
+
     /// Agent `i`'s (0-based) ROS 2 robot, names checked by ROS 2's rules.
     fn ros2_link(&self, i: usize) -> Result<Ros2Link, ScenarioError> {
         let links = Merge::new(
@@ -299,6 +315,7 @@ impl Scenario {
                 DEFAULT_CMD_VEL_TIMEOUT,
             )?,
             odom_rate: positive(|r| r.odom_rate, "odom_rate", DEFAULT_ODOM_RATE)?,
+            odom_origin: self.odom_origin(i)?,
             namespace,
         })
     }
@@ -402,5 +419,54 @@ offset = { x = 0.3, y = 0.0 }
             .unwrap_or_else(|| panic!());
         assert!(e.message.contains("unknown field"), "{e}");
         assert!(!is_valid_fleet_name("") && is_valid_fleet_name("a-b_c.9"));
+    }
+
+    #[test]
+    fn the_odom_origin_is_the_start_unless_given() {
+        // BASE's agent starts at the origin, heading 0.
+        let f = parse("").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(f.ros2[0].odom_origin, Pose::default());
+        let f = parse(
+            "odom_origin = { x = 1.5, y = -2.0, theta_deg = 90.0 }
+",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let o = f.ros2[0].odom_origin;
+        assert_eq!((o.x, o.y), (1.5, -2.0));
+        assert!((o.theta - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        // A start pose away from the origin is the default origin.
+        let src = BASE.replace(
+            "[[agents]]\nstart = { x = 0.0, y = 0.0, theta = 0.0 }",
+            "[[agents]]\nstart = { x = 3.0, y = 4.0, theta = 0.5, v = 0.2 }",
+        );
+        assert_ne!(src, BASE);
+        let f = Scenario::parse(&src, "t.toml", None)
+            .and_then(|s| s.fleet())
+            .unwrap_or_else(|e| panic!("{e}"));
+        let o = f.ros2[0].odom_origin;
+        assert_eq!((o.x, o.y, o.theta), (3.0, 4.0, 0.5));
+        // An origin is a pose: no speed, one heading, finite, located.
+        for (extra, field) in [
+            (
+                "odom_origin = { x = 0.0, y = 0.0, theta = 0.0, v = 1.0 }\n",
+                "agents[1].odom_origin.v",
+            ),
+            (
+                "odom_origin = { x = 0.0, y = 0.0, theta = 0.0, theta_deg = 1.0 }\n",
+                "agents[1].odom_origin.theta_deg",
+            ),
+            (
+                "odom_origin = { x = 0.0, y = 0.0 }\n",
+                "agents[1].odom_origin",
+            ),
+            (
+                "odom_origin = { x = nan, y = 0.0, theta = 0.0 }\n",
+                "agents[1].odom_origin.x",
+            ),
+        ] {
+            let e = parse(extra).err().unwrap_or_else(|| panic!("{extra}"));
+            assert_eq!(e.field, field, "{e}");
+            assert!(e.location.line > 0, "{e}");
+        }
     }
 }

@@ -9,7 +9,10 @@ use std::ops::Range;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
+use super::schema::PoseSpec;
+use crate::check;
 use crate::error::{Location, ParamError, ScenarioError};
+use crate::model::State;
 
 /// One step of a field path.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -99,6 +102,56 @@ impl<'a> Locator<'a> {
     }
 
     /// A refused value at `path`: `value reason`.
+    /// The state a `{ x, y, theta | theta_deg [, v, omega] }` table gives
+    /// (`speeds`: whether `v`, `omega` are allowed), its refusals at `path`.
+    pub(crate) fn pose(
+        &self,
+        p: &PoseSpec,
+        path: &FieldPath,
+        speeds: bool,
+    ) -> Result<State, ScenarioError> {
+        let (theta, theta_key) = match (p.theta, p.theta_deg) {
+            (Some(_), Some(_)) => {
+                return Err(self.error(
+                    &path.key("theta_deg"),
+                    "give either theta (radians) or theta_deg (degrees), not both",
+                ));
+            }
+            (Some(t), None) => (t, "theta"),
+            (None, Some(d)) => (d.to_radians(), "theta_deg"),
+            (None, None) => {
+                return Err(self.error(
+                    path,
+                    "missing field `theta` (radians) or `theta_deg` (degrees)",
+                ));
+            }
+        };
+        if !speeds && (p.v.is_some() || p.omega.is_some()) {
+            let which = if p.v.is_some() { "v" } else { "omega" };
+            return Err(self.error(
+                &path.key(which),
+                "this pose takes no speed: only an agent's `start` has `v` and `omega`",
+            ));
+        }
+        let (v, omega) = (p.v.unwrap_or(0.0), p.omega.unwrap_or(0.0));
+        for (k, value) in [
+            ("x", p.x),
+            ("y", p.y),
+            (theta_key, theta),
+            ("v", v),
+            ("omega", omega),
+        ] {
+            check::finite(k, value).map_err(|e| self.param(&path.key(k), &e))?;
+        }
+        Ok(State {
+            x: p.x,
+            y: p.y,
+            theta,
+            v,
+            omega,
+        })
+    }
+
     pub(crate) fn param(&self, path: &FieldPath, e: &ParamError) -> ScenarioError {
         self.error(path, format!("{} {}", e.value, e.reason))
     }

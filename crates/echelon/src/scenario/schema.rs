@@ -527,6 +527,11 @@ pub struct AgentSection {
     /// This agent's ROS 2 robot (overrides `[fleet.ros2]` field by field).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros2: Option<Ros2Section>,
+    /// Where its robot's odometry frame (`odom`, REP 105) lies in the world:
+    /// the robot's world pose when its odometry started (power-on). Default:
+    /// its `start` pose (a robot placed on its start mark at power-on).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odom_origin: Option<PoseSpec>,
     /// This agent's safety filter (over `[safety]`: `enabled`, `gain`, `range`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetySection>,

@@ -17,7 +17,10 @@ code from echelon:
 - declares its own liveliness tokens (node, odom publisher, cmd_vel
   subscription) and records every `@ros2_lv/<domain>/**` token it sees;
 - under `--scheme bridge` uses zenoh-bridge-ros2dds's plain keys
-  (`<ns>/cmd_vel`, `<ns>/odom`) and no attachment or tokens.
+  (`<ns>/cmd_vel`, `<ns>/odom`) and no attachment or tokens;
+- under `--scheme rmw_zenoh_humble` is a Humble robot: rmw_zenoh's humble
+  branch writes `TypeHashNotSupported` where Jazzy writes the RIHS01 hash, in
+  keys and liveliness tokens (Humble has no type hashes).
 
 It runs for `--duration` s (or until SIGTERM/SIGINT) and then writes a JSON
 report to `--report`: commands received, attachments valid/invalid, the last
@@ -25,7 +28,7 @@ command and its attachment, tokens seen, the final pose.
 
 Usage: fake_base.py --connect tcp/127.0.0.1:7447 [--listen ...] [--domain 0]
        [--namespace /robot1] [--cmd-type twist-stamped|twist]
-       [--scheme rmw_zenoh|bridge] [--rate 50] [--duration 10]
+       [--scheme rmw_zenoh|rmw_zenoh_humble|bridge] [--rate 50] [--duration 10]
        [--x 0 --y 0 --yaw 0] [--cmd-timeout 0.5] --report out.json
 """
 
@@ -63,7 +66,14 @@ def topic_key(args, topic, pkg, name):
     path = f"{ns}/{topic}" if ns else topic
     if args.scheme == "bridge":
         return path
-    return f"{args.domain}/{path}/{pkg}::msg::dds_::{name}_/{type_hash(pkg, name)}"
+    return f"{args.domain}/{path}/{pkg}::msg::dds_::{name}_/{key_hash(args, pkg, name)}"
+
+
+def key_hash(args, pkg, name):
+    """The type hash's chunk of keys and tokens: Humble has none."""
+    if args.scheme == "rmw_zenoh_humble":
+        return "TypeHashNotSupported"
+    return type_hash(pkg, name)
 
 
 def mangle(name):
@@ -77,7 +87,7 @@ def main():
     p.add_argument("--domain", type=int, default=0)
     p.add_argument("--namespace", default="/")
     p.add_argument("--cmd-type", choices=["twist-stamped", "twist"], default="twist-stamped")
-    p.add_argument("--scheme", choices=["rmw_zenoh", "bridge"], default="rmw_zenoh")
+    p.add_argument("--scheme", choices=["rmw_zenoh", "rmw_zenoh_humble", "bridge"], default="rmw_zenoh")
     p.add_argument("--rate", type=float, default=50.0)
     p.add_argument("--duration", type=float, default=10.0)
     p.add_argument("--x", type=float, default=0.0)
@@ -173,7 +183,7 @@ def main():
     publisher = session.declare_publisher(odom_key)
     tokens = []
     gid = bytes(range(0xB0, 0xC0))
-    if args.scheme == "rmw_zenoh":
+    if args.scheme != "bridge":
         session.liveliness().declare_subscriber(f"@ros2_lv/{args.domain}/**", on_token, history=True)
         ns = "/" + args.namespace.strip("/") if args.namespace.strip("/") else "/"
         node = f"@ros2_lv/{args.domain}/{session.zid()}/0/0/NN/%/{mangle(ns)}/fake_base"
@@ -182,10 +192,10 @@ def main():
         tokens.append(session.liveliness().declare_token(node))
         tokens.append(session.liveliness().declare_token(
             f"{prefix(1, 'MP')}/{mangle(ns_topic('odom'))}/nav_msgs::msg::dds_::Odometry_/"
-            f"{type_hash('nav_msgs', 'Odometry')}/::,:,:,:,,"))
+            f"{key_hash(args, 'nav_msgs', 'Odometry')}/::,:,:,:,,"))
         tokens.append(session.liveliness().declare_token(
             f"{prefix(2, 'MS')}/{mangle(ns_topic('cmd_vel'))}/{cmd_pkg}::msg::dds_::{cmd_name}_/"
-            f"{type_hash(cmd_pkg, cmd_name)}/::,:,:,:,,"))
+            f"{key_hash(args, cmd_pkg, cmd_name)}/::,:,:,:,,"))
 
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -223,7 +233,7 @@ def main():
         odom.twist.twist.linear.x = v
         odom.twist.twist.angular.z = omega
         payload = serialize_message(odom)
-        if args.scheme == "rmw_zenoh":
+        if args.scheme != "bridge":
             attachment = z_serialize((Int64(seq), Int64(stamp_ns), [UInt8(b) for b in gid]))
             publisher.put(payload, attachment=attachment)
         else:

@@ -591,6 +591,54 @@ fn twist_commands_over_bridge_keys_drive_the_python_base_too() {
     assert_eq!(base["last_command"]["v"], 0.0);
 }
 
+/// A Humble robot (rmw_zenoh's humble branch: `TypeHashNotSupported` where
+/// Jazzy writes the type hash, in keys and liveliness tokens) under
+/// `key_scheme = "rmw_zenoh_humble"`: the independent base hears every
+/// command on Humble's key, sees the robot's Humble tokens, and the robot
+/// takes its odometry and converges.
+#[test]
+fn a_humble_robot_is_driven_over_humbles_keys() {
+    let _fleet = common::one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let src = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenarios/experiment-circle-velocity.toml"),
+    )
+    .unwrap();
+    let scenario = dir.path().join("humble.toml");
+    std::fs::write(
+        &scenario,
+        format!("{src}\n[fleet.ros2]\nkey_scheme = \"rmw_zenoh_humble\"\n"),
+    )
+    .unwrap();
+    let (report, base) = drive_python_base(
+        scenario.to_str().unwrap(),
+        &["--scheme", "rmw_zenoh_humble"],
+        START,
+    );
+    assert_eq!(
+        base["cmd_key"],
+        "0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported",
+        "{base}"
+    );
+    assert!(f(&base, &["commands"]) > 300.0, "{base}");
+    assert_eq!(f(&base, &["attachments_valid"]), f(&base, &["commands"]));
+    assert_eq!(f(&report, &["ros2", "odom_wrong_type"]), 0.0, "{report}");
+    let tokens: Vec<&str> = base["tokens"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    assert!(
+        tokens.iter().any(|t| t.contains(
+            "/MP/%/%robot1/echelon_robot/%robot1%cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported/"
+        )),
+        "{tokens:?}"
+    );
+    assert!(!tokens.iter().any(|t| t.contains("RIHS01_")), "{tokens:?}");
+}
+
 /// A bad `[fleet.ros2]` value stops `fleet robot --ros2` and `fleet up
 /// --ros2` before anything starts: one line naming file, line, column and
 /// field, exit 2.

@@ -5,6 +5,9 @@
 //!   name>/<RIHS01 type hash>`, e.g.
 //!   `0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/RIHS01_5f0f…`
 //!   (`TopicInfo` in rmw_zenoh's `liveliness_utils.cpp`).
+//! - `rmw_zenoh_humble` (rmw_zenoh on ROS 2 Humble, which has no type
+//!   hashes): the same key with [`HUMBLE_TYPE_HASH`] in the hash's place,
+//!   `0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported`.
 //! - `bridge` (zenoh-bridge-ros2dds for a robot left on DDS): the key is the
 //!   topic without the leading slash, `robot1/cmd_vel`; no domain, type or
 //!   hash (the bridge's own `namespace` setting, if any, is part of the
@@ -16,13 +19,27 @@ use crate::names::KeyScheme;
 #[cfg(doc)]
 use crate::names::fully_qualified_topic;
 
+/// What rmw_zenoh on Humble writes where a type hash stands, in keys and
+/// liveliness tokens.
+pub const HUMBLE_TYPE_HASH: &str = "TypeHashNotSupported";
+
+/// The type-hash chunk `scheme` writes for `ty` in keys and liveliness
+/// tokens (`None`: the scheme's keys carry no type).
+pub fn hash_chunk(scheme: KeyScheme, ty: &MessageType) -> Option<&'static str> {
+    match scheme {
+        KeyScheme::RmwZenoh => Some(ty.hash),
+        KeyScheme::RmwZenohHumble => Some(HUMBLE_TYPE_HASH),
+        KeyScheme::Bridge => None,
+    }
+}
+
 /// The key of `fq_topic` (a fully qualified name, see
 /// [`fully_qualified_topic`]) carrying messages of type `ty`.
 pub fn topic_key(scheme: KeyScheme, domain_id: u32, fq_topic: &str, ty: &MessageType) -> String {
     let topic = fq_topic.trim_matches('/');
-    match scheme {
-        KeyScheme::RmwZenoh => format!("{domain_id}/{topic}/{}/{}", ty.dds_name(), ty.hash),
-        KeyScheme::Bridge => topic.to_owned(),
+    match hash_chunk(scheme, ty) {
+        Some(hash) => format!("{domain_id}/{topic}/{}/{hash}", ty.dds_name()),
+        None => topic.to_owned(),
     }
 }
 
@@ -33,7 +50,7 @@ pub fn topic_key(scheme: KeyScheme, domain_id: u32, fq_topic: &str, ty: &Message
 pub fn topic_key_any_type(scheme: KeyScheme, domain_id: u32, fq_topic: &str) -> String {
     let topic = fq_topic.trim_matches('/');
     match scheme {
-        KeyScheme::RmwZenoh => format!("{domain_id}/{topic}/*/*"),
+        KeyScheme::RmwZenoh | KeyScheme::RmwZenohHumble => format!("{domain_id}/{topic}/*/*"),
         KeyScheme::Bridge => topic.to_owned(),
     }
 }
@@ -66,9 +83,9 @@ pub enum KeyMismatch {
 /// Checks that an rmw_zenoh sample key names type `ty` with its hash. Under
 /// the `bridge` scheme keys carry no type and every key passes.
 pub fn check_topic_key(scheme: KeyScheme, key: &str, ty: &MessageType) -> Result<(), KeyMismatch> {
-    if scheme == KeyScheme::Bridge {
+    let Some(expected_hash) = hash_chunk(scheme, ty) else {
         return Ok(());
-    }
+    };
     let mut parts = key.rsplitn(3, '/');
     // `<domain>/<topic…>/<type>/<hash>`: at least a domain and a topic before the type.
     let (hash, type_name) = match (parts.next(), parts.next(), parts.next()) {
@@ -82,10 +99,10 @@ pub fn check_topic_key(scheme: KeyScheme, key: &str, ty: &MessageType) -> Result
             expected,
         });
     }
-    if hash != ty.hash {
+    if hash != expected_hash {
         return Err(KeyMismatch::WrongHash {
             found: hash.to_owned(),
-            expected: ty.hash,
+            expected: expected_hash,
         });
     }
     Ok(())
@@ -142,5 +159,41 @@ mod tests {
             check_topic_key(KeyScheme::Bridge, "robot1/odom", &ODOMETRY),
             Ok(())
         );
+    }
+
+    /// Humble's keys (rmw_zenoh's humble branch; hiroz's `no-type-hash`):
+    /// the type hash's chunk is `TypeHashNotSupported`; a Humble robot's
+    /// key is refused under the Jazzy scheme and a Jazzy one under Humble's,
+    /// each saying which hash it found.
+    #[test]
+    fn humble_keys_carry_no_type_hash() {
+        let humble = topic_key(
+            KeyScheme::RmwZenohHumble,
+            0,
+            "/robot1/cmd_vel",
+            &TWIST_STAMPED,
+        );
+        assert_eq!(
+            humble,
+            "0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported"
+        );
+        let jazzy = topic_key(KeyScheme::RmwZenoh, 0, "/robot1/cmd_vel", &TWIST_STAMPED);
+        for (scheme, key, ok) in [
+            (KeyScheme::RmwZenohHumble, &humble, true),
+            (KeyScheme::RmwZenoh, &jazzy, true),
+            (KeyScheme::RmwZenohHumble, &jazzy, false),
+            (KeyScheme::RmwZenoh, &humble, false),
+        ] {
+            let r = check_topic_key(scheme, key, &TWIST_STAMPED);
+            assert_eq!(r.is_ok(), ok, "{scheme:?} {key}: {r:?}");
+            if !ok {
+                assert!(matches!(r, Err(KeyMismatch::WrongHash { .. })), "{r:?}");
+            }
+        }
+        assert_eq!(
+            topic_key_any_type(KeyScheme::RmwZenohHumble, 3, "/robot1/odom"),
+            "3/robot1/odom/*/*"
+        );
+        assert_eq!(hash_chunk(KeyScheme::Bridge, &ODOMETRY), None);
     }
 }

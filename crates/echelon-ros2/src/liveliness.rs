@@ -1,7 +1,9 @@
 //! rmw_zenoh liveliness tokens: how `ros2 node list` and `ros2 topic list`
 //! on a ROS 2 machine learn of a node, its publishers and its subscriptions.
 //!
-//! The format is rmw_zenoh Jazzy 0.2.x's (`liveliness_utils.cpp`, `Entity`):
+//! The format is rmw_zenoh Jazzy 0.2.x's (`liveliness_utils.cpp`, `Entity`;
+//! on Humble, [`NodeInfo::with_scheme`], `TypeHashNotSupported` stands for the
+//! hash):
 //!
 //! ```text
 //! @ros2_lv/<domain>/<zid>/<node id>/<entity id>/<NN|MP|MS>/<enclave>/<namespace>/<node name>
@@ -18,8 +20,9 @@
 
 use std::time::Duration;
 
+use crate::keys::hash_chunk;
 use crate::msgs::MessageType;
-use crate::names::{NameError, check_node_name, normalize_namespace};
+use crate::names::{KeyScheme, NameError, check_node_name, normalize_namespace};
 
 /// The key prefix of every rmw_zenoh liveliness token.
 pub const ADMIN_SPACE: &str = "@ros2_lv";
@@ -186,6 +189,9 @@ pub struct NodeInfo {
     pub namespace: String,
     /// The node name.
     pub name: String,
+    /// How the type hash is written in its endpoints' tokens (rmw_zenoh on
+    /// Jazzy by default, [`KeyScheme::RmwZenohHumble`] on Humble).
+    pub scheme: KeyScheme,
 }
 
 impl NodeInfo {
@@ -206,7 +212,15 @@ impl NodeInfo {
             enclave: "/".to_owned(),
             namespace: normalize_namespace(namespace)?,
             name: name.to_owned(),
+            scheme: KeyScheme::RmwZenoh,
         })
+    }
+
+    /// The node as a robot of key scheme `scheme` sees it (Humble's tokens
+    /// carry `TypeHashNotSupported`; the bridge's keys carry no tokens of
+    /// echelon's, so it keeps Jazzy's form).
+    pub fn with_scheme(self, scheme: KeyScheme) -> NodeInfo {
+        NodeInfo { scheme, ..self }
     }
 
     fn prefix(&self, entity_id: u64, kind: &str) -> String {
@@ -234,7 +248,7 @@ impl NodeInfo {
             self.prefix(entity_id, kind),
             mangle(fq_topic),
             mangle(&ty.dds_name()),
-            mangle(ty.hash),
+            mangle(hash_chunk(self.scheme, ty).unwrap_or(ty.hash)),
             qos_keyexpr(qos)
         )
     }
@@ -323,6 +337,15 @@ mod tests {
             "@ros2_lv/0/c0ffee/0/2/MS/%/%robot1/echelon_robot/%robot1%odom/\
              nav_msgs::msg::dds_::Odometry_/\
              RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0/::,:,:,:,,"
+        );
+        // On Humble the hash's chunk is `TypeHashNotSupported`; the node's
+        // own token has no type and does not change.
+        let humble = node.clone().with_scheme(KeyScheme::RmwZenohHumble);
+        assert_eq!(humble.node_token(), node.node_token());
+        assert_eq!(
+            humble.publisher_token(1, "/robot1/cmd_vel", &TWIST_STAMPED, &Qos::keep_last(10)),
+            "@ros2_lv/0/c0ffee/0/1/MP/%/%robot1/echelon_robot/%robot1%cmd_vel/\
+             geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported/::,10:,:,:,,"
         );
         let root = NodeInfo::new(7, "ab", 3, "", "n").expect("valid");
         assert_eq!(root.node_token(), "@ros2_lv/7/ab/3/3/NN/%/%/n");

@@ -8,9 +8,15 @@
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum KeyScheme {
-    /// rmw_zenoh's `<domain>/<topic>/<type>/<hash>`.
+    /// rmw_zenoh's `<domain>/<topic>/<type>/<hash>` (Jazzy and later: the
+    /// RIHS01 type hash).
     #[default]
     RmwZenoh,
+    /// rmw_zenoh on ROS 2 Humble: the same keys and tokens with
+    /// `TypeHashNotSupported` where the type hash stands (Humble has no
+    /// type hashes; rmw_zenoh's `humble` branch, and ZettaScale's `hiroz`
+    /// under its `no-type-hash` feature, write this constant).
+    RmwZenohHumble,
     /// zenoh-bridge-ros2dds's plain `<topic>`.
     Bridge,
 }

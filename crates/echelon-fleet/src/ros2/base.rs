@@ -269,7 +269,8 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
     let session = net::open(&opts.net)?;
     let zid = session.zid().to_string();
     let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, "echelon_base")
-        .map_err(|e| FleetError::Config(e.to_string()))?;
+        .map_err(|e| FleetError::Config(e.to_string()))?
+        .with_scheme(link.key_scheme);
     let cmd_type = cmd_vel_type(&link);
     let odom_token = node.publisher_token(1, &link.odom, &ODOMETRY, &Qos::default());
     let tokens = [

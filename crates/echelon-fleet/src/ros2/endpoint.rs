@@ -36,7 +36,8 @@ impl<'a> Ros2Endpoint<'a> {
     ) -> Result<Ros2Endpoint<'a>, FleetError> {
         let zid = session.zid().to_string();
         let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, "echelon_robot")
-            .map_err(|e| FleetError::Config(format!("agent {agent}: {e}")))?;
+            .map_err(|e| FleetError::Config(format!("agent {agent}: {e}")))?
+            .with_scheme(link.key_scheme);
         let cmd_type = cmd_vel_type(link);
         let pub_token = node.publisher_token(1, &link.cmd_vel, &cmd_type, &Qos::default());
         let tokens = declare_tokens(

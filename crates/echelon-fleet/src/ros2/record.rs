@@ -112,7 +112,7 @@ impl RosTopic {
         }
         let trimmed = topic.trim_start_matches('/');
         let key_topic = match scheme {
-            KeyScheme::RmwZenoh => format!("{domain_id}/{trimmed}"),
+            KeyScheme::RmwZenoh | KeyScheme::RmwZenohHumble => format!("{domain_id}/{trimmed}"),
             KeyScheme::Bridge => trimmed.to_owned(),
         };
         let qos = Qos::default();
@@ -199,7 +199,7 @@ impl RosTopic {
     pub fn owns(&self, key: &str) -> bool {
         match self.scheme {
             KeyScheme::Bridge => key == self.key_topic,
-            KeyScheme::RmwZenoh => key
+            KeyScheme::RmwZenoh | KeyScheme::RmwZenohHumble => key
                 .strip_prefix(self.key_topic.as_str())
                 .and_then(|rest| rest.strip_prefix('/'))
                 .is_some_and(|rest| {

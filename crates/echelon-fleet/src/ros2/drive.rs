@@ -25,7 +25,7 @@ use serde::Serialize;
 use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::model::State;
 use echelon::scenario::Ros2Link;
-use echelon::scenario::schema::CmdVelType;
+use echelon::scenario::schema::{CmdVelStamp, CmdVelType};
 
 use crate::plant::{Actuation, Command, Plant};
 use echelon_ros2::CdrError;
@@ -46,14 +46,14 @@ pub fn cmd_vel_type(link: &Ros2Link) -> MessageType {
 
 /// Encodes a velocity command as `link`'s `cmd_vel` type into `buf`.
 pub fn encode_cmd_vel(link: &Ros2Link, cmd: VelocityCommand, stamp_ns: i64, buf: &mut Vec<u8>) {
+    let stamp = match link.cmd_vel_stamp {
+        CmdVelStamp::Zero => Time::default(),
+        CmdVelStamp::Now => Time::from_nanos(stamp_ns),
+    };
     match link.cmd_vel_type {
-        CmdVelType::TwistStamped => TwistStamped::planar(
-            cmd.v,
-            cmd.omega,
-            Time::from_nanos(stamp_ns),
-            &link.base_frame,
-        )
-        .encode_into(buf),
+        CmdVelType::TwistStamped => {
+            TwistStamped::planar(cmd.v, cmd.omega, stamp, &link.base_frame).encode_into(buf)
+        }
         CmdVelType::Twist => Twist::planar(cmd.v, cmd.omega).encode_into(buf),
     }
 }
@@ -457,6 +457,21 @@ mod tests {
         assert_eq!(msg.header.frame_id, "base_link");
         assert_eq!(att.sequence_number, 1);
         assert_eq!(att.gid, [7; 16]);
+        // By default the stamp is zero (diff_drive_controller: "now" on its
+        // own clock); the attachment keeps the send time.
+        assert_eq!(msg.header.stamp, Time::default());
+        assert!(att.source_timestamp_ns > 0);
+        let mut stamped = Ros2Drive::new(
+            Ros2Link {
+                cmd_vel_stamp: CmdVelStamp::Now,
+                ..link()
+            },
+            base,
+            [7; 16],
+            Recorder::default(),
+        );
+        stamped.command(Command::Velocity(VelocityCommand { v: 0.1, omega: 0.0 }));
+        let (msg, att) = last_cmd(&stamped);
         assert_eq!(att.source_timestamp_ns, msg.header.stamp.to_nanos());
         d.command(Command::Velocity(VelocityCommand {
             v: f64::NAN,

@@ -3,7 +3,7 @@
 
 use super::locate::FieldPath;
 use super::plausible::{self, Part};
-use super::schema::{CmdVelType, Ros2Section};
+use super::schema::{CmdVelStamp, CmdVelType, Ros2Section};
 use super::{Merge, Scenario};
 use crate::check;
 use crate::error::ScenarioError;
@@ -101,6 +101,8 @@ pub struct Ros2Link {
     pub odom: String,
     /// `cmd_vel`'s message type.
     pub cmd_vel_type: CmdVelType,
+    /// What stamps a `TwistStamped` command.
+    pub cmd_vel_stamp: CmdVelStamp,
     /// How topics map onto Zenoh keys.
     pub key_scheme: KeyScheme,
     /// The body frame (`cmd_vel`'s `frame_id`, odometry's `child_frame_id`).
@@ -303,6 +305,9 @@ impl Scenario {
             cmd_vel_type: links
                 .get_or(|r| r.cmd_vel_type, "cmd_vel_type", CmdVelType::default())
                 .0,
+            cmd_vel_stamp: links
+                .get_or(|r| r.cmd_vel_stamp, "cmd_vel_stamp", CmdVelStamp::default())
+                .0,
             key_scheme: links
                 .get_or(|r| r.key_scheme, "key_scheme", KeyScheme::default())
                 .0,
@@ -354,6 +359,7 @@ offset = { x = 0.3, y = 0.0 }
             for (k, l) in f.ros2.iter().enumerate() {
                 assert_eq!(l.namespace, format!("/robot{}", k + 1));
                 assert_eq!(l.odom_timeout, DEFAULT_ODOM_TIMEOUT);
+                assert_eq!(l.cmd_vel_stamp, CmdVelStamp::Zero);
             }
             assert_eq!(f.name, *name);
             assert_eq!(f.reference_rate, DEFAULT_REFERENCE_RATE);

@@ -210,6 +210,9 @@ pub struct Ros2Section {
     /// `twist-stamped` (default; `diff_drive_controller` since Jazzy) or `twist`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cmd_vel_type: Option<CmdVelType>,
+    /// What stamps a `TwistStamped` command: `zero` (default) or `now`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cmd_vel_stamp: Option<CmdVelStamp>,
     /// The velocity command topic, relative to the namespace or absolute
     /// (default `cmd_vel`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -251,6 +254,26 @@ pub enum CmdVelType {
     TwistStamped,
     /// `geometry_msgs/msg/Twist`.
     Twist,
+}
+
+/// The stamp of a `TwistStamped` command.
+///
+/// `diff_drive_controller` (Humble and Jazzy alike) drops a stamped command
+/// whose stamp is older than its `cmd_vel_timeout` by the controller's own
+/// clock, and takes a zero stamp as "now" (its `cmd_vel` callback replaces
+/// it with `get_node()->now()`). A wall-clock stamp therefore stops a robot
+/// whose clock is not synchronised with this machine's, or that runs on
+/// `use_sim_time`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CmdVelStamp {
+    /// A zero stamp: the controller takes the command as received now.
+    /// Works whatever the robot's clock.
+    #[default]
+    Zero,
+    /// This machine's wall clock at sending: for robots whose clocks are
+    /// synchronised (chrony/NTP/PTP) and logs that want send times.
+    Now,
 }
 
 /// `[fleet.link_loss]` or an agent's `link_loss = { … }`.

@@ -15,7 +15,7 @@ use super::Figure;
 use super::axis::{Coord, format_tick};
 use super::panel::{Item, LEGEND_MAX, Panel};
 use super::simplify::simplify;
-use super::style::{Dash, Marker, Stroke, palette, register_fonts, text};
+use super::style::{Marker, Stroke, palette, register_fonts, text};
 use crate::ReportError;
 
 const TITLE_PX: f64 = 22.0;
@@ -116,12 +116,7 @@ where
     let mut labelled = 0usize;
     let mut unlisted = 0usize;
     for item in &panel.items {
-        let label = match item {
-            Item::Line { label, .. }
-            | Item::Segments { label, .. }
-            | Item::Markers { label, .. } => label.as_deref(),
-        };
-        let listed = label.filter(|_| {
+        let listed = item.label().filter(|_| {
             let ok = labelled < LEGEND_MAX;
             labelled += 1;
             if !ok {
@@ -169,11 +164,7 @@ fn legend_corner(
     let longest = panel
         .items
         .iter()
-        .filter_map(|i| match i {
-            Item::Line { label, .. }
-            | Item::Segments { label, .. }
-            | Item::Markers { label, .. } => label.as_ref().map(|l| l.chars().count()),
-        })
+        .filter_map(|i| i.label().map(|l| l.chars().count()))
         .max()
         .unwrap_or(8);
     // Legend box size in pixels, as plotters lays it out at this font size.
@@ -274,15 +265,12 @@ where
                     .into_iter()
                     .map(|i| run[i])
                     .collect();
-                let anno = match stroke.dash {
-                    Dash::Solid => chart
+                let anno = match stroke.dash.pattern() {
+                    None => chart
                         .draw_series(LineSeries::new(kept, stroke.style()))
                         .map_err(draw_err)?,
-                    Dash::Dashed => chart
-                        .draw_series(DashedLineSeries::new(kept, 9, 6, stroke.style()))
-                        .map_err(draw_err)?,
-                    Dash::Dotted => chart
-                        .draw_series(DashedLineSeries::new(kept, 2, 4, stroke.style()))
+                    Some((size, gap)) => chart
+                        .draw_series(DashedLineSeries::new(kept, size, gap, stroke.style()))
                         .map_err(draw_err)?,
                 };
                 if first && let Some(l) = label {
@@ -309,16 +297,11 @@ where
                 .map(|[a, b]| vec![map(*a), map(*b)])
                 .filter(|s| s.iter().all(|p| p.0.is_finite() && p.1.is_finite()))
                 .collect();
-            let anno = match stroke.dash {
-                Dash::Solid => chart
+            let anno = match stroke.dash.pattern() {
+                None => chart
                     .draw_series(segs.into_iter().map(|s| PathElement::new(s, style)))
                     .map_err(draw_err)?,
-                Dash::Dashed | Dash::Dotted => {
-                    let (size, gap) = if stroke.dash == Dash::Dashed {
-                        (9, 6)
-                    } else {
-                        (2, 4)
-                    };
+                Some((size, gap)) => {
                     for s in segs {
                         chart
                             .draw_series(DashedLineSeries::new(s, size, gap, style))

@@ -36,6 +36,22 @@ pub enum Item {
     },
 }
 
+impl Item {
+    /// Its legend entry, if any.
+    pub(super) fn label(&self) -> Option<&str> {
+        match self {
+            Item::Line { label, .. }
+            | Item::Segments { label, .. }
+            | Item::Markers { label, .. } => label.as_deref(),
+        }
+    }
+}
+
+/// A legend entry: `None` for an empty `label` (kept out of the legend).
+fn legend_entry(label: &str) -> Option<String> {
+    (!label.is_empty()).then(|| label.to_owned())
+}
+
 /// One set of axes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Panel {
@@ -90,7 +106,7 @@ impl Panel {
     /// Adds a line (an empty `label` keeps it out of the legend).
     pub fn line(&mut self, label: &str, points: Vec<(f64, f64)>, stroke: Stroke) -> &mut Panel {
         self.items.push(Item::Line {
-            label: (!label.is_empty()).then(|| label.to_owned()),
+            label: legend_entry(label),
             points,
             stroke,
         });
@@ -105,7 +121,7 @@ impl Panel {
         stroke: Stroke,
     ) -> &mut Panel {
         self.items.push(Item::Segments {
-            label: (!label.is_empty()).then(|| label.to_owned()),
+            label: legend_entry(label),
             segments,
             stroke,
         });
@@ -120,7 +136,7 @@ impl Panel {
         color: Color,
     ) -> &mut Panel {
         self.items.push(Item::Markers {
-            label: (!label.is_empty()).then(|| label.to_owned()),
+            label: legend_entry(label),
             at,
             color,
         });

@@ -72,6 +72,17 @@ pub enum Dash {
     Dotted,
 }
 
+impl Dash {
+    /// `(dash, gap)` lengths in pixels; `None` for a solid line.
+    pub(super) fn pattern(self) -> Option<(u32, u32)> {
+        match self {
+            Dash::Solid => None,
+            Dash::Dashed => Some((9, 6)),
+            Dash::Dotted => Some((2, 4)),
+        }
+    }
+}
+
 /// A line's look.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Stroke {

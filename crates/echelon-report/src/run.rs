@@ -117,9 +117,15 @@ impl AgentTrack {
 
     /// ‖e‖ at every logged instant, m.
     pub fn error_norm(&self) -> Vec<f64> {
-        self.get(Column::Ex)
+        self.norm(Column::Ex, Column::Ey)
+    }
+
+    /// The norm of the vector `(x, y)` at every logged instant: `‖e‖` from
+    /// `(Ex, Ey)`, `‖z‖` from `(Zx, Zy)`.
+    pub(crate) fn norm(&self, x: Column, y: Column) -> Vec<f64> {
+        self.get(x)
             .iter()
-            .zip(self.get(Column::Ey))
+            .zip(self.get(y))
             .map(|(x, y)| x.hypot(*y))
             .collect()
     }

@@ -148,11 +148,9 @@ fn assert_bars_match_sat(figure: &Figure, times: &[f64], sat: &[f64], i: usize) 
 
 #[test]
 fn a_velocity_runs_signals_show_command_against_actual_with_limits_and_saturation() {
-    let dir = tempfile::tempdir().unwrap();
     // TurtleBot 3 Burgers catching up from rest: the command exceeds the
     // 0.22 m/s limit for the first seconds.
-    common::run_builtin("turtlebot-circle", dir.path(), &common::for_seconds(12.0));
-    let data = RunData::load(dir.path()).unwrap();
+    let (dir, data) = common::load_builtin("turtlebot-circle", &common::for_seconds(12.0));
     assert!(data.agents.iter().all(|a| a.is_velocity()));
     let figure = plots::signals(&data);
     assert!(figure.title.contains("commanded and actual speeds"));
@@ -189,11 +187,7 @@ fn a_velocity_runs_signals_show_command_against_actual_with_limits_and_saturatio
                 limits[0].1,
                 [[(t0, limit), (t1, limit)], [(t0, -limit), (t1, -limit)]]
             );
-            assert!(
-                p.items.iter().any(
-                    |it| matches!(it, Item::Line { label: Some(l), .. } if l == COMMANDED_LABEL)
-                )
-            );
+            assert!(common::labelled_line(p, COMMANDED_LABEL).is_some());
         }
         // The command is cut: it asks for more than the base gives.
         let v_cmd = csv_column(dir.path(), i + 1, Column::VCmd);
@@ -253,13 +247,7 @@ fn a_velocity_runs_signals_show_command_against_actual_with_limits_and_saturatio
 /// `t = 0`, where the robots stand at their start speeds).
 #[test]
 fn an_ideal_base_follows_its_command_and_never_saturates() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_builtin(
-        "circle-pentagon-velocity",
-        dir.path(),
-        &common::for_seconds(3.0),
-    );
-    let data = RunData::load(dir.path()).unwrap();
+    let (_dir, data) = common::load_builtin("circle-pentagon-velocity", &common::for_seconds(3.0));
     let figure = plots::signals(&data);
     let v = panel(&figure, "v");
     for i in 0..4 {
@@ -312,9 +300,7 @@ offset = { x = 0.4, y = 0.0 }
 
 #[test]
 fn a_mixed_run_shows_torques_for_the_torque_agent_and_commands_for_the_base() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_source(MIXED, dir.path(), &echelon::scenario::Overrides::default());
-    let data = RunData::load(dir.path()).unwrap();
+    let (dir, data) = common::load_source(MIXED, &echelon::scenario::Overrides::default());
     assert!(!data.agents[0].is_velocity() && data.agents[1].is_velocity());
     assert!(data.agents[0].limits.is_none());
     let figure = plots::signals(&data);
@@ -347,9 +333,7 @@ fn a_mixed_run_shows_torques_for_the_torque_agent_and_commands_for_the_base() {
 /// the same title, size and six panels, each agent's column as a solid line.
 #[test]
 fn a_torque_runs_signals_figure_is_unchanged() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_builtin("circle-pentagon", dir.path(), &common::for_seconds(4.0));
-    let data = RunData::load(dir.path()).unwrap();
+    let (dir, data) = common::load_builtin("circle-pentagon", &common::for_seconds(4.0));
     assert!(!data.has_velocity_agents());
     let times = csv_times(dir.path(), 1);
     let panel_of =

@@ -136,6 +136,11 @@ pub fn paths(data: &RunData) -> Figure {
     Figure::new(&title, width, height).with_panel(panel)
 }
 
+/// Every agent's column `c` against time.
+fn column_panel(data: &RunData, y: Axis, c: Column, legend: bool) -> Panel {
+    time_panel(data, y, |i| data.agents[i].get(c).to_vec(), legend)
+}
+
 fn time_panel(data: &RunData, y: Axis, series: impl Fn(usize) -> Vec<f64>, legend: bool) -> Panel {
     let mut panel = Panel::new(Axis::new("t", "s"), y);
     if !legend {
@@ -154,7 +159,6 @@ fn time_panel(data: &RunData, y: Axis, series: impl Fn(usize) -> Vec<f64>, legen
 
 /// `e_x` and `e_y` of every agent against time (Figs. 9, 11).
 pub fn errors(data: &RunData) -> Figure {
-    let col = |c: Column| move |i: usize| data.agents[i].get(c).to_vec();
     Figure::new(
         &format!(
             "{}: tracking error e (eq. 7, follower frame)",
@@ -163,18 +167,8 @@ pub fn errors(data: &RunData) -> Figure {
         1000,
         720,
     )
-    .with_panel(time_panel(
-        data,
-        Axis::new("e_x", "m"),
-        col(Column::Ex),
-        true,
-    ))
-    .with_panel(time_panel(
-        data,
-        Axis::new("e_y", "m"),
-        col(Column::Ey),
-        false,
-    ))
+    .with_panel(column_panel(data, Axis::new("e_x", "m"), Column::Ex, true))
+    .with_panel(column_panel(data, Axis::new("e_y", "m"), Column::Ey, false))
 }
 
 /// v, ω, ‖e‖, ‖z‖ and the wheel torques against time (Fig. 14).
@@ -185,23 +179,17 @@ pub fn signals(data: &RunData) -> Figure {
     if data.has_velocity_agents() {
         return velocity_signals(data);
     }
-    let col = |c: Column| move |i: usize| data.agents[i].get(c).to_vec();
     let figure = Figure::new(
         &format!("{}: speeds, errors and torques", data.summary.scenario),
         1200,
         1050,
     )
     .with_columns(2)
-    .with_panel(time_panel(
-        data,
-        Axis::new("v", "m/s"),
-        col(Column::V),
-        true,
-    ))
-    .with_panel(time_panel(
+    .with_panel(column_panel(data, Axis::new("v", "m/s"), Column::V, true))
+    .with_panel(column_panel(
         data,
         Axis::new("ω", "rad/s"),
-        col(Column::Omega),
+        Column::Omega,
         false,
     ))
     .with_panel(error_norm_panel(data))
@@ -220,22 +208,18 @@ fn error_norm_panel(data: &RunData) -> Panel {
 }
 
 fn z_norm_panel(data: &RunData) -> Panel {
-    let z_norm = |i: usize| {
-        let a = &data.agents[i];
-        a.get(Column::Zx)
-            .iter()
-            .zip(a.get(Column::Zy))
-            .map(|(x, y)| x.hypot(*y))
-            .collect()
-    };
-    time_panel(data, Axis::new("‖z‖", "m/s"), z_norm, false)
+    time_panel(
+        data,
+        Axis::new("‖z‖", "m/s"),
+        |i| data.agents[i].norm(Column::Zx, Column::Zy),
+        false,
+    )
 }
 
 fn torque_panels(data: &RunData) -> [Panel; 2] {
-    let col = |c: Column| move |i: usize| data.agents[i].get(c).to_vec();
     [
-        time_panel(data, Axis::new("τ_r", "N·m"), col(Column::TauR), false),
-        time_panel(data, Axis::new("τ_l", "N·m"), col(Column::TauL), false),
+        column_panel(data, Axis::new("τ_r", "N·m"), Column::TauR, false),
+        column_panel(data, Axis::new("τ_l", "N·m"), Column::TauL, false),
     ]
 }
 

@@ -9,22 +9,11 @@ use std::path::Path;
 use echelon::odometry::ZetaModel;
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sweep::{self, Grid};
-use echelon_report::figure::Item;
-use echelon_report::{RunData, write_all};
-
-fn svg_texts(path: &Path) -> Vec<String> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let doc = roxmltree::Document::parse(&text).unwrap();
-    doc.descendants()
-        .filter(|n| n.has_tag_name("text"))
-        .filter_map(|n| n.text())
-        .map(|t| t.trim().to_owned())
-        .collect()
-}
+use echelon_report::write_all;
 
 /// The texts of the SVG at `path`, which show every one of `needles`.
 fn svg_texts_showing(path: &Path, needles: &[&str]) -> Vec<String> {
-    let texts = svg_texts(path);
+    let texts = common::svg_texts(path);
     for needle in needles {
         assert!(
             texts.iter().any(|t| t == needle),
@@ -64,9 +53,7 @@ period = 3.0
 
 #[test]
 fn runs_with_odometry_get_a_drift_figure() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_source(DRIFTING, dir.path(), &Overrides::default());
-    let data = RunData::load(dir.path()).unwrap();
+    let (dir, data) = common::load_source(DRIFTING, &Overrides::default());
     assert!(data.odometry[0].is_some() && data.odometry[1].is_none());
     // Fixes every 3 s over 12 s: 4, counted in the fix column.
     let fixes: f64 = data.odometry[0].as_ref().unwrap().fix.iter().sum();
@@ -189,18 +176,9 @@ fn a_velocity_sweep_figure_overlays_the_kinematic_bound() {
     let figure = echelon_report::odometry::sweep("circle-pentagon-velocity", &rows, &curves);
     let label = "Theorem 2 (kinematic law), ζ = 1e-5 m";
     let bound_line = |panel: usize| -> Vec<(f64, f64)> {
-        figure.panels[panel]
-            .items
-            .iter()
-            .find_map(|i| match i {
-                Item::Line {
-                    label: Some(l),
-                    points,
-                    ..
-                } if l == label => Some(points.clone()),
-                _ => None,
-            })
+        common::labelled_line(&figure.panels[panel], label)
             .unwrap_or_else(|| panic!("no `{label}` line in panel {panel}"))
+            .to_vec()
     };
     let sqrt2 = std::f64::consts::SQRT_2;
     let z_want: Vec<(f64, f64)> = [20.0, 100.0, 400.0]

@@ -12,18 +12,6 @@ use echelon::scenario::Overrides;
 use echelon_report::html::{MAX_POSE_VALUES, REPORT_FILE};
 use echelon_report::{ReportError, RunData, write_all};
 
-fn svg_texts(path: &Path) -> Vec<String> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let doc = roxmltree::Document::parse(&text)
-        .unwrap_or_else(|e| panic!("{} is not XML: {e}", path.display()));
-    assert_eq!(doc.root_element().tag_name().name(), "svg");
-    doc.descendants()
-        .filter(|n| n.has_tag_name("text"))
-        .filter_map(|n| n.text())
-        .map(|t| t.trim().to_owned())
-        .collect()
-}
-
 /// Decodes a PNG; returns (width, height, number of distinct colours).
 fn png_info(path: &Path) -> (u32, u32, usize) {
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
@@ -61,7 +49,7 @@ fn figures_exist_parse_and_name_agents_and_units() {
     ];
     for (stem, labels) in units {
         let svg = dir.path().join(format!("{stem}.svg"));
-        let texts = svg_texts(&svg);
+        let texts = common::svg_texts(&svg);
         for label in labels.iter().copied() {
             assert!(
                 texts.iter().any(|t| t == label),
@@ -79,7 +67,7 @@ fn figures_exist_parse_and_name_agents_and_units() {
         // Text, axes, grid and four agents' colours (and their antialiasing).
         assert!(colours > 20, "{stem}.png looks blank: {colours} colours");
     }
-    let paths = svg_texts(&dir.path().join("paths.svg"));
+    let paths = common::svg_texts(&dir.path().join("paths.svg"));
     assert!(paths.iter().any(|t| t == "reference"));
     assert!(
         paths
@@ -206,7 +194,7 @@ fn two_hundred_agents_are_thinned_and_still_match_the_csv() {
         .len();
     assert!(size < 12_000_000, "report.html is {size} bytes");
     // The legend lists 12 entries (the reference and 11 robots) and counts the rest.
-    let texts = svg_texts(&dir.path().join("paths.svg"));
+    let texts = common::svg_texts(&dir.path().join("paths.svg"));
     assert!(texts.iter().any(|t| t == "robot 11"));
     assert!(!texts.iter().any(|t| t == "robot 12"));
     assert!(texts.iter().any(|t| t == "… and 190 more"), "{texts:?}");
@@ -242,7 +230,7 @@ fn a_run_without_the_newer_files_still_plots() {
     assert!(data.reference.is_none() && data.agents[0].leader.is_none());
     write_all(dir.path()).unwrap();
     assert!(
-        svg_texts(&dir.path().join("paths.svg"))
+        common::svg_texts(&dir.path().join("paths.svg"))
             .iter()
             .any(|t| t == "agent 3")
     );

@@ -10,8 +10,6 @@ use std::path::Path;
 
 use echelon::output::{SAFETY_FILE, SAFETY_HEADER, Table};
 use echelon::scenario::Overrides;
-use echelon_report::figure::Item;
-use echelon_report::run::RunData;
 use echelon_report::safety::{self, Action};
 use echelon_report::{html, write_all};
 
@@ -36,26 +34,9 @@ fn csv_closest(dir: &Path, agents: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
     (closest, outcomes)
 }
 
-fn figure_line<'a>(fig: &'a echelon_report::figure::Figure, label: &str) -> &'a [(f64, f64)] {
-    fig.panels
-        .iter()
-        .flat_map(|p| &p.items)
-        .find_map(|item| match item {
-            Item::Line {
-                label: Some(l),
-                points,
-                ..
-            } if l == label => Some(points.as_slice()),
-            _ => None,
-        })
-        .unwrap_or_else(|| panic!("no line {label:?}"))
-}
-
 #[test]
 fn crossing_gets_a_safety_figure_whose_closest_pair_is_the_runs() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_builtin("crossing", dir.path(), &Overrides::default());
-    let data = RunData::load(dir.path()).unwrap();
+    let (dir, data) = common::load_builtin("crossing", &Overrides::default());
     let n = data.agents.len();
     let summary = data.summary.safety.clone().unwrap();
     let s = data.safety.as_ref().unwrap();
@@ -101,7 +82,7 @@ fn crossing_gets_a_safety_figure_whose_closest_pair_is_the_runs() {
     }
 
     let fig = safety::figure(&data).unwrap();
-    let line = figure_line(&fig, "closest pair");
+    let line = common::figure_line(&fig, "closest pair");
     assert_eq!(line.len(), d.len());
     assert!(line.iter().zip(&d).all(|(p, v)| p.1 == *v));
 
@@ -152,9 +133,7 @@ fn crossing_gets_a_safety_figure_whose_closest_pair_is_the_runs() {
 
 #[test]
 fn obstacle_clearance_is_plotted_per_obstacle() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_builtin("obstacle-slalom", dir.path(), &Overrides::default());
-    let data = RunData::load(dir.path()).unwrap();
+    let (_dir, data) = common::load_builtin("obstacle-slalom", &Overrides::default());
     let summary = data.summary.safety.clone().unwrap();
     let s = data.safety.as_ref().unwrap();
     assert!(!s.obstacles.is_empty());
@@ -173,7 +152,7 @@ fn obstacle_clearance_is_plotted_per_obstacle() {
     );
     let fig = safety::figure(&data).unwrap();
     for (o, c) in clear.iter().enumerate() {
-        let line = figure_line(&fig, &format!("obstacle {} clearance", o + 1));
+        let line = common::figure_line(&fig, &format!("obstacle {} clearance", o + 1));
         assert!(line.iter().zip(c).all(|(p, v)| p.1 == *v));
     }
     let replay = html::replay_data(&data).safety.unwrap();
@@ -182,9 +161,7 @@ fn obstacle_clearance_is_plotted_per_obstacle() {
 
 #[test]
 fn runs_without_a_safety_filter_have_no_safety_figure_section_or_replay_data() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_builtin("experiment-circle", dir.path(), &common::for_seconds(1.0));
-    let data = RunData::load(dir.path()).unwrap();
+    let (dir, data) = common::load_builtin("experiment-circle", &common::for_seconds(1.0));
     assert!(data.safety.is_none() && data.summary.safety.is_none());
     assert!(safety::figure(&data).is_none());
     let written = write_all(dir.path()).unwrap();

@@ -10,18 +10,20 @@ mod common;
 use std::path::Path;
 
 use echelon::output::{SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE, Table};
+use echelon::sample::COLUMNS;
 use echelon_report::figure::{Axis, Dash, Figure, Item, Panel, Stroke};
 use echelon_report::html::REPORT_FILE;
 use echelon_report::plots::{self, COMMANDED_LABEL};
 use echelon_report::run::Column;
 use echelon_report::{RunData, write_all};
 
-/// One column of trajectory.csv for agent `agent` (from 1), by name.
-fn csv_column(dir: &Path, agent: usize, name: &str) -> Vec<f64> {
+/// One column of trajectory.csv for agent `agent` (from 1), by its header
+/// name (`t`, `agent` and the [`Column`]s: the core's names).
+fn csv_named(dir: &Path, agent: usize, name: &str) -> Vec<f64> {
     let path = dir.join(TRAJECTORY_FILE);
     let table = Table::read(&path).unwrap();
     let (a, c) = (
-        table.column("agent", &path).unwrap(),
+        table.column(COLUMNS[1], &path).unwrap(),
         table.column(name, &path).unwrap(),
     );
     table
@@ -32,11 +34,21 @@ fn csv_column(dir: &Path, agent: usize, name: &str) -> Vec<f64> {
         .collect()
 }
 
-/// `(t, value)` of one column of trajectory.csv for agent `agent` (from 1).
-fn csv_series(dir: &Path, agent: usize, name: &str) -> Vec<(f64, f64)> {
-    csv_column(dir, agent, "t")
+/// Column `c` of trajectory.csv for agent `agent` (from 1), by its name.
+fn csv_column(dir: &Path, agent: usize, c: Column) -> Vec<f64> {
+    csv_named(dir, agent, c.name())
+}
+
+/// The logged instants: trajectory.csv's `t` for agent `agent` (from 1).
+fn csv_times(dir: &Path, agent: usize) -> Vec<f64> {
+    csv_named(dir, agent, COLUMNS[0])
+}
+
+/// `(t, value)` of column `c` of trajectory.csv for agent `agent` (from 1).
+fn csv_series(dir: &Path, agent: usize, c: Column) -> Vec<(f64, f64)> {
+    csv_times(dir, agent)
         .into_iter()
-        .zip(csv_column(dir, agent, name))
+        .zip(csv_column(dir, agent, c))
         .collect()
 }
 
@@ -136,25 +148,24 @@ fn assert_bars_match_sat(figure: &Figure, times: &[f64], sat: &[f64], i: usize) 
 
 #[test]
 fn a_velocity_runs_signals_show_command_against_actual_with_limits_and_saturation() {
-    let dir = tempfile::tempdir().unwrap();
     // TurtleBot 3 Burgers catching up from rest: the command exceeds the
     // 0.22 m/s limit for the first seconds.
-    common::run_builtin("turtlebot-circle", dir.path(), &common::for_seconds(12.0));
-    let data = RunData::load(dir.path()).unwrap();
+    let (dir, data) = common::load_builtin("turtlebot-circle", &common::for_seconds(12.0));
     assert!(data.agents.iter().all(|a| a.is_velocity()));
     let figure = plots::signals(&data);
     assert!(figure.title.contains("commanded and actual speeds"));
     // No torque panels for velocity bases.
     assert_eq!(quantities(&figure), ["v", "ω", "‖e‖", "‖z‖", "agent"]);
-    let times = csv_column(dir.path(), 1, "t");
+    let times = csv_times(dir.path(), 1);
     let mut saturated_anywhere = 0;
     for i in 0..3 {
         let with_t = |c: &[f64]| -> Vec<(f64, f64)> {
             times.iter().copied().zip(c.iter().copied()).collect()
         };
-        for (quantity, actual, commanded, limit) in
-            [("v", "v", "v_cmd", 0.22), ("ω", "omega", "omega_cmd", 2.84)]
-        {
+        for (quantity, actual, commanded, limit) in [
+            ("v", Column::V, Column::VCmd, 0.22),
+            ("ω", Column::Omega, Column::OmegaCmd, 2.84),
+        ] {
             let p = panel(&figure, quantity);
             let actual = csv_column(dir.path(), i + 1, actual);
             let commanded = csv_column(dir.path(), i + 1, commanded);
@@ -176,15 +187,11 @@ fn a_velocity_runs_signals_show_command_against_actual_with_limits_and_saturatio
                 limits[0].1,
                 [[(t0, limit), (t1, limit)], [(t0, -limit), (t1, -limit)]]
             );
-            assert!(
-                p.items.iter().any(
-                    |it| matches!(it, Item::Line { label: Some(l), .. } if l == COMMANDED_LABEL)
-                )
-            );
+            assert!(common::labelled_line(p, COMMANDED_LABEL).is_some());
         }
         // The command is cut: it asks for more than the base gives.
-        let v_cmd = csv_column(dir.path(), i + 1, "v_cmd");
-        let sat = csv_column(dir.path(), i + 1, "sat");
+        let v_cmd = csv_column(dir.path(), i + 1, Column::VCmd);
+        let sat = csv_column(dir.path(), i + 1, Column::Sat);
         if v_cmd.iter().any(|v| v.abs() > 0.22) {
             assert!(sat.contains(&1.0));
         }
@@ -240,13 +247,7 @@ fn a_velocity_runs_signals_show_command_against_actual_with_limits_and_saturatio
 /// `t = 0`, where the robots stand at their start speeds).
 #[test]
 fn an_ideal_base_follows_its_command_and_never_saturates() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_builtin(
-        "circle-pentagon-velocity",
-        dir.path(),
-        &common::for_seconds(3.0),
-    );
-    let data = RunData::load(dir.path()).unwrap();
+    let (_dir, data) = common::load_builtin("circle-pentagon-velocity", &common::for_seconds(3.0));
     let figure = plots::signals(&data);
     let v = panel(&figure, "v");
     for i in 0..4 {
@@ -299,9 +300,7 @@ offset = { x = 0.4, y = 0.0 }
 
 #[test]
 fn a_mixed_run_shows_torques_for_the_torque_agent_and_commands_for_the_base() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_source(MIXED, dir.path(), &echelon::scenario::Overrides::default());
-    let data = RunData::load(dir.path()).unwrap();
+    let (dir, data) = common::load_source(MIXED, &echelon::scenario::Overrides::default());
     assert!(!data.agents[0].is_velocity() && data.agents[1].is_velocity());
     assert!(data.agents[0].limits.is_none());
     let figure = plots::signals(&data);
@@ -309,21 +308,21 @@ fn a_mixed_run_shows_torques_for_the_torque_agent_and_commands_for_the_base() {
         quantities(&figure),
         ["v", "ω", "‖e‖", "‖z‖", "τ_r", "τ_l", "agent"]
     );
-    let times = csv_column(dir.path(), 1, "t");
+    let times = csv_times(dir.path(), 1);
     let v = panel(&figure, "v");
     // The torque agent: its actual speed, no command.
-    let v1 = csv_series(dir.path(), 1, "v");
+    let v1 = csv_series(dir.path(), 1, Column::V);
     assert_eq!(line_with(v, Stroke::series(0)), v1);
     assert!(!has_line_with(v, Stroke::series(0).dashed(Dash::Dashed)));
     // The base: its command.
-    let c2 = csv_series(dir.path(), 2, "v_cmd");
+    let c2 = csv_series(dir.path(), 2, Column::VCmd);
     assert_eq!(line_with(v, Stroke::series(1).dashed(Dash::Dashed)), c2);
     // Torques: the torque agent's numbers; the base's are NaN (not drawn).
     let tau = panel(&figure, "τ_r");
-    let t1 = csv_series(dir.path(), 1, "tau_r");
+    let t1 = csv_series(dir.path(), 1, Column::TauR);
     assert_eq!(line_with(tau, Stroke::series(0)), t1);
     assert!(bars(&figure, 0).is_empty(), "a torque agent has no bars");
-    assert_bars_match_sat(&figure, &times, &csv_column(dir.path(), 2, "sat"), 1);
+    assert_bars_match_sat(&figure, &times, &csv_column(dir.path(), 2, Column::Sat), 1);
     write_all(dir.path()).unwrap();
     let html = std::fs::read_to_string(dir.path().join(REPORT_FILE)).unwrap();
     assert!(html.contains("— (torque)"));
@@ -334,11 +333,9 @@ fn a_mixed_run_shows_torques_for_the_torque_agent_and_commands_for_the_base() {
 /// the same title, size and six panels, each agent's column as a solid line.
 #[test]
 fn a_torque_runs_signals_figure_is_unchanged() {
-    let dir = tempfile::tempdir().unwrap();
-    common::run_builtin("circle-pentagon", dir.path(), &common::for_seconds(4.0));
-    let data = RunData::load(dir.path()).unwrap();
+    let (dir, data) = common::load_builtin("circle-pentagon", &common::for_seconds(4.0));
     assert!(!data.has_velocity_agents());
-    let times = csv_column(dir.path(), 1, "t");
+    let times = csv_times(dir.path(), 1);
     let panel_of =
         |quantity: &str, unit: &str, legend: bool, values: &dyn Fn(usize) -> Vec<f64>| {
             let mut p = Panel::new(Axis::new("t", "s"), Axis::new(quantity, unit));
@@ -355,8 +352,8 @@ fn a_torque_runs_signals_figure_is_unchanged() {
             p
         };
     let path = dir.path();
-    let col = |name: &'static str| move |i: usize| csv_column(path, i + 1, name);
-    let norm = |x: &'static str, y: &'static str| {
+    let col = |c: Column| move |i: usize| csv_column(path, i + 1, c);
+    let norm = |x: Column, y: Column| {
         move |i: usize| {
             csv_column(path, i + 1, x)
                 .iter()
@@ -367,12 +364,12 @@ fn a_torque_runs_signals_figure_is_unchanged() {
     };
     let want = Figure::new("circle-pentagon: speeds, errors and torques", 1200, 1050)
         .with_columns(2)
-        .with_panel(panel_of("v", "m/s", true, &col("v")))
-        .with_panel(panel_of("ω", "rad/s", false, &col("omega")))
-        .with_panel(panel_of("‖e‖", "m", false, &norm("ex", "ey")))
-        .with_panel(panel_of("‖z‖", "m/s", false, &norm("zx", "zy")))
-        .with_panel(panel_of("τ_r", "N·m", false, &col("tau_r")))
-        .with_panel(panel_of("τ_l", "N·m", false, &col("tau_l")));
+        .with_panel(panel_of("v", "m/s", true, &col(Column::V)))
+        .with_panel(panel_of("ω", "rad/s", false, &col(Column::Omega)))
+        .with_panel(panel_of("‖e‖", "m", false, &norm(Column::Ex, Column::Ey)))
+        .with_panel(panel_of("‖z‖", "m/s", false, &norm(Column::Zx, Column::Zy)))
+        .with_panel(panel_of("τ_r", "N·m", false, &col(Column::TauR)))
+        .with_panel(panel_of("τ_l", "N·m", false, &col(Column::TauL)));
     assert_eq!(plots::signals(&data), want);
     // No saturation column or note in a torque run's report.
     write_all(dir.path()).unwrap();

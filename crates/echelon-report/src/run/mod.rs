@@ -5,10 +5,14 @@
 //! Only `trajectory.csv` and `summary.json` are required: a directory written
 //! before `reference.csv` and `scenario.toml` existed still plots, without the
 //! reference path and the leader links.
+//!
+//! The columns of `trajectory.csv` are in `column` ([`Column`]), the shape of
+//! `summary.json` in `summary` ([`SummaryFile`]); both are re-exported here.
+
+mod column;
+mod summary;
 
 use std::path::{Path, PathBuf};
-
-use serde::Deserialize;
 
 use echelon::formation::Leader;
 use echelon::output::{
@@ -22,61 +26,8 @@ use echelon::scenario::{Overrides, Scenario};
 
 use crate::ReportError;
 
-/// The per-agent columns of `trajectory.csv` after `t` and `agent`, in order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Column {
-    /// x, m.
-    X,
-    /// y, m.
-    Y,
-    /// θ, rad, wrapped to (−π, π].
-    Theta,
-    /// v, m/s.
-    V,
-    /// ω, rad/s.
-    Omega,
-    /// e_x, m (eq. 7, body frame).
-    Ex,
-    /// e_y, m.
-    Ey,
-    /// z_x, m/s (eq. 10).
-    Zx,
-    /// z_y, m/s.
-    Zy,
-    /// u1, N.
-    U1,
-    /// u2, N·m.
-    U2,
-    /// τ_r, N·m.
-    TauR,
-    /// τ_l, N·m.
-    TauL,
-    /// The kinematic law's commanded `v*`, m/s (velocity runs only; `NaN` for
-    /// a torque-driven agent).
-    VCmd,
-    /// Commanded `ω*`, rad/s.
-    OmegaCmd,
-    /// `v` after the base's speed limits, m/s.
-    VApplied,
-    /// `ω` after the base's speed limits, rad/s.
-    OmegaApplied,
-    /// 1 when the speed limits cut the command at this instant, else 0.
-    Sat,
-}
-
-/// Number of [`Column`]s: the sample's columns after `t` and `agent`
-/// ([`echelon::sample::COLUMNS`], [`echelon::sample::VELOCITY_COLUMNS`]).
-pub const COLUMNS: usize =
-    echelon::sample::COLUMNS.len() - 2 + echelon::sample::VELOCITY_COLUMNS.len();
-
-/// The columns a run with velocity bases adds after [`Column::TauL`].
-pub const VELOCITY_COLUMNS: [Column; 5] = [
-    Column::VCmd,
-    Column::OmegaCmd,
-    Column::VApplied,
-    Column::OmegaApplied,
-    Column::Sat,
-];
+pub use column::{COLUMNS, Column, VELOCITY_COLUMNS};
+pub use summary::{AgentResult, AgentSafetySummary, SafetySummary, SummaryFile};
 
 /// A velocity base's speed limits (`f64::INFINITY`: unlimited).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -117,9 +68,15 @@ impl AgentTrack {
 
     /// ‖e‖ at every logged instant, m.
     pub fn error_norm(&self) -> Vec<f64> {
-        self.get(Column::Ex)
+        self.norm(Column::Ex, Column::Ey)
+    }
+
+    /// The norm of the vector `(x, y)` at every logged instant: `‖e‖` from
+    /// `(Ex, Ey)`, `‖z‖` from `(Zx, Zy)`.
+    pub(crate) fn norm(&self, x: Column, y: Column) -> Vec<f64> {
+        self.get(x)
             .iter()
-            .zip(self.get(Column::Ey))
+            .zip(self.get(y))
             .map(|(x, y)| x.hypot(*y))
             .collect()
     }
@@ -151,91 +108,6 @@ pub struct OdometryTrack {
     pub ey: Vec<f64>,
     /// Fixes applied since the previous instant.
     pub fix: Vec<f64>,
-}
-
-/// Per-agent results of `summary.json` (fields this crate shows; others are ignored).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct AgentResult {
-    /// 1-based number.
-    pub agent: usize,
-    /// Name.
-    pub name: String,
-    /// Final ‖e‖, m.
-    pub final_error: Option<f64>,
-    /// RMS ‖e‖, m.
-    pub rms_error: Option<f64>,
-    /// Peak |τ|, N·m.
-    pub peak_torque: Option<f64>,
-    /// Settling time, s.
-    pub settle_time: Option<f64>,
-    /// Steps at which a velocity base's speed limits cut the command (`None`:
-    /// a torque-driven agent).
-    #[serde(default)]
-    pub saturated_ticks: Option<u64>,
-}
-
-/// `summary.json` (fields this crate shows; others are ignored).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct SummaryFile {
-    /// Scenario name.
-    pub scenario: String,
-    /// Simulated time, s.
-    pub duration: f64,
-    /// RK4 step, s.
-    pub dt: f64,
-    /// Steps.
-    pub steps: u64,
-    /// Sampled controller period, s.
-    #[serde(default)]
-    pub controller_period: Option<f64>,
-    /// Settling tolerance, m.
-    pub settle_tolerance: f64,
-    /// Warnings.
-    #[serde(default)]
-    pub warnings: Vec<String>,
-    /// Per agent.
-    pub agents: Vec<AgentResult>,
-    /// The safety filter's statistics (`None`: no `[safety]`).
-    #[serde(default)]
-    pub safety: Option<SafetySummary>,
-}
-
-/// `summary.json`'s `safety` (see `echelon::stats::SafetyReport`).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct SafetySummary {
-    /// The smallest `radius` among the agents that filter, m.
-    pub radius: f64,
-    /// Smallest distance between two robots' points `L` ahead over the run
-    /// (every step), m.
-    pub min_distance: f64,
-    /// When, s.
-    pub min_distance_t: f64,
-    /// Between which agents (1-based).
-    pub min_distance_agents: [usize; 2],
-    /// Smallest distance from a robot's point to an obstacle's edge, m.
-    #[serde(default)]
-    pub min_obstacle_clearance: Option<f64>,
-    /// Controller samples at which a filter changed the command (all agents).
-    pub active: u64,
-    /// Samples at which a robot braked (QP infeasible).
-    pub infeasible: u64,
-    /// Deadlocks broken.
-    pub deadlock_breaks: u64,
-    /// Per agent.
-    pub agents: Vec<AgentSafetySummary>,
-}
-
-/// One agent's line of [`SafetySummary`].
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct AgentSafetySummary {
-    /// 1-based number.
-    pub agent: usize,
-    /// Samples at which its filter changed the command.
-    pub active: u64,
-    /// Samples at which it braked.
-    pub infeasible: u64,
-    /// Deadlocks it started breaking.
-    pub deadlock_breaks: u64,
 }
 
 /// What one filtering agent's filter did at each logged instant (`safety.csv`).

@@ -24,6 +24,29 @@ fn dsinc(u: f64) -> f64 {
     }
 }
 
+/// A fix's innovation `ν` over the measured `rows`, the fix's variances and
+/// `S⁻¹`.
+struct Innovation {
+    rows: &'static [usize],
+    var: [f64; 3],
+    nu: [f64; 3],
+    s_inv: M3,
+}
+
+impl Innovation {
+    fn distance_sq(&self) -> f64 {
+        let m = self.rows.len();
+        (0..m)
+            .map(|a| {
+                let na = self.nu[self.rows[a]];
+                (0..m)
+                    .map(|b| na * self.s_inv[a][b] * self.nu[self.rows[b]])
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+}
+
 /// Pose covariance of the estimate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Ekf {
@@ -94,16 +117,17 @@ impl Ekf {
         self.p = p;
     }
 
-    /// Fuses an absolute fix `z` (position with standard deviation `sd_pos`, and
-    /// the heading if `sd_heading` is given) into `estimate`; returns the new mean.
-    pub fn update(
-        &mut self,
+    /// The innovation of fix `z` against `estimate` and its covariance's
+    /// inverse over the measured rows (`x, y`, and `θ` when `sd_heading`
+    /// is given).
+    fn innovation(
+        &self,
         estimate: &Pose,
         z: &Pose,
         sd_pos: f64,
         sd_heading: Option<f64>,
-    ) -> Pose {
-        let rows: &[usize] = if sd_heading.is_some() {
+    ) -> Innovation {
+        let rows: &'static [usize] = if sd_heading.is_some() {
             &[0, 1, 2]
         } else {
             &[0, 1]
@@ -114,7 +138,7 @@ impl Ekf {
             sd_pos * sd_pos,
             sd_heading.map_or(0.0, |s| s * s),
         ];
-        let innovation = [
+        let nu = [
             z.x - estimate.x,
             z.y - estimate.y,
             wrap_angle(z.theta - estimate.theta),
@@ -126,7 +150,44 @@ impl Ekf {
                 s[a][b] = self.p[i][j] + if a == b { var[i].max(1e-18) } else { 0.0 };
             }
         }
-        let s_inv = crate::math::invert(&s, m);
+        Innovation {
+            rows,
+            var,
+            nu,
+            s_inv: crate::math::invert(&s, m),
+        }
+    }
+
+    /// The squared Mahalanobis distance `νᵀ S⁻¹ ν` of fix `z` from
+    /// `estimate` (`S = H P Hᵀ + R`): chi-square with 2 (or, with a heading,
+    /// 3) degrees of freedom for a fix consistent with the filter.
+    pub fn distance_sq(
+        &self,
+        estimate: &Pose,
+        z: &Pose,
+        sd_pos: f64,
+        sd_heading: Option<f64>,
+    ) -> f64 {
+        self.innovation(estimate, z, sd_pos, sd_heading)
+            .distance_sq()
+    }
+
+    /// Fuses an absolute fix `z` (position with standard deviation `sd_pos`, and
+    /// the heading if `sd_heading` is given) into `estimate`; returns the new mean.
+    pub fn update(
+        &mut self,
+        estimate: &Pose,
+        z: &Pose,
+        sd_pos: f64,
+        sd_heading: Option<f64>,
+    ) -> Pose {
+        let Innovation {
+            rows,
+            var,
+            nu: innovation,
+            s_inv,
+        } = self.innovation(estimate, z, sd_pos, sd_heading);
+        let m = rows.len();
         // K = P Hᵀ S⁻¹ (3 × m).
         let mut k = [[0.0; 3]; 3];
         for (i, row) in k.iter_mut().enumerate() {

@@ -13,6 +13,7 @@
 
 pub mod bound;
 mod ekf;
+pub mod fuse;
 pub mod umbmark;
 
 use std::collections::VecDeque;
@@ -27,6 +28,7 @@ use crate::math::sinc;
 use crate::model::{Pose, RobotParams, State};
 
 pub use ekf::Ekf;
+use fuse::{FixFusion, FixNoise};
 
 /// Linear displacements of the two wheels over one sample, m.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -315,7 +317,7 @@ pub struct Odometer {
     estimate: Pose,
     /// The true pose at the last sample.
     anchor: Pose,
-    ekf: Option<Ekf>,
+    fusion: FixFusion,
     origin: (f64, f64),
     wheel_angle: [f64; 2],
     wheel_travel: [f64; 2],
@@ -362,13 +364,8 @@ impl Odometer {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(stream);
         let estimate = start.pose();
-        let ekf = match spec.fixes {
-            Some(FixSpec {
-                fusion: Fusion::Ekf,
-                ..
-            }) => Some(Ekf::new()),
-            _ => None,
-        };
+        // The simulator's fixes come from its own truth: none is gated.
+        let fusion = FixFusion::new(spec.fixes.map_or(Fusion::Reset, |f| f.fusion), false);
         let capacity = match spec.fixes {
             Some(f) if fix_every > 0 => {
                 (f.latency / (spec.period * fix_every as f64)).ceil() as usize + 2
@@ -385,7 +382,7 @@ impl Odometer {
             rng,
             estimate,
             anchor: estimate,
-            ekf,
+            fusion,
             origin: (0.0, start.theta),
             wheel_angle: [0.0; 2],
             wheel_travel: [0.0; 2],
@@ -508,7 +505,7 @@ impl Odometer {
             self.estimate.x -= errors.zeta;
             self.estimate.y -= errors.zeta;
         }
-        if let Some(ekf) = &mut self.ekf {
+        if let Some(ekf) = self.fusion.ekf_mut() {
             let var = wheel_variance(&errors, self.nominal_radius, true_step);
             ekf.predict(&previous, delta, big_theta, l, var);
         }
@@ -548,20 +545,18 @@ impl Odometer {
     }
 
     fn apply(&mut self, p: &PendingFix, f: &FixSpec) {
-        // The fix is of the pose when it was taken: carry it to now with the
-        // motion dead-reckoned since then.
-        let since = p.estimate_then.between(&self.estimate);
-        let mut now = p.fix.compose(&since);
-        if f.heading_noise.is_none() {
-            now.theta = self.estimate.theta;
+        let noise = FixNoise {
+            position: f.position_noise,
+            heading: f.heading_noise,
+        };
+        // Never gated (see `Odometer::with_wheels`).
+        if let Ok(estimate) = self
+            .fusion
+            .apply(&self.estimate, &p.estimate_then, &p.fix, noise)
+        {
+            self.estimate = estimate;
+            self.fixes += 1;
         }
-        match &mut self.ekf {
-            None => self.estimate = now,
-            Some(ekf) => {
-                self.estimate = ekf.update(&self.estimate, &now, f.position_noise, f.heading_noise);
-            }
-        }
-        self.fixes += 1;
     }
 }
 

@@ -14,12 +14,15 @@ mod msg;
 
 use std::path::PathBuf;
 
-/// The types a topic carries (`cmd_vel`, `odom`), by `package/Type`: those
-/// with a full definition, which the fleet records and `identify` reads.
+/// The types a topic carries (`cmd_vel`, `odom`, a motion-capture pose, AMCL's
+/// `amcl_pose`), by `package/Type`: those with a full definition, which the
+/// fleet records and `identify` reads.
 const TOPIC_TYPES: &[&str] = &[
     "geometry_msgs/Twist",
     "geometry_msgs/TwistStamped",
     "nav_msgs/Odometry",
+    "geometry_msgs/PoseStamped",
+    "geometry_msgs/PoseWithCovarianceStamped",
 ];
 
 fn main() {

@@ -32,6 +32,8 @@ import struct
 import sys
 
 TYPES = {
+    "geometry_msgs/msg/PoseStamped": ("geometry_msgs", "PoseStamped"),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": ("geometry_msgs", "PoseWithCovarianceStamped"),
     "geometry_msgs/msg/Twist": ("geometry_msgs", "Twist"),
     "geometry_msgs/msg/TwistStamped": ("geometry_msgs", "TwistStamped"),
     "nav_msgs/msg/Odometry": ("nav_msgs", "Odometry"),

@@ -19,13 +19,14 @@ use std::process::{Command, Stdio};
 
 use echelon_ros2::cdr::CdrError;
 use echelon_ros2::msgs::{
-    HEADER, Header, ODOMETRY, Odometry, Point, Pose, PoseWithCovariance, Quaternion, RosMessage,
-    TWIST, TWIST_STAMPED, Time, Twist, TwistStamped, TwistWithCovariance, Vector3,
+    HEADER, Header, ODOMETRY, Odometry, POSE_STAMPED, POSE_WITH_COVARIANCE_STAMPED, Point, Pose,
+    PoseStamped, PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, RosMessage, TWIST,
+    TWIST_STAMPED, Time, Twist, TwistStamped, TwistWithCovariance, Vector3,
 };
 use serde_json::{Value, json};
 
 mod common;
-use common::{odometry, twist, twist_stamped};
+use common::{covariance, header, odometry, quat, twist, twist_stamped};
 
 const INSTALL_HINT: &str = "the ROS 2 interop tests need python3 (3.11) with the ROS 2 Jazzy \
     wheels: run `scripts/test` (it installs scripts/requirements-ros2.txt), or \
@@ -187,6 +188,124 @@ fn odometries() -> Vec<Odometry> {
     v
 }
 
+/// A frame name longer than any padding or small-buffer optimisation.
+fn long_frame() -> String {
+    (0..40).map(|k| format!("robot_{k}/")).collect::<String>() + "base_link"
+}
+
+fn pose_json(p: &Pose) -> Value {
+    json!({"position": common::point(&p.position), "orientation": quat(&p.orientation)})
+}
+
+fn pose_stamped(p: &PoseStamped) -> Value {
+    json!({"header": header(&p.header), "pose": pose_json(&p.pose)})
+}
+
+fn pose_with_covariance_stamped(p: &PoseWithCovarianceStamped) -> Value {
+    json!({
+        "header": header(&p.header),
+        "pose": {"pose": pose_json(&p.pose.pose), "covariance": covariance(&p.pose.covariance)},
+    })
+}
+
+/// Poses whose orientation is a unit quaternion for even `k` and four
+/// arbitrary numbers (not normalised, as a wire value may be) for odd `k`.
+fn pose(k: usize) -> Pose {
+    Pose {
+        position: point(k + 2),
+        orientation: if k.is_multiple_of(2) {
+            Quaternion::from_yaw(spread(k + 4))
+        } else {
+            Quaternion {
+                x: spread(k),
+                y: spread(k + 3),
+                z: spread(k + 5),
+                w: spread(k + 7),
+            }
+        },
+    }
+}
+
+fn pose_stampeds() -> Vec<PoseStamped> {
+    let mut v: Vec<PoseStamped> = (0..14)
+        .map(|k| PoseStamped {
+            header: Header {
+                stamp: time(k + 2),
+                frame_id: frame(k + 5),
+            },
+            pose: pose(k),
+        })
+        .collect();
+    v.push(PoseStamped::planar(
+        2.5,
+        -1.75,
+        -2.0,
+        Time::from_nanos(-1_500_000_000),
+        &long_frame(),
+    ));
+    v.push(PoseStamped::planar(0.0, 0.0, 0.0, Time::default(), ""));
+    v.push(PoseStamped::planar(
+        f64::NAN,
+        1.0,
+        0.5,
+        Time::from_nanos(1),
+        "mocap",
+    ));
+    v
+}
+
+fn pose_with_covariance_stampeds() -> Vec<PoseWithCovarianceStamped> {
+    let mut v: Vec<PoseWithCovarianceStamped> = (0..13)
+        .map(|k| PoseWithCovarianceStamped {
+            header: Header {
+                stamp: time(k + 3),
+                frame_id: frame(k + 7),
+            },
+            pose: PoseWithCovariance {
+                pose: pose(k + 1),
+                covariance: std::array::from_fn(|i| spread(3 * i + k)),
+            },
+        })
+        .collect();
+    // All 36 entries distinct (a transposed or shifted index shows).
+    v.push(PoseWithCovarianceStamped {
+        header: Header {
+            stamp: Time::from_nanos(-7),
+            frame_id: long_frame(),
+        },
+        pose: PoseWithCovariance {
+            pose: Pose::planar(-3.5, 4.25, 2.75),
+            covariance: distinct_covariance(),
+        },
+    });
+    v.push(PoseWithCovarianceStamped::planar(
+        1.0,
+        2.0,
+        -3.0,
+        [[0.25, 0.01, -0.02], [0.01, 0.5, 0.03], [-0.02, 0.03, 0.068]],
+        Time::from_nanos(1_700_000_000_123_456_789),
+        "map",
+    ));
+    v.push(PoseWithCovarianceStamped::planar(
+        0.0,
+        0.0,
+        0.0,
+        [
+            [f64::INFINITY, 0.0, 0.0],
+            [0.0, f64::NAN, 0.0],
+            [0.0, 0.0, -0.0],
+        ],
+        Time::default(),
+        "",
+    ));
+    v
+}
+
+/// A covariance whose 36 entries differ: entry (i, j) is `i + j / 8 + 1/64`.
+fn distinct_covariance() -> [f64; 36] {
+    std::array::from_fn(|n| (n / 6) as f64 + (n % 6) as f64 / 8.0 + 1.0 / 64.0)
+}
+
 fn serialize_in_rclpy(type_name: &str, values: &[Value]) -> Vec<Vec<u8>> {
     let input: Vec<Value> = values
         .iter()
@@ -278,6 +397,83 @@ fn odometry_golden_vectors_both_ways() {
 }
 
 #[test]
+fn pose_stamped_golden_vectors_both_ways() {
+    both_ways(&pose_stampeds(), pose_stamped);
+}
+
+#[test]
+fn pose_with_covariance_stamped_golden_vectors_both_ways() {
+    let messages = pose_with_covariance_stampeds();
+    let distinct = &messages[13].pose.covariance;
+    for (i, a) in distinct.iter().enumerate() {
+        assert!(distinct[..i].iter().all(|b| b != a), "entry {i} repeats");
+    }
+    both_ways(&messages, pose_with_covariance_stamped);
+}
+
+#[test]
+fn the_planar_covariance_of_an_rclpy_pose_is_rows_and_columns_0_1_5() {
+    // In rclpy, covariance[6 i + j] is entry (i, j) over (x, y, z, rot X, rot Y, rot Z).
+    let mut msg = pose_with_covariance_stampeds().swap_remove(13);
+    msg.pose.pose.orientation = Quaternion::from_yaw(-2.5);
+    let bytes = serialize_in_rclpy(
+        POSE_WITH_COVARIANCE_STAMPED.name,
+        &[pose_with_covariance_stamped(&msg)],
+    );
+    let decoded = PoseWithCovarianceStamped::from_cdr_finite(&bytes[0]).expect("finite");
+    let c = distinct_covariance();
+    assert_eq!(
+        decoded.planar_covariance(),
+        [
+            [c[0], c[1], c[5]],
+            [c[6], c[7], c[11]],
+            [c[30], c[31], c[35]]
+        ]
+    );
+    assert!((decoded.yaw() + 2.5).abs() < 1e-12);
+    assert_eq!(
+        (decoded.pose.pose.position.x, decoded.pose.pose.position.y),
+        (-3.5, 4.25)
+    );
+}
+
+#[test]
+fn rclpy_poses_with_nan_are_reported_non_finite() {
+    let fix = PoseStamped::planar(1.0, 2.0, 0.3, Time::from_nanos(-3), "mocap");
+    let mut fixes = [fix.clone(), fix];
+    fixes[0].pose.position.y = f64::NAN;
+    fixes[1].pose.orientation.w = f64::NAN;
+    let values: Vec<Value> = fixes.iter().map(pose_stamped).collect();
+    let bytes = serialize_in_rclpy(POSE_STAMPED.name, &values);
+    for (b, field) in bytes.iter().zip(["pose.position", "pose.orientation"]) {
+        assert!(PoseStamped::from_cdr(b).is_ok());
+        assert_eq!(
+            PoseStamped::from_cdr_finite(b),
+            Err(CdrError::NonFinite { field })
+        );
+    }
+
+    let estimate = pose_with_covariance_stampeds().swap_remove(14);
+    let mut estimates = [estimate.clone(), estimate.clone(), estimate];
+    estimates[0].pose.pose.position.x = f64::NAN;
+    estimates[1].pose.pose.orientation.z = f64::NAN;
+    estimates[2].pose.covariance[35] = f64::NAN;
+    let values: Vec<Value> = estimates.iter().map(pose_with_covariance_stamped).collect();
+    let bytes = serialize_in_rclpy(POSE_WITH_COVARIANCE_STAMPED.name, &values);
+    for (b, field) in bytes.iter().zip([
+        "pose.pose.position",
+        "pose.pose.orientation",
+        "pose.covariance",
+    ]) {
+        assert!(PoseWithCovarianceStamped::from_cdr(b).is_ok());
+        assert_eq!(
+            PoseWithCovarianceStamped::from_cdr_finite(b),
+            Err(CdrError::NonFinite { field })
+        );
+    }
+}
+
+#[test]
 fn rclpy_odometry_with_nan_is_reported_non_finite() {
     let mut odom = odometries().pop().expect("one");
     odom.pose.pose.position.y = f64::NAN;
@@ -294,7 +490,14 @@ fn rclpy_odometry_with_nan_is_reported_non_finite() {
 #[test]
 fn type_hash_constants_equal_the_wheels() {
     let hashes = rclpy("hashes", None);
-    for ty in [TWIST, TWIST_STAMPED, ODOMETRY, HEADER] {
+    for ty in [
+        TWIST,
+        TWIST_STAMPED,
+        ODOMETRY,
+        HEADER,
+        POSE_STAMPED,
+        POSE_WITH_COVARIANCE_STAMPED,
+    ] {
         assert_eq!(
             hashes.get(ty.name).and_then(Value::as_str),
             Some(ty.hash),

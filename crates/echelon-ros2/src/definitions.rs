@@ -15,8 +15,8 @@ use crate::msgs::MessageType;
 include!(concat!(env!("OUT_DIR"), "/definitions.rs"));
 
 /// The full definition of `ty`, for the message types a topic carries
-/// ([`TOPIC_TYPES`]: `Twist`, `TwistStamped`, `Odometry`); `None` for any
-/// other.
+/// ([`TOPIC_TYPES`]: `Twist`, `TwistStamped`, `Odometry`, `PoseStamped`,
+/// `PoseWithCovarianceStamped`); `None` for any other.
 pub fn definition(ty: &MessageType) -> Option<&'static str> {
     TOPIC_TYPES.iter().find(|(t, _)| t == ty).map(|&(_, d)| d)
 }
@@ -24,7 +24,7 @@ pub fn definition(ty: &MessageType) -> Option<&'static str> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::msgs::{HEADER, TWIST_STAMPED};
+    use crate::msgs::{HEADER, POSE, POSE_WITH_COVARIANCE_STAMPED, TWIST_STAMPED};
 
     /// The `MSG:` lines of a definition, in order.
     fn nested(definition: &str) -> Vec<&str> {
@@ -47,16 +47,44 @@ mod tests {
             ]
         );
         assert_eq!(nested(ODOMETRY_DEFINITION).len(), 9);
+        assert_eq!(
+            nested(POSE_STAMPED_DEFINITION),
+            [
+                "geometry_msgs/Pose",
+                "geometry_msgs/Point",
+                "geometry_msgs/Quaternion",
+                "std_msgs/Header",
+                "builtin_interfaces/Time"
+            ]
+        );
+        assert_eq!(
+            nested(POSE_WITH_COVARIANCE_STAMPED_DEFINITION),
+            [
+                "geometry_msgs/PoseWithCovariance",
+                "geometry_msgs/Pose",
+                "geometry_msgs/Point",
+                "geometry_msgs/Quaternion",
+                "std_msgs/Header",
+                "builtin_interfaces/Time"
+            ]
+        );
         for d in [
             TWIST_DEFINITION,
             TWIST_STAMPED_DEFINITION,
             ODOMETRY_DEFINITION,
+            POSE_STAMPED_DEFINITION,
+            POSE_WITH_COVARIANCE_STAMPED_DEFINITION,
         ] {
             let separators = d.matches(&format!("\n{}\nMSG: ", "=".repeat(80))).count();
             assert_eq!(separators, nested(d).len());
         }
         assert!(TWIST_STAMPED_DEFINITION.starts_with("# A twist with reference"));
         assert_eq!(definition(&TWIST_STAMPED), Some(TWIST_STAMPED_DEFINITION));
+        assert_eq!(
+            definition(&POSE_WITH_COVARIANCE_STAMPED),
+            Some(POSE_WITH_COVARIANCE_STAMPED_DEFINITION)
+        );
         assert_eq!(definition(&HEADER), None);
+        assert_eq!(definition(&POSE), None);
     }
 }

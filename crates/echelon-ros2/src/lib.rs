@@ -6,9 +6,9 @@
 //!   refuses a bad `[fleet.ros2]` name with them.
 //! - [`cdr`]: the CDR little-endian codec (4-byte encapsulation header,
 //!   alignment after it, padding content ignored).
-//! - [`msgs`]: the message types (`Twist`, `TwistStamped`, `Odometry` and
-//!   what they nest) with their RIHS01 type hashes, quaternion yaw and a
-//!   yaw unwrapper.
+//! - [`msgs`]: the message types (`Twist`, `TwistStamped`, `Odometry`,
+//!   `PoseStamped`, `PoseWithCovarianceStamped` and what they nest) with
+//!   their RIHS01 type hashes, quaternion yaw and a yaw unwrapper.
 //! - [`definitions`]: the full message definitions (`ros2msg` schemas), as
 //!   `ros2 bag record -s mcap` stores them.
 //! - [`keys`]: the topic key expressions of the `rmw_zenoh` and `bridge`

@@ -59,10 +59,9 @@ fn safety(c: &mut Criterion) {
         omega_max: 3.0,
         ..VelocityBase::IDEAL
     };
-    let robot = RobotParams {
-        torque_limit: Some(3.0),
-        ..RobotParams::AGENT1
-    };
+    let robot = RobotParams::AGENT1
+        .with_torque_limit(Some(3.0))
+        .expect("3 N m is a valid torque limit");
     let mut f = SafetyFilter::new(config);
     let mut g = c.benchmark_group("safety/one call, 5 neighbours + 1 obstacle");
     for (name, cmd) in [

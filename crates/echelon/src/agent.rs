@@ -39,7 +39,7 @@ impl Drive {
     /// odometry needs).
     pub fn wheels(&self) -> (f64, f64) {
         match self {
-            Drive::Torque { robot, .. } => (robot.half_wheelbase, robot.wheel_radius),
+            Drive::Torque { robot, .. } => (robot.half_wheelbase(), robot.wheel_radius()),
             Drive::Velocity(r) => (r.half_wheelbase, r.wheel_radius),
         }
     }
@@ -75,8 +75,8 @@ pub struct AgentSpec {
 }
 
 impl AgentSpec {
-    /// A torque-driven agent, refusing an impossible robot
-    /// ([`RobotParams::validate`]), gains ([`Gains::new`]), placement
+    /// A torque-driven agent (its robot is valid by construction,
+    /// [`RobotParams::new`]), refusing impossible gains ([`Gains::new`]), placement
     /// ([`Placement::new`]) or a start state that is not finite. Whether its
     /// leader exists is the formation's business ([`crate::plan::Plan::new`]).
     pub fn new(
@@ -88,7 +88,6 @@ impl AgentSpec {
         variant: Variant,
         start: State,
     ) -> Result<AgentSpec, ParamError> {
-        robot.validate()?;
         AgentSpec::checked(
             name.into(),
             Drive::Torque { robot, variant },

@@ -414,8 +414,8 @@ impl VelocityRobot {
     /// the paper's robots with their motor loops closed.
     pub const IDEAL: VelocityRobot = VelocityRobot {
         base: VelocityBase::IDEAL,
-        half_wheelbase: crate::model::RobotParams::AGENT1.half_wheelbase,
-        wheel_radius: crate::model::RobotParams::AGENT1.wheel_radius,
+        half_wheelbase: crate::model::RobotParams::AGENT1.half_wheelbase(),
+        wheel_radius: crate::model::RobotParams::AGENT1.wheel_radius(),
     };
 
     /// TurtleBot 3 Burger: `r = 0.033 m`, `l = 0.080 m` (`WHEEL_RADIUS`,

@@ -264,10 +264,10 @@ impl LawRobot {
     #[inline]
     pub(crate) fn new(r: &RobotParams) -> LawRobot {
         LawRobot {
-            m: r.mass,
-            j: r.inertia,
-            eta_m: r.linear_friction / r.mass,
-            psi_j: r.angular_friction / r.inertia,
+            m: r.mass(),
+            j: r.inertia(),
+            eta_m: r.linear_friction() / r.mass(),
+            psi_j: r.angular_friction() / r.inertia(),
         }
     }
 }

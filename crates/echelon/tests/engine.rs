@@ -178,10 +178,7 @@ fn long_chains_agree_as_well_as_their_sensitivity_allows() {
 #[test]
 fn other_laws_placements_and_references_match() {
     let lemniscate = Reference::Lemniscate(Lemniscate::new(2.0, 0.2, [0.0, 0.0]).unwrap());
-    let limited = RobotParams {
-        torque_limit: Some(4.0),
-        ..RobotParams::AGENT2
-    };
+    let limited = RobotParams::AGENT2.with_torque_limit(Some(4.0)).unwrap();
     for (comp, variant, robot, leader_of) in [
         (LyComp::Exact, Variant::Paper, RobotParams::AGENT2, false),
         (LyComp::Exact, Variant::Complete, RobotParams::AGENT2, true),

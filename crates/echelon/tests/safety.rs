@@ -180,8 +180,8 @@ fn a_torque_head_on_deadlock_is_broken_and_both_robots_arrive() {
     let mut accelerations = [[0.0; 2]; 2];
     let goals = [[2.0, 0.0], [-2.0, 0.0]];
     let mut filters = [SafetyFilter::new(config), SafetyFilter::new(config)];
-    let (m, j) = (robot.mass, robot.inertia);
-    let (eta, psi) = (robot.linear_friction, robot.angular_friction);
+    let (m, j) = (robot.mass(), robot.inertia());
+    let (eta, psi) = (robot.linear_friction(), robot.angular_friction());
     let dt = 0.01;
     let mut closest = f64::INFINITY;
     for step in 0..8000 {

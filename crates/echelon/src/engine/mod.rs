@@ -231,8 +231,8 @@ pub type Engine = BatchEngine<Torque>;
 pub type VelocityEngine = BatchEngine<Velocity>;
 
 impl Batch {
-    /// What a batch's agents share, refusing an impossible robot
-    /// ([`RobotParams::validate`]) or a step that is not a finite number > 0.
+    /// What a batch's agents share (its robot is valid by construction,
+    /// [`RobotParams::new`]), refusing a step that is not a finite number > 0.
     pub fn new(
         robot: RobotParams,
         variant: Variant,
@@ -245,7 +245,6 @@ impl Batch {
             move |source| SimError::Param { context, source }
         };
         check::positive("dt", dt).map_err(param("sim"))?;
-        robot.validate().map_err(param("robot"))?;
         Ok(Batch {
             robot,
             variant,
@@ -278,10 +277,10 @@ impl Engine {
         batch: Batch,
         members: impl IntoIterator<Item = Member>,
     ) -> Result<Engine, EngineError> {
-        let limit = batch.robot.torque_limit.map(|tau| Limit {
+        let limit = batch.robot.torque_limit().map(|tau| Limit {
             tau,
-            r: batch.robot.wheel_radius,
-            l: batch.robot.half_wheelbase,
+            r: batch.robot.wheel_radius(),
+            l: batch.robot.half_wheelbase(),
         });
         if limit.is_some() && batch.topology == Topology::Chain {
             return Err(EngineError::Unsupported(
@@ -293,10 +292,10 @@ impl Engine {
         let r = &batch.robot;
         let consts = Consts {
             law: LawRobot::new(r),
-            eta: r.linear_friction,
-            psi: r.angular_friction,
-            inv_m: 1.0 / r.mass,
-            inv_j: 1.0 / r.inertia,
+            eta: r.linear_friction(),
+            psi: r.angular_friction(),
+            inv_m: 1.0 / r.mass(),
+            inv_j: 1.0 / r.inertia(),
             variant: batch.variant,
             comp,
             limit,

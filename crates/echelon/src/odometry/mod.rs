@@ -339,8 +339,8 @@ impl Odometer {
     ) -> Result<Odometer, ParamError> {
         Odometer::with_wheels(
             spec,
-            robot.half_wheelbase,
-            robot.wheel_radius,
+            robot.half_wheelbase(),
+            robot.wheel_radius(),
             start,
             seed,
             stream,

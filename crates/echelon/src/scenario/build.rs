@@ -511,28 +511,32 @@ impl Builder<'_> {
                 )
             })
         };
-        let params = RobotParams {
-            mass: field(r.mass, base.map(|b| b.mass), "mass")?,
-            linear_friction: field(
+        let params = RobotParams::new(
+            field(r.mass, base.map(|b| b.mass()), "mass")?,
+            field(
                 r.linear_friction,
-                base.map(|b| b.linear_friction),
+                base.map(|b| b.linear_friction()),
                 "linear_friction",
             )?,
-            inertia: field(r.inertia, base.map(|b| b.inertia), "inertia")?,
-            angular_friction: field(
+            field(r.inertia, base.map(|b| b.inertia()), "inertia")?,
+            field(
                 r.angular_friction,
-                base.map(|b| b.angular_friction),
+                base.map(|b| b.angular_friction()),
                 "angular_friction",
             )?,
-            half_wheelbase: field(
+            field(
                 r.half_wheelbase,
-                base.map(|b| b.half_wheelbase),
+                base.map(|b| b.half_wheelbase()),
                 "half_wheelbase",
             )?,
-            wheel_radius: field(r.wheel_radius, base.map(|b| b.wheel_radius), "wheel_radius")?,
-            torque_limit: r.torque_limit.or(base.and_then(|b| b.torque_limit)),
-        };
-        self.within(&at, params.validate())?;
+            field(
+                r.wheel_radius,
+                base.map(|b| b.wheel_radius()),
+                "wheel_radius",
+            )?,
+        )
+        .and_then(|p| p.with_torque_limit(r.torque_limit.or(base.and_then(|b| b.torque_limit()))));
+        let params = self.within(&at, params)?;
         Ok(Body::Torque(params))
     }
 

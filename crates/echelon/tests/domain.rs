@@ -1,0 +1,205 @@
+//! Domain types that cannot hold an invalid value (issue 21): every checked
+//! constructor refuses what it must (naming the field), every value it accepts
+//! round-trips through serde (TOML and JSON) unchanged, and deserialising an
+//! invalid document fails with the constructor's own message.
+#![allow(clippy::unwrap_used)] // tests fail loudly by design
+
+use echelon::ParamError;
+use echelon::model::RobotParams;
+use proptest::prelude::*;
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+/// A finite number > 0, from tiny to huge.
+fn positive() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        1e-3..1e4f64,
+        prop::num::f64::POSITIVE | prop::num::f64::NORMAL,
+    ]
+}
+
+/// A finite number ≥ 0.
+fn non_negative() -> impl Strategy<Value = f64> {
+    prop_oneof![Just(0.0), positive()]
+}
+
+/// A number that is not finite.
+fn not_finite() -> impl Strategy<Value = f64> {
+    prop_oneof![Just(f64::NAN), Just(f64::INFINITY), Just(f64::NEG_INFINITY)]
+}
+
+/// A number that is not a finite number > 0.
+fn not_positive() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        Just(0.0),
+        Just(-0.0),
+        prop::num::f64::NEGATIVE | prop::num::f64::NORMAL | prop::num::f64::SUBNORMAL,
+        not_finite(),
+    ]
+}
+
+/// A number that is not a finite number ≥ 0.
+fn negative_or_not_finite() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        prop::num::f64::NEGATIVE | prop::num::f64::NORMAL | prop::num::f64::SUBNORMAL,
+        not_finite(),
+    ]
+}
+
+/// A decimal with few digits (`12.345`): JSON parses it back exactly (serde_json
+/// parses arbitrary floats to within one ulp only, without `float_roundtrip`).
+fn decimal(lo: u32) -> impl Strategy<Value = f64> {
+    (lo..1_000_000u32, 0..6i32).prop_map(|(k, e)| f64::from(k) / 10f64.powi(e))
+}
+
+/// `value` through a TOML document and back.
+fn toml_round_trip<T: Serialize + DeserializeOwned>(value: &T) -> T {
+    toml::from_str(&toml::to_string(value).unwrap()).unwrap()
+}
+
+/// `value` through a JSON document and back.
+fn json_round_trip<T: Serialize + DeserializeOwned>(value: &T) -> T {
+    serde_json::from_str(&serde_json::to_string(value).unwrap()).unwrap()
+}
+
+/// `value` through a JSON tree and back (no text: exact for any float).
+fn json_value_round_trip<T: Serialize + DeserializeOwned>(value: &T) -> T {
+    serde_json::from_value(serde_json::to_value(value).unwrap()).unwrap()
+}
+
+/// The document `value` serialises to with `field` set to `bad`, as TOML
+/// (which can write NaN and infinities).
+fn toml_with<T: Serialize>(value: &T, field: &str, bad: f64) -> String {
+    let mut table = toml::Table::try_from(value).unwrap();
+    table.insert(field.to_owned(), toml::Value::Float(bad));
+    toml::to_string(&table).unwrap()
+}
+
+/// Deserialising `doc` fails with exactly the constructor's message.
+fn refused_as<T: DeserializeOwned + std::fmt::Debug>(
+    doc: &str,
+    expected: &ParamError,
+) -> Result<(), TestCaseError> {
+    let e = toml::from_str::<T>(doc).unwrap_err();
+    prop_assert_eq!(e.message(), expected.to_string(), "{}", doc);
+    Ok(())
+}
+
+/// `RobotParams::new`'s arguments in order.
+type RobotArgs = (f64, f64, f64, f64, f64, f64);
+
+fn robot(a: RobotArgs) -> Result<RobotParams, ParamError> {
+    RobotParams::new(a.0, a.1, a.2, a.3, a.4, a.5)
+}
+
+fn robot_args() -> impl Strategy<Value = RobotArgs> {
+    (
+        positive(),
+        non_negative(),
+        positive(),
+        non_negative(),
+        positive(),
+        positive(),
+    )
+}
+
+const ROBOT_FIELDS: [&str; 6] = [
+    "mass",
+    "linear_friction",
+    "inertia",
+    "angular_friction",
+    "half_wheelbase",
+    "wheel_radius",
+];
+
+/// `a` with its `i`-th argument replaced.
+fn set(a: RobotArgs, i: usize, v: f64) -> RobotArgs {
+    let mut x = [a.0, a.1, a.2, a.3, a.4, a.5];
+    x[i] = v;
+    (x[0], x[1], x[2], x[3], x[4], x[5])
+}
+
+proptest! {
+    /// Valid arguments give a robot whose getters return them; any other
+    /// torque limit than a finite number > 0 is refused.
+    #[test]
+    fn robot_accepts_what_is_physical(a in robot_args(), limit in positive()) {
+        let p = robot(a).unwrap();
+        prop_assert_eq!(
+            (p.mass(), p.linear_friction(), p.inertia(), p.angular_friction(), p.half_wheelbase(), p.wheel_radius()),
+            a
+        );
+        prop_assert_eq!(p.torque_limit(), None);
+        prop_assert_eq!(p.with_torque_limit(Some(limit)).unwrap().torque_limit(), Some(limit));
+    }
+
+    /// A non-positive or non-finite mass, inertia, half wheelbase or wheel
+    /// radius, a negative or non-finite friction, or a torque limit that is
+    /// not a finite number > 0 is refused, naming the field.
+    #[test]
+    fn robot_refuses_what_is_not(
+        a in robot_args(),
+        which in 0..6usize,
+        not_pos in not_positive(),
+        neg in negative_or_not_finite(),
+    ) {
+        let friction = which == 1 || which == 3;
+        let bad = if friction { neg } else { not_pos };
+        let e = robot(set(a, which, bad)).unwrap_err();
+        prop_assert_eq!(e.field, ROBOT_FIELDS[which]);
+        let e = robot(a).unwrap().with_torque_limit(Some(not_pos)).unwrap_err();
+        prop_assert_eq!(e.field, "torque_limit");
+    }
+
+    /// Every robot round-trips through TOML and JSON unchanged.
+    #[test]
+    fn robot_round_trips(a in robot_args(), limit in prop::option::of(positive())) {
+        let p = robot(a).unwrap().with_torque_limit(limit).unwrap();
+        prop_assert_eq!(toml_round_trip(&p), p);
+        prop_assert_eq!(json_value_round_trip(&p), p);
+    }
+
+    /// Robots with decimal values round-trip through JSON text unchanged.
+    #[test]
+    fn robot_round_trips_as_json_text(
+        m in decimal(1), eta in decimal(0), j in decimal(1), psi in decimal(0),
+        l in decimal(1), r in decimal(1), limit in prop::option::of(decimal(1)),
+    ) {
+        let p = RobotParams::new(m, eta, j, psi, l, r).unwrap().with_torque_limit(limit).unwrap();
+        prop_assert_eq!(json_round_trip(&p), p);
+    }
+
+    /// A document with an impossible value does not deserialise: the error is
+    /// the constructor's.
+    #[test]
+    fn robot_document_refused(
+        a in robot_args(),
+        which in 0..7usize,
+        not_pos in not_positive(),
+        neg in negative_or_not_finite(),
+    ) {
+        let p = robot(a).unwrap();
+        let (bad, expected) = if which == 6 {
+            (not_pos, p.with_torque_limit(Some(not_pos)).unwrap_err())
+        } else {
+            let bad = if which == 1 || which == 3 { neg } else { not_pos };
+            (bad, robot(set(a, which, bad)).unwrap_err())
+        };
+        let field = if which == 6 { "torque_limit" } else { ROBOT_FIELDS[which] };
+        refused_as::<RobotParams>(&toml_with(&p, field, bad), &expected)?;
+    }
+}
+
+#[test]
+fn robot_serialised_form_is_unchanged() {
+    let json = serde_json::to_string(&RobotParams::AGENT1).unwrap();
+    assert_eq!(
+        json,
+        r#"{"mass":27.0,"linear_friction":180.0,"inertia":1.42,"angular_friction":9.47,"half_wheelbase":0.23,"wheel_radius":0.101,"torque_limit":null}"#
+    );
+    let bad = json.replace("27.0", "-27.0");
+    let e = serde_json::from_str::<RobotParams>(&bad).unwrap_err();
+    assert!(e.to_string().starts_with("mass = -27: must be > 0"), "{e}");
+    let missing = r#"{"mass":27.0}"#;
+    assert!(serde_json::from_str::<RobotParams>(missing).is_err());
+}

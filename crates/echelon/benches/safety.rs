@@ -54,11 +54,8 @@ fn safety(c: &mut Criterion) {
         Err(e) => panic!("{e}"),
     };
     let (me, ns, obstacles) = scene();
-    let base = VelocityBase {
-        v_max: 0.5,
-        omega_max: 3.0,
-        ..VelocityBase::IDEAL
-    };
+    let base = VelocityBase::new(0.0, 0.0, 0.5, 3.0, f64::INFINITY, f64::INFINITY)
+        .expect("an ideal base with speed limits");
     let robot = RobotParams::AGENT1
         .with_torque_limit(Some(3.0))
         .expect("3 N m is a valid torque limit");

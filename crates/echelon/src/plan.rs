@@ -135,7 +135,7 @@ impl Agents {
                 && a.torque_robot().is_some()
                 && specs[j]
                     .velocity_robot()
-                    .is_some_and(|r| r.base.tau_v == 0.0)
+                    .is_some_and(|r| r.base().tau_v() == 0.0)
             {
                 return Err(FormationError::NoLeaderAcceleration {
                     agent: i + 1,
@@ -186,7 +186,7 @@ impl Plan {
     ) -> Result<Plan, SimError> {
         for (i, a) in agents.iter().enumerate() {
             if let Some(r) = a.velocity_robot() {
-                r.base
+                r.base()
                     .check_step(config.dt)
                     .map_err(|source| SimError::Param {
                         context: format!("agent {} robot", i + 1),

@@ -541,7 +541,7 @@ impl SafetyFilter {
             Constraint { a, b }
         });
         let barriers = self.rows.len();
-        push_box(&mut self.rows, [base.v_max, l * base.omega_max]);
+        push_box(&mut self.rows, [base.v_max(), l * base.omega_max()]);
         let (x, outcome, deadlock) = self.decide(t, x0, barriers, [0.0, 0.0]);
         let command = match outcome {
             Outcome::Nominal => limited,
@@ -869,11 +869,7 @@ mod tests {
     }
 
     fn ideal() -> VelocityBase {
-        VelocityBase {
-            v_max: 0.5,
-            omega_max: 4.0,
-            ..VelocityBase::IDEAL
-        }
+        VelocityBase::new(0.0, 0.0, 0.5, 4.0, f64::INFINITY, f64::INFINITY).unwrap()
     }
 
     #[test]
@@ -1032,8 +1028,8 @@ mod tests {
                         // barriers no more than standing still would.
                         let x = x_of(out.command, l);
                         // (clarabel's tolerance, in x = (v, L ω))
-                        prop_assert!(out.command.v.abs() <= base.v_max + TOLERANCE);
-                        prop_assert!(l * out.command.omega.abs() <= l * base.omega_max + TOLERANCE);
+                        prop_assert!(out.command.v.abs() <= base.v_max() + TOLERANCE);
+                        prop_assert!(l * out.command.omega.abs() <= l * base.omega_max() + TOLERANCE);
                         let worst = |x: [f64; 2]| {
                             rows.iter().map(|c| -c.slack(x)).fold(0.0f64, f64::max)
                         };

@@ -5,6 +5,7 @@
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
 use echelon::ParamError;
+use echelon::base::{AccelLimit, VelocityBase, VelocityRobot};
 use echelon::model::RobotParams;
 use proptest::prelude::*;
 use serde::Serialize;
@@ -202,4 +203,98 @@ fn robot_serialised_form_is_unchanged() {
     assert!(e.to_string().starts_with("mass = -27: must be > 0"), "{e}");
     let missing = r#"{"mass":27.0}"#;
     assert!(serde_json::from_str::<RobotParams>(missing).is_err());
+}
+
+/// A limit: a finite number > 0 or infinite (no limit).
+fn limit() -> impl Strategy<Value = f64> {
+    prop_oneof![positive(), Just(f64::INFINITY)]
+}
+
+/// A limit that is not one: zero, negative (even −∞) or NaN.
+fn not_a_limit() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        Just(0.0),
+        Just(-0.0),
+        Just(f64::NAN),
+        Just(f64::NEG_INFINITY),
+        prop::num::f64::NEGATIVE | prop::num::f64::NORMAL | prop::num::f64::SUBNORMAL,
+    ]
+}
+
+/// `VelocityBase::new`'s arguments: lags ≥ 0, speed limits, and acceleration
+/// limits that are finite only on a lagged axis.
+fn base_args() -> impl Strategy<Value = [f64; 6]> {
+    (
+        non_negative(),
+        non_negative(),
+        limit(),
+        limit(),
+        limit(),
+        limit(),
+    )
+        .prop_map(|(tv, tw, v, w, a, alpha)| {
+            let a = if tv > 0.0 { a } else { f64::INFINITY };
+            let alpha = if tw > 0.0 { alpha } else { f64::INFINITY };
+            [tv, tw, v, w, a, alpha]
+        })
+}
+
+fn base(x: [f64; 6]) -> Result<VelocityBase, ParamError> {
+    VelocityBase::new(x[0], x[1], x[2], x[3], x[4], x[5])
+}
+
+const BASE_FIELDS: [&str; 6] = [
+    "tau_v",
+    "tau_omega",
+    "v_max",
+    "omega_max",
+    "a_max",
+    "alpha_max",
+];
+
+proptest! {
+    /// Valid arguments give a base whose getters return them (joint
+    /// acceleration limits unless asked otherwise), and a robot on it with any
+    /// wheels of finite size > 0.
+    #[test]
+    fn base_accepts_what_is_possible(
+        x in base_args(), per_axis in any::<bool>(), l in positive(), r in positive(),
+    ) {
+        let b = base(x).unwrap();
+        prop_assert_eq!(
+            [b.tau_v(), b.tau_omega(), b.v_max(), b.omega_max(), b.a_max(), b.alpha_max()],
+            x
+        );
+        prop_assert_eq!(b.accel(), AccelLimit::Joint);
+        let accel = if per_axis { AccelLimit::PerAxis } else { AccelLimit::Joint };
+        prop_assert_eq!(b.with_accel(accel).accel(), accel);
+        let robot = VelocityRobot::new(b, l, r).unwrap();
+        prop_assert_eq!((robot.base(), robot.half_wheelbase(), robot.wheel_radius()), (b, l, r));
+    }
+
+    /// A negative or non-finite lag, a limit that is zero, negative or NaN, a
+    /// finite acceleration limit on an axis without lag, or a wheel that is
+    /// not a finite number > 0 is refused, naming the field.
+    #[test]
+    fn base_refuses_what_is_not(
+        x in base_args(),
+        which in 0..6usize,
+        bad_lag in negative_or_not_finite(),
+        bad_limit in not_a_limit(),
+        finite_limit in positive(),
+        bad_wheel in not_positive(),
+    ) {
+        let mut y = x;
+        y[which] = if which < 2 { bad_lag } else { bad_limit };
+        prop_assert_eq!(base(y).unwrap_err().field, BASE_FIELDS[which]);
+        // An axis without lag takes no finite acceleration limit.
+        let axis = which % 2;
+        let mut z = x;
+        z[axis] = 0.0;
+        z[4 + axis] = finite_limit;
+        prop_assert_eq!(base(z).unwrap_err().field, BASE_FIELDS[4 + axis]);
+        let b = base(x).unwrap();
+        prop_assert_eq!(VelocityRobot::new(b, bad_wheel, 0.05).unwrap_err().field, "half_wheelbase");
+        prop_assert_eq!(VelocityRobot::new(b, 0.15, bad_wheel).unwrap_err().field, "wheel_radius");
+    }
 }

@@ -614,7 +614,10 @@ fn truth_of(spec: &AgentSpec) -> Vec<(&'static str, f64)> {
             ("inertia", r.inertia()),
             ("angular_friction", r.angular_friction()),
         ],
-        (None, Some(b)) => vec![("tau_v", b.base.tau_v), ("tau_omega", b.base.tau_omega)],
+        (None, Some(b)) => vec![
+            ("tau_v", b.base().tau_v()),
+            ("tau_omega", b.base().tau_omega()),
+        ],
         (None, None) => unreachable!(),
     }
 }

@@ -102,11 +102,7 @@ fn the_torque_column_goes_around_the_posts() {
 fn a_head_on_deadlock_is_broken_and_both_robots_arrive() {
     let l = 0.1;
     let config = SafetyConfig::new(0.4, 1.0, f64::INFINITY).unwrap();
-    let base = VelocityBase {
-        v_max: 0.5,
-        omega_max: 4.0,
-        ..VelocityBase::IDEAL
-    };
+    let base = VelocityBase::new(0.0, 0.0, 0.5, 4.0, f64::INFINITY, f64::INFINITY).unwrap();
     let mut robots = [
         State::at_rest(-2.0, 0.0, 0.0),
         State::at_rest(2.0, 0.0, std::f64::consts::PI),

@@ -562,21 +562,24 @@ impl Builder<'_> {
             (_, Some(p)) => p,
             (None, None) => VelocityRobot::IDEAL,
         };
-        let b = from.base;
-        let robot = VelocityRobot {
-            base: VelocityBase {
-                tau_v: r.tau_v.unwrap_or(b.tau_v),
-                tau_omega: r.tau_omega.unwrap_or(b.tau_omega),
-                v_max: r.v_max.unwrap_or(b.v_max),
-                omega_max: r.omega_max.unwrap_or(b.omega_max),
-                a_max: r.a_max.unwrap_or(b.a_max),
-                alpha_max: r.alpha_max.unwrap_or(b.alpha_max),
-                accel: r.accel.unwrap_or(b.accel),
-            },
-            half_wheelbase: r.half_wheelbase.unwrap_or(from.half_wheelbase),
-            wheel_radius: r.wheel_radius.unwrap_or(from.wheel_radius),
-        };
-        self.within(at, robot.validate())?;
+        let b = from.base();
+        let robot = VelocityBase::new(
+            r.tau_v.unwrap_or(b.tau_v()),
+            r.tau_omega.unwrap_or(b.tau_omega()),
+            r.v_max.unwrap_or(b.v_max()),
+            r.omega_max.unwrap_or(b.omega_max()),
+            r.a_max.unwrap_or(b.a_max()),
+            r.alpha_max.unwrap_or(b.alpha_max()),
+        )
+        .map(|base| base.with_accel(r.accel.unwrap_or(b.accel())))
+        .and_then(|base| {
+            VelocityRobot::new(
+                base,
+                r.half_wheelbase.unwrap_or(from.half_wheelbase()),
+                r.wheel_radius.unwrap_or(from.wheel_radius()),
+            )
+        });
+        let robot = self.within(at, robot)?;
         Ok(robot)
     }
 
@@ -735,7 +738,7 @@ impl Builder<'_> {
                 } else {
                     at.key("robot")
                 };
-                self.within(&path, r.base.check_step(dt))?;
+                self.within(&path, r.base().check_step(dt))?;
                 Drive::Velocity(r)
             }
             (Body::Torque(robot), Some((law, path))) => match law.variant() {

@@ -432,7 +432,7 @@ impl Simulation {
         self.refresh();
         for (i, a) in self.sys.plan.agents().iter().enumerate() {
             if let (Drive::Velocity(r), Some(v)) = (&a.drive, self.out[i].velocity) {
-                self.state[i] = r.base.settle(&self.state[i], v.applied);
+                self.state[i] = r.base().settle(&self.state[i], v.applied);
             }
         }
         self.fresh = false;

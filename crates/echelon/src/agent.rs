@@ -140,7 +140,6 @@ impl AgentSpec {
         gains: Gains,
         start: State,
     ) -> Result<AgentSpec, ParamError> {
-        gains.validate()?;
         placement.validate()?;
         start.validate_start()?;
         Ok(AgentSpec {

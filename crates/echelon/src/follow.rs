@@ -102,7 +102,7 @@ pub fn follow(spec: &AgentSpec, sensed: &State, leader: LeaderView<'_>) -> Follo
             velocity: None,
         },
         Drive::Velocity(_) => {
-            let k = kinematic_law(sensed, &motion, &offset, spec.gains.ke);
+            let k = kinematic_law(sensed, &motion, &offset, spec.gains.ke());
             Follow {
                 law: LawOutput {
                     u: Input::default(),

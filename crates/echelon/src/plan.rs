@@ -204,10 +204,10 @@ impl Plan {
         let mut warnings = Vec::new();
         for (i, a) in agents.specs.iter().enumerate() {
             let ctx = format!("agent {}", i + 1);
-            if a.variant() == Some(Variant::Paper) && a.gains.ke * a.gains.kz <= 0.25 {
+            if a.variant() == Some(Variant::Paper) && a.gains.ke() * a.gains.kz() <= 0.25 {
                 warnings.push(format!(
                     "{ctx}: K_e K_z = {} ≤ 1/4: Theorem 1 does not guarantee convergence for the paper law (use law = \"complete\")",
-                    a.gains.ke * a.gains.kz
+                    a.gains.ke() * a.gains.kz()
                 ));
             }
             let (lo, hi) = FitCoefficients::PAPER_RANGE;

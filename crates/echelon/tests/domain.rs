@@ -6,6 +6,7 @@
 
 use echelon::ParamError;
 use echelon::base::{AccelLimit, VelocityBase, VelocityRobot};
+use echelon::control::Gains;
 use echelon::model::RobotParams;
 use proptest::prelude::*;
 use serde::Serialize;
@@ -296,5 +297,17 @@ proptest! {
         let b = base(x).unwrap();
         prop_assert_eq!(VelocityRobot::new(b, bad_wheel, 0.05).unwrap_err().field, "half_wheelbase");
         prop_assert_eq!(VelocityRobot::new(b, 0.15, bad_wheel).unwrap_err().field, "wheel_radius");
+    }
+}
+
+proptest! {
+    /// Gains are two finite numbers > 0: those are kept as given, anything
+    /// else is refused naming `ke` or `kz`.
+    #[test]
+    fn gains_are_positive(ke in positive(), kz in positive(), bad in not_positive()) {
+        let g = Gains::new(ke, kz).unwrap();
+        prop_assert_eq!((g.ke(), g.kz()), (ke, kz));
+        prop_assert_eq!(Gains::new(bad, kz).unwrap_err().field, "ke");
+        prop_assert_eq!(Gains::new(ke, bad).unwrap_err().field, "kz");
     }
 }

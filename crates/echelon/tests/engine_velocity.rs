@@ -86,7 +86,7 @@ impl Scalar {
                     )
                 }
             };
-            let out = kinematic_law(&xs[i], &leader, &off, m.gains.ke);
+            let out = kinematic_law(&xs[i], &leader, &off, m.gains.ke());
             outs.push((out.e, out.cmd, self.base.limit(out.cmd).0));
         }
         outs

@@ -261,7 +261,6 @@ impl Member {
     pub fn new(start: State, placement: Placement, gains: Gains) -> Result<Member, ParamError> {
         start.validate_start()?;
         placement.validate()?;
-        gains.validate()?;
         Ok(Member {
             start,
             placement,
@@ -691,8 +690,8 @@ fn block(m: &[Member], live: usize) -> Block {
         lx: lane(&|a| a.placement.lx()),
         inv_lx: lane(&|a| 1.0 / a.placement.lx()),
         ly_off: lane(&|a| a.placement.ly_off),
-        ke: lane(&|a| a.gains.ke),
-        kz: lane(&|a| a.gains.kz),
+        ke: lane(&|a| a.gains.ke()),
+        kz: lane(&|a| a.gains.kz()),
         comp,
         live: Mask(std::array::from_fn(|l| if l < live { u64::MAX } else { 0 })),
     }

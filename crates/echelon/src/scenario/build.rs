@@ -172,9 +172,9 @@ impl Builder<'_> {
         };
         let mut warnings = Vec::new();
         for (i, a) in specs.iter().enumerate() {
-            let mut gains = vec![("ke", "K_e", a.gains.ke)];
+            let mut gains = vec![("ke", "K_e", a.gains.ke())];
             if a.law() != Law::Kinematic {
-                gains.push(("kz", "K_z", a.gains.kz));
+                gains.push(("kz", "K_z", a.gains.kz()));
             }
             let Some((key, symbol, k)) = gains
                 .into_iter()
@@ -720,8 +720,8 @@ impl Builder<'_> {
         };
         // Each control setting: the agent's own, else [control], else the paper's.
         let control = self.control(i);
-        let (ke, _) = control.get_or(|c| c.ke, "ke", Gains::PAPER.ke);
-        let (kz, _) = control.get_or(|c| c.kz, "kz", Gains::PAPER.kz);
+        let (ke, _) = control.get_or(|c| c.ke, "ke", Gains::PAPER.ke());
+        let (kz, _) = control.get_or(|c| c.kz, "kz", Gains::PAPER.kz());
         let gains = Gains::new(ke, kz).map_err(|e| self.at.param(&control.path_of(e.field), &e))?;
         let (l, l_path) = control.get_or(|c| c.l, "l", DEFAULT_L);
         self.at(&l_path, check::positive("l", l))?;

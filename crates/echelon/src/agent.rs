@@ -140,7 +140,6 @@ impl AgentSpec {
         gains: Gains,
         start: State,
     ) -> Result<AgentSpec, ParamError> {
-        placement.validate()?;
         start.validate_start()?;
         Ok(AgentSpec {
             name,
@@ -365,7 +364,7 @@ impl AgentSpec {
                 safety: None,
             };
         };
-        let l = self.placement.l;
+        let l = self.placement.l();
         let guarded = |outcome, deadlock, min_distance| Guarded {
             outcome,
             stale: false,

@@ -211,10 +211,10 @@ impl Plan {
                 ));
             }
             let (lo, hi) = FitCoefficients::PAPER_RANGE;
-            if a.placement.comp == LyComp::Fit && !(lo..=hi).contains(&a.placement.lx_off) {
+            if a.placement.lycomp() == LyComp::Fit && !(lo..=hi).contains(&a.placement.lx_off()) {
                 warnings.push(format!(
                     "{ctx}: L_Xoff = {} m is outside the range {lo}–{hi} m where the eq. 6 fit holds (use lycomp = \"exact\")",
-                    a.placement.lx_off
+                    a.placement.lx_off()
                 ));
             }
         }
@@ -306,7 +306,7 @@ impl Plan {
             .agents
             .specs
             .iter()
-            .map(|a| crate::safety::point(&a.start, a.placement.l))
+            .map(|a| crate::safety::point(&a.start, a.placement.l()))
             .collect();
         if let Some((agent, source)) =
             crate::safety::start_conflict(&points, &spec.agents, &spec.obstacles)

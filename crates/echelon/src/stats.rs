@@ -290,7 +290,7 @@ impl Observer for SafetyWatch {
         if !sim.has_safety() {
             return Ok(());
         }
-        self.l = sim.agents().iter().map(|a| a.placement.l).collect();
+        self.l = sim.agents().iter().map(|a| a.placement.l()).collect();
         self.obstacles = sim.obstacles().to_vec();
         let radius = sim.safety_radius().unwrap_or(f64::INFINITY);
         self.report = Some(SafetyReport {

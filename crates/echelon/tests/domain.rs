@@ -7,6 +7,7 @@
 use echelon::ParamError;
 use echelon::base::{AccelLimit, VelocityBase, VelocityRobot};
 use echelon::control::Gains;
+use echelon::lycomp::{FitCoefficients, LyComp, LyDerivatives, Placement};
 use echelon::model::RobotParams;
 use proptest::prelude::*;
 use serde::Serialize;
@@ -309,5 +310,52 @@ proptest! {
         prop_assert_eq!((g.ke(), g.kz()), (ke, kz));
         prop_assert_eq!(Gains::new(bad, kz).unwrap_err().field, "ke");
         prop_assert_eq!(Gains::new(ke, bad).unwrap_err().field, "kz");
+    }
+}
+
+/// A finite offset, m.
+fn offset() -> impl Strategy<Value = f64> {
+    prop_oneof![-5.0..5.0f64, -1e6..1e6f64]
+}
+
+fn derivatives() -> impl Strategy<Value = LyDerivatives> {
+    prop_oneof![Just(LyDerivatives::Neglect), Just(LyDerivatives::Exact)]
+}
+
+proptest! {
+    /// Finite offsets and `L > 0` with `L_X = L_Xoff + L > 0` give a placement
+    /// that keeps them (and the eq. 6 fit for its `L_Xoff`); in the fit's
+    /// range the fit is accepted too.
+    #[test]
+    fn placement_accepts_what_keeps_lx_positive(
+        lx in offset(), ly in offset(), l in positive(), d in derivatives(),
+        exact in any::<bool>(), in_range in 0.1..0.9f64,
+    ) {
+        prop_assume!(lx + l > 0.0);
+        let comp = if exact { LyComp::Exact } else { LyComp::None };
+        let p = Placement::new(lx, ly, l, comp, d).unwrap();
+        prop_assert_eq!((p.lx_off(), p.ly_off(), p.l(), p.lycomp(), p.derivatives()), (lx, ly, l, comp, d));
+        prop_assert_eq!(p.fit(), FitCoefficients::paper(lx));
+        prop_assert!(p.lx() > 0.0);
+        let f = Placement::new(in_range, ly, l, LyComp::Fit, d).unwrap();
+        prop_assert_eq!(f.lycomp(), LyComp::Fit);
+        let t = Placement::tracking(l).unwrap();
+        prop_assert_eq!((t.lx_off(), t.ly_off(), t.l()), (0.0, 0.0, l));
+    }
+
+    /// `L` that is not a finite number > 0, an offset that is not finite, or
+    /// `L_X ≤ 0` is refused, naming `l`, `offset.x` or `offset.y`.
+    #[test]
+    fn placement_refuses_what_does_not(
+        lx in offset(), ly in offset(), l in positive(), d in derivatives(),
+        bad_l in not_positive(), bad_offset in not_finite(), behind in 0.0..10.0f64,
+    ) {
+        prop_assume!(lx + l > 0.0);
+        let new = |lx, ly, l| Placement::new(lx, ly, l, LyComp::Exact, d);
+        prop_assert_eq!(new(lx, ly, bad_l).unwrap_err().field, "l");
+        prop_assert_eq!(Placement::tracking(bad_l).unwrap_err().field, "l");
+        prop_assert_eq!(new(bad_offset, ly, l).unwrap_err().field, "offset.x");
+        prop_assert_eq!(new(lx, bad_offset, l).unwrap_err().field, "offset.y");
+        prop_assert_eq!(new(-l - behind, ly, l).unwrap_err().field, "offset.x");
     }
 }

@@ -299,7 +299,15 @@ fn what_the_engine_cannot_do_is_refused() {
     };
     assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
     let mut specs = f.agent_specs();
-    specs[3].placement.derivatives = LyDerivatives::Exact;
+    let p = specs[3].placement;
+    specs[3].placement = Placement::new(
+        p.lx_off(),
+        p.ly_off(),
+        p.l(),
+        p.lycomp(),
+        LyDerivatives::Exact,
+    )
+    .unwrap();
     assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
     // Impossible values cannot reach the engine: the constructors refuse them.
     let err = Gains::new(1.5, -1.0).unwrap_err();

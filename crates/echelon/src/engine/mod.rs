@@ -260,7 +260,6 @@ impl Member {
     /// [`Placement::new`] and [`Gains::new`] refuse.
     pub fn new(start: State, placement: Placement, gains: Gains) -> Result<Member, ParamError> {
         start.validate_start()?;
-        placement.validate()?;
         Ok(Member {
             start,
             placement,
@@ -631,8 +630,8 @@ fn pack(
             )));
         }
         match comp {
-            None => comp = Some(m.placement.comp),
-            Some(c) if c != m.placement.comp => {
+            None => comp = Some(m.placement.lycomp()),
+            Some(c) if c != m.placement.lycomp() => {
                 return Err(EngineError::Unsupported(format!(
                     "mixed L_Ycomp modes (agent {n} differs from agent 1)"
                 )));
@@ -663,18 +662,18 @@ fn pack(
 /// `live` lanes are agents.
 fn block(m: &[Member], live: usize) -> Block {
     let lane = |f: &dyn Fn(&Member) -> f64| -> V { Lanes(std::array::from_fn(|l| f(&m[l]))) };
-    let comp: [V; 3] = match m[0].placement.comp {
+    let comp: [V; 3] = match m[0].placement.lycomp() {
         LyComp::Fit => [
-            lane(&|a| 2.0 * a.placement.fit.g),
-            lane(&|a| 1.0 / a.placement.fit.delta),
+            lane(&|a| 2.0 * a.placement.fit().g),
+            lane(&|a| 1.0 / a.placement.fit().delta),
             lane(&|a| {
-                let k = a.placement.fit.epsilon / a.placement.fit.delta;
+                let k = a.placement.fit().epsilon / a.placement.fit().delta;
                 k * k
             }),
         ],
         LyComp::Exact => [
-            lane(&|a| a.placement.lx_off),
-            lane(&|a| a.placement.lx_off * a.placement.lx_off),
+            lane(&|a| a.placement.lx_off()),
+            lane(&|a| a.placement.lx_off() * a.placement.lx_off()),
             lane(&|_| 0.0),
         ],
         LyComp::None => [lane(&|_| 0.0); 3],
@@ -689,7 +688,7 @@ fn block(m: &[Member], live: usize) -> Block {
         ],
         lx: lane(&|a| a.placement.lx()),
         inv_lx: lane(&|a| 1.0 / a.placement.lx()),
-        ly_off: lane(&|a| a.placement.ly_off),
+        ly_off: lane(&|a| a.placement.ly_off()),
         ke: lane(&|a| a.gains.ke()),
         kz: lane(&|a| a.gains.kz()),
         comp,

@@ -285,7 +285,7 @@ impl Builder<'_> {
         let points: Vec<[f64; 2]> = agents
             .specs()
             .iter()
-            .map(|a| crate::safety::point(&a.start, a.placement.l))
+            .map(|a| crate::safety::point(&a.start, a.placement.l()))
             .collect();
         if let Some((i, e)) = crate::safety::start_conflict(&points, &configs, &obstacles) {
             return Err(self

@@ -102,7 +102,7 @@ impl Simulation {
                     .map(|c| c.map(|c| SafetyFilter::new(c).with_period(period)))
                     .collect(),
                 obstacles: spec.obstacles.clone(),
-                l: agents.iter().map(|a| a.placement.l).collect(),
+                l: agents.iter().map(|a| a.placement.l()).collect(),
                 out: spec
                     .agents
                     .iter()

@@ -40,11 +40,7 @@ fn scene() -> (State, Vec<Neighbour>, Vec<Obstacle>) {
         Neighbour::of_state(&s, L, Some([0.0, 0.0]), true)
     })
     .to_vec();
-    let obstacles = vec![Obstacle {
-        x: 1.0,
-        y: 1.0,
-        r: 0.2,
-    }];
+    let obstacles = vec![Obstacle::new(1.0, 1.0, 0.2).expect("a valid obstacle")];
     (me, ns, obstacles)
 }
 

@@ -178,15 +178,12 @@ impl SafetyConfig {
     }
 }
 
-/// A static disc obstacle.
+/// A static disc obstacle, built through [`Obstacle::new`] (which checks it).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Obstacle {
-    /// Centre, m.
-    pub x: f64,
-    /// Centre, m.
-    pub y: f64,
-    /// Radius, m (`> 0`).
-    pub r: f64,
+    x: f64,
+    y: f64,
+    r: f64,
 }
 
 impl Obstacle {
@@ -196,6 +193,24 @@ impl Obstacle {
         check::finite("y", y)?;
         check::positive("r", r)?;
         Ok(Obstacle { x, y, r })
+    }
+
+    /// Centre, m.
+    #[inline]
+    pub const fn x(&self) -> f64 {
+        self.x
+    }
+
+    /// Centre, m.
+    #[inline]
+    pub const fn y(&self) -> f64 {
+        self.y
+    }
+
+    /// Radius, m (`> 0`).
+    #[inline]
+    pub const fn r(&self) -> f64 {
+        self.r
     }
 }
 

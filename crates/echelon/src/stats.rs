@@ -329,7 +329,7 @@ impl Observer for SafetyWatch {
             for (s, &l) in frame.states.iter().zip(&self.l) {
                 let p = crate::safety::point(s, l);
                 for o in &self.obstacles {
-                    *clear = clear.min((p[0] - o.x).hypot(p[1] - o.y) - o.r);
+                    *clear = clear.min((p[0] - o.x()).hypot(p[1] - o.y()) - o.r());
                 }
             }
         }

@@ -9,6 +9,8 @@ use echelon::base::{AccelLimit, VelocityBase, VelocityRobot};
 use echelon::control::Gains;
 use echelon::lycomp::{FitCoefficients, LyComp, LyDerivatives, Placement};
 use echelon::model::RobotParams;
+use echelon::reference::Circle;
+use echelon::safety::Obstacle;
 use proptest::prelude::*;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -357,5 +359,41 @@ proptest! {
         prop_assert_eq!(new(bad_offset, ly, l).unwrap_err().field, "offset.x");
         prop_assert_eq!(new(lx, bad_offset, l).unwrap_err().field, "offset.y");
         prop_assert_eq!(new(-l - behind, ly, l).unwrap_err().field, "offset.x");
+    }
+}
+
+proptest! {
+    /// A circle from any finite start at a finite speed ≥ 0 and finite turn
+    /// rate keeps them; a value that is not finite, or a negative speed, is
+    /// refused naming its field.
+    #[test]
+    fn circle_checks_its_values(
+        x in offset(), y in offset(), heading in offset(), speed in non_negative(),
+        turn_rate in offset(), bad in not_finite(), backwards in positive(),
+    ) {
+        let c = Circle::new([x, y], heading, speed, turn_rate).unwrap();
+        prop_assert_eq!((c.start(), c.heading(), c.speed(), c.turn_rate()), ([x, y], heading, speed, turn_rate));
+        let field = |r: Result<Circle, echelon::ReferenceError>| match r {
+            Err(echelon::ReferenceError::Param(e)) => e.field,
+            other => panic!("{other:?}"),
+        };
+        prop_assert_eq!(field(Circle::new([bad, y], heading, speed, turn_rate)), "start.x");
+        prop_assert_eq!(field(Circle::new([x, bad], heading, speed, turn_rate)), "start.y");
+        prop_assert_eq!(field(Circle::new([x, y], bad, speed, turn_rate)), "start.theta");
+        prop_assert_eq!(field(Circle::new([x, y], heading, bad, turn_rate)), "speed");
+        prop_assert_eq!(field(Circle::new([x, y], heading, -backwards, turn_rate)), "speed");
+        prop_assert_eq!(field(Circle::new([x, y], heading, speed, bad)), "turn_rate");
+    }
+
+    /// An obstacle has a finite centre and a radius that is a finite number > 0.
+    #[test]
+    fn obstacle_checks_its_values(
+        x in offset(), y in offset(), r in positive(), bad in not_finite(), bad_r in not_positive(),
+    ) {
+        let o = Obstacle::new(x, y, r).unwrap();
+        prop_assert_eq!((o.x(), o.y(), o.r()), (x, y, r));
+        prop_assert_eq!(Obstacle::new(bad, y, r).unwrap_err().field, "x");
+        prop_assert_eq!(Obstacle::new(x, bad, r).unwrap_err().field, "y");
+        prop_assert_eq!(Obstacle::new(x, y, bad_r).unwrap_err().field, "r");
     }
 }

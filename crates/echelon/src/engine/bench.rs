@@ -45,12 +45,9 @@ impl BenchFormation {
 
     /// The virtual leader: eq. 18 with `V_d = 0.5 m/s`, `ω_d = 0.1 rad/s`.
     pub fn reference(&self) -> Reference {
-        Reference::Circle(Circle {
-            start: [0.0, 0.0],
-            heading: 0.0,
-            speed: 0.5,
-            turn_rate: 0.1,
-        })
+        Reference::Circle(
+            Circle::new([0.0, 0.0], 0.0, 0.5, 0.1).expect("the bench's circle is valid"),
+        )
     }
 
     /// The robots, in order.

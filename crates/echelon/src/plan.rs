@@ -268,8 +268,9 @@ impl Plan {
                         context: context(),
                         source,
                     };
-                    let k = check::multiple_of("period", spec.period, dt, &format!("dt = {dt} s"))
-                        .map_err(param)?;
+                    let k =
+                        check::multiple_of("period", spec.period(), dt, &format!("dt = {dt} s"))
+                            .map_err(param)?;
                     let (l, r) = a.drive.wheels();
                     let o = Odometer::with_wheels(spec, l, r, &a.start, seed, i as u64)
                         .map_err(param)?;

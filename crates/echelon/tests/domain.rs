@@ -9,6 +9,7 @@ use echelon::base::{AccelLimit, VelocityBase, VelocityRobot};
 use echelon::control::Gains;
 use echelon::lycomp::{FitCoefficients, LyComp, LyDerivatives, Placement};
 use echelon::model::RobotParams;
+use echelon::odometry::{ErrorModel, OdometrySpec};
 use echelon::reference::Circle;
 use echelon::safety::Obstacle;
 use proptest::prelude::*;
@@ -395,5 +396,21 @@ proptest! {
         prop_assert_eq!(Obstacle::new(bad, y, r).unwrap_err().field, "x");
         prop_assert_eq!(Obstacle::new(x, bad, r).unwrap_err().field, "y");
         prop_assert_eq!(Obstacle::new(x, y, bad_r).unwrap_err().field, "r");
+    }
+}
+
+proptest! {
+    /// An odometry spec has a period that is a finite number > 0 and a valid
+    /// error model: those are kept, anything else is refused naming the field.
+    #[test]
+    fn odometry_spec_checks_its_parts(
+        period in positive(), bad in not_positive(), ratio in positive(), bad_ratio in not_positive(),
+    ) {
+        let errors = ErrorModel::systematic(ratio, 1.0);
+        let spec = OdometrySpec::new(period, errors, None).unwrap();
+        prop_assert_eq!((spec.period(), spec.errors(), spec.fixes()), (period, errors, None));
+        prop_assert_eq!(OdometrySpec::new(bad, errors, None).unwrap_err().field, "period");
+        let wrong = ErrorModel::systematic(1.0, bad_ratio);
+        prop_assert_eq!(OdometrySpec::new(period, wrong, None).unwrap_err().field, "wheelbase_ratio");
     }
 }

@@ -319,11 +319,9 @@ fn what_the_engine_cannot_do_is_refused() {
     assert!(Engine::from_plan(&plan).is_err());
     // Odometry: the controllers act on estimates, which the engine does not model.
     let config = SimConfig::new(0.01, 1.0, Timing::Continuous).unwrap();
-    let spec = echelon::odometry::OdometrySpec {
-        period: 0.01,
-        errors: echelon::odometry::ErrorModel::PERFECT,
-        fixes: None,
-    };
+    let spec =
+        echelon::odometry::OdometrySpec::new(0.01, echelon::odometry::ErrorModel::PERFECT, None)
+            .unwrap();
     let plan = Plan::new(f.agent_specs(), f.reference(), config).unwrap();
     let with_odometry = plan
         .clone()

@@ -1171,7 +1171,7 @@ fn crossing_keeps_robots_apart_in_the_fleet() {
     let dir = tempfile::tempdir().unwrap();
     let scenario = Scenario::resolve("crossing").unwrap();
     let run = scenario.build(&Overrides::default()).unwrap();
-    let l: Vec<f64> = run.plan.agents().iter().map(|a| a.placement.l).collect();
+    let l: Vec<f64> = run.plan.agents().iter().map(|a| a.placement.l()).collect();
     let radius = run.plan.safety_radius().unwrap();
     let fleet_dir = dir.path().join("fleet");
     let report = up(

@@ -106,13 +106,13 @@ impl ExciteSignal {
                 f64::INFINITY
             }
         };
-        let v_amp = (MARGIN * base.v_max)
-            .min(jump(base.a_max, base.tau_v))
+        let v_amp = (MARGIN * base.v_max())
+            .min(jump(base.a_max(), base.tau_v()))
             .min(V_CAP);
-        let omega_amp = (MARGIN * base.omega_max)
-            .min(jump(base.alpha_max, base.tau_omega))
+        let omega_amp = (MARGIN * base.omega_max())
+            .min(jump(base.alpha_max(), base.tau_omega()))
             .min(OMEGA_CAP);
-        let tau = base.tau_v.max(base.tau_omega);
+        let tau = base.tau_v().max(base.tau_omega());
         let hold = (8.0 * tau).max(1.0);
         // Whole retraced pairs (four steps each).
         let steps_end = (0.6 * duration / (4.0 * hold)).floor().max(1.0) * 4.0 * hold;
@@ -132,8 +132,8 @@ impl ExciteSignal {
         };
         let f1 = corner
             .min(2.0)
-            .min(rate_f(base.a_max, v_amp))
-            .min(rate_f(base.alpha_max, omega_amp));
+            .min(rate_f(base.a_max(), v_amp))
+            .min(rate_f(base.alpha_max(), omega_amp));
         let f0 = (0.25 / hold).min(f1);
         ExciteSignal {
             v_amp,
@@ -283,7 +283,7 @@ pub fn run(opts: ExciteOptions, stop: &StopFlag) -> Result<ExciteReport, FleetEr
             opts.agent
         )));
     };
-    let base = robot.base;
+    let base = robot.base();
     let signal = ExciteSignal::for_base(&base, opts.duration);
     let link = fleet.ros2[opts.agent as usize - 1].clone();
     let topics = RosTopic::of_link(&link).map_err(|e| FleetError::Config(e.to_string()))?;
@@ -420,28 +420,15 @@ mod tests {
     use echelon::identify::{self, Log, Model, simulate_axis};
 
     fn lab() -> VelocityBase {
-        VelocityBase {
-            tau_v: 0.1,
-            tau_omega: 0.1,
-            v_max: 0.3,
-            omega_max: 2.0,
-            a_max: 1.0,
-            alpha_max: 5.0,
-            ..VelocityBase::IDEAL
-        }
+        VelocityBase::new(0.1, 0.1, 0.3, 2.0, 1.0, 5.0).expect("the lab base")
     }
 
     fn bases() -> [VelocityBase; 3] {
         [
             lab(),
             VelocityBase::IDEAL,
-            VelocityBase {
-                tau_v: 0.25,
-                tau_omega: 0.4,
-                v_max: 0.22,
-                omega_max: 2.84,
-                ..VelocityBase::IDEAL
-            },
+            VelocityBase::new(0.25, 0.4, 0.22, 2.84, f64::INFINITY, f64::INFINITY)
+                .expect("a slow base"),
         ]
     }
 
@@ -462,24 +449,27 @@ mod tests {
                         f64::INFINITY
                     }
                 };
-                let max_jump = [bound(b.a_max, b.tau_v), bound(b.alpha_max, b.tau_omega)];
+                let max_jump = [
+                    bound(b.a_max(), b.tau_v()),
+                    bound(b.alpha_max(), b.tau_omega()),
+                ];
                 let h = 1e-3;
                 let mut last = VelocityCommand::default();
                 for t in grid(&sig, h) {
                     let c = sig.at(t);
                     assert!(
-                        c.v.abs() <= MARGIN * b.v_max && c.v.abs() <= V_CAP,
+                        c.v.abs() <= MARGIN * b.v_max() && c.v.abs() <= V_CAP,
                         "{b:?} {t} {c:?}"
                     );
-                    assert!(c.omega.abs() <= MARGIN * b.omega_max && c.omega.abs() <= OMEGA_CAP);
+                    assert!(c.omega.abs() <= MARGIN * b.omega_max() && c.omega.abs() <= OMEGA_CAP);
                     let jump = [(c.v - last.v).abs(), (c.omega - last.omega).abs()];
                     for axis in 0..2 {
                         assert!(jump[axis] <= max_jump[axis] + 1e-12, "{b:?} {t}: {jump:?}");
                     }
                     // In the chirp the rate obeys the acceleration limits.
                     if t > sig.steps_end + h && t < sig.chirp_end {
-                        assert!(jump[0] / h <= MARGIN * b.a_max * 1.001, "{t}");
-                        assert!(jump[1] / h <= MARGIN * b.alpha_max * 1.001, "{t}");
+                        assert!(jump[0] / h <= MARGIN * b.a_max() * 1.001, "{t}");
+                        assert!(jump[1] / h <= MARGIN * b.alpha_max() * 1.001, "{t}");
                     }
                     last = c;
                 }
@@ -529,8 +519,8 @@ mod tests {
             let log = Log {
                 source: "excite".to_owned(),
                 agent: 1,
-                v: simulate_axis(&t, &vc, b.tau_v, 1.0, 0.0),
-                omega: simulate_axis(&t, &wc, b.tau_omega, 1.0, 0.0),
+                v: simulate_axis(&t, &vc, b.tau_v(), 1.0, 0.0),
+                omega: simulate_axis(&t, &wc, b.tau_omega(), 1.0, 0.0),
                 t,
                 cmd: Some([vc, wc]),
                 ..Log::default()
@@ -539,11 +529,11 @@ mod tests {
             let tau_v = id.get("tau_v").map(|e| e.value);
             let tau_w = id.get("tau_omega").map(|e| e.value);
             assert!(
-                tau_v.is_some_and(|x| (x / b.tau_v - 1.0).abs() < 1e-3),
+                tau_v.is_some_and(|x| (x / b.tau_v() - 1.0).abs() < 1e-3),
                 "{tau_v:?}"
             );
             assert!(
-                tau_w.is_some_and(|x| (x / b.tau_omega - 1.0).abs() < 1e-3),
+                tau_w.is_some_and(|x| (x / b.tau_omega() - 1.0).abs() < 1e-3),
                 "{tau_w:?}"
             );
         }

@@ -234,7 +234,10 @@ impl SimulatedDrive {
                 SimulatedDrive::Torque(SimulatedPlant::new(*robot, spec.start, t0, max_step))
             }
             Drive::Velocity(r) => SimulatedDrive::Velocity(SimulatedVelocityBase::new(
-                r.base, spec.start, t0, max_step,
+                r.base(),
+                spec.start,
+                t0,
+                max_step,
             )),
         }
     }
@@ -324,11 +327,15 @@ mod tests {
         assert!((s.y - r * (1.0 - 0.5f64.cos())).abs() < 1e-9, "{s:?}");
         assert_eq!((s.v, s.omega), (0.4, 0.5));
 
-        let lagged = VelocityBase {
-            tau_v: 0.2,
-            tau_omega: 0.1,
-            ..VelocityBase::IDEAL
-        };
+        let lagged = VelocityBase::new(
+            0.2,
+            0.1,
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::INFINITY,
+        )
+        .expect("a lagged base");
         let mut b = SimulatedVelocityBase::new(lagged, State::at_rest(0.0, 0.0, 0.0), 0.0, 1e-3);
         b.command(Command::Velocity(c));
         b.advance(0.3);
@@ -342,11 +349,8 @@ mod tests {
             "{s:?}"
         );
         // Beyond the limits: scaled together (curvature kept), and held.
-        let limited = VelocityBase {
-            v_max: 0.2,
-            omega_max: 1.0,
-            ..lagged
-        };
+        let limited = VelocityBase::new(0.2, 0.1, 0.2, 1.0, f64::INFINITY, f64::INFINITY)
+            .expect("a lagged base with speed limits");
         let mut b = SimulatedVelocityBase::new(limited, State::at_rest(0.0, 0.0, 0.0), 0.0, 1e-3);
         let act = b.command(Command::Velocity(c));
         let (applied, saturated) = act.velocity.expect("a velocity base");

@@ -129,7 +129,7 @@ fn replay_safety(data: &RunData, rows: &[usize]) -> Option<ReplaySafety> {
     Some(ReplaySafety {
         radius: s.radius,
         l: s.l.clone(),
-        obstacles: s.obstacles.iter().map(|o| [o.x, o.y, o.r]).collect(),
+        obstacles: s.obstacles.iter().map(|o| [o.x(), o.y(), o.r()]).collect(),
         actions,
     })
 }

@@ -48,7 +48,7 @@ pub fn obstacle_clearances(data: &RunData) -> Vec<Vec<f64>> {
                 .map(|k| {
                     (0..data.agents.len())
                         .filter_map(|i| s.point(data, i, k))
-                        .map(|(x, y)| (x - o.x).hypot(y - o.y) - o.r)
+                        .map(|(x, y)| (x - o.x()).hypot(y - o.y()) - o.r())
                         .fold(f64::INFINITY, f64::min)
                 })
                 .collect()

@@ -40,11 +40,7 @@ fn scene() -> (State, Vec<Neighbour>, Vec<Obstacle>) {
         Neighbour::of_state(&s, L, Some([0.0, 0.0]), true)
     })
     .to_vec();
-    let obstacles = vec![Obstacle {
-        x: 1.0,
-        y: 1.0,
-        r: 0.2,
-    }];
+    let obstacles = vec![Obstacle::new(1.0, 1.0, 0.2).expect("a valid obstacle")];
     (me, ns, obstacles)
 }
 
@@ -54,15 +50,11 @@ fn safety(c: &mut Criterion) {
         Err(e) => panic!("{e}"),
     };
     let (me, ns, obstacles) = scene();
-    let base = VelocityBase {
-        v_max: 0.5,
-        omega_max: 3.0,
-        ..VelocityBase::IDEAL
-    };
-    let robot = RobotParams {
-        torque_limit: Some(3.0),
-        ..RobotParams::AGENT1
-    };
+    let base = VelocityBase::new(0.0, 0.0, 0.5, 3.0, f64::INFINITY, f64::INFINITY)
+        .expect("an ideal base with speed limits");
+    let robot = RobotParams::AGENT1
+        .with_torque_limit(Some(3.0))
+        .expect("3 N m is a valid torque limit");
     let mut f = SafetyFilter::new(config);
     let mut g = c.benchmark_group("safety/one call, 5 neighbours + 1 obstacle");
     for (name, cmd) in [

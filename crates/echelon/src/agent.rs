@@ -39,8 +39,8 @@ impl Drive {
     /// odometry needs).
     pub fn wheels(&self) -> (f64, f64) {
         match self {
-            Drive::Torque { robot, .. } => (robot.half_wheelbase, robot.wheel_radius),
-            Drive::Velocity(r) => (r.half_wheelbase, r.wheel_radius),
+            Drive::Torque { robot, .. } => (robot.half_wheelbase(), robot.wheel_radius()),
+            Drive::Velocity(r) => (r.half_wheelbase(), r.wheel_radius()),
         }
     }
 
@@ -75,8 +75,8 @@ pub struct AgentSpec {
 }
 
 impl AgentSpec {
-    /// A torque-driven agent, refusing an impossible robot
-    /// ([`RobotParams::validate`]), gains ([`Gains::new`]), placement
+    /// A torque-driven agent (its robot is valid by construction,
+    /// [`RobotParams::new`]), refusing impossible gains ([`Gains::new`]), placement
     /// ([`Placement::new`]) or a start state that is not finite. Whether its
     /// leader exists is the formation's business ([`crate::plan::Plan::new`]).
     pub fn new(
@@ -88,7 +88,6 @@ impl AgentSpec {
         variant: Variant,
         start: State,
     ) -> Result<AgentSpec, ParamError> {
-        robot.validate()?;
         AgentSpec::checked(
             name.into(),
             Drive::Torque { robot, variant },
@@ -99,9 +98,9 @@ impl AgentSpec {
         )
     }
 
-    /// An agent on a velocity-controlled base under the kinematic law,
-    /// refusing an impossible base ([`VelocityRobot::validate`]) and the rest
-    /// as [`AgentSpec::new`]. A start speed outside the base's limits is refused.
+    /// An agent on a velocity-controlled base under the kinematic law (its
+    /// base is possible by construction, [`VelocityRobot::new`]), refusing
+    /// the rest as [`AgentSpec::new`]. A start speed outside the base's limits is refused.
     pub fn velocity(
         name: impl Into<String>,
         robot: VelocityRobot,
@@ -110,19 +109,18 @@ impl AgentSpec {
         gains: Gains,
         start: State,
     ) -> Result<AgentSpec, ParamError> {
-        robot.validate()?;
-        let b = &robot.base;
+        let b = robot.base();
         check::require(
             "v",
             start.v,
-            start.v.abs() <= b.v_max,
-            format!("exceeds the base's v_max = {} m/s", b.v_max),
+            start.v.abs() <= b.v_max(),
+            format!("exceeds the base's v_max = {} m/s", b.v_max()),
         )?;
         check::require(
             "omega",
             start.omega,
-            start.omega.abs() <= b.omega_max,
-            format!("exceeds the base's omega_max = {} rad/s", b.omega_max),
+            start.omega.abs() <= b.omega_max(),
+            format!("exceeds the base's omega_max = {} rad/s", b.omega_max()),
         )?;
         AgentSpec::checked(
             name.into(),
@@ -142,8 +140,6 @@ impl AgentSpec {
         gains: Gains,
         start: State,
     ) -> Result<AgentSpec, ParamError> {
-        gains.validate()?;
-        placement.validate()?;
         start.validate_start()?;
         Ok(AgentSpec {
             name,
@@ -242,7 +238,7 @@ impl Drive {
                 }
             }
             (Drive::Velocity(r), Command::Velocity(c)) => Actuation {
-                velocity: Some(r.base.limit(c)),
+                velocity: Some(r.base().limit(c)),
                 ..Actuation::default()
             },
             (_, _) => self.actuate(self.zero()),
@@ -255,7 +251,7 @@ impl Drive {
     pub fn derivative(&self, s: &State, applied: &Actuation) -> State {
         match self {
             Drive::Torque { robot, .. } => robot.derivative(s, applied.u),
-            Drive::Velocity(r) => r.base.derivative(s, applied.applied_velocity()),
+            Drive::Velocity(r) => r.base().derivative(s, applied.applied_velocity()),
         }
     }
 
@@ -268,7 +264,7 @@ impl Drive {
             Drive::Torque { .. } => [s.v, s.omega, applied.u.u1, applied.u.u2],
             Drive::Velocity(r) => {
                 let c = applied.applied_velocity();
-                let (v, w) = r.base.speeds(s, c);
+                let (v, w) = r.base().speeds(s, c);
                 [v, w, c.v, c.omega]
             }
         }
@@ -368,7 +364,7 @@ impl AgentSpec {
                 safety: None,
             };
         };
-        let l = self.placement.l;
+        let l = self.placement.l();
         let guarded = |outcome, deadlock, min_distance| Guarded {
             outcome,
             stale: false,
@@ -386,7 +382,7 @@ impl AgentSpec {
                 },
             ),
             (Sight::Neighbours(nb), Drive::Velocity(r), Command::Velocity(c)) => {
-                let f = filter.velocity(t, me, l, c, &r.base, nb, obstacles);
+                let f = filter.velocity(t, me, l, c, &r.base(), nb, obstacles);
                 (
                     Command::Velocity(f.command),
                     guarded(f.outcome, f.deadlock, f.min_distance),

@@ -35,7 +35,7 @@
 //!   command directly ([`VelocityBase::derivative`] gives `v̇ = 0` for that axis,
 //!   and [`VelocityBase::settle`] writes the command into the state after each
 //!   step). An axis without lag cannot have an acceleration limit (there is no
-//!   acceleration to limit; a rate limit is a lag): [`VelocityBase::validate`]
+//!   acceleration to limit; a rate limit is a lag): [`VelocityBase::new`]
 //!   refuses a finite `a_max` with `τ_v = 0` and likewise for `ω`.
 //!
 //! Integration: classical RK4 with the command held or re-evaluated per stage,
@@ -77,22 +77,18 @@ pub enum AccelLimit {
 /// An unlimited speed or acceleration is `f64::INFINITY`. There is no
 /// `Default`: [`VelocityBase::IDEAL`] is the base the kinematic law's theory
 /// assumes, not a robot; the presets are real ones.
+///
+/// Built through [`VelocityBase::new`] (or a preset), which checks every
+/// parameter, so a `VelocityBase` in hand is always a possible one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VelocityBase {
-    /// Lag of the linear speed `τ_v ≥ 0`, s (0: ideal, `v` follows the command).
-    pub tau_v: f64,
-    /// Lag of the angular speed `τ_ω ≥ 0`, s (0: ideal).
-    pub tau_omega: f64,
-    /// Largest `|v|`, m/s (`> 0`, may be infinite).
-    pub v_max: f64,
-    /// Largest `|ω|`, rad/s (`> 0`, may be infinite).
-    pub omega_max: f64,
-    /// Largest `|v̇|`, m/s² (`> 0`; finite only with `τ_v > 0`).
-    pub a_max: f64,
-    /// Largest `|ω̇|`, rad/s² (`> 0`; finite only with `τ_ω > 0`).
-    pub alpha_max: f64,
-    /// Joint (path-keeping, the default) or per-axis acceleration limits.
-    pub accel: AccelLimit,
+    tau_v: f64,
+    tau_omega: f64,
+    v_max: f64,
+    omega_max: f64,
+    a_max: f64,
+    alpha_max: f64,
+    accel: AccelLimit,
 }
 
 impl VelocityBase {
@@ -181,7 +177,11 @@ impl VelocityBase {
             .map(|(_, p)| *p)
     }
 
-    /// A base with joint acceleration limits, checked ([`VelocityBase::validate`]).
+    /// A base with joint acceleration limits, checked: lags `τ_v`, `τ_ω` (s)
+    /// finite and `≥ 0` (0: ideal, the axis follows the command); limits
+    /// `v_max` (m/s), `ω_max` (rad/s), `a_max` (m/s²), `α_max` (rad/s²) `> 0`
+    /// (infinite: unlimited, NaN refused); no finite acceleration limit on an
+    /// axis without lag. The error names the first field refused.
     pub fn new(
         tau_v: f64,
         tau_omega: f64,
@@ -199,14 +199,62 @@ impl VelocityBase {
             alpha_max,
             accel: AccelLimit::Joint,
         };
-        base.validate()?;
+        base.check()?;
         Ok(base)
+    }
+
+    /// The same base with its acceleration limits acting as `accel`.
+    #[must_use]
+    pub const fn with_accel(self, accel: AccelLimit) -> VelocityBase {
+        VelocityBase { accel, ..self }
+    }
+
+    /// Lag of the linear speed `τ_v ≥ 0`, s (0: ideal, `v` follows the command).
+    #[inline]
+    pub const fn tau_v(&self) -> f64 {
+        self.tau_v
+    }
+
+    /// Lag of the angular speed `τ_ω ≥ 0`, s (0: ideal).
+    #[inline]
+    pub const fn tau_omega(&self) -> f64 {
+        self.tau_omega
+    }
+
+    /// Largest `|v|`, m/s (`> 0`, may be infinite).
+    #[inline]
+    pub const fn v_max(&self) -> f64 {
+        self.v_max
+    }
+
+    /// Largest `|ω|`, rad/s (`> 0`, may be infinite).
+    #[inline]
+    pub const fn omega_max(&self) -> f64 {
+        self.omega_max
+    }
+
+    /// Largest `|v̇|`, m/s² (`> 0`; finite only with `τ_v > 0`).
+    #[inline]
+    pub const fn a_max(&self) -> f64 {
+        self.a_max
+    }
+
+    /// Largest `|ω̇|`, rad/s² (`> 0`; finite only with `τ_ω > 0`).
+    #[inline]
+    pub const fn alpha_max(&self) -> f64 {
+        self.alpha_max
+    }
+
+    /// Joint (path-keeping, the default) or per-axis acceleration limits.
+    #[inline]
+    pub const fn accel(&self) -> AccelLimit {
+        self.accel
     }
 
     /// Checks every parameter: lags finite and `≥ 0`; limits `> 0` (infinite:
     /// unlimited, NaN refused); no finite acceleration limit on an axis without
     /// lag.
-    pub fn validate(&self) -> Result<(), ParamError> {
+    fn check(&self) -> Result<(), ParamError> {
         for (field, tau) in [("tau_v", self.tau_v), ("tau_omega", self.tau_omega)] {
             if !tau.is_finite() {
                 return Err(ParamError::new(field, tau, "must be a finite number"));
@@ -399,14 +447,13 @@ impl VelocityBase {
 /// A velocity-controlled robot: its [`VelocityBase`] and the wheel geometry its
 /// odometry needs (eq. 2). No mass or inertia: the base's own motor loops hide
 /// them behind the lags.
+///
+/// Built through [`VelocityRobot::new`] (or a preset), which checks the wheels.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VelocityRobot {
-    /// Lags and limits.
-    pub base: VelocityBase,
-    /// `l`, half the wheel separation, m.
-    pub half_wheelbase: f64,
-    /// `r`, m.
-    pub wheel_radius: f64,
+    base: VelocityBase,
+    half_wheelbase: f64,
+    wheel_radius: f64,
 }
 
 impl VelocityRobot {
@@ -414,8 +461,8 @@ impl VelocityRobot {
     /// the paper's robots with their motor loops closed.
     pub const IDEAL: VelocityRobot = VelocityRobot {
         base: VelocityBase::IDEAL,
-        half_wheelbase: crate::model::RobotParams::AGENT1.half_wheelbase,
-        wheel_radius: crate::model::RobotParams::AGENT1.wheel_radius,
+        half_wheelbase: crate::model::RobotParams::AGENT1.half_wheelbase(),
+        wheel_radius: crate::model::RobotParams::AGENT1.wheel_radius(),
     };
 
     /// TurtleBot 3 Burger: `r = 0.033 m`, `l = 0.080 m` (`WHEEL_RADIUS`,
@@ -460,17 +507,44 @@ impl VelocityRobot {
             .map(|(_, p)| *p)
     }
 
-    /// Checks the base ([`VelocityBase::validate`]) and the wheels (finite, `> 0`).
-    pub fn validate(&self) -> Result<(), ParamError> {
+    /// The robot on `base` (already checked: [`VelocityBase::new`]) with half
+    /// wheel separation `l` (m) and wheel radius `r` (m), each a finite number
+    /// `> 0`.
+    pub fn new(
+        base: VelocityBase,
+        half_wheelbase: f64,
+        wheel_radius: f64,
+    ) -> Result<VelocityRobot, ParamError> {
         use crate::check::{finite, require};
-        self.base.validate()?;
         for (field, value) in [
-            ("half_wheelbase", self.half_wheelbase),
-            ("wheel_radius", self.wheel_radius),
+            ("half_wheelbase", half_wheelbase),
+            ("wheel_radius", wheel_radius),
         ] {
             require(field, finite(field, value)?, value > 0.0, "must be > 0")?;
         }
-        Ok(())
+        Ok(VelocityRobot {
+            base,
+            half_wheelbase,
+            wheel_radius,
+        })
+    }
+
+    /// Lags and limits.
+    #[inline]
+    pub const fn base(&self) -> VelocityBase {
+        self.base
+    }
+
+    /// `l`, half the wheel separation, m.
+    #[inline]
+    pub const fn half_wheelbase(&self) -> f64 {
+        self.half_wheelbase
+    }
+
+    /// `r`, m.
+    #[inline]
+    pub const fn wheel_radius(&self) -> f64 {
+        self.wheel_radius
     }
 }
 
@@ -481,8 +555,21 @@ mod tests {
     #[test]
     fn presets_are_valid_and_named() {
         for (name, base) in VelocityBase::PRESETS {
-            assert!(base.validate().is_ok(), "{name}");
+            assert!(base.check().is_ok(), "{name}");
+            let rebuilt = VelocityBase::new(
+                base.tau_v,
+                base.tau_omega,
+                base.v_max,
+                base.omega_max,
+                base.a_max,
+                base.alpha_max,
+            );
+            assert_eq!(rebuilt, Ok(base), "{name}");
             assert_eq!(VelocityBase::preset(name), Some(base));
+        }
+        for (name, robot) in VelocityRobot::PRESETS {
+            let rebuilt = VelocityRobot::new(robot.base, robot.half_wheelbase, robot.wheel_radius);
+            assert_eq!(rebuilt, Ok(robot), "{name}");
         }
         assert!(VelocityBase::IDEAL.is_ideal());
         assert!(!VelocityBase::TURTLEBOT3_BURGER.is_ideal());
@@ -491,53 +578,38 @@ mod tests {
 
     #[test]
     fn invalid_parameters_are_refused_by_name() {
-        let field = |b: VelocityBase| b.validate().unwrap_err().field;
         let tb3 = VelocityBase::TURTLEBOT3_BURGER;
-        assert_eq!(field(VelocityBase { tau_v: -0.1, ..tb3 }), "tau_v");
-        assert_eq!(
-            field(VelocityBase {
-                tau_omega: f64::NAN,
-                ..tb3
-            }),
-            "tau_omega"
-        );
-        assert_eq!(field(VelocityBase { v_max: 0.0, ..tb3 }), "v_max");
-        assert_eq!(
-            field(VelocityBase {
-                omega_max: -1.0,
-                ..tb3
-            }),
-            "omega_max"
-        );
-        assert_eq!(
-            field(VelocityBase {
-                a_max: f64::NAN,
-                ..tb3
-            }),
-            "a_max"
-        );
-        assert_eq!(
-            field(VelocityBase {
-                alpha_max: 0.0,
-                ..tb3
-            }),
-            "alpha_max"
-        );
+        // TurtleBot 3's values with one replaced: (τ_v, τ_ω, v_max, ω_max, a_max, α_max).
+        let field = |i: usize, v: f64| {
+            let mut x = [0.1, 0.1, 0.22, 2.84, 2.5, 3.2];
+            x[i] = v;
+            VelocityBase::new(x[0], x[1], x[2], x[3], x[4], x[5])
+                .unwrap_err()
+                .field
+        };
+        assert_eq!(field(0, -0.1), "tau_v");
+        assert_eq!(field(1, f64::NAN), "tau_omega");
+        assert_eq!(field(2, 0.0), "v_max");
+        assert_eq!(field(3, -1.0), "omega_max");
+        assert_eq!(field(4, f64::NAN), "a_max");
+        assert_eq!(field(5, 0.0), "alpha_max");
         // An acceleration limit without a lag is refused on its own axis.
-        assert_eq!(field(VelocityBase { tau_v: 0.0, ..tb3 }), "a_max");
-        assert_eq!(
-            field(VelocityBase {
-                tau_omega: 0.0,
-                ..tb3
-            }),
-            "alpha_max"
-        );
+        assert_eq!(field(0, 0.0), "a_max");
+        assert_eq!(field(1, 0.0), "alpha_max");
         assert!(VelocityBase::new(0.0, 0.0, 0.22, 2.84, f64::INFINITY, f64::INFINITY).is_ok());
         assert_eq!(
             VelocityBase::new(-1.0, 0.1, 1.0, 1.0, 1.0, 1.0)
                 .unwrap_err()
                 .field,
             "tau_v"
+        );
+        assert_eq!(
+            VelocityRobot::new(tb3, 0.0, 0.033).unwrap_err().field,
+            "half_wheelbase"
+        );
+        assert_eq!(
+            VelocityRobot::new(tb3, 0.08, f64::NAN).unwrap_err().field,
+            "wheel_radius"
         );
         // Steps longer than a lag are refused; ideal axes take any step.
         assert_eq!(tb3.check_step(0.2).unwrap_err().field, "tau_v");
@@ -619,10 +691,7 @@ mod tests {
         assert!((s.v - 0.01).abs() < 1e-15 && (s.omega - 0.02).abs() < 1e-15);
         assert!(b.accel_limited(&State::default(), cmd));
         // Per-axis: ω ramps at 4 rad/s² (its own limit), v at 1: the path bends.
-        let p = VelocityBase {
-            accel: AccelLimit::PerAxis,
-            ..b
-        };
+        let p = b.with_accel(AccelLimit::PerAxis);
         let s = p.rk4_step(&State::default(), cmd, 0.01);
         assert!((s.v - 0.01).abs() < 1e-15 && (s.omega - 0.04).abs() < 1e-15);
     }

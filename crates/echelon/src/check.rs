@@ -1,5 +1,5 @@
 //! The rules every parameter is checked against, each written once. The
-//! validating constructors ([`crate::RobotParams::validate`],
+//! validating constructors ([`crate::RobotParams::new`],
 //! [`crate::Gains::new`], [`crate::lycomp::Placement::new`],
 //! [`crate::AgentSpec::new`], [`crate::SimConfig::new`], the references, the
 //! odometry specs, …) are built from these; each returns a [`ParamError`]

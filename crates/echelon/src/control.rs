@@ -29,13 +29,12 @@ use crate::lanes::Real;
 use crate::model::{Input, RobotParams, State};
 use crate::reference::Jet;
 
-/// The backstepping gains.
+/// The backstepping gains, both finite and > 0: built through [`Gains::new`]
+/// (or [`Gains::PAPER`]), so a `Gains` in hand is always a usable one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gains {
-    /// `K_e > 0`: convergence rate of `e` (first step).
-    pub ke: f64,
-    /// `K_z > 0`: convergence rate of `z` (second step).
-    pub kz: f64,
+    ke: f64,
+    kz: f64,
 }
 
 impl Gains {
@@ -44,16 +43,21 @@ impl Gains {
 
     /// Gains for a simulation: both finite and > 0 (eq. 13's `K_e`, `K_z`).
     pub fn new(ke: f64, kz: f64) -> Result<Gains, ParamError> {
-        let gains = Gains { ke, kz };
-        gains.validate()?;
-        Ok(gains)
+        check::positive("ke", ke)?;
+        check::positive("kz", kz)?;
+        Ok(Gains { ke, kz })
     }
 
-    /// [`Gains::new`]'s checks.
-    pub fn validate(&self) -> Result<(), ParamError> {
-        check::positive("ke", self.ke)?;
-        check::positive("kz", self.kz)?;
-        Ok(())
+    /// `K_e > 0`: convergence rate of `e` (first step).
+    #[inline]
+    pub const fn ke(&self) -> f64 {
+        self.ke
+    }
+
+    /// `K_z > 0`: convergence rate of `z` (second step).
+    #[inline]
+    pub const fn kz(&self) -> f64 {
+        self.kz
     }
 }
 
@@ -264,10 +268,10 @@ impl LawRobot {
     #[inline]
     pub(crate) fn new(r: &RobotParams) -> LawRobot {
         LawRobot {
-            m: r.mass,
-            j: r.inertia,
-            eta_m: r.linear_friction / r.mass,
-            psi_j: r.angular_friction / r.inertia,
+            m: r.mass(),
+            j: r.inertia(),
+            eta_m: r.linear_friction() / r.mass(),
+            psi_j: r.angular_friction() / r.inertia(),
         }
     }
 }

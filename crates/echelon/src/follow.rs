@@ -102,7 +102,7 @@ pub fn follow(spec: &AgentSpec, sensed: &State, leader: LeaderView<'_>) -> Follo
             velocity: None,
         },
         Drive::Velocity(_) => {
-            let k = kinematic_law(sensed, &motion, &offset, spec.gains.ke);
+            let k = kinematic_law(sensed, &motion, &offset, spec.gains.ke());
             Follow {
                 law: LawOutput {
                     u: Input::default(),
@@ -177,12 +177,7 @@ mod tests {
     #[test]
     fn a_reference_leader_with_neglected_derivatives_is_its_motion() {
         let s = spec();
-        let c = Circle {
-            start: [0.0, 0.0],
-            heading: 0.0,
-            speed: 0.2,
-            turn_rate: 0.2,
-        };
+        let c = Circle::new([0.0, 0.0], 0.0, 0.2, 0.2).unwrap();
         let jet = c.eval(3.0, Order::Two);
         let me = State::at_rest(-0.3, 0.2, 0.1);
         let a = follow(&s, &me, LeaderView::Reference(&jet));

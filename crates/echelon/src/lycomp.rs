@@ -115,20 +115,17 @@ pub fn fit_rc<D: DualNum<Primitive = f64> + Copy>(rc: D, c: &FitCoefficients) ->
 
 /// A follower's desired placement of its leader: offsets, `L`, and how `L_Y`
 /// follows the leader's curvature.
+///
+/// Built through [`Placement::new`] or [`Placement::tracking`], which check
+/// it, so a `Placement` in hand always has `L_X > 0`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
-    /// `L_Xoff`, m.
-    pub lx_off: f64,
-    /// `L_Yoff`, m.
-    pub ly_off: f64,
-    /// `L > 0`, m: keeps `L_X > 0` (eq. 13 divides by it).
-    pub l: f64,
-    /// How `L_Ycomp` is computed.
-    pub comp: LyComp,
-    /// Whether `L̇_Y`, `L̈_Y` are used.
-    pub derivatives: LyDerivatives,
-    /// Fit coefficients for `lx_off` (used with [`LyComp::Fit`]).
-    pub fit: FitCoefficients,
+    lx_off: f64,
+    ly_off: f64,
+    l: f64,
+    comp: LyComp,
+    derivatives: LyDerivatives,
+    fit: FitCoefficients,
 }
 
 impl Placement {
@@ -157,12 +154,49 @@ impl Placement {
             derivatives,
             fit: FitCoefficients::paper(lx_off),
         };
-        p.validate()?;
+        p.check()?;
         Ok(p)
     }
 
+    /// `L_Xoff`, m.
+    #[inline]
+    pub const fn lx_off(&self) -> f64 {
+        self.lx_off
+    }
+
+    /// `L_Yoff`, m.
+    #[inline]
+    pub const fn ly_off(&self) -> f64 {
+        self.ly_off
+    }
+
+    /// `L > 0`, m: keeps `L_X > 0` (eq. 13 divides by it).
+    #[inline]
+    pub const fn l(&self) -> f64 {
+        self.l
+    }
+
+    /// How `L_Ycomp` is computed (the field `comp`; [`Placement::comp`]
+    /// computes it).
+    #[inline]
+    pub const fn lycomp(&self) -> LyComp {
+        self.comp
+    }
+
+    /// Whether `L̇_Y`, `L̈_Y` are used.
+    #[inline]
+    pub const fn derivatives(&self) -> LyDerivatives {
+        self.derivatives
+    }
+
+    /// Fit coefficients for `lx_off` (used with [`LyComp::Fit`]).
+    #[inline]
+    pub const fn fit(&self) -> FitCoefficients {
+        self.fit
+    }
+
     /// [`Placement::new`]'s checks.
-    pub fn validate(&self) -> Result<(), ParamError> {
+    fn check(&self) -> Result<(), ParamError> {
         check::positive("l", self.l)?;
         check::finite("offset.x", self.lx_off)?;
         check::finite("offset.y", self.ly_off)?;

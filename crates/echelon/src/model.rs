@@ -16,22 +16,62 @@ use serde::{Deserialize, Serialize};
 use crate::error::ParamError;
 
 /// Physical parameters of one robot (paper Table I).
+///
+/// Every value is physical: it can only be built through [`RobotParams::new`]
+/// (and [`RobotParams::with_torque_limit`]), the presets, or deserialised
+/// (which runs the same checks), so a `RobotParams` in hand is always valid.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "RawRobotParams", into = "RawRobotParams")]
 pub struct RobotParams {
-    /// Mass `m`, kg.
-    pub mass: f64,
-    /// Viscous friction on the linear speed `η`, kg/s.
-    pub linear_friction: f64,
-    /// Moment of inertia about the vertical axis `J`, kg m².
-    pub inertia: f64,
-    /// Viscous friction on the angular speed `ψ`, kg m²/s.
-    pub angular_friction: f64,
-    /// Half the distance between the driving wheels `l`, m.
-    pub half_wheelbase: f64,
-    /// Driving wheel radius `r`, m.
-    pub wheel_radius: f64,
-    /// Largest torque magnitude each wheel motor can produce, N m (`None`: unlimited).
-    pub torque_limit: Option<f64>,
+    mass: f64,
+    linear_friction: f64,
+    inertia: f64,
+    angular_friction: f64,
+    half_wheelbase: f64,
+    wheel_radius: f64,
+    torque_limit: Option<f64>,
+}
+
+/// The serialised form of [`RobotParams`]: the same fields, unchecked.
+#[derive(Serialize, Deserialize)]
+struct RawRobotParams {
+    mass: f64,
+    linear_friction: f64,
+    inertia: f64,
+    angular_friction: f64,
+    half_wheelbase: f64,
+    wheel_radius: f64,
+    torque_limit: Option<f64>,
+}
+
+impl TryFrom<RawRobotParams> for RobotParams {
+    type Error = ParamError;
+
+    fn try_from(r: RawRobotParams) -> Result<Self, ParamError> {
+        RobotParams::new(
+            r.mass,
+            r.linear_friction,
+            r.inertia,
+            r.angular_friction,
+            r.half_wheelbase,
+            r.wheel_radius,
+        )?
+        .with_torque_limit(r.torque_limit)
+    }
+}
+
+impl From<RobotParams> for RawRobotParams {
+    fn from(p: RobotParams) -> Self {
+        RawRobotParams {
+            mass: p.mass,
+            linear_friction: p.linear_friction,
+            inertia: p.inertia,
+            angular_friction: p.angular_friction,
+            half_wheelbase: p.half_wheelbase,
+            wheel_radius: p.wheel_radius,
+            torque_limit: p.torque_limit,
+        }
+    }
 }
 
 impl RobotParams {
@@ -71,10 +111,88 @@ impl RobotParams {
             .map(|(_, p)| *p)
     }
 
+    /// A robot without a torque limit, checked: mass `m` (kg), inertia `J`
+    /// (kg m²), half wheelbase `l` (m) and wheel radius `r` (m) strictly
+    /// positive, the frictions `η` (kg/s) and `ψ` (kg m²/s) non-negative,
+    /// everything finite. The error names the first field refused.
+    pub fn new(
+        mass: f64,
+        linear_friction: f64,
+        inertia: f64,
+        angular_friction: f64,
+        half_wheelbase: f64,
+        wheel_radius: f64,
+    ) -> Result<RobotParams, ParamError> {
+        let p = RobotParams {
+            mass,
+            linear_friction,
+            inertia,
+            angular_friction,
+            half_wheelbase,
+            wheel_radius,
+            torque_limit: None,
+        };
+        p.check()?;
+        Ok(p)
+    }
+
+    /// The same robot with wheel motors limited to `±limit` N m each (`None`:
+    /// unlimited); a limit must be a finite number > 0.
+    pub fn with_torque_limit(self, limit: Option<f64>) -> Result<RobotParams, ParamError> {
+        let p = RobotParams {
+            torque_limit: limit,
+            ..self
+        };
+        p.check()?;
+        Ok(p)
+    }
+
+    /// Mass `m`, kg.
+    #[inline]
+    pub const fn mass(&self) -> f64 {
+        self.mass
+    }
+
+    /// Viscous friction on the linear speed `η`, kg/s.
+    #[inline]
+    pub const fn linear_friction(&self) -> f64 {
+        self.linear_friction
+    }
+
+    /// Moment of inertia about the vertical axis `J`, kg m².
+    #[inline]
+    pub const fn inertia(&self) -> f64 {
+        self.inertia
+    }
+
+    /// Viscous friction on the angular speed `ψ`, kg m²/s.
+    #[inline]
+    pub const fn angular_friction(&self) -> f64 {
+        self.angular_friction
+    }
+
+    /// Half the distance between the driving wheels `l`, m.
+    #[inline]
+    pub const fn half_wheelbase(&self) -> f64 {
+        self.half_wheelbase
+    }
+
+    /// Driving wheel radius `r`, m.
+    #[inline]
+    pub const fn wheel_radius(&self) -> f64 {
+        self.wheel_radius
+    }
+
+    /// Largest torque magnitude each wheel motor can produce, N m (`None`: unlimited).
+    #[inline]
+    pub const fn torque_limit(&self) -> Option<f64> {
+        self.torque_limit
+    }
+
     /// Checks that every parameter is physical: mass, inertia, wheel radius and
     /// half wheelbase strictly positive, frictions non-negative, the torque limit
     /// (if any) strictly positive, everything finite.
-    pub fn validate(&self) -> Result<(), ParamError> {
+    fn check(&self) -> Result<(), ParamError> {
         use crate::check::{finite, positive, require};
         for (field, value) in [
             ("mass", self.mass),
@@ -425,7 +543,7 @@ mod tests {
                 agent2 in any::<bool>(),
             ) {
                 let base = if agent2 { RobotParams::AGENT2 } else { RobotParams::AGENT1 };
-                let p = RobotParams { torque_limit: Some(limit), ..base };
+                let p = base.with_torque_limit(Some(limit)).unwrap();
                 let u = Input { u1, u2 };
                 let (out, cut) = p.limit(u);
                 let tau = p.torques(out);
@@ -478,10 +596,7 @@ mod tests {
 
     #[test]
     fn saturation_clamps_each_wheel() {
-        let p = RobotParams {
-            torque_limit: Some(1.0),
-            ..RobotParams::AGENT1
-        };
+        let p = RobotParams::AGENT1.with_torque_limit(Some(1.0)).unwrap();
         let (u, tau) = p.actuate(p.inputs(Torques {
             right: 3.0,
             left: -0.5,
@@ -542,22 +657,22 @@ mod tests {
 
     #[test]
     fn invalid_parameters_are_refused() {
-        let bad = RobotParams {
-            mass: -1.0,
-            ..RobotParams::AGENT1
-        };
-        assert_eq!(bad.validate().unwrap_err().field, "mass");
-        let nan = RobotParams {
-            inertia: f64::NAN,
-            ..RobotParams::AGENT1
-        };
-        assert_eq!(nan.validate().unwrap_err().field, "inertia");
-        let neg_friction = RobotParams {
-            angular_friction: -0.1,
-            ..RobotParams::AGENT1
-        };
-        assert!(neg_friction.validate().is_err());
-        assert!(RobotParams::AGENT1.validate().is_ok());
+        let bad = RobotParams::new(-1.0, 180.0, 1.42, 9.47, 0.23, 0.101);
+        assert_eq!(bad.unwrap_err().field, "mass");
+        let nan = RobotParams::new(27.0, 180.0, f64::NAN, 9.47, 0.23, 0.101);
+        assert_eq!(nan.unwrap_err().field, "inertia");
+        let neg_friction = RobotParams::new(27.0, 180.0, 1.42, -0.1, 0.23, 0.101);
+        assert!(neg_friction.is_err());
+        let zero_limit = RobotParams::AGENT1.with_torque_limit(Some(0.0));
+        assert_eq!(zero_limit.unwrap_err().field, "torque_limit");
+        assert_eq!(
+            RobotParams::new(27.0, 180.0, 1.42, 9.47, 0.23, 0.101),
+            Ok(RobotParams::AGENT1)
+        );
+        assert_eq!(
+            RobotParams::new(25.0, 133.7, 1.03, 5.51, 0.203, 0.10),
+            Ok(RobotParams::AGENT2)
+        );
     }
 
     #[test]

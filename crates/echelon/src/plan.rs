@@ -135,7 +135,7 @@ impl Agents {
                 && a.torque_robot().is_some()
                 && specs[j]
                     .velocity_robot()
-                    .is_some_and(|r| r.base.tau_v == 0.0)
+                    .is_some_and(|r| r.base().tau_v() == 0.0)
             {
                 return Err(FormationError::NoLeaderAcceleration {
                     agent: i + 1,
@@ -186,7 +186,7 @@ impl Plan {
     ) -> Result<Plan, SimError> {
         for (i, a) in agents.iter().enumerate() {
             if let Some(r) = a.velocity_robot() {
-                r.base
+                r.base()
                     .check_step(config.dt)
                     .map_err(|source| SimError::Param {
                         context: format!("agent {} robot", i + 1),
@@ -204,17 +204,17 @@ impl Plan {
         let mut warnings = Vec::new();
         for (i, a) in agents.specs.iter().enumerate() {
             let ctx = format!("agent {}", i + 1);
-            if a.variant() == Some(Variant::Paper) && a.gains.ke * a.gains.kz <= 0.25 {
+            if a.variant() == Some(Variant::Paper) && a.gains.ke() * a.gains.kz() <= 0.25 {
                 warnings.push(format!(
                     "{ctx}: K_e K_z = {} ≤ 1/4: Theorem 1 does not guarantee convergence for the paper law (use law = \"complete\")",
-                    a.gains.ke * a.gains.kz
+                    a.gains.ke() * a.gains.kz()
                 ));
             }
             let (lo, hi) = FitCoefficients::PAPER_RANGE;
-            if a.placement.comp == LyComp::Fit && !(lo..=hi).contains(&a.placement.lx_off) {
+            if a.placement.lycomp() == LyComp::Fit && !(lo..=hi).contains(&a.placement.lx_off()) {
                 warnings.push(format!(
                     "{ctx}: L_Xoff = {} m is outside the range {lo}–{hi} m where the eq. 6 fit holds (use lycomp = \"exact\")",
-                    a.placement.lx_off
+                    a.placement.lx_off()
                 ));
             }
         }
@@ -268,8 +268,9 @@ impl Plan {
                         context: context(),
                         source,
                     };
-                    let k = check::multiple_of("period", spec.period, dt, &format!("dt = {dt} s"))
-                        .map_err(param)?;
+                    let k =
+                        check::multiple_of("period", spec.period(), dt, &format!("dt = {dt} s"))
+                            .map_err(param)?;
                     let (l, r) = a.drive.wheels();
                     let o = Odometer::with_wheels(spec, l, r, &a.start, seed, i as u64)
                         .map_err(param)?;
@@ -306,7 +307,7 @@ impl Plan {
             .agents
             .specs
             .iter()
-            .map(|a| crate::safety::point(&a.start, a.placement.l))
+            .map(|a| crate::safety::point(&a.start, a.placement.l()))
             .collect();
         if let Some((agent, source)) =
             crate::safety::start_conflict(&points, &spec.agents, &spec.obstacles)

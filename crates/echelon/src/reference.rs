@@ -91,16 +91,14 @@ pub trait Trajectory: fmt::Debug + Send + Sync {
 
 /// Eq. 18: the path of a unicycle with constant speed `V_d` and turn rate `ω_d`
 /// from a start pose: a circle of radius `V_d/ω_d`, or a straight line when `ω_d = 0`.
+///
+/// Built through [`Circle::new`], which checks it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Circle {
-    /// Start position `(x_d(0), y_d(0))`, m.
-    pub start: [f64; 2],
-    /// Start heading `θ_d(0)`, rad.
-    pub heading: f64,
-    /// `V_d`, m/s.
-    pub speed: f64,
-    /// `ω_d`, rad/s (0: straight line).
-    pub turn_rate: f64,
+    start: [f64; 2],
+    heading: f64,
+    speed: f64,
+    turn_rate: f64,
 }
 
 impl Circle {
@@ -128,6 +126,30 @@ impl Circle {
             speed,
             turn_rate,
         })
+    }
+
+    /// Start position `(x_d(0), y_d(0))`, m.
+    #[inline]
+    pub const fn start(&self) -> [f64; 2] {
+        self.start
+    }
+
+    /// Start heading `θ_d(0)`, rad.
+    #[inline]
+    pub const fn heading(&self) -> f64 {
+        self.heading
+    }
+
+    /// `V_d ≥ 0`, m/s.
+    #[inline]
+    pub const fn speed(&self) -> f64 {
+        self.speed
+    }
+
+    /// `ω_d`, rad/s (0: straight line).
+    #[inline]
+    pub const fn turn_rate(&self) -> f64 {
+        self.turn_rate
     }
 }
 

@@ -178,15 +178,12 @@ impl SafetyConfig {
     }
 }
 
-/// A static disc obstacle.
+/// A static disc obstacle, built through [`Obstacle::new`] (which checks it).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Obstacle {
-    /// Centre, m.
-    pub x: f64,
-    /// Centre, m.
-    pub y: f64,
-    /// Radius, m (`> 0`).
-    pub r: f64,
+    x: f64,
+    y: f64,
+    r: f64,
 }
 
 impl Obstacle {
@@ -196,6 +193,24 @@ impl Obstacle {
         check::finite("y", y)?;
         check::positive("r", r)?;
         Ok(Obstacle { x, y, r })
+    }
+
+    /// Centre, m.
+    #[inline]
+    pub const fn x(&self) -> f64 {
+        self.x
+    }
+
+    /// Centre, m.
+    #[inline]
+    pub const fn y(&self) -> f64 {
+        self.y
+    }
+
+    /// Radius, m (`> 0`).
+    #[inline]
+    pub const fn r(&self) -> f64 {
+        self.r
     }
 }
 
@@ -407,8 +422,8 @@ impl Envelope {
     /// `(v, w)`: `v̇ = x₁ − η v/m`, `ω̇ = x₂/L − ψ ω/J`.
     fn push_rows(&self, rows: &mut Vec<Constraint>, robot: &RobotParams, l: f64, v: f64, w: f64) {
         let k = self.rate;
-        let dv = robot.linear_friction * v / robot.mass;
-        let dw = robot.angular_friction * w / robot.inertia;
+        let dv = robot.linear_friction() * v / robot.mass();
+        let dw = robot.angular_friction() * w / robot.inertia();
         // v_max − v ≥ 0:      −v̇ ≥ −κ (v_max − v)
         rows.push(Constraint {
             a: [-1.0, 0.0],
@@ -541,7 +556,7 @@ impl SafetyFilter {
             Constraint { a, b }
         });
         let barriers = self.rows.len();
-        push_box(&mut self.rows, [base.v_max, l * base.omega_max]);
+        push_box(&mut self.rows, [base.v_max(), l * base.omega_max()]);
         let (x, outcome, deadlock) = self.decide(t, x0, barriers, [0.0, 0.0]);
         let command = match outcome {
             Outcome::Nominal => limited,
@@ -586,8 +601,8 @@ impl SafetyFilter {
         obstacles: &[Obstacle],
     ) -> Filtered<Input> {
         let own = Own::ahead(me, l, 0.0);
-        let (m, j) = (robot.mass, robot.inertia);
-        let (eta, psi) = (robot.linear_friction, robot.angular_friction);
+        let (m, j) = (robot.mass(), robot.inertia());
+        let (eta, psi) = (robot.linear_friction(), robot.angular_friction());
         let (v, w) = (me.v, me.omega);
         // p̈_i = f + R(θ) x with x = (u1/m, L u2/J).
         let along = -eta * v / m - l * w * w;
@@ -624,11 +639,11 @@ impl SafetyFilter {
         // Barriers and the envelope may give way in an emergency; the wheel
         // torque rows below may not.
         let soft_end = self.rows.len();
-        if let Some(limit) = robot.torque_limit {
+        if let Some(limit) = robot.torque_limit() {
             // τ_r,l = r (u1 ± u2/l_w)/2, |τ| ≤ limit:
             // |m x₁ ± J x₂ /(L l_w)| ≤ 2 limit / r.
-            let bound = 2.0 * limit / robot.wheel_radius;
-            let k = j / (l * robot.half_wheelbase);
+            let bound = 2.0 * limit / robot.wheel_radius();
+            let k = j / (l * robot.half_wheelbase());
             for s in [1.0, -1.0] {
                 for sign in [1.0, -1.0] {
                     self.rows.push(Constraint {
@@ -646,7 +661,7 @@ impl SafetyFilter {
             // within them (the brake is the torque the robot has, not a
             // fixed law). Without (the relaxed answer would be unbounded):
             // friction's brake.
-            Outcome::Braked => match robot.torque_limit.and_then(|_| {
+            Outcome::Braked => match robot.torque_limit().and_then(|_| {
                 // The barriers within the wheel limits, the envelope given up
                 // first; else the least violation of both.
                 let mut keep: Vec<Constraint> = self.rows[..barriers].to_vec();
@@ -869,11 +884,7 @@ mod tests {
     }
 
     fn ideal() -> VelocityBase {
-        VelocityBase {
-            v_max: 0.5,
-            omega_max: 4.0,
-            ..VelocityBase::IDEAL
-        }
+        VelocityBase::new(0.0, 0.0, 0.5, 4.0, f64::INFINITY, f64::INFINITY).unwrap()
     }
 
     #[test]
@@ -1032,8 +1043,8 @@ mod tests {
                         // barriers no more than standing still would.
                         let x = x_of(out.command, l);
                         // (clarabel's tolerance, in x = (v, L ω))
-                        prop_assert!(out.command.v.abs() <= base.v_max + TOLERANCE);
-                        prop_assert!(l * out.command.omega.abs() <= l * base.omega_max + TOLERANCE);
+                        prop_assert!(out.command.v.abs() <= base.v_max() + TOLERANCE);
+                        prop_assert!(l * out.command.omega.abs() <= l * base.omega_max() + TOLERANCE);
                         let worst = |x: [f64; 2]| {
                             rows.iter().map(|c| -c.slack(x)).fold(0.0f64, f64::max)
                         };
@@ -1056,14 +1067,14 @@ mod tests {
                 gain in 0.2..5.0f64,
             ) {
                 let l = 0.05;
-                let robot = RobotParams { torque_limit: Some(3.0), ..RobotParams::AGENT1 };
+                let robot = RobotParams::AGENT1.with_torque_limit(Some(3.0)).unwrap();
                 let config = SafetyConfig::new(0.3, gain, 1.5).unwrap();
                 let ns = outside(&me, l, ns, 0.3);
                 let mut f = SafetyFilter::new(config);
                 let nominal = Input { u1, u2 };
                 let out = f.torque(0.0, &me, l, &robot, nominal, &ns, &[]);
                 let rows = f.constraints().to_vec();
-                let x_of = |u: Input| [u.u1 / robot.mass, l * u.u2 / robot.inertia];
+                let x_of = |u: Input| [u.u1 / robot.mass(), l * u.u2 / robot.inertia()];
                 // Barriers, then the speed envelope (4 rows), then the torque limit (4).
                 let barriers = rows.len() - 8;
                 // The nominal is first limited with its turn kept.
@@ -1086,7 +1097,7 @@ mod tests {
                         // The least-violating command within the wheel
                         // torque limits (the last four rows), else
                         // friction's brake.
-                        let brake = Input { u1: -robot.linear_friction * me.v, u2: -robot.angular_friction * me.omega };
+                        let brake = Input { u1: -robot.linear_friction() * me.v, u2: -robot.angular_friction() * me.omega };
                         if out.command != brake {
                             let x = x_of(out.command);
                             for c in &rows[rows.len() - 4..] {

@@ -290,7 +290,7 @@ impl Observer for SafetyWatch {
         if !sim.has_safety() {
             return Ok(());
         }
-        self.l = sim.agents().iter().map(|a| a.placement.l).collect();
+        self.l = sim.agents().iter().map(|a| a.placement.l()).collect();
         self.obstacles = sim.obstacles().to_vec();
         let radius = sim.safety_radius().unwrap_or(f64::INFINITY);
         self.report = Some(SafetyReport {
@@ -329,7 +329,7 @@ impl Observer for SafetyWatch {
             for (s, &l) in frame.states.iter().zip(&self.l) {
                 let p = crate::safety::point(s, l);
                 for o in &self.obstacles {
-                    *clear = clear.min((p[0] - o.x).hypot(p[1] - o.y) - o.r);
+                    *clear = clear.min((p[0] - o.x()).hypot(p[1] - o.y()) - o.r());
                 }
             }
         }

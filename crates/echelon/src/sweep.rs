@@ -350,15 +350,22 @@ pub fn run_case(
             }
             match a.velocity_robot() {
                 None => {
-                    let t =
-                        Theorem2::new(a.gains.ke, a.gains.kz, case.zeta, omega_max[i], grid.gamma)?;
+                    let t = Theorem2::new(
+                        a.gains.ke(),
+                        a.gains.kz(),
+                        case.zeta,
+                        omega_max[i],
+                        grid.gamma,
+                    )?;
                     let b = t.z_bound(case.fix_every);
-                    widen(b, z_max[i] / b, b / a.gains.ke);
+                    widen(b, z_max[i] / b, b / a.gains.ke());
                 }
                 // The kinematic form is for an ideal base: no lag, and no
                 // speed limit cutting the command once the transient is over.
-                Some(r) if r.base.tau_v == 0.0 && r.base.tau_omega == 0.0 && !saturated[i] => {
-                    let t = KinematicTheorem2::new(a.gains.ke, case.zeta, grid.gamma)?;
+                Some(r)
+                    if r.base().tau_v() == 0.0 && r.base().tau_omega() == 0.0 && !saturated[i] =>
+                {
+                    let t = KinematicTheorem2::new(a.gains.ke(), case.zeta, grid.gamma)?;
                     let e = t.e_bound(case.fix_every);
                     widen(t.z_bound(case.fix_every), e_max[i] / e, e);
                 }

@@ -178,10 +178,7 @@ fn long_chains_agree_as_well_as_their_sensitivity_allows() {
 #[test]
 fn other_laws_placements_and_references_match() {
     let lemniscate = Reference::Lemniscate(Lemniscate::new(2.0, 0.2, [0.0, 0.0]).unwrap());
-    let limited = RobotParams {
-        torque_limit: Some(4.0),
-        ..RobotParams::AGENT2
-    };
+    let limited = RobotParams::AGENT2.with_torque_limit(Some(4.0)).unwrap();
     for (comp, variant, robot, leader_of) in [
         (LyComp::Exact, Variant::Paper, RobotParams::AGENT2, false),
         (LyComp::Exact, Variant::Complete, RobotParams::AGENT2, true),
@@ -302,7 +299,15 @@ fn what_the_engine_cannot_do_is_refused() {
     };
     assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
     let mut specs = f.agent_specs();
-    specs[3].placement.derivatives = LyDerivatives::Exact;
+    let p = specs[3].placement;
+    specs[3].placement = Placement::new(
+        p.lx_off(),
+        p.ly_off(),
+        p.l(),
+        p.lycomp(),
+        LyDerivatives::Exact,
+    )
+    .unwrap();
     assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
     // Impossible values cannot reach the engine: the constructors refuse them.
     let err = Gains::new(1.5, -1.0).unwrap_err();
@@ -314,11 +319,9 @@ fn what_the_engine_cannot_do_is_refused() {
     assert!(Engine::from_plan(&plan).is_err());
     // Odometry: the controllers act on estimates, which the engine does not model.
     let config = SimConfig::new(0.01, 1.0, Timing::Continuous).unwrap();
-    let spec = echelon::odometry::OdometrySpec {
-        period: 0.01,
-        errors: echelon::odometry::ErrorModel::PERFECT,
-        fixes: None,
-    };
+    let spec =
+        echelon::odometry::OdometrySpec::new(0.01, echelon::odometry::ErrorModel::PERFECT, None)
+            .unwrap();
     let plan = Plan::new(f.agent_specs(), f.reference(), config).unwrap();
     let with_odometry = plan
         .clone()

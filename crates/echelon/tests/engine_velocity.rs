@@ -86,7 +86,7 @@ impl Scalar {
                     )
                 }
             };
-            let out = kinematic_law(&xs[i], &leader, &off, m.gains.ke);
+            let out = kinematic_law(&xs[i], &leader, &off, m.gains.ke());
             outs.push((out.e, out.cmd, self.base.limit(out.cmd).0));
         }
         outs
@@ -179,7 +179,7 @@ fn compare(
                 i + 1
             );
             // The limits hold in every state.
-            assert!(e.v.abs() <= base.v_max && e.omega.abs() <= base.omega_max);
+            assert!(e.v.abs() <= base.v_max() && e.omega.abs() <= base.omega_max());
         }
     };
     check(&scalar, &engine);
@@ -208,15 +208,9 @@ fn formation(agents: usize, topology: Topology, seed: u64) -> BenchFormation {
 }
 
 /// A slow base with unequal lags and tight limits (saturates often).
-const SLOW: VelocityBase = VelocityBase {
-    tau_v: 0.2,
-    tau_omega: 0.05,
-    v_max: 0.6,
-    omega_max: 1.2,
-    a_max: 1.0,
-    alpha_max: 4.0,
-    accel: AccelLimit::Joint,
-};
+fn slow() -> VelocityBase {
+    VelocityBase::new(0.2, 0.05, 0.6, 1.2, 1.0, 4.0).unwrap()
+}
 
 /// The bases every test runs: the ideal one, the benchmark's (Jackal), a slow
 /// one with joint and with per-axis acceleration limits, and one whose `ω`
@@ -225,21 +219,11 @@ fn bases() -> Vec<(&'static str, VelocityBase)> {
     vec![
         ("ideal", VelocityBase::IDEAL),
         ("jackal", VelocityBase::JACKAL),
-        ("slow, joint", SLOW),
-        (
-            "slow, per axis",
-            VelocityBase {
-                accel: AccelLimit::PerAxis,
-                ..SLOW
-            },
-        ),
+        ("slow, joint", slow()),
+        ("slow, per axis", slow().with_accel(AccelLimit::PerAxis)),
         (
             "ω without lag",
-            VelocityBase {
-                tau_omega: 0.0,
-                alpha_max: f64::INFINITY,
-                ..SLOW
-            },
+            VelocityBase::new(0.2, 0.0, 0.6, 1.2, 1.0, f64::INFINITY).unwrap(),
         ),
     ]
 }
@@ -262,7 +246,7 @@ fn star_matches_the_scalar_reference() {
             assert!(worst < 1e-9, "{name}: {worst}");
             ticks += saturated;
         }
-        if base.v_max.is_finite() {
+        if base.v_max().is_finite() {
             assert!(ticks > 0, "{name}: the limits never acted");
         }
     }
@@ -286,7 +270,7 @@ fn chain_matches_the_scalar_reference() {
             assert!(worst < 1e-9, "{name}: {worst}");
             ticks += saturated;
         }
-        if base.v_max.is_finite() {
+        if base.v_max().is_finite() {
             assert!(ticks > 0, "{name}: the limits never acted");
         }
     }
@@ -384,11 +368,8 @@ fn bad_batches_are_refused() {
     let err =
         VelocityBatch::new(VelocityBase::JACKAL, Topology::Star, f.reference(), 0.1).unwrap_err();
     assert!(err.to_string().contains("tau_v"), "{err}");
-    let bad = VelocityBase {
-        v_max: -1.0,
-        ..VelocityBase::JACKAL
-    };
-    let err = VelocityBatch::new(bad, Topology::Star, f.reference(), 0.001).unwrap_err();
+    // A base with an impossible limit cannot even be built.
+    let err = VelocityBase::new(0.05, 0.05, -1.0, 4.0, 20.0, 25.0).unwrap_err();
     assert!(err.to_string().contains("v_max"), "{err}");
     let batch =
         VelocityBatch::new(VelocityBase::JACKAL, Topology::Star, f.reference(), 0.001).unwrap();
@@ -441,11 +422,7 @@ fn the_engine_agrees_with_the_simulator() {
                         (Topology::Chain, i) if i > 0 => Leader::Agent(i - 1),
                         _ => Leader::Reference,
                     };
-                    let robot = VelocityRobot {
-                        base,
-                        half_wheelbase: 0.15,
-                        wheel_radius: 0.05,
-                    };
+                    let robot = VelocityRobot::new(base, 0.15, 0.05).unwrap();
                     AgentSpec::velocity(
                         format!("agent {}", i + 1),
                         robot,
@@ -496,7 +473,7 @@ fn the_engine_agrees_with_the_simulator() {
             eprintln!("{name}, {topology:?} of {n}: engine vs simulator, worst {worst:e}");
             assert!(worst < 1e-9, "{name}, {topology:?}: {worst}");
         }
-        if base.v_max.is_finite() {
+        if base.v_max().is_finite() {
             assert!(
                 ticks > 0,
                 "{name}: the limits never acted at the checkpoints"

@@ -34,11 +34,11 @@ fn excitation(robot: &RobotParams) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     };
     let u1 = t
         .iter()
-        .map(|&t| robot.linear_friction * shape(t, 0.7, 2.3, 7.1))
+        .map(|&t| robot.linear_friction() * shape(t, 0.7, 2.3, 7.1))
         .collect();
     let u2 = t
         .iter()
-        .map(|&t| 2.0 * robot.angular_friction * shape(t, 0.5, 1.7, 5.3))
+        .map(|&t| 2.0 * robot.angular_friction() * shape(t, 0.5, 1.7, 5.3))
         .collect();
     (t, u1, u2)
 }
@@ -80,10 +80,10 @@ fn torque_log(robot: &RobotParams, seed: u64, rotate: bool) -> Log {
 fn table_i_robots_within_2_percent_and_intervals_cover_the_truth_in_90_percent_of_50_seeds() {
     for (name, robot) in RobotParams::PRESETS {
         let truth = [
-            ("mass", robot.mass),
-            ("linear_friction", robot.linear_friction),
-            ("inertia", robot.inertia),
-            ("angular_friction", robot.angular_friction),
+            ("mass", robot.mass()),
+            ("linear_friction", robot.linear_friction()),
+            ("inertia", robot.inertia()),
+            ("angular_friction", robot.angular_friction()),
         ];
         let mut covered = [0; 4];
         let mut worst = [0.0_f64; 4];
@@ -126,10 +126,10 @@ fn the_equation_error_guess_is_close_and_the_output_error_fit_is_closer() {
     let id = identify::identify(&torque_log(&robot, 7, true), Model::Torque).unwrap();
     let e = id.get("inertia").unwrap();
     assert!(
-        (e.first_guess - robot.inertia).abs() / robot.inertia < 0.2,
+        (e.first_guess - robot.inertia()).abs() / robot.inertia() < 0.2,
         "{e:?}"
     );
-    assert!((e.value - robot.inertia).abs() <= (e.first_guess - robot.inertia).abs());
+    assert!((e.value - robot.inertia()).abs() <= (e.first_guess - robot.inertia()).abs());
 }
 
 #[test]
@@ -238,10 +238,10 @@ fn an_echelon_run_log_gives_table_i_and_the_identified_robot_reproduces_a_scenar
         add_noise(&mut log, 100 + agent as u64);
         let id = identify::identify(&log, Model::Torque).unwrap();
         for (field, want) in [
-            ("mass", truth.mass),
-            ("linear_friction", truth.linear_friction),
-            ("inertia", truth.inertia),
-            ("angular_friction", truth.angular_friction),
+            ("mass", truth.mass()),
+            ("linear_friction", truth.linear_friction()),
+            ("inertia", truth.inertia()),
+            ("angular_friction", truth.angular_friction()),
         ] {
             let e = id.get(field).unwrap();
             eprintln!("agent {agent} {field}: {e:?} (truth {want})");
@@ -252,7 +252,9 @@ fn an_echelon_run_log_gives_table_i_and_the_identified_robot_reproduces_a_scenar
         }
         // l and r come back from eq. 2 (u and τ logged).
         let [l, r] = id.geometry.unwrap();
-        assert!((l - truth.half_wheelbase).abs() < 1e-9 && (r - truth.wheel_radius).abs() < 1e-9);
+        assert!(
+            (l - truth.half_wheelbase()).abs() < 1e-9 && (r - truth.wheel_radius()).abs() < 1e-9
+        );
 
         // Round trip: the identified block pasted into the circle experiment
         // (the controller then uses the identified m, η, J, ψ) drives the
@@ -289,12 +291,12 @@ fn an_echelon_run_log_gives_table_i_and_the_identified_robot_reproduces_a_scenar
         let off = format!(
             "\n[robots.off]\nmass = {}\nlinear_friction = {}\ninertia = {}\nangular_friction = {}\n\
              half_wheelbase = {}\nwheel_radius = {}\n",
-            1.15 * truth.mass,
-            1.15 * truth.linear_friction,
-            1.15 * truth.inertia,
-            1.15 * truth.angular_friction,
-            truth.half_wheelbase,
-            truth.wheel_radius
+            1.15 * truth.mass(),
+            1.15 * truth.linear_friction(),
+            1.15 * truth.inertia(),
+            1.15 * truth.angular_friction(),
+            truth.half_wheelbase(),
+            truth.wheel_radius()
         );
         let wrong = Scenario::parse(
             &(circle
@@ -531,7 +533,7 @@ fn a_noise_free_log_says_its_intervals_mean_nothing_and_a_noisy_one_does_not() {
     assert!(!block.contains("95 % interval"), "{block}");
     // Exact to rounding.
     let m = id.get("mass").unwrap().value;
-    assert!((m / robot.mass - 1.0).abs() < 1e-9, "{m}");
+    assert!((m / robot.mass() - 1.0).abs() < 1e-9, "{m}");
 
     let noisy = identify::identify(&torque_log(&robot, 1, true), Model::Torque).unwrap();
     assert!(noisy.axes.iter().all(|a| !a.noise_free));
@@ -607,12 +609,15 @@ fn builtins(torque: bool) -> Vec<&'static str> {
 fn truth_of(spec: &AgentSpec) -> Vec<(&'static str, f64)> {
     match (spec.torque_robot(), spec.velocity_robot()) {
         (Some(r), _) => vec![
-            ("mass", r.mass),
-            ("linear_friction", r.linear_friction),
-            ("inertia", r.inertia),
-            ("angular_friction", r.angular_friction),
+            ("mass", r.mass()),
+            ("linear_friction", r.linear_friction()),
+            ("inertia", r.inertia()),
+            ("angular_friction", r.angular_friction()),
         ],
-        (None, Some(b)) => vec![("tau_v", b.base.tau_v), ("tau_omega", b.base.tau_omega)],
+        (None, Some(b)) => vec![
+            ("tau_v", b.base().tau_v()),
+            ("tau_omega", b.base().tau_omega()),
+        ],
         (None, None) => unreachable!(),
     }
 }

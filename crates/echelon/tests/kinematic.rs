@@ -330,10 +330,9 @@ prop_compose! {
         a_max in 0.1..20.0f64, alpha_max in 0.1..30.0f64,
         per_axis in any::<bool>(),
     ) -> VelocityBase {
-        VelocityBase {
-            accel: if per_axis { AccelLimit::PerAxis } else { AccelLimit::Joint },
-            ..VelocityBase::new(tau_v, tau_omega, v_max, omega_max, a_max, alpha_max).unwrap()
-        }
+        VelocityBase::new(tau_v, tau_omega, v_max, omega_max, a_max, alpha_max)
+            .unwrap()
+            .with_accel(if per_axis { AccelLimit::PerAxis } else { AccelLimit::Joint })
     }
 }
 
@@ -354,8 +353,8 @@ proptest! {
         base in any_base(), cmd in any_command(),
     ) {
         let (c, saturated) = base.limit(cmd);
-        prop_assert!(c.v.abs() <= base.v_max && c.omega.abs() <= base.omega_max);
-        let within = cmd.v.abs() <= base.v_max && cmd.omega.abs() <= base.omega_max;
+        prop_assert!(c.v.abs() <= base.v_max() && c.omega.abs() <= base.omega_max());
+        let within = cmd.v.abs() <= base.v_max() && cmd.omega.abs() <= base.omega_max();
         prop_assert_eq!(saturated, !within);
         if within {
             prop_assert_eq!(c, cmd);
@@ -364,7 +363,7 @@ proptest! {
             let cross = c.omega * cmd.v - c.v * cmd.omega;
             prop_assert!(cross.abs() <= 1e-15 * (cmd.omega * cmd.v).abs(), "{cross:e}");
             prop_assert!(c.v * cmd.v >= 0.0 && c.omega * cmd.omega >= 0.0);
-            let reach = (c.v.abs() / base.v_max).max(c.omega.abs() / base.omega_max);
+            let reach = (c.v.abs() / base.v_max()).max(c.omega.abs() / base.omega_max());
             prop_assert!((reach - 1.0).abs() < 1e-15, "{reach}");
         }
     }
@@ -380,27 +379,29 @@ proptest! {
         dt_share in 0.01..1.0f64, on_ray in 0.0..1.0f64,
     ) {
         let (c, _) = base.limit(cmd);
-        let s = State { x: 0.0, y: 0.0, theta, v: v * base.v_max, omega: omega * base.omega_max };
-        let dt = dt_share * base.tau_v.min(base.tau_omega);
+        let s = State { x: 0.0, y: 0.0, theta, v: v * base.v_max(), omega: omega * base.omega_max() };
+        let dt = dt_share * base.tau_v().min(base.tau_omega());
         let next = base.rk4_step(&s, c, dt);
         let tol = 1e-12;
         // A change is the difference of two speeds: it carries their rounding
         // (a few ulps of the speed), whatever its own size.
         let ulps = |a: f64, b: f64| 4.0 * f64::EPSILON * a.abs().max(b.abs());
-        prop_assert!(next.v.abs() <= base.v_max && next.omega.abs() <= base.omega_max);
+        prop_assert!(next.v.abs() <= base.v_max() && next.omega.abs() <= base.omega_max());
         prop_assert!(
-            (next.v - s.v).abs() <= base.a_max * dt * (1.0 + tol) + ulps(next.v, s.v),
-            "{} > {}", (next.v - s.v).abs(), base.a_max * dt
+            (next.v - s.v).abs() <= base.a_max() * dt * (1.0 + tol) + ulps(next.v, s.v),
+            "{} > {}", (next.v - s.v).abs(), base.a_max() * dt
         );
         prop_assert!(
             (next.omega - s.omega).abs()
-                <= base.alpha_max * dt * (1.0 + tol) + ulps(next.omega, s.omega),
-            "{} > {}", (next.omega - s.omega).abs(), base.alpha_max * dt
+                <= base.alpha_max() * dt * (1.0 + tol) + ulps(next.omega, s.omega),
+            "{} > {}", (next.omega - s.omega).abs(), base.alpha_max() * dt
         );
         // on the ray: equal lags, joint limits, a start at on_ray × command
-        let joint = VelocityBase { tau_omega: base.tau_v, accel: AccelLimit::Joint, ..base };
+        let joint = VelocityBase::new(
+            base.tau_v(), base.tau_v(), base.v_max(), base.omega_max(), base.a_max(), base.alpha_max(),
+        ).unwrap();
         let s = State { v: on_ray * c.v, omega: on_ray * c.omega, ..s };
-        let next = joint.rk4_step(&s, c, dt_share * joint.tau_v);
+        let next = joint.rk4_step(&s, c, dt_share * joint.tau_v());
         let cross = next.omega * c.v - next.v * c.omega;
         prop_assert!(cross.abs() <= 1e-12 * (c.v * c.omega).abs().max(1e-300), "{cross:e}");
     }

@@ -157,7 +157,7 @@ fn differentiate(
         off.lx,
         d(off.ly, off.dly),
         d(off.dly, off.ddly),
-        gains.ke,
+        gains.ke(),
     );
     assert_eq!([e[0].re, e[1].re], out.e);
     assert_eq!([z[0].re, z[1].re], out.z);
@@ -200,7 +200,7 @@ proptest! {
         ke in 0.05..5.0f64, kz in 0.05..30.0f64, complete in any::<bool>(),
     ) {
         let variant = if complete { Variant::Complete } else { Variant::Paper };
-        let gains = Gains { ke, kz };
+        let gains = Gains::new(ke, kz).unwrap();
         let i = differentiate(&robot, s, pd, dpd, ddpd, off, gains, variant);
         let extra = if complete { [i.e[0], i.e[1]] } else { [0.0, 0.0] };
         for (k, extra) in extra.iter().enumerate() {
@@ -219,19 +219,19 @@ proptest! {
         (robot, s, [pd, dpd, ddpd], off) in instant_inputs(),
         ke in 0.05..5.0f64, margin in 1.01..50.0f64,
     ) {
-        let gains = Gains { ke, kz: margin * 0.25 / ke };
+        let gains = Gains::new(ke, margin * 0.25 / ke).unwrap();
         let i = differentiate(&robot, s, pd, dpd, ddpd, off, gains, Variant::Paper);
         let vdot = i.e[0] * i.de[0] + i.e[1] * i.de[1] + i.z[0] * i.dz[0] + i.z[1] * i.dz[1];
         let size = i.e[0].powi(2) + i.e[1].powi(2) + i.z[0].powi(2) + i.z[1].powi(2);
         prop_assume!(size > 1e-12);
-        prop_assert!(vdot < 0.0, "V̇₂ = {} with K_e K_z = {}", vdot, ke * gains.kz);
+        prop_assert!(vdot < 0.0, "V̇₂ = {} with K_e K_z = {}", vdot, ke * gains.kz());
     }
 }
 
 #[test]
 fn paper_law_can_increase_v2_when_ke_kz_is_below_a_quarter() {
     // The cross term eᵀz is real: with K_e K_z < 1/4 and e ∥ z, V̇₂ > 0.
-    let gains = Gains { ke: 0.1, kz: 0.5 };
+    let gains = Gains::new(0.1, 0.5).unwrap();
     let (e, z) = ([1.0, 0.0], [1.0, 0.0]);
     assert!(lyapunov_rate(e, z, gains, Variant::Paper) > 0.0);
     assert!(lyapunov_rate(e, z, gains, Variant::Complete) < 0.0);

@@ -42,11 +42,7 @@ fn arc(start: Pose, v: f64, w: f64, t: f64) -> (State, f64) {
 }
 
 fn odometer(errors: ErrorModel, period: f64, fixes: Option<FixSpec>, start: &State) -> Odometer {
-    let spec = OdometrySpec {
-        period,
-        errors,
-        fixes,
-    };
+    let spec = OdometrySpec::new(period, errors, fixes).unwrap();
     Odometer::new(spec, &RobotParams::AGENT1, start, 1, 0).unwrap()
 }
 

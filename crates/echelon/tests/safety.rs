@@ -32,7 +32,7 @@ fn run(name: &str, filter: bool) -> (Option<SafetyReport>, f64, f64, Vec<f64>) {
     let run = s.build(&Overrides::default()).unwrap();
     let sim = &mut run.simulation();
     assert_eq!(sim.has_safety(), filter);
-    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement.l).collect();
+    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement.l()).collect();
     let (mut closest, mut clearance) = (f64::INFINITY, f64::INFINITY);
     let mut every = |f: &Frame<'_>| -> Result<(), ObserverError> {
         closest = closest.min(SafetyWatch::closest_pair(f.states, &l).unwrap().0);
@@ -102,11 +102,7 @@ fn the_torque_column_goes_around_the_posts() {
 fn a_head_on_deadlock_is_broken_and_both_robots_arrive() {
     let l = 0.1;
     let config = SafetyConfig::new(0.4, 1.0, f64::INFINITY).unwrap();
-    let base = VelocityBase {
-        v_max: 0.5,
-        omega_max: 4.0,
-        ..VelocityBase::IDEAL
-    };
+    let base = VelocityBase::new(0.0, 0.0, 0.5, 4.0, f64::INFINITY, f64::INFINITY).unwrap();
     let mut robots = [
         State::at_rest(-2.0, 0.0, 0.0),
         State::at_rest(2.0, 0.0, std::f64::consts::PI),
@@ -180,8 +176,8 @@ fn a_torque_head_on_deadlock_is_broken_and_both_robots_arrive() {
     let mut accelerations = [[0.0; 2]; 2];
     let goals = [[2.0, 0.0], [-2.0, 0.0]];
     let mut filters = [SafetyFilter::new(config), SafetyFilter::new(config)];
-    let (m, j) = (robot.mass, robot.inertia);
-    let (eta, psi) = (robot.linear_friction, robot.angular_friction);
+    let (m, j) = (robot.mass(), robot.inertia());
+    let (eta, psi) = (robot.linear_friction(), robot.angular_friction());
     let dt = 0.01;
     let mut closest = f64::INFINITY;
     for step in 0..8000 {

@@ -585,7 +585,7 @@ fn the_readme_example_scenario_builds_and_runs() {
     assert_eq!(
         run.plan.agents()[1]
             .torque_robot()
-            .and_then(|r| r.torque_limit),
+            .and_then(|r| r.torque_limit()),
         Some(5.0)
     );
     let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };

@@ -14,7 +14,7 @@ fn logged_errors(src: &str) -> (Vec<Vec<[f64; 2]>>, Vec<f64>, f64) {
         .build(&Overrides::default())
         .unwrap();
     let n = run.plan.agents().len();
-    let ke: Vec<f64> = run.plan.agents().iter().map(|a| a.gains.ke).collect();
+    let ke: Vec<f64> = run.plan.agents().iter().map(|a| a.gains.ke()).collect();
     let dt = run.plan.config().dt;
     let mut e = vec![Vec::new(); n];
     let mut log = |f: &Frame<'_>| -> Result<(), ObserverError> {
@@ -153,7 +153,7 @@ fn lagged_limited_bases_hold_their_limits_and_converge() {
                 })
                 .unwrap();
             let dt = run.plan.config().dt;
-            let b = run.plan.agents()[0].velocity_robot().unwrap().base;
+            let b = run.plan.agents()[0].velocity_robot().unwrap().base();
             let tol = 1e-12;
             let mut prev: Option<Vec<(f64, f64)>> = None;
             let mut last_e = Vec::new();
@@ -161,13 +161,13 @@ fn lagged_limited_bases_hold_their_limits_and_converge() {
                 let now: Vec<(f64, f64)> = f.states.iter().map(|s| (s.v, s.omega)).collect();
                 for (s, o) in f.states.iter().zip(f.outputs) {
                     let c = o.velocity.unwrap().applied;
-                    assert!(s.v.abs() <= b.v_max + tol && s.omega.abs() <= b.omega_max + tol);
-                    assert!(c.v.abs() <= b.v_max + tol && c.omega.abs() <= b.omega_max + tol);
+                    assert!(s.v.abs() <= b.v_max() + tol && s.omega.abs() <= b.omega_max() + tol);
+                    assert!(c.v.abs() <= b.v_max() + tol && c.omega.abs() <= b.omega_max() + tol);
                 }
                 if let Some(p) = &prev {
                     for ((v0, w0), (v1, w1)) in p.iter().zip(&now) {
-                        assert!((v1 - v0).abs() <= b.a_max * dt * (1.0 + 1e-9) + tol);
-                        assert!((w1 - w0).abs() <= b.alpha_max * dt * (1.0 + 1e-9) + tol);
+                        assert!((v1 - v0).abs() <= b.a_max() * dt * (1.0 + 1e-9) + tol);
+                        assert!((w1 - w0).abs() <= b.alpha_max() * dt * (1.0 + 1e-9) + tol);
                     }
                 }
                 prev = Some(now);

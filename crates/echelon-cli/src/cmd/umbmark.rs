@@ -58,8 +58,8 @@ pub(crate) fn umbmark(a: &UmbmarkArgs) -> Result<()> {
     let test = SquareTest {
         side: a.side,
         runs: a.runs,
-        wheel_radius: robot.wheel_radius,
-        half_wheelbase: robot.half_wheelbase,
+        wheel_radius: robot.wheel_radius(),
+        half_wheelbase: robot.half_wheelbase(),
         errors: ErrorModel {
             wheel_diameter_ratio: a.ed,
             wheelbase_ratio: a.eb,
@@ -127,8 +127,8 @@ fn print(
     outln!(
         "UMBmark: {} m square, {source}; nominal r = {} m, b = {} m",
         a.side,
-        robot.wheel_radius,
-        2.0 * robot.half_wheelbase
+        robot.wheel_radius(),
+        2.0 * robot.half_wheelbase()
     )?;
     outln!("  run  dir        ε_x (m)      ε_y (m)")?;
     for e in errors {

@@ -88,7 +88,7 @@ fn safety_in(plan: &Plan, agent: u32) -> Option<RobotSafety> {
     Some(RobotSafety {
         config,
         obstacles: plan.obstacles().to_vec(),
-        l: plan.agents().iter().map(|a| a.placement.l).collect(),
+        l: plan.agents().iter().map(|a| a.placement.l()).collect(),
         cooperative: (0..n).map(|i| plan.safety_of(i).is_some()).collect(),
     })
 }

@@ -119,7 +119,7 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
             )));
         };
         let ros = Ros2Endpoint::declare(&session, &link, opts.agent)?;
-        let drive = Ros2Drive::new(link, robot.base, ros.gid, ZenohCmdSink(&ros.publisher));
+        let drive = Ros2Drive::new(link, robot.base(), ros.gid, ZenohCmdSink(&ros.publisher));
         let robot = Robot::new(config, drive, net::rand_source());
         let clock = driver.clock;
         let (robot, result) = driver.run(robot, stop, |robot| {

@@ -302,7 +302,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         .map_err(|e| FleetError::Zenoh(format!("declaring {odom_key}: {e}")))?;
 
     let clock = FleetClock::new(opts.time_scale);
-    let model = SimulatedVelocityBase::new(robot.base, spec.start, 0.0, PLANT_STEP);
+    let model = SimulatedVelocityBase::new(robot.base(), spec.start, 0.0, PLANT_STEP);
     let mut base = SimBase::new(link.clone(), model, gid_from_token(&odom_token));
     let nap = Duration::from_millis(20);
     while !stop.is_raised() {

@@ -441,11 +441,8 @@ mod tests {
 
     #[test]
     fn commands_are_limited_finite_stamped_and_attached() {
-        let base = VelocityBase {
-            v_max: 0.2,
-            omega_max: 1.0,
-            ..VelocityBase::IDEAL
-        };
+        let base = VelocityBase::new(0.0, 0.0, 0.2, 1.0, f64::INFINITY, f64::INFINITY)
+            .expect("an ideal base with speed limits");
         let mut d = drive(base);
         let act = d.command(Command::Velocity(VelocityCommand { v: 0.4, omega: 0.5 }));
         let (applied, saturated) = act.velocity.expect("velocity");

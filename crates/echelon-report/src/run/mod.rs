@@ -345,12 +345,12 @@ fn built(scenario: &Scenario, dt: f64) -> Built {
                     .iter()
                     .map(|a| {
                         a.velocity_robot().map(|r| SpeedLimits {
-                            v_max: r.base.v_max,
-                            omega_max: r.base.omega_max,
+                            v_max: r.base().v_max(),
+                            omega_max: r.base().omega_max(),
                         })
                     })
                     .collect(),
-                l: agents.iter().map(|a| a.placement.l).collect(),
+                l: agents.iter().map(|a| a.placement.l()).collect(),
                 obstacles: run.plan.obstacles().to_vec(),
             }
         },

@@ -45,12 +45,9 @@ impl BenchFormation {
 
     /// The virtual leader: eq. 18 with `V_d = 0.5 m/s`, `ω_d = 0.1 rad/s`.
     pub fn reference(&self) -> Reference {
-        Reference::Circle(Circle {
-            start: [0.0, 0.0],
-            heading: 0.0,
-            speed: 0.5,
-            turn_rate: 0.1,
-        })
+        Reference::Circle(
+            Circle::new([0.0, 0.0], 0.0, 0.5, 0.1).expect("the bench's circle is valid"),
+        )
     }
 
     /// The robots, in order.
@@ -150,13 +147,13 @@ mod tests {
         for m in &a {
             assert!(m.start.x.abs() <= 2.0 && m.start.y.abs() <= 2.0);
             assert!(m.start.theta.abs() <= std::f64::consts::PI);
-            assert!((0.2..0.8).contains(&m.placement.lx_off));
-            assert!(m.placement.ly_off.abs() <= 1.0);
+            assert!((0.2..0.8).contains(&m.placement.lx_off()));
+            assert!(m.placement.ly_off().abs() <= 1.0);
             assert_eq!((m.start.v, m.start.omega), (0.0, 0.0));
         }
         // Uniform draws: the means are near the middles.
         let mean = |f: &dyn Fn(&Member) -> f64| a.iter().map(f).sum::<f64>() / a.len() as f64;
         assert!(mean(&|m| m.start.x).abs() < 0.2);
-        assert!((mean(&|m| m.placement.lx_off) - 0.5).abs() < 0.03);
+        assert!((mean(&|m| m.placement.lx_off()) - 0.5).abs() < 0.03);
     }
 }

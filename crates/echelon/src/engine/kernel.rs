@@ -841,7 +841,7 @@ mod tests {
                     ddp: [leader[i][4], leader[i][5]],
                 };
                 let off = Offset { lx: hold[i].0, ly: hold[i].1, dly: 0.0, ddly: 0.0 };
-                let g = Gains { ke: gains[i].0, kz: gains[i].1 };
+                let g = Gains::new(gains[i].0, gains[i].1).unwrap();
                 let want = law(&robot, &s, &m, &off, g, variant);
                 prop_assert_eq!(want.u.u1.to_bits(), u[0].0[i].to_bits());
                 prop_assert_eq!(want.u.u2.to_bits(), u[1].0[i].to_bits());

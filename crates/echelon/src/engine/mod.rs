@@ -231,8 +231,8 @@ pub type Engine = BatchEngine<Torque>;
 pub type VelocityEngine = BatchEngine<Velocity>;
 
 impl Batch {
-    /// What a batch's agents share, refusing an impossible robot
-    /// ([`RobotParams::validate`]) or a step that is not a finite number > 0.
+    /// What a batch's agents share (its robot is valid by construction,
+    /// [`RobotParams::new`]), refusing a step that is not a finite number > 0.
     pub fn new(
         robot: RobotParams,
         variant: Variant,
@@ -245,7 +245,6 @@ impl Batch {
             move |source| SimError::Param { context, source }
         };
         check::positive("dt", dt).map_err(param("sim"))?;
-        robot.validate().map_err(param("robot"))?;
         Ok(Batch {
             robot,
             variant,
@@ -261,8 +260,6 @@ impl Member {
     /// [`Placement::new`] and [`Gains::new`] refuse.
     pub fn new(start: State, placement: Placement, gains: Gains) -> Result<Member, ParamError> {
         start.validate_start()?;
-        placement.validate()?;
-        gains.validate()?;
         Ok(Member {
             start,
             placement,
@@ -278,10 +275,10 @@ impl Engine {
         batch: Batch,
         members: impl IntoIterator<Item = Member>,
     ) -> Result<Engine, EngineError> {
-        let limit = batch.robot.torque_limit.map(|tau| Limit {
+        let limit = batch.robot.torque_limit().map(|tau| Limit {
             tau,
-            r: batch.robot.wheel_radius,
-            l: batch.robot.half_wheelbase,
+            r: batch.robot.wheel_radius(),
+            l: batch.robot.half_wheelbase(),
         });
         if limit.is_some() && batch.topology == Topology::Chain {
             return Err(EngineError::Unsupported(
@@ -293,10 +290,10 @@ impl Engine {
         let r = &batch.robot;
         let consts = Consts {
             law: LawRobot::new(r),
-            eta: r.linear_friction,
-            psi: r.angular_friction,
-            inv_m: 1.0 / r.mass,
-            inv_j: 1.0 / r.inertia,
+            eta: r.linear_friction(),
+            psi: r.angular_friction(),
+            inv_m: 1.0 / r.mass(),
+            inv_j: 1.0 / r.inertia(),
             variant: batch.variant,
             comp,
             limit,
@@ -633,8 +630,8 @@ fn pack(
             )));
         }
         match comp {
-            None => comp = Some(m.placement.comp),
-            Some(c) if c != m.placement.comp => {
+            None => comp = Some(m.placement.lycomp()),
+            Some(c) if c != m.placement.lycomp() => {
                 return Err(EngineError::Unsupported(format!(
                     "mixed L_Ycomp modes (agent {n} differs from agent 1)"
                 )));
@@ -665,18 +662,18 @@ fn pack(
 /// `live` lanes are agents.
 fn block(m: &[Member], live: usize) -> Block {
     let lane = |f: &dyn Fn(&Member) -> f64| -> V { Lanes(std::array::from_fn(|l| f(&m[l]))) };
-    let comp: [V; 3] = match m[0].placement.comp {
+    let comp: [V; 3] = match m[0].placement.lycomp() {
         LyComp::Fit => [
-            lane(&|a| 2.0 * a.placement.fit.g),
-            lane(&|a| 1.0 / a.placement.fit.delta),
+            lane(&|a| 2.0 * a.placement.fit().g),
+            lane(&|a| 1.0 / a.placement.fit().delta),
             lane(&|a| {
-                let k = a.placement.fit.epsilon / a.placement.fit.delta;
+                let k = a.placement.fit().epsilon / a.placement.fit().delta;
                 k * k
             }),
         ],
         LyComp::Exact => [
-            lane(&|a| a.placement.lx_off),
-            lane(&|a| a.placement.lx_off * a.placement.lx_off),
+            lane(&|a| a.placement.lx_off()),
+            lane(&|a| a.placement.lx_off() * a.placement.lx_off()),
             lane(&|_| 0.0),
         ],
         LyComp::None => [lane(&|_| 0.0); 3],
@@ -691,9 +688,9 @@ fn block(m: &[Member], live: usize) -> Block {
         ],
         lx: lane(&|a| a.placement.lx()),
         inv_lx: lane(&|a| 1.0 / a.placement.lx()),
-        ly_off: lane(&|a| a.placement.ly_off),
-        ke: lane(&|a| a.gains.ke),
-        kz: lane(&|a| a.gains.kz),
+        ly_off: lane(&|a| a.placement.ly_off()),
+        ke: lane(&|a| a.gains.ke()),
+        kz: lane(&|a| a.gains.kz()),
         comp,
         live: Mask(std::array::from_fn(|l| if l < live { u64::MAX } else { 0 })),
     }

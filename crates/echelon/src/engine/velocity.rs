@@ -647,8 +647,8 @@ pub struct VelocityBatch {
 
 impl VelocityBatch {
     /// What a velocity batch's agents share (the kinematic law on one base),
-    /// refusing an impossible base ([`VelocityBase::validate`]), a step that
-    /// is not a finite number > 0 or one longer than a lag
+    /// (its base is possible by construction, [`VelocityBase::new`]), refusing
+    /// a step that is not a finite number > 0 or one longer than a lag
     /// ([`VelocityBase::check_step`]).
     pub fn new(
         base: VelocityBase,
@@ -661,7 +661,6 @@ impl VelocityBatch {
             move |source| SimError::Param { context, source }
         };
         check::positive("dt", dt).map_err(param("sim"))?;
-        base.validate().map_err(param("base"))?;
         base.check_step(dt).map_err(param("base"))?;
         Ok(VelocityBatch {
             base,
@@ -815,13 +814,13 @@ impl VelocityEngine {
         let c = VConsts {
             comp,
             dt: batch.dt,
-            lag: [b.tau_v > 0.0, b.tau_omega > 0.0],
-            inv_tau: [b.tau_v, b.tau_omega].map(|t| if t > 0.0 { 1.0 / t } else { 0.0 }),
-            max: [b.v_max, b.omega_max],
-            inv_max: [inv(b.v_max), inv(b.omega_max)],
-            acc: [b.a_max, b.alpha_max],
-            inv_acc: [inv(b.a_max), inv(b.alpha_max)],
-            accel: b.accel,
+            lag: [b.tau_v() > 0.0, b.tau_omega() > 0.0],
+            inv_tau: [b.tau_v(), b.tau_omega()].map(|t| if t > 0.0 { 1.0 / t } else { 0.0 }),
+            max: [b.v_max(), b.omega_max()],
+            inv_max: [inv(b.v_max()), inv(b.omega_max())],
+            acc: [b.a_max(), b.alpha_max()],
+            inv_acc: [inv(b.a_max()), inv(b.alpha_max())],
+            accel: b.accel(),
         };
         let blocks = blocks.iter().flat_map(VBlock::of).collect();
         Ok(BatchEngine::assemble(

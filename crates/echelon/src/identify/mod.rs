@@ -663,22 +663,21 @@ impl Identified {
     /// The identified torque-driven robot, when every parameter it needs is
     /// known (`m, η, J, ψ` and the geometry, taken from `geometry` or else
     /// `fallback`) and the robot they make is a valid one
-    /// ([`RobotParams::validate`]: a fit that gives a mass or a friction
+    /// ([`RobotParams::new`]: a fit that gives a mass or a friction
     /// that is not > 0 gives no robot).
     pub fn robot_params(&self, fallback: Option<&RobotParams>) -> Option<RobotParams> {
         let [l, r] = self
             .geometry
-            .or_else(|| fallback.map(|p| [p.half_wheelbase, p.wheel_radius]))?;
-        let robot = RobotParams {
-            mass: self.get("mass")?.value,
-            linear_friction: self.get("linear_friction")?.value,
-            inertia: self.get("inertia")?.value,
-            angular_friction: self.get("angular_friction")?.value,
-            half_wheelbase: l,
-            wheel_radius: r,
-            torque_limit: None,
-        };
-        robot.validate().ok().map(|()| robot)
+            .or_else(|| fallback.map(|p| [p.half_wheelbase(), p.wheel_radius()]))?;
+        RobotParams::new(
+            self.get("mass")?.value,
+            self.get("linear_friction")?.value,
+            self.get("inertia")?.value,
+            self.get("angular_friction")?.value,
+            l,
+            r,
+        )
+        .ok()
     }
 
     /// The `[robots.NAME]` block: identified parameters as fields, each with
@@ -1255,15 +1254,15 @@ pub fn simulate_torque(robot: &RobotParams, t: &[f64], u1: &[f64], u2: &[f64]) -
         simulate_axis(
             t,
             u1,
-            robot.mass / robot.linear_friction,
-            1.0 / robot.linear_friction,
+            robot.mass() / robot.linear_friction(),
+            1.0 / robot.linear_friction(),
             0.0,
         ),
         simulate_axis(
             t,
             u2,
-            robot.inertia / robot.angular_friction,
-            1.0 / robot.angular_friction,
+            robot.inertia() / robot.angular_friction(),
+            1.0 / robot.angular_friction(),
             0.0,
         ),
     ]

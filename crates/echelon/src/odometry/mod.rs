@@ -249,15 +249,13 @@ impl FixSpec {
     }
 }
 
-/// One robot's odometry: sampling period, errors and fixes.
+/// One robot's odometry: sampling period, errors and fixes. Built through
+/// [`OdometrySpec::new`], which checks all three.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OdometrySpec {
-    /// Sampling period of the encoders, s (a whole multiple of the simulation step).
-    pub period: f64,
-    /// What makes the encoders lie.
-    pub errors: ErrorModel,
-    /// Absolute fixes, if any.
-    pub fixes: Option<FixSpec>,
+    period: f64,
+    errors: ErrorModel,
+    fixes: Option<FixSpec>,
 }
 
 impl OdometrySpec {
@@ -276,6 +274,24 @@ impl OdometrySpec {
         };
         spec.validate()?;
         Ok(spec)
+    }
+
+    /// Sampling period of the encoders, s (a whole multiple of the simulation step).
+    #[inline]
+    pub const fn period(&self) -> f64 {
+        self.period
+    }
+
+    /// What makes the encoders lie.
+    #[inline]
+    pub const fn errors(&self) -> ErrorModel {
+        self.errors
+    }
+
+    /// Absolute fixes, if any.
+    #[inline]
+    pub const fn fixes(&self) -> Option<FixSpec> {
+        self.fixes
     }
 
     /// [`OdometrySpec::new`]'s checks; the samples between fixes (0: no fixes).
@@ -341,8 +357,8 @@ impl Odometer {
     ) -> Result<Odometer, ParamError> {
         Odometer::with_wheels(
             spec,
-            robot.half_wheelbase,
-            robot.wheel_radius,
+            robot.half_wheelbase(),
+            robot.wheel_radius(),
             start,
             seed,
             stream,

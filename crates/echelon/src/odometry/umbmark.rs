@@ -64,8 +64,8 @@ impl SquareTest {
         SquareTest {
             side: 4.0,
             runs: 5,
-            wheel_radius: robot.wheel_radius,
-            half_wheelbase: robot.half_wheelbase,
+            wheel_radius: robot.wheel_radius(),
+            half_wheelbase: robot.half_wheelbase(),
             errors,
             seed,
         }

@@ -172,9 +172,9 @@ impl Builder<'_> {
         };
         let mut warnings = Vec::new();
         for (i, a) in specs.iter().enumerate() {
-            let mut gains = vec![("ke", "K_e", a.gains.ke)];
+            let mut gains = vec![("ke", "K_e", a.gains.ke())];
             if a.law() != Law::Kinematic {
-                gains.push(("kz", "K_z", a.gains.kz));
+                gains.push(("kz", "K_z", a.gains.kz()));
             }
             let Some((key, symbol, k)) = gains
                 .into_iter()
@@ -285,7 +285,7 @@ impl Builder<'_> {
         let points: Vec<[f64; 2]> = agents
             .specs()
             .iter()
-            .map(|a| crate::safety::point(&a.start, a.placement.l))
+            .map(|a| crate::safety::point(&a.start, a.placement.l()))
             .collect();
         if let Some((i, e)) = crate::safety::start_conflict(&points, &configs, &obstacles) {
             return Err(self
@@ -468,28 +468,32 @@ impl Builder<'_> {
                 )
             })
         };
-        let params = RobotParams {
-            mass: field(r.mass, base.map(|b| b.mass), "mass")?,
-            linear_friction: field(
+        let params = RobotParams::new(
+            field(r.mass, base.map(|b| b.mass()), "mass")?,
+            field(
                 r.linear_friction,
-                base.map(|b| b.linear_friction),
+                base.map(|b| b.linear_friction()),
                 "linear_friction",
             )?,
-            inertia: field(r.inertia, base.map(|b| b.inertia), "inertia")?,
-            angular_friction: field(
+            field(r.inertia, base.map(|b| b.inertia()), "inertia")?,
+            field(
                 r.angular_friction,
-                base.map(|b| b.angular_friction),
+                base.map(|b| b.angular_friction()),
                 "angular_friction",
             )?,
-            half_wheelbase: field(
+            field(
                 r.half_wheelbase,
-                base.map(|b| b.half_wheelbase),
+                base.map(|b| b.half_wheelbase()),
                 "half_wheelbase",
             )?,
-            wheel_radius: field(r.wheel_radius, base.map(|b| b.wheel_radius), "wheel_radius")?,
-            torque_limit: r.torque_limit.or(base.and_then(|b| b.torque_limit)),
-        };
-        self.within(&at, params.validate())?;
+            field(
+                r.wheel_radius,
+                base.map(|b| b.wheel_radius()),
+                "wheel_radius",
+            )?,
+        )
+        .and_then(|p| p.with_torque_limit(r.torque_limit.or(base.and_then(|b| b.torque_limit()))));
+        let params = self.within(&at, params)?;
         Ok(Body::Torque(params))
     }
 
@@ -515,21 +519,24 @@ impl Builder<'_> {
             (_, Some(p)) => p,
             (None, None) => VelocityRobot::IDEAL,
         };
-        let b = from.base;
-        let robot = VelocityRobot {
-            base: VelocityBase {
-                tau_v: r.tau_v.unwrap_or(b.tau_v),
-                tau_omega: r.tau_omega.unwrap_or(b.tau_omega),
-                v_max: r.v_max.unwrap_or(b.v_max),
-                omega_max: r.omega_max.unwrap_or(b.omega_max),
-                a_max: r.a_max.unwrap_or(b.a_max),
-                alpha_max: r.alpha_max.unwrap_or(b.alpha_max),
-                accel: r.accel.unwrap_or(b.accel),
-            },
-            half_wheelbase: r.half_wheelbase.unwrap_or(from.half_wheelbase),
-            wheel_radius: r.wheel_radius.unwrap_or(from.wheel_radius),
-        };
-        self.within(at, robot.validate())?;
+        let b = from.base();
+        let robot = VelocityBase::new(
+            r.tau_v.unwrap_or(b.tau_v()),
+            r.tau_omega.unwrap_or(b.tau_omega()),
+            r.v_max.unwrap_or(b.v_max()),
+            r.omega_max.unwrap_or(b.omega_max()),
+            r.a_max.unwrap_or(b.a_max()),
+            r.alpha_max.unwrap_or(b.alpha_max()),
+        )
+        .map(|base| base.with_accel(r.accel.unwrap_or(b.accel())))
+        .and_then(|base| {
+            VelocityRobot::new(
+                base,
+                r.half_wheelbase.unwrap_or(from.half_wheelbase()),
+                r.wheel_radius.unwrap_or(from.wheel_radius()),
+            )
+        });
+        let robot = self.within(at, robot)?;
         Ok(robot)
     }
 
@@ -670,8 +677,8 @@ impl Builder<'_> {
         };
         // Each control setting: the agent's own, else [control], else the paper's.
         let control = self.control(i);
-        let (ke, _) = control.get_or(|c| c.ke, "ke", Gains::PAPER.ke);
-        let (kz, _) = control.get_or(|c| c.kz, "kz", Gains::PAPER.kz);
+        let (ke, _) = control.get_or(|c| c.ke, "ke", Gains::PAPER.ke());
+        let (kz, _) = control.get_or(|c| c.kz, "kz", Gains::PAPER.kz());
         let gains = Gains::new(ke, kz).map_err(|e| self.at.param(&control.path_of(e.field), &e))?;
         let (l, l_path) = control.get_or(|c| c.l, "l", DEFAULT_L);
         self.at(&l_path, check::positive("l", l))?;
@@ -688,7 +695,7 @@ impl Builder<'_> {
                 } else {
                     at.key("robot")
                 };
-                self.within(&path, r.base.check_step(dt))?;
+                self.within(&path, r.base().check_step(dt))?;
                 Drive::Velocity(r)
             }
             (Body::Torque(robot), Some((law, path))) => match law.variant() {

@@ -102,7 +102,7 @@ impl Simulation {
                     .map(|c| c.map(|c| SafetyFilter::new(c).with_period(period)))
                     .collect(),
                 obstacles: spec.obstacles.clone(),
-                l: agents.iter().map(|a| a.placement.l).collect(),
+                l: agents.iter().map(|a| a.placement.l()).collect(),
                 out: spec
                     .agents
                     .iter()
@@ -432,7 +432,7 @@ impl Simulation {
         self.refresh();
         for (i, a) in self.sys.plan.agents().iter().enumerate() {
             if let (Drive::Velocity(r), Some(v)) = (&a.drive, self.out[i].velocity) {
-                self.state[i] = r.base.settle(&self.state[i], v.applied);
+                self.state[i] = r.base().settle(&self.state[i], v.applied);
             }
         }
         self.fresh = false;

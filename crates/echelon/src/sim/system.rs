@@ -104,10 +104,10 @@ impl System {
                         offset.lx,
                         offset.ly,
                         offset.dly,
-                        a.gains.ke,
+                        a.gains.ke(),
                     ),
                     Drive::Velocity(_) => {
-                        let k = kinematic_law(s, &motion, &offset, a.gains.ke);
+                        let k = kinematic_law(s, &motion, &offset, a.gains.ke());
                         (k.e, k.z)
                     }
                 }

@@ -82,19 +82,21 @@ impl BenchFormation {
     pub fn agent_specs(&self) -> Vec<AgentSpec> {
         self.members()
             .enumerate()
-            .map(|(i, m)| AgentSpec {
-                name: format!("agent {}", i + 1),
-                drive: crate::agent::Drive::Torque {
-                    robot: Self::ROBOT,
-                    variant: Variant::Paper,
-                },
-                leader: match (self.topology, i) {
+            .map(|(i, m)| {
+                let leader = match (self.topology, i) {
                     (Topology::Chain, 1..) => Leader::Agent(i - 1),
                     _ => Leader::Reference,
-                },
-                placement: m.placement,
-                gains: m.gains,
-                start: m.start,
+                };
+                AgentSpec::new(
+                    format!("agent {}", i + 1),
+                    Self::ROBOT,
+                    leader,
+                    m.placement,
+                    m.gains,
+                    Variant::Paper,
+                    m.start,
+                )
+                .expect("the bench's members are valid agents")
             })
             .collect()
     }

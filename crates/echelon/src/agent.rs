@@ -72,6 +72,9 @@ pub struct AgentSpec {
     pub gains: Gains,
     /// Initial state.
     pub start: State,
+    /// The largest `|v̇|` the act step lets the law ask, m/s² (`None`: no
+    /// limit); [`AgentSpec::with_max_accel`].
+    max_accel: Option<f64>,
 }
 
 impl AgentSpec {
@@ -148,7 +151,60 @@ impl AgentSpec {
             placement,
             gains,
             start,
+            max_accel: None,
         })
+    }
+
+    /// This agent with the largest linear acceleration `|v̇|` its act step
+    /// lets the law ask, m/s² (a payload's or a passenger's comfort, not the
+    /// motors'): `> 0`, and a velocity base must have a lag `τ_v > 0` (an
+    /// ideal base's speed jumps to its command).
+    pub fn with_max_accel(self, max_accel: Option<f64>) -> Result<AgentSpec, ParamError> {
+        if let Some(a) = max_accel {
+            crate::check::positive("max_accel", a)?;
+            if let Drive::Velocity(r) = &self.drive {
+                crate::check::require(
+                    "max_accel",
+                    a,
+                    r.base().tau_v() > 0.0,
+                    "needs a velocity base with a lag (tau_v > 0)",
+                )?;
+            }
+        }
+        Ok(AgentSpec { max_accel, ..self })
+    }
+
+    /// The largest `|v̇|` the act step lets the law ask, m/s².
+    pub fn max_accel(&self) -> Option<f64> {
+        self.max_accel
+    }
+
+    /// `nominal` with the linear acceleration it asks of the robot in state
+    /// `me` brought within `±max_accel`: for a torque robot `m v̇ = u1 − η v`
+    /// (eq. 3) bounds `u1`; for a velocity base the lag `τ_v v̇ = v* − v`
+    /// bounds `v*`. The turn is kept.
+    fn limit_accel(&self, me: &State, nominal: Command) -> Command {
+        let Some(a) = self.max_accel else {
+            return nominal;
+        };
+        match (&self.drive, nominal) {
+            (Drive::Torque { robot, .. }, Command::Torque(u)) => {
+                let drag = robot.linear_friction() * me.v;
+                let reach = a * robot.mass();
+                Command::Torque(Input {
+                    u1: u.u1.clamp(drag - reach, drag + reach),
+                    ..u
+                })
+            }
+            (Drive::Velocity(r), Command::Velocity(c)) => {
+                let reach = a * r.base().tau_v();
+                Command::Velocity(VelocityCommand {
+                    v: c.v.clamp(me.v - reach, me.v + reach),
+                    ..c
+                })
+            }
+            (_, other) => other,
+        }
     }
 
     /// The torque plant (eq. 3), `None` for a velocity base.
@@ -352,6 +408,7 @@ impl AgentSpec {
     /// stale): the command its plant receives ([`Drive::actuate`] applies
     /// the drive's limits to it).
     pub fn act(&self, t: f64, me: &State, nominal: Command, guard: Option<Guard<'_>>) -> Act {
+        let nominal = self.limit_accel(me, nominal);
         let Some(Guard {
             filter,
             sight,

@@ -319,6 +319,10 @@ impl Engine {
         let Some(first) = agents.first() else {
             return Err(EngineError::Unsupported("an empty formation".into()));
         };
+        if agents.iter().any(|a| a.max_accel().is_some()) {
+            // The kernels run the law alone, not the act step's limits.
+            return Err(EngineError::Unsupported("max_accel".into()));
+        }
         let star = agents.iter().all(|a| a.leader == Leader::Reference);
         let chain = agents.iter().enumerate().all(|(i, a)| {
             a.leader

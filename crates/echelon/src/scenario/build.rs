@@ -750,6 +750,7 @@ impl Builder<'_> {
             }
             Drive::Velocity(r) => AgentSpec::velocity(name, r, leader, placement, gains, start),
         };
+        let spec = spec.and_then(|s| s.with_max_accel(a.max_accel));
         self.within(&at, spec)
     }
 }

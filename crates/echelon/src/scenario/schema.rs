@@ -538,6 +538,9 @@ pub struct AgentSection {
     /// Controller settings for this agent only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub control: Option<ControlSection>,
+    /// The largest `|v̇|` its act step lets the law ask, m/s².
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_accel: Option<f64>,
     /// Odometry settings for this agent (over `[odometry]`, field by field).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub odometry: Option<OdometrySection>,

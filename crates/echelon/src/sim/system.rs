@@ -112,7 +112,13 @@ impl System {
                     }
                 }
             };
-            let command = held.map_or_else(|| law.command(), |h| h[i]);
+            // The act step (agent.rs): the law's command through the agent's
+            // limits; a sampled controller's held command went through it
+            // (and its filter) at the sample.
+            let command = held.map_or_else(
+                || a.act(t, &sensed(i), law.command(), None).command,
+                |h| h[i],
+            );
             let applied = a.drive.actuate(command);
             dx[i] = a.drive.derivative(&x[i], &applied);
             speeds[i] = a.drive.speeds(&x[i], &applied);

@@ -32,9 +32,9 @@ use crate::latency::FleetLatency;
 use crate::leader::LeaderReport;
 use crate::net::{ROUTER_IDENTITY, base_identity, robot_identity};
 use crate::robot::RobotReport;
-use crate::role::Role;
+use crate::role::{Member, Role};
 use crate::ros2::base::BaseReport;
-use crate::ros2::base::base_role;
+
 use crate::router::RouterReport;
 use crate::{FleetError, StopFlag};
 
@@ -503,7 +503,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
                 endpoints.insert(robot_role(k), net.peer(robot_at(k)).into());
             }
             for k in 1..=bases {
-                endpoints.insert(base_role(k), net.peer(k).into());
+                endpoints.insert(Member::Base(k as u32).liveliness(), net.peer(k).into());
             }
             endpoints.insert(Role::Leader.name().into(), net.peer(leader_at).into());
         }
@@ -514,7 +514,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         let role = match i {
             0 => Role::Collector.name().to_owned(),
             i if i == leader_at => Role::Leader.name().to_owned(),
-            i if i <= bases => base_role(i),
+            i if i <= bases => Member::Base(i as u32).liveliness(),
             i => robot_role(i - bases),
         };
         if let Some(site) = sites.get_mut(site_of(i)) {
@@ -566,7 +566,12 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             scale.clone(),
         ];
         args.extend(common(k, &base_identity(k)));
-        base_procs.push(spawn(&opts.exe, &base_role(k), &args, &logs)?);
+        base_procs.push(spawn(
+            &opts.exe,
+            &Member::Base(k as u32).liveliness(),
+            &args,
+            &logs,
+        )?);
     }
 
     let mut robots = Vec::with_capacity(n);
@@ -615,7 +620,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         args.extend(["--wait-for".to_owned(), robot_role(k)]);
     }
     for k in 1..=bases {
-        args.extend(["--wait-for".to_owned(), base_role(k)]);
+        args.extend(["--wait-for".to_owned(), Member::Base(k as u32).liveliness()]);
     }
     args.extend(common(leader_at, Role::Leader.name()));
     let mut leader = spawn(&opts.exe, Role::Leader.name(), &args, &logs)?;

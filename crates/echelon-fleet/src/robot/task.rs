@@ -185,3 +185,88 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         Ok(self.robot.report())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::faults::FaultSpec;
+    use crate::leader::{Leader as Reference, LeaderTask};
+    use crate::robot::RobotConfig;
+    use crate::role::bus::Bus;
+    use crate::wire::{LinkStatus, RobotState};
+    use echelon::scenario::{Overrides, Scenario};
+
+    const FAST_CIRCLE: &str = include_str!("../../../echelon-cli/tests/fleet/fast-circle.toml");
+
+    fn states(bus: &Bus, id: usize, key: &str) -> Vec<RobotState> {
+        bus.published_by(id, key)
+            .filter_map(|p| match wire::decode(&p.payload) {
+                Ok(Message::State(_, s)) => Some(s),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The leader and a chain of two robots, the tasks the runtime runs,
+    /// on the bus: the chain converges; with the reference link cut for
+    /// 3 s, robot 1 extrapolates, loses the link once and recovers; robot
+    /// 2 (its own link fresh) never loses its link.
+    #[test]
+    fn the_leader_and_a_chain_run_on_the_bus() {
+        let s = Scenario::parse(FAST_CIRCLE, "test", None).unwrap_or_else(|e| panic!("{e}"));
+        let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
+        let keys = Keys::new("lab");
+        let reference = s
+            .build(&Overrides::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .plan
+            .reference()
+            .clone();
+        let mut bus = Bus::new();
+        let leader = Reference::new(reference, 50.0, 30.0, 1);
+        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        let robot = |k| {
+            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
+                .unwrap_or_else(|e| panic!("{e}"));
+            RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
+        };
+        let r1 = bus.add(robot(1), 0.0);
+        let r2 = bus.add(robot(2), 0.0);
+        let reference_key = keys.reference();
+        bus.link = Box::new(move |from, key, t| {
+            (from != l || key != reference_key || !(12.0..15.0).contains(&t)).then_some(0.0)
+        });
+        bus.run_until(30.0);
+        assert!(!bus.is_running(l), "the leader stops at its duration");
+        for (id, k) in [(r1, 1), (r2, 2)] {
+            let task: &RobotTask = bus.task(id).unwrap_or_else(|| panic!("a robot"));
+            let rep = task.robot().report();
+            assert!(rep.final_error < 1e-3, "agent {k}: {rep:?}");
+            assert_eq!(rep.link, "tracking");
+            assert_eq!(rep.counters.link_losses, u64::from(k == 1), "{rep:?}");
+            // 100 Hz for 30 s, every state published and logged.
+            assert!((2990..=3001).contains(&rep.ticks), "{rep:?}");
+            let published = states(&bus, id, &keys.state(k));
+            assert_eq!(published.len() as u64, rep.published);
+            assert!(published.windows(2).all(|w| w[0].t <= w[1].t));
+            let cut = published.iter().filter(|st| (13.0..15.0).contains(&st.t));
+            let expected = if k == 1 {
+                LinkStatus::Extrapolating
+            } else {
+                LinkStatus::Tracking
+            };
+            assert!(cut.clone().count() > 150);
+            assert!(cut.into_iter().all(|st| st.link == expected));
+            // Its counters once per fleet second on its stats key.
+            let stats = bus.published_by(id, &keys.stats(k)).count();
+            assert!((29..=31).contains(&stats), "{stats}");
+        }
+        // The reference sent during the cut (150 samples) reached no one;
+        // the last one may wait for robot 1's next tick.
+        let sent = bus.published_by(l, &keys.reference()).count() as u64;
+        let task: &RobotTask = bus.task(r1).unwrap_or_else(|| panic!("a robot"));
+        let c = task.robot().counters();
+        assert_eq!(sent, 1501);
+        assert!((sent - 151..=sent - 150).contains(&c.received), "{c:?}");
+    }
+}

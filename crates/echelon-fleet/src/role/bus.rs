@@ -4,7 +4,9 @@
 //!
 //! Every task has a start (bus time at which its clock reads 0). The bus
 //! goes from event to event: deliveries due (in the order they were sent),
-//! then the ticks due (in the order the tasks were added). A publication
+//! then the ticks due (in the order the tasks were added), each followed by
+//! the deliveries it made due (what it sent without latency reaches the
+//! tasks that tick after it at the same instant). A publication
 //! reaches every input whose key expression includes its key, the sender's
 //! own included (as on Zenoh), after the [link](Bus::link)'s latency, or
 //! never if the link drops it.
@@ -381,15 +383,7 @@ impl Bus {
                 return;
             }
             self.now = t;
-            let mut progress = false;
-            while let Some(entry) = self.queue.first_entry() {
-                if entry.key().0.0 > t {
-                    break;
-                }
-                let ((at, _), p) = entry.remove_entry();
-                self.deliver(at.0, &p);
-                progress = true;
-            }
+            let mut progress = self.deliver_due();
             for id in 0..self.entries.len() {
                 let e = &mut self.entries[id];
                 if !e.running || e.start + e.node.next_wake() > t {
@@ -417,9 +411,25 @@ impl Bus {
                         self.entries[id].error = Some(err);
                     }
                 }
+                // What it sent without latency reaches the next tasks now.
+                progress |= self.deliver_due();
             }
             stalled = !progress;
         }
+    }
+
+    /// Delivers every message due by now, in order; whether there was any.
+    fn deliver_due(&mut self) -> bool {
+        let mut any = false;
+        while let Some(entry) = self.queue.first_entry() {
+            if entry.key().0.0 > self.now {
+                break;
+            }
+            let ((at, _), p) = entry.remove_entry();
+            self.deliver(at.0, &p);
+            any = true;
+        }
+        any
     }
 }
 

@@ -591,8 +591,6 @@ mod tests {
         }
     }
 
-    const FAST_CIRCLE: &str = include_str!("../../echelon-cli/tests/fleet/fast-circle.toml");
-
     /// The tasks' declarations are the ones the access control is made of:
     /// what a leader and robot publish is what [`publishes`] says, what they
     /// subscribe to is within [`subscribes`], their tokens are their names.
@@ -602,17 +600,9 @@ mod tests {
         use crate::leader::{Leader, LeaderTask};
         use crate::robot::{Robot, RobotConfig, RobotTask};
         use crate::role::Task;
-        use echelon::scenario::{Overrides, Scenario};
 
-        let s = Scenario::parse(FAST_CIRCLE, "test", None).unwrap_or_else(|e| panic!("{e}"));
-        let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
+        let (s, fleet, reference) = crate::testing::fast_circle();
         let keys = Keys::new("lab");
-        let reference = s
-            .build(&Overrides::default())
-            .unwrap_or_else(|e| panic!("{e}"))
-            .plan
-            .reference()
-            .clone();
         let within = |declared: &[String], allowed: &[String], what: &str| {
             for d in declared {
                 assert!(allowed.iter().any(|a| includes(a, d)), "{what}: {d}");

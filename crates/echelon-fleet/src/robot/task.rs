@@ -194,9 +194,6 @@ mod tests {
     use crate::robot::RobotConfig;
     use crate::role::bus::Bus;
     use crate::wire::{LinkStatus, RobotState};
-    use echelon::scenario::{Overrides, Scenario};
-
-    const FAST_CIRCLE: &str = include_str!("../../../echelon-cli/tests/fleet/fast-circle.toml");
 
     fn states(bus: &Bus, id: usize, key: &str) -> Vec<RobotState> {
         bus.published_by(id, key)
@@ -213,15 +210,8 @@ mod tests {
     /// 2 (its own link fresh) never loses its link.
     #[test]
     fn the_leader_and_a_chain_run_on_the_bus() {
-        let s = Scenario::parse(FAST_CIRCLE, "test", None).unwrap_or_else(|e| panic!("{e}"));
-        let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
+        let (s, fleet, reference) = crate::testing::fast_circle();
         let keys = Keys::new("lab");
-        let reference = s
-            .build(&Overrides::default())
-            .unwrap_or_else(|e| panic!("{e}"))
-            .plan
-            .reference()
-            .clone();
         let mut bus = Bus::new();
         let leader = Reference::new(reference, 50.0, 30.0, 1);
         let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);

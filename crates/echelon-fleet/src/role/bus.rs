@@ -92,6 +92,22 @@ struct Entry {
     error: Option<FleetError>,
 }
 
+impl Entry {
+    /// `task`, started, its clock reading 0 at bus time `start`.
+    fn new<T: Task + 'static>(task: T, start: f64) -> Entry {
+        let mut node: Box<dyn Node> = Box::new(task);
+        node.started();
+        Entry {
+            inputs: node.inputs(),
+            outputs: node.outputs(),
+            node,
+            start,
+            running: true,
+            error: None,
+        }
+    }
+}
+
 /// A message on its way: `(arrival, sequence)` orders deliveries.
 struct Pending {
     from: TaskId,
@@ -218,32 +234,14 @@ impl Bus {
 
     /// Adds `task`, its clock reading 0 at bus time `start`.
     pub fn add<T: Task + 'static>(&mut self, task: T, start: f64) -> TaskId {
-        let mut node: Box<dyn Node> = Box::new(task);
-        node.started();
-        self.entries.push(Entry {
-            inputs: node.inputs(),
-            outputs: node.outputs(),
-            node,
-            start,
-            running: true,
-            error: None,
-        });
+        self.entries.push(Entry::new(task, start));
         self.entries.len() - 1
     }
 
     /// Puts `task` in place of task `id` (a restarted process), its clock
     /// reading 0 at bus time `start`.
     pub fn replace<T: Task + 'static>(&mut self, id: TaskId, task: T, start: f64) {
-        let mut node: Box<dyn Node> = Box::new(task);
-        node.started();
-        self.entries[id] = Entry {
-            inputs: node.inputs(),
-            outputs: node.outputs(),
-            node,
-            start,
-            running: true,
-            error: None,
-        };
+        self.entries[id] = Entry::new(task, start);
     }
 
     /// Task `id`, as its type (`None`: another type).

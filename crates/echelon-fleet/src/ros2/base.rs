@@ -18,8 +18,8 @@ use echelon::agent::Drive;
 use echelon::base::VelocityCommand;
 use echelon::scenario::{Ros2Link, Scenario};
 
-use super::declare_tokens;
 use super::drive::{SampleRefusal, cmd_vel_type, decode_cmd_vel};
+use super::endpoint::declare_node;
 use crate::clock::FleetClock;
 use crate::keys::Keys;
 use crate::net::NetOptions;
@@ -27,9 +27,8 @@ use crate::plant::{Plant, SimulatedVelocityBase};
 use crate::robot::{PLANT_STEP, agent_spec};
 use crate::role::{Flow, Member, Outputs, Sample, Task, runtime};
 use crate::{FleetError, StopFlag};
-use echelon_ros2::attachment::{Attachment, Gid, gid_from_token};
+use echelon_ros2::attachment::{Attachment, Gid};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
-use echelon_ros2::liveliness::{NodeInfo, Qos};
 use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, Time};
 
 /// What a simulated base counted (its report and its stats).
@@ -328,22 +327,17 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
     let alive = keys.alive(&Member::Base(opts.agent).liveliness());
     runtime::run_on(
         |session| {
-            let zid = session.zid().to_string();
-            let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, "echelon_base")
-                .map_err(|e| FleetError::Config(e.to_string()))?;
-            let cmd_type = cmd_vel_type(&link);
-            let odom_token = node.publisher_token(1, &link.odom, &ODOMETRY, &Qos::default());
-            let tokens = declare_tokens(
+            let (tokens, gid) = declare_node(
                 session,
-                &[
-                    node.node_token(),
-                    odom_token.clone(),
-                    node.subscription_token(2, &link.cmd_vel, &cmd_type, &Qos::default()),
-                ],
+                &link,
+                "echelon_base",
+                (&link.odom, &ODOMETRY),
+                (&link.cmd_vel, &cmd_vel_type(&link)),
+                |e| FleetError::Config(e.to_string()),
             )?;
             let model = SimulatedVelocityBase::new(robot.base, spec.start, 0.0, PLANT_STEP);
             let task = BaseTask {
-                base: SimBase::new(link.clone(), model, gid_from_token(&odom_token)),
+                base: SimBase::new(link.clone(), model, gid),
                 agent: opts.agent,
                 cmd_key: topic_key_any_type(link.key_scheme, link.domain_id, &link.cmd_vel),
                 odom_key: topic_key(link.key_scheme, link.domain_id, &link.odom, &ODOMETRY),

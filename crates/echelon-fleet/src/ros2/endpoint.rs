@@ -15,7 +15,33 @@ use crate::ros2::drive::{CmdSink, cmd_vel_type};
 use echelon_ros2::attachment::{Gid, gid_from_token};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
 use echelon_ros2::liveliness::{NodeInfo, Qos};
-use echelon_ros2::msgs::ODOMETRY;
+use echelon_ros2::msgs::{MessageType, ODOMETRY};
+use echelon_ros2::names::NameError;
+
+/// A ROS 2 node `<namespace>/<name>` of agent `link`'s with one publisher
+/// and one subscription (topic, type), as rmw_zenoh declares them
+/// (liveliness tokens); its tokens and its publisher's gid.
+pub(crate) fn declare_node(
+    session: &zenoh::Session,
+    link: &Ros2Link,
+    name: &str,
+    publishes: (&str, &MessageType),
+    subscribes: (&str, &MessageType),
+    name_error: impl FnOnce(NameError) -> FleetError,
+) -> Result<(Vec<zenoh::liveliness::LivelinessToken>, Gid), FleetError> {
+    let zid = session.zid().to_string();
+    let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, name).map_err(name_error)?;
+    let pub_token = node.publisher_token(1, publishes.0, publishes.1, &Qos::default());
+    let tokens = declare_tokens(
+        session,
+        &[
+            node.node_token(),
+            pub_token.clone(),
+            node.subscription_token(2, subscribes.0, subscribes.1, &Qos::default()),
+        ],
+    )?;
+    Ok((tokens, gid_from_token(&pub_token)))
+}
 
 /// Agent `k`'s ROS 2 node `<namespace>/echelon_robot` as rmw_zenoh declares
 /// it (liveliness tokens: the node, a `cmd_vel` publisher, an `odom`
@@ -36,18 +62,14 @@ impl Ros2Node {
         link: &Ros2Link,
         agent: u32,
     ) -> Result<Ros2Node, FleetError> {
-        let zid = session.zid().to_string();
-        let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, "echelon_robot")
-            .map_err(|e| FleetError::Config(format!("agent {agent}: {e}")))?;
         let cmd_type = cmd_vel_type(link);
-        let pub_token = node.publisher_token(1, &link.cmd_vel, &cmd_type, &Qos::default());
-        let tokens = declare_tokens(
+        let (tokens, gid) = declare_node(
             session,
-            &[
-                node.node_token(),
-                pub_token.clone(),
-                node.subscription_token(2, &link.odom, &ODOMETRY, &Qos::default()),
-            ],
+            link,
+            "echelon_robot",
+            (&link.cmd_vel, &cmd_type),
+            (&link.odom, &ODOMETRY),
+            |e| FleetError::Config(format!("agent {agent}: {e}")),
         )?;
         let cmd_key = topic_key(link.key_scheme, link.domain_id, &link.cmd_vel, &cmd_type);
         let publisher = session
@@ -56,7 +78,7 @@ impl Ros2Node {
             .map_err(|e| FleetError::Zenoh(format!("declaring {cmd_key}: {e}")))?;
         Ok(Ros2Node {
             publisher,
-            gid: gid_from_token(&pub_token),
+            gid,
             odom_key: topic_key_any_type(link.key_scheme, link.domain_id, &link.odom),
             tokens,
         })

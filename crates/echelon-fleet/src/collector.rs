@@ -39,8 +39,9 @@ use crate::clock::FleetClock;
 use crate::keys::{KeyKind, Keys};
 use crate::latency::{Latency, LatencyReport};
 use crate::net::NetOptions;
-use crate::role::{Flow, Member, Outputs, Sample, Task, runtime};
+use crate::role::Member;
 use crate::ros2::record::{self, RosTopic, RosTopicError};
+use crate::runtime::{self, Flow, Outputs, Sample, Task};
 use crate::wire::{self, DecodeError, LinkStatus, Message, RobotState};
 use crate::{FleetError, StopFlag, unix_nanos};
 

@@ -12,7 +12,8 @@ use echelon::scenario::{Overrides, Scenario};
 use crate::clock::FleetClock;
 use crate::keys::Keys;
 use crate::net::{self, NetOptions};
-use crate::role::{Flow, Member, Outputs, Sample, Task, WaitFor, runtime};
+use crate::role::Member;
+use crate::runtime::{self, Flow, Outputs, Sample, Task, WaitFor};
 use crate::wire::{self, Header, Reference as WireReference};
 use crate::{FleetError, StopFlag};
 

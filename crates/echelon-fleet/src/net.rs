@@ -599,7 +599,7 @@ mod tests {
         use crate::faults::FaultSpec;
         use crate::leader::{Leader, LeaderTask};
         use crate::robot::{Robot, RobotConfig, RobotTask};
-        use crate::role::Task;
+        use crate::runtime::Task;
 
         let (s, fleet, reference) = crate::testing::fast_circle();
         let keys = Keys::new("lab");

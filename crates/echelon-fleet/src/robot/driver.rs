@@ -6,9 +6,9 @@ use crate::clock::FleetClock;
 use crate::faults::FaultSpec;
 use crate::keys::Keys;
 use crate::net::{self, NetOptions};
-use crate::role::runtime;
 use crate::ros2::drive::Ros2Drive;
 use crate::ros2::endpoint::{OwnedCmdSink, Ros2Node};
+use crate::runtime;
 use crate::{FleetError, StopFlag};
 
 use super::{Robot, RobotConfig, RobotReport, RobotTask};

@@ -7,7 +7,8 @@ use echelon::formation::Leader;
 use crate::FleetError;
 use crate::keys::Keys;
 use crate::plant::{Plant, SimulatedDrive};
-use crate::role::{Flow, Member, Outputs, Sample, Task};
+use crate::role::Member;
+use crate::runtime::{Flow, Outputs, Sample, Task};
 use crate::wire::{self, DecodeError, Message};
 
 use super::{Robot, RobotReport, RobotStats};
@@ -192,7 +193,7 @@ mod tests {
     use crate::faults::FaultSpec;
     use crate::leader::{Leader as Reference, LeaderTask};
     use crate::robot::RobotConfig;
-    use crate::role::bus::Bus;
+    use crate::runtime::bus::Bus;
     use crate::wire::{LinkStatus, RobotState};
 
     fn states(bus: &Bus, id: usize, key: &str) -> Vec<RobotState> {

@@ -1,22 +1,13 @@
 //! The fleet's process roles, named once: what each process is, as its
-//! report says it (`"role": "robot"`) and `fleet up` reads it back, and the
-//! one runtime they run on.
+//! report says it (`"role": "robot"`) and `fleet up` reads it back.
 //!
-//! A role's behaviour is a [`Task`] (sans-IO: inputs in, ticks at its next
-//! wake, outputs out, a typed report at the end), run over Zenoh by
-//! [`runtime::run`] and in memory, on a fake clock, by [`bus::Bus`]. The
-//! names of the roles are written here only: liveliness tokens
+//! The names of the roles are written here only: liveliness tokens
 //! ([`Member::liveliness`]), certificate identities ([`Member::identity`])
 //! and the access control ([`crate::net::access_control`]) derive from
-//! [`Role`] and [`Member`].
+//! [`Role`] and [`Member`]. What each role does is a
+//! [`crate::runtime::Task`], run by the [one runtime](crate::runtime).
 
 use serde::{Deserialize, Serialize};
-
-pub mod bus;
-pub mod runtime;
-mod task;
-
-pub use task::{Flow, Outputs, Sample, Task, WaitFor};
 
 /// What a fleet process is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

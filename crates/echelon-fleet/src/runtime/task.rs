@@ -37,7 +37,7 @@ pub enum Flow {
     Stop,
 }
 
-/// Where a task's messages go: Zenoh ([`super::runtime`]) or the in-memory
+/// Where a task's messages go: Zenoh ([`super::run`]) or the in-memory
 /// bus ([`super::bus`]).
 pub trait Outputs {
     /// Publishes `payload` on the task's output number `output` (an index

@@ -1,9 +1,14 @@
-//! The one Zenoh driver of every [`Task`]: open the session, declare the
-//! task's subscriptions, publishers and liveliness tokens, wait for whom it
-//! waits for, then sleep until its next wake (or, for a task that [wakes on
-//! input](Task::wakes_on_input), until a sample arrives), hand it what
-//! arrived, tick it, publish what it says; on a stop request, its end or an
-//! error: stop it, close the session, take its report.
+//! The one runtime of the fleet's roles: what a role does is a [`Task`]
+//! (sans-IO: inputs in, ticks at its next wake, outputs out, a typed report
+//! at the end); [`run`] is the one Zenoh driver of every task, and
+//! [`bus::Bus`] runs the same tasks in memory on a fake clock.
+//!
+//! [`run`]: open the session, declare the task's subscriptions, publishers
+//! and liveliness tokens, wait for whom it waits for, then sleep until its
+//! next wake (or, for a task that [wakes on input](Task::wakes_on_input),
+//! until a sample arrives), hand it what arrived, tick it, publish what it
+//! says; on a stop request, its end or an error: stop it, close the
+//! session, take its report.
 
 use std::collections::BTreeSet;
 use std::sync::mpsc;
@@ -18,7 +23,10 @@ use crate::latency;
 use crate::net::{self, NetOptions};
 use crate::{FleetError, StopFlag};
 
-use super::{Flow, Outputs, Sample, Task, WaitFor};
+pub mod bus;
+mod task;
+
+pub use task::{Flow, Outputs, Sample, Task, WaitFor};
 
 /// Longest sleep, real time, so that a stop request is seen.
 const NAP: Duration = Duration::from_millis(20);

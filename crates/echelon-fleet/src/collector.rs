@@ -23,11 +23,9 @@ use std::fmt::Write as _;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::PathBuf;
-use std::sync::mpsc;
 use std::time::Duration;
 
 use serde::Serialize;
-use zenoh::Wait;
 
 use echelon::output::{CsvWriter, FrameRows, TRAJECTORY_FILE, TrajectoryRows};
 use echelon::sample::AgentSample;
@@ -37,10 +35,13 @@ use echelon_mcap::{
     ReferenceRecord, agent_topic, nanos,
 };
 
+use crate::clock::FleetClock;
 use crate::keys::{KeyKind, Keys};
-use crate::latency::{self, Latency, LatencyReport};
-use crate::net::{self, NetOptions};
+use crate::latency::{Latency, LatencyReport};
+use crate::net::NetOptions;
+use crate::role::Member;
 use crate::ros2::record::{self, RosTopic, RosTopicError};
+use crate::runtime::{self, Flow, Outputs, Sample, Task};
 use crate::wire::{self, DecodeError, LinkStatus, Message, RobotState};
 use crate::{FleetError, StopFlag, unix_nanos};
 
@@ -598,30 +599,110 @@ impl FileSink {
     }
 }
 
-/// One sample as the driver's subscriptions hand it over.
-struct Received {
-    key: String,
-    payload: Vec<u8>,
-    /// Its delay since the sender's stamp, ns (`None`: not stamped).
-    delay: Option<i64>,
-    /// `Some` for a sample of a ROS 2 subscription: its attachment, if any.
-    ros: Option<Option<Vec<u8>>>,
+/// [`Collector`] as a [`Task`] of the fleet runtime: every fleet key (and
+/// its ROS 2 topics) in, each sample recorded as soon as it arrives (and
+/// those that arrived before its inputs closed); files closed and
+/// `collector.json` written with its report.
+pub struct CollectorTask {
+    collector: Collector,
+    sink: FileSink,
+    out: PathBuf,
+    /// Stop at this time of its clock (real time), s.
+    until: f64,
+    /// The wall clock (UNIX ns), for `log_time`.
+    wall: fn() -> u64,
 }
 
-impl Received {
-    fn record(
-        &self,
-        collector: &mut Collector,
-        sink: &mut FileSink,
-        now: u64,
-    ) -> Result<(), FleetError> {
-        collector.record_delay(&self.key, self.delay);
-        match &self.ros {
-            None => collector.on_message(&self.key, &self.payload, now, sink),
-            Some(attachment) => {
-                collector.on_ros_sample(&self.key, &self.payload, attachment.as_deref(), now, sink)
-            }
+impl std::fmt::Debug for CollectorTask {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CollectorTask")
+            .field("collector", &self.collector)
+            .field("out", &self.out)
+            .field("until", &self.until)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Its input number of the fleet's keys (then one per ROS 2 topic).
+const FLEET: usize = 0;
+
+impl CollectorTask {
+    /// `collector` recording to `sink`, its summary to `out`, for at most
+    /// `max_wall` of real time.
+    pub fn new(
+        collector: Collector,
+        sink: FileSink,
+        out: PathBuf,
+        max_wall: Option<Duration>,
+    ) -> CollectorTask {
+        CollectorTask {
+            collector,
+            sink,
+            out,
+            until: max_wall.map_or(f64::INFINITY, |m| m.as_secs_f64()),
+            wall: unix_nanos,
         }
+    }
+}
+
+impl Task for CollectorTask {
+    type Report = CollectorReport;
+
+    fn inputs(&self) -> Vec<String> {
+        std::iter::once(self.collector.keys.everything())
+            .chain(self.collector.ros_topics().iter().map(RosTopic::key_expr))
+            .collect()
+    }
+
+    fn outputs(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    fn tokens(&self) -> Vec<String> {
+        vec![self.collector.keys.alive(&Member::Collector.liveliness())]
+    }
+
+    fn wakes_on_input(&self) -> bool {
+        true
+    }
+
+    fn on_input(&mut self, input: usize, s: &Sample<'_>) -> Result<(), FleetError> {
+        let now = (self.wall)();
+        if input == FLEET {
+            self.collector.record_delay(s.key, s.delay);
+            return self
+                .collector
+                .on_message(s.key, s.payload, now, &mut self.sink);
+        }
+        // A ROS 2 publisher stamps its attachment, not the sample.
+        let delay = s.delay.or_else(|| {
+            let sent = record::publish_time(s.attachment, 0);
+            (sent > 0).then(|| s.unix_ns as i64 - sent as i64)
+        });
+        self.collector.record_delay(s.key, delay);
+        self.collector
+            .on_ros_sample(s.key, s.payload, s.attachment, now, &mut self.sink)
+    }
+
+    fn next_wake(&self) -> f64 {
+        self.until
+    }
+
+    fn tick(&mut self, now: f64, _: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        Ok(if now >= self.until {
+            Flow::Stop
+        } else {
+            Flow::Continue
+        })
+    }
+
+    fn report(self) -> Result<CollectorReport, FleetError> {
+        let mut sink = self.sink;
+        let report = self.collector.finish();
+        sink.latency_metadata(&report)?;
+        sink.finish()?;
+        crate::write_json_file(&self.out.join(SUMMARY_FILE), &report)?;
+        Ok(report)
     }
 }
 
@@ -642,7 +723,8 @@ pub fn run_with_ros2(
 }
 
 /// [`run_with_ros2`], writing `trajectory.csv` with the columns of
-/// `trajectory` ([`FileSink::with_trajectory`]).
+/// `trajectory` ([`FileSink::with_trajectory`]): [`CollectorTask`] on the
+/// fleet runtime.
 pub fn run_recording(
     opts: CollectorOptions,
     ros: Vec<RosTopic>,
@@ -650,81 +732,11 @@ pub fn run_recording(
     stop: &StopFlag,
 ) -> Result<CollectorReport, FleetError> {
     let keys = Keys::new(&opts.fleet);
-    let mut collector =
-        Collector::with_ros2(keys.clone(), ros).map_err(|e| FleetError::Config(e.to_string()))?;
-    let mut sink = FileSink::with_trajectory(&opts.out, trajectory)?;
-
-    let session = net::open(&opts.net)?;
-    let (tx, rx) = mpsc::channel::<Received>();
-    let fleet_tx = tx.clone();
-    let subscriber = session
-        .declare_subscriber(keys.everything())
-        .callback(move |s| {
-            let delay = latency::delay_ns(s.timestamp(), unix_nanos());
-            let _ = fleet_tx.send(Received {
-                key: s.key_expr().as_str().to_owned(),
-                payload: s.payload().to_bytes().into_owned(),
-                delay,
-                ros: None,
-            });
-        })
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("subscribing: {e}")))?;
-    let mut ros_subscribers = Vec::with_capacity(collector.ros_topics().len());
-    for topic in collector.ros_topics() {
-        let tx = tx.clone();
-        let key_expr = topic.key_expr();
-        let sub = session
-            .declare_subscriber(key_expr.clone())
-            .callback(move |s| {
-                let now = unix_nanos();
-                let attachment = s.attachment().map(|a| a.to_bytes().into_owned());
-                // A ROS 2 publisher stamps its attachment, not the sample.
-                let delay = latency::delay_ns(s.timestamp(), now).or_else(|| {
-                    let sent = record::publish_time(attachment.as_deref(), 0);
-                    (sent > 0).then(|| now as i64 - sent as i64)
-                });
-                let _ = tx.send(Received {
-                    key: s.key_expr().as_str().to_owned(),
-                    payload: s.payload().to_bytes().into_owned(),
-                    delay,
-                    ros: Some(attachment),
-                });
-            })
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("subscribing to {key_expr}: {e}")))?;
-        ros_subscribers.push(sub);
-    }
-    drop(tx);
-    let token = session
-        .liveliness()
-        .declare_token(keys.alive("collector"))
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
-
-    let started = std::time::Instant::now();
-    while !stop.is_raised() && opts.max_wall.is_none_or(|m| started.elapsed() < m) {
-        match rx.recv_timeout(Duration::from_millis(50)) {
-            Ok(sample) => sample.record(&mut collector, &mut sink, unix_nanos())?,
-            Err(mpsc::RecvTimeoutError::Timeout) => {}
-            Err(mpsc::RecvTimeoutError::Disconnected) => break,
-        }
-    }
-    // Stop listening, then log everything that had already arrived.
-    drop(token);
-    let _ = subscriber.undeclare().wait();
-    for sub in ros_subscribers {
-        let _ = sub.undeclare().wait();
-    }
-    let _ = session.close().wait();
-    while let Ok(sample) = rx.try_recv() {
-        sample.record(&mut collector, &mut sink, unix_nanos())?;
-    }
-    let report = collector.finish();
-    sink.latency_metadata(&report)?;
-    sink.finish()?;
-    crate::write_json_file(&opts.out.join(SUMMARY_FILE), &report)?;
-    Ok(report)
+    let collector =
+        Collector::with_ros2(keys, ros).map_err(|e| FleetError::Config(e.to_string()))?;
+    let sink = FileSink::with_trajectory(&opts.out, trajectory)?;
+    let task = CollectorTask::new(collector, sink, opts.out, opts.max_wall);
+    runtime::run(task, &opts.net, FleetClock::new(1.0), stop)
 }
 
 #[cfg(test)]

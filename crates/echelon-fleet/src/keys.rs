@@ -5,17 +5,27 @@
 //! | `echelon/<fleet>/reference` | leader | reference sample ([`crate::wire`], binary) |
 //! | `echelon/<fleet>/robot/<k>/state` | robot `k` (from 1) | robot state ([`crate::wire`], binary); read by the collector, robot `k`'s followers and, with `[safety]`, every other robot |
 //! | `echelon/<fleet>/robot/<k>/stats` | robot `k` | its counters, JSON, once per fleet second and at exit |
-//! | `echelon/<fleet>/alive/<role>` | every process | liveliness token (`leader`, `collector`, `robot/<k>`) |
+//! | `echelon/<fleet>/alive/<role>` | every process | liveliness token ([`crate::role::Member::liveliness`]: `leader`, `collector`, `robot/<k>`, `base/<k>`) |
 //!
 //! The collector subscribes to `echelon/<fleet>/**`.
 
-/// Robot `k`'s role in liveliness tokens and `--wait-for`: `robot/<k>`.
-pub fn robot_role(k: impl std::fmt::Display) -> String {
-    format!("robot/{k}")
-}
-
 /// First chunk of every key.
 pub const ROOT: &str = "echelon";
+
+/// `echelon/**`: every key of every fleet.
+pub fn every_fleet() -> String {
+    format!("{ROOT}/**")
+}
+
+/// The fleet chunk standing for every fleet ([`Keys::any`]).
+const ANY_FLEET: &str = "*";
+
+// The chunks after `echelon/<fleet>/`, each written once.
+const REFERENCE: &str = "reference";
+const ROBOT: &str = "robot";
+const STATE: &str = "state";
+const STATS: &str = "stats";
+const ALIVE: &str = "alive";
 
 /// The key expressions of one fleet.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -44,6 +54,12 @@ impl Keys {
         }
     }
 
+    /// The key expressions of every fleet at once (`echelon/*/…`), for the
+    /// access control.
+    pub fn any() -> Keys {
+        Keys::new(ANY_FLEET)
+    }
+
     /// The fleet name.
     pub fn fleet(&self) -> &str {
         &self.fleet
@@ -51,28 +67,28 @@ impl Keys {
 
     /// `echelon/<fleet>/reference`.
     pub fn reference(&self) -> String {
-        format!("{ROOT}/{}/reference", self.fleet)
+        format!("{ROOT}/{}/{REFERENCE}", self.fleet)
     }
 
     /// `echelon/<fleet>/robot/<k>/state`.
     pub fn state(&self, k: u32) -> String {
-        format!("{ROOT}/{}/robot/{k}/state", self.fleet)
+        format!("{ROOT}/{}/{ROBOT}/{k}/{STATE}", self.fleet)
     }
 
     /// `echelon/<fleet>/robot/*/state`: every robot's state (neighbours for
     /// the safety filter).
     pub fn states(&self) -> String {
-        format!("{ROOT}/{}/robot/*/state", self.fleet)
+        format!("{ROOT}/{}/{ROBOT}/*/{STATE}", self.fleet)
     }
 
     /// `echelon/<fleet>/robot/<k>/stats`.
     pub fn stats(&self, k: u32) -> String {
-        format!("{ROOT}/{}/robot/{k}/stats", self.fleet)
+        format!("{ROOT}/{}/{ROBOT}/{k}/{STATS}", self.fleet)
     }
 
     /// `echelon/<fleet>/alive/<role>`.
     pub fn alive(&self, role: &str) -> String {
-        format!("{ROOT}/{}/alive/{role}", self.fleet)
+        format!("{ROOT}/{}/{ALIVE}/{role}", self.fleet)
     }
 
     /// `echelon/<fleet>/**`.
@@ -90,18 +106,18 @@ impl Keys {
         else {
             return KeyKind::Other;
         };
-        if rest == "reference" {
+        if rest == REFERENCE {
             return KeyKind::Reference;
         }
         let parts: Vec<&str> = rest.split('/').collect();
-        if let ["robot", num, what] = parts[..]
+        if let [ROBOT, num, what] = parts[..]
             && let Ok(k) = num.parse::<u32>()
             && k >= 1
             && k.to_string() == num
         {
             return match what {
-                "state" => KeyKind::State(k),
-                "stats" => KeyKind::Stats(k),
+                STATE => KeyKind::State(k),
+                STATS => KeyKind::Stats(k),
                 _ => KeyKind::Other,
             };
         }

@@ -1,13 +1,9 @@
 //! `echelon fleet leader`: the virtual leader (paper section 5's "virtual
 //! leader computer") publishing the scenario's reference at a fixed rate.
 
-use std::collections::BTreeSet;
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use serde::Serialize;
-use zenoh::Wait;
-use zenoh::sample::SampleKind;
 
 use echelon::control::LeaderMotion;
 use echelon::reference::{Order, Reference, Trajectory};
@@ -16,6 +12,8 @@ use echelon::scenario::{Overrides, Scenario};
 use crate::clock::FleetClock;
 use crate::keys::Keys;
 use crate::net::{self, NetOptions};
+use crate::role::Member;
+use crate::runtime::{self, Flow, Outputs, Sample, Task, WaitFor};
 use crate::wire::{self, Header, Reference as WireReference};
 use crate::{FleetError, StopFlag};
 
@@ -56,66 +54,6 @@ pub struct LeaderReport {
     /// When every `--wait-for` role had joined and the clock started, UNIX
     /// ns (`fleet up`'s startup time ends here).
     pub clock_start_unix_ns: u64,
-}
-
-/// Waits until every role of `roles` has a liveliness token under
-/// `echelon/<fleet>/alive/`, or `timeout` passes.
-fn wait_for_roles(
-    session: &zenoh::Session,
-    keys: &Keys,
-    roles: &[String],
-    timeout: Duration,
-    stop: &StopFlag,
-) -> Result<(), FleetError> {
-    if roles.is_empty() {
-        return Ok(());
-    }
-    let seen: Arc<Mutex<BTreeSet<String>>> = Arc::default();
-    let sink = seen.clone();
-    let prefix = keys.alive("");
-    let _sub = session
-        .liveliness()
-        .declare_subscriber(keys.alive("**"))
-        .history(true)
-        .callback(move |s| {
-            if s.kind() == SampleKind::Put
-                && let Some(role) = s.key_expr().as_str().strip_prefix(&prefix)
-                && let Ok(mut set) = sink.lock()
-            {
-                set.insert(role.to_owned());
-            }
-        })
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
-    let started = Instant::now();
-    loop {
-        let missing: Vec<String> = {
-            let set = seen
-                .lock()
-                .map_err(|_| FleetError::Config("poisoned".into()))?;
-            roles
-                .iter()
-                .filter(|r| !set.contains(*r))
-                .cloned()
-                .collect()
-        };
-        if missing.is_empty() {
-            // Let the declarations that came with the tokens settle.
-            std::thread::sleep(Duration::from_millis(100));
-            return Ok(());
-        }
-        if stop.is_raised() {
-            return Ok(());
-        }
-        if started.elapsed() > timeout {
-            return Err(FleetError::Config(format!(
-                "waited {:.0} s for {} to join the fleet",
-                timeout.as_secs_f64(),
-                missing.join(", ")
-            )));
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
 }
 
 /// The virtual leader as a state machine: sample `k` of the reference is due
@@ -192,8 +130,99 @@ impl Leader {
     }
 }
 
-/// Publishes the reference until `duration` or the stop flag: the Zenoh
-/// driver of [`Leader`].
+/// [`Leader`] as a [`Task`] of the fleet runtime: no inputs, the reference
+/// out, its liveliness token held; its clock starts once every
+/// `--wait-for` name is present.
+#[derive(Debug, Clone)]
+pub struct LeaderTask {
+    leader: Leader,
+    keys: Keys,
+    wait_for: Option<WaitFor>,
+    buf: Vec<u8>,
+    clock_start_unix_ns: u64,
+}
+
+impl LeaderTask {
+    /// `leader` publishing in the fleet of `keys`.
+    pub fn new(leader: Leader, keys: Keys) -> LeaderTask {
+        LeaderTask {
+            leader,
+            keys,
+            wait_for: None,
+            buf: Vec::with_capacity(wire::REFERENCE_LEN),
+            clock_start_unix_ns: 0,
+        }
+    }
+
+    /// The same, starting its clock once `w` is present.
+    pub fn waiting_for(self, w: WaitFor) -> LeaderTask {
+        LeaderTask {
+            wait_for: Some(w),
+            ..self
+        }
+    }
+
+    /// The leader.
+    pub fn leader(&self) -> &Leader {
+        &self.leader
+    }
+}
+
+/// Its only output: the reference.
+const REFERENCE: usize = 0;
+
+impl Task for LeaderTask {
+    type Report = LeaderReport;
+
+    fn inputs(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    fn outputs(&self) -> Vec<String> {
+        vec![self.keys.reference()]
+    }
+
+    fn tokens(&self) -> Vec<String> {
+        vec![self.keys.alive(&Member::Leader.liveliness())]
+    }
+
+    fn wait_for(&self) -> Option<WaitFor> {
+        self.wait_for.clone()
+    }
+
+    fn started(&mut self, unix_ns: u64) {
+        self.clock_start_unix_ns = unix_ns;
+    }
+
+    fn on_input(&mut self, _: usize, _: &Sample<'_>) -> Result<(), FleetError> {
+        Ok(())
+    }
+
+    fn next_wake(&self) -> f64 {
+        self.leader.next_due().unwrap_or(f64::NEG_INFINITY)
+    }
+
+    fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        if self.leader.next_due().is_none() {
+            return Ok(Flow::Stop);
+        }
+        if let Some((h, sample)) = self.leader.tick(now) {
+            wire::encode_reference(&mut self.buf, h, &sample);
+            out.publish(REFERENCE, &self.buf)?;
+        }
+        Ok(Flow::Continue)
+    }
+
+    fn report(self) -> Result<LeaderReport, FleetError> {
+        Ok(LeaderReport {
+            clock_start_unix_ns: self.clock_start_unix_ns,
+            ..self.leader.report()
+        })
+    }
+}
+
+/// Publishes the reference until `duration` or the stop flag: [`LeaderTask`]
+/// on the fleet runtime.
 pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetError> {
     let fleet = opts.scenario.fleet()?;
     let built = opts.scenario.build(&Overrides::default())?;
@@ -201,39 +230,13 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
     let rate = opts.rate.unwrap_or(fleet.reference_rate);
     let duration = opts.duration.unwrap_or(built.plan.config().duration);
     let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name));
-
-    let session = net::open(&opts.net)?;
-    let publisher = session
-        .declare_publisher(keys.reference())
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("declaring the reference publisher: {e}")))?;
-    let _token = session
-        .liveliness()
-        .declare_token(keys.alive("leader"))
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
-    wait_for_roles(&session, &keys, &opts.wait_for, opts.wait_timeout, stop)?;
-
-    let clock = FleetClock::new(opts.time_scale);
-    let clock_start_unix_ns = crate::unix_nanos();
-    let mut leader = Leader::new(reference, rate, duration, net::rand_source());
-    let mut buf = Vec::with_capacity(wire::REFERENCE_LEN);
-    while !stop.is_raised() {
-        let Some(t) = leader.next_due() else {
-            break;
-        };
-        clock.sleep_until(t, Duration::from_millis(20));
-        if let Some((h, sample)) = leader.tick(clock.now()) {
-            wire::encode_reference(&mut buf, h, &sample);
-            net::publish(&session, &publisher, &buf)?;
-        }
-    }
-    drop(publisher);
-    let _ = session.close().wait();
-    Ok(LeaderReport {
-        clock_start_unix_ns,
-        ..leader.report()
-    })
+    let leader = Leader::new(reference, rate, duration, net::rand_source());
+    let task = LeaderTask::new(leader, keys.clone()).waiting_for(WaitFor {
+        keys,
+        names: opts.wait_for,
+        timeout: opts.wait_timeout,
+    });
+    runtime::run(task, &opts.net, FleetClock::new(opts.time_scale), stop)
 }
 
 #[cfg(test)]

@@ -28,6 +28,7 @@ pub mod robot;
 pub mod role;
 pub mod ros2;
 pub mod router;
+pub mod runtime;
 pub mod up;
 pub mod wire;
 

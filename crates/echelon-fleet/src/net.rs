@@ -12,6 +12,8 @@ use zenoh::bytes::ZBytes;
 use zenoh::{Config, Session, Wait};
 
 use crate::FleetError;
+use crate::keys::{Keys, every_fleet};
+use crate::role::Member;
 
 /// How long `open` waits for every `connect` endpoint, s of real time.
 pub const CONNECT_TIMEOUT_MS: u64 = 30_000;
@@ -102,32 +104,58 @@ pub struct NetOptions {
     pub secure: Option<Secure>,
 }
 
-/// Robot `k`'s identity (certificate and access-control subject).
-pub fn robot_identity(k: impl std::fmt::Display) -> String {
-    format!("robot-{k}")
-}
-
-/// Agent `k`'s simulated ROS 2 base's identity (`fleet base --ros2`).
-pub fn base_identity(k: impl std::fmt::Display) -> String {
-    format!("base-{k}")
-}
-
-/// Every router's identity (`fleet router`): the access control treats all
-/// routers alike, so the sites of a fleet may share one certificate.
-pub const ROUTER_IDENTITY: &str = "router";
-
 /// The identities a fleet of `robots` robots uses (with a simulated ROS 2
-/// base per robot, and its routers).
+/// base per robot, and its routers): each member's
+/// ([`Member::identity`]), once.
 pub fn identities(robots: u32) -> Vec<String> {
-    [
-        "leader".to_owned(),
-        "collector".to_owned(),
-        ROUTER_IDENTITY.to_owned(),
-    ]
-    .into_iter()
-    .chain((1..=robots).map(robot_identity))
-    .chain((1..=robots).map(base_identity))
-    .collect()
+    let mut ids: Vec<String> = Vec::new();
+    for m in Member::all(robots) {
+        let id = m.identity();
+        if !ids.contains(&id) {
+            ids.push(id);
+        }
+    }
+    ids
+}
+
+/// What `member` puts on the network in the fleet of `keys` (a fleet, or
+/// [`Keys::any`]), given each agent's ROS 2 keys `ros`: the keys its
+/// process publishes on, and for a router every key it forwards.
+pub fn publishes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
+    let ros_of = |k: u32| ros.get(k as usize - 1);
+    match member {
+        Member::Leader => vec![keys.reference()],
+        Member::Robot(k) => [keys.state(k), keys.stats(k)]
+            .into_iter()
+            .chain(ros_of(k).map(|r| r.cmd_vel.clone()))
+            .collect(),
+        Member::Collector => Vec::new(),
+        Member::Base(k) => ros_of(k).map(|r| r.odom.clone()).into_iter().collect(),
+        Member::Excite(k) => ros_of(k).map(|r| r.cmd_vel.clone()).into_iter().collect(),
+        Member::Router => std::iter::once(every_fleet())
+            .chain(ros.iter().flat_map(|r| [r.cmd_vel.clone(), r.odom.clone()]))
+            .collect(),
+    }
+}
+
+/// What `member` may subscribe to in the fleet of `keys`: a robot its
+/// leader stream (the reference or any robot's state) and, with a safety
+/// filter, every robot's state, and its ROS 2 odometry; the collector and a
+/// router everything.
+pub fn subscribes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
+    let ros_of = |k: u32| ros.get(k as usize - 1);
+    match member {
+        Member::Leader => Vec::new(),
+        Member::Robot(k) => [keys.reference(), keys.states()]
+            .into_iter()
+            .chain(ros_of(k).map(|r| r.odom.clone()))
+            .collect(),
+        Member::Base(k) => ros_of(k).map(|r| r.cmd_vel.clone()).into_iter().collect(),
+        Member::Excite(k) => ros_of(k).map(|r| r.odom.clone()).into_iter().collect(),
+        Member::Collector | Member::Router => std::iter::once(keys.everything())
+            .chain(ros.iter().flat_map(|r| [r.cmd_vel.clone(), r.odom.clone()]))
+            .collect(),
+    }
 }
 
 /// The Zenoh link protocol of the secure mode: QUIC (TLS 1.3 inside, mutual
@@ -157,9 +185,11 @@ pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
     )
 }
 
-/// The access-control section of the secure mode: every member may subscribe,
-/// declare liveliness and send; on arrival, references are accepted only from
-/// the leader's certificate and robot `k`'s keys only from robot `k`'s; with
+/// The access-control section of the secure mode, generated from the
+/// fleet's [`Member`]s: every member may subscribe, declare liveliness and
+/// send; on arrival, a put is accepted only from an identity whose members
+/// [publish](publishes) its key: references only from the leader's
+/// certificate, robot `k`'s state and stats only from robot `k`'s; with
 /// ROS 2 links, agent `k`'s `cmd_vel` only from robot `k` and its `odom` only
 /// from base `k`, and rmw_zenoh's liveliness tokens (`@ros2_lv/**`) from
 /// every member.
@@ -172,43 +202,23 @@ pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
 /// enforced at the router the sender is linked to; in a peer mesh, at every
 /// receiver.
 pub fn access_control(robots: u32, ros2: &[RosAcl]) -> serde_json::Value {
-    let everyone: Vec<String> = identities(robots).iter().map(|i| common_name(i)).collect();
+    let ids = identities(robots);
+    let everyone: Vec<String> = ids.iter().map(|i| common_name(i)).collect();
+    let all = [every_fleet()];
     let mut rules = vec![
         json!({
             "id": "declare", "permission": "allow", "flows": ["egress", "ingress"],
             "messages": ["declare_subscriber", "liveliness_token", "liveliness_query",
                           "declare_liveliness_subscriber", "query", "reply"],
-            "key_exprs": ["echelon/**"],
+            "key_exprs": all,
         }),
         json!({
             "id": "send", "permission": "allow", "flows": ["egress"],
-            "messages": ["put"], "key_exprs": ["echelon/**"],
-        }),
-        json!({
-            "id": "reference-in", "permission": "allow", "flows": ["ingress"],
-            "messages": ["put"], "key_exprs": ["echelon/*/reference"],
+            "messages": ["put"], "key_exprs": all,
         }),
     ];
-    let mut subjects = vec![
-        json!({"id": "members", "cert_common_names": everyone}),
-        json!({"id": "leader", "cert_common_names": [common_name("leader")]}),
-        json!({"id": "routers", "cert_common_names": [common_name(ROUTER_IDENTITY)]}),
-    ];
-    let mut policies = vec![
-        json!({"rules": ["declare", "send"], "subjects": ["members"]}),
-        json!({"rules": ["reference-in"], "subjects": ["leader"]}),
-    ];
-    // What a router forwards: every fleet key and, with ROS 2 links, theirs.
-    let mut routed = vec!["echelon/**".to_owned()];
-    routed.extend(
-        ros2.iter()
-            .flat_map(|r| [r.cmd_vel.clone(), r.odom.clone()]),
-    );
-    rules.push(json!({
-        "id": "router-in", "permission": "allow", "flows": ["ingress"],
-        "messages": ["put"], "key_exprs": routed,
-    }));
-    policies.push(json!({"rules": ["router-in"], "subjects": ["routers"]}));
+    let mut subjects = vec![json!({"id": "members", "cert_common_names": everyone})];
+    let mut policies = vec![json!({"rules": ["declare", "send"], "subjects": ["members"]})];
     if !ros2.is_empty() {
         let ros_keys: Vec<&str> = ros2
             .iter()
@@ -228,33 +238,29 @@ pub fn access_control(robots: u32, ros2: &[RosAcl]) -> serde_json::Value {
         }));
         policies.push(json!({"rules": ["ros-declare", "ros-send"], "subjects": ["members"]}));
     }
-    for k in 1..=robots {
-        let id = robot_identity(k);
+    // What arrives from an identity: what its members put (a router: what
+    // it forwards).
+    let any = Keys::any();
+    let members = Member::all(robots);
+    for id in &ids {
+        let mut own: Vec<String> = Vec::new();
+        for m in members.iter().filter(|m| m.identity() == *id) {
+            for key in publishes(*m, &any, ros2) {
+                if !own.contains(&key) {
+                    own.push(key);
+                }
+            }
+        }
+        if own.is_empty() {
+            continue;
+        }
         let rule = format!("{id}-in");
-        let mut own = vec![format!("echelon/*/robot/{k}/**")];
-        let ros = ros2.get(k as usize - 1);
-        own.extend(ros.map(|r| r.cmd_vel.clone()));
         rules.push(json!({
             "id": rule, "permission": "allow", "flows": ["ingress"],
             "messages": ["put"], "key_exprs": own,
         }));
-        subjects.push(json!({
-            "id": id,
-            "cert_common_names": [common_name(&id)],
-        }));
-        policies.push(json!({
-            "rules": [rule], "subjects": [id],
-        }));
-        if let Some(r) = ros {
-            let base = base_identity(k);
-            let rule = format!("{base}-in");
-            rules.push(json!({
-                "id": rule, "permission": "allow", "flows": ["ingress"],
-                "messages": ["put"], "key_exprs": [r.odom],
-            }));
-            subjects.push(json!({"id": base, "cert_common_names": [common_name(&base)]}));
-            policies.push(json!({"rules": [rule], "subjects": [base]}));
-        }
+        subjects.push(json!({"id": id, "cert_common_names": [common_name(id)]}));
+        policies.push(json!({"rules": [rule], "subjects": [id]}));
     }
     json!({
         "enabled": true,
@@ -457,5 +463,166 @@ mod tests {
         let acl = c.get_json("access_control").unwrap_or_default();
         assert!(acl.contains("echelon-robot-3") && acl.contains("echelon/*/reference"));
         assert!(acl.contains("echelon-router") && acl.contains("router-in"));
+    }
+
+    use serde_json::Value;
+    use zenoh::key_expr::keyexpr;
+
+    fn includes(expr: &str, key: &str) -> bool {
+        match (keyexpr::new(expr), keyexpr::new(key)) {
+            (Ok(e), Ok(k)) => e.includes(k),
+            _ => panic!("not key expressions: {expr}, {key}"),
+        }
+    }
+
+    fn strs(v: &Value) -> Vec<&str> {
+        v.as_array()
+            .map(|a| a.iter().filter_map(Value::as_str).collect())
+            .unwrap_or_default()
+    }
+
+    /// Whether `acl` lets a message `message` on `key` flow `flow` from (or
+    /// to) the certificate `cn`: zenoh's reading (default deny; allowed
+    /// when a policy of a subject naming `cn` has a rule of that flow and
+    /// message whose key expressions include `key`).
+    fn allows(acl: &Value, cn: &str, flow: &str, message: &str, key: &str) -> bool {
+        assert_eq!(acl["default_permission"], "deny");
+        let subjects: Vec<&str> = acl["subjects"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter(|s| strs(&s["cert_common_names"]).contains(&cn))
+            .filter_map(|s| s["id"].as_str())
+            .collect();
+        let rules: Vec<&str> = acl["policies"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter(|p| strs(&p["subjects"]).iter().any(|s| subjects.contains(s)))
+            .flat_map(|p| strs(&p["rules"]))
+            .collect();
+        acl["rules"].as_array().into_iter().flatten().any(|r| {
+            r["permission"] == "allow"
+                && rules.contains(&r["id"].as_str().unwrap_or_default())
+                && strs(&r["flows"]).contains(&flow)
+                && strs(&r["messages"]).contains(&message)
+                && strs(&r["key_exprs"]).iter().any(|e| includes(e, key))
+        })
+    }
+
+    /// Agents `1..=n`'s ROS 2 keys as [`ros_acl`] writes them.
+    fn ros_links(n: u32) -> Vec<RosAcl> {
+        (1..=n)
+            .map(|k| RosAcl {
+                cmd_vel: format!("0/robot{k}/cmd_vel/*/*"),
+                odom: format!("0/robot{k}/odom/*/*"),
+            })
+            .collect()
+    }
+
+    /// A concrete key of a ROS 2 key expression (any type).
+    fn concrete(expr: &str) -> String {
+        expr.replace('*', "T")
+    }
+
+    /// For every fleet size, with and without ROS 2 links, and every
+    /// identity: a put arriving from it is allowed exactly on the keys its
+    /// members publish, in any fleet; every member may declare what it
+    /// subscribes to.
+    #[test]
+    fn each_identity_may_put_exactly_what_its_members_publish() {
+        for robots in 1..=4 {
+            for with_ros in [0, 1, robots] {
+                let ros = ros_links(with_ros);
+                let acl = access_control(robots, &ros);
+                let members = Member::all(robots);
+                let fleets = [Keys::new("lab"), Keys::new("lab-2")];
+                // Every key any member puts, in two fleets, and keys no
+                // member of this fleet size puts.
+                let mut universe: Vec<String> = Vec::new();
+                for keys in &fleets {
+                    for m in members.iter().filter(|m| **m != Member::Router) {
+                        universe.extend(publishes(*m, keys, &ros).iter().map(|k| concrete(k)));
+                    }
+                    universe.push(keys.state(robots + 1));
+                    universe.push(keys.stats(robots + 1));
+                    universe.push(keys.alive("x"));
+                }
+                universe.extend(
+                    ros_links(robots + 1)
+                        .iter()
+                        .flat_map(|r| [concrete(&r.cmd_vel), concrete(&r.odom)]),
+                );
+                for id in identities(robots) {
+                    let cn = common_name(&id);
+                    let own: Vec<Member> = members
+                        .iter()
+                        .copied()
+                        .filter(|m| m.identity() == id)
+                        .collect();
+                    assert!(!own.is_empty(), "{id}");
+                    for key in &universe {
+                        let expected = own.iter().any(|m| {
+                            fleets.iter().any(|keys| {
+                                publishes(*m, keys, &ros).iter().any(|p| includes(p, key))
+                            })
+                        });
+                        assert_eq!(
+                            allows(&acl, &cn, "ingress", "put", key),
+                            expected,
+                            "{robots} robots, {with_ros} ROS 2 links: {id} putting {key}"
+                        );
+                    }
+                    for m in &own {
+                        for key in subscribes(*m, &fleets[0], &ros) {
+                            assert!(
+                                allows(&acl, &cn, "egress", "declare_subscriber", &key)
+                                    && allows(&acl, &cn, "ingress", "declare_subscriber", &key),
+                                "{m} subscribing to {key}"
+                            );
+                        }
+                    }
+                }
+                // Nobody outside the fleet's identities may put anything.
+                for key in &universe {
+                    assert!(!allows(&acl, "echelon-robot-99", "ingress", "put", key));
+                }
+            }
+        }
+    }
+
+    /// The tasks' declarations are the ones the access control is made of:
+    /// what a leader and robot publish is what [`publishes`] says, what they
+    /// subscribe to is within [`subscribes`], their tokens are their names.
+    #[test]
+    fn the_roles_declare_what_the_access_control_allows() {
+        use crate::faults::FaultSpec;
+        use crate::leader::{Leader, LeaderTask};
+        use crate::robot::{Robot, RobotConfig, RobotTask};
+        use crate::runtime::Task;
+
+        let (s, fleet, reference) = crate::testing::fast_circle();
+        let keys = Keys::new("lab");
+        let within = |declared: &[String], allowed: &[String], what: &str| {
+            for d in declared {
+                assert!(allowed.iter().any(|a| includes(a, d)), "{what}: {d}");
+            }
+        };
+        let leader = LeaderTask::new(Leader::new(reference, 50.0, 1.0, 1), keys.clone());
+        let m = Member::Leader;
+        assert_eq!(leader.outputs(), publishes(m, &keys, &[]));
+        within(&leader.inputs(), &subscribes(m, &keys, &[]), "leader");
+        assert_eq!(leader.tokens(), vec![keys.alive(&m.liveliness())]);
+        for k in 1..=2 {
+            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let robot = RobotTask::new(Robot::simulated(config, 1), keys.clone());
+            let m = Member::Robot(k);
+            let mut out = robot.outputs();
+            out.push(keys.stats(k));
+            assert_eq!(out, publishes(m, &keys, &[]));
+            within(&robot.inputs(), &subscribes(m, &keys, &[]), "robot");
+            assert_eq!(robot.tokens(), vec![keys.alive(&m.liveliness())]);
+        }
     }
 }

@@ -67,7 +67,7 @@ pub fn run(opts: &RouterOptions, stop: &StopFlag) -> Result<RouterReport, FleetE
     let sink = members.clone();
     let _sub = session
         .liveliness()
-        .declare_subscriber("echelon/*/alive/**")
+        .declare_subscriber(crate::keys::Keys::any().alive("**"))
         .history(true)
         .callback(move |s| {
             if let Ok(mut m) = sink.lock() {

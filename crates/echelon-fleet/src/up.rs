@@ -27,14 +27,12 @@ use echelon::scenario::{Overrides, Scenario};
 use crate::collector::CollectorReport;
 use crate::cost::{self, ProcessCost, RoleCost};
 use crate::faults::FaultSpec;
-use crate::keys::robot_role;
 use crate::latency::FleetLatency;
 use crate::leader::LeaderReport;
-use crate::net::{ROUTER_IDENTITY, base_identity, robot_identity};
 use crate::robot::RobotReport;
-use crate::role::Role;
+use crate::role::{Member, Role};
 use crate::ros2::base::BaseReport;
-use crate::ros2::base::base_role;
+
 use crate::router::RouterReport;
 use crate::{FleetError, StopFlag};
 
@@ -57,7 +55,7 @@ pub enum Topology {
 /// The role name of site `s`'s router (from 1) in logs, reports and
 /// `endpoints.json`: `router/<s>`.
 pub fn router_role(site: usize) -> String {
-    format!("router/{site}")
+    format!("{}/{site}", Role::Router)
 }
 
 /// Options of `fleet up`.
@@ -503,10 +501,13 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         Topology::Mesh => {
             endpoints.insert(Role::Collector.name().into(), net.peer(0).into());
             for k in 1..=n {
-                endpoints.insert(robot_role(k), net.peer(robot_at(k)).into());
+                endpoints.insert(
+                    Member::Robot(k as u32).liveliness(),
+                    net.peer(robot_at(k)).into(),
+                );
             }
             for k in 1..=bases {
-                endpoints.insert(base_role(k), net.peer(k).into());
+                endpoints.insert(Member::Base(k as u32).liveliness(), net.peer(k).into());
             }
             endpoints.insert(Role::Leader.name().into(), net.peer(leader_at).into());
         }
@@ -517,8 +518,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         let role = match i {
             0 => Role::Collector.name().to_owned(),
             i if i == leader_at => Role::Leader.name().to_owned(),
-            i if i <= bases => base_role(i),
-            i => robot_role(i - bases),
+            i if i <= bases => Member::Base(i as u32).liveliness(),
+            i => Member::Robot((i - bases) as u32).liveliness(),
         };
         if let Some(site) = sites.get_mut(site_of(i)) {
             site.push(role);
@@ -534,7 +535,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         for other in &net.routers[..s] {
             args.extend(["--connect".to_owned(), other.clone()]);
         }
-        args.extend(secure_args(ROUTER_IDENTITY));
+        args.extend(secure_args(&Member::Router.identity()));
         routers.push(spawn(&opts.exe, &router_role(s + 1), &args, &logs)?);
     }
     let scale = opts.time_scale.to_string();
@@ -553,7 +554,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     if opts.ros2 {
         args.push("--ros2".to_owned());
     }
-    args.extend(common(0, Role::Collector.name()));
+    args.extend(common(0, &Member::Collector.identity()));
     let mut collector = spawn(&opts.exe, Role::Collector.name(), &args, &logs)?;
 
     let mut base_procs = Vec::with_capacity(bases);
@@ -568,8 +569,13 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             "--time-scale".to_owned(),
             scale.clone(),
         ];
-        args.extend(common(k, &base_identity(k)));
-        base_procs.push(spawn(&opts.exe, &base_role(k), &args, &logs)?);
+        args.extend(common(k, &Member::Base(k as u32).identity()));
+        base_procs.push(spawn(
+            &opts.exe,
+            &Member::Base(k as u32).liveliness(),
+            &args,
+            &logs,
+        )?);
     }
 
     let mut robots = Vec::with_capacity(n);
@@ -599,8 +605,13 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         if opts.ros2 {
             args.push("--ros2".to_owned());
         }
-        args.extend(common(robot_at(k), &robot_identity(k)));
-        robots.push(spawn(&opts.exe, &robot_role(k), &args, &logs)?);
+        args.extend(common(robot_at(k), &Member::Robot(k as u32).identity()));
+        robots.push(spawn(
+            &opts.exe,
+            &Member::Robot(k as u32).liveliness(),
+            &args,
+            &logs,
+        )?);
     }
 
     let mut args = vec![
@@ -615,12 +626,15 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         Role::Collector.name().to_owned(),
     ];
     for k in 1..=n {
-        args.extend(["--wait-for".to_owned(), robot_role(k)]);
+        args.extend([
+            "--wait-for".to_owned(),
+            Member::Robot(k as u32).liveliness(),
+        ]);
     }
     for k in 1..=bases {
-        args.extend(["--wait-for".to_owned(), base_role(k)]);
+        args.extend(["--wait-for".to_owned(), Member::Base(k as u32).liveliness()]);
     }
-    args.extend(common(leader_at, Role::Leader.name()));
+    args.extend(common(leader_at, &Member::Leader.identity()));
     let mut leader = spawn(&opts.exe, Role::Leader.name(), &args, &logs)?;
 
     // Generous: connection set-up, then the run in real time, then the wind-down.

@@ -20,6 +20,7 @@ use echelon_fleet::latency::LatencyReport;
 use echelon_fleet::leader::{self, LeaderOptions};
 use echelon_fleet::net::{self, Mode, NetOptions, Secure};
 use echelon_fleet::robot::{self, RobotOptions};
+use echelon_fleet::role::Member;
 use echelon_fleet::ros2::RosTopic;
 use echelon_fleet::ros2::base::{self, BaseOptions};
 use echelon_fleet::router::{self, RouterOptions};
@@ -411,7 +412,9 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
         FleetCommand::Leader(a) => {
             let scenario = Scenario::resolve(&a.scenario)?;
             let robots = agents_of(&scenario)?;
-            let net = a.net.options("leader", Some(robots), Some(&scenario))?;
+            let net = a
+                .net
+                .options(&Member::Leader.identity(), Some(robots), Some(&scenario))?;
             let stop = StopFlag::on_signals()?;
             let report = leader::run(
                 LeaderOptions {
@@ -430,7 +433,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
         }
         FleetCommand::Robot(a) => {
             let (scenario, net, stop) =
-                agent_process(&a.scenario, &a.net, &net::robot_identity(a.agent))?;
+                agent_process(&a.scenario, &a.net, &Member::Robot(a.agent).identity())?;
             let report = robot::run(
                 RobotOptions {
                     scenario,
@@ -451,7 +454,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 bail!("fleet base simulates a ROS 2 base: give --ros2");
             }
             let (scenario, net, stop) =
-                agent_process(&a.scenario, &a.net, &net::base_identity(a.agent))?;
+                agent_process(&a.scenario, &a.net, &Member::Base(a.agent).identity())?;
             let report = base::run(
                 BaseOptions {
                     scenario,
@@ -470,7 +473,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 bail!("fleet excite drives a ROS 2 robot: give --ros2");
             }
             let (scenario, net, stop) =
-                agent_process(&a.scenario, &a.net, &net::robot_identity(a.agent))?;
+                agent_process(&a.scenario, &a.net, &Member::Robot(a.agent).identity())?;
             let report = excite::run(
                 ExciteOptions {
                     scenario,
@@ -498,7 +501,9 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 .map(|s| s.build(&Overrides::default()))
                 .transpose()?;
             let robots = run.as_ref().map(|r| r.plan.agents().len() as u32);
-            let net = a.net.options("collector", robots, scenario.as_ref())?;
+            let net = a
+                .net
+                .options(&Member::Collector.identity(), robots, scenario.as_ref())?;
             let stop = StopFlag::on_signals()?;
             let ros = match (&scenario, a.ros2) {
                 (Some(s), true) => ros_topics(s)?,
@@ -529,7 +534,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             let robots = scenario.as_ref().map(agents_of).transpose()?;
             let net = a
                 .net
-                .options(net::ROUTER_IDENTITY, robots, scenario.as_ref())?;
+                .options(&Member::Router.identity(), robots, scenario.as_ref())?;
             let stop = StopFlag::on_signals()?;
             let report = router::run(
                 &RouterOptions {

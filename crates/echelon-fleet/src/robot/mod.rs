@@ -38,10 +38,12 @@ use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
 mod config;
 mod driver;
 mod report;
+mod task;
 
 pub use config::{RobotConfig, RobotSafety, agent_spec, safety_of};
 pub use driver::{RobotOptions, run};
 pub use report::{RobotReport, RobotStats, SafetyCounts};
+pub use task::{PlantFeed, RobotTask};
 
 /// Longest plant integration sub-step, fleet s (the simulator's default `dt`).
 pub const PLANT_STEP: f64 = 1e-3;

@@ -15,27 +15,24 @@
 //! driver: rmw_zenoh keys, attachments and liveliness tokens, as a ROS 2 node
 //! `/robotK/echelon_base` would show.
 
-use std::sync::mpsc;
-use std::time::{Duration, Instant};
-
 use serde::Serialize;
-use zenoh::Wait;
 
 use echelon::agent::Drive;
 use echelon::base::VelocityCommand;
 use echelon::scenario::{Ros2Link, Scenario};
 
-use super::declare_tokens;
 use super::drive::{SampleRefusal, cmd_vel_type, decode_cmd_vel};
+use super::endpoint::declare_node;
 use crate::clock::FleetClock;
 use crate::keys::Keys;
-use crate::net::{self, NetOptions};
+use crate::net::NetOptions;
 use crate::plant::{Plant, SimulatedVelocityBase};
 use crate::robot::{PLANT_STEP, agent_spec};
+use crate::role::Member;
+use crate::runtime::{self, Flow, Outputs, Sample, Task};
 use crate::{FleetError, StopFlag};
-use echelon_ros2::attachment::{Attachment, Gid, gid_from_token};
+use echelon_ros2::attachment::{Attachment, Gid};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
-use echelon_ros2::liveliness::{NodeInfo, Qos};
 use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, Time};
 
 /// What a simulated base counted (its report and its stats).
@@ -250,12 +247,76 @@ pub struct BaseReport {
     pub last_command: [f64; 2],
 }
 
-/// The role name of agent `k`'s simulated base (its echelon liveliness token).
-pub fn base_role(k: impl std::fmt::Display) -> String {
-    format!("base/{k}")
+/// [`SimBase`] as a [`Task`] of the fleet runtime: `cmd_vel` in, odometry
+/// out, until `duration`.
+#[derive(Debug)]
+pub struct BaseTask {
+    base: SimBase,
+    agent: u32,
+    cmd_key: String,
+    odom_key: String,
+    alive: String,
+    duration: Option<f64>,
+    /// The wall clock (UNIX ns), for the stamps.
+    wall: fn() -> u64,
 }
 
-/// Runs a simulated ROS 2 base until `duration` or the stop flag.
+/// Its only output: odometry.
+const ODOM: usize = 0;
+
+impl Task for BaseTask {
+    type Report = BaseReport;
+
+    fn inputs(&self) -> Vec<String> {
+        vec![self.cmd_key.clone()]
+    }
+
+    fn outputs(&self) -> Vec<String> {
+        vec![self.odom_key.clone()]
+    }
+
+    fn tokens(&self) -> Vec<String> {
+        vec![self.alive.clone()]
+    }
+
+    fn on_input(&mut self, _: usize, s: &Sample<'_>) -> Result<(), FleetError> {
+        // Refusals are counted in the report.
+        let _ = self.base.on_cmd(s.key, s.payload, s.attachment, s.at);
+        Ok(())
+    }
+
+    fn next_wake(&self) -> f64 {
+        self.base.next_wake()
+    }
+
+    fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        if self.duration.is_some_and(|d| now >= d) {
+            return Ok(Flow::Stop);
+        }
+        if let Some(odom) = self.base.tick(now, (self.wall)() as i64) {
+            out.publish_attached(ODOM, &odom.payload, &odom.attachment)
+                .map_err(|e| FleetError::Zenoh(format!("publishing odometry: {e}")))?;
+        }
+        Ok(Flow::Continue)
+    }
+
+    fn report(self) -> Result<BaseReport, FleetError> {
+        let base = self.base;
+        let s = base.base().true_state();
+        let link = &base.link;
+        Ok(BaseReport {
+            role: crate::role::Role::Base,
+            agent: self.agent,
+            topics: [link.cmd_vel.clone(), link.odom.clone()],
+            counters: *base.counters(),
+            final_state: [s.x, s.y, s.theta, s.v, s.omega],
+            last_command: [base.followed().v, base.followed().omega],
+        })
+    }
+}
+
+/// Runs a simulated ROS 2 base until `duration` or the stop flag:
+/// [`BaseTask`] on the fleet runtime, declared as a ROS 2 node.
 pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError> {
     let fleet = opts.scenario.fleet()?;
     let spec = agent_spec(&opts.scenario, opts.agent)?;
@@ -266,74 +327,35 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         )));
     };
     let link = fleet.ros2[opts.agent as usize - 1].clone();
-    let session = net::open(&opts.net)?;
-    let zid = session.zid().to_string();
-    let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, "echelon_base")
-        .map_err(|e| FleetError::Config(e.to_string()))?
-        .with_scheme(link.key_scheme);
-    let cmd_type = cmd_vel_type(&link);
-    let odom_token = node.publisher_token(1, &link.odom, &ODOMETRY, &Qos::default());
-    let tokens = [
-        node.node_token(),
-        odom_token.clone(),
-        node.subscription_token(2, &link.cmd_vel, &cmd_type, &Qos::default()),
-        Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name)).alive(&base_role(opts.agent)),
-    ];
-    let _tokens = declare_tokens(&session, &tokens)?;
-    type CmdSample = (Instant, String, Vec<u8>, Option<Vec<u8>>);
-    let (tx, rx) = mpsc::channel::<CmdSample>();
-    let cmd_key = topic_key_any_type(link.key_scheme, link.domain_id, &link.cmd_vel);
-    let _sub = session
-        .declare_subscriber(&cmd_key)
-        .callback(move |s| {
-            let _ = tx.send((
-                Instant::now(),
-                s.key_expr().as_str().to_owned(),
-                s.payload().to_bytes().into_owned(),
-                s.attachment().map(|a| a.to_bytes().into_owned()),
-            ));
-        })
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("subscribing to {cmd_key}: {e}")))?;
-    let odom_key = topic_key(link.key_scheme, link.domain_id, &link.odom, &ODOMETRY);
-    let publisher = session
-        .declare_publisher(odom_key.clone())
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("declaring {odom_key}: {e}")))?;
-
-    let clock = FleetClock::new(opts.time_scale);
-    let model = SimulatedVelocityBase::new(robot.base(), spec.start, 0.0, PLANT_STEP);
-    let mut base = SimBase::new(link.clone(), model, gid_from_token(&odom_token));
-    let nap = Duration::from_millis(20);
-    while !stop.is_raised() {
-        clock.sleep_until(base.next_wake(), nap);
-        while let Ok((at, key, payload, attachment)) = rx.try_recv() {
-            // Refusals are counted in the report.
-            let _ = base.on_cmd(&key, &payload, attachment.as_deref(), clock.at(at));
-        }
-        let now = clock.now();
-        if opts.duration.is_some_and(|d| now >= d) {
-            break;
-        }
-        if let Some(out) = base.tick(now, crate::unix_nanos() as i64) {
-            publisher
-                .put(out.payload)
-                .attachment(out.attachment.to_vec())
-                .wait()
-                .map_err(|e| FleetError::Zenoh(format!("publishing odometry: {e}")))?;
-        }
-    }
-    drop(publisher);
-    let _ = session.close().wait();
-    let s = base.base().true_state();
-    Ok(BaseReport {
-        role: crate::role::Role::Base,
-        agent: opts.agent,
-        topics: [link.cmd_vel, link.odom],
-        counters: *base.counters(),
-        final_state: [s.x, s.y, s.theta, s.v, s.omega],
-        last_command: [base.followed().v, base.followed().omega],
-    })
+    let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name));
+    let alive = keys.alive(&Member::Base(opts.agent).liveliness());
+    runtime::run_on(
+        |session| {
+            let (tokens, gid) = declare_node(
+                session,
+                &link,
+                "echelon_base",
+                (&link.odom, &ODOMETRY),
+                (&link.cmd_vel, &cmd_vel_type(&link)),
+                |e| FleetError::Config(e.to_string()),
+            )?;
+            let model = SimulatedVelocityBase::new(robot.base(), spec.start, 0.0, PLANT_STEP);
+            let task = BaseTask {
+                base: SimBase::new(link.clone(), model, gid),
+                agent: opts.agent,
+                cmd_key: topic_key_any_type(link.key_scheme, link.domain_id, &link.cmd_vel),
+                odom_key: topic_key(link.key_scheme, link.domain_id, &link.odom, &ODOMETRY),
+                alive,
+                duration: opts.duration,
+                wall: crate::unix_nanos,
+            };
+            Ok((task, tokens))
+        },
+        &opts.net,
+        FleetClock::new(opts.time_scale),
+        stop,
+    )?
+    .report()
 }
 
 #[cfg(test)]

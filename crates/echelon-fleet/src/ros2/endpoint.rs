@@ -15,43 +15,96 @@ use crate::ros2::drive::{CmdSink, cmd_vel_type};
 use echelon_ros2::attachment::{Gid, gid_from_token};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
 use echelon_ros2::liveliness::{NodeInfo, Qos};
-use echelon_ros2::msgs::ODOMETRY;
+use echelon_ros2::msgs::{MessageType, ODOMETRY};
+use echelon_ros2::names::NameError;
 
-/// Agent `k`'s ROS 2 presence: a node `<namespace>/echelon_robot` with a
-/// `cmd_vel` publisher and an `odom` subscription, as rmw_zenoh declares
-/// them (liveliness tokens), and the odometry that arrives.
-pub(crate) struct Ros2Endpoint<'a> {
-    pub(crate) publisher: zenoh::pubsub::Publisher<'a>,
+/// A ROS 2 node `<namespace>/<name>` of agent `link`'s with one publisher
+/// and one subscription (topic, type), as rmw_zenoh declares them
+/// (liveliness tokens); its tokens and its publisher's gid.
+pub(crate) fn declare_node(
+    session: &zenoh::Session,
+    link: &Ros2Link,
+    name: &str,
+    publishes: (&str, &MessageType),
+    subscribes: (&str, &MessageType),
+    name_error: impl FnOnce(NameError) -> FleetError,
+) -> Result<(Vec<zenoh::liveliness::LivelinessToken>, Gid), FleetError> {
+    let zid = session.zid().to_string();
+    let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, name)
+        .map_err(name_error)?
+        .with_scheme(link.key_scheme);
+    let pub_token = node.publisher_token(1, publishes.0, publishes.1, &Qos::default());
+    let tokens = declare_tokens(
+        session,
+        &[
+            node.node_token(),
+            pub_token.clone(),
+            node.subscription_token(2, subscribes.0, subscribes.1, &Qos::default()),
+        ],
+    )?;
+    Ok((tokens, gid_from_token(&pub_token)))
+}
+
+/// Agent `k`'s ROS 2 node `<namespace>/echelon_robot` as rmw_zenoh declares
+/// it (liveliness tokens: the node, a `cmd_vel` publisher, an `odom`
+/// subscription) and its `cmd_vel` publisher; the `odom` subscription
+/// itself is its user's.
+pub(crate) struct Ros2Node {
+    pub(crate) publisher: zenoh::pubsub::Publisher<'static>,
+    pub(crate) gid: Gid,
+    /// The key expression of its `odom`, any type (so that a publisher of
+    /// the wrong type is seen, counted and refused rather than never heard).
+    pub(crate) odom_key: String,
+    pub(crate) tokens: Vec<zenoh::liveliness::LivelinessToken>,
+}
+
+impl Ros2Node {
+    pub(crate) fn declare(
+        session: &zenoh::Session,
+        link: &Ros2Link,
+        agent: u32,
+    ) -> Result<Ros2Node, FleetError> {
+        let cmd_type = cmd_vel_type(link);
+        let (tokens, gid) = declare_node(
+            session,
+            link,
+            "echelon_robot",
+            (&link.cmd_vel, &cmd_type),
+            (&link.odom, &ODOMETRY),
+            |e| FleetError::Config(format!("agent {agent}: {e}")),
+        )?;
+        let cmd_key = topic_key(link.key_scheme, link.domain_id, &link.cmd_vel, &cmd_type);
+        let publisher = session
+            .declare_publisher(cmd_key.clone())
+            .wait()
+            .map_err(|e| FleetError::Zenoh(format!("declaring {cmd_key}: {e}")))?;
+        Ok(Ros2Node {
+            publisher,
+            gid,
+            odom_key: topic_key_any_type(link.key_scheme, link.domain_id, &link.odom),
+            tokens,
+        })
+    }
+}
+
+/// Agent `k`'s ROS 2 presence ([`Ros2Node`]) and the odometry that arrives.
+pub(crate) struct Ros2Endpoint {
+    pub(crate) publisher: zenoh::pubsub::Publisher<'static>,
     pub(crate) gid: Gid,
     pub(crate) odom: mpsc::Receiver<(Instant, String, Vec<u8>)>,
     _subscriber: zenoh::pubsub::Subscriber<()>,
     _tokens: Vec<zenoh::liveliness::LivelinessToken>,
 }
 
-impl<'a> Ros2Endpoint<'a> {
+impl Ros2Endpoint {
     pub(crate) fn declare(
-        session: &'a zenoh::Session,
+        session: &zenoh::Session,
         link: &Ros2Link,
         agent: u32,
-    ) -> Result<Ros2Endpoint<'a>, FleetError> {
-        let zid = session.zid().to_string();
-        let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, "echelon_robot")
-            .map_err(|e| FleetError::Config(format!("agent {agent}: {e}")))?
-            .with_scheme(link.key_scheme);
-        let cmd_type = cmd_vel_type(link);
-        let pub_token = node.publisher_token(1, &link.cmd_vel, &cmd_type, &Qos::default());
-        let tokens = declare_tokens(
-            session,
-            &[
-                node.node_token(),
-                pub_token.clone(),
-                node.subscription_token(2, &link.odom, &ODOMETRY, &Qos::default()),
-            ],
-        )?;
+    ) -> Result<Ros2Endpoint, FleetError> {
+        let node = Ros2Node::declare(session, link, agent)?;
         let (tx, odom) = mpsc::channel();
-        // Any type on the odom topic, so a publisher of the wrong type is
-        // seen, counted and refused rather than never heard.
-        let odom_key = topic_key_any_type(link.key_scheme, link.domain_id, &link.odom);
+        let odom_key = node.odom_key;
         let subscriber = session
             .declare_subscriber(&odom_key)
             .callback(move |s| {
@@ -63,18 +116,31 @@ impl<'a> Ros2Endpoint<'a> {
             })
             .wait()
             .map_err(|e| FleetError::Zenoh(format!("subscribing to {odom_key}: {e}")))?;
-        let cmd_key = topic_key(link.key_scheme, link.domain_id, &link.cmd_vel, &cmd_type);
-        let publisher = session
-            .declare_publisher(cmd_key.clone())
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("declaring {cmd_key}: {e}")))?;
         Ok(Ros2Endpoint {
-            publisher,
-            gid: gid_from_token(&pub_token),
+            publisher: node.publisher,
+            gid: node.gid,
             odom,
             _subscriber: subscriber,
-            _tokens: tokens,
+            _tokens: node.tokens,
         })
+    }
+}
+
+/// `cmd_vel` through a Zenoh publisher it owns, stamped by the system clock.
+pub(crate) struct OwnedCmdSink(pub(crate) zenoh::pubsub::Publisher<'static>);
+
+impl std::fmt::Debug for OwnedCmdSink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("OwnedCmdSink")
+    }
+}
+
+impl CmdSink for OwnedCmdSink {
+    fn now_ns(&self) -> i64 {
+        ZenohCmdSink(&self.0).now_ns()
+    }
+    fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
+        ZenohCmdSink(&self.0).send(payload, attachment)
     }
 }
 

@@ -1,0 +1,263 @@
+//! [`Robot`] as a [`Task`] of the fleet runtime: its leader stream (and,
+//! with a safety filter, every robot's state) in, its state and counters
+//! out.
+
+use echelon::formation::Leader;
+
+use crate::FleetError;
+use crate::keys::Keys;
+use crate::plant::{Plant, SimulatedDrive};
+use crate::role::Member;
+use crate::runtime::{Flow, Outputs, Sample, Task};
+use crate::wire::{self, DecodeError, Message};
+
+use super::{Robot, RobotReport, RobotStats};
+
+/// The input number of the leader stream (then every robot's state, with a
+/// safety filter, then the plant's input, if any).
+const LEADER: usize = 0;
+/// The output number of its state.
+const STATE: usize = 0;
+
+/// What a plant does with a sample of its own input (key, bytes, fleet time).
+pub type PlantFeed<P> = fn(&mut P, &str, &[u8], f64);
+
+/// A robot on the fleet runtime. What arrives waits for its next tick (in
+/// order: the leader stream, the neighbours, the plant's input), as its
+/// Zenoh driver has always handed it over.
+#[derive(Debug)]
+pub struct RobotTask<P: Plant = SimulatedDrive> {
+    robot: Robot<P>,
+    keys: Keys,
+    leader: Vec<(f64, Option<i64>, Vec<u8>)>,
+    neighbours: Vec<(f64, Result<Message, DecodeError>)>,
+    plant_input: Option<(String, PlantFeed<P>)>,
+    plant: Vec<(f64, String, Vec<u8>)>,
+    buf: Vec<u8>,
+    failed: bool,
+}
+
+impl<P: Plant> RobotTask<P> {
+    /// `robot` in the fleet of `keys`.
+    pub fn new(robot: Robot<P>, keys: Keys) -> Self {
+        RobotTask {
+            robot,
+            keys,
+            leader: Vec::new(),
+            neighbours: Vec::new(),
+            plant_input: None,
+            plant: Vec::new(),
+            buf: Vec::with_capacity(wire::STATE_LEN),
+            failed: false,
+        }
+    }
+
+    /// The same, its plant also reading `key` (e.g. a ROS 2 base's
+    /// odometry) through `feed`.
+    pub fn with_plant_input(self, key: String, feed: PlantFeed<P>) -> Self {
+        RobotTask {
+            plant_input: Some((key, feed)),
+            ..self
+        }
+    }
+
+    /// The robot.
+    pub fn robot(&self) -> &Robot<P> {
+        &self.robot
+    }
+
+    /// The robot, to change (e.g. a test's fault).
+    pub fn robot_mut(&mut self) -> &mut Robot<P> {
+        &mut self.robot
+    }
+
+    /// The robot, taken out.
+    pub fn into_robot(self) -> Robot<P> {
+        self.robot
+    }
+
+    /// Its key of the leader stream: the reference, or its leader robot's state.
+    pub fn leader_key(&self) -> String {
+        match self.robot.config().spec.leader {
+            Leader::Reference => self.keys.reference(),
+            Leader::Agent(j) => self.keys.state(j as u32 + 1),
+        }
+    }
+
+    fn agent(&self) -> u32 {
+        self.robot.config().agent
+    }
+
+    fn publish_stats(&self, out: &mut dyn Outputs, stats: &RobotStats) {
+        if let Ok(json) = serde_json::to_vec(stats) {
+            out.put(&self.keys.stats(self.agent()), &json);
+        }
+    }
+}
+
+impl<P: Plant + 'static> Task for RobotTask<P> {
+    type Report = RobotReport;
+
+    fn inputs(&self) -> Vec<String> {
+        let mut keys = vec![self.leader_key()];
+        if self.robot.has_safety() {
+            keys.push(self.keys.states());
+        }
+        keys.extend(self.plant_input.as_ref().map(|(k, _)| k.clone()));
+        keys
+    }
+
+    fn outputs(&self) -> Vec<String> {
+        vec![self.keys.state(self.agent())]
+    }
+
+    fn tokens(&self) -> Vec<String> {
+        vec![self.keys.alive(&Member::Robot(self.agent()).liveliness())]
+    }
+
+    fn on_input(&mut self, input: usize, sample: &Sample<'_>) -> Result<(), FleetError> {
+        let neighbours = usize::from(self.robot.has_safety());
+        if input == LEADER {
+            self.leader
+                .push((sample.at, sample.delay, sample.payload.to_vec()));
+        } else if input == neighbours {
+            self.neighbours
+                .push((sample.at, wire::decode(sample.payload)));
+        } else {
+            self.plant
+                .push((sample.at, sample.key.to_owned(), sample.payload.to_vec()));
+        }
+        Ok(())
+    }
+
+    fn next_wake(&self) -> f64 {
+        self.robot.next_wake()
+    }
+
+    fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        if !self.robot.is_due(now) {
+            return Ok(Flow::Continue);
+        }
+        for (at, delay, bytes) in self.leader.drain(..) {
+            self.robot.on_stamped_message(&bytes, at, delay);
+        }
+        for (at, msg) in self.neighbours.drain(..) {
+            self.robot.on_neighbour(msg, at);
+        }
+        if let Some((_, feed)) = &self.plant_input {
+            for (at, key, bytes) in self.plant.drain(..) {
+                let t = self.robot.fleet_time(at);
+                feed(self.robot.plant_mut(), &key, &bytes, t);
+            }
+        }
+        let tick = self.robot.tick(now);
+        if let Some((h, state)) = tick.publish {
+            wire::encode_state(&mut self.buf, h, &state);
+            if let Err(e) = out.publish(STATE, &self.buf) {
+                self.failed = true;
+                return Err(e);
+            }
+        }
+        if let Some(stats) = tick.stats {
+            self.publish_stats(out, &stats);
+        }
+        Ok(if tick.done {
+            Flow::Stop
+        } else {
+            Flow::Continue
+        })
+    }
+
+    /// Commands zero ([`Robot::finish`]); says why if it diverged, else
+    /// publishes its final counters (unless publishing had failed).
+    fn stop(&mut self, out: &mut dyn Outputs) -> Result<(), FleetError> {
+        let stats = self.robot.finish();
+        if self.failed {
+            return Ok(());
+        }
+        if let Some(why) = self.robot.diverged() {
+            return Err(FleetError::Diverged(why.to_owned()));
+        }
+        self.publish_stats(out, &stats);
+        Ok(())
+    }
+
+    fn report(self) -> Result<RobotReport, FleetError> {
+        Ok(self.robot.report())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::faults::FaultSpec;
+    use crate::leader::{Leader as Reference, LeaderTask};
+    use crate::robot::RobotConfig;
+    use crate::runtime::bus::Bus;
+    use crate::wire::{LinkStatus, RobotState};
+
+    fn states(bus: &Bus, id: usize, key: &str) -> Vec<RobotState> {
+        bus.published_by(id, key)
+            .filter_map(|p| match wire::decode(&p.payload) {
+                Ok(Message::State(_, s)) => Some(s),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The leader and a chain of two robots, the tasks the runtime runs,
+    /// on the bus: the chain converges; with the reference link cut for
+    /// 3 s, robot 1 extrapolates, loses the link once and recovers; robot
+    /// 2 (its own link fresh) never loses its link.
+    #[test]
+    fn the_leader_and_a_chain_run_on_the_bus() {
+        let (s, fleet, reference) = crate::testing::fast_circle();
+        let keys = Keys::new("lab");
+        let mut bus = Bus::new();
+        let leader = Reference::new(reference, 50.0, 30.0, 1);
+        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        let robot = |k| {
+            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
+                .unwrap_or_else(|e| panic!("{e}"));
+            RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
+        };
+        let r1 = bus.add(robot(1), 0.0);
+        let r2 = bus.add(robot(2), 0.0);
+        let reference_key = keys.reference();
+        bus.link = Box::new(move |from, key, t| {
+            (from != l || key != reference_key || !(12.0..15.0).contains(&t)).then_some(0.0)
+        });
+        bus.run_until(30.0);
+        assert!(!bus.is_running(l), "the leader stops at its duration");
+        for (id, k) in [(r1, 1), (r2, 2)] {
+            let task: &RobotTask = bus.task(id).unwrap_or_else(|| panic!("a robot"));
+            let rep = task.robot().report();
+            assert!(rep.final_error < 1e-3, "agent {k}: {rep:?}");
+            assert_eq!(rep.link, "tracking");
+            assert_eq!(rep.counters.link_losses, u64::from(k == 1), "{rep:?}");
+            // 100 Hz for 30 s, every state published and logged.
+            assert!((2990..=3001).contains(&rep.ticks), "{rep:?}");
+            let published = states(&bus, id, &keys.state(k));
+            assert_eq!(published.len() as u64, rep.published);
+            assert!(published.windows(2).all(|w| w[0].t <= w[1].t));
+            let cut = published.iter().filter(|st| (13.0..15.0).contains(&st.t));
+            let expected = if k == 1 {
+                LinkStatus::Extrapolating
+            } else {
+                LinkStatus::Tracking
+            };
+            assert!(cut.clone().count() > 150);
+            assert!(cut.into_iter().all(|st| st.link == expected));
+            // Its counters once per fleet second on its stats key.
+            let stats = bus.published_by(id, &keys.stats(k)).count();
+            assert!((29..=31).contains(&stats), "{stats}");
+        }
+        // The reference sent during the cut (150 samples) reached no one;
+        // the last one may wait for robot 1's next tick.
+        let sent = bus.published_by(l, &keys.reference()).count() as u64;
+        let task: &RobotTask = bus.task(r1).unwrap_or_else(|| panic!("a robot"));
+        let c = task.robot().counters();
+        assert_eq!(sent, 1501);
+        assert!((sent - 151..=sent - 150).contains(&c.received), "{c:?}");
+    }
+}

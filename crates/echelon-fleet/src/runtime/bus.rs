@@ -1,0 +1,579 @@
+//! An in-memory bus running [`Task`]s on one fake clock: what the Zenoh
+//! runtime does, deterministically, without a network or a sleep (tests,
+//! benches).
+//!
+//! Every task has a start (bus time at which its clock reads 0). The bus
+//! goes from event to event: deliveries due (in the order they were sent),
+//! then the ticks due (in the order the tasks were added), each followed by
+//! the deliveries it made due (what it sent without latency reaches the
+//! tasks that tick after it at the same instant). A publication
+//! reaches every input whose key expression includes its key, the sender's
+//! own included (as on Zenoh), after the [link](Bus::link)'s latency, or
+//! never if the link drops it.
+
+use std::any::Any;
+use std::collections::BTreeMap;
+
+use zenoh::key_expr::keyexpr;
+
+use crate::FleetError;
+
+use super::{Flow, Outputs, Sample, Task};
+
+/// A task's number on the bus.
+pub type TaskId = usize;
+
+/// One publication, as the bus logged it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Published {
+    /// Bus time it was sent.
+    pub t: f64,
+    /// Its sender.
+    pub from: TaskId,
+    /// Its key.
+    pub key: String,
+    /// Its payload.
+    pub payload: Vec<u8>,
+}
+
+/// Latency of a publication `(sender, key, bus time)`: `Some(s)`, or `None`
+/// to drop it.
+pub type Link = Box<dyn FnMut(TaskId, &str, f64) -> Option<f64>>;
+
+/// A [`Task`] with its type and report erased.
+trait Node: Any {
+    fn inputs(&self) -> Vec<String>;
+    fn outputs(&self) -> Vec<String>;
+    fn on_input(&mut self, input: usize, sample: &Sample<'_>) -> Result<(), FleetError>;
+    fn next_wake(&self) -> f64;
+    fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError>;
+    fn stop(&mut self, out: &mut dyn Outputs) -> Result<(), FleetError>;
+    fn started(&mut self);
+    fn as_any(&self) -> &dyn Any;
+    fn as_any_mut(&mut self) -> &mut dyn Any;
+}
+
+impl<T: Task + 'static> Node for T {
+    fn inputs(&self) -> Vec<String> {
+        Task::inputs(self)
+    }
+    fn outputs(&self) -> Vec<String> {
+        Task::outputs(self)
+    }
+    fn on_input(&mut self, input: usize, sample: &Sample<'_>) -> Result<(), FleetError> {
+        Task::on_input(self, input, sample)
+    }
+    fn next_wake(&self) -> f64 {
+        Task::next_wake(self)
+    }
+    fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        Task::tick(self, now, out)
+    }
+    fn stop(&mut self, out: &mut dyn Outputs) -> Result<(), FleetError> {
+        Task::stop(self, out)
+    }
+    fn started(&mut self) {
+        Task::started(self, 0);
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+}
+
+struct Entry {
+    node: Box<dyn Node>,
+    start: f64,
+    inputs: Vec<String>,
+    outputs: Vec<String>,
+    running: bool,
+    error: Option<FleetError>,
+}
+
+impl Entry {
+    /// `task`, started, its clock reading 0 at bus time `start`.
+    fn new<T: Task + 'static>(task: T, start: f64) -> Entry {
+        let mut node: Box<dyn Node> = Box::new(task);
+        node.started();
+        Entry {
+            inputs: node.inputs(),
+            outputs: node.outputs(),
+            node,
+            start,
+            running: true,
+            error: None,
+        }
+    }
+}
+
+/// A message on its way: `(arrival, sequence)` orders deliveries.
+struct Pending {
+    from: TaskId,
+    key: String,
+    payload: Vec<u8>,
+    attachment: Option<Vec<u8>>,
+    sent: f64,
+}
+
+/// What a task sent during one call, before the bus routes it.
+#[derive(Default)]
+struct Sent {
+    outputs: Vec<String>,
+    messages: Vec<(String, Vec<u8>, Option<Vec<u8>>)>,
+}
+
+impl Outputs for Sent {
+    fn publish(&mut self, output: usize, payload: &[u8]) -> Result<(), FleetError> {
+        let key = self.key(output)?;
+        self.messages.push((key, payload.to_vec(), None));
+        Ok(())
+    }
+    fn publish_attached(
+        &mut self,
+        output: usize,
+        payload: &[u8],
+        attachment: &[u8],
+    ) -> Result<(), FleetError> {
+        let key = self.key(output)?;
+        self.messages
+            .push((key, payload.to_vec(), Some(attachment.to_vec())));
+        Ok(())
+    }
+    fn put(&mut self, key: &str, payload: &[u8]) {
+        self.messages.push((key.to_owned(), payload.to_vec(), None));
+    }
+}
+
+impl Sent {
+    fn key(&self, output: usize) -> Result<String, FleetError> {
+        self.outputs
+            .get(output)
+            .cloned()
+            .ok_or_else(|| FleetError::Zenoh(format!("no output {output}")))
+    }
+}
+
+/// Tasks exchanging messages in memory on one fake clock.
+pub struct Bus {
+    now: f64,
+    entries: Vec<Entry>,
+    queue: BTreeMap<(OrderedTime, u64), Pending>,
+    seq: u64,
+    /// Every publication so far.
+    pub log: Vec<Published>,
+    /// Decides each publication's latency (default: none, delivered at once).
+    pub link: Link,
+}
+
+/// A time that sorts (never NaN on the bus).
+#[derive(Debug, Clone, Copy)]
+struct OrderedTime(f64);
+
+impl PartialEq for OrderedTime {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other).is_eq()
+    }
+}
+
+impl Eq for OrderedTime {}
+
+impl PartialOrd for OrderedTime {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for OrderedTime {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&other.0)
+    }
+}
+
+impl Default for Bus {
+    fn default() -> Self {
+        Bus::new()
+    }
+}
+
+impl std::fmt::Debug for Bus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Bus")
+            .field("now", &self.now)
+            .field("tasks", &self.entries.len())
+            .field("pending", &self.queue.len())
+            .finish()
+    }
+}
+
+fn includes(expr: &str, key: &str) -> bool {
+    match (keyexpr::new(expr), keyexpr::new(key)) {
+        (Ok(e), Ok(k)) => e.includes(k),
+        _ => false,
+    }
+}
+
+impl Bus {
+    /// An empty bus at time 0 with a perfect link.
+    pub fn new() -> Bus {
+        Bus {
+            now: 0.0,
+            entries: Vec::new(),
+            queue: BTreeMap::new(),
+            seq: 0,
+            log: Vec::new(),
+            link: Box::new(|_, _, _| Some(0.0)),
+        }
+    }
+
+    /// Bus time now.
+    pub fn now(&self) -> f64 {
+        self.now
+    }
+
+    /// Adds `task`, its clock reading 0 at bus time `start`.
+    pub fn add<T: Task + 'static>(&mut self, task: T, start: f64) -> TaskId {
+        self.entries.push(Entry::new(task, start));
+        self.entries.len() - 1
+    }
+
+    /// Puts `task` in place of task `id` (a restarted process), its clock
+    /// reading 0 at bus time `start`.
+    pub fn replace<T: Task + 'static>(&mut self, id: TaskId, task: T, start: f64) {
+        self.entries[id] = Entry::new(task, start);
+    }
+
+    /// Task `id`, as its type (`None`: another type).
+    pub fn task<T: Task + 'static>(&self, id: TaskId) -> Option<&T> {
+        self.entries.get(id)?.node.as_any().downcast_ref()
+    }
+
+    /// Task `id`, as its type, to change.
+    pub fn task_mut<T: Task + 'static>(&mut self, id: TaskId) -> Option<&mut T> {
+        self.entries.get_mut(id)?.node.as_any_mut().downcast_mut()
+    }
+
+    /// Whether task `id` still runs.
+    pub fn is_running(&self, id: TaskId) -> bool {
+        self.entries.get(id).is_some_and(|e| e.running)
+    }
+
+    /// The error task `id` stopped on, if any.
+    pub fn error(&self, id: TaskId) -> Option<&FleetError> {
+        self.entries.get(id)?.error.as_ref()
+    }
+
+    /// Removes task `id` from the bus and returns it (it is not stopped);
+    /// the other tasks keep their numbers.
+    pub fn take<T: Task + 'static>(&mut self, id: TaskId) -> Option<T> {
+        let e = self.entries.get_mut(id)?;
+        if !e.node.as_any().is::<T>() {
+            return None;
+        }
+        let placeholder: Box<dyn Node> = Box::new(Idle);
+        let node = std::mem::replace(&mut e.node, placeholder);
+        e.running = false;
+        e.inputs.clear();
+        let any: Box<dyn Any> = node;
+        any.downcast().ok().map(|b| *b)
+    }
+
+    /// Publications of task `id` on `key`, in order.
+    pub fn published_by<'a>(
+        &'a self,
+        id: TaskId,
+        key: &'a str,
+    ) -> impl Iterator<Item = &'a Published> + 'a {
+        self.log
+            .iter()
+            .filter(move |p| p.from == id && p.key == key)
+    }
+
+    /// Stops task `id` as the runtime does (its last words are sent).
+    pub fn stop(&mut self, id: TaskId) -> Result<(), FleetError> {
+        let e = &mut self.entries[id];
+        if !e.running {
+            return Ok(());
+        }
+        e.running = false;
+        let mut sent = Sent {
+            outputs: e.outputs.clone(),
+            ..Sent::default()
+        };
+        let r = e.node.stop(&mut sent);
+        self.route(id, sent);
+        r
+    }
+
+    fn route(&mut self, from: TaskId, sent: Sent) {
+        for (key, payload, attachment) in sent.messages {
+            self.log.push(Published {
+                t: self.now,
+                from,
+                key: key.clone(),
+                payload: payload.clone(),
+            });
+            if let Some(latency) = (self.link)(from, &key, self.now) {
+                self.queue.insert(
+                    (OrderedTime(self.now + latency.max(0.0)), self.seq),
+                    Pending {
+                        from,
+                        key,
+                        payload,
+                        attachment,
+                        sent: self.now,
+                    },
+                );
+                self.seq += 1;
+            }
+        }
+    }
+
+    fn deliver(&mut self, at: f64, p: &Pending) {
+        let _ = p.from;
+        let _ = p.sent;
+        for e in &mut self.entries {
+            if !e.running {
+                continue;
+            }
+            for (input, expr) in e.inputs.iter().enumerate() {
+                if includes(expr, &p.key) {
+                    let sample = Sample {
+                        key: &p.key,
+                        payload: &p.payload,
+                        attachment: p.attachment.as_deref(),
+                        at: at - e.start,
+                        unix_ns: (at.max(0.0) * 1e9) as u64,
+                        delay: Some(((at - p.sent) * 1e9).round() as i64),
+                    };
+                    if let Err(err) = e.node.on_input(input, &sample) {
+                        e.error = Some(err);
+                        e.running = false;
+                        break;
+                    }
+                }
+            }
+        }
+    }
+
+    fn next_event(&self) -> f64 {
+        let delivery = self.queue.keys().next().map_or(f64::INFINITY, |(t, _)| t.0);
+        self.entries
+            .iter()
+            .filter(|e| e.running)
+            .map(|e| e.start + e.node.next_wake())
+            .fold(delivery, f64::min)
+    }
+
+    /// Runs every task until bus time `end` (included).
+    pub fn run_until(&mut self, end: f64) {
+        let mut stalled = false;
+        loop {
+            let mut t = self.next_event().max(self.now);
+            if stalled && t <= self.now {
+                // A task woke and found nothing due (its wake rounded below
+                // its due time): the next instant.
+                t = self.now + 1e-12 * self.now.abs().max(1.0);
+            }
+            if t > end {
+                self.now = self.now.max(end);
+                return;
+            }
+            self.now = t;
+            let mut progress = self.deliver_due();
+            for id in 0..self.entries.len() {
+                let e = &mut self.entries[id];
+                if !e.running || e.start + e.node.next_wake() > t {
+                    continue;
+                }
+                let before = e.node.next_wake();
+                let mut sent = Sent {
+                    outputs: e.outputs.clone(),
+                    ..Sent::default()
+                };
+                let flow = e.node.tick(t - e.start, &mut sent);
+                progress |= !sent.messages.is_empty() || e.node.next_wake() != before;
+                self.route(id, sent);
+                match flow {
+                    Ok(Flow::Continue) => {}
+                    Ok(Flow::Stop) => {
+                        progress = true;
+                        if let Err(err) = self.stop(id) {
+                            self.entries[id].error = Some(err);
+                        }
+                    }
+                    Err(err) => {
+                        progress = true;
+                        let _ = self.stop(id);
+                        self.entries[id].error = Some(err);
+                    }
+                }
+                // What it sent without latency reaches the next tasks now.
+                progress |= self.deliver_due();
+            }
+            stalled = !progress;
+        }
+    }
+
+    /// Delivers every message due by now, in order; whether there was any.
+    fn deliver_due(&mut self) -> bool {
+        let mut any = false;
+        while let Some(entry) = self.queue.first_entry() {
+            if entry.key().0.0 > self.now {
+                break;
+            }
+            let ((at, _), p) = entry.remove_entry();
+            self.deliver(at.0, &p);
+            any = true;
+        }
+        any
+    }
+}
+
+/// What is left on the bus where a task was taken.
+struct Idle;
+
+impl Task for Idle {
+    type Report = ();
+    fn inputs(&self) -> Vec<String> {
+        Vec::new()
+    }
+    fn outputs(&self) -> Vec<String> {
+        Vec::new()
+    }
+    fn on_input(&mut self, _: usize, _: &Sample<'_>) -> Result<(), FleetError> {
+        Ok(())
+    }
+    fn next_wake(&self) -> f64 {
+        f64::INFINITY
+    }
+    fn tick(&mut self, _: f64, _: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        Ok(Flow::Continue)
+    }
+    fn report(self) -> Result<(), FleetError> {
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Publishes its tick count on `out` every `period`, records what it hears.
+    struct Echo {
+        period: f64,
+        next: f64,
+        ticks: u64,
+        heard: Vec<(f64, String, Vec<u8>)>,
+        until: f64,
+    }
+
+    impl Echo {
+        fn new(period: f64, until: f64) -> Echo {
+            Echo {
+                period,
+                next: 0.0,
+                ticks: 0,
+                heard: Vec::new(),
+                until,
+            }
+        }
+    }
+
+    impl Task for Echo {
+        type Report = u64;
+        fn inputs(&self) -> Vec<String> {
+            vec!["t/*/n".into()]
+        }
+        fn outputs(&self) -> Vec<String> {
+            vec![format!("t/{}/n", (self.period * 1000.0) as u32)]
+        }
+        fn on_input(&mut self, _: usize, s: &Sample<'_>) -> Result<(), FleetError> {
+            self.heard
+                .push((s.at, s.key.to_owned(), s.payload.to_vec()));
+            Ok(())
+        }
+        fn next_wake(&self) -> f64 {
+            self.next
+        }
+        fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+            if now < self.next {
+                return Ok(Flow::Continue);
+            }
+            out.publish(0, &self.ticks.to_le_bytes())?;
+            self.ticks += 1;
+            self.next += self.period;
+            Ok(if self.next > self.until {
+                Flow::Stop
+            } else {
+                Flow::Continue
+            })
+        }
+        fn report(self) -> Result<u64, FleetError> {
+            Ok(self.ticks)
+        }
+    }
+
+    fn n(bytes: &[u8]) -> u64 {
+        u64::from_le_bytes(bytes.try_into().unwrap_or_default())
+    }
+
+    #[test]
+    fn the_bus_delivers_in_order_on_the_fake_clock() {
+        let mut bus = Bus::new();
+        let a = bus.add(Echo::new(0.1, 1.0), 0.0);
+        let b = bus.add(Echo::new(0.25, 1.0), 0.5);
+        // 30 ms from a to b, 10 ms back; a drops its message sent at 0.3.
+        bus.link = Box::new(move |from, _, t| match from {
+            0 if (t - 0.3).abs() < 1e-9 => None,
+            0 => Some(0.03),
+            _ => Some(0.01),
+        });
+        bus.run_until(10.0);
+        assert_eq!(bus.now(), 10.0);
+        let ea: &Echo = bus.task(a).unwrap_or_else(|| panic!("an Echo"));
+        let eb: &Echo = bus.task(b).unwrap_or_else(|| panic!("an Echo"));
+        // Stopped past `until`: 11 ticks (0, …, 1.0), 5 ticks (0, …, 1.0).
+        assert_eq!((ea.ticks, eb.ticks), (11, 5));
+        assert!(!bus.is_running(a) && !bus.is_running(b));
+        // b hears a's messages 30 ms later on its clock (started at 0.5),
+        // in order, all but the one dropped; and its own 10 ms later, but
+        // not the last (sent as it stopped: its input was closed).
+        let from_a: Vec<(f64, u64)> = eb
+            .heard
+            .iter()
+            .filter(|h| h.1 == "t/100/n")
+            .map(|h| (h.0, n(&h.2)))
+            .collect();
+        let expected: Vec<(f64, u64)> = (0..=10)
+            .filter(|&k| k != 3)
+            .map(|k| (k as f64 * 0.1 + 0.03 - 0.5, k))
+            .filter(|&(at, _)| at >= -0.5)
+            .collect();
+        assert_eq!(from_a.len(), expected.len());
+        for (got, want) in from_a.iter().zip(&expected) {
+            assert!(
+                (got.0 - want.0).abs() < 1e-9 && got.1 == want.1,
+                "{from_a:?}"
+            );
+        }
+        let own: Vec<u64> = eb
+            .heard
+            .iter()
+            .filter(|h| h.1 == "t/250/n")
+            .map(|h| n(&h.2))
+            .collect();
+        assert_eq!(own, vec![0, 1, 2, 3]);
+        // a hears b 10 ms after b sent, b's clock 0.5 ahead of a's.
+        let first = ea.heard.iter().find(|h| h.1 == "t/250/n").map(|h| h.0);
+        assert!(first.is_some_and(|t| (t - 0.51).abs() < 1e-9), "{first:?}");
+        // Times seen are in order, and the log is the publications in order.
+        assert!(ea.heard.windows(2).all(|w| w[0].0 <= w[1].0));
+        assert!(eb.heard.windows(2).all(|w| w[0].0 <= w[1].0));
+        assert_eq!(bus.log.len(), 16);
+        assert!(bus.log.windows(2).all(|w| w[0].t <= w[1].t));
+        let reported = bus.take::<Echo>(a).and_then(|e| e.report().ok());
+        assert_eq!(reported, Some(11));
+    }
+}

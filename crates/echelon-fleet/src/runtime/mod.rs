@@ -1,0 +1,268 @@
+//! The one runtime of the fleet's roles: what a role does is a [`Task`]
+//! (sans-IO: inputs in, ticks at its next wake, outputs out, a typed report
+//! at the end); [`run`] is the one Zenoh driver of every task, and
+//! [`bus::Bus`] runs the same tasks in memory on a fake clock.
+//!
+//! [`run`]: open the session, declare the task's subscriptions, publishers
+//! and liveliness tokens, wait for whom it waits for, then sleep until its
+//! next wake (or, for a task that [wakes on input](Task::wakes_on_input),
+//! until a sample arrives), hand it what arrived, tick it, publish what it
+//! says; on a stop request, its end or an error: stop it, close the
+//! session, take its report.
+
+use std::collections::BTreeSet;
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use zenoh::Wait;
+use zenoh::sample::SampleKind;
+
+use crate::clock::FleetClock;
+use crate::latency;
+use crate::net::{self, NetOptions};
+use crate::{FleetError, StopFlag};
+
+pub mod bus;
+mod task;
+
+pub use task::{Flow, Outputs, Sample, Task, WaitFor};
+
+/// Longest sleep, real time, so that a stop request is seen.
+const NAP: Duration = Duration::from_millis(20);
+
+/// A sample as a subscription hands it over.
+struct Arrival {
+    input: usize,
+    at: Instant,
+    unix_ns: u64,
+    delay: Option<i64>,
+    key: String,
+    payload: Vec<u8>,
+    attachment: Option<Vec<u8>>,
+}
+
+/// The Zenoh side of [`Outputs`].
+struct ZenohOutputs<'a> {
+    session: &'a zenoh::Session,
+    publishers: Vec<zenoh::pubsub::Publisher<'a>>,
+}
+
+impl Outputs for ZenohOutputs<'_> {
+    fn publish(&mut self, output: usize, payload: &[u8]) -> Result<(), FleetError> {
+        let publisher = self.publisher(output)?;
+        net::publish(self.session, publisher, payload)
+    }
+
+    fn publish_attached(
+        &mut self,
+        output: usize,
+        payload: &[u8],
+        attachment: &[u8],
+    ) -> Result<(), FleetError> {
+        self.publisher(output)?
+            .put(payload.to_vec())
+            .attachment(attachment.to_vec())
+            .wait()
+            .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))
+    }
+
+    fn put(&mut self, key: &str, payload: &[u8]) {
+        net::put_stamped(self.session, key, payload.to_vec());
+    }
+}
+
+impl<'a> ZenohOutputs<'a> {
+    fn publisher(&self, output: usize) -> Result<&zenoh::pubsub::Publisher<'a>, FleetError> {
+        self.publishers
+            .get(output)
+            .ok_or_else(|| FleetError::Zenoh(format!("no output {output}")))
+    }
+}
+
+/// Runs `task` on a session opened with `net` until it stops or `stop` is
+/// raised, and takes its report; `clock` is restarted (reading 0) when the
+/// task starts.
+pub fn run<T: Task>(
+    task: T,
+    net: &NetOptions,
+    clock: FleetClock,
+    stop: &StopFlag,
+) -> Result<T::Report, FleetError> {
+    run_on(|_| Ok((task, ())), net, clock, stop)?.report()
+}
+
+/// [`run`] for a task built on the session (`build` may also declare what
+/// the task needs besides its inputs, outputs and tokens, e.g. a ROS 2
+/// node's liveliness tokens, and hand it back as `G`, kept until the
+/// session closes); returns the task stopped, its report not taken.
+pub fn run_on<T: Task, G>(
+    build: impl FnOnce(&zenoh::Session) -> Result<(T, G), FleetError>,
+    net: &NetOptions,
+    mut clock: FleetClock,
+    stop: &StopFlag,
+) -> Result<T, FleetError> {
+    let session = net::open(net)?;
+    let (mut task, guard) = build(&session)?;
+    let (tx, rx) = mpsc::channel::<Arrival>();
+    let mut subscribers = Vec::new();
+    for (input, key) in task.inputs().into_iter().enumerate() {
+        let tx = tx.clone();
+        let sub = session
+            .declare_subscriber(&key)
+            .callback(move |s| {
+                let unix_ns = crate::unix_nanos();
+                let _ = tx.send(Arrival {
+                    input,
+                    at: Instant::now(),
+                    unix_ns,
+                    delay: latency::delay_ns(s.timestamp(), unix_ns),
+                    key: s.key_expr().as_str().to_owned(),
+                    payload: s.payload().to_bytes().into_owned(),
+                    attachment: s.attachment().map(|a| a.to_bytes().into_owned()),
+                });
+            })
+            .wait()
+            .map_err(|e| FleetError::Zenoh(format!("subscribing to {key}: {e}")))?;
+        subscribers.push(sub);
+    }
+    drop(tx);
+    let mut publishers = Vec::new();
+    for key in task.outputs() {
+        publishers.push(
+            session
+                .declare_publisher(key.clone())
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("declaring {key}: {e}")))?,
+        );
+    }
+    let mut tokens = Vec::new();
+    for key in task.tokens() {
+        tokens.push(
+            session
+                .liveliness()
+                .declare_token(key)
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?,
+        );
+    }
+    if let Some(w) = task.wait_for() {
+        wait_for(&session, &w, stop)?;
+    }
+    clock.sync(0.0, Instant::now());
+    task.started(crate::unix_nanos());
+
+    let mut out = ZenohOutputs {
+        session: &session,
+        publishers,
+    };
+    let hand = |task: &mut T, a: &Arrival| {
+        task.on_input(
+            a.input,
+            &Sample {
+                key: &a.key,
+                payload: &a.payload,
+                attachment: a.attachment.as_deref(),
+                at: clock.at(a.at),
+                unix_ns: a.unix_ns,
+                delay: a.delay,
+            },
+        )
+    };
+    let reactive = task.wakes_on_input();
+    let ran: Result<(), FleetError> = (|| {
+        while !stop.is_raised() {
+            if reactive {
+                let left = (task.next_wake() - clock.now()).max(0.0);
+                match rx.recv_timeout(clock.real(left).min(NAP)) {
+                    Ok(a) => {
+                        hand(&mut task, &a)?;
+                        continue;
+                    }
+                    Err(mpsc::RecvTimeoutError::Timeout) => {}
+                    Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
+                }
+            } else {
+                clock.sleep_until(task.next_wake(), NAP);
+            }
+            while let Ok(a) = rx.try_recv() {
+                hand(&mut task, &a)?;
+            }
+            if task.tick(clock.now(), &mut out)? == Flow::Stop {
+                return Ok(());
+            }
+        }
+        Ok(())
+    })();
+    let stopped = task.stop(&mut out);
+    drop(out);
+    drop(tokens);
+    drop(guard);
+    for sub in subscribers {
+        let _ = sub.undeclare().wait();
+    }
+    let _ = session.close().wait();
+    ran?;
+    stopped?;
+    if reactive {
+        // What had arrived before the inputs closed.
+        while let Ok(a) = rx.try_recv() {
+            hand(&mut task, &a)?;
+        }
+    }
+    Ok(task)
+}
+
+/// Waits until every name of `w` has a liveliness token under
+/// `echelon/<fleet>/alive/`, or its timeout passes (or `stop` is raised).
+fn wait_for(session: &zenoh::Session, w: &WaitFor, stop: &StopFlag) -> Result<(), FleetError> {
+    if w.names.is_empty() {
+        return Ok(());
+    }
+    let seen: Arc<Mutex<BTreeSet<String>>> = Arc::default();
+    let sink = seen.clone();
+    let prefix = w.keys.alive("");
+    let _sub = session
+        .liveliness()
+        .declare_subscriber(w.keys.alive("**"))
+        .history(true)
+        .callback(move |s| {
+            if s.kind() == SampleKind::Put
+                && let Some(name) = s.key_expr().as_str().strip_prefix(&prefix)
+                && let Ok(mut set) = sink.lock()
+            {
+                set.insert(name.to_owned());
+            }
+        })
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
+    let started = Instant::now();
+    loop {
+        let missing: Vec<String> = {
+            let set = seen
+                .lock()
+                .map_err(|_| FleetError::Config("poisoned".into()))?;
+            w.names
+                .iter()
+                .filter(|r| !set.contains(*r))
+                .cloned()
+                .collect()
+        };
+        if missing.is_empty() {
+            // Let the declarations that came with the tokens settle.
+            std::thread::sleep(Duration::from_millis(100));
+            return Ok(());
+        }
+        if stop.is_raised() {
+            return Ok(());
+        }
+        if started.elapsed() > w.timeout {
+            return Err(FleetError::Config(format!(
+                "waited {:.0} s for {} to join the fleet",
+                w.timeout.as_secs_f64(),
+                missing.join(", ")
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}

@@ -1,0 +1,136 @@
+//! What a role is to the runtime: a [`Task`], after copper-rs tasks and
+//! sans-IO protocol crates. It reads no clock, opens no socket and sleeps
+//! nowhere: it is handed what arrives ([`Task::on_input`]) and ticked at its
+//! [next wake](Task::next_wake), both with the time the runtime reads, and
+//! it writes what it sends to [`Outputs`].
+
+use std::time::Duration;
+
+use serde::Serialize;
+
+use crate::FleetError;
+use crate::keys::Keys;
+
+/// One sample handed to a task.
+#[derive(Debug, Clone, Copy)]
+pub struct Sample<'a> {
+    /// Its key.
+    pub key: &'a str,
+    /// Its payload.
+    pub payload: &'a [u8],
+    /// Its attachment, if any (rmw_zenoh's on ROS 2 samples).
+    pub attachment: Option<&'a [u8]>,
+    /// When it arrived, on the task's clock (s).
+    pub at: f64,
+    /// When it arrived, UNIX ns (wall clock; on the bus, `at` in ns).
+    pub unix_ns: u64,
+    /// Its delay since the sender stamped it, ns (`None`: not stamped).
+    pub delay: Option<i64>,
+}
+
+/// What the runtime does after a tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Flow {
+    /// Keep going.
+    Continue,
+    /// The task is done: stop it.
+    Stop,
+}
+
+/// Where a task's messages go: Zenoh ([`super::run`]) or the in-memory
+/// bus ([`super::bus`]).
+pub trait Outputs {
+    /// Publishes `payload` on the task's output number `output` (an index
+    /// into [`Task::outputs`]), stamped with the sender's timestamp.
+    fn publish(&mut self, output: usize, payload: &[u8]) -> Result<(), FleetError>;
+    /// Publishes `payload` with `attachment` on output `output`, unstamped
+    /// (as rmw_zenoh does).
+    fn publish_attached(
+        &mut self,
+        output: usize,
+        payload: &[u8],
+        attachment: &[u8],
+    ) -> Result<(), FleetError>;
+    /// Puts `payload` on `key`, stamped, without a declared publisher; best
+    /// effort (errors are ignored).
+    fn put(&mut self, key: &str, payload: &[u8]);
+}
+
+/// Liveliness names to wait for before a task's clock starts.
+#[derive(Debug, Clone)]
+pub struct WaitFor {
+    /// The fleet whose `alive/<name>` tokens are awaited.
+    pub keys: Keys,
+    /// The names ([`crate::role::Member::liveliness`]).
+    pub names: Vec<String>,
+    /// The longest wait, real time.
+    pub timeout: Duration,
+}
+
+/// A fleet role's behaviour, whatever carries its messages.
+///
+/// The runtime subscribes to [`inputs`](Task::inputs), declares
+/// [`outputs`](Task::outputs) and [`tokens`](Task::tokens), waits for
+/// [`wait_for`](Task::wait_for), then until the task stops (or a stop
+/// request): hands it every sample that arrived ([`on_input`], with its
+/// arrival time) and ticks it at its next wake ([`tick`]). Then it
+/// [stops](Task::stop) it (with the outputs still open) and takes its
+/// [report](Task::report).
+///
+/// [`on_input`]: Task::on_input
+/// [`tick`]: Task::tick
+pub trait Task {
+    /// What it reports when it stops: typed, serialised across processes.
+    type Report: Serialize;
+
+    /// The key expressions it subscribes to; [`Task::on_input`] is told the
+    /// index of the one a sample came through.
+    fn inputs(&self) -> Vec<String>;
+
+    /// The keys it publishes on (declared publishers), by index.
+    fn outputs(&self) -> Vec<String>;
+
+    /// The liveliness tokens it holds while it runs (full key expressions).
+    fn tokens(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    /// Who must be present before its clock starts.
+    fn wait_for(&self) -> Option<WaitFor> {
+        None
+    }
+
+    /// Whether it takes each sample as soon as it arrives (a recorder); else
+    /// samples wait for its next wake (a controller), and the runtime does
+    /// not wake up for each of them.
+    fn wakes_on_input(&self) -> bool {
+        false
+    }
+
+    /// Its clock started (reading 0) at UNIX ns `unix_ns`.
+    fn started(&mut self, unix_ns: u64) {
+        let _ = unix_ns;
+    }
+
+    /// Takes a sample that arrived through input `input`.
+    fn on_input(&mut self, input: usize, sample: &Sample<'_>) -> Result<(), FleetError>;
+
+    /// When it next wants a tick, on its clock (s); `-∞`: at once.
+    fn next_wake(&self) -> f64;
+
+    /// Runs at time `now` (its clock, s): at or after [`Task::next_wake`],
+    /// or earlier (it decides what is due).
+    fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError>;
+
+    /// The task is stopping (done, a stop request, or an error): its last
+    /// words, outputs still open.
+    fn stop(&mut self, out: &mut dyn Outputs) -> Result<(), FleetError> {
+        let _ = out;
+        Ok(())
+    }
+
+    /// What it reports, once stopped (and, if it [wakes on
+    /// input](Task::wakes_on_input), handed what arrived until its inputs
+    /// closed).
+    fn report(self) -> Result<Self::Report, FleetError>;
+}

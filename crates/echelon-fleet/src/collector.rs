@@ -27,7 +27,8 @@ use std::time::Duration;
 
 use serde::Serialize;
 
-use echelon::output::{CsvWriter, FrameRows, TRAJECTORY_FILE, TrajectoryRows};
+use echelon::csv::CsvWriter;
+use echelon::output::{FrameRows, TRAJECTORY_FILE, TrajectoryRows};
 use echelon::sample::AgentSample;
 use echelon::stats::{AgentStats, Summary};
 use echelon_mcap::{

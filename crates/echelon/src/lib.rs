@@ -36,6 +36,7 @@ pub mod agent;
 pub mod base;
 pub mod check;
 pub mod control;
+pub mod csv;
 pub mod engine;
 pub mod error;
 pub mod follow;

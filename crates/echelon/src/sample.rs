@@ -1,6 +1,7 @@
 //! One agent at one instant: the one sample type that `trajectory.csv`, the
 //! MCAP `/agent/K/state` channel, the fleet's wire state and the report all
-//! carry, whoever produced it (the simulator's [`Frame`] or a fleet robot).
+//! carry, whoever produced it (the simulator's frames, `sim/outputs.rs`, or a
+//! fleet robot).
 //!
 //! Its fields are `trajectory.csv`'s columns, in order ([`COLUMNS`],
 //! [`VELOCITY_COLUMNS`]); serialised (serde, JSON Schema through schemars)
@@ -11,9 +12,8 @@ use std::io::{self, Write};
 use serde::{Deserialize, Serialize};
 
 use crate::base::VelocityCommand;
-use crate::model::{State, wrap_angle};
-use crate::output::CsvWriter;
-use crate::sim::{AgentOutput, Frame, VelocityOutput};
+use crate::csv::CsvWriter;
+use crate::model::State;
 
 /// One agent at one instant: true state, tracking error `e` (eq. 7) and
 /// backstepping error `z` (eq. 10) of the true state in the robot's body
@@ -96,47 +96,7 @@ impl VelocitySample {
     }
 }
 
-impl From<&VelocityOutput> for VelocitySample {
-    fn from(v: &VelocityOutput) -> Self {
-        VelocitySample::new(v.command, v.applied, v.saturated)
-    }
-}
-
 impl AgentSample {
-    /// Agent `agent` (from 1) at `t` in true state `s` with controller
-    /// output `o` (the heading wrapped).
-    pub fn new(t: f64, agent: u32, s: &State, o: &AgentOutput) -> AgentSample {
-        AgentSample {
-            t,
-            agent,
-            x: s.x,
-            y: s.y,
-            theta: wrap_angle(s.theta),
-            v: s.v,
-            omega: s.omega,
-            ex: o.e[0],
-            ey: o.e[1],
-            zx: o.z[0],
-            zy: o.z[1],
-            u1: o.u.u1,
-            u2: o.u.u2,
-            tau_r: o.tau.right,
-            tau_l: o.tau.left,
-            velocity: o.velocity.as_ref().map(VelocitySample::from),
-        }
-    }
-
-    /// Agent `i` (from 0) of `frame`; `None` past its agents.
-    pub fn of(frame: &Frame<'_>, i: usize) -> Option<AgentSample> {
-        let (s, o) = (frame.states.get(i)?, frame.outputs.get(i)?);
-        Some(AgentSample::new(frame.t, i as u32 + 1, s, o))
-    }
-
-    /// Every agent of `frame`, in order.
-    pub fn all<'a>(frame: &'a Frame<'_>) -> impl Iterator<Item = AgentSample> + 'a {
-        (0..frame.states.len()).map_while(|i| AgentSample::of(frame, i))
-    }
-
     /// ‖e‖, m.
     pub fn error_norm(&self) -> f64 {
         self.ex.hypot(self.ey)

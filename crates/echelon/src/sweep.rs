@@ -30,10 +30,10 @@ use serde::Serialize;
 
 use crate::check;
 use crate::control::Law;
+use crate::csv::CsvWriter;
 use crate::error::{ParamError, ScenarioError, SimError};
 use crate::odometry::ZetaModel;
 use crate::odometry::bound::{KinematicTheorem2, Theorem2};
-use crate::output::CsvWriter;
 use crate::scenario::schema::{FixesSection, Fusion, OdometrySection};
 use crate::scenario::{Overrides, Run, Scenario};
 use crate::sim::{Every, Frame, ObserverError};

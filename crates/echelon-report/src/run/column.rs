@@ -100,7 +100,8 @@ mod tests {
 
     use std::path::Path;
 
-    use echelon::output::{CsvWriter, TRAJECTORY_HEADER_VELOCITY, Table};
+    use echelon::csv::CsvWriter;
+    use echelon::output::{TRAJECTORY_HEADER_VELOCITY, Table};
     use echelon::sample::{AgentSample, VelocitySample};
 
     use super::*;

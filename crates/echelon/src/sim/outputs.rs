@@ -1,9 +1,11 @@
 //! What each agent is doing at one instant, as observers see it.
 
+use super::Frame;
 use crate::agent::{Actuation, Command};
 use crate::base::VelocityCommand;
-use crate::model::{Input, Torques};
+use crate::model::{Input, State, Torques, wrap_angle};
 use crate::safety::Outcome;
+use crate::sample::{AgentSample, VelocitySample};
 
 /// What one agent's controller and motors are doing at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -116,4 +118,49 @@ pub struct SafetyOutput {
     /// Distance from the agent's point to the nearest neighbour's point it
     /// sees (within `range`), m; infinite when it sees none.
     pub min_distance: f64,
+}
+
+// The sample of a simulated agent (sample.rs holds the type; the simulator,
+// which is above it, builds it from its outputs).
+
+impl From<&VelocityOutput> for VelocitySample {
+    fn from(v: &VelocityOutput) -> Self {
+        VelocitySample::new(v.command, v.applied, v.saturated)
+    }
+}
+
+impl AgentSample {
+    /// Agent `agent` (from 1) at `t` in true state `s` with controller
+    /// output `o` (the heading wrapped).
+    pub fn new(t: f64, agent: u32, s: &State, o: &AgentOutput) -> AgentSample {
+        AgentSample {
+            t,
+            agent,
+            x: s.x,
+            y: s.y,
+            theta: wrap_angle(s.theta),
+            v: s.v,
+            omega: s.omega,
+            ex: o.e[0],
+            ey: o.e[1],
+            zx: o.z[0],
+            zy: o.z[1],
+            u1: o.u.u1,
+            u2: o.u.u2,
+            tau_r: o.tau.right,
+            tau_l: o.tau.left,
+            velocity: o.velocity.as_ref().map(VelocitySample::from),
+        }
+    }
+
+    /// Agent `i` (from 0) of `frame`; `None` past its agents.
+    pub fn of(frame: &Frame<'_>, i: usize) -> Option<AgentSample> {
+        let (s, o) = (frame.states.get(i)?, frame.outputs.get(i)?);
+        Some(AgentSample::new(frame.t, i as u32 + 1, s, o))
+    }
+
+    /// Every agent of `frame`, in order.
+    pub fn all<'a>(frame: &'a Frame<'_>) -> impl Iterator<Item = AgentSample> + 'a {
+        (0..frame.states.len()).map_while(|i| AgentSample::of(frame, i))
+    }
 }

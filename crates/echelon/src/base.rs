@@ -171,10 +171,7 @@ impl VelocityBase {
 
     /// A preset by name (see [`VelocityBase::PRESETS`]).
     pub fn preset(name: &str) -> Option<VelocityBase> {
-        Self::PRESETS
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, p)| *p)
+        crate::model::find_preset(&Self::PRESETS, name)
     }
 
     /// A base with joint acceleration limits, checked: lags `τ_v`, `τ_ω` (s)
@@ -501,10 +498,7 @@ impl VelocityRobot {
 
     /// A preset by name.
     pub fn preset(name: &str) -> Option<VelocityRobot> {
-        Self::PRESETS
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, p)| *p)
+        crate::model::find_preset(&Self::PRESETS, name)
     }
 
     /// The robot on `base` (already checked: [`VelocityBase::new`]) with half

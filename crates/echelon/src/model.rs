@@ -15,6 +15,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::ParamError;
 
+/// The value named `name` in a table of named presets.
+pub(crate) fn find_preset<T: Copy>(presets: &[(&str, T)], name: &str) -> Option<T> {
+    presets.iter().find(|(n, _)| *n == name).map(|(_, p)| *p)
+}
+
 /// Physical parameters of one robot (paper Table I).
 ///
 /// Every value is physical: it can only be built through [`RobotParams::new`]
@@ -105,10 +110,7 @@ impl RobotParams {
 
     /// A preset by name (`agent1`, `agent2`).
     pub fn preset(name: &str) -> Option<RobotParams> {
-        Self::PRESETS
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, p)| *p)
+        find_preset(&Self::PRESETS, name)
     }
 
     /// A robot without a torque limit, checked: mass `m` (kg), inertia `J`

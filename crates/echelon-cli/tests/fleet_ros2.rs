@@ -679,6 +679,32 @@ fn a_bad_ros2_setting_is_refused_with_its_place() {
     }
 }
 
+/// A robot driving a real ROS 2 base runs in real time: `--time-scale` is
+/// refused (exit 2, one line) unless its base is `fleet base`'s simulation.
+#[test]
+fn a_real_robot_refuses_a_time_scale() {
+    let out = Command::new(EXE)
+        .args([
+            "fleet",
+            "robot",
+            SCENARIO,
+            "--agent",
+            "1",
+            "--ros2",
+            "--time-scale",
+            "10",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("real time") && err.contains("--time-scale 10"),
+        "{err}"
+    );
+}
+
 /// `fleet excite --ros2` on a simulated ROS 2 base (`fleet base --ros2`,
 /// lags τ_v = τ_ω = 0.1 s with its speed and acceleration limits, the
 /// scenario's `lab` robot), in real time for 16 s: it completes within a

@@ -603,7 +603,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             args.extend(["--outage".to_owned(), format!("{s}:{l}")]);
         }
         if opts.ros2 {
-            args.push("--ros2".to_owned());
+            // Its robot is the simulated base started above, on this clock.
+            args.extend(["--ros2".to_owned(), "--simulated-base".to_owned()]);
         }
         args.extend(common(robot_at(k), &Member::Robot(k as u32).identity()));
         robots.push(spawn(

@@ -221,6 +221,10 @@ pub(crate) struct RobotArgs {
     /// Drive the agent's ROS 2 robot ([fleet.ros2]): odom in, cmd_vel out over rmw_zenoh.
     #[arg(long)]
     ros2: bool,
+    /// With --ros2: the robot is `fleet base`'s simulation, so --time-scale
+    /// may differ from 1 (a real robot runs in real time).
+    #[arg(long, requires = "ros2")]
+    simulated_base: bool,
     #[command(flatten)]
     faults: FaultArgs,
     #[command(flatten)]
@@ -432,6 +436,14 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             print_report(&report)
         }
         FleetCommand::Robot(a) => {
+            if a.ros2 && !a.simulated_base && a.time_scale != 1.0 {
+                bail!(
+                    "fleet robot --ros2 drives a real robot, which runs in real time: \
+                     --time-scale {} is refused (give --simulated-base when the robot is \
+                     `fleet base`'s simulation, as `fleet up --ros2` does)",
+                    a.time_scale
+                );
+            }
             let (scenario, net, stop) =
                 agent_process(&a.scenario, &a.net, &Member::Robot(a.agent).identity())?;
             let report = robot::run(

@@ -19,6 +19,8 @@ use serde::Serialize;
 
 use echelon::agent::Drive;
 use echelon::base::VelocityCommand;
+use echelon::model::State;
+use echelon::odometry::{Odometer, OdometrySpec};
 use echelon::scenario::{Ros2Link, Scenario};
 
 use super::drive::{SampleRefusal, cmd_vel_type, decode_cmd_vel};
@@ -79,6 +81,26 @@ pub struct SimBase {
     counters: BaseCounters,
     /// The last command followed (after the base's speed limits).
     followed: VelocityCommand,
+    /// Its wheel odometry when the agent has `[odometry]`: what it publishes
+    /// instead of the truth.
+    encoders: Option<Encoders>,
+}
+
+/// A simulated base's wheel odometry: the simulator's [`Odometer`] (its
+/// error models: `ζ`, `E_d`, `E_b`, slip, encoder ticks, speed noise; no
+/// fixes: a robot's own odometry has none) sampled every period of the
+/// agent's `[odometry]` on the base's true motion.
+#[derive(Debug, Clone)]
+struct Encoders {
+    odometer: Odometer,
+    period: f64,
+    /// Local time of the next sample.
+    next: f64,
+    /// `s = ∫v dt` up to `last.0` (trapezoids between the instants the base
+    /// was brought to), m.
+    distance: f64,
+    /// The last instant the base was brought to, and its speed since.
+    last: (f64, f64),
 }
 
 impl SimBase {
@@ -94,6 +116,75 @@ impl SimBase {
             next_odom: 0.0,
             counters: BaseCounters::default(),
             followed: VelocityCommand::default(),
+            encoders: None,
+        }
+    }
+
+    /// This base publishing what wheel odometry of `spec` (sampling period
+    /// and error model; its fixes are dropped) measures of its motion,
+    /// started at its pose at local time `t0`, rather than the truth:
+    /// wheels `(l, r)`, random numbers from `seed` and `stream` (the
+    /// simulator's for the same agent).
+    pub fn with_odometry(
+        self,
+        spec: OdometrySpec,
+        wheels: (f64, f64),
+        seed: u64,
+        stream: u64,
+        t0: f64,
+    ) -> Result<Self, FleetError> {
+        let refuse = |e: echelon::error::ParamError| FleetError::Config(format!("odometry: {e}"));
+        let spec = OdometrySpec::new(spec.period(), spec.errors(), None).map_err(refuse)?;
+        let start = self.base.true_state();
+        let odometer = Odometer::with_wheels(spec, wheels.0, wheels.1, &start, seed, stream)
+            .map_err(refuse)?;
+        Ok(SimBase {
+            encoders: Some(Encoders {
+                odometer,
+                period: spec.period(),
+                next: t0 + spec.period(),
+                distance: 0.0,
+                last: (t0, start.v),
+            }),
+            ..self
+        })
+    }
+
+    /// Brings the base to local time `t`, its encoders sampled on the way.
+    fn advance(&mut self, t: f64) {
+        if let Some(e) = self.encoders.as_mut() {
+            while e.next <= t {
+                self.base.advance(e.next);
+                let s = self.base.true_state();
+                e.distance += 0.5 * (e.last.1 + s.v) * (e.next - e.last.0);
+                e.odometer.sample(e.next, &s, e.distance);
+                e.last = (e.next, s.v);
+                e.next += e.period;
+            }
+        }
+        self.base.advance(t);
+        if let Some(e) = self.encoders.as_mut() {
+            let v = self.base.true_state().v;
+            e.distance += 0.5 * (e.last.1 + v) * (t - e.last.0);
+            e.last = (t, v);
+        }
+    }
+
+    /// Follows `cmd` from now on (the speed may jump: an ideal base).
+    fn follow(&mut self, cmd: VelocityCommand) {
+        self.followed = self.base.follow(cmd).0;
+        if let Some(e) = self.encoders.as_mut() {
+            e.last.1 = self.base.true_state().v;
+        }
+    }
+
+    /// What its odometry says now, in the world: the truth, or what its
+    /// encoders measured.
+    pub fn odometry(&self) -> State {
+        let truth = self.base.true_state();
+        match &self.encoders {
+            Some(e) => e.odometer.measure(&truth),
+            None => truth,
         }
     }
 
@@ -125,8 +216,8 @@ impl SimBase {
         let checked = self.check(key, payload, attachment);
         match checked {
             Ok(cmd) => {
-                self.base.advance(now);
-                self.followed = self.base.follow(cmd).0;
+                self.advance(now);
+                self.follow(cmd);
                 self.last_cmd = Some(now);
                 self.timed_out = false;
                 self.counters.cmd_accepted += 1;
@@ -175,19 +266,19 @@ impl SimBase {
         {
             // diff_drive_controller's cmd_vel_timeout: brake to zero, from
             // the moment the timeout expired.
-            self.base.advance(at + self.link.cmd_vel_timeout);
+            self.advance(at + self.link.cmd_vel_timeout);
             self.timed_out = true;
             // A base already commanded to rest is not stopped by a timeout.
             self.counters.cmd_timeouts += u64::from(self.followed != VelocityCommand::default());
-            self.followed = self.base.follow(VelocityCommand::default()).0;
+            self.follow(VelocityCommand::default());
         }
-        self.base.advance(now);
+        self.advance(now);
         if now < self.next_odom {
             return None;
         }
         let period = 1.0 / self.link.odom_rate;
         self.next_odom = (self.next_odom + period).max(now);
-        let s = self.base.true_state().seen_from(&self.link.odom_origin);
+        let s = self.odometry().seen_from(&self.link.odom_origin);
         let odom = Odometry::planar(
             s.x,
             s.y,
@@ -327,6 +418,13 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         )));
     };
     let link = fleet.ros2[opts.agent as usize - 1].clone();
+    // The agent's `[odometry]`: its wheel odometry lies as the simulator's.
+    let plan = opts
+        .scenario
+        .build(&echelon::scenario::Overrides::default())?
+        .plan;
+    let odometry = plan.odometers()[opts.agent as usize - 1].clone();
+    let seed = plan.seed();
     let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name));
     let alive = keys.alive(&Member::Base(opts.agent).liveliness());
     runtime::run_on(
@@ -340,8 +438,18 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                 |e| FleetError::Config(e.to_string()),
             )?;
             let model = SimulatedVelocityBase::new(robot.base(), spec.start, 0.0, PLANT_STEP);
+            let mut base = SimBase::new(link.clone(), model, gid);
+            if let Some(odometry) = &odometry {
+                base = base.with_odometry(
+                    odometry.spec(),
+                    spec.drive.wheels(),
+                    seed,
+                    u64::from(opts.agent - 1),
+                    0.0,
+                )?;
+            }
             let task = BaseTask {
-                base: SimBase::new(link.clone(), model, gid),
+                base,
                 agent: opts.agent,
                 cmd_key: topic_key_any_type(link.key_scheme, link.domain_id, &link.cmd_vel),
                 odom_key: topic_key(link.key_scheme, link.domain_id, &link.odom, &ODOMETRY),
@@ -363,7 +471,7 @@ mod tests {
     use super::*;
     use crate::ros2::drive::encode_cmd_vel;
     use echelon::base::VelocityBase;
-    use echelon::model::State;
+    use echelon::odometry::ErrorModel;
     use echelon_ros2::KeyScheme;
     use echelon_ros2::msgs::{TWIST, TWIST_STAMPED};
 
@@ -396,6 +504,68 @@ mod tests {
             gid: [1; 16],
         }
         .encode()
+    }
+
+    /// Drives `b` at `(v, ω)` for `t` s (commands every 0.1 s) and returns
+    /// the last odometry it published (odom frame) and its true state.
+    fn drive(mut b: SimBase, v: f64, omega: f64, t: f64) -> (Odometry, State) {
+        let key = topic_key(KeyScheme::RmwZenoh, 0, &link().cmd_vel, &TWIST_STAMPED);
+        let mut last = None;
+        let steps = (t / 0.1).round() as u32;
+        for k in 0..=steps {
+            let now = f64::from(k) * 0.1;
+            b.on_cmd(&key, &cmd(v, omega), Some(&attachment()), now)
+                .expect("a valid command");
+            if let Some(out) = b.tick(now, 1) {
+                // The truth when this odometry was published.
+                last = Some((out, b.base().true_state()));
+            }
+        }
+        let (out, truth) = last.expect("odometry");
+        let odom = Odometry::from_cdr_finite(&out.payload).expect("valid");
+        (odom, truth)
+    }
+
+    fn odometry(errors: ErrorModel) -> OdometrySpec {
+        OdometrySpec::new(0.01, errors, None).expect("valid odometry")
+    }
+
+    /// With perfect encoders the base's odometry is its truth (to the
+    /// trapezoidal travel's rounding); with Borenstein's unequal wheel
+    /// diameters `E_d` a base driving straight believes it turned by the
+    /// closed form `Θ̂ = d r (1/r_R − 1/r_L) / (2 l)` after `d` metres, while
+    /// its true heading stays 0.
+    #[test]
+    fn a_base_publishes_what_its_encoders_measure() {
+        let (l, r) = (0.2, 0.05);
+        let perfect = base()
+            .with_odometry(odometry(ErrorModel::PERFECT), (l, r), 7, 0, 0.0)
+            .expect("valid");
+        let (odom, truth) = drive(perfect, 0.3, 0.4, 5.0);
+        let p = odom.pose.pose.position;
+        assert!(
+            (p.x - truth.x).abs() < 1e-6 && (p.y - truth.y).abs() < 1e-6,
+            "{p:?} vs {truth:?}"
+        );
+        let ed = ErrorModel {
+            wheel_diameter_ratio: 1.02,
+            ..ErrorModel::PERFECT
+        };
+        let uneven = base()
+            .with_odometry(odometry(ed), (l, r), 7, 0, 0.0)
+            .expect("valid");
+        let (odom, truth) = drive(uneven, 0.3, 0.0, 5.0);
+        assert_eq!(truth.theta, 0.0);
+        let (rr, rl) = ed.wheel_radii(r);
+        // Travel up to the last odometry sample before the last message.
+        let d = odom.pose.pose.position.x.hypot(odom.pose.pose.position.y);
+        let want = d * r * (1.0 / rr - 1.0 / rl) / (2.0 * l);
+        let got = odom.yaw();
+        assert!(want.abs() > 1e-3, "{want}");
+        assert!(
+            (got - want).abs() < 2e-3 * want.abs() + 1e-6,
+            "believed heading {got} rad, closed form {want} rad"
+        );
     }
 
     #[test]

@@ -430,6 +430,11 @@ impl Odometer {
         (s.x - b.x).hypot(s.y - b.y)
     }
 
+    /// Its odometry: sampling period, error model, fixes.
+    pub fn spec(&self) -> OdometrySpec {
+        self.spec
+    }
+
     /// Number of fixes applied so far.
     pub fn fixes_applied(&self) -> u64 {
         self.fixes

@@ -1,0 +1,262 @@
+//! The filter for torque-driven robots (eq. 3): exponential barriers of
+//! relative degree two, the speed envelope ([`Envelope`]) and the wheel
+//! torque limit.
+
+use super::filter::{Filtered, Outcome, Own, SafetyFilter};
+use super::neighbour::{Neighbour, Obstacle};
+use super::qp::{Constraint, solve, solve_relaxed};
+use crate::model::{Input, RobotParams, State};
+
+/// `p`, 1/s: the inner pole of the torque barrier, `ψ̇₁ + p ψ₁ ≥ 0` with
+/// `ψ₁ = ḣ + γ h` (`p = max(γ, INNER_RATE)`). With both poles at `−γ` (the
+/// filter before issue 20) `ψ₁` could fall no faster than `γ ψ₁`, and since
+/// `ḧ` carries `2 dᵀp̈`, which grows with the distance `d`, a robot moving
+/// away from a neighbour metres off was forbidden to brake (friction alone
+/// decelerates Table I's robots at `η v/m ≈ 6 m/s²` at 1 m/s): the filter
+/// kept it driving away, the law's braking refused. `ψ₁ ≥ 0` still keeps
+/// `h ≥ 0`; the inner loop, on the robot's acceleration, is just allowed to
+/// be faster than the outer one.
+pub const INNER_RATE: f64 = 5.0;
+
+/// The speed envelope a torque-driven robot's filtered command keeps it in:
+/// `−v_reverse ≤ v ≤ v_max`, `|ω| ≤ omega_max`, each as a first-order barrier
+/// `ḣ ≥ −κ h` on `(u1, u2)` (`v̇ = (u1 − η v)/m`, `ω̇ = (u2 − ψ ω)/J`, eq. 3),
+/// rows of the QP like the torque limit (a nominal command that satisfies
+/// every barrier is not held to them).
+///
+/// Why (issue 20): the filter steers the point `L` ahead, whose acceleration
+/// `(u1/m, L u2/J)` the QP changes as little as possible. The heading is that
+/// output's internal (zero) dynamics: holding the point's lateral
+/// acceleration needs `ω̇ ≈ −(v/L) ω`, unstable at rate `|v|/L` whenever
+/// `v < 0` (20/s per m/s at `L = 0.05 m`), and a lateral correction of the
+/// point costs the QP `L` times less than the angular acceleration it
+/// demands. Unbounded, a filter that pushed a robot backwards made it spin
+/// up (12 rad/s in 3 s) and the run diverge (‖e‖ ≈ 1e213 m). The envelope
+/// bounds the state the filter may create, and with no reverse (the default)
+/// the heading stays on the stable side of its zero dynamics: the filter may
+/// slow a robot to a stop, never drive it backwards. When the envelope and
+/// the barriers conflict the QP is infeasible and the robot brakes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Envelope {
+    /// Largest forward speed, m/s.
+    pub v_max: f64,
+    /// Largest reverse speed, m/s (`v ≥ −v_reverse`).
+    pub v_reverse: f64,
+    /// Largest turn rate, rad/s.
+    pub omega_max: f64,
+    /// `κ`, 1/s: how fast the state is brought back inside.
+    pub rate: f64,
+}
+
+impl Envelope {
+    /// The default envelope: 1.5 m/s forward, no reverse, 4 rad/s, κ = 5/s.
+    pub const DEFAULT: Envelope = Envelope {
+        v_max: 1.5,
+        v_reverse: 0.0,
+        omega_max: 4.0,
+        rate: 5.0,
+    };
+
+    /// The four rows in the QP's variables `x = (u1/m, L u2/J)` at speeds
+    /// `(v, w)`: `v̇ = x₁ − η v/m`, `ω̇ = x₂/L − ψ ω/J`.
+    fn push_rows(&self, rows: &mut Vec<Constraint>, robot: &RobotParams, l: f64, v: f64, w: f64) {
+        let k = self.rate;
+        let dv = robot.linear_friction() * v / robot.mass();
+        let dw = robot.angular_friction() * w / robot.inertia();
+        // v_max − v ≥ 0:      −v̇ ≥ −κ (v_max − v)
+        rows.push(Constraint {
+            a: [-1.0, 0.0],
+            b: -k * (self.v_max - v) - dv,
+        });
+        // v + v_reverse ≥ 0:   v̇ ≥ −κ (v + v_reverse)
+        rows.push(Constraint {
+            a: [1.0, 0.0],
+            b: -k * (v + self.v_reverse) + dv,
+        });
+        // omega_max ∓ ω ≥ 0
+        rows.push(Constraint {
+            a: [0.0, -1.0 / l],
+            b: -k * (self.omega_max - w) - dw,
+        });
+        rows.push(Constraint {
+            a: [0.0, 1.0 / l],
+            b: -k * (self.omega_max + w) + dw,
+        });
+    }
+}
+
+impl SafetyFilter {
+    /// Filters a torque-driven robot's inputs `nominal` (eq. 3) at time `t`:
+    /// `ḧ + 2γ ḣ + γ² h ≥ 0` for every neighbour in range and every obstacle,
+    /// and the wheel torque limit if `robot` has one.
+    #[allow(clippy::too_many_arguments)]
+    pub fn torque(
+        &mut self,
+        t: f64,
+        me: &State,
+        l: f64,
+        robot: &RobotParams,
+        nominal: Input,
+        neighbours: &[Neighbour],
+        obstacles: &[Obstacle],
+    ) -> Filtered<Input> {
+        let own = Own::ahead(me, l, 0.0);
+        let (m, j) = (robot.mass(), robot.inertia());
+        let (eta, psi) = (robot.linear_friction(), robot.angular_friction());
+        let (v, w) = (me.v, me.omega);
+        // p̈_i = f + R(θ) x with x = (u1/m, L u2/J).
+        let along = -eta * v / m - l * w * w;
+        let across = v * w - l * psi * w / j;
+        let f = [
+            along * own.cos - across * own.sin,
+            along * own.sin + across * own.cos,
+        ];
+        let limited = robot.limit(nominal).0;
+        let x0 = [limited.u1 / m, l * limited.u2 / j];
+        let gamma = self.config.gain;
+        self.rows.clear();
+        let min_distance = self.barriers(&own, neighbours, obstacles, |d, h, n| {
+            let a = own.row(d);
+            let (dpj, ddpj) = n.map_or(([0.0; 2], [0.0; 2]), |n| (n.dp, n.ddp));
+            let rel = [own.dp[0] - dpj[0], own.dp[1] - dpj[1]];
+            let dh = 2.0 * (d[0] * rel[0] + d[1] * rel[1]);
+            // Everything in ḧ + (γ + p) ḣ + γ p h that u does not move
+            // (ψ₁ = ḣ + γ h, ψ̇₁ + p ψ₁ ≥ 0).
+            let p = INNER_RATE.max(gamma);
+            let drift =
+                2.0 * (rel[0] * rel[0] + rel[1] * rel[1]) + (gamma + p) * dh + gamma * p * h;
+            let df = 2.0 * (d[0] * f[0] + d[1] * f[1]);
+            let b = match n {
+                Some(n) if n.cooperative => -df - 0.5 * drift,
+                _ => -df + 2.0 * (d[0] * ddpj[0] + d[1] * ddpj[1]) - drift,
+            };
+            Constraint { a, b }
+        });
+        // The speed envelope ([`Envelope`]) bounds what the QP may answer; a
+        // nominal that satisfies every barrier passes as it is.
+        let barriers = self.rows.len();
+        Envelope::DEFAULT.push_rows(&mut self.rows, robot, l, v, w);
+        // Barriers and the envelope may give way in an emergency; the wheel
+        // torque rows below may not.
+        let soft_end = self.rows.len();
+        if let Some(limit) = robot.torque_limit() {
+            // τ_r,l = r (u1 ± u2/l_w)/2, |τ| ≤ limit:
+            // |m x₁ ± J x₂ /(L l_w)| ≤ 2 limit / r.
+            let bound = 2.0 * limit / robot.wheel_radius();
+            let k = j / (l * robot.half_wheelbase());
+            for s in [1.0, -1.0] {
+                for sign in [1.0, -1.0] {
+                    self.rows.push(Constraint {
+                        a: [-sign * m, -sign * s * k],
+                        b: -bound,
+                    });
+                }
+            }
+        }
+        let (x, outcome, deadlock) = self.decide(t, x0, barriers, f);
+        let command = match outcome {
+            Outcome::Nominal => limited,
+            // No command satisfies every row. With wheel-torque limits:
+            // the command that breaks the barriers and the envelope least
+            // within them (the brake is the torque the robot has, not a
+            // fixed law). Without (the relaxed answer would be unbounded):
+            // friction's brake.
+            Outcome::Braked => match robot.torque_limit().and_then(|_| {
+                // The barriers within the wheel limits, the envelope given up
+                // first; else the least violation of both.
+                let mut keep: Vec<Constraint> = self.rows[..barriers].to_vec();
+                keep.extend_from_slice(&self.rows[soft_end..]);
+                solve(&keep, x0).or_else(|| solve_relaxed(&self.rows, soft_end, x0))
+            }) {
+                Some(x) => Input {
+                    u1: m * x[0],
+                    u2: j * x[1] / l,
+                },
+                None => robot.brake(me),
+            },
+            Outcome::Filtered => Input {
+                u1: m * x[0],
+                u2: j * x[1] / l,
+            },
+        };
+        Filtered {
+            command,
+            nominal,
+            outcome,
+            deadlock,
+            min_distance,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    mod properties {
+        use super::*;
+        use crate::safety::strategies::{neighbours, outside, state};
+        use crate::safety::{SafetyConfig, TOLERANCE};
+        use proptest::prelude::*;
+
+        proptest! {
+            /// The same for the torque filter's exponential barriers and the
+            /// wheel torque limit.
+            #[test]
+            fn torque_filter_satisfies_its_constraints(
+                me in state(),
+                ns in neighbours(),
+                u1 in -60.0..60.0f64,
+                u2 in -10.0..10.0f64,
+                gain in 0.2..5.0f64,
+            ) {
+                let l = 0.05;
+                let robot = RobotParams::AGENT1.with_torque_limit(Some(3.0)).unwrap();
+                let config = SafetyConfig::new(0.3, gain, 1.5).unwrap();
+                let ns = outside(&me, l, ns, 0.3);
+                let mut f = SafetyFilter::new(config);
+                let nominal = Input { u1, u2 };
+                let out = f.torque(0.0, &me, l, &robot, nominal, &ns, &[]);
+                let rows = f.constraints().to_vec();
+                let x_of = |u: Input| [u.u1 / robot.mass(), l * u.u2 / robot.inertia()];
+                // Barriers, then the speed envelope (4 rows), then the torque limit (4).
+                let barriers = rows.len() - 8;
+                // The nominal is first limited with its turn kept.
+                let limited = robot.limit(nominal).0;
+                let nominal_ok = rows[..barriers].iter().all(|c| c.slack(x_of(limited)) >= 0.0);
+                match out.outcome {
+                    Outcome::Nominal => {
+                        prop_assert!(nominal_ok);
+                        prop_assert_eq!(out.command, limited);
+                    }
+                    Outcome::Filtered => {
+                        let x = x_of(out.command);
+                        for c in &rows {
+                            // relative to the row's bound (the torque rows are in N)
+                            let scale = 1.0 + c.b.abs();
+                            prop_assert!(c.slack(x) >= -TOLERANCE * scale, "{c:?} at {x:?}");
+                        }
+                    }
+                    Outcome::Braked => {
+                        // The least-violating command within the wheel
+                        // torque limits (the last four rows), else
+                        // friction's brake.
+                        let brake = Input { u1: -robot.linear_friction() * me.v, u2: -robot.angular_friction() * me.omega };
+                        if out.command != brake {
+                            let x = x_of(out.command);
+                            for c in &rows[rows.len() - 4..] {
+                                let scale = 1.0 + c.b.abs();
+                                prop_assert!(c.slack(x) >= -TOLERANCE * scale, "{c:?} at {x:?}");
+                            }
+                        }
+                    }
+                }
+                if nominal_ok {
+                    prop_assert_eq!(out.outcome, Outcome::Nominal);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,293 @@
+//! The collector as a state machine ([`Collector`]): every sample in,
+//! records out to a [`RecordSink`], everything counted.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use echelon_mcap::{
+    AGENT_STATE, AgentStateRecord, JsonSchema, LeaderRecord, REFERENCE, REFERENCE_TOPIC,
+    ReferenceRecord, agent_topic, nanos,
+};
+
+use super::{AgentRecord, CollectorReport, REJECTED, REJECTED_TOPIC, RecordSink, STATS};
+use crate::FleetError;
+use crate::keys::{KeyKind, Keys};
+use crate::latency::{Latency, LatencyReport};
+use crate::ros2::record::{self, RosTopic, RosTopicError};
+use crate::wire::{self, DecodeError, LinkStatus, Message, RobotState};
+
+/// The collector as a state machine: every sample received goes in through
+/// [`Collector::on_message`] with the time it arrived, and comes out as
+/// records in a [`RecordSink`]; it counts everything. It reads no clock and
+/// opens no file.
+pub struct Collector {
+    pub(super) keys: Keys,
+    ros: Vec<RosTopic>,
+    report: CollectorReport,
+    agents: BTreeMap<u32, AgentRecord>,
+    latency: Latency,
+    latency_by_key: BTreeMap<String, Latency>,
+}
+
+fn bump(counts: &mut BTreeMap<String, u64>, name: &str) {
+    *counts.entry(name.to_owned()).or_insert(0) += 1;
+}
+
+fn hex(bytes: &[u8]) -> String {
+    let mut s = String::with_capacity(2 * bytes.len().min(1024));
+    for b in bytes.iter().take(1024) {
+        let _ = write!(s, "{b:02x}");
+    }
+    s
+}
+
+impl std::fmt::Debug for Collector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Collector")
+            .field("keys", &self.keys)
+            .field("ros", &self.ros)
+            .field("report", &self.report)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Collector {
+    /// A collector of fleet `keys`.
+    pub fn new(keys: Keys) -> Collector {
+        Collector {
+            keys,
+            ros: Vec::new(),
+            report: CollectorReport {
+                role: crate::role::Role::Collector,
+                received: 0,
+                logged: 0,
+                received_by_key: BTreeMap::new(),
+                logged_by_topic: BTreeMap::new(),
+                rejected: BTreeMap::new(),
+                ros_recorded: 0,
+                ros_refused: 0,
+                latency: LatencyReport::default(),
+                latency_by_key: BTreeMap::new(),
+                agents: Vec::new(),
+            },
+            agents: BTreeMap::new(),
+            latency: Latency::new(),
+            latency_by_key: BTreeMap::new(),
+        }
+    }
+
+    /// A collector of fleet `keys` that also records the ROS 2 topics
+    /// `ros` ([`Collector::on_ros_sample`]). Refused: a topic listed twice,
+    /// or named like one of echelon's channels.
+    pub fn with_ros2(keys: Keys, ros: Vec<RosTopic>) -> Result<Collector, RosTopicError> {
+        record::check_topics(&ros)?;
+        Ok(Collector {
+            ros,
+            ..Collector::new(keys)
+        })
+    }
+
+    /// The ROS 2 topics it records.
+    pub fn ros_topics(&self) -> &[RosTopic] {
+        &self.ros
+    }
+
+    /// Records a ROS 2 sample that arrived on `key` at UNIX ns `now`, with
+    /// its Zenoh attachment if any: exactly one MCAP message, on the
+    /// channel of the topic that owns `key` if the key names the topic's
+    /// type and hash and the payload is a valid CDR message of that type
+    /// (logged as received, `publish_time` the attachment's source
+    /// timestamp, else `now`), otherwise on `/rejected` with the reason.
+    pub fn on_ros_sample(
+        &mut self,
+        key: &str,
+        bytes: &[u8],
+        attachment: Option<&[u8]>,
+        now: u64,
+        sink: &mut impl RecordSink,
+    ) -> Result<(), FleetError> {
+        self.count_received(key);
+        let Some(i) = self.ros.iter().position(|t| t.owns(key)) else {
+            self.report.ros_refused += 1;
+            return self.reject(sink, key, "ROS: key of no recorded topic", bytes, now);
+        };
+        if let Err(refusal) = self.ros[i].check(key, bytes) {
+            self.report.ros_refused += 1;
+            return self.reject(sink, key, refusal.reason(), bytes, now);
+        }
+        let topic = &self.ros[i];
+        sink.log_ros(topic, now, record::publish_time(attachment, now), bytes)?;
+        let name = topic.topic().to_owned();
+        self.report.ros_recorded += 1;
+        self.count_logged(&name);
+        Ok(())
+    }
+
+    /// Records the delay of a sample received on `key` (call once per sample
+    /// with [`Collector::on_message`] or [`Collector::on_ros_sample`];
+    /// `None`: it was not stamped). Allocates only for a key's first sample.
+    pub fn record_delay(&mut self, key: &str, delay: Option<i64>) {
+        self.latency.record(delay);
+        match self.latency_by_key.get_mut(key) {
+            Some(l) => l.record(delay),
+            None => {
+                let mut l = Latency::new();
+                l.record(delay);
+                self.latency_by_key.insert(key.to_owned(), l);
+            }
+        }
+    }
+
+    /// What it counted so far (`agents` and the latencies are filled by
+    /// [`Collector::finish`]).
+    pub fn report(&self) -> &CollectorReport {
+        &self.report
+    }
+
+    fn log(
+        &mut self,
+        sink: &mut impl RecordSink,
+        topic: &str,
+        schema: &JsonSchema,
+        now: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        sink.log(topic, schema, now, publish_time, data)?;
+        self.count_logged(topic);
+        Ok(())
+    }
+
+    fn count_logged(&mut self, topic: &str) {
+        self.report.logged += 1;
+        bump(&mut self.report.logged_by_topic, topic);
+    }
+
+    fn count_received(&mut self, key: &str) {
+        self.report.received += 1;
+        bump(&mut self.report.received_by_key, key);
+    }
+
+    fn reject(
+        &mut self,
+        sink: &mut impl RecordSink,
+        key: &str,
+        reason: &str,
+        bytes: &[u8],
+        now: u64,
+    ) -> Result<(), FleetError> {
+        bump(&mut self.report.rejected, reason);
+        let record = serde_json::json!({
+            "key": key, "reason": reason, "size": bytes.len(), "hex": hex(bytes),
+        });
+        let data = serde_json::to_vec(&record).map_err(echelon_mcap::McapLogError::from)?;
+        self.log(sink, REJECTED_TOPIC, &REJECTED, now, 0, &data)
+    }
+
+    /// Records a sample that arrived on `key` at UNIX ns `now`: exactly one
+    /// MCAP message (typed, or on `/rejected`), and a CSV row for a started
+    /// robot's state.
+    pub fn on_message(
+        &mut self,
+        key: &str,
+        bytes: &[u8],
+        now: u64,
+        sink: &mut impl RecordSink,
+    ) -> Result<(), FleetError> {
+        self.count_received(key);
+        let kind = self.keys.classify(key);
+        if let KeyKind::Stats(k) = kind {
+            return match serde_json::from_slice::<serde_json::Value>(bytes) {
+                Ok(v) if v.get("agent").and_then(|a| a.as_u64()) == Some(u64::from(k)) => {
+                    let t = v.get("t").and_then(|t| t.as_f64()).unwrap_or(0.0);
+                    let topic = format!("/agent/{k}/stats");
+                    self.log(sink, &topic, &STATS, now, nanos(t), bytes)
+                }
+                Ok(_) => self.reject(sink, key, "stats of another agent", bytes, now),
+                Err(_) => self.reject(sink, key, "malformed stats JSON", bytes, now),
+            };
+        }
+        let msg = match wire::decode(bytes) {
+            Ok(m) => m,
+            Err(DecodeError::Malformed(_)) => {
+                return self.reject(sink, key, "malformed", bytes, now);
+            }
+            Err(DecodeError::WrongVersion(_)) => {
+                return self.reject(sink, key, "wrong version", bytes, now);
+            }
+        };
+        match (kind, msg) {
+            (KeyKind::Reference, Message::Reference(h, r)) => {
+                let rec = ReferenceRecord {
+                    t: r.t,
+                    seq: Some(h.seq),
+                    motion: LeaderRecord::from(&r.motion),
+                    speed: r.speed,
+                    turn_rate: r.turn_rate,
+                };
+                let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
+                self.log(sink, REFERENCE_TOPIC, &REFERENCE, now, nanos(r.t), &data)
+            }
+            (KeyKind::State(k), Message::State(h, s)) if s.agent == k => {
+                self.state(k, h.seq, &s, now, sink)
+            }
+            (KeyKind::Other, _) => self.reject(sink, key, "unknown key", bytes, now),
+            _ => self.reject(
+                sink,
+                key,
+                "message of the wrong kind for its key",
+                bytes,
+                now,
+            ),
+        }
+    }
+
+    fn state(
+        &mut self,
+        k: u32,
+        seq: u64,
+        s: &RobotState,
+        now: u64,
+        sink: &mut impl RecordSink,
+    ) -> Result<(), FleetError> {
+        let sample = s.sample();
+        let rec = AgentStateRecord {
+            seq: Some(seq),
+            link: Some(s.link.name()),
+            leader: Some(LeaderRecord::from(&s.leader)),
+            ..AgentStateRecord::new(sample)
+        };
+        let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
+        self.log(
+            sink,
+            &agent_topic(k as usize),
+            &AGENT_STATE,
+            now,
+            nanos(s.t),
+            &data,
+        )?;
+        let a = self.agents.entry(k).or_insert_with(|| AgentRecord {
+            agent: k,
+            ..AgentRecord::default()
+        });
+        a.messages += 1;
+        a.link = s.link.name().to_owned();
+        if s.link == LinkStatus::Waiting {
+            return Ok(());
+        }
+        a.add(&sample);
+        sink.row(&sample)
+    }
+
+    /// The final report, with the per-agent records.
+    pub fn finish(mut self) -> CollectorReport {
+        self.report.agents = self.agents.into_values().collect();
+        self.report.latency = self.latency.report(false);
+        self.report.latency_by_key = self
+            .latency_by_key
+            .iter()
+            .map(|(k, l)| (k.clone(), l.report(false)))
+            .collect();
+        self.report
+    }
+}

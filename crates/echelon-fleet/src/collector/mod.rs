@@ -1,0 +1,42 @@
+//! `echelon fleet collector`: records everything published under
+//! `echelon/<fleet>/**` (paper section 5's data collector).
+//!
+//! Every sample that reaches it is logged to `fleet.mcap` exactly once: valid
+//! messages on their typed channel (`/reference`, `/agent/K/state`,
+//! `/agent/K/stats`), anything else on `/rejected` with the key, the reason and
+//! the bytes. Robot states (once started) also go to `trajectory.csv` with the
+//! simulator's header. On SIGINT/SIGTERM it stops listening, logs what is still
+//! queued, and closes valid files.
+//!
+//! Given ROS 2 topics ([`RosTopic`](crate::ros2::record::RosTopic), e.g. every robot's `cmd_vel` and
+//! `odom`), it also records them as `ros2 bag record -s mcap` does: one
+//! channel per topic named like it (`/robot1/cmd_vel`), the raw CDR bytes as
+//! received, schema `ros2msg` with the full message definition, `log_time`
+//! the receipt time and `publish_time` the rmw_zenoh attachment's source
+//! timestamp. Whoever published them (echelon or a real robot), a sample of
+//! the wrong type (key) or with an invalid CDR payload is refused: counted
+//! and logged on `/rejected` instead.
+
+mod machine;
+mod report;
+mod schema;
+mod sink;
+mod task;
+#[cfg(test)]
+mod tests;
+
+pub use machine::Collector;
+pub use report::{AgentRecord, CollectorReport};
+pub use schema::{REJECTED, STATS};
+pub use sink::{FileSink, RecordSink};
+pub use task::{CollectorOptions, CollectorTask, run, run_recording, run_with_ros2};
+
+/// The MCAP file the collector writes.
+pub const MCAP_FILE: &str = "fleet.mcap";
+/// The collector's summary.
+pub const SUMMARY_FILE: &str = "collector.json";
+/// Name of the MCAP metadata record holding the per-key latency summaries
+/// (each key's value: its [`LatencyReport`](crate::latency::LatencyReport) as JSON).
+pub const LATENCY_METADATA: &str = "echelon.latency";
+/// Topic of everything that was not a valid message of its key.
+pub const REJECTED_TOPIC: &str = "/rejected";

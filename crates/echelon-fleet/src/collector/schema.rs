@@ -1,0 +1,49 @@
+//! The JSON schemas of the collector's own MCAP channels (`/rejected`,
+//! `/agent/K/stats`).
+
+use std::borrow::Cow;
+
+use echelon_mcap::JsonSchema;
+
+/// Schema of `/rejected`.
+pub const REJECTED: JsonSchema = JsonSchema {
+    name: "echelon.Rejected",
+    schema: Cow::Borrowed(
+        r#"{
+  "$schema": "http://json-schema.org/draft-07/schema#",
+  "title": "echelon.Rejected",
+  "description": "A sample received under the fleet's keys that was not a valid message for its key.",
+  "type": "object",
+  "properties": {
+    "key": {"type": "string"},
+    "reason": {"type": "string"},
+    "size": {"type": "integer"},
+    "hex": {"type": "string", "description": "the payload, hexadecimal (first 1024 bytes)"}
+  },
+  "required": ["key", "reason", "size", "hex"]
+}"#,
+    ),
+};
+
+/// Schema of `/agent/K/stats` (a robot's counters, as it published them).
+pub const STATS: JsonSchema = JsonSchema {
+    name: "echelon.RobotStats",
+    schema: Cow::Borrowed(
+        r#"{
+  "$schema": "http://json-schema.org/draft-07/schema#",
+  "title": "echelon.RobotStats",
+  "description": "A robot's receive counters and link status (docs/fleet.md).",
+  "type": "object",
+  "properties": {
+    "agent": {"type": "integer"},
+    "t": {"type": "number"},
+    "link": {"type": "string"},
+    "counters": {"type": "object"},
+    "published": {"type": "integer"},
+    "overruns": {"type": "integer"},
+    "safety": {"type": "object", "description": "with [safety]: the filter's counters so far (steps, active, infeasible, stale_brakes, deadlock_breaks, stale_neighbours, lagging, refused, min_distance)"}
+  },
+  "required": ["agent", "t", "link", "counters"]
+}"#,
+    ),
+};

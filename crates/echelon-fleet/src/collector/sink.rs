@@ -1,0 +1,156 @@
+//! Where the collector's records go: the [`RecordSink`] trait and its files,
+//! [`FileSink`] (`fleet.mcap` and `trajectory.csv`).
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::PathBuf;
+
+use echelon::csv::CsvWriter;
+use echelon::output::{FrameRows, TRAJECTORY_FILE, TrajectoryRows};
+use echelon::sample::AgentSample;
+use echelon_mcap::{JsonSchema, McapLog};
+
+use super::{CollectorReport, LATENCY_METADATA, MCAP_FILE};
+use crate::FleetError;
+use crate::ros2::record::RosTopic;
+
+/// Where the collector's records go: the files ([`run`](super::run)), or memory in tests.
+pub trait RecordSink {
+    /// Logs one MCAP message on `topic` (received at UNIX ns `log_time`, sent
+    /// at `publish_time`).
+    fn log(
+        &mut self,
+        topic: &str,
+        schema: &JsonSchema,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError>;
+    /// Logs one ROS 2 message (CDR bytes as received) on the channel of
+    /// `topic` (received at UNIX ns `log_time`, published at `publish_time`).
+    fn log_ros(
+        &mut self,
+        topic: &RosTopic,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError>;
+    /// Appends one `trajectory.csv` row.
+    fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError>;
+}
+
+/// The collector's files: `fleet.mcap` and `trajectory.csv` in a directory.
+pub struct FileSink {
+    log: McapLog<BufWriter<File>>,
+    seq: BTreeMap<u16, u32>,
+    csv: CsvWriter<BufWriter<File>>,
+    trajectory: TrajectoryRows,
+    csv_path: PathBuf,
+}
+
+impl std::fmt::Debug for FileSink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FileSink")
+            .field("log", &self.log)
+            .field("csv_path", &self.csv_path)
+            .finish_non_exhaustive()
+    }
+}
+
+impl RecordSink for FileSink {
+    fn log(
+        &mut self,
+        topic: &str,
+        schema: &JsonSchema,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        let id = self.log.channel(topic, schema)?;
+        self.write(id, log_time, publish_time, data)
+    }
+
+    fn log_ros(
+        &mut self,
+        topic: &RosTopic,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        let id =
+            self.log
+                .ros2_channel(topic.topic(), &topic.schema(), topic.offered_qos_profiles())?;
+        self.write(id, log_time, publish_time, data)
+    }
+
+    fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError> {
+        self.trajectory
+            .row(sample, &mut self.csv)
+            .map_err(FleetError::io(&self.csv_path))
+    }
+}
+
+impl FileSink {
+    /// Writes one message on channel `id` with the channel's next sequence number.
+    fn write(
+        &mut self,
+        id: u16,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        let seq = self.seq.entry(id).or_insert(0);
+        self.log.write(id, *seq, log_time, publish_time, data)?;
+        *seq = seq.wrapping_add(1);
+        Ok(())
+    }
+
+    /// Creates `out` if needed and the files [`MCAP_FILE`] and
+    /// [`TRAJECTORY_FILE`] in it (truncated), the latter with the columns of
+    /// a fleet of torque-driven robots ([`FileSink::with_trajectory`]).
+    pub fn create(out: &std::path::Path) -> Result<FileSink, FleetError> {
+        FileSink::with_trajectory(out, TrajectoryRows::default())
+    }
+
+    /// [`FileSink::create`], `trajectory.csv` with the columns of
+    /// `trajectory` (those `echelon run` writes for the same scenario:
+    /// [`TrajectoryRows::for_agents`]).
+    pub fn with_trajectory(
+        out: &std::path::Path,
+        trajectory: TrajectoryRows,
+    ) -> Result<FileSink, FleetError> {
+        std::fs::create_dir_all(out).map_err(FleetError::io(out))?;
+        let mcap_path = out.join(MCAP_FILE);
+        let csv_path = out.join(TRAJECTORY_FILE);
+        let log = McapLog::create(&mcap_path)?;
+        let file = File::create(&csv_path).map_err(FleetError::io(&csv_path))?;
+        let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), trajectory.header())
+            .map_err(FleetError::io(&csv_path))?;
+        Ok(FileSink {
+            log,
+            seq: BTreeMap::new(),
+            csv,
+            trajectory,
+            csv_path,
+        })
+    }
+
+    /// Writes the per-key latency summaries of `report` as the MCAP
+    /// metadata record [`LATENCY_METADATA`].
+    pub fn latency_metadata(&mut self, report: &CollectorReport) -> Result<(), FleetError> {
+        let mut map = BTreeMap::new();
+        for (key, l) in &report.latency_by_key {
+            let json = serde_json::to_string(l).map_err(echelon_mcap::McapLogError::from)?;
+            map.insert(key.clone(), json);
+        }
+        self.log.metadata(LATENCY_METADATA, map)?;
+        Ok(())
+    }
+
+    /// Closes both files (MCAP summary and footer written).
+    pub fn finish(mut self) -> Result<(), FleetError> {
+        self.log.finish()?;
+        self.csv.flush().map_err(FleetError::io(&self.csv_path))
+    }
+}

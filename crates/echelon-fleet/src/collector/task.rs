@@ -1,0 +1,169 @@
+//! The collector on the fleet runtime: [`CollectorTask`] and its Zenoh
+//! drivers ([`run`], [`run_with_ros2`], [`run_recording`]).
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use echelon::output::TrajectoryRows;
+
+use super::{Collector, CollectorReport, FileSink, SUMMARY_FILE};
+use crate::clock::FleetClock;
+use crate::keys::Keys;
+use crate::net::NetOptions;
+use crate::role::Member;
+use crate::ros2::record::{self, RosTopic};
+use crate::runtime::{self, Flow, Outputs, Sample, Task};
+use crate::{FleetError, StopFlag, unix_nanos};
+
+/// Options of the collector.
+#[derive(Debug, Clone)]
+pub struct CollectorOptions {
+    /// Output directory.
+    pub out: PathBuf,
+    /// Fleet name.
+    pub fleet: String,
+    /// Stop after this long of real time (absent: run until a signal).
+    pub max_wall: Option<Duration>,
+    /// Network.
+    pub net: NetOptions,
+}
+
+/// [`Collector`] as a [`Task`] of the fleet runtime: every fleet key (and
+/// its ROS 2 topics) in, each sample recorded as soon as it arrives (and
+/// those that arrived before its inputs closed); files closed and
+/// `collector.json` written with its report.
+pub struct CollectorTask {
+    collector: Collector,
+    sink: FileSink,
+    out: PathBuf,
+    /// Stop at this time of its clock (real time), s.
+    until: f64,
+    /// The wall clock (UNIX ns), for `log_time`.
+    wall: fn() -> u64,
+}
+
+impl std::fmt::Debug for CollectorTask {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CollectorTask")
+            .field("collector", &self.collector)
+            .field("out", &self.out)
+            .field("until", &self.until)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Its input number of the fleet's keys (then one per ROS 2 topic).
+const FLEET: usize = 0;
+
+impl CollectorTask {
+    /// `collector` recording to `sink`, its summary to `out`, for at most
+    /// `max_wall` of real time.
+    pub fn new(
+        collector: Collector,
+        sink: FileSink,
+        out: PathBuf,
+        max_wall: Option<Duration>,
+    ) -> CollectorTask {
+        CollectorTask {
+            collector,
+            sink,
+            out,
+            until: max_wall.map_or(f64::INFINITY, |m| m.as_secs_f64()),
+            wall: unix_nanos,
+        }
+    }
+}
+
+impl Task for CollectorTask {
+    type Report = CollectorReport;
+
+    fn inputs(&self) -> Vec<String> {
+        std::iter::once(self.collector.keys.everything())
+            .chain(self.collector.ros_topics().iter().map(RosTopic::key_expr))
+            .collect()
+    }
+
+    fn outputs(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    fn tokens(&self) -> Vec<String> {
+        vec![self.collector.keys.alive(&Member::Collector.liveliness())]
+    }
+
+    fn wakes_on_input(&self) -> bool {
+        true
+    }
+
+    fn on_input(&mut self, input: usize, s: &Sample<'_>) -> Result<(), FleetError> {
+        let now = (self.wall)();
+        if input == FLEET {
+            self.collector.record_delay(s.key, s.delay);
+            return self
+                .collector
+                .on_message(s.key, s.payload, now, &mut self.sink);
+        }
+        // A ROS 2 publisher stamps its attachment, not the sample.
+        let delay = s.delay.or_else(|| {
+            let sent = record::publish_time(s.attachment, 0);
+            (sent > 0).then(|| s.unix_ns as i64 - sent as i64)
+        });
+        self.collector.record_delay(s.key, delay);
+        self.collector
+            .on_ros_sample(s.key, s.payload, s.attachment, now, &mut self.sink)
+    }
+
+    fn next_wake(&self) -> f64 {
+        self.until
+    }
+
+    fn tick(&mut self, now: f64, _: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        Ok(if now >= self.until {
+            Flow::Stop
+        } else {
+            Flow::Continue
+        })
+    }
+
+    fn report(self) -> Result<CollectorReport, FleetError> {
+        let mut sink = self.sink;
+        let report = self.collector.finish();
+        sink.latency_metadata(&report)?;
+        sink.finish()?;
+        crate::write_json_file(&self.out.join(SUMMARY_FILE), &report)?;
+        Ok(report)
+    }
+}
+
+/// Records until the stop flag (or `max_wall`), then closes the files: the
+/// Zenoh driver of [`Collector`] (no ROS 2 topics; see [`run_with_ros2`]).
+pub fn run(opts: CollectorOptions, stop: &StopFlag) -> Result<CollectorReport, FleetError> {
+    run_with_ros2(opts, Vec::new(), stop)
+}
+
+/// [`run`], also recording the ROS 2 topics `ros` (one Zenoh subscription
+/// per topic, on [`RosTopic::key_expr`]).
+pub fn run_with_ros2(
+    opts: CollectorOptions,
+    ros: Vec<RosTopic>,
+    stop: &StopFlag,
+) -> Result<CollectorReport, FleetError> {
+    run_recording(opts, ros, TrajectoryRows::default(), stop)
+}
+
+/// [`run_with_ros2`], writing `trajectory.csv` with the columns of
+/// `trajectory` ([`FileSink::with_trajectory`]): [`CollectorTask`] on the
+/// fleet runtime.
+pub fn run_recording(
+    opts: CollectorOptions,
+    ros: Vec<RosTopic>,
+    trajectory: TrajectoryRows,
+    stop: &StopFlag,
+) -> Result<CollectorReport, FleetError> {
+    let keys = Keys::new(&opts.fleet);
+    let collector =
+        Collector::with_ros2(keys, ros).map_err(|e| FleetError::Config(e.to_string()))?;
+    let sink = FileSink::with_trajectory(&opts.out, trajectory)?;
+    let task = CollectorTask::new(collector, sink, opts.out, opts.max_wall);
+    runtime::run(task, &opts.net, FleetClock::new(1.0), stop)
+}

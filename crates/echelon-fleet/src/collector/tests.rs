@@ -1,0 +1,346 @@
+//! Tests of the collector's state machine, with records kept in memory.
+
+use echelon::control::LeaderMotion;
+use echelon::csv::CsvWriter;
+use echelon::output::TrajectoryRows;
+use echelon::sample::AgentSample;
+use echelon::stats::Summary;
+use echelon_mcap::{JsonSchema, REFERENCE_TOPIC, nanos};
+
+use super::{Collector, REJECTED_TOPIC, RecordSink};
+use crate::FleetError;
+use crate::keys::Keys;
+use crate::ros2::record::RosTopic;
+use crate::wire::{self, Header, LinkStatus, Reference, RobotState};
+
+/// Records in memory.
+#[derive(Debug, Default)]
+struct Memory {
+    logged: Vec<(String, u64, u64, Vec<u8>)>,
+    rows: Vec<String>,
+    trajectory: TrajectoryRows,
+}
+
+impl RecordSink for Memory {
+    fn log(
+        &mut self,
+        topic: &str,
+        _schema: &JsonSchema,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        self.logged
+            .push((topic.to_owned(), log_time, publish_time, data.to_vec()));
+        Ok(())
+    }
+
+    fn log_ros(
+        &mut self,
+        topic: &RosTopic,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        self.logged.push((
+            topic.topic().to_owned(),
+            log_time,
+            publish_time,
+            data.to_vec(),
+        ));
+        Ok(())
+    }
+
+    fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError> {
+        // One row on its own, without the header line.
+        let mut csv =
+            CsvWriter::new(Vec::new(), "").map_err(FleetError::io(std::path::Path::new("row")))?;
+        self.trajectory
+            .row(sample, &mut csv)
+            .map_err(FleetError::io(std::path::Path::new("row")))?;
+        let bytes = csv
+            .into_inner()
+            .map_err(FleetError::io(std::path::Path::new("row")))?;
+        let text = String::from_utf8_lossy(&bytes);
+        self.rows.push(text.trim_start_matches('\n').to_owned());
+        Ok(())
+    }
+}
+
+/// Valid messages go to their typed topic, a started robot's state also to
+/// the CSV; garbage, wrong versions, unknown keys and messages of the
+/// wrong kind go to `/rejected` with their reason: every sample is logged
+/// exactly once.
+#[test]
+fn every_sample_is_logged_once_and_garbage_is_rejected_with_its_reason() {
+    let keys = Keys::new("f");
+    let mut c = Collector::new(keys.clone());
+    let mut sink = Memory::default();
+    let mut reference = Vec::new();
+    wire::encode_reference(
+        &mut reference,
+        Header { source: 1, seq: 4 },
+        &Reference {
+            t: 2.0,
+            motion: LeaderMotion::default(),
+            speed: 0.2,
+            turn_rate: 0.2,
+        },
+    );
+    let state = |link| {
+        let mut b = Vec::new();
+        let s = RobotState {
+            t: 2.5,
+            agent: 1,
+            link,
+            e: [3e-3, 4e-3],
+            ..RobotState::default()
+        };
+        wire::encode_state(&mut b, Header { source: 2, seq: 0 }, &s);
+        b
+    };
+    let (tracking, waiting) = (state(LinkStatus::Tracking), state(LinkStatus::Waiting));
+    let mut wrong_version = reference.clone();
+    wrong_version[1] = 9;
+    let stats = br#"{"agent":1,"t":3.0}"#;
+    let k = |s: &str| s.to_owned();
+    let inputs: Vec<(String, &[u8])> = vec![
+        (keys.reference(), &reference),
+        (keys.state(1), &tracking),
+        (keys.state(1), &waiting),
+        (keys.stats(1), stats),
+        (keys.stats(2), stats),
+        (keys.stats(1), b"{"),
+        (keys.reference(), &[1, 2, 3]),
+        (keys.state(1), &wrong_version),
+        (keys.state(2), &tracking),
+        (keys.state(1), &reference),
+        (k("echelon/f/alive/junk"), &reference),
+    ];
+    for (i, (key, bytes)) in inputs.iter().enumerate() {
+        c.on_message(key, bytes, 1000 + i as u64, &mut sink)
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+    let report = c.finish();
+    assert_eq!(report.received, inputs.len() as u64);
+    assert_eq!(report.logged, report.received);
+    assert_eq!(sink.logged.len() as u64, report.logged);
+    let rejected: Vec<(&str, u64)> = report
+        .rejected
+        .iter()
+        .map(|(r, n)| (r.as_str(), *n))
+        .collect();
+    assert_eq!(
+        rejected,
+        [
+            ("malformed", 1),
+            ("malformed stats JSON", 1),
+            ("message of the wrong kind for its key", 2),
+            ("stats of another agent", 1),
+            ("unknown key", 1),
+            ("wrong version", 1),
+        ]
+    );
+    assert_eq!(report.logged_by_topic[REFERENCE_TOPIC], 1);
+    assert_eq!(report.logged_by_topic["/agent/1/state"], 2);
+    assert_eq!(report.logged_by_topic["/agent/1/stats"], 1);
+    assert_eq!(report.logged_by_topic[REJECTED_TOPIC], 7);
+    // log_time is the arrival time given, publish_time the sender's.
+    assert_eq!((sink.logged[0].1, sink.logged[0].2), (1000, nanos(2.0)));
+    // One CSV row: the tracking state, not the waiting one.
+    assert_eq!(sink.rows.len(), 1);
+    assert!(sink.rows[0].starts_with("2.5,1,"), "{}", sink.rows[0]);
+    let a = &report.agents[0];
+    assert_eq!((a.agent, a.messages, a.rows), (1, 2, 1));
+    assert!((a.final_error - 5e-3).abs() < 1e-15);
+    assert_eq!(a.link, "waiting");
+}
+
+/// The states of a simulated run of velocity bases, sent as robots send
+/// them, give the collector the simulator's statistics (the same
+/// accumulator, the same samples) and the simulator's rows, velocity
+/// columns included.
+#[test]
+fn the_collector_s_statistics_and_rows_are_the_simulator_s() {
+    use echelon::output::{FrameRows, TRAJECTORY_HEADER_VELOCITY};
+    use echelon::scenario::{Overrides, Scenario};
+    use echelon::sim::{Frame, Observer, ObserverError};
+
+    let run = Scenario::builtin("experiment-circle-velocity")
+        .unwrap_or_else(|| panic!("a built-in"))
+        .build(&Overrides {
+            duration: Some(2.0),
+            ..Overrides::default()
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut simulation = run.simulation();
+    let trajectory = TrajectoryRows::for_agents(run.plan.agents());
+    assert_eq!(trajectory.header(), TRAJECTORY_HEADER_VELOCITY);
+    let keys = Keys::new("f");
+    let mut c = Collector::new(keys.clone());
+    let mut sink = Memory {
+        trajectory,
+        ..Memory::default()
+    };
+    let mut sim_rows = Memory {
+        trajectory,
+        ..Memory::default()
+    };
+    let mut summary = Summary::new(run.plan.agents().len(), Summary::SETTLE_TOLERANCE);
+    let mut send = |frame: &Frame<'_>| -> Result<(), ObserverError> {
+        for (i, (state, o)) in frame.states.iter().zip(frame.outputs).enumerate() {
+            let s = RobotState {
+                t: frame.t,
+                agent: i as u32 + 1,
+                link: LinkStatus::Tracking,
+                state: *state,
+                e: o.e,
+                z: o.z,
+                u: o.u,
+                tau: o.tau,
+                velocity: o.velocity.as_ref().map(Into::into),
+                ..RobotState::default()
+            };
+            let mut b = Vec::new();
+            wire::encode_state(
+                &mut b,
+                Header {
+                    source: 1,
+                    seq: frame.step,
+                },
+                &s,
+            );
+            c.on_message(&keys.state(s.agent), &b, 0, &mut sink)?;
+        }
+        for sample in AgentSample::all(frame) {
+            sim_rows.row(&sample)?;
+        }
+        Ok(())
+    };
+    simulation
+        .run(&mut [&mut send as &mut dyn Observer, &mut summary])
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(sink.rows, sim_rows.rows);
+    assert!(sink.rows[0].split(',').count() == 20, "{}", sink.rows[0]);
+    let report = c.finish();
+    let agents = summary.agents(run.plan.agents());
+    assert_eq!(report.agents.len(), agents.len());
+    for (a, s) in report.agents.iter().zip(&agents) {
+        assert_eq!(a.rows, run.plan.steps() + 1);
+        assert_eq!(
+            (a.final_error, a.rms_error, a.peak_torque),
+            (s.final_error, s.rms_error, s.peak_torque)
+        );
+        assert_eq!(
+            [a.final_state[0], a.final_state[1], a.final_state[2]],
+            [s.final_pose.x, s.final_pose.y, s.final_pose.theta]
+        );
+    }
+}
+
+/// Delays are recorded per key and in total, unstamped samples counted
+/// apart, and the quantiles come out in seconds.
+#[test]
+fn delays_are_summarised_per_key_and_in_total() {
+    let keys = Keys::new("f");
+    let mut c = Collector::new(keys.clone());
+    for d in [1_000_000, 2_000_000, 3_000_000] {
+        c.record_delay(&keys.reference(), Some(d));
+    }
+    c.record_delay(&keys.state(1), Some(5_000_000));
+    c.record_delay(&keys.state(1), None);
+    let r = c.finish();
+    assert_eq!((r.latency.count, r.latency.unstamped), (4, 1));
+    assert!((r.latency.max - 5e-3).abs() < 1e-12);
+    let reference = &r.latency_by_key[&keys.reference()];
+    assert_eq!(reference.count, 3);
+    assert!((reference.p50 - 2e-3).abs() <= 2e-3 * crate::latency::RELATIVE_ERROR);
+    assert!((reference.max - 3e-3).abs() < 1e-12);
+    assert_eq!(r.latency_by_key[&keys.state(1)].unstamped, 1);
+    assert!(reference.buckets.is_empty());
+}
+
+/// ROS samples of the recorded topics are logged as received on their
+/// topic's channel; a wrong type, a wrong hash, bad CDR or a foreign key
+/// goes to `/rejected`, counted as refused; every sample once.
+#[test]
+fn ros_samples_are_recorded_as_received_or_refused_with_their_reason() {
+    use echelon_ros2::KeyScheme;
+    use echelon_ros2::attachment::Attachment;
+    use echelon_ros2::keys::topic_key;
+    use echelon_ros2::msgs::{ODOMETRY, TWIST, TWIST_STAMPED, Time, TwistStamped};
+    use echelon_ros2::{Odometry, RosMessage};
+
+    let scheme = KeyScheme::RmwZenoh;
+    let mut topics = RosTopic::robot(scheme, 0, "/robot1", TWIST_STAMPED)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .to_vec();
+    let mut c =
+        Collector::with_ros2(Keys::new("f"), topics.clone()).unwrap_or_else(|e| panic!("{e}"));
+    let mut sink = Memory::default();
+    let cmd_key = topic_key(scheme, 0, "/robot1/cmd_vel", &TWIST_STAMPED);
+    let odom_key = topic_key(scheme, 0, "/robot1/odom", &ODOMETRY);
+    let cmd = TwistStamped::planar(0.3, 0.1, Time::from_nanos(5), "base_link").to_cdr();
+    let odom = Odometry::planar(
+        1.0,
+        2.0,
+        0.5,
+        0.3,
+        0.1,
+        Time::default(),
+        "odom",
+        "base_link",
+    )
+    .to_cdr();
+    let attachment = Attachment {
+        sequence_number: 1,
+        source_timestamp_ns: 777,
+        gid: [0; 16],
+    }
+    .encode();
+    let wrong_type = topic_key(scheme, 0, "/robot1/cmd_vel", &TWIST);
+    let wrong_hash = format!("0/robot1/odom/{}/RIHS01_00", ODOMETRY.dds_name());
+    // (key, payload, attachment)
+    type Sample<'a> = (String, &'a [u8], Option<&'a [u8]>);
+    let inputs: Vec<Sample<'_>> = vec![
+        (cmd_key.clone(), &cmd, Some(&attachment)),
+        (odom_key.clone(), &odom, None),
+        (odom_key.clone(), &odom[..odom.len() - 3], None),
+        (wrong_type, &cmd, None),
+        (wrong_hash, &odom, None),
+        (cmd_key.clone(), &[0xff; 8], None),
+        ("0/robot2/odom/x/y".to_owned(), &odom, None),
+    ];
+    for (i, (key, bytes, att)) in inputs.iter().enumerate() {
+        c.on_ros_sample(key, bytes, *att, 100 + i as u64, &mut sink)
+            .unwrap_or_else(|e| panic!("{e}"));
+    }
+    let report = c.finish();
+    assert_eq!(report.received, inputs.len() as u64);
+    assert_eq!(report.logged, report.received);
+    assert_eq!((report.ros_recorded, report.ros_refused), (2, 5));
+    assert_eq!(
+        sink.logged[0],
+        ("/robot1/cmd_vel".to_owned(), 100, 777, cmd.clone())
+    );
+    assert_eq!(sink.logged[1], ("/robot1/odom".to_owned(), 101, 101, odom));
+    let rejected: Vec<(&str, u64)> = report
+        .rejected
+        .iter()
+        .map(|(r, n)| (r.as_str(), *n))
+        .collect();
+    assert_eq!(
+        rejected,
+        [
+            ("ROS: key of no recorded topic", 1),
+            ("ROS: malformed CDR for the topic's type", 1),
+            ("ROS: not CDR little-endian", 1),
+            ("ROS: wrong message type on the key", 1),
+            ("ROS: wrong type hash on the key", 1),
+        ]
+    );
+    assert_eq!(report.logged_by_topic[REJECTED_TOPIC], 5);
+    // A topic twice is refused.
+    topics.push(topics[0].clone());
+    assert!(Collector::with_ros2(Keys::new("f"), topics).is_err());
+}

@@ -1,12 +1,11 @@
 //! The deadlock monitor: when a robot the filter holds counts as stuck, and
 //! how it breaks the deadlock (its desired motion turned right, see the
-//! module documentation of [`crate::safety`]).
-
-use super::filter::{Outcome, SafetyFilter};
-use super::qp::{Constraint, solve};
+//! module documentation of [`crate::safety`]). The filter asks it
+//! ([`super::SafetyFilter::decide`] in `filter.rs`); it knows nothing of the
+//! filter.
 
 /// How long after its filter last changed its command a robot still counts
-/// as held by it ([`SafetyFilter::deadlocked`]), s.
+/// as held by it ([`super::SafetyFilter::deadlocked`]), s.
 pub const DEADLOCK_MEMORY: f64 = 10.0;
 
 /// How long a robot must be stuck before it breaks a deadlock, s.
@@ -29,63 +28,48 @@ pub(super) struct Deadlock {
     now: f64,
 }
 
-impl SafetyFilter {
-    /// Whether the filter holds the robot: it changed the command (and so
-    /// may be stuck or breaking a deadlock) at its last call or at any call
-    /// within [`DEADLOCK_MEMORY`] before it (a robot that keeps falling back
-    /// into the same stand-off between breaks, or rides along a neighbour's
-    /// barrier beside its slot, is held too).
-    pub fn deadlocked(&self) -> bool {
-        let d = &self.deadlock;
-        d.last.is_some_and(|t| d.now - t <= DEADLOCK_MEMORY)
+impl Deadlock {
+    /// Whether the filter holds the robot: it changed the command at the
+    /// last call or at any call within [`DEADLOCK_MEMORY`] before it.
+    pub(super) fn held(&self) -> bool {
+        self.last.is_some_and(|t| self.now - t <= DEADLOCK_MEMORY)
     }
 
     /// How many deadlocks it has started breaking.
-    pub fn deadlock_breaks(&self) -> u64 {
-        self.deadlock.breaks
+    pub(super) fn breaks(&self) -> u64 {
+        self.breaks
     }
 
-    /// The QP's answer for the desired `x0` and the rows gathered, the
-    /// outcome and whether a deadlock is being broken; updates the monitor.
-    /// `drift` is the part of the point's motion the command does not set
-    /// (zero for velocity bases), for the stuck test.
-    pub(super) fn decide(
-        &mut self,
-        t: f64,
-        x0: [f64; 2],
-        barriers: usize,
-        drift: [f64; 2],
-    ) -> ([f64; 2], Outcome, bool) {
-        let satisfied = |rows: &[Constraint], x: [f64; 2]| rows.iter().all(|c| c.slack(x) >= 0.0);
-        self.deadlock.now = t;
-        if satisfied(&self.rows[..barriers], x0) {
-            self.deadlock.stuck_since = None;
-            self.deadlock.breaking = false;
-            return (x0, Outcome::Nominal, false);
-        }
-        let breaking = self.deadlock.breaking;
-        let want = if breaking { turn_right(x0) } else { x0 };
-        let (x, outcome) = match solve(&self.rows, want) {
-            Some(x) => (x, Outcome::Filtered),
-            None => ([0.0; 2], Outcome::Braked),
-        };
-        // Stuck: less than half of the motion the nominal asks for survives
-        // (the point stops, or slides alongside a neighbour it should pass).
-        let moved = [x[0] + drift[0], x[1] + drift[1]];
-        let asked = [x0[0] + drift[0], x0[1] + drift[1]];
-        let asked_sq = asked[0] * asked[0] + asked[1] * asked[1];
-        let stuck = asked_sq >= 1e-4 && moved[0] * asked[0] + moved[1] * asked[1] < 0.5 * asked_sq;
+    /// A call at `t` where the nominal satisfied every constraint: not
+    /// stuck, not breaking.
+    pub(super) fn free(&mut self, t: f64) {
+        self.now = t;
+        self.stuck_since = None;
+        self.breaking = false;
+    }
+
+    /// A call at `t` where the filter acts: the desired motion for the QP
+    /// (`x0`, turned right while breaking a deadlock) and whether it is
+    /// breaking one.
+    pub(super) fn want(&mut self, t: f64, x0: [f64; 2]) -> ([f64; 2], bool) {
+        self.now = t;
+        let want = if self.breaking { turn_right(x0) } else { x0 };
+        (want, self.breaking)
+    }
+
+    /// After the filter acted at `t`: whether the robot was `stuck`; it
+    /// starts breaking a deadlock after [`STUCK_TIME`] stuck.
+    pub(super) fn record(&mut self, t: f64, stuck: bool) {
         if stuck {
-            let since = *self.deadlock.stuck_since.get_or_insert(t);
-            if !self.deadlock.breaking && t - since >= STUCK_TIME {
-                self.deadlock.breaking = true;
-                self.deadlock.breaks += 1;
+            let since = *self.stuck_since.get_or_insert(t);
+            if !self.breaking && t - since >= STUCK_TIME {
+                self.breaking = true;
+                self.breaks += 1;
             }
         } else {
-            self.deadlock.stuck_since = None;
+            self.stuck_since = None;
         }
-        self.deadlock.last = Some(t);
-        (x, outcome, breaking)
+        self.last = Some(t);
     }
 }
 

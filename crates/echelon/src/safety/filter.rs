@@ -5,7 +5,7 @@
 use super::config::SafetyConfig;
 use super::deadlock::Deadlock;
 use super::neighbour::{Neighbour, Obstacle};
-use super::qp::Constraint;
+use super::qp::{Constraint, solve};
 use crate::model::State;
 
 /// What the filter did to a command.
@@ -154,5 +154,52 @@ impl Own {
             2.0 * (d[0] * self.cos + d[1] * self.sin),
             2.0 * (-d[0] * self.sin + d[1] * self.cos),
         ]
+    }
+}
+
+impl SafetyFilter {
+    /// Whether the filter holds the robot: it changed the command (and so
+    /// may be stuck or breaking a deadlock) at its last call or at any call
+    /// within [`super::DEADLOCK_MEMORY`] before it (a robot that keeps falling back
+    /// into the same stand-off between breaks, or rides along a neighbour's
+    /// barrier beside its slot, is held too).
+    pub fn deadlocked(&self) -> bool {
+        self.deadlock.held()
+    }
+
+    /// How many deadlocks it has started breaking.
+    pub fn deadlock_breaks(&self) -> u64 {
+        self.deadlock.breaks()
+    }
+
+    /// The QP's answer for the desired `x0` and the rows gathered, the
+    /// outcome and whether a deadlock is being broken; updates the monitor.
+    /// `drift` is the part of the point's motion the command does not set
+    /// (zero for velocity bases), for the stuck test.
+    pub(super) fn decide(
+        &mut self,
+        t: f64,
+        x0: [f64; 2],
+        barriers: usize,
+        drift: [f64; 2],
+    ) -> ([f64; 2], Outcome, bool) {
+        let satisfied = |rows: &[Constraint], x: [f64; 2]| rows.iter().all(|c| c.slack(x) >= 0.0);
+        if satisfied(&self.rows[..barriers], x0) {
+            self.deadlock.free(t);
+            return (x0, Outcome::Nominal, false);
+        }
+        let (want, breaking) = self.deadlock.want(t, x0);
+        let (x, outcome) = match solve(&self.rows, want) {
+            Some(x) => (x, Outcome::Filtered),
+            None => ([0.0; 2], Outcome::Braked),
+        };
+        // Stuck: less than half of the motion the nominal asks for survives
+        // (the point stops, or slides alongside a neighbour it should pass).
+        let moved = [x[0] + drift[0], x[1] + drift[1]];
+        let asked = [x0[0] + drift[0], x0[1] + drift[1]];
+        let asked_sq = asked[0] * asked[0] + asked[1] * asked[1];
+        let stuck = asked_sq >= 1e-4 && moved[0] * asked[0] + moved[1] * asked[1] < 0.5 * asked_sq;
+        self.deadlock.record(t, stuck);
+        (x, outcome, breaking)
     }
 }

@@ -351,6 +351,12 @@ impl Plan {
         &self.odometers
     }
 
+    /// Agent `i`'s (0-based) odometer, `None` when it knows its true pose
+    /// (or the plan has no odometry at all: [`Plan::odometers`] is empty then).
+    pub fn odometer(&self, i: usize) -> Option<&Odometer> {
+        self.odometers.get(i).and_then(Option::as_ref)
+    }
+
     /// Each agent's odometry sampling interval, in steps (empty without
     /// odometry).
     pub fn odometry_every(&self) -> &[u64] {

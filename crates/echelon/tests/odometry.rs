@@ -780,3 +780,25 @@ fn a_lagging_base_or_a_mixed_formation_gets_the_bound_its_theory_gives() {
     assert!(r.e_bound.unwrap() >= std::f64::consts::SQRT_2 * n * zeta / g.gamma);
     assert!(r.z_over_bound.unwrap() < 1.0, "{r:?}");
 }
+
+/// `Plan::odometer(k)`: `None` for every agent of a plan without odometry
+/// (whose list is empty) and past the agents; `Some` for a dead-reckoning
+/// agent.
+#[test]
+fn a_plan_names_each_agents_odometer_or_none() {
+    use echelon::scenario::{Overrides, Scenario};
+    let plan = |name: &str| {
+        Scenario::resolve(name)
+            .unwrap()
+            .build(&Overrides::default())
+            .unwrap()
+            .plan
+    };
+    let none = plan("lemniscate-wedge");
+    assert!(none.odometers().is_empty());
+    assert!((0..4).all(|k| none.odometer(k).is_none()));
+    let fixes = plan("fix-study");
+    let n = fixes.agents().len();
+    assert!((0..n).any(|k| fixes.odometer(k).is_some()));
+    assert!(fixes.odometer(n).is_none());
+}

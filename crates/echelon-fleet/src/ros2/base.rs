@@ -423,11 +423,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         .scenario
         .build(&echelon::scenario::Overrides::default())?
         .plan;
-    let odometry = plan
-        .odometers()
-        .get(opts.agent as usize - 1)
-        .cloned()
-        .flatten();
+    let odometry = plan.odometer(opts.agent as usize - 1).cloned();
     let seed = plan.seed();
     let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name));
     let alive = keys.alive(&Member::Base(opts.agent).liveliness());

@@ -293,6 +293,19 @@ fn fake_base() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/ros2/fake_base.py")
 }
 
+/// [`SCENARIO`] written to `dir/<name>.toml` with `agent1` added to agent
+/// 1's table and `ros2` as its `[fleet.ros2]` section.
+fn variant(dir: &Path, name: &str, agent1: &str, ros2: &str) -> PathBuf {
+    let src = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenarios/{SCENARIO}.toml")),
+    )
+    .unwrap();
+    let src = src.replacen("[[agents]]\n", &format!("[[agents]]\n{agent1}"), 1);
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, format!("{src}\n[fleet.ros2]\n{ros2}")).unwrap();
+    path
+}
+
 /// Robot 1 of `scenario` (and a leader) against `fake_base.py` with
 /// `base_args`, 10 s of fleet time; the robot's and the base's reports.
 ///
@@ -557,29 +570,18 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
 fn twist_commands_over_bridge_keys_drive_the_python_base_too() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let src = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../scenarios/experiment-circle-velocity.toml"),
-    )
-    .unwrap();
-    let scenario = dir.path().join("bridge.toml");
     // And a robot switched on elsewhere than its start mark: its odometry
     // origin is given in the world.
     let origin = [1.0, 2.0, 0.3];
-    let src = src.replacen(
-        "[[agents]]\n",
+    let scenario = variant(
+        dir.path(),
+        "bridge",
         &format!(
-            "[[agents]]\nodom_origin = {{ x = {}, y = {}, theta = {} }}\n",
+            "odom_origin = {{ x = {}, y = {}, theta = {} }}\n",
             origin[0], origin[1], origin[2]
         ),
-        1,
+        "cmd_vel_type = \"twist\"\nkey_scheme = \"bridge\"\n",
     );
-    assert!(src.contains("odom_origin"));
-    std::fs::write(
-        &scenario,
-        format!("{src}\n[fleet.ros2]\ncmd_vel_type = \"twist\"\nkey_scheme = \"bridge\"\n"),
-    )
-    .unwrap();
     let (_, base) = drive_python_base(
         scenario.to_str().unwrap(),
         &["--cmd-type", "twist", "--scheme", "bridge"],
@@ -600,17 +602,12 @@ fn twist_commands_over_bridge_keys_drive_the_python_base_too() {
 fn a_humble_robot_is_driven_over_humbles_keys() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let src = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../scenarios/experiment-circle-velocity.toml"),
-    )
-    .unwrap();
-    let scenario = dir.path().join("humble.toml");
-    std::fs::write(
-        &scenario,
-        format!("{src}\n[fleet.ros2]\nkey_scheme = \"rmw_zenoh_humble\"\n"),
-    )
-    .unwrap();
+    let scenario = variant(
+        dir.path(),
+        "humble",
+        "",
+        "key_scheme = \"rmw_zenoh_humble\"\n",
+    );
     let (report, base) = drive_python_base(
         scenario.to_str().unwrap(),
         &["--scheme", "rmw_zenoh_humble"],

@@ -158,6 +158,14 @@ impl Summary {
     /// The settling tolerance on ‖e‖ used by `summary.json`: 1 cm.
     pub const SETTLE_TOLERANCE: f64 = 0.01;
 
+    /// Whether a robot ended deadlocked: more than [`Self::SETTLE_TOLERANCE`]
+    /// from its slot (‖e‖ = `error`) while its filter `held` it
+    /// ([`crate::safety::SafetyFilter::deadlocked`]). The simulator's
+    /// summary and the fleet robot's report use this one rule.
+    pub fn deadlocked_at_end(held: bool, error: f64) -> bool {
+        held && error >= Self::SETTLE_TOLERANCE
+    }
+
     /// A summary for `n` agents with the given settling tolerance on ‖e‖ (m).
     pub fn new(n: usize, tolerance: f64) -> Summary {
         Summary {
@@ -340,7 +348,7 @@ impl Observer for SafetyWatch {
             }
             a.deadlock_breaks = o.deadlock_breaks;
             let e = out.e[0].hypot(out.e[1]);
-            a.deadlocked_at_end = o.enabled && o.deadlocked && e >= Summary::SETTLE_TOLERANCE;
+            a.deadlocked_at_end = Summary::deadlocked_at_end(o.enabled && o.deadlocked, e);
         }
         if frame.last {
             r.active = r.agents.iter().map(|a| a.active).sum();

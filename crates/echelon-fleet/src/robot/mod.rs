@@ -517,9 +517,10 @@ impl<P: Plant> Robot<P> {
     /// Whether its filter kept it from its slot at the end (the
     /// simulator's rule, [`echelon::stats::Summary::SETTLE_TOLERANCE`]).
     fn deadlocked_at_end(&self) -> bool {
-        let e = self.last.e[0].hypot(self.last.e[1]);
-        self.safety.as_ref().is_some_and(|s| s.filter.deadlocked())
-            && e >= echelon::stats::Summary::SETTLE_TOLERANCE
+        echelon::stats::Summary::deadlocked_at_end(
+            self.safety.as_ref().is_some_and(|s| s.filter.deadlocked()),
+            self.last.e[0].hypot(self.last.e[1]),
+        )
     }
 
     fn stats_at(&self, t: f64, link: LinkStatus) -> RobotStats {

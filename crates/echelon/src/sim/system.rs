@@ -81,7 +81,8 @@ impl System {
                 Leader::Reference => LeaderView::Reference(&jet),
                 Leader::Agent(j) => view(sensed(j), j),
             };
-            let law = follow(a, &sensed(i), leader);
+            let me = sensed(i);
+            let law = follow(a, &me, leader);
             let (LawOutput { e, z, .. }, motion, offset) = (law.law, law.leader, law.offset);
             let (e_true, z_true) = if out.is_none() || odometers.is_empty() {
                 (e, z)
@@ -115,10 +116,7 @@ impl System {
             // The act step (agent.rs): the law's command through the agent's
             // limits; a sampled controller's held command went through it
             // (and its filter) at the sample.
-            let command = held.map_or_else(
-                || a.act(t, &sensed(i), law.command(), None).command,
-                |h| h[i],
-            );
+            let command = held.map_or_else(|| a.act(t, &me, law.command(), None).command, |h| h[i]);
             let applied = a.drive.actuate(command);
             dx[i] = a.drive.derivative(&x[i], &applied);
             speeds[i] = a.drive.speeds(&x[i], &applied);

@@ -293,6 +293,16 @@ fn fake_base() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/ros2/fake_base.py")
 }
 
+/// The liveliness tokens `fake_base.py` saw.
+fn tokens(base: &Value) -> Vec<&str> {
+    base["tokens"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .collect()
+}
+
 /// [`SCENARIO`] written to `dir/<name>.toml` with `agent1` added to agent
 /// 1's table and `ros2` as its `[fleet.ros2]` section.
 fn variant(dir: &Path, name: &str, agent1: &str, ros2: &str) -> PathBuf {
@@ -417,12 +427,7 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
         "the robot stopped with zero"
     );
     assert_eq!(base["last_command"]["frame_id"], "base_link");
-    let tokens: Vec<&str> = base["tokens"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(Value::as_str)
-        .collect();
+    let tokens = tokens(&base);
     assert!(
         tokens
             .iter()
@@ -621,12 +626,7 @@ fn a_humble_robot_is_driven_over_humbles_keys() {
     assert!(f(&base, &["commands"]) > 300.0, "{base}");
     assert_eq!(f(&base, &["attachments_valid"]), f(&base, &["commands"]));
     assert_eq!(f(&report, &["ros2", "odom_wrong_type"]), 0.0, "{report}");
-    let tokens: Vec<&str> = base["tokens"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(Value::as_str)
-        .collect();
+    let tokens = tokens(&base);
     assert!(
         tokens.iter().any(|t| t.contains(
             "/MP/%/%robot1/echelon_robot/%robot1%cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported/"

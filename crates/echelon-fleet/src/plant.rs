@@ -11,6 +11,8 @@ use echelon::agent::{AgentSpec, Drive};
 use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::model::{Input, RobotParams, State};
 
+use crate::ros2::fixes::FixReport;
+
 /// A differential-drive robot under the fleet controller: what the robot's
 /// state machine ([`crate::robot::Robot`]) drives, injected. The simulated
 /// models are two; a real drive (ROS 2 `cmd_vel` out, odometry in) is another.
@@ -33,6 +35,12 @@ pub trait Plant {
     /// restarted): the plant's time jumps there without moving.
     fn set_time(&mut self, t: f64) {
         let _ = t;
+    }
+    /// What its absolute fixes did, at fleet time `t` (`None`: it takes
+    /// none, as a simulated plant, which is never lost).
+    fn fixes(&self, t: f64) -> Option<FixReport> {
+        let _ = t;
+        None
     }
 }
 

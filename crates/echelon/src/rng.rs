@@ -32,6 +32,14 @@ impl SplitMix64 {
     pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.next_f64()
     }
+
+    /// Standard normal, by the Box–Muller transform (one of the pair).
+    pub fn normal(&mut self) -> f64 {
+        // 1 − u ∈ (0, 1]: the logarithm is finite.
+        let u = 1.0 - self.next_f64();
+        let v = self.next_f64();
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
 }
 
 #[cfg(test)]
@@ -53,5 +61,24 @@ mod tests {
                 16_408_922_859_458_223_821,
             ]
         );
+    }
+
+    /// The Box–Muller draws have the standard normal's moments: over 200 000
+    /// draws from any seed, mean within 0.01, variance within 2 %, and
+    /// 99.73 % ± 0.1 % within three standard deviations.
+    #[test]
+    fn normal_draws_are_standard_normal() {
+        for seed in [0, 1, 42, u64::MAX] {
+            let mut r = SplitMix64::new(seed);
+            let n = 200_000;
+            let xs: Vec<f64> = (0..n).map(|_| r.normal()).collect();
+            assert!(xs.iter().all(|x| x.is_finite()));
+            let mean = xs.iter().sum::<f64>() / n as f64;
+            let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
+            let within = xs.iter().filter(|x| x.abs() < 3.0).count() as f64 / n as f64;
+            assert!(mean.abs() < 0.01, "seed {seed}: mean {mean}");
+            assert!((var - 1.0).abs() < 0.02, "seed {seed}: variance {var}");
+            assert!((within - 0.9973).abs() < 1e-3, "seed {seed}: {within}");
+        }
     }
 }

@@ -1,6 +1,6 @@
 //! A robot process: its options, and [`RobotTask`] on the fleet runtime.
 
-use echelon::scenario::{FleetSettings, Scenario};
+use echelon::scenario::{FleetSettings, Overrides, Scenario};
 
 use crate::clock::FleetClock;
 use crate::faults::FaultSpec;
@@ -8,6 +8,7 @@ use crate::keys::Keys;
 use crate::net::{self, NetOptions};
 use crate::ros2::drive::Ros2Drive;
 use crate::ros2::endpoint::{OwnedCmdSink, Ros2Node};
+use crate::ros2::fixes;
 use crate::runtime;
 use crate::{FleetError, StopFlag};
 
@@ -61,15 +62,22 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     };
     let base = velocity.base();
     let agent = opts.agent;
+    let plan = opts.scenario.build(&Overrides::default())?.plan;
+    let fixes = fixes::for_agent(agent, &link, &plan, &config.spec)?;
     let task = runtime::run_on(
         |session| {
             let node = Ros2Node::declare(session, &link, agent)?;
-            let drive = Ros2Drive::new(link, base, node.gid, OwnedCmdSink(node.publisher));
+            let mut drive = Ros2Drive::new(link, base, node.gid, OwnedCmdSink(node.publisher));
+            if let Some(f) = fixes {
+                drive = drive.with_fixes(f);
+            }
             let robot = Robot::new(config, drive, net::rand_source());
-            // Refusals are counted in the drive's report.
-            let task = RobotTask::new(robot, keys).with_plant_input(node.odom_key, |d, k, b, t| {
-                let _ = d.on_odom(k, b, t);
-            });
+            // Refusals are counted in the drive's report; the inputs are
+            // numbered as the drive's (odometry, then fixes).
+            let mut inputs = vec![node.odom_key];
+            inputs.extend(node.fix_key);
+            let task = RobotTask::new(robot, keys)
+                .with_plant_inputs(inputs, |d, i, k, b, t| d.on_input(i, k, b, t));
             Ok((task, node.tokens))
         },
         &opts.net,

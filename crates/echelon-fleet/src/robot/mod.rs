@@ -511,6 +511,7 @@ impl<P: Plant> Robot<P> {
             latency: self.latency.report(true),
             ros2: None,
             safety: self.safety_counts(),
+            fixes: self.plant.fixes(self.last.t),
         }
     }
 
@@ -532,6 +533,7 @@ impl<P: Plant> Robot<P> {
             published: self.seq,
             overruns: self.overruns,
             safety: self.safety_counts(),
+            fixes: self.plant.fixes(t),
         }
     }
 

@@ -6,6 +6,7 @@ use crate::latency::LatencyReport;
 use crate::link::Counters;
 use crate::role::Role;
 use crate::ros2::drive::Ros2Counters;
+use crate::ros2::fixes::FixReport;
 
 /// What a robot reports when it stops (one JSON line on stdout; `fleet
 /// up` reads it back as this type, so a renamed field is an error, never a 0).
@@ -52,6 +53,9 @@ pub struct RobotReport {
     /// With `[safety]`: what its safety filter did.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetyCounts>,
+    /// With fixes from ROS 2: what they did, and Theorem 2's requirement.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fixes: Option<FixReport>,
 }
 
 /// What a robot's safety filter did over its run (`docs/safety.md`, "In the
@@ -125,4 +129,8 @@ pub struct RobotStats {
     /// With `[safety]`: what its safety filter did so far.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetyCounts>,
+    /// With fixes from ROS 2: what they did so far (fix age, intervals
+    /// against Theorem 2's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fixes: Option<FixReport>,
 }

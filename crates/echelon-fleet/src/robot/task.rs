@@ -14,13 +14,14 @@ use crate::wire::{self, DecodeError, Message};
 use super::{Robot, RobotReport, RobotStats};
 
 /// The input number of the leader stream (then every robot's state, with a
-/// safety filter, then the plant's input, if any).
+/// safety filter, then the plant's inputs, if any).
 const LEADER: usize = 0;
 /// The output number of its state.
 const STATE: usize = 0;
 
-/// What a plant does with a sample of its own input (key, bytes, fleet time).
-pub type PlantFeed<P> = fn(&mut P, &str, &[u8], f64);
+/// What a plant does with a sample of its own inputs (the input's number
+/// among them, key, bytes, fleet time).
+pub type PlantFeed<P> = fn(&mut P, usize, &str, &[u8], f64);
 
 /// A robot on the fleet runtime. What arrives waits for its next tick (in
 /// order: the leader stream, the neighbours, the plant's input), as its
@@ -31,8 +32,8 @@ pub struct RobotTask<P: Plant = SimulatedDrive> {
     keys: Keys,
     leader: Vec<(f64, Option<i64>, Vec<u8>)>,
     neighbours: Vec<(f64, Result<Message, DecodeError>)>,
-    plant_input: Option<(String, PlantFeed<P>)>,
-    plant: Vec<(f64, String, Vec<u8>)>,
+    plant_inputs: Option<(Vec<String>, PlantFeed<P>)>,
+    plant: Vec<(f64, usize, String, Vec<u8>)>,
     buf: Vec<u8>,
     failed: bool,
 }
@@ -45,18 +46,18 @@ impl<P: Plant> RobotTask<P> {
             keys,
             leader: Vec::new(),
             neighbours: Vec::new(),
-            plant_input: None,
+            plant_inputs: None,
             plant: Vec::new(),
             buf: Vec::with_capacity(wire::STATE_LEN),
             failed: false,
         }
     }
 
-    /// The same, its plant also reading `key` (e.g. a ROS 2 base's
-    /// odometry) through `feed`.
-    pub fn with_plant_input(self, key: String, feed: PlantFeed<P>) -> Self {
+    /// The same, its plant also reading `keys` (e.g. a ROS 2 base's
+    /// odometry and fixes) through `feed`.
+    pub fn with_plant_inputs(self, keys: Vec<String>, feed: PlantFeed<P>) -> Self {
         RobotTask {
-            plant_input: Some((key, feed)),
+            plant_inputs: Some((keys, feed)),
             ..self
         }
     }
@@ -103,7 +104,9 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         if self.robot.has_safety() {
             keys.push(self.keys.states());
         }
-        keys.extend(self.plant_input.as_ref().map(|(k, _)| k.clone()));
+        if let Some((plant, _)) = &self.plant_inputs {
+            keys.extend(plant.iter().cloned());
+        }
         keys
     }
 
@@ -124,8 +127,12 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
             self.neighbours
                 .push((sample.at, wire::decode(sample.payload)));
         } else {
-            self.plant
-                .push((sample.at, sample.key.to_owned(), sample.payload.to_vec()));
+            self.plant.push((
+                sample.at,
+                input - neighbours - 1,
+                sample.key.to_owned(),
+                sample.payload.to_vec(),
+            ));
         }
         Ok(())
     }
@@ -144,10 +151,10 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         for (at, msg) in self.neighbours.drain(..) {
             self.robot.on_neighbour(msg, at);
         }
-        if let Some((_, feed)) = &self.plant_input {
-            for (at, key, bytes) in self.plant.drain(..) {
+        if let Some((_, feed)) = &self.plant_inputs {
+            for (at, input, key, bytes) in self.plant.drain(..) {
                 let t = self.robot.fleet_time(at);
-                feed(self.robot.plant_mut(), &key, &bytes, t);
+                feed(self.robot.plant_mut(), input, &key, &bytes, t);
             }
         }
         let tick = self.robot.tick(now);

@@ -19,12 +19,17 @@ use serde::Serialize;
 
 use echelon::agent::Drive;
 use echelon::base::VelocityCommand;
-use echelon::model::State;
-use echelon::odometry::{Odometer, OdometrySpec};
-use echelon::scenario::{Ros2Link, Scenario};
+use std::collections::VecDeque;
+
+use echelon::model::{Pose, State};
+use echelon::odometry::{FixSchedule, FixSpec, Odometer, OdometrySpec};
+use echelon::rng::SplitMix64;
+use echelon::scenario::schema::FixMessage;
+use echelon::scenario::{FixSource, Ros2Link, Scenario};
 
 use super::drive::{SampleRefusal, cmd_vel_type, decode_cmd_vel};
 use super::endpoint::declare_node;
+use super::fixes::fix_type;
 use crate::clock::FleetClock;
 use crate::keys::Keys;
 use crate::net::NetOptions;
@@ -35,7 +40,9 @@ use crate::runtime::{self, Flow, Outputs, Sample, Task};
 use crate::{FleetError, StopFlag};
 use echelon_ros2::attachment::{Attachment, Gid};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
-use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, Time};
+use echelon_ros2::msgs::{
+    ODOMETRY, Odometry, PoseStamped, PoseWithCovarianceStamped, RosMessage, Time,
+};
 
 /// What a simulated base counted (its report and its stats).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
@@ -57,6 +64,9 @@ pub struct BaseCounters {
     pub cmd_timeouts: u64,
     /// Odometry messages published.
     pub odom_published: u64,
+    /// Simulated motion-capture fixes published.
+    #[serde(default)]
+    pub fixes_published: u64,
 }
 
 /// One odometry message to publish.
@@ -75,6 +85,8 @@ pub struct SimBase {
     base: SimulatedVelocityBase,
     gid: Gid,
     seq: i64,
+    /// Local time it was brought to.
+    t: f64,
     last_cmd: Option<f64>,
     timed_out: bool,
     next_odom: f64,
@@ -84,6 +96,33 @@ pub struct SimBase {
     /// Its wheel odometry when the agent has `[odometry]`: what it publishes
     /// instead of the truth.
     encoders: Option<Encoders>,
+    /// A simulated motion capture of it, when the agent takes fixes from
+    /// ROS 2.
+    mocap: Option<Mocap>,
+}
+
+/// A simulated motion-capture system (or any pose source) watching one
+/// base: its true pose taken every `period`, with Gaussian noise, sent
+/// `latency` later, stamped with the instant it was taken (the fix's
+/// `period`, `position_noise`, `heading_noise` and `latency`, as the
+/// simulator's fixes), in the source's frame and message type.
+#[derive(Debug, Clone)]
+struct Mocap {
+    source: FixSource,
+    position_noise: f64,
+    heading_noise: Option<f64>,
+    latency: f64,
+    period: f64,
+    /// Local seconds per wall second (the stamps are wall clock).
+    time_scale: f64,
+    rng: SplitMix64,
+    gid: Gid,
+    seq: i64,
+    /// Local time of the next take.
+    next: f64,
+    /// Taken, waiting for their latency: (local time taken, pose in the
+    /// source's frame).
+    pending: VecDeque<(f64, Pose)>,
 }
 
 /// A simulated base's wheel odometry: the simulator's [`Odometer`] (its
@@ -111,12 +150,46 @@ impl SimBase {
             base,
             gid,
             seq: 0,
+            t: 0.0,
             last_cmd: None,
             timed_out: false,
             next_odom: 0.0,
             counters: BaseCounters::default(),
             followed: VelocityCommand::default(),
             encoders: None,
+            mocap: None,
+        }
+    }
+
+    /// This base also watched by a simulated motion capture publishing on
+    /// `source` as the publisher `gid`: every `period` from the base's time
+    /// now, with the noises and latency of `spec`, random numbers from `seed`
+    /// (the stamps map local time to the wall clock at `time_scale`).
+    pub fn with_mocap(
+        self,
+        source: FixSource,
+        spec: &FixSpec,
+        period: f64,
+        gid: Gid,
+        seed: u64,
+        time_scale: f64,
+    ) -> Self {
+        let t0 = self.t;
+        SimBase {
+            mocap: Some(Mocap {
+                source,
+                position_noise: spec.position_noise,
+                heading_noise: spec.heading_noise,
+                latency: spec.latency,
+                period,
+                time_scale,
+                rng: SplitMix64::new(seed),
+                gid,
+                seq: 0,
+                next: t0 + period,
+                pending: VecDeque::with_capacity((spec.latency / period).ceil() as usize + 2),
+            }),
+            ..self
         }
     }
 
@@ -150,8 +223,13 @@ impl SimBase {
         })
     }
 
-    /// Brings the base to local time `t`, its encoders sampled on the way.
+    /// Brings the base to local time `t`, its encoders sampled on the way
+    /// (never back in time).
     fn advance(&mut self, t: f64) {
+        if t < self.t {
+            return;
+        }
+        self.t = t;
         if let Some(e) = self.encoders.as_mut() {
             while e.next <= t {
                 self.base.advance(e.next);
@@ -251,9 +329,73 @@ impl SimBase {
         decode_cmd_vel(&self.link, key, payload)
     }
 
-    /// Local time of the next odometry.
+    /// Local time of the next odometry or motion-capture event.
     pub fn next_wake(&self) -> f64 {
-        self.next_odom
+        let mocap = self.mocap.as_ref().map_or(f64::INFINITY, |m| {
+            let sent = m
+                .pending
+                .front()
+                .map_or(f64::INFINITY, |&(at, _)| at + m.latency);
+            m.next.min(sent)
+        });
+        self.next_odom.min(mocap)
+    }
+
+    /// The next motion-capture fix due at local time `now` (after
+    /// [`SimBase::tick`] brought the base there), stamped from `stamp_ns`,
+    /// the wall clock now; call until `None`.
+    pub fn take_fix(&mut self, now: f64, stamp_ns: i64) -> Option<OdomOut> {
+        let m = self.mocap.as_mut()?;
+        let &(taken, pose) = m.pending.front()?;
+        if taken + m.latency > now {
+            return None;
+        }
+        m.pending.pop_front();
+        let stamp = Time::from_nanos(stamp_ns - ((now - taken) / m.time_scale * 1e9) as i64);
+        let frame = &m.source.frame;
+        let payload = match m.source.message {
+            FixMessage::PoseStamped => {
+                PoseStamped::planar(pose.x, pose.y, pose.theta, stamp, frame).to_cdr()
+            }
+            FixMessage::PoseWithCovarianceStamped => {
+                let p = m.position_noise * m.position_noise;
+                let h = m.heading_noise.map_or(0.0, |s| s * s);
+                let cov = [[p, 0.0, 0.0], [0.0, p, 0.0], [0.0, 0.0, h]];
+                PoseWithCovarianceStamped::planar(pose.x, pose.y, pose.theta, cov, stamp, frame)
+                    .to_cdr()
+            }
+        };
+        m.seq += 1;
+        self.counters.fixes_published += 1;
+        Some(OdomOut {
+            payload,
+            attachment: Attachment {
+                sequence_number: m.seq,
+                source_timestamp_ns: stamp_ns,
+                gid: m.gid,
+            }
+            .encode(),
+        })
+    }
+
+    /// Takes the motion-capture fixes due up to local time `now`, bringing
+    /// the base to each instant.
+    fn watch(&mut self, now: f64) {
+        while let Some(at) = self.mocap.as_ref().map(|m| m.next).filter(|&at| at <= now) {
+            self.advance(at);
+            let truth = self.base.true_state().pose();
+            let Some(m) = self.mocap.as_mut() else {
+                break;
+            };
+            let mut seen = m.source.frame_origin.between(&truth);
+            seen.x += m.rng.normal() * m.position_noise;
+            seen.y += m.rng.normal() * m.position_noise;
+            if let Some(sd) = m.heading_noise {
+                seen.theta += m.rng.normal() * sd;
+            }
+            m.pending.push_back((at, seen));
+            m.next += m.period;
+        }
     }
 
     /// Brings the base to local time `now` (stopping it if its command timed
@@ -272,6 +414,7 @@ impl SimBase {
             self.counters.cmd_timeouts += u64::from(self.followed != VelocityCommand::default());
             self.follow(VelocityCommand::default());
         }
+        self.watch(now);
         self.advance(now);
         if now < self.next_odom {
             return None;
@@ -346,14 +489,17 @@ pub struct BaseTask {
     agent: u32,
     cmd_key: String,
     odom_key: String,
+    /// The simulated motion capture's key, when it has one.
+    fix_key: Option<String>,
     alive: String,
     duration: Option<f64>,
     /// The wall clock (UNIX ns), for the stamps.
     wall: fn() -> u64,
 }
 
-/// Its only output: odometry.
+/// Its outputs: odometry, then the simulated motion capture's fixes.
 const ODOM: usize = 0;
+const FIXES: usize = 1;
 
 impl Task for BaseTask {
     type Report = BaseReport;
@@ -363,7 +509,9 @@ impl Task for BaseTask {
     }
 
     fn outputs(&self) -> Vec<String> {
-        vec![self.odom_key.clone()]
+        let mut keys = vec![self.odom_key.clone()];
+        keys.extend(self.fix_key.clone());
+        keys
     }
 
     fn tokens(&self) -> Vec<String> {
@@ -384,9 +532,14 @@ impl Task for BaseTask {
         if self.duration.is_some_and(|d| now >= d) {
             return Ok(Flow::Stop);
         }
-        if let Some(odom) = self.base.tick(now, (self.wall)() as i64) {
+        let wall = (self.wall)() as i64;
+        if let Some(odom) = self.base.tick(now, wall) {
             out.publish_attached(ODOM, &odom.payload, &odom.attachment)
                 .map_err(|e| FleetError::Zenoh(format!("publishing odometry: {e}")))?;
+        }
+        while let Some(fix) = self.base.take_fix(now, wall) {
+            out.publish_attached(FIXES, &fix.payload, &fix.attachment)
+                .map_err(|e| FleetError::Zenoh(format!("publishing a fix: {e}")))?;
         }
         Ok(Flow::Continue)
     }
@@ -425,20 +578,52 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         .plan;
     let odometry = plan.odometer(opts.agent as usize - 1).cloned();
     let seed = plan.seed();
+    // A simulated motion capture when the agent takes fixes from ROS 2.
+    let mocap = match (
+        &link.fixes,
+        odometry.as_ref().and_then(|o| o.spec().fixes()),
+    ) {
+        (Some(source), Some(spec)) => {
+            let period = match spec.schedule {
+                FixSchedule::Period(p) => p,
+                FixSchedule::EverySamples(n) => {
+                    n as f64 * odometry.as_ref().map_or(0.0, |o| o.spec().period())
+                }
+            };
+            Some((source.clone(), spec, period))
+        }
+        _ => None,
+    };
     let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name));
     let alive = keys.alive(&Member::Base(opts.agent).liveliness());
     runtime::run_on(
         |session| {
-            let (tokens, gid) = declare_node(
+            let mut publishes = vec![(link.odom.as_str(), &ODOMETRY)];
+            if let Some((source, ..)) = &mocap {
+                publishes.push((source.topic.as_str(), fix_type(source.message)));
+            }
+            let (tokens, gids) = declare_node(
                 session,
                 &link,
                 "echelon_base",
-                (&link.odom, &ODOMETRY),
-                (&link.cmd_vel, &cmd_vel_type(&link)),
+                &publishes,
+                &[(&link.cmd_vel, &cmd_vel_type(&link))],
                 |e| FleetError::Config(e.to_string()),
             )?;
             let model = SimulatedVelocityBase::new(robot.base(), spec.start, 0.0, PLANT_STEP);
-            let mut base = SimBase::new(link.clone(), model, gid);
+            let mut base = SimBase::new(link.clone(), model, gids[0]);
+            if let Some((source, spec, period)) = &mocap {
+                // Its own random stream: the odometry's are the agents'.
+                let stream = seed ^ (0x6d6f_6361_7000_0000 | u64::from(opts.agent));
+                base = base.with_mocap(
+                    source.clone(),
+                    spec,
+                    *period,
+                    gids[1],
+                    stream,
+                    opts.time_scale,
+                );
+            }
             if let Some(odometry) = &odometry {
                 base = base.with_odometry(
                     odometry.spec(),
@@ -453,6 +638,14 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                 agent: opts.agent,
                 cmd_key: topic_key_any_type(link.key_scheme, link.domain_id, &link.cmd_vel),
                 odom_key: topic_key(link.key_scheme, link.domain_id, &link.odom, &ODOMETRY),
+                fix_key: mocap.as_ref().map(|(source, ..)| {
+                    topic_key(
+                        link.key_scheme,
+                        link.domain_id,
+                        &source.topic,
+                        fix_type(source.message),
+                    )
+                }),
                 alive,
                 duration: opts.duration,
                 wall: crate::unix_nanos,

@@ -23,10 +23,11 @@
 use serde::Serialize;
 
 use echelon::base::{VelocityBase, VelocityCommand};
-use echelon::model::State;
+use echelon::model::{Pose, State};
 use echelon::scenario::Ros2Link;
 use echelon::scenario::schema::{CmdVelStamp, CmdVelType};
 
+use super::fixes::{FixInput, FixReport};
 use crate::plant::{Actuation, Command, Plant};
 use echelon_ros2::CdrError;
 use echelon_ros2::attachment::{Attachment, Gid};
@@ -35,6 +36,11 @@ use echelon_ros2::msgs::{
     MessageType, ODOMETRY, Odometry, RosMessage, TWIST, TWIST_STAMPED, Time, Twist, TwistStamped,
     YawUnwrapper,
 };
+
+/// The input number of a drive's odometry.
+pub const ODOM_INPUT: usize = 0;
+/// The input number of a drive's fixes.
+pub const FIX_INPUT: usize = 1;
 
 /// The message type a link's `cmd_vel` carries.
 pub fn cmd_vel_type(link: &Ros2Link) -> MessageType {
@@ -152,10 +158,13 @@ pub struct Ros2Drive<S: CmdSink> {
     seq: i64,
     buf: Vec<u8>,
     yaw: YawUnwrapper,
-    /// The last valid odometry in the world, and its fleet time of arrival.
+    /// The last valid odometry (odom frame) still on the fleet clock's
+    /// timeline, and its fleet time of arrival.
     odom: Option<(State, f64)>,
     /// The last valid odometry as received (odom frame).
     raw: Option<State>,
+    /// Its absolute fixes, when it has a source.
+    fixes: Option<FixInput>,
     t: f64,
     last_sent: VelocityCommand,
     counters: Ros2Counters,
@@ -175,9 +184,19 @@ impl<S: CmdSink> Ros2Drive<S> {
             yaw: YawUnwrapper::new(),
             odom: None,
             raw: None,
+            fixes: None,
             t: 0.0,
             last_sent: VelocityCommand::default(),
             counters: Ros2Counters::default(),
+        }
+    }
+
+    /// The same drive fusing absolute fixes from `fixes` (its
+    /// `odom_origin` becomes the fixes' starting correction).
+    pub fn with_fixes(self, fixes: FixInput) -> Self {
+        Ros2Drive {
+            fixes: Some(fixes),
+            ..self
         }
     }
 
@@ -185,6 +204,33 @@ impl<S: CmdSink> Ros2Drive<S> {
     /// (the state is this mapped into the world).
     pub fn odometry(&self) -> Option<State> {
         self.raw
+    }
+
+    /// Its fixes, if it takes any.
+    pub fn fixes(&self) -> Option<&FixInput> {
+        self.fixes.as_ref()
+    }
+
+    /// The pose of the robot's odom frame in the world: as its fixes say,
+    /// else the link's `odom_origin`.
+    pub fn odom_origin(&self) -> Pose {
+        self.fixes
+            .as_ref()
+            .map_or(self.link.odom_origin, FixInput::correction)
+    }
+
+    /// A sample of input `input` ([`ODOM_INPUT`] or [`FIX_INPUT`]) on `key`
+    /// that arrived at fleet time `t`; refusals are counted.
+    pub fn on_input(&mut self, input: usize, key: &str, payload: &[u8], t: f64) {
+        match (input, self.fixes.as_mut()) {
+            (ODOM_INPUT, _) => {
+                let _ = self.on_odom(key, payload, t);
+            }
+            (_, Some(f)) => {
+                let _ = f.on_fix(key, payload, t);
+            }
+            (_, None) => {}
+        }
     }
 
     /// What it counted.
@@ -222,7 +268,10 @@ impl<S: CmdSink> Ros2Drive<S> {
                     v: odom.twist.twist.linear.x,
                     omega: odom.twist.twist.angular.z,
                 };
-                self.odom = Some((raw.carried_by(&self.link.odom_origin), t));
+                if let Some(f) = self.fixes.as_mut() {
+                    f.on_odom(odom.header.stamp.to_nanos(), raw.pose(), t);
+                }
+                self.odom = Some((raw, t));
                 self.raw = Some(raw);
                 self.counters.odom_accepted += 1;
             }
@@ -274,11 +323,18 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
     fn state(&self) -> Option<State> {
         self.odom
             .filter(|&(_, at)| self.t - at <= self.link.odom_timeout)
-            .map(|(s, _)| s)
+            .map(|(raw, _)| raw.carried_by(&self.odom_origin()))
     }
 
     fn advance(&mut self, t: f64) {
         self.t = self.t.max(t);
+        if let Some(f) = self.fixes.as_mut() {
+            f.tick(self.t);
+        }
+    }
+
+    fn fixes(&self, t: f64) -> Option<FixReport> {
+        self.fixes.as_ref().map(|f| f.report(t))
     }
 
     fn command(&mut self, cmd: Command) -> Actuation {

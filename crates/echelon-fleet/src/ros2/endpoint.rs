@@ -12,49 +12,64 @@ use echelon::scenario::Ros2Link;
 use crate::FleetError;
 use crate::ros2::declare_tokens;
 use crate::ros2::drive::{CmdSink, cmd_vel_type};
+use crate::ros2::fixes::fix_type;
 use echelon_ros2::attachment::{Gid, gid_from_token};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
 use echelon_ros2::liveliness::{NodeInfo, Qos};
 use echelon_ros2::msgs::{MessageType, ODOMETRY};
 use echelon_ros2::names::NameError;
 
-/// A ROS 2 node `<namespace>/<name>` of agent `link`'s with one publisher
-/// and one subscription (topic, type), as rmw_zenoh declares them
-/// (liveliness tokens); its tokens and its publisher's gid.
+/// A ROS 2 node `<namespace>/<name>` of agent `link`'s with publishers and
+/// subscriptions (topic, type), as rmw_zenoh declares them (liveliness
+/// tokens, entity ids numbered from 1 in that order); its tokens and its
+/// publishers' gids, in order.
 pub(crate) fn declare_node(
     session: &zenoh::Session,
     link: &Ros2Link,
     name: &str,
-    publishes: (&str, &MessageType),
-    subscribes: (&str, &MessageType),
+    publishes: &[(&str, &MessageType)],
+    subscribes: &[(&str, &MessageType)],
     name_error: impl FnOnce(NameError) -> FleetError,
-) -> Result<(Vec<zenoh::liveliness::LivelinessToken>, Gid), FleetError> {
+) -> Result<(Vec<zenoh::liveliness::LivelinessToken>, Vec<Gid>), FleetError> {
     let zid = session.zid().to_string();
     let node = NodeInfo::new(link.domain_id, &zid, 0, &link.namespace, name)
         .map_err(name_error)?
         .with_scheme(link.key_scheme);
-    let pub_token = node.publisher_token(1, publishes.0, publishes.1, &Qos::default());
-    let tokens = declare_tokens(
-        session,
-        &[
-            node.node_token(),
-            pub_token.clone(),
-            node.subscription_token(2, subscribes.0, subscribes.1, &Qos::default()),
-        ],
-    )?;
-    Ok((tokens, gid_from_token(&pub_token)))
+    let mut id = 0;
+    let mut next = || {
+        id += 1;
+        id
+    };
+    let publishers: Vec<String> = publishes
+        .iter()
+        .map(|(topic, ty)| node.publisher_token(next(), topic, ty, &Qos::default()))
+        .collect();
+    let mut tokens = vec![node.node_token()];
+    tokens.extend(publishers.iter().cloned());
+    tokens.extend(
+        subscribes
+            .iter()
+            .map(|(topic, ty)| node.subscription_token(next(), topic, ty, &Qos::default())),
+    );
+    let tokens = declare_tokens(session, &tokens)?;
+    Ok((
+        tokens,
+        publishers.iter().map(|t| gid_from_token(t)).collect(),
+    ))
 }
 
 /// Agent `k`'s ROS 2 node `<namespace>/echelon_robot` as rmw_zenoh declares
 /// it (liveliness tokens: the node, a `cmd_vel` publisher, an `odom`
-/// subscription) and its `cmd_vel` publisher; the `odom` subscription
-/// itself is its user's.
+/// subscription and, with fixes, their subscription) and its `cmd_vel`
+/// publisher; the subscriptions themselves are its user's.
 pub(crate) struct Ros2Node {
     pub(crate) publisher: zenoh::pubsub::Publisher<'static>,
     pub(crate) gid: Gid,
     /// The key expression of its `odom`, any type (so that a publisher of
     /// the wrong type is seen, counted and refused rather than never heard).
     pub(crate) odom_key: String,
+    /// The key expression of its fixes (any type), when it takes any.
+    pub(crate) fix_key: Option<String>,
     pub(crate) tokens: Vec<zenoh::liveliness::LivelinessToken>,
 }
 
@@ -65,12 +80,16 @@ impl Ros2Node {
         agent: u32,
     ) -> Result<Ros2Node, FleetError> {
         let cmd_type = cmd_vel_type(link);
-        let (tokens, gid) = declare_node(
+        let mut subscribes = vec![(link.odom.as_str(), &ODOMETRY)];
+        if let Some(f) = &link.fixes {
+            subscribes.push((f.topic.as_str(), fix_type(f.message)));
+        }
+        let (tokens, gids) = declare_node(
             session,
             link,
             "echelon_robot",
-            (&link.cmd_vel, &cmd_type),
-            (&link.odom, &ODOMETRY),
+            &[(&link.cmd_vel, &cmd_type)],
+            &subscribes,
             |e| FleetError::Config(format!("agent {agent}: {e}")),
         )?;
         let cmd_key = topic_key(link.key_scheme, link.domain_id, &link.cmd_vel, &cmd_type);
@@ -80,8 +99,12 @@ impl Ros2Node {
             .map_err(|e| FleetError::Zenoh(format!("declaring {cmd_key}: {e}")))?;
         Ok(Ros2Node {
             publisher,
-            gid,
+            gid: gids[0],
             odom_key: topic_key_any_type(link.key_scheme, link.domain_id, &link.odom),
+            fix_key: link
+                .fixes
+                .as_ref()
+                .map(|f| topic_key_any_type(link.key_scheme, link.domain_id, &f.topic)),
             tokens,
         })
     }

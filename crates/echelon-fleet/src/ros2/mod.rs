@@ -6,6 +6,8 @@
 //!
 //! - [`drive`]: [`drive::Ros2Drive`], a fleet [`crate::plant::Plant`] that
 //!   reads odometry and sends `cmd_vel`.
+//! - [`fixes`]: absolute fixes from ROS 2 poses fused with the odometry,
+//!   and Theorem 2 in the loop.
 //! - [`base`]: a simulated ROS 2 velocity base as a process (`echelon fleet
 //!   base`), answering `cmd_vel` with odometry.
 //! - [`record`]: the topics the fleet collector records into `fleet.mcap`
@@ -18,6 +20,7 @@
 pub mod base;
 pub mod drive;
 pub mod endpoint;
+pub mod fixes;
 pub mod record;
 
 pub use record::{RosRefusal, RosTopic, RosTopicError};

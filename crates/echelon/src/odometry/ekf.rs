@@ -172,6 +172,16 @@ impl Ekf {
             .distance_sq()
     }
 
+    /// The covariance after the estimate was replaced by a fix (a reset):
+    /// the fix's own, `diag(σ², σ², σ_θ²)`; without a heading in the fix
+    /// the heading keeps its variance (its correlations with the position
+    /// are dropped, the position now being the fix's).
+    pub fn reset_to(&mut self, sd_pos: f64, sd_heading: Option<f64>) {
+        let var = sd_pos * sd_pos;
+        let heading = sd_heading.map_or(self.p[2][2], |s| s * s);
+        self.p = [[var, 0.0, 0.0], [0.0, var, 0.0], [0.0, 0.0, heading]];
+    }
+
     /// Fuses an absolute fix `z` (position with standard deviation `sd_pos`, and
     /// the heading if `sd_heading` is given) into `estimate`; returns the new mean.
     pub fn update(

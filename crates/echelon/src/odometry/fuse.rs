@@ -44,10 +44,16 @@ pub struct Gated {
     pub threshold: f64,
 }
 
-/// What fuses fixes into one robot's estimate: the fusion rule, the EKF's
-/// covariance when the rule is `ekf`, the gate and the counts.
+/// What fuses fixes into one robot's estimate: the fusion rule, the
+/// estimate's covariance (when the rule is `ekf`, or a gate needs it), the
+/// gate and the counts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FixFusion {
+    fusion: Fusion,
+    /// The covariance of the estimate: the EKF's own, or, for a gated
+    /// `reset`, the same propagation (odometry grows it, a reset sets it to
+    /// the fix's) so that the gate weighs the odometry's drift since the
+    /// last fix.
     ekf: Option<Ekf>,
     /// Whether implausible fixes are refused (chi-square 99.9 %).
     gate: bool,
@@ -61,19 +67,22 @@ impl FixFusion {
     /// [`GATE_3DOF`]) from the estimate.
     pub fn new(fusion: Fusion, gate: bool) -> FixFusion {
         FixFusion {
-            ekf: (fusion == Fusion::Ekf).then(Ekf::new),
+            fusion,
+            ekf: (fusion == Fusion::Ekf || gate).then(Ekf::new),
             gate,
             applied: 0,
             gated: 0,
         }
     }
 
-    /// The EKF, when fusing by `ekf` (the odometry predicts through it).
+    /// The covariance filter, when fusing by `ekf` or gating (the odometry
+    /// predicts through it).
     pub fn ekf_mut(&mut self) -> Option<&mut Ekf> {
         self.ekf.as_mut()
     }
 
-    /// The estimate's covariance of `(x, y, θ)` when fusing by `ekf`.
+    /// The estimate's covariance of `(x, y, θ)` when fusing by `ekf` or
+    /// gating.
     pub fn covariance(&self) -> Option<[[f64; 3]; 3]> {
         self.ekf.as_ref().map(Ekf::covariance)
     }
@@ -93,8 +102,8 @@ impl FixFusion {
     /// gate's refusal (the estimate and the covariance then unchanged).
     ///
     /// Without a heading in the fix the estimate's heading is kept. The gate
-    /// needs an uncertainty: with `reset` fusion and a noiseless fix (`S =
-    /// 0`) nothing is gated.
+    /// needs an uncertainty: with `reset` fusion and a noiseless fix nothing
+    /// is gated (a stated zero noise is trusted).
     pub fn apply(
         &mut self,
         estimate: &Pose,
@@ -112,7 +121,7 @@ impl FixFusion {
             } else {
                 GATE_2DOF
             };
-            let uncertain = noise.position > 0.0 || self.ekf.is_some();
+            let uncertain = noise.position > 0.0 || self.fusion == Fusion::Ekf;
             let d2 = match &self.ekf {
                 Some(ekf) => ekf.distance_sq(estimate, &now, noise.position, noise.heading),
                 None => Ekf::new().distance_sq(estimate, &now, noise.position, noise.heading),
@@ -125,11 +134,36 @@ impl FixFusion {
                 });
             }
         }
+        Ok(self.fuse(estimate, now, noise))
+    }
+
+    /// `fix`, taken at the instant the estimate was `then`, replaces the
+    /// estimate now whatever the gate says (a robot relocalised after its
+    /// odometry drifted beyond what the gate believes): carried to now, the
+    /// covariance reset to the fix's.
+    pub fn reset(&mut self, estimate: &Pose, then: &Pose, fix: &Pose, noise: FixNoise) -> Pose {
+        let mut now = carry(fix, then, estimate);
+        if noise.heading.is_none() {
+            now.theta = estimate.theta;
+        }
         self.applied += 1;
-        Ok(match &mut self.ekf {
-            None => now,
-            Some(ekf) => ekf.update(estimate, &now, noise.position, noise.heading),
-        })
+        if let Some(ekf) = self.ekf.as_mut() {
+            ekf.reset_to(noise.position, noise.heading);
+        }
+        now
+    }
+
+    fn fuse(&mut self, estimate: &Pose, now: Pose, noise: FixNoise) -> Pose {
+        self.applied += 1;
+        match (self.fusion, self.ekf.as_mut()) {
+            (Fusion::Ekf, Some(ekf)) => ekf.update(estimate, &now, noise.position, noise.heading),
+            (_, ekf) => {
+                if let Some(ekf) = ekf {
+                    ekf.reset_to(noise.position, noise.heading);
+                }
+                now
+            }
+        }
     }
 }
 

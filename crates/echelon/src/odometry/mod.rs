@@ -65,6 +65,20 @@ pub fn arc_update(pose: &Pose, delta: f64, big_theta: f64) -> Pose {
     }
 }
 
+/// The inverse of [`arc_update`]: the `(Δ, Θ)` of the arc from `from` to
+/// `to` (a motion that is not an arc from `from`'s heading, e.g. a sideways
+/// slip, gets the arc with the same chord length and heading change; the
+/// sign of `Δ` is that of the chord along the arc's mid heading). For `|Θ| <
+/// 2π`.
+pub fn arc_motion(from: &Pose, to: &Pose) -> (f64, f64) {
+    let big_theta = to.theta - from.theta;
+    let (dx, dy) = (to.x - from.x, to.y - from.y);
+    let (s, c) = (from.theta + 0.5 * big_theta).sin_cos();
+    let along = dx * c + dy * s;
+    let chord = dx.hypot(dy).copysign(along);
+    (chord / sinc(0.5 * big_theta), big_theta)
+}
+
 /// Dead reckoning from wheel displacements: eq. 21 then eq. 22.
 #[inline]
 pub fn dead_reckon(pose: &Pose, d: WheelDisplacement, half_wheelbase: f64) -> Pose {
@@ -171,6 +185,39 @@ impl ErrorModel {
             check::at_least_one("ticks_per_rev", n.into())?;
         }
         Ok(())
+    }
+
+    /// Variance of each wheel's measured displacement in a sample in which
+    /// the wheels (radius `r`) travelled `step` (right, left), m²: slip plus
+    /// the quantization of the encoders (uniform over one tick) plus `ζ²`,
+    /// plus a floor that keeps a filter from trusting odometry absolutely.
+    pub fn wheel_variance(&self, r: f64, step: [f64; 2]) -> [f64; 2] {
+        let tick = self.tick(r).powi(2) / 6.0;
+        let zeta = self.zeta * self.zeta;
+        let floor = 1e-12;
+        step.map(|d| self.slip * d.abs() + tick + zeta + floor)
+    }
+
+    /// One encoder tick of a wheel of radius `r`, m (0: ideal encoders).
+    fn tick(&self, r: f64) -> f64 {
+        self.ticks_per_rev
+            .map_or(0.0, |n| std::f64::consts::TAU * r / f64::from(n))
+    }
+
+    /// Theorem 2's `ζ` for this model: a bound on the position error per
+    /// axis of one sample in which the robot (wheels of radius `r`)
+    /// travelled `step` m, under the theorem's Assumption 1 (the heading
+    /// exact): the additive `ζ`, plus three standard deviations of the
+    /// slip on the mean wheel displacement (`3 √(slip · step / 2)`), plus
+    /// one encoder tick. The systematic `E_d`, `E_b` turn the heading and
+    /// are outside Assumption 1; fixes that carry a heading correct them.
+    pub fn zeta_per_sample(&self, r: f64, step: f64) -> f64 {
+        let slip = if self.slip > 0.0 {
+            3.0 * (self.slip * step.abs() / 2.0).sqrt()
+        } else {
+            0.0
+        };
+        self.zeta + slip + self.tick(r)
     }
 
     /// Actual right and left wheel radii for nominal radius `r` (Borenstein: the
@@ -527,7 +574,7 @@ impl Odometer {
             self.estimate.y -= errors.zeta;
         }
         if let Some(ekf) = self.fusion.ekf_mut() {
-            let var = wheel_variance(&errors, self.nominal_radius, true_step);
+            let var = errors.wheel_variance(self.nominal_radius, true_step);
             ekf.predict(&previous, delta, big_theta, l, var);
         }
         if errors.speed_noise > 0.0 || errors.turn_rate_noise > 0.0 {
@@ -581,21 +628,29 @@ impl Odometer {
     }
 }
 
-/// Variance of each wheel's measured displacement this sample: slip plus the
-/// quantization of the encoders (uniform over one tick), plus a floor that keeps
-/// the filter from trusting odometry absolutely.
-fn wheel_variance(e: &ErrorModel, r: f64, true_step: [f64; 2]) -> [f64; 2] {
-    let tick = e.ticks_per_rev.map_or(0.0, |n| {
-        (std::f64::consts::TAU * r / f64::from(n)).powi(2) / 6.0
-    });
-    let zeta = e.zeta * e.zeta;
-    let floor = 1e-12;
-    true_step.map(|d| e.slip * d.abs() + tick + zeta + floor)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// `arc_motion` inverts `arc_update` for any arc (forward or
+        /// backward, straight or turning, from any pose): the same `(Δ, Θ)`
+        /// back, and the same pose reached again.
+        #[test]
+        fn arc_motion_inverts_arc_update(
+            x in -50.0..50.0f64, y in -50.0..50.0f64, theta in -20.0..20.0f64,
+            delta in -2.0..2.0f64, big_theta in -3.0..3.0f64
+        ) {
+            let from = Pose { x, y, theta };
+            let to = arc_update(&from, delta, big_theta);
+            let (d, b) = arc_motion(&from, &to);
+            prop_assert!((b - big_theta).abs() < 1e-12);
+            prop_assert!((d - delta).abs() < 1e-9 * (1.0 + delta.abs()), "{d} vs {delta}");
+            let again = arc_update(&from, d, b);
+            prop_assert!((again.x - to.x).abs() < 1e-9 && (again.y - to.y).abs() < 1e-9);
+        }
+    }
 
     #[test]
     fn straight_and_turn_in_place() {

@@ -3,7 +3,7 @@
 
 use super::locate::FieldPath;
 use super::plausible::{self, Part};
-use super::schema::{CmdVelStamp, CmdVelType, Ros2Section};
+use super::schema::{CmdVelStamp, CmdVelType, FixMessage, FixesSection, Ros2Section};
 use super::{Merge, Scenario};
 use crate::check;
 use crate::error::ScenarioError;
@@ -118,6 +118,32 @@ pub struct Ros2Link {
     /// The odometry frame's pose in the world (`odom_origin`, default the
     /// agent's start pose): a world pose is `odom_origin ⊕ odometry pose`.
     pub odom_origin: Pose,
+    /// Where its absolute fixes come from (its `fixes.source`), if anywhere.
+    pub fixes: Option<FixSource>,
+}
+
+/// A ROS 2 topic of absolute fixes for one robot (an agent's `fixes` with a
+/// `source`), resolved. The fixes' noises, schedule, latency and fusion
+/// are the agent's [`crate::odometry::FixSpec`] (the simulator's, one
+/// description of the same fix stream).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FixSource {
+    /// The fully qualified topic (`/robot1/pose`, `/mocap/robot1/pose`).
+    pub topic: String,
+    /// Its message type.
+    pub message: FixMessage,
+    /// The fixes' `header.frame_id`.
+    pub frame: String,
+    /// The pose of that frame in the world: a world fix is
+    /// `frame_origin ⊕ message pose`.
+    pub frame_origin: Pose,
+    /// Fixes missing for longer than this are reported, s (`None`: three
+    /// fix periods).
+    pub timeout: Option<f64>,
+    /// The formation tolerance Theorem 2's fix interval is computed for, m.
+    pub tolerance: Option<f64>,
+    /// Whether implausible fixes are refused.
+    pub gate: bool,
 }
 
 /// Whether `s` can be one chunk of a Zenoh key expression as echelon uses it:
@@ -321,8 +347,58 @@ impl Scenario {
             )?,
             odom_rate: positive(|r| r.odom_rate, "odom_rate", DEFAULT_ODOM_RATE)?,
             odom_origin: self.odom_origin(i)?,
+            fixes: self.fix_source(i, &namespace)?,
             namespace,
         })
+    }
+
+    /// Agent `i`'s (0-based) fixes from ROS 2: its `fixes` over `[fixes]`,
+    /// when they are on and name a `source`.
+    fn fix_source(&self, i: usize, namespace: &str) -> Result<Option<FixSource>, ScenarioError> {
+        let fix = Merge::new(
+            self.file.agents[i].fixes.as_ref(),
+            self.file.fixes.as_ref(),
+            FieldPath::from("agents").index(i).key("fixes"),
+            FieldPath::from("fixes"),
+        );
+        let on = fix.get(|s| s.enabled, "enabled").is_none_or(|(e, _)| e);
+        let Some((source, path)) = fix.get(|s: &FixesSection| s.source.clone(), "source") else {
+            return Ok(None);
+        };
+        if !on {
+            return Ok(None);
+        }
+        let topic = ros_names::fully_qualified_topic(namespace, &source)
+            .map_err(|e| self.error(&path, e.to_string()))?;
+        let (frame, path) = fix.get_or(|s| s.frame.clone(), "frame", "map".to_owned());
+        if frame.is_empty() || frame.chars().any(|c| c.is_whitespace() || c.is_control()) {
+            return Err(self.error(
+                &path,
+                format!("frame id `{frame}` must be non-empty, without spaces"),
+            ));
+        }
+        let frame_origin = match fix.get(|s| s.frame_origin.clone(), "frame_origin") {
+            Some((p, path)) => self.locator().pose(&p, &path, false)?.pose(),
+            None => Pose::default(),
+        };
+        let positive = |get: fn(&FixesSection) -> Option<f64>, key: &str| {
+            fix.get(get, key)
+                .map(|(v, path)| {
+                    check::positive("", v).map_err(|e| self.locator().param(&path, &e))
+                })
+                .transpose()
+        };
+        Ok(Some(FixSource {
+            topic,
+            message: fix
+                .get_or(|s| s.message, "message", FixMessage::default())
+                .0,
+            frame,
+            frame_origin,
+            timeout: positive(|s| s.timeout, "timeout")?,
+            tolerance: positive(|s| s.tolerance, "tolerance")?,
+            gate: fix.get_or(|s| s.gate, "gate", true).0,
+        }))
     }
 }
 
@@ -468,6 +544,91 @@ offset = { x = 0.3, y = 0.0 }
             (
                 "odom_origin = { x = nan, y = 0.0, theta = 0.0 }\n",
                 "agents[1].odom_origin.x",
+            ),
+        ] {
+            let e = parse(extra).err().unwrap_or_else(|| panic!("{extra}"));
+            assert_eq!(e.field, field, "{e}");
+            assert!(e.location.line > 0, "{e}");
+        }
+    }
+
+    #[test]
+    fn fixes_from_ros2_are_resolved_with_their_defaults() {
+        // No source: no fixes from ROS 2 (the simulator's own fixes only).
+        let f = parse(
+            "fixes = { period = 0.1 }
+",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(f.ros2[0].fixes, None);
+        let f = parse(
+            "fixes = { period = 0.1, source = \"pose\" }
+",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let src = f.ros2[0]
+            .fixes
+            .clone()
+            .unwrap_or_else(|| panic!("a source"));
+        assert_eq!(
+            src,
+            FixSource {
+                topic: "/robot1/pose".into(),
+                message: FixMessage::PoseStamped,
+                frame: "map".into(),
+                frame_origin: Pose::default(),
+                timeout: None,
+                tolerance: None,
+                gate: true,
+            }
+        );
+        // Every field given, over the file's [fixes].
+        let f = parse(
+            "fixes = { source = \"/mocap/r1/pose\", message = \"pose-with-covariance-stamped\", frame = \"mocap\", frame_origin = { x = 1.0, y = 2.0, theta_deg = 90.0 }, timeout = 2.0, tolerance = 0.05, gate = false }\n[fixes]\nperiod = 0.1\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let src = f.ros2[0]
+            .fixes
+            .clone()
+            .unwrap_or_else(|| panic!("a source"));
+        assert_eq!(src.topic, "/mocap/r1/pose");
+        assert_eq!(src.message, FixMessage::PoseWithCovarianceStamped);
+        assert_eq!(src.frame, "mocap");
+        assert_eq!((src.frame_origin.x, src.frame_origin.y), (1.0, 2.0));
+        assert!((src.frame_origin.theta - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        assert_eq!(
+            (src.timeout, src.tolerance, src.gate),
+            (Some(2.0), Some(0.05), false)
+        );
+        // Turned off for the agent under a file's source.
+        let f = parse("fixes = { enabled = false }\n[fixes]\nperiod = 0.1\nsource = \"pose\"\n")
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(f.ros2[0].fixes, None);
+        // Bad values name their field and line.
+        for (extra, field) in [
+            (
+                "fixes = { period = 0.1, source = \"bad topic\" }\n",
+                "agents[1].fixes.source",
+            ),
+            (
+                "fixes = { period = 0.1, source = \"pose\", frame = \"a b\" }\n",
+                "agents[1].fixes.frame",
+            ),
+            (
+                "fixes = { period = 0.1, source = \"pose\", timeout = 0.0 }\n",
+                "agents[1].fixes.timeout",
+            ),
+            (
+                "fixes = { period = 0.1, source = \"pose\", tolerance = -1.0 }\n",
+                "agents[1].fixes.tolerance",
+            ),
+            (
+                "fixes = { period = 0.1, source = \"pose\", frame_origin = { x = 0.0, y = 0.0 } }\n",
+                "agents[1].fixes.frame_origin",
+            ),
+            (
+                "fixes = { period = 0.1, source = \"pose\", message = \"odometry\" }\n",
+                "agents[1].fixes.message",
             ),
         ] {
             let e = parse(extra).err().unwrap_or_else(|| panic!("{extra}"));

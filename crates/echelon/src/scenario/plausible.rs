@@ -128,6 +128,16 @@ pub const PLAUSIBLE: &[Plausible] = &[
     row("fixes.position_noise", "m", 0.0, 1000.0),
     row("fixes.heading_noise", "rad", 0.0, std::f64::consts::PI),
     row("fixes.latency", "s", 0.0, 60.0),
+    row("fixes.timeout", "s", 1e-3, 3600.0),
+    row("fixes.tolerance", "m", 1e-4, 100.0),
+    row("frame_origin.x", "m", -POSITION, POSITION),
+    row("frame_origin.y", "m", -POSITION, POSITION),
+    row("frame_origin.theta", "rad", -1000.0, 1000.0),
+    row("frame_origin.theta_deg", "°", -57_000.0, 57_000.0),
+    row("odom_origin.x", "m", -POSITION, POSITION),
+    row("odom_origin.y", "m", -POSITION, POSITION),
+    row("odom_origin.theta", "rad", -1000.0, 1000.0),
+    row("odom_origin.theta_deg", "°", -57_000.0, 57_000.0),
     // [safety] and an agent's safety
     row("safety.radius", "m", 1e-3, 100.0),
     row("safety.gain", "1/s", 1e-3, 1e4),
@@ -393,6 +403,14 @@ robot = "v"
 start = { x = 0.0, y = 1.0, theta_deg = 0.0 }
 leader = "reference"
 mode = "tracking"
+odom_origin = { x = 0.0, y = 1.0, theta = 0.0 }
+fixes = { source = "pose", timeout = 1.0, tolerance = 0.05, frame_origin = { x = 0.0, y = 0.0, theta_deg = 0.0 } }
+[[agents]]
+robot = "v"
+start = { x = 0.0, y = 2.0, theta = 0.0 }
+leader = "reference"
+odom_origin = { x = 0.0, y = 2.0, theta_deg = 0.0 }
+fixes = { frame_origin = { x = 0.0, y = 0.0, theta = 0.0 } }
 [odometry]
 period = 0.01
 ticks_per_rev = 1024

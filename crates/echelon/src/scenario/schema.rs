@@ -156,6 +156,47 @@ pub struct FixesSection {
     /// `reset` (the paper, default) or `ekf`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fusion: Option<Fusion>,
+    /// Fleet (`fleet robot --ros2`): the ROS 2 topic the fixes arrive on,
+    /// relative to the robot's namespace or absolute (absent: the fleet
+    /// takes no fixes; the simulator ignores it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+    /// Fleet: the fix messages' type, `pose-stamped` (default; motion
+    /// capture) or `pose-with-covariance-stamped` (AMCL's `amcl_pose`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub message: Option<FixMessage>,
+    /// Fleet: the fixes' `header.frame_id` (default `map`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<String>,
+    /// Fleet: the pose of the fixes' frame in the world (default: the
+    /// world itself).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_origin: Option<PoseSpec>,
+    /// Fleet: fixes missing for longer than this are reported, s (default:
+    /// three fix periods); the robot carries on on odometry.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timeout: Option<f64>,
+    /// Fleet: the formation tolerance, m: the robot computes the fix
+    /// interval Theorem 2 requires for it and warns when fixes come slower.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance: Option<f64>,
+    /// Fleet: refuse fixes whose Mahalanobis distance from the estimate is
+    /// implausible (chi-square 99.9 %; default true).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gate: Option<bool>,
+}
+
+/// The message type of absolute fixes taken from ROS 2.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FixMessage {
+    /// `geometry_msgs/msg/PoseStamped` (mocap4ros2, vrpn_mocap): the
+    /// uncertainty is the fixes' `position_noise`/`heading_noise`.
+    #[default]
+    PoseStamped,
+    /// `geometry_msgs/msg/PoseWithCovarianceStamped` (AMCL's `amcl_pose`):
+    /// the uncertainty is the message's covariance.
+    PoseWithCovarianceStamped,
 }
 
 /// `[fleet]`: how the scenario runs as separate processes (`echelon fleet`).

@@ -1,0 +1,977 @@
+//! Absolute fixes from ROS 2 for a fleet robot (paper section 6): poses
+//! from a motion-capture driver (`geometry_msgs/PoseStamped`) or a
+//! localiser (`geometry_msgs/PoseWithCovarianceStamped`, AMCL's
+//! `amcl_pose`) fused with the robot's odometry, and Theorem 2 in the loop.
+//!
+//! [`FixInput`] is sans-IO, fed by [`super::drive::Ros2Drive`]: the raw
+//! odometry samples with their stamps ([`FixInput::on_odom`]) and the fix
+//! messages ([`FixInput::on_fix`]). It keeps the *correction*, the pose of
+//! the robot's odom frame in the world as the fixes say it is (at first the
+//! link's `odom_origin`); the robot's world estimate is `correction ⊕ raw
+//! odometry`. A fix goes through the simulator's own fusion
+//! ([`echelon::odometry::fuse::FixFusion`], `reset` or `ekf`, one
+//! implementation):
+//!
+//! 1. checked (type and hash on the key, CDR, finite, its `frame_id`, a
+//!    usable orientation), else counted and refused;
+//! 2. mapped into the world (`frame_origin ⊕ pose`);
+//! 3. latency compensated from its stamp: the raw odometry at the stamp is
+//!    interpolated in the recent history (odometry stamps and fix stamps
+//!    must share a clock: chrony), and the fix carried to now by the motion
+//!    the odometry measured since (`fix ⊕ (then⁻¹ ⊕ now)`);
+//! 4. gated: its squared Mahalanobis distance from the estimate, with the
+//!    covariance the odometry's error model grew since the last fix, beyond
+//!    the chi-square 99.9 % quantile, is refused and counted. The first fix
+//!    is taken as it is (until then the world pose is only `odom_origin`'s
+//!    say-so); after [`RELOCALIZE_AFTER`] refusals in a row the fixes are
+//!    believed over the odometry (the robot relocalises: counted and said);
+//! 5. fused: the covariance is the message's when it has one
+//!    (`PoseWithCovarianceStamped`), else the scenario's `position_noise`
+//!    and `heading_noise` (no `heading_noise`: the heading is not fixed).
+//!
+//! Fixes missing for longer than the timeout are reported once per outage
+//! and the robot carries on on odometry alone. With a `tolerance`, the fix
+//! interval Theorem 2 requires for the kinematic law
+//! ([`echelon::odometry::bound::KinematicTheorem2`]: `‖e‖ ≤ √2 N ζ / γ`) is
+//! computed from the odometry error model ([`ErrorModel::zeta_per_sample`]
+//! at the base's top speed), and fixes that come slower are warned about
+//! once, saying by how much.
+
+use std::collections::VecDeque;
+
+use serde::{Deserialize, Serialize};
+
+use echelon::agent::AgentSpec;
+use echelon::model::{Pose, wrap_angle};
+use echelon::odometry::bound::KinematicTheorem2;
+use echelon::odometry::fuse::{FixFusion, FixNoise, carry};
+use echelon::odometry::{ErrorModel, FixSchedule, FixSpec, arc_motion};
+use echelon::plan::Plan;
+use echelon::scenario::schema::FixMessage;
+use echelon::scenario::{FixSource, Ros2Link};
+use echelon_ros2::KeyScheme;
+use echelon_ros2::keys::check_topic_key;
+use echelon_ros2::msgs::{
+    MessageType, POSE_STAMPED, POSE_WITH_COVARIANCE_STAMPED, PoseStamped,
+    PoseWithCovarianceStamped, Quaternion, RosMessage,
+};
+
+use super::drive::SampleRefusal;
+use crate::FleetError;
+
+/// Raw odometry samples kept for latency compensation (20 s at 50 Hz).
+pub const HISTORY: usize = 1024;
+/// Refused fixes in a row after which the fixes are believed over the
+/// odometry.
+pub const RELOCALIZE_AFTER: u32 = 10;
+/// Theorem 2's `γ` (as `echelon bound`'s default).
+pub const GAMMA: f64 = 0.99;
+/// The default timeout, in fix periods.
+pub const TIMEOUT_PERIODS: f64 = 3.0;
+
+/// The message type of a fix source.
+pub fn fix_type(message: FixMessage) -> &'static MessageType {
+    match message {
+        FixMessage::PoseStamped => &POSE_STAMPED,
+        FixMessage::PoseWithCovarianceStamped => &POSE_WITH_COVARIANCE_STAMPED,
+    }
+}
+
+/// What a robot counted of its fixes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FixCounters {
+    /// Fix messages received.
+    pub received: u64,
+    /// Fused into the estimate.
+    pub applied: u64,
+    /// Refused by the gate (implausibly far from the estimate).
+    pub gated: u64,
+    /// Applied over the gate after [`RELOCALIZE_AFTER`] refusals in a row.
+    pub relocalized: u64,
+    /// Refused: another type or hash on the key.
+    pub wrong_type: u64,
+    /// Refused: not CDR of the message type, or no usable orientation.
+    pub malformed: u64,
+    /// Refused: a NaN or an infinity.
+    pub non_finite: u64,
+    /// Refused: another `frame_id` than configured.
+    pub wrong_frame: u64,
+    /// Refused: no odometry at the fix's stamp (older than the history, or
+    /// no odometry yet).
+    pub unmatched: u64,
+    /// Times fixes went missing for longer than the timeout.
+    pub outages: u64,
+}
+
+/// Theorem 2 for this robot: the inputs (as `echelon bound --law kinematic`
+/// takes them) and the fix interval they require.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FixRequirement {
+    /// `K_e`.
+    pub ke: f64,
+    /// `ζ`, m per odometry sample (the error model at the base's top speed).
+    pub zeta: f64,
+    /// `γ`.
+    pub gamma: f64,
+    /// The odometry sample period `T_s`, s.
+    pub sample_period: f64,
+    /// The formation tolerance `max ‖e‖`, m.
+    pub tolerance: f64,
+    /// The largest `N` keeping `‖e‖` within the tolerance.
+    pub steps: u64,
+    /// `N T_s`: the longest interval between fixes Theorem 2 allows, s.
+    pub interval: f64,
+}
+
+impl FixRequirement {
+    /// Theorem 2 (kinematic law) for gain `ke`, `zeta` m per sample of
+    /// `sample_period` s and `tolerance` m; `None` when `ζ = 0` (perfect
+    /// odometry needs no fix).
+    pub fn new(
+        ke: f64,
+        zeta: f64,
+        sample_period: f64,
+        tolerance: f64,
+    ) -> Result<Option<FixRequirement>, String> {
+        if zeta == 0.0 {
+            return Ok(None);
+        }
+        let t = KinematicTheorem2::new(ke, zeta, GAMMA).map_err(|e| e.to_string())?;
+        let steps = t.max_steps(tolerance).map_err(|e| e.to_string())?;
+        Ok(Some(FixRequirement {
+            ke,
+            zeta,
+            gamma: GAMMA,
+            sample_period,
+            tolerance,
+            steps,
+            interval: steps as f64 * sample_period,
+        }))
+    }
+}
+
+/// What a robot reports of its fixes, live (its stats) and at the end.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FixReport {
+    /// The counts.
+    pub counters: FixCounters,
+    /// The longest interval between two applied fixes, s.
+    pub interval_max: Option<f64>,
+    /// The mean interval between applied fixes, s.
+    pub interval_mean: Option<f64>,
+    /// Time since the last applied fix (or since odometry began), s.
+    pub age: Option<f64>,
+    /// The largest position innovation per axis per odometry sample seen
+    /// at a fix: the odometry error measured, m (Theorem 2's `ζ` as the
+    /// robot actually drifted).
+    pub zeta_measured: Option<f64>,
+    /// Theorem 2's requirement (with a `tolerance`).
+    pub required: Option<FixRequirement>,
+    /// Whether an interval between fixes exceeded the requirement.
+    pub too_slow: bool,
+}
+
+/// Why a fix was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FixRefusal {
+    /// The sample itself (type, CDR, finiteness, frame).
+    #[error(transparent)]
+    Sample(#[from] SampleRefusal),
+    /// Another `frame_id` than configured.
+    #[error("frame `{0}`, expected `{1}`")]
+    Frame(String, String),
+    /// No usable orientation (a zero quaternion).
+    #[error("no usable orientation (a zero quaternion)")]
+    Orientation,
+    /// No odometry at its stamp.
+    #[error("no odometry at the fix's stamp")]
+    Unmatched,
+    /// Implausibly far from the estimate.
+    #[error("gated: squared Mahalanobis distance {distance_sq:.1} > {threshold:.1}")]
+    Gated {
+        /// `νᵀ S⁻¹ ν`.
+        distance_sq: f64,
+        /// The threshold.
+        threshold: f64,
+    },
+}
+
+/// How a robot's odometry errs and how it is sampled: what grows the
+/// estimate's covariance between fixes and gives Theorem 2 its `ζ`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryModel {
+    /// The error model (the agent's `[odometry]`; perfect without one).
+    pub errors: ErrorModel,
+    /// `(l, r)`: half wheelbase and wheel radius, m.
+    pub wheels: (f64, f64),
+    /// The odometry sample period `T_s`, s.
+    pub sample_period: f64,
+    /// The base's top speed, m/s.
+    pub top_speed: f64,
+}
+
+/// One robot's fixes from ROS 2 (see the module doc).
+#[derive(Debug, Clone)]
+pub struct FixInput {
+    agent: u32,
+    source: FixSource,
+    key_scheme: KeyScheme,
+    /// The scenario's fix noise (`PoseStamped`; the fallback of a
+    /// covariance with zeros).
+    noise: FixNoise,
+    fusion: FixFusion,
+    model: OdometryModel,
+    timeout: f64,
+    required: Option<FixRequirement>,
+    /// The odom frame's pose in the world.
+    correction: Pose,
+    /// Recent raw odometry: (stamp ns, pose in the odom frame).
+    history: VecDeque<(i64, Pose)>,
+    /// Fleet time odometry began (the first sample).
+    began: Option<f64>,
+    last_fix: Option<f64>,
+    intervals: (u64, f64, f64),
+    zeta_measured: Option<f64>,
+    refused_in_a_row: u32,
+    outage: bool,
+    too_slow: bool,
+    counters: FixCounters,
+}
+
+impl FixInput {
+    /// Fixes for agent `agent` from `source` (keys in `key_scheme`), of
+    /// the agent's fix spec `spec` (noise, fusion, nominal schedule), on
+    /// odometry that errs as `model`, starting from the odom frame at
+    /// `odom_origin`; Theorem 2 with gain `ke`.
+    pub fn new(
+        agent: u32,
+        source: FixSource,
+        key_scheme: KeyScheme,
+        spec: &FixSpec,
+        model: OdometryModel,
+        odom_origin: Pose,
+        ke: f64,
+    ) -> Result<FixInput, String> {
+        let period = match spec.schedule {
+            FixSchedule::Period(p) => p,
+            FixSchedule::EverySamples(n) => n as f64 * model.sample_period,
+        };
+        let required = match source.tolerance {
+            Some(tolerance) => {
+                let step = model.top_speed * model.sample_period;
+                let zeta = model.errors.zeta_per_sample(model.wheels.1, step);
+                FixRequirement::new(ke, zeta, model.sample_period, tolerance)?
+            }
+            None => None,
+        };
+        Ok(FixInput {
+            agent,
+            timeout: source.timeout.unwrap_or(TIMEOUT_PERIODS * period),
+            fusion: FixFusion::new(spec.fusion, source.gate),
+            source,
+            key_scheme,
+            noise: FixNoise {
+                position: spec.position_noise,
+                heading: spec.heading_noise,
+            },
+            model,
+            required,
+            correction: odom_origin,
+            history: VecDeque::with_capacity(HISTORY),
+            began: None,
+            last_fix: None,
+            intervals: (0, 0.0, 0.0),
+            zeta_measured: None,
+            refused_in_a_row: 0,
+            outage: false,
+            too_slow: false,
+            counters: FixCounters::default(),
+        })
+    }
+
+    /// The source.
+    pub fn source(&self) -> &FixSource {
+        &self.source
+    }
+
+    /// The pose of the robot's odom frame in the world, as the fixes say.
+    pub fn correction(&self) -> Pose {
+        self.correction
+    }
+
+    /// What it counted.
+    pub fn counters(&self) -> &FixCounters {
+        &self.counters
+    }
+
+    /// The estimate's covariance of `(x, y, θ)`, when it keeps one (`ekf`,
+    /// or a gate).
+    pub fn covariance(&self) -> Option<[[f64; 3]; 3]> {
+        self.fusion.covariance()
+    }
+
+    /// Its report at fleet time `t`.
+    pub fn report(&self, t: f64) -> FixReport {
+        let (n, sum, max) = self.intervals;
+        FixReport {
+            counters: self.counters,
+            interval_max: (n > 0).then_some(max),
+            interval_mean: (n > 0).then(|| sum / n as f64),
+            age: self.last_fix.or(self.began).map(|at| t - at),
+            zeta_measured: self.zeta_measured,
+            required: self.required,
+            too_slow: self.too_slow,
+        }
+    }
+
+    /// A raw odometry sample (odom frame) stamped `stamp_ns`, arrived at
+    /// fleet time `t`: grows the covariance by the model and keeps it for
+    /// latency compensation.
+    pub fn on_odom(&mut self, stamp_ns: i64, raw: Pose, t: f64) {
+        self.began.get_or_insert(t);
+        match self.history.back().copied() {
+            // The robot's clock went back (it restarted): a new history.
+            Some((last, _)) if stamp_ns < last => self.history.clear(),
+            Some((_, prev)) => {
+                if let Some(ekf) = self.fusion.ekf_mut() {
+                    let (delta, big_theta) = arc_motion(&prev, &raw);
+                    let (l, r) = self.model.wheels;
+                    let step = [delta + l * big_theta, delta - l * big_theta];
+                    let var = self.model.errors.wheel_variance(r, step);
+                    ekf.predict(&self.correction.compose(&prev), delta, big_theta, l, var);
+                }
+            }
+            None => {}
+        }
+        if self.history.len() == HISTORY {
+            self.history.pop_front();
+        }
+        self.history.push_back((stamp_ns, raw));
+    }
+
+    /// Fleet time `t`: reports (once per outage) fixes missing for longer
+    /// than the timeout.
+    pub fn tick(&mut self, t: f64) {
+        let Some(since) = self.last_fix.or(self.began) else {
+            return;
+        };
+        if !self.outage && t - since > self.timeout {
+            self.outage = true;
+            self.counters.outages += 1;
+            eprintln!(
+                "agent {}: no fix from {} for {:.2} s (timeout {} s): carrying on on odometry alone",
+                self.agent,
+                self.source.topic,
+                t - since,
+                self.timeout
+            );
+        }
+    }
+
+    /// A fix message on `key` that arrived at fleet time `t`: checked,
+    /// carried to now, gated and fused, or counted and refused.
+    pub fn on_fix(&mut self, key: &str, payload: &[u8], t: f64) -> Result<(), FixRefusal> {
+        self.counters.received += 1;
+        let result = self.take(key, payload, t);
+        if let Err(e) = &result {
+            let c = &mut self.counters;
+            match e {
+                FixRefusal::Sample(SampleRefusal::WrongType(_)) => c.wrong_type += 1,
+                FixRefusal::Sample(SampleRefusal::NonFinite(_)) => c.non_finite += 1,
+                FixRefusal::Frame(..) => c.wrong_frame += 1,
+                FixRefusal::Sample(_) | FixRefusal::Orientation => c.malformed += 1,
+                FixRefusal::Unmatched => c.unmatched += 1,
+                FixRefusal::Gated { .. } => c.gated += 1,
+            }
+        }
+        result
+    }
+
+    fn take(&mut self, key: &str, payload: &[u8], t: f64) -> Result<(), FixRefusal> {
+        let (fix, stamp, noise) = self.decode(key, payload)?;
+        let (&(_, raw_now), raw_then) = match (self.history.back(), self.raw_at(stamp)) {
+            (Some(now), Some(then)) => (now, then),
+            _ => return Err(FixRefusal::Unmatched),
+        };
+        let estimate = self.correction.compose(&raw_now);
+        let then = self.correction.compose(&raw_then);
+        let mut fix = self.source.frame_origin.compose(&fix);
+        // The heading continuous with the estimate's (which is unwrapped).
+        fix.theta = then.theta + wrap_angle(fix.theta - then.theta);
+        let carried = carry(&fix, &then, &estimate);
+        if self.last_fix.is_none() {
+            // Until its first fix the world pose is only `odom_origin`'s
+            // say-so: the first fix is taken as it is.
+            let new = self.fusion.reset(&estimate, &then, &fix, noise);
+            self.applied(t, &estimate, &carried);
+            self.correction = new.compose(&raw_now.between(&Pose::default()));
+            return Ok(());
+        }
+        let new = match self.fusion.apply(&estimate, &then, &fix, noise) {
+            Ok(new) => {
+                self.refused_in_a_row = 0;
+                new
+            }
+            Err(g) => {
+                self.refused_in_a_row += 1;
+                if self.refused_in_a_row < RELOCALIZE_AFTER {
+                    return Err(FixRefusal::Gated {
+                        distance_sq: g.distance_sq,
+                        threshold: g.threshold,
+                    });
+                }
+                // The fixes agree with one another against the odometry:
+                // believe them.
+                self.counters.gated += 1;
+                self.counters.relocalized += 1;
+                self.refused_in_a_row = 0;
+                eprintln!(
+                    "agent {}: {} fixes in a row refused by the gate; relocalised on {} ({:.3} m from the odometry estimate)",
+                    self.agent,
+                    RELOCALIZE_AFTER,
+                    self.source.topic,
+                    (carried.x - estimate.x).hypot(carried.y - estimate.y)
+                );
+                self.fusion.reset(&estimate, &then, &fix, noise)
+            }
+        };
+        self.applied(t, &estimate, &carried);
+        // new = correction' ⊕ raw_now.
+        self.correction = new.compose(&raw_now.between(&Pose::default()));
+        Ok(())
+    }
+
+    /// Bookkeeping of a fix applied at fleet time `t` whose carried pose
+    /// was `carried` against the odometry estimate `estimate`.
+    fn applied(&mut self, t: f64, estimate: &Pose, carried: &Pose) {
+        self.counters.applied += 1;
+        if let Some(last) = self.last_fix {
+            let interval = t - last;
+            let (n, sum, max) = self.intervals;
+            self.intervals = (n + 1, sum + interval, max.max(interval));
+            let samples = (interval / self.model.sample_period).max(1.0);
+            let error = (carried.x - estimate.x)
+                .abs()
+                .max((carried.y - estimate.y).abs());
+            let zeta = error / samples;
+            self.zeta_measured = Some(self.zeta_measured.map_or(zeta, |z| z.max(zeta)));
+            if let Some(req) = self.required
+                && interval > req.interval
+                && !self.too_slow
+            {
+                self.too_slow = true;
+                eprintln!(
+                    "agent {}: fixes from {} came {:.3} s apart; Theorem 2 requires at most {:.3} s for ‖e‖ ≤ {} m (ζ = {:.3e} m per {} s sample): {:.1}× too slow",
+                    self.agent,
+                    self.source.topic,
+                    interval,
+                    req.interval,
+                    req.tolerance,
+                    req.zeta,
+                    req.sample_period,
+                    interval / req.interval
+                );
+            }
+        }
+        if self.outage {
+            self.outage = false;
+            eprintln!(
+                "agent {}: fixes from {} again",
+                self.agent, self.source.topic
+            );
+        }
+        self.last_fix = Some(t);
+    }
+
+    /// The fix in its frame, its stamp (ns) and its noise.
+    fn decode(&self, key: &str, payload: &[u8]) -> Result<(Pose, i64, FixNoise), FixRefusal> {
+        let ty = fix_type(self.source.message);
+        check_topic_key(self.key_scheme, key, ty)
+            .map_err(|e| SampleRefusal::WrongType(e.to_string()))?;
+        let (header, pose, covariance) = match self.source.message {
+            FixMessage::PoseStamped => {
+                let m = PoseStamped::from_cdr_finite(payload).map_err(sample_refusal)?;
+                (m.header, m.pose, None)
+            }
+            FixMessage::PoseWithCovarianceStamped => {
+                let m =
+                    PoseWithCovarianceStamped::from_cdr_finite(payload).map_err(sample_refusal)?;
+                let c = m.planar_covariance();
+                (m.header, m.pose.pose, Some(c))
+            }
+        };
+        if header.frame_id != self.source.frame {
+            return Err(FixRefusal::Frame(
+                header.frame_id,
+                self.source.frame.clone(),
+            ));
+        }
+        let q: Quaternion = pose.orientation;
+        if q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w < 1e-12 {
+            return Err(FixRefusal::Orientation);
+        }
+        let fix = Pose {
+            x: pose.position.x,
+            y: pose.position.y,
+            theta: q.yaw(),
+        };
+        let noise = match covariance {
+            None => self.noise,
+            Some(c) => {
+                let position = c[0][0].max(c[1][1]);
+                let heading = c[2][2];
+                FixNoise {
+                    position: if position > 0.0 {
+                        position.sqrt()
+                    } else {
+                        self.noise.position
+                    },
+                    heading: if heading > 0.0 {
+                        Some(heading.sqrt())
+                    } else {
+                        self.noise.heading
+                    },
+                }
+            }
+        };
+        Ok((fix, header.stamp.to_nanos(), noise))
+    }
+
+    /// The raw odometry at `stamp` ns, interpolated; the latest for a zero
+    /// stamp (unstamped) or one after it; `None` before the history.
+    fn raw_at(&self, stamp: i64) -> Option<Pose> {
+        let &(last_stamp, last) = self.history.back()?;
+        if stamp == 0 || stamp >= last_stamp {
+            return Some(last);
+        }
+        let i = self.history.partition_point(|&(s, _)| s <= stamp);
+        if i == 0 {
+            return None;
+        }
+        let (s0, p0) = self.history[i - 1];
+        let (s1, p1) = self.history[i];
+        let w = (stamp - s0) as f64 / (s1 - s0) as f64;
+        Some(Pose {
+            x: p0.x + w * (p1.x - p0.x),
+            y: p0.y + w * (p1.y - p0.y),
+            theta: p0.theta + w * (p1.theta - p0.theta),
+        })
+    }
+}
+
+/// Agent `agent`'s fixes from ROS 2 as the scenario describes them (its
+/// link's `fixes` source, its fix spec and odometry error model from
+/// `plan`, its velocity base's top speed and its gain `K_e` from `spec`);
+/// `None` when it takes none.
+pub fn for_agent(
+    agent: u32,
+    link: &Ros2Link,
+    plan: &Plan,
+    spec: &AgentSpec,
+) -> Result<Option<FixInput>, FleetError> {
+    let Some(source) = link.fixes.clone() else {
+        return Ok(None);
+    };
+    let refuse = |why: String| FleetError::Config(format!("agent {agent}: fixes: {why}"));
+    let odometer = plan.odometer(agent as usize - 1);
+    let Some((odometry, fixes)) = odometer.and_then(|o| Some((o.spec(), o.spec().fixes()?))) else {
+        return Err(refuse(
+            "`source` names a topic but the agent takes no fixes (its odometry is disabled?)"
+                .into(),
+        ));
+    };
+    let top_speed = spec
+        .velocity_robot()
+        .map_or(f64::INFINITY, |r| r.base().v_max());
+    if source.tolerance.is_some() && !top_speed.is_finite() && odometry.errors().slip > 0.0 {
+        return Err(refuse(
+            "`tolerance` with slip needs the base's top speed (`v_max`) to bound the odometry error per sample".into(),
+        ));
+    }
+    let model = OdometryModel {
+        errors: odometry.errors(),
+        wheels: spec.drive.wheels(),
+        sample_period: odometry.period(),
+        top_speed,
+    };
+    FixInput::new(
+        agent,
+        source,
+        link.key_scheme,
+        &fixes,
+        model,
+        link.odom_origin,
+        spec.gains.ke(),
+    )
+    .map(Some)
+    .map_err(refuse)
+}
+
+fn sample_refusal(e: echelon_ros2::CdrError) -> FixRefusal {
+    match e {
+        echelon_ros2::CdrError::NonFinite { field } => SampleRefusal::NonFinite(field).into(),
+        e => SampleRefusal::Malformed(e).into(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use echelon::odometry::Fusion;
+    use echelon_ros2::keys::topic_key;
+    use echelon_ros2::msgs::{ODOMETRY, Time};
+    use proptest::prelude::*;
+
+    const TOPIC: &str = "/mocap/robot1/pose";
+
+    fn source(message: FixMessage, frame_origin: Pose, gate: bool) -> FixSource {
+        FixSource {
+            topic: TOPIC.to_owned(),
+            message,
+            frame: "map".to_owned(),
+            frame_origin,
+            timeout: None,
+            tolerance: None,
+            gate,
+        }
+    }
+
+    fn spec(fusion: Fusion, position_noise: f64, heading_noise: Option<f64>) -> FixSpec {
+        FixSpec {
+            schedule: FixSchedule::Period(0.1),
+            position_noise,
+            heading_noise,
+            latency: 0.0,
+            fusion,
+        }
+    }
+
+    const MODEL: OdometryModel = OdometryModel {
+        errors: ErrorModel::PERFECT,
+        wheels: (0.1, 0.03),
+        sample_period: 0.02,
+        top_speed: 0.5,
+    };
+
+    fn input(src: FixSource, spec: FixSpec, model: OdometryModel, origin: Pose) -> FixInput {
+        FixInput::new(1, src, KeyScheme::RmwZenoh, &spec, model, origin, 1.0)
+            .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    fn key(message: FixMessage) -> String {
+        topic_key(KeyScheme::RmwZenoh, 0, TOPIC, fix_type(message))
+    }
+
+    fn pose_msg(p: &Pose, stamp_ns: i64, frame: &str) -> Vec<u8> {
+        PoseStamped::planar(p.x, p.y, p.theta, Time::from_nanos(stamp_ns), frame).to_cdr()
+    }
+
+    fn pose() -> impl Strategy<Value = Pose> {
+        (-20.0..20.0f64, -20.0..20.0f64, -3.1..3.1f64).prop_map(|(x, y, theta)| Pose {
+            x,
+            y,
+            theta,
+        })
+    }
+
+    /// A robot driven along arcs from `start` (world): its true world poses
+    /// every 20 ms and their stamps (ns).
+    fn drive(start: Pose, arcs: &[(f64, f64)]) -> Vec<(i64, Pose)> {
+        let mut p = start;
+        let mut out = vec![(20_000_000, p)];
+        for (k, &(delta, big_theta)) in arcs.iter().enumerate() {
+            p = echelon::odometry::arc_update(&p, delta, big_theta);
+            out.push((20_000_000 * (k as i64 + 2), p));
+        }
+        out
+    }
+
+    proptest! {
+        /// Wherever the robot was switched on (its true odom frame) and
+        /// whatever `odom_origin` says, in whatever frame the fixes come
+        /// and with whatever latency: one fix (with heading) of the true
+        /// pose at its stamp, carried by exact odometry, puts the world
+        /// estimate on the truth now, and it stays there as the robot
+        /// moves: exactly for an exact fix reset into the estimate, within
+        /// 1 mm for a fix 0.1 mm sure fused by the EKF into an estimate the
+        /// odometry's slip model made unsure.
+        #[test]
+        fn one_late_fix_puts_the_estimate_on_the_truth(
+            true_origin in pose(), said_origin in pose(), frame in pose(), start in pose(),
+            arcs in prop::collection::vec((-0.02..0.02f64, -0.05..0.05f64), 30..80),
+            late in 0usize..14, ekf in any::<bool>(),
+        ) {
+            let truth = drive(start, &arcs);
+            let (fix, model, tol) = if ekf {
+                let errors = ErrorModel { slip: 1e-2, ..ErrorModel::PERFECT };
+                (spec(Fusion::Ekf, 1e-4, Some(1e-4)), OdometryModel { errors, ..MODEL }, 1e-3)
+            } else {
+                (spec(Fusion::Reset, 0.0, Some(0.0)), MODEL, 1e-6)
+            };
+            let mut f = input(
+                source(FixMessage::PoseStamped, frame, false),
+                fix,
+                model,
+                said_origin,
+            );
+            let raw = |p: &Pose| true_origin.between(p);
+            let n = truth.len();
+            for (i, (stamp, p)) in truth[..n - 10].iter().enumerate() {
+                f.on_odom(*stamp, raw(p), i as f64 * 0.02);
+            }
+            // Fixes of the pose `late` samples ago (and one earlier), in
+            // `frame`: the first is taken as it is, the second fused.
+            for (ago, at) in [(late + 5, 0.9), (late, 1.0)] {
+                let (stamp, then) = truth[n - 11 - ago];
+                let seen = frame.between(&then);
+                let msg = pose_msg(&seen, stamp, "map");
+                prop_assert!(f.on_fix(&key(FixMessage::PoseStamped), &msg, at).is_ok());
+            }
+            for (i, (stamp, p)) in truth[n - 10..].iter().enumerate() {
+                f.on_odom(*stamp, raw(p), 1.0 + i as f64 * 0.02);
+                let est = f.correction().compose(&raw(p));
+                prop_assert!((est.x - p.x).abs() < tol && (est.y - p.y).abs() < tol, "{est:?} vs {p:?}");
+                prop_assert!(wrap_angle(est.theta - p.theta).abs() < tol);
+            }
+            prop_assert_eq!(f.counters().applied, 2);
+        }
+    }
+
+    /// A stream of broken or implausible fixes: each one counted in its
+    /// own counter and refused, the correction unchanged; a good one after
+    /// them is applied.
+    #[test]
+    fn bad_fixes_are_counted_and_refused() {
+        let origin = Pose {
+            x: 1.0,
+            y: 2.0,
+            theta: 0.5,
+        };
+        let mut f = input(
+            source(FixMessage::PoseStamped, Pose::default(), true),
+            spec(Fusion::Reset, 0.005, None),
+            MODEL,
+            origin,
+        );
+        let k = key(FixMessage::PoseStamped);
+        let here = origin;
+        // No odometry yet: nothing to carry the fix by.
+        assert_eq!(
+            f.on_fix(&k, &pose_msg(&here, 0, "map"), 0.0),
+            Err(FixRefusal::Unmatched)
+        );
+        f.on_odom(1_000, Pose::default(), 0.0);
+        // The first fix is taken as it is.
+        f.on_fix(&k, &pose_msg(&here, 1_000, "map"), 0.0)
+            .expect("the first fix");
+        let wrong_key = topic_key(KeyScheme::RmwZenoh, 0, TOPIC, &ODOMETRY);
+        assert!(matches!(
+            f.on_fix(&wrong_key, &pose_msg(&here, 1_000, "map"), 0.0),
+            Err(FixRefusal::Sample(SampleRefusal::WrongType(_)))
+        ));
+        let mut truncated = pose_msg(&here, 1_000, "map");
+        truncated.truncate(30);
+        assert!(matches!(
+            f.on_fix(&k, &truncated, 0.0),
+            Err(FixRefusal::Sample(SampleRefusal::Malformed(_)))
+        ));
+        let nan = Pose {
+            x: f64::NAN,
+            ..here
+        };
+        assert!(matches!(
+            f.on_fix(&k, &pose_msg(&nan, 1_000, "map"), 0.0),
+            Err(FixRefusal::Sample(SampleRefusal::NonFinite(_)))
+        ));
+        assert!(matches!(
+            f.on_fix(&k, &pose_msg(&here, 1_000, "odom"), 0.0),
+            Err(FixRefusal::Frame(..))
+        ));
+        let mut zero_q = PoseStamped::planar(here.x, here.y, 0.0, Time::from_nanos(1_000), "map");
+        zero_q.pose.orientation.w = 0.0;
+        assert_eq!(
+            f.on_fix(&k, &zero_q.to_cdr(), 0.0),
+            Err(FixRefusal::Orientation)
+        );
+        // 5 m away with 5 mm noise.
+        let far = Pose {
+            x: here.x + 5.0,
+            ..here
+        };
+        assert!(matches!(
+            f.on_fix(&k, &pose_msg(&far, 1_000, "map"), 0.0),
+            Err(FixRefusal::Gated { .. })
+        ));
+        // Stamped before the history began.
+        f.on_odom(2_000, Pose::default(), 0.02);
+        assert_eq!(
+            f.on_fix(&k, &pose_msg(&here, 500, "map"), 0.02),
+            Err(FixRefusal::Unmatched)
+        );
+        assert_eq!(f.correction(), origin, "nothing refused moved the estimate");
+        let c = *f.counters();
+        assert_eq!(
+            (
+                c.received,
+                c.unmatched,
+                c.wrong_type,
+                c.malformed,
+                c.non_finite,
+                c.wrong_frame,
+                c.gated,
+                c.applied
+            ),
+            (9, 2, 1, 2, 1, 1, 1, 1)
+        );
+        // 3 mm off: applied.
+        let near = Pose {
+            x: here.x + 0.003,
+            ..here
+        };
+        f.on_fix(&k, &pose_msg(&near, 2_000, "map"), 0.02)
+            .expect("a plausible fix");
+        assert!((f.correction().x - near.x).abs() < 1e-12);
+        assert_eq!(f.counters().applied, 2);
+    }
+
+    /// Fixes that all agree against the odometry (a robot carried away, or
+    /// odometry that drifted beyond the gate's belief) are believed after
+    /// [`RELOCALIZE_AFTER`] refusals in a row.
+    #[test]
+    fn consistent_refused_fixes_relocalise_the_robot() {
+        let mut f = input(
+            source(FixMessage::PoseStamped, Pose::default(), true),
+            spec(Fusion::Ekf, 0.005, Some(0.01)),
+            MODEL,
+            Pose::default(),
+        );
+        let k = key(FixMessage::PoseStamped);
+        let away = Pose {
+            x: 3.0,
+            y: -1.0,
+            theta: 1.0,
+        };
+        f.on_odom(999, Pose::default(), 0.0);
+        f.on_fix(&k, &pose_msg(&Pose::default(), 0, "map"), 0.0)
+            .expect("the first fix");
+        for i in 0..RELOCALIZE_AFTER {
+            f.on_odom(1_000 + i64::from(i), Pose::default(), 0.1 * f64::from(i));
+            let r = f.on_fix(&k, &pose_msg(&away, 0, "map"), 0.1 * f64::from(i));
+            assert_eq!(r.is_ok(), i + 1 == RELOCALIZE_AFTER, "fix {i}: {r:?}");
+        }
+        let c = f.correction();
+        assert!(
+            (c.x - 3.0).abs() < 1e-12 && (c.y + 1.0).abs() < 1e-12 && (c.theta - 1.0).abs() < 1e-12
+        );
+        assert_eq!(f.counters().relocalized, 1);
+        assert_eq!(f.counters().gated, u64::from(RELOCALIZE_AFTER));
+        // The covariance is the fix's now.
+        let p = f.covariance().expect("ekf");
+        assert!((p[0][0] - 0.005f64.powi(2)).abs() < 1e-15);
+    }
+
+    /// AMCL's covariance is the fix's uncertainty: the same innovation
+    /// moves the EKF's estimate less the larger the message's covariance.
+    #[test]
+    fn a_pose_with_covariance_weighs_the_fix() {
+        let shift = |var: f64| {
+            let mut f = input(
+                source(FixMessage::PoseWithCovarianceStamped, Pose::default(), true),
+                spec(Fusion::Ekf, 0.0, None),
+                OdometryModel {
+                    errors: ErrorModel {
+                        slip: 1e-3,
+                        ..ErrorModel::PERFECT
+                    },
+                    ..MODEL
+                },
+                Pose::default(),
+            );
+            let k = key(FixMessage::PoseWithCovarianceStamped);
+            f.on_odom(999, Pose::default(), 0.0);
+            let first = PoseWithCovarianceStamped::planar(
+                0.0,
+                0.0,
+                0.0,
+                [[var, 0.0, 0.0], [0.0, var, 0.0], [0.0, 0.0, 1e-6]],
+                Time::default(),
+                "map",
+            );
+            f.on_fix(&k, &first.to_cdr(), 0.0).expect("the first fix");
+            // 1 m straight ahead grows the covariance.
+            for i in 0..=100 {
+                let p = Pose {
+                    x: 0.01 * f64::from(i),
+                    ..Pose::default()
+                };
+                f.on_odom(1_000 + i64::from(i), p, 0.02 * f64::from(i));
+            }
+            let cov = [[var, 0.0, 0.0], [0.0, var, 0.0], [0.0, 0.0, 0.0]];
+            let msg =
+                PoseWithCovarianceStamped::planar(1.0, 0.02, 0.0, cov, Time::default(), "map");
+            f.on_fix(&k, &msg.to_cdr(), 2.0).expect("applied");
+            let raw_now = Pose {
+                x: 1.0,
+                ..Pose::default()
+            };
+            f.correction().compose(&raw_now).y
+        };
+        let (sure, unsure) = (shift(1e-6), shift(1e-3));
+        assert!(
+            sure > unsure && unsure > 0.0 && sure < 0.02,
+            "{sure} {unsure}"
+        );
+    }
+
+    /// Theorem 2 in the loop: the requirement is `KinematicTheorem2`'s
+    /// inverse for the model's ζ at top speed; fixes spaced within it
+    /// raise nothing, one gap beyond it raises the flag (once); an outage
+    /// longer than the timeout is counted once and ends with the next fix.
+    #[test]
+    fn fix_intervals_are_held_against_theorem_2() {
+        let model = OdometryModel {
+            errors: ErrorModel {
+                zeta: 1e-4,
+                ..ErrorModel::PERFECT
+            },
+            ..MODEL
+        };
+        let src = FixSource {
+            tolerance: Some(0.05),
+            ..source(FixMessage::PoseStamped, Pose::default(), false)
+        };
+        let mut f = input(src, spec(Fusion::Reset, 0.0, None), model, Pose::default());
+        let req = f.report(0.0).required.expect("a requirement");
+        let t2 = KinematicTheorem2::new(1.0, 1e-4, GAMMA).expect("valid");
+        assert_eq!(req.steps, t2.max_steps(0.05).expect("steps"));
+        assert!((req.interval - req.steps as f64 * 0.02).abs() < 1e-12);
+        // ‖e‖ ≤ √2 N ζ/γ: N = ⌊0.05 · 0.99 / (√2 · 1e-4)⌋ = 350, 7 s.
+        assert_eq!(req.steps, 350);
+        let k = key(FixMessage::PoseStamped);
+        let mut t = 0.0;
+        let fix_at = |f: &mut FixInput, t: f64| {
+            f.on_odom((t * 1e9) as i64 + 1, Pose::default(), t);
+            f.on_fix(&k, &pose_msg(&Pose::default(), 0, "map"), t)
+                .expect("applied");
+        };
+        for _ in 0..5 {
+            fix_at(&mut f, t);
+            t += 0.9 * req.interval;
+        }
+        assert!(!f.report(t).too_slow);
+        t += 0.2 * req.interval;
+        f.tick(t);
+        // The default timeout: three fix periods of 0.1 s.
+        assert_eq!(f.counters().outages, 1);
+        f.tick(t + 1.0);
+        assert_eq!(f.counters().outages, 1, "one report per outage");
+        fix_at(&mut f, t);
+        let rep = f.report(t);
+        assert!(rep.too_slow);
+        assert!((rep.interval_max.expect("intervals") - 1.1 * req.interval).abs() < 1e-9);
+        assert_eq!(rep.age, Some(0.0));
+    }
+}

@@ -1,9 +1,12 @@
 //! `echelon bound`: Theorem 2 both ways — the ultimate bound on ‖z‖ for a fix
-//! every N samples, or the largest N (and fix period) for a bound you can accept.
+//! every N samples, or the largest N (and fix period) for a bound you can accept;
+//! for the paper's dynamic law or (`--law kinematic`) the kinematic law a
+//! velocity base runs, whose bound a fleet robot taking fixes from ROS 2
+//! computes for its `fixes.tolerance` (the same number for the same inputs).
 
 use anyhow::{Result, bail};
 
-use echelon::odometry::bound::Theorem2;
+use echelon::odometry::bound::{BoundReport, KinematicTheorem2, Theorem2};
 
 use super::out::outln;
 use super::{non_negative, positive};
@@ -21,9 +24,13 @@ pub(crate) struct BoundArgs {
     /// ζ: the largest odometry error per axis per sample, m.
     #[arg(long, value_name = "M", value_parser = positive)]
     zeta: f64,
-    /// ω_M: the largest angular speed of the robot, rad/s.
+    /// ω_M: the largest angular speed of the robot, rad/s (the dynamic law).
     #[arg(long, value_name = "RAD_S", value_parser = non_negative)]
-    omega_max: f64,
+    omega_max: Option<f64>,
+    /// The law: `dynamic` (the paper's eq. 13, Theorem 2 as written) or
+    /// `kinematic` (a velocity base: ‖e‖ ≤ √2 N ζ / γ, ‖z‖ ≤ √2 K_e N ζ).
+    #[arg(long, value_enum, default_value_t = Law::Dynamic)]
+    law: Law,
     /// γ ∈ (0, 1) of the proof; the bound is smallest as γ → 1.
     #[arg(long, value_name = "G", default_value_t = 0.99)]
     gamma: f64,
@@ -44,9 +51,72 @@ pub(crate) struct BoundArgs {
     json: bool,
 }
 
+/// Which law's Theorem 2.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum Law {
+    /// The paper's dynamic law (eq. 13).
+    Dynamic,
+    /// The kinematic law of a velocity base.
+    Kinematic,
+}
+
+/// The kinematic law's Theorem 2: `N` for `--steps` or `--max-e`, with its
+/// bounds.
+fn kinematic(a: &BoundArgs) -> Result<()> {
+    let t = KinematicTheorem2::new(a.ke, a.zeta, a.gamma)?;
+    let steps = match (a.steps, a.max_z, a.max_e) {
+        (Some(0), ..) => bail!("--steps 0: N counts the samples between fixes and must be ≥ 1"),
+        (Some(n), ..) => n,
+        (None, Some(_), _) => {
+            bail!("--law kinematic takes --max-e (its bound is on ‖e‖), not --max-z")
+        }
+        (None, None, Some(e)) => t.max_steps(e)?,
+        (None, None, None) => bail!("give --steps or --max-e"),
+    };
+    let report = BoundReport {
+        z_bound: t.z_bound(steps),
+        steps,
+        fix_period_s: a.ts.map(|ts| ts * steps as f64),
+    };
+    let e_bound = t.e_bound(steps);
+    if a.json {
+        let mut v = serde_json::to_value(report)?;
+        v["e_bound"] = serde_json::json!(e_bound);
+        outln!("{v}")?;
+        return Ok(());
+    }
+    outln!("Theorem 2, kinematic law: ‖e‖ ≤ √2 N ζ / γ, ‖z‖ ≤ √2 K_e N ζ")?;
+    outln!("  K_e = {}, ζ = {} m, γ = {}", a.ke, a.zeta, a.gamma)?;
+    match a.max_e {
+        Some(e) if a.steps.is_none() => {
+            if steps == 0 {
+                outln!(
+                    "  no fix interval keeps ‖e‖ ≤ {e} m: one sample of dead reckoning already exceeds it"
+                )?;
+                return Ok(());
+            }
+            outln!("  largest N keeping ‖e‖ ≤ {e} m: N = {steps} samples")?;
+        }
+        _ => outln!("  N = {steps} samples between fixes")?,
+    }
+    outln!("  ultimate ‖e‖ ≤ {e_bound:.6} m")?;
+    outln!("  ‖z‖ ≤ {:.6} m/s at every instant", report.z_bound)?;
+    match (report.fix_period_s, a.ts) {
+        (Some(p), Some(ts)) => outln!("  a fix at least every N·T_s = {p} s (T_s = {ts} s)")?,
+        _ => outln!("  (give --ts to turn N into a fix period)")?,
+    }
+    Ok(())
+}
+
 /// Runs `echelon bound`.
 pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
-    let t = Theorem2::new(a.ke, a.kz, a.zeta, a.omega_max, a.gamma)?;
+    if a.law == Law::Kinematic {
+        return kinematic(a);
+    }
+    let Some(omega_max) = a.omega_max else {
+        bail!("the dynamic law's bound needs --omega-max (the largest angular speed, rad/s)");
+    };
+    let t = Theorem2::new(a.ke, a.kz, a.zeta, omega_max, a.gamma)?;
     let report = match (a.steps, a.max_z, a.max_e) {
         (Some(0), ..) => bail!("--steps 0: N counts the samples between fixes and must be ≥ 1"),
         (Some(n), ..) => t.forward(n, a.ts),
@@ -68,7 +138,7 @@ pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
         a.ke,
         a.kz,
         a.zeta,
-        a.omega_max,
+        omega_max,
         a.gamma
     )?;
     if a.steps.is_none() {

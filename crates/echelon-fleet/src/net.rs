@@ -42,6 +42,30 @@ pub struct RosAcl {
     pub cmd_vel: String,
     /// Key expression of its `odom`, any type.
     pub odom: String,
+    /// Key expression of its simulated base's ground truth, any type.
+    pub truth: String,
+    /// Key expression of its fixes, any type (published by its simulated
+    /// base's motion capture), when it takes fixes from ROS 2.
+    pub fixes: Option<String>,
+}
+
+impl RosAcl {
+    /// What its simulated base publishes: odometry, ground truth, fixes.
+    fn base_publishes(&self) -> impl Iterator<Item = String> + '_ {
+        [self.odom.clone(), self.truth.clone()]
+            .into_iter()
+            .chain(self.fixes.clone())
+    }
+
+    /// What its robot reads: odometry and fixes.
+    fn robot_reads(&self) -> impl Iterator<Item = String> + '_ {
+        std::iter::once(self.odom.clone()).chain(self.fixes.clone())
+    }
+
+    /// Every key of the link.
+    fn all(&self) -> impl Iterator<Item = String> + '_ {
+        std::iter::once(self.cmd_vel.clone()).chain(self.base_publishes())
+    }
 }
 
 /// The access-control keys of each agent's ROS 2 link.
@@ -52,6 +76,15 @@ pub fn ros_acl(links: &[echelon::scenario::Ros2Link]) -> Vec<RosAcl> {
         .map(|l| RosAcl {
             cmd_vel: topic_key_any_type(l.key_scheme, l.domain_id, &l.cmd_vel),
             odom: topic_key_any_type(l.key_scheme, l.domain_id, &l.odom),
+            truth: topic_key_any_type(
+                l.key_scheme,
+                l.domain_id,
+                &crate::ros2::base::ground_truth_topic(l),
+            ),
+            fixes: l
+                .fixes
+                .as_ref()
+                .map(|f| topic_key_any_type(l.key_scheme, l.domain_id, &f.topic)),
         })
         .collect()
 }
@@ -130,10 +163,13 @@ pub fn publishes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
             .chain(ros_of(k).map(|r| r.cmd_vel.clone()))
             .collect(),
         Member::Collector => Vec::new(),
-        Member::Base(k) => ros_of(k).map(|r| r.odom.clone()).into_iter().collect(),
+        Member::Base(k) => ros_of(k)
+            .into_iter()
+            .flat_map(RosAcl::base_publishes)
+            .collect(),
         Member::Excite(k) => ros_of(k).map(|r| r.cmd_vel.clone()).into_iter().collect(),
         Member::Router => std::iter::once(every_fleet())
-            .chain(ros.iter().flat_map(|r| [r.cmd_vel.clone(), r.odom.clone()]))
+            .chain(ros.iter().flat_map(RosAcl::all))
             .collect(),
     }
 }
@@ -148,12 +184,12 @@ pub fn subscribes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
         Member::Leader => Vec::new(),
         Member::Robot(k) => [keys.reference(), keys.states()]
             .into_iter()
-            .chain(ros_of(k).map(|r| r.odom.clone()))
+            .chain(ros_of(k).into_iter().flat_map(RosAcl::robot_reads))
             .collect(),
         Member::Base(k) => ros_of(k).map(|r| r.cmd_vel.clone()).into_iter().collect(),
         Member::Excite(k) => ros_of(k).map(|r| r.odom.clone()).into_iter().collect(),
         Member::Collector | Member::Router => std::iter::once(keys.everything())
-            .chain(ros.iter().flat_map(|r| [r.cmd_vel.clone(), r.odom.clone()]))
+            .chain(ros.iter().flat_map(RosAcl::all))
             .collect(),
     }
 }
@@ -458,6 +494,8 @@ mod tests {
         let ros = vec![RosAcl {
             cmd_vel: "0/robot1/cmd_vel/*/*".into(),
             odom: "0/robot1/odom/*/*".into(),
+            truth: "0/robot1/ground_truth/*/*".into(),
+            fixes: Some("0/mocap/robot1/pose/*/*".into()),
         }];
         set(&mut c, "access_control", access_control(3, &ros)).unwrap_or_else(|e| panic!("{e}"));
         let acl = c.get_json("access_control").unwrap_or_default();
@@ -516,6 +554,8 @@ mod tests {
             .map(|k| RosAcl {
                 cmd_vel: format!("0/robot{k}/cmd_vel/*/*"),
                 odom: format!("0/robot{k}/odom/*/*"),
+                truth: format!("0/robot{k}/ground_truth/*/*"),
+                fixes: (k % 2 == 1).then(|| format!("0/robot{k}/pose/*/*")),
             })
             .collect()
     }
@@ -551,7 +591,7 @@ mod tests {
                 universe.extend(
                     ros_links(robots + 1)
                         .iter()
-                        .flat_map(|r| [concrete(&r.cmd_vel), concrete(&r.odom)]),
+                        .flat_map(|r| r.all().map(|k| concrete(&k)).collect::<Vec<_>>()),
                 );
                 for id in identities(robots) {
                     let cn = common_name(&id);

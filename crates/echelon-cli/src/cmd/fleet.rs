@@ -396,11 +396,12 @@ fn agent_process(
     Ok((scenario, net, StopFlag::on_signals()?))
 }
 
-/// Every agent's `cmd_vel` and `odom` as `[fleet.ros2]` places them.
+/// Every agent's `cmd_vel` and `odom` as `[fleet.ros2]` places them, the
+/// ground truth a simulated base publishes and the fixes it takes.
 fn ros_topics(s: &Scenario) -> Result<Vec<RosTopic>> {
     let mut topics = Vec::new();
     for link in s.fleet()?.ros2 {
-        topics.extend(RosTopic::of_link(&link)?);
+        topics.extend(RosTopic::all_of_link(&link)?);
     }
     Ok(topics)
 }

@@ -44,6 +44,17 @@ use echelon_ros2::msgs::{
     ODOMETRY, Odometry, PoseStamped, PoseWithCovarianceStamped, RosMessage, Time,
 };
 
+/// The world frame's id (REP 105's `map`): the frame of a simulated base's
+/// ground truth.
+pub const WORLD_FRAME: &str = "map";
+
+/// A simulated base's ground-truth topic in `namespace`.
+pub fn ground_truth_topic(link: &Ros2Link) -> String {
+    // The namespace is canonical and `ground_truth` a valid relative name.
+    echelon_ros2::names::fully_qualified_topic(&link.namespace, "ground_truth")
+        .unwrap_or_else(|_| format!("{}/ground_truth", link.namespace.trim_end_matches('/')))
+}
+
 /// What a simulated base counted (its report and its stats).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -85,6 +96,7 @@ pub struct SimBase {
     base: SimulatedVelocityBase,
     gid: Gid,
     seq: i64,
+    truth_seq: i64,
     /// Local time it was brought to.
     t: f64,
     last_cmd: Option<f64>,
@@ -150,6 +162,7 @@ impl SimBase {
             base,
             gid,
             seq: 0,
+            truth_seq: 0,
             t: 0.0,
             last_cmd: None,
             timed_out: false,
@@ -329,6 +342,34 @@ impl SimBase {
         decode_cmd_vel(&self.link, key, payload)
     }
 
+    /// Its true state as `nav_msgs/Odometry` in the world frame
+    /// ([`WORLD_FRAME`], child its base frame), stamped `stamp_ns`, as
+    /// the publisher `gid`: what a simulator's ground-truth plugin
+    /// publishes (Gazebo's p3d), for logs and tests.
+    pub fn ground_truth(&mut self, stamp_ns: i64, gid: Gid) -> OdomOut {
+        let s = self.base.true_state();
+        let odom = Odometry::planar(
+            s.x,
+            s.y,
+            s.theta,
+            s.v,
+            s.omega,
+            Time::from_nanos(stamp_ns),
+            WORLD_FRAME,
+            &self.link.base_frame,
+        );
+        self.truth_seq += 1;
+        OdomOut {
+            payload: odom.to_cdr(),
+            attachment: Attachment {
+                sequence_number: self.truth_seq,
+                source_timestamp_ns: stamp_ns,
+                gid,
+            }
+            .encode(),
+        }
+    }
+
     /// Local time of the next odometry or motion-capture event.
     pub fn next_wake(&self) -> f64 {
         let mocap = self.mocap.as_ref().map_or(f64::INFINITY, |m| {
@@ -491,15 +532,19 @@ pub struct BaseTask {
     odom_key: String,
     /// The simulated motion capture's key, when it has one.
     fix_key: Option<String>,
+    /// Its ground truth's key and publisher gid.
+    truth: (String, Gid),
     alive: String,
     duration: Option<f64>,
     /// The wall clock (UNIX ns), for the stamps.
     wall: fn() -> u64,
 }
 
-/// Its outputs: odometry, then the simulated motion capture's fixes.
+/// Its outputs: odometry, ground truth, then the simulated motion
+/// capture's fixes.
 const ODOM: usize = 0;
-const FIXES: usize = 1;
+const TRUTH: usize = 1;
+const FIXES: usize = 2;
 
 impl Task for BaseTask {
     type Report = BaseReport;
@@ -509,7 +554,7 @@ impl Task for BaseTask {
     }
 
     fn outputs(&self) -> Vec<String> {
-        let mut keys = vec![self.odom_key.clone()];
+        let mut keys = vec![self.odom_key.clone(), self.truth.0.clone()];
         keys.extend(self.fix_key.clone());
         keys
     }
@@ -536,6 +581,9 @@ impl Task for BaseTask {
         if let Some(odom) = self.base.tick(now, wall) {
             out.publish_attached(ODOM, &odom.payload, &odom.attachment)
                 .map_err(|e| FleetError::Zenoh(format!("publishing odometry: {e}")))?;
+            let truth = self.base.ground_truth(wall, self.truth.1);
+            out.publish_attached(TRUTH, &truth.payload, &truth.attachment)
+                .map_err(|e| FleetError::Zenoh(format!("publishing ground truth: {e}")))?;
         }
         while let Some(fix) = self.base.take_fix(now, wall) {
             out.publish_attached(FIXES, &fix.payload, &fix.attachment)
@@ -598,7 +646,11 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
     let alive = keys.alive(&Member::Base(opts.agent).liveliness());
     runtime::run_on(
         |session| {
-            let mut publishes = vec![(link.odom.as_str(), &ODOMETRY)];
+            let truth_topic = ground_truth_topic(&link);
+            let mut publishes = vec![
+                (link.odom.as_str(), &ODOMETRY),
+                (truth_topic.as_str(), &ODOMETRY),
+            ];
             if let Some((source, ..)) = &mocap {
                 publishes.push((source.topic.as_str(), fix_type(source.message)));
             }
@@ -619,7 +671,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                     source.clone(),
                     spec,
                     *period,
-                    gids[1],
+                    gids[2],
                     stream,
                     opts.time_scale,
                 );
@@ -638,6 +690,10 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                 agent: opts.agent,
                 cmd_key: topic_key_any_type(link.key_scheme, link.domain_id, &link.cmd_vel),
                 odom_key: topic_key(link.key_scheme, link.domain_id, &link.odom, &ODOMETRY),
+                truth: (
+                    topic_key(link.key_scheme, link.domain_id, &truth_topic, &ODOMETRY),
+                    gids[1],
+                ),
                 fix_key: mocap.as_ref().map(|(source, ..)| {
                     topic_key(
                         link.key_scheme,

@@ -49,7 +49,7 @@ pub enum RosTopicError {
     Name(#[from] NameError),
     /// A type whose message definition echelon does not carry.
     #[error(
-        "ROS topic `{topic}`: type `{ty}` cannot be recorded (echelon records geometry_msgs/msg/Twist, geometry_msgs/msg/TwistStamped and nav_msgs/msg/Odometry)"
+        "ROS topic `{topic}`: type `{ty}` cannot be recorded (echelon records geometry_msgs/msg/Twist, TwistStamped, PoseStamped, PoseWithCovarianceStamped and nav_msgs/msg/Odometry)"
     )]
     UnsupportedType {
         /// The topic.
@@ -151,6 +151,21 @@ impl RosTopic {
             topic(&link.cmd_vel, super::drive::cmd_vel_type(link))?,
             topic(&link.odom, ODOMETRY)?,
         ])
+    }
+
+    /// [`RosTopic::of_link`]'s, the ground truth a simulated base publishes
+    /// ([`super::base::ground_truth_topic`]) and the agent's fixes, if it
+    /// takes any from ROS 2: what `fleet collect --ros2` records.
+    pub fn all_of_link(link: &echelon::scenario::Ros2Link) -> Result<Vec<RosTopic>, RosTopicError> {
+        let topic = |name: &str, ty| {
+            RosTopic::new(link.key_scheme, link.domain_id, &link.namespace, name, ty)
+        };
+        let mut topics = Vec::from(RosTopic::of_link(link)?);
+        topics.push(topic(&super::base::ground_truth_topic(link), ODOMETRY)?);
+        if let Some(f) = &link.fixes {
+            topics.push(topic(&f.topic, *super::fixes::fix_type(f.message))?);
+        }
+        Ok(topics)
     }
 
     /// The same topic, its publishers offering `qos` (recorded as the

@@ -308,3 +308,27 @@ fn only_whole_tokens_of_inline_code_count() {
         doc.replace("`{ x, theta_deg }`", "`{ REMOVED, theta_deg }`")
     );
 }
+
+/// README's table of built-ins lists every built-in scenario
+/// (`scenarios/*.toml`), once, and nothing else.
+#[test]
+fn the_readme_lists_every_built_in() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md");
+    let readme = std::fs::read_to_string(&path).unwrap();
+    let start = readme
+        .find("| built-in | paper | what it shows |")
+        .expect("README's table of built-ins");
+    let mut listed: Vec<&str> = readme[start..]
+        .lines()
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .filter_map(|l| l.split('`').nth(1))
+        .collect();
+    listed.sort_unstable();
+    let mut builtins: Vec<&str> = echelon::scenario::builtin()
+        .iter()
+        .map(|(n, _)| *n)
+        .collect();
+    builtins.sort_unstable();
+    assert_eq!(listed, builtins);
+}

@@ -6,6 +6,7 @@
 
 /// How topics map onto Zenoh keys.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "schemars", derive(schemars::JsonSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum KeyScheme {
     /// rmw_zenoh's `<domain>/<topic>/<type>/<hash>` (Jazzy and later: the

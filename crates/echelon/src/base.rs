@@ -58,7 +58,9 @@ pub struct VelocityCommand {
 }
 
 /// How the acceleration limits act on the two axes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum AccelLimit {
     /// `(v̇, ω̇)` scaled together by the one factor that brings both within

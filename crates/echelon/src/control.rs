@@ -76,7 +76,9 @@ pub enum Variant {
 
 /// A scenario's `law`: one of the two forms of eq. 13 for a torque-driven
 /// robot, or the kinematic law ([`crate::kinematic`]) for a velocity base.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum Law {
     /// [`Variant::Paper`].

@@ -88,7 +88,17 @@ pub fn dead_reckon(pose: &Pose, d: WheelDisplacement, half_wheelbase: f64) -> Po
 
 /// How the paper's additive error `ζ` enters (`zeta_model = "wheels"` or
 /// `"worst-case"` in a scenario).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Deserialize,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum ZetaModel {
     /// Assumption 1, eq. 23: each wheel's true displacement exceeds the measured
@@ -238,7 +248,17 @@ pub enum FixSchedule {
 }
 
 /// How a fix corrects the estimate (`fusion = "reset"` or `"ekf"` in a scenario).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Deserialize,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum Fusion {
     /// Replace the estimate by the fix (the paper's "recalibration").

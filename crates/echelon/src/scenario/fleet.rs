@@ -38,7 +38,17 @@ pub const DEFAULT_DECEL: f64 = 0.1;
 
 /// What a robot does when its leader's stream is lost (`policy = "stop"` or
 /// `"extrapolate"` in a scenario).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Deserialize,
+    serde::Serialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum LinkPolicy {
     /// Converge to the last received position (the paper's experiment).

@@ -15,7 +15,7 @@ pub use crate::odometry::{Fusion, ZetaModel};
 pub use echelon_ros2::KeyScheme;
 
 /// A whole scenario file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ScenarioFile {
     /// Short name (defaults to the file name).
@@ -59,7 +59,7 @@ pub struct ScenarioFile {
 
 /// `[safety]` or an agent's `safety = { … }`: keep each robot's point `L`
 /// ahead at least `radius` from the others' and from obstacles' edges.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SafetySection {
     /// `false` turns the filter off (for one agent, under `[safety]`).
@@ -82,7 +82,7 @@ pub struct SafetySection {
 }
 
 /// A disc obstacle `{ x, y, r }`, m.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ObstacleSpec {
     /// Centre, m.
@@ -95,7 +95,7 @@ pub struct ObstacleSpec {
 
 /// `[odometry]`: the robot dead-reckons from its wheel encoders (paper section 6)
 /// and the controller acts on that estimate. All fields optional.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct OdometrySection {
     /// `false` turns odometry off (for one agent, under a global `[odometry]`).
@@ -132,7 +132,7 @@ pub struct OdometrySection {
 
 /// `[fixes]`: absolute position fixes. All fields optional, but exactly one of
 /// `every_steps` and `period` is needed.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FixesSection {
     /// `false` turns fixes off (for one agent, under a global `[fixes]`).
@@ -201,7 +201,7 @@ pub enum FixMessage {
 
 /// `[fleet]`: how the scenario runs as separate processes (`echelon fleet`).
 /// Every field is optional; the simulator ignores this section.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FleetSection {
     /// Fleet name, the second chunk of every key expression (default: the
@@ -238,7 +238,7 @@ impl FleetSection {
 
 /// `[fleet.ros2]` or an agent's `ros2 = { … }`: where a ROS 2 robot's
 /// `cmd_vel` and `odom` are (docs/ros2.md).
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Ros2Section {
     /// The robot's namespace; `{k}` is replaced by the agent number
@@ -286,7 +286,9 @@ pub struct Ros2Section {
 }
 
 /// The `cmd_vel` message type.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum CmdVelType {
     /// `geometry_msgs/msg/TwistStamped` (what `diff_drive_controller` takes
@@ -305,7 +307,9 @@ pub enum CmdVelType {
 /// it with `get_node()->now()`). A wall-clock stamp therefore stops a robot
 /// whose clock is not synchronised with this machine's, or that runs on
 /// `use_sim_time`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum CmdVelStamp {
     /// A zero stamp: the controller takes the command as received now.
@@ -318,7 +322,7 @@ pub enum CmdVelStamp {
 }
 
 /// `[fleet.link_loss]` or an agent's `link_loss = { … }`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LinkLossSection {
     /// `stop` or `extrapolate` (default).
@@ -334,7 +338,7 @@ pub struct LinkLossSection {
 }
 
 /// `[sim]`: how long and how finely to integrate.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SimSection {
     /// Simulated time, s.
@@ -353,7 +357,7 @@ pub struct SimSection {
 
 /// `[sim] bounds = { speed, turn_rate, distance }`: the divergence guard
 /// ([`crate::guard::Bounds`]); each field optional.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BoundsSpec {
     /// Largest `|v|`, m/s.
@@ -368,7 +372,7 @@ pub struct BoundsSpec {
 }
 
 /// `[log]`: what goes to `trajectory.csv`.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LogSection {
     /// Logging period, s (0: every step; default 0.01).
@@ -385,7 +389,7 @@ impl LogSection {
 /// `[control]` (defaults for all agents) or an agent's `control` (overrides).
 /// Every field is optional; unset fields fall back to `[control]`, then to the
 /// paper's values.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ControlSection {
     /// `paper` (default for torque-driven robots), `complete`, or `kinematic`
@@ -416,7 +420,7 @@ impl ControlSection {
 }
 
 /// How a `[robots.NAME]` is driven.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum DriveName {
     /// Wheel torques: the paper's plant (eq. 3).
@@ -429,7 +433,7 @@ pub enum DriveName {
 /// A torque-driven robot (the default) takes the fields from `mass` to
 /// `torque_limit`; a velocity base (`drive = "velocity"`) takes `tau_v` to
 /// `accel`; both take the wheel geometry.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RobotSection {
     /// `torque` (default; `velocity` when `preset` names a velocity base).
@@ -485,7 +489,7 @@ pub struct RobotSection {
 
 /// A pose, optionally with initial speeds. Exactly one of `theta` (rad) and
 /// `theta_deg` (degrees).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PoseSpec {
     /// x, m.
@@ -507,7 +511,7 @@ pub struct PoseSpec {
 }
 
 /// `[reference.KIND]`: the virtual leader's trajectory.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum ReferenceSection {
     /// Eq. 18: constant speed and turn rate from a start pose.
@@ -556,7 +560,7 @@ pub enum ReferenceSection {
 }
 
 /// `[[agents]]`: one robot of the formation.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AgentSection {
     /// Display name (default `agent K`).
@@ -568,6 +572,7 @@ pub struct AgentSection {
     /// Initial pose and speeds.
     pub start: PoseSpec,
     /// `"reference"` or the number of the agent it follows.
+    #[schemars(with = "serde_json::Value")]
     pub leader: LeaderSpec,
     /// `formation` (default: hold the leader at `offset`) or `tracking`
     /// (pure tracking, eqs. 14–16: no offset).
@@ -605,7 +610,7 @@ pub struct AgentSection {
 }
 
 /// What an agent's controller does.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum ModeName {
     /// Leader-follower at an offset (eq. 13).
@@ -616,7 +621,7 @@ pub enum ModeName {
 
 /// `(L_Xoff, L_Yoff)`: the leader is `L_Xoff + L` ahead and `L_Yoff + L_Ycomp`
 /// to the left of the follower, in the follower's frame.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct OffsetSpec {
     /// `L_Xoff`, m.

@@ -256,12 +256,9 @@ pub fn access_control(robots: u32, ros2: &[RosAcl]) -> serde_json::Value {
     let mut subjects = vec![json!({"id": "members", "cert_common_names": everyone})];
     let mut policies = vec![json!({"rules": ["declare", "send"], "subjects": ["members"]})];
     if !ros2.is_empty() {
-        let ros_keys: Vec<&str> = ros2
-            .iter()
-            .flat_map(|r| [r.cmd_vel.as_str(), r.odom.as_str()])
-            .collect();
+        let ros_keys: Vec<String> = ros2.iter().flat_map(RosAcl::all).collect();
         let mut declared = vec!["@ros2_lv/**"];
-        declared.extend(&ros_keys);
+        declared.extend(ros_keys.iter().map(String::as_str));
         rules.push(json!({
             "id": "ros-declare", "permission": "allow", "flows": ["egress", "ingress"],
             "messages": ["declare_subscriber", "liveliness_token", "liveliness_query",

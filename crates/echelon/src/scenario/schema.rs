@@ -187,7 +187,9 @@ pub struct FixesSection {
 }
 
 /// The message type of absolute fixes taken from ROS 2.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum FixMessage {
     /// `geometry_msgs/msg/PoseStamped` (mocap4ros2, vrpn_mocap): the

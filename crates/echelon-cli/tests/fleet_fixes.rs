@@ -1,0 +1,259 @@
+//! Real robots in one world (docs/ros2.md, "Fixes"), as processes:
+//! `fleet up --ros2` with bases whose odometry drifts (2 % on one wheel,
+//! a longer wheelbase, slip) and a simulated motion capture at 10 Hz with
+//! 5 mm noise and 30 ms latency. Every robot's *true* world position (the
+//! bases' ground truth in `fleet.mcap`) stays within 2 cm of its slot once
+//! settled; without the fixes it does not. Theorem 2's fix interval is the
+//! one `echelon bound --law kinematic` gives for the same inputs, and a
+//! robot whose fixes come slower than it requires says so.
+
+#![allow(clippy::unwrap_used)]
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::Command;
+
+use serde_json::Value;
+
+use echelon_ros2::msgs::{Odometry, RosMessage};
+
+mod common;
+
+use common::EXE;
+
+const SCENARIO: &str = "experiment-circle-velocity";
+
+/// Odometry that drifts as a real robot's does: one wheel 2 % larger
+/// (`E_d`), the wheelbase 1 % longer than nominal (`E_b`), random slip.
+const DRIFT: &str = "\n[odometry]\nperiod = 0.02\nwheel_diameter_ratio = 1.02\nwheelbase_ratio = 1.01\nslip = 1e-5\n";
+
+/// Fixes from a motion capture: 10 Hz, 5 mm, 0.01 rad, 30 ms late, fused
+/// by the EKF; agent 1 asks a tolerance its fixes meet, agent 2 one they
+/// do not.
+const MOCAP: &str = "\n[fixes]\nsource = \"pose\"\nperiod = 0.1\nposition_noise = 0.005\nheading_noise = 0.01\nlatency = 0.03\nfusion = \"ekf\"\n";
+
+/// The builtin with `extra` appended, and per-agent `fixes` tables.
+fn scenario(dir: &Path, name: &str, extra: &str, agents: [&str; 2]) -> String {
+    let src = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenarios/{SCENARIO}.toml")),
+    )
+    .unwrap();
+    let mut parts = src.split("[[agents]]\n");
+    let mut out = parts.next().unwrap().to_owned();
+    for (part, own) in parts.zip(agents) {
+        out.push_str("[[agents]]\n");
+        out.push_str(own);
+        out.push_str(part);
+    }
+    out.push_str(extra);
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, out).unwrap();
+    path.to_string_lossy().into_owned()
+}
+
+/// `fleet up --ros2` of `scenario` for `duration` fleet seconds at ×5.
+fn fleet_up(scenario: &str, duration: &str, out: &Path) -> Value {
+    let o = Command::new(EXE)
+        .args(["fleet", "up", scenario, "--ros2", "--time-scale", "5"])
+        .args(["--duration", duration, "--quiet", "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_str(&std::fs::read_to_string(out.join("fleet-summary.json")).unwrap()).unwrap()
+}
+
+/// A robot's published state: its fleet time, its estimate `(x, y, θ)`,
+/// `e` and the leader point `p_d` its law used.
+#[derive(Debug, Clone, Copy)]
+struct Estimate {
+    wall: u64,
+    t: f64,
+    pose: [f64; 3],
+    e: [f64; 2],
+    pd: [f64; 2],
+}
+
+/// From `fleet.mcap`: per agent, its states (by receipt time) and its
+/// base's ground truth `(wall stamp ns, x, y, θ)`.
+type Logged = BTreeMap<u32, (Vec<Estimate>, Vec<(u64, [f64; 3])>)>;
+
+fn read_log(dir: &Path) -> Logged {
+    let bytes = std::fs::read(dir.join("fleet.mcap")).unwrap();
+    let mut out: Logged = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let topic = m.channel.topic.as_str();
+        if let Some(k) = topic
+            .strip_prefix("/agent/")
+            .and_then(|r| r.strip_suffix("/state"))
+        {
+            let v: Value = serde_json::from_slice(&m.data).unwrap();
+            let Some(leader) = v.get("leader") else {
+                continue;
+            };
+            let g = |k: &str| v[k].as_f64().unwrap();
+            out.entry(k.parse().unwrap()).or_default().0.push(Estimate {
+                wall: m.log_time,
+                t: g("t"),
+                pose: [g("x"), g("y"), g("theta")],
+                e: [g("ex"), g("ey")],
+                pd: [leader["x"].as_f64().unwrap(), leader["y"].as_f64().unwrap()],
+            });
+        } else if let Some(k) = topic
+            .strip_prefix("/robot")
+            .and_then(|r| r.strip_suffix("/ground_truth"))
+        {
+            let o = Odometry::from_cdr_finite(&m.data).unwrap();
+            assert_eq!(o.header.frame_id, "map");
+            let p = o.pose.pose.position;
+            let stamp = o.header.stamp.to_nanos() as u64;
+            out.entry(k.parse().unwrap())
+                .or_default()
+                .1
+                .push((stamp, [p.x, p.y, o.yaw()]));
+        }
+    }
+    out
+}
+
+/// `e = R(θ)ᵀ(p − p_d) + L` (eq. 7) at the true pose, with the `L` the
+/// robot used (from its estimate and its `e`).
+fn true_error(est: &Estimate, truth: [f64; 3]) -> f64 {
+    let body = |pose: [f64; 3]| {
+        let (s, c) = pose[2].sin_cos();
+        let (dx, dy) = (pose[0] - est.pd[0], pose[1] - est.pd[1]);
+        [c * dx + s * dy, -s * dx + c * dy]
+    };
+    let d = body(est.pose);
+    let l = [est.e[0] - d[0], est.e[1] - d[1]];
+    let t = body(truth);
+    (t[0] + l[0]).hypot(t[1] + l[1])
+}
+
+/// Per agent, the largest true ‖e‖ after fleet time `settled`: each ground
+/// truth sample against the state the robot published nearest in wall time.
+fn worst_true_error(log: &Logged, settled: f64) -> BTreeMap<u32, (f64, usize)> {
+    let mut worst = BTreeMap::new();
+    for (&k, (states, truth)) in log {
+        let mut max = 0.0f64;
+        let mut n = 0;
+        for &(stamp, pose) in truth {
+            let i = states.partition_point(|s| s.wall < stamp);
+            let near = [i.checked_sub(1), Some(i)]
+                .into_iter()
+                .flatten()
+                .filter_map(|j| states.get(j))
+                .min_by_key(|s| s.wall.abs_diff(stamp));
+            let Some(est) = near else { continue };
+            // Within 2 ms of wall time (10 ms of fleet time at ×5).
+            if est.t < settled || est.wall.abs_diff(stamp) > 2_000_000 {
+                continue;
+            }
+            max = max.max(true_error(est, pose));
+            n += 1;
+        }
+        worst.insert(k, (max, n));
+    }
+    worst
+}
+
+fn fixes_of(robot: &Value) -> &Value {
+    robot
+        .get("fixes")
+        .unwrap_or_else(|| panic!("no fixes: {robot}"))
+}
+
+#[test]
+fn drifting_robots_with_a_motion_capture_keep_their_slots_in_the_world() {
+    let _fleet = common::one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let with = scenario(
+        dir.path(),
+        "mocap",
+        &format!("{DRIFT}{MOCAP}"),
+        [
+            "fixes = { tolerance = 0.05 }\n",
+            "fixes = { tolerance = 0.001 }\n",
+        ],
+    );
+    let up = fleet_up(&with, "60", &dir.path().join("with"));
+    let log = read_log(&dir.path().join("with"));
+    assert_eq!(log.len(), 2, "{:?}", log.keys());
+    for (k, (worst, n)) in worst_true_error(&log, 30.0) {
+        assert!(n > 500, "agent {k}: {n} ground-truth samples compared");
+        assert!(
+            worst < 0.02,
+            "agent {k}: true ‖e‖ up to {worst} m with fixes"
+        );
+    }
+    let robots = up["robots"].as_array().unwrap();
+    for r in robots {
+        let f = fixes_of(r);
+        let c = &f["counters"];
+        // 10 Hz for 60 s, all applied (the first taken as it is).
+        assert!(c["applied"].as_u64().unwrap() > 500, "{f}");
+        for refused in ["wrong_type", "malformed", "non_finite", "wrong_frame"] {
+            assert_eq!(c[refused], 0, "{refused}: {f}");
+        }
+        assert!(f["interval_max"].as_f64().unwrap() < 0.3, "{f}");
+        // Theorem 2's interval is `echelon bound`'s for the same inputs.
+        let req = &f["required"];
+        let num = |k: &str| req[k].as_f64().unwrap().to_string();
+        let bound = Command::new(EXE)
+            .args(["bound", "--law", "kinematic", "--json"])
+            .args([
+                "--ke",
+                &num("ke"),
+                "--zeta",
+                &num("zeta"),
+                "--gamma",
+                &num("gamma"),
+            ])
+            .args(["--max-e", &num("tolerance"), "--ts", &num("sample_period")])
+            .output()
+            .unwrap();
+        assert!(
+            bound.status.success(),
+            "{}",
+            String::from_utf8_lossy(&bound.stderr)
+        );
+        let b: Value = serde_json::from_slice(&bound.stdout).unwrap();
+        assert_eq!(b["steps"], req["steps"], "{b} vs {req}");
+        assert!(
+            (b["fix_period_s"].as_f64().unwrap() - req["interval"].as_f64().unwrap()).abs() < 1e-12
+        );
+    }
+    // Agent 1's fixes come often enough; agent 2's do not, and it said so once.
+    let slow: Vec<bool> = robots
+        .iter()
+        .map(|r| fixes_of(r)["too_slow"].as_bool().unwrap())
+        .collect();
+    assert_eq!(slow, [false, true], "{up}");
+    let logs: String = std::fs::read_dir(dir.path().join("with/logs"))
+        .unwrap()
+        .map(|e| std::fs::read_to_string(e.unwrap().path()).unwrap_or_default())
+        .collect();
+    assert_eq!(logs.matches("Theorem 2 requires").count(), 1, "{logs}");
+    assert!(
+        logs.contains("agent 2: fixes from /robot2/pose came"),
+        "{logs}"
+    );
+
+    // Without fixes the same odometry drifts away from the slots.
+    let without = scenario(dir.path(), "drift", DRIFT, ["", ""]);
+    let up = fleet_up(&without, "60", &dir.path().join("without"));
+    let log = read_log(&dir.path().join("without"));
+    let worst = worst_true_error(&log, 30.0);
+    assert!(
+        worst.values().any(|&(w, _)| w > 0.04),
+        "odometry alone drifted only {worst:?}"
+    );
+    assert!(
+        up["robots"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|r| r.get("fixes").is_none())
+    );
+}

@@ -26,7 +26,7 @@ pub(crate) fn find_preset<T: Copy>(presets: &[(&str, T)], name: &str) -> Option<
 /// (and [`RobotParams::with_torque_limit`]), the presets, or deserialised
 /// (which runs the same checks), so a `RobotParams` in hand is always valid.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "RawRobotParams", into = "RawRobotParams")]
+#[serde(try_from = "RawRobotParams")]
 pub struct RobotParams {
     mass: f64,
     linear_friction: f64,
@@ -37,8 +37,8 @@ pub struct RobotParams {
     torque_limit: Option<f64>,
 }
 
-/// The serialised form of [`RobotParams`]: the same fields, unchecked.
-#[derive(Serialize, Deserialize)]
+/// The deserialised form of [`RobotParams`]: the same fields, unchecked.
+#[derive(Deserialize)]
 struct RawRobotParams {
     mass: f64,
     linear_friction: f64,
@@ -62,20 +62,6 @@ impl TryFrom<RawRobotParams> for RobotParams {
             r.wheel_radius,
         )?
         .with_torque_limit(r.torque_limit)
-    }
-}
-
-impl From<RobotParams> for RawRobotParams {
-    fn from(p: RobotParams) -> Self {
-        RawRobotParams {
-            mass: p.mass,
-            linear_friction: p.linear_friction,
-            inertia: p.inertia,
-            angular_friction: p.angular_friction,
-            half_wheelbase: p.half_wheelbase,
-            wheel_radius: p.wheel_radius,
-            torque_limit: p.torque_limit,
-        }
     }
 }
 

@@ -383,17 +383,24 @@ fn agents_of(s: &Scenario) -> Result<u32> {
     Ok(s.build(&Overrides::default())?.plan.agents().len() as u32)
 }
 
-/// What every agent process (robot, base, excite) sets up first: its
-/// scenario, its session options under `identity`, and the signal flag.
-fn agent_process(
+/// One process of a scenario (leader, robot, base, excite): sets up what
+/// every such process does first (its scenario, its session options as
+/// `member`, and the signal flag), runs `run` with them and prints its report.
+fn scenario_process<R, E>(
     scenario: &str,
     net: &NetArgs,
-    identity: &str,
-) -> Result<(Scenario, NetOptions, StopFlag)> {
+    member: Member,
+    run: impl FnOnce(Scenario, NetOptions, &StopFlag) -> Result<R, E>,
+) -> Result<()>
+where
+    R: serde::Serialize,
+    E: std::error::Error + Send + Sync + 'static,
+{
     let scenario = Scenario::resolve(scenario)?;
     let robots = agents_of(&scenario)?;
-    let net = net.options(identity, Some(robots), Some(&scenario))?;
-    Ok((scenario, net, StopFlag::on_signals()?))
+    let net = net.options(&member.identity(), Some(robots), Some(&scenario))?;
+    let stop = StopFlag::on_signals()?;
+    print_report(&run(scenario, net, &stop)?)
 }
 
 /// Every agent's `cmd_vel` and `odom` as `[fleet.ros2]` places them.
@@ -413,15 +420,12 @@ fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
 /// Runs a fleet subcommand.
 pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
     match cmd {
-        FleetCommand::Leader(a) => {
-            let scenario = Scenario::resolve(&a.scenario)?;
-            let robots = agents_of(&scenario)?;
-            let net = a
-                .net
-                .options(&Member::Leader.identity(), Some(robots), Some(&scenario))?;
-            let stop = StopFlag::on_signals()?;
-            let report = leader::run(
-                LeaderOptions {
+        FleetCommand::Leader(a) => scenario_process(
+            &a.scenario,
+            &a.net,
+            Member::Leader,
+            |scenario, net, stop| {
+                let options = LeaderOptions {
                     scenario,
                     rate: a.rate,
                     time_scale: a.time_scale,
@@ -430,11 +434,10 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     wait_timeout: Duration::from_secs_f64(a.wait_timeout),
                     net,
                     fleet: a.net.fleet.clone(),
-                },
-                &stop,
-            )?;
-            print_report(&report)
-        }
+                };
+                leader::run(options, stop)
+            },
+        ),
         FleetCommand::Robot(a) => {
             if a.ros2 && !a.simulated_base && a.time_scale != 1.0 {
                 bail!(
@@ -444,10 +447,9 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     a.time_scale
                 );
             }
-            let (scenario, net, stop) =
-                agent_process(&a.scenario, &a.net, &Member::Robot(a.agent).identity())?;
-            let report = robot::run(
-                RobotOptions {
+            let member = Member::Robot(a.agent);
+            scenario_process(&a.scenario, &a.net, member, |scenario, net, stop| {
+                let options = RobotOptions {
                     scenario,
                     agent: a.agent,
                     time_scale: a.time_scale,
@@ -456,38 +458,34 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     net,
                     fleet: a.net.fleet.clone(),
                     ros2: a.ros2,
-                },
-                &stop,
-            )?;
-            print_report(&report)
+                };
+                robot::run(options, stop)
+            })
         }
         FleetCommand::Base(a) => {
             if !a.ros2 {
                 bail!("fleet base simulates a ROS 2 base: give --ros2");
             }
-            let (scenario, net, stop) =
-                agent_process(&a.scenario, &a.net, &Member::Base(a.agent).identity())?;
-            let report = base::run(
-                BaseOptions {
+            let member = Member::Base(a.agent);
+            scenario_process(&a.scenario, &a.net, member, |scenario, net, stop| {
+                let options = BaseOptions {
                     scenario,
                     agent: a.agent,
                     time_scale: a.time_scale,
                     duration: a.duration,
                     net,
                     fleet: a.net.fleet.clone(),
-                },
-                &stop,
-            )?;
-            print_report(&report)
+                };
+                base::run(options, stop)
+            })
         }
         FleetCommand::Excite(a) => {
             if !a.ros2 {
                 bail!("fleet excite drives a ROS 2 robot: give --ros2");
             }
-            let (scenario, net, stop) =
-                agent_process(&a.scenario, &a.net, &Member::Robot(a.agent).identity())?;
-            let report = excite::run(
-                ExciteOptions {
+            let member = Member::Robot(a.agent);
+            scenario_process(&a.scenario, &a.net, member, |scenario, net, stop| {
+                let options = ExciteOptions {
                     scenario,
                     agent: a.agent,
                     duration: a.duration,
@@ -496,10 +494,9 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     wait: a.wait,
                     out: a.out,
                     net,
-                },
-                &stop,
-            )?;
-            print_report(&report)
+                };
+                excite::run(options, stop)
+            })
         }
         FleetCommand::Collector(a) => {
             let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;

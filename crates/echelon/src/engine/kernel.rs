@@ -112,46 +112,34 @@ impl Add for Aff {
         }
     }
 }
-impl Add<V> for Aff {
-    type Output = Aff;
-    #[inline(always)]
-    fn add(self, o: V) -> Aff {
-        Aff {
-            a: self.a + o,
-            b: self.b,
+
+/// `Aff ⊕ o` for a value `o` without a `v̇_L` term: `shift` moves `a` alone,
+/// `scale` both parts.
+macro_rules! aff_op {
+    (shift $tr:ident, $f:ident, $o:ty, $op:tt) => {
+        impl $tr<$o> for Aff {
+            type Output = Aff;
+            #[inline(always)]
+            fn $f(self, o: $o) -> Aff {
+                Aff { a: self.a $op o, b: self.b }
+            }
         }
-    }
-}
-impl Sub<V> for Aff {
-    type Output = Aff;
-    #[inline(always)]
-    fn sub(self, o: V) -> Aff {
-        Aff {
-            a: self.a - o,
-            b: self.b,
+    };
+    (scale $tr:ident, $f:ident, $o:ty, $op:tt) => {
+        impl $tr<$o> for Aff {
+            type Output = Aff;
+            #[inline(always)]
+            fn $f(self, o: $o) -> Aff {
+                Aff { a: self.a $op o, b: self.b $op o }
+            }
         }
-    }
+    };
 }
-impl Mul<V> for Aff {
-    type Output = Aff;
-    #[inline(always)]
-    fn mul(self, o: V) -> Aff {
-        Aff {
-            a: self.a * o,
-            b: self.b * o,
-        }
-    }
-}
-impl Mul<f64> for Aff {
-    type Output = Aff;
-    #[inline(always)]
-    fn mul(self, o: f64) -> Aff {
-        Aff {
-            a: self.a * o,
-            b: self.b * o,
-        }
-    }
-}
+aff_op!(shift Add, add, V, +);
+aff_op!(shift Sub, sub, V, -);
+aff_op!(scale Mul, mul, V, *);
+aff_op!(scale Mul, mul, f64, *);
+
 impl Neg for Aff {
     type Output = Aff;
     #[inline(always)]
@@ -330,14 +318,7 @@ pub(crate) fn star_stage(
     r: &Carry,
     ly: V,
 ) -> StageOut {
-    let body = Body {
-        x: x[0],
-        y: x[1],
-        sin,
-        cos,
-        v: x[3],
-        omega: x[4],
-    };
+    let body = Body::of(x, sin, cos);
     let hold = hold_ly(b, ly);
     let splat2 = |a: [f64; 2]| [V::splat(a[0]), V::splat(a[1])];
     let p = law_partial(&c.law, &body, splat2(r.p), splat2(r.dp), &hold, b.ke);
@@ -537,14 +518,7 @@ impl Leaders {
 /// in `p̈_d`, which is affine in `v̇_L`).
 #[inline(always)]
 fn chain_block(c: &Consts, b: &Block, x: &[V; 5], sin: V, cos: V, l: &Leaders) -> (Aff, Aff) {
-    let body = Body {
-        x: x[0],
-        y: x[1],
-        sin,
-        cos,
-        v: x[3],
-        omega: x[4],
-    };
+    let body = Body::of(x, sin, cos);
     let hold = hold(c, b, l.vd, l.wd);
     let p = law_partial(&c.law, &body, l.p, l.dp, &hold, b.ke);
     let ddp = [
@@ -716,14 +690,7 @@ pub(crate) fn chain_probe(
         prev = own;
         let dvl = shift_in(sc.k[3], lead_dv);
         lead_dv = sc.k[3].0[W - 1];
-        let body = Body {
-            x: b.x[0],
-            y: b.x[1],
-            sin,
-            cos,
-            v: b.x[3],
-            omega: b.x[4],
-        };
+        let body = Body::of(&b.x, sin, cos);
         let hold = hold(c, b, l.vd, l.wd);
         let p = law_partial(&c.law, &body, l.p, l.dp, &hold, b.ke);
         let ddp = [l.q[0] + l.g[0] * dvl, l.q[1] + l.g[1] * dvl];

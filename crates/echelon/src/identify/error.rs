@@ -44,7 +44,7 @@ pub enum IdentifyError {
         agent: usize,
         /// Samples found.
         samples: usize,
-        /// Samples needed ([`MIN_SAMPLES`]).
+        /// Samples needed ([`MIN_SAMPLES`](super::MIN_SAMPLES)).
         min: usize,
     },
     /// A needed value is NaN or infinite.

@@ -80,7 +80,7 @@ pub struct AxisSummary {
     pub rcond: f64,
     /// Whether its parameters were identified.
     pub identifiable: bool,
-    /// Residuals at rounding level ([`NOISE_FREE_RELATIVE_RMS`]): a
+    /// Residuals at rounding level ([`NOISE_FREE_RELATIVE_RMS`](super::NOISE_FREE_RELATIVE_RMS)): a
     /// simulated, noise-free log; the intervals are not meaningful.
     pub noise_free: bool,
     /// How the axis was fitted: `integrals` (exact, from `integrals.csv`),
@@ -120,7 +120,7 @@ pub struct Prediction {
     pub omega_model: Vec<f64>,
 }
 
-/// What [`identify`] found.
+/// What [`identify`](super::identify) found.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Identified {
     /// The model identified.

@@ -24,7 +24,7 @@ pub const TRAJECTORY_HEADER: &str = "t,agent,x,y,theta,v,omega,ex,ey,zx,zy,u1,u2
 /// `u1,u2,tau_r,tau_l` are `NaN`, a torque agent's five new cells too.
 pub const TRAJECTORY_HEADER_VELOCITY: &str = "t,agent,x,y,theta,v,omega,ex,ey,zx,zy,u1,u2,tau_r,tau_l,v_cmd,omega_cmd,v_applied,omega_applied,sat";
 
-/// What a [`CsvLog`] writes: a header and, for each frame it is shown, its rows.
+/// What a [`CsvLog`](super::CsvLog) writes: a header and, for each frame it is shown, its rows.
 pub trait FrameRows {
     /// The header line.
     fn header(&self) -> &'static str;

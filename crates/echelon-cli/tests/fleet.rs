@@ -12,7 +12,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
@@ -24,7 +24,7 @@ use echelon::scenario::{Overrides, Scenario};
 
 mod common;
 
-use common::{EXE, Guard, spawn};
+use common::{EXE, Guard, check, echelon_ok, f, spawn};
 
 fn fixture(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -34,21 +34,6 @@ fn fixture(name: &str) -> String {
         .to_string()
 }
 
-fn check(out: &Output, what: &str) {
-    assert!(
-        out.status.success(),
-        "{what} failed: {}\nstdout: {}",
-        String::from_utf8_lossy(&out.stderr),
-        String::from_utf8_lossy(&out.stdout)
-    );
-}
-
-/// Runs `echelon ARGS… LAST` to its end and checks that it succeeded.
-fn echelon_ok(args: &[&str], last: &Path) {
-    let out = Command::new(EXE).args(args).arg(last).output().unwrap();
-    check(&out, &args.join(" "));
-}
-
 /// `echelon fleet up` into `dir`; returns fleet-summary.json.
 fn up(scenario: &str, dir: &Path, extra: &[&str]) -> Value {
     echelon_ok(
@@ -56,13 +41,6 @@ fn up(scenario: &str, dir: &Path, extra: &[&str]) -> Value {
         dir,
     );
     serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
-}
-
-fn f(v: &Value, path: &[&str]) -> f64 {
-    path.iter()
-        .fold(v, |v, k| &v[*k])
-        .as_f64()
-        .unwrap_or_else(|| panic!("{path:?} in {v}"))
 }
 
 fn u(v: &Value, path: &[&str]) -> u64 {

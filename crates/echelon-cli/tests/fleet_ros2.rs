@@ -25,7 +25,7 @@ use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST, Time, TwistStamp
 
 mod common;
 
-use common::{EXE, spawn};
+use common::{EXE, check, echelon_ok, f, spawn};
 const SCENARIO: &str = "experiment-circle-velocity";
 /// Agent 1's start pose in [`SCENARIO`], world `[x, y, θ]`.
 const START: [f64; 3] = [0.0, -0.6, std::f64::consts::FRAC_PI_2];
@@ -57,25 +57,9 @@ fn args<'a>(fixed: &[&'a str], more: &'a [String]) -> Vec<&'a str> {
         .collect()
 }
 
-fn f(v: &Value, path: &[&str]) -> f64 {
-    path.iter()
-        .fold(v, |v, k| &v[*k])
-        .as_f64()
-        .unwrap_or_else(|| panic!("{path:?} in {v}"))
-}
-
 /// The simulator's final poses of the scenario run for `duration`.
 fn simulated_final(duration: &str, dir: &Path) -> Vec<(f64, f64)> {
-    let out = Command::new(EXE)
-        .args(["run", SCENARIO, "--duration", duration, "--out"])
-        .arg(dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    echelon_ok(&["run", SCENARIO, "--duration", duration, "--out"], dir);
     let s: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
     s["agents"]
@@ -93,8 +77,8 @@ fn simulated_final(duration: &str, dir: &Path) -> Vec<(f64, f64)> {
 fn fleet_up_ros2_ends_where_the_simulator_ends() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let out = Command::new(EXE)
-        .args([
+    echelon_ok(
+        &[
             "fleet",
             "up",
             SCENARIO,
@@ -105,14 +89,8 @@ fn fleet_up_ros2_ends_where_the_simulator_ends() {
             "30",
             "--quiet",
             "--out",
-        ])
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
+        dir.path(),
     );
     let up: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("fleet-summary.json")).unwrap(),
@@ -456,16 +434,7 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let certs = dir.path().join("certs");
-    let out = Command::new(EXE)
-        .args(["fleet", "certs", "--robots", "2"])
-        .arg(&certs)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    echelon_ok(&["fleet", "certs", "--robots", "2"], &certs);
     let fleet_dir = dir.path().join("fleet");
     let fleet = std::thread::spawn({
         let (fleet_dir, certs) = (fleet_dir.clone(), certs.clone());
@@ -544,12 +513,7 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
         puts += 1;
         std::thread::sleep(Duration::from_millis(5));
     }
-    let out = fleet.join().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    check(&fleet.join().unwrap(), "fleet up");
     assert!(puts > 100, "the rogue published {puts}");
     let up: Value = serde_json::from_str(
         &std::fs::read_to_string(fleet_dir.join("fleet-summary.json")).unwrap(),

@@ -14,10 +14,7 @@
 //! closes its files. Each child's stderr goes to `DIR/logs/<role>.log`; its
 //! last stdout line (kept in `DIR/logs/<role>.out`) is its JSON report.
 
-use std::io::{BufRead, BufReader};
-use std::net::{TcpListener, UdpSocket};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
@@ -25,16 +22,22 @@ use serde::Serialize;
 use echelon::scenario::{Overrides, Scenario};
 
 use crate::collector::CollectorReport;
-use crate::cost::{self, ProcessCost, RoleCost};
 use crate::faults::FaultSpec;
 use crate::latency::FleetLatency;
 use crate::leader::LeaderReport;
 use crate::robot::RobotReport;
 use crate::role::{Member, Role};
-use crate::ros2::base::BaseReport;
 
-use crate::router::RouterReport;
 use crate::{FleetError, StopFlag};
+
+mod ports;
+mod process;
+mod report;
+use ports::Links;
+pub use ports::{free_ports, free_ports_for};
+use process::{Proc, poll_all, spawn};
+pub use report::{UpCost, UpReport};
+use report::{report, up_cost};
 
 /// The summary `fleet up` writes.
 pub const UP_SUMMARY_FILE: &str = "fleet-summary.json";
@@ -82,347 +85,6 @@ pub struct UpOptions {
     pub topology: Topology,
     /// Router topology: the number of sites (routers), ≥ 1.
     pub sites: usize,
-}
-
-/// Every process's final report.
-#[derive(Debug, Clone, Serialize)]
-pub struct UpReport {
-    /// Scenario name.
-    pub scenario: String,
-    /// Fleet name.
-    pub fleet: String,
-    /// Fleet time run, s.
-    pub duration: f64,
-    /// Time scale.
-    pub time_scale: f64,
-    /// Wall-clock time, s.
-    pub wall: f64,
-    /// Startup: from the first process started until every process had
-    /// joined and the leader started the clock, s (absent if the leader did
-    /// not say when).
-    pub startup: Option<f64>,
-    /// The rest of `wall`: the run and the wind-down, s.
-    pub run: Option<f64>,
-    /// What the processes cost (CPU, peak memory), per process and per role.
-    pub cost: UpCost,
-    /// Delays measured by the robots (merged, and the worst robot) and the
-    /// collector.
-    pub latency: FleetLatency,
-    /// With `[safety]`: the robots' safety counters summed (the smallest
-    /// `min_distance`), each robot's under `robots[k].safety`.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub safety: Option<crate::robot::SafetyCounts>,
-    /// Robots (agent numbers) their filter kept from their slot at the end
-    /// (each robot's `deadlocked_at_end`).
-    pub deadlocked_at_end: Vec<u32>,
-    /// The leader's report.
-    pub leader: LeaderReport,
-    /// Each robot's report, agent 1 first.
-    pub robots: Vec<RobotReport>,
-    /// The collector's report.
-    pub collector: CollectorReport,
-    /// With `--ros2`: each simulated base's report.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub bases: Vec<BaseReport>,
-    /// How the processes were linked.
-    pub topology: Topology,
-    /// Router topology: each router's endpoint, site 1 first.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub router_endpoints: Vec<String>,
-    /// Router topology: the roles linked to each router, site 1 first.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub sites: Vec<Vec<String>>,
-    /// Router topology: each router's report, site 1 first.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub routers: Vec<RouterReport>,
-}
-
-/// CPU and peak memory of every process of `fleet up` ([`crate::cost`]).
-#[derive(Debug, Clone, Default, Serialize)]
-pub struct UpCost {
-    /// The leader.
-    pub leader: RoleCost,
-    /// The collector.
-    pub collector: RoleCost,
-    /// The robots (`cpu_mean`: CPU seconds per robot).
-    pub robots: RoleCost,
-    /// With `--ros2`: the simulated bases.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub bases: Option<RoleCost>,
-    /// Router topology: the routers.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub routers: Option<RoleCost>,
-    /// Every process.
-    pub total: RoleCost,
-    /// Each process, in start order.
-    pub processes: Vec<ProcessCost>,
-}
-
-/// A started child, killed if still running when dropped (a failing test or
-/// an error never leaves processes behind).
-struct Proc {
-    role: String,
-    child: Child,
-    log: PathBuf,
-    /// Where its stdout goes; its last JSON line is its report.
-    stdout: PathBuf,
-    report: Option<serde_json::Value>,
-    status: Option<std::process::ExitStatus>,
-    /// CPU seconds, read when it exited (before it was reaped).
-    cpu: Option<f64>,
-    /// Peak RSS so far, bytes, and when it was last sampled.
-    max_rss: Option<u64>,
-    rss_sampled: Option<Instant>,
-}
-
-impl Proc {
-    fn terminate(&self) {
-        let pid = rustix::process::Pid::from_child(&self.child);
-        let _ = rustix::process::kill_process(pid, rustix::process::Signal::TERM);
-    }
-
-    /// Whether it has exited, not reaping it (so that `/proc` still holds
-    /// its CPU time); `true` if that cannot be told.
-    fn exited(&self) -> bool {
-        use rustix::process::{Pid, WaitId, WaitIdOptions, waitid};
-        let pid = Pid::from_child(&self.child);
-        let options = WaitIdOptions::EXITED | WaitIdOptions::NOWAIT | WaitIdOptions::NOHANG;
-        !matches!(waitid(WaitId::Pid(pid), options), Ok(None))
-    }
-
-    /// Its cost so far.
-    fn cost(&self) -> ProcessCost {
-        ProcessCost {
-            role: self.role.clone(),
-            cpu: self.cpu,
-            max_rss: self.max_rss,
-        }
-    }
-
-    /// Polls; samples its peak memory while it runs, reads its CPU time
-    /// when it exits, then reaps it and reads the report line from stdout.
-    fn poll(&mut self) -> Result<bool, FleetError> {
-        if self.status.is_some() {
-            return Ok(true);
-        }
-        if !self.exited() {
-            if self
-                .rss_sampled
-                .is_none_or(|t| t.elapsed() >= cost::MEMORY_PERIOD)
-            {
-                self.rss_sampled = Some(Instant::now());
-                if let Some(m) = cost::peak_rss(self.child.id()) {
-                    self.max_rss = Some(self.max_rss.unwrap_or(0).max(m));
-                }
-            }
-            return Ok(false);
-        }
-        if self.cpu.is_none() {
-            self.cpu = cost::cpu_seconds(self.child.id());
-        }
-        match self.child.try_wait() {
-            Ok(Some(status)) => {
-                self.status = Some(status);
-                let last = std::fs::File::open(&self.stdout).ok().and_then(|out| {
-                    BufReader::new(out)
-                        .lines()
-                        .map_while(Result::ok)
-                        .filter(|l| l.trim_start().starts_with('{'))
-                        .last()
-                });
-                self.report = last.and_then(|l| serde_json::from_str(&l).ok());
-                Ok(true)
-            }
-            Ok(None) => Ok(false),
-            Err(e) => Err(FleetError::Child(format!("{}: {e}", self.role))),
-        }
-    }
-
-    fn failure(&self) -> Option<String> {
-        let status = self.status?;
-        if status.success() {
-            return None;
-        }
-        let tail = std::fs::read_to_string(&self.log)
-            .unwrap_or_default()
-            .lines()
-            .rev()
-            .find(|l| !l.trim().is_empty())
-            .unwrap_or("")
-            .to_owned();
-        Some(format!(
-            "{} exited with {status} ({}: {tail})",
-            self.role,
-            self.log.display()
-        ))
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        if self.status.is_none() && matches!(self.child.try_wait(), Ok(None)) {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
-}
-
-/// The cost of every process, per role and in all.
-fn up_cost(
-    leader: &Proc,
-    collector: &Proc,
-    robots: &[Proc],
-    bases: &[Proc],
-    routers: &[Proc],
-) -> UpCost {
-    let of = |procs: &[Proc]| procs.iter().map(Proc::cost).collect::<Vec<_>>();
-    let (leader, collector) = (vec![leader.cost()], vec![collector.cost()]);
-    let (robots, bases, routers) = (of(robots), of(bases), of(routers));
-    let processes: Vec<ProcessCost> = routers
-        .iter()
-        .chain(&collector)
-        .chain(&bases)
-        .chain(&robots)
-        .chain(&leader)
-        .cloned()
-        .collect();
-    UpCost {
-        leader: RoleCost::of(&leader),
-        collector: RoleCost::of(&collector),
-        robots: RoleCost::of(&robots),
-        bases: (!bases.is_empty()).then(|| RoleCost::of(&bases)),
-        routers: (!routers.is_empty()).then(|| RoleCost::of(&routers)),
-        total: RoleCost::of(&processes),
-        processes,
-    }
-}
-
-/// Polls every one of `procs` (none skipped); whether all have exited.
-fn poll_all<'a>(procs: impl IntoIterator<Item = &'a mut Proc>) -> Result<bool, FleetError> {
-    let mut all = true;
-    for p in procs {
-        all &= p.poll()?;
-    }
-    Ok(all)
-}
-
-/// Free loopback ports for a Zenoh link protocol: UDP ports for QUIC, else
-/// TCP ports.
-pub fn free_ports_for(proto: &str, n: usize) -> Result<Vec<u16>, FleetError> {
-    match proto {
-        "quic" => held_ports(n, "UDP", || {
-            let socket = UdpSocket::bind("127.0.0.1:0")?;
-            Ok((socket.local_addr()?.port(), socket))
-        }),
-        _ => free_ports(n),
-    }
-}
-
-/// Free loopback TCP ports (bound then released: each is free right now).
-pub fn free_ports(n: usize) -> Result<Vec<u16>, FleetError> {
-    held_ports(n, "TCP", || {
-        let listener = TcpListener::bind("127.0.0.1:0")?;
-        Ok((listener.local_addr()?.port(), listener))
-    })
-}
-
-/// `n` ports from `bind`, all bound at once (so they differ), released on
-/// return.
-fn held_ports<S>(
-    n: usize,
-    kind: &str,
-    bind: impl Fn() -> std::io::Result<(u16, S)>,
-) -> Result<Vec<u16>, FleetError> {
-    let held = (0..n)
-        .map(|_| bind())
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| FleetError::Config(format!("no free loopback {kind} port: {e}")))?;
-    Ok(held.into_iter().map(|(port, _)| port).collect())
-}
-
-/// How `fleet up`'s processes link: the routers' endpoints (router topology)
-/// or every process's own port (mesh).
-struct Links {
-    topology: Topology,
-    proto: &'static str,
-    /// Router topology: site `s`'s router endpoint at `s`.
-    routers: Vec<String>,
-    /// Mesh: process `i`'s port at `i`.
-    ports: Vec<u16>,
-}
-
-impl Links {
-    fn new(opts: &UpOptions, proto: &'static str, processes: usize) -> Result<Links, FleetError> {
-        let (routers, ports) = match opts.topology {
-            Topology::Router => {
-                let ports = free_ports_for(proto, opts.sites)?;
-                let routers = ports
-                    .iter()
-                    .map(|p| format!("{proto}/127.0.0.1:{p}"))
-                    .collect();
-                (routers, Vec::new())
-            }
-            Topology::Mesh => (Vec::new(), free_ports_for(proto, processes)?),
-        };
-        Ok(Links {
-            topology: opts.topology,
-            proto,
-            routers,
-            ports,
-        })
-    }
-
-    /// Mesh: process `i`'s endpoint.
-    fn peer(&self, i: usize) -> String {
-        format!("{}/127.0.0.1:{}", self.proto, self.ports[i])
-    }
-
-    /// The Zenoh arguments of process `i` (of site `site`, from 0).
-    fn args(&self, i: usize, site: usize) -> Vec<String> {
-        match self.topology {
-            Topology::Router => vec![
-                "--mode".to_owned(),
-                "client".to_owned(),
-                "--connect".to_owned(),
-                self.routers[site].clone(),
-            ],
-            Topology::Mesh => {
-                let mut a = vec!["--listen".to_owned(), self.peer(i)];
-                for j in 0..i {
-                    a.extend(["--connect".to_owned(), self.peer(j)]);
-                }
-                a
-            }
-        }
-    }
-}
-
-fn spawn(exe: &Path, role: &str, args: &[String], logs: &Path) -> Result<Proc, FleetError> {
-    let log = logs.join(format!("{}.log", role.replace('/', "-")));
-    let file = std::fs::File::create(&log).map_err(FleetError::io(&log))?;
-    // Stdout goes to a file, not a pipe: a report longer than the pipe's
-    // buffer (the collector's, with a hundred robots) would block the child
-    // in its last write while `fleet up` waits for it to exit.
-    let stdout = logs.join(format!("{}.out", role.replace('/', "-")));
-    let out = std::fs::File::create(&stdout).map_err(FleetError::io(&stdout))?;
-    let child = Command::new(exe)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(out)
-        .stderr(file)
-        .spawn()
-        .map_err(|e| FleetError::Child(format!("starting {role} ({}): {e}", exe.display())))?;
-    Ok(Proc {
-        role: role.to_owned(),
-        child,
-        log,
-        stdout,
-        report: None,
-        status: None,
-        cpu: None,
-        max_rss: None,
-        rss_sampled: None,
-    })
 }
 
 /// Runs the fleet and returns every process's report.
@@ -775,24 +437,4 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     };
     crate::write_json_file(&opts.out.join(UP_SUMMARY_FILE), &up)?;
     Ok(up)
-}
-
-/// A process's report read back as its role's type: an error naming the
-/// process when it printed none or one that does not parse (a renamed or
-/// missing field is refused, never read as 0).
-fn report<T: serde::de::DeserializeOwned>(p: &Proc) -> Result<T, FleetError> {
-    let value = p.report.clone().ok_or_else(|| {
-        FleetError::Child(format!(
-            "{} printed no report ({})",
-            p.role,
-            p.log.display()
-        ))
-    })?;
-    serde_json::from_value(value).map_err(|e| {
-        FleetError::Child(format!(
-            "{} printed a report that does not parse as its role's: {e} ({})",
-            p.role,
-            p.log.display()
-        ))
-    })
 }

@@ -289,6 +289,21 @@ pub(crate) struct Body<V> {
     pub(crate) omega: V,
 }
 
+impl<V: Copy> Body<V> {
+    /// The body of a state `[x, y, θ, v, ω]` whose heading is `(sin, cos)`.
+    #[inline(always)]
+    pub(crate) fn of(x: &[V; 5], sin: V, cos: V) -> Body<V> {
+        Body {
+            x: x[0],
+            y: x[1],
+            sin,
+            cos,
+            v: x[3],
+            omega: x[4],
+        }
+    }
+}
+
 /// Where the follower holds its leader at one instant: `L_X` (and `1/L_X`),
 /// `L_Y`, `L̇_Y`, `L̈_Y` ([`Offset`] in any number type).
 #[derive(Debug, Clone, Copy)]

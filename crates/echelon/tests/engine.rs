@@ -5,7 +5,7 @@
 //! on one thread or two, stepped at once or one step at a time.
 
 mod common;
-use common::relative;
+use common::{assert_engine_agrees, state_pairs};
 
 use echelon::SimError;
 use echelon::control::{Gains, Variant};
@@ -38,12 +38,7 @@ fn compare(agents: Vec<AgentSpec>, reference: Reference, dt: f64, steps: u64) ->
             .enumerate()
         {
             let e = engine.state(i);
-            let pairs = [
-                (e.x, s.x),
-                (e.y, s.y),
-                (e.theta, s.theta),
-                (e.v, s.v),
-                (e.omega, s.omega),
+            let law = [
                 (p.e[0], o.e[0]),
                 (p.e[1], o.e[1]),
                 (p.z[0], o.z[0]),
@@ -51,15 +46,8 @@ fn compare(agents: Vec<AgentSpec>, reference: Reference, dt: f64, steps: u64) ->
                 (p.u[0], o.command.u1),
                 (p.u[1], o.command.u2),
             ];
-            for (k, (a, b)) in pairs.into_iter().enumerate() {
-                assert!(
-                    relative(a, b) <= 1e-9,
-                    "agent {} quantity {k} at t = {}: engine {a} vs scalar {b}",
-                    i + 1,
-                    frame.t
-                );
-                worst = worst.max(relative(a, b));
-            }
+            let pairs = state_pairs(&e, s).into_iter().chain(law);
+            worst = worst.max(assert_engine_agrees(pairs, i, frame.t));
         }
     };
     check(&mut sim, &engine);

@@ -15,7 +15,7 @@
 //! exceeds a speed limit.
 
 mod common;
-use common::relative;
+use common::{assert_engine_agrees, relative, state_pairs};
 
 use echelon::base::{AccelLimit, VelocityBase, VelocityCommand};
 use echelon::control::LeaderMotion;
@@ -150,12 +150,7 @@ fn compare(
         assert_eq!(probes.len(), outs.len());
         for (i, ((s, o), p)) in scalar.xs.iter().zip(&outs).zip(&probes).enumerate() {
             let e = engine.state(i);
-            let pairs = [
-                (e.x, s.x),
-                (e.y, s.y),
-                (e.theta, s.theta),
-                (e.v, s.v),
-                (e.omega, s.omega),
+            let law = [
                 (p.e[0], o.0[0]),
                 (p.e[1], o.0[1]),
                 (p.command.v, o.1.v),
@@ -163,14 +158,8 @@ fn compare(
                 (p.applied.v, o.2.v),
                 (p.applied.omega, o.2.omega),
             ];
-            for (k, (a, b)) in pairs.into_iter().enumerate() {
-                assert!(
-                    relative(a, b) <= 1e-9,
-                    "agent {} quantity {k} at t = {t}: engine {a} vs scalar {b}",
-                    i + 1
-                );
-                worst = worst.max(relative(a, b));
-            }
+            let pairs = state_pairs(&e, s).into_iter().chain(law);
+            worst = worst.max(assert_engine_agrees(pairs, i, t));
             assert_eq!(p.saturated, base.limit(o.1).1, "agent {} at t = {t}", i + 1);
             assert_eq!(
                 engine.saturated_ticks(i),
@@ -451,19 +440,14 @@ fn the_engine_agrees_with_the_simulator() {
                     let e = engine.state(i);
                     let p = &probes[i];
                     let v = o.velocity.expect("a velocity agent reports its command");
-                    for (a, b) in [
-                        (e.x, s.x),
-                        (e.y, s.y),
-                        (e.theta, s.theta),
-                        (e.v, s.v),
-                        (e.omega, s.omega),
+                    for (a, b) in state_pairs(&e, s).into_iter().chain([
                         (p.e[0], o.e[0]),
                         (p.e[1], o.e[1]),
                         (p.command.v, v.command.v),
                         (p.command.omega, v.command.omega),
                         (p.applied.v, v.applied.v),
                         (p.applied.omega, v.applied.omega),
-                    ] {
+                    ]) {
                         worst = worst.max(relative(a, b));
                     }
                     assert_eq!(p.saturated, v.saturated, "{name}: agent {}", i + 1);

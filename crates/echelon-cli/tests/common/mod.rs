@@ -3,12 +3,38 @@
 
 #![allow(dead_code, clippy::unwrap_used)]
 
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
 
 use serde_json::Value;
 
 /// The `echelon` binary under test.
 pub(crate) const EXE: &str = env!("CARGO_BIN_EXE_echelon");
+
+/// Asserts that the process `what` succeeded, with its stderr and stdout
+/// otherwise.
+pub(crate) fn check(out: &Output, what: &str) {
+    assert!(
+        out.status.success(),
+        "{what} failed: {}\nstdout: {}",
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
+    );
+}
+
+/// Runs `echelon ARGS… LAST` to its end and checks that it succeeded.
+pub(crate) fn echelon_ok(args: &[&str], last: &Path) {
+    let out = Command::new(EXE).args(args).arg(last).output().unwrap();
+    check(&out, &args.join(" "));
+}
+
+/// The number at `path` in a JSON report.
+pub(crate) fn f(v: &Value, path: &[&str]) -> f64 {
+    path.iter()
+        .fold(v, |v, k| &v[*k])
+        .as_f64()
+        .unwrap_or_else(|| panic!("{path:?} in {v}"))
+}
 
 /// Holds the test binary's one fleet slot: a test that runs fleet
 /// processes takes it first, so fleets run one at a time. Each fleet is a

@@ -7,7 +7,7 @@ use echelon::sample::AgentSample;
 use echelon::stats::Summary;
 use echelon_mcap::{JsonSchema, REFERENCE_TOPIC, nanos};
 
-use super::{Collector, REJECTED_TOPIC, RecordSink};
+use super::{Collector, CollectorReport, REJECTED_TOPIC, RecordSink};
 use crate::FleetError;
 use crate::keys::Keys;
 use crate::ros2::record::RosTopic;
@@ -125,13 +125,8 @@ fn every_sample_is_logged_once_and_garbage_is_rejected_with_its_reason() {
     assert_eq!(report.received, inputs.len() as u64);
     assert_eq!(report.logged, report.received);
     assert_eq!(sink.logged.len() as u64, report.logged);
-    let rejected: Vec<(&str, u64)> = report
-        .rejected
-        .iter()
-        .map(|(r, n)| (r.as_str(), *n))
-        .collect();
     assert_eq!(
-        rejected,
+        rejected(&report),
         [
             ("malformed", 1),
             ("malformed stats JSON", 1),
@@ -324,13 +319,8 @@ fn ros_samples_are_recorded_as_received_or_refused_with_their_reason() {
         ("/robot1/cmd_vel".to_owned(), 100, 777, cmd.clone())
     );
     assert_eq!(sink.logged[1], ("/robot1/odom".to_owned(), 101, 101, odom));
-    let rejected: Vec<(&str, u64)> = report
-        .rejected
-        .iter()
-        .map(|(r, n)| (r.as_str(), *n))
-        .collect();
     assert_eq!(
-        rejected,
+        rejected(&report),
         [
             ("ROS: key of no recorded topic", 1),
             ("ROS: malformed CDR for the topic's type", 1),
@@ -343,4 +333,13 @@ fn ros_samples_are_recorded_as_received_or_refused_with_their_reason() {
     // A topic twice is refused.
     topics.push(topics[0].clone());
     assert!(Collector::with_ros2(Keys::new("f"), topics).is_err());
+}
+
+/// The report's rejection counts, by reason.
+fn rejected(report: &CollectorReport) -> Vec<(&str, u64)> {
+    report
+        .rejected
+        .iter()
+        .map(|(r, n)| (r.as_str(), *n))
+        .collect()
 }

@@ -10,10 +10,20 @@
 
 use std::ops::{Add, Mul, Neg, Sub};
 
-use crate::control::{Body, Hold, LawRobot, Variant, law_finish, law_partial, robot_leader};
+use crate::control::{Hold, LawRobot, Variant};
 use crate::lanes::{Lanes, Mask};
 use crate::lycomp::LyComp;
 use crate::reference::Jet;
+
+mod chain;
+mod probe;
+mod star;
+use chain::Leaders;
+pub(crate) use chain::Scratch;
+pub(crate) use chain::{chain_stage, chain_tile, shift_from, shift_in};
+pub use probe::Probe;
+pub(crate) use probe::{chain_probe, star_probe, state_of};
+pub(crate) use star::{star_stage, star_tile};
 
 /// Agents per block (lanes per vector).
 pub(crate) const W: usize = 8;
@@ -112,46 +122,34 @@ impl Add for Aff {
         }
     }
 }
-impl Add<V> for Aff {
-    type Output = Aff;
-    #[inline(always)]
-    fn add(self, o: V) -> Aff {
-        Aff {
-            a: self.a + o,
-            b: self.b,
+
+/// `Aff ⊕ o` for a value `o` without a `v̇_L` term: `shift` moves `a` alone,
+/// `scale` both parts.
+macro_rules! aff_op {
+    (shift $tr:ident, $f:ident, $o:ty, $op:tt) => {
+        impl $tr<$o> for Aff {
+            type Output = Aff;
+            #[inline(always)]
+            fn $f(self, o: $o) -> Aff {
+                Aff { a: self.a $op o, b: self.b }
+            }
         }
-    }
-}
-impl Sub<V> for Aff {
-    type Output = Aff;
-    #[inline(always)]
-    fn sub(self, o: V) -> Aff {
-        Aff {
-            a: self.a - o,
-            b: self.b,
+    };
+    (scale $tr:ident, $f:ident, $o:ty, $op:tt) => {
+        impl $tr<$o> for Aff {
+            type Output = Aff;
+            #[inline(always)]
+            fn $f(self, o: $o) -> Aff {
+                Aff { a: self.a $op o, b: self.b $op o }
+            }
         }
-    }
+    };
 }
-impl Mul<V> for Aff {
-    type Output = Aff;
-    #[inline(always)]
-    fn mul(self, o: V) -> Aff {
-        Aff {
-            a: self.a * o,
-            b: self.b * o,
-        }
-    }
-}
-impl Mul<f64> for Aff {
-    type Output = Aff;
-    #[inline(always)]
-    fn mul(self, o: f64) -> Aff {
-        Aff {
-            a: self.a * o,
-            b: self.b * o,
-        }
-    }
-}
+aff_op!(shift Add, add, V, +);
+aff_op!(shift Sub, sub, V, -);
+aff_op!(scale Mul, mul, V, *);
+aff_op!(scale Mul, mul, f64, *);
+
 impl Neg for Aff {
     type Output = Aff;
     #[inline(always)]
@@ -309,432 +307,10 @@ pub(crate) fn first_lane<const N: usize>(m: Mask<N>) -> usize {
     m.0.iter().position(|&b| b != 0).unwrap_or(0)
 }
 
-/// What a star agent's controller and plant do at one stage.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct StageOut {
-    pub(crate) dx: [V; 5],
-    pub(crate) e: [V; 2],
-    pub(crate) z: [V; 2],
-    pub(crate) u: [V; 2],
-}
-
-/// One stage of a block following the reference `r`, at which the agents
-/// hold it at `ly` ([`star_ly`]): the law (eqs. 7–13), the motors, and the
-/// plant's derivative (eq. 3). `sin`, `cos` are those of the heading `x[2]`.
-#[inline(always)]
-pub(crate) fn star_stage(
-    c: &Consts,
-    b: &Block,
-    x: &[V; 5],
-    (sin, cos): (V, V),
-    r: &Carry,
-    ly: V,
-) -> StageOut {
-    let body = Body {
-        x: x[0],
-        y: x[1],
-        sin,
-        cos,
-        v: x[3],
-        omega: x[4],
-    };
-    let hold = hold_ly(b, ly);
-    let splat2 = |a: [f64; 2]| [V::splat(a[0]), V::splat(a[1])];
-    let p = law_partial(&c.law, &body, splat2(r.p), splat2(r.dp), &hold, b.ke);
-    let u = law_finish(&c.law, &p, splat2(r.q), b.kz, c.variant);
-    let applied = actuate(c.limit, u);
-    let dv = (applied[0] - x[3] * c.eta) * c.inv_m;
-    let dw = (applied[1] - x[4] * c.psi) * c.inv_j;
-    StageOut {
-        dx: [x[3] * cos, x[3] * sin, x[4], dv, dw],
-        e: p.e,
-        z: p.z,
-        u,
-    }
-}
-
-/// `x + d k` and the sines and cosines of its heading, from those of `x`
-/// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`).
-#[inline(always)]
-#[allow(clippy::type_complexity)]
-pub(crate) fn turned_state<const N: usize>(
-    x: &[Lanes<N>; 5],
-    (sin, cos): (Lanes<N>, Lanes<N>),
-    d: &[Lanes<N>; 5],
-    k: f64,
-) -> ([Lanes<N>; 5], (Lanes<N>, Lanes<N>)) {
-    let next = add_scaled(x, d, k);
-    let turned = (d[2] * k)
-        .sin_cos_turned(sin, cos)
-        .unwrap_or_else(|| next[2].sin_cos());
-    (next, turned)
-}
-
-/// Advances star blocks by `refs.len()` steps; `refs[n]` is the reference at
-/// `t_n`, `t_n + dt/2` (twice) and `t_{n+1}`. Each block runs all its steps in
-/// registers. Returns the first step (within this call) and agent (within
-/// `blocks`) whose state stopped being finite, if any.
-///
-/// Per step and agent: one `sin_cos` (stage 1; stages 2–4 turn it by their
-/// small `δθ`), and two `L_Y`, since stages 2 and 3 see the reference at the
-/// same instant and stage 4's instant is the next step's stage 1
-/// (`refs[n][3] == refs[n + 1][0]`, as `fill_reference` makes them).
-#[inline(always)]
-pub(crate) fn star_tile(
-    c: &Consts,
-    blocks: &mut [Block],
-    refs: &[[Carry; 4]],
-) -> Option<(usize, usize)> {
-    let (h, dt, h6) = (0.5 * c.dt, c.dt, c.dt / 6.0);
-    let mut first: Option<(usize, usize)> = None;
-    for (bi, b) in blocks.iter_mut().enumerate() {
-        let mut x = b.x;
-        let mut ly1 = refs.first().map_or(b.ly_off, |r| star_ly(c, b, &r[0]));
-        for (n, r) in refs.iter().enumerate() {
-            let (ly23, ly4) = (star_ly(c, b, &r[1]), star_ly(c, b, &r[3]));
-            let sc1 = x[2].sin_cos();
-            let k1 = star_stage(c, b, &x, sc1, &r[0], ly1).dx;
-            let (x2, sc2) = turned_state(&x, sc1, &k1, h);
-            let k2 = star_stage(c, b, &x2, sc2, &r[1], ly23).dx;
-            let (x3, sc3) = turned_state(&x, sc1, &k2, h);
-            let k3 = star_stage(c, b, &x3, sc3, &r[2], ly23).dx;
-            let (x4, sc4) = turned_state(&x, sc1, &k3, dt);
-            let k4 = star_stage(c, b, &x4, sc4, &r[3], ly4).dx;
-            let k23 = each(|i| k2[i] + k3[i]);
-            x = combine(&x, &k1, &k23, &k4, h6);
-            ly1 = ly4;
-            let bad = broken(&x, b.live);
-            if bad.any() {
-                let at = (n, bi * W + first_lane(bad));
-                first = Some(first.map_or(at, |f| f.min(at)));
-                break;
-            }
-        }
-        b.x = x;
-    }
-    first
-}
-
-/// Per-block work space of a chain stage.
-#[derive(Debug, Clone, Copy)]
-pub struct Scratch {
-    /// This stage's derivative (the previous stage's until overwritten).
-    k: [V; 5],
-    k1: [V; 5],
-    /// `k₂ + k₃`.
-    k23: [V; 5],
-    /// `v̇ = α + β v̇_L`, `ω̇ = γ + δ v̇_L`.
-    dv: Aff,
-    dw: Aff,
-}
-
-impl Default for Scratch {
-    fn default() -> Scratch {
-        let z = V::splat(0.0);
-        Scratch {
-            k: [z; 5],
-            k1: [z; 5],
-            k23: [z; 5],
-            dv: Aff { a: z, b: z },
-            dw: Aff { a: z, b: z },
-        }
-    }
-}
-
-/// `[prev_{W−1}, own₀, …, own_{W−2}]`: each lane's leader is the lane before.
-#[inline(always)]
-pub(crate) fn shift_from<const N: usize>(own: Lanes<N>, prev: Lanes<N>) -> Lanes<N> {
-    let mut r = [prev.0[N - 1]; N];
-    r[1..].copy_from_slice(&own.0[..N - 1]);
-    Lanes(r)
-}
-
-/// `[carry, own₀, …, own_{W−2}]`.
-#[inline(always)]
-pub(crate) fn shift_in(own: V, carry: f64) -> V {
-    shift_from(own, V::splat(carry))
-}
-
-/// A block's agents as leaders (their followers' [`Carry`]s), in lanes.
-#[derive(Debug, Clone, Copy)]
-struct Leaders {
-    p: [V; 2],
-    dp: [V; 2],
-    q: [V; 2],
-    g: [V; 2],
-    vd: V,
-    wd: V,
-}
-
-impl Leaders {
-    /// Robots at `x` with heading `(sin, cos)` as leaders:
-    /// `LeaderMotion::of_robot` and `Placement::offset_for_robot`'s
-    /// `(max(v, 0), ω)`.
-    #[inline(always)]
-    fn of(x: &[V; 5], sin: V, cos: V) -> Leaders {
-        let unit = Aff {
-            a: V::splat(0.0),
-            b: V::splat(1.0),
-        };
-        let (dp, ddp) = robot_leader(sin, cos, x[3], x[4], unit);
-        Leaders {
-            p: [x[0], x[1]],
-            dp,
-            q: [ddp[0].a, ddp[1].a],
-            g: [ddp[0].b, ddp[1].b],
-            vd: x[3].max(V::splat(0.0)),
-            wd: x[4],
-        }
-    }
-
-    /// A carried leader in every lane.
-    #[inline(always)]
-    fn splat(c: &Carry) -> Leaders {
-        let s2 = |k: [f64; 2]| [V::splat(k[0]), V::splat(k[1])];
-        Leaders {
-            p: s2(c.p),
-            dp: s2(c.dp),
-            q: s2(c.q),
-            g: s2(c.g),
-            vd: V::splat(c.vd),
-            wd: V::splat(c.wd),
-        }
-    }
-
-    /// Each lane's leader: the lane before, the first lane's the last lane
-    /// of `prev` (the block before).
-    #[inline(always)]
-    fn shifted(&self, prev: &Leaders) -> Leaders {
-        let s2 = |v: [V; 2], k: [V; 2]| [shift_from(v[0], k[0]), shift_from(v[1], k[1])];
-        Leaders {
-            p: s2(self.p, prev.p),
-            dp: s2(self.dp, prev.dp),
-            q: s2(self.q, prev.q),
-            g: s2(self.g, prev.g),
-            vd: shift_from(self.vd, prev.vd),
-            wd: shift_from(self.wd, prev.wd),
-        }
-    }
-
-    /// The last lane, for the next block's first agent.
-    #[inline(always)]
-    fn last(&self) -> Carry {
-        let l = W - 1;
-        Carry {
-            p: [self.p[0].0[l], self.p[1].0[l]],
-            dp: [self.dp[0].0[l], self.dp[1].0[l]],
-            q: [self.q[0].0[l], self.q[1].0[l]],
-            g: [self.g[0].0[l], self.g[1].0[l]],
-            vd: self.vd.0[l],
-            wd: self.wd.0[l],
-            dv: 0.0,
-        }
-    }
-}
-
-/// A chain block's law at one stage, with the leaders' accelerations left
-/// open: `v̇`, `ω̇` as affine functions of `v̇_L` (eqs. 7–13 and 3 are affine
-/// in `p̈_d`, which is affine in `v̇_L`).
-#[inline(always)]
-fn chain_block(c: &Consts, b: &Block, x: &[V; 5], sin: V, cos: V, l: &Leaders) -> (Aff, Aff) {
-    let body = Body {
-        x: x[0],
-        y: x[1],
-        sin,
-        cos,
-        v: x[3],
-        omega: x[4],
-    };
-    let hold = hold(c, b, l.vd, l.wd);
-    let p = law_partial(&c.law, &body, l.p, l.dp, &hold, b.ke);
-    let ddp = [
-        Aff {
-            a: l.q[0],
-            b: l.g[0],
-        },
-        Aff {
-            a: l.q[1],
-            b: l.g[1],
-        },
-    ];
-    let u = law_finish(&c.law, &p, ddp, b.kz, c.variant);
-    (
-        (u[0] - x[3] * c.eta) * c.inv_m,
-        (u[1] - x[4] * c.psi) * c.inv_j,
-    )
-}
-
-/// The chain stage update coefficients: stage `s` evaluates at `x + a_s k_{s−1}`.
-#[inline(always)]
-fn stage_state(b: &Block, sc: &Scratch, s: usize, dt: f64) -> [V; 5] {
-    match s {
-        0 => b.x,
-        3 => add_scaled(&b.x, &sc.k, dt),
-        _ => add_scaled(&b.x, &sc.k, 0.5 * dt),
-    }
-}
-
-/// One stage of a chain segment whose first agent follows `cin`: every
-/// derivative into `scratch[..].k`; returns the last agent as a leader (with
-/// its `v̇`). Vectorised except for `v̇ᵢ = αᵢ + βᵢ v̇ᵢ₋₁`, one multiply-add per
-/// agent in order.
-#[inline(always)]
-pub(crate) fn chain_stage(
-    c: &Consts,
-    blocks: &[Block],
-    scratch: &mut [Scratch],
-    s: usize,
-    cin: &Carry,
-) -> Carry {
-    let mut prev = Leaders::splat(cin);
-    for (b, sc) in blocks.iter().zip(scratch.iter_mut()) {
-        let x = stage_state(b, sc, s, c.dt);
-        let (sin, cos) = x[2].sin_cos();
-        let own = Leaders::of(&x, sin, cos);
-        let leaders = own.shifted(&prev);
-        prev = own;
-        let (dv, dw) = chain_block(c, b, &x, sin, cos, &leaders);
-        sc.k[0] = x[3] * cos;
-        sc.k[1] = x[3] * sin;
-        sc.k[2] = x[4];
-        sc.dv = dv;
-        sc.dw = dw;
-    }
-    // The only sequential part: each v̇ needs the one before.
-    let mut dvl = cin.dv;
-    for sc in scratch.iter_mut() {
-        let lead = dvl;
-        let mut dv = [0.0; W];
-        for (l, d) in dv.iter_mut().enumerate() {
-            dvl = sc.dv.a.0[l] + sc.dv.b.0[l] * dvl;
-            *d = dvl;
-        }
-        let dv = Lanes(dv);
-        sc.k[3] = dv;
-        sc.k[4] = sc.dw.a + sc.dw.b * shift_in(dv, lead);
-    }
-    let mut carry = prev.last();
-    carry.dv = dvl;
-    carry
-}
-
-/// Advances a chain segment by `carries.len()` steps. `carries[n][s]` is the
-/// leader of the segment's first agent at step `n`, stage `s`, and is replaced
-/// by the segment's last agent (the next segment's leader). Returns the first
-/// broken step and agent (within the segment), if any.
-#[inline(always)]
-pub(crate) fn chain_tile(
-    c: &Consts,
-    blocks: &mut [Block],
-    scratch: &mut [Scratch],
-    carries: &mut [[Carry; 4]],
-) -> Option<(usize, usize)> {
-    let h6 = c.dt / 6.0;
-    for (n, stages) in carries.iter_mut().enumerate() {
-        for (s, carry) in stages.iter_mut().enumerate() {
-            *carry = chain_stage(c, blocks, scratch, s, carry);
-            for sc in scratch.iter_mut() {
-                match s {
-                    0 => sc.k1 = sc.k,
-                    1 => sc.k23 = sc.k,
-                    2 => sc.k23 = each(|i| sc.k23[i] + sc.k[i]),
-                    _ => {}
-                }
-            }
-        }
-        let mut first = None;
-        for (bi, (b, sc)) in blocks.iter_mut().zip(scratch.iter()).enumerate() {
-            b.x = combine(&b.x, &sc.k1, &sc.k23, &sc.k, h6);
-            let bad = broken(&b.x, b.live);
-            if first.is_none() && bad.any() {
-                first = Some((n, bi * W + first_lane(bad)));
-            }
-        }
-        if first.is_some() {
-            return first;
-        }
-    }
-    None
-}
-
-/// What one agent's controller does at one instant.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Probe {
-    /// Tracking error `e` (eq. 7), body frame, m.
-    pub e: [f64; 2],
-    /// Backstepping error `z` (eq. 10), body frame, m/s.
-    pub z: [f64; 2],
-    /// The commanded input `u` (eq. 13), before any torque saturation.
-    pub u: [f64; 2],
-}
-
-/// Lane `l` of a block's state.
-#[inline]
-pub(crate) fn state_of<const N: usize>(x: &[Lanes<N>; 5], l: usize) -> crate::model::State {
-    crate::model::State {
-        x: x[0].0[l],
-        y: x[1].0[l],
-        theta: x[2].0[l],
-        v: x[3].0[l],
-        omega: x[4].0[l],
-    }
-}
-
-fn unpack(out: &mut Vec<Probe>, e: [V; 2], z: [V; 2], u: [V; 2]) {
-    for l in 0..W {
-        out.push(Probe {
-            e: [e[0].0[l], e[1].0[l]],
-            z: [z[0].0[l], z[1].0[l]],
-            u: [u[0].0[l], u[1].0[l]],
-        });
-    }
-}
-
-/// The star's controllers at the blocks' current state (reference `r`).
-pub(crate) fn star_probe(c: &Consts, blocks: &[Block], r: &Carry, out: &mut Vec<Probe>) {
-    for b in blocks {
-        let o = star_stage(c, b, &b.x, b.x[2].sin_cos(), r, star_ly(c, b, r));
-        unpack(out, o.e, o.z, o.u);
-    }
-}
-
-/// A chain's controllers at the blocks' current state: the first stage, then
-/// the law once more per block with every leader's `v̇` known.
-pub(crate) fn chain_probe(
-    c: &Consts,
-    blocks: &[Block],
-    scratch: &mut [Scratch],
-    r: &Carry,
-    out: &mut Vec<Probe>,
-) {
-    chain_stage(c, blocks, scratch, 0, r);
-    let (mut prev, mut lead_dv) = (Leaders::splat(r), r.dv);
-    for (b, sc) in blocks.iter().zip(scratch.iter()) {
-        let (sin, cos) = b.x[2].sin_cos();
-        let own = Leaders::of(&b.x, sin, cos);
-        let l = own.shifted(&prev);
-        prev = own;
-        let dvl = shift_in(sc.k[3], lead_dv);
-        lead_dv = sc.k[3].0[W - 1];
-        let body = Body {
-            x: b.x[0],
-            y: b.x[1],
-            sin,
-            cos,
-            v: b.x[3],
-            omega: b.x[4],
-        };
-        let hold = hold(c, b, l.vd, l.wd);
-        let p = law_partial(&c.law, &body, l.p, l.dp, &hold, b.ke);
-        let ddp = [l.q[0] + l.g[0] * dvl, l.q[1] + l.g[1] * dvl];
-        let u = law_finish(&c.law, &p, ddp, b.kz, c.variant);
-        unpack(out, p.e, p.z, u);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::control::{Body, law_finish, law_partial};
     use crate::lycomp::{self, FitCoefficients};
     use proptest::prelude::*;
 

@@ -8,14 +8,10 @@ use super::locate::{FieldPath, Locator};
 use super::merge::Merge;
 use super::overrides::Overrides;
 use super::plausible::{self, Part};
-use super::schema::{
-    AgentSection, DriveName, FixesSection, LeaderSpec, ModeName, OdometrySection, ReferenceSection,
-    RobotSection, ScenarioFile,
-};
+use super::schema::{AgentSection, LeaderSpec, ModeName, ReferenceSection, ScenarioFile};
 use super::waypoints::{self, ReadError};
 use super::{DEFAULT_LOG_DT, Run, Scenario};
 use crate::agent::{AgentSpec, Drive};
-use crate::base::{VelocityBase, VelocityRobot};
 use crate::check;
 use crate::control::{Gains, Law, Variant};
 use crate::error::{FormationError, ParamError, ReferenceError, ScenarioError};
@@ -23,11 +19,14 @@ use crate::formation::Leader;
 use crate::guard::Bounds;
 use crate::lycomp::{LyComp, LyDerivatives, Placement};
 use crate::math::whole_ratio;
-use crate::model::RobotParams;
-use crate::odometry::{ErrorModel, FixSchedule, FixSpec, Fusion, OdometrySpec, ZetaModel};
 use crate::plan::{Agents, Plan, SafetySpec, SimConfig, Timing};
 use crate::reference::{Circle, Cubic, Lemniscate, Reference, Waypoints};
 use crate::safety::{Obstacle, SafetyConfig};
+
+mod odometry;
+mod robot;
+
+use robot::Body;
 
 /// `L`, m, when neither the agent nor `[control]` sets it.
 const DEFAULT_L: f64 = 0.05;
@@ -385,276 +384,6 @@ impl Builder<'_> {
         })
     }
 
-    /// A robot by name: a `[robots.NAME]`, else a preset (torque: `agent1`,
-    /// `agent2`; velocity: [`VelocityRobot::PRESETS`]).
-    fn robot(&self, name: &str, path: &FieldPath) -> Result<Body, ScenarioError> {
-        if let Some(r) = self.file.robots.get(name) {
-            return self.robot_section(name, r);
-        }
-        if let Some(p) = RobotParams::preset(name) {
-            return Ok(Body::Torque(p));
-        }
-        VelocityRobot::preset(name)
-            .map(Body::Velocity)
-            .ok_or_else(|| {
-                let mut known: Vec<&str> = RobotParams::PRESETS.iter().map(|(n, _)| *n).collect();
-                known.extend(VelocityRobot::PRESETS.iter().map(|(n, _)| *n));
-                known.extend(self.file.robots.keys().map(String::as_str));
-                self.at.error(
-                    path,
-                    format!("unknown robot `{name}` (known: {})", known.join(", ")),
-                )
-            })
-    }
-
-    fn robot_section(&self, name: &str, r: &RobotSection) -> Result<Body, ScenarioError> {
-        let at = FieldPath::from("robots").key(name);
-        let velocity_preset = r.preset.as_deref().and_then(VelocityRobot::preset);
-        let drive = r.drive.unwrap_or(if velocity_preset.is_some() {
-            DriveName::Velocity
-        } else {
-            DriveName::Torque
-        });
-        let torque_only = [
-            ("mass", r.mass.is_some()),
-            ("linear_friction", r.linear_friction.is_some()),
-            ("inertia", r.inertia.is_some()),
-            ("angular_friction", r.angular_friction.is_some()),
-            ("torque_limit", r.torque_limit.is_some()),
-        ];
-        let velocity_only = [
-            ("tau_v", r.tau_v.is_some()),
-            ("tau_omega", r.tau_omega.is_some()),
-            ("v_max", r.v_max.is_some()),
-            ("omega_max", r.omega_max.is_some()),
-            ("a_max", r.a_max.is_some()),
-            ("alpha_max", r.alpha_max.is_some()),
-            ("accel", r.accel.is_some()),
-        ];
-        let (foreign, why): (&[(&str, bool)], _) = match drive {
-            DriveName::Torque => (
-                &velocity_only,
-                "is a velocity base's field: this robot is torque-driven (set drive = \"velocity\")",
-            ),
-            DriveName::Velocity => (
-                &torque_only,
-                "is a torque-driven robot's field: a velocity base (drive = \"velocity\") runs its own motor loops and takes lags and limits instead",
-            ),
-        };
-        if let Some((key, _)) = foreign.iter().find(|(_, set)| *set) {
-            return Err(self.at.error(&at.key(key), format!("`{key}` {why}")));
-        }
-        if drive == DriveName::Velocity {
-            return self
-                .velocity_section(&at, r, velocity_preset)
-                .map(Body::Velocity);
-        }
-        let base = match &r.preset {
-            Some(p) => Some(RobotParams::preset(p).ok_or_else(|| {
-                self.at.error(
-                    &at.key("preset"),
-                    format!("unknown preset `{p}` (presets: agent1, agent2)"),
-                )
-            })?),
-            None => None,
-        };
-        let field = |v: Option<f64>, from: Option<f64>, key: &str| -> Result<f64, ScenarioError> {
-            v.or(from).ok_or_else(|| {
-                self.at.error(
-                    &at,
-                    format!(
-                        "missing field `{key}` (or start from a preset with `preset = \"agent1\"`)"
-                    ),
-                )
-            })
-        };
-        let params = RobotParams::new(
-            field(r.mass, base.map(|b| b.mass()), "mass")?,
-            field(
-                r.linear_friction,
-                base.map(|b| b.linear_friction()),
-                "linear_friction",
-            )?,
-            field(r.inertia, base.map(|b| b.inertia()), "inertia")?,
-            field(
-                r.angular_friction,
-                base.map(|b| b.angular_friction()),
-                "angular_friction",
-            )?,
-            field(
-                r.half_wheelbase,
-                base.map(|b| b.half_wheelbase()),
-                "half_wheelbase",
-            )?,
-            field(
-                r.wheel_radius,
-                base.map(|b| b.wheel_radius()),
-                "wheel_radius",
-            )?,
-        )
-        .and_then(|p| p.with_torque_limit(r.torque_limit.or(base.and_then(|b| b.torque_limit()))));
-        let params = self.within(&at, params)?;
-        Ok(Body::Torque(params))
-    }
-
-    /// A `[robots.NAME]` with `drive = "velocity"`: a preset's values (or an
-    /// ideal base) overridden field by field; an absent limit is no limit.
-    fn velocity_section(
-        &self,
-        at: &FieldPath,
-        r: &RobotSection,
-        preset: Option<VelocityRobot>,
-    ) -> Result<VelocityRobot, ScenarioError> {
-        let from = match (&r.preset, preset) {
-            (Some(p), None) => {
-                let known: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
-                return Err(self.at.error(
-                    &at.key("preset"),
-                    format!(
-                        "unknown velocity-base preset `{p}` (presets: {})",
-                        known.join(", ")
-                    ),
-                ));
-            }
-            (_, Some(p)) => p,
-            (None, None) => VelocityRobot::IDEAL,
-        };
-        let b = from.base();
-        let robot = VelocityBase::new(
-            r.tau_v.unwrap_or(b.tau_v()),
-            r.tau_omega.unwrap_or(b.tau_omega()),
-            r.v_max.unwrap_or(b.v_max()),
-            r.omega_max.unwrap_or(b.omega_max()),
-            r.a_max.unwrap_or(b.a_max()),
-            r.alpha_max.unwrap_or(b.alpha_max()),
-        )
-        .map(|base| base.with_accel(r.accel.unwrap_or(b.accel())))
-        .and_then(|base| {
-            VelocityRobot::new(
-                base,
-                r.half_wheelbase.unwrap_or(from.half_wheelbase()),
-                r.wheel_radius.unwrap_or(from.wheel_radius()),
-            )
-        });
-        let robot = self.within(at, robot)?;
-        Ok(robot)
-    }
-
-    /// Agent `i`'s odometry: its own `odometry`/`fixes` over the file's, field by
-    /// field; `None` when neither asks for odometry (or `enabled = false`).
-    fn odometry(
-        &self,
-        i: usize,
-        a: &AgentSection,
-        dt: f64,
-        timing: &Timing,
-    ) -> Result<Option<OdometrySpec>, ScenarioError> {
-        let f = self.file;
-        let agent = FieldPath::from("agents").index(i);
-        let odo = Merge::new(
-            a.odometry.as_ref(),
-            f.odometry.as_ref(),
-            agent.key("odometry"),
-            FieldPath::from("odometry"),
-        );
-        let fix = Merge::new(
-            a.fixes.as_ref(),
-            f.fixes.as_ref(),
-            agent.key("fixes"),
-            FieldPath::from("fixes"),
-        );
-        let odometry_off = odo.get(|s| s.enabled, "enabled").filter(|(e, _)| !e);
-        let fixes_on = fix.any() && fix.get(|s| s.enabled, "enabled").is_none_or(|(e, _)| e);
-        if let Some((_, path)) = odometry_off {
-            // Global fixes simply do not apply; the agent's own would contradict.
-            if fixes_on && a.fixes.is_some() {
-                return Err(self.at.error(
-                    &path,
-                    "fixes correct an odometry estimate, but this agent's odometry is disabled",
-                ));
-            }
-            return Ok(None);
-        }
-        if !odo.any() && !fixes_on {
-            return Ok(None);
-        }
-        let period = match odo.get(|s| s.period, "period") {
-            None => match timing {
-                Timing::Sampled { period } => *period,
-                Timing::Continuous => dt,
-            },
-            Some((p, path)) => {
-                let whole = check::multiple_of("period", p, dt, &format!("dt = {dt} s"));
-                self.at(&path, whole)?;
-                p
-            }
-        };
-        let num = |get: fn(&OdometrySection) -> Option<f64>, key: &str, default: f64| {
-            odo.get(get, key).map_or(default, |(v, _)| v)
-        };
-        let errors = ErrorModel {
-            zeta: num(|s| s.zeta, "zeta", 0.0),
-            zeta_model: odo
-                .get(|s| s.zeta_model, "zeta_model")
-                .map_or(ZetaModel::Wheels, |(m, _)| m),
-            wheel_diameter_ratio: num(|s| s.wheel_diameter_ratio, "wheel_diameter_ratio", 1.0),
-            wheelbase_ratio: num(|s| s.wheelbase_ratio, "wheelbase_ratio", 1.0),
-            slip: num(|s| s.slip, "slip", 0.0),
-            ticks_per_rev: odo
-                .get(|s| s.ticks_per_rev, "ticks_per_rev")
-                .map(|(v, _)| v),
-            speed_noise: num(|s| s.speed_noise, "speed_noise", 0.0),
-            turn_rate_noise: num(|s| s.turn_rate_noise, "turn_rate_noise", 0.0),
-        };
-        errors
-            .validate()
-            .map_err(|e| self.at.param(&odo.path_of(e.field), &e))?;
-        let fixes = if fixes_on {
-            Some(self.fixes(&fix, period)?)
-        } else {
-            None
-        };
-        let spec = OdometrySpec::new(period, errors, fixes);
-        Ok(Some(self.at(&odo.table_path(), spec)?))
-    }
-
-    /// The fixes that apply to one agent, sampled every `period` seconds.
-    fn fixes(&self, fix: &Merge<'_, FixesSection>, period: f64) -> Result<FixSpec, ScenarioError> {
-        let schedule = match (
-            fix.get(|s| s.every_steps, "every_steps"),
-            fix.get(|s| s.period, "period"),
-        ) {
-            (Some(_), Some((_, path))) => {
-                return Err(self
-                    .at
-                    .error(&path, "give either every_steps or period, not both"));
-            }
-            (None, None) => {
-                return Err(self.at.error(
-                    &fix.table_path(),
-                    "missing field `every_steps` (samples between fixes) or `period` (s)",
-                ));
-            }
-            (Some((n, _)), None) => FixSchedule::EverySamples(n),
-            (None, Some((p, _))) => FixSchedule::Period(p),
-        };
-        let value =
-            |get: fn(&FixesSection) -> Option<f64>, key: &str| fix.get(get, key).map(|(v, _)| v);
-        let spec = FixSpec {
-            schedule,
-            position_noise: value(|s| s.position_noise, "position_noise").unwrap_or(0.0),
-            heading_noise: value(|s| s.heading_noise, "heading_noise"),
-            latency: value(|s| s.latency, "latency").unwrap_or(0.0),
-            fusion: fix
-                .get(|s| s.fusion, "fusion")
-                .map_or(Fusion::Reset, |(f, _)| f),
-        };
-        spec.validate()
-            .and_then(|()| spec.samples_between(period))
-            .map_err(|e| self.at.param(&fix.path_of(e.field), &e))?;
-        Ok(spec)
-    }
-
     fn agent(&self, i: usize, a: &AgentSection, dt: f64) -> Result<AgentSpec, ScenarioError> {
         let at = FieldPath::from("agents").index(i);
         let n = self.file.agents.len();
@@ -753,11 +482,4 @@ impl Builder<'_> {
         let spec = spec.and_then(|s| s.with_max_accel(a.max_accel));
         self.within(&at, spec)
     }
-}
-
-/// A robot's body as the scenario defines it, before its law is chosen.
-#[derive(Debug, Clone, Copy)]
-enum Body {
-    Torque(RobotParams),
-    Velocity(VelocityRobot),
 }

@@ -350,35 +350,18 @@ impl Simulation {
         let held = (self.hold_every > 0).then_some(&self.held[..]);
         let sys = &self.sys;
         let odo = &self.odometers[..];
-        for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k1)) {
-            *s = x.add_scaled(k, 0.5 * dt);
-        }
+        // The three inner stages: `x + h k` from the previous stage's slope,
+        // then the slope there.
+        let eval = |t: f64, x: &[State], dx: &mut [State], sp: &mut [[f64; 4]]| {
+            sys.evaluate(t, x, held, odo, None, dx, sp);
+        };
         let [_, sp2, sp3, sp4] = &mut self.speeds;
-        sys.evaluate(
-            t + 0.5 * dt,
-            &self.stage,
-            held,
-            odo,
-            None,
-            &mut self.k2,
-            sp2,
-        );
-        for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k2)) {
-            *s = x.add_scaled(k, 0.5 * dt);
-        }
-        sys.evaluate(
-            t + 0.5 * dt,
-            &self.stage,
-            held,
-            odo,
-            None,
-            &mut self.k3,
-            sp3,
-        );
-        for (s, (x, k)) in self.stage.iter_mut().zip(self.state.iter().zip(&self.k3)) {
-            *s = x.add_scaled(k, dt);
-        }
-        sys.evaluate(t + dt, &self.stage, held, odo, None, &mut self.k4, sp4);
+        add_scaled(&mut self.stage, &self.state, &self.k1, 0.5 * dt);
+        eval(t + 0.5 * dt, &self.stage, &mut self.k2, sp2);
+        add_scaled(&mut self.stage, &self.state, &self.k2, 0.5 * dt);
+        eval(t + 0.5 * dt, &self.stage, &mut self.k3, sp3);
+        add_scaled(&mut self.stage, &self.state, &self.k3, dt);
+        eval(t + dt, &self.stage, &mut self.k4, sp4);
         let h6 = dt / 6.0;
         for (i, x) in self.state.iter_mut().enumerate() {
             let k = [&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]];
@@ -453,5 +436,13 @@ impl Simulation {
             self.step()?;
         }
         observer.finish().map_err(failed)
+    }
+}
+
+/// `out = x + h k`, agent by agent (an RK4 stage's state).
+#[inline]
+fn add_scaled(out: &mut [State], x: &[State], k: &[State], h: f64) {
+    for (s, (x, k)) in out.iter_mut().zip(x.iter().zip(k)) {
+        *s = x.add_scaled(k, h);
     }
 }

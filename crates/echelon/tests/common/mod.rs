@@ -78,3 +78,31 @@ pub fn norm(v: [f64; 2]) -> f64 {
 pub fn relative(a: f64, b: f64) -> f64 {
     (a - b).abs() / a.abs().max(b.abs()).max(1.0)
 }
+
+/// The five state quantities of the batch engine's state `e` and the scalar
+/// simulator's `s`, paired for [`assert_engine_agrees`].
+pub fn state_pairs(e: &State, s: &State) -> [(f64, f64); 5] {
+    [
+        (e.x, s.x),
+        (e.y, s.y),
+        (e.theta, s.theta),
+        (e.v, s.v),
+        (e.omega, s.omega),
+    ]
+}
+
+/// Asserts that every `(engine, scalar)` pair of agent `i` (from 0) at time
+/// `t` agrees to a relative 10⁻⁹ ([`relative`]); returns the largest relative
+/// difference.
+pub fn assert_engine_agrees(pairs: impl IntoIterator<Item = (f64, f64)>, i: usize, t: f64) -> f64 {
+    let mut worst = 0.0f64;
+    for (k, (a, b)) in pairs.into_iter().enumerate() {
+        assert!(
+            relative(a, b) <= 1e-9,
+            "agent {} quantity {k} at t = {t}: engine {a} vs scalar {b}",
+            i + 1
+        );
+        worst = worst.max(relative(a, b));
+    }
+    worst
+}

@@ -1,0 +1,360 @@
+//! The `echelon fleet` subcommands' arguments (clap).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand, ValueEnum};
+use echelon::scenario::{Scenario, is_valid_fleet_name};
+use echelon_fleet::faults::FaultSpec;
+use echelon_fleet::net::{self, Mode, NetOptions, Secure};
+
+use crate::cmd::{non_negative, parse_number, positive};
+
+/// `echelon fleet` subcommands.
+#[derive(Debug, Subcommand)]
+pub(crate) enum FleetCommand {
+    /// Publish the scenario's reference (the virtual leader).
+    Leader(LeaderArgs),
+    /// Run one agent of the scenario: control law on a simulated plant paced in real time, or on a ROS 2 robot (--ros2).
+    Robot(RobotArgs),
+    /// A simulated ROS 2 base (--ros2): cmd_vel in, odom out over rmw_zenoh, as diff_drive_controller on a robot.
+    Base(BaseArgs),
+    /// Drive one ROS 2 robot's cmd_vel with steps and chirps within its limits (--ros2) and record cmd_vel and odom to a bag for `echelon identify`.
+    Excite(ExciteArgs),
+    /// Record everything to DIR/fleet.mcap and DIR/trajectory.csv.
+    Collector(CollectorArgs),
+    /// A Zenoh router (the engine of zenohd) for the fleet's processes to link to; runs until SIGINT/SIGTERM.
+    Router(RouterArgs),
+    /// Start a router, a leader, one process per robot and a collector on loopback; stop them; summarise.
+    #[command(allow_negative_numbers = true)]
+    Up(UpArgs),
+    /// Make a development CA and certificates for the secure mode.
+    Certs(CertsArgs),
+    /// Run `fleet up` for several fleet sizes on loopback at time scale 1 and tabulate startup, CPU, messages/s, latency, losses and final error.
+    #[command(allow_negative_numbers = true)]
+    Bench(BenchArgs),
+}
+
+/// Zenoh mode of a fleet process.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub(super) enum ModeArg {
+    /// Links to every endpoint it connects to (and, by gossip, to their peers).
+    Peer,
+    /// Exactly one link, to a router (`fleet router`), which it reconnects to if lost.
+    Client,
+}
+
+/// How a process joins the fleet.
+#[derive(Debug, Args)]
+pub(crate) struct NetArgs {
+    /// Zenoh mode [default: peer, or the --zenoh-config file's].
+    #[arg(long, value_enum)]
+    pub(super) mode: Option<ModeArg>,
+    /// Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable) [default: tcp/127.0.0.1:0, quic/127.0.0.1:0 in secure mode].
+    #[arg(long, value_name = "ENDPOINT")]
+    pub(super) listen: Vec<String>,
+    /// Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub(super) connect: Vec<String>,
+    /// A Zenoh configuration file (JSON5) to start from instead of the default (peer, no multicast).
+    #[arg(long, value_name = "FILE")]
+    pub(super) zenoh_config: Option<PathBuf>,
+    /// Fleet name, the second chunk of every key [default: the scenario's].
+    #[arg(long, value_name = "NAME")]
+    pub(super) fleet: Option<String>,
+    /// Secure mode: mutual TLS and access control with the certificates in DIR (`echelon fleet certs`).
+    #[arg(long, value_name = "DIR")]
+    pub(super) secure: Option<PathBuf>,
+    /// Certificate identity in secure mode [default: leader, robot-K, base-K, collector or router].
+    #[arg(long, value_name = "ID", requires = "secure")]
+    pub(super) identity: Option<String>,
+    /// Number of robot identities the access control knows [default: the scenario's agents].
+    #[arg(long, value_name = "N", requires = "secure")]
+    pub(super) robots: Option<u32>,
+}
+
+impl NetArgs {
+    pub(super) fn options(
+        &self,
+        default_identity: &str,
+        robots: Option<u32>,
+        scenario: Option<&Scenario>,
+    ) -> Result<NetOptions> {
+        if let Some(name) = &self.fleet
+            && !is_valid_fleet_name(name)
+        {
+            bail!("--fleet `{name}`: letters, digits, '-', '_' and '.' only");
+        }
+        let secure = match &self.secure {
+            None => None,
+            Some(dir) => Some(Secure {
+                dir: dir.clone(),
+                identity: self
+                    .identity
+                    .clone()
+                    .unwrap_or_else(|| default_identity.to_owned()),
+                robots: self
+                    .robots
+                    .or(robots)
+                    .context("--secure needs --robots N (or a scenario) for the access control")?,
+                ros2: match scenario {
+                    Some(s) => net::ros_acl(&s.fleet()?.ros2),
+                    None => Vec::new(),
+                },
+            }),
+        };
+        Ok(NetOptions {
+            mode: self.mode.map(|m| match m {
+                ModeArg::Peer => Mode::Peer,
+                ModeArg::Client => Mode::Client,
+            }),
+            listen: self.listen.clone(),
+            connect: self.connect.clone(),
+            zenoh_config: self.zenoh_config.clone(),
+            secure,
+        })
+    }
+}
+
+/// Fault injection on what robots receive.
+#[derive(Debug, Args)]
+pub(crate) struct FaultArgs {
+    /// Drop each received message with probability P (0–1).
+    #[arg(long, value_name = "P", value_parser = probability, default_value_t = 0.0)]
+    pub(super) loss: f64,
+    /// Delay every received message by MS milliseconds of fleet time.
+    #[arg(long, value_name = "MS", value_parser = non_negative, default_value_t = 0.0)]
+    pub(super) delay: f64,
+    /// Drop everything received in [START, START+LEN) s of fleet time.
+    #[arg(long, value_name = "START:LEN", value_parser = outage)]
+    pub(super) outage: Option<(f64, f64)>,
+    /// Seed of the drop pattern.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub(super) seed: u64,
+}
+
+impl FaultArgs {
+    pub(super) fn spec(&self) -> FaultSpec {
+        FaultSpec {
+            loss: self.loss,
+            delay: self.delay * 1e-3,
+            outage: self.outage,
+            seed: self.seed,
+        }
+    }
+}
+
+fn probability(s: &str) -> Result<f64, String> {
+    let v = parse_number(s)?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{s} must be between 0 and 1"))
+    }
+}
+
+fn outage(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}` is not START:LEN (seconds)"))?;
+    Ok((non_negative(a)?, positive(b)?))
+}
+
+/// `echelon fleet leader`.
+#[derive(Debug, Args)]
+pub(crate) struct LeaderArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    pub(super) scenario: String,
+    /// Publication rate, Hz [default: the scenario's [fleet] reference_rate, else 50].
+    #[arg(long, value_name = "HZ", value_parser = positive)]
+    pub(super) rate: Option<f64>,
+    /// Fleet seconds to publish [default: the scenario's sim.duration].
+    #[arg(long, value_name = "S", value_parser = positive)]
+    pub(super) duration: Option<f64>,
+    /// Run the clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    pub(super) time_scale: f64,
+    /// Wait for this process (collector, robot/K) before starting the clock (repeatable).
+    #[arg(long, value_name = "ROLE")]
+    pub(super) wait_for: Vec<String>,
+    /// Longest wait for --wait-for, s of real time.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    pub(super) wait_timeout: f64,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
+/// `echelon fleet robot`.
+#[derive(Debug, Args)]
+pub(crate) struct RobotArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    pub(super) scenario: String,
+    /// Which agent of the scenario, from 1.
+    #[arg(long, value_name = "K")]
+    pub(super) agent: u32,
+    /// Stop at this fleet time, s [default: run until SIGINT/SIGTERM].
+    #[arg(long, value_name = "S", value_parser = positive)]
+    pub(super) duration: Option<f64>,
+    /// Run the clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    pub(super) time_scale: f64,
+    /// Drive the agent's ROS 2 robot ([fleet.ros2]): odom in, cmd_vel out over rmw_zenoh.
+    #[arg(long)]
+    pub(super) ros2: bool,
+    /// With --ros2: the robot is `fleet base`'s simulation, so --time-scale
+    /// may differ from 1 (a real robot runs in real time).
+    #[arg(long, requires = "ros2")]
+    pub(super) simulated_base: bool,
+    #[command(flatten)]
+    pub(super) faults: FaultArgs,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
+/// `echelon fleet base`.
+#[derive(Debug, Args)]
+pub(crate) struct BaseArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    pub(super) scenario: String,
+    /// Simulate a ROS 2 base (the only kind so far; required).
+    #[arg(long)]
+    pub(super) ros2: bool,
+    /// Which agent's base, from 1.
+    #[arg(long, value_name = "K")]
+    pub(super) agent: u32,
+    /// Stop after this many (scaled) seconds [default: run until SIGINT/SIGTERM].
+    #[arg(long, value_name = "S", value_parser = positive)]
+    pub(super) duration: Option<f64>,
+    /// Run the clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    pub(super) time_scale: f64,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
+/// `echelon fleet excite`.
+#[derive(Debug, Args)]
+pub(crate) struct ExciteArgs {
+    /// A built-in scenario name or a path to a .toml file (the agent's velocity base and [fleet.ros2] link).
+    pub(super) scenario: String,
+    /// Drive a ROS 2 robot (the only kind; required).
+    #[arg(long)]
+    pub(super) ros2: bool,
+    /// Which agent's robot, from 1.
+    #[arg(long, value_name = "K")]
+    pub(super) agent: u32,
+    /// The MCAP bag to write (cmd_vel and odom as ROS 2 channels).
+    #[arg(long, value_name = "FILE")]
+    pub(super) out: PathBuf,
+    /// Length of the manoeuvre, s.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    pub(super) duration: f64,
+    /// Stop with zero when odometry puts the robot farther than this from its start, m.
+    #[arg(long, value_name = "M", value_parser = positive, default_value_t = 1.0)]
+    pub(super) radius: f64,
+    /// Command rate, Hz.
+    #[arg(long, value_name = "HZ", value_parser = positive, default_value_t = 20.0)]
+    pub(super) rate: f64,
+    /// Seconds to wait for the first odometry.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 10.0)]
+    pub(super) wait: f64,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
+/// `echelon fleet collector`.
+#[derive(Debug, Args)]
+pub(crate) struct CollectorArgs {
+    /// The scenario, for the fleet name and robot count (or give --fleet).
+    pub(super) scenario: Option<String>,
+    /// Output directory.
+    #[arg(long, value_name = "DIR")]
+    pub(super) out: PathBuf,
+    /// Also record every agent's ROS 2 cmd_vel and odom ([fleet.ros2]) as ROS 2 channels.
+    #[arg(long, requires = "scenario")]
+    pub(super) ros2: bool,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
+/// `echelon fleet router`.
+#[derive(Debug, Args)]
+pub(crate) struct RouterArgs {
+    /// The scenario, for the access control's robot count and ROS 2 keys in secure mode (or give --robots).
+    pub(super) scenario: Option<String>,
+    /// `--listen` its endpoints, `--connect` other sites' routers (retried until they answer).
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
+/// How `fleet up` links its processes.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub(super) enum TopologyArg {
+    /// A router per site; every process a Zenoh client with one link to its site's router.
+    Router,
+    /// Every process a peer linked to every other (N² links; a handful of robots).
+    Mesh,
+}
+
+/// `echelon fleet up`.
+#[derive(Debug, Args)]
+pub(crate) struct UpArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    pub(super) scenario: String,
+    /// Output directory.
+    #[arg(long, value_name = "DIR")]
+    pub(super) out: PathBuf,
+    /// Fleet seconds to run [default: the scenario's sim.duration].
+    #[arg(long, value_name = "S", value_parser = positive)]
+    pub(super) duration: Option<f64>,
+    /// Run every clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    pub(super) time_scale: f64,
+    #[command(flatten)]
+    pub(super) faults: FaultArgs,
+    /// Secure mode with the certificates in DIR (`echelon fleet certs DIR`).
+    #[arg(long, value_name = "DIR")]
+    pub(super) secure: Option<PathBuf>,
+    /// Robots drive simulated ROS 2 bases (one `fleet base --ros2` each), all robot↔base traffic in ROS 2's format.
+    #[arg(long)]
+    pub(super) ros2: bool,
+    /// How the processes link.
+    #[arg(long, value_enum, default_value = "router")]
+    pub(super) topology: TopologyArg,
+    /// Router topology: S routers linked to each other (sites on loopback), robots spread over them.
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    pub(super) sites: usize,
+    /// Print nothing but errors.
+    #[arg(long, short)]
+    pub(super) quiet: bool,
+}
+
+/// `echelon fleet bench`.
+#[derive(Debug, Args)]
+pub(crate) struct BenchArgs {
+    /// Output directory: DIR/nNNN/ per size, DIR/bench.json and DIR/bench.md.
+    #[arg(long, value_name = "DIR")]
+    pub(super) out: PathBuf,
+    /// Fleet sizes to run, in order (robots behind a circle, generated).
+    #[arg(long, value_name = "N,…", value_delimiter = ',', default_values_t = [10, 50, 100, 200])]
+    pub(super) robots: Vec<usize>,
+    /// Fleet seconds each size runs (real seconds: time scale 1).
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    pub(super) duration: f64,
+    /// Print only the table.
+    #[arg(long, short)]
+    pub(super) quiet: bool,
+}
+
+/// `echelon fleet certs`.
+#[derive(Debug, Args)]
+pub(crate) struct CertsArgs {
+    /// Output directory.
+    pub(super) dir: PathBuf,
+    /// Number of robot identities (robot-1 … robot-N).
+    #[arg(long, value_name = "N", default_value_t = 4)]
+    pub(super) robots: u32,
+    /// Another host name or IP address the fleet's processes listen on (repeatable).
+    #[arg(long, value_name = "HOST")]
+    pub(super) host: Vec<String>,
+}

@@ -1,0 +1,273 @@
+//! `echelon fleet up` and `fleet bench`: the whole fleet on loopback, and
+//! the summary they print.
+
+use anyhow::{Context, Result, bail};
+use echelon_fleet::bench::{self, BenchOptions, Progress};
+use echelon_fleet::collector::MCAP_FILE;
+use echelon_fleet::latency::LatencyReport;
+use echelon_fleet::up::{self, Topology, UP_SUMMARY_FILE, UpOptions};
+use echelon_fleet::{StopFlag, collector::SUMMARY_FILE};
+
+use crate::cmd::out::outln;
+
+use super::{BenchArgs, TopologyArg, UpArgs};
+
+pub(super) fn bench_cmd(a: BenchArgs) -> Result<()> {
+    if a.robots.contains(&0) {
+        bail!("--robots: every fleet size must be ≥ 1");
+    }
+    let stop = StopFlag::on_signals()?;
+    let exe = std::env::current_exe().context("locating the echelon binary")?;
+    let quiet = a.quiet;
+    let duration = a.duration;
+    let report = bench::run(
+        &BenchOptions {
+            robots: a.robots,
+            duration,
+            out: a.out.clone(),
+            exe,
+        },
+        &stop,
+        |p| {
+            if quiet {
+                return;
+            }
+            match p {
+                Progress::Start { robots, index, of } => eprintln!(
+                    "[{index}/{of}] {robots} robots: fleet up for {duration} s of fleet time…"
+                ),
+                Progress::Done(row) => match &row.error {
+                    Some(e) => eprintln!("      failed: {e}"),
+                    None => eprintln!(
+                        "      done in {:.1} s ({}/{} converged)",
+                        row.wall, row.converged, row.robots
+                    ),
+                },
+            }
+        },
+    )?;
+    outln!("{}", bench::markdown(&report).trim_end())?;
+    if !quiet {
+        outln!(
+            "wrote {}, {}",
+            a.out.join(bench::BENCH_JSON).display(),
+            a.out.join(bench::BENCH_MD).display()
+        )?;
+    }
+    if report.rows.iter().any(|r| r.error.is_some()) {
+        bail!("some fleet sizes failed (see the table)");
+    }
+    Ok(())
+}
+
+pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
+    let stop = StopFlag::on_signals()?;
+    let exe = std::env::current_exe().context("locating the echelon binary")?;
+    let report = up::run(
+        &UpOptions {
+            scenario: a.scenario,
+            out: a.out.clone(),
+            duration: a.duration,
+            time_scale: a.time_scale,
+            faults: a.faults.spec(),
+            secure: a.secure,
+            exe,
+            ros2: a.ros2,
+            topology: match a.topology {
+                TopologyArg::Router => Topology::Router,
+                TopologyArg::Mesh => Topology::Mesh,
+            },
+            sites: a.sites,
+        },
+        &stop,
+    )?;
+    if a.quiet {
+        return Ok(());
+    }
+    outln!(
+        "{}: fleet \"{}\", {} robot{}, {} s of fleet time at ×{} in {:.1} s",
+        report.scenario,
+        report.fleet,
+        report.robots.len(),
+        if report.robots.len() == 1 { "" } else { "s" },
+        report.duration,
+        report.time_scale,
+        report.wall
+    )?;
+    if let (Some(startup), Some(run)) = (report.startup, report.run) {
+        outln!("  startup (all joined) {startup:.2} s, then run {run:.2} s")?;
+    }
+    match report.topology {
+        Topology::Router => outln!(
+            "  through {} router{} at {}",
+            report.routers.len(),
+            if report.routers.len() == 1 { "" } else { "s" },
+            report.router_endpoints.join(", ")
+        )?,
+        Topology::Mesh => outln!("  peer mesh (every process linked to every other)")?,
+    }
+    for (s, r) in report.routers.iter().enumerate() {
+        outln!(
+            "  router {}: {} processes at most at once, {} in all, up {:.1} s",
+            s + 1,
+            r.members_peak,
+            r.members_joined,
+            r.uptime
+        )?;
+    }
+    outln!(
+        "  leader: {} reference samples published",
+        report.leader.published
+    )?;
+    outln!(
+        "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8} {:>8}",
+        "agent",
+        "final ‖e‖",
+        "received",
+        "accepted",
+        "loss",
+        "outage",
+        "malform",
+        "wrong-ver",
+        "stale",
+        "reordered",
+        "losses",
+        "p50 ms",
+        "p99 ms"
+    )?;
+    for r in &report.robots {
+        let c = &r.counters;
+        outln!(
+            "  {:<8} {:>9.2e} m {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8.3} {:>8.3}",
+            format!("robot {}", r.agent),
+            r.final_error,
+            c.received,
+            c.accepted,
+            c.injected_loss,
+            c.injected_outage,
+            c.malformed,
+            c.wrong_version,
+            c.stale,
+            c.reordered,
+            c.link_losses,
+            r.latency.p50 * 1e3,
+            r.latency.p99 * 1e3,
+        )?;
+    }
+    for (b, r) in report.bases.iter().zip(&report.robots) {
+        let c = &b.counters;
+        let refused = c.cmd_wrong_type + c.cmd_malformed + c.cmd_non_finite + c.cmd_no_attachment;
+        let ros = r.ros2.unwrap_or_default();
+        let odom_refused =
+            ros.odom_wrong_type + ros.odom_malformed + ros.odom_non_finite + ros.odom_wrong_frames;
+        outln!(
+            "  ROS 2 base {}: {} cmd_vel received, {} refused, {} odom published; robot: {} odom accepted, {} refused, {} commands saturated",
+            b.agent,
+            c.cmd_received,
+            refused,
+            c.odom_published,
+            ros.odom_accepted,
+            odom_refused,
+            ros.cmd_saturated,
+        )?;
+    }
+    if let Some(t) = &report.safety {
+        for r in &report.robots {
+            let s = r.safety.unwrap_or_default();
+            let d = s.min_distance;
+            outln!(
+                "  safety, robot {}: filter acted {} of {} steps, {} infeasible (braked), {} deadlock breaks, {} stale neighbours ({} steps braked), nearest point {}",
+                r.agent,
+                s.active,
+                s.steps,
+                s.infeasible,
+                s.deadlock_breaks,
+                s.stale_neighbours,
+                s.stale_brakes,
+                d.map_or("none in range".to_owned(), |d| format!("{d:.4} m")),
+            )?;
+        }
+        outln!(
+            "  safety, fleet: acted {} steps, {} infeasible, {} deadlock breaks, {} stale neighbours, nearest points {}",
+            t.active,
+            t.infeasible,
+            t.deadlock_breaks,
+            t.stale_neighbours,
+            t.min_distance
+                .map_or("none in range".to_owned(), |d| format!("{d:.4} m")),
+        )?;
+        if !report.deadlocked_at_end.is_empty() {
+            outln!(
+                "  safety: robots {:?} ended away from their slots, held by their filters (deadlocked)",
+                report.deadlocked_at_end
+            )?;
+        }
+    }
+    let col = &report.collector;
+    outln!(
+        "  collector: {} messages received, {} logged, {} rejected",
+        col.received,
+        col.logged,
+        col.rejected.values().sum::<u64>()
+    )?;
+    let lat = |l: &LatencyReport| {
+        format!(
+            "{} samples, p50 {:.3} ms, p95 {:.3} ms, p99 {:.3} ms, max {:.3} ms",
+            l.count,
+            l.p50 * 1e3,
+            l.p95 * 1e3,
+            l.p99 * 1e3,
+            l.max * 1e3
+        )
+    };
+    let worst = report
+        .latency
+        .worst_robot
+        .as_ref()
+        .map_or(String::new(), |w| {
+            format!(
+                " (worst: robot {}, p99 {:.3} ms)",
+                w.agent,
+                w.latency.p99 * 1e3
+            )
+        });
+    outln!(
+        "  latency, leader → robot: {}{worst}",
+        lat(&report.latency.robots)
+    )?;
+    outln!("  latency, → collector: {}", lat(&report.latency.collector))?;
+    let mb = |b: u64| b as f64 / (1u64 << 20) as f64;
+    let c = &report.cost;
+    outln!(
+        "  CPU: robots {:.2} s ({:.3} s per robot, max {:.3}), leader {:.2} s, collector {:.2} s, total {:.2} s",
+        c.robots.cpu,
+        c.robots.cpu_mean,
+        c.robots.cpu_max,
+        c.leader.cpu,
+        c.collector.cpu,
+        c.total.cpu
+    )?;
+    outln!(
+        "  peak RSS: robot {:.1} MiB (mean; max {:.1}), leader {:.1} MiB, collector {:.1} MiB, sum {:.1} MiB",
+        mb(c.robots.max_rss_mean),
+        mb(c.robots.max_rss_max),
+        mb(c.leader.max_rss_max),
+        mb(c.collector.max_rss_max),
+        mb(c.total.max_rss_sum)
+    )?;
+    if let Some(r) = &c.routers {
+        outln!(
+            "  routers: CPU {:.2} s, peak RSS {:.1} MiB (max)",
+            r.cpu,
+            mb(r.max_rss_max)
+        )?;
+    }
+    outln!(
+        "wrote {}, {}, {}, {}",
+        a.out.join(MCAP_FILE).display(),
+        a.out.join(echelon::output::TRAJECTORY_FILE).display(),
+        a.out.join(SUMMARY_FILE).display(),
+        a.out.join(UP_SUMMARY_FILE).display()
+    )?;
+    Ok(())
+}

@@ -1,0 +1,139 @@
+//! What `fleet up` reports ([`UpReport`]): per process, per router, the
+//! collector's latency and the fleet's cost.
+
+use serde::Serialize;
+
+use crate::FleetError;
+use crate::collector::CollectorReport;
+use crate::cost::{ProcessCost, RoleCost};
+use crate::latency::FleetLatency;
+use crate::leader::LeaderReport;
+use crate::robot::RobotReport;
+use crate::ros2::base::BaseReport;
+use crate::router::RouterReport;
+
+use super::{Proc, Topology};
+
+/// Every process's final report.
+#[derive(Debug, Clone, Serialize)]
+pub struct UpReport {
+    /// Scenario name.
+    pub scenario: String,
+    /// Fleet name.
+    pub fleet: String,
+    /// Fleet time run, s.
+    pub duration: f64,
+    /// Time scale.
+    pub time_scale: f64,
+    /// Wall-clock time, s.
+    pub wall: f64,
+    /// Startup: from the first process started until every process had
+    /// joined and the leader started the clock, s (absent if the leader did
+    /// not say when).
+    pub startup: Option<f64>,
+    /// The rest of `wall`: the run and the wind-down, s.
+    pub run: Option<f64>,
+    /// What the processes cost (CPU, peak memory), per process and per role.
+    pub cost: UpCost,
+    /// Delays measured by the robots (merged, and the worst robot) and the
+    /// collector.
+    pub latency: FleetLatency,
+    /// With `[safety]`: the robots' safety counters summed (the smallest
+    /// `min_distance`), each robot's under `robots[k].safety`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safety: Option<crate::robot::SafetyCounts>,
+    /// Robots (agent numbers) their filter kept from their slot at the end
+    /// (each robot's `deadlocked_at_end`).
+    pub deadlocked_at_end: Vec<u32>,
+    /// The leader's report.
+    pub leader: LeaderReport,
+    /// Each robot's report, agent 1 first.
+    pub robots: Vec<RobotReport>,
+    /// The collector's report.
+    pub collector: CollectorReport,
+    /// With `--ros2`: each simulated base's report.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub bases: Vec<BaseReport>,
+    /// How the processes were linked.
+    pub topology: Topology,
+    /// Router topology: each router's endpoint, site 1 first.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub router_endpoints: Vec<String>,
+    /// Router topology: the roles linked to each router, site 1 first.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sites: Vec<Vec<String>>,
+    /// Router topology: each router's report, site 1 first.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub routers: Vec<RouterReport>,
+}
+
+/// CPU and peak memory of every process of `fleet up` ([`crate::cost`]).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct UpCost {
+    /// The leader.
+    pub leader: RoleCost,
+    /// The collector.
+    pub collector: RoleCost,
+    /// The robots (`cpu_mean`: CPU seconds per robot).
+    pub robots: RoleCost,
+    /// With `--ros2`: the simulated bases.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bases: Option<RoleCost>,
+    /// Router topology: the routers.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub routers: Option<RoleCost>,
+    /// Every process.
+    pub total: RoleCost,
+    /// Each process, in start order.
+    pub processes: Vec<ProcessCost>,
+}
+
+/// The cost of every process, per role and in all.
+pub(super) fn up_cost(
+    leader: &Proc,
+    collector: &Proc,
+    robots: &[Proc],
+    bases: &[Proc],
+    routers: &[Proc],
+) -> UpCost {
+    let of = |procs: &[Proc]| procs.iter().map(Proc::cost).collect::<Vec<_>>();
+    let (leader, collector) = (vec![leader.cost()], vec![collector.cost()]);
+    let (robots, bases, routers) = (of(robots), of(bases), of(routers));
+    let processes: Vec<ProcessCost> = routers
+        .iter()
+        .chain(&collector)
+        .chain(&bases)
+        .chain(&robots)
+        .chain(&leader)
+        .cloned()
+        .collect();
+    UpCost {
+        leader: RoleCost::of(&leader),
+        collector: RoleCost::of(&collector),
+        robots: RoleCost::of(&robots),
+        bases: (!bases.is_empty()).then(|| RoleCost::of(&bases)),
+        routers: (!routers.is_empty()).then(|| RoleCost::of(&routers)),
+        total: RoleCost::of(&processes),
+        processes,
+    }
+}
+
+/// A process's report read back as its role's type: an error naming the
+/// process when it printed none or one that does not parse (a renamed or
+/// missing field is refused, never read as 0).
+pub(super) fn report<T: serde::de::DeserializeOwned>(p: &Proc) -> Result<T, FleetError> {
+    let value = p.report.clone().ok_or_else(|| {
+        FleetError::Child(format!(
+            "{} printed no report ({})",
+            p.role,
+            p.log.display()
+        ))
+    })?;
+    serde_json::from_value(value).map_err(|e| {
+        FleetError::Child(format!(
+            "{} printed a report that does not parse as its role's: {e} ({})",
+            p.role,
+            p.log.display()
+        ))
+    })
+}

@@ -1,0 +1,344 @@
+//! The [`BatchEngine`] driver over any [`Kernel`]: the tile loop with the
+//! reference filled once per tile, a star's blocks over the pool, a chain
+//! segment by segment; and packing the members into blocks of lanes.
+
+use pulp::Arch;
+use rayon::prelude::*;
+
+use crate::error::Breach;
+use crate::error::SimError;
+use crate::guard::Bounds;
+use crate::lanes::{Lanes, Mask};
+use crate::lycomp::LyComp;
+use crate::model::State;
+use crate::reference::{Order, Reference, Trajectory};
+
+use super::kernel::{Block, Carry, V, W};
+use super::{BatchEngine, EngineError, Kernel, Member, SEGMENT, TILE, Topology, chain, star};
+
+impl<K: Kernel> BatchEngine<K> {
+    /// An engine at step 0 with its work space.
+    pub(super) fn assemble(
+        consts: K::Consts,
+        topology: Topology,
+        reference: Reference,
+        blocks: Vec<K::Block>,
+        n: usize,
+    ) -> BatchEngine<K> {
+        let chain = topology == Topology::Chain;
+        let scratch = match chain {
+            true => vec![K::Scratch::default(); blocks.len().min(2 * K::SEGMENT)],
+            false => Vec::new(),
+        };
+        BatchEngine {
+            consts,
+            topology,
+            reference,
+            n,
+            step: 0,
+            blocks,
+            tiles: [K::tile(TILE), K::tile(if chain { TILE } else { 0 })],
+            scratch,
+            failed: None,
+            arch: Arch::new(),
+        }
+    }
+
+    /// Number of agents.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether there are no agents (never: an empty batch is refused).
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// Who follows whom.
+    pub fn topology(&self) -> Topology {
+        self.topology
+    }
+
+    /// RK4 step, s.
+    pub fn dt(&self) -> f64 {
+        K::dt(&self.consts)
+    }
+
+    /// Steps taken.
+    pub fn step_index(&self) -> u64 {
+        self.step
+    }
+
+    /// Current time, s (`step · dt`, as the scalar simulator counts).
+    pub fn time(&self) -> f64 {
+        self.step as f64 * self.dt()
+    }
+
+    /// Heap bytes per agent: states and per-agent constants, plus the fixed
+    /// work space spread over the agents.
+    pub fn bytes_per_agent(&self) -> f64 {
+        let bytes = self.blocks.capacity() * size_of::<K::Block>()
+            + self.tiles.iter().map(K::tile_bytes).sum::<usize>()
+            + self.scratch.capacity() * size_of::<K::Scratch>();
+        bytes as f64 / self.n as f64
+    }
+
+    /// Bytes per agent of state and constants alone (what grows with `N`).
+    pub const BLOCK_BYTES_PER_AGENT: usize = size_of::<K::Block>() / K::LANES;
+
+    /// Agent `i`'s state.
+    pub fn state(&self, i: usize) -> State {
+        K::state(&self.blocks[i / K::LANES], i % K::LANES)
+    }
+
+    /// Every agent's state.
+    pub fn states(&self) -> Vec<State> {
+        (0..self.n).map(|i| self.state(i)).collect()
+    }
+
+    /// Every agent's controller at the current state, computed by the
+    /// engine's own kernels.
+    pub fn probes(&self) -> Vec<K::Probe> {
+        let mut out = K::probes(
+            &self.consts,
+            self.topology,
+            &self.blocks,
+            &self.reference,
+            self.time(),
+        );
+        out.truncate(self.n);
+        out
+    }
+
+    /// One RK4 step.
+    pub fn step(&mut self) -> Result<(), SimError> {
+        self.run(1)
+    }
+
+    /// `steps` RK4 steps, the law in every stage. A star spreads its blocks,
+    /// a chain of 512 agents or more its two halves, over the current rayon
+    /// pool (`pool.install(|| engine.run(n))`); the
+    /// result is the same bits on any number of threads, and the same as
+    /// `steps` calls of [`BatchEngine::step`]. Fails like the scalar simulator
+    /// when a state stops being finite; the engine then stays failed.
+    pub fn run(&mut self, steps: u64) -> Result<(), SimError> {
+        if let Some(e) = &self.failed {
+            return Err(e.clone());
+        }
+        let broke = if self.topology == Topology::Chain
+            && rayon::current_num_threads() >= 2
+            && self.blocks.len() * K::LANES >= 2 * SEGMENT * W
+        {
+            self.run_chain_on_two_cores(steps)
+        } else {
+            self.run_tiles(steps)
+        };
+        if let Some((n, agent)) = broke {
+            let state = self.state(agent);
+            let e = SimError::Diverged {
+                agent: agent + 1,
+                name: format!("agent {}", agent + 1),
+                t: (n + 1) as f64 * self.dt(),
+                breach: Bounds::DEFAULT.check(&state).unwrap_or(Breach {
+                    quantity: "state",
+                    value: f64::NAN,
+                    bound: f64::INFINITY,
+                    unit: "",
+                }),
+            };
+            self.failed = Some(e.clone());
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// `steps` steps a tile at a time; the first broken `(step, agent)`.
+    fn run_tiles(&mut self, steps: u64) -> Option<(u64, usize)> {
+        let (arch, dt) = (self.arch, self.dt());
+        let mut left = steps;
+        while left > 0 {
+            let len = left.min(TILE as u64) as usize;
+            let tile = &mut self.tiles[0];
+            K::fill(tile, len, &self.reference, self.step, dt);
+            let c = &self.consts;
+            let broke = match self.topology {
+                Topology::Star => star::<K>(arch, c, &mut self.blocks, tile, len),
+                Topology::Chain => {
+                    chain::<K>(arch, c, &mut self.blocks, &mut self.scratch, tile, len)
+                }
+            };
+            if let Some((n, agent)) = broke {
+                return Some((self.step + n as u64, agent));
+            }
+            self.step += len as u64;
+            left -= len as u64;
+        }
+        None
+    }
+
+    /// A chain on two cores: the first half of the agents runs tile `m` while
+    /// the second half runs tile `m − 1`, led by the first half's last agent
+    /// as recorded in the previous tile (a wavefront; the two tile buffers
+    /// swap each tile). Every agent computes exactly what it would on one
+    /// core.
+    fn run_chain_on_two_cores(&mut self, steps: u64) -> Option<(u64, usize)> {
+        let split = self.blocks.len() / 2;
+        let (arch, dt) = (self.arch, self.dt());
+        let (c, reference) = (&self.consts, &self.reference);
+        let (front, back) = self.blocks.split_at_mut(split);
+        let (scratch_a, scratch_b) = self.scratch.split_at_mut(K::SEGMENT);
+        let [x, y] = &mut self.tiles;
+        let (mut x, mut y) = (x, y);
+        // The tile waiting in `y` for the back half: (first step, length).
+        let mut pending: Option<(u64, usize)> = None;
+        let (mut step, mut left) = (self.step, steps);
+        let mut broke: Option<(u64, usize)> = None;
+        fn note(broke: &mut Option<(u64, usize)>, at: (u64, usize)) {
+            *broke = Some(broke.map_or(at, |b| b.min(at)));
+        }
+        while left > 0 || pending.is_some() {
+            let next = (left > 0).then(|| {
+                let len = left.min(TILE as u64) as usize;
+                K::fill(x, len, reference, step, dt);
+                (step, len)
+            });
+            let (a, b) = rayon::join(
+                || next.and_then(|(_, len)| chain::<K>(arch, c, front, scratch_a, x, len)),
+                || pending.and_then(|(_, len)| chain::<K>(arch, c, back, scratch_b, y, len)),
+            );
+            if let (Some((n, agent)), Some((s0, _))) = (b, pending) {
+                note(&mut broke, (s0 + n as u64, split * K::LANES + agent));
+            }
+            if let (Some((n, agent)), Some((s0, _))) = (a, next) {
+                note(&mut broke, (s0 + n as u64, agent));
+                // The back half may break earlier within this tile.
+                if let Some((m, agent)) = chain::<K>(arch, c, back, scratch_b, x, n + 1) {
+                    note(&mut broke, (s0 + m as u64, split * K::LANES + agent));
+                }
+            }
+            if broke.is_some() {
+                return broke;
+            }
+            std::mem::swap(&mut x, &mut y);
+            pending = next;
+            if let Some((_, len)) = next {
+                step += len as u64;
+                left -= len as u64;
+            }
+        }
+        self.step += steps;
+        None
+    }
+}
+
+/// Runs every engine `steps` steps, in parallel on the current rayon pool
+/// (Monte Carlo sweeps: independent runs).
+pub fn sweep<K: Kernel>(engines: &mut [BatchEngine<K>], steps: u64) -> Vec<Result<(), SimError>> {
+    engines.par_iter_mut().map(|e| e.run(steps)).collect()
+}
+
+/// Packs members into blocks of `W` lanes (the last one padded with copies of
+/// the last member), refusing what neither kernel does. Returns the blocks,
+/// the shared `L_Ycomp` mode and the number of agents.
+pub(super) fn pack(
+    members: impl IntoIterator<Item = Member>,
+) -> Result<(Vec<Block>, LyComp, usize), EngineError> {
+    let mut comp = None;
+    let mut blocks: Vec<Block> = Vec::new();
+    let mut lanes: Vec<Member> = Vec::with_capacity(W);
+    let mut n = 0usize;
+    for m in members {
+        n += 1;
+        if m.placement.uses_exact_derivatives() {
+            return Err(EngineError::Unsupported(format!(
+                "exact L_Y derivatives (agent {n}; use ly_derivatives = \"neglect\")"
+            )));
+        }
+        match comp {
+            None => comp = Some(m.placement.lycomp()),
+            Some(c) if c != m.placement.lycomp() => {
+                return Err(EngineError::Unsupported(format!(
+                    "mixed L_Ycomp modes (agent {n} differs from agent 1)"
+                )));
+            }
+            Some(_) => {}
+        }
+        lanes.push(m);
+        if lanes.len() == W {
+            blocks.push(block(&lanes, W));
+            lanes.clear();
+        }
+    }
+    let Some(comp) = comp else {
+        return Err(EngineError::Unsupported("an empty formation".into()));
+    };
+    if !lanes.is_empty() {
+        let live = lanes.len();
+        while lanes.len() < W {
+            lanes.push(lanes[live - 1]);
+        }
+        blocks.push(block(&lanes, live));
+    }
+    blocks.shrink_to_fit();
+    Ok((blocks, comp, n))
+}
+
+/// Packs up to `W` members (padded by the caller) into a block; the first
+/// `live` lanes are agents.
+fn block(m: &[Member], live: usize) -> Block {
+    let lane = |f: &dyn Fn(&Member) -> f64| -> V { Lanes(std::array::from_fn(|l| f(&m[l]))) };
+    let comp: [V; 3] = match m[0].placement.lycomp() {
+        LyComp::Fit => [
+            lane(&|a| 2.0 * a.placement.fit().g),
+            lane(&|a| 1.0 / a.placement.fit().delta),
+            lane(&|a| {
+                let k = a.placement.fit().epsilon / a.placement.fit().delta;
+                k * k
+            }),
+        ],
+        LyComp::Exact => [
+            lane(&|a| a.placement.lx_off()),
+            lane(&|a| a.placement.lx_off() * a.placement.lx_off()),
+            lane(&|_| 0.0),
+        ],
+        LyComp::None => [lane(&|_| 0.0); 3],
+    };
+    Block {
+        x: [
+            lane(&|a| a.start.x),
+            lane(&|a| a.start.y),
+            lane(&|a| a.start.theta),
+            lane(&|a| a.start.v),
+            lane(&|a| a.start.omega),
+        ],
+        lx: lane(&|a| a.placement.lx()),
+        inv_lx: lane(&|a| 1.0 / a.placement.lx()),
+        ly_off: lane(&|a| a.placement.ly_off()),
+        ke: lane(&|a| a.gains.ke()),
+        kz: lane(&|a| a.gains.kz()),
+        comp,
+        live: Mask(std::array::from_fn(|l| if l < live { u64::MAX } else { 0 })),
+    }
+}
+
+/// The reference at every stage of the tile's steps: `t_n`, `t_n + dt/2`
+/// (stages 2 and 3 share it), `t_{n+1}`, with `t_n = n · dt` as the scalar
+/// simulator computes it. Stage 4 is at `t_{n+1}`, not `t_n + dt` (the scalar
+/// simulator's, an ulp of `t` away): one reference value, and one `L_Y` per
+/// agent, serve stage 4 of a step and stage 1 of the next.
+pub(super) fn fill_reference(
+    carries: &mut [[Carry; 4]],
+    reference: &Reference,
+    step0: u64,
+    dt: f64,
+) {
+    let at = |n: u64| Carry::reference(&reference.eval(n as f64 * dt, Order::Two));
+    let mut a = at(step0);
+    for (n, c) in (step0..).zip(carries.iter_mut()) {
+        let t = n as f64 * dt;
+        let b = Carry::reference(&reference.eval(t + 0.5 * dt, Order::Two));
+        let d = at(n + 1);
+        *c = [a, b, b, d];
+        a = d;
+    }
+}

@@ -1,0 +1,174 @@
+//! A robot's body by name: a `[robots.NAME]` section (torque or velocity
+//! base), else a preset.
+
+use crate::base::{VelocityBase, VelocityRobot};
+use crate::error::ScenarioError;
+use crate::model::RobotParams;
+use crate::scenario::locate::FieldPath;
+use crate::scenario::schema::{DriveName, RobotSection};
+
+use super::Builder;
+
+impl Builder<'_> {
+    /// A robot by name: a `[robots.NAME]`, else a preset (torque: `agent1`,
+    /// `agent2`; velocity: [`VelocityRobot::PRESETS`]).
+    pub(super) fn robot(&self, name: &str, path: &FieldPath) -> Result<Body, ScenarioError> {
+        if let Some(r) = self.file.robots.get(name) {
+            return self.robot_section(name, r);
+        }
+        if let Some(p) = RobotParams::preset(name) {
+            return Ok(Body::Torque(p));
+        }
+        VelocityRobot::preset(name)
+            .map(Body::Velocity)
+            .ok_or_else(|| {
+                let mut known: Vec<&str> = RobotParams::PRESETS.iter().map(|(n, _)| *n).collect();
+                known.extend(VelocityRobot::PRESETS.iter().map(|(n, _)| *n));
+                known.extend(self.file.robots.keys().map(String::as_str));
+                self.at.error(
+                    path,
+                    format!("unknown robot `{name}` (known: {})", known.join(", ")),
+                )
+            })
+    }
+
+    fn robot_section(&self, name: &str, r: &RobotSection) -> Result<Body, ScenarioError> {
+        let at = FieldPath::from("robots").key(name);
+        let velocity_preset = r.preset.as_deref().and_then(VelocityRobot::preset);
+        let drive = r.drive.unwrap_or(if velocity_preset.is_some() {
+            DriveName::Velocity
+        } else {
+            DriveName::Torque
+        });
+        let torque_only = [
+            ("mass", r.mass.is_some()),
+            ("linear_friction", r.linear_friction.is_some()),
+            ("inertia", r.inertia.is_some()),
+            ("angular_friction", r.angular_friction.is_some()),
+            ("torque_limit", r.torque_limit.is_some()),
+        ];
+        let velocity_only = [
+            ("tau_v", r.tau_v.is_some()),
+            ("tau_omega", r.tau_omega.is_some()),
+            ("v_max", r.v_max.is_some()),
+            ("omega_max", r.omega_max.is_some()),
+            ("a_max", r.a_max.is_some()),
+            ("alpha_max", r.alpha_max.is_some()),
+            ("accel", r.accel.is_some()),
+        ];
+        let (foreign, why): (&[(&str, bool)], _) = match drive {
+            DriveName::Torque => (
+                &velocity_only,
+                "is a velocity base's field: this robot is torque-driven (set drive = \"velocity\")",
+            ),
+            DriveName::Velocity => (
+                &torque_only,
+                "is a torque-driven robot's field: a velocity base (drive = \"velocity\") runs its own motor loops and takes lags and limits instead",
+            ),
+        };
+        if let Some((key, _)) = foreign.iter().find(|(_, set)| *set) {
+            return Err(self.at.error(&at.key(key), format!("`{key}` {why}")));
+        }
+        if drive == DriveName::Velocity {
+            return self
+                .velocity_section(&at, r, velocity_preset)
+                .map(Body::Velocity);
+        }
+        let base = match &r.preset {
+            Some(p) => Some(RobotParams::preset(p).ok_or_else(|| {
+                self.at.error(
+                    &at.key("preset"),
+                    format!("unknown preset `{p}` (presets: agent1, agent2)"),
+                )
+            })?),
+            None => None,
+        };
+        let field = |v: Option<f64>, from: Option<f64>, key: &str| -> Result<f64, ScenarioError> {
+            v.or(from).ok_or_else(|| {
+                self.at.error(
+                    &at,
+                    format!(
+                        "missing field `{key}` (or start from a preset with `preset = \"agent1\"`)"
+                    ),
+                )
+            })
+        };
+        let params = RobotParams::new(
+            field(r.mass, base.map(|b| b.mass()), "mass")?,
+            field(
+                r.linear_friction,
+                base.map(|b| b.linear_friction()),
+                "linear_friction",
+            )?,
+            field(r.inertia, base.map(|b| b.inertia()), "inertia")?,
+            field(
+                r.angular_friction,
+                base.map(|b| b.angular_friction()),
+                "angular_friction",
+            )?,
+            field(
+                r.half_wheelbase,
+                base.map(|b| b.half_wheelbase()),
+                "half_wheelbase",
+            )?,
+            field(
+                r.wheel_radius,
+                base.map(|b| b.wheel_radius()),
+                "wheel_radius",
+            )?,
+        )
+        .and_then(|p| p.with_torque_limit(r.torque_limit.or(base.and_then(|b| b.torque_limit()))));
+        let params = self.within(&at, params)?;
+        Ok(Body::Torque(params))
+    }
+
+    /// A `[robots.NAME]` with `drive = "velocity"`: a preset's values (or an
+    /// ideal base) overridden field by field; an absent limit is no limit.
+    fn velocity_section(
+        &self,
+        at: &FieldPath,
+        r: &RobotSection,
+        preset: Option<VelocityRobot>,
+    ) -> Result<VelocityRobot, ScenarioError> {
+        let from = match (&r.preset, preset) {
+            (Some(p), None) => {
+                let known: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
+                return Err(self.at.error(
+                    &at.key("preset"),
+                    format!(
+                        "unknown velocity-base preset `{p}` (presets: {})",
+                        known.join(", ")
+                    ),
+                ));
+            }
+            (_, Some(p)) => p,
+            (None, None) => VelocityRobot::IDEAL,
+        };
+        let b = from.base();
+        let robot = VelocityBase::new(
+            r.tau_v.unwrap_or(b.tau_v()),
+            r.tau_omega.unwrap_or(b.tau_omega()),
+            r.v_max.unwrap_or(b.v_max()),
+            r.omega_max.unwrap_or(b.omega_max()),
+            r.a_max.unwrap_or(b.a_max()),
+            r.alpha_max.unwrap_or(b.alpha_max()),
+        )
+        .map(|base| base.with_accel(r.accel.unwrap_or(b.accel())))
+        .and_then(|base| {
+            VelocityRobot::new(
+                base,
+                r.half_wheelbase.unwrap_or(from.half_wheelbase()),
+                r.wheel_radius.unwrap_or(from.wheel_radius()),
+            )
+        });
+        let robot = self.within(at, robot)?;
+        Ok(robot)
+    }
+}
+
+/// A robot's body as the scenario defines it, before its law is chosen.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Body {
+    Torque(RobotParams),
+    Velocity(VelocityRobot),
+}

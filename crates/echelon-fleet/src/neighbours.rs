@@ -38,7 +38,7 @@
 
 use echelon::agent::Sight;
 use echelon::model::State;
-use echelon::safety::{Neighbour, point};
+use echelon::safety::{Neighbour, point, uncertainty_margin};
 
 use crate::wire::{Header, LinkStatus, RobotState};
 
@@ -169,8 +169,10 @@ impl NeighbourTable {
     }
 
     /// The neighbours for a control step at local time `local` (fleet time
-    /// `t`) of a robot whose point is `p`, seeing `range` far.
-    pub fn build(&mut self, local: f64, t: f64, p: [f64; 2], range: f64) -> Sight<'_> {
+    /// `t`) of a robot whose point is `p`, seeing `range` far, whose
+    /// position estimate has standard deviation `sigma` (each pair's radius
+    /// widened by [`uncertainty_margin`] of the two).
+    pub fn build(&mut self, local: f64, t: f64, p: [f64; 2], range: f64, sigma: f64) -> Sight<'_> {
         self.list.clear();
         let mut brake = false;
         for (i, e) in self.entries.iter_mut().enumerate() {
@@ -189,12 +191,10 @@ impl NeighbourTable {
                 let (s, dv) = advance(&e.state, dt);
                 let lagging = dt > self.lag;
                 self.lagging += u64::from(lagging && self.cooperative[i]);
-                self.list.push(Neighbour::of_state(
-                    &s,
-                    l,
-                    Some(dv),
-                    self.cooperative[i] && !lagging,
-                ));
+                self.list.push(
+                    Neighbour::of_state(&s, l, Some(dv), self.cooperative[i] && !lagging)
+                        .with_margin(uncertainty_margin(sigma, e.state.sigma)),
+                );
                 continue;
             }
             let q = point(&e.state.state, l);
@@ -212,6 +212,7 @@ impl NeighbourTable {
             self.list.push(Neighbour {
                 p: q,
                 cooperative: false,
+                margin: uncertainty_margin(sigma, e.state.sigma),
                 ..Neighbour::default()
             });
         }
@@ -289,6 +290,29 @@ mod tests {
         }
     }
 
+    /// Each pair's radius is widened by both robots' published `σ`
+    /// (`uncertainty_margin`), fresh or stale.
+    #[test]
+    fn uncertain_neighbours_get_a_wider_radius() {
+        let mut n = table();
+        let (h, s) = msg(2, 0, 1.0, 1.0, 0.5);
+        n.on_state(h, &RobotState { sigma: 0.02, ..s }, 10.0);
+        let (h, s) = msg(3, 0, 1.0, -1.0, 0.0);
+        n.on_state(h, &s, 10.0);
+        let got = list(n.build(10.01, 1.01, [0.0, 0.0], 5.0, 0.01));
+        assert!(
+            (got[0].margin - 3.0 * (0.01 + 0.02)).abs() < 1e-15,
+            "{got:?}"
+        );
+        assert!((got[1].margin - 3.0 * 0.01).abs() < 1e-15, "{got:?}");
+        // Stale within range (before the hold): still widened.
+        let got = list(n.build(10.0 + TIMEOUT + 0.01, 1.3, [0.0, 0.0], 5.0, 0.0));
+        assert!(
+            (got[0].margin - 0.06).abs() < 1e-15 && got[1].margin == 0.0,
+            "{got:?}"
+        );
+    }
+
     #[test]
     fn fresh_neighbours_are_advanced_to_now_and_keep_their_cooperation() {
         let mut n = table();
@@ -298,7 +322,7 @@ mod tests {
         n.on_state(h, &s, 10.0);
         // 10 ms later (both clocks): agent 2 moved 5 mm along x; within the
         // lag it still takes its half of the pair constraint.
-        let got = list(n.build(10.01, 1.01, [0.0, 0.0], 5.0));
+        let got = list(n.build(10.01, 1.01, [0.0, 0.0], 5.0, 0.0));
         assert_eq!(got.len(), 2);
         assert!(
             (got[0].p[0] - (1.0 + 0.05 + 0.005)).abs() < 1e-12,
@@ -310,7 +334,7 @@ mod tests {
         assert_eq!(n.lagging(), 0);
         // 0.1 s later, nothing new heard: advanced 5 cm, and no longer trusted
         // to act (its sample is older than the lag): non-cooperative.
-        let got = list(n.build(10.1, 1.1, [0.0, 0.0], 5.0));
+        let got = list(n.build(10.1, 1.1, [0.0, 0.0], 5.0, 0.0));
         assert!((got[0].p[0] - (1.0 + 0.05 + 0.05)).abs() < 1e-12, "{got:?}");
         assert!(!got[0].cooperative && !got[1].cooperative);
         assert_eq!(n.lagging(), 1);
@@ -347,14 +371,14 @@ mod tests {
         let (h, s) = msg(2, 4, 0.0, 2.0, 0.0);
         n.on_state(h, &s, 0.0);
         assert_eq!(n.refused(), 2);
-        let got = list(n.build(0.0, 0.0, [0.0, 0.0], 5.0));
+        let got = list(n.build(0.0, 0.0, [0.0, 0.0], 5.0, 0.0));
         assert_eq!(got.len(), 1);
         assert!((got[0].p[0] - 1.05).abs() < 1e-12);
         // A restarted neighbour (new source) starts again from seq 0.
         let (mut h, s) = msg(2, 0, 0.0, 2.0, 0.0);
         h.source = 8;
         n.on_state(h, &s, 0.0);
-        let got = list(n.build(0.0, 0.0, [0.0, 0.0], 5.0));
+        let got = list(n.build(0.0, 0.0, [0.0, 0.0], 5.0, 0.0));
         assert!((got[0].p[0] - 2.05).abs() < 1e-12);
     }
 
@@ -366,24 +390,30 @@ mod tests {
         // Stale (older than the timeout): non-cooperative, at rest, at its
         // last point (not advanced).
         let t = 10.0 + TIMEOUT + 0.1;
-        let got = list(n.build(t, 1.3, [0.0, 0.0], 1.5));
+        let got = list(n.build(t, 1.3, [0.0, 0.0], 1.5, 0.0));
         assert_eq!(got.len(), 1);
         assert_eq!(got[0].p, [1.05, 0.0]);
         assert_eq!((got[0].dp, got[0].cooperative), ([0.0; 2], false));
         assert_eq!(n.stale_events(), 1);
         // Still within the hold: one episode, counted once.
-        let _ = list(n.build(t + STALE_HOLD - 0.2, 1.6, [0.0, 0.0], 1.5));
+        let _ = list(n.build(t + STALE_HOLD - 0.2, 1.6, [0.0, 0.0], 1.5, 0.0));
         assert_eq!(n.stale_events(), 1);
         // Past the hold: brake.
         assert_eq!(
-            n.build(10.0 + TIMEOUT + STALE_HOLD + 0.01, 1.8, [0.0, 0.0], 1.5),
+            n.build(
+                10.0 + TIMEOUT + STALE_HOLD + 0.01,
+                1.8,
+                [0.0, 0.0],
+                1.5,
+                0.0
+            ),
             Sight::Stale
         );
         // Heard again: fresh, cooperative; a later loss is a new episode.
         let (h, s) = msg(2, 1, 2.0, 1.0, 0.0);
         n.on_state(h, &s, 11.0);
-        assert!(list(n.build(11.0, 2.0, [0.0, 0.0], 1.5))[0].cooperative);
-        let _ = n.build(11.0 + TIMEOUT + 0.01, 2.3, [0.0, 0.0], 1.5);
+        assert!(list(n.build(11.0, 2.0, [0.0, 0.0], 1.5, 0.0))[0].cooperative);
+        let _ = n.build(11.0 + TIMEOUT + 0.01, 2.3, [0.0, 0.0], 1.5, 0.0);
         assert_eq!(n.stale_events(), 2);
     }
 
@@ -393,11 +423,11 @@ mod tests {
         let (h, s) = msg(3, 0, 0.0, 4.0, 0.0);
         n.on_state(h, &s, 0.0);
         // In range while fresh: seen (the filter itself ignores it beyond range).
-        assert_eq!(list(n.build(0.1, 0.1, [0.0, 0.0], 1.5)).len(), 1);
+        assert_eq!(list(n.build(0.1, 0.1, [0.0, 0.0], 1.5, 0.0)).len(), 1);
         // Stale beyond range, however long: neither seen, nor counted, nor braking.
-        assert!(list(n.build(100.0, 100.0, [0.0, 0.0], 1.5)).is_empty());
+        assert!(list(n.build(100.0, 100.0, [0.0, 0.0], 1.5, 0.0)).is_empty());
         assert_eq!(n.stale_events(), 0);
         // Never heard of: nothing.
-        assert!(list(table().build(0.0, 0.0, [0.0, 0.0], 1.5)).is_empty());
+        assert!(list(table().build(0.0, 0.0, [0.0, 0.0], 1.5, 0.0)).is_empty());
     }
 }

@@ -36,6 +36,11 @@ pub trait Plant {
     fn set_time(&mut self, t: f64) {
         let _ = t;
     }
+    /// The standard deviation of its position estimate along the most
+    /// uncertain axis, m (0: exact, as a simulated plant, or unknown).
+    fn position_sigma(&self) -> f64 {
+        0.0
+    }
     /// What its absolute fixes did, at fleet time `t` (`None`: it takes
     /// none, as a simulated plant, which is never lost).
     fn fixes(&self, t: f64) -> Option<FixReport> {

@@ -25,15 +25,15 @@ use echelon::sim::AgentOutput;
 /// First byte of every message.
 pub const MAGIC: u8 = 0xEC;
 /// Format version written and accepted (2: a state carries its velocity
-/// base's command).
-pub const VERSION: u8 = 2;
+/// base's command; 3: and its position uncertainty `σ`).
+pub const VERSION: u8 = 3;
 /// Header length, bytes.
 pub const HEADER_LEN: usize = 24;
 /// A reference message's length, bytes (header + 8 f64).
 pub const REFERENCE_LEN: usize = HEADER_LEN + 8 * 8;
 /// A state message's length, bytes (header + agent u32 + drive flags u8 +
-/// 3 reserved + 25 f64).
-pub const STATE_LEN: usize = HEADER_LEN + 8 + 25 * 8;
+/// 3 reserved + 26 f64).
+pub const STATE_LEN: usize = HEADER_LEN + 8 + 26 * 8;
 
 /// Drive flags of a state: a velocity base's state.
 const FLAG_VELOCITY: u8 = 1;
@@ -120,8 +120,8 @@ pub struct Reference {
 /// `agent: u32` (from 1), drive flags `u8` (bit 0: a velocity base, bit 1:
 /// its speed limits cut the command), 3 reserved bytes (0), then the f64s
 /// `x, y, θ, v, ω, v̇, ω̇, e_x, e_y, z_x, z_y, u1, u2, τ_r, τ_l,
-/// p_d[2], ṗ_d[2], p̈_d[2], v*, ω*, v_applied, ω_applied` (the last four 0
-/// for a torque-driven robot).
+/// p_d[2], ṗ_d[2], p̈_d[2], v*, ω*, v_applied, ω_applied, σ` (`v*` to
+/// `ω_applied` 0 for a torque-driven robot; `σ ≥ 0`).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RobotState {
     /// Sender time, s.
@@ -148,6 +148,11 @@ pub struct RobotState {
     pub leader: LeaderMotion,
     /// A velocity base's command (`None`: a torque-driven robot).
     pub velocity: Option<VelocitySample>,
+    /// The standard deviation of its position estimate along its most
+    /// uncertain axis, m (0: exact, as a simulated plant, or unknown): what
+    /// neighbours' safety filters widen the pair's radius by
+    /// (`docs/safety.md`, "Uncertain positions").
+    pub sigma: f64,
 }
 
 impl RobotState {
@@ -251,6 +256,7 @@ pub fn encode_state(buf: &mut Vec<u8>, h: Header, s: &RobotState) {
             c.omega_cmd,
             c.v_applied,
             c.omega_applied,
+            s.sigma,
         ],
     );
 }
@@ -330,9 +336,12 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
             if agent == 0 {
                 return Err(DecodeError::Malformed("agent numbers start at 1"));
             }
-            let v = f64s::<25>(&b[HEADER_LEN + 8..])?;
+            let v = f64s::<26>(&b[HEADER_LEN + 8..])?;
+            if v[25] < 0.0 {
+                return Err(DecodeError::Malformed("a negative position uncertainty"));
+            }
             let velocity = match b[HEADER_LEN + 4] {
-                0 if v[21..] == [0.0; 4] => None,
+                0 if v[21..25] == [0.0; 4] => None,
                 0 => {
                     return Err(DecodeError::Malformed(
                         "a torque state with a velocity command",
@@ -380,6 +389,7 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
                         ddp: [v[19], v[20]],
                     },
                     velocity,
+                    sigma: v[25],
                 },
             ))
         }
@@ -418,7 +428,7 @@ mod tests {
         #[test]
         fn states_round_trip(
             source in any::<u32>(), seq in any::<u64>(), agent in 1..1000u32, link in 0..4u8,
-            drive in 0..3u8, v in proptest::collection::vec(finite(), 26),
+            drive in 0..3u8, v in proptest::collection::vec(finite(), 26), sigma in 0.0..10.0f64,
         ) {
             let s = RobotState {
                 t: v[21],
@@ -440,6 +450,7 @@ mod tests {
                     omega_applied: v[25],
                     sat: drive == 2,
                 }),
+                sigma,
             };
             let h = Header { source, seq };
             let mut buf = Vec::new();
@@ -500,5 +511,16 @@ mod tests {
         let mut kind = buf;
         kind[2] = 9;
         assert!(matches!(decode(&kind), Err(DecodeError::Malformed(_))));
+        // A negative position uncertainty is malformed.
+        let mut buf = Vec::new();
+        let s = RobotState {
+            agent: 1,
+            sigma: 0.01,
+            ..RobotState::default()
+        };
+        encode_state(&mut buf, Header { source: 7, seq: 3 }, &s);
+        assert!(matches!(decode(&buf), Ok(Message::State(_, d)) if d.sigma == 0.01));
+        buf[STATE_LEN - 8..].copy_from_slice(&(-0.01f64).to_le_bytes());
+        assert!(matches!(decode(&buf), Err(DecodeError::Malformed(_))));
     }
 }

@@ -326,3 +326,59 @@ fn bad_safety_input_names_file_line_column_and_field() {
         assert!(text.starts_with(&format!("test.toml:{line}:")), "{text}");
     }
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+
+    /// A neighbour's `margin` (the fleet's position uncertainty,
+    /// `uncertainty_margin`) widens the pair's radius: a robot driving its
+    /// point at a resting neighbour from any side, at any speed, with any
+    /// margin, stops at `radius + margin` from it (the exact unicycle step
+    /// costs well under a millimetre), and never closer.
+    #[test]
+    fn a_margin_widens_the_pairs_radius(
+        heading in -3.1..3.1f64, side in -0.5..0.5f64, v_max in 0.1..1.0f64,
+        sigma_me in 0.0..0.05f64, sigma_other in 0.0..0.05f64,
+    ) {
+        let (l, radius) = (0.1, 0.3);
+        let margin = echelon::safety::uncertainty_margin(sigma_me, sigma_other);
+        proptest::prop_assert!((margin - 3.0 * (sigma_me + sigma_other)).abs() < 1e-15);
+        let config = SafetyConfig::new(radius, 1.0, f64::INFINITY).unwrap();
+        let base = VelocityBase::new(0.0, 0.0, v_max, 4.0, f64::INFINITY, f64::INFINITY).unwrap();
+        let other = State::at_rest(0.0, 0.0, 0.0);
+        let seen = Neighbour::of_state(&other, l, None, false).with_margin(margin);
+        let q = point(&other, l);
+        // Two metres out, facing the neighbour's point (a little aside).
+        let (s, c) = heading.sin_cos();
+        let mut r = State::at_rest(q[0] + 2.0 * c - side * s, q[1] + 2.0 * s + side * c, heading + std::f64::consts::PI);
+        let mut filter = SafetyFilter::new(config);
+        let dt = 0.01;
+        let mut closest = f64::INFINITY;
+        for step in 0..2000 {
+            let p = point(&r, l);
+            // Straight through the neighbour, to a goal beyond it.
+            let goal = [2.0 * q[0] - p[0], 2.0 * q[1] - p[1]];
+            let want = [goal[0] - p[0], goal[1] - p[1]];
+            let (sn, cs) = r.theta.sin_cos();
+            let nominal = VelocityCommand {
+                v: cs * want[0] + sn * want[1],
+                omega: (-sn * want[0] + cs * want[1]) / l,
+            };
+            let cmd = filter.velocity(step as f64 * dt, &r, l, nominal, &base, &[seen], &[]).command;
+            let th = r.theta + cmd.omega * dt;
+            if cmd.omega.abs() > 1e-12 {
+                r.x += cmd.v / cmd.omega * (th.sin() - r.theta.sin());
+                r.y -= cmd.v / cmd.omega * (th.cos() - r.theta.cos());
+            } else {
+                r.x += cmd.v * dt * r.theta.cos();
+                r.y += cmd.v * dt * r.theta.sin();
+            }
+            (r.theta, r.v, r.omega) = (th, cmd.v, cmd.omega);
+            let p = point(&r, l);
+            closest = closest.min((p[0] - q[0]).hypot(p[1] - q[1]));
+        }
+        proptest::prop_assert!(closest >= radius + margin - 1e-3, "closest {} for {}", closest, radius + margin);
+        // It did come close: the margin, not caution, set the distance.
+        proptest::prop_assert!(closest <= radius + margin + 0.05, "closest {} for {}", closest, radius + margin);
+    }
+}

@@ -426,8 +426,9 @@ impl<P: Plant> Robot<P> {
                     },
                 );
                 let nominal = out.command();
+                let sigma = self.plant.position_sigma();
                 let cmd = match self.safety.as_mut() {
-                    Some(s) => s.act(&self.config, local, now, &state, nominal),
+                    Some(s) => s.act(&self.config, local, now, &state, sigma, nominal),
                     None => self.config.spec.act(now, &state, nominal, None).command,
                 };
                 let act = self.plant.command(cmd);
@@ -445,6 +446,7 @@ impl<P: Plant> Robot<P> {
                     tau: act.tau,
                     leader: out.leader,
                     velocity: act.velocity_sample(cmd),
+                    sigma,
                 };
                 self.ticks += 1;
                 Some(self.header_for(self.last))
@@ -550,14 +552,16 @@ impl<P: Plant> Robot<P> {
 
 impl Safety {
     /// The act step ([`AgentSpec::act`]) through this robot's filter at
-    /// local time `local` (fleet time `t`) for a robot in state `me`: the
-    /// command for its plant, counted (`docs/safety.md`, "In the fleet").
+    /// local time `local` (fleet time `t`) for a robot in state `me`, its
+    /// position estimate `sigma` uncertain: the command for its plant,
+    /// counted (`docs/safety.md`, "In the fleet").
     fn act(
         &mut self,
         config: &RobotConfig,
         local: f64,
         t: f64,
         me: &State,
+        sigma: f64,
         nominal: Command,
     ) -> Command {
         let Some(settings) = config.safety.as_ref() else {
@@ -566,7 +570,7 @@ impl Safety {
         let l = config.spec.placement.l();
         let sight = self
             .table
-            .build(local, t, point(me, l), settings.config.range);
+            .build(local, t, point(me, l), settings.config.range, sigma);
         let guard = Guard {
             filter: &mut self.filter,
             sight,

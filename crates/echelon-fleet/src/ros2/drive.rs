@@ -333,6 +333,13 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
         }
     }
 
+    fn position_sigma(&self) -> f64 {
+        self.fixes
+            .as_ref()
+            .and_then(FixInput::covariance)
+            .map_or(0.0, |p| position_sigma(&p))
+    }
+
     fn fixes(&self, t: f64) -> Option<FixReport> {
         self.fixes.as_ref().map(|f| f.report(t))
     }
@@ -376,6 +383,16 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
         self.t = t;
         self.odom = None;
     }
+}
+
+/// The standard deviation along the most uncertain axis of the position
+/// block of a pose covariance `p` (the square root of its largest
+/// eigenvalue).
+pub fn position_sigma(p: &[[f64; 3]; 3]) -> f64 {
+    let (a, b, d) = (p[0][0], p[0][1], p[1][1]);
+    let mean = 0.5 * (a + d);
+    let spread = (0.5 * (a - d)).hypot(b);
+    (mean + spread).max(0.0).sqrt()
 }
 
 #[cfg(test)]
@@ -437,6 +454,24 @@ mod tests {
             TwistStamped::from_cdr_finite(payload).expect("valid TwistStamped"),
             Attachment::decode(attachment).expect("valid attachment"),
         )
+    }
+
+    proptest::proptest! {
+        /// `position_sigma` is the square root of the position block's
+        /// largest eigenvalue, for any covariance: `det(P − σ² I) = 0` and
+        /// `σ²` at least either variance.
+        #[test]
+        fn position_sigma_is_the_largest_axis(
+            a in -1.0..1.0f64, b in -1.0..1.0f64, c in -1.0..1.0f64, h in 0.0..1.0f64
+        ) {
+            // P = L Lᵀ with L lower triangular: any 2×2 covariance.
+            let (pxx, pxy, pyy) = (a * a, a * b, b * b + c * c);
+            let p = [[pxx, pxy, 0.0], [pxy, pyy, 0.0], [0.0, 0.0, h]];
+            let l = position_sigma(&p).powi(2);
+            let det = (pxx - l) * (pyy - l) - pxy * pxy;
+            proptest::prop_assert!(det.abs() < 1e-9, "{det}");
+            proptest::prop_assert!(l >= pxx - 1e-12 && l >= pyy - 1e-12);
+        }
     }
 
     #[test]

@@ -126,7 +126,8 @@ impl SafetyFilter {
                 continue;
             }
             min_distance = min_distance.min(dist);
-            let h = d[0] * d[0] + d[1] * d[1] - radius * radius;
+            let r = radius + n.margin;
+            let h = d[0] * d[0] + d[1] * d[1] - r * r;
             self.rows.push(row(d, h, Some(n)));
         }
         for o in obstacles {

@@ -126,6 +126,8 @@ mod velocity;
 pub use config::SafetyConfig;
 pub use deadlock::{BIAS_ANGLE, DEADLOCK_MEMORY, STUCK_TIME};
 pub use filter::{Filtered, Outcome, SafetyFilter};
-pub use neighbour::{Neighbour, Obstacle, point, start_conflict};
+pub use neighbour::{
+    Neighbour, Obstacle, UNCERTAINTY_SIGMAS, point, start_conflict, uncertainty_margin,
+};
 pub use qp::{Constraint, TOLERANCE};
 pub use torque::{Envelope, INNER_RATE};

@@ -60,6 +60,10 @@ pub struct Neighbour {
     /// Whether the neighbour runs this filter too and so takes half of each
     /// pair constraint.
     pub cooperative: bool,
+    /// Extra clearance for this pair beyond the radius, m: the position
+    /// uncertainty of the two robots' estimates (`docs/safety.md`,
+    /// "Uncertain positions"; 0 when both are known exactly).
+    pub margin: f64,
 }
 
 impl Neighbour {
@@ -78,8 +82,29 @@ impl Neighbour {
             dp,
             ddp,
             cooperative,
+            margin: 0.0,
         }
     }
+
+    /// The same neighbour with the pair's radius widened by `margin` m.
+    pub fn with_margin(self, margin: f64) -> Neighbour {
+        Neighbour { margin, ..self }
+    }
+}
+
+/// How many standard deviations of each robot's position estimate widen a
+/// pair's radius ([`uncertainty_margin`]).
+pub const UNCERTAINTY_SIGMAS: f64 = 3.0;
+
+/// The extra clearance a pair of robots keeps between their *estimated*
+/// points when the estimates are uncertain: `3 (σ_i + σ_j)`, with `σ` the
+/// standard deviation of each estimate along its most uncertain axis. If
+/// each robot's true point is within `3σ` of its estimate (per axis, 99.7 %
+/// for a Gaussian error), estimates `radius + 3(σ_i + σ_j)` apart put the
+/// true points at least `radius` apart: drift cannot make two robots
+/// collide while their filters believe them clear.
+pub fn uncertainty_margin(sigma_me: f64, sigma_other: f64) -> f64 {
+    UNCERTAINTY_SIGMAS * (sigma_me.max(0.0) + sigma_other.max(0.0))
 }
 
 /// `p = (x, y) + L (cos θ, sin θ)`: the point the filter keeps apart.

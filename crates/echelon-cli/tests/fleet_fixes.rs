@@ -257,3 +257,98 @@ fn drifting_robots_with_a_motion_capture_keep_their_slots_in_the_world() {
             .all(|r| r.get("fixes").is_none())
     );
 }
+
+/// Per agent, its true point `l` ahead at wall time `w` (ns), interpolated
+/// in its base's ground truth.
+fn true_point(truth: &[(u64, [f64; 3])], w: u64, l: f64) -> Option<[f64; 2]> {
+    let i = truth.partition_point(|&(s, _)| s < w);
+    let (&(s0, a), &(s1, b)) = (truth.get(i.checked_sub(1)?)?, truth.get(i)?);
+    if s1 - s0 > 100_000_000 {
+        return None;
+    }
+    let f = (w - s0) as f64 / (s1 - s0) as f64;
+    let p = |k: usize| a[k] + f * (b[k] - a[k]);
+    // The yaw is wrapped to [−π, π]: interpolate along the short way.
+    let turn = (b[2] - a[2] + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI;
+    let theta = a[2] + f * turn;
+    Some([p(0) + l * theta.cos(), p(1) + l * theta.sin()])
+}
+
+/// The crossing (two columns swapping sides under the safety filter) on
+/// drifting odometry with motion-capture fixes, ten times: the robots'
+/// *true* points keep the 0.3 m radius (less 1 cm) in every run.
+#[test]
+fn the_crossing_on_drifting_odometry_with_fixes_keeps_the_radius_in_ten_runs() {
+    let _fleet = common::one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let src = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/crossing.toml"),
+    )
+    .unwrap();
+    let path = dir.path().join("crossing-drift.toml");
+    std::fs::write(&path, format!("{src}{DRIFT}{MOCAP}")).unwrap();
+    let scenario = path.to_string_lossy().into_owned();
+    let mut closest_all = Vec::new();
+    for run in 0..10 {
+        let out = dir.path().join(format!("run{run}"));
+        let up = fleet_up(&scenario, "40", &out);
+        let log = read_log(&out);
+        assert_eq!(log.len(), 6);
+        let truths: Vec<&Vec<(u64, [f64; 3])>> = log.values().map(|(_, t)| t).collect();
+        let start = truths.iter().map(|t| t[0].0).max().unwrap();
+        let end = truths.iter().map(|t| t.last().unwrap().0).min().unwrap();
+        let mut closest = f64::INFINITY;
+        let mut at = (0, 0, 0);
+        let mut w = start;
+        while w < end {
+            let pts: Vec<_> = truths.iter().map(|t| true_point(t, w, 0.05)).collect();
+            for i in 0..pts.len() {
+                for j in i + 1..pts.len() {
+                    if let (Some(a), Some(b)) = (pts[i], pts[j]) {
+                        let d = (a[0] - b[0]).hypot(a[1] - b[1]);
+                        if d < closest {
+                            (closest, at) = (d, (w, i, j));
+                        }
+                    }
+                }
+            }
+            w += 10_000_000;
+        }
+        // Where the robots believed they were then (their published
+        // estimates nearest in wall time).
+        let believed: Vec<String> = [at.1, at.2]
+            .iter()
+            .map(|&i| {
+                let states = &log.values().nth(i).unwrap().0;
+                let k = states.partition_point(|s| s.wall < at.0).min(states.len() - 1);
+                let s = states[k];
+                format!(
+                    "agent {} at {} true point {:?} t {:.2}: estimate ({:.3}, {:.3}, {:.3}), e ({:.3}, {:.3}), truth {:?}",
+                    i + 1,
+                    at.0,
+                    true_point(truths[i], at.0, 0.05),
+                    s.t,
+                    s.pose[0],
+                    s.pose[1],
+                    s.pose[2],
+                    s.e[0],
+                    s.e[1],
+                    truths[i][truths[i].partition_point(|&(w, _)| w < at.0).min(truths[i].len() - 1)].1
+                )
+            })
+            .collect();
+        for r in up["robots"].as_array().unwrap() {
+            assert!(
+                fixes_of(r)["counters"]["applied"].as_u64().unwrap() > 300,
+                "{r}"
+            );
+        }
+        closest_all.push(closest);
+        assert!(
+            closest >= 0.29,
+            "run {run}: true points {closest} m apart (radius 0.3): {believed:#?}"
+        );
+    }
+    eprintln!("closest true distance per run: {closest_all:?}");
+}

@@ -11,7 +11,6 @@
 
 #![allow(clippy::unwrap_used)]
 
-use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
@@ -25,37 +24,10 @@ use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST, Time, TwistStamp
 
 mod common;
 
-use common::{EXE, check, echelon_ok, f, spawn};
+use common::{EXE, args, check, echelon_ok, f, mesh, ports, spawn};
 const SCENARIO: &str = "experiment-circle-velocity";
 /// Agent 1's start pose in [`SCENARIO`], world `[x, y, θ]`.
 const START: [f64; 3] = [0.0, -0.6, std::f64::consts::FRAC_PI_2];
-
-fn ports(n: usize) -> Vec<String> {
-    let l: Vec<_> = (0..n)
-        .map(|_| TcpListener::bind("127.0.0.1:0").unwrap())
-        .collect();
-    l.iter()
-        .map(|l| format!("tcp/127.0.0.1:{}", l.local_addr().unwrap().port()))
-        .collect()
-}
-
-/// `--listen mine --connect each of before` (a full mesh of peers).
-fn mesh(mine: &str, before: &[String]) -> Vec<String> {
-    let mut a = vec!["--listen".to_owned(), mine.to_owned()];
-    for e in before {
-        a.push("--connect".to_owned());
-        a.push(e.clone());
-    }
-    a
-}
-
-fn args<'a>(fixed: &[&'a str], more: &'a [String]) -> Vec<&'a str> {
-    fixed
-        .iter()
-        .copied()
-        .chain(more.iter().map(String::as_str))
-        .collect()
-}
 
 /// The simulator's final poses of the scenario run for `duration`.
 fn simulated_final(duration: &str, dir: &Path) -> Vec<(f64, f64)> {

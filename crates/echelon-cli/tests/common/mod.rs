@@ -96,3 +96,32 @@ pub(crate) fn spawn(args: &[&str]) -> Guard {
             .unwrap(),
     )
 }
+
+/// `n` free loopback TCP endpoints.
+pub(crate) fn ports(n: usize) -> Vec<String> {
+    let l: Vec<_> = (0..n)
+        .map(|_| std::net::TcpListener::bind("127.0.0.1:0").unwrap())
+        .collect();
+    l.iter()
+        .map(|l| format!("tcp/127.0.0.1:{}", l.local_addr().unwrap().port()))
+        .collect()
+}
+
+/// `--listen mine --connect each of before` (a full mesh of peers).
+pub(crate) fn mesh(mine: &str, before: &[String]) -> Vec<String> {
+    let mut a = vec!["--listen".to_owned(), mine.to_owned()];
+    for e in before {
+        a.push("--connect".to_owned());
+        a.push(e.clone());
+    }
+    a
+}
+
+/// `fixed` then `more`, as one argument list.
+pub(crate) fn args<'a>(fixed: &[&'a str], more: &'a [String]) -> Vec<&'a str> {
+    fixed
+        .iter()
+        .copied()
+        .chain(more.iter().map(String::as_str))
+        .collect()
+}

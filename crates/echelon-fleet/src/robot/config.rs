@@ -71,6 +71,9 @@ pub struct RobotConfig {
     pub safety: Option<RobotSafety>,
     /// The divergence guard's bounds on its plant's state (`[sim] bounds`).
     pub bounds: Bounds,
+    /// Its robot is driven by someone else (`ros2 = { driven = true }`):
+    /// it commands nothing and publishes the robot's motion as a head.
+    pub driven: bool,
 }
 
 /// Agent `agent`'s safety settings (`None`: it does not filter).
@@ -117,6 +120,7 @@ impl RobotConfig {
             duration,
             safety,
             bounds: plan.config().bounds,
+            driven: false,
         })
     }
 }

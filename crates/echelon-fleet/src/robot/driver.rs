@@ -62,6 +62,10 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     };
     let base = velocity.base();
     let agent = opts.agent;
+    let config = RobotConfig {
+        driven: link.driven,
+        ..config
+    };
     let plan = opts.scenario.build(&Overrides::default())?.plan;
     let fixes = fixes::for_agent(agent, &link, &plan, &config.spec)?;
     let task = runtime::run_on(

@@ -45,6 +45,10 @@ pub use driver::{RobotOptions, run};
 pub use report::{RobotReport, RobotStats, SafetyCounts};
 pub use task::{PlantFeed, RobotTask};
 
+/// Time constant of the derivative filter that gives a driven head's `v̇`,
+/// `ω̇` from its odometry's speeds, fleet s ([`HeadFilter`]).
+pub const HEAD_FILTER: f64 = 0.1;
+
 /// Longest plant integration sub-step, fleet s (the simulator's default `dt`).
 pub const PLANT_STEP: f64 = 1e-3;
 /// Period of the state messages while waiting for the leader, fleet s.
@@ -134,6 +138,36 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     safety: Option<Safety>,
     /// Set when the plant's state left its bounds: the robot has stopped.
     diverged: Option<String>,
+    /// A driven head's derivative filter.
+    head: HeadFilter,
+}
+
+/// `v̇`, `ω̇` of a driven head from its measured speeds: the "dirty
+/// derivative" `s / (τ s + 1)` with `τ =` [`HEAD_FILTER`], discretised by
+/// backward Euler (stable at any step): `x ← x + h/(τ + h) (u − x)`,
+/// `u̇ ≈ (u − x)/τ`. A ramp's slope is reached within `e^{−t/τ}`; noise
+/// above `1/(2π τ)` ≈ 1.6 Hz is attenuated.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct HeadFilter {
+    /// Time of the last update and the filtered `(v, ω)` then.
+    last: Option<(f64, [f64; 2])>,
+}
+
+impl HeadFilter {
+    /// The filter fed speeds `(v, ω)` measured at time `t`: `(v̇, ω̇)`.
+    pub fn update(&mut self, t: f64, v: f64, omega: f64) -> (f64, f64) {
+        let u = [v, omega];
+        let x = match self.last {
+            Some((t0, x)) if t > t0 => {
+                let a = (t - t0) / (HEAD_FILTER + t - t0);
+                [x[0] + a * (u[0] - x[0]), x[1] + a * (u[1] - x[1])]
+            }
+            Some((_, x)) => x,
+            None => u,
+        };
+        self.last = Some((t, x));
+        ((u[0] - x[0]) / HEAD_FILTER, (u[1] - x[1]) / HEAD_FILTER)
+    }
 }
 
 /// A robot's safety filter and what it knows of its neighbours.
@@ -176,11 +210,9 @@ impl<P: Plant> Robot<P> {
             counts: SafetyCounts::default(),
         });
         Robot {
-            config,
             plant,
             source,
             offset: 0.0,
-            synced: false,
             tracker,
             injector,
             delayed: VecDeque::with_capacity(64),
@@ -195,6 +227,10 @@ impl<P: Plant> Robot<P> {
             latency: Latency::new(),
             safety,
             diverged: None,
+            head: HeadFilter::default(),
+            // A driven head keeps the fleet's time: its own clock.
+            synced: config.driven,
+            config,
         }
     }
 
@@ -289,6 +325,11 @@ impl<P: Plant> Robot<P> {
     /// sample for delivery. Counts whatever happens.
     pub fn on_message(&mut self, bytes: &[u8], now: f64) {
         self.tracker.counters.received += 1;
+        if self.config.driven {
+            // A driven head follows no one (its driver is its leader).
+            self.tracker.counters.foreign += 1;
+            return;
+        }
         let msg = match wire::decode(bytes) {
             Ok(m) => m,
             Err(DecodeError::Malformed(_)) => {
@@ -347,6 +388,9 @@ impl<P: Plant> Robot<P> {
     ///
     /// [`is_due`]: Robot::is_due
     pub fn tick(&mut self, now: f64) -> RobotTick {
+        if self.config.driven {
+            return self.tick_driven(now);
+        }
         let local = now;
         let now = self.fleet_time(now);
         while let Some(&(at, h, s)) = self.delayed.front() {
@@ -481,10 +525,49 @@ impl<P: Plant> Robot<P> {
 
     /// Commands zero: the one place where losing the leader, the odometry or
     /// the process stops the drive ([`Plant::stop`]: zero torques, or a zero
-    /// `cmd_vel` sent at once). The command is held until the next one.
+    /// `cmd_vel` sent at once). The command is held until the next one. A
+    /// driven head is never commanded (its driver owns its `cmd_vel`).
     pub fn halt(&mut self, why: Halt) {
         let _ = why;
-        self.plant.stop();
+        if !self.config.driven {
+            self.plant.stop();
+        }
+    }
+
+    /// A driven head's tick: its robot's state from the plant (its
+    /// odometry, world-mapped and fixed), `v̇`, `ω̇` from [`HeadFilter`],
+    /// published as a state its followers follow; nothing commanded.
+    /// Stale odometry publishes nothing: the followers' streams go stale
+    /// and their link-loss policy applies.
+    fn tick_driven(&mut self, now: f64) -> RobotTick {
+        let now = self.fleet_time(now);
+        self.plant.advance(now);
+        let publish = self.plant.state().map(|state| {
+            let (dv, domega) = self.head.update(now, state.v, state.omega);
+            self.last = RobotState {
+                t: now,
+                agent: self.config.agent,
+                link: LinkStatus::Tracking,
+                state,
+                dv,
+                domega,
+                sigma: self.plant.position_sigma(),
+                ..RobotState::default()
+            };
+            self.ticks += 1;
+            self.header_for(self.last)
+        });
+        let stats = (now >= self.next_stats).then(|| {
+            self.next_stats = now + 1.0;
+            self.stats_at(now, LinkStatus::Tracking)
+        });
+        let done = self.config.duration.is_some_and(|d| now >= d);
+        self.next_tick = (self.next_tick + self.config.period).max(now);
+        RobotTick {
+            publish,
+            stats,
+            done,
+        }
     }
 
     /// The process is stopping: commands zero and returns the final counters.

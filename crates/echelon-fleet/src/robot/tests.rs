@@ -816,3 +816,89 @@ fn a_neighbour_stale_past_the_hold_brakes_the_robot() {
     // The stats message carries the same counters.
     assert_eq!(r.finish().safety, Some(c));
 }
+
+proptest::proptest! {
+    /// The head's derivative filter: a constant speed has no derivative, a
+    /// ramp's slope is reached within `e^{−t/τ}` (here after 1 s, 5 τ… 10 τ),
+    /// at any sampling step.
+    #[test]
+    fn the_head_filter_differentiates_ramps(
+        v0 in -1.0..1.0f64, a in -2.0..2.0f64, w0 in -1.0..1.0f64, alpha in -2.0..2.0f64,
+        h in 0.001..0.05f64,
+    ) {
+        let mut f = HeadFilter::default();
+        let mut t = 0.0;
+        let mut last = (0.0, 0.0);
+        while t < 1.0 {
+            last = f.update(t, v0 + a * t, w0 + alpha * t);
+            t += h;
+        }
+        let tol = 1e-2 * (1.0 + a.abs().max(alpha.abs()));
+        proptest::prop_assert!((last.0 - a).abs() < tol, "{} vs {}", last.0, a);
+        proptest::prop_assert!((last.1 - alpha).abs() < tol, "{} vs {}", last.1, alpha);
+        let mut still = HeadFilter::default();
+        for k in 0..50 {
+            proptest::prop_assert_eq!(still.update(f64::from(k) * h, v0, w0), (0.0, 0.0));
+        }
+    }
+}
+
+/// A driven head (`ros2 = { driven = true }`): its robot moves by its
+/// driver's commands (here the test's, on the simulated plant), never the
+/// robot's; it publishes the plant's state with `v̇` from its filter on its
+/// own clock, ignores the reference, and stopping commands nothing.
+#[test]
+fn a_driven_head_publishes_its_robots_motion_and_commands_nothing() {
+    let s = scenario(EXTRAPOLATE);
+    let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
+    let config = RobotConfig::from_scenario(&s, &fleet, 1, FaultSpec::default(), None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut head = Robot::simulated(
+        RobotConfig {
+            driven: true,
+            ..config
+        },
+        7,
+    );
+    assert!(head.is_synced(), "a head keeps its own time");
+    let driver = Command::Torque(Input { u1: 20.0, u2: 1.0 });
+    head.plant_mut().command(driver);
+    // The reference's messages are not its leader's.
+    let mut leader = LeaderTask::new(reference(&s), 50.0, 1e9, 1);
+    let mut buf = Vec::new();
+    let mut published = Vec::new();
+    let mut now = 0.0;
+    while now < 3.0 {
+        if let Some((h, r)) = leader.tick(now + 50.0) {
+            wire::encode_reference(&mut buf, h, &r);
+            head.on_message(&buf, now);
+        }
+        if head.is_due(now) {
+            let tick = head.tick(now);
+            if let Some((_, st)) = tick.publish {
+                published.push(st);
+            }
+        }
+        now += 0.001;
+    }
+    assert!(head.counters().foreign > 100 && head.counters().received == head.counters().foreign);
+    assert!(
+        (290..=302).contains(&published.len()),
+        "{}",
+        published.len()
+    );
+    let last = published[published.len() - 1];
+    assert!((last.t - 2.99).abs() < 0.011, "its own clock: {}", last.t);
+    let truth = head.plant().state().unwrap_or_else(|| panic!("a state"));
+    assert!(last.state.v > 0.05 && (last.state.x - truth.x).abs() < 0.01);
+    let (dv, domega) = head.plant().accelerations();
+    assert!(
+        (last.dv - dv).abs() < 0.05 * dv.abs() + 1e-3
+            && (last.domega - domega).abs() < 0.05 * domega.abs() + 1e-3,
+        "{last:?} vs ({dv}, {domega})"
+    );
+    assert_eq!(last.link, LinkStatus::Tracking);
+    // Stopping leaves the driver's command alone.
+    let _ = head.finish();
+    assert_eq!(head.plant().accelerations(), (dv, domega));
+}

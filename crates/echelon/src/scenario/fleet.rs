@@ -130,6 +130,9 @@ pub struct Ros2Link {
     pub odom_origin: Pose,
     /// Where its absolute fixes come from (its `fixes.source`), if anywhere.
     pub fixes: Option<FixSource>,
+    /// Driven by someone else (teleop, Nav2): the fleet robot only reads it
+    /// and publishes its motion as the head of its followers.
+    pub driven: bool,
 }
 
 /// A ROS 2 topic of absolute fixes for one robot (an agent's `fixes` with a
@@ -358,6 +361,7 @@ impl Scenario {
             odom_rate: positive(|r| r.odom_rate, "odom_rate", DEFAULT_ODOM_RATE)?,
             odom_origin: self.odom_origin(i)?,
             fixes: self.fix_source(i, &namespace)?,
+            driven: links.get_or(|r| r.driven, "driven", false).0,
             namespace,
         })
     }

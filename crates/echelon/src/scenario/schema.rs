@@ -285,6 +285,11 @@ pub struct Ros2Section {
     /// The simulated base publishes odometry at this rate, Hz (default 50).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub odom_rate: Option<f64>,
+    /// `true`: someone else drives this robot (teleop, Nav2); its fleet
+    /// robot sends no `cmd_vel` and publishes the robot's motion, read from
+    /// its odometry, as the head its followers follow (default false).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub driven: Option<bool>,
 }
 
 /// The `cmd_vel` message type.

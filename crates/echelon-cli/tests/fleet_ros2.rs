@@ -993,3 +993,43 @@ fn fleet_up_real_refuses_what_real_robots_cannot_do() {
         "agents[1].ros2.connect",
     );
 }
+
+/// A robot process whose robot's router answers but carries no odometry
+/// (the robot's driver not running) does not join the fleet: after 30 s it
+/// fails (exit 2) naming the topic and the router.
+#[test]
+fn a_robot_without_odometry_behind_its_router_does_not_join_the_fleet() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = ports(4);
+    let scenario = dir.path().join("three-real.toml");
+    std::fs::write(&scenario, three_robots_behind(&e[..3])).unwrap();
+    let scenario = scenario.to_str().unwrap();
+    let _robot_router = spawn(&["fleet", "router", "--listen", &e[0]]);
+    let _fleet_router = spawn(&["fleet", "router", "--listen", &e[3]]);
+    let started = Instant::now();
+    let robot = Command::new(EXE)
+        .args([
+            "fleet",
+            "robot",
+            scenario,
+            "--agent",
+            "1",
+            "--ros2",
+            "--mode",
+            "client",
+            "--connect",
+            &e[3],
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&robot.stderr);
+    assert_eq!(robot.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains(&format!(
+            "nothing arrived from agent 1's robot (/robot1/odom at {})",
+            e[0]
+        )),
+        "{err}"
+    );
+    assert!(started.elapsed() >= Duration::from_secs(30), "{err}");
+}

@@ -304,6 +304,7 @@ pub fn run(
                 secure: None,
                 exe: opts.exe.clone(),
                 ros2: false,
+                real: false,
                 topology: up::Topology::Router,
                 sites: 1,
             },

@@ -194,6 +194,44 @@ pub fn subscribes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
     }
 }
 
+/// The session options of agent `agent`'s robot's own router: a client of
+/// the first of `connect` that answers (one link; no gossip, so no
+/// link to the robot's own nodes), in secure mode with the process's
+/// identity (the robot's router must then be a `tls/` or `quic/` listener
+/// trusting the fleet's CA: docs/real-robots.md).
+pub fn robot_router(
+    agent: u32,
+    connect: &[String],
+    fleet: &NetOptions,
+) -> Result<NetOptions, FleetError> {
+    if let Some(s) = &fleet.secure
+        && let Some(e) = connect
+            .iter()
+            .find(|e| !(e.starts_with("tls/") || e.starts_with("quic/")))
+    {
+        return Err(FleetError::Config(format!(
+            "agent {agent}: ros2.connect `{e}`: in secure mode a robot's router is reached over tls/ or quic/ with identity {} (docs/real-robots.md, \"Secure mode on real robots\")",
+            s.identity
+        )));
+    }
+    if fleet.secure.is_none()
+        && let Some(e) = connect
+            .iter()
+            .find(|e| e.starts_with("tls/") || e.starts_with("quic/"))
+    {
+        return Err(FleetError::Config(format!(
+            "agent {agent}: ros2.connect `{e}` needs certificates: give --secure DIR (or a tcp/ endpoint)"
+        )));
+    }
+    Ok(NetOptions {
+        mode: Some(Mode::Client),
+        listen: Vec::new(),
+        connect: connect.to_vec(),
+        zenoh_config: None,
+        secure: fleet.secure.clone(),
+    })
+}
+
 /// The Zenoh link protocol of the secure mode: QUIC (TLS 1.3 inside, mutual
 /// authentication, certificate common names for the access control).
 ///
@@ -483,6 +521,62 @@ mod tests {
             router.get_json("connect/exit_on_failure").ok().as_deref(),
             Some("false")
         );
+    }
+
+    /// What the scenario accepts as a robot's router Zenoh parses as an
+    /// endpoint, and a robot's own session is a client of it, with
+    /// certificates exactly when the link needs them.
+    #[test]
+    fn a_robots_router_is_a_zenoh_endpoint_reached_as_a_client() {
+        let plain = [
+            "tcp/192.168.1.21:7447",
+            "udp/robot-1.lab:7447",
+            "tcp/[fe80::1]:7447#iface=eth0",
+        ];
+        let secured = ["tls/10.0.0.2:7448", "quic/robot-2:7448"];
+        for e in plain.iter().chain(&secured) {
+            echelon::scenario::check_endpoint(e).unwrap_or_else(|m| panic!("{m}"));
+            e.parse::<zenoh::config::EndPoint>()
+                .unwrap_or_else(|m| panic!("{e}: {m}"));
+        }
+        let fleet = NetOptions {
+            mode: Some(Mode::Client),
+            connect: vec!["tcp/127.0.0.1:7447".into()],
+            ..NetOptions::default()
+        };
+        let robot = robot_router(1, &[plain[0].into(), plain[1].into()], &fleet)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(robot.mode, Some(Mode::Client));
+        assert_eq!(
+            robot.connect,
+            vec![plain[0].to_owned(), plain[1].to_owned()]
+        );
+        assert!(robot.listen.is_empty() && robot.secure.is_none());
+        let c = config(&robot).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(c.get_json("mode").ok().as_deref(), Some("\"client\""));
+        let e = robot_router(2, &[secured[0].into()], &fleet)
+            .err()
+            .unwrap_or_else(|| panic!("tls without certificates"));
+        assert!(
+            e.to_string().contains("agent 2") && e.to_string().contains("--secure"),
+            "{e}"
+        );
+        let secure = NetOptions {
+            secure: Some(Secure {
+                dir: "certs".into(),
+                identity: "robot-3".into(),
+                robots: 3,
+                ros2: Vec::new(),
+            }),
+            ..fleet
+        };
+        let robot =
+            robot_router(3, &secured.map(String::from), &secure).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(robot.secure, secure.secure);
+        let e = robot_router(3, &[plain[0].into()], &secure)
+            .err()
+            .unwrap_or_else(|| panic!("tcp in secure mode"));
+        assert!(e.to_string().contains("tls/ or quic/"), "{e}");
     }
 
     #[test]

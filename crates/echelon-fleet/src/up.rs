@@ -13,6 +13,12 @@
 //! and leader stop at `--duration`; the collector is then sent SIGTERM and
 //! closes its files. Each child's stderr goes to `DIR/logs/<role>.log`; its
 //! last stdout line (kept in `DIR/logs/<role>.out`) is its JSON report.
+//!
+//! With `ros2`, one simulated ROS 2 base per robot (`fleet base --ros2`)
+//! starts before the robots, on the fleet's network. With `ros2` and `real`
+//! there are none: each robot process reaches its real robot at the agent's
+//! `ros2.connect` in a session of its own (docs/ros2.md, "Two networks"),
+//! and joins the fleet once the robot's odometry arrives; real time only.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -81,10 +87,54 @@ pub struct UpOptions {
     /// Robots drive ROS 2 bases: one simulated base per robot
     /// (`fleet base --ros2`), all robot↔base traffic in ROS 2's format.
     pub ros2: bool,
+    /// With `ros2`: the bases are real robots, each behind its own router
+    /// (its agent's `ros2.connect`): no simulated bases, time scale 1, and
+    /// each robot process reaches its robot in a session of its own.
+    pub real: bool,
     /// Through routers (default) or a peer mesh.
     pub topology: Topology,
     /// Router topology: the number of sites (routers), ≥ 1.
     pub sites: usize,
+}
+
+/// `fleet up --ros2 --real`'s refusals, before anything starts: real robots
+/// run in real time, and each agent names its robot's router, reachable
+/// with the fleet's mode (plain, or secure with certificates).
+fn check_real(
+    opts: &UpOptions,
+    links: &[echelon::scenario::Ros2Link],
+    n: usize,
+) -> Result<(), FleetError> {
+    if !opts.ros2 {
+        return Err(FleetError::Config(
+            "--real drives ROS 2 robots: give --ros2 too".into(),
+        ));
+    }
+    if opts.time_scale != 1.0 {
+        return Err(FleetError::Config(format!(
+            "--time-scale {}: real robots run in real time, so `fleet up --real` runs at 1 (rehearse faster on simulated bases: `fleet up --ros2` without --real)",
+            opts.time_scale
+        )));
+    }
+    for (i, link) in links.iter().enumerate() {
+        let k = i as u32 + 1;
+        if link.connect.is_empty() {
+            return Err(FleetError::Config(format!(
+                "agent {k} has no ros2.connect: `fleet up --real` reaches each robot at its own router; give agents[{k}].ros2.connect, or [fleet.ros2] connect for all (e.g. \"tcp/192.168.1.2{{k}}:7447\")"
+            )));
+        }
+        let fleet_net = crate::net::NetOptions {
+            secure: opts.secure.as_ref().map(|dir| crate::net::Secure {
+                dir: dir.clone(),
+                identity: Member::Robot(k).identity(),
+                robots: n as u32,
+                ros2: Vec::new(),
+            }),
+            ..crate::net::NetOptions::default()
+        };
+        crate::net::robot_router(k, &link.connect, &fleet_net)?;
+    }
+    Ok(())
 }
 
 /// Runs the fleet and returns every process's report.
@@ -110,6 +160,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         }
         _ => {}
     }
+    if opts.real {
+        check_real(opts, &fleet.ros2, n)?;
+    }
     let duration = opts.duration.unwrap_or(built.plan.config().duration);
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
@@ -118,7 +171,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // Start order: the routers (router topology), the collector, the ROS 2
     // bases (with --ros2), the robots, the leader; in a mesh also the order
     // of their ports.
-    let bases = if opts.ros2 { n } else { 0 };
+    let bases = if opts.ros2 && !opts.real { n } else { 0 };
     let robot_at = |k: usize| bases + k;
     let leader_at = bases + n + 1;
     let net = Links::new(opts, proto, leader_at + 1)?;
@@ -213,7 +266,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         // For its trajectory.csv's columns (and, with --ros2, its topics).
         opts.scenario.clone(),
     ];
-    if opts.ros2 {
+    // Real robots' ROS topics stay on their own routers, out of its reach.
+    if opts.ros2 && !opts.real {
         args.push("--ros2".to_owned());
     }
     args.extend(common(0, &Member::Collector.identity()));
@@ -265,8 +319,11 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             args.extend(["--outage".to_owned(), format!("{s}:{l}")]);
         }
         if opts.ros2 {
+            args.push("--ros2".to_owned());
+        }
+        if opts.ros2 && !opts.real {
             // Its robot is the simulated base started above, on this clock.
-            args.extend(["--ros2".to_owned(), "--simulated-base".to_owned()]);
+            args.push("--simulated-base".to_owned());
         }
         args.extend(common(robot_at(k), &Member::Robot(k as u32).identity()));
         robots.push(spawn(

@@ -74,6 +74,14 @@ fn the_real_robot_examples_say_how_each_robot_is_reached() {
             s.file.agents.iter().any(|a| a.ros2.is_some()),
             "{at}: no agent's own ros2"
         );
+        // Every robot's own router is named: `fleet up --ros2 --real` runs them.
+        for (k, link) in s.fleet().unwrap().ros2.iter().enumerate() {
+            assert!(
+                !link.connect.is_empty(),
+                "{at}: agent {} has no connect",
+                k + 1
+            );
+        }
         let run = s.build(&Overrides::default()).unwrap();
         for (k, agent) in run.plan.agents().iter().enumerate() {
             assert!(

@@ -109,6 +109,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     net,
                     fleet: a.net.fleet.clone(),
                     ros2: a.ros2,
+                    own_router: !a.simulated_base,
                 };
                 robot::run(options, stop)
             })

@@ -33,7 +33,17 @@ pub struct RobotOptions {
     pub fleet: Option<String>,
     /// Drive the agent's ROS 2 robot (`[fleet.ros2]`) instead of a simulated one.
     pub ros2: bool,
+    /// With `ros2`: reach the robot at its own router (the agent's
+    /// `ros2.connect`, when it names one) in a second Zenoh session, apart
+    /// from the fleet's; and join the fleet only once its odometry arrives.
+    /// `false`: the robot is on the fleet's network (`fleet base`'s
+    /// simulation, as `fleet up --ros2` runs it).
+    pub own_router: bool,
 }
+
+/// How long a robot process waits for its robot's first odometry before
+/// joining the fleet, real time.
+const FIRST_ODOMETRY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
 
 /// Runs the robot until `duration` or the stop flag: [`RobotTask`] on the
 /// fleet runtime, on its simulated drive or, with `ros2`, on its ROS 2
@@ -68,9 +78,22 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     };
     let plan = opts.scenario.build(&Overrides::default())?.plan;
     let fixes = fixes::for_agent(agent, &link, &plan, &config.spec)?;
-    let task = runtime::run_on(
-        |session| {
-            let node = Ros2Node::declare(session, &link, agent)?;
+    let robot_net = match opts.own_router && !link.connect.is_empty() {
+        true => Some(net::robot_router(agent, &link.connect, &opts.net)?),
+        false => None,
+    };
+    let device = robot_net.as_ref().map(|net| runtime::Device {
+        net,
+        name: format!(
+            "agent {agent}'s robot ({} at {})",
+            link.odom,
+            link.connect.join(" or ")
+        ),
+        first_sample: Some(FIRST_ODOMETRY_TIMEOUT),
+    });
+    let task = runtime::run_split(
+        |_fleet, robot| {
+            let node = Ros2Node::declare(robot, &link, agent)?;
             let mut drive = Ros2Drive::new(link, base, node.gid, OwnedCmdSink(node.publisher));
             if let Some(f) = fixes {
                 drive = drive.with_fixes(f);
@@ -81,10 +104,11 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
             let mut inputs = vec![node.odom_key];
             inputs.extend(node.fix_key);
             let task = RobotTask::new(robot, keys)
-                .with_plant_inputs(inputs, |d, i, k, b, t| d.on_input(i, k, b, t));
-            Ok((task, node.tokens))
+                .with_plant_inputs(inputs.clone(), |d, i, k, b, t| d.on_input(i, k, b, t));
+            Ok((task, node.tokens, inputs))
         },
         &opts.net,
+        device,
         clock,
         stop,
     )?;

@@ -99,16 +99,65 @@ pub fn run<T: Task>(
 pub fn run_on<T: Task, G>(
     build: impl FnOnce(&zenoh::Session) -> Result<(T, G), FleetError>,
     net: &NetOptions,
+    clock: FleetClock,
+    stop: &StopFlag,
+) -> Result<T, FleetError> {
+    run_split(
+        |fleet, _| build(fleet).map(|(task, guard)| (task, guard, Vec::new())),
+        net,
+        None,
+        clock,
+        stop,
+    )
+}
+
+/// A second Zenoh network a task also talks to, kept apart from the
+/// fleet's: a real robot's own (its `rmw_zenohd` or bridge).
+#[derive(Debug, Clone)]
+pub struct Device<'a> {
+    /// How its session is opened.
+    pub net: &'a NetOptions,
+    /// What it is, for errors (`agent 2's robot at tcp/192.168.1.22:7447`).
+    pub name: String,
+    /// Wait this long (real time) for a first sample on the task's inputs
+    /// from the device before declaring the task's liveliness tokens (before
+    /// joining the fleet); `None`: do not wait.
+    pub first_sample: Option<Duration>,
+}
+
+/// [`run_on`] with a second session, opened with `device` (none: the fleet's
+/// session serves as both): `build` declares on either (fleet, device) and
+/// names which of the task's inputs (keys as [`Task::inputs`] gives them)
+/// are subscribed to on the device's session; every other input, output
+/// and token is the fleet's. Nothing crosses from one network to the other.
+pub fn run_split<T: Task, G>(
+    build: impl FnOnce(&zenoh::Session, &zenoh::Session) -> Result<(T, G, Vec<String>), FleetError>,
+    net: &NetOptions,
+    device: Option<Device<'_>>,
     mut clock: FleetClock,
     stop: &StopFlag,
 ) -> Result<T, FleetError> {
     let session = net::open(net)?;
-    let (mut task, guard) = build(&session)?;
+    let device_session = match &device {
+        Some(d) => Some(
+            net::open(d.net).map_err(|e| FleetError::Zenoh(format!("reaching {}: {e}", d.name)))?,
+        ),
+        None => None,
+    };
+    let dev = device_session.as_ref().unwrap_or(&session);
+    let (mut task, guard, device_inputs) = build(&session, dev)?;
     let (tx, rx) = mpsc::channel::<Arrival>();
     let mut subscribers = Vec::new();
+    let mut from_device = Vec::new();
     for (input, key) in task.inputs().into_iter().enumerate() {
         let tx = tx.clone();
-        let sub = session
+        let on = if device_inputs.contains(&key) {
+            from_device.push(input);
+            dev
+        } else {
+            &session
+        };
+        let sub = on
             .declare_subscriber(&key)
             .callback(move |s| {
                 let unix_ns = crate::unix_nanos();
@@ -127,6 +176,37 @@ pub fn run_on<T: Task, G>(
         subscribers.push(sub);
     }
     drop(tx);
+    // Samples that arrived before the clock started, handed once it has.
+    let mut early = Vec::new();
+    if let Some(d) = &device
+        && let Some(timeout) = d.first_sample
+        && !from_device.is_empty()
+    {
+        let started = Instant::now();
+        loop {
+            if stop.is_raised() {
+                break;
+            }
+            if started.elapsed() > timeout {
+                return Err(FleetError::Config(format!(
+                    "nothing arrived from {} within {:.0} s (is its driver running, and are the namespace, domain and key scheme right?)",
+                    d.name,
+                    timeout.as_secs_f64()
+                )));
+            }
+            match rx.recv_timeout(NAP) {
+                Ok(a) => {
+                    let first = from_device.contains(&a.input);
+                    early.push(a);
+                    if first {
+                        break;
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            }
+        }
+    }
     let mut publishers = Vec::new();
     for key in task.outputs() {
         publishers.push(
@@ -171,6 +251,9 @@ pub fn run_on<T: Task, G>(
     };
     let reactive = task.wakes_on_input();
     let ran: Result<(), FleetError> = (|| {
+        for a in early.drain(..) {
+            hand(&mut task, &a)?;
+        }
         while !stop.is_raised() {
             if reactive {
                 let left = (task.next_wake() - clock.now()).max(0.0);
@@ -202,6 +285,9 @@ pub fn run_on<T: Task, G>(
         let _ = sub.undeclare().wait();
     }
     let _ = session.close().wait();
+    if let Some(d) = device_session {
+        let _ = d.close().wait();
+    }
     ran?;
     stopped?;
     if reactive {

@@ -133,6 +133,57 @@ pub struct Ros2Link {
     /// Driven by someone else (teleop, Nav2): the fleet robot only reads it
     /// and publishes its motion as the head of its followers.
     pub driven: bool,
+    /// Its own Zenoh router's endpoints (`connect`, `{k}` replaced), tried
+    /// in order; empty: the robot is reached through the fleet's network.
+    pub connect: Vec<String>,
+}
+
+/// The link protocols a robot's router may be reached over: those echelon's
+/// Zenoh is built with.
+pub const ENDPOINT_PROTOCOLS: [&str; 4] = ["tcp", "udp", "tls", "quic"];
+
+/// Checks a Zenoh endpoint as a robot's router is given:
+/// `<protocol>/<host>:<port>` (a name, an IPv4 address or a bracketed IPv6
+/// one), optionally followed by Zenoh's `?metadata` and `#config` parts,
+/// which are passed on unchecked.
+pub fn check_endpoint(e: &str) -> Result<(), String> {
+    let locator = e.split(['?', '#']).next().unwrap_or_default();
+    let Some((proto, address)) = locator.split_once('/') else {
+        return Err(format!(
+            "`{e}` is not a Zenoh endpoint: give <protocol>/<host>:<port>, e.g. tcp/192.168.1.21:7447"
+        ));
+    };
+    if !ENDPOINT_PROTOCOLS.contains(&proto) {
+        return Err(format!(
+            "`{e}`: the protocol must be one of {} (not `{proto}`)",
+            ENDPOINT_PROTOCOLS.join(", ")
+        ));
+    }
+    let bad = |why: &str| Err(format!("`{e}`: {why}; give <protocol>/<host>:<port>"));
+    let Some((host, port)) = address.rsplit_once(':') else {
+        return bad("no port");
+    };
+    if !matches!(port.parse::<u16>(), Ok(p) if p > 0) {
+        return bad(&format!("`{port}` is not a port (1 to 65535)"));
+    }
+    let host_ok = if let Some(v6) = host.strip_prefix('[').and_then(|h| h.strip_suffix(']')) {
+        v6.parse::<std::net::Ipv6Addr>().is_ok()
+    } else {
+        !host.is_empty()
+            && host.split('.').all(|label| {
+                !label.is_empty()
+                    && !label.starts_with('-')
+                    && label
+                        .bytes()
+                        .all(|b| b.is_ascii_alphanumeric() || b == b'-')
+            })
+    };
+    if !host_ok {
+        return bad(&format!(
+            "`{host}` is not a host name, an IPv4 address or a bracketed IPv6 address"
+        ));
+    }
+    Ok(())
 }
 
 /// A ROS 2 topic of absolute fixes for one robot (an agent's `fixes` with a
@@ -363,7 +414,35 @@ impl Scenario {
             fixes: self.fix_source(i, &namespace)?,
             driven: links.get_or(|r| r.driven, "driven", false).0,
             namespace,
+            connect: self.connect(i, &links)?,
         })
+    }
+
+    /// Agent `i`'s (0-based) robot router endpoints (`connect`, `{k}`
+    /// replaced), each checked.
+    fn connect(
+        &self,
+        i: usize,
+        links: &Merge<'_, Ros2Section>,
+    ) -> Result<Vec<String>, ScenarioError> {
+        let Some((endpoints, path)) = links.get(|r| r.connect.clone(), "connect") else {
+            return Ok(Vec::new());
+        };
+        let endpoints: Vec<String> = endpoints
+            .to_vec()
+            .iter()
+            .map(|e| e.replace("{k}", &(i + 1).to_string()))
+            .collect();
+        if endpoints.is_empty() {
+            return Err(self.error(
+                &path,
+                "an empty list: give the robot's router, e.g. \"tcp/192.168.1.21:7447\"",
+            ));
+        }
+        for e in &endpoints {
+            check_endpoint(e).map_err(|m| self.error(&path, format!("agent {}: {m}", i + 1)))?;
+        }
+        Ok(endpoints)
     }
 
     /// Agent `i`'s (0-based) fixes from ROS 2: its `fixes` over `[fixes]`,
@@ -649,5 +728,100 @@ offset = { x = 0.3, y = 0.0 }
             assert_eq!(e.field, field, "{e}");
             assert!(e.location.line > 0, "{e}");
         }
+    }
+
+    #[test]
+    fn robot_routers_are_resolved_and_checked() {
+        // None by default: the robot is on the fleet's network.
+        let f = parse("").unwrap_or_else(|e| panic!("{e}"));
+        assert!(f.ros2[0].connect.is_empty());
+        // One endpoint per agent, `{k}` from [fleet.ros2], or the agent's list.
+        let f = parse("\n[fleet.ros2]\nconnect = \"tcp/192.168.1.2{k}:7447\"\n")
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(f.ros2[0].connect, vec!["tcp/192.168.1.21:7447".to_owned()]);
+        let f = parse(
+            "ros2 = { connect = [\"tls/robot-1.lab:7448\", \"tcp/[fe80::1]:7447#iface=eth0\"] }\n[fleet.ros2]\nconnect = \"tcp/10.0.0.1:7447\"\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            f.ros2[0].connect,
+            vec![
+                "tls/robot-1.lab:7448".to_owned(),
+                "tcp/[fe80::1]:7447#iface=eth0".to_owned()
+            ]
+        );
+        // A bad endpoint names its field and line, at the agent or the file.
+        for (extra, field, says) in [
+            (
+                "ros2 = { connect = \"192.168.1.21:7447\" }\n",
+                "agents[1].ros2.connect",
+                "not a Zenoh endpoint",
+            ),
+            (
+                "ros2 = { connect = \"192.168.1.21\" }\n",
+                "agents[1].ros2.connect",
+                "not a Zenoh endpoint",
+            ),
+            (
+                "ros2 = { connect = \"tcp/192.168.1.21\" }\n",
+                "agents[1].ros2.connect",
+                "no port",
+            ),
+            (
+                "ros2 = { connect = \"tcp/192.168.1.21:0\" }\n",
+                "agents[1].ros2.connect",
+                "not a port",
+            ),
+            (
+                "ros2 = { connect = \"tcp/192.168.1.21:74470\" }\n",
+                "agents[1].ros2.connect",
+                "not a port",
+            ),
+            (
+                "ros2 = { connect = \"ws/robot:7447\" }\n",
+                "agents[1].ros2.connect",
+                "protocol must be",
+            ),
+            (
+                "ros2 = { connect = \"tcp/:7447\" }\n",
+                "agents[1].ros2.connect",
+                "not a host",
+            ),
+            (
+                "ros2 = { connect = \"tcp/robot {k}:7447\" }\n",
+                "agents[1].ros2.connect",
+                "not a host",
+            ),
+            (
+                "ros2 = { connect = \"tcp/[::zz]:7447\" }\n",
+                "agents[1].ros2.connect",
+                "not a host",
+            ),
+            (
+                "ros2 = { connect = [] }\n",
+                "agents[1].ros2.connect",
+                "empty list",
+            ),
+            (
+                "\n[fleet.ros2]\nconnect = \"tcp/robot{j}:7447\"\n",
+                "fleet.ros2.connect",
+                "not a host",
+            ),
+            (
+                "\n[fleet.ros2]\nconnect = [\"tcp/a:1\", \"udp/b\"]\n",
+                "fleet.ros2.connect",
+                "no port",
+            ),
+        ] {
+            let e = parse(extra).err().unwrap_or_else(|| panic!("{extra}"));
+            assert_eq!(e.field, field, "{e}");
+            assert!(e.location.line > 0, "{e}");
+            assert!(e.message.contains(says), "{extra}: {e}");
+        }
+        // Not a string or a list of strings: refused by the parser.
+        let e = parse("ros2 = { connect = 7447 }\n")
+            .err()
+            .unwrap_or_else(|| panic!());
+        assert!(e.location.line > 0, "{e}");
     }
 }

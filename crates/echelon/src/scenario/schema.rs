@@ -290,6 +290,33 @@ pub struct Ros2Section {
     /// its odometry, as the head its followers follow (default false).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub driven: Option<bool>,
+    /// The robot's own Zenoh router (its `rmw_zenohd` or bridge), a Zenoh
+    /// endpoint such as `tcp/192.168.1.21:7447` or a list of them (tried in
+    /// order); `{k}` is replaced by the agent number. A robot process
+    /// driving a real robot reaches it there, in a session of its own
+    /// (`fleet up --ros2 --real`; docs/ros2.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub connect: Option<Endpoints>,
+}
+
+/// One Zenoh endpoint or a list of them.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(untagged)]
+pub enum Endpoints {
+    /// One endpoint, `tcp/192.168.1.21:7447`.
+    One(String),
+    /// Several, tried in order.
+    Many(Vec<String>),
+}
+
+impl Endpoints {
+    /// The endpoints, in order.
+    pub fn to_vec(&self) -> Vec<String> {
+        match self {
+            Endpoints::One(e) => vec![e.clone()],
+            Endpoints::Many(v) => v.clone(),
+        }
+    }
 }
 
 /// The `cmd_vel` message type.

@@ -25,7 +25,7 @@ pub(crate) enum FleetCommand {
     Collector(CollectorArgs),
     /// A Zenoh router (the engine of zenohd) for the fleet's processes to link to; runs until SIGINT/SIGTERM.
     Router(RouterArgs),
-    /// Start a router, a leader, one process per robot and a collector on loopback; stop them; summarise.
+    /// Start a router, a leader, one process per robot and a collector on loopback (with --ros2 --real, driving real robots at their own routers); stop them; summarise.
     #[command(allow_negative_numbers = true)]
     Up(UpArgs),
     /// Make a development CA and certificates for the secure mode.
@@ -318,6 +318,9 @@ pub(crate) struct UpArgs {
     /// Robots drive simulated ROS 2 bases (one `fleet base --ros2` each), all robot↔base traffic in ROS 2's format.
     #[arg(long)]
     pub(super) ros2: bool,
+    /// With --ros2: drive real robots, each at its own router (the agents' `ros2.connect`), instead of simulated bases; real time only.
+    #[arg(long, requires = "ros2")]
+    pub(super) real: bool,
     /// How the processes link.
     #[arg(long, value_enum, default_value = "router")]
     pub(super) topology: TopologyArg,

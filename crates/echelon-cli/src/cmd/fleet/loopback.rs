@@ -73,6 +73,7 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             secure: a.secure,
             exe,
             ros2: a.ros2,
+            real: a.real,
             topology: match a.topology {
                 TopologyArg::Router => Topology::Router,
                 TopologyArg::Mesh => Topology::Mesh,
@@ -170,6 +171,24 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             odom_refused,
             ros.cmd_saturated,
         )?;
+    }
+    if report.bases.is_empty() {
+        // Real robots (--real): what each robot process saw of its robot.
+        for r in &report.robots {
+            let Some(ros) = r.ros2 else { continue };
+            let odom_refused = ros.odom_wrong_type
+                + ros.odom_malformed
+                + ros.odom_non_finite
+                + ros.odom_wrong_frames;
+            outln!(
+                "  ROS 2 robot {}: {} cmd_vel sent ({} saturated), {} odom accepted, {} refused",
+                r.agent,
+                ros.cmd_sent,
+                ros.cmd_saturated,
+                ros.odom_accepted,
+                odom_refused,
+            )?;
+        }
     }
     if let Some(t) = &report.safety {
         for r in &report.robots {

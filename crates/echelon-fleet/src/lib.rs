@@ -14,6 +14,7 @@ pub mod bench;
 pub mod certs;
 pub mod clock;
 pub mod collector;
+pub mod command;
 pub mod cost;
 pub mod excite;
 pub mod faults;

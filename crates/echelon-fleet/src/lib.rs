@@ -24,6 +24,7 @@ pub mod leader;
 pub mod link;
 pub mod neighbours;
 pub mod net;
+pub mod operator;
 pub mod plant;
 pub mod robot;
 pub mod role;

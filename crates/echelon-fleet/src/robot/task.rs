@@ -381,4 +381,61 @@ mod tests {
         let leader: &LeaderTask = bus.task(l).unwrap_or_else(|| panic!("the leader"));
         assert!((leader.leader().paused(60.0) - 10.0).abs() < 0.05);
     }
+
+    /// The leader interrupted before its end (the runtime stops it on
+    /// SIGINT/SIGTERM) puts a fleet stop as its last words: robot 1 (under
+    /// `extrapolate`, which would coast on for the hold) and its follower
+    /// command zero from their next tick; a leader that reaches its end
+    /// puts none.
+    #[test]
+    fn an_interrupted_leader_stops_the_fleet() {
+        let (s, fleet, reference) = crate::testing::fast_circle();
+        let keys = Keys::new("lab");
+        let mut bus = Bus::new();
+        let leader = Reference::new(reference.clone(), 50.0, 60.0, 1);
+        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        let robot = |k| {
+            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
+                .unwrap_or_else(|e| panic!("{e}"));
+            RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
+        };
+        let r1 = bus.add(robot(1), 0.0);
+        let r2 = bus.add(robot(2), 0.0);
+        bus.run_until(10.0);
+        bus.stop(l).unwrap_or_else(|e| panic!("{e}"));
+        let command_key = keys.command();
+        let sent: Vec<_> = bus.published_by(l, &command_key).collect();
+        assert_eq!(sent.len(), 1);
+        let c = crate::command::FleetCommand::decode(&sent[0].payload)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (c.order, c.by.as_str()),
+            (crate::command::Order::Stop, "leader")
+        );
+        bus.run_until(12.0);
+        for (id, k) in [(r1, 1), (r2, 2)] {
+            let key = keys.state(k);
+            let after: Vec<RobotState> = bus
+                .published_by(id, &key)
+                .filter(|p| p.t > 10.0 + 0.01)
+                .filter_map(|p| match wire::decode(&p.payload) {
+                    Ok(Message::State(_, st)) => Some(st),
+                    _ => None,
+                })
+                .collect();
+            assert!(after.len() > 150, "agent {k}");
+            assert!(after.iter().all(|st| st.link == LinkStatus::Stopped));
+        }
+        let task: LeaderTask = bus.take(l).unwrap_or_else(|| panic!("the leader"));
+        let rep = task.report().unwrap_or_else(|e| panic!("{e}"));
+        assert!(rep.stopped_the_fleet);
+
+        // A leader at its end stops nothing.
+        let mut bus = Bus::new();
+        let leader = Reference::new(reference, 50.0, 1.0, 1);
+        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        bus.run_until(2.0);
+        assert!(!bus.is_running(l));
+        assert_eq!(bus.published_by(l, &keys.command()).count(), 0);
+    }
 }

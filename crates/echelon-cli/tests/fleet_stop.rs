@@ -34,6 +34,28 @@ fn unix_ns() -> u64 {
         .as_nanos() as u64
 }
 
+/// Runs `fleet stop` or `fleet resume` for `scenario` through `router`
+/// with `more` arguments: whether it succeeded, its report, its stderr.
+fn run_command(what: &str, scenario: &str, router: &str, more: &[&str]) -> (bool, Value, String) {
+    let out = Command::new(EXE)
+        .args(["fleet", what, scenario, "--mode", "client", "--connect"])
+        .arg(router)
+        .args(["--reason", "fleet_stop test"])
+        .args(more)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    let report = text
+        .lines()
+        .rfind(|l| l.starts_with('{'))
+        .map_or(Value::Null, |l| serde_json::from_str(l).unwrap());
+    (
+        out.status.success(),
+        report,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// Runs `fleet stop` or `fleet resume` through `router`; its report.
 fn command(what: &str, router: &str) -> Value {
     let out = Command::new(EXE)
@@ -45,6 +67,16 @@ fn command(what: &str, router: &str) -> Value {
     check(&out, &format!("fleet {what}"));
     let text = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(text.lines().rfind(|l| l.starts_with('{')).unwrap()).unwrap()
+}
+
+/// Waits for `fleet up` to end successfully; its summary.
+fn up_summary(up: common::Guard, dir: &Path) -> Value {
+    let mut up = up;
+    let status = up.0.wait().unwrap();
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut up.0.stderr.take().unwrap(), &mut err).unwrap();
+    assert!(status.success(), "fleet up: {status}: {err}");
+    serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
 }
 
 /// Waits until `heard` has a non-zero command after `since` from each of
@@ -189,15 +221,7 @@ fn fleet_stop_zeroes_every_cmd_vel_until_fleet_resume() {
         );
     }
 
-    let mut up = up;
-    let status = up.0.wait().unwrap();
-    let mut err = String::new();
-    std::io::Read::read_to_string(&mut up.0.stderr.take().unwrap(), &mut err).unwrap();
-    assert!(status.success(), "fleet up: {status}: {err}");
-    let up: Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("fleet-summary.json")).unwrap(),
-    )
-    .unwrap();
+    let up = up_summary(up, dir.path());
     for r in up["robots"].as_array().unwrap() {
         let c = &r["commands"];
         assert_eq!((f(c, &["stops"]), f(c, &["resumes"])), (1.0, 1.0), "{r}");
@@ -210,4 +234,63 @@ fn fleet_stop_zeroes_every_cmd_vel_until_fleet_resume() {
     let col = &up["collector"];
     assert_eq!(col["logged_by_topic"]["/fleet/command"], 2, "{col}");
     assert_eq!(col["rejected"], serde_json::json!({}), "{col}");
+}
+
+/// Secure mode: a stop put with robot 1's certificate is refused by the
+/// router's access control (no robot stops, the command exits 1 naming
+/// both robots); the same with the `operator` certificate `fleet certs`
+/// makes stops both, and the resume lifts it.
+#[test]
+fn in_secure_mode_only_the_operator_stops_the_fleet() {
+    let _fleet = common::one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    let certs = certs.to_str().unwrap();
+    common::echelon_ok(&["fleet", "certs", "--robots", "2"], Path::new(certs));
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fleet/fast-circle.toml");
+    let scenario = scenario.to_str().unwrap();
+    let out = dir.path().join("up");
+    let up = spawn(&[
+        "fleet",
+        "up",
+        scenario,
+        "--secure",
+        certs,
+        "--time-scale",
+        "2",
+        "--duration",
+        "16",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let router = router_endpoint(&out);
+    let secure = |id: &'static str| ["--secure", certs, "--identity", id, "--timeout", "2"];
+    // Wait until both robots have joined and hear their leader.
+    let start = Instant::now();
+    let (ok, rogue, err) = loop {
+        let (ok, report, err) = run_command("stop", scenario, &router, &secure("robot-1"));
+        if report["alive"].as_array().is_some_and(|a| a.len() == 2) {
+            break (ok, report, err);
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "{report} {err}");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert!(!ok, "{rogue}");
+    assert!(err.contains("did not acknowledge"), "{err}");
+    assert_eq!(rogue["acknowledged"], serde_json::json!([]), "{rogue}");
+    assert_eq!(rogue["missing"], serde_json::json!(["robot/1", "robot/2"]));
+
+    let (ok, stop, err) = run_command("stop", scenario, &router, &secure("operator"));
+    assert!(ok, "{stop} {err}");
+    assert_eq!(stop["acknowledged"].as_array().unwrap().len(), 2, "{stop}");
+    assert_eq!(stop["command"]["by"], "operator");
+    std::thread::sleep(Duration::from_millis(500));
+    let (ok, resume, err) = run_command("resume", scenario, &router, &secure("operator"));
+    assert!(ok, "{resume} {err}");
+    let up = up_summary(up, &out);
+    for r in up["robots"].as_array().unwrap() {
+        let c = &r["commands"];
+        assert_eq!((f(c, &["stops"]), f(c, &["resumes"])), (1.0, 1.0), "{r}");
+    }
 }

@@ -41,7 +41,8 @@ pub const STATS: JsonSchema = JsonSchema {
     "counters": {"type": "object"},
     "published": {"type": "integer"},
     "overruns": {"type": "integer"},
-    "safety": {"type": "object", "description": "with [safety]: the filter's counters so far (steps, active, infeasible, stale_brakes, deadlock_breaks, stale_neighbours, lagging, refused, min_distance)"}
+    "safety": {"type": "object", "description": "with [safety]: the filter's counters so far (steps, active, infeasible, stale_brakes, deadlock_breaks, stale_neighbours, lagging, refused, min_distance)"},
+    "commands": {"type": "object", "description": "what the fleet commands did so far (received, stops, resumes, refused, ignored)"}
   },
   "required": ["agent", "t", "link", "counters"]
 }"#,

@@ -1,5 +1,6 @@
 //! `echelon fleet certs`: a development certificate authority and one
-//! certificate per fleet identity (`leader`, `collector`, `robot-1` …), for
+//! certificate per fleet identity (`leader`, `collector`, `router`,
+//! `operator` for `fleet stop`/`resume`, `robot-1` …, `base-1` …), for
 //! the secure mode (Zenoh mutual TLS + access control by common name).
 //!
 //! Files: `ca.pem`, `ca-key.pem`, and for each identity `<id>.pem` (signed by
@@ -99,8 +100,10 @@ mod tests {
             hosts: vec!["robot1.local".into()],
         })
         .unwrap_or_else(|e| panic!("{e}"));
-        // CA + leader, collector, router, robot-1, robot-2, base-1, base-2, each cert + key.
-        assert_eq!(files.len(), 16);
+        // CA + leader, collector, router, operator, robot-1, robot-2, base-1,
+        // base-2, each cert + key.
+        assert_eq!(files.len(), 18);
+        assert!(dir.path().join("operator.pem").is_file());
         let pem = std::fs::read_to_string(dir.path().join("robot-2.pem")).unwrap_or_default();
         assert!(pem.starts_with("-----BEGIN CERTIFICATE-----"));
         let key = std::fs::read_to_string(dir.path().join("robot-2-key.pem")).unwrap_or_default();

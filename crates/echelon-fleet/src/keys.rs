@@ -6,6 +6,8 @@
 //! | `echelon/<fleet>/robot/<k>/state` | robot `k` (from 1) | robot state ([`crate::wire`], binary); read by the collector, robot `k`'s followers and, with `[safety]`, every other robot |
 //! | `echelon/<fleet>/robot/<k>/stats` | robot `k` | its counters, JSON, once per fleet second and at exit |
 //! | `echelon/<fleet>/alive/<role>` | every process | liveliness token ([`crate::role::Member::liveliness`]: `leader`, `collector`, `robot/<k>`, `base/<k>`) |
+//! | `echelon/<fleet>/command` | `fleet stop` / `fleet resume` (the `operator`), the leader when interrupted | fleet command ([`crate::command::FleetCommand`], JSON) |
+//! | `echelon/<fleet>/latch/<role>` | every robot and the leader, as a queryable | the command in force ([`crate::command::Latched`], JSON), answered to queries on `latch/**` |
 //!
 //! The collector subscribes to `echelon/<fleet>/**`.
 
@@ -26,6 +28,8 @@ const ROBOT: &str = "robot";
 const STATE: &str = "state";
 const STATS: &str = "stats";
 const ALIVE: &str = "alive";
+const COMMAND: &str = "command";
+const LATCH: &str = "latch";
 
 /// The key expressions of one fleet.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -42,6 +46,8 @@ pub enum KeyKind {
     State(u32),
     /// Robot `k`'s counters.
     Stats(u32),
+    /// The fleet command.
+    Command,
     /// Anything else under the fleet's root.
     Other,
 }
@@ -91,6 +97,32 @@ impl Keys {
         format!("{ROOT}/{}/{ALIVE}/{role}", self.fleet)
     }
 
+    /// `echelon/<fleet>/command`: the fleet-wide stop and resume.
+    pub fn command(&self) -> String {
+        format!("{ROOT}/{}/{COMMAND}", self.fleet)
+    }
+
+    /// `echelon/<fleet>/latch/<role>`: where `role` (a liveliness name)
+    /// answers with the command in force.
+    pub fn latch(&self, role: &str) -> String {
+        format!("{ROOT}/{}/{LATCH}/{role}", self.fleet)
+    }
+
+    /// `echelon/<fleet>/latch/**`: every latch, to query.
+    pub fn latches(&self) -> String {
+        self.latch("**")
+    }
+
+    /// The liveliness name of a latch key of this fleet (`None`: not one).
+    pub fn latch_holder<'a>(&self, key: &'a str) -> Option<&'a str> {
+        key.strip_prefix(ROOT)?
+            .strip_prefix('/')?
+            .strip_prefix(self.fleet.as_str())?
+            .strip_prefix('/')?
+            .strip_prefix(LATCH)?
+            .strip_prefix('/')
+    }
+
     /// `echelon/<fleet>/**`.
     pub fn everything(&self) -> String {
         format!("{ROOT}/{}/**", self.fleet)
@@ -108,6 +140,9 @@ impl Keys {
         };
         if rest == REFERENCE {
             return KeyKind::Reference;
+        }
+        if rest == COMMAND {
+            return KeyKind::Command;
         }
         let parts: Vec<&str> = rest.split('/').collect();
         if let [ROBOT, num, what] = parts[..]
@@ -140,5 +175,10 @@ mod tests {
         assert_eq!(k.classify("echelon/other/reference"), KeyKind::Other);
         assert_eq!(k.classify("echelon/lab-1/alive/leader"), KeyKind::Other);
         assert_eq!(k.reference(), "echelon/lab-1/reference");
+        assert_eq!(k.classify(&k.command()), KeyKind::Command);
+        assert_eq!(k.command(), "echelon/lab-1/command");
+        assert_eq!(k.latch_holder(&k.latch("robot/2")), Some("robot/2"));
+        assert_eq!(k.latch_holder("echelon/lab-2/latch/robot/2"), None);
+        assert_eq!(k.classify(&k.latch("leader")), KeyKind::Other);
     }
 }

@@ -1,5 +1,13 @@
 //! `echelon fleet leader`: the virtual leader (paper section 5's "virtual
 //! leader computer") publishing the scenario's reference at a fixed rate.
+//!
+//! The leader hears the fleet command ([`crate::command`]): while a stop is
+//! in force its reference pauses (the samples keep coming, fresh, with the
+//! reference held where it was when the stop came), and on a resume it goes
+//! on from there, so the robots resume behind a leader that waited for them
+//! instead of chasing one that went on. Interrupted (SIGINT, SIGTERM) before
+//! its end, it first puts a fleet stop: robots stop within a control period
+//! instead of playing out their link-loss policy.
 
 use std::time::Duration;
 
@@ -10,10 +18,11 @@ use echelon::reference::{Order, Reference, Trajectory};
 use echelon::scenario::{Overrides, Scenario};
 
 use crate::clock::FleetClock;
+use crate::command::{self, Change, CommandCounts, FleetCommand, Latch};
 use crate::keys::Keys;
 use crate::net::{self, NetOptions};
 use crate::role::Member;
-use crate::runtime::{self, Flow, Outputs, Sample, Task, WaitFor};
+use crate::runtime::{self, Flow, Latching, Outputs, Sample, Task, WaitFor};
 use crate::wire::{self, Header, Reference as WireReference};
 use crate::{FleetError, StopFlag};
 
@@ -54,6 +63,12 @@ pub struct LeaderReport {
     /// When every `--wait-for` role had joined and the clock started, UNIX
     /// ns (`fleet up`'s startup time ends here).
     pub clock_start_unix_ns: u64,
+    /// Fleet time the reference was paused by fleet stops, s.
+    pub paused: f64,
+    /// What the fleet commands did.
+    pub commands: CommandCounts,
+    /// Whether it put a fleet stop when it was interrupted.
+    pub stopped_the_fleet: bool,
 }
 
 /// The virtual leader as a state machine: sample `k` of the reference is due
@@ -68,6 +83,10 @@ pub struct Leader {
     k: u64,
     late: u64,
     last_t: f64,
+    /// Fleet time the reference paused at (a fleet stop in force).
+    paused_at: Option<f64>,
+    /// Fleet time paused so far: the reference is evaluated at `t - shift`.
+    shift: f64,
 }
 
 impl Leader {
@@ -82,7 +101,33 @@ impl Leader {
             k: 0,
             late: 0,
             last_t: 0.0,
+            paused_at: None,
+            shift: 0.0,
         }
+    }
+
+    /// Holds the reference where it is at fleet time `t` (a fleet stop).
+    pub fn pause(&mut self, t: f64) {
+        if self.paused_at.is_none() {
+            self.paused_at = Some(t);
+        }
+    }
+
+    /// Goes on from where it paused, at fleet time `t` (a resume).
+    pub fn resume(&mut self, t: f64) {
+        if let Some(p) = self.paused_at.take() {
+            self.shift += (t - p).max(0.0);
+        }
+    }
+
+    /// Whether it is paused.
+    pub fn is_paused(&self) -> bool {
+        self.paused_at.is_some()
+    }
+
+    /// Fleet time paused so far (up to `t` for a pause in progress), s.
+    pub fn paused(&self, t: f64) -> f64 {
+        self.shift + self.paused_at.map_or(0.0, |p| (t - p).max(0.0))
     }
 
     /// Fleet time of the next sample, or `None` once past `duration`.
@@ -102,7 +147,12 @@ impl Leader {
         if now - t > self.period {
             self.late += 1;
         }
-        let jet = self.reference.eval(t, Order::Two);
+        // The reference's own time: fleet time less the pauses.
+        let tau = match self.paused_at {
+            Some(p) if t >= p => p - self.shift,
+            _ => t - self.shift,
+        };
+        let jet = self.reference.eval(tau, Order::Two);
         let sample = WireReference {
             t,
             motion: LeaderMotion::of_jet(&jet),
@@ -126,6 +176,9 @@ impl Leader {
             t: self.last_t,
             late: self.late,
             clock_start_unix_ns: 0,
+            paused: self.paused(self.last_t),
+            commands: CommandCounts::default(),
+            stopped_the_fleet: false,
         }
     }
 }
@@ -140,6 +193,8 @@ pub struct LeaderTask {
     wait_for: Option<WaitFor>,
     buf: Vec<u8>,
     clock_start_unix_ns: u64,
+    latch: Latch,
+    stopped_the_fleet: bool,
 }
 
 impl LeaderTask {
@@ -151,6 +206,8 @@ impl LeaderTask {
             wait_for: None,
             buf: Vec::with_capacity(wire::REFERENCE_LEN),
             clock_start_unix_ns: 0,
+            latch: Latch::new(),
+            stopped_the_fleet: false,
         }
     }
 
@@ -166,20 +223,47 @@ impl LeaderTask {
     pub fn leader(&self) -> &Leader {
         &self.leader
     }
+
+    /// The fleet command it is under.
+    pub fn latch(&self) -> &Latch {
+        &self.latch
+    }
+
+    fn follow_latch(&mut self, change: Change, t: f64) {
+        match change {
+            Change::Stopped => self.leader.pause(t),
+            Change::Resumed => self.leader.resume(t),
+            Change::Unchanged => {}
+        }
+    }
 }
 
-/// Its only output: the reference.
+/// Its outputs: the reference, the fleet command.
 const REFERENCE: usize = 0;
+const COMMAND: usize = 1;
+/// Its inputs: the fleet command (the latch answers: the next).
+const COMMAND_IN: usize = 0;
 
 impl Task for LeaderTask {
     type Report = LeaderReport;
 
     fn inputs(&self) -> Vec<String> {
-        Vec::new()
+        vec![self.keys.command()]
     }
 
     fn outputs(&self) -> Vec<String> {
-        vec![self.keys.reference()]
+        vec![self.keys.reference(), self.keys.command()]
+    }
+
+    fn latching(&self) -> Option<Latching> {
+        Some(Latching {
+            answer_on: self.keys.latch(&Member::Leader.liveliness()),
+            ask: self.keys.latches(),
+        })
+    }
+
+    fn latched(&self) -> Option<Vec<u8>> {
+        Some(self.latch.latched().encode())
     }
 
     fn tokens(&self) -> Vec<String> {
@@ -194,7 +278,33 @@ impl Task for LeaderTask {
         self.clock_start_unix_ns = unix_ns;
     }
 
-    fn on_input(&mut self, _: usize, _: &Sample<'_>) -> Result<(), FleetError> {
+    fn on_input(&mut self, input: usize, sample: &Sample<'_>) -> Result<(), FleetError> {
+        let change = if input == COMMAND_IN {
+            self.latch.on_payload(sample.payload)
+        } else {
+            self.latch.on_hearsay(sample.payload)
+        };
+        self.follow_latch(change, sample.at.max(0.0));
+        Ok(())
+    }
+
+    /// Interrupted before its end (a signal, an error): puts a fleet stop
+    /// first, numbered after every command it knows.
+    fn stop(&mut self, out: &mut dyn Outputs) -> Result<(), FleetError> {
+        if self.leader.next_due().is_none() {
+            return Ok(());
+        }
+        let c = FleetCommand::new(
+            command::Order::Stop,
+            self.latch.seq() + 1,
+            &Member::Leader.identity(),
+            "the leader was interrupted",
+        );
+        out.publish(COMMAND, &c.encode())?;
+        let t = self.leader.last_t;
+        let change = self.latch.on_command(c);
+        self.follow_latch(change, t);
+        self.stopped_the_fleet = true;
         Ok(())
     }
 
@@ -216,6 +326,8 @@ impl Task for LeaderTask {
     fn report(self) -> Result<LeaderReport, FleetError> {
         Ok(LeaderReport {
             clock_start_unix_ns: self.clock_start_unix_ns,
+            commands: self.latch.counts(),
+            stopped_the_fleet: self.stopped_the_fleet,
             ..self.leader.report()
         })
     }

@@ -157,7 +157,8 @@ pub fn identities(robots: u32) -> Vec<String> {
 pub fn publishes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
     let ros_of = |k: u32| ros.get(k as usize - 1);
     match member {
-        Member::Leader => vec![keys.reference()],
+        Member::Leader => vec![keys.reference(), keys.command()],
+        Member::Operator => vec![keys.command()],
         Member::Robot(k) => [keys.state(k), keys.stats(k)]
             .into_iter()
             .chain(ros_of(k).map(|r| r.cmd_vel.clone()))
@@ -174,15 +175,16 @@ pub fn publishes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
     }
 }
 
-/// What `member` may subscribe to in the fleet of `keys`: a robot its
-/// leader stream (the reference or any robot's state) and, with a safety
-/// filter, every robot's state, and its ROS 2 odometry; the collector and a
-/// router everything.
+/// What `member` may subscribe to in the fleet of `keys`: the leader the
+/// fleet command; a robot its leader stream (the reference or any robot's
+/// state), with a safety filter every robot's state, the fleet command, and
+/// its ROS 2 odometry; the collector and a router everything.
 pub fn subscribes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
     let ros_of = |k: u32| ros.get(k as usize - 1);
     match member {
-        Member::Leader => Vec::new(),
-        Member::Robot(k) => [keys.reference(), keys.states()]
+        Member::Leader => vec![keys.command()],
+        Member::Operator => Vec::new(),
+        Member::Robot(k) => [keys.reference(), keys.states(), keys.command()]
             .into_iter()
             .chain(ros_of(k).into_iter().flat_map(RosAcl::robot_reads))
             .collect(),
@@ -232,6 +234,16 @@ pub fn robot_router(
     })
 }
 
+/// The latch key `member` answers queries on with the fleet command in
+/// force ([`crate::command`]): the leader's and each robot's. Every member
+/// may ask them (`echelon/<fleet>/latch/**`).
+pub fn answers(member: Member, keys: &Keys) -> Option<String> {
+    match member {
+        Member::Leader | Member::Robot(_) => Some(keys.latch(&member.liveliness())),
+        _ => None,
+    }
+}
+
 /// The Zenoh link protocol of the secure mode: QUIC (TLS 1.3 inside, mutual
 /// authentication, certificate common names for the access control).
 ///
@@ -266,7 +278,10 @@ pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
 /// certificate, robot `k`'s state and stats only from robot `k`'s; with
 /// ROS 2 links, agent `k`'s `cmd_vel` only from robot `k` and its `odom` only
 /// from base `k`, and rmw_zenoh's liveliness tokens (`@ros2_lv/**`) from
-/// every member.
+/// every member; the fleet command only from the `operator` and the
+/// `leader`. Queries, queryables and replies (the command latches) are
+/// allowed to every member: what a process learns from a latch answer can
+/// only stop it ([`crate::command`]).
 ///
 /// The subject of a message is the certificate of the link it arrives on, so
 /// the origin is known only at its first hop: a router enforces these rules
@@ -283,7 +298,8 @@ pub fn access_control(robots: u32, ros2: &[RosAcl]) -> serde_json::Value {
         json!({
             "id": "declare", "permission": "allow", "flows": ["egress", "ingress"],
             "messages": ["declare_subscriber", "liveliness_token", "liveliness_query",
-                          "declare_liveliness_subscriber", "query", "reply"],
+                          "declare_liveliness_subscriber", "query", "declare_queryable",
+                          "reply"],
             "key_exprs": all,
         }),
         json!({
@@ -705,6 +721,18 @@ mod tests {
                         );
                     }
                     for m in &own {
+                        for msg in ["query", "reply"] {
+                            assert!(allows(&acl, &cn, "egress", msg, &fleets[0].latches()));
+                        }
+                        if let Some(key) = answers(*m, &fleets[0]) {
+                            for msg in ["declare_queryable", "reply"] {
+                                assert!(
+                                    allows(&acl, &cn, "egress", msg, &key)
+                                        && allows(&acl, &cn, "ingress", msg, &key),
+                                    "{m} answering on {key}"
+                                );
+                            }
+                        }
                         for key in subscribes(*m, &fleets[0], &ros) {
                             assert!(
                                 allows(&acl, &cn, "egress", "declare_subscriber", &key)
@@ -717,6 +745,17 @@ mod tests {
                 // Nobody outside the fleet's identities may put anything.
                 for key in &universe {
                     assert!(!allows(&acl, "echelon-robot-99", "ingress", "put", key));
+                }
+                // The fleet command: from the operator and the leader only
+                // (and a router, which forwards everything of the fleet).
+                for keys in &fleets {
+                    for id in identities(robots) {
+                        assert_eq!(
+                            allows(&acl, &common_name(&id), "ingress", "put", &keys.command()),
+                            ["operator", "leader", "router"].contains(&id.as_str()),
+                            "{id} putting the command"
+                        );
+                    }
                 }
             }
         }

@@ -25,17 +25,20 @@ pub enum Role {
     Router,
     /// Drives a base with an excitation signal (`fleet excite`).
     Excite,
+    /// Sends the fleet-wide commands (`fleet stop`, `fleet resume`).
+    Operator,
 }
 
 impl Role {
     /// Every role.
-    pub const ALL: [Role; 6] = [
+    pub const ALL: [Role; 7] = [
         Role::Leader,
         Role::Robot,
         Role::Collector,
         Role::Base,
         Role::Router,
         Role::Excite,
+        Role::Operator,
     ];
 
     /// Its name, as in reports and on the command line.
@@ -47,6 +50,7 @@ impl Role {
             Role::Base => "base",
             Role::Router => "router",
             Role::Excite => "excite",
+            Role::Operator => "operator",
         }
     }
 }
@@ -84,18 +88,26 @@ pub enum Member {
     Router,
     /// `fleet excite` on agent `k`'s robot (in its place, with its identity).
     Excite(u32),
+    /// `fleet stop` and `fleet resume`: the one identity besides the leader
+    /// that may put the fleet command.
+    Operator,
 }
 
 impl Member {
     /// Every member of a fleet of `robots` robots (each with a base and
-    /// an exciter).
+    /// an exciter), and its operator.
     pub fn all(robots: u32) -> Vec<Member> {
-        [Member::Leader, Member::Collector, Member::Router]
-            .into_iter()
-            .chain((1..=robots).map(Member::Robot))
-            .chain((1..=robots).map(Member::Base))
-            .chain((1..=robots).map(Member::Excite))
-            .collect()
+        [
+            Member::Leader,
+            Member::Collector,
+            Member::Router,
+            Member::Operator,
+        ]
+        .into_iter()
+        .chain((1..=robots).map(Member::Robot))
+        .chain((1..=robots).map(Member::Base))
+        .chain((1..=robots).map(Member::Excite))
+        .collect()
     }
 
     /// Its role.
@@ -107,6 +119,7 @@ impl Member {
             Member::Base(_) => Role::Base,
             Member::Router => Role::Router,
             Member::Excite(_) => Role::Excite,
+            Member::Operator => Role::Operator,
         }
     }
 
@@ -114,13 +127,13 @@ impl Member {
     pub fn agent(self) -> Option<u32> {
         match self {
             Member::Robot(k) | Member::Base(k) | Member::Excite(k) => Some(k),
-            Member::Leader | Member::Collector | Member::Router => None,
+            Member::Leader | Member::Collector | Member::Router | Member::Operator => None,
         }
     }
 
     /// Its name in liveliness tokens, `--wait-for` and `fleet up`'s
-    /// messages: `leader`, `collector`, `router`, `robot/<k>`, `base/<k>`,
-    /// `excite/<k>`.
+    /// messages: `leader`, `collector`, `router`, `operator`, `robot/<k>`,
+    /// `base/<k>`, `excite/<k>`.
     pub fn liveliness(self) -> String {
         match self.agent() {
             Some(k) => format!("{}/{k}", self.role()),
@@ -129,7 +142,7 @@ impl Member {
     }
 
     /// Its identity (certificate and access-control subject): `leader`,
-    /// `collector`, `router`, `robot-<k>`, `base-<k>`; an exciter drives
+    /// `collector`, `router`, `operator`, `robot-<k>`, `base-<k>`; an exciter drives
     /// its robot in its place, as `robot-<k>`.
     pub fn identity(self) -> String {
         let role = match self {
@@ -181,6 +194,8 @@ mod member_tests {
         assert_eq!(Member::Excite(3).identity(), "robot-3");
         assert_eq!(Member::Base(1).identity(), "base-1");
         assert_eq!(Member::Router.identity(), "router");
-        assert_eq!(Member::all(2).len(), 9);
+        assert_eq!(Member::Operator.identity(), "operator");
+        assert_eq!(Member::Operator.liveliness(), "operator");
+        assert_eq!(Member::all(2).len(), 10);
     }
 }

@@ -76,6 +76,9 @@ pub enum LinkStatus {
     /// Lost; the leader motion is brought to rest (`stop`, or `extrapolate`
     /// past its hold time).
     Stopping = 3,
+    /// A fleet stop is in force (`fleet stop`): the robot commands zero
+    /// until a resume, whatever its link.
+    Stopped = 4,
 }
 
 impl LinkStatus {
@@ -86,6 +89,7 @@ impl LinkStatus {
             LinkStatus::Tracking => "tracking",
             LinkStatus::Extrapolating => "extrapolating",
             LinkStatus::Stopping => "stopping",
+            LinkStatus::Stopped => "stopped",
         }
     }
 
@@ -95,6 +99,7 @@ impl LinkStatus {
             1 => LinkStatus::Tracking,
             2 => LinkStatus::Extrapolating,
             3 => LinkStatus::Stopping,
+            4 => LinkStatus::Stopped,
             _ => return None,
         })
     }
@@ -427,7 +432,7 @@ mod tests {
 
         #[test]
         fn states_round_trip(
-            source in any::<u32>(), seq in any::<u64>(), agent in 1..1000u32, link in 0..4u8,
+            source in any::<u32>(), seq in any::<u64>(), agent in 1..1000u32, link in 0..5u8,
             drive in 0..3u8, v in proptest::collection::vec(finite(), 26), sigma in 0.0..10.0f64,
         ) {
             let s = RobotState {

@@ -12,9 +12,11 @@ use echelon::scenario::{Overrides, Scenario};
 use echelon_fleet::StopFlag;
 use echelon_fleet::certs::{self, CertOptions};
 use echelon_fleet::collector::{self, CollectorOptions};
+use echelon_fleet::command::Order;
 use echelon_fleet::excite::{self, ExciteOptions};
 use echelon_fleet::leader::{self, LeaderOptions};
 use echelon_fleet::net::NetOptions;
+use echelon_fleet::operator::{self, OperatorOptions};
 use echelon_fleet::robot::{self, RobotOptions};
 use echelon_fleet::role::Member;
 use echelon_fleet::ros2::RosTopic;
@@ -65,6 +67,48 @@ fn ros_topics(s: &Scenario) -> Result<Vec<RosTopic>> {
 
 fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
     outln!("{}", serde_json::to_string(report)?)?;
+    Ok(())
+}
+
+/// `fleet stop` / `fleet resume`: puts the command, prints the report,
+/// fails when a robot alive did not acknowledge it.
+fn command_cmd(a: args::CommandArgs, order: Order) -> Result<()> {
+    let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
+    let fleet = match (&a.net.fleet, &scenario) {
+        (Some(f), _) => f.clone(),
+        (None, Some(s)) => s.fleet()?.name,
+        (None, None) => bail!("give the scenario or --fleet NAME"),
+    };
+    let robots = scenario.as_ref().map(agents_of).transpose()?;
+    let net = a
+        .net
+        .options(&Member::Operator.identity(), robots, scenario.as_ref())?;
+    let stop = StopFlag::on_signals()?;
+    let report = operator::run(
+        &OperatorOptions {
+            fleet: fleet.clone(),
+            order,
+            reason: a.reason,
+            timeout: Duration::from_secs_f64(a.timeout),
+            net,
+        },
+        &stop,
+    )?;
+    print_report(&report)?;
+    if report.alive.is_empty() {
+        eprintln!(
+            "warning: no robot is alive in fleet `{fleet}`: the {} is held only by the leader, if any",
+            order.name()
+        );
+    }
+    if !report.missing.is_empty() {
+        bail!(
+            "fleet {}: {} did not acknowledge within {} s",
+            order.name(),
+            report.missing.join(", "),
+            a.timeout
+        );
+    }
     Ok(())
 }
 
@@ -206,6 +250,8 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             )?;
             print_report(&report)
         }
+        FleetCommand::Stop(a) => command_cmd(a, Order::Stop),
+        FleetCommand::Resume(a) => command_cmd(a, Order::Resume),
         FleetCommand::Up(a) => up_cmd(a),
         FleetCommand::Bench(a) => bench_cmd(a),
         FleetCommand::Certs(a) => {
@@ -218,7 +264,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 hosts: a.host,
             })?;
             outln!(
-                "wrote {} files to {} (CA, leader, collector, router, robot-1…robot-{n}, base-1…base-{n}); development use only",
+                "wrote {} files to {} (CA, leader, collector, router, operator, robot-1…robot-{n}, base-1…base-{n}); development use only",
                 files.len(),
                 a.dir.display(),
                 n = a.robots

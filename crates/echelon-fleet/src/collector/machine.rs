@@ -9,8 +9,12 @@ use echelon_mcap::{
     ReferenceRecord, agent_topic, nanos,
 };
 
-use super::{AgentRecord, CollectorReport, REJECTED, REJECTED_TOPIC, RecordSink, STATS};
+use super::{
+    AgentRecord, COMMAND, COMMAND_TOPIC, CollectorReport, REJECTED, REJECTED_TOPIC, RecordSink,
+    STATS,
+};
 use crate::FleetError;
+use crate::command::FleetCommand;
 use crate::keys::{KeyKind, Keys};
 use crate::latency::{Latency, LatencyReport};
 use crate::ros2::record::{self, RosTopic, RosTopicError};
@@ -205,6 +209,12 @@ impl Collector {
                 }
                 Ok(_) => self.reject(sink, key, "stats of another agent", bytes, now),
                 Err(_) => self.reject(sink, key, "malformed stats JSON", bytes, now),
+            };
+        }
+        if kind == KeyKind::Command {
+            return match FleetCommand::decode(bytes) {
+                Ok(c) => self.log(sink, COMMAND_TOPIC, &COMMAND, now, c.stamp_unix_ns, bytes),
+                Err(_) => self.reject(sink, key, "malformed command", bytes, now),
             };
         }
         let msg = match wire::decode(bytes) {

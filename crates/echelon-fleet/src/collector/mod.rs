@@ -3,7 +3,7 @@
 //!
 //! Every sample that reaches it is logged to `fleet.mcap` exactly once: valid
 //! messages on their typed channel (`/reference`, `/agent/K/state`,
-//! `/agent/K/stats`), anything else on `/rejected` with the key, the reason and
+//! `/agent/K/stats`, `/fleet/command`), anything else on `/rejected` with the key, the reason and
 //! the bytes. Robot states (once started) also go to `trajectory.csv` with the
 //! simulator's header. On SIGINT/SIGTERM it stops listening, logs what is still
 //! queued, and closes valid files.
@@ -27,7 +27,7 @@ mod tests;
 
 pub use machine::Collector;
 pub use report::{AgentRecord, CollectorReport};
-pub use schema::{REJECTED, STATS};
+pub use schema::{COMMAND, REJECTED, STATS};
 pub use sink::{FileSink, RecordSink};
 pub use task::{CollectorOptions, CollectorTask, run, run_recording, run_with_ros2};
 
@@ -38,5 +38,7 @@ pub const SUMMARY_FILE: &str = "collector.json";
 /// Name of the MCAP metadata record holding the per-key latency summaries
 /// (each key's value: its [`LatencyReport`](crate::latency::LatencyReport) as JSON).
 pub const LATENCY_METADATA: &str = "echelon.latency";
+/// Topic of the fleet commands ([`crate::command::FleetCommand`]).
+pub const COMMAND_TOPIC: &str = "/fleet/command";
 /// Topic of everything that was not a valid message of its key.
 pub const REJECTED_TOPIC: &str = "/rejected";

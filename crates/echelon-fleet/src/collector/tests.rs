@@ -103,6 +103,8 @@ fn every_sample_is_logged_once_and_garbage_is_rejected_with_its_reason() {
     let mut wrong_version = reference.clone();
     wrong_version[1] = 9;
     let stats = br#"{"agent":1,"t":3.0}"#;
+    let command =
+        crate::command::FleetCommand::new(crate::command::Order::Stop, 1, "operator", "").encode();
     let k = |s: &str| s.to_owned();
     let inputs: Vec<(String, &[u8])> = vec![
         (keys.reference(), &reference),
@@ -116,6 +118,8 @@ fn every_sample_is_logged_once_and_garbage_is_rejected_with_its_reason() {
         (keys.state(2), &tracking),
         (keys.state(1), &reference),
         (k("echelon/f/alive/junk"), &reference),
+        (keys.command(), &command),
+        (keys.command(), b"{\"order\":\"stop\"}"),
     ];
     for (i, (key, bytes)) in inputs.iter().enumerate() {
         c.on_message(key, bytes, 1000 + i as u64, &mut sink)
@@ -129,6 +133,7 @@ fn every_sample_is_logged_once_and_garbage_is_rejected_with_its_reason() {
         rejected(&report),
         [
             ("malformed", 1),
+            ("malformed command", 1),
             ("malformed stats JSON", 1),
             ("message of the wrong kind for its key", 2),
             ("stats of another agent", 1),
@@ -139,7 +144,8 @@ fn every_sample_is_logged_once_and_garbage_is_rejected_with_its_reason() {
     assert_eq!(report.logged_by_topic[REFERENCE_TOPIC], 1);
     assert_eq!(report.logged_by_topic["/agent/1/state"], 2);
     assert_eq!(report.logged_by_topic["/agent/1/stats"], 1);
-    assert_eq!(report.logged_by_topic[REJECTED_TOPIC], 7);
+    assert_eq!(report.logged_by_topic[super::COMMAND_TOPIC], 1);
+    assert_eq!(report.logged_by_topic[REJECTED_TOPIC], 8);
     // log_time is the arrival time given, publish_time the sender's.
     assert_eq!((sink.logged[0].1, sink.logged[0].2), (1000, nanos(2.0)));
     // One CSV row: the tracking state, not the waiting one.

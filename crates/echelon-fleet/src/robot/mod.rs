@@ -15,8 +15,14 @@
 //! publish the state with the leader motion used.
 //!
 //! Whenever the robot has nothing to follow (no leader sample, no odometry,
-//! the process stopping) it goes through one place, [`Robot::halt`], which
-//! commands zero.
+//! the process stopping) or must not move (a fleet stop, [`crate::command`])
+//! it goes through one place, [`Robot::halt`], which commands zero.
+//!
+//! A fleet stop ([`Robot::on_command`]) commands zero at once, when it is
+//! handed over, and again on every tick until a resume; the robot keeps its
+//! clock, its leader stream and its plant up to date meanwhile, and
+//! publishes its state with the link status `stopped`. On a resume the law
+//! runs again from the robot's state at its next tick.
 
 use std::collections::VecDeque;
 
@@ -27,6 +33,7 @@ use echelon::formation::Leader;
 use echelon::model::State;
 use echelon::safety::{Outcome, SafetyFilter, point};
 
+use crate::command::{Change, CommandCounts, Latch, Latched};
 use crate::faults::{FaultInjector, Verdict};
 use crate::latency::Latency;
 use crate::link::{Counters, LeaderSample, StreamTracker, predict};
@@ -66,6 +73,8 @@ pub enum Halt {
     Shutdown,
     /// The plant's state left the divergence guard's bounds.
     Diverged,
+    /// A fleet stop is in force (`fleet stop`, or the leader interrupted).
+    Stopped,
 }
 
 /// What one tick asks the driver to do.
@@ -140,6 +149,8 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     diverged: Option<String>,
     /// A driven head's derivative filter.
     head: HeadFilter,
+    /// The fleet command it is under.
+    latch: Latch,
 }
 
 /// `v̇`, `ω̇` of a driven head from its measured speeds: the "dirty
@@ -227,11 +238,49 @@ impl<P: Plant> Robot<P> {
             latency: Latency::new(),
             safety,
             diverged: None,
+            latch: Latch::new(),
             head: HeadFilter::default(),
             // A driven head keeps the fleet's time: its own clock.
             synced: config.driven,
             config,
         }
+    }
+
+    /// Takes a payload that arrived on the fleet command key
+    /// ([`crate::command`]): refused and counted if malformed; a stop
+    /// commands zero at once and on every tick until a resume numbered
+    /// after it.
+    pub fn on_command(&mut self, bytes: &[u8]) -> Change {
+        let change = self.latch.on_payload(bytes);
+        if self.latch.stopped() {
+            self.halt(Halt::Stopped);
+        }
+        change
+    }
+
+    /// Takes another process's latch answer (at start): it can only stop
+    /// the robot ([`Latch::on_hearsay`]).
+    pub fn on_latch_answer(&mut self, bytes: &[u8]) -> Change {
+        let change = self.latch.on_hearsay(bytes);
+        if self.latch.stopped() {
+            self.halt(Halt::Stopped);
+        }
+        change
+    }
+
+    /// Whether a fleet stop is in force.
+    pub fn is_stopped(&self) -> bool {
+        self.latch.stopped()
+    }
+
+    /// What it answers on its latch key.
+    pub fn latched(&self) -> Latched {
+        self.latch.latched()
+    }
+
+    /// What the fleet commands did.
+    pub fn command_counts(&self) -> CommandCounts {
+        self.latch.counts()
     }
 
     /// Why it stopped for good, if its plant's state stopped being finite or
@@ -402,6 +451,9 @@ impl<P: Plant> Robot<P> {
                 self.sample = Some(s);
             }
         }
+        if self.latch.stopped() {
+            return self.stopped_tick(now);
+        }
         let prediction = match (self.synced, self.sample) {
             (true, Some(s)) => Some(predict(
                 &s,
@@ -523,10 +575,65 @@ impl<P: Plant> Robot<P> {
         }
     }
 
-    /// Commands zero: the one place where losing the leader, the odometry or
-    /// the process stops the drive ([`Plant::stop`]: zero torques, or a zero
-    /// `cmd_vel` sent at once). The command is held until the next one. A
-    /// driven head is never commanded (its driver owns its `cmd_vel`).
+    /// A tick under a fleet stop at fleet time `now`: zero commanded, the
+    /// state published (`stopped`; `waiting` while its clock is not the
+    /// leader's), the counters once per fleet second, ticks every control
+    /// period as when following.
+    fn stopped_tick(&mut self, now: f64) -> RobotTick {
+        if self.synced {
+            self.plant.advance(now);
+        }
+        self.halt(Halt::Stopped);
+        let (t, link) = if self.synced {
+            (now, LinkStatus::Stopped)
+        } else {
+            (0.0, LinkStatus::Waiting)
+        };
+        let publish = self.plant.state().map(|state| {
+            let (dv, domega) = self.plant.accelerations();
+            self.last = RobotState {
+                t,
+                agent: self.config.agent,
+                link,
+                state,
+                dv,
+                domega,
+                e: self.last.e,
+                leader: self.last.leader,
+                velocity: self
+                    .config
+                    .spec
+                    .velocity_robot()
+                    .map(|_| echelon::sample::VelocitySample::default()),
+                ..RobotState::default()
+            };
+            self.header_for(self.last)
+        });
+        let stats = (self.synced && now >= self.next_stats).then(|| {
+            self.next_stats += 1.0;
+            self.stats_at(now, link)
+        });
+        let done = self.config.duration.is_some_and(|d| now >= d);
+        let period = self.config.period;
+        self.next_tick = if !self.synced {
+            now + WAITING_PERIOD.min(period * 10.0)
+        } else if now - self.next_tick > period {
+            now + period
+        } else {
+            self.next_tick + period
+        };
+        RobotTick {
+            publish,
+            stats,
+            done,
+        }
+    }
+
+    /// Commands zero: the one place where losing the leader, the odometry,
+    /// the process or a fleet stop stops the drive ([`Plant::stop`]: zero
+    /// torques, or a zero `cmd_vel` sent at once). The command is held until
+    /// the next one. A driven head is never commanded (its driver owns its
+    /// `cmd_vel`).
     pub fn halt(&mut self, why: Halt) {
         let _ = why;
         if !self.config.driven {
@@ -597,6 +704,7 @@ impl<P: Plant> Robot<P> {
             ros2: None,
             safety: self.safety_counts(),
             fixes: self.plant.fixes(self.last.t),
+            commands: self.latch.counts(),
         }
     }
 
@@ -619,6 +727,7 @@ impl<P: Plant> Robot<P> {
             overruns: self.overruns,
             safety: self.safety_counts(),
             fixes: self.plant.fixes(t),
+            commands: self.latch.counts(),
         }
     }
 

@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::command::CommandCounts;
 use crate::latency::LatencyReport;
 use crate::link::Counters;
 use crate::role::Role;
@@ -56,6 +57,8 @@ pub struct RobotReport {
     /// With fixes from ROS 2: what they did, and Theorem 2's requirement.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fixes: Option<FixReport>,
+    /// What the fleet commands (`fleet stop`, `fleet resume`) did.
+    pub commands: CommandCounts,
 }
 
 /// What a robot's safety filter did over its run (`docs/safety.md`, "In the
@@ -133,4 +136,6 @@ pub struct RobotStats {
     /// against Theorem 2's).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fixes: Option<FixReport>,
+    /// What the fleet commands did so far.
+    pub commands: CommandCounts,
 }

@@ -1,6 +1,7 @@
 //! [`Robot`] as a [`Task`] of the fleet runtime: its leader stream (and,
-//! with a safety filter, every robot's state) in, its state and counters
-//! out.
+//! with a safety filter, every robot's state), its plant's inputs and the
+//! fleet command in, its state and counters out; its latch answered on
+//! `latch/robot/<k>`.
 
 use echelon::formation::Leader;
 
@@ -8,13 +9,14 @@ use crate::FleetError;
 use crate::keys::Keys;
 use crate::plant::{Plant, SimulatedDrive};
 use crate::role::Member;
-use crate::runtime::{Flow, Outputs, Sample, Task};
+use crate::runtime::{Flow, Latching, Outputs, Sample, Task};
 use crate::wire::{self, DecodeError, Message};
 
 use super::{Robot, RobotReport, RobotStats};
 
 /// The input number of the leader stream (then every robot's state, with a
-/// safety filter, then the plant's inputs, if any).
+/// safety filter, then the plant's inputs, if any, then the fleet command;
+/// the latch answers after them).
 const LEADER: usize = 0;
 /// The output number of its state.
 const STATE: usize = 0;
@@ -89,6 +91,12 @@ impl<P: Plant> RobotTask<P> {
         self.robot.config().agent
     }
 
+    /// The input number of the fleet command (the latch answers: the next).
+    fn command_input(&self) -> usize {
+        1 + usize::from(self.robot.has_safety())
+            + self.plant_inputs.as_ref().map_or(0, |(keys, _)| keys.len())
+    }
+
     fn publish_stats(&self, out: &mut dyn Outputs, stats: &RobotStats) {
         if let Ok(json) = serde_json::to_vec(stats) {
             out.put(&self.keys.stats(self.agent()), &json);
@@ -107,6 +115,7 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         if let Some((plant, _)) = &self.plant_inputs {
             keys.extend(plant.iter().cloned());
         }
+        keys.push(self.keys.command());
         keys
     }
 
@@ -118,9 +127,26 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         vec![self.keys.alive(&Member::Robot(self.agent()).liveliness())]
     }
 
+    fn latching(&self) -> Option<Latching> {
+        Some(Latching {
+            answer_on: self.keys.latch(&Member::Robot(self.agent()).liveliness()),
+            ask: self.keys.latches(),
+        })
+    }
+
+    fn latched(&self) -> Option<Vec<u8>> {
+        Some(self.robot.latched().encode())
+    }
+
     fn on_input(&mut self, input: usize, sample: &Sample<'_>) -> Result<(), FleetError> {
         let neighbours = usize::from(self.robot.has_safety());
-        if input == LEADER {
+        let command = self.command_input();
+        if input == command {
+            // Obeyed at once: a stop commands zero now, not at the next tick.
+            self.robot.on_command(sample.payload);
+        } else if input == command + 1 {
+            self.robot.on_latch_answer(sample.payload);
+        } else if input == LEADER {
             self.leader
                 .push((sample.at, sample.delay, sample.payload.to_vec()));
         } else if input == neighbours {
@@ -266,5 +292,150 @@ mod tests {
         let c = task.robot().counters();
         assert_eq!(sent, 1501);
         assert!((sent - 151..=sent - 150).contains(&c.received), "{c:?}");
+    }
+
+    /// A fleet stop put on the bus (the operator) halfway: each robot's
+    /// states say `stopped` from its next tick on and it commands zero on
+    /// every tick; the leader's reference pauses; robot 2 restarted during
+    /// the stop learns it from the latches and stays stopped; garbage on the
+    /// command key is refused; after the resume both move again and the
+    /// chain converges.
+    #[test]
+    fn a_fleet_stop_on_the_bus_holds_every_robot_until_the_resume() {
+        use crate::command::{FleetCommand, Latched, Order};
+        let (s, fleet, reference) = crate::testing::fast_circle();
+        let keys = Keys::new("lab");
+        let mut bus = Bus::new();
+        let leader = Reference::new(reference, 50.0, 60.0, 1);
+        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        let robot = |k| {
+            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
+                .unwrap_or_else(|e| panic!("{e}"));
+            RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
+        };
+        let r1 = bus.add(robot(1), 0.0);
+        let r2 = bus.add(robot(2), 0.0);
+        let period = 0.01;
+        bus.run_until(20.0);
+        bus.put(&keys.command(), b"{not a command");
+        bus.put(
+            &keys.command(),
+            &FleetCommand::new(Order::Stop, 1, "operator", "test").encode(),
+        );
+        bus.run_until(25.0);
+        // Robot 2 restarts during the stop.
+        bus.replace(r2, robot(2), 25.0);
+        bus.run_until(30.0);
+        let resume_at = bus.now();
+        bus.put(
+            &keys.command(),
+            &FleetCommand::new(Order::Resume, 2, "operator", "test").encode(),
+        );
+        bus.run_until(60.0);
+        for (id, k) in [(r1, 1), (r2, 2)] {
+            let key = keys.state(k);
+            let during: Vec<&crate::runtime::bus::Published> = bus
+                .published_by(id, &key)
+                .filter(|p| p.t > 20.0 + period && p.t < resume_at)
+                .collect();
+            assert!(during.len() > 500, "agent {k}: {}", during.len());
+            for p in during {
+                let Ok(Message::State(_, st)) = wire::decode(&p.payload) else {
+                    panic!("a state");
+                };
+                assert!(
+                    matches!(st.link, LinkStatus::Stopped | LinkStatus::Waiting),
+                    "agent {k} at {}: {st:?}",
+                    p.t
+                );
+                assert_eq!(st.u, echelon::model::Input::default());
+            }
+            let task: &RobotTask = bus.task(id).unwrap_or_else(|| panic!("a robot"));
+            let rep = task.robot().report();
+            assert_eq!(rep.link, "tracking");
+            assert!(rep.final_error < 1e-3, "agent {k}: {rep:?}");
+            assert_eq!(
+                (rep.commands.stops, rep.commands.resumes),
+                (1, 1),
+                "{rep:?}"
+            );
+            let answer = Latched::decode(&bus.latched(id).unwrap_or_default());
+            assert!(answer.is_some_and(|a| !a.stopped && a.seq() == 2));
+        }
+        let task: &RobotTask = bus.task(r1).unwrap_or_else(|| panic!("a robot"));
+        assert_eq!(task.robot().command_counts().refused, 1);
+        // The reference stood still during the stop (10 s paused).
+        let refs: Vec<crate::wire::Reference> = bus
+            .published_by(l, &keys.reference())
+            .filter(|p| p.t > 20.1 && p.t < resume_at)
+            .filter_map(|p| match wire::decode(&p.payload) {
+                Ok(Message::Reference(_, r)) => Some(r),
+                _ => None,
+            })
+            .collect();
+        assert!(refs.len() > 400);
+        assert!(
+            refs.windows(2)
+                .all(|w| w[0].motion.p == w[1].motion.p && w[0].t < w[1].t)
+        );
+        let leader: &LeaderTask = bus.task(l).unwrap_or_else(|| panic!("the leader"));
+        assert!((leader.leader().paused(60.0) - 10.0).abs() < 0.05);
+    }
+
+    /// The leader interrupted before its end (the runtime stops it on
+    /// SIGINT/SIGTERM) puts a fleet stop as its last words: robot 1 (under
+    /// `extrapolate`, which would coast on for the hold) and its follower
+    /// command zero from their next tick; a leader that reaches its end
+    /// puts none.
+    #[test]
+    fn an_interrupted_leader_stops_the_fleet() {
+        let (s, fleet, reference) = crate::testing::fast_circle();
+        let keys = Keys::new("lab");
+        let mut bus = Bus::new();
+        let leader = Reference::new(reference.clone(), 50.0, 60.0, 1);
+        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        let robot = |k| {
+            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
+                .unwrap_or_else(|e| panic!("{e}"));
+            RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
+        };
+        let r1 = bus.add(robot(1), 0.0);
+        let r2 = bus.add(robot(2), 0.0);
+        bus.run_until(10.0);
+        bus.stop(l).unwrap_or_else(|e| panic!("{e}"));
+        let command_key = keys.command();
+        let sent: Vec<_> = bus.published_by(l, &command_key).collect();
+        assert_eq!(sent.len(), 1);
+        let c = crate::command::FleetCommand::decode(&sent[0].payload)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            (c.order, c.by.as_str()),
+            (crate::command::Order::Stop, "leader")
+        );
+        bus.run_until(12.0);
+        for (id, k) in [(r1, 1), (r2, 2)] {
+            let key = keys.state(k);
+            let after: Vec<RobotState> = bus
+                .published_by(id, &key)
+                .filter(|p| p.t > 10.0 + 0.01)
+                .filter_map(|p| match wire::decode(&p.payload) {
+                    Ok(Message::State(_, st)) => Some(st),
+                    _ => None,
+                })
+                .collect();
+            assert!(after.len() > 150, "agent {k}");
+            assert!(after.iter().all(|st| st.link == LinkStatus::Stopped));
+        }
+        let task: LeaderTask = bus.take(l).unwrap_or_else(|| panic!("the leader"));
+        let rep = task.report().unwrap_or_else(|e| panic!("{e}"));
+        assert!(rep.stopped_the_fleet);
+
+        // A leader at its end stops nothing.
+        let mut bus = Bus::new();
+        let leader = Reference::new(reference, 50.0, 1.0, 1);
+        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        bus.run_until(2.0);
+        assert!(!bus.is_running(l));
+        assert_eq!(bus.published_by(l, &keys.command()).count(), 0);
     }
 }

@@ -18,10 +18,13 @@ use zenoh::key_expr::keyexpr;
 
 use crate::FleetError;
 
-use super::{Flow, Outputs, Sample, Task};
+use super::{Flow, Latching, Outputs, Sample, Task};
 
 /// A task's number on the bus.
 pub type TaskId = usize;
+
+/// The sender of what [`Bus::put`] puts (no task).
+pub const OUTSIDE: TaskId = usize::MAX;
 
 /// One publication, as the bus logged it.
 #[derive(Debug, Clone, PartialEq)]
@@ -49,6 +52,8 @@ trait Node: Any {
     fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError>;
     fn stop(&mut self, out: &mut dyn Outputs) -> Result<(), FleetError>;
     fn started(&mut self);
+    fn latching(&self) -> Option<Latching>;
+    fn latched(&self) -> Option<Vec<u8>>;
     fn as_any(&self) -> &dyn Any;
     fn as_any_mut(&mut self) -> &mut dyn Any;
 }
@@ -74,6 +79,12 @@ impl<T: Task + 'static> Node for T {
     }
     fn started(&mut self) {
         Task::started(self, 0);
+    }
+    fn latching(&self) -> Option<Latching> {
+        Task::latching(self)
+    }
+    fn latched(&self) -> Option<Vec<u8>> {
+        Task::latched(self)
     }
     fn as_any(&self) -> &dyn Any {
         self
@@ -235,13 +246,54 @@ impl Bus {
     /// Adds `task`, its clock reading 0 at bus time `start`.
     pub fn add<T: Task + 'static>(&mut self, task: T, start: f64) -> TaskId {
         self.entries.push(Entry::new(task, start));
-        self.entries.len() - 1
+        let id = self.entries.len() - 1;
+        self.ask_latches(id);
+        id
     }
 
     /// Puts `task` in place of task `id` (a restarted process), its clock
     /// reading 0 at bus time `start`.
     pub fn replace<T: Task + 'static>(&mut self, id: TaskId, task: T, start: f64) {
         self.entries[id] = Entry::new(task, start);
+        self.ask_latches(id);
+    }
+
+    /// Task `id`'s latch query, as the runtime makes it when the task
+    /// starts: what every other running task's latch under its key
+    /// expression answers now, handed over at once (no latency, no loss).
+    fn ask_latches(&mut self, id: TaskId) {
+        let Some(l) = self.entries[id].node.latching() else {
+            return;
+        };
+        let answers: Vec<(String, Vec<u8>)> = self
+            .entries
+            .iter()
+            .enumerate()
+            .filter(|(j, e)| *j != id && e.running)
+            .filter_map(|(_, e)| {
+                let theirs = e.node.latching()?;
+                let payload = e.node.latched()?;
+                includes(&l.ask, &theirs.answer_on).then_some((theirs.answer_on, payload))
+            })
+            .collect();
+        let e = &mut self.entries[id];
+        let input = e.inputs.len();
+        let at = self.now - e.start;
+        for (key, payload) in answers {
+            let sample = Sample {
+                key: &key,
+                payload: &payload,
+                attachment: None,
+                at,
+                unix_ns: (at.max(0.0) * 1e9) as u64,
+                delay: None,
+            };
+            if let Err(err) = e.node.on_input(input, &sample) {
+                e.running = false;
+                e.error = Some(err);
+                return;
+            }
+        }
     }
 
     /// Task `id`, as its type (`None`: another type).
@@ -288,6 +340,22 @@ impl Bus {
         self.log
             .iter()
             .filter(move |p| p.from == id && p.key == key)
+    }
+
+    /// Puts `payload` on `key` now from outside the tasks (e.g. an
+    /// operator's command), sender [`OUTSIDE`], through the link.
+    pub fn put(&mut self, key: &str, payload: &[u8]) {
+        let sent = Sent {
+            messages: vec![(key.to_owned(), payload.to_vec(), None)],
+            ..Sent::default()
+        };
+        self.route(OUTSIDE, sent);
+    }
+
+    /// What task `id`'s latch answers now (`None`: it holds none, or says
+    /// nothing).
+    pub fn latched(&self, id: TaskId) -> Option<Vec<u8>> {
+        self.entries.get(id)?.node.latched()
     }
 
     /// Stops task `id` as the runtime does (its last words are sent).

@@ -26,10 +26,12 @@ use crate::{FleetError, StopFlag};
 pub mod bus;
 mod task;
 
-pub use task::{Flow, Outputs, Sample, Task, WaitFor};
+pub use task::{Flow, Latching, Outputs, Sample, Task, WaitFor};
 
 /// Longest sleep, real time, so that a stop request is seen.
 const NAP: Duration = Duration::from_millis(20);
+/// Longest wait for the answers to a task's latch query, real time.
+pub const LATCH_QUERY_TIMEOUT: Duration = Duration::from_secs(1);
 
 /// A sample as a subscription hands it over.
 struct Arrival {
@@ -226,11 +228,45 @@ pub fn run_split<T: Task, G>(
                 .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?,
         );
     }
+    // The latch: answer queries with what the task says after each call;
+    // ask once (after `wait_for`, so the awaited are asked too).
+    let latching = task.latching();
+    let answer: Arc<Mutex<Option<Vec<u8>>>> = Arc::new(Mutex::new(task.latched()));
+    let _queryable = match &latching {
+        Some(l) => Some(declare_latch(&session, &l.answer_on, answer.clone())?),
+        None => None,
+    };
     if let Some(w) = task.wait_for() {
         wait_for(&session, &w, stop)?;
     }
+    let heard = match &latching {
+        Some(l) => ask_latches(&session, l)?,
+        None => Vec::new(),
+    };
     clock.sync(0.0, Instant::now());
     task.started(crate::unix_nanos());
+    let latch_input = task.inputs().len();
+    for (key, payload) in &heard {
+        task.on_input(
+            latch_input,
+            &Sample {
+                key,
+                payload,
+                attachment: None,
+                at: clock.now(),
+                unix_ns: crate::unix_nanos(),
+                delay: None,
+            },
+        )?;
+    }
+    let update = |task: &T| {
+        if latching.is_some()
+            && let Ok(mut a) = answer.lock()
+        {
+            *a = task.latched();
+        }
+    };
+    update(&task);
 
     let mut out = ZenohOutputs {
         session: &session,
@@ -260,6 +296,7 @@ pub fn run_split<T: Task, G>(
                 match rx.recv_timeout(clock.real(left).min(NAP)) {
                     Ok(a) => {
                         hand(&mut task, &a)?;
+                        update(&task);
                         continue;
                     }
                     Err(mpsc::RecvTimeoutError::Timeout) => {}
@@ -271,7 +308,9 @@ pub fn run_split<T: Task, G>(
             while let Ok(a) = rx.try_recv() {
                 hand(&mut task, &a)?;
             }
-            if task.tick(clock.now(), &mut out)? == Flow::Stop {
+            let flow = task.tick(clock.now(), &mut out)?;
+            update(&task);
+            if flow == Flow::Stop {
                 return Ok(());
             }
         }
@@ -297,6 +336,62 @@ pub fn run_split<T: Task, G>(
         }
     }
     Ok(task)
+}
+
+/// Declares the queryable answering on `key` with what `answer` holds.
+fn declare_latch(
+    session: &zenoh::Session,
+    key: &str,
+    answer: Arc<Mutex<Option<Vec<u8>>>>,
+) -> Result<zenoh::query::Queryable<()>, FleetError> {
+    let reply_key = key.to_owned();
+    session
+        .declare_queryable(key)
+        .callback(move |q| {
+            let payload = answer.lock().ok().and_then(|a| a.clone());
+            if let Some(p) = payload {
+                let _ = q.reply(reply_key.clone(), p).wait();
+            }
+        })
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("declaring the latch {key}: {e}")))
+}
+
+/// Asks every latch of `l.ask` (at most [`LATCH_QUERY_TIMEOUT`]): the
+/// answers but the asker's own, `(key, payload)`.
+fn ask_latches(
+    session: &zenoh::Session,
+    l: &Latching,
+) -> Result<Vec<(String, Vec<u8>)>, FleetError> {
+    let mut heard = query_all(session, &l.ask, LATCH_QUERY_TIMEOUT)?;
+    heard.retain(|(key, _)| *key != l.answer_on);
+    Ok(heard)
+}
+
+/// Every queryable's answers to a query on `ask` within `timeout`, `(key,
+/// payload)`, unconsolidated.
+pub fn query_all(
+    session: &zenoh::Session,
+    ask: &str,
+    timeout: Duration,
+) -> Result<Vec<(String, Vec<u8>)>, FleetError> {
+    let replies = session
+        .get(ask)
+        .target(zenoh::query::QueryTarget::All)
+        .consolidation(zenoh::query::ConsolidationMode::None)
+        .timeout(timeout)
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("asking {ask}: {e}")))?;
+    let mut heard = Vec::new();
+    while let Ok(reply) = replies.recv() {
+        if let Ok(s) = reply.result() {
+            heard.push((
+                s.key_expr().as_str().to_owned(),
+                s.payload().to_bytes().into_owned(),
+            ));
+        }
+    }
+    Ok(heard)
 }
 
 /// Waits until every name of `w` has a liveliness token under

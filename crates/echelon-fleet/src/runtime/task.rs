@@ -67,6 +67,18 @@ pub struct WaitFor {
     pub timeout: Duration,
 }
 
+/// A latch a task holds and asks for at its start (the fleet command,
+/// [`crate::command`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Latching {
+    /// The key it answers queries on, with [`Task::latched`].
+    pub answer_on: String,
+    /// The key expression it queries once, before its clock starts; each
+    /// answer (but its own) is handed to [`Task::on_input`] as input number
+    /// `inputs().len()`, once its clock reads 0.
+    pub ask: String,
+}
+
 /// A fleet role's behaviour, whatever carries its messages.
 ///
 /// The runtime subscribes to [`inputs`](Task::inputs), declares
@@ -93,6 +105,16 @@ pub trait Task {
     /// The liveliness tokens it holds while it runs (full key expressions).
     fn tokens(&self) -> Vec<String> {
         Vec::new()
+    }
+
+    /// The latch it holds and asks for (`None`: none).
+    fn latching(&self) -> Option<Latching> {
+        None
+    }
+
+    /// What it answers on its latch key now (`None`: nothing).
+    fn latched(&self) -> Option<Vec<u8>> {
+        None
     }
 
     /// Who must be present before its clock starts.

@@ -28,6 +28,10 @@ pub(crate) enum FleetCommand {
     /// Start a router, a leader, one process per robot and a collector on loopback (with --ros2 --real, driving real robots at their own routers); stop them; summarise.
     #[command(allow_negative_numbers = true)]
     Up(UpArgs),
+    /// Stop every robot of the fleet (latched: they command zero until `fleet resume`); exits 0 once every robot alive has acknowledged.
+    Stop(CommandArgs),
+    /// Lift a `fleet stop`: the robots follow again from where they are, the leader's reference goes on from where it paused.
+    Resume(CommandArgs),
     /// Make a development CA and certificates for the secure mode.
     Certs(CertsArgs),
     /// Run `fleet up` for several fleet sizes on loopback at time scale 1 and tabulate startup, CPU, messages/s, latency, losses and final error.
@@ -65,7 +69,7 @@ pub(crate) struct NetArgs {
     /// Secure mode: mutual TLS and access control with the certificates in DIR (`echelon fleet certs`).
     #[arg(long, value_name = "DIR")]
     pub(super) secure: Option<PathBuf>,
-    /// Certificate identity in secure mode [default: leader, robot-K, base-K, collector or router].
+    /// Certificate identity in secure mode [default: leader, robot-K, base-K, collector, router or operator].
     #[arg(long, value_name = "ID", requires = "secure")]
     pub(super) identity: Option<String>,
     /// Number of robot identities the access control knows [default: the scenario's agents].
@@ -347,6 +351,21 @@ pub(crate) struct BenchArgs {
     /// Print only the table.
     #[arg(long, short)]
     pub(super) quiet: bool,
+}
+
+/// `echelon fleet stop` / `echelon fleet resume`.
+#[derive(Debug, Args)]
+pub(crate) struct CommandArgs {
+    /// The scenario, for the fleet name (and the access control's robot count in secure mode), or give --fleet.
+    pub(super) scenario: Option<String>,
+    /// Why, in a few words (carried by the command and logged by the collector).
+    #[arg(long, value_name = "TEXT", default_value = "")]
+    pub(super) reason: String,
+    /// Longest wait for every robot alive to acknowledge, s of real time; exit status 1 if one did not.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 5.0)]
+    pub(super) timeout: f64,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
 }
 
 /// `echelon fleet certs`.

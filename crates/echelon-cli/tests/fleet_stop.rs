@@ -1,0 +1,296 @@
+//! One stop for the whole fleet, as processes: `fleet up --ros2` runs;
+//! `fleet stop` puts the fleet command and returns once every robot has
+//! acknowledged it; within 50 ms of its publication the last `cmd_vel` of
+//! every base is zero and nothing else follows until `fleet resume`, after
+//! which every robot drives again.
+
+#![allow(clippy::unwrap_used)]
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::Command;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use zenoh::Wait;
+
+use echelon_ros2::msgs::{RosMessage, TwistStamped};
+
+mod common;
+
+use common::{EXE, check, f, spawn};
+
+const SCENARIO: &str = "experiment-circle-velocity";
+
+/// What the test heard on the bases' `cmd_vel`: per namespace, `(UNIX ns
+/// of arrival, v, ω)` in order.
+type Heard = Arc<Mutex<BTreeMap<String, Vec<(u64, f64, f64)>>>>;
+
+fn unix_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as u64
+}
+
+/// Runs `fleet stop` or `fleet resume` for `scenario` through `router`
+/// with `more` arguments: whether it succeeded, its report, its stderr.
+fn run_command(what: &str, scenario: &str, router: &str, more: &[&str]) -> (bool, Value, String) {
+    let out = Command::new(EXE)
+        .args(["fleet", what, scenario, "--mode", "client", "--connect"])
+        .arg(router)
+        .args(["--reason", "fleet_stop test"])
+        .args(more)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    let report = text
+        .lines()
+        .rfind(|l| l.starts_with('{'))
+        .map_or(Value::Null, |l| serde_json::from_str(l).unwrap());
+    (
+        out.status.success(),
+        report,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Runs `fleet stop` or `fleet resume` through `router`; its report.
+fn command(what: &str, router: &str) -> Value {
+    let out = Command::new(EXE)
+        .args(["fleet", what, SCENARIO, "--mode", "client", "--connect"])
+        .arg(router)
+        .args(["--reason", "fleet_stop test", "--timeout", "5"])
+        .output()
+        .unwrap();
+    check(&out, &format!("fleet {what}"));
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.lines().rfind(|l| l.starts_with('{')).unwrap()).unwrap()
+}
+
+/// Waits for `fleet up` to end successfully; its summary.
+fn up_summary(up: common::Guard, dir: &Path) -> Value {
+    let mut up = up;
+    let status = up.0.wait().unwrap();
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut up.0.stderr.take().unwrap(), &mut err).unwrap();
+    assert!(status.success(), "fleet up: {status}: {err}");
+    serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
+}
+
+/// Waits until `heard` has a non-zero command after `since` from each of
+/// `n` bases.
+fn until_all_move(heard: &Heard, n: usize, since: u64, what: &str) {
+    let start = Instant::now();
+    loop {
+        let moving = heard
+            .lock()
+            .unwrap()
+            .values()
+            .filter(|c| {
+                c.iter()
+                    .any(|&(t, v, w)| t > since && (v != 0.0 || w != 0.0))
+            })
+            .count();
+        if moving == n {
+            return;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "{what}: {moving} of {n} bases moving"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn router_endpoint(dir: &Path) -> String {
+    let path = dir.join("endpoints.json");
+    let start = Instant::now();
+    loop {
+        if let Ok(text) = std::fs::read_to_string(&path)
+            && let Ok(v) = serde_json::from_str::<Value>(&text)
+            && let Some(e) = v["router/1"].as_str()
+        {
+            return e.to_owned();
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "no endpoints.json"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// `fleet up --ros2` (×2), `fleet stop`, `fleet resume`: every robot
+/// acknowledges each; from 50 ms after the stop's publication to the
+/// resume every `cmd_vel` of every base is zero, the last one before that
+/// instant too; after the resume every base moves again; the robots count
+/// one stop and one resume, the leader paused, the collector logged both
+/// commands.
+#[test]
+fn fleet_stop_zeroes_every_cmd_vel_until_fleet_resume() {
+    let _fleet = common::one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let up = spawn(&[
+        "fleet",
+        "up",
+        SCENARIO,
+        "--ros2",
+        "--time-scale",
+        "2",
+        "--duration",
+        "24",
+        "--quiet",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    let router = router_endpoint(dir.path());
+    let session = echelon_fleet::net::open(&echelon_fleet::net::NetOptions {
+        mode: Some(echelon_fleet::net::Mode::Client),
+        connect: vec![router.clone()],
+        ..Default::default()
+    })
+    .unwrap();
+    let heard: Heard = Arc::default();
+    let h = heard.clone();
+    let _sub = session
+        .declare_subscriber("0/*/cmd_vel/**")
+        .callback(move |s| {
+            let at = unix_ns();
+            let ns = s.key_expr().as_str().split('/').nth(1).unwrap().to_owned();
+            let m = TwistStamped::from_cdr_finite(&s.payload().to_bytes()).unwrap();
+            h.lock().unwrap().entry(ns).or_default().push((
+                at,
+                m.twist.linear.x,
+                m.twist.angular.z,
+            ));
+        })
+        .wait()
+        .unwrap();
+    let n = 2;
+    until_all_move(&heard, n, 0, "before the stop");
+    std::thread::sleep(Duration::from_millis(500));
+
+    let stop = command("stop", &router);
+    let robots: Vec<String> = (1..=n).map(|k| format!("robot/{k}")).collect();
+    assert_eq!(stop["command"]["order"], "stop", "{stop}");
+    assert_eq!(stop["alive"], serde_json::json!(robots), "{stop}");
+    assert_eq!(stop["missing"], serde_json::json!([]), "{stop}");
+    assert_eq!(stop["acknowledged"].as_array().unwrap().len(), n, "{stop}");
+    assert_eq!(stop["leader"], true, "{stop}");
+    let stopped_at = stop["published_unix_ns"].as_u64().unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+
+    let resume = command("resume", &router);
+    assert_eq!(resume["missing"], serde_json::json!([]), "{resume}");
+    assert_eq!(resume["acknowledged"].as_array().unwrap().len(), n);
+    let resumed_at = resume["published_unix_ns"].as_u64().unwrap();
+    assert!(
+        resume["command"]["seq"].as_u64() > stop["command"]["seq"].as_u64(),
+        "{resume}"
+    );
+    until_all_move(&heard, n, resumed_at, "after the resume");
+
+    let deadline = stopped_at + 50_000_000;
+    for (ns, cmds) in heard.lock().unwrap().iter() {
+        let last_by_deadline = cmds.iter().rev().find(|c| c.0 <= deadline).unwrap();
+        assert_eq!(
+            (last_by_deadline.1, last_by_deadline.2),
+            (0.0, 0.0),
+            "{ns}: the last cmd_vel 50 ms after the stop"
+        );
+        let held: Vec<_> = cmds
+            .iter()
+            .filter(|c| c.0 > deadline && c.0 < resumed_at)
+            .collect();
+        // Zero every control period (100 Hz at ×2) for 1.5 s and more.
+        assert!(held.len() > 100, "{ns}: {}", held.len());
+        assert!(
+            held.iter().all(|c| (c.1, c.2) == (0.0, 0.0)),
+            "{ns}: a non-zero cmd_vel before the resume"
+        );
+        // Zero within 50 ms: the first zero after the stop, measured.
+        let first_zero = cmds
+            .iter()
+            .find(|c| c.0 >= stopped_at && (c.1, c.2) == (0.0, 0.0))
+            .unwrap();
+        eprintln!(
+            "{ns}: first zero cmd_vel {:.1} ms after the stop's publication",
+            (first_zero.0 as f64 - stopped_at as f64) * 1e-6
+        );
+    }
+
+    let up = up_summary(up, dir.path());
+    for r in up["robots"].as_array().unwrap() {
+        let c = &r["commands"];
+        assert_eq!((f(c, &["stops"]), f(c, &["resumes"])), (1.0, 1.0), "{r}");
+        assert_eq!(f(c, &["refused"]), 0.0, "{r}");
+        assert_eq!(r["link"], "tracking", "{r}");
+    }
+    let leader = &up["leader"];
+    assert!(f(leader, &["paused"]) > 2.0, "{leader}");
+    assert_eq!(leader["stopped_the_fleet"], false, "{leader}");
+    let col = &up["collector"];
+    assert_eq!(col["logged_by_topic"]["/fleet/command"], 2, "{col}");
+    assert_eq!(col["rejected"], serde_json::json!({}), "{col}");
+}
+
+/// Secure mode: a stop put with robot 1's certificate is refused by the
+/// router's access control (no robot stops, the command exits 1 naming
+/// both robots); the same with the `operator` certificate `fleet certs`
+/// makes stops both, and the resume lifts it.
+#[test]
+fn in_secure_mode_only_the_operator_stops_the_fleet() {
+    let _fleet = common::one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    let certs = certs.to_str().unwrap();
+    common::echelon_ok(&["fleet", "certs", "--robots", "2"], Path::new(certs));
+    let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fleet/fast-circle.toml");
+    let scenario = scenario.to_str().unwrap();
+    let out = dir.path().join("up");
+    let up = spawn(&[
+        "fleet",
+        "up",
+        scenario,
+        "--secure",
+        certs,
+        "--time-scale",
+        "2",
+        "--duration",
+        "16",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let router = router_endpoint(&out);
+    let secure = |id: &'static str| ["--secure", certs, "--identity", id, "--timeout", "2"];
+    // Wait until both robots have joined and hear their leader.
+    let start = Instant::now();
+    let (ok, rogue, err) = loop {
+        let (ok, report, err) = run_command("stop", scenario, &router, &secure("robot-1"));
+        if report["alive"].as_array().is_some_and(|a| a.len() == 2) {
+            break (ok, report, err);
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "{report} {err}");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert!(!ok, "{rogue}");
+    assert!(err.contains("did not acknowledge"), "{err}");
+    assert_eq!(rogue["acknowledged"], serde_json::json!([]), "{rogue}");
+    assert_eq!(rogue["missing"], serde_json::json!(["robot/1", "robot/2"]));
+
+    let (ok, stop, err) = run_command("stop", scenario, &router, &secure("operator"));
+    assert!(ok, "{stop} {err}");
+    assert_eq!(stop["acknowledged"].as_array().unwrap().len(), 2, "{stop}");
+    assert_eq!(stop["command"]["by"], "operator");
+    std::thread::sleep(Duration::from_millis(500));
+    let (ok, resume, err) = run_command("resume", scenario, &router, &secure("operator"));
+    assert!(ok, "{resume} {err}");
+    let up = up_summary(up, &out);
+    for r in up["robots"].as_array().unwrap() {
+        let c = &r["commands"];
+        assert_eq!((f(c, &["stops"]), f(c, &["resumes"])), (1.0, 1.0), "{r}");
+    }
+}

@@ -1,0 +1,415 @@
+//! The fleet-wide command: `echelon fleet stop` / `fleet resume` (and the
+//! leader's stop when it is interrupted), put on `echelon/<fleet>/command`
+//! and obeyed by every robot.
+//!
+//! A command is a small JSON message ([`FleetCommand`]: the order, a
+//! sequence number, who sent it, when and why). Every process that hears
+//! commands (robots, the leader) keeps a [`Latch`]: the stop in force, if
+//! any. The rules:
+//!
+//! - a **stop** is always obeyed, whatever its number (a stop is never
+//!   unsafe); the latch keeps the highest stop number heard;
+//! - a **resume** lifts the stop in force only when its number is higher
+//!   than that stop's (`fleet resume` numbers its command one past the
+//!   highest number the fleet answers, so it lifts every stop issued before
+//!   it, and a resume that crossed a newer stop on the way does not);
+//! - what a process learns second-hand (a latch answer, [`Latch::on_hearsay`])
+//!   can only stop it: in secure mode only the `operator` and the `leader`
+//!   may put on the command key, while any member may answer a query.
+//!
+//! The latch is held by the processes themselves (the robots and the
+//! leader), each answering queries on its own `echelon/<fleet>/latch/<name>`
+//! key with what is in force ([`Latched`]); a process that starts asks
+//! `echelon/<fleet>/latch/**` before its clock starts, so a robot that
+//! starts or restarts during a stop is stopped before its first tick. The
+//! same answers are the acknowledgements `fleet stop` waits for.
+
+use serde::{Deserialize, Serialize};
+
+/// The longest command payload accepted, bytes.
+pub const MAX_LEN: usize = 2048;
+/// The longest `reason`, characters.
+pub const MAX_REASON: usize = 256;
+/// The longest `by`, characters.
+const MAX_BY: usize = 64;
+/// The format version written and accepted.
+pub const COMMAND_VERSION: u32 = 1;
+
+/// What a command orders.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Order {
+    /// Command zero on every tick until resumed.
+    Stop,
+    /// Follow again, from where the robot is.
+    Resume,
+}
+
+impl Order {
+    /// Its name (`stop`, `resume`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Order::Stop => "stop",
+            Order::Resume => "resume",
+        }
+    }
+}
+
+/// A fleet-wide command, as JSON on `echelon/<fleet>/command`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FleetCommand {
+    /// [`COMMAND_VERSION`].
+    pub version: u32,
+    /// Stop or resume.
+    pub order: Order,
+    /// Its number: a resume lifts only the stops numbered below it.
+    pub seq: u64,
+    /// When its sender issued it, UNIX ns (the sender's wall clock; for the
+    /// logs, not for ordering).
+    pub stamp_unix_ns: u64,
+    /// Who sent it: its sender's identity (`operator`, `leader`).
+    pub by: String,
+    /// Why, in a few words (may be empty).
+    pub reason: String,
+}
+
+/// Why a command payload was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum CommandError {
+    /// Too long, not JSON, or not a command.
+    #[error("malformed command: {0}")]
+    Malformed(&'static str),
+    /// Another format version.
+    #[error("command format version {0}, expected {COMMAND_VERSION}")]
+    WrongVersion(u32),
+}
+
+impl FleetCommand {
+    /// A command `order` numbered `seq`, sent now by `by` for `reason`.
+    pub fn new(order: Order, seq: u64, by: &str, reason: &str) -> FleetCommand {
+        FleetCommand {
+            version: COMMAND_VERSION,
+            order,
+            seq,
+            stamp_unix_ns: crate::unix_nanos(),
+            by: by.chars().take(MAX_BY).collect(),
+            reason: reason.chars().take(MAX_REASON).collect(),
+        }
+    }
+
+    /// Its JSON.
+    pub fn encode(&self) -> Vec<u8> {
+        serde_json::to_vec(self).unwrap_or_default()
+    }
+
+    /// A command from its JSON, checked: at most [`MAX_LEN`] bytes, this
+    /// version, a sender named, a reason of at most [`MAX_REASON`]
+    /// characters.
+    pub fn decode(bytes: &[u8]) -> Result<FleetCommand, CommandError> {
+        if bytes.len() > MAX_LEN {
+            return Err(CommandError::Malformed("too long"));
+        }
+        let v: serde_json::Value =
+            serde_json::from_slice(bytes).map_err(|_| CommandError::Malformed("not JSON"))?;
+        match v.get("version").and_then(serde_json::Value::as_u64) {
+            Some(n) if n == u64::from(COMMAND_VERSION) => {}
+            Some(n) => return Err(CommandError::WrongVersion(n.min(u64::from(u32::MAX)) as u32)),
+            None => return Err(CommandError::Malformed("no version")),
+        }
+        let c: FleetCommand =
+            serde_json::from_value(v).map_err(|_| CommandError::Malformed("not a command"))?;
+        if c.by.is_empty() || c.by.chars().count() > MAX_BY {
+            return Err(CommandError::Malformed("sender"));
+        }
+        if c.reason.chars().count() > MAX_REASON {
+            return Err(CommandError::Malformed("reason too long"));
+        }
+        Ok(c)
+    }
+}
+
+/// What a process answers on its latch key: whether it is stopped, and the
+/// command in force (the stop, or the last resume; `None`: none heard).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Latched {
+    /// Whether a stop is in force.
+    pub stopped: bool,
+    /// The command in force.
+    pub command: Option<FleetCommand>,
+}
+
+impl Latched {
+    /// Its JSON.
+    pub fn encode(&self) -> Vec<u8> {
+        serde_json::to_vec(self).unwrap_or_default()
+    }
+
+    /// From its JSON (`None`: not a latch answer).
+    pub fn decode(bytes: &[u8]) -> Option<Latched> {
+        if bytes.len() > 2 * MAX_LEN {
+            return None;
+        }
+        let l: Latched = serde_json::from_slice(bytes).ok()?;
+        let consistent = match &l.command {
+            Some(c) => (c.order == Order::Stop) == l.stopped && c.version == COMMAND_VERSION,
+            None => !l.stopped,
+        };
+        consistent.then_some(l)
+    }
+
+    /// The highest command number it knows.
+    pub fn seq(&self) -> u64 {
+        self.command.as_ref().map_or(0, |c| c.seq)
+    }
+
+    /// Whether it acknowledges `c`: the same order, numbered `c.seq` or
+    /// later.
+    pub fn acknowledges(&self, c: &FleetCommand) -> bool {
+        self.command
+            .as_ref()
+            .is_some_and(|l| l.order == c.order && l.seq >= c.seq)
+    }
+}
+
+/// What the commands a process received did (its report's `commands`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommandCounts {
+    /// Command payloads received on the command key.
+    pub received: u64,
+    /// Times it went from running to stopped (on a command or a latch answer).
+    pub stops: u64,
+    /// Times a resume set it running again.
+    pub resumes: u64,
+    /// Payloads refused: malformed or of another version.
+    pub refused: u64,
+    /// Resumes ignored: not stopped, or numbered at or below the stop in
+    /// force.
+    pub ignored: u64,
+}
+
+/// What a command did to a latch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Change {
+    /// It was running and is stopped now.
+    Stopped,
+    /// It was stopped and runs again.
+    Resumed,
+    /// Nothing changed (a stop while stopped, a resume ignored or refused).
+    Unchanged,
+}
+
+/// The fleet command a process is under (see the module's rules).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Latch {
+    /// The stop in force (the highest-numbered one heard).
+    stop: Option<FleetCommand>,
+    /// The last resume obeyed.
+    resume: Option<FleetCommand>,
+    counts: CommandCounts,
+}
+
+impl Latch {
+    /// Running, nothing heard.
+    pub fn new() -> Latch {
+        Latch::default()
+    }
+
+    /// Whether a stop is in force.
+    pub fn stopped(&self) -> bool {
+        self.stop.is_some()
+    }
+
+    /// The stop in force.
+    pub fn stop(&self) -> Option<&FleetCommand> {
+        self.stop.as_ref()
+    }
+
+    /// Its counters.
+    pub fn counts(&self) -> CommandCounts {
+        self.counts
+    }
+
+    /// What it answers on its latch key.
+    pub fn latched(&self) -> Latched {
+        Latched {
+            stopped: self.stopped(),
+            command: self.stop.clone().or_else(|| self.resume.clone()),
+        }
+    }
+
+    /// The highest command number it knows.
+    pub fn seq(&self) -> u64 {
+        self.stop
+            .iter()
+            .chain(&self.resume)
+            .map(|c| c.seq)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// Takes a payload that arrived on the command key: decoded (refused and
+    /// counted if malformed) and obeyed by the rules.
+    pub fn on_payload(&mut self, bytes: &[u8]) -> Change {
+        self.counts.received += 1;
+        match FleetCommand::decode(bytes) {
+            Ok(c) => self.on_command(c),
+            Err(_) => {
+                self.counts.refused += 1;
+                Change::Unchanged
+            }
+        }
+    }
+
+    /// Obeys `c`: a stop always, a resume numbered above the stop in force.
+    pub fn on_command(&mut self, c: FleetCommand) -> Change {
+        match c.order {
+            Order::Stop => self.take_stop(c),
+            Order::Resume => match &self.stop {
+                Some(s) if c.seq > s.seq => {
+                    self.stop = None;
+                    self.resume = Some(c);
+                    self.counts.resumes += 1;
+                    Change::Resumed
+                }
+                _ => {
+                    self.counts.ignored += 1;
+                    if self.stop.is_none() && self.resume.as_ref().is_none_or(|r| c.seq > r.seq) {
+                        // Running anyway: keep the newest number.
+                        self.resume = Some(c);
+                    }
+                    Change::Unchanged
+                }
+            },
+        }
+    }
+
+    /// Takes another process's latch answer (hearsay): only a stop is taken.
+    pub fn on_hearsay(&mut self, bytes: &[u8]) -> Change {
+        match Latched::decode(bytes) {
+            Some(Latched {
+                stopped: true,
+                command: Some(c),
+            }) => self.take_stop(c),
+            _ => Change::Unchanged,
+        }
+    }
+
+    fn take_stop(&mut self, c: FleetCommand) -> Change {
+        let change = if self.stop.is_none() {
+            self.counts.stops += 1;
+            Change::Stopped
+        } else {
+            Change::Unchanged
+        };
+        if self.stop.as_ref().is_none_or(|s| c.seq >= s.seq) {
+            self.stop = Some(c);
+        }
+        change
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cmd(order: Order, seq: u64) -> FleetCommand {
+        FleetCommand::new(order, seq, "operator", "test")
+    }
+
+    #[test]
+    fn commands_round_trip_and_bad_payloads_are_refused() {
+        let c = cmd(Order::Stop, 3);
+        assert_eq!(FleetCommand::decode(&c.encode()), Ok(c.clone()));
+        let json = String::from_utf8(c.encode()).unwrap_or_default();
+        assert!(json.contains("\"order\":\"stop\""), "{json}");
+        let bad: [&[u8]; 7] = [
+            b"",
+            b"garbage",
+            b"{}",
+            br#"{"version":1,"order":"halt","seq":1,"stamp_unix_ns":0,"by":"x","reason":""}"#,
+            br#"{"version":1,"order":"stop","seq":-1,"stamp_unix_ns":0,"by":"x","reason":""}"#,
+            br#"{"version":1,"order":"stop","seq":1,"stamp_unix_ns":0,"by":"","reason":""}"#,
+            br#"{"version":1,"order":"stop","seq":1,"stamp_unix_ns":0,"by":"x","reason":"","x":1}"#,
+        ];
+        for b in bad {
+            assert!(
+                matches!(FleetCommand::decode(b), Err(CommandError::Malformed(_))),
+                "{}",
+                String::from_utf8_lossy(b)
+            );
+        }
+        let v2 = br#"{"version":2,"order":"stop","seq":1,"stamp_unix_ns":0,"by":"x","reason":""}"#;
+        assert_eq!(FleetCommand::decode(v2), Err(CommandError::WrongVersion(2)));
+        let long = FleetCommand {
+            reason: "x".repeat(MAX_REASON + 1),
+            ..c.clone()
+        };
+        assert!(FleetCommand::decode(&long.encode()).is_err());
+        assert!(FleetCommand::decode(&vec![b' '; MAX_LEN + 1]).is_err());
+        // `new` cuts a long reason to what is accepted.
+        let cut = FleetCommand::new(Order::Stop, 1, "operator", &"y".repeat(1000));
+        assert!(FleetCommand::decode(&cut.encode()).is_ok());
+    }
+
+    #[test]
+    fn a_stop_always_holds_and_only_a_later_resume_lifts_it() {
+        let mut l = Latch::new();
+        assert!(!l.stopped());
+        assert_eq!(
+            l.latched(),
+            Latched {
+                stopped: false,
+                command: None
+            }
+        );
+        assert_eq!(l.on_command(cmd(Order::Stop, 2)), Change::Stopped);
+        // An older stop still stops (it is already), the newest number kept.
+        assert_eq!(l.on_command(cmd(Order::Stop, 1)), Change::Unchanged);
+        assert_eq!(l.stop().map(|s| s.seq), Some(2));
+        // A resume numbered at or below the stop is ignored.
+        assert_eq!(l.on_command(cmd(Order::Resume, 2)), Change::Unchanged);
+        assert!(l.stopped());
+        assert_eq!(l.on_command(cmd(Order::Resume, 3)), Change::Resumed);
+        assert!(!l.stopped());
+        assert_eq!(l.seq(), 3);
+        assert!(l.latched().acknowledges(&cmd(Order::Resume, 3)));
+        assert!(!l.latched().acknowledges(&cmd(Order::Stop, 3)));
+        // A stop numbered below the resume still stops.
+        assert_eq!(l.on_command(cmd(Order::Stop, 1)), Change::Stopped);
+        assert_eq!(l.on_payload(b"garbage"), Change::Unchanged);
+        let c = l.counts();
+        assert_eq!(
+            (c.received, c.stops, c.resumes, c.refused, c.ignored),
+            (1, 2, 1, 1, 1)
+        );
+    }
+
+    #[test]
+    fn hearsay_only_stops() {
+        let mut l = Latch::new();
+        let resumed = Latched {
+            stopped: false,
+            command: Some(cmd(Order::Resume, 9)),
+        };
+        assert_eq!(l.on_hearsay(&resumed.encode()), Change::Unchanged);
+        assert_eq!(l.seq(), 0);
+        let stopped = Latched {
+            stopped: true,
+            command: Some(cmd(Order::Stop, 4)),
+        };
+        assert_eq!(l.on_hearsay(&stopped.encode()), Change::Stopped);
+        assert_eq!(l.on_hearsay(&resumed.encode()), Change::Unchanged);
+        assert!(l.stopped());
+        // Inconsistent or foreign answers are nothing.
+        let liar = Latched {
+            stopped: false,
+            command: Some(cmd(Order::Stop, 4)),
+        };
+        assert_eq!(Latched::decode(&liar.encode()), None);
+        assert_eq!(Latched::decode(b"[1,2]"), None);
+        assert_eq!(l.on_command(cmd(Order::Resume, 5)), Change::Resumed);
+    }
+}

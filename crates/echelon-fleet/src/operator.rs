@@ -1,0 +1,232 @@
+//! `echelon fleet stop` and `echelon fleet resume`: a short-lived process,
+//! the fleet's `operator`, that puts one fleet command
+//! ([`crate::command`]) and waits until every robot alive acknowledges it.
+//!
+//! In order: which robots are alive (their liveliness tokens,
+//! `alive/robot/<k>`); the highest command number the fleet's latches
+//! answer (the command is numbered one past it, so a resume lifts every
+//! stop issued before it); the put on `echelon/<fleet>/command`; then the
+//! latches asked every [`POLL`] until each live robot answers with this
+//! order at this number or later, or `timeout` passes. A robot
+//! acknowledges once it obeys: a stopped robot has commanded zero when it
+//! answers.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+use zenoh::Wait;
+
+use crate::command::{FleetCommand, Latched, Order};
+use crate::keys::Keys;
+use crate::net::{self, NetOptions};
+use crate::role::{Member, Role};
+use crate::runtime;
+use crate::{FleetError, StopFlag};
+
+/// How often the latches are asked for acknowledgements, real time.
+pub const POLL: Duration = Duration::from_millis(20);
+/// How long the leader's acknowledgement is awaited once every robot's is
+/// in (it is for the report only).
+const LEADER_GRACE: Duration = Duration::from_millis(250);
+/// How long the liveliness tokens and the first latch answers are awaited.
+const ASK: Duration = Duration::from_millis(1000);
+
+/// Options of `fleet stop` / `fleet resume`.
+#[derive(Debug, Clone)]
+pub struct OperatorOptions {
+    /// The fleet.
+    pub fleet: String,
+    /// Stop or resume.
+    pub order: Order,
+    /// Why (in the command and the logs).
+    pub reason: String,
+    /// Longest wait for the acknowledgements, real time.
+    pub timeout: Duration,
+    /// Network.
+    pub net: NetOptions,
+}
+
+/// One robot's acknowledgement.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ack {
+    /// Its liveliness name (`robot/<k>`).
+    pub robot: String,
+    /// Seconds from the put to the answer that acknowledged it (real time;
+    /// an upper bound on when the robot obeyed).
+    pub after: f64,
+}
+
+/// What `fleet stop` / `fleet resume` reports (one JSON line on stdout).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OperatorReport {
+    /// [`Role::Operator`].
+    pub role: Role,
+    /// The command put.
+    pub command: FleetCommand,
+    /// When it was put, UNIX ns.
+    pub published_unix_ns: u64,
+    /// The robots alive when it was put.
+    pub alive: Vec<String>,
+    /// The robots that acknowledged it, in the order they did.
+    pub acknowledged: Vec<Ack>,
+    /// The robots alive that did not within the timeout.
+    pub missing: Vec<String>,
+    /// Whether the leader acknowledged it (its reference pauses during a
+    /// stop; `false` also when there is no leader).
+    pub leader: bool,
+}
+
+/// The robots of `alive` that acknowledge `c` in `answers` (latch key,
+/// payload), and whether the leader does.
+pub fn tally(
+    keys: &Keys,
+    c: &FleetCommand,
+    answers: &[(String, Vec<u8>)],
+) -> (BTreeSet<String>, bool) {
+    let mut robots = BTreeSet::new();
+    let mut leader = false;
+    for (key, payload) in answers {
+        let Some(holder) = keys.latch_holder(key) else {
+            continue;
+        };
+        if !Latched::decode(payload).is_some_and(|l| l.acknowledges(c)) {
+            continue;
+        }
+        if holder == Member::Leader.liveliness() {
+            leader = true;
+        } else if holder.starts_with(&format!("{}/", Role::Robot)) {
+            robots.insert(holder.to_owned());
+        }
+    }
+    (robots, leader)
+}
+
+/// The highest command number in `answers` (0: none).
+pub fn highest_seq(answers: &[(String, Vec<u8>)]) -> u64 {
+    answers
+        .iter()
+        .filter_map(|(_, p)| Latched::decode(p))
+        .map(|l| l.seq())
+        .max()
+        .unwrap_or(0)
+}
+
+/// The robots alive in the fleet of `keys` (their liveliness names).
+fn alive_robots(session: &zenoh::Session, keys: &Keys) -> Result<Vec<String>, FleetError> {
+    let prefix = keys.alive("");
+    let replies = session
+        .liveliness()
+        .get(keys.alive(&format!("{}/*", Role::Robot)))
+        .timeout(ASK)
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
+    let mut alive = BTreeSet::new();
+    while let Ok(reply) = replies.recv() {
+        if let Ok(s) = reply.result()
+            && let Some(name) = s.key_expr().as_str().strip_prefix(&prefix)
+        {
+            alive.insert(name.to_owned());
+        }
+    }
+    Ok(alive.into_iter().collect())
+}
+
+/// Puts the command and waits for the acknowledgements (or `stop`).
+pub fn run(opts: &OperatorOptions, stop: &StopFlag) -> Result<OperatorReport, FleetError> {
+    let keys = Keys::new(&opts.fleet);
+    let session = net::open(&opts.net)?;
+    let alive = alive_robots(&session, &keys)?;
+    let before = runtime::query_all(&session, &keys.latches(), ASK)?;
+    let identity = opts
+        .net
+        .secure
+        .as_ref()
+        .map_or_else(|| Member::Operator.identity(), |s| s.identity.clone());
+    let command = FleetCommand::new(
+        opts.order,
+        highest_seq(&before) + 1,
+        &identity,
+        &opts.reason,
+    );
+    net::put_stamped(&session, &keys.command(), command.encode());
+    let published_unix_ns = crate::unix_nanos();
+    let put = Instant::now();
+    let mut acknowledged: Vec<Ack> = Vec::new();
+    let mut leader = false;
+    let mut seen: BTreeMap<String, f64> = BTreeMap::new();
+    loop {
+        let answers = runtime::query_all(&session, &keys.latches(), ASK)?;
+        let after = put.elapsed().as_secs_f64();
+        let (robots, by_leader) = tally(&keys, &command, &answers);
+        leader |= by_leader;
+        for r in robots {
+            seen.entry(r.clone()).or_insert_with(|| {
+                acknowledged.push(Ack {
+                    robot: r.clone(),
+                    after,
+                });
+                after
+            });
+        }
+        let done = alive.iter().all(|r| seen.contains_key(r));
+        if (done && (leader || put.elapsed() > LEADER_GRACE)) || stop.is_raised() {
+            break;
+        }
+        if put.elapsed() > opts.timeout {
+            break;
+        }
+        std::thread::sleep(POLL);
+    }
+    let missing = alive
+        .iter()
+        .filter(|r| !seen.contains_key(*r))
+        .cloned()
+        .collect();
+    let _ = session.close().wait();
+    Ok(OperatorReport {
+        role: Role::Operator,
+        command,
+        published_unix_ns,
+        alive,
+        acknowledged,
+        missing,
+        leader,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::command::Latch;
+
+    #[test]
+    fn acknowledgements_are_the_latches_that_obey() {
+        let keys = Keys::new("lab");
+        let stop = FleetCommand::new(Order::Stop, 3, "operator", "");
+        let mut obeying = Latch::new();
+        obeying.on_command(stop.clone());
+        let mut older = Latch::new();
+        older.on_command(FleetCommand::new(Order::Stop, 2, "operator", ""));
+        let answers = vec![
+            (keys.latch("robot/1"), obeying.latched().encode()),
+            (keys.latch("robot/2"), older.latched().encode()),
+            (keys.latch("robot/3"), Latch::new().latched().encode()),
+            (keys.latch("robot/4"), b"garbage".to_vec()),
+            (keys.latch("leader"), obeying.latched().encode()),
+            (
+                Keys::new("other").latch("robot/5"),
+                obeying.latched().encode(),
+            ),
+        ];
+        let (robots, leader) = tally(&keys, &stop, &answers);
+        assert_eq!(robots.into_iter().collect::<Vec<_>>(), vec!["robot/1"]);
+        assert!(leader);
+        assert_eq!(highest_seq(&answers), 3);
+        assert_eq!(highest_seq(&[]), 0);
+        let resume = FleetCommand::new(Order::Resume, 4, "operator", "");
+        assert!(tally(&keys, &resume, &answers).0.is_empty());
+    }
+}

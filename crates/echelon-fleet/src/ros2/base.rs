@@ -89,6 +89,33 @@ pub struct OdomOut {
     pub attachment: [u8; 33],
 }
 
+impl OdomOut {
+    /// `s` as `nav_msgs/Odometry` in `frames` (the pose's, the twist's),
+    /// stamped `stamp_ns`, with the attachment of message `(sequence
+    /// number, publisher gid)`.
+    fn of(s: &State, frames: (&str, &str), stamp_ns: i64, (seq, gid): (i64, Gid)) -> OdomOut {
+        let odom = Odometry::planar(
+            s.x,
+            s.y,
+            s.theta,
+            s.v,
+            s.omega,
+            Time::from_nanos(stamp_ns),
+            frames.0,
+            frames.1,
+        );
+        OdomOut {
+            payload: odom.to_cdr(),
+            attachment: Attachment {
+                sequence_number: seq,
+                source_timestamp_ns: stamp_ns,
+                gid,
+            }
+            .encode(),
+        }
+    }
+}
+
 /// A simulated ROS 2 base on the local clock.
 #[derive(Debug, Clone)]
 pub struct SimBase {
@@ -347,27 +374,14 @@ impl SimBase {
     /// the publisher `gid`: what a simulator's ground-truth plugin
     /// publishes (Gazebo's p3d), for logs and tests.
     pub fn ground_truth(&mut self, stamp_ns: i64, gid: Gid) -> OdomOut {
-        let s = self.base.true_state();
-        let odom = Odometry::planar(
-            s.x,
-            s.y,
-            s.theta,
-            s.v,
-            s.omega,
-            Time::from_nanos(stamp_ns),
-            WORLD_FRAME,
-            &self.link.base_frame,
-        );
         self.truth_seq += 1;
-        OdomOut {
-            payload: odom.to_cdr(),
-            attachment: Attachment {
-                sequence_number: self.truth_seq,
-                source_timestamp_ns: stamp_ns,
-                gid,
-            }
-            .encode(),
-        }
+        let frames = (WORLD_FRAME, self.link.base_frame.as_str());
+        OdomOut::of(
+            &self.base.true_state(),
+            frames,
+            stamp_ns,
+            (self.truth_seq, gid),
+        )
     }
 
     /// Local time of the next odometry or motion-capture event.
@@ -463,27 +477,10 @@ impl SimBase {
         let period = 1.0 / self.link.odom_rate;
         self.next_odom = (self.next_odom + period).max(now);
         let s = self.odometry().seen_from(&self.link.odom_origin);
-        let odom = Odometry::planar(
-            s.x,
-            s.y,
-            s.theta,
-            s.v,
-            s.omega,
-            Time::from_nanos(stamp_ns),
-            &self.link.odom_frame,
-            &self.link.base_frame,
-        );
         self.seq += 1;
         self.counters.odom_published += 1;
-        Some(OdomOut {
-            payload: odom.to_cdr(),
-            attachment: Attachment {
-                sequence_number: self.seq,
-                source_timestamp_ns: stamp_ns,
-                gid: self.gid,
-            }
-            .encode(),
-        })
+        let frames = (self.link.odom_frame.as_str(), self.link.base_frame.as_str());
+        Some(OdomOut::of(&s, frames, stamp_ns, (self.seq, self.gid)))
     }
 }
 

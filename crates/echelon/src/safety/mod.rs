@@ -129,5 +129,5 @@ pub use filter::{Filtered, Outcome, SafetyFilter};
 pub use neighbour::{
     Neighbour, Obstacle, UNCERTAINTY_SIGMAS, point, start_conflict, uncertainty_margin,
 };
-pub use qp::{Constraint, TOLERANCE};
+pub use qp::{Constraint, MAX_ROWS, TOLERANCE};
 pub use torque::{Envelope, INNER_RATE};

@@ -4,7 +4,7 @@
 
 use super::filter::{Filtered, Outcome, Own, SafetyFilter};
 use super::neighbour::{Neighbour, Obstacle};
-use super::qp::{Constraint, solve, solve_relaxed};
+use super::qp::{Constraint, solve_relaxed, solve_split};
 use crate::model::{Input, RobotParams, State};
 
 /// `p`, 1/s: the inner pole of the torque barrier, `ψ̇₁ + p ψ₁ ≥ 0` with
@@ -164,9 +164,8 @@ impl SafetyFilter {
             Outcome::Braked => match robot.torque_limit().and_then(|_| {
                 // The barriers within the wheel limits, the envelope given up
                 // first; else the least violation of both.
-                let mut keep: Vec<Constraint> = self.rows[..barriers].to_vec();
-                keep.extend_from_slice(&self.rows[soft_end..]);
-                solve(&keep, x0).or_else(|| solve_relaxed(&self.rows, soft_end, x0))
+                solve_split(&self.rows[..barriers], &self.rows[soft_end..], x0)
+                    .or_else(|| solve_relaxed(&self.rows, soft_end, x0))
             }) {
                 Some(x) => Input {
                     u1: m * x[0],

@@ -229,6 +229,28 @@ mod tests {
     use crate::runtime::bus::Bus;
     use crate::wire::{LinkStatus, RobotState};
 
+    /// Robot `k` of the fast circle's chain, in the fleet of `keys`.
+    fn chain_robot(k: u32, keys: &Keys) -> RobotTask {
+        let (s, fleet, _) = crate::testing::fast_circle();
+        let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
+            .unwrap_or_else(|e| panic!("{e}"));
+        RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
+    }
+
+    /// The fast circle's leader (publishing for `duration`) and its chain
+    /// of two robots on a bus, fleet `lab`: the bus, the keys and the
+    /// tasks' ids (leader, robot 1, robot 2).
+    fn chain_on_bus(duration: f64) -> (Bus, Keys, [usize; 3]) {
+        let (_, _, reference) = crate::testing::fast_circle();
+        let keys = Keys::new("lab");
+        let mut bus = Bus::new();
+        let leader = Reference::new(reference, 50.0, duration, 1);
+        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        let r1 = bus.add(chain_robot(1, &keys), 0.0);
+        let r2 = bus.add(chain_robot(2, &keys), 0.0);
+        (bus, keys, [l, r1, r2])
+    }
+
     fn states(bus: &Bus, id: usize, key: &str) -> Vec<RobotState> {
         bus.published_by(id, key)
             .filter_map(|p| match wire::decode(&p.payload) {
@@ -244,18 +266,7 @@ mod tests {
     /// 2 (its own link fresh) never loses its link.
     #[test]
     fn the_leader_and_a_chain_run_on_the_bus() {
-        let (s, fleet, reference) = crate::testing::fast_circle();
-        let keys = Keys::new("lab");
-        let mut bus = Bus::new();
-        let leader = Reference::new(reference, 50.0, 30.0, 1);
-        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
-        let robot = |k| {
-            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
-                .unwrap_or_else(|e| panic!("{e}"));
-            RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
-        };
-        let r1 = bus.add(robot(1), 0.0);
-        let r2 = bus.add(robot(2), 0.0);
+        let (mut bus, keys, [l, r1, r2]) = chain_on_bus(30.0);
         let reference_key = keys.reference();
         bus.link = Box::new(move |from, key, t| {
             (from != l || key != reference_key || !(12.0..15.0).contains(&t)).then_some(0.0)
@@ -303,18 +314,7 @@ mod tests {
     #[test]
     fn a_fleet_stop_on_the_bus_holds_every_robot_until_the_resume() {
         use crate::command::{FleetCommand, Latched, Order};
-        let (s, fleet, reference) = crate::testing::fast_circle();
-        let keys = Keys::new("lab");
-        let mut bus = Bus::new();
-        let leader = Reference::new(reference, 50.0, 60.0, 1);
-        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
-        let robot = |k| {
-            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
-                .unwrap_or_else(|e| panic!("{e}"));
-            RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
-        };
-        let r1 = bus.add(robot(1), 0.0);
-        let r2 = bus.add(robot(2), 0.0);
+        let (mut bus, keys, [l, r1, r2]) = chain_on_bus(60.0);
         let period = 0.01;
         bus.run_until(20.0);
         bus.put(&keys.command(), b"{not a command");
@@ -324,7 +324,7 @@ mod tests {
         );
         bus.run_until(25.0);
         // Robot 2 restarts during the stop.
-        bus.replace(r2, robot(2), 25.0);
+        bus.replace(r2, chain_robot(2, &Keys::new("lab")), 25.0);
         bus.run_until(30.0);
         let resume_at = bus.now();
         bus.put(
@@ -389,18 +389,7 @@ mod tests {
     /// puts none.
     #[test]
     fn an_interrupted_leader_stops_the_fleet() {
-        let (s, fleet, reference) = crate::testing::fast_circle();
-        let keys = Keys::new("lab");
-        let mut bus = Bus::new();
-        let leader = Reference::new(reference.clone(), 50.0, 60.0, 1);
-        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
-        let robot = |k| {
-            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
-                .unwrap_or_else(|e| panic!("{e}"));
-            RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
-        };
-        let r1 = bus.add(robot(1), 0.0);
-        let r2 = bus.add(robot(2), 0.0);
+        let (mut bus, keys, [l, r1, r2]) = chain_on_bus(60.0);
         bus.run_until(10.0);
         bus.stop(l).unwrap_or_else(|e| panic!("{e}"));
         let command_key = keys.command();
@@ -432,6 +421,7 @@ mod tests {
 
         // A leader at its end stops nothing.
         let mut bus = Bus::new();
+        let (_, _, reference) = crate::testing::fast_circle();
         let leader = Reference::new(reference, 50.0, 1.0, 1);
         let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
         bus.run_until(2.0);

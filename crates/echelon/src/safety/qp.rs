@@ -727,8 +727,11 @@ mod tests {
             match (new, old) {
                 (Some(x), Some(y)) => {
                     let (fx, fy) = (objective(x, want), objective(y, want));
+                    // Clarabel's lower objective counts only if it met every
+                    // row to rounding (it meets them within its tolerance).
+                    let clarabel_broke = fy < fx && !feasible(&Split(&rows, &[]), y, Allowed::Rounding);
                     prop_assert!(
-                        (fx - fy).abs() <= 1e-6 * fx.max(fy).max(1.0),
+                        (fx - fy).abs() <= 1e-6 * fx.max(fy).max(1.0) || clarabel_broke,
                         "exact {x:?} ({fx}) vs clarabel {y:?} ({fy})"
                     );
                     for c in &rows {
@@ -760,12 +763,26 @@ mod tests {
                 (Some(x), Some(y)) => {
                     let fx = relaxed_objective(&rows, soft_end, x, want);
                     let fy = relaxed_objective(&rows, soft_end, y, want);
-                    // Never worse than clarabel (1e-6); clarabel's answer, whose
-                    // objective carries W s² (up to ~1e9 here), within its own
-                    // accuracy of the exact one (1e-5).
+                    // The exact answer meets the hard rows (its objective,
+                    // with the least slack for the soft rows, is then
+                    // attained) and is never worse than clarabel's (1e-6).
+                    // Clarabel may be worse: its problem carries W s² (up to
+                    // ~1e11 here) and with nearly parallel rows its interior
+                    // point stops short (seen: 0.8 % above the exact answer).
                     let scale = fx.max(fy).max(1.0);
                     prop_assert!(
-                        fx - fy <= 1e-6 * scale && fy - fx <= 1e-5 * scale,
+                        feasible(&Split(&rows[soft_end..], &[]), x, Allowed::Bound(TOLERANCE)),
+                        "exact {x:?} breaks a hard row"
+                    );
+                    // Clarabel meets rows only within its tolerance: on a row
+                    // with a tiny coefficient (a [1, 5e-4] row pins x₂ at
+                    // ~500) that buys it objective (seen: 1.6e-6 relative).
+                    // Its lower objective counts only if it met the hard rows
+                    // to rounding.
+                    let clarabel_broke =
+                        !feasible(&Split(&rows[soft_end..], &[]), y, Allowed::Rounding);
+                    prop_assert!(
+                        fx - fy <= 1e-6 * scale || clarabel_broke,
                         "exact {x:?} ({fx}) vs clarabel {y:?} ({fy})"
                     );
                 }

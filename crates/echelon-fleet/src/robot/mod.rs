@@ -26,12 +26,10 @@
 
 use std::collections::VecDeque;
 
-use echelon::agent::{Command, Guard};
 use echelon::control::LeaderMotion;
 use echelon::follow::{LeaderView, follow};
 use echelon::formation::Leader;
-use echelon::model::State;
-use echelon::safety::{Outcome, SafetyFilter, point};
+use echelon::safety::SafetyFilter;
 
 use crate::command::{Change, CommandCounts, Latch, Latched};
 use crate::faults::{FaultInjector, Verdict};
@@ -44,17 +42,16 @@ use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
 
 mod config;
 mod driver;
+mod head;
 mod report;
+mod safety;
 mod task;
 
 pub use config::{RobotConfig, RobotSafety, agent_spec, safety_of};
 pub use driver::{RobotOptions, run};
+pub use head::{HEAD_FILTER, HeadFilter};
 pub use report::{RobotReport, RobotStats, SafetyCounts};
 pub use task::{PlantFeed, RobotTask};
-
-/// Time constant of the derivative filter that gives a driven head's `v̇`,
-/// `ω̇` from its odometry's speeds, fleet s ([`HeadFilter`]).
-pub const HEAD_FILTER: f64 = 0.1;
 
 /// Longest plant integration sub-step, fleet s (the simulator's default `dt`).
 pub const PLANT_STEP: f64 = 1e-3;
@@ -151,42 +148,6 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     head: HeadFilter,
     /// The fleet command it is under.
     latch: Latch,
-}
-
-/// `v̇`, `ω̇` of a driven head from its measured speeds: the "dirty
-/// derivative" `s / (τ s + 1)` with `τ =` [`HEAD_FILTER`], discretised by
-/// backward Euler (stable at any step): `x ← x + h/(τ + h) (u − x)`,
-/// `u̇ ≈ (u − x)/τ`. A ramp's slope is reached within `e^{−t/τ}`; noise
-/// above `1/(2π τ)` ≈ 1.6 Hz is attenuated.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct HeadFilter {
-    /// Time of the last update and the filtered `(v, ω)` then.
-    last: Option<(f64, [f64; 2])>,
-}
-
-impl HeadFilter {
-    /// The filter fed speeds `(v, ω)` measured at time `t`: `(v̇, ω̇)`.
-    pub fn update(&mut self, t: f64, v: f64, omega: f64) -> (f64, f64) {
-        let u = [v, omega];
-        let x = match self.last {
-            Some((t0, x)) if t > t0 => {
-                let a = (t - t0) / (HEAD_FILTER + t - t0);
-                [x[0] + a * (u[0] - x[0]), x[1] + a * (u[1] - x[1])]
-            }
-            Some((_, x)) => x,
-            None => u,
-        };
-        self.last = Some((t, x));
-        ((u[0] - x[0]) / HEAD_FILTER, (u[1] - x[1]) / HEAD_FILTER)
-    }
-}
-
-/// A robot's safety filter and what it knows of its neighbours.
-#[derive(Debug, Clone)]
-struct Safety {
-    filter: SafetyFilter,
-    table: NeighbourTable,
-    counts: SafetyCounts,
 }
 
 impl Robot<SimulatedDrive> {
@@ -641,42 +602,6 @@ impl<P: Plant> Robot<P> {
         }
     }
 
-    /// A driven head's tick: its robot's state from the plant (its
-    /// odometry, world-mapped and fixed), `v̇`, `ω̇` from [`HeadFilter`],
-    /// published as a state its followers follow; nothing commanded.
-    /// Stale odometry publishes nothing: the followers' streams go stale
-    /// and their link-loss policy applies.
-    fn tick_driven(&mut self, now: f64) -> RobotTick {
-        let now = self.fleet_time(now);
-        self.plant.advance(now);
-        let publish = self.plant.state().map(|state| {
-            let (dv, domega) = self.head.update(now, state.v, state.omega);
-            self.last = RobotState {
-                t: now,
-                agent: self.config.agent,
-                link: LinkStatus::Tracking,
-                state,
-                dv,
-                domega,
-                sigma: self.plant.position_sigma(),
-                ..RobotState::default()
-            };
-            self.ticks += 1;
-            self.header_for(self.last)
-        });
-        let stats = (now >= self.next_stats).then(|| {
-            self.next_stats = now + 1.0;
-            self.stats_at(now, LinkStatus::Tracking)
-        });
-        let done = self.config.duration.is_some_and(|d| now >= d);
-        self.next_tick = (self.next_tick + self.config.period).max(now);
-        RobotTick {
-            publish,
-            stats,
-            done,
-        }
-    }
-
     /// The process is stopping: commands zero and returns the final counters.
     pub fn finish(&mut self) -> RobotStats {
         self.halt(Halt::Shutdown);
@@ -742,52 +667,7 @@ impl<P: Plant> Robot<P> {
     }
 }
 
-impl Safety {
-    /// The act step ([`AgentSpec::act`]) through this robot's filter at
-    /// local time `local` (fleet time `t`) for a robot in state `me`, its
-    /// position estimate `sigma` uncertain: the command for its plant,
-    /// counted (`docs/safety.md`, "In the fleet").
-    fn act(
-        &mut self,
-        config: &RobotConfig,
-        local: f64,
-        t: f64,
-        me: &State,
-        sigma: f64,
-        nominal: Command,
-    ) -> Command {
-        let Some(settings) = config.safety.as_ref() else {
-            return config.spec.act(t, me, nominal, None).command;
-        };
-        let l = config.spec.placement.l();
-        let sight = self
-            .table
-            .build(local, t, point(me, l), settings.config.range, sigma);
-        let guard = Guard {
-            filter: &mut self.filter,
-            sight,
-            obstacles: &settings.obstacles,
-        };
-        let act = config.spec.act(t, me, nominal, Some(guard));
-        let c = &mut self.counts;
-        c.steps += 1;
-        if let Some(g) = act.safety {
-            if g.outcome != Outcome::Nominal {
-                c.active += 1;
-            }
-            if g.stale {
-                c.stale_brakes += 1;
-            } else if g.outcome == Outcome::Braked {
-                c.infeasible += 1;
-            }
-            if g.min_distance.is_finite() {
-                let d = g.min_distance;
-                c.min_distance = Some(c.min_distance.map_or(d, |m| m.min(d)));
-            }
-        }
-        act.command
-    }
-}
+use safety::Safety;
 
 #[cfg(test)]
 mod tests;

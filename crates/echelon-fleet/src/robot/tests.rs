@@ -5,6 +5,7 @@ use crate::faults::FaultSpec;
 use crate::leader::Leader as LeaderTask;
 use crate::link::predict;
 use crate::plant::SimulatedPlant;
+use echelon::agent::Command;
 use echelon::follow::LeaderView;
 use echelon::model::Input;
 use echelon::model::State;

@@ -1,0 +1,65 @@
+//! A fleet robot's safety filter step (`docs/safety.md`, "In the fleet"):
+//! its filter, its neighbour table and its counts.
+
+use echelon::agent::{Command, Guard};
+use echelon::model::State;
+use echelon::safety::{Outcome, SafetyFilter, point};
+
+use crate::neighbours::NeighbourTable;
+
+use super::{RobotConfig, SafetyCounts};
+
+/// A robot's safety filter and what it knows of its neighbours.
+#[derive(Debug, Clone)]
+pub(super) struct Safety {
+    pub(super) filter: SafetyFilter,
+    pub(super) table: NeighbourTable,
+    pub(super) counts: SafetyCounts,
+}
+
+impl Safety {
+    /// The act step ([`AgentSpec::act`]) through this robot's filter at
+    /// local time `local` (fleet time `t`) for a robot in state `me`, its
+    /// position estimate `sigma` uncertain: the command for its plant,
+    /// counted (`docs/safety.md`, "In the fleet").
+    pub(super) fn act(
+        &mut self,
+        config: &RobotConfig,
+        local: f64,
+        t: f64,
+        me: &State,
+        sigma: f64,
+        nominal: Command,
+    ) -> Command {
+        let Some(settings) = config.safety.as_ref() else {
+            return config.spec.act(t, me, nominal, None).command;
+        };
+        let l = config.spec.placement.l();
+        let sight = self
+            .table
+            .build(local, t, point(me, l), settings.config.range, sigma);
+        let guard = Guard {
+            filter: &mut self.filter,
+            sight,
+            obstacles: &settings.obstacles,
+        };
+        let act = config.spec.act(t, me, nominal, Some(guard));
+        let c = &mut self.counts;
+        c.steps += 1;
+        if let Some(g) = act.safety {
+            if g.outcome != Outcome::Nominal {
+                c.active += 1;
+            }
+            if g.stale {
+                c.stale_brakes += 1;
+            } else if g.outcome == Outcome::Braked {
+                c.infeasible += 1;
+            }
+            if g.min_distance.is_finite() {
+                let d = g.min_distance;
+                c.min_distance = Some(c.min_distance.map_or(d, |m| m.min(d)));
+            }
+        }
+        act.command
+    }
+}

@@ -22,7 +22,7 @@ use echelon::base::VelocityCommand;
 use std::collections::VecDeque;
 
 use echelon::model::{Pose, State};
-use echelon::odometry::{FixSchedule, FixSpec, Odometer, OdometrySpec};
+use echelon::odometry::{FixSpec, Odometer, OdometrySpec};
 use echelon::rng::SplitMix64;
 use echelon::scenario::schema::FixMessage;
 use echelon::scenario::{FixSource, Ros2Link, Scenario};
@@ -629,12 +629,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         odometry.as_ref().and_then(|o| o.spec().fixes()),
     ) {
         (Some(source), Some(spec)) => {
-            let period = match spec.schedule {
-                FixSchedule::Period(p) => p,
-                FixSchedule::EverySamples(n) => {
-                    n as f64 * odometry.as_ref().map_or(0.0, |o| o.spec().period())
-                }
-            };
+            let period = spec.interval(odometry.as_ref().map_or(0.0, |o| o.spec().period()));
             Some((source.clone(), spec, period))
         }
         _ => None,

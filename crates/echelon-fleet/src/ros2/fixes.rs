@@ -45,7 +45,7 @@ use echelon::agent::AgentSpec;
 use echelon::model::{Pose, wrap_angle};
 use echelon::odometry::bound::KinematicTheorem2;
 use echelon::odometry::fuse::{FixFusion, FixNoise, carry};
-use echelon::odometry::{ErrorModel, FixSchedule, FixSpec, arc_motion};
+use echelon::odometry::{ErrorModel, FixSpec, arc_motion};
 use echelon::plan::Plan;
 use echelon::scenario::schema::FixMessage;
 use echelon::scenario::{FixSource, Ros2Link};
@@ -255,10 +255,7 @@ impl FixInput {
         odom_origin: Pose,
         ke: f64,
     ) -> Result<FixInput, String> {
-        let period = match spec.schedule {
-            FixSchedule::Period(p) => p,
-            FixSchedule::EverySamples(n) => n as f64 * model.sample_period,
-        };
+        let period = spec.interval(model.sample_period);
         let required = match source.tolerance {
             Some(tolerance) => {
                 let step = model.top_speed * model.sample_period;
@@ -402,15 +399,14 @@ impl FixInput {
         // The heading continuous with the estimate's (which is unwrapped).
         fix.theta = then.theta + wrap_angle(fix.theta - then.theta);
         let carried = carry(&fix, &then, &estimate);
-        if self.last_fix.is_none() {
+        let fused = if self.last_fix.is_none() {
             // Until its first fix the world pose is only `odom_origin`'s
             // say-so: the first fix is taken as it is.
-            let new = self.fusion.reset(&estimate, &then, &fix, noise);
-            self.applied(t, &estimate, &carried);
-            self.correction = new.compose(&raw_now.between(&Pose::default()));
-            return Ok(());
-        }
-        let new = match self.fusion.apply(&estimate, &then, &fix, noise) {
+            Ok(self.fusion.reset(&estimate, &then, &fix, noise))
+        } else {
+            self.fusion.apply(&estimate, &then, &fix, noise)
+        };
+        let new = match fused {
             Ok(new) => {
                 self.refused_in_a_row = 0;
                 new

@@ -302,6 +302,15 @@ impl FixSpec {
         Ok(())
     }
 
+    /// Seconds between fixes, for odometry sampled every `sample_period`
+    /// seconds (`every_steps` samples of it, or the `period` itself).
+    pub fn interval(&self, sample_period: f64) -> f64 {
+        match self.schedule {
+            FixSchedule::Period(p) => p,
+            FixSchedule::EverySamples(n) => n as f64 * sample_period,
+        }
+    }
+
     /// Odometry samples between fixes, for sampling every `period` seconds.
     pub fn samples_between(&self, period: f64) -> Result<u64, ParamError> {
         match self.schedule {

@@ -409,3 +409,45 @@ fn the_crossing_on_drifting_odometry_with_fixes_keeps_the_radius_in_ten_runs() {
     }
     eprintln!("closest true distance per run: {closest_all:?}");
 }
+
+/// A bad value in the fields this work added (`fixes.source`, `fixes.frame`,
+/// `fixes.tolerance`, `ros2.driven`) is refused by the fleet with exit 2 and
+/// one line naming file, line, column and field.
+#[test]
+fn bad_fix_and_head_settings_are_refused_with_their_place() {
+    let dir = tempfile::tempdir().unwrap();
+    for (own, field) in [
+        (
+            "fixes = { period = 0.1, source = \"bad topic\" }\n",
+            "agents[1].fixes.source",
+        ),
+        (
+            "fixes = { period = 0.1, source = \"pose\", frame = \"a b\" }\n",
+            "agents[1].fixes.frame",
+        ),
+        (
+            "fixes = { period = 0.1, source = \"pose\", tolerance = -0.1 }\n",
+            "agents[1].fixes.tolerance",
+        ),
+        ("ros2 = { driven = \"yes\" }\n", "agents[1].ros2.driven"),
+    ] {
+        let path = scenario(dir.path(), "bad", "", [own, ""]);
+        let src = std::fs::read_to_string(&path).unwrap();
+        let line = src.lines().position(|l| l == own.trim_end()).unwrap() + 1;
+        let out = Command::new(EXE)
+            .args(["fleet", "robot", &path, "--agent", "1", "--ros2"])
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{own}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        let place = format!("{path}:{line}:");
+        let rest = err
+            .split_once(&place)
+            .map(|(_, r)| r)
+            .unwrap_or_else(|| panic!("{err}"));
+        let (column, after) = rest.split_once(':').unwrap();
+        assert!(column.parse::<u32>().unwrap() > 0, "{err}");
+        assert!(after.trim_start().starts_with(field), "{field}: {err}");
+    }
+}

@@ -17,6 +17,7 @@ use crate::plan::{Plan, SimConfig};
 use crate::reference::{Order, Reference};
 use crate::safety::{Neighbour, Obstacle, SafetyFilter};
 
+mod driven;
 mod observe;
 mod outputs;
 mod system;

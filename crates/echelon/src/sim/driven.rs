@@ -1,0 +1,104 @@
+//! Stepping under commands from outside the simulator (a Python controller,
+//! Robotarium-style): the caller's command for each agent goes through the
+//! agent's act step (its acceleration limit) and is held over the RK4 step,
+//! exactly as a sampled controller's command is; the drive's limits,
+//! the plant and odometry then apply as in [`Simulation::step`].
+//!
+//! [`Simulation::sensed`] and [`Simulation::leader_view`] give the caller
+//! what the simulator's own law is given (the pose its odometry estimates,
+//! the leader motion and offsets of eqs. 4–6), so that a controller written
+//! outside with [`crate::control::law`] reproduces a sampled run's bits.
+
+use super::Simulation;
+use crate::agent::{Command, Drive};
+use crate::control::{LeaderMotion, Offset};
+use crate::error::{ParamError, SimError};
+use crate::follow::LeaderView;
+use crate::formation::Leader;
+use crate::model::State;
+use crate::reference::{Jet, Trajectory};
+
+impl Simulation {
+    /// What agent `i`'s controller senses of itself: its odometry estimate
+    /// when it dead-reckons (eqs. 32–35), else its true state.
+    pub fn sensed(&self, i: usize) -> State {
+        match self.odometers.get(i) {
+            Some(Some(o)) => o.measure(&self.state[i]),
+            _ => self.state[i],
+        }
+    }
+
+    /// The leader motion `p_d, ṗ_d, p̈_d` and the offsets `L_X, L_Y, L̇_Y,
+    /// L̈_Y` (eqs. 4–6) agent `i`'s law is given now, as in `echelon run`.
+    /// A robot leader `j` is seen through its sensed state, at the speeds
+    /// its base moves at, accelerating under `commands[j]` (the caller
+    /// computes leaders first: [`crate::formation::Formation::order`]).
+    /// `commands` holds one command per agent; only the leader's is read.
+    pub fn leader_view(&self, i: usize, commands: &[Command]) -> (LeaderMotion, Offset) {
+        let agents = self.sys.plan.agents();
+        let a = &agents[i];
+        match a.leader {
+            Leader::Reference => {
+                let jet = if self.sys.uses_reference {
+                    self.sys.plan.reference().eval(self.time(), self.sys.order)
+                } else {
+                    Jet::default()
+                };
+                LeaderView::Reference(&jet).resolve(&a.placement)
+            }
+            Leader::Agent(j) => {
+                let leader = &agents[j];
+                let sensed = self.sensed(j);
+                let command = leader.act(self.time(), &sensed, commands[j], None).command;
+                let applied = leader.drive.actuate(command);
+                let dv = leader.drive.derivative(&self.state[j], &applied).v;
+                let state = match leader.drive {
+                    Drive::Torque { .. } => sensed,
+                    Drive::Velocity(_) => {
+                        let [v, omega, ..] = leader.drive.speeds(&self.state[j], &applied);
+                        State { v, omega, ..sensed }
+                    }
+                };
+                LeaderView::Robot { state, dv }.resolve(&a.placement)
+            }
+        }
+    }
+
+    /// Advances one RK4 step under `commands`, one per agent in its drive's
+    /// terms (`u1, u2` for a torque-driven robot, `v*, ω*` for a velocity
+    /// base; the other kind applies as zero), held over the step. From the
+    /// first call on the simulation's own controller no longer samples: the
+    /// frames show the caller's commands, and a scenario's safety filter is
+    /// not applied (filter the commands before passing them).
+    pub fn step_with(&mut self, commands: &[Command]) -> Result<(), SimError> {
+        let n = self.state.len();
+        if commands.len() != n {
+            return Err(SimError::Param {
+                context: "step".into(),
+                source: ParamError::new(
+                    "commands",
+                    commands.len() as f64,
+                    format!("needs one command per agent ({n})"),
+                ),
+            });
+        }
+        let t = self.time();
+        for (i, c) in commands.iter().enumerate() {
+            let me = self.sensed(i);
+            self.held[i] = self.sys.plan.agents()[i].act(t, &me, *c, None).command;
+        }
+        // The held commands are the caller's from now on: never a sample.
+        self.hold_every = u64::MAX;
+        self.sys.evaluate(
+            t,
+            &self.state,
+            Some(&self.held),
+            &self.odometers,
+            Some(&mut self.out),
+            &mut self.k1,
+            &mut self.speeds[0],
+        );
+        self.fresh = true;
+        self.step()
+    }
+}

@@ -1,0 +1,66 @@
+"""Theorem 2 and identification."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from . import _echelon
+
+
+def bound(
+    ke: float,
+    zeta: float,
+    *,
+    kz: float | None = None,
+    omega_max: float | None = None,
+    gamma: float = 0.99,
+    steps: int | None = None,
+    max_z: float | None = None,
+    max_e: float | None = None,
+    ts: float | None = None,
+    law: str = "paper",
+) -> dict[str, Any]:
+    """Theorem 2 (``echelon bound``), both ways.
+
+    Forward, with ``steps`` (``N``, odometry samples between fixes): the
+    ultimate bound on ‖z‖. Inverse, with ``max_z`` (paper's law) or
+    ``max_e`` (kinematic law): the largest ``N`` that keeps it. The paper's
+    law needs ``kz`` and ``omega_max``: ``z_bound = √2 K_e N ζ √(K_z² +
+    ω_M²) / (K_z γ)``; the kinematic law's form is ``z_bound = √2 K_e N ζ``,
+    ``e_bound = √2 N ζ / γ``. ``ts`` (the sample period, s) adds
+    ``fix_period_s = N T_s``. Returns a dict of ``z_bound``, ``e_bound``,
+    ``steps`` and ``fix_period_s``."""
+    z, n, period, e = _echelon.bound(
+        ke, zeta, kz=kz, omega_max=omega_max, gamma=gamma, steps=steps,
+        max_z=max_z, max_e=max_e, ts=ts, law=law,
+    )
+    return {"z_bound": z, "e_bound": e, "steps": n, "fix_period_s": period}
+
+
+def identify(
+    log: Any, agent: int = 1, model: str | None = None, name: str = "identified"
+) -> dict[str, Any]:
+    """Identifies a robot (``echelon identify``): eq. 3's ``m, η, J, ψ``
+    (``model="torque"``) or a velocity base's lags and limits
+    (``"velocity"``; by default from the log's columns) from ``log``: a run
+    directory or ``trajectory.csv`` path, an :class:`echelon.Run`, or a
+    pandas DataFrame with ``trajectory.csv``'s columns. Returns the result
+    (parameters with 95 % intervals, fit checks) as a dict, with its
+    ``[robots.NAME]`` block under ``"robot_toml"``."""
+    from ._scenario import Run
+
+    if isinstance(log, Run):
+        log = log.dir
+    if isinstance(log, (str, os.PathLike)):
+        text, toml = _echelon.identify_log(path=Path(log), agent=agent, model=model, name=name)
+    elif hasattr(log, "to_csv"):
+        csv = log.to_csv(index=False, float_format="%.17g")
+        text, toml = _echelon.identify_log(csv=csv, agent=agent, model=model, name=name)
+    else:
+        raise TypeError("log: a path, an echelon.Run or a pandas DataFrame")
+    out = json.loads(text)
+    out["robot_toml"] = toml
+    return out

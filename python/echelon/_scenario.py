@@ -1,0 +1,240 @@
+"""Scenarios and runs (``echelon run``, ``echelon plot``) from Python."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import weakref
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from . import _echelon
+
+#: The keyword arguments that override a scenario's settings, as
+#: ``echelon run``'s flags do: ``dt`` (RK4 step, s), ``duration`` (s),
+#: ``log_dt`` (logging period, s; 0 logs every step), ``law`` (``"paper"``
+#: or ``"complete"`` for every agent) and ``seed``.
+OVERRIDES = ("dt", "duration", "log_dt", "law", "seed")
+
+
+def _checked(overrides: dict[str, Any]) -> dict[str, Any]:
+    unknown = sorted(set(overrides) - set(OVERRIDES))
+    if unknown:
+        raise TypeError(
+            f"unknown override(s) {', '.join(unknown)}; the overrides are {', '.join(OVERRIDES)}"
+        )
+    return {k: v for k, v in overrides.items() if v is not None}
+
+
+def builtins() -> list[str]:
+    """The names of the built-in scenarios (``echelon scenarios``)."""
+    return list(_echelon.Scenario.builtins())
+
+
+class Scenario:
+    """A scenario: a parsed TOML document and the overrides to run it with.
+
+    Errors in the document raise :class:`echelon.ScenarioError`, whose
+    ``file``, ``line``, ``column`` and ``field`` say where.
+    """
+
+    def __init__(self, inner: _echelon.Scenario, **overrides: Any) -> None:
+        self._inner = inner
+        self._overrides = _checked(overrides)
+        # Build once: a scenario that cannot run fails here, not later.
+        self._warnings = inner.check(**self._overrides)
+
+    @classmethod
+    def builtin(cls, name: str, **overrides: Any) -> Scenario:
+        """A built-in scenario by name (see :func:`echelon.builtins`)."""
+        return cls(_echelon.Scenario.builtin(name), **overrides)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str], **overrides: Any) -> Scenario:
+        """A scenario file."""
+        return cls(_echelon.Scenario.load(Path(path)), **overrides)
+
+    @classmethod
+    def from_toml(
+        cls,
+        text: str,
+        origin: str = "<toml>",
+        base_dir: str | os.PathLike[str] | None = None,
+        **overrides: Any,
+    ) -> Scenario:
+        """A scenario from TOML text; ``origin`` names it in errors."""
+        base = None if base_dir is None else Path(base_dir)
+        return cls(_echelon.Scenario.from_source(text, origin, base), **overrides)
+
+    @classmethod
+    def from_dict(
+        cls,
+        document: dict[str, Any],
+        origin: str = "<dict>",
+        base_dir: str | os.PathLike[str] | None = None,
+        **overrides: Any,
+    ) -> Scenario:
+        """A scenario from the TOML document as a dict (as ``tomllib.load``
+        gives it). Errors name the field and its place in the document
+        written as TOML (:attr:`source`)."""
+        try:
+            text = json.dumps(document, allow_nan=False)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"not a scenario document: {e}") from None
+        base = None if base_dir is None else Path(base_dir)
+        return cls(_echelon.Scenario.from_json(text, origin, base), **overrides)
+
+    @property
+    def name(self) -> str:
+        return self._inner.name
+
+    @property
+    def source(self) -> str:
+        """The TOML source."""
+        return self._inner.source
+
+    @property
+    def origin(self) -> str:
+        return self._inner.origin
+
+    @property
+    def overrides(self) -> dict[str, Any]:
+        return dict(self._overrides)
+
+    @property
+    def warnings(self) -> list[str]:
+        """Values that are allowed but outside their usual range."""
+        return list(self._warnings)
+
+    def with_overrides(self, **overrides: Any) -> Scenario:
+        """The same scenario with more overrides."""
+        return Scenario(self._inner, **{**self._overrides, **_checked(overrides)})
+
+    def run(self, out: str | os.PathLike[str] | None = None, **overrides: Any) -> Run:
+        """Runs the scenario as ``echelon run`` does, writing its files into
+        ``out`` (a temporary directory, removed with the :class:`Run`, when
+        None). Raises :class:`echelon.SimulationError` when the run diverges."""
+        ov = {**self._overrides, **_checked(overrides)}
+        if out is None:
+            directory = Path(tempfile.mkdtemp(prefix=f"echelon-{self.name}-"))
+            temporary = True
+        else:
+            directory = Path(out)
+            temporary = False
+        try:
+            summary = self._inner.run(directory, **ov)
+        except BaseException:
+            if temporary:
+                shutil.rmtree(directory, ignore_errors=True)
+            raise
+        return Run(directory, json.loads(summary), temporary=temporary)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_restore, (self._inner, self._overrides))
+
+    def __repr__(self) -> str:
+        ov = "".join(f", {k}={v!r}" for k, v in self._overrides.items())
+        return f"Scenario({self.name!r} from {self.origin!r}{ov})"
+
+
+def _restore(inner: _echelon.Scenario, overrides: dict[str, Any]) -> Scenario:
+    return Scenario(inner, **overrides)
+
+
+class Run:
+    """A finished run: the files ``echelon run`` writes, read back.
+
+    ``trajectory`` has ``trajectory.csv``'s columns (one row per agent per
+    logged instant; ``agent`` counts from 1); ``agents`` has the same per
+    agent as numpy arrays; ``summary`` is ``summary.json``; ``odometry`` and
+    ``safety`` are the tables of runs that dead-reckon or filter, else None.
+    """
+
+    def __init__(self, directory: Path, summary: dict[str, Any], temporary: bool = False) -> None:
+        self.dir = Path(directory)
+        self.summary = summary
+        self._tables: dict[str, pd.DataFrame | None] = {}
+        if temporary:
+            weakref.finalize(self, shutil.rmtree, str(self.dir), True)
+
+    def _table(self, name: str) -> pd.DataFrame | None:
+        if name not in self._tables:
+            path = self.dir / f"{name}.csv"
+            self._tables[name] = pd.read_csv(path) if path.exists() else None
+        return self._tables[name]
+
+    @property
+    def trajectory(self) -> pd.DataFrame:
+        table = self._table("trajectory")
+        assert table is not None, "every run writes trajectory.csv"
+        return table
+
+    @property
+    def reference(self) -> pd.DataFrame | None:
+        return self._table("reference")
+
+    @property
+    def integrals(self) -> pd.DataFrame | None:
+        return self._table("integrals")
+
+    @property
+    def odometry(self) -> pd.DataFrame | None:
+        return self._table("odometry")
+
+    @property
+    def safety(self) -> pd.DataFrame | None:
+        return self._table("safety")
+
+    @property
+    def agents(self) -> list[dict[str, np.ndarray]]:
+        """Per agent (in order), each trajectory column as a numpy array."""
+        t = self.trajectory
+        return [
+            {c: group[c].to_numpy() for c in t.columns if c != "agent"}
+            for _, group in t.groupby("agent", sort=True)
+        ]
+
+    @property
+    def final_errors(self) -> list[float]:
+        """Each agent's final ‖e‖, m (``summary.json``'s ``final_error``)."""
+        return [a["final_error"] for a in self.summary["agents"]]
+
+    def plot(self, files: bool = False) -> dict[str, Any]:
+        """The run's figures (``echelon plot``: paths, errors, signals, and
+        safety when filtered), written as SVG and PNG into the run's
+        directory with ``report.html``. Returns them by name as matplotlib
+        figures, or with ``files=True`` as their PNG paths."""
+        figures, _report = _echelon.plot_dir(self.dir)
+        if files:
+            return {name: Path(png) for name, _svg, png in figures}
+        import matplotlib.image as mpimg
+        import matplotlib.pyplot as plt
+
+        out = {}
+        for name, _svg, png in figures:
+            image = mpimg.imread(png)
+            h, w = image.shape[:2]
+            fig = plt.figure(figsize=(w / 100, h / 100), dpi=100)
+            ax = fig.add_axes((0, 0, 1, 1))
+            ax.imshow(image)
+            ax.set_axis_off()
+            plt.close(fig)
+            out[name] = fig
+        return out
+
+    def report(self, path: str | os.PathLike[str]) -> Path:
+        """Writes the self-contained ``report.html`` (figures and replay) to
+        ``path``; returns it."""
+        _figures, report = _echelon.plot_dir(self.dir)
+        target = Path(path)
+        if target.resolve() != Path(report).resolve():
+            shutil.copyfile(report, target)
+        return target
+
+    def __repr__(self) -> str:
+        return f"Run({self.summary['scenario']!r}, dir={str(self.dir)!r})"

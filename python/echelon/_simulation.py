@@ -1,0 +1,102 @@
+"""A scenario stepped under your controller's commands."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from . import _echelon
+from ._scenario import Scenario
+
+
+class Simulation:
+    """A scenario's robots, limits and odometry, stepped under commands from
+    Python (Robotarium's loop): ``step(commands)`` applies one RK4 step with
+    ``commands[i]`` held, ``(u1, u2)`` (eq. 3c–d) for a torque-driven agent
+    or ``(v*, ω*)`` for a velocity base, through the agent's limits exactly
+    as ``echelon run`` applies its law's command. A scenario's own safety
+    filter is not applied: filter the commands (:mod:`echelon.safety`).
+
+    ``agents`` describes each agent (drive, leader, gains, robot, ...);
+    ``leader(i, commands)`` gives what the paper's law needs, so a loop over
+    ``order`` with :mod:`echelon.law` reproduces a sampled ``echelon run``.
+    """
+
+    def __init__(self, scenario: Scenario | str, **overrides: Any) -> None:
+        if isinstance(scenario, str):
+            scenario = Scenario.builtin(scenario)
+        ov = {**scenario.overrides, **overrides}
+        self.scenario = scenario
+        self._sim = _echelon.Simulation(scenario._inner, **ov)
+        self.agents: list[dict[str, Any]] = []
+        for a in self._sim.agents:
+            a = dict(a)
+            robot_json = a.pop("robot_json")
+            a["robot"] = None if robot_json is None else json.loads(robot_json)
+            self.agents.append(a)
+
+    @property
+    def n(self) -> int:
+        """Number of agents."""
+        return self._sim.n
+
+    @property
+    def time(self) -> float:
+        """Current time, s."""
+        return self._sim.time
+
+    @property
+    def dt(self) -> float:
+        """RK4 step, s."""
+        return self._sim.dt
+
+    @property
+    def steps(self) -> int:
+        """Steps of the scenario's duration."""
+        return self._sim.steps
+
+    @property
+    def step_index(self) -> int:
+        return self._sim.step_index
+
+    @property
+    def done(self) -> bool:
+        """Whether the scenario's duration is reached."""
+        return self._sim.done
+
+    @property
+    def order(self) -> list[int]:
+        """Every leader before its followers (0-based indices)."""
+        return self._sim.order
+
+    @property
+    def poses(self) -> np.ndarray:
+        """True states, ``(n, 5)``: x, y, θ, v, ω."""
+        return self._sim.poses
+
+    @property
+    def sensed(self) -> np.ndarray:
+        """What each controller senses of itself, ``(n, 5)`` (its odometry
+        estimate when it dead-reckons)."""
+        return self._sim.sensed
+
+    def leader(self, i: int, commands: np.ndarray | None = None) -> dict[str, Any]:
+        """What agent ``i``'s law is given now: ``p``, ``dp``, ``ddp`` (the
+        leader's motion) and ``lx``, ``ly``, ``dly``, ``ddly`` (eqs. 4–6). A
+        robot leader accelerates under its row of ``commands``."""
+        if commands is None:
+            commands = np.zeros((self.n, 2))
+        return self._sim.leader(i, np.ascontiguousarray(commands, dtype=np.float64))
+
+    def step(self, commands: np.ndarray) -> None:
+        """One RK4 step under ``commands``, ``(n, 2)``."""
+        self._sim.step(np.ascontiguousarray(commands, dtype=np.float64))
+
+    def errors(self) -> tuple[np.ndarray, np.ndarray]:
+        """The true ``e`` (eq. 7) and ``z`` (eq. 10) now, ``(n, 2)`` each."""
+        return self._sim.errors()
+
+    def __repr__(self) -> str:
+        return f"Simulation({self.scenario.name!r}, t={self.time}, n={self.n})"

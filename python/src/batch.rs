@@ -1,0 +1,158 @@
+//! The batch engine from Python: `echelon bench`'s formation (or a
+//! scenario's), stepped in Rust with the GIL released, its states written
+//! into an array the caller owns.
+
+use numpy::PyReadwriteArray2;
+use pyo3::prelude::*;
+
+use echelon::engine::{BenchFormation, Engine, Topology, VelocityEngine};
+
+use crate::errors;
+use crate::scenario::PyScenario;
+
+/// The engine of one drive.
+#[derive(Debug, Clone)]
+enum Kind {
+    Torque(Engine),
+    Velocity(VelocityEngine),
+}
+
+/// N agents stepped by the batch engine (SIMD lanes, all cores).
+#[pyclass(module = "echelon._echelon", name = "BatchEngine")]
+#[derive(Debug)]
+struct PyBatchEngine {
+    engine: Kind,
+}
+
+#[pymethods]
+impl PyBatchEngine {
+    /// `echelon bench`'s formation: `agents` robots at random poses (from
+    /// `seed`), following a circle (`star`) or each the one before
+    /// (`chain`); `torque` (the paper's robots and law) or `velocity`
+    /// (Jackal bases, the kinematic law); RK4 step `dt`.
+    #[staticmethod]
+    #[pyo3(signature = (agents, topology="star", drive="torque", dt=0.001, seed=1))]
+    fn bench(agents: usize, topology: &str, drive: &str, dt: f64, seed: u64) -> PyResult<Self> {
+        if agents == 0 {
+            return Err(errors::value("agents: must be ≥ 1"));
+        }
+        let topology = match topology {
+            "star" => Topology::Star,
+            "chain" => Topology::Chain,
+            other => {
+                return Err(errors::value(format!(
+                    "topology: `{other}` (star or chain)"
+                )));
+            }
+        };
+        let f = BenchFormation {
+            agents,
+            topology,
+            seed,
+        };
+        let engine = match drive {
+            "torque" => Kind::Torque(f.engine(dt).map_err(errors::value)?),
+            "velocity" => {
+                BenchFormation::BASE
+                    .check_step(dt)
+                    .map_err(|e| errors::value(format!("dt: the velocity base's {e}")))?;
+                Kind::Velocity(
+                    f.velocity_engine(BenchFormation::BASE, dt)
+                        .map_err(errors::value)?,
+                )
+            }
+            other => {
+                return Err(errors::value(format!(
+                    "drive: `{other}` (torque or velocity)"
+                )));
+            }
+        };
+        Ok(PyBatchEngine { engine })
+    }
+
+    /// The engine for a scenario's agents (same robot and law, a star or a
+    /// chain, continuous control, no odometry or safety filter).
+    #[staticmethod]
+    fn from_scenario(py: Python<'_>, scenario: &PyScenario) -> PyResult<Self> {
+        let run = scenario.build(py, &echelon::Overrides::default())?;
+        let engine = Engine::from_plan(&run.plan).map_err(errors::value)?;
+        Ok(PyBatchEngine {
+            engine: Kind::Torque(engine),
+        })
+    }
+
+    /// Number of agents.
+    #[getter]
+    fn n(&self) -> usize {
+        match &self.engine {
+            Kind::Torque(e) => e.len(),
+            Kind::Velocity(e) => e.len(),
+        }
+    }
+
+    /// Current time, s.
+    #[getter]
+    fn time(&self) -> f64 {
+        match &self.engine {
+            Kind::Torque(e) => e.time(),
+            Kind::Velocity(e) => e.time(),
+        }
+    }
+
+    /// Steps `steps` RK4 steps with the GIL released; then, if `out` is
+    /// given (`(n, 5)` float64, C-contiguous, owned by the caller), writes
+    /// the states into it: x, y, θ, v, ω.
+    #[pyo3(signature = (steps, out=None))]
+    fn run(
+        &mut self,
+        py: Python<'_>,
+        steps: u64,
+        out: Option<PyReadwriteArray2<'_, f64>>,
+    ) -> PyResult<()> {
+        let engine = &mut self.engine;
+        let result = py.detach(|| match engine {
+            Kind::Torque(e) => e.run(steps),
+            Kind::Velocity(e) => e.run(steps),
+        });
+        result.map_err(|e| errors::sim(&e))?;
+        if let Some(out) = out {
+            self.states_into(py, out)?;
+        }
+        Ok(())
+    }
+
+    /// Writes the states into `out` (`(n, 5)` float64, C-contiguous).
+    fn states(&self, py: Python<'_>, out: PyReadwriteArray2<'_, f64>) -> PyResult<()> {
+        self.states_into(py, out)
+    }
+}
+
+impl PyBatchEngine {
+    fn states_into(&self, py: Python<'_>, mut out: PyReadwriteArray2<'_, f64>) -> PyResult<()> {
+        let n = self.n();
+        if out.as_array().shape() != [n, 5] {
+            return Err(errors::value(format!(
+                "out: shape {:?}, expected ({n}, 5)",
+                out.as_array().shape()
+            )));
+        }
+        let buf = out
+            .as_slice_mut()
+            .map_err(|_| errors::value("out: must be C-contiguous"))?;
+        let engine = &self.engine;
+        py.detach(|| {
+            for (i, row) in buf.chunks_exact_mut(5).enumerate() {
+                let s = match engine {
+                    Kind::Torque(e) => e.state(i),
+                    Kind::Velocity(e) => e.state(i),
+                };
+                row.copy_from_slice(&[s.x, s.y, s.theta, s.v, s.omega]);
+            }
+        });
+        Ok(())
+    }
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyBatchEngine>()
+}

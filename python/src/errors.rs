@@ -1,0 +1,88 @@
+//! Rust errors as Python exceptions: a scenario error keeps its file, line,
+//! column and field as attributes; a refused value is a `ValueError` naming
+//! the field; a run that failed is a `SimulationError`.
+
+use pyo3::create_exception;
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+
+create_exception!(
+    _echelon,
+    ScenarioError,
+    PyValueError,
+    "A scenario that cannot be loaded or built. Attributes: file, line, column \
+     (1-based; 0 when unknown), field (dotted path, e.g. `agents[2].gains.ke`; \
+     empty for the whole file) and message. str() is `file:line:column: field: message`."
+);
+create_exception!(
+    _echelon,
+    SimulationError,
+    PyRuntimeError,
+    "A run that failed: it diverged (a state left its bounds) or an output could not be written."
+);
+
+/// A scenario error as a [`ScenarioError`] carrying its location.
+pub(crate) fn scenario(py: Python<'_>, e: &echelon::ScenarioError) -> PyErr {
+    let err = ScenarioError::new_err(e.to_string());
+    let value = err.value(py);
+    let attrs = [
+        (
+            "file",
+            e.location
+                .file
+                .clone()
+                .into_pyobject(py)
+                .map(|o| o.into_any()),
+        ),
+        (
+            "line",
+            e.location.line.into_pyobject(py).map(|o| o.into_any()),
+        ),
+        (
+            "column",
+            e.location.column.into_pyobject(py).map(|o| o.into_any()),
+        ),
+        (
+            "field",
+            e.field.clone().into_pyobject(py).map(|o| o.into_any()),
+        ),
+        (
+            "message",
+            e.message.clone().into_pyobject(py).map(|o| o.into_any()),
+        ),
+    ];
+    for (name, v) in attrs {
+        match v {
+            Ok(v) => {
+                if let Err(e) = value.setattr(name, v) {
+                    return e;
+                }
+            }
+            Err(e) => return e.into(),
+        }
+    }
+    err
+}
+
+/// A refused parameter (names its field) as a `ValueError`.
+pub(crate) fn param(e: &echelon::ParamError) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// A failed simulation as a [`SimulationError`].
+pub(crate) fn sim(e: &echelon::SimError) -> PyErr {
+    SimulationError::new_err(e.to_string())
+}
+
+/// An output error: I/O as `OSError`, the rest as [`SimulationError`].
+pub(crate) fn output(e: &echelon::OutputError) -> PyErr {
+    match e {
+        echelon::OutputError::Io { .. } => PyOSError::new_err(e.to_string()),
+        _ => SimulationError::new_err(e.to_string()),
+    }
+}
+
+/// Any other error, by its message, as a `ValueError`.
+pub(crate) fn value(e: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}

@@ -1,0 +1,34 @@
+//! `echelon._echelon`: the Rust side of the Python package `echelon`
+//! (python/echelon). Thin: every number comes from the `echelon` crate; this
+//! layer converts arrays and errors. The Python package wraps it in pandas
+//! tables, matplotlib figures and Ray tasks.
+//!
+//! - [`scenario`]: scenarios, runs into a directory, sweeps;
+//! - [`simulation`]: a scenario stepped under commands from Python;
+//! - [`pieces`]: the law, the safety filter, Theorem 2 and identification
+//!   as functions on arrays;
+//! - [`batch`]: the batch engine on caller-owned buffers;
+//! - [`errors`]: Rust errors as Python exceptions.
+
+mod batch;
+mod errors;
+mod pieces;
+mod scenario;
+mod simulation;
+
+use pyo3::prelude::*;
+
+/// The extension module.
+#[pymodule]
+fn _echelon(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("ScenarioError", py.get_type::<errors::ScenarioError>())?;
+    m.add("SimulationError", py.get_type::<errors::SimulationError>())?;
+    m.add("SWEEP_HEADER", echelon::sweep::SWEEP_HEADER)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    scenario::register(m)?;
+    simulation::register(m)?;
+    pieces::register(m)?;
+    batch::register(m)?;
+    Ok(())
+}

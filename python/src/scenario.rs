@@ -1,0 +1,439 @@
+//! Scenarios from Python: the built-ins, files and documents; a run into an
+//! output directory (what `echelon run` writes, read back by the Python side
+//! with pandas); the figures and report of `echelon plot`; and sweeps, whole
+//! or one case at a time (what a Ray task runs).
+
+use std::path::{Path, PathBuf};
+
+use pyo3::prelude::*;
+
+use echelon::error::Location;
+use echelon::odometry::ZetaModel;
+use echelon::scenario::{self as sc, Overrides};
+use echelon::sweep::{self, Grid};
+use echelon::{Scenario, Variant};
+
+use crate::errors;
+
+/// A parsed scenario (`echelon.Scenario` wraps it with its overrides).
+#[pyclass(module = "echelon._echelon", name = "Scenario", frozen)]
+#[derive(Debug, Clone)]
+pub(crate) struct PyScenario {
+    pub(crate) inner: Scenario,
+    origin: String,
+    base_dir: Option<PathBuf>,
+}
+
+/// The overrides of `echelon run`'s flags, from keyword arguments.
+pub(crate) fn overrides(
+    dt: Option<f64>,
+    duration: Option<f64>,
+    log_dt: Option<f64>,
+    law: Option<&str>,
+    seed: Option<u64>,
+) -> PyResult<Overrides> {
+    let law = match law {
+        None => None,
+        Some("paper") => Some(Variant::Paper),
+        Some("complete") => Some(Variant::Complete),
+        Some(other) => {
+            return Err(errors::value(format!(
+                "law: `{other}` is not a law (paper or complete)"
+            )));
+        }
+    };
+    for (field, v, zero_ok) in [
+        ("dt", dt, false),
+        ("duration", duration, false),
+        ("log_dt", log_dt, true),
+    ] {
+        if let Some(v) = v
+            && !(v.is_finite() && (v > 0.0 || (zero_ok && v == 0.0)))
+        {
+            let want = if zero_ok { "≥ 0" } else { "> 0" };
+            return Err(errors::value(format!(
+                "{field}: {v} must be a finite number {want}"
+            )));
+        }
+    }
+    Ok(Overrides {
+        dt,
+        duration,
+        log_dt,
+        law,
+        seed,
+    })
+}
+
+impl PyScenario {
+    fn parse(
+        source: &str,
+        origin: &str,
+        base_dir: Option<PathBuf>,
+    ) -> Result<Self, echelon::ScenarioError> {
+        let inner = Scenario::parse(source, origin, base_dir.as_deref())?;
+        Ok(PyScenario {
+            inner,
+            origin: origin.to_owned(),
+            base_dir,
+        })
+    }
+
+    /// The run of this scenario under `ov`, or the scenario error.
+    pub(crate) fn build(&self, py: Python<'_>, ov: &Overrides) -> PyResult<sc::Run> {
+        self.inner.build(ov).map_err(|e| errors::scenario(py, &e))
+    }
+}
+
+#[pymethods]
+impl PyScenario {
+    /// Parses TOML `source`; `origin` names it in errors, `base_dir` resolves
+    /// relative file references (waypoints).
+    #[staticmethod]
+    #[pyo3(signature = (source, origin, base_dir=None))]
+    fn from_source(
+        py: Python<'_>,
+        source: &str,
+        origin: &str,
+        base_dir: Option<PathBuf>,
+    ) -> PyResult<Self> {
+        Self::parse(source, origin, base_dir).map_err(|e| errors::scenario(py, &e))
+    }
+
+    /// A document given as JSON text (a Python dict, `json.dumps`ed), turned
+    /// into TOML and parsed; errors locate fields in that TOML.
+    #[staticmethod]
+    #[pyo3(signature = (json, origin, base_dir=None))]
+    fn from_json(
+        py: Python<'_>,
+        json: &str,
+        origin: &str,
+        base_dir: Option<PathBuf>,
+    ) -> PyResult<Self> {
+        let value: toml::Value = serde_json::from_str(json).map_err(|e| {
+            errors::scenario(py, &whole(origin, format!("not a scenario document: {e}")))
+        })?;
+        let source = toml::to_string(&value).map_err(|e| {
+            errors::scenario(py, &whole(origin, format!("not a scenario document: {e}")))
+        })?;
+        Self::from_source(py, &source, origin, base_dir)
+    }
+
+    /// A built-in scenario.
+    #[staticmethod]
+    fn builtin(py: Python<'_>, name: &str) -> PyResult<Self> {
+        let Some((_, src)) = sc::builtin().iter().find(|(n, _)| *n == name) else {
+            let names: Vec<&str> = sc::builtin().iter().map(|(n, _)| *n).collect();
+            return Err(errors::scenario(
+                py,
+                &whole(
+                    name,
+                    format!(
+                        "no built-in scenario of that name (built-ins: {})",
+                        names.join(", ")
+                    ),
+                ),
+            ));
+        };
+        Self::from_source(py, src, &format!("builtin:{name}"), None)
+    }
+
+    /// The built-in scenarios' names.
+    #[staticmethod]
+    fn builtins() -> Vec<&'static str> {
+        sc::builtin().iter().map(|(n, _)| *n).collect()
+    }
+
+    /// Reads and parses a scenario file.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let inner = Scenario::load(&path).map_err(|e| errors::scenario(py, &e))?;
+        Ok(PyScenario {
+            inner,
+            origin: path.display().to_string(),
+            base_dir: path.parent().map(Path::to_path_buf),
+        })
+    }
+
+    /// The scenario's name.
+    #[getter]
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+
+    /// The TOML source.
+    #[getter]
+    fn source(&self) -> &str {
+        self.inner.source()
+    }
+
+    /// Where it came from (a path or `builtin:NAME`).
+    #[getter]
+    fn origin(&self) -> &str {
+        &self.origin
+    }
+
+    /// The directory relative references resolve against.
+    #[getter]
+    fn base_dir(&self) -> Option<PathBuf> {
+        self.base_dir.clone()
+    }
+
+    /// Builds the scenario under the overrides; returns its warnings
+    /// (raises `ScenarioError` when it does not build).
+    #[pyo3(signature = (dt=None, duration=None, log_dt=None, law=None, seed=None))]
+    fn check(
+        &self,
+        py: Python<'_>,
+        dt: Option<f64>,
+        duration: Option<f64>,
+        log_dt: Option<f64>,
+        law: Option<&str>,
+        seed: Option<u64>,
+    ) -> PyResult<Vec<String>> {
+        let run = self.build(py, &overrides(dt, duration, log_dt, law, seed)?)?;
+        Ok(run
+            .warnings
+            .iter()
+            .chain(run.plan.warnings())
+            .cloned()
+            .collect())
+    }
+
+    /// Runs the scenario into `dir` (`echelon run --out DIR`: trajectory.csv,
+    /// reference.csv, integrals.csv, summary.json, scenario.toml, and
+    /// odometry.csv / safety.csv when present), the GIL released; returns
+    /// summary.json's text. A run that diverged keeps its outputs up to the
+    /// last state within bounds and raises `SimulationError`.
+    #[pyo3(signature = (dir, dt=None, duration=None, log_dt=None, law=None, seed=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        &self,
+        py: Python<'_>,
+        dir: PathBuf,
+        dt: Option<f64>,
+        duration: Option<f64>,
+        log_dt: Option<f64>,
+        law: Option<&str>,
+        seed: Option<u64>,
+    ) -> PyResult<String> {
+        let mut run = self.build(py, &overrides(dt, duration, log_dt, law, seed)?)?;
+        let summary = py
+            .detach(|| echelon::output::run_to_dir(&mut run, &dir, &mut []))
+            .map_err(|e| errors::output(&e))?;
+        serde_json::to_string(&summary).map_err(errors::value)
+    }
+
+    /// The number of cases of a sweep grid.
+    #[pyo3(signature = (zeta, zeta_model, ed, eb, slip, fix_every, seeds, gamma, transient=None, dt=None, duration=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn sweep_len(
+        &self,
+        py: Python<'_>,
+        zeta: Vec<f64>,
+        zeta_model: &str,
+        ed: Vec<f64>,
+        eb: Vec<f64>,
+        slip: Vec<f64>,
+        fix_every: Vec<u64>,
+        seeds: Vec<u64>,
+        gamma: f64,
+        transient: Option<f64>,
+        dt: Option<f64>,
+        duration: Option<f64>,
+    ) -> PyResult<usize> {
+        let ov = overrides(dt, duration, None, None, None)?;
+        let grid = self.grid(
+            py, &ov, zeta, zeta_model, ed, eb, slip, fix_every, seeds, gamma, transient,
+        )?;
+        Ok(grid.cases().len())
+    }
+
+    /// `echelon sweep`'s `sweep.csv` for the grid, every case on all cores
+    /// (the GIL released). `cases` limits it to those indices (grid order),
+    /// without the header: what one Ray task computes; joined in order after
+    /// the header they are the same bytes.
+    #[pyo3(signature = (zeta, zeta_model, ed, eb, slip, fix_every, seeds, gamma, transient=None, dt=None, duration=None, cases=None, threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn sweep_csv(
+        &self,
+        py: Python<'_>,
+        zeta: Vec<f64>,
+        zeta_model: &str,
+        ed: Vec<f64>,
+        eb: Vec<f64>,
+        slip: Vec<f64>,
+        fix_every: Vec<u64>,
+        seeds: Vec<u64>,
+        gamma: f64,
+        transient: Option<f64>,
+        dt: Option<f64>,
+        duration: Option<f64>,
+        cases: Option<Vec<usize>>,
+        threads: Option<usize>,
+    ) -> PyResult<String> {
+        let ov = overrides(dt, duration, None, None, None)?;
+        let grid = self.grid(
+            py, &ov, zeta, zeta_model, ed, eb, slip, fix_every, seeds, gamma, transient,
+        )?;
+        let scenario = &self.inner;
+        let pool = {
+            let mut b = rayon::ThreadPoolBuilder::new();
+            if let Some(k) = threads {
+                if k == 0 {
+                    return Err(errors::value("threads: must be ≥ 1"));
+                }
+                b = b.num_threads(k);
+            }
+            b.build().map_err(errors::value)?
+        };
+        let rows = py.detach(|| {
+            pool.install(|| match &cases {
+                None => sweep::run(scenario, &ov, &grid, &|| ()),
+                Some(idx) => {
+                    use rayon::prelude::*;
+                    let all = grid.cases();
+                    let picked: Vec<_> = idx
+                        .iter()
+                        .map(|&k| all.get(k).copied().ok_or(k))
+                        .collect::<Result<_, usize>>()
+                        .map_err(|k| {
+                            sweep::SweepError::Param(echelon::ParamError::new(
+                                "cases",
+                                k as f64,
+                                format!("past the grid's {} cases", all.len()),
+                            ))
+                        })?;
+                    picked
+                        .par_iter()
+                        .map(|c| sweep::run_case(scenario, &ov, &grid, c))
+                        .collect()
+                }
+            })
+        });
+        let rows = rows.map_err(|e| match e {
+            sweep::SweepError::Scenario(e) => errors::scenario(py, &e),
+            sweep::SweepError::Sim(e) => errors::sim(&e),
+            sweep::SweepError::Param(e) => errors::param(&e),
+        })?;
+        let mut bytes = Vec::new();
+        sweep::write_csv(&mut bytes, &rows, grid.zeta_model).map_err(errors::value)?;
+        let text = String::from_utf8(bytes).map_err(errors::value)?;
+        Ok(match cases {
+            // Without the header line.
+            Some(_) => text
+                .split_once('\n')
+                .map_or(String::new(), |(_, rest)| rest.to_owned()),
+            None => text,
+        })
+    }
+
+    /// Pickles as its source, origin and base directory (a Ray task gets it so).
+    fn __reduce__(
+        slf: &Bound<'_, Self>,
+    ) -> PyResult<(Py<PyAny>, (String, String, Option<PathBuf>))> {
+        let this = slf.get();
+        let ctor = slf.get_type().getattr("from_source")?.unbind();
+        Ok((
+            ctor,
+            (
+                this.inner.source().to_owned(),
+                this.origin.clone(),
+                this.base_dir.clone(),
+            ),
+        ))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<echelon._echelon.Scenario {} from {}>",
+            self.inner.name(),
+            self.origin
+        )
+    }
+}
+
+impl PyScenario {
+    /// The sweep grid, as `echelon sweep` builds it (`transient` defaults to
+    /// half the run's duration).
+    #[allow(clippy::too_many_arguments)]
+    fn grid(
+        &self,
+        py: Python<'_>,
+        ov: &Overrides,
+        zeta: Vec<f64>,
+        zeta_model: &str,
+        ed: Vec<f64>,
+        eb: Vec<f64>,
+        slip: Vec<f64>,
+        fix_every: Vec<u64>,
+        seeds: Vec<u64>,
+        gamma: f64,
+        transient: Option<f64>,
+    ) -> PyResult<Grid> {
+        let zeta_model = match zeta_model {
+            "wheels" => ZetaModel::Wheels,
+            "worst-case" => ZetaModel::WorstCase,
+            other => {
+                return Err(errors::value(format!(
+                    "zeta_model: `{other}` is not a model (wheels or worst-case)"
+                )));
+            }
+        };
+        let probe = self.build(py, ov)?;
+        let duration = probe.plan.steps() as f64 * probe.plan.config().dt;
+        let grid = Grid {
+            zeta,
+            zeta_model,
+            wheel_diameter_ratio: ed,
+            wheelbase_ratio: eb,
+            slip,
+            fix_every,
+            seeds,
+            gamma,
+            transient: transient.unwrap_or(0.5 * duration),
+        };
+        grid.validate().map_err(|e| errors::param(&e))?;
+        Ok(grid)
+    }
+}
+
+/// An error about a whole document (no line).
+fn whole(file: &str, message: String) -> echelon::ScenarioError {
+    echelon::ScenarioError {
+        location: Location {
+            file: file.to_owned(),
+            line: 0,
+            column: 0,
+        },
+        field: String::new(),
+        message,
+    }
+}
+
+/// `echelon plot DIR`: the run's figures (SVG and PNG) and report.html;
+/// returns the PNG paths by figure name and the report's path.
+#[pyfunction]
+fn plot_dir(py: Python<'_>, dir: PathBuf) -> PyResult<(Vec<(String, PathBuf, PathBuf)>, PathBuf)> {
+    let written = py
+        .detach(|| echelon_report::write_all(&dir))
+        .map_err(errors::value)?;
+    let figures = written
+        .figures
+        .into_iter()
+        .map(|f| {
+            let stem = f
+                .png
+                .file_stem()
+                .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+            (stem, f.svg, f.png)
+        })
+        .collect();
+    Ok((figures, written.report))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyScenario>()?;
+    m.add_function(wrap_pyfunction!(plot_dir, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,137 @@
+"""Scenarios and runs: the same files and numbers as `echelon run`, errors
+with their place in the file."""
+
+from __future__ import annotations
+
+import json
+import pickle
+import subprocess
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import echelon
+from conftest import builtin_document
+
+
+def test_a_builtin_run_matches_the_cli_bit_for_bit(echelon_cli, tmp_path):
+    out = tmp_path / "cli"
+    subprocess.run(
+        [str(echelon_cli), "run", "lemniscate-wedge", "--duration", "5", "--out", str(out), "-q"],
+        check=True,
+    )
+    run = echelon.Scenario.builtin("lemniscate-wedge", duration=5).run(tmp_path / "py")
+    cli_summary = json.loads((out / "summary.json").read_text())
+    assert run.summary == cli_summary
+    assert run.final_errors == [a["final_error"] for a in cli_summary["agents"]]
+    for name in ["trajectory.csv", "reference.csv", "integrals.csv", "summary.json"]:
+        assert (tmp_path / "py" / name).read_bytes() == (out / name).read_bytes(), name
+
+
+def test_the_trajectory_table_and_per_agent_arrays_agree():
+    run = echelon.Scenario.builtin("circle-pentagon", duration=2).run()
+    t = run.trajectory
+    assert list(t.columns[:7]) == ["t", "agent", "x", "y", "theta", "v", "omega"]
+    assert sorted(t["agent"].unique()) == [1, 2, 3, 4]
+    assert len(run.agents) == 4
+    for k, a in enumerate(run.agents, start=1):
+        rows = t[t["agent"] == k]
+        np.testing.assert_array_equal(a["x"], rows["x"].to_numpy())
+        np.testing.assert_array_equal(a["t"], rows["t"].to_numpy())
+        # Final pose of summary.json is the last logged row.
+        final = run.summary["agents"][k - 1]["final_pose"]
+        assert (a["x"][-1], a["y"][-1]) == (final["x"], final["y"])
+    assert run.odometry is None and run.safety is None
+
+
+def test_odometry_and_safety_tables_when_present():
+    fix = echelon.Scenario.builtin("fix-study", duration=1).run()
+    assert isinstance(fix.odometry, pd.DataFrame) and len(fix.odometry) > 0
+    crossing = echelon.Scenario.builtin("crossing", duration=1).run()
+    assert isinstance(crossing.safety, pd.DataFrame) and len(crossing.safety) > 0
+    assert "safety" in crossing.summary
+
+
+def test_overrides_as_keyword_arguments():
+    base = echelon.Scenario.builtin("circle-pentagon")
+    s = base.with_overrides(duration=0.5, dt=0.002, log_dt=0.1, law="complete", seed=3)
+    run = s.run()
+    assert run.summary["dt"] == 0.002
+    assert run.summary["steps"] == 250
+    assert list(run.trajectory["t"].unique()) == pytest.approx([0, 0.1, 0.2, 0.3, 0.4, 0.5])
+    with pytest.raises(TypeError, match="unknown override"):
+        base.with_overrides(speed=2)
+    with pytest.raises(ValueError, match="dt"):
+        base.run(dt=-1)
+
+
+def test_from_dict_runs_the_same_as_the_file():
+    doc = builtin_document("circle-pentagon")
+    a = echelon.Scenario.from_dict(doc, duration=1).run()
+    b = echelon.Scenario.builtin("circle-pentagon", duration=1).run()
+    assert a.summary == b.summary
+    pd.testing.assert_frame_equal(a.trajectory, b.trajectory)
+
+
+def test_load_a_file(tmp_path):
+    path = tmp_path / "mine.toml"
+    path.write_text(echelon.Scenario.builtin("experiment-circle").source)
+    s = echelon.Scenario.load(path, duration=0.5)
+    assert s.name == "experiment-circle"
+    assert s.run().summary["steps"] > 0
+
+
+def test_scenario_errors_carry_file_line_column_and_field(tmp_path):
+    source = echelon.Scenario.builtin("circle-pentagon").source
+    lines = source.splitlines()
+    k = next(i for i, l in enumerate(lines) if l.startswith("ke = "))
+    lines[k] = "ke = -1.5"
+    path = tmp_path / "bad.toml"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(echelon.ScenarioError) as info:
+        echelon.Scenario.load(path)
+    e = info.value
+    assert (e.file, e.line, e.column) == (str(path), k + 1, 6)
+    assert e.field == "control.ke"
+    assert str(e).startswith(f"{path}:{k + 1}:6: control.ke: ")
+    assert isinstance(e, ValueError)
+
+
+def test_a_dict_error_names_the_field_in_the_written_document():
+    doc = builtin_document("circle-pentagon")
+    doc["agents"][2]["offset"]["x"] = float("nan")
+    with pytest.raises(TypeError):
+        echelon.Scenario.from_dict(doc)
+    doc = builtin_document("circle-pentagon")
+    doc["agents"][2]["offset"]["x"] = -5.0
+    with pytest.raises(echelon.ScenarioError) as info:
+        echelon.Scenario.from_dict(doc)
+    e = info.value
+    assert e.file == "<dict>" and e.field.startswith("agents[3].offset")
+    assert e.line > 0 and e.column > 0
+
+
+def test_unknown_builtin_and_parse_errors():
+    with pytest.raises(echelon.ScenarioError, match="built-ins: .*circle-pentagon"):
+        echelon.Scenario.builtin("no-such")
+    with pytest.raises(echelon.ScenarioError) as info:
+        echelon.Scenario.from_toml("[sim]\ndt = \n", origin="inline.toml")
+    assert info.value.file == "inline.toml" and info.value.line == 2
+
+
+def test_scenarios_pickle():
+    s = echelon.Scenario.builtin("fix-study", duration=0.5)
+    t = pickle.loads(pickle.dumps(s))
+    assert (t.name, t.source, t.overrides) == (s.name, s.source, s.overrides)
+
+
+def test_plot_and_report(tmp_path):
+    run = echelon.Scenario.builtin("circle-pentagon", duration=1).run(tmp_path / "run")
+    files = run.plot(files=True)
+    assert {"paths", "errors", "signals"} <= set(files)
+    assert all(p.read_bytes().startswith(b"\x89PNG") for p in files.values())
+    figures = run.plot()
+    assert figures["paths"].get_axes()
+    report = run.report(tmp_path / "r.html")
+    assert report.read_text().lstrip().lower().startswith("<!doctype html")

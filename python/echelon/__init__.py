@@ -15,7 +15,8 @@ Units are SI and angles radians throughout.
 """
 
 from . import law, safety
-from ._echelon import BatchEngine, ScenarioError, SimulationError, __version__
+from ._batch import BatchEngine
+from ._echelon import ScenarioError, SimulationError, __version__
 from ._pieces import bound, identify
 from ._scenario import Run, Scenario, builtins
 from ._simulation import Simulation

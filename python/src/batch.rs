@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use echelon::engine::{BenchFormation, Engine, Topology, VelocityEngine};
 
 use crate::errors;
-use crate::scenario::PyScenario;
+use crate::scenario::{PyScenario, overrides};
 
 /// The engine of one drive.
 #[derive(Debug, Clone)]
@@ -73,8 +73,18 @@ impl PyBatchEngine {
     /// The engine for a scenario's agents (same robot and law, a star or a
     /// chain, continuous control, no odometry or safety filter).
     #[staticmethod]
-    fn from_scenario(py: Python<'_>, scenario: &PyScenario) -> PyResult<Self> {
-        let run = scenario.build(py, &echelon::Overrides::default())?;
+    #[pyo3(signature = (scenario, dt=None, duration=None, log_dt=None, law=None, seed=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn from_scenario(
+        py: Python<'_>,
+        scenario: &PyScenario,
+        dt: Option<f64>,
+        duration: Option<f64>,
+        log_dt: Option<f64>,
+        law: Option<&str>,
+        seed: Option<u64>,
+    ) -> PyResult<Self> {
+        let run = scenario.build(py, &overrides(dt, duration, log_dt, law, seed)?)?;
         let engine = Engine::from_plan(&run.plan).map_err(errors::value)?;
         Ok(PyBatchEngine {
             engine: Kind::Torque(engine),

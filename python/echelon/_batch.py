@@ -1,0 +1,61 @@
+"""The batch engine: N agents stepped in Rust on all cores, the GIL released."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from . import _echelon
+from ._scenario import Scenario
+
+
+class BatchEngine:
+    """N agents of one robot and law, every one following the reference
+    (``star``) or each the one before (``chain``), stepped by echelon's batch
+    engine (SIMD lanes, all cores) with the GIL released. The states are
+    written into an ``(n, 5)`` float64 array you own (x, y, θ, v, ω) when
+    you ask: ``run(steps, out=buffer)`` steps ``steps`` times and fills it,
+    with no copy or allocation per step."""
+
+    def __init__(self, inner: Any) -> None:
+        self._inner = inner
+
+    @classmethod
+    def bench(
+        cls, agents: int, topology: str = "star", drive: str = "torque", dt: float = 0.001, seed: int = 1
+    ) -> BatchEngine:
+        """``echelon bench``'s formation: ``agents`` robots at random poses
+        (from ``seed``) behind a circle; ``torque`` (Table I, the paper's law)
+        or ``velocity`` (Jackal bases, the kinematic law)."""
+        return cls(_echelon.BatchEngine.bench(agents, topology, drive, dt, seed))
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario | str, **overrides: Any) -> BatchEngine:
+        """The engine for a scenario whose agents share robot and law and
+        form a star or a chain (continuous control, no odometry or safety)."""
+        if isinstance(scenario, str):
+            scenario = Scenario.builtin(scenario)
+        return cls(_echelon.BatchEngine.from_scenario(scenario._inner, **{**scenario.overrides, **overrides}))
+
+    @property
+    def n(self) -> int:
+        return self._inner.n
+
+    @property
+    def time(self) -> float:
+        return self._inner.time
+
+    def buffer(self) -> np.ndarray:
+        """A new ``(n, 5)`` array for :meth:`run` and :meth:`states`."""
+        return np.empty((self.n, 5))
+
+    def run(self, steps: int, out: np.ndarray | None = None) -> None:
+        """Steps ``steps`` RK4 steps (GIL released); then writes the states
+        into ``out`` if given (``(n, 5)`` float64, C-contiguous)."""
+        self._inner.run(steps, out)
+
+    def states(self, out: np.ndarray) -> np.ndarray:
+        """Writes the states into ``out``; returns it."""
+        self._inner.states(out)
+        return out

@@ -1,0 +1,65 @@
+"""Sweeps: the local sweep is `echelon sweep`'s sweep.csv byte for byte, and
+the Ray sweep is the local one byte for byte."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+
+import echelon
+
+GRID = {"zeta": [1e-5, 3e-5], "fix_every": [10, 50, 0]}
+
+
+@pytest.fixture(scope="module")
+def local():
+    return echelon.sweep(echelon.Scenario.builtin("fix-study", duration=2), GRID, seeds=2)
+
+
+def test_the_local_sweep_is_the_clis(local, echelon_cli, tmp_path):
+    subprocess.run(
+        [str(echelon_cli), "sweep", "fix-study", "--duration", "2", "--zeta", "1e-5,3e-5",
+         "--fix-every", "10,50,0", "--seeds", "2", "--out", str(tmp_path), "-q"],
+        check=True,
+    )
+    assert local.csv.encode() == (tmp_path / "sweep.csv").read_bytes()
+    t = local.table
+    assert len(t) == 2 * 3 * 2
+    assert list(t["seed"][:2]) == [0, 1]
+    # Theorem 2 bounds the runs with fixes, the longer N the larger.
+    fixed = t[(t["fix_every"] > 0) & (t["zeta"] == 1e-5)]
+    assert fixed["z_bound"].notna().all()
+    by_n = fixed.groupby("fix_every")["z_bound"].max()
+    assert by_n[50] > by_n[10]
+    assert t[t["fix_every"] == 0]["z_bound"].isna().all()
+
+
+def test_threads_do_not_change_the_bytes(local):
+    one = echelon.sweep(echelon.Scenario.builtin("fix-study", duration=2), GRID, seeds=2, threads=1)
+    assert one.csv == local.csv
+
+
+def test_the_ray_sweep_is_the_local_sweep_byte_for_byte(local, tmp_path):
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        remote = echelon.sweep(
+            echelon.Scenario.builtin("fix-study", duration=2), GRID, seeds=2, executor="ray", tasks=5
+        )
+    finally:
+        ray.shutdown()
+    assert remote.csv == local.csv
+    assert remote.write(tmp_path / "a.csv").read_bytes() == local.write(tmp_path / "b.csv").read_bytes()
+
+
+def test_bad_grids_are_refused():
+    s = echelon.Scenario.builtin("fix-study", duration=1)
+    with pytest.raises(TypeError, match="unknown grid key"):
+        echelon.sweep(s, {"zzeta": [1]})
+    with pytest.raises(ValueError, match="zeta_model"):
+        echelon.sweep(s, {"zeta_model": "sideways"})
+    with pytest.raises(ValueError, match="gamma"):
+        echelon.sweep(s, gamma=2.0)
+    with pytest.raises(ValueError, match="executor"):
+        echelon.sweep(s, executor="dask")

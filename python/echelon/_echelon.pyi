@@ -1,0 +1,195 @@
+"""Type stubs of the extension module `echelon._echelon` (python/src). The
+public API is the `echelon` package, which wraps these."""
+
+from os import PathLike
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+SWEEP_HEADER: str
+
+Law = Literal["paper", "complete"]
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be loaded or built: `file:line:column: field: message`."""
+
+    file: str
+    line: int
+    column: int
+    field: str
+    message: str
+
+class SimulationError(RuntimeError):
+    """A run that diverged or could not write its outputs."""
+
+class Scenario:
+    @staticmethod
+    def from_source(source: str, origin: str, base_dir: str | PathLike[str] | None = None) -> Scenario: ...
+    @staticmethod
+    def from_json(json: str, origin: str, base_dir: str | PathLike[str] | None = None) -> Scenario: ...
+    @staticmethod
+    def builtin(name: str) -> Scenario: ...
+    @staticmethod
+    def builtins() -> list[str]: ...
+    @staticmethod
+    def load(path: str | PathLike[str]) -> Scenario: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def source(self) -> str: ...
+    @property
+    def origin(self) -> str: ...
+    @property
+    def base_dir(self) -> str | None: ...
+    def check(
+        self,
+        dt: float | None = None,
+        duration: float | None = None,
+        log_dt: float | None = None,
+        law: Law | None = None,
+        seed: int | None = None,
+    ) -> list[str]: ...
+    def run(
+        self,
+        dir: str | PathLike[str],
+        dt: float | None = None,
+        duration: float | None = None,
+        log_dt: float | None = None,
+        law: Law | None = None,
+        seed: int | None = None,
+    ) -> str: ...
+    def sweep_len(
+        self,
+        zeta: list[float],
+        zeta_model: str,
+        ed: list[float],
+        eb: list[float],
+        slip: list[float],
+        fix_every: list[int],
+        seeds: list[int],
+        gamma: float,
+        transient: float | None = None,
+        dt: float | None = None,
+        duration: float | None = None,
+    ) -> int: ...
+    def sweep_csv(
+        self,
+        zeta: list[float],
+        zeta_model: str,
+        ed: list[float],
+        eb: list[float],
+        slip: list[float],
+        fix_every: list[int],
+        seeds: list[int],
+        gamma: float,
+        transient: float | None = None,
+        dt: float | None = None,
+        duration: float | None = None,
+        cases: list[int] | None = None,
+        threads: int | None = None,
+    ) -> str: ...
+
+def plot_dir(dir: str | PathLike[str]) -> tuple[list[tuple[str, str, str]], str]: ...
+
+class Simulation:
+    def __init__(
+        self,
+        scenario: Scenario,
+        dt: float | None = None,
+        duration: float | None = None,
+        log_dt: float | None = None,
+        law: Law | None = None,
+        seed: int | None = None,
+    ) -> None: ...
+    n: int
+    time: float
+    step_index: int
+    steps: int
+    dt: float
+    done: bool
+    order: list[int]
+    poses: npt.NDArray[np.float64]
+    sensed: npt.NDArray[np.float64]
+    agents: list[dict[str, Any]]
+    def leader(self, i: int, commands: npt.NDArray[np.float64]) -> dict[str, Any]: ...
+    def step(self, commands: npt.NDArray[np.float64]) -> None: ...
+    def errors(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+
+def law_paper(
+    state: npt.NDArray[np.float64],
+    p: npt.NDArray[np.float64],
+    dp: npt.NDArray[np.float64],
+    ddp: npt.NDArray[np.float64],
+    offset: npt.NDArray[np.float64],
+    robot_json: str,
+    ke: float,
+    kz: float,
+    variant: str = "paper",
+) -> tuple[list[float], list[float], list[float]]: ...
+def law_kinematic(
+    state: npt.NDArray[np.float64],
+    p: npt.NDArray[np.float64],
+    dp: npt.NDArray[np.float64],
+    offset: npt.NDArray[np.float64],
+    ke: float,
+) -> tuple[list[float], list[float], list[float]]: ...
+def robot_preset(name: str) -> str: ...
+
+class SafetyFilters:
+    def __init__(
+        self,
+        n: int,
+        radius: float,
+        gain: float = 1.0,
+        range: float = ...,
+        l: float = 0.1,
+        obstacles: npt.NDArray[np.float64] | None = None,
+        period: float = 0.01,
+        base: str = "ideal",
+    ) -> None: ...
+    def filter(
+        self, t: float, poses: npt.NDArray[np.float64], commands: npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.float64], list[str], list[float]]: ...
+
+def bound(
+    ke: float,
+    zeta: float,
+    *,
+    kz: float | None = None,
+    omega_max: float | None = None,
+    gamma: float = 0.99,
+    steps: int | None = None,
+    max_z: float | None = None,
+    max_e: float | None = None,
+    ts: float | None = None,
+    law: str = "paper",
+) -> tuple[float, int, float | None, float]: ...
+def identify_log(
+    *,
+    path: str | PathLike[str] | None = None,
+    csv: str | None = None,
+    agent: int = 1,
+    model: str | None = None,
+    name: str = "identified",
+) -> tuple[str, str]: ...
+
+class BatchEngine:
+    @staticmethod
+    def bench(
+        agents: int, topology: str = "star", drive: str = "torque", dt: float = 0.001, seed: int = 1
+    ) -> BatchEngine: ...
+    @staticmethod
+    def from_scenario(
+        scenario: Scenario,
+        dt: float | None = None,
+        duration: float | None = None,
+        log_dt: float | None = None,
+        law: Law | None = None,
+        seed: int | None = None,
+    ) -> BatchEngine: ...
+    n: int
+    time: float
+    def run(self, steps: int, out: npt.NDArray[np.float64] | None = None) -> None: ...
+    def states(self, out: npt.NDArray[np.float64]) -> None: ...

@@ -1,0 +1,32 @@
+"""The notebooks of examples/ run from top to bottom and save their figures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbclient import NotebookClient
+
+from conftest import REPO
+
+NOTEBOOKS = sorted((REPO / "examples").glob("*.ipynb"))
+
+
+def test_there_are_notebooks():
+    assert NOTEBOOKS
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_notebook_runs_and_saves_its_figures(path: Path, tmp_path, monkeypatch):
+    figures = tmp_path / "figures"
+    monkeypatch.setenv("ECHELON_FIGURES", str(figures))
+    monkeypatch.setenv("ECHELON_QUICK", "1")
+    nb = nbformat.read(path, as_version=4)
+    NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
+    saved = sorted(p.name for p in figures.glob("*.png"))
+    assert saved, "the notebook saved no figure"
+    for p in figures.glob("*.png"):
+        assert p.read_bytes().startswith(b"\x89PNG") and p.stat().st_size > 10_000, p.name
+    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []) if o.get("output_type") == "error"]
+    assert not errors

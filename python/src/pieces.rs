@@ -104,6 +104,9 @@ fn law_kinematic(
     Ok(([k.cmd.v, k.cmd.omega], k.e, k.z))
 }
 
+/// The filtered commands, each robot's outcome and its closest neighbour.
+type Filtered<'py> = (Bound<'py, PyArray2<f64>>, Vec<&'static str>, Vec<f64>);
+
 /// Safety filters for `n` velocity-controlled robots, one each (their
 /// deadlock monitors keep state between calls).
 #[pyclass(module = "echelon._echelon", name = "SafetyFilters")]
@@ -186,7 +189,7 @@ impl PySafetyFilters {
         t: f64,
         poses: PyReadonlyArray2<'_, f64>,
         commands: PyReadonlyArray2<'_, f64>,
-    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Vec<&'static str>, Vec<f64>)> {
+    ) -> PyResult<Filtered<'py>> {
         let (p, c) = (poses.as_array(), commands.as_array());
         let n = self.filters.len();
         if p.nrows() != n || !(p.ncols() == 3 || p.ncols() == 5) {

@@ -15,6 +15,12 @@ use echelon::{Scenario, Variant};
 
 use crate::errors;
 
+/// What a scenario is rebuilt from: source, origin, base directory.
+type SourceParts = (String, String, Option<PathBuf>);
+
+/// A figure written: its name, SVG and PNG paths.
+type Figure = (String, PathBuf, PathBuf);
+
 /// A parsed scenario (`echelon.Scenario` wraps it with its overrides).
 #[pyclass(module = "echelon._echelon", name = "Scenario", frozen)]
 #[derive(Debug, Clone)]
@@ -329,9 +335,7 @@ impl PyScenario {
     }
 
     /// Pickles as its source, origin and base directory (a Ray task gets it so).
-    fn __reduce__(
-        slf: &Bound<'_, Self>,
-    ) -> PyResult<(Py<PyAny>, (String, String, Option<PathBuf>))> {
+    fn __reduce__(slf: &Bound<'_, Self>) -> PyResult<(Py<PyAny>, SourceParts)> {
         let this = slf.get();
         let ctor = slf.get_type().getattr("from_source")?.unbind();
         Ok((
@@ -414,7 +418,7 @@ fn whole(file: &str, message: String) -> echelon::ScenarioError {
 /// `echelon plot DIR`: the run's figures (SVG and PNG) and report.html;
 /// returns the PNG paths by figure name and the report's path.
 #[pyfunction]
-fn plot_dir(py: Python<'_>, dir: PathBuf) -> PyResult<(Vec<(String, PathBuf, PathBuf)>, PathBuf)> {
+fn plot_dir(py: Python<'_>, dir: PathBuf) -> PyResult<(Vec<Figure>, PathBuf)> {
     let written = py
         .detach(|| echelon_report::write_all(&dir))
         .map_err(errors::value)?;

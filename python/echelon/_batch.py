@@ -36,7 +36,7 @@ class BatchEngine:
         form a star or a chain (continuous control, no odometry or safety)."""
         if isinstance(scenario, str):
             scenario = Scenario.builtin(scenario)
-        return cls(_echelon.BatchEngine.from_scenario(scenario._inner, **{**scenario.overrides, **overrides}))
+        return cls(_echelon.BatchEngine.from_scenario(scenario._inner, {**scenario.overrides, **overrides}))
 
     @property
     def n(self) -> int:

@@ -2,7 +2,7 @@
 public API is the `echelon` package, which wraps these."""
 
 from os import PathLike
-from typing import Any, Literal
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -11,6 +11,30 @@ __version__: str
 SWEEP_HEADER: str
 
 Law = Literal["paper", "complete"]
+
+class Overrides(TypedDict, total=False):
+    """`echelon run`'s flags; absent or None: the scenario's own."""
+
+    dt: float | None
+    duration: float | None
+    log_dt: float | None
+    law: Law | None
+    seed: int | None
+
+class Grid(TypedDict, total=False):
+    """A sweep grid (`echelon sweep`'s lists) and the dt, duration overrides."""
+
+    zeta: list[float]
+    zeta_model: str
+    ed: list[float]
+    eb: list[float]
+    slip: list[float]
+    fix_every: list[int]
+    seeds: list[int]
+    gamma: float
+    transient: float | None
+    dt: float | None
+    duration: float | None
 
 class ScenarioError(ValueError):
     """A scenario that cannot be loaded or built: `file:line:column: field: message`."""
@@ -43,66 +67,15 @@ class Scenario:
     def origin(self) -> str: ...
     @property
     def base_dir(self) -> str | None: ...
-    def check(
-        self,
-        dt: float | None = None,
-        duration: float | None = None,
-        log_dt: float | None = None,
-        law: Law | None = None,
-        seed: int | None = None,
-    ) -> list[str]: ...
-    def run(
-        self,
-        dir: str | PathLike[str],
-        dt: float | None = None,
-        duration: float | None = None,
-        log_dt: float | None = None,
-        law: Law | None = None,
-        seed: int | None = None,
-    ) -> str: ...
-    def sweep_len(
-        self,
-        zeta: list[float],
-        zeta_model: str,
-        ed: list[float],
-        eb: list[float],
-        slip: list[float],
-        fix_every: list[int],
-        seeds: list[int],
-        gamma: float,
-        transient: float | None = None,
-        dt: float | None = None,
-        duration: float | None = None,
-    ) -> int: ...
-    def sweep_csv(
-        self,
-        zeta: list[float],
-        zeta_model: str,
-        ed: list[float],
-        eb: list[float],
-        slip: list[float],
-        fix_every: list[int],
-        seeds: list[int],
-        gamma: float,
-        transient: float | None = None,
-        dt: float | None = None,
-        duration: float | None = None,
-        cases: list[int] | None = None,
-        threads: int | None = None,
-    ) -> str: ...
+    def check(self, overrides: Overrides | None = None) -> list[str]: ...
+    def run(self, dir: str | PathLike[str], overrides: Overrides | None = None) -> str: ...
+    def sweep_len(self, grid: Grid) -> int: ...
+    def sweep_csv(self, grid: Grid, cases: list[int] | None = None, threads: int | None = None) -> str: ...
 
 def plot_dir(dir: str | PathLike[str]) -> tuple[list[tuple[str, str, str]], str]: ...
 
 class Simulation:
-    def __init__(
-        self,
-        scenario: Scenario,
-        dt: float | None = None,
-        duration: float | None = None,
-        log_dt: float | None = None,
-        law: Law | None = None,
-        seed: int | None = None,
-    ) -> None: ...
+    def __init__(self, scenario: Scenario, overrides: Overrides | None = None) -> None: ...
     n: int
     time: float
     step_index: int
@@ -181,14 +154,7 @@ class BatchEngine:
         agents: int, topology: str = "star", drive: str = "torque", dt: float = 0.001, seed: int = 1
     ) -> BatchEngine: ...
     @staticmethod
-    def from_scenario(
-        scenario: Scenario,
-        dt: float | None = None,
-        duration: float | None = None,
-        log_dt: float | None = None,
-        law: Law | None = None,
-        seed: int | None = None,
-    ) -> BatchEngine: ...
+    def from_scenario(scenario: Scenario, overrides: Overrides | None = None) -> BatchEngine: ...
     n: int
     time: float
     def run(self, steps: int, out: npt.NDArray[np.float64] | None = None) -> None: ...

@@ -47,7 +47,7 @@ class Scenario:
         self._inner = inner
         self._overrides = _checked(overrides)
         # Build once: a scenario that cannot run fails here, not later.
-        self._warnings = inner.check(**self._overrides)
+        self._warnings = inner.check(self._overrides)
 
     @classmethod
     def builtin(cls, name: str, **overrides: Any) -> Scenario:
@@ -127,7 +127,7 @@ class Scenario:
             directory = Path(out)
             temporary = False
         try:
-            summary = self._inner.run(directory, **ov)
+            summary = self._inner.run(directory, ov)
         except BaseException:
             if temporary:
                 shutil.rmtree(directory, ignore_errors=True)

@@ -29,7 +29,7 @@ class Simulation:
             scenario = Scenario.builtin(scenario)
         ov = {**scenario.overrides, **overrides}
         self.scenario = scenario
-        self._sim = _echelon.Simulation(scenario._inner, **ov)
+        self._sim = _echelon.Simulation(scenario._inner, ov)
         self.agents: list[dict[str, Any]] = []
         for a in self._sim.agents:
             a = dict(a)

@@ -77,7 +77,7 @@ def _arguments(
 
 def _cases(inner: Any, args: dict[str, Any], cases: list[int]) -> str:
     """One Ray task: the rows of ``cases``, on one thread (Ray schedules cores)."""
-    return inner.sweep_csv(**args, cases=cases, threads=1)
+    return inner.sweep_csv(args, cases=cases, threads=1)
 
 
 def sweep(
@@ -109,14 +109,14 @@ def sweep(
     args = _arguments(scenario, grid, seeds, first_seed, gamma, transient)
     inner = scenario._inner
     if executor is None:
-        return Sweep(inner.sweep_csv(**args, threads=threads))
+        return Sweep(inner.sweep_csv(args, threads=threads))
     if executor != "ray":
         raise ValueError(f"executor: `{executor}` (None for local cores, or \"ray\")")
     import ray
 
     if not ray.is_initialized():
         ray.init()
-    total = inner.sweep_len(**args)
+    total = inner.sweep_len(args)
     if tasks is None:
         tasks = max(1, 2 * int(ray.cluster_resources().get("CPU", 1)))
     tasks = max(1, min(tasks, total))

@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use echelon::engine::{BenchFormation, Engine, Topology, VelocityEngine};
 
 use crate::errors;
-use crate::scenario::{PyScenario, overrides};
+use crate::scenario::{OverrideArgs, PyScenario};
 
 /// The engine of one drive.
 #[derive(Debug, Clone)]
@@ -73,18 +73,13 @@ impl PyBatchEngine {
     /// The engine for a scenario's agents (same robot and law, a star or a
     /// chain, continuous control, no odometry or safety filter).
     #[staticmethod]
-    #[pyo3(signature = (scenario, dt=None, duration=None, log_dt=None, law=None, seed=None))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (scenario, overrides=None))]
     fn from_scenario(
         py: Python<'_>,
         scenario: &PyScenario,
-        dt: Option<f64>,
-        duration: Option<f64>,
-        log_dt: Option<f64>,
-        law: Option<&str>,
-        seed: Option<u64>,
+        overrides: Option<OverrideArgs>,
     ) -> PyResult<Self> {
-        let run = scenario.build(py, &overrides(dt, duration, log_dt, law, seed)?)?;
+        let run = scenario.build(py, overrides.as_ref())?;
         let engine = Engine::from_plan(&run.plan).map_err(errors::value)?;
         Ok(PyBatchEngine {
             engine: Kind::Torque(engine),

@@ -5,7 +5,9 @@
 
 use std::path::{Path, PathBuf};
 
+use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use echelon::error::Location;
 use echelon::odometry::ZetaModel;
@@ -30,45 +32,109 @@ pub(crate) struct PyScenario {
     base_dir: Option<PathBuf>,
 }
 
-/// The overrides of `echelon run`'s flags, from keyword arguments.
-pub(crate) fn overrides(
+/// `echelon run`'s flags as a dict (`dt`, `duration`, `log_dt`, `law`,
+/// `seed`; absent or None: the scenario's own).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct OverrideArgs {
     dt: Option<f64>,
     duration: Option<f64>,
     log_dt: Option<f64>,
-    law: Option<&str>,
+    law: Option<String>,
     seed: Option<u64>,
-) -> PyResult<Overrides> {
-    let law = match law {
-        None => None,
-        Some("paper") => Some(Variant::Paper),
-        Some("complete") => Some(Variant::Complete),
-        Some(other) => {
-            return Err(errors::value(format!(
-                "law: `{other}` is not a law (paper or complete)"
-            )));
+}
+
+impl<'a, 'py> FromPyObject<'a, 'py> for OverrideArgs {
+    type Error = PyErr;
+
+    fn extract(ob: Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        let d = ob.cast::<PyDict>()?;
+        for key in d.keys() {
+            let key: String = key.extract()?;
+            if !OVERRIDES.contains(&key.as_str()) {
+                return Err(PyTypeError::new_err(format!(
+                    "unknown override `{key}` (the overrides are {})",
+                    OVERRIDES.join(", ")
+                )));
+            }
         }
-    };
-    for (field, v, zero_ok) in [
-        ("dt", dt, false),
-        ("duration", duration, false),
-        ("log_dt", log_dt, true),
-    ] {
-        if let Some(v) = v
-            && !(v.is_finite() && (v > 0.0 || (zero_ok && v == 0.0)))
-        {
-            let want = if zero_ok { "≥ 0" } else { "> 0" };
-            return Err(errors::value(format!(
-                "{field}: {v} must be a finite number {want}"
-            )));
+        fn item<'py, T: FromPyObjectOwned<'py>>(
+            d: &Bound<'py, PyDict>,
+            key: &str,
+        ) -> PyResult<Option<T>> {
+            match d.get_item(key)? {
+                Some(v) if !v.is_none() => v.extract().map(Some).map_err(Into::into),
+                _ => Ok(None),
+            }
         }
+        Ok(OverrideArgs {
+            dt: item(&d, "dt")?,
+            duration: item(&d, "duration")?,
+            log_dt: item(&d, "log_dt")?,
+            law: item(&d, "law")?,
+            seed: item(&d, "seed")?,
+        })
     }
-    Ok(Overrides {
-        dt,
-        duration,
-        log_dt,
-        law,
-        seed,
-    })
+}
+
+/// The keys of [`OverrideArgs`].
+const OVERRIDES: [&str; 5] = ["dt", "duration", "log_dt", "law", "seed"];
+
+impl OverrideArgs {
+    /// The overrides, checked as `echelon run` checks its flags.
+    pub(crate) fn resolve(&self) -> PyResult<Overrides> {
+        let law = match self.law.as_deref() {
+            None => None,
+            Some("paper") => Some(Variant::Paper),
+            Some("complete") => Some(Variant::Complete),
+            Some(other) => {
+                return Err(errors::value(format!(
+                    "law: `{other}` is not a law (paper or complete)"
+                )));
+            }
+        };
+        for (field, v, zero_ok) in [
+            ("dt", self.dt, false),
+            ("duration", self.duration, false),
+            ("log_dt", self.log_dt, true),
+        ] {
+            if let Some(v) = v
+                && !(v.is_finite() && (v > 0.0 || (zero_ok && v == 0.0)))
+            {
+                let want = if zero_ok { "≥ 0" } else { "> 0" };
+                return Err(errors::value(format!(
+                    "{field}: {v} must be a finite number {want}"
+                )));
+            }
+        }
+        Ok(Overrides {
+            dt: self.dt,
+            duration: self.duration,
+            log_dt: self.log_dt,
+            law,
+            seed: self.seed,
+        })
+    }
+}
+
+/// A sweep grid as a dict: `echelon sweep`'s lists, `gamma`, `transient`
+/// (None: half the duration) and the `dt`, `duration` overrides.
+#[derive(Debug, Clone, FromPyObject)]
+#[pyo3(from_item_all)]
+pub(crate) struct GridArgs {
+    zeta: Vec<f64>,
+    zeta_model: String,
+    ed: Vec<f64>,
+    eb: Vec<f64>,
+    slip: Vec<f64>,
+    fix_every: Vec<u64>,
+    seeds: Vec<u64>,
+    gamma: f64,
+    #[pyo3(default)]
+    transient: Option<f64>,
+    #[pyo3(default)]
+    dt: Option<f64>,
+    #[pyo3(default)]
+    duration: Option<f64>,
 }
 
 impl PyScenario {
@@ -85,9 +151,10 @@ impl PyScenario {
         })
     }
 
-    /// The run of this scenario under `ov`, or the scenario error.
-    pub(crate) fn build(&self, py: Python<'_>, ov: &Overrides) -> PyResult<sc::Run> {
-        self.inner.build(ov).map_err(|e| errors::scenario(py, &e))
+    /// The run of this scenario under the overrides, or the scenario error.
+    pub(crate) fn build(&self, py: Python<'_>, ov: Option<&OverrideArgs>) -> PyResult<sc::Run> {
+        let ov = ov.map_or_else(|| Ok(Overrides::default()), OverrideArgs::resolve)?;
+        self.inner.build(&ov).map_err(|e| errors::scenario(py, &e))
     }
 }
 
@@ -187,17 +254,9 @@ impl PyScenario {
 
     /// Builds the scenario under the overrides; returns its warnings
     /// (raises `ScenarioError` when it does not build).
-    #[pyo3(signature = (dt=None, duration=None, log_dt=None, law=None, seed=None))]
-    fn check(
-        &self,
-        py: Python<'_>,
-        dt: Option<f64>,
-        duration: Option<f64>,
-        log_dt: Option<f64>,
-        law: Option<&str>,
-        seed: Option<u64>,
-    ) -> PyResult<Vec<String>> {
-        let run = self.build(py, &overrides(dt, duration, log_dt, law, seed)?)?;
+    #[pyo3(signature = (overrides=None))]
+    fn check(&self, py: Python<'_>, overrides: Option<OverrideArgs>) -> PyResult<Vec<String>> {
+        let run = self.build(py, overrides.as_ref())?;
         Ok(run
             .warnings
             .iter()
@@ -211,19 +270,14 @@ impl PyScenario {
     /// odometry.csv / safety.csv when present), the GIL released; returns
     /// summary.json's text. A run that diverged keeps its outputs up to the
     /// last state within bounds and raises `SimulationError`.
-    #[pyo3(signature = (dir, dt=None, duration=None, log_dt=None, law=None, seed=None))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (dir, overrides=None))]
     fn run(
         &self,
         py: Python<'_>,
         dir: PathBuf,
-        dt: Option<f64>,
-        duration: Option<f64>,
-        log_dt: Option<f64>,
-        law: Option<&str>,
-        seed: Option<u64>,
+        overrides: Option<OverrideArgs>,
     ) -> PyResult<String> {
-        let mut run = self.build(py, &overrides(dt, duration, log_dt, law, seed)?)?;
+        let mut run = self.build(py, overrides.as_ref())?;
         let summary = py
             .detach(|| echelon::output::run_to_dir(&mut run, &dir, &mut []))
             .map_err(|e| errors::output(&e))?;
@@ -231,27 +285,8 @@ impl PyScenario {
     }
 
     /// The number of cases of a sweep grid.
-    #[pyo3(signature = (zeta, zeta_model, ed, eb, slip, fix_every, seeds, gamma, transient=None, dt=None, duration=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn sweep_len(
-        &self,
-        py: Python<'_>,
-        zeta: Vec<f64>,
-        zeta_model: &str,
-        ed: Vec<f64>,
-        eb: Vec<f64>,
-        slip: Vec<f64>,
-        fix_every: Vec<u64>,
-        seeds: Vec<u64>,
-        gamma: f64,
-        transient: Option<f64>,
-        dt: Option<f64>,
-        duration: Option<f64>,
-    ) -> PyResult<usize> {
-        let ov = overrides(dt, duration, None, None, None)?;
-        let grid = self.grid(
-            py, &ov, zeta, zeta_model, ed, eb, slip, fix_every, seeds, gamma, transient,
-        )?;
+    fn sweep_len(&self, py: Python<'_>, grid: GridArgs) -> PyResult<usize> {
+        let (grid, _) = self.grid(py, &grid)?;
         Ok(grid.cases().len())
     }
 
@@ -259,29 +294,15 @@ impl PyScenario {
     /// (the GIL released). `cases` limits it to those indices (grid order),
     /// without the header: what one Ray task computes; joined in order after
     /// the header they are the same bytes.
-    #[pyo3(signature = (zeta, zeta_model, ed, eb, slip, fix_every, seeds, gamma, transient=None, dt=None, duration=None, cases=None, threads=None))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (grid, cases=None, threads=None))]
     fn sweep_csv(
         &self,
         py: Python<'_>,
-        zeta: Vec<f64>,
-        zeta_model: &str,
-        ed: Vec<f64>,
-        eb: Vec<f64>,
-        slip: Vec<f64>,
-        fix_every: Vec<u64>,
-        seeds: Vec<u64>,
-        gamma: f64,
-        transient: Option<f64>,
-        dt: Option<f64>,
-        duration: Option<f64>,
+        grid: GridArgs,
         cases: Option<Vec<usize>>,
         threads: Option<usize>,
     ) -> PyResult<String> {
-        let ov = overrides(dt, duration, None, None, None)?;
-        let grid = self.grid(
-            py, &ov, zeta, zeta_model, ed, eb, slip, fix_every, seeds, gamma, transient,
-        )?;
+        let (grid, ov) = self.grid(py, &grid)?;
         let scenario = &self.inner;
         let pool = {
             let mut b = rayon::ThreadPoolBuilder::new();
@@ -358,24 +379,10 @@ impl PyScenario {
 }
 
 impl PyScenario {
-    /// The sweep grid, as `echelon sweep` builds it (`transient` defaults to
-    /// half the run's duration).
-    #[allow(clippy::too_many_arguments)]
-    fn grid(
-        &self,
-        py: Python<'_>,
-        ov: &Overrides,
-        zeta: Vec<f64>,
-        zeta_model: &str,
-        ed: Vec<f64>,
-        eb: Vec<f64>,
-        slip: Vec<f64>,
-        fix_every: Vec<u64>,
-        seeds: Vec<u64>,
-        gamma: f64,
-        transient: Option<f64>,
-    ) -> PyResult<Grid> {
-        let zeta_model = match zeta_model {
+    /// The sweep grid and overrides, as `echelon sweep` builds them
+    /// (`transient` defaults to half the run's duration).
+    fn grid(&self, py: Python<'_>, g: &GridArgs) -> PyResult<(Grid, Overrides)> {
+        let zeta_model = match g.zeta_model.as_str() {
             "wheels" => ZetaModel::Wheels,
             "worst-case" => ZetaModel::WorstCase,
             other => {
@@ -384,21 +391,26 @@ impl PyScenario {
                 )));
             }
         };
-        let probe = self.build(py, ov)?;
+        let ov = OverrideArgs {
+            dt: g.dt,
+            duration: g.duration,
+            ..OverrideArgs::default()
+        };
+        let probe = self.build(py, Some(&ov))?;
         let duration = probe.plan.steps() as f64 * probe.plan.config().dt;
         let grid = Grid {
-            zeta,
+            zeta: g.zeta.clone(),
             zeta_model,
-            wheel_diameter_ratio: ed,
-            wheelbase_ratio: eb,
-            slip,
-            fix_every,
-            seeds,
-            gamma,
-            transient: transient.unwrap_or(0.5 * duration),
+            wheel_diameter_ratio: g.ed.clone(),
+            wheelbase_ratio: g.eb.clone(),
+            slip: g.slip.clone(),
+            fix_every: g.fix_every.clone(),
+            seeds: g.seeds.clone(),
+            gamma: g.gamma,
+            transient: g.transient.unwrap_or(0.5 * duration),
         };
         grid.validate().map_err(|e| errors::param(&e))?;
-        Ok(grid)
+        Ok((grid, ov.resolve()?))
     }
 }
 

@@ -14,7 +14,7 @@ use echelon::formation::Leader;
 use echelon::model::{Input, State};
 
 use crate::errors;
-use crate::scenario::{PyScenario, overrides};
+use crate::scenario::{OverrideArgs, PyScenario};
 
 /// A running simulation of a scenario.
 #[pyclass(module = "echelon._echelon", name = "Simulation")]
@@ -89,18 +89,13 @@ fn commands_into(
 impl PySimulation {
     /// The simulation of `scenario` (under `echelon run`'s overrides) at `t = 0`.
     #[new]
-    #[pyo3(signature = (scenario, dt=None, duration=None, log_dt=None, law=None, seed=None))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (scenario, overrides=None))]
     fn new(
         py: Python<'_>,
         scenario: &PyScenario,
-        dt: Option<f64>,
-        duration: Option<f64>,
-        log_dt: Option<f64>,
-        law: Option<&str>,
-        seed: Option<u64>,
+        overrides: Option<OverrideArgs>,
     ) -> PyResult<Self> {
-        let run = scenario.build(py, &overrides(dt, duration, log_dt, law, seed)?)?;
+        let run = scenario.build(py, overrides.as_ref())?;
         let sim = run.simulation();
         let n = sim.agents().len();
         Ok(PySimulation {

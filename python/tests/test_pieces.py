@@ -170,3 +170,30 @@ def test_the_batch_engine_matches_the_simulator_on_a_scenario():
     last = run.trajectory[run.trajectory.t == run.trajectory.t.max()]
     np.testing.assert_allclose(out[:, 0], last["x"].to_numpy(), atol=1e-9)
     np.testing.assert_allclose(out[:, 1], last["y"].to_numpy(), atol=1e-9)
+
+
+def test_the_engine_releases_the_gil_while_stepping():
+    # A Python thread spinning on the GIL gets nothing done while an extension
+    # call holds it; it counts on while the engine steps.
+    import threading
+
+    e = echelon.BatchEngine.bench(20_000, dt=0.001)
+    ticks = 0
+    stop = threading.Event()
+    started = threading.Event()
+
+    def spin():
+        nonlocal ticks
+        started.set()
+        while not stop.is_set():
+            ticks += 1
+
+    t = threading.Thread(target=spin)
+    t.start()
+    started.wait()
+    before = ticks
+    e.run(400)
+    during = ticks - before
+    stop.set()
+    t.join()
+    assert during > 10_000, during

@@ -8,7 +8,7 @@ use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 
-use echelon::base::{VelocityBase, VelocityCommand};
+use echelon::base::{VelocityBase, VelocityCommand, VelocityRobot};
 use echelon::control::{self, Gains, LeaderMotion, Offset, Variant};
 use echelon::identify::{self, Log, Model};
 use echelon::kinematic::kinematic_law;
@@ -149,8 +149,8 @@ impl PySafetyFilters {
                 "period: {period} must be a finite number > 0"
             )));
         }
-        let base = VelocityBase::preset(base).ok_or_else(|| {
-            let names: Vec<&str> = VelocityBase::PRESETS.iter().map(|(n, _)| *n).collect();
+        let base = VelocityRobot::preset(base).map(|r| r.base()).ok_or_else(|| {
+            let names: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
             errors::value(format!(
                 "base: `{base}` is not a preset ({})",
                 names.join(", ")

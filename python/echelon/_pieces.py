@@ -27,8 +27,9 @@ def bound(
 
     Forward, with ``steps`` (``N``, odometry samples between fixes): the
     ultimate bound on ‖z‖. Inverse, with ``max_z`` (paper's law) or
-    ``max_e`` (kinematic law): the largest ``N`` that keeps it. The paper's
-    law needs ``kz`` and ``omega_max``: ``z_bound = √2 K_e N ζ √(K_z² +
+    ``max_e`` (kinematic law): the largest ``N`` that keeps it. ``law`` is
+    ``"paper"`` (``echelon bound``'s ``dynamic``; ``"complete"`` is the same
+    bound) or ``"kinematic"``. The paper's law needs ``kz`` and ``omega_max``: ``z_bound = √2 K_e N ζ √(K_z² +
     ω_M²) / (K_z γ)``; the kinematic law's form is ``z_bound = √2 K_e N ζ``,
     ``e_bound = √2 N ζ / γ``. ``ts`` (the sample period, s) adds
     ``fix_period_s = N T_s``. Returns a dict of ``z_bound``, ``e_bound``,

@@ -149,13 +149,15 @@ impl PySafetyFilters {
                 "period: {period} must be a finite number > 0"
             )));
         }
-        let base = VelocityRobot::preset(base).map(|r| r.base()).ok_or_else(|| {
-            let names: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
-            errors::value(format!(
-                "base: `{base}` is not a preset ({})",
-                names.join(", ")
-            ))
-        })?;
+        let base = VelocityRobot::preset(base)
+            .map(|r| r.base())
+            .ok_or_else(|| {
+                let names: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
+                errors::value(format!(
+                    "base: `{base}` is not a preset ({})",
+                    names.join(", ")
+                ))
+            })?;
         let mut obs = Vec::new();
         if let Some(o) = obstacles {
             let a = o.as_array();
@@ -274,7 +276,7 @@ fn bound(
     }
     let period = |n: u64| ts.map(|t| t * n as f64);
     match law {
-        "paper" | "complete" => {
+        "paper" | "complete" | "dynamic" => {
             let (Some(kz), Some(omega_max)) = (kz, omega_max) else {
                 return Err(errors::value(
                     "the paper's law's bound needs kz and omega_max",

@@ -197,3 +197,20 @@ def test_the_engine_releases_the_gil_while_stepping():
     stop.set()
     t.join()
     assert during > 10_000, during
+
+
+@pytest.mark.parametrize(
+    "args, kwargs",
+    [
+        (["--zeta", "1e-5", "--omega-max", "0.2", "--steps", "100"], {"kz": 10.0, "omega_max": 0.2, "steps": 100}),
+        (["--zeta", "1e-5", "--omega-max", "0.2", "--max-z", "0.01"], {"kz": 10.0, "omega_max": 0.2, "max_z": 0.01}),
+        (["--zeta", "1e-5", "--steps", "100", "--law", "kinematic"], {"steps": 100, "law": "kinematic"}),
+        (["--zeta", "1e-5", "--max-e", "0.003", "--law", "kinematic"], {"max_e": 0.003, "law": "kinematic"}),
+    ],
+)
+def test_bound_is_echelon_bound(echelon_cli, args, kwargs):
+    import json
+    import subprocess
+
+    out = subprocess.run([str(echelon_cli), "bound", *args, "--json"], check=True, capture_output=True, text=True)
+    assert echelon.bound(1.5, 1e-5, **kwargs) == json.loads(out.stdout)

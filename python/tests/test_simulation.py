@@ -77,15 +77,16 @@ def test_law_commands_helper_is_the_same_loop():
 
 
 def test_limits_apply_to_python_commands():
-    # A huge torque command saturates: the same as any command beyond the limit.
+    # TurtleBot 3 bases: a (v, ω) command beyond their speed and acceleration
+    # limits moves them as any other beyond the limits does, within them.
     s = echelon.Scenario.builtin("turtlebot-circle", duration=0.1)
-    sim = echelon.Simulation(s)
-    if sim.agents[0]["drive"] == "torque":
-        pytest.skip("turtlebot-circle is expected on velocity bases")
     big, bigger = echelon.Simulation(s), echelon.Simulation(s)
-    big.step(np.full((sim.n, 2), 100.0))
-    bigger.step(np.full((sim.n, 2), 1000.0))
+    assert {a["drive"] for a in big.agents} == {"velocity"}
+    for _ in range(20):
+        big.step(np.full((big.n, 2), 100.0))
+        bigger.step(np.full((big.n, 2), 1000.0))
     np.testing.assert_array_equal(big.poses, bigger.poses)
+    assert np.all(np.abs(big.poses[:, 3]) <= 0.22 + 1e-12)  # v_max of a Burger, m/s
 
 
 def test_bad_commands_are_refused():

@@ -29,7 +29,9 @@ pub use machine::Collector;
 pub use report::{AgentRecord, CollectorReport};
 pub use schema::{COMMAND, REJECTED, STATS};
 pub use sink::{FileSink, RecordSink};
-pub use task::{CollectorOptions, CollectorTask, run, run_recording, run_with_ros2};
+pub use task::{
+    CollectorOptions, CollectorTask, Recording, run, run_recording, run_with, run_with_ros2,
+};
 
 /// The MCAP file the collector writes.
 pub const MCAP_FILE: &str = "fleet.mcap";

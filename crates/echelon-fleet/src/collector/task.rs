@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use echelon::output::TrajectoryRows;
+use echelon_mcap::scene::SceneSpec;
 
 use super::{Collector, CollectorReport, FileSink, SUMMARY_FILE};
 use crate::clock::FleetClock;
@@ -160,10 +161,39 @@ pub fn run_recording(
     trajectory: TrajectoryRows,
     stop: &StopFlag,
 ) -> Result<CollectorReport, FleetError> {
+    let recording = Recording {
+        ros,
+        trajectory,
+        ..Recording::default()
+    };
+    run_with(opts, recording, stop)
+}
+
+/// What the collector records beyond the fleet's keys, and how.
+#[derive(Debug, Clone, Default)]
+pub struct Recording {
+    /// ROS 2 topics to record ([`run_with_ros2`]).
+    pub ros: Vec<RosTopic>,
+    /// The columns of `trajectory.csv` ([`FileSink::with_trajectory`]).
+    pub trajectory: TrajectoryRows,
+    /// The scenario's scene: with it, `fleet.mcap` also carries the 3D
+    /// channels ([`echelon_mcap::scene`], [`FileSink::with_scene`]).
+    pub scene: Option<SceneSpec>,
+}
+
+/// The collector recording `recording`: [`CollectorTask`] on the fleet runtime.
+pub fn run_with(
+    opts: CollectorOptions,
+    recording: Recording,
+    stop: &StopFlag,
+) -> Result<CollectorReport, FleetError> {
     let keys = Keys::new(&opts.fleet);
-    let collector =
-        Collector::with_ros2(keys, ros).map_err(|e| FleetError::Config(e.to_string()))?;
-    let sink = FileSink::with_trajectory(&opts.out, trajectory)?;
+    let collector = Collector::with_ros2(keys, recording.ros)
+        .map_err(|e| FleetError::Config(e.to_string()))?;
+    let mut sink = FileSink::with_trajectory(&opts.out, recording.trajectory)?;
+    if let Some(spec) = &recording.scene {
+        sink = sink.with_scene(spec)?;
+    }
     let task = CollectorTask::new(collector, sink, opts.out, opts.max_wall);
     runtime::run(task, &opts.net, FleetClock::new(1.0), stop)
 }

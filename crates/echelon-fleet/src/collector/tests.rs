@@ -5,6 +5,7 @@ use echelon::csv::CsvWriter;
 use echelon::output::TrajectoryRows;
 use echelon::sample::AgentSample;
 use echelon::stats::Summary;
+use echelon_mcap::scene::ScenePose;
 use echelon_mcap::{JsonSchema, REFERENCE_TOPIC, nanos};
 
 use super::{Collector, CollectorReport, REJECTED_TOPIC, RecordSink};
@@ -19,6 +20,7 @@ struct Memory {
     logged: Vec<(String, u64, u64, Vec<u8>)>,
     rows: Vec<String>,
     trajectory: TrajectoryRows,
+    poses: Vec<(u32, ScenePose)>,
 }
 
 impl RecordSink for Memory {
@@ -63,6 +65,11 @@ impl RecordSink for Memory {
             .map_err(FleetError::io(std::path::Path::new("row")))?;
         let text = String::from_utf8_lossy(&bytes);
         self.rows.push(text.trim_start_matches('\n').to_owned());
+        Ok(())
+    }
+
+    fn pose(&mut self, k: u32, pose: &ScenePose, _: u64, _: u64) -> Result<(), FleetError> {
+        self.poses.push((k, *pose));
         Ok(())
     }
 }

@@ -493,7 +493,10 @@ mod tests {
             if schema.encoding != "jsonschema" {
                 // The 3D channels: Foxglove's schemas, checked in scene's tests.
                 assert_eq!(
-                    (schema.encoding.as_str(), m.channel.message_encoding.as_str()),
+                    (
+                        schema.encoding.as_str(),
+                        m.channel.message_encoding.as_str()
+                    ),
                     ("protobuf", "protobuf")
                 );
                 *scene_counts.entry(m.channel.topic.clone()).or_default() += 1;

@@ -138,7 +138,9 @@ impl SceneSpec {
     /// reference sampled at up to [`PATH_POINTS`] instants over the run.
     pub fn of(plan: &Plan) -> SceneSpec {
         let duration = plan.config().duration;
-        let n = PATH_POINTS.min((duration / plan.config().dt).ceil() as usize + 1).max(2);
+        let n = PATH_POINTS
+            .min((duration / plan.config().dt).ceil() as usize + 1)
+            .max(2);
         let path = (0..n)
             .map(|i| {
                 let t = duration * i as f64 / (n - 1) as f64;
@@ -575,10 +577,32 @@ mod tests {
         let mut scene = Scene::new(&spec(vec![Leader::Reference], None));
         channels.fixed(&mut log, &mut scene, 0.5, 7).unwrap();
         scene
-            .set(1, &ScenePose { t: 0.5, p: [1.0, 2.0], theta: 0.3, e: [0.0; 2], leader: [0.0; 2] })
+            .set(
+                1,
+                &ScenePose {
+                    t: 0.5,
+                    p: [1.0, 2.0],
+                    theta: 0.3,
+                    e: [0.0; 2],
+                    leader: [0.0; 2],
+                },
+            )
             .unwrap();
         channels.robot(&mut log, &scene, 1, 8, 9).unwrap();
-        assert!(scene.set(2, &ScenePose { t: 0.5, p: [0.0; 2], theta: 0.0, e: [0.0; 2], leader: [0.0; 2] }).is_none());
+        assert!(
+            scene
+                .set(
+                    2,
+                    &ScenePose {
+                        t: 0.5,
+                        p: [0.0; 2],
+                        theta: 0.0,
+                        e: [0.0; 2],
+                        leader: [0.0; 2]
+                    }
+                )
+                .is_none()
+        );
         let bytes = log.finish().unwrap().into_inner();
         let mut topics = Vec::new();
         for m in mcap::MessageStream::new(&bytes).unwrap() {

@@ -188,8 +188,8 @@ pub fn run_with(
     stop: &StopFlag,
 ) -> Result<CollectorReport, FleetError> {
     let keys = Keys::new(&opts.fleet);
-    let collector = Collector::with_ros2(keys, recording.ros)
-        .map_err(|e| FleetError::Config(e.to_string()))?;
+    let collector =
+        Collector::with_ros2(keys, recording.ros).map_err(|e| FleetError::Config(e.to_string()))?;
     let mut sink = FileSink::with_trajectory(&opts.out, recording.trajectory)?;
     if let Some(spec) = &recording.scene {
         sink = sink.with_scene(spec)?;

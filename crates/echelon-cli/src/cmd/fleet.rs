@@ -232,6 +232,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     ros,
                     trajectory,
                     scene,
+                    foxglove: a.foxglove,
                 },
                 &stop,
             )?;

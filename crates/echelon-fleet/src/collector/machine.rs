@@ -74,6 +74,7 @@ impl Collector {
                 latency: LatencyReport::default(),
                 latency_by_key: BTreeMap::new(),
                 agents: Vec::new(),
+                live: None,
             },
             agents: BTreeMap::new(),
             latency: Latency::new(),

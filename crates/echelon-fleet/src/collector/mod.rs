@@ -17,6 +17,7 @@
 //! the wrong type (key) or with an invalid CDR payload is refused: counted
 //! and logged on `/rejected` instead.
 
+mod live;
 mod machine;
 mod report;
 mod schema;
@@ -25,6 +26,7 @@ mod task;
 #[cfg(test)]
 mod tests;
 
+pub use live::{BACKLOG, DEFAULT_ADDR, LiveFeed, LiveReport, QUEUE};
 pub use machine::Collector;
 pub use report::{AgentRecord, CollectorReport};
 pub use schema::{COMMAND, REJECTED, STATS};

@@ -1,13 +1,15 @@
 //! The collector on the fleet runtime: [`CollectorTask`] and its Zenoh
 //! drivers ([`run`], [`run_with_ros2`], [`run_recording`]).
 
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
 
 use echelon::output::TrajectoryRows;
 use echelon_mcap::scene::SceneSpec;
 
-use super::{Collector, CollectorReport, FileSink, SUMMARY_FILE};
+use super::live::Tee;
+use super::{Collector, CollectorReport, FileSink, LiveFeed, SUMMARY_FILE};
 use crate::clock::FleetClock;
 use crate::keys::Keys;
 use crate::net::NetOptions;
@@ -36,6 +38,8 @@ pub struct CollectorOptions {
 pub struct CollectorTask {
     collector: Collector,
     sink: FileSink,
+    /// With `--foxglove`: the live feed, fed everything the files get.
+    live: Option<LiveFeed>,
     out: PathBuf,
     /// Stop at this time of its clock (real time), s.
     until: f64,
@@ -68,10 +72,17 @@ impl CollectorTask {
         CollectorTask {
             collector,
             sink,
+            live: None,
             out,
             until: max_wall.map_or(f64::INFINITY, |m| m.as_secs_f64()),
             wall: unix_nanos,
         }
+    }
+
+    /// Also feeds everything it records to `live`.
+    pub fn with_live(mut self, live: LiveFeed) -> CollectorTask {
+        self.live = Some(live);
+        self
     }
 }
 
@@ -100,9 +111,15 @@ impl Task for CollectorTask {
         let now = (self.wall)();
         if input == FLEET {
             self.collector.record_delay(s.key, s.delay);
-            return self
-                .collector
-                .on_message(s.key, s.payload, now, &mut self.sink);
+            return match self.live.as_mut() {
+                Some(live) => {
+                    let mut tee = Tee(&mut self.sink, live);
+                    self.collector.on_message(s.key, s.payload, now, &mut tee)
+                }
+                None => self
+                    .collector
+                    .on_message(s.key, s.payload, now, &mut self.sink),
+            };
         }
         // A ROS 2 publisher stamps its attachment, not the sample.
         let delay = s.delay.or_else(|| {
@@ -110,8 +127,17 @@ impl Task for CollectorTask {
             (sent > 0).then(|| s.unix_ns as i64 - sent as i64)
         });
         self.collector.record_delay(s.key, delay);
-        self.collector
-            .on_ros_sample(s.key, s.payload, s.attachment, now, &mut self.sink)
+        match self.live.as_mut() {
+            Some(live) => {
+                let mut tee = Tee(&mut self.sink, live);
+                self.collector
+                    .on_ros_sample(s.key, s.payload, s.attachment, now, &mut tee)
+            }
+            None => {
+                self.collector
+                    .on_ros_sample(s.key, s.payload, s.attachment, now, &mut self.sink)
+            }
+        }
     }
 
     fn next_wake(&self) -> f64 {
@@ -128,7 +154,8 @@ impl Task for CollectorTask {
 
     fn report(self) -> Result<CollectorReport, FleetError> {
         let mut sink = self.sink;
-        let report = self.collector.finish();
+        let mut report = self.collector.finish();
+        report.live = self.live.map(LiveFeed::finish).transpose()?;
         sink.latency_metadata(&report)?;
         sink.finish()?;
         crate::write_json_file(&self.out.join(SUMMARY_FILE), &report)?;
@@ -179,6 +206,9 @@ pub struct Recording {
     /// The scenario's scene: with it, `fleet.mcap` also carries the 3D
     /// channels ([`echelon_mcap::scene`], [`FileSink::with_scene`]).
     pub scene: Option<SceneSpec>,
+    /// Serve the live fleet to Foxglove on this address ([`LiveFeed`];
+    /// port 0: any free port, named on stderr and in the report).
+    pub foxglove: Option<SocketAddr>,
 }
 
 /// The collector recording `recording`: [`CollectorTask`] on the fleet runtime.
@@ -194,6 +224,11 @@ pub fn run_with(
     if let Some(spec) = &recording.scene {
         sink = sink.with_scene(spec)?;
     }
-    let task = CollectorTask::new(collector, sink, opts.out, opts.max_wall);
+    let mut task = CollectorTask::new(collector, sink, opts.out, opts.max_wall);
+    if let Some(addr) = recording.foxglove {
+        let live = LiveFeed::start(addr, recording.scene.as_ref())?;
+        eprintln!("foxglove: the live fleet at {}", live.address());
+        task = task.with_live(live);
+    }
     runtime::run(task, &opts.net, FleetClock::new(1.0), stop)
 }

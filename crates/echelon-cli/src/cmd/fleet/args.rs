@@ -277,6 +277,9 @@ pub(crate) struct CollectorArgs {
     /// Also record every agent's ROS 2 cmd_vel and odom ([fleet.ros2]) as ROS 2 channels.
     #[arg(long, requires = "scenario")]
     pub(super) ros2: bool,
+    /// Serve the live fleet to Foxglove (its WebSocket protocol) on ADDR [default: 127.0.0.1:8765; port 0: any free port]: every channel of fleet.mcap, 3D ones with the scenario (docs/foxglove.md).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_ADDR)]
+    pub(super) foxglove: Option<std::net::SocketAddr>,
     #[command(flatten)]
     pub(super) net: NetArgs,
 }

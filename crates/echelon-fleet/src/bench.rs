@@ -307,6 +307,7 @@ pub fn run(
                 real: false,
                 topology: up::Topology::Router,
                 sites: 1,
+                foxglove: None,
             },
             stop,
         );

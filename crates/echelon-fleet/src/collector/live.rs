@@ -20,9 +20,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use echelon_mcap::JsonSchema;
-use echelon_mcap::scene::{
-    SCENE_STATIC_TOPIC, SCENE_TOPIC, Scene, ScenePose, SceneSpec, TF_TOPIC,
-};
+use echelon_mcap::scene::{SCENE_STATIC_TOPIC, SCENE_TOPIC, Scene, ScenePose, SceneSpec, TF_TOPIC};
 use foxglove::messages::{FrameTransforms, SceneUpdate};
 use foxglove::{Channel, Context, RawChannel, Schema, WebSocketServer};
 use serde::{Deserialize, Serialize};
@@ -140,7 +138,13 @@ impl LiveFeed {
         }
     }
 
-    fn message(&mut self, topic: &str, schema: impl FnOnce() -> (Schema, &'static str), log_time: u64, data: &[u8]) {
+    fn message(
+        &mut self,
+        topic: &str,
+        schema: impl FnOnce() -> (Schema, &'static str),
+        log_time: u64,
+        data: &[u8],
+    ) {
         if !self.announced.contains(topic) {
             let (schema, message_encoding) = schema();
             let item = Item::Channel {
@@ -202,7 +206,11 @@ impl RecordSink for LiveFeed {
         let ros = || {
             let s = topic.schema();
             (
-                Schema::new(s.name, echelon_mcap::ROS2MSG, s.definition.as_bytes().to_vec()),
+                Schema::new(
+                    s.name,
+                    echelon_mcap::ROS2MSG,
+                    s.definition.as_bytes().to_vec(),
+                ),
                 echelon_mcap::CDR,
             )
         };
@@ -341,7 +349,9 @@ fn serve(
                 }
             }
             Item::Pose { k, pose } => {
-                let Some(scene) = scene.as_mut() else { continue };
+                let Some(scene) = scene.as_mut() else {
+                    continue;
+                };
                 last_t = pose.t;
                 if scene.set(k, &pose).is_some()
                     && let Some((t, update)) = scene.robot(k)

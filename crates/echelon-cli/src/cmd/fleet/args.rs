@@ -334,6 +334,9 @@ pub(crate) struct UpArgs {
     /// Router topology: S routers linked to each other (sites on loopback), robots spread over them.
     #[arg(long, value_name = "S", default_value_t = 1)]
     pub(super) sites: usize,
+    /// Serve the live fleet to Foxglove (its WebSocket protocol) on ADDR [default: 127.0.0.1:8765; port 0: any free port]: the collector's channels and the 3D ones (docs/foxglove.md); the address is in DIR/endpoints.json.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_ADDR)]
+    pub(super) foxglove: Option<std::net::SocketAddr>,
     /// Print nothing but errors.
     #[arg(long, short)]
     pub(super) quiet: bool,

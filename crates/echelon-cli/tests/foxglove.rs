@@ -14,7 +14,7 @@ use serde_json::Value;
 
 mod common;
 
-use common::{check, echelon_ok};
+use common::{check, echelon_ok, one_fleet_at_a_time};
 
 /// Poses: the CSV and the 3D channels both carry the f64 values themselves
 /// (the CSV in shortest round-trip form, protobuf as doubles), so they agree
@@ -22,11 +22,14 @@ use common::{check, echelon_ok};
 const POSITION_TOLERANCE: f64 = 1e-9;
 const HEADING_TOLERANCE: f64 = 1e-9;
 
+fn script(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/foxglove").join(name)
+}
+
 /// `read_3d.py`'s JSON of `mcap`.
 fn read_3d(mcap: &Path) -> Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/foxglove/read_3d.py");
     let out = Command::new("python3")
-        .arg(&script)
+        .arg(script("read_3d.py"))
         .arg(mcap)
         .output()
         .unwrap_or_else(|e| panic!("python3: {e}"));
@@ -65,47 +68,59 @@ fn check_schemas(read: &Value) {
     }
 }
 
-/// Every state (t, agent, x, y, θ) has exactly one transform `world` →
-/// `robotK/base_link` stamped t with that position and heading, and one
-/// body entity at that position; there are no others.
+/// Robot `k` of an entity id or child frame `robotK…`.
+fn robot_of(id: &str) -> Option<u64> {
+    let rest = id.strip_prefix("robot")?;
+    let digits = rest.split('/').next()?;
+    digits.parse().ok()
+}
+
+/// Every state (t, agent, x, y, θ), in order per robot, has its transform
+/// `world` → `robotK/base_link` stamped t with that position and heading
+/// and its body at that position, in the same order; there are no others.
 fn check_poses(read: &Value, states: &[(f64, u64, f64, f64, f64)]) {
-    let key = |t: f64, k: u64| ((t * 1e9).round() as u64, k);
-    let mut tf = BTreeMap::new();
+    let mut tf: BTreeMap<u64, Vec<(f64, f64, f64, f64)>> = BTreeMap::new();
     for e in read["tf"].as_array().unwrap() {
         let frame = e[1].as_str().unwrap();
         assert_eq!(e[2], "world");
-        let k: u64 = frame
-            .strip_prefix("robot")
-            .and_then(|f| f.strip_suffix("/base_link"))
-            .unwrap_or_else(|| panic!("child frame {frame}"))
-            .parse()
-            .unwrap();
+        assert!(frame.ends_with("/base_link"), "{frame}");
+        let k = robot_of(frame).unwrap_or_else(|| panic!("child frame {frame}"));
         assert_eq!(num(&e[5]), 0.0);
-        let old = tf.insert(key(num(&e[0]), k), (num(&e[3]), num(&e[4]), num(&e[6])));
-        assert!(old.is_none(), "two transforms of robot {k} at {}", e[0]);
+        tf.entry(k)
+            .or_default()
+            .push((num(&e[0]), num(&e[3]), num(&e[4]), num(&e[6])));
     }
-    let mut bodies = BTreeMap::new();
+    let mut bodies: BTreeMap<u64, Vec<(f64, f64)>> = BTreeMap::new();
     for e in read["scene"].as_array().unwrap() {
         let id = e[1].as_str().unwrap();
         if let Some(k) = id.strip_prefix("robot").and_then(|k| k.parse::<u64>().ok()) {
-            bodies.insert(key(num(&e[0]), k), (num(&e[2]), num(&e[3])));
+            bodies.entry(k).or_default().push((num(&e[2]), num(&e[3])));
         }
     }
-    assert_eq!(tf.len(), states.len(), "one transform per state");
-    assert_eq!(bodies.len(), states.len(), "one body per state");
+    let mut by_robot: BTreeMap<u64, Vec<(f64, f64, f64, f64)>> = BTreeMap::new();
     for &(t, k, x, y, theta) in states {
-        let &(tx, ty, tyaw) = tf
-            .get(&key(t, k))
-            .unwrap_or_else(|| panic!("no transform of robot {k} at {t}"));
-        assert!(
-            (tx - x).abs() <= POSITION_TOLERANCE && (ty - y).abs() <= POSITION_TOLERANCE,
-            "robot {k} at {t}: transform ({tx}, {ty}), state ({x}, {y})"
-        );
-        assert!(
-            angle_diff(tyaw, theta).abs() <= HEADING_TOLERANCE,
-            "robot {k} at {t}: yaw {tyaw}, θ {theta}"
-        );
-        assert_eq!(bodies[&key(t, k)], (tx, ty));
+        by_robot.entry(k).or_default().push((t, x, y, theta));
+    }
+    assert_eq!(
+        tf.keys().collect::<Vec<_>>(),
+        by_robot.keys().collect::<Vec<_>>()
+    );
+    for (k, want) in &by_robot {
+        let (got, body) = (&tf[k], &bodies[k]);
+        assert_eq!(got.len(), want.len(), "robot {k}: one transform per state");
+        assert_eq!(body.len(), want.len(), "robot {k}: one body per state");
+        for ((&(tt, tx, ty, tyaw), &(t, x, y, theta)), &b) in got.iter().zip(want).zip(body) {
+            assert!((tt - t).abs() < 1e-9, "robot {k}: transform at {tt}, state at {t}");
+            assert!(
+                (tx - x).abs() <= POSITION_TOLERANCE && (ty - y).abs() <= POSITION_TOLERANCE,
+                "robot {k} at {t}: transform ({tx}, {ty}), state ({x}, {y})"
+            );
+            assert!(
+                angle_diff(tyaw, theta).abs() <= HEADING_TOLERANCE,
+                "robot {k} at {t}: yaw {tyaw}, θ {theta}"
+            );
+            assert_eq!(b, (tx, ty), "robot {k} at {t}: body");
+        }
     }
 }
 
@@ -153,10 +168,7 @@ fn run_mcap_3d_channels_are_foxglove_and_match_the_csv() {
     assert_eq!(read["static"], serde_json::json!(want));
     // Each leader link starts at its robot.
     for l in read["links"].as_array().unwrap() {
-        let k: u64 = l[1].as_str().unwrap()["robot".len()..]
-            .trim_end_matches("/link")
-            .parse()
-            .unwrap();
+        let k = robot_of(l[1].as_str().unwrap()).unwrap();
         let t = num(&l[0]);
         let s = states
             .iter()
@@ -164,4 +176,134 @@ fn run_mcap_3d_channels_are_foxglove_and_match_the_csv() {
             .unwrap();
         assert_eq!((num(&l[2]), num(&l[3])), (s.2, s.3));
     }
+}
+
+/// `fleet up` into `dir` with `extra` arguments; fleet-summary.json.
+fn up(dir: &Path, extra: &[&str]) -> Value {
+    echelon_ok(
+        &[
+            &[
+                "fleet",
+                "up",
+                "experiment-circle",
+                "--duration",
+                "20",
+                "--time-scale",
+                "5",
+                "--quiet",
+            ],
+            extra,
+            &["--out"],
+        ]
+        .concat(),
+        dir,
+    );
+    serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
+}
+
+/// `ws_client.py URL --seconds S [more]`, started now.
+fn viewer(url: &str, seconds: &str, more: &[&str]) -> std::process::Child {
+    Command::new("python3")
+        .arg(script("ws_client.py"))
+        .args([url, "--seconds", seconds])
+        .args(more)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+fn finished(child: std::process::Child, what: &str) -> Value {
+    let out = child.wait_with_output().unwrap();
+    check(&out, what);
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `fleet up --foxglove`: an independent client of Foxglove's WebSocket
+/// protocol (scripts/foxglove/ws_client.py) subscribes during the run and
+/// decodes every robot's transform and body at ≥ 10 Hz, on channels with
+/// Foxglove's schemas, next to the JSON ones; a second viewer subscribes
+/// and never reads: the fleet's latency stays what it is without viewers,
+/// and the collector counts what it could not hand over. fleet.mcap's 3D
+/// channels equal its `/agent/K/state` records.
+#[test]
+fn fleet_up_serves_foxglove_live_and_a_stalled_viewer_costs_nothing() {
+    let _fleet = one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let base = up(&dir.path().join("base"), &[]);
+
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let addr = format!("127.0.0.1:{port}");
+    let url = format!("ws://{addr}");
+    let stalled = viewer(&url, "6", &["--stall"]);
+    let reader = viewer(&url, "2", &[]);
+    let live_dir = dir.path().join("live");
+    let live = up(&live_dir, &["--foxglove", &addr]);
+    let read = finished(reader, "ws_client.py");
+    let _ = finished(stalled, "ws_client.py --stall");
+
+    let endpoints: Value =
+        serde_json::from_str(&std::fs::read_to_string(live_dir.join("endpoints.json")).unwrap())
+            .unwrap();
+    assert_eq!(endpoints["foxglove"], url.as_str());
+    let channels = &read["channels"];
+    for (topic, name) in [
+        ("/tf", "foxglove.FrameTransforms"),
+        ("/scene", "foxglove.SceneUpdate"),
+        ("/scene/static", "foxglove.SceneUpdate"),
+    ] {
+        assert_eq!(
+            channels[topic],
+            serde_json::json!(["protobuf", name, "protobuf", true]),
+            "{channels}"
+        );
+    }
+    let robots = live["robots"].as_array().unwrap().len();
+    assert!(robots >= 2);
+    for k in 1..=robots {
+        assert_eq!(channels[format!("/agent/{k}/state")][1], "echelon.AgentState");
+        for (what, rate) in [
+            ("transform", &read["tf"][format!("robot{k}/base_link")]),
+            ("body", &read["scene"][format!("robot{k}")]),
+            ("slot", &read["scene"][format!("robot{k}/slot")]),
+        ] {
+            assert!(num(&rate["rate"]) >= 10.0, "robot {k}'s {what}: {rate}");
+        }
+    }
+    assert_eq!(channels["/reference"][1], "echelon.Reference");
+
+    // The collector saw both viewers and counted every record it handed
+    // over or dropped.
+    let feed = &live["collector"]["live"];
+    assert!(feed["max_clients"].as_u64().unwrap() >= 2, "{feed}");
+    assert!(feed["queued"].as_u64().unwrap() > 0, "{feed}");
+    assert!(feed["dropped"].is_u64(), "{feed}");
+    assert!(base["collector"].get("live").is_none());
+    // The fleet's latency with two viewers, one stalled, is what it is
+    // without (a stated margin for a loaded 2-core machine: twice, plus 1 ms).
+    for who in ["collector", "robots"] {
+        for q in ["p50", "p95"] {
+            let (b, l) = (
+                num(&base["latency"][who][q]),
+                num(&live["latency"][who][q]),
+            );
+            assert!(l <= 2.0 * b + 1e-3, "{who} {q}: {l} s with viewers, {b} s without");
+        }
+    }
+
+    // fleet.mcap: one transform and body per recorded state, at its pose.
+    let read = read_3d(&live_dir.join("fleet.mcap"));
+    check_schemas(&read);
+    let states: Vec<(f64, u64, f64, f64, f64)> = read["states"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| (num(&s[0]), s[1].as_u64().unwrap(), num(&s[2]), num(&s[3]), num(&s[4])))
+        .collect();
+    assert!(states.len() > robots * 10);
+    check_poses(&read, &states);
 }

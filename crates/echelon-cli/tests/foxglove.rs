@@ -23,7 +23,9 @@ const POSITION_TOLERANCE: f64 = 1e-9;
 const HEADING_TOLERANCE: f64 = 1e-9;
 
 fn script(name: &str) -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/foxglove").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scripts/foxglove")
+        .join(name)
 }
 
 /// `read_3d.py`'s JSON of `mcap`.
@@ -110,7 +112,10 @@ fn check_poses(read: &Value, states: &[(f64, u64, f64, f64, f64)]) {
         assert_eq!(got.len(), want.len(), "robot {k}: one transform per state");
         assert_eq!(body.len(), want.len(), "robot {k}: one body per state");
         for ((&(tt, tx, ty, tyaw), &(t, x, y, theta)), &b) in got.iter().zip(want).zip(body) {
-            assert!((tt - t).abs() < 1e-9, "robot {k}: transform at {tt}, state at {t}");
+            assert!(
+                (tt - t).abs() < 1e-9,
+                "robot {k}: transform at {tt}, state at {t}"
+            );
             assert!(
                 (tx - x).abs() <= POSITION_TOLERANCE && (ty - y).abs() <= POSITION_TOLERANCE,
                 "robot {k} at {t}: transform ({tx}, {ty}), state ({x}, {y})"
@@ -166,6 +171,28 @@ fn run_mcap_3d_channels_are_foxglove_and_match_the_csv() {
     let mut want = vec!["reference".to_owned()];
     want.extend((1..=obstacles).map(|i| format!("obstacle/{i}")));
     assert_eq!(read["static"], serde_json::json!(want));
+    // docs/foxglove-layout.json draws these channels in `world` and plots a
+    // field the state records have.
+    let layout: Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/foxglove-layout.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let three_d = &layout["configById"]["3D!echelon"];
+    assert_eq!(three_d["followTf"], "world");
+    for topic in three_d["topics"].as_object().unwrap().keys() {
+        assert!(read["schemas"].get(topic).is_some(), "{topic}");
+    }
+    let schema = echelon_mcap::AGENT_STATE.schema.to_string();
+    for p in layout["configById"]["Plot!echelon"]["paths"]
+        .as_array()
+        .unwrap()
+    {
+        let field = p["value"].as_str().unwrap().rsplit('.').next().unwrap();
+        assert!(schema.contains(&format!("\"{field}\"")), "{field}");
+    }
     // Each leader link starts at its robot.
     for l in read["links"].as_array().unwrap() {
         let k = robot_of(l[1].as_str().unwrap()).unwrap();
@@ -265,7 +292,10 @@ fn fleet_up_serves_foxglove_live_and_a_stalled_viewer_costs_nothing() {
     let robots = live["robots"].as_array().unwrap().len();
     assert!(robots >= 2);
     for k in 1..=robots {
-        assert_eq!(channels[format!("/agent/{k}/state")][1], "echelon.AgentState");
+        assert_eq!(
+            channels[format!("/agent/{k}/state")][1],
+            "echelon.AgentState"
+        );
         for (what, rate) in [
             ("transform", &read["tf"][format!("robot{k}/base_link")]),
             ("body", &read["scene"][format!("robot{k}")]),
@@ -287,11 +317,11 @@ fn fleet_up_serves_foxglove_live_and_a_stalled_viewer_costs_nothing() {
     // without (a stated margin for a loaded 2-core machine: twice, plus 1 ms).
     for who in ["collector", "robots"] {
         for q in ["p50", "p95"] {
-            let (b, l) = (
-                num(&base["latency"][who][q]),
-                num(&live["latency"][who][q]),
+            let (b, l) = (num(&base["latency"][who][q]), num(&live["latency"][who][q]));
+            assert!(
+                l <= 2.0 * b + 1e-3,
+                "{who} {q}: {l} s with viewers, {b} s without"
             );
-            assert!(l <= 2.0 * b + 1e-3, "{who} {q}: {l} s with viewers, {b} s without");
         }
     }
 
@@ -302,7 +332,15 @@ fn fleet_up_serves_foxglove_live_and_a_stalled_viewer_costs_nothing() {
         .as_array()
         .unwrap()
         .iter()
-        .map(|s| (num(&s[0]), s[1].as_u64().unwrap(), num(&s[2]), num(&s[3]), num(&s[4])))
+        .map(|s| {
+            (
+                num(&s[0]),
+                s[1].as_u64().unwrap(),
+                num(&s[2]),
+                num(&s[3]),
+                num(&s[4]),
+            )
+        })
         .collect();
     assert!(states.len() > robots * 10);
     check_poses(&read, &states);

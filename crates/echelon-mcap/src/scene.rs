@@ -80,6 +80,21 @@ fn pose(x: f64, y: f64, z: f64, theta: f64) -> Pose {
     }
 }
 
+/// An upright cylinder of `diameter` and `height` centred at `(x, y, z)`.
+fn cylinder(x: f64, y: f64, z: f64, diameter: f64, height: f64, color: Color) -> CylinderPrimitive {
+    CylinderPrimitive {
+        pose: Some(pose(x, y, z, 0.0)),
+        size: Some(Vector3 {
+            x: diameter,
+            y: diameter,
+            z: height,
+        }),
+        bottom_scale: 1.0,
+        top_scale: 1.0,
+        color: Some(color),
+    }
+}
+
 const fn rgba(r: f64, g: f64, b: f64, a: f64) -> Color {
     Color { r, g, b, a }
 }
@@ -225,17 +240,7 @@ impl Scene {
                     format!("robot{k}"),
                     vec![kv("agent", k.to_string()), kv("leader", leader)],
                 );
-                body.cylinders = vec![CylinderPrimitive {
-                    pose: Some(pose(0.0, 0.0, 0.025, 0.0)),
-                    size: Some(Vector3 {
-                        x: 2.0 * BODY_RADIUS,
-                        y: 2.0 * BODY_RADIUS,
-                        z: 0.05,
-                    }),
-                    bottom_scale: 1.0,
-                    top_scale: 1.0,
-                    color: Some(color),
-                }];
+                body.cylinders = vec![cylinder(0.0, 0.0, 0.025, 2.0 * BODY_RADIUS, 0.05, color)];
                 body.arrows = vec![ArrowPrimitive {
                     pose: Some(pose(0.0, 0.0, 0.06, 0.0)),
                     shaft_length: 1.5 * BODY_RADIUS,
@@ -275,17 +280,8 @@ impl Scene {
                 let mut entities = vec![body, slot, link];
                 if let Some(r) = spec.safety_radius {
                     let mut safety = entity(format!("robot{k}/safety"), Vec::new());
-                    safety.cylinders = vec![CylinderPrimitive {
-                        pose: Some(pose(0.0, 0.0, 0.001, 0.0)),
-                        size: Some(Vector3 {
-                            x: 2.0 * r,
-                            y: 2.0 * r,
-                            z: 0.002,
-                        }),
-                        bottom_scale: 1.0,
-                        top_scale: 1.0,
-                        color: Some(rgba(0.9, 0.2, 0.2, 0.15)),
-                    }];
+                    let red = rgba(0.9, 0.2, 0.2, 0.15);
+                    safety.cylinders = vec![cylinder(0.0, 0.0, 0.001, 2.0 * r, 0.002, red)];
                     entities.push(safety);
                 }
                 SceneUpdate {
@@ -311,17 +307,7 @@ impl Scene {
         let mut fixed = vec![path];
         for (i, &[x, y, r]) in spec.obstacles.iter().enumerate() {
             let mut o = entity(format!("obstacle/{}", i + 1), Vec::new());
-            o.cylinders = vec![CylinderPrimitive {
-                pose: Some(pose(x, y, 0.1, 0.0)),
-                size: Some(Vector3 {
-                    x: 2.0 * r,
-                    y: 2.0 * r,
-                    z: 0.2,
-                }),
-                bottom_scale: 1.0,
-                top_scale: 1.0,
-                color: Some(rgba(0.3, 0.3, 0.3, 0.9)),
-            }];
+            o.cylinders = vec![cylinder(x, y, 0.1, 2.0 * r, 0.2, rgba(0.3, 0.3, 0.3, 0.9))];
             fixed.push(o);
         }
         Scene {

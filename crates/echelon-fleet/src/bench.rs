@@ -308,6 +308,7 @@ pub fn run(
                 topology: up::Topology::Router,
                 sites: 1,
                 foxglove: None,
+                dashboard: None,
             },
             stop,
         );

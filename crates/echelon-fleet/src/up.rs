@@ -98,6 +98,9 @@ pub struct UpOptions {
     /// Serve the live fleet to Foxglove on this address: the collector's
     /// `--foxglove` ([`crate::collector::LiveFeed`]).
     pub foxglove: Option<std::net::SocketAddr>,
+    /// Serve the live dashboard on this address: the collector's
+    /// `--dashboard` ([`crate::collector::Dashboard`]).
+    pub dashboard: Option<std::net::SocketAddr>,
 }
 
 /// `fleet up --ros2 --real`'s refusals, before anything starts: real robots
@@ -233,6 +236,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     if let Some(addr) = opts.foxglove {
         endpoints.insert("foxglove".into(), format!("ws://{addr}").into());
     }
+    if let Some(addr) = opts.dashboard {
+        endpoints.insert("dashboard".into(), format!("http://{addr}/").into());
+    }
     crate::write_json_file(&opts.out.join(ENDPOINTS_FILE), &endpoints)?;
     let mut sites = vec![Vec::new(); net.routers.len()];
     for i in 0..=leader_at {
@@ -278,6 +284,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     }
     if let Some(addr) = opts.foxglove {
         args.extend(["--foxglove".to_owned(), addr.to_string()]);
+    }
+    if let Some(addr) = opts.dashboard {
+        args.extend(["--dashboard".to_owned(), addr.to_string()]);
     }
     args.extend(common(0, &Member::Collector.identity()));
     let mut collector = spawn(&opts.exe, Role::Collector.name(), &args, &logs)?;

@@ -233,6 +233,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     trajectory,
                     scene,
                     foxglove: a.foxglove,
+                    dashboard: a.dashboard,
                 },
                 &stop,
             )?;

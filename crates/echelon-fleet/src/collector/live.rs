@@ -37,6 +37,8 @@ pub const BACKLOG: usize = 1024;
 const FIXED_EVERY: Duration = Duration::from_secs(1);
 /// Foxglove's default WebSocket address.
 pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
+/// The dashboard's default address.
+pub const DEFAULT_DASHBOARD: &str = "127.0.0.1:8766";
 
 /// What the live feed did (`collector.json`'s `live`).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]

@@ -17,6 +17,7 @@
 //! the wrong type (key) or with an invalid CDR payload is refused: counted
 //! and logged on `/rejected` instead.
 
+mod dashboard;
 mod live;
 mod machine;
 mod report;
@@ -26,7 +27,8 @@ mod task;
 #[cfg(test)]
 mod tests;
 
-pub use live::{BACKLOG, DEFAULT_ADDR, LiveFeed, LiveReport, QUEUE};
+pub use dashboard::{Dashboard, TICK as DASHBOARD_TICK};
+pub use live::{BACKLOG, DEFAULT_ADDR, DEFAULT_DASHBOARD, LiveFeed, LiveReport, QUEUE};
 pub use machine::Collector;
 pub use report::{AgentRecord, CollectorReport};
 pub use schema::{COMMAND, REJECTED, STATS};

@@ -8,9 +8,12 @@ use std::time::Duration;
 use echelon::output::TrajectoryRows;
 use echelon_mcap::scene::SceneSpec;
 
+use super::dashboard::{Dashboard, TICK};
 use super::live::Tee;
 use super::{Collector, CollectorReport, FileSink, LiveFeed, SUMMARY_FILE};
 use crate::clock::FleetClock;
+use crate::command::{FleetCommand, Latch};
+use crate::keys::KeyKind;
 use crate::keys::Keys;
 use crate::net::NetOptions;
 use crate::role::Member;
@@ -40,6 +43,11 @@ pub struct CollectorTask {
     sink: FileSink,
     /// With `--foxglove`: the live feed, fed everything the files get.
     live: Option<LiveFeed>,
+    /// With `--dashboard`: its buttons' orders, put at the next tick, and
+    /// the fleet's commands seen (for the next command's number).
+    dashboard: Option<(Dashboard, Latch)>,
+    /// The next tick while the dashboard runs, s.
+    next_poll: f64,
     out: PathBuf,
     /// Stop at this time of its clock (real time), s.
     until: f64,
@@ -73,10 +81,19 @@ impl CollectorTask {
             collector,
             sink,
             live: None,
+            dashboard: None,
+            next_poll: 0.0,
             out,
             until: max_wall.map_or(f64::INFINITY, |m| m.as_secs_f64()),
             wall: unix_nanos,
         }
+    }
+
+    /// Also puts the orders of `dashboard`'s buttons on the fleet's
+    /// command key (the fleet-wide stop and resume, [`crate::command`]).
+    pub fn with_dashboard(mut self, dashboard: Dashboard) -> CollectorTask {
+        self.dashboard = Some((dashboard, Latch::new()));
+        self
     }
 
     /// Also feeds everything it records to `live`.
@@ -96,7 +113,10 @@ impl Task for CollectorTask {
     }
 
     fn outputs(&self) -> Vec<String> {
-        Vec::new()
+        match self.dashboard {
+            Some(_) => vec![self.collector.keys.command()],
+            None => Vec::new(),
+        }
     }
 
     fn tokens(&self) -> Vec<String> {
@@ -111,6 +131,11 @@ impl Task for CollectorTask {
         let now = (self.wall)();
         if input == FLEET {
             self.collector.record_delay(s.key, s.delay);
+            if let Some((_, latch)) = self.dashboard.as_mut()
+                && self.collector.keys.classify(s.key) == KeyKind::Command
+            {
+                latch.on_payload(s.payload);
+            }
             return match self.live.as_mut() {
                 Some(live) => {
                     let mut tee = Tee(&mut self.sink, live);
@@ -141,10 +166,21 @@ impl Task for CollectorTask {
     }
 
     fn next_wake(&self) -> f64 {
-        self.until
+        match self.dashboard {
+            Some(_) => self.until.min(self.next_poll),
+            None => self.until,
+        }
     }
 
-    fn tick(&mut self, now: f64, _: &mut dyn Outputs) -> Result<Flow, FleetError> {
+    fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        if let Some((dashboard, latch)) = self.dashboard.as_mut() {
+            self.next_poll = now + TICK;
+            while let Some(order) = dashboard.order() {
+                let c = FleetCommand::new(order, latch.seq() + 1, "dashboard", "dashboard button");
+                out.publish(0, &c.encode())?;
+                latch.on_command(c);
+            }
+        }
         Ok(if now >= self.until {
             Flow::Stop
         } else {
@@ -209,6 +245,10 @@ pub struct Recording {
     /// Serve the live fleet to Foxglove on this address ([`LiveFeed`];
     /// port 0: any free port, named on stderr and in the report).
     pub foxglove: Option<SocketAddr>,
+    /// Serve the live dashboard on this address ([`Dashboard`]; needs the
+    /// scene; starts the Foxglove server on a free port if `foxglove` is
+    /// not given).
+    pub dashboard: Option<SocketAddr>,
 }
 
 /// The collector recording `recording`: [`CollectorTask`] on the fleet runtime.
@@ -225,9 +265,21 @@ pub fn run_with(
         sink = sink.with_scene(spec)?;
     }
     let mut task = CollectorTask::new(collector, sink, opts.out, opts.max_wall);
-    if let Some(addr) = recording.foxglove {
+    let foxglove = recording
+        .foxglove
+        .or_else(|| recording.dashboard.map(|d| SocketAddr::new(d.ip(), 0)));
+    if let Some(addr) = foxglove {
         let live = LiveFeed::start(addr, recording.scene.as_ref())?;
         eprintln!("foxglove: the live fleet at {}", live.address());
+        if let Some(at) = recording.dashboard {
+            let scene = recording
+                .scene
+                .as_ref()
+                .ok_or_else(|| FleetError::Config("--dashboard needs the scenario".into()))?;
+            let dashboard = Dashboard::start(at, live.address(), scene)?;
+            eprintln!("dashboard (operator): {}", dashboard.operator_url());
+            task = task.with_dashboard(dashboard);
+        }
         task = task.with_live(live);
     }
     runtime::run(task, &opts.net, FleetClock::new(1.0), stop)

@@ -80,6 +80,7 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             },
             sites: a.sites,
             foxglove: a.foxglove,
+            dashboard: a.dashboard,
         },
         &stop,
     )?;

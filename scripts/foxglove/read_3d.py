@@ -13,7 +13,8 @@ Prints one JSON object:
    "scene": [[t, entity id, x, y], ...]            (bodies, slots)
    "links": [[t, entity id, x0, y0, x1, y1], ...]
    "static": [entity ids of /scene/static],
-   "states": [[t, agent, x, y, theta], ...]}       (/agent/K/state JSON)
+   "states": [[t, agent, x, y, theta, log_time ns, u1, u2], ...]}
+                                                    (/agent/K/state JSON)
 t is the message's publish time in seconds.
 """
 
@@ -55,7 +56,8 @@ def main(path):
             if channel.message_encoding == "json":
                 if channel.topic.startswith("/agent/") and channel.topic.endswith("/state"):
                     r = json.loads(message.data)
-                    out["states"].append([r["t"], r["agent"], r["x"], r["y"], r["theta"]])
+                    out["states"].append([r["t"], r["agent"], r["x"], r["y"], r["theta"],
+                                          message.log_time, r["u1"], r["u2"]])
                 continue
             cls = TYPES.get(schema.name)
             if channel.topic not in out["schemas"]:

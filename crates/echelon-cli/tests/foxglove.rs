@@ -345,3 +345,114 @@ fn fleet_up_serves_foxglove_live_and_a_stalled_viewer_costs_nothing() {
     assert!(states.len() > robots * 10);
     check_poses(&read, &states);
 }
+
+/// `fleet up --dashboard` in headless Chromium (scripts/foxglove/
+/// dashboard_check.py over the DevTools protocol): the page draws every
+/// robot where the collector recorded it; opened without the operator
+/// token its Stop all is disabled and the server refuses the stop; opened
+/// with the token, pressing Stop all makes every robot command zero within
+/// 100 ms (the collector's receipt of the robot's state).
+#[test]
+fn the_dashboard_draws_the_fleet_and_its_stop_stops_every_robot() {
+    let _fleet = one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let addr = format!("127.0.0.1:{port}");
+    let out = dir.path().join("fleet");
+    let out_s = out.display().to_string();
+    let fleet = common::spawn(&[
+        "fleet",
+        "up",
+        "experiment-circle",
+        "--duration",
+        "30",
+        "--time-scale",
+        "2",
+        "--quiet",
+        "--dashboard",
+        &addr,
+        "--out",
+        &out_s,
+    ]);
+    // The operator URL, printed by the collector at start.
+    let log = out.join("logs/collector.log");
+    let started = std::time::Instant::now();
+    let token = loop {
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        if let Some(i) = text.find("?token=") {
+            break text[i + 7..].lines().next().unwrap().trim().to_owned();
+        }
+        assert!(
+            started.elapsed().as_secs() < 60,
+            "no operator URL in {text}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    let robots = 2;
+    let page = Command::new("python3")
+        .arg(script("dashboard_check.py"))
+        .args([&format!("http://{addr}/"), &token, &robots.to_string()])
+        .output()
+        .unwrap();
+    check(&page, "dashboard_check.py");
+    let page: Value = serde_json::from_slice(&page.stdout).unwrap();
+    let mut fleet = fleet;
+    assert!(fleet.0.wait().unwrap().success());
+
+    assert_eq!(page["errors"], serde_json::json!([]), "{page}");
+    assert_eq!(page["readonly"]["disabled"], true);
+    assert_eq!(page["readonly"]["status"], 403);
+    assert_eq!(page["stop"]["status"], 200);
+
+    let read = read_3d(&out.join("fleet.mcap"));
+    let states = read["states"].as_array().unwrap();
+    // Drawn where recorded: the disc's centre mapped back to the world is
+    // the state's position (to the canvas transform's rounding, 1e-9 m).
+    let samples = page["samples"].as_array().unwrap();
+    let mut seen: BTreeMap<u64, std::collections::BTreeSet<u64>> = BTreeMap::new();
+    for s in samples {
+        let (k, t) = (s[0].as_u64().unwrap(), num(&s[1]));
+        let state = states
+            .iter()
+            .find(|r| r[1].as_u64() == Some(k) && (num(&r[0]) - t).abs() < 1e-9)
+            .unwrap_or_else(|| panic!("robot {k} drawn at t = {t}, which it never reported"));
+        let (dx, dy) = (num(&s[2]) - num(&state[2]), num(&s[3]) - num(&state[3]));
+        assert!(
+            dx.hypot(dy) < 1e-9,
+            "robot {k} at {t}: drawn {s}, recorded {state}"
+        );
+        seen.entry(k).or_default().insert((t * 1e9) as u64);
+    }
+    assert_eq!(seen.len(), robots, "{seen:?}");
+    assert!(
+        seen.values().all(|ts| ts.len() >= 5),
+        "the drawing moved: {seen:?}"
+    );
+
+    // Stop all: every robot's command is zero within 100 ms, and stays zero.
+    let pressed = (num(&page["stop"]["pressed_ms"]) * 1e6) as u64;
+    for k in 1..=robots as u64 {
+        let after: Vec<&Value> = states
+            .iter()
+            .filter(|r| r[1].as_u64() == Some(k) && r[5].as_u64().unwrap() > pressed)
+            .collect();
+        let first_zero = after
+            .iter()
+            .find(|r| num(&r[6]) == 0.0 && num(&r[7]) == 0.0)
+            .unwrap_or_else(|| panic!("robot {k} never commanded zero after the press"));
+        let within = (first_zero[5].as_u64().unwrap() - pressed) as f64 * 1e-9;
+        assert!(within <= 0.1, "robot {k}: zero {within} s after the press");
+        let late: Vec<_> = after
+            .iter()
+            .filter(|r| r[5].as_u64().unwrap() > pressed + 100_000_000)
+            .collect();
+        assert!(!late.is_empty());
+        for r in late {
+            assert_eq!((num(&r[6]), num(&r[7])), (0.0, 0.0), "robot {k}: {r}");
+        }
+    }
+}

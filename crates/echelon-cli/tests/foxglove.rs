@@ -54,9 +54,9 @@ fn num(v: &Value) -> f64 {
 
 /// The 3D channels' schemas are Foxglove's well-known ones: protobuf, named
 /// as Foxglove names them, and defining the messages exactly as Foxglove's
-/// published classes do.
-fn check_schemas(read: &Value) {
-    let schemas = &read["schemas"];
+/// published classes do (`schemas`: topic → [message encoding, schema name,
+/// schema encoding, same definition]).
+fn check_schemas(schemas: &Value) {
     for (topic, name) in [
         ("/tf", "foxglove.FrameTransforms"),
         ("/scene", "foxglove.SceneUpdate"),
@@ -149,7 +149,7 @@ fn run_mcap_3d_channels_are_foxglove_and_match_the_csv() {
         &out,
     );
     let read = read_3d(&out.join("run.mcap"));
-    check_schemas(&read);
+    check_schemas(&read["schemas"]);
     let csv = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
     let states: Vec<(f64, u64, f64, f64, f64)> = csv
         .lines()
@@ -203,6 +203,12 @@ fn run_mcap_3d_channels_are_foxglove_and_match_the_csv() {
             .unwrap();
         assert_eq!((num(&l[2]), num(&l[3])), (s.2, s.3));
     }
+}
+
+/// A free loopback address, `127.0.0.1:PORT`.
+fn free_addr() -> String {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    l.local_addr().unwrap().to_string()
 }
 
 /// `fleet up` into `dir` with `extra` arguments; fleet-summary.json.
@@ -259,12 +265,7 @@ fn fleet_up_serves_foxglove_live_and_a_stalled_viewer_costs_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let base = up(&dir.path().join("base"), &[]);
 
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let addr = format!("127.0.0.1:{port}");
+    let addr = free_addr();
     let url = format!("ws://{addr}");
     let stalled = viewer(&url, "6", &["--stall"]);
     let reader = viewer(&url, "2", &[]);
@@ -278,17 +279,7 @@ fn fleet_up_serves_foxglove_live_and_a_stalled_viewer_costs_nothing() {
             .unwrap();
     assert_eq!(endpoints["foxglove"], url.as_str());
     let channels = &read["channels"];
-    for (topic, name) in [
-        ("/tf", "foxglove.FrameTransforms"),
-        ("/scene", "foxglove.SceneUpdate"),
-        ("/scene/static", "foxglove.SceneUpdate"),
-    ] {
-        assert_eq!(
-            channels[topic],
-            serde_json::json!(["protobuf", name, "protobuf", true]),
-            "{channels}"
-        );
-    }
+    check_schemas(channels);
     let robots = live["robots"].as_array().unwrap().len();
     assert!(robots >= 2);
     for k in 1..=robots {
@@ -327,7 +318,7 @@ fn fleet_up_serves_foxglove_live_and_a_stalled_viewer_costs_nothing() {
 
     // fleet.mcap: one transform and body per recorded state, at its pose.
     let read = read_3d(&live_dir.join("fleet.mcap"));
-    check_schemas(&read);
+    check_schemas(&read["schemas"]);
     let states: Vec<(f64, u64, f64, f64, f64)> = read["states"]
         .as_array()
         .unwrap()
@@ -356,12 +347,7 @@ fn fleet_up_serves_foxglove_live_and_a_stalled_viewer_costs_nothing() {
 fn the_dashboard_draws_the_fleet_and_its_stop_stops_every_robot() {
     let _fleet = one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let addr = format!("127.0.0.1:{port}");
+    let addr = free_addr();
     let out = dir.path().join("fleet");
     let out_s = out.display().to_string();
     let fleet = common::spawn(&[

@@ -356,3 +356,52 @@ fn rejected(report: &CollectorReport) -> Vec<(&str, u64)> {
         .map(|(r, n)| (r.as_str(), *n))
         .collect()
 }
+
+/// Each valid robot state, started or waiting, is shown on the 3D channels
+/// once: at its position and heading, with its `e`, linked to the leader
+/// point its law used; states that are rejected are not shown.
+#[test]
+fn each_valid_state_is_shown_at_its_pose_linked_to_its_leader_point() {
+    let keys = Keys::new("f");
+    let mut c = Collector::new(keys.clone());
+    let mut sink = Memory::default();
+    let state = |agent, link, x: f64| {
+        let mut b = Vec::new();
+        let s = RobotState {
+            t: 1.5,
+            agent,
+            link,
+            state: echelon::State {
+                x,
+                y: -2.0,
+                theta: 0.7,
+                v: 0.1,
+                omega: 0.0,
+            },
+            e: [0.1, -0.2],
+            leader: LeaderMotion {
+                p: [3.0, 4.0],
+                ..LeaderMotion::default()
+            },
+            ..RobotState::default()
+        };
+        wire::encode_state(&mut b, Header { source: 2, seq: 0 }, &s);
+        b
+    };
+    let inputs = [
+        (keys.state(1), state(1, LinkStatus::Tracking, 1.0)),
+        (keys.state(2), state(2, LinkStatus::Waiting, 2.0)),
+        (keys.state(2), state(1, LinkStatus::Tracking, 9.0)),
+    ];
+    for (key, bytes) in &inputs {
+        c.on_message(key, bytes, 5, &mut sink).unwrap();
+    }
+    let want = |x| ScenePose {
+        t: 1.5,
+        p: [x, -2.0],
+        theta: 0.7,
+        e: [0.1, -0.2],
+        leader: [3.0, 4.0],
+    };
+    assert_eq!(sink.poses, [(1, want(1.0)), (2, want(2.0))]);
+}

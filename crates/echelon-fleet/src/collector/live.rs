@@ -7,12 +7,14 @@
 //! Backpressure: the collector hands each record to [`LiveFeed`] with a
 //! non-blocking send into a bounded queue ([`QUEUE`] records); when the
 //! queue is full the record is dropped and counted ([`LiveReport::dropped`]),
-//! so a slow server thread never slows the collector. The server thread
+//! so a slow server thread never slows the collector. Message buffers go
+//! back to the collector once served, so a warm feed does not allocate per
+//! record. The server thread
 //! feeds the `foxglove` crate's server, whose queue per viewer is bounded
 //! too ([`BACKLOG`] messages, the oldest dropped when a viewer does not
 //! read), so a stalled viewer never slows it either.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
@@ -56,15 +58,17 @@ pub struct LiveReport {
 
 /// One record for the server thread.
 enum Item {
-    /// A channel, before its first message.
+    /// Channel `id`, before its first message.
     Channel {
+        id: usize,
         topic: String,
         schema: Schema,
         message_encoding: String,
     },
-    /// A message on a channel already announced, received at UNIX ns.
+    /// A message on channel `id` (already announced), received at UNIX ns;
+    /// its buffer goes back to the collector once served.
     Message {
-        topic: String,
+        id: usize,
         log_time: u64,
         data: Vec<u8>,
     },
@@ -76,7 +80,11 @@ enum Item {
 /// to the server thread, which owns the WebSocket server.
 pub struct LiveFeed {
     tx: Option<SyncSender<Item>>,
-    announced: BTreeSet<String>,
+    /// Channel ids by topic, once announced.
+    announced: BTreeMap<String, usize>,
+    /// Message buffers the server thread gave back (at most [`QUEUE`] in
+    /// use at once): no allocation per record once warm.
+    free: Receiver<Vec<u8>>,
     report: LiveReport,
     thread: Option<JoinHandle<Result<u64, FleetError>>>,
 }
@@ -95,10 +103,11 @@ impl LiveFeed {
     pub fn start(addr: SocketAddr, scene: Option<&SceneSpec>) -> Result<LiveFeed, FleetError> {
         let (tx, rx) = sync_channel(QUEUE);
         let (ready_tx, ready_rx) = sync_channel(1);
+        let (free_tx, free) = sync_channel(QUEUE);
         let scene = scene.map(Scene::new);
         let thread = std::thread::Builder::new()
             .name("foxglove".into())
-            .spawn(move || serve(addr, scene, &rx, &ready_tx))
+            .spawn(move || serve(addr, scene, &rx, &ready_tx, &free_tx))
             .map_err(|e| FleetError::Config(format!("foxglove: no thread: {e}")))?;
         let bound = match ready_rx.recv() {
             Ok(bound) => bound,
@@ -111,7 +120,8 @@ impl LiveFeed {
         };
         Ok(LiveFeed {
             tx: Some(tx),
-            announced: BTreeSet::new(),
+            announced: BTreeMap::new(),
+            free,
             report: LiveReport {
                 address: format!("ws://{bound}"),
                 ..LiveReport::default()
@@ -147,22 +157,31 @@ impl LiveFeed {
         log_time: u64,
         data: &[u8],
     ) {
-        if !self.announced.contains(topic) {
-            let (schema, message_encoding) = schema();
-            let item = Item::Channel {
-                topic: topic.to_owned(),
-                schema,
-                message_encoding: message_encoding.to_owned(),
-            };
-            if !self.send(item) {
-                return;
+        let id = match self.announced.get(topic) {
+            Some(&id) => id,
+            None => {
+                let id = self.announced.len();
+                let (schema, message_encoding) = schema();
+                let item = Item::Channel {
+                    id,
+                    topic: topic.to_owned(),
+                    schema,
+                    message_encoding: message_encoding.to_owned(),
+                };
+                if !self.send(item) {
+                    return;
+                }
+                self.announced.insert(topic.to_owned(), id);
+                id
             }
-            self.announced.insert(topic.to_owned());
-        }
+        };
+        let mut buf = self.free.try_recv().unwrap_or_default();
+        buf.clear();
+        buf.extend_from_slice(data);
         self.send(Item::Message {
-            topic: topic.to_owned(),
+            id,
             log_time,
-            data: data.to_vec(),
+            data: buf,
         });
     }
 
@@ -282,6 +301,7 @@ fn serve(
     mut scene: Option<Scene>,
     rx: &Receiver<Item>,
     ready: &SyncSender<SocketAddr>,
+    free: &SyncSender<Vec<u8>>,
 ) -> Result<u64, FleetError> {
     let failed = |e: &dyn std::fmt::Display| FleetError::Config(format!("foxglove {addr}: {e}"));
     // One worker: the server must not take the fleet's cores.
@@ -302,7 +322,7 @@ fn serve(
         .map_err(|e| failed(&e))?;
     let bound = SocketAddr::new(addr.ip(), server.port());
     let _ = ready.send(bound);
-    let mut channels: BTreeMap<String, Arc<RawChannel>> = BTreeMap::new();
+    let mut channels: Vec<Option<Arc<RawChannel>>> = Vec::new();
     let tf: Channel<FrameTransforms> = ctx.channel_builder(TF_TOPIC).build();
     let scene_channel: Channel<SceneUpdate> = ctx.channel_builder(SCENE_TOPIC).build();
     let fixed_channel: Channel<SceneUpdate> = ctx.channel_builder(SCENE_STATIC_TOPIC).build();
@@ -324,6 +344,7 @@ fn serve(
         };
         match item {
             Item::Channel {
+                id,
                 topic,
                 schema,
                 message_encoding,
@@ -334,14 +355,13 @@ fn serve(
                     .schema(schema)
                     .build_raw()
                     .map_err(|e| failed(&e))?;
-                channels.insert(topic, channel);
+                if channels.len() <= id {
+                    channels.resize(id + 1, None);
+                }
+                channels[id] = Some(channel);
             }
-            Item::Message {
-                topic,
-                log_time,
-                data,
-            } => {
-                if let Some(channel) = channels.get(&topic) {
+            Item::Message { id, log_time, data } => {
+                if let Some(Some(channel)) = channels.get(id) {
                     channel.log_with_meta(
                         &data,
                         foxglove::PartialMetadata {
@@ -349,6 +369,8 @@ fn serve(
                         },
                     );
                 }
+                // The buffer back to the collector (dropped if it has enough).
+                let _ = free.try_send(data);
             }
             Item::Pose { k, pose } => {
                 let Some(scene) = scene.as_mut() else {

@@ -307,6 +307,8 @@ pub fn run(
                 real: false,
                 topology: up::Topology::Router,
                 sites: 1,
+                foxglove: None,
+                dashboard: None,
             },
             stop,
         );

@@ -95,6 +95,12 @@ pub struct UpOptions {
     pub topology: Topology,
     /// Router topology: the number of sites (routers), ≥ 1.
     pub sites: usize,
+    /// Serve the live fleet to Foxglove on this address: the collector's
+    /// `--foxglove` ([`crate::collector::LiveFeed`]).
+    pub foxglove: Option<std::net::SocketAddr>,
+    /// Serve the live dashboard on this address: the collector's
+    /// `--dashboard` ([`crate::collector::Dashboard`]).
+    pub dashboard: Option<std::net::SocketAddr>,
 }
 
 /// `fleet up --ros2 --real`'s refusals, before anything starts: real robots
@@ -227,6 +233,12 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             endpoints.insert(Role::Leader.name().into(), net.peer(leader_at).into());
         }
     }
+    if let Some(addr) = opts.foxglove {
+        endpoints.insert("foxglove".into(), format!("ws://{addr}").into());
+    }
+    if let Some(addr) = opts.dashboard {
+        endpoints.insert("dashboard".into(), format!("http://{addr}/").into());
+    }
     crate::write_json_file(&opts.out.join(ENDPOINTS_FILE), &endpoints)?;
     let mut sites = vec![Vec::new(); net.routers.len()];
     for i in 0..=leader_at {
@@ -269,6 +281,12 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // Real robots' ROS topics stay on their own routers, out of its reach.
     if opts.ros2 && !opts.real {
         args.push("--ros2".to_owned());
+    }
+    if let Some(addr) = opts.foxglove {
+        args.extend(["--foxglove".to_owned(), addr.to_string()]);
+    }
+    if let Some(addr) = opts.dashboard {
+        args.extend(["--dashboard".to_owned(), addr.to_string()]);
     }
     args.extend(common(0, &Member::Collector.identity()));
     let mut collector = spawn(&opts.exe, Role::Collector.name(), &args, &logs)?;

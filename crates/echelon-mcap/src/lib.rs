@@ -13,6 +13,7 @@
 //! |---|---|---|
 //! | `/reference` | `echelon.Reference` | the virtual leader: `p_d`, `ṗ_d`, `p̈_d`, `V_d`, `ω_d` |
 //! | `/agent/K/state` | `echelon.AgentState` | agent K (from 1): the `trajectory.csv` row, plus, in a fleet, sequence, link status and the leader motion the robot used |
+//! | `/tf`, `/scene`, `/scene/static` | `foxglove.FrameTransforms`, `foxglove.SceneUpdate` (protobuf) | the 3D channels ([`scene`]): each robot's pose, body, slot, leader link and safety circle; the reference path and obstacles |
 //!
 //! Times: `publish_time` is the run's (or fleet's) time `t` in nanoseconds;
 //! `log_time` is `t` too for a simulation, the collector's UNIX receive time for
@@ -27,6 +28,7 @@
 pub mod bag;
 mod observer;
 mod records;
+pub mod scene;
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -58,6 +60,9 @@ pub enum McapLogError {
     /// A record could not be serialised.
     #[error("JSON: {0}")]
     Json(#[from] serde_json::Error),
+    /// A Foxglove message could not be encoded.
+    #[error("Foxglove message: {0}")]
+    Encode(String),
     /// A topic already has a channel of another schema.
     #[error("topic `{topic}` already has schema `{registered}`, not `{requested}`")]
     TopicSchema {
@@ -83,9 +88,9 @@ pub fn nanos(t: f64) -> u64 {
 pub struct McapLog<W: Write + Seek> {
     writer: mcap::Writer<W>,
     /// By (schema encoding, name).
-    schemas: BTreeMap<(&'static str, &'static str), u16>,
+    schemas: BTreeMap<(String, String), u16>,
     /// By topic: channel id and schema name.
-    channels: BTreeMap<String, (u16, &'static str)>,
+    channels: BTreeMap<String, (u16, String)>,
     messages: u64,
 }
 
@@ -162,36 +167,52 @@ impl<W: Write + Seek> McapLog<W> {
         self.add_channel(topic, schema.name, schema_id, CDR, metadata)
     }
 
+    /// The channel id of `topic` carrying Foxglove's well-known message
+    /// type `T` (e.g. `foxglove::messages::FrameTransforms`), registering
+    /// both on first use with the schema and message encoding the `foxglove`
+    /// crate gives (`protobuf`, its file descriptor set): what Foxglove's 3D
+    /// panel draws. A topic already registered with another schema is refused.
+    pub fn foxglove_channel<T: foxglove::Encode>(
+        &mut self,
+        topic: &str,
+    ) -> Result<u16, McapLogError> {
+        let schema = T::get_schema().ok_or_else(|| {
+            McapLogError::Encode(format!("{topic}: the message type has no schema"))
+        })?;
+        if let Some(id) = self.existing(topic, &schema.name)? {
+            return Ok(id);
+        }
+        let schema_id = self.schema(&schema.encoding, &schema.name, &schema.data)?;
+        let encoding = T::get_message_encoding();
+        self.add_channel(topic, &schema.name, schema_id, &encoding, BTreeMap::new())
+    }
+
     fn existing(&self, topic: &str, schema: &str) -> Result<Option<u16>, McapLogError> {
         match self.channels.get(topic) {
-            Some(&(id, registered)) if registered == schema => Ok(Some(id)),
-            Some(&(_, registered)) => Err(McapLogError::TopicSchema {
+            Some((id, registered)) if registered == schema => Ok(Some(*id)),
+            Some((_, registered)) => Err(McapLogError::TopicSchema {
                 topic: topic.to_owned(),
-                registered: registered.to_owned(),
+                registered: registered.clone(),
                 requested: schema.to_owned(),
             }),
             None => Ok(None),
         }
     }
 
-    fn schema(
-        &mut self,
-        encoding: &'static str,
-        name: &'static str,
-        data: &[u8],
-    ) -> Result<u16, McapLogError> {
-        if let Some(&id) = self.schemas.get(&(encoding, name)) {
+    fn schema(&mut self, encoding: &str, name: &str, data: &[u8]) -> Result<u16, McapLogError> {
+        let key = (encoding.to_owned(), name.to_owned());
+        if let Some(&id) = self.schemas.get(&key) {
             return Ok(id);
         }
         let id = self.writer.add_schema(name, encoding, data)?;
-        self.schemas.insert((encoding, name), id);
+        self.schemas.insert(key, id);
         Ok(id)
     }
 
     fn add_channel(
         &mut self,
         topic: &str,
-        schema_name: &'static str,
+        schema_name: &str,
         schema_id: u16,
         message_encoding: &str,
         metadata: BTreeMap<String, String>,
@@ -199,7 +220,8 @@ impl<W: Write + Seek> McapLog<W> {
         let id = self
             .writer
             .add_channel(schema_id, topic, message_encoding, &metadata)?;
-        self.channels.insert(topic.to_owned(), (id, schema_name));
+        self.channels
+            .insert(topic.to_owned(), (id, schema_name.to_owned()));
         Ok(id)
     }
 
@@ -464,9 +486,22 @@ mod tests {
         let steps = run.plan.steps();
         let frames = steps / every + 1 + u64::from(!steps.is_multiple_of(every));
         let mut counts: BTreeMap<String, u64> = BTreeMap::new();
+        let mut scene_counts: BTreeMap<String, u64> = BTreeMap::new();
         for m in mcap::MessageStream::new(&bytes).unwrap() {
             let m = m.unwrap();
             let schema = m.channel.schema.as_ref().unwrap();
+            if schema.encoding != "jsonschema" {
+                // The 3D channels: Foxglove's schemas, checked in scene's tests.
+                assert_eq!(
+                    (
+                        schema.encoding.as_str(),
+                        m.channel.message_encoding.as_str()
+                    ),
+                    ("protobuf", "protobuf")
+                );
+                *scene_counts.entry(m.channel.topic.clone()).or_default() += 1;
+                continue;
+            }
             let schema: Value = serde_json::from_slice(&schema.data).unwrap();
             let record: Value = serde_json::from_slice(&m.data).unwrap();
             conforms(&record, &schema, &m.channel.topic).unwrap();
@@ -478,10 +513,19 @@ mod tests {
         let agents = run.plan.agents().len();
         assert_eq!(counts.len(), agents + 1);
         assert!(counts.values().all(|&n| n == frames), "{counts:?}");
+        let agents = agents as u64;
+        assert_eq!(
+            scene_counts,
+            BTreeMap::from([
+                (scene::TF_TOPIC.to_owned(), frames * agents),
+                (scene::SCENE_TOPIC.to_owned(), frames * agents),
+                (scene::SCENE_STATIC_TOPIC.to_owned(), 1),
+            ])
+        );
         let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
         assert_eq!(
             summary.stats.unwrap().message_count,
-            frames * (agents as u64 + 1)
+            frames * (agents + 1) + 2 * frames * agents + 1
         );
     }
 

@@ -22,6 +22,7 @@ use echelon_fleet::role::Member;
 use echelon_fleet::ros2::RosTopic;
 use echelon_fleet::ros2::base::{self, BaseOptions};
 use echelon_fleet::router::{self, RouterOptions};
+use echelon_mcap::scene::SceneSpec;
 
 use super::out::outln;
 
@@ -218,15 +219,22 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             let trajectory = run.as_ref().map_or_else(TrajectoryRows::default, |r| {
                 TrajectoryRows::for_agents(r.plan.agents())
             });
-            let report = collector::run_recording(
+            // With the scenario, fleet.mcap also carries the 3D channels.
+            let scene = run.as_ref().map(|r| SceneSpec::of(&r.plan));
+            let report = collector::run_with(
                 CollectorOptions {
                     out: a.out,
                     fleet,
                     max_wall: None,
                     net,
                 },
-                ros,
-                trajectory,
+                collector::Recording {
+                    ros,
+                    trajectory,
+                    scene,
+                    foxglove: a.foxglove,
+                    dashboard: a.dashboard,
+                },
                 &stop,
             )?;
             print_report(&report)

@@ -51,7 +51,7 @@ pub(crate) struct RunArgs {
     /// Also draw the figures (paths, errors, signals as SVG and PNG) and report.html.
     #[arg(long)]
     plot: bool,
-    /// Also write DIR/run.mcap (JSON channels: /reference, /agent/K/state), like a fleet run.
+    /// Also write DIR/run.mcap (JSON channels: /reference, /agent/K/state; Foxglove's 3D channels /tf, /scene, /scene/static), like a fleet run.
     #[arg(long)]
     mcap: bool,
     /// Print nothing but errors.

@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
+use echelon_mcap::scene::ScenePose;
 use echelon_mcap::{
     AGENT_STATE, AgentStateRecord, JsonSchema, LeaderRecord, REFERENCE, REFERENCE_TOPIC,
     ReferenceRecord, agent_topic, nanos,
@@ -73,6 +74,7 @@ impl Collector {
                 latency: LatencyReport::default(),
                 latency_by_key: BTreeMap::new(),
                 agents: Vec::new(),
+                live: None,
             },
             agents: BTreeMap::new(),
             latency: Latency::new(),
@@ -276,6 +278,7 @@ impl Collector {
             nanos(s.t),
             &data,
         )?;
+        sink.pose(k, &ScenePose::of(&sample, s.leader.p), now, nanos(s.t))?;
         let a = self.agents.entry(k).or_insert_with(|| AgentRecord {
             agent: k,
             ..AgentRecord::default()

@@ -17,6 +17,8 @@
 //! the wrong type (key) or with an invalid CDR payload is refused: counted
 //! and logged on `/rejected` instead.
 
+mod dashboard;
+mod live;
 mod machine;
 mod report;
 mod schema;
@@ -25,11 +27,15 @@ mod task;
 #[cfg(test)]
 mod tests;
 
+pub use dashboard::{Dashboard, TICK as DASHBOARD_TICK};
+pub use live::{BACKLOG, DEFAULT_ADDR, DEFAULT_DASHBOARD, LiveFeed, LiveReport, QUEUE};
 pub use machine::Collector;
 pub use report::{AgentRecord, CollectorReport};
 pub use schema::{COMMAND, REJECTED, STATS};
 pub use sink::{FileSink, RecordSink};
-pub use task::{CollectorOptions, CollectorTask, run, run_recording, run_with_ros2};
+pub use task::{
+    CollectorOptions, CollectorTask, Recording, run, run_recording, run_with, run_with_ros2,
+};
 
 /// The MCAP file the collector writes.
 pub const MCAP_FILE: &str = "fleet.mcap";

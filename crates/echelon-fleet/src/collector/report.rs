@@ -80,4 +80,7 @@ pub struct CollectorReport {
     pub latency_by_key: BTreeMap<String, LatencyReport>,
     /// Per agent.
     pub agents: Vec<AgentRecord>,
+    /// With `--foxglove`: what the live feed served and dropped.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub live: Option<super::LiveReport>,
 }

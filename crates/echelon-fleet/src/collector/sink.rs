@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use echelon::csv::CsvWriter;
 use echelon::output::{FrameRows, TRAJECTORY_FILE, TrajectoryRows};
 use echelon::sample::AgentSample;
+use echelon_mcap::scene::{Scene, SceneChannels, ScenePose, SceneSpec};
 use echelon_mcap::{JsonSchema, McapLog};
 
 use super::{CollectorReport, LATENCY_METADATA, MCAP_FILE};
@@ -38,6 +39,16 @@ pub trait RecordSink {
     ) -> Result<(), FleetError>;
     /// Appends one `trajectory.csv` row.
     fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError>;
+    /// Shows robot `k` (from 1) at `pose` on the 3D channels
+    /// ([`echelon_mcap::scene`]), received at UNIX ns `log_time`, sent at
+    /// `publish_time`; nothing when the sink has no scene.
+    fn pose(
+        &mut self,
+        k: u32,
+        pose: &ScenePose,
+        log_time: u64,
+        publish_time: u64,
+    ) -> Result<(), FleetError>;
 }
 
 /// The collector's files: `fleet.mcap` and `trajectory.csv` in a directory.
@@ -47,6 +58,9 @@ pub struct FileSink {
     csv: CsvWriter<BufWriter<File>>,
     trajectory: TrajectoryRows,
     csv_path: PathBuf,
+    /// The 3D channels, when the scenario is known; whether the fixed
+    /// scene was written.
+    scene: Option<(Scene, SceneChannels, bool)>,
 }
 
 impl std::fmt::Debug for FileSink {
@@ -88,6 +102,29 @@ impl RecordSink for FileSink {
         self.trajectory
             .row(sample, &mut self.csv)
             .map_err(FleetError::io(&self.csv_path))
+    }
+
+    fn pose(
+        &mut self,
+        k: u32,
+        pose: &ScenePose,
+        log_time: u64,
+        publish_time: u64,
+    ) -> Result<(), FleetError> {
+        let Some((scene, channels, fixed_written)) = self.scene.as_mut() else {
+            return Ok(());
+        };
+        if scene.set(k, pose).is_none() {
+            // A robot the scenario does not have: its state is on
+            // `/agent/K/state` still; the scene has no place for it.
+            return Ok(());
+        }
+        if !*fixed_written {
+            *fixed_written = true;
+            channels.fixed(&mut self.log, scene, pose.t, log_time)?;
+        }
+        channels.robot(&mut self.log, scene, k, log_time, publish_time)?;
+        Ok(())
     }
 }
 
@@ -133,7 +170,17 @@ impl FileSink {
             csv,
             trajectory,
             csv_path,
+            scene: None,
         })
+    }
+
+    /// Also writes the 3D channels ([`echelon_mcap::scene`]) of `spec`'s
+    /// robots: each robot's transform and scene with each of its states,
+    /// the fixed scene once, with the first.
+    pub fn with_scene(mut self, spec: &SceneSpec) -> Result<FileSink, FleetError> {
+        let channels = SceneChannels::register(&mut self.log)?;
+        self.scene = Some((Scene::new(spec), channels, false));
+        Ok(self)
     }
 
     /// Writes the per-key latency summaries of `report` as the MCAP

@@ -1,13 +1,19 @@
 //! The collector on the fleet runtime: [`CollectorTask`] and its Zenoh
 //! drivers ([`run`], [`run_with_ros2`], [`run_recording`]).
 
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
 
 use echelon::output::TrajectoryRows;
+use echelon_mcap::scene::SceneSpec;
 
-use super::{Collector, CollectorReport, FileSink, SUMMARY_FILE};
+use super::dashboard::{Dashboard, TICK};
+use super::live::Tee;
+use super::{Collector, CollectorReport, FileSink, LiveFeed, SUMMARY_FILE};
 use crate::clock::FleetClock;
+use crate::command::{FleetCommand, Latch};
+use crate::keys::KeyKind;
 use crate::keys::Keys;
 use crate::net::NetOptions;
 use crate::role::Member;
@@ -35,6 +41,13 @@ pub struct CollectorOptions {
 pub struct CollectorTask {
     collector: Collector,
     sink: FileSink,
+    /// With `--foxglove`: the live feed, fed everything the files get.
+    live: Option<LiveFeed>,
+    /// With `--dashboard`: its buttons' orders, put at the next tick, and
+    /// the fleet's commands seen (for the next command's number).
+    dashboard: Option<(Dashboard, Latch)>,
+    /// The next tick while the dashboard runs, s.
+    next_poll: f64,
     out: PathBuf,
     /// Stop at this time of its clock (real time), s.
     until: f64,
@@ -67,10 +80,26 @@ impl CollectorTask {
         CollectorTask {
             collector,
             sink,
+            live: None,
+            dashboard: None,
+            next_poll: 0.0,
             out,
             until: max_wall.map_or(f64::INFINITY, |m| m.as_secs_f64()),
             wall: unix_nanos,
         }
+    }
+
+    /// Also puts the orders of `dashboard`'s buttons on the fleet's
+    /// command key (the fleet-wide stop and resume, [`crate::command`]).
+    pub fn with_dashboard(mut self, dashboard: Dashboard) -> CollectorTask {
+        self.dashboard = Some((dashboard, Latch::new()));
+        self
+    }
+
+    /// Also feeds everything it records to `live`.
+    pub fn with_live(mut self, live: LiveFeed) -> CollectorTask {
+        self.live = Some(live);
+        self
     }
 }
 
@@ -84,7 +113,10 @@ impl Task for CollectorTask {
     }
 
     fn outputs(&self) -> Vec<String> {
-        Vec::new()
+        match self.dashboard {
+            Some(_) => vec![self.collector.keys.command()],
+            None => Vec::new(),
+        }
     }
 
     fn tokens(&self) -> Vec<String> {
@@ -99,9 +131,20 @@ impl Task for CollectorTask {
         let now = (self.wall)();
         if input == FLEET {
             self.collector.record_delay(s.key, s.delay);
-            return self
-                .collector
-                .on_message(s.key, s.payload, now, &mut self.sink);
+            if let Some((_, latch)) = self.dashboard.as_mut()
+                && self.collector.keys.classify(s.key) == KeyKind::Command
+            {
+                latch.on_payload(s.payload);
+            }
+            return match self.live.as_mut() {
+                Some(live) => {
+                    let mut tee = Tee(&mut self.sink, live);
+                    self.collector.on_message(s.key, s.payload, now, &mut tee)
+                }
+                None => self
+                    .collector
+                    .on_message(s.key, s.payload, now, &mut self.sink),
+            };
         }
         // A ROS 2 publisher stamps its attachment, not the sample.
         let delay = s.delay.or_else(|| {
@@ -109,15 +152,35 @@ impl Task for CollectorTask {
             (sent > 0).then(|| s.unix_ns as i64 - sent as i64)
         });
         self.collector.record_delay(s.key, delay);
-        self.collector
-            .on_ros_sample(s.key, s.payload, s.attachment, now, &mut self.sink)
+        match self.live.as_mut() {
+            Some(live) => {
+                let mut tee = Tee(&mut self.sink, live);
+                self.collector
+                    .on_ros_sample(s.key, s.payload, s.attachment, now, &mut tee)
+            }
+            None => {
+                self.collector
+                    .on_ros_sample(s.key, s.payload, s.attachment, now, &mut self.sink)
+            }
+        }
     }
 
     fn next_wake(&self) -> f64 {
-        self.until
+        match self.dashboard {
+            Some(_) => self.until.min(self.next_poll),
+            None => self.until,
+        }
     }
 
-    fn tick(&mut self, now: f64, _: &mut dyn Outputs) -> Result<Flow, FleetError> {
+    fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        if let Some((dashboard, latch)) = self.dashboard.as_mut() {
+            self.next_poll = now + TICK;
+            while let Some(order) = dashboard.order() {
+                let c = FleetCommand::new(order, latch.seq() + 1, "dashboard", "dashboard button");
+                out.publish(0, &c.encode())?;
+                latch.on_command(c);
+            }
+        }
         Ok(if now >= self.until {
             Flow::Stop
         } else {
@@ -127,7 +190,8 @@ impl Task for CollectorTask {
 
     fn report(self) -> Result<CollectorReport, FleetError> {
         let mut sink = self.sink;
-        let report = self.collector.finish();
+        let mut report = self.collector.finish();
+        report.live = self.live.map(LiveFeed::finish).transpose()?;
         sink.latency_metadata(&report)?;
         sink.finish()?;
         crate::write_json_file(&self.out.join(SUMMARY_FILE), &report)?;
@@ -160,10 +224,63 @@ pub fn run_recording(
     trajectory: TrajectoryRows,
     stop: &StopFlag,
 ) -> Result<CollectorReport, FleetError> {
+    let recording = Recording {
+        ros,
+        trajectory,
+        ..Recording::default()
+    };
+    run_with(opts, recording, stop)
+}
+
+/// What the collector records beyond the fleet's keys, and how.
+#[derive(Debug, Clone, Default)]
+pub struct Recording {
+    /// ROS 2 topics to record ([`run_with_ros2`]).
+    pub ros: Vec<RosTopic>,
+    /// The columns of `trajectory.csv` ([`FileSink::with_trajectory`]).
+    pub trajectory: TrajectoryRows,
+    /// The scenario's scene: with it, `fleet.mcap` also carries the 3D
+    /// channels ([`echelon_mcap::scene`], [`FileSink::with_scene`]).
+    pub scene: Option<SceneSpec>,
+    /// Serve the live fleet to Foxglove on this address ([`LiveFeed`];
+    /// port 0: any free port, named on stderr and in the report).
+    pub foxglove: Option<SocketAddr>,
+    /// Serve the live dashboard on this address ([`Dashboard`]; needs the
+    /// scene; starts the Foxglove server on a free port if `foxglove` is
+    /// not given).
+    pub dashboard: Option<SocketAddr>,
+}
+
+/// The collector recording `recording`: [`CollectorTask`] on the fleet runtime.
+pub fn run_with(
+    opts: CollectorOptions,
+    recording: Recording,
+    stop: &StopFlag,
+) -> Result<CollectorReport, FleetError> {
     let keys = Keys::new(&opts.fleet);
     let collector =
-        Collector::with_ros2(keys, ros).map_err(|e| FleetError::Config(e.to_string()))?;
-    let sink = FileSink::with_trajectory(&opts.out, trajectory)?;
-    let task = CollectorTask::new(collector, sink, opts.out, opts.max_wall);
+        Collector::with_ros2(keys, recording.ros).map_err(|e| FleetError::Config(e.to_string()))?;
+    let mut sink = FileSink::with_trajectory(&opts.out, recording.trajectory)?;
+    if let Some(spec) = &recording.scene {
+        sink = sink.with_scene(spec)?;
+    }
+    let mut task = CollectorTask::new(collector, sink, opts.out, opts.max_wall);
+    let foxglove = recording
+        .foxglove
+        .or_else(|| recording.dashboard.map(|d| SocketAddr::new(d.ip(), 0)));
+    if let Some(addr) = foxglove {
+        let live = LiveFeed::start(addr, recording.scene.as_ref())?;
+        eprintln!("foxglove: the live fleet at {}", live.address());
+        if let Some(at) = recording.dashboard {
+            let scene = recording
+                .scene
+                .as_ref()
+                .ok_or_else(|| FleetError::Config("--dashboard needs the scenario".into()))?;
+            let dashboard = Dashboard::start(at, live.address(), scene)?;
+            eprintln!("dashboard (operator): {}", dashboard.operator_url());
+            task = task.with_dashboard(dashboard);
+        }
+        task = task.with_live(live);
+    }
     runtime::run(task, &opts.net, FleetClock::new(1.0), stop)
 }

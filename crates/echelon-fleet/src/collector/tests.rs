@@ -5,6 +5,7 @@ use echelon::csv::CsvWriter;
 use echelon::output::TrajectoryRows;
 use echelon::sample::AgentSample;
 use echelon::stats::Summary;
+use echelon_mcap::scene::ScenePose;
 use echelon_mcap::{JsonSchema, REFERENCE_TOPIC, nanos};
 
 use super::{Collector, CollectorReport, REJECTED_TOPIC, RecordSink};
@@ -19,6 +20,7 @@ struct Memory {
     logged: Vec<(String, u64, u64, Vec<u8>)>,
     rows: Vec<String>,
     trajectory: TrajectoryRows,
+    poses: Vec<(u32, ScenePose)>,
 }
 
 impl RecordSink for Memory {
@@ -63,6 +65,11 @@ impl RecordSink for Memory {
             .map_err(FleetError::io(std::path::Path::new("row")))?;
         let text = String::from_utf8_lossy(&bytes);
         self.rows.push(text.trim_start_matches('\n').to_owned());
+        Ok(())
+    }
+
+    fn pose(&mut self, k: u32, pose: &ScenePose, _: u64, _: u64) -> Result<(), FleetError> {
+        self.poses.push((k, *pose));
         Ok(())
     }
 }
@@ -348,4 +355,53 @@ fn rejected(report: &CollectorReport) -> Vec<(&str, u64)> {
         .iter()
         .map(|(r, n)| (r.as_str(), *n))
         .collect()
+}
+
+/// Each valid robot state, started or waiting, is shown on the 3D channels
+/// once: at its position and heading, with its `e`, linked to the leader
+/// point its law used; states that are rejected are not shown.
+#[test]
+fn each_valid_state_is_shown_at_its_pose_linked_to_its_leader_point() {
+    let keys = Keys::new("f");
+    let mut c = Collector::new(keys.clone());
+    let mut sink = Memory::default();
+    let state = |agent, link, x: f64| {
+        let mut b = Vec::new();
+        let s = RobotState {
+            t: 1.5,
+            agent,
+            link,
+            state: echelon::State {
+                x,
+                y: -2.0,
+                theta: 0.7,
+                v: 0.1,
+                omega: 0.0,
+            },
+            e: [0.1, -0.2],
+            leader: LeaderMotion {
+                p: [3.0, 4.0],
+                ..LeaderMotion::default()
+            },
+            ..RobotState::default()
+        };
+        wire::encode_state(&mut b, Header { source: 2, seq: 0 }, &s);
+        b
+    };
+    let inputs = [
+        (keys.state(1), state(1, LinkStatus::Tracking, 1.0)),
+        (keys.state(2), state(2, LinkStatus::Waiting, 2.0)),
+        (keys.state(2), state(1, LinkStatus::Tracking, 9.0)),
+    ];
+    for (key, bytes) in &inputs {
+        c.on_message(key, bytes, 5, &mut sink).unwrap();
+    }
+    let want = |x| ScenePose {
+        t: 1.5,
+        p: [x, -2.0],
+        theta: 0.7,
+        e: [0.1, -0.2],
+        leader: [3.0, 4.0],
+    };
+    assert_eq!(sink.poses, [(1, want(1.0)), (2, want(2.0))]);
 }

@@ -277,6 +277,12 @@ pub(crate) struct CollectorArgs {
     /// Also record every agent's ROS 2 cmd_vel and odom ([fleet.ros2]) as ROS 2 channels.
     #[arg(long, requires = "scenario")]
     pub(super) ros2: bool,
+    /// Serve the live fleet to Foxglove (its WebSocket protocol) on ADDR [default: 127.0.0.1:8765; port 0: any free port]: every channel of fleet.mcap, 3D ones with the scenario (docs/foxglove.md).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_ADDR)]
+    pub(super) foxglove: Option<std::net::SocketAddr>,
+    /// Serve the live dashboard page on ADDR [default: 127.0.0.1:8766]: the robots moving, per robot link, ‖e‖, safety, saturation, and Stop all / Resume for whoever opens it with the operator token printed at start (docs/foxglove.md).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_DASHBOARD)]
+    pub(super) dashboard: Option<std::net::SocketAddr>,
     #[command(flatten)]
     pub(super) net: NetArgs,
 }
@@ -331,6 +337,12 @@ pub(crate) struct UpArgs {
     /// Router topology: S routers linked to each other (sites on loopback), robots spread over them.
     #[arg(long, value_name = "S", default_value_t = 1)]
     pub(super) sites: usize,
+    /// Serve the live fleet to Foxglove (its WebSocket protocol) on ADDR [default: 127.0.0.1:8765; port 0: any free port]: the collector's channels and the 3D ones (docs/foxglove.md); the address is in DIR/endpoints.json.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_ADDR)]
+    pub(super) foxglove: Option<std::net::SocketAddr>,
+    /// Serve the live dashboard page on ADDR [default: 127.0.0.1:8766]: the robots moving, per robot link, ‖e‖, safety, saturation, and Stop all / Resume for whoever opens it with the operator token printed at start (docs/foxglove.md).
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_DASHBOARD)]
+    pub(super) dashboard: Option<std::net::SocketAddr>,
     /// Print nothing but errors.
     #[arg(long, short)]
     pub(super) quiet: bool,

@@ -79,6 +79,8 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
                 TopologyArg::Mesh => Topology::Mesh,
             },
             sites: a.sites,
+            foxglove: a.foxglove,
+            dashboard: a.dashboard,
         },
         &stop,
     )?;

@@ -1,0 +1,392 @@
+//! The live fleet in Foxglove (`fleet collector --foxglove ADDR`, `fleet up
+//! --foxglove`): what the collector records, served as it arrives through
+//! the `foxglove` crate's WebSocket server (Foxglove's WebSocket protocol,
+//! subprotocol `foxglove.sdk.v1`): the same channels as `fleet.mcap` (the
+//! JSON ones, the ROS 2 ones, and the 3D channels of [`echelon_mcap::scene`]).
+//!
+//! Backpressure: the collector hands each record to [`LiveFeed`] with a
+//! non-blocking send into a bounded queue ([`QUEUE`] records); when the
+//! queue is full the record is dropped and counted ([`LiveReport::dropped`]),
+//! so a slow server thread never slows the collector. Message buffers go
+//! back to the collector once served, so a warm feed does not allocate per
+//! record. The server thread
+//! feeds the `foxglove` crate's server, whose queue per viewer is bounded
+//! too ([`BACKLOG`] messages, the oldest dropped when a viewer does not
+//! read), so a stalled viewer never slows it either.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use echelon_mcap::JsonSchema;
+use echelon_mcap::scene::{SCENE_STATIC_TOPIC, SCENE_TOPIC, Scene, ScenePose, SceneSpec, TF_TOPIC};
+use foxglove::messages::{FrameTransforms, SceneUpdate};
+use foxglove::{Channel, Context, RawChannel, Schema, WebSocketServer};
+use serde::{Deserialize, Serialize};
+
+use super::RecordSink;
+use crate::FleetError;
+use crate::ros2::record::RosTopic;
+
+/// Records the collector may have queued for the server thread.
+pub const QUEUE: usize = 4096;
+/// Messages the server queues per viewer before dropping its oldest.
+pub const BACKLOG: usize = 1024;
+/// How often the fixed scene is sent again, for viewers that joined late.
+const FIXED_EVERY: Duration = Duration::from_secs(1);
+/// Foxglove's default WebSocket address.
+pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
+/// The dashboard's default address.
+pub const DEFAULT_DASHBOARD: &str = "127.0.0.1:8766";
+
+/// What the live feed did (`collector.json`'s `live`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LiveReport {
+    /// The server's address, `ws://HOST:PORT`.
+    pub address: String,
+    /// Records handed to the server thread.
+    pub queued: u64,
+    /// Records dropped because its queue was full.
+    pub dropped: u64,
+    /// Most viewers connected at once.
+    pub max_clients: u64,
+}
+
+/// One record for the server thread.
+enum Item {
+    /// Channel `id`, before its first message.
+    Channel {
+        id: usize,
+        topic: String,
+        schema: Schema,
+        message_encoding: String,
+    },
+    /// A message on channel `id` (already announced), received at UNIX ns;
+    /// its buffer goes back to the collector once served.
+    Message {
+        id: usize,
+        log_time: u64,
+        data: Vec<u8>,
+    },
+    /// Robot `k` moved.
+    Pose { k: u32, pose: ScenePose },
+}
+
+/// The collector's side of the live feed: a bounded, never blocking queue
+/// to the server thread, which owns the WebSocket server.
+pub struct LiveFeed {
+    tx: Option<SyncSender<Item>>,
+    /// Channel ids by topic, once announced.
+    announced: BTreeMap<String, usize>,
+    /// Message buffers the server thread gave back (at most [`QUEUE`] in
+    /// use at once): no allocation per record once warm.
+    free: Receiver<Vec<u8>>,
+    report: LiveReport,
+    thread: Option<JoinHandle<Result<u64, FleetError>>>,
+}
+
+impl std::fmt::Debug for LiveFeed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LiveFeed")
+            .field("report", &self.report)
+            .finish_non_exhaustive()
+    }
+}
+
+impl LiveFeed {
+    /// Starts the WebSocket server on `addr` (port 0: any free port) and its
+    /// thread; with `scene`, the 3D channels too. Returns once it listens.
+    pub fn start(addr: SocketAddr, scene: Option<&SceneSpec>) -> Result<LiveFeed, FleetError> {
+        let (tx, rx) = sync_channel(QUEUE);
+        let (ready_tx, ready_rx) = sync_channel(1);
+        let (free_tx, free) = sync_channel(QUEUE);
+        let scene = scene.map(Scene::new);
+        let thread = std::thread::Builder::new()
+            .name("foxglove".into())
+            .spawn(move || serve(addr, scene, &rx, &ready_tx, &free_tx))
+            .map_err(|e| FleetError::Config(format!("foxglove: no thread: {e}")))?;
+        let bound = match ready_rx.recv() {
+            Ok(bound) => bound,
+            Err(_) => {
+                return Err(match thread.join() {
+                    Ok(Err(e)) => e,
+                    _ => FleetError::Config("foxglove: the server thread ended".into()),
+                });
+            }
+        };
+        Ok(LiveFeed {
+            tx: Some(tx),
+            announced: BTreeMap::new(),
+            free,
+            report: LiveReport {
+                address: format!("ws://{bound}"),
+                ..LiveReport::default()
+            },
+            thread: Some(thread),
+        })
+    }
+
+    /// The server's address, `ws://HOST:PORT`.
+    pub fn address(&self) -> &str {
+        &self.report.address
+    }
+
+    /// Hands `item` over if there is room; counts it either way.
+    fn send(&mut self, item: Item) -> bool {
+        let Some(tx) = &self.tx else { return false };
+        match tx.try_send(item) {
+            Ok(()) => {
+                self.report.queued += 1;
+                true
+            }
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                self.report.dropped += 1;
+                false
+            }
+        }
+    }
+
+    fn message(
+        &mut self,
+        topic: &str,
+        schema: impl FnOnce() -> (Schema, &'static str),
+        log_time: u64,
+        data: &[u8],
+    ) {
+        let id = match self.announced.get(topic) {
+            Some(&id) => id,
+            None => {
+                let id = self.announced.len();
+                let (schema, message_encoding) = schema();
+                let item = Item::Channel {
+                    id,
+                    topic: topic.to_owned(),
+                    schema,
+                    message_encoding: message_encoding.to_owned(),
+                };
+                if !self.send(item) {
+                    return;
+                }
+                self.announced.insert(topic.to_owned(), id);
+                id
+            }
+        };
+        let mut buf = self.free.try_recv().unwrap_or_default();
+        buf.clear();
+        buf.extend_from_slice(data);
+        self.send(Item::Message {
+            id,
+            log_time,
+            data: buf,
+        });
+    }
+
+    /// Stops the server; what it did.
+    pub fn finish(mut self) -> Result<LiveReport, FleetError> {
+        self.tx = None;
+        if let Some(thread) = self.thread.take() {
+            let clients = thread
+                .join()
+                .map_err(|_| FleetError::Config("foxglove: the server thread panicked".into()))??;
+            self.report.max_clients = clients;
+        }
+        Ok(self.report.clone())
+    }
+}
+
+impl RecordSink for LiveFeed {
+    fn log(
+        &mut self,
+        topic: &str,
+        schema: &JsonSchema,
+        log_time: u64,
+        _publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        let json = || {
+            (
+                Schema::new(schema.name, "jsonschema", schema.schema.as_bytes().to_vec()),
+                "json",
+            )
+        };
+        self.message(topic, json, log_time, data);
+        Ok(())
+    }
+
+    fn log_ros(
+        &mut self,
+        topic: &RosTopic,
+        log_time: u64,
+        _publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        let ros = || {
+            let s = topic.schema();
+            (
+                Schema::new(
+                    s.name,
+                    echelon_mcap::ROS2MSG,
+                    s.definition.as_bytes().to_vec(),
+                ),
+                echelon_mcap::CDR,
+            )
+        };
+        self.message(topic.topic(), ros, log_time, data);
+        Ok(())
+    }
+
+    fn row(&mut self, _: &echelon::sample::AgentSample) -> Result<(), FleetError> {
+        Ok(())
+    }
+
+    fn pose(&mut self, k: u32, pose: &ScenePose, _: u64, _: u64) -> Result<(), FleetError> {
+        self.send(Item::Pose { k, pose: *pose });
+        Ok(())
+    }
+}
+
+/// Every record to both sinks: the files, then the live feed.
+pub(super) struct Tee<'a, A, B>(pub(super) &'a mut A, pub(super) &'a mut B);
+
+impl<A: RecordSink, B: RecordSink> RecordSink for Tee<'_, A, B> {
+    fn log(
+        &mut self,
+        topic: &str,
+        schema: &JsonSchema,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        self.0.log(topic, schema, log_time, publish_time, data)?;
+        self.1.log(topic, schema, log_time, publish_time, data)
+    }
+
+    fn log_ros(
+        &mut self,
+        topic: &RosTopic,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> Result<(), FleetError> {
+        self.0.log_ros(topic, log_time, publish_time, data)?;
+        self.1.log_ros(topic, log_time, publish_time, data)
+    }
+
+    fn row(&mut self, sample: &echelon::sample::AgentSample) -> Result<(), FleetError> {
+        self.0.row(sample)?;
+        self.1.row(sample)
+    }
+
+    fn pose(
+        &mut self,
+        k: u32,
+        pose: &ScenePose,
+        log_time: u64,
+        publish_time: u64,
+    ) -> Result<(), FleetError> {
+        self.0.pose(k, pose, log_time, publish_time)?;
+        self.1.pose(k, pose, log_time, publish_time)
+    }
+}
+
+/// The server thread: the WebSocket server on `addr` (its bound address
+/// sent on `ready`), fed from `rx` until the collector hangs up; returns
+/// the most viewers seen at once.
+fn serve(
+    addr: SocketAddr,
+    mut scene: Option<Scene>,
+    rx: &Receiver<Item>,
+    ready: &SyncSender<SocketAddr>,
+    free: &SyncSender<Vec<u8>>,
+) -> Result<u64, FleetError> {
+    let failed = |e: &dyn std::fmt::Display| FleetError::Config(format!("foxglove {addr}: {e}"));
+    // One worker: the server must not take the fleet's cores.
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .thread_name("foxglove-ws")
+        .enable_all()
+        .build()
+        .map_err(|e| failed(&e))?;
+    let ctx = Context::new();
+    let server = WebSocketServer::new()
+        .name("echelon")
+        .context(&ctx)
+        .bind(addr.ip().to_string(), addr.port())
+        .message_backlog_size(BACKLOG)
+        .tokio_runtime(runtime.handle())
+        .start_blocking()
+        .map_err(|e| failed(&e))?;
+    let bound = SocketAddr::new(addr.ip(), server.port());
+    let _ = ready.send(bound);
+    let mut channels: Vec<Option<Arc<RawChannel>>> = Vec::new();
+    let tf: Channel<FrameTransforms> = ctx.channel_builder(TF_TOPIC).build();
+    let scene_channel: Channel<SceneUpdate> = ctx.channel_builder(SCENE_TOPIC).build();
+    let fixed_channel: Channel<SceneUpdate> = ctx.channel_builder(SCENE_STATIC_TOPIC).build();
+    let mut fixed_sent: Option<Instant> = None;
+    let mut last_t = 0.0;
+    let mut max_clients = 0u64;
+    loop {
+        max_clients = max_clients.max(server.client_count() as u64);
+        if let Some(scene) = scene.as_mut()
+            && fixed_sent.is_none_or(|at| at.elapsed() >= FIXED_EVERY)
+        {
+            fixed_sent = Some(Instant::now());
+            fixed_channel.log(scene.fixed(last_t));
+        }
+        let item = match rx.recv_timeout(FIXED_EVERY) {
+            Ok(item) => item,
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        match item {
+            Item::Channel {
+                id,
+                topic,
+                schema,
+                message_encoding,
+            } => {
+                let channel = ctx
+                    .channel_builder(topic.as_str())
+                    .message_encoding(message_encoding)
+                    .schema(schema)
+                    .build_raw()
+                    .map_err(|e| failed(&e))?;
+                if channels.len() <= id {
+                    channels.resize(id + 1, None);
+                }
+                channels[id] = Some(channel);
+            }
+            Item::Message { id, log_time, data } => {
+                if let Some(Some(channel)) = channels.get(id) {
+                    channel.log_with_meta(
+                        &data,
+                        foxglove::PartialMetadata {
+                            log_time: Some(log_time),
+                        },
+                    );
+                }
+                // The buffer back to the collector (dropped if it has enough).
+                let _ = free.try_send(data);
+            }
+            Item::Pose { k, pose } => {
+                let Some(scene) = scene.as_mut() else {
+                    continue;
+                };
+                last_t = pose.t;
+                if scene.set(k, &pose).is_some()
+                    && let Some((t, update)) = scene.robot(k)
+                {
+                    tf.log(t);
+                    scene_channel.log(update);
+                }
+            }
+        }
+    }
+    server.stop().wait_blocking();
+    drop(runtime);
+    Ok(max_clients)
+}

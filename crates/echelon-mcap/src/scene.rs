@@ -1,0 +1,626 @@
+//! The 3D channels: Foxglove's well-known schemas (`foxglove.FrameTransforms`,
+//! `foxglove.SceneUpdate`, protobuf) from the official `foxglove` crate, so
+//! that Foxglove's (or Lichtblick's) 3D panel draws a run, recorded or live.
+//!
+//! | topic | schema | content |
+//! |---|---|---|
+//! | [`TF_TOPIC`] `/tf` | `foxglove.FrameTransforms` | `world` → `robotK/base_link` (REP 105's base frame, namespaced per robot like its ROS topics) |
+//! | [`SCENE_TOPIC`] `/scene` | `foxglove.SceneUpdate` | per robot: its body and heading, its slot, the link to its leader, its safety circle |
+//! | [`SCENE_STATIC_TOPIC`] `/scene/static` | `foxglove.SceneUpdate` | what does not move: the reference path and the obstacles |
+//!
+//! One `/tf` and one `/scene` message per robot and instant (a fleet's robots
+//! report one at a time); entities have no lifetime, so each robot's replace
+//! its previous ones (same ids). Everything is in the `world` frame (the
+//! scenario's plane at z = 0), SI units.
+//!
+//! The slot is where the robot would stand with zero tracking error: from
+//! eq. 7, `e = R(θ)(p − p_d) + L`, so `p_slot = p − R(θ)ᵀ e` (equal to
+//! `p_d − R(θ)ᵀ L`). The leader link runs from `p` to `p_d` (the reference's
+//! point, or the leader robot's position).
+
+use std::io::{Seek, Write};
+
+use echelon::formation::Leader;
+use echelon::plan::Plan;
+use echelon::reference::{Order, Trajectory};
+use echelon::sample::AgentSample;
+use foxglove::Encode;
+use foxglove::messages::{
+    ArrowPrimitive, Color, CylinderPrimitive, FrameTransform, FrameTransforms, LinePrimitive,
+    Point3, Pose, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, TextPrimitive, Timestamp,
+    Vector3, line_primitive,
+};
+
+use super::{McapLog, McapLogError};
+
+/// Topic of the frame transforms `world` → each robot's `base_link`.
+pub const TF_TOPIC: &str = "/tf";
+/// Topic of the moving scene (robots, slots, leader links, safety circles).
+pub const SCENE_TOPIC: &str = "/scene";
+/// Topic of the fixed scene (reference path, obstacles).
+pub const SCENE_STATIC_TOPIC: &str = "/scene/static";
+/// The fixed frame every pose is given in.
+pub const WORLD_FRAME: &str = "world";
+
+/// Radius of a robot's drawn body, m (a display size: the scenario gives
+/// wheel geometry, not a footprint).
+pub const BODY_RADIUS: f64 = 0.08;
+/// Points of the drawn reference path, at most.
+const PATH_POINTS: usize = 400;
+
+/// Robot `k`'s (from 1) base frame: `robotK/base_link`.
+pub fn base_link(k: u32) -> String {
+    format!("robot{k}/base_link")
+}
+
+/// A time in seconds as a Foxglove timestamp (negative and non-finite as 0).
+pub fn timestamp(t: f64) -> Timestamp {
+    let ns = super::nanos(t);
+    Timestamp::new(
+        (ns / 1_000_000_000).min(u64::from(u32::MAX)) as u32,
+        (ns % 1_000_000_000) as u32,
+    )
+}
+
+/// The rotation by `theta` about z.
+fn yaw(theta: f64) -> Quaternion {
+    let (s, c) = (0.5 * theta).sin_cos();
+    Quaternion {
+        x: 0.0,
+        y: 0.0,
+        z: s,
+        w: c,
+    }
+}
+
+fn pose(x: f64, y: f64, z: f64, theta: f64) -> Pose {
+    Pose {
+        position: Some(Vector3 { x, y, z }),
+        orientation: Some(yaw(theta)),
+    }
+}
+
+/// An upright cylinder of `diameter` and `height` centred at `(x, y, z)`.
+fn cylinder(x: f64, y: f64, z: f64, diameter: f64, height: f64, color: Color) -> CylinderPrimitive {
+    CylinderPrimitive {
+        pose: Some(pose(x, y, z, 0.0)),
+        size: Some(Vector3 {
+            x: diameter,
+            y: diameter,
+            z: height,
+        }),
+        bottom_scale: 1.0,
+        top_scale: 1.0,
+        color: Some(color),
+    }
+}
+
+const fn rgba(r: f64, g: f64, b: f64, a: f64) -> Color {
+    Color { r, g, b, a }
+}
+
+/// What robot `k` shows at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScenePose {
+    /// Time, s.
+    pub t: f64,
+    /// Position, m.
+    pub p: [f64; 2],
+    /// Heading θ, rad.
+    pub theta: f64,
+    /// Tracking error `e` (eq. 7), body frame, m.
+    pub e: [f64; 2],
+    /// The leader's point `p_d`, m.
+    pub leader: [f64; 2],
+}
+
+impl ScenePose {
+    /// The pose of `sample`, following a leader at `p_d = leader`.
+    pub fn of(sample: &AgentSample, leader: [f64; 2]) -> ScenePose {
+        ScenePose {
+            t: sample.t,
+            p: [sample.x, sample.y],
+            theta: sample.theta,
+            e: [sample.ex, sample.ey],
+            leader,
+        }
+    }
+
+    /// The slot `p − R(θ)ᵀ e` (eq. 7 solved for zero error).
+    pub fn slot(&self) -> [f64; 2] {
+        let (s, c) = self.theta.sin_cos();
+        let [ex, ey] = self.e;
+        [self.p[0] - (c * ex - s * ey), self.p[1] - (s * ex + c * ey)]
+    }
+}
+
+/// What is fixed during a run: safety radius, obstacles, the reference path,
+/// and who follows whom (for [`Scene::leader_point`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneSpec {
+    /// Each agent's leader (from 0).
+    pub leaders: Vec<Leader>,
+    /// The safety filter's radius, m (none: no safety circles).
+    pub safety_radius: Option<f64>,
+    /// Obstacles `[x, y, r]`, m.
+    pub obstacles: Vec<[f64; 3]>,
+    /// The reference path `p_d(t)` over the run, m.
+    pub path: Vec<[f64; 2]>,
+}
+
+impl SceneSpec {
+    /// The scene of `plan`: its formation, safety radius, obstacles, and its
+    /// reference sampled at up to [`PATH_POINTS`] instants over the run.
+    pub fn of(plan: &Plan) -> SceneSpec {
+        let duration = plan.config().duration;
+        let n = PATH_POINTS
+            .min((duration / plan.config().dt).ceil() as usize + 1)
+            .max(2);
+        let path = (0..n)
+            .map(|i| {
+                let t = duration * i as f64 / (n - 1) as f64;
+                plan.reference().eval(t, Order::Two).p
+            })
+            .collect();
+        SceneSpec {
+            leaders: plan.formation().leaders().to_vec(),
+            safety_radius: plan.safety_radius(),
+            obstacles: plan
+                .obstacles()
+                .iter()
+                .map(|o| [o.x(), o.y(), o.r()])
+                .collect(),
+            path,
+        }
+    }
+}
+
+/// The 3D messages of a run, kept and refilled in place (no allocation per
+/// instant once built): per robot a one-transform `FrameTransforms` and a
+/// `SceneUpdate` of its entities, and the fixed scene.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    tf: Vec<FrameTransforms>,
+    robots: Vec<SceneUpdate>,
+    fixed: SceneUpdate,
+    leaders: Vec<Leader>,
+}
+
+/// Entities of a robot's update, in order.
+const BODY: usize = 0;
+const SLOT: usize = 1;
+const LINK: usize = 2;
+const SAFETY: usize = 3;
+
+fn entity(id: String, metadata: Vec<foxglove::messages::KeyValuePair>) -> SceneEntity {
+    SceneEntity {
+        frame_id: WORLD_FRAME.to_owned(),
+        id,
+        metadata,
+        ..SceneEntity::default()
+    }
+}
+
+impl Scene {
+    /// The scene of `spec`'s robots (none moved yet: all at the origin).
+    pub fn new(spec: &SceneSpec) -> Scene {
+        let n = spec.leaders.len();
+        let palette = |k: usize| {
+            let h = (k as f64 * 0.618_034).fract() * std::f64::consts::TAU;
+            rgba(
+                0.5 + 0.4 * h.cos(),
+                0.5 + 0.4 * (h + 2.094).cos(),
+                0.5 + 0.4 * (h + 4.189).cos(),
+                1.0,
+            )
+        };
+        let tf = (1..=n as u32)
+            .map(|k| FrameTransforms {
+                transforms: vec![FrameTransform {
+                    timestamp: Some(timestamp(0.0)),
+                    parent_frame_id: WORLD_FRAME.to_owned(),
+                    child_frame_id: base_link(k),
+                    translation: Some(Vector3::default()),
+                    rotation: Some(yaw(0.0)),
+                }],
+            })
+            .collect();
+        let robots = (1..=n)
+            .map(|k| {
+                let color = palette(k);
+                let kv = |key: &str, value: String| foxglove::messages::KeyValuePair {
+                    key: key.to_owned(),
+                    value,
+                };
+                let leader = match spec.leaders[k - 1] {
+                    Leader::Reference => "reference".to_owned(),
+                    Leader::Agent(j) => format!("robot{}", j + 1),
+                };
+                let mut body = entity(
+                    format!("robot{k}"),
+                    vec![kv("agent", k.to_string()), kv("leader", leader)],
+                );
+                body.cylinders = vec![cylinder(0.0, 0.0, 0.025, 2.0 * BODY_RADIUS, 0.05, color)];
+                body.arrows = vec![ArrowPrimitive {
+                    pose: Some(pose(0.0, 0.0, 0.06, 0.0)),
+                    shaft_length: 1.5 * BODY_RADIUS,
+                    shaft_diameter: 0.02,
+                    head_length: 0.06,
+                    head_diameter: 0.05,
+                    color: Some(rgba(0.1, 0.1, 0.1, 1.0)),
+                }];
+                body.texts = vec![TextPrimitive {
+                    pose: Some(pose(0.0, 0.0, 0.2, 0.0)),
+                    billboard: true,
+                    font_size: 14.0,
+                    scale_invariant: true,
+                    color: Some(rgba(0.1, 0.1, 0.1, 1.0)),
+                    text: k.to_string(),
+                }];
+                let mut slot = entity(format!("robot{k}/slot"), Vec::new());
+                slot.spheres = vec![SpherePrimitive {
+                    pose: Some(pose(0.0, 0.0, 0.0, 0.0)),
+                    size: Some(Vector3 {
+                        x: 0.05,
+                        y: 0.05,
+                        z: 0.05,
+                    }),
+                    color: Some(Color { a: 0.5, ..color }),
+                }];
+                let mut link = entity(format!("robot{k}/link"), Vec::new());
+                link.lines = vec![LinePrimitive {
+                    r#type: line_primitive::Type::LineList as i32,
+                    pose: Some(pose(0.0, 0.0, 0.0, 0.0)),
+                    thickness: 2.0,
+                    scale_invariant: true,
+                    points: vec![Point3::default(), Point3::default()],
+                    color: Some(rgba(0.4, 0.4, 0.4, 0.8)),
+                    ..LinePrimitive::default()
+                }];
+                let mut entities = vec![body, slot, link];
+                if let Some(r) = spec.safety_radius {
+                    let mut safety = entity(format!("robot{k}/safety"), Vec::new());
+                    let red = rgba(0.9, 0.2, 0.2, 0.15);
+                    safety.cylinders = vec![cylinder(0.0, 0.0, 0.001, 2.0 * r, 0.002, red)];
+                    entities.push(safety);
+                }
+                SceneUpdate {
+                    deletions: Vec::new(),
+                    entities,
+                }
+            })
+            .collect();
+        let mut path = entity("reference".to_owned(), Vec::new());
+        path.lines = vec![LinePrimitive {
+            r#type: line_primitive::Type::LineStrip as i32,
+            pose: Some(pose(0.0, 0.0, 0.0, 0.0)),
+            thickness: 1.5,
+            scale_invariant: true,
+            points: spec
+                .path
+                .iter()
+                .map(|&[x, y]| Point3 { x, y, z: 0.0 })
+                .collect(),
+            color: Some(rgba(0.2, 0.4, 0.9, 0.8)),
+            ..LinePrimitive::default()
+        }];
+        let mut fixed = vec![path];
+        for (i, &[x, y, r]) in spec.obstacles.iter().enumerate() {
+            let mut o = entity(format!("obstacle/{}", i + 1), Vec::new());
+            o.cylinders = vec![cylinder(x, y, 0.1, 2.0 * r, 0.2, rgba(0.3, 0.3, 0.3, 0.9))];
+            fixed.push(o);
+        }
+        Scene {
+            tf,
+            robots,
+            fixed: SceneUpdate {
+                deletions: Vec::new(),
+                entities: fixed,
+            },
+            leaders: spec.leaders.clone(),
+        }
+    }
+
+    /// Number of robots.
+    pub fn robots(&self) -> usize {
+        self.robots.len()
+    }
+
+    /// The leader's point `p_d` of agent `i` (from 0) when the robots stand
+    /// at `positions` and the reference at `reference_point`.
+    pub fn leader_point(&self, i: usize, positions: &[[f64; 2]], reference: [f64; 2]) -> [f64; 2] {
+        match self.leaders.get(i) {
+            Some(Leader::Agent(j)) => positions.get(*j).copied().unwrap_or(reference),
+            _ => reference,
+        }
+    }
+
+    /// Moves robot `k` (from 1) to `pose`; `None` if there is no robot `k`.
+    pub fn set(&mut self, k: u32, at: &ScenePose) -> Option<()> {
+        let i = (k as usize).checked_sub(1)?;
+        let stamp = Some(timestamp(at.t));
+        let tf = &mut self.tf.get_mut(i)?.transforms[0];
+        tf.timestamp = stamp;
+        tf.translation = Some(Vector3 {
+            x: at.p[0],
+            y: at.p[1],
+            z: 0.0,
+        });
+        tf.rotation = Some(yaw(at.theta));
+        let update = self.robots.get_mut(i)?;
+        for e in &mut update.entities {
+            e.timestamp = stamp;
+        }
+        let [x, y] = at.p;
+        let e = &mut update.entities;
+        e[BODY].cylinders[0].pose = Some(pose(x, y, 0.025, at.theta));
+        e[BODY].arrows[0].pose = Some(pose(x, y, 0.06, at.theta));
+        e[BODY].texts[0].pose = Some(pose(x, y, 0.2, 0.0));
+        let [sx, sy] = at.slot();
+        e[SLOT].spheres[0].pose = Some(pose(sx, sy, 0.0, 0.0));
+        let points = &mut e[LINK].lines[0].points;
+        points[0] = Point3 { x, y, z: 0.0 };
+        points[1] = Point3 {
+            x: at.leader[0],
+            y: at.leader[1],
+            z: 0.0,
+        };
+        if let Some(safety) = e.get_mut(SAFETY) {
+            safety.cylinders[0].pose = Some(pose(x, y, 0.001, 0.0));
+        }
+        Some(())
+    }
+
+    /// Robot `k`'s (from 1) transform and scene, as last [`Scene::set`].
+    pub fn robot(&self, k: u32) -> Option<(&FrameTransforms, &SceneUpdate)> {
+        let i = (k as usize).checked_sub(1)?;
+        Some((self.tf.get(i)?, self.robots.get(i)?))
+    }
+
+    /// The fixed scene (reference path, obstacles), stamped `t`.
+    pub fn fixed(&mut self, t: f64) -> &SceneUpdate {
+        for e in &mut self.fixed.entities {
+            e.timestamp = Some(timestamp(t));
+        }
+        &self.fixed
+    }
+}
+
+/// The MCAP channels of the 3D topics in one log, and a buffer to encode into.
+#[derive(Debug, Default)]
+pub struct SceneChannels {
+    tf: u16,
+    scene: u16,
+    fixed: u16,
+    seq: [u32; 3],
+    buf: Vec<u8>,
+}
+
+impl SceneChannels {
+    /// Registers [`TF_TOPIC`], [`SCENE_TOPIC`] and [`SCENE_STATIC_TOPIC`] in `log`.
+    pub fn register<W: Write + Seek>(log: &mut McapLog<W>) -> Result<Self, McapLogError> {
+        Ok(SceneChannels {
+            tf: log.foxglove_channel::<FrameTransforms>(TF_TOPIC)?,
+            scene: log.foxglove_channel::<SceneUpdate>(SCENE_TOPIC)?,
+            fixed: log.foxglove_channel::<SceneUpdate>(SCENE_STATIC_TOPIC)?,
+            seq: [0; 3],
+            buf: Vec::with_capacity(4096),
+        })
+    }
+
+    fn write<W: Write + Seek, T: Encode>(
+        &mut self,
+        log: &mut McapLog<W>,
+        which: usize,
+        log_time: u64,
+        publish_time: u64,
+        msg: &T,
+    ) -> Result<(), McapLogError> {
+        let channel = [self.tf, self.scene, self.fixed][which];
+        self.buf.clear();
+        msg.encode(&mut self.buf)
+            .map_err(|e| McapLogError::Encode(e.to_string()))?;
+        let seq = self.seq[which];
+        self.seq[which] = seq.wrapping_add(1);
+        log.write(channel, seq, log_time, publish_time, &self.buf)
+    }
+
+    /// Writes robot `k`'s transform and scene as `scene` holds them.
+    pub fn robot<W: Write + Seek>(
+        &mut self,
+        log: &mut McapLog<W>,
+        scene: &Scene,
+        k: u32,
+        log_time: u64,
+        publish_time: u64,
+    ) -> Result<(), McapLogError> {
+        let (tf, update) = scene
+            .robot(k)
+            .ok_or_else(|| McapLogError::Encode(format!("no robot {k} in the scene")))?;
+        self.write(log, 0, log_time, publish_time, tf)?;
+        self.write(log, 1, log_time, publish_time, update)
+    }
+
+    /// Writes the fixed scene, stamped `t`.
+    pub fn fixed<W: Write + Seek>(
+        &mut self,
+        log: &mut McapLog<W>,
+        scene: &mut Scene,
+        t: f64,
+        log_time: u64,
+    ) -> Result<(), McapLogError> {
+        let publish_time = super::nanos(t);
+        let fixed = scene.fixed(t);
+        self.write(log, 2, log_time, publish_time, fixed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use foxglove::Decode;
+    use proptest::prelude::*;
+
+    use super::*;
+
+    fn spec(leaders: Vec<Leader>, safety_radius: Option<f64>) -> SceneSpec {
+        SceneSpec {
+            leaders,
+            safety_radius,
+            obstacles: vec![[1.0, 2.0, 0.5]],
+            path: vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]],
+        }
+    }
+
+    /// `R(θ) a` (world to body frame).
+    fn to_body(theta: f64, a: [f64; 2]) -> [f64; 2] {
+        let (s, c) = theta.sin_cos();
+        [c * a[0] + s * a[1], -s * a[0] + c * a[1]]
+    }
+
+    proptest! {
+        /// With `e = R(θ)(p − p_d) + L` (eq. 7), the slot is `p_d − R(θ)ᵀ L`
+        /// wherever the robot stands.
+        #[test]
+        fn the_slot_is_where_eq_7_gives_zero_error(
+            p in prop::array::uniform2(-50.0..50.0f64),
+            pd in prop::array::uniform2(-50.0..50.0f64),
+            theta in -10.0..10.0f64,
+            l in prop::array::uniform2(-2.0..2.0f64),
+        ) {
+            let d = to_body(theta, [p[0] - pd[0], p[1] - pd[1]]);
+            let e = [d[0] + l[0], d[1] + l[1]];
+            let at = ScenePose { t: 0.0, p, theta, e, leader: pd };
+            let slot = at.slot();
+            let (s, c) = theta.sin_cos();
+            let want = [pd[0] - (c * l[0] - s * l[1]), pd[1] - (s * l[0] + c * l[1])];
+            prop_assert!((slot[0] - want[0]).abs() < 1e-9 && (slot[1] - want[1]).abs() < 1e-9,
+                "{slot:?} vs {want:?}");
+        }
+
+        /// What [`Scene::set`] puts in robot k's messages comes back from
+        /// their protobuf bytes: the transform's translation and yaw, the
+        /// body at p, the slot, the link from p to p_d; other robots untouched.
+        #[test]
+        fn a_robots_messages_round_trip_through_protobuf(
+            p in prop::array::uniform2(-50.0..50.0f64),
+            pd in prop::array::uniform2(-50.0..50.0f64),
+            e in prop::array::uniform2(-1.0..1.0f64),
+            theta in -3.1..3.1f64,
+            t in 0.0..1e4f64,
+            k in 1u32..=3,
+        ) {
+            let mut scene = Scene::new(&spec(
+                vec![Leader::Reference, Leader::Agent(0), Leader::Agent(1)],
+                Some(0.3),
+            ));
+            let at = ScenePose { t, p, theta, e, leader: pd };
+            scene.set(k, &at).unwrap();
+            let (tf, update) = scene.robot(k).unwrap();
+            let mut buf = Vec::new();
+            tf.encode(&mut buf).unwrap();
+            let tf = FrameTransforms::decode(&buf[..]).unwrap();
+            let tr = &tf.transforms[0];
+            prop_assert_eq!(&tr.parent_frame_id, WORLD_FRAME);
+            prop_assert_eq!(&tr.child_frame_id, &base_link(k));
+            let v = tr.translation.unwrap();
+            prop_assert_eq!((v.x, v.y, v.z), (p[0], p[1], 0.0));
+            let q = tr.rotation.unwrap();
+            let yaw = 2.0 * q.z.atan2(q.w);
+            prop_assert!((yaw - theta).abs() < 1e-12, "{} vs {}", yaw, theta);
+            prop_assert_eq!(tr.timestamp.unwrap(), timestamp(t));
+
+            buf.clear();
+            update.encode(&mut buf).unwrap();
+            let update = SceneUpdate::decode(&buf[..]).unwrap();
+            let ids: Vec<&str> = update.entities.iter().map(|e| e.id.as_str()).collect();
+            let want = [format!("robot{k}"), format!("robot{k}/slot"),
+                format!("robot{k}/link"), format!("robot{k}/safety")];
+            prop_assert_eq!(ids, want.iter().map(String::as_str).collect::<Vec<_>>());
+            let position = |pose: &Option<Pose>| {
+                let v = pose.unwrap().position.unwrap();
+                [v.x, v.y]
+            };
+            prop_assert_eq!(position(&update.entities[BODY].cylinders[0].pose), p);
+            prop_assert_eq!(position(&update.entities[SLOT].spheres[0].pose), at.slot());
+            prop_assert_eq!(position(&update.entities[SAFETY].cylinders[0].pose), p);
+            let link = &update.entities[LINK].lines[0].points;
+            prop_assert_eq!([link[0].x, link[0].y, link[1].x, link[1].y], [p[0], p[1], pd[0], pd[1]]);
+            for other in (1..=3).filter(|&j| j != k) {
+                let tr = &scene.robot(other).unwrap().0.transforms[0];
+                prop_assert_eq!(tr.translation.unwrap(), Vector3::default());
+            }
+        }
+    }
+
+    /// The schemas are Foxglove's well-known ones, as the foxglove crate
+    /// gives them, and the fixed scene holds the path and each obstacle.
+    #[test]
+    fn channels_carry_foxglove_schemas_and_the_fixed_scene() {
+        let mut log = McapLog::new(std::io::Cursor::new(Vec::new())).unwrap();
+        let mut channels = SceneChannels::register(&mut log).unwrap();
+        let mut scene = Scene::new(&spec(vec![Leader::Reference], None));
+        channels.fixed(&mut log, &mut scene, 0.5, 7).unwrap();
+        scene
+            .set(
+                1,
+                &ScenePose {
+                    t: 0.5,
+                    p: [1.0, 2.0],
+                    theta: 0.3,
+                    e: [0.0; 2],
+                    leader: [0.0; 2],
+                },
+            )
+            .unwrap();
+        channels.robot(&mut log, &scene, 1, 8, 9).unwrap();
+        assert!(
+            scene
+                .set(
+                    2,
+                    &ScenePose {
+                        t: 0.5,
+                        p: [0.0; 2],
+                        theta: 0.0,
+                        e: [0.0; 2],
+                        leader: [0.0; 2]
+                    }
+                )
+                .is_none()
+        );
+        let bytes = log.finish().unwrap().into_inner();
+        let mut topics = Vec::new();
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            let schema = m.channel.schema.as_ref().unwrap();
+            assert_eq!(schema.encoding, "protobuf");
+            assert_eq!(m.channel.message_encoding, "protobuf");
+            let name = if m.channel.topic == TF_TOPIC {
+                "foxglove.FrameTransforms"
+            } else {
+                "foxglove.SceneUpdate"
+            };
+            assert_eq!(schema.name, name);
+            assert!(!schema.data.is_empty());
+            if m.channel.topic == SCENE_STATIC_TOPIC {
+                let fixed = SceneUpdate::decode(&m.data[..]).unwrap();
+                let ids: Vec<&str> = fixed.entities.iter().map(|e| e.id.as_str()).collect();
+                assert_eq!(ids, ["reference", "obstacle/1"]);
+                assert_eq!(fixed.entities[0].lines[0].points.len(), 3);
+                let o = &fixed.entities[1].cylinders[0];
+                assert_eq!(o.size.unwrap().x, 1.0);
+                assert_eq!((m.log_time, m.publish_time), (7, 500_000_000));
+            } else {
+                assert_eq!((m.log_time, m.publish_time), (8, 9));
+            }
+            if m.channel.topic == SCENE_TOPIC {
+                // Without a safety radius, no safety circle.
+                let update = SceneUpdate::decode(&m.data[..]).unwrap();
+                assert_eq!(update.entities.len(), 3);
+            }
+            topics.push(m.channel.topic.clone());
+        }
+        assert_eq!(topics, [SCENE_STATIC_TOPIC, TF_TOPIC, SCENE_TOPIC]);
+    }
+}

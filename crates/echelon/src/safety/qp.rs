@@ -289,6 +289,28 @@ impl<const N: usize> Best<N> {
         }
     }
 
+    /// Where an enumeration starts: `w` itself when it meets every row
+    /// (`Ok`), else the best of its projections onto each single row it
+    /// breaks.
+    fn start(rows: &impl Rows<N>, w: [f64; N], allowed: Allowed) -> Result<[f64; N], Best<N>> {
+        let mut best = Best::new();
+        best.offer(rows, w, w, allowed);
+        if let Some(z) = best.z {
+            return Ok(z);
+        }
+        for i in 0..rows.len() {
+            let (g, h) = rows.row(i);
+            let gg = dot(g, g);
+            let r = h - dot(g, w);
+            // λ = r/‖g‖² ≥ 0: only a row that w breaks.
+            if gg > 0.0 && r > 0.0 {
+                let l = r / gg;
+                best.offer(rows, w, std::array::from_fn(|k| w[k] + l * g[k]), allowed);
+            }
+        }
+        Err(best)
+    }
+
     #[inline]
     fn offer(&mut self, rows: &impl Rows<N>, w: [f64; N], z: [f64; N], allowed: Allowed) {
         let mut d2 = 0.0;
@@ -309,21 +331,10 @@ const PARALLEL: f64 = 1e-12;
 /// The projection of `w` onto the rows in the plane.
 fn project2(rows: &impl Rows<2>, w: [f64; 2], allowed: Allowed) -> Option<[f64; 2]> {
     let m = rows.len();
-    let mut best = Best::new();
-    best.offer(rows, w, w, allowed);
-    if best.z.is_some() {
-        return best.z;
-    }
-    for i in 0..m {
-        let (g, h) = rows.row(i);
-        let gg = dot(g, g);
-        let r = h - dot(g, w);
-        // λ = r/‖g‖² ≥ 0: only a row that w breaks.
-        if gg > 0.0 && r > 0.0 {
-            let l = r / gg;
-            best.offer(rows, w, [w[0] + l * g[0], w[1] + l * g[1]], allowed);
-        }
-    }
+    let mut best = match Best::start(rows, w, allowed) {
+        Ok(w) => return Some(w),
+        Err(best) => best,
+    };
     for i in 0..m {
         let (gi, hi) = rows.row(i);
         let ni = dot(gi, gi).sqrt();
@@ -361,25 +372,10 @@ fn project2(rows: &impl Rows<2>, w: [f64; 2], allowed: Allowed) -> Option<[f64; 
 /// The projection of `w` onto the rows in space.
 fn project3(rows: &impl Rows<3>, w: [f64; 3], allowed: Allowed) -> Option<[f64; 3]> {
     let m = rows.len();
-    let mut best = Best::new();
-    best.offer(rows, w, w, allowed);
-    if best.z.is_some() {
-        return best.z;
-    }
-    for i in 0..m {
-        let (g, h) = rows.row(i);
-        let gg = dot(g, g);
-        let r = h - dot(g, w);
-        if gg > 0.0 && r > 0.0 {
-            let l = r / gg;
-            best.offer(
-                rows,
-                w,
-                [w[0] + l * g[0], w[1] + l * g[1], w[2] + l * g[2]],
-                allowed,
-            );
-        }
-    }
+    let mut best = match Best::start(rows, w, allowed) {
+        Ok(w) => return Some(w),
+        Err(best) => best,
+    };
     for i in 0..m {
         let (gi, hi) = rows.row(i);
         let gii = dot(gi, gi);

@@ -163,19 +163,6 @@ impl VelocityBase {
         accel: AccelLimit::Joint,
     };
 
-    /// The named presets: `ideal`, `turtlebot3-burger`, `turtlebot4`, `jackal`.
-    pub const PRESETS: [(&'static str, VelocityBase); 4] = [
-        ("ideal", Self::IDEAL),
-        ("turtlebot3-burger", Self::TURTLEBOT3_BURGER),
-        ("turtlebot4", Self::TURTLEBOT4),
-        ("jackal", Self::JACKAL),
-    ];
-
-    /// A preset by name (see [`VelocityBase::PRESETS`]).
-    pub fn preset(name: &str) -> Option<VelocityBase> {
-        crate::model::find_preset(&Self::PRESETS, name)
-    }
-
     /// A base with joint acceleration limits, checked: lags `τ_v`, `τ_ω` (s)
     /// finite and `≥ 0` (0: ideal, the axis follows the command); limits
     /// `v_max` (m/s), `ω_max` (rad/s), `a_max` (m/s²), `α_max` (rad/s²) `> 0`
@@ -490,7 +477,8 @@ impl VelocityRobot {
         wheel_radius: 0.098,
     };
 
-    /// The named presets, as [`VelocityBase::PRESETS`].
+    /// The named presets: `ideal`, `turtlebot3-burger`, `turtlebot4`,
+    /// `jackal` (each on the [`VelocityBase`] of that name).
     pub const PRESETS: [(&'static str, VelocityRobot); 4] = [
         ("ideal", Self::IDEAL),
         ("turtlebot3-burger", Self::TURTLEBOT3_BURGER),

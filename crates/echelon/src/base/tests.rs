@@ -2,7 +2,8 @@ use super::*;
 
 #[test]
 fn presets_are_valid_and_named() {
-    for (name, base) in VelocityBase::PRESETS {
+    for (name, robot) in VelocityRobot::PRESETS {
+        let base = robot.base;
         assert!(base.check().is_ok(), "{name}");
         let rebuilt = VelocityBase::new(
             base.tau_v,
@@ -13,15 +14,13 @@ fn presets_are_valid_and_named() {
             base.alpha_max,
         );
         assert_eq!(rebuilt, Ok(base), "{name}");
-        assert_eq!(VelocityBase::preset(name), Some(base));
-    }
-    for (name, robot) in VelocityRobot::PRESETS {
-        let rebuilt = VelocityRobot::new(robot.base, robot.half_wheelbase, robot.wheel_radius);
+        let rebuilt = VelocityRobot::new(base, robot.half_wheelbase, robot.wheel_radius);
         assert_eq!(rebuilt, Ok(robot), "{name}");
+        assert_eq!(VelocityRobot::preset(name), Some(robot));
     }
     assert!(VelocityBase::IDEAL.is_ideal());
     assert!(!VelocityBase::TURTLEBOT3_BURGER.is_ideal());
-    assert_eq!(VelocityBase::preset("husky"), None);
+    assert_eq!(VelocityRobot::preset("husky"), None);
 }
 
 #[test]

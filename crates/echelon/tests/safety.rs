@@ -32,7 +32,7 @@ fn run(name: &str, filter: bool) -> (Option<SafetyReport>, f64, f64, Vec<f64>) {
     let run = s.build(&Overrides::default()).unwrap();
     let sim = &mut run.simulation();
     assert_eq!(sim.has_safety(), filter);
-    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement.l()).collect();
+    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement().l()).collect();
     let (mut closest, mut clearance) = (f64::INFINITY, f64::INFINITY);
     let mut every = |f: &Frame<'_>| -> Result<(), ObserverError> {
         closest = closest.min(SafetyWatch::closest_pair(f.states, &l).unwrap().0);

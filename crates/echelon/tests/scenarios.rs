@@ -123,7 +123,7 @@ fn expect_errors_in_base(cases: &[(&str, &str, usize, &str, &str)]) {
 fn the_base_scenario_is_valid() {
     let run = build(BASE).unwrap();
     assert_eq!(run.plan.agents().len(), 2);
-    assert_eq!(run.plan.agents()[1].name, "agent 2");
+    assert_eq!(run.plan.agents()[1].name(), "agent 2");
     assert_eq!(run.log_every, 1);
 }
 

@@ -14,7 +14,7 @@ fn logged_errors(src: &str) -> (Vec<Vec<[f64; 2]>>, Vec<f64>, f64) {
         .build(&Overrides::default())
         .unwrap();
     let n = run.plan.agents().len();
-    let ke: Vec<f64> = run.plan.agents().iter().map(|a| a.gains.ke()).collect();
+    let ke: Vec<f64> = run.plan.agents().iter().map(|a| a.gains().ke()).collect();
     let dt = run.plan.config().dt;
     let mut e = vec![Vec::new(); n];
     let mut log = |f: &Frame<'_>| -> Result<(), ObserverError> {

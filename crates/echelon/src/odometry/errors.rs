@@ -32,28 +32,19 @@ pub enum ZetaModel {
 }
 
 /// The errors of one robot's odometry. All default to a perfect odometer.
+///
+/// Built from [`ErrorModel::PERFECT`] by the `with_*` methods, each of which
+/// refuses an impossible value, so an `ErrorModel` always holds a possible one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ErrorModel {
-    /// The paper's additive error `ζ`, m per sample (eq. 23).
-    pub zeta: f64,
-    /// How `ζ` enters.
-    pub zeta_model: ZetaModel,
-    /// Borenstein's `E_d = D_R / D_L`, the ratio of the actual wheel diameters
-    /// (their mean is the nominal one). 1 is perfect.
-    pub wheel_diameter_ratio: f64,
-    /// Borenstein's `E_b = b_actual / b_nominal`, the actual over the nominal
-    /// wheelbase. 1 is perfect.
-    pub wheelbase_ratio: f64,
-    /// Random slip: each wheel's measured displacement gets Gaussian noise of
-    /// variance `slip · |Δ|`, m²/m (variance per metre travelled).
-    pub slip: f64,
-    /// Encoder resolution, ticks per wheel revolution (`None`: ideal encoders).
-    pub ticks_per_rev: Option<u32>,
-    /// Standard deviation of the measured linear speed, m/s (Assumption 2: speeds
-    /// are measured directly; 0 is exact).
-    pub speed_noise: f64,
-    /// Standard deviation of the measured angular speed, rad/s.
-    pub turn_rate_noise: f64,
+    zeta: f64,
+    zeta_model: ZetaModel,
+    wheel_diameter_ratio: f64,
+    wheelbase_ratio: f64,
+    slip: f64,
+    ticks_per_rev: Option<u32>,
+    speed_noise: f64,
+    turn_rate_noise: f64,
 }
 
 impl Default for ErrorModel {
@@ -75,45 +66,120 @@ impl ErrorModel {
         turn_rate_noise: 0.0,
     };
 
-    /// Only Borenstein's systematic errors: the wheel diameter ratio `E_d`
-    /// and the wheelbase ratio `E_b`, everything else perfect.
-    pub const fn systematic(ed: f64, eb: f64) -> ErrorModel {
-        ErrorModel {
-            wheel_diameter_ratio: ed,
-            wheelbase_ratio: eb,
-            ..ErrorModel::PERFECT
-        }
+    /// Only Borenstein's systematic errors ([`ErrorModel::with_systematic`]),
+    /// everything else perfect.
+    pub fn systematic(ed: f64, eb: f64) -> Result<ErrorModel, ParamError> {
+        ErrorModel::PERFECT.with_systematic(ed, eb)
     }
 
-    /// Refuses non-finite values, negative variances and ratios ≤ 0.
-    pub fn validate(&self) -> Result<(), ParamError> {
-        for (field, v) in [
-            ("zeta", self.zeta),
-            ("wheel_diameter_ratio", self.wheel_diameter_ratio),
-            ("wheelbase_ratio", self.wheelbase_ratio),
-            ("slip", self.slip),
-            ("speed_noise", self.speed_noise),
-            ("turn_rate_noise", self.turn_rate_noise),
-        ] {
+    /// This model with the paper's additive error `ζ`, m per sample (eq. 23),
+    /// entering as `zeta_model`; `ζ` must be finite.
+    pub fn with_zeta(self, zeta: f64, zeta_model: ZetaModel) -> Result<ErrorModel, ParamError> {
+        Ok(ErrorModel {
+            zeta: check::finite("zeta", zeta)?,
+            zeta_model,
+            ..self
+        })
+    }
+
+    /// This model with Borenstein's `E_d = D_R / D_L` (`ed`, the ratio of the
+    /// actual wheel diameters, whose mean is the nominal one) and `E_b =
+    /// b_actual / b_nominal` (`eb`): finite and > 0, 1 is perfect.
+    pub fn with_systematic(self, ed: f64, eb: f64) -> Result<ErrorModel, ParamError> {
+        let ratio = |field, v: f64| {
             check::finite(field, v)?;
-        }
-        for (field, v) in [
-            ("wheel_diameter_ratio", self.wheel_diameter_ratio),
-            ("wheelbase_ratio", self.wheelbase_ratio),
-        ] {
-            check::require(field, v, v > 0.0, "must be > 0 (1 is a perfect robot)")?;
-        }
-        for (field, v) in [
-            ("slip", self.slip),
-            ("speed_noise", self.speed_noise),
-            ("turn_rate_noise", self.turn_rate_noise),
-        ] {
-            check::require(field, v, v >= 0.0, "must be ≥ 0")?;
-        }
-        if let Some(n) = self.ticks_per_rev {
+            check::require(field, v, v > 0.0, "must be > 0 (1 is a perfect robot)")
+        };
+        Ok(ErrorModel {
+            wheel_diameter_ratio: ratio("wheel_diameter_ratio", ed)?,
+            wheelbase_ratio: ratio("wheelbase_ratio", eb)?,
+            ..self
+        })
+    }
+
+    /// This model with random slip: each wheel's measured displacement gets
+    /// Gaussian noise of variance `slip · |Δ|`, m²/m (variance per metre
+    /// travelled), ≥ 0.
+    pub fn with_slip(self, slip: f64) -> Result<ErrorModel, ParamError> {
+        Ok(ErrorModel {
+            slip: check::non_negative("slip", slip)?,
+            ..self
+        })
+    }
+
+    /// This model with encoders of `ticks_per_rev` ticks per wheel
+    /// revolution, ≥ 1 (`None`: ideal encoders).
+    pub fn with_ticks_per_rev(self, ticks_per_rev: Option<u32>) -> Result<ErrorModel, ParamError> {
+        if let Some(n) = ticks_per_rev {
             check::at_least_one("ticks_per_rev", n.into())?;
         }
-        Ok(())
+        Ok(ErrorModel {
+            ticks_per_rev,
+            ..self
+        })
+    }
+
+    /// This model with noisy speed measurements (Assumption 2: speeds are
+    /// measured directly): the standard deviations of the measured linear
+    /// speed, m/s, and angular speed, rad/s, ≥ 0 (0 is exact).
+    pub fn with_speed_noise(
+        self,
+        speed_noise: f64,
+        turn_rate_noise: f64,
+    ) -> Result<ErrorModel, ParamError> {
+        Ok(ErrorModel {
+            speed_noise: check::non_negative("speed_noise", speed_noise)?,
+            turn_rate_noise: check::non_negative("turn_rate_noise", turn_rate_noise)?,
+            ..self
+        })
+    }
+
+    /// The paper's additive error `ζ`, m per sample (eq. 23).
+    #[inline]
+    pub const fn zeta(&self) -> f64 {
+        self.zeta
+    }
+
+    /// How `ζ` enters.
+    #[inline]
+    pub const fn zeta_model(&self) -> ZetaModel {
+        self.zeta_model
+    }
+
+    /// Borenstein's `E_d = D_R / D_L`.
+    #[inline]
+    pub const fn wheel_diameter_ratio(&self) -> f64 {
+        self.wheel_diameter_ratio
+    }
+
+    /// Borenstein's `E_b = b_actual / b_nominal`.
+    #[inline]
+    pub const fn wheelbase_ratio(&self) -> f64 {
+        self.wheelbase_ratio
+    }
+
+    /// Slip variance per metre travelled, m²/m.
+    #[inline]
+    pub const fn slip(&self) -> f64 {
+        self.slip
+    }
+
+    /// Encoder ticks per wheel revolution (`None`: ideal encoders).
+    #[inline]
+    pub const fn ticks_per_rev(&self) -> Option<u32> {
+        self.ticks_per_rev
+    }
+
+    /// Standard deviation of the measured linear speed, m/s.
+    #[inline]
+    pub const fn speed_noise(&self) -> f64 {
+        self.speed_noise
+    }
+
+    /// Standard deviation of the measured angular speed, rad/s.
+    #[inline]
+    pub const fn turn_rate_noise(&self) -> f64 {
+        self.turn_rate_noise
     }
 
     /// Variance of each wheel's measured displacement in a sample in which
@@ -163,30 +229,33 @@ mod tests {
 
     #[test]
     fn wheel_radii_keep_the_mean_and_the_ratio() {
-        let e = ErrorModel {
-            wheel_diameter_ratio: 1.02,
-            ..ErrorModel::PERFECT
-        };
+        let e = ErrorModel::systematic(1.02, 1.0).unwrap();
         let (r, l) = e.wheel_radii(0.1);
         assert!((r / l - 1.02).abs() < 1e-15 && (0.5 * (r + l) - 0.1).abs() < 1e-15);
     }
 
     #[test]
-    fn invalid_error_models_are_refused() {
-        let bad = ErrorModel {
-            wheelbase_ratio: 0.0,
-            ..ErrorModel::PERFECT
-        };
-        assert_eq!(bad.validate().unwrap_err().field, "wheelbase_ratio");
-        let bad = ErrorModel {
-            slip: -1.0,
-            ..ErrorModel::PERFECT
-        };
-        assert_eq!(bad.validate().unwrap_err().field, "slip");
-        let bad = ErrorModel {
-            zeta: f64::NAN,
-            ..ErrorModel::PERFECT
-        };
-        assert_eq!(bad.validate().unwrap_err().field, "zeta");
+    fn impossible_errors_are_refused() {
+        let p = ErrorModel::PERFECT;
+        let field = |e: Result<ErrorModel, ParamError>| e.unwrap_err().field;
+        assert_eq!(field(p.with_systematic(1.0, 0.0)), "wheelbase_ratio");
+        assert_eq!(
+            field(p.with_systematic(f64::INFINITY, 1.0)),
+            "wheel_diameter_ratio"
+        );
+        assert_eq!(field(p.with_slip(-1.0)), "slip");
+        assert_eq!(field(p.with_zeta(f64::NAN, ZetaModel::Wheels)), "zeta");
+        assert_eq!(field(p.with_ticks_per_rev(Some(0))), "ticks_per_rev");
+        assert_eq!(field(p.with_speed_noise(0.0, -0.1)), "turn_rate_noise");
+        // Each setter keeps what the others set.
+        let m = p
+            .with_slip(0.2)
+            .unwrap()
+            .with_systematic(1.01, 0.99)
+            .unwrap();
+        assert_eq!(
+            (m.slip(), m.wheel_diameter_ratio(), m.wheelbase_ratio()),
+            (0.2, 1.01, 0.99)
+        );
     }
 }

@@ -35,24 +35,23 @@ pub enum Fusion {
 }
 
 /// Absolute position fixes (a motion-capture system, GNSS, a beacon…).
+///
+/// Built by [`FixSpec::new`] (exact, immediate fixes) and the `with_*`
+/// methods, each of which refuses an impossible value.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FixSpec {
-    /// When.
-    pub schedule: FixSchedule,
-    /// Standard deviation of each position coordinate, m.
-    pub position_noise: f64,
-    /// Standard deviation of the heading, rad (`None`: fixes give no heading).
-    pub heading_noise: Option<f64>,
-    /// Delay between taking a fix and the robot receiving it, s.
-    pub latency: f64,
-    /// How the fix is used.
-    pub fusion: Fusion,
+    schedule: FixSchedule,
+    position_noise: f64,
+    heading_noise: Option<f64>,
+    latency: f64,
+    fusion: Fusion,
 }
 
 impl FixSpec {
-    /// Refuses an empty schedule and negative or non-finite noises and latency.
-    pub fn validate(&self) -> Result<(), ParamError> {
-        match self.schedule {
+    /// Exact fixes without latency, taken on `schedule` (at least every
+    /// sample, or a finite period > 0) and used as `fusion` says.
+    pub fn new(schedule: FixSchedule, fusion: Fusion) -> Result<FixSpec, ParamError> {
+        match schedule {
             FixSchedule::EverySamples(n) => {
                 check::at_least_one("every_steps", n)?;
             }
@@ -60,12 +59,70 @@ impl FixSpec {
                 check::positive("period", p)?;
             }
         }
-        check::non_negative("position_noise", self.position_noise)?;
-        if let Some(v) = self.heading_noise {
+        Ok(FixSpec {
+            schedule,
+            position_noise: 0.0,
+            heading_noise: None,
+            latency: 0.0,
+            fusion,
+        })
+    }
+
+    /// These fixes with noise: the standard deviation of each position
+    /// coordinate, m, and of the heading, rad (`None`: fixes give no
+    /// heading), finite and ≥ 0.
+    pub fn with_noise(
+        self,
+        position_noise: f64,
+        heading_noise: Option<f64>,
+    ) -> Result<FixSpec, ParamError> {
+        check::non_negative("position_noise", position_noise)?;
+        if let Some(v) = heading_noise {
             check::non_negative("heading_noise", v)?;
         }
-        check::non_negative("latency", self.latency)?;
-        Ok(())
+        Ok(FixSpec {
+            position_noise,
+            heading_noise,
+            ..self
+        })
+    }
+
+    /// These fixes arriving `latency` seconds after they are taken (finite, ≥ 0).
+    pub fn with_latency(self, latency: f64) -> Result<FixSpec, ParamError> {
+        Ok(FixSpec {
+            latency: check::non_negative("latency", latency)?,
+            ..self
+        })
+    }
+
+    /// When.
+    #[inline]
+    pub const fn schedule(&self) -> FixSchedule {
+        self.schedule
+    }
+
+    /// Standard deviation of each position coordinate, m.
+    #[inline]
+    pub const fn position_noise(&self) -> f64 {
+        self.position_noise
+    }
+
+    /// Standard deviation of the heading, rad (`None`: fixes give no heading).
+    #[inline]
+    pub const fn heading_noise(&self) -> Option<f64> {
+        self.heading_noise
+    }
+
+    /// Delay between taking a fix and the robot receiving it, s.
+    #[inline]
+    pub const fn latency(&self) -> f64 {
+        self.latency
+    }
+
+    /// How the fix is used.
+    #[inline]
+    pub const fn fusion(&self) -> Fusion {
+        self.fusion
     }
 
     /// Seconds between fixes, for odometry sampled every `sample_period`

@@ -86,30 +86,35 @@ pub fn dead_reckon(pose: &Pose, d: WheelDisplacement, half_wheelbase: f64) -> Po
 }
 
 /// One robot's odometry: sampling period, errors and fixes. Built through
-/// [`OdometrySpec::new`], which checks all three.
+/// [`OdometrySpec::new`], which checks that they fit together.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OdometrySpec {
     period: f64,
     errors: ErrorModel,
     fixes: Option<FixSpec>,
+    /// Samples between fixes (0: no fixes).
+    fix_every: u64,
 }
 
 impl OdometrySpec {
-    /// A robot's odometry, refusing a period that is not a finite number > 0,
-    /// an invalid error model or fixes ([`ErrorModel::validate`],
-    /// [`FixSpec::validate`]) and fixes that are not a whole number of samples apart.
+    /// A robot's odometry sampled every `period` seconds (a finite number
+    /// > 0), refusing fixes that are not a whole number of samples apart.
     pub fn new(
         period: f64,
         errors: ErrorModel,
         fixes: Option<FixSpec>,
     ) -> Result<OdometrySpec, ParamError> {
-        let spec = OdometrySpec {
+        check::positive("period", period)?;
+        let fix_every = match &fixes {
+            None => 0,
+            Some(f) => f.samples_between(period)?,
+        };
+        Ok(OdometrySpec {
             period,
             errors,
             fixes,
-        };
-        spec.validate()?;
-        Ok(spec)
+            fix_every,
+        })
     }
 
     /// Sampling period of the encoders, s (a whole multiple of the simulation step).
@@ -128,19 +133,6 @@ impl OdometrySpec {
     #[inline]
     pub const fn fixes(&self) -> Option<FixSpec> {
         self.fixes
-    }
-
-    /// [`OdometrySpec::new`]'s checks; the samples between fixes (0: no fixes).
-    fn validate(&self) -> Result<u64, ParamError> {
-        check::positive("period", self.period)?;
-        self.errors.validate()?;
-        match &self.fixes {
-            None => Ok(0),
-            Some(f) => {
-                f.validate()?;
-                f.samples_between(self.period)
-            }
-        }
     }
 }
 

@@ -9,7 +9,6 @@ use rand_distr::StandardNormal;
 
 use super::fuse::{FixFusion, FixNoise};
 use super::{FixSpec, Fusion, OdometrySpec, WheelDisplacement, ZetaModel, arc_update};
-use crate::error::ParamError;
 use crate::model::{Pose, RobotParams, State};
 
 /// A fix on its way to the robot.
@@ -58,7 +57,7 @@ impl Odometer {
         start: &State,
         seed: u64,
         stream: u64,
-    ) -> Result<Odometer, ParamError> {
+    ) -> Odometer {
         Odometer::with_wheels(
             spec,
             robot.half_wheelbase(),
@@ -79,26 +78,26 @@ impl Odometer {
         start: &State,
         seed: u64,
         stream: u64,
-    ) -> Result<Odometer, ParamError> {
-        let fix_every = spec.validate()?;
+    ) -> Odometer {
+        let fix_every = spec.fix_every;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(stream);
         let estimate = start.pose();
         // The simulator's fixes come from its own truth: none is gated.
-        let fusion = FixFusion::new(spec.fixes.map_or(Fusion::Reset, |f| f.fusion), false);
+        let fusion = FixFusion::new(spec.fixes.map_or(Fusion::Reset, |f| f.fusion()), false);
         let capacity = match spec.fixes {
             Some(f) if fix_every > 0 => {
-                (f.latency / (spec.period * fix_every as f64)).ceil() as usize + 2
+                (f.latency() / (spec.period * fix_every as f64)).ceil() as usize + 2
             }
             _ => 0,
         };
-        Ok(Odometer {
+        Odometer {
             spec,
             fix_every,
             nominal_radius: wheel_radius,
             nominal_half_wheelbase: half_wheelbase,
             radii: spec.errors.wheel_radii(wheel_radius),
-            actual_half_wheelbase: half_wheelbase * spec.errors.wheelbase_ratio,
+            actual_half_wheelbase: half_wheelbase * spec.errors.wheelbase_ratio(),
             rng,
             estimate,
             anchor: estimate,
@@ -111,7 +110,7 @@ impl Odometer {
             samples: 0,
             fixes: 0,
             pending: VecDeque::with_capacity(capacity),
-        })
+        }
     }
 
     /// The pose estimate `(x̂, ŷ, θ̂)` of the last sample.
@@ -183,7 +182,7 @@ impl Odometer {
         for w in 0..2 {
             let angle = travel[w] / radii[w];
             true_step[w] = travel[w] - self.wheel_travel[w];
-            measured[w] = match self.spec.errors.ticks_per_rev {
+            measured[w] = match self.spec.errors.ticks_per_rev() {
                 None => (angle - self.wheel_angle[w]) * self.nominal_radius,
                 Some(n) => {
                     let per_tick = std::f64::consts::TAU / f64::from(n);
@@ -196,7 +195,7 @@ impl Odometer {
             self.wheel_angle[w] = angle;
             self.wheel_travel[w] = travel[w];
         }
-        let slip = self.spec.errors.slip;
+        let slip = self.spec.errors.slip();
         if slip > 0.0 {
             for w in 0..2 {
                 measured[w] += self.normal() * (slip * true_step[w].abs()).sqrt();
@@ -219,25 +218,25 @@ impl Odometer {
         let l = self.nominal_half_wheelbase;
         let (mut delta, big_theta) = measured.to_motion(l);
         let errors = self.spec.errors;
-        if errors.zeta_model == ZetaModel::Wheels {
+        if errors.zeta_model() == ZetaModel::Wheels {
             // Eq. 24: Δ̂ = Δ − ζ with Θ̂ = Θ (the same ζ on both wheels, eq. 23).
-            delta -= errors.zeta;
+            delta -= errors.zeta();
         }
         let previous = self.estimate;
         self.estimate = arc_update(&previous, delta, big_theta);
-        if errors.zeta_model == ZetaModel::WorstCase {
+        if errors.zeta_model() == ZetaModel::WorstCase {
             // Eq. 31: the truth runs ahead of the estimate by ζ on both axes.
-            self.estimate.x -= errors.zeta;
-            self.estimate.y -= errors.zeta;
+            self.estimate.x -= errors.zeta();
+            self.estimate.y -= errors.zeta();
         }
         if let Some(ekf) = self.fusion.ekf_mut() {
             let var = errors.wheel_variance(self.nominal_radius, true_step);
             ekf.predict(&previous, delta, big_theta, l, var);
         }
-        if errors.speed_noise > 0.0 || errors.turn_rate_noise > 0.0 {
+        if errors.speed_noise() > 0.0 || errors.turn_rate_noise() > 0.0 {
             self.speed_noise = (
-                self.normal() * errors.speed_noise,
-                self.normal() * errors.turn_rate_noise,
+                self.normal() * errors.speed_noise(),
+                self.normal() * errors.turn_rate_noise(),
             );
         }
         self.samples += 1;
@@ -245,15 +244,15 @@ impl Odometer {
         if let Some(f) = self.spec.fixes {
             if self.samples.is_multiple_of(self.fix_every) {
                 let mut fix = Pose {
-                    x: s.x + self.normal() * f.position_noise,
-                    y: s.y + self.normal() * f.position_noise,
+                    x: s.x + self.normal() * f.position_noise(),
+                    y: s.y + self.normal() * f.position_noise(),
                     theta: self.estimate.theta,
                 };
-                if let Some(sd) = f.heading_noise {
+                if let Some(sd) = f.heading_noise() {
                     fix.theta = s.theta + self.normal() * sd;
                 }
                 self.pending.push_back(PendingFix {
-                    arrives: t + f.latency,
+                    arrives: t + f.latency(),
                     fix,
                     estimate_then: self.estimate,
                 });
@@ -271,8 +270,8 @@ impl Odometer {
 
     fn apply(&mut self, p: &PendingFix, f: &FixSpec) {
         let noise = FixNoise {
-            position: f.position_noise,
-            heading: f.heading_noise,
+            position: f.position_noise(),
+            heading: f.heading_noise(),
         };
         // Never gated (see `Odometer::with_wheels`).
         if let Ok(estimate) = self

@@ -17,9 +17,7 @@ pub use echelon_ros2::KeyScheme;
 mod fleet;
 mod odometry;
 
-pub use fleet::{
-    CmdVelStamp, CmdVelType, Endpoints, FleetSection, LinkLossSection, Ros2Section,
-};
+pub use fleet::{CmdVelStamp, CmdVelType, Endpoints, FleetSection, LinkLossSection, Ros2Section};
 pub use odometry::{FixMessage, FixesSection, OdometrySection};
 
 /// A whole scenario file.

@@ -1,6 +1,9 @@
 //! The `[fleet]` section resolved: what `echelon fleet` needs beyond the
 //! simulation (fleet name, rates, link-loss policies).
 
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
 use super::locate::FieldPath;
 use super::plausible::{self, Part};
 use super::schema::{CmdVelStamp, CmdVelType, FixMessage, FixesSection, Ros2Section};
@@ -38,17 +41,7 @@ pub const DEFAULT_DECEL: f64 = 0.1;
 
 /// What a robot does when its leader's stream is lost (`policy = "stop"` or
 /// `"extrapolate"` in a scenario).
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Deserialize,
-    serde::Serialize,
-    schemars::JsonSchema,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum LinkPolicy {
     /// Converge to the last received position (the paper's experiment).

@@ -49,18 +49,13 @@ impl Drive {
     fn start(&self, start: State) -> Result<State, ParamError> {
         if let Drive::Velocity(robot) = self {
             let b = robot.base();
-            check::require(
-                "v",
-                start.v,
-                start.v.abs() <= b.v_max(),
-                format!("exceeds the base's v_max = {} m/s", b.v_max()),
-            )?;
-            check::require(
-                "omega",
-                start.omega,
-                start.omega.abs() <= b.omega_max(),
-                format!("exceeds the base's omega_max = {} rad/s", b.omega_max()),
-            )?;
+            for (field, value, max, unit) in [
+                ("v", start.v, b.v_max(), "m/s"),
+                ("omega", start.omega, b.omega_max(), "rad/s"),
+            ] {
+                let reason = format!("exceeds the base's {field}_max = {max} {unit}");
+                check::require(field, value, value.abs() <= max, reason)?;
+            }
         }
         start.start()
     }

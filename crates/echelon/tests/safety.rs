@@ -3,13 +3,15 @@
 //! and bad `[safety]` input.
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
+mod common;
+
 use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::model::{Input, RobotParams};
 use echelon::safety::{Neighbour, SafetyConfig, SafetyFilter, point};
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 use echelon::stats::{SafetyReport, SafetyWatch, Summary};
-use echelon::{Observer, ScenarioError, State};
+use echelon::{Observer, State};
 
 /// Runs a built-in (with `safety` removed when `filter` is false), watching
 /// every step: the safety report (if any), the smallest distance between two
@@ -255,9 +257,7 @@ offset = { x = 0.5, y = -0.5 }
 safety = { gain = 2.0 }
 "#;
 
-fn build(src: &str) -> Result<echelon::Run, ScenarioError> {
-    Scenario::parse(src, "test.toml", None)?.build(&Overrides::default())
-}
+use common::build;
 
 #[test]
 fn the_base_builds_with_a_filter_per_agent() {

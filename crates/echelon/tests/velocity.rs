@@ -3,16 +3,15 @@
 //! lagged, limited bases.
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
+mod common;
+
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 
 /// Runs `src` and returns, per agent, the logged `(t, e)` of every step, and
 /// `K_e` of each agent.
 fn logged_errors(src: &str) -> (Vec<Vec<[f64; 2]>>, Vec<f64>, f64) {
-    let run = Scenario::parse(src, "test.toml", None)
-        .unwrap()
-        .build(&Overrides::default())
-        .unwrap();
+    let run = common::build(src).unwrap();
     let n = run.plan.agents().len();
     let ke: Vec<f64> = run.plan.agents().iter().map(|a| a.gains().ke()).collect();
     let dt = run.plan.config().dt;

@@ -196,6 +196,14 @@ impl AgentSpec {
         self.max_accel
     }
 
+    /// What this agent's act step does beyond its law, when it does anything
+    /// (the setting's name, e.g. `max_accel`): what a runner of the bare law,
+    /// as the batch engine, must refuse. The safety filter is the plan's
+    /// ([`crate::plan::Plan::safety`]), not the agent's.
+    pub fn beyond_law(&self) -> Option<&'static str> {
+        self.max_accel.map(|_| "max_accel")
+    }
+
     /// Display name (the scenario's, e.g. `agent 1`).
     pub fn name(&self) -> &str {
         &self.name

@@ -316,9 +316,9 @@ impl Engine {
         let Some(first) = agents.first() else {
             return Err(EngineError::Unsupported("an empty formation".into()));
         };
-        if agents.iter().any(|a| a.max_accel().is_some()) {
-            // The kernels run the law alone, not the act step's limits.
-            return Err(EngineError::Unsupported("max_accel".into()));
+        // The kernels run the law alone, not the rest of the act step.
+        if let Some(what) = agents.iter().find_map(AgentSpec::beyond_law) {
+            return Err(EngineError::Unsupported(what.into()));
         }
         let star = agents.iter().all(|a| a.leader() == Leader::Reference);
         let chain = agents.iter().enumerate().all(|(i, a)| {

@@ -59,11 +59,7 @@ fn runs_with_odometry_get_a_drift_figure() {
     let fixes: f64 = data.odometry[0].as_ref().unwrap().fix.iter().sum();
     assert_eq!(fixes, 4.0);
     let written = write_all(dir.path()).unwrap();
-    let drift = written
-        .figures
-        .iter()
-        .find(|f| f.svg.ends_with("drift.svg"))
-        .unwrap();
+    let drift = written.figure("drift").unwrap();
     let texts = svg_texts_showing(
         &drift.svg,
         &[

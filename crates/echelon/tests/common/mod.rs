@@ -132,6 +132,21 @@ pub fn load_clean_scenario(path: &std::path::Path) -> echelon::scenario::Scenari
 
 /// The scenario text `src` built with the default overrides.
 pub fn build(src: &str) -> Result<echelon::Run, echelon::ScenarioError> {
-    use echelon::scenario::{Overrides, Scenario};
-    Scenario::parse(src, "test.toml", None)?.build(&Overrides::default())
+    build_with(src, &echelon::scenario::Overrides::default())
+}
+
+/// The scenario text `src` built with `overrides`.
+pub fn build_with(
+    src: &str,
+    overrides: &echelon::scenario::Overrides,
+) -> Result<echelon::Run, echelon::ScenarioError> {
+    echelon::scenario::Scenario::parse(src, "test.toml", None)?.build(overrides)
+}
+
+/// The default overrides but for the run's `duration`, s.
+pub fn for_seconds(duration: f64) -> echelon::scenario::Overrides {
+    echelon::scenario::Overrides {
+        duration: Some(duration),
+        ..echelon::scenario::Overrides::default()
+    }
 }

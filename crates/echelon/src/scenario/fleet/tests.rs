@@ -122,7 +122,7 @@ fn the_odom_origin_is_the_start_unless_given() {
     let o = f.ros2[0].odom_origin;
     assert_eq!((o.x, o.y, o.theta), (3.0, 4.0, 0.5));
     // An origin is a pose: no speed, one heading, finite, located.
-    for (extra, field) in [
+    assert_refused(&[
         (
             "odom_origin = { x = 0.0, y = 0.0, theta = 0.0, v = 1.0 }\n",
             "agents[1].odom_origin.v",
@@ -139,11 +139,7 @@ fn the_odom_origin_is_the_start_unless_given() {
             "odom_origin = { x = nan, y = 0.0, theta = 0.0 }\n",
             "agents[1].odom_origin.x",
         ),
-    ] {
-        let e = parse(extra).err().unwrap_or_else(|| panic!("{extra}"));
-        assert_eq!(e.field, field, "{e}");
-        assert!(e.location.line > 0, "{e}");
-    }
+    ]);
 }
 
 #[test]
@@ -199,7 +195,7 @@ fn fixes_from_ros2_are_resolved_with_their_defaults() {
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(f.ros2[0].fixes, None);
     // Bad values name their field and line.
-    for (extra, field) in [
+    assert_refused(&[
         (
             "fixes = { period = 0.1, source = \"bad topic\" }\n",
             "agents[1].fixes.source",
@@ -224,11 +220,7 @@ fn fixes_from_ros2_are_resolved_with_their_defaults() {
             "fixes = { period = 0.1, source = \"pose\", message = \"odometry\" }\n",
             "agents[1].fixes.message",
         ),
-    ] {
-        let e = parse(extra).err().unwrap_or_else(|| panic!("{extra}"));
-        assert_eq!(e.field, field, "{e}");
-        assert!(e.location.line > 0, "{e}");
-    }
+    ]);
 }
 
 #[test]
@@ -324,4 +316,14 @@ fn robot_routers_are_resolved_and_checked() {
         .err()
         .unwrap_or_else(|| panic!());
     assert!(e.location.line > 0, "{e}");
+}
+
+/// Each `(extra, field)`: the base scenario with `extra` is refused, the
+/// error naming `field` at a line of the file.
+fn assert_refused(cases: &[(&str, &str)]) {
+    for (extra, field) in cases {
+        let e = parse(extra).err().unwrap_or_else(|| panic!("{extra}"));
+        assert_eq!(e.field, *field, "{e}");
+        assert!(e.location.line > 0, "{e}");
+    }
 }

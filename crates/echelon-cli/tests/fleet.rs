@@ -94,13 +94,13 @@ fn true_errors(scenario: &str, csv: &Path, k: usize) -> Vec<(f64, f64)> {
                 dp: jet.dp,
                 ddp: jet.ddp,
             };
-            let off = spec.placement.offset_for_reference(&jet);
+            let off = spec.placement().offset_for_reference(&jet);
             let out = law(
                 spec.torque_robot().expect("a torque-driven fleet agent"),
                 &s,
                 &motion,
                 &off,
-                spec.gains,
+                spec.gains(),
                 spec.variant().expect("a torque-driven fleet agent"),
             );
             (t, out.e[0].hypot(out.e[1]))
@@ -1156,7 +1156,12 @@ fn crossing_keeps_robots_apart_in_the_fleet() {
     let dir = tempfile::tempdir().unwrap();
     let scenario = Scenario::resolve("crossing").unwrap();
     let run = scenario.build(&Overrides::default()).unwrap();
-    let l: Vec<f64> = run.plan.agents().iter().map(|a| a.placement.l()).collect();
+    let l: Vec<f64> = run
+        .plan
+        .agents()
+        .iter()
+        .map(|a| a.placement().l())
+        .collect();
     let radius = run.plan.safety_radius().unwrap();
     let fleet_dir = dir.path().join("fleet");
     let report = up(

@@ -277,7 +277,7 @@ impl Bag {
 pub fn run(opts: ExciteOptions, stop: &StopFlag) -> Result<ExciteReport, FleetError> {
     let fleet = opts.scenario.fleet()?;
     let spec = agent_spec(&opts.scenario, opts.agent)?;
-    let Drive::Velocity(robot) = &spec.drive else {
+    let Drive::Velocity(robot) = &spec.drive() else {
         return Err(FleetError::Config(format!(
             "agent {}: fleet excite drives a velocity base (set drive = \"velocity\" on its robot)",
             opts.agent

@@ -242,13 +242,13 @@ pub enum SimulatedDrive {
 impl SimulatedDrive {
     /// Agent `spec`'s robot at its start, at fleet time `t0`.
     pub fn of(spec: &AgentSpec, t0: f64, max_step: f64) -> Self {
-        match &spec.drive {
+        match &spec.drive() {
             Drive::Torque { robot, .. } => {
-                SimulatedDrive::Torque(SimulatedPlant::new(*robot, spec.start, t0, max_step))
+                SimulatedDrive::Torque(SimulatedPlant::new(*robot, spec.start(), t0, max_step))
             }
             Drive::Velocity(r) => SimulatedDrive::Velocity(SimulatedVelocityBase::new(
                 r.base(),
-                spec.start,
+                spec.start(),
                 t0,
                 max_step,
             )),

@@ -76,6 +76,14 @@ pub struct Written {
     pub report: PathBuf,
 }
 
+impl Written {
+    /// The figure `name` (`drift` for `drift.svg` and `drift.png`), if written.
+    pub fn figure(&self, name: &str) -> Option<&figure::Saved> {
+        let svg = format!("{name}.svg");
+        self.figures.iter().find(|f| f.svg.ends_with(&svg))
+    }
+}
+
 /// Reads the run in `dir` and writes its figures (`paths`, `errors`,
 /// `signals`, as SVG and PNG) and `report.html` next to `trajectory.csv`.
 pub fn write_all(dir: &Path) -> Result<Written, ReportError> {

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use echelon::odometry::ZetaModel;
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sweep::{self, Grid};
+use echelon::sweep::{self, Grid, GridSpec};
 use echelon_report::write_all;
 
 /// The texts of the SVG at `path`, which show every one of `needles`.
@@ -59,11 +59,7 @@ fn runs_with_odometry_get_a_drift_figure() {
     let fixes: f64 = data.odometry[0].as_ref().unwrap().fix.iter().sum();
     assert_eq!(fixes, 4.0);
     let written = write_all(dir.path()).unwrap();
-    let drift = written
-        .figures
-        .iter()
-        .find(|f| f.svg.ends_with("drift.svg"))
-        .unwrap();
+    let drift = written.figure("drift").unwrap();
     let texts = svg_texts_showing(
         &drift.svg,
         &[
@@ -97,7 +93,7 @@ fn runs_without_odometry_have_no_drift_figure() {
 fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
     let s = Scenario::builtin("fix-study").unwrap();
     let ov = common::for_seconds(6.0);
-    let grid = Grid {
+    let grid = Grid::new(GridSpec {
         zeta: vec![1e-5],
         zeta_model: ZetaModel::WorstCase,
         wheel_diameter_ratio: vec![1.0, 1.002],
@@ -107,7 +103,8 @@ fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
         seeds: vec![0],
         gamma: 0.99,
         transient: 3.0,
-    };
+    })
+    .unwrap();
     let rows = sweep::run(&s, &ov, &grid, &|| {}).unwrap();
     let curves = sweep::drift_curves(&s, &ov, &grid, 100).unwrap();
     assert_eq!(curves.len(), 2, "one curve per error model");
@@ -160,7 +157,7 @@ fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
 fn a_velocity_sweep_figure_overlays_the_kinematic_bound() {
     let s = Scenario::builtin("circle-pentagon-velocity").unwrap();
     let ov = common::for_seconds(14.0);
-    let grid = Grid {
+    let grid = Grid::new(GridSpec {
         zeta: vec![1e-5],
         zeta_model: ZetaModel::WorstCase,
         wheel_diameter_ratio: vec![1.0],
@@ -170,7 +167,8 @@ fn a_velocity_sweep_figure_overlays_the_kinematic_bound() {
         seeds: vec![0],
         gamma: 0.9,
         transient: 10.0,
-    };
+    })
+    .unwrap();
     let rows = sweep::run(&s, &ov, &grid, &|| {}).unwrap();
     let curves = sweep::drift_curves(&s, &ov, &grid, 50).unwrap();
     let figure = echelon_report::odometry::sweep("circle-pentagon-velocity", &rows, &curves);

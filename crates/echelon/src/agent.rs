@@ -44,6 +44,22 @@ impl Drive {
         }
     }
 
+    /// `start` as this drive's start state: finite, and on a velocity base
+    /// within its speed limits.
+    fn start(&self, start: State) -> Result<State, ParamError> {
+        if let Drive::Velocity(robot) = self {
+            let b = robot.base();
+            for (field, value, max, unit) in [
+                ("v", start.v, b.v_max(), "m/s"),
+                ("omega", start.omega, b.omega_max(), "rad/s"),
+            ] {
+                let reason = format!("exceeds the base's {field}_max = {max} {unit}");
+                check::require(field, value, value.abs() <= max, reason)?;
+            }
+        }
+        start.start()
+    }
+
     /// The law this drive runs.
     pub fn law(&self) -> Law {
         match self {
@@ -55,25 +71,17 @@ impl Drive {
 
 /// One robot of a formation: its body, its leader, where it holds that leader,
 /// and its controller. Built by [`AgentSpec::new`] (torque-driven) or
-/// [`AgentSpec::velocity`], which refuse impossible values; the fields are
-/// public to read.
+/// [`AgentSpec::velocity`], which refuse impossible values; read through
+/// its getters.
 #[derive(Debug, Clone, PartialEq)]
 #[non_exhaustive]
 pub struct AgentSpec {
-    /// Display name (the scenario's, e.g. `agent 1`).
-    pub name: String,
-    /// The body and the law that drives it.
-    pub drive: Drive,
-    /// Whom it follows.
-    pub leader: Leader,
-    /// `L_Xoff`, `L_Yoff`, `L` and the `L_Ycomp` options.
-    pub placement: Placement,
-    /// `K_e`, `K_z` (`K_z` unused by the kinematic law).
-    pub gains: Gains,
-    /// Initial state.
-    pub start: State,
-    /// The largest `|v̇|` the act step lets the law ask, m/s² (`None`: no
-    /// limit); [`AgentSpec::with_max_accel`].
+    name: String,
+    drive: Drive,
+    leader: Leader,
+    placement: Placement,
+    gains: Gains,
+    start: State,
     max_accel: Option<f64>,
 }
 
@@ -112,19 +120,6 @@ impl AgentSpec {
         gains: Gains,
         start: State,
     ) -> Result<AgentSpec, ParamError> {
-        let b = robot.base();
-        check::require(
-            "v",
-            start.v,
-            start.v.abs() <= b.v_max(),
-            format!("exceeds the base's v_max = {} m/s", b.v_max()),
-        )?;
-        check::require(
-            "omega",
-            start.omega,
-            start.omega.abs() <= b.omega_max(),
-            format!("exceeds the base's omega_max = {} rad/s", b.omega_max()),
-        )?;
         AgentSpec::checked(
             name.into(),
             Drive::Velocity(robot),
@@ -143,15 +138,22 @@ impl AgentSpec {
         gains: Gains,
         start: State,
     ) -> Result<AgentSpec, ParamError> {
-        start.validate_start()?;
         Ok(AgentSpec {
             name,
+            start: drive.start(start)?,
             drive,
             leader,
             placement,
             gains,
-            start,
             max_accel: None,
+        })
+    }
+
+    /// This agent starting in `start` instead, refused as by its constructor.
+    pub fn with_start(self, start: State) -> Result<AgentSpec, ParamError> {
+        Ok(AgentSpec {
+            start: self.drive.start(start)?,
+            ..self
         })
     }
 
@@ -174,9 +176,62 @@ impl AgentSpec {
         Ok(AgentSpec { max_accel, ..self })
     }
 
+    /// This agent following `leader` instead.
+    pub fn with_leader(self, leader: Leader) -> AgentSpec {
+        AgentSpec { leader, ..self }
+    }
+
+    /// This agent held at `placement` instead.
+    pub fn with_placement(self, placement: Placement) -> AgentSpec {
+        AgentSpec { placement, ..self }
+    }
+
+    /// This agent with the gains `gains` instead.
+    pub fn with_gains(self, gains: Gains) -> AgentSpec {
+        AgentSpec { gains, ..self }
+    }
+
     /// The largest `|v̇|` the act step lets the law ask, m/s².
     pub fn max_accel(&self) -> Option<f64> {
         self.max_accel
+    }
+
+    /// What this agent's act step does beyond its law, when it does anything
+    /// (the setting's name, e.g. `max_accel`): what a runner of the bare law,
+    /// as the batch engine, must refuse. The safety filter is the plan's
+    /// ([`crate::plan::Plan::safety`]), not the agent's.
+    pub fn beyond_law(&self) -> Option<&'static str> {
+        self.max_accel.map(|_| "max_accel")
+    }
+
+    /// Display name (the scenario's, e.g. `agent 1`).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The body and the law that drives it.
+    pub fn drive(&self) -> &Drive {
+        &self.drive
+    }
+
+    /// Whom it follows.
+    pub fn leader(&self) -> Leader {
+        self.leader
+    }
+
+    /// `L_Xoff`, `L_Yoff`, `L` and the `L_Ycomp` options.
+    pub fn placement(&self) -> Placement {
+        self.placement
+    }
+
+    /// `K_e`, `K_z` (`K_z` unused by the kinematic law).
+    pub fn gains(&self) -> Gains {
+        self.gains
+    }
+
+    /// Initial state.
+    pub fn start(&self) -> State {
+        self.start
     }
 
     /// `nominal` with the linear acceleration it asks of the robot in state

@@ -93,16 +93,16 @@ impl Follow {
 /// ([`crate::base::VelocityBase::speeds`]): the caller puts them in its state.
 #[inline]
 pub fn follow(spec: &AgentSpec, sensed: &State, leader: LeaderView<'_>) -> Follow {
-    let (motion, offset) = leader.resolve(&spec.placement);
-    match &spec.drive {
+    let (motion, offset) = leader.resolve(&spec.placement());
+    match spec.drive() {
         Drive::Torque { robot, variant } => Follow {
-            law: law(robot, sensed, &motion, &offset, spec.gains, *variant),
+            law: law(robot, sensed, &motion, &offset, spec.gains(), *variant),
             leader: motion,
             offset,
             velocity: None,
         },
         Drive::Velocity(_) => {
-            let k = kinematic_law(sensed, &motion, &offset, spec.gains.ke());
+            let k = kinematic_law(sensed, &motion, &offset, spec.gains().ke());
             Follow {
                 law: LawOutput {
                     u: Input::default(),
@@ -198,7 +198,7 @@ mod tests {
                 &me,
                 &a.leader,
                 &a.offset,
-                s.gains,
+                s.gains(),
                 Variant::Complete
             )
         );

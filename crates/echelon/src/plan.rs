@@ -121,17 +121,17 @@ pub struct Agents {
 impl Agents {
     /// Checks the agents together (each is valid by [`AgentSpec::new`]).
     pub fn new(specs: Vec<AgentSpec>) -> Result<Agents, FormationError> {
-        let formation = Formation::new(specs.iter().map(|a| a.leader).collect())?;
+        let formation = Formation::new(specs.iter().map(|a| a.leader()).collect())?;
         for (i, a) in specs.iter().enumerate() {
-            if let Leader::Agent(j) = a.leader
-                && a.placement.uses_exact_derivatives()
+            if let Leader::Agent(j) = a.leader()
+                && a.placement().uses_exact_derivatives()
             {
                 return Err(FormationError::ExactDerivativesNeedReference {
                     agent: i + 1,
                     leader: j + 1,
                 });
             }
-            if let Leader::Agent(j) = a.leader
+            if let Leader::Agent(j) = a.leader()
                 && a.torque_robot().is_some()
                 && specs[j]
                     .velocity_robot()
@@ -204,17 +204,18 @@ impl Plan {
         let mut warnings = Vec::new();
         for (i, a) in agents.specs.iter().enumerate() {
             let ctx = format!("agent {}", i + 1);
-            if a.variant() == Some(Variant::Paper) && a.gains.ke() * a.gains.kz() <= 0.25 {
+            if a.variant() == Some(Variant::Paper) && a.gains().ke() * a.gains().kz() <= 0.25 {
                 warnings.push(format!(
                     "{ctx}: K_e K_z = {} ≤ 1/4: Theorem 1 does not guarantee convergence for the paper law (use law = \"complete\")",
-                    a.gains.ke() * a.gains.kz()
+                    a.gains().ke() * a.gains().kz()
                 ));
             }
             let (lo, hi) = FitCoefficients::PAPER_RANGE;
-            if a.placement.lycomp() == LyComp::Fit && !(lo..=hi).contains(&a.placement.lx_off()) {
+            if a.placement().lycomp() == LyComp::Fit && !(lo..=hi).contains(&a.placement().lx_off())
+            {
                 warnings.push(format!(
                     "{ctx}: L_Xoff = {} m is outside the range {lo}–{hi} m where the eq. 6 fit holds (use lycomp = \"exact\")",
-                    a.placement.lx_off()
+                    a.placement().lx_off()
                 ));
             }
         }
@@ -271,9 +272,8 @@ impl Plan {
                     let k =
                         check::multiple_of("period", spec.period(), dt, &format!("dt = {dt} s"))
                             .map_err(param)?;
-                    let (l, r) = a.drive.wheels();
-                    let o = Odometer::with_wheels(spec, l, r, &a.start, seed, i as u64)
-                        .map_err(param)?;
+                    let (l, r) = a.drive().wheels();
+                    let o = Odometer::with_wheels(spec, l, r, &a.start(), seed, i as u64);
                     odometers.push(Some(o));
                     every.push(k);
                 }
@@ -307,7 +307,7 @@ impl Plan {
             .agents
             .specs
             .iter()
-            .map(|a| crate::safety::point(&a.start, a.placement.l()))
+            .map(|a| crate::safety::point(&a.start(), a.placement().l()))
             .collect();
         if let Some((agent, source)) =
             crate::safety::start_conflict(&points, &spec.agents, &spec.obstacles)

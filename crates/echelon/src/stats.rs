@@ -187,7 +187,7 @@ impl Summary {
             .enumerate()
             .map(|(i, (a, stats))| AgentSummary {
                 agent: i + 1,
-                name: a.name.clone(),
+                name: a.name().to_owned(),
                 final_pose: stats.last().map_or(Pose::default(), |s| Pose {
                     x: s.x,
                     y: s.y,
@@ -298,7 +298,7 @@ impl Observer for SafetyWatch {
         if !sim.has_safety() {
             return Ok(());
         }
-        self.l = sim.agents().iter().map(|a| a.placement.l()).collect();
+        self.l = sim.agents().iter().map(|a| a.placement().l()).collect();
         self.obstacles = sim.obstacles().to_vec();
         let radius = sim.safety_radius().unwrap_or(f64::INFINITY);
         self.report = Some(SafetyReport {

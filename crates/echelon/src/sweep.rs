@@ -38,9 +38,10 @@ use crate::scenario::schema::{FixesSection, Fusion, OdometrySection};
 use crate::scenario::{Overrides, Run, Scenario};
 use crate::sim::{Every, Frame, ObserverError};
 
-/// The grid of a sweep: every combination of the lists, for every seed.
+/// The grid a sweep is asked for: every combination of the lists, for every
+/// seed. [`Grid::new`] checks it.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Grid {
+pub struct GridSpec {
     /// The paper's `ζ`, m per sample.
     pub zeta: Vec<f64>,
     /// How `ζ` enters.
@@ -60,6 +61,11 @@ pub struct Grid {
     /// Statistics are taken after this time, s (the "ultimate" behaviour).
     pub transient: f64,
 }
+
+/// A checked [`GridSpec`]: every list has a value and every value is
+/// possible, so a sweep over it can run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grid(GridSpec);
 
 /// One run of a sweep.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -181,15 +187,60 @@ pub enum SweepError {
 }
 
 impl Grid {
+    /// The grid `spec`, refusing empty lists, impossible values and γ
+    /// outside (0, 1).
+    pub fn new(spec: GridSpec) -> Result<Grid, ParamError> {
+        let lists: [(&'static str, usize); 6] = [
+            ("zeta", spec.zeta.len()),
+            ("wheel_diameter_ratio", spec.wheel_diameter_ratio.len()),
+            ("wheelbase_ratio", spec.wheelbase_ratio.len()),
+            ("slip", spec.slip.len()),
+            ("fix_every", spec.fix_every.len()),
+            ("seeds", spec.seeds.len()),
+        ];
+        for (field, n) in lists {
+            if n == 0 {
+                return Err(ParamError::new(field, 0.0, "needs at least one value"));
+            }
+        }
+        for (field, values) in [("zeta", &spec.zeta), ("slip", &spec.slip)] {
+            for &v in values {
+                check::non_negative(field, v)?;
+            }
+        }
+        for (field, values) in [
+            ("wheel_diameter_ratio", &spec.wheel_diameter_ratio),
+            ("wheelbase_ratio", &spec.wheelbase_ratio),
+        ] {
+            for &v in values {
+                check::positive(field, v)?;
+            }
+        }
+        if !(spec.gamma > 0.0 && spec.gamma < 1.0) {
+            return Err(ParamError::new(
+                "gamma",
+                spec.gamma,
+                "must be in (0, 1) (Theorem 2's γ)",
+            ));
+        }
+        check::non_negative("transient", spec.transient)?;
+        Ok(Grid(spec))
+    }
+
+    /// What the grid holds.
+    pub fn spec(&self) -> &GridSpec {
+        &self.0
+    }
+
     /// Every case, in grid order: ζ, E_d, E_b, slip, N, then seed varies fastest.
     pub fn cases(&self) -> Vec<Case> {
         let mut out = Vec::new();
-        for &zeta in &self.zeta {
-            for &ed in &self.wheel_diameter_ratio {
-                for &eb in &self.wheelbase_ratio {
-                    for &slip in &self.slip {
-                        for &fix_every in &self.fix_every {
-                            for &seed in &self.seeds {
+        for &zeta in &self.0.zeta {
+            for &ed in &self.0.wheel_diameter_ratio {
+                for &eb in &self.0.wheelbase_ratio {
+                    for &slip in &self.0.slip {
+                        for &fix_every in &self.0.fix_every {
+                            for &seed in &self.0.seeds {
                                 out.push(Case {
                                     zeta,
                                     wheel_diameter_ratio: ed,
@@ -205,45 +256,6 @@ impl Grid {
             }
         }
         out
-    }
-
-    /// Refuses empty lists, impossible values and γ outside (0, 1).
-    pub fn validate(&self) -> Result<(), ParamError> {
-        let lists: [(&'static str, usize); 6] = [
-            ("zeta", self.zeta.len()),
-            ("wheel_diameter_ratio", self.wheel_diameter_ratio.len()),
-            ("wheelbase_ratio", self.wheelbase_ratio.len()),
-            ("slip", self.slip.len()),
-            ("fix_every", self.fix_every.len()),
-            ("seeds", self.seeds.len()),
-        ];
-        for (field, n) in lists {
-            if n == 0 {
-                return Err(ParamError::new(field, 0.0, "needs at least one value"));
-            }
-        }
-        for (field, values) in [("zeta", &self.zeta), ("slip", &self.slip)] {
-            for &v in values {
-                check::non_negative(field, v)?;
-            }
-        }
-        for (field, values) in [
-            ("wheel_diameter_ratio", &self.wheel_diameter_ratio),
-            ("wheelbase_ratio", &self.wheelbase_ratio),
-        ] {
-            for &v in values {
-                check::positive(field, v)?;
-            }
-        }
-        if !(self.gamma > 0.0 && self.gamma < 1.0) {
-            return Err(ParamError::new(
-                "gamma",
-                self.gamma,
-                "must be in (0, 1) (Theorem 2's γ)",
-            ));
-        }
-        check::non_negative("transient", self.transient)?;
-        Ok(())
     }
 }
 
@@ -287,7 +299,7 @@ fn build_case(
     grid: &Grid,
     case: &Case,
 ) -> Result<Run, SweepError> {
-    let s = apply(scenario, case, grid.zeta_model);
+    let s = apply(scenario, case, grid.0.zeta_model);
     Ok(s.build(&Overrides {
         seed: Some(case.seed),
         ..*overrides
@@ -310,7 +322,7 @@ pub fn run_case(
     let mut omega_max = vec![0.0f64; n];
     // Whether a velocity base's speed limits cut its command after the transient.
     let mut saturated = vec![false; n];
-    let transient = grid.transient;
+    let transient = grid.0.transient;
     let mut observe = |f: &Frame<'_>| -> Result<(), ObserverError> {
         for (i, odometer) in f.odometers.iter().enumerate() {
             let Some(odometer) = odometer else { continue };
@@ -351,21 +363,21 @@ pub fn run_case(
             match a.velocity_robot() {
                 None => {
                     let t = Theorem2::new(
-                        a.gains.ke(),
-                        a.gains.kz(),
+                        a.gains().ke(),
+                        a.gains().kz(),
                         case.zeta,
                         omega_max[i],
-                        grid.gamma,
+                        grid.0.gamma,
                     )?;
                     let b = t.z_bound(case.fix_every);
-                    widen(b, z_max[i] / b, b / a.gains.ke());
+                    widen(b, z_max[i] / b, b / a.gains().ke());
                 }
                 // The kinematic form is for an ideal base: no lag, and no
                 // speed limit cutting the command once the transient is over.
                 Some(r)
                     if r.base().tau_v() == 0.0 && r.base().tau_omega() == 0.0 && !saturated[i] =>
                 {
-                    let t = KinematicTheorem2::new(a.gains.ke(), case.zeta, grid.gamma)?;
+                    let t = KinematicTheorem2::new(a.gains().ke(), case.zeta, grid.0.gamma)?;
                     let e = t.e_bound(case.fix_every);
                     widen(t.z_bound(case.fix_every), e_max[i] / e, e);
                 }
@@ -425,9 +437,8 @@ pub fn run(
     grid: &Grid,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Vec<Row>, SweepError> {
-    grid.validate()?;
     // Build once up front so that a broken scenario fails before any work.
-    apply(scenario, &grid.cases()[0], grid.zeta_model).build(overrides)?;
+    apply(scenario, &grid.cases()[0], grid.0.zeta_model).build(overrides)?;
     grid.cases()
         .par_iter()
         .map(|case| {
@@ -467,11 +478,10 @@ pub fn drift_curves(
     grid: &Grid,
     points: usize,
 ) -> Result<Vec<DriftCurve>, SweepError> {
-    grid.validate()?;
     let mut models: Vec<Case> = Vec::new();
     for c in grid.cases() {
         let model = Case {
-            seed: grid.seeds[0],
+            seed: grid.0.seeds[0],
             ..c.error_model()
         };
         if !models.contains(&model) {

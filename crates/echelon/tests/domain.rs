@@ -406,11 +406,10 @@ proptest! {
     fn odometry_spec_checks_its_parts(
         period in positive(), bad in not_positive(), ratio in positive(), bad_ratio in not_positive(),
     ) {
-        let errors = ErrorModel::systematic(ratio, 1.0);
+        let errors = ErrorModel::systematic(ratio, 1.0).unwrap();
         let spec = OdometrySpec::new(period, errors, None).unwrap();
         prop_assert_eq!((spec.period(), spec.errors(), spec.fixes()), (period, errors, None));
         prop_assert_eq!(OdometrySpec::new(bad, errors, None).unwrap_err().field, "period");
-        let wrong = ErrorModel::systematic(1.0, bad_ratio);
-        prop_assert_eq!(OdometrySpec::new(period, wrong, None).unwrap_err().field, "wheelbase_ratio");
+        prop_assert_eq!(ErrorModel::systematic(1.0, bad_ratio).unwrap_err().field, "wheelbase_ratio");
     }
 }

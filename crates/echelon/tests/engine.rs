@@ -111,10 +111,14 @@ fn near_formation(f: &BenchFormation) -> Vec<AgentSpec> {
     let mut x = 0.0;
     let mut specs = f.agent_specs();
     for s in &mut specs {
-        x -= s.placement.lx();
-        s.start.x = x + rng.uniform(-0.1, 0.1);
-        s.start.y = rng.uniform(-0.1, 0.1);
-        s.start.theta = rng.uniform(-0.1, 0.1);
+        x -= s.placement().lx();
+        let start = State {
+            x: x + rng.uniform(-0.1, 0.1),
+            y: rng.uniform(-0.1, 0.1),
+            theta: rng.uniform(-0.1, 0.1),
+            ..s.start()
+        };
+        *s = s.clone().with_start(start).unwrap();
     }
     specs
 }
@@ -133,7 +137,12 @@ fn long_chains_agree_as_well_as_their_sensitivity_allows() {
     let plan = Plan::new(specs.clone(), f.reference(), config).unwrap();
     let mut sim = Simulation::new(&plan);
     let mut engine = Engine::from_plan(&plan).unwrap();
-    specs[0].start.x = specs[0].start.x.next_up();
+    let first = specs[0].start();
+    let nudge = State {
+        x: first.x.next_up(),
+        ..first
+    };
+    specs[0] = specs[0].clone().with_start(nudge).unwrap();
     let mut nudged = Simulation::new(&Plan::new(specs, f.reference(), config).unwrap());
     let distance = |a: &[State], b: &[State]| {
         a.iter()
@@ -277,25 +286,34 @@ fn results_do_not_depend_on_threads_or_on_how_steps_are_grouped() {
 fn what_the_engine_cannot_do_is_refused() {
     let f = formation(4, Topology::Chain, 1);
     let mut specs = f.agent_specs();
-    specs[2].leader = Leader::Reference;
+    specs[2] = specs[2].clone().with_leader(Leader::Reference);
     let err = Engine::from_agents(&specs, f.reference(), 0.01).unwrap_err();
     assert!(matches!(err, EngineError::Unsupported(_)), "{err}");
     let mut specs = f.agent_specs();
-    specs[1].drive = echelon::agent::Drive::Torque {
-        robot: RobotParams::AGENT2,
-        variant: echelon::Variant::Paper,
-    };
-    assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
-    let mut specs = f.agent_specs();
-    let p = specs[3].placement;
-    specs[3].placement = Placement::new(
-        p.lx_off(),
-        p.ly_off(),
-        p.l(),
-        p.lycomp(),
-        LyDerivatives::Exact,
+    let s = &specs[1];
+    specs[1] = AgentSpec::new(
+        s.name(),
+        RobotParams::AGENT2,
+        s.leader(),
+        s.placement(),
+        s.gains(),
+        echelon::Variant::Paper,
+        s.start(),
     )
     .unwrap();
+    assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
+    let mut specs = f.agent_specs();
+    let p = specs[3].placement();
+    specs[3] = specs[3].clone().with_placement(
+        Placement::new(
+            p.lx_off(),
+            p.ly_off(),
+            p.l(),
+            p.lycomp(),
+            LyDerivatives::Exact,
+        )
+        .unwrap(),
+    );
     assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
     // Impossible values cannot reach the engine: the constructors refuse them.
     let err = Gains::new(1.5, -1.0).unwrap_err();
@@ -335,9 +353,12 @@ fn a_blow_up_is_reported_like_the_scalar_simulator_does() {
         (formation(600, Topology::Chain, 3), 400),
     ] {
         let mut specs = f.agent_specs();
-        specs[bad].placement =
-            Placement::new(-0.049_999, 0.0, 0.05, LyComp::Fit, LyDerivatives::Neglect).unwrap();
-        specs[bad].gains = Gains::new(50.0, 500.0).unwrap();
+        specs[bad] = specs[bad]
+            .clone()
+            .with_placement(
+                Placement::new(-0.049_999, 0.0, 0.05, LyComp::Fit, LyDerivatives::Neglect).unwrap(),
+            )
+            .with_gains(Gains::new(50.0, 500.0).unwrap());
         let dt = 0.05;
         let config = SimConfig::new(dt, 100.0, Timing::Continuous).unwrap();
         let mut sim = Simulation::new(&Plan::new(specs.clone(), f.reference(), config).unwrap());

@@ -6,9 +6,10 @@
 //! velocity bases under the kinematic law.
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
-use echelon::scenario::schema::ScenarioFile;
 use echelon::scenario::{Overrides, Scenario};
 
 fn examples_dir() -> PathBuf {
@@ -38,27 +39,9 @@ fn every_example_parses_builds_resolves_its_fleet_and_round_trips() {
     let files = tomls(&examples_dir());
     assert!(files.len() >= 3, "examples found: {files:?}");
     for path in &files {
-        let s = Scenario::load(path).unwrap_or_else(|e| panic!("{e}"));
-        let run = s
-            .build(&Overrides::default())
-            .unwrap_or_else(|e| panic!("{e}"));
-        assert!(
-            run.plan.warnings().is_empty() && run.warnings.is_empty(),
-            "{}: {:?} {:?}",
-            path.display(),
-            run.plan.warnings(),
-            run.warnings
-        );
-        assert!(
-            s.file.description.is_some(),
-            "{} has a description",
-            path.display()
-        );
+        let s = common::load_clean_scenario(path);
         let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(fleet.ros2.len(), s.file.agents.len(), "{}", path.display());
-        let text = toml::to_string(&s.file).unwrap();
-        let back: ScenarioFile = toml::from_str(&text).unwrap();
-        assert_eq!(back, s.file, "{} round trip", path.display());
     }
 }
 

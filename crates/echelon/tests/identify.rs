@@ -328,7 +328,7 @@ fn an_echelon_run_log_gives_table_i_and_the_identified_robot_reproduces_a_scenar
 /// `plant` behind the simulation's reference: RK4 at 1 ms, input held per step.
 fn closed_loop_error(sim: &Simulation, spec: &AgentSpec, plant: &RobotParams, t_end: f64) -> f64 {
     let dt = 1e-3;
-    let mut s = spec.start;
+    let mut s = spec.start();
     let steps = (t_end / dt).round() as usize;
     let eval = |t: f64, s: &State| {
         let jet = sim.reference().eval(t, Order::Two);

@@ -85,10 +85,7 @@ offset = {{ x = 0.5, y = 0.0 }}
 /// The largest `|Δv|/Δt` over a run's samples (RK4 combines stage slopes
 /// that are each within the bound, so the step's mean slope is too).
 fn peak_accel(src: &str) -> f64 {
-    let run = Scenario::parse(src, "t.toml", None)
-        .unwrap()
-        .build(&Overrides::default())
-        .unwrap();
+    let run = common::build(src).unwrap();
     let dt = run.plan.config().dt;
     let mut last: Option<f64> = None;
     let mut peak: f64 = 0.0;
@@ -153,9 +150,9 @@ fn impossible_max_accel_is_refused_with_its_place() {
             "tau_v > 0",
         ),
     ] {
-        let e = Scenario::parse(&scenario(extra, robot), "t.toml", None)
-            .and_then(|s| s.build(&Overrides::default()).map(|_| ()))
-            .unwrap_err();
+        let Err(e) = common::build(&scenario(extra, robot)) else {
+            panic!("max_accel with {extra} on {robot} is refused");
+        };
         assert_eq!(e.field, "agents[1].max_accel", "{e}");
         assert!(
             e.location.line > 0 && e.to_string().contains(message),

@@ -13,7 +13,7 @@ use echelon::odometry::{
 use echelon::output::{self, ODOMETRY_FILE, ODOMETRY_HEADER, TRAJECTORY_FILE};
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
-use echelon::sweep::{self, Grid};
+use echelon::sweep::{self, Grid, GridSpec};
 
 /// The exact pose and travelled distance of a unicycle at constant `v`, `ω`.
 fn arc(start: Pose, v: f64, w: f64, t: f64) -> (State, f64) {
@@ -43,7 +43,7 @@ fn arc(start: Pose, v: f64, w: f64, t: f64) -> (State, f64) {
 
 fn odometer(errors: ErrorModel, period: f64, fixes: Option<FixSpec>, start: &State) -> Odometer {
     let spec = OdometrySpec::new(period, errors, fixes).unwrap();
-    Odometer::new(spec, &RobotParams::AGENT1, start, 1, 0).unwrap()
+    Odometer::new(spec, &RobotParams::AGENT1, start, 1, 0)
 }
 
 #[test]
@@ -150,10 +150,9 @@ fn zeta_leaves_the_heading_estimate_bit_identical() {
     let (s0, _) = arc(start, 0.5, 0.7, 0.0);
     let mut perfect = odometer(ErrorModel::PERFECT, 0.01, None, &s0);
     let mut drifting = odometer(
-        ErrorModel {
-            zeta: 3e-4,
-            ..ErrorModel::PERFECT
-        },
+        ErrorModel::PERFECT
+            .with_zeta(3e-4, ZetaModel::Wheels)
+            .unwrap(),
         0.01,
         None,
         &s0,
@@ -175,23 +174,19 @@ fn zeta_leaves_the_heading_estimate_bit_identical() {
 #[test]
 fn fixes_reset_the_estimate_and_latency_is_carried_forward() {
     let zeta = 1e-4;
-    let worst = ErrorModel {
-        zeta,
-        zeta_model: ZetaModel::WorstCase,
-        ..ErrorModel::PERFECT
-    };
+    let worst = ErrorModel::PERFECT
+        .with_zeta(zeta, ZetaModel::WorstCase)
+        .unwrap();
     let start = Pose {
         x: 0.0,
         y: 0.0,
         theta: 0.0,
     };
     let (s0, _) = arc(start, 0.5, 0.3, 0.0);
-    let fixes = |latency: f64| FixSpec {
-        schedule: FixSchedule::EverySamples(20),
-        position_noise: 0.0,
-        heading_noise: None,
-        latency,
-        fusion: Fusion::Reset,
+    let fixes = |latency: f64| {
+        FixSpec::new(FixSchedule::EverySamples(20), Fusion::Reset)
+            .and_then(|f| f.with_latency(latency))
+            .unwrap()
     };
     // No latency: the estimate is the truth at every fix.
     let mut o = odometer(worst, 0.01, Some(fixes(0.0)), &s0);
@@ -287,8 +282,13 @@ offset = { x = 0.5, y = 0.3 }
 zeta = 1e-6
 "#;
 
-fn grid(model: ZetaModel, fix_every: Vec<u64>, seeds: Vec<u64>) -> Grid {
-    Grid {
+/// The grid `g`, checked.
+fn checked(g: &GridSpec) -> Grid {
+    Grid::new(g.clone()).unwrap()
+}
+
+fn grid(model: ZetaModel, fix_every: Vec<u64>, seeds: Vec<u64>) -> GridSpec {
+    GridSpec {
         zeta: vec![1e-6, 4e-6],
         zeta_model: model,
         wheel_diameter_ratio: vec![1.0],
@@ -308,7 +308,7 @@ fn theorem_2_bounds_every_run_of_a_sweep_under_the_papers_assumptions() {
         let rows = sweep::run(
             &s,
             &Overrides::default(),
-            &grid(model, vec![100, 1000, 3000], vec![0]),
+            &checked(&grid(model, vec![100, 1000, 3000], vec![0])),
             &|| {},
         )
         .unwrap();
@@ -353,7 +353,7 @@ fn systematic_errors_break_the_linear_drift_assumption() {
     g.zeta = vec![0.0];
     g.wheelbase_ratio = vec![1.01];
     g.transient = 0.0;
-    let rows = sweep::run(&s, &Overrides::default(), &g, &|| {}).unwrap();
+    let rows = sweep::run(&s, &Overrides::default(), &checked(&g), &|| {}).unwrap();
     assert!(rows[0].z_bound.is_none(), "outside Theorem 2's assumptions");
     assert!(rows[0].drift_max > 0.1, "drift {}", rows[0].drift_max);
 }
@@ -373,7 +373,7 @@ fn sweeps_give_the_same_rows_on_any_number_of_threads() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| sweep::run(&s, &ov, &g, &|| {}).unwrap())
+            .install(|| sweep::run(&s, &ov, &checked(&g), &|| {}).unwrap())
     };
     let (one, two) = (on(1), on(2));
     assert_eq!(one, two);
@@ -395,13 +395,12 @@ fn umbmark_recovers_injected_systematic_errors_within_ten_percent() {
         (1.002, 0.99, 3),
         (1.006, 1.03, 4),
     ] {
-        let errors = ErrorModel {
-            slip: 1e-7,
-            ticks_per_rev: Some(2000),
-            ..ErrorModel::systematic(ed, eb)
-        };
+        let errors = ErrorModel::systematic(ed, eb)
+            .and_then(|e| e.with_slip(1e-7))
+            .and_then(|e| e.with_ticks_per_rev(Some(2000)))
+            .unwrap();
         let t = SquareTest::borenstein(&RobotParams::AGENT1, errors, seed);
-        let errors = t.simulate().unwrap();
+        let errors = t.simulate();
         // Slip scatters the runs: they are not all alike.
         assert!(errors.windows(2).any(|w| (w[0].ex - w[1].ex).abs() > 1e-3));
         let c = umbmark::estimate(&errors, &t).unwrap();
@@ -416,13 +415,15 @@ fn umbmark_recovers_injected_systematic_errors_within_ten_percent() {
             c.refined.eb
         );
         // The corrections scale the odometry's wheel diameters to the actual ones.
-        let (actual_r, actual_l) = t.errors.wheel_radii(t.wheel_radius);
+        let (actual_r, actual_l) = t.errors().wheel_radii(t.wheel_radius());
         assert!((c.c_right / c.c_left - c.refined.ed).abs() < 1e-12);
         assert!(
-            (c.c_right * t.wheel_radius - actual_r).abs() < 0.1 * (actual_r - t.wheel_radius).abs()
+            (c.c_right * t.wheel_radius() - actual_r).abs()
+                < 0.1 * (actual_r - t.wheel_radius()).abs()
         );
         assert!(
-            (c.c_left * t.wheel_radius - actual_l).abs() < 0.1 * (actual_l - t.wheel_radius).abs()
+            (c.c_left * t.wheel_radius() - actual_l).abs()
+                < 0.1 * (actual_l - t.wheel_radius()).abs()
         );
     }
 }
@@ -541,10 +542,10 @@ fn odometry_settings_are_validated_with_their_location() {
 fn umbmark_from_logs_reproduces_the_simulated_return_errors() {
     use echelon::odometry::umbmark::{ChaCha8Rng, Direction};
     use rand::SeedableRng;
-    let t = SquareTest {
-        runs: 1,
-        ..SquareTest::borenstein(&RobotParams::AGENT1, ErrorModel::systematic(1.003, 1.02), 0)
-    };
+    let errors = ErrorModel::systematic(1.003, 1.02).unwrap();
+    let t = SquareTest::borenstein(&RobotParams::AGENT1, errors, 0)
+        .with_square(4.0, 1)
+        .unwrap();
     // The same test written as run logs, with the whole run moved rigidly
     // (start at (5, −2) heading 30°): the errors are read in the start frame.
     let origin = Pose {
@@ -583,7 +584,7 @@ fn umbmark_from_logs_reproduces_the_simulated_return_errors() {
         .collect();
     let paths: Vec<_> = dirs.iter().map(|d| d.path().to_path_buf()).collect();
     let logged = umbmark::from_logs(&paths).unwrap();
-    let simulated = t.simulate().unwrap();
+    let simulated = t.simulate();
     assert_eq!(logged.len(), 2);
     for (a, b) in logged.iter().zip(&simulated) {
         assert_eq!(a.direction, b.direction);
@@ -613,7 +614,7 @@ fn torque_sweep_outputs_match_their_golden_bytes() {
     };
     let mut out = Vec::new();
     for model in [ZetaModel::Wheels, ZetaModel::WorstCase] {
-        let g = Grid {
+        let g = GridSpec {
             zeta: vec![1e-5, 4e-5],
             zeta_model: model,
             wheel_diameter_ratio: vec![1.0, 1.002],
@@ -624,10 +625,10 @@ fn torque_sweep_outputs_match_their_golden_bytes() {
             gamma: 0.9,
             transient: 2.0,
         };
-        let rows = sweep::run(&s, &ov, &g, &|| {}).unwrap();
+        let rows = sweep::run(&s, &ov, &checked(&g), &|| {}).unwrap();
         assert!(rows.iter().any(|r| r.z_bound.is_some()));
         sweep::write_csv(&mut out, &rows, model).unwrap();
-        let curves = sweep::drift_curves(&s, &ov, &g, 50).unwrap();
+        let curves = sweep::drift_curves(&s, &ov, &checked(&g), 50).unwrap();
         sweep::write_drift_csv(&mut out, &curves).unwrap();
     }
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/sweep-fix-study.csv");
@@ -686,7 +687,7 @@ fn the_kinematic_theorem_2_bounds_every_run_of_a_velocity_sweep() {
     let s = Scenario::parse(KINEMATIC_STUDY, "kinematic.toml", None).unwrap();
     for model in [ZetaModel::Wheels, ZetaModel::WorstCase] {
         let g = grid(model, vec![100, 1000, 3000], vec![0]);
-        let rows = sweep::run(&s, &Overrides::default(), &g, &|| {}).unwrap();
+        let rows = sweep::run(&s, &Overrides::default(), &checked(&g), &|| {}).unwrap();
         assert_eq!(rows.len(), 6);
         let mut tightest_z: f64 = 0.0;
         for r in &rows {
@@ -757,7 +758,7 @@ fn a_lagging_base_or_a_mixed_formation_gets_the_bound_its_theory_gives() {
         ..Overrides::default()
     };
     g.transient = 5.0;
-    let rows = sweep::run(&s, &ov, &g, &|| {}).unwrap();
+    let rows = sweep::run(&s, &ov, &checked(&g), &|| {}).unwrap();
     assert_eq!(rows[0].laws, sweep::Laws::Kinematic);
     assert_eq!((rows[0].z_bound, rows[0].e_bound), (None, None));
     // A torque robot on the paper's law beside an ideal base: each its own form,
@@ -770,7 +771,7 @@ fn a_lagging_base_or_a_mixed_formation_gets_the_bound_its_theory_gives() {
             1,
         );
     let s = Scenario::parse(&mixed, "mixed.toml", None).unwrap();
-    let rows = sweep::run(&s, &ov, &g, &|| {}).unwrap();
+    let rows = sweep::run(&s, &ov, &checked(&g), &|| {}).unwrap();
     let r = &rows[0];
     assert_eq!(r.laws, sweep::Laws::Mixed);
     let (n, zeta) = (1000.0, 1e-6);

@@ -78,7 +78,7 @@ fn circle_pentagon_converges_and_holds_the_x_separation_at_l_xoff_plus_l() {
     let states = sim.states().to_vec();
     let reference = sim.reference().eval(t, Order::Two);
     for (i, a) in sim.agents().iter().enumerate() {
-        let leader = match a.leader {
+        let leader = match a.leader() {
             Leader::Reference => reference.p,
             Leader::Agent(j) => states[j].position(),
         };
@@ -86,18 +86,18 @@ fn circle_pentagon_converges_and_holds_the_x_separation_at_l_xoff_plus_l() {
         // The paper's steady-state "error in x": the follower sits L = 0.05 m
         // farther back than L_Xoff.
         assert!(
-            (rel[0] - (a.placement.lx_off() + 0.05)).abs() < 1e-6,
+            (rel[0] - (a.placement().lx_off() + 0.05)).abs() < 1e-6,
             "agent {}: leader {} m ahead, want {}",
             i + 1,
             rel[0],
-            a.placement.lx_off() + 0.05
+            a.placement().lx_off() + 0.05
         );
         // Sideways: L_Yoff plus the eq. 6 compensation for the leader's turn.
-        let (v, w) = match a.leader {
+        let (v, w) = match a.leader() {
             Leader::Reference => (reference.speed(), reference.turn_rate()),
             Leader::Agent(j) => (states[j].v, states[j].omega),
         };
-        let ly = a.placement.ly_off() + a.placement.comp(v, w);
+        let ly = a.placement().ly_off() + a.placement().comp(v, w);
         assert!(
             (rel[1] - ly).abs() < 1e-6,
             "agent {}: {} vs {ly}",

@@ -3,13 +3,15 @@
 //! and bad `[safety]` input.
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
+mod common;
+
 use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::model::{Input, RobotParams};
 use echelon::safety::{Neighbour, SafetyConfig, SafetyFilter, point};
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 use echelon::stats::{SafetyReport, SafetyWatch, Summary};
-use echelon::{Observer, ScenarioError, State};
+use echelon::{Observer, State};
 
 /// Runs a built-in (with `safety` removed when `filter` is false), watching
 /// every step: the safety report (if any), the smallest distance between two
@@ -32,7 +34,7 @@ fn run(name: &str, filter: bool) -> (Option<SafetyReport>, f64, f64, Vec<f64>) {
     let run = s.build(&Overrides::default()).unwrap();
     let sim = &mut run.simulation();
     assert_eq!(sim.has_safety(), filter);
-    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement.l()).collect();
+    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement().l()).collect();
     let (mut closest, mut clearance) = (f64::INFINITY, f64::INFINITY);
     let mut every = |f: &Frame<'_>| -> Result<(), ObserverError> {
         closest = closest.min(SafetyWatch::closest_pair(f.states, &l).unwrap().0);
@@ -255,9 +257,7 @@ offset = { x = 0.5, y = -0.5 }
 safety = { gain = 2.0 }
 "#;
 
-fn build(src: &str) -> Result<echelon::Run, ScenarioError> {
-    Scenario::parse(src, "test.toml", None)?.build(&Overrides::default())
-}
+use common::build;
 
 #[test]
 fn the_base_builds_with_a_filter_per_agent() {

@@ -144,7 +144,7 @@ fn run(case: &Case) -> Option<Seen> {
         }
     };
     let sim = &mut run.simulation();
-    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement.l()).collect();
+    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement().l()).collect();
     let mut seen = Seen {
         closest: f64::INFINITY,
         ..Seen::default()

@@ -2,13 +2,13 @@
 //! outputs and determinism.
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
+mod common;
+
 use std::path::Path;
 
-use echelon::ScenarioError;
 use echelon::output::{
     self, REFERENCE_FILE, SCENARIO_FILE, SUMMARY_FILE, TRAJECTORY_FILE, TRAJECTORY_HEADER,
 };
-use echelon::scenario::schema::ScenarioFile;
 use echelon::scenario::{self, Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 
@@ -43,29 +43,10 @@ fn every_scenario_file_parses_builds_and_round_trips() {
             continue;
         }
         seen += 1;
-        let s = Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"));
-        let run = s
-            .build(&Overrides::default())
-            .unwrap_or_else(|e| panic!("{e}"));
-        assert!(
-            run.plan.warnings().is_empty() && run.warnings.is_empty(),
-            "{}: {:?} {:?}",
-            s.name(),
-            run.plan.warnings(),
-            run.warnings
-        );
-        assert!(
-            s.file.description.is_some(),
-            "{} has a description",
-            s.name()
-        );
+        let s = common::load_clean_scenario(&path);
         // The file is the built-in of the same name.
         let stem = path.file_stem().unwrap().to_str().unwrap();
         assert_eq!(Scenario::builtin(stem).unwrap().source(), s.source());
-        // serialise → parse gives the same scenario.
-        let text = toml::to_string(&s.file).unwrap();
-        let back: ScenarioFile = toml::from_str(&text).unwrap();
-        assert_eq!(back, s.file, "{} round trip", s.name());
     }
     assert_eq!(seen, NAMES.len());
 }
@@ -91,9 +72,7 @@ leader = 1
 offset = { x = 0.5, y = -0.4 }
 "#;
 
-fn build(src: &str) -> Result<echelon::Run, ScenarioError> {
-    Scenario::parse(src, "test.toml", None)?.build(&Overrides::default())
-}
+use common::build;
 
 fn expect_error(src: &str, line: usize, field: &str, message: &str) {
     let err = match build(src) {
@@ -123,7 +102,7 @@ fn expect_errors_in_base(cases: &[(&str, &str, usize, &str, &str)]) {
 fn the_base_scenario_is_valid() {
     let run = build(BASE).unwrap();
     assert_eq!(run.plan.agents().len(), 2);
-    assert_eq!(run.plan.agents()[1].name, "agent 2");
+    assert_eq!(run.plan.agents()[1].name(), "agent 2");
     assert_eq!(run.log_every, 1);
 }
 

@@ -3,18 +3,17 @@
 //! lagged, limited bases.
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
-use echelon::scenario::{Overrides, Scenario};
+mod common;
+
+use echelon::scenario::Scenario;
 use echelon::sim::{Frame, ObserverError};
 
 /// Runs `src` and returns, per agent, the logged `(t, e)` of every step, and
 /// `K_e` of each agent.
 fn logged_errors(src: &str) -> (Vec<Vec<[f64; 2]>>, Vec<f64>, f64) {
-    let run = Scenario::parse(src, "test.toml", None)
-        .unwrap()
-        .build(&Overrides::default())
-        .unwrap();
+    let run = common::build(src).unwrap();
     let n = run.plan.agents().len();
-    let ke: Vec<f64> = run.plan.agents().iter().map(|a| a.gains.ke()).collect();
+    let ke: Vec<f64> = run.plan.agents().iter().map(|a| a.gains().ke()).collect();
     let dt = run.plan.config().dt;
     let mut e = vec![Vec::new(); n];
     let mut log = |f: &Frame<'_>| -> Result<(), ObserverError> {
@@ -145,13 +144,7 @@ fn lagged_limited_bases_hold_their_limits_and_converge() {
                 robot.accel = Some(echelon::scenario::schema::AccelLimit::PerAxis);
             }
             let text = toml::to_string(&file).unwrap();
-            let run = Scenario::parse(&text, "test.toml", None)
-                .unwrap()
-                .build(&Overrides {
-                    duration: Some(60.0),
-                    ..Overrides::default()
-                })
-                .unwrap();
+            let run = common::build_with(&text, &common::for_seconds(60.0)).unwrap();
             let dt = run.plan.config().dt;
             let b = run.plan.agents()[0].velocity_robot().unwrap().base();
             let tol = 1e-12;
@@ -190,13 +183,7 @@ fn velocity_bases_dead_reckon() {
     let base = Scenario::builtin("experiment-circle-velocity").unwrap();
     let text = toml::to_string(&base.file).unwrap()
         + "\n[odometry]\nperiod = 0.01\nwheel_diameter_ratio = 1.002\n";
-    let run = Scenario::parse(&text, "test.toml", None)
-        .unwrap()
-        .build(&Overrides {
-            duration: Some(30.0),
-            ..Overrides::default()
-        })
-        .unwrap();
+    let run = common::build_with(&text, &common::for_seconds(30.0)).unwrap();
     assert!(run.plan.odometers().iter().all(Option::is_some));
     let mut last = Vec::new();
     let mut log = |f: &Frame<'_>| -> Result<(), ObserverError> {

@@ -177,12 +177,12 @@ fn print_summary(sim: &Simulation, s: &RunSummary, elapsed: f64) -> anyhow::Resu
     let leaders: Vec<String> = (0..agents.len())
         .map(|i| match sim.formation().leader(i) {
             Leader::Reference => "reference".to_owned(),
-            Leader::Agent(j) => agents[j].name.clone(),
+            Leader::Agent(j) => agents[j].name().to_owned(),
         })
         .collect();
     let name_w = agents
         .iter()
-        .map(|a| a.name.chars().count())
+        .map(|a| a.name().chars().count())
         .max()
         .unwrap_or(0)
         .max(5);

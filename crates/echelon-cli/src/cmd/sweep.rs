@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use echelon::odometry::ZetaModel;
 use echelon::scenario::{Overrides, Scenario};
-use echelon::sweep::{self, Grid, Row};
+use echelon::sweep::{self, Grid, GridSpec, Row};
 
 use super::out::outln;
 use super::{non_negative, positive};
@@ -92,7 +92,7 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
     };
     let probe = scenario.build(&overrides)?;
     let duration = probe.plan.steps() as f64 * probe.plan.config().dt;
-    let grid = Grid {
+    let grid = Grid::new(GridSpec {
         zeta: a.zeta.clone(),
         zeta_model: match a.zeta_model {
             ZetaArg::Wheels => ZetaModel::Wheels,
@@ -105,8 +105,7 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         seeds: (a.seed..a.seed.saturating_add(a.seeds)).collect(),
         gamma: a.gamma,
         transient: a.transient.unwrap_or(0.5 * duration),
-    };
-    grid.validate()?;
+    })?;
     let total = grid.cases().len();
     let pool = {
         let mut b = rayon::ThreadPoolBuilder::new();
@@ -143,7 +142,7 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join("sweep.csv");
     let file = File::create(&path).with_context(|| format!("writing {}", path.display()))?;
-    sweep::write_csv(BufWriter::new(file), &rows, grid.zeta_model)
+    sweep::write_csv(BufWriter::new(file), &rows, grid.spec().zeta_model)
         .with_context(|| format!("writing {}", path.display()))?;
     let drift_path = out.join("drift.csv");
     let file =

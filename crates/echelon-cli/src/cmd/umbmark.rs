@@ -55,22 +55,12 @@ pub(crate) fn umbmark(a: &UmbmarkArgs) -> Result<()> {
     let robot = RobotParams::preset(&a.robot)
         .with_context(|| format!("unknown robot `{}` (presets: agent1, agent2)", a.robot))?;
     anyhow::ensure!(a.runs >= 1, "--runs must be ≥ 1");
-    let test = SquareTest {
-        side: a.side,
-        runs: a.runs,
-        wheel_radius: robot.wheel_radius(),
-        half_wheelbase: robot.half_wheelbase(),
-        errors: ErrorModel {
-            wheel_diameter_ratio: a.ed,
-            wheelbase_ratio: a.eb,
-            slip: a.slip,
-            ticks_per_rev: a.ticks,
-            ..ErrorModel::PERFECT
-        },
-        seed: a.seed,
-    };
+    let errors = ErrorModel::systematic(a.ed, a.eb)
+        .and_then(|e| e.with_slip(a.slip))
+        .and_then(|e| e.with_ticks_per_rev(a.ticks))?;
+    let test = SquareTest::borenstein(&robot, errors, a.seed).with_square(a.side, a.runs)?;
     let errors = if a.from_log.is_empty() {
-        test.simulate()?
+        test.simulate()
     } else {
         umbmark::from_logs(&a.from_log)?
     };

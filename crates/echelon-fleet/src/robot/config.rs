@@ -40,7 +40,7 @@ fn spec_in(plan: &Plan, agent: u32) -> Result<AgentSpec, FleetError> {
             "--agent {agent}: the scenario has agents 1..={n}"
         )));
     };
-    if spec.placement.uses_exact_derivatives() {
+    if spec.placement().uses_exact_derivatives() {
         return Err(FleetError::Config(format!(
             "agent {agent}: ly_derivatives = \"exact\" needs the reference's 3rd and 4th derivatives, which the fleet does not send; use \"neglect\""
         )));
@@ -91,7 +91,7 @@ fn safety_in(plan: &Plan, agent: u32) -> Option<RobotSafety> {
     Some(RobotSafety {
         config,
         obstacles: plan.obstacles().to_vec(),
-        l: plan.agents().iter().map(|a| a.placement.l()).collect(),
+        l: plan.agents().iter().map(|a| a.placement().l()).collect(),
         cooperative: (0..n).map(|i| plan.safety_of(i).is_some()).collect(),
     })
 }

@@ -166,7 +166,7 @@ impl<P: Plant> Robot<P> {
         let injector = FaultInjector::new(config.faults, u64::from(config.agent));
         let last = RobotState {
             agent: config.agent,
-            state: config.spec.start,
+            state: config.spec.start(),
             ..RobotState::default()
         };
         let safety = config.safety.as_ref().map(|s| Safety {
@@ -351,7 +351,7 @@ impl<P: Plant> Robot<P> {
                 return;
             }
         };
-        let Some((h, s)) = sample_of(&msg, self.config.spec.leader) else {
+        let Some((h, s)) = sample_of(&msg, self.config.spec.leader()) else {
             self.tracker.counters.foreign += 1;
             return;
         };
@@ -614,7 +614,7 @@ impl<P: Plant> Robot<P> {
         RobotReport {
             role: Role::Robot,
             agent: self.config.agent,
-            name: self.config.spec.name.clone(),
+            name: self.config.spec.name().to_owned(),
             counters: self.tracker.counters,
             pending: self.delayed.len() as u64,
             published: self.seq,

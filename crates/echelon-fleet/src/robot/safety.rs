@@ -34,7 +34,7 @@ impl Safety {
         let Some(settings) = config.safety.as_ref() else {
             return config.spec.act(t, me, nominal, None).command;
         };
-        let l = config.spec.placement.l();
+        let l = config.spec.placement().l();
         let sight = self
             .table
             .build(local, t, point(me, l), settings.config.range, sigma);

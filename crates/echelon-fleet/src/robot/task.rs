@@ -81,7 +81,7 @@ impl<P: Plant> RobotTask<P> {
 
     /// Its key of the leader stream: the reference, or its leader robot's state.
     pub fn leader_key(&self) -> String {
-        match self.robot.config().spec.leader {
+        match self.robot.config().spec.leader() {
             Leader::Reference => self.keys.reference(),
             Leader::Agent(j) => self.keys.state(j as u32 + 1),
         }

@@ -112,7 +112,7 @@ impl World {
                 let up = self.cut.is_none_or(|(a, b)| t < a || t >= b);
                 wire::encode_reference(&mut self.buf, h, &r);
                 for robot in &mut self.robots {
-                    if up && robot.config().spec.leader == Leader::Reference {
+                    if up && robot.config().spec.leader() == Leader::Reference {
                         robot.on_message(&self.buf, t + self.latency);
                     }
                 }
@@ -126,7 +126,7 @@ impl World {
                     self.log[i].push(Published { local: t, state });
                     wire::encode_state(&mut self.buf, h, &state);
                     for follower in &mut self.robots {
-                        if follower.config().spec.leader == Leader::Agent(i) {
+                        if follower.config().spec.leader() == Leader::Agent(i) {
                             follower.on_message(&self.buf, t);
                         }
                     }
@@ -727,7 +727,7 @@ fn losing_the_odometry_or_the_process_commands_zero() {
     let plant = Flaky {
         inner: SimulatedPlant::new(
             *config.spec.torque_robot().unwrap(),
-            config.spec.start,
+            config.spec.start(),
             0.0,
             PLANT_STEP,
         ),
@@ -912,7 +912,7 @@ fn commanded_robot(s: &Scenario) -> Robot<Flaky> {
     let plant = Flaky {
         inner: SimulatedPlant::new(
             *config.spec.torque_robot().unwrap(),
-            config.spec.start,
+            config.spec.start(),
             0.0,
             PLANT_STEP,
         ),
@@ -1033,11 +1033,11 @@ fn a_stop_heard_before_start_latches() {
             .iter()
             .all(|(st, cmd)| st.link == LinkStatus::Stopped && *cmd == Input::default())
     );
-    assert_eq!(r.last().state, r.config().spec.start);
+    assert_eq!(r.last().state, r.config().spec.start());
     r.on_command(&command(Order::Resume, 4));
     assert!(r.is_stopped());
     r.on_command(&command(Order::Resume, 5));
     let moving = drive(&mut r, &reference, 2.0, 3.0);
     assert!(moving.iter().all(|(st, _)| st.link == LinkStatus::Tracking));
-    assert!(dist(&r.last().state, &r.config().spec.start) > 0.01);
+    assert!(dist(&r.last().state, &r.config().spec.start()) > 0.01);
 }

@@ -218,16 +218,16 @@ impl SimBase {
         SimBase {
             mocap: Some(Mocap {
                 source,
-                position_noise: spec.position_noise,
-                heading_noise: spec.heading_noise,
-                latency: spec.latency,
+                position_noise: spec.position_noise(),
+                heading_noise: spec.heading_noise(),
+                latency: spec.latency(),
                 period,
                 time_scale,
                 rng: SplitMix64::new(seed),
                 gid,
                 seq: 0,
                 next: t0 + period,
-                pending: VecDeque::with_capacity((spec.latency / period).ceil() as usize + 2),
+                pending: VecDeque::with_capacity((spec.latency() / period).ceil() as usize + 2),
             }),
             ..self
         }
@@ -249,8 +249,7 @@ impl SimBase {
         let refuse = |e: echelon::error::ParamError| FleetError::Config(format!("odometry: {e}"));
         let spec = OdometrySpec::new(spec.period(), spec.errors(), None).map_err(refuse)?;
         let start = self.base.true_state();
-        let odometer = Odometer::with_wheels(spec, wheels.0, wheels.1, &start, seed, stream)
-            .map_err(refuse)?;
+        let odometer = Odometer::with_wheels(spec, wheels.0, wheels.1, &start, seed, stream);
         Ok(SimBase {
             encoders: Some(Encoders {
                 odometer,
@@ -609,7 +608,7 @@ impl Task for BaseTask {
 pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError> {
     let fleet = opts.scenario.fleet()?;
     let spec = agent_spec(&opts.scenario, opts.agent)?;
-    let Drive::Velocity(robot) = &spec.drive else {
+    let Drive::Velocity(robot) = &spec.drive() else {
         return Err(FleetError::Config(format!(
             "agent {}: a ROS 2 base is a velocity base (set drive = \"velocity\" on its robot)",
             opts.agent
@@ -654,7 +653,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                 &[(&link.cmd_vel, &cmd_vel_type(&link))],
                 |e| FleetError::Config(e.to_string()),
             )?;
-            let model = SimulatedVelocityBase::new(robot.base(), spec.start, 0.0, PLANT_STEP);
+            let model = SimulatedVelocityBase::new(robot.base(), spec.start(), 0.0, PLANT_STEP);
             let mut base = SimBase::new(link.clone(), model, gids[0]);
             if let Some((source, spec, period)) = &mocap {
                 // Its own random stream: the odometry's are the agents'.
@@ -671,7 +670,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
             if let Some(odometry) = &odometry {
                 base = base.with_odometry(
                     odometry.spec(),
-                    spec.drive.wheels(),
+                    spec.drive().wheels(),
                     seed,
                     u64::from(opts.agent - 1),
                     0.0,

@@ -267,12 +267,12 @@ impl FixInput {
         Ok(FixInput {
             agent,
             timeout: source.timeout.unwrap_or(TIMEOUT_PERIODS * period),
-            fusion: FixFusion::new(spec.fusion, source.gate),
+            fusion: FixFusion::new(spec.fusion(), source.gate),
             source,
             key_scheme,
             noise: FixNoise {
-                position: spec.position_noise,
-                heading: spec.heading_noise,
+                position: spec.position_noise(),
+                heading: spec.heading_noise(),
             },
             model,
             required,
@@ -582,14 +582,14 @@ pub fn for_agent(
     let top_speed = spec
         .velocity_robot()
         .map_or(f64::INFINITY, |r| r.base().v_max());
-    if source.tolerance.is_some() && !top_speed.is_finite() && odometry.errors().slip > 0.0 {
+    if source.tolerance.is_some() && !top_speed.is_finite() && odometry.errors().slip() > 0.0 {
         return Err(refuse(
             "`tolerance` with slip needs the base's top speed (`v_max`) to bound the odometry error per sample".into(),
         ));
     }
     let model = OdometryModel {
         errors: odometry.errors(),
-        wheels: spec.drive.wheels(),
+        wheels: spec.drive().wheels(),
         sample_period: odometry.period(),
         top_speed,
     };
@@ -600,7 +600,7 @@ pub fn for_agent(
         &fixes,
         model,
         link.odom_origin,
-        spec.gains.ke(),
+        spec.gains().ke(),
     )
     .map(Some)
     .map_err(refuse)

@@ -350,7 +350,7 @@ fn built(scenario: &Scenario, dt: f64) -> Built {
                         })
                     })
                     .collect(),
-                l: agents.iter().map(|a| a.placement.l()).collect(),
+                l: agents.iter().map(|a| a.placement().l()).collect(),
                 obstacles: run.plan.obstacles().to_vec(),
             }
         },

@@ -257,9 +257,8 @@ impl Member {
     /// One agent, refusing a start state that is not finite and what
     /// [`Placement::new`] and [`Gains::new`] refuse.
     pub fn new(start: State, placement: Placement, gains: Gains) -> Result<Member, ParamError> {
-        start.validate_start()?;
         Ok(Member {
-            start,
+            start: start.start()?,
             placement,
             gains,
         })
@@ -317,13 +316,13 @@ impl Engine {
         let Some(first) = agents.first() else {
             return Err(EngineError::Unsupported("an empty formation".into()));
         };
-        if agents.iter().any(|a| a.max_accel().is_some()) {
-            // The kernels run the law alone, not the act step's limits.
-            return Err(EngineError::Unsupported("max_accel".into()));
+        // The kernels run the law alone, not the rest of the act step.
+        if let Some(what) = agents.iter().find_map(AgentSpec::beyond_law) {
+            return Err(EngineError::Unsupported(what.into()));
         }
-        let star = agents.iter().all(|a| a.leader == Leader::Reference);
+        let star = agents.iter().all(|a| a.leader() == Leader::Reference);
         let chain = agents.iter().enumerate().all(|(i, a)| {
-            a.leader
+            a.leader()
                 == if i == 0 {
                     Leader::Reference
                 } else {
@@ -339,8 +338,8 @@ impl Engine {
                 ));
             }
         };
-        let torque = |i: usize, a: &AgentSpec| match a.drive {
-            crate::agent::Drive::Torque { robot, variant } => Ok((robot, variant)),
+        let torque = |i: usize, a: &AgentSpec| match a.drive() {
+            crate::agent::Drive::Torque { robot, variant } => Ok((*robot, *variant)),
             crate::agent::Drive::Velocity(_) => Err(EngineError::Unsupported(format!(
                 "velocity bases (agent {} is one)",
                 i + 1
@@ -367,9 +366,9 @@ impl Engine {
         Engine::new(
             batch,
             agents.iter().map(|a| Member {
-                start: a.start,
-                placement: a.placement,
-                gains: a.gains,
+                start: a.start(),
+                placement: a.placement(),
+                gains: a.gains(),
             }),
         )
     }

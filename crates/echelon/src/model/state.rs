@@ -22,8 +22,9 @@ pub struct State {
 }
 
 impl State {
-    /// Refuses a start state that is not finite (errors name `start.x`, …).
-    pub fn validate_start(&self) -> Result<(), ParamError> {
+    /// This state as a start, refused when not finite (errors name
+    /// `start.x`, …): what [`crate::AgentSpec`] and the engine's members start from.
+    pub(crate) fn start(self) -> Result<State, ParamError> {
         for (field, v) in [
             ("start.x", self.x),
             ("start.y", self.y),
@@ -33,7 +34,7 @@ impl State {
         ] {
             crate::check::finite(field, v)?;
         }
-        Ok(())
+        Ok(self)
     }
 
     /// A robot at rest at pose `(x, y, θ)`.

@@ -40,26 +40,22 @@ pub struct ReturnError {
     pub ey: f64,
 }
 
-/// A simulated UMBmark test.
+/// A simulated UMBmark test. Built by [`SquareTest::borenstein`] and
+/// [`SquareTest::with_square`], which refuse an impossible square.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SquareTest {
-    /// Side of the square `L`, m (Borenstein: 4 m).
-    pub side: f64,
-    /// Runs in each direction (Borenstein: 5).
-    pub runs: usize,
-    /// Nominal wheel radius `r`, m.
-    pub wheel_radius: f64,
-    /// Nominal half wheelbase `l`, m.
-    pub half_wheelbase: f64,
-    /// The robot's actual errors (`E_d`, `E_b`, slip, ticks; other fields unused).
-    pub errors: ErrorModel,
-    /// Random seed for slip.
-    pub seed: u64,
+    side: f64,
+    runs: usize,
+    wheel_radius: f64,
+    half_wheelbase: f64,
+    errors: ErrorModel,
+    seed: u64,
 }
 
 impl SquareTest {
     /// Borenstein's test (a 4 m square, 5 runs each way) of a robot with the
-    /// nominal wheels of `robot` and the actual `errors`.
+    /// nominal wheels of `robot` and the actual `errors` (`E_d`, `E_b`,
+    /// slip, ticks; its other errors are unused); `seed` draws the slip.
     pub const fn borenstein(robot: &RobotParams, errors: ErrorModel, seed: u64) -> SquareTest {
         SquareTest {
             side: 4.0,
@@ -71,23 +67,48 @@ impl SquareTest {
         }
     }
 
-    /// Checks the test's parameters.
-    pub fn validate(&self) -> Result<(), ParamError> {
-        self.errors.validate()?;
-        for (f, v) in [
-            ("side", self.side),
-            ("wheel_radius", self.wheel_radius),
-            ("half_wheelbase", self.half_wheelbase),
-        ] {
-            crate::check::positive(f, v)?;
+    /// This test on a square of side `side` m (finite, > 0), `runs` runs in
+    /// each direction (≥ 1).
+    pub fn with_square(self, side: f64, runs: usize) -> Result<SquareTest, ParamError> {
+        crate::check::at_least_one("runs", runs as u64)?;
+        Ok(SquareTest {
+            side: crate::check::positive("side", side)?,
+            runs,
+            ..self
+        })
+    }
+
+    /// Side of the square `L`, m.
+    pub const fn side(&self) -> f64 {
+        self.side
+    }
+
+    /// Runs in each direction.
+    pub const fn runs(&self) -> usize {
+        self.runs
+    }
+
+    /// The robot's nominal wheel radius `r`, m.
+    pub const fn wheel_radius(&self) -> f64 {
+        self.wheel_radius
+    }
+
+    /// The robot's actual errors.
+    pub const fn errors(&self) -> ErrorModel {
+        self.errors
+    }
+
+    /// This test's geometry with one run and other errors.
+    const fn one_run(&self, errors: ErrorModel) -> SquareTest {
+        SquareTest {
+            runs: 1,
+            errors,
+            ..*self
         }
-        crate::check::at_least_one("runs", self.runs as u64)?;
-        Ok(())
     }
 
     /// Drives every run and returns the return errors, CW runs first.
-    pub fn simulate(&self) -> Result<Vec<ReturnError>, ParamError> {
-        self.validate()?;
+    pub fn simulate(&self) -> Vec<ReturnError> {
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let mut out = Vec::with_capacity(2 * self.runs);
         for direction in [Direction::Cw, Direction::Ccw] {
@@ -101,7 +122,7 @@ impl SquareTest {
                 });
             }
         }
-        Ok(out)
+        out
     }
 
     /// One square: four legs, each followed by a 90° turn on the spot; returns
@@ -116,7 +137,7 @@ impl SquareTest {
     pub fn trace(&self, direction: Direction, rng: &mut ChaCha8Rng) -> Vec<(Pose, Pose)> {
         let e = &self.errors;
         let (rr, rl) = e.wheel_radii(self.wheel_radius);
-        let actual_l = self.half_wheelbase * e.wheelbase_ratio;
+        let actual_l = self.half_wheelbase * e.wheelbase_ratio();
         let sign = match direction {
             Direction::Ccw => 1.0,
             Direction::Cw => -1.0,
@@ -132,10 +153,10 @@ impl SquareTest {
                 let angles = [right, left].map(|d| self.encoder_angle(d));
                 let measured = angles.map(|a| a * self.wheel_radius);
                 let mut travel = [angles[0] * rr, angles[1] * rl];
-                if e.slip > 0.0 {
+                if e.slip() > 0.0 {
                     for t in &mut travel {
                         let noise: f64 = rng.sample(StandardNormal);
-                        *t += noise * (e.slip * t.abs()).sqrt();
+                        *t += noise * (e.slip() * t.abs()).sqrt();
                     }
                 }
                 truth = dead_reckon(
@@ -164,7 +185,7 @@ impl SquareTest {
     /// displacement `d`: the nearest whole tick with real encoders.
     fn encoder_angle(&self, d: f64) -> f64 {
         let angle = d / self.wheel_radius;
-        match self.errors.ticks_per_rev {
+        match self.errors.ticks_per_rev() {
             None => angle,
             Some(n) => {
                 let per_tick = std::f64::consts::TAU / f64::from(n);
@@ -210,9 +231,6 @@ pub struct Calibration {
 /// Why the return errors cannot be turned into an estimate.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum UmbmarkError {
-    /// A parameter is impossible.
-    #[error(transparent)]
-    Param(#[from] ParamError),
     /// Runs in only one direction.
     #[error("UMBmark needs runs in both directions (clockwise: {cw}, counter-clockwise: {ccw})")]
     OneDirection {
@@ -257,27 +275,27 @@ fn borenstein(
 }
 
 /// The centres of gravity `[x_cw, y_cw, x_ccw, y_ccw]` an error-free-but-systematic
-/// robot would produce: the model the refinement inverts.
-fn model(geometry: &SquareTest, s: Systematic) -> [f64; 4] {
-    let t = SquareTest {
-        runs: 1,
-        errors: ErrorModel::systematic(s.ed, s.eb),
-        ..*geometry
-    };
+/// robot would produce: the model the refinement inverts (`None` for
+/// impossible errors, `E_d` or `E_b` ≤ 0).
+fn model(geometry: &SquareTest, s: Systematic) -> Option<[f64; 4]> {
+    let t = geometry.one_run(ErrorModel::systematic(s.ed, s.eb).ok()?);
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let (a, b) = (
         t.drive(Direction::Cw, &mut rng),
         t.drive(Direction::Ccw, &mut rng),
     );
-    [a.0.x - a.1.x, a.0.y - a.1.y, b.0.x - b.1.x, b.0.y - b.1.y]
+    Some([a.0.x - a.1.x, a.0.y - a.1.y, b.0.x - b.1.x, b.0.y - b.1.y])
 }
 
 /// Gauss-Newton on `(E_d, E_b)` so that the exact square kinematics reproduce
-/// the observed centres of gravity, from Borenstein's estimate.
+/// the observed centres of gravity, from Borenstein's estimate (kept when
+/// the fit leaves the possible errors).
 fn refine(geometry: &SquareTest, observed: [f64; 4], start: Systematic) -> Systematic {
     let mut p = [start.ed, start.eb];
     for _ in 0..20 {
-        let f = model(geometry, Systematic { ed: p[0], eb: p[1] });
+        let Some(f) = model(geometry, Systematic { ed: p[0], eb: p[1] }) else {
+            return start;
+        };
         let r: [f64; 4] = std::array::from_fn(|i| f[i] - observed[i]);
         // Jacobian by central differences of the (smooth) kinematic model.
         let h = 1e-6;
@@ -287,22 +305,10 @@ fn refine(geometry: &SquareTest, observed: [f64; 4], start: Systematic) -> Syste
             let mut hi = p;
             lo[k] -= h;
             hi[k] += h;
-            let (fl, fh) = (
-                model(
-                    geometry,
-                    Systematic {
-                        ed: lo[0],
-                        eb: lo[1],
-                    },
-                ),
-                model(
-                    geometry,
-                    Systematic {
-                        ed: hi[0],
-                        eb: hi[1],
-                    },
-                ),
-            );
+            let at = |q: [f64; 2]| model(geometry, Systematic { ed: q[0], eb: q[1] });
+            let (Some(fl), Some(fh)) = (at(lo), at(hi)) else {
+                return start;
+            };
             for i in 0..4 {
                 j[i][k] = (fh[i] - fl[i]) / (2.0 * h);
             }
@@ -344,12 +350,7 @@ pub fn estimate(
     errors: &[ReturnError],
     geometry: &SquareTest,
 ) -> Result<Calibration, UmbmarkError> {
-    let clean = SquareTest {
-        errors: ErrorModel::PERFECT,
-        runs: 1,
-        ..*geometry
-    };
-    clean.validate()?;
+    let clean = geometry.one_run(ErrorModel::PERFECT);
     let centroid = |d: Direction| -> (usize, [f64; 2]) {
         let (n, sum) = errors
             .iter()
@@ -454,11 +455,10 @@ mod tests {
 
     /// A 4 m square test of Table I agent 1's geometry.
     fn square(ed: f64, eb: f64, slip: f64, ticks: Option<u32>, seed: u64) -> SquareTest {
-        let errors = ErrorModel {
-            slip,
-            ticks_per_rev: ticks,
-            ..ErrorModel::systematic(ed, eb)
-        };
+        let errors = ErrorModel::systematic(ed, eb)
+            .and_then(|e| e.with_slip(slip))
+            .and_then(|e| e.with_ticks_per_rev(ticks))
+            .unwrap();
         SquareTest::borenstein(&RobotParams::AGENT1, errors, seed)
     }
 
@@ -468,7 +468,7 @@ mod tests {
 
     #[test]
     fn a_perfect_robot_returns_exactly() {
-        let errs = test(1.0, 1.0).simulate().unwrap();
+        let errs = test(1.0, 1.0).simulate();
         assert!(
             errs.iter()
                 .all(|e| e.ex.abs() < 1e-12 && e.ey.abs() < 1e-12)
@@ -482,7 +482,6 @@ mod tests {
     fn one_direction_is_refused() {
         let errs: Vec<ReturnError> = test(1.01, 1.0)
             .simulate()
-            .unwrap()
             .into_iter()
             .filter(|e| e.direction == Direction::Cw)
             .collect();
@@ -494,7 +493,7 @@ mod tests {
 
     fn run(ed: f64, eb: f64, slip: f64, ticks: Option<u32>, seed: u64) -> Calibration {
         let t = square(ed, eb, slip, ticks, seed);
-        estimate(&t.simulate().unwrap(), &t).unwrap()
+        estimate(&t.simulate(), &t).unwrap()
     }
 
     /// The relative error of the estimated deviation from a perfect robot.

@@ -218,7 +218,7 @@ impl FrameRows for SafetyRows {
     }
 
     fn start(&mut self, sim: &Simulation) {
-        self.l = sim.agents().iter().map(|a| a.placement.l()).collect();
+        self.l = sim.agents().iter().map(|a| a.placement().l()).collect();
         self.radius = sim.safety_radius().unwrap_or(f64::NAN);
     }
 

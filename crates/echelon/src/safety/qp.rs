@@ -306,24 +306,39 @@ impl<const N: usize> Best<N> {
 /// this.
 const PARALLEL: f64 = 1e-12;
 
-/// The projection of `w` onto the rows in the plane.
-fn project2(rows: &impl Rows<2>, w: [f64; 2], allowed: Allowed) -> Option<[f64; 2]> {
-    let m = rows.len();
+/// The projection of `w` onto the rows `g · z ≥ h` (within `allowed`) by
+/// enumeration: `w` itself when it meets them, else the closest of its
+/// projections onto each single row it breaks and of the candidates that
+/// `vertices` offers (onto the intersections of two rows and more, which
+/// depend on the dimension).
+fn project<const N: usize, R: Rows<N>>(
+    rows: &R,
+    w: [f64; N],
+    allowed: Allowed,
+    vertices: fn(&R, [f64; N], Allowed, &mut Best<N>),
+) -> Option<[f64; N]> {
     let mut best = Best::new();
     best.offer(rows, w, w, allowed);
     if best.z.is_some() {
         return best.z;
     }
-    for i in 0..m {
+    for i in 0..rows.len() {
         let (g, h) = rows.row(i);
         let gg = dot(g, g);
         let r = h - dot(g, w);
         // λ = r/‖g‖² ≥ 0: only a row that w breaks.
         if gg > 0.0 && r > 0.0 {
             let l = r / gg;
-            best.offer(rows, w, [w[0] + l * g[0], w[1] + l * g[1]], allowed);
+            best.offer(rows, w, std::array::from_fn(|k| w[k] + l * g[k]), allowed);
         }
     }
+    vertices(rows, w, allowed, &mut best);
+    best.z
+}
+
+/// [`project`]'s candidates in the plane: the vertices of two rows.
+fn vertices2<R: Rows<2>>(rows: &R, w: [f64; 2], allowed: Allowed, best: &mut Best<2>) {
+    let m = rows.len();
     for i in 0..m {
         let (gi, hi) = rows.row(i);
         let ni = dot(gi, gi).sqrt();
@@ -355,31 +370,12 @@ fn project2(rows: &impl Rows<2>, w: [f64; 2], allowed: Allowed) -> Option<[f64; 
             }
         }
     }
-    best.z
 }
 
-/// The projection of `w` onto the rows in space.
-fn project3(rows: &impl Rows<3>, w: [f64; 3], allowed: Allowed) -> Option<[f64; 3]> {
+/// [`project`]'s candidates in space: the projections onto the line of two
+/// rows and the vertices of three.
+fn vertices3<R: Rows<3>>(rows: &R, w: [f64; 3], allowed: Allowed, best: &mut Best<3>) {
     let m = rows.len();
-    let mut best = Best::new();
-    best.offer(rows, w, w, allowed);
-    if best.z.is_some() {
-        return best.z;
-    }
-    for i in 0..m {
-        let (g, h) = rows.row(i);
-        let gg = dot(g, g);
-        let r = h - dot(g, w);
-        if gg > 0.0 && r > 0.0 {
-            let l = r / gg;
-            best.offer(
-                rows,
-                w,
-                [w[0] + l * g[0], w[1] + l * g[1], w[2] + l * g[2]],
-                allowed,
-            );
-        }
-    }
     for i in 0..m {
         let (gi, hi) = rows.row(i);
         let gii = dot(gi, gi);
@@ -444,7 +440,6 @@ fn project3(rows: &impl Rows<3>, w: [f64; 3], allowed: Allowed) -> Option<[f64; 
             }
         }
     }
-    best.z
 }
 
 /// The exact answer of [`solve_split`] by enumeration, its second pass
@@ -456,8 +451,8 @@ fn exact(
     tol: f64,
 ) -> Option<[f64; 2]> {
     let rows = Split(first, second);
-    project2(&rows, want, Allowed::Rounding)
-        .or_else(|| project2(&rows, want, Allowed::Absolute(tol)))
+    project(&rows, want, Allowed::Rounding, vertices2)
+        .or_else(|| project(&rows, want, Allowed::Absolute(tol), vertices2))
 }
 
 /// The exact answer of [`solve_relaxed`] by enumeration in `(x, √W s)`.
@@ -469,8 +464,8 @@ fn exact_relaxed(
 ) -> Option<[f64; 2]> {
     let problem = Relaxed { rows, soft_end };
     let w = [want[0], want[1], 0.0];
-    project3(&problem, w, Allowed::Rounding)
-        .or_else(|| project3(&problem, w, Allowed::Bound(tol)))
+    project(&problem, w, Allowed::Rounding, vertices3)
+        .or_else(|| project(&problem, w, Allowed::Bound(tol), vertices3))
         .map(|z| [z[0], z[1]])
 }
 

@@ -171,9 +171,9 @@ impl Builder<'_> {
         };
         let mut warnings = Vec::new();
         for (i, a) in specs.iter().enumerate() {
-            let mut gains = vec![("ke", "K_e", a.gains.ke())];
+            let mut gains = vec![("ke", "K_e", a.gains().ke())];
             if a.law() != Law::Kinematic {
-                gains.push(("kz", "K_z", a.gains.kz()));
+                gains.push(("kz", "K_z", a.gains().kz()));
             }
             let Some((key, symbol, k)) = gains
                 .into_iter()
@@ -284,7 +284,7 @@ impl Builder<'_> {
         let points: Vec<[f64; 2]> = agents
             .specs()
             .iter()
-            .map(|a| crate::safety::point(&a.start, a.placement.l()))
+            .map(|a| crate::safety::point(&a.start(), a.placement().l()))
             .collect();
         if let Some((i, e)) = crate::safety::start_conflict(&points, &configs, &obstacles) {
             return Err(self

@@ -18,7 +18,7 @@ use crate::error::ScenarioError;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Plausible {
     /// The end of a field path, dotted: `*` stands for any key (a robot's
-    /// name, the reference's kind), `[]` for any array index
+    /// name, the reference's kind), `a|b` for either key, `[]` for any array index
     /// (`safety.obstacles[].r`). An agent's own tables match too
     /// (`control.ke` matches `agents[2].control.ke`).
     pub pattern: &'static str,
@@ -60,6 +60,12 @@ const POSITION: f64 = 1e6;
 const SPEED: f64 = 100.0;
 /// Largest plausible turn rate, rad/s.
 const TURN_RATE: f64 = 1000.0;
+
+/// The fields of every pose (`PoseSpec`): a start, a frame's origin.
+const POSE_X: &str = "start|frame_origin|odom_origin.x";
+const POSE_Y: &str = "start|frame_origin|odom_origin.y";
+const POSE_THETA: &str = "start|frame_origin|odom_origin.theta";
+const POSE_THETA_DEG: &str = "start|frame_origin|odom_origin.theta_deg";
 
 /// The plausible ranges, one row per field (the first row that matches a
 /// field's path applies). `docs/scenario-format.md` ("Plausible ranges")
@@ -103,11 +109,12 @@ pub const PLAUSIBLE: &[Plausible] = &[
     row("cubic.scale", "m/s³", -100.0, 100.0),
     row("cubic.t_switch", "s", -1e6, 1e6),
     row("waypoints.points[][]", "s or m", -1e6, 1e6),
-    // poses: a reference's start and an agent's
-    row("start.x", "m", -POSITION, POSITION),
-    row("start.y", "m", -POSITION, POSITION),
-    row("start.theta", "rad", -1000.0, 1000.0),
-    row("start.theta_deg", "°", -57_000.0, 57_000.0),
+    // poses: a reference's start, an agent's, and the frames' origins
+    // (`[fixes]`' frame_origin, an agent's odom_origin)
+    row(POSE_X, "m", -POSITION, POSITION),
+    row(POSE_Y, "m", -POSITION, POSITION),
+    row(POSE_THETA, "rad", -1000.0, 1000.0),
+    row(POSE_THETA_DEG, "°", -57_000.0, 57_000.0),
     row("start.v", "m/s", -SPEED, SPEED),
     row("start.omega", "rad/s", -TURN_RATE, TURN_RATE),
     // [[agents]]
@@ -130,14 +137,6 @@ pub const PLAUSIBLE: &[Plausible] = &[
     row("fixes.latency", "s", 0.0, 60.0),
     row("fixes.timeout", "s", 1e-3, 3600.0),
     row("fixes.tolerance", "m", 1e-4, 100.0),
-    row("frame_origin.x", "m", -POSITION, POSITION),
-    row("frame_origin.y", "m", -POSITION, POSITION),
-    row("frame_origin.theta", "rad", -1000.0, 1000.0),
-    row("frame_origin.theta_deg", "°", -57_000.0, 57_000.0),
-    row("odom_origin.x", "m", -POSITION, POSITION),
-    row("odom_origin.y", "m", -POSITION, POSITION),
-    row("odom_origin.theta", "rad", -1000.0, 1000.0),
-    row("odom_origin.theta_deg", "°", -57_000.0, 57_000.0),
     // [safety] and an agent's safety
     row("safety.radius", "m", 1e-3, 100.0),
     row("safety.gain", "1/s", 1e-3, 1e4),
@@ -257,7 +256,7 @@ fn matches(pattern: &str, path: &FieldPath) -> bool {
         .zip(path.0.iter().rev())
         .all(|(w, seg)| match (w, seg) {
             (Some("*"), Seg::Key(_)) | (None, Seg::Index(_)) => true,
-            (Some(w), Seg::Key(k)) => w == k,
+            (Some(w), Seg::Key(k)) => w.split('|').any(|w| w == k),
             _ => false,
         })
 }
@@ -324,8 +323,11 @@ mod tests {
         assert_eq!(row("robots.heavy.mass"), Some("robots.*.mass"));
         assert_eq!(row("control.ke"), Some("control.ke"));
         assert_eq!(row("agents[1].control.ke"), Some("control.ke"));
-        assert_eq!(row("agents[1].start.x"), Some("start.x"));
-        assert_eq!(row("reference.circle.start.theta"), Some("start.theta"));
+        assert_eq!(row("agents[1].start.x"), Some(POSE_X));
+        assert_eq!(row("reference.circle.start.theta"), Some(POSE_THETA));
+        assert_eq!(row("fixes.frame_origin.y"), Some(POSE_Y));
+        assert_eq!(row("agents[0].odom_origin.theta_deg"), Some(POSE_THETA_DEG));
+        assert_eq!(row("agents[0].origin.x"), None);
         assert_eq!(row("reference.line.speed"), Some("reference.*.speed"));
         assert_eq!(row("safety.obstacles[1].r"), Some("obstacles[].r"));
         assert_eq!(row("agents[1].safety.gain"), Some("safety.gain"));

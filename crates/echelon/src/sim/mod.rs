@@ -80,16 +80,19 @@ impl Simulation {
     pub fn new(plan: &Plan) -> Simulation {
         let agents = plan.agents();
         let config = *plan.config();
-        let order = if agents.iter().any(|a| a.placement.uses_exact_derivatives()) {
+        let order = if agents
+            .iter()
+            .any(|a| a.placement().uses_exact_derivatives())
+        {
             Order::Four
         } else {
             Order::Two
         };
-        let uses_reference = agents.iter().any(|a| a.leader == Leader::Reference);
+        let uses_reference = agents.iter().any(|a| a.leader() == Leader::Reference);
         let n = agents.len();
-        let state: Vec<State> = agents.iter().map(|a| a.start).collect();
+        let state: Vec<State> = agents.iter().map(|a| a.start()).collect();
         let velocity_agents = agents.iter().any(|a| a.velocity_robot().is_some());
-        let held = agents.iter().map(|a| a.drive.zero()).collect();
+        let held = agents.iter().map(|a| a.drive().zero()).collect();
         let mut hold_every = config.hold_every();
         let safety = plan.safety().map(|spec| {
             if hold_every == 0 {
@@ -103,7 +106,7 @@ impl Simulation {
                     .map(|c| c.map(|c| SafetyFilter::new(c).with_period(period)))
                     .collect(),
                 obstacles: spec.obstacles.clone(),
-                l: agents.iter().map(|a| a.placement.l()).collect(),
+                l: agents.iter().map(|a| a.placement().l()).collect(),
                 out: spec
                     .agents
                     .iter()
@@ -301,7 +304,7 @@ impl Simulation {
             &mut self.speeds[0],
         );
         for (i, a) in self.sys.plan.agents().iter().enumerate() {
-            let applied = a.drive.actuate(self.held[i]);
+            let applied = a.drive().actuate(self.held[i]);
             let o = &mut self.out[i];
             (o.u, o.tau) = (applied.u, applied.tau);
             if let (Some(v), Some((c, _))) = (o.velocity.as_mut(), applied.velocity) {
@@ -368,7 +371,7 @@ impl Simulation {
             let k = [&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]];
             // ṡ = v through the same RK4 stages: the stage speeds are
             // v, v + dt/2 v̇₁, v + dt/2 v̇₂, v + dt v̇₃.
-            if let Drive::Velocity(_) = sys.plan.agents()[i].drive {
+            if let Drive::Velocity(_) = sys.plan.agents()[i].drive() {
                 // ṡ = the speed the base moves at, stage by stage.
                 let s = |k: usize| self.speeds[k][i][0];
                 self.distance[i] += h6 * (s(0) + 2.0 * s(1) + 2.0 * s(2) + s(3));
@@ -388,7 +391,7 @@ impl Simulation {
             if let Some(breach) = bounds.check(s) {
                 return Err(SimError::Diverged {
                     agent: i + 1,
-                    name: self.sys.plan.agents()[i].name.clone(),
+                    name: self.sys.plan.agents()[i].name().to_owned(),
                     t: self.time(),
                     breach,
                 });
@@ -415,7 +418,7 @@ impl Simulation {
     fn settle(&mut self) {
         self.refresh();
         for (i, a) in self.sys.plan.agents().iter().enumerate() {
-            if let (Drive::Velocity(r), Some(v)) = (&a.drive, self.out[i].velocity) {
+            if let (Drive::Velocity(r), Some(v)) = (a.drive(), self.out[i].velocity) {
                 self.state[i] = r.base().settle(&self.state[i], v.applied);
             }
         }

@@ -46,9 +46,9 @@ impl System {
             // Between samples of a sampled controller, with nobody looking at
             // the law's outputs: only the plant moves.
             for (i, a) in self.plan.agents().iter().enumerate() {
-                let applied = a.drive.actuate(h[i]);
-                dx[i] = a.drive.derivative(&x[i], &applied);
-                speeds[i] = a.drive.speeds(&x[i], &applied);
+                let applied = a.drive().actuate(h[i]);
+                dx[i] = a.drive().derivative(&x[i], &applied);
+                speeds[i] = a.drive().speeds(&x[i], &applied);
             }
             return;
         }
@@ -67,7 +67,7 @@ impl System {
             // leader was evaluated first, so dx[j].v is its v̇ now and
             // speeds[j] the velocities its base moves at.
             let view = |state: State, j: usize| {
-                let state = match self.plan.agents()[j].drive {
+                let state = match self.plan.agents()[j].drive() {
                     Drive::Torque { .. } => state,
                     Drive::Velocity(_) => State {
                         v: speeds[j][0],
@@ -77,7 +77,7 @@ impl System {
                 };
                 LeaderView::Robot { state, dv: dx[j].v }
             };
-            let leader = match a.leader {
+            let leader = match a.leader() {
                 Leader::Reference => LeaderView::Reference(&jet),
                 Leader::Agent(j) => view(sensed(j), j),
             };
@@ -88,12 +88,12 @@ impl System {
                 (e, z)
             } else {
                 // The same errors from the true states of the robot and its leader.
-                let (motion, offset) = match a.leader {
+                let (motion, offset) = match a.leader() {
                     Leader::Reference => (motion, offset),
-                    Leader::Agent(j) => view(x[j], j).resolve(&a.placement),
+                    Leader::Agent(j) => view(x[j], j).resolve(&a.placement()),
                 };
                 let s = &x[i];
-                match a.drive {
+                match a.drive() {
                     Drive::Torque { .. } => errors(
                         s.x,
                         s.y,
@@ -105,10 +105,10 @@ impl System {
                         offset.lx,
                         offset.ly,
                         offset.dly,
-                        a.gains.ke(),
+                        a.gains().ke(),
                     ),
                     Drive::Velocity(_) => {
-                        let k = kinematic_law(s, &motion, &offset, a.gains.ke());
+                        let k = kinematic_law(s, &motion, &offset, a.gains().ke());
                         (k.e, k.z)
                     }
                 }
@@ -117,9 +117,9 @@ impl System {
             // limits; a sampled controller's held command went through it
             // (and its filter) at the sample.
             let command = held.map_or_else(|| a.act(t, &me, law.command(), None).command, |h| h[i]);
-            let applied = a.drive.actuate(command);
-            dx[i] = a.drive.derivative(&x[i], &applied);
-            speeds[i] = a.drive.speeds(&x[i], &applied);
+            let applied = a.drive().actuate(command);
+            dx[i] = a.drive().derivative(&x[i], &applied);
+            speeds[i] = a.drive().speeds(&x[i], &applied);
             let output = AgentOutput::of(e_true, z_true, e, z, command, &applied);
             if let Some(out) = out.as_deref_mut() {
                 out[i] = output;

@@ -106,3 +106,47 @@ pub fn assert_engine_agrees(pairs: impl IntoIterator<Item = (f64, f64)>, i: usiz
     }
     worst
 }
+
+/// Loads the scenario file `path` and asserts what every shipped file
+/// (`scenarios/`, `examples/`) keeps: it builds without a warning, has a
+/// description, and serialise → parse gives the same file. Returns it.
+pub fn load_clean_scenario(path: &std::path::Path) -> echelon::scenario::Scenario {
+    use echelon::scenario::{Overrides, Scenario, schema::ScenarioFile};
+    let at = path.display();
+    let s = Scenario::load(path).unwrap_or_else(|e| panic!("{e}"));
+    let run = s
+        .build(&Overrides::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        run.plan.warnings().is_empty() && run.warnings.is_empty(),
+        "{at}: {:?} {:?}",
+        run.plan.warnings(),
+        run.warnings
+    );
+    assert!(s.file.description.is_some(), "{at} has a description");
+    let text = toml::to_string(&s.file).unwrap();
+    let back: ScenarioFile = toml::from_str(&text).unwrap();
+    assert_eq!(back, s.file, "{at} round trip");
+    s
+}
+
+/// The scenario text `src` built with the default overrides.
+pub fn build(src: &str) -> Result<echelon::Run, echelon::ScenarioError> {
+    build_with(src, &echelon::scenario::Overrides::default())
+}
+
+/// The scenario text `src` built with `overrides`.
+pub fn build_with(
+    src: &str,
+    overrides: &echelon::scenario::Overrides,
+) -> Result<echelon::Run, echelon::ScenarioError> {
+    echelon::scenario::Scenario::parse(src, "test.toml", None)?.build(overrides)
+}
+
+/// The default overrides but for the run's `duration`, s.
+pub fn for_seconds(duration: f64) -> echelon::scenario::Overrides {
+    echelon::scenario::Overrides {
+        duration: Some(duration),
+        ..echelon::scenario::Overrides::default()
+    }
+}

@@ -77,10 +77,7 @@ fn a_base_publishes_what_its_encoders_measure() {
         (p.x - truth.x).abs() < 1e-6 && (p.y - truth.y).abs() < 1e-6,
         "{p:?} vs {truth:?}"
     );
-    let ed = ErrorModel {
-        wheel_diameter_ratio: 1.02,
-        ..ErrorModel::PERFECT
-    };
+    let ed = ErrorModel::systematic(1.02, 1.0).unwrap();
     let uneven = base()
         .with_odometry(odometry(ed), (l, r), 7, 0, 0.0)
         .expect("valid");

@@ -19,13 +19,9 @@ fn source(message: FixMessage, frame_origin: Pose, gate: bool) -> FixSource {
 }
 
 fn spec(fusion: Fusion, position_noise: f64, heading_noise: Option<f64>) -> FixSpec {
-    FixSpec {
-        schedule: FixSchedule::Period(0.1),
-        position_noise,
-        heading_noise,
-        latency: 0.0,
-        fusion,
-    }
+    FixSpec::new(FixSchedule::Period(0.1), fusion)
+        .and_then(|f| f.with_noise(position_noise, heading_noise))
+        .unwrap()
 }
 
 const MODEL: OdometryModel = OdometryModel {
@@ -81,7 +77,7 @@ proptest! {
     ) {
         let truth = drive(start, &arcs);
         let (fix, model, tol) = if ekf {
-            let errors = ErrorModel { slip: 1e-2, ..ErrorModel::PERFECT };
+            let errors = ErrorModel::PERFECT.with_slip(1e-2).unwrap();
             (spec(Fusion::Ekf, 1e-4, Some(1e-4)), OdometryModel { errors, ..MODEL }, 1e-3)
         } else {
             (spec(Fusion::Reset, 0.0, Some(0.0)), MODEL, 1e-6)
@@ -257,10 +253,7 @@ fn a_pose_with_covariance_weighs_the_fix() {
             source(FixMessage::PoseWithCovarianceStamped, Pose::default(), true),
             spec(Fusion::Ekf, 0.0, None),
             OdometryModel {
-                errors: ErrorModel {
-                    slip: 1e-3,
-                    ..ErrorModel::PERFECT
-                },
+                errors: ErrorModel::PERFECT.with_slip(1e-3).unwrap(),
                 ..MODEL
             },
             Pose::default(),
@@ -307,10 +300,9 @@ fn a_pose_with_covariance_weighs_the_fix() {
 #[test]
 fn fix_intervals_are_held_against_theorem_2() {
     let model = OdometryModel {
-        errors: ErrorModel {
-            zeta: 1e-4,
-            ..ErrorModel::PERFECT
-        },
+        errors: ErrorModel::PERFECT
+            .with_zeta(1e-4, echelon::odometry::ZetaModel::Wheels)
+            .unwrap(),
         ..MODEL
     };
     let src = FixSource {

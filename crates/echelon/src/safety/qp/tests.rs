@@ -111,8 +111,8 @@ fn rows() -> impl Strategy<Value = Vec<Constraint>> {
 /// the enumeration may each say either.
 fn marginal(first: &[Constraint], want: [f64; 2]) -> bool {
     let rows = Split(first, &[]);
-    project2(&rows, want, Allowed::Rounding).is_none()
-        && project2(&rows, want, Allowed::Absolute(1e-4)).is_some()
+    project(&rows, want, Allowed::Rounding, vertices2).is_none()
+        && project(&rows, want, Allowed::Absolute(1e-4), vertices2).is_some()
 }
 
 fn marginal_relaxed(rows: &[Constraint], soft_end: usize, want: [f64; 2]) -> bool {

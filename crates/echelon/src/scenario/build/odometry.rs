@@ -64,22 +64,28 @@ impl Builder<'_> {
         let num = |get: fn(&OdometrySection) -> Option<f64>, key: &str, default: f64| {
             odo.get(get, key).map_or(default, |(v, _)| v)
         };
-        let errors = ErrorModel {
-            zeta: num(|s| s.zeta, "zeta", 0.0),
-            zeta_model: odo
-                .get(|s| s.zeta_model, "zeta_model")
-                .map_or(ZetaModel::Wheels, |(m, _)| m),
-            wheel_diameter_ratio: num(|s| s.wheel_diameter_ratio, "wheel_diameter_ratio", 1.0),
-            wheelbase_ratio: num(|s| s.wheelbase_ratio, "wheelbase_ratio", 1.0),
-            slip: num(|s| s.slip, "slip", 0.0),
-            ticks_per_rev: odo
-                .get(|s| s.ticks_per_rev, "ticks_per_rev")
-                .map(|(v, _)| v),
-            speed_noise: num(|s| s.speed_noise, "speed_noise", 0.0),
-            turn_rate_noise: num(|s| s.turn_rate_noise, "turn_rate_noise", 0.0),
-        };
-        errors
-            .validate()
+        let zeta_model = odo
+            .get(|s| s.zeta_model, "zeta_model")
+            .map_or(ZetaModel::Wheels, |(m, _)| m);
+        let ticks = odo
+            .get(|s| s.ticks_per_rev, "ticks_per_rev")
+            .map(|(v, _)| v);
+        let errors = ErrorModel::PERFECT
+            .with_zeta(num(|s| s.zeta, "zeta", 0.0), zeta_model)
+            .and_then(|e| {
+                e.with_systematic(
+                    num(|s| s.wheel_diameter_ratio, "wheel_diameter_ratio", 1.0),
+                    num(|s| s.wheelbase_ratio, "wheelbase_ratio", 1.0),
+                )
+            })
+            .and_then(|e| e.with_slip(num(|s| s.slip, "slip", 0.0)))
+            .and_then(|e| e.with_ticks_per_rev(ticks))
+            .and_then(|e| {
+                e.with_speed_noise(
+                    num(|s| s.speed_noise, "speed_noise", 0.0),
+                    num(|s| s.turn_rate_noise, "turn_rate_noise", 0.0),
+                )
+            })
             .map_err(|e| self.at.param(&odo.path_of(e.field), &e))?;
         let fixes = if fixes_on {
             Some(self.fixes(&fix, period)?)
@@ -112,18 +118,18 @@ impl Builder<'_> {
         };
         let value =
             |get: fn(&FixesSection) -> Option<f64>, key: &str| fix.get(get, key).map(|(v, _)| v);
-        let spec = FixSpec {
-            schedule,
-            position_noise: value(|s| s.position_noise, "position_noise").unwrap_or(0.0),
-            heading_noise: value(|s| s.heading_noise, "heading_noise"),
-            latency: value(|s| s.latency, "latency").unwrap_or(0.0),
-            fusion: fix
-                .get(|s| s.fusion, "fusion")
-                .map_or(Fusion::Reset, |(f, _)| f),
-        };
-        spec.validate()
-            .and_then(|()| spec.samples_between(period))
-            .map_err(|e| self.at.param(&fix.path_of(e.field), &e))?;
-        Ok(spec)
+        let fusion = fix
+            .get(|s| s.fusion, "fusion")
+            .map_or(Fusion::Reset, |(f, _)| f);
+        FixSpec::new(schedule, fusion)
+            .and_then(|f| {
+                f.with_noise(
+                    value(|s| s.position_noise, "position_noise").unwrap_or(0.0),
+                    value(|s| s.heading_noise, "heading_noise"),
+                )
+            })
+            .and_then(|f| f.with_latency(value(|s| s.latency, "latency").unwrap_or(0.0)))
+            .and_then(|f| f.samples_between(period).map(|_| f))
+            .map_err(|e| self.at.param(&fix.path_of(e.field), &e))
     }
 }

@@ -12,7 +12,7 @@ use pyo3::types::PyDict;
 use echelon::error::Location;
 use echelon::odometry::ZetaModel;
 use echelon::scenario::{self as sc, Overrides};
-use echelon::sweep::{self, Grid};
+use echelon::sweep::{self, Grid, GridSpec};
 use echelon::{Scenario, Variant};
 
 use crate::errors;
@@ -344,7 +344,7 @@ impl PyScenario {
             sweep::SweepError::Param(e) => errors::param(&e),
         })?;
         let mut bytes = Vec::new();
-        sweep::write_csv(&mut bytes, &rows, grid.zeta_model).map_err(errors::value)?;
+        sweep::write_csv(&mut bytes, &rows, grid.spec().zeta_model).map_err(errors::value)?;
         let text = String::from_utf8(bytes).map_err(errors::value)?;
         Ok(match cases {
             // Without the header line.
@@ -398,7 +398,7 @@ impl PyScenario {
         };
         let probe = self.build(py, Some(&ov))?;
         let duration = probe.plan.steps() as f64 * probe.plan.config().dt;
-        let grid = Grid {
+        let grid = Grid::new(GridSpec {
             zeta: g.zeta.clone(),
             zeta_model,
             wheel_diameter_ratio: g.ed.clone(),
@@ -408,8 +408,8 @@ impl PyScenario {
             seeds: g.seeds.clone(),
             gamma: g.gamma,
             transient: g.transient.unwrap_or(0.5 * duration),
-        };
-        grid.validate().map_err(|e| errors::param(&e))?;
+        })
+        .map_err(|e| errors::param(&e))?;
         Ok((grid, ov.resolve()?))
     }
 }

@@ -77,7 +77,7 @@ fn commands_into(
                 "commands[{i}]: ({c0}, {c1}) is not finite"
             )));
         }
-        out.push(match agent.drive {
+        out.push(match agent.drive() {
             Drive::Torque { .. } => Command::Torque(Input { u1: c0, u2: c1 }),
             Drive::Velocity(_) => Command::Velocity(VelocityCommand { v: c0, omega: c1 }),
         });
@@ -169,24 +169,24 @@ impl PySimulation {
         let mut out = Vec::new();
         for a in self.sim.agents() {
             let d = PyDict::new(py);
-            d.set_item("name", &a.name)?;
+            d.set_item("name", a.name())?;
             d.set_item(
                 "drive",
-                match a.drive {
+                match a.drive() {
                     Drive::Torque { .. } => "torque",
                     Drive::Velocity(_) => "velocity",
                 },
             )?;
             d.set_item(
                 "leader",
-                match a.leader {
+                match a.leader() {
                     Leader::Reference => None,
                     Leader::Agent(j) => Some(j),
                 },
             )?;
-            d.set_item("ke", a.gains.ke())?;
-            d.set_item("kz", a.gains.kz())?;
-            d.set_item("l", a.placement.l())?;
+            d.set_item("ke", a.gains().ke())?;
+            d.set_item("kz", a.gains().kz())?;
+            d.set_item("l", a.placement().l())?;
             d.set_item("law", a.law().name())?;
             d.set_item("max_accel", a.max_accel())?;
             let robot = match a.torque_robot() {

@@ -37,29 +37,29 @@ impl Simulation {
     pub fn leader_view(&self, i: usize, commands: &[Command]) -> (LeaderMotion, Offset) {
         let agents = self.sys.plan.agents();
         let a = &agents[i];
-        match a.leader {
+        match a.leader() {
             Leader::Reference => {
                 let jet = if self.sys.uses_reference {
                     self.sys.plan.reference().eval(self.time(), self.sys.order)
                 } else {
                     Jet::default()
                 };
-                LeaderView::Reference(&jet).resolve(&a.placement)
+                LeaderView::Reference(&jet).resolve(&a.placement())
             }
             Leader::Agent(j) => {
                 let leader = &agents[j];
                 let sensed = self.sensed(j);
                 let command = leader.act(self.time(), &sensed, commands[j], None).command;
-                let applied = leader.drive.actuate(command);
-                let dv = leader.drive.derivative(&self.state[j], &applied).v;
-                let state = match leader.drive {
+                let applied = leader.drive().actuate(command);
+                let dv = leader.drive().derivative(&self.state[j], &applied).v;
+                let state = match leader.drive() {
                     Drive::Torque { .. } => sensed,
                     Drive::Velocity(_) => {
-                        let [v, omega, ..] = leader.drive.speeds(&self.state[j], &applied);
+                        let [v, omega, ..] = leader.drive().speeds(&self.state[j], &applied);
                         State { v, omega, ..sensed }
                     }
                 };
-                LeaderView::Robot { state, dv }.resolve(&a.placement)
+                LeaderView::Robot { state, dv }.resolve(&a.placement())
             }
         }
     }

@@ -79,7 +79,7 @@ pub fn ros_acl(links: &[echelon::scenario::Ros2Link]) -> Vec<RosAcl> {
             truth: topic_key_any_type(
                 l.key_scheme,
                 l.domain_id,
-                &crate::ros2::base::ground_truth_topic(l),
+                &crate::ros2::ground_truth_topic(l),
             ),
             fixes: l
                 .fixes

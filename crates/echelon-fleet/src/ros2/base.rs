@@ -27,9 +27,11 @@ use echelon::rng::SplitMix64;
 use echelon::scenario::schema::FixMessage;
 use echelon::scenario::{FixSource, Ros2Link, Scenario};
 
-use super::drive::{SampleRefusal, cmd_vel_type, decode_cmd_vel};
+use super::drive::{cmd_vel_type, decode_cmd_vel};
 use super::endpoint::declare_node;
 use super::fixes::fix_type;
+use super::ground_truth_topic;
+use super::refusal::SampleRefusal;
 use crate::clock::FleetClock;
 use crate::keys::Keys;
 use crate::net::NetOptions;
@@ -47,13 +49,6 @@ use echelon_ros2::msgs::{
 /// The world frame's id (REP 105's `map`): the frame of a simulated base's
 /// ground truth.
 pub const WORLD_FRAME: &str = "map";
-
-/// A simulated base's ground-truth topic in `namespace`.
-pub fn ground_truth_topic(link: &Ros2Link) -> String {
-    // The namespace is canonical and `ground_truth` a valid relative name.
-    echelon_ros2::names::fully_qualified_topic(&link.namespace, "ground_truth")
-        .unwrap_or_else(|_| format!("{}/ground_truth", link.namespace.trim_end_matches('/')))
-}
 
 /// What a simulated base counted (its report and its stats).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]

@@ -56,7 +56,7 @@ use echelon_ros2::msgs::{
     PoseWithCovarianceStamped, Quaternion, RosMessage,
 };
 
-use super::drive::SampleRefusal;
+use super::refusal::SampleRefusal;
 use crate::FleetError;
 
 /// Raw odometry samples kept for latency compensation (20 s at 50 Hz).
@@ -489,12 +489,12 @@ impl FixInput {
             .map_err(|e| SampleRefusal::WrongType(e.to_string()))?;
         let (header, pose, covariance) = match self.source.message {
             FixMessage::PoseStamped => {
-                let m = PoseStamped::from_cdr_finite(payload).map_err(sample_refusal)?;
+                let m = PoseStamped::from_cdr_finite(payload).map_err(SampleRefusal::from)?;
                 (m.header, m.pose, None)
             }
             FixMessage::PoseWithCovarianceStamped => {
-                let m =
-                    PoseWithCovarianceStamped::from_cdr_finite(payload).map_err(sample_refusal)?;
+                let m = PoseWithCovarianceStamped::from_cdr_finite(payload)
+                    .map_err(SampleRefusal::from)?;
                 let c = m.planar_covariance();
                 (m.header, m.pose.pose, Some(c))
             }
@@ -604,13 +604,6 @@ pub fn for_agent(
     )
     .map(Some)
     .map_err(refuse)
-}
-
-fn sample_refusal(e: echelon_ros2::CdrError) -> FixRefusal {
-    match e {
-        echelon_ros2::CdrError::NonFinite { field } => SampleRefusal::NonFinite(field).into(),
-        e => SampleRefusal::Malformed(e).into(),
-    }
 }
 
 #[cfg(test)]

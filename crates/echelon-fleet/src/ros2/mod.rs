@@ -12,6 +12,8 @@
 //!   base`), answering `cmd_vel` with odometry.
 //! - [`record`]: the topics the fleet collector records into `fleet.mcap`
 //!   as ROS 2 channels, and the checks a sample passes first.
+//! - [`refusal`]: why a ROS 2 sample was refused, for all of them.
+//! - [`ground_truth_topic`]: where a simulated base publishes its ground truth.
 //! - [`declare_tokens`]: rmw_zenoh liveliness tokens declared on a session.
 //!
 //! Interoperability with real ROS 2 is proven by `tests/ros2_*.rs` against
@@ -22,8 +24,18 @@ pub mod drive;
 pub mod endpoint;
 pub mod fixes;
 pub mod record;
+pub mod refusal;
 
 pub use record::{RosRefusal, RosTopic, RosTopicError};
+
+use echelon::scenario::Ros2Link;
+
+/// A simulated base's ground-truth topic in `namespace`.
+pub fn ground_truth_topic(link: &Ros2Link) -> String {
+    // The namespace is canonical and `ground_truth` a valid relative name.
+    echelon_ros2::names::fully_qualified_topic(&link.namespace, "ground_truth")
+        .unwrap_or_else(|_| format!("{}/ground_truth", link.namespace.trim_end_matches('/')))
+}
 
 /// Declares each of `tokens` on `session`; they live as long as the returned
 /// handles.

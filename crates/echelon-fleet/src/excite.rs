@@ -35,7 +35,7 @@ use zenoh::Wait;
 
 use echelon::agent::Drive;
 use echelon::base::{VelocityBase, VelocityCommand};
-use echelon::scenario::Scenario;
+use echelon::scenario::{Overrides, Scenario};
 use echelon_mcap::McapLog;
 
 use crate::clock::FleetClock;
@@ -276,7 +276,8 @@ impl Bag {
 /// Runs the manoeuvre on agent `opts.agent`'s ROS 2 robot.
 pub fn run(opts: ExciteOptions, stop: &StopFlag) -> Result<ExciteReport, FleetError> {
     let fleet = opts.scenario.fleet()?;
-    let spec = agent_spec(&opts.scenario, opts.agent)?;
+    let plan = opts.scenario.build(&Overrides::default())?.plan;
+    let spec = agent_spec(&plan, opts.agent)?;
     let Drive::Velocity(robot) = &spec.drive else {
         return Err(FleetError::Config(format!(
             "agent {}: fleet excite drives a velocity base (set drive = \"velocity\" on its robot)",

@@ -768,10 +768,10 @@ mod tests {
     fn the_roles_declare_what_the_access_control_allows() {
         use crate::faults::FaultSpec;
         use crate::leader::{Leader, LeaderTask};
-        use crate::robot::{Robot, RobotConfig, RobotTask};
+        use crate::robot::{Robot, RobotTask};
         use crate::runtime::Task;
 
-        let (s, fleet, reference) = crate::testing::fast_circle();
+        let (s, _, reference) = crate::testing::fast_circle();
         let keys = Keys::new("lab");
         let within = |declared: &[String], allowed: &[String], what: &str| {
             for d in declared {
@@ -784,8 +784,7 @@ mod tests {
         within(&leader.inputs(), &subscribes(m, &keys, &[]), "leader");
         assert_eq!(leader.tokens(), vec![keys.alive(&m.liveliness())]);
         for k in 1..=2 {
-            let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
-                .unwrap_or_else(|e| panic!("{e}"));
+            let config = crate::testing::robot_config(&s, k, FaultSpec::default());
             let robot = RobotTask::new(Robot::simulated(config, 1), keys.clone());
             let m = Member::Robot(k);
             let mut out = robot.outputs();

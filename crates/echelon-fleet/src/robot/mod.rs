@@ -47,7 +47,7 @@ mod report;
 mod safety;
 mod task;
 
-pub use config::{RobotConfig, RobotSafety, agent_spec, safety_of};
+pub use config::{RobotConfig, RobotSafety, agent_spec};
 pub use driver::{RobotOptions, run};
 pub use head::{HEAD_FILTER, HeadFilter};
 pub use report::{RobotReport, RobotStats, SafetyCounts};

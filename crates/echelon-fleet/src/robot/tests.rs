@@ -29,9 +29,7 @@ fn scenario(link_loss: &str) -> Scenario {
 }
 
 fn robot(s: &Scenario, agent: u32, faults: FaultSpec) -> Robot {
-    let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
-    let config = RobotConfig::from_scenario(s, &fleet, agent, faults, None)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let config = crate::testing::robot_config(s, agent, faults);
     Robot::simulated(config, 100 + agent)
 }
 
@@ -721,9 +719,7 @@ impl Plant for Flaky {
 #[test]
 fn losing_the_odometry_or_the_process_commands_zero() {
     let s = scenario(EXTRAPOLATE);
-    let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
-    let config = RobotConfig::from_scenario(&s, &fleet, 1, FaultSpec::default(), None)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let config = crate::testing::robot_config(&s, 1, FaultSpec::default());
     let plant = Flaky {
         inner: SimulatedPlant::new(
             *config.spec.torque_robot().unwrap(),
@@ -851,9 +847,7 @@ proptest::proptest! {
 #[test]
 fn a_driven_head_publishes_its_robots_motion_and_commands_nothing() {
     let s = scenario(EXTRAPOLATE);
-    let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
-    let config = RobotConfig::from_scenario(&s, &fleet, 1, FaultSpec::default(), None)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let config = crate::testing::robot_config(&s, 1, FaultSpec::default());
     let mut head = Robot::simulated(
         RobotConfig {
             driven: true,
@@ -906,9 +900,7 @@ fn a_driven_head_publishes_its_robots_motion_and_commands_nothing() {
 
 /// Robot 1 on a [`Flaky`] plant (never lost) behind the reference.
 fn commanded_robot(s: &Scenario) -> Robot<Flaky> {
-    let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
-    let config = RobotConfig::from_scenario(s, &fleet, 1, FaultSpec::default(), None)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let config = crate::testing::robot_config(s, 1, FaultSpec::default());
     let plant = Flaky {
         inner: SimulatedPlant::new(
             *config.spec.torque_robot().unwrap(),

@@ -25,16 +25,14 @@ use echelon::model::{Pose, State};
 use echelon::odometry::{FixSpec, Odometer, OdometrySpec};
 use echelon::rng::SplitMix64;
 use echelon::scenario::schema::FixMessage;
-use echelon::scenario::{FixSource, Ros2Link, Scenario};
+use echelon::scenario::{FixSource, Ros2Link};
 
 use super::drive::{cmd_vel_type, decode_cmd_vel};
 use super::endpoint::declare_node;
 use super::fixes::fix_type;
 use super::ground_truth_topic;
 use super::refusal::SampleRefusal;
-use crate::clock::FleetClock;
-use crate::keys::Keys;
-use crate::net::NetOptions;
+use crate::options::{ProcessOptions, Resolved};
 use crate::plant::{Plant, SimulatedVelocityBase};
 use crate::robot::{PLANT_STEP, agent_spec};
 use crate::role::Member;
@@ -482,18 +480,12 @@ impl SimBase {
 /// Options of `fleet base --ros2`.
 #[derive(Debug, Clone)]
 pub struct BaseOptions {
-    /// The scenario (the agent's start pose, its base model and `ros2` link).
-    pub scenario: Scenario,
+    /// The scenario (the agent's start pose, its base model and `ros2`
+    /// link), clock, network and fleet name (for its echelon liveliness
+    /// token); `duration` absent: run until a signal.
+    pub process: ProcessOptions,
     /// Agent number, from 1.
     pub agent: u32,
-    /// Clock speed-up `K`.
-    pub time_scale: f64,
-    /// Stop after this much (scaled) time (absent: at a signal).
-    pub duration: Option<f64>,
-    /// Network.
-    pub net: NetOptions,
-    /// Fleet name for its echelon liveliness token (absent: the scenario's).
-    pub fleet: Option<String>,
 }
 
 /// What a base reports when it stops.
@@ -602,20 +594,20 @@ impl Task for BaseTask {
 /// Runs a simulated ROS 2 base until `duration` or the stop flag:
 /// [`BaseTask`] on the fleet runtime, declared as a ROS 2 node.
 pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError> {
-    let fleet = opts.scenario.fleet()?;
-    let spec = agent_spec(&opts.scenario, opts.agent)?;
+    let Resolved {
+        plan,
+        settings,
+        keys,
+    } = opts.process.resolve()?;
+    let spec = agent_spec(&plan, opts.agent)?;
     let Drive::Velocity(robot) = &spec.drive else {
         return Err(FleetError::Config(format!(
             "agent {}: a ROS 2 base is a velocity base (set drive = \"velocity\" on its robot)",
             opts.agent
         )));
     };
-    let link = fleet.ros2[opts.agent as usize - 1].clone();
+    let link = settings.ros2[opts.agent as usize - 1].clone();
     // The agent's `[odometry]`: its wheel odometry lies as the simulator's.
-    let plan = opts
-        .scenario
-        .build(&echelon::scenario::Overrides::default())?
-        .plan;
     let odometry = plan.odometer(opts.agent as usize - 1).cloned();
     let seed = plan.seed();
     // A simulated motion capture when the agent takes fixes from ROS 2.
@@ -629,7 +621,6 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         }
         _ => None,
     };
-    let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name));
     let alive = keys.alive(&Member::Base(opts.agent).liveliness());
     runtime::run_on(
         |session| {
@@ -660,7 +651,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                     *period,
                     gids[2],
                     stream,
-                    opts.time_scale,
+                    opts.process.time_scale,
                 );
             }
             if let Some(odometry) = &odometry {
@@ -690,13 +681,13 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                     )
                 }),
                 alive,
-                duration: opts.duration,
+                duration: opts.process.duration,
                 wall: crate::unix_nanos,
             };
             Ok((task, tokens))
         },
-        &opts.net,
-        FleetClock::new(opts.time_scale),
+        &opts.process.net,
+        opts.process.clock(),
         stop,
     )?
     .report()

@@ -79,6 +79,12 @@ impl World {
         }
     }
 
+    /// Agents 1, 2, … of `s`, agent `k` with faults `faults[k - 1]`.
+    fn of(s: &Scenario, faults: &[FaultSpec]) -> World {
+        let robots = (1..).zip(faults).map(|(k, f)| robot(s, k, *f)).collect();
+        World::new(s, robots)
+    }
+
     /// Runs until local time `end`.
     fn run_until(&mut self, end: f64) {
         loop {
@@ -176,7 +182,7 @@ fn conserved(r: &Robot) {
 fn a_diverging_robot_stops_at_zero_and_says_why() {
     let src = FAST_CIRCLE.replace("[sim]", "[control]\nke = 1e12\n\n[sim]");
     let s = Scenario::parse(&src, "test", None).unwrap_or_else(|e| panic!("{e}"));
-    let mut w = World::new(&s, vec![robot(&s, 1, FaultSpec::default())]);
+    let mut w = World::of(&s, &[FaultSpec::default()]);
     w.run_until(2.0);
     let r = &w.robots[0];
     let why = r.diverged().unwrap_or_else(|| panic!("{:?}", r.report()));
@@ -217,13 +223,7 @@ fn the_scenarios_bounds_stop_the_fleet_robot() {
 #[test]
 fn a_perfect_link_converges_and_the_chain_follows() {
     let s = scenario(EXTRAPOLATE);
-    let mut w = World::new(
-        &s,
-        vec![
-            robot(&s, 1, FaultSpec::default()),
-            robot(&s, 2, FaultSpec::default()),
-        ],
-    );
+    let mut w = World::of(&s, &[FaultSpec::default(); 2]);
     w.run_until(30.0);
     for (i, r) in w.robots.iter().enumerate() {
         let rep = r.report();
@@ -253,13 +253,7 @@ fn velocity_bases_converge_where_the_simulator_does() {
         .replace("robot = \"agent2\"", "robot = \"base\"")
         + "\n[robots.base]\ndrive = \"velocity\"\ntau_v = 0.05\ntau_omega = 0.04\nv_max = 0.5\nomega_max = 2.0\na_max = 1.0\nalpha_max = 4.0\n";
     let s = Scenario::parse(&src, "test", None).unwrap_or_else(|e| panic!("{e}"));
-    let mut w = World::new(
-        &s,
-        vec![
-            robot(&s, 1, FaultSpec::default()),
-            robot(&s, 2, FaultSpec::default()),
-        ],
-    );
+    let mut w = World::of(&s, &[FaultSpec::default(); 2]);
     w.run_until(30.0);
     let mut sim = s
         .build(&Overrides::default())
@@ -292,10 +286,7 @@ fn stop_policy_brings_the_robot_and_its_follower_to_rest() {
         outage: Some((12.0, 3.0)),
         ..FaultSpec::default()
     };
-    let mut w = World::new(
-        &s,
-        vec![robot(&s, 1, faults), robot(&s, 2, FaultSpec::default())],
-    );
+    let mut w = World::of(&s, &[faults, FaultSpec::default()]);
     w.run_until(12.0);
     let before = w.robots[0].last().e;
     assert!(norm(before) < 5e-3, "{before:?}");
@@ -351,7 +342,7 @@ fn stop_policy_brings_the_robot_and_its_follower_to_rest() {
 fn extrapolate_keeps_the_robot_on_the_true_circle_within_the_hold() {
     let s = scenario(EXTRAPOLATE);
     let reference = reference(&s);
-    let mut w = World::new(&s, vec![robot(&s, 1, FaultSpec::default())]);
+    let mut w = World::of(&s, &[FaultSpec::default()]);
     w.cut = Some((12.0, 15.0));
     w.run_until(20.0);
     let spec = w.robots[0].config().spec.clone();
@@ -386,7 +377,7 @@ fn extrapolate_keeps_the_robot_on_the_true_circle_within_the_hold() {
 fn extrapolate_past_the_hold_stops_on_the_circle() {
     let s = scenario(r#"{ policy = "extrapolate", hold = 1.0, decel = 0.2 }"#);
     let reference = reference(&s);
-    let mut w = World::new(&s, vec![robot(&s, 1, FaultSpec::default())]);
+    let mut w = World::of(&s, &[FaultSpec::default()]);
     w.cut = Some((12.0, 40.0));
     w.run_until(25.0);
     let ts = 11.98;
@@ -425,7 +416,7 @@ fn a_restarted_leader_resyncs_and_the_old_sample_is_dropped() {
         delay: 0.05,
         ..FaultSpec::default()
     };
-    let mut w = World::new(&s, vec![robot(&s, 1, faults)]);
+    let mut w = World::of(&s, &[faults]);
     w.run_until(10.0);
     assert!(w.robots[0].last().t > 9.9);
     // The new leader process: another source, its clock from 0.
@@ -586,7 +577,7 @@ fn injected_loss_is_seeded_and_the_formation_still_converges() {
         ..FaultSpec::default()
     };
     let run = || {
-        let mut w = World::new(&s, vec![robot(&s, 1, faults), robot(&s, 2, faults)]);
+        let mut w = World::of(&s, &[faults; 2]);
         w.run_until(30.0);
         w.robots.iter().map(Robot::report).collect::<Vec<_>>()
     };
@@ -613,7 +604,7 @@ fn injected_delay_holds_samples_back() {
         delay: 0.05,
         ..FaultSpec::default()
     };
-    let mut w = World::new(&s, vec![robot(&s, 1, faults)]);
+    let mut w = World::of(&s, &[faults]);
     w.run_until(0.2);
     let first = w.log[0]
         .iter()
@@ -646,13 +637,7 @@ fn injected_delay_holds_samples_back() {
 #[test]
 fn a_follower_whose_leader_robot_goes_silent_stops() {
     let s = scenario(STOP);
-    let mut w = World::new(
-        &s,
-        vec![
-            robot(&s, 1, FaultSpec::default()),
-            robot(&s, 2, FaultSpec::default()),
-        ],
-    );
+    let mut w = World::of(&s, &[FaultSpec::default(); 2]);
     w.run_until(12.0);
     // Robot 1's process dies: drop it, robot 2 stays (now index 0).
     let mut follower = w.robots.remove(1);

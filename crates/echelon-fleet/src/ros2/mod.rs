@@ -8,8 +8,9 @@
 //!   reads odometry and sends `cmd_vel`.
 //! - [`fixes`]: absolute fixes from ROS 2 poses fused with the odometry,
 //!   and Theorem 2 in the loop.
-//! - [`base`]: a simulated ROS 2 velocity base as a process (`echelon fleet
-//!   base`), answering `cmd_vel` with odometry.
+//! - [`sim_base`]: a simulated ROS 2 velocity base (sans-IO), answering
+//!   `cmd_vel` with odometry; [`base`]: it as a process (`echelon fleet
+//!   base`).
 //! - [`record`]: the topics the fleet collector records into `fleet.mcap`
 //!   as ROS 2 channels, and the checks a sample passes first.
 //! - [`refusal`]: why a ROS 2 sample was refused, for all of them.
@@ -25,6 +26,7 @@ pub mod endpoint;
 pub mod fixes;
 pub mod record;
 pub mod refusal;
+pub mod sim_base;
 
 pub use record::{RosRefusal, RosTopic, RosTopicError};
 

@@ -4,6 +4,7 @@ use echelon::base::VelocityBase;
 use echelon::odometry::ErrorModel;
 use echelon::scenario::Scenario;
 use echelon_ros2::KeyScheme;
+use echelon_ros2::keys::topic_key;
 use echelon_ros2::msgs::{TWIST, TWIST_STAMPED};
 
 fn link() -> Ros2Link {

@@ -136,20 +136,15 @@ struct Sent {
 }
 
 impl Outputs for Sent {
-    fn publish(&mut self, output: usize, payload: &[u8]) -> Result<(), FleetError> {
-        let key = self.key(output)?;
-        self.messages.push((key, payload.to_vec(), None));
-        Ok(())
-    }
-    fn publish_attached(
+    fn send(
         &mut self,
         output: usize,
         payload: &[u8],
-        attachment: &[u8],
+        attachment: Option<&[u8]>,
     ) -> Result<(), FleetError> {
         let key = self.key(output)?;
         self.messages
-            .push((key, payload.to_vec(), Some(attachment.to_vec())));
+            .push((key, payload.to_vec(), attachment.map(<[u8]>::to_vec)));
         Ok(())
     }
     fn put(&mut self, key: &str, payload: &[u8]) {

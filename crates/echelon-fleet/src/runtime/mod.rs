@@ -51,22 +51,21 @@ struct ZenohOutputs<'a> {
 }
 
 impl Outputs for ZenohOutputs<'_> {
-    fn publish(&mut self, output: usize, payload: &[u8]) -> Result<(), FleetError> {
-        let publisher = self.publisher(output)?;
-        net::publish(self.session, publisher, payload)
-    }
-
-    fn publish_attached(
+    fn send(
         &mut self,
         output: usize,
         payload: &[u8],
-        attachment: &[u8],
+        attachment: Option<&[u8]>,
     ) -> Result<(), FleetError> {
-        self.publisher(output)?
-            .put(payload.to_vec())
-            .attachment(attachment.to_vec())
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))
+        let publisher = self.publisher(output)?;
+        match attachment {
+            None => net::publish(self.session, publisher, payload),
+            Some(attachment) => publisher
+                .put(payload.to_vec())
+                .attachment(attachment.to_vec())
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("publishing: {e}"))),
+        }
     }
 
     fn put(&mut self, key: &str, payload: &[u8]) {

@@ -6,7 +6,7 @@ use crate::leader::Leader as LeaderTask;
 use crate::link::predict;
 use crate::plant::SimulatedPlant;
 use echelon::agent::Command;
-use echelon::follow::LeaderView;
+use echelon::follow::{LeaderView, follow};
 use echelon::model::Input;
 use echelon::model::State;
 use echelon::reference::{Order, Reference, Trajectory};

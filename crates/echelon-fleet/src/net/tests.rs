@@ -127,48 +127,16 @@ fn access_control_is_accepted_by_zenoh() {
 }
 
 use serde_json::Value;
-use zenoh::key_expr::keyexpr;
 
-fn includes(expr: &str, key: &str) -> bool {
-    match (keyexpr::new(expr), keyexpr::new(key)) {
-        (Ok(e), Ok(k)) => e.includes(k),
-        _ => panic!("not key expressions: {expr}, {key}"),
-    }
-}
-
-fn strs(v: &Value) -> Vec<&str> {
-    v.as_array()
-        .map(|a| a.iter().filter_map(Value::as_str).collect())
-        .unwrap_or_default()
-}
+#[path = "../../tests/common/acl.rs"]
+mod acl_reading;
+use acl_reading::{includes, strs};
 
 /// Whether `acl` lets a message `message` on `key` flow `flow` from (or
-/// to) the certificate `cn`: zenoh's reading (default deny; allowed
-/// when a policy of a subject naming `cn` has a rule of that flow and
-/// message whose key expressions include `key`).
+/// to) the certificate `cn` ([`acl_reading::allows`]).
 fn allows(acl: &Value, cn: &str, flow: &str, message: &str, key: &str) -> bool {
-    assert_eq!(acl["default_permission"], "deny");
-    let subjects: Vec<&str> = acl["subjects"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|s| strs(&s["cert_common_names"]).contains(&cn))
-        .filter_map(|s| s["id"].as_str())
-        .collect();
-    let rules: Vec<&str> = acl["policies"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|p| strs(&p["subjects"]).iter().any(|s| subjects.contains(s)))
-        .flat_map(|p| strs(&p["rules"]))
-        .collect();
-    acl["rules"].as_array().into_iter().flatten().any(|r| {
-        r["permission"] == "allow"
-            && rules.contains(&r["id"].as_str().unwrap_or_default())
-            && strs(&r["flows"]).contains(&flow)
-            && strs(&r["messages"]).contains(&message)
-            && strs(&r["key_exprs"]).iter().any(|e| includes(e, key))
-    })
+    let named = |s: &Value| strs(&s["cert_common_names"]).contains(&cn);
+    acl_reading::allows(acl, named, flow, message, key)
 }
 
 /// Agents `1..=n`'s ROS 2 keys as [`ros_acl`] writes them.

@@ -224,6 +224,22 @@ impl Plant for Flaky {
     }
 }
 
+/// Robot 1 on a [`Flaky`] plant (never lost) behind the reference.
+fn commanded_robot(s: &Scenario) -> Robot<Flaky> {
+    let config = crate::testing::robot_config(s, 1, FaultSpec::default());
+    let plant = Flaky {
+        inner: SimulatedPlant::new(
+            *config.spec.torque_robot().unwrap(),
+            config.spec.start,
+            0.0,
+            PLANT_STEP,
+        ),
+        lost: false,
+        commanded: Input::default(),
+    };
+    Robot::new(config, plant, 1)
+}
+
 mod command;
 mod link;
 mod messages;

@@ -53,18 +53,7 @@ fn the_scenarios_bounds_stop_the_fleet_robot() {
 #[test]
 fn losing_the_odometry_or_the_process_commands_zero() {
     let s = scenario(EXTRAPOLATE);
-    let config = crate::testing::robot_config(&s, 1, FaultSpec::default());
-    let plant = Flaky {
-        inner: SimulatedPlant::new(
-            *config.spec.torque_robot().unwrap(),
-            config.spec.start,
-            0.0,
-            PLANT_STEP,
-        ),
-        lost: false,
-        commanded: Input::default(),
-    };
-    let mut r = Robot::new(config, plant, 1);
+    let mut r = commanded_robot(&s);
     let reference = reference(&s);
     let mut buf = Vec::new();
     reference_message(&mut buf, 0, 0.0, &reference);

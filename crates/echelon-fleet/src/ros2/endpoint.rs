@@ -15,7 +15,7 @@ use crate::ros2::drive::{CmdSink, cmd_vel_type};
 use crate::ros2::fixes::fix_type;
 use echelon_ros2::attachment::{Gid, gid_from_token};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
-use echelon_ros2::liveliness::{NodeInfo, Qos};
+use echelon_ros2::liveliness::{Endpoint, NodeInfo, Qos};
 use echelon_ros2::msgs::{MessageType, ODOMETRY};
 use echelon_ros2::names::NameError;
 
@@ -42,15 +42,15 @@ pub(crate) fn declare_node(
     };
     let publishers: Vec<String> = publishes
         .iter()
-        .map(|(topic, ty)| node.publisher_token(next(), topic, ty, &Qos::default()))
+        .map(|(topic, ty)| {
+            node.endpoint_token(Endpoint::Publisher, next(), topic, ty, &Qos::default())
+        })
         .collect();
     let mut tokens = vec![node.node_token()];
     tokens.extend(publishers.iter().cloned());
-    tokens.extend(
-        subscribes
-            .iter()
-            .map(|(topic, ty)| node.subscription_token(next(), topic, ty, &Qos::default())),
-    );
+    tokens.extend(subscribes.iter().map(|(topic, ty)| {
+        node.endpoint_token(Endpoint::Subscription, next(), topic, ty, &Qos::default())
+    }));
     let tokens = declare_tokens(session, &tokens)?;
     Ok((
         tokens,

@@ -407,8 +407,7 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
 fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("certs");
-    echelon_ok(&["fleet", "certs", "--robots", "2"], &certs);
+    let certs = common::certs(dir.path(), 2);
     let fleet_dir = dir.path().join("fleet");
     let fleet = std::thread::spawn({
         let (fleet_dir, certs) = (fleet_dir.clone(), certs.clone());
@@ -423,44 +422,13 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
                 .unwrap()
         }
     });
-    let endpoints = fleet_dir.join("endpoints.json");
-    let started = Instant::now();
-    while !endpoints.exists() {
-        assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "no endpoints.json"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(Duration::from_millis(100));
-    let endpoints: Value =
-        serde_json::from_str(&std::fs::read_to_string(&endpoints).unwrap()).unwrap();
-    let connect: Vec<&str> = endpoints
-        .as_object()
-        .unwrap()
-        .iter()
-        .filter(|(k, _)| *k != "topology")
-        .filter_map(|(_, v)| v.as_str())
-        .collect();
+    let connect: Vec<String> = common::endpoints_of(&fleet_dir).into_values().collect();
     assert!(
         connect.iter().all(|e| e.starts_with("quic/")),
         "{connect:?}"
     );
-    let path = |p: PathBuf| p.display().to_string();
-    let config = serde_json::json!({
-        "mode": "peer",
-        "scouting": {"multicast": {"enabled": false}},
-        "listen": {"endpoints": ["quic/127.0.0.1:0"]},
-        "connect": {"endpoints": connect, "timeout_ms": 10000, "exit_on_failure": false},
-        "transport": {"link": {"tls": {
-            "root_ca_certificate": path(certs.join("ca.pem")),
-            "listen_certificate": path(certs.join("robot-2.pem")),
-            "listen_private_key": path(certs.join("robot-2-key.pem")),
-            "connect_certificate": path(certs.join("robot-2.pem")),
-            "connect_private_key": path(certs.join("robot-2-key.pem")),
-            "enable_mtls": true,
-        }}},
-    });
+    let tls = common::tls_as(&certs, "robot-2");
+    let config = common::outsider_config(&connect, tls, 10000, false);
     let rogue = zenoh::open(zenoh::Config::from_json5(&config.to_string()).unwrap())
         .wait()
         .unwrap();

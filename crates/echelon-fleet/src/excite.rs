@@ -17,9 +17,10 @@
 //!   first backwards, so under an ideal base the robot is back at its start
 //!   pose every four steps; a lag only perturbs that slightly.
 //!
-//! [`run`] drives the robot's `cmd_vel` with it through a [`Ros2Drive`]
-//! (the robot's limits applied, rmw_zenoh keys, attachments and liveliness
-//! as `fleet robot --ros2`), and records every command sent and every valid
+//! [`ExciteTask`] drives the robot's `cmd_vel` with it through a
+//! [`Ros2Drive`] (the robot's limits applied; rmw_zenoh keys, attachments
+//! and the node's liveliness as `fleet robot --ros2` declares them, on the
+//! fleet runtime: [`run`]), and records every command sent and every valid
 //! odometry received to an MCAP bag as `ros2 bag record -s mcap` would
 //! (ROS 2 channels of [`RosTopic::of_link`]). It commands zero and stops at
 //! the end, on SIGINT/SIGTERM, when the odometry is lost (older than
@@ -27,24 +28,23 @@
 //! its start; the bag is finished in every case.
 
 use std::path::PathBuf;
-use std::sync::mpsc;
-use std::time::{Duration, Instant};
 
 use serde::Serialize;
-use zenoh::Wait;
 
 use echelon::agent::Drive;
 use echelon::base::{VelocityBase, VelocityCommand};
+use echelon::model::State;
 use echelon::scenario::{Overrides, Scenario};
 use echelon_mcap::McapLog;
 
 use crate::clock::FleetClock;
-use crate::net::{self, NetOptions};
+use crate::net::NetOptions;
 use crate::plant::{Command, Plant};
 use crate::robot::agent_spec;
 use crate::ros2::drive::{CmdSink, Ros2Counters, Ros2Drive};
-use crate::ros2::endpoint::{Ros2Endpoint, ZenohCmdSink};
+use crate::ros2::endpoint::{OwnedCmdSink, Ros2Node};
 use crate::ros2::record::RosTopic;
+use crate::runtime::{self, Flow, Outputs, Sample, Task};
 use crate::{FleetError, StopFlag};
 
 /// Largest linear speed of the manoeuvre, m/s.
@@ -259,6 +259,12 @@ struct Bag {
     counts: [u64; 2],
 }
 
+impl std::fmt::Debug for Bag {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Bag").field("counts", &self.counts).finish()
+    }
+}
+
 impl Bag {
     fn write(&mut self, which: usize, log_time: u64, data: &[u8]) -> Result<(), FleetError> {
         self.counts[which] += 1;
@@ -273,7 +279,185 @@ impl Bag {
     }
 }
 
-/// Runs the manoeuvre on agent `opts.agent`'s ROS 2 robot.
+/// Where the manoeuvre is.
+#[derive(Debug, Clone, Copy)]
+enum Phase {
+    /// Waiting for the first odometry, which gives the start.
+    Waiting,
+    /// Commanding the signal from time `t0`, the robot's start `start`;
+    /// command `k` is due at `t0 + k / rate`.
+    Running { start: State, t0: f64, k: u64 },
+    /// Completed, zero commanded: recording the robot settling until `until`.
+    Settling { until: f64 },
+}
+
+/// The manoeuvre as a [`Task`] of the fleet runtime: the robot's odometry
+/// in (recorded when valid), [`ExciteSignal`] out through its drive's
+/// `cmd_vel` at `rate` (recorded as sent).
+#[derive(Debug)]
+pub struct ExciteTask<S: CmdSink> {
+    drive: Ros2Drive<Recording<S>>,
+    /// The bag, until the task stops.
+    bag: Option<Bag>,
+    counts: [u64; 2],
+    signal: ExciteSignal,
+    agent: u32,
+    odom_key: String,
+    period: f64,
+    radius: f64,
+    wait: f64,
+    phase: Phase,
+    next: f64,
+    ended: ExciteEnd,
+    max_distance: f64,
+    out: PathBuf,
+}
+
+/// How often a task waiting for odometry or for the robot to settle looks,
+/// s.
+const LOOK: f64 = 0.01;
+
+impl<S: CmdSink> ExciteTask<S> {
+    /// Writes the commands the drive sent since the last call to the bag.
+    fn flush(&mut self) -> Result<(), FleetError> {
+        let sent = std::mem::take(&mut self.drive.sink_mut().sent);
+        for (at, payload) in sent {
+            self.write(0, at, &payload)?;
+        }
+        Ok(())
+    }
+
+    fn write(&mut self, which: usize, log_time: u64, data: &[u8]) -> Result<(), FleetError> {
+        if let Some(bag) = &mut self.bag {
+            bag.write(which, log_time, data)?;
+            self.counts = bag.counts;
+        }
+        Ok(())
+    }
+
+    /// The manoeuvre ends (`why`) at `now`: zero commanded; after a
+    /// completed one the robot's settling is recorded for a second.
+    fn end(&mut self, why: ExciteEnd, now: f64) -> Result<Flow, FleetError> {
+        self.ended = why;
+        self.drive.stop();
+        self.flush()?;
+        if why != ExciteEnd::Completed {
+            return Ok(Flow::Stop);
+        }
+        self.phase = Phase::Settling { until: now + 1.0 };
+        self.next = now + 1.0;
+        Ok(Flow::Continue)
+    }
+}
+
+impl<S: CmdSink> Task for ExciteTask<S> {
+    type Report = ExciteReport;
+
+    fn inputs(&self) -> Vec<String> {
+        vec![self.odom_key.clone()]
+    }
+
+    fn outputs(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    fn on_input(&mut self, _input: usize, sample: &Sample<'_>) -> Result<(), FleetError> {
+        // Refused samples are counted by the drive, not recorded.
+        if self
+            .drive
+            .on_odom(sample.key, sample.payload, sample.at)
+            .is_ok()
+        {
+            self.write(1, sample.unix_ns, sample.payload)?;
+        }
+        Ok(())
+    }
+
+    fn next_wake(&self) -> f64 {
+        self.next
+    }
+
+    fn tick(&mut self, now: f64, _out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        self.drive.advance(now);
+        let (start, t0, k) = match self.phase {
+            Phase::Settling { until } if now >= until => return Ok(Flow::Stop),
+            Phase::Settling { until } => {
+                self.next = until;
+                return Ok(Flow::Continue);
+            }
+            Phase::Waiting => match self.drive.state() {
+                Some(start) => (start, now, 0),
+                None if now > self.wait => {
+                    return Err(FleetError::Config(format!(
+                        "agent {}: no odometry on {} within {} s; is the robot's base up?",
+                        self.agent,
+                        self.drive.link().odom,
+                        self.wait
+                    )));
+                }
+                None => {
+                    self.next = now + LOOK;
+                    return Ok(Flow::Continue);
+                }
+            },
+            Phase::Running { start, t0, k } => (start, t0, k),
+        };
+        let Some(s) = self.drive.state() else {
+            return self.end(ExciteEnd::OdometryLost, now);
+        };
+        let d = (s.x - start.x).hypot(s.y - start.y);
+        self.max_distance = self.max_distance.max(d);
+        if d > self.radius {
+            return self.end(ExciteEnd::LeftRadius, now);
+        }
+        let t = now - t0;
+        if t >= self.signal.duration {
+            return self.end(ExciteEnd::Completed, now);
+        }
+        self.drive.command(Command::Velocity(self.signal.at(t)));
+        self.flush()?;
+        self.phase = Phase::Running {
+            start,
+            t0,
+            k: k + 1,
+        };
+        self.next = t0 + (k + 1) as f64 * self.period;
+        Ok(Flow::Continue)
+    }
+
+    /// Zero commanded (a stop request or an error ends it here) and the bag
+    /// finished, in every case.
+    fn stop(&mut self, _out: &mut dyn Outputs) -> Result<(), FleetError> {
+        if matches!(self.phase, Phase::Waiting | Phase::Running { .. }) {
+            self.drive.stop();
+        }
+        self.flush()?;
+        if let Some(bag) = self.bag.take() {
+            bag.log.finish()?;
+        }
+        Ok(())
+    }
+
+    fn report(self) -> Result<ExciteReport, FleetError> {
+        let link = self.drive.link();
+        Ok(ExciteReport {
+            role: crate::role::Role::Excite,
+            agent: self.agent,
+            ended: self.ended,
+            bag: self.out.display().to_string(),
+            topics: [link.cmd_vel.clone(), link.odom.clone()],
+            cmd_recorded: self.counts[0],
+            odom_recorded: self.counts[1],
+            max_distance: self.max_distance,
+            amplitudes: [self.signal.v_amp, self.signal.omega_amp],
+            hold: self.signal.hold,
+            ros2: *self.drive.counters(),
+        })
+    }
+}
+
+/// Runs the manoeuvre on agent `opts.agent`'s ROS 2 robot: [`ExciteTask`]
+/// on the fleet runtime, in real time, declared as the robot's ROS 2 node.
 pub fn run(opts: ExciteOptions, stop: &StopFlag) -> Result<ExciteReport, FleetError> {
     let fleet = opts.scenario.fleet()?;
     let plan = opts.scenario.build(&Overrides::default())?.plan;
@@ -293,126 +477,42 @@ pub fn run(opts: ExciteOptions, stop: &StopFlag) -> Result<ExciteReport, FleetEr
     for (c, t) in channels.iter_mut().zip(&topics) {
         *c = log.ros2_channel(t.topic(), &t.schema(), t.offered_qos_profiles())?;
     }
-    let mut bag = Bag {
+    let bag = Bag {
         log,
         channels,
         counts: [0; 2],
     };
-
-    let session = net::open(&opts.net)?;
-    let ros = Ros2Endpoint::declare(&session, &link, opts.agent)?;
-    let sink = Recording {
-        inner: ZenohCmdSink(&ros.publisher),
-        sent: Vec::new(),
-    };
-    let mut drive = Ros2Drive::new(link.clone(), base, ros.gid, sink);
-    let clock = FleetClock::new(1.0);
-    // Instants to UNIX nanoseconds (log times of received odometry).
-    let (unix0, instant0) = (crate::unix_nanos(), Instant::now());
-    let unix_at = |i: Instant| unix0 + i.saturating_duration_since(instant0).as_nanos() as u64;
-    let feed = |drive: &mut Ros2Drive<Recording<ZenohCmdSink<'_, '_>>>,
-                bag: &mut Bag,
-                rx: &mpsc::Receiver<(Instant, String, Vec<u8>)>|
-     -> Result<(), FleetError> {
-        while let Ok((arrival, key, bytes)) = rx.try_recv() {
-            // Refused samples are counted by the drive, not recorded.
-            if drive.on_odom(&key, &bytes, clock.at(arrival)).is_ok() {
-                bag.write(1, unix_at(arrival), &bytes)?;
-            }
-        }
-        Ok(())
-    };
-    let flush = |drive: &mut Ros2Drive<Recording<ZenohCmdSink<'_, '_>>>,
-                 bag: &mut Bag|
-     -> Result<(), FleetError> {
-        for (at, payload) in std::mem::take(&mut drive.sink_mut().sent) {
-            bag.write(0, at, &payload)?;
-        }
-        Ok(())
-    };
-
-    // The first odometry gives the start.
-    let nap = Duration::from_millis(10);
-    let start = loop {
-        feed(&mut drive, &mut bag, &ros.odom)?;
-        drive.advance(clock.now());
-        if let Some(s) = drive.state() {
-            break Some(s);
-        }
-        if stop.is_raised() {
-            break None;
-        }
-        if clock.now() > opts.wait {
-            let _ = bag.log.finish();
-            let _ = session.close().wait();
-            return Err(FleetError::Config(format!(
-                "agent {}: no odometry on {} within {} s; is the robot's base up?",
-                opts.agent, link.odom, opts.wait
-            )));
-        }
-        std::thread::sleep(nap);
-    };
-    let mut ended = ExciteEnd::Signal;
-    let mut max_distance: f64 = 0.0;
-    if let Some(start) = start {
-        let t0 = clock.now();
-        let period = 1.0 / opts.rate;
-        let mut k = 0_u64;
-        ended = loop {
-            let due = t0 + k as f64 * period;
-            clock.sleep_until(due, nap);
-            if clock.now() < due {
-                continue;
-            }
-            feed(&mut drive, &mut bag, &ros.odom)?;
-            let now = clock.now();
-            drive.advance(now);
-            if stop.is_raised() {
-                break ExciteEnd::Signal;
-            }
-            let Some(s) = drive.state() else {
-                break ExciteEnd::OdometryLost;
+    let agent = opts.agent;
+    runtime::run_on(
+        |session| {
+            let node = Ros2Node::declare(session, &link, agent)?;
+            let sink = Recording {
+                inner: OwnedCmdSink(node.publisher),
+                sent: Vec::new(),
             };
-            let d = (s.x - start.x).hypot(s.y - start.y);
-            max_distance = max_distance.max(d);
-            if d > opts.radius {
-                break ExciteEnd::LeftRadius;
-            }
-            let t = now - t0;
-            if t >= signal.duration {
-                break ExciteEnd::Completed;
-            }
-            drive.command(Command::Velocity(signal.at(t)));
-            flush(&mut drive, &mut bag)?;
-            k += 1;
-        };
-    }
-    drive.stop();
-    flush(&mut drive, &mut bag)?;
-    if ended == ExciteEnd::Completed {
-        // The robot settles under the zero command: recorded too.
-        let until = clock.now() + 1.0;
-        while clock.now() < until && !stop.is_raised() {
-            std::thread::sleep(nap);
-            feed(&mut drive, &mut bag, &ros.odom)?;
-        }
-    }
-    let counts = bag.counts;
-    bag.log.finish()?;
-    let _ = session.close().wait();
-    Ok(ExciteReport {
-        role: crate::role::Role::Excite,
-        agent: opts.agent,
-        ended,
-        bag: opts.out.display().to_string(),
-        topics: [link.cmd_vel, link.odom],
-        cmd_recorded: counts[0],
-        odom_recorded: counts[1],
-        max_distance,
-        amplitudes: [signal.v_amp, signal.omega_amp],
-        hold: signal.hold,
-        ros2: *drive.counters(),
-    })
+            let task = ExciteTask {
+                drive: Ros2Drive::new(link, base, node.gid, sink),
+                bag: Some(bag),
+                counts: [0; 2],
+                signal,
+                agent,
+                odom_key: node.odom_key,
+                period: 1.0 / opts.rate,
+                radius: opts.radius,
+                wait: opts.wait,
+                phase: Phase::Waiting,
+                next: f64::NEG_INFINITY,
+                ended: ExciteEnd::Signal,
+                max_distance: 0.0,
+                out: opts.out.clone(),
+            };
+            Ok((task, node.tokens))
+        },
+        &opts.net,
+        FleetClock::new(1.0),
+        stop,
+    )?
+    .report()
 }
 
 #[cfg(test)]

@@ -206,6 +206,11 @@ impl<S: CmdSink> Ros2Drive<S> {
         }
     }
 
+    /// Its robot's link.
+    pub fn link(&self) -> &Ros2Link {
+        &self.link
+    }
+
     /// What it counted.
     pub fn counters(&self) -> &Ros2Counters {
         &self.counters

@@ -71,7 +71,7 @@ pub struct ExciteOptions {
 }
 
 /// Why the manoeuvre ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ExciteEnd {
     /// It ran to its end.
@@ -85,7 +85,8 @@ pub enum ExciteEnd {
 }
 
 /// What `fleet excite` reports when it stops.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ExciteReport {
     /// [`crate::role::Role::Excite`].
     pub role: crate::role::Role,

@@ -29,7 +29,7 @@ mod task;
 pub use task::{Flow, Latching, Outputs, Sample, Task, WaitFor};
 
 /// Longest sleep, real time, so that a stop request is seen.
-const NAP: Duration = Duration::from_millis(20);
+pub const NAP: Duration = Duration::from_millis(20);
 /// Longest wait for the answers to a task's latch query, real time.
 pub const LATCH_QUERY_TIMEOUT: Duration = Duration::from_secs(1);
 

@@ -44,6 +44,23 @@ fn simulated_final(duration: &str, dir: &Path) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// A robot's ROS 2 counters after a run: it sent over 1000 commands, took
+/// over 500 odometry samples and refused none.
+fn drove_cleanly(ros: &Value) {
+    assert!(
+        f(ros, &["cmd_sent"]) > 1000.0 && f(ros, &["odom_accepted"]) > 500.0,
+        "{ros}"
+    );
+    for k in [
+        "odom_malformed",
+        "odom_non_finite",
+        "odom_wrong_type",
+        "odom_wrong_frames",
+    ] {
+        assert_eq!(f(ros, &[k]), 0.0, "{k}: {ros}");
+    }
+}
+
 /// `fleet up --ros2`: every robot↔base message in ROS 2's format; the
 /// robots end within 5 mm of the simulator's final positions (measured:
 /// 0.25 mm at 30 s), and the collector recorded the ROS topics.
@@ -79,19 +96,7 @@ fn fleet_up_ros2_ends_where_the_simulator_ends() {
         let d = (rx - x).hypot(ry - y);
         assert!(d < 5e-3, "robot {}: {d} m from the simulator", r["agent"]);
         assert!(f(r, &["final_error"]) < 5e-3, "{r}");
-        let ros = &r["ros2"];
-        assert!(
-            f(ros, &["cmd_sent"]) > 1000.0 && f(ros, &["odom_accepted"]) > 500.0,
-            "{ros}"
-        );
-        for k in [
-            "odom_malformed",
-            "odom_non_finite",
-            "odom_wrong_type",
-            "odom_wrong_frames",
-        ] {
-            assert_eq!(f(ros, &[k]), 0.0, "{k}: {ros}");
-        }
+        drove_cleanly(&r["ros2"]);
     }
     for b in up["bases"].as_array().unwrap() {
         let c = &b["counters"];
@@ -854,19 +859,7 @@ fn fleet_up_real_on_bases_behind_their_own_routers_ends_where_the_simulator_ends
         );
         assert!(d < 1e-2, "robot {}: {d} m from the simulator", r["agent"]);
         assert!(f(r, &["final_error"]) < 1e-2, "{r}");
-        let ros = &r["ros2"];
-        assert!(
-            f(ros, &["cmd_sent"]) > 1000.0 && f(ros, &["odom_accepted"]) > 500.0,
-            "{ros}"
-        );
-        for k in [
-            "odom_malformed",
-            "odom_non_finite",
-            "odom_wrong_type",
-            "odom_wrong_frames",
-        ] {
-            assert_eq!(f(ros, &[k]), 0.0, "{k}: {ros}");
-        }
+        drove_cleanly(&r["ros2"]);
     }
     for b in &bases {
         let c = &b["counters"];

@@ -13,7 +13,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use serde_json::Value;
 
@@ -24,7 +24,7 @@ use echelon::scenario::{Overrides, Scenario};
 
 mod common;
 
-use common::{EXE, Guard, check, echelon_ok, f, spawn};
+use common::{EXE, Guard, check, echelon_ok, endpoints_of, f, spawn};
 
 fn fixture(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -204,21 +204,6 @@ fn check_conservation(c: &Value) {
             "more than 5 % {k}: {c}"
         );
     }
-}
-
-/// The endpoints a running `fleet up` in `dir` listens on (waits for them).
-fn endpoints_of(dir: &Path) -> BTreeMap<String, String> {
-    let path = dir.join("endpoints.json");
-    let started = Instant::now();
-    while !path.exists() {
-        assert!(started.elapsed() < Duration::from_secs(30));
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(Duration::from_millis(50));
-    let mut all: BTreeMap<String, String> =
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    assert!(all.remove("topology").is_some(), "{all:?}");
-    all
 }
 
 fn counts_of(v: &Value) -> BTreeMap<String, u64> {
@@ -499,8 +484,7 @@ fn late_error_of_robot_1(fleet_dir: &Path) -> f64 {
 fn secure_mode_rogue_moves_no_robot() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("certs");
-    echelon_ok(&["fleet", "certs", "--robots", "2"], &certs);
+    let certs = common::certs(dir.path(), 2);
     let fleet_dir = dir.path().join("fleet");
     let scenario = fixture("fast-circle.toml");
     let fleet = std::thread::spawn({
@@ -530,33 +514,16 @@ fn secure_mode_rogue_moves_no_robot() {
             .contains("reference.line")
     );
     let connect: Vec<String> = endpoints.values().cloned().collect();
-    let path = |p: PathBuf| p.display().to_string();
+    let config = |tls: Value| common::outsider_config(&connect, tls, 5000, true).to_string();
     // Rogue 1: robot 2's certificate, no access control of its own.
     let stolen = dir.path().join("stolen.json5");
-    let tls = serde_json::json!({
-        "root_ca_certificate": path(certs.join("ca.pem")),
-        "listen_certificate": path(certs.join("robot-2.pem")),
-        "listen_private_key": path(certs.join("robot-2-key.pem")),
-        "connect_certificate": path(certs.join("robot-2.pem")),
-        "connect_private_key": path(certs.join("robot-2-key.pem")),
-        "enable_mtls": true,
-    });
-    let config = |tls: Value| {
-        serde_json::json!({
-            "mode": "peer",
-            "scouting": {"multicast": {"enabled": false}},
-            "listen": {"endpoints": ["quic/127.0.0.1:0"]},
-            "connect": {"endpoints": connect, "timeout_ms": 5000, "exit_on_failure": true},
-            "transport": {"link": {"tls": tls}},
-        })
-        .to_string()
-    };
-    std::fs::write(&stolen, config(tls)).unwrap();
+    std::fs::write(&stolen, config(common::tls_as(&certs, "robot-2"))).unwrap();
     // Rogue 2: trusts the CA but has no certificate of its own.
     let anonymous = dir.path().join("anonymous.json5");
+    let ca = certs.join("ca.pem").display().to_string();
     std::fs::write(
         &anonymous,
-        config(serde_json::json!({"root_ca_certificate": path(certs.join("ca.pem"))})),
+        config(serde_json::json!({ "root_ca_certificate": ca })),
     )
     .unwrap();
     let mut stolen_rogue = rogue_leader(&fake, &stolen);

@@ -44,6 +44,23 @@ fn simulated_final(duration: &str, dir: &Path) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// A robot's ROS 2 counters after a run: it sent over 1000 commands, took
+/// over 500 odometry samples and refused none.
+fn drove_cleanly(ros: &Value) {
+    assert!(
+        f(ros, &["cmd_sent"]) > 1000.0 && f(ros, &["odom_accepted"]) > 500.0,
+        "{ros}"
+    );
+    for k in [
+        "odom_malformed",
+        "odom_non_finite",
+        "odom_wrong_type",
+        "odom_wrong_frames",
+    ] {
+        assert_eq!(f(ros, &[k]), 0.0, "{k}: {ros}");
+    }
+}
+
 /// `fleet up --ros2`: every robot↔base message in ROS 2's format; the
 /// robots end within 5 mm of the simulator's final positions (measured:
 /// 0.25 mm at 30 s), and the collector recorded the ROS topics.
@@ -79,19 +96,7 @@ fn fleet_up_ros2_ends_where_the_simulator_ends() {
         let d = (rx - x).hypot(ry - y);
         assert!(d < 5e-3, "robot {}: {d} m from the simulator", r["agent"]);
         assert!(f(r, &["final_error"]) < 5e-3, "{r}");
-        let ros = &r["ros2"];
-        assert!(
-            f(ros, &["cmd_sent"]) > 1000.0 && f(ros, &["odom_accepted"]) > 500.0,
-            "{ros}"
-        );
-        for k in [
-            "odom_malformed",
-            "odom_non_finite",
-            "odom_wrong_type",
-            "odom_wrong_frames",
-        ] {
-            assert_eq!(f(ros, &[k]), 0.0, "{k}: {ros}");
-        }
+        drove_cleanly(&r["ros2"]);
     }
     for b in up["bases"].as_array().unwrap() {
         let c = &b["counters"];
@@ -407,8 +412,7 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
 fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let certs = dir.path().join("certs");
-    echelon_ok(&["fleet", "certs", "--robots", "2"], &certs);
+    let certs = common::certs(dir.path(), 2);
     let fleet_dir = dir.path().join("fleet");
     let fleet = std::thread::spawn({
         let (fleet_dir, certs) = (fleet_dir.clone(), certs.clone());
@@ -423,44 +427,13 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
                 .unwrap()
         }
     });
-    let endpoints = fleet_dir.join("endpoints.json");
-    let started = Instant::now();
-    while !endpoints.exists() {
-        assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "no endpoints.json"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(Duration::from_millis(100));
-    let endpoints: Value =
-        serde_json::from_str(&std::fs::read_to_string(&endpoints).unwrap()).unwrap();
-    let connect: Vec<&str> = endpoints
-        .as_object()
-        .unwrap()
-        .iter()
-        .filter(|(k, _)| *k != "topology")
-        .filter_map(|(_, v)| v.as_str())
-        .collect();
+    let connect: Vec<String> = common::endpoints_of(&fleet_dir).into_values().collect();
     assert!(
         connect.iter().all(|e| e.starts_with("quic/")),
         "{connect:?}"
     );
-    let path = |p: PathBuf| p.display().to_string();
-    let config = serde_json::json!({
-        "mode": "peer",
-        "scouting": {"multicast": {"enabled": false}},
-        "listen": {"endpoints": ["quic/127.0.0.1:0"]},
-        "connect": {"endpoints": connect, "timeout_ms": 10000, "exit_on_failure": false},
-        "transport": {"link": {"tls": {
-            "root_ca_certificate": path(certs.join("ca.pem")),
-            "listen_certificate": path(certs.join("robot-2.pem")),
-            "listen_private_key": path(certs.join("robot-2-key.pem")),
-            "connect_certificate": path(certs.join("robot-2.pem")),
-            "connect_private_key": path(certs.join("robot-2-key.pem")),
-            "enable_mtls": true,
-        }}},
-    });
+    let tls = common::tls_as(&certs, "robot-2");
+    let config = common::outsider_config(&connect, tls, 10000, false);
     let rogue = zenoh::open(zenoh::Config::from_json5(&config.to_string()).unwrap())
         .wait()
         .unwrap();
@@ -886,19 +859,7 @@ fn fleet_up_real_on_bases_behind_their_own_routers_ends_where_the_simulator_ends
         );
         assert!(d < 1e-2, "robot {}: {d} m from the simulator", r["agent"]);
         assert!(f(r, &["final_error"]) < 1e-2, "{r}");
-        let ros = &r["ros2"];
-        assert!(
-            f(ros, &["cmd_sent"]) > 1000.0 && f(ros, &["odom_accepted"]) > 500.0,
-            "{ros}"
-        );
-        for k in [
-            "odom_malformed",
-            "odom_non_finite",
-            "odom_wrong_type",
-            "odom_wrong_frames",
-        ] {
-            assert_eq!(f(ros, &[k]), 0.0, "{k}: {ros}");
-        }
+        drove_cleanly(&r["ros2"]);
     }
     for b in &bases {
         let c = &b["counters"];

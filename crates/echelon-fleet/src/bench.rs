@@ -350,7 +350,7 @@ mod tests {
             let agents = built.plan.agents();
             assert_eq!(agents.len(), n);
             for k in 1..=n as u32 {
-                crate::robot::agent_spec(&s, k).unwrap_or_else(|e| panic!("{e}"));
+                crate::robot::agent_spec(&built.plan, k).unwrap_or_else(|e| panic!("{e}"));
             }
             assert_eq!(
                 s.fleet().unwrap_or_else(|e| panic!("{e}")).name,

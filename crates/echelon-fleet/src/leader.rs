@@ -15,12 +15,11 @@ use serde::Serialize;
 
 use echelon::control::LeaderMotion;
 use echelon::reference::{Order, Reference, Trajectory};
-use echelon::scenario::{Overrides, Scenario};
 
-use crate::clock::FleetClock;
 use crate::command::{self, Change, CommandCounts, FleetCommand, Latch};
 use crate::keys::Keys;
-use crate::net::{self, NetOptions};
+use crate::net;
+use crate::options::{ProcessOptions, Resolved};
 use crate::role::Member;
 use crate::runtime::{self, Flow, Latching, Outputs, Sample, Task, WaitFor};
 use crate::wire::{self, Header, Reference as WireReference};
@@ -29,23 +28,16 @@ use crate::{FleetError, StopFlag};
 /// Options of the leader process.
 #[derive(Debug, Clone)]
 pub struct LeaderOptions {
-    /// The scenario.
-    pub scenario: Scenario,
+    /// Scenario, clock, network and fleet name (`duration` absent: the
+    /// scenario's `sim.duration`).
+    pub process: ProcessOptions,
     /// Publication rate, Hz (absent: the scenario's `[fleet] reference_rate`).
     pub rate: Option<f64>,
-    /// Clock speed-up `K`.
-    pub time_scale: f64,
-    /// Stop after this fleet time (absent: the scenario's `sim.duration`).
-    pub duration: Option<f64>,
     /// Before starting the clock, wait until these liveliness roles are present
     /// (e.g. `collector`, `robot/1`), at most `wait_timeout`.
     pub wait_for: Vec<String>,
     /// Longest wait for `wait_for`, real time.
     pub wait_timeout: Duration,
-    /// Network.
-    pub net: NetOptions,
-    /// Fleet name (absent: the scenario's).
-    pub fleet: Option<String>,
 }
 
 /// What the leader reports when it stops (one JSON line on stdout).
@@ -336,19 +328,21 @@ impl Task for LeaderTask {
 /// Publishes the reference until `duration` or the stop flag: [`LeaderTask`]
 /// on the fleet runtime.
 pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetError> {
-    let fleet = opts.scenario.fleet()?;
-    let built = opts.scenario.build(&Overrides::default())?;
-    let reference = built.plan.reference().clone();
-    let rate = opts.rate.unwrap_or(fleet.reference_rate);
-    let duration = opts.duration.unwrap_or(built.plan.config().duration);
-    let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name));
+    let Resolved {
+        plan,
+        settings,
+        keys,
+    } = opts.process.resolve()?;
+    let reference = plan.reference().clone();
+    let rate = opts.rate.unwrap_or(settings.reference_rate);
+    let duration = opts.process.duration.unwrap_or(plan.config().duration);
     let leader = Leader::new(reference, rate, duration, net::rand_source());
     let task = LeaderTask::new(leader, keys.clone()).waiting_for(WaitFor {
         keys,
         names: opts.wait_for,
         timeout: opts.wait_timeout,
     });
-    runtime::run(task, &opts.net, FleetClock::new(opts.time_scale), stop)
+    runtime::run(task, &opts.process.net, opts.process.clock(), stop)
 }
 
 #[cfg(test)]

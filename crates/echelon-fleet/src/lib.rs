@@ -25,6 +25,7 @@ pub mod link;
 pub mod neighbours;
 pub mod net;
 pub mod operator;
+pub mod options;
 pub mod plant;
 pub mod robot;
 pub mod role;

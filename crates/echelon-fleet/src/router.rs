@@ -6,6 +6,20 @@
 //! The router also watches the fleets' liveliness tokens
 //! (`echelon/*/alive/**`), so its report says how many processes were linked
 //! through the router network at once (`members_peak`) and in all.
+//!
+//! Why it is not a [`Task`](crate::runtime::Task) on the runtime: a task is
+//! a member of one fleet on a fleet clock (it subscribes to its inputs,
+//! publishes on its outputs, holds its liveliness token and is ticked),
+//! and a router is none of these. It routes the other processes' samples
+//! inside Zenoh's own threads, belongs to no one fleet (it carries every
+//! fleet's keys, and other sites' routers link to it), runs in real time
+//! only, and what it reports comes from its session (its id, the routers
+//! linked to it) and from a liveliness subscription on every fleet's
+//! `alive/**`, not from samples handed to it. What it shares with the
+//! runtime: the session ([`net::open`], in router mode, with the same
+//! configuration and secure mode as every process), the stop flag polled
+//! every [`runtime::NAP`], and a typed report ([`RouterReport`]) that
+//! `fleet up` reads back as such.
 
 use std::collections::BTreeSet;
 use std::sync::{Arc, Mutex};
@@ -16,6 +30,7 @@ use zenoh::Wait;
 use zenoh::sample::SampleKind;
 
 use crate::net::{self, Mode, NetOptions};
+use crate::runtime;
 use crate::{FleetError, StopFlag};
 
 /// Options of `fleet router`.
@@ -86,7 +101,7 @@ pub fn run(opts: &RouterOptions, stop: &StopFlag) -> Result<RouterReport, FleetE
     let listen = net.listen.clone();
     eprintln!("fleet router {} listening on {listen:?}", session.zid());
     while !stop.is_raised() && opts.max_wall.is_none_or(|m| started.elapsed() < m) {
-        std::thread::sleep(Duration::from_millis(50));
+        std::thread::sleep(runtime::NAP);
     }
     let routers_at_exit = session.info().routers_zid().wait().count();
     let (members_joined, members_peak, members_at_exit) = {

@@ -150,7 +150,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let built = scenario.build(&Overrides::default())?;
     let n = built.plan.agents().len();
     for k in 1..=n as u32 {
-        crate::robot::agent_spec(&scenario, k)?;
+        crate::robot::agent_spec(&built.plan, k)?;
     }
     match opts.topology {
         Topology::Router if opts.sites == 0 || opts.sites > n.max(1) => {

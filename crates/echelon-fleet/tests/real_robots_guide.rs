@@ -13,7 +13,10 @@ use std::path::Path;
 use echelon::scenario::Scenario;
 use echelon_fleet::net::{common_name, ros_acl};
 use serde_json::Value;
-use zenoh::key_expr::keyexpr;
+
+#[path = "common/acl.rs"]
+mod acl;
+use acl::{allows, strs};
 
 fn root() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
@@ -26,53 +29,6 @@ fn sample() -> String {
     let start = doc.find("```json5\n").expect("a ```json5 block") + "```json5\n".len();
     let len = doc[start..].find("\n```").expect("its end");
     doc[start..start + len].to_owned()
-}
-
-fn strs(v: &Value) -> Vec<&str> {
-    v.as_array()
-        .map(|a| a.iter().filter_map(Value::as_str).collect())
-        .unwrap_or_default()
-}
-
-fn includes(expr: &str, key: &str) -> bool {
-    keyexpr::new(expr)
-        .unwrap()
-        .includes(keyexpr::new(key).unwrap())
-}
-
-/// Whether `acl` lets `message` on `key` flow `flow` for a link matching
-/// `matches` (a subject), by Zenoh's reading: default deny, allowed when a
-/// policy of a matching subject has an allowing rule of that flow and
-/// message whose key expressions include `key`.
-fn allows(
-    acl: &Value,
-    matches: impl Fn(&Value) -> bool,
-    flow: &str,
-    message: &str,
-    key: &str,
-) -> bool {
-    assert_eq!(acl["default_permission"], "deny");
-    let subjects: Vec<&str> = acl["subjects"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|s| matches(s))
-        .filter_map(|s| s["id"].as_str())
-        .collect();
-    let rules: Vec<&str> = acl["policies"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|p| strs(&p["subjects"]).iter().any(|s| subjects.contains(s)))
-        .flat_map(|p| strs(&p["rules"]))
-        .collect();
-    acl["rules"].as_array().into_iter().flatten().any(|r| {
-        r["permission"] == "allow"
-            && rules.contains(&r["id"].as_str().unwrap_or_default())
-            && strs(&r["flows"]).contains(&flow)
-            && strs(&r["messages"]).contains(&message)
-            && strs(&r["key_exprs"]).iter().any(|e| includes(e, key))
-    })
 }
 
 /// A link showing the certificate `cn` from the network (not loopback).

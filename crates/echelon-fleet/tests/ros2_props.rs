@@ -8,7 +8,7 @@ use std::f64::consts::{PI, TAU};
 use echelon_ros2::attachment::{ATTACHMENT_LEN, Attachment};
 use echelon_ros2::cdr::CdrError;
 use echelon_ros2::keys::{check_topic_key, topic_key};
-use echelon_ros2::liveliness::{NodeInfo, Qos};
+use echelon_ros2::liveliness::{Endpoint, NodeInfo, Qos};
 use echelon_ros2::msgs::{
     Header, ODOMETRY, Odometry, Point, Pose, PoseWithCovariance, Quaternion, RosMessage,
     TWIST_STAMPED, Time, Twist, TwistStamped, TwistWithCovariance, Vector3, YawUnwrapper,
@@ -245,7 +245,7 @@ proptest! {
         prop_assert_eq!(key.split('/').count(), 3 + fq.matches('/').count());
         let node = NodeInfo::new(domain, "1f2e3d", ids.0, &namespace, "echelon_robot")
             .map_err(|e| TestCaseError::fail(e.to_string()))?;
-        let token = node.publisher_token(ids.1, &fq, &TWIST_STAMPED, &Qos::keep_last(depth));
+        let token = node.endpoint_token(Endpoint::Publisher, ids.1, &fq, &TWIST_STAMPED, &Qos::keep_last(depth));
         let parts: Vec<&str> = token.split('/').collect();
         // Admin space, domain, zid, node id, entity id, kind, enclave,
         // namespace, node, topic, type, hash, qos: no empty part, names mangled.

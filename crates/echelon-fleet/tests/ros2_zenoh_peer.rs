@@ -23,7 +23,7 @@ use std::time::{Duration, Instant};
 use echelon_fleet::net::{self, NetOptions};
 use echelon_ros2::attachment::{Attachment, gid_from_token};
 use echelon_ros2::keys::{check_topic_key, topic_key, topic_key_any_type};
-use echelon_ros2::liveliness::{NodeInfo, Qos};
+use echelon_ros2::liveliness::{Endpoint, NodeInfo, Qos};
 use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST_STAMPED, Time, TwistStamped};
 use echelon_ros2::names::{KeyScheme, fully_qualified_topic};
 use zenoh::Wait;
@@ -78,8 +78,20 @@ fn a_python_ros2_base_hears_echelon_and_answers() {
     let node = NodeInfo::new(0, &zid, 0, "/robot1", "echelon_robot").expect("valid node");
     let cmd_topic = fully_qualified_topic("/robot1", "cmd_vel").expect("valid");
     let odom_topic = fully_qualified_topic("/robot1", "odom").expect("valid");
-    let pub_token = node.publisher_token(1, &cmd_topic, &TWIST_STAMPED, &Qos::keep_last(10));
-    let sub_token = node.subscription_token(2, &odom_topic, &ODOMETRY, &Qos::default());
+    let pub_token = node.endpoint_token(
+        Endpoint::Publisher,
+        1,
+        &cmd_topic,
+        &TWIST_STAMPED,
+        &Qos::keep_last(10),
+    );
+    let sub_token = node.endpoint_token(
+        Endpoint::Subscription,
+        2,
+        &odom_topic,
+        &ODOMETRY,
+        &Qos::default(),
+    );
     let declare = |key: &str| {
         session
             .liveliness()

@@ -45,6 +45,6 @@ pub mod names;
 pub use attachment::{Attachment, AttachmentError, Gid};
 pub use cdr::CdrError;
 pub use keys::KeyMismatch;
-pub use liveliness::{NodeInfo, Qos};
+pub use liveliness::{Endpoint, NodeInfo, Qos};
 pub use msgs::{MessageType, Odometry, RosMessage, Time, Twist, TwistStamped, YawUnwrapper};
 pub use names::{KeyScheme, NameError};

@@ -174,6 +174,25 @@ pub fn mangle(name: &str) -> String {
     name.replace('/', "%")
 }
 
+/// What kind of endpoint a token declares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Endpoint {
+    /// A publisher (`MP`).
+    Publisher,
+    /// A subscription (`MS`).
+    Subscription,
+}
+
+impl Endpoint {
+    /// Its entity kind in a token.
+    fn code(self) -> &'static str {
+        match self {
+            Endpoint::Publisher => "MP",
+            Endpoint::Subscription => "MS",
+        }
+    }
+}
+
 /// The ROS 2 node echelon appears as.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct NodeInfo {
@@ -235,9 +254,11 @@ impl NodeInfo {
         )
     }
 
-    fn endpoint(
+    /// A publisher's (`MP`) or a subscription's (`MS`) token for fully
+    /// qualified topic `fq_topic`.
+    pub fn endpoint_token(
         &self,
-        kind: &str,
+        kind: Endpoint,
         entity_id: u64,
         fq_topic: &str,
         ty: &MessageType,
@@ -245,7 +266,7 @@ impl NodeInfo {
     ) -> String {
         format!(
             "{}/{}/{}/{}/{}",
-            self.prefix(entity_id, kind),
+            self.prefix(entity_id, kind.code()),
             mangle(fq_topic),
             mangle(&ty.dds_name()),
             mangle(hash_chunk(self.scheme, ty).unwrap_or(ty.hash)),
@@ -256,28 +277,6 @@ impl NodeInfo {
     /// The node's token (`NN`).
     pub fn node_token(&self) -> String {
         self.prefix(self.node_id, "NN")
-    }
-
-    /// A publisher's token (`MP`) for fully qualified topic `fq_topic`.
-    pub fn publisher_token(
-        &self,
-        entity_id: u64,
-        fq_topic: &str,
-        ty: &MessageType,
-        qos: &Qos,
-    ) -> String {
-        self.endpoint("MP", entity_id, fq_topic, ty, qos)
-    }
-
-    /// A subscription's token (`MS`) for fully qualified topic `fq_topic`.
-    pub fn subscription_token(
-        &self,
-        entity_id: u64,
-        fq_topic: &str,
-        ty: &MessageType,
-        qos: &Qos,
-    ) -> String {
-        self.endpoint("MS", entity_id, fq_topic, ty, qos)
     }
 }
 
@@ -327,13 +326,25 @@ mod tests {
             "@ros2_lv/0/c0ffee/0/0/NN/%/%robot1/echelon_robot"
         );
         assert_eq!(
-            node.publisher_token(1, "/robot1/cmd_vel", &TWIST_STAMPED, &Qos::keep_last(10)),
+            node.endpoint_token(
+                Endpoint::Publisher,
+                1,
+                "/robot1/cmd_vel",
+                &TWIST_STAMPED,
+                &Qos::keep_last(10)
+            ),
             "@ros2_lv/0/c0ffee/0/1/MP/%/%robot1/echelon_robot/%robot1%cmd_vel/\
              geometry_msgs::msg::dds_::TwistStamped_/\
              RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64/::,10:,:,:,,"
         );
         assert_eq!(
-            node.subscription_token(2, "/robot1/odom", &ODOMETRY, &Qos::default()),
+            node.endpoint_token(
+                Endpoint::Subscription,
+                2,
+                "/robot1/odom",
+                &ODOMETRY,
+                &Qos::default()
+            ),
             "@ros2_lv/0/c0ffee/0/2/MS/%/%robot1/echelon_robot/%robot1%odom/\
              nav_msgs::msg::dds_::Odometry_/\
              RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0/::,:,:,:,,"
@@ -343,7 +354,13 @@ mod tests {
         let humble = node.clone().with_scheme(KeyScheme::RmwZenohHumble);
         assert_eq!(humble.node_token(), node.node_token());
         assert_eq!(
-            humble.publisher_token(1, "/robot1/cmd_vel", &TWIST_STAMPED, &Qos::keep_last(10)),
+            humble.endpoint_token(
+                Endpoint::Publisher,
+                1,
+                "/robot1/cmd_vel",
+                &TWIST_STAMPED,
+                &Qos::keep_last(10)
+            ),
             "@ros2_lv/0/c0ffee/0/1/MP/%/%robot1/echelon_robot/%robot1%cmd_vel/\
              geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported/::,10:,:,:,,"
         );

@@ -122,37 +122,29 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             Member::Leader,
             |scenario, net, stop| {
                 let options = LeaderOptions {
-                    scenario,
+                    process: a.clock.process(scenario, net, &a.net),
                     rate: a.rate,
-                    time_scale: a.time_scale,
-                    duration: a.duration,
                     wait_for: a.wait_for,
                     wait_timeout: Duration::from_secs_f64(a.wait_timeout),
-                    net,
-                    fleet: a.net.fleet.clone(),
                 };
                 leader::run(options, stop)
             },
         ),
         FleetCommand::Robot(a) => {
-            if a.ros2 && !a.simulated_base && a.time_scale != 1.0 {
+            if a.ros2 && !a.simulated_base && a.clock.time_scale != 1.0 {
                 bail!(
                     "fleet robot --ros2 drives a real robot, which runs in real time: \
                      --time-scale {} is refused (give --simulated-base when the robot is \
                      `fleet base`'s simulation, as `fleet up --ros2` does)",
-                    a.time_scale
+                    a.clock.time_scale
                 );
             }
-            let member = Member::Robot(a.agent);
-            scenario_process(&a.scenario, &a.net, member, |scenario, net, stop| {
+            let member = Member::Robot(a.agent.agent);
+            scenario_process(&a.agent.scenario, &a.net, member, |scenario, net, stop| {
                 let options = RobotOptions {
-                    scenario,
-                    agent: a.agent,
-                    time_scale: a.time_scale,
-                    duration: a.duration,
+                    process: a.clock.process(scenario, net, &a.net),
+                    agent: a.agent.agent,
                     faults: a.faults.spec(),
-                    net,
-                    fleet: a.net.fleet.clone(),
                     ros2: a.ros2,
                     own_router: !a.simulated_base,
                 };
@@ -163,15 +155,11 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             if !a.ros2 {
                 bail!("fleet base simulates a ROS 2 base: give --ros2");
             }
-            let member = Member::Base(a.agent);
-            scenario_process(&a.scenario, &a.net, member, |scenario, net, stop| {
+            let member = Member::Base(a.agent.agent);
+            scenario_process(&a.agent.scenario, &a.net, member, |scenario, net, stop| {
                 let options = BaseOptions {
-                    scenario,
-                    agent: a.agent,
-                    time_scale: a.time_scale,
-                    duration: a.duration,
-                    net,
-                    fleet: a.net.fleet.clone(),
+                    process: a.clock.process(scenario, net, &a.net),
+                    agent: a.agent.agent,
                 };
                 base::run(options, stop)
             })
@@ -180,11 +168,11 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             if !a.ros2 {
                 bail!("fleet excite drives a ROS 2 robot: give --ros2");
             }
-            let member = Member::Robot(a.agent);
-            scenario_process(&a.scenario, &a.net, member, |scenario, net, stop| {
+            let member = Member::Robot(a.agent.agent);
+            scenario_process(&a.agent.scenario, &a.net, member, |scenario, net, stop| {
                 let options = ExciteOptions {
                     scenario,
-                    agent: a.agent,
+                    agent: a.agent.agent,
                     duration: a.duration,
                     radius: a.radius,
                     rate: a.rate,

@@ -3,8 +3,10 @@
 
 #![allow(dead_code, clippy::unwrap_used)]
 
-use std::path::Path;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
@@ -124,4 +126,62 @@ pub(crate) fn args<'a>(fixed: &[&'a str], more: &'a [String]) -> Vec<&'a str> {
         .copied()
         .chain(more.iter().map(String::as_str))
         .collect()
+}
+
+/// `echelon fleet certs --robots ROBOTS` into `dir/certs`; that directory.
+pub(crate) fn certs(dir: &Path, robots: u32) -> PathBuf {
+    let certs = dir.join("certs");
+    echelon_ok(&["fleet", "certs", "--robots", &robots.to_string()], &certs);
+    certs
+}
+
+/// The endpoint of each process of a `fleet up` writing to `dir` (its
+/// `endpoints.json`, waited for), without the topology.
+pub(crate) fn endpoints_of(dir: &Path) -> BTreeMap<String, String> {
+    let path = dir.join("endpoints.json");
+    let started = Instant::now();
+    while !path.exists() {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no endpoints.json"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(100));
+    let mut all: BTreeMap<String, String> =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    assert!(all.remove("topology").is_some(), "{all:?}");
+    all
+}
+
+/// Zenoh's mutual-TLS settings for a process holding `identity`'s
+/// certificate from `certs` (a stolen one, in the rogue tests).
+pub(crate) fn tls_as(certs: &Path, identity: &str) -> Value {
+    let path = |name: String| certs.join(name).display().to_string();
+    serde_json::json!({
+        "root_ca_certificate": path("ca.pem".into()),
+        "listen_certificate": path(format!("{identity}.pem")),
+        "listen_private_key": path(format!("{identity}-key.pem")),
+        "connect_certificate": path(format!("{identity}.pem")),
+        "connect_private_key": path(format!("{identity}-key.pem")),
+        "enable_mtls": true,
+    })
+}
+
+/// The Zenoh configuration of a peer outside the fleet that connects to
+/// `connect` over QUIC with the TLS settings `tls`, waiting `timeout_ms` for
+/// them (and exiting if they do not answer, with `exit_on_failure`).
+pub(crate) fn outsider_config(
+    connect: &[String],
+    tls: Value,
+    timeout_ms: u64,
+    exit_on_failure: bool,
+) -> Value {
+    serde_json::json!({
+        "mode": "peer",
+        "scouting": {"multicast": {"enabled": false}},
+        "listen": {"endpoints": ["quic/127.0.0.1:0"]},
+        "connect": {"endpoints": connect, "timeout_ms": timeout_ms, "exit_on_failure": exit_on_failure},
+        "transport": {"link": {"tls": tls}},
+    })
 }

@@ -4,7 +4,7 @@ use echelon::agent::AgentSpec;
 use echelon::guard::Bounds;
 use echelon::plan::Plan;
 use echelon::safety::{Obstacle, SafetyConfig};
-use echelon::scenario::{FleetSettings, LinkLoss, Overrides, Scenario};
+use echelon::scenario::{FleetSettings, LinkLoss};
 
 use crate::FleetError;
 use crate::faults::FaultSpec;
@@ -22,13 +22,8 @@ pub struct RobotSafety {
     pub cooperative: Vec<bool>,
 }
 
-/// The agent's spec from the scenario, checked for the fleet.
-pub fn agent_spec(scenario: &Scenario, agent: u32) -> Result<AgentSpec, FleetError> {
-    spec_in(&scenario.build(&Overrides::default())?.plan, agent)
-}
-
-/// [`agent_spec`] from the scenario's plan.
-fn spec_in(plan: &Plan, agent: u32) -> Result<AgentSpec, FleetError> {
+/// Agent `agent`'s spec (from 1) in the scenario's plan, checked for the fleet.
+pub fn agent_spec(plan: &Plan, agent: u32) -> Result<AgentSpec, FleetError> {
     let agents = plan.agents();
     let n = agents.len();
     let Some(spec) = (agent as usize)
@@ -76,15 +71,8 @@ pub struct RobotConfig {
     pub driven: bool,
 }
 
-/// Agent `agent`'s safety settings (`None`: it does not filter).
-pub fn safety_of(scenario: &Scenario, agent: u32) -> Result<Option<RobotSafety>, FleetError> {
-    Ok(safety_in(
-        &scenario.build(&Overrides::default())?.plan,
-        agent,
-    ))
-}
-
-/// [`safety_of`] from the scenario's plan.
+/// Agent `agent`'s safety settings from the scenario's plan (`None`: it
+/// does not filter).
 fn safety_in(plan: &Plan, agent: u32) -> Option<RobotSafety> {
     let config = plan.safety_of(agent as usize - 1)?;
     let n = plan.agents().len();
@@ -97,18 +85,18 @@ fn safety_in(plan: &Plan, agent: u32) -> Option<RobotSafety> {
 }
 
 impl RobotConfig {
-    /// Agent `agent`'s configuration from a scenario and its `[fleet]` settings.
-    pub fn from_scenario(
-        scenario: &Scenario,
+    /// Agent `agent`'s configuration from the scenario's plan and its
+    /// `[fleet]` settings.
+    pub fn from_plan(
+        plan: &Plan,
         fleet: &FleetSettings,
         agent: u32,
         faults: FaultSpec,
         duration: Option<f64>,
     ) -> Result<RobotConfig, FleetError> {
-        let plan = scenario.build(&Overrides::default())?.plan;
-        let spec = spec_in(&plan, agent)?;
+        let spec = agent_spec(plan, agent)?;
         let loss = fleet.link_loss[agent as usize - 1];
-        let safety = safety_in(&plan, agent);
+        let safety = safety_in(plan, agent);
         Ok(RobotConfig {
             agent,
             spec,

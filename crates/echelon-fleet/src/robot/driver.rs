@@ -1,11 +1,8 @@
 //! A robot process: its options, and [`RobotTask`] on the fleet runtime.
 
-use echelon::scenario::{FleetSettings, Overrides, Scenario};
-
-use crate::clock::FleetClock;
 use crate::faults::FaultSpec;
-use crate::keys::Keys;
-use crate::net::{self, NetOptions};
+use crate::net;
+use crate::options::{ProcessOptions, Resolved};
 use crate::ros2::drive::Ros2Drive;
 use crate::ros2::endpoint::{OwnedCmdSink, Ros2Node};
 use crate::ros2::fixes;
@@ -17,20 +14,13 @@ use super::{Robot, RobotConfig, RobotReport, RobotTask};
 /// Options of a robot process.
 #[derive(Debug, Clone)]
 pub struct RobotOptions {
-    /// The scenario.
-    pub scenario: Scenario,
+    /// Scenario, clock, network and fleet name (`duration` absent: run
+    /// until a signal).
+    pub process: ProcessOptions,
     /// Agent number, from 1.
     pub agent: u32,
-    /// Clock speed-up `K`.
-    pub time_scale: f64,
-    /// Stop at this fleet time (absent: run until a signal).
-    pub duration: Option<f64>,
     /// Faults injected on what this robot receives.
     pub faults: FaultSpec,
-    /// Network.
-    pub net: NetOptions,
-    /// Fleet name (absent: the scenario's).
-    pub fleet: Option<String>,
     /// Drive the agent's ROS 2 robot (`[fleet.ros2]`) instead of a simulated one.
     pub ros2: bool,
     /// With `ros2`: reach the robot at its own router (the agent's
@@ -49,21 +39,25 @@ const FIRST_ODOMETRY_TIMEOUT: std::time::Duration = std::time::Duration::from_se
 /// fleet runtime, on its simulated drive or, with `ros2`, on its ROS 2
 /// robot.
 pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetError> {
-    let fleet: FleetSettings = opts.scenario.fleet()?;
-    let config = RobotConfig::from_scenario(
-        &opts.scenario,
-        &fleet,
+    let Resolved {
+        plan,
+        settings,
+        keys,
+    } = opts.process.resolve()?;
+    let config = RobotConfig::from_plan(
+        &plan,
+        &settings,
         opts.agent,
         opts.faults,
-        opts.duration,
+        opts.process.duration,
     )?;
-    let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&fleet.name));
-    let clock = FleetClock::new(opts.time_scale);
+    let net = &opts.process.net;
+    let clock = opts.process.clock();
     if !opts.ros2 {
         let robot = Robot::simulated(config, net::rand_source());
-        return runtime::run(RobotTask::new(robot, keys), &opts.net, clock, stop);
+        return runtime::run(RobotTask::new(robot, keys), net, clock, stop);
     }
-    let link = fleet.ros2[opts.agent as usize - 1].clone();
+    let link = settings.ros2[opts.agent as usize - 1].clone();
     let Some(velocity) = config.spec.velocity_robot() else {
         return Err(FleetError::Config(format!(
             "agent {}: a ROS 2 robot takes velocity commands: give it a velocity base (drive = \"velocity\") and the kinematic law",
@@ -76,10 +70,9 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         driven: link.driven,
         ..config
     };
-    let plan = opts.scenario.build(&Overrides::default())?.plan;
     let fixes = fixes::for_agent(agent, &link, &plan, &config.spec)?;
     let robot_net = match opts.own_router && !link.connect.is_empty() {
-        true => Some(net::robot_router(agent, &link.connect, &opts.net)?),
+        true => Some(net::robot_router(agent, &link.connect, net)?),
         false => None,
     };
     let device = robot_net.as_ref().map(|net| runtime::Device {
@@ -107,7 +100,7 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
                 .with_plant_inputs(inputs.clone(), |d, i, k, b, t| d.on_input(i, k, b, t));
             Ok((task, node.tokens, inputs))
         },
-        &opts.net,
+        net,
         device,
         clock,
         stop,

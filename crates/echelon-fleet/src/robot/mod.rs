@@ -27,14 +27,13 @@
 use std::collections::VecDeque;
 
 use echelon::control::LeaderMotion;
-use echelon::follow::{LeaderView, follow};
 use echelon::formation::Leader;
 use echelon::safety::SafetyFilter;
 
 use crate::command::{Change, CommandCounts, Latch, Latched};
 use crate::faults::{FaultInjector, Verdict};
 use crate::latency::Latency;
-use crate::link::{Counters, LeaderSample, StreamTracker, predict};
+use crate::link::{Counters, LeaderSample, StreamTracker};
 use crate::neighbours::{LAG_PERIODS, NeighbourTable, STALE_HOLD};
 use crate::plant::{Plant, SimulatedDrive};
 use crate::role::Role;
@@ -46,8 +45,9 @@ mod head;
 mod report;
 mod safety;
 mod task;
+mod tick;
 
-pub use config::{RobotConfig, RobotSafety, agent_spec, safety_of};
+pub use config::{RobotConfig, RobotSafety, agent_spec};
 pub use driver::{RobotOptions, run};
 pub use head::{HEAD_FILTER, HeadFilter};
 pub use report::{RobotReport, RobotStats, SafetyCounts};
@@ -390,204 +390,6 @@ impl<P: Plant> Robot<P> {
     /// The delays measured on the leader stream.
     pub fn latency(&self) -> &Latency {
         &self.latency
-    }
-
-    /// Runs one controller tick at local time `now` (call when [`is_due`]):
-    /// delivers what is due, brings the plant to now, runs the law on the
-    /// leader motion (fresh or the link-loss policy's) and commands the plant.
-    ///
-    /// [`is_due`]: Robot::is_due
-    pub fn tick(&mut self, now: f64) -> RobotTick {
-        if self.config.driven {
-            return self.tick_driven(now);
-        }
-        let local = now;
-        let now = self.fleet_time(now);
-        while let Some(&(at, h, s)) = self.delayed.front() {
-            if at > now {
-                break;
-            }
-            self.delayed.pop_front();
-            if self.tracker.check(h, s.t, at).is_ok() {
-                self.sample = Some(s);
-            }
-        }
-        if self.latch.stopped() {
-            return self.stopped_tick(now);
-        }
-        let prediction = match (self.synced, self.sample) {
-            (true, Some(s)) => Some(predict(
-                &s,
-                now,
-                self.config.link_timeout,
-                &self.config.loss,
-            )),
-            _ => None,
-        };
-        let Some(p) = prediction else {
-            // Waiting for the leader: stand still, say so now and then.
-            if self.synced {
-                self.plant.advance(now);
-            }
-            self.halt(Halt::NoLeader);
-            let t = if self.synced { now } else { 0.0 };
-            let publish = self.plant.state().map(|state| {
-                self.last = RobotState {
-                    t,
-                    agent: self.config.agent,
-                    link: LinkStatus::Waiting,
-                    state,
-                    ..RobotState::default()
-                };
-                self.header_for(self.last)
-            });
-            self.next_tick = now + WAITING_PERIOD.min(self.config.period * 10.0);
-            return RobotTick {
-                publish,
-                stats: None,
-                done: false,
-            };
-        };
-        if p.status == LinkStatus::Tracking {
-            self.fresh = true;
-        } else if self.fresh {
-            self.fresh = false;
-            self.tracker.counters.link_losses += 1;
-        }
-
-        self.plant.advance(now);
-        let state = self.plant.state();
-        if let Some(breach) = state.and_then(|s| self.config.bounds.check(&s)) {
-            // Diverged: zero first, then say so and stop for good.
-            self.halt(Halt::Diverged);
-            self.diverged = Some(format!(
-                "agent {} diverged at t = {now} s: {breach}",
-                self.config.agent
-            ));
-            self.next_tick = f64::INFINITY;
-            return RobotTick {
-                publish: None,
-                stats: None,
-                done: true,
-            };
-        }
-        let publish = match state {
-            Some(state) => {
-                let out = follow(
-                    &self.config.spec,
-                    &state,
-                    LeaderView::Motion {
-                        motion: p.motion,
-                        speed: p.speed,
-                        turn_rate: p.turn_rate,
-                    },
-                );
-                let nominal = out.command();
-                let sigma = self.plant.position_sigma();
-                let cmd = match self.safety.as_mut() {
-                    Some(s) => s.act(&self.config, local, now, &state, sigma, nominal),
-                    None => self.config.spec.act(now, &state, nominal, None).command,
-                };
-                let act = self.plant.command(cmd);
-                let (dv, domega) = self.plant.accelerations();
-                self.last = RobotState {
-                    t: now,
-                    agent: self.config.agent,
-                    link: p.status,
-                    state,
-                    dv,
-                    domega,
-                    e: out.law.e,
-                    z: out.law.z,
-                    u: act.u,
-                    tau: act.tau,
-                    leader: out.leader,
-                    velocity: act.velocity_sample(cmd),
-                    sigma,
-                };
-                self.ticks += 1;
-                Some(self.header_for(self.last))
-            }
-            None => {
-                self.halt(Halt::NoOdometry);
-                None
-            }
-        };
-
-        let stats = (now >= self.next_stats).then(|| {
-            self.next_stats += 1.0;
-            self.stats_at(now, p.status)
-        });
-        let done = self.config.duration.is_some_and(|d| now >= d);
-        if !done {
-            let period = self.config.period;
-            self.next_tick += period;
-            if now - self.next_tick > period {
-                // Late by more than a period: the plant keeps moving in real
-                // time; the controller resumes on the next tick from now.
-                self.overruns += 1;
-                self.next_tick = now + period;
-            }
-        }
-        RobotTick {
-            publish,
-            stats,
-            done,
-        }
-    }
-
-    /// A tick under a fleet stop at fleet time `now`: zero commanded, the
-    /// state published (`stopped`; `waiting` while its clock is not the
-    /// leader's), the counters once per fleet second, ticks every control
-    /// period as when following.
-    fn stopped_tick(&mut self, now: f64) -> RobotTick {
-        if self.synced {
-            self.plant.advance(now);
-        }
-        self.halt(Halt::Stopped);
-        let (t, link) = if self.synced {
-            (now, LinkStatus::Stopped)
-        } else {
-            (0.0, LinkStatus::Waiting)
-        };
-        let publish = self.plant.state().map(|state| {
-            let (dv, domega) = self.plant.accelerations();
-            self.last = RobotState {
-                t,
-                agent: self.config.agent,
-                link,
-                state,
-                dv,
-                domega,
-                e: self.last.e,
-                leader: self.last.leader,
-                velocity: self
-                    .config
-                    .spec
-                    .velocity_robot()
-                    .map(|_| echelon::sample::VelocitySample::default()),
-                ..RobotState::default()
-            };
-            self.header_for(self.last)
-        });
-        let stats = (self.synced && now >= self.next_stats).then(|| {
-            self.next_stats += 1.0;
-            self.stats_at(now, link)
-        });
-        let done = self.config.duration.is_some_and(|d| now >= d);
-        let period = self.config.period;
-        self.next_tick = if !self.synced {
-            now + WAITING_PERIOD.min(period * 10.0)
-        } else if now - self.next_tick > period {
-            now + period
-        } else {
-            self.next_tick + period
-        };
-        RobotTick {
-            publish,
-            stats,
-            done,
-        }
     }
 
     /// Commands zero: the one place where losing the leader, the odometry,

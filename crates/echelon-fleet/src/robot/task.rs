@@ -225,15 +225,13 @@ mod tests {
     use super::*;
     use crate::faults::FaultSpec;
     use crate::leader::{Leader as Reference, LeaderTask};
-    use crate::robot::RobotConfig;
     use crate::runtime::bus::Bus;
     use crate::wire::{LinkStatus, RobotState};
 
     /// Robot `k` of the fast circle's chain, in the fleet of `keys`.
     fn chain_robot(k: u32, keys: &Keys) -> RobotTask {
-        let (s, fleet, _) = crate::testing::fast_circle();
-        let config = RobotConfig::from_scenario(&s, &fleet, k, FaultSpec::default(), None)
-            .unwrap_or_else(|e| panic!("{e}"));
+        let (s, _, _) = crate::testing::fast_circle();
+        let config = crate::testing::robot_config(&s, k, FaultSpec::default());
         RobotTask::new(Robot::simulated(config, 100 + k), keys.clone())
     }
 

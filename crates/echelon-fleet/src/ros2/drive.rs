@@ -28,8 +28,8 @@ use echelon::scenario::Ros2Link;
 use echelon::scenario::schema::{CmdVelStamp, CmdVelType};
 
 use super::fixes::{FixInput, FixReport};
+use super::refusal::SampleRefusal;
 use crate::plant::{Actuation, Command, Plant};
-use echelon_ros2::CdrError;
 use echelon_ros2::attachment::{Attachment, Gid};
 use echelon_ros2::keys::check_topic_key;
 use echelon_ros2::msgs::{
@@ -64,26 +64,6 @@ pub fn encode_cmd_vel(link: &Ros2Link, cmd: VelocityCommand, stamp_ns: i64, buf:
     }
 }
 
-/// Why a ROS 2 sample was refused.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum SampleRefusal {
-    /// The key carries another type or hash.
-    #[error("wrong type on the key: {0}")]
-    WrongType(String),
-    /// Not CDR of the expected type.
-    #[error("malformed CDR: {0}")]
-    Malformed(CdrError),
-    /// A NaN or an infinity.
-    #[error("non-finite {0}")]
-    NonFinite(&'static str),
-    /// Frames other than configured.
-    #[error("frames `{0}` → `{1}`, expected the configured ones")]
-    WrongFrames(String, String),
-    /// rmw_zenoh subscribers drop a sample without its attachment.
-    #[error("no valid rmw_zenoh attachment")]
-    NoAttachment,
-}
-
 /// A `cmd_vel` payload decoded to a velocity command, refusing the wrong
 /// type on the key, bad CDR and non-finite values.
 pub fn decode_cmd_vel(
@@ -97,18 +77,11 @@ pub fn decode_cmd_vel(
         CmdVelType::TwistStamped => TwistStamped::from_cdr_finite(payload).map(|t| t.twist),
         CmdVelType::Twist => Twist::from_cdr_finite(payload),
     }
-    .map_err(refusal)?;
+    .map_err(SampleRefusal::from)?;
     Ok(VelocityCommand {
         v: twist.linear.x,
         omega: twist.angular.z,
     })
-}
-
-fn refusal(e: CdrError) -> SampleRefusal {
-    match e {
-        CdrError::NonFinite { field } => SampleRefusal::NonFinite(field),
-        e => SampleRefusal::Malformed(e),
-    }
 }
 
 /// Where a drive's commands go: the `cmd_vel` publisher, and the wall clock
@@ -233,6 +206,11 @@ impl<S: CmdSink> Ros2Drive<S> {
         }
     }
 
+    /// Its robot's link.
+    pub fn link(&self) -> &Ros2Link {
+        &self.link
+    }
+
     /// What it counted.
     pub fn counters(&self) -> &Ros2Counters {
         &self.counters
@@ -288,7 +266,7 @@ impl<S: CmdSink> Ros2Drive<S> {
     fn check_odom(&self, key: &str, payload: &[u8]) -> Result<Odometry, SampleRefusal> {
         check_topic_key(self.link.key_scheme, key, &ODOMETRY)
             .map_err(|e| SampleRefusal::WrongType(e.to_string()))?;
-        let odom = Odometry::from_cdr_finite(payload).map_err(refusal)?;
+        let odom = Odometry::from_cdr_finite(payload).map_err(SampleRefusal::from)?;
         if odom.header.frame_id != self.link.odom_frame
             || odom.child_frame_id != self.link.base_frame
         {

@@ -1,9 +1,7 @@
 //! A fleet process's ROS 2 presence (the robot's and `fleet excite`'s): a
 //! node with a `cmd_vel` publisher and an `odom` subscription, as rmw_zenoh
-//! declares them, and `cmd_vel` sent through Zenoh.
-
-use std::sync::mpsc;
-use std::time::Instant;
+//! declares them, and `cmd_vel` sent through Zenoh; the subscriptions are
+//! the runtime's ([`crate::runtime`]).
 
 use zenoh::Wait;
 
@@ -15,7 +13,7 @@ use crate::ros2::drive::{CmdSink, cmd_vel_type};
 use crate::ros2::fixes::fix_type;
 use echelon_ros2::attachment::{Gid, gid_from_token};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
-use echelon_ros2::liveliness::{NodeInfo, Qos};
+use echelon_ros2::liveliness::{Endpoint, NodeInfo, Qos};
 use echelon_ros2::msgs::{MessageType, ODOMETRY};
 use echelon_ros2::names::NameError;
 
@@ -42,15 +40,15 @@ pub(crate) fn declare_node(
     };
     let publishers: Vec<String> = publishes
         .iter()
-        .map(|(topic, ty)| node.publisher_token(next(), topic, ty, &Qos::default()))
+        .map(|(topic, ty)| {
+            node.endpoint_token(Endpoint::Publisher, next(), topic, ty, &Qos::default())
+        })
         .collect();
     let mut tokens = vec![node.node_token()];
     tokens.extend(publishers.iter().cloned());
-    tokens.extend(
-        subscribes
-            .iter()
-            .map(|(topic, ty)| node.subscription_token(next(), topic, ty, &Qos::default())),
-    );
+    tokens.extend(subscribes.iter().map(|(topic, ty)| {
+        node.endpoint_token(Endpoint::Subscription, next(), topic, ty, &Qos::default())
+    }));
     let tokens = declare_tokens(session, &tokens)?;
     Ok((
         tokens,
@@ -106,45 +104,6 @@ impl Ros2Node {
                 .as_ref()
                 .map(|f| topic_key_any_type(link.key_scheme, link.domain_id, &f.topic)),
             tokens,
-        })
-    }
-}
-
-/// Agent `k`'s ROS 2 presence ([`Ros2Node`]) and the odometry that arrives.
-pub(crate) struct Ros2Endpoint {
-    pub(crate) publisher: zenoh::pubsub::Publisher<'static>,
-    pub(crate) gid: Gid,
-    pub(crate) odom: mpsc::Receiver<(Instant, String, Vec<u8>)>,
-    _subscriber: zenoh::pubsub::Subscriber<()>,
-    _tokens: Vec<zenoh::liveliness::LivelinessToken>,
-}
-
-impl Ros2Endpoint {
-    pub(crate) fn declare(
-        session: &zenoh::Session,
-        link: &Ros2Link,
-        agent: u32,
-    ) -> Result<Ros2Endpoint, FleetError> {
-        let node = Ros2Node::declare(session, link, agent)?;
-        let (tx, odom) = mpsc::channel();
-        let odom_key = node.odom_key;
-        let subscriber = session
-            .declare_subscriber(&odom_key)
-            .callback(move |s| {
-                let _ = tx.send((
-                    Instant::now(),
-                    s.key_expr().as_str().to_owned(),
-                    s.payload().to_bytes().into_owned(),
-                ));
-            })
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("subscribing to {odom_key}: {e}")))?;
-        Ok(Ros2Endpoint {
-            publisher: node.publisher,
-            gid: node.gid,
-            odom,
-            _subscriber: subscriber,
-            _tokens: node.tokens,
         })
     }
 }

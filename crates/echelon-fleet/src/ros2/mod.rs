@@ -8,10 +8,13 @@
 //!   reads odometry and sends `cmd_vel`.
 //! - [`fixes`]: absolute fixes from ROS 2 poses fused with the odometry,
 //!   and Theorem 2 in the loop.
-//! - [`base`]: a simulated ROS 2 velocity base as a process (`echelon fleet
-//!   base`), answering `cmd_vel` with odometry.
+//! - [`sim_base`]: a simulated ROS 2 velocity base (sans-IO), answering
+//!   `cmd_vel` with odometry; [`base`]: it as a process (`echelon fleet
+//!   base`).
 //! - [`record`]: the topics the fleet collector records into `fleet.mcap`
 //!   as ROS 2 channels, and the checks a sample passes first.
+//! - [`refusal`]: why a ROS 2 sample was refused, for all of them.
+//! - [`ground_truth_topic`]: where a simulated base publishes its ground truth.
 //! - [`declare_tokens`]: rmw_zenoh liveliness tokens declared on a session.
 //!
 //! Interoperability with real ROS 2 is proven by `tests/ros2_*.rs` against
@@ -22,8 +25,19 @@ pub mod drive;
 pub mod endpoint;
 pub mod fixes;
 pub mod record;
+pub mod refusal;
+pub mod sim_base;
 
 pub use record::{RosRefusal, RosTopic, RosTopicError};
+
+use echelon::scenario::Ros2Link;
+
+/// A simulated base's ground-truth topic in `namespace`.
+pub fn ground_truth_topic(link: &Ros2Link) -> String {
+    // The namespace is canonical and `ground_truth` a valid relative name.
+    echelon_ros2::names::fully_qualified_topic(&link.namespace, "ground_truth")
+        .unwrap_or_else(|_| format!("{}/ground_truth", link.namespace.trim_end_matches('/')))
+}
 
 /// Declares each of `tokens` on `session`; they live as long as the returned
 /// handles.

@@ -154,14 +154,14 @@ impl RosTopic {
     }
 
     /// [`RosTopic::of_link`]'s, the ground truth a simulated base publishes
-    /// ([`super::base::ground_truth_topic`]) and the agent's fixes, if it
+    /// ([`super::ground_truth_topic`]) and the agent's fixes, if it
     /// takes any from ROS 2: what `fleet collect --ros2` records.
     pub fn all_of_link(link: &echelon::scenario::Ros2Link) -> Result<Vec<RosTopic>, RosTopicError> {
         let topic = |name: &str, ty| {
             RosTopic::new(link.key_scheme, link.domain_id, &link.namespace, name, ty)
         };
         let mut topics = Vec::from(RosTopic::of_link(link)?);
-        topics.push(topic(&super::base::ground_truth_topic(link), ODOMETRY)?);
+        topics.push(topic(&super::ground_truth_topic(link), ODOMETRY)?);
         if let Some(f) = &link.fixes {
             topics.push(topic(&f.topic, *super::fixes::fix_type(f.message))?);
         }

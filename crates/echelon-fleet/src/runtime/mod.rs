@@ -29,7 +29,7 @@ mod task;
 pub use task::{Flow, Latching, Outputs, Sample, Task, WaitFor};
 
 /// Longest sleep, real time, so that a stop request is seen.
-const NAP: Duration = Duration::from_millis(20);
+pub const NAP: Duration = Duration::from_millis(20);
 /// Longest wait for the answers to a task's latch query, real time.
 pub const LATCH_QUERY_TIMEOUT: Duration = Duration::from_secs(1);
 
@@ -51,22 +51,21 @@ struct ZenohOutputs<'a> {
 }
 
 impl Outputs for ZenohOutputs<'_> {
-    fn publish(&mut self, output: usize, payload: &[u8]) -> Result<(), FleetError> {
-        let publisher = self.publisher(output)?;
-        net::publish(self.session, publisher, payload)
-    }
-
-    fn publish_attached(
+    fn send(
         &mut self,
         output: usize,
         payload: &[u8],
-        attachment: &[u8],
+        attachment: Option<&[u8]>,
     ) -> Result<(), FleetError> {
-        self.publisher(output)?
-            .put(payload.to_vec())
-            .attachment(attachment.to_vec())
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))
+        let publisher = self.publisher(output)?;
+        match attachment {
+            None => net::publish(self.session, publisher, payload),
+            Some(attachment) => publisher
+                .put(payload.to_vec())
+                .attachment(attachment.to_vec())
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("publishing: {e}"))),
+        }
     }
 
     fn put(&mut self, key: &str, payload: &[u8]) {

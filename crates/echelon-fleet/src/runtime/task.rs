@@ -40,17 +40,28 @@ pub enum Flow {
 /// Where a task's messages go: Zenoh ([`super::run`]) or the in-memory
 /// bus ([`super::bus`]).
 pub trait Outputs {
-    /// Publishes `payload` on the task's output number `output` (an index
-    /// into [`Task::outputs`]), stamped with the sender's timestamp.
-    fn publish(&mut self, output: usize, payload: &[u8]) -> Result<(), FleetError>;
-    /// Publishes `payload` with `attachment` on output `output`, unstamped
-    /// (as rmw_zenoh does).
+    /// Sends `payload` on the task's output number `output` (an index into
+    /// [`Task::outputs`]): without an attachment stamped with the sender's
+    /// timestamp, with one unstamped (as rmw_zenoh does).
+    fn send(
+        &mut self,
+        output: usize,
+        payload: &[u8],
+        attachment: Option<&[u8]>,
+    ) -> Result<(), FleetError>;
+    /// Publishes `payload` on output `output`, stamped.
+    fn publish(&mut self, output: usize, payload: &[u8]) -> Result<(), FleetError> {
+        self.send(output, payload, None)
+    }
+    /// Publishes `payload` with `attachment` on output `output`, unstamped.
     fn publish_attached(
         &mut self,
         output: usize,
         payload: &[u8],
         attachment: &[u8],
-    ) -> Result<(), FleetError>;
+    ) -> Result<(), FleetError> {
+        self.send(output, payload, Some(attachment))
+    }
     /// Puts `payload` on `key`, stamped, without a declared publisher; best
     /// effort (errors are ignored).
     fn put(&mut self, key: &str, payload: &[u8]);

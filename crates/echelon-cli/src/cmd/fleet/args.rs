@@ -7,6 +7,7 @@ use clap::{Args, Subcommand, ValueEnum};
 use echelon::scenario::{Scenario, is_valid_fleet_name};
 use echelon_fleet::faults::FaultSpec;
 use echelon_fleet::net::{self, Mode, NetOptions, Secure};
+use echelon_fleet::options::ProcessOptions;
 
 use crate::cmd::{non_negative, parse_number, positive};
 
@@ -164,6 +165,47 @@ fn outage(s: &str) -> Result<(f64, f64), String> {
     Ok((non_negative(a)?, positive(b)?))
 }
 
+/// A scenario and one of its agents (`robot`, `base`, `excite`).
+#[derive(Debug, Args)]
+pub(crate) struct AgentArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    pub(super) scenario: String,
+    /// Which agent of the scenario, from 1.
+    #[arg(long, value_name = "K")]
+    pub(super) agent: u32,
+}
+
+/// How long and how fast a fleet process's clock runs (`leader`, `robot`,
+/// `base`, `up`).
+#[derive(Debug, Args)]
+pub(crate) struct ClockArgs {
+    /// Stop at this fleet time, s [default: leader and up, the scenario's sim.duration; robot and base, at SIGINT/SIGTERM].
+    #[arg(long, value_name = "S", value_parser = positive)]
+    pub(super) duration: Option<f64>,
+    /// Run the clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    pub(super) time_scale: f64,
+}
+
+impl ClockArgs {
+    /// A process of `scenario` on this clock, joining the fleet by `net`
+    /// (its session options `options`, its fleet name).
+    pub(super) fn process(
+        &self,
+        scenario: Scenario,
+        options: NetOptions,
+        net: &NetArgs,
+    ) -> ProcessOptions {
+        ProcessOptions {
+            scenario,
+            time_scale: self.time_scale,
+            duration: self.duration,
+            net: options,
+            fleet: net.fleet.clone(),
+        }
+    }
+}
+
 /// `echelon fleet leader`.
 #[derive(Debug, Args)]
 pub(crate) struct LeaderArgs {
@@ -172,12 +214,8 @@ pub(crate) struct LeaderArgs {
     /// Publication rate, Hz [default: the scenario's [fleet] reference_rate, else 50].
     #[arg(long, value_name = "HZ", value_parser = positive)]
     pub(super) rate: Option<f64>,
-    /// Fleet seconds to publish [default: the scenario's sim.duration].
-    #[arg(long, value_name = "S", value_parser = positive)]
-    pub(super) duration: Option<f64>,
-    /// Run the clock K times faster than real time.
-    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
-    pub(super) time_scale: f64,
+    #[command(flatten)]
+    pub(super) clock: ClockArgs,
     /// Wait for this process (collector, robot/K) before starting the clock (repeatable).
     #[arg(long, value_name = "ROLE")]
     pub(super) wait_for: Vec<String>,
@@ -191,17 +229,10 @@ pub(crate) struct LeaderArgs {
 /// `echelon fleet robot`.
 #[derive(Debug, Args)]
 pub(crate) struct RobotArgs {
-    /// A built-in scenario name or a path to a .toml file.
-    pub(super) scenario: String,
-    /// Which agent of the scenario, from 1.
-    #[arg(long, value_name = "K")]
-    pub(super) agent: u32,
-    /// Stop at this fleet time, s [default: run until SIGINT/SIGTERM].
-    #[arg(long, value_name = "S", value_parser = positive)]
-    pub(super) duration: Option<f64>,
-    /// Run the clock K times faster than real time.
-    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
-    pub(super) time_scale: f64,
+    #[command(flatten)]
+    pub(super) agent: AgentArgs,
+    #[command(flatten)]
+    pub(super) clock: ClockArgs,
     /// Drive the agent's ROS 2 robot ([fleet.ros2]): odom in, cmd_vel out over rmw_zenoh.
     #[arg(long)]
     pub(super) ros2: bool,
@@ -218,20 +249,13 @@ pub(crate) struct RobotArgs {
 /// `echelon fleet base`.
 #[derive(Debug, Args)]
 pub(crate) struct BaseArgs {
-    /// A built-in scenario name or a path to a .toml file.
-    pub(super) scenario: String,
+    #[command(flatten)]
+    pub(super) agent: AgentArgs,
+    #[command(flatten)]
+    pub(super) clock: ClockArgs,
     /// Simulate a ROS 2 base (the only kind so far; required).
     #[arg(long)]
     pub(super) ros2: bool,
-    /// Which agent's base, from 1.
-    #[arg(long, value_name = "K")]
-    pub(super) agent: u32,
-    /// Stop after this many (scaled) seconds [default: run until SIGINT/SIGTERM].
-    #[arg(long, value_name = "S", value_parser = positive)]
-    pub(super) duration: Option<f64>,
-    /// Run the clock K times faster than real time.
-    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
-    pub(super) time_scale: f64,
     #[command(flatten)]
     pub(super) net: NetArgs,
 }
@@ -239,14 +263,12 @@ pub(crate) struct BaseArgs {
 /// `echelon fleet excite`.
 #[derive(Debug, Args)]
 pub(crate) struct ExciteArgs {
-    /// A built-in scenario name or a path to a .toml file (the agent's velocity base and [fleet.ros2] link).
-    pub(super) scenario: String,
+    /// The agent (its velocity base and [fleet.ros2] link).
+    #[command(flatten)]
+    pub(super) agent: AgentArgs,
     /// Drive a ROS 2 robot (the only kind; required).
     #[arg(long)]
     pub(super) ros2: bool,
-    /// Which agent's robot, from 1.
-    #[arg(long, value_name = "K")]
-    pub(super) agent: u32,
     /// The MCAP bag to write (cmd_vel and odom as ROS 2 channels).
     #[arg(long, value_name = "FILE")]
     pub(super) out: PathBuf,
@@ -314,12 +336,8 @@ pub(crate) struct UpArgs {
     /// Output directory.
     #[arg(long, value_name = "DIR")]
     pub(super) out: PathBuf,
-    /// Fleet seconds to run [default: the scenario's sim.duration].
-    #[arg(long, value_name = "S", value_parser = positive)]
-    pub(super) duration: Option<f64>,
-    /// Run every clock K times faster than real time.
-    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
-    pub(super) time_scale: f64,
+    #[command(flatten)]
+    pub(super) clock: ClockArgs,
     #[command(flatten)]
     pub(super) faults: FaultArgs,
     /// Secure mode with the certificates in DIR (`echelon fleet certs DIR`).

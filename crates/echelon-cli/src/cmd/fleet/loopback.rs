@@ -67,8 +67,8 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
         &UpOptions {
             scenario: a.scenario,
             out: a.out.clone(),
-            duration: a.duration,
-            time_scale: a.time_scale,
+            duration: a.clock.duration,
+            time_scale: a.clock.time_scale,
             faults: a.faults.spec(),
             secure: a.secure,
             exe,

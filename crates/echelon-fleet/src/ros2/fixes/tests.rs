@@ -1,4 +1,5 @@
 use super::*;
+use echelon::odometry::bound::KinematicTheorem2;
 use echelon::odometry::{FixSchedule, Fusion};
 use echelon_ros2::keys::topic_key;
 use echelon_ros2::msgs::{ODOMETRY, Time};

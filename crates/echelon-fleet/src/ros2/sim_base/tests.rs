@@ -2,7 +2,9 @@ use super::*;
 use crate::ros2::drive::encode_cmd_vel;
 use echelon::base::VelocityBase;
 use echelon::odometry::ErrorModel;
+use echelon::scenario::Scenario;
 use echelon_ros2::KeyScheme;
+use echelon_ros2::keys::topic_key;
 use echelon_ros2::msgs::{TWIST, TWIST_STAMPED};
 
 fn link() -> Ros2Link {

@@ -1,0 +1,251 @@
+//! Zenoh sessions: the default configuration (peer mode, no multicast
+//! scouting, explicit endpoints), client mode (one link to a router), router
+//! mode (`fleet router`), a user's `--zenoh-config` file, and the secure mode
+//! (mutual TLS with access control by certificate common name). Every
+//! process's session, the router's included, is configured here; the
+//! secure mode's access control is generated in [`acl`].
+
+use std::path::PathBuf;
+
+use serde::Serialize;
+use serde_json::json;
+use zenoh::bytes::ZBytes;
+use zenoh::{Config, Session, Wait};
+
+use crate::FleetError;
+
+mod acl;
+pub use acl::{
+    RosAcl, Secure, access_control, answers, common_name, identities, identity_files, publishes,
+    ros_acl, subscribes,
+};
+
+/// How long `open` waits for every `connect` endpoint, s of real time.
+pub const CONNECT_TIMEOUT_MS: u64 = 30_000;
+
+/// A session's Zenoh mode.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Links to the peers it connects to (and, by gossip, to the peers they
+    /// know); routes nothing for others.
+    #[default]
+    Peer,
+    /// Exactly one link, to a router, which routes everything for it; when the
+    /// router goes away it keeps reconnecting.
+    Client,
+    /// Routes for its clients and peers and links to other routers
+    /// (`fleet router`, the engine of `zenohd`).
+    Router,
+}
+
+impl Mode {
+    /// Zenoh's name of the mode.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Peer => "peer",
+            Mode::Client => "client",
+            Mode::Router => "router",
+        }
+    }
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Where and how a process joins the fleet.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct NetOptions {
+    /// Zenoh mode; `None`: peer, or the `zenoh_config` file's mode.
+    pub mode: Option<Mode>,
+    /// Endpoints to listen on, e.g. `tcp/127.0.0.1:7447` (`tls/…` in secure mode).
+    pub listen: Vec<String>,
+    /// Endpoints to connect to.
+    pub connect: Vec<String>,
+    /// A Zenoh configuration file (JSON5) to start from instead of the default.
+    pub zenoh_config: Option<PathBuf>,
+    /// Secure mode.
+    pub secure: Option<Secure>,
+}
+
+/// The session options of agent `agent`'s robot's own router: a client of
+/// the first of `connect` that answers (one link; no gossip, so no
+/// link to the robot's own nodes), in secure mode with the process's
+/// identity (the robot's router must then be a `tls/` or `quic/` listener
+/// trusting the fleet's CA: docs/real-robots.md).
+pub fn robot_router(
+    agent: u32,
+    connect: &[String],
+    fleet: &NetOptions,
+) -> Result<NetOptions, FleetError> {
+    if let Some(s) = &fleet.secure
+        && let Some(e) = connect
+            .iter()
+            .find(|e| !(e.starts_with("tls/") || e.starts_with("quic/")))
+    {
+        return Err(FleetError::Config(format!(
+            "agent {agent}: ros2.connect `{e}`: in secure mode a robot's router is reached over tls/ or quic/ with identity {} (docs/real-robots.md, \"Secure mode on real robots\")",
+            s.identity
+        )));
+    }
+    if fleet.secure.is_none()
+        && let Some(e) = connect
+            .iter()
+            .find(|e| e.starts_with("tls/") || e.starts_with("quic/"))
+    {
+        return Err(FleetError::Config(format!(
+            "agent {agent}: ros2.connect `{e}` needs certificates: give --secure DIR (or a tcp/ endpoint)"
+        )));
+    }
+    Ok(NetOptions {
+        mode: Some(Mode::Client),
+        listen: Vec::new(),
+        connect: connect.to_vec(),
+        zenoh_config: None,
+        secure: fleet.secure.clone(),
+    })
+}
+
+/// The Zenoh link protocol of the secure mode: QUIC (TLS 1.3 inside, mutual
+/// authentication, certificate common names for the access control).
+///
+/// Not Zenoh's `tls` link: zenoh-link-tls 1.10 reads and writes one rustls
+/// stream from two tasks without a lock (eclipse-zenoh/zenoh#2557, open), and
+/// fleet processes died of it (SIGILL in rustls) about one run in six under
+/// the secure tests. QUIC's streams (quinn) are split safely.
+pub const SECURE_PROTOCOL: &str = "quic";
+
+/// The link protocol of a fleet: [`SECURE_PROTOCOL`] with `--secure`, else TCP.
+pub fn link_protocol(secure: bool) -> &'static str {
+    if secure { SECURE_PROTOCOL } else { "tcp" }
+}
+
+fn set(config: &mut Config, key: &str, value: serde_json::Value) -> Result<(), FleetError> {
+    config
+        .insert_json5(key, &value.to_string())
+        .map_err(|e| FleetError::Zenoh(format!("config {key}: {e}")))
+}
+
+/// The Zenoh configuration for these options.
+pub fn config(opts: &NetOptions) -> Result<Config, FleetError> {
+    let mut config = match &opts.zenoh_config {
+        Some(path) => Config::from_file(path)
+            .map_err(|e| FleetError::Zenoh(format!("{}: {e}", path.display())))?,
+        None => {
+            let mut c = Config::default();
+            set(&mut c, "mode", json!(Mode::Peer.as_str()))?;
+            set(&mut c, "scouting/multicast/enabled", json!(false))?;
+            if opts.listen.is_empty() && opts.mode != Some(Mode::Client) {
+                let proto = link_protocol(opts.secure.is_some());
+                set(
+                    &mut c,
+                    "listen/endpoints",
+                    json!([format!("{proto}/127.0.0.1:0")]),
+                )?;
+            }
+            c
+        }
+    };
+    if let Some(mode) = opts.mode {
+        set(&mut config, "mode", json!(mode.as_str()))?;
+    }
+    if !opts.listen.is_empty() {
+        set(&mut config, "listen/endpoints", json!(opts.listen))?;
+    }
+    if !opts.connect.is_empty() {
+        set(&mut config, "connect/endpoints", json!(opts.connect))?;
+        set(&mut config, "connect/timeout_ms", json!(CONNECT_TIMEOUT_MS))?;
+        // A process needs its links to start; a router comes up alone and
+        // links to the other sites' routers when they appear. Either way a
+        // link lost later is retried for ever (a client re-opens its session
+        // with its router, its subscriptions and tokens included).
+        let router = opts.mode == Some(Mode::Router);
+        set(&mut config, "connect/exit_on_failure", json!(!router))?;
+        set(
+            &mut config,
+            "connect/retry",
+            json!({"period_init_ms": 50, "period_max_ms": 500, "period_increase_factor": 2}),
+        )?;
+    }
+    if let Some(s) = &opts.secure {
+        set(&mut config, "transport/link/tls", tls(s)?)?;
+        set(
+            &mut config,
+            "access_control",
+            access_control(s.robots, &s.ros2),
+        )?;
+    }
+    Ok(config)
+}
+
+/// The TLS section of the secure mode (Zenoh reads it for QUIC links too):
+/// `s.identity`'s certificate on both sides of every link, the fleet CA as
+/// the only root, mutual authentication.
+fn tls(s: &Secure) -> Result<serde_json::Value, FleetError> {
+    let ca = s.dir.join("ca.pem");
+    let (cert, key) = identity_files(&s.dir, &s.identity);
+    for f in [&ca, &cert, &key] {
+        if !f.is_file() {
+            return Err(FleetError::Config(format!(
+                "secure mode needs {} (make the certificates with `echelon fleet certs {}`)",
+                f.display(),
+                s.dir.display()
+            )));
+        }
+    }
+    let path = |p: &PathBuf| json!(p.display().to_string());
+    Ok(json!({
+        "root_ca_certificate": path(&ca),
+        "listen_certificate": path(&cert),
+        "listen_private_key": path(&key),
+        "connect_certificate": path(&cert),
+        "connect_private_key": path(&key),
+        "enable_mtls": true,
+    }))
+}
+
+/// Opens a session (blocks until every `connect` endpoint is reached, or fails).
+pub fn open(opts: &NetOptions) -> Result<Session, FleetError> {
+    let config = config(opts)?;
+    zenoh::open(config)
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("opening the session: {e}")))
+}
+
+/// Publishes one encoded message, stamped with the session's timestamp
+/// (the receivers' latency measure, [`crate::latency`]).
+pub(crate) fn publish(
+    session: &Session,
+    publisher: &zenoh::pubsub::Publisher<'_>,
+    bytes: &[u8],
+) -> Result<(), FleetError> {
+    publisher
+        .put(bytes.to_vec())
+        .timestamp(session.new_timestamp())
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))
+}
+
+/// Puts `payload` on `key` (a non-declared publication, e.g. a robot's
+/// stats), stamped like [`publish`]; errors are ignored (best effort).
+pub(crate) fn put_stamped(session: &Session, key: &str, payload: impl Into<ZBytes>) {
+    let _ = session
+        .put(key, payload)
+        .timestamp(session.new_timestamp())
+        .wait();
+}
+
+/// A random source id: the low bits of a hash of the process id and the time.
+pub(crate) fn rand_source() -> u32 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u32(std::process::id());
+    h.write_u64(crate::unix_nanos());
+    h.finish() as u32
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,280 @@
+use super::*;
+use crate::keys::Keys;
+use crate::role::Member;
+
+#[test]
+fn default_config_is_peer_without_multicast() {
+    let c = config(&NetOptions {
+        listen: vec!["tcp/127.0.0.1:7999".into()],
+        connect: vec!["tcp/127.0.0.1:7998".into()],
+        ..NetOptions::default()
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(c.get_json("mode").ok().as_deref(), Some("\"peer\""));
+    assert_eq!(
+        c.get_json("scouting/multicast/enabled").ok().as_deref(),
+        Some("false")
+    );
+    assert!(
+        c.get_json("listen/endpoints")
+            .unwrap_or_default()
+            .contains("7999")
+    );
+}
+
+#[test]
+fn a_client_does_not_listen_and_a_router_outlives_its_connects() {
+    let client = config(&NetOptions {
+        mode: Some(Mode::Client),
+        connect: vec!["tcp/127.0.0.1:7998".into()],
+        ..NetOptions::default()
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(client.get_json("mode").ok().as_deref(), Some("\"client\""));
+    assert!(
+        !client
+            .get_json("listen/endpoints")
+            .unwrap_or_default()
+            .contains("127.0.0.1:0")
+    );
+    assert_eq!(
+        client.get_json("connect/exit_on_failure").ok().as_deref(),
+        Some("true")
+    );
+    let router = config(&NetOptions {
+        mode: Some(Mode::Router),
+        listen: vec!["tcp/127.0.0.1:7999".into()],
+        connect: vec!["tcp/127.0.0.1:7998".into()],
+        ..NetOptions::default()
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(router.get_json("mode").ok().as_deref(), Some("\"router\""));
+    assert_eq!(
+        router.get_json("connect/exit_on_failure").ok().as_deref(),
+        Some("false")
+    );
+}
+
+/// What the scenario accepts as a robot's router Zenoh parses as an
+/// endpoint, and a robot's own session is a client of it, with
+/// certificates exactly when the link needs them.
+#[test]
+fn a_robots_router_is_a_zenoh_endpoint_reached_as_a_client() {
+    let plain = [
+        "tcp/192.168.1.21:7447",
+        "udp/robot-1.lab:7447",
+        "tcp/[fe80::1]:7447#iface=eth0",
+    ];
+    let secured = ["tls/10.0.0.2:7448", "quic/robot-2:7448"];
+    for e in plain.iter().chain(&secured) {
+        echelon::scenario::check_endpoint(e).unwrap_or_else(|m| panic!("{m}"));
+        e.parse::<zenoh::config::EndPoint>()
+            .unwrap_or_else(|m| panic!("{e}: {m}"));
+    }
+    let fleet = NetOptions {
+        mode: Some(Mode::Client),
+        connect: vec!["tcp/127.0.0.1:7447".into()],
+        ..NetOptions::default()
+    };
+    let robot = robot_router(1, &[plain[0].into(), plain[1].into()], &fleet)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(robot.mode, Some(Mode::Client));
+    assert_eq!(
+        robot.connect,
+        vec![plain[0].to_owned(), plain[1].to_owned()]
+    );
+    assert!(robot.listen.is_empty() && robot.secure.is_none());
+    let c = config(&robot).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(c.get_json("mode").ok().as_deref(), Some("\"client\""));
+    let e = robot_router(2, &[secured[0].into()], &fleet)
+        .err()
+        .unwrap_or_else(|| panic!("tls without certificates"));
+    assert!(
+        e.to_string().contains("agent 2") && e.to_string().contains("--secure"),
+        "{e}"
+    );
+    let secure = NetOptions {
+        secure: Some(Secure {
+            dir: "certs".into(),
+            identity: "robot-3".into(),
+            robots: 3,
+            ros2: Vec::new(),
+        }),
+        ..fleet
+    };
+    let robot =
+        robot_router(3, &secured.map(String::from), &secure).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(robot.secure, secure.secure);
+    let e = robot_router(3, &[plain[0].into()], &secure)
+        .err()
+        .unwrap_or_else(|| panic!("tcp in secure mode"));
+    assert!(e.to_string().contains("tls/ or quic/"), "{e}");
+}
+
+#[test]
+fn access_control_is_accepted_by_zenoh() {
+    let mut c = Config::default();
+    let ros = vec![RosAcl {
+        cmd_vel: "0/robot1/cmd_vel/*/*".into(),
+        odom: "0/robot1/odom/*/*".into(),
+        truth: "0/robot1/ground_truth/*/*".into(),
+        fixes: Some("0/mocap/robot1/pose/*/*".into()),
+    }];
+    set(&mut c, "access_control", access_control(3, &ros)).unwrap_or_else(|e| panic!("{e}"));
+    let acl = c.get_json("access_control").unwrap_or_default();
+    assert!(acl.contains("echelon-robot-3") && acl.contains("echelon/*/reference"));
+    assert!(acl.contains("echelon-router") && acl.contains("router-in"));
+}
+
+use serde_json::Value;
+
+#[path = "../../tests/common/acl.rs"]
+mod acl_reading;
+use acl_reading::{includes, strs};
+
+/// Whether `acl` lets a message `message` on `key` flow `flow` from (or
+/// to) the certificate `cn` ([`acl_reading::allows`]).
+fn allows(acl: &Value, cn: &str, flow: &str, message: &str, key: &str) -> bool {
+    let named = |s: &Value| strs(&s["cert_common_names"]).contains(&cn);
+    acl_reading::allows(acl, named, flow, message, key)
+}
+
+/// Agents `1..=n`'s ROS 2 keys as [`ros_acl`] writes them.
+fn ros_links(n: u32) -> Vec<RosAcl> {
+    (1..=n)
+        .map(|k| RosAcl {
+            cmd_vel: format!("0/robot{k}/cmd_vel/*/*"),
+            odom: format!("0/robot{k}/odom/*/*"),
+            truth: format!("0/robot{k}/ground_truth/*/*"),
+            fixes: (k % 2 == 1).then(|| format!("0/robot{k}/pose/*/*")),
+        })
+        .collect()
+}
+
+/// A concrete key of a ROS 2 key expression (any type).
+fn concrete(expr: &str) -> String {
+    expr.replace('*', "T")
+}
+
+/// For every fleet size, with and without ROS 2 links, and every
+/// identity: a put arriving from it is allowed exactly on the keys its
+/// members publish, in any fleet; every member may declare what it
+/// subscribes to.
+#[test]
+fn each_identity_may_put_exactly_what_its_members_publish() {
+    for robots in 1..=4 {
+        for with_ros in [0, 1, robots] {
+            let ros = ros_links(with_ros);
+            let acl = access_control(robots, &ros);
+            let members = Member::all(robots);
+            let fleets = [Keys::new("lab"), Keys::new("lab-2")];
+            // Every key any member puts, in two fleets, and keys no
+            // member of this fleet size puts.
+            let mut universe: Vec<String> = Vec::new();
+            for keys in &fleets {
+                for m in members.iter().filter(|m| **m != Member::Router) {
+                    universe.extend(publishes(*m, keys, &ros).iter().map(|k| concrete(k)));
+                }
+                universe.push(keys.state(robots + 1));
+                universe.push(keys.stats(robots + 1));
+                universe.push(keys.alive("x"));
+            }
+            universe.extend(
+                ros_links(robots + 1)
+                    .iter()
+                    .flat_map(|r| r.all().map(|k| concrete(&k)).collect::<Vec<_>>()),
+            );
+            for id in identities(robots) {
+                let cn = common_name(&id);
+                let own: Vec<Member> = members
+                    .iter()
+                    .copied()
+                    .filter(|m| m.identity() == id)
+                    .collect();
+                assert!(!own.is_empty(), "{id}");
+                for key in &universe {
+                    let expected = own.iter().any(|m| {
+                        fleets
+                            .iter()
+                            .any(|keys| publishes(*m, keys, &ros).iter().any(|p| includes(p, key)))
+                    });
+                    assert_eq!(
+                        allows(&acl, &cn, "ingress", "put", key),
+                        expected,
+                        "{robots} robots, {with_ros} ROS 2 links: {id} putting {key}"
+                    );
+                }
+                for m in &own {
+                    for msg in ["query", "reply"] {
+                        assert!(allows(&acl, &cn, "egress", msg, &fleets[0].latches()));
+                    }
+                    if let Some(key) = answers(*m, &fleets[0]) {
+                        for msg in ["declare_queryable", "reply"] {
+                            assert!(
+                                allows(&acl, &cn, "egress", msg, &key)
+                                    && allows(&acl, &cn, "ingress", msg, &key),
+                                "{m} answering on {key}"
+                            );
+                        }
+                    }
+                    for key in subscribes(*m, &fleets[0], &ros) {
+                        assert!(
+                            allows(&acl, &cn, "egress", "declare_subscriber", &key)
+                                && allows(&acl, &cn, "ingress", "declare_subscriber", &key),
+                            "{m} subscribing to {key}"
+                        );
+                    }
+                }
+            }
+            // Nobody outside the fleet's identities may put anything.
+            for key in &universe {
+                assert!(!allows(&acl, "echelon-robot-99", "ingress", "put", key));
+            }
+            // The fleet command: from the operator and the leader only
+            // (and a router, which forwards everything of the fleet).
+            for keys in &fleets {
+                for id in identities(robots) {
+                    assert_eq!(
+                        allows(&acl, &common_name(&id), "ingress", "put", &keys.command()),
+                        ["operator", "leader", "router"].contains(&id.as_str()),
+                        "{id} putting the command"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// The tasks' declarations are the ones the access control is made of:
+/// what a leader and robot publish is what [`publishes`] says, what they
+/// subscribe to is within [`subscribes`], their tokens are their names.
+#[test]
+fn the_roles_declare_what_the_access_control_allows() {
+    use crate::faults::FaultSpec;
+    use crate::leader::{Leader, LeaderTask};
+    use crate::robot::{Robot, RobotTask};
+    use crate::runtime::Task;
+
+    let (s, _, reference) = crate::testing::fast_circle();
+    let keys = Keys::new("lab");
+    let within = |declared: &[String], allowed: &[String], what: &str| {
+        for d in declared {
+            assert!(allowed.iter().any(|a| includes(a, d)), "{what}: {d}");
+        }
+    };
+    let leader = LeaderTask::new(Leader::new(reference, 50.0, 1.0, 1), keys.clone());
+    let m = Member::Leader;
+    assert_eq!(leader.outputs(), publishes(m, &keys, &[]));
+    within(&leader.inputs(), &subscribes(m, &keys, &[]), "leader");
+    assert_eq!(leader.tokens(), vec![keys.alive(&m.liveliness())]);
+    for k in 1..=2 {
+        let config = crate::testing::robot_config(&s, k, FaultSpec::default());
+        let robot = RobotTask::new(Robot::simulated(config, 1), keys.clone());
+        let m = Member::Robot(k);
+        let mut out = robot.outputs();
+        out.push(keys.stats(k));
+        assert_eq!(out, publishes(m, &keys, &[]));
+        within(&robot.inputs(), &subscribes(m, &keys, &[]), "robot");
+        assert_eq!(robot.tokens(), vec![keys.alive(&m.liveliness())]);
+    }
+}

@@ -1,0 +1,35 @@
+//! Why a ROS 2 sample was refused: one type for the drive's odometry, the
+//! simulated base's `cmd_vel` and the fixes' poses.
+
+use echelon_ros2::CdrError;
+
+/// Why a ROS 2 sample was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SampleRefusal {
+    /// The key carries another type or hash.
+    #[error("wrong type on the key: {0}")]
+    WrongType(String),
+    /// Not CDR of the expected type.
+    #[error("malformed CDR: {0}")]
+    Malformed(CdrError),
+    /// A NaN or an infinity.
+    #[error("non-finite {0}")]
+    NonFinite(&'static str),
+    /// Frames other than configured.
+    #[error("frames `{0}` → `{1}`, expected the configured ones")]
+    WrongFrames(String, String),
+    /// rmw_zenoh subscribers drop a sample without its attachment.
+    #[error("no valid rmw_zenoh attachment")]
+    NoAttachment,
+}
+
+impl From<CdrError> for SampleRefusal {
+    /// A non-finite field is [`SampleRefusal::NonFinite`]; any other CDR
+    /// error is [`SampleRefusal::Malformed`].
+    fn from(e: CdrError) -> Self {
+        match e {
+            CdrError::NonFinite { field } => Self::NonFinite(field),
+            e => Self::Malformed(e),
+        }
+    }
+}

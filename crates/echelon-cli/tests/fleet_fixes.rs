@@ -165,20 +165,27 @@ fn worst_true_error(log: &Logged, settled: f64) -> BTreeMap<u32, (f64, usize)> {
 /// fixes. `ζ̂` is the odometry error the run measured: the largest per-axis
 /// distance between a robot's true and estimated positions, per odometry
 /// sample since the start (`N = t / T_s` samples of dead reckoning). The
-/// theorem is for an ideal base and a continuous controller, whose `ê` (the
-/// error the robot sees) the law keeps at the estimate's own error; a fleet
-/// robot is a sampled loop over a network, and what it leaves in `ê` is
-/// measured here as `r`, the 99th percentile of its `‖ê‖` once the start's
-/// transient is over (fleet t ≥ 20 s). Checked: `r` stays under 1 cm (the
-/// robot tracks its estimate), the true ‖e‖ stays under `√2 N ζ̂ / γ + r` in
-/// 99 % of the samples (a loaded machine's brief stall is outside what the
-/// theorem models, and counted), and the error did grow.
+/// theorem speaks of position errors with the heading exact (its
+/// Assumption 1), so it is checked on `e` at the true position and the
+/// estimated heading; this odometry's longer wheelbase also drifts the
+/// heading, which rotates `p − p_d` and adds `2|sin(θ̃/2)|‖p − p_d‖` to the
+/// true ‖e‖ (reported, not bounded by the theorem). The theorem is for an
+/// ideal base and a continuous controller, whose `ê` (the error the robot
+/// sees) the law keeps at the estimate's own error; a fleet robot is a
+/// sampled loop over a network, and what it leaves in `ê` is measured as
+/// `r`, the 99th percentile of its `‖ê‖` once the start's transient is over
+/// (fleet t ≥ 20 s). Checked: `r` stays under 1 cm (the robot tracks its
+/// estimate), that `e` stays under `√2 N ζ̂ / γ + r` in 99 % of the samples
+/// (a loaded machine's brief stall is outside what the theorem models, and
+/// counted), and the true error did grow.
 fn theorem_2_holds_on_measured_drift(log: &Logged) {
     const TS: f64 = 0.02;
     const GAMMA: f64 = 0.99;
     const SETTLED: f64 = 20.0;
     for (k, (states, truth)) in log {
-        // (fleet t, true ‖e‖, per-axis position error), matched in wall time.
+        // (fleet t, true ‖e‖, per-axis position error, ‖e‖ at the true
+        // position and the estimated heading, the heading's share), matched
+        // in wall time.
         let mut rows = Vec::new();
         for &(stamp, pose) in truth {
             let i = states.partition_point(|s| s.wall < stamp);
@@ -188,12 +195,25 @@ fn theorem_2_holds_on_measured_drift(log: &Logged) {
             let axis = (pose[0] - est.pose[0])
                 .abs()
                 .max((pose[1] - est.pose[1]).abs());
-            rows.push((est.t, true_error(est, pose), axis));
+            let at_estimated_heading = true_error(est, [pose[0], pose[1], est.pose[2]]);
+            let heading = (pose[2] - est.pose[2])
+                .sin()
+                .atan2((pose[2] - est.pose[2]).cos());
+            let share = 2.0
+                * (heading / 2.0).sin().abs()
+                * (pose[0] - est.pd[0]).hypot(pose[1] - est.pd[1]);
+            rows.push((
+                est.t,
+                true_error(est, pose),
+                axis,
+                at_estimated_heading,
+                share,
+            ));
         }
         let zeta = rows
             .iter()
             .filter(|r| r.0 > 1.0)
-            .map(|&(t, _, axis)| axis / (t / TS))
+            .map(|&(t, _, axis, ..)| axis / (t / TS))
             .fold(0.0f64, f64::max);
         assert!(zeta > 0.0, "agent {k}: no drift measured");
         let mut seen: Vec<f64> = states
@@ -206,8 +226,9 @@ fn theorem_2_holds_on_measured_drift(log: &Logged) {
         let r = seen[seen.len() * 99 / 100];
         assert!(r < 0.01, "agent {k}: the robot's own ‖ê‖ p99 {r} m");
         let (mut checked, mut over) = (0usize, Vec::new());
-        let mut ratio = 0.0f64;
-        for &(t, e, _) in rows.iter().filter(|r| r.0 >= SETTLED) {
+        let (mut ratio, mut heading_share) = (0.0f64, 0.0f64);
+        for &(t, _, _, e, share) in rows.iter().filter(|r| r.0 >= SETTLED) {
+            heading_share = heading_share.max(share);
             let bound = std::f64::consts::SQRT_2 * (t / TS) * zeta / GAMMA + r;
             ratio = ratio.max(e / bound);
             if e > bound {
@@ -218,14 +239,15 @@ fn theorem_2_holds_on_measured_drift(log: &Logged) {
         assert!(checked > 1000, "agent {k}: {checked} samples checked");
         assert!(
             over.len() * 100 <= checked,
-            "agent {k}: true ‖e‖ over Theorem 2's bound (ζ̂ = {zeta:e} m/sample, r = {r} m) \
+            "agent {k}: ‖e‖ (true position, estimated heading) over Theorem 2's bound (ζ̂ = {zeta:e} m/sample, r = {r} m) \
              in {} of {checked} samples: {:?}",
             over.len(),
             &over[..over.len().min(10)]
         );
         eprintln!(
-            "agent {k}: ζ̂ = {zeta:e} m/sample, r = {r:.4} m, true ‖e‖ at most {ratio:.2} of the \
-             bound, over it in {} of {checked} samples",
+            "agent {k}: ζ̂ = {zeta:e} m/sample, r = {r:.4} m, ‖e‖ at most {ratio:.2} of the \
+             bound, over it in {} of {checked} samples; the heading's drift added up to \
+             {heading_share:.4} m to the true ‖e‖",
             over.len()
         );
         let late = rows.iter().rev().take(50).map(|r| r.1).fold(0.0, f64::max);

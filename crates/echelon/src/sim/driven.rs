@@ -9,23 +9,19 @@
 //! the leader motion and offsets of eqs. 4–6), so that a controller written
 //! outside with [`crate::control::law`] reproduces a sampled run's bits.
 
-use super::Simulation;
-use crate::agent::{Command, Drive};
+use super::{Simulation, system};
+use crate::agent::Command;
 use crate::control::{LeaderMotion, Offset};
 use crate::error::{ParamError, SimError};
 use crate::follow::LeaderView;
 use crate::formation::Leader;
 use crate::model::State;
-use crate::reference::{Jet, Trajectory};
 
 impl Simulation {
     /// What agent `i`'s controller senses of itself: its odometry estimate
     /// when it dead-reckons (eqs. 32–35), else its true state.
     pub fn sensed(&self, i: usize) -> State {
-        match self.odometers.get(i) {
-            Some(Some(o)) => o.measure(&self.state[i]),
-            _ => self.state[i],
-        }
+        system::sensed(&self.odometers, &self.state, i)
     }
 
     /// The leader motion `p_d, ṗ_d, p̈_d` and the offsets `L_X, L_Y, L̇_Y,
@@ -39,11 +35,7 @@ impl Simulation {
         let a = &agents[i];
         match a.leader() {
             Leader::Reference => {
-                let jet = if self.sys.uses_reference {
-                    self.sys.plan.reference().eval(self.time(), self.sys.order)
-                } else {
-                    Jet::default()
-                };
+                let jet = self.sys.jet(self.time());
                 LeaderView::Reference(&jet).resolve(&a.placement())
             }
             Leader::Agent(j) => {
@@ -52,14 +44,8 @@ impl Simulation {
                 let command = leader.act(self.time(), &sensed, commands[j], None).command;
                 let applied = leader.drive().actuate(command);
                 let dv = leader.drive().derivative(&self.state[j], &applied).v;
-                let state = match leader.drive() {
-                    Drive::Torque { .. } => sensed,
-                    Drive::Velocity(_) => {
-                        let [v, omega, ..] = leader.drive().speeds(&self.state[j], &applied);
-                        State { v, omega, ..sensed }
-                    }
-                };
-                LeaderView::Robot { state, dv }.resolve(&a.placement())
+                let speeds = leader.drive().speeds(&self.state[j], &applied);
+                system::robot_leader(leader.drive(), sensed, speeds, dv).resolve(&a.placement())
             }
         }
     }

@@ -251,10 +251,7 @@ impl Simulation {
         };
         let n = self.state.len();
         for (j, seen) in safety.seen.iter_mut().enumerate() {
-            *seen = match self.odometers.get(j) {
-                Some(Some(o)) => o.measure(&self.state[j]),
-                _ => self.state[j],
-            };
+            *seen = system::sensed(&self.odometers, &self.state, j);
         }
         for i in 0..n {
             if safety.filters[i].is_none() {

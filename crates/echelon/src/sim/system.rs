@@ -12,6 +12,37 @@ use crate::odometry::Odometer;
 use crate::plan::Plan;
 use crate::reference::{Jet, Order, Trajectory};
 
+/// What agent `j`'s controller senses of itself in states `x`: its odometry
+/// estimate when it dead-reckons (eqs. 32–35), else its true state.
+#[inline]
+pub(super) fn sensed(odometers: &[Option<Odometer>], x: &[State], j: usize) -> State {
+    match odometers.get(j) {
+        Some(Some(o)) => o.measure(&x[j]),
+        _ => x[j],
+    }
+}
+
+/// What a follower's law knows of leader robot `drive` in `state`: a
+/// velocity base moves at `speeds` (`v, ω` of [`Drive::speeds`]), not at the
+/// state's own; `dv` is its `v̇` now.
+#[inline]
+pub(super) fn robot_leader(
+    drive: &Drive,
+    state: State,
+    speeds: [f64; 4],
+    dv: f64,
+) -> LeaderView<'static> {
+    let state = match drive {
+        Drive::Torque { .. } => state,
+        Drive::Velocity(_) => State {
+            v: speeds[0],
+            omega: speeds[1],
+            ..state
+        },
+    };
+    LeaderView::Robot { state, dv }
+}
+
 /// Immutable description of the system being simulated.
 #[derive(Debug, Clone)]
 pub(super) struct System {
@@ -22,6 +53,17 @@ pub(super) struct System {
 }
 
 impl System {
+    /// The reference's jet at `t`, to the order the laws need (zero when no
+    /// agent follows the reference).
+    #[inline]
+    pub(super) fn jet(&self, t: f64) -> Jet {
+        if self.uses_reference {
+            self.plan.reference().eval(t, self.order)
+        } else {
+            Jet::default()
+        }
+    }
+
     /// Evaluates every agent at time `t` and states `x`: state derivatives into
     /// `dx`, the velocities each robot moves at into `speeds` and, when `out`
     /// is given (RK4's first stage, which observers see), controller outputs
@@ -52,30 +94,15 @@ impl System {
             }
             return;
         }
-        let jet = if self.uses_reference {
-            self.plan.reference().eval(t, self.order)
-        } else {
-            Jet::default()
-        };
-        let sensed = |j: usize| match odometers.get(j) {
-            Some(Some(o)) => o.measure(&x[j]),
-            _ => x[j],
-        };
+        let jet = self.jet(t);
+        let sensed = |j: usize| sensed(odometers, x, j);
         for &i in self.plan.formation().order() {
             let a = &self.plan.agents()[i];
             // What the law knows of the leader, from a state of robot j: the
             // leader was evaluated first, so dx[j].v is its v̇ now and
             // speeds[j] the velocities its base moves at.
             let view = |state: State, j: usize| {
-                let state = match self.plan.agents()[j].drive() {
-                    Drive::Torque { .. } => state,
-                    Drive::Velocity(_) => State {
-                        v: speeds[j][0],
-                        omega: speeds[j][1],
-                        ..state
-                    },
-                };
-                LeaderView::Robot { state, dv: dx[j].v }
+                robot_leader(self.plan.agents()[j].drive(), state, speeds[j], dx[j].v)
             };
             let leader = match a.leader() {
                 Leader::Reference => LeaderView::Reference(&jet),

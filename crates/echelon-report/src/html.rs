@@ -38,6 +38,7 @@ use serde::Serialize;
 use echelon::formation::Leader;
 
 use crate::figure::palette;
+use crate::replay::STYLE;
 use crate::run::{Column, RunData};
 
 /// The report's file name.
@@ -46,30 +47,13 @@ pub const REPORT_FILE: &str = "report.html";
 /// At most this many `float32` pose values are embedded (≈ 8 MB of base64).
 pub const MAX_POSE_VALUES: usize = 1_500_000;
 
-const STYLE: &str = include_str!("../assets/report.css");
+/// The recorded run's driver of the replay drawing ([`crate::replay`]).
 const SCRIPT: &str = include_str!("../assets/replay.js");
-/// Drawing the safety discs: inserted into [`SCRIPT`] for runs with a safety
-/// filter, before [`SAFETY_FN_ANCHOR`], and called before [`SAFETY_CALL_ANCHOR`].
-const SAFETY_SCRIPT: &str = include_str!("../assets/replay-safety.js");
-const SAFETY_FN_ANCHOR: &str = "  function draw() {\n";
-const SAFETY_CALL_ANCHOR: &str = "    // Robots: oriented triangles, one filled path per colour.\n";
 
-/// The replay's script: [`SCRIPT`], with the safety drawing when `safety`.
+/// The replay's script: the drawing (with the safety drawing when
+/// `safety`), then [`SCRIPT`].
 fn script(safety: bool) -> String {
-    if !safety {
-        return SCRIPT.to_owned();
-    }
-    SCRIPT
-        .replacen(
-            SAFETY_FN_ANCHOR,
-            &format!("{SAFETY_SCRIPT}{SAFETY_FN_ANCHOR}"),
-            1,
-        )
-        .replacen(
-            SAFETY_CALL_ANCHOR,
-            &format!("    drawSafety(k, muted);\n{SAFETY_CALL_ANCHOR}"),
-            1,
-        )
+    format!("{}{SCRIPT}", crate::replay::drawing(safety))
 }
 
 /// The embedded replay data (see the module doc).
@@ -197,7 +181,7 @@ pub fn replay_data(data: &RunData) -> ReplayData {
                     Leader::Reference => -1,
                     Leader::Agent(j) => j as i64,
                 }),
-                color: palette::series(i).hex(),
+                color: crate::replay::agent_color(i),
             })
             .collect(),
         stride,
@@ -536,17 +520,13 @@ mod tests {
     }
 
     #[test]
-    fn the_safety_script_finds_its_anchors_once() {
-        assert_eq!(SCRIPT.matches(SAFETY_FN_ANCHOR).count(), 1);
-        assert_eq!(SCRIPT.matches(SAFETY_CALL_ANCHOR).count(), 1);
-        assert_eq!(script(false), SCRIPT);
-        let with = script(true);
-        assert_eq!(with.matches("function drawSafety(").count(), 1);
-        assert_eq!(with.matches("drawSafety(k, muted);").count(), 1);
-        assert!(
-            with.find("function drawSafety(") < with.find("function draw() {")
-                && with.find("drawSafety(k, muted);") < with.find(SAFETY_CALL_ANCHOR)
-        );
+    fn the_script_is_the_drawing_then_the_driver() {
+        for safety in [false, true] {
+            let s = script(safety);
+            assert!(s.ends_with(SCRIPT));
+            assert!(s.starts_with(&crate::replay::drawing(safety)));
+            assert_eq!(s.contains("function drawSafety("), safety);
+        }
     }
 
     #[test]

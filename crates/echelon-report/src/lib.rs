@@ -11,6 +11,7 @@
 //! - [`safety`]: the `safety` figure of a run with a safety filter (closest
 //!   pair, obstacle clearance, when the filters acted);
 //! - [`html`]: `report.html`, with the replay;
+//! - [`replay`]: the replay's drawing, shared with the fleet's live dashboard;
 //! - [`lycomp`]: eq. 5 against eq. 6 (Fig. 5), and refitting eq. 6 for any `L_Xoff`.
 
 pub mod figure;
@@ -18,6 +19,7 @@ pub mod html;
 pub mod lycomp;
 pub mod odometry;
 pub mod plots;
+pub mod replay;
 pub mod run;
 pub mod safety;
 

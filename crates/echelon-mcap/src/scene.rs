@@ -134,12 +134,15 @@ impl ScenePose {
     }
 }
 
-/// What is fixed during a run: safety radius, obstacles, the reference path,
-/// and who follows whom (for [`Scene::leader_point`]).
+/// What is fixed during a run: safety radius, each agent's `L`, obstacles,
+/// the reference path, and who follows whom (for [`Scene::leader_point`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SceneSpec {
     /// Each agent's leader (from 0).
     pub leaders: Vec<Leader>,
+    /// Each agent's `L` (from 0), m: its point ahead, which the safety
+    /// filter keeps `safety_radius` from the others' (the dashboard draws it).
+    pub l: Vec<f64>,
     /// The safety filter's radius, m (none: no safety circles).
     pub safety_radius: Option<f64>,
     /// Obstacles `[x, y, r]`, m.
@@ -164,6 +167,7 @@ impl SceneSpec {
             .collect();
         SceneSpec {
             leaders: plan.formation().leaders().to_vec(),
+            l: plan.agents().iter().map(|a| a.placement().l()).collect(),
             safety_radius: plan.safety_radius(),
             obstacles: plan
                 .obstacles()
@@ -466,6 +470,7 @@ mod tests {
 
     fn spec(leaders: Vec<Leader>, safety_radius: Option<f64>) -> SceneSpec {
         SceneSpec {
+            l: vec![0.1; leaders.len()],
             leaders,
             safety_radius,
             obstacles: vec![[1.0, 2.0, 0.5]],

@@ -27,7 +27,7 @@ mod task;
 #[cfg(test)]
 mod tests;
 
-pub use dashboard::{Dashboard, TICK as DASHBOARD_TICK};
+pub use dashboard::Dashboard;
 pub use live::{BACKLOG, DEFAULT_ADDR, DEFAULT_DASHBOARD, LiveFeed, LiveReport, QUEUE};
 pub use machine::Collector;
 pub use report::{AgentRecord, CollectorReport};

@@ -8,12 +8,10 @@ use std::time::Duration;
 use echelon::output::TrajectoryRows;
 use echelon_mcap::scene::SceneSpec;
 
-use super::dashboard::{Dashboard, TICK};
+use super::dashboard::Dashboard;
 use super::live::Tee;
 use super::{Collector, CollectorReport, FileSink, LiveFeed, SUMMARY_FILE};
 use crate::clock::FleetClock;
-use crate::command::{FleetCommand, Latch};
-use crate::keys::KeyKind;
 use crate::keys::Keys;
 use crate::net::NetOptions;
 use crate::role::Member;
@@ -43,11 +41,6 @@ pub struct CollectorTask {
     sink: FileSink,
     /// With `--foxglove`: the live feed, fed everything the files get.
     live: Option<LiveFeed>,
-    /// With `--dashboard`: its buttons' orders, put at the next tick, and
-    /// the fleet's commands seen (for the next command's number).
-    dashboard: Option<(Dashboard, Latch)>,
-    /// The next tick while the dashboard runs, s.
-    next_poll: f64,
     out: PathBuf,
     /// Stop at this time of its clock (real time), s.
     until: f64,
@@ -81,19 +74,10 @@ impl CollectorTask {
             collector,
             sink,
             live: None,
-            dashboard: None,
-            next_poll: 0.0,
             out,
             until: max_wall.map_or(f64::INFINITY, |m| m.as_secs_f64()),
             wall: unix_nanos,
         }
-    }
-
-    /// Also puts the orders of `dashboard`'s buttons on the fleet's
-    /// command key (the fleet-wide stop and resume, [`crate::command`]).
-    pub fn with_dashboard(mut self, dashboard: Dashboard) -> CollectorTask {
-        self.dashboard = Some((dashboard, Latch::new()));
-        self
     }
 
     /// Also feeds everything it records to `live`.
@@ -113,10 +97,7 @@ impl Task for CollectorTask {
     }
 
     fn outputs(&self) -> Vec<String> {
-        match self.dashboard {
-            Some(_) => vec![self.collector.keys.command()],
-            None => Vec::new(),
-        }
+        Vec::new()
     }
 
     fn tokens(&self) -> Vec<String> {
@@ -131,11 +112,6 @@ impl Task for CollectorTask {
         let now = (self.wall)();
         if input == FLEET {
             self.collector.record_delay(s.key, s.delay);
-            if let Some((_, latch)) = self.dashboard.as_mut()
-                && self.collector.keys.classify(s.key) == KeyKind::Command
-            {
-                latch.on_payload(s.payload);
-            }
             return match self.live.as_mut() {
                 Some(live) => {
                     let mut tee = Tee(&mut self.sink, live);
@@ -166,21 +142,10 @@ impl Task for CollectorTask {
     }
 
     fn next_wake(&self) -> f64 {
-        match self.dashboard {
-            Some(_) => self.until.min(self.next_poll),
-            None => self.until,
-        }
+        self.until
     }
 
-    fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
-        if let Some((dashboard, latch)) = self.dashboard.as_mut() {
-            self.next_poll = now + TICK;
-            while let Some(order) = dashboard.order() {
-                let c = FleetCommand::new(order, latch.seq() + 1, "dashboard", "dashboard button");
-                out.publish(0, &c.encode())?;
-                latch.on_command(c);
-            }
-        }
+    fn tick(&mut self, now: f64, _: &mut dyn Outputs) -> Result<Flow, FleetError> {
         Ok(if now >= self.until {
             Flow::Stop
         } else {
@@ -276,9 +241,8 @@ pub fn run_with(
                 .scene
                 .as_ref()
                 .ok_or_else(|| FleetError::Config("--dashboard needs the scenario".into()))?;
-            let dashboard = Dashboard::start(at, live.address(), scene)?;
+            let dashboard = Dashboard::start(at, live.address(), scene, &opts.fleet, &opts.net)?;
             eprintln!("dashboard (operator): {}", dashboard.operator_url());
-            task = task.with_dashboard(dashboard);
         }
         task = task.with_live(live);
     }

@@ -11,8 +11,20 @@
 //! back to the collector once served, so a warm feed does not allocate per
 //! record. The server thread
 //! feeds the `foxglove` crate's server, whose queue per viewer is bounded
-//! too ([`BACKLOG`] messages, the oldest dropped when a viewer does not
-//! read), so a stalled viewer never slows it either.
+//! too ([`BACKLOG`] messages, set explicitly; the oldest dropped when a
+//! viewer does not read), so a stalled viewer never slows it either.
+//!
+//! What is counted, and what is not: the collector's queue's drops exactly
+//! ([`LiveReport::dropped`]), and the messages the server thread gave the
+//! crate to send ([`LiveReport::served`]; each goes into the queue of every
+//! viewer subscribed to its channel). A viewer's own drops are **not**
+//! counted: `foxglove` 0.25 drops a slow viewer's oldest messages inside
+//! its server (`send_lossy`, whose result it discards) and exposes no
+//! count, callback or queue depth for them (its only trace is a log line
+//! at most every 30 s). What is known is the bound: a viewer holds at most
+//! [`BACKLOG`] of them unread ([`LiveReport::viewer_backlog`]), so one that
+//! subscribes to everything and never reads loses all but [`BACKLOG`] of
+//! [`LiveReport::served`].
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -54,6 +66,14 @@ pub struct LiveReport {
     pub dropped: u64,
     /// Most viewers connected at once.
     pub max_clients: u64,
+    /// Messages the server thread gave the `foxglove` server to send (each
+    /// to every viewer subscribed to its channel).
+    #[serde(default)]
+    pub served: u64,
+    /// Messages the `foxglove` server queues per viewer, [`BACKLOG`]; a
+    /// viewer's older unread ones are dropped, uncounted (the module doc).
+    #[serde(default)]
+    pub viewer_backlog: u64,
 }
 
 /// One record for the server thread.
@@ -86,7 +106,7 @@ pub struct LiveFeed {
     /// use at once): no allocation per record once warm.
     free: Receiver<Vec<u8>>,
     report: LiveReport,
-    thread: Option<JoinHandle<Result<u64, FleetError>>>,
+    thread: Option<JoinHandle<Result<Served, FleetError>>>,
 }
 
 impl std::fmt::Debug for LiveFeed {
@@ -124,6 +144,7 @@ impl LiveFeed {
             free,
             report: LiveReport {
                 address: format!("ws://{bound}"),
+                viewer_backlog: BACKLOG as u64,
                 ..LiveReport::default()
             },
             thread: Some(thread),
@@ -189,10 +210,11 @@ impl LiveFeed {
     pub fn finish(mut self) -> Result<LiveReport, FleetError> {
         self.tx = None;
         if let Some(thread) = self.thread.take() {
-            let clients = thread
+            let served = thread
                 .join()
                 .map_err(|_| FleetError::Config("foxglove: the server thread panicked".into()))??;
-            self.report.max_clients = clients;
+            self.report.max_clients = served.max_clients;
+            self.report.served = served.messages;
         }
         Ok(self.report.clone())
     }
@@ -293,16 +315,25 @@ impl<A: RecordSink, B: RecordSink> RecordSink for Tee<'_, A, B> {
     }
 }
 
+/// What the server thread did.
+#[derive(Debug, Clone, Copy, Default)]
+struct Served {
+    /// Most viewers connected at once.
+    max_clients: u64,
+    /// Messages given to the `foxglove` server to send.
+    messages: u64,
+}
+
 /// The server thread: the WebSocket server on `addr` (its bound address
-/// sent on `ready`), fed from `rx` until the collector hangs up; returns
-/// the most viewers seen at once.
+/// sent on `ready`), fed from `rx` until the collector hangs up; what it
+/// did.
 fn serve(
     addr: SocketAddr,
     mut scene: Option<Scene>,
     rx: &Receiver<Item>,
     ready: &SyncSender<SocketAddr>,
     free: &SyncSender<Vec<u8>>,
-) -> Result<u64, FleetError> {
+) -> Result<Served, FleetError> {
     let failed = |e: &dyn std::fmt::Display| FleetError::Config(format!("foxglove {addr}: {e}"));
     // One worker: the server must not take the fleet's cores.
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -328,14 +359,15 @@ fn serve(
     let fixed_channel: Channel<SceneUpdate> = ctx.channel_builder(SCENE_STATIC_TOPIC).build();
     let mut fixed_sent: Option<Instant> = None;
     let mut last_t = 0.0;
-    let mut max_clients = 0u64;
+    let mut served = Served::default();
     loop {
-        max_clients = max_clients.max(server.client_count() as u64);
+        served.max_clients = served.max_clients.max(server.client_count() as u64);
         if let Some(scene) = scene.as_mut()
             && fixed_sent.is_none_or(|at| at.elapsed() >= FIXED_EVERY)
         {
             fixed_sent = Some(Instant::now());
             fixed_channel.log(scene.fixed(last_t));
+            served.messages += 1;
         }
         let item = match rx.recv_timeout(FIXED_EVERY) {
             Ok(item) => item,
@@ -368,6 +400,7 @@ fn serve(
                             log_time: Some(log_time),
                         },
                     );
+                    served.messages += 1;
                 }
                 // The buffer back to the collector (dropped if it has enough).
                 let _ = free.try_send(data);
@@ -382,11 +415,12 @@ fn serve(
                 {
                     tf.log(t);
                     scene_channel.log(update);
+                    served.messages += 2;
                 }
             }
         }
     }
     server.stop().wait_blocking();
     drop(runtime);
-    Ok(max_clients)
+    Ok(served)
 }

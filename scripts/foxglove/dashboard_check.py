@@ -2,27 +2,34 @@
 """Drives the live dashboard in headless Chromium over the Chrome DevTools
 Protocol (Python `websockets`), during a `fleet up --dashboard`.
 
-Usage: dashboard_check.py URL TOKEN ROBOTS
+Usage: dashboard_check.py URL TOKEN ROBOTS [--states JSON] [--resume]
 
 1. Opens URL without the token (read-only): waits until ROBOTS robots are
    drawn, checks the Stop all button is disabled and that the server
    refuses the page's stop (its HTTP status).
 2. Samples, 20 times 50 ms apart, what the page drew: per robot the world
-   position of the drawn disc and the time of the state it drew.
+   position of the drawn robot and the time of the state it drew; reads
+   the robots' table as shown; with --states, the table cells the page
+   makes of each of those states (`dashboard.cells(k, state, null, age)`,
+   JSON `[[k, state, age], ...]`).
 3. Opens URL?token=TOKEN and presses Stop all with real mouse events;
-   notes the UNIX time (ms) of the press and the server's answer.
+   notes the UNIX time (ms) of the press and the server's answer (status
+   and, when 200, the command put and who acknowledged it); with --resume,
+   one second later presses Resume the same way.
 
 Prints one JSON object: {"readonly": {"disabled": bool, "status": int},
-"samples": [[k, t, x, y], ...], "stop": {"pressed_ms": ms, "status": int},
-"errors": [console errors and exceptions]}.
+"samples": [[k, t, x, y], ...], "table": [[cell, ...], ...], "cells":
+[[cell, ...], ...], "stop": {"pressed_ms": ms, "status": int, "outcome":
+{...}}, "resume": {...} (with --resume), "errors": [console errors and
+exceptions]}.
 """
 
+import argparse
 import contextlib
 import json
 import os
 import re
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -84,7 +91,17 @@ class Page:
                                                    "button": "left", "clickCount": 1}, session=True)
 
 
-def main(url, token, robots):
+def press(page, button, nth):
+    """Presses `button`; when it pressed, the server's answer."""
+    pressed = time.time() * 1000.0
+    page.click(button)
+    page.until(f"dashboard.orders.length >= {nth}", 10)
+    status = page.eval(f"dashboard.orders[{nth - 1}][1]")
+    outcome = page.eval("dashboard.outcomes[dashboard.outcomes.length - 1] || null")
+    return {"pressed_ms": pressed, "status": status, "outcome": outcome if status == 200 else None}
+
+
+def main(url, token, robots, states, resume):
     chromium = os.environ.get("ECHELON_CHROMIUM", "/usr/bin/chromium")
     profile = tempfile.mkdtemp()
     proc = subprocess.Popen(
@@ -95,13 +112,13 @@ def main(url, token, robots):
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         with contextlib.ExitStack() as stack:
-            check(stack, proc, robots, url, token)
+            check(stack, proc, robots, url, token, states, resume)
     finally:
         proc.kill()
         proc.wait()
 
 
-def check(stack, proc, robots, url, token):
+def check(stack, proc, robots, url, token, states, resume):
     browser_ws = None
     for line in proc.stderr:
         m = re.search(r"ws://\S+", line)
@@ -124,16 +141,28 @@ def check(stack, proc, robots, url, token):
             samples.append([int(k), v["t"], v["world"][0], v["world"][1]])
         time.sleep(0.05)
     out["samples"] = samples
+    out["table"] = ro.eval("[...document.querySelectorAll('#robots tbody tr')]"
+                           ".filter((r) => r.style.display !== 'none')"
+                           ".map((r) => [...r.cells].map((c) => c.textContent))")
+    out["cells"] = [ro.eval(f"dashboard.cells({k}, {json.dumps(st)}, null, {age})")
+                    for k, st, age in states]
     op = Page(stack, browser_ws, f"{url}?token={token}")
     op.until(drawn)
     op.until("!document.getElementById('stop').disabled")
-    pressed = time.time() * 1000.0
-    op.click("stop")
-    op.until("dashboard.orders.length > 0", 10)
-    out["stop"] = {"pressed_ms": pressed, "status": op.eval("dashboard.orders[0][1]")}
+    out["stop"] = press(op, "stop", 1)
+    if resume:
+        time.sleep(1.0)
+        out["resume"] = press(op, "resume", 2)
     out["errors"] = ro.errors + op.errors
     print(json.dumps(out))
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2], int(sys.argv[3]))
+    parser = argparse.ArgumentParser()
+    parser.add_argument("url")
+    parser.add_argument("token")
+    parser.add_argument("robots", type=int)
+    parser.add_argument("--states", default="[]")
+    parser.add_argument("--resume", action="store_true")
+    a = parser.parse_args()
+    main(a.url, a.token, a.robots, json.loads(a.states), a.resume)

@@ -4,18 +4,22 @@
 //! exactly as a sampled controller's command is; the drive's limits,
 //! the plant and odometry then apply as in [`Simulation::step`].
 //!
+//! A scenario's safety filter applies to the caller's commands as to a
+//! sampled law's, unless the caller turns it off.
+//!
 //! [`Simulation::sensed`] and [`Simulation::leader_view`] give the caller
 //! what the simulator's own law is given (the pose its odometry estimates,
 //! the leader motion and offsets of eqs. 4–6), so that a controller written
 //! outside with [`crate::control::law`] reproduces a sampled run's bits.
 
-use super::{Simulation, system};
+use super::{SafetyOutput, Simulation, system};
 use crate::agent::Command;
 use crate::control::{LeaderMotion, Offset};
 use crate::error::{ParamError, SimError};
 use crate::follow::LeaderView;
 use crate::formation::Leader;
 use crate::model::State;
+use crate::safety::Outcome;
 
 impl Simulation {
     /// What agent `i`'s controller senses of itself: its odometry estimate
@@ -54,9 +58,16 @@ impl Simulation {
     /// terms (`u1, u2` for a torque-driven robot, `v*, ω*` for a velocity
     /// base; the other kind applies as zero), held over the step. From the
     /// first call on the simulation's own controller no longer samples: the
-    /// frames show the caller's commands, and a scenario's safety filter is
-    /// not applied (filter the commands before passing them).
-    pub fn step_with(&mut self, commands: &[Command]) -> Result<(), SimError> {
+    /// frames show the caller's commands.
+    ///
+    /// With `filter` and a scenario with `[safety]`, each filtering agent's
+    /// command then goes through its safety filter exactly as a sampled law's
+    /// does in `echelon run` (the simulator's own filter step, with the
+    /// neighbours its controller sees); [`Simulation::safety_outputs`] says
+    /// what each filter did. The filters' period is the scenario's controller
+    /// period (`dt` without one), whatever the caller holds its commands for.
+    /// Returns whether the filter ran (`filter` and the scenario has one).
+    pub fn step_with(&mut self, commands: &[Command], filter: bool) -> Result<bool, SimError> {
         let n = self.state.len();
         if commands.len() != n {
             return Err(SimError::Param {
@@ -84,7 +95,29 @@ impl Simulation {
             &mut self.k1,
             &mut self.speeds[0],
         );
+        let filtered = filter && self.safety.is_some();
+        if filtered {
+            self.filter();
+        } else if let Some(safety) = self.safety.as_deref_mut() {
+            // Unfiltered: every command passes as it is.
+            for (o, h) in safety.out.iter_mut().zip(&self.held) {
+                o.sampled = false;
+                o.outcome = Outcome::Nominal;
+                o.deadlock = false;
+                o.nominal = h.values();
+                o.filtered = h.values();
+            }
+        }
         self.fresh = true;
-        self.step()
+        self.step()?;
+        Ok(filtered)
+    }
+
+    /// What each agent's safety filter did when it last ran (empty without
+    /// `[safety]`), without evaluating anything: after
+    /// [`Simulation::step_with`], the filtering at the start of that step
+    /// (`sampled` is cleared by the evaluation that ends the step).
+    pub fn safety_outputs(&self) -> &[SafetyOutput] {
+        self.safety.as_ref().map_or(&[], |s| &s.out[..])
     }
 }

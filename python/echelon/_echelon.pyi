@@ -2,7 +2,7 @@
 public API is the `echelon` package, which wraps these."""
 
 from os import PathLike
-from typing import Any, Literal, TypedDict
+from typing import Any, Callable, Literal, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -90,6 +90,7 @@ class Simulation:
     def leader(self, i: int, commands: npt.NDArray[np.float64]) -> dict[str, Any]: ...
     has_safety: bool
     def step(self, commands: npt.NDArray[np.float64], filter: bool) -> None: ...
+    def step_by(self, law: Callable[[int, float, npt.NDArray[np.float64], dict[str, Any]], Any]) -> None: ...
     def safety_step(
         self,
     ) -> (

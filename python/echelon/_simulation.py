@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -107,6 +107,20 @@ class Simulation:
         simulation's :attr:`safety` switch) is true."""
         on = self.safety if filter is None else bool(filter)
         self._sim.step(np.ascontiguousarray(commands, dtype=np.float64), on)
+
+    def step_by(self, law: Callable[[int, float, np.ndarray, dict[str, Any]], Any]) -> None:
+        """One RK4 step of a continuous-time controller: ``law(i, t, state,
+        leader)`` is called for each agent (``order``: leaders first) in each
+        of RK4's four stages (and, with velocity bases, at the new state to
+        settle them), where ``echelon run`` evaluates its own law, and
+        returns agent ``i``'s ``(u1, u2)`` or ``(v*, ω*)``. ``state`` is what
+        the agent senses at the stage (``[x, y, θ, v, ω]``), ``leader`` what
+        its law is given there (as :meth:`leader`). :func:`echelon.law.own`
+        is the agents' own laws as such a function. For scenarios with a
+        continuous-time controller only (no ``controller_period``, no
+        ``[safety]``, not stepped by :meth:`step`); an exception raised by
+        ``law`` stops the step, nothing moved."""
+        self._sim.step_by(law)
 
     @property
     def safety_step(self) -> dict[str, Any] | None:

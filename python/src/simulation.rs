@@ -7,12 +7,14 @@ use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use echelon::Simulation;
 use echelon::agent::{Command, Drive};
 use echelon::base::VelocityCommand;
+use echelon::control::{LeaderMotion, Offset};
 use echelon::formation::Leader;
 use echelon::model::{Input, State};
 use echelon::safety::Outcome;
+use echelon::sim::StepByError;
+use echelon::{SimError, Simulation};
 
 use crate::errors;
 use crate::scenario::{OverrideArgs, PyScenario};
@@ -255,6 +257,58 @@ impl PySimulation {
         self.commands = scratch;
         self.filtered = stepped?;
         Ok(())
+    }
+
+    /// One RK4 step of a continuous-time controller: `law(i, t, state,
+    /// leader)` is called for every agent (leaders first) in each of RK4's
+    /// four stages (and at the new state, for velocity bases), where
+    /// `echelon run` evaluates its own law; `state` is what the agent senses
+    /// (`[x, y, θ, v, ω]`), `leader` the dict of [`PySimulation::leader`] at
+    /// the stage; it returns the agent's `(u1, u2)` or `(v*, ω*)`. An
+    /// exception raised by `law` stops the step (nothing moves) and is
+    /// raised here.
+    fn step_by(&mut self, py: Python<'_>, law: Bound<'_, PyAny>) -> PyResult<()> {
+        let drives: Vec<bool> = self
+            .sim
+            .agents()
+            .iter()
+            .map(|a| matches!(a.drive(), Drive::Torque { .. }))
+            .collect();
+        let call =
+            |i: usize, t: f64, me: &State, m: &LeaderMotion, o: &Offset| -> PyResult<Command> {
+                let state = vec![me.x, me.y, me.theta, me.v, me.omega].into_pyarray(py);
+                let leader = PyDict::new(py);
+                leader.set_item("p", m.p)?;
+                leader.set_item("dp", m.dp)?;
+                leader.set_item("ddp", m.ddp)?;
+                leader.set_item("lx", o.lx)?;
+                leader.set_item("ly", o.ly)?;
+                leader.set_item("dly", o.dly)?;
+                leader.set_item("ddly", o.ddly)?;
+                let got: Vec<f64> = law.call1((i, t, state, leader))?.extract()?;
+                let [c0, c1] = got[..] else {
+                    return Err(errors::value(format!(
+                        "law: agent {i}'s command has {} numbers, expected 2",
+                        got.len()
+                    )));
+                };
+                if !(c0.is_finite() && c1.is_finite()) {
+                    return Err(errors::value(format!(
+                        "law: agent {i}'s command ({c0}, {c1}) is not finite"
+                    )));
+                }
+                Ok(if drives[i] {
+                    Command::Torque(Input { u1: c0, u2: c1 })
+                } else {
+                    Command::Velocity(VelocityCommand { v: c0, omega: c1 })
+                })
+            };
+        match self.sim.step_by(call) {
+            Ok(()) => Ok(()),
+            Err(StepByError::Law(e)) => Err(e),
+            Err(StepByError::Sim(SimError::Timing(m))) => Err(errors::value(m)),
+            Err(StepByError::Sim(e)) => Err(errors::sim(&e)),
+        }
     }
 
     /// Whether the scenario has a safety filter (`[safety]`).

@@ -7,18 +7,25 @@
 //! A scenario's safety filter applies to the caller's commands as to a
 //! sampled law's, unless the caller turns it off.
 //!
+//! A continuous-time controller is evaluated in each RK4 stage; the caller
+//! gives [`Simulation::step_by`] its law, which is called where the
+//! simulator calls its own.
+//!
 //! [`Simulation::sensed`] and [`Simulation::leader_view`] give the caller
 //! what the simulator's own law is given (the pose its odometry estimates,
 //! the leader motion and offsets of eqs. 4–6), so that a controller written
 //! outside with [`crate::control::law`] reproduces a sampled run's bits.
 
+use std::cell::RefCell;
+
+use super::system::Source;
 use super::{SafetyOutput, Simulation, system};
 use crate::agent::Command;
 use crate::control::{LeaderMotion, Offset};
 use crate::error::{ParamError, SimError};
 use crate::follow::LeaderView;
 use crate::formation::Leader;
-use crate::model::State;
+use crate::model::{Input, State};
 use crate::safety::Outcome;
 
 impl Simulation {
@@ -113,11 +120,104 @@ impl Simulation {
         Ok(filtered)
     }
 
-    /// What each agent's safety filter did when it last ran (empty without
-    /// `[safety]`), without evaluating anything: after
-    /// [`Simulation::step_with`], the filtering at the start of that step
-    /// (`sampled` is cleared by the evaluation that ends the step).
+    /// What each agent's safety filter did (empty without `[safety]`),
+    /// without evaluating anything: after [`Simulation::step_with`], the
+    /// filtering at the start of that step (`sampled` is cleared by the
+    /// evaluation that ends the step); after one with the filter off, every
+    /// command passed as it was (`min_distance` is the last filtering's).
     pub fn safety_outputs(&self) -> &[SafetyOutput] {
         self.safety.as_ref().map_or(&[], |s| &s.out[..])
     }
+
+    /// Advances one RK4 step with `law` in place of every agent's own law,
+    /// evaluated where `echelon run` evaluates a continuous-time
+    /// controller's: in each of RK4's four stages, leaders before followers
+    /// (and at the new state, to settle a velocity base's speeds). `law(i, t,
+    /// sensed, motion, offset)` is agent `i`'s command (in its drive's terms)
+    /// at `t` from what it senses and what its own law is given then
+    /// ([`Simulation::leader_view`]'s leader motion and offsets, at the
+    /// stage); it goes through the agent's act step, limits and plant as its
+    /// own law's does. Only for a continuous-time controller: a scenario that
+    /// samples its controller (or filters, or was stepped by
+    /// [`Simulation::step_with`]) is refused. When `law` fails, the step
+    /// stops there and the error is returned: nothing has moved, unless it
+    /// failed settling a velocity base (the step is then taken, the base's
+    /// speeds unsettled).
+    pub fn step_by<E>(
+        &mut self,
+        mut law: impl FnMut(usize, f64, &State, &LeaderMotion, &Offset) -> Result<Command, E>,
+    ) -> Result<(), StepByError<E>> {
+        if self.hold_every != 0 {
+            return Err(StepByError::Sim(SimError::Timing(
+                "step_by: this simulation's controller is sampled (controller_period, \
+                 [safety] or step_with): its commands are held over the step, give them to step_with"
+                    .into(),
+            )));
+        }
+        let failed: RefCell<Option<E>> = RefCell::new(None);
+        let mut caller = |i: usize, t: f64, me: &State, m: &LeaderMotion, o: &Offset| {
+            if failed.borrow().is_none() {
+                match law(i, t, me, m, o) {
+                    Ok(c) => return c,
+                    Err(e) => *failed.borrow_mut() = Some(e),
+                }
+            }
+            // After a failure the rest of the stage is thrown away.
+            Command::Torque(Input::default())
+        };
+        let abort = || SimError::Observer("the caller's law failed".into());
+        let t = self.time();
+        self.sys.evaluate_by(
+            t,
+            &self.state,
+            Source::Caller(&mut caller),
+            &self.odometers,
+            Some(&mut self.out),
+            &mut self.k1,
+            &mut self.speeds[0],
+        );
+        self.fresh = failed.borrow().is_none();
+        let stepped = if self.fresh {
+            self.advance(|sys, _, odo, t, x, dx, sp| {
+                sys.evaluate_by(t, x, Source::Caller(&mut caller), odo, None, dx, sp);
+                if failed.borrow().is_some() {
+                    Err(abort())
+                } else {
+                    Ok(())
+                }
+            })
+        } else {
+            Err(abort())
+        };
+        if stepped.is_ok() && self.velocity_agents {
+            self.sys.evaluate_by(
+                self.time(),
+                &self.state,
+                Source::Caller(&mut caller),
+                &self.odometers,
+                Some(&mut self.out),
+                &mut self.k1,
+                &mut self.speeds[0],
+            );
+            if failed.borrow().is_none() {
+                self.settle_to_outputs();
+            }
+        }
+        self.fresh = false;
+        drop(caller);
+        match (failed.into_inner(), stepped) {
+            (Some(e), _) => Err(StepByError::Law(e)),
+            (None, Err(e)) => Err(StepByError::Sim(e)),
+            (None, Ok(())) => Ok(()),
+        }
+    }
+}
+
+/// Why [`Simulation::step_by`] failed.
+#[derive(Debug)]
+pub enum StepByError<E> {
+    /// The caller's law failed.
+    Law(E),
+    /// The step did (a sampled controller, a divergence).
+    Sim(SimError),
 }

@@ -233,7 +233,7 @@ class Run:
     def _table(self, name: str) -> pd.DataFrame | None:
         if name not in self._tables:
             path = self.dir / f"{name}.csv"
-            self._tables[name] = pd.read_csv(path) if path.exists() else None
+            self._tables[name] = pd.read_csv(path, float_precision="round_trip") if path.exists() else None
         return self._tables[name]
 
     @property

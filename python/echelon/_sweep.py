@@ -35,7 +35,7 @@ class Sweep:
     @property
     def table(self) -> pd.DataFrame:
         if self._table is None:
-            self._table = pd.read_csv(io.StringIO(self.csv))
+            self._table = pd.read_csv(io.StringIO(self.csv), float_precision="round_trip")
         return self._table
 
     def write(self, path: str | os.PathLike[str]) -> Path:

@@ -23,6 +23,15 @@ from . import _echelon
 OVERRIDES = ("dt", "duration", "log_dt", "law", "seed")
 
 
+def read_csv(source: Any) -> pd.DataFrame:
+    """A table echelon wrote, its numbers exactly as written: pandas 3 parses
+    floats round-trip, pandas 2 (the last on Python 3.10) only when asked
+    (its default was 1 ulp off some written values)."""
+    if int(pd.__version__.split(".")[0]) < 3:
+        return pd.read_csv(source, float_precision="round_trip")
+    return pd.read_csv(source)
+
+
 def _checked(overrides: dict[str, Any]) -> dict[str, Any]:
     unknown = sorted(set(overrides) - set(OVERRIDES))
     if unknown:
@@ -233,7 +242,7 @@ class Run:
     def _table(self, name: str) -> pd.DataFrame | None:
         if name not in self._tables:
             path = self.dir / f"{name}.csv"
-            self._tables[name] = pd.read_csv(path, float_precision="round_trip") if path.exists() else None
+            self._tables[name] = read_csv(path) if path.exists() else None
         return self._tables[name]
 
     @property

@@ -98,6 +98,9 @@ impl Filters {
         if let Some(bad) = commands.iter().find(|c| !c.is_finite()) {
             return Err(errors::value(format!("commands: {bad} is not finite")));
         }
+        if let Some(bad) = poses.iter().find(|c| !c.is_finite()) {
+            return Err(errors::value(format!("poses: {bad} is not finite")));
+        }
         self.states.clear();
         for (i, row) in poses.rows().into_iter().enumerate() {
             let row: Vec<f64> = row.to_vec();

@@ -157,6 +157,10 @@ def test_the_torque_filter_refuses_bad_input():
         f(np.zeros((2, 5)), np.zeros((2, 3)))
     with pytest.raises(ValueError, match="not finite"):
         f(np.zeros((2, 5)), np.full((2, 2), np.inf))
+    with pytest.raises(ValueError, match="poses: NaN is not finite"):
+        f(np.full((2, 5), np.nan), np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="poses: NaN is not finite"):
+        echelon.safety.Filter(2, 0.3)(np.full((2, 3), np.nan), np.zeros((2, 2)))
     with pytest.raises(ValueError, match="radius"):
         echelon.safety.TorqueFilter(2, -0.3)
     with pytest.raises(ValueError, match="not a preset"):

@@ -204,7 +204,6 @@ impl Simulation {
             }
         }
         self.fresh = false;
-        drop(caller);
         match (failed.into_inner(), stepped) {
             (Some(e), _) => Err(StepByError::Law(e)),
             (None, Err(e)) => Err(StepByError::Sim(e)),

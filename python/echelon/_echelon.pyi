@@ -2,7 +2,7 @@
 public API is the `echelon` package, which wraps these."""
 
 from os import PathLike
-from typing import Any, Literal, TypedDict
+from typing import Any, Callable, Literal, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -44,6 +44,7 @@ class ScenarioError(ValueError):
     column: int
     field: str
     message: str
+    path: tuple[str | int, ...] | None
 
 class SimulationError(RuntimeError):
     """A run that diverged or could not write its outputs."""
@@ -87,7 +88,17 @@ class Simulation:
     sensed: npt.NDArray[np.float64]
     agents: list[dict[str, Any]]
     def leader(self, i: int, commands: npt.NDArray[np.float64]) -> dict[str, Any]: ...
-    def step(self, commands: npt.NDArray[np.float64]) -> None: ...
+    has_safety: bool
+    def step(self, commands: npt.NDArray[np.float64], filter: bool) -> None: ...
+    def step_by(self, law: Callable[[int, float, npt.NDArray[np.float64], dict[str, Any]], Any]) -> None: ...
+    def safety_step(
+        self,
+    ) -> (
+        tuple[
+            list[bool], list[str], list[bool], npt.NDArray[np.float64], npt.NDArray[np.float64], list[float]
+        ]
+        | None
+    ): ...
     def errors(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 
 def law_paper(
@@ -125,6 +136,24 @@ class SafetyFilters:
     def filter(
         self, t: float, poses: npt.NDArray[np.float64], commands: npt.NDArray[np.float64]
     ) -> tuple[npt.NDArray[np.float64], list[str], list[float]]: ...
+
+class TorqueSafetyFilters:
+    def __init__(
+        self,
+        n: int,
+        radius: float,
+        robots_json: list[str],
+        gain: float = 1.0,
+        range: float = ...,
+        l: float = 0.1,
+        obstacles: npt.NDArray[np.float64] | None = None,
+    ) -> None: ...
+    def filter(
+        self, t: float, states: npt.NDArray[np.float64], commands: npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.float64], list[str], list[float]]: ...
+
+TORQUE_INNER_RATE: float
+TORQUE_ENVELOPE: tuple[float, float, float, float]
 
 def bound(
     ke: float,

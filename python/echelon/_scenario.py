@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import tempfile
 import weakref
@@ -20,6 +21,15 @@ from . import _echelon
 #: ``log_dt`` (logging period, s; 0 logs every step), ``law`` (``"paper"``
 #: or ``"complete"`` for every agent) and ``seed``.
 OVERRIDES = ("dt", "duration", "log_dt", "law", "seed")
+
+
+def read_csv(source: Any) -> pd.DataFrame:
+    """A table echelon wrote, its numbers exactly as written: pandas 3 parses
+    floats round-trip, pandas 2 (the last on Python 3.10) only when asked
+    (its default was 1 ulp off some written values)."""
+    if int(pd.__version__.split(".")[0]) < 3:
+        return pd.read_csv(source, float_precision="round_trip")
+    return pd.read_csv(source)
 
 
 def _checked(overrides: dict[str, Any]) -> dict[str, Any]:
@@ -80,14 +90,22 @@ class Scenario:
         **overrides: Any,
     ) -> Scenario:
         """A scenario from the TOML document as a dict (as ``tomllib.load``
-        gives it). Errors name the field and its place in the document
-        written as TOML (:attr:`source`)."""
+        gives it). An error in it points into the dict: its
+        :class:`echelon.ScenarioError` has ``file`` = ``origin``, ``line`` =
+        ``column`` = 0, ``field`` the dict path with indices as in the dict
+        (from 0: ``agents[1].offset.x`` is ``document["agents"][1]["offset"]["x"]``)
+        and ``path`` the same as a tuple of keys and indices."""
         try:
             text = json.dumps(document, allow_nan=False)
         except (TypeError, ValueError) as e:
             raise TypeError(f"not a scenario document: {e}") from None
         base = None if base_dir is None else Path(base_dir)
-        return cls(_echelon.Scenario.from_json(text, origin, base), **overrides)
+        try:
+            return cls(_echelon.Scenario.from_json(text, origin, base), **overrides)
+        except _echelon.ScenarioError as e:
+            if e.file != origin:
+                raise  # not in the document: an override's, a waypoints file's
+            raise _dict_error(e, document, origin) from None
 
     @property
     def name(self) -> str:
@@ -142,6 +160,65 @@ class Scenario:
         return f"Scenario({self.name!r} from {self.origin!r}{ov})"
 
 
+def _dict_path(document: Any, field: str) -> tuple[str | int, ...]:
+    """The path into ``document`` of a scenario error's ``field`` (the file's
+    dotted path, e.g. ``agents[3].offset.x``, agents counting from 1): keys
+    matched against the dict's own (a key may hold a dot), indices from 0."""
+    path: list[str | int] = []
+    node, rest = document, field
+    while rest:
+        if rest.startswith("["):
+            close = rest.find("]")
+            if close < 0 or not rest[1:close].isdigit():
+                path.append(rest)
+                break
+            index = int(rest[1:close]) - 1
+            path.append(index)
+            node = node[index] if isinstance(node, list) and 0 <= index < len(node) else None
+            rest = rest[close + 1 :]
+            continue
+        rest = rest.removeprefix(".")
+        key = None
+        if isinstance(node, dict):
+            for k in sorted((k for k in node if isinstance(k, str)), key=len, reverse=True):
+                if rest.startswith(k) and (len(rest) == len(k) or rest[len(k)] in ".["):
+                    key = k
+                    break
+        if key is None:  # not in the dict (a missing field): up to the next separator
+            key = re.match(r"[^.\[]*", rest).group(0)  # type: ignore[union-attr]
+        path.append(key)
+        node = node.get(key) if isinstance(node, dict) else None
+        rest = rest[len(key) :]
+        if not key and rest:  # nothing consumed: keep the rest whole
+            path[-1] = rest
+            break
+    return tuple(path)
+
+
+def _dotted(path: tuple[str | int, ...]) -> str:
+    """``agents[1].offset.x``; a key that is not a plain name as ``["a.b"]``."""
+    out = ""
+    for seg in path:
+        if isinstance(seg, int):
+            out += f"[{seg}]"
+        elif re.fullmatch(r"[A-Za-z0-9_-]+", seg):
+            out += f".{seg}" if out else seg
+        else:
+            out += f"[{json.dumps(seg, ensure_ascii=False)}]"
+    return out
+
+
+def _dict_error(e: Any, document: Any, origin: str) -> Any:
+    """A scenario error in a dict document, pointing into the dict."""
+    path = _dict_path(document, e.field) if e.field else ()
+    field = _dotted(path)
+    text = f"{origin}: {field}: {e.message}" if field else f"{origin}: {e.message}"
+    err = _echelon.ScenarioError(text)
+    err.file, err.line, err.column = origin, 0, 0
+    err.field, err.path, err.message = field, path, e.message
+    return err
+
+
 def _restore(inner: _echelon.Scenario, overrides: dict[str, Any]) -> Scenario:
     return Scenario(inner, **overrides)
 
@@ -165,7 +242,7 @@ class Run:
     def _table(self, name: str) -> pd.DataFrame | None:
         if name not in self._tables:
             path = self.dir / f"{name}.csv"
-            self._tables[name] = pd.read_csv(path) if path.exists() else None
+            self._tables[name] = read_csv(path) if path.exists() else None
         return self._tables[name]
 
     @property

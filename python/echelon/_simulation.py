@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -16,19 +16,25 @@ class Simulation:
     Python (Robotarium's loop): ``step(commands)`` applies one RK4 step with
     ``commands[i]`` held, ``(u1, u2)`` (eq. 3c–d) for a torque-driven agent
     or ``(v*, ω*)`` for a velocity base, through the agent's limits exactly
-    as ``echelon run`` applies its law's command. A scenario's own safety
-    filter is not applied: filter the commands (:mod:`echelon.safety`).
+    as ``echelon run`` applies its law's command.
+
+    A scenario with ``[safety]`` filters the commands as ``echelon run``
+    filters its law's (the simulator's own filter step): ``safety=False``
+    turns it off for every step, ``step(commands, filter=False)`` for one;
+    :attr:`safety_step` says what the filter did at the last step.
 
     ``agents`` describes each agent (drive, leader, gains, robot, ...);
     ``leader(i, commands)`` gives what the paper's law needs, so a loop over
     ``order`` with :mod:`echelon.law` reproduces a sampled ``echelon run``.
     """
 
-    def __init__(self, scenario: Scenario | str, **overrides: Any) -> None:
+    def __init__(self, scenario: Scenario | str, *, safety: bool = True, **overrides: Any) -> None:
         if isinstance(scenario, str):
             scenario = Scenario.builtin(scenario)
         ov = {**scenario.overrides, **overrides}
         self.scenario = scenario
+        #: Whether :meth:`step` applies the scenario's safety filter by default.
+        self.safety = bool(safety)
         self._sim = _echelon.Simulation(scenario._inner, ov)
         self.agents: list[dict[str, Any]] = []
         for a in self._sim.agents:
@@ -90,9 +96,57 @@ class Simulation:
             commands = np.zeros((self.n, 2))
         return self._sim.leader(i, np.ascontiguousarray(commands, dtype=np.float64))
 
-    def step(self, commands: np.ndarray) -> None:
-        """One RK4 step under ``commands``, ``(n, 2)``."""
-        self._sim.step(np.ascontiguousarray(commands, dtype=np.float64))
+    @property
+    def has_safety(self) -> bool:
+        """Whether the scenario has a safety filter (``[safety]``)."""
+        return self._sim.has_safety
+
+    def step(self, commands: np.ndarray, filter: bool | None = None) -> None:
+        """One RK4 step under ``commands``, ``(n, 2)``, through the
+        scenario's safety filter when it has one and ``filter`` (None: the
+        simulation's :attr:`safety` switch) is true."""
+        on = self.safety if filter is None else bool(filter)
+        self._sim.step(np.ascontiguousarray(commands, dtype=np.float64), on)
+
+    def step_by(self, law: Callable[[int, float, np.ndarray, dict[str, Any]], Any]) -> None:
+        """One RK4 step of a continuous-time controller: ``law(i, t, state,
+        leader)`` is called for each agent (``order``: leaders first) in each
+        of RK4's four stages (and, with velocity bases, at the new state to
+        settle them), where ``echelon run`` evaluates its own law, and
+        returns agent ``i``'s ``(u1, u2)`` or ``(v*, ω*)``. ``state`` is what
+        the agent senses at the stage (``[x, y, θ, v, ω]``), ``leader`` what
+        its law is given there (as :meth:`leader`). :func:`echelon.law.own`
+        is the agents' own laws as such a function. For scenarios with a
+        continuous-time controller only (no ``controller_period``, no
+        ``[safety]``, not stepped by :meth:`step`); an exception raised by
+        ``law`` stops the step, nothing moved."""
+        self._sim.step_by(law)
+
+    @property
+    def safety_step(self) -> dict[str, Any] | None:
+        """What the safety filter did at the last step, or None when it did
+        not run (no ``[safety]``, switched off, no step yet). A dict of
+        per-agent entries: ``ran`` (bool, the agent filters), ``active``
+        (bool, its command was changed), ``outcome`` (``nominal``,
+        ``filtered``, ``braked``; ``off`` for an agent without a filter),
+        ``deadlock`` (bool, it is breaking a deadlock), ``nominal`` and
+        ``filtered`` (``(n, 2)``: the command given, after the acceleration
+        limit, and the command sent) and ``min_distance`` (m, to the nearest
+        neighbour's point in range; inf: none in range)."""
+        got = self._sim.safety_step()
+        if got is None:
+            return None
+        ran, outcome, deadlock, nominal, filtered, closest = got
+        outcome = list(outcome)
+        return {
+            "ran": np.asarray(ran, dtype=bool),
+            "active": np.asarray([o in ("filtered", "braked") for o in outcome], dtype=bool),
+            "outcome": outcome,
+            "deadlock": np.asarray(deadlock, dtype=bool),
+            "nominal": nominal,
+            "filtered": filtered,
+            "min_distance": np.asarray(closest, dtype=np.float64),
+        }
 
     def errors(self) -> tuple[np.ndarray, np.ndarray]:
         """The true ``e`` (eq. 7) and ``z`` (eq. 10) now, ``(n, 2)`` each."""

@@ -11,7 +11,7 @@ from typing import Any, Iterable, Mapping
 import pandas as pd
 
 from . import _echelon
-from ._scenario import Scenario
+from ._scenario import Scenario, read_csv
 
 #: A sweep grid's keys and ``echelon sweep``'s defaults.
 GRID_DEFAULTS: dict[str, Any] = {
@@ -35,7 +35,7 @@ class Sweep:
     @property
     def table(self) -> pd.DataFrame:
         if self._table is None:
-            self._table = pd.read_csv(io.StringIO(self.csv))
+            self._table = read_csv(io.StringIO(self.csv))
         return self._table
 
     def write(self, path: str | os.PathLike[str]) -> Path:

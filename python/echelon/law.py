@@ -4,13 +4,16 @@
   (eqs. 7–13; ``variant="complete"`` cancels the cross term);
 - :func:`kinematic`: its first step as a velocity command, for velocity bases;
 - :func:`commands`: every agent of a :class:`echelon.Simulation` under its
-  own law, in Python, as ``echelon run`` evaluates it (a template for your own).
+  own law, in Python, as ``echelon run`` evaluates it at a controller sample
+  (a template for your own);
+- :func:`own`: the same as a law for :meth:`echelon.Simulation.step_by`,
+  evaluated in every RK4 stage (a continuous-time controller).
 """
 
 from __future__ import annotations
 
 import json
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -90,3 +93,34 @@ def commands(sim: Any) -> np.ndarray:
         else:
             out[i], _, _ = kinematic(sensed[i], leader, a["ke"])
     return out
+
+
+def own(sim: Any) -> Callable[[int, float, np.ndarray, Mapping[str, Any]], np.ndarray]:
+    """Each agent's own law (the paper's, complete or kinematic) as a
+    continuous-time law for :meth:`echelon.Simulation.step_by`: ``law(i, t,
+    state, leader)`` is agent ``i``'s command from what it senses and what
+    its law is given at an RK4 stage."""
+    agents = [dict(a) for a in sim.agents]
+    for a in agents:
+        # Serialised once, not in every stage.
+        a["robot"] = None if a["robot"] is None else json.dumps(a["robot"])
+
+    def law(i: int, t: float, state: np.ndarray, leader: Mapping[str, Any]) -> np.ndarray:
+        a = agents[i]
+        if a["drive"] == "torque":
+            u, _, _ = _echelon.law_paper(
+                state,
+                np.asarray(leader["p"], dtype=np.float64),
+                np.asarray(leader["dp"], dtype=np.float64),
+                np.asarray(leader["ddp"], dtype=np.float64),
+                _offset(leader),
+                a["robot"],
+                float(a["ke"]),
+                float(a["kz"]),
+                a["law"],
+            )
+            return np.array(u)
+        cmd, _, _ = kinematic(state, leader, a["ke"])
+        return cmd
+
+    return law

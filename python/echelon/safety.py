@@ -1,20 +1,41 @@
 """The barrier-certificate safety filter (docs/safety.md) on numpy arrays,
-for velocity-controlled robots, used as Robotarium's barrier certificates
-are: compute nominal ``(v, ω)`` commands, filter them, send them.
+used as Robotarium's barrier certificates are: compute nominal commands,
+filter them, send them.
 
 Each robot's point ``l`` ahead of its centre is kept ``radius`` from the
-other robots' points and from obstacles' edges: the commands are the
-nearest (least squares on ``(v, l ω)``) that keep ``ḣ ≥ −γ h`` for every
-pair, each robot taking half of each shared constraint.
+other robots' points and from obstacles' edges, each robot taking half of
+each shared constraint:
+
+- velocity bases (:class:`Filter`, :func:`filter`): the ``(v, ω)`` nearest
+  (least squares on ``(v, l ω)``) that keeps ``ḣ ≥ −γ h`` for every pair;
+- torque-driven robots (eq. 3; :class:`TorqueFilter`, :func:`torque_filter`):
+  the ``(u1, u2)`` nearest (least squares on the point's acceleration
+  ``(u1/m, l u2/J)``) that keeps ``ḧ + (γ + p) ḣ + γ p h ≥ 0`` (``p`` =
+  ``max(γ, INNER_RATE)``), within the speed envelope (:data:`ENVELOPE`) and
+  the robot's wheel torque limit.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import json
+from typing import Mapping, Sequence
+
 import numpy as np
 
 from . import _echelon
+
+#: ``p``, 1/s: the inner pole of the torque barrier (``ψ̇₁ + p ψ₁ ≥ 0``,
+#: ``ψ₁ = ḣ + γ h``, ``p = max(γ, INNER_RATE)``).
+INNER_RATE: float = _echelon.TORQUE_INNER_RATE
+
+#: The speed envelope a torque robot's filtered command keeps it in:
+#: ``v_max`` (m/s), ``v_reverse`` (m/s, ``v ≥ −v_reverse``), ``omega_max``
+#: (rad/s) and ``rate`` (``κ``, 1/s: how fast the state is brought back).
+ENVELOPE: dict[str, float] = dict(
+    zip(("v_max", "v_reverse", "omega_max", "rate"), _echelon.TORQUE_ENVELOPE)
+)
 
 
 class Filter:
@@ -73,6 +94,76 @@ def filter(
     p = np.ascontiguousarray(poses, dtype=np.float64)
     f = Filter(p.shape[0], radius, gain=gain, range=range, l=l, obstacles=obstacles, period=period, base=base)
     return f(p, commands)
+
+
+def _robot_json(robot: Mapping[str, Any] | str) -> str:
+    if isinstance(robot, str):
+        return _echelon.robot_preset(robot)
+    return json.dumps(dict(robot))
+
+
+class TorqueFilter:
+    """Filters for ``n`` torque-driven robots (eq. 3), kept between calls
+    (each robot's deadlock monitor remembers). ``robot`` holds eq. 3's
+    parameters (``mass``, ``linear_friction``, ``inertia``,
+    ``angular_friction``, ``half_wheelbase``, ``wheel_radius``,
+    ``torque_limit``: a dict, as ``Simulation.agents[i]["robot"]``) or
+    names a preset (``agent1``, ``agent2``: Table I), for every robot, or
+    is a list of them, one per robot. ``gain`` is ``γ`` (1/s), ``range``
+    the sensing range (m), ``obstacles`` rows of ``(x, y, r)``."""
+
+    def __init__(
+        self,
+        n: int,
+        radius: float,
+        *,
+        robot: Mapping[str, Any] | str | Sequence[Mapping[str, Any] | str] = "agent1",
+        gain: float = 1.0,
+        range: float = float("inf"),
+        l: float = 0.1,
+        obstacles: Any = None,
+    ) -> None:
+        robots = [robot] if isinstance(robot, (str, Mapping)) else list(robot)
+        obs = None if obstacles is None else np.ascontiguousarray(obstacles, dtype=np.float64).reshape(-1, 3)
+        self._inner = _echelon.TorqueSafetyFilters(
+            n, radius, [_robot_json(r) for r in robots], gain, range, l, obs
+        )
+        self.n = n
+        self.l = l
+        self.radius = radius
+        self.outcomes: list[str] = []
+        self.min_distance: list[float] = []
+
+    def __call__(self, states: Any, commands: Any, t: float = 0.0) -> np.ndarray:
+        """The filtered inputs ``(n, 2)`` (``u1``, ``u2``) for robots in
+        ``states`` (``(n, 5)``: x, y, θ, v, ω) asking for ``commands``
+        ``(n, 2)`` at time ``t``. ``outcomes`` and ``min_distance`` then hold
+        what each robot's filter did."""
+        out, self.outcomes, self.min_distance = self._inner.filter(
+            float(t),
+            np.ascontiguousarray(states, dtype=np.float64),
+            np.ascontiguousarray(commands, dtype=np.float64),
+        )
+        return out
+
+
+def torque_filter(
+    states: Any,
+    commands: Any,
+    *,
+    radius: float,
+    robot: Mapping[str, Any] | str | Sequence[Mapping[str, Any] | str] = "agent1",
+    obstacles: Any = None,
+    gain: float = 1.0,
+    range: float = float("inf"),
+    l: float = 0.1,
+) -> np.ndarray:
+    """One filtering of torque robots' ``commands`` (``(n, 2)``: u1, u2) in
+    ``states`` (``(n, 5)``; see :class:`TorqueFilter`, which keeps the
+    filters between calls)."""
+    s = np.ascontiguousarray(states, dtype=np.float64)
+    f = TorqueFilter(s.shape[0], radius, robot=robot, gain=gain, range=range, l=l, obstacles=obstacles)
+    return f(s, commands)
 
 
 def points(poses: Any, l: float = 0.1) -> np.ndarray:

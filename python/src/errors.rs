@@ -12,7 +12,10 @@ create_exception!(
     PyValueError,
     "A scenario that cannot be loaded or built. Attributes: file, line, column \
      (1-based; 0 when unknown), field (dotted path, e.g. `agents[2].gains.ke`; \
-     empty for the whole file) and message. str() is `file:line:column: field: message`."
+     empty for the whole file), message, and path (None; for a dict document \
+     given to `Scenario.from_dict`, the keys and 0-based indices into it, \
+     `field` then being that path, e.g. `agents[1].gains.ke`, and line, column 0). \
+     str() is `file:line:column: field: message`."
 );
 create_exception!(
     _echelon,
@@ -51,6 +54,9 @@ pub(crate) fn scenario(py: Python<'_>, e: &echelon::ScenarioError) -> PyErr {
             e.message.clone().into_pyobject(py).map(|o| o.into_any()),
         ),
     ];
+    if let Err(e) = value.setattr("path", py.None()) {
+        return e;
+    }
     for (name, v) in attrs {
         match v {
             Ok(v) => {

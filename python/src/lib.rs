@@ -5,14 +5,15 @@
 //!
 //! - [`scenario`]: scenarios, runs into a directory, sweeps;
 //! - [`simulation`]: a scenario stepped under commands from Python;
-//! - [`pieces`]: the law, the safety filter, Theorem 2 and identification
-//!   as functions on arrays;
+//! - [`pieces`]: the law, Theorem 2 and identification as functions on arrays;
+//! - [`safety`]: the safety filters (velocity and torque robots) on arrays;
 //! - [`batch`]: the batch engine on caller-owned buffers;
 //! - [`errors`]: Rust errors as Python exceptions.
 
 mod batch;
 mod errors;
 mod pieces;
+mod safety;
 mod scenario;
 mod simulation;
 
@@ -29,6 +30,7 @@ fn _echelon(m: &Bound<'_, PyModule>) -> PyResult<()> {
     scenario::register(m)?;
     simulation::register(m)?;
     pieces::register(m)?;
+    safety::register(m)?;
     batch::register(m)?;
     Ok(())
 }

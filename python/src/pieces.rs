@@ -1,20 +1,17 @@
 //! echelon's pieces as functions on arrays: the paper's law (eqs. 7–13) and
-//! the kinematic law, the barrier-certificate safety filter for velocity
-//! robots, Theorem 2 both ways, and identification from a log.
+//! the kinematic law, Theorem 2 both ways, and identification from a log
+//! (the safety filters: [`crate::safety`]).
 
 use std::path::PathBuf;
 
-use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::PyReadonlyArray1;
 use pyo3::prelude::*;
 
-use echelon::base::{VelocityBase, VelocityCommand, VelocityRobot};
 use echelon::control::{self, Gains, LeaderMotion, Offset, Variant};
 use echelon::identify::{self, Log, Model};
 use echelon::kinematic::kinematic_law;
 use echelon::model::RobotParams;
 use echelon::odometry::bound::{KinematicTheorem2, Theorem2};
-use echelon::safety::{Neighbour, Obstacle, SafetyConfig, SafetyFilter};
 
 use crate::errors;
 use crate::simulation::state_of;
@@ -102,152 +99,6 @@ fn law_kinematic(
     }
     let k = kinematic_law(&s, &motion, &off, ke);
     Ok(([k.cmd.v, k.cmd.omega], k.e, k.z))
-}
-
-/// The filtered commands, each robot's outcome and its closest neighbour.
-type Filtered<'py> = (Bound<'py, PyArray2<f64>>, Vec<&'static str>, Vec<f64>);
-
-/// Safety filters for `n` velocity-controlled robots, one each (their
-/// deadlock monitors keep state between calls).
-#[pyclass(module = "echelon._echelon", name = "SafetyFilters")]
-#[derive(Debug)]
-struct PySafetyFilters {
-    filters: Vec<SafetyFilter>,
-    obstacles: Vec<Obstacle>,
-    base: VelocityBase,
-    l: f64,
-    // Scratch.
-    states: Vec<echelon::State>,
-    neighbours: Vec<Neighbour>,
-}
-
-#[pymethods]
-impl PySafetyFilters {
-    /// `n` robots keeping their points `l` ahead `radius` apart and
-    /// `radius` from obstacles' edges (`(m, 3)`: x, y, r); `gain` is the
-    /// barrier's γ, `range` the sensing range, `period` the control
-    /// period, `base` a velocity base preset (`ideal`, `jackal`, …).
-    #[new]
-    #[pyo3(signature = (n, radius, gain=1.0, range=f64::INFINITY, l=0.1, obstacles=None, period=0.01, base="ideal"))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        n: usize,
-        radius: f64,
-        gain: f64,
-        range: f64,
-        l: f64,
-        obstacles: Option<PyReadonlyArray2<'_, f64>>,
-        period: f64,
-        base: &str,
-    ) -> PyResult<Self> {
-        let config = SafetyConfig::new(radius, gain, range).map_err(|e| errors::param(&e))?;
-        if !(l > 0.0 && l.is_finite()) {
-            return Err(errors::value(format!("l: {l} must be a finite number > 0")));
-        }
-        if !(period > 0.0 && period.is_finite()) {
-            return Err(errors::value(format!(
-                "period: {period} must be a finite number > 0"
-            )));
-        }
-        let base = VelocityRobot::preset(base)
-            .map(|r| r.base())
-            .ok_or_else(|| {
-                let names: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
-                errors::value(format!(
-                    "base: `{base}` is not a preset ({})",
-                    names.join(", ")
-                ))
-            })?;
-        let mut obs = Vec::new();
-        if let Some(o) = obstacles {
-            let a = o.as_array();
-            if a.ncols() != 3 {
-                return Err(errors::value("obstacles: expected rows of (x, y, r)"));
-            }
-            for row in a.rows() {
-                obs.push(Obstacle::new(row[0], row[1], row[2]).map_err(|e| errors::param(&e))?);
-            }
-        }
-        Ok(PySafetyFilters {
-            filters: (0..n)
-                .map(|_| SafetyFilter::new(config).with_period(period))
-                .collect(),
-            obstacles: obs,
-            base,
-            l,
-            states: Vec::with_capacity(n),
-            neighbours: Vec::with_capacity(n),
-        })
-    }
-
-    /// Filters `commands` (`(n, 2)`: v, ω) of robots in `poses` (`(n, 3)`:
-    /// x, y, θ, moving at their commands; or `(n, 5)` with v, ω) at time `t`:
-    /// returns the filtered commands `(n, 2)`, each robot's outcome
-    /// (`nominal`, `filtered`, `braked`) and the smallest distance from its
-    /// point to a neighbour's.
-    fn filter<'py>(
-        &mut self,
-        py: Python<'py>,
-        t: f64,
-        poses: PyReadonlyArray2<'_, f64>,
-        commands: PyReadonlyArray2<'_, f64>,
-    ) -> PyResult<Filtered<'py>> {
-        let (p, c) = (poses.as_array(), commands.as_array());
-        let n = self.filters.len();
-        if p.nrows() != n || !(p.ncols() == 3 || p.ncols() == 5) {
-            return Err(errors::value(format!(
-                "poses: shape {:?}, expected ({n}, 3) or ({n}, 5)",
-                p.shape()
-            )));
-        }
-        if c.shape() != [n, 2] {
-            return Err(errors::value(format!(
-                "commands: shape {:?}, expected ({n}, 2)",
-                c.shape()
-            )));
-        }
-        self.states.clear();
-        for i in 0..n {
-            let row: Vec<f64> = p.row(i).to_vec();
-            let mut s = state_of(&row)?;
-            if row.len() == 3 {
-                (s.v, s.omega) = (c[[i, 0]], c[[i, 1]]);
-            }
-            self.states.push(s);
-        }
-        let mut out = Array2::zeros((n, 2));
-        let mut outcomes = Vec::with_capacity(n);
-        let mut closest = Vec::with_capacity(n);
-        for i in 0..n {
-            self.neighbours.clear();
-            for j in (0..n).filter(|&j| j != i) {
-                self.neighbours
-                    .push(Neighbour::of_state(&self.states[j], self.l, None, true));
-            }
-            let nominal = VelocityCommand {
-                v: c[[i, 0]],
-                omega: c[[i, 1]],
-            };
-            let f = self.filters[i].velocity(
-                t,
-                &self.states[i],
-                self.l,
-                nominal,
-                &self.base,
-                &self.neighbours,
-                &self.obstacles,
-            );
-            out[[i, 0]] = f.command.v;
-            out[[i, 1]] = f.command.omega;
-            outcomes.push(match f.outcome {
-                echelon::safety::Outcome::Nominal => "nominal",
-                echelon::safety::Outcome::Filtered => "filtered",
-                echelon::safety::Outcome::Braked => "braked",
-            });
-            closest.push(f.min_distance);
-        }
-        Ok((out.into_pyarray(py), outcomes, closest))
-    }
 }
 
 /// Theorem 2 forward (`steps` given: the bound) or inverse (`max_z` given:
@@ -370,7 +221,6 @@ fn robot_preset(name: &str) -> PyResult<String> {
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(law_paper, m)?)?;
     m.add_function(wrap_pyfunction!(law_kinematic, m)?)?;
-    m.add_class::<PySafetyFilters>()?;
     m.add_function(wrap_pyfunction!(robot_preset, m)?)?;
     m.add_function(wrap_pyfunction!(bound, m)?)?;
     m.add_function(wrap_pyfunction!(identify_log, m)?)?;

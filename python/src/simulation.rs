@@ -7,11 +7,14 @@ use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use echelon::Simulation;
 use echelon::agent::{Command, Drive};
 use echelon::base::VelocityCommand;
+use echelon::control::{LeaderMotion, Offset};
 use echelon::formation::Leader;
 use echelon::model::{Input, State};
+use echelon::safety::Outcome;
+use echelon::sim::StepByError;
+use echelon::{SimError, Simulation};
 
 use crate::errors;
 use crate::scenario::{OverrideArgs, PyScenario};
@@ -23,6 +26,8 @@ pub(crate) struct PySimulation {
     sim: Simulation,
     /// Scratch: the commands of one step.
     commands: Vec<Command>,
+    /// Whether the safety filter ran at the last step.
+    filtered: bool,
 }
 
 /// `[x, y, θ, v, ω]` rows.
@@ -101,6 +106,7 @@ impl PySimulation {
         Ok(PySimulation {
             sim,
             commands: Vec::with_capacity(n),
+            filtered: false,
         })
     }
 
@@ -232,18 +238,132 @@ impl PySimulation {
 
     /// One RK4 step under `commands`, `(n, 2)`: `(u1, u2)` (eq. 3c–d) for a
     /// torque-driven agent, `(v*, ω*)` for a velocity base; through the
-    /// agent's acceleration limit, its torque limit or base limits, the
-    /// plant and its odometry, as `echelon run` applies its law's.
-    fn step(&mut self, py: Python<'_>, commands: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+    /// agent's acceleration limit, the scenario's safety filter (when it has
+    /// `[safety]` and `filter`), its torque limit or base limits, the plant
+    /// and its odometry, as `echelon run` applies its law's.
+    fn step(
+        &mut self,
+        py: Python<'_>,
+        commands: PyReadonlyArray2<'_, f64>,
+        filter: bool,
+    ) -> PyResult<()> {
         let mut scratch = std::mem::take(&mut self.commands);
         let result = commands_into(&self.sim, &commands, &mut scratch);
         let sim = &mut self.sim;
         let stepped = result.and_then(|()| {
-            let r = py.detach(|| sim.step_with(&scratch));
+            let r = py.detach(|| sim.step_with(&scratch, filter));
             r.map_err(|e| errors::sim(&e))
         });
         self.commands = scratch;
-        stepped
+        self.filtered = stepped?;
+        Ok(())
+    }
+
+    /// One RK4 step of a continuous-time controller: `law(i, t, state,
+    /// leader)` is called for every agent (leaders first) in each of RK4's
+    /// four stages (and at the new state, for velocity bases), where
+    /// `echelon run` evaluates its own law; `state` is what the agent senses
+    /// (`[x, y, θ, v, ω]`), `leader` the dict of [`PySimulation::leader`] at
+    /// the stage; it returns the agent's `(u1, u2)` or `(v*, ω*)`. An
+    /// exception raised by `law` stops the step (nothing moves) and is
+    /// raised here.
+    fn step_by(&mut self, py: Python<'_>, law: Bound<'_, PyAny>) -> PyResult<()> {
+        let drives: Vec<bool> = self
+            .sim
+            .agents()
+            .iter()
+            .map(|a| matches!(a.drive(), Drive::Torque { .. }))
+            .collect();
+        let call =
+            |i: usize, t: f64, me: &State, m: &LeaderMotion, o: &Offset| -> PyResult<Command> {
+                let state = vec![me.x, me.y, me.theta, me.v, me.omega].into_pyarray(py);
+                let leader = PyDict::new(py);
+                leader.set_item("p", m.p)?;
+                leader.set_item("dp", m.dp)?;
+                leader.set_item("ddp", m.ddp)?;
+                leader.set_item("lx", o.lx)?;
+                leader.set_item("ly", o.ly)?;
+                leader.set_item("dly", o.dly)?;
+                leader.set_item("ddly", o.ddly)?;
+                let got: Vec<f64> = law.call1((i, t, state, leader))?.extract()?;
+                let [c0, c1] = got[..] else {
+                    return Err(errors::value(format!(
+                        "law: agent {i}'s command has {} numbers, expected 2",
+                        got.len()
+                    )));
+                };
+                if !(c0.is_finite() && c1.is_finite()) {
+                    return Err(errors::value(format!(
+                        "law: agent {i}'s command ({c0}, {c1}) is not finite"
+                    )));
+                }
+                Ok(if drives[i] {
+                    Command::Torque(Input { u1: c0, u2: c1 })
+                } else {
+                    Command::Velocity(VelocityCommand { v: c0, omega: c1 })
+                })
+            };
+        match self.sim.step_by(call) {
+            Ok(()) => Ok(()),
+            Err(StepByError::Law(e)) => Err(e),
+            Err(StepByError::Sim(SimError::Timing(m))) => Err(errors::value(m)),
+            Err(StepByError::Sim(e)) => Err(errors::sim(&e)),
+        }
+    }
+
+    /// Whether the scenario has a safety filter (`[safety]`).
+    #[getter]
+    fn has_safety(&self) -> bool {
+        self.sim.has_safety()
+    }
+
+    /// What the safety filter did at the last step, or None when it did not
+    /// run (no `[safety]`, turned off, or no step yet): per agent whether it
+    /// ran, its outcome (`nominal`, `filtered`, `braked`; `off` for an agent
+    /// without a filter), whether it broke a deadlock, the command given
+    /// (after the acceleration limit) and the command sent, `(n, 2)` each,
+    /// and the distance to the nearest neighbour's point in range, m.
+    #[allow(clippy::type_complexity)]
+    fn safety_step<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> Option<(
+        Vec<bool>,
+        Vec<&'static str>,
+        Vec<bool>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Vec<f64>,
+    )> {
+        if !self.filtered {
+            return None;
+        }
+        let out = self.sim.safety_outputs();
+        let n = out.len();
+        let (mut nominal, mut filtered) = (Array2::zeros((n, 2)), Array2::zeros((n, 2)));
+        for (i, o) in out.iter().enumerate() {
+            for k in 0..2 {
+                nominal[[i, k]] = o.nominal[k];
+                filtered[[i, k]] = o.filtered[k];
+            }
+        }
+        let outcome = out
+            .iter()
+            .map(|o| match (o.enabled, o.outcome) {
+                (false, _) => "off",
+                (true, Outcome::Nominal) => "nominal",
+                (true, Outcome::Filtered) => "filtered",
+                (true, Outcome::Braked) => "braked",
+            })
+            .collect();
+        Some((
+            out.iter().map(|o| o.enabled).collect(),
+            outcome,
+            out.iter().map(|o| o.deadlock).collect(),
+            nominal.into_pyarray(py),
+            filtered.into_pyarray(py),
+            out.iter().map(|o| o.min_distance).collect(),
+        ))
     }
 
     /// The true tracking errors now: `e` (eq. 7) and `z` (eq. 10), `(n, 2)` each.

@@ -98,18 +98,75 @@ def test_scenario_errors_carry_file_line_column_and_field(tmp_path):
     assert isinstance(e, ValueError)
 
 
-def test_a_dict_error_names_the_field_in_the_written_document():
+def test_a_dict_error_is_a_type_error_when_not_a_document():
     doc = builtin_document("circle-pentagon")
     doc["agents"][2]["offset"]["x"] = float("nan")
     with pytest.raises(TypeError):
         echelon.Scenario.from_dict(doc)
+
+
+def _set(doc: dict, path: tuple, value) -> None:
+    node = doc
+    for k in path[:-1]:
+        node = node[k]
+    if value is _DELETE:
+        del node[path[-1]]
+    else:
+        node[path[-1]] = value
+
+
+_DELETE = object()
+
+# (where, what): a wrong value at `where` in circle-pentagon's document (or
+# none: a missing field), each a different check of the scenario's.
+_WRONG = [
+    (("control", "ke"), -1.5),  # a gain must be > 0
+    (("control", "kz"), "ten"),  # a type error, found while parsing
+    (("sim", "dt"), 0.0),
+    (("agents", 2, "offset", "x"), -5.0),  # L_X > 0 (eq. 4)
+    (("agents", 0, "start", "x"), "left"),
+    (("agents", 3, "leader"), 9),  # no agent 9
+    (("agents", 1, "start"), _DELETE),  # missing field
+    (("agents", 1, "control", "ke"), -2.0),  # an agent's own gains
+    (("robots", "heavy.bot", "mass"), -27.0),  # a key with a dot
+    (("robots", "heavy.bot", "wheel_radius"), "big"),
+    (("agents", 0, "max_accel"), -1.0),
+    (("agents", 2, "wrong_key"), 1.0),  # an unknown field
+]
+
+
+@pytest.mark.parametrize("where, value", _WRONG, ids=lambda w: ".".join(map(str, w)) if isinstance(w, tuple) else None)
+def test_a_dict_error_points_into_the_dict(where, value):
     doc = builtin_document("circle-pentagon")
-    doc["agents"][2]["offset"]["x"] = -5.0
+    doc["robots"] = {"heavy.bot": {"preset": "agent1"}}
+    for a in doc["agents"]:
+        a["robot"] = "heavy.bot"
+    doc["agents"][1]["control"] = {"ke": 1.0}
+    echelon.Scenario.from_dict(doc)  # the document itself is fine
+    _set(doc, where, value)
     with pytest.raises(echelon.ScenarioError) as info:
-        echelon.Scenario.from_dict(doc)
+        echelon.Scenario.from_dict(doc, origin="my-dict")
     e = info.value
-    assert e.file == "<dict>" and e.field.startswith("agents[3].offset")
-    assert e.line > 0 and e.column > 0
+    assert (e.file, e.line, e.column) == ("my-dict", 0, 0)
+    assert e.path == where, (e.path, str(e))
+    # The path indexes the dict (what is there, or the parent of a missing field).
+    node = doc
+    for k in e.path[:-1]:
+        node = node[k]
+    assert value is _DELETE or node[e.path[-1]] == value
+    expected = "".join(
+        f"[{k}]" if isinstance(k, int) else (f'["{k}"]' if "." in k else (f".{k}" if i else k))
+        for i, k in enumerate(where)
+    )
+    assert e.field == expected
+    assert str(e) == f"my-dict: {expected}: {e.message}"
+    assert isinstance(e, ValueError)
+
+
+def test_a_dict_error_from_an_override_keeps_its_own_place():
+    doc = builtin_document("circle-pentagon")
+    with pytest.raises(ValueError, match="dt"):
+        echelon.Scenario.from_dict(doc, dt=-1.0)
 
 
 def test_unknown_builtin_and_parse_errors():

@@ -22,6 +22,7 @@ mod observe;
 mod outputs;
 mod system;
 
+pub use driven::StepByError;
 pub use observe::{Every, Frame, Observer, ObserverError};
 pub use outputs::{AgentOutput, SafetyOutput, VelocityOutput};
 use system::System;
@@ -346,23 +347,45 @@ impl Simulation {
     /// the configuration's [`crate::guard::Bounds`]; the simulation then stays at that state.
     pub fn step(&mut self) -> Result<(), SimError> {
         self.refresh();
+        let hold = self.hold_every > 0;
+        self.advance(|sys, held, odo, t, x, dx, sp| {
+            sys.evaluate(t, x, hold.then_some(held), odo, None, dx, sp);
+            Ok(())
+        })?;
+        if self.velocity_agents {
+            self.settle();
+        }
+        Ok(())
+    }
+
+    /// RK4 from the first stage's slope (`k1`, fresh): the three inner
+    /// stages, each `x + h k` from the previous stage's slope and then
+    /// `stage` (the slope there), and the step's combination, distance,
+    /// input integral, bounds and odometry. A failed `stage` leaves the
+    /// state as it was.
+    #[allow(clippy::type_complexity)]
+    fn advance(
+        &mut self,
+        mut stage: impl FnMut(
+            &System,
+            &[Command],
+            &[Option<Odometer>],
+            f64,
+            &[State],
+            &mut [State],
+            &mut [[f64; 4]],
+        ) -> Result<(), SimError>,
+    ) -> Result<(), SimError> {
         let dt = self.config.dt;
         let t = self.time();
-        let held = (self.hold_every > 0).then_some(&self.held[..]);
-        let sys = &self.sys;
-        let odo = &self.odometers[..];
-        // The three inner stages: `x + h k` from the previous stage's slope,
-        // then the slope there.
-        let eval = |t: f64, x: &[State], dx: &mut [State], sp: &mut [[f64; 4]]| {
-            sys.evaluate(t, x, held, odo, None, dx, sp);
-        };
+        let (sys, held, odo) = (&self.sys, &self.held[..], &self.odometers[..]);
         let [_, sp2, sp3, sp4] = &mut self.speeds;
         add_scaled(&mut self.stage, &self.state, &self.k1, 0.5 * dt);
-        eval(t + 0.5 * dt, &self.stage, &mut self.k2, sp2);
+        stage(sys, held, odo, t + 0.5 * dt, &self.stage, &mut self.k2, sp2)?;
         add_scaled(&mut self.stage, &self.state, &self.k2, 0.5 * dt);
-        eval(t + 0.5 * dt, &self.stage, &mut self.k3, sp3);
+        stage(sys, held, odo, t + 0.5 * dt, &self.stage, &mut self.k3, sp3)?;
         add_scaled(&mut self.stage, &self.state, &self.k3, dt);
-        eval(t + dt, &self.stage, &mut self.k4, sp4);
+        stage(sys, held, odo, t + dt, &self.stage, &mut self.k4, sp4)?;
         let h6 = dt / 6.0;
         for (i, x) in self.state.iter_mut().enumerate() {
             let k = [&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]];
@@ -402,9 +425,6 @@ impl Simulation {
                 o.sample(now, &self.state[i], self.distance[i]);
             }
         }
-        if self.velocity_agents {
-            self.settle();
-        }
         Ok(())
     }
 
@@ -414,6 +434,11 @@ impl Simulation {
     /// mode, the held command or the new sample).
     fn settle(&mut self) {
         self.refresh();
+        self.settle_to_outputs();
+    }
+
+    /// [`Simulation::settle`] under the commands in the outputs now.
+    fn settle_to_outputs(&mut self) {
         for (i, a) in self.sys.plan.agents().iter().enumerate() {
             if let (Drive::Velocity(r), Some(v)) = (a.drive(), self.out[i].velocity) {
                 self.state[i] = r.base().settle(&self.state[i], v.applied);

@@ -3,7 +3,7 @@
 
 use super::AgentOutput;
 use crate::agent::{Command, Drive};
-use crate::control::{LawOutput, errors};
+use crate::control::{LawOutput, LeaderMotion, Offset, errors};
 use crate::follow::{LeaderView, follow};
 use crate::formation::Leader;
 use crate::kinematic::kinematic_law;
@@ -43,6 +43,25 @@ pub(super) fn robot_leader(
     LeaderView::Robot { state, dv }
 }
 
+/// A law from outside the simulator ([`Simulation::step_by`]): agent `i`'s
+/// command at `t` from what it senses and what its law is given (leader
+/// motion and offsets, eqs. 4–6).
+///
+/// [`Simulation::step_by`]: super::Simulation::step_by
+pub(super) type CallerLaw<'a> =
+    dyn FnMut(usize, f64, &State, &LeaderMotion, &Offset) -> Command + 'a;
+
+/// Where each agent's command comes from in [`System::evaluate_by`].
+pub(super) enum Source<'a, 'b> {
+    /// Its own law, through its act step.
+    Law,
+    /// Held commands (a sampled controller between samples, or a caller's),
+    /// already through the act step.
+    Held(&'a [Command]),
+    /// A caller's law in place of its own, through its act step.
+    Caller(&'a mut CallerLaw<'b>),
+}
+
 /// Immutable description of the system being simulated.
 #[derive(Debug, Clone)]
 pub(super) struct System {
@@ -80,11 +99,28 @@ impl System {
         x: &[State],
         held: Option<&[Command]>,
         odometers: &[Option<Odometer>],
+        out: Option<&mut [AgentOutput]>,
+        dx: &mut [State],
+        speeds: &mut [[f64; 4]],
+    ) {
+        let source = held.map_or(Source::Law, Source::Held);
+        self.evaluate_by(t, x, source, odometers, out, dx, speeds);
+    }
+
+    /// [`System::evaluate`] with the commands from `source`.
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn evaluate_by(
+        &self,
+        t: f64,
+        x: &[State],
+        mut source: Source<'_, '_>,
+        odometers: &[Option<Odometer>],
         mut out: Option<&mut [AgentOutput]>,
         dx: &mut [State],
         speeds: &mut [[f64; 4]],
     ) {
-        if let (None, Some(h)) = (&out, held) {
+        if let (None, Source::Held(h)) = (&out, &source) {
             // Between samples of a sampled controller, with nobody looking at
             // the law's outputs: only the plant moves.
             for (i, a) in self.plan.agents().iter().enumerate() {
@@ -143,7 +179,11 @@ impl System {
             // The act step (agent.rs): the law's command through the agent's
             // limits; a sampled controller's held command went through it
             // (and its filter) at the sample.
-            let command = held.map_or_else(|| a.act(t, &me, law.command(), None).command, |h| h[i]);
+            let command = match &mut source {
+                Source::Law => a.act(t, &me, law.command(), None).command,
+                Source::Held(h) => h[i],
+                Source::Caller(f) => a.act(t, &me, f(i, t, &me, &motion, &offset), None).command,
+            };
             let applied = a.drive().actuate(command);
             dx[i] = a.drive().derivative(&x[i], &applied);
             speeds[i] = a.drive().speeds(&x[i], &applied);

@@ -1,0 +1,340 @@
+//! The barrier-certificate safety filters ([`echelon::safety`],
+//! `docs/safety.md`) on arrays, one filter per robot kept between calls
+//! (their deadlock monitors remember): velocity bases (`ḣ ≥ −γ h`, on
+//! `(v, ω)`) and torque-driven robots (the exponential barrier of relative
+//! degree two on eq. 3's `(u1, u2)`, the speed envelope, the wheel torque
+//! limit). Every robot filters, so each takes half of each pair constraint.
+
+use numpy::ndarray::{Array2, ArrayView2};
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
+use pyo3::prelude::*;
+
+use echelon::State;
+use echelon::base::{VelocityBase, VelocityCommand, VelocityRobot};
+use echelon::model::{Input, RobotParams};
+use echelon::safety::{
+    Envelope, INNER_RATE, Neighbour, Obstacle, Outcome, SafetyConfig, SafetyFilter,
+};
+
+use crate::errors;
+use crate::simulation::state_of;
+
+/// The filtered commands, each robot's outcome and its closest neighbour.
+type Filtered<'py> = (Bound<'py, PyArray2<f64>>, Vec<&'static str>, Vec<f64>);
+
+/// What both kinds share: the robots' filters, the obstacles, `L`, scratch.
+#[derive(Debug)]
+struct Filters {
+    filters: Vec<SafetyFilter>,
+    obstacles: Vec<Obstacle>,
+    l: f64,
+    states: Vec<State>,
+    neighbours: Vec<Neighbour>,
+}
+
+impl Filters {
+    /// `n` filters keeping points `l` ahead `radius` apart (`gain` γ,
+    /// sensing `range`), obstacles as `(m, 3)` rows `x, y, r`, commands held
+    /// `period` s (0: continuous).
+    fn new(
+        n: usize,
+        radius: f64,
+        gain: f64,
+        range: f64,
+        l: f64,
+        obstacles: Option<PyReadonlyArray2<'_, f64>>,
+        period: f64,
+    ) -> PyResult<Filters> {
+        let config = SafetyConfig::new(radius, gain, range).map_err(|e| errors::param(&e))?;
+        if !(l > 0.0 && l.is_finite()) {
+            return Err(errors::value(format!("l: {l} must be a finite number > 0")));
+        }
+        let mut obs = Vec::new();
+        if let Some(o) = obstacles {
+            let a = o.as_array();
+            if a.ncols() != 3 {
+                return Err(errors::value("obstacles: expected rows of (x, y, r)"));
+            }
+            for row in a.rows() {
+                obs.push(Obstacle::new(row[0], row[1], row[2]).map_err(|e| errors::param(&e))?);
+            }
+        }
+        Ok(Filters {
+            filters: (0..n)
+                .map(|_| SafetyFilter::new(config).with_period(period))
+                .collect(),
+            obstacles: obs,
+            l,
+            states: Vec::with_capacity(n),
+            neighbours: Vec::with_capacity(n),
+        })
+    }
+
+    /// Checks `(n, cols)` poses (`cols` among `allowed`) and `(n, 2)`
+    /// commands, and reads the poses into `states` (a 3-column pose moves
+    /// at its command when `at_command`).
+    fn read(
+        &mut self,
+        poses: &ArrayView2<'_, f64>,
+        commands: &ArrayView2<'_, f64>,
+        allowed: &[usize],
+        at_command: bool,
+    ) -> PyResult<()> {
+        let n = self.filters.len();
+        if poses.nrows() != n || !allowed.contains(&poses.ncols()) {
+            let shapes: Vec<String> = allowed.iter().map(|c| format!("({n}, {c})")).collect();
+            return Err(errors::value(format!(
+                "poses: shape {:?}, expected {}",
+                poses.shape(),
+                shapes.join(" or ")
+            )));
+        }
+        if commands.shape() != [n, 2] {
+            return Err(errors::value(format!(
+                "commands: shape {:?}, expected ({n}, 2)",
+                commands.shape()
+            )));
+        }
+        if let Some(bad) = commands.iter().find(|c| !c.is_finite()) {
+            return Err(errors::value(format!("commands: {bad} is not finite")));
+        }
+        if let Some(bad) = poses.iter().find(|c| !c.is_finite()) {
+            return Err(errors::value(format!("poses: {bad} is not finite")));
+        }
+        self.states.clear();
+        for (i, row) in poses.rows().into_iter().enumerate() {
+            let row: Vec<f64> = row.to_vec();
+            let mut s = state_of(&row)?;
+            if at_command && row.len() == 3 {
+                (s.v, s.omega) = (commands[[i, 0]], commands[[i, 1]]);
+            }
+            self.states.push(s);
+        }
+        Ok(())
+    }
+
+    /// The neighbours robot `i` sees: every other robot, cooperative, with
+    /// `dv[j] = (v̇, ω̇)` when known.
+    fn neighbours_of(&mut self, i: usize, dv: Option<&[[f64; 2]]>) {
+        self.neighbours.clear();
+        for (j, s) in self.states.iter().enumerate().filter(|&(j, _)| j != i) {
+            let dv = dv.map(|d| d[j]);
+            self.neighbours
+                .push(Neighbour::of_state(s, self.l, dv, true));
+        }
+    }
+}
+
+fn outcome_name(o: Outcome) -> &'static str {
+    match o {
+        Outcome::Nominal => "nominal",
+        Outcome::Filtered => "filtered",
+        Outcome::Braked => "braked",
+    }
+}
+
+/// Safety filters for `n` velocity-controlled robots, one each.
+#[pyclass(module = "echelon._echelon", name = "SafetyFilters")]
+#[derive(Debug)]
+struct PySafetyFilters {
+    f: Filters,
+    base: VelocityBase,
+}
+
+#[pymethods]
+impl PySafetyFilters {
+    /// `n` robots keeping their points `l` ahead `radius` apart and
+    /// `radius` from obstacles' edges (`(m, 3)`: x, y, r); `gain` is the
+    /// barrier's γ, `range` the sensing range, `period` the control
+    /// period, `base` a velocity base preset (`ideal`, `jackal`, …).
+    #[new]
+    #[pyo3(signature = (n, radius, gain=1.0, range=f64::INFINITY, l=0.1, obstacles=None, period=0.01, base="ideal"))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        n: usize,
+        radius: f64,
+        gain: f64,
+        range: f64,
+        l: f64,
+        obstacles: Option<PyReadonlyArray2<'_, f64>>,
+        period: f64,
+        base: &str,
+    ) -> PyResult<Self> {
+        if !(period > 0.0 && period.is_finite()) {
+            return Err(errors::value(format!(
+                "period: {period} must be a finite number > 0"
+            )));
+        }
+        let f = Filters::new(n, radius, gain, range, l, obstacles, period)?;
+        let base = VelocityRobot::preset(base)
+            .map(|r| r.base())
+            .ok_or_else(|| {
+                let names: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
+                errors::value(format!(
+                    "base: `{base}` is not a preset ({})",
+                    names.join(", ")
+                ))
+            })?;
+        Ok(PySafetyFilters { f, base })
+    }
+
+    /// Filters `commands` (`(n, 2)`: v, ω) of robots in `poses` (`(n, 3)`:
+    /// x, y, θ, moving at their commands; or `(n, 5)` with v, ω) at time `t`:
+    /// returns the filtered commands `(n, 2)`, each robot's outcome
+    /// (`nominal`, `filtered`, `braked`) and the smallest distance from its
+    /// point to a neighbour's.
+    fn filter<'py>(
+        &mut self,
+        py: Python<'py>,
+        t: f64,
+        poses: PyReadonlyArray2<'_, f64>,
+        commands: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<Filtered<'py>> {
+        let c = commands.as_array();
+        self.f.read(&poses.as_array(), &c, &[3, 5], true)?;
+        let n = self.f.filters.len();
+        let mut out = Array2::zeros((n, 2));
+        let mut outcomes = Vec::with_capacity(n);
+        let mut closest = Vec::with_capacity(n);
+        for i in 0..n {
+            self.f.neighbours_of(i, None);
+            let nominal = VelocityCommand {
+                v: c[[i, 0]],
+                omega: c[[i, 1]],
+            };
+            let Filters {
+                filters,
+                obstacles,
+                l,
+                states,
+                neighbours,
+            } = &mut self.f;
+            let r = filters[i].velocity(
+                t, &states[i], *l, nominal, &self.base, neighbours, obstacles,
+            );
+            (out[[i, 0]], out[[i, 1]]) = (r.command.v, r.command.omega);
+            outcomes.push(outcome_name(r.outcome));
+            closest.push(r.min_distance);
+        }
+        Ok((out.into_pyarray(py), outcomes, closest))
+    }
+}
+
+/// Safety filters for `n` torque-driven robots (eq. 3), one each.
+#[pyclass(module = "echelon._echelon", name = "TorqueSafetyFilters")]
+#[derive(Debug)]
+struct PyTorqueSafetyFilters {
+    f: Filters,
+    robots: Vec<RobotParams>,
+    /// Scratch: each robot's `(v̇, ω̇)` under its nominal command.
+    dv: Vec<[f64; 2]>,
+}
+
+#[pymethods]
+impl PyTorqueSafetyFilters {
+    /// `n` torque-driven robots (`robots_json`: eq. 3's parameters as JSON,
+    /// one for all or one per robot) keeping their points `l` ahead
+    /// `radius` apart and `radius` from obstacles' edges (`(m, 3)`: x, y, r);
+    /// `gain` is the barrier's γ, `range` the sensing range.
+    #[new]
+    #[pyo3(signature = (n, radius, robots_json, gain=1.0, range=f64::INFINITY, l=0.1, obstacles=None))]
+    fn new(
+        n: usize,
+        radius: f64,
+        robots_json: Vec<String>,
+        gain: f64,
+        range: f64,
+        l: f64,
+        obstacles: Option<PyReadonlyArray2<'_, f64>>,
+    ) -> PyResult<Self> {
+        let f = Filters::new(n, radius, gain, range, l, obstacles, 0.0)?;
+        if !(robots_json.len() == 1 || robots_json.len() == n) {
+            return Err(errors::value(format!(
+                "robot: {} robots given for {n} (one for all, or one each)",
+                robots_json.len()
+            )));
+        }
+        let parsed = robots_json
+            .iter()
+            .map(|j| serde_json::from_str::<RobotParams>(j))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| errors::value(format!("robot: {e}")))?;
+        let robots = (0..n).map(|i| parsed[i.min(parsed.len() - 1)]).collect();
+        Ok(PyTorqueSafetyFilters {
+            f,
+            robots,
+            dv: vec![[0.0; 2]; n],
+        })
+    }
+
+    /// Filters `commands` (`(n, 2)`: u1, u2 of eq. 3) of robots in `poses`
+    /// (`(n, 5)`: x, y, θ, v, ω) at time `t`: returns the filtered commands
+    /// `(n, 2)`, each robot's outcome (`nominal`, `filtered`, `braked`) and
+    /// the smallest distance from its point to a neighbour's.
+    fn filter<'py>(
+        &mut self,
+        py: Python<'py>,
+        t: f64,
+        poses: PyReadonlyArray2<'_, f64>,
+        commands: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<Filtered<'py>> {
+        let c = commands.as_array();
+        self.f.read(&poses.as_array(), &c, &[5], false)?;
+        let n = self.f.filters.len();
+        // What each robot's neighbours measure of it: its acceleration under
+        // its nominal (as the simulator's filter sees its neighbours).
+        for (i, (robot, s)) in self.robots.iter().zip(&self.f.states).enumerate() {
+            let u = robot
+                .limit(Input {
+                    u1: c[[i, 0]],
+                    u2: c[[i, 1]],
+                })
+                .0;
+            let d = robot.derivative(s, u);
+            self.dv[i] = [d.v, d.omega];
+        }
+        let mut out = Array2::zeros((n, 2));
+        let mut outcomes = Vec::with_capacity(n);
+        let mut closest = Vec::with_capacity(n);
+        for i in 0..n {
+            self.f.neighbours_of(i, Some(&self.dv));
+            let nominal = Input {
+                u1: c[[i, 0]],
+                u2: c[[i, 1]],
+            };
+            let Filters {
+                filters,
+                obstacles,
+                l,
+                states,
+                neighbours,
+            } = &mut self.f;
+            let r = filters[i].torque(
+                t,
+                &states[i],
+                *l,
+                &self.robots[i],
+                nominal,
+                neighbours,
+                obstacles,
+            );
+            (out[[i, 0]], out[[i, 1]]) = (r.command.u1, r.command.u2);
+            outcomes.push(outcome_name(r.outcome));
+            closest.push(r.min_distance);
+        }
+        Ok((out.into_pyarray(py), outcomes, closest))
+    }
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PySafetyFilters>()?;
+    m.add_class::<PyTorqueSafetyFilters>()?;
+    // The torque filter's fixed settings (echelon::safety::{INNER_RATE, Envelope}).
+    m.add("TORQUE_INNER_RATE", INNER_RATE)?;
+    let e = Envelope::DEFAULT;
+    m.add(
+        "TORQUE_ENVELOPE",
+        (e.v_max, e.v_reverse, e.omega_max, e.rate),
+    )?;
+    Ok(())
+}

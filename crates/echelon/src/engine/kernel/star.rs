@@ -1,11 +1,12 @@
 //! A star block's stage and tile: every agent follows the reference.
 
-use crate::control::{Body, law_finish, law_partial};
+use crate::control::{Body, Variant, law_finish, law_partial};
 use crate::lanes::Lanes;
+use crate::lycomp::LyComp;
 
 use super::{
     Block, Carry, Consts, V, W, actuate, add_scaled, broken, combine, each, first_lane, hold_ly,
-    star_ly,
+    sin_cos_cold, star_ly, vectors,
 };
 
 /// What a star agent's controller and plant do at one stage.
@@ -46,7 +47,9 @@ pub(crate) fn star_stage(
 }
 
 /// `x + d k` and the sines and cosines of its heading, from those of `x`
-/// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`).
+/// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`; when some
+/// lane turns by 0.05 rad or more, [`Lanes::sin_cos`] out of line). The new
+/// state goes through memory as whole vectors ([`vectors`]).
 #[inline(always)]
 #[allow(clippy::type_complexity)]
 pub(crate) fn turned_state<const N: usize>(
@@ -55,10 +58,12 @@ pub(crate) fn turned_state<const N: usize>(
     d: &[Lanes<N>; 5],
     k: f64,
 ) -> ([Lanes<N>; 5], (Lanes<N>, Lanes<N>)) {
-    let next = add_scaled(x, d, k);
-    let turned = (d[2] * k)
-        .sin_cos_turned(sin, cos)
-        .unwrap_or_else(|| next[2].sin_cos());
+    let mut next = add_scaled(x, d, k);
+    vectors(&mut next);
+    let turned = match (d[2] * k).sin_cos_turned(sin, cos) {
+        Some(sc) => sc,
+        None => sin_cos_cold(next[2]),
+    };
     (next, turned)
 }
 
@@ -71,12 +76,67 @@ pub(crate) fn turned_state<const N: usize>(
 /// small `δθ`), and two `L_Y`, since stages 2 and 3 see the reference at the
 /// same instant and stage 4's instant is the next step's stage 1
 /// (`refs[n][3] == refs[n + 1][0]`, as `fill_reference` makes them).
+///
+/// The batch's choices (`L_Ycomp` mode, law variant, torque limit or none)
+/// are made once per tile: each combination is its own loop with them as
+/// constants ([`star_tile_as`]), without branches on them inside.
 #[inline(always)]
 pub(crate) fn star_tile(
     c: &Consts,
     blocks: &mut [Block],
     refs: &[[Carry; 4]],
 ) -> Option<(usize, usize)> {
+    match (c.variant, c.limit.is_some()) {
+        (Variant::Paper, false) => star_tile_comp::<false, false>(c, blocks, refs),
+        (Variant::Paper, true) => star_tile_comp::<false, true>(c, blocks, refs),
+        (Variant::Complete, false) => star_tile_comp::<true, false>(c, blocks, refs),
+        (Variant::Complete, true) => star_tile_comp::<true, true>(c, blocks, refs),
+    }
+}
+
+/// [`star_tile`] for one law variant and limit, choosing the `L_Ycomp` mode.
+#[inline(always)]
+fn star_tile_comp<const COMPLETE: bool, const LIMITED: bool>(
+    c: &Consts,
+    blocks: &mut [Block],
+    refs: &[[Carry; 4]],
+) -> Option<(usize, usize)> {
+    match c.comp {
+        LyComp::Exact => star_tile_as::<EXACT, COMPLETE, LIMITED>(c, blocks, refs),
+        LyComp::Fit => star_tile_as::<FIT, COMPLETE, LIMITED>(c, blocks, refs),
+        LyComp::None => star_tile_as::<NONE, COMPLETE, LIMITED>(c, blocks, refs),
+    }
+}
+
+/// [`LyComp`] as a constant parameter.
+const EXACT: u8 = 0;
+const FIT: u8 = 1;
+const NONE: u8 = 2;
+
+/// The star tile with `c`'s `L_Ycomp` mode, variant and limit replaced by
+/// constants (the same values: the caller matched them), so that the
+/// compiler sees one straight loop (LLVM does not unswitch a loop this
+/// large, and the joins of the branches on them cost spills).
+#[inline(always)]
+fn star_tile_as<const COMP: u8, const COMPLETE: bool, const LIMITED: bool>(
+    c: &Consts,
+    blocks: &mut [Block],
+    refs: &[[Carry; 4]],
+) -> Option<(usize, usize)> {
+    let c = &Consts {
+        comp: match COMP {
+            EXACT => LyComp::Exact,
+            FIT => LyComp::Fit,
+            _ => LyComp::None,
+        },
+        variant: if COMPLETE {
+            Variant::Complete
+        } else {
+            Variant::Paper
+        },
+        limit: if LIMITED { c.limit } else { None },
+        ..*c
+    };
     let (h, dt, h6) = (0.5 * c.dt, c.dt, c.dt / 6.0);
     let mut first: Option<(usize, usize)> = None;
     for (bi, b) in blocks.iter_mut().enumerate() {
@@ -94,6 +154,7 @@ pub(crate) fn star_tile(
             let k4 = star_stage(c, b, &x4, sc4, &r[3], ly4).dx;
             let k23 = each(|i| k2[i] + k3[i]);
             x = combine(&x, &k1, &k23, &k4, h6);
+            vectors(&mut x);
             ly1 = ly4;
             let bad = broken(&x, b.live);
             if bad.any() {

@@ -1,8 +1,7 @@
 //! A star block's stage and tile: every agent follows the reference.
 
-use crate::control::{Body, Variant, law_finish, law_partial};
+use crate::control::{Body, law_finish, law_partial};
 use crate::lanes::Lanes;
-use crate::lycomp::LyComp;
 
 use super::{
     Block, Carry, Consts, V, W, actuate, add_scaled, broken, combine, each, first_lane, hold_ly,
@@ -76,67 +75,12 @@ pub(crate) fn turned_state<const N: usize>(
 /// small `δθ`), and two `L_Y`, since stages 2 and 3 see the reference at the
 /// same instant and stage 4's instant is the next step's stage 1
 /// (`refs[n][3] == refs[n + 1][0]`, as `fill_reference` makes them).
-///
-/// The batch's choices (`L_Ycomp` mode, law variant, torque limit or none)
-/// are made once per tile: each combination is its own loop with them as
-/// constants ([`star_tile_as`]), without branches on them inside.
 #[inline(always)]
 pub(crate) fn star_tile(
     c: &Consts,
     blocks: &mut [Block],
     refs: &[[Carry; 4]],
 ) -> Option<(usize, usize)> {
-    match (c.variant, c.limit.is_some()) {
-        (Variant::Paper, false) => star_tile_comp::<false, false>(c, blocks, refs),
-        (Variant::Paper, true) => star_tile_comp::<false, true>(c, blocks, refs),
-        (Variant::Complete, false) => star_tile_comp::<true, false>(c, blocks, refs),
-        (Variant::Complete, true) => star_tile_comp::<true, true>(c, blocks, refs),
-    }
-}
-
-/// [`star_tile`] for one law variant and limit, choosing the `L_Ycomp` mode.
-#[inline(always)]
-fn star_tile_comp<const COMPLETE: bool, const LIMITED: bool>(
-    c: &Consts,
-    blocks: &mut [Block],
-    refs: &[[Carry; 4]],
-) -> Option<(usize, usize)> {
-    match c.comp {
-        LyComp::Exact => star_tile_as::<EXACT, COMPLETE, LIMITED>(c, blocks, refs),
-        LyComp::Fit => star_tile_as::<FIT, COMPLETE, LIMITED>(c, blocks, refs),
-        LyComp::None => star_tile_as::<NONE, COMPLETE, LIMITED>(c, blocks, refs),
-    }
-}
-
-/// [`LyComp`] as a constant parameter.
-const EXACT: u8 = 0;
-const FIT: u8 = 1;
-const NONE: u8 = 2;
-
-/// The star tile with `c`'s `L_Ycomp` mode, variant and limit replaced by
-/// constants (the same values: the caller matched them), so that the
-/// compiler sees one straight loop (LLVM does not unswitch a loop this
-/// large, and the joins of the branches on them cost spills).
-#[inline(always)]
-fn star_tile_as<const COMP: u8, const COMPLETE: bool, const LIMITED: bool>(
-    c: &Consts,
-    blocks: &mut [Block],
-    refs: &[[Carry; 4]],
-) -> Option<(usize, usize)> {
-    let c = &Consts {
-        comp: match COMP {
-            EXACT => LyComp::Exact,
-            FIT => LyComp::Fit,
-            _ => LyComp::None,
-        },
-        variant: if COMPLETE {
-            Variant::Complete
-        } else {
-            Variant::Paper
-        },
-        limit: if LIMITED { c.limit } else { None },
-        ..*c
-    };
     let (h, dt, h6) = (0.5 * c.dt, c.dt, c.dt / 6.0);
     let mut first: Option<(usize, usize)> = None;
     for (bi, b) in blocks.iter_mut().enumerate() {

@@ -149,7 +149,12 @@ impl<K: Kernel> BatchEngine<K> {
                 state.len()
             )));
         }
-        if let Some(k) = state.iter().position(|v| !v.is_finite()) {
+        // A branch-free pass (it vectorises); the first bad value only if any.
+        let finite = state.iter().fold(true, |ok, v| ok & v.is_finite());
+        if let Some(k) = (!finite)
+            .then(|| state.iter().position(|v| !v.is_finite()))
+            .flatten()
+        {
             return Err(EngineError::Buffer(format!(
                 "{} of agent {} is {} (must be finite)",
                 ["x", "y", "θ", "v", "ω"][k / n],

@@ -34,6 +34,12 @@
 //! and `settle` of `base.rs` in lanes, saturated ticks counted per agent, a
 //! robot leader's `ṗ_d` from the speeds its base moves at (`engine/velocity.rs`).
 //!
+//! The state can live in a buffer the caller owns: [`BatchEngine::run_on`]
+//! steps five columns (x, y, θ, v, ω of every agent, as
+//! [`BatchEngine::columns`] lays them out) in place, with the same bits as
+//! [`BatchEngine::run`] (what the Python `BatchEngine.step` does on a numpy
+//! array).
+//!
 //! Both are one [`BatchEngine`] driver over a [`Kernel`]: the driver owns
 //! the tile loop (the reference filled once per tile of 64 steps), spreads a
 //! star's blocks over the pool, walks a chain segment by segment (a long

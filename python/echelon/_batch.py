@@ -13,10 +13,11 @@ from ._scenario import Scenario
 class BatchEngine:
     """N agents of one robot and law, every one following the reference
     (``star``) or each the one before (``chain``), stepped by echelon's batch
-    engine (SIMD lanes, all cores) with the GIL released. The states are
-    written into an ``(n, 5)`` float64 array you own (x, y, θ, v, ω) when
-    you ask: ``run(steps, out=buffer)`` steps ``steps`` times and fills it,
-    with no copy or allocation per step."""
+    engine (SIMD lanes, all cores) with the GIL released. The states can
+    live in a ``(5, n)`` float64 array you own (rows x, y, θ, v, ω):
+    ``state = engine.state()`` then ``engine.step(state, steps)`` steps it in
+    place, no copy. Or the engine keeps them and writes them into an
+    ``(n, 5)`` array when you ask: ``run(steps, out=buffer)``."""
 
     def __init__(self, inner: Any) -> None:
         self._inner = inner
@@ -45,6 +46,20 @@ class BatchEngine:
     @property
     def time(self) -> float:
         return self._inner.time
+
+    def state(self) -> np.ndarray:
+        """A new ``(5, n)`` float64 array, yours, holding the current states
+        as rows x, y, θ, v, ω: the buffer :meth:`step` steps in place."""
+        return self._inner.state()
+
+    def step(self, state: np.ndarray, steps: int = 1) -> np.ndarray:
+        """Steps the states in ``state`` (``(5, n)`` float64, C-contiguous,
+        writeable: as :meth:`state` makes it) ``steps`` RK4 steps in place,
+        in Rust with the GIL released and no copy: the engine reads and writes
+        your array. Returns it. A wrong array raises ``ValueError`` and
+        changes nothing."""
+        self._inner.step(state, steps)
+        return state
 
     def buffer(self) -> np.ndarray:
         """A new ``(n, 5)`` array for :meth:`run` and :meth:`states`."""

@@ -1,8 +1,12 @@
 //! The batch engine from Python: `echelon bench`'s formation (or a
-//! scenario's), stepped in Rust with the GIL released, its states written
-//! into an array the caller owns.
+//! scenario's), stepped in Rust with the GIL released, on a `(5, n)` numpy
+//! array the caller owns (stepped in place: `step`), or with its states
+//! written into one (`run(steps, out)`).
 
-use numpy::PyReadwriteArray2;
+use numpy::{
+    PyArray1, PyArray2, PyArrayDescrMethods, PyArrayMethods, PyReadwriteArray2, PyUntypedArray,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use echelon::engine::{BenchFormation, Engine, Topology, VelocityEngine};
@@ -124,6 +128,67 @@ impl PyBatchEngine {
             self.states_into(py, out)?;
         }
         Ok(())
+    }
+
+    /// A new `(5, n)` float64 array, yours, holding the current states as
+    /// columns (rows x, y, θ, v, ω): the buffer `step` steps in place.
+    fn state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let cols = match &self.engine {
+            Kind::Torque(e) => e.columns(),
+            Kind::Velocity(e) => e.columns(),
+        };
+        PyArray1::from_vec(py, cols).reshape([5, self.n()])
+    }
+
+    /// Steps the states in `state` (a `(5, n)` float64 C-contiguous writeable
+    /// array you own, rows x, y, θ, v, ω, as `state()` makes it) `steps` RK4
+    /// steps in place: the engine reads and writes your memory, no copy, the
+    /// GIL released. A wrong array (type, dtype, shape, layout, read-only, a
+    /// value that is not finite) raises `ValueError` and changes nothing.
+    #[pyo3(signature = (state, steps=1))]
+    fn step(&mut self, py: Python<'_>, state: &Bound<'_, PyAny>, steps: u64) -> PyResult<()> {
+        let n = self.n();
+        let untyped = state.cast::<PyUntypedArray>().map_err(|_| {
+            errors::value(format!(
+                "state: a numpy array of shape (5, {n}) and dtype float64, not {}",
+                state.get_type()
+            ))
+        })?;
+        if !untyped.dtype().is_equiv_to(&numpy::dtype::<f64>(py)) {
+            return Err(errors::value(format!(
+                "state: dtype {}, expected float64",
+                untyped.dtype()
+            )));
+        }
+        if untyped.shape() != [5, n] {
+            return Err(errors::value(format!(
+                "state: shape {:?}, expected (5, {n}) (rows x, y, θ, v, ω)",
+                untyped.shape()
+            )));
+        }
+        if !untyped.is_c_contiguous() {
+            return Err(errors::value(
+                "state: must be C-contiguous (np.ascontiguousarray makes a copy the engine can step)",
+            ));
+        }
+        let array = state
+            .cast::<PyArray2<f64>>()
+            .map_err(|e| errors::value(format!("state: {e}")))?;
+        let mut rw = array
+            .try_readwrite()
+            .map_err(|e| errors::value(format!("state: not writeable ({e})")))?;
+        let buf = rw
+            .as_slice_mut()
+            .map_err(|_| errors::value("state: must be C-contiguous"))?;
+        let engine = &mut self.engine;
+        let result = py.detach(|| match engine {
+            Kind::Torque(e) => e.run_on(buf, steps),
+            Kind::Velocity(e) => e.run_on(buf, steps),
+        });
+        result.map_err(|e| match e {
+            echelon::engine::EngineError::Sim(e) => errors::sim(&e),
+            other => errors::value(other),
+        })
     }
 
     /// Writes the states into `out` (`(n, 5)` float64, C-contiguous).

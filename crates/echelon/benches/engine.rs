@@ -1,6 +1,7 @@
 //! The speed suite: one law evaluation, one RK4 agent-step, stars and chains
-//! of 4, 1 000 and 100 000 agents, a sweep of 256 runs, and the velocity-base
-//! kernel (Jackal bases, kinematic law) on stars and chains. `cargo bench -p echelon`;
+//! of 4, 1 000 and 100 000 agents (each also on a state buffer the caller
+//! owns, `run_on`), a sweep of 256 runs, and the velocity-base kernel (Jackal
+//! bases, kinematic law) on stars and chains. `cargo bench -p echelon`;
 //! BENCHMARKS.md has the figures. Throughputs are in agent-steps (elements).
 
 use std::hint::black_box;
@@ -97,6 +98,12 @@ fn formations(c: &mut Criterion) {
             g.throughput(Throughput::Elements(agents as u64 * steps));
             let mut e = formation(agents, topology);
             g.bench_function(format!("N = {agents}"), |b| b.iter(|| e.run(steps)));
+            // The same on a state buffer the caller owns (`run_on`).
+            let mut e = formation(agents, topology);
+            let mut state = e.columns();
+            g.bench_function(format!("N = {agents}, caller's buffer"), |b| {
+                b.iter(|| e.run_on(&mut state, steps))
+            });
         }
         g.finish();
     }

@@ -115,6 +115,69 @@ impl<K: Kernel> BatchEngine<K> {
         self.run(1)
     }
 
+    /// Every agent's state as five columns of [`len`](Self::len) values
+    /// (x, y, θ, v, ω: column `q` at `q n .. (q + 1) n`), the layout of
+    /// [`BatchEngine::run_on`]'s buffer.
+    pub fn columns(&self) -> Vec<f64> {
+        let n = self.n;
+        let mut out = vec![0.0; 5 * n];
+        for (i, s) in self.states().iter().enumerate() {
+            for (q, v) in [s.x, s.y, s.theta, s.v, s.omega].into_iter().enumerate() {
+                out[q * n + i] = v;
+            }
+        }
+        out
+    }
+
+    /// `steps` RK4 steps of the states in `state`, a buffer the caller owns
+    /// (five columns of `n`, as [`BatchEngine::columns`] lays them out), in
+    /// place: the same computation as [`BatchEngine::run`] with the state
+    /// read from and written to the caller's memory (a star's blocks load
+    /// their lanes at the start of each tile of up to 64 steps and store them
+    /// at its end, in the task that steps them; a chain at the call's start
+    /// and end), no allocation. Afterwards the engine's own states
+    /// ([`BatchEngine::state`], [`BatchEngine::probes`]) are `state`'s too.
+    ///
+    /// A buffer of the wrong length, or holding a value that is not finite,
+    /// is refused ([`EngineError::Buffer`]) and nothing changes, neither the
+    /// buffer nor the engine.
+    pub fn run_on(&mut self, state: &mut [f64], steps: u64) -> Result<(), EngineError> {
+        let n = self.n;
+        if state.len() != 5 * n {
+            return Err(EngineError::Buffer(format!(
+                "{} values, expected 5 × {n} (columns x, y, θ, v, ω of {n} agents)",
+                state.len()
+            )));
+        }
+        // A branch-free pass (it vectorises); the first bad value only if any.
+        let finite = state.iter().fold(true, |ok, v| ok & v.is_finite());
+        if let Some(k) = (!finite)
+            .then(|| state.iter().position(|v| !v.is_finite()))
+            .flatten()
+        {
+            return Err(EngineError::Buffer(format!(
+                "{} of agent {} is {} (must be finite)",
+                ["x", "y", "θ", "v", "ω"][k / n],
+                k % n + 1,
+                state[k]
+            )));
+        }
+        if let Some(e) = &self.failed {
+            return Err(e.clone().into());
+        }
+        let mut cols = Columns::new(state, n);
+        let broke = match self.topology {
+            Topology::Star => self.run_tiles(steps, Some(cols)),
+            Topology::Chain => {
+                cols.load::<K>(&mut self.blocks);
+                let broke = self.run_chain(steps);
+                cols.store::<K>(&mut self.blocks);
+                broke
+            }
+        };
+        Ok(self.fail_at(broke)?)
+    }
+
     /// `steps` RK4 steps, the law in every stage. A star spreads its blocks,
     /// a chain of 512 agents or more its two halves, over the current rayon
     /// pool (`pool.install(|| engine.run(n))`); the
@@ -125,14 +188,26 @@ impl<K: Kernel> BatchEngine<K> {
         if let Some(e) = &self.failed {
             return Err(e.clone());
         }
-        let broke = if self.topology == Topology::Chain
-            && rayon::current_num_threads() >= 2
-            && self.blocks.len() * K::LANES >= 2 * SEGMENT * W
-        {
+        let broke = match self.topology {
+            Topology::Star => self.run_tiles(steps, None),
+            Topology::Chain => self.run_chain(steps),
+        };
+        self.fail_at(broke)
+    }
+
+    /// A chain's `steps` steps: as two halves on two threads when it is long
+    /// and the pool has them.
+    fn run_chain(&mut self, steps: u64) -> Option<(u64, usize)> {
+        if rayon::current_num_threads() >= 2 && self.blocks.len() * K::LANES >= 2 * SEGMENT * W {
             self.run_chain_on_two_cores(steps)
         } else {
-            self.run_tiles(steps)
-        };
+            self.run_tiles(steps, None)
+        }
+    }
+
+    /// The scalar simulator's error for the first broken `(step, agent)`, if
+    /// any; the engine then stays failed.
+    fn fail_at(&mut self, broke: Option<(u64, usize)>) -> Result<(), SimError> {
         if let Some((n, agent)) = broke {
             let state = self.state(agent);
             let e = SimError::Diverged {
@@ -153,7 +228,8 @@ impl<K: Kernel> BatchEngine<K> {
     }
 
     /// `steps` steps a tile at a time; the first broken `(step, agent)`.
-    fn run_tiles(&mut self, steps: u64) -> Option<(u64, usize)> {
+    /// With `cols` (a star only), the state is the caller's.
+    fn run_tiles(&mut self, steps: u64, mut cols: Option<Columns<'_>>) -> Option<(u64, usize)> {
         let (arch, dt) = (self.arch, self.dt());
         let mut left = steps;
         while left > 0 {
@@ -162,7 +238,14 @@ impl<K: Kernel> BatchEngine<K> {
             K::fill(tile, len, &self.reference, self.step, dt);
             let c = &self.consts;
             let broke = match self.topology {
-                Topology::Star => star::<K>(arch, c, &mut self.blocks, tile, len),
+                Topology::Star => star::<K>(
+                    arch,
+                    c,
+                    &mut self.blocks,
+                    cols.as_mut().map(Columns::reborrow),
+                    tile,
+                    len,
+                ),
                 Topology::Chain => {
                     chain::<K>(arch, c, &mut self.blocks, &mut self.scratch, tile, len)
                 }
@@ -228,6 +311,64 @@ impl<K: Kernel> BatchEngine<K> {
         }
         self.step += steps;
         None
+    }
+}
+
+/// Five state columns (x, y, θ, v, ω) of the same agents, a caller's buffer
+/// ([`BatchEngine::run_on`]): agent `i`'s quantity `q` at `cols[q][i]`.
+pub(super) struct Columns<'a>([&'a mut [f64]; 5]);
+
+impl<'a> Columns<'a> {
+    /// The columns of `buf` (`5 n` values).
+    pub(super) fn new(buf: &'a mut [f64], n: usize) -> Columns<'a> {
+        let (x, rest) = buf.split_at_mut(n);
+        let (y, rest) = rest.split_at_mut(n);
+        let (theta, rest) = rest.split_at_mut(n);
+        let (v, omega) = rest.split_at_mut(n);
+        Columns([x, y, theta, v, omega])
+    }
+
+    /// The same columns, borrowed for a shorter while.
+    pub(super) fn reborrow<'b>(&'b mut self) -> Columns<'b> {
+        let [a, b, c, d, e] = &mut self.0;
+        Columns([&mut **a, &mut **b, &mut **c, &mut **d, &mut **e])
+    }
+
+    /// Agents `..at` and `at..`.
+    pub(super) fn split_at(self, at: usize) -> (Columns<'a>, Columns<'a>) {
+        let at = at.min(self.0[0].len());
+        let [a, b, c, d, e] = self.0.map(|col| col.split_at_mut(at));
+        (
+            Columns([a.0, b.0, c.0, d.0, e.0]),
+            Columns([a.1, b.1, c.1, d.1, e.1]),
+        )
+    }
+
+    /// The blocks' live lanes from the columns (the blocks start at agent 0
+    /// of the columns; padding lanes keep their own values).
+    pub(super) fn load<K: Kernel>(&self, blocks: &mut [K::Block]) {
+        for (bi, b) in blocks.iter_mut().enumerate() {
+            let x = K::x_mut(b);
+            for (q, col) in self.0.iter().enumerate() {
+                if let Some(lanes) = col.get(bi * K::LANES..) {
+                    let live = lanes.len().min(K::LANES);
+                    x[q].0[..live].copy_from_slice(&lanes[..live]);
+                }
+            }
+        }
+    }
+
+    /// The blocks' live lanes into the columns.
+    pub(super) fn store<K: Kernel>(&mut self, blocks: &mut [K::Block]) {
+        for (bi, b) in blocks.iter_mut().enumerate() {
+            let x = K::x_mut(b);
+            for (q, col) in self.0.iter_mut().enumerate() {
+                if let Some(lanes) = col.get_mut(bi * K::LANES..) {
+                    let live = lanes.len().min(K::LANES);
+                    lanes[..live].copy_from_slice(&x[q].0[..live]);
+                }
+            }
+        }
     }
 }
 

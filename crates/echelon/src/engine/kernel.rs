@@ -270,10 +270,30 @@ pub(crate) fn add_scaled<const N: usize>(
     each(|i| x[i] + d[i] * k)
 }
 
-/// `[f(0), …, f(4)]`.
+/// `[f(0), …, f(4)]`, written out (`std::array::from_fn` calls its closure
+/// out of line in the dispatched kernels: a call per quantity, lanes spilled
+/// around it).
 #[inline(always)]
 pub(crate) fn each<const N: usize>(f: impl Fn(usize) -> Lanes<N>) -> [Lanes<N>; 5] {
-    std::array::from_fn(f)
+    [f(0), f(1), f(2), f(3), f(4)]
+}
+
+/// Puts a state in memory, whole vectors at a time. Without it the
+/// vectoriser, seeing a whole RK4 step as one block of scalar operations,
+/// splits parts of it into half vectors and shuffles (measured on both
+/// kernels: BENCHMARKS.md).
+#[inline(always)]
+pub(crate) fn vectors<const N: usize>(x: &mut [Lanes<N>; 5]) {
+    std::hint::black_box(x);
+}
+
+/// [`Lanes::sin_cos`] out of line: the rare fallback of an angle-sum turn
+/// (some lane turned by 0.05 rad or more), kept out of the hot loop so that
+/// the compiler keeps the kernel in vectors.
+#[cold]
+#[inline(never)]
+pub(crate) fn sin_cos_cold<const N: usize>(theta: Lanes<N>) -> (Lanes<N>, Lanes<N>) {
+    theta.sin_cos()
 }
 
 /// `x + h/6 (k₁ + 2 (k₂ + k₃) + k₄)`, with `k23 = k₂ + k₃`.

@@ -34,6 +34,12 @@
 //! and `settle` of `base.rs` in lanes, saturated ticks counted per agent, a
 //! robot leader's `ṗ_d` from the speeds its base moves at (`engine/velocity.rs`).
 //!
+//! The state can live in a buffer the caller owns: [`BatchEngine::run_on`]
+//! steps five columns (x, y, θ, v, ω of every agent, as
+//! [`BatchEngine::columns`] lays them out) in place, with the same bits as
+//! [`BatchEngine::run`] (what the Python `BatchEngine.step` does on a numpy
+//! array).
+//!
 //! Both are one [`BatchEngine`] driver over a [`Kernel`]: the driver owns
 //! the tile loop (the reference filled once per tile of 64 steps), spreads a
 //! star's blocks over the pool, walks a chain segment by segment (a long
@@ -64,7 +70,7 @@ use crate::reference::Reference;
 
 pub use bench::BenchFormation;
 pub use driver::sweep;
-use driver::{fill_reference, pack};
+use driver::{Columns, fill_reference, pack};
 pub use kernel::Probe;
 use kernel::{Consts, Limit};
 pub use torque::Torque;
@@ -125,6 +131,10 @@ pub enum EngineError {
     /// Something the scalar simulator does that the engine does not.
     #[error("the batch engine does not support {0}")]
     Unsupported(String),
+    /// A caller's state buffer the engine cannot step
+    /// ([`BatchEngine::run_on`]): wrong length or a value that is not finite.
+    #[error("state buffer: {0}")]
+    Buffer(String),
 }
 
 mod sealed {
@@ -160,6 +170,9 @@ pub trait Kernel: sealed::Sealed + Sized {
     /// Lane `l` of a block's state.
     #[doc(hidden)]
     fn state(b: &Self::Block, l: usize) -> State;
+    /// A block's state, `x, y, θ, v, ω` in lanes (what [`Columns`] load and store).
+    #[doc(hidden)]
+    fn x_mut(b: &mut Self::Block) -> &mut [kernel::V; 5];
     /// A tile of leaders for `steps` steps.
     #[doc(hidden)]
     fn tile(steps: usize) -> Self::Tile;
@@ -217,7 +230,8 @@ pub struct BatchEngine<K: Kernel> {
     /// A chain's per-segment work space (two segments: one per half).
     scratch: Vec<K::Scratch>,
     failed: Option<SimError>,
-    /// The widest instruction set this CPU has (AVX2 on x86-64 when present).
+    /// The widest instruction set this CPU has (on x86-64: AVX-512, else AVX2,
+    /// else the baseline).
     arch: Arch,
 }
 
@@ -396,27 +410,136 @@ impl Engine {
 mod tests {
     use super::*;
 
-    /// The AVX2 kernels (when this CPU has AVX2) and the baseline SSE2 ones
-    /// compute the same bits: no fused multiply-add, same operations.
+    /// The AVX-512 kernels, the AVX2 ones (each when this CPU has it) and
+    /// the baseline SSE2 ones compute the same bits: no fused multiply-add,
+    /// same operations.
     #[test]
     fn every_instruction_set_gives_the_same_bits() {
+        let mut arches = vec![Arch::Scalar];
+        #[cfg(target_arch = "x86_64")]
+        {
+            arches.extend(pulp::x86::V3::try_new().map(Arch::V3));
+            arches.extend(pulp::x86::V4::try_new().map(Arch::V4));
+        }
         for topology in [Topology::Star, Topology::Chain] {
             let f = BenchFormation {
                 agents: 37,
                 topology,
                 seed: 5,
             };
-            let mut best = f.engine(0.01).unwrap_or_else(|e| panic!("{e}"));
-            let mut baseline = best.clone();
-            baseline.arch = Arch::Scalar;
-            assert!(best.run(300).is_ok() && baseline.run(300).is_ok());
-            let bits = |e: &Engine| -> Vec<u64> {
+            let bits = |arch: Arch| -> Vec<u64> {
+                let mut e = f.engine(0.01).unwrap_or_else(|e| panic!("{e}"));
+                e.arch = arch;
+                assert!(e.run(300).is_ok());
                 e.states()
                     .iter()
                     .flat_map(|s| [s.x, s.y, s.theta, s.v, s.omega].map(f64::to_bits))
                     .collect()
             };
-            assert_eq!(bits(&best), bits(&baseline), "{topology:?}");
+            let baseline = bits(Arch::Scalar);
+            for &arch in &arches {
+                assert_eq!(bits(arch), baseline, "{topology:?} {arch:?}");
+            }
         }
+    }
+
+    fn column_bits(c: &[f64]) -> Vec<u64> {
+        c.iter().map(|v| v.to_bits()).collect()
+    }
+
+    /// `run_on` a caller's columns, in uneven calls, on 1 and 2 threads;
+    /// `run` on the engine's own state in one call on one thread.
+    fn run_on_agrees<K: Kernel>(make: &dyn Fn() -> BatchEngine<K>, calls: &[u64]) {
+        let steps: u64 = calls.iter().sum();
+        let mut own = make();
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        one.install(|| own.run(steps)).unwrap();
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut e = make();
+            let mut buf = e.columns();
+            for &k in calls {
+                pool.install(|| e.run_on(&mut buf, k)).unwrap();
+            }
+            assert_eq!(column_bits(&buf), column_bits(&own.columns()));
+            // The engine's own states are the buffer's too.
+            assert_eq!(column_bits(&e.columns()), column_bits(&buf));
+            assert_eq!(e.step_index(), steps);
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+
+        /// Stepping the caller's buffer is stepping the engine: the same bits
+        /// for any number of agents (partial blocks, parallel tasks, a chain
+        /// in two halves), drive, topology, and grouping of steps.
+        #[test]
+        fn run_on_the_callers_columns_is_run(
+            agents in 1usize..700,
+            chain in proptest::bool::ANY,
+            velocity in proptest::bool::ANY,
+            seed in 0u64..1000,
+            calls in proptest::collection::vec(1u64..150, 1..4),
+        ) {
+            let f = BenchFormation {
+                agents,
+                topology: if chain { Topology::Chain } else { Topology::Star },
+                seed,
+            };
+            if velocity {
+                run_on_agrees(&|| f.velocity_engine(BenchFormation::BASE, 0.001).unwrap(), &calls);
+            } else {
+                run_on_agrees(&|| f.engine(0.001).unwrap(), &calls);
+            }
+        }
+    }
+
+    /// A buffer of the wrong length or with a value that is not finite is
+    /// refused; neither it nor the engine changes.
+    #[test]
+    fn a_bad_buffer_is_refused_and_changes_nothing() {
+        let f = BenchFormation {
+            agents: 10,
+            topology: Topology::Star,
+            seed: 3,
+        };
+        let mut e = f.engine(0.001).unwrap();
+        let mut good = e.columns();
+        e.run_on(&mut good, 7).unwrap();
+        let before = (e.columns(), e.step_index());
+        for len in [0, 49, 51, 100] {
+            let mut short = vec![0.5; len];
+            let err = e.run_on(&mut short, 3).unwrap_err();
+            assert!(
+                matches!(&err, EngineError::Buffer(m) if m.contains("expected 5 × 10")),
+                "{err}"
+            );
+            assert!(short.iter().all(|&v| v == 0.5));
+        }
+        for (at, bad) in [(0, f64::NAN), (23, f64::INFINITY), (49, f64::NEG_INFINITY)] {
+            let mut buf = good.clone();
+            buf[at] = bad;
+            let copy = column_bits(&buf);
+            let err = e.run_on(&mut buf, 3).unwrap_err();
+            let what = format!(
+                "{} of agent {}",
+                ["x", "y", "θ", "v", "ω"][at / 10],
+                at % 10 + 1
+            );
+            assert!(
+                matches!(&err, EngineError::Buffer(m) if m.contains(&what)),
+                "{err}"
+            );
+            assert_eq!(column_bits(&buf), copy);
+        }
+        assert_eq!(column_bits(&e.columns()), column_bits(&before.0));
+        assert_eq!(e.step_index(), before.1);
     }
 }

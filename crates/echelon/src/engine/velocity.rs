@@ -56,7 +56,8 @@ use super::{BatchEngine, EngineError, Kernel, Member, Topology, VelocityEngine, 
 
 mod law;
 mod tile;
-use law::{command, derivative, ly_of, settle, speeds, turned, vectors};
+use super::kernel::vectors;
+use law::{command, derivative, ly_of, settle, speeds, turned};
 use tile::Run;
 pub(crate) use tile::Tile;
 pub(crate) use tile::{Chain, Star, probe};
@@ -313,6 +314,10 @@ impl Kernel for Velocity {
 
     fn state(b: &VBlock, l: usize) -> State {
         state_of(&b.x, l)
+    }
+
+    fn x_mut(b: &mut VBlock) -> &mut [V4; 5] {
+        &mut b.x
     }
 
     fn tile(steps: usize) -> Tile {

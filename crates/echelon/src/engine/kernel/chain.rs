@@ -5,7 +5,10 @@
 use crate::control::{Body, law_finish, law_partial, robot_leader};
 use crate::lanes::Lanes;
 
-use super::{Aff, Block, Carry, Consts, V, W, add_scaled, broken, combine, each, first_lane, hold};
+use super::{
+    Aff, Block, Carry, Consts, V, W, add_scaled, broken, combine, each, first_lane, hold,
+    sin_cos_cold,
+};
 
 /// Per-block work space of a chain stage.
 #[derive(Debug, Clone, Copy)]
@@ -18,6 +21,8 @@ pub struct Scratch {
     /// `v̇ = α + β v̇_L`, `ω̇ = γ + δ v̇_L`.
     pub(super) dv: Aff,
     pub(super) dw: Aff,
+    /// `sin θ`, `cos θ` at stage 1 (stages 2–4 turn them).
+    pub(super) sc1: (V, V),
 }
 
 impl Default for Scratch {
@@ -29,6 +34,7 @@ impl Default for Scratch {
             k23: [z; 5],
             dv: Aff { a: z, b: z },
             dw: Aff { a: z, b: z },
+            sc1: (z, z),
         }
     }
 }
@@ -159,6 +165,27 @@ fn stage_state(b: &Block, sc: &Scratch, s: usize, dt: f64) -> [V; 5] {
     }
 }
 
+/// `sin θ`, `cos θ` of stage `s`'s state `x`: stage 1's from
+/// [`Lanes::sin_cos`] (kept in the scratch), stages 2–4's turned from them by
+/// the stage's `δθ` ([`V::sin_cos_turned`], as a star's stages are; out of line
+/// when some lane turns by 0.05 rad or more).
+#[inline(always)]
+fn stage_sin_cos(sc: &mut Scratch, x: &[V; 5], s: usize, dt: f64) -> (V, V) {
+    let a = match s {
+        0 => {
+            sc.sc1 = x[2].sin_cos();
+            return sc.sc1;
+        }
+        3 => dt,
+        _ => 0.5 * dt,
+    };
+    // The `δθ` that `stage_state` added to θ.
+    match (sc.k[2] * a).sin_cos_turned(sc.sc1.0, sc.sc1.1) {
+        Some(turned) => turned,
+        None => sin_cos_cold(x[2]),
+    }
+}
+
 /// One stage of a chain segment whose first agent follows `cin`: every
 /// derivative into `scratch[..].k`; returns the last agent as a leader (with
 /// its `v̇`). Vectorised except for `v̇ᵢ = αᵢ + βᵢ v̇ᵢ₋₁`, one multiply-add per
@@ -174,7 +201,7 @@ pub(crate) fn chain_stage(
     let mut prev = Leaders::splat(cin);
     for (b, sc) in blocks.iter().zip(scratch.iter_mut()) {
         let x = stage_state(b, sc, s, c.dt);
-        let (sin, cos) = x[2].sin_cos();
+        let (sin, cos) = stage_sin_cos(sc, &x, s, c.dt);
         let own = Leaders::of(&x, sin, cos);
         let leaders = own.shifted(&prev);
         prev = own;

@@ -5,7 +5,7 @@ use crate::lanes::Lanes;
 
 use super::{
     Block, Carry, Consts, V, W, actuate, add_scaled, broken, combine, each, first_lane, hold_ly,
-    star_ly,
+    sin_cos_cold, star_ly, vectors,
 };
 
 /// What a star agent's controller and plant do at one stage.
@@ -46,7 +46,9 @@ pub(crate) fn star_stage(
 }
 
 /// `x + d k` and the sines and cosines of its heading, from those of `x`
-/// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`).
+/// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`; when some
+/// lane turns by 0.05 rad or more, [`Lanes::sin_cos`] out of line). The new
+/// state goes through memory as whole vectors ([`vectors`]).
 #[inline(always)]
 #[allow(clippy::type_complexity)]
 pub(crate) fn turned_state<const N: usize>(
@@ -55,10 +57,12 @@ pub(crate) fn turned_state<const N: usize>(
     d: &[Lanes<N>; 5],
     k: f64,
 ) -> ([Lanes<N>; 5], (Lanes<N>, Lanes<N>)) {
-    let next = add_scaled(x, d, k);
-    let turned = (d[2] * k)
-        .sin_cos_turned(sin, cos)
-        .unwrap_or_else(|| next[2].sin_cos());
+    let mut next = add_scaled(x, d, k);
+    vectors(&mut next);
+    let turned = match (d[2] * k).sin_cos_turned(sin, cos) {
+        Some(sc) => sc,
+        None => sin_cos_cold(next[2]),
+    };
     (next, turned)
 }
 
@@ -94,6 +98,7 @@ pub(crate) fn star_tile(
             let k4 = star_stage(c, b, &x4, sc4, &r[3], ly4).dx;
             let k23 = each(|i| k2[i] + k3[i]);
             x = combine(&x, &k1, &k23, &k4, h6);
+            vectors(&mut x);
             ly1 = ly4;
             let bad = broken(&x, b.live);
             if bad.any() {

@@ -3,7 +3,7 @@
 
 use crate::base::AccelLimit;
 use crate::control::Hold;
-use crate::engine::kernel::compensation;
+use crate::engine::kernel::{compensation, sin_cos_cold, vectors};
 use crate::kinematic::kinematic_of;
 use crate::lanes::Lanes;
 
@@ -136,21 +136,6 @@ pub(super) fn turned(
         None => sin_cos_cold(next[2]),
     };
     (next, sc)
-}
-
-/// Puts a state in memory, whole vectors at a time. Without it the
-/// vectoriser, seeing the entire step as one block of scalar operations,
-/// splits parts of it into half vectors and shuffles (≈ 35 % more
-/// instructions per agent-step, measured).
-#[inline(always)]
-pub(super) fn vectors(x: &mut [V4; 5]) {
-    std::hint::black_box(x);
-}
-
-#[cold]
-#[inline(never)]
-fn sin_cos_cold(theta: V4) -> (V4, V4) {
-    theta.sin_cos()
 }
 
 /// The state after a step ([`crate::base::VelocityBase::settle`]), given the

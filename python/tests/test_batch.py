@@ -1,0 +1,147 @@
+"""The batch engine stepping state in arrays the caller owns (issue 24, item 3):
+`BatchEngine.state()` hands out a `(5, n)` array, `BatchEngine.step(state,
+steps)` steps it in place with the GIL released."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+import echelon
+
+CASES = [
+    (topology, drive, n)
+    for topology in ("star", "chain")
+    for drive in ("torque", "velocity")
+    # A partial last block (8 lanes per block), several parallel tasks, and a
+    # chain long enough to run as two halves on two threads.
+    for n in (1, 13, 77, 600)
+]
+
+
+@pytest.mark.parametrize("topology, drive, n", CASES)
+def test_step_changes_the_callers_array_in_place_and_equals_run(topology, drive, n):
+    seed = 11 + n
+    e = echelon.BatchEngine.bench(n, topology=topology, drive=drive, dt=0.001, seed=seed)
+    state = e.state()
+    assert state.shape == (5, n) and state.dtype == np.float64 and state.flags.c_contiguous
+    start = state.copy()
+    # The engine's own rows (n, 5) are the columns' transpose.
+    own = np.empty((n, 5))
+    e.states(own)
+    np.testing.assert_array_equal(state, own.T)
+    assert np.all(start[3:] == 0.0)  # at rest
+
+    pointer = state.__array_interface__["data"][0]
+    # Uneven calls: within a tile, across tile boundaries, one step.
+    for steps in (1, 63, 2, 130, 4):
+        assert e.step(state, steps) is state
+    assert state.__array_interface__["data"][0] == pointer
+    assert e.time == pytest.approx(0.2)
+    assert np.all(np.isfinite(state)) and not np.array_equal(state, start)
+
+    # The same formation run by the engine on its own state: the same bits.
+    ref = echelon.BatchEngine.bench(n, topology=topology, drive=drive, dt=0.001, seed=seed)
+    out = np.empty((n, 5))
+    ref.run(200, out=out)
+    np.testing.assert_array_equal(state, out.T)
+    # and the engine's own states follow the caller's buffer.
+    e.states(own)
+    np.testing.assert_array_equal(own.T, state)
+
+
+def test_the_callers_state_is_what_is_stepped():
+    # Move one robot in the caller's array: the engine steps the moved robot
+    # from there, as a fresh engine started at that state would.
+    e = echelon.BatchEngine.bench(16, seed=4)
+    state = e.state()
+    e.step(state, 10)
+    state[0, 5] += 0.5  # x of agent 6
+    state[2, 5] -= 0.25  # its heading
+    moved = state.copy()
+    e.step(state, 50)
+    assert not np.array_equal(state[:, 5], moved[:, 5])
+    # The others did not feel it (a star): they are where an untouched run puts them.
+    other = echelon.BatchEngine.bench(16, seed=4)
+    s2 = other.state()
+    other.step(s2, 60)
+    keep = [i for i in range(16) if i != 5]
+    np.testing.assert_array_equal(state[:, keep], s2[:, keep])
+    assert not np.array_equal(state[:, 5], s2[:, 5])
+
+
+BAD = {
+    "wrong shape": lambda n: np.zeros((n, 5)),
+    "too few agents": lambda n: np.zeros((5, n - 1)),
+    "one dimension": lambda n: np.zeros(5 * n),
+    "float32": lambda n: np.zeros((5, n), dtype=np.float32),
+    "int64": lambda n: np.zeros((5, n), dtype=np.int64),
+    "Fortran order": lambda n: np.asfortranarray(np.zeros((5, n))),
+    "strided view": lambda n: np.zeros((5, 2 * n))[:, ::2],
+    "a list": lambda n: [[0.0] * n for _ in range(5)],
+}
+
+
+@pytest.mark.parametrize("what", sorted(BAD))
+def test_a_wrong_array_raises_valueerror_and_changes_nothing(what):
+    e = echelon.BatchEngine.bench(9, seed=2)
+    good = e.state()
+    e.step(good, 5)
+    before, t = good.copy(), e.time
+    bad = BAD[what](9)
+    snapshot = np.array(bad, copy=True)
+    with pytest.raises(ValueError, match="state"):
+        e.step(bad, 3)
+    np.testing.assert_array_equal(np.asarray(bad), snapshot)
+    assert e.time == t
+    # The engine is untouched: it goes on from where it was.
+    e.step(good, 7)
+    ref = echelon.BatchEngine.bench(9, seed=2)
+    s = ref.state()
+    ref.step(s, 12)
+    np.testing.assert_array_equal(good, s)
+    assert not np.array_equal(good, before)
+
+
+def test_a_read_only_or_non_finite_array_raises_valueerror_and_changes_nothing():
+    e = echelon.BatchEngine.bench(9, seed=2)
+    state = e.state()
+    state.flags.writeable = False
+    with pytest.raises(ValueError, match="writeable"):
+        e.step(state, 1)
+    state = e.state()
+    state[3, 4] = np.nan
+    snapshot = state.copy()
+    with pytest.raises(ValueError, match="v of agent 5"):
+        e.step(state, 1)
+    np.testing.assert_array_equal(state, snapshot)
+    assert e.time == 0.0
+    state[3, 4] = 0.0
+    e.step(state, 1)
+    assert e.time == pytest.approx(0.001)
+
+
+def test_step_releases_the_gil():
+    e = echelon.BatchEngine.bench(20_000, dt=0.001)
+    state = e.state()
+    ticks = 0
+    stop = threading.Event()
+    started = threading.Event()
+
+    def spin():
+        nonlocal ticks
+        started.set()
+        while not stop.is_set():
+            ticks += 1
+
+    t = threading.Thread(target=spin)
+    t.start()
+    started.wait()
+    before = ticks
+    e.step(state, 400)
+    during = ticks - before
+    stop.set()
+    t.join()
+    assert during > 10_000, during

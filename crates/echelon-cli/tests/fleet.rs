@@ -1036,9 +1036,85 @@ fn bench_smoke() {
     assert_eq!(u(row, &["stale"]) + u(row, &["link_losses"]), 0);
     assert!(f(row, &["latency_p50"]) <= f(row, &["latency_p99"]));
     assert!(f(row, &["cpu_per_robot"]) > 0.0 && f(row, &["messages_per_s"]) > 0.0);
+    // CPU per robot per minute of fleet time, and per message.
+    let per_min = f(row, &["cpu_per_robot"]) / 4.0 * 60.0;
+    assert!(
+        (f(row, &["cpu_per_robot_per_min"]) - per_min).abs() < 1e-9,
+        "{row}"
+    );
+    assert!(
+        f(row, &["cpu_robot_max"]) >= f(row, &["cpu_per_robot"]),
+        "{row}"
+    );
+    let us = f(row, &["cpu_collector"]) / u(row, &["collector_received"]) as f64 * 1e6;
+    assert!(
+        (f(row, &["collector_us_per_message"]) - us).abs() < 1e-6,
+        "{row}"
+    );
+    assert!(f(row, &["router_us_per_message"]) > 0.0, "{row}");
+    assert_eq!(
+        u(row, &["collector_dropped"]) + u(row, &["collector_decimated"]),
+        0
+    );
     let md = std::fs::read_to_string(dir.path().join("bench.md")).unwrap();
     assert!(md.lines().any(|l| l.starts_with("| 2 |")), "{md}");
     assert!(dir.path().join("n002/fleet-summary.json").is_file());
+}
+
+/// `fleet up --log-rate HZ`: the collector logs at most HZ states per robot
+/// per second of receipt time (the 1/HZ s bins it touches), counts the
+/// others as decimated, and still logs every reference; the CSV has one row
+/// per logged started state; nothing dropped.
+#[test]
+fn log_rate_decimates_the_collector_s_states() {
+    let _fleet = common::one_fleet_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let fleet_dir = dir.path().join("fleet");
+    let report = up(
+        "circle-pentagon",
+        &fleet_dir,
+        &["--duration", "10", "--time-scale", "5", "--log-rate", "4"],
+    );
+    let col = &report["collector"];
+    let (received, logged, decimated) = (
+        u(col, &["received"]),
+        u(col, &["logged"]),
+        u(col, &["decimated"]),
+    );
+    assert_eq!(u(col, &["dropped"]), 0, "{col}");
+    assert!(decimated > 0, "{col}");
+    assert_eq!(logged + decimated, received, "{col}");
+    let by_topic = counts_of(&col["logged_by_topic"]);
+    let by_key = counts_of(&col["received_by_key"]);
+    // 10 fleet s at ×5: 2 s of receipt time (and the wind-down): at 4 Hz
+    // a handful per robot, never the 100 Hz stream.
+    let wall = f(&report, &["wall"]);
+    for k in 1..=4 {
+        let states = by_topic[&format!("/agent/{k}/state")];
+        assert!(states >= 2, "{k}: {states}");
+        assert!(
+            states as f64 <= wall * 4.0 + 2.0,
+            "{k}: {states} in {wall} s"
+        );
+        let sent = by_key[&format!("echelon/circle-pentagon/robot/{k}/state")];
+        assert!(sent > 10 * states, "{k}: {sent} vs {states}");
+    }
+    assert_eq!(
+        by_topic["/reference"],
+        by_key["echelon/circle-pentagon/reference"]
+    );
+    let mcap_path = fleet_dir.join("fleet.mcap");
+    assert_eq!(mcap_counts(&mcap_path), by_topic);
+    let rows: u64 = col["agents"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| u(a, &["rows"]))
+        .sum();
+    assert_eq!(
+        rows as usize,
+        self::rows(&fleet_dir.join("trajectory.csv")).len()
+    );
 }
 
 /// `(t, agent, point L ahead)` of every row of a trajectory CSV (the

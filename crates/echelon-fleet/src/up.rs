@@ -101,6 +101,9 @@ pub struct UpOptions {
     /// Serve the live dashboard on this address: the collector's
     /// `--dashboard` ([`crate::collector::Dashboard`]).
     pub dashboard: Option<std::net::SocketAddr>,
+    /// The collector's state-log rate, states per robot per second
+    /// (`--log-rate`; `None`: every state).
+    pub log_rate: Option<f64>,
 }
 
 /// `fleet up --ros2 --real`'s refusals, before anything starts: real robots
@@ -287,6 +290,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     }
     if let Some(addr) = opts.dashboard {
         args.extend(["--dashboard".to_owned(), addr.to_string()]);
+    }
+    if let Some(hz) = opts.log_rate {
+        args.extend(["--log-rate".to_owned(), hz.to_string()]);
     }
     args.extend(common(0, &Member::Collector.identity()));
     let mut collector = spawn(&opts.exe, Role::Collector.name(), &args, &logs)?;

@@ -115,6 +115,15 @@ fn command_cmd(a: args::CommandArgs, order: Order) -> Result<()> {
 
 /// Runs a fleet subcommand.
 pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
+    // A fleet process's Zenoh runtime sized for it (overridable).
+    match &cmd {
+        FleetCommand::Router(_) => echelon_fleet::net::exec_with_sized_runtime("router"),
+        FleetCommand::Leader(_)
+        | FleetCommand::Robot(_)
+        | FleetCommand::Base(_)
+        | FleetCommand::Collector(_) => echelon_fleet::net::exec_with_sized_runtime("client"),
+        _ => {}
+    }
     match cmd {
         FleetCommand::Leader(a) => scenario_process(
             &a.scenario,
@@ -222,6 +231,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     scene,
                     foxglove: a.foxglove,
                     dashboard: a.dashboard,
+                    log_rate: a.log_rate,
                 },
                 &stop,
             )?;

@@ -32,6 +32,11 @@ pub struct Collector {
     agents: BTreeMap<u32, AgentRecord>,
     latency: Latency,
     latency_by_key: BTreeMap<String, Latency>,
+    /// The state-log rate: at most one state per agent per bin of this
+    /// many ns of receipt time (0: every state).
+    log_bin: u64,
+    /// Per agent, the bin of the last state logged.
+    last_bin: BTreeMap<u32, u64>,
 }
 
 fn bump(counts: &mut BTreeMap<String, u64>, name: &str) {
@@ -71,6 +76,8 @@ impl Collector {
                 rejected: BTreeMap::new(),
                 ros_recorded: 0,
                 ros_refused: 0,
+                decimated: 0,
+                dropped: 0,
                 latency: LatencyReport::default(),
                 latency_by_key: BTreeMap::new(),
                 agents: Vec::new(),
@@ -79,6 +86,49 @@ impl Collector {
             agents: BTreeMap::new(),
             latency: Latency::new(),
             latency_by_key: BTreeMap::new(),
+            log_bin: 0,
+            last_bin: BTreeMap::new(),
+        }
+    }
+
+    /// Logs at most `hz` states per agent per second of receipt time
+    /// (`None`: every state): the receipt times are cut into bins of
+    /// `1/hz` s and the first state of an agent in each bin is logged (on
+    /// `/agent/K/state`, the 3D pose, `trajectory.csv` and its statistics);
+    /// the others are counted as `decimated`. Refused: a rate that is not
+    /// a positive number.
+    pub fn with_log_rate(mut self, hz: Option<f64>) -> Result<Collector, FleetError> {
+        self.log_bin = match hz {
+            None => 0,
+            Some(hz) if hz.is_finite() && hz > 0.0 => (1e9 / hz).round().max(1.0) as u64,
+            Some(hz) => {
+                return Err(FleetError::Config(format!(
+                    "--log-rate {hz}: must be a positive number of states per second"
+                )));
+            }
+        };
+        Ok(self)
+    }
+
+    /// Samples dropped so far before they reached it (its input queue was
+    /// full), a running total.
+    pub fn set_dropped(&mut self, total: u64) {
+        self.report.dropped = total;
+    }
+
+    /// Whether agent `k`'s state received at UNIX ns `now` is logged under
+    /// the state-log rate (and if so, notes its bin).
+    fn keep_state(&mut self, k: u32, now: u64) -> bool {
+        if self.log_bin == 0 {
+            return true;
+        }
+        let bin = now / self.log_bin;
+        match self.last_bin.insert(k, bin) {
+            Some(last) if last == bin => {
+                self.report.decimated += 1;
+                false
+            }
+            _ => true,
         }
     }
 
@@ -262,6 +312,15 @@ impl Collector {
         now: u64,
         sink: &mut impl RecordSink,
     ) -> Result<(), FleetError> {
+        if !self.keep_state(k, now) {
+            let a = self.agents.entry(k).or_insert_with(|| AgentRecord {
+                agent: k,
+                ..AgentRecord::default()
+            });
+            a.messages += 1;
+            a.link = s.link.name().to_owned();
+            return Ok(());
+        }
         let sample = s.sample();
         let rec = AgentStateRecord {
             seq: Some(seq),
@@ -302,5 +361,147 @@ impl Collector {
             .map(|(k, l)| (k.clone(), l.report(false)))
             .collect();
         self.report
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use echelon::sample::AgentSample;
+    use echelon_mcap::scene::ScenePose;
+    use echelon_mcap::{JsonSchema, agent_topic};
+    use proptest::prelude::*;
+
+    use super::{Collector, RecordSink};
+    use crate::FleetError;
+    use crate::keys::Keys;
+    use crate::ros2::record::RosTopic;
+    use crate::wire::{self, Header, LinkStatus, RobotState};
+
+    /// Counts what is logged, per topic, and the rows.
+    #[derive(Debug, Default)]
+    struct Counts {
+        logged: BTreeMap<String, Vec<u64>>,
+        rows: usize,
+    }
+
+    impl RecordSink for Counts {
+        fn log(
+            &mut self,
+            topic: &str,
+            _: &JsonSchema,
+            log_time: u64,
+            _: u64,
+            _: &[u8],
+        ) -> Result<(), FleetError> {
+            self.logged
+                .entry(topic.to_owned())
+                .or_default()
+                .push(log_time);
+            Ok(())
+        }
+        fn log_ros(&mut self, _: &RosTopic, _: u64, _: u64, _: &[u8]) -> Result<(), FleetError> {
+            Ok(())
+        }
+        fn row(&mut self, _: &AgentSample) -> Result<(), FleetError> {
+            self.rows += 1;
+            Ok(())
+        }
+        fn pose(&mut self, _: u32, _: &ScenePose, _: u64, _: u64) -> Result<(), FleetError> {
+            Ok(())
+        }
+    }
+
+    fn state(agent: u32, seq: u64, t: f64) -> Vec<u8> {
+        let mut buf = Vec::new();
+        let s = RobotState {
+            t,
+            agent,
+            link: LinkStatus::Tracking,
+            ..RobotState::default()
+        };
+        wire::encode_state(&mut buf, Header { source: 7, seq }, &s);
+        buf
+    }
+
+    #[test]
+    fn a_log_rate_that_is_not_positive_is_refused() {
+        for hz in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let c = Collector::new(Keys::new("lab")).with_log_rate(Some(hz));
+            assert!(matches!(c, Err(FleetError::Config(_))), "{hz}");
+        }
+    }
+
+    proptest! {
+        /// Under `--log-rate HZ`, each agent's states are logged at most
+        /// once per 1/HZ s bin of receipt time and at least once in every
+        /// bin one arrived in (the first of it); the rest are counted as
+        /// decimated, and every state is either logged or decimated. Other
+        /// agents' states do not take an agent's turn.
+        #[test]
+        fn log_rate_decimates_per_agent(
+            hz in 0.5..200.0f64,
+            arrivals in prop::collection::vec((1u32..4, 0u64..5_000_000_000), 1..400),
+        ) {
+            let mut arrivals = arrivals;
+            arrivals.sort_by_key(|&(_, at)| at);
+            let keys = Keys::new("lab");
+            let mut c = Collector::new(keys.clone()).with_log_rate(Some(hz)).unwrap();
+            let mut sink = Counts::default();
+            for (i, &(k, at)) in arrivals.iter().enumerate() {
+                let bytes = state(k, i as u64, at as f64 * 1e-9);
+                c.on_message(&keys.state(k), &bytes, 1_000_000_000 + at, &mut sink).unwrap();
+            }
+            let bin = (1e9 / hz).round() as u64;
+            let report = c.finish();
+            let mut logged = 0;
+            for k in 1..4u32 {
+                let times: Vec<u64> = arrivals
+                    .iter()
+                    .filter(|&&(a, _)| a == k)
+                    .map(|&(_, at)| 1_000_000_000 + at)
+                    .collect();
+                // The first arrival of each bin, in order.
+                let mut expected: Vec<u64> = Vec::new();
+                for &t in &times {
+                    if expected.last().is_none_or(|&l| l / bin != t / bin) {
+                        expected.push(t);
+                    }
+                }
+                let got = sink.logged.get(&agent_topic(k as usize)).cloned().unwrap_or_default();
+                prop_assert_eq!(&got, &expected, "agent {}", k);
+                // At most one per bin: over a span of receipt time T, at
+                // most T·HZ + 2 states (the bins it touches).
+                if let (Some(first), Some(last)) = (got.first(), got.last()) {
+                    prop_assert!(got.len() as u64 <= last / bin - first / bin + 1);
+                    prop_assert!((got.len() as f64) <= (last - first) as f64 * 1e-9 * hz + 2.0);
+                }
+                logged += got.len() as u64;
+            }
+            prop_assert_eq!(report.received, arrivals.len() as u64);
+            prop_assert_eq!(report.logged, logged);
+            prop_assert_eq!(report.logged + report.decimated, report.received);
+            prop_assert_eq!(sink.rows as u64, logged);
+            let messages: u64 = report.agents.iter().map(|a| a.messages).sum();
+            prop_assert_eq!(messages, report.received);
+        }
+
+        /// Without a log rate every state is logged.
+        #[test]
+        fn without_a_log_rate_every_state_is_logged(
+            arrivals in prop::collection::vec((1u32..4, 0u64..1_000_000), 1..100),
+        ) {
+            let keys = Keys::new("lab");
+            let mut c = Collector::new(keys.clone()).with_log_rate(None).unwrap();
+            let mut sink = Counts::default();
+            for (i, &(k, at)) in arrivals.iter().enumerate() {
+                let bytes = state(k, i as u64, 0.0);
+                c.on_message(&keys.state(k), &bytes, at, &mut sink).unwrap();
+            }
+            let report = c.finish();
+            prop_assert_eq!(report.decimated, 0);
+            prop_assert_eq!(report.logged, arrivals.len() as u64);
+        }
     }
 }

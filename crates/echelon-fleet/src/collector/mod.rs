@@ -34,7 +34,8 @@ pub use report::{AgentRecord, CollectorReport};
 pub use schema::{COMMAND, REJECTED, STATS};
 pub use sink::{FileSink, RecordSink};
 pub use task::{
-    CollectorOptions, CollectorTask, Recording, run, run_recording, run_with, run_with_ros2,
+    BATCH, CollectorOptions, CollectorTask, INPUT_QUEUE, Recording, run, run_recording, run_with,
+    run_with_ros2,
 };
 
 /// The MCAP file the collector writes.

@@ -58,7 +58,8 @@ pub struct CollectorReport {
     pub role: crate::role::Role,
     /// Samples received, total.
     pub received: u64,
-    /// Messages logged to the MCAP file, total (equals `received`).
+    /// Messages logged to the MCAP file, total (equals `received` less
+    /// `decimated`).
     pub logged: u64,
     /// Samples received per key.
     pub received_by_key: BTreeMap<String, u64>,
@@ -71,6 +72,14 @@ pub struct CollectorReport {
     /// ROS 2 samples refused (wrong type or hash on the key, invalid CDR,
     /// a key of no recorded topic); also counted in `rejected` by reason.
     pub ros_refused: u64,
+    /// Robot states received but not logged under the state-log rate
+    /// (`--log-rate`).
+    #[serde(default)]
+    pub decimated: u64,
+    /// Samples that reached the process but not the collector: its input
+    /// queue was full (never received, logged or counted in `received`).
+    #[serde(default)]
+    pub dropped: u64,
     /// Delay from the sender's timestamp to receipt of every sample
     /// received, s (`count + unstamped` equals `received`): the Zenoh sample
     /// timestamp, or for a ROS 2 sample without one its rmw_zenoh

@@ -20,6 +20,65 @@ pub use acl::{
     ros_acl, subscribes,
 };
 
+/// The environment variable Zenoh sizes its runtime from (read once, when
+/// a process first uses Zenoh; RON syntax, zenoh-runtime's `ZRuntime`).
+pub const ZENOH_RUNTIME_ENV: &str = "ZENOH_RUNTIME";
+
+/// Zenoh's runtime for a fleet process that sends a few samples per tick
+/// (a robot, a base, the leader, the collector): its five runtimes
+/// (application, acceptor, transmission, reception, network; by default
+/// 1 + 1 + 1 + 2 + 1 worker threads, each with its own timer and I/O
+/// driver) handed over to one runtime of one worker thread. A sample then
+/// goes out or comes in with one thread woken, not a chain of them.
+pub const CLIENT_RUNTIME: &str = "(app: (worker_threads: 1), acc: (handover: app), tx: (handover: app), rx: (handover: app), net: (handover: app))";
+
+/// Zenoh's runtime for a router: the same single runtime, with two worker
+/// threads (it forwards every sample of the fleet).
+pub const ROUTER_RUNTIME: &str = "(app: (worker_threads: 2), acc: (handover: app), tx: (handover: app), rx: (handover: app), net: (handover: app))";
+
+/// The `ZENOH_RUNTIME` a fleet process of role `role` is started with
+/// ([`ROUTER_RUNTIME`] for `router…`, else [`CLIENT_RUNTIME`]), unless
+/// this process's environment sets one already (`None`: theirs is
+/// inherited, overriding ours).
+pub fn zenoh_runtime(role: &str) -> Option<&'static str> {
+    if std::env::var_os(ZENOH_RUNTIME_ENV).is_some() {
+        return None;
+    }
+    Some(if role.starts_with("router") {
+        ROUTER_RUNTIME
+    } else {
+        CLIENT_RUNTIME
+    })
+}
+
+/// Makes this process run with [`zenoh_runtime`]`(role)`: if the
+/// environment sets no `ZENOH_RUNTIME`, re-executes the process (same
+/// binary, arguments and process id) with it set; returns at once when it
+/// is set already (by the user, or by `fleet up` for its children). Call
+/// before anything uses Zenoh. If the re-execution fails it says so and
+/// returns (Zenoh's default runtime then).
+pub fn exec_with_sized_runtime(role: &str) {
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::CommandExt;
+        let Some(runtime) = zenoh_runtime(role) else {
+            return;
+        };
+        let Ok(exe) = std::env::current_exe() else {
+            return;
+        };
+        let err = std::process::Command::new(exe)
+            .args(std::env::args_os().skip(1))
+            .env(ZENOH_RUNTIME_ENV, runtime)
+            .exec();
+        eprintln!(
+            "could not restart with {ZENOH_RUNTIME_ENV} set ({err}): Zenoh's default runtime"
+        );
+    }
+    #[cfg(not(unix))]
+    let _ = role;
+}
+
 /// How long `open` waits for every `connect` endpoint, s of real time.
 pub const CONNECT_TIMEOUT_MS: u64 = 30_000;
 

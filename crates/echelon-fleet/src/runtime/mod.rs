@@ -11,6 +11,7 @@
 //! session, take its report.
 
 use std::collections::BTreeSet;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -26,22 +27,126 @@ use crate::{FleetError, StopFlag};
 pub mod bus;
 mod task;
 
-pub use task::{Flow, Latching, Outputs, Sample, Task, WaitFor};
+pub use task::{DEFAULT_QUEUE, Flow, Latching, Outputs, Sample, Task, WaitFor};
 
 /// Longest sleep, real time, so that a stop request is seen.
 pub const NAP: Duration = Duration::from_millis(20);
 /// Longest wait for the answers to a task's latch query, real time.
 pub const LATCH_QUERY_TIMEOUT: Duration = Duration::from_secs(1);
 
-/// A sample as a subscription hands it over.
+/// A sample as a subscription hands it over: its key, payload and
+/// attachment copied out of Zenoh's receive buffer (which goes back to
+/// Zenoh's pool at once: holding it would make Zenoh allocate and zero a
+/// new 64 KiB buffer for its next read) into one buffer of [`Spares`].
 struct Arrival {
     input: usize,
     at: Instant,
     unix_ns: u64,
     delay: Option<i64>,
-    key: String,
-    payload: Vec<u8>,
-    attachment: Option<Vec<u8>>,
+    /// Key, then payload, then attachment.
+    buf: Vec<u8>,
+    /// Where the key ends in `buf`.
+    key_end: usize,
+    /// Where the payload ends in `buf`.
+    payload_end: usize,
+    attachment: bool,
+}
+
+impl Arrival {
+    fn key(&self) -> &str {
+        std::str::from_utf8(&self.buf[..self.key_end]).unwrap_or("")
+    }
+}
+
+/// Buffers of arrivals taken, handed back to the subscriptions' callbacks:
+/// no allocation per sample once a few are in use.
+#[derive(Debug, Clone, Default)]
+struct Spares(Arc<Mutex<Vec<Vec<u8>>>>);
+
+impl Spares {
+    /// Spares kept at most.
+    const KEEP: usize = 64;
+
+    /// `sample` copied into a spare buffer (a new one if none is left).
+    fn arrival(&self, input: usize, sample: &zenoh::sample::Sample) -> Arrival {
+        let unix_ns = crate::unix_nanos();
+        let at = Instant::now();
+        let mut buf = self
+            .0
+            .lock()
+            .ok()
+            .and_then(|mut v| v.pop())
+            .unwrap_or_default();
+        buf.clear();
+        buf.extend_from_slice(sample.key_expr().as_str().as_bytes());
+        let key_end = buf.len();
+        for slice in sample.payload().slices() {
+            buf.extend_from_slice(slice);
+        }
+        let payload_end = buf.len();
+        if let Some(a) = sample.attachment() {
+            for slice in a.slices() {
+                buf.extend_from_slice(slice);
+            }
+        }
+        Arrival {
+            input,
+            at,
+            unix_ns,
+            delay: latency::delay_ns(sample.timestamp(), unix_ns),
+            buf,
+            key_end,
+            payload_end,
+            attachment: sample.attachment().is_some(),
+        }
+    }
+
+    /// Takes back the buffer of `a`, taken.
+    fn recycle(&self, a: Arrival) {
+        if let Ok(mut v) = self.0.lock()
+            && v.len() < Self::KEEP
+        {
+            v.push(a.buf);
+        }
+    }
+}
+
+/// Samples that arrived and wait for the task, at most (its
+/// [`Task::queue`]); one more is dropped and counted, never blocking
+/// Zenoh's receiving thread.
+#[derive(Debug)]
+struct Queue<T> {
+    tx: mpsc::SyncSender<T>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl<T> Clone for Queue<T> {
+    fn clone(&self) -> Self {
+        Queue {
+            tx: self.tx.clone(),
+            dropped: self.dropped.clone(),
+        }
+    }
+}
+
+impl<T> Queue<T> {
+    /// A queue of `capacity` (at least 1), and its receiving end.
+    fn new(capacity: usize) -> (Queue<T>, mpsc::Receiver<T>) {
+        let (tx, rx) = mpsc::sync_channel(capacity.max(1));
+        let q = Queue {
+            tx,
+            dropped: Arc::default(),
+        };
+        (q, rx)
+    }
+
+    /// Queues `item`; if the queue is full, drops it and counts it (at
+    /// once: never waits).
+    fn offer(&self, item: T) {
+        if let Err(mpsc::TrySendError::Full(_)) = self.tx.try_send(item) {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
 }
 
 /// The Zenoh side of [`Outputs`].
@@ -147,11 +252,14 @@ pub fn run_split<T: Task, G>(
     };
     let dev = device_session.as_ref().unwrap_or(&session);
     let (mut task, guard, device_inputs) = build(&session, dev)?;
-    let (tx, rx) = mpsc::channel::<Arrival>();
+    let (queue, rx) = Queue::<Arrival>::new(task.queue());
+    let dropped = queue.dropped.clone();
+    let spares = Spares::default();
     let mut subscribers = Vec::new();
     let mut from_device = Vec::new();
     for (input, key) in task.inputs().into_iter().enumerate() {
-        let tx = tx.clone();
+        let queue = queue.clone();
+        let spares = spares.clone();
         let on = if device_inputs.contains(&key) {
             from_device.push(input);
             dev
@@ -160,23 +268,12 @@ pub fn run_split<T: Task, G>(
         };
         let sub = on
             .declare_subscriber(&key)
-            .callback(move |s| {
-                let unix_ns = crate::unix_nanos();
-                let _ = tx.send(Arrival {
-                    input,
-                    at: Instant::now(),
-                    unix_ns,
-                    delay: latency::delay_ns(s.timestamp(), unix_ns),
-                    key: s.key_expr().as_str().to_owned(),
-                    payload: s.payload().to_bytes().into_owned(),
-                    attachment: s.attachment().map(|a| a.to_bytes().into_owned()),
-                });
-            })
+            .callback(move |sample| queue.offer(spares.arrival(input, &sample)))
             .wait()
             .map_err(|e| FleetError::Zenoh(format!("subscribing to {key}: {e}")))?;
         subscribers.push(sub);
     }
-    drop(tx);
+    drop(queue);
     // Samples that arrived before the clock started, handed once it has.
     let mut early = Vec::new();
     if let Some(d) = &device
@@ -271,30 +368,51 @@ pub fn run_split<T: Task, G>(
         session: &session,
         publishers,
     };
-    let hand = |task: &mut T, a: &Arrival| {
-        task.on_input(
+    // Drops are handed to the task (as a running total) before what
+    // arrived after them.
+    let mut told = 0;
+    let mut hand = |task: &mut T, a: Arrival| {
+        let total = dropped.load(Ordering::Relaxed);
+        if total != told {
+            told = total;
+            task.on_dropped(total);
+        }
+        let handed = task.on_input(
             a.input,
             &Sample {
-                key: &a.key,
-                payload: &a.payload,
-                attachment: a.attachment.as_deref(),
+                key: a.key(),
+                payload: &a.buf[a.key_end..a.payload_end],
+                attachment: a.attachment.then(|| &a.buf[a.payload_end..]),
                 at: clock.at(a.at),
                 unix_ns: a.unix_ns,
                 delay: a.delay,
             },
-        )
+        );
+        spares.recycle(a);
+        handed
     };
     let reactive = task.wakes_on_input();
+    let batch = task.batch();
     let ran: Result<(), FleetError> = (|| {
         for a in early.drain(..) {
-            hand(&mut task, &a)?;
+            hand(&mut task, a)?;
         }
         while !stop.is_raised() {
-            if reactive {
+            if reactive && batch > 0.0 {
+                // Let a batch gather (no wake-up per sample), take it all.
+                clock.sleep_until(task.next_wake().min(clock.now() + batch), NAP);
+                while let Ok(a) = rx.try_recv() {
+                    hand(&mut task, a)?;
+                }
+                update(&task);
+                if clock.now() < task.next_wake() {
+                    continue;
+                }
+            } else if reactive {
                 let left = (task.next_wake() - clock.now()).max(0.0);
                 match rx.recv_timeout(clock.real(left).min(NAP)) {
                     Ok(a) => {
-                        hand(&mut task, &a)?;
+                        hand(&mut task, a)?;
                         update(&task);
                         continue;
                     }
@@ -305,7 +423,7 @@ pub fn run_split<T: Task, G>(
                 clock.sleep_until(task.next_wake(), NAP);
             }
             while let Ok(a) = rx.try_recv() {
-                hand(&mut task, &a)?;
+                hand(&mut task, a)?;
             }
             let flow = task.tick(clock.now(), &mut out)?;
             update(&task);
@@ -331,8 +449,16 @@ pub fn run_split<T: Task, G>(
     if reactive {
         // What had arrived before the inputs closed.
         while let Ok(a) = rx.try_recv() {
-            hand(&mut task, &a)?;
+            hand(&mut task, a)?;
         }
+    }
+    let total = dropped.load(Ordering::Relaxed);
+    if total > 0 {
+        task.on_dropped(total);
+        eprintln!(
+            "{total} samples dropped: more than {} waited for the task at once",
+            task.queue()
+        );
     }
     Ok(task)
 }
@@ -444,5 +570,38 @@ fn wait_for(session: &zenoh::Session, w: &WaitFor, stop: &StopFlag) -> Result<()
             )));
         }
         std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// A full queue drops what comes (at once, from other threads
+        /// too) and counts it: what is taken plus what is dropped is what
+        /// was offered, and what is taken is the first `capacity` in order.
+        #[test]
+        fn a_full_queue_drops_and_counts(capacity in 1usize..64, offered in 0usize..300) {
+            let (q, rx) = Queue::<usize>::new(capacity);
+            let sender = q.clone();
+            // From another thread, as Zenoh's: it must never block.
+            std::thread::spawn(move || {
+                for i in 0..offered {
+                    sender.offer(i);
+                }
+            })
+            .join()
+            .unwrap();
+            let taken: Vec<usize> = rx.try_iter().collect();
+            let dropped = q.dropped.load(Ordering::Relaxed) as usize;
+            prop_assert_eq!(taken.len(), offered.min(capacity));
+            prop_assert_eq!(taken.len() + dropped, offered);
+            prop_assert!(taken.iter().copied().eq(0..taken.len()));
+            // Room again once taken.
+            q.offer(7);
+            prop_assert_eq!(rx.try_recv().ok(), Some(7));
+        }
     }
 }

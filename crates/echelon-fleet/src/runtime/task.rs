@@ -11,6 +11,10 @@ use serde::Serialize;
 use crate::FleetError;
 use crate::keys::Keys;
 
+/// [`Task::queue`] unless a task says otherwise: a controller's inputs
+/// between two ticks, with room for bursts.
+pub const DEFAULT_QUEUE: usize = 4096;
+
 /// One sample handed to a task.
 #[derive(Debug, Clone, Copy)]
 pub struct Sample<'a> {
@@ -138,6 +142,28 @@ pub trait Task {
     /// not wake up for each of them.
     fn wakes_on_input(&self) -> bool {
         false
+    }
+
+    /// How many samples may wait for it (between two ticks, or while it
+    /// takes one); the next ones are dropped, counted and handed to
+    /// [`Task::on_dropped`]: a Zenoh receiving thread never blocks on it.
+    fn queue(&self) -> usize {
+        DEFAULT_QUEUE
+    }
+
+    /// `total` samples were dropped so far because more than
+    /// [`Task::queue`] waited for it (told before the samples that arrived
+    /// after them, and once at its end; the runtime also prints the total).
+    fn on_dropped(&mut self, total: u64) {
+        let _ = total;
+    }
+
+    /// For a task that [wakes on input](Task::wakes_on_input): how long
+    /// (fleet s) samples may gather before it is handed them all at once
+    /// (0: each as soon as it arrives). A recorder of thousands of samples
+    /// a second wakes once per batch, not once per sample.
+    fn batch(&self) -> f64 {
+        0.0
     }
 
     /// Its clock started (reading 0) at UNIX ns `unix_ns`.

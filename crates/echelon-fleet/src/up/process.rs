@@ -142,7 +142,11 @@ pub(super) fn spawn(
     // in its last write while `fleet up` waits for it to exit.
     let stdout = logs.join(format!("{}.out", role.replace('/', "-")));
     let out = std::fs::File::create(&stdout).map_err(FleetError::io(&stdout))?;
-    let child = Command::new(exe)
+    let mut command = Command::new(exe);
+    if let Some(runtime) = crate::net::zenoh_runtime(role) {
+        command.env(crate::net::ZENOH_RUNTIME_ENV, runtime);
+    }
+    let child = command
         .args(args)
         .stdin(Stdio::null())
         .stdout(out)

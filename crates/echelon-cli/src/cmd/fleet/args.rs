@@ -305,6 +305,9 @@ pub(crate) struct CollectorArgs {
     /// Serve the live dashboard page on ADDR [default: 127.0.0.1:8766]: the robots moving, per robot link, ‖e‖, safety, saturation, and Stop all / Resume for whoever opens it with the operator token printed at start (docs/foxglove.md).
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_DASHBOARD)]
     pub(super) dashboard: Option<std::net::SocketAddr>,
+    /// Log at most HZ states per robot per second (the first of each 1/HZ s of receipt time; the others counted as `decimated` in collector.json) [default: every state].
+    #[arg(long, value_name = "HZ", value_parser = positive)]
+    pub(super) log_rate: Option<f64>,
     #[command(flatten)]
     pub(super) net: NetArgs,
 }
@@ -361,6 +364,9 @@ pub(crate) struct UpArgs {
     /// Serve the live dashboard page on ADDR [default: 127.0.0.1:8766]: the robots moving, per robot link, ‖e‖, safety, saturation, and Stop all / Resume for whoever opens it with the operator token printed at start (docs/foxglove.md).
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_DASHBOARD)]
     pub(super) dashboard: Option<std::net::SocketAddr>,
+    /// The collector's state-log rate: at most HZ states per robot per second (`fleet collector --log-rate`) [default: every state].
+    #[arg(long, value_name = "HZ", value_parser = positive)]
+    pub(super) log_rate: Option<f64>,
     /// Print nothing but errors.
     #[arg(long, short)]
     pub(super) quiet: bool,
@@ -378,6 +384,9 @@ pub(crate) struct BenchArgs {
     /// Fleet seconds each size runs (real seconds: time scale 1).
     #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
     pub(super) duration: f64,
+    /// The collector's state-log rate, states per robot per second (`fleet collector --log-rate`) [default: every state].
+    #[arg(long, value_name = "HZ", value_parser = positive)]
+    pub(super) log_rate: Option<f64>,
     /// Print only the table.
     #[arg(long, short)]
     pub(super) quiet: bool,

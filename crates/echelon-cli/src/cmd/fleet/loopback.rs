@@ -26,6 +26,7 @@ pub(super) fn bench_cmd(a: BenchArgs) -> Result<()> {
             duration,
             out: a.out.clone(),
             exe,
+            log_rate: a.log_rate,
         },
         &stop,
         |p| {
@@ -81,6 +82,7 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             sites: a.sites,
             foxglove: a.foxglove,
             dashboard: a.dashboard,
+            log_rate: a.log_rate,
         },
         &stop,
     )?;
@@ -231,6 +233,13 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
         col.logged,
         col.rejected.values().sum::<u64>()
     )?;
+    if col.decimated > 0 || col.dropped > 0 {
+        outln!(
+            "  collector: {} states decimated (--log-rate), {} samples dropped (queue full)",
+            col.decimated,
+            col.dropped
+        )?;
+    }
     let lat = |l: &LatencyReport| {
         format!(
             "{} samples, p50 {:.3} ms, p95 {:.3} ms, p99 {:.3} ms, max {:.3} ms",

@@ -17,7 +17,7 @@ use crate::net::NetOptions;
 use crate::role::Member;
 use crate::ros2::record::{self, RosTopic};
 use crate::runtime::{self, Flow, Outputs, Sample, Task};
-use crate::{FleetError, StopFlag, unix_nanos};
+use crate::{FleetError, StopFlag};
 
 /// Options of the collector.
 #[derive(Debug, Clone)]
@@ -44,8 +44,6 @@ pub struct CollectorTask {
     out: PathBuf,
     /// Stop at this time of its clock (real time), s.
     until: f64,
-    /// The wall clock (UNIX ns), for `log_time`.
-    wall: fn() -> u64,
 }
 
 impl std::fmt::Debug for CollectorTask {
@@ -86,7 +84,6 @@ impl CollectorTask {
             live: None,
             out,
             until: max_wall.map_or(f64::INFINITY, |m| m.as_secs_f64()),
-            wall: unix_nanos,
         }
     }
 
@@ -131,7 +128,9 @@ impl Task for CollectorTask {
     }
 
     fn on_input(&mut self, input: usize, s: &Sample<'_>) -> Result<(), FleetError> {
-        let now = (self.wall)();
+        // Logged at its arrival (UNIX ns), not when its batch is taken
+        // (up to BATCH later): the log time is the receipt time.
+        let now = s.unix_ns;
         if input == FLEET {
             self.collector.record_delay(s.key, s.delay);
             return match self.live.as_mut() {

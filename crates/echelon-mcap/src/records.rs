@@ -114,6 +114,23 @@ pub struct AgentStateRecord {
     /// Fleet only: the leader motion the law used.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub leader: Option<LeaderRecord>,
+    /// Fleet, ROS 2 robots only: the robot's own odometry.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub odometry: Option<OdometryRecord>,
+}
+
+/// A ROS 2 robot's own odometry beside its world pose (docs/ros2.md,
+/// "Frames"): the world pose is `odom_origin ⊕ raw` (or the fixes'
+/// correction ⊕ raw).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, schemars::JsonSchema)]
+pub struct OdometryRecord {
+    /// The pose in the robot's odom frame `[x, y, θ]` (m, m, rad; heading
+    /// unwrapped), before the odom → world map.
+    pub raw: [f64; 3],
+    /// Age of the newest odometry sample when the state was published, s.
+    pub age: f64,
+    /// Age of the newest accepted fix then, s (null: none yet, or no fixes).
+    pub fix_age: Option<f64>,
 }
 
 impl AgentStateRecord {
@@ -125,6 +142,7 @@ impl AgentStateRecord {
             seq: None,
             link: None,
             leader: None,
+            odometry: None,
         }
     }
 }

@@ -10,8 +10,12 @@
 //!   the pose in the odom frame, yaw unwrapped, carried by the link's
 //!   `odom_origin`, the odom frame's pose in the world; the twist stays in
 //!   the body frame, REP 103), and there is none once it is older than
-//!   `odom_timeout`, so the robot commands zero; the raw odometry is kept
-//!   ([`Ros2Drive::odometry`]);
+//!   `odom_timeout`, so the robot commands zero; the raw odometry is
+//!   published beside it ([`Plant::odometry`]: the pose in the odom frame,
+//!   its age and the last fix's);
+//! - its position uncertainty `σ` is its EKF's when its fixes keep a
+//!   covariance, else the dead-reckoning rule of [`Drift`] on its error
+//!   model;
 //! - odometry that is not CDR of `nav_msgs/msg/Odometry`, carries the wrong
 //!   type or hash on its key, holds a NaN or an infinity, or is in other
 //!   frames than configured is counted and refused, never a crash;
@@ -27,9 +31,11 @@ use echelon::model::{Pose, State};
 use echelon::scenario::Ros2Link;
 use echelon::scenario::schema::{CmdVelStamp, CmdVelType};
 
+use super::drift::Drift;
 use super::fixes::{FixInput, FixReport};
 use super::refusal::SampleRefusal;
 use crate::plant::{Actuation, Command, Plant};
+use crate::wire::OdometryState;
 use echelon_ros2::attachment::{Attachment, Gid};
 use echelon_ros2::keys::check_topic_key;
 use echelon_ros2::msgs::{
@@ -64,24 +70,27 @@ pub fn encode_cmd_vel(link: &Ros2Link, cmd: VelocityCommand, stamp_ns: i64, buf:
     }
 }
 
-/// A `cmd_vel` payload decoded to a velocity command, refusing the wrong
+/// A `cmd_vel` payload decoded to a velocity command and its stamp, ns
+/// (`None`: a plain `Twist`; `Some(0)`: a zero stamp), refusing the wrong
 /// type on the key, bad CDR and non-finite values.
 pub fn decode_cmd_vel(
     link: &Ros2Link,
     key: &str,
     payload: &[u8],
-) -> Result<VelocityCommand, SampleRefusal> {
+) -> Result<(VelocityCommand, Option<i64>), SampleRefusal> {
     check_topic_key(link.key_scheme, key, &cmd_vel_type(link))
         .map_err(|e| SampleRefusal::WrongType(e.to_string()))?;
-    let twist = match link.cmd_vel_type {
-        CmdVelType::TwistStamped => TwistStamped::from_cdr_finite(payload).map(|t| t.twist),
-        CmdVelType::Twist => Twist::from_cdr_finite(payload),
+    let (twist, stamp) = match link.cmd_vel_type {
+        CmdVelType::TwistStamped => TwistStamped::from_cdr_finite(payload)
+            .map(|t| (t.twist, Some(t.header.stamp.to_nanos()))),
+        CmdVelType::Twist => Twist::from_cdr_finite(payload).map(|t| (t, None)),
     }
     .map_err(SampleRefusal::from)?;
-    Ok(VelocityCommand {
+    let cmd = VelocityCommand {
         v: twist.linear.x,
         omega: twist.angular.z,
-    })
+    };
+    Ok((cmd, stamp))
 }
 
 /// Where a drive's commands go: the `cmd_vel` publisher, and the wall clock
@@ -134,10 +143,10 @@ pub struct Ros2Drive<S: CmdSink> {
     /// The last valid odometry (odom frame) still on the fleet clock's
     /// timeline, and its fleet time of arrival.
     odom: Option<(State, f64)>,
-    /// The last valid odometry as received (odom frame).
-    raw: Option<State>,
     /// Its absolute fixes, when it has a source.
     fixes: Option<FixInput>,
+    /// Its dead-reckoning uncertainty, when its error model is known.
+    drift: Option<Drift>,
     t: f64,
     last_sent: VelocityCommand,
     counters: Ros2Counters,
@@ -156,8 +165,8 @@ impl<S: CmdSink> Ros2Drive<S> {
             buf: Vec::with_capacity(128),
             yaw: YawUnwrapper::new(),
             odom: None,
-            raw: None,
             fixes: None,
+            drift: None,
             t: 0.0,
             last_sent: VelocityCommand::default(),
             counters: Ros2Counters::default(),
@@ -173,10 +182,13 @@ impl<S: CmdSink> Ros2Drive<S> {
         }
     }
 
-    /// The last valid odometry as the robot sent it, in its odom frame
-    /// (the state is this mapped into the world).
-    pub fn odometry(&self) -> Option<State> {
-        self.raw
+    /// The same drive knowing how its odometry errs: its `σ` without an
+    /// EKF covariance is `drift`'s ([`Drift`]).
+    pub fn with_drift(self, drift: Drift) -> Self {
+        Ros2Drive {
+            drift: Some(drift),
+            ..self
+        }
     }
 
     /// Its fixes, if it takes any.
@@ -200,7 +212,11 @@ impl<S: CmdSink> Ros2Drive<S> {
                 let _ = self.on_odom(key, payload, t);
             }
             (_, Some(f)) => {
-                let _ = f.on_fix(key, payload, t);
+                if f.on_fix(key, payload, t).is_ok()
+                    && let (Some(d), Some((_, noise))) = (self.drift.as_mut(), f.last_fix())
+                {
+                    d.reset(noise.position, noise.heading);
+                }
             }
             (_, None) => {}
         }
@@ -249,14 +265,20 @@ impl<S: CmdSink> Ros2Drive<S> {
                 if let Some(f) = self.fixes.as_mut() {
                     f.on_odom(odom.header.stamp.to_nanos(), raw.pose(), t);
                 }
+                if let Some(d) = self.drift.as_mut() {
+                    d.on_odom(raw.pose());
+                }
                 self.odom = Some((raw, t));
-                self.raw = Some(raw);
                 self.counters.odom_accepted += 1;
             }
             Err(SampleRefusal::WrongType(_)) => self.counters.odom_wrong_type += 1,
             Err(SampleRefusal::NonFinite(_)) => self.counters.odom_non_finite += 1,
             Err(SampleRefusal::WrongFrames(..)) => self.counters.odom_wrong_frames += 1,
-            Err(SampleRefusal::Malformed(_) | SampleRefusal::NoAttachment) => {
+            Err(
+                SampleRefusal::Malformed(_)
+                | SampleRefusal::NoAttachment
+                | SampleRefusal::Stale { .. },
+            ) => {
                 self.counters.odom_malformed += 1;
             }
         }
@@ -312,10 +334,24 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
     }
 
     fn position_sigma(&self) -> f64 {
-        self.fixes
+        match self.fixes.as_ref().and_then(FixInput::covariance) {
+            Some(p) => position_sigma(&p),
+            None => self.drift.as_ref().map_or(0.0, Drift::sigma),
+        }
+    }
+
+    fn odometry(&self) -> Option<OdometryState> {
+        let (raw, at) = self.odom?;
+        let fix_age = self
+            .fixes
             .as_ref()
-            .and_then(FixInput::covariance)
-            .map_or(0.0, |p| position_sigma(&p))
+            .and_then(FixInput::last_fix)
+            .map(|(fixed, _)| (self.t - fixed).max(0.0));
+        Some(OdometryState {
+            raw: [raw.x, raw.y, raw.theta],
+            age: (self.t - at).max(0.0),
+            fix_age,
+        })
     }
 
     fn fixes(&self, t: f64) -> Option<FixReport> {
@@ -379,6 +415,7 @@ mod tests {
     use echelon::scenario::Scenario;
     use echelon_ros2::KeyScheme;
     use echelon_ros2::keys::topic_key;
+    use echelon_ros2::msgs::{POSE_STAMPED, PoseStamped};
 
     /// Records what was sent; time advances 1 ms per read.
     #[derive(Debug, Default)]
@@ -506,6 +543,176 @@ mod tests {
             (6, 1, 2, 1)
         );
         assert_eq!((c.odom_wrong_type, c.odom_wrong_frames), (1, 1));
+    }
+
+    /// A drive whose odom frame is at a world pose `origin` (returned with
+    /// it and its fixes' key), with fixes from `/mocap/robot1/pose`
+    /// (`PoseStamped` in `map`, 5 mm noise, `reset`, gated with `gate`) on
+    /// slipping odometry.
+    fn drive_with_fixes(gate: bool) -> (Ros2Drive<Recorder>, String, Pose) {
+        use crate::ros2::fixes::{FixInput, OdometryModel};
+        use echelon::odometry::{ErrorModel, FixSchedule, FixSpec, Fusion};
+        use echelon::scenario::FixSource;
+        use echelon::scenario::schema::FixMessage;
+        let errors = ErrorModel::PERFECT.with_slip(1e-4).expect("valid slip");
+        let model = OdometryModel {
+            errors,
+            wheels: (0.15, 0.05),
+            sample_period: 0.02,
+            top_speed: 0.5,
+        };
+        let source = FixSource {
+            topic: "/mocap/robot1/pose".to_owned(),
+            message: FixMessage::PoseStamped,
+            frame: "map".to_owned(),
+            frame_origin: Pose::default(),
+            timeout: None,
+            tolerance: None,
+            gate,
+        };
+        let spec = FixSpec::new(FixSchedule::Period(0.1), Fusion::Reset)
+            .and_then(|f| f.with_noise(0.005, None))
+            .expect("valid fix spec");
+        let origin = Pose {
+            x: 1.0,
+            y: -2.0,
+            theta: 0.7,
+        };
+        let l = Ros2Link {
+            odom_origin: origin,
+            ..link()
+        };
+        let fixes = FixInput::new(1, source, KeyScheme::RmwZenoh, &spec, model, origin, 1.0)
+            .expect("valid fixes");
+        let key = topic_key(KeyScheme::RmwZenoh, 0, "/mocap/robot1/pose", &POSE_STAMPED);
+        let d = Ros2Drive::new(l, VelocityBase::IDEAL, [7; 16], Recorder::default())
+            .with_fixes(fixes)
+            .with_drift(Drift::new(errors, (0.15, 0.05)));
+        (d, key, origin)
+    }
+
+    /// Odometry sample `k` of a straight run at 0.5 m/s (every 20 ms,
+    /// stamped) fed to `d` at fleet time `0.02 k`, and `d` brought there:
+    /// the raw state sent.
+    fn straight(d: &mut Ros2Drive<Recorder>, k: u32) -> State {
+        let l = link();
+        let t = f64::from(k) * 0.02;
+        let msg = Odometry::planar(
+            0.5 * t,
+            0.0,
+            0.0,
+            0.5,
+            0.0,
+            Time::from_nanos(1_000_000_000 + (t * 1e9) as i64),
+            "odom",
+            "base_link",
+        );
+        d.on_input(ODOM_INPUT, &odom_key(&l), &msg.to_cdr(), t);
+        d.advance(t);
+        State {
+            x: 0.5 * t,
+            v: 0.5,
+            ..State::default()
+        }
+    }
+
+    /// Issue 22: a wrong type, another frame, a NaN pose and a fix 5 m away
+    /// are counted and refused, and the robot keeps driving on its
+    /// odometry: its state stays `odom_origin ⊕ raw`, its published
+    /// odometry block is the raw pose with its age and the last good fix's.
+    #[test]
+    fn bad_fixes_leave_the_robot_on_its_odometry() {
+        let (mut d, key, origin) = drive_with_fixes(true);
+        let at = |p: &Pose| PoseStamped::planar(p.x, p.y, p.theta, Time::default(), "map");
+        for k in 0..10 {
+            straight(&mut d, k);
+        }
+        // A good fix at the truth: taken, the world unchanged.
+        let truth = origin.compose(&Pose {
+            x: 0.5 * 0.18,
+            ..Pose::default()
+        });
+        d.on_input(FIX_INPUT, &key, &at(&truth).to_cdr(), 0.18);
+        let wrong_type = topic_key(
+            KeyScheme::RmwZenoh,
+            0,
+            "/mocap/robot1/pose",
+            &echelon_ros2::msgs::POSE_WITH_COVARIANCE_STAMPED,
+        );
+        let far = Pose {
+            x: truth.x + 5.0,
+            ..truth
+        };
+        let nan = Pose {
+            x: f64::NAN,
+            ..truth
+        };
+        let mut other_frame = at(&truth);
+        other_frame.header.frame_id = "odom".to_owned();
+        for k in 10..100 {
+            let raw = straight(&mut d, k);
+            let t = f64::from(k) * 0.02;
+            match k % 4 {
+                0 => d.on_input(FIX_INPUT, &wrong_type, &at(&truth).to_cdr(), t),
+                1 => d.on_input(FIX_INPUT, &key, &other_frame.to_cdr(), t),
+                2 => d.on_input(FIX_INPUT, &key, &at(&nan).to_cdr(), t),
+                _ if k < 40 => d.on_input(FIX_INPUT, &key, &at(&far).to_cdr(), t),
+                _ => {}
+            }
+            let s = d.state().expect("driving on odometry");
+            let want = raw.carried_by(&origin);
+            assert!(
+                (s.x - want.x).abs() < 1e-9 && (s.y - want.y).abs() < 1e-9,
+                "{s:?} vs {want:?}"
+            );
+            let o = Plant::odometry(&d).expect("the raw odometry");
+            assert_eq!(o.raw, [raw.x, 0.0, 0.0]);
+            assert_eq!(o.age, 0.0);
+            let fix_age = o.fix_age.expect("a fix was taken");
+            assert!((fix_age - (t - 0.18)).abs() < 1e-12, "{fix_age}");
+        }
+        let c = d.fixes().expect("fixes").counters();
+        assert_eq!(
+            (
+                c.applied,
+                c.wrong_type,
+                c.wrong_frame,
+                c.non_finite,
+                c.gated
+            ),
+            (1, 22, 22, 23, 8),
+            "{c:?}"
+        );
+        assert_eq!(c.relocalized, 0);
+    }
+
+    /// σ without an EKF covariance (`reset` fixes, no gate): the
+    /// dead-reckoning rule, growing with the distance driven, the fix's
+    /// noise right after a fix; without fixes the same rule from the start.
+    #[test]
+    fn sigma_grows_on_odometry_and_is_the_fixs_after_one() {
+        let (mut d, key, origin) = drive_with_fixes(false);
+        let at = |p: &Pose| PoseStamped::planar(p.x, p.y, p.theta, Time::default(), "map");
+        assert_eq!(d.position_sigma(), 0.0);
+        let mut last = 0.0;
+        for k in 0..50 {
+            straight(&mut d, k);
+            let sigma = d.position_sigma();
+            assert!(sigma >= last);
+            last = sigma;
+        }
+        // Slip alone on a straight line: √(slip d / 2) along the track,
+        // plus the heading's share.
+        let along = (1e-4 * 0.49 / 2.0f64).sqrt();
+        assert!(last > along, "{last} vs {along}");
+        let truth = origin.compose(&Pose {
+            x: 0.49 * 0.5,
+            ..Pose::default()
+        });
+        d.on_input(FIX_INPUT, &key, &at(&truth).to_cdr(), 0.98);
+        assert_eq!(d.position_sigma(), 0.005);
+        straight(&mut d, 50);
+        assert!(d.position_sigma() > 0.005);
     }
 
     #[test]

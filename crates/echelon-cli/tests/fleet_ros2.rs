@@ -197,6 +197,8 @@ fn raw_odometry_is_what_the_base_published(dir: &Path) {
             "robot {k}: age {age}"
         );
         assert!(o["fix_age"].is_null(), "robot {k}: {o}");
+        // No `[odometry]`: its error is unknown, σ 0.
+        assert_eq!(f(v, &["sigma"]), 0.0, "robot {k}");
         *checked.entry(*k).or_insert(0) += 1;
     }
     assert!(checked.values().all(|&n| n > 500), "{checked:?}");

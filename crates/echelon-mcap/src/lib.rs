@@ -395,6 +395,7 @@ mod tests {
                 age: 0.01,
                 fix_age: Some(0.05),
             }),
+            sigma: Some(0.02),
             ..AgentStateRecord::new(AgentSample::new(
                 1.5,
                 2,
@@ -427,6 +428,7 @@ mod tests {
             link: None,
             leader: None,
             odometry: None,
+            sigma: None,
             sample: AgentSample {
                 velocity: None,
                 ..fleet_state().sample

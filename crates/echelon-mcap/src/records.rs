@@ -117,6 +117,11 @@ pub struct AgentStateRecord {
     /// Fleet, ROS 2 robots only: the robot's own odometry.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub odometry: Option<OdometryRecord>,
+    /// Fleet only: `σ`, the standard deviation of the robot's position
+    /// estimate along its most uncertain axis, m (0: exact or unknown), by
+    /// which its neighbours widened their radius.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<f64>,
 }
 
 /// A ROS 2 robot's own odometry beside its world pose (docs/ros2.md,
@@ -143,6 +148,7 @@ impl AgentStateRecord {
             link: None,
             leader: None,
             odometry: None,
+            sigma: None,
         }
     }
 }

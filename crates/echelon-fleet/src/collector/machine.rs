@@ -272,6 +272,7 @@ impl Collector {
                 age: o.age,
                 fix_age: o.fix_age,
             }),
+            sigma: Some(s.sigma),
             ..AgentStateRecord::new(sample)
         };
         let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;

@@ -75,6 +75,10 @@ struct Estimate {
     pose: [f64; 3],
     e: [f64; 2],
     pd: [f64; 2],
+    /// The `σ` it published, m.
+    sigma: f64,
+    /// Its raw odometry's `fix_age`, s (`None`: no fix yet).
+    fix_age: Option<f64>,
 }
 
 /// From `fleet.mcap`: per agent, its states (by receipt time) and its
@@ -102,6 +106,8 @@ fn read_log(dir: &Path) -> Logged {
                 pose: [g("x"), g("y"), g("theta")],
                 e: [g("ex"), g("ey")],
                 pd: [leader["x"].as_f64().unwrap(), leader["y"].as_f64().unwrap()],
+                sigma: g("sigma"),
+                fix_age: v["odometry"]["fix_age"].as_f64(),
             });
         } else if let Some(k) = topic
             .strip_prefix("/robot")
@@ -285,6 +291,26 @@ fn drifting_robots_with_a_motion_capture_keep_their_slots_in_the_world() {
     let up = fleet_up(&with, "60", &dir.path().join("with"));
     let log = read_log(&dir.path().join("with"));
     assert_eq!(log.len(), 2, "{:?}", log.keys());
+    // Once settled, each state says how old its last fix was (10 Hz fixes)
+    // and publishes the EKF's small σ.
+    for (k, (states, _)) in &log {
+        for s in states.iter().filter(|s| s.t >= 30.0) {
+            let age = s
+                .fix_age
+                .unwrap_or_else(|| panic!("agent {k}: no fix_age at {}", s.t));
+            assert!(
+                (0.0..0.3).contains(&age),
+                "agent {k}: fix_age {age} at {}",
+                s.t
+            );
+            assert!(
+                s.sigma > 0.0 && s.sigma < 0.02,
+                "agent {k}: σ {} at {}",
+                s.sigma,
+                s.t
+            );
+        }
+    }
     for (k, (worst, n)) in worst_true_error(&log, 30.0) {
         assert!(n > 500, "agent {k}: {n} ground-truth samples compared");
         assert!(
@@ -349,6 +375,27 @@ fn drifting_robots_with_a_motion_capture_keep_their_slots_in_the_world() {
     let without = scenario(dir.path(), "drift", DRIFT, ["", ""]);
     let up = fleet_up(&without, "60", &dir.path().join("without"));
     let log = read_log(&dir.path().join("without"));
+    // On odometry alone σ is the dead-reckoning rule's: it never shrinks
+    // and ends well above the fixes' (docs/safety.md, "Uncertain positions").
+    for (k, (states, _)) in &log {
+        let mut by_time = states.clone();
+        by_time.sort_by(|a, b| a.t.total_cmp(&b.t).then(a.wall.cmp(&b.wall)));
+        for w in by_time.windows(2) {
+            assert!(
+                w[1].sigma >= w[0].sigma,
+                "agent {k}: σ {} then {}",
+                w[0].sigma,
+                w[1].sigma
+            );
+        }
+        assert!(by_time.iter().all(|s| s.fix_age.is_none()), "agent {k}");
+        let last = by_time.last().unwrap().sigma;
+        eprintln!("agent {k}: σ on odometry alone after 60 s: {last:.3} m");
+        assert!(
+            last > 0.05,
+            "agent {k}: σ {last} m after 60 s on drifting odometry"
+        );
+    }
     let worst = worst_true_error(&log, 30.0);
     assert!(
         worst.values().any(|&(w, _)| w > 0.04),

@@ -63,7 +63,8 @@ fn drove_cleanly(ros: &Value) {
 
 /// `fleet up --ros2`: every robot↔base message in ROS 2's format; the
 /// robots end within 5 mm of the simulator's final positions (measured:
-/// 0.25 mm at 30 s), and the collector recorded the ROS topics.
+/// 0.25 mm at 30 s), and the collector recorded the ROS topics and each
+/// robot's raw odometry ([`raw_odometry_is_what_the_base_published`]).
 #[test]
 fn fleet_up_ros2_ends_where_the_simulator_ends() {
     let _fleet = common::one_fleet_at_a_time();
@@ -106,6 +107,130 @@ fn fleet_up_ros2_ends_where_the_simulator_ends() {
     let col = &up["collector"];
     assert!(f(col, &["ros_recorded"]) > 1000.0, "{col}");
     assert_eq!(f(col, &["ros_refused"]), 0.0, "{col}");
+    raw_odometry_is_what_the_base_published(dir.path());
+}
+
+/// Issue 22: the collector keeps each ROS 2 robot's raw odometry. In the
+/// run's `fleet.mcap`, every `/agent/K/state` carries `odometry` (`raw`,
+/// `age`, `fix_age`): `raw` is, bit for bit, the pose of an odometry
+/// message its base published in its odom frame (`/robotK/odom`, as the
+/// collector recorded it; the heading unwrapped), the world pose is
+/// `odom_origin ⊕ raw` (no fixes: the origin is the agent's start), the
+/// age is within the odometry timeout and `fix_age` is null. `odometry.csv`
+/// has the same, one row per started state.
+fn raw_odometry_is_what_the_base_published(dir: &Path) {
+    use std::collections::BTreeMap;
+    let scenario = echelon::scenario::Scenario::builtin(SCENARIO).unwrap();
+    let links = scenario.fleet().unwrap().ros2;
+    let bytes = std::fs::read(dir.join("fleet.mcap")).unwrap();
+    // Per robot: odometry poses `[x, y, yaw]` as the base published them.
+    let mut odom: BTreeMap<u32, Vec<[f64; 3]>> = BTreeMap::new();
+    let mut states: Vec<(u32, Value)> = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let topic = m.channel.topic.as_str();
+        if let Some(k) = topic
+            .strip_prefix("/agent/")
+            .and_then(|r| r.strip_suffix("/state"))
+        {
+            states.push((k.parse().unwrap(), serde_json::from_slice(&m.data).unwrap()));
+        } else if let Some(k) = topic
+            .strip_prefix("/robot")
+            .and_then(|r| r.strip_suffix("/odom"))
+        {
+            let o = Odometry::from_cdr_finite(&m.data).unwrap();
+            let p = o.pose.pose.position;
+            odom.entry(k.parse().unwrap())
+                .or_default()
+                .push([p.x, p.y, o.yaw()]);
+        }
+    }
+    for poses in odom.values_mut() {
+        poses.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    }
+    // The published odometry at `(x, y)` (to the last bit of a JSON
+    // round trip): its yaw.
+    let published = |k: u32, x: f64, y: f64| -> Option<f64> {
+        let poses = &odom[&k];
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + b.abs());
+        let from = poses.partition_point(|p| p[0] < x - 1e-9);
+        poses[from..]
+            .iter()
+            .take_while(|p| p[0] <= x + 1e-9)
+            .find(|p| close(p[0], x) && close(p[1], y))
+            .map(|p| p[2])
+    };
+    assert_eq!(odom.len(), links.len(), "every base's odometry recorded");
+    let mut checked = BTreeMap::new();
+    for (k, v) in &states {
+        let o = &v["odometry"];
+        let raw: Vec<f64> = o["raw"]
+            .as_array()
+            .unwrap_or_else(|| panic!("robot {k}: no raw odometry in {v}"))
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        let yaw = published(*k, raw[0], raw[1])
+            .unwrap_or_else(|| panic!("robot {k}: raw {raw:?} is no odometry its base published"));
+        assert!(
+            echelon::model::wrap_angle(raw[2] - yaw).abs() < 1e-12,
+            "robot {k}: raw heading {} against {yaw}",
+            raw[2]
+        );
+        let link = &links[*k as usize - 1];
+        let world = link.odom_origin.compose(&echelon::model::Pose {
+            x: raw[0],
+            y: raw[1],
+            theta: raw[2],
+        });
+        let got = [f(v, &["x"]), f(v, &["y"]), f(v, &["theta"])];
+        let want = [world.x, world.y, world.theta];
+        for (g, w) in got.iter().zip(want) {
+            assert!(
+                (g - w).abs() < 1e-9,
+                "robot {k}: world {got:?}, odom_origin ⊕ raw {want:?}"
+            );
+        }
+        let age = f(o, &["age"]);
+        assert!(
+            (0.0..=link.odom_timeout).contains(&age),
+            "robot {k}: age {age}"
+        );
+        assert!(o["fix_age"].is_null(), "robot {k}: {o}");
+        // No `[odometry]`: its error is unknown, σ 0.
+        assert_eq!(f(v, &["sigma"]), 0.0, "robot {k}");
+        *checked.entry(*k).or_insert(0) += 1;
+    }
+    assert!(checked.values().all(|&n| n > 500), "{checked:?}");
+    // The same in odometry.csv, one row per started state.
+    let csv = std::fs::read_to_string(dir.join("odometry.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some("t,agent,x,y,theta,x_raw,y_raw,theta_raw,age,fix_age")
+    );
+    let mut rows = 0;
+    for line in lines {
+        let cells: Vec<&str> = line.split(',').collect();
+        assert_eq!(cells.len(), 10, "{line}");
+        assert_eq!(cells[9], "", "no fix: {line}");
+        let n: Vec<f64> = cells[..9].iter().map(|c| c.parse().unwrap()).collect();
+        let k = n[1] as u32;
+        assert!(published(k, n[5], n[6]).is_some(), "{line}");
+        let world = links[k as usize - 1]
+            .odom_origin
+            .compose(&echelon::model::Pose {
+                x: n[5],
+                y: n[6],
+                theta: n[7],
+            });
+        assert!(
+            (world.x - n[2]).abs() < 1e-9 && (world.y - n[3]).abs() < 1e-9,
+            "{line}"
+        );
+        rows += 1;
+    }
+    assert!(rows > 1000, "{rows} rows");
 }
 
 /// What the test session heard on robot 1's `cmd_vel`: `(v, ω)` in order.
@@ -762,22 +887,57 @@ offset = {{ x = 0.65, y = 0.0 }}
 /// fleet's router none of the bases', and the collector no ROS topic.
 #[test]
 fn fleet_up_real_on_bases_behind_their_own_routers_ends_where_the_simulator_ends() {
+    real_fleet_ends_where_the_simulator_ends(false);
+}
+
+/// The same in secure mode (certificates from `fleet certs`): each robot's
+/// router a `quic/` listener trusting the fleet's CA (as
+/// docs/real-robots.md, "Secure mode on real robots", sets up
+/// `rmw_zenohd`), each base reaching it as `base-K`, each robot process as
+/// `robot-K`, the fleet's own links mutual TLS too; it converges the same.
+#[test]
+fn secure_fleet_up_real_on_bases_behind_their_own_routers_converges_too() {
+    real_fleet_ends_where_the_simulator_ends(true);
+}
+
+/// `fleet up --ros2 --real` on [`three_robots_behind`] their own routers
+/// (in secure mode with `secure`), checked against the simulator.
+fn real_fleet_ends_where_the_simulator_ends(secure: bool) {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let routers = ports(3);
+    let mut routers = ports(3);
+    let certs = secure.then(|| common::certs(dir.path(), 3));
+    let secure_args: Vec<&str> = match &certs {
+        Some(c) => vec!["--secure", c.to_str().unwrap()],
+        None => Vec::new(),
+    };
+    if secure {
+        for r in &mut routers {
+            *r = r.replacen("tcp/", "quic/", 1);
+        }
+    }
     let scenario = dir.path().join("three-real.toml");
     std::fs::write(&scenario, three_robots_behind(&routers)).unwrap();
     let scenario = scenario.to_str().unwrap();
     let robot_routers: Vec<_> = routers
         .iter()
-        .map(|e| spawn(&["fleet", "router", "--listen", e]))
+        .map(|e| {
+            // In secure mode the scenario gives the access control its
+            // robots and ROS 2 keys.
+            let mut a = vec!["fleet", "router", "--listen", e];
+            if secure {
+                a.push(scenario);
+                a.extend(&secure_args);
+            }
+            spawn(&a)
+        })
         .collect();
     let bases: Vec<_> = routers
         .iter()
         .enumerate()
         .map(|(i, e)| {
             let k = (i + 1).to_string();
-            spawn(&[
+            let mut a = vec![
                 "fleet",
                 "base",
                 scenario,
@@ -788,7 +948,9 @@ fn fleet_up_real_on_bases_behind_their_own_routers_ends_where_the_simulator_ends
                 "client",
                 "--connect",
                 e,
-            ])
+            ];
+            a.extend(&secure_args);
+            spawn(&a)
         })
         .collect();
     let out = dir.path().join("up");
@@ -801,8 +963,9 @@ fn fleet_up_real_on_bases_behind_their_own_routers_ends_where_the_simulator_ends
             "--real",
             "--duration",
             "12",
-            "--out",
         ])
+        .args(&secure_args)
+        .arg("--out")
         .arg(&out)
         .output()
         .unwrap();

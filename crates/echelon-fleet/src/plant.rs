@@ -12,6 +12,7 @@ use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::model::{Input, RobotParams, State};
 
 use crate::ros2::fixes::FixReport;
+use crate::wire::OdometryState;
 
 /// A differential-drive robot under the fleet controller: what the robot's
 /// state machine ([`crate::robot::Robot`]) drives, injected. The simulated
@@ -40,6 +41,11 @@ pub trait Plant {
     /// uncertain axis, m (0: exact, as a simulated plant, or unknown).
     fn position_sigma(&self) -> f64 {
         0.0
+    }
+    /// Its own odometry, raw (its odom frame), with its age and its last
+    /// fix's, now (`None`: a simulated plant, or no odometry yet).
+    fn odometry(&self) -> Option<OdometryState> {
+        None
     }
     /// What its absolute fixes did, at fleet time `t` (`None`: it takes
     /// none, as a simulated plant, which is never lost).

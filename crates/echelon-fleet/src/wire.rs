@@ -12,7 +12,8 @@
 //! | 8 | u64 | sequence number, from 0, +1 per message of this source |
 //! | 16 | f64 | sender time `t`, fleet seconds |
 //!
-//! then the kind's payload (see [`Reference`] and [`RobotState`]).
+//! then the kind's payload (see [`Reference`] and [`RobotState`]; a state
+//! may end with an optional odometry block, [`OdometryState`]).
 //! All floats must be finite. A message whose length, magic, kind or floats
 //! are wrong is *malformed*; a well-formed header with another version is
 //! *wrong-version*. Neither ever panics the receiver.
@@ -25,7 +26,9 @@ use echelon::sim::AgentOutput;
 /// First byte of every message.
 pub const MAGIC: u8 = 0xEC;
 /// Format version written and accepted (2: a state carries its velocity
-/// base's command; 3: and its position uncertainty `σ`).
+/// base's command; 3: and its position uncertainty `σ`, and optionally its
+/// raw odometry: a state without the block is as before, so version 3
+/// senders that never send it are still understood).
 pub const VERSION: u8 = 3;
 /// Header length, bytes.
 pub const HEADER_LEN: usize = 24;
@@ -34,11 +37,20 @@ pub const REFERENCE_LEN: usize = HEADER_LEN + 8 * 8;
 /// A state message's length, bytes (header + agent u32 + drive flags u8 +
 /// 3 reserved + 26 f64).
 pub const STATE_LEN: usize = HEADER_LEN + 8 + 26 * 8;
+/// A state message's length with its odometry block, bytes ([`STATE_LEN`]
+/// + 5 f64: raw `x, y, θ`, `age`, `fix_age`).
+pub const STATE_ODOMETRY_LEN: usize = STATE_LEN + 5 * 8;
 
 /// Drive flags of a state: a velocity base's state.
 const FLAG_VELOCITY: u8 = 1;
 /// Drive flags of a state: the base's speed limits cut the command.
 const FLAG_SATURATED: u8 = 2;
+/// Drive flags of a state: the odometry block follows.
+const FLAG_ODOMETRY: u8 = 4;
+/// Drive flags of a state: the odometry block's `fix_age` is set.
+const FLAG_FIX_AGE: u8 = 8;
+/// The drive flags that say what the velocity fields hold.
+const DRIVE_BITS: u8 = FLAG_VELOCITY | FLAG_SATURATED;
 
 const KIND_REFERENCE: u8 = 1;
 const KIND_STATE: u8 = 2;
@@ -119,6 +131,21 @@ pub struct Reference {
     pub turn_rate: f64,
 }
 
+/// A ROS 2 robot's own odometry as its state was published: what the
+/// collector keeps beside the world pose (`odometry` in the state JSON:
+/// `{"raw": [x, y, θ], "age": s, "fix_age": s | null}`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct OdometryState {
+    /// The pose in the robot's own odom frame (before the odom → world
+    /// map), heading unwrapped, `[x, y, θ]` (m, m, rad).
+    pub raw: [f64; 3],
+    /// Age of the newest odometry sample when the state was published, s (≥ 0).
+    pub age: f64,
+    /// Age of the newest accepted fix then, s (≥ 0); `None`: no fix yet,
+    /// or the robot takes none.
+    pub fix_age: Option<f64>,
+}
+
 /// A robot's state with what its controller did: its [`AgentSample`]
 /// ([`RobotState::sample`]) and what the wire adds (link status,
 /// accelerations, the leader motion used). Payload after the header:
@@ -126,7 +153,9 @@ pub struct Reference {
 /// its speed limits cut the command), 3 reserved bytes (0), then the f64s
 /// `x, y, θ, v, ω, v̇, ω̇, e_x, e_y, z_x, z_y, u1, u2, τ_r, τ_l,
 /// p_d[2], ṗ_d[2], p̈_d[2], v*, ω*, v_applied, ω_applied, σ` (`v*` to
-/// `ω_applied` 0 for a torque-driven robot; `σ ≥ 0`).
+/// `ω_applied` 0 for a torque-driven robot; `σ ≥ 0`). With drive flag bit 2
+/// an odometry block follows ([`OdometryState`]): the f64s `x_raw, y_raw,
+/// θ_raw, age, fix_age` (`fix_age` meaningful with bit 3, else 0; ages ≥ 0).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RobotState {
     /// Sender time, s.
@@ -158,6 +187,9 @@ pub struct RobotState {
     /// neighbours' safety filters widen the pair's radius by
     /// (`docs/safety.md`, "Uncertain positions").
     pub sigma: f64,
+    /// A ROS 2 robot's raw odometry (`None`: a simulated plant, or no
+    /// odometry yet).
+    pub odometry: Option<OdometryState>,
 }
 
 impl RobotState {
@@ -183,6 +215,9 @@ impl RobotState {
 
 /// A decoded message.
 #[derive(Debug, Clone, Copy, PartialEq)]
+// A state is larger than a reference; boxing it would allocate per
+// message on the receive path, which must not.
+#[allow(clippy::large_enum_variant)]
 pub enum Message {
     /// From the leader.
     Reference(Header, Reference),
@@ -227,9 +262,12 @@ pub fn encode_reference(buf: &mut Vec<u8>, h: Header, r: &Reference) {
 pub fn encode_state(buf: &mut Vec<u8>, h: Header, s: &RobotState) {
     put_header(buf, KIND_STATE, s.link as u8, h, s.t);
     buf.extend_from_slice(&s.agent.to_le_bytes());
-    let flags = s.velocity.map_or(0, |v| {
+    let mut flags = s.velocity.map_or(0, |v| {
         FLAG_VELOCITY | if v.sat { FLAG_SATURATED } else { 0 }
     });
+    if let Some(o) = &s.odometry {
+        flags |= FLAG_ODOMETRY | if o.fix_age.is_some() { FLAG_FIX_AGE } else { 0 };
+    }
     buf.extend_from_slice(&[flags, 0, 0, 0]);
     let (x, l) = (&s.state, &s.leader);
     let c = s.velocity.unwrap_or_default();
@@ -264,6 +302,18 @@ pub fn encode_state(buf: &mut Vec<u8>, h: Header, s: &RobotState) {
             s.sigma,
         ],
     );
+    if let Some(o) = &s.odometry {
+        put_f64s(
+            buf,
+            &[
+                o.raw[0],
+                o.raw[1],
+                o.raw[2],
+                o.age,
+                o.fix_age.unwrap_or(0.0),
+            ],
+        );
+    }
 }
 
 /// Reads `N` finite little-endian f64s from `b` (which holds exactly `8N` bytes).
@@ -278,6 +328,24 @@ fn f64s<const N: usize>(b: &[u8]) -> Result<[f64; N], DecodeError> {
         }
     }
     Ok(out)
+}
+
+/// The odometry block of a state with drive flags `flags` (`b`: its 40 bytes).
+fn odometry_block(b: &[u8], flags: u8) -> Result<OdometryState, DecodeError> {
+    let o = f64s::<5>(b)?;
+    if o[3] < 0.0 || o[4] < 0.0 {
+        return Err(DecodeError::Malformed("a negative odometry age"));
+    }
+    let fix_age = match flags & FLAG_FIX_AGE != 0 {
+        true => Some(o[4]),
+        false if o[4] == 0.0 => None,
+        false => return Err(DecodeError::Malformed("a fix age without its flag")),
+    };
+    Ok(OdometryState {
+        raw: [o[0], o[1], o[2]],
+        age: o[3],
+        fix_age,
+    })
 }
 
 fn u32_at(b: &[u8], at: usize) -> u32 {
@@ -332,7 +400,14 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
             ))
         }
         KIND_STATE => {
-            if b.len() != STATE_LEN {
+            let flags = b[HEADER_LEN + 4];
+            let with_odometry = flags & FLAG_ODOMETRY != 0;
+            let len = if with_odometry {
+                STATE_ODOMETRY_LEN
+            } else {
+                STATE_LEN
+            };
+            if b.len() != len {
                 return Err(DecodeError::Malformed("wrong length for a state"));
             }
             let link =
@@ -341,26 +416,31 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
             if agent == 0 {
                 return Err(DecodeError::Malformed("agent numbers start at 1"));
             }
-            let v = f64s::<26>(&b[HEADER_LEN + 8..])?;
+            let v = f64s::<26>(&b[HEADER_LEN + 8..STATE_LEN])?;
             if v[25] < 0.0 {
                 return Err(DecodeError::Malformed("a negative position uncertainty"));
             }
-            let velocity = match b[HEADER_LEN + 4] {
+            let odometry = match with_odometry {
+                false if flags & FLAG_FIX_AGE != 0 => {
+                    return Err(DecodeError::Malformed("a fix age without odometry"));
+                }
+                false => None,
+                true => Some(odometry_block(&b[STATE_LEN..], flags)?),
+            };
+            let velocity = match flags & !(FLAG_ODOMETRY | FLAG_FIX_AGE) {
                 0 if v[21..25] == [0.0; 4] => None,
                 0 => {
                     return Err(DecodeError::Malformed(
                         "a torque state with a velocity command",
                     ));
                 }
-                f if f & FLAG_VELOCITY != 0 && f & !(FLAG_VELOCITY | FLAG_SATURATED) == 0 => {
-                    Some(VelocitySample {
-                        v_cmd: v[21],
-                        omega_cmd: v[22],
-                        v_applied: v[23],
-                        omega_applied: v[24],
-                        sat: f & FLAG_SATURATED != 0,
-                    })
-                }
+                f if f & FLAG_VELOCITY != 0 && f & !DRIVE_BITS == 0 => Some(VelocitySample {
+                    v_cmd: v[21],
+                    omega_cmd: v[22],
+                    v_applied: v[23],
+                    omega_applied: v[24],
+                    sat: f & FLAG_SATURATED != 0,
+                }),
                 _ => return Err(DecodeError::Malformed("unknown drive flags")),
             };
             Ok(Message::State(
@@ -395,6 +475,7 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
                     },
                     velocity,
                     sigma: v[25],
+                    odometry,
                 },
             ))
         }
@@ -403,129 +484,4 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use proptest::prelude::*;
-
-    fn finite() -> impl Strategy<Value = f64> {
-        -1e6..1e6f64
-    }
-
-    proptest! {
-        #[test]
-        fn references_round_trip(
-            source in any::<u32>(), seq in any::<u64>(), t in finite(),
-            v in proptest::array::uniform8(finite()),
-        ) {
-            let r = Reference {
-                t,
-                motion: LeaderMotion { p: [v[0], v[1]], dp: [v[2], v[3]], ddp: [v[4], v[5]] },
-                speed: v[6],
-                turn_rate: v[7],
-            };
-            let h = Header { source, seq };
-            let mut buf = Vec::new();
-            encode_reference(&mut buf, h, &r);
-            prop_assert_eq!(buf.len(), REFERENCE_LEN);
-            prop_assert_eq!(decode(&buf), Ok(Message::Reference(h, r)));
-        }
-
-        #[test]
-        fn states_round_trip(
-            source in any::<u32>(), seq in any::<u64>(), agent in 1..1000u32, link in 0..5u8,
-            drive in 0..3u8, v in proptest::collection::vec(finite(), 26), sigma in 0.0..10.0f64,
-        ) {
-            let s = RobotState {
-                t: v[21],
-                agent,
-                link: LinkStatus::from_u8(link).unwrap_or_default(),
-                state: State { x: v[0], y: v[1], theta: v[2], v: v[3], omega: v[4] },
-                dv: v[5],
-                domega: v[6],
-                e: [v[7], v[8]],
-                z: [v[9], v[10]],
-                u: Input { u1: v[11], u2: v[12] },
-                tau: Torques { right: v[13], left: v[14] },
-                leader: LeaderMotion { p: [v[15], v[16]], dp: [v[17], v[18]], ddp: [v[19], v[20]] },
-                // 0: torque-driven; 1, 2: a velocity base, its limits cutting or not.
-                velocity: (drive > 0).then_some(VelocitySample {
-                    v_cmd: v[22],
-                    omega_cmd: v[23],
-                    v_applied: v[24],
-                    omega_applied: v[25],
-                    sat: drive == 2,
-                }),
-                sigma,
-            };
-            let h = Header { source, seq };
-            let mut buf = Vec::new();
-            encode_state(&mut buf, h, &s);
-            prop_assert_eq!(buf.len(), STATE_LEN);
-            prop_assert_eq!(decode(&buf), Ok(Message::State(h, s)));
-        }
-
-        /// Arbitrary bytes decode to an error or a message, never a panic; a
-        /// message only if the bytes are exactly one valid encoding.
-        #[test]
-        fn garbage_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..256)) {
-            if let Ok(m) = decode(&bytes) {
-                let mut buf = Vec::new();
-                match m {
-                    Message::Reference(h, r) => encode_reference(&mut buf, h, &r),
-                    Message::State(h, s) => encode_state(&mut buf, h, &s),
-                }
-                // Reserved bytes are not checked; everything else must match.
-                if bytes.len() == STATE_LEN {
-                    buf[HEADER_LEN + 5..HEADER_LEN + 8].copy_from_slice(&bytes[HEADER_LEN + 5..HEADER_LEN + 8]);
-                }
-                prop_assert_eq!(buf, bytes);
-            }
-        }
-
-        /// A truncated message is malformed.
-        #[test]
-        fn truncation_is_malformed(cut in 0..REFERENCE_LEN) {
-            let mut buf = Vec::new();
-            encode_reference(&mut buf, Header { source: 1, seq: 2 }, &Reference {
-                t: 1.0, motion: LeaderMotion::default(), speed: 0.0, turn_rate: 0.0,
-            });
-            buf.truncate(cut);
-            prop_assert!(matches!(decode(&buf), Err(DecodeError::Malformed(_))));
-        }
-    }
-
-    #[test]
-    fn version_and_magic_are_checked() {
-        let mut buf = Vec::new();
-        let r = Reference {
-            t: 0.5,
-            motion: LeaderMotion::default(),
-            speed: 0.1,
-            turn_rate: 0.0,
-        };
-        encode_reference(&mut buf, Header { source: 7, seq: 3 }, &r);
-        let mut v1 = buf.clone();
-        v1[1] = 1;
-        assert_eq!(decode(&v1), Err(DecodeError::WrongVersion(1)));
-        let mut bad = buf.clone();
-        bad[0] = 0;
-        assert!(matches!(decode(&bad), Err(DecodeError::Malformed(_))));
-        let mut nan = buf.clone();
-        nan[HEADER_LEN..HEADER_LEN + 8].copy_from_slice(&f64::NAN.to_le_bytes());
-        assert!(matches!(decode(&nan), Err(DecodeError::Malformed(_))));
-        let mut kind = buf;
-        kind[2] = 9;
-        assert!(matches!(decode(&kind), Err(DecodeError::Malformed(_))));
-        // A negative position uncertainty is malformed.
-        let mut buf = Vec::new();
-        let s = RobotState {
-            agent: 1,
-            sigma: 0.01,
-            ..RobotState::default()
-        };
-        encode_state(&mut buf, Header { source: 7, seq: 3 }, &s);
-        assert!(matches!(decode(&buf), Ok(Message::State(_, d)) if d.sigma == 0.01));
-        buf[STATE_LEN - 8..].copy_from_slice(&(-0.01f64).to_le_bytes());
-        assert!(matches!(decode(&buf), Err(DecodeError::Malformed(_))));
-    }
-}
+mod tests;

@@ -39,8 +39,8 @@ use serde::Serialize;
 
 pub use observer::McapObserver;
 pub use records::{
-    AGENT_STATE, AgentStateRecord, CDR, JsonSchema, LeaderRecord, REFERENCE, REFERENCE_TOPIC,
-    ROS2MSG, ReferenceRecord, Ros2Schema, agent_topic,
+    AGENT_STATE, AgentStateRecord, CDR, JsonSchema, LeaderRecord, OdometryRecord, REFERENCE,
+    REFERENCE_TOPIC, ROS2MSG, ReferenceRecord, Ros2Schema, agent_topic,
 };
 
 /// A failure while writing an MCAP file.
@@ -390,6 +390,12 @@ mod tests {
                 ax: 0.0,
                 ay: 0.25,
             }),
+            odometry: Some(OdometryRecord {
+                raw: [0.5, -0.25, 6.5],
+                age: 0.01,
+                fix_age: Some(0.05),
+            }),
+            sigma: Some(0.02),
             ..AgentStateRecord::new(AgentSample::new(
                 1.5,
                 2,
@@ -421,6 +427,8 @@ mod tests {
             seq: None,
             link: None,
             leader: None,
+            odometry: None,
+            sigma: None,
             sample: AgentSample {
                 velocity: None,
                 ..fleet_state().sample

@@ -114,6 +114,28 @@ pub struct AgentStateRecord {
     /// Fleet only: the leader motion the law used.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub leader: Option<LeaderRecord>,
+    /// Fleet, ROS 2 robots only: the robot's own odometry.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub odometry: Option<OdometryRecord>,
+    /// Fleet only: `σ`, the standard deviation of the robot's position
+    /// estimate along its most uncertain axis, m (0: exact or unknown), by
+    /// which its neighbours widened their radius.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<f64>,
+}
+
+/// A ROS 2 robot's own odometry beside its world pose (docs/ros2.md,
+/// "Frames"): the world pose is `odom_origin ⊕ raw` (or the fixes'
+/// correction ⊕ raw).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, schemars::JsonSchema)]
+pub struct OdometryRecord {
+    /// The pose in the robot's odom frame `[x, y, θ]` (m, m, rad; heading
+    /// unwrapped), before the odom → world map.
+    pub raw: [f64; 3],
+    /// Age of the newest odometry sample when the state was published, s.
+    pub age: f64,
+    /// Age of the newest accepted fix then, s (null: none yet, or no fixes).
+    pub fix_age: Option<f64>,
 }
 
 impl AgentStateRecord {
@@ -125,6 +147,8 @@ impl AgentStateRecord {
             seq: None,
             link: None,
             leader: None,
+            odometry: None,
+            sigma: None,
         }
     }
 }

@@ -169,6 +169,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 let options = BaseOptions {
                     process: a.clock.process(scenario, net, &a.net),
                     agent: a.agent.agent,
+                    clock_offset: a.clock_offset,
                 };
                 base::run(options, stop)
             })

@@ -303,6 +303,15 @@ impl<A: RecordSink, B: RecordSink> RecordSink for Tee<'_, A, B> {
         self.1.row(sample)
     }
 
+    fn odometry(
+        &mut self,
+        s: &crate::wire::RobotState,
+        o: &crate::wire::OdometryState,
+    ) -> Result<(), FleetError> {
+        self.0.odometry(s, o)?;
+        self.1.odometry(s, o)
+    }
+
     fn pose(
         &mut self,
         k: u32,

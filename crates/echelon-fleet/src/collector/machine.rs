@@ -6,8 +6,8 @@ use std::fmt::Write as _;
 
 use echelon_mcap::scene::ScenePose;
 use echelon_mcap::{
-    AGENT_STATE, AgentStateRecord, JsonSchema, LeaderRecord, REFERENCE, REFERENCE_TOPIC,
-    ReferenceRecord, agent_topic, nanos,
+    AGENT_STATE, AgentStateRecord, JsonSchema, LeaderRecord, OdometryRecord, REFERENCE,
+    REFERENCE_TOPIC, ReferenceRecord, agent_topic, nanos,
 };
 
 use super::{
@@ -326,6 +326,12 @@ impl Collector {
             seq: Some(seq),
             link: Some(s.link.name()),
             leader: Some(LeaderRecord::from(&s.leader)),
+            odometry: s.odometry.map(|o| OdometryRecord {
+                raw: o.raw,
+                age: o.age,
+                fix_age: o.fix_age,
+            }),
+            sigma: Some(s.sigma),
             ..AgentStateRecord::new(sample)
         };
         let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
@@ -348,6 +354,9 @@ impl Collector {
             return Ok(());
         }
         a.add(&sample);
+        if let Some(o) = &s.odometry {
+            sink.odometry(s, o)?;
+        }
         sink.row(&sample)
     }
 

@@ -1,5 +1,6 @@
 //! Where the collector's records go: the [`RecordSink`] trait and its files,
-//! [`FileSink`] (`fleet.mcap` and `trajectory.csv`).
+//! [`FileSink`] (`fleet.mcap`, `trajectory.csv` and, for ROS 2 robots,
+//! `odometry.csv`).
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -15,6 +16,16 @@ use echelon_mcap::{JsonSchema, McapLog};
 use super::{CollectorReport, LATENCY_METADATA, MCAP_FILE};
 use crate::FleetError;
 use crate::ros2::record::RosTopic;
+use crate::wire::{OdometryState, RobotState};
+
+/// The collector's table of its ROS 2 robots' own odometry beside their
+/// world poses, written once a robot publishes it.
+pub(crate) const ODOMETRY_FILE: &str = "odometry.csv";
+
+/// Its columns: fleet time, agent, the world pose the robot published, its
+/// raw odometry (odom frame, heading unwrapped), the odometry's age and the
+/// last fix's (empty: none).
+pub(crate) const ODOMETRY_HEADER: &str = "t,agent,x,y,theta,x_raw,y_raw,theta_raw,age,fix_age";
 
 /// Where the collector's records go: the files ([`run`](super::run)), or memory in tests.
 pub trait RecordSink {
@@ -39,6 +50,13 @@ pub trait RecordSink {
     ) -> Result<(), FleetError>;
     /// Appends one `trajectory.csv` row.
     fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError>;
+    /// Appends one [`ODOMETRY_FILE`] row: the raw odometry `o` a ROS 2
+    /// robot published with its state `s` (nothing in a sink without the
+    /// table).
+    fn odometry(&mut self, s: &RobotState, o: &OdometryState) -> Result<(), FleetError> {
+        let _ = (s, o);
+        Ok(())
+    }
     /// Shows robot `k` (from 1) at `pose` on the 3D channels
     /// ([`echelon_mcap::scene`]), received at UNIX ns `log_time`, sent at
     /// `publish_time`; nothing when the sink has no scene.
@@ -58,6 +76,8 @@ pub struct FileSink {
     csv: CsvWriter<BufWriter<File>>,
     trajectory: TrajectoryRows,
     csv_path: PathBuf,
+    /// [`ODOMETRY_FILE`], from its first row.
+    odometry: Option<CsvWriter<BufWriter<File>>>,
     /// The 3D channels, when the scenario is known; whether the fixed
     /// scene was written.
     scene: Option<(Scene, SceneChannels, bool)>,
@@ -104,6 +124,28 @@ impl RecordSink for FileSink {
             .map_err(FleetError::io(&self.csv_path))
     }
 
+    fn odometry(&mut self, s: &RobotState, o: &OdometryState) -> Result<(), FleetError> {
+        let path = self.odometry_path();
+        let csv = match self.odometry.as_mut() {
+            Some(csv) => csv,
+            None => {
+                let file = File::create(&path).map_err(FleetError::io(&path))?;
+                let csv = CsvWriter::new(BufWriter::with_capacity(1 << 16, file), ODOMETRY_HEADER)
+                    .map_err(FleetError::io(&path))?;
+                self.odometry.insert(csv)
+            }
+        };
+        let x = &s.state;
+        csv.time(s.t)
+            .int(u64::from(s.agent))
+            .nums([x.x, x.y, x.theta])
+            .nums(o.raw)
+            .num(o.age)
+            .opt(o.fix_age)
+            .end_row()
+            .map_err(FleetError::io(&path))
+    }
+
     fn pose(
         &mut self,
         k: u32,
@@ -129,6 +171,11 @@ impl RecordSink for FileSink {
 }
 
 impl FileSink {
+    /// Where [`ODOMETRY_FILE`] goes: beside `trajectory.csv`.
+    fn odometry_path(&self) -> PathBuf {
+        self.csv_path.with_file_name(ODOMETRY_FILE)
+    }
+
     /// Writes one message on channel `id` with the channel's next sequence number.
     fn write(
         &mut self,
@@ -170,6 +217,7 @@ impl FileSink {
             csv,
             trajectory,
             csv_path,
+            odometry: None,
             scene: None,
         })
     }
@@ -195,9 +243,13 @@ impl FileSink {
         Ok(())
     }
 
-    /// Closes both files (MCAP summary and footer written).
+    /// Closes the files (MCAP summary and footer written).
     pub fn finish(mut self) -> Result<(), FleetError> {
         self.log.finish()?;
+        if let Some(csv) = self.odometry.as_mut() {
+            let path = self.csv_path.with_file_name(ODOMETRY_FILE);
+            csv.flush().map_err(FleetError::io(&path))?;
+        }
         self.csv.flush().map_err(FleetError::io(&self.csv_path))
     }
 }

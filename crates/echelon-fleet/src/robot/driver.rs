@@ -3,6 +3,7 @@
 use crate::faults::FaultSpec;
 use crate::net;
 use crate::options::{ProcessOptions, Resolved};
+use crate::ros2::drift::Drift;
 use crate::ros2::drive::Ros2Drive;
 use crate::ros2::endpoint::{OwnedCmdSink, Ros2Node};
 use crate::ros2::fixes;
@@ -71,6 +72,11 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         ..config
     };
     let fixes = fixes::for_agent(agent, &link, &plan, &config.spec)?;
+    // Its σ on odometry alone, from the agent's `[odometry]` error model
+    // (none: σ unknown, 0).
+    let drift = plan
+        .odometer(agent as usize - 1)
+        .map(|o| Drift::new(o.spec().errors(), config.spec.drive().wheels()));
     let robot_net = match opts.own_router && !link.connect.is_empty() {
         true => Some(net::robot_router(agent, &link.connect, net)?),
         false => None,
@@ -90,6 +96,9 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
             let mut drive = Ros2Drive::new(link, base, node.gid, OwnedCmdSink(node.publisher));
             if let Some(f) = fixes {
                 drive = drive.with_fixes(f);
+            }
+            if let Some(d) = drift {
+                drive = drive.with_drift(d);
             }
             let robot = Robot::new(config, drive, net::rand_source());
             // Refusals are counted in the drive's report; the inputs are

@@ -458,8 +458,14 @@ impl<P: Plant> Robot<P> {
         }
     }
 
-    /// The next header of its stream, for `state`.
+    /// The next header of its stream, for `state` (which gets the plant's
+    /// raw odometry, as does the last state kept).
     fn header_for(&mut self, state: RobotState) -> (Header, RobotState) {
+        let state = RobotState {
+            odometry: self.plant.odometry(),
+            ..state
+        };
+        self.last.odometry = state.odometry;
         let h = Header {
             source: self.source,
             seq: self.seq,

@@ -56,6 +56,7 @@ impl<P: Plant> Robot<P> {
                     agent: self.config.agent,
                     link: LinkStatus::Waiting,
                     state,
+                    sigma: self.plant.position_sigma(),
                     ..RobotState::default()
                 };
                 self.header_for(self.last)
@@ -123,6 +124,7 @@ impl<P: Plant> Robot<P> {
                     leader: out.leader,
                     velocity: act.velocity_sample(cmd),
                     sigma,
+                    odometry: None,
                 };
                 self.ticks += 1;
                 Some(self.header_for(self.last))
@@ -185,6 +187,7 @@ impl<P: Plant> Robot<P> {
                     .spec
                     .velocity_robot()
                     .map(|_| echelon::sample::VelocitySample::default()),
+                sigma: self.plant.position_sigma(),
                 ..RobotState::default()
             };
             self.header_for(self.last)

@@ -31,6 +31,9 @@ pub struct BaseOptions {
     pub process: ProcessOptions,
     /// Agent number, from 1.
     pub agent: u32,
+    /// Its clock minus the wall clock, s: what it ages stamped `cmd_vel`
+    /// by (`diff_drive_controller`'s `cmd_vel_timeout`).
+    pub clock_offset: f64,
 }
 
 /// What a base reports when it stops.
@@ -94,7 +97,8 @@ impl Task for BaseTask {
 
     fn on_input(&mut self, _: usize, s: &Sample<'_>) -> Result<(), FleetError> {
         // Refusals are counted in the report.
-        let _ = self.base.on_cmd(s.key, s.payload, s.attachment, s.at);
+        let wall = (self.wall)() as i64;
+        let _ = self.base.on_cmd(s.key, s.payload, s.attachment, s.at, wall);
         Ok(())
     }
 
@@ -186,7 +190,8 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                 |e| FleetError::Config(e.to_string()),
             )?;
             let model = SimulatedVelocityBase::new(robot.base(), spec.start(), 0.0, PLANT_STEP);
-            let mut base = SimBase::new(link.clone(), model, gids[0]);
+            let mut base =
+                SimBase::new(link.clone(), model, gids[0]).with_clock_offset(opts.clock_offset);
             if let Some((source, spec, period)) = &mocap {
                 // Its own random stream: the odometry's are the agents'.
                 let stream = seed ^ (0x6d6f_6361_7000_0000 | u64::from(opts.agent));

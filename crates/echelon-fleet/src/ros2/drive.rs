@@ -10,8 +10,12 @@
 //!   the pose in the odom frame, yaw unwrapped, carried by the link's
 //!   `odom_origin`, the odom frame's pose in the world; the twist stays in
 //!   the body frame, REP 103), and there is none once it is older than
-//!   `odom_timeout`, so the robot commands zero; the raw odometry is kept
-//!   ([`Ros2Drive::odometry`]);
+//!   `odom_timeout`, so the robot commands zero; the raw odometry is
+//!   published beside it ([`Plant::odometry`]: the pose in the odom frame,
+//!   its age and the last fix's);
+//! - its position uncertainty `σ` is its EKF's when its fixes keep a
+//!   covariance, else the dead-reckoning rule of [`Drift`] on its error
+//!   model;
 //! - odometry that is not CDR of `nav_msgs/msg/Odometry`, carries the wrong
 //!   type or hash on its key, holds a NaN or an infinity, or is in other
 //!   frames than configured is counted and refused, never a crash;
@@ -27,9 +31,11 @@ use echelon::model::{Pose, State};
 use echelon::scenario::Ros2Link;
 use echelon::scenario::schema::{CmdVelStamp, CmdVelType};
 
+use super::drift::Drift;
 use super::fixes::{FixInput, FixReport};
 use super::refusal::SampleRefusal;
 use crate::plant::{Actuation, Command, Plant};
+use crate::wire::OdometryState;
 use echelon_ros2::attachment::{Attachment, Gid};
 use echelon_ros2::keys::check_topic_key;
 use echelon_ros2::msgs::{
@@ -64,24 +70,27 @@ pub fn encode_cmd_vel(link: &Ros2Link, cmd: VelocityCommand, stamp_ns: i64, buf:
     }
 }
 
-/// A `cmd_vel` payload decoded to a velocity command, refusing the wrong
+/// A `cmd_vel` payload decoded to a velocity command and its stamp, ns
+/// (`None`: a plain `Twist`; `Some(0)`: a zero stamp), refusing the wrong
 /// type on the key, bad CDR and non-finite values.
 pub fn decode_cmd_vel(
     link: &Ros2Link,
     key: &str,
     payload: &[u8],
-) -> Result<VelocityCommand, SampleRefusal> {
+) -> Result<(VelocityCommand, Option<i64>), SampleRefusal> {
     check_topic_key(link.key_scheme, key, &cmd_vel_type(link))
         .map_err(|e| SampleRefusal::WrongType(e.to_string()))?;
-    let twist = match link.cmd_vel_type {
-        CmdVelType::TwistStamped => TwistStamped::from_cdr_finite(payload).map(|t| t.twist),
-        CmdVelType::Twist => Twist::from_cdr_finite(payload),
+    let (twist, stamp) = match link.cmd_vel_type {
+        CmdVelType::TwistStamped => TwistStamped::from_cdr_finite(payload)
+            .map(|t| (t.twist, Some(t.header.stamp.to_nanos()))),
+        CmdVelType::Twist => Twist::from_cdr_finite(payload).map(|t| (t, None)),
     }
     .map_err(SampleRefusal::from)?;
-    Ok(VelocityCommand {
+    let cmd = VelocityCommand {
         v: twist.linear.x,
         omega: twist.angular.z,
-    })
+    };
+    Ok((cmd, stamp))
 }
 
 /// Where a drive's commands go: the `cmd_vel` publisher, and the wall clock
@@ -134,10 +143,10 @@ pub struct Ros2Drive<S: CmdSink> {
     /// The last valid odometry (odom frame) still on the fleet clock's
     /// timeline, and its fleet time of arrival.
     odom: Option<(State, f64)>,
-    /// The last valid odometry as received (odom frame).
-    raw: Option<State>,
     /// Its absolute fixes, when it has a source.
     fixes: Option<FixInput>,
+    /// Its dead-reckoning uncertainty, when its error model is known.
+    drift: Option<Drift>,
     t: f64,
     last_sent: VelocityCommand,
     counters: Ros2Counters,
@@ -156,8 +165,8 @@ impl<S: CmdSink> Ros2Drive<S> {
             buf: Vec::with_capacity(128),
             yaw: YawUnwrapper::new(),
             odom: None,
-            raw: None,
             fixes: None,
+            drift: None,
             t: 0.0,
             last_sent: VelocityCommand::default(),
             counters: Ros2Counters::default(),
@@ -173,10 +182,13 @@ impl<S: CmdSink> Ros2Drive<S> {
         }
     }
 
-    /// The last valid odometry as the robot sent it, in its odom frame
-    /// (the state is this mapped into the world).
-    pub fn odometry(&self) -> Option<State> {
-        self.raw
+    /// The same drive knowing how its odometry errs: its `σ` without an
+    /// EKF covariance is `drift`'s ([`Drift`]).
+    pub fn with_drift(self, drift: Drift) -> Self {
+        Ros2Drive {
+            drift: Some(drift),
+            ..self
+        }
     }
 
     /// Its fixes, if it takes any.
@@ -200,7 +212,11 @@ impl<S: CmdSink> Ros2Drive<S> {
                 let _ = self.on_odom(key, payload, t);
             }
             (_, Some(f)) => {
-                let _ = f.on_fix(key, payload, t);
+                if f.on_fix(key, payload, t).is_ok()
+                    && let (Some(d), Some((_, noise))) = (self.drift.as_mut(), f.last_fix())
+                {
+                    d.reset(noise.position, noise.heading);
+                }
             }
             (_, None) => {}
         }
@@ -249,14 +265,20 @@ impl<S: CmdSink> Ros2Drive<S> {
                 if let Some(f) = self.fixes.as_mut() {
                     f.on_odom(odom.header.stamp.to_nanos(), raw.pose(), t);
                 }
+                if let Some(d) = self.drift.as_mut() {
+                    d.on_odom(raw.pose());
+                }
                 self.odom = Some((raw, t));
-                self.raw = Some(raw);
                 self.counters.odom_accepted += 1;
             }
             Err(SampleRefusal::WrongType(_)) => self.counters.odom_wrong_type += 1,
             Err(SampleRefusal::NonFinite(_)) => self.counters.odom_non_finite += 1,
             Err(SampleRefusal::WrongFrames(..)) => self.counters.odom_wrong_frames += 1,
-            Err(SampleRefusal::Malformed(_) | SampleRefusal::NoAttachment) => {
+            Err(
+                SampleRefusal::Malformed(_)
+                | SampleRefusal::NoAttachment
+                | SampleRefusal::Stale { .. },
+            ) => {
                 self.counters.odom_malformed += 1;
             }
         }
@@ -312,10 +334,24 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
     }
 
     fn position_sigma(&self) -> f64 {
-        self.fixes
+        match self.fixes.as_ref().and_then(FixInput::covariance) {
+            Some(p) => position_sigma(&p),
+            None => self.drift.as_ref().map_or(0.0, Drift::sigma),
+        }
+    }
+
+    fn odometry(&self) -> Option<OdometryState> {
+        let (raw, at) = self.odom?;
+        let fix_age = self
+            .fixes
             .as_ref()
-            .and_then(FixInput::covariance)
-            .map_or(0.0, |p| position_sigma(&p))
+            .and_then(FixInput::last_fix)
+            .map(|(fixed, _)| (self.t - fixed).max(0.0));
+        Some(OdometryState {
+            raw: [raw.x, raw.y, raw.theta],
+            age: (self.t - at).max(0.0),
+            fix_age,
+        })
     }
 
     fn fixes(&self, t: f64) -> Option<FixReport> {
@@ -374,185 +410,4 @@ pub fn position_sigma(p: &[[f64; 3]; 3]) -> f64 {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use echelon::scenario::Scenario;
-    use echelon_ros2::KeyScheme;
-    use echelon_ros2::keys::topic_key;
-
-    /// Records what was sent; time advances 1 ms per read.
-    #[derive(Debug, Default)]
-    pub(crate) struct Recorder {
-        pub(crate) sent: Vec<(Vec<u8>, Vec<u8>)>,
-        pub(crate) now: std::cell::Cell<i64>,
-    }
-
-    impl CmdSink for Recorder {
-        fn now_ns(&self) -> i64 {
-            self.now.set(self.now.get() + 1_000_000);
-            self.now.get()
-        }
-        fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
-            self.sent.push((payload.to_vec(), attachment.to_vec()));
-            Ok(())
-        }
-    }
-
-    fn link() -> Ros2Link {
-        let src = "[sim]\nduration = 1.0\ndt = 0.01\n[reference.circle]\nspeed = 0.1\nturn_rate = 0.1\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\n[[agents]]\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\nleader = \"reference\"\n";
-        let s = Scenario::parse(src, "t", None).unwrap_or_else(|e| panic!("{e}"));
-        s.fleet().unwrap_or_else(|e| panic!("{e}")).ros2[0].clone()
-    }
-
-    fn drive(base: VelocityBase) -> Ros2Drive<Recorder> {
-        Ros2Drive::new(link(), base, [7; 16], Recorder::default())
-    }
-
-    fn odom_key(l: &Ros2Link) -> String {
-        topic_key(KeyScheme::RmwZenoh, l.domain_id, &l.odom, &ODOMETRY)
-    }
-
-    fn odom(x: f64, yaw: f64, v: f64) -> Vec<u8> {
-        Odometry::planar(
-            x,
-            0.0,
-            yaw,
-            v,
-            0.1,
-            Time::from_nanos(5),
-            "odom",
-            "base_link",
-        )
-        .to_cdr()
-    }
-
-    fn last_cmd(d: &Ros2Drive<Recorder>) -> (TwistStamped, Attachment) {
-        let (payload, attachment) = d.sink().sent.last().expect("a command sent");
-        (
-            TwistStamped::from_cdr_finite(payload).expect("valid TwistStamped"),
-            Attachment::decode(attachment).expect("valid attachment"),
-        )
-    }
-
-    proptest::proptest! {
-        /// `position_sigma` is the square root of the position block's
-        /// largest eigenvalue, for any covariance: `det(P − σ² I) = 0` and
-        /// `σ²` at least either variance.
-        #[test]
-        fn position_sigma_is_the_largest_axis(
-            a in -1.0..1.0f64, b in -1.0..1.0f64, c in -1.0..1.0f64, h in 0.0..1.0f64
-        ) {
-            // P = L Lᵀ with L lower triangular: any 2×2 covariance.
-            let (pxx, pxy, pyy) = (a * a, a * b, b * b + c * c);
-            let p = [[pxx, pxy, 0.0], [pxy, pyy, 0.0], [0.0, 0.0, h]];
-            let l = position_sigma(&p).powi(2);
-            let det = (pxx - l) * (pyy - l) - pxy * pxy;
-            proptest::prop_assert!(det.abs() < 1e-9, "{det}");
-            proptest::prop_assert!(l >= pxx - 1e-12 && l >= pyy - 1e-12);
-        }
-    }
-
-    #[test]
-    fn odometry_is_the_state_until_it_goes_stale() {
-        let mut d = drive(VelocityBase::IDEAL);
-        let l = link();
-        assert_eq!(
-            (l.namespace.as_str(), l.odom.as_str()),
-            ("/robot1", "/robot1/odom")
-        );
-        assert_eq!(d.state(), None);
-        d.on_odom(&odom_key(&l), &odom(1.0, 3.0, 0.2), 0.0)
-            .expect("valid odometry");
-        // Across ±π the heading keeps counting.
-        d.on_odom(&odom_key(&l), &odom(1.1, -3.0, 0.2), 0.02)
-            .expect("valid odometry");
-        d.advance(0.02);
-        let s = d.state().expect("fresh");
-        assert_eq!((s.x, s.v, s.omega), (1.1, 0.2, 0.1));
-        assert!((s.theta - (2.0 * std::f64::consts::PI - 3.0)).abs() < 1e-12);
-        d.advance(0.02 + l.odom_timeout);
-        assert!(d.state().is_some());
-        d.advance(0.03 + l.odom_timeout);
-        assert_eq!(d.state(), None, "stale odometry is no state");
-        assert_eq!(d.counters().odom_accepted, 2);
-    }
-
-    #[test]
-    fn bad_odometry_is_counted_and_refused() {
-        let mut d = drive(VelocityBase::IDEAL);
-        let l = link();
-        let key = odom_key(&l);
-        d.on_odom(&key, &odom(1.0, 0.0, 0.0), 0.0).expect("valid");
-        let before = d.state();
-        let mut truncated = odom(2.0, 0.0, 0.0);
-        truncated.truncate(40);
-        assert!(d.on_odom(&key, &truncated, 0.01).is_err());
-        assert!(d.on_odom(&key, b"garbage", 0.01).is_err());
-        assert!(d.on_odom(&key, &odom(f64::NAN, 0.0, 0.0), 0.01).is_err());
-        let twist_key = topic_key(KeyScheme::RmwZenoh, 0, &l.odom, &TWIST);
-        assert!(d.on_odom(&twist_key, &odom(2.0, 0.0, 0.0), 0.01).is_err());
-        let other_frames =
-            Odometry::planar(2.0, 0.0, 0.0, 0.0, 0.0, Time::default(), "map", "base_link").to_cdr();
-        assert!(d.on_odom(&key, &other_frames, 0.01).is_err());
-        assert_eq!(d.state(), before, "refused samples change nothing");
-        let c = d.counters();
-        assert_eq!(
-            (
-                c.odom_received,
-                c.odom_accepted,
-                c.odom_malformed,
-                c.odom_non_finite
-            ),
-            (6, 1, 2, 1)
-        );
-        assert_eq!((c.odom_wrong_type, c.odom_wrong_frames), (1, 1));
-    }
-
-    #[test]
-    fn commands_are_limited_finite_stamped_and_attached() {
-        let base = VelocityBase::new(0.0, 0.0, 0.2, 1.0, f64::INFINITY, f64::INFINITY)
-            .expect("an ideal base with speed limits");
-        let mut d = drive(base);
-        let act = d.command(Command::Velocity(VelocityCommand { v: 0.4, omega: 0.5 }));
-        let (applied, saturated) = act.velocity.expect("velocity");
-        assert!(saturated);
-        let (msg, att) = last_cmd(&d);
-        assert_eq!(msg.twist.linear.x, 0.2);
-        assert!((msg.twist.angular.z - 0.25).abs() < 1e-15);
-        assert_eq!(msg.twist.angular.z, applied.omega);
-        assert_eq!(msg.header.frame_id, "base_link");
-        assert_eq!(att.sequence_number, 1);
-        assert_eq!(att.gid, [7; 16]);
-        // By default the stamp is zero (diff_drive_controller: "now" on its
-        // own clock); the attachment keeps the send time.
-        assert_eq!(msg.header.stamp, Time::default());
-        assert!(att.source_timestamp_ns > 0);
-        let mut stamped = Ros2Drive::new(
-            Ros2Link {
-                cmd_vel_stamp: CmdVelStamp::Now,
-                ..link()
-            },
-            base,
-            [7; 16],
-            Recorder::default(),
-        );
-        stamped.command(Command::Velocity(VelocityCommand { v: 0.1, omega: 0.0 }));
-        let (msg, att) = last_cmd(&stamped);
-        assert_eq!(att.source_timestamp_ns, msg.header.stamp.to_nanos());
-        d.command(Command::Velocity(VelocityCommand {
-            v: f64::NAN,
-            omega: 0.1,
-        }));
-        let (msg, att) = last_cmd(&d);
-        assert_eq!((msg.twist.linear.x, msg.twist.angular.z), (0.0, 0.0));
-        assert_eq!(att.sequence_number, 2);
-        d.stop();
-        let (msg, _) = last_cmd(&d);
-        assert_eq!((msg.twist.linear.x, msg.twist.angular.z), (0.0, 0.0));
-        let c = d.counters();
-        assert_eq!(
-            (c.cmd_sent, c.cmd_saturated, c.cmd_non_finite, c.cmd_zero),
-            (3, 1, 1, 1)
-        );
-    }
-}
+mod tests;

@@ -134,6 +134,8 @@ pub struct FixInput {
     /// Fleet time odometry began (the first sample).
     began: Option<f64>,
     last_fix: Option<f64>,
+    /// The noise of the last applied fix.
+    last_noise: Option<FixNoise>,
     intervals: (u64, f64, f64),
     zeta_measured: Option<f64>,
     refused_in_a_row: u32,
@@ -181,6 +183,7 @@ impl FixInput {
             history: VecDeque::with_capacity(HISTORY),
             began: None,
             last_fix: None,
+            last_noise: None,
             intervals: (0, 0.0, 0.0),
             zeta_measured: None,
             refused_in_a_row: 0,
@@ -209,6 +212,11 @@ impl FixInput {
     /// or a gate).
     pub fn covariance(&self) -> Option<[[f64; 3]; 3]> {
         self.fusion.covariance()
+    }
+
+    /// Fleet time of the last applied fix and its noise (`None`: none yet).
+    pub fn last_fix(&self) -> Option<(f64, FixNoise)> {
+        self.last_fix.zip(self.last_noise)
     }
 
     /// Its report at fleet time `t`.
@@ -336,6 +344,7 @@ impl FixInput {
             }
         };
         self.applied(t, &estimate, &carried);
+        self.last_noise = Some(noise);
         // new = correction' ⊕ raw_now.
         self.correction = new.compose(&raw_now.between(&Pose::default()));
         Ok(())

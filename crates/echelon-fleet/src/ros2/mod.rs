@@ -6,6 +6,7 @@
 //!
 //! - [`drive`]: [`drive::Ros2Drive`], a fleet [`crate::plant::Plant`] that
 //!   reads odometry and sends `cmd_vel`.
+//! - [`drift`]: the position uncertainty `σ` of a robot on odometry alone.
 //! - [`fixes`]: absolute fixes from ROS 2 poses fused with the odometry,
 //!   and Theorem 2 in the loop.
 //! - [`sim_base`]: a simulated ROS 2 velocity base (sans-IO), answering
@@ -21,6 +22,7 @@
 //! the ROS 2 Jazzy Python wheels and an independent Zenoh peer.
 
 pub mod base;
+pub mod drift;
 pub mod drive;
 pub mod endpoint;
 pub mod fixes;

@@ -21,6 +21,15 @@ pub enum SampleRefusal {
     /// rmw_zenoh subscribers drop a sample without its attachment.
     #[error("no valid rmw_zenoh attachment")]
     NoAttachment,
+    /// A stamped command older than `cmd_vel_timeout` by the receiver's
+    /// clock (`diff_drive_controller` drops these).
+    #[error("stamped {age:.3} s ago by the receiver's clock, beyond cmd_vel_timeout {timeout} s")]
+    Stale {
+        /// The command's age by the receiver's clock, s.
+        age: f64,
+        /// The timeout, s.
+        timeout: f64,
+    },
 }
 
 impl From<CdrError> for SampleRefusal {

@@ -7,7 +7,9 @@
 //! anything else counted and refused), follows them through the agent's
 //! velocity-base model ([`SimulatedVelocityBase`]: lags, speed and
 //! acceleration limits), stops when no command arrived for `cmd_vel_timeout`,
-//! and publishes `nav_msgs/Odometry` (pose in the odom frame, twist in the
+//! drops a stamped command older than `cmd_vel_timeout` by its own clock
+//! (the wall clock shifted by its clock offset; a zero stamp is "now"), as
+//! `diff_drive_controller` does, and publishes `nav_msgs/Odometry` (pose in the odom frame, twist in the
 //! body frame) at `odom_rate` ([`SimBase::tick`]). Like a real robot's, its
 //! odometry starts where it was switched on: its world pose is the agent's
 //! `start`, its odom frame lies at the link's `odom_origin` (by default the
@@ -60,6 +62,10 @@ pub struct BaseCounters {
     /// Simulated motion-capture fixes published.
     #[serde(default)]
     pub fixes_published: u64,
+    /// Refused: stamped longer than `cmd_vel_timeout` ago by the base's
+    /// clock (a zero stamp is never stale).
+    #[serde(default)]
+    pub cmd_stale: u64,
 }
 
 /// One odometry message to publish.
@@ -120,6 +126,9 @@ pub struct SimBase {
     /// A simulated motion capture of it, when the agent takes fixes from
     /// ROS 2.
     mocap: Option<Mocap>,
+    /// Its clock minus the wall clock, ns (a robot whose clock is not
+    /// synchronised, or runs on `use_sim_time`).
+    clock_offset_ns: i64,
 }
 
 /// A simulated motion-capture system (or any pose source) watching one
@@ -180,6 +189,16 @@ impl SimBase {
             followed: VelocityCommand::default(),
             encoders: None,
             mocap: None,
+            clock_offset_ns: 0,
+        }
+    }
+
+    /// This base with its clock `offset` s ahead of the wall clock (behind
+    /// when negative): what it compares `cmd_vel` stamps with.
+    pub fn with_clock_offset(self, offset: f64) -> Self {
+        SimBase {
+            clock_offset_ns: (offset * 1e9).round() as i64,
+            ..self
         }
     }
 
@@ -307,17 +326,19 @@ impl SimBase {
         self.followed
     }
 
-    /// A `cmd_vel` sample that arrived at local time `now`: checked and
-    /// followed from now on, or counted and refused.
+    /// A `cmd_vel` sample that arrived at local time `now`, wall clock
+    /// `wall_ns` (UNIX ns): checked and followed from now on, or counted
+    /// and refused.
     pub fn on_cmd(
         &mut self,
         key: &str,
         payload: &[u8],
         attachment: Option<&[u8]>,
         now: f64,
+        wall_ns: i64,
     ) -> Result<(), SampleRefusal> {
         self.counters.cmd_received += 1;
-        let checked = self.check(key, payload, attachment);
+        let checked = self.check(key, payload, attachment, wall_ns);
         match checked {
             Ok(cmd) => {
                 self.advance(now);
@@ -332,6 +353,7 @@ impl SimBase {
                     SampleRefusal::WrongType(_) => self.counters.cmd_wrong_type += 1,
                     SampleRefusal::NonFinite(_) => self.counters.cmd_non_finite += 1,
                     SampleRefusal::NoAttachment => self.counters.cmd_no_attachment += 1,
+                    SampleRefusal::Stale { .. } => self.counters.cmd_stale += 1,
                     SampleRefusal::Malformed(_) | SampleRefusal::WrongFrames(..) => {
                         self.counters.cmd_malformed += 1;
                     }
@@ -346,13 +368,26 @@ impl SimBase {
         key: &str,
         payload: &[u8],
         attachment: Option<&[u8]>,
+        wall_ns: i64,
     ) -> Result<VelocityCommand, SampleRefusal> {
         if self.link.key_scheme == echelon_ros2::KeyScheme::RmwZenoh
             && attachment.is_none_or(|a| Attachment::decode(a).is_err())
         {
             return Err(SampleRefusal::NoAttachment);
         }
-        decode_cmd_vel(&self.link, key, payload)
+        let (cmd, stamp) = decode_cmd_vel(&self.link, key, payload)?;
+        // diff_drive_controller: a zero stamp is "now"; any other is aged
+        // by the controller's own clock.
+        if let Some(stamp) = stamp.filter(|&s| s != 0) {
+            let age = (wall_ns.saturating_add(self.clock_offset_ns) - stamp) as f64 * 1e-9;
+            if age > self.link.cmd_vel_timeout {
+                return Err(SampleRefusal::Stale {
+                    age,
+                    timeout: self.link.cmd_vel_timeout,
+                });
+            }
+        }
+        Ok(cmd)
     }
 
     /// Its true state as `nav_msgs/Odometry` in the world frame

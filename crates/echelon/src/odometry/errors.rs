@@ -180,10 +180,16 @@ impl ErrorModel {
     /// the quantization of the encoders (uniform over one tick) plus `ζ²`,
     /// plus a floor that keeps a filter from trusting odometry absolutely.
     pub fn wheel_variance(&self, r: f64, step: [f64; 2]) -> [f64; 2] {
+        let floor = 1e-12;
+        self.displacement_variance(r, step).map(|v| v + floor)
+    }
+
+    /// [`ErrorModel::wheel_variance`] without the floor: what the model
+    /// itself says, 0 for a perfect odometer.
+    pub fn displacement_variance(&self, r: f64, step: [f64; 2]) -> [f64; 2] {
         let tick = self.tick(r).powi(2) / 6.0;
         let zeta = self.zeta * self.zeta;
-        let floor = 1e-12;
-        step.map(|d| self.slip * d.abs() + tick + zeta + floor)
+        step.map(|d| self.slip * d.abs() + tick + zeta)
     }
 
     /// One encoder tick of a wheel of radius `r`, m (0: ideal encoders).

@@ -256,6 +256,11 @@ pub(crate) struct BaseArgs {
     /// Simulate a ROS 2 base (the only kind so far; required).
     #[arg(long)]
     pub(super) ros2: bool,
+    /// The base's clock minus the wall clock, s (negative: behind): it
+    /// drops a stamped cmd_vel older than cmd_vel_timeout by its own clock,
+    /// as diff_drive_controller does (a zero stamp is "now").
+    #[arg(long, value_name = "S", value_parser = parse_number, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub(super) clock_offset: f64,
     #[command(flatten)]
     pub(super) net: NetArgs,
 }

@@ -46,7 +46,7 @@ fn drive(mut b: SimBase, v: f64, omega: f64, t: f64) -> (Odometry, State) {
     let steps = (t / 0.1).round() as u32;
     for k in 0..=steps {
         let now = f64::from(k) * 0.1;
-        b.on_cmd(&key, &cmd(v, omega), Some(&attachment()), now)
+        b.on_cmd(&key, &cmd(v, omega), Some(&attachment()), now, 1)
             .expect("a valid command");
         if let Some(out) = b.tick(now, 1) {
             // The truth when this odometry was published.
@@ -103,7 +103,7 @@ fn it_follows_commands_publishes_odometry_and_stops_on_timeout() {
     let key = topic_key(KeyScheme::RmwZenoh, 0, &l.cmd_vel, &TWIST_STAMPED);
     let mut b = base();
     assert!(b.tick(0.0, 1).is_some(), "odometry at once");
-    b.on_cmd(&key, &cmd(0.2, 0.0), Some(&attachment()), 0.0)
+    b.on_cmd(&key, &cmd(0.2, 0.0), Some(&attachment()), 0.0, 1)
         .expect("a valid command");
     let mut last = None;
     let mut published = 0;
@@ -132,17 +132,17 @@ fn bad_commands_are_counted_and_refused() {
     let twist_key = topic_key(KeyScheme::RmwZenoh, 0, &l.cmd_vel, &TWIST);
     let mut b = base();
     let att = attachment();
-    assert!(b.on_cmd(&key, &cmd(0.2, 0.0), None, 0.0).is_err());
+    assert!(b.on_cmd(&key, &cmd(0.2, 0.0), None, 0.0, 1).is_err());
     assert!(
-        b.on_cmd(&key, b"\x00\x01\x00\x00junk", Some(&att), 0.0)
+        b.on_cmd(&key, b"\x00\x01\x00\x00junk", Some(&att), 0.0, 1)
             .is_err()
     );
     assert!(
-        b.on_cmd(&key, &cmd(f64::INFINITY, 0.0), Some(&att), 0.0)
+        b.on_cmd(&key, &cmd(f64::INFINITY, 0.0), Some(&att), 0.0, 1)
             .is_err()
     );
     assert!(
-        b.on_cmd(&twist_key, &cmd(0.2, 0.0), Some(&att), 0.0)
+        b.on_cmd(&twist_key, &cmd(0.2, 0.0), Some(&att), 0.0, 1)
             .is_err()
     );
     assert_eq!(b.followed(), VelocityCommand::default());
@@ -157,4 +157,60 @@ fn bad_commands_are_counted_and_refused() {
         (4, 0, 1, 1)
     );
     assert_eq!((c.cmd_non_finite, c.cmd_wrong_type), (1, 1));
+}
+
+/// `diff_drive_controller`'s stamp check: a base whose clock is `offset`
+/// s ahead of the sender's, commanded every 0.1 s for 2 s at 0.2 m/s with
+/// `cmd_vel_stamp = stamp` (stamps from the sender's wall clock): where it
+/// ends (x, m) and its counters.
+fn stamped_run(stamp: echelon::scenario::schema::CmdVelStamp, offset: f64) -> (f64, BaseCounters) {
+    let l = Ros2Link {
+        cmd_vel_stamp: stamp,
+        ..link()
+    };
+    let key = topic_key(KeyScheme::RmwZenoh, 0, &l.cmd_vel, &TWIST_STAMPED);
+    let model = SimulatedVelocityBase::new(
+        VelocityBase::IDEAL,
+        State::at_rest(0.0, 0.0, 0.0),
+        0.0,
+        1e-3,
+    );
+    let mut b = SimBase::new(l.clone(), model, [3; 16]).with_clock_offset(offset);
+    let wall0: i64 = 1_700_000_000_000_000_000;
+    let mut buf = Vec::new();
+    for k in 0..=20 {
+        let now = f64::from(k) * 0.1;
+        let wall = wall0 + (now * 1e9) as i64;
+        encode_cmd_vel(&l, VelocityCommand { v: 0.2, omega: 0.0 }, wall, &mut buf);
+        // The command reaches the base 2 ms later.
+        let _ = b.on_cmd(&key, &buf, Some(&attachment()), now, wall + 2_000_000);
+        b.tick(now, wall);
+    }
+    (b.base().true_state().x, *b.counters())
+}
+
+/// With its clock ahead by more than `cmd_vel_timeout` (0.5 s), a base
+/// drops every command stamped `now` (counted, it never moves) and takes
+/// every command stamped zero ("now" by its own clock: it drives 0.2 m/s
+/// × 2 s); with its clock within the timeout, stamped commands drive it too.
+#[test]
+fn stale_stamps_leave_the_base_stopped_and_zero_stamps_drive_it() {
+    use echelon::scenario::schema::CmdVelStamp;
+    for offset in [0.6, 3.0, -600.0] {
+        let (x, c) = stamped_run(CmdVelStamp::Now, offset);
+        if offset > 0.5 {
+            assert_eq!(x, 0.0, "offset {offset}");
+            assert_eq!((c.cmd_stale, c.cmd_accepted), (21, 0), "offset {offset}");
+        } else {
+            // A clock behind the sender's: the commands look fresh.
+            assert!((x - 0.4).abs() < 1e-9, "offset {offset}: {x}");
+            assert_eq!(c.cmd_stale, 0);
+        }
+        let (x, c) = stamped_run(CmdVelStamp::Zero, offset);
+        assert!((x - 0.4).abs() < 1e-9, "offset {offset}: {x}");
+        assert_eq!((c.cmd_stale, c.cmd_accepted), (0, 21));
+    }
+    let (x, c) = stamped_run(CmdVelStamp::Now, 0.4);
+    assert!((x - 0.4).abs() < 1e-9, "{x}");
+    assert_eq!((c.cmd_stale, c.cmd_accepted), (0, 21));
 }

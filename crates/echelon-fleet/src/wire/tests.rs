@@ -1,0 +1,187 @@
+use super::*;
+use proptest::prelude::*;
+
+fn finite() -> impl Strategy<Value = f64> {
+    -1e6..1e6f64
+}
+
+/// No block, a block without a fix, a block with one.
+fn odometry() -> impl Strategy<Value = Option<OdometryState>> {
+    (
+        0..3u8,
+        proptest::array::uniform3(finite()),
+        0.0..1e3f64,
+        0.0..1e3f64,
+    )
+        .prop_map(|(kind, raw, age, fix_age)| {
+            (kind > 0).then_some(OdometryState {
+                raw,
+                age,
+                fix_age: (kind == 2).then_some(fix_age),
+            })
+        })
+}
+
+proptest! {
+    #[test]
+    fn references_round_trip(
+        source in any::<u32>(), seq in any::<u64>(), t in finite(),
+        v in proptest::array::uniform8(finite()),
+    ) {
+        let r = Reference {
+            t,
+            motion: LeaderMotion { p: [v[0], v[1]], dp: [v[2], v[3]], ddp: [v[4], v[5]] },
+            speed: v[6],
+            turn_rate: v[7],
+        };
+        let h = Header { source, seq };
+        let mut buf = Vec::new();
+        encode_reference(&mut buf, h, &r);
+        prop_assert_eq!(buf.len(), REFERENCE_LEN);
+        prop_assert_eq!(decode(&buf), Ok(Message::Reference(h, r)));
+    }
+
+    #[test]
+    fn states_round_trip(
+        source in any::<u32>(), seq in any::<u64>(), agent in 1..1000u32, link in 0..5u8,
+        drive in 0..3u8, v in proptest::collection::vec(finite(), 26), sigma in 0.0..10.0f64,
+        odometry in odometry(),
+    ) {
+        let s = RobotState {
+            t: v[21],
+            agent,
+            link: LinkStatus::from_u8(link).unwrap_or_default(),
+            state: State { x: v[0], y: v[1], theta: v[2], v: v[3], omega: v[4] },
+            dv: v[5],
+            domega: v[6],
+            e: [v[7], v[8]],
+            z: [v[9], v[10]],
+            u: Input { u1: v[11], u2: v[12] },
+            tau: Torques { right: v[13], left: v[14] },
+            leader: LeaderMotion { p: [v[15], v[16]], dp: [v[17], v[18]], ddp: [v[19], v[20]] },
+            // 0: torque-driven; 1, 2: a velocity base, its limits cutting or not.
+            velocity: (drive > 0).then_some(VelocitySample {
+                v_cmd: v[22],
+                omega_cmd: v[23],
+                v_applied: v[24],
+                omega_applied: v[25],
+                sat: drive == 2,
+            }),
+            sigma,
+            odometry,
+        };
+        let h = Header { source, seq };
+        let mut buf = Vec::new();
+        encode_state(&mut buf, h, &s);
+        let len = if odometry.is_some() { STATE_ODOMETRY_LEN } else { STATE_LEN };
+        prop_assert_eq!(buf.len(), len);
+        prop_assert_eq!(decode(&buf), Ok(Message::State(h, s)));
+    }
+
+    /// Arbitrary bytes decode to an error or a message, never a panic; a
+    /// message only if the bytes are exactly one valid encoding.
+    #[test]
+    fn garbage_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..300)) {
+        if let Ok(m) = decode(&bytes) {
+            let mut buf = Vec::new();
+            match m {
+                Message::Reference(h, r) => encode_reference(&mut buf, h, &r),
+                Message::State(h, s) => encode_state(&mut buf, h, &s),
+            }
+            // Reserved bytes are not checked; everything else must match.
+            if bytes.len() >= STATE_LEN {
+                buf[HEADER_LEN + 5..HEADER_LEN + 8].copy_from_slice(&bytes[HEADER_LEN + 5..HEADER_LEN + 8]);
+            }
+            prop_assert_eq!(buf, bytes);
+        }
+    }
+
+    /// A truncated message is malformed.
+    #[test]
+    fn truncation_is_malformed(cut in 0..REFERENCE_LEN) {
+        let mut buf = Vec::new();
+        encode_reference(&mut buf, Header { source: 1, seq: 2 }, &Reference {
+            t: 1.0, motion: LeaderMotion::default(), speed: 0.0, turn_rate: 0.0,
+        });
+        buf.truncate(cut);
+        prop_assert!(matches!(decode(&buf), Err(DecodeError::Malformed(_))));
+    }
+}
+
+#[test]
+fn version_and_magic_are_checked() {
+    let mut buf = Vec::new();
+    let r = Reference {
+        t: 0.5,
+        motion: LeaderMotion::default(),
+        speed: 0.1,
+        turn_rate: 0.0,
+    };
+    encode_reference(&mut buf, Header { source: 7, seq: 3 }, &r);
+    let mut v1 = buf.clone();
+    v1[1] = 1;
+    assert_eq!(decode(&v1), Err(DecodeError::WrongVersion(1)));
+    let mut bad = buf.clone();
+    bad[0] = 0;
+    assert!(matches!(decode(&bad), Err(DecodeError::Malformed(_))));
+    let mut nan = buf.clone();
+    nan[HEADER_LEN..HEADER_LEN + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+    assert!(matches!(decode(&nan), Err(DecodeError::Malformed(_))));
+    let mut kind = buf;
+    kind[2] = 9;
+    assert!(matches!(decode(&kind), Err(DecodeError::Malformed(_))));
+    // A negative position uncertainty is malformed.
+    let mut buf = Vec::new();
+    let s = RobotState {
+        agent: 1,
+        sigma: 0.01,
+        ..RobotState::default()
+    };
+    encode_state(&mut buf, Header { source: 7, seq: 3 }, &s);
+    assert!(matches!(decode(&buf), Ok(Message::State(_, d)) if d.sigma == 0.01));
+    buf[STATE_LEN - 8..].copy_from_slice(&(-0.01f64).to_le_bytes());
+    assert!(matches!(decode(&buf), Err(DecodeError::Malformed(_))));
+}
+
+/// The odometry block: a state without it keeps the old length (old
+/// senders are understood); with it, a negative age, a fix age without
+/// its flag, the flag without the block or a block cut short are
+/// malformed.
+#[test]
+fn the_odometry_block_is_optional_and_checked() {
+    let h = Header { source: 1, seq: 2 };
+    let mut buf = Vec::new();
+    let plain = RobotState {
+        agent: 2,
+        ..RobotState::default()
+    };
+    encode_state(&mut buf, h, &plain);
+    assert_eq!(buf.len(), STATE_LEN);
+    assert_eq!(decode(&buf), Ok(Message::State(h, plain)));
+    let with = RobotState {
+        odometry: Some(OdometryState {
+            raw: [1.0, -2.0, 7.0],
+            age: 0.02,
+            fix_age: None,
+        }),
+        ..plain
+    };
+    encode_state(&mut buf, h, &with);
+    assert_eq!(buf.len(), STATE_ODOMETRY_LEN);
+    assert_eq!(decode(&buf), Ok(Message::State(h, with)));
+    let malformed = |b: &[u8]| matches!(decode(b), Err(DecodeError::Malformed(_)));
+    let mut bad = buf.clone();
+    bad[STATE_LEN + 24..STATE_LEN + 32].copy_from_slice(&(-1.0f64).to_le_bytes());
+    assert!(malformed(&bad), "negative age");
+    let mut bad = buf.clone();
+    bad[STATE_LEN + 32..].copy_from_slice(&0.5f64.to_le_bytes());
+    assert!(malformed(&bad), "a fix age without its flag");
+    assert!(malformed(&buf[..STATE_LEN]), "the flag without the block");
+    let mut bad = buf.clone();
+    bad[HEADER_LEN + 4] |= FLAG_FIX_AGE;
+    bad[STATE_LEN + 32..].copy_from_slice(&(-0.5f64).to_le_bytes());
+    assert!(malformed(&bad), "a negative fix age");
+    let mut bad = buf[..STATE_LEN].to_vec();
+    bad[HEADER_LEN + 4] = FLAG_FIX_AGE;
+    assert!(malformed(&bad), "a fix age flag without odometry");
+}

@@ -123,6 +123,44 @@ impl Filters {
                 .push(Neighbour::of_state(s, self.l, dv, true));
         }
     }
+
+    /// Every robot in turn: its neighbours ([`Filters::neighbours_of`]),
+    /// then `one(i, its filter, its state, L, neighbours, obstacles)`, which
+    /// filters its command; the answers gathered for Python.
+    #[allow(clippy::type_complexity)]
+    fn each<'py>(
+        &mut self,
+        py: Python<'py>,
+        dv: Option<&[[f64; 2]]>,
+        mut one: impl FnMut(
+            usize,
+            &mut SafetyFilter,
+            &State,
+            f64,
+            &[Neighbour],
+            &[Obstacle],
+        ) -> ([f64; 2], Outcome, f64),
+    ) -> Filtered<'py> {
+        let n = self.filters.len();
+        let mut out = Array2::zeros((n, 2));
+        let mut outcomes = Vec::with_capacity(n);
+        let mut closest = Vec::with_capacity(n);
+        for i in 0..n {
+            self.neighbours_of(i, dv);
+            let Filters {
+                filters,
+                obstacles,
+                l,
+                states,
+                neighbours,
+            } = self;
+            let (c, outcome, d) = one(i, &mut filters[i], &states[i], *l, neighbours, obstacles);
+            (out[[i, 0]], out[[i, 1]]) = (c[0], c[1]);
+            outcomes.push(outcome_name(outcome));
+            closest.push(d);
+        }
+        (out.into_pyarray(py), outcomes, closest)
+    }
 }
 
 fn outcome_name(o: Outcome) -> &'static str {
@@ -192,31 +230,17 @@ impl PySafetyFilters {
     ) -> PyResult<Filtered<'py>> {
         let c = commands.as_array();
         self.f.read(&poses.as_array(), &c, &[3, 5], true)?;
-        let n = self.f.filters.len();
-        let mut out = Array2::zeros((n, 2));
-        let mut outcomes = Vec::with_capacity(n);
-        let mut closest = Vec::with_capacity(n);
-        for i in 0..n {
-            self.f.neighbours_of(i, None);
-            let nominal = VelocityCommand {
-                v: c[[i, 0]],
-                omega: c[[i, 1]],
-            };
-            let Filters {
-                filters,
-                obstacles,
-                l,
-                states,
-                neighbours,
-            } = &mut self.f;
-            let r = filters[i].velocity(
-                t, &states[i], *l, nominal, &self.base, neighbours, obstacles,
-            );
-            (out[[i, 0]], out[[i, 1]]) = (r.command.v, r.command.omega);
-            outcomes.push(outcome_name(r.outcome));
-            closest.push(r.min_distance);
-        }
-        Ok((out.into_pyarray(py), outcomes, closest))
+        let base = &self.base;
+        Ok(self
+            .f
+            .each(py, None, |i, filter, me, l, neighbours, obstacles| {
+                let nominal = VelocityCommand {
+                    v: c[[i, 0]],
+                    omega: c[[i, 1]],
+                };
+                let r = filter.velocity(t, me, l, nominal, base, neighbours, obstacles);
+                ([r.command.v, r.command.omega], r.outcome, r.min_distance)
+            }))
     }
 }
 
@@ -280,7 +304,6 @@ impl PyTorqueSafetyFilters {
     ) -> PyResult<Filtered<'py>> {
         let c = commands.as_array();
         self.f.read(&poses.as_array(), &c, &[5], false)?;
-        let n = self.f.filters.len();
         // What each robot's neighbours measure of it: its acceleration under
         // its nominal (as the simulator's filter sees its neighbours).
         for (i, (robot, s)) in self.robots.iter().zip(&self.f.states).enumerate() {
@@ -293,36 +316,19 @@ impl PyTorqueSafetyFilters {
             let d = robot.derivative(s, u);
             self.dv[i] = [d.v, d.omega];
         }
-        let mut out = Array2::zeros((n, 2));
-        let mut outcomes = Vec::with_capacity(n);
-        let mut closest = Vec::with_capacity(n);
-        for i in 0..n {
-            self.f.neighbours_of(i, Some(&self.dv));
-            let nominal = Input {
-                u1: c[[i, 0]],
-                u2: c[[i, 1]],
-            };
-            let Filters {
-                filters,
-                obstacles,
-                l,
-                states,
-                neighbours,
-            } = &mut self.f;
-            let r = filters[i].torque(
-                t,
-                &states[i],
-                *l,
-                &self.robots[i],
-                nominal,
-                neighbours,
-                obstacles,
-            );
-            (out[[i, 0]], out[[i, 1]]) = (r.command.u1, r.command.u2);
-            outcomes.push(outcome_name(r.outcome));
-            closest.push(r.min_distance);
-        }
-        Ok((out.into_pyarray(py), outcomes, closest))
+        let robots = &self.robots;
+        Ok(self.f.each(
+            py,
+            Some(&self.dv),
+            |i, filter, me, l, neighbours, obstacles| {
+                let nominal = Input {
+                    u1: c[[i, 0]],
+                    u2: c[[i, 1]],
+                };
+                let r = filter.torque(t, me, l, &robots[i], nominal, neighbours, obstacles);
+                ([r.command.u1, r.command.u2], r.outcome, r.min_distance)
+            },
+        ))
     }
 }
 

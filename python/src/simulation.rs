@@ -225,15 +225,7 @@ impl PySimulation {
         let view = result.map(|()| self.sim.leader_view(i, &scratch));
         self.commands = scratch;
         let (motion, offset) = view?;
-        let d = PyDict::new(py);
-        d.set_item("p", motion.p)?;
-        d.set_item("dp", motion.dp)?;
-        d.set_item("ddp", motion.ddp)?;
-        d.set_item("lx", offset.lx)?;
-        d.set_item("ly", offset.ly)?;
-        d.set_item("dly", offset.dly)?;
-        d.set_item("ddly", offset.ddly)?;
-        Ok(d)
+        leader_dict(py, &motion, &offset)
     }
 
     /// One RK4 step under `commands`, `(n, 2)`: `(u1, u2)` (eq. 3c–d) for a
@@ -277,14 +269,7 @@ impl PySimulation {
         let call =
             |i: usize, t: f64, me: &State, m: &LeaderMotion, o: &Offset| -> PyResult<Command> {
                 let state = vec![me.x, me.y, me.theta, me.v, me.omega].into_pyarray(py);
-                let leader = PyDict::new(py);
-                leader.set_item("p", m.p)?;
-                leader.set_item("dp", m.dp)?;
-                leader.set_item("ddp", m.ddp)?;
-                leader.set_item("lx", o.lx)?;
-                leader.set_item("ly", o.ly)?;
-                leader.set_item("dly", o.dly)?;
-                leader.set_item("ddly", o.ddly)?;
+                let leader = leader_dict(py, m, o)?;
                 let got: Vec<f64> = law.call1((i, t, state, leader))?.extract()?;
                 let [c0, c1] = got[..] else {
                     return Err(errors::value(format!(
@@ -387,4 +372,18 @@ impl PySimulation {
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySimulation>()
+}
+
+/// What an agent's law is given of its leader ([`PySimulation::leader`]):
+/// the leader motion `p, ṗ, p̈` and the offset `L_X, L_Y, L̇_Y, L̈_Y`.
+fn leader_dict<'py>(py: Python<'py>, m: &LeaderMotion, o: &Offset) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("p", m.p)?;
+    d.set_item("dp", m.dp)?;
+    d.set_item("ddp", m.ddp)?;
+    d.set_item("lx", o.lx)?;
+    d.set_item("ly", o.ly)?;
+    d.set_item("dly", o.dly)?;
+    d.set_item("ddly", o.ddly)?;
+    Ok(d)
 }

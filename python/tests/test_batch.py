@@ -4,12 +4,11 @@ steps)` steps it in place with the GIL released."""
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 import pytest
 
 import echelon
+from conftest import counts_while
 
 CASES = [
     (topology, drive, n)
@@ -126,22 +125,5 @@ def test_a_read_only_or_non_finite_array_raises_valueerror_and_changes_nothing()
 def test_step_releases_the_gil():
     e = echelon.BatchEngine.bench(20_000, dt=0.001)
     state = e.state()
-    ticks = 0
-    stop = threading.Event()
-    started = threading.Event()
-
-    def spin():
-        nonlocal ticks
-        started.set()
-        while not stop.is_set():
-            ticks += 1
-
-    t = threading.Thread(target=spin)
-    t.start()
-    started.wait()
-    before = ticks
-    e.step(state, 400)
-    during = ticks - before
-    stop.set()
-    t.join()
+    during = counts_while(lambda: e.step(state, 400))
     assert during > 10_000, during

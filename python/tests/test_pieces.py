@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import echelon
-from conftest import builtin_document
+from conftest import builtin_document, counts_while
 
 
 def unicycle(poses: np.ndarray, cmd: np.ndarray, dt: float) -> np.ndarray:
@@ -175,27 +175,8 @@ def test_the_batch_engine_matches_the_simulator_on_a_scenario():
 def test_the_engine_releases_the_gil_while_stepping():
     # A Python thread spinning on the GIL gets nothing done while an extension
     # call holds it; it counts on while the engine steps.
-    import threading
-
     e = echelon.BatchEngine.bench(20_000, dt=0.001)
-    ticks = 0
-    stop = threading.Event()
-    started = threading.Event()
-
-    def spin():
-        nonlocal ticks
-        started.set()
-        while not stop.is_set():
-            ticks += 1
-
-    t = threading.Thread(target=spin)
-    t.start()
-    started.wait()
-    before = ticks
-    e.run(400)
-    during = ticks - before
-    stop.set()
-    t.join()
+    during = counts_while(lambda: e.run(400))
     assert during > 10_000, during
 
 

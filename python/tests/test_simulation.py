@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import echelon
-from conftest import builtin_document
+from conftest import builtin_document, worst_position_gap
 
 
 def python_loop(scenario: echelon.Scenario, hold_every: int) -> dict[float, np.ndarray]:
@@ -37,12 +37,7 @@ def python_loop(scenario: echelon.Scenario, hold_every: int) -> dict[float, np.n
 def assert_reproduces(scenario: echelon.Scenario, hold_every: int) -> None:
     run = scenario.run(log_dt=0)
     poses = python_loop(scenario, hold_every)
-    t = run.trajectory
-    assert len(t) == len(poses) * len(run.agents)
-    worst = 0.0
-    for (time, k), row in t.groupby(["t", "agent"]):
-        p = poses[round(time, 9)][k - 1]
-        worst = max(worst, abs(p[0] - row["x"].iloc[0]), abs(p[1] - row["y"].iloc[0]))
+    worst = worst_position_gap(run, poses)
     assert worst <= 1e-9, worst
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import echelon
+from conftest import worst_position_gap
 
 
 def stepped_by(scenario: echelon.Scenario, law=None) -> dict[float, np.ndarray]:
@@ -23,13 +24,7 @@ def stepped_by(scenario: echelon.Scenario, law=None) -> dict[float, np.ndarray]:
 def worst_gap(scenario: echelon.Scenario, law=None) -> float:
     run = scenario.run(log_dt=0)
     poses = stepped_by(scenario, law)
-    t = run.trajectory
-    assert len(t) == len(poses) * len(run.agents)
-    worst = 0.0
-    for (time, k), row in t.groupby(["t", "agent"]):
-        p = poses[round(time, 9)][k - 1]
-        worst = max(worst, abs(p[0] - row["x"].iloc[0]), abs(p[1] - row["y"].iloc[0]))
-    return worst
+    return worst_position_gap(run, poses)
 
 
 @pytest.mark.parametrize(

@@ -8,10 +8,10 @@ Python package when it is installed, and the largest ‖e‖ against
 `echelon bench` (a release build, its own process) followed by the peer on
 the same workload, and prints both medians, their ratio and the machine.
 
-    python3 -m venv --system-site-packages /work/venv-peers
-    /work/venv-peers/bin/pip install -r benches/peers/requirements.txt
+    python3 -m venv --system-site-packages .venv-peers
+    .venv-peers/bin/pip install -r benches/peers/requirements.txt
     cargo build --release -p echelon-cli
-    /work/venv-peers/bin/python benches/peers/run.py --pairs 5
+    .venv-peers/bin/python benches/peers/run.py --pairs 5
 
 Agent-steps per second count `N × steps / wall seconds` of the stepping
 alone on both sides (echelon excludes building the formation; the peer

@@ -14,6 +14,7 @@ use echelon::output::{
     SUMMARY_FILE, TRAJECTORY_FILE,
 };
 use echelon::scenario::{Overrides, Scenario};
+use echelon::stats::SafetyReport;
 use echelon::sim::{Every, Observer};
 use echelon::{Simulation, Variant};
 use echelon_mcap::McapObserver;
@@ -205,15 +206,81 @@ fn print_summary(sim: &Simulation, s: &RunSummary, elapsed: f64) -> anyhow::Resu
         let settle = a
             .settle_time
             .map_or_else(|| "never".to_owned(), |t| format!("{t:.2} s"));
+        // A velocity base has no wheel torques: its cell says so rather
+        // than print a 0 that reads as a measurement.
+        let torque = match a.saturated_ticks {
+            Some(_) => format!("{:>10}", "—"),
+            None => format!("{:>6.2} N·m", a.peak_torque),
+        };
         outln!(
-            "  {:<name_w$}  {:<leader_w$}  {:>9.2e} m  {:>7.3} m  {:>6.2} N·m  {:>13}",
+            "  {:<name_w$}  {:<leader_w$}  {:>9.2e} m  {:>7.3} m  {torque}  {:>13}",
             a.name,
             leader,
             a.final_error,
             a.rms_error,
-            a.peak_torque,
             settle
         )?;
+    }
+    let saturated: Vec<String> = s
+        .agents
+        .iter()
+        .filter_map(|a| a.saturated_ticks.filter(|&n| n > 0).map(|n| (a, n)))
+        .map(|(a, n)| format!("{} {n}", a.name))
+        .collect();
+    if !saturated.is_empty() {
+        outln!(
+            "  velocity limits cut the command (steps): {}",
+            saturated.join(", ")
+        )?;
+    }
+    if let Some(safety) = &s.safety {
+        print_safety(s, safety)?;
+    }
+    Ok(())
+}
+
+/// The safety filter's outcome under the table: the closest approach
+/// against the radius (what the filter promises), how often it acted, and
+/// any robot it left deadlocked (which the ‖e‖ column alone would show as
+/// an unexplained "never").
+fn print_safety(s: &RunSummary, safety: &SafetyReport) -> anyhow::Result<()> {
+    let name = |k: usize| s.agents.get(k.wrapping_sub(1)).map_or("?", |a| a.name.as_str());
+    let [a, b] = safety.min_distance_agents;
+    if safety.min_distance.is_finite() {
+        outln!(
+            "  safety: closest approach {:.4} m ({} and {}, t = {:.2} s), radius {} m",
+            safety.min_distance,
+            name(a),
+            name(b),
+            safety.min_distance_t,
+            safety.radius
+        )?;
+        // The filter holds the radius to within a millimetre (docs/safety.md:
+        // sampled commands, solver tolerances); deeper is a broken promise.
+        if safety.min_distance < safety.radius - 1e-3 {
+            super::out::err_line(&format!(
+                "warning: the robots came {:.1} mm inside the safety radius",
+                (safety.radius - safety.min_distance) * 1e3
+            ));
+        }
+    } else {
+        outln!("  safety: radius {} m, no pair of robots", safety.radius)?;
+    }
+    if let Some(clearance) = safety.min_obstacle_clearance {
+        outln!("          smallest obstacle clearance {clearance:.4} m")?;
+    }
+    outln!(
+        "          filter acted on {} agent-steps, braked {} (infeasible), {} deadlock breaks",
+        safety.active,
+        safety.infeasible,
+        safety.deadlock_breaks
+    )?;
+    if !safety.deadlocked_at_end.is_empty() {
+        let names: Vec<&str> = safety.deadlocked_at_end.iter().map(|&k| name(k)).collect();
+        super::out::err_line(&format!(
+            "warning: deadlocked by the safety filter at the end: {}",
+            names.join(", ")
+        ));
     }
     Ok(())
 }

@@ -115,9 +115,17 @@ impl<W: Write> CsvWriter<W> {
         self
     }
 
-    /// A text cell, written as given (echelon's texts hold no comma or quote).
+    /// A text cell: as given, or quoted (RFC 4180, `"` doubled) when it
+    /// holds a comma, a quote or a line break (a breach's `‖(x, y)‖`).
     pub fn text(&mut self, s: &str) -> &mut Self {
-        self.cell().push_str(s);
+        let cell = self.cell();
+        if s.contains([',', '"', '\n', '\r']) {
+            cell.push('"');
+            cell.push_str(&s.replace('"', "\"\""));
+            cell.push('"');
+        } else {
+            cell.push_str(s);
+        }
         self
     }
 

@@ -37,6 +37,7 @@ use crate::odometry::bound::{KinematicTheorem2, Theorem2};
 use crate::scenario::schema::{FixesSection, Fusion, OdometrySection};
 use crate::scenario::{Overrides, Run, Scenario};
 use crate::sim::{Every, Frame, ObserverError};
+use crate::stats::Divergence;
 
 /// The grid a sweep is asked for: every combination of the lists, for every
 /// seed. [`Grid::new`] checks it.
@@ -168,6 +169,31 @@ impl Laws {
         }
     }
 }
+
+/// A case whose run diverged ([`SimError::Diverged`]): a sweep goes on
+/// past it, reports it apart from the rows (`diverged.csv`) and fails at
+/// the end, so one absurd corner of a grid neither hides nor loses the rest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DivergedCase {
+    /// The case.
+    pub case: Case,
+    /// Where, when and what left its bound.
+    pub divergence: Divergence,
+}
+
+/// What a sweep gives: a row per case that ran to its end, in grid order,
+/// and the cases that diverged, in grid order.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Sweep {
+    /// The runs that ended.
+    pub rows: Vec<Row>,
+    /// The runs that diverged.
+    pub diverged: Vec<DivergedCase>,
+}
+
+/// The header of `diverged.csv`: a diverged case and its divergence
+/// (`value`, `bound` empty when not finite / not a bound).
+pub const DIVERGED_HEADER: &str = "zeta,zeta_model,wheel_diameter_ratio,wheelbase_ratio,slip,fix_every,seed,agent,t,quantity,value,bound";
 
 /// The header of `sweep.csv`.
 pub const SWEEP_HEADER: &str = "zeta,zeta_model,wheel_diameter_ratio,wheelbase_ratio,slip,fix_every,seed,omega_max,z_max,z_hat_max,e_max,final_drift,drift_max,z_bound,z_over_bound,e_bound";
@@ -430,23 +456,67 @@ fn noise_free(s: &Scenario) -> bool {
 }
 
 /// Runs every case of `grid` in parallel on the current rayon pool; `progress`
-/// is called once per finished run. Rows are in grid order.
+/// is called once per finished run. Rows are in grid order. Fails on the
+/// first case (in grid order) that fails, a divergence included; see
+/// [`run_all`] for a sweep that goes on past divergences.
 pub fn run(
     scenario: &Scenario,
     overrides: &Overrides,
     grid: &Grid,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Vec<Row>, SweepError> {
+    outcomes(scenario, overrides, grid, progress)?
+        .into_iter()
+        .collect()
+}
+
+/// As [`run`], but a case that diverges is reported in
+/// [`Sweep::diverged`] instead of stopping the sweep (`echelon sweep`);
+/// any other failure still fails it.
+pub fn run_all(
+    scenario: &Scenario,
+    overrides: &Overrides,
+    grid: &Grid,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Sweep, SweepError> {
+    let mut sweep = Sweep::default();
+    for (outcome, case) in outcomes(scenario, overrides, grid, progress)?
+        .into_iter()
+        .zip(grid.cases())
+    {
+        match outcome {
+            Ok(row) => sweep.rows.push(row),
+            Err(SweepError::Sim(e)) => match Divergence::of(&e) {
+                Some(divergence) => sweep.diverged.push(DivergedCase {
+                    case: *case,
+                    divergence,
+                }),
+                None => return Err(e.into()),
+            },
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(sweep)
+}
+
+/// Every case's outcome, in grid order.
+fn outcomes(
+    scenario: &Scenario,
+    overrides: &Overrides,
+    grid: &Grid,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Vec<Result<Row, SweepError>>, SweepError> {
     // Build once up front so that a broken scenario fails before any work.
     apply(scenario, &grid.cases()[0], grid.0.zeta_model).build(overrides)?;
-    grid.cases()
+    Ok(grid
+        .cases()
         .par_iter()
         .map(|case| {
             let row = run_case(scenario, overrides, grid, case);
             progress();
             row
         })
-        .collect()
+        .collect())
 }
 
 /// How an error model's drift grows without fixes.
@@ -511,7 +581,14 @@ pub fn drift_curves(
                 samples.push(n);
                 Ok(())
             };
-            sim.run(&mut Every::new(every, &mut observe))?;
+            // Without fixes an absurd error model can drive the robot out
+            // of its bounds: its curve ends where it diverged (the sweep's
+            // rows report the divergence).
+            match sim.run(&mut Every::new(every, &mut observe)) {
+                Ok(()) => {}
+                Err(e) if Divergence::of(&e).is_some() => {}
+                Err(e) => return Err(e.into()),
+            }
             let paper = samples
                 .iter()
                 .map(|&n| std::f64::consts::SQRT_2 * n as f64 * case.zeta)
@@ -519,11 +596,10 @@ pub fn drift_curves(
             let k1 = times
                 .iter()
                 .position(|&t| t >= 1.0)
-                .unwrap_or(times.len() - 1);
-            let slope = if times[k1] > 0.0 {
-                drift[k1] / times[k1]
-            } else {
-                0.0
+                .unwrap_or(times.len().saturating_sub(1));
+            let slope = match times.get(k1) {
+                Some(&t) if t > 0.0 => drift[k1] / t,
+                _ => 0.0,
             };
             let early_slope = times.iter().map(|t| slope * t).collect();
             Ok(DriftCurve {
@@ -557,13 +633,42 @@ pub fn write_drift_csv<W: Write>(w: W, curves: &[DriftCurve]) -> io::Result<()> 
     csv.flush()
 }
 
+/// Writes `diverged.csv` ([`DIVERGED_HEADER`]).
+pub fn write_diverged_csv<W: Write>(
+    w: W,
+    diverged: &[DivergedCase],
+    zeta_model: ZetaModel,
+) -> io::Result<()> {
+    let mut csv = CsvWriter::new(w, DIVERGED_HEADER)?;
+    for d in diverged {
+        let (c, v) = (&d.case, &d.divergence);
+        csv.num(c.zeta)
+            .text(zeta_model_name(zeta_model))
+            .nums([c.wheel_diameter_ratio, c.wheelbase_ratio, c.slip])
+            .int(c.fix_every)
+            .int(c.seed)
+            .int(v.agent as u64)
+            .time(v.t)
+            .text(&v.quantity)
+            .opt(v.value)
+            .opt(v.bound);
+        csv.end_row()?;
+    }
+    csv.flush()
+}
+
+/// `zeta_model`'s value in the CSV files, as the CLI spells it.
+fn zeta_model_name(zeta_model: ZetaModel) -> &'static str {
+    match zeta_model {
+        ZetaModel::Wheels => "wheels",
+        ZetaModel::WorstCase => "worst-case",
+    }
+}
+
 /// Writes `sweep.csv`.
 pub fn write_csv<W: Write>(w: W, rows: &[Row], zeta_model: ZetaModel) -> io::Result<()> {
     let mut csv = CsvWriter::new(w, SWEEP_HEADER)?;
-    let model = match zeta_model {
-        ZetaModel::Wheels => "wheels",
-        ZetaModel::WorstCase => "worst-case",
-    };
+    let model = zeta_model_name(zeta_model);
     for r in rows {
         let c = &r.case;
         csv.num(c.zeta)

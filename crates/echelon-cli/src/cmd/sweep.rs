@@ -130,10 +130,11 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
     bar.set_prefix(scenario.name().to_owned());
     let started = Instant::now();
     let (rows, curves) = pool.install(|| {
-        let rows = sweep::run(&scenario, &overrides, &grid, &|| bar.inc(1))?;
+        let rows = sweep::run_all(&scenario, &overrides, &grid, &|| bar.inc(1))?;
         let curves = sweep::drift_curves(&scenario, &overrides, &grid, 300)?;
         Ok::<_, sweep::SweepError>((rows, curves))
     })?;
+    let sweep::Sweep { rows, diverged } = rows;
     bar.finish_and_clear();
     let out = a
         .out
@@ -166,7 +167,41 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
             figure.png.display()
         )?;
     }
-    Ok(())
+    // A diverged case does not stop the sweep (the other rows are written
+    // above) but fails it: its cases go to diverged.csv and the exit code is 1.
+    let diverged_path = out.join("diverged.csv");
+    if diverged.is_empty() {
+        // A stale list from an earlier sweep into the same directory would
+        // be read as this one's.
+        match std::fs::remove_file(&diverged_path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                return Err(e).with_context(|| format!("removing {}", diverged_path.display()));
+            }
+        }
+        return Ok(());
+    }
+    let file = File::create(&diverged_path)
+        .with_context(|| format!("writing {}", diverged_path.display()))?;
+    sweep::write_diverged_csv(BufWriter::new(file), &diverged, grid.spec().zeta_model)
+        .with_context(|| format!("writing {}", diverged_path.display()))?;
+    let first = &diverged[0];
+    Err(super::out::Diverged(format!(
+        "{} of {total} runs diverged, listed in {} (the first: ζ = {}, E_d = {}, E_b = {}, slip = {}, N = {}, seed {}: {}); the other {} rows are in {}",
+        diverged.len(),
+        diverged_path.display(),
+        first.case.zeta,
+        first.case.wheel_diameter_ratio,
+        first.case.wheelbase_ratio,
+        first.case.slip,
+        first.case.fix_every,
+        first.case.seed,
+        first.divergence.message,
+        rows.len(),
+        path.display(),
+    ))
+    .into())
 }
 
 fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) -> anyhow::Result<()> {

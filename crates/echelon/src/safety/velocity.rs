@@ -1,7 +1,7 @@
 //! The filter for velocity bases: `ḣ ≥ −γ h`, linear in `(v, ω)`, within
 //! the base's speed limits.
 
-use super::filter::{Filtered, Outcome, Own, SafetyFilter};
+use super::filter::{Filtered, Own, SafetyFilter};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, push_box, solve_relaxed};
 use crate::base::{VelocityBase, VelocityCommand};
@@ -41,33 +41,18 @@ impl SafetyFilter {
         });
         let barriers = self.rows.len();
         push_box(&mut self.rows, [base.v_max(), l * base.omega_max()]);
-        let (x, outcome, deadlock) = self.decide(t, x0, barriers, [0.0, 0.0]);
-        let command = match outcome {
-            Outcome::Nominal => limited,
-            // No command satisfies every barrier within the box: the one
-            // that breaks them least (one shared slack) within the base's
-            // limits, so its neighbours' shares are missed as little as
-            // possible; zero if even that fails.
-            Outcome::Braked => {
-                solve_relaxed(&self.rows, barriers, x0).map_or(VelocityCommand::default(), |x| {
-                    VelocityCommand {
-                        v: x[0],
-                        omega: x[1] / l,
-                    }
-                })
-            }
-            Outcome::Filtered => VelocityCommand {
-                v: x[0],
-                omega: x[1] / l,
-            },
+        let decision = self.decide(t, x0, barriers, [0.0, 0.0]);
+        let of = |x: [f64; 2]| VelocityCommand {
+            v: x[0],
+            omega: x[1] / l,
         };
-        Filtered {
-            command,
-            nominal,
-            outcome,
-            deadlock,
-            min_distance,
-        }
+        // No command satisfies every barrier within the box: the one that
+        // breaks them least (one shared slack) within the base's limits, so
+        // its neighbours' shares are missed as little as possible; zero if
+        // even that fails.
+        let braked =
+            || solve_relaxed(&self.rows, barriers, x0).map_or(VelocityCommand::default(), of);
+        Filtered::decided(decision, nominal, limited, min_distance, of, braked)
     }
 }
 
@@ -76,6 +61,7 @@ mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
+    use crate::safety::Outcome;
     use crate::safety::SafetyConfig;
 
     fn config() -> SafetyConfig {

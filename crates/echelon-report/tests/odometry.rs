@@ -23,33 +23,30 @@ fn svg_texts_showing(path: &Path, needles: &[&str]) -> Vec<String> {
     texts
 }
 
-const DRIFTING: &str = r#"
-name = "drifting"
-seed = 4
-[sim]
-duration = 12.0
-dt = 0.001
-controller_period = 0.01
-[reference.circle]
-speed = 0.4
-turn_rate = 0.2
-start = { x = 0.0, y = 0.0, theta = 0.0 }
-[[agents]]
-name = "scout"
-start = { x = -0.5, y = -0.3, theta = 0.0 }
-leader = "reference"
-offset = { x = 0.5, y = 0.3 }
-[[agents]]
-name = "perfect"
-start = { x = -1.0, y = 0.3, theta = 0.0 }
-leader = 1
-offset = { x = 0.5, y = -0.3 }
-odometry = { enabled = false }
-[odometry]
-wheelbase_ratio = 1.02
-[fixes]
-period = 3.0
-"#;
+/// A one-seed sweep under the worst-case error `ζ = 1e-5 m` per sample over
+/// the wheel diameter ratios and fix intervals given, with Theorem 2's `γ`
+/// and the transient left out of the ultimate bound.
+fn worst_case(
+    wheel_diameter_ratio: Vec<f64>,
+    fix_every: Vec<u64>,
+    gamma: f64,
+    transient: f64,
+) -> Grid {
+    Grid::new(GridSpec {
+        zeta: vec![1e-5],
+        zeta_model: ZetaModel::WorstCase,
+        wheel_diameter_ratio,
+        wheelbase_ratio: vec![1.0],
+        slip: vec![0.0],
+        fix_every,
+        seeds: vec![0],
+        gamma,
+        transient,
+    })
+    .unwrap()
+}
+
+const DRIFTING: &str = include_str!("fixtures/drifting.toml");
 
 #[test]
 fn runs_with_odometry_get_a_drift_figure() {
@@ -93,18 +90,7 @@ fn runs_without_odometry_have_no_drift_figure() {
 fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
     let s = Scenario::builtin("fix-study").unwrap();
     let ov = common::for_seconds(6.0);
-    let grid = Grid::new(GridSpec {
-        zeta: vec![1e-5],
-        zeta_model: ZetaModel::WorstCase,
-        wheel_diameter_ratio: vec![1.0, 1.002],
-        wheelbase_ratio: vec![1.0],
-        slip: vec![0.0],
-        fix_every: vec![10, 50, 100],
-        seeds: vec![0],
-        gamma: 0.99,
-        transient: 3.0,
-    })
-    .unwrap();
+    let grid = worst_case(vec![1.0, 1.002], vec![10, 50, 100], 0.99, 3.0);
     let rows = sweep::run(&s, &ov, &grid, &|| {}).unwrap();
     let curves = sweep::drift_curves(&s, &ov, &grid, 100).unwrap();
     assert_eq!(curves.len(), 2, "one curve per error model");
@@ -157,18 +143,7 @@ fn the_sweep_figure_shows_runs_bounds_and_drift_growth() {
 fn a_velocity_sweep_figure_overlays_the_kinematic_bound() {
     let s = Scenario::builtin("circle-pentagon-velocity").unwrap();
     let ov = common::for_seconds(14.0);
-    let grid = Grid::new(GridSpec {
-        zeta: vec![1e-5],
-        zeta_model: ZetaModel::WorstCase,
-        wheel_diameter_ratio: vec![1.0],
-        wheelbase_ratio: vec![1.0],
-        slip: vec![0.0],
-        fix_every: vec![20, 100, 400],
-        seeds: vec![0],
-        gamma: 0.9,
-        transient: 10.0,
-    })
-    .unwrap();
+    let grid = worst_case(vec![1.0], vec![20, 100, 400], 0.9, 10.0);
     let rows = sweep::run(&s, &ov, &grid, &|| {}).unwrap();
     let curves = sweep::drift_curves(&s, &ov, &grid, 50).unwrap();
     let figure = echelon_report::odometry::sweep("circle-pentagon-velocity", &rows, &curves);

@@ -270,33 +270,7 @@ fn an_ideal_base_follows_its_command_and_never_saturates() {
     );
 }
 
-const MIXED: &str = r#"
-name = "mixed"
-[sim]
-duration = 6.0
-dt = 0.001
-[log]
-dt = 0.01
-[control]
-lycomp = "exact"
-[robots.burger]
-preset = "turtlebot3-burger"
-[reference.circle]
-speed = 0.15
-turn_rate = 0.1
-start = { x = 0.0, y = 0.0, theta = 0.0 }
-[[agents]]
-name = "torque"
-start = { x = -0.5, y = -0.3, theta = 0.0 }
-leader = "reference"
-offset = { x = 0.4, y = 0.3 }
-[[agents]]
-name = "burger"
-robot = "burger"
-start = { x = -1.2, y = 0.4, theta = 0.0 }
-leader = 1
-offset = { x = 0.4, y = 0.0 }
-"#;
+const MIXED: &str = include_str!("fixtures/mixed.toml");
 
 #[test]
 fn a_mixed_run_shows_torques_for_the_torque_agent_and_commands_for_the_base() {

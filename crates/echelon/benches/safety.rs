@@ -3,13 +3,15 @@
 //! when the nominal command is already safe (no QP) and when the QP is solved
 //! (clarabel builds its solver on every solve). `cargo bench -p echelon --bench safety`.
 
+use std::fmt::Debug;
 use std::hint::black_box;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::measurement::WallTime;
+use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
 
 use echelon::base::{VelocityBase, VelocityCommand};
 use echelon::model::{Input, RobotParams, State};
-use echelon::safety::{Neighbour, Obstacle, SafetyConfig, SafetyFilter};
+use echelon::safety::{Filtered, Neighbour, Obstacle, SafetyConfig, SafetyFilter};
 
 const L: f64 = 0.05;
 
@@ -44,6 +46,20 @@ fn scene() -> (State, Vec<Neighbour>, Vec<Obstacle>) {
     (me, ns, obstacles)
 }
 
+/// Benchmarks `filter` on each `(name, command)` case, after checking that
+/// the filter is active exactly on the cases whose name ends with "QP".
+fn bench_cases<C: Copy + Debug>(
+    g: &mut BenchmarkGroup<'_, WallTime>,
+    cases: [(&str, C); 2],
+    mut filter: impl FnMut(C) -> Filtered<C>,
+) {
+    for (name, cmd) in cases {
+        let out = filter(cmd);
+        assert_eq!(out.active(), name.ends_with("QP"), "{name}: {out:?}");
+        g.bench_function(name, |b| b.iter(|| filter(cmd)));
+    }
+}
+
 fn safety(c: &mut Criterion) {
     let config = match SafetyConfig::new(0.3, 1.0, 2.0) {
         Ok(c) => c,
@@ -57,7 +73,7 @@ fn safety(c: &mut Criterion) {
         .expect("3 N m is a valid torque limit");
     let mut f = SafetyFilter::new(config);
     let mut g = c.benchmark_group("safety/one call, 5 neighbours + 1 obstacle");
-    for (name, cmd) in [
+    let velocity_cases = [
         (
             "velocity, nominal safe",
             VelocityCommand {
@@ -66,43 +82,33 @@ fn safety(c: &mut Criterion) {
             },
         ),
         ("velocity, QP", VelocityCommand { v: 0.5, omega: 0.0 }),
-    ] {
-        let out = f.velocity(0.0, &me, L, cmd, &base, &ns, &obstacles);
-        assert_eq!(out.active(), name.ends_with("QP"), "{name}: {out:?}");
-        g.bench_function(name, |b| {
-            b.iter(|| {
-                f.velocity(
-                    0.0,
-                    black_box(&me),
-                    L,
-                    black_box(cmd),
-                    &base,
-                    black_box(&ns),
-                    &obstacles,
-                )
-            })
-        });
-    }
-    for (name, u) in [
+    ];
+    bench_cases(&mut g, velocity_cases, |cmd| {
+        f.velocity(
+            0.0,
+            black_box(&me),
+            L,
+            black_box(cmd),
+            &base,
+            black_box(&ns),
+            &obstacles,
+        )
+    });
+    let torque_cases = [
         ("torque, nominal safe", Input { u1: 1.0, u2: 0.0 }),
         ("torque, QP", Input { u1: 80.0, u2: 0.0 }),
-    ] {
-        let out = f.torque(0.0, &me, L, &robot, u, &ns, &obstacles);
-        assert_eq!(out.active(), name.ends_with("QP"), "{name}: {out:?}");
-        g.bench_function(name, |b| {
-            b.iter(|| {
-                f.torque(
-                    0.0,
-                    black_box(&me),
-                    L,
-                    &robot,
-                    black_box(u),
-                    black_box(&ns),
-                    &obstacles,
-                )
-            })
-        });
-    }
+    ];
+    bench_cases(&mut g, torque_cases, |u| {
+        f.torque(
+            0.0,
+            black_box(&me),
+            L,
+            &robot,
+            black_box(u),
+            black_box(&ns),
+            &obstacles,
+        )
+    });
     g.finish();
 }
 

@@ -100,7 +100,7 @@ impl AgentSpec {
         start: State,
     ) -> Result<AgentSpec, ParamError> {
         AgentSpec::checked(
-            name.into(),
+            name,
             Drive::Torque { robot, variant },
             leader,
             placement,
@@ -121,7 +121,7 @@ impl AgentSpec {
         start: State,
     ) -> Result<AgentSpec, ParamError> {
         AgentSpec::checked(
-            name.into(),
+            name,
             Drive::Velocity(robot),
             leader,
             placement,
@@ -131,7 +131,7 @@ impl AgentSpec {
     }
 
     fn checked(
-        name: String,
+        name: impl Into<String>,
         drive: Drive,
         leader: Leader,
         placement: Placement,
@@ -139,7 +139,7 @@ impl AgentSpec {
         start: State,
     ) -> Result<AgentSpec, ParamError> {
         Ok(AgentSpec {
-            name,
+            name: name.into(),
             start: drive.start(start)?,
             drive,
             leader,

@@ -315,6 +315,20 @@ pub(crate) struct Hold<V> {
     pub(crate) ddly: V,
 }
 
+impl Hold<f64> {
+    /// The offsets `off` as the law holds them (with `1/L_X`).
+    #[inline(always)]
+    pub(crate) fn of(off: &Offset) -> Hold<f64> {
+        Hold {
+            lx: off.lx,
+            inv_lx: 1.0 / off.lx,
+            ly: off.ly,
+            dly: off.dly,
+            ddly: off.ddly,
+        }
+    }
+}
+
 /// Everything of eqs. 7–13 that comes before the leader's acceleration `p̈_d`
 /// enters: `e`, `z`, and `h` without its `−R p̈_d` term.
 #[derive(Debug, Clone, Copy)]
@@ -428,13 +442,7 @@ pub fn law(
         v: s.v,
         omega: s.omega,
     };
-    let hold = Hold {
-        lx: off.lx,
-        inv_lx: 1.0 / off.lx,
-        ly: off.ly,
-        dly: off.dly,
-        ddly: off.ddly,
-    };
+    let hold = Hold::of(off);
     let lr = LawRobot::new(robot);
     let p = law_partial(&lr, &body, leader.p, leader.dp, &hold, gains.ke);
     let [u1, u2] = law_finish(&lr, &p, leader.ddp, gains.kz, variant);

@@ -78,13 +78,7 @@ pub(crate) fn kinematic_of<V: Real>(
 /// state: `LeaderMotion::of_robot(&State { v, omega, ..s }, dv)`.
 #[inline]
 pub fn kinematic_law(me: &State, leader: &LeaderMotion, off: &Offset, ke: f64) -> KinematicOutput {
-    let hold = Hold {
-        lx: off.lx,
-        inv_lx: 1.0 / off.lx,
-        ly: off.ly,
-        dly: off.dly,
-        ddly: off.ddly,
-    };
+    let hold = Hold::of(off);
     let ([v, omega], e) = kinematic_of(
         me.x,
         me.y,

@@ -24,6 +24,33 @@ const SIGMA_V: f64 = 0.005;
 const SIGMA_OMEGA: f64 = 0.01;
 const LOG_DT: f64 = 0.01;
 
+/// `cases` cases drawn from the fixed RNG seed `seed` (CI reruns the same
+/// sample), no failure persisted.
+fn fixed_sample(cases: u32, seed: u64) -> ProptestConfig {
+    ProptestConfig {
+        cases,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(seed),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    }
+}
+
+/// Asserts that one of `id`'s warnings says every one of `parts`.
+fn assert_warns(id: &identify::Identified, parts: &[&str]) {
+    assert!(
+        id.warnings
+            .iter()
+            .any(|w| parts.iter().all(|p| w.contains(p))),
+        "{:?}",
+        id.warnings
+    );
+}
+
+/// The simulation settings `scenario` builds to without overrides.
+fn settings(scenario: &Scenario) -> echelon::SimConfig {
+    *scenario.build(&Overrides::default()).unwrap().plan.config()
+}
+
 /// A 60 s excitation held every 10 ms: steps of a square wave over slow and
 /// fast sines, sized for `|v| ≲ 0.6 m/s`, `|ω| ≲ 1.2 rad/s` on the robot.
 fn excitation(robot: &RobotParams) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
@@ -138,13 +165,7 @@ fn a_log_without_rotation_says_j_and_psi_are_not_identifiable_and_gives_no_numbe
     let id = identify::identify(&torque_log(&robot, 3, false), Model::Torque).unwrap();
     assert!(id.get("mass").is_some() && id.get("linear_friction").is_some());
     assert!(id.get("inertia").is_none() && id.get("angular_friction").is_none());
-    assert!(
-        id.warnings
-            .iter()
-            .any(|w| w.contains("J, ψ not identifiable") && w.contains("no rotation")),
-        "{:?}",
-        id.warnings
-    );
+    assert_warns(&id, &["J, ψ not identifiable", "no rotation"]);
     let block = id.robot_toml("new");
     assert!(
         !block
@@ -476,13 +497,7 @@ fn an_acceleration_limit_that_acted_is_found_and_said_to_bias_the_lag() {
         alpha.reached && (alpha.observed - 4.0).abs() < 1e-6,
         "{alpha:?}"
     );
-    assert!(
-        id.warnings
-            .iter()
-            .any(|w| w.contains("alpha_max = 4.0000 acted") && w.contains("tau_omega is biased")),
-        "{:?}",
-        id.warnings
-    );
+    assert_warns(&id, &["alpha_max = 4.0000 acted", "tau_omega is biased"]);
     // The limit scales both axes together (joint limit): neither is a
     // first-order lag then, the residuals show it, and no lag is printed.
     for field in ["tau_v", "tau_omega"] {
@@ -517,13 +532,7 @@ fn a_noise_free_log_says_its_intervals_mean_nothing_and_a_noisy_one_does_not() {
     let id = identify::identify(&clean, Model::Torque).unwrap();
     assert!(id.axes.iter().all(|a| a.noise_free), "{:?}", id.axes);
     assert!(id.params.iter().all(|p| p.noise_free));
-    assert!(
-        id.warnings
-            .iter()
-            .any(|w| w.contains("noise-free log on the linear axis")),
-        "{:?}",
-        id.warnings
-    );
+    assert_warns(&id, &["noise-free log on the linear axis"]);
     let block = id.robot_toml("x");
     assert_eq!(
         block.matches("interval not meaningful").count(),
@@ -563,12 +572,7 @@ fn builtin_run(
             .replace("robot = \"@swap@\"", "robot = \"agent2\"");
     }
     let parsed = Scenario::parse(&src, &format!("{name}.toml"), None).unwrap();
-    let full = parsed
-        .build(&Overrides::default())
-        .unwrap()
-        .plan
-        .config()
-        .duration;
+    let full = settings(&parsed).duration;
     let mut run = parsed
         .build(&Overrides {
             duration: Some(full.min(max_duration)),
@@ -754,12 +758,7 @@ fn run_case(torque: bool) -> impl Strategy<Value = (&'static str, bool, u32)> {
 /// (the transients that excite the robots; the experiments run 157–314 s).
 fn check_case(name: &str, swap: bool, log_ms: u32, torque: bool) {
     let scenario = Scenario::builtin(name).unwrap();
-    let step = scenario
-        .build(&Overrides::default())
-        .unwrap()
-        .plan
-        .config()
-        .dt;
+    let step = settings(&scenario).dt;
     // The log interval is a whole multiple of the step.
     let k = ((f64::from(log_ms) * 1e-3 / step).round() as u32).max(1);
     let log_dt = f64::from(k) * step;
@@ -793,12 +792,7 @@ proptest! {
     // 24 cases × every torque agent of the run (1–4) × 51 logs (noise-free
     // and 50 seeds) × with and without integrals.csv; fixed RNG seed so CI
     // reruns the same sample.
-    #![proptest_config(ProptestConfig {
-        cases: 24,
-        rng_seed: proptest::test_runner::RngSeed::Fixed(20),
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(fixed_sample(24, 20))]
     #[test]
     fn torque_builtins_every_agent_any_log_interval_within_2_percent_or_withheld(
         (name, swap, log_ms) in run_case(true)
@@ -809,12 +803,7 @@ proptest! {
 
 proptest! {
     // 12 cases × every velocity agent (2–6) × 51 logs.
-    #![proptest_config(ProptestConfig {
-        cases: 12,
-        rng_seed: proptest::test_runner::RngSeed::Fixed(21),
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(fixed_sample(12, 21))]
     #[test]
     fn velocity_builtins_every_agent_any_log_interval_within_2_percent_or_withheld(
         (name, swap, log_ms) in run_case(false)
@@ -861,12 +850,9 @@ fn nonfeasible_agent2_logged_every_10_ms_is_exact_with_its_integrals_and_withhel
     add_noise(&mut log, 7);
     let id = identify::identify(&log, Model::Torque).unwrap();
     assert_eq!(id.axes[1].method, "interpolated inputs", "{:?}", id.axes);
-    assert!(
-        id.warnings
-            .iter()
-            .any(|w| w.contains("angular axis's inputs between samples are not in the log")),
-        "{:?}",
-        id.warnings
+    assert_warns(
+        &id,
+        &["angular axis's inputs between samples are not in the log"],
     );
 }
 
@@ -980,12 +966,7 @@ fn bag_log(
 proptest! {
     // 12 cases × (noise-free + 50 seeds): ROS 2 bags at 20 and 50 Hz
     // odometry, 20 Hz commands, lags 0.05–0.4 s.
-    #![proptest_config(ProptestConfig {
-        cases: 12,
-        rng_seed: proptest::test_runner::RngSeed::Fixed(22),
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(fixed_sample(12, 22))]
     #[test]
     fn ros2_bag_lags_at_20_and_50_hz_within_2_percent_and_covered(
         tau_v in 0.05_f64..0.4,

@@ -100,19 +100,7 @@ fn at_samples(scenario: &str, check: &mut dyn FnMut(u64, &State, Pose)) {
     run.simulation().run(&mut obs).unwrap();
 }
 
-const LEMNISCATE: &str = r#"
-[sim]
-duration = 20.0
-dt = 0.001
-controller_period = 0.01
-[reference.lemniscate]
-a = 3.0
-c = 0.3
-[[agents]]
-start = { x = 3.4, y = -0.5, theta_deg = 80.0 }
-leader = "reference"
-offset = { x = 0.3, y = 0.2 }
-"#;
+const LEMNISCATE: &str = include_str!("fixtures/odometry-lemniscate.toml");
 
 #[test]
 fn paper_error_model_keeps_heading_exact_and_drift_within_n_zeta_per_axis() {
@@ -265,22 +253,7 @@ fn the_ekf_beats_resets_when_fixes_are_noisy() {
     );
 }
 
-const STUDY: &str = r#"
-name = "fix-study"
-[sim]
-duration = 30.0
-dt = 0.001
-[reference.circle]
-speed = 0.5
-turn_rate = 0.2
-start = { x = 0.0, y = 0.0, theta_deg = 0.0 }
-[[agents]]
-start = { x = -0.6, y = -0.2, theta_deg = 0.0 }
-leader = "reference"
-offset = { x = 0.5, y = 0.3 }
-[odometry]
-zeta = 1e-6
-"#;
+const STUDY: &str = include_str!("fixtures/fix-study-short.toml");
 
 /// The grid `g`, checked.
 fn checked(g: &GridSpec) -> Grid {
@@ -647,36 +620,7 @@ fn torque_sweep_outputs_match_their_golden_bytes() {
 
 /// Theorem 2's study on an ideal velocity base under the kinematic law (two
 /// robots holding places behind the reference, both dead-reckoning).
-const KINEMATIC_STUDY: &str = r#"
-name = "kinematic-study"
-[sim]
-duration = 30.0
-dt = 0.001
-[control]
-law = "kinematic"
-ke = 1.5
-l = 0.05
-lycomp = "exact"
-[robots.base]
-drive = "velocity"
-preset = "ideal"
-[reference.circle]
-speed = 0.5
-turn_rate = 0.2
-start = { x = 0.0, y = 0.0, theta_deg = 0.0 }
-[[agents]]
-robot = "base"
-start = { x = -0.6, y = -0.2, theta_deg = 0.0 }
-leader = "reference"
-offset = { x = 0.5, y = 0.3 }
-[[agents]]
-robot = "base"
-start = { x = -0.9, y = 0.5, theta_deg = 20.0 }
-leader = "reference"
-offset = { x = 0.8, y = -0.4 }
-[odometry]
-zeta = 1e-6
-"#;
+const KINEMATIC_STUDY: &str = include_str!("fixtures/kinematic-study.toml");
 
 /// The kinematic law's Theorem 2 (control-law.md) along simulated runs: on an
 /// ideal base the true `z = K_e ẽ`, so ‖z‖ ≤ √2 K_e N ζ at every instant and

@@ -34,6 +34,18 @@ fn run_max_error_after(sim: &mut Simulation, after: f64) -> Vec<f64> {
     worst
 }
 
+/// Runs `sim` (the built-in `name`) to the end and asserts that every
+/// agent's ‖e‖ stays below `bound` from `after` s on.
+fn assert_settles(name: &str, sim: &mut Simulation, after: f64, bound: f64) {
+    for (i, w) in run_max_error_after(sim, after).iter().enumerate() {
+        assert!(
+            *w < bound,
+            "{name} agent {}: max ‖e‖ from {after} s to the end = {w:e}",
+            i + 1
+        );
+    }
+}
+
 #[test]
 fn pure_tracking_of_the_nonfeasible_cubic_converges_by_ten_seconds() {
     // Section 4.2 / eq. 20: the robot starts 0.4 m off, facing away, and the
@@ -70,10 +82,7 @@ fn leader_in_body(follower: &State, leader: [f64; 2]) -> [f64; 2] {
 #[test]
 fn circle_pentagon_converges_and_holds_the_x_separation_at_l_xoff_plus_l() {
     let mut sim = built("circle-pentagon");
-    let worst = run_max_error_after(&mut sim, 50.0);
-    for (i, w) in worst.iter().enumerate() {
-        assert!(*w < 1e-6, "agent {}: max ‖e‖ over 50 s–end = {w:e}", i + 1);
-    }
+    assert_settles("circle-pentagon", &mut sim, 50.0, 1e-6);
     let t = sim.time();
     let states = sim.states().to_vec();
     let reference = sim.reference().eval(t, Order::Two);
@@ -111,25 +120,18 @@ fn circle_pentagon_converges_and_holds_the_x_separation_at_l_xoff_plus_l() {
 fn lemniscate_wedge_converges_to_within_the_neglected_l_y_derivatives() {
     // With L̇_Y and L̈_Y neglected (the paper's choice) the error does not vanish
     // where the curvature changes, but stays small: the paper's Fig. 11.
-    let mut sim = built("lemniscate-wedge");
-    let worst = run_max_error_after(&mut sim, 20.0);
-    for (i, w) in worst.iter().enumerate() {
-        assert!(*w < 5e-3, "agent {}: max ‖e‖ over 20 s–end = {w}", i + 1);
-    }
+    assert_settles(
+        "lemniscate-wedge",
+        &mut built("lemniscate-wedge"),
+        20.0,
+        5e-3,
+    );
 }
 
 #[test]
 fn experiments_converge() {
     for name in ["experiment-circle", "experiment-lemniscate"] {
-        let mut sim = built(name);
-        let worst = run_max_error_after(&mut sim, 60.0);
-        for (i, w) in worst.iter().enumerate() {
-            assert!(
-                *w < 1e-4,
-                "{name} agent {}: max ‖e‖ after 60 s = {w:e}",
-                i + 1
-            );
-        }
+        assert_settles(name, &mut built(name), 60.0, 1e-4);
     }
 }
 

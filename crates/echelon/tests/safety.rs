@@ -96,6 +96,30 @@ fn the_torque_column_goes_around_the_posts() {
     assert!(clearance < 0.0, "clearance without the filter {clearance}");
 }
 
+/// The velocity command that moves the point `l` ahead of a robot in state
+/// `me` at the world velocity `want` (`R(θ) want`, its turn divided by `l`).
+fn towards(me: &State, l: f64, want: [f64; 2]) -> VelocityCommand {
+    let (s, c) = me.theta.sin_cos();
+    VelocityCommand {
+        v: c * want[0] + s * want[1],
+        omega: (-s * want[0] + c * want[1]) / l,
+    }
+}
+
+/// Moves `r` along the exact unicycle arc of the constant command `c` for
+/// `dt`; its speeds become `c`'s.
+fn unicycle_step(r: &mut State, c: VelocityCommand, dt: f64) {
+    let th = r.theta + c.omega * dt;
+    if c.omega.abs() > 1e-12 {
+        r.x += c.v / c.omega * (th.sin() - r.theta.sin());
+        r.y -= c.v / c.omega * (th.cos() - r.theta.cos());
+    } else {
+        r.x += c.v * dt * r.theta.cos();
+        r.y += c.v * dt * r.theta.sin();
+    }
+    (r.theta, r.v, r.omega) = (th, c.v, c.omega);
+}
+
 /// Two ideal velocity bases head-on, each driving its point toward a goal
 /// behind the other (`ṗ = −k (p − goal)`, the nominal mapped to `(v, ω)`),
 /// in perfect mirror symmetry. Without the deadlock rule they would stop
@@ -121,24 +145,9 @@ fn a_head_on_deadlock_is_broken_and_both_robots_arrive() {
             let other = Neighbour::of_state(&seen[1 - i], l, None, true);
             let p = point(me, l);
             let want = [-(p[0] - goals[i][0]), -(p[1] - goals[i][1])];
-            let (s, c) = me.theta.sin_cos();
-            let nominal = VelocityCommand {
-                v: c * want[0] + s * want[1],
-                omega: (-s * want[0] + c * want[1]) / l,
-            };
+            let nominal = towards(me, l, want);
             let f = filters[i].velocity(t, me, l, nominal, &base, &[other], &[]);
-            let r = &mut robots[i];
-            // Exact unicycle step for constant (v, ω).
-            let c = f.command;
-            let th = r.theta + c.omega * dt;
-            if c.omega.abs() > 1e-12 {
-                r.x += c.v / c.omega * (th.sin() - r.theta.sin());
-                r.y -= c.v / c.omega * (th.cos() - r.theta.cos());
-            } else {
-                r.x += c.v * dt * r.theta.cos();
-                r.y += c.v * dt * r.theta.sin();
-            }
-            (r.theta, r.v, r.omega) = (th, c.v, c.omega);
+            unicycle_step(&mut robots[i], f.command, dt);
         }
         let (a, b) = (point(&robots[0], l), point(&robots[1], l));
         closest = closest.min((a[0] - b[0]).hypot(a[1] - b[1]));
@@ -231,33 +240,9 @@ fn a_torque_head_on_deadlock_is_broken_and_both_robots_arrive() {
     }
 }
 
-const BASE: &str = r#"name = "base"
-[sim]
-duration = 1.0
-dt = 0.01
+const BASE: &str = include_str!("fixtures/safety-base.toml");
 
-[reference.line]
-speed = 0.2
-start = { x = 0.0, y = 0.0, theta = 0.0 }
-
-[safety]
-radius = 0.3
-gain = 1.0
-obstacles = [{ x = 3.0, y = 0.0, r = 0.2 }]
-
-[[agents]]
-start = { x = -0.5, y = 0.5, theta = 0.0 }
-leader = "reference"
-offset = { x = 0.5, y = 0.5 }
-
-[[agents]]
-start = { x = -0.5, y = -0.5, theta = 0.0 }
-leader = "reference"
-offset = { x = 0.5, y = -0.5 }
-safety = { gain = 2.0 }
-"#;
-
-use common::build;
+use common::{build, expect_errors_in};
 
 #[test]
 fn the_base_builds_with_a_filter_per_agent() {
@@ -310,21 +295,7 @@ fn bad_safety_input_names_file_line_column_and_field() {
             "agent 1",
         ),
     ];
-    for (from, to, line, field, message) in cases {
-        assert!(BASE.contains(from), "`{from}` is not in BASE");
-        let src = BASE.replace(from, to);
-        let err = match build(&src) {
-            Ok(_) => panic!("accepted:\n{src}"),
-            Err(e) => e,
-        };
-        let text = err.to_string();
-        assert_eq!(err.location.line, line, "{text}");
-        assert!(err.location.column > 0, "{text}");
-        assert_eq!(err.field, field, "{text}");
-        assert!(err.message.contains(message), "{text}");
-        assert!(!text.contains('\n'), "one line: {text}");
-        assert!(text.starts_with(&format!("test.toml:{line}:")), "{text}");
-    }
+    expect_errors_in(BASE, &cases);
 }
 
 proptest::proptest! {
@@ -359,21 +330,9 @@ proptest::proptest! {
             // Straight through the neighbour, to a goal beyond it.
             let goal = [2.0 * q[0] - p[0], 2.0 * q[1] - p[1]];
             let want = [goal[0] - p[0], goal[1] - p[1]];
-            let (sn, cs) = r.theta.sin_cos();
-            let nominal = VelocityCommand {
-                v: cs * want[0] + sn * want[1],
-                omega: (-sn * want[0] + cs * want[1]) / l,
-            };
+            let nominal = towards(&r, l, want);
             let cmd = filter.velocity(step as f64 * dt, &r, l, nominal, &base, &[seen], &[]).command;
-            let th = r.theta + cmd.omega * dt;
-            if cmd.omega.abs() > 1e-12 {
-                r.x += cmd.v / cmd.omega * (th.sin() - r.theta.sin());
-                r.y -= cmd.v / cmd.omega * (th.cos() - r.theta.cos());
-            } else {
-                r.x += cmd.v * dt * r.theta.cos();
-                r.y += cmd.v * dt * r.theta.sin();
-            }
-            (r.theta, r.v, r.omega) = (th, cmd.v, cmd.omega);
+            unicycle_step(&mut r, cmd, dt);
             let p = point(&r, l);
             closest = closest.min((p[0] - q[0]).hypot(p[1] - q[1]));
         }

@@ -51,52 +51,9 @@ fn every_scenario_file_parses_builds_and_round_trips() {
     assert_eq!(seen, NAMES.len());
 }
 
-const BASE: &str = r#"name = "base"
-[sim]
-duration = 1.0
-dt = 0.01
+const BASE: &str = include_str!("fixtures/base.toml");
 
-[reference.circle]
-speed = 0.5
-turn_rate = 0.1
-start = { x = 0.0, y = 0.0, theta_deg = 0.0 }
-
-[[agents]]
-start = { x = -0.3, y = -1.5, theta_deg = 0.0 }
-leader = "reference"
-offset = { x = 0.5, y = 0.8 }
-
-[[agents]]
-start = { x = -0.8, y = -0.2, theta = 0.0 }
-leader = 1
-offset = { x = 0.5, y = -0.4 }
-"#;
-
-use common::build;
-
-fn expect_error(src: &str, line: usize, field: &str, message: &str) {
-    let err = match build(src) {
-        Ok(_) => panic!("accepted:\n{src}"),
-        Err(e) => e,
-    };
-    let text = err.to_string();
-    assert_eq!(err.location.file, "test.toml", "{text}");
-    assert_eq!(err.location.line, line, "{text}");
-    assert!(err.location.column > 0, "{text}");
-    assert_eq!(err.field, field, "{text}");
-    assert!(err.message.contains(message), "{text}");
-    assert!(!text.contains('\n'), "one line: {text}");
-    assert!(text.starts_with(&format!("test.toml:{line}:")), "{text}");
-}
-
-/// [`expect_error`] for each `(from, to, line, field, message)`: `BASE` with
-/// `from` replaced by `to`.
-fn expect_errors_in_base(cases: &[(&str, &str, usize, &str, &str)]) {
-    for &(from, to, line, field, message) in cases {
-        assert!(BASE.contains(from), "`{from}` is not in BASE");
-        expect_error(&BASE.replace(from, to), line, field, message);
-    }
-}
+use common::{build, expect_error, expect_errors_in};
 
 #[test]
 fn the_base_scenario_is_valid() {
@@ -108,91 +65,97 @@ fn the_base_scenario_is_valid() {
 
 #[test]
 fn syntax_and_type_errors_name_line_column_and_field() {
-    expect_errors_in_base(&[
-        ("[sim]", "[sim", 2, "", ""),
-        (
-            "speed = 0.5",
-            "speed = \"fast\"",
-            7,
-            "reference.circle.speed",
-            "invalid type",
-        ),
-        (
-            "offset = { x = 0.5, y = 0.8 }",
-            "ofset = { x = 0.5, y = 0.8 }",
-            14,
-            "agents[1].ofset",
-            "unknown field",
-        ),
-        ("dt = 0.01\n", "", 2, "sim.dt", "missing field"),
-        (
-            "[reference.circle]",
-            "[reference.square]",
-            6,
-            "reference.square",
-            "unknown variant",
-        ),
-        (
-            "leader = 1",
-            "leader = \"agent 1\"",
-            18,
-            "agents[2].leader",
-            "\"reference\" or the number",
-        ),
-    ]);
+    expect_errors_in(
+        BASE,
+        &[
+            ("[sim]", "[sim", 2, "", ""),
+            (
+                "speed = 0.5",
+                "speed = \"fast\"",
+                7,
+                "reference.circle.speed",
+                "invalid type",
+            ),
+            (
+                "offset = { x = 0.5, y = 0.8 }",
+                "ofset = { x = 0.5, y = 0.8 }",
+                14,
+                "agents[1].ofset",
+                "unknown field",
+            ),
+            ("dt = 0.01\n", "", 2, "sim.dt", "missing field"),
+            (
+                "[reference.circle]",
+                "[reference.square]",
+                6,
+                "reference.square",
+                "unknown variant",
+            ),
+            (
+                "leader = 1",
+                "leader = \"agent 1\"",
+                18,
+                "agents[2].leader",
+                "\"reference\" or the number",
+            ),
+        ],
+    );
 }
 
 #[test]
 fn impossible_values_are_refused_with_the_reason() {
-    expect_errors_in_base(&[
-        // L_X = L_Xoff + L ≤ 0
-        (
-            "x = 0.5, y = 0.8",
-            "x = -0.2, y = 0.8",
-            14,
-            "agents[1].offset.x",
-            "L_X = L_Xoff + L",
-        ),
-        // a cycle in the leader graph
-        (
-            "leader = \"reference\"",
-            "leader = 2",
-            13,
-            "agents[1].leader",
-            "agents 1 → 2 → 1 form a cycle",
-        ),
-        // a dangling leader, and agent numbers from 1
-        (
-            "leader = 1",
-            "leader = 7",
-            18,
-            "agents[2].leader",
-            "does not exist",
-        ),
-        (
-            "leader = 1",
-            "leader = 0",
-            18,
-            "agents[2].leader",
-            "numbered 1..=2",
-        ),
-        // an agent following itself
-        (
-            "leader = 1",
-            "leader = 2",
-            18,
-            "agents[2].leader",
-            "follows itself",
-        ),
-        // negative speed for the virtual leader
-        (
-            "speed = 0.5",
-            "speed = -0.5",
-            7,
-            "reference.circle.speed",
-            "≥ 0",
-        ),
-    ]);
+    expect_errors_in(
+        BASE,
+        &[
+            // L_X = L_Xoff + L ≤ 0
+            (
+                "x = 0.5, y = 0.8",
+                "x = -0.2, y = 0.8",
+                14,
+                "agents[1].offset.x",
+                "L_X = L_Xoff + L",
+            ),
+            // a cycle in the leader graph
+            (
+                "leader = \"reference\"",
+                "leader = 2",
+                13,
+                "agents[1].leader",
+                "agents 1 → 2 → 1 form a cycle",
+            ),
+            // a dangling leader, and agent numbers from 1
+            (
+                "leader = 1",
+                "leader = 7",
+                18,
+                "agents[2].leader",
+                "does not exist",
+            ),
+            (
+                "leader = 1",
+                "leader = 0",
+                18,
+                "agents[2].leader",
+                "numbered 1..=2",
+            ),
+            // an agent following itself
+            (
+                "leader = 1",
+                "leader = 2",
+                18,
+                "agents[2].leader",
+                "follows itself",
+            ),
+            // negative speed for the virtual leader
+            (
+                "speed = 0.5",
+                "speed = -0.5",
+                7,
+                "reference.circle.speed",
+                "≥ 0",
+            ),
+        ],
+    );
     // L ≤ 0
     expect_error(
         &format!("{BASE}\n[control]\nl = 0.0\n"),
@@ -229,36 +192,39 @@ fn impossible_values_are_refused_with_the_reason() {
 
 #[test]
 fn ambiguous_or_inconsistent_settings_are_refused() {
-    expect_errors_in_base(&[
-        (
-            "theta_deg = 0.0 }\nleader = \"reference\"",
-            "theta_deg = 0.0, theta = 0.0 }\nleader = \"reference\"",
-            12,
-            "agents[1].start.theta_deg",
-            "not both",
-        ),
-        (
-            "dt = 0.01\n",
-            "dt = 0.01\ncontroller_period = 0.025\n",
-            5,
-            "sim.controller_period",
-            "whole multiple",
-        ),
-        (
-            "offset = { x = 0.5, y = -0.4 }",
-            "mode = \"tracking\"\noffset = { x = 0.5, y = -0.4 }",
-            20,
-            "agents[2].offset",
-            "takes no offset",
-        ),
-        (
-            "offset = { x = 0.5, y = -0.4 }\n",
-            "",
-            16,
-            "agents[2]",
-            "missing field `offset`",
-        ),
-    ]);
+    expect_errors_in(
+        BASE,
+        &[
+            (
+                "theta_deg = 0.0 }\nleader = \"reference\"",
+                "theta_deg = 0.0, theta = 0.0 }\nleader = \"reference\"",
+                12,
+                "agents[1].start.theta_deg",
+                "not both",
+            ),
+            (
+                "dt = 0.01\n",
+                "dt = 0.01\ncontroller_period = 0.025\n",
+                5,
+                "sim.controller_period",
+                "whole multiple",
+            ),
+            (
+                "offset = { x = 0.5, y = -0.4 }",
+                "mode = \"tracking\"\noffset = { x = 0.5, y = -0.4 }",
+                20,
+                "agents[2].offset",
+                "takes no offset",
+            ),
+            (
+                "offset = { x = 0.5, y = -0.4 }\n",
+                "",
+                16,
+                "agents[2]",
+                "missing field `offset`",
+            ),
+        ],
+    );
     expect_error(
         &BASE.replacen("[[agents]]\n", "[[agents]]\nrobot = \"agent9\"\n", 1),
         12,
@@ -818,29 +784,32 @@ fn absurd_values_are_refused_with_their_plausible_range() {
         "robots.heavy.mass",
         "1e30 kg is outside the plausible range 0.05 to 5000 kg",
     );
-    expect_errors_in_base(&[
-        (
-            "speed = 0.5",
-            "speed = 1e5",
-            7,
-            "reference.circle.speed",
-            "plausible range 0 to 100 m/s",
-        ),
-        (
-            "x = -0.3, y = -1.5",
-            "x = -0.3, y = -1e7",
-            12,
-            "agents[1].start.y",
-            "plausible range -1e6 to 1e6 m",
-        ),
-        (
-            "duration = 1.0",
-            "duration = 1e7",
-            3,
-            "sim.duration",
-            "plausible range 0 to 1e6 s",
-        ),
-    ]);
+    expect_errors_in(
+        BASE,
+        &[
+            (
+                "speed = 0.5",
+                "speed = 1e5",
+                7,
+                "reference.circle.speed",
+                "plausible range 0 to 100 m/s",
+            ),
+            (
+                "x = -0.3, y = -1.5",
+                "x = -0.3, y = -1e7",
+                12,
+                "agents[1].start.y",
+                "plausible range -1e6 to 1e6 m",
+            ),
+            (
+                "duration = 1.0",
+                "duration = 1e7",
+                3,
+                "sim.duration",
+                "plausible range 0 to 1e6 s",
+            ),
+        ],
+    );
     // An agent's own table is named, not the file's.
     expect_error(
         &BASE.replacen("[[agents]]\n", "[[agents]]\ncontrol = { kz = 1e16 }\n", 1),

@@ -42,6 +42,31 @@ impl<C> Filtered<C> {
     pub fn active(&self) -> bool {
         self.outcome != Outcome::Nominal
     }
+
+    /// The answer for what [`SafetyFilter::decide`] chose: the `limited`
+    /// nominal when it passes, the QP's `x` as a command (`of`) when filtered,
+    /// `braked()` when no command satisfies every row.
+    pub(super) fn decided(
+        (x, outcome, deadlock): ([f64; 2], Outcome, bool),
+        nominal: C,
+        limited: C,
+        min_distance: f64,
+        of: impl FnOnce([f64; 2]) -> C,
+        braked: impl FnOnce() -> C,
+    ) -> Filtered<C> {
+        let command = match outcome {
+            Outcome::Nominal => limited,
+            Outcome::Braked => braked(),
+            Outcome::Filtered => of(x),
+        };
+        Filtered {
+            command,
+            nominal,
+            outcome,
+            deadlock,
+            min_distance,
+        }
+    }
 }
 
 /// One robot's safety filter: its settings, the QP's buffers and the deadlock

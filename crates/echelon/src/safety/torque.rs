@@ -2,7 +2,7 @@
 //! relative degree two, the speed envelope ([`Envelope`]) and the wheel
 //! torque limit.
 
-use super::filter::{Filtered, Outcome, Own, SafetyFilter};
+use super::filter::{Filtered, Own, SafetyFilter};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, solve_relaxed, solve_split};
 use crate::model::{Input, RobotParams, State};
@@ -153,38 +153,28 @@ impl SafetyFilter {
                 }
             }
         }
-        let (x, outcome, deadlock) = self.decide(t, x0, barriers, f);
-        let command = match outcome {
-            Outcome::Nominal => limited,
-            // No command satisfies every row. With wheel-torque limits:
-            // the command that breaks the barriers and the envelope least
-            // within them (the brake is the torque the robot has, not a
-            // fixed law). Without (the relaxed answer would be unbounded):
-            // friction's brake.
-            Outcome::Braked => match robot.torque_limit().and_then(|_| {
-                // The barriers within the wheel limits, the envelope given up
-                // first; else the least violation of both.
-                solve_split(&self.rows[..barriers], &self.rows[soft_end..], x0)
-                    .or_else(|| solve_relaxed(&self.rows, soft_end, x0))
-            }) {
-                Some(x) => Input {
-                    u1: m * x[0],
-                    u2: j * x[1] / l,
-                },
-                None => robot.brake(me),
-            },
-            Outcome::Filtered => Input {
-                u1: m * x[0],
-                u2: j * x[1] / l,
-            },
+        let decision = self.decide(t, x0, barriers, f);
+        let of = |x: [f64; 2]| Input {
+            u1: m * x[0],
+            u2: j * x[1] / l,
         };
-        Filtered {
-            command,
-            nominal,
-            outcome,
-            deadlock,
-            min_distance,
-        }
+        let rows = &self.rows;
+        // No command satisfies every row. With wheel-torque limits: the
+        // command that breaks the barriers and the envelope least within
+        // them (the brake is the torque the robot has, not a fixed law).
+        // Without (the relaxed answer would be unbounded): friction's brake.
+        let braked = || {
+            robot
+                .torque_limit()
+                .and_then(|_| {
+                    // The barriers within the wheel limits, the envelope given
+                    // up first; else the least violation of both.
+                    solve_split(&rows[..barriers], &rows[soft_end..], x0)
+                        .or_else(|| solve_relaxed(rows, soft_end, x0))
+                })
+                .map_or_else(|| robot.brake(me), of)
+        };
+        Filtered::decided(decision, nominal, limited, min_distance, of, braked)
     }
 }
 
@@ -193,6 +183,7 @@ mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
+    use crate::safety::Outcome;
 
     mod properties {
         use super::*;

@@ -1,7 +1,7 @@
 //! The filter for velocity bases: `ḣ ≥ −γ h`, linear in `(v, ω)`, within
 //! the base's speed limits.
 
-use super::filter::{Filtered, Outcome, Own, SafetyFilter};
+use super::filter::{Filtered, Own, SafetyFilter};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, push_box, solve_relaxed};
 use crate::base::{VelocityBase, VelocityCommand};
@@ -41,33 +41,18 @@ impl SafetyFilter {
         });
         let barriers = self.rows.len();
         push_box(&mut self.rows, [base.v_max(), l * base.omega_max()]);
-        let (x, outcome, deadlock) = self.decide(t, x0, barriers, [0.0, 0.0]);
-        let command = match outcome {
-            Outcome::Nominal => limited,
-            // No command satisfies every barrier within the box: the one
-            // that breaks them least (one shared slack) within the base's
-            // limits, so its neighbours' shares are missed as little as
-            // possible; zero if even that fails.
-            Outcome::Braked => {
-                solve_relaxed(&self.rows, barriers, x0).map_or(VelocityCommand::default(), |x| {
-                    VelocityCommand {
-                        v: x[0],
-                        omega: x[1] / l,
-                    }
-                })
-            }
-            Outcome::Filtered => VelocityCommand {
-                v: x[0],
-                omega: x[1] / l,
-            },
+        let decision = self.decide(t, x0, barriers, [0.0, 0.0]);
+        let of = |x: [f64; 2]| VelocityCommand {
+            v: x[0],
+            omega: x[1] / l,
         };
-        Filtered {
-            command,
-            nominal,
-            outcome,
-            deadlock,
-            min_distance,
-        }
+        // No command satisfies every barrier within the box: the one that
+        // breaks them least (one shared slack) within the base's limits, so
+        // its neighbours' shares are missed as little as possible; zero if
+        // even that fails.
+        let braked =
+            || solve_relaxed(&self.rows, barriers, x0).map_or(VelocityCommand::default(), of);
+        Filtered::decided(decision, nominal, limited, min_distance, of, braked)
     }
 }
 
@@ -76,6 +61,7 @@ mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
+    use crate::safety::Outcome;
     use crate::safety::SafetyConfig;
 
     fn config() -> SafetyConfig {
@@ -86,34 +72,33 @@ mod tests {
         VelocityBase::new(0.0, 0.0, 0.5, 4.0, f64::INFINITY, f64::INFINITY).unwrap()
     }
 
+    /// One call of a fresh filter on an ideal base at rest at the origin
+    /// facing +x (its point 0.05 m ahead), with `nominal` and the one
+    /// neighbour `other` (its point as far ahead of it).
+    fn once(
+        other: &State,
+        cooperative: bool,
+        nominal: VelocityCommand,
+    ) -> Filtered<VelocityCommand> {
+        let l = 0.05;
+        let me = State::at_rest(0.0, 0.0, 0.0);
+        let n = Neighbour::of_state(other, l, None, cooperative);
+        SafetyFilter::new(config()).velocity(0.0, &me, l, nominal, &ideal(), &[n], &[])
+    }
+
     #[test]
     fn a_nominal_that_is_safe_passes_unchanged() {
-        let mut f = SafetyFilter::new(config());
-        let me = State::at_rest(0.0, 0.0, 0.0);
         // Driving away from a neighbour behind.
-        let n = Neighbour::of_state(&State::at_rest(-1.0, 0.0, 0.0), 0.05, None, true);
         let nominal = VelocityCommand { v: 0.3, omega: 0.1 };
-        let out = f.velocity(0.0, &me, 0.05, nominal, &ideal(), &[n], &[]);
+        let out = once(&State::at_rest(-1.0, 0.0, 0.0), true, nominal);
         assert_eq!(out.outcome, Outcome::Nominal);
         assert_eq!(out.command, nominal);
     }
 
     #[test]
     fn head_on_the_filter_keeps_half_the_barrier() {
-        let mut f = SafetyFilter::new(config());
-        let l = 0.05;
-        let me = State::at_rest(0.0, 0.0, 0.0);
         let other = State::at_rest(0.6, 0.0, std::f64::consts::PI);
-        let n = Neighbour::of_state(&other, l, None, true);
-        let out = f.velocity(
-            0.0,
-            &me,
-            l,
-            VelocityCommand { v: 0.5, omega: 0.0 },
-            &ideal(),
-            &[n],
-            &[],
-        );
+        let out = once(&other, true, VelocityCommand { v: 0.5, omega: 0.0 });
         assert_eq!(out.outcome, Outcome::Filtered);
         // d = p_i − p_j = (−0.5, 0), h = 0.25 − 0.09; 2 dᵀṗ = −v ≥ −h/2.
         let h = 0.25 - 0.09;
@@ -125,21 +110,9 @@ mod tests {
     #[test]
     fn boxed_in_it_flees_as_fast_as_its_base_allows() {
         // A non-cooperative neighbour rushing in faster than the base can flee.
-        let mut f = SafetyFilter::new(config());
-        let l = 0.05;
-        let me = State::at_rest(0.0, 0.0, 0.0);
         let mut other = State::at_rest(0.40, 0.0, std::f64::consts::PI);
         other.v = 3.0;
-        let n = Neighbour::of_state(&other, l, None, false);
-        let out = f.velocity(
-            0.0,
-            &me,
-            l,
-            VelocityCommand { v: 0.1, omega: 0.0 },
-            &ideal(),
-            &[n],
-            &[],
-        );
+        let out = once(&other, false, VelocityCommand { v: 0.1, omega: 0.0 });
         assert_eq!(out.outcome, Outcome::Braked);
         // The least violation within |v| ≤ 0.5: full speed straight back.
         assert!((out.command.v + 0.5).abs() < 1e-6, "{out:?}");

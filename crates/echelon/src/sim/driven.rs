@@ -19,7 +19,7 @@
 use std::cell::RefCell;
 
 use super::system::Source;
-use super::{SafetyOutput, Simulation, system};
+use super::{Now, SafetyOutput, Simulation, system};
 use crate::agent::Command;
 use crate::control::{LeaderMotion, Offset};
 use crate::error::{ParamError, SimError};
@@ -93,15 +93,7 @@ impl Simulation {
         }
         // The held commands are the caller's from now on: never a sample.
         self.hold_every = u64::MAX;
-        self.sys.evaluate(
-            t,
-            &self.state,
-            Some(&self.held),
-            &self.odometers,
-            Some(&mut self.out),
-            &mut self.k1,
-            &mut self.speeds[0],
-        );
+        self.evaluate_now(Now::Held, true);
         let filtered = filter && self.safety.is_some();
         if filtered {
             self.filter();
@@ -166,16 +158,7 @@ impl Simulation {
             Command::Torque(Input::default())
         };
         let abort = || SimError::Observer("the caller's law failed".into());
-        let t = self.time();
-        self.sys.evaluate_by(
-            t,
-            &self.state,
-            Source::Caller(&mut caller),
-            &self.odometers,
-            Some(&mut self.out),
-            &mut self.k1,
-            &mut self.speeds[0],
-        );
+        self.evaluate_now(Now::Caller(&mut caller), true);
         self.fresh = failed.borrow().is_none();
         let stepped = if self.fresh {
             self.advance(|sys, _, odo, t, x, dx, sp| {
@@ -190,15 +173,7 @@ impl Simulation {
             Err(abort())
         };
         if stepped.is_ok() && self.velocity_agents {
-            self.sys.evaluate_by(
-                self.time(),
-                &self.state,
-                Source::Caller(&mut caller),
-                &self.odometers,
-                Some(&mut self.out),
-                &mut self.k1,
-                &mut self.speeds[0],
-            );
+            self.evaluate_now(Now::Caller(&mut caller), true);
             if failed.borrow().is_none() {
                 self.settle_to_outputs();
             }

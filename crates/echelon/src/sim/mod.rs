@@ -25,7 +25,17 @@ mod system;
 pub use driven::StepByError;
 pub use observe::{Every, Frame, Observer, ObserverError};
 pub use outputs::{AgentOutput, SafetyOutput, VelocityOutput};
-use system::System;
+use system::{CallerLaw, Source, System};
+
+/// Where the commands of [`Simulation::evaluate_now`] come from.
+enum Now<'a, 'b> {
+    /// Each agent's own law, through its act step.
+    Law,
+    /// The held commands (already through the act step).
+    Held,
+    /// A caller's law in place of each agent's own, through its act step.
+    Caller(&'a mut CallerLaw<'b>),
+}
 
 /// The filters of a running simulation and their scratch.
 #[derive(Debug, Clone)]
@@ -210,22 +220,34 @@ impl Simulation {
         &self.state
     }
 
+    /// Evaluates every agent at the current state and time (RK4's first
+    /// stage): its derivative into `k1`, the stage's speeds and, when
+    /// `observe`, its outputs ([`System::evaluate_by`]).
+    fn evaluate_now(&mut self, commands: Now<'_, '_>, observe: bool) {
+        let source = match commands {
+            Now::Law => Source::Law,
+            Now::Held => Source::Held(&self.held),
+            Now::Caller(law) => Source::Caller(law),
+        };
+        self.sys.evaluate_by(
+            self.time(),
+            &self.state,
+            source,
+            &self.odometers,
+            observe.then_some(&mut self.out[..]),
+            &mut self.k1,
+            &mut self.speeds[0],
+        );
+    }
+
     /// Evaluates the controllers at the current state (RK4's first stage), once.
     fn refresh(&mut self) {
         if self.fresh {
             return;
         }
         let sample = self.hold_every > 0 && self.step.is_multiple_of(self.hold_every);
-        let held = (self.hold_every > 0 && !sample).then_some(&self.held[..]);
-        self.sys.evaluate(
-            self.time(),
-            &self.state,
-            held,
-            &self.odometers,
-            Some(&mut self.out),
-            &mut self.k1,
-            &mut self.speeds[0],
-        );
+        let held = self.hold_every > 0 && !sample;
+        self.evaluate_now(if held { Now::Held } else { Now::Law }, true);
         if sample {
             for (h, o) in self.held.iter_mut().zip(&self.out) {
                 *h = o.commanded();
@@ -292,15 +314,7 @@ impl Simulation {
             o.deadlocked = filter.deadlocked();
         }
         // The plant moves under the filtered commands from this instant on.
-        self.sys.evaluate(
-            t,
-            &self.state,
-            Some(&self.held),
-            &self.odometers,
-            None,
-            &mut self.k1,
-            &mut self.speeds[0],
-        );
+        self.evaluate_now(Now::Held, false);
         for (i, a) in self.sys.plan.agents().iter().enumerate() {
             let applied = a.drive().actuate(self.held[i]);
             let o = &mut self.out[i];

@@ -150,3 +150,30 @@ pub fn for_seconds(duration: f64) -> echelon::scenario::Overrides {
         ..echelon::scenario::Overrides::default()
     }
 }
+
+/// Asserts that the scenario text `src` (built as `test.toml`) is refused on
+/// one line saying where (`line`, a column), which field (`field`) and why
+/// (containing `message`).
+pub fn expect_error(src: &str, line: usize, field: &str, message: &str) {
+    let err = match build(src) {
+        Ok(_) => panic!("accepted:\n{src}"),
+        Err(e) => e,
+    };
+    let text = err.to_string();
+    assert_eq!(err.location.file, "test.toml", "{text}");
+    assert_eq!(err.location.line, line, "{text}");
+    assert!(err.location.column > 0, "{text}");
+    assert_eq!(err.field, field, "{text}");
+    assert!(err.message.contains(message), "{text}");
+    assert!(!text.contains('\n'), "one line: {text}");
+    assert!(text.starts_with(&format!("test.toml:{line}:")), "{text}");
+}
+
+/// [`expect_error`] for each `(from, to, line, field, message)`: `base` with
+/// `from` replaced by `to`.
+pub fn expect_errors_in(base: &str, cases: &[(&str, &str, usize, &str, &str)]) {
+    for &(from, to, line, field, message) in cases {
+        assert!(base.contains(from), "`{from}` is not in the base scenario");
+        expect_error(&base.replace(from, to), line, field, message);
+    }
+}

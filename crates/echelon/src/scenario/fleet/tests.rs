@@ -1,21 +1,7 @@
 use super::*;
 use crate::scenario::builtin;
 
-const BASE: &str = r#"
-[sim]
-duration = 1.0
-dt = 0.01
-
-[reference.circle]
-speed = 0.1
-turn_rate = 0.1
-start = { x = 0.0, y = 0.0, theta = 0.0 }
-
-[[agents]]
-start = { x = 0.0, y = 0.0, theta = 0.0 }
-leader = "reference"
-offset = { x = 0.3, y = 0.0 }
-"#;
+const BASE: &str = include_str!("../../../tests/fixtures/fleet-base.toml");
 
 fn parse(extra: &str) -> Result<FleetSettings, ScenarioError> {
     Scenario::parse(&format!("{BASE}{extra}"), "t.toml", None)?.fleet()

@@ -488,7 +488,7 @@ pub fn run_all(
             Ok(row) => sweep.rows.push(row),
             Err(SweepError::Sim(e)) => match Divergence::of(&e) {
                 Some(divergence) => sweep.diverged.push(DivergedCase {
-                    case: *case,
+                    case,
                     divergence,
                 }),
                 None => return Err(e.into()),

@@ -113,9 +113,9 @@ fn injected_loss_is_seeded_and_the_formation_still_converges() {
         ..FaultSpec::default()
     };
     let run = || {
-        let mut w = World::of(&s, &[faults; 2]);
+        let mut w = Fleet::of(&s, &[faults; 2]);
         w.run_until(30.0);
-        w.robots.iter().map(Robot::report).collect::<Vec<_>>()
+        w.robots().map(Robot::report).collect::<Vec<_>>()
     };
     let (a, b) = (run(), run());
     for (ra, rb) in a.iter().zip(&b) {
@@ -140,28 +140,30 @@ fn injected_delay_holds_samples_back() {
         delay: 0.05,
         ..FaultSpec::default()
     };
-    let mut w = World::of(&s, &[faults]);
+    let mut w = Fleet::of(&s, &[faults]);
     w.run_until(0.2);
-    let first = w.log[0]
+    let first = w
+        .log(0)
         .iter()
         .find(|p| p.state.link == LinkStatus::Tracking)
         .unwrap_or_else(|| panic!("never tracked"));
     // Synced at 0 on the first arrival; waiting ticks come every 0.1 s,
     // so the first sample (delivered at 0.05) is first used at 0.1.
     assert!((first.state.t - 0.1).abs() < 1e-9, "{first:?}");
-    let waiting = w.log[0]
+    let waiting = w
+        .log(0)
         .iter()
         .take_while(|p| p.state.link == LinkStatus::Waiting)
         .count();
     assert_eq!(waiting, 1);
     // Messages of the last 50 ms are in flight.
     assert!(
-        (2..=3).contains(&w.robots[0].pending()),
+        (2..=3).contains(&w.robot(0).pending()),
         "{}",
-        w.robots[0].pending()
+        w.robot(0).pending()
     );
     w.run_until(30.0);
-    let r = &w.robots[0];
+    let r = &w.robot(0);
     assert!(r.report().final_error < 1e-3, "{:?}", r.report());
     assert_eq!(r.counters().link_losses, 0);
     conserved(r);

@@ -85,20 +85,12 @@ fn raw_odometry_is_what_the_base_published(dir: &Path) {
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         let topic = m.channel.topic.as_str();
-        if let Some(k) = topic
-            .strip_prefix("/agent/")
-            .and_then(|r| r.strip_suffix("/state"))
-        {
-            states.push((k.parse().unwrap(), serde_json::from_slice(&m.data).unwrap()));
-        } else if let Some(k) = topic
-            .strip_prefix("/robot")
-            .and_then(|r| r.strip_suffix("/odom"))
-        {
+        if let Some(k) = common::topic_number(topic, "/agent/", "/state") {
+            states.push((k, serde_json::from_slice(&m.data).unwrap()));
+        } else if let Some(k) = common::topic_number(topic, "/robot", "/odom") {
             let o = Odometry::from_cdr_finite(&m.data).unwrap();
             let p = o.pose.pose.position;
-            odom.entry(k.parse().unwrap())
-                .or_default()
-                .push([p.x, p.y, o.yaw()]);
+            odom.entry(k).or_default().push([p.x, p.y, o.yaw()]);
         }
     }
     for poses in odom.values_mut() {

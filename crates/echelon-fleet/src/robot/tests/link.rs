@@ -195,11 +195,7 @@ fn extrapolate_past_the_hold_stops_on_the_circle() {
 #[test]
 fn a_restarted_leader_resyncs_and_the_old_sample_is_dropped() {
     let s = scenario(EXTRAPOLATE);
-    let faults = FaultSpec {
-        delay: 0.05,
-        ..FaultSpec::default()
-    };
-    let mut w = Fleet::of(&s, &[faults]);
+    let mut w = Fleet::of(&s, &[delayed(0.05)]);
     w.run_until(10.0);
     assert!(w.robot(0).last().t > 9.9);
     // The new leader process: another source, its clock from 0.

@@ -136,22 +136,17 @@ fn injected_loss_is_seeded_and_the_formation_still_converges() {
 #[test]
 fn injected_delay_holds_samples_back() {
     let s = scenario(EXTRAPOLATE);
-    let faults = FaultSpec {
-        delay: 0.05,
-        ..FaultSpec::default()
-    };
-    let mut w = Fleet::of(&s, &[faults]);
+    let mut w = Fleet::of(&s, &[delayed(0.05)]);
     w.run_until(0.2);
-    let first = w
-        .log(0)
+    let log = w.log(0);
+    let first = log
         .iter()
         .find(|p| p.state.link == LinkStatus::Tracking)
         .unwrap_or_else(|| panic!("never tracked"));
     // Synced at 0 on the first arrival; waiting ticks come every 0.1 s,
     // so the first sample (delivered at 0.05) is first used at 0.1.
     assert!((first.state.t - 0.1).abs() < 1e-9, "{first:?}");
-    let waiting = w
-        .log(0)
+    let waiting = log
         .iter()
         .take_while(|p| p.state.link == LinkStatus::Waiting)
         .count();

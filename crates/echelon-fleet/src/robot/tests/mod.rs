@@ -38,6 +38,14 @@ fn robot(s: &Scenario, agent: u32, faults: FaultSpec) -> Robot {
     Robot::simulated(config, 100 + agent)
 }
 
+/// Faults: every leader sample held back `delay` s.
+fn delayed(delay: f64) -> FaultSpec {
+    FaultSpec {
+        delay,
+        ..FaultSpec::default()
+    }
+}
+
 fn reference(s: &Scenario) -> Reference {
     s.build(&Overrides::default())
         .unwrap_or_else(|e| panic!("{e}"))

@@ -100,6 +100,34 @@ fn check_stopped(states: &[Value], robots: u64, pressed: u64, until: u64) {
     }
 }
 
+/// `fleet up experiment-circle` (and `extra`) for `duration` fleet s at
+/// ×2 into `out`, its dashboard on a free address: the process, the
+/// address and the operator token.
+fn dashboard_fleet(out: &Path, duration: &str, extra: &[&str]) -> (common::Guard, String, String) {
+    let addr = free_addr();
+    let out_s = out.display().to_string();
+    let fleet = common::spawn(
+        &[
+            &["fleet", "up", "experiment-circle"][..],
+            extra,
+            &[
+                "--duration",
+                duration,
+                "--time-scale",
+                "2",
+                "--quiet",
+                "--dashboard",
+                &addr,
+                "--out",
+                &out_s,
+            ],
+        ]
+        .concat(),
+    );
+    let token = operator_token(out);
+    (fleet, addr, token)
+}
+
 /// `fleet up --dashboard` in headless Chromium (scripts/foxglove/
 /// dashboard_check.py over the DevTools protocol), after a `fleet stop`
 /// and a `fleet resume` from the command line: the page draws every robot
@@ -115,25 +143,9 @@ fn check_stopped(states: &[Value], robots: u64, pressed: u64, until: u64) {
 fn the_dashboard_draws_the_fleet_and_its_stop_stops_every_robot() {
     let _fleet = one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let addr = free_addr();
-    let out = dir.path().join("fleet");
-    let out_s = out.display().to_string();
     let scenario = "experiment-circle";
-    let fleet = common::spawn(&[
-        "fleet",
-        "up",
-        scenario,
-        "--duration",
-        "40",
-        "--time-scale",
-        "2",
-        "--quiet",
-        "--dashboard",
-        &addr,
-        "--out",
-        &out_s,
-    ]);
-    let token = operator_token(&out);
+    let out = dir.path().join("fleet");
+    let (fleet, addr, token) = dashboard_fleet(&out, "40", &[]);
     let router = common::endpoints_of(&out)["router/1"].clone();
     let robots = 2;
     // Stop until both robots are in the fleet (and acknowledge), then resume.
@@ -305,26 +317,8 @@ fn in_secure_mode_the_dashboard_stops_the_fleet_as_the_operator() {
     let _fleet = one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let certs = common::certs(dir.path(), 2);
-    let addr = free_addr();
     let out = dir.path().join("fleet");
-    let out_s = out.display().to_string();
-    let fleet = common::spawn(&[
-        "fleet",
-        "up",
-        "experiment-circle",
-        "--secure",
-        certs.to_str().unwrap(),
-        "--duration",
-        "30",
-        "--time-scale",
-        "2",
-        "--quiet",
-        "--dashboard",
-        &addr,
-        "--out",
-        &out_s,
-    ]);
-    let token = operator_token(&out);
+    let (fleet, addr, token) = dashboard_fleet(&out, "30", &["--secure", certs.to_str().unwrap()]);
     let robots = 2;
     let page = dashboard_check(&addr, &token, robots, &[]);
     let mut fleet = fleet;

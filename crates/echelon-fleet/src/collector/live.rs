@@ -35,10 +35,10 @@ use std::time::{Duration, Instant};
 
 use echelon_mcap::scene::{SCENE_STATIC_TOPIC, SCENE_TOPIC, Scene, ScenePose, SceneSpec, TF_TOPIC};
 use foxglove::messages::{FrameTransforms, SceneUpdate};
-use foxglove::{Channel, Context, RawChannel, Schema, WebSocketServer};
+use foxglove::{Context, RawChannel, Schema, WebSocketServer};
 use serde::{Deserialize, Serialize};
 
-use super::sink::{Channel as RecordChannel, RecordSink, Stamp};
+use super::sink::{Channel, RecordSink, Stamp};
 use crate::FleetError;
 
 /// Records the collector may have queued for the server thread.
@@ -219,18 +219,13 @@ impl LiveFeed {
 }
 
 impl RecordSink for LiveFeed {
-    fn log(
-        &mut self,
-        channel: RecordChannel<'_>,
-        stamp: Stamp,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
+    fn log(&mut self, channel: Channel<'_>, stamp: Stamp, data: &[u8]) -> Result<(), FleetError> {
         let schema = || match channel {
-            RecordChannel::Json(_, schema) => (
+            Channel::Json(_, schema) => (
                 Schema::new(schema.name, "jsonschema", schema.schema.as_bytes().to_vec()),
                 "json",
             ),
-            RecordChannel::Ros(topic) => {
+            Channel::Ros(topic) => {
                 let s = topic.schema();
                 (
                     Schema::new(
@@ -260,12 +255,7 @@ impl RecordSink for LiveFeed {
 pub(super) struct Tee<'a, A, B>(pub(super) &'a mut A, pub(super) &'a mut B);
 
 impl<A: RecordSink, B: RecordSink> RecordSink for Tee<'_, A, B> {
-    fn log(
-        &mut self,
-        channel: RecordChannel<'_>,
-        stamp: Stamp,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
+    fn log(&mut self, channel: Channel<'_>, stamp: Stamp, data: &[u8]) -> Result<(), FleetError> {
         self.0.log(channel, stamp, data)?;
         self.1.log(channel, stamp, data)
     }
@@ -329,9 +319,10 @@ fn serve(
     let bound = SocketAddr::new(addr.ip(), server.port());
     let _ = ready.send(bound);
     let mut channels: Vec<Option<Arc<RawChannel>>> = Vec::new();
-    let tf: Channel<FrameTransforms> = ctx.channel_builder(TF_TOPIC).build();
-    let scene_channel: Channel<SceneUpdate> = ctx.channel_builder(SCENE_TOPIC).build();
-    let fixed_channel: Channel<SceneUpdate> = ctx.channel_builder(SCENE_STATIC_TOPIC).build();
+    let tf: foxglove::Channel<FrameTransforms> = ctx.channel_builder(TF_TOPIC).build();
+    let scene_channel: foxglove::Channel<SceneUpdate> = ctx.channel_builder(SCENE_TOPIC).build();
+    let fixed_channel: foxglove::Channel<SceneUpdate> =
+        ctx.channel_builder(SCENE_STATIC_TOPIC).build();
     let mut fixed_sent: Option<Instant> = None;
     let mut last_t = 0.0;
     let mut served = Served::default();

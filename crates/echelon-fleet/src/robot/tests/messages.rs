@@ -3,14 +3,19 @@
 
 use super::*;
 
+/// Robot 1 of the fast circle (`extrapolate`), to feed by hand, and the
+/// reference.
+fn robot_1() -> (Robot, Reference) {
+    let s = scenario(EXTRAPOLATE);
+    (robot(&s, 1, FaultSpec::default()), reference(&s))
+}
+
 /// Every message taken in has its delay recorded (garbage too: the
 /// delay is the transport's), unstamped ones counted apart, and the
 /// report's latency counts add up to `counters.received`.
 #[test]
 fn every_received_message_has_its_delay_recorded() {
-    let s = scenario(EXTRAPOLATE);
-    let reference = reference(&s);
-    let mut r = robot(&s, 1, FaultSpec::default());
+    let (mut r, reference) = robot_1();
     let mut buf = Vec::new();
     for (k, delay) in [Some(200_000), Some(400_000), None, Some(-3)]
         .into_iter()
@@ -35,9 +40,7 @@ fn every_received_message_has_its_delay_recorded() {
 /// sample, advanced by its age.
 #[test]
 fn stale_reordered_and_garbage_messages_are_counted_and_refused() {
-    let s = scenario(EXTRAPOLATE);
-    let reference = reference(&s);
-    let mut r = robot(&s, 1, FaultSpec::default());
+    let (mut r, reference) = robot_1();
     let mut buf = Vec::new();
     reference_message(&mut buf, 0, 0.0, &reference);
     r.on_message(&buf, 0.0);

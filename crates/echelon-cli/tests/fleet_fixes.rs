@@ -91,16 +91,13 @@ fn read_log(dir: &Path) -> Logged {
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         let topic = m.channel.topic.as_str();
-        if let Some(k) = topic
-            .strip_prefix("/agent/")
-            .and_then(|r| r.strip_suffix("/state"))
-        {
+        if let Some(k) = common::topic_number(topic, "/agent/", "/state") {
             let v: Value = serde_json::from_slice(&m.data).unwrap();
             let Some(leader) = v.get("leader") else {
                 continue;
             };
             let g = |k: &str| v[k].as_f64().unwrap();
-            out.entry(k.parse().unwrap()).or_default().0.push(Estimate {
+            out.entry(k).or_default().0.push(Estimate {
                 wall: m.log_time,
                 t: g("t"),
                 pose: [g("x"), g("y"), g("theta")],
@@ -109,15 +106,12 @@ fn read_log(dir: &Path) -> Logged {
                 sigma: g("sigma"),
                 fix_age: v["odometry"]["fix_age"].as_f64(),
             });
-        } else if let Some(k) = topic
-            .strip_prefix("/robot")
-            .and_then(|r| r.strip_suffix("/ground_truth"))
-        {
+        } else if let Some(k) = common::topic_number(topic, "/robot", "/ground_truth") {
             let o = Odometry::from_cdr_finite(&m.data).unwrap();
             assert_eq!(o.header.frame_id, "map");
             let p = o.pose.pose.position;
             let stamp = o.header.stamp.to_nanos() as u64;
-            out.entry(k.parse().unwrap())
+            out.entry(k)
                 .or_default()
                 .1
                 .push((stamp, [p.x, p.y, o.yaw()]));

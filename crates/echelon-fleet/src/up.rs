@@ -270,6 +270,18 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     }
     let scale = opts.time_scale.to_string();
     let dur = duration.to_string();
+    // `fleet ROLE SCENARIO` on the fleet's clock, to its end.
+    let on_clock = |role: Role| {
+        vec![
+            "fleet".to_owned(),
+            role.name().to_owned(),
+            opts.scenario.clone(),
+            "--duration".to_owned(),
+            dur.clone(),
+            "--time-scale".to_owned(),
+            scale.clone(),
+        ]
+    };
     let started = Instant::now();
     let started_unix_ns = crate::unix_nanos();
 
@@ -320,19 +332,13 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
 
     let mut robots = Vec::with_capacity(n);
     for k in 1..=n {
-        let mut args = vec![
-            "fleet".to_owned(),
-            Role::Robot.name().to_owned(),
-            opts.scenario.clone(),
+        let mut args = on_clock(Role::Robot);
+        args.extend([
             "--agent".to_owned(),
             k.to_string(),
-            "--duration".to_owned(),
-            dur.clone(),
-            "--time-scale".to_owned(),
-            scale.clone(),
             "--seed".to_owned(),
             opts.faults.seed.to_string(),
-        ];
+        ]);
         if opts.faults.loss > 0.0 {
             args.extend(["--loss".to_owned(), opts.faults.loss.to_string()]);
         }
@@ -358,17 +364,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         )?);
     }
 
-    let mut args = vec![
-        "fleet".to_owned(),
-        Role::Leader.name().to_owned(),
-        opts.scenario.clone(),
-        "--duration".to_owned(),
-        dur.clone(),
-        "--time-scale".to_owned(),
-        scale.clone(),
-        "--wait-for".to_owned(),
-        Role::Collector.name().to_owned(),
-    ];
+    let mut args = on_clock(Role::Leader);
+    args.extend(["--wait-for".to_owned(), Role::Collector.name().to_owned()]);
     for k in 1..=n {
         args.extend([
             "--wait-for".to_owned(),

@@ -325,14 +325,18 @@ mod tests {
             node.node_token(),
             "@ros2_lv/0/c0ffee/0/0/NN/%/%robot1/echelon_robot"
         );
-        assert_eq!(
-            node.endpoint_token(
+        // The same publisher on Jazzy's keys and on Humble's (below).
+        let cmd_vel = |n: &NodeInfo| {
+            n.endpoint_token(
                 Endpoint::Publisher,
                 1,
                 "/robot1/cmd_vel",
                 &TWIST_STAMPED,
-                &Qos::keep_last(10)
-            ),
+                &Qos::keep_last(10),
+            )
+        };
+        assert_eq!(
+            cmd_vel(&node),
             "@ros2_lv/0/c0ffee/0/1/MP/%/%robot1/echelon_robot/%robot1%cmd_vel/\
              geometry_msgs::msg::dds_::TwistStamped_/\
              RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64/::,10:,:,:,,"
@@ -354,13 +358,7 @@ mod tests {
         let humble = node.clone().with_scheme(KeyScheme::RmwZenohHumble);
         assert_eq!(humble.node_token(), node.node_token());
         assert_eq!(
-            humble.endpoint_token(
-                Endpoint::Publisher,
-                1,
-                "/robot1/cmd_vel",
-                &TWIST_STAMPED,
-                &Qos::keep_last(10)
-            ),
+            cmd_vel(&humble),
             "@ros2_lv/0/c0ffee/0/1/MP/%/%robot1/echelon_robot/%robot1%cmd_vel/\
              geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported/::,10:,:,:,,"
         );

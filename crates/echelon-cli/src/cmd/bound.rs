@@ -80,10 +80,7 @@ fn kinematic(a: &BoundArgs) -> Result<()> {
     };
     let e_bound = t.e_bound(steps);
     if a.json {
-        let mut v = serde_json::to_value(report)?;
-        v["e_bound"] = serde_json::json!(e_bound);
-        outln!("{v}")?;
-        return Ok(());
+        return print_json(report, e_bound);
     }
     outln!("Theorem 2, kinematic law: ‖e‖ ≤ √2 N ζ / γ, ‖z‖ ≤ √2 K_e N ζ")?;
     outln!("  K_e = {}, ζ = {} m, γ = {}", a.ke, a.zeta, a.gamma)?;
@@ -108,6 +105,14 @@ fn kinematic(a: &BoundArgs) -> Result<()> {
     Ok(())
 }
 
+/// Prints `report` with `e_bound` as one JSON line.
+fn print_json(report: BoundReport, e_bound: f64) -> Result<()> {
+    let mut v = serde_json::to_value(report)?;
+    v["e_bound"] = serde_json::json!(e_bound);
+    outln!("{v}")?;
+    Ok(())
+}
+
 /// Runs `echelon bound`.
 pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
     if a.law == Law::Kinematic {
@@ -127,10 +132,7 @@ pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
     // ‖e‖ is ultimately within ‖z‖/K_e: V̇₁ = −K_e‖e‖² + eᵀz < 0 beyond it.
     let e_bound = report.z_bound / a.ke;
     if a.json {
-        let mut v = serde_json::to_value(report)?;
-        v["e_bound"] = serde_json::json!(e_bound);
-        outln!("{v}")?;
-        return Ok(());
+        return print_json(report, e_bound);
     }
     outln!("Theorem 2: ‖z‖ ≤ √2 K_e N ζ √(K_z² + ω_M²) / (K_z γ)")?;
     outln!(

@@ -13,6 +13,16 @@ use serde_json::Value;
 /// The `echelon` binary under test.
 pub(crate) const EXE: &str = env!("CARGO_BIN_EXE_echelon");
 
+/// `K` of a topic `PREFIX K SUFFIX` (`/agent/2/state`, `/robot2/odom`),
+/// if `topic` is one.
+pub(crate) fn topic_number(topic: &str, prefix: &str, suffix: &str) -> Option<u32> {
+    topic
+        .strip_prefix(prefix)?
+        .strip_suffix(suffix)?
+        .parse()
+        .ok()
+}
+
 /// Asserts that the process `what` succeeded, with its stderr and stdout
 /// otherwise.
 pub(crate) fn check(out: &Output, what: &str) {

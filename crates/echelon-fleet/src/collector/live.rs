@@ -33,15 +33,13 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use echelon_mcap::JsonSchema;
 use echelon_mcap::scene::{SCENE_STATIC_TOPIC, SCENE_TOPIC, Scene, ScenePose, SceneSpec, TF_TOPIC};
 use foxglove::messages::{FrameTransforms, SceneUpdate};
-use foxglove::{Channel, Context, RawChannel, Schema, WebSocketServer};
+use foxglove::{Context, RawChannel, Schema, WebSocketServer};
 use serde::{Deserialize, Serialize};
 
-use super::RecordSink;
+use super::sink::{Channel, RecordSink, Stamp};
 use crate::FleetError;
-use crate::ros2::record::RosTopic;
 
 /// Records the collector may have queued for the server thread.
 pub const QUEUE: usize = 4096;
@@ -221,43 +219,25 @@ impl LiveFeed {
 }
 
 impl RecordSink for LiveFeed {
-    fn log(
-        &mut self,
-        topic: &str,
-        schema: &JsonSchema,
-        log_time: u64,
-        _publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
-        let json = || {
-            (
+    fn log(&mut self, channel: Channel<'_>, stamp: Stamp, data: &[u8]) -> Result<(), FleetError> {
+        let schema = || match channel {
+            Channel::Json(_, schema) => (
                 Schema::new(schema.name, "jsonschema", schema.schema.as_bytes().to_vec()),
                 "json",
-            )
+            ),
+            Channel::Ros(topic) => {
+                let s = topic.schema();
+                (
+                    Schema::new(
+                        s.name,
+                        echelon_mcap::ROS2MSG,
+                        s.definition.as_bytes().to_vec(),
+                    ),
+                    echelon_mcap::CDR,
+                )
+            }
         };
-        self.message(topic, json, log_time, data);
-        Ok(())
-    }
-
-    fn log_ros(
-        &mut self,
-        topic: &RosTopic,
-        log_time: u64,
-        _publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
-        let ros = || {
-            let s = topic.schema();
-            (
-                Schema::new(
-                    s.name,
-                    echelon_mcap::ROS2MSG,
-                    s.definition.as_bytes().to_vec(),
-                ),
-                echelon_mcap::CDR,
-            )
-        };
-        self.message(topic.topic(), ros, log_time, data);
+        self.message(channel.topic(), schema, stamp.log_time, data);
         Ok(())
     }
 
@@ -265,7 +245,7 @@ impl RecordSink for LiveFeed {
         Ok(())
     }
 
-    fn pose(&mut self, k: u32, pose: &ScenePose, _: u64, _: u64) -> Result<(), FleetError> {
+    fn pose(&mut self, k: u32, pose: &ScenePose, _: Stamp) -> Result<(), FleetError> {
         self.send(Item::Pose { k, pose: *pose });
         Ok(())
     }
@@ -275,27 +255,9 @@ impl RecordSink for LiveFeed {
 pub(super) struct Tee<'a, A, B>(pub(super) &'a mut A, pub(super) &'a mut B);
 
 impl<A: RecordSink, B: RecordSink> RecordSink for Tee<'_, A, B> {
-    fn log(
-        &mut self,
-        topic: &str,
-        schema: &JsonSchema,
-        log_time: u64,
-        publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
-        self.0.log(topic, schema, log_time, publish_time, data)?;
-        self.1.log(topic, schema, log_time, publish_time, data)
-    }
-
-    fn log_ros(
-        &mut self,
-        topic: &RosTopic,
-        log_time: u64,
-        publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
-        self.0.log_ros(topic, log_time, publish_time, data)?;
-        self.1.log_ros(topic, log_time, publish_time, data)
+    fn log(&mut self, channel: Channel<'_>, stamp: Stamp, data: &[u8]) -> Result<(), FleetError> {
+        self.0.log(channel, stamp, data)?;
+        self.1.log(channel, stamp, data)
     }
 
     fn row(&mut self, sample: &echelon::sample::AgentSample) -> Result<(), FleetError> {
@@ -312,15 +274,9 @@ impl<A: RecordSink, B: RecordSink> RecordSink for Tee<'_, A, B> {
         self.1.odometry(s, o)
     }
 
-    fn pose(
-        &mut self,
-        k: u32,
-        pose: &ScenePose,
-        log_time: u64,
-        publish_time: u64,
-    ) -> Result<(), FleetError> {
-        self.0.pose(k, pose, log_time, publish_time)?;
-        self.1.pose(k, pose, log_time, publish_time)
+    fn pose(&mut self, k: u32, pose: &ScenePose, stamp: Stamp) -> Result<(), FleetError> {
+        self.0.pose(k, pose, stamp)?;
+        self.1.pose(k, pose, stamp)
     }
 }
 
@@ -363,9 +319,10 @@ fn serve(
     let bound = SocketAddr::new(addr.ip(), server.port());
     let _ = ready.send(bound);
     let mut channels: Vec<Option<Arc<RawChannel>>> = Vec::new();
-    let tf: Channel<FrameTransforms> = ctx.channel_builder(TF_TOPIC).build();
-    let scene_channel: Channel<SceneUpdate> = ctx.channel_builder(SCENE_TOPIC).build();
-    let fixed_channel: Channel<SceneUpdate> = ctx.channel_builder(SCENE_STATIC_TOPIC).build();
+    let tf: foxglove::Channel<FrameTransforms> = ctx.channel_builder(TF_TOPIC).build();
+    let scene_channel: foxglove::Channel<SceneUpdate> = ctx.channel_builder(SCENE_TOPIC).build();
+    let fixed_channel: foxglove::Channel<SceneUpdate> =
+        ctx.channel_builder(SCENE_STATIC_TOPIC).build();
     let mut fixed_sent: Option<Instant> = None;
     let mut last_t = 0.0;
     let mut served = Served::default();

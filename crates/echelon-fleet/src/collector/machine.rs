@@ -11,8 +11,8 @@ use echelon_mcap::{
 };
 
 use super::{
-    AgentRecord, COMMAND, COMMAND_TOPIC, CollectorReport, REJECTED, REJECTED_TOPIC, RecordSink,
-    STATS,
+    AgentRecord, COMMAND, COMMAND_TOPIC, Channel, CollectorReport, REJECTED, REJECTED_TOPIC,
+    RecordSink, STATS, Stamp,
 };
 use crate::FleetError;
 use crate::command::FleetCommand;
@@ -172,7 +172,11 @@ impl Collector {
             return self.reject(sink, key, refusal.reason(), bytes, now);
         }
         let topic = &self.ros[i];
-        sink.log_ros(topic, now, record::publish_time(attachment, now), bytes)?;
+        let stamp = Stamp {
+            log_time: now,
+            publish_time: record::publish_time(attachment, now),
+        };
+        sink.log(Channel::Ros(topic), stamp, bytes)?;
         let name = topic.topic().to_owned();
         self.report.ros_recorded += 1;
         self.count_logged(&name);
@@ -209,7 +213,11 @@ impl Collector {
         publish_time: u64,
         data: &[u8],
     ) -> Result<(), FleetError> {
-        sink.log(topic, schema, now, publish_time, data)?;
+        let stamp = Stamp {
+            log_time: now,
+            publish_time,
+        };
+        sink.log(Channel::Json(topic, schema), stamp, data)?;
         self.count_logged(topic);
         Ok(())
     }
@@ -343,7 +351,11 @@ impl Collector {
             nanos(s.t),
             &data,
         )?;
-        sink.pose(k, &ScenePose::of(&sample, s.leader.p), now, nanos(s.t))?;
+        let stamp = Stamp {
+            log_time: now,
+            publish_time: nanos(s.t),
+        };
+        sink.pose(k, &ScenePose::of(&sample, s.leader.p), stamp)?;
         let a = self.agents.entry(k).or_insert_with(|| AgentRecord {
             agent: k,
             ..AgentRecord::default()
@@ -378,14 +390,13 @@ mod tests {
     use std::collections::BTreeMap;
 
     use echelon::sample::AgentSample;
+    use echelon_mcap::agent_topic;
     use echelon_mcap::scene::ScenePose;
-    use echelon_mcap::{JsonSchema, agent_topic};
     use proptest::prelude::*;
 
-    use super::{Collector, RecordSink};
+    use super::{Channel, Collector, RecordSink, Stamp};
     use crate::FleetError;
     use crate::keys::Keys;
-    use crate::ros2::record::RosTopic;
     use crate::wire::{self, Header, LinkStatus, RobotState};
 
     /// Counts what is logged, per topic, and the rows.
@@ -396,28 +407,21 @@ mod tests {
     }
 
     impl RecordSink for Counts {
-        fn log(
-            &mut self,
-            topic: &str,
-            _: &JsonSchema,
-            log_time: u64,
-            _: u64,
-            _: &[u8],
-        ) -> Result<(), FleetError> {
-            self.logged
-                .entry(topic.to_owned())
-                .or_default()
-                .push(log_time);
-            Ok(())
-        }
-        fn log_ros(&mut self, _: &RosTopic, _: u64, _: u64, _: &[u8]) -> Result<(), FleetError> {
+        fn log(&mut self, channel: Channel<'_>, stamp: Stamp, _: &[u8]) -> Result<(), FleetError> {
+            // The ROS 2 channels are not counted.
+            if let Channel::Json(topic, _) = channel {
+                self.logged
+                    .entry(topic.to_owned())
+                    .or_default()
+                    .push(stamp.log_time);
+            }
             Ok(())
         }
         fn row(&mut self, _: &AgentSample) -> Result<(), FleetError> {
             self.rows += 1;
             Ok(())
         }
-        fn pose(&mut self, _: u32, _: &ScenePose, _: u64, _: u64) -> Result<(), FleetError> {
+        fn pose(&mut self, _: u32, _: &ScenePose, _: Stamp) -> Result<(), FleetError> {
             Ok(())
         }
     }

@@ -32,7 +32,7 @@ pub use live::{BACKLOG, DEFAULT_ADDR, DEFAULT_DASHBOARD, LiveFeed, LiveReport, Q
 pub use machine::Collector;
 pub use report::{AgentRecord, CollectorReport};
 pub use schema::{COMMAND, REJECTED, STATS};
-pub use sink::{FileSink, RecordSink};
+pub use sink::{Channel, FileSink, RecordSink, Stamp};
 pub use task::{
     BATCH, CollectorOptions, CollectorTask, INPUT_QUEUE, Recording, run, run_recording, run_with,
     run_with_ros2,

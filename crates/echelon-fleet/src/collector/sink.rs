@@ -27,27 +27,39 @@ pub(crate) const ODOMETRY_FILE: &str = "odometry.csv";
 /// last fix's (empty: none).
 pub(crate) const ODOMETRY_HEADER: &str = "t,agent,x,y,theta,x_raw,y_raw,theta_raw,age,fix_age";
 
+/// The MCAP channel a record goes on.
+#[derive(Debug, Clone, Copy)]
+pub enum Channel<'a> {
+    /// One of the collector's JSON channels: its topic and schema.
+    Json(&'a str, &'a JsonSchema),
+    /// A ROS 2 topic's channel: CDR bytes as received.
+    Ros(&'a RosTopic),
+}
+
+impl Channel<'_> {
+    /// Its topic.
+    pub fn topic(&self) -> &str {
+        match self {
+            Channel::Json(topic, _) => topic,
+            Channel::Ros(topic) => topic.topic(),
+        }
+    }
+}
+
+/// When a record was received (`log_time`) and sent (`publish_time`),
+/// UNIX ns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stamp {
+    /// Received.
+    pub log_time: u64,
+    /// Sent.
+    pub publish_time: u64,
+}
+
 /// Where the collector's records go: the files ([`run`](super::run)), or memory in tests.
 pub trait RecordSink {
-    /// Logs one MCAP message on `topic` (received at UNIX ns `log_time`, sent
-    /// at `publish_time`).
-    fn log(
-        &mut self,
-        topic: &str,
-        schema: &JsonSchema,
-        log_time: u64,
-        publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError>;
-    /// Logs one ROS 2 message (CDR bytes as received) on the channel of
-    /// `topic` (received at UNIX ns `log_time`, published at `publish_time`).
-    fn log_ros(
-        &mut self,
-        topic: &RosTopic,
-        log_time: u64,
-        publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError>;
+    /// Logs one MCAP message on `channel`.
+    fn log(&mut self, channel: Channel<'_>, stamp: Stamp, data: &[u8]) -> Result<(), FleetError>;
     /// Appends one `trajectory.csv` row.
     fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError>;
     /// Appends one [`ODOMETRY_FILE`] row: the raw odometry `o` a ROS 2
@@ -58,15 +70,8 @@ pub trait RecordSink {
         Ok(())
     }
     /// Shows robot `k` (from 1) at `pose` on the 3D channels
-    /// ([`echelon_mcap::scene`]), received at UNIX ns `log_time`, sent at
-    /// `publish_time`; nothing when the sink has no scene.
-    fn pose(
-        &mut self,
-        k: u32,
-        pose: &ScenePose,
-        log_time: u64,
-        publish_time: u64,
-    ) -> Result<(), FleetError>;
+    /// ([`echelon_mcap::scene`]); nothing when the sink has no scene.
+    fn pose(&mut self, k: u32, pose: &ScenePose, stamp: Stamp) -> Result<(), FleetError>;
 }
 
 /// The collector's files: `fleet.mcap` and `trajectory.csv` in a directory.
@@ -93,29 +98,16 @@ impl std::fmt::Debug for FileSink {
 }
 
 impl RecordSink for FileSink {
-    fn log(
-        &mut self,
-        topic: &str,
-        schema: &JsonSchema,
-        log_time: u64,
-        publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
-        let id = self.log.channel(topic, schema)?;
-        self.write(id, log_time, publish_time, data)
-    }
-
-    fn log_ros(
-        &mut self,
-        topic: &RosTopic,
-        log_time: u64,
-        publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
-        let id =
-            self.log
-                .ros2_channel(topic.topic(), &topic.schema(), topic.offered_qos_profiles())?;
-        self.write(id, log_time, publish_time, data)
+    fn log(&mut self, channel: Channel<'_>, stamp: Stamp, data: &[u8]) -> Result<(), FleetError> {
+        let id = match channel {
+            Channel::Json(topic, schema) => self.log.channel(topic, schema)?,
+            Channel::Ros(topic) => self.log.ros2_channel(
+                topic.topic(),
+                &topic.schema(),
+                topic.offered_qos_profiles(),
+            )?,
+        };
+        self.write(id, stamp, data)
     }
 
     fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError> {
@@ -146,13 +138,7 @@ impl RecordSink for FileSink {
             .map_err(FleetError::io(&path))
     }
 
-    fn pose(
-        &mut self,
-        k: u32,
-        pose: &ScenePose,
-        log_time: u64,
-        publish_time: u64,
-    ) -> Result<(), FleetError> {
+    fn pose(&mut self, k: u32, pose: &ScenePose, stamp: Stamp) -> Result<(), FleetError> {
         let Some((scene, channels, fixed_written)) = self.scene.as_mut() else {
             return Ok(());
         };
@@ -163,9 +149,9 @@ impl RecordSink for FileSink {
         }
         if !*fixed_written {
             *fixed_written = true;
-            channels.fixed(&mut self.log, scene, pose.t, log_time)?;
+            channels.fixed(&mut self.log, scene, pose.t, stamp.log_time)?;
         }
-        channels.robot(&mut self.log, scene, k, log_time, publish_time)?;
+        channels.robot(&mut self.log, scene, k, stamp.log_time, stamp.publish_time)?;
         Ok(())
     }
 }
@@ -177,15 +163,10 @@ impl FileSink {
     }
 
     /// Writes one message on channel `id` with the channel's next sequence number.
-    fn write(
-        &mut self,
-        id: u16,
-        log_time: u64,
-        publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
+    fn write(&mut self, id: u16, stamp: Stamp, data: &[u8]) -> Result<(), FleetError> {
         let seq = self.seq.entry(id).or_insert(0);
-        self.log.write(id, *seq, log_time, publish_time, data)?;
+        self.log
+            .write(id, *seq, stamp.log_time, stamp.publish_time, data)?;
         *seq = seq.wrapping_add(1);
         Ok(())
     }

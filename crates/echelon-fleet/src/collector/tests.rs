@@ -6,9 +6,9 @@ use echelon::output::TrajectoryRows;
 use echelon::sample::AgentSample;
 use echelon::stats::Summary;
 use echelon_mcap::scene::ScenePose;
-use echelon_mcap::{JsonSchema, REFERENCE_TOPIC, nanos};
+use echelon_mcap::{REFERENCE_TOPIC, nanos};
 
-use super::{Collector, CollectorReport, REJECTED_TOPIC, RecordSink};
+use super::{Channel, Collector, CollectorReport, REJECTED_TOPIC, RecordSink, Stamp};
 use crate::FleetError;
 use crate::keys::Keys;
 use crate::ros2::record::RosTopic;
@@ -24,30 +24,11 @@ struct Memory {
 }
 
 impl RecordSink for Memory {
-    fn log(
-        &mut self,
-        topic: &str,
-        _schema: &JsonSchema,
-        log_time: u64,
-        publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
-        self.logged
-            .push((topic.to_owned(), log_time, publish_time, data.to_vec()));
-        Ok(())
-    }
-
-    fn log_ros(
-        &mut self,
-        topic: &RosTopic,
-        log_time: u64,
-        publish_time: u64,
-        data: &[u8],
-    ) -> Result<(), FleetError> {
+    fn log(&mut self, channel: Channel<'_>, stamp: Stamp, data: &[u8]) -> Result<(), FleetError> {
         self.logged.push((
-            topic.topic().to_owned(),
-            log_time,
-            publish_time,
+            channel.topic().to_owned(),
+            stamp.log_time,
+            stamp.publish_time,
             data.to_vec(),
         ));
         Ok(())
@@ -68,7 +49,7 @@ impl RecordSink for Memory {
         Ok(())
     }
 
-    fn pose(&mut self, k: u32, pose: &ScenePose, _: u64, _: u64) -> Result<(), FleetError> {
+    fn pose(&mut self, k: u32, pose: &ScenePose, _: Stamp) -> Result<(), FleetError> {
         self.poses.push((k, *pose));
         Ok(())
     }

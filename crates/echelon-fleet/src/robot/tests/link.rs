@@ -6,9 +6,9 @@ use super::*;
 #[test]
 fn a_perfect_link_converges_and_the_chain_follows() {
     let s = scenario(EXTRAPOLATE);
-    let mut w = World::of(&s, &[FaultSpec::default(); 2]);
+    let mut w = Fleet::of(&s, &[FaultSpec::default(); 2]);
     w.run_until(30.0);
-    for (i, r) in w.robots.iter().enumerate() {
+    for (i, r) in w.robots().enumerate() {
         let rep = r.report();
         assert!(rep.final_error < 1e-3, "agent {}: {rep:?}", i + 1);
         assert_eq!(rep.link, "tracking");
@@ -36,7 +36,7 @@ fn velocity_bases_converge_where_the_simulator_does() {
         .replace("robot = \"agent2\"", "robot = \"base\"")
         + "\n[robots.base]\ndrive = \"velocity\"\ntau_v = 0.05\ntau_omega = 0.04\nv_max = 0.5\nomega_max = 2.0\na_max = 1.0\nalpha_max = 4.0\n";
     let s = Scenario::parse(&src, "test", None).unwrap_or_else(|e| panic!("{e}"));
-    let mut w = World::of(&s, &[FaultSpec::default(); 2]);
+    let mut w = Fleet::of(&s, &[FaultSpec::default(); 2]);
     w.run_until(30.0);
     let mut sim = s
         .build(&Overrides::default())
@@ -44,7 +44,7 @@ fn velocity_bases_converge_where_the_simulator_does() {
         .simulation();
     sim.run(&mut |_: &echelon::sim::Frame<'_>| Ok(()))
         .unwrap_or_else(|e| panic!("{e}"));
-    for (i, r) in w.robots.iter().enumerate() {
+    for (i, r) in w.robots().enumerate() {
         let rep = r.report();
         assert!(rep.final_error < 1e-3, "agent {}: {rep:?}", i + 1);
         let end = r.plant().true_state();
@@ -69,9 +69,9 @@ fn stop_policy_brings_the_robot_and_its_follower_to_rest() {
         outage: Some((12.0, 3.0)),
         ..FaultSpec::default()
     };
-    let mut w = World::of(&s, &[faults, FaultSpec::default()]);
+    let mut w = Fleet::of(&s, &[faults, FaultSpec::default()]);
     w.run_until(12.0);
-    let before = w.robots[0].last().e;
+    let before = w.robot(0).last().e;
     assert!(norm(before) < 5e-3, "{before:?}");
     w.run_until(15.0);
     // The last sample heard was sent at 11.98; the timeout is 0.5 s.
@@ -105,13 +105,13 @@ fn stop_policy_brings_the_robot_and_its_follower_to_rest() {
     }
     // Both recover.
     w.run_until(30.0);
-    let c = *w.robots[0].counters();
+    let c = *w.robot(0).counters();
     assert_eq!(c.link_losses, 1, "{c:?}");
     assert!(
         c.injected_outage >= 149 && c.injected_outage <= 151,
         "{c:?}"
     );
-    for r in &w.robots {
+    for r in w.robots() {
         assert!(r.report().final_error < 1e-3, "{:?}", r.report());
         assert_eq!(r.last().link, LinkStatus::Tracking);
         conserved(r);
@@ -125,10 +125,10 @@ fn stop_policy_brings_the_robot_and_its_follower_to_rest() {
 fn extrapolate_keeps_the_robot_on_the_true_circle_within_the_hold() {
     let s = scenario(EXTRAPOLATE);
     let reference = reference(&s);
-    let mut w = World::of(&s, &[FaultSpec::default()]);
-    w.cut = Some((12.0, 15.0));
+    let mut w = Fleet::of(&s, &[FaultSpec::default()]);
+    w.cut(12.0, 15.0);
     w.run_until(20.0);
-    let spec = w.robots[0].config().spec.clone();
+    let spec = w.robot(0).config().spec.clone();
     let during = w.states(0, 12.0, 15.0);
     assert!(during.len() >= 299, "{}", during.len());
     let mut max_e: f64 = 0.0;
@@ -148,9 +148,9 @@ fn extrapolate_keeps_the_robot_on_the_true_circle_within_the_hold() {
         max_e = max_e.max(norm(truth.law.e));
     }
     assert!(max_e < 0.01, "{max_e}");
-    assert_eq!(w.robots[0].counters().link_losses, 1);
-    assert!(w.robots[0].last().link == LinkStatus::Tracking);
-    assert!(norm(w.robots[0].last().e) < 1e-3);
+    assert_eq!(w.robot(0).counters().link_losses, 1);
+    assert!(w.robot(0).last().link == LinkStatus::Tracking);
+    assert!(norm(w.robot(0).last().e) < 1e-3);
 }
 
 /// `extrapolate`, hold 1 s, decel 0.2 m/s²: past the hold the leader motion
@@ -160,8 +160,8 @@ fn extrapolate_keeps_the_robot_on_the_true_circle_within_the_hold() {
 fn extrapolate_past_the_hold_stops_on_the_circle() {
     let s = scenario(r#"{ policy = "extrapolate", hold = 1.0, decel = 0.2 }"#);
     let reference = reference(&s);
-    let mut w = World::of(&s, &[FaultSpec::default()]);
-    w.cut = Some((12.0, 40.0));
+    let mut w = Fleet::of(&s, &[FaultSpec::default()]);
+    w.cut(12.0, 40.0);
     w.run_until(25.0);
     let ts = 11.98;
     let big_t = std::f64::consts::PI * 0.2 / (2.0 * 0.2);
@@ -195,20 +195,15 @@ fn extrapolate_past_the_hold_stops_on_the_circle() {
 #[test]
 fn a_restarted_leader_resyncs_and_the_old_sample_is_dropped() {
     let s = scenario(EXTRAPOLATE);
-    let faults = FaultSpec {
-        delay: 0.05,
-        ..FaultSpec::default()
-    };
-    let mut w = World::of(&s, &[faults]);
+    let mut w = Fleet::of(&s, &[delayed(0.05)]);
     w.run_until(10.0);
-    assert!(w.robots[0].last().t > 9.9);
+    assert!(w.robot(0).last().t > 9.9);
     // The new leader process: another source, its clock from 0.
-    w.leader = LeaderTask::new(reference(&s), 50.0, 1e9, 2);
-    w.leader_start = 10.001;
+    w.restart_leader(&s, 2, 10.001);
     w.run_until(10.3);
-    let after: Vec<Published> = w.log[0]
-        .iter()
-        .copied()
+    let after: Vec<Published> = w
+        .log(0)
+        .into_iter()
         .filter(|p| p.local > 10.0 && p.state.t < 5.0)
         .collect();
     // New timeline: fleet time restarts near 0.
@@ -230,13 +225,13 @@ fn a_restarted_leader_resyncs_and_the_old_sample_is_dropped() {
             first.state.leader.p[1] - want[1]
         ]) < 1e-3
     );
-    let c = *w.robots[0].counters();
+    let c = *w.robot(0).counters();
     assert_eq!(c.restarts, 1, "{c:?}");
     // The old leader's messages still delayed at the restart (50 ms of
     // them) were refused as stale.
     assert!((2..=3).contains(&c.stale), "{c:?}");
-    assert!(w.robots[0].is_synced());
-    conserved(&w.robots[0]);
+    assert!(w.robot(0).is_synced());
+    conserved(w.robot(0));
 }
 
 /// A chained follower whose leader robot stops publishing (its process
@@ -245,26 +240,22 @@ fn a_restarted_leader_resyncs_and_the_old_sample_is_dropped() {
 #[test]
 fn a_follower_whose_leader_robot_goes_silent_stops() {
     let s = scenario(STOP);
-    let mut w = World::of(&s, &[FaultSpec::default(); 2]);
+    let mut w = Fleet::of(&s, &[FaultSpec::default(); 2]);
     w.run_until(12.0);
-    // Robot 1's process dies: drop it, robot 2 stays (now index 0).
-    let mut follower = w.robots.remove(1);
-    assert!(follower.report().final_error < 5e-3);
-    let mut t = w.now;
-    let mut last = *follower.last();
-    while t < 16.0 {
-        t = follower.next_wake();
-        if !follower.is_due(t) {
-            t += 1e-9;
-        }
-        if let Some((_, st)) = follower.tick(t).publish {
-            last = st;
-            if st.t > 12.0 + 0.5 + 0.011 {
-                assert_eq!(st.link, LinkStatus::Stopping, "{st:?}");
-                assert_eq!(st.leader.dp, [0.0, 0.0]);
-            }
+    assert!(w.robot(1).report().final_error < 5e-3);
+    // Robot 1's process dies: it leaves the bus, robot 2 stays.
+    let died: Option<RobotTask> = w.bus.take(w.robots[0]);
+    assert!(died.is_some());
+    let mut last = *w.robot(1).last();
+    w.run_until(16.0);
+    for p in w.log(1).into_iter().filter(|p| p.local > 12.0) {
+        let st = p.state;
+        last = st;
+        if st.t > 12.0 + 0.5 + 0.011 {
+            assert_eq!(st.link, LinkStatus::Stopping, "{st:?}");
+            assert_eq!(st.leader.dp, [0.0, 0.0]);
         }
     }
     assert!(last.state.v.abs() < 0.02 && norm(last.e) < 0.02, "{last:?}");
-    assert_eq!(follower.counters().link_losses, 1);
+    assert_eq!(w.robot(1).counters().link_losses, 1);
 }

@@ -3,14 +3,19 @@
 
 use super::*;
 
+/// Robot 1 of the fast circle (`extrapolate`), to feed by hand, and the
+/// reference.
+fn robot_1() -> (Robot, Reference) {
+    let s = scenario(EXTRAPOLATE);
+    (robot(&s, 1, FaultSpec::default()), reference(&s))
+}
+
 /// Every message taken in has its delay recorded (garbage too: the
 /// delay is the transport's), unstamped ones counted apart, and the
 /// report's latency counts add up to `counters.received`.
 #[test]
 fn every_received_message_has_its_delay_recorded() {
-    let s = scenario(EXTRAPOLATE);
-    let reference = reference(&s);
-    let mut r = robot(&s, 1, FaultSpec::default());
+    let (mut r, reference) = robot_1();
     let mut buf = Vec::new();
     for (k, delay) in [Some(200_000), Some(400_000), None, Some(-3)]
         .into_iter()
@@ -35,9 +40,7 @@ fn every_received_message_has_its_delay_recorded() {
 /// sample, advanced by its age.
 #[test]
 fn stale_reordered_and_garbage_messages_are_counted_and_refused() {
-    let s = scenario(EXTRAPOLATE);
-    let reference = reference(&s);
-    let mut r = robot(&s, 1, FaultSpec::default());
+    let (mut r, reference) = robot_1();
     let mut buf = Vec::new();
     reference_message(&mut buf, 0, 0.0, &reference);
     r.on_message(&buf, 0.0);
@@ -113,9 +116,9 @@ fn injected_loss_is_seeded_and_the_formation_still_converges() {
         ..FaultSpec::default()
     };
     let run = || {
-        let mut w = World::of(&s, &[faults; 2]);
+        let mut w = Fleet::of(&s, &[faults; 2]);
         w.run_until(30.0);
-        w.robots.iter().map(Robot::report).collect::<Vec<_>>()
+        w.robots().map(Robot::report).collect::<Vec<_>>()
     };
     let (a, b) = (run(), run());
     for (ra, rb) in a.iter().zip(&b) {
@@ -136,32 +139,29 @@ fn injected_loss_is_seeded_and_the_formation_still_converges() {
 #[test]
 fn injected_delay_holds_samples_back() {
     let s = scenario(EXTRAPOLATE);
-    let faults = FaultSpec {
-        delay: 0.05,
-        ..FaultSpec::default()
-    };
-    let mut w = World::of(&s, &[faults]);
+    let mut w = Fleet::of(&s, &[delayed(0.05)]);
     w.run_until(0.2);
-    let first = w.log[0]
+    let log = w.log(0);
+    let first = log
         .iter()
         .find(|p| p.state.link == LinkStatus::Tracking)
         .unwrap_or_else(|| panic!("never tracked"));
     // Synced at 0 on the first arrival; waiting ticks come every 0.1 s,
     // so the first sample (delivered at 0.05) is first used at 0.1.
     assert!((first.state.t - 0.1).abs() < 1e-9, "{first:?}");
-    let waiting = w.log[0]
+    let waiting = log
         .iter()
         .take_while(|p| p.state.link == LinkStatus::Waiting)
         .count();
     assert_eq!(waiting, 1);
     // Messages of the last 50 ms are in flight.
     assert!(
-        (2..=3).contains(&w.robots[0].pending()),
+        (2..=3).contains(&w.robot(0).pending()),
         "{}",
-        w.robots[0].pending()
+        w.robot(0).pending()
     );
     w.run_until(30.0);
-    let r = &w.robots[0];
+    let r = &w.robot(0);
     assert!(r.report().final_error < 1e-3, "{:?}", r.report());
     assert_eq!(r.counters().link_losses, 0);
     conserved(r);

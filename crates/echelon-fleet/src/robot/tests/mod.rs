@@ -1,10 +1,15 @@
-//! The robot's behaviour on a fake clock: a [`crate::leader::Leader`] and robots exchanging encoded messages in one deterministic event loop, no network, no sleeps.
+//! The robot's behaviour on a fake clock: the leader and robots as the
+//! runtime's tasks on its in-memory bus ([`crate::runtime::bus::Bus`]),
+//! exchanging encoded messages in one deterministic event loop, no network,
+//! no sleeps; or one robot fed by hand.
 
 use super::*;
 use crate::faults::FaultSpec;
-use crate::leader::Leader as LeaderTask;
+use crate::keys::Keys;
+use crate::leader::{Leader as ReferenceLeader, LeaderTask};
 use crate::link::predict;
 use crate::plant::SimulatedPlant;
+use crate::runtime::bus::{Bus, TaskId};
 use echelon::agent::Command;
 use echelon::follow::{LeaderView, follow};
 use echelon::model::Input;
@@ -33,6 +38,14 @@ fn robot(s: &Scenario, agent: u32, faults: FaultSpec) -> Robot {
     Robot::simulated(config, 100 + agent)
 }
 
+/// Faults: every leader sample held back `delay` s.
+fn delayed(delay: f64) -> FaultSpec {
+    FaultSpec {
+        delay,
+        ..FaultSpec::default()
+    }
+}
+
 fn reference(s: &Scenario) -> Reference {
     s.build(&Overrides::default())
         .unwrap_or_else(|e| panic!("{e}"))
@@ -49,104 +62,103 @@ struct Published {
     state: RobotState,
 }
 
-/// A leader and robots on one fake clock. The leader's messages reach
-/// the robots that follow the reference `latency` later unless the link
-/// is `cut`; a robot's states reach its followers at once.
-struct World {
-    leader: LeaderTask,
-    /// Local time at which the leader's clock read 0.
-    leader_start: f64,
-    robots: Vec<Robot>,
-    latency: f64,
-    cut: Option<(f64, f64)>,
-    now: f64,
-    buf: Vec<u8>,
-    log: Vec<Vec<Published>>,
+/// A leader and robots as the tasks the fleet runtime runs, on its
+/// in-memory [`Bus`] (one fake clock, every task started at 0): the
+/// leader's messages reach the robots that follow the reference unless
+/// the link is [cut](Fleet::cut); a robot's states reach its followers at
+/// once.
+struct Fleet {
+    bus: Bus,
+    keys: Keys,
+    leader: TaskId,
+    /// Agent `i + 1`'s task.
+    robots: Vec<TaskId>,
 }
 
-impl World {
-    fn new(s: &Scenario, robots: Vec<Robot>) -> World {
-        let n = robots.len();
-        World {
-            leader: LeaderTask::new(reference(s), 50.0, 1e9, 1),
-            leader_start: 0.0,
+impl Fleet {
+    fn new(s: &Scenario, robots: Vec<Robot>) -> Fleet {
+        let keys = Keys::new("test");
+        let mut bus = Bus::new();
+        let leader = bus.add(leader_task(s, 1, &keys), 0.0);
+        let robots = robots
+            .into_iter()
+            .map(|r| bus.add(RobotTask::new(r, keys.clone()), 0.0))
+            .collect();
+        Fleet {
+            bus,
+            keys,
+            leader,
             robots,
-            latency: 0.0,
-            cut: None,
-            now: 0.0,
-            buf: Vec::new(),
-            log: vec![Vec::new(); n],
         }
     }
 
     /// Agents 1, 2, … of `s`, agent `k` with faults `faults[k - 1]`.
-    fn of(s: &Scenario, faults: &[FaultSpec]) -> World {
+    fn of(s: &Scenario, faults: &[FaultSpec]) -> Fleet {
         let robots = (1..).zip(faults).map(|(k, f)| robot(s, k, *f)).collect();
-        World::new(s, robots)
+        Fleet::new(s, robots)
     }
 
-    /// Runs until local time `end`.
+    /// Drops the leader's messages sent in `[a, b)` (bus time).
+    fn cut(&mut self, a: f64, b: f64) {
+        let (leader, key) = (self.leader, self.keys.reference());
+        self.bus.link = Box::new(move |from, k, t| {
+            (from != leader || k != key || !(a..b).contains(&t)).then_some(0.0)
+        });
+    }
+
+    /// A new leader process (`source`), its clock reading 0 at bus time
+    /// `start`, in place of the old one.
+    fn restart_leader(&mut self, s: &Scenario, source: u32, start: f64) {
+        let task = leader_task(s, source, &self.keys);
+        self.bus.replace(self.leader, task, start);
+    }
+
+    /// Runs until bus time `end`.
     fn run_until(&mut self, end: f64) {
-        loop {
-            let leader_due = self
-                .leader
-                .next_due()
-                .map_or(f64::INFINITY, |t| t + self.leader_start);
-            let mut t = self
-                .robots
-                .iter()
-                .map(Robot::next_wake)
-                .fold(leader_due, f64::min)
-                .max(self.now);
-            if t > end {
-                self.now = end;
-                return;
-            }
-            let due = leader_due <= t || self.robots.iter().any(|r| r.is_due(t));
-            if !due {
-                // next_wake − offset + offset rounded below the tick time.
-                t += 1e-12 * t.abs().max(1.0);
-            }
-            self.now = t;
-            // The leader's own time, not below its due time (rounding).
-            let leader_now = self.leader.next_due().map(|d| d.max(t - self.leader_start));
-            if leader_due <= t
-                && let Some((h, r)) = leader_now.and_then(|lt| self.leader.tick(lt))
-            {
-                let up = self.cut.is_none_or(|(a, b)| t < a || t >= b);
-                wire::encode_reference(&mut self.buf, h, &r);
-                for robot in &mut self.robots {
-                    if up && robot.config().spec.leader() == Leader::Reference {
-                        robot.on_message(&self.buf, t + self.latency);
-                    }
-                }
-            }
-            for i in 0..self.robots.len() {
-                if !self.robots[i].is_due(t) {
-                    continue;
-                }
-                let out = self.robots[i].tick(t);
-                if let Some((h, state)) = out.publish {
-                    self.log[i].push(Published { local: t, state });
-                    wire::encode_state(&mut self.buf, h, &state);
-                    for follower in &mut self.robots {
-                        if follower.config().spec.leader() == Leader::Agent(i) {
-                            follower.on_message(&self.buf, t);
-                        }
-                    }
-                }
-            }
-        }
+        self.bus.run_until(end);
     }
 
-    /// Agent `i`'s (from 0) states published with fleet time in `[a, b)`.
+    /// Agent `i + 1`'s robot.
+    fn robot(&self, i: usize) -> &Robot {
+        self.bus
+            .task::<RobotTask>(self.robots[i])
+            .unwrap_or_else(|| panic!("agent {} is not on the bus", i + 1))
+            .robot()
+    }
+
+    /// Every robot, agent 1 first.
+    fn robots(&self) -> impl Iterator<Item = &Robot> {
+        (0..self.robots.len()).map(|i| self.robot(i))
+    }
+
+    /// Agent `i + 1`'s states, in the order it published them.
+    fn log(&self, i: usize) -> Vec<Published> {
+        let key = self.keys.state(i as u32 + 1);
+        self.bus
+            .published_by(self.robots[i], &key)
+            .map(|p| match wire::decode(&p.payload) {
+                Ok(Message::State(_, state)) => Published { local: p.t, state },
+                other => panic!("not a state: {other:?}"),
+            })
+            .collect()
+    }
+
+    /// Agent `i + 1`'s states published with fleet time in `[a, b)`.
     fn states(&self, i: usize, a: f64, b: f64) -> Vec<RobotState> {
-        self.log[i]
-            .iter()
+        self.log(i)
+            .into_iter()
             .map(|p| p.state)
             .filter(|s| s.t >= a && s.t < b)
             .collect()
     }
+}
+
+/// `s`'s reference published at 50 Hz (for ever) under `source`.
+fn leader_task(s: &Scenario, source: u32, keys: &Keys) -> LeaderTask {
+    LeaderTask::new(
+        ReferenceLeader::new(reference(s), 50.0, 1e9, source),
+        keys.clone(),
+    )
 }
 
 fn norm(v: [f64; 2]) -> f64 {

@@ -10,9 +10,9 @@ use super::*;
 fn a_diverging_robot_stops_at_zero_and_says_why() {
     let src = FAST_CIRCLE.replace("[sim]", "[control]\nke = 1e12\n\n[sim]");
     let s = Scenario::parse(&src, "test", None).unwrap_or_else(|e| panic!("{e}"));
-    let mut w = World::of(&s, &[FaultSpec::default()]);
+    let mut w = Fleet::of(&s, &[FaultSpec::default()]);
     w.run_until(2.0);
-    let r = &w.robots[0];
+    let r = &w.robot(0);
     let why = r.diverged().unwrap_or_else(|| panic!("{:?}", r.report()));
     assert!(why.starts_with("agent 1 diverged at t = "), "{why}");
     assert!(
@@ -24,9 +24,9 @@ fn a_diverging_robot_stops_at_zero_and_says_why() {
         panic!("a torque robot")
     };
     assert_eq!(p.applied_input(), Input::default());
-    let last = w.log[0].last().map_or(0.0, |p| p.local);
+    let last = w.log(0).last().map_or(0.0, |p| p.local);
     w.run_until(3.0);
-    assert_eq!(w.log[0].last().map_or(0.0, |p| p.local), last);
+    assert_eq!(w.log(0).last().map_or(0.0, |p| p.local), last);
 }
 
 /// `[sim] bounds` reaches the fleet robot: a bound of 0.05 m/s stops a
@@ -37,9 +37,10 @@ fn the_scenarios_bounds_stop_the_fleet_robot() {
     let s = Scenario::parse(&src, "test", None).unwrap_or_else(|e| panic!("{e}"));
     let r = robot(&s, 1, FaultSpec::default());
     assert_eq!(r.config().bounds.speed, 0.05);
-    let mut w = World::new(&s, vec![r]);
+    let mut w = Fleet::new(&s, vec![r]);
     w.run_until(10.0);
-    let why = w.robots[0]
+    let why = w
+        .robot(0)
         .diverged()
         .unwrap_or_else(|| panic!("never stopped"));
     assert!(
@@ -182,7 +183,7 @@ fn a_driven_head_publishes_its_robots_motion_and_commands_nothing() {
     let driver = Command::Torque(Input { u1: 20.0, u2: 1.0 });
     head.plant_mut().command(driver);
     // The reference's messages are not its leader's.
-    let mut leader = LeaderTask::new(reference(&s), 50.0, 1e9, 1);
+    let mut leader = ReferenceLeader::new(reference(&s), 50.0, 1e9, 1);
     let mut buf = Vec::new();
     let mut published = Vec::new();
     let mut now = 0.0;

@@ -1,0 +1,239 @@
+//! Bad input: exit 2 with one line, nothing written; a diverging run exits 1.
+
+use super::*;
+
+const GOOD: &str = "[sim]\nduration = 1.0\ndt = 0.01\n\n[reference.line]\nspeed = 0.3\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\n\n[[agents]]\nstart = { x = -1.0, y = 0.0, theta = 0.0 }\nleader = \"reference\"\noffset = { x = 0.5, y = 0.0 }\n";
+
+/// `echelon run` refuses each scenario text naming each of its needles
+/// (files `dir/s.toml`), and creates no `out`.
+fn refuses_each<'a>(
+    dir: &Path,
+    out: &Path,
+    cases: impl IntoIterator<Item = (String, &'a [&'a str])>,
+) {
+    for (text, needles) in cases {
+        let f = scenario_file(dir, &text);
+        assert_refused(
+            &echelon(&["run", &f, "--out", out.to_str().unwrap()]),
+            needles,
+        );
+        assert!(!out.exists(), "a refused run creates no output");
+    }
+}
+
+#[test]
+fn bad_input_exits_2_with_one_line_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    let out_s = out.to_str().unwrap();
+    let good = scenario_file(dir.path(), GOOD);
+    assert!(
+        echelon(&["run", &good, "--out", out_s, "-q"])
+            .status
+            .success()
+    );
+    std::fs::remove_dir_all(&out).unwrap();
+    let cases: [(String, &[&str]); 8] = [
+        (GOOD.replace("[sim]", "[sim"), &["s.toml:1:"]),
+        (
+            GOOD.replace("dt = 0.01", "dt = \"small\""),
+            &["s.toml:3:6: sim.dt: invalid type"],
+        ),
+        (
+            GOOD.replace("leader", "leadr"),
+            &["s.toml:11:1: agents[1].leadr: unknown field"],
+        ),
+        (
+            GOOD.replace("x = 0.5", "x = -0.5"),
+            &["s.toml:12:16: agents[1].offset.x", "L_X = L_Xoff + L"],
+        ),
+        (
+            GOOD.to_owned() + "[control]\nl = -0.05\n",
+            &["s.toml:14:5: control.l", "> 0"],
+        ),
+        (
+            GOOD.replace("theta = 0.0 }\nleader", "theta = nan }\nleader"),
+            &["agents[1].start.theta", "finite"],
+        ),
+        (
+            GOOD.replace(
+                "[[agents]]",
+                "[robots.r]\npreset = \"agent2\"\nmass = -1.0\n\n[[agents]]\nrobot = \"r\"",
+            ),
+            &["robots.r.mass", "must be > 0"],
+        ),
+        (
+            GOOD.replace("dt = 0.01", "dt = 0.01\nbounds = { speed = 0.0 }"),
+            &["s.toml:4:", "sim.bounds.speed", "> 0"],
+        ),
+    ];
+    refuses_each(dir.path(), &out, cases);
+    let cycle = GOOD.replace("leader = \"reference\"", "leader = 2")
+        + "\n[[agents]]\nstart = { x = -2.0, y = 0.0, theta = 0.0 }\nleader = 1\noffset = { x = 0.5, y = 0.0 }\n";
+    assert_refused(
+        &echelon(&["run", &scenario_file(dir.path(), &cycle), "--out", out_s]),
+        &["agents[1].leader", "agents 1 → 2 → 1 form a cycle"],
+    );
+    assert_refused(
+        &echelon(&["run", "no-such-scenario"]),
+        &["no built-in scenario"],
+    );
+    assert_refused(
+        &echelon(&["run", "/no/such/file.toml"]),
+        &["/no/such/file.toml: cannot read"],
+    );
+    assert_refused(
+        &echelon(&["show", "nope"]),
+        &["no built-in scenario `nope`"],
+    );
+    assert!(!out.exists());
+}
+
+/// Velocity bases (issue 11): a torque-only field on one, or the kinematic
+/// law on a torque-driven robot, is refused at its field with exit 2.
+/// The divergence guard (issue 20): a run whose state blows up stops at once
+/// with one line naming the agent, the time and the quantity, exits 1 (not
+/// 2: the input was valid), keeps what it wrote up to then, and its summary
+/// says it diverged. The same in the torque crossing of issue 20, which used
+/// to blow up silently and now converges (exit 0).
+#[test]
+fn a_diverging_run_exits_1_naming_agent_time_and_quantity() {
+    let dir = tempfile::tempdir().unwrap();
+    let source = echelon::scenario::Scenario::builtin("nonfeasible")
+        .unwrap()
+        .source()
+        .replace("ke = 1.5", "ke = 1e12");
+    let file = scenario_file(dir.path(), &source);
+    let out = dir.path().join("out");
+    let o = run(&file, &out, &["--mcap"]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "stderr: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    // The scenario's warnings about the gain (a line each), then one error line.
+    let errors: Vec<&str> = err
+        .lines()
+        .filter(|l| !l.starts_with("warning: "))
+        .collect();
+    assert_eq!(errors.len(), 1, "one error line: {err}");
+    for needle in [
+        "error: ",
+        "agent 1 (robot) diverged at t = ",
+        "left its bound 100 m/s",
+    ] {
+        assert!(errors[0].contains(needle), "`{needle}` not in: {err}");
+    }
+    assert!(
+        err.contains("control.ke"),
+        "the gain is warned about: {err}"
+    );
+    assert!(stdout(&o).is_empty(), "no summary table: {}", stdout(&o));
+    let s = summary(&out);
+    assert_eq!(s["diverged"]["agent"], 1);
+    assert_eq!(s["diverged"]["quantity"], "|v|");
+    assert_eq!(s["diverged"]["bound"], 100.0);
+    for f in [
+        "trajectory.csv",
+        "reference.csv",
+        "scenario.toml",
+        "run.mcap",
+    ] {
+        assert!(out.join(f).exists(), "{f} written");
+    }
+    // Every row written is within bounds.
+    let rows = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
+    for line in rows.lines().skip(1) {
+        let v: f64 = line.split(',').nth(5).unwrap().parse().unwrap();
+        assert!(v.abs() <= 100.0, "{line}");
+    }
+}
+
+#[test]
+fn bad_velocity_base_input_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    let out_s = out.to_str().unwrap();
+    let velocity = |fields: &str| {
+        GOOD.replace(
+            "[[agents]]",
+            &format!("[robots.b]\ndrive = \"velocity\"\n{fields}\n[[agents]]\nrobot = \"b\""),
+        )
+    };
+    let cases: [(String, &[&str]); 3] = [
+        (
+            velocity("mass = 1.0\n"),
+            &["s.toml:11:8: robots.b.mass", "torque-driven robot's field"],
+        ),
+        (
+            velocity("v_max = 0.0\n"),
+            &["robots.b.v_max", "must be > 0"],
+        ),
+        (
+            GOOD.to_owned() + "[control]\nlaw = \"kinematic\"\n",
+            &["s.toml:14:7: control.law", "torque-driven"],
+        ),
+    ];
+    refuses_each(dir.path(), &out, cases);
+    let f = scenario_file(dir.path(), &velocity(""));
+    assert!(echelon(&["run", &f, "--out", out_s, "-q"]).status.success());
+}
+
+/// Safety filter (issue 15): impossible `[safety]` values and a robot that
+/// starts inside an obstacle are refused at their field with exit 2; a good
+/// one writes `safety.csv` and a `safety` block in `summary.json`.
+#[test]
+fn bad_safety_input_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    let out_s = out.to_str().unwrap();
+    let safety = |table: &str| format!("{GOOD}[safety]\n{table}");
+    let cases: [(String, &[&str]); 4] = [
+        (
+            safety("radius = 0.0\n"),
+            &["s.toml:14:10: safety.radius", "> 0"],
+        ),
+        (
+            safety("radius = 0.2\ngain = -1.0\n"),
+            &["s.toml:15:8: safety.gain"],
+        ),
+        (
+            safety("radius = 0.2\nobstacles = [{ x = 3.0, y = 0.0, r = 0.0 }]\n"),
+            &["s.toml:15:", "safety.obstacles[1].r", "> 0"],
+        ),
+        (
+            safety("radius = 0.2\nobstacles = [{ x = -0.95, y = 0.0, r = 0.1 }]\n"),
+            &["s.toml:10:", "agents[1].start", "obstacle 1"],
+        ),
+    ];
+    refuses_each(dir.path(), &out, cases);
+    let f = scenario_file(dir.path(), &safety("radius = 0.2\n"));
+    assert!(echelon(&["run", &f, "--out", out_s, "-q"]).status.success());
+    assert!(out.join("safety.csv").exists());
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(summary.contains("\"safety\""), "{summary}");
+}
+
+#[test]
+fn bad_flags_exit_2() {
+    for args in [
+        &["run", "nonfeasible", "--dt", "-1"][..],
+        &["run", "nonfeasible", "--dt", "0"],
+        &["run", "nonfeasible", "--duration", "nan"],
+        &["run", "nonfeasible", "--law", "best"],
+        &["frobnicate"],
+    ] {
+        assert_refused(&echelon(args), &["(see --help)"]);
+    }
+    assert_refused(
+        &echelon(&["run", "nonfeasible", "--law", "best"]),
+        &["possible values: paper, complete"],
+    );
+    let o = echelon(&[
+        "run",
+        "nonfeasible",
+        "--dt",
+        "0.003",
+        "--out",
+        "/nonexistent/never",
+    ]);
+    assert_refused(&o, &["log.dt", "--log-dt"]);
+}

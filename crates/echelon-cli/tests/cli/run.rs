@@ -1,0 +1,198 @@
+//! `echelon run` and `echelon plot`: the files written, overrides, odometry,
+//! figures, and `lycomp`.
+
+use super::*;
+
+#[test]
+fn run_writes_the_documented_files_and_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = run("nonfeasible", &out, &[]);
+    let text = succeeded(&o);
+    assert!(
+        text.contains("nonfeasible: 1 agent, 10 s at dt = 0.001 s (10000 steps)"),
+        "{text}"
+    );
+    assert!(
+        text.contains("robot") && text.contains("reference"),
+        "{text}"
+    );
+    let csv = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some("t,agent,x,y,theta,v,omega,ex,ey,zx,zy,u1,u2,tau_r,tau_l")
+    );
+    assert_eq!(
+        lines.next().unwrap().split(',').take(5).collect::<Vec<_>>(),
+        ["0", "1", "-4.0", "0.4", "-1.5707963267948966"]
+    );
+    assert_eq!(csv.lines().count(), 1 + 1001, "every 10 ms from 0 to 10 s");
+    let summary: serde_json::Value = summary(&out);
+    let agent = &summary["agents"][0];
+    for key in [
+        "final_pose",
+        "final_error",
+        "rms_error",
+        "peak_torque",
+        "settle_time",
+    ] {
+        assert!(agent.get(key).is_some(), "summary has {key}: {summary}");
+    }
+    assert!(agent["final_error"].as_f64().unwrap() < 1e-3);
+    assert!(agent["settle_time"].as_f64().unwrap() < 10.0);
+}
+
+#[test]
+fn overrides_change_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o");
+    let o = run(
+        "circle-pentagon",
+        &out,
+        &[
+            "--duration",
+            "2",
+            "--dt",
+            "0.002",
+            "--log-dt",
+            "0",
+            "--law",
+            "complete",
+            "-q",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary: serde_json::Value = summary(&out);
+    assert_eq!(summary["steps"], 1000);
+    assert_eq!(summary["dt"], 0.002);
+    let rows = std::fs::read_to_string(out.join("trajectory.csv"))
+        .unwrap()
+        .lines()
+        .count()
+        - 1;
+    assert_eq!(rows, 1001 * 4, "--log-dt 0 logs every step of every agent");
+}
+
+#[test]
+fn settle_time_is_null_when_never_within_a_centimetre() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("short");
+    let o = run("lemniscate-wedge", &out, &["--duration", "0.5", "-q"]);
+    assert!(o.status.success());
+    let summary: serde_json::Value = summary(&out);
+    assert!(summary["agents"][1]["settle_time"].is_null(), "{summary}");
+}
+
+#[test]
+fn run_writes_odometry_csv_when_agents_dead_reckon() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = scenario_file(dir.path(), STUDY);
+    let out = dir.path().join("r");
+    let o = run(&file, &out, &["--seed", "3"]);
+    assert!(succeeded(&o).contains("odometry.csv"));
+    let odo = std::fs::read_to_string(out.join("odometry.csv")).unwrap();
+    assert_eq!(
+        odo.lines().next(),
+        Some("t,agent,x_hat,y_hat,theta_hat,ex_hat,ey_hat,zx_hat,zy_hat,fix")
+    );
+    assert_eq!(
+        odo.lines().count(),
+        std::fs::read_to_string(out.join("trajectory.csv"))
+            .unwrap()
+            .lines()
+            .count()
+    );
+    // Without odometry no odometry.csv is written.
+    let plain = dir.path().join("p");
+    assert!(
+        run("nonfeasible", &plain, &["--duration", "1", "-q"])
+            .status
+            .success()
+    );
+    assert!(!plain.join("odometry.csv").exists());
+}
+
+#[test]
+fn run_plot_writes_figures_and_report_and_plot_redraws_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cp");
+    let o = run("circle-pentagon", &out, &["--duration", "5", "--plot"]);
+    let text = succeeded(&o);
+    for f in [
+        "trajectory.csv",
+        "reference.csv",
+        "summary.json",
+        "scenario.toml",
+        "paths.svg",
+        "paths.png",
+        "errors.svg",
+        "errors.png",
+        "signals.svg",
+        "signals.png",
+        "report.html",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+        assert!(text.contains(f), "stdout does not name {f}: {text}");
+    }
+    // `plot` works from the directory alone, with the same result.
+    let before = std::fs::read(out.join("report.html")).unwrap();
+    std::fs::remove_file(out.join("paths.svg")).unwrap();
+    let o = echelon(&["plot", out.to_str().unwrap(), "--quiet"]);
+    assert!(succeeded(&o).is_empty());
+    assert!(out.join("paths.svg").is_file());
+    assert!(std::fs::read(out.join("report.html")).unwrap() == before);
+    // The recorded scenario names the overrides of the run.
+    let scenario = std::fs::read_to_string(out.join("scenario.toml")).unwrap();
+    assert!(scenario.contains("# overrides: --duration 5"), "{scenario}");
+}
+
+#[test]
+fn plot_refuses_a_directory_that_is_not_a_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = echelon(&["plot", dir.path().to_str().unwrap()]);
+    assert_refused(&o, &["summary.json"]);
+    std::fs::write(dir.path().join("summary.json"), "{").unwrap();
+    let o = echelon(&["plot", dir.path().to_str().unwrap()]);
+    assert_refused(&o, &["summary.json", "EOF"]);
+    assert!(!dir.path().join("report.html").exists());
+}
+
+#[test]
+fn lycomp_prints_the_largest_gap_and_writes_fig_5() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ly");
+    let o = echelon(&["lycomp", "--lxoff", "0.5", "--out", out.to_str().unwrap()]);
+    let text = succeeded(&o);
+    // docs/control-law.md: the largest gap is 0.23 m, near |R_C| = 0.7.
+    assert!(
+        text.contains("largest gap to eq. 5: 0.230 m at |R_C| = 0.705 m"),
+        "{text}"
+    );
+    assert!(!text.contains("least squares"));
+    assert!(out.join("lycomp.svg").is_file() && out.join("lycomp.png").is_file());
+    let svg = std::fs::read_to_string(out.join("lycomp.svg")).unwrap();
+    assert!(svg.contains("R_C [m]") && svg.contains("L_Ycomp [m]"));
+
+    let o = echelon(&[
+        "lycomp",
+        "--fit",
+        "--lxoff",
+        "0.5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let text = succeeded(&o);
+    assert!(
+        text.contains("eq. 6, least squares   G = 0.213724  δ = 0.450806  ε = 0.702275  largest gap to eq. 5: 0.122 m"),
+        "{text}"
+    );
+    // Outside the paper's range: a warning and the refit.
+    let o = echelon(&["lycomp", "--lxoff", "2", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success());
+    assert!(stderr(&o).starts_with("warning: the paper's polynomials"));
+    assert!(stdout(&o).contains("least squares"));
+    for bad in ["0", "-1", "nan", "x"] {
+        assert_refused(&echelon(&["lycomp", "--lxoff", bad]), &["--lxoff"]);
+    }
+}

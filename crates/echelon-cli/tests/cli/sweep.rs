@@ -1,0 +1,142 @@
+//! `echelon sweep` and `echelon umbmark`.
+
+use super::*;
+
+#[test]
+fn sweep_writes_one_row_per_run_the_same_on_any_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = scenario_file(dir.path(), STUDY);
+    let run = |threads: &str, out: &str| {
+        let out = dir.path().join(out);
+        let o = echelon(&[
+            "sweep",
+            &file,
+            "--zeta",
+            "1e-5,2e-5",
+            "--fix-every",
+            "0,100,500",
+            "--slip",
+            "0,1e-6",
+            "--seeds",
+            "2",
+            "--threads",
+            threads,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        (
+            stdout(&o),
+            std::fs::read_to_string(out.join("sweep.csv")).unwrap(),
+        )
+    };
+    let (text, one) = run("1", "a");
+    for f in ["drift.csv", "sweep.svg", "sweep.png"] {
+        assert!(dir.path().join("a").join(f).exists(), "{f}");
+    }
+    let (_, two) = run("2", "b");
+    assert_eq!(one, two, "sweep.csv depends on the thread count");
+    let mut lines = one.lines();
+    assert_eq!(lines.next().unwrap(), echelon::sweep::SWEEP_HEADER);
+    assert_eq!(lines.count(), 2 * 3 * 2 * 2, "ζ × N × slip × seeds");
+    assert!(text.contains("24 runs on 1 threads"), "{text}");
+    // Rows under Theorem 2's assumptions carry the bound, and respect it.
+    for row in one.lines().skip(1) {
+        let cells: Vec<&str> = row.split(',').collect();
+        let (slip, n, ratio) = (cells[4], cells[5], cells[14]);
+        if slip == "0.0" && n != "0" {
+            assert!(ratio.parse::<f64>().unwrap() < 1.0, "{row}");
+        } else {
+            assert!(ratio.is_empty(), "no bound outside the theorem: {row}");
+        }
+    }
+    assert_refused(&echelon(&["sweep", &file, "--gamma", "1"]), &["gamma"]);
+    assert_refused(&echelon(&["sweep", &file, "--ed", "0"]), &["--ed"]);
+}
+
+#[test]
+fn a_velocity_sweep_fills_the_bound_columns_with_the_kinematic_form() {
+    // The ideal velocity bases of circle-pentagon-velocity under the kinematic
+    // law: z_bound = √2 K_e N ζ, e_bound = √2 N ζ / γ, ratio ‖e‖/e_bound.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("v");
+    let o = echelon(&[
+        "sweep",
+        "circle-pentagon-velocity",
+        "--zeta-model",
+        "worst-case",
+        "--fix-every",
+        "0,100",
+        "--seeds",
+        "1",
+        "--duration",
+        "14",
+        "--transient",
+        "10",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("‖e‖/e bound"), "{}", stdout(&o));
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 2);
+    assert!(rows[0][13].is_empty(), "no fixes, no bound");
+    let num = |c: &str| c.parse::<f64>().unwrap();
+    let r = &rows[1];
+    let (e_max, z_bound, ratio, e_bound) = (num(r[10]), num(r[13]), num(r[14]), num(r[15]));
+    let sqrt2 = std::f64::consts::SQRT_2;
+    assert!((z_bound - sqrt2 * 1.5 * 100.0 * 1e-5).abs() < 1e-15);
+    assert!((e_bound - sqrt2 * 100.0 * 1e-5 / 0.99).abs() < 1e-15);
+    assert!(
+        (ratio - e_max / e_bound).abs() < 1e-12 && ratio < 1.0,
+        "{r:?}"
+    );
+}
+
+#[test]
+fn umbmark_estimates_and_writes_its_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("u");
+    let o = echelon(&[
+        "umbmark",
+        "--ed",
+        "1.004",
+        "--eb",
+        "1.015",
+        "--slip",
+        "1e-7",
+        "--seed",
+        "2",
+        "--json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let c = json(&o);
+    let ed = c["refined"]["ed"].as_f64().unwrap();
+    let eb = c["refined"]["eb"].as_f64().unwrap();
+    assert!(
+        (ed - 1.004).abs() < 0.1 * 0.004 && (eb - 1.015).abs() < 0.1 * 0.015,
+        "{c}"
+    );
+    let csv = std::fs::read_to_string(out.join("umbmark.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 10);
+    assert!(out.join("calibration.json").exists());
+    let text = stdout(&echelon(&["umbmark", "--ed", "1.004", "--eb", "1.015"]));
+    assert!(
+        text.contains("Borenstein") && text.contains("corrections: left wheel diameter ×"),
+        "{text}"
+    );
+    assert_refused(
+        &echelon(&["umbmark", "--robot", "agent9"]),
+        &["unknown robot"],
+    );
+    assert_refused(
+        &echelon(&["umbmark", "--from-log", "/no/such/run"]),
+        &["/no/such/run"],
+    );
+}

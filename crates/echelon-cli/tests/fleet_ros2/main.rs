@@ -1,0 +1,59 @@
+//! The fleet driving ROS 2 bases over rmw_zenoh, as processes:
+//!
+//! - `fleet up --ros2`: leader, robots, simulated ROS 2 bases and collector;
+//!   the robots end where the simulator ends;
+//! - `fleet up --ros2 --real`: the same on bases each behind its own
+//!   router, as real robots are, and its refusals;
+//! - a robot whose base dies and whose odometry topic then carries garbage
+//!   counts and refuses it and commands zero; SIGTERM leaves a zero
+//!   `cmd_vel` as the last message on its key;
+//! - a robot process driving an independent ROS 2 base written in Python
+//!   (eclipse-zenoh, rclpy serialization: `scripts/ros2/fake_base.py`)
+//!   converges to its slot.
+
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+use zenoh::Wait;
+
+use echelon_ros2::keys::topic_key;
+use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST, Time, TwistStamped};
+
+#[path = "../common/mod.rs"]
+mod common;
+mod excite;
+mod python_base;
+mod real;
+mod refusals;
+mod up;
+
+use common::{EXE, args, check, echelon_ok, f, mesh, ports, spawn};
+const SCENARIO: &str = "experiment-circle-velocity";
+
+/// Agent 1's start pose in [`SCENARIO`], world `[x, y, θ]`.
+const START: [f64; 3] = [0.0, -0.6, std::f64::consts::FRAC_PI_2];
+
+/// A robot's ROS 2 counters after a run: it sent over 1000 commands, took
+/// over 500 odometry samples and refused none.
+fn drove_cleanly(ros: &Value) {
+    assert!(
+        f(ros, &["cmd_sent"]) > 1000.0 && f(ros, &["odom_accepted"]) > 500.0,
+        "{ros}"
+    );
+    for k in [
+        "odom_malformed",
+        "odom_non_finite",
+        "odom_wrong_type",
+        "odom_wrong_frames",
+    ] {
+        assert_eq!(f(ros, &[k]), 0.0, "{k}: {ros}");
+    }
+}
+
+/// What the test session heard on robot 1's `cmd_vel`: `(v, ω)` in order.
+type Heard = Arc<Mutex<Vec<(f64, f64)>>>;

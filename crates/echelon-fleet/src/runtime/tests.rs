@@ -7,8 +7,10 @@ use std::time::Duration;
 use zenoh::Wait;
 
 use super::*;
+use crate::keys::Keys;
 use crate::up::free_ports;
 
+const FLEET: &str = "probe";
 const INPUT: &str = "echelon/probe/in";
 const OUTPUT: &str = "echelon/probe/out";
 
@@ -46,6 +48,16 @@ impl Task for Probe {
 
     fn outputs(&self) -> Vec<String> {
         vec![OUTPUT.to_owned()]
+    }
+
+    /// The feeder: its subscription is declared before its token, so once
+    /// the token is seen every state published reaches it.
+    fn wait_for(&self) -> Option<WaitFor> {
+        Some(WaitFor {
+            keys: Keys::new(FLEET),
+            names: vec!["feeder".to_owned()],
+            timeout: Duration::from_secs(30),
+        })
     }
 
     fn on_input(&mut self, _input: usize, _sample: &Sample<'_>) -> Result<(), FleetError> {
@@ -103,6 +115,11 @@ fn run_probe(probe: Probe, feed: Option<Duration>) -> (Probe, ThreadId, usize) {
     .unwrap_or_else(|e| panic!("{e}"));
     let received = feeder
         .declare_subscriber(OUTPUT)
+        .wait()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let _token = feeder
+        .liveliness()
+        .declare_token(Keys::new(FLEET).alive("feeder"))
         .wait()
         .unwrap_or_else(|e| panic!("{e}"));
     while !runner.is_finished() {

@@ -236,7 +236,12 @@ fn on_worker<T: Task + Send + 'static>(
     let back = loop {
         match rx.recv_timeout(WATCH) {
             Ok(back) => break back,
-            Err(mpsc::RecvTimeoutError::Disconnected) => break Back::Stop,
+            // The ticker ended without a word: the task panicked there.
+            Err(mpsc::RecvTimeoutError::Disconnected) => {
+                break Back::Ended(Err(FleetError::Config(
+                    "the task panicked on Zenoh's thread".into(),
+                )));
+            }
             Err(mpsc::RecvTimeoutError::Timeout) => {
                 if stop.is_raised() {
                     break Back::Stop;
@@ -253,8 +258,13 @@ fn on_worker<T: Task + Send + 'static>(
             }
         }
     };
-    // Taken back: the ticker finds nothing at its next wake and ends.
-    let engine = shared.lock().ok().and_then(|mut e| e.take());
+    // Taken back (even from a tick that panicked: its last words, zero
+    // commanded, are still said): the ticker finds nothing at its next
+    // wake and ends.
+    let engine = shared
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .take();
     match engine {
         Some(engine) => (back, engine),
         None => unreachable!("only the calling thread takes the task"),

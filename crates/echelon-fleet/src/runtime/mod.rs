@@ -7,8 +7,13 @@
 //! and liveliness tokens, wait for whom it waits for, then sleep until its
 //! next wake (or, for a task that [wakes on input](Task::wakes_on_input),
 //! until a sample arrives), hand it what arrived, tick it, publish what it
-//! says; on a stop request, its end or an error: stop it, close the
+//! says (on Zenoh's own thread once one of its samples arrived there: see
+//! `drive.rs`); on a stop request, its end or an error: stop it, close the
 //! session, take its report.
+//!
+//! By job: `inputs.rs` (what arrives, queued with counted drops),
+//! `outputs.rs` (what it publishes), `presence.rs` (latches, liveliness),
+//! `drive.rs` (where and when it ticks).
 
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};

@@ -58,6 +58,9 @@ pub(super) struct Engine<T> {
     pub(super) answer: Option<Arc<Mutex<Option<Vec<u8>>>>>,
     /// Ticks in a row that moved its next wake by less than [`COARSE`].
     pub(super) fine: u32,
+    /// Whether the last tick that moved its next wake moved it by
+    /// [`COARSE`] or more (none yet: `false`).
+    pub(super) coarse: bool,
 }
 
 impl<T: Task> Engine<T> {
@@ -108,10 +111,8 @@ impl<T: Task> Engine<T> {
         let flow = self.task.tick(self.clock.now(), &mut self.out)?;
         let after = self.task.next_wake();
         if after > before {
-            self.fine = match self.clock.real(after - before) < COARSE {
-                true => self.fine + 1,
-                false => 0,
-            };
+            self.coarse = self.clock.real(after - before) >= COARSE;
+            self.fine = if self.coarse { 0 } else { self.fine + 1 };
         }
         self.update();
         Ok(flow)
@@ -162,7 +163,7 @@ pub(super) fn drive<T: Task + Send + 'static>(
     while !stop.is_raised() {
         if hand_over.is_some_and(|at| Instant::now() >= at)
             && let Some(handle) = worker.handle()
-            && engine.fine == 0
+            && engine.coarse
         {
             let (back, e) = on_worker(engine, handle, stop);
             engine = e;

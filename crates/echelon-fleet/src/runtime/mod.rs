@@ -233,6 +233,7 @@ pub fn run_split<T: Task + Send + 'static, G>(
         told: 0,
         answer: latching.is_some().then_some(answer),
         fine: 0,
+        coarse: false,
     };
     engine.update();
     let ran = early.into_iter().try_for_each(|a| engine.hand(a));

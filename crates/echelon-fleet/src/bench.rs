@@ -94,6 +94,8 @@ pub struct BenchRow {
     pub stale: u64,
     /// Link losses, all robots.
     pub link_losses: u64,
+    /// Samples the robots dropped, their input queues full, all robots.
+    pub robots_dropped: u64,
     /// Largest final ‖e‖ of the robots, m.
     pub final_max_error: f64,
     /// Robots whose final ‖e‖ is below 1 cm.
@@ -217,6 +219,7 @@ pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
         collector_p99: up.latency.collector.p99,
         stale: up.robots.iter().map(|r| r.counters.stale).sum(),
         link_losses: up.robots.iter().map(|r| r.counters.link_losses).sum(),
+        robots_dropped: up.robots_dropped(),
         final_max_error: final_errors.iter().copied().fold(0.0, f64::max),
         converged: final_errors.iter().filter(|&&e| e < 0.01).count(),
     }
@@ -225,17 +228,17 @@ pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
 /// The table in Markdown (one line per size, then the machine).
 pub fn markdown(report: &BenchReport) -> String {
     let mut s = String::from(
-        "| N | startup s | CPU/robot s per 60 s | max | router CPU s | µs/msg | collector CPU s | µs/msg | dropped | RSS/robot MiB | msg/s | latency p50 ms | p99 ms | max ms | stale | link losses | final max ‖e‖ m | converged |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| N | startup s | CPU/robot s per 60 s | max | router CPU s | µs/msg | collector CPU s | µs/msg | dropped | RSS/robot MiB | msg/s | latency p50 ms | p99 ms | max ms | stale | link losses | robot drops | final max ‖e‖ m | converged |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in &report.rows {
         if let Some(e) = &r.error {
-            let _ = writeln!(s, "| {} | failed: {} |||||||||||||||||", r.robots, e);
+            let _ = writeln!(s, "| {} | failed: {} ||||||||||||||||||", r.robots, e);
             continue;
         }
         let _ = writeln!(
             s,
-            "| {} | {} | {:.3} | {:.3} | {:.2} | {:.1} | {:.2} | {:.1} | {} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {:.2e} | {}/{} |",
+            "| {} | {} | {:.3} | {:.3} | {:.2} | {:.1} | {:.2} | {:.1} | {} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {:.2e} | {}/{} |",
             r.robots,
             r.startup.map_or("—".to_owned(), |v| format!("{v:.2}")),
             r.cpu_per_robot_per_min,
@@ -252,6 +255,7 @@ pub fn markdown(report: &BenchReport) -> String {
             r.latency_max * 1e3,
             r.stale,
             r.link_losses,
+            r.robots_dropped,
             r.final_max_error,
             r.converged,
             r.robots

@@ -288,6 +288,24 @@ pub(crate) fn publish(
         .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))
 }
 
+/// Publishes `payload` on `publisher`: without an attachment stamped as
+/// [`publish`] does, with one unstamped (as rmw_zenoh does).
+pub(crate) fn send(
+    session: &Session,
+    publisher: &zenoh::pubsub::Publisher<'_>,
+    payload: &[u8],
+    attachment: Option<&[u8]>,
+) -> Result<(), FleetError> {
+    match attachment {
+        None => publish(session, publisher, payload),
+        Some(attachment) => publisher
+            .put(payload.to_vec())
+            .attachment(attachment.to_vec())
+            .wait()
+            .map_err(|e| FleetError::Zenoh(format!("publishing: {e}"))),
+    }
+}
+
 /// Puts `payload` on `key` (a non-declared publication, e.g. a robot's
 /// stats), stamped like [`publish`]; errors are ignored (best effort).
 pub(crate) fn put_stamped(session: &Session, key: &str, payload: impl Into<ZBytes>) {

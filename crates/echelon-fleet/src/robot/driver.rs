@@ -7,7 +7,7 @@ use crate::ros2::drift::Drift;
 use crate::ros2::drive::Ros2Drive;
 use crate::ros2::endpoint::{OwnedCmdSink, Ros2Node};
 use crate::ros2::fixes;
-use crate::runtime;
+use crate::runtime::{self, Task};
 use crate::{FleetError, StopFlag};
 
 use super::{Robot, RobotConfig, RobotReport, RobotTask};
@@ -114,9 +114,9 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         clock,
         stop,
     )?;
-    let robot = task.into_robot();
+    let ros2 = Some(*task.robot().plant().counters());
     Ok(RobotReport {
-        ros2: Some(*robot.plant().counters()),
-        ..robot.report()
+        ros2,
+        ..task.report()?
     })
 }

@@ -432,6 +432,7 @@ impl<P: Plant> Robot<P> {
             safety: self.safety_counts(),
             fixes: self.plant.fixes(self.last.t),
             commands: self.latch.counts(),
+            dropped: 0,
         }
     }
 

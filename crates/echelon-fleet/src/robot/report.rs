@@ -59,6 +59,9 @@ pub struct RobotReport {
     pub fixes: Option<FixReport>,
     /// What the fleet commands (`fleet stop`, `fleet resume`) did.
     pub commands: CommandCounts,
+    /// Samples dropped before it took them: more than its input queue
+    /// holds ([`crate::runtime::DEFAULT_QUEUE`]) waited for one tick.
+    pub dropped: u64,
 }
 
 /// What a robot's safety filter did over its run (`docs/safety.md`, "In the

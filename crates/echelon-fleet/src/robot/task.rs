@@ -38,6 +38,8 @@ pub struct RobotTask<P: Plant = SimulatedDrive> {
     plant: Vec<(f64, usize, String, Vec<u8>)>,
     buf: Vec<u8>,
     failed: bool,
+    /// Samples dropped before it took them (the runtime's count).
+    dropped: u64,
 }
 
 impl<P: Plant> RobotTask<P> {
@@ -52,6 +54,7 @@ impl<P: Plant> RobotTask<P> {
             plant: Vec::new(),
             buf: Vec::with_capacity(wire::STATE_LEN),
             failed: false,
+            dropped: 0,
         }
     }
 
@@ -163,6 +166,10 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         Ok(())
     }
 
+    fn on_dropped(&mut self, total: u64) {
+        self.dropped = total;
+    }
+
     fn next_wake(&self) -> f64 {
         self.robot.next_wake()
     }
@@ -215,8 +222,12 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         Ok(())
     }
 
+    /// The robot's report, with the samples the runtime dropped.
     fn report(self) -> Result<RobotReport, FleetError> {
-        Ok(self.robot.report())
+        Ok(RobotReport {
+            dropped: self.dropped,
+            ..self.robot.report()
+        })
     }
 }
 
@@ -256,6 +267,18 @@ mod tests {
                 _ => None,
             })
             .collect()
+    }
+
+    /// Samples the runtime dropped (its queue full) are in the robot's
+    /// report, as the runtime's running total says.
+    #[test]
+    fn the_runtimes_drops_are_in_the_report() {
+        let mut task = chain_robot(1, &Keys::new("lab"));
+        assert_eq!(task.robot().report().dropped, 0);
+        task.on_dropped(3);
+        task.on_dropped(7);
+        let rep = task.report().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(rep.dropped, 7);
     }
 
     /// The leader and a chain of two robots, the tasks the runtime runs,

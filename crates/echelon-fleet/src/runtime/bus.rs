@@ -154,10 +154,7 @@ impl Outputs for Sent {
 
 impl Sent {
     fn key(&self, output: usize) -> Result<String, FleetError> {
-        self.outputs
-            .get(output)
-            .cloned()
-            .ok_or_else(|| FleetError::Zenoh(format!("no output {output}")))
+        super::declared(&self.outputs, output).cloned()
     }
 }
 

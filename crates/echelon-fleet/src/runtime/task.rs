@@ -71,6 +71,14 @@ pub trait Outputs {
     fn put(&mut self, key: &str, payload: &[u8]);
 }
 
+/// Output number `output` of `outputs` (a task's, as [`Task::outputs`]
+/// orders them: keys, publishers), or an error naming it.
+pub(crate) fn declared<T>(outputs: &[T], output: usize) -> Result<&T, FleetError> {
+    outputs
+        .get(output)
+        .ok_or_else(|| FleetError::Zenoh(format!("no output {output}")))
+}
+
 /// Liveliness names to wait for before a task's clock starts.
 #[derive(Debug, Clone)]
 pub struct WaitFor {

@@ -67,6 +67,14 @@ pub struct UpReport {
     pub routers: Vec<RouterReport>,
 }
 
+impl UpReport {
+    /// Samples the robots dropped before taking them, their input queues
+    /// full (each robot's `dropped`), summed.
+    pub fn robots_dropped(&self) -> u64 {
+        self.robots.iter().map(|r| r.dropped).sum()
+    }
+}
+
 /// CPU and peak memory of every process of `fleet up` ([`crate::cost`]).
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct UpCost {

@@ -240,6 +240,12 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             col.dropped
         )?;
     }
+    let robots_dropped = report.robots_dropped();
+    if robots_dropped > 0 {
+        outln!(
+            "  robots: {robots_dropped} samples dropped (input queue full; each robot's `dropped`)"
+        )?;
+    }
     let lat = |l: &LatencyReport| {
         format!(
             "{} samples, p50 {:.3} ms, p95 {:.3} ms, p99 {:.3} ms, max {:.3} ms",

@@ -1,0 +1,128 @@
+//! Who is there before a task's clock starts: its latch answered and asked
+//! ([`declare_latch`], [`ask_latches`], [`query_all`]), and the liveliness
+//! tokens it waits for ([`wait_for`]).
+
+use std::collections::BTreeSet;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use zenoh::Wait;
+use zenoh::sample::SampleKind;
+
+use crate::{FleetError, StopFlag};
+
+use super::{LATCH_QUERY_TIMEOUT, Latching, WaitFor};
+
+/// Declares the queryable answering on `key` with what `answer` holds.
+pub(super) fn declare_latch(
+    session: &zenoh::Session,
+    key: &str,
+    answer: Arc<Mutex<Option<Vec<u8>>>>,
+) -> Result<zenoh::query::Queryable<()>, FleetError> {
+    let reply_key = key.to_owned();
+    session
+        .declare_queryable(key)
+        .callback(move |q| {
+            let payload = answer.lock().ok().and_then(|a| a.clone());
+            if let Some(p) = payload {
+                let _ = q.reply(reply_key.clone(), p).wait();
+            }
+        })
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("declaring the latch {key}: {e}")))
+}
+
+/// Asks every latch of `l.ask` (at most [`LATCH_QUERY_TIMEOUT`]): the
+/// answers but the asker's own, `(key, payload)`.
+pub(super) fn ask_latches(
+    session: &zenoh::Session,
+    l: &Latching,
+) -> Result<Vec<(String, Vec<u8>)>, FleetError> {
+    let mut heard = query_all(session, &l.ask, LATCH_QUERY_TIMEOUT)?;
+    heard.retain(|(key, _)| *key != l.answer_on);
+    Ok(heard)
+}
+
+/// Every queryable's answers to a query on `ask` within `timeout`, `(key,
+/// payload)`, unconsolidated.
+pub fn query_all(
+    session: &zenoh::Session,
+    ask: &str,
+    timeout: Duration,
+) -> Result<Vec<(String, Vec<u8>)>, FleetError> {
+    let replies = session
+        .get(ask)
+        .target(zenoh::query::QueryTarget::All)
+        .consolidation(zenoh::query::ConsolidationMode::None)
+        .timeout(timeout)
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("asking {ask}: {e}")))?;
+    let mut heard = Vec::new();
+    while let Ok(reply) = replies.recv() {
+        if let Ok(s) = reply.result() {
+            heard.push((
+                s.key_expr().as_str().to_owned(),
+                s.payload().to_bytes().into_owned(),
+            ));
+        }
+    }
+    Ok(heard)
+}
+
+/// Waits until every name of `w` has a liveliness token under
+/// `echelon/<fleet>/alive/`, or its timeout passes (or `stop` is raised).
+pub(super) fn wait_for(
+    session: &zenoh::Session,
+    w: &WaitFor,
+    stop: &StopFlag,
+) -> Result<(), FleetError> {
+    if w.names.is_empty() {
+        return Ok(());
+    }
+    let seen: Arc<Mutex<BTreeSet<String>>> = Arc::default();
+    let sink = seen.clone();
+    let prefix = w.keys.alive("");
+    let _sub = session
+        .liveliness()
+        .declare_subscriber(w.keys.alive("**"))
+        .history(true)
+        .callback(move |s| {
+            if s.kind() == SampleKind::Put
+                && let Some(name) = s.key_expr().as_str().strip_prefix(&prefix)
+                && let Ok(mut set) = sink.lock()
+            {
+                set.insert(name.to_owned());
+            }
+        })
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
+    let started = Instant::now();
+    loop {
+        let missing: Vec<String> = {
+            let set = seen
+                .lock()
+                .map_err(|_| FleetError::Config("poisoned".into()))?;
+            w.names
+                .iter()
+                .filter(|r| !set.contains(*r))
+                .cloned()
+                .collect()
+        };
+        if missing.is_empty() {
+            // Let the declarations that came with the tokens settle.
+            std::thread::sleep(Duration::from_millis(100));
+            return Ok(());
+        }
+        if stop.is_raised() {
+            return Ok(());
+        }
+        if started.elapsed() > w.timeout {
+            return Err(FleetError::Config(format!(
+                "waited {:.0} s for {} to join the fleet",
+                w.timeout.as_secs_f64(),
+                missing.join(", ")
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}

@@ -19,6 +19,7 @@ mod chain;
 mod probe;
 mod star;
 use chain::Leaders;
+pub(crate) use chain::Scratch;
 pub(crate) use chain::{chain_stage, chain_tile, shift_from, shift_in};
 pub use probe::Probe;
 pub(crate) use probe::{chain_probe, star_probe, state_of};
@@ -293,54 +294,6 @@ pub(crate) fn vectors<const N: usize>(x: &mut [Lanes<N>; 5]) {
 #[inline(never)]
 pub(crate) fn sin_cos_cold<const N: usize>(theta: Lanes<N>) -> (Lanes<N>, Lanes<N>) {
     theta.sin_cos()
-}
-
-/// `x + d k` and the sines and cosines of its heading, from those of `x`
-/// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`; when some
-/// lane turns by 0.05 rad or more, [`Lanes::sin_cos`] out of line). The new
-/// state goes through memory as whole vectors ([`vectors`]).
-#[inline(always)]
-#[allow(clippy::type_complexity)]
-fn turned_state<const N: usize>(
-    x: &[Lanes<N>; 5],
-    (sin, cos): (Lanes<N>, Lanes<N>),
-    d: &[Lanes<N>; 5],
-    k: f64,
-) -> ([Lanes<N>; 5], (Lanes<N>, Lanes<N>)) {
-    let mut next = add_scaled(x, d, k);
-    vectors(&mut next);
-    let turned = match (d[2] * k).sin_cos_turned(sin, cos) {
-        Some(sc) => sc,
-        None => sin_cos_cold(next[2]),
-    };
-    (next, turned)
-}
-
-/// A block's four RK4 stages: `stage(s, x_s, (sin θ_s, cos θ_s))` is stage
-/// `s`'s derivative at `x_s`. (A trait rather than a closure: closures are
-/// called out of line in the dispatched kernels, their lanes spilled.)
-pub(crate) trait Stages {
-    fn stage(&mut self, s: usize, x: &[V; 5], sc: (V, V)) -> [V; 5];
-}
-
-/// One RK4 step of a block from `x`. Stage 1's `sin`, `cos` by
-/// [`Lanes::sin_cos`], stages 2–4's turned from them ([`turned_state`]); the
-/// new state goes through memory as whole vectors ([`vectors`]).
-#[inline(always)]
-pub(crate) fn rk4_step(x: &[V; 5], dt: f64, f: &mut impl Stages) -> [V; 5] {
-    let h = 0.5 * dt;
-    let sc1 = x[2].sin_cos();
-    let k1 = f.stage(0, x, sc1);
-    let (x2, sc2) = turned_state(x, sc1, &k1, h);
-    let k2 = f.stage(1, &x2, sc2);
-    let (x3, sc3) = turned_state(x, sc1, &k2, h);
-    let k3 = f.stage(2, &x3, sc3);
-    let (x4, sc4) = turned_state(x, sc1, &k3, dt);
-    let k4 = f.stage(3, &x4, sc4);
-    let k23 = each(|i| k2[i] + k3[i]);
-    let mut next = combine(x, &k1, &k23, &k4, dt / 6.0);
-    vectors(&mut next);
-    next
 }
 
 /// `x + h/6 (k₁ + 2 (k₂ + k₃) + k₄)`, with `k23 = k₂ + k₃`.

@@ -9,7 +9,7 @@ use crate::model::State;
 use crate::reference::{Order, Reference, Trajectory};
 
 use super::kernel::Probe;
-use super::kernel::{Block, Carry, Consts, W};
+use super::kernel::{Block, Carry, Consts, Scratch, W};
 use super::{Columns, Kernel, PAR_BLOCKS, SEGMENT, Topology, fill_reference};
 use super::{kernel, sealed};
 
@@ -37,6 +37,7 @@ impl WithSimd for StarTile<'_> {
 struct ChainTile<'a> {
     c: &'a Consts,
     blocks: &'a mut [Block],
+    scratch: &'a mut [Scratch],
     carries: &'a mut [[Carry; 4]],
 }
 
@@ -44,7 +45,7 @@ impl WithSimd for ChainTile<'_> {
     type Output = Option<(usize, usize)>;
     #[inline(always)]
     fn with_simd<S: Simd>(self, _: S) -> Self::Output {
-        kernel::chain_tile(self.c, self.blocks, self.carries)
+        kernel::chain_tile(self.c, self.blocks, self.scratch, self.carries)
     }
 }
 
@@ -54,7 +55,7 @@ impl Kernel for Torque {
     type Probe = Probe;
     type Consts = Consts;
     type Block = Block;
-    type Scratch = ();
+    type Scratch = Scratch;
     /// Per step, the leader at the four stages.
     type Tile = Vec<[Carry; 4]>;
     const LANES: usize = W;
@@ -102,13 +103,15 @@ impl Kernel for Torque {
         arch: Arch,
         c: &Consts,
         blocks: &mut [Block],
-        _: &mut [()],
+        scratch: &mut [Scratch],
         t: &mut Vec<[Carry; 4]>,
         len: usize,
     ) -> Option<(usize, usize)> {
+        let scratch = &mut scratch[..blocks.len()];
         arch.dispatch(ChainTile {
             c,
             blocks,
+            scratch,
             carries: &mut t[..len],
         })
     }
@@ -124,7 +127,10 @@ impl Kernel for Torque {
         let mut out = Vec::with_capacity(blocks.len() * W);
         match topology {
             Topology::Star => kernel::star_probe(c, blocks, &r, &mut out),
-            Topology::Chain => kernel::chain_probe(c, blocks, &r, &mut out),
+            Topology::Chain => {
+                let mut scratch = vec![Scratch::default(); blocks.len()];
+                kernel::chain_probe(c, blocks, &mut scratch, &r, &mut out);
+            }
         }
         out
     }

@@ -5,7 +5,39 @@
 use crate::control::{Body, law_finish, law_partial, robot_leader};
 use crate::lanes::Lanes;
 
-use super::{Aff, Block, Carry, Consts, Stages, V, W, broken, first_lane, hold, rk4_step};
+use super::{
+    Aff, Block, Carry, Consts, V, W, add_scaled, broken, combine, each, first_lane, hold,
+    sin_cos_cold,
+};
+
+/// Per-block work space of a chain stage.
+#[derive(Debug, Clone, Copy)]
+pub struct Scratch {
+    /// This stage's derivative (the previous stage's until overwritten).
+    pub(super) k: [V; 5],
+    pub(super) k1: [V; 5],
+    /// `k₂ + k₃`.
+    pub(super) k23: [V; 5],
+    /// `v̇ = α + β v̇_L`, `ω̇ = γ + δ v̇_L`.
+    pub(super) dv: Aff,
+    pub(super) dw: Aff,
+    /// `sin θ`, `cos θ` at stage 1 (stages 2–4 turn them).
+    pub(super) sc1: (V, V),
+}
+
+impl Default for Scratch {
+    fn default() -> Scratch {
+        let z = V::splat(0.0);
+        Scratch {
+            k: [z; 5],
+            k1: [z; 5],
+            k23: [z; 5],
+            dv: Aff { a: z, b: z },
+            dw: Aff { a: z, b: z },
+            sc1: (z, z),
+        }
+    }
+}
 
 /// `[prev_{W−1}, own₀, …, own_{W−2}]`: each lane's leader is the lane before.
 #[inline(always)]
@@ -123,89 +155,116 @@ fn chain_block(c: &Consts, b: &Block, x: &[V; 5], sin: V, cos: V, l: &Leaders) -
     )
 }
 
-/// One stage of a chain block at state `x` (heading `(sin, cos)`) whose
-/// first agent follows `carry`: the derivative of every lane, and `carry`
-/// replaced by the block's last agent as a leader (with its `v̇`), the next
-/// block's first agent's leader. Vectorised except for `v̇ᵢ = αᵢ + βᵢ v̇ᵢ₋₁`,
-/// one multiply-add per agent in order.
+/// The chain stage update coefficients: stage `s` evaluates at `x + a_s k_{s−1}`.
+#[inline(always)]
+fn stage_state(b: &Block, sc: &Scratch, s: usize, dt: f64) -> [V; 5] {
+    match s {
+        0 => b.x,
+        3 => add_scaled(&b.x, &sc.k, dt),
+        _ => add_scaled(&b.x, &sc.k, 0.5 * dt),
+    }
+}
+
+/// `sin θ`, `cos θ` of stage `s`'s state `x`: stage 1's from
+/// [`Lanes::sin_cos`] (kept in the scratch), stages 2–4's turned from them by
+/// the stage's `δθ` ([`V::sin_cos_turned`], as a star's stages are; out of line
+/// when some lane turns by 0.05 rad or more).
+#[inline(always)]
+fn stage_sin_cos(sc: &mut Scratch, x: &[V; 5], s: usize, dt: f64) -> (V, V) {
+    let a = match s {
+        0 => {
+            sc.sc1 = x[2].sin_cos();
+            return sc.sc1;
+        }
+        3 => dt,
+        _ => 0.5 * dt,
+    };
+    // The `δθ` that `stage_state` added to θ.
+    match (sc.k[2] * a).sin_cos_turned(sc.sc1.0, sc.sc1.1) {
+        Some(turned) => turned,
+        None => sin_cos_cold(x[2]),
+    }
+}
+
+/// One stage of a chain segment whose first agent follows `cin`: every
+/// derivative into `scratch[..].k`; returns the last agent as a leader (with
+/// its `v̇`). Vectorised except for `v̇ᵢ = αᵢ + βᵢ v̇ᵢ₋₁`, one multiply-add per
+/// agent in order.
 #[inline(always)]
 pub(crate) fn chain_stage(
     c: &Consts,
-    b: &Block,
-    x: &[V; 5],
-    (sin, cos): (V, V),
-    carry: &mut Carry,
-) -> [V; 5] {
-    let own = Leaders::of(x, sin, cos);
-    let leaders = own.shifted(&Leaders::splat(carry));
-    let (dv, dw) = chain_block(c, b, x, sin, cos, &leaders);
+    blocks: &[Block],
+    scratch: &mut [Scratch],
+    s: usize,
+    cin: &Carry,
+) -> Carry {
+    let mut prev = Leaders::splat(cin);
+    for (b, sc) in blocks.iter().zip(scratch.iter_mut()) {
+        let x = stage_state(b, sc, s, c.dt);
+        let (sin, cos) = stage_sin_cos(sc, &x, s, c.dt);
+        let own = Leaders::of(&x, sin, cos);
+        let leaders = own.shifted(&prev);
+        prev = own;
+        let (dv, dw) = chain_block(c, b, &x, sin, cos, &leaders);
+        sc.k[0] = x[3] * cos;
+        sc.k[1] = x[3] * sin;
+        sc.k[2] = x[4];
+        sc.dv = dv;
+        sc.dw = dw;
+    }
     // The only sequential part: each v̇ needs the one before.
-    let lead = carry.dv;
-    let mut dvl = lead;
-    let mut acc = [0.0; W];
-    for (l, d) in acc.iter_mut().enumerate() {
-        dvl = dv.a.0[l] + dv.b.0[l] * dvl;
-        *d = dvl;
+    let mut dvl = cin.dv;
+    for sc in scratch.iter_mut() {
+        let lead = dvl;
+        let mut dv = [0.0; W];
+        for (l, d) in dv.iter_mut().enumerate() {
+            dvl = sc.dv.a.0[l] + sc.dv.b.0[l] * dvl;
+            *d = dvl;
+        }
+        let dv = Lanes(dv);
+        sc.k[3] = dv;
+        sc.k[4] = sc.dw.a + sc.dw.b * shift_in(dv, lead);
     }
-    let acc = Lanes(acc);
-    *carry = own.last();
+    let mut carry = prev.last();
     carry.dv = dvl;
-    [
-        x[3] * cos,
-        x[3] * sin,
-        x[4],
-        acc,
-        dw.a + dw.b * shift_in(acc, lead),
-    ]
+    carry
 }
 
-/// A chain block's stages at one step: its first agent's leader at each,
-/// replaced by its last agent.
-struct ChainStages<'a> {
-    c: &'a Consts,
-    b: &'a Block,
-    stages: &'a mut [Carry; 4],
-}
-
-impl Stages for ChainStages<'_> {
-    #[inline(always)]
-    fn stage(&mut self, s: usize, x: &[V; 5], sc: (V, V)) -> [V; 5] {
-        chain_stage(self.c, self.b, x, sc, &mut self.stages[s])
-    }
-}
-
-/// Advances chain blocks by `carries.len()` steps. `carries[n][s]` is the
-/// leader of the first block's first agent at step `n`, stage `s`, and is
-/// replaced by the last block's last agent (the next segment's leader).
-///
-/// Block after block, each running all its steps in registers as a star's
-/// does: a block at step `n` needs only the block before at step `n` (its
-/// last agent, at each stage, is what `carries[n]` holds when the block
-/// reads it) and itself at step `n − 1`. Every agent computes exactly what a
-/// stage-by-stage walk over all blocks computes. Returns the first broken
-/// step and agent (within `blocks`), if any; the blocks after a broken one
-/// stop at its step.
+/// Advances a chain segment by `carries.len()` steps. `carries[n][s]` is the
+/// leader of the segment's first agent at step `n`, stage `s`, and is replaced
+/// by the segment's last agent (the next segment's leader). Returns the first
+/// broken step and agent (within the segment), if any.
 #[inline(always)]
 pub(crate) fn chain_tile(
     c: &Consts,
     blocks: &mut [Block],
+    scratch: &mut [Scratch],
     carries: &mut [[Carry; 4]],
 ) -> Option<(usize, usize)> {
-    let mut first: Option<(usize, usize)> = None;
-    let mut steps = carries.len();
-    for (bi, b) in blocks.iter_mut().enumerate() {
-        let mut x = b.x;
-        for (n, stages) in carries[..steps].iter_mut().enumerate() {
-            x = rk4_step(&x, c.dt, &mut ChainStages { c, b, stages });
-            let bad = broken(&x, b.live);
-            if bad.any() {
-                let at = (n, bi * W + first_lane(bad));
-                first = Some(first.map_or(at, |f| f.min(at)));
-                steps = n + 1;
-                break;
+    let h6 = c.dt / 6.0;
+    for (n, stages) in carries.iter_mut().enumerate() {
+        for (s, carry) in stages.iter_mut().enumerate() {
+            *carry = chain_stage(c, blocks, scratch, s, carry);
+            for sc in scratch.iter_mut() {
+                match s {
+                    0 => sc.k1 = sc.k,
+                    1 => sc.k23 = sc.k,
+                    2 => sc.k23 = each(|i| sc.k23[i] + sc.k[i]),
+                    _ => {}
+                }
             }
         }
-        b.x = x;
+        let mut first = None;
+        for (bi, (b, sc)) in blocks.iter_mut().zip(scratch.iter()).enumerate() {
+            b.x = combine(&b.x, &sc.k1, &sc.k23, &sc.k, h6);
+            let bad = broken(&b.x, b.live);
+            if first.is_none() && bad.any() {
+                first = Some((n, bi * W + first_lane(bad)));
+            }
+        }
+        if first.is_some() {
+            return first;
+        }
     }
-    first
+    None
 }

@@ -5,7 +5,7 @@ use crate::control::{Body, law_finish, law_partial};
 use crate::lanes::Lanes;
 
 use super::{
-    Block, Carry, Consts, Leaders, V, W, chain_stage, hold, shift_in, star_ly, star_stage,
+    Block, Carry, Consts, Leaders, Scratch, V, W, chain_stage, hold, shift_in, star_ly, star_stage,
 };
 
 /// What one agent's controller does at one instant.
@@ -49,17 +49,24 @@ pub(crate) fn star_probe(c: &Consts, blocks: &[Block], r: &Carry, out: &mut Vec<
     }
 }
 
-/// A chain's controllers at the blocks' current state: each block's first
-/// stage (which solves its `v̇`s), then the law once more with every leader's
-/// `v̇` known.
-pub(crate) fn chain_probe(c: &Consts, blocks: &[Block], r: &Carry, out: &mut Vec<Probe>) {
-    let mut carry = *r;
-    for b in blocks {
+/// A chain's controllers at the blocks' current state: the first stage, then
+/// the law once more per block with every leader's `v̇` known.
+pub(crate) fn chain_probe(
+    c: &Consts,
+    blocks: &[Block],
+    scratch: &mut [Scratch],
+    r: &Carry,
+    out: &mut Vec<Probe>,
+) {
+    chain_stage(c, blocks, scratch, 0, r);
+    let (mut prev, mut lead_dv) = (Leaders::splat(r), r.dv);
+    for (b, sc) in blocks.iter().zip(scratch.iter()) {
         let (sin, cos) = b.x[2].sin_cos();
-        let lead = carry;
-        let k = chain_stage(c, b, &b.x, (sin, cos), &mut carry);
-        let l = Leaders::of(&b.x, sin, cos).shifted(&Leaders::splat(&lead));
-        let dvl = shift_in(k[3], lead.dv);
+        let own = Leaders::of(&b.x, sin, cos);
+        let l = own.shifted(&prev);
+        prev = own;
+        let dvl = shift_in(sc.k[3], lead_dv);
+        lead_dv = sc.k[3].0[W - 1];
         let body = Body::of(&b.x, sin, cos);
         let hold = hold(c, b, l.vd, l.wd);
         let p = law_partial(&c.law, &body, l.p, l.dp, &hold, b.ke);

@@ -1,9 +1,11 @@
 //! A star block's stage and tile: every agent follows the reference.
 
 use crate::control::{Body, law_finish, law_partial};
+use crate::lanes::Lanes;
 
 use super::{
-    Block, Carry, Consts, Stages, V, W, actuate, broken, first_lane, hold_ly, rk4_step, star_ly,
+    Block, Carry, Consts, V, W, actuate, add_scaled, broken, combine, each, first_lane, hold_ly,
+    sin_cos_cold, star_ly, vectors,
 };
 
 /// What a star agent's controller and plant do at one stage.
@@ -43,19 +45,25 @@ pub(crate) fn star_stage(
     }
 }
 
-/// A star block's stages at one step: the reference and `L_Y` at each.
-struct StarStages<'a> {
-    c: &'a Consts,
-    b: &'a Block,
-    r: &'a [Carry; 4],
-    ly: [V; 4],
-}
-
-impl Stages for StarStages<'_> {
-    #[inline(always)]
-    fn stage(&mut self, s: usize, x: &[V; 5], sc: (V, V)) -> [V; 5] {
-        star_stage(self.c, self.b, x, sc, &self.r[s], self.ly[s]).dx
-    }
+/// `x + d k` and the sines and cosines of its heading, from those of `x`
+/// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`; when some
+/// lane turns by 0.05 rad or more, [`Lanes::sin_cos`] out of line). The new
+/// state goes through memory as whole vectors ([`vectors`]).
+#[inline(always)]
+#[allow(clippy::type_complexity)]
+pub(crate) fn turned_state<const N: usize>(
+    x: &[Lanes<N>; 5],
+    (sin, cos): (Lanes<N>, Lanes<N>),
+    d: &[Lanes<N>; 5],
+    k: f64,
+) -> ([Lanes<N>; 5], (Lanes<N>, Lanes<N>)) {
+    let mut next = add_scaled(x, d, k);
+    vectors(&mut next);
+    let turned = match (d[2] * k).sin_cos_turned(sin, cos) {
+        Some(sc) => sc,
+        None => sin_cos_cold(next[2]),
+    };
+    (next, turned)
 }
 
 /// Advances star blocks by `refs.len()` steps; `refs[n]` is the reference at
@@ -73,14 +81,24 @@ pub(crate) fn star_tile(
     blocks: &mut [Block],
     refs: &[[Carry; 4]],
 ) -> Option<(usize, usize)> {
+    let (h, dt, h6) = (0.5 * c.dt, c.dt, c.dt / 6.0);
     let mut first: Option<(usize, usize)> = None;
     for (bi, b) in blocks.iter_mut().enumerate() {
         let mut x = b.x;
         let mut ly1 = refs.first().map_or(b.ly_off, |r| star_ly(c, b, &r[0]));
         for (n, r) in refs.iter().enumerate() {
             let (ly23, ly4) = (star_ly(c, b, &r[1]), star_ly(c, b, &r[3]));
-            let ly = [ly1, ly23, ly23, ly4];
-            x = rk4_step(&x, c.dt, &mut StarStages { c, b, r, ly });
+            let sc1 = x[2].sin_cos();
+            let k1 = star_stage(c, b, &x, sc1, &r[0], ly1).dx;
+            let (x2, sc2) = turned_state(&x, sc1, &k1, h);
+            let k2 = star_stage(c, b, &x2, sc2, &r[1], ly23).dx;
+            let (x3, sc3) = turned_state(&x, sc1, &k2, h);
+            let k3 = star_stage(c, b, &x3, sc3, &r[2], ly23).dx;
+            let (x4, sc4) = turned_state(&x, sc1, &k3, dt);
+            let k4 = star_stage(c, b, &x4, sc4, &r[3], ly4).dx;
+            let k23 = each(|i| k2[i] + k3[i]);
+            x = combine(&x, &k1, &k23, &k4, h6);
+            vectors(&mut x);
             ly1 = ly4;
             let bad = broken(&x, b.live);
             if bad.any() {

@@ -487,10 +487,7 @@ pub fn run_all(
         match outcome {
             Ok(row) => sweep.rows.push(row),
             Err(SweepError::Sim(e)) => match Divergence::of(&e) {
-                Some(divergence) => sweep.diverged.push(DivergedCase {
-                    case,
-                    divergence,
-                }),
+                Some(divergence) => sweep.diverged.push(DivergedCase { case, divergence }),
                 None => return Err(e.into()),
             },
             Err(e) => return Err(e),

@@ -14,8 +14,8 @@ use echelon::output::{
     SUMMARY_FILE, TRAJECTORY_FILE,
 };
 use echelon::scenario::{Overrides, Scenario};
-use echelon::stats::SafetyReport;
 use echelon::sim::{Every, Observer};
+use echelon::stats::SafetyReport;
 use echelon::{Simulation, Variant};
 use echelon_mcap::McapObserver;
 
@@ -244,7 +244,11 @@ fn print_summary(sim: &Simulation, s: &RunSummary, elapsed: f64) -> anyhow::Resu
 /// any robot it left deadlocked (which the ‖e‖ column alone would show as
 /// an unexplained "never").
 fn print_safety(s: &RunSummary, safety: &SafetyReport) -> anyhow::Result<()> {
-    let name = |k: usize| s.agents.get(k.wrapping_sub(1)).map_or("?", |a| a.name.as_str());
+    let name = |k: usize| {
+        s.agents
+            .get(k.wrapping_sub(1))
+            .map_or("?", |a| a.name.as_str())
+    };
     let [a, b] = safety.min_distance_agents;
     if safety.min_distance.is_finite() {
         outln!(

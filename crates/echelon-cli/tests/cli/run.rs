@@ -196,3 +196,87 @@ fn lycomp_prints_the_largest_gap_and_writes_fig_5() {
         assert_refused(&echelon(&["lycomp", "--lxoff", bad]), &["--lxoff"]);
     }
 }
+
+/// The summary's safety lines say what `summary.json` says: the closest
+/// approach (to the printed precision), between whom, against the radius; a
+/// warning exactly when the robots came more than 1 mm inside it, and one
+/// naming exactly the robots deadlocked at the end. A velocity base's torque
+/// cell is a dash, not a measured 0.
+#[test]
+fn run_prints_the_safety_filters_outcome_as_its_summary_has_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let deadlock = dir.path().join("deadlock-crossing.toml");
+    std::fs::write(&deadlock, include_str!("deadlock-crossing.toml")).unwrap();
+    for (scenario, velocity) in [
+        ("crossing", true),
+        ("obstacle-slalom", false),
+        (deadlock.to_str().unwrap(), false),
+    ] {
+        let out = dir.path().join("out");
+        let o = run(scenario, &out, &[]);
+        let text = succeeded(&o);
+        let err = stderr(&o);
+        let s = summary(&out);
+        let safety = &s["safety"];
+        let names: Vec<&str> = s["agents"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|a| a["name"].as_str().unwrap())
+            .collect();
+        let name = |k: &serde_json::Value| names[k.as_u64().unwrap() as usize - 1];
+        let (d, radius) = (
+            safety["min_distance"].as_f64().unwrap(),
+            safety["radius"].as_f64().unwrap(),
+        );
+        let pair = &safety["min_distance_agents"];
+        let line = format!(
+            "safety: closest approach {d:.4} m ({} and {}, t = {:.2} s), radius {radius} m",
+            name(&pair[0]),
+            name(&pair[1]),
+            safety["min_distance_t"].as_f64().unwrap()
+        );
+        assert!(text.contains(&line), "{scenario}: `{line}` not in\n{text}");
+        assert!(
+            text.contains(&format!(
+                "filter acted on {} agent-steps, braked {} (infeasible), {} deadlock breaks",
+                safety["active"], safety["infeasible"], safety["deadlock_breaks"]
+            )),
+            "{scenario}: {text}"
+        );
+        assert_eq!(
+            err.contains("inside the safety radius"),
+            d < radius - 1e-3,
+            "{scenario}: {d} against {radius}: {err}"
+        );
+        let deadlocked: Vec<&str> = safety["deadlocked_at_end"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(name)
+            .collect();
+        let warned = err
+            .lines()
+            .find_map(|l| l.strip_prefix("warning: deadlocked by the safety filter at the end: "));
+        match warned {
+            Some(list) => assert_eq!(list.split(", ").collect::<Vec<_>>(), deadlocked),
+            None => assert!(
+                deadlocked.is_empty(),
+                "{scenario}: {deadlocked:?} not named: {err}"
+            ),
+        }
+        let rows: Vec<&str> = text
+            .lines()
+            .filter(|l| {
+                names
+                    .iter()
+                    .any(|n| l.trim_start().starts_with(&format!("{n} ")))
+            })
+            .collect();
+        assert_eq!(rows.len(), names.len(), "{scenario}: {text}");
+        for row in rows {
+            assert_eq!(row.contains(" — "), velocity, "{scenario}: {row}");
+            assert_eq!(row.contains("N·m"), !velocity, "{scenario}: {row}");
+        }
+    }
+}

@@ -140,3 +140,72 @@ fn umbmark_estimates_and_writes_its_results() {
         &["/no/such/run"],
     );
 }
+
+/// A sweep whose grid reaches an absurd error model (ζ = 0.5 m per sample,
+/// no fix for 1000 samples) does not stop at the first divergence: every
+/// case is either a row of sweep.csv or a line of diverged.csv, never both,
+/// the command fails with 1 (not 2: nothing was refused) naming the count,
+/// and a later sweep that does not diverge into the same directory removes
+/// the stale list.
+#[test]
+fn a_sweep_goes_on_past_divergent_cases_lists_them_and_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sw");
+    let grid = |zeta: &str| {
+        echelon(&[
+            "sweep",
+            "fix-study",
+            "--zeta",
+            zeta,
+            "--fix-every",
+            "1,1000",
+            "--seeds",
+            "2",
+            "--duration",
+            "20",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let o = grid("0.001,0.5");
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    let read = |f: &str| std::fs::read_to_string(out.join(f)).unwrap();
+    let (rows, diverged) = (read("sweep.csv"), read("diverged.csv"));
+    let mut diverged_lines = diverged.lines();
+    assert_eq!(diverged_lines.next(), Some(echelon::sweep::DIVERGED_HEADER));
+    // (ζ, N, seed) of each case: columns 0, 5 and 6 of both files.
+    let case = |line: &str| {
+        let c: Vec<String> = line.split(',').map(str::to_owned).collect();
+        (c[0].clone(), c[5].clone(), c[6].clone())
+    };
+    let ran: Vec<_> = rows.lines().skip(1).map(case).collect();
+    let failed: Vec<_> = diverged.lines().skip(1).map(case).collect();
+    assert!(!failed.is_empty(), "ζ = 0.5 m without fixes diverges");
+    assert_eq!(ran.len() + failed.len(), 2 * 2 * 2, "ζ × N × seeds");
+    for c in &failed {
+        assert!(!ran.contains(c), "{c:?} both ran and diverged");
+    }
+    for zeta in ["0.001", "0.5"] {
+        for n in ["1", "1000"] {
+            for seed in ["0", "1"] {
+                let c = (zeta.to_owned(), n.to_owned(), seed.to_owned());
+                assert!(ran.contains(&c) || failed.contains(&c), "{c:?} missing");
+            }
+        }
+    }
+    for line in diverged_lines {
+        // What left its bound, beyond it (a finite value with a bound).
+        let c: Vec<&str> = line.split(',').collect();
+        let (value, bound) = (c[10].parse::<f64>().unwrap(), c[11].parse::<f64>().unwrap());
+        assert!(value > bound, "{line}");
+    }
+    assert!(
+        err.contains(&format!("{} of 8 runs diverged", failed.len())),
+        "{err}"
+    );
+    let o = grid("0.001");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.join("diverged.csv").exists(), "a stale diverged.csv");
+}

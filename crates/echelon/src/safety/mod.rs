@@ -130,4 +130,4 @@ pub use neighbour::{
     Neighbour, Obstacle, UNCERTAINTY_SIGMAS, point, start_conflict, uncertainty_margin,
 };
 pub use qp::{Constraint, MAX_ROWS, TOLERANCE};
-pub use torque::{Envelope, INNER_RATE};
+pub use torque::{EMERGENCY_ACCEL, Envelope, INNER_RATE};

@@ -22,6 +22,27 @@ enum Encounter {
     HeadOn,
     /// Robots in one lane; the last must pass the first.
     Overtake,
+    /// Two columns of one to three robots, each following the one ahead
+    /// (the head follows the reference), start on the wrong side of their
+    /// slots; the reference heads anywhere, often the other way, so the
+    /// columns turn around, cross, fall behind and catch up.
+    Columns(Columns),
+}
+
+/// The settings of a [`Encounter::Columns`] case (`/work/prompts/stress.py`'s
+/// shape, which found a torque crossing 255 mm inside the radius: a robot
+/// that braked in an emergency was run into by the one behind it).
+#[derive(Debug, Clone, Copy)]
+struct Columns {
+    /// The reference's heading, rad.
+    heading: f64,
+    /// The filter's `γ`, 1/s.
+    gain: f64,
+    /// The law's `ke`, `kz`.
+    ke: f64,
+    kz: f64,
+    /// Distance between the columns' slots, m.
+    sep: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -70,6 +91,8 @@ impl Case {
             let j = self.jitter[i];
             let k = i as f64 - (n as f64 - 1.0) / 2.0;
             let (slot, start, theta) = match self.encounter {
+                // (its own layout: two columns, leaders in a chain)
+                Encounter::Columns(c) => return self.columns_toml(c),
                 Encounter::Crossing => {
                     // Side by side; each starts on the mirror side.
                     let slot = [0.6 + j[3], k * gap];
@@ -100,6 +123,64 @@ impl Case {
                 "[[agents]]\nrobot = \"r\"\nstart = {{ x = {}, y = {}, theta = {} }}\nleader = \"reference\"\noffset = {{ x = {}, y = {} }}\n",
                 start[0], start[1], theta, slot[0], -slot[1]
             );
+        }
+        s
+    }
+}
+
+impl Case {
+    /// Two columns of `n` robots each, reference heading `c.heading`.
+    fn columns_toml(&self, c: Columns) -> String {
+        let mut s = String::new();
+        s += &format!("name = \"columns\"\n[sim]\nduration = {LONGEST}\n");
+        s += if self.torque {
+            "dt = 0.005\n"
+        } else {
+            "dt = 0.01\n"
+        };
+        s += "[log]\ndt = 0.1\n";
+        if self.torque {
+            s += &format!(
+                "[control]\nlaw = \"complete\"\nke = {}\nkz = {}\nl = 0.05\nlycomp = \"none\"\n",
+                c.ke, c.kz
+            );
+            s += &format!("[robots.r]\npreset = \"{}\"\n", self.preset);
+            if let Some(t) = self.torque_limit {
+                s += &format!("torque_limit = {t}\n");
+            }
+        } else {
+            s += &format!(
+                "[control]\nlaw = \"kinematic\"\nke = {}\nl = 0.05\nlycomp = \"none\"\n",
+                c.ke
+            );
+            s += "[robots.r]\ndrive = \"velocity\"\npreset = \"ideal\"\nv_max = 0.5\nomega_max = 3.0\n";
+        }
+        s += &format!(
+            "[reference.line]\nspeed = {}\nstart = {{ x = 0.0, y = 0.0, theta = {} }}\n",
+            self.speed, c.heading
+        );
+        s += &format!(
+            "[safety]\nradius = {}\ngain = {}\nrange = 1.5\n",
+            self.radius, c.gain
+        );
+        let mut k = 0;
+        for side in [1.0, -1.0] {
+            for i in 0..self.n {
+                k += 1;
+                let j = self.jitter[k - 1];
+                let (leader, offset) = if i == 0 {
+                    ("\"reference\"".to_string(), side * c.sep / 2.0)
+                } else {
+                    ((k - 1).to_string(), 0.0)
+                };
+                // On the other side of the line from its slot.
+                s += &format!(
+                    "[[agents]]\nrobot = \"r\"\nstart = {{ x = {}, y = {}, theta = {} }}\nleader = {leader}\noffset = {{ x = 0.5, y = {offset} }}\n",
+                    -0.5 - 0.6 * i as f64 + j[0] / 2.0,
+                    -side * c.sep / 2.0 + j[1] / 2.0,
+                    j[2],
+                );
+            }
         }
         s
     }
@@ -216,6 +297,56 @@ fn encounters(torque: bool) -> impl Strategy<Value = Case> {
         )
 }
 
+/// [`Encounter::Columns`] cases: radius 0.15–0.4 m, `γ` 0.5–3/s, reference
+/// speed 0.05–0.3 m/s heading anywhere, 1–3 robots per column; torques with
+/// and without wheel-torque limits.
+fn columns(torque: bool) -> impl Strategy<Value = Case> {
+    (
+        (
+            1..=3usize,
+            0.05..0.3f64,
+            0.15..0.4f64,
+            0.5..3.0f64,
+            -3.0..3.0f64,
+        ),
+        (0.8..2.5f64, 4.0..15.0f64, 0.4..1.2f64),
+        prop_oneof![Just("agent1"), Just("agent2")],
+        prop_oneof![Just(None), (8.0..40.0f64).prop_map(Some)],
+        prop::collection::vec((-0.2..0.2f64, -0.1..0.1f64, -0.5..0.5f64), 6),
+    )
+        .prop_map(
+            move |(
+                (n, speed, radius, gain, heading),
+                (ke, kz, sep),
+                preset,
+                torque_limit,
+                jitter,
+            )| {
+                Case {
+                    n,
+                    speed,
+                    radius,
+                    torque,
+                    preset,
+                    torque_limit,
+                    jitter: jitter.into_iter().map(|(a, b, c)| [a, b, c, 0.0]).collect(),
+                    encounter: Encounter::Columns(Columns {
+                        heading,
+                        gain,
+                        // (the kinematic law's ke: 0.5–2)
+                        ke: if torque {
+                            ke
+                        } else {
+                            0.5 + (ke - 0.8) * 1.5 / 1.7
+                        },
+                        kz,
+                        sep,
+                    }),
+                }
+            },
+        )
+}
+
 /// An unsigned setting from the environment, else `default`.
 fn env_or(name: &str, default: u64) -> u64 {
     std::env::var(name)
@@ -274,6 +405,25 @@ proptest! {
     }
 }
 
+proptest! {
+    // Crossing columns with the reference heading anywhere (the encounters
+    // above all head along +x, slow: none ever turned a column around, let
+    // it fall behind and catch up fast, which is where a torque robot that
+    // braked in an emergency was run into). Fixed seed; COLUMNS_CASES=N for more.
+    #![proptest_config(ProptestConfig {
+        cases: env_or("COLUMNS_CASES", 12) as u32,
+        rng_seed: RngSeed::Fixed(env_or("STRESS_SEED", 20)),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
+
+    /// Torque-driven columns (Table I, with and without wheel torque limits).
+    #[test]
+    fn torque_columns_turning_around_stay_apart_bounded_and_converge_or_report(case in columns(true)) {
+        check(&case)?;
+    }
+}
+
 /// The crossing of issue 20: two Table I `agent1` robots without torque
 /// limits swap sides behind a line at 0.3 m/s, `radius = 0.4`. Before the
 /// speed envelope the filter spun agent 1 up to 12 rad/s by 3.1 s and the run
@@ -295,6 +445,53 @@ fn the_issue_20_torque_crossing_keeps_apart_and_converges() {
     }
 }
 
+/// The case `stress.py` found (seed 3, trial 14): two columns of three Table
+/// I `agent1` robots without torque limits, the reference heading back
+/// (θ = 2.607). The columns turned round, fell metres behind and caught up
+/// at 6–8 m/s (the nominal passed the filter unheld by its speed envelope);
+/// r2's QP went infeasible and it braked by friction (≈ 50 m/s²) while r3,
+/// counting on r2's half of their pair, kept its nominal: 0.095 m for a
+/// 0.35 m radius.
+#[test]
+fn the_turned_around_torque_columns_keep_apart() {
+    let jitter = [
+        [-0.176, -0.034, 0.064],
+        [0.132, -0.05, -0.32],
+        [-0.1, 0.024, 0.254],
+        [-0.042, -0.028, -0.103],
+        [-0.06, -0.018, -0.417],
+        [0.0, 0.094, -0.087],
+    ];
+    let case = Case {
+        n: 3,
+        speed: 0.242,
+        radius: 0.35,
+        torque: true,
+        preset: "agent1",
+        torque_limit: None,
+        jitter: jitter.iter().map(|j| [j[0], j[1], j[2], 0.0]).collect(),
+        encounter: Encounter::Columns(Columns {
+            heading: 2.607,
+            gain: 0.591,
+            ke: 1.205,
+            kz: 10.099,
+            sep: 0.81,
+        }),
+    };
+    if let Ok(path) = std::env::var("COLUMNS_DUMP") {
+        std::fs::write(path, case.toml()).unwrap();
+    }
+    // The filter's promise (r5, behind r4 that its filter held metres off
+    // its slot, still ends 3 cm off at 180 s unreported: not asserted here).
+    let seen = run(&case).unwrap();
+    assert!(seen.unbounded.is_none(), "{:?}", seen.unbounded);
+    assert!(
+        seen.closest >= case.radius - 1e-3,
+        "closest {}",
+        seen.closest
+    );
+}
+
 /// `SURVEY=N cargo test --release --test safety_stress -- --ignored survey`:
 /// N encounters of each drive, every failure listed (the proptests stop at
 /// the first).
@@ -307,16 +504,18 @@ fn survey() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(100);
     let mut failed = 0;
-    for torque in [true, false] {
+    let kinds: [(&str, bool, BoxedStrategy<Case>); 4] = [
+        ("torque", true, encounters(true).boxed()),
+        ("velocity", false, encounters(false).boxed()),
+        ("torque-columns", true, columns(true).boxed()),
+        ("velocity-columns", false, columns(false).boxed()),
+    ];
+    for (kind, torque, strategy) in kinds {
         let mut runner = proptest::test_runner::TestRunner::deterministic();
-        let strategy = encounters(torque);
         for k in 0..n {
             let case = strategy.new_tree(&mut runner).unwrap().current();
             if let Ok(dir) = std::env::var("SURVEY_DUMP") {
-                let path = format!(
-                    "{dir}/{}-{k}.toml",
-                    if torque { "torque" } else { "velocity" }
-                );
+                let path = format!("{dir}/{kind}-{k}.toml");
                 std::fs::write(path, case.toml()).unwrap();
                 continue;
             }
@@ -324,11 +523,11 @@ fn survey() {
                 failed += 1;
                 let first = e.to_string();
                 println!(
-                    "torque {torque} case {k}: {}",
+                    "{kind} (torque {torque}) case {k}: {}",
                     first.lines().next().unwrap_or("")
                 );
             }
         }
     }
-    println!("failed {failed} of {}", 2 * n);
+    println!("failed {failed} of {}", 4 * n);
 }

@@ -66,7 +66,8 @@
 //!
 //! The point `L` ahead has relative degree two, but the heading is its
 //! internal dynamics, unstable in reverse; the QP's answer is therefore held
-//! to a speed envelope ([`Envelope`]: no reverse, `|ω|` and `v` bounded), and
+//! to a speed envelope ([`Envelope`]: no reverse, `|ω|` and `v` bounded; a
+//! nominal at the top speed is held to it too), and
 //! a robot with a `torque_limit` has its nominal limited first with its turn
 //! kept ([`RobotParams::limit`]), so a command that saturates both wheels
 //! still steers. Issue 20 found a crossing of two Table I robots that
@@ -91,10 +92,11 @@
 //! takes the command that breaks the barriers least (one shared slack)
 //! within its speed limits, zero if even that fails (before issue 20's last
 //! survey it stopped dead, which left a cooperative neighbour's half of their
-//! pair untaken: 1.6 cm inside the radius); for a torque-driven robot with a `torque_limit`, the command
-//! that breaks the barriers and the envelope least within its wheel-torque
-//! limits (`solve_relaxed`), else `u = (−η v, −ψ ω)` (twice the friction's
-//! deceleration).
+//! pair untaken: 1.6 cm inside the radius); a torque-driven robot takes the
+//! barriers alone (the envelope given up), else the command that breaks the
+//! barriers and the envelope least, within its wheel-torque limits or,
+//! without them, an acceleration box (`SafetyFilter::emergency`,
+//! [`EMERGENCY_ACCEL`]); `u = (−η v, −ψ ω)` only if no solver answers.
 //!
 //! ## Deadlock
 //!
@@ -130,4 +132,4 @@ pub use neighbour::{
     Neighbour, Obstacle, UNCERTAINTY_SIGMAS, point, start_conflict, uncertainty_margin,
 };
 pub use qp::{Constraint, MAX_ROWS, TOLERANCE};
-pub use torque::{Envelope, INNER_RATE};
+pub use torque::{EMERGENCY_ACCEL, Envelope, INNER_RATE};

@@ -4,7 +4,7 @@
 
 use super::filter::{Filtered, Own, SafetyFilter};
 use super::neighbour::{Neighbour, Obstacle};
-use super::qp::{Constraint, solve_relaxed, solve_split};
+use super::qp::{Constraint, push_box, solve_relaxed, solve_split};
 use crate::model::{Input, RobotParams, State};
 
 /// `p`, 1/s: the inner pole of the torque barrier, `ψ̇₁ + p ψ₁ ≥ 0` with
@@ -17,6 +17,11 @@ use crate::model::{Input, RobotParams, State};
 /// `h ≥ 0`; the inner loop, on the robot's acceleration, is just allowed to
 /// be faster than the outer one.
 pub const INNER_RATE: f64 = 5.0;
+
+/// The smallest half-width, m/s², of the acceleration box in which a
+/// torque-driven robot without wheel-torque limits takes its emergency
+/// action (the box also holds the nominal and friction's brake).
+pub const EMERGENCY_ACCEL: f64 = 20.0;
 
 /// The speed envelope a torque-driven robot's filtered command keeps it in:
 /// `−v_reverse ≤ v ≤ v_max`, `|ω| ≤ omega_max`, each as a first-order barrier
@@ -56,6 +61,41 @@ impl Envelope {
         omega_max: 4.0,
         rate: 5.0,
     };
+
+    /// The nominal `x0 = (u1/m, L u2/J)` held to the envelope's top speed
+    /// once the robot is at it (`v ≥ v_max`: the row `v̇ ≤ κ (v_max − v)`,
+    /// one coordinate, so this is the projection onto it), not to its reverse bound (a law that brakes at low speed keeps
+    /// its braking) nor to its turn rate (a law's sharp turn at the start is
+    /// its own; the `obstacle-slalom` golden moved when it was held).
+    fn clip(&self, robot: &RobotParams, v: f64, x0: [f64; 2]) -> [f64; 2] {
+        if v < self.v_max {
+            // Below the top speed the law accelerates as it likes (holding
+            // it to the row from rest moved the `obstacle-slalom` golden).
+            return x0;
+        }
+        let dv = robot.linear_friction() * v / robot.mass();
+        // v̇ = x₁ − η v/m ≤ κ (v_max − v)
+        [x0[0].min(self.rate * (self.v_max - v) + dv), x0[1]]
+    }
+
+    /// The nominal inputs as the filter takes them: held to the top speed
+    /// ([`Envelope::clip`]), then to the wheel torques with
+    /// the turn kept ([`RobotParams::limit`]); bit for bit the law's when
+    /// neither acts.
+    fn hold(&self, robot: &RobotParams, l: f64, me: &State, nominal: Input) -> Input {
+        let (m, j) = (robot.mass(), robot.inertia());
+        let x_law = [nominal.u1 / m, l * nominal.u2 / j];
+        let x_env = self.clip(robot, me.v, x_law);
+        let held = if x_env == x_law {
+            nominal
+        } else {
+            Input {
+                u1: m * x_env[0],
+                u2: j * x_env[1] / l,
+            }
+        };
+        robot.limit(held).0
+    }
 
     /// The four rows in the QP's variables `x = (u1/m, L u2/J)` at speeds
     /// `(v, w)`: `v̇ = x₁ − η v/m`, `ω̇ = x₂/L − ψ ω/J`.
@@ -111,7 +151,12 @@ impl SafetyFilter {
             along * own.cos - across * own.sin,
             along * own.sin + across * own.cos,
         ];
-        let limited = robot.limit(nominal).0;
+        // The nominal held to the envelope's top speed, then
+        // to the wheel torques with its turn kept: the law may not run a
+        // robot at 7 m/s among others (a crossing that fell metres behind
+        // did, and the barriers, rows of a QP it never reached, could not
+        // stop it in time).
+        let limited = Envelope::DEFAULT.hold(robot, l, me, nominal);
         let x0 = [limited.u1 / m, l * limited.u2 / j];
         let gamma = self.config.gain;
         self.rows.clear();
@@ -154,27 +199,47 @@ impl SafetyFilter {
             }
         }
         let decision = self.decide(t, x0, barriers, f);
-        let of = |x: [f64; 2]| Input {
+        let of = move |x: [f64; 2]| Input {
             u1: m * x[0],
             u2: j * x[1] / l,
         };
-        let rows = &self.rows;
-        // No command satisfies every row. With wheel-torque limits: the
-        // command that breaks the barriers and the envelope least within
-        // them (the brake is the torque the robot has, not a fixed law).
-        // Without (the relaxed answer would be unbounded): friction's brake.
+        // No command satisfies every row: the emergency action
+        // ([`SafetyFilter::emergency`]), friction's brake only if even that
+        // fails.
         let braked = || {
-            robot
-                .torque_limit()
-                .and_then(|_| {
-                    // The barriers within the wheel limits, the envelope given
-                    // up first; else the least violation of both.
-                    solve_split(&rows[..barriers], &rows[soft_end..], x0)
-                        .or_else(|| solve_relaxed(rows, soft_end, x0))
-                })
-                .map_or_else(|| robot.brake(me), of)
+            let brake = robot.brake(me);
+            let xb = [brake.u1 / m, l * brake.u2 / j];
+            self.emergency(barriers, soft_end, x0, xb).map_or(brake, of)
         };
         Filtered::decided(decision, nominal, limited, min_distance, of, braked)
+    }
+}
+
+impl SafetyFilter {
+    /// The emergency action when no command satisfies every row (barriers
+    /// `..barriers`, the envelope `..soft_end`, the wheel-torque rows after):
+    /// the barriers alone, the envelope given up, within the hard rows; else
+    /// the command that breaks the barriers and the envelope least (one
+    /// shared slack) within them. The hard rows are the wheel-torque limits,
+    /// or for a robot without them the box `|x_k| ≤ max(EMERGENCY_ACCEL,
+    /// |x0_k|, |brake_k|)` (pushed here): a bounded action that still takes
+    /// the robot's share of every pair. A bare friction brake did not: a
+    /// robot that braked at 50 m/s² left the one behind it, which counts on
+    /// its half of their pair, to run into it (a randomized crossing came
+    /// 255 mm inside a 0.35 m radius).
+    fn emergency(
+        &mut self,
+        barriers: usize,
+        soft_end: usize,
+        x0: [f64; 2],
+        brake: [f64; 2],
+    ) -> Option<[f64; 2]> {
+        if self.rows.len() == soft_end {
+            let bound = [0, 1].map(|k| EMERGENCY_ACCEL.max(x0[k].abs()).max(brake[k].abs()));
+            push_box(&mut self.rows, bound);
+        }
+        solve_split(&self.rows[..barriers], &self.rows[soft_end..], x0)
+            .or_else(|| solve_relaxed(&self.rows, soft_end, x0))
     }
 }
 
@@ -213,8 +278,11 @@ mod tests {
                 let x_of = |u: Input| [u.u1 / robot.mass(), l * u.u2 / robot.inertia()];
                 // Barriers, then the speed envelope (4 rows), then the torque limit (4).
                 let barriers = rows.len() - 8;
-                // The nominal is first limited with its turn kept.
-                let limited = robot.limit(nominal).0;
+                // The nominal is first held to the envelope's top speed and
+                // then limited with its turn kept.
+                let limited = Envelope::DEFAULT.hold(&robot, l, &me, nominal);
+                // (the states here are below the top speed: untouched)
+                prop_assert_eq!(limited, robot.limit(nominal).0);
                 let nominal_ok = rows[..barriers].iter().all(|c| c.slack(x_of(limited)) >= 0.0);
                 match out.outcome {
                     Outcome::Nominal => {
@@ -245,6 +313,52 @@ mod tests {
                 }
                 if nominal_ok {
                     prop_assert_eq!(out.outcome, Outcome::Nominal);
+                }
+            }
+
+            /// Without wheel-torque limits the emergency action is bounded:
+            /// within the box `|x_k| ≤ max(EMERGENCY_ACCEL, |x0_k|, |brake_k|)`
+            /// (the last four rows, pushed for it), and it keeps every
+            /// barrier whenever some command in the box does (the envelope
+            /// given up), which a friction brake did not.
+            #[test]
+            fn torque_emergency_without_limits_is_bounded_and_keeps_the_barriers(
+                me in state(),
+                ns in neighbours(),
+                u1 in -60.0..60.0f64,
+                u2 in -10.0..10.0f64,
+                gain in 0.2..5.0f64,
+            ) {
+                let l = 0.05;
+                let robot = RobotParams::AGENT1;
+                let config = SafetyConfig::new(0.3, gain, 1.5).unwrap();
+                let ns = outside(&me, l, ns, 0.3);
+                let mut f = SafetyFilter::new(config);
+                let out = f.torque(0.0, &me, l, &robot, Input { u1, u2 }, &ns, &[]);
+                let x_of = |u: Input| [u.u1 / robot.mass(), l * u.u2 / robot.inertia()];
+                prop_assert!(out.command.u1.is_finite() && out.command.u2.is_finite());
+                if out.outcome == Outcome::Braked {
+                    let rows = f.constraints().to_vec();
+                    // barriers, the envelope (4), the box (4)
+                    let barriers = rows.len() - 8;
+                    let x = x_of(out.command);
+                    for c in &rows[rows.len() - 4..] {
+                        prop_assert!(c.a[0].abs() + c.a[1].abs() == 1.0);
+                        prop_assert!(c.slack(x) >= -TOLERANCE * (1.0 + c.b.abs()), "{c:?} at {x:?}");
+                    }
+                    let bound = -rows[rows.len() - 4].b;
+                    prop_assert!(bound >= EMERGENCY_ACCEL);
+                    // Some corner or the centre of the box keeps every
+                    // barrier: so must the answer.
+                    let b2 = -rows[rows.len() - 2].b;
+                    let feasible = [[0.0, 0.0], [bound, b2], [bound, -b2], [-bound, b2], [-bound, -b2]]
+                        .into_iter()
+                        .any(|z| rows[..barriers].iter().all(|c| c.slack(z) >= 0.0));
+                    if feasible {
+                        for c in &rows[..barriers] {
+                            prop_assert!(c.slack(x) >= -TOLERANCE * (1.0 + c.b.abs()), "{c:?} at {x:?}");
+                        }
+                    }
                 }
             }
         }

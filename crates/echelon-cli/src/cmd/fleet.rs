@@ -17,6 +17,7 @@ use echelon_fleet::excite::{self, ExciteOptions};
 use echelon_fleet::leader::{self, LeaderOptions};
 use echelon_fleet::net::NetOptions;
 use echelon_fleet::operator::{self, OperatorOptions};
+use echelon_fleet::options::ProcessOptions;
 use echelon_fleet::robot::{self, RobotOptions};
 use echelon_fleet::role::Member;
 use echelon_fleet::ros2::RosTopic;
@@ -36,6 +37,13 @@ fn agents_of(s: &Scenario) -> Result<u32> {
     Ok(s.build(&Overrides::default())?.plan.agents().len() as u32)
 }
 
+/// The session options of `member` joining by `net`, the access control
+/// sized by the scenario's agents when there is one.
+fn session(net: &NetArgs, member: Member, scenario: Option<&Scenario>) -> Result<NetOptions> {
+    let robots = scenario.map(agents_of).transpose()?;
+    net.options(&member.identity(), robots, scenario)
+}
+
 /// One process of a scenario (leader, robot, base, excite): sets up what
 /// every such process does first (its scenario, its session options as
 /// `member`, and the signal flag), runs `run` with them and prints its report.
@@ -50,10 +58,30 @@ where
     E: std::error::Error + Send + Sync + 'static,
 {
     let scenario = Scenario::resolve(scenario)?;
-    let robots = agents_of(&scenario)?;
-    let net = net.options(&member.identity(), Some(robots), Some(&scenario))?;
+    let net = session(net, member, Some(&scenario))?;
     let stop = StopFlag::on_signals()?;
     print_report(&run(scenario, net, &stop)?)
+}
+
+/// Agent K's process on the fleet clock (robot, base): [`scenario_process`]
+/// as `member(K)`, `run` given its process options and K.
+fn agent_process<R, E>(
+    a: &args::AgentClockArgs,
+    net: &NetArgs,
+    member: fn(u32) -> Member,
+    run: impl FnOnce(ProcessOptions, u32, &StopFlag) -> Result<R, E>,
+) -> Result<()>
+where
+    R: serde::Serialize,
+    E: std::error::Error + Send + Sync + 'static,
+{
+    let k = a.agent.agent;
+    scenario_process(
+        &a.agent.scenario,
+        net,
+        member(k),
+        |scenario, options, stop| run(a.clock.process(scenario, options, net), k, stop),
+    )
 }
 
 /// Every agent's `cmd_vel` and `odom` as `[fleet.ros2]` places them, the
@@ -75,15 +103,8 @@ fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
 /// fails when a robot alive did not acknowledge it.
 fn command_cmd(a: args::CommandArgs, order: Order) -> Result<()> {
     let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
-    let fleet = match (&a.net.fleet, &scenario) {
-        (Some(f), _) => f.clone(),
-        (None, Some(s)) => s.fleet()?.name,
-        (None, None) => bail!("give the scenario or --fleet NAME"),
-    };
-    let robots = scenario.as_ref().map(agents_of).transpose()?;
-    let net = a
-        .net
-        .options(&Member::Operator.identity(), robots, scenario.as_ref())?;
+    let fleet = a.net.fleet_name(scenario.as_ref())?;
+    let net = session(&a.net, Member::Operator, scenario.as_ref())?;
     let stop = StopFlag::on_signals()?;
     let report = operator::run(
         &OperatorOptions {
@@ -140,19 +161,18 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             },
         ),
         FleetCommand::Robot(a) => {
-            if a.ros2 && !a.simulated_base && a.clock.time_scale != 1.0 {
+            if a.ros2 && !a.simulated_base && a.agent.clock.time_scale != 1.0 {
                 bail!(
                     "fleet robot --ros2 drives a real robot, which runs in real time: \
                      --time-scale {} is refused (give --simulated-base when the robot is \
                      `fleet base`'s simulation, as `fleet up --ros2` does)",
-                    a.clock.time_scale
+                    a.agent.clock.time_scale
                 );
             }
-            let member = Member::Robot(a.agent.agent);
-            scenario_process(&a.agent.scenario, &a.net, member, |scenario, net, stop| {
+            agent_process(&a.agent, &a.net, Member::Robot, |process, agent, stop| {
                 let options = RobotOptions {
-                    process: a.clock.process(scenario, net, &a.net),
-                    agent: a.agent.agent,
+                    process,
+                    agent,
                     faults: a.faults.spec(),
                     ros2: a.ros2,
                     own_router: !a.simulated_base,
@@ -164,11 +184,10 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             if !a.ros2 {
                 bail!("fleet base simulates a ROS 2 base: give --ros2");
             }
-            let member = Member::Base(a.agent.agent);
-            scenario_process(&a.agent.scenario, &a.net, member, |scenario, net, stop| {
+            agent_process(&a.agent, &a.net, Member::Base, |process, agent, stop| {
                 let options = BaseOptions {
-                    process: a.clock.process(scenario, net, &a.net),
-                    agent: a.agent.agent,
+                    process,
+                    agent,
                     clock_offset: a.clock_offset,
                 };
                 base::run(options, stop)
@@ -195,11 +214,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
         }
         FleetCommand::Collector(a) => {
             let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
-            let fleet = match (&a.net.fleet, &scenario) {
-                (Some(f), _) => f.clone(),
-                (None, Some(s)) => s.fleet()?.name,
-                (None, None) => bail!("give the scenario or --fleet NAME"),
-            };
+            let fleet = a.net.fleet_name(scenario.as_ref())?;
             let run = scenario
                 .as_ref()
                 .map(|s| s.build(&Overrides::default()))
@@ -230,9 +245,9 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     ros,
                     trajectory,
                     scene,
-                    foxglove: a.foxglove,
-                    dashboard: a.dashboard,
-                    log_rate: a.log_rate,
+                    foxglove: a.live.foxglove,
+                    dashboard: a.live.dashboard,
+                    log_rate: a.live.log_rate,
                 },
                 &stop,
             )?;
@@ -243,10 +258,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 bail!("fleet router is always a router, for every fleet: no --mode or --fleet");
             }
             let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
-            let robots = scenario.as_ref().map(agents_of).transpose()?;
-            let net = a
-                .net
-                .options(&Member::Router.identity(), robots, scenario.as_ref())?;
+            let net = session(&a.net, Member::Router, scenario.as_ref())?;
             let stop = StopFlag::on_signals()?;
             let report = router::run(
                 &RouterOptions {

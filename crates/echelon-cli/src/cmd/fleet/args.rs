@@ -79,6 +79,15 @@ pub(crate) struct NetArgs {
 }
 
 impl NetArgs {
+    /// The fleet's name: `--fleet`, else the scenario's.
+    pub(super) fn fleet_name(&self, scenario: Option<&Scenario>) -> Result<String> {
+        match (&self.fleet, scenario) {
+            (Some(f), _) => Ok(f.clone()),
+            (None, Some(s)) => Ok(s.fleet()?.name),
+            (None, None) => bail!("give the scenario or --fleet NAME"),
+        }
+    }
+
     pub(super) fn options(
         &self,
         default_identity: &str,
@@ -206,6 +215,15 @@ impl ClockArgs {
     }
 }
 
+/// One agent's process on the fleet clock (`robot`, `base`).
+#[derive(Debug, Args)]
+pub(crate) struct AgentClockArgs {
+    #[command(flatten)]
+    pub(super) agent: AgentArgs,
+    #[command(flatten)]
+    pub(super) clock: ClockArgs,
+}
+
 /// `echelon fleet leader`.
 #[derive(Debug, Args)]
 pub(crate) struct LeaderArgs {
@@ -230,9 +248,7 @@ pub(crate) struct LeaderArgs {
 #[derive(Debug, Args)]
 pub(crate) struct RobotArgs {
     #[command(flatten)]
-    pub(super) agent: AgentArgs,
-    #[command(flatten)]
-    pub(super) clock: ClockArgs,
+    pub(super) agent: AgentClockArgs,
     /// Drive the agent's ROS 2 robot ([fleet.ros2]): odom in, cmd_vel out over rmw_zenoh.
     #[arg(long)]
     pub(super) ros2: bool,
@@ -250,9 +266,7 @@ pub(crate) struct RobotArgs {
 #[derive(Debug, Args)]
 pub(crate) struct BaseArgs {
     #[command(flatten)]
-    pub(super) agent: AgentArgs,
-    #[command(flatten)]
-    pub(super) clock: ClockArgs,
+    pub(super) agent: AgentClockArgs,
     /// Simulate a ROS 2 base (the only kind so far; required).
     #[arg(long)]
     pub(super) ros2: bool,
@@ -304,6 +318,16 @@ pub(crate) struct CollectorArgs {
     /// Also record every agent's ROS 2 cmd_vel and odom ([fleet.ros2]) as ROS 2 channels.
     #[arg(long, requires = "scenario")]
     pub(super) ros2: bool,
+    #[command(flatten)]
+    pub(super) live: LiveArgs,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
+/// What the collector serves live and how densely it logs (`collector`,
+/// and `up` for the collector it starts, with its own wording of the help).
+#[derive(Debug, Args)]
+pub(crate) struct LiveArgs {
     /// Serve the live fleet to Foxglove (its WebSocket protocol) on ADDR [default: 127.0.0.1:8765; port 0: any free port]: every channel of fleet.mcap, 3D ones with the scenario (docs/foxglove.md).
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_ADDR)]
     pub(super) foxglove: Option<std::net::SocketAddr>,
@@ -313,8 +337,6 @@ pub(crate) struct CollectorArgs {
     /// Log at most HZ states per robot per second (the first of each 1/HZ s of receipt time; the others counted as `decimated` in collector.json) [default: every state].
     #[arg(long, value_name = "HZ", value_parser = positive)]
     pub(super) log_rate: Option<f64>,
-    #[command(flatten)]
-    pub(super) net: NetArgs,
 }
 
 /// `echelon fleet router`.
@@ -338,6 +360,15 @@ pub(super) enum TopologyArg {
 
 /// `echelon fleet up`.
 #[derive(Debug, Args)]
+#[command(
+    mut_arg("foxglove", |a| a.help(
+        "Serve the live fleet to Foxglove (its WebSocket protocol) on ADDR [default: 127.0.0.1:8765; port 0: any free port]: \
+         the collector's channels and the 3D ones (docs/foxglove.md); the address is in DIR/endpoints.json"
+    )),
+    mut_arg("log_rate", |a| a.help(
+        "The collector's state-log rate: at most HZ states per robot per second (`fleet collector --log-rate`) [default: every state]"
+    )),
+)]
 pub(crate) struct UpArgs {
     /// A built-in scenario name or a path to a .toml file.
     pub(super) scenario: String,
@@ -363,15 +394,9 @@ pub(crate) struct UpArgs {
     /// Router topology: S routers linked to each other (sites on loopback), robots spread over them.
     #[arg(long, value_name = "S", default_value_t = 1)]
     pub(super) sites: usize,
-    /// Serve the live fleet to Foxglove (its WebSocket protocol) on ADDR [default: 127.0.0.1:8765; port 0: any free port]: the collector's channels and the 3D ones (docs/foxglove.md); the address is in DIR/endpoints.json.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_ADDR)]
-    pub(super) foxglove: Option<std::net::SocketAddr>,
-    /// Serve the live dashboard page on ADDR [default: 127.0.0.1:8766]: the robots moving, per robot link, ‖e‖, safety, saturation, and Stop all / Resume for whoever opens it with the operator token printed at start (docs/foxglove.md).
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = echelon_fleet::collector::DEFAULT_DASHBOARD)]
-    pub(super) dashboard: Option<std::net::SocketAddr>,
-    /// The collector's state-log rate: at most HZ states per robot per second (`fleet collector --log-rate`) [default: every state].
-    #[arg(long, value_name = "HZ", value_parser = positive)]
-    pub(super) log_rate: Option<f64>,
+    /// The collector's, which `up` starts.
+    #[command(flatten)]
+    pub(super) live: LiveArgs,
     /// Print nothing but errors.
     #[arg(long, short)]
     pub(super) quiet: bool,

@@ -80,9 +80,9 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
                 TopologyArg::Mesh => Topology::Mesh,
             },
             sites: a.sites,
-            foxglove: a.foxglove,
-            dashboard: a.dashboard,
-            log_rate: a.log_rate,
+            foxglove: a.live.foxglove,
+            dashboard: a.live.dashboard,
+            log_rate: a.live.log_rate,
         },
         &stop,
     )?;

@@ -37,33 +37,21 @@ const MOCAP: &str = "\n[fixes]\nsource = \"pose\"\nperiod = 0.1\nposition_noise 
 
 /// The builtin with `extra` appended, and per-agent `fixes` tables.
 fn scenario(dir: &Path, name: &str, extra: &str, agents: [&str; 2]) -> String {
-    let src = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenarios/{SCENARIO}.toml")),
-    )
-    .unwrap();
-    let mut parts = src.split("[[agents]]\n");
-    let mut out = parts.next().unwrap().to_owned();
-    for (part, own) in parts.zip(agents) {
-        out.push_str("[[agents]]\n");
-        out.push_str(own);
-        out.push_str(part);
-    }
-    out.push_str(extra);
-    let path = dir.join(format!("{name}.toml"));
-    std::fs::write(&path, out).unwrap();
-    path.to_string_lossy().into_owned()
+    common::scenario_variant(dir, SCENARIO, name, &agents, extra)
 }
 
 /// `fleet up --ros2` of `scenario` for `duration` fleet seconds at ×5.
 fn fleet_up(scenario: &str, duration: &str, out: &Path) -> Value {
-    let o = Command::new(EXE)
-        .args(["fleet", "up", scenario, "--ros2", "--time-scale", "5"])
-        .args(["--duration", duration, "--quiet", "--out"])
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_str(&std::fs::read_to_string(out.join("fleet-summary.json")).unwrap()).unwrap()
+    let args = [
+        scenario,
+        "--ros2",
+        "--time-scale",
+        "5",
+        "--duration",
+        duration,
+        "--quiet",
+    ];
+    common::fleet_up(&args, out)
 }
 
 /// A robot's published state: its fleet time, its estimate `(x, y, θ)`,

@@ -20,7 +20,7 @@ use echelon_ros2::msgs::{RosMessage, TWIST_STAMPED, Time, TwistStamped};
 
 mod common;
 
-use common::{args, mesh, ports, spawn};
+use common::{ports, spawn_peer};
 
 const SCENARIO: &str = r#"name = "teleop-column"
 [sim]
@@ -117,15 +117,13 @@ fn a_teleoperated_head_leads_a_column() {
     for k in 1..=3u32 {
         let agent = k.to_string();
         let i = 2 * k as usize - 1;
-        let base = mesh(&e[i], &e[..i]);
         let mut a = vec!["fleet", "base", scenario, "--ros2", "--agent", &agent];
         a.extend(scale);
-        children.push(spawn(&args(&a, &base)));
-        let robot = mesh(&e[i + 1], &e[..=i]);
+        children.push(spawn_peer(&a, &e, i));
         let mut a = vec!["fleet", "robot", scenario, "--ros2", "--simulated-base"];
         a.extend(["--agent", &agent, "--duration", "31"]);
         a.extend(scale);
-        children.push(spawn(&args(&a, &robot)));
+        children.push(spawn_peer(&a, &e, i + 1));
     }
     // The driver: the script on the head base's cmd_vel at 20 Hz (wall),
     // by the head's own published time.

@@ -76,7 +76,7 @@ fn up_summary(up: common::Guard, dir: &Path) -> Value {
     let mut err = String::new();
     std::io::Read::read_to_string(&mut up.0.stderr.take().unwrap(), &mut err).unwrap();
     assert!(status.success(), "fleet up: {status}: {err}");
-    serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
+    common::fleet_summary(dir)
 }
 
 /// Waits until `heard` has a non-zero command after `since` from each of

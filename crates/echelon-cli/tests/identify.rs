@@ -49,18 +49,15 @@ fn identify_writes_a_block_a_scenario_accepts_with_its_summary_and_figure() {
     let run = dir.path().join("run");
     excitation_run(&run, "45");
     let out = dir.path().join("id");
-    let o = echelon(&[
-        "identify",
-        run.to_str().unwrap(),
-        "--agent",
-        "2",
-        "--name",
-        "lab2",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
-    let stdout = text(&o.stdout);
+    // Agent 2 as `lab2` from `input` (and `more`): what it prints.
+    let identify = |input: &Path, more: &[&str]| {
+        let input = input.to_str().unwrap();
+        let args = ["identify", input, "--agent", "2", "--name", "lab2"];
+        let o = echelon(&[&args[..], more].concat());
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        text(&o.stdout)
+    };
+    let stdout = identify(&run, &["--out", out.to_str().unwrap()]);
     assert!(stdout.contains("[robots.lab2]"), "{stdout}");
     assert!(stdout.contains("torque model, agent 2"), "{stdout}");
     let block = std::fs::read_to_string(out.join("robot.toml")).unwrap();
@@ -79,17 +76,7 @@ fn identify_writes_a_block_a_scenario_accepts_with_its_summary_and_figure() {
 
     // The same run's run.mcap (/agent/2/state JSON records, as in a
     // fleet.mcap) gives the same block but for its source line.
-    let mcap = run.join("run.mcap");
-    let o = echelon(&[
-        "identify",
-        mcap.to_str().unwrap(),
-        "--agent",
-        "2",
-        "--name",
-        "lab2",
-    ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
-    let from_mcap = text(&o.stdout);
+    let from_mcap = identify(&run.join("run.mcap"), &[]);
     let body = |s: &str| -> String {
         s.lines()
             .filter(|l| l.starts_with('[') || l.contains(" = "))

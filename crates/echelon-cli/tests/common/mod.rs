@@ -40,6 +40,34 @@ pub(crate) fn echelon_ok(args: &[&str], last: &Path) {
     check(&out, &args.join(" "));
 }
 
+/// A `fleet up` output directory's `fleet-summary.json`.
+pub(crate) fn fleet_summary(dir: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
+}
+
+/// Runs `echelon fleet up ARGS… --out DIR` to its end and checks that it
+/// succeeded; its `fleet-summary.json`.
+pub(crate) fn fleet_up(args: &[&str], dir: &Path) -> Value {
+    echelon_ok(&[&["fleet", "up"], args, &["--out"]].concat(), dir);
+    fleet_summary(dir)
+}
+
+/// Starts `echelon fleet up ARGS… --out DIR` on a thread, for a test that
+/// talks to the fleet meanwhile; the thread gives its output.
+pub(crate) fn fleet_up_in_background(args: &[&str], dir: &Path) -> std::thread::JoinHandle<Output> {
+    let args: Vec<String> = args.iter().map(|a| (*a).to_owned()).collect();
+    let dir = dir.to_owned();
+    std::thread::spawn(move || {
+        Command::new(EXE)
+            .args(["fleet", "up"])
+            .args(&args)
+            .arg("--out")
+            .arg(&dir)
+            .output()
+            .unwrap()
+    })
+}
+
 /// The number at `path` in a JSON report.
 pub(crate) fn f(v: &Value, path: &[&str]) -> f64 {
     path.iter()
@@ -119,23 +147,45 @@ pub(crate) fn ports(n: usize) -> Vec<String> {
         .collect()
 }
 
-/// `--listen mine --connect each of before` (a full mesh of peers).
-pub(crate) fn mesh(mine: &str, before: &[String]) -> Vec<String> {
-    let mut a = vec!["--listen".to_owned(), mine.to_owned()];
-    for e in before {
-        a.push("--connect".to_owned());
-        a.push(e.clone());
+/// Starts `echelon CMD…` as process `i` of a full mesh of peers on the
+/// endpoints `e`: `--listen e[i]`, and `--connect` each of `e[..i]`.
+pub(crate) fn spawn_peer(cmd: &[&str], e: &[String], i: usize) -> Guard {
+    let mut a = cmd.to_vec();
+    a.extend(["--listen", &e[i]]);
+    for before in &e[..i] {
+        a.extend(["--connect", before]);
     }
-    a
+    spawn(&a)
 }
 
-/// `fixed` then `more`, as one argument list.
-pub(crate) fn args<'a>(fixed: &[&'a str], more: &'a [String]) -> Vec<&'a str> {
-    fixed
-        .iter()
-        .copied()
-        .chain(more.iter().map(String::as_str))
-        .collect()
+/// The built-in scenario `builtin` with `agents[k]` put first in its agent
+/// `k`'s table (one entry per agent at most) and `extra` appended, written
+/// to `dir/NAME.toml`; that path.
+pub(crate) fn scenario_variant(
+    dir: &Path,
+    builtin: &str,
+    name: &str,
+    agents: &[&str],
+    extra: &str,
+) -> String {
+    let src = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenarios/{builtin}.toml")),
+    )
+    .unwrap();
+    let mut parts = src.split("[[agents]]\n");
+    let mut out = parts.next().unwrap().to_owned();
+    let mut n = 0;
+    for part in parts {
+        out.push_str("[[agents]]\n");
+        out.push_str(agents.get(n).copied().unwrap_or_default());
+        out.push_str(part);
+        n += 1;
+    }
+    assert!(agents.len() <= n, "{builtin} has {n} agents");
+    out.push_str(extra);
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, out).unwrap();
+    path.to_string_lossy().into_owned()
 }
 
 /// `echelon fleet certs --robots ROBOTS` into `dir/certs`; that directory.

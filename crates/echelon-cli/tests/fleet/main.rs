@@ -42,11 +42,7 @@ fn fixture(name: &str) -> String {
 
 /// `echelon fleet up` into `dir`; returns fleet-summary.json.
 fn up(scenario: &str, dir: &Path, extra: &[&str]) -> Value {
-    echelon_ok(
-        &[&["fleet", "up", scenario], extra, &["--out"]].concat(),
-        dir,
-    );
-    serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
+    common::fleet_up(&[&[scenario], extra].concat(), dir)
 }
 
 /// `fleet up circle-pentagon` for 10 fleet s at ×5 (and `extra`) into a

@@ -62,21 +62,11 @@ fn secure_mode_rogue_moves_no_robot() {
     let certs = common::certs(dir.path(), 2);
     let fleet_dir = dir.path().join("fleet");
     let scenario = fixture("fast-circle.toml");
-    let fleet = std::thread::spawn({
-        let (fleet_dir, certs) = (fleet_dir.clone(), certs.clone());
-        move || {
-            up(
-                &scenario,
-                &fleet_dir,
-                &[
-                    "--time-scale",
-                    "10",
-                    "--secure",
-                    &certs.display().to_string(),
-                ],
-            )
-        }
-    });
+    let certs_arg = certs.display().to_string();
+    let fleet = common::fleet_up_in_background(
+        &[&scenario, "--time-scale", "10", "--secure", &certs_arg],
+        &fleet_dir,
+    );
     let endpoints = endpoints_of(&fleet_dir);
     // Through the router (the default): it is the only process listening.
     assert_eq!(endpoints.keys().collect::<Vec<_>>(), ["router/1"]);
@@ -103,7 +93,8 @@ fn secure_mode_rogue_moves_no_robot() {
     .unwrap();
     let mut stolen_rogue = rogue_leader(&fake, &stolen);
     let mut anonymous_rogue = rogue_leader(&fake, &anonymous);
-    let report = fleet.join().unwrap();
+    check(&fleet.join().unwrap(), "fleet up");
+    let report = common::fleet_summary(&fleet_dir);
     // The rogue with a stolen robot certificate joined and published…
     let status = stolen_rogue.0.wait().unwrap();
     let mut text = String::new();
@@ -163,16 +154,7 @@ fn without_security_the_same_rogue_does_move_robots() {
     // The rogue's reference jumps 5 m at 1 m/s: robot 1, between two
     // leaders, may spin past the divergence guard's 100 rad/s, command zero
     // and exit 1 (then `fleet up` fails naming it): that is moving it too.
-    let fleet = std::thread::spawn({
-        let fleet_dir = fleet_dir.clone();
-        move || {
-            Command::new(EXE)
-                .args(["fleet", "up", &scenario, "--time-scale", "10", "--out"])
-                .arg(&fleet_dir)
-                .output()
-                .unwrap()
-        }
-    });
+    let fleet = common::fleet_up_in_background(&[&scenario, "--time-scale", "10"], &fleet_dir);
     let endpoints = endpoints_of(&fleet_dir);
     assert!(endpoints.values().all(|e| e.starts_with("tcp/")));
     let fake = fake_reference(dir.path());
@@ -203,10 +185,7 @@ fn without_security_the_same_rogue_does_move_robots() {
         assert!(diverged, "fleet up failed otherwise: {err}");
         return;
     }
-    let report: Value = serde_json::from_str(
-        &std::fs::read_to_string(fleet_dir.join("fleet-summary.json")).unwrap(),
-    )
-    .unwrap();
+    let report = common::fleet_summary(&fleet_dir);
     let published = u(&report["leader"], &["published"]);
     let c = &report["robots"][0]["counters"];
     // A second sender on the reference key: the robot saw its samples.

@@ -14,14 +14,13 @@ fn fleet_excite_records_a_bag_that_identify_turns_into_the_base_lags() {
     let dir = tempfile::tempdir().unwrap();
     let bag = dir.path().join("excite.mcap");
     let e = ports(2);
-    let base_net = mesh(&e[0], &[]);
-    let base = spawn(&args(
+    let base = spawn_peer(
         &["fleet", "base", SCENARIO, "--ros2", "--agent", "1"],
-        &base_net,
-    ));
-    let excite_net = mesh(&e[1], &e[..1]);
+        &e,
+        0,
+    );
     let bag_arg = bag.to_str().unwrap();
-    let excite = spawn(&args(
+    let excite = spawn_peer(
         &[
             "fleet",
             "excite",
@@ -34,8 +33,9 @@ fn fleet_excite_records_a_bag_that_identify_turns_into_the_base_lags() {
             "--out",
             bag_arg,
         ],
-        &excite_net,
-    ));
+        &e,
+        1,
+    );
     let report = excite.report();
     base.terminate();
     let base_report = base.report();

@@ -32,8 +32,20 @@ mod real;
 mod refusals;
 mod up;
 
-use common::{EXE, args, check, echelon_ok, f, mesh, ports, spawn};
+use common::{EXE, check, echelon_ok, f, ports, spawn, spawn_peer};
 const SCENARIO: &str = "experiment-circle-velocity";
+
+/// `fleet up` of [`SCENARIO`] on simulated ROS 2 bases: 30 fleet seconds
+/// at ×10, quietly.
+const UP_ROS2: [&str; 7] = [
+    SCENARIO,
+    "--ros2",
+    "--time-scale",
+    "10",
+    "--duration",
+    "30",
+    "--quiet",
+];
 
 /// Agent 1's start pose in [`SCENARIO`], world `[x, y, θ]`.
 const START: [f64; 3] = [0.0, -0.6, std::f64::consts::FRAC_PI_2];

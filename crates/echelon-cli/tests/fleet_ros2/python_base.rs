@@ -20,15 +20,9 @@ fn tokens(base: &Value) -> Vec<&str> {
 
 /// [`SCENARIO`] written to `dir/<name>.toml` with `agent1` added to agent
 /// 1's table and `ros2` as its `[fleet.ros2]` section.
-fn variant(dir: &Path, name: &str, agent1: &str, ros2: &str) -> PathBuf {
-    let src = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../scenarios/{SCENARIO}.toml")),
-    )
-    .unwrap();
-    let src = src.replacen("[[agents]]\n", &format!("[[agents]]\n{agent1}"), 1);
-    let path = dir.join(format!("{name}.toml"));
-    std::fs::write(&path, format!("{src}\n[fleet.ros2]\n{ros2}")).unwrap();
-    path
+fn variant(dir: &Path, name: &str, agent1: &str, ros2: &str) -> String {
+    let ros2 = format!("\n[fleet.ros2]\n{ros2}");
+    common::scenario_variant(dir, SCENARIO, name, &[agent1], &ros2)
 }
 
 /// Robot 1 of `scenario` (and a leader) against `fake_base.py` with
@@ -65,8 +59,7 @@ fn drive_python_base(scenario: &str, base_args: &[&str], origin: [f64; 3]) -> (V
         .unwrap_or_else(|e| {
             panic!("cannot run `{python}`: {e}; run `scripts/test` (it installs scripts/requirements-test.txt)")
         });
-    let robot_net = mesh(&e[1], &e[..1]);
-    let robot = spawn(&args(
+    let robot = spawn_peer(
         &[
             "fleet",
             "robot",
@@ -77,10 +70,10 @@ fn drive_python_base(scenario: &str, base_args: &[&str], origin: [f64; 3]) -> (V
             "--duration",
             "10",
         ],
-        &robot_net,
-    ));
-    let leader_net = mesh(&e[2], &e[..2]);
-    let leader = spawn(&args(
+        &e,
+        1,
+    );
+    let leader = spawn_peer(
         &[
             "fleet",
             "leader",
@@ -92,8 +85,9 @@ fn drive_python_base(scenario: &str, base_args: &[&str], origin: [f64; 3]) -> (V
             "--wait-timeout",
             "60",
         ],
-        &leader_net,
-    ));
+        &e,
+        2,
+    );
     let report = robot.report();
     leader.report();
     let _ = Command::new("kill")
@@ -172,19 +166,11 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
     let dir = tempfile::tempdir().unwrap();
     let certs = common::certs(dir.path(), 2);
     let fleet_dir = dir.path().join("fleet");
-    let fleet = std::thread::spawn({
-        let (fleet_dir, certs) = (fleet_dir.clone(), certs.clone());
-        move || {
-            Command::new(EXE)
-                .args(["fleet", "up", SCENARIO, "--ros2", "--time-scale", "10"])
-                .args(["--duration", "30", "--quiet", "--secure"])
-                .arg(&certs)
-                .arg("--out")
-                .arg(&fleet_dir)
-                .output()
-                .unwrap()
-        }
-    });
+    let certs_arg = certs.to_str().unwrap();
+    let fleet = common::fleet_up_in_background(
+        &[&UP_ROS2[..], &["--secure", certs_arg]].concat(),
+        &fleet_dir,
+    );
     let connect: Vec<String> = common::endpoints_of(&fleet_dir).into_values().collect();
     assert!(
         connect.iter().all(|e| e.starts_with("quic/")),
@@ -220,10 +206,7 @@ fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
     }
     check(&fleet.join().unwrap(), "fleet up");
     assert!(puts > 100, "the rogue published {puts}");
-    let up: Value = serde_json::from_str(
-        &std::fs::read_to_string(fleet_dir.join("fleet-summary.json")).unwrap(),
-    )
-    .unwrap();
+    let up = common::fleet_summary(&fleet_dir);
     let robot = &up["robots"][0];
     let base = &up["bases"][0];
     let sent = f(robot, &["ros2", "cmd_sent"]);
@@ -257,7 +240,7 @@ fn twist_commands_over_bridge_keys_drive_the_python_base_too() {
         "cmd_vel_type = \"twist\"\nkey_scheme = \"bridge\"\n",
     );
     let (_, base) = drive_python_base(
-        scenario.to_str().unwrap(),
+        &scenario,
         &["--cmd-type", "twist", "--scheme", "bridge"],
         origin,
     );
@@ -282,11 +265,7 @@ fn a_humble_robot_is_driven_over_humbles_keys() {
         "",
         "key_scheme = \"rmw_zenoh_humble\"\n",
     );
-    let (report, base) = drive_python_base(
-        scenario.to_str().unwrap(),
-        &["--scheme", "rmw_zenoh_humble"],
-        START,
-    );
+    let (report, base) = drive_python_base(&scenario, &["--scheme", "rmw_zenoh_humble"], START);
     assert_eq!(
         base["cmd_key"],
         "0/robot1/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported",

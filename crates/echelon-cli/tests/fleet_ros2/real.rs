@@ -176,9 +176,7 @@ fn real_fleet_ends_where_the_simulator_ends(secure: bool) {
         .into_iter()
         .map(common::Guard::report)
         .collect();
-    let up: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("fleet-summary.json")).unwrap())
-            .unwrap();
+    let up = common::fleet_summary(&out);
     assert_eq!(up["time_scale"], 1.0);
     assert!(up.get("bases").is_none(), "no simulated base of its own");
 

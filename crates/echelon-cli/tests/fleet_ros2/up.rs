@@ -25,25 +25,7 @@ fn simulated_final(duration: &str, dir: &Path) -> Vec<(f64, f64)> {
 fn fleet_up_ros2_ends_where_the_simulator_ends() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    echelon_ok(
-        &[
-            "fleet",
-            "up",
-            SCENARIO,
-            "--ros2",
-            "--time-scale",
-            "10",
-            "--duration",
-            "30",
-            "--quiet",
-            "--out",
-        ],
-        dir.path(),
-    );
-    let up: Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("fleet-summary.json")).unwrap(),
-    )
-    .unwrap();
+    let up = common::fleet_up(&UP_ROS2, dir.path());
     let sim = simulated_final("30", &dir.path().join("sim"));
     let robots = up["robots"].as_array().unwrap();
     assert_eq!(robots.len(), sim.len());
@@ -207,18 +189,17 @@ fn bad_odometry_is_refused_and_sigterm_leaves_zero_on_cmd_vel() {
         })
         .wait()
         .unwrap();
-    let base_net = mesh(&e[1], &e[..1]);
-    let base = spawn(&args(
+    let base = spawn_peer(
         &["fleet", "base", SCENARIO, "--ros2", "--agent", "1"],
-        &base_net,
-    ));
-    let robot_net = mesh(&e[2], &e[..2]);
-    let robot = spawn(&args(
+        &e,
+        1,
+    );
+    let robot = spawn_peer(
         &["fleet", "robot", SCENARIO, "--ros2", "--agent", "1"],
-        &robot_net,
-    ));
-    let leader_net = mesh(&e[3], &e[..3]);
-    let _leader = spawn(&args(
+        &e,
+        2,
+    );
+    let _leader = spawn_peer(
         &[
             "fleet",
             "leader",
@@ -228,8 +209,9 @@ fn bad_odometry_is_refused_and_sigterm_leaves_zero_on_cmd_vel() {
             "--wait-for",
             "base/1",
         ],
-        &leader_net,
-    ));
+        &e,
+        3,
+    );
     // Until the robot drives (a non-zero command).
     let start = Instant::now();
     while !heard

@@ -142,23 +142,13 @@ fn free_addr() -> String {
 
 /// `fleet up` into `dir` with `extra` arguments; fleet-summary.json.
 fn up(dir: &Path, extra: &[&str]) -> Value {
-    echelon_ok(
-        &[
-            &[
-                "fleet",
-                "up",
-                "experiment-circle",
-                "--duration",
-                "20",
-                "--time-scale",
-                "5",
-                "--quiet",
-            ],
-            extra,
-            &["--out"],
-        ]
-        .concat(),
-        dir,
-    );
-    serde_json::from_str(&std::fs::read_to_string(dir.join("fleet-summary.json")).unwrap()).unwrap()
+    let fixed = [
+        "experiment-circle",
+        "--duration",
+        "20",
+        "--time-scale",
+        "5",
+        "--quiet",
+    ];
+    common::fleet_up(&[&fixed[..], extra].concat(), dir)
 }

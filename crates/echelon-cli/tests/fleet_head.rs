@@ -93,11 +93,7 @@ fn a_teleoperated_head_leads_a_column() {
     std::fs::write(&path, SCENARIO).unwrap();
     let scenario = path.to_str().unwrap();
     let e = ports(7);
-    let session = echelon_fleet::net::open(&echelon_fleet::net::NetOptions {
-        listen: vec![e[0].clone()],
-        ..Default::default()
-    })
-    .unwrap();
+    let session = common::open_peer(&e);
     // Every robot's published state: (agent, fleet t, ‖e‖).
     let states: Arc<Mutex<Vec<(u32, f64, f64)>>> = Arc::default();
     let s = states.clone();

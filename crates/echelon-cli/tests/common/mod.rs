@@ -147,6 +147,16 @@ pub(crate) fn ports(n: usize) -> Vec<String> {
         .collect()
 }
 
+/// The test's own Zenoh session as process 0 of a full mesh of peers on
+/// the endpoints `e` (see [`spawn_peer`]): it listens on `e[0]`.
+pub(crate) fn open_peer(e: &[String]) -> zenoh::Session {
+    echelon_fleet::net::open(&echelon_fleet::net::NetOptions {
+        listen: vec![e[0].clone()],
+        ..Default::default()
+    })
+    .unwrap()
+}
+
 /// Starts `echelon CMD…` as process `i` of a full mesh of peers on the
 /// endpoints `e`: `--listen e[i]`, and `--connect` each of `e[..i]`.
 pub(crate) fn spawn_peer(cmd: &[&str], e: &[String], i: usize) -> Guard {

@@ -171,11 +171,7 @@ fn raw_odometry_is_what_the_base_published(dir: &Path) {
 fn bad_odometry_is_refused_and_sigterm_leaves_zero_on_cmd_vel() {
     let _fleet = common::one_fleet_at_a_time();
     let e = ports(4);
-    let session = echelon_fleet::net::open(&echelon_fleet::net::NetOptions {
-        listen: vec![e[0].clone()],
-        ..Default::default()
-    })
-    .unwrap();
+    let session = common::open_peer(&e);
     let heard: Heard = Arc::default();
     let h = heard.clone();
     let cmd_key = "0/robot1/cmd_vel/**";

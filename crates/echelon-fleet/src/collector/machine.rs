@@ -10,6 +10,7 @@ use echelon_mcap::{
     REFERENCE_TOPIC, ReferenceRecord, agent_topic, nanos,
 };
 
+use super::schema::Rejected;
 use super::{
     AgentRecord, COMMAND, COMMAND_TOPIC, Channel, CollectorReport, REJECTED, REJECTED_TOPIC,
     RecordSink, STATS, Stamp,
@@ -241,9 +242,12 @@ impl Collector {
         now: u64,
     ) -> Result<(), FleetError> {
         bump(&mut self.report.rejected, reason);
-        let record = serde_json::json!({
-            "key": key, "reason": reason, "size": bytes.len(), "hex": hex(bytes),
-        });
+        let record = Rejected {
+            key,
+            reason,
+            size: bytes.len(),
+            hex: hex(bytes),
+        };
         let data = serde_json::to_vec(&record).map_err(echelon_mcap::McapLogError::from)?;
         self.log(sink, REJECTED_TOPIC, &REJECTED, now, 0, &data)
     }

@@ -26,6 +26,7 @@ use crate::wire::{self, DecodeError, LinkStatus, Message, RobotState};
 /// [`Collector::on_message`] with the time it arrived, and comes out as
 /// records in a [`RecordSink`]; it counts everything. It reads no clock and
 /// opens no file.
+#[derive(Debug)]
 pub struct Collector {
     pub(super) keys: Keys,
     ros: Vec<RosTopic>,
@@ -50,16 +51,6 @@ fn hex(bytes: &[u8]) -> String {
         let _ = write!(s, "{b:02x}");
     }
     s
-}
-
-impl std::fmt::Debug for Collector {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Collector")
-            .field("keys", &self.keys)
-            .field("ros", &self.ros)
-            .field("report", &self.report)
-            .finish_non_exhaustive()
-    }
 }
 
 impl Collector {

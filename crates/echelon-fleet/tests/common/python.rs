@@ -25,14 +25,14 @@ pub(crate) fn script(name: &str) -> PathBuf {
 /// what to install when they cannot run.
 pub(crate) struct Helpers {
     /// The interpreter.
-    pub python: String,
+    pub(crate) python: String,
     /// What to install, ending every error of a helper that cannot run.
-    pub hint: &'static str,
+    pub(crate) hint: &'static str,
 }
 
 impl Helpers {
     /// With [`python`].
-    pub fn new(hint: &'static str) -> Helpers {
+    pub(crate) fn new(hint: &'static str) -> Helpers {
         Helpers {
             python: python(),
             hint,
@@ -42,7 +42,12 @@ impl Helpers {
     /// Runs `python scripts/ros2/<name> args…` with `input` (JSON) on its
     /// stdin, and parses its JSON output; an error that it cannot run or
     /// failed (with its stderr) names what to install.
-    pub fn run(&self, name: &str, args: &[&str], input: Option<&Value>) -> Result<Value, String> {
+    pub(crate) fn run(
+        &self,
+        name: &str,
+        args: &[&str],
+        input: Option<&Value>,
+    ) -> Result<Value, String> {
         let Helpers { python, hint } = self;
         let mut child = Command::new(python)
             .arg(script(name))

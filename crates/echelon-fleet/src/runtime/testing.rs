@@ -9,13 +9,13 @@ use crate::FleetError;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct Tick {
     /// When it ran, on the task's clock.
-    pub now: f64,
+    pub(super) now: f64,
     /// The wake it was due at.
-    pub due: f64,
+    pub(super) due: f64,
     /// The thread it ran on.
-    pub thread: ThreadId,
+    pub(super) thread: ThreadId,
     /// Samples heard before it.
-    pub heard: usize,
+    pub(super) heard: usize,
 }
 
 /// A task ticking every `period` (its clock) until it has ticked `ticks`
@@ -30,17 +30,17 @@ pub(super) struct Periodic {
     input: String,
     output: String,
     /// What it waits for before its clock starts.
-    pub wait_for: Option<WaitFor>,
+    pub(super) wait_for: Option<WaitFor>,
     /// Its due ticks.
-    pub log: Vec<Tick>,
+    pub(super) log: Vec<Tick>,
     /// The samples it heard: time on its clock, key, payload.
-    pub heard: Vec<(f64, String, Vec<u8>)>,
+    pub(super) heard: Vec<(f64, String, Vec<u8>)>,
 }
 
 impl Periodic {
     /// Ticks every `period` s `ticks` times, hearing `input` (a key
     /// expression) and publishing on `output`.
-    pub fn new(period: f64, ticks: usize, input: &str, output: &str) -> Periodic {
+    pub(super) fn new(period: f64, ticks: usize, input: &str, output: &str) -> Periodic {
         Periodic {
             period,
             ticks,

@@ -36,7 +36,7 @@ const MAX_BY: usize = 64;
 pub const COMMAND_VERSION: u32 = 1;
 
 /// What a command orders.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Order {
     /// Command zero on every tick until resumed.
@@ -56,8 +56,9 @@ impl Order {
 }
 
 /// A fleet-wide command, as JSON on `echelon/<fleet>/command`.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(title = "echelon.FleetCommand")]
 pub struct FleetCommand {
     /// [`COMMAND_VERSION`].
     pub version: u32,
@@ -174,7 +175,9 @@ impl Latched {
 }
 
 /// What the commands a process received did (its report's `commands`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(deny_unknown_fields)]
 pub struct CommandCounts {
     /// Command payloads received on the command key.

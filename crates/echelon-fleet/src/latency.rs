@@ -37,22 +37,34 @@ const BUCKETS: usize = (EXACT + (TOP as u64 - 7) * SUB) as usize;
 pub const RELATIVE_ERROR: f64 = 1.0 / 128.0;
 
 /// A fixed-memory histogram of non-negative integers (nanoseconds).
-#[derive(Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Histogram {
-    counts: Box<[u64]>,
+    counts: Buckets,
     count: u64,
     sum: u128,
     min: u64,
     max: u64,
 }
 
-impl std::fmt::Debug for Histogram {
+/// A histogram's count per bucket ([`BUCKETS`] of them), shown by its
+/// non-empty buckets only.
+#[derive(Clone, PartialEq, Eq)]
+struct Buckets(Box<[u64]>);
+
+impl Buckets {
+    /// The non-empty buckets as `(smallest value, count)`, smallest first.
+    fn non_empty(&self) -> impl Iterator<Item = (u64, u64)> + '_ {
+        self.0
+            .iter()
+            .enumerate()
+            .filter(|&(_, &c)| c > 0)
+            .map(|(i, &c)| (bounds(i).0, c))
+    }
+}
+
+impl std::fmt::Debug for Buckets {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Histogram")
-            .field("count", &self.count)
-            .field("min", &self.min)
-            .field("max", &self.max)
-            .finish_non_exhaustive()
+        f.debug_map().entries(self.non_empty()).finish()
     }
 }
 
@@ -88,7 +100,7 @@ impl Histogram {
     /// An empty histogram (its one allocation).
     pub fn new() -> Histogram {
         Histogram {
-            counts: vec![0; BUCKETS].into_boxed_slice(),
+            counts: Buckets(vec![0; BUCKETS].into_boxed_slice()),
             count: 0,
             sum: 0,
             min: u64::MAX,
@@ -106,7 +118,7 @@ impl Histogram {
         if n == 0 {
             return;
         }
-        self.counts[index(v)] += n;
+        self.counts.0[index(v)] += n;
         self.count += n;
         self.sum += u128::from(v) * u128::from(n);
         self.min = self.min.min(v);
@@ -115,7 +127,7 @@ impl Histogram {
 
     /// Adds every value of `other`.
     pub fn merge(&mut self, other: &Histogram) {
-        for (a, b) in self.counts.iter_mut().zip(other.counts.iter()) {
+        for (a, b) in self.counts.0.iter_mut().zip(other.counts.0.iter()) {
             *a += b;
         }
         self.count += other.count;
@@ -160,7 +172,7 @@ impl Histogram {
         }
         let rank = ((p * self.count as f64).ceil() as u64).clamp(1, self.count);
         let mut seen = 0;
-        for (i, &c) in self.counts.iter().enumerate() {
+        for (i, &c) in self.counts.0.iter().enumerate() {
             seen += c;
             if seen >= rank {
                 let (lower, width) = bounds(i);
@@ -172,12 +184,7 @@ impl Histogram {
 
     /// The non-empty buckets as `(smallest value, count)`, smallest first.
     pub fn buckets(&self) -> Vec<(u64, u64)> {
-        self.counts
-            .iter()
-            .enumerate()
-            .filter(|&(_, &c)| c > 0)
-            .map(|(i, &c)| (bounds(i).0, c))
-            .collect()
+        self.counts.non_empty().collect()
     }
 }
 

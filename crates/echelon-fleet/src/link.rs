@@ -13,7 +13,9 @@ use crate::wire::{Header, LinkStatus};
 /// lands in exactly one of `accepted`, `malformed`, `wrong_version`, `foreign`,
 /// `injected_loss`, `injected_outage`, `stale`, `reordered` (or is still
 /// delayed when the process stops).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(deny_unknown_fields)]
 pub struct Counters {
     /// Samples that reached the process on the stream's key.

@@ -76,158 +76,156 @@ fn integrate(
     to
 }
 
-/// Eq. 3 integrated with RK4 over the real elapsed fleet time, in sub-steps
-/// of at most `max_step`, with the last command held (zero-order hold).
-#[derive(Debug, Clone)]
-pub struct SimulatedPlant {
-    params: RobotParams,
-    state: State,
-    applied: Input,
-    t: f64,
-    max_step: f64,
+/// A model a [`Simulated`] plant integrates: eq. 3 ([`RobotParams`], wheel
+/// torques) or a velocity base ([`VelocityBase`], velocity commands).
+pub trait Model: Copy + std::fmt::Debug {
+    /// The input it holds between commands (after its limits).
+    type Held: Copy + Default + PartialEq + std::fmt::Debug;
+    /// The command that stops it, in its own terms.
+    const ZERO: Command;
+    /// What `cmd` makes it hold from state `state` (a velocity base settles
+    /// `state` to it), and what the motors apply; a command of the other
+    /// kind is zero (the robot never sends one: its law is its drive's).
+    fn apply(&self, state: &mut State, cmd: Command) -> (Self::Held, Actuation);
+    /// One RK4 step of `h` from `s`, `held` held.
+    fn rk4_step(&self, s: &State, held: Self::Held, h: f64) -> State;
+    /// `(v̇, ω̇)` in `s` with `held` held.
+    fn accelerations(&self, s: &State, held: Self::Held) -> (f64, f64);
 }
 
-impl SimulatedPlant {
-    /// A robot with `params` in state `start` at fleet time `t0`.
-    pub fn new(params: RobotParams, start: State, t0: f64, max_step: f64) -> Self {
-        SimulatedPlant {
-            params,
-            state: start,
-            applied: Input::default(),
-            t: t0,
-            max_step,
-        }
-    }
+impl Model for RobotParams {
+    type Held = Input;
+    const ZERO: Command = Command::Torque(Input { u1: 0.0, u2: 0.0 });
 
-    /// The simulated state (never lost).
-    pub fn true_state(&self) -> State {
-        self.state
-    }
-
-    /// The input applied now (after the torque limit).
-    pub fn applied_input(&self) -> Input {
-        self.applied
-    }
-}
-
-impl Plant for SimulatedPlant {
-    fn state(&self) -> Option<State> {
-        Some(self.state)
-    }
-
-    fn advance(&mut self, t: f64) {
-        let (params, applied) = (self.params, self.applied);
-        self.t = integrate(&mut self.state, self.t, t, self.max_step, |s, h| {
-            params.rk4_step(s, applied, h)
-        });
-    }
-
-    fn command(&mut self, cmd: Command) -> Actuation {
-        // A velocity command cannot drive wheel torques: the robot never
-        // sends one to a torque plant (its law is chosen by its drive); zero.
+    fn apply(&self, _state: &mut State, cmd: Command) -> (Input, Actuation) {
         let u = match cmd {
             Command::Torque(u) => u,
             Command::Velocity(_) => Input::default(),
         };
-        let (applied, tau) = self.params.actuate(u);
-        self.applied = applied;
-        Actuation {
+        let (applied, tau) = self.actuate(u);
+        let actuation = Actuation {
             u: applied,
             tau,
             velocity: None,
-        }
+        };
+        (applied, actuation)
     }
 
-    fn stop(&mut self) {
-        self.command(Command::Torque(Input::default()));
+    fn rk4_step(&self, s: &State, held: Input, h: f64) -> State {
+        RobotParams::rk4_step(self, s, held, h)
     }
 
-    fn accelerations(&self) -> (f64, f64) {
-        self.params.accelerations(&self.state, self.applied)
-    }
-
-    fn set_time(&mut self, t: f64) {
-        self.t = t;
+    fn accelerations(&self, s: &State, held: Input) -> (f64, f64) {
+        RobotParams::accelerations(self, s, held)
     }
 }
 
-/// A velocity-controlled base ([`VelocityBase`]: first-order lags, speed and
-/// acceleration limits) integrated with RK4 over the real elapsed fleet
-/// time, in sub-steps of at most `max_step`, the last command held; the
-/// command is limited as the simulator limits it
-/// ([`echelon::sim::Simulation`]), so the fleet and the simulator move the
-/// same base.
+impl Model for VelocityBase {
+    type Held = VelocityCommand;
+    const ZERO: Command = Command::Velocity(VelocityCommand { v: 0.0, omega: 0.0 });
+
+    /// The command limited as the simulator limits it
+    /// ([`echelon::sim::Simulation`]), so the fleet and the simulator move
+    /// the same base.
+    fn apply(&self, state: &mut State, cmd: Command) -> (VelocityCommand, Actuation) {
+        let cmd = match cmd {
+            Command::Velocity(c) => c,
+            Command::Torque(_) => VelocityCommand::default(),
+        };
+        let (applied, saturated) = self.limit(cmd);
+        *state = self.settle(state, applied);
+        let actuation = Actuation {
+            velocity: Some((applied, saturated)),
+            ..Actuation::default()
+        };
+        (applied, actuation)
+    }
+
+    fn rk4_step(&self, s: &State, held: VelocityCommand, h: f64) -> State {
+        VelocityBase::rk4_step(self, s, held, h)
+    }
+
+    fn accelerations(&self, s: &State, held: VelocityCommand) -> (f64, f64) {
+        VelocityBase::accelerations(self, s, held)
+    }
+}
+
+/// A [`Model`] integrated with RK4 over the real elapsed fleet time, in
+/// sub-steps of at most `max_step`, the last command held (zero-order
+/// hold).
 #[derive(Debug, Clone)]
-pub struct SimulatedVelocityBase {
-    base: VelocityBase,
+pub struct Simulated<M: Model> {
+    model: M,
     state: State,
-    applied: VelocityCommand,
+    applied: M::Held,
     t: f64,
     max_step: f64,
 }
 
-impl SimulatedVelocityBase {
-    /// A base in state `start` at fleet time `t0`.
-    pub fn new(base: VelocityBase, start: State, t0: f64, max_step: f64) -> Self {
-        SimulatedVelocityBase {
-            base,
+/// Eq. 3, simulated.
+pub type SimulatedPlant = Simulated<RobotParams>;
+
+/// A velocity-controlled base ([`VelocityBase`]: first-order lags, speed
+/// and acceleration limits), simulated.
+pub type SimulatedVelocityBase = Simulated<VelocityBase>;
+
+impl<M: Model> Simulated<M> {
+    /// A robot moving as `model` in state `start` at fleet time `t0`.
+    pub fn new(model: M, start: State, t0: f64, max_step: f64) -> Self {
+        Simulated {
+            model,
             state: start,
-            applied: VelocityCommand::default(),
+            applied: M::Held::default(),
             t: t0,
             max_step,
         }
     }
 
-    /// The simulated state (never lost): pose, and the speeds the base moves at.
+    /// The simulated state (never lost): pose, and the speeds it moves at.
     pub fn true_state(&self) -> State {
         self.state
     }
 
-    /// The command it follows (after the speed limits).
-    pub fn applied(&self) -> VelocityCommand {
+    /// The input it holds now (after its limits).
+    pub fn applied(&self) -> M::Held {
         self.applied
-    }
-
-    /// Follows `cmd` from now on; returns it after the speed limits and
-    /// whether they cut it.
-    pub fn follow(&mut self, cmd: VelocityCommand) -> (VelocityCommand, bool) {
-        let (applied, saturated) = self.base.limit(cmd);
-        self.applied = applied;
-        self.state = self.base.settle(&self.state, applied);
-        (applied, saturated)
     }
 }
 
-impl Plant for SimulatedVelocityBase {
+impl Simulated<VelocityBase> {
+    /// Follows `cmd` from now on; returns it after the speed limits and
+    /// whether they cut it.
+    pub fn follow(&mut self, cmd: VelocityCommand) -> (VelocityCommand, bool) {
+        self.command(Command::Velocity(cmd))
+            .velocity
+            .unwrap_or_default()
+    }
+}
+
+impl<M: Model> Plant for Simulated<M> {
     fn state(&self) -> Option<State> {
         Some(self.state)
     }
 
     fn advance(&mut self, t: f64) {
-        let (base, applied) = (self.base, self.applied);
+        let (model, applied) = (self.model, self.applied);
         self.t = integrate(&mut self.state, self.t, t, self.max_step, |s, h| {
-            base.rk4_step(s, applied, h)
+            model.rk4_step(s, applied, h)
         });
     }
 
     fn command(&mut self, cmd: Command) -> Actuation {
-        // Wheel torques cannot drive a velocity base: zero (never sent).
-        let cmd = match cmd {
-            Command::Velocity(c) => c,
-            Command::Torque(_) => VelocityCommand::default(),
-        };
-        Actuation {
-            velocity: Some(self.follow(cmd)),
-            ..Actuation::default()
-        }
+        let (applied, actuation) = self.model.apply(&mut self.state, cmd);
+        self.applied = applied;
+        actuation
     }
 
     fn stop(&mut self) {
-        self.follow(VelocityCommand::default());
+        self.command(M::ZERO);
     }
 
     fn accelerations(&self) -> (f64, f64) {
-        self.base.accelerations(&self.state, self.applied)
+        self.model.accelerations(&self.state, self.applied)
     }
 
     fn set_time(&mut self, t: f64) {

@@ -13,10 +13,6 @@
 //! These tests need `python3` with the wheels (`scripts/test` installs
 //! `scripts/requirements-ros2.txt`); without them they fail and say so.
 
-use std::io::Write;
-use std::path::PathBuf;
-use std::process::{Command, Stdio};
-
 use echelon_ros2::cdr::CdrError;
 use echelon_ros2::msgs::{
     HEADER, Header, ODOMETRY, Odometry, POSE_STAMPED, POSE_WITH_COVARIANCE_STAMPED, Point, Pose,
@@ -27,6 +23,9 @@ use serde_json::{Value, json};
 
 mod common;
 use common::{covariance, header, odometry, quat, twist, twist_stamped};
+#[path = "common/python.rs"]
+mod python;
+use python::Helpers;
 
 const INSTALL_HINT: &str = "the ROS 2 interop tests need python3 (3.11) with the ROS 2 Jazzy \
     wheels: run `scripts/test` (it installs scripts/requirements-ros2.txt), or \
@@ -34,50 +33,11 @@ const INSTALL_HINT: &str = "the ROS 2 interop tests need python3 (3.11) with the
     ros-jazzy-geometry-msgs, ros-jazzy-nav-msgs; ~280 MB); set ECHELON_PYTHON to use \
     another interpreter";
 
-fn script() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scripts/ros2/rclpy_codec.py")
-}
-
-/// Runs the rclpy helper with `python`; an error message names what to install.
-fn run_with(python: &str, command: &str, input: Option<&Value>) -> Result<Value, String> {
-    let mut child = Command::new(python)
-        .arg(script())
-        .arg(command)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .map_err(|e| format!("cannot run `{python}`: {e}; {INSTALL_HINT}"))?;
-    if let Some(input) = input {
-        let mut stdin = child.stdin.take().ok_or("no stdin")?;
-        stdin
-            .write_all(input.to_string().as_bytes())
-            .map_err(|e| format!("writing to {python}: {e}"))?;
-    }
-    drop(child.stdin.take());
-    let out = child
-        .wait_with_output()
-        .map_err(|e| format!("waiting for {python}: {e}"))?;
-    if !out.status.success() {
-        return Err(format!(
-            "`{python} {} {command}` failed ({}): {}\n{INSTALL_HINT}",
-            script().display(),
-            out.status,
-            String::from_utf8_lossy(&out.stderr).trim()
-        ));
-    }
-    serde_json::from_slice(&out.stdout).map_err(|e| format!("bad JSON from rclpy_codec.py: {e}"))
-}
-
-fn python() -> String {
-    std::env::var("ECHELON_PYTHON").unwrap_or_else(|_| "python3".to_owned())
-}
-
+/// Runs `rclpy_codec.py command` with `input` on its stdin.
 fn rclpy(command: &str, input: Option<&Value>) -> Value {
-    match run_with(&python(), command, input) {
-        Ok(v) => v,
-        Err(e) => panic!("{e}"),
-    }
+    Helpers::new(INSTALL_HINT)
+        .run("rclpy_codec.py", &[command], input)
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// A float from a few parameters that covers signs, magnitudes and the
@@ -509,9 +469,7 @@ fn type_hash_constants_equal_the_wheels() {
 
 #[test]
 fn a_missing_interpreter_is_reported_with_what_to_install() {
-    let err = run_with("/nonexistent/python3", "check", None).expect_err("cannot run");
-    assert!(err.contains("scripts/test"), "{err}");
-    assert!(err.contains("requirements-ros2.txt"), "{err}");
+    python::assert_missing_interpreter_named(INSTALL_HINT, "requirements-ros2.txt");
     // And the real one answers.
     let check = rclpy("check", None);
     assert_eq!(check["ok"], Value::Bool(true), "{check}");

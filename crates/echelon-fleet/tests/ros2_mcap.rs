@@ -16,8 +16,7 @@
 //! `scripts/requirements-ros2.txt`); `scripts/test` installs them. Without
 //! them they fail and say what to install.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::path::Path;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use echelon::control::LeaderMotion;
@@ -41,6 +40,9 @@ use serde_json::Value;
 
 mod common;
 use common::{odometry, twist, twist_stamped};
+#[path = "common/python.rs"]
+mod python;
+use python::Helpers;
 use zenoh::Wait;
 
 const INSTALL_HINT: &str = "the ROS 2 MCAP tests need python3 (3.11) with mcap-ros2-support \
@@ -48,40 +50,11 @@ const INSTALL_HINT: &str = "the ROS 2 MCAP tests need python3 (3.11) with mcap-r
     or `python3 -m pip install -r scripts/requirements-test.txt`; set ECHELON_PYTHON to use \
     another interpreter";
 
-fn python() -> String {
-    std::env::var("ECHELON_PYTHON").unwrap_or_else(|_| "python3".to_owned())
-}
-
-fn script(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scripts/ros2")
-        .join(name)
-}
-
-/// Runs `python scripts/ros2/<name> args…` and parses its JSON output; an
-/// error message names what to install.
-fn try_run_script(python: &str, name: &str, args: &[&str]) -> Result<Value, String> {
-    let out = Command::new(python)
-        .arg(script(name))
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .output()
-        .map_err(|e| format!("cannot run `{python}`: {e}; {INSTALL_HINT}"))?;
-    if !out.status.success() {
-        return Err(format!(
-            "`{python} {name} {}` failed ({}): {}\n{INSTALL_HINT}",
-            args.join(" "),
-            out.status,
-            String::from_utf8_lossy(&out.stderr).trim()
-        ));
-    }
-    serde_json::from_slice(&out.stdout).map_err(|e| format!("bad JSON from {name}: {e}"))
-}
-
+/// Runs `scripts/ros2/<name> args…` and parses its JSON output.
 fn run_script(name: &str, args: &[&str]) -> Value {
-    try_run_script(&python(), name, args).unwrap_or_else(|e| panic!("{e}"))
+    Helpers::new(INSTALL_HINT)
+        .run(name, args, None)
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 #[test]
@@ -102,12 +75,10 @@ fn embedded_definitions_equal_rosbag2s_text_from_the_wheels() {
 
 #[test]
 fn a_missing_interpreter_is_reported_with_what_to_install() {
-    let err = try_run_script("/nonexistent/python3", "read_mcap.py", &["x.mcap"])
-        .expect_err("cannot run");
-    assert!(err.contains("scripts/test"), "{err}");
-    assert!(err.contains("requirements-test.txt"), "{err}");
+    python::assert_missing_interpreter_named(INSTALL_HINT, "requirements-test.txt");
     // A missing file is an error of the script, reported with its stderr.
-    let err = try_run_script(&python(), "read_mcap.py", &["/nonexistent.mcap"])
+    let err = Helpers::new(INSTALL_HINT)
+        .run("read_mcap.py", &["/nonexistent.mcap"], None)
         .expect_err("no such file");
     assert!(err.contains("nonexistent.mcap"), "{err}");
 }

@@ -16,7 +16,6 @@
 //! Needs `python3` with `scripts/requirements-ros2.txt` (run `scripts/test`).
 
 use std::net::TcpListener;
-use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -27,6 +26,9 @@ use echelon_ros2::liveliness::{Endpoint, NodeInfo, Qos};
 use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST_STAMPED, Time, TwistStamped};
 use echelon_ros2::names::{KeyScheme, fully_qualified_topic};
 use zenoh::Wait;
+
+#[path = "common/python.rs"]
+mod python;
 
 const INSTALL_HINT: &str = "this test needs python3 (3.11) with the ROS 2 Jazzy wheels and \
     eclipse-zenoh: run `scripts/test` (it installs scripts/requirements-ros2.txt), or \
@@ -40,20 +42,16 @@ fn free_port() -> u16 {
         .expect("a free port")
 }
 
-fn fake_base() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scripts/ros2/fake_base.py")
-}
-
 #[test]
 fn a_python_ros2_base_hears_echelon_and_answers() {
     let port = free_port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let dir = tempfile::tempdir().expect("temp dir");
     let report_path = dir.path().join("base.json");
-    let python = std::env::var("ECHELON_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let python = python::python();
     // As on a real robot: the ROS 2 side listens (its router), echelon connects.
     let mut child = Command::new(&python)
-        .arg(fake_base())
+        .arg(python::script("fake_base.py"))
         .args([
             "--listen",
             &endpoint,

@@ -10,6 +10,7 @@ use echelon_mcap::{
     REFERENCE_TOPIC, ReferenceRecord, agent_topic, nanos,
 };
 
+use super::schema::Rejected;
 use super::{
     AgentRecord, COMMAND, COMMAND_TOPIC, Channel, CollectorReport, REJECTED, REJECTED_TOPIC,
     RecordSink, STATS, Stamp,
@@ -25,6 +26,7 @@ use crate::wire::{self, DecodeError, LinkStatus, Message, RobotState};
 /// [`Collector::on_message`] with the time it arrived, and comes out as
 /// records in a [`RecordSink`]; it counts everything. It reads no clock and
 /// opens no file.
+#[derive(Debug)]
 pub struct Collector {
     pub(super) keys: Keys,
     ros: Vec<RosTopic>,
@@ -49,16 +51,6 @@ fn hex(bytes: &[u8]) -> String {
         let _ = write!(s, "{b:02x}");
     }
     s
-}
-
-impl std::fmt::Debug for Collector {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Collector")
-            .field("keys", &self.keys)
-            .field("ros", &self.ros)
-            .field("report", &self.report)
-            .finish_non_exhaustive()
-    }
 }
 
 impl Collector {
@@ -241,9 +233,12 @@ impl Collector {
         now: u64,
     ) -> Result<(), FleetError> {
         bump(&mut self.report.rejected, reason);
-        let record = serde_json::json!({
-            "key": key, "reason": reason, "size": bytes.len(), "hex": hex(bytes),
-        });
+        let record = Rejected {
+            key,
+            reason,
+            size: bytes.len(),
+            hex: hex(bytes),
+        };
         let data = serde_json::to_vec(&record).map_err(echelon_mcap::McapLogError::from)?;
         self.log(sink, REJECTED_TOPIC, &REJECTED, now, 0, &data)
     }

@@ -1,77 +1,81 @@
 //! The JSON schemas of the collector's own MCAP channels (`/rejected`,
-//! `/agent/K/stats`, `/fleet/command`).
+//! `/agent/K/stats`, `/fleet/command`), each derived from the type whose
+//! JSON the channel carries, so a field added to the type is in its schema.
 
-use std::borrow::Cow;
+use std::sync::LazyLock;
 
 use echelon_mcap::JsonSchema;
+use serde::Serialize;
 
-/// A draft-07 object schema titled `$name`: its description, its
-/// properties (the lines inside `"properties"`) and its required list.
-macro_rules! object_schema {
-    ($name:literal, $description:literal, $properties:literal, $required:literal $(,)?) => {
-        JsonSchema {
-            name: $name,
-            schema: Cow::Borrowed(concat!(
-                "{\n  \"$schema\": \"http://json-schema.org/draft-07/schema#\",\n  \"title\": \"",
-                $name,
-                "\",\n  \"description\": \"",
-                $description,
-                "\",\n  \"type\": \"object\",\n  \"properties\": {\n",
-                $properties,
-                "\n  },\n  \"required\": ",
-                $required,
-                "\n}"
-            )),
-        }
-    };
+use crate::command::FleetCommand;
+use crate::robot::RobotStats;
+
+/// A sample received under the fleet's keys that was not a valid message
+/// for its key (a `/rejected` message).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, schemars::JsonSchema)]
+#[schemars(title = "echelon.Rejected")]
+pub(super) struct Rejected<'a> {
+    /// The key it arrived on.
+    pub key: &'a str,
+    /// Why it was refused.
+    pub reason: &'a str,
+    /// Its payload's size, bytes.
+    pub size: usize,
+    /// The payload, hexadecimal (first 1024 bytes).
+    pub hex: String,
 }
 
-/// Schema of `/rejected`.
-pub const REJECTED: JsonSchema = object_schema!(
-    "echelon.Rejected",
-    "A sample received under the fleet's keys that was not a valid message for its key.",
-    r#"    "key": {"type": "string"},
-    "reason": {"type": "string"},
-    "size": {"type": "integer"},
-    "hex": {"type": "string", "description": "the payload, hexadecimal (first 1024 bytes)"}"#,
-    r#"["key", "reason", "size", "hex"]"#,
-);
+/// Schema of `/rejected`, derived from its records.
+pub static REJECTED: LazyLock<JsonSchema> =
+    LazyLock::new(|| JsonSchema::of::<Rejected<'static>>("echelon.Rejected"));
 
-/// Schema of `/agent/K/stats` (a robot's counters, as it published them).
-pub const STATS: JsonSchema = object_schema!(
-    "echelon.RobotStats",
-    "A robot's receive counters and link status (docs/fleet.md).",
-    r#"    "agent": {"type": "integer"},
-    "t": {"type": "number"},
-    "link": {"type": "string"},
-    "counters": {"type": "object"},
-    "published": {"type": "integer"},
-    "overruns": {"type": "integer"},
-    "safety": {"type": "object", "description": "with [safety]: the filter's counters so far (steps, active, infeasible, stale_brakes, deadlock_breaks, stale_neighbours, lagging, refused, min_distance)"},
-    "commands": {"type": "object", "description": "what the fleet commands did so far (received, stops, resumes, refused, ignored)"}"#,
-    r#"["agent", "t", "link", "counters"]"#,
-);
+/// Schema of `/agent/K/stats` (a robot's counters, as it published them),
+/// derived from [`RobotStats`].
+pub static STATS: LazyLock<JsonSchema> =
+    LazyLock::new(|| JsonSchema::of::<RobotStats>("echelon.RobotStats"));
 
-/// Schema of `/fleet/command` (the fleet commands, as their sender put them).
-pub const COMMAND: JsonSchema = object_schema!(
-    "echelon.FleetCommand",
-    "A fleet-wide stop or resume (fleet stop, fleet resume, the leader interrupted; docs/fleet.md).",
-    r#"    "version": {"type": "integer"},
-    "order": {"type": "string", "enum": ["stop", "resume"]},
-    "seq": {"type": "integer", "description": "a resume lifts only the stops numbered below it"},
-    "stamp_unix_ns": {"type": "integer"},
-    "by": {"type": "string"},
-    "reason": {"type": "string"}"#,
-    r#"["version", "order", "seq", "stamp_unix_ns", "by", "reason"]"#,
-);
+/// Schema of `/fleet/command` (the fleet commands, as their sender put
+/// them), derived from [`FleetCommand`].
+pub static COMMAND: LazyLock<JsonSchema> =
+    LazyLock::new(|| JsonSchema::of::<FleetCommand>("echelon.FleetCommand"));
 
 #[cfg(test)]
 mod tests {
+    use std::collections::BTreeSet;
+
+    use super::*;
+    use crate::command::Order;
+    use crate::robot::SafetyCounts;
+    use crate::ros2::fixes::FixReport;
+
     /// Each schema is a JSON object schema titled with its name, whose
-    /// required fields are among its properties.
+    /// required fields are among its properties, and whose properties are
+    /// exactly the fields its type writes (every optional one present).
     #[test]
-    fn each_schema_is_json_titled_with_its_name() {
-        for s in [super::REJECTED, super::STATS, super::COMMAND] {
+    fn each_schema_is_its_types_json() {
+        let stats = RobotStats {
+            agent: 2,
+            t: 1.5,
+            link: "fresh",
+            counters: Default::default(),
+            published: 3,
+            overruns: 0,
+            safety: Some(SafetyCounts::default()),
+            fixes: Some(FixReport::default()),
+            commands: Default::default(),
+        };
+        let rejected = Rejected {
+            key: "echelon/f/x",
+            reason: "malformed",
+            size: 1,
+            hex: "00".to_owned(),
+        };
+        let command = FleetCommand::new(Order::Stop, 1, "operator", "test");
+        for (s, json) in [
+            (&*REJECTED, serde_json::to_value(&rejected)),
+            (&*STATS, serde_json::to_value(stats)),
+            (&*COMMAND, serde_json::to_value(&command)),
+        ] {
             let v: serde_json::Value =
                 serde_json::from_str(&s.schema).unwrap_or_else(|e| panic!("{}: {e}", s.name));
             assert_eq!(v["title"], s.name);
@@ -82,6 +86,20 @@ mod tests {
                 let r = r.as_str().unwrap_or_default();
                 assert!(v["properties"].get(r).is_some(), "{}: {r}", s.name);
             }
+            let json = json.unwrap_or_else(|e| panic!("{}: {e}", s.name));
+            let written: BTreeSet<&String> = json
+                .as_object()
+                .into_iter()
+                .flatten()
+                .map(|(k, _)| k)
+                .collect();
+            let declared: BTreeSet<&String> = v["properties"]
+                .as_object()
+                .into_iter()
+                .flatten()
+                .map(|(k, _)| k)
+                .collect();
+            assert_eq!(written, declared, "{}", s.name);
         }
     }
 }

@@ -75,6 +75,7 @@ pub trait RecordSink {
 }
 
 /// The collector's files: `fleet.mcap` and `trajectory.csv` in a directory.
+#[derive(Debug)]
 pub struct FileSink {
     log: McapLog<BufWriter<File>>,
     seq: BTreeMap<u16, u32>,
@@ -86,15 +87,6 @@ pub struct FileSink {
     /// The 3D channels, when the scenario is known; whether the fixed
     /// scene was written.
     scene: Option<(Scene, SceneChannels, bool)>,
-}
-
-impl std::fmt::Debug for FileSink {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("FileSink")
-            .field("log", &self.log)
-            .field("csv_path", &self.csv_path)
-            .finish_non_exhaustive()
-    }
 }
 
 impl RecordSink for FileSink {

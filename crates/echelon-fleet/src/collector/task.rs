@@ -36,6 +36,7 @@ pub struct CollectorOptions {
 /// its ROS 2 topics) in, each sample recorded as soon as it arrives (and
 /// those that arrived before its inputs closed); files closed and
 /// `collector.json` written with its report.
+#[derive(Debug)]
 pub struct CollectorTask {
     collector: Collector,
     sink: FileSink,
@@ -44,16 +45,6 @@ pub struct CollectorTask {
     out: PathBuf,
     /// Stop at this time of its clock (real time), s.
     until: f64,
-}
-
-impl std::fmt::Debug for CollectorTask {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("CollectorTask")
-            .field("collector", &self.collector)
-            .field("out", &self.out)
-            .field("until", &self.until)
-            .finish_non_exhaustive()
-    }
 }
 
 /// Its input number of the fleet's keys (then one per ROS 2 topic).

@@ -274,40 +274,27 @@ pub fn open(opts: &NetOptions) -> Result<Session, FleetError> {
         .map_err(|e| FleetError::Zenoh(format!("opening the session: {e}")))
 }
 
-/// Publishes one encoded message, stamped with the session's timestamp
-/// (the receivers' latency measure, [`crate::latency`]).
-pub(crate) fn publish(
-    session: &Session,
-    publisher: &zenoh::pubsub::Publisher<'_>,
-    bytes: &[u8],
-) -> Result<(), FleetError> {
-    publisher
-        .put(bytes.to_vec())
-        .timestamp(session.new_timestamp())
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))
-}
-
-/// Publishes `payload` on `publisher`: without an attachment stamped as
-/// [`publish`] does, with one unstamped (as rmw_zenoh does).
+/// Publishes `payload` on `publisher`: without an attachment stamped with
+/// the session's timestamp (the receivers' latency measure,
+/// [`crate::latency`]), with one unstamped (as rmw_zenoh does).
 pub(crate) fn send(
     session: &Session,
     publisher: &zenoh::pubsub::Publisher<'_>,
     payload: &[u8],
     attachment: Option<&[u8]>,
 ) -> Result<(), FleetError> {
-    match attachment {
-        None => publish(session, publisher, payload),
-        Some(attachment) => publisher
-            .put(payload.to_vec())
-            .attachment(attachment.to_vec())
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("publishing: {e}"))),
-    }
+    let put = publisher.put(payload.to_vec());
+    let put = match attachment {
+        None => put.timestamp(session.new_timestamp()),
+        Some(attachment) => put.attachment(attachment.to_vec()),
+    };
+    put.wait()
+        .map_err(|e| FleetError::Zenoh(format!("publishing: {e}")))
 }
 
 /// Puts `payload` on `key` (a non-declared publication, e.g. a robot's
-/// stats), stamped like [`publish`]; errors are ignored (best effort).
+/// stats), stamped like [`send`] without an attachment; errors are ignored
+/// (best effort).
 pub(crate) fn put_stamped(session: &Session, key: &str, payload: impl Into<ZBytes>) {
     let _ = session
         .put(key, payload)

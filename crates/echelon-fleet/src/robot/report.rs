@@ -66,7 +66,7 @@ pub struct RobotReport {
 
 /// What a robot's safety filter did over its run (`docs/safety.md`, "In the
 /// fleet").
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SafetyCounts {
     /// Control steps that went through the filter.
@@ -118,7 +118,8 @@ impl SafetyCounts {
 }
 
 /// The stats message published on `echelon/<fleet>/robot/<k>/stats`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, schemars::JsonSchema)]
+#[schemars(title = "echelon.RobotStats")]
 pub struct RobotStats {
     /// Agent number, from 1.
     pub agent: u32,

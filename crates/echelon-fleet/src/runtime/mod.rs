@@ -270,4 +270,6 @@ pub fn run_split<T: Task + Send + 'static, G>(
 }
 
 #[cfg(test)]
+mod testing;
+#[cfg(test)]
 mod tests;

@@ -56,6 +56,7 @@ pub(super) struct Outcome {
 }
 
 /// The session, once open.
+#[derive(Debug)]
 enum Link {
     Opening,
     Open(zenoh::Session),
@@ -63,21 +64,13 @@ enum Link {
 }
 
 /// The operator behind the buttons.
+#[derive(Debug)]
 pub(super) struct Operator {
     keys: Keys,
     identity: String,
     link: Arc<Mutex<Link>>,
     /// The highest command number this page put.
     last: u64,
-}
-
-impl std::fmt::Debug for Operator {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Operator")
-            .field("identity", &self.identity)
-            .field("last", &self.last)
-            .finish_non_exhaustive()
-    }
 }
 
 /// The session options of the operator beside a collector joined with

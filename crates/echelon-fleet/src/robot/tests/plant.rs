@@ -23,7 +23,7 @@ fn a_diverging_robot_stops_at_zero_and_says_why() {
     let SimulatedDrive::Torque(p) = r.plant() else {
         panic!("a torque robot")
     };
-    assert_eq!(p.applied_input(), Input::default());
+    assert_eq!(p.applied(), Input::default());
     let last = w.log(0).last().map_or(0.0, |p| p.local);
     w.run_until(3.0);
     assert_eq!(w.log(0).last().map_or(0.0, |p| p.local), last);

@@ -9,7 +9,9 @@ use echelon::odometry::bound::KinematicTheorem2;
 pub const GAMMA: f64 = 0.99;
 
 /// What a robot counted of its fixes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(deny_unknown_fields)]
 pub struct FixCounters {
     /// Fix messages received.
@@ -37,7 +39,7 @@ pub struct FixCounters {
 
 /// Theorem 2 for this robot: the inputs (as `echelon bound --law kinematic`
 /// takes them) and the fix interval they require.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FixRequirement {
     /// `K_e`.
@@ -84,7 +86,7 @@ impl FixRequirement {
 }
 
 /// What a robot reports of its fixes, live (its stats) and at the end.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FixReport {
     /// The counts.

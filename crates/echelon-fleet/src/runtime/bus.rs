@@ -18,7 +18,7 @@ use zenoh::key_expr::keyexpr;
 
 use crate::FleetError;
 
-use super::{Flow, Latching, Outputs, Sample, Task};
+use super::{Flow, Latching, Outgoing, Outputs, Sample, Task};
 
 /// A task's number on the bus.
 pub type TaskId = usize;
@@ -136,15 +136,10 @@ struct Sent {
 }
 
 impl Outputs for Sent {
-    fn send(
-        &mut self,
-        output: usize,
-        payload: &[u8],
-        attachment: Option<&[u8]>,
-    ) -> Result<(), FleetError> {
-        let key = self.key(output)?;
+    fn send(&mut self, m: Outgoing<'_>) -> Result<(), FleetError> {
+        let key = self.key(m.output)?;
         self.messages
-            .push((key, payload.to_vec(), attachment.map(<[u8]>::to_vec)));
+            .push((key, m.payload.to_vec(), m.attachment.map(<[u8]>::to_vec)));
         Ok(())
     }
     fn put(&mut self, key: &str, payload: &[u8]) {

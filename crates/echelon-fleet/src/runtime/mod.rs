@@ -33,7 +33,7 @@ mod task;
 
 pub use drive::{COARSE, RETRY, STALL, WATCH};
 pub use presence::query_all;
-pub use task::{DEFAULT_QUEUE, Flow, Latching, Outputs, Sample, Task, WaitFor};
+pub use task::{DEFAULT_QUEUE, Flow, Latching, Outgoing, Outputs, Sample, Task, WaitFor};
 
 use drive::Engine;
 use inputs::{Queue, Spares, Worker};

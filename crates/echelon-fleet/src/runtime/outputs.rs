@@ -4,7 +4,7 @@
 use crate::FleetError;
 use crate::net;
 
-use super::{Outputs, declared};
+use super::{Outgoing, Outputs, declared};
 
 /// A task's outputs on Zenoh. It owns what it publishes with (a session
 /// handle and the publishers), so that it can go with the task to the
@@ -15,18 +15,9 @@ pub(super) struct ZenohOutputs {
 }
 
 impl Outputs for ZenohOutputs {
-    fn send(
-        &mut self,
-        output: usize,
-        payload: &[u8],
-        attachment: Option<&[u8]>,
-    ) -> Result<(), FleetError> {
-        net::send(
-            &self.session,
-            declared(&self.publishers, output)?,
-            payload,
-            attachment,
-        )
+    fn send(&mut self, m: Outgoing<'_>) -> Result<(), FleetError> {
+        let publisher = declared(&self.publishers, m.output)?;
+        net::send(&self.session, publisher, m.payload, m.attachment)
     }
 
     fn put(&mut self, key: &str, payload: &[u8]) {

@@ -41,21 +41,33 @@ pub enum Flow {
     Stop,
 }
 
+/// One message a task sends: its payload on its output number `output` (an
+/// index into [`Task::outputs`]), with rmw_zenoh's attachment for a ROS 2
+/// peer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Outgoing<'a> {
+    /// The task's output it goes on.
+    pub output: usize,
+    /// The payload.
+    pub payload: &'a [u8],
+    /// An attachment (`None`: the runtime stamps it with the sender's
+    /// timestamp instead).
+    pub attachment: Option<&'a [u8]>,
+}
+
 /// Where a task's messages go: Zenoh ([`super::run`]) or the in-memory
 /// bus ([`super::bus`]).
 pub trait Outputs {
-    /// Sends `payload` on the task's output number `output` (an index into
-    /// [`Task::outputs`]): without an attachment stamped with the sender's
+    /// Sends `message`: without an attachment stamped with the sender's
     /// timestamp, with one unstamped (as rmw_zenoh does).
-    fn send(
-        &mut self,
-        output: usize,
-        payload: &[u8],
-        attachment: Option<&[u8]>,
-    ) -> Result<(), FleetError>;
+    fn send(&mut self, message: Outgoing<'_>) -> Result<(), FleetError>;
     /// Publishes `payload` on output `output`, stamped.
     fn publish(&mut self, output: usize, payload: &[u8]) -> Result<(), FleetError> {
-        self.send(output, payload, None)
+        self.send(Outgoing {
+            output,
+            payload,
+            attachment: None,
+        })
     }
     /// Publishes `payload` with `attachment` on output `output`, unstamped.
     fn publish_attached(
@@ -64,7 +76,11 @@ pub trait Outputs {
         payload: &[u8],
         attachment: &[u8],
     ) -> Result<(), FleetError> {
-        self.send(output, payload, Some(attachment))
+        self.send(Outgoing {
+            output,
+            payload,
+            attachment: Some(attachment),
+        })
     }
     /// Puts `payload` on `key`, stamped, without a declared publisher; best
     /// effort (errors are ignored).

@@ -66,7 +66,7 @@ pub mod sweep;
 pub use agent::{AgentSpec, Command};
 pub use control::{Gains, Variant};
 pub use error::{FormationError, OutputError, ParamError, ReferenceError, ScenarioError, SimError};
-pub use model::{Input, RobotParams, State, Torques};
+pub use model::{Input, RobotParams, RobotParamsSpec, State, Torques};
 pub use plan::{Plan, SimConfig, Timing};
 pub use scenario::{Overrides, Run, Scenario};
 pub use sim::{Frame, Observer, Simulation};

@@ -379,16 +379,22 @@ fn check(case: &Case) -> Result<(), TestCaseError> {
     Ok(())
 }
 
+/// `cases` cases from the fixed seed 20 (`STRESS_SEED=K` for another
+/// sample), failures not persisted: CI runs the same sample.
+fn fixed_seed(cases: u32) -> ProptestConfig {
+    ProptestConfig {
+        cases,
+        rng_seed: RngSeed::Fixed(env_or("STRESS_SEED", 20)),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    }
+}
+
 proptest! {
     // 48 cases each from a fixed seed, so CI runs the same sample
     // (STRESS_CASES=N for more, STRESS_SEED=K for another sample; `survey`
     // lists every failure of many): about 5 s in the test profile.
-    #![proptest_config(ProptestConfig {
-        cases: env_or("STRESS_CASES", 48) as u32,
-        rng_seed: RngSeed::Fixed(env_or("STRESS_SEED", 20)),
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(fixed_seed(env_or("STRESS_CASES", 48) as u32))]
 
     /// Torque-driven robots (Table I, with and without wheel torque limits)
     /// under exponential barriers, the speed envelope and the turn-keeping
@@ -410,12 +416,7 @@ proptest! {
     // above all head along +x, slow: none ever turned a column around, let
     // it fall behind and catch up fast, which is where a torque robot that
     // braked in an emergency was run into). Fixed seed; COLUMNS_CASES=N for more.
-    #![proptest_config(ProptestConfig {
-        cases: env_or("COLUMNS_CASES", 12) as u32,
-        rng_seed: RngSeed::Fixed(env_or("STRESS_SEED", 20)),
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(fixed_seed(env_or("COLUMNS_CASES", 12) as u32))]
 
     /// Torque-driven columns (Table I, with and without wheel torque limits).
     #[test]

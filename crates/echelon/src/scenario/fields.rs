@@ -65,6 +65,15 @@ impl SerializeStruct for Fields {
     }
 }
 
+/// Serialiser methods for plain values: no fields of their own.
+macro_rules! plain_values {
+    ($($method:ident($t:ty)),* $(,)?) => {
+        $(fn $method(self, _: $t) -> Result<Out, Unread> {
+            Ok(None)
+        })*
+    };
+}
+
 impl ser::Serializer for Names {
     type Ok = Out;
     type Error = Unread;
@@ -80,23 +89,27 @@ impl ser::Serializer for Names {
         Ok(Fields(Vec::with_capacity(len)))
     }
 
-    // Plain values: no fields of their own.
-    fn serialize_bool(self, _: bool) -> Result<Out, Unread> {
-        Ok(None)
-    }
-    fn serialize_i64(self, _: i64) -> Result<Out, Unread> {
-        Ok(None)
-    }
-    fn serialize_u64(self, _: u64) -> Result<Out, Unread> {
-        Ok(None)
-    }
-    fn serialize_f64(self, _: f64) -> Result<Out, Unread> {
-        Ok(None)
-    }
-    fn serialize_str(self, _: &str) -> Result<Out, Unread> {
-        Ok(None)
+    plain_values! {
+        serialize_bool(bool),
+        serialize_i8(i8),
+        serialize_i16(i16),
+        serialize_i32(i32),
+        serialize_i64(i64),
+        serialize_u8(u8),
+        serialize_u16(u16),
+        serialize_u32(u32),
+        serialize_u64(u64),
+        serialize_f32(f32),
+        serialize_f64(f64),
+        serialize_char(char),
+        serialize_str(&str),
+        serialize_bytes(&[u8]),
+        serialize_unit_struct(&'static str),
     }
     fn serialize_none(self) -> Result<Out, Unread> {
+        Ok(None)
+    }
+    fn serialize_unit(self) -> Result<Out, Unread> {
         Ok(None)
     }
     fn serialize_some<T: Serialize + ?Sized>(self, _: &T) -> Result<Out, Unread> {
@@ -108,39 +121,6 @@ impl ser::Serializer for Names {
         _: u32,
         _: &'static str,
     ) -> Result<Out, Unread> {
-        Ok(None)
-    }
-    fn serialize_i8(self, v: i8) -> Result<Out, Unread> {
-        self.serialize_i64(v.into())
-    }
-    fn serialize_i16(self, v: i16) -> Result<Out, Unread> {
-        self.serialize_i64(v.into())
-    }
-    fn serialize_i32(self, v: i32) -> Result<Out, Unread> {
-        self.serialize_i64(v.into())
-    }
-    fn serialize_u8(self, v: u8) -> Result<Out, Unread> {
-        self.serialize_u64(v.into())
-    }
-    fn serialize_u16(self, v: u16) -> Result<Out, Unread> {
-        self.serialize_u64(v.into())
-    }
-    fn serialize_u32(self, v: u32) -> Result<Out, Unread> {
-        self.serialize_u64(v.into())
-    }
-    fn serialize_f32(self, v: f32) -> Result<Out, Unread> {
-        self.serialize_f64(v.into())
-    }
-    fn serialize_char(self, _: char) -> Result<Out, Unread> {
-        Ok(None)
-    }
-    fn serialize_bytes(self, _: &[u8]) -> Result<Out, Unread> {
-        Ok(None)
-    }
-    fn serialize_unit(self) -> Result<Out, Unread> {
-        Ok(None)
-    }
-    fn serialize_unit_struct(self, _: &'static str) -> Result<Out, Unread> {
         Ok(None)
     }
     fn serialize_newtype_struct<T: Serialize + ?Sized>(

@@ -58,15 +58,15 @@ struct Case {
 }
 
 impl Case {
+    /// The file's start: its name, the longest run, the step (`torque_dt`
+    /// for torque-driven robots, 0.01 s for velocity bases), the log period.
+    fn preamble(&self, name: &str, torque_dt: f64) -> String {
+        let dt = if self.torque { torque_dt } else { 0.01 };
+        format!("name = \"{name}\"\n[sim]\nduration = {LONGEST}\ndt = {dt}\n[log]\ndt = 0.1\n")
+    }
+
     fn toml(&self) -> String {
-        let mut s = String::new();
-        s += &format!("name = \"stress\"\n[sim]\nduration = {LONGEST}\n");
-        s += if self.torque {
-            "dt = 0.002\n"
-        } else {
-            "dt = 0.01\n"
-        };
-        s += "[log]\ndt = 0.1\n";
+        let mut s = self.preamble("stress", 0.002);
         if self.torque {
             s +=
                 "[control]\nlaw = \"complete\"\nke = 1.5\nkz = 10.0\nl = 0.05\nlycomp = \"none\"\n";
@@ -131,14 +131,7 @@ impl Case {
 impl Case {
     /// Two columns of `n` robots each, reference heading `c.heading`.
     fn columns_toml(&self, c: Columns) -> String {
-        let mut s = String::new();
-        s += &format!("name = \"columns\"\n[sim]\nduration = {LONGEST}\n");
-        s += if self.torque {
-            "dt = 0.005\n"
-        } else {
-            "dt = 0.01\n"
-        };
-        s += "[log]\ndt = 0.1\n";
+        let mut s = self.preamble("columns", 0.005);
         if self.torque {
             s += &format!(
                 "[control]\nlaw = \"complete\"\nke = {}\nkz = {}\nl = 0.05\nlycomp = \"none\"\n",

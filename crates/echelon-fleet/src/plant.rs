@@ -306,6 +306,7 @@ impl Plant for SimulatedDrive {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use echelon::base::VelocityBaseSpec;
 
     #[test]
     fn advancing_in_pieces_equals_advancing_at_once() {
@@ -344,14 +345,11 @@ mod tests {
         assert!((s.y - r * (1.0 - 0.5f64.cos())).abs() < 1e-9, "{s:?}");
         assert_eq!((s.v, s.omega), (0.4, 0.5));
 
-        let lagged = VelocityBase::new(
-            0.2,
-            0.1,
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::INFINITY,
-        )
+        let lagged = VelocityBase::new(VelocityBaseSpec {
+            tau_v: 0.2,
+            tau_omega: 0.1,
+            ..VelocityBase::IDEAL.spec()
+        })
         .expect("a lagged base");
         let mut b = SimulatedVelocityBase::new(lagged, State::at_rest(0.0, 0.0, 0.0), 0.0, 1e-3);
         b.command(Command::Velocity(c));
@@ -366,8 +364,14 @@ mod tests {
             "{s:?}"
         );
         // Beyond the limits: scaled together (curvature kept), and held.
-        let limited = VelocityBase::new(0.2, 0.1, 0.2, 1.0, f64::INFINITY, f64::INFINITY)
-            .expect("a lagged base with speed limits");
+        let limited = VelocityBase::new(VelocityBaseSpec {
+            tau_v: 0.2,
+            tau_omega: 0.1,
+            v_max: 0.2,
+            omega_max: 1.0,
+            ..VelocityBase::IDEAL.spec()
+        })
+        .expect("a lagged base with speed limits");
         let mut b = SimulatedVelocityBase::new(limited, State::at_rest(0.0, 0.0, 0.0), 0.0, 1e-3);
         let act = b.command(Command::Velocity(c));
         let (applied, saturated) = act.velocity.expect("a velocity base");

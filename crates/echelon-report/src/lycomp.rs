@@ -29,6 +29,7 @@
 //! 0.230 m at `λ = 0.5`). Levenberg–Marquardt reaches the same optimum from
 //! the paper's coefficients as from the generic start of [`refit`].
 
+use echelon::lm;
 use echelon::lycomp::{FitCoefficients, exact, fit_rc};
 
 use crate::ReportError;
@@ -129,31 +130,41 @@ fn samples(lambda: f64) -> impl Iterator<Item = (f64, f64, f64)> {
     })
 }
 
-/// Solves the 3×3 symmetric positive-definite system `a x = b` (Cholesky).
-fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
-    let mut l = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..=i {
-            let s: f64 = a[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
-            if i == j {
-                if s <= 0.0 {
-                    return None;
+/// Levenberg–Marquardt iterations [`refit_from`] runs at most.
+const MAX_ITERATIONS: usize = 500;
+
+/// Eq. 6's `(G, δ, ε)` against eq. 5 at the samples `(R_C, w, eq. 5)`.
+struct Eq6Fit {
+    pts: Vec<(f64, f64, f64)>,
+}
+
+impl Eq6Fit {
+    fn cost(&self, p: [f64; 3]) -> f64 {
+        weighted_cost(self.pts.iter().copied(), |rc| eq6_with_gradient(rc, p).0)
+    }
+}
+
+impl lm::LeastSquares<3> for Eq6Fit {
+    fn normal_equations(&self, &p: &[f64; 3]) -> ([[f64; 3]; 3], [f64; 3]) {
+        let mut jtj = [[0.0; 3]; 3];
+        let mut jtr = [0.0; 3];
+        for &(rc, w, y) in &self.pts {
+            let (f, grad) = eq6_with_gradient(rc, p);
+            let r = y - f;
+            for i in 0..3 {
+                jtr[i] += w * grad[i] * r;
+                for j in 0..3 {
+                    jtj[i][j] += w * grad[i] * grad[j];
                 }
-                l[i][i] = s.sqrt();
-            } else {
-                l[i][j] = s / l[j][j];
             }
         }
+        (jtj, jtr)
     }
-    let mut y = [0.0; 3];
-    for i in 0..3 {
-        y[i] = (b[i] - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
+
+    /// Eq. 6 needs `δ > 0`.
+    fn trial(&mut self, &p: &[f64; 3]) -> Option<f64> {
+        (p[1] > 0.0).then(|| self.cost(p))
     }
-    let mut x = [0.0; 3];
-    for i in (0..3).rev() {
-        x[i] = (y[i] - (i + 1..3).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
-    }
-    Some(x)
 }
 
 /// Refits eq. 6's `G`, `δ`, `ε` to eq. 5 for `L_Xoff = lambda` by
@@ -164,56 +175,16 @@ pub fn refit_from(lambda: f64, start: FitCoefficients) -> Result<Refit, ReportEr
             "L_Xoff = {lambda} m: the fit needs a finite L_Xoff > 0"
         )));
     }
-    let pts: Vec<(f64, f64, f64)> = samples(lambda).collect();
-    let cost_of = |p: [f64; 3]| weighted_cost(pts.iter().copied(), |rc| eq6_with_gradient(rc, p).0);
-    let mut p = [start.g, start.delta, start.epsilon];
-    let mut cost = cost_of(p);
-    let mut mu = 1e-3;
-    let mut iterations = 0;
-    for it in 0..500 {
-        iterations = it + 1;
-        let mut jtj = [[0.0; 3]; 3];
-        let mut jtr = [0.0; 3];
-        for &(rc, w, y) in &pts {
-            let (f, grad) = eq6_with_gradient(rc, p);
-            let r = f - y;
-            for i in 0..3 {
-                jtr[i] += w * grad[i] * r;
-                for j in 0..3 {
-                    jtj[i][j] += w * grad[i] * grad[j];
-                }
-            }
-        }
-        let mut improved = false;
-        while mu < 1e12 {
-            let mut a = jtj;
-            for (i, row) in a.iter_mut().enumerate() {
-                row[i] += mu * jtj[i][i].max(1e-12);
-            }
-            let Some(step) = solve3(a, [-jtr[0], -jtr[1], -jtr[2]]) else {
-                mu *= 10.0;
-                continue;
-            };
-            let trial = [p[0] + step[0], p[1] + step[1], p[2] + step[2]];
-            let c = if trial[1] > 0.0 {
-                cost_of(trial)
-            } else {
-                f64::INFINITY
-            };
-            if c < cost {
-                let rel = (cost - c) / cost.max(f64::MIN_POSITIVE);
-                p = trial;
-                cost = c;
-                mu = (mu / 10.0).max(1e-12);
-                improved = rel > 1e-15;
-                break;
-            }
-            mu *= 10.0;
-        }
-        if !improved {
-            break;
-        }
-    }
+    let mut problem = Eq6Fit {
+        pts: samples(lambda).collect(),
+    };
+    let p = [start.g, start.delta, start.epsilon];
+    let cost = problem.cost(p);
+    let lm::Minimum {
+        p,
+        cost,
+        iterations,
+    } = lm::minimise(&mut problem, p, cost, MAX_ITERATIONS);
     if !p.iter().all(|v| v.is_finite()) || p[1] <= 0.0 {
         return Err(ReportError::Invalid(format!(
             "the eq. 6 fit for L_Xoff = {lambda} m did not converge"
@@ -313,17 +284,6 @@ mod tests {
         for rc in [0.2, 0.7, 3.0] {
             let (f, _) = eq6_with_gradient(rc, [c.g, c.delta, c.epsilon]);
             assert!((f - fit_rc(rc, &c)).abs() < 1e-15);
-        }
-    }
-
-    #[test]
-    fn solve3_solves() {
-        let a = [[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]];
-        let x = [1.0, -2.0, 0.5];
-        let b = [0, 1, 2].map(|i| (0..3).map(|j| a[i][j] * x[j]).sum::<f64>());
-        let got = solve3(a, b).unwrap();
-        for i in 0..3 {
-            assert!((got[i] - x[i]).abs() < 1e-12);
         }
     }
 }

@@ -9,7 +9,7 @@ use std::hint::black_box;
 use criterion::measurement::WallTime;
 use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
 
-use echelon::base::{VelocityBase, VelocityCommand};
+use echelon::base::{VelocityBase, VelocityBaseSpec, VelocityCommand};
 use echelon::model::{Input, RobotParams, State};
 use echelon::safety::{Filtered, Neighbour, Obstacle, SafetyConfig, SafetyFilter};
 
@@ -66,8 +66,12 @@ fn safety(c: &mut Criterion) {
         Err(e) => panic!("{e}"),
     };
     let (me, ns, obstacles) = scene();
-    let base = VelocityBase::new(0.0, 0.0, 0.5, 3.0, f64::INFINITY, f64::INFINITY)
-        .expect("an ideal base with speed limits");
+    let base = VelocityBase::new(VelocityBaseSpec {
+        v_max: 0.5,
+        omega_max: 3.0,
+        ..VelocityBase::IDEAL.spec()
+    })
+    .expect("an ideal base with speed limits");
     let robot = RobotParams::AGENT1
         .with_torque_limit(Some(3.0))
         .expect("3 N m is a valid torque limit");

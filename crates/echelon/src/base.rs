@@ -73,6 +73,31 @@ pub enum AccelLimit {
     PerAxis,
 }
 
+/// A velocity-controlled base's lags and limits as written: unchecked.
+/// [`VelocityBase::new`] checks them.
+///
+/// Start from a preset's (`VelocityBase::JACKAL.spec()`) or the ideal base's
+/// to change a few: `VelocityBaseSpec { v_max: 0.5, ..VelocityBase::IDEAL.spec() }`.
+/// The serialised form of a [`VelocityBase`] has these fields.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct VelocityBaseSpec {
+    /// Lag of the linear speed `τ_v`, s: finite and `≥ 0` (0: ideal, `v`
+    /// follows the command).
+    pub tau_v: f64,
+    /// Lag of the angular speed `τ_ω`, s: finite and `≥ 0` (0: ideal).
+    pub tau_omega: f64,
+    /// Largest `|v|`, m/s: `> 0` (infinite: unlimited).
+    pub v_max: f64,
+    /// Largest `|ω|`, rad/s: `> 0` (infinite: unlimited).
+    pub omega_max: f64,
+    /// Largest `|v̇|`, m/s²: `> 0`, finite only with `τ_v > 0`.
+    pub a_max: f64,
+    /// Largest `|ω̇|`, rad/s²: `> 0`, finite only with `τ_ω > 0`.
+    pub alpha_max: f64,
+    /// Joint (path-keeping) or per-axis acceleration limits.
+    pub accel: AccelLimit,
+}
+
 /// A velocity-controlled base: first-order lags and limits on speed and
 /// acceleration (see the [module docs](self)).
 ///
@@ -81,29 +106,88 @@ pub enum AccelLimit {
 /// assumes, not a robot; the presets are real ones.
 ///
 /// Built through [`VelocityBase::new`] (or a preset), which checks every
-/// parameter, so a `VelocityBase` in hand is always a possible one.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// parameter (and so does deserialising), so a `VelocityBase` in hand is
+/// always a possible one.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "VelocityBaseSpec", into = "VelocityBaseSpec")]
 pub struct VelocityBase {
-    tau_v: f64,
-    tau_omega: f64,
-    v_max: f64,
-    omega_max: f64,
-    a_max: f64,
-    alpha_max: f64,
-    accel: AccelLimit,
+    spec: VelocityBaseSpec,
+}
+
+impl From<VelocityBase> for VelocityBaseSpec {
+    fn from(b: VelocityBase) -> VelocityBaseSpec {
+        b.spec
+    }
+}
+
+impl TryFrom<VelocityBaseSpec> for VelocityBase {
+    type Error = ParamError;
+
+    fn try_from(spec: VelocityBaseSpec) -> Result<Self, ParamError> {
+        VelocityBase::new(spec)
+    }
+}
+
+/// Checks every parameter: lags finite and `≥ 0`; limits `> 0` (infinite:
+/// unlimited, NaN refused); no finite acceleration limit on an axis without
+/// lag.
+fn check(b: &VelocityBaseSpec) -> Result<(), ParamError> {
+    for (field, tau) in [("tau_v", b.tau_v), ("tau_omega", b.tau_omega)] {
+        if !tau.is_finite() {
+            return Err(ParamError::new(field, tau, "must be a finite number"));
+        }
+        if tau < 0.0 {
+            return Err(ParamError::new(
+                field,
+                tau,
+                "must be ≥ 0 (a lag in seconds; 0 is an ideal base)",
+            ));
+        }
+    }
+    for (field, max) in [
+        ("v_max", b.v_max),
+        ("omega_max", b.omega_max),
+        ("a_max", b.a_max),
+        ("alpha_max", b.alpha_max),
+    ] {
+        if max.is_nan() || max <= 0.0 {
+            return Err(ParamError::new(
+                field,
+                max,
+                "must be > 0 (leave it out for no limit)",
+            ));
+        }
+    }
+    if b.tau_v == 0.0 && b.a_max.is_finite() {
+        return Err(ParamError::new(
+            "a_max",
+            b.a_max,
+            "needs tau_v > 0: a base that follows its speed command instantly has no acceleration to limit",
+        ));
+    }
+    if b.tau_omega == 0.0 && b.alpha_max.is_finite() {
+        return Err(ParamError::new(
+            "alpha_max",
+            b.alpha_max,
+            "needs tau_omega > 0: a base that follows its turn-rate command instantly has no acceleration to limit",
+        ));
+    }
+    Ok(())
 }
 
 impl VelocityBase {
     /// The ideal base: no lag, no limits; `v`, `ω` equal the command. With it
     /// the kinematic law gives `V̇₁ = −K_e‖e‖²` exactly (control-law.md).
     pub const IDEAL: VelocityBase = VelocityBase {
-        tau_v: 0.0,
-        tau_omega: 0.0,
-        v_max: f64::INFINITY,
-        omega_max: f64::INFINITY,
-        a_max: f64::INFINITY,
-        alpha_max: f64::INFINITY,
-        accel: AccelLimit::Joint,
+        spec: VelocityBaseSpec {
+            tau_v: 0.0,
+            tau_omega: 0.0,
+            v_max: f64::INFINITY,
+            omega_max: f64::INFINITY,
+            a_max: f64::INFINITY,
+            alpha_max: f64::INFINITY,
+            accel: AccelLimit::Joint,
+        },
     };
 
     /// ROBOTIS TurtleBot 3 Burger.
@@ -118,13 +202,15 @@ impl VelocityBase {
     /// - `τ_v = τ_ω = 0.1 s`: an estimate (Dynamixel XL430 velocity loop behind
     ///   the OpenCR board; no published time constant).
     pub const TURTLEBOT3_BURGER: VelocityBase = VelocityBase {
-        tau_v: 0.1,
-        tau_omega: 0.1,
-        v_max: 0.22,
-        omega_max: 2.84,
-        a_max: 2.5,
-        alpha_max: 3.2,
-        accel: AccelLimit::Joint,
+        spec: VelocityBaseSpec {
+            tau_v: 0.1,
+            tau_omega: 0.1,
+            v_max: 0.22,
+            omega_max: 2.84,
+            a_max: 2.5,
+            alpha_max: 3.2,
+            accel: AccelLimit::Joint,
+        },
     };
 
     /// Clearpath TurtleBot 4 (iRobot Create 3 base).
@@ -137,13 +223,15 @@ impl VelocityBase {
     ///   limits, not the base's).
     /// - `τ_v = τ_ω = 0.1 s`: an estimate (no published time constant).
     pub const TURTLEBOT4: VelocityBase = VelocityBase {
-        tau_v: 0.1,
-        tau_omega: 0.1,
-        v_max: 0.31,
-        omega_max: 1.90,
-        a_max: 2.5,
-        alpha_max: 3.2,
-        accel: AccelLimit::Joint,
+        spec: VelocityBaseSpec {
+            tau_v: 0.1,
+            tau_omega: 0.1,
+            v_max: 0.31,
+            omega_max: 1.90,
+            a_max: 2.5,
+            alpha_max: 3.2,
+            accel: AccelLimit::Joint,
+        },
     };
 
     /// Clearpath Jackal.
@@ -154,140 +242,90 @@ impl VelocityBase {
     ///   (the `diff_drive_controller` configuration Clearpath ships).
     /// - `τ_v = τ_ω = 0.05 s`: an estimate (no published time constant).
     pub const JACKAL: VelocityBase = VelocityBase {
-        tau_v: 0.05,
-        tau_omega: 0.05,
-        v_max: 2.0,
-        omega_max: 4.0,
-        a_max: 20.0,
-        alpha_max: 25.0,
-        accel: AccelLimit::Joint,
+        spec: VelocityBaseSpec {
+            tau_v: 0.05,
+            tau_omega: 0.05,
+            v_max: 2.0,
+            omega_max: 4.0,
+            a_max: 20.0,
+            alpha_max: 25.0,
+            accel: AccelLimit::Joint,
+        },
     };
 
-    /// A base with joint acceleration limits, checked: lags `τ_v`, `τ_ω` (s)
-    /// finite and `≥ 0` (0: ideal, the axis follows the command); limits
-    /// `v_max` (m/s), `ω_max` (rad/s), `a_max` (m/s²), `α_max` (rad/s²) `> 0`
-    /// (infinite: unlimited, NaN refused); no finite acceleration limit on an
-    /// axis without lag. The error names the first field refused.
-    pub fn new(
-        tau_v: f64,
-        tau_omega: f64,
-        v_max: f64,
-        omega_max: f64,
-        a_max: f64,
-        alpha_max: f64,
-    ) -> Result<VelocityBase, ParamError> {
-        let base = VelocityBase {
-            tau_v,
-            tau_omega,
-            v_max,
-            omega_max,
-            a_max,
-            alpha_max,
-            accel: AccelLimit::Joint,
-        };
-        base.check()?;
-        Ok(base)
+    /// The base `spec`, checked: lags `τ_v`, `τ_ω` (s) finite and `≥ 0` (0:
+    /// ideal, the axis follows the command); limits `v_max` (m/s), `ω_max`
+    /// (rad/s), `a_max` (m/s²), `α_max` (rad/s²) `> 0` (infinite: unlimited,
+    /// NaN refused); no finite acceleration limit on an axis without lag. The
+    /// error names the first field refused.
+    pub fn new(spec: VelocityBaseSpec) -> Result<VelocityBase, ParamError> {
+        check(&spec)?;
+        Ok(VelocityBase { spec })
+    }
+
+    /// The lags and limits as written (what [`VelocityBase::new`] takes back).
+    #[inline]
+    pub const fn spec(&self) -> VelocityBaseSpec {
+        self.spec
     }
 
     /// The same base with its acceleration limits acting as `accel`.
     #[must_use]
     pub const fn with_accel(self, accel: AccelLimit) -> VelocityBase {
-        VelocityBase { accel, ..self }
+        VelocityBase {
+            spec: VelocityBaseSpec { accel, ..self.spec },
+        }
     }
 
     /// Lag of the linear speed `τ_v ≥ 0`, s (0: ideal, `v` follows the command).
     #[inline]
     pub const fn tau_v(&self) -> f64 {
-        self.tau_v
+        self.spec.tau_v
     }
 
     /// Lag of the angular speed `τ_ω ≥ 0`, s (0: ideal).
     #[inline]
     pub const fn tau_omega(&self) -> f64 {
-        self.tau_omega
+        self.spec.tau_omega
     }
 
     /// Largest `|v|`, m/s (`> 0`, may be infinite).
     #[inline]
     pub const fn v_max(&self) -> f64 {
-        self.v_max
+        self.spec.v_max
     }
 
     /// Largest `|ω|`, rad/s (`> 0`, may be infinite).
     #[inline]
     pub const fn omega_max(&self) -> f64 {
-        self.omega_max
+        self.spec.omega_max
     }
 
     /// Largest `|v̇|`, m/s² (`> 0`; finite only with `τ_v > 0`).
     #[inline]
     pub const fn a_max(&self) -> f64 {
-        self.a_max
+        self.spec.a_max
     }
 
     /// Largest `|ω̇|`, rad/s² (`> 0`; finite only with `τ_ω > 0`).
     #[inline]
     pub const fn alpha_max(&self) -> f64 {
-        self.alpha_max
+        self.spec.alpha_max
     }
 
     /// Joint (path-keeping, the default) or per-axis acceleration limits.
     #[inline]
     pub const fn accel(&self) -> AccelLimit {
-        self.accel
-    }
-
-    /// Checks every parameter: lags finite and `≥ 0`; limits `> 0` (infinite:
-    /// unlimited, NaN refused); no finite acceleration limit on an axis without
-    /// lag.
-    fn check(&self) -> Result<(), ParamError> {
-        for (field, tau) in [("tau_v", self.tau_v), ("tau_omega", self.tau_omega)] {
-            if !tau.is_finite() {
-                return Err(ParamError::new(field, tau, "must be a finite number"));
-            }
-            if tau < 0.0 {
-                return Err(ParamError::new(
-                    field,
-                    tau,
-                    "must be ≥ 0 (a lag in seconds; 0 is an ideal base)",
-                ));
-            }
-        }
-        for (field, max) in [
-            ("v_max", self.v_max),
-            ("omega_max", self.omega_max),
-            ("a_max", self.a_max),
-            ("alpha_max", self.alpha_max),
-        ] {
-            if max.is_nan() || max <= 0.0 {
-                return Err(ParamError::new(
-                    field,
-                    max,
-                    "must be > 0 (leave it out for no limit)",
-                ));
-            }
-        }
-        if self.tau_v == 0.0 && self.a_max.is_finite() {
-            return Err(ParamError::new(
-                "a_max",
-                self.a_max,
-                "needs tau_v > 0: a base that follows its speed command instantly has no acceleration to limit",
-            ));
-        }
-        if self.tau_omega == 0.0 && self.alpha_max.is_finite() {
-            return Err(ParamError::new(
-                "alpha_max",
-                self.alpha_max,
-                "needs tau_omega > 0: a base that follows its turn-rate command instantly has no acceleration to limit",
-            ));
-        }
-        Ok(())
+        self.spec.accel
     }
 
     /// Checks that an RK4 step `dt` resolves the lags: every non-zero lag must
     /// be at least `dt` (a shorter one is better modelled as 0).
     pub fn check_step(&self, dt: f64) -> Result<(), ParamError> {
-        for (field, tau) in [("tau_v", self.tau_v), ("tau_omega", self.tau_omega)] {
+        for (field, tau) in [
+            ("tau_v", self.spec.tau_v),
+            ("tau_omega", self.spec.tau_omega),
+        ] {
             if tau > 0.0 && tau < dt {
                 return Err(ParamError::new(
                     field,
@@ -302,10 +340,10 @@ impl VelocityBase {
     /// Whether both axes follow the command without lag or limits (`V̇₁ = −K_e‖e‖²`
     /// holds exactly under the kinematic law).
     pub fn is_ideal(&self) -> bool {
-        self.tau_v == 0.0
-            && self.tau_omega == 0.0
-            && self.v_max == f64::INFINITY
-            && self.omega_max == f64::INFINITY
+        self.spec.tau_v == 0.0
+            && self.spec.tau_omega == 0.0
+            && self.spec.v_max == f64::INFINITY
+            && self.spec.omega_max == f64::INFINITY
     }
 
     /// The speed limits, keeping the path: `(v, ω)` scaled by
@@ -318,15 +356,15 @@ impl VelocityBase {
     #[inline]
     pub fn limit(&self, cmd: VelocityCommand) -> (VelocityCommand, bool) {
         let (av, aw) = (cmd.v.abs(), cmd.omega.abs());
-        if av <= self.v_max && aw <= self.omega_max {
+        if av <= self.spec.v_max && aw <= self.spec.omega_max {
             return (cmd, false);
         }
-        let k = (self.v_max / av).min(self.omega_max / aw);
+        let k = (self.spec.v_max / av).min(self.spec.omega_max / aw);
         // The binding axis lands on its limit exactly; the clamps guard the
         // last bit of rounding in the product.
         let limited = VelocityCommand {
-            v: (cmd.v * k).clamp(-self.v_max, self.v_max),
-            omega: (cmd.omega * k).clamp(-self.omega_max, self.omega_max),
+            v: (cmd.v * k).clamp(-self.spec.v_max, self.spec.v_max),
+            omega: (cmd.omega * k).clamp(-self.spec.omega_max, self.spec.omega_max),
         };
         (limited, true)
     }
@@ -337,19 +375,19 @@ impl VelocityBase {
     #[inline]
     pub fn accelerations(&self, s: &State, cmd: VelocityCommand) -> (f64, f64) {
         let (dv, dw) = self.lag_rates(s, cmd);
-        match self.accel {
+        match self.spec.accel {
             AccelLimit::Joint => {
                 let k = 1f64
-                    .min(self.a_max / dv.abs())
-                    .min(self.alpha_max / dw.abs());
+                    .min(self.spec.a_max / dv.abs())
+                    .min(self.spec.alpha_max / dw.abs());
                 (
-                    (dv * k).clamp(-self.a_max, self.a_max),
-                    (dw * k).clamp(-self.alpha_max, self.alpha_max),
+                    (dv * k).clamp(-self.spec.a_max, self.spec.a_max),
+                    (dw * k).clamp(-self.spec.alpha_max, self.spec.alpha_max),
                 )
             }
             AccelLimit::PerAxis => (
-                dv.clamp(-self.a_max, self.a_max),
-                dw.clamp(-self.alpha_max, self.alpha_max),
+                dv.clamp(-self.spec.a_max, self.spec.a_max),
+                dw.clamp(-self.spec.alpha_max, self.spec.alpha_max),
             ),
         }
     }
@@ -358,7 +396,7 @@ impl VelocityBase {
     #[inline]
     pub fn accel_limited(&self, s: &State, cmd: VelocityCommand) -> bool {
         let (dv, dw) = self.lag_rates(s, cmd);
-        dv.abs() > self.a_max || dw.abs() > self.alpha_max
+        dv.abs() > self.spec.a_max || dw.abs() > self.spec.alpha_max
     }
 
     /// `(v_c − v)/τ_v` and `(ω_c − ω)/τ_ω`, 0 on an axis without lag.
@@ -368,8 +406,8 @@ impl VelocityBase {
             if tau > 0.0 { (target - now) / tau } else { 0.0 }
         };
         (
-            rate(cmd.v, s.v, self.tau_v),
-            rate(cmd.omega, s.omega, self.tau_omega),
+            rate(cmd.v, s.v, self.spec.tau_v),
+            rate(cmd.omega, s.omega, self.spec.tau_omega),
         )
     }
 
@@ -378,8 +416,8 @@ impl VelocityBase {
     #[inline]
     pub fn speeds(&self, s: &State, cmd: VelocityCommand) -> (f64, f64) {
         (
-            if self.tau_v > 0.0 { s.v } else { cmd.v },
-            if self.tau_omega > 0.0 {
+            if self.spec.tau_v > 0.0 { s.v } else { cmd.v },
+            if self.spec.tau_omega > 0.0 {
                 s.omega
             } else {
                 cmd.omega
@@ -412,8 +450,8 @@ impl VelocityBase {
     pub fn settle(&self, s: &State, cmd: VelocityCommand) -> State {
         let (v, w) = self.speeds(s, cmd);
         State {
-            v: v.clamp(-self.v_max, self.v_max),
-            omega: w.clamp(-self.omega_max, self.omega_max),
+            v: v.clamp(-self.spec.v_max, self.spec.v_max),
+            omega: w.clamp(-self.spec.omega_max, self.spec.omega_max),
             ..*s
         }
     }
@@ -422,11 +460,7 @@ impl VelocityBase {
     /// then [settled](VelocityBase::settle).
     #[inline]
     pub fn rk4_step(&self, s: &State, cmd: VelocityCommand, dt: f64) -> State {
-        let k1 = self.derivative(s, cmd);
-        let k2 = self.derivative(&s.add_scaled(&k1, 0.5 * dt), cmd);
-        let k3 = self.derivative(&s.add_scaled(&k2, 0.5 * dt), cmd);
-        let k4 = self.derivative(&s.add_scaled(&k3, dt), cmd);
-        self.settle(&s.rk4_combine([&k1, &k2, &k3, &k4], dt / 6.0), cmd)
+        self.settle(&s.rk4_step(dt, |x| self.derivative(x, cmd)), cmd)
     }
 }
 
@@ -435,7 +469,8 @@ impl VelocityBase {
 /// them behind the lags.
 ///
 /// Built through [`VelocityRobot::new`] (or a preset), which checks the wheels.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Serialises as its `base` and its wheels.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct VelocityRobot {
     base: VelocityBase,
     half_wheelbase: f64,

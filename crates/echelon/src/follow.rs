@@ -122,7 +122,7 @@ mod tests {
     use super::*;
     use crate::control::{Gains, Variant};
     use crate::formation::Leader;
-    use crate::lycomp::{LyComp, LyDerivatives};
+    use crate::lycomp::{LyComp, LyDerivatives, PlacementSpec};
     use crate::model::RobotParams;
     use crate::reference::{Circle, Order, Trajectory};
 
@@ -131,8 +131,14 @@ mod tests {
             "a",
             RobotParams::AGENT1,
             Leader::Reference,
-            Placement::new(0.3, 0.35, 0.1, LyComp::Exact, LyDerivatives::Neglect)
-                .expect("valid placement"),
+            Placement::new(PlacementSpec {
+                lx_off: 0.3,
+                ly_off: 0.35,
+                l: 0.1,
+                comp: LyComp::Exact,
+                derivatives: LyDerivatives::Neglect,
+            })
+            .expect("valid placement"),
             Gains::PAPER,
             Variant::Complete,
             State::at_rest(0.0, 0.0, 0.0),

@@ -28,7 +28,8 @@
 //! - [`scenario`]: the TOML scenario format and the paper's built-in setups;
 //! - [`safety`]: barrier-certificate safety filter between robots and around obstacles;
 //! - [`output`]: `trajectory.csv` and `summary.json`;
-//! - [`identify`]: a robot's eq. 3 parameters or velocity-base lags from its logs.
+//! - [`identify`]: a robot's eq. 3 parameters or velocity-base lags from its logs;
+//! - [`lm`]: Levenberg–Marquardt for the small least-squares fits.
 //!
 //! Units are SI and angles radians throughout (ROS REP 103).
 
@@ -45,6 +46,7 @@ pub mod guard;
 pub mod identify;
 pub mod kinematic;
 pub mod lanes;
+pub mod lm;
 pub mod lycomp;
 mod math;
 pub mod model;
@@ -64,7 +66,7 @@ pub mod sweep;
 pub use agent::{AgentSpec, Command};
 pub use control::{Gains, Variant};
 pub use error::{FormationError, OutputError, ParamError, ReferenceError, ScenarioError, SimError};
-pub use model::{Input, RobotParams, State, Torques};
+pub use model::{Input, RobotParams, RobotParamsSpec, State, Torques};
 pub use plan::{Plan, SimConfig, Timing};
 pub use scenario::{Overrides, Run, Scenario};
 pub use sim::{Frame, Observer, Simulation};

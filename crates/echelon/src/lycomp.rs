@@ -117,6 +117,22 @@ pub fn fit_rc<D: DualNum<Primitive = f64> + Copy>(rc: D, c: &FitCoefficients) ->
         * (2.0 * c.g)
 }
 
+/// A follower's desired placement of its leader as written: unchecked.
+/// [`Placement::new`] checks it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlacementSpec {
+    /// `L_Xoff`, m (finite; the scenario's `offset.x`).
+    pub lx_off: f64,
+    /// `L_Yoff`, m (finite; the scenario's `offset.y`).
+    pub ly_off: f64,
+    /// `L`, m: a finite number `> 0` with `L_X = L_Xoff + L > 0`.
+    pub l: f64,
+    /// How `L_Ycomp` is computed.
+    pub comp: LyComp,
+    /// Whether `L̇_Y`, `L̈_Y` are used.
+    pub derivatives: LyDerivatives,
+}
+
 /// A follower's desired placement of its leader: offsets, `L`, and how `L_Y`
 /// follows the leader's curvature.
 ///
@@ -124,12 +140,16 @@ pub fn fit_rc<D: DualNum<Primitive = f64> + Copy>(rc: D, c: &FitCoefficients) ->
 /// it, so a `Placement` in hand always has `L_X > 0`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
-    lx_off: f64,
-    ly_off: f64,
-    l: f64,
-    comp: LyComp,
-    derivatives: LyDerivatives,
+    spec: PlacementSpec,
     fit: FitCoefficients,
+}
+
+impl TryFrom<PlacementSpec> for Placement {
+    type Error = ParamError;
+
+    fn try_from(spec: PlacementSpec) -> Result<Self, ParamError> {
+        Placement::new(spec)
+    }
 }
 
 impl Placement {
@@ -137,60 +157,56 @@ impl Placement {
     /// derivatives asked for and some `L_Ycomp` to differentiate.
     #[inline]
     pub fn uses_exact_derivatives(&self) -> bool {
-        self.derivatives == LyDerivatives::Exact && self.comp != LyComp::None
+        self.spec.derivatives == LyDerivatives::Exact && self.spec.comp != LyComp::None
     }
 
     /// A leader-follower placement (Definition 1). Refuses non-finite offsets,
     /// `L` that is not a finite number > 0 and `L_X = L_Xoff + L ≤ 0` (eq. 13
     /// divides by `L_X`); errors name `offset.x`, `offset.y` or `l`.
-    pub fn new(
-        lx_off: f64,
-        ly_off: f64,
-        l: f64,
-        comp: LyComp,
-        derivatives: LyDerivatives,
-    ) -> Result<Placement, ParamError> {
+    pub fn new(spec: PlacementSpec) -> Result<Placement, ParamError> {
         let p = Placement {
-            lx_off,
-            ly_off,
-            l,
-            comp,
-            derivatives,
-            fit: FitCoefficients::paper(lx_off),
+            spec,
+            fit: FitCoefficients::paper(spec.lx_off),
         };
         p.check()?;
         Ok(p)
     }
 
+    /// The placement as written (what [`Placement::new`] takes back).
+    #[inline]
+    pub const fn spec(&self) -> PlacementSpec {
+        self.spec
+    }
+
     /// `L_Xoff`, m.
     #[inline]
     pub const fn lx_off(&self) -> f64 {
-        self.lx_off
+        self.spec.lx_off
     }
 
     /// `L_Yoff`, m.
     #[inline]
     pub const fn ly_off(&self) -> f64 {
-        self.ly_off
+        self.spec.ly_off
     }
 
     /// `L > 0`, m: keeps `L_X > 0` (eq. 13 divides by it).
     #[inline]
     pub const fn l(&self) -> f64 {
-        self.l
+        self.spec.l
     }
 
     /// How `L_Ycomp` is computed (the field `comp`; [`Placement::comp`]
     /// computes it).
     #[inline]
     pub const fn lycomp(&self) -> LyComp {
-        self.comp
+        self.spec.comp
     }
 
     /// Whether `L̇_Y`, `L̈_Y` are used.
     #[inline]
     pub const fn derivatives(&self) -> LyDerivatives {
-        self.derivatives
+        self.spec.derivatives
     }
 
     /// Fit coefficients for `lx_off` (used with [`LyComp::Fit`]).
@@ -201,21 +217,21 @@ impl Placement {
 
     /// [`Placement::new`]'s checks.
     fn check(&self) -> Result<(), ParamError> {
-        check::positive("l", self.l)?;
-        check::finite("offset.x", self.lx_off)?;
-        check::finite("offset.y", self.ly_off)?;
+        check::positive("l", self.spec.l)?;
+        check::finite("offset.x", self.spec.lx_off)?;
+        check::finite("offset.y", self.spec.ly_off)?;
         let lx = self.lx();
         check::require(
             "offset.x",
-            self.lx_off,
+            self.spec.lx_off,
             lx > 0.0,
             format!("makes L_X = L_Xoff + L = {lx} m, which must be > 0 (eq. 13 divides by L_X)"),
         )?;
-        if self.comp == LyComp::Fit {
+        if self.spec.comp == LyComp::Fit {
             let FitCoefficients { g, epsilon, delta } = self.fit;
             check::require(
                 "offset.x",
-                self.lx_off,
+                self.spec.lx_off,
                 g.is_finite() && epsilon.is_finite() && delta.is_finite() && delta != 0.0,
                 "is too far outside the range of the eq. 6 fit (use lycomp = \"exact\")",
             )?;
@@ -226,20 +242,26 @@ impl Placement {
     /// Pure tracking (eqs. 14–16): `L_X = L`, `L_Y = 0`; the point `L` ahead of
     /// the robot tracks `p_d`. Refuses `L` that is not a finite number > 0.
     pub fn tracking(l: f64) -> Result<Placement, ParamError> {
-        Placement::new(0.0, 0.0, l, LyComp::None, LyDerivatives::Neglect)
+        Placement::new(PlacementSpec {
+            lx_off: 0.0,
+            ly_off: 0.0,
+            l,
+            comp: LyComp::None,
+            derivatives: LyDerivatives::Neglect,
+        })
     }
 
     /// `L_X = L_Xoff + L`.
     #[inline]
     pub fn lx(&self) -> f64 {
-        self.lx_off + self.l
+        self.spec.lx_off + self.spec.l
     }
 
     /// `L_Ycomp` for the leader's speed and turn rate (either type: `f64` or dual).
     #[inline]
     pub fn comp<D: DualNum<Primitive = f64> + Copy>(&self, speed: D, turn_rate: D) -> D {
-        match self.comp {
-            LyComp::Exact => exact(speed, turn_rate, self.lx_off),
+        match self.spec.comp {
+            LyComp::Exact => exact(speed, turn_rate, self.spec.lx_off),
             LyComp::Fit => fit(speed, turn_rate, &self.fit),
             LyComp::None => D::from(0.0),
         }
@@ -249,7 +271,7 @@ impl Placement {
     /// when derivatives are exact).
     #[inline]
     pub fn offset_for_reference(&self, jet: &Jet) -> Offset {
-        match (self.comp, self.derivatives) {
+        match (self.spec.comp, self.spec.derivatives) {
             (LyComp::None, _) => self.offset(0.0, 0.0, 0.0),
             (_, LyDerivatives::Neglect) => {
                 self.offset(self.comp(jet.speed(), jet.turn_rate()), 0.0, 0.0)
@@ -281,7 +303,7 @@ impl Placement {
     fn offset(&self, comp: f64, dly: f64, ddly: f64) -> Offset {
         Offset {
             lx: self.lx(),
-            ly: self.ly_off + comp,
+            ly: self.spec.ly_off + comp,
             dly,
             ddly,
         }

@@ -23,74 +23,105 @@ pub(crate) fn find_preset<T: Copy>(presets: &[(&str, T)], name: &str) -> Option<
     presets.iter().find(|(n, _)| *n == name).map(|(_, p)| *p)
 }
 
-/// Physical parameters of one robot (paper Table I).
+/// Physical parameters of one robot (paper Table I), as written: unchecked.
+/// [`RobotParams::new`] checks them; a scenario's `[robots.NAME]` and the
+/// serialised form of a [`RobotParams`] have these fields.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RobotParamsSpec {
+    /// Mass `m`, kg (finite, `> 0`).
+    pub mass: f64,
+    /// Viscous friction on the linear speed `η`, kg/s (finite, `≥ 0`).
+    pub linear_friction: f64,
+    /// Moment of inertia about the vertical axis `J`, kg m² (finite, `> 0`).
+    pub inertia: f64,
+    /// Viscous friction on the angular speed `ψ`, kg m²/s (finite, `≥ 0`).
+    pub angular_friction: f64,
+    /// Half the distance between the driving wheels `l`, m (finite, `> 0`).
+    pub half_wheelbase: f64,
+    /// Driving wheel radius `r`, m (finite, `> 0`).
+    pub wheel_radius: f64,
+    /// Largest torque magnitude each wheel motor can produce, N m (finite,
+    /// `> 0`; `None`: unlimited).
+    pub torque_limit: Option<f64>,
+}
+
+/// Physical parameters of one robot (paper Table I), checked.
 ///
 /// Every value is physical: it can only be built through [`RobotParams::new`]
 /// (and [`RobotParams::with_torque_limit`]), the presets, or deserialised
 /// (which runs the same checks), so a `RobotParams` in hand is always valid.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "RawRobotParams")]
+#[serde(try_from = "RobotParamsSpec", into = "RobotParamsSpec")]
 pub struct RobotParams {
-    mass: f64,
-    linear_friction: f64,
-    inertia: f64,
-    angular_friction: f64,
-    half_wheelbase: f64,
-    wheel_radius: f64,
-    torque_limit: Option<f64>,
+    spec: RobotParamsSpec,
 }
 
-/// The deserialised form of [`RobotParams`]: the same fields, unchecked.
-#[derive(Deserialize)]
-struct RawRobotParams {
-    mass: f64,
-    linear_friction: f64,
-    inertia: f64,
-    angular_friction: f64,
-    half_wheelbase: f64,
-    wheel_radius: f64,
-    torque_limit: Option<f64>,
-}
-
-impl TryFrom<RawRobotParams> for RobotParams {
+impl TryFrom<RobotParamsSpec> for RobotParams {
     type Error = ParamError;
 
-    fn try_from(r: RawRobotParams) -> Result<Self, ParamError> {
-        RobotParams::new(
-            r.mass,
-            r.linear_friction,
-            r.inertia,
-            r.angular_friction,
-            r.half_wheelbase,
-            r.wheel_radius,
-        )?
-        .with_torque_limit(r.torque_limit)
+    fn try_from(spec: RobotParamsSpec) -> Result<Self, ParamError> {
+        RobotParams::new(spec)
     }
+}
+
+impl From<RobotParams> for RobotParamsSpec {
+    fn from(p: RobotParams) -> RobotParamsSpec {
+        p.spec
+    }
+}
+
+/// Checks that every parameter is physical: mass, inertia, wheel radius and
+/// half wheelbase strictly positive, frictions non-negative, the torque limit
+/// (if any) strictly positive, everything finite.
+fn check(p: &RobotParamsSpec) -> Result<(), ParamError> {
+    use crate::check::{finite, positive, require};
+    for (field, value) in [
+        ("mass", p.mass),
+        ("inertia", p.inertia),
+        ("half_wheelbase", p.half_wheelbase),
+        ("wheel_radius", p.wheel_radius),
+    ] {
+        require(field, finite(field, value)?, value > 0.0, "must be > 0")?;
+    }
+    for (field, value) in [
+        ("linear_friction", p.linear_friction),
+        ("angular_friction", p.angular_friction),
+    ] {
+        require(field, finite(field, value)?, value >= 0.0, "must be ≥ 0")?;
+    }
+    if let Some(limit) = p.torque_limit {
+        positive("torque_limit", limit)?;
+    }
+    Ok(())
 }
 
 impl RobotParams {
     /// Table I, agent 1: `m = 27 kg, η = 180 kg/s, J = 1.42 kg m², ψ = 9.47 kg m²/s,
     /// l = 0.23 m, r = 0.101 m`.
     pub const AGENT1: RobotParams = RobotParams {
-        mass: 27.0,
-        linear_friction: 180.0,
-        inertia: 1.42,
-        angular_friction: 9.47,
-        half_wheelbase: 0.23,
-        wheel_radius: 0.101,
-        torque_limit: None,
+        spec: RobotParamsSpec {
+            mass: 27.0,
+            linear_friction: 180.0,
+            inertia: 1.42,
+            angular_friction: 9.47,
+            half_wheelbase: 0.23,
+            wheel_radius: 0.101,
+            torque_limit: None,
+        },
     };
 
     /// Table I, agent 2: `m = 25 kg, η = 133.7 kg/s, J = 1.03 kg m², ψ = 5.51 kg m²/s,
     /// l = 0.203 m, r = 0.10 m`.
     pub const AGENT2: RobotParams = RobotParams {
-        mass: 25.0,
-        linear_friction: 133.7,
-        inertia: 1.03,
-        angular_friction: 5.51,
-        half_wheelbase: 0.203,
-        wheel_radius: 0.10,
-        torque_limit: None,
+        spec: RobotParamsSpec {
+            mass: 25.0,
+            linear_friction: 133.7,
+            inertia: 1.03,
+            angular_friction: 5.51,
+            half_wheelbase: 0.203,
+            wheel_radius: 0.10,
+            torque_limit: None,
+        },
     };
 
     /// The named presets: `agent1` and `agent2` of Table I.
@@ -102,115 +133,79 @@ impl RobotParams {
         find_preset(&Self::PRESETS, name)
     }
 
-    /// A robot without a torque limit, checked: mass `m` (kg), inertia `J`
-    /// (kg m²), half wheelbase `l` (m) and wheel radius `r` (m) strictly
-    /// positive, the frictions `η` (kg/s) and `ψ` (kg m²/s) non-negative,
-    /// everything finite. The error names the first field refused.
-    pub fn new(
-        mass: f64,
-        linear_friction: f64,
-        inertia: f64,
-        angular_friction: f64,
-        half_wheelbase: f64,
-        wheel_radius: f64,
-    ) -> Result<RobotParams, ParamError> {
-        let p = RobotParams {
-            mass,
-            linear_friction,
-            inertia,
-            angular_friction,
-            half_wheelbase,
-            wheel_radius,
-            torque_limit: None,
-        };
-        p.check()?;
-        Ok(p)
+    /// The robot `spec`, checked: mass `m` (kg), inertia `J` (kg m²), half
+    /// wheelbase `l` (m) and wheel radius `r` (m) strictly positive, the
+    /// frictions `η` (kg/s) and `ψ` (kg m²/s) non-negative, the torque limit
+    /// (if any) strictly positive, everything finite. The error names the
+    /// first field refused.
+    pub fn new(spec: RobotParamsSpec) -> Result<RobotParams, ParamError> {
+        check(&spec)?;
+        Ok(RobotParams { spec })
     }
 
     /// The same robot with wheel motors limited to `±limit` N m each (`None`:
     /// unlimited); a limit must be a finite number > 0.
     pub fn with_torque_limit(self, limit: Option<f64>) -> Result<RobotParams, ParamError> {
-        let p = RobotParams {
+        RobotParams::new(RobotParamsSpec {
             torque_limit: limit,
-            ..self
-        };
-        p.check()?;
-        Ok(p)
+            ..self.spec
+        })
+    }
+
+    /// The parameters as written (what [`RobotParams::new`] takes back).
+    #[inline]
+    pub const fn spec(&self) -> RobotParamsSpec {
+        self.spec
     }
 
     /// Mass `m`, kg.
     #[inline]
     pub const fn mass(&self) -> f64 {
-        self.mass
+        self.spec.mass
     }
 
     /// Viscous friction on the linear speed `η`, kg/s.
     #[inline]
     pub const fn linear_friction(&self) -> f64 {
-        self.linear_friction
+        self.spec.linear_friction
     }
 
     /// Moment of inertia about the vertical axis `J`, kg m².
     #[inline]
     pub const fn inertia(&self) -> f64 {
-        self.inertia
+        self.spec.inertia
     }
 
     /// Viscous friction on the angular speed `ψ`, kg m²/s.
     #[inline]
     pub const fn angular_friction(&self) -> f64 {
-        self.angular_friction
+        self.spec.angular_friction
     }
 
     /// Half the distance between the driving wheels `l`, m.
     #[inline]
     pub const fn half_wheelbase(&self) -> f64 {
-        self.half_wheelbase
+        self.spec.half_wheelbase
     }
 
     /// Driving wheel radius `r`, m.
     #[inline]
     pub const fn wheel_radius(&self) -> f64 {
-        self.wheel_radius
+        self.spec.wheel_radius
     }
 
     /// Largest torque magnitude each wheel motor can produce, N m (`None`: unlimited).
     #[inline]
     pub const fn torque_limit(&self) -> Option<f64> {
-        self.torque_limit
-    }
-
-    /// Checks that every parameter is physical: mass, inertia, wheel radius and
-    /// half wheelbase strictly positive, frictions non-negative, the torque limit
-    /// (if any) strictly positive, everything finite.
-    fn check(&self) -> Result<(), ParamError> {
-        use crate::check::{finite, positive, require};
-        for (field, value) in [
-            ("mass", self.mass),
-            ("inertia", self.inertia),
-            ("half_wheelbase", self.half_wheelbase),
-            ("wheel_radius", self.wheel_radius),
-        ] {
-            require(field, finite(field, value)?, value > 0.0, "must be > 0")?;
-        }
-        for (field, value) in [
-            ("linear_friction", self.linear_friction),
-            ("angular_friction", self.angular_friction),
-        ] {
-            require(field, finite(field, value)?, value >= 0.0, "must be ≥ 0")?;
-        }
-        if let Some(limit) = self.torque_limit {
-            positive("torque_limit", limit)?;
-        }
-        Ok(())
+        self.spec.torque_limit
     }
 
     /// Wheel torques from the generalised inputs: `τr = r(u1 + u2/l)/2`,
     /// `τl = r(u1 − u2/l)/2` (eq. 2 inverted).
     #[inline]
     pub fn torques(&self, u: Input) -> Torques {
-        let r = self.wheel_radius;
-        let turn = u.u2 / self.half_wheelbase;
+        let r = self.spec.wheel_radius;
+        let turn = u.u2 / self.spec.half_wheelbase;
         Torques {
             right: 0.5 * r * (u.u1 + turn),
             left: 0.5 * r * (u.u1 - turn),
@@ -221,10 +216,10 @@ impl RobotParams {
     /// `u2 = (l/r)(τr − τl)` (eq. 2).
     #[inline]
     pub fn inputs(&self, tau: Torques) -> Input {
-        let r = self.wheel_radius;
+        let r = self.spec.wheel_radius;
         Input {
             u1: (tau.right + tau.left) / r,
-            u2: self.half_wheelbase * (tau.right - tau.left) / r,
+            u2: self.spec.half_wheelbase * (tau.right - tau.left) / r,
         }
     }
 
@@ -233,7 +228,7 @@ impl RobotParams {
     #[inline]
     pub fn actuate(&self, u: Input) -> (Input, Torques) {
         let tau = self.torques(u);
-        match self.torque_limit {
+        match self.spec.torque_limit {
             None => (u, tau),
             Some(limit) => {
                 let sat = Torques {
@@ -260,12 +255,12 @@ impl RobotParams {
     /// through [`crate::base::VelocityBase::limit`]). Returns the command and
     /// whether it was cut.
     pub fn limit(&self, u: Input) -> (Input, bool) {
-        let Some(limit) = self.torque_limit else {
+        let Some(limit) = self.spec.torque_limit else {
             return (u, false);
         };
         // |u1 ± u2/l| ≤ b
-        let b = 2.0 * limit / self.wheel_radius;
-        let turn = u.u2 / self.half_wheelbase;
+        let b = 2.0 * limit / self.spec.wheel_radius;
+        let turn = u.u2 / self.spec.half_wheelbase;
         if u.u1.abs() + turn.abs() <= b {
             return (u, false);
         }
@@ -273,7 +268,7 @@ impl RobotParams {
         let room = b - turn.abs();
         let out = Input {
             u1: u.u1.clamp(-room, room),
-            u2: turn * self.half_wheelbase,
+            u2: turn * self.spec.half_wheelbase,
         };
         (out, true)
     }
@@ -283,8 +278,8 @@ impl RobotParams {
     #[inline]
     pub fn brake(&self, s: &State) -> Input {
         Input {
-            u1: -self.linear_friction * s.v,
-            u2: -self.angular_friction * s.omega,
+            u1: -self.spec.linear_friction * s.v,
+            u2: -self.spec.angular_friction * s.omega,
         }
     }
 
@@ -292,8 +287,8 @@ impl RobotParams {
     #[inline]
     pub fn accelerations(&self, s: &State, u: Input) -> (f64, f64) {
         (
-            (u.u1 - self.linear_friction * s.v) / self.mass,
-            (u.u2 - self.angular_friction * s.omega) / self.inertia,
+            (u.u1 - self.spec.linear_friction * s.v) / self.spec.mass,
+            (u.u2 - self.spec.angular_friction * s.omega) / self.spec.inertia,
         )
     }
 
@@ -317,11 +312,7 @@ impl RobotParams {
     /// constant (zero-order hold): the plant between two controller samples.
     #[inline]
     pub fn rk4_step(&self, s: &State, u: Input, dt: f64) -> State {
-        let k1 = self.derivative(s, u);
-        let k2 = self.derivative(&s.add_scaled(&k1, 0.5 * dt), u);
-        let k3 = self.derivative(&s.add_scaled(&k2, 0.5 * dt), u);
-        let k4 = self.derivative(&s.add_scaled(&k3, dt), u);
-        s.rk4_combine([&k1, &k2, &k3, &k4], dt / 6.0)
+        s.rk4_step(dt, |x| self.derivative(x, u))
     }
 }
 
@@ -357,8 +348,8 @@ mod tests {
                 if !cut {
                     prop_assert_eq!(out, u);
                 }
-                let b = 2.0 * limit / p.wheel_radius;
-                if (u2 / p.half_wheelbase).abs() <= b {
+                let b = 2.0 * limit / p.wheel_radius();
+                if (u2 / p.half_wheelbase()).abs() <= b {
                     prop_assert!((out.u2 - u2).abs() <= 1e-9 * u2.abs().max(1.0));
                 }
                 prop_assert!(out.u2 * u2 >= 0.0 && out.u1 * u1 >= 0.0);
@@ -422,8 +413,8 @@ mod tests {
             ..State::default()
         };
         let u = Input {
-            u1: p.linear_friction * 0.5,
-            u2: p.angular_friction * 0.1,
+            u1: p.linear_friction() * 0.5,
+            u2: p.angular_friction() * 0.1,
         };
         let d = p.derivative(&s, u);
         assert!(d.v.abs() < 1e-12 && d.omega.abs() < 1e-12);
@@ -445,37 +436,50 @@ mod tests {
             s = p.rk4_step(&s, u, dt);
         }
         let t = 1.0;
-        let v_inf = u.u1 / p.linear_friction;
-        let w_inf = u.u2 / p.angular_friction;
-        let v = v_inf + (0.1 - v_inf) * (-p.linear_friction * t / p.mass).exp();
-        let w = w_inf + (0.2 - w_inf) * (-p.angular_friction * t / p.inertia).exp();
+        let v_inf = u.u1 / p.linear_friction();
+        let w_inf = u.u2 / p.angular_friction();
+        let v = v_inf + (0.1 - v_inf) * (-p.linear_friction() * t / p.mass()).exp();
+        let w = w_inf + (0.2 - w_inf) * (-p.angular_friction() * t / p.inertia()).exp();
         assert!((s.v - v).abs() < 1e-8, "{} vs {v}", s.v);
         assert!((s.omega - w).abs() < 1e-8, "{} vs {w}", s.omega);
         // θ is the integral of ω.
         let theta = w_inf * t
-            + (0.2 - w_inf) * p.inertia / p.angular_friction
-                * (1.0 - (-p.angular_friction * t / p.inertia).exp());
+            + (0.2 - w_inf) * p.inertia() / p.angular_friction()
+                * (1.0 - (-p.angular_friction() * t / p.inertia()).exp());
         assert!((s.theta - theta).abs() < 1e-8);
     }
 
     #[test]
     fn invalid_parameters_are_refused() {
-        let bad = RobotParams::new(-1.0, 180.0, 1.42, 9.47, 0.23, 0.101);
-        assert_eq!(bad.unwrap_err().field, "mass");
-        let nan = RobotParams::new(27.0, 180.0, f64::NAN, 9.47, 0.23, 0.101);
-        assert_eq!(nan.unwrap_err().field, "inertia");
-        let neg_friction = RobotParams::new(27.0, 180.0, 1.42, -0.1, 0.23, 0.101);
+        let agent1 = RobotParams::AGENT1.spec();
+        let with = |f: fn(&mut RobotParamsSpec)| {
+            let mut spec = agent1;
+            f(&mut spec);
+            RobotParams::new(spec)
+        };
+        assert_eq!(with(|s| s.mass = -1.0).unwrap_err().field, "mass");
+        assert_eq!(with(|s| s.inertia = f64::NAN).unwrap_err().field, "inertia");
+        let neg_friction = with(|s| s.angular_friction = -0.1);
         assert!(neg_friction.is_err());
         let zero_limit = RobotParams::AGENT1.with_torque_limit(Some(0.0));
         assert_eq!(zero_limit.unwrap_err().field, "torque_limit");
-        assert_eq!(
-            RobotParams::new(27.0, 180.0, 1.42, 9.47, 0.23, 0.101),
-            Ok(RobotParams::AGENT1)
-        );
-        assert_eq!(
-            RobotParams::new(25.0, 133.7, 1.03, 5.51, 0.203, 0.10),
-            Ok(RobotParams::AGENT2)
-        );
+        // Table I's values, in the paper's order `m, η, J, ψ, l, r`.
+        for ([m, eta, j, psi, l, r], preset) in [
+            ([27.0, 180.0, 1.42, 9.47, 0.23, 0.101], RobotParams::AGENT1),
+            ([25.0, 133.7, 1.03, 5.51, 0.203, 0.10], RobotParams::AGENT2),
+        ] {
+            let spec = RobotParamsSpec {
+                mass: m,
+                linear_friction: eta,
+                inertia: j,
+                angular_friction: psi,
+                half_wheelbase: l,
+                wheel_radius: r,
+                torque_limit: None,
+            };
+            assert_eq!(RobotParams::new(spec), Ok(preset));
+            assert_eq!(preset.spec(), spec);
+        }
     }
 
     #[test]

@@ -5,10 +5,10 @@
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
 use echelon::ParamError;
-use echelon::base::{AccelLimit, VelocityBase, VelocityRobot};
+use echelon::base::{AccelLimit, VelocityBase, VelocityBaseSpec, VelocityRobot};
 use echelon::control::Gains;
-use echelon::lycomp::{FitCoefficients, LyComp, LyDerivatives, Placement};
-use echelon::model::RobotParams;
+use echelon::lycomp::{FitCoefficients, LyComp, LyDerivatives, Placement, PlacementSpec};
+use echelon::model::{RobotParams, RobotParamsSpec};
 use echelon::odometry::{ErrorModel, OdometrySpec};
 use echelon::reference::Circle;
 use echelon::safety::Obstacle;
@@ -91,11 +91,19 @@ fn refused_as<T: DeserializeOwned + std::fmt::Debug>(
     Ok(())
 }
 
-/// `RobotParams::new`'s arguments in order.
+/// `RobotParamsSpec`'s fields in order, without the torque limit.
 type RobotArgs = (f64, f64, f64, f64, f64, f64);
 
 fn robot(a: RobotArgs) -> Result<RobotParams, ParamError> {
-    RobotParams::new(a.0, a.1, a.2, a.3, a.4, a.5)
+    RobotParams::new(RobotParamsSpec {
+        mass: a.0,
+        linear_friction: a.1,
+        inertia: a.2,
+        angular_friction: a.3,
+        half_wheelbase: a.4,
+        wheel_radius: a.5,
+        torque_limit: None,
+    })
 }
 
 fn robot_args() -> impl Strategy<Value = RobotArgs> {
@@ -171,7 +179,7 @@ proptest! {
         m in decimal(1), eta in decimal(0), j in decimal(1), psi in decimal(0),
         l in decimal(1), r in decimal(1), limit in prop::option::of(decimal(1)),
     ) {
-        let p = RobotParams::new(m, eta, j, psi, l, r).unwrap().with_torque_limit(limit).unwrap();
+        let p = robot((m, eta, j, psi, l, r)).unwrap().with_torque_limit(limit).unwrap();
         prop_assert_eq!(json_round_trip(&p), p);
     }
 
@@ -226,7 +234,7 @@ fn not_a_limit() -> impl Strategy<Value = f64> {
     ]
 }
 
-/// `VelocityBase::new`'s arguments: lags ≥ 0, speed limits, and acceleration
+/// `VelocityBaseSpec`'s numbers in order: lags ≥ 0, speed limits, and acceleration
 /// limits that are finite only on a lagged axis.
 fn base_args() -> impl Strategy<Value = [f64; 6]> {
     (
@@ -245,7 +253,16 @@ fn base_args() -> impl Strategy<Value = [f64; 6]> {
 }
 
 fn base(x: [f64; 6]) -> Result<VelocityBase, ParamError> {
-    VelocityBase::new(x[0], x[1], x[2], x[3], x[4], x[5])
+    let [tau_v, tau_omega, v_max, omega_max, a_max, alpha_max] = x;
+    VelocityBase::new(VelocityBaseSpec {
+        tau_v,
+        tau_omega,
+        v_max,
+        omega_max,
+        a_max,
+        alpha_max,
+        accel: AccelLimit::Joint,
+    })
 }
 
 const BASE_FIELDS: [&str; 6] = [
@@ -336,11 +353,11 @@ proptest! {
     ) {
         prop_assume!(lx + l > 0.0);
         let comp = if exact { LyComp::Exact } else { LyComp::None };
-        let p = Placement::new(lx, ly, l, comp, d).unwrap();
+        let p = Placement::new(PlacementSpec { lx_off: lx, ly_off: ly, l, comp, derivatives: d }).unwrap();
         prop_assert_eq!((p.lx_off(), p.ly_off(), p.l(), p.lycomp(), p.derivatives()), (lx, ly, l, comp, d));
         prop_assert_eq!(p.fit(), FitCoefficients::paper(lx));
         prop_assert!(p.lx() > 0.0);
-        let f = Placement::new(in_range, ly, l, LyComp::Fit, d).unwrap();
+        let f = Placement::new(PlacementSpec { lx_off: in_range, ly_off: ly, l, comp: LyComp::Fit, derivatives: d }).unwrap();
         prop_assert_eq!(f.lycomp(), LyComp::Fit);
         let t = Placement::tracking(l).unwrap();
         prop_assert_eq!((t.lx_off(), t.ly_off(), t.l()), (0.0, 0.0, l));
@@ -354,7 +371,7 @@ proptest! {
         bad_l in not_positive(), bad_offset in not_finite(), behind in 0.0..10.0f64,
     ) {
         prop_assume!(lx + l > 0.0);
-        let new = |lx, ly, l| Placement::new(lx, ly, l, LyComp::Exact, d);
+        let new = |lx, ly, l| Placement::new(PlacementSpec { lx_off: lx, ly_off: ly, l, comp: LyComp::Exact, derivatives: d });
         prop_assert_eq!(new(lx, ly, bad_l).unwrap_err().field, "l");
         prop_assert_eq!(Placement::tracking(bad_l).unwrap_err().field, "l");
         prop_assert_eq!(new(bad_offset, ly, l).unwrap_err().field, "offset.x");

@@ -11,7 +11,7 @@ use echelon::SimError;
 use echelon::control::{Gains, Variant};
 use echelon::engine::{BenchFormation, Engine, EngineError, Topology};
 use echelon::formation::Leader;
-use echelon::lycomp::{LyComp, LyDerivatives, Placement};
+use echelon::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
 use echelon::model::{RobotParams, State};
 use echelon::reference::{Lemniscate, Reference};
 use echelon::rng::SplitMix64;
@@ -193,13 +193,13 @@ fn other_laws_placements_and_references_match() {
                     } else {
                         Leader::Reference
                     },
-                    Placement::new(
-                        0.3 + 0.1 * k,
-                        0.5 - 0.2 * k,
-                        0.05,
+                    Placement::new(PlacementSpec {
+                        lx_off: 0.3 + 0.1 * k,
+                        ly_off: 0.5 - 0.2 * k,
+                        l: 0.05,
                         comp,
-                        LyDerivatives::Neglect,
-                    )
+                        derivatives: LyDerivatives::Neglect,
+                    })
                     .unwrap(),
                     Gains::new(1.0 + 0.2 * k, 8.0 + k).unwrap(),
                     variant,
@@ -305,13 +305,10 @@ fn what_the_engine_cannot_do_is_refused() {
     let mut specs = f.agent_specs();
     let p = specs[3].placement();
     specs[3] = specs[3].clone().with_placement(
-        Placement::new(
-            p.lx_off(),
-            p.ly_off(),
-            p.l(),
-            p.lycomp(),
-            LyDerivatives::Exact,
-        )
+        Placement::new(PlacementSpec {
+            derivatives: LyDerivatives::Exact,
+            ..p.spec()
+        })
         .unwrap(),
     );
     assert!(Engine::from_agents(&specs, f.reference(), 0.01).is_err());
@@ -356,7 +353,14 @@ fn a_blow_up_is_reported_like_the_scalar_simulator_does() {
         specs[bad] = specs[bad]
             .clone()
             .with_placement(
-                Placement::new(-0.049_999, 0.0, 0.05, LyComp::Fit, LyDerivatives::Neglect).unwrap(),
+                Placement::new(PlacementSpec {
+                    lx_off: -0.049_999,
+                    ly_off: 0.0,
+                    l: 0.05,
+                    comp: LyComp::Fit,
+                    derivatives: LyDerivatives::Neglect,
+                })
+                .unwrap(),
             )
             .with_gains(Gains::new(50.0, 500.0).unwrap());
         let dt = 0.05;

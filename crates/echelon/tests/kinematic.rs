@@ -8,7 +8,10 @@
 //! stage (a continuous-time controller, as the simulator does).
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
-use echelon::base::{AccelLimit, VelocityBase, VelocityCommand};
+mod common;
+use common::placement;
+
+use echelon::base::{AccelLimit, VelocityBase, VelocityBaseSpec, VelocityCommand};
 use echelon::control::{LeaderMotion, errors};
 use echelon::kinematic::{KinematicOutput, kinematic_law, lyapunov, lyapunov_rate};
 use echelon::lycomp::{LyComp, LyDerivatives, Placement};
@@ -151,10 +154,6 @@ fn gaps(samples: &[Sample], a: usize, ke: f64) -> (f64, f64) {
         }
     }
     (closed, rate)
-}
-
-fn placement(lx_off: f64, ly_off: f64, comp: LyComp, derivatives: LyDerivatives) -> Placement {
-    Placement::new(lx_off, ly_off, 0.05, comp, derivatives).expect("valid placement")
 }
 
 #[test]
@@ -330,9 +329,11 @@ prop_compose! {
         a_max in 0.1..20.0f64, alpha_max in 0.1..30.0f64,
         per_axis in any::<bool>(),
     ) -> VelocityBase {
-        VelocityBase::new(tau_v, tau_omega, v_max, omega_max, a_max, alpha_max)
-            .unwrap()
-            .with_accel(if per_axis { AccelLimit::PerAxis } else { AccelLimit::Joint })
+        VelocityBase::new(VelocityBaseSpec {
+            tau_v, tau_omega, v_max, omega_max, a_max, alpha_max,
+            accel: if per_axis { AccelLimit::PerAxis } else { AccelLimit::Joint },
+        })
+        .unwrap()
     }
 }
 
@@ -397,9 +398,11 @@ proptest! {
             "{} > {}", (next.omega - s.omega).abs(), base.alpha_max() * dt
         );
         // on the ray: equal lags, joint limits, a start at on_ray × command
-        let joint = VelocityBase::new(
-            base.tau_v(), base.tau_v(), base.v_max(), base.omega_max(), base.a_max(), base.alpha_max(),
-        ).unwrap();
+        let joint = VelocityBase::new(VelocityBaseSpec {
+            tau_omega: base.tau_v(),
+            accel: AccelLimit::Joint,
+            ..base.spec()
+        }).unwrap();
         let s = State { v: on_ray * c.v, omega: on_ray * c.omega, ..s };
         let next = joint.rk4_step(&s, c, dt_share * joint.tau_v());
         let cross = next.omega * c.v - next.v * c.omega;

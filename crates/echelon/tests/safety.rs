@@ -5,7 +5,7 @@
 
 mod common;
 
-use echelon::base::{VelocityBase, VelocityCommand};
+use echelon::base::{VelocityBase, VelocityBaseSpec, VelocityCommand};
 use echelon::model::{Input, RobotParams};
 use echelon::safety::{Neighbour, SafetyConfig, SafetyFilter, point};
 use echelon::scenario::{Overrides, Scenario};
@@ -128,7 +128,12 @@ fn unicycle_step(r: &mut State, c: VelocityCommand, dt: f64) {
 fn a_head_on_deadlock_is_broken_and_both_robots_arrive() {
     let l = 0.1;
     let config = SafetyConfig::new(0.4, 1.0, f64::INFINITY).unwrap();
-    let base = VelocityBase::new(0.0, 0.0, 0.5, 4.0, f64::INFINITY, f64::INFINITY).unwrap();
+    let base = VelocityBase::new(VelocityBaseSpec {
+        v_max: 0.5,
+        omega_max: 4.0,
+        ..VelocityBase::IDEAL.spec()
+    })
+    .unwrap();
     let mut robots = [
         State::at_rest(-2.0, 0.0, 0.0),
         State::at_rest(2.0, 0.0, std::f64::consts::PI),
@@ -315,7 +320,7 @@ proptest::proptest! {
         let margin = echelon::safety::uncertainty_margin(sigma_me, sigma_other);
         proptest::prop_assert!((margin - 3.0 * (sigma_me + sigma_other)).abs() < 1e-15);
         let config = SafetyConfig::new(radius, 1.0, f64::INFINITY).unwrap();
-        let base = VelocityBase::new(0.0, 0.0, v_max, 4.0, f64::INFINITY, f64::INFINITY).unwrap();
+        let base = VelocityBase::new(VelocityBaseSpec { v_max, omega_max: 4.0, ..VelocityBase::IDEAL.spec() }).unwrap();
         let other = State::at_rest(0.0, 0.0, 0.0);
         let seen = Neighbour::of_state(&other, l, None, false).with_margin(margin);
         let q = point(&other, l);

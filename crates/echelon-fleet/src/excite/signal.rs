@@ -132,18 +132,34 @@ impl ExciteSignal {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use echelon::base::VelocityBaseSpec;
     use echelon::identify::{self, Log, Model, simulate_axis};
 
     fn lab() -> VelocityBase {
-        VelocityBase::new(0.1, 0.1, 0.3, 2.0, 1.0, 5.0).expect("the lab base")
+        VelocityBase::new(VelocityBaseSpec {
+            tau_v: 0.1,
+            tau_omega: 0.1,
+            v_max: 0.3,
+            omega_max: 2.0,
+            a_max: 1.0,
+            alpha_max: 5.0,
+            ..VelocityBase::IDEAL.spec()
+        })
+        .expect("the lab base")
     }
 
     fn bases() -> [VelocityBase; 3] {
         [
             lab(),
             VelocityBase::IDEAL,
-            VelocityBase::new(0.25, 0.4, 0.22, 2.84, f64::INFINITY, f64::INFINITY)
-                .expect("a slow base"),
+            VelocityBase::new(VelocityBaseSpec {
+                tau_v: 0.25,
+                tau_omega: 0.4,
+                v_max: 0.22,
+                omega_max: 2.84,
+                ..VelocityBase::IDEAL.spec()
+            })
+            .expect("a slow base"),
         ]
     }
 

@@ -4,16 +4,7 @@ use super::*;
 fn presets_are_valid_and_named() {
     for (name, robot) in VelocityRobot::PRESETS {
         let base = robot.base;
-        assert!(base.check().is_ok(), "{name}");
-        let rebuilt = VelocityBase::new(
-            base.tau_v,
-            base.tau_omega,
-            base.v_max,
-            base.omega_max,
-            base.a_max,
-            base.alpha_max,
-        );
-        assert_eq!(rebuilt, Ok(base), "{name}");
+        assert_eq!(VelocityBase::new(base.spec()), Ok(base), "{name}");
         let rebuilt = VelocityRobot::new(base, robot.half_wheelbase, robot.wheel_radius);
         assert_eq!(rebuilt, Ok(robot), "{name}");
         assert_eq!(VelocityRobot::preset(name), Some(robot));
@@ -26,30 +17,30 @@ fn presets_are_valid_and_named() {
 #[test]
 fn invalid_parameters_are_refused_by_name() {
     let tb3 = VelocityBase::TURTLEBOT3_BURGER;
-    // TurtleBot 3's values with one replaced: (τ_v, τ_ω, v_max, ω_max, a_max, α_max).
-    let field = |i: usize, v: f64| {
-        let mut x = [0.1, 0.1, 0.22, 2.84, 2.5, 3.2];
-        x[i] = v;
-        VelocityBase::new(x[0], x[1], x[2], x[3], x[4], x[5])
-            .unwrap_err()
-            .field
+    // TurtleBot 3's values with one replaced.
+    let field = |change: fn(&mut VelocityBaseSpec)| {
+        let mut spec = tb3.spec();
+        change(&mut spec);
+        VelocityBase::new(spec).unwrap_err().field
     };
-    assert_eq!(field(0, -0.1), "tau_v");
-    assert_eq!(field(1, f64::NAN), "tau_omega");
-    assert_eq!(field(2, 0.0), "v_max");
-    assert_eq!(field(3, -1.0), "omega_max");
-    assert_eq!(field(4, f64::NAN), "a_max");
-    assert_eq!(field(5, 0.0), "alpha_max");
+    assert_eq!(field(|b| b.tau_v = -0.1), "tau_v");
+    assert_eq!(field(|b| b.tau_omega = f64::NAN), "tau_omega");
+    assert_eq!(field(|b| b.v_max = 0.0), "v_max");
+    assert_eq!(field(|b| b.omega_max = -1.0), "omega_max");
+    assert_eq!(field(|b| b.a_max = f64::NAN), "a_max");
+    assert_eq!(field(|b| b.alpha_max = 0.0), "alpha_max");
     // An acceleration limit without a lag is refused on its own axis.
-    assert_eq!(field(0, 0.0), "a_max");
-    assert_eq!(field(1, 0.0), "alpha_max");
-    assert!(VelocityBase::new(0.0, 0.0, 0.22, 2.84, f64::INFINITY, f64::INFINITY).is_ok());
-    assert_eq!(
-        VelocityBase::new(-1.0, 0.1, 1.0, 1.0, 1.0, 1.0)
-            .unwrap_err()
-            .field,
-        "tau_v"
+    assert_eq!(field(|b| b.tau_v = 0.0), "a_max");
+    assert_eq!(field(|b| b.tau_omega = 0.0), "alpha_max");
+    assert!(
+        VelocityBase::new(VelocityBaseSpec {
+            v_max: 0.22,
+            omega_max: 2.84,
+            ..VelocityBase::IDEAL.spec()
+        })
+        .is_ok()
     );
+    assert_eq!(field(|b| b.tau_v = -1.0), "tau_v");
     assert_eq!(
         VelocityRobot::new(tb3, 0.0, 0.033).unwrap_err().field,
         "half_wheelbase"
@@ -113,7 +104,16 @@ fn ideal_base_moves_at_the_command() {
 #[test]
 fn lagged_base_matches_the_closed_form_below_the_acceleration_limit() {
     // v(t) = v_c (1 − e^{−t/τ}) while |v̇| = (v_c − v)/τ stays ≤ a_max.
-    let b = VelocityBase::new(0.2, 0.1, 1.0, 2.0, 5.0, 10.0).unwrap();
+    let b = VelocityBase::new(VelocityBaseSpec {
+        tau_v: 0.2,
+        tau_omega: 0.1,
+        v_max: 1.0,
+        omega_max: 2.0,
+        a_max: 5.0,
+        alpha_max: 10.0,
+        accel: AccelLimit::Joint,
+    })
+    .unwrap();
     let cmd = VelocityCommand {
         v: 0.5,
         omega: -0.8,
@@ -132,7 +132,16 @@ fn acceleration_limit_gives_a_ramp_and_joint_keeps_the_direction() {
     // From rest to a command far beyond what a_max allows in the lag: the
     // lag asks for (v_c/τ, ω_c/τ) = (5, 10); joint limits scale both by
     // min(1/5, 4/10) = 0.2, so the base ramps at (1, 2) and ω/v = 2 = ω_c/v_c.
-    let b = VelocityBase::new(0.1, 0.1, 1.0, 2.0, 1.0, 4.0).unwrap();
+    let b = VelocityBase::new(VelocityBaseSpec {
+        tau_v: 0.1,
+        tau_omega: 0.1,
+        v_max: 1.0,
+        omega_max: 2.0,
+        a_max: 1.0,
+        alpha_max: 4.0,
+        accel: AccelLimit::Joint,
+    })
+    .unwrap();
     let cmd = VelocityCommand { v: 0.5, omega: 1.0 };
     let s = b.rk4_step(&State::default(), cmd, 0.01);
     assert!((s.v - 0.01).abs() < 1e-15 && (s.omega - 0.02).abs() < 1e-15);

@@ -5,7 +5,7 @@ use crate::agent::AgentSpec;
 use crate::base::VelocityBase;
 use crate::control::{Gains, Variant};
 use crate::formation::Leader;
-use crate::lycomp::{LyComp, LyDerivatives, Placement};
+use crate::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
 use crate::model::{RobotParams, State};
 use crate::reference::{Circle, Reference};
 use crate::rng::SplitMix64;
@@ -67,9 +67,14 @@ impl BenchFormation {
                 }
             };
             // 0.2 ≤ L_Xoff ≤ 0.8 and L > 0: valid, in the range of the eq. 6 fit.
-            let placement =
-                Placement::new(lx_off, ly_off, Self::L, LyComp::Fit, LyDerivatives::Neglect)
-                    .expect("a placement in the fit's range is valid");
+            let placement = Placement::new(PlacementSpec {
+                lx_off,
+                ly_off,
+                l: Self::L,
+                comp: LyComp::Fit,
+                derivatives: LyDerivatives::Neglect,
+            })
+            .expect("a placement in the fit's range is valid");
             Member {
                 start: State::at_rest(x, y, theta),
                 placement,

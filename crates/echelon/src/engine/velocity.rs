@@ -166,7 +166,7 @@ impl Lead {
 
 /// Leaders in `N` lanes.
 #[derive(Debug, Clone, Copy)]
-struct Leads<const N: usize> {
+pub(crate) struct Leads<const N: usize> {
     p: [Lanes<N>; 2],
     dp: [Lanes<N>; 2],
     vd: Lanes<N>,

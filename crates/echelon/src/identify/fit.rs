@@ -28,6 +28,8 @@ mod residuals;
 pub(crate) use integral::{AxisIntegrals, fit_integral};
 pub(crate) use linalg::rcond;
 use linalg::{inverse_spd, least_squares, solve_spd};
+
+use crate::lm;
 pub(crate) use residuals::{ljung_box, noise_from_differences, scan};
 
 /// Number of samples per window of the integrated equation (first guess).
@@ -289,87 +291,118 @@ pub(crate) struct Between {
     pub(crate) cost_ratio: f64,
 }
 
+/// One axis's output-error fit: the data, and the simulated output and its
+/// sensitivities to `(τ, k, x₀)` at the current point and at the last trial.
+struct Axis<'a> {
+    grid: &'a Grid,
+    foh: bool,
+    y: &'a [f64],
+    x: Vec<f64>,
+    s: Vec<[f64; 3]>,
+    x_try: Vec<f64>,
+    s_try: Vec<[f64; 3]>,
+}
+
+/// [`Axis`] as a least-squares problem in the `N` parameters `free` (indices
+/// into `(τ, k, x₀)`; `k` is 1 when not free).
+struct Free<'a, 'b, const N: usize> {
+    axis: &'b mut Axis<'a>,
+    free: [usize; N],
+}
+
+impl<const N: usize> lm::LeastSquares<N> for Free<'_, '_, N> {
+    fn normal_equations(&self, _: &[f64; N]) -> ([[f64; N]; N], [f64; N]) {
+        let Axis { y, x, s, .. } = &*self.axis;
+        let mut jtj = [[0.0; N]; N];
+        let mut jtr = [0.0; N];
+        for i in 0..x.len() {
+            let r = y[i] - x[i];
+            for (p, &fp) in self.free.iter().enumerate() {
+                jtr[p] += s[i][fp] * r;
+                for (q, &fq) in self.free.iter().enumerate() {
+                    jtj[p][q] += s[i][fp] * s[i][fq];
+                }
+            }
+        }
+        (jtj, jtr)
+    }
+
+    fn trial(&mut self, p: &[f64; N]) -> Option<f64> {
+        let mut full = [0.0, 1.0, 0.0];
+        for (&f, &v) in self.free.iter().zip(p) {
+            full[f] = v;
+        }
+        let [tau, k, x0] = full;
+        if tau <= 0.0 || !tau.is_finite() || !k.is_finite() {
+            return None;
+        }
+        let a = &mut *self.axis;
+        simulate(a.grid, a.foh, tau, k, x0, &mut a.x_try, &mut a.s_try);
+        Some(cost(a.y, &a.x_try))
+    }
+
+    fn accept(&mut self) {
+        let a = &mut *self.axis;
+        std::mem::swap(&mut a.x, &mut a.x_try);
+        std::mem::swap(&mut a.s, &mut a.s_try);
+    }
+}
+
 fn fit_with(d: &AxisData<'_>, fixed_gain: bool, foh: bool) -> AxisFit {
     let n = d.t.len();
     let (guess, _) = equation_error(d, fixed_gain);
     let span = d.t[n - 1] - d.t[0];
     let h = span / (n - 1) as f64;
-    let mut tau = if guess[0].is_finite() && guess[0] > 0.0 && guess[0] < span {
+    let tau = if guess[0].is_finite() && guess[0] > 0.0 && guess[0] < span {
         guess[0]
     } else {
         10.0 * h
     };
-    let mut k = if fixed_gain {
+    let k = if fixed_gain {
         1.0
     } else if guess[1].is_finite() && guess[1] != 0.0 {
         guess[1]
     } else {
         1.0
     };
-    let mut x0 = d.y[0];
+    let x0 = d.y[0];
     let grid = Grid::new(d);
-    let mut x = vec![0.0; n];
-    let mut s = vec![[0.0; 3]; n];
-    let mut x_try = vec![0.0; n];
-    let mut s_try = vec![[0.0; 3]; n];
-    simulate(&grid, foh, tau, k, x0, &mut x, &mut s);
-    let mut c = cost(d.y, &x);
-    let mut lambda = 1e-3;
+    let mut axis = Axis {
+        grid: &grid,
+        foh,
+        y: d.y,
+        x: vec![0.0; n],
+        s: vec![[0.0; 3]; n],
+        x_try: vec![0.0; n],
+        s_try: vec![[0.0; 3]; n],
+    };
+    simulate(&grid, foh, tau, k, x0, &mut axis.x, &mut axis.s);
+    let c = cost(d.y, &axis.x);
     // Free parameters: [τ, k, x₀] or [τ, x₀].
-    let free: &[usize] = if fixed_gain { &[0, 2] } else { &[0, 1, 2] };
-    for _ in 0..MAX_ITER {
-        let mut jtj = [[0.0; 3]; 3];
-        let mut jtr = [0.0; 3];
-        for i in 0..n {
-            let r = d.y[i] - x[i];
-            for (p, &fp) in free.iter().enumerate() {
-                jtr[p] += s[i][fp] * r;
-                for (q, &fq) in free.iter().enumerate() {
-                    jtj[p][q] += s[i][fp] * s[i][fq];
-                }
-            }
-        }
-        let mut improved = false;
-        for _ in 0..30 {
-            let step = if fixed_gain {
-                let a = [
-                    [jtj[0][0] * (1.0 + lambda), jtj[0][1]],
-                    [jtj[1][0], jtj[1][1] * (1.0 + lambda)],
-                ];
-                solve_spd(&a, &[jtr[0], jtr[1]]).map(|d| [d[0], 0.0, d[1]])
-            } else {
-                let mut a = jtj;
-                for (p, row) in a.iter_mut().enumerate() {
-                    row[p] *= 1.0 + lambda;
-                }
-                solve_spd(&a, &jtr)
-            };
-            let Some(step) = step else {
-                lambda *= 10.0;
-                continue;
-            };
-            let (t2, k2, x2) = (tau + step[0], k + step[1], x0 + step[2]);
-            if t2 <= 0.0 || !t2.is_finite() || !k2.is_finite() {
-                lambda *= 10.0;
-                continue;
-            }
-            simulate(&grid, foh, t2, k2, x2, &mut x_try, &mut s_try);
-            let c2 = cost(d.y, &x_try);
-            if c2 <= c {
-                let rel = (c - c2) / c.max(f64::MIN_POSITIVE);
-                (tau, k, x0, c) = (t2, k2, x2, c2);
-                std::mem::swap(&mut x, &mut x_try);
-                std::mem::swap(&mut s, &mut s_try);
-                lambda = (lambda / 10.0).max(1e-12);
-                improved = rel > 1e-14;
-                break;
-            }
-            lambda *= 10.0;
-        }
-        if !improved {
-            break;
-        }
-    }
+    let (n_free, [tau, k, x0], c) = if fixed_gain {
+        let m = lm::minimise(
+            &mut Free {
+                axis: &mut axis,
+                free: [0, 2],
+            },
+            [tau, x0],
+            c,
+            MAX_ITER,
+        );
+        (2, [m.p[0], 1.0, m.p[1]], m.cost)
+    } else {
+        let m = lm::minimise(
+            &mut Free {
+                axis: &mut axis,
+                free: [0, 1, 2],
+            },
+            [tau, k, x0],
+            c,
+            MAX_ITER,
+        );
+        (3, m.p, m.cost)
+    };
+    let Axis { x, s, .. } = axis;
     // Covariance σ² (JᵀJ)⁻¹ at the optimum.
     let mut jtj = [[0.0; 3]; 3];
     for si in &s {
@@ -379,7 +412,7 @@ fn fit_with(d: &AxisData<'_>, fixed_gain: bool, foh: bool) -> AxisFit {
             }
         }
     }
-    let dof = n.saturating_sub(free.len()).max(1) as f64;
+    let dof = n.saturating_sub(n_free).max(1) as f64;
     let sigma2 = c / dof;
     let mut cov = [[f64::INFINITY; 2]; 2];
     let rc;

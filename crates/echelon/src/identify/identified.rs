@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use crate::model::RobotParams;
+use crate::model::{RobotParams, RobotParamsSpec};
 
 use super::fit::Z95;
 use super::{Model, ResidualChecks};
@@ -167,14 +167,15 @@ impl Identified {
         let [l, r] = self
             .geometry
             .or_else(|| fallback.map(|p| [p.half_wheelbase(), p.wheel_radius()]))?;
-        RobotParams::new(
-            self.get("mass")?.value,
-            self.get("linear_friction")?.value,
-            self.get("inertia")?.value,
-            self.get("angular_friction")?.value,
-            l,
-            r,
-        )
+        RobotParams::new(RobotParamsSpec {
+            mass: self.get("mass")?.value,
+            linear_friction: self.get("linear_friction")?.value,
+            inertia: self.get("inertia")?.value,
+            angular_friction: self.get("angular_friction")?.value,
+            half_wheelbase: l,
+            wheel_radius: r,
+            torque_limit: None,
+        })
         .ok()
     }
 

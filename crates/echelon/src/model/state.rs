@@ -115,6 +115,16 @@ impl State {
         }
     }
 
+    /// One classical RK4 step of `ẋ = f(x)` over `dt` from `self`.
+    #[inline]
+    pub fn rk4_step(&self, dt: f64, f: impl Fn(&State) -> State) -> State {
+        let k1 = f(self);
+        let k2 = f(&self.add_scaled(&k1, 0.5 * dt));
+        let k3 = f(&self.add_scaled(&k2, 0.5 * dt));
+        let k4 = f(&self.add_scaled(&k3, dt));
+        self.rk4_combine([&k1, &k2, &k3, &k4], dt / 6.0)
+    }
+
     /// Whether every component is finite.
     #[inline]
     pub fn is_finite(&self) -> bool {

@@ -3,10 +3,36 @@
 
 use proptest::prelude::*;
 
+use super::SafetyConfig;
 use super::neighbour::{Neighbour, point};
 use crate::model::State;
 
-pub(super) fn state() -> impl Strategy<Value = State> {
+/// The filter's `L` in the property tests, m.
+pub(super) const L: f64 = 0.05;
+
+/// The safety radius in the property tests, m.
+const RADIUS: f64 = 0.3;
+
+/// What a filter sees in the property tests: the robot, its neighbours
+/// (outside the radius), and a configuration with some barrier gain.
+#[derive(Debug, Clone)]
+pub(super) struct Scene {
+    pub(super) me: State,
+    pub(super) ns: Vec<Neighbour>,
+    pub(super) config: SafetyConfig,
+}
+
+/// A robot anywhere, neighbours outside the safety radius 0.3 around its
+/// point `L` ahead, a barrier gain in `[0.2, 5)`.
+pub(super) fn scene() -> impl Strategy<Value = Scene> {
+    (state(), neighbours(), 0.2..5.0f64).prop_map(|(me, ns, gain)| Scene {
+        ns: outside(&me, L, ns, RADIUS),
+        me,
+        config: SafetyConfig::new(RADIUS, gain, 1.5).expect("a gain in [0.2, 5) is valid"),
+    })
+}
+
+fn state() -> impl Strategy<Value = State> {
     (
         -2.0..2.0f64,
         -2.0..2.0f64,
@@ -23,7 +49,7 @@ pub(super) fn state() -> impl Strategy<Value = State> {
         })
 }
 
-pub(super) fn neighbours() -> impl Strategy<Value = Vec<Neighbour>> {
+fn neighbours() -> impl Strategy<Value = Vec<Neighbour>> {
     prop::collection::vec((state(), any::<bool>()), 0..6).prop_map(|v| {
         v.into_iter()
             .map(|(s, coop)| Neighbour::of_state(&s, 0.05, Some([0.3, -0.2]), coop))
@@ -33,7 +59,7 @@ pub(super) fn neighbours() -> impl Strategy<Value = Vec<Neighbour>> {
 
 /// Drops neighbours whose point is inside the radius (`h < 0`: the
 /// filter starts outside the unsafe set).
-pub(super) fn outside(me: &State, l: f64, ns: Vec<Neighbour>, radius: f64) -> Vec<Neighbour> {
+fn outside(me: &State, l: f64, ns: Vec<Neighbour>, radius: f64) -> Vec<Neighbour> {
     let p = point(me, l);
     ns.into_iter()
         .filter(|n| (p[0] - n.p[0]).hypot(p[1] - n.p[1]) > radius)

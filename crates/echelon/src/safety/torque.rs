@@ -252,35 +252,35 @@ mod tests {
 
     mod properties {
         use super::*;
-        use crate::safety::strategies::{neighbours, outside, state};
-        use crate::safety::{SafetyConfig, TOLERANCE};
+        use crate::safety::TOLERANCE;
+        use crate::safety::strategies::{L, Scene, scene};
         use proptest::prelude::*;
+
+        /// `x` of the QP for a torque command.
+        fn x_of(robot: &RobotParams, u: Input) -> [f64; 2] {
+            [u.u1 / robot.mass(), L * u.u2 / robot.inertia()]
+        }
 
         proptest! {
             /// The same for the torque filter's exponential barriers and the
             /// wheel torque limit.
             #[test]
             fn torque_filter_satisfies_its_constraints(
-                me in state(),
-                ns in neighbours(),
+                Scene { me, ns, config } in scene(),
                 u1 in -60.0..60.0f64,
                 u2 in -10.0..10.0f64,
-                gain in 0.2..5.0f64,
             ) {
-                let l = 0.05;
                 let robot = RobotParams::AGENT1.with_torque_limit(Some(3.0)).unwrap();
-                let config = SafetyConfig::new(0.3, gain, 1.5).unwrap();
-                let ns = outside(&me, l, ns, 0.3);
                 let mut f = SafetyFilter::new(config);
                 let nominal = Input { u1, u2 };
-                let out = f.torque(0.0, &me, l, &robot, nominal, &ns, &[]);
+                let out = f.torque(0.0, &me, L, &robot, nominal, &ns, &[]);
                 let rows = f.constraints().to_vec();
-                let x_of = |u: Input| [u.u1 / robot.mass(), l * u.u2 / robot.inertia()];
+                let x_of = |u: Input| x_of(&robot, u);
                 // Barriers, then the speed envelope (4 rows), then the torque limit (4).
                 let barriers = rows.len() - 8;
                 // The nominal is first held to the envelope's top speed and
                 // then limited with its turn kept.
-                let limited = Envelope::DEFAULT.hold(&robot, l, &me, nominal);
+                let limited = Envelope::DEFAULT.hold(&robot, L, &me, nominal);
                 // (the states here are below the top speed: untouched)
                 prop_assert_eq!(limited, robot.limit(nominal).0);
                 let nominal_ok = rows[..barriers].iter().all(|c| c.slack(x_of(limited)) >= 0.0);
@@ -323,19 +323,14 @@ mod tests {
             /// given up), which a friction brake did not.
             #[test]
             fn torque_emergency_without_limits_is_bounded_and_keeps_the_barriers(
-                me in state(),
-                ns in neighbours(),
+                Scene { me, ns, config } in scene(),
                 u1 in -60.0..60.0f64,
                 u2 in -10.0..10.0f64,
-                gain in 0.2..5.0f64,
             ) {
-                let l = 0.05;
                 let robot = RobotParams::AGENT1;
-                let config = SafetyConfig::new(0.3, gain, 1.5).unwrap();
-                let ns = outside(&me, l, ns, 0.3);
                 let mut f = SafetyFilter::new(config);
-                let out = f.torque(0.0, &me, l, &robot, Input { u1, u2 }, &ns, &[]);
-                let x_of = |u: Input| [u.u1 / robot.mass(), l * u.u2 / robot.inertia()];
+                let out = f.torque(0.0, &me, L, &robot, Input { u1, u2 }, &ns, &[]);
+                let x_of = |u: Input| x_of(&robot, u);
                 prop_assert!(out.command.u1.is_finite() && out.command.u2.is_finite());
                 if out.outcome == Outcome::Braked {
                     let rows = f.constraints().to_vec();

@@ -61,6 +61,7 @@ mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
+    use crate::base::VelocityBaseSpec;
     use crate::safety::Outcome;
     use crate::safety::SafetyConfig;
 
@@ -69,7 +70,12 @@ mod tests {
     }
 
     fn ideal() -> VelocityBase {
-        VelocityBase::new(0.0, 0.0, 0.5, 4.0, f64::INFINITY, f64::INFINITY).unwrap()
+        VelocityBase::new(VelocityBaseSpec {
+            v_max: 0.5,
+            omega_max: 4.0,
+            ..VelocityBase::IDEAL.spec()
+        })
+        .unwrap()
     }
 
     /// One call of a fresh filter on an ideal base at rest at the origin
@@ -121,7 +127,7 @@ mod tests {
 
     mod properties {
         use super::*;
-        use crate::safety::strategies::{neighbours, outside, state};
+        use crate::safety::strategies::{L, Scene, scene};
         use crate::safety::{Obstacle, TOLERANCE};
         use proptest::prelude::*;
 
@@ -137,23 +143,18 @@ mod tests {
             /// back bit for bit.
             #[test]
             fn velocity_filter_satisfies_its_constraints(
-                me in state(),
-                ns in neighbours(),
+                Scene { me, ns, config } in scene(),
                 v in -0.8..0.8f64,
                 omega in -3.0..3.0f64,
-                gain in 0.2..5.0f64,
             ) {
-                let l = 0.05;
-                let config = SafetyConfig::new(0.3, gain, 1.5).unwrap();
-                let ns = outside(&me, l, ns, 0.3);
                 let obstacles = [Obstacle::new(1.5, -1.5, 0.2).unwrap()];
                 let mut f = SafetyFilter::new(config);
                 let base = ideal();
                 let nominal = VelocityCommand { v, omega };
-                let out = f.velocity(0.0, &me, l, nominal, &base, &ns, &obstacles);
+                let out = f.velocity(0.0, &me, L, nominal, &base, &ns, &obstacles);
                 let limited = base.limit(nominal).0;
                 let rows = f.constraints().to_vec();
-                let nominal_ok = rows.iter().all(|c| c.slack(x_of(limited, l)) >= 0.0);
+                let nominal_ok = rows.iter().all(|c| c.slack(x_of(limited, L)) >= 0.0);
                 match out.outcome {
                     Outcome::Nominal => {
                         prop_assert!(nominal_ok);
@@ -161,7 +162,7 @@ mod tests {
                     }
                     Outcome::Filtered => {
                         prop_assert!(!nominal_ok);
-                        let x = x_of(out.command, l);
+                        let x = x_of(out.command, L);
                         for c in &rows {
                             prop_assert!(c.slack(x) >= -TOLERANCE, "{c:?} at {x:?}");
                         }
@@ -169,10 +170,10 @@ mod tests {
                     Outcome::Braked => {
                         // Within the base's limits, and breaking the
                         // barriers no more than standing still would.
-                        let x = x_of(out.command, l);
+                        let x = x_of(out.command, L);
                         // (clarabel's tolerance, in x = (v, L ω))
                         prop_assert!(out.command.v.abs() <= base.v_max() + TOLERANCE);
-                        prop_assert!(l * out.command.omega.abs() <= l * base.omega_max() + TOLERANCE);
+                        prop_assert!(L * out.command.omega.abs() <= L * base.omega_max() + TOLERANCE);
                         let worst = |x: [f64; 2]| {
                             rows.iter().map(|c| -c.slack(x)).fold(0.0f64, f64::max)
                         };

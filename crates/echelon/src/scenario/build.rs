@@ -17,7 +17,7 @@ use crate::control::{Gains, Law, Variant};
 use crate::error::{FormationError, ParamError, ReferenceError, ScenarioError};
 use crate::formation::Leader;
 use crate::guard::Bounds;
-use crate::lycomp::{LyComp, LyDerivatives, Placement};
+use crate::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
 use crate::math::whole_ratio;
 use crate::plan::{Agents, Plan, SafetySpec, SimConfig, Timing};
 use crate::reference::{Circle, Cubic, Lemniscate, Reference, Waypoints};
@@ -470,7 +470,13 @@ impl Builder<'_> {
                     "missing field `offset` = { x = L_Xoff, y = L_Yoff } (or mode = \"tracking\")",
                 ));
             }
-            (ModeName::Formation, Some(o)) => Placement::new(o.x, o.y, l, comp, derivatives),
+            (ModeName::Formation, Some(o)) => Placement::new(PlacementSpec {
+                lx_off: o.x,
+                ly_off: o.y,
+                l,
+                comp,
+                derivatives,
+            }),
         };
         let placement = self.within(&at, placement)?;
         let spec = match drive {

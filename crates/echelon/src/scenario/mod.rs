@@ -18,6 +18,7 @@
 
 mod build;
 mod builtin;
+mod fields;
 mod fleet;
 mod locate;
 mod merge;

@@ -2,7 +2,7 @@
 #![allow(dead_code, unreachable_pub)]
 
 use echelon::formation::Leader;
-use echelon::lycomp::{LyComp, LyDerivatives, Placement};
+use echelon::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
 use echelon::reference::Reference;
 use echelon::sim::{AgentOutput, Frame, ObserverError};
 use echelon::{AgentSpec, Gains, Plan, RobotParams, SimConfig, Simulation, State, Timing, Variant};
@@ -23,7 +23,14 @@ pub fn agent(leader: Leader, placement: Placement, start: State, variant: Varian
 
 /// A leader-follower placement with the paper's L = 0.05 m.
 pub fn placement(lx_off: f64, ly_off: f64, comp: LyComp, derivatives: LyDerivatives) -> Placement {
-    Placement::new(lx_off, ly_off, 0.05, comp, derivatives).expect("a valid placement")
+    Placement::new(PlacementSpec {
+        lx_off,
+        ly_off,
+        l: 0.05,
+        comp,
+        derivatives,
+    })
+    .expect("a valid placement")
 }
 
 /// One recorded frame.

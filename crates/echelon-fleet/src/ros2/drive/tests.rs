@@ -1,4 +1,5 @@
 use super::*;
+use echelon::base::VelocityBaseSpec;
 use echelon::scenario::Scenario;
 use echelon_ros2::KeyScheme;
 use echelon_ros2::keys::topic_key;
@@ -304,8 +305,12 @@ fn sigma_grows_on_odometry_and_is_the_fixs_after_one() {
 
 #[test]
 fn commands_are_limited_finite_stamped_and_attached() {
-    let base = VelocityBase::new(0.0, 0.0, 0.2, 1.0, f64::INFINITY, f64::INFINITY)
-        .expect("an ideal base with speed limits");
+    let base = VelocityBase::new(VelocityBaseSpec {
+        v_max: 0.2,
+        omega_max: 1.0,
+        ..VelocityBase::IDEAL.spec()
+    })
+    .expect("an ideal base with speed limits");
     let mut d = drive(base);
     let act = d.command(Command::Velocity(VelocityCommand { v: 0.4, omega: 0.5 }));
     let (applied, saturated) = act.velocity.expect("velocity");

@@ -19,9 +19,17 @@ pub(crate) trait Leaders {
     /// it), to be shared by the stages that see the same leader.
     fn ly(c: &VConsts, own: &Own<VW>, lead: &Lead) -> Option<V4>;
 
+    /// The leaders of the block's lanes at state `x` (heading `sc`) when the
+    /// first lane's leader is `lead`, and the block's own last agent as a
+    /// leader (a star's agents lead nobody: any value); `None` when a lane's
+    /// leader depends on the command of the lane before (then
+    /// [`Leaders::command`] goes lane by lane).
+    fn leads(c: &VConsts, x: &[V4; 5], sc: (V4, V4), lead: &Lead) -> Option<(Leads<VW>, Lead)>;
+
     /// The block's command at state `x` (heading `sc`) when the first lane's
     /// leader is `lead` (at `L_Y = ly` when given), and the block's own last
-    /// agent as a leader (a star's agents lead nobody: any value).
+    /// agent as a leader.
+    #[inline(always)]
     fn command(
         c: &VConsts,
         own: &Own<VW>,
@@ -29,7 +37,15 @@ pub(crate) trait Leaders {
         sc: (V4, V4),
         lead: &Lead,
         ly: Option<V4>,
-    ) -> (Cmd<VW>, Lead);
+    ) -> (Cmd<VW>, Lead) {
+        match Self::leads(c, x, sc, lead) {
+            Some((l, me)) => {
+                let ly = ly.unwrap_or_else(|| ly_of(c, own, &l));
+                (command(c, own, x, sc, &l, ly), me)
+            }
+            None => lane_by_lane(c, own, x, sc, lead),
+        }
+    }
 }
 
 /// Every agent follows the virtual leader.
@@ -47,17 +63,8 @@ impl Leaders for Star {
     }
 
     #[inline(always)]
-    fn command(
-        c: &VConsts,
-        own: &Own<VW>,
-        x: &[V4; 5],
-        sc: (V4, V4),
-        lead: &Lead,
-        ly: Option<V4>,
-    ) -> (Cmd<VW>, Lead) {
-        let l = Leads::splat(lead);
-        let ly = ly.unwrap_or_else(|| ly_of(c, own, &l));
-        (command(c, own, x, sc, &l, ly), *lead)
+    fn leads(_: &VConsts, _: &[V4; 5], _: (V4, V4), lead: &Lead) -> Option<(Leads<VW>, Lead)> {
+        Some((Leads::splat(lead), *lead))
     }
 }
 
@@ -68,49 +75,51 @@ impl Leaders for Chain {
     }
 
     #[inline(always)]
-    fn command(
-        c: &VConsts,
-        own: &Own<VW>,
-        x: &[V4; 5],
-        sc: (V4, V4),
-        lead: &Lead,
-        _: Option<V4>,
-    ) -> (Cmd<VW>, Lead) {
-        if c.lag[0] && c.lag[1] {
-            // The leaders move at their states' speeds: one vector evaluation.
-            let mine = Leads::robots(x, sc, [x[3], x[4]]);
-            let l = mine.shifted(lead);
-            return (
-                command(c, own, x, sc, &l, ly_of(c, own, &l)),
-                mine.lead(VW - 1),
-            );
-        }
+    fn leads(c: &VConsts, x: &[V4; 5], sc: (V4, V4), lead: &Lead) -> Option<(Leads<VW>, Lead)> {
+        // The leaders move at their states' speeds: one vector evaluation.
         // A leader moves at its command on an axis without lag: lane by lane.
-        let zero = V4::splat(0.0);
-        let mut out = Cmd {
-            raw: [zero; 2],
-            cmd: [zero; 2],
-            e: [zero; 2],
-            saturated: Mask([0; VW]),
-        };
-        let one = |v: V4, i: usize| Lanes([v.0[i]]);
-        let mut lead = *lead;
-        for i in 0..VW {
-            let xi = x.map(|v| one(v, i));
-            let sci = (one(sc.0, i), one(sc.1, i));
-            let l = Leads::<1>::splat(&lead);
-            let oi = own.lane(i);
-            let k = command(c, &oi, &xi, sci, &l, ly_of(c, &oi, &l));
-            lead = Leads::<1>::robots(&xi, sci, speeds(c, &xi, &k.cmd)).lead(0);
-            for j in 0..2 {
-                out.raw[j].0[i] = k.raw[j].0[0];
-                out.cmd[j].0[i] = k.cmd[j].0[0];
-                out.e[j].0[i] = k.e[j].0[0];
-            }
-            out.saturated.0[i] = k.saturated.0[0];
-        }
-        (out, lead)
+        (c.lag[0] && c.lag[1]).then(|| {
+            let mine = Leads::robots(x, sc, [x[3], x[4]]);
+            (mine.shifted(lead), mine.lead(VW - 1))
+        })
     }
+}
+
+/// A chain's command when a leader moves at its command (an axis without
+/// lag): each lane's leader is the lane before, at the speeds its command
+/// gives.
+#[inline(always)]
+fn lane_by_lane(
+    c: &VConsts,
+    own: &Own<VW>,
+    x: &[V4; 5],
+    sc: (V4, V4),
+    lead: &Lead,
+) -> (Cmd<VW>, Lead) {
+    let zero = V4::splat(0.0);
+    let mut out = Cmd {
+        raw: [zero; 2],
+        cmd: [zero; 2],
+        e: [zero; 2],
+        saturated: Mask([0; VW]),
+    };
+    let one = |v: V4, i: usize| Lanes([v.0[i]]);
+    let mut lead = *lead;
+    for i in 0..VW {
+        let xi = x.map(|v| one(v, i));
+        let sci = (one(sc.0, i), one(sc.1, i));
+        let l = Leads::<1>::splat(&lead);
+        let oi = own.lane(i);
+        let k = command(c, &oi, &xi, sci, &l, ly_of(c, &oi, &l));
+        lead = Leads::<1>::robots(&xi, sci, speeds(c, &xi, &k.cmd)).lead(0);
+        for j in 0..2 {
+            out.raw[j].0[i] = k.raw[j].0[0];
+            out.cmd[j].0[i] = k.cmd[j].0[0];
+            out.e[j].0[i] = k.e[j].0[0];
+        }
+        out.saturated.0[i] = k.saturated.0[0];
+    }
+    (out, lead)
 }
 
 /// The leaders over one tile: `first` at the first step's start; per step,

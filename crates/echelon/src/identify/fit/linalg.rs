@@ -4,44 +4,7 @@
 // Small dense linear algebra (n ≤ 3) reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
-/// Solves the symmetric positive definite `n × n` system `a x = b` (n ≤ 3) by
-/// Cholesky; `None` if `a` is not positive definite.
-pub(super) fn solve_spd<const N: usize>(a: &[[f64; N]; N], b: &[f64; N]) -> Option<[f64; N]> {
-    let mut l = [[0.0; N]; N];
-    for i in 0..N {
-        for j in 0..=i {
-            let mut sum = a[i][j];
-            for p in 0..j {
-                sum -= l[i][p] * l[j][p];
-            }
-            if i == j {
-                if sum.is_nan() || sum <= 0.0 {
-                    return None;
-                }
-                l[i][i] = sum.sqrt();
-            } else {
-                l[i][j] = sum / l[j][j];
-            }
-        }
-    }
-    let mut z = [0.0; N];
-    for i in 0..N {
-        let mut sum = b[i];
-        for p in 0..i {
-            sum -= l[i][p] * z[p];
-        }
-        z[i] = sum / l[i][i];
-    }
-    let mut x = [0.0; N];
-    for i in (0..N).rev() {
-        let mut sum = z[i];
-        for p in i + 1..N {
-            sum -= l[p][i] * x[p];
-        }
-        x[i] = sum / l[i][i];
-    }
-    Some(x)
-}
+pub(super) use crate::lm::solve_spd;
 
 /// The inverse of a symmetric positive definite matrix, column by column.
 pub(super) fn inverse_spd<const N: usize>(a: &[[f64; N]; N]) -> Option<[[f64; N]; N]> {

@@ -1,9 +1,10 @@
 //! A robot's body by name: a `[robots.NAME]` section (torque or velocity
 //! base), else a preset.
 
-use crate::base::{VelocityBase, VelocityRobot};
+use crate::base::{VelocityBase, VelocityBaseSpec, VelocityRobot};
 use crate::error::ScenarioError;
-use crate::model::RobotParams;
+use crate::model::{RobotParams, RobotParamsSpec};
+use crate::scenario::fields::field_names;
 use crate::scenario::locate::FieldPath;
 use crate::scenario::schema::{DriveName, RobotSection};
 
@@ -40,33 +41,27 @@ impl Builder<'_> {
         } else {
             DriveName::Torque
         });
-        let torque_only = [
-            ("mass", r.mass.is_some()),
-            ("linear_friction", r.linear_friction.is_some()),
-            ("inertia", r.inertia.is_some()),
-            ("angular_friction", r.angular_friction.is_some()),
-            ("torque_limit", r.torque_limit.is_some()),
-        ];
-        let velocity_only = [
-            ("tau_v", r.tau_v.is_some()),
-            ("tau_omega", r.tau_omega.is_some()),
-            ("v_max", r.v_max.is_some()),
-            ("omega_max", r.omega_max.is_some()),
-            ("a_max", r.a_max.is_some()),
-            ("alpha_max", r.alpha_max.is_some()),
-            ("accel", r.accel.is_some()),
-        ];
-        let (foreign, why): (&[(&str, bool)], _) = match drive {
+        // A drive takes the fields its robots have: a field given that only
+        // the other drive's robots have is refused.
+        let torque = field_names(&RobotParams::AGENT1).unwrap_or_default();
+        let velocity = field_names(&VelocityRobot::IDEAL).unwrap_or_default();
+        let (takes, foreign, why) = match drive {
             DriveName::Torque => (
-                &velocity_only,
+                torque,
+                velocity,
                 "is a velocity base's field: this robot is torque-driven (set drive = \"velocity\")",
             ),
             DriveName::Velocity => (
-                &torque_only,
+                velocity,
+                torque,
                 "is a torque-driven robot's field: a velocity base (drive = \"velocity\") runs its own motor loops and takes lags and limits instead",
             ),
         };
-        if let Some((key, _)) = foreign.iter().find(|(_, set)| *set) {
+        let given = field_names(r).unwrap_or_default();
+        if let Some(key) = given
+            .into_iter()
+            .find(|key| foreign.contains(key) && !takes.contains(key))
+        {
             return Err(self.at.error(&at.key(key), format!("`{key}` {why}")));
         }
         if drive == DriveName::Velocity {
@@ -83,8 +78,10 @@ impl Builder<'_> {
             })?),
             None => None,
         };
-        let field = |v: Option<f64>, from: Option<f64>, key: &str| -> Result<f64, ScenarioError> {
-            v.or(from).ok_or_else(|| {
+        let base = base.map(|b| b.spec());
+        // A field given, else the preset's.
+        let field = |given: Option<f64>, of: fn(&RobotParamsSpec) -> f64, key: &str| {
+            given.or(base.as_ref().map(of)).ok_or_else(|| {
                 self.at.error(
                     &at,
                     format!(
@@ -93,31 +90,19 @@ impl Builder<'_> {
                 )
             })
         };
-        let params = RobotParams::new(
-            field(r.mass, base.map(|b| b.mass()), "mass")?,
-            field(
-                r.linear_friction,
-                base.map(|b| b.linear_friction()),
-                "linear_friction",
-            )?,
-            field(r.inertia, base.map(|b| b.inertia()), "inertia")?,
-            field(
+        let params = RobotParams::new(RobotParamsSpec {
+            mass: field(r.mass, |b| b.mass, "mass")?,
+            linear_friction: field(r.linear_friction, |b| b.linear_friction, "linear_friction")?,
+            inertia: field(r.inertia, |b| b.inertia, "inertia")?,
+            angular_friction: field(
                 r.angular_friction,
-                base.map(|b| b.angular_friction()),
+                |b| b.angular_friction,
                 "angular_friction",
             )?,
-            field(
-                r.half_wheelbase,
-                base.map(|b| b.half_wheelbase()),
-                "half_wheelbase",
-            )?,
-            field(
-                r.wheel_radius,
-                base.map(|b| b.wheel_radius()),
-                "wheel_radius",
-            )?,
-        )
-        .and_then(|p| p.with_torque_limit(r.torque_limit.or(base.and_then(|b| b.torque_limit()))));
+            half_wheelbase: field(r.half_wheelbase, |b| b.half_wheelbase, "half_wheelbase")?,
+            wheel_radius: field(r.wheel_radius, |b| b.wheel_radius, "wheel_radius")?,
+            torque_limit: r.torque_limit.or(base.and_then(|b| b.torque_limit)),
+        });
         let params = self.within(&at, params)?;
         Ok(Body::Torque(params))
     }
@@ -144,16 +129,16 @@ impl Builder<'_> {
             (_, Some(p)) => p,
             (None, None) => VelocityRobot::IDEAL,
         };
-        let b = from.base();
-        let robot = VelocityBase::new(
-            r.tau_v.unwrap_or(b.tau_v()),
-            r.tau_omega.unwrap_or(b.tau_omega()),
-            r.v_max.unwrap_or(b.v_max()),
-            r.omega_max.unwrap_or(b.omega_max()),
-            r.a_max.unwrap_or(b.a_max()),
-            r.alpha_max.unwrap_or(b.alpha_max()),
-        )
-        .map(|base| base.with_accel(r.accel.unwrap_or(b.accel())))
+        let b = from.base().spec();
+        let robot = VelocityBase::new(VelocityBaseSpec {
+            tau_v: r.tau_v.unwrap_or(b.tau_v),
+            tau_omega: r.tau_omega.unwrap_or(b.tau_omega),
+            v_max: r.v_max.unwrap_or(b.v_max),
+            omega_max: r.omega_max.unwrap_or(b.omega_max),
+            a_max: r.a_max.unwrap_or(b.a_max),
+            alpha_max: r.alpha_max.unwrap_or(b.alpha_max),
+            accel: r.accel.unwrap_or(b.accel),
+        })
         .and_then(|base| {
             VelocityRobot::new(
                 base,

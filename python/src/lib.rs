@@ -3,12 +3,12 @@
 //! layer converts arrays and errors. The Python package wraps it in pandas
 //! tables, matplotlib figures and Ray tasks.
 //!
-//! - [`scenario`]: scenarios, runs into a directory, sweeps;
-//! - [`simulation`]: a scenario stepped under commands from Python;
-//! - [`pieces`]: the law, Theorem 2 and identification as functions on arrays;
-//! - [`safety`]: the safety filters (velocity and torque robots) on arrays;
-//! - [`batch`]: the batch engine on caller-owned buffers;
-//! - [`errors`]: Rust errors as Python exceptions.
+//! - `scenario`: scenarios, runs into a directory, sweeps;
+//! - `simulation`: a scenario stepped under commands from Python;
+//! - `pieces`: the law, Theorem 2 and identification as functions on arrays;
+//! - `safety`: the safety filters (velocity and torque robots) on arrays;
+//! - `batch`: the batch engine on caller-owned buffers;
+//! - `errors`: Rust errors as Python exceptions.
 
 mod batch;
 mod errors;

@@ -153,7 +153,7 @@ pub struct SceneSpec {
 
 impl SceneSpec {
     /// The scene of `plan`: its formation, safety radius, obstacles, and its
-    /// reference sampled at up to [`PATH_POINTS`] instants over the run.
+    /// reference sampled at up to `PATH_POINTS` (400) instants over the run.
     pub fn of(plan: &Plan) -> SceneSpec {
         let duration = plan.config().duration;
         let n = PATH_POINTS

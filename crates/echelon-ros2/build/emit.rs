@@ -164,9 +164,16 @@ fn default_value(f: &Field) -> String {
     }
 }
 
-/// Doc comment lines, indented.
+/// Doc comment lines, indented; a line of the `.msg` comments that is a bare
+/// URL becomes a link (`<https://…>`), as rustdoc wants it.
 fn doc(out: &mut String, indent: &str, lines: &[String]) {
     for l in lines {
+        let url = l.starts_with("http://") || l.starts_with("https://");
+        let l = if url && !l.contains(char::is_whitespace) {
+            format!("<{l}>")
+        } else {
+            l.clone()
+        };
         let _ = writeln!(out, "{indent}///{}{l}", if l.is_empty() { "" } else { " " });
     }
 }

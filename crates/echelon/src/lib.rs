@@ -6,7 +6,7 @@
 //!
 //! - [`model`]: the plant, a unicycle with mass, inertia, viscous friction and
 //!   wheel torques (eqs. 1–3, Table I);
-//! - [`reference`]: reference trajectories with exact derivatives (eqs. 17–20,
+//! - [`reference`](mod@reference): reference trajectories with exact derivatives (eqs. 17–20,
 //!   lines, timed waypoints);
 //! - [`lycomp`]: where a follower holds its leader, `L_X`, `L_Y` and the curvature
 //!   compensation `L_Ycomp` (eqs. 4–6);

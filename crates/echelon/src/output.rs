@@ -28,7 +28,7 @@ pub use rows::{
 pub use table::Table;
 
 /// An [`Observer`] writing a CSV log of the frames it is shown (attach it
-/// with [`Every`](crate::sim::Every) for a logging period): the header when
+/// with [`crate::sim::Every`] for a logging period): the header when
 /// created, [`FrameRows`] for each frame, a flush when the run finishes.
 #[derive(Debug)]
 pub struct CsvLog<W: Write, R> {

@@ -109,7 +109,7 @@ impl Dashboard {
     /// Serves the page on `addr` (port 0: any free port), fed from the
     /// Foxglove server at `ws` (`ws://HOST:PORT`), drawing `scene`; its
     /// buttons stop and resume fleet `fleet`, joined as the collector is
-    /// (`net`: [`operator::operator_net`]).
+    /// (`net`: `operator::operator_net`).
     pub fn start(
         addr: SocketAddr,
         ws: &str,

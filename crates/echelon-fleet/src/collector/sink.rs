@@ -62,7 +62,7 @@ pub trait RecordSink {
     fn log(&mut self, channel: Channel<'_>, stamp: Stamp, data: &[u8]) -> Result<(), FleetError>;
     /// Appends one `trajectory.csv` row.
     fn row(&mut self, sample: &AgentSample) -> Result<(), FleetError>;
-    /// Appends one [`ODOMETRY_FILE`] row: the raw odometry `o` a ROS 2
+    /// Appends one `odometry.csv` row: the raw odometry `o` a ROS 2
     /// robot published with its state `s` (nothing in a sink without the
     /// table).
     fn odometry(&mut self, s: &RobotState, o: &OdometryState) -> Result<(), FleetError> {

@@ -3,7 +3,7 @@
 //! mode (`fleet router`), a user's `--zenoh-config` file, and the secure mode
 //! (mutual TLS with access control by certificate common name). Every
 //! process's session, the router's included, is configured here; the
-//! secure mode's access control is generated in [`acl`].
+//! secure mode's access control is generated in `net/acl.rs`.
 
 use std::path::PathBuf;
 

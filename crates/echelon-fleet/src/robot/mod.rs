@@ -6,7 +6,7 @@
 //! time read by the caller, and it drives an injected [`Plant`]. It reads no
 //! clock, opens no socket and sleeps nowhere, so every behaviour (link loss,
 //! restarts, faults) is tested with a fake clock. [`run`] is the thin driver:
-//! Zenoh in and out, the [`FleetClock`], and a sleep until the next tick.
+//! Zenoh in and out, the [`FleetClock`](crate::clock::FleetClock), and a sleep until the next tick.
 //!
 //! Every tick (the `[fleet] control_rate`): take what arrived from the leader
 //! stream (through fault injection, decoding and the sequence/staleness
@@ -118,7 +118,7 @@ fn sample_of(msg: &Message, leader: Leader) -> Option<(Header, LeaderSample)> {
 /// One fleet robot as a state machine over an injected [`Plant`].
 ///
 /// Times passed in are the caller's *local* clock (monotonic, scaled, e.g.
-/// [`FleetClock`] never synced); the robot keeps the offset that turns them
+/// [`FleetClock`](crate::clock::FleetClock) never synced); the robot keeps the offset that turns them
 /// into fleet time, which is the leader's: the first message of the leader
 /// stream (or a restarted leader's) sets it.
 #[derive(Debug, Clone)]
@@ -381,7 +381,7 @@ impl<P: Plant> Robot<P> {
     }
 
     /// [`Robot::on_message`] for a sample that arrived `delay` ns after its
-    /// sender stamped it ([`latency::delay_ns`]; `None`: not stamped).
+    /// sender stamped it ([`crate::latency::delay_ns`]; `None`: not stamped).
     pub fn on_stamped_message(&mut self, bytes: &[u8], now: f64, delay: Option<i64>) {
         self.latency.record(delay);
         self.on_message(bytes, now);

@@ -291,7 +291,7 @@ pub struct VelocityProbe {
 }
 
 /// The velocity-base kernel of [`BatchEngine`]: velocity-controlled bases
-/// under the kinematic law (see the [module docs](self)).
+/// under the kinematic law (see the module docs of `engine::velocity`).
 #[derive(Debug, Clone, Copy)]
 pub enum Velocity {}
 

@@ -69,7 +69,7 @@ pub const WHITENESS_LAGS: usize = 10;
 /// noise's RMS); larger, the residuals are not noise but misfit.
 pub const MAX_RESIDUAL_OVER_NOISE: f64 = 1.5;
 
-/// The residual checks of one axis ([`misfit`]), as `identify.json`
+/// The residual checks of one axis (`misfit`), as `identify.json`
 /// reports them.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ResidualChecks {

@@ -20,7 +20,7 @@ pub struct FixCounters {
     pub applied: u64,
     /// Refused by the gate (implausibly far from the estimate).
     pub gated: u64,
-    /// Applied over the gate after [`RELOCALIZE_AFTER`] refusals in a row.
+    /// Applied over the gate after [`RELOCALIZE_AFTER`](super::RELOCALIZE_AFTER) refusals in a row.
     pub relocalized: u64,
     /// Refused: another type or hash on the key.
     pub wrong_type: u64,

@@ -631,7 +631,10 @@ mod tests {
             let report: ClosestApproach = watch.report().unwrap().approach();
             assert_eq!(&report, approach.closest(), "{name}");
             assert!(report.min_distance.is_finite());
-            assert_eq!(report.min_obstacle_clearance.is_some(), name == "obstacle-slalom");
+            assert_eq!(
+                report.min_obstacle_clearance.is_some(),
+                name == "obstacle-slalom"
+            );
         }
     }
 }

@@ -499,6 +499,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         safety: crate::robot::SafetyCounts::total(
             robot_reports.iter().filter_map(|r| r.safety.as_ref()),
         ),
+        approach: collector_report.approach.clone(),
         deadlocked_at_end: robot_reports
             .iter()
             .filter(|r| r.deadlocked_at_end)

@@ -6,6 +6,7 @@
 use crate::agent::AgentSpec;
 use crate::error::SimError;
 use crate::model::{Pose, State};
+use crate::plan::Plan;
 use crate::safety::{Obstacle, Outcome};
 use crate::sample::AgentSample;
 use crate::sim::{Frame, Observer, ObserverError, Simulation};
@@ -259,11 +260,150 @@ pub struct SafetyReport {
     pub agents: Vec<AgentSafety>,
 }
 
+/// The geometric part of the safety statistics: the closest approach
+/// between two robots' points `L` ahead (how close, when, which pair) and
+/// the smallest obstacle clearance, under the smallest filter `radius`
+/// (`summary.json`'s `safety` and `collector.json`'s `approach` share it).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClosestApproach {
+    /// The smallest `radius` among the agents that filter, m.
+    pub radius: f64,
+    /// Smallest distance between two robots' points `L` ahead, m.
+    pub min_distance: f64,
+    /// When it happened, s.
+    pub min_distance_t: f64,
+    /// Between which agents (1-based, the smaller first).
+    pub min_distance_agents: [usize; 2],
+    /// Smallest distance from a robot's point to an obstacle's edge, m
+    /// (absent without obstacles).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_obstacle_clearance: Option<f64>,
+}
+
+/// Accumulates a [`ClosestApproach`] over the instants it is shown: at each
+/// one, every pair of the robots shown (their points `L` ahead) and every
+/// robot against every obstacle. The simulator's [`SafetyWatch`] feeds it
+/// every frame; the fleet's collector the states it receives.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Approach {
+    l: Vec<f64>,
+    obstacles: Vec<Obstacle>,
+    closest: ClosestApproach,
+    /// Whether a pair was ever shown.
+    paired: bool,
+}
+
+impl Approach {
+    /// An accumulator for agents whose points are `l[i]` ahead, filtering
+    /// at `radius` among `obstacles`.
+    pub fn new(l: Vec<f64>, radius: f64, obstacles: Vec<Obstacle>) -> Approach {
+        Approach {
+            l,
+            closest: ClosestApproach {
+                radius,
+                min_distance: f64::INFINITY,
+                min_distance_t: 0.0,
+                min_distance_agents: [0, 0],
+                min_obstacle_clearance: (!obstacles.is_empty()).then_some(f64::INFINITY),
+            },
+            obstacles,
+            paired: false,
+        }
+    }
+
+    /// The accumulator of `plan`'s agents and obstacles (`None`: no agent
+    /// filters).
+    pub fn of(plan: &Plan) -> Option<Approach> {
+        let radius = plan.safety_radius()?;
+        let l = plan.agents().iter().map(|a| a.placement().l()).collect();
+        Some(Approach::new(l, radius, plan.obstacles().to_vec()))
+    }
+
+    /// Number of agents.
+    pub fn agents(&self) -> usize {
+        self.l.len()
+    }
+
+    /// Agent `i`'s (0-based) point `L` ahead in state `s`.
+    pub fn point(&self, i: usize, s: &State) -> [f64; 2] {
+        crate::safety::point(s, self.l[i])
+    }
+
+    /// Records every agent's state at time `t` (`states[i]` is agent
+    /// `i + 1`'s).
+    pub fn record(&mut self, t: f64, states: &[State]) {
+        self.record_some(t, states.iter().enumerate());
+    }
+
+    /// Records the states of some agents at time `t`: `(i, state)` with `i`
+    /// the 0-based agent index, in increasing `i` (agents out of range are
+    /// ignored). Ties keep the earliest instant, then the first pair in the
+    /// order `(j, i)`, `j < i`, by `i` then `j`.
+    pub fn record_some<'s>(
+        &mut self,
+        t: f64,
+        states: impl IntoIterator<Item = (usize, &'s State)>,
+    ) {
+        let points: Vec<(usize, [f64; 2])> = states
+            .into_iter()
+            .filter(|&(i, _)| i < self.l.len())
+            .map(|(i, s)| (i, self.point(i, s)))
+            .collect();
+        let c = &mut self.closest;
+        for (n, &(i, p)) in points.iter().enumerate() {
+            for &(j, q) in &points[..n] {
+                let d = (p[0] - q[0]).hypot(p[1] - q[1]);
+                self.paired = true;
+                if d < c.min_distance {
+                    (c.min_distance, c.min_distance_t, c.min_distance_agents) =
+                        (d, t, [j + 1, i + 1]);
+                }
+            }
+            if let Some(clear) = c.min_obstacle_clearance.as_mut() {
+                for o in &self.obstacles {
+                    *clear = clear.min((p[0] - o.x()).hypot(p[1] - o.y()) - o.r());
+                }
+            }
+        }
+    }
+
+    /// Whether two robots were ever shown at one instant.
+    pub fn paired(&self) -> bool {
+        self.paired
+    }
+
+    /// What it gathered so far.
+    pub fn closest(&self) -> &ClosestApproach {
+        &self.closest
+    }
+}
+
+impl SafetyReport {
+    /// Its geometric part.
+    pub fn approach(&self) -> ClosestApproach {
+        ClosestApproach {
+            radius: self.radius,
+            min_distance: self.min_distance,
+            min_distance_t: self.min_distance_t,
+            min_distance_agents: self.min_distance_agents,
+            min_obstacle_clearance: self.min_obstacle_clearance,
+        }
+    }
+
+    fn set_approach(&mut self, c: &ClosestApproach) {
+        self.radius = c.radius;
+        self.min_distance = c.min_distance;
+        self.min_distance_t = c.min_distance_t;
+        self.min_distance_agents = c.min_distance_agents;
+        self.min_obstacle_clearance = c.min_obstacle_clearance;
+    }
+}
+
 /// Gathers a [`SafetyReport`] over a run (nothing without a safety filter).
 #[derive(Debug, Clone, Default)]
 pub struct SafetyWatch {
-    l: Vec<f64>,
-    obstacles: Vec<Obstacle>,
+    approach: Option<Approach>,
     report: Option<SafetyReport>,
 }
 
@@ -273,23 +413,14 @@ impl SafetyWatch {
         self.report.as_ref()
     }
 
-    /// Smallest distance between two robots' points in `states`, and which.
+    /// Smallest distance between two robots' points in `states`, and which
+    /// ([`Approach`] over one instant).
     pub fn closest_pair(states: &[State], l: &[f64]) -> Option<(f64, [usize; 2])> {
-        let points: Vec<[f64; 2]> = states
-            .iter()
-            .zip(l)
-            .map(|(s, &l)| crate::safety::point(s, l))
-            .collect();
-        let mut best = None;
-        for i in 0..points.len() {
-            for j in 0..i {
-                let d = (points[i][0] - points[j][0]).hypot(points[i][1] - points[j][1]);
-                if best.is_none_or(|(b, _)| d < b) {
-                    best = Some((d, [j + 1, i + 1]));
-                }
-            }
-        }
-        best
+        let mut a = Approach::new(l.to_vec(), f64::INFINITY, Vec::new());
+        a.record(0.0, states);
+        let c = a.closest();
+        a.paired()
+            .then_some((c.min_distance, c.min_distance_agents))
     }
 }
 
@@ -298,20 +429,21 @@ impl Observer for SafetyWatch {
         if !sim.has_safety() {
             return Ok(());
         }
-        self.l = sim.agents().iter().map(|a| a.placement().l()).collect();
-        self.obstacles = sim.obstacles().to_vec();
+        let l: Vec<f64> = sim.agents().iter().map(|a| a.placement().l()).collect();
         let radius = sim.safety_radius().unwrap_or(f64::INFINITY);
+        let approach = Approach::new(l, radius, sim.obstacles().to_vec());
+        let c = approach.closest().clone();
         self.report = Some(SafetyReport {
-            radius,
-            min_distance: f64::INFINITY,
-            min_distance_t: 0.0,
-            min_distance_agents: [0, 0],
-            min_obstacle_clearance: (!self.obstacles.is_empty()).then_some(f64::INFINITY),
+            radius: c.radius,
+            min_distance: c.min_distance,
+            min_distance_t: c.min_distance_t,
+            min_distance_agents: c.min_distance_agents,
+            min_obstacle_clearance: c.min_obstacle_clearance,
             active: 0,
             infeasible: 0,
             deadlock_breaks: 0,
             deadlocked_at_end: Vec::new(),
-            agents: (1..=self.l.len())
+            agents: (1..=approach.agents())
                 .map(|agent| AgentSafety {
                     agent,
                     active: 0,
@@ -321,26 +453,16 @@ impl Observer for SafetyWatch {
                 })
                 .collect(),
         });
+        self.approach = Some(approach);
         Ok(())
     }
 
     fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
-        let Some(r) = self.report.as_mut() else {
+        let (Some(r), Some(approach)) = (self.report.as_mut(), self.approach.as_mut()) else {
             return Ok(());
         };
-        if let Some((d, pair)) = SafetyWatch::closest_pair(frame.states, &self.l)
-            && d < r.min_distance
-        {
-            (r.min_distance, r.min_distance_t, r.min_distance_agents) = (d, frame.t, pair);
-        }
-        if let Some(clear) = r.min_obstacle_clearance.as_mut() {
-            for (s, &l) in frame.states.iter().zip(&self.l) {
-                let p = crate::safety::point(s, l);
-                for o in &self.obstacles {
-                    *clear = clear.min((p[0] - o.x()).hypot(p[1] - o.y()) - o.r());
-                }
-            }
-        }
+        approach.record(frame.t, frame.states);
+        r.set_approach(approach.closest());
         for ((a, o), out) in r.agents.iter_mut().zip(frame.safety).zip(frame.outputs) {
             if o.sampled {
                 a.active += u64::from(o.outcome != Outcome::Nominal);
@@ -362,5 +484,157 @@ impl Observer for SafetyWatch {
                 .collect();
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)] // tests fail loudly by design
+
+    use proptest::prelude::*;
+
+    use super::{Approach, ClosestApproach, SafetyWatch};
+    use crate::Observer;
+    use crate::model::State;
+    use crate::safety::Obstacle;
+    use crate::scenario::{Overrides, Scenario};
+    use crate::sim::{Frame, ObserverError};
+
+    fn state([x, y, theta]: [f64; 3]) -> State {
+        State {
+            x,
+            y,
+            theta,
+            v: 0.0,
+            omega: 0.0,
+        }
+    }
+
+    /// The closest approach by brute force over every instant and pair:
+    /// the smallest distance, the first instant it occurs at and the first
+    /// pair `(j, i)`, `j < i` in the order of `i` then `j`; the smallest
+    /// clearance over every instant, robot and obstacle.
+    fn brute(
+        frames: &[(f64, Vec<State>)],
+        l: &[f64],
+        obstacles: &[Obstacle],
+    ) -> (f64, f64, [usize; 2], f64) {
+        let (mut best, mut at, mut pair, mut clear) = (f64::INFINITY, 0.0, [0, 0], f64::INFINITY);
+        for (t, states) in frames {
+            let p: Vec<[f64; 2]> = states
+                .iter()
+                .zip(l)
+                .map(|(s, &l)| [s.x + l * s.theta.cos(), s.y + l * s.theta.sin()])
+                .collect();
+            for i in 0..p.len() {
+                for j in 0..i {
+                    let d = (p[i][0] - p[j][0]).hypot(p[i][1] - p[j][1]);
+                    if d < best {
+                        (best, at, pair) = (d, *t, [j + 1, i + 1]);
+                    }
+                }
+                for o in obstacles {
+                    let c = (p[i][0] - o.x()).hypot(p[i][1] - o.y()) - o.r();
+                    clear = clear.min(c);
+                }
+            }
+        }
+        (best, at, pair, clear)
+    }
+
+    proptest! {
+        /// For random points over time, the accumulator's minimum is the
+        /// brute-force minimum over every pair and instant, with its pair
+        /// and time; the clearance is the brute-force one; feeding every
+        /// agent through `record_some` gives the same as `record`.
+        #[test]
+        fn approach_is_the_brute_force_minimum(
+            n in 2usize..6,
+            l in prop::collection::vec(0.0..0.5f64, 6),
+            raw in prop::collection::vec(
+                prop::collection::vec((-5.0..5.0f64, -5.0..5.0f64, -4.0..4.0f64), 6),
+                1..30,
+            ),
+            obstacles in prop::collection::vec((-5.0..5.0f64, -5.0..5.0f64, 0.1..1.0f64), 0..3),
+        ) {
+            let l = &l[..n];
+            let obstacles: Vec<Obstacle> = obstacles
+                .iter()
+                .map(|&(x, y, r)| Obstacle::new(x, y, r).unwrap())
+                .collect();
+            let frames: Vec<(f64, Vec<State>)> = raw
+                .iter()
+                .enumerate()
+                .map(|(k, f)| (0.1 * k as f64, f[..n].iter().map(|&(x, y, th)| state([x, y, th])).collect()))
+                .collect();
+            let mut a = Approach::new(l.to_vec(), 0.3, obstacles.clone());
+            let mut b = a.clone();
+            for (t, states) in &frames {
+                a.record(*t, states);
+                b.record_some(*t, states.iter().enumerate());
+            }
+            let (best, at, pair, clear) = brute(&frames, l, &obstacles);
+            let c = a.closest();
+            prop_assert!((c.min_distance - best).abs() <= 1e-12 * (1.0 + best), "{} vs {}", c.min_distance, best);
+            prop_assert_eq!(c.min_distance_t, at);
+            prop_assert_eq!(c.min_distance_agents, pair);
+            prop_assert!(pair[0] < pair[1] && pair[1] <= n);
+            match c.min_obstacle_clearance {
+                Some(got) => prop_assert!((got - clear).abs() <= 1e-12 * (1.0 + clear.abs())),
+                None => prop_assert!(obstacles.is_empty()),
+            }
+            prop_assert_eq!(c.radius, 0.3);
+            prop_assert!(a.paired());
+            prop_assert_eq!(&a, &b);
+        }
+
+        /// Shown a subset of the agents, it is the minimum over that subset
+        /// only, its pair named by the agents' own numbers.
+        #[test]
+        fn a_subset_is_named_by_its_agents(
+            pts in prop::collection::vec((-5.0..5.0f64, -5.0..5.0f64), 5),
+            keep in prop::collection::vec(any::<bool>(), 5),
+        ) {
+            let states: Vec<State> = pts.iter().map(|&(x, y)| state([x, y, 0.0])).collect();
+            let kept: Vec<(usize, &State)> = states.iter().enumerate().filter(|(i, _)| keep[*i]).collect();
+            let mut a = Approach::new(vec![0.0; 5], 0.3, Vec::new());
+            a.record_some(1.0, kept.iter().copied());
+            let sub: Vec<State> = kept.iter().map(|(_, s)| **s).collect();
+            let (best, _, pair, _) = brute(&[(1.0, sub)], &vec![0.0; kept.len()], &[]);
+            prop_assert_eq!(a.paired(), kept.len() >= 2);
+            if kept.len() >= 2 {
+                prop_assert_eq!(a.closest().min_distance.to_bits(), best.to_bits());
+                let named = [kept[pair[0] - 1].0 + 1, kept[pair[1] - 1].0 + 1];
+                prop_assert_eq!(a.closest().min_distance_agents, named);
+            }
+        }
+    }
+
+    /// Fed every frame of a run, the accumulator gives exactly the
+    /// geometric part of `SafetyWatch`'s report (with and without obstacles).
+    #[test]
+    fn fed_a_runs_frames_it_is_the_watchs_report() {
+        for name in ["crossing", "obstacle-slalom"] {
+            let run = Scenario::builtin(name)
+                .unwrap()
+                .build(&Overrides::default())
+                .unwrap();
+            let mut approach = Approach::of(&run.plan).unwrap();
+            let sim = &mut run.simulation();
+            let mut every = |f: &Frame<'_>| -> Result<(), ObserverError> {
+                approach.record(f.t, f.states);
+                Ok(())
+            };
+            let mut watch = SafetyWatch::default();
+            sim.run(&mut [&mut every as &mut dyn Observer, &mut watch])
+                .unwrap();
+            let report: ClosestApproach = watch.report().unwrap().approach();
+            assert_eq!(&report, approach.closest(), "{name}");
+            assert!(report.min_distance.is_finite());
+            assert_eq!(
+                report.min_obstacle_clearance.is_some(),
+                name == "obstacle-slalom"
+            );
+        }
     }
 }

@@ -9,9 +9,10 @@ use anyhow::{Result, bail};
 
 use echelon::output::TrajectoryRows;
 use echelon::scenario::{Overrides, Scenario};
+use echelon::stats::Approach;
 use echelon_fleet::StopFlag;
 use echelon_fleet::certs::{self, CertOptions};
-use echelon_fleet::collector::{self, CollectorOptions};
+use echelon_fleet::collector::{self, ApproachWatch, CollectorOptions};
 use echelon_fleet::command::Order;
 use echelon_fleet::excite::{self, ExciteOptions};
 use echelon_fleet::leader::{self, LeaderOptions};
@@ -234,6 +235,15 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             });
             // With the scenario, fleet.mcap also carries the 3D channels.
             let scene = run.as_ref().map(|r| SceneSpec::of(&r.plan));
+            // With `[safety]`: the closest approach from the true states.
+            let approach = match (&scenario, &run) {
+                (Some(s), Some(r)) => Approach::of(&r.plan)
+                    .map(|a| {
+                        Ok::<_, anyhow::Error>(ApproachWatch::new(a, 1.0 / s.fleet()?.control_rate))
+                    })
+                    .transpose()?,
+                _ => None,
+            };
             let report = collector::run_with(
                 CollectorOptions {
                     out: a.out,
@@ -248,6 +258,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     foxglove: a.live.foxglove,
                     dashboard: a.live.dashboard,
                     log_rate: a.live.log_rate,
+                    approach,
                 },
                 &stop,
             )?;

@@ -15,7 +15,7 @@ use echelon::output::{
 };
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Every, Observer};
-use echelon::stats::SafetyReport;
+use echelon::stats::{ClosestApproach, SafetyReport};
 use echelon::{Simulation, Variant};
 use echelon_mcap::McapObserver;
 
@@ -239,6 +239,41 @@ fn print_summary(sim: &Simulation, s: &RunSummary, elapsed: f64) -> anyhow::Resu
     Ok(())
 }
 
+/// The closest approach between two robots' points against the radius
+/// (what the filter promises), names from `name` (1-based agent), and the
+/// smallest obstacle clearance: `echelon run`'s and `fleet up`'s lines; a
+/// warning on stderr when the robots came more than 1 mm inside the radius.
+pub(super) fn print_approach(
+    c: &ClosestApproach,
+    name: impl Fn(usize) -> String,
+) -> anyhow::Result<()> {
+    let [a, b] = c.min_distance_agents;
+    if c.min_distance.is_finite() {
+        outln!(
+            "  safety: closest approach {:.4} m ({} and {}, t = {:.2} s), radius {} m",
+            c.min_distance,
+            name(a),
+            name(b),
+            c.min_distance_t,
+            c.radius
+        )?;
+        // The filter holds the radius to within a millimetre (docs/safety.md:
+        // sampled commands, solver tolerances); deeper is a broken promise.
+        if c.min_distance < c.radius - 1e-3 {
+            super::out::err_line(&format!(
+                "warning: the robots came {:.1} mm inside the safety radius",
+                (c.radius - c.min_distance) * 1e3
+            ));
+        }
+    } else {
+        outln!("  safety: radius {} m, no pair of robots", c.radius)?;
+    }
+    if let Some(clearance) = c.min_obstacle_clearance {
+        outln!("          smallest obstacle clearance {clearance:.4} m")?;
+    }
+    Ok(())
+}
+
 /// The safety filter's outcome under the table: the closest approach
 /// against the radius (what the filter promises), how often it acted, and
 /// any robot it left deadlocked (which the ‖e‖ column alone would show as
@@ -249,30 +284,7 @@ fn print_safety(s: &RunSummary, safety: &SafetyReport) -> anyhow::Result<()> {
             .get(k.wrapping_sub(1))
             .map_or("?", |a| a.name.as_str())
     };
-    let [a, b] = safety.min_distance_agents;
-    if safety.min_distance.is_finite() {
-        outln!(
-            "  safety: closest approach {:.4} m ({} and {}, t = {:.2} s), radius {} m",
-            safety.min_distance,
-            name(a),
-            name(b),
-            safety.min_distance_t,
-            safety.radius
-        )?;
-        // The filter holds the radius to within a millimetre (docs/safety.md:
-        // sampled commands, solver tolerances); deeper is a broken promise.
-        if safety.min_distance < safety.radius - 1e-3 {
-            super::out::err_line(&format!(
-                "warning: the robots came {:.1} mm inside the safety radius",
-                (safety.radius - safety.min_distance) * 1e3
-            ));
-        }
-    } else {
-        outln!("  safety: radius {} m, no pair of robots", safety.radius)?;
-    }
-    if let Some(clearance) = safety.min_obstacle_clearance {
-        outln!("          smallest obstacle clearance {clearance:.4} m")?;
-    }
+    print_approach(&safety.approach(), |k| name(k).to_owned())?;
     outln!(
         "          filter acted on {} agent-steps, braked {} (infeasible), {} deadlock breaks",
         safety.active,

@@ -335,15 +335,59 @@ fn crossing_keeps_robots_apart_in_the_fleet() {
         .collect();
     let radius = run.plan.safety_radius().unwrap();
     let fleet_dir = dir.path().join("fleet");
-    let report = up(
+    // ×5, not ×10: at ×10 six robots at 100 Hz and the collector ask
+    // 6000 ticks/s of two cores, ticks overrun (~120 per robot) and
+    // neighbour states arrive a whole control period old, outside what
+    // the decentralised split assumes (docs/fleet.md).
+    let args = [
+        "fleet",
+        "up",
         "crossing",
-        &fleet_dir,
-        // ×5, not ×10: at ×10 six robots at 100 Hz and the collector ask
-        // 6000 ticks/s of two cores, ticks overrun (~120 per robot) and
-        // neighbour states arrive a whole control period old, outside what
-        // the decentralised split assumes (docs/fleet.md).
-        &["--time-scale", "5", "--duration", "120"],
+        "--time-scale",
+        "5",
+        "--duration",
+        "120",
+        "--out",
+    ];
+    let out = Command::new(EXE)
+        .args(args)
+        .arg(&fleet_dir)
+        .output()
+        .unwrap();
+    check(&out, &args.join(" "));
+    let report = common::fleet_summary(&fleet_dir);
+    // The closest approach from the true states the collector received,
+    // printed as `echelon run` prints it: the summary's figures, names and
+    // time, and not below the radius − 1 mm (no warning on stderr).
+    let approach = &report["approach"];
+    let [a, b] = [0, 1].map(|i| approach["min_distance_agents"][i].as_u64().unwrap());
+    let name = |k: u64| {
+        report["robots"][k as usize - 1]["name"]
+            .as_str()
+            .unwrap()
+            .to_owned()
+    };
+    let d = f(approach, &["min_distance"]);
+    let line = format!(
+        "  safety: closest approach {d:.4} m ({} and {}, t = {:.2} s), radius {} m",
+        name(a),
+        name(b),
+        f(approach, &["min_distance_t"]),
+        f(approach, &["radius"]),
     );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.lines().any(|l| l == line),
+        "{line:?} not in:\n{stdout}"
+    );
+    assert!(a < b && b as usize <= l.len(), "{approach}");
+    assert_eq!(f(approach, &["radius"]), radius);
+    assert!(
+        d >= radius - 1e-3,
+        "closest approach {d} m < radius {radius} m − 1 mm"
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("inside the safety radius"), "{stderr}");
     let (min, pairs) = min_pair_distance(&fleet_dir.join("trajectory.csv"), &l, 0.05);
     // 6 robots × 5 others × ~8000 states.
     assert!(pairs > 200_000, "{pairs} pairs compared");

@@ -12,8 +12,8 @@ use echelon_mcap::{
 
 use super::schema::Rejected;
 use super::{
-    AgentRecord, COMMAND, COMMAND_TOPIC, Channel, CollectorReport, REJECTED, REJECTED_TOPIC,
-    RecordSink, STATS, Stamp,
+    AgentRecord, ApproachWatch, COMMAND, COMMAND_TOPIC, Channel, CollectorReport, REJECTED,
+    REJECTED_TOPIC, RecordSink, STATS, Stamp,
 };
 use crate::FleetError;
 use crate::command::FleetCommand;
@@ -39,6 +39,8 @@ pub struct Collector {
     log_bin: u64,
     /// Per agent, the bin of the last state logged.
     last_bin: BTreeMap<u32, u64>,
+    /// With `[safety]`: the closest approach from the states received.
+    approach: Option<ApproachWatch>,
 }
 
 fn bump(counts: &mut BTreeMap<String, u64>, name: &str) {
@@ -73,6 +75,7 @@ impl Collector {
                 latency: LatencyReport::default(),
                 latency_by_key: BTreeMap::new(),
                 agents: Vec::new(),
+                approach: None,
                 live: None,
             },
             agents: BTreeMap::new(),
@@ -80,7 +83,16 @@ impl Collector {
             latency_by_key: BTreeMap::new(),
             log_bin: 0,
             last_bin: BTreeMap::new(),
+            approach: None,
         }
+    }
+
+    /// Also measures the closest approach between the robots from the
+    /// started robots' states it receives (every one, logged or decimated;
+    /// [`ApproachWatch`]), into the report's `approach`.
+    pub fn with_approach(mut self, watch: Option<ApproachWatch>) -> Collector {
+        self.approach = watch;
+        self
     }
 
     /// Logs at most `hz` states per agent per second of receipt time
@@ -315,6 +327,11 @@ impl Collector {
         now: u64,
         sink: &mut impl RecordSink,
     ) -> Result<(), FleetError> {
+        if let Some(w) = self.approach.as_mut()
+            && s.link != LinkStatus::Waiting
+        {
+            w.on_state(k, s.t, &s.state);
+        }
         if !self.keep_state(k, now) {
             let a = self.agents.entry(k).or_insert_with(|| AgentRecord {
                 agent: k,
@@ -370,6 +387,7 @@ impl Collector {
     /// The final report, with the per-agent records.
     pub fn finish(mut self) -> CollectorReport {
         self.report.agents = self.agents.into_values().collect();
+        self.report.approach = self.approach.as_ref().and_then(ApproachWatch::report);
         self.report.latency = self.latency.report(false);
         self.report.latency_by_key = self
             .latency_by_key

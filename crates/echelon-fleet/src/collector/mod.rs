@@ -17,6 +17,7 @@
 //! the wrong type (key) or with an invalid CDR payload is refused: counted
 //! and logged on `/rejected` instead.
 
+mod approach;
 mod dashboard;
 mod live;
 mod machine;
@@ -27,6 +28,7 @@ mod task;
 #[cfg(test)]
 mod tests;
 
+pub use approach::ApproachWatch;
 pub use dashboard::Dashboard;
 pub use live::{BACKLOG, DEFAULT_ADDR, DEFAULT_DASHBOARD, LiveFeed, LiveReport, QUEUE};
 pub use machine::Collector;

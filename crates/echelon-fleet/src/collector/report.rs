@@ -89,6 +89,11 @@ pub struct CollectorReport {
     pub latency_by_key: BTreeMap<String, LatencyReport>,
     /// Per agent.
     pub agents: Vec<AgentRecord>,
+    /// With the scenario's `[safety]`: the closest approach between two
+    /// robots' points `L` ahead from the true states received (matched in
+    /// time as [`super::ApproachWatch`] says), and the obstacle clearance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub approach: Option<echelon::stats::ClosestApproach>,
     /// With `--foxglove`: what the live feed served and dropped.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub live: Option<super::LiveReport>,

@@ -229,6 +229,9 @@ pub struct Recording {
     /// Log at most this many states per robot per second
     /// ([`Collector::with_log_rate`]; `None`: every state).
     pub log_rate: Option<f64>,
+    /// With the scenario's `[safety]`: measure the closest approach
+    /// ([`Collector::with_approach`]).
+    pub approach: Option<super::ApproachWatch>,
 }
 
 /// The collector recording `recording`: [`CollectorTask`] on the fleet runtime.
@@ -240,7 +243,8 @@ pub fn run_with(
     let keys = Keys::new(&opts.fleet);
     let collector = Collector::with_ros2(keys, recording.ros)
         .map_err(|e| FleetError::Config(e.to_string()))?
-        .with_log_rate(recording.log_rate)?;
+        .with_log_rate(recording.log_rate)?
+        .with_approach(recording.approach);
     let mut sink = FileSink::with_trajectory(&opts.out, recording.trajectory)?;
     if let Some(spec) = &recording.scene {
         sink = sink.with_scene(spec)?;

@@ -42,6 +42,11 @@ pub struct UpReport {
     /// `min_distance`), each robot's under `robots[k].safety`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety: Option<crate::robot::SafetyCounts>,
+    /// With `[safety]`: the closest approach between two robots' points
+    /// from the true states the collector received (its report's
+    /// `approach`: [`crate::collector::ApproachWatch`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub approach: Option<echelon::stats::ClosestApproach>,
     /// Robots (agent numbers) their filter kept from their slot at the end
     /// (each robot's `deadlocked_at_end`).
     pub deadlocked_at_end: Vec<u32>,

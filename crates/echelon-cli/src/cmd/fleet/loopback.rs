@@ -194,6 +194,17 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             )?;
         }
     }
+    if let Some(c) = &report.approach {
+        // The closest approach from the true states the collector received.
+        let name = |k: usize| {
+            report
+                .robots
+                .iter()
+                .find(|r| r.agent as usize == k)
+                .map_or_else(|| format!("robot {k}"), |r| r.name.clone())
+        };
+        crate::cmd::run::print_approach(c, name)?;
+    }
     if let Some(t) = &report.safety {
         for r in &report.robots {
             let s = r.safety.unwrap_or_default();

@@ -285,13 +285,25 @@ pub struct ClosestApproach {
 /// one, every pair of the robots shown (their points `L` ahead) and every
 /// robot against every obstacle. The simulator's [`SafetyWatch`] feeds it
 /// every frame; the fleet's collector the states it receives.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Approach {
     l: Vec<f64>,
     obstacles: Vec<Obstacle>,
     closest: ClosestApproach,
     /// Whether a pair was ever shown.
     paired: bool,
+    /// The points of the instant being recorded (kept, so that recording
+    /// does not allocate once it has seen every agent).
+    points: Vec<(usize, [f64; 2])>,
+}
+
+/// Equal when they accumulate for the same agents and obstacles and hold
+/// the same result (the scratch points of the last instant are not state).
+impl PartialEq for Approach {
+    fn eq(&self, other: &Approach) -> bool {
+        (&self.l, &self.obstacles, &self.closest, self.paired)
+            == (&other.l, &other.obstacles, &other.closest, other.paired)
+    }
 }
 
 impl Approach {
@@ -309,6 +321,7 @@ impl Approach {
             },
             obstacles,
             paired: false,
+            points: Vec::new(),
         }
     }
 
@@ -345,11 +358,14 @@ impl Approach {
         t: f64,
         states: impl IntoIterator<Item = (usize, &'s State)>,
     ) {
-        let points: Vec<(usize, [f64; 2])> = states
-            .into_iter()
-            .filter(|&(i, _)| i < self.l.len())
-            .map(|(i, s)| (i, self.point(i, s)))
-            .collect();
+        let mut points = std::mem::take(&mut self.points);
+        points.clear();
+        points.extend(
+            states
+                .into_iter()
+                .filter(|&(i, _)| i < self.l.len())
+                .map(|(i, s)| (i, self.point(i, s))),
+        );
         let c = &mut self.closest;
         for (n, &(i, p)) in points.iter().enumerate() {
             for &(j, q) in &points[..n] {
@@ -366,6 +382,7 @@ impl Approach {
                 }
             }
         }
+        self.points = points;
     }
 
     /// Whether two robots were ever shown at one instant.

@@ -212,6 +212,8 @@ pub struct Latch {
     /// The last resume obeyed.
     resume: Option<FleetCommand>,
     counts: CommandCounts,
+    /// Moves whenever what [`Latch::latched`] answers changes.
+    changes: u64,
 }
 
 impl Latch {
@@ -233,6 +235,13 @@ impl Latch {
     /// Its counters.
     pub fn counts(&self) -> CommandCounts {
         self.counts
+    }
+
+    /// A number that moves whenever what [`Latch::latched`] answers
+    /// changes (and only then may it differ): a holder of the encoded
+    /// answer re-encodes it only when this moved.
+    pub fn changes(&self) -> u64 {
+        self.changes
     }
 
     /// What it answers on its latch key.
@@ -274,6 +283,7 @@ impl Latch {
                 Some(s) if c.seq > s.seq => {
                     self.stop = None;
                     self.resume = Some(c);
+                    self.changes += 1;
                     self.counts.resumes += 1;
                     Change::Resumed
                 }
@@ -282,6 +292,7 @@ impl Latch {
                     if self.stop.is_none() && self.resume.as_ref().is_none_or(|r| c.seq > r.seq) {
                         // Running anyway: keep the newest number.
                         self.resume = Some(c);
+                        self.changes += 1;
                     }
                     Change::Unchanged
                 }
@@ -307,8 +318,9 @@ impl Latch {
         } else {
             Change::Unchanged
         };
-        if self.stop.as_ref().is_none_or(|s| c.seq >= s.seq) {
+        if self.stop.as_ref().is_none_or(|s| c.seq >= s.seq) && self.stop.as_ref() != Some(&c) {
             self.stop = Some(c);
+            self.changes += 1;
         }
         change
     }
@@ -414,5 +426,34 @@ mod tests {
         assert_eq!(Latched::decode(&liar.encode()), None);
         assert_eq!(Latched::decode(b"[1,2]"), None);
         assert_eq!(l.on_command(cmd(Order::Resume, 5)), Change::Resumed);
+    }
+
+    proptest::proptest! {
+        /// What the latch answers changes exactly when its change counter
+        /// moves, over any sequence of commands, payloads (good or not) and
+        /// hearsay: the runtime, which re-encodes the answer only when the
+        /// counter moved, never answers a stale latch.
+        #[test]
+        fn the_answer_changes_only_when_changes_moves(
+            ops in proptest::collection::vec((0u8..4, proptest::bool::ANY, 0u64..6, 0usize..3), 1..60),
+        ) {
+            let mut l = Latch::new();
+            for (kind, stop, seq, by) in ops {
+                let order = if stop { Order::Stop } else { Order::Resume };
+                let c = FleetCommand::new(order, seq, ["operator", "up", "leader"][by], "prop");
+                let (before, counted) = (l.latched(), l.changes());
+                match kind {
+                    0 => { l.on_command(c); }
+                    1 => { l.on_payload(&c.encode()); }
+                    2 => { l.on_payload(&c.encode()[1..]); }
+                    _ => {
+                        let heard = Latched { stopped: stop, command: Some(c) };
+                        l.on_hearsay(&heard.encode());
+                    }
+                }
+                proptest::prop_assert_eq!(l.changes() != counted, l.latched() != before);
+                proptest::prop_assert!(l.changes() >= counted);
+            }
+        }
     }
 }

@@ -258,6 +258,10 @@ impl Task for LeaderTask {
         Some(self.latch.latched().encode())
     }
 
+    fn latch_changes(&self) -> Option<u64> {
+        Some(self.latch.changes())
+    }
+
     fn tokens(&self) -> Vec<String> {
         vec![self.keys.alive(&Member::Leader.liveliness())]
     }

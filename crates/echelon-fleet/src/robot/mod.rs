@@ -239,6 +239,11 @@ impl<P: Plant> Robot<P> {
         self.latch.latched()
     }
 
+    /// Moves whenever [`Robot::latched`] changes ([`Latch::changes`]).
+    pub fn latch_changes(&self) -> u64 {
+        self.latch.changes()
+    }
+
     /// What the fleet commands did.
     pub fn command_counts(&self) -> CommandCounts {
         self.latch.counts()

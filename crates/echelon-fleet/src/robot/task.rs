@@ -141,6 +141,10 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         Some(self.robot.latched().encode())
     }
 
+    fn latch_changes(&self) -> Option<u64> {
+        Some(self.robot.latch_changes())
+    }
+
     fn on_input(&mut self, input: usize, sample: &Sample<'_>) -> Result<(), FleetError> {
         let neighbours = usize::from(self.robot.has_safety());
         let command = self.command_input();

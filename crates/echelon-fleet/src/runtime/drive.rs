@@ -56,6 +56,8 @@ pub(super) struct Engine<T> {
     pub(super) told: u64,
     /// What its latch answers (`None`: it holds none).
     pub(super) answer: Option<Arc<Mutex<Option<Vec<u8>>>>>,
+    /// The task's [`Task::latch_changes`] when `answer` was last set.
+    pub(super) answered: Option<u64>,
     /// Ticks in a row that moved its next wake by less than [`COARSE`].
     pub(super) fine: u32,
     /// Whether the last tick that moved its next wake moved it by
@@ -95,12 +97,18 @@ impl<T: Task> Engine<T> {
         Ok(())
     }
 
-    /// Sets what its latch answers to what the task says now.
-    pub(super) fn update(&self) {
+    /// Sets what its latch answers to what the task says now (encoded
+    /// again only when [`Task::latch_changes`] moved, or is unknown).
+    pub(super) fn update(&mut self) {
+        let changes = self.task.latch_changes();
+        if changes.is_some() && changes == self.answered {
+            return;
+        }
         if let Some(answer) = &self.answer
             && let Ok(mut a) = answer.lock()
         {
             *a = self.task.latched();
+            self.answered = changes;
         }
     }
 

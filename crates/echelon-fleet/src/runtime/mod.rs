@@ -232,6 +232,7 @@ pub fn run_split<T: Task + Send + 'static, G>(
         dropped,
         told: 0,
         answer: latching.is_some().then_some(answer),
+        answered: None,
         fine: 0,
         coarse: false,
     };

@@ -156,6 +156,14 @@ pub trait Task {
         None
     }
 
+    /// A number that moves whenever what [`Task::latched`] answers changes:
+    /// the runtime encodes the answer again only when it moved, not every
+    /// tick. `None` (the default): unknown, so the answer is taken after
+    /// every call.
+    fn latch_changes(&self) -> Option<u64> {
+        None
+    }
+
     /// Who must be present before its clock starts.
     fn wait_for(&self) -> Option<WaitFor> {
         None

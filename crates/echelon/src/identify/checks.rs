@@ -87,6 +87,14 @@ pub struct ResidualChecks {
     pub scan_window: [f64; 2],
     /// The noise the measurement shows by itself (second differences).
     pub noise_from_differences: f64,
+    /// A score test of the lag against a limit on its rate (an acceleration
+    /// limit, or a delay, slowing the fastest transients), in standard
+    /// errors: the largest over the limits tried (see `transient_bound`).
+    pub transient_z: f64,
+    /// Its 99.9 % bound (Bonferroni over the limits tried).
+    pub transient_bound: f64,
+    /// The rate limit it was found at (m/s² or rad/s² on a velocity base).
+    pub transient_rate: f64,
 }
 
 impl ResidualChecks {
@@ -95,6 +103,9 @@ impl ResidualChecks {
         let (ljung_box_q, ljung_box_bound, lag1_autocorrelation) =
             fit::ljung_box(&r, WHITENESS_LAGS);
         let (scan_z, scan_bound, [a, b]) = fit::scan(&r);
+        let gain = f.cov[1][1] > 0.0;
+        let (transient_z, transient_bound, transient_rate) =
+            fit::transients(d.t, (d.u, &f.predicted, &r), (f.theta[0], f.theta[1]), gain);
         ResidualChecks {
             ljung_box_q,
             ljung_box_bound,
@@ -103,6 +114,9 @@ impl ResidualChecks {
             scan_bound,
             scan_window: [d.t[a], d.t[b]],
             noise_from_differences: fit::noise_from_differences(d.y),
+            transient_z,
+            transient_bound,
+            transient_rate,
         }
     }
 }
@@ -129,6 +143,14 @@ pub(super) fn misfit(f: &AxisFit, c: &ResidualChecks, exact: bool) -> Option<Str
     if z > bound {
         return Some(format!(
             "the model misfits this log: its residuals keep one sign from t = {a:.3} s to {b:.3} s (local mean {z:.1} standard errors, 99.9 % bound {bound:.1}){hint}"
+        ));
+    }
+    let (z, bound) = (c.transient_z, c.transient_bound);
+    if z.abs() > bound {
+        return Some(format!(
+            "the model misfits this log on its fastest transients: its residuals follow what a limit of {:.3} on the rate would change ({:.1} standard errors, 99.9 % bound {bound:.1}) — an acceleration limit or a delay acted there, and the lag fitted through them is biased (log gentler steps){hint}",
+            c.transient_rate,
+            z.abs()
         ));
     }
     if f.rms > MAX_RESIDUAL_OVER_NOISE * noise {

@@ -30,7 +30,7 @@ pub(crate) use linalg::rcond;
 use linalg::{inverse_spd, least_squares, solve_spd};
 
 use crate::lm;
-pub(crate) use residuals::{ljung_box, noise_from_differences, scan};
+pub(crate) use residuals::{ljung_box, noise_from_differences, scan, transients};
 
 /// Number of samples per window of the integrated equation (first guess).
 const WINDOW: usize = 10;

@@ -69,6 +69,91 @@ pub(crate) fn scan(r: &[f64]) -> (f64, f64, [usize; 2]) {
     }
 }
 
+/// Rate limits [`transients`] tries: `0.8, 0.8², … 0.8⁹` of the model's
+/// largest rate (down to 13 %).
+const LIMITS: usize = 9;
+/// The ratio between two tried limits.
+const LIMIT_RATIO: f64 = 0.8;
+
+/// A score test of the lag against a rate limit (or anything that slows the
+/// axis on its fastest transients, as a delay): for each tried limit `A`,
+/// the output change the limit would make to first order, `g` (the model's
+/// rate beyond `A`, `sign(ẋ) max(|ẋ| − A, 0)`, through the lag), with the
+/// part the fitted parameters can absorb projected out (the sensitivities
+/// of the output to `τ`, to the gain when it is fitted, and to `x₀`); then
+/// `z = gᵀr / (σ ‖g‖)`, `σ` the residual RMS. Under the model the residuals
+/// `r` are white and `z` a standard normal for each `A`. A fit through
+/// transients that a limit cut stretches its lag to follow them and leaves
+/// residuals along `g`, which a whiteness test over the whole log dilutes.
+///
+/// `t`, `u`, `x`: the samples' times, inputs and the model's prediction;
+/// `tau`, `k`: the fit; `gain`: whether `k` was fitted. Returns the largest
+/// `|z|` (signed), its 99.9 % bound (Bonferroni over the limits, as
+/// [`scan`]'s) and the limit `A` it was found at.
+pub(crate) fn transients(
+    t: &[f64],
+    (u, x, r): (&[f64], &[f64], &[f64]),
+    (tau, k): (f64, f64),
+    gain: bool,
+) -> (f64, f64, f64) {
+    let n = t.len().min(u.len()).min(x.len()).min(r.len());
+    let bound = (2.0 * (2.0 * LIMITS as f64 / 1e-3).ln()).sqrt();
+    let rate: Vec<f64> = (0..n).map(|i| (k * u[i] - x[i]) / tau).collect();
+    let top = rate.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+    let sigma = (r[..n].iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt();
+    if n < 3 || !(sigma > 0.0 && top > 0.0 && top.is_finite() && tau > 0.0) {
+        return (0.0, bound, top);
+    }
+    // The lag as a filter: `y_{i+1} = a y_i + (1 − a) w_i`, `a = e^{−Δt/τ}`.
+    let lag = |w: &dyn Fn(usize) -> f64| -> Vec<f64> {
+        let mut y = vec![0.0; n];
+        for i in 0..n - 1 {
+            let a = (-(t[i + 1] - t[i]) / tau).exp();
+            y[i + 1] = a * y[i] + (1.0 - a) * w(i);
+        }
+        y
+    };
+    // What the fit absorbs, orthonormalised (Gram–Schmidt).
+    let mut basis: Vec<Vec<f64>> = Vec::new();
+    let mut directions = vec![lag(&|i| rate[i])];
+    if gain {
+        directions.push(lag(&|i| u[i]));
+    }
+    directions.push((0..n).map(|i| (-(t[i] - t[0]) / tau).exp()).collect());
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(p, q)| p * q).sum::<f64>();
+    let project_out = |v: &mut Vec<f64>, basis: &[Vec<f64>]| {
+        for e in basis {
+            let c = dot(v, e);
+            v.iter_mut().zip(e).for_each(|(p, q)| *p -= c * q);
+        }
+    };
+    for mut d in directions {
+        let before = dot(&d, &d).sqrt();
+        project_out(&mut d, &basis);
+        let norm = dot(&d, &d).sqrt();
+        if norm > 1e-9 * before && norm > 0.0 {
+            d.iter_mut().for_each(|p| *p /= norm);
+            basis.push(d);
+        }
+    }
+    let (mut best, mut at) = (0.0_f64, top);
+    for j in 1..=LIMITS {
+        let limit = top * LIMIT_RATIO.powi(j as i32);
+        let mut g = lag(&|i| rate[i].signum() * (rate[i].abs() - limit).max(0.0));
+        let before = dot(&g, &g).sqrt();
+        project_out(&mut g, &basis);
+        let norm = dot(&g, &g).sqrt();
+        if !(norm > 1e-6 * before && norm > 0.0) {
+            continue;
+        }
+        let z = dot(&g, &r[..n]) / (sigma * norm);
+        if z.abs() > best.abs() {
+            (best, at) = (z, limit);
+        }
+    }
+    (best, bound, at)
+}
+
 /// The measurement noise the output shows by itself, model-free: the RMS of
 /// its second differences over `√6` (white noise of RMS σ gives
 /// `E[(y₊ − 2y + y₋)²] = 6σ²`; a smooth signal adds its curvature, so this

@@ -717,7 +717,10 @@ fn circle_for(n: usize, radius: f64) -> f64 {
     (radius + 0.1) / (2.0 * half.sin()) + 0.1
 }
 
-fn swaps(base: BoxedStrategy<Lagged>, n: std::ops::RangeInclusive<usize>) -> impl Strategy<Value = Swap> {
+fn swaps(
+    base: BoxedStrategy<Lagged>,
+    n: std::ops::RangeInclusive<usize>,
+) -> impl Strategy<Value = Swap> {
     (
         base,
         n,
@@ -765,7 +768,7 @@ fn presets() -> BoxedStrategy<Lagged> {
 /// fourth): excluded from the property, because such an axis's speed steps
 /// to the command and the filter only approximates it as a lag of one
 /// controller period (docs/safety.md, "Velocity bases with lag": the survey
-/// found 2 of about 150 such swaps 2–35 mm inside the radius).
+/// found 2 of about 150 such swaps 1.5–33 mm inside the radius).
 fn random_lagged(lag_free: bool) -> BoxedStrategy<Lagged> {
     (
         (0.02..0.3f64, 0.02..0.3f64, 0..4u8),

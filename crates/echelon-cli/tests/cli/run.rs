@@ -322,7 +322,11 @@ fn two_turtlebot4s_swapping_sides_keep_the_radius() {
     let s = summary(&out);
     let d = s["safety"]["min_distance"].as_f64().unwrap();
     assert!((d - closest).abs() <= 5e-5, "{d} printed as {closest}");
-    assert!(!stderr(&o).contains("inside the safety radius"), "{}", stderr(&o));
+    assert!(
+        !stderr(&o).contains("inside the safety radius"),
+        "{}",
+        stderr(&o)
+    );
     for a in s["agents"].as_array().unwrap() {
         let e = a["final_error"].as_f64().unwrap();
         assert!(e < 0.01, "{a}");

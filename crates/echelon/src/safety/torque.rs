@@ -135,7 +135,7 @@ impl Envelope {
 
 impl SafetyFilter {
     /// Filters a torque-driven robot's inputs `nominal` (eq. 3) at time `t`:
-    /// `ḧ + 2γ ḣ + γ² h ≥ 0` for every neighbour in range and every obstacle,
+    /// `ḧ + (γ + p) ḣ + γ p h ≥ 0` for every neighbour in range and every obstacle,
     /// and the wheel torque limit if `robot` has one.
     #[allow(clippy::too_many_arguments)]
     pub fn torque(
@@ -263,7 +263,8 @@ mod tests {
         let rest = State::at_rest(0.0, 0.0, 0.0);
         for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
             for nominal in [Input { u1: bad, u2: 0.0 }, Input { u1: 1.0, u2: bad }] {
-                let out = SafetyFilter::new(config).torque(0.0, &rest, l, &robot, nominal, &[n], &[]);
+                let out =
+                    SafetyFilter::new(config).torque(0.0, &rest, l, &robot, nominal, &[n], &[]);
                 assert_eq!(out.outcome, Outcome::Nominal);
                 assert_eq!(out.command.u1.to_bits(), nominal.u1.to_bits());
                 assert_eq!(out.command.u2.to_bits(), nominal.u2.to_bits());

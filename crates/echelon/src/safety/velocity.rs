@@ -247,7 +247,12 @@ mod tests {
     #[test]
     fn non_finite_input_passes_through_unchanged() {
         let l = 0.05;
-        let n = Neighbour::of_state(&State::at_rest(0.6, 0.0, std::f64::consts::PI), l, None, true);
+        let n = Neighbour::of_state(
+            &State::at_rest(0.6, 0.0, std::f64::consts::PI),
+            l,
+            None,
+            true,
+        );
         let rest = State::at_rest(0.0, 0.0, 0.0);
         for base in [ideal(), VelocityBase::TURTLEBOT4] {
             for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
@@ -256,8 +261,15 @@ mod tests {
                     VelocityCommand { v: 0.2, omega: bad },
                 ];
                 for nominal in nominals {
-                    let out = SafetyFilter::new(config())
-                        .velocity(0.0, &rest, l, nominal, &base, &[n], &[]);
+                    let out = SafetyFilter::new(config()).velocity(
+                        0.0,
+                        &rest,
+                        l,
+                        nominal,
+                        &base,
+                        &[n],
+                        &[],
+                    );
                     assert_eq!(out.outcome, Outcome::Nominal);
                     assert_eq!(out.command.v.to_bits(), nominal.v.to_bits());
                     assert_eq!(out.command.omega.to_bits(), nominal.omega.to_bits());
@@ -265,7 +277,8 @@ mod tests {
                 let mut me = rest;
                 me.v = bad;
                 let nominal = VelocityCommand { v: 0.5, omega: 0.0 };
-                let out = SafetyFilter::new(config()).velocity(0.0, &me, l, nominal, &base, &[n], &[]);
+                let out =
+                    SafetyFilter::new(config()).velocity(0.0, &me, l, nominal, &base, &[n], &[]);
                 assert_eq!((out.command, out.outcome), (nominal, Outcome::Nominal));
             }
         }

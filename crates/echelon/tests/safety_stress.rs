@@ -3,7 +3,9 @@
 //! torque-driven (Table I, with and without wheel torque limits) and on
 //! velocity bases. Every step: states finite and bounded, points at least
 //! `radius − 1 mm` apart; at the end every robot has converged or its filter
-//! reports it deadlocked.
+//! reports it deadlocked. And two to eight velocity bases with lag
+//! (TurtleBot 3/4, Jackal, random lags and limits) on a circle swapping
+//! places with their antipodes: points at least `radius − 1 mm` apart.
 #![allow(clippy::unwrap_used)]
 
 use echelon::scenario::{Overrides, Scenario};
@@ -524,4 +526,352 @@ fn survey() {
         }
     }
     println!("failed {failed} of {}", 4 * n);
+}
+
+/// A velocity base with lag for [`Swap`]: a preset by name, or lags and
+/// limits of its own.
+#[derive(Debug, Clone, Copy)]
+enum Lagged {
+    /// `turtlebot3-burger`, `turtlebot4` or `jackal`.
+    Preset(&'static str),
+    /// `[robots.r]` on the ideal preset with these lags and limits.
+    Own {
+        tau_v: f64,
+        tau_omega: f64,
+        v_max: f64,
+        omega_max: f64,
+        a_max: f64,
+        alpha_max: f64,
+        per_axis: bool,
+    },
+}
+
+/// `n` robots on a circle of radius `circle` (jittered), each holding the
+/// antipode of its start: every point crosses the centre.
+#[derive(Debug, Clone)]
+struct Swap {
+    base: Lagged,
+    n: usize,
+    circle: f64,
+    radius: f64,
+    gain: f64,
+    ke: f64,
+    /// Per robot: angle, radial and heading jitter (rad, m, rad).
+    jitter: Vec<[f64; 3]>,
+}
+
+impl Swap {
+    fn toml(&self) -> String {
+        let mut s = format!(
+            "name = \"swap\"\n[sim]\nduration = {SWAP_LONGEST}\ndt = 0.01\n[log]\ndt = 0.1\n\
+             [control]\nlaw = \"kinematic\"\nke = {}\nl = 0.05\nlycomp = \"none\"\n",
+            self.ke
+        );
+        match self.base {
+            Lagged::Preset(name) => s += &format!("[robots.r]\npreset = \"{name}\"\n"),
+            Lagged::Own {
+                tau_v,
+                tau_omega,
+                v_max,
+                omega_max,
+                a_max,
+                alpha_max,
+                per_axis,
+            } => {
+                s += &format!(
+                    "[robots.r]\ndrive = \"velocity\"\npreset = \"ideal\"\ntau_v = {tau_v}\n\
+                     tau_omega = {tau_omega}\nv_max = {v_max}\nomega_max = {omega_max}\n\
+                     accel = \"{}\"\n",
+                    if per_axis { "per-axis" } else { "joint" }
+                );
+                // (an axis without lag has no acceleration to limit)
+                if tau_v > 0.0 {
+                    s += &format!("a_max = {a_max}\n");
+                }
+                if tau_omega > 0.0 {
+                    s += &format!("alpha_max = {alpha_max}\n");
+                }
+            }
+        }
+        // The reference rests ahead of every slot (the law needs L_X > 0).
+        let ahead = self.circle + 1.0;
+        s += &format!(
+            "[reference.line]\nspeed = 0.0\nstart = {{ x = {ahead}, y = 0.0, theta = 0.0 }}\n"
+        );
+        s += &format!("[safety]\nradius = {}\ngain = {}\n", self.radius, self.gain);
+        for (i, j) in self.jitter.iter().take(self.n).enumerate() {
+            let phi = std::f64::consts::TAU * i as f64 / self.n as f64 + j[0];
+            let r = self.circle + j[1];
+            let (sin, cos) = phi.sin_cos();
+            // The slot, (−x, −y) of the offset in the reference's frame, is
+            // the antipode of the start.
+            s += &format!(
+                "[[agents]]\nrobot = \"r\"\nstart = {{ x = {}, y = {}, theta = {} }}\n\
+                 leader = \"reference\"\noffset = {{ x = {}, y = {} }}\n",
+                r * cos,
+                r * sin,
+                phi + std::f64::consts::PI + j[2],
+                ahead + r * cos,
+                r * sin,
+            );
+        }
+        s
+    }
+}
+
+/// The longest a swap runs, s (it stops once every robot holds its slot).
+const SWAP_LONGEST: f64 = 90.0;
+
+/// What a swap showed.
+#[derive(Debug)]
+struct Swapped {
+    /// The closest two points came, m, and when, s.
+    closest: f64,
+    at: f64,
+    /// Agent-steps the filter found no command satisfying every row.
+    braked: usize,
+    /// The first state that was not finite, or the run's error.
+    bad: Option<String>,
+    /// Whether every robot came within 1 cm of its slot.
+    settled: bool,
+    /// Whether some robot's filter held it at the end (deadlocked).
+    deadlocked: bool,
+}
+
+impl Swap {
+    /// Whether the base meets the condition under which the filter of
+    /// relative degree two can always brake as its barrier asks
+    /// (docs/safety.md, "Velocity bases with lag"): with `p =
+    /// max(γ, INNER_RATE)` and `τ'` the lag seen over the 10 ms period,
+    /// `(γ + p) τ_v' ≤ 1` (the braking `(γ + p) v` the barrier may ask for is
+    /// reached without reversing) and `a_max ≥ (γ + p) v_max`. The presets
+    /// meet it for every gain up to 3/s.
+    fn covered(&self) -> bool {
+        let Lagged::Own {
+            tau_v,
+            v_max,
+            a_max,
+            ..
+        } = self.base
+        else {
+            return true;
+        };
+        let rate = self.gain + echelon::safety::INNER_RATE.max(self.gain);
+        let period: f64 = 0.01;
+        let seen = period / -(-period / tau_v).exp_m1();
+        rate * seen <= 1.0 && a_max >= rate * v_max
+    }
+}
+
+/// Runs a swap watching every step.
+fn swap(case: &Swap) -> Swapped {
+    let src = case.toml();
+    let scenario = Scenario::parse(&src, "swap.toml", None).unwrap();
+    let run = scenario
+        .build(&Overrides::default())
+        .unwrap_or_else(|e| panic!("{e}\n{src}"));
+    let sim = &mut run.simulation();
+    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement().l()).collect();
+    let mut seen = Swapped {
+        closest: f64::INFINITY,
+        at: 0.0,
+        braked: 0,
+        bad: None,
+        settled: false,
+        deadlocked: false,
+    };
+    let mut every = |f: &Frame<'_>| -> Result<(), ObserverError> {
+        let d = SafetyWatch::closest_pair(f.states, &l).unwrap().0;
+        if d < seen.closest {
+            (seen.closest, seen.at) = (d, f.t);
+        }
+        seen.braked += f
+            .safety
+            .iter()
+            .filter(|s| s.outcome == echelon::safety::Outcome::Braked)
+            .count();
+        if let Some((i, s)) = f.states.iter().enumerate().find(|(_, s)| !s.is_finite()) {
+            seen.bad
+                .get_or_insert(format!("agent {} at t = {} s: {s:?}", i + 1, f.t));
+        }
+        seen.deadlocked = f.safety.iter().any(|s| s.deadlocked);
+        if f.outputs.iter().all(|o| o.e[0].hypot(o.e[1]) < 0.01) {
+            return Err("settled".into());
+        }
+        Ok(())
+    };
+    match sim.run(&mut every) {
+        Err(e) if e.to_string().contains("settled") => seen.settled = true,
+        Err(e) => {
+            seen.bad.get_or_insert(e.to_string());
+        }
+        Ok(_) => {}
+    }
+    seen
+}
+
+/// The circle's radius that puts neighbouring starts (jittered by at most
+/// `0.05` rad and `0.05` m) well outside the safety radius.
+fn circle_for(n: usize, radius: f64) -> f64 {
+    let half = std::f64::consts::PI / n as f64 - 0.05;
+    (radius + 0.1) / (2.0 * half.sin()) + 0.1
+}
+
+fn swaps(
+    base: BoxedStrategy<Lagged>,
+    n: std::ops::RangeInclusive<usize>,
+) -> impl Strategy<Value = Swap> {
+    (
+        base,
+        n,
+        0.2..0.5f64,
+        0.0..1.5f64,
+        0.3..3.0f64,
+        0.5..2.0f64,
+        prop::collection::vec((-0.05..0.05f64, -0.05..0.05f64, -0.5..0.5f64), 8),
+    )
+        .prop_map(|(base, n, radius, extra, gain, ke, jitter)| Swap {
+            base,
+            n,
+            circle: circle_for(n, radius) + extra,
+            radius,
+            gain,
+            ke,
+            jitter: jitter.into_iter().map(|(a, b, c)| [a, b, c]).collect(),
+        })
+}
+
+fn check_swap(case: &Swap) -> Result<(), TestCaseError> {
+    let seen = swap(case);
+    let src = case.toml();
+    prop_assert!(seen.bad.is_none(), "{seen:?}\n{src}");
+    prop_assert!(
+        seen.closest >= case.radius - 1e-3,
+        "{seen:?} for radius {}\n{src}",
+        case.radius
+    );
+    Ok(())
+}
+
+fn presets() -> BoxedStrategy<Lagged> {
+    prop_oneof![
+        Just(Lagged::Preset("turtlebot3-burger")),
+        Just(Lagged::Preset("turtlebot4")),
+        Just(Lagged::Preset("jackal")),
+    ]
+    .boxed()
+}
+
+/// Velocity bases with lags 0.02–0.3 s on both axes, speeds 0.1–1.5 m/s
+/// and 1–5 rad/s, acceleration limits 1–20 m/s², 2–30 rad/s², joint or per
+/// axis. `lag_free` also gives bases with one axis without lag (every
+/// fourth): excluded from the property, because such an axis's speed steps
+/// to the command and the filter only approximates it as a lag of one
+/// controller period (docs/safety.md, "Velocity bases with lag": the survey
+/// found 2 of about 150 such swaps 1.5–33 mm inside the radius).
+fn random_lagged(lag_free: bool) -> BoxedStrategy<Lagged> {
+    (
+        (0.02..0.3f64, 0.02..0.3f64, 0..4u8),
+        (0.1..1.5f64, 1.0..5.0f64),
+        (1.0..20.0f64, 2.0..30.0f64, any::<bool>()),
+    )
+        .prop_map(
+            move |((tau_v, tau_omega, zero), (v_max, omega_max), (a_max, alpha_max, per_axis))| {
+                let zero = if lag_free { zero } else { 0 };
+                Lagged::Own {
+                    tau_v: if zero == 1 { 0.0 } else { tau_v },
+                    tau_omega: if zero == 2 { 0.0 } else { tau_omega },
+                    v_max,
+                    omega_max,
+                    a_max,
+                    alpha_max,
+                    per_axis,
+                }
+            },
+        )
+        .boxed()
+}
+
+proptest! {
+    // Fixed seed, SWAP_CASES=N for more (`swap_survey` lists every failure).
+    #![proptest_config(fixed_seed(env_or("SWAP_CASES", 48) as u32))]
+
+    /// 2–8 TurtleBot 3 / TurtleBot 4 / Jackal bases (lag 0.05–0.1 s) on a
+    /// circle, each driving to its antipode: every pair stays at least
+    /// `radius − 1 mm` apart the whole run.
+    #[test]
+    fn lagged_presets_swapping_places_keep_the_radius(case in swaps(presets(), 2..=8)) {
+        check_swap(&case)?;
+    }
+
+    /// The same for random velocity bases lagging on both axes (lags
+    /// 0.02–0.3 s, speed and acceleration limits from slow to fast, joint or
+    /// per axis) that meet the filter's condition ([`Swap::covered`]).
+    #[test]
+    fn lagged_bases_swapping_places_keep_the_radius(
+        case in swaps(random_lagged(false), 2..=8).prop_filter(
+            "outside the condition the filter needs: (γ + p) τ_v' ≤ 1, a_max ≥ (γ + p) v_max",
+            Swap::covered,
+        ),
+    ) {
+        check_swap(&case)?;
+    }
+}
+
+/// Three TurtleBot 3 Burgers (lag 0.1 s, 0.22 m/s) on a circle of 0.8 m
+/// swap places, nearly symmetric (all three points head for the centre at
+/// once), at three barrier gains: every pair keeps the radius, and all three
+/// arrive or their filters report the stand-off at the centre.
+#[test]
+fn three_turtlebot3_burgers_swapping_keep_apart() {
+    for gain in [0.5, 1.0, 3.0] {
+        let case = Swap {
+            base: Lagged::Preset("turtlebot3-burger"),
+            n: 3,
+            circle: 0.8,
+            radius: 0.3,
+            gain,
+            ke: 1.0,
+            jitter: vec![[0.0, 0.0, 0.0], [0.01, 0.0, 0.02], [-0.01, 0.01, 0.0]],
+        };
+        let seen = swap(&case);
+        assert!(seen.bad.is_none(), "γ = {gain}: {seen:?}");
+        assert!(seen.closest >= case.radius - 1e-3, "γ = {gain}: {seen:?}");
+        // All arrive, or the filter reports the stand-off it holds them in.
+        assert!(seen.settled || seen.deadlocked, "γ = {gain}: {seen:?}");
+    }
+}
+
+/// `SURVEY=N cargo test --test safety_stress -- --ignored swap_survey`: N
+/// swaps of the lagged presets and N of random lagged bases, every one
+/// inside the radius listed.
+#[test]
+#[ignore = "a survey for development: many cases"]
+fn swap_survey() {
+    use proptest::strategy::ValueTree;
+    let n: usize = env_or("SURVEY", 100) as usize;
+    let mut failed = 0;
+    let kinds: [(&str, BoxedStrategy<Swap>); 2] = [
+        ("presets", swaps(presets(), 2..=8).boxed()),
+        ("random", swaps(random_lagged(true), 2..=8).boxed()),
+    ];
+    for (kind, strategy) in kinds {
+        let mut runner = proptest::test_runner::TestRunner::deterministic();
+        for k in 0..n {
+            let case = strategy.new_tree(&mut runner).unwrap().current();
+            let seen = swap(&case);
+            if seen.bad.is_some() || seen.closest < case.radius - 1e-3 {
+                failed += 1;
+                println!(
+                    "{kind} {k}: {:?} n {} radius {:.3} gain {:.2} covered {}: {seen:?}",
+                    case.base,
+                    case.n,
+                    case.radius,
+                    case.gain,
+                    case.covered()
+                );
+            }
+        }
+    }
+    println!("failed {failed} of {}", 2 * n);
 }

@@ -280,3 +280,96 @@ fn run_prints_the_safety_filters_outcome_as_its_summary_has_it() {
         }
     }
 }
+
+/// The closest approach `echelon run` printed, m.
+fn printed_closest_approach(text: &str) -> f64 {
+    let rest = text
+        .lines()
+        .find_map(|l| l.trim_start().strip_prefix("safety: closest approach "))
+        .unwrap_or_else(|| panic!("no closest approach in\n{text}"));
+    rest.split(' ').next().unwrap().parse().unwrap()
+}
+
+/// Two TurtleBot 4s (lag 0.1 s, 0.31 m/s) on a line swap sides, nearly head
+/// on: the filter, which treats a lagged base as of relative degree two,
+/// keeps their points at least `radius − 1 mm` apart, as printed, and both
+/// arrive.
+#[test]
+fn two_turtlebot4s_swapping_sides_keep_the_radius() {
+    let dir = tempfile::tempdir().unwrap();
+    let radius = 0.4;
+    let mut text = format!(
+        "name = \"swap\"\n[sim]\nduration = 60.0\ndt = 0.01\n[log]\ndt = 0.05\n\
+         [control]\nlaw = \"kinematic\"\nke = 1.0\nl = 0.05\nlycomp = \"none\"\n\
+         [reference.line]\nspeed = 0.0\nstart = {{ x = 3.0, y = 0.0, theta = 0.0 }}\n\
+         [safety]\nradius = {radius}\ngain = 1.0\n"
+    );
+    // Each holds the other's start: the slot is (−x, −y) of the offset from
+    // the reference, at rest 3 m ahead (the law needs L_X > 0).
+    for (x, y, theta) in [(-1.2, 0.03, 0.0), (1.2, -0.02, 3.1)] {
+        text += &format!(
+            "[[agents]]\nrobot = \"turtlebot4\"\nstart = {{ x = {x}, y = {y}, theta = {theta} }}\n\
+             leader = \"reference\"\noffset = {{ x = {}, y = {y} }}\n",
+            3.0 + x
+        );
+    }
+    let file = scenario_file(dir.path(), &text);
+    let out = dir.path().join("out");
+    let o = run(&file, &out, &[]);
+    let printed = succeeded(&o);
+    let closest = printed_closest_approach(&printed);
+    assert!(closest >= radius - 1e-3, "closest {closest}\n{printed}");
+    let s = summary(&out);
+    let d = s["safety"]["min_distance"].as_f64().unwrap();
+    assert!((d - closest).abs() <= 5e-5, "{d} printed as {closest}");
+    assert!(
+        !stderr(&o).contains("inside the safety radius"),
+        "{}",
+        stderr(&o)
+    );
+    for a in s["agents"].as_array().unwrap() {
+        let e = a["final_error"].as_f64().unwrap();
+        assert!(e < 0.01, "{a}");
+    }
+}
+
+/// A run with `[safety]` whose gains blow it up (the law's `ke` absurd, the
+/// barrier's `γ` at its largest) stops with exit 1 and the divergence
+/// guard's message, no panic (the filters pass a state or nominal that is
+/// not finite on unchanged: their unit tests). Velocity bases (the
+/// first-order and the lagged filter) and torque-driven robots alike.
+#[test]
+fn a_filtered_run_whose_gains_blow_it_up_exits_1_as_diverged() {
+    let dir = tempfile::tempdir().unwrap();
+    let robots = [
+        "[robots.r]\npreset = \"agent1\"\n",
+        "[robots.r]\ndrive = \"velocity\"\npreset = \"ideal\"\n",
+        // (lags without limits: a base with limits cannot leave the bounds)
+        "[robots.r]\ndrive = \"velocity\"\npreset = \"ideal\"\ntau_v = 0.05\ntau_omega = 0.05\n",
+    ];
+    for (k, robot) in robots.iter().enumerate() {
+        let law = if k == 0 { "complete" } else { "kinematic" };
+        let mut text = format!(
+            "[sim]\nduration = 5.0\ndt = 0.001\n[control]\nlaw = \"{law}\"\nke = 1e12\nkz = 1e12\n\
+             l = 0.05\nlycomp = \"none\"\n{robot}\
+             [reference.line]\nspeed = 0.5\nstart = {{ x = 0.0, y = 0.0, theta = 0.0 }}\n\
+             [safety]\nradius = 0.3\ngain = 1e4\n"
+        );
+        if k != 0 {
+            // (the kinematic law has no kz)
+            text = text.replace("kz = 1e12\n", "");
+        }
+        for (x, y) in [(-1.0, 0.6), (-1.0, -0.6)] {
+            text += &format!(
+                "[[agents]]\nrobot = \"r\"\nstart = {{ x = {x}, y = {y}, theta = 0.0 }}\n\
+                 leader = \"reference\"\noffset = {{ x = 0.5, y = {y} }}\n"
+            );
+        }
+        let file = scenario_file(dir.path(), &text);
+        let o = run(&file, &dir.path().join("out"), &[]);
+        let err = stderr(&o);
+        assert!(!err.contains("panicked"), "{robot}: {err}");
+        assert_eq!(o.status.code(), Some(1), "{robot}: {err}");
+        assert!(err.contains(") diverged at t = "), "{robot}: {err}");
+    }
+}

@@ -11,7 +11,8 @@ pub struct SafetyConfig {
     /// Smallest distance between two robots' points `L` ahead, and the
     /// clearance a point keeps from an obstacle's edge, m.
     pub radius: f64,
-    /// `γ`, 1/s: `ḣ ≥ −γ h` (velocity bases), `ḧ + 2γ ḣ + γ² h ≥ 0` (torques).
+    /// `γ`, 1/s: `ḣ ≥ −γ h` (velocity bases without lag), `ḧ + (γ + p) ḣ + γ p h ≥ 0`
+    /// (torques and velocity bases with lag; `p = max(γ, INNER_RATE)`).
     pub gain: f64,
     /// Neighbours whose point is farther than this are ignored, m (may be
     /// infinite).

@@ -8,6 +8,17 @@ use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, solve};
 use crate::model::State;
 
+/// `p`, 1/s: the inner pole of the torque barrier, `ψ̇₁ + p ψ₁ ≥ 0` with
+/// `ψ₁ = ḣ + γ h` (`p = max(γ, INNER_RATE)`). With both poles at `−γ` (the
+/// filter before issue 20) `ψ₁` could fall no faster than `γ ψ₁`, and since
+/// `ḧ` carries `2 dᵀp̈`, which grows with the distance `d`, a robot moving
+/// away from a neighbour metres off was forbidden to brake (friction alone
+/// decelerates Table I's robots at `η v/m ≈ 6 m/s²` at 1 m/s): the filter
+/// kept it driving away, the law's braking refused. `ψ₁ ≥ 0` still keeps
+/// `h ≥ 0`; the inner loop, on the robot's acceleration, is just allowed to
+/// be faster than the outer one.
+pub const INNER_RATE: f64 = 5.0;
+
 /// What the filter did to a command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Outcome {
@@ -41,6 +52,22 @@ impl<C> Filtered<C> {
     /// Whether the command differs from the nominal one.
     pub fn active(&self) -> bool {
         self.outcome != Outcome::Nominal
+    }
+
+    /// The answer for a robot whose state or nominal is not finite: the
+    /// nominal passed through untouched (no QP on it), for the divergence
+    /// guard to report.
+    pub(super) fn passed(nominal: C) -> Filtered<C>
+    where
+        C: Copy,
+    {
+        Filtered {
+            command: nominal,
+            nominal,
+            outcome: Outcome::Nominal,
+            deadlock: false,
+            min_distance: f64::INFINITY,
+        }
     }
 
     /// The answer for what [`SafetyFilter::decide`] chose: the `limited`
@@ -162,6 +189,45 @@ impl SafetyFilter {
             self.rows.push(row(d, h, None));
         }
         min_distance
+    }
+}
+
+impl SafetyFilter {
+    /// Pushes the exponential barrier of relative degree two,
+    /// `ḧ + (γ + p) ḣ + γ p h ≥ 0` (`p = max(γ, `[`INNER_RATE`]`)`), for every
+    /// neighbour in range and every obstacle, for a robot whose point moves
+    /// as `p̈ = f + R(θ) diag(scale) x` in the QP's variables `x` (torques:
+    /// `scale = (1, 1)`; a velocity base with lags: `(1/τ_v, 1/τ_ω)`). A
+    /// cooperative neighbour takes half of the pair (the shared term zero),
+    /// a non-cooperative one's measured `p̈_j` enters; returns the smallest
+    /// distance to a neighbour's point in range.
+    pub(super) fn second_order_barriers(
+        &mut self,
+        own: &Own,
+        neighbours: &[Neighbour],
+        obstacles: &[Obstacle],
+        f: [f64; 2],
+        scale: [f64; 2],
+    ) -> f64 {
+        let gamma = self.config.gain;
+        self.barriers(own, neighbours, obstacles, |d, h, n| {
+            let row = own.row(d);
+            let a = [row[0] * scale[0], row[1] * scale[1]];
+            let (dpj, ddpj) = n.map_or(([0.0; 2], [0.0; 2]), |n| (n.dp, n.ddp));
+            let rel = [own.dp[0] - dpj[0], own.dp[1] - dpj[1]];
+            let dh = 2.0 * (d[0] * rel[0] + d[1] * rel[1]);
+            // Everything in ḧ + (γ + p) ḣ + γ p h that x does not move
+            // (ψ₁ = ḣ + γ h, ψ̇₁ + p ψ₁ ≥ 0).
+            let p = INNER_RATE.max(gamma);
+            let drift =
+                2.0 * (rel[0] * rel[0] + rel[1] * rel[1]) + (gamma + p) * dh + gamma * p * h;
+            let df = 2.0 * (d[0] * f[0] + d[1] * f[1]);
+            let b = match n {
+                Some(n) if n.cooperative => -df - 0.5 * drift,
+                _ => -df + 2.0 * (d[0] * ddpj[0] + d[1] * ddpj[1]) - drift,
+            };
+            Constraint { a, b }
+        })
     }
 }
 

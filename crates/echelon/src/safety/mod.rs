@@ -73,6 +73,22 @@
 //! still steers. Issue 20 found a crossing of two Table I robots that
 //! diverged (‖e‖ ≈ 1e213 m) without these.
 //!
+//! ## Velocity bases with lag: relative degree two
+//!
+//! A base that follows its command through a lag on either axis
+//! (`v̇ = (v* − v)/τ_v`, `ω̇ = (ω* − ω)/τ_ω`, [`VelocityBase`]) is filtered like
+//! a torque-driven robot: `p̈_i = f_i + R(θ) diag(1/τ_v, 1/τ_ω) x` with
+//! `x = (v*, L ω*)` and `f_i = R(θ)(−v/τ_v − L ω², v ω − L ω/τ_ω)` from the
+//! actual speeds in the state, the same exponential barrier, the speed
+//! envelope with the base's limits, the base's speed and acceleration limits
+//! as hard rows and the same emergency action. The lags are taken as seen
+//! over the controller period ([`STEP_LAG`] for a lag-free axis without one).
+//! It holds while `(γ + p) τ_v ≤ 1` and `a_max ≥ (γ + p) v_max`
+//! (`docs/safety.md`, "Velocity bases with lag").
+//!
+//! A state or nominal that is not finite is passed on unchanged, for the
+//! divergence guard ([`crate::guard`]) to report.
+//!
 //! ## The quadratic program
 //!
 //! The QP is solved in the point's units, `x = diag(1, L)(v, ω)` for a
@@ -114,6 +130,7 @@
 //!
 //! [`RobotParams::limit`]: crate::model::RobotParams::limit
 //! [`VelocityBase::limit`]: crate::base::VelocityBase::limit
+//! [`VelocityBase`]: crate::base::VelocityBase
 
 mod config;
 mod deadlock;
@@ -127,9 +144,10 @@ mod velocity;
 
 pub use config::SafetyConfig;
 pub use deadlock::{BIAS_ANGLE, DEADLOCK_MEMORY, STUCK_TIME};
-pub use filter::{Filtered, Outcome, SafetyFilter};
+pub use filter::{Filtered, INNER_RATE, Outcome, SafetyFilter};
 pub use neighbour::{
     Neighbour, Obstacle, UNCERTAINTY_SIGMAS, point, start_conflict, uncertainty_margin,
 };
 pub use qp::{Constraint, MAX_ROWS, TOLERANCE};
-pub use torque::{EMERGENCY_ACCEL, Envelope, INNER_RATE};
+pub use torque::{EMERGENCY_ACCEL, Envelope};
+pub use velocity::STEP_LAG;

@@ -99,13 +99,24 @@ fn relaxed_with(
 
 /// `|x_k| ≤ bound_k` as four rows (an infinite bound adds none).
 pub(super) fn push_box(rows: &mut Vec<Constraint>, bound: [f64; 2]) {
+    push_band(rows, [0.0; 2], bound);
+}
+
+/// `|x_k − centre_k| ≤ bound_k` as four rows (an infinite bound adds none).
+pub(super) fn push_band(rows: &mut Vec<Constraint>, centre: [f64; 2], bound: [f64; 2]) {
     for (k, b) in bound.into_iter().enumerate() {
         if b.is_finite() {
             let mut a = [0.0; 2];
             a[k] = 1.0;
-            rows.push(Constraint { a, b: -b });
+            rows.push(Constraint {
+                a,
+                b: centre[k] - b,
+            });
             a[k] = -1.0;
-            rows.push(Constraint { a, b: -b });
+            rows.push(Constraint {
+                a,
+                b: -centre[k] - b,
+            });
         }
     }
 }

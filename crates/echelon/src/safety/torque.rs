@@ -4,19 +4,8 @@
 
 use super::filter::{Filtered, Own, SafetyFilter};
 use super::neighbour::{Neighbour, Obstacle};
-use super::qp::{Constraint, push_box, solve_relaxed, solve_split};
+use super::qp::{Constraint, push_band, solve_relaxed, solve_split};
 use crate::model::{Input, RobotParams, State};
-
-/// `p`, 1/s: the inner pole of the torque barrier, `ψ̇₁ + p ψ₁ ≥ 0` with
-/// `ψ₁ = ḣ + γ h` (`p = max(γ, INNER_RATE)`). With both poles at `−γ` (the
-/// filter before issue 20) `ψ₁` could fall no faster than `γ ψ₁`, and since
-/// `ḧ` carries `2 dᵀp̈`, which grows with the distance `d`, a robot moving
-/// away from a neighbour metres off was forbidden to brake (friction alone
-/// decelerates Table I's robots at `η v/m ≈ 6 m/s²` at 1 m/s): the filter
-/// kept it driving away, the law's braking refused. `ψ₁ ≥ 0` still keeps
-/// `h ≥ 0`; the inner loop, on the robot's acceleration, is just allowed to
-/// be faster than the outer one.
-pub const INNER_RATE: f64 = 5.0;
 
 /// The smallest half-width, m/s², of the acceleration box in which a
 /// torque-driven robot without wheel-torque limits takes its emergency
@@ -62,6 +51,17 @@ impl Envelope {
         rate: 5.0,
     };
 
+    /// The envelope of a velocity base with lags: its own speed limits (the
+    /// default's where it has none), no reverse, the default's rate.
+    pub(super) fn lagged(base: &crate::base::VelocityBase) -> Envelope {
+        let finite = |x: f64, default: f64| if x.is_finite() { x } else { default };
+        Envelope {
+            v_max: finite(base.v_max(), Envelope::DEFAULT.v_max),
+            omega_max: finite(base.omega_max(), Envelope::DEFAULT.omega_max),
+            ..Envelope::DEFAULT
+        }
+    }
+
     /// The nominal `x0 = (u1/m, L u2/J)` held to the envelope's top speed
     /// once the robot is at it (`v ≥ v_max`: the row `v̇ ≤ κ (v_max − v)`,
     /// one coordinate, so this is the projection onto it), not to its reverse bound (a law that brakes at low speed keeps
@@ -97,29 +97,37 @@ impl Envelope {
         robot.limit(held).0
     }
 
-    /// The four rows in the QP's variables `x = (u1/m, L u2/J)` at speeds
-    /// `(v, w)`: `v̇ = x₁ − η v/m`, `ω̇ = x₂/L − ψ ω/J`.
-    fn push_rows(&self, rows: &mut Vec<Constraint>, robot: &RobotParams, l: f64, v: f64, w: f64) {
+    /// The four rows in the QP's variables `x` at speeds `(v, w)`, for a
+    /// robot whose speeds move as `v̇ = gain₁ x₁ − drag₁`,
+    /// `ω̇ = gain₂ x₂ − drag₂` (torques, `x = (u1/m, L u2/J)`: gain `(1, 1/L)`,
+    /// drag `(η v/m, ψ ω/J)`; a velocity base with lags, `x = (v*, L ω*)`:
+    /// gain `(1/τ_v, 1/(L τ_ω))`, drag `(v/τ_v, ω/τ_ω)`).
+    pub(super) fn push_rows(
+        &self,
+        rows: &mut Vec<Constraint>,
+        gain: [f64; 2],
+        [dv, dw]: [f64; 2],
+        v: f64,
+        w: f64,
+    ) {
         let k = self.rate;
-        let dv = robot.linear_friction() * v / robot.mass();
-        let dw = robot.angular_friction() * w / robot.inertia();
         // v_max − v ≥ 0:      −v̇ ≥ −κ (v_max − v)
         rows.push(Constraint {
-            a: [-1.0, 0.0],
+            a: [-gain[0], 0.0],
             b: -k * (self.v_max - v) - dv,
         });
         // v + v_reverse ≥ 0:   v̇ ≥ −κ (v + v_reverse)
         rows.push(Constraint {
-            a: [1.0, 0.0],
+            a: [gain[0], 0.0],
             b: -k * (v + self.v_reverse) + dv,
         });
         // omega_max ∓ ω ≥ 0
         rows.push(Constraint {
-            a: [0.0, -1.0 / l],
+            a: [0.0, -gain[1]],
             b: -k * (self.omega_max - w) - dw,
         });
         rows.push(Constraint {
-            a: [0.0, 1.0 / l],
+            a: [0.0, gain[1]],
             b: -k * (self.omega_max + w) + dw,
         });
     }
@@ -127,7 +135,7 @@ impl Envelope {
 
 impl SafetyFilter {
     /// Filters a torque-driven robot's inputs `nominal` (eq. 3) at time `t`:
-    /// `ḧ + 2γ ḣ + γ² h ≥ 0` for every neighbour in range and every obstacle,
+    /// `ḧ + (γ + p) ḣ + γ p h ≥ 0` for every neighbour in range and every obstacle,
     /// and the wheel torque limit if `robot` has one.
     #[allow(clippy::too_many_arguments)]
     pub fn torque(
@@ -140,6 +148,11 @@ impl SafetyFilter {
         neighbours: &[Neighbour],
         obstacles: &[Obstacle],
     ) -> Filtered<Input> {
+        if !(me.is_finite() && nominal.u1.is_finite() && nominal.u2.is_finite()) {
+            // Diverged: the non-finite value goes on for the divergence
+            // guard to report (`crate::guard`), no QP on it.
+            return Filtered::passed(nominal);
+        }
         let own = Own::ahead(me, l, 0.0);
         let (m, j) = (robot.mass(), robot.inertia());
         let (eta, psi) = (robot.linear_friction(), robot.angular_friction());
@@ -158,29 +171,13 @@ impl SafetyFilter {
         // stop it in time).
         let limited = Envelope::DEFAULT.hold(robot, l, me, nominal);
         let x0 = [limited.u1 / m, l * limited.u2 / j];
-        let gamma = self.config.gain;
         self.rows.clear();
-        let min_distance = self.barriers(&own, neighbours, obstacles, |d, h, n| {
-            let a = own.row(d);
-            let (dpj, ddpj) = n.map_or(([0.0; 2], [0.0; 2]), |n| (n.dp, n.ddp));
-            let rel = [own.dp[0] - dpj[0], own.dp[1] - dpj[1]];
-            let dh = 2.0 * (d[0] * rel[0] + d[1] * rel[1]);
-            // Everything in ḧ + (γ + p) ḣ + γ p h that u does not move
-            // (ψ₁ = ḣ + γ h, ψ̇₁ + p ψ₁ ≥ 0).
-            let p = INNER_RATE.max(gamma);
-            let drift =
-                2.0 * (rel[0] * rel[0] + rel[1] * rel[1]) + (gamma + p) * dh + gamma * p * h;
-            let df = 2.0 * (d[0] * f[0] + d[1] * f[1]);
-            let b = match n {
-                Some(n) if n.cooperative => -df - 0.5 * drift,
-                _ => -df + 2.0 * (d[0] * ddpj[0] + d[1] * ddpj[1]) - drift,
-            };
-            Constraint { a, b }
-        });
+        let min_distance = self.second_order_barriers(&own, neighbours, obstacles, f, [1.0, 1.0]);
         // The speed envelope ([`Envelope`]) bounds what the QP may answer; a
         // nominal that satisfies every barrier passes as it is.
         let barriers = self.rows.len();
-        Envelope::DEFAULT.push_rows(&mut self.rows, robot, l, v, w);
+        let drag = [eta * v / m, psi * w / j];
+        Envelope::DEFAULT.push_rows(&mut self.rows, [1.0, 1.0 / l], drag, v, w);
         // Barriers and the envelope may give way in an emergency; the wheel
         // torque rows below may not.
         let soft_end = self.rows.len();
@@ -209,7 +206,9 @@ impl SafetyFilter {
         let braked = || {
             let brake = robot.brake(me);
             let xb = [brake.u1 / m, l * brake.u2 / j];
-            self.emergency(barriers, soft_end, x0, xb).map_or(brake, of)
+            let bound = [0, 1].map(|k| EMERGENCY_ACCEL.max(x0[k].abs()).max(xb[k].abs()));
+            self.emergency(barriers, soft_end, x0, [[0.0; 2], bound])
+                .map_or(brake, of)
         };
         Filtered::decided(decision, nominal, limited, min_distance, of, braked)
     }
@@ -217,26 +216,27 @@ impl SafetyFilter {
 
 impl SafetyFilter {
     /// The emergency action when no command satisfies every row (barriers
-    /// `..barriers`, the envelope `..soft_end`, the wheel-torque rows after):
-    /// the barriers alone, the envelope given up, within the hard rows; else
-    /// the command that breaks the barriers and the envelope least (one
-    /// shared slack) within them. The hard rows are the wheel-torque limits,
-    /// or for a robot without them the box `|x_k| ≤ max(EMERGENCY_ACCEL,
-    /// |x0_k|, |brake_k|)` (pushed here): a bounded action that still takes
-    /// the robot's share of every pair. A bare friction brake did not: a
-    /// robot that braked at 50 m/s² left the one behind it, which counts on
+    /// `..barriers`, the envelope `..soft_end`, the hard rows after): the
+    /// barriers alone, the envelope given up, within the hard rows; else the
+    /// command that breaks the barriers and the envelope least (one shared
+    /// slack) within them. The hard rows are the robot's own limits (wheel
+    /// torques; a velocity base's speeds and accelerations), or for a robot
+    /// without any the band `|x_k − centre_k| ≤ bound_k` of `fallback =
+    /// [centre, bound]` (pushed here; a torque-driven robot's is `|x_k| ≤
+    /// max(EMERGENCY_ACCEL, |x0_k|, |brake_k|)`): a bounded action that still
+    /// takes the robot's share of every pair. A bare friction brake did not:
+    /// a robot that braked at 50 m/s² left the one behind it, which counts on
     /// its half of their pair, to run into it (a randomized crossing came
     /// 255 mm inside a 0.35 m radius).
-    fn emergency(
+    pub(super) fn emergency(
         &mut self,
         barriers: usize,
         soft_end: usize,
         x0: [f64; 2],
-        brake: [f64; 2],
+        [centre, bound]: [[f64; 2]; 2],
     ) -> Option<[f64; 2]> {
         if self.rows.len() == soft_end {
-            let bound = [0, 1].map(|k| EMERGENCY_ACCEL.max(x0[k].abs()).max(brake[k].abs()));
-            push_box(&mut self.rows, bound);
+            push_band(&mut self.rows, centre, bound);
         }
         solve_split(&self.rows[..barriers], &self.rows[soft_end..], x0)
             .or_else(|| solve_relaxed(&self.rows, soft_end, x0))
@@ -249,6 +249,33 @@ mod tests {
 
     use super::*;
     use crate::safety::Outcome;
+
+    /// A non-finite nominal or state (a run blowing up) is passed on as it
+    /// is, for the divergence guard to report: no panic, no QP on it.
+    #[test]
+    fn non_finite_input_passes_through_unchanged() {
+        use crate::safety::SafetyConfig;
+        let l = 0.05;
+        let robot = RobotParams::AGENT1;
+        let other = State::at_rest(0.6, 0.0, std::f64::consts::PI);
+        let n = Neighbour::of_state(&other, l, None, true);
+        let config = SafetyConfig::new(0.3, 1.0, 2.0).unwrap();
+        let rest = State::at_rest(0.0, 0.0, 0.0);
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            for nominal in [Input { u1: bad, u2: 0.0 }, Input { u1: 1.0, u2: bad }] {
+                let out =
+                    SafetyFilter::new(config).torque(0.0, &rest, l, &robot, nominal, &[n], &[]);
+                assert_eq!(out.outcome, Outcome::Nominal);
+                assert_eq!(out.command.u1.to_bits(), nominal.u1.to_bits());
+                assert_eq!(out.command.u2.to_bits(), nominal.u2.to_bits());
+            }
+            let mut me = rest;
+            me.omega = bad;
+            let nominal = Input { u1: 5.0, u2: 0.0 };
+            let out = SafetyFilter::new(config).torque(0.0, &me, l, &robot, nominal, &[n], &[]);
+            assert_eq!((out.command, out.outcome), (nominal, Outcome::Nominal));
+        }
+    }
 
     mod properties {
         use super::*;

@@ -1,11 +1,23 @@
-//! The filter for velocity bases: `ḣ ≥ −γ h`, linear in `(v, ω)`, within
-//! the base's speed limits.
+//! The filter for velocity bases: without lag `ḣ ≥ −γ h`, linear in
+//! `(v, ω)`, within the base's speed limits; with a lag on either axis the
+//! exponential barrier of relative degree two (as for torques, `filter.rs`)
+//! on the lags' rates, the speed envelope ([`Envelope`]), and the base's
+//! speed and acceleration limits as hard rows.
 
 use super::filter::{Filtered, Own, SafetyFilter};
 use super::neighbour::{Neighbour, Obstacle};
-use super::qp::{Constraint, push_box, solve_relaxed};
+use super::qp::{Constraint, push_band, push_box, solve_relaxed};
+use super::torque::{EMERGENCY_ACCEL, Envelope};
 use crate::base::{VelocityBase, VelocityCommand};
 use crate::model::State;
+
+/// The lag, s, a velocity base's lag-free axis is taken to have when the
+/// other axis lags and the filter runs continuously (no period): its speed
+/// jumps to the command, which the barrier of relative degree two sees as a
+/// lag this short. With a controller period `T` the axis's lag is taken as
+/// `T` (the speed reaches the held command within one period; see
+/// `SafetyFilter::held_lag`).
+pub const STEP_LAG: f64 = 0.01;
 
 impl SafetyFilter {
     /// Filters a velocity base's command `nominal` at time `t` (s) for a robot
@@ -22,6 +34,14 @@ impl SafetyFilter {
         neighbours: &[Neighbour],
         obstacles: &[Obstacle],
     ) -> Filtered<VelocityCommand> {
+        if !(me.is_finite() && nominal.v.is_finite() && nominal.omega.is_finite()) {
+            // Diverged: the non-finite value goes on for the divergence
+            // guard to report (`crate::guard`), no QP on it.
+            return Filtered::passed(nominal);
+        }
+        if base.tau_v() > 0.0 || base.tau_omega() > 0.0 {
+            return self.lagged(t, me, l, nominal, base, neighbours, obstacles);
+        }
         let own = Own::ahead(me, l, 0.5 * self.period);
         let limited = base.limit(nominal).0;
         let x0 = [limited.v, l * limited.omega];
@@ -52,6 +72,102 @@ impl SafetyFilter {
         // even that fails.
         let braked =
             || solve_relaxed(&self.rows, barriers, x0).map_or(VelocityCommand::default(), of);
+        Filtered::decided(decision, nominal, limited, min_distance, of, braked)
+    }
+
+    /// The lag `τ` (s, 0: none) as the filter sees it when the command is
+    /// held for the period `T`: the lag whose rate `(x − v)/τ'` is the
+    /// speed's mean rate over the period, `τ' = T / (1 − e^{−T/τ})`
+    /// (`≈ τ + T/2`; `T` for an axis without lag, whose speed steps to the
+    /// command). Without a period, `τ` (a lag-free axis: [`STEP_LAG`]).
+    fn held_lag(&self, tau: f64) -> f64 {
+        let t = self.period;
+        match (t > 0.0, tau > 0.0) {
+            (true, _) => t / -(-t / tau).exp_m1(),
+            (false, true) => tau,
+            (false, false) => STEP_LAG,
+        }
+    }
+
+    /// [`SafetyFilter::velocity`] for a base with a lag on either axis: the
+    /// command `x = (v*, L ω*)` moves the speeds only through the lags,
+    /// `v̇ = (v* − v)/τ_v`, `ω̇ = (ω* − ω)/τ_ω` (`me` carries the actual
+    /// `v`, `ω`), so the point `L` ahead has relative degree two:
+    ///
+    /// ```text
+    /// p̈ = R(θ) (v̇ − L ω², L ω̇ + v ω) = f + R(θ) diag(1/τ_v, 1/τ_ω) x
+    /// f = R(θ) (−v/τ_v − L ω², v ω − L ω/τ_ω)
+    /// ```
+    ///
+    /// and the exponential barrier `ḧ + (γ + p) ḣ + γ p h ≥ 0` of the torque
+    /// filter applies ([`SafetyFilter::second_order_barriers`]), with the
+    /// speed envelope ([`Envelope`]: no reverse, the base's speeds) as soft
+    /// rows, and as hard rows the base's speed limits on the command and its
+    /// acceleration limits on the lags' response (`|v* − v| ≤ τ_v a_max`,
+    /// `|ω* − ω| ≤ τ_ω α_max`: within them the base responds as the lag says,
+    /// the joint scaling never acts). With the command held for a period the
+    /// lags are taken as seen over it ([`SafetyFilter::held_lag`]: a lag-free
+    /// axis lags by the period).
+    #[allow(clippy::too_many_arguments)]
+    fn lagged(
+        &mut self,
+        t: f64,
+        me: &State,
+        l: f64,
+        nominal: VelocityCommand,
+        base: &VelocityBase,
+        neighbours: &[Neighbour],
+        obstacles: &[Obstacle],
+    ) -> Filtered<VelocityCommand> {
+        let (tv, tw) = (self.held_lag(base.tau_v()), self.held_lag(base.tau_omega()));
+        let own = Own::ahead(me, l, 0.0);
+        let (v, w) = (me.v, me.omega);
+        let along = -v / tv - l * w * w;
+        let across = v * w - l * w / tw;
+        let f = [
+            along * own.cos - across * own.sin,
+            along * own.sin + across * own.cos,
+        ];
+        let limited = base.limit(nominal).0;
+        let x0 = [limited.v, l * limited.omega];
+        self.rows.clear();
+        let min_distance =
+            self.second_order_barriers(&own, neighbours, obstacles, f, [1.0 / tv, 1.0 / tw]);
+        let barriers = self.rows.len();
+        Envelope::lagged(base).push_rows(
+            &mut self.rows,
+            [1.0 / tv, 1.0 / (l * tw)],
+            [v / tv, w / tw],
+            v,
+            w,
+        );
+        let soft_end = self.rows.len();
+        // The hard rows: the speed limits on the command, the acceleration
+        // limits on the lags' response.
+        push_box(&mut self.rows, [base.v_max(), l * base.omega_max()]);
+        let reach = |tau: f64, max: f64| if max.is_finite() { tau * max } else { max };
+        push_band(
+            &mut self.rows,
+            [v, l * w],
+            [
+                reach(base.tau_v(), base.a_max()),
+                l * reach(base.tau_omega(), base.alpha_max()),
+            ],
+        );
+        let decision = self.decide(t, x0, barriers, [0.0, 0.0]);
+        let of = |x: [f64; 2]| VelocityCommand {
+            v: x[0],
+            omega: x[1] / l,
+        };
+        // No command satisfies every row: the barriers alone within the
+        // hard rows, else the least violation within them (a base without
+        // limits: within EMERGENCY_ACCEL of its speeds); zero if even that
+        // fails.
+        let braked = || {
+            let fallback = [[v, l * w], [tv * EMERGENCY_ACCEL, tw * EMERGENCY_ACCEL]];
+            self.emergency(barriers, soft_end, x0, fallback)
+                .map_or(VelocityCommand::default(), of)
+        };
         Filtered::decided(decision, nominal, limited, min_distance, of, braked)
     }
 }
@@ -123,6 +239,49 @@ mod tests {
         // The least violation within |v| ≤ 0.5: full speed straight back.
         assert!((out.command.v + 0.5).abs() < 1e-6, "{out:?}");
         assert!(out.command.omega.abs() < 1e-4, "{out:?}");
+    }
+
+    /// A non-finite nominal or state (a run blowing up) is passed on as it
+    /// is, for the divergence guard to report: no panic, no QP on it, on an
+    /// ideal base and on a lagged one.
+    #[test]
+    fn non_finite_input_passes_through_unchanged() {
+        let l = 0.05;
+        let n = Neighbour::of_state(
+            &State::at_rest(0.6, 0.0, std::f64::consts::PI),
+            l,
+            None,
+            true,
+        );
+        let rest = State::at_rest(0.0, 0.0, 0.0);
+        for base in [ideal(), VelocityBase::TURTLEBOT4] {
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+                let nominals = [
+                    VelocityCommand { v: bad, omega: 0.0 },
+                    VelocityCommand { v: 0.2, omega: bad },
+                ];
+                for nominal in nominals {
+                    let out = SafetyFilter::new(config()).velocity(
+                        0.0,
+                        &rest,
+                        l,
+                        nominal,
+                        &base,
+                        &[n],
+                        &[],
+                    );
+                    assert_eq!(out.outcome, Outcome::Nominal);
+                    assert_eq!(out.command.v.to_bits(), nominal.v.to_bits());
+                    assert_eq!(out.command.omega.to_bits(), nominal.omega.to_bits());
+                }
+                let mut me = rest;
+                me.v = bad;
+                let nominal = VelocityCommand { v: 0.5, omega: 0.0 };
+                let out =
+                    SafetyFilter::new(config()).velocity(0.0, &me, l, nominal, &base, &[n], &[]);
+                assert_eq!((out.command, out.outcome), (nominal, Outcome::Nominal));
+            }
+        }
     }
 
     mod properties {

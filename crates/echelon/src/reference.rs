@@ -292,7 +292,17 @@ pub struct Waypoints {
 }
 
 impl Waypoints {
-    /// Builds the spline through `points`, each `[t, x, y]`.
+    /// Shortest time between consecutive waypoints, s: closer ones ask the
+    /// spline for absurd speeds and its derivatives for absurd values.
+    pub const MIN_GAP: f64 = 1e-6;
+    /// Largest average speed between consecutive waypoints, m/s: the
+    /// plausible speed of a reference (the scenario's `reference.*.speed`).
+    pub const MAX_SPEED: f64 = 100.0;
+
+    /// Builds the spline through `points`, each `[t, x, y]`, refusing fewer
+    /// than two, a coordinate that is not finite, times that do not increase
+    /// by at least [`Self::MIN_GAP`] and an average speed between
+    /// consecutive points above [`Self::MAX_SPEED`].
     pub fn new(points: Vec<[f64; 3]>) -> Result<Waypoints, ReferenceError> {
         check_waypoints(&points)?;
         let t: Vec<f64> = points.iter().map(|p| p[0]).collect();

@@ -112,6 +112,30 @@ pub enum ReferenceError {
         /// `distance / (t − previous)`, m/s.
         speed: f64,
     },
+    /// The spline through waypoints within the speed limit on average that
+    /// still exceeds [`crate::reference::Waypoints::MAX_SPEED`] between two
+    /// of them (times unevenly spaced make it overshoot).
+    #[error(
+        "between waypoints {} and {index} (1-based; t = {} s and t = {} s) the path through the waypoints reaches {} m/s (at t = {} s), above the {} m/s a reference may have: space the waypoints more evenly in time",
+        .index - 1,
+        num(*.previous),
+        num(*.t),
+        num(*.speed),
+        num(*.at),
+        crate::reference::Waypoints::MAX_SPEED
+    )]
+    WaypointsOvershoot {
+        /// 1-based index of the later waypoint.
+        index: usize,
+        /// Its time, s.
+        t: f64,
+        /// The previous waypoint's time, s.
+        previous: f64,
+        /// When the speed is too high, s.
+        at: f64,
+        /// The speed there, m/s.
+        speed: f64,
+    },
 }
 
 /// A leader graph that is not a forest rooted at the reference.

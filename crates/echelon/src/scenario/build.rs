@@ -360,7 +360,8 @@ impl Builder<'_> {
                 ReferenceError::Param(p) => self.at.param(&section.join(p.field), &p),
                 ReferenceError::TimesNotIncreasing { index, .. }
                 | ReferenceError::WaypointsTooClose { index, .. }
-                | ReferenceError::WaypointsTooFast { index, .. } => {
+                | ReferenceError::WaypointsTooFast { index, .. }
+                | ReferenceError::WaypointsOvershoot { index, .. } => {
                     self.at.error(&section.key("points").index(index - 1), e)
                 }
                 ReferenceError::NonFiniteWaypoint {

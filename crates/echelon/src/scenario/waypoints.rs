@@ -52,7 +52,8 @@ impl Table {
         match e {
             ReferenceError::TimesNotIncreasing { index, .. }
             | ReferenceError::WaypointsTooClose { index, .. }
-            | ReferenceError::WaypointsTooFast { index, .. } => row(*index, 0),
+            | ReferenceError::WaypointsTooFast { index, .. }
+            | ReferenceError::WaypointsOvershoot { index, .. } => row(*index, 0),
             ReferenceError::NonFiniteWaypoint {
                 index, coordinate, ..
             } => row(*index, *coordinate),

@@ -329,8 +329,8 @@ impl Waypoints {
             for s in 1..Self::SPEED_SAMPLES {
                 let t = a + (b - a) * s as f64 / Self::SPEED_SAMPLES as f64;
                 let speed = self.x.eval(t)[1].hypot(self.y.eval(t)[1]);
-                // Not `speed > MAX`: NaN is refused too.
-                if !(speed <= Self::MAX_SPEED) {
+                // NaN (a spline that is not finite) is refused too.
+                if speed.is_nan() || speed > Self::MAX_SPEED {
                     return Err(ReferenceError::WaypointsOvershoot {
                         index: k + 2,
                         t: b,

@@ -297,8 +297,8 @@ pub(crate) fn check_waypoints(points: &[[f64; 3]]) -> Result<(), ReferenceError>
         }
         let distance = (p[1] - q[1]).hypot(p[2] - q[2]);
         let speed = distance / gap;
-        // Not `speed > MAX`: an overflowing distance is infinite, a speed NaN never.
-        if !(speed <= Waypoints::MAX_SPEED) {
+        // An overflowing distance is infinite; NaN is refused too.
+        if speed.is_nan() || speed > Waypoints::MAX_SPEED {
             return Err(ReferenceError::WaypointsTooFast {
                 index: i + 1,
                 t,

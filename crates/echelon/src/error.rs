@@ -3,6 +3,17 @@
 use std::borrow::Cow;
 use std::fmt;
 
+/// `v` for a message: plain, or in exponent form when very large or small
+/// (`1e30`, not thirty-one digits).
+pub(crate) fn num(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-3..1e5).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 /// A physical or control parameter with an impossible value.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{field} = {value}: {reason}")]
@@ -36,7 +47,11 @@ pub enum ReferenceError {
     #[error("a waypoint path needs at least 2 points, got {0}")]
     TooFewWaypoints(usize),
     /// Waypoint times not strictly increasing.
-    #[error("waypoint {index} (1-based) has time {t} s, not after the previous one ({previous} s)")]
+    #[error(
+        "waypoint {index} (1-based) has time {} s, not after the previous one ({} s)",
+        num(*.t),
+        num(*.previous)
+    )]
     TimesNotIncreasing {
         /// 1-based index of the offending waypoint.
         index: usize,
@@ -46,10 +61,80 @@ pub enum ReferenceError {
         previous: f64,
     },
     /// A waypoint coordinate that is not a finite number.
-    #[error("waypoint {index} (1-based) is not finite")]
+    #[error("waypoint {index} (1-based): its {} = {value} is not a finite number", ["t", "x", "y"][*.coordinate % 3])]
     NonFiniteWaypoint {
         /// 1-based index of the offending waypoint.
         index: usize,
+        /// Which coordinate: 0 for `t`, 1 for `x`, 2 for `y`.
+        coordinate: usize,
+        /// Its value.
+        value: f64,
+    },
+    /// Two consecutive waypoints closer in time than
+    /// [`crate::reference::Waypoints::MIN_GAP`]: the spline between them
+    /// would swing through absurd speeds.
+    #[error(
+        "waypoint {index} (1-based) at t = {} s is only {} s after waypoint {} at t = {} s: consecutive waypoints must be at least {} s apart",
+        num(*.t),
+        num(.t - .previous),
+        .index - 1,
+        num(*.previous),
+        num(crate::reference::Waypoints::MIN_GAP)
+    )]
+    WaypointsTooClose {
+        /// 1-based index of the later waypoint.
+        index: usize,
+        /// Its time, s.
+        t: f64,
+        /// The previous waypoint's time, s.
+        previous: f64,
+    },
+    /// Two consecutive waypoints whose distance over their time gap is an
+    /// average speed above [`crate::reference::Waypoints::MAX_SPEED`].
+    #[error(
+        "waypoints {} and {index} (1-based; t = {} s and t = {} s) are {} m apart: an average speed of {} m/s, above the {} m/s a reference may have",
+        .index - 1,
+        num(*.previous),
+        num(*.t),
+        num(*.distance),
+        num(*.speed),
+        crate::reference::Waypoints::MAX_SPEED
+    )]
+    WaypointsTooFast {
+        /// 1-based index of the later waypoint.
+        index: usize,
+        /// Its time, s.
+        t: f64,
+        /// The previous waypoint's time, s.
+        previous: f64,
+        /// Distance between the two, m.
+        distance: f64,
+        /// `distance / (t − previous)`, m/s.
+        speed: f64,
+    },
+    /// The spline through waypoints within the speed limit on average that
+    /// still exceeds [`crate::reference::Waypoints::MAX_SPEED`] between two
+    /// of them (times unevenly spaced make it overshoot).
+    #[error(
+        "between waypoints {} and {index} (1-based; t = {} s and t = {} s) the path through the waypoints reaches {} m/s (at t = {} s), above the {} m/s a reference may have: space the waypoints more evenly in time",
+        .index - 1,
+        num(*.previous),
+        num(*.t),
+        num(*.speed),
+        num(*.at),
+        crate::reference::Waypoints::MAX_SPEED
+    )]
+    WaypointsOvershoot {
+        /// 1-based index of the later waypoint.
+        index: usize,
+        /// Its time, s.
+        t: f64,
+        /// The previous waypoint's time, s.
+        previous: f64,
+        /// When the speed is too high, s.
+        at: f64,
+        /// The speed there, m/s.
+        speed: f64,
     },
 }
 

@@ -292,17 +292,56 @@ pub struct Waypoints {
 }
 
 impl Waypoints {
-    /// Builds the spline through `points`, each `[t, x, y]`.
+    /// Shortest time between consecutive waypoints, s: closer ones ask the
+    /// spline for absurd speeds and its derivatives for absurd values.
+    pub const MIN_GAP: f64 = 1e-6;
+    /// Largest speed of the spline, and so of the average between
+    /// consecutive waypoints, m/s: the plausible speed of a reference (the
+    /// scenario's `reference.*.speed`).
+    pub const MAX_SPEED: f64 = 100.0;
+    /// Times per segment the spline's speed is checked against [`Self::MAX_SPEED`].
+    pub const SPEED_SAMPLES: usize = 16;
+
+    /// Builds the spline through `points`, each `[t, x, y]`, refusing fewer
+    /// than two, a coordinate that is not finite, times that do not increase
+    /// by at least [`Self::MIN_GAP`], an average speed between consecutive
+    /// points above [`Self::MAX_SPEED`], and a spline that overshoots it.
     pub fn new(points: Vec<[f64; 3]>) -> Result<Waypoints, ReferenceError> {
         check_waypoints(&points)?;
         let t: Vec<f64> = points.iter().map(|p| p[0]).collect();
         let xs: Vec<f64> = points.iter().map(|p| p[1]).collect();
         let ys: Vec<f64> = points.iter().map(|p| p[2]).collect();
-        Ok(Waypoints {
+        let w = Waypoints {
             x: Septic::new(&t, &xs),
             y: Septic::new(&t, &ys),
             points,
-        })
+        };
+        w.check_speed()?;
+        Ok(w)
+    }
+
+    /// Refuses a spline faster than [`Self::MAX_SPEED`] anywhere (sampled
+    /// [`Self::SPEED_SAMPLES`] times per segment): waypoints unevenly spaced
+    /// in time make it overshoot far beyond their average speeds.
+    fn check_speed(&self) -> Result<(), ReferenceError> {
+        for (k, pair) in self.points.windows(2).enumerate() {
+            let (a, b) = (pair[0][0], pair[1][0]);
+            for s in 1..Self::SPEED_SAMPLES {
+                let t = a + (b - a) * s as f64 / Self::SPEED_SAMPLES as f64;
+                let speed = self.x.eval(t)[1].hypot(self.y.eval(t)[1]);
+                // NaN (a spline that is not finite) is refused too.
+                if speed.is_nan() || speed > Self::MAX_SPEED {
+                    return Err(ReferenceError::WaypointsOvershoot {
+                        index: k + 2,
+                        t: b,
+                        previous: a,
+                        at: t,
+                        speed,
+                    });
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The waypoints, `[t, x, y]` each.

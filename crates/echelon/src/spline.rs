@@ -10,6 +10,7 @@
 //! the system is square and banded, solved in O(n).
 
 use crate::error::ReferenceError;
+use crate::reference::Waypoints;
 
 /// Derivatives fixed at each knot (1: velocity, 2: acceleration, 3: jerk).
 const M: usize = 3;
@@ -258,20 +259,52 @@ impl Banded {
     }
 }
 
-/// Checks waypoint data: at least two points, finite, strictly increasing times.
+/// Checks waypoint data: at least two points, finite, strictly increasing
+/// times at least [`Waypoints::MIN_GAP`] apart, and no average speed between
+/// two consecutive points above [`Waypoints::MAX_SPEED`]. Indices in the
+/// errors are 1-based.
 pub(crate) fn check_waypoints(points: &[[f64; 3]]) -> Result<(), ReferenceError> {
     if points.len() < 2 {
         return Err(ReferenceError::TooFewWaypoints(points.len()));
     }
     for (i, p) in points.iter().enumerate() {
-        if !p.iter().all(|v| v.is_finite()) {
-            return Err(ReferenceError::NonFiniteWaypoint { index: i + 1 });
+        if let Some(coordinate) = p.iter().position(|v| !v.is_finite()) {
+            return Err(ReferenceError::NonFiniteWaypoint {
+                index: i + 1,
+                coordinate,
+                value: p[coordinate],
+            });
         }
-        if i > 0 && p[0] <= points[i - 1][0] {
+        let Some(q) = i.checked_sub(1).map(|k| points[k]) else {
+            continue;
+        };
+        let (t, previous) = (p[0], q[0]);
+        if t <= previous {
             return Err(ReferenceError::TimesNotIncreasing {
                 index: i + 1,
-                t: p[0],
-                previous: points[i - 1][0],
+                t,
+                previous,
+            });
+        }
+        // `t − previous` rounds: compare the gap as the spline will see it.
+        let gap = t - previous;
+        if gap < Waypoints::MIN_GAP {
+            return Err(ReferenceError::WaypointsTooClose {
+                index: i + 1,
+                t,
+                previous,
+            });
+        }
+        let distance = (p[1] - q[1]).hypot(p[2] - q[2]);
+        let speed = distance / gap;
+        // An overflowing distance is infinite; NaN is refused too.
+        if speed.is_nan() || speed > Waypoints::MAX_SPEED {
+            return Err(ReferenceError::WaypointsTooFast {
+                index: i + 1,
+                t,
+                previous,
+                distance,
+                speed,
             });
         }
     }
@@ -368,7 +401,65 @@ mod tests {
         ));
         assert!(matches!(
             check_waypoints(&[[0.0, 0.0, 0.0], [1.0, f64::NAN, 1.0]]),
-            Err(ReferenceError::NonFiniteWaypoint { index: 2 })
+            Err(ReferenceError::NonFiniteWaypoint {
+                index: 2,
+                coordinate: 1,
+                ..
+            })
         ));
+    }
+
+    proptest::proptest! {
+        /// Consecutive waypoints closer than `MIN_GAP` in time, or farther
+        /// apart than `MAX_SPEED` allows, are refused naming the later one;
+        /// any others are accepted and the spline through them is finite
+        /// (value and derivatives 1–4) everywhere.
+        #[test]
+        fn gaps_and_speeds_decide_and_the_accepted_spline_is_finite(
+            gaps in proptest::collection::vec(
+                proptest::prop_oneof![1 => 1e-12..1e-6f64, 4 => 1e-6..1e-3f64, 8 => 1e-3..1e4f64],
+                1..12,
+            ),
+            steps in proptest::collection::vec(
+                (-1.0..1.0f64, -1.0..1.0f64, proptest::prop_oneof![8 => 0.0..1.0f64, 1 => 1.0..1e9f64]),
+                12,
+            ),
+            t0 in -1e5..1e5f64,
+        ) {
+            // Each step's average speed is a factor of the limit, now and then above 1.
+            let mut points = vec![[t0, 0.0, 0.0]];
+            for (g, (dx, dy, f)) in gaps.iter().zip(&steps) {
+                let last = points[points.len() - 1];
+                let norm = dx.hypot(*dy).max(1e-12);
+                let d = f * Waypoints::MAX_SPEED * g;
+                points.push([last[0] + g, last[1] + d * dx / norm, last[2] + d * dy / norm]);
+            }
+            let first_bad = points.windows(2).position(|w| {
+                let gap = w[1][0] - w[0][0];
+                gap < Waypoints::MIN_GAP
+                    || (w[1][1] - w[0][1]).hypot(w[1][2] - w[0][2]) / gap > Waypoints::MAX_SPEED
+            });
+            match (check_waypoints(&points), first_bad) {
+                (Ok(()), None) => {
+                    let times: Vec<f64> = points.iter().map(|p| p[0]).collect();
+                    for k in [1, 2] {
+                        let values: Vec<f64> = points.iter().map(|p| p[k]).collect();
+                        let q = Septic::new(&times, &values);
+                        for w in times.windows(2) {
+                            for s in [0.0, 0.1, 0.5, 0.9] {
+                                let e = q.eval(w[0] + s * (w[1] - w[0]));
+                                proptest::prop_assert!(e.iter().all(|v| v.is_finite()), "{e:?} in {points:?}");
+                            }
+                        }
+                    }
+                }
+                (Err(
+                    ReferenceError::TimesNotIncreasing { index, .. }
+                    | ReferenceError::WaypointsTooClose { index, .. }
+                    | ReferenceError::WaypointsTooFast { index, .. },
+                ), Some(k)) => proptest::prop_assert_eq!(index, k + 2),
+                (got, want) => proptest::prop_assert!(false, "{got:?}, first bad pair {want:?}: {points:?}"),
+            }
+        }
     }
 }

@@ -10,6 +10,7 @@ use anyhow::{Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
+use echelon::ParamError;
 use echelon::odometry::ZetaModel;
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sweep::{self, Grid, GridSpec, Row};
@@ -74,6 +75,27 @@ pub(crate) struct SweepArgs {
     quiet: bool,
 }
 
+/// The flag that gives a [`GridSpec`] field.
+fn flag_of(field: &str) -> Option<&'static str> {
+    Some(match field {
+        "zeta" => "--zeta",
+        "wheel_diameter_ratio" => "--ed",
+        "wheelbase_ratio" => "--eb",
+        "slip" => "--slip",
+        "fix_every" => "--fix-every",
+        "seeds" => "--seeds",
+        "gamma" => "--gamma",
+        "transient" => "--transient",
+        _ => return None,
+    })
+}
+
+/// A grid value refused, named by its flag as a scenario's value set by a
+/// flag is (`command line: --gamma: 2 must be in (0, 1) …`).
+fn flag_error(flag: &str, e: &ParamError) -> anyhow::Error {
+    anyhow::anyhow!("command line: {flag}: {} {}", e.value, e.reason)
+}
+
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum ZetaArg {
     /// Eq. 23: the same ζ on both wheels; the heading stays exact.
@@ -105,6 +127,10 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         seeds: (a.seed..a.seed.saturating_add(a.seeds)).collect(),
         gamma: a.gamma,
         transient: a.transient.unwrap_or(0.5 * duration),
+    })
+    .map_err(|e| match flag_of(e.field) {
+        Some(flag) => flag_error(flag, &e),
+        None => e.into(),
     })?;
     let total = grid.cases().len();
     let pool = {
@@ -129,11 +155,19 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
     );
     bar.set_prefix(scenario.name().to_owned());
     let started = Instant::now();
-    let (rows, curves) = pool.install(|| {
-        let rows = sweep::run_all(&scenario, &overrides, &grid, &|| bar.inc(1))?;
-        let curves = sweep::drift_curves(&scenario, &overrides, &grid, 300)?;
-        Ok::<_, sweep::SweepError>((rows, curves))
-    })?;
+    let (rows, curves) = pool
+        .install(|| {
+            let rows = sweep::run_all(&scenario, &overrides, &grid, &|| bar.inc(1))?;
+            let curves = sweep::drift_curves(&scenario, &overrides, &grid, 300)?;
+            Ok::<_, sweep::SweepError>((rows, curves))
+        })
+        .map_err(|e| match e {
+            sweep::SweepError::Param(p) => match flag_of(p.field) {
+                Some(flag) => flag_error(flag, &p),
+                None => sweep::SweepError::Param(p).into(),
+            },
+            e => e.into(),
+        })?;
     let sweep::Sweep { rows, diverged } = rows;
     bar.finish_and_clear();
     let out = a

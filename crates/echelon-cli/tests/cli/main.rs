@@ -7,6 +7,7 @@ use std::process::{Command, Output};
 mod bench;
 mod bound;
 mod commands;
+mod newuser;
 mod refusals;
 mod run;
 mod sweep;

@@ -235,5 +235,6 @@ fn bad_flags_exit_2() {
         "--out",
         "/nonexistent/never",
     ]);
-    assert_refused(&o, &["log.dt", "--log-dt"]);
+    // The flag changed the step: it is named first, the file's log.dt after.
+    assert_refused(&o, &["command line: --dt: 0.003 s", "log.dt", "--log-dt"]);
 }

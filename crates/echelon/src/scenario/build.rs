@@ -36,7 +36,8 @@ impl Scenario {
     /// validates every value and resolves the [`Plan`].
     pub fn build(&self, ov: &Overrides) -> Result<Run, ScenarioError> {
         let mut file = self.file.clone();
-        let flags = ov.apply(&mut file);
+        let mut flags = self.flags.clone();
+        flags.extend(ov.apply(&mut file));
         let builder = Builder {
             file: &file,
             at: Locator::new(&self.source, &self.origin, &flags),
@@ -76,6 +77,26 @@ impl Builder<'_> {
         r.map_err(|e| self.at.param(&section.join(e.field), &e))
     }
 
+    /// The value at `path` refused against the step `sim.dt` (`e`): at
+    /// `path`, unless the command line set the step and not that value —
+    /// then at the step's flag (`--dt`), naming the value and where it is.
+    fn against_step(&self, path: &FieldPath, e: &ParamError) -> ScenarioError {
+        let step = FieldPath::from("sim.dt");
+        if self.at.flag(&step).is_none() || self.at.flag(path).is_some() {
+            return self.at.param(path, e);
+        }
+        self.at.error(
+            &step,
+            format!(
+                "{} s does not fit {path} ({}): {} {}",
+                self.file.sim.dt,
+                self.at.place(path),
+                e.value,
+                e.reason
+            ),
+        )
+    }
+
     /// The plan, the logging interval in steps, the seed and the
     /// warnings about gains the step cannot resolve.
     fn build(&self) -> Result<(Plan, u64, u64, Vec<String>), ScenarioError> {
@@ -85,7 +106,13 @@ impl Builder<'_> {
             None => Timing::Continuous,
             Some(period) => Timing::Sampled { period },
         };
-        let mut config = self.within(&sim, SimConfig::new(f.sim.dt, f.sim.duration, timing))?;
+        // `duration` (its number of steps) and `controller_period` are
+        // checked against the step.
+        let mut config =
+            SimConfig::new(f.sim.dt, f.sim.duration, timing).map_err(|e| match e.field {
+                "dt" => self.at.param(&sim.key("dt"), &e),
+                field => self.against_step(&sim.key(field), &e),
+            })?;
         if let Some(b) = f.sim.bounds {
             let d = Bounds::DEFAULT;
             let bounds = Bounds::new(
@@ -105,12 +132,24 @@ impl Builder<'_> {
             1
         } else {
             whole_ratio(log_dt, dt).ok_or_else(|| match f.log.dt {
-                Some(_) => self.at.error(
-                    &log,
-                    format!(
-                        "{log_dt} s is not 0 (every step) or a whole multiple of dt = {dt} s (on the command line: --log-dt)"
-                    ),
-                ),
+                Some(_) => {
+                    // Where the step and the period come from, if not the file.
+                    let hint = match (self.at.flag(&sim.key("dt")), self.at.flag(&log)) {
+                        (_, None) => " (on the command line: --log-dt)",
+                        (Some(_), Some(_)) => " (--dt)",
+                        (None, Some(_)) => "",
+                    };
+                    self.against_step(
+                        &log,
+                        &ParamError::new(
+                            "dt",
+                            log_dt,
+                            format!(
+                                "s is not 0 (every step) or a whole multiple of dt = {dt} s{hint}"
+                            ),
+                        ),
+                    )
+                }
                 // The default period is nowhere in the file: the step is.
                 None => self.at.error(
                     &sim.key("dt"),
@@ -226,6 +265,12 @@ impl Builder<'_> {
         }
         for (i, a) in f.agents.iter().enumerate() {
             let own = FieldPath::from("agents").index(i).key("safety");
+            if a.safety.is_some() && f.safety.is_none() {
+                return Err(self.at.error(
+                    &own,
+                    "an agent's safety settings refine the [safety] section, and there is none: add [safety] with radius = the smallest distance between two robots' points L ahead (m)",
+                ));
+            }
             if let Some(s) = &a.safety {
                 if s.radius.is_some() {
                     return Err(self.at.error(
@@ -314,9 +359,16 @@ impl Builder<'_> {
             match e {
                 ReferenceError::Param(p) => self.at.param(&section.join(p.field), &p),
                 ReferenceError::TimesNotIncreasing { index, .. }
-                | ReferenceError::NonFiniteWaypoint { index } => {
+                | ReferenceError::WaypointsTooClose { index, .. }
+                | ReferenceError::WaypointsTooFast { index, .. }
+                | ReferenceError::WaypointsOvershoot { index, .. } => {
                     self.at.error(&section.key("points").index(index - 1), e)
                 }
+                ReferenceError::NonFiniteWaypoint {
+                    index, coordinate, ..
+                } => self
+                    .at
+                    .error(&section.key("points").index(index - 1).index(coordinate), e),
                 ReferenceError::TooFewWaypoints(_) => self.at.error(&section.key("points"), e),
             }
         };
@@ -348,9 +400,15 @@ impl Builder<'_> {
             ),
             ReferenceSection::Waypoints { points, file } => {
                 let at = at("waypoints");
-                let pts = match (points, file) {
-                    (Some(p), None) => p.clone(),
-                    (None, Some(f)) => self.waypoint_file(f, &at.key("file"))?,
+                let path = match (points, file) {
+                    (Some(p), None) => {
+                        Waypoints::new(p.clone()).map_err(|e| located(at.clone(), e))?
+                    }
+                    // The CSV file's refusals are at its rows.
+                    (None, Some(f)) => {
+                        let table = self.waypoint_file(f, &at.key("file"))?;
+                        Waypoints::new(table.points.clone()).map_err(|e| table.error(&e))?
+                    }
                     (Some(_), Some(_)) => {
                         return Err(self
                             .at
@@ -360,20 +418,17 @@ impl Builder<'_> {
                         return Err(self.at.error(&at, "missing field `points` (or `file`)"));
                     }
                 };
-                let via_file = file.is_some();
-                Reference::Waypoints(Waypoints::new(pts).map_err(|e| {
-                    if via_file {
-                        self.at.error(&at.key("file"), e)
-                    } else {
-                        located(at.clone(), e)
-                    }
-                })?)
+                Reference::Waypoints(path)
             }
         })
     }
 
     /// Reads `t,x,y` rows from a CSV file next to the scenario.
-    fn waypoint_file(&self, name: &str, path: &FieldPath) -> Result<Vec<[f64; 3]>, ScenarioError> {
+    fn waypoint_file(
+        &self,
+        name: &str,
+        path: &FieldPath,
+    ) -> Result<waypoints::Table, ScenarioError> {
         let full = match self.base_dir {
             Some(d) => d.join(name),
             None => PathBuf::from(name),
@@ -424,7 +479,9 @@ impl Builder<'_> {
                 } else {
                     at.key("robot")
                 };
-                self.within(&path, r.base().check_step(dt))?;
+                r.base()
+                    .check_step(dt)
+                    .map_err(|e| self.against_step(&path.join(e.field), &e))?;
                 Drive::Velocity(r)
             }
             (Body::Torque(robot), Some((law, path))) => match law.variant() {

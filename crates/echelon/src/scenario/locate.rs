@@ -76,28 +76,39 @@ impl<'a> Locator<'a> {
     /// An error at `path`: `file:line:column: path: message`, or
     /// `command line: --flag: message` when a flag set the value.
     pub(crate) fn error(&self, path: &FieldPath, message: impl Display) -> ScenarioError {
-        if let Some((_, flag)) = self.flags.iter().find(|(p, _)| p == path) {
+        if let Some(flag) = self.flag(path) {
             return ScenarioError {
                 location: Location {
                     file: "command line".into(),
                     line: 0,
                     column: 0,
                 },
-                field: (*flag).to_owned(),
+                field: flag.to_owned(),
                 message: message.to_string(),
             };
         }
+        ScenarioError {
+            location: self.place(path),
+            field: path.to_string(),
+            message: message.to_string(),
+        }
+    }
+
+    /// The flag that set the value at `path`, if the command line did.
+    pub(crate) fn flag(&self, path: &FieldPath) -> Option<&'static str> {
+        self.flags.iter().find(|(p, _)| p == path).map(|(_, f)| *f)
+    }
+
+    /// Where `path` (or the deepest part of it that exists) is in the file:
+    /// `file:line:column`, or the file alone when none of it is.
+    pub(crate) fn place(&self, path: &FieldPath) -> Location {
         let (line, column) = Spans::new(self.source)
             .span_of(path)
             .map_or((0, 0), |s| line_col(self.source, s.start));
-        ScenarioError {
-            location: Location {
-                file: self.origin.to_owned(),
-                line,
-                column,
-            },
-            field: path.to_string(),
-            message: message.to_string(),
+        Location {
+            file: self.origin.to_owned(),
+            line,
+            column,
         }
     }
 

@@ -34,7 +34,7 @@ pub use fleet::{
     DEFAULT_REFERENCE_RATE, DEFAULT_STALE_AFTER, ENDPOINT_PROTOCOLS, FixSource, FleetSettings,
     LinkLoss, LinkPolicy, MAX_DOMAIN_ID, Ros2Link, check_endpoint, is_valid_fleet_name,
 };
-pub use overrides::Overrides;
+pub use overrides::{OdometryOverrides, Overrides};
 pub use plausible::{PLAUSIBLE, Plausible};
 
 use std::fmt::Display;
@@ -44,7 +44,7 @@ use crate::error::ScenarioError;
 use crate::plan::Plan;
 use crate::sim::Simulation;
 
-use locate::{FieldPath, Locator, whole_file_error};
+use locate::{FieldPath, Locator, Origins, whole_file_error};
 use merge::Merge;
 use schema::ScenarioFile;
 
@@ -60,6 +60,9 @@ pub struct Scenario {
     origin: String,
     source: String,
     base_dir: Option<PathBuf>,
+    /// Fields set on behalf of a command-line flag ([`OdometryOverrides`]),
+    /// whose errors name the flag.
+    flags: Origins,
 }
 
 /// A scenario ready to run.
@@ -113,6 +116,7 @@ impl Scenario {
             origin: origin.to_owned(),
             source: source.to_owned(),
             base_dir: base_dir.map(Path::to_path_buf),
+            flags: Origins::new(),
         })
     }
 

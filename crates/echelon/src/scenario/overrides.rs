@@ -4,9 +4,11 @@
 
 use std::fmt;
 
+use super::Scenario;
 use super::locate::{FieldPath, Origins};
-use super::schema::ScenarioFile;
+use super::schema::{FixesSection, OdometrySection, ScenarioFile};
 use crate::control::Variant;
+use crate::odometry::ZetaModel;
 
 /// Command-line style overrides of a scenario's settings.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -84,5 +86,89 @@ impl fmt::Display for Overrides {
         } else {
             f.write_str(&flags.join(" "))
         }
+    }
+}
+
+/// An odometry error model and fix interval written over the `[odometry]` and
+/// `[fixes]` of a scenario and of each agent that has its own (`echelon
+/// sweep`'s grid; the file's other odometry settings — period, ticks, noise,
+/// fix noise — are kept). A value refused names its flag.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryOverrides {
+    /// `ζ`, m per sample (`--zeta`).
+    pub zeta: f64,
+    /// How `ζ` enters (`--zeta-model`).
+    pub zeta_model: ZetaModel,
+    /// `E_d` (`--ed`).
+    pub wheel_diameter_ratio: f64,
+    /// `E_b` (`--eb`).
+    pub wheelbase_ratio: f64,
+    /// Slip variance, m²/m (`--slip`).
+    pub slip: f64,
+    /// Odometry samples between absolute fixes, 0: no fixes (`--fix-every`).
+    pub fix_every: u64,
+}
+
+impl OdometryOverrides {
+    /// The odometry fields set, with their flags.
+    const ODOMETRY: [(&'static str, &'static str); 5] = [
+        ("zeta", "--zeta"),
+        ("zeta_model", "--zeta-model"),
+        ("wheel_diameter_ratio", "--ed"),
+        ("wheelbase_ratio", "--eb"),
+        ("slip", "--slip"),
+    ];
+
+    fn odometry(&self, o: &mut OdometrySection) {
+        o.zeta = Some(self.zeta);
+        o.zeta_model = Some(self.zeta_model);
+        o.wheel_diameter_ratio = Some(self.wheel_diameter_ratio);
+        o.wheelbase_ratio = Some(self.wheelbase_ratio);
+        o.slip = Some(self.slip);
+    }
+
+    /// Sets the fixes; returns the field set.
+    fn fixes(&self, f: &mut FixesSection) -> &'static str {
+        if self.fix_every == 0 {
+            f.enabled = Some(false);
+            "enabled"
+        } else {
+            f.enabled = None;
+            f.every_steps = Some(self.fix_every);
+            f.period = None;
+            "every_steps"
+        }
+    }
+}
+
+impl Scenario {
+    /// This scenario with `o` written over its odometry and fixes.
+    pub fn with_odometry(&self, o: &OdometryOverrides) -> Scenario {
+        let mut s = self.clone();
+        let f = &mut s.file;
+        o.odometry(f.odometry.get_or_insert_with(Default::default));
+        let fixes_key = o.fixes(f.fixes.get_or_insert_with(Default::default));
+        let mut odometry_at = vec![FieldPath::from("odometry")];
+        let mut fixes_at = vec![FieldPath::from("fixes")];
+        for (i, a) in f.agents.iter_mut().enumerate() {
+            let agent = FieldPath::from("agents").index(i);
+            if let Some(odometry) = &mut a.odometry {
+                o.odometry(odometry);
+                odometry_at.push(agent.key("odometry"));
+            }
+            if let Some(fixes) = &mut a.fixes {
+                o.fixes(fixes);
+                fixes_at.push(agent.key("fixes"));
+            }
+        }
+        for table in odometry_at {
+            for (key, flag) in OdometryOverrides::ODOMETRY {
+                s.flags.push((table.key(key), flag));
+            }
+        }
+        for table in fixes_at {
+            s.flags.push((table.key(fixes_key), "--fix-every"));
+        }
+        s
     }
 }

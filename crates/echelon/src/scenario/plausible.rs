@@ -56,8 +56,9 @@ const fn warned(
 
 /// Largest plausible `|x|`, `|y|` of a position, m (1000 km).
 const POSITION: f64 = 1e6;
-/// Largest plausible speed, m/s.
-const SPEED: f64 = 100.0;
+/// Largest plausible speed, m/s: a reference's, which waypoints may not
+/// exceed on average either ([`crate::reference::Waypoints::MAX_SPEED`]).
+const SPEED: f64 = crate::reference::Waypoints::MAX_SPEED;
 /// Largest plausible turn rate, rad/s.
 const TURN_RATE: f64 = 1000.0;
 
@@ -288,16 +289,7 @@ fn numbers_in(v: &toml::Value, path: &mut FieldPath, out: &mut Vec<(FieldPath, f
     }
 }
 
-/// `v` for a message: plain, or in exponent form when very large or small
-/// (`1e30`, not thirty-one digits).
-pub(super) fn num(v: f64) -> String {
-    let a = v.abs();
-    if a != 0.0 && !(1e-3..1e5).contains(&a) {
-        format!("{v:e}")
-    } else {
-        format!("{v}")
-    }
-}
+pub(super) use crate::error::num;
 
 #[cfg(test)]
 mod tests {

@@ -35,7 +35,7 @@ use crate::error::{ParamError, ScenarioError, SimError};
 use crate::odometry::ZetaModel;
 use crate::odometry::bound::{KinematicTheorem2, Theorem2};
 use crate::scenario::schema::{FixesSection, Fusion, OdometrySection};
-use crate::scenario::{Overrides, Run, Scenario};
+use crate::scenario::{OdometryOverrides, Overrides, Run, Scenario};
 use crate::sim::{Frame, ObserverError};
 use crate::stats::Divergence;
 
@@ -291,37 +291,18 @@ impl Grid {
     }
 }
 
-/// The scenario with a case's odometry and fixes applied to every agent (the
-/// file's other odometry settings — period, ticks, noise, fix noise — are kept).
+/// The scenario with a case's odometry and fixes applied to every agent
+/// ([`Scenario::with_odometry`]: the file's other odometry settings — period,
+/// ticks, noise, fix noise — are kept; a refused value names its flag).
 pub fn apply(scenario: &Scenario, case: &Case, zeta_model: ZetaModel) -> Scenario {
-    let mut s = scenario.clone();
-    let set_odometry = |o: &mut OdometrySection| {
-        o.zeta = Some(case.zeta);
-        o.zeta_model = Some(zeta_model);
-        o.wheel_diameter_ratio = Some(case.wheel_diameter_ratio);
-        o.wheelbase_ratio = Some(case.wheelbase_ratio);
-        o.slip = Some(case.slip);
-    };
-    let set_fixes = |f: &mut FixesSection| {
-        if case.fix_every == 0 {
-            f.enabled = Some(false);
-        } else {
-            f.enabled = None;
-            f.every_steps = Some(case.fix_every);
-            f.period = None;
-        }
-    };
-    set_odometry(s.file.odometry.get_or_insert_with(Default::default));
-    set_fixes(s.file.fixes.get_or_insert_with(Default::default));
-    for a in &mut s.file.agents {
-        if let Some(o) = &mut a.odometry {
-            set_odometry(o);
-        }
-        if let Some(f) = &mut a.fixes {
-            set_fixes(f);
-        }
-    }
-    s
+    scenario.with_odometry(&OdometryOverrides {
+        zeta: case.zeta,
+        zeta_model,
+        wheel_diameter_ratio: case.wheel_diameter_ratio,
+        wheelbase_ratio: case.wheelbase_ratio,
+        slip: case.slip,
+        fix_every: case.fix_every,
+    })
 }
 
 /// The scenario of one case ([`apply`]), built with the case's seed.
@@ -509,8 +490,12 @@ fn outcomes(
     grid: &Grid,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Vec<Result<Row, SweepError>>, SweepError> {
-    // Build once up front so that a broken scenario fails before any work.
-    apply(scenario, &grid.cases()[0], grid.0.zeta_model).build(overrides)?;
+    // Build every error model up front (the seed changes no check) so that
+    // a broken scenario or a refused grid value fails before any work.
+    let seed = grid.0.seeds[0];
+    for case in grid.cases().iter().filter(|c| c.seed == seed) {
+        build_case(scenario, overrides, grid, case)?;
+    }
     Ok(grid
         .cases()
         .par_iter()

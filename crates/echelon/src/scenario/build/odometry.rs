@@ -50,14 +50,17 @@ impl Builder<'_> {
         if !odo.any() && !fixes_on {
             return Ok(None);
         }
+        // Whether the sampling period is the step's (a fixes' period must be a
+        // multiple of it: a refusal then may be the step's fault).
+        let is_step = odo.get(|s| s.period, "period").is_none() && *timing == Timing::Continuous;
         let period = match odo.get(|s| s.period, "period") {
             None => match timing {
                 Timing::Sampled { period } => *period,
                 Timing::Continuous => dt,
             },
             Some((p, path)) => {
-                let whole = check::multiple_of("period", p, dt, &format!("dt = {dt} s"));
-                self.at(&path, whole)?;
+                check::multiple_of("period", p, dt, &format!("dt = {dt} s"))
+                    .map_err(|e| self.against_step(&path, &e))?;
                 p
             }
         };
@@ -88,7 +91,7 @@ impl Builder<'_> {
             })
             .map_err(|e| self.at.param(&odo.path_of(e.field), &e))?;
         let fixes = if fixes_on {
-            Some(self.fixes(&fix, period)?)
+            Some(self.fixes(&fix, period, is_step)?)
         } else {
             None
         };
@@ -96,8 +99,14 @@ impl Builder<'_> {
         Ok(Some(self.at(&odo.table_path(), spec)?))
     }
 
-    /// The fixes that apply to one agent, sampled every `period` seconds.
-    fn fixes(&self, fix: &Merge<'_, FixesSection>, period: f64) -> Result<FixSpec, ScenarioError> {
+    /// The fixes that apply to one agent, sampled every `period` seconds
+    /// (`is_step`: the step `sim.dt`).
+    fn fixes(
+        &self,
+        fix: &Merge<'_, FixesSection>,
+        period: f64,
+        is_step: bool,
+    ) -> Result<FixSpec, ScenarioError> {
         let schedule = match (
             fix.get(|s| s.every_steps, "every_steps"),
             fix.get(|s| s.period, "period"),
@@ -121,7 +130,7 @@ impl Builder<'_> {
         let fusion = fix
             .get(|s| s.fusion, "fusion")
             .map_or(Fusion::Reset, |(f, _)| f);
-        FixSpec::new(schedule, fusion)
+        let spec = FixSpec::new(schedule, fusion)
             .and_then(|f| {
                 f.with_noise(
                     value(|s| s.position_noise, "position_noise").unwrap_or(0.0),
@@ -129,7 +138,15 @@ impl Builder<'_> {
                 )
             })
             .and_then(|f| f.with_latency(value(|s| s.latency, "latency").unwrap_or(0.0)))
-            .and_then(|f| f.samples_between(period).map(|_| f))
-            .map_err(|e| self.at.param(&fix.path_of(e.field), &e))
+            .map_err(|e| self.at.param(&fix.path_of(e.field), &e))?;
+        spec.samples_between(period).map_err(|e| {
+            let path = fix.path_of(e.field);
+            if is_step {
+                self.against_step(&path, &e)
+            } else {
+                self.at.param(&path, &e)
+            }
+        })?;
+        Ok(spec)
     }
 }

@@ -366,6 +366,29 @@ impl Drive {
         }
     }
 
+    /// `s` made consistent with `applied` (a velocity base's
+    /// [`crate::base::VelocityBase::settle`]: an axis without lag takes the
+    /// applied command's velocity, a lagged one stays within the speed
+    /// limits); a torque-driven robot's state is `s` as it is (eq. 3 has
+    /// nothing to settle).
+    #[inline]
+    pub fn settle(&self, s: &State, applied: &Actuation) -> State {
+        match self {
+            Drive::Torque { .. } => *s,
+            Drive::Velocity(r) => r.base().settle(s, applied.applied_velocity()),
+        }
+    }
+
+    /// One RK4 step of `h` from `s` with `applied` held (zero-order hold):
+    /// [`State::rk4_step`] over [`Drive::derivative`], then
+    /// [settled](Drive::settle). Eq. 3's
+    /// [`RobotParams::rk4_step`] on a torque-driven robot,
+    /// [`crate::base::VelocityBase::rk4_step`] on a velocity base, bit for bit.
+    #[inline]
+    pub fn rk4_step(&self, s: &State, applied: &Actuation, h: f64) -> State {
+        self.settle(&s.rk4_step(h, |x| self.derivative(x, applied)), applied)
+    }
+
     /// `[v, ω, in₁, in₂]`: the velocities the robot moves at in `s` under
     /// `applied`, and the input its plant receives (`u1, u2`, or the applied
     /// `v, ω` command).

@@ -13,7 +13,7 @@ use super::fixes::fix_type;
 use super::ground_truth_topic;
 use super::sim_base::{BaseCounters, SimBase};
 use crate::options::{ProcessOptions, Resolved};
-use crate::plant::SimulatedVelocityBase;
+use crate::plant::SimulatedDrive;
 use crate::robot::{PLANT_STEP, agent_spec};
 use crate::role::Member;
 use crate::runtime::{self, Flow, Outputs, Sample, Task};
@@ -149,7 +149,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         keys,
     } = opts.process.resolve()?;
     let spec = agent_spec(&plan, opts.agent)?;
-    let Drive::Velocity(robot) = &spec.drive() else {
+    let Drive::Velocity(_) = spec.drive() else {
         return Err(FleetError::Config(format!(
             "agent {}: a ROS 2 base is a velocity base (set drive = \"velocity\" on its robot)",
             opts.agent
@@ -189,7 +189,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                 &[(&link.cmd_vel, &cmd_vel_type(&link))],
                 |e| FleetError::Config(e.to_string()),
             )?;
-            let model = SimulatedVelocityBase::new(robot.base(), spec.start(), 0.0, PLANT_STEP);
+            let model = SimulatedDrive::of(&spec, 0.0, PLANT_STEP);
             let mut base =
                 SimBase::new(link.clone(), model, gids[0]).with_clock_offset(opts.clock_offset);
             if let Some((source, spec, period)) = &mocap {

@@ -5,7 +5,7 @@
 //! [`SimBase`] (sans-IO) takes `cmd_vel` samples ([`SimBase::on_cmd`]: the
 //! key's type and hash, the rmw_zenoh attachment, CDR and finiteness checked;
 //! anything else counted and refused), follows them through the agent's
-//! velocity-base model ([`SimulatedVelocityBase`]: lags, speed and
+//! velocity base, simulated ([`SimulatedDrive`]: lags, speed and
 //! acceleration limits), stops when no command arrived for `cmd_vel_timeout`,
 //! drops a stamped command older than `cmd_vel_timeout` by its own clock
 //! (the wall clock shifted by its clock offset; a zero stamp is "now"), as
@@ -30,7 +30,7 @@ use echelon::scenario::{FixSource, Ros2Link};
 use super::drive::decode_cmd_vel;
 use super::refusal::SampleRefusal;
 use crate::FleetError;
-use crate::plant::{Plant, SimulatedVelocityBase};
+use crate::plant::{Plant, SimulatedDrive};
 
 use echelon_ros2::attachment::{Attachment, Gid};
 use echelon_ros2::msgs::{Odometry, PoseStamped, PoseWithCovarianceStamped, RosMessage, Time};
@@ -108,7 +108,7 @@ impl OdomOut {
 #[derive(Debug, Clone)]
 pub struct SimBase {
     link: Ros2Link,
-    base: SimulatedVelocityBase,
+    base: SimulatedDrive,
     gid: Gid,
     seq: i64,
     truth_seq: i64,
@@ -173,8 +173,9 @@ struct Encoders {
 }
 
 impl SimBase {
-    /// A base for `link` moving as `base`, publishing odometry as `gid`.
-    pub fn new(link: Ros2Link, base: SimulatedVelocityBase, gid: Gid) -> Self {
+    /// A base for `link` moving as `base` (a velocity base: it is sent
+    /// velocity commands), publishing odometry as `gid`.
+    pub fn new(link: Ros2Link, base: SimulatedDrive, gid: Gid) -> Self {
         SimBase {
             link,
             base,
@@ -317,7 +318,7 @@ impl SimBase {
     }
 
     /// The simulated base.
-    pub fn base(&self) -> &SimulatedVelocityBase {
+    pub fn base(&self) -> &SimulatedDrive {
         &self.base
     }
 

@@ -7,8 +7,8 @@
 //! in between. Stepping is explicit ([`Simulation::step`]) over plain data; the
 //! same inputs give the same bits.
 
+use crate::agent::{Actuation, Command, Guard, Sight};
 use crate::agent::{AgentSpec, Drive};
-use crate::agent::{Command, Guard, Sight};
 use crate::error::SimError;
 use crate::formation::{Formation, Leader};
 use crate::model::State;
@@ -443,8 +443,8 @@ impl Simulation {
     }
 
     /// Makes each velocity base's state consistent with the command at the new
-    /// state ([`crate::base::VelocityBase::settle`]: an axis without lag takes
-    /// the command's velocity), evaluating the controllers there (in sampled
+    /// state ([`Drive::settle`]: an axis without lag takes the command's
+    /// velocity), evaluating the controllers there (in sampled
     /// mode, the held command or the new sample).
     fn settle(&mut self) {
         self.refresh();
@@ -454,8 +454,12 @@ impl Simulation {
     /// [`Simulation::settle`] under the commands in the outputs now.
     fn settle_to_outputs(&mut self) {
         for (i, a) in self.sys.plan.agents().iter().enumerate() {
-            if let (Drive::Velocity(r), Some(v)) = (a.drive(), self.out[i].velocity) {
-                self.state[i] = r.base().settle(&self.state[i], v.applied);
+            if let Some(v) = self.out[i].velocity {
+                let applied = Actuation {
+                    velocity: Some((v.applied, v.saturated)),
+                    ..Actuation::default()
+                };
+                self.state[i] = a.drive().settle(&self.state[i], &applied);
             }
         }
         self.fresh = false;

@@ -8,7 +8,7 @@ use crate::faults::FaultSpec;
 use crate::keys::Keys;
 use crate::leader::{Leader as ReferenceLeader, LeaderTask};
 use crate::link::predict;
-use crate::plant::SimulatedPlant;
+use crate::plant::SimulatedDrive;
 use crate::runtime::bus::{Bus, TaskId};
 use echelon::agent::Command;
 use echelon::follow::{LeaderView, follow};
@@ -201,7 +201,7 @@ fn reference_message(buf: &mut Vec<u8>, seq: u64, t: f64, reference: &Reference)
 /// A plant whose odometry can fail, recording what it is commanded.
 #[derive(Debug)]
 struct Flaky {
-    inner: SimulatedPlant,
+    inner: SimulatedDrive,
     lost: bool,
     commanded: Input,
 }
@@ -240,12 +240,7 @@ impl Plant for Flaky {
 fn commanded_robot(s: &Scenario) -> Robot<Flaky> {
     let config = crate::testing::robot_config(s, 1, FaultSpec::default());
     let plant = Flaky {
-        inner: SimulatedPlant::new(
-            *config.spec.torque_robot().unwrap(),
-            config.spec.start(),
-            0.0,
-            PLANT_STEP,
-        ),
+        inner: SimulatedDrive::of(&config.spec, 0.0, PLANT_STEP),
         lost: false,
         commanded: Input::default(),
     };

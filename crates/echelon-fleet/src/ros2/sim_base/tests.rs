@@ -1,6 +1,7 @@
 use super::*;
 use crate::ros2::drive::encode_cmd_vel;
-use echelon::base::VelocityBase;
+use echelon::agent::Drive;
+use echelon::base::VelocityRobot;
 use echelon::odometry::ErrorModel;
 use echelon::scenario::Scenario;
 use echelon_ros2::KeyScheme;
@@ -14,8 +15,8 @@ fn link() -> Ros2Link {
 }
 
 fn base() -> SimBase {
-    let model = SimulatedVelocityBase::new(
-        VelocityBase::IDEAL,
+    let model = SimulatedDrive::new(
+        Drive::Velocity(VelocityRobot::IDEAL),
         State::at_rest(0.0, 0.0, 0.0),
         0.0,
         1e-3,
@@ -168,8 +169,8 @@ fn stamped_run(stamp: echelon::scenario::schema::CmdVelStamp, offset: f64) -> (f
         ..link()
     };
     let key = topic_key(KeyScheme::RmwZenoh, 0, &l.cmd_vel, &TWIST_STAMPED);
-    let model = SimulatedVelocityBase::new(
-        VelocityBase::IDEAL,
+    let model = SimulatedDrive::new(
+        Drive::Velocity(VelocityRobot::IDEAL),
         State::at_rest(0.0, 0.0, 0.0),
         0.0,
         1e-3,

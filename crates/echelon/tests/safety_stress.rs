@@ -8,6 +8,7 @@
 //! places with their antipodes: points at least `radius − 1 mm` apart.
 #![allow(clippy::unwrap_used)]
 
+use echelon::base::{AccelLimit, VelocityBaseSpec};
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 use echelon::stats::SafetyWatch;
@@ -535,15 +536,7 @@ enum Lagged {
     /// `turtlebot3-burger`, `turtlebot4` or `jackal`.
     Preset(&'static str),
     /// `[robots.r]` on the ideal preset with these lags and limits.
-    Own {
-        tau_v: f64,
-        tau_omega: f64,
-        v_max: f64,
-        omega_max: f64,
-        a_max: f64,
-        alpha_max: f64,
-        per_axis: bool,
-    },
+    Own(VelocityBaseSpec),
 }
 
 /// `n` robots on a circle of radius `circle` (jittered), each holding the
@@ -569,27 +562,26 @@ impl Swap {
         );
         match self.base {
             Lagged::Preset(name) => s += &format!("[robots.r]\npreset = \"{name}\"\n"),
-            Lagged::Own {
-                tau_v,
-                tau_omega,
-                v_max,
-                omega_max,
-                a_max,
-                alpha_max,
-                per_axis,
-            } => {
+            Lagged::Own(b) => {
                 s += &format!(
-                    "[robots.r]\ndrive = \"velocity\"\npreset = \"ideal\"\ntau_v = {tau_v}\n\
-                     tau_omega = {tau_omega}\nv_max = {v_max}\nomega_max = {omega_max}\n\
-                     accel = \"{}\"\n",
-                    if per_axis { "per-axis" } else { "joint" }
+                    "[robots.r]\ndrive = \"velocity\"\npreset = \"ideal\"\ntau_v = {}\n\
+                     tau_omega = {}\nv_max = {}\nomega_max = {}\naccel = \"{}\"\n",
+                    b.tau_v,
+                    b.tau_omega,
+                    b.v_max,
+                    b.omega_max,
+                    if b.accel == AccelLimit::PerAxis {
+                        "per-axis"
+                    } else {
+                        "joint"
+                    }
                 );
                 // (an axis without lag has no acceleration to limit)
-                if tau_v > 0.0 {
-                    s += &format!("a_max = {a_max}\n");
+                if b.tau_v > 0.0 {
+                    s += &format!("a_max = {}\n", b.a_max);
                 }
-                if tau_omega > 0.0 {
-                    s += &format!("alpha_max = {alpha_max}\n");
+                if b.tau_omega > 0.0 {
+                    s += &format!("alpha_max = {}\n", b.alpha_max);
                 }
             }
         }
@@ -647,12 +639,12 @@ impl Swap {
     /// reached without reversing) and `a_max ≥ (γ + p) v_max`. The presets
     /// meet it for every gain up to 3/s.
     fn covered(&self) -> bool {
-        let Lagged::Own {
+        let Lagged::Own(VelocityBaseSpec {
             tau_v,
             v_max,
             a_max,
             ..
-        } = self.base
+        }) = self.base
         else {
             return true;
         };
@@ -778,15 +770,19 @@ fn random_lagged(lag_free: bool) -> BoxedStrategy<Lagged> {
         .prop_map(
             move |((tau_v, tau_omega, zero), (v_max, omega_max), (a_max, alpha_max, per_axis))| {
                 let zero = if lag_free { zero } else { 0 };
-                Lagged::Own {
+                Lagged::Own(VelocityBaseSpec {
                     tau_v: if zero == 1 { 0.0 } else { tau_v },
                     tau_omega: if zero == 2 { 0.0 } else { tau_omega },
                     v_max,
                     omega_max,
                     a_max,
                     alpha_max,
-                    per_axis,
-                }
+                    accel: if per_axis {
+                        AccelLimit::PerAxis
+                    } else {
+                        AccelLimit::Joint
+                    },
+                })
             },
         )
         .boxed()

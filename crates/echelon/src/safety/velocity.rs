@@ -19,6 +19,19 @@ use crate::model::State;
 /// `SafetyFilter::held_lag`).
 pub const STEP_LAG: f64 = 0.01;
 
+/// What [`SafetyFilter::velocity`] was given, handed on to the lagged
+/// base's filter.
+#[derive(Debug, Clone, Copy)]
+struct Call<'a> {
+    t: f64,
+    me: &'a State,
+    l: f64,
+    nominal: VelocityCommand,
+    base: &'a VelocityBase,
+    neighbours: &'a [Neighbour],
+    obstacles: &'a [Obstacle],
+}
+
 impl SafetyFilter {
     /// Filters a velocity base's command `nominal` at time `t` (s) for a robot
     /// in state `me` (its point `l` ahead): `ḣ ≥ −γ h` for every neighbour in
@@ -40,7 +53,15 @@ impl SafetyFilter {
             return Filtered::passed(nominal);
         }
         if base.tau_v() > 0.0 || base.tau_omega() > 0.0 {
-            return self.lagged(t, me, l, nominal, base, neighbours, obstacles);
+            return self.lagged(Call {
+                t,
+                me,
+                l,
+                nominal,
+                base,
+                neighbours,
+                obstacles,
+            });
         }
         let own = Own::ahead(me, l, 0.5 * self.period);
         let limited = base.limit(nominal).0;
@@ -108,17 +129,16 @@ impl SafetyFilter {
     /// the joint scaling never acts). With the command held for a period the
     /// lags are taken as seen over it ([`SafetyFilter::held_lag`]: a lag-free
     /// axis lags by the period).
-    #[allow(clippy::too_many_arguments)]
-    fn lagged(
-        &mut self,
-        t: f64,
-        me: &State,
-        l: f64,
-        nominal: VelocityCommand,
-        base: &VelocityBase,
-        neighbours: &[Neighbour],
-        obstacles: &[Obstacle],
-    ) -> Filtered<VelocityCommand> {
+    fn lagged(&mut self, call: Call<'_>) -> Filtered<VelocityCommand> {
+        let Call {
+            t,
+            me,
+            l,
+            nominal,
+            base,
+            neighbours,
+            obstacles,
+        } = call;
         let (tv, tw) = (self.held_lag(base.tau_v()), self.held_lag(base.tau_omega()));
         let own = Own::ahead(me, l, 0.0);
         let (v, w) = (me.v, me.omega);

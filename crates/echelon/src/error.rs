@@ -70,16 +70,16 @@ pub enum ReferenceError {
         /// Its value.
         value: f64,
     },
-    /// Two consecutive waypoints closer in time than
-    /// [`crate::reference::Waypoints::MIN_GAP`]: the spline between them
-    /// would swing through absurd speeds.
+    /// Two consecutive waypoints closer in time than `min_gap`
+    /// (`Waypoints::MIN_GAP`): the spline between them would swing through
+    /// absurd speeds.
     #[error(
         "waypoint {index} (1-based) at t = {} s is only {} s after waypoint {} at t = {} s: consecutive waypoints must be at least {} s apart",
         num(*.t),
         num(.t - .previous),
         .index - 1,
         num(*.previous),
-        num(crate::reference::Waypoints::MIN_GAP)
+        num(*.min_gap)
     )]
     WaypointsTooClose {
         /// 1-based index of the later waypoint.
@@ -88,9 +88,11 @@ pub enum ReferenceError {
         t: f64,
         /// The previous waypoint's time, s.
         previous: f64,
+        /// The shortest gap allowed, s.
+        min_gap: f64,
     },
     /// Two consecutive waypoints whose distance over their time gap is an
-    /// average speed above [`crate::reference::Waypoints::MAX_SPEED`].
+    /// average speed above `max_speed` (`Waypoints::MAX_SPEED`).
     #[error(
         "waypoints {} and {index} (1-based; t = {} s and t = {} s) are {} m apart: an average speed of {} m/s, above the {} m/s a reference may have",
         .index - 1,
@@ -98,7 +100,7 @@ pub enum ReferenceError {
         num(*.t),
         num(*.distance),
         num(*.speed),
-        crate::reference::Waypoints::MAX_SPEED
+        .max_speed
     )]
     WaypointsTooFast {
         /// 1-based index of the later waypoint.
@@ -111,10 +113,12 @@ pub enum ReferenceError {
         distance: f64,
         /// `distance / (t − previous)`, m/s.
         speed: f64,
+        /// The largest average speed allowed, m/s.
+        max_speed: f64,
     },
     /// The spline through waypoints within the speed limit on average that
-    /// still exceeds [`crate::reference::Waypoints::MAX_SPEED`] between two
-    /// of them (times unevenly spaced make it overshoot).
+    /// still exceeds `max_speed` (`Waypoints::MAX_SPEED`) between two of
+    /// them (times unevenly spaced make it overshoot).
     #[error(
         "between waypoints {} and {index} (1-based; t = {} s and t = {} s) the path through the waypoints reaches {} m/s (at t = {} s), above the {} m/s a reference may have: space the waypoints more evenly in time",
         .index - 1,
@@ -122,7 +126,7 @@ pub enum ReferenceError {
         num(*.t),
         num(*.speed),
         num(*.at),
-        crate::reference::Waypoints::MAX_SPEED
+        .max_speed
     )]
     WaypointsOvershoot {
         /// 1-based index of the later waypoint.
@@ -135,6 +139,8 @@ pub enum ReferenceError {
         at: f64,
         /// The speed there, m/s.
         speed: f64,
+        /// The largest speed allowed, m/s.
+        max_speed: f64,
     },
 }
 

@@ -10,7 +10,14 @@
 //! the system is square and banded, solved in O(n).
 
 use crate::error::ReferenceError;
-use crate::reference::Waypoints;
+
+/// Shortest time between consecutive waypoints, s: closer ones ask the
+/// spline for absurd speeds and its derivatives for absurd values.
+pub const MIN_GAP: f64 = 1e-6;
+/// Largest speed of the spline, and so of the average between consecutive
+/// waypoints, m/s: the plausible speed of a reference (the scenario's
+/// `reference.*.speed`).
+pub const MAX_SPEED: f64 = 100.0;
 
 /// Derivatives fixed at each knot (1: velocity, 2: acceleration, 3: jerk).
 const M: usize = 3;
@@ -260,8 +267,8 @@ impl Banded {
 }
 
 /// Checks waypoint data: at least two points, finite, strictly increasing
-/// times at least [`Waypoints::MIN_GAP`] apart, and no average speed between
-/// two consecutive points above [`Waypoints::MAX_SPEED`]. Indices in the
+/// times at least [`MIN_GAP`] apart, and no average speed between
+/// two consecutive points above [`MAX_SPEED`]. Indices in the
 /// errors are 1-based.
 pub(crate) fn check_waypoints(points: &[[f64; 3]]) -> Result<(), ReferenceError> {
     if points.len() < 2 {
@@ -288,23 +295,25 @@ pub(crate) fn check_waypoints(points: &[[f64; 3]]) -> Result<(), ReferenceError>
         }
         // `t − previous` rounds: compare the gap as the spline will see it.
         let gap = t - previous;
-        if gap < Waypoints::MIN_GAP {
+        if gap < MIN_GAP {
             return Err(ReferenceError::WaypointsTooClose {
                 index: i + 1,
                 t,
                 previous,
+                min_gap: MIN_GAP,
             });
         }
         let distance = (p[1] - q[1]).hypot(p[2] - q[2]);
         let speed = distance / gap;
         // An overflowing distance is infinite; NaN is refused too.
-        if speed.is_nan() || speed > Waypoints::MAX_SPEED {
+        if speed.is_nan() || speed > MAX_SPEED {
             return Err(ReferenceError::WaypointsTooFast {
                 index: i + 1,
                 t,
                 previous,
                 distance,
                 speed,
+                max_speed: MAX_SPEED,
             });
         }
     }
@@ -431,13 +440,13 @@ mod tests {
             for (g, (dx, dy, f)) in gaps.iter().zip(&steps) {
                 let last = points[points.len() - 1];
                 let norm = dx.hypot(*dy).max(1e-12);
-                let d = f * Waypoints::MAX_SPEED * g;
+                let d = f * MAX_SPEED * g;
                 points.push([last[0] + g, last[1] + d * dx / norm, last[2] + d * dy / norm]);
             }
             let first_bad = points.windows(2).position(|w| {
                 let gap = w[1][0] - w[0][0];
-                gap < Waypoints::MIN_GAP
-                    || (w[1][1] - w[0][1]).hypot(w[1][2] - w[0][2]) / gap > Waypoints::MAX_SPEED
+                gap < MIN_GAP
+                    || (w[1][1] - w[0][1]).hypot(w[1][2] - w[0][2]) / gap > MAX_SPEED
             });
             match (check_waypoints(&points), first_bad) {
                 (Ok(()), None) => {

@@ -292,10 +292,12 @@ pub struct Waypoints {
 }
 
 impl Waypoints {
-    /// Shortest time between consecutive waypoints, s
-    /// ([`crate::spline::MIN_GAP`]).
+    /// Shortest time between consecutive waypoints, s: closer ones ask the
+    /// spline for absurd speeds and its derivatives for absurd values.
     pub const MIN_GAP: f64 = crate::spline::MIN_GAP;
-    /// Largest speed of the spline, m/s ([`crate::spline::MAX_SPEED`]).
+    /// Largest speed of the spline, and so of the average between
+    /// consecutive waypoints, m/s: the plausible speed of a reference (the
+    /// scenario's `reference.*.speed`).
     pub const MAX_SPEED: f64 = crate::spline::MAX_SPEED;
     /// Times per segment the spline's speed is checked against [`Self::MAX_SPEED`].
     pub const SPEED_SAMPLES: usize = 16;

@@ -13,11 +13,11 @@ use crate::error::ReferenceError;
 
 /// Shortest time between consecutive waypoints, s: closer ones ask the
 /// spline for absurd speeds and its derivatives for absurd values.
-pub const MIN_GAP: f64 = 1e-6;
+pub(crate) const MIN_GAP: f64 = 1e-6;
 /// Largest speed of the spline, and so of the average between consecutive
 /// waypoints, m/s: the plausible speed of a reference (the scenario's
 /// `reference.*.speed`).
-pub const MAX_SPEED: f64 = 100.0;
+pub(crate) const MAX_SPEED: f64 = 100.0;
 
 /// Derivatives fixed at each knot (1: velocity, 2: acceleration, 3: jerk).
 const M: usize = 3;

@@ -409,7 +409,15 @@ impl PyScenario {
             gamma: g.gamma,
             transient: g.transient.unwrap_or(0.5 * duration),
         })
-        .map_err(|e| errors::param(&e))?;
+        .map_err(|mut e| {
+            // Named by the grid key that set it, as Python spells it.
+            e.field = match e.field {
+                "wheel_diameter_ratio" => "ed",
+                "wheelbase_ratio" => "eb",
+                field => field,
+            };
+            errors::param(&e)
+        })?;
         Ok((grid, ov.resolve()?))
     }
 }

@@ -63,3 +63,25 @@ def test_bad_grids_are_refused():
         echelon.sweep(s, gamma=2.0)
     with pytest.raises(ValueError, match="executor"):
         echelon.sweep(s, executor="dask")
+
+
+@pytest.mark.parametrize(
+    "key, value", [("zeta", 1e300), ("ed", 1e9), ("slip", 1e300), ("fix_every", 10_000_000_000)]
+)
+def test_a_value_the_scenario_refuses_names_its_grid_key_as_python_spells_it(key, value):
+    s = echelon.Scenario.builtin("fix-study", duration=1)
+    with pytest.raises(echelon.ScenarioError) as raised:
+        echelon.sweep(s, {key: [value]}, seeds=1)
+    e = raised.value
+    assert (e.file, e.field, e.line, e.column) == ("arguments", key, 0, 0), str(e)
+    assert str(e).startswith(f"arguments: {key}: "), str(e)
+
+
+@pytest.mark.parametrize(
+    "key, value", [("zeta", -1.0), ("ed", 0.0), ("eb", -1.0), ("slip", float("nan"))]
+)
+def test_a_value_the_grid_refuses_names_its_grid_key_as_python_spells_it(key, value):
+    s = echelon.Scenario.builtin("fix-study", duration=1)
+    with pytest.raises(ValueError, match=f"^{key} = ") as raised:
+        echelon.sweep(s, {key: [value]}, seeds=1)
+    assert not isinstance(raised.value, echelon.ScenarioError)

@@ -454,6 +454,7 @@ pub fn run(
 ) -> Result<Vec<Row>, SweepError> {
     outcomes(scenario, overrides, grid, progress)?
         .into_iter()
+        .map(|(_, row)| row)
         .collect()
 }
 
@@ -467,10 +468,7 @@ pub fn run_all(
     progress: &(dyn Fn() + Sync),
 ) -> Result<Sweep, SweepError> {
     let mut sweep = Sweep::default();
-    for (outcome, case) in outcomes(scenario, overrides, grid, progress)?
-        .into_iter()
-        .zip(grid.cases())
-    {
+    for (case, outcome) in outcomes(scenario, overrides, grid, progress)? {
         match outcome {
             Ok(row) => sweep.rows.push(row),
             Err(SweepError::Sim(e)) => match Divergence::of(&e) {
@@ -483,26 +481,26 @@ pub fn run_all(
     Ok(sweep)
 }
 
-/// Every case's outcome, in grid order.
+/// Every case with its outcome, in grid order.
 fn outcomes(
     scenario: &Scenario,
     overrides: &Overrides,
     grid: &Grid,
     progress: &(dyn Fn() + Sync),
-) -> Result<Vec<Result<Row, SweepError>>, SweepError> {
+) -> Result<Vec<(Case, Result<Row, SweepError>)>, SweepError> {
+    let cases = grid.cases();
     // Build every error model up front (the seed changes no check) so that
     // a broken scenario or a refused grid value fails before any work.
     let seed = grid.0.seeds[0];
-    for case in grid.cases().iter().filter(|c| c.seed == seed) {
+    for case in cases.iter().filter(|c| c.seed == seed) {
         build_case(scenario, overrides, grid, case)?;
     }
-    Ok(grid
-        .cases()
-        .par_iter()
+    Ok(cases
+        .into_par_iter()
         .map(|case| {
-            let row = run_case(scenario, overrides, grid, case);
+            let row = run_case(scenario, overrides, grid, &case);
             progress();
-            row
+            (case, row)
         })
         .collect())
 }

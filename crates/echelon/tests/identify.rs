@@ -859,18 +859,6 @@ fn nonfeasible_agent2_logged_every_10_ms_is_exact_with_its_integrals_and_withhel
     );
 }
 
-/// A ROS 2 bag's velocity-base log as `echelon identify` builds it
-/// (echelon-mcap's `velocity_log`, rebuilt here on the same rules): a base
-/// with lags `taus` integrated exactly on a 1 ms grid, commands published
-/// every `cmd_ms` (random steps held 0.3–1.5 s, a chirp of ω in the middle
-/// third, a stop for the last second, as `scripts/ros2/lagged_base_bag.py`),
-/// odometry every `odom_ms` offset by `offset_ms` with noise σ_v = 0.01 m/s,
-/// σ_ω = 0.02 rad/s (noise-free when `seed` is `None`); the base's
-/// [`Quirks`]: it applies each command `late_ms` after its stamp (latency),
-/// and clamps each axis's rate at `a_max` (per axis, as
-/// diff_drive_controller's speed limiter). The grid is the
-/// odometry's times, the input of each interval the commands' hold averaged
-/// over it, and `hold` the command messages themselves.
 /// What a [`bag_log`]'s base does beyond its lags.
 #[derive(Debug, Clone, Copy)]
 struct Quirks {
@@ -888,6 +876,18 @@ impl Quirks {
     };
 }
 
+/// A ROS 2 bag's velocity-base log as `echelon identify` builds it
+/// (echelon-mcap's `velocity_log`, rebuilt here on the same rules): a base
+/// with lags `taus` integrated exactly on a 1 ms grid, commands published
+/// every `cmd_ms` (random steps held 0.3–1.5 s, a chirp of ω in the middle
+/// third, a stop for the last second, as `scripts/ros2/lagged_base_bag.py`),
+/// odometry every `odom_ms` offset by `offset_ms` with noise σ_v = 0.01 m/s,
+/// σ_ω = 0.02 rad/s (noise-free when `seed` is `None`); the base's
+/// [`Quirks`]: it applies each command `late_ms` after its stamp (latency),
+/// and clamps each axis's rate at `a_max` (per axis, as
+/// diff_drive_controller's speed limiter). The grid is the
+/// odometry's times, the input of each interval the commands' hold averaged
+/// over it, and `hold` the command messages themselves.
 fn bag_log(
     taus: [f64; 2],
     cmd_ms: usize,
@@ -991,6 +991,51 @@ fn bag_log(
     log
 }
 
+/// The velocity lags `[τ_v, τ_ω]` identified from [`bag_log`]'s noise-free
+/// log and its [`SEEDS`] noisy ones (commands every 50 ms, odometry every
+/// `odom_ms` + `offset` ms, the base's `quirks`), tallied against `truth`:
+/// one tally per lag.
+fn tally_bag_lags(
+    truth: [f64; 2],
+    odom_ms: usize,
+    offset: usize,
+    profile: u64,
+    quirks: Quirks,
+) -> Vec<(&'static str, Tally)> {
+    let mut tallies: Vec<(&'static str, Tally)> = ["tau_v", "tau_omega"]
+        .map(|f| (f, Tally::default()))
+        .to_vec();
+    let logs = std::iter::once(None).chain((0..SEEDS).map(|s| Some(profile * 100 + s)));
+    for seed in logs {
+        let log = bag_log(truth, 50, odom_ms, offset, profile, seed, quirks);
+        let id = identify::identify(&log, Model::Velocity);
+        for (want, (field, t)) in truth.iter().zip(tallies.iter_mut()) {
+            let p = id
+                .as_ref()
+                .ok()
+                .and_then(|id| id.params.iter().find(|p| p.field == *field));
+            match p.and_then(|p| p.estimate) {
+                Some(e) if seed.is_none() => t.clean = Some((e.value / want - 1.0).abs()),
+                Some(e) => {
+                    t.printed += 1;
+                    t.covered += usize::from(e.contains(*want));
+                    t.worst = t.worst.max((e.value / want - 1.0).abs());
+                }
+                None => {
+                    let why = match (&id, p) {
+                        (Err(e), _) => e.to_string(),
+                        (Ok(_), p) => p
+                            .and_then(|p| p.not_identifiable.clone())
+                            .unwrap_or_default(),
+                    };
+                    t.why.get_or_insert(why);
+                }
+            }
+        }
+    }
+    tallies
+}
+
 proptest! {
     // 12 cases × (noise-free + 50 seeds): ROS 2 bags at 20 and 50 Hz
     // odometry, 20 Hz commands, lags 0.05–0.4 s.
@@ -1005,38 +1050,11 @@ proptest! {
     ) {
         let odom_ms = if fifty { 20 } else { 50 };
         let offset = offset % odom_ms;
-        let truth = [("tau_v", tau_v), ("tau_omega", tau_w)];
         let case = format!("τ = {tau_v:.3}, {tau_w:.3} s, odometry every {odom_ms} ms + {offset}");
+        let tallies = tally_bag_lags([tau_v, tau_w], odom_ms, offset, profile, Quirks::NONE);
         // Noise-free: exact, through the hold.
-        let clean = bag_log([tau_v, tau_w], 50, odom_ms, offset, profile, None, Quirks::NONE);
-        let id = identify::identify(&clean, Model::Velocity).unwrap();
-        let mut tallies: Vec<(&'static str, Tally)> =
-            truth.iter().map(|(f, _)| (*f, Tally::default())).collect();
-        for ((field, want), (_, t)) in truth.iter().zip(tallies.iter_mut()) {
-            let e = id.get(field).unwrap_or_else(|| panic!("{case}: {field} {:?}", id.warnings));
-            prop_assert!((e.value / want - 1.0).abs() < 1e-6, "{case}: {field} {e:?}");
-            t.clean = Some((e.value / want - 1.0).abs());
-        }
-        for seed in 0..SEEDS {
-            let log = bag_log([tau_v, tau_w], 50, odom_ms, offset, profile, Some(profile * 100 + seed), Quirks::NONE);
-            let id = identify::identify(&log, Model::Velocity);
-            for ((field, want), (_, t)) in truth.iter().zip(tallies.iter_mut()) {
-                let Ok(id) = &id else {
-                    t.why.get_or_insert_with(|| format!("{:?}", id.as_ref().err()));
-                    continue;
-                };
-                let p = id.params.iter().find(|p| p.field == *field).unwrap();
-                match p.estimate {
-                    Some(e) => {
-                        t.printed += 1;
-                        t.covered += usize::from(e.contains(*want));
-                        t.worst = t.worst.max((e.value / want - 1.0).abs());
-                    }
-                    None => {
-                        t.why.get_or_insert_with(|| p.not_identifiable.clone().unwrap_or_default());
-                    }
-                }
-            }
+        for (field, t) in &tallies {
+            prop_assert!(t.clean.is_some_and(|e| e < 1e-6), "{case}: {field} {t:?}");
         }
         eprintln!("{case}: {tallies:?}");
         let pooled = assert_tallies(&case, 1, &tallies);
@@ -1065,36 +1083,11 @@ proptest! {
         let odom_ms = if fifty { 20 } else { 50 };
         let offset = offset % odom_ms;
         let quirks = Quirks { a_max: [cut * 1.0 / tau_v, cut * 2.4 / tau_w], ..Quirks::NONE };
-        let truth = [("tau_v", tau_v), ("tau_omega", tau_w)];
         let case = format!(
             "τ = {tau_v:.3}, {tau_w:.3} s, a_max = {:.2}, {:.2}, odometry every {odom_ms} ms + {offset}, profile {profile}",
             quirks.a_max[0], quirks.a_max[1]
         );
-        let mut tallies: Vec<(&'static str, Tally)> =
-            truth.iter().map(|(f, _)| (*f, Tally::default())).collect();
-        let logs = std::iter::once(None).chain((0..SEEDS).map(|s| Some(profile * 100 + s)));
-        for seed in logs {
-            let log = bag_log([tau_v, tau_w], 50, odom_ms, offset, profile, seed, quirks);
-            let id = identify::identify(&log, Model::Velocity);
-            for ((field, want), (_, t)) in truth.iter().zip(tallies.iter_mut()) {
-                let p = id.as_ref().ok().and_then(|id| id.params.iter().find(|p| p.field == *field));
-                match p.and_then(|p| p.estimate) {
-                    Some(e) if seed.is_none() => t.clean = Some((e.value / want - 1.0).abs()),
-                    Some(e) => {
-                        t.printed += 1;
-                        t.covered += usize::from(e.contains(*want));
-                        t.worst = t.worst.max((e.value / want - 1.0).abs());
-                    }
-                    None => {
-                        let why = match (&id, p) {
-                            (Err(e), _) => e.to_string(),
-                            (Ok(_), p) => p.and_then(|p| p.not_identifiable.clone()).unwrap_or_default(),
-                        };
-                        t.why.get_or_insert(why);
-                    }
-                }
-            }
-        }
+        let tallies = tally_bag_lags([tau_v, tau_w], odom_ms, offset, profile, quirks);
         eprintln!("{case}: {tallies:?}");
         let pooled = assert_tallies(&case, 1, &tallies);
         assert_pooled(&case, pooled);

@@ -32,6 +32,37 @@ fn decode_every_way(bytes: &[u8]) {
     let _ = Attachment::decode(bytes);
 }
 
+/// Every number of an odometry message, in wire order: the pose (position,
+/// orientation), its covariance, the twist (linear, angular), its covariance.
+fn numbers_mut(odom: &mut Odometry) -> Vec<&mut f64> {
+    let (p, t) = (&mut odom.pose, &mut odom.twist);
+    let Point { x, y, z } = &mut p.pose.position;
+    let Quaternion {
+        x: qx,
+        y: qy,
+        z: qz,
+        w: qw,
+    } = &mut p.pose.orientation;
+    let Vector3 {
+        x: vx,
+        y: vy,
+        z: vz,
+    } = &mut t.twist.linear;
+    let Vector3 {
+        x: wx,
+        y: wy,
+        z: wz,
+    } = &mut t.twist.angular;
+    let numbers: Vec<&mut f64> = [x, y, z, qx, qy, qz, qw]
+        .into_iter()
+        .chain(&mut p.covariance)
+        .chain([vx, vy, vz, wx, wy, wz])
+        .chain(&mut t.covariance)
+        .collect();
+    assert_eq!(numbers.len(), 3 + 4 + 36 + 6 + 36);
+    numbers
+}
+
 /// Any f64 bit pattern: NaNs, infinities, subnormals, -0.
 fn any_f64() -> impl Strategy<Value = f64> + Clone {
     prop_oneof![
@@ -159,30 +190,13 @@ proptest! {
     #[test]
     fn a_non_finite_number_anywhere_is_reported(
         odom in odometry(finite_f64()),
-        slot in 0usize..(3 + 4 + 36 + 6 + 36),
+        slot in any::<prop::sample::Index>(),
         bad in prop_oneof![Just(f64::NAN), Just(f64::INFINITY), Just(f64::NEG_INFINITY)],
     ) {
         let mut odom = odom;
-        let p = &mut odom.pose;
-        let t = &mut odom.twist;
-        let target: &mut f64 = match slot {
-            0 => &mut p.pose.position.x,
-            1 => &mut p.pose.position.y,
-            2 => &mut p.pose.position.z,
-            3 => &mut p.pose.orientation.x,
-            4 => &mut p.pose.orientation.y,
-            5 => &mut p.pose.orientation.z,
-            6 => &mut p.pose.orientation.w,
-            7..=42 => &mut p.covariance[slot - 7],
-            43 => &mut t.twist.linear.x,
-            44 => &mut t.twist.linear.y,
-            45 => &mut t.twist.linear.z,
-            46 => &mut t.twist.angular.x,
-            47 => &mut t.twist.angular.y,
-            48 => &mut t.twist.angular.z,
-            _ => &mut t.covariance[slot - 49],
-        };
-        *target = bad;
+        let mut numbers = numbers_mut(&mut odom);
+        let slot = slot.index(numbers.len());
+        *numbers[slot] = bad;
         let refused = matches!(Odometry::from_cdr_finite(&odom.to_cdr()), Err(CdrError::NonFinite { .. }));
         prop_assert!(refused);
         prop_assert!(Odometry::from_cdr(&odom.to_cdr()).is_ok());

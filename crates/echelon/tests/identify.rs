@@ -991,6 +991,23 @@ fn bag_log(
     log
 }
 
+/// The bags the lag properties draw: lags `[τ_v, τ_ω]` of 0.05–0.4 s,
+/// odometry every 20 or 50 ms offset by a whole ms within that, and the
+/// seed of the command profile.
+fn bag_case() -> impl Strategy<Value = ([f64; 2], usize, usize, u64)> {
+    (
+        0.05_f64..0.4,
+        0.05_f64..0.4,
+        any::<bool>(),
+        1_usize..20,
+        0_u64..1000,
+    )
+        .prop_map(|(tau_v, tau_w, fifty, offset, profile)| {
+            let odom_ms = if fifty { 20 } else { 50 };
+            ([tau_v, tau_w], odom_ms, offset % odom_ms, profile)
+        })
+}
+
 /// The velocity lags `[τ_v, τ_ω]` identified from [`bag_log`]'s noise-free
 /// log and its [`SEEDS`] noisy ones (commands every 50 ms, odometry every
 /// `odom_ms` + `offset` ms, the base's `quirks`), tallied against `truth`:
@@ -1042,14 +1059,8 @@ proptest! {
     #![proptest_config(fixed_sample(12, 22))]
     #[test]
     fn ros2_bag_lags_at_20_and_50_hz_within_2_percent_and_covered(
-        tau_v in 0.05_f64..0.4,
-        tau_w in 0.05_f64..0.4,
-        fifty in any::<bool>(),
-        offset in 1_usize..20,
-        profile in 0_u64..1000,
+        ([tau_v, tau_w], odom_ms, offset, profile) in bag_case(),
     ) {
-        let odom_ms = if fifty { 20 } else { 50 };
-        let offset = offset % odom_ms;
         let case = format!("τ = {tau_v:.3}, {tau_w:.3} s, odometry every {odom_ms} ms + {offset}");
         let tallies = tally_bag_lags([tau_v, tau_w], odom_ms, offset, profile, Quirks::NONE);
         // Noise-free: exact, through the hold.
@@ -1073,15 +1084,9 @@ proptest! {
     #![proptest_config(fixed_sample(12, 24))]
     #[test]
     fn a_base_whose_acceleration_limit_cuts_its_largest_steps_gets_lags_within_2_percent_or_withheld(
-        tau_v in 0.05_f64..0.4,
-        tau_w in 0.05_f64..0.4,
+        ([tau_v, tau_w], odom_ms, offset, profile) in bag_case(),
         cut in 0.3_f64..1.2,
-        fifty in any::<bool>(),
-        offset in 1_usize..20,
-        profile in 0_u64..1000,
     ) {
-        let odom_ms = if fifty { 20 } else { 50 };
-        let offset = offset % odom_ms;
         let quirks = Quirks { a_max: [cut * 1.0 / tau_v, cut * 2.4 / tau_w], ..Quirks::NONE };
         let case = format!(
             "τ = {tau_v:.3}, {tau_w:.3} s, a_max = {:.2}, {:.2}, odometry every {odom_ms} ms + {offset}, profile {profile}",

@@ -104,6 +104,21 @@ fn until_all_move(heard: &Heard, n: usize, since: u64, what: &str) {
     }
 }
 
+/// Starts `echelon fleet up SCENARIO EXTRA… --time-scale 2 --duration
+/// DURATION --quiet --out OUT`; it and its router's endpoint.
+fn fleet_up(scenario: &str, extra: &[&str], duration: &str, out: &Path) -> (common::Guard, String) {
+    let up = spawn(
+        &[
+            &["fleet", "up", scenario],
+            extra,
+            &["--time-scale", "2", "--duration", duration, "--quiet"],
+            &["--out", out.to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    (up, router_endpoint(out))
+}
+
 fn router_endpoint(dir: &Path) -> String {
     let path = dir.join("endpoints.json");
     let start = Instant::now();
@@ -132,20 +147,7 @@ fn router_endpoint(dir: &Path) -> String {
 fn fleet_stop_zeroes_every_cmd_vel_until_fleet_resume() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let up = spawn(&[
-        "fleet",
-        "up",
-        SCENARIO,
-        "--ros2",
-        "--time-scale",
-        "2",
-        "--duration",
-        "24",
-        "--quiet",
-        "--out",
-        dir.path().to_str().unwrap(),
-    ]);
-    let router = router_endpoint(dir.path());
+    let (up, router) = fleet_up(SCENARIO, &["--ros2"], "24", dir.path());
     let session = echelon_fleet::net::open(&echelon_fleet::net::NetOptions {
         mode: Some(echelon_fleet::net::Mode::Client),
         connect: vec![router.clone()],
@@ -250,21 +252,7 @@ fn in_secure_mode_only_the_operator_stops_the_fleet() {
     let scenario = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fleet/fast-circle.toml");
     let scenario = scenario.to_str().unwrap();
     let out = dir.path().join("up");
-    let up = spawn(&[
-        "fleet",
-        "up",
-        scenario,
-        "--secure",
-        certs,
-        "--time-scale",
-        "2",
-        "--duration",
-        "16",
-        "--quiet",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    let router = router_endpoint(&out);
+    let (up, router) = fleet_up(scenario, &["--secure", certs], "16", &out);
     let secure = |id: &'static str| ["--secure", certs, "--identity", id, "--timeout", "2"];
     // Wait until both robots have joined and hear their leader.
     let start = Instant::now();

@@ -124,30 +124,22 @@ pub fn run(opts: &RouterOptions, stop: &StopFlag) -> Result<RouterReport, FleetE
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::up::free_ports;
+    use crate::testing::serve_on_loopback;
 
     /// Two clients that know only the router exchange a sample through it,
     /// and the router counts their liveliness tokens.
     #[test]
     fn clients_talk_through_the_router() {
-        let port = free_ports(1).unwrap_or_else(|e| panic!("{e}"))[0];
-        let endpoint = format!("tcp/127.0.0.1:{port}");
-        let stop = StopFlag::new();
-        let router = {
-            let (stop, endpoint) = (stop.clone(), endpoint.clone());
-            std::thread::spawn(move || {
-                run(
-                    &RouterOptions {
-                        net: NetOptions {
-                            listen: vec![endpoint],
-                            ..NetOptions::default()
-                        },
-                        max_wall: Some(Duration::from_secs(30)),
-                    },
-                    &stop,
-                )
-            })
-        };
+        let (endpoint, stop, router) = serve_on_loopback(|net, stop| {
+            let max_wall = Some(Duration::from_secs(30));
+            run(
+                &RouterOptions {
+                    net: net.clone(),
+                    max_wall,
+                },
+                stop,
+            )
+        });
         let client = || {
             net::open(&NetOptions {
                 mode: Some(Mode::Client),

@@ -58,32 +58,28 @@ fn the_guides_rmw_zenohd_sample_is_the_fleets_rule_for_agent_1() {
 
     let robot1 = common_name("robot-1");
     // Robot process 1 may command agent 1, subscribe to its odometry and
-    // receive it, and declare rmw_zenoh's liveliness tokens.
-    assert!(allows(&acl, cert(&robot1), "ingress", "put", &cmd_vel));
-    assert!(allows(
-        &acl,
-        cert(&robot1),
-        "ingress",
-        "declare_subscriber",
-        &odom
-    ));
-    assert!(allows(&acl, cert(&robot1), "egress", "put", &odom));
-    assert!(allows(
-        &acl,
-        cert(&robot1),
-        "ingress",
-        "liveliness_token",
-        "@ros2_lv/0/abc/0/1/MP/%/%j100_0001/echelon_robot/%j100_0001%cmd_vel"
-    ));
-    // ... and nothing else: not agent 1's odometry, nor other topics.
-    assert!(!allows(&acl, cert(&robot1), "ingress", "put", &odom));
-    assert!(!allows(
-        &acl,
-        cert(&robot1),
-        "ingress",
-        "put",
-        "0/j100_0001/platform/emergency_stop/T/T"
-    ));
+    // receive it, and declare rmw_zenoh's liveliness tokens; and nothing
+    // else: not put agent 1's odometry, nor other topics.
+    let token = "@ros2_lv/0/abc/0/1/MP/%/%j100_0001/echelon_robot/%j100_0001%cmd_vel";
+    for (allowed, flow, message, key) in [
+        (true, "ingress", "put", cmd_vel.as_str()),
+        (true, "ingress", "declare_subscriber", odom.as_str()),
+        (true, "egress", "put", odom.as_str()),
+        (true, "ingress", "liveliness_token", token),
+        (false, "ingress", "put", odom.as_str()),
+        (
+            false,
+            "ingress",
+            "put",
+            "0/j100_0001/platform/emergency_stop/T/T",
+        ),
+    ] {
+        assert_eq!(
+            allows(&acl, cert(&robot1), flow, message, key),
+            allowed,
+            "robot-1 {flow} {message} {key}"
+        );
+    }
     // Other fleet identities, and links without a certificate from the
     // network, may not command it.
     for id in [

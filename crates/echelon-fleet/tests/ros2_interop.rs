@@ -341,24 +341,22 @@ fn both_ways<M: RosMessage>(messages: &[M], to_json: fn(&M) -> Value) {
     }
 }
 
-#[test]
-fn twist_golden_vectors_both_ways() {
-    both_ways(&twists(), twist);
+/// One test a row `name: messages, their rclpy JSON;`, checking the
+/// messages [`both_ways`].
+macro_rules! golden_vectors_both_ways {
+    ($($name:ident: $messages:expr, $to_json:expr;)*) => {$(
+        #[test]
+        fn $name() {
+            both_ways(&$messages, $to_json);
+        }
+    )*};
 }
 
-#[test]
-fn twist_stamped_golden_vectors_both_ways() {
-    both_ways(&twist_stampeds(), twist_stamped);
-}
-
-#[test]
-fn odometry_golden_vectors_both_ways() {
-    both_ways(&odometries(), odometry);
-}
-
-#[test]
-fn pose_stamped_golden_vectors_both_ways() {
-    both_ways(&pose_stampeds(), pose_stamped);
+golden_vectors_both_ways! {
+    twist_golden_vectors_both_ways: twists(), twist;
+    twist_stamped_golden_vectors_both_ways: twist_stampeds(), twist_stamped;
+    odometry_golden_vectors_both_ways: odometries(), odometry;
+    pose_stamped_golden_vectors_both_ways: pose_stampeds(), pose_stamped;
 }
 
 #[test]

@@ -154,6 +154,50 @@ fn check_read_back(mcap: &Path, topics: &[RosTopic], expected: &[Expected]) {
     }
 }
 
+/// The collector state machine fed by hand through its file sink, and the
+/// messages it should record on the ROS channels, in order.
+struct Fed {
+    c: Collector,
+    sink: FileSink,
+    /// The last receipt time, ns.
+    now: u64,
+    expected: Vec<Expected>,
+}
+
+impl Fed {
+    /// Feeds one ROS sample on `key` 10 ms after the last one; its receipt
+    /// time.
+    fn ros(&mut self, key: &str, bytes: &[u8], att: Option<&[u8]>) -> u64 {
+        self.now += 10_000_000;
+        self.c
+            .on_ros_sample(key, bytes, att, self.now, &mut self.sink)
+            .unwrap_or_else(|e| panic!("{e}"));
+        self.now
+    }
+
+    /// Feeds `bytes` on `key`, with the attachment `(sequence number, source
+    /// timestamp)` if any, and expects `message` on `topic`, logged at its
+    /// receipt time and published at the attachment's source timestamp (at
+    /// its receipt time without one).
+    fn recorded(
+        &mut self,
+        key: &str,
+        bytes: &[u8],
+        att: Option<(i64, i64)>,
+        topic: &'static str,
+        message: Value,
+    ) {
+        let encoded = att.map(|(seq, source_ts)| attachment(seq, source_ts));
+        let log_time = self.ros(key, bytes, encoded.as_ref().map(|a| &a[..]));
+        self.expected.push(Expected {
+            topic,
+            log_time,
+            publish_time: att.map_or(log_time, |(_, source_ts)| source_ts as u64),
+            message,
+        });
+    }
+}
+
 /// The collector state machine writes `fleet.mcap` through its file sink;
 /// mcap-ros2-support decodes every recorded message to the values sent.
 #[test]
@@ -166,49 +210,27 @@ fn collector_ros_channels_decode_in_mcap_ros2_support() {
     let odom3 = RosTopic::new(KeyScheme::Bridge, 0, "/robot3", "odom", ODOMETRY)
         .unwrap_or_else(|e| panic!("{e}"));
     let topics = vec![cmd1, odom1, cmd2, odom3.with_qos(Qos::keep_last(10))];
-    let mut c =
-        Collector::with_ros2(Keys::new("t"), topics.clone()).unwrap_or_else(|e| panic!("{e}"));
-    let mut sink = FileSink::create(dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    let mut fed = Fed {
+        c: Collector::with_ros2(Keys::new("t"), topics.clone()).unwrap_or_else(|e| panic!("{e}")),
+        sink: FileSink::create(dir.path()).unwrap_or_else(|e| panic!("{e}")),
+        now: 1_764_000_000_000_000_000,
+        expected: Vec::new(),
+    };
 
     let key =
         |ns: &str, topic: &str, ty| topic_key(KeyScheme::RmwZenoh, 0, &format!("{ns}/{topic}"), ty);
-    let base = 1_764_000_000_000_000_000u64;
-    let mut now = base;
-    let mut expected = Vec::new();
-    // Feeds one ROS sample 10 ms after the last one; returns its time.
-    fn feed(
-        c: &mut Collector,
-        sink: &mut FileSink,
-        now: &mut u64,
-        key: &str,
-        bytes: &[u8],
-        att: Option<&[u8]>,
-    ) -> u64 {
-        *now += 10_000_000;
-        c.on_ros_sample(key, bytes, att, *now, sink)
-            .unwrap_or_else(|e| panic!("{e}"));
-        *now
-    }
     for k in 0..6u32 {
         let kf = f64::from(k);
         // robot1: TwistStamped commands with attachments.
         let stamp = Time::from_nanos(1_764_000_000_123_456_789 + i64::from(k) * 20_000_000);
         let cmd = TwistStamped::planar(0.25 + 0.01 * kf, -0.4 + 0.1 * kf, stamp, "base_link");
-        let source_ts = stamp.to_nanos() + 1000;
-        let t = feed(
-            &mut c,
-            &mut sink,
-            &mut now,
+        fed.recorded(
             &key("/robot1", "cmd_vel", &TWIST_STAMPED),
             &cmd.to_cdr(),
-            Some(&attachment(i64::from(k) + 1, source_ts)),
+            Some((i64::from(k) + 1, stamp.to_nanos() + 1000)),
+            "/robot1/cmd_vel",
+            twist_stamped(&cmd),
         );
-        expected.push(Expected {
-            topic: "/robot1/cmd_vel",
-            log_time: t,
-            publish_time: source_ts as u64,
-            message: twist_stamped(&cmd),
-        });
         // robot1: odometry with covariances, no attachment.
         let mut odom = Odometry::planar(
             1.5 - 0.1 * kf,
@@ -222,34 +244,20 @@ fn collector_ros_channels_decode_in_mcap_ros2_support() {
         );
         odom.pose.covariance = std::array::from_fn(|i| i as f64 * 1e-3 + kf);
         odom.twist.covariance[35] = 0.5 * kf;
-        let t = feed(
-            &mut c,
-            &mut sink,
-            &mut now,
-            &key("/robot1", "odom", &ODOMETRY),
+        let odom_key = key("/robot1", "odom", &ODOMETRY);
+        fed.recorded(
+            &odom_key,
             &odom.to_cdr(),
             None,
+            "/robot1/odom",
+            odometry(&odom),
         );
-        expected.push(Expected {
-            topic: "/robot1/odom",
-            log_time: t,
-            publish_time: t,
-            message: odometry(&odom),
-        });
         // Refused on the way: a Twist on robot1's TwistStamped topic,
         // truncated odometry, garbage.
-        let odom_cdr = odom.to_cdr();
-        let refused: [(String, &[u8]); 3] = [
-            (
-                key("/robot1", "cmd_vel", &TWIST),
-                &Twist::planar(1.0, 1.0).to_cdr(),
-            ),
-            (key("/robot1", "odom", &ODOMETRY), &odom_cdr[..100]),
-            (key("/robot1", "odom", &ODOMETRY), b"junk"),
-        ];
-        for (k, bytes) in &refused {
-            feed(&mut c, &mut sink, &mut now, k, bytes, None);
-        }
+        let twist_on_cmd = Twist::planar(1.0, 1.0).to_cdr();
+        fed.ros(&key("/robot1", "cmd_vel", &TWIST), &twist_on_cmd, None);
+        fed.ros(&odom_key, &odom.to_cdr()[..100], None);
+        fed.ros(&odom_key, b"junk", None);
         // The fleet's own traffic goes on as before.
         let mut reference = Vec::new();
         wire::encode_reference(
@@ -265,27 +273,21 @@ fn collector_ros_channels_decode_in_mcap_ros2_support() {
                 turn_rate: 0.1,
             },
         );
-        now += 1;
-        c.on_message("echelon/t/reference", &reference, now, &mut sink)
+        fed.now += 1;
+        fed.c
+            .on_message("echelon/t/reference", &reference, fed.now, &mut fed.sink)
             .unwrap_or_else(|e| panic!("{e}"));
     }
     // robot2: plain Twist, one with NaN (recorded as sent).
     for (v, w) in [(0.1, 0.2), (f64::NAN, -0.0), (-0.3, 1e-300)] {
         let cmd = Twist::planar(v, w);
-        let t = feed(
-            &mut c,
-            &mut sink,
-            &mut now,
+        fed.recorded(
             &key("/robot2", "cmd_vel", &TWIST),
             &cmd.to_cdr(),
             None,
+            "/robot2/cmd_vel",
+            twist(&cmd),
         );
-        expected.push(Expected {
-            topic: "/robot2/cmd_vel",
-            log_time: t,
-            publish_time: t,
-            message: twist(&cmd),
-        });
     }
     // robot3 behind zenoh-bridge-ros2dds: plain key, non-ASCII frame.
     let odom = Odometry::planar(
@@ -298,30 +300,23 @@ fn collector_ros_channels_decode_in_mcap_ros2_support() {
         "ödom",
         "base_link",
     );
-    let t = feed(
-        &mut c,
-        &mut sink,
-        &mut now,
+    fed.recorded(
         "robot3/odom",
         &odom.to_cdr(),
         None,
+        "/robot3/odom",
+        odometry(&odom),
     );
-    expected.push(Expected {
-        topic: "/robot3/odom",
-        log_time: t,
-        publish_time: t,
-        message: odometry(&odom),
-    });
-    sink.finish().unwrap_or_else(|e| panic!("{e}"));
-    let report = c.finish();
-    assert_eq!(report.ros_recorded, expected.len() as u64);
+    fed.sink.finish().unwrap_or_else(|e| panic!("{e}"));
+    let report = fed.c.finish();
+    assert_eq!(report.ros_recorded, fed.expected.len() as u64);
     assert_eq!(report.ros_refused, 18);
     assert_eq!(report.logged_by_topic[REJECTED_TOPIC], 18);
     assert_eq!(report.logged_by_topic["/reference"], 6);
     assert_eq!(report.logged, report.received);
 
     // The bridge topic was given keep_last(10); the others rmw_zenoh's default.
-    check_read_back(&dir.path().join(MCAP_FILE), &topics, &expected);
+    check_read_back(&dir.path().join(MCAP_FILE), &topics, &fed.expected);
 }
 
 /// The collector's Zenoh driver subscribes to the ROS topics' keys and

@@ -2,6 +2,8 @@
 //! Theorem 2 against Monte Carlo sweeps, UMBmark, determinism.
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
+mod common;
+
 use std::path::Path;
 
 use echelon::RobotParams;
@@ -402,15 +404,15 @@ fn umbmark_recovers_injected_systematic_errors_within_ten_percent() {
 }
 
 fn run_into(dir: &Path, src: &str, seed: Option<u64>) {
-    let mut run = Scenario::parse(src, "test.toml", None)
-        .unwrap()
-        .build(&Overrides {
-            seed,
-            ..Overrides::default()
-        })
-        .unwrap();
-    let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
-    output::run_to_dir(&mut run, dir, &mut none).unwrap();
+    let overrides = Overrides {
+        seed,
+        ..Overrides::default()
+    };
+    common::run_to_dir(
+        &Scenario::parse(src, "test.toml", None).unwrap(),
+        &overrides,
+        dir,
+    );
 }
 
 #[test]

@@ -353,12 +353,11 @@ fn overrides_replace_the_files_timing_and_law() {
 }
 
 fn run_into(dir: &Path, name: &str) -> output::RunSummary {
-    let mut run = Scenario::builtin(name)
-        .unwrap()
-        .build(&Overrides::default())
-        .unwrap();
-    let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
-    output::run_to_dir(&mut run, dir, &mut none).unwrap()
+    common::run_to_dir(
+        &Scenario::builtin(name).unwrap(),
+        &Overrides::default(),
+        dir,
+    )
 }
 
 #[test]
@@ -403,9 +402,7 @@ fn the_run_records_its_scenario_and_reference() {
         law: Some(echelon::Variant::Complete),
         ..Overrides::default()
     };
-    let mut run = scenario.build(&overrides).unwrap();
-    let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
-    output::run_to_dir(&mut run, dir.path(), &mut none).unwrap();
+    common::run_to_dir(&scenario, &overrides, dir.path());
     // scenario.toml: a header naming origin and overrides, then the exact source,
     // which parses back to the same scenario.
     let text = std::fs::read_to_string(dir.path().join(SCENARIO_FILE)).unwrap();

@@ -25,11 +25,14 @@ fn echelon(args: &[&str]) -> Output {
         .expect("the echelon binary runs")
 }
 
-/// `echelon run SCENARIO --out OUT EXTRA…`.
+/// `echelon ARGS… --out OUT`.
+fn echelon_into(out: &Path, args: &[&str]) -> Output {
+    echelon(&[args, &["--out", out.to_str().unwrap()]].concat())
+}
+
+/// `echelon run SCENARIO EXTRA… --out OUT`.
 fn run(scenario: &str, out: &Path, extra: &[&str]) -> Output {
-    let mut args = vec!["run", scenario, "--out", out.to_str().unwrap()];
-    args.extend_from_slice(extra);
-    echelon(&args)
+    echelon_into(out, &[&["run", scenario], extra].concat())
 }
 
 fn stdout(o: &Output) -> String {

@@ -162,7 +162,7 @@ fn plot_refuses_a_directory_that_is_not_a_run() {
 fn lycomp_prints_the_largest_gap_and_writes_fig_5() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ly");
-    let o = echelon(&["lycomp", "--lxoff", "0.5", "--out", out.to_str().unwrap()]);
+    let o = echelon_into(&out, &["lycomp", "--lxoff", "0.5"]);
     let text = succeeded(&o);
     // docs/control-law.md: the largest gap is 0.23 m, near |R_C| = 0.7.
     assert!(
@@ -174,21 +174,14 @@ fn lycomp_prints_the_largest_gap_and_writes_fig_5() {
     let svg = std::fs::read_to_string(out.join("lycomp.svg")).unwrap();
     assert!(svg.contains("R_C [m]") && svg.contains("L_Ycomp [m]"));
 
-    let o = echelon(&[
-        "lycomp",
-        "--fit",
-        "--lxoff",
-        "0.5",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = echelon_into(&out, &["lycomp", "--fit", "--lxoff", "0.5"]);
     let text = succeeded(&o);
     assert!(
         text.contains("eq. 6, least squares   G = 0.213724  δ = 0.450806  ε = 0.702275  largest gap to eq. 5: 0.122 m"),
         "{text}"
     );
     // Outside the paper's range: a warning and the refit.
-    let o = echelon(&["lycomp", "--lxoff", "2", "--out", out.to_str().unwrap()]);
+    let o = echelon_into(&out, &["lycomp", "--lxoff", "2"]);
     assert!(o.status.success());
     assert!(stderr(&o).starts_with("warning: the paper's polynomials"));
     assert!(stdout(&o).contains("least squares"));

@@ -8,22 +8,23 @@ fn sweep_writes_one_row_per_run_the_same_on_any_thread_count() {
     let file = scenario_file(dir.path(), STUDY);
     let run = |threads: &str, out: &str| {
         let out = dir.path().join(out);
-        let o = echelon(&[
-            "sweep",
-            &file,
-            "--zeta",
-            "1e-5,2e-5",
-            "--fix-every",
-            "0,100,500",
-            "--slip",
-            "0,1e-6",
-            "--seeds",
-            "2",
-            "--threads",
-            threads,
-            "--out",
-            out.to_str().unwrap(),
-        ]);
+        let o = echelon_into(
+            &out,
+            &[
+                "sweep",
+                &file,
+                "--zeta",
+                "1e-5,2e-5",
+                "--fix-every",
+                "0,100,500",
+                "--slip",
+                "0,1e-6",
+                "--seeds",
+                "2",
+                "--threads",
+                threads,
+            ],
+        );
         assert!(o.status.success(), "{}", stderr(&o));
         (
             stdout(&o),
@@ -60,22 +61,23 @@ fn a_velocity_sweep_fills_the_bound_columns_with_the_kinematic_form() {
     // law: z_bound = √2 K_e N ζ, e_bound = √2 N ζ / γ, ratio ‖e‖/e_bound.
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("v");
-    let o = echelon(&[
-        "sweep",
-        "circle-pentagon-velocity",
-        "--zeta-model",
-        "worst-case",
-        "--fix-every",
-        "0,100",
-        "--seeds",
-        "1",
-        "--duration",
-        "14",
-        "--transient",
-        "10",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = echelon_into(
+        &out,
+        &[
+            "sweep",
+            "circle-pentagon-velocity",
+            "--zeta-model",
+            "worst-case",
+            "--fix-every",
+            "0,100",
+            "--seeds",
+            "1",
+            "--duration",
+            "14",
+            "--transient",
+            "10",
+        ],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stdout(&o).contains("‖e‖/e bound"), "{}", stdout(&o));
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
@@ -102,20 +104,12 @@ fn a_velocity_sweep_fills_the_bound_columns_with_the_kinematic_form() {
 fn umbmark_estimates_and_writes_its_results() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("u");
-    let o = echelon(&[
-        "umbmark",
-        "--ed",
-        "1.004",
-        "--eb",
-        "1.015",
-        "--slip",
-        "1e-7",
-        "--seed",
-        "2",
-        "--json",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = echelon_into(
+        &out,
+        &[
+            "umbmark", "--ed", "1.004", "--eb", "1.015", "--slip", "1e-7", "--seed", "2", "--json",
+        ],
+    );
     let c = json(&o);
     let ed = c["refined"]["ed"].as_f64().unwrap();
     let eb = c["refined"]["eb"].as_f64().unwrap();
@@ -152,20 +146,21 @@ fn a_sweep_goes_on_past_divergent_cases_lists_them_and_fails() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sw");
     let grid = |zeta: &str| {
-        echelon(&[
-            "sweep",
-            "fix-study",
-            "--zeta",
-            zeta,
-            "--fix-every",
-            "1,1000",
-            "--seeds",
-            "2",
-            "--duration",
-            "20",
-            "--out",
-            out.to_str().unwrap(),
-        ])
+        echelon_into(
+            &out,
+            &[
+                "sweep",
+                "fix-study",
+                "--zeta",
+                zeta,
+                "--fix-every",
+                "1,1000",
+                "--seeds",
+                "2",
+                "--duration",
+                "20",
+            ],
+        )
     };
     let o = grid("0.001,0.5");
     let err = stderr(&o);

@@ -68,6 +68,22 @@ pub(crate) fn fleet_up_in_background(args: &[&str], dir: &Path) -> std::thread::
     })
 }
 
+/// A secure fleet: certificates for `robots` robots made in `dir/certs`
+/// ([`certs`]), and `echelon fleet up ARGS… --secure DIR/certs` started into
+/// `dir/fleet` on a thread ([`fleet_up_in_background`]); the certificates'
+/// and the fleet's directories and the thread.
+pub(crate) fn secure_fleet_up_in_background(
+    dir: &Path,
+    robots: u32,
+    args: &[&str],
+) -> (PathBuf, PathBuf, std::thread::JoinHandle<Output>) {
+    let certs = certs(dir, robots);
+    let fleet_dir = dir.join("fleet");
+    let secure = ["--secure", certs.to_str().unwrap()];
+    let fleet = fleet_up_in_background(&[args, &secure].concat(), &fleet_dir);
+    (certs, fleet_dir, fleet)
+}
+
 /// The number at `path` in a JSON report.
 pub(crate) fn f(v: &Value, path: &[&str]) -> f64 {
     path.iter()

@@ -59,14 +59,9 @@ fn late_error_of_robot_1(fleet_dir: &Path) -> f64 {
 fn secure_mode_rogue_moves_no_robot() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let certs = common::certs(dir.path(), 2);
-    let fleet_dir = dir.path().join("fleet");
     let scenario = fixture("fast-circle.toml");
-    let certs_arg = certs.display().to_string();
-    let fleet = common::fleet_up_in_background(
-        &[&scenario, "--time-scale", "10", "--secure", &certs_arg],
-        &fleet_dir,
-    );
+    let (certs, fleet_dir, fleet) =
+        common::secure_fleet_up_in_background(dir.path(), 2, &[&scenario, "--time-scale", "10"]);
     let endpoints = endpoints_of(&fleet_dir);
     // Through the router (the default): it is the only process listening.
     assert_eq!(endpoints.keys().collect::<Vec<_>>(), ["router/1"]);

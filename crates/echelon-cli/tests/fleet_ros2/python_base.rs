@@ -164,13 +164,7 @@ fn a_robot_process_drives_a_python_ros2_base_to_its_slot() {
 fn secure_ros2_fleet_takes_cmd_vel_only_from_its_robot() {
     let _fleet = common::one_fleet_at_a_time();
     let dir = tempfile::tempdir().unwrap();
-    let certs = common::certs(dir.path(), 2);
-    let fleet_dir = dir.path().join("fleet");
-    let certs_arg = certs.to_str().unwrap();
-    let fleet = common::fleet_up_in_background(
-        &[&UP_ROS2[..], &["--secure", certs_arg]].concat(),
-        &fleet_dir,
-    );
+    let (certs, fleet_dir, fleet) = common::secure_fleet_up_in_background(dir.path(), 2, &UP_ROS2);
     let connect: Vec<String> = common::endpoints_of(&fleet_dir).into_values().collect();
     assert!(
         connect.iter().all(|e| e.starts_with("quic/")),

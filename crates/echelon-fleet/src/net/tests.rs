@@ -2,57 +2,43 @@ use super::*;
 use crate::keys::Keys;
 use crate::role::Member;
 
+/// The Zenoh configuration [`config`] builds from `opts`, read key by key:
+/// the JSON text at a key, empty where there is none.
+fn zenoh_config(opts: &NetOptions) -> impl Fn(&str) -> String + use<> {
+    let c = config(opts).unwrap_or_else(|e| panic!("{e}"));
+    move |key| c.get_json(key).unwrap_or_default()
+}
+
 #[test]
 fn default_config_is_peer_without_multicast() {
-    let c = config(&NetOptions {
+    let c = zenoh_config(&NetOptions {
         listen: vec!["tcp/127.0.0.1:7999".into()],
         connect: vec!["tcp/127.0.0.1:7998".into()],
         ..NetOptions::default()
-    })
-    .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(c.get_json("mode").ok().as_deref(), Some("\"peer\""));
-    assert_eq!(
-        c.get_json("scouting/multicast/enabled").ok().as_deref(),
-        Some("false")
-    );
-    assert!(
-        c.get_json("listen/endpoints")
-            .unwrap_or_default()
-            .contains("7999")
-    );
+    });
+    assert_eq!(c("mode"), "\"peer\"");
+    assert_eq!(c("scouting/multicast/enabled"), "false");
+    assert!(c("listen/endpoints").contains("7999"));
 }
 
 #[test]
 fn a_client_does_not_listen_and_a_router_outlives_its_connects() {
-    let client = config(&NetOptions {
+    let client = zenoh_config(&NetOptions {
         mode: Some(Mode::Client),
         connect: vec!["tcp/127.0.0.1:7998".into()],
         ..NetOptions::default()
-    })
-    .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(client.get_json("mode").ok().as_deref(), Some("\"client\""));
-    assert!(
-        !client
-            .get_json("listen/endpoints")
-            .unwrap_or_default()
-            .contains("127.0.0.1:0")
-    );
-    assert_eq!(
-        client.get_json("connect/exit_on_failure").ok().as_deref(),
-        Some("true")
-    );
-    let router = config(&NetOptions {
+    });
+    assert_eq!(client("mode"), "\"client\"");
+    assert!(!client("listen/endpoints").contains("127.0.0.1:0"));
+    assert_eq!(client("connect/exit_on_failure"), "true");
+    let router = zenoh_config(&NetOptions {
         mode: Some(Mode::Router),
         listen: vec!["tcp/127.0.0.1:7999".into()],
         connect: vec!["tcp/127.0.0.1:7998".into()],
         ..NetOptions::default()
-    })
-    .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(router.get_json("mode").ok().as_deref(), Some("\"router\""));
-    assert_eq!(
-        router.get_json("connect/exit_on_failure").ok().as_deref(),
-        Some("false")
-    );
+    });
+    assert_eq!(router("mode"), "\"router\"");
+    assert_eq!(router("connect/exit_on_failure"), "false");
 }
 
 /// What the scenario accepts as a robot's router Zenoh parses as an
@@ -84,8 +70,7 @@ fn a_robots_router_is_a_zenoh_endpoint_reached_as_a_client() {
         vec![plain[0].to_owned(), plain[1].to_owned()]
     );
     assert!(robot.listen.is_empty() && robot.secure.is_none());
-    let c = config(&robot).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(c.get_json("mode").ok().as_deref(), Some("\"client\""));
+    assert_eq!(zenoh_config(&robot)("mode"), "\"client\"");
     let e = robot_router(2, &[secured[0].into()], &fleet)
         .err()
         .unwrap_or_else(|| panic!("tls without certificates"));

@@ -9,7 +9,7 @@ use zenoh::Wait;
 use super::*;
 use crate::keys::Keys;
 use crate::runtime::testing::{Periodic, Tick};
-use crate::up::free_ports;
+use crate::testing::serve_on_loopback;
 
 const FLEET: &str = "probe";
 const INPUT: &str = "echelon/probe/in";
@@ -35,20 +35,10 @@ fn probe_task(period: f64, ticks: usize) -> Periodic {
 /// counts what it publishes; the probe stopped, the calling thread's id,
 /// and the samples received from it.
 fn run_probe(probe: Periodic, feed: Option<Duration>) -> (Periodic, ThreadId, usize) {
-    let port = free_ports(1).unwrap_or_else(|e| panic!("{e}"))[0];
-    let endpoint = format!("tcp/127.0.0.1:{port}");
-    let stop = StopFlag::new();
-    let runner = {
-        let (endpoint, stop) = (endpoint.clone(), stop.clone());
-        std::thread::spawn(move || {
-            let net = NetOptions {
-                listen: vec![endpoint],
-                ..NetOptions::default()
-            };
-            let probe = run_on(|_| Ok((probe, ())), &net, FleetClock::new(1.0), &stop);
-            (probe, std::thread::current().id())
-        })
-    };
+    let (endpoint, stop, runner) = serve_on_loopback(move |net, stop| {
+        let probe = run_on(|_| Ok((probe, ())), net, FleetClock::new(1.0), stop);
+        (probe, std::thread::current().id())
+    });
     let feeder = net::open(&NetOptions {
         connect: vec![endpoint],
         ..NetOptions::default()

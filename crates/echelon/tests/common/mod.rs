@@ -150,6 +150,24 @@ pub fn build_with(
     echelon::scenario::Scenario::parse(src, "test.toml", None)?.build(overrides)
 }
 
+/// `scenario` built with `overrides` and run into `dir` as `echelon run
+/// --out DIR` runs it (its files, no other observer); the run's summary.
+pub fn run_to_dir(
+    scenario: &echelon::scenario::Scenario,
+    overrides: &echelon::scenario::Overrides,
+    dir: &std::path::Path,
+) -> echelon::output::RunSummary {
+    let mut run = scenario.build(overrides).unwrap_or_else(|e| panic!("{e}"));
+    write_run(&mut run, dir)
+}
+
+/// Runs the built `run` into `dir` (its files, no other observer); its
+/// summary.
+pub fn write_run(run: &mut echelon::Run, dir: &std::path::Path) -> echelon::output::RunSummary {
+    let mut none = |_: &Frame<'_>| -> Result<(), ObserverError> { Ok(()) };
+    echelon::output::run_to_dir(run, dir, &mut none).unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// The default overrides but for the run's `duration`, s.
 pub fn for_seconds(duration: f64) -> echelon::scenario::Overrides {
     echelon::scenario::Overrides {

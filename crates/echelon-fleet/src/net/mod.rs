@@ -302,6 +302,50 @@ pub(crate) fn put_stamped(session: &Session, key: &str, payload: impl Into<ZByte
         .wait();
 }
 
+/// The longest [`flush`] waits, real time.
+pub const FLUSH_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Returns once whoever `session` is linked to (its router; in a mesh,
+/// every peer) holds everything it published before (or after `timeout`,
+/// with an error): a round trip behind its last words, before the session
+/// closes.
+///
+/// Closing does not wait for them: over QUIC (the secure mode's links)
+/// Zenoh closes the connection at once (quinn's `Connection::close`,
+/// with no linger), abandoning stream data the peer has not received yet;
+/// over TCP the socket lingers, but not past a process killed right after.
+/// The round trip is a liveliness query on `key` (one the access control
+/// lets the process declare on: its own token or subscription): Zenoh
+/// sends it at the data priority, the priority of every put, so on the
+/// same link and queue behind them; the router (each peer) routes what
+/// arrives on a link in order, and answers once the query came, so
+/// everything before it is routed by then: queued on the live links to its
+/// subscribers. What the answer carries (tokens) is not used.
+pub(crate) fn flush(
+    session: &Session,
+    key: &str,
+    timeout: std::time::Duration,
+) -> Result<(), FleetError> {
+    let replies = session
+        .liveliness()
+        .get(key)
+        .timeout(timeout)
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("flushing (query on {key}): {e}")))?;
+    let mut answered = true;
+    // Ends when the query is final: answered by all, or timed out.
+    while let Ok(reply) = replies.recv() {
+        answered &= reply.result().is_ok();
+    }
+    match answered {
+        true => Ok(()),
+        false => Err(FleetError::Zenoh(format!(
+            "no answer to the flush query on {key} within {:.0} s",
+            timeout.as_secs_f64()
+        ))),
+    }
+}
+
 /// A random source id: the low bits of a hash of the process id and the time.
 pub(crate) fn rand_source() -> u32 {
     use std::hash::{BuildHasher, Hasher};

@@ -333,7 +333,9 @@ fn last_words_flushed_before_close_all_arrive_over_quic() {
         .declare_subscriber(keys.reference())
         .callback(move |s| {
             let bytes = s.payload().to_bytes();
-            let _ = tx.send(u32::from_le_bytes(bytes.as_ref().try_into().unwrap_or_default()));
+            let _ = tx.send(u32::from_le_bytes(
+                bytes.as_ref().try_into().unwrap_or_default(),
+            ));
         })
         .wait()
         .unwrap_or_else(|e| panic!("{e}"));

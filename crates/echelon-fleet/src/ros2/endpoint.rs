@@ -177,7 +177,11 @@ impl CmdSink for OwnedCmdSink {
     /// again at each tick while it stays stopped.
     fn send_stop(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
         let off_zenoh = tokio::runtime::Handle::try_current().is_err();
-        let publisher = if off_zenoh { &self.0.last } else { &self.0.each };
+        let publisher = if off_zenoh {
+            &self.0.last
+        } else {
+            &self.0.each
+        };
         put(publisher, payload, attachment)
     }
 }

@@ -266,7 +266,10 @@ pub fn run_split<T: Task + Send + 'static, G>(
     let stopped = engine.task.stop(&mut engine.out);
     // Its last words on their way before the sessions close (the fleet's,
     // then the device's: a robot's final zero goes to its robot).
-    let sessions = [(Some(&session), flush_keys.0), (device_session.as_ref(), flush_keys.1)];
+    let sessions = [
+        (Some(&session), flush_keys.0),
+        (device_session.as_ref(), flush_keys.1),
+    ];
     for (s, key) in sessions {
         if let (Some(s), Some(key)) = (s, key)
             && let Err(e) = net::flush(s, &key, net::FLUSH_TIMEOUT)

@@ -12,8 +12,9 @@
 //! leader waits for every liveliness token before starting the clock. Robots
 //! and leader stop at `--duration`; the bases, then the collector, are then
 //! sent SIGTERM: each takes what is still on its way until its inputs are
-//! quiet, and the collector closes its files. Each child's stderr goes to `DIR/logs/<role>.log`; its
-//! last stdout line (kept in `DIR/logs/<role>.out`) is its JSON report.
+//! quiet, and the collector closes its files. Each child's stderr goes to
+//! `DIR/logs/<role>.log`; its last stdout line (kept in
+//! `DIR/logs/<role>.out`) is its JSON report.
 //!
 //! With `ros2`, one simulated ROS 2 base per robot (`fleet base --ros2`)
 //! starts before the robots, on the fleet's network. With `ros2` and `real`

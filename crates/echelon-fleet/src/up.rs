@@ -10,9 +10,11 @@
 //! to every process started before it (N² links: a handful of robots only).
 //! The collector starts first, then robot 1 … N, then the leader; the
 //! leader waits for every liveliness token before starting the clock. Robots
-//! and leader stop at `--duration`; the collector is then sent SIGTERM and
-//! closes its files. Each child's stderr goes to `DIR/logs/<role>.log`; its
-//! last stdout line (kept in `DIR/logs/<role>.out`) is its JSON report.
+//! and leader stop at `--duration`; the bases, then the collector, are then
+//! sent SIGTERM: each takes what is still on its way until its inputs are
+//! quiet, and the collector closes its files. Each child's stderr goes to
+//! `DIR/logs/<role>.log`; its last stdout line (kept in
+//! `DIR/logs/<role>.out`) is its JSON report.
 //!
 //! With `ros2`, one simulated ROS 2 base per robot (`fleet base --ros2`)
 //! starts before the robots, on the fleet's network. With `ros2` and `real`
@@ -440,19 +442,28 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         }
         std::thread::sleep(nap);
     }
-    // 2. Let the last messages reach the collector, then stop it and the
-    // bases (after the robots' last, zero, command).
-    std::thread::sleep(Duration::from_millis(300));
-    collector.terminate();
+    // 2. The bases, then the collector. No wait is needed here: each robot
+    // and the leader made sure their router held their last words before
+    // they exited (`net::flush`), and on SIGTERM a base follows the
+    // commands still on their way (its robot's final zero), the collector
+    // records what is (the leader's last samples, the robots' and the
+    // bases' last words), each until its inputs are quiet
+    // (`runtime::Linger`, bounded), so the collector goes last.
     for b in &base_procs {
         b.terminate();
     }
     let wind_down = Instant::now();
+    while !poll_all(&mut base_procs)? {
+        if wind_down.elapsed() > Duration::from_secs(30) {
+            return Err(FleetError::Child("a ROS 2 base did not stop".into()));
+        }
+        std::thread::sleep(nap);
+    }
+    collector.terminate();
+    let wind_down = Instant::now();
     while !poll_all(std::iter::once(&mut collector).chain(&mut base_procs))? {
         if wind_down.elapsed() > Duration::from_secs(30) {
-            return Err(FleetError::Child(
-                "the collector or a ROS 2 base did not stop".into(),
-            ));
+            return Err(FleetError::Child("the collector did not stop".into()));
         }
         std::thread::sleep(nap);
     }

@@ -5,8 +5,9 @@
 //! messages on their typed channel (`/reference`, `/agent/K/state`,
 //! `/agent/K/stats`, `/fleet/command`), anything else on `/rejected` with the key, the reason and
 //! the bytes. Robot states (once started) also go to `trajectory.csv` with the
-//! simulator's header. On SIGINT/SIGTERM it stops listening, logs what is still
-//! queued, and closes valid files.
+//! simulator's header. On SIGINT/SIGTERM it records what is still on its way
+//! until its inputs are quiet ([`crate::runtime::Linger`]), stops listening,
+//! logs what is still queued, and closes valid files.
 //!
 //! Given ROS 2 topics ([`RosTopic`](crate::ros2::record::RosTopic), e.g. every robot's `cmd_vel` and
 //! `odom`), it also records them as `ros2 bag record -s mcap` does: one

@@ -16,7 +16,7 @@ use crate::keys::Keys;
 use crate::net::NetOptions;
 use crate::role::Member;
 use crate::ros2::record::{self, RosTopic};
-use crate::runtime::{self, Flow, Outputs, Sample, Task};
+use crate::runtime::{self, Flow, Linger, Outputs, Sample, Task};
 use crate::{FleetError, StopFlag};
 
 /// Options of the collector.
@@ -116,6 +116,13 @@ impl Task for CollectorTask {
 
     fn on_dropped(&mut self, total: u64) {
         self.collector.set_dropped(total);
+    }
+
+    /// On SIGINT/SIGTERM it records what is still on its way (the others'
+    /// last words, flushed to its router before they exited) until nothing
+    /// came for a while: `fleet up` stops it after every other process.
+    fn linger(&self) -> Option<Linger> {
+        Some(Linger::FLEET)
     }
 
     fn on_input(&mut self, input: usize, s: &Sample<'_>) -> Result<(), FleetError> {

@@ -302,6 +302,52 @@ pub(crate) fn put_stamped(session: &Session, key: &str, payload: impl Into<ZByte
         .wait();
 }
 
+/// The longest [`flush`] waits, real time.
+pub const FLUSH_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Returns once the router `session` is a client of holds everything it
+/// published before (or after `timeout`, with an error): a round trip
+/// behind its last words, before the session closes.
+///
+/// Closing does not wait for them: over QUIC (the secure mode's links)
+/// Zenoh closes the connection at once (quinn's `Connection::close`, with
+/// no linger), abandoning stream data the router has not received yet; over
+/// TCP the socket lingers. The round trip is a query on `key` (one the
+/// access control lets the process declare on: its own token or
+/// subscription). A query goes at the data priority, the priority of every
+/// put, so on the same link and stream, behind them (a liveliness query
+/// would not: Zenoh sends its interest at the control priority, on a QUIC
+/// stream of its own); a client sends it to its router whatever matches
+/// it, and the router, which routes what arrives on a link in order,
+/// answers (its final reply, or the queryables' answers it forwards) once
+/// it came: everything before it is routed by then, queued on the live
+/// links to its subscribers. In a peer mesh a query reaches only the peers
+/// with a matching queryable, so there it proves nothing (a mesh over TCP
+/// relies on the socket's linger).
+pub(crate) fn flush(
+    session: &Session,
+    key: &str,
+    timeout: std::time::Duration,
+) -> Result<(), FleetError> {
+    let replies = session
+        .get(key)
+        .timeout(timeout)
+        .wait()
+        .map_err(|e| FleetError::Zenoh(format!("flushing (query on {key}): {e}")))?;
+    let mut answered = true;
+    // Ends when the query is final: answered, or timed out.
+    while let Ok(reply) = replies.recv() {
+        answered &= reply.result().is_ok();
+    }
+    match answered {
+        true => Ok(()),
+        false => Err(FleetError::Zenoh(format!(
+            "no answer to the flush query on {key} within {:.0} s",
+            timeout.as_secs_f64()
+        ))),
+    }
+}
+
 /// A random source id: the low bits of a hash of the process id and the time.
 pub(crate) fn rand_source() -> u32 {
     use std::hash::{BuildHasher, Hasher};

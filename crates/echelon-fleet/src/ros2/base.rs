@@ -16,7 +16,7 @@ use crate::options::{ProcessOptions, Resolved};
 use crate::plant::SimulatedDrive;
 use crate::robot::{PLANT_STEP, agent_spec};
 use crate::role::Member;
-use crate::runtime::{self, Flow, Outputs, Sample, Task};
+use crate::runtime::{self, Flow, Linger, Outputs, Sample, Task};
 use crate::{FleetError, StopFlag};
 use echelon_ros2::attachment::Gid;
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
@@ -104,6 +104,13 @@ impl Task for BaseTask {
 
     fn next_wake(&self) -> f64 {
         self.base.next_wake()
+    }
+
+    /// On SIGINT/SIGTERM it still follows the `cmd_vel` on its way (its
+    /// robot's last, zero, command: flushed to the router before the robot
+    /// exited) until none came for a while.
+    fn linger(&self) -> Option<Linger> {
+        Some(Linger::FLEET)
     }
 
     fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {

@@ -22,7 +22,9 @@
 //! - no command it sends is non-finite or beyond the base's speed limits
 //!   (scaled together, keeping the curvature, [`VelocityBase::limit`]);
 //! - [`Plant::stop`] sends a zero command at once (leader or odometry lost,
-//!   the process stopping).
+//!   the process stopping), through [`CmdSink::send_stop`] (on Zenoh,
+//!   congestion control `Block` for the process's last words:
+//!   `endpoint.rs`).
 
 use serde::Serialize;
 
@@ -100,6 +102,12 @@ pub trait CmdSink {
     fn now_ns(&self) -> i64;
     /// Publishes one `cmd_vel` payload with its rmw_zenoh attachment.
     fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String>;
+    /// Publishes a stop's zero ([`Plant::stop`]), reliably where the sink
+    /// can: it may be the robot's last command, never superseded by another
+    /// (the default: as [`CmdSink::send`]).
+    fn send_stop(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
+        self.send(payload, attachment)
+    }
 }
 
 /// What a ROS 2 drive counted.
@@ -300,8 +308,9 @@ impl<S: CmdSink> Ros2Drive<S> {
         Ok(odom)
     }
 
-    /// Sends `cmd` (already finite and within the limits).
-    fn send(&mut self, cmd: VelocityCommand) {
+    /// Sends `cmd` (already finite and within the limits); a stop's zero
+    /// through [`CmdSink::send_stop`].
+    fn send(&mut self, cmd: VelocityCommand, stop: bool) {
         let now = self.sink.now_ns();
         encode_cmd_vel(&self.link, cmd, now, &mut self.buf);
         self.seq += 1;
@@ -311,7 +320,11 @@ impl<S: CmdSink> Ros2Drive<S> {
             gid: self.gid,
         }
         .encode();
-        match self.sink.send(&self.buf, &attachment) {
+        let sent = match stop {
+            true => self.sink.send_stop(&self.buf, &attachment),
+            false => self.sink.send(&self.buf, &attachment),
+        };
+        match sent {
             Ok(()) => self.counters.cmd_sent += 1,
             Err(_) => self.counters.send_errors += 1,
         }
@@ -372,7 +385,7 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
             (VelocityCommand::default(), false)
         };
         self.counters.cmd_saturated += u64::from(saturated);
-        self.send(cmd);
+        self.send(cmd, false);
         Actuation {
             velocity: Some((cmd, saturated)),
             ..Actuation::default()
@@ -381,7 +394,7 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
 
     fn stop(&mut self) {
         self.counters.cmd_zero += 1;
-        self.send(VelocityCommand::default());
+        self.send(VelocityCommand::default(), true);
     }
 
     fn accelerations(&self) -> (f64, f64) {

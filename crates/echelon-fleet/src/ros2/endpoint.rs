@@ -4,6 +4,7 @@
 //! the runtime's ([`crate::runtime`]).
 
 use zenoh::Wait;
+use zenoh::qos::CongestionControl;
 
 use echelon::scenario::Ros2Link;
 
@@ -61,7 +62,7 @@ pub(crate) fn declare_node(
 /// subscription and, with fixes, their subscription) and its `cmd_vel`
 /// publisher; the subscriptions themselves are its user's.
 pub(crate) struct Ros2Node {
-    pub(crate) publisher: zenoh::pubsub::Publisher<'static>,
+    pub(crate) publisher: CmdPublisher,
     pub(crate) gid: Gid,
     /// The key expression of its `odom`, any type (so that a publisher of
     /// the wrong type is seen, counted and refused rather than never heard).
@@ -91,10 +92,7 @@ impl Ros2Node {
             |e| FleetError::Config(format!("agent {agent}: {e}")),
         )?;
         let cmd_key = topic_key(link.key_scheme, link.domain_id, &link.cmd_vel, &cmd_type);
-        let publisher = session
-            .declare_publisher(cmd_key.clone())
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("declaring {cmd_key}: {e}")))?;
+        let publisher = CmdPublisher::declare(session, cmd_key)?;
         Ok(Ros2Node {
             publisher,
             gid: gids[0],
@@ -108,8 +106,42 @@ impl Ros2Node {
     }
 }
 
-/// `cmd_vel` through a Zenoh publisher it owns, stamped by the system clock.
-pub(crate) struct OwnedCmdSink(pub(crate) zenoh::pubsub::Publisher<'static>);
+/// A robot's two Zenoh publishers of its `cmd_vel` (one key, one ROS 2
+/// publisher as rmw_zenoh declares it: the liveliness token is the node's).
+///
+/// Every command of the control loop goes out through `each`, with Zenoh's
+/// default congestion control (`Drop`): a put never blocks the loop, which
+/// ticks on Zenoh's own runtime thread (`runtime/drive.rs`) where a blocked
+/// put would hold up the very transmission task it waits for; a dropped
+/// command is superseded by the next tick's. A stop's zero goes out through
+/// `last`, with `CongestionControl::Block` (as rmw_zenoh publishes reliable
+/// topics): no queue on its way (this process's or a router's) drops it;
+/// it may be the last command the robot ever sends.
+pub(crate) struct CmdPublisher {
+    pub(crate) each: zenoh::pubsub::Publisher<'static>,
+    pub(crate) last: zenoh::pubsub::Publisher<'static>,
+}
+
+impl CmdPublisher {
+    /// Both publishers on `key`.
+    fn declare(session: &zenoh::Session, key: String) -> Result<CmdPublisher, FleetError> {
+        let declare = |congestion| {
+            session
+                .declare_publisher(key.clone())
+                .congestion_control(congestion)
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("declaring {key}: {e}")))
+        };
+        Ok(CmdPublisher {
+            each: declare(CongestionControl::Drop)?,
+            last: declare(CongestionControl::Block)?,
+        })
+    }
+}
+
+/// `cmd_vel` through a robot's [`CmdPublisher`], stamped by the system
+/// clock.
+pub(crate) struct OwnedCmdSink(pub(crate) CmdPublisher);
 
 impl std::fmt::Debug for OwnedCmdSink {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -117,33 +149,39 @@ impl std::fmt::Debug for OwnedCmdSink {
     }
 }
 
+fn put(
+    publisher: &zenoh::pubsub::Publisher<'_>,
+    payload: &[u8],
+    attachment: &[u8],
+) -> Result<(), String> {
+    publisher
+        .put(payload.to_vec())
+        .attachment(attachment.to_vec())
+        .wait()
+        .map_err(|e| e.to_string())
+}
+
 impl CmdSink for OwnedCmdSink {
-    fn now_ns(&self) -> i64 {
-        ZenohCmdSink(&self.0).now_ns()
-    }
-    fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
-        ZenohCmdSink(&self.0).send(payload, attachment)
-    }
-}
-
-/// `cmd_vel` through a Zenoh publisher, stamped by the system clock.
-pub(crate) struct ZenohCmdSink<'a, 'b>(pub(crate) &'a zenoh::pubsub::Publisher<'b>);
-
-impl std::fmt::Debug for ZenohCmdSink<'_, '_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("ZenohCmdSink")
-    }
-}
-
-impl CmdSink for ZenohCmdSink<'_, '_> {
     fn now_ns(&self) -> i64 {
         crate::unix_nanos() as i64
     }
     fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
-        self.0
-            .put(payload.to_vec())
-            .attachment(attachment.to_vec())
-            .wait()
-            .map_err(|e| e.to_string())
+        put(&self.0.each, payload, attachment)
+    }
+    /// Blocks (at most Zenoh's `wait_before_close`, 5 s, on a queue that
+    /// does not move) only off Zenoh's runtime: the process's last words
+    /// are said on its own thread ([`crate::runtime::run_split`]), where
+    /// waiting for the queue cannot stall Zenoh's transmission. A stop ticked
+    /// on Zenoh's thread (the leader or the odometry lost mid-run) goes out
+    /// as every command does, never blocking there; the robot commands zero
+    /// again at each tick while it stays stopped.
+    fn send_stop(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
+        let off_zenoh = tokio::runtime::Handle::try_current().is_err();
+        let publisher = if off_zenoh {
+            &self.0.last
+        } else {
+            &self.0.each
+        };
+        put(publisher, payload, attachment)
     }
 }

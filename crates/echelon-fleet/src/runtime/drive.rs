@@ -23,7 +23,7 @@ use crate::{FleetError, StopFlag};
 
 use super::inputs::{Arrival, Spares, Worker};
 use super::outputs::ZenohOutputs;
-use super::{Flow, NAP, Sample, Task};
+use super::{Flow, Linger, Lingered, NAP, Sample, Task};
 
 /// Ticks closer than this (real time) stay on the calling thread's precise
 /// sleep.
@@ -95,6 +95,27 @@ impl<T: Task> Engine<T> {
             self.hand(a)?;
         }
         Ok(())
+    }
+
+    /// After a stop request: hands the task what still arrives until its
+    /// inputs were quiet, as `l` says ([`super::linger`]).
+    pub(super) fn linger(&mut self, l: Linger) -> Result<Lingered, FleetError> {
+        let start = Instant::now();
+        // Its queue, out of the engine while the engine takes what it gives.
+        let (_, none) = mpsc::channel();
+        let rx = std::mem::replace(&mut self.rx, none);
+        let lingered = super::linger::linger(
+            l,
+            || start.elapsed(),
+            |wait| match rx.recv_timeout(wait) {
+                Ok(a) => Ok(Some(a)),
+                Err(mpsc::RecvTimeoutError::Timeout) => Ok(None),
+                Err(mpsc::RecvTimeoutError::Disconnected) => Err(()),
+            },
+            |a| self.hand(a),
+        );
+        self.rx = rx;
+        lingered
     }
 
     /// Sets what its latch answers to what the task says now (encoded

@@ -8,8 +8,10 @@
 //! next wake (or, for a task that [wakes on input](Task::wakes_on_input),
 //! until a sample arrives), hand it what arrived, tick it, publish what it
 //! says (on Zenoh's own thread once one of its samples arrived there: see
-//! `drive.rs`); on a stop request, its end or an error: stop it, close the
-//! session, take its report.
+//! `drive.rs`); on a stop request, its end or an error: stop it (after a
+//! stop request, a task that [lingers](Task::linger) first takes what still
+//! arrives: `linger.rs`), make sure its last words reached the router or
+//! peers ([`net::flush`]), close the session, take its report.
 //!
 //! By job: `inputs.rs` (what arrives, queued with counted drops),
 //! `outputs.rs` (what it publishes), `presence.rs` (latches, liveliness),
@@ -27,11 +29,13 @@ use crate::{FleetError, StopFlag};
 pub mod bus;
 mod drive;
 mod inputs;
+mod linger;
 mod outputs;
 mod presence;
 mod task;
 
 pub use drive::{COARSE, RETRY, STALL, WATCH};
+pub use linger::{Linger, Lingered};
 pub use presence::query_all;
 pub use task::{DEFAULT_QUEUE, Flow, Latching, Outgoing, Outputs, Sample, Task, WaitFor};
 
@@ -118,14 +122,19 @@ pub fn run_split<T: Task + Send + 'static, G>(
     let worker = Worker::default();
     let mut subscribers = Vec::new();
     let mut from_device = Vec::new();
+    // Keys each session may query (net::flush): its first token, else its
+    // first subscription.
+    let mut flush_keys = (task.tokens().into_iter().next(), None);
     for (input, key) in task.inputs().into_iter().enumerate() {
         let queue = queue.clone();
         let spares = spares.clone();
         let worker = worker.clone();
         let on = if device_inputs.contains(&key) {
             from_device.push(input);
+            flush_keys.1.get_or_insert_with(|| key.clone());
             dev
         } else {
+            flush_keys.0.get_or_insert_with(|| key.clone());
             &session
         };
         let sub = on
@@ -242,7 +251,32 @@ pub fn run_split<T: Task + Send + 'static, G>(
         Ok(()) => drive::drive(engine, &worker, stop),
         Err(e) => (engine, Err(e)),
     };
+    // A stop request: first what still arrives (a task that lingers).
+    let ran = match (ran, engine.task.linger()) {
+        (Ok(()), Some(l)) if stop.is_raised() => engine.linger(l).map(|lingered| {
+            if lingered.cut {
+                eprintln!(
+                    "inputs still arriving {:.1} s after the stop request: stopped anyway",
+                    lingered.ended.as_secs_f64()
+                );
+            }
+        }),
+        (ran, _) => ran,
+    };
     let stopped = engine.task.stop(&mut engine.out);
+    // Its last words on their way before the sessions close (the fleet's,
+    // then the device's: a robot's final zero goes to its robot).
+    let sessions = [
+        (Some(&session), flush_keys.0),
+        (device_session.as_ref(), flush_keys.1),
+    ];
+    for (s, key) in sessions {
+        if let (Some(s), Some(key)) = (s, key)
+            && let Err(e) = net::flush(s, &key, net::FLUSH_TIMEOUT)
+        {
+            eprintln!("{e}: its last messages may not have arrived");
+        }
+    }
     engine.out.publishers.clear();
     drop(tokens);
     drop(guard);

@@ -11,6 +11,8 @@ use serde::Serialize;
 use crate::FleetError;
 use crate::keys::Keys;
 
+use super::Linger;
+
 /// [`Task::queue`] unless a task says otherwise: a controller's inputs
 /// between two ticks, with room for bursts.
 pub const DEFAULT_QUEUE: usize = 4096;
@@ -196,6 +198,15 @@ pub trait Task {
     /// a second wakes once per batch, not once per sample.
     fn batch(&self) -> f64 {
         0.0
+    }
+
+    /// How it lingers after a stop request, taking what still arrives
+    /// before its [last words](Task::stop) ([`Linger`]; `None`, the default:
+    /// it stops at once). For a task that takes the others' last words (a
+    /// recorder, a robot's base); never for a robot, which commands zero
+    /// before anything else.
+    fn linger(&self) -> Option<Linger> {
+        None
     }
 
     /// Its clock started (reading 0) at UNIX ns `unix_ns`.

@@ -5,11 +5,14 @@ use echelon_ros2::KeyScheme;
 use echelon_ros2::keys::topic_key;
 use echelon_ros2::msgs::{POSE_STAMPED, PoseStamped};
 
-/// Records what was sent; time advances 1 ms per read.
+/// Records what was sent (and which of it through `send_stop`); time
+/// advances 1 ms per read.
 #[derive(Debug, Default)]
 pub(crate) struct Recorder {
     pub(crate) sent: Vec<(Vec<u8>, Vec<u8>)>,
     pub(crate) now: std::cell::Cell<i64>,
+    /// The indices in `sent` of what went through `send_stop`.
+    pub(crate) stops: Vec<usize>,
 }
 
 impl CmdSink for Recorder {
@@ -20,6 +23,10 @@ impl CmdSink for Recorder {
     fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
         self.sent.push((payload.to_vec(), attachment.to_vec()));
         Ok(())
+    }
+    fn send_stop(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
+        self.stops.push(self.sent.len());
+        self.send(payload, attachment)
     }
 }
 
@@ -353,4 +360,53 @@ fn commands_are_limited_finite_stamped_and_attached() {
         (c.cmd_sent, c.cmd_saturated, c.cmd_non_finite, c.cmd_zero),
         (3, 1, 1, 1)
     );
+}
+
+proptest::proptest! {
+    /// Whatever the robot commands in between (zero included, NaN, beyond
+    /// the limits), exactly its stops go through `send_stop` (the reliable
+    /// put of the robot's last words) and each of them is zero; every other
+    /// command goes through `send` (never blocking the control loop); one
+    /// sequence number for both, counted.
+    #[test]
+    fn exactly_the_stops_go_through_send_stop_as_zeros(
+        steps in proptest::collection::vec(
+            proptest::option::of((-5.0f64..5.0, -20.0f64..20.0, proptest::bool::ANY)),
+            1..60,
+        )
+    ) {
+        let base = VelocityBase::new(VelocityBaseSpec {
+            v_max: 0.5,
+            omega_max: 2.0,
+            ..VelocityBase::IDEAL.spec()
+        })
+        .expect("an ideal base with speed limits");
+        let mut d = drive(base);
+        let mut stops = Vec::new();
+        for (i, step) in steps.iter().enumerate() {
+            match *step {
+                None => {
+                    stops.push(i);
+                    d.stop();
+                }
+                Some((v, omega, nan)) => {
+                    let v = if nan { f64::NAN } else { v };
+                    d.command(Command::Velocity(VelocityCommand { v, omega }));
+                }
+            }
+        }
+        proptest::prop_assert_eq!(&d.sink().stops, &stops);
+        for &i in &stops {
+            let (payload, _) = &d.sink().sent[i];
+            let msg = TwistStamped::from_cdr_finite(payload).expect("valid TwistStamped");
+            proptest::prop_assert_eq!((msg.twist.linear.x, msg.twist.angular.z), (0.0, 0.0));
+        }
+        for (i, (_, att)) in d.sink().sent.iter().enumerate() {
+            let att = Attachment::decode(att).expect("valid attachment");
+            proptest::prop_assert_eq!(att.sequence_number, i as i64 + 1);
+        }
+        let c = d.counters();
+        proptest::prop_assert_eq!(c.cmd_sent, steps.len() as u64);
+        proptest::prop_assert_eq!(c.cmd_zero, stops.len() as u64);
+    }
 }

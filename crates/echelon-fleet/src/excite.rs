@@ -125,8 +125,22 @@ impl<S: CmdSink> CmdSink for Recording<S> {
     }
     fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
         self.inner.send(payload, attachment)?;
-        self.sent.push((crate::unix_nanos(), payload.to_vec()));
+        self.record(payload);
         Ok(())
+    }
+    /// The stop's zero goes out as the inner sink sends stops (reliably,
+    /// [`CmdSink::send_stop`]), and is recorded like any command.
+    fn send_stop(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
+        self.inner.send_stop(payload, attachment)?;
+        self.record(payload);
+        Ok(())
+    }
+}
+
+impl<S> Recording<S> {
+    /// Keeps a sent command for the bag, stamped now.
+    fn record(&mut self, payload: &[u8]) {
+        self.sent.push((crate::unix_nanos(), payload.to_vec()));
     }
 }
 

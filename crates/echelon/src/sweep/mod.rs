@@ -481,13 +481,16 @@ pub fn run_all(
     Ok(sweep)
 }
 
+/// A case and what running it gave.
+type Outcome = (Case, Result<Row, SweepError>);
+
 /// Every case with its outcome, in grid order.
 fn outcomes(
     scenario: &Scenario,
     overrides: &Overrides,
     grid: &Grid,
     progress: &(dyn Fn() + Sync),
-) -> Result<Vec<(Case, Result<Row, SweepError>)>, SweepError> {
+) -> Result<Vec<Outcome>, SweepError> {
     let cases = grid.cases();
     // Build every error model up front (the seed changes no check) so that
     // a broken scenario or a refused grid value fails before any work.

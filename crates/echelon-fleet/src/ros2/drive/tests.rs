@@ -310,14 +310,19 @@ fn sigma_grows_on_odometry_and_is_the_fixs_after_one() {
     assert!(d.position_sigma() > 0.005);
 }
 
-#[test]
-fn commands_are_limited_finite_stamped_and_attached() {
-    let base = VelocityBase::new(VelocityBaseSpec {
-        v_max: 0.2,
-        omega_max: 1.0,
+/// A lag-free base whose speeds are limited to `v_max`, `omega_max`.
+fn limited(v_max: f64, omega_max: f64) -> VelocityBase {
+    VelocityBase::new(VelocityBaseSpec {
+        v_max,
+        omega_max,
         ..VelocityBase::IDEAL.spec()
     })
-    .expect("an ideal base with speed limits");
+    .expect("an ideal base with speed limits")
+}
+
+#[test]
+fn commands_are_limited_finite_stamped_and_attached() {
+    let base = limited(0.2, 1.0);
     let mut d = drive(base);
     let act = d.command(Command::Velocity(VelocityCommand { v: 0.4, omega: 0.5 }));
     let (applied, saturated) = act.velocity.expect("velocity");
@@ -375,13 +380,7 @@ proptest::proptest! {
             1..60,
         )
     ) {
-        let base = VelocityBase::new(VelocityBaseSpec {
-            v_max: 0.5,
-            omega_max: 2.0,
-            ..VelocityBase::IDEAL.spec()
-        })
-        .expect("an ideal base with speed limits");
-        let mut d = drive(base);
+        let mut d = drive(limited(0.5, 2.0));
         let mut stops = Vec::new();
         for (i, step) in steps.iter().enumerate() {
             match *step {

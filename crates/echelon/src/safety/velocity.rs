@@ -4,10 +4,9 @@
 //! on the lags' rates, the speed envelope ([`Envelope`]), and the base's
 //! speed and acceleration limits as hard rows.
 
-use super::filter::{Filtered, Own, SafetyFilter};
+use super::filter::{EMERGENCY_ACCEL, Envelope, Filtered, Own, SafetyFilter};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, push_band, push_box, solve_relaxed};
-use super::torque::{EMERGENCY_ACCEL, Envelope};
 use crate::base::{VelocityBase, VelocityCommand};
 use crate::model::State;
 

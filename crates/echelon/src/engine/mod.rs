@@ -252,11 +252,7 @@ impl Batch {
         reference: Reference,
         dt: f64,
     ) -> Result<Batch, SimError> {
-        let param = |context: &str| {
-            let context = context.to_owned();
-            move |source| SimError::Param { context, source }
-        };
-        check::positive("dt", dt).map_err(param("sim"))?;
+        check::positive("dt", dt).map_err(SimError::param("sim"))?;
         Ok(Batch {
             robot,
             variant,

@@ -262,12 +262,8 @@ impl VelocityBatch {
         reference: Reference,
         dt: f64,
     ) -> Result<VelocityBatch, SimError> {
-        let param = |context: &str| {
-            let context = context.to_owned();
-            move |source| SimError::Param { context, source }
-        };
-        check::positive("dt", dt).map_err(param("sim"))?;
-        base.check_step(dt).map_err(param("base"))?;
+        check::positive("dt", dt).map_err(SimError::param("sim"))?;
+        base.check_step(dt).map_err(SimError::param("base"))?;
         Ok(VelocityBatch {
             base,
             topology,

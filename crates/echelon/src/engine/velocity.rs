@@ -57,7 +57,7 @@ use super::{BatchEngine, EngineError, Kernel, Member, Topology, VelocityEngine, 
 mod law;
 mod tile;
 use super::kernel::vectors;
-use law::{command, derivative, ly_of, settle, speeds, turned};
+use law::{command, derivative, ly_of, settle, speeds};
 use tile::Run;
 pub(crate) use tile::Tile;
 pub(crate) use tile::{Chain, Star, probe};

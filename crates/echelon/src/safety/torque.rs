@@ -167,25 +167,25 @@ mod tests {
     #[test]
     fn non_finite_input_passes_through_unchanged() {
         use crate::safety::SafetyConfig;
+        use crate::safety::strategies::assert_passed;
         let l = 0.05;
         let robot = RobotParams::AGENT1;
         let other = State::at_rest(0.6, 0.0, std::f64::consts::PI);
         let n = Neighbour::of_state(&other, l, None, true);
         let config = SafetyConfig::new(0.3, 1.0, 2.0).unwrap();
         let rest = State::at_rest(0.0, 0.0, 0.0);
+        let numbers = |u: Input| [u.u1, u.u2];
         for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
             for nominal in [Input { u1: bad, u2: 0.0 }, Input { u1: 1.0, u2: bad }] {
                 let out =
                     SafetyFilter::new(config).torque(0.0, &rest, l, &robot, nominal, &[n], &[]);
-                assert_eq!(out.outcome, Outcome::Nominal);
-                assert_eq!(out.command.u1.to_bits(), nominal.u1.to_bits());
-                assert_eq!(out.command.u2.to_bits(), nominal.u2.to_bits());
+                assert_passed(&out, nominal, numbers);
             }
             let mut me = rest;
             me.omega = bad;
             let nominal = Input { u1: 5.0, u2: 0.0 };
             let out = SafetyFilter::new(config).torque(0.0, &me, l, &robot, nominal, &[n], &[]);
-            assert_eq!((out.command, out.outcome), (nominal, Outcome::Nominal));
+            assert_passed(&out, nominal, numbers);
         }
     }
 

@@ -197,11 +197,11 @@ impl SafetyFilter {
 /// torque-driven robot without wheel-torque limits takes its emergency
 /// action (the box also holds the nominal and friction's brake); a velocity
 /// base with lags and no limits takes it within the speeds its lags reach at
-/// this acceleration ([`SafetyFilter::emergency`]).
+/// this acceleration ([`SafetyFilter::velocity`]).
 pub const EMERGENCY_ACCEL: f64 = 20.0;
 
 /// The speed envelope a torque-driven robot's filtered command keeps it in
-/// (and a velocity base's with lags, [`Envelope::lagged`]):
+/// (and a velocity base's with lags, [`SafetyFilter::velocity`]):
 /// `−v_reverse ≤ v ≤ v_max`, `|ω| ≤ omega_max`, each as a first-order barrier
 /// `ḣ ≥ −κ h` on `(u1, u2)` (`v̇ = (u1 − η v)/m`, `ω̇ = (u2 − ψ ω)/J`, eq. 3),
 /// rows of the QP like the torque limit (a nominal command that satisfies

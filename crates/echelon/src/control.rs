@@ -229,27 +229,15 @@ pub fn errors<D: DualNum<Primitive = f64> + Copy>(
         v,
         omega,
     };
-    errors_of(&body, pd, dpd, D::from(lx), ly, dly, D::from(ke))
-}
-
-/// Eqs. 7 and 10 in any number type (`f64`, duals, SIMD lanes).
-#[inline(always)]
-fn errors_of<V: Real>(
-    s: &Body<V>,
-    pd: [V; 2],
-    dpd: [V; 2],
-    lx: V,
-    ly: V,
-    dly: V,
-    ke: V,
-) -> ([V; 2], [V; 2]) {
-    let (sin, cos) = (s.sin, s.cos);
-    let d = rotate(sin, cos, [s.x - pd[0], s.y - pd[1]]);
-    let e = [d[0] + lx, d[1] + ly];
-    let rdp = rotate(sin, cos, dpd);
-    let xi = [s.v - s.omega * ly, s.omega * lx];
-    let z = [xi[0] - rdp[0] + e[0] * ke, xi[1] - rdp[1] + dly + e[1] * ke];
-    (e, z)
+    // `1/L_X` and `L̈_Y` do not enter eqs. 7 and 10.
+    let hold = Hold {
+        lx: D::from(lx),
+        inv_lx: D::from(1.0 / lx),
+        ly,
+        dly,
+        ddly: D::from(0.0),
+    };
+    errors_at(&body, pd, dpd, &hold, D::from(ke))
 }
 
 /// The robot constants of eq. 3 as the law uses them, with its ratios
@@ -365,7 +353,7 @@ pub(crate) fn law_partial<V: Real>(
     } = *hold;
     let (v, w) = (s.v, s.omega);
     // eqs. 7 and 10
-    let (e, z) = errors_of(s, pd, dpd, lx, ly, dly, ke);
+    let (e, z) = errors_at(s, pd, dpd, hold, ke);
     let rdp = rotate(s.sin, s.cos, dpd);
     // ė (eq. 8, with L̇_Y) = −S e + ξ − R ṗ_d + [0, L̇_Y] = −S e + z − K_e e
     let de = [w * e[1] + z[0] - ke * e[0], -w * e[0] + z[1] - ke * e[1]];
@@ -472,8 +460,10 @@ pub fn lyapunov_rate(e: [f64; 2], z: [f64; 2], gains: Gains, variant: Variant) -
     -gains.ke * ee + cross - gains.kz * zz
 }
 
-/// Eqs. 7 and 10 for the crate's other laws ([`crate::kinematic`], their SIMD
-/// kernels): `e` and `z` of a body holding its leader at `hold`.
+/// Eqs. 7 and 10 in any number type (`f64`, duals, SIMD lanes): `e` and `z`
+/// of a body holding its leader at `hold` (`1/L_X` and `L̈_Y` do not enter).
+/// The one place of these formulas: [`errors`], [`law`], [`crate::kinematic`]
+/// and the SIMD kernels all come here.
 #[inline(always)]
 pub(crate) fn errors_at<V: Real>(
     s: &Body<V>,
@@ -482,5 +472,14 @@ pub(crate) fn errors_at<V: Real>(
     hold: &Hold<V>,
     ke: V,
 ) -> ([V; 2], [V; 2]) {
-    errors_of(s, pd, dpd, hold.lx, hold.ly, hold.dly, ke)
+    let (sin, cos) = (s.sin, s.cos);
+    let d = rotate(sin, cos, [s.x - pd[0], s.y - pd[1]]);
+    let e = [d[0] + hold.lx, d[1] + hold.ly];
+    let rdp = rotate(sin, cos, dpd);
+    let xi = [s.v - s.omega * hold.ly, s.omega * hold.lx];
+    let z = [
+        xi[0] - rdp[0] + e[0] * ke,
+        xi[1] - rdp[1] + hold.dly + e[1] * ke,
+    ];
+    (e, z)
 }

@@ -234,6 +234,15 @@ pub enum SimError {
     Observer(String),
 }
 
+impl SimError {
+    /// For `map_err`: a [`ParamError`] as a [`SimError::Param`] of `context`
+    /// (`sim`, `base`, `agent 3 robot`, ...).
+    pub(crate) fn param(context: &str) -> impl FnOnce(ParamError) -> SimError + use<> {
+        let context = context.to_owned();
+        move |source| SimError::Param { context, source }
+    }
+}
+
 /// Where in a scenario file a problem is.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Location {

@@ -296,6 +296,29 @@ pub(crate) fn sin_cos_cold<const N: usize>(theta: Lanes<N>) -> (Lanes<N>, Lanes<
     theta.sin_cos()
 }
 
+/// `x + d k` and the sines and cosines of its heading, turned from those of
+/// `x` by `d[2] k` ([`Lanes::sin_cos_turned`]), or, when some lane turns by
+/// 0.05 rad or more, from [`Lanes::sin_cos`] out of line ([`sin_cos_cold`]:
+/// rare, and the kernel stays small enough for the compiler to keep it in
+/// vectors). The new state goes through memory as whole vectors
+/// ([`vectors`]). An RK4 stage's state in both engines' kernels.
+#[inline(always)]
+#[allow(clippy::type_complexity)]
+pub(crate) fn turned_state<const N: usize>(
+    x: &[Lanes<N>; 5],
+    (sin, cos): (Lanes<N>, Lanes<N>),
+    d: &[Lanes<N>; 5],
+    k: f64,
+) -> ([Lanes<N>; 5], (Lanes<N>, Lanes<N>)) {
+    let mut next = add_scaled(x, d, k);
+    vectors(&mut next);
+    let turned = match (d[2] * k).sin_cos_turned(sin, cos) {
+        Some(sc) => sc,
+        None => sin_cos_cold(next[2]),
+    };
+    (next, turned)
+}
+
 /// `x + h/6 (k₁ + 2 (k₂ + k₃) + k₄)`, with `k23 = k₂ + k₃`.
 #[inline(always)]
 pub(crate) fn combine<const N: usize>(

@@ -70,11 +70,10 @@ use crate::reference::Reference;
 
 pub use bench::BenchFormation;
 pub use driver::sweep;
-use driver::{Columns, fill_reference, pack};
+use driver::{fill_reference, pack};
 pub use kernel::Probe;
 use kernel::{Consts, Limit};
 pub use torque::Torque;
-use torque::{chain, star};
 pub use velocity::{Velocity, VelocityBatch, VelocityProbe};
 
 /// Steps each block runs in registers before the next block's turn.
@@ -170,7 +169,7 @@ pub trait Kernel: sealed::Sealed + Sized {
     /// Lane `l` of a block's state.
     #[doc(hidden)]
     fn state(b: &Self::Block, l: usize) -> State;
-    /// A block's state, `x, y, θ, v, ω` in lanes (what [`Columns`] load and store).
+    /// A block's state, `x, y, θ, v, ω` in lanes (what [`Columns`](driver::Columns) load and store).
     #[doc(hidden)]
     fn x_mut(b: &mut Self::Block) -> &mut [kernel::V; 5];
     /// A tile of leaders for `steps` steps.
@@ -252,11 +251,7 @@ impl Batch {
         reference: Reference,
         dt: f64,
     ) -> Result<Batch, SimError> {
-        let param = |context: &str| {
-            let context = context.to_owned();
-            move |source| SimError::Param { context, source }
-        };
-        check::positive("dt", dt).map_err(param("sim"))?;
+        check::positive("dt", dt).map_err(SimError::param("sim"))?;
         Ok(Batch {
             robot,
             variant,

@@ -10,7 +10,7 @@ use crate::reference::{Order, Reference, Trajectory};
 
 use super::kernel::Probe;
 use super::kernel::{Block, Carry, Consts, Scratch, W};
-use super::{Columns, Kernel, PAR_BLOCKS, SEGMENT, Topology, fill_reference};
+use super::{Kernel, SEGMENT, Topology, fill_reference};
 use super::{kernel, sealed};
 
 /// The torque kernel: robots of eq. 3 under the dynamic law (eqs. 7–13).
@@ -134,72 +134,4 @@ impl Kernel for Torque {
         }
         out
     }
-}
-
-/// A star's tile, its blocks spread over the current rayon pool; the
-/// earliest broken `(step, agent)`. With `cols`, the state is the caller's:
-/// each task loads its blocks' lanes from the columns before its tile and
-/// stores them back after it (once per tile of up to 64 steps; the blocks
-/// keep a working copy, as they keep their own state without `cols`).
-pub(super) fn star<K: Kernel>(
-    arch: Arch,
-    c: &K::Consts,
-    blocks: &mut [K::Block],
-    mut cols: Option<Columns<'_>>,
-    t: &K::Tile,
-    len: usize,
-) -> Option<(usize, usize)> {
-    if rayon::current_num_threads() <= 1 || blocks.len() <= PAR_BLOCKS {
-        if let Some(cols) = &cols {
-            cols.load::<K>(blocks);
-        }
-        let broke = K::star(arch, c, blocks, t, len);
-        if let Some(cols) = &mut cols {
-            cols.store::<K>(blocks);
-        }
-        return broke;
-    }
-    // Halves on whole tasks of `PAR_BLOCKS` blocks (what `par_chunks_mut`
-    // does, with the columns split at the same agents).
-    let mid = (blocks.len() / 2).div_ceil(PAR_BLOCKS) * PAR_BLOCKS;
-    let (front, back) = blocks.split_at_mut(mid);
-    let (cf, cb) = match cols {
-        Some(cols) => {
-            let (f, b) = cols.split_at(mid * K::LANES);
-            (Some(f), Some(b))
-        }
-        None => (None, None),
-    };
-    let (a, b) = rayon::join(
-        || star::<K>(arch, c, front, cf, t, len),
-        || star::<K>(arch, c, back, cb, t, len),
-    );
-    let b = b.map(|(n, agent)| (n, mid * K::LANES + agent));
-    match (a, b) {
-        (Some(a), Some(b)) => Some(a.min(b)),
-        (a, b) => a.or(b),
-    }
-}
-
-/// A chain's tile, segment after segment, each led by the one before
-/// through `t`; the earliest broken `(step, agent)`.
-pub(super) fn chain<K: Kernel>(
-    arch: Arch,
-    c: &K::Consts,
-    blocks: &mut [K::Block],
-    scratch: &mut [K::Scratch],
-    t: &mut K::Tile,
-    len: usize,
-) -> Option<(usize, usize)> {
-    let mut first: Option<(usize, usize)> = None;
-    let mut steps = len;
-    for (si, seg) in blocks.chunks_mut(K::SEGMENT).enumerate() {
-        if let Some((n, a)) = K::chain(arch, c, seg, scratch, t, steps) {
-            // Later agents may break earlier: run them up to this step.
-            let at = (n, si * K::SEGMENT * K::LANES + a);
-            first = Some(first.map_or(at, |f| f.min(at)));
-            steps = n + 1;
-        }
-    }
-    first
 }

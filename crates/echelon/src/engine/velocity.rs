@@ -57,7 +57,7 @@ use super::{BatchEngine, EngineError, Kernel, Member, Topology, VelocityEngine, 
 mod law;
 mod tile;
 use super::kernel::vectors;
-use law::{command, derivative, ly_of, settle, speeds, turned};
+use law::{command, derivative, ly_of, settle, speeds};
 use tile::Run;
 pub(crate) use tile::Tile;
 pub(crate) use tile::{Chain, Star, probe};
@@ -262,12 +262,8 @@ impl VelocityBatch {
         reference: Reference,
         dt: f64,
     ) -> Result<VelocityBatch, SimError> {
-        let param = |context: &str| {
-            let context = context.to_owned();
-            move |source| SimError::Param { context, source }
-        };
-        check::positive("dt", dt).map_err(param("sim"))?;
-        base.check_step(dt).map_err(param("base"))?;
+        check::positive("dt", dt).map_err(SimError::param("sim"))?;
+        base.check_step(dt).map_err(SimError::param("base"))?;
         Ok(VelocityBatch {
             base,
             topology,

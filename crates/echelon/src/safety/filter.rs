@@ -1,6 +1,7 @@
 //! The filter itself: [`SafetyFilter`] (its settings, the QP's rows and the
-//! deadlock monitor), its answer ([`Filtered`], [`Outcome`]) and the barrier
-//! rows common to velocity bases and torque-driven robots.
+//! deadlock monitor), its answer ([`Filtered`], [`Outcome`]) and the rows
+//! common to velocity bases and torque-driven robots: the barriers, the speed
+//! envelope ([`Envelope`]) and the emergency box ([`EMERGENCY_ACCEL`]).
 
 use super::config::SafetyConfig;
 use super::deadlock::Deadlock;
@@ -189,6 +190,100 @@ impl SafetyFilter {
             self.rows.push(row(d, h, None));
         }
         min_distance
+    }
+}
+
+/// The smallest half-width, m/s², of the acceleration box in which a
+/// torque-driven robot without wheel-torque limits takes its emergency
+/// action (the box also holds the nominal and friction's brake); a velocity
+/// base with lags and no limits takes it within the speeds its lags reach at
+/// this acceleration ([`SafetyFilter::velocity`]).
+pub const EMERGENCY_ACCEL: f64 = 20.0;
+
+/// The speed envelope a torque-driven robot's filtered command keeps it in
+/// (and a velocity base's with lags, [`SafetyFilter::velocity`]):
+/// `−v_reverse ≤ v ≤ v_max`, `|ω| ≤ omega_max`, each as a first-order barrier
+/// `ḣ ≥ −κ h` on `(u1, u2)` (`v̇ = (u1 − η v)/m`, `ω̇ = (u2 − ψ ω)/J`, eq. 3),
+/// rows of the QP like the torque limit (a nominal command that satisfies
+/// every barrier is not held to them).
+///
+/// Why (issue 20): the filter steers the point `L` ahead, whose acceleration
+/// `(u1/m, L u2/J)` the QP changes as little as possible. The heading is that
+/// output's internal (zero) dynamics: holding the point's lateral
+/// acceleration needs `ω̇ ≈ −(v/L) ω`, unstable at rate `|v|/L` whenever
+/// `v < 0` (20/s per m/s at `L = 0.05 m`), and a lateral correction of the
+/// point costs the QP `L` times less than the angular acceleration it
+/// demands. Unbounded, a filter that pushed a robot backwards made it spin
+/// up (12 rad/s in 3 s) and the run diverge (‖e‖ ≈ 1e213 m). The envelope
+/// bounds the state the filter may create, and with no reverse (the default)
+/// the heading stays on the stable side of its zero dynamics: the filter may
+/// slow a robot to a stop, never drive it backwards. When the envelope and
+/// the barriers conflict the QP is infeasible and the robot brakes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Envelope {
+    /// Largest forward speed, m/s.
+    pub v_max: f64,
+    /// Largest reverse speed, m/s (`v ≥ −v_reverse`).
+    pub v_reverse: f64,
+    /// Largest turn rate, rad/s.
+    pub omega_max: f64,
+    /// `κ`, 1/s: how fast the state is brought back inside.
+    pub rate: f64,
+}
+
+impl Envelope {
+    /// The default envelope: 1.5 m/s forward, no reverse, 4 rad/s, κ = 5/s.
+    pub const DEFAULT: Envelope = Envelope {
+        v_max: 1.5,
+        v_reverse: 0.0,
+        omega_max: 4.0,
+        rate: 5.0,
+    };
+
+    /// The envelope of a velocity base with lags: its own speed limits (the
+    /// default's where it has none), no reverse, the default's rate.
+    pub(super) fn lagged(base: &crate::base::VelocityBase) -> Envelope {
+        let finite = |x: f64, default: f64| if x.is_finite() { x } else { default };
+        Envelope {
+            v_max: finite(base.v_max(), Envelope::DEFAULT.v_max),
+            omega_max: finite(base.omega_max(), Envelope::DEFAULT.omega_max),
+            ..Envelope::DEFAULT
+        }
+    }
+
+    /// The four rows in the QP's variables `x` at speeds `(v, w)`, for a
+    /// robot whose speeds move as `v̇ = gain₁ x₁ − drag₁`,
+    /// `ω̇ = gain₂ x₂ − drag₂` (torques, `x = (u1/m, L u2/J)`: gain `(1, 1/L)`,
+    /// drag `(η v/m, ψ ω/J)`; a velocity base with lags, `x = (v*, L ω*)`:
+    /// gain `(1/τ_v, 1/(L τ_ω))`, drag `(v/τ_v, ω/τ_ω)`).
+    pub(super) fn push_rows(
+        &self,
+        rows: &mut Vec<Constraint>,
+        gain: [f64; 2],
+        [dv, dw]: [f64; 2],
+        v: f64,
+        w: f64,
+    ) {
+        let k = self.rate;
+        // v_max − v ≥ 0:      −v̇ ≥ −κ (v_max − v)
+        rows.push(Constraint {
+            a: [-gain[0], 0.0],
+            b: -k * (self.v_max - v) - dv,
+        });
+        // v + v_reverse ≥ 0:   v̇ ≥ −κ (v + v_reverse)
+        rows.push(Constraint {
+            a: [gain[0], 0.0],
+            b: -k * (v + self.v_reverse) + dv,
+        });
+        // omega_max ∓ ω ≥ 0
+        rows.push(Constraint {
+            a: [0.0, -gain[1]],
+            b: -k * (self.omega_max - w) - dw,
+        });
+        rows.push(Constraint {
+            a: [0.0, gain[1]],
+            b: -k * (self.omega_max + w) + dw,
+        });
     }
 }
 

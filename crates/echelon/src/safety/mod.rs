@@ -144,10 +144,9 @@ mod velocity;
 
 pub use config::SafetyConfig;
 pub use deadlock::{BIAS_ANGLE, DEADLOCK_MEMORY, STUCK_TIME};
-pub use filter::{Filtered, INNER_RATE, Outcome, SafetyFilter};
+pub use filter::{EMERGENCY_ACCEL, Envelope, Filtered, INNER_RATE, Outcome, SafetyFilter};
 pub use neighbour::{
     Neighbour, Obstacle, UNCERTAINTY_SIGMAS, point, start_conflict, uncertainty_margin,
 };
 pub use qp::{Constraint, MAX_ROWS, TOLERANCE};
-pub use torque::{EMERGENCY_ACCEL, Envelope};
 pub use velocity::STEP_LAG;

@@ -1,10 +1,10 @@
-//! Proptest strategies shared by the velocity and torque filters' property
-//! tests.
+//! Proptest strategies and checks shared by the velocity and torque
+//! filters' tests.
 
 use proptest::prelude::*;
 
-use super::SafetyConfig;
 use super::neighbour::{Neighbour, point};
+use super::{Filtered, Outcome, SafetyConfig};
 use crate::model::State;
 
 /// The filter's `L` in the property tests, m.
@@ -64,4 +64,17 @@ fn outside(me: &State, l: f64, ns: Vec<Neighbour>, radius: f64) -> Vec<Neighbour
     ns.into_iter()
         .filter(|n| (p[0] - n.p[0]).hypot(p[1] - n.p[1]) > radius)
         .collect()
+}
+
+/// The filter passed `nominal` on untouched (a diverged robot's, for the
+/// divergence guard): outcome nominal, the command's two numbers (`numbers`:
+/// `[u1, u2]` or `[v, ω]`) those of `nominal` bit for bit, NaN included.
+pub(super) fn assert_passed<C: Copy>(
+    out: &Filtered<C>,
+    nominal: C,
+    numbers: impl Fn(C) -> [f64; 2],
+) {
+    assert_eq!(out.outcome, Outcome::Nominal);
+    let bits = |c| numbers(c).map(f64::to_bits);
+    assert_eq!(bits(out.command), bits(nominal));
 }

@@ -2,66 +2,13 @@
 //! relative degree two, the speed envelope ([`Envelope`]) and the wheel
 //! torque limit.
 
-use super::filter::{Filtered, Own, SafetyFilter};
+use super::filter::{EMERGENCY_ACCEL, Envelope, Filtered, Own, SafetyFilter};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, push_band, solve_relaxed, solve_split};
 use crate::model::{Input, RobotParams, State};
 
-/// The smallest half-width, m/s², of the acceleration box in which a
-/// torque-driven robot without wheel-torque limits takes its emergency
-/// action (the box also holds the nominal and friction's brake).
-pub const EMERGENCY_ACCEL: f64 = 20.0;
-
-/// The speed envelope a torque-driven robot's filtered command keeps it in:
-/// `−v_reverse ≤ v ≤ v_max`, `|ω| ≤ omega_max`, each as a first-order barrier
-/// `ḣ ≥ −κ h` on `(u1, u2)` (`v̇ = (u1 − η v)/m`, `ω̇ = (u2 − ψ ω)/J`, eq. 3),
-/// rows of the QP like the torque limit (a nominal command that satisfies
-/// every barrier is not held to them).
-///
-/// Why (issue 20): the filter steers the point `L` ahead, whose acceleration
-/// `(u1/m, L u2/J)` the QP changes as little as possible. The heading is that
-/// output's internal (zero) dynamics: holding the point's lateral
-/// acceleration needs `ω̇ ≈ −(v/L) ω`, unstable at rate `|v|/L` whenever
-/// `v < 0` (20/s per m/s at `L = 0.05 m`), and a lateral correction of the
-/// point costs the QP `L` times less than the angular acceleration it
-/// demands. Unbounded, a filter that pushed a robot backwards made it spin
-/// up (12 rad/s in 3 s) and the run diverge (‖e‖ ≈ 1e213 m). The envelope
-/// bounds the state the filter may create, and with no reverse (the default)
-/// the heading stays on the stable side of its zero dynamics: the filter may
-/// slow a robot to a stop, never drive it backwards. When the envelope and
-/// the barriers conflict the QP is infeasible and the robot brakes.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Envelope {
-    /// Largest forward speed, m/s.
-    pub v_max: f64,
-    /// Largest reverse speed, m/s (`v ≥ −v_reverse`).
-    pub v_reverse: f64,
-    /// Largest turn rate, rad/s.
-    pub omega_max: f64,
-    /// `κ`, 1/s: how fast the state is brought back inside.
-    pub rate: f64,
-}
-
+/// How the torque filter holds its nominal to the envelope.
 impl Envelope {
-    /// The default envelope: 1.5 m/s forward, no reverse, 4 rad/s, κ = 5/s.
-    pub const DEFAULT: Envelope = Envelope {
-        v_max: 1.5,
-        v_reverse: 0.0,
-        omega_max: 4.0,
-        rate: 5.0,
-    };
-
-    /// The envelope of a velocity base with lags: its own speed limits (the
-    /// default's where it has none), no reverse, the default's rate.
-    pub(super) fn lagged(base: &crate::base::VelocityBase) -> Envelope {
-        let finite = |x: f64, default: f64| if x.is_finite() { x } else { default };
-        Envelope {
-            v_max: finite(base.v_max(), Envelope::DEFAULT.v_max),
-            omega_max: finite(base.omega_max(), Envelope::DEFAULT.omega_max),
-            ..Envelope::DEFAULT
-        }
-    }
-
     /// The nominal `x0 = (u1/m, L u2/J)` held to the envelope's top speed
     /// once the robot is at it (`v ≥ v_max`: the row `v̇ ≤ κ (v_max − v)`,
     /// one coordinate, so this is the projection onto it), not to its reverse bound (a law that brakes at low speed keeps
@@ -95,41 +42,6 @@ impl Envelope {
             }
         };
         robot.limit(held).0
-    }
-
-    /// The four rows in the QP's variables `x` at speeds `(v, w)`, for a
-    /// robot whose speeds move as `v̇ = gain₁ x₁ − drag₁`,
-    /// `ω̇ = gain₂ x₂ − drag₂` (torques, `x = (u1/m, L u2/J)`: gain `(1, 1/L)`,
-    /// drag `(η v/m, ψ ω/J)`; a velocity base with lags, `x = (v*, L ω*)`:
-    /// gain `(1/τ_v, 1/(L τ_ω))`, drag `(v/τ_v, ω/τ_ω)`).
-    pub(super) fn push_rows(
-        &self,
-        rows: &mut Vec<Constraint>,
-        gain: [f64; 2],
-        [dv, dw]: [f64; 2],
-        v: f64,
-        w: f64,
-    ) {
-        let k = self.rate;
-        // v_max − v ≥ 0:      −v̇ ≥ −κ (v_max − v)
-        rows.push(Constraint {
-            a: [-gain[0], 0.0],
-            b: -k * (self.v_max - v) - dv,
-        });
-        // v + v_reverse ≥ 0:   v̇ ≥ −κ (v + v_reverse)
-        rows.push(Constraint {
-            a: [gain[0], 0.0],
-            b: -k * (v + self.v_reverse) + dv,
-        });
-        // omega_max ∓ ω ≥ 0
-        rows.push(Constraint {
-            a: [0.0, -gain[1]],
-            b: -k * (self.omega_max - w) - dw,
-        });
-        rows.push(Constraint {
-            a: [0.0, gain[1]],
-            b: -k * (self.omega_max + w) + dw,
-        });
     }
 }
 
@@ -255,25 +167,25 @@ mod tests {
     #[test]
     fn non_finite_input_passes_through_unchanged() {
         use crate::safety::SafetyConfig;
+        use crate::safety::strategies::assert_passed;
         let l = 0.05;
         let robot = RobotParams::AGENT1;
         let other = State::at_rest(0.6, 0.0, std::f64::consts::PI);
         let n = Neighbour::of_state(&other, l, None, true);
         let config = SafetyConfig::new(0.3, 1.0, 2.0).unwrap();
         let rest = State::at_rest(0.0, 0.0, 0.0);
+        let numbers = |u: Input| [u.u1, u.u2];
         for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
             for nominal in [Input { u1: bad, u2: 0.0 }, Input { u1: 1.0, u2: bad }] {
                 let out =
                     SafetyFilter::new(config).torque(0.0, &rest, l, &robot, nominal, &[n], &[]);
-                assert_eq!(out.outcome, Outcome::Nominal);
-                assert_eq!(out.command.u1.to_bits(), nominal.u1.to_bits());
-                assert_eq!(out.command.u2.to_bits(), nominal.u2.to_bits());
+                assert_passed(&out, nominal, numbers);
             }
             let mut me = rest;
             me.omega = bad;
             let nominal = Input { u1: 5.0, u2: 0.0 };
             let out = SafetyFilter::new(config).torque(0.0, &me, l, &robot, nominal, &[n], &[]);
-            assert_eq!((out.command, out.outcome), (nominal, Outcome::Nominal));
+            assert_passed(&out, nominal, numbers);
         }
     }
 

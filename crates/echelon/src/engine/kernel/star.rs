@@ -1,11 +1,10 @@
 //! A star block's stage and tile: every agent follows the reference.
 
 use crate::control::{Body, law_finish, law_partial};
-use crate::lanes::Lanes;
 
 use super::{
-    Block, Carry, Consts, V, W, actuate, add_scaled, broken, combine, each, first_lane, hold_ly,
-    sin_cos_cold, star_ly, vectors,
+    Block, Carry, Consts, V, W, actuate, broken, combine, each, first_lane, hold_ly, star_ly,
+    turned_state, vectors,
 };
 
 /// What a star agent's controller and plant do at one stage.
@@ -43,27 +42,6 @@ pub(crate) fn star_stage(
         z: p.z,
         u,
     }
-}
-
-/// `x + d k` and the sines and cosines of its heading, from those of `x`
-/// ([`V::sin_cos_turned`]: the stage turns the robot by `d[2] k`; when some
-/// lane turns by 0.05 rad or more, [`Lanes::sin_cos`] out of line). The new
-/// state goes through memory as whole vectors ([`vectors`]).
-#[inline(always)]
-#[allow(clippy::type_complexity)]
-pub(crate) fn turned_state<const N: usize>(
-    x: &[Lanes<N>; 5],
-    (sin, cos): (Lanes<N>, Lanes<N>),
-    d: &[Lanes<N>; 5],
-    k: f64,
-) -> ([Lanes<N>; 5], (Lanes<N>, Lanes<N>)) {
-    let mut next = add_scaled(x, d, k);
-    vectors(&mut next);
-    let turned = match (d[2] * k).sin_cos_turned(sin, cos) {
-        Some(sc) => sc,
-        None => sin_cos_cold(next[2]),
-    };
-    (next, turned)
 }
 
 /// Advances star blocks by `refs.len()` steps; `refs[n]` is the reference at

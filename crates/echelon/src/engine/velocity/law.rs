@@ -3,7 +3,7 @@
 
 use crate::base::AccelLimit;
 use crate::control::Hold;
-use crate::engine::kernel::{compensation, sin_cos_cold, vectors};
+use crate::engine::kernel::compensation;
 use crate::kinematic::kinematic_of;
 use crate::lanes::Lanes;
 
@@ -109,33 +109,6 @@ pub(super) fn derivative(c: &VConsts, x: &[V4; 5], (sin, cos): (V4, V4), cmd: &[
         (dv, dw) = (V4::select(over, lv, dv), V4::select(over, lw, dw));
     }
     [v * cos, v * sin, w, dv, dw]
-}
-
-/// `x + d k` and the sines and cosines of its heading, turned from those of
-/// `x` by `d[2] k` ([`V4::sin_cos_turned`]), or, when some lane turns by
-/// 0.05 rad or more, from [`V4::sin_cos`] out of line (rare: the kernel stays
-/// small enough for the compiler to keep it in vectors).
-#[inline(always)]
-#[allow(clippy::type_complexity)]
-pub(super) fn turned(
-    x: &[V4; 5],
-    (sin, cos): (V4, V4),
-    d: &[V4; 5],
-    k: f64,
-) -> ([V4; 5], (V4, V4)) {
-    let mut next = [
-        x[0] + d[0] * k,
-        x[1] + d[1] * k,
-        x[2] + d[2] * k,
-        x[3] + d[3] * k,
-        x[4] + d[4] * k,
-    ];
-    vectors(&mut next);
-    let sc = match (d[2] * k).sin_cos_turned(sin, cos) {
-        Some(sc) => sc,
-        None => sin_cos_cold(next[2]),
-    };
-    (next, sc)
 }
 
 /// The state after a step ([`crate::base::VelocityBase::settle`]), given the

@@ -5,12 +5,12 @@ use std::marker::PhantomData;
 
 use pulp::{Simd, WithSimd};
 
-use crate::engine::kernel::{broken, first_lane};
+use crate::engine::kernel::{broken, first_lane, turned_state};
 use crate::lanes::{Lanes, Mask};
 
 use super::{
     Cmd, Lead, Leads, Own, V4, VBlock, VConsts, VW, command, derivative, ly_of, settle, speeds,
-    turned, vectors,
+    vectors,
 };
 
 /// How a block sees its leaders.
@@ -205,15 +205,15 @@ fn block_tile<L: Leaders, T: Stages>(
             *k = k.wrapping_sub(m);
         }
         let k1 = derivative(c, &x, sc, &cur.cmd);
-        let (x2, sc2) = turned(&x, sc, &k1, h);
+        let (x2, sc2) = turned_state(&x, sc, &k1, h);
         let (c2, me) = L::command(c, own, &x2, sc2, &leads[0], ly23);
         t.put(n, 0, me);
         let k2 = derivative(c, &x2, sc2, &c2.cmd);
-        let (x3, sc3) = turned(&x, sc, &k2, h);
+        let (x3, sc3) = turned_state(&x, sc, &k2, h);
         let (c3, me) = L::command(c, own, &x3, sc3, &leads[1], ly23);
         t.put(n, 1, me);
         let k3 = derivative(c, &x3, sc3, &c3.cmd);
-        let (x4, sc4) = turned(&x, sc, &k3, dt);
+        let (x4, sc4) = turned_state(&x, sc, &k3, dt);
         let (c4, me) = L::command(c, own, &x4, sc4, &leads[2], ly4);
         t.put(n, 2, me);
         let k4 = derivative(c, &x4, sc4, &c4.cmd);

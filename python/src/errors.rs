@@ -24,16 +24,13 @@ create_exception!(
     "A run that failed: it diverged (a state left its bounds) or an output could not be written."
 );
 
-/// Where the core places a value a command-line flag set.
-const COMMAND_LINE: &str = "command line";
-
 /// The error as a Python caller set the value: one the core places on the
 /// command line (`command line: --zeta: …`, a flag of `echelon sweep`) was
 /// set by a keyword argument or a grid key here, which Python spells
 /// `zeta`, `fix_every`, `log_dt`: `arguments: zeta: …`.
 fn as_python(e: &echelon::ScenarioError) -> echelon::ScenarioError {
     let mut e = e.clone();
-    if e.location.file == COMMAND_LINE {
+    if e.location.file == echelon::error::Location::COMMAND_LINE {
         e.location.file = "arguments".into();
         if let Some(flag) = e.field.strip_prefix("--") {
             e.field = flag.replace('-', "_");

@@ -254,6 +254,12 @@ pub struct Location {
     pub column: usize,
 }
 
+impl Location {
+    /// The `file` of a value a command-line flag set (its `field` is then
+    /// the flag, `--dt`; line and column are 0).
+    pub const COMMAND_LINE: &'static str = "command line";
+}
+
 impl fmt::Display for Location {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let file = one_line(&self.file);

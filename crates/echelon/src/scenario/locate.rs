@@ -79,7 +79,7 @@ impl<'a> Locator<'a> {
         if let Some(flag) = self.flag(path) {
             return ScenarioError {
                 location: Location {
-                    file: "command line".into(),
+                    file: Location::COMMAND_LINE.into(),
                     line: 0,
                     column: 0,
                 },

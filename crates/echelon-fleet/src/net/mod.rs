@@ -303,7 +303,7 @@ pub(crate) fn put_stamped(session: &Session, key: &str, payload: impl Into<ZByte
 }
 
 /// The longest [`flush`] waits, real time.
-pub const FLUSH_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
+pub(crate) const FLUSH_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// Returns once the router `session` is a client of holds everything it
 /// published before (or after `timeout`, with an error): a round trip

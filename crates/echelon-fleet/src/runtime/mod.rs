@@ -11,7 +11,7 @@
 //! `drive.rs`); on a stop request, its end or an error: stop it (after a
 //! stop request, a task that [lingers](Task::linger) first takes what still
 //! arrives: `linger.rs`), make sure its last words reached the router or
-//! peers ([`net::flush`]), close the session, take its report.
+//! peers (`net::flush`), close the session, take its report.
 //!
 //! By job: `inputs.rs` (what arrives, queued with counted drops),
 //! `outputs.rs` (what it publishes), `presence.rs` (latches, liveliness),

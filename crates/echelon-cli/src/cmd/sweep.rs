@@ -10,10 +10,11 @@ use anyhow::{Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use echelon::ParamError;
+use echelon::error::Location;
 use echelon::odometry::ZetaModel;
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sweep::{self, Grid, GridSpec, Row};
+use echelon::{ParamError, ScenarioError};
 
 use super::out::outln;
 use super::{non_negative, positive};
@@ -93,7 +94,16 @@ fn flag_of(field: &str) -> Option<&'static str> {
 /// A grid value refused, named by its flag as a scenario's value set by a
 /// flag is (`command line: --gamma: 2 must be in (0, 1) …`).
 fn flag_error(flag: &str, e: &ParamError) -> anyhow::Error {
-    anyhow::anyhow!("command line: {flag}: {} {}", e.value, e.reason)
+    ScenarioError {
+        location: Location {
+            file: Location::COMMAND_LINE.into(),
+            line: 0,
+            column: 0,
+        },
+        field: flag.to_owned(),
+        message: format!("{} {}", e.value, e.reason),
+    }
+    .into()
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]

@@ -50,18 +50,17 @@ impl Builder<'_> {
         if !odo.any() && !fixes_on {
             return Ok(None);
         }
-        // Whether the sampling period is the step's (a fixes' period must be a
-        // multiple of it: a refusal then may be the step's fault).
-        let is_step = odo.get(|s| s.period, "period").is_none() && *timing == Timing::Continuous;
-        let period = match odo.get(|s| s.period, "period") {
+        // The sampling period, and whether it is the step's (a fixes' period
+        // must be a multiple of it: a refusal then may be the step's fault).
+        let (period, is_step) = match odo.get(|s| s.period, "period") {
             None => match timing {
-                Timing::Sampled { period } => *period,
-                Timing::Continuous => dt,
+                Timing::Sampled { period } => (*period, false),
+                Timing::Continuous => (dt, true),
             },
             Some((p, path)) => {
                 check::multiple_of("period", p, dt, &format!("dt = {dt} s"))
                     .map_err(|e| self.against_step(&path, &e))?;
-                p
+                (p, false)
             }
         };
         let num = |get: fn(&OdometrySection) -> Option<f64>, key: &str, default: f64| {

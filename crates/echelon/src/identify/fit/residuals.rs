@@ -32,6 +32,13 @@ pub(crate) fn ljung_box(r: &[f64], lags: usize) -> (f64, f64, f64) {
 }
 
 /// A multi-scale scan of the residuals' local means: the largest
+/// The 99.9 % bound on the largest `|z|` of `tests` standard normal
+/// statistics (Bonferroni, with the Gaussian tail bound):
+/// `√(2 ln(2M/0.001))` for `M = tests` (at least one).
+fn bonferroni_999(tests: usize) -> f64 {
+    (2.0 * (2.0 * tests.max(1) as f64 / 1e-3).ln()).sqrt()
+}
+
 /// `|Σ r| / (σ √L)` over windows of `L = 8, 16, …` samples (up to half the
 /// log) at strides of `L/2`, `σ` the residual RMS; with its 99.9 % bound
 /// (Bonferroni over the windows: `√(2 ln(2M/0.001))` for `M` windows) and
@@ -61,7 +68,7 @@ pub(crate) fn scan(r: &[f64]) -> (f64, f64, [usize; 2]) {
         }
         len *= 2;
     }
-    let bound = (2.0 * (2.0 * windows.max(1) as f64 / 1e-3).ln()).sqrt();
+    let bound = bonferroni_999(windows);
     if sigma > 0.0 {
         (best, bound, at)
     } else {
@@ -97,7 +104,7 @@ pub(crate) fn transients(
     gain: bool,
 ) -> (f64, f64, f64) {
     let n = t.len().min(u.len()).min(x.len()).min(r.len());
-    let bound = (2.0 * (2.0 * LIMITS as f64 / 1e-3).ln()).sqrt();
+    let bound = bonferroni_999(LIMITS);
     let rate: Vec<f64> = (0..n).map(|i| (k * u[i] - x[i]) / tau).collect();
     let top = rate.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
     let sigma = (r[..n].iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt();

@@ -43,7 +43,7 @@ mod process;
 mod report;
 use ports::Links;
 pub use ports::{free_ports, free_ports_for};
-use process::{Proc, poll_all, spawn};
+use process::{Proc, poll_all, spawn, stop_all};
 pub use report::{UpCost, UpReport};
 use report::{report, up_cost};
 
@@ -449,24 +449,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // records what is (the leader's last samples, the robots' and the
     // bases' last words), each until its inputs are quiet
     // (`runtime::Linger`, bounded), so the collector goes last.
-    for b in &base_procs {
-        b.terminate();
-    }
-    let wind_down = Instant::now();
-    while !poll_all(&mut base_procs)? {
-        if wind_down.elapsed() > Duration::from_secs(30) {
-            return Err(FleetError::Child("a ROS 2 base did not stop".into()));
-        }
-        std::thread::sleep(nap);
-    }
-    collector.terminate();
-    let wind_down = Instant::now();
-    while !poll_all(std::iter::once(&mut collector).chain(&mut base_procs))? {
-        if wind_down.elapsed() > Duration::from_secs(30) {
-            return Err(FleetError::Child("the collector did not stop".into()));
-        }
-        std::thread::sleep(nap);
-    }
+    stop_all(&mut base_procs, nap, "a ROS 2 base")?;
+    stop_all(std::slice::from_mut(&mut collector), nap, "the collector")?;
     if let Some(f) = std::iter::once(&collector)
         .chain(&base_procs)
         .find_map(Proc::failure)
@@ -474,16 +458,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         return Err(FleetError::Child(f));
     }
     // The routers last, once nothing is linked to them any more.
-    for r in &routers {
-        r.terminate();
-    }
-    let wind_down = Instant::now();
-    while !poll_all(&mut routers)? {
-        if wind_down.elapsed() > Duration::from_secs(30) {
-            return Err(FleetError::Child("a router did not stop".into()));
-        }
-        std::thread::sleep(nap);
-    }
+    stop_all(&mut routers, nap, "a router")?;
     if let Some(f) = routers.iter().find_map(Proc::failure) {
         return Err(FleetError::Child(f));
     }

@@ -129,6 +129,27 @@ pub(super) fn poll_all<'a>(
     Ok(all)
 }
 
+/// Asks each of `procs` to stop (SIGTERM) and waits until all have exited
+/// (polling every `nap`, at most 30 s; then the error names `what`). Their
+/// exit statuses are left for [`Proc::failure`].
+pub(super) fn stop_all(
+    procs: &mut [Proc],
+    nap: std::time::Duration,
+    what: &str,
+) -> Result<(), FleetError> {
+    for p in procs.iter() {
+        p.terminate();
+    }
+    let wind_down = Instant::now();
+    while !poll_all(procs.iter_mut())? {
+        if wind_down.elapsed() > std::time::Duration::from_secs(30) {
+            return Err(FleetError::Child(format!("{what} did not stop")));
+        }
+        std::thread::sleep(nap);
+    }
+    Ok(())
+}
+
 pub(super) fn spawn(
     exe: &Path,
     role: &str,

@@ -32,11 +32,17 @@ fn as_python(e: &echelon::ScenarioError) -> echelon::ScenarioError {
     let mut e = e.clone();
     if e.location.file == echelon::error::Location::COMMAND_LINE {
         e.location.file = "arguments".into();
-        if let Some(flag) = e.field.strip_prefix("--") {
-            e.field = flag.replace('-', "_");
+        if let Some(key) = keyword(&e.field) {
+            e.field = key;
         }
     }
     e
+}
+
+/// The Python keyword of a command-line flag: `--fix-every` → `fix_every`
+/// (`None` for a name that is not a flag).
+pub(crate) fn keyword(flag: &str) -> Option<String> {
+    flag.strip_prefix("--").map(|f| f.replace('-', "_"))
 }
 
 /// A scenario error as a [`ScenarioError`] carrying its location.
@@ -89,6 +95,15 @@ pub(crate) fn scenario(py: Python<'_>, e: &echelon::ScenarioError) -> PyErr {
 /// A refused parameter (names its field) as a `ValueError`.
 pub(crate) fn param(e: &echelon::ParamError) -> PyErr {
     PyValueError::new_err(e.to_string())
+}
+
+/// A grid value refused, as a `ValueError` naming the grid key that set it
+/// (`eb = -1: …`: the keyword of its `echelon sweep` flag).
+pub(crate) fn grid_param(e: &echelon::ParamError) -> PyErr {
+    match echelon::sweep::GridSpec::flag(e.field).and_then(keyword) {
+        Some(key) => PyValueError::new_err(format!("{key} = {}: {}", e.value, e.reason)),
+        None => param(e),
+    }
 }
 
 /// A failed simulation as a [`SimulationError`].

@@ -341,7 +341,7 @@ impl PyScenario {
         let rows = rows.map_err(|e| match e {
             sweep::SweepError::Scenario(e) => errors::scenario(py, &e),
             sweep::SweepError::Sim(e) => errors::sim(&e),
-            sweep::SweepError::Param(e) => errors::param(&e),
+            sweep::SweepError::Param(e) => errors::grid_param(&e),
         })?;
         let mut bytes = Vec::new();
         sweep::write_csv(&mut bytes, &rows, grid.spec().zeta_model).map_err(errors::value)?;
@@ -409,15 +409,7 @@ impl PyScenario {
             gamma: g.gamma,
             transient: g.transient.unwrap_or(0.5 * duration),
         })
-        .map_err(|mut e| {
-            // Named by the grid key that set it, as Python spells it.
-            e.field = match e.field {
-                "wheel_diameter_ratio" => "ed",
-                "wheelbase_ratio" => "eb",
-                field => field,
-            };
-            errors::param(&e)
-        })?;
+        .map_err(|e| errors::grid_param(&e))?;
         Ok((grid, ov.resolve()?))
     }
 }

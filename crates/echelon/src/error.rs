@@ -302,6 +302,22 @@ pub struct ScenarioError {
     pub message: String,
 }
 
+impl ScenarioError {
+    /// A value the command-line flag `flag` (`--dt`) set, refused:
+    /// `command line: --dt: message`.
+    pub fn of_flag(flag: &str, message: impl fmt::Display) -> ScenarioError {
+        ScenarioError {
+            location: Location {
+                file: Location::COMMAND_LINE.into(),
+                line: 0,
+                column: 0,
+            },
+            field: flag.to_owned(),
+            message: message.to_string(),
+        }
+    }
+}
+
 impl fmt::Display for ScenarioError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let message = one_line(&self.message);

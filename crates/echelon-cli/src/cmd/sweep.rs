@@ -10,7 +10,6 @@ use anyhow::{Context, Result};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use echelon::error::Location;
 use echelon::odometry::ZetaModel;
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sweep::{self, Grid, GridSpec, Row};
@@ -76,34 +75,10 @@ pub(crate) struct SweepArgs {
     quiet: bool,
 }
 
-/// The flag that gives a [`GridSpec`] field.
-fn flag_of(field: &str) -> Option<&'static str> {
-    Some(match field {
-        "zeta" => "--zeta",
-        "wheel_diameter_ratio" => "--ed",
-        "wheelbase_ratio" => "--eb",
-        "slip" => "--slip",
-        "fix_every" => "--fix-every",
-        "seeds" => "--seeds",
-        "gamma" => "--gamma",
-        "transient" => "--transient",
-        _ => return None,
-    })
-}
-
 /// A grid value refused, named by its flag as a scenario's value set by a
 /// flag is (`command line: --gamma: 2 must be in (0, 1) …`).
 fn flag_error(flag: &str, e: &ParamError) -> anyhow::Error {
-    ScenarioError {
-        location: Location {
-            file: Location::COMMAND_LINE.into(),
-            line: 0,
-            column: 0,
-        },
-        field: flag.to_owned(),
-        message: format!("{} {}", e.value, e.reason),
-    }
-    .into()
+    ScenarioError::of_flag(flag, format_args!("{} {}", e.value, e.reason)).into()
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -138,7 +113,7 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         gamma: a.gamma,
         transient: a.transient.unwrap_or(0.5 * duration),
     })
-    .map_err(|e| match flag_of(e.field) {
+    .map_err(|e| match GridSpec::flag(e.field) {
         Some(flag) => flag_error(flag, &e),
         None => e.into(),
     })?;
@@ -172,7 +147,7 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
             Ok::<_, sweep::SweepError>((rows, curves))
         })
         .map_err(|e| match e {
-            sweep::SweepError::Param(p) => match flag_of(p.field) {
+            sweep::SweepError::Param(p) => match GridSpec::flag(p.field) {
                 Some(flag) => flag_error(flag, &p),
                 None => sweep::SweepError::Param(p).into(),
             },

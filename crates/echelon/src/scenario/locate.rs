@@ -77,15 +77,7 @@ impl<'a> Locator<'a> {
     /// `command line: --flag: message` when a flag set the value.
     pub(crate) fn error(&self, path: &FieldPath, message: impl Display) -> ScenarioError {
         if let Some(flag) = self.flag(path) {
-            return ScenarioError {
-                location: Location {
-                    file: Location::COMMAND_LINE.into(),
-                    line: 0,
-                    column: 0,
-                },
-                field: flag.to_owned(),
-                message: message.to_string(),
-            };
+            return ScenarioError::of_flag(flag, message);
         }
         ScenarioError {
             location: self.place(path),

@@ -110,13 +110,17 @@ pub struct OdometryOverrides {
 }
 
 impl OdometryOverrides {
-    /// The odometry fields set, with their flags.
-    const ODOMETRY: [(&'static str, &'static str); 5] = [
+    /// Each field with the `echelon sweep` flag that sets it, in the order
+    /// of the struct: the odometry fields (also the `[odometry]` keys they
+    /// are written to), then `fix_every`. The one table of these names
+    /// ([`crate::sweep::GridSpec::flag`] reads it too).
+    pub const FLAGS: [(&'static str, &'static str); 6] = [
         ("zeta", "--zeta"),
         ("zeta_model", "--zeta-model"),
         ("wheel_diameter_ratio", "--ed"),
         ("wheelbase_ratio", "--eb"),
         ("slip", "--slip"),
+        ("fix_every", "--fix-every"),
     ];
 
     fn odometry(&self, o: &mut OdometrySection) {
@@ -161,13 +165,14 @@ impl Scenario {
                 fixes_at.push(agent.key("fixes"));
             }
         }
+        let [odometry_flags @ .., (_, fix_flag)] = &OdometryOverrides::FLAGS;
         for table in odometry_at {
-            for (key, flag) in OdometryOverrides::ODOMETRY {
+            for &(key, flag) in odometry_flags.iter() {
                 s.flags.push((table.key(key), flag));
             }
         }
         for table in fixes_at {
-            s.flags.push((table.key(fixes_key), "--fix-every"));
+            s.flags.push((table.key(fixes_key), *fix_flag));
         }
         s
     }

@@ -218,6 +218,25 @@ pub enum SweepError {
     Sim(#[from] SimError),
 }
 
+impl GridSpec {
+    /// The `echelon sweep` flag that sets `field`, a field of this struct
+    /// as a [`ParamError`] from [`Grid::new`] or a sweep names it (`None`
+    /// for any other name). Python's keyword is the flag without `--`, `-`
+    /// written `_`.
+    pub fn flag(field: &str) -> Option<&'static str> {
+        const OTHERS: [(&str, &str); 3] = [
+            ("seeds", "--seeds"),
+            ("gamma", "--gamma"),
+            ("transient", "--transient"),
+        ];
+        OdometryOverrides::FLAGS
+            .iter()
+            .chain(&OTHERS)
+            .find(|(f, _)| *f == field)
+            .map(|&(_, flag)| flag)
+    }
+}
+
 impl Grid {
     /// The grid `spec`, refusing empty lists, impossible values and γ
     /// outside (0, 1).
@@ -506,4 +525,73 @@ fn outcomes(
             (case, row)
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn valid() -> GridSpec {
+        GridSpec {
+            zeta: vec![0.0, 1e-4],
+            zeta_model: ZetaModel::Wheels,
+            wheel_diameter_ratio: vec![1.0],
+            wheelbase_ratio: vec![1.002],
+            slip: vec![0.0],
+            fix_every: vec![0, 50],
+            seeds: vec![1, 2],
+            gamma: 0.9,
+            transient: 1.0,
+        }
+    }
+
+    /// A value no grid field takes: negative, zero where positive is
+    /// needed, not finite, or γ outside (0, 1).
+    fn bad() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            Just(f64::NAN),
+            Just(f64::INFINITY),
+            Just(f64::NEG_INFINITY),
+            -1e300..-1e-300,
+        ]
+    }
+
+    proptest! {
+        /// Whatever the grid refuses, the refusal names a field that has an
+        /// `echelon sweep` flag (so the CLI and Python can name it as their
+        /// user spelled it), never a name outside the table.
+        #[test]
+        fn every_refused_grid_value_names_a_field_with_a_flag(which in 0usize..12, v in bad()) {
+            let mut g = valid();
+            match which {
+                0 => g.zeta.clear(),
+                1 => g.wheel_diameter_ratio.clear(),
+                2 => g.wheelbase_ratio.clear(),
+                3 => g.slip.clear(),
+                4 => g.fix_every.clear(),
+                5 => g.seeds.clear(),
+                6 => g.zeta.push(v),
+                7 => g.slip.push(v),
+                8 => g.wheel_diameter_ratio.push(v),
+                9 => g.wheelbase_ratio.push(v),
+                10 => g.gamma = if v.is_nan() { v } else { 1.0 - v },
+                _ => g.transient = v,
+            }
+            let e = Grid::new(g).err();
+            prop_assert!(e.is_some(), "case {which} with {v} accepted");
+            let field = e.map_or("", |e| e.field);
+            prop_assert!(GridSpec::flag(field).is_some(), "{field} has no flag");
+        }
+    }
+
+    #[test]
+    fn the_odometry_fields_keep_their_scenario_keys_and_flags() {
+        assert!(Grid::new(valid()).is_ok());
+        assert_eq!(GridSpec::flag("wheel_diameter_ratio"), Some("--ed"));
+        assert_eq!(GridSpec::flag("wheelbase_ratio"), Some("--eb"));
+        assert_eq!(GridSpec::flag("fix_every"), Some("--fix-every"));
+        assert_eq!(GridSpec::flag("transient"), Some("--transient"));
+        assert_eq!(GridSpec::flag("cases"), None);
+    }
 }

@@ -22,6 +22,7 @@ use crate::clock::FleetClock;
 use crate::{FleetError, StopFlag};
 
 use super::inputs::{Arrival, Spares, Worker};
+use super::linger::Waited;
 use super::outputs::ZenohOutputs;
 use super::{Flow, Linger, Lingered, NAP, Sample, Task};
 
@@ -101,21 +102,15 @@ impl<T: Task> Engine<T> {
     /// inputs were quiet, as `l` says ([`super::linger`]).
     pub(super) fn linger(&mut self, l: Linger) -> Result<Lingered, FleetError> {
         let start = Instant::now();
-        // Its queue, out of the engine while the engine takes what it gives.
-        let (_, none) = mpsc::channel();
-        let rx = std::mem::replace(&mut self.rx, none);
-        let lingered = super::linger::linger(
+        super::linger::linger(
             l,
             || start.elapsed(),
-            |wait| match rx.recv_timeout(wait) {
-                Ok(a) => Ok(Some(a)),
-                Err(mpsc::RecvTimeoutError::Timeout) => Ok(None),
-                Err(mpsc::RecvTimeoutError::Disconnected) => Err(()),
+            |wait| match self.rx.recv_timeout(wait) {
+                Ok(a) => self.hand(a).map(|()| Waited::Took),
+                Err(mpsc::RecvTimeoutError::Timeout) => Ok(Waited::Quiet),
+                Err(mpsc::RecvTimeoutError::Disconnected) => Ok(Waited::Closed),
             },
-            |a| self.hand(a),
-        );
-        self.rx = rx;
-        lingered
+        )
     }
 
     /// Sets what its latch answers to what the task says now (encoded

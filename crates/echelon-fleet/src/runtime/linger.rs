@@ -54,15 +54,24 @@ pub struct Lingered {
     pub cut: bool,
 }
 
+/// What waiting for one sample gave ([`linger`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Waited {
+    /// One came, and the task took it.
+    Took,
+    /// None came in the time given.
+    Quiet,
+    /// The inputs closed: nothing more can come.
+    Closed,
+}
+
 /// Lingers as `linger` says: `clock` reads the time since the stop
-/// request; `next(wait)` waits at most `wait` for a sample (`Ok(None)`: none
-/// came; `Err(())`: the inputs closed, nothing more can come); `take` hands
-/// one to the task.
-pub(super) fn linger<A>(
+/// request; `take_next(wait)` waits at most `wait` for a sample and hands
+/// it to the task.
+pub(super) fn linger(
     linger: Linger,
     clock: impl Fn() -> Duration,
-    mut next: impl FnMut(Duration) -> Result<Option<A>, ()>,
-    mut take: impl FnMut(A) -> Result<(), FleetError>,
+    mut take_next: impl FnMut(Duration) -> Result<Waited, FleetError>,
 ) -> Result<Lingered, FleetError> {
     let mut last = None;
     let mut taken = 0;
@@ -72,14 +81,13 @@ pub(super) fn linger<A>(
         if now >= end {
             break;
         }
-        match next(end - now) {
-            Ok(Some(a)) => {
+        match take_next(end - now)? {
+            Waited::Took => {
                 last = Some(clock());
                 taken += 1;
-                take(a)?;
             }
-            Ok(None) => {}
-            Err(()) => break,
+            Waited::Quiet => {}
+            Waited::Closed => break,
         }
     }
     Ok(Lingered {
@@ -112,17 +120,14 @@ mod tests {
                     Some(&a) if Duration::from_millis(a) <= until => {
                         now.set(now.get().max(Duration::from_millis(a)));
                         pending.next();
-                        Ok(Some(a))
+                        taken.push(a);
+                        Ok(Waited::Took)
                     }
                     _ => {
                         now.set(until);
-                        Ok(None)
+                        Ok(Waited::Quiet)
                     }
                 }
-            },
-            |a| {
-                taken.push(a);
-                Ok(())
             },
         )
         .unwrap_or_else(|e| panic!("{e}"));
@@ -182,13 +187,8 @@ mod tests {
     /// Inputs that close end it at once: nothing more can come.
     #[test]
     fn closed_inputs_end_it() {
-        let lingered = linger(
-            Linger::FLEET,
-            || Duration::ZERO,
-            |_| Err::<Option<()>, ()>(()),
-            |_| Ok(()),
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
+        let lingered = linger(Linger::FLEET, || Duration::ZERO, |_| Ok(Waited::Closed))
+            .unwrap_or_else(|e| panic!("{e}"));
         assert_eq!((lingered.taken, lingered.cut), (0, false));
     }
 }

@@ -144,9 +144,11 @@ fn print(
         c.borenstein.eb
     )?;
     outln!(
-        "refined (exact square kinematics):  E_d = {:.6}, E_b = {:.6}",
+        "refined (exact square kinematics):  E_d = {:.6}, E_b = {:.6}  (reproduces the centres to {:.2e} m rms; runs' standard error {:.2e} m)",
         c.refined.ed,
-        c.refined.eb
+        c.refined.eb,
+        c.fit_rms,
+        c.scatter
     )?;
     outln!(
         "corrections: left wheel diameter × {:.6}, right wheel diameter × {:.6}, wheelbase {:.6} m",
@@ -154,5 +156,8 @@ fn print(
         c.c_right,
         c.wheelbase
     )?;
+    for w in &c.warnings {
+        outln!("  warning: {w}")?;
+    }
     Ok(())
 }

@@ -125,6 +125,25 @@ fn umbmark_estimates_and_writes_its_results() {
         text.contains("Borenstein") && text.contains("corrections: left wheel diameter ×"),
         "{text}"
     );
+    // Large errors: the fit is the robot's (it once printed E_d = 0.887,
+    // E_b = 0.439 for these), and says nothing against itself.
+    let c = json(&echelon(&[
+        "umbmark", "--ed", "1.1", "--runs", "1", "--json",
+    ]));
+    assert!(
+        (c["refined"]["ed"].as_f64().unwrap() - 1.1).abs() < 1e-9
+            && (c["refined"]["eb"].as_f64().unwrap() - 1.0).abs() < 1e-9
+            && c["warnings"].as_array().unwrap().is_empty(),
+        "{c}"
+    );
+    // Beyond what the square tells apart (a wheelbase a third of nominal):
+    // said so, with the best fit it is not.
+    let text = stdout(&echelon(&["umbmark", "--eb", "0.33", "--runs", "1"]));
+    assert!(
+        text.contains("warning: no E_d in [0.67, 1.5] and E_b in [0.6, 2]")
+            && text.contains("not the robot's"),
+        "{text}"
+    );
     assert_refused(
         &echelon(&["umbmark", "--robot", "agent9"]),
         &["unknown robot"],

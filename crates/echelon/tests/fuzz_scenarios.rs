@@ -752,15 +752,17 @@ fn a_new_users_bad_waypoints_and_safety_are_refused_at_their_place() {
     // A fix latency of any size is refused at its plausible range (it sized
     // an allocation first: 1e9 s aborted the process).
     let fix_study = Scenario::builtin("fix-study").unwrap().source().to_owned();
-    let cases = cases.into_iter().chain(["1e9", "1e15", "1e300"].map(|latency| {
-        (
-            fix_study.replace(
-                "every_steps = 100",
-                &format!("every_steps = 100\nlatency = {latency}"),
-            ),
-            "fixes.latency: ",
-        )
-    }));
+    let cases = cases
+        .into_iter()
+        .chain(["1e9", "1e15", "1e300"].map(|latency| {
+            (
+                fix_study.replace(
+                    "every_steps = 100",
+                    &format!("every_steps = 100\nlatency = {latency}"),
+                ),
+                "fixes.latency: ",
+            )
+        }));
     for (src, want) in cases {
         let e = Scenario::parse(&src, ORIGIN, None)
             .unwrap()

@@ -60,7 +60,9 @@ pub(crate) fn seconds(s: &str) -> Result<f64, String> {
     if v <= MAX_REAL_SECONDS {
         Ok(v)
     } else {
-        Err(format!("{s} s is more than {MAX_REAL_SECONDS:e} s (about 31 years)"))
+        Err(format!(
+            "{s} s is more than {MAX_REAL_SECONDS:e} s (about 31 years)"
+        ))
     }
 }
 

@@ -348,7 +348,9 @@ fn geometry(u: &[Vec<f64>; 2], tau: &[Vec<f64>; 2]) -> Option<[f64; 2]> {
 fn velocity_limits(log: &Log, applied: &[Vec<f64>; 2], warnings: &mut Vec<String>) -> Vec<Limit> {
     let mut out = Vec::new();
     let measured = [&log.v, &log.omega];
-    let tops = applied.each_ref().map(|a| a.iter().fold(0.0_f64, |m, x| m.max(x.abs())));
+    let tops = applied
+        .each_ref()
+        .map(|a| a.iter().fold(0.0_f64, |m, x| m.max(x.abs())));
     let at_top = |axis: usize, i: usize| applied[axis][i].abs() >= tops[axis] * (1.0 - 1e-6);
     for axis in 0..2 {
         let (speed, accel) = [("v_max", "a_max"), ("omega_max", "alpha_max")][axis];
@@ -360,11 +362,12 @@ fn velocity_limits(log: &Log, applied: &[Vec<f64>; 2], warnings: &mut Vec<String
         // axis's only where the other axis is below its own top (that
         // axis's limit, if it ever bound, is its top: it did not bind here).
         let other = 1 - axis;
-        let reached = log.cmd.as_ref().is_some_and(|cmd| {
-            cmd[axis].iter().zip(a).enumerate().any(|(i, (c, a))| {
-                c.abs() > a.abs() + 1e-9 && at_top(axis, i) && !at_top(other, i)
-            })
-        });
+        let reached =
+            log.cmd.as_ref().is_some_and(|cmd| {
+                cmd[axis].iter().zip(a).enumerate().any(|(i, (c, a))| {
+                    c.abs() > a.abs() + 1e-9 && at_top(axis, i) && !at_top(other, i)
+                })
+            });
         let observed = if reached {
             top
         } else {
@@ -376,10 +379,12 @@ fn velocity_limits(log: &Log, applied: &[Vec<f64>; 2], warnings: &mut Vec<String
             reached,
         });
         if !reached {
-            let cut = log
-                .cmd
-                .as_ref()
-                .is_some_and(|cmd| cmd[axis].iter().zip(a).any(|(c, a)| c.abs() > a.abs() + 1e-9));
+            let cut = log.cmd.as_ref().is_some_and(|cmd| {
+                cmd[axis]
+                    .iter()
+                    .zip(a)
+                    .any(|(c, a)| c.abs() > a.abs() + 1e-9)
+            });
             let why = if cut {
                 format!(
                     "the command was cut only with {} at its top: the speed limit scales both together",

@@ -189,3 +189,56 @@ fn a_bad_dt_and_log_dt_pair_names_the_flag_that_broke_it() {
         ],
     );
 }
+
+/// Two runs into one directory: the second leaves exactly its own files
+/// there. Each built-in run with `--plot --mcap`, then the next built-in
+/// (in list order, cyclically) plainly into the same directory: no
+/// `odometry.csv`, `safety.csv`, figure, `report.html` or `run.mcap` of the
+/// first survives (fix-study's `odometry.csv` used to, and `echelon plot`
+/// then failed on it), and `echelon plot` draws the second.
+#[test]
+fn a_run_into_an_old_run_directory_leaves_only_its_own_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let out_s = out.to_str().unwrap();
+    let list: Vec<&str> = names().collect();
+    let files = |out: &Path| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    for (i, first) in list.iter().enumerate() {
+        let second = list[(i + 1) % list.len()];
+        let short = ["--duration", "0.05", "--out", out_s];
+        let o = echelon(&[&["run", first, "--plot", "--mcap", "-q"][..], &short].concat());
+        assert_eq!(o.status.code(), Some(0), "{first}: {}", stderr(&o));
+        let o = echelon(&[&["run", second][..], &short].concat());
+        assert!(o.status.code() == Some(0), "{second}: {}", stderr(&o));
+        // What the second run says it wrote is all there is.
+        let said = stdout(&o);
+        let wrote = said.lines().find_map(|l| l.strip_prefix("wrote ")).unwrap();
+        let mut want: Vec<String> = wrote
+            .split(", ")
+            .map(|p| {
+                Path::new(p)
+                    .file_name()
+                    .unwrap()
+                    .to_string_lossy()
+                    .into_owned()
+            })
+            .collect();
+        want.sort();
+        assert_eq!(files(&out), want, "{first} then {second}");
+        let o = echelon(&["plot", out_s]);
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "plot after {first} then {second}: {}",
+            stderr(&o)
+        );
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+}

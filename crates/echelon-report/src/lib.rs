@@ -69,6 +69,25 @@ pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
     std::fs::rename(&part, path).map_err(io)
 }
 
+/// Removes the figure `stem` (`.svg` and `.png`) from `dir`, if there.
+fn remove_figure(dir: &Path, stem: &str) -> Result<(), ReportError> {
+    for ext in ["svg", "png"] {
+        echelon::output::remove_if_present(&dir.join(format!("{stem}.{ext}")))?;
+    }
+    Ok(())
+}
+
+/// Removes what [`write_all`] writes (every run figure and `report.html`)
+/// from `dir`, if there: `echelon run` calls it, as what an earlier run
+/// drew there is not the new run's.
+pub fn remove_all(dir: &Path) -> Result<(), ReportError> {
+    for stem in plots::RUN_FIGURES {
+        remove_figure(dir, stem)?;
+    }
+    echelon::output::remove_if_present(&dir.join(html::REPORT_FILE))?;
+    Ok(())
+}
+
 /// What [`write_all`] wrote.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Written {
@@ -100,6 +119,13 @@ pub fn write_all(dir: &Path) -> Result<Written, ReportError> {
     }
     let report = dir.join(html::REPORT_FILE);
     write_file(&report, html::report(&data, &svgs).as_bytes())?;
+    // A figure this run does not have (`drift`, `safety`), drawn for an
+    // earlier run into the same directory, is not this run's.
+    for stem in plots::RUN_FIGURES {
+        if !figures.iter().any(|(s, _)| *s == stem) {
+            remove_figure(dir, stem)?;
+        }
+    }
     Ok(Written {
         figures: saved,
         report,

@@ -370,6 +370,9 @@ pub fn velocity_signals(data: &RunData) -> Figure {
     figure.with_panel(saturation_panel(data))
 }
 
+/// The file stems of every run figure [`run_figures`] may draw.
+pub const RUN_FIGURES: [&str; 5] = ["paths", "errors", "signals", "drift", "safety"];
+
 /// The run figures with their file stems: `paths`, `errors`, `signals`,
 /// `drift` when agents dead-reckon, and `safety` when a safety filter ran.
 pub fn run_figures(data: &RunData) -> Vec<(&'static str, Figure)> {

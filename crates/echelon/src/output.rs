@@ -153,6 +153,14 @@ fn io_error(path: &Path) -> impl FnOnce(io::Error) -> OutputError + '_ {
     }
 }
 
+/// Removes the file `path` if there is one.
+pub fn remove_if_present(path: &Path) -> Result<(), OutputError> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != io::ErrorKind::NotFound => Err(io_error(path)(e)),
+        _ => Ok(()),
+    }
+}
+
 /// Where a file is written before it is renamed to `path` when complete
 /// (`dir/.name.part`), so that a reader never sees half a file.
 pub fn part_path(path: &Path) -> PathBuf {
@@ -165,7 +173,9 @@ pub fn part_path(path: &Path) -> PathBuf {
 /// Runs `run` to its end, writing `dir/trajectory.csv`, `dir/reference.csv`,
 /// `dir/integrals.csv`, `dir/summary.json` and `dir/scenario.toml`; `extra` sees every frame too
 /// (e.g. a progress bar). Files are written under temporary names and renamed
-/// only when the run succeeds, so a failed run leaves no half-written output.
+/// only when the run succeeds, so a failed run leaves no half-written output;
+/// an `odometry.csv` or `safety.csv` of an earlier run that this one does not
+/// write is removed.
 pub fn run_to_dir(
     run: &mut Run,
     dir: &Path,
@@ -270,6 +280,13 @@ pub fn run_to_dir(
     for (from, to) in parts.iter().zip(&names) {
         let to = dir.join(to);
         std::fs::rename(from, &to).map_err(io_error(&to))?;
+    }
+    // A log this run does not write, left by an earlier run into the same
+    // directory, would be read as this run's (`echelon plot`, `identify`).
+    for stale in [ODOMETRY_FILE, SAFETY_FILE] {
+        if !names.contains(&stale) {
+            remove_if_present(&dir.join(stale))?;
+        }
     }
     match diverged {
         None => Ok(report),

@@ -125,6 +125,8 @@ const KEYS: &[&str] = &[
     "enabled = false",
     "name = \"n\"",
     "l = 0.1",
+    // Sized an allocation before its plausible range was checked (an abort).
+    "latency = 1e300",
 ];
 
 #[derive(Debug, Clone)]
@@ -747,6 +749,20 @@ fn a_new_users_bad_waypoints_and_safety_are_refused_at_their_place() {
             "agents[1].safety: an agent's safety settings refine the [safety] section, and there is none",
         ),
     ];
+    // A fix latency of any size is refused at its plausible range (it sized
+    // an allocation first: 1e9 s aborted the process).
+    let fix_study = Scenario::builtin("fix-study").unwrap().source().to_owned();
+    let cases = cases
+        .into_iter()
+        .chain(["1e9", "1e15", "1e300"].map(|latency| {
+            (
+                fix_study.replace(
+                    "every_steps = 100",
+                    &format!("every_steps = 100\nlatency = {latency}"),
+                ),
+                "fixes.latency: ",
+            )
+        }));
     for (src, want) in cases {
         let e = Scenario::parse(&src, ORIGIN, None)
             .unwrap()

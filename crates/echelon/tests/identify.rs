@@ -1136,3 +1136,86 @@ fn a_base_that_applies_its_commands_late_is_a_misfit_when_the_log_is_noise_free(
     assert!((id.get("tau_v").unwrap().value / 0.1 - 1.0).abs() < 1e-9);
     assert!((id.get("tau_omega").unwrap().value / 0.15 - 1.0).abs() < 1e-9);
 }
+
+proptest! {
+    #![proptest_config(fixed_sample(64, 31))]
+
+    /// A base's speed limit scales `v` and `ω` together: when one axis's
+    /// limit binds, the other axis's applied value is cut too. A speed
+    /// limit `identify` says the log shows is the true one, whichever axis
+    /// bound and whatever the commands (random sinusoids and steps, up to
+    /// 3× either limit), never the cut value of the other axis (the
+    /// `turtlebot-circle` log gave `omega_max = 0.39` for a Burger's 2.84).
+    #[test]
+    fn a_speed_limit_said_to_be_shown_is_the_true_one(
+        v_max in 0.1_f64..2.0,
+        omega_max in 0.2_f64..5.0,
+        amp in (0.2_f64..3.0, 0.2_f64..3.0),
+        freq in (0.1_f64..2.0, 0.1_f64..2.0),
+        steps in any::<bool>(),
+        seed in any::<u64>(),
+    ) {
+        use echelon::base::{VelocityBase, VelocityBaseSpec, VelocityCommand};
+        let base = VelocityBase::new(VelocityBaseSpec {
+            v_max,
+            omega_max,
+            ..VelocityBase::IDEAL.spec()
+        })
+        .unwrap();
+        let (tau_v, tau_w) = (0.1, 0.07);
+        let t: Vec<f64> = (0..3000).map(|i| i as f64 * LOG_DT).collect();
+        let wave = |t: f64, f: f64, phase: f64| {
+            let s = (f * t + phase).sin();
+            if steps { s.signum() * (0.5 + 0.5 * (3.1 * f * t).sin().abs()) } else { s }
+        };
+        let cmd: Vec<VelocityCommand> = t
+            .iter()
+            .map(|&t| VelocityCommand {
+                v: amp.0 * v_max * wave(t, freq.0, 0.0),
+                omega: amp.1 * omega_max * wave(t, freq.1, 1.3),
+            })
+            .collect();
+        let applied: Vec<VelocityCommand> = cmd.iter().map(|c| base.limit(*c).0).collect();
+        let axis = |f: fn(&VelocityCommand) -> f64, c: &[VelocityCommand]| -> Vec<f64> {
+            c.iter().map(f).collect()
+        };
+        let (cv, cw) = (axis(|c| c.v, &cmd), axis(|c| c.omega, &cmd));
+        let (av, aw) = (axis(|c| c.v, &applied), axis(|c| c.omega, &applied));
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let (nv, nw) = (
+            Normal::new(0.0, SIGMA_V).unwrap(),
+            Normal::new(0.0, SIGMA_OMEGA).unwrap(),
+        );
+        let v: Vec<f64> = identify::simulate_axis(&t, &av, tau_v, 1.0, 0.0)
+            .into_iter()
+            .map(|x| x + nv.sample(&mut rng))
+            .collect();
+        let omega: Vec<f64> = identify::simulate_axis(&t, &aw, tau_w, 1.0, 0.0)
+            .into_iter()
+            .map(|x| x + nw.sample(&mut rng))
+            .collect();
+        let log = Log {
+            source: "synthetic limited base".into(),
+            agent: 1,
+            t,
+            v,
+            omega,
+            cmd: Some([cv, cw]),
+            applied: Some([av, aw]),
+            ..Log::default()
+        };
+        let Ok(id) = identify::identify(&log, Model::Velocity) else {
+            return Ok(());
+        };
+        for (field, truth) in [("v_max", v_max), ("omega_max", omega_max)] {
+            let l = id.limits.iter().find(|l| l.field == field).unwrap();
+            if l.reached {
+                prop_assert!(
+                    (l.observed - truth).abs() <= 1e-9 * truth,
+                    "{field} = {} said shown, truth {truth}",
+                    l.observed
+                );
+            }
+        }
+    }
+}

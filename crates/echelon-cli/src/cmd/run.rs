@@ -113,6 +113,14 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
         &mut [&mut progress as &mut dyn Observer, &mut mcap],
     );
     drop(progress);
+    // The directory now holds this run's logs (even a diverged run's): what
+    // an earlier run left that this one does not rewrite is not its own.
+    if matches!(result, Ok(_) | Err(echelon::OutputError::Diverged { .. })) {
+        if !args.mcap {
+            output::remove_if_present(&out.join(MCAP_FILE))?;
+        }
+        echelon_report::remove_all(&out)?;
+    }
     let summary = match result {
         Ok(s) => s,
         Err(e @ echelon::OutputError::Diverged { .. }) => {

@@ -120,3 +120,125 @@ fn a_bad_flag_is_named_not_a_file_position() {
         );
     }
 }
+
+/// `--dt A --log-dt B` that do not fit: the error is at the flag that broke
+/// the fit. circle-pentagon steps 1 ms and logs every 10 ms; a `--log-dt`
+/// that is a whole number of its 1 ms steps was fine until `--dt` changed
+/// the step, so `--dt` is named (with `--log-dt`'s value); one that is not
+/// is refused at `--log-dt` naming `--dt`. `--dt` alone names the file's
+/// log.dt and says how to change it; neither flag names the other falsely.
+#[test]
+fn a_bad_dt_and_log_dt_pair_names_the_flag_that_broke_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    // Steps of 3, 7, 9, 30 ms against periods of 1 ms × 10, 11, 13, 40, 70 ...
+    for dt_ms in [3_u32, 7, 9, 30] {
+        for log_ms in [10_u32, 11, 13, 40, 70] {
+            if log_ms % dt_ms == 0 {
+                continue;
+            }
+            let (dt, log) = (
+                format!("{}", f64::from(dt_ms) * 1e-3),
+                format!("{}", f64::from(log_ms) * 1e-3),
+            );
+            let args = ["run", "circle-pentagon", "--dt", &dt, "--log-dt", &log];
+            let blame = format!("error: command line: --dt: {dt} s does not fit --log-dt {log} s");
+            refused_writing_nothing(
+                &args,
+                &out,
+                &[&blame, "fits the scenario's own dt = 0.001 s"],
+            );
+        }
+        // ... and of 1.5 ms, 2.5 ms: not whole 1 ms steps, so --log-dt is to blame.
+        for log in ["0.0015", "0.0025"] {
+            let dt = format!("{}", f64::from(dt_ms) * 1e-3);
+            let args = ["run", "circle-pentagon", "--dt", &dt, "--log-dt", log];
+            let blame = format!(
+                "error: command line: --log-dt: {log} s is not 0 (every step) or a whole multiple of dt = {dt} s (--dt)"
+            );
+            refused_writing_nothing(&args, &out, &[&blame]);
+        }
+    }
+    // --dt alone: the file's log.dt is named, and --log-dt only as the way out.
+    let o = echelon(&[
+        "run",
+        "circle-pentagon",
+        "--dt",
+        "0.03",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_refused(
+        &o,
+        &[
+            "--dt: 0.03 s does not fit log.dt (builtin:circle-pentagon:13:6)",
+            "change the logging period with --log-dt",
+        ],
+    );
+    assert!(
+        !stderr(&o).contains("on the command line: --log-dt"),
+        "{}",
+        stderr(&o)
+    );
+    // --log-dt alone: where the step it misfits is.
+    refused_writing_nothing(
+        &["run", "circle-pentagon", "--log-dt", "0.0015"],
+        &out,
+        &[
+            "--log-dt: 0.0015 s is not 0 (every step) or a whole multiple of dt = 0.001 s (sim.dt, builtin:circle-pentagon:10:6)",
+        ],
+    );
+}
+
+/// Two runs into one directory: the second leaves exactly its own files
+/// there. Each built-in run with `--plot --mcap`, then the next built-in
+/// (in list order, cyclically) plainly into the same directory: no
+/// `odometry.csv`, `safety.csv`, figure, `report.html` or `run.mcap` of the
+/// first survives (fix-study's `odometry.csv` used to, and `echelon plot`
+/// then failed on it), and `echelon plot` draws the second.
+#[test]
+fn a_run_into_an_old_run_directory_leaves_only_its_own_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let out_s = out.to_str().unwrap();
+    let list: Vec<&str> = names().collect();
+    let files = |out: &Path| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    for (i, first) in list.iter().enumerate() {
+        let second = list[(i + 1) % list.len()];
+        let short = ["--duration", "0.05", "--out", out_s];
+        let o = echelon(&[&["run", first, "--plot", "--mcap", "-q"][..], &short].concat());
+        assert_eq!(o.status.code(), Some(0), "{first}: {}", stderr(&o));
+        let o = echelon(&[&["run", second][..], &short].concat());
+        assert!(o.status.code() == Some(0), "{second}: {}", stderr(&o));
+        // What the second run says it wrote is all there is.
+        let said = stdout(&o);
+        let wrote = said.lines().find_map(|l| l.strip_prefix("wrote ")).unwrap();
+        let mut want: Vec<String> = wrote
+            .split(", ")
+            .map(|p| {
+                Path::new(p)
+                    .file_name()
+                    .unwrap()
+                    .to_string_lossy()
+                    .into_owned()
+            })
+            .collect();
+        want.sort();
+        assert_eq!(files(&out), want, "{first} then {second}");
+        let o = echelon(&["plot", out_s]);
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "plot after {first} then {second}: {}",
+            stderr(&o)
+        );
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+}

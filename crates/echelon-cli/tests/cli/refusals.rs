@@ -238,3 +238,42 @@ fn bad_flags_exit_2() {
     // The flag changed the step: it is named first, the file's log.dt after.
     assert_refused(&o, &["command line: --dt: 0.003 s", "log.dt", "--log-dt"]);
 }
+
+/// A fleet time or timeout no `std::time::Duration` holds (or a time scale
+/// that makes the run's real length one) used to panic (exit 101) in
+/// `fleet up`, `fleet stop`, `fleet leader`: each is refused at its flag,
+/// at every magnitude, before anything starts.
+#[test]
+fn fleet_times_beyond_any_duration_are_refused_at_their_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    let out_s = out.to_str().unwrap();
+    let up = ["fleet", "up", "circle-pentagon", "--out", out_s];
+    for exp in (10..=300).step_by(29) {
+        let big = format!("1e{exp}");
+        let tiny = format!("1e-{exp}");
+        for (args, flag) in [
+            ([&up[..], &["--duration", &big]].concat(), "--duration"),
+            (
+                [&up[..], &["--duration", "1", "--time-scale", &tiny]].concat(),
+                "--time-scale",
+            ),
+            ([&up[..], &["--time-scale", &big]].concat(), "--time-scale"),
+            (
+                vec!["fleet", "stop", "circle-pentagon", "--timeout", &big],
+                "--timeout",
+            ),
+            (
+                vec!["fleet", "leader", "circle-pentagon", "--wait-timeout", &big],
+                "--wait-timeout",
+            ),
+            (
+                vec!["fleet", "bench", "--duration", &big, "--out", out_s],
+                "--duration",
+            ),
+        ] {
+            assert_refused(&echelon(&args), &[flag]);
+            assert!(!out.exists(), "{args:?} wrote {out_s}");
+        }
+    }
+}

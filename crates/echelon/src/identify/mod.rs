@@ -348,17 +348,26 @@ fn geometry(u: &[Vec<f64>; 2], tau: &[Vec<f64>; 2]) -> Option<[f64; 2]> {
 fn velocity_limits(log: &Log, applied: &[Vec<f64>; 2], warnings: &mut Vec<String>) -> Vec<Limit> {
     let mut out = Vec::new();
     let measured = [&log.v, &log.omega];
+    let tops = applied
+        .each_ref()
+        .map(|a| a.iter().fold(0.0_f64, |m, x| m.max(x.abs())));
+    let at_top = |axis: usize, i: usize| applied[axis][i].abs() >= tops[axis] * (1.0 - 1e-6);
     for axis in 0..2 {
         let (speed, accel) = [("v_max", "a_max"), ("omega_max", "alpha_max")][axis];
-        let a = &applied[axis];
-        let top = a.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
-        // The base cut the command on this axis, at its largest applied value.
-        let reached = log.cmd.as_ref().is_some_and(|cmd| {
-            cmd[axis]
-                .iter()
-                .zip(a)
-                .any(|(c, a)| c.abs() > a.abs() + 1e-9 && a.abs() >= top * (1.0 - 1e-6))
-        });
+        let (a, top) = (&applied[axis], tops[axis]);
+        // The base cut the command on this axis, at its largest applied
+        // value, and this axis's limit did it. The limit scales `v` and `ω`
+        // together (base.rs, `VelocityBase::limit`): when `v_max` binds, `ω`
+        // is cut too, to whatever keeps the curvature. So the cut is this
+        // axis's only where the other axis is below its own top (that
+        // axis's limit, if it ever bound, is its top: it did not bind here).
+        let other = 1 - axis;
+        let reached =
+            log.cmd.as_ref().is_some_and(|cmd| {
+                cmd[axis].iter().zip(a).enumerate().any(|(i, (c, a))| {
+                    c.abs() > a.abs() + 1e-9 && at_top(axis, i) && !at_top(other, i)
+                })
+            });
         let observed = if reached {
             top
         } else {
@@ -370,8 +379,22 @@ fn velocity_limits(log: &Log, applied: &[Vec<f64>; 2], warnings: &mut Vec<String
             reached,
         });
         if !reached {
+            let cut = log.cmd.as_ref().is_some_and(|cmd| {
+                cmd[axis]
+                    .iter()
+                    .zip(a)
+                    .any(|(c, a)| c.abs() > a.abs() + 1e-9)
+            });
+            let why = if cut {
+                format!(
+                    "the command was cut only with {} at its top: the speed limit scales both together",
+                    ["v", "ω"][other]
+                )
+            } else {
+                "the command never exceeded it".to_owned()
+            };
             warnings.push(format!(
-                "{speed}: observed {observed:.4}, not necessarily the limit (the command never exceeded it)"
+                "{speed}: observed {observed:.4}, not necessarily the limit ({why})"
             ));
         }
         // Acceleration: the largest |Δv/Δt| of the measurement over 5-sample

@@ -11,6 +11,11 @@ use super::fuse::{FixFusion, FixNoise};
 use super::{FixSpec, Fusion, OdometrySpec, WheelDisplacement, ZetaModel, arc_update};
 use crate::model::{Pose, RobotParams, State};
 
+/// Most fixes in flight an odometer makes room for when it is built
+/// ([`Odometer::with_wheels`]): 2¹⁶, a minute of latency at a fix every
+/// millisecond. A longer latency's queue grows while the run fills it.
+const MAX_PREALLOCATED_FIXES: usize = 1 << 16;
+
 /// A fix on its way to the robot.
 #[derive(Debug, Clone, Copy)]
 struct PendingFix {
@@ -85,9 +90,13 @@ impl Odometer {
         let estimate = start.pose();
         // The simulator's fixes come from its own truth: none is gated.
         let fusion = FixFusion::new(spec.fixes.map_or(Fusion::Reset, |f| f.fusion()), false);
+        // Room for the fixes in flight (a latency's worth), so that the run
+        // does not allocate; at most `MAX_PREALLOCATED_FIXES` up front, as the
+        // latency is any finite number here (beyond, the queue grows).
         let capacity = match spec.fixes {
             Some(f) if fix_every > 0 => {
-                (f.latency() / (spec.period * fix_every as f64)).ceil() as usize + 2
+                let in_flight = (f.latency() / (spec.period * fix_every as f64)).ceil() + 2.0;
+                in_flight.min(MAX_PREALLOCATED_FIXES as f64) as usize
             }
             _ => 0,
         };

@@ -42,6 +42,7 @@ impl Scenario {
             file: &file,
             at: Locator::new(&self.source, &self.origin, &flags),
             base_dir: self.base_dir.as_deref(),
+            file_step: self.file.sim.dt,
         };
         let (plan, log_every, seed, stiff) = builder.build()?;
         // Each value passed its own rules; now its plausible range.
@@ -64,6 +65,8 @@ struct Builder<'a> {
     file: &'a ScenarioFile,
     at: Locator<'a>,
     base_dir: Option<&'a Path>,
+    /// `sim.dt` as the scenario gives it, before `--dt`.
+    file_step: f64,
 }
 
 impl Builder<'_> {
@@ -95,6 +98,62 @@ impl Builder<'_> {
                 e.reason
             ),
         )
+    }
+
+    /// The refusal of a logging period `log_dt` that is not a whole multiple
+    /// of the step `dt` (both s), at the value to blame: the one the command
+    /// line changed (`--dt` when `--log-dt` fits the scenario's own step,
+    /// else `--log-dt`), else the file's `log.dt`, naming where the other is.
+    fn log_dt_misfit(&self, log_dt: f64, dt: f64) -> ScenarioError {
+        let f = self.file;
+        let (step, log) = (FieldPath::from("sim.dt"), FieldPath::from("log.dt"));
+        let (dt_flag, log_flag) = (self.at.flag(&step), self.at.flag(&log));
+        let misfit =
+            |dt: f64| format!("s is not 0 (every step) or a whole multiple of dt = {dt} s");
+        if f.log.dt.is_none() {
+            // The default period is nowhere in the file: the step is.
+            return self.at.error(
+                &step,
+                format!(
+                    "{dt} s: the default logging period log.dt = {log_dt} s is not a whole multiple of it (set [log] dt = 0 to log every step, or a multiple of dt; on the command line: --log-dt)"
+                ),
+            );
+        }
+        match (dt_flag, log_flag) {
+            // `--dt` alone changed the step the file's log.dt fitted.
+            (Some(_), None) => self.at.error(
+                &step,
+                format!(
+                    "{dt} s does not fit log.dt ({}): {log_dt} {} (change the logging period with --log-dt)",
+                    self.at.place(&log),
+                    misfit(dt)
+                ),
+            ),
+            // Both flags, and --log-dt fits the scenario's own step: --dt broke it.
+            (Some(_), Some(log_flag)) if whole_ratio(log_dt, self.file_step).is_some() => {
+                self.at.error(
+                    &step,
+                    format!(
+                        "{dt} s does not fit {log_flag} {log_dt} s: {log_dt} {} ({log_flag} fits the scenario's own dt = {} s)",
+                        misfit(dt),
+                        self.file_step
+                    ),
+                )
+            }
+            (Some(dt_flag), Some(_)) => self.at.param(
+                &log,
+                &ParamError::new("dt", log_dt, format!("{} ({dt_flag})", misfit(dt))),
+            ),
+            // The step is the file's: name where it is.
+            (None, _) => self.at.param(
+                &log,
+                &ParamError::new(
+                    "dt",
+                    log_dt,
+                    format!("{} (sim.dt, {})", misfit(dt), self.at.place(&step)),
+                ),
+            ),
+        }
     }
 
     /// The plan, the logging interval in steps, the seed and the
@@ -131,33 +190,7 @@ impl Builder<'_> {
         let log_every = if log_dt == 0.0 {
             1
         } else {
-            whole_ratio(log_dt, dt).ok_or_else(|| match f.log.dt {
-                Some(_) => {
-                    // Where the step and the period come from, if not the file.
-                    let hint = match (self.at.flag(&sim.key("dt")), self.at.flag(&log)) {
-                        (_, None) => " (on the command line: --log-dt)",
-                        (Some(_), Some(_)) => " (--dt)",
-                        (None, Some(_)) => "",
-                    };
-                    self.against_step(
-                        &log,
-                        &ParamError::new(
-                            "dt",
-                            log_dt,
-                            format!(
-                                "s is not 0 (every step) or a whole multiple of dt = {dt} s{hint}"
-                            ),
-                        ),
-                    )
-                }
-                // The default period is nowhere in the file: the step is.
-                None => self.at.error(
-                    &sim.key("dt"),
-                    format!(
-                        "{dt} s: the default logging period log.dt = {log_dt} s is not a whole multiple of it (set [log] dt = 0 to log every step, or a multiple of dt; on the command line: --log-dt)"
-                    ),
-                ),
-            })?
+            whole_ratio(log_dt, dt).ok_or_else(|| self.log_dt_misfit(log_dt, dt))?
         };
         let reference = self.reference()?;
         let specs = f

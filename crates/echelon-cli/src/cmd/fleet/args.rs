@@ -9,7 +9,7 @@ use echelon_fleet::faults::FaultSpec;
 use echelon_fleet::net::{self, Mode, NetOptions, Secure};
 use echelon_fleet::options::ProcessOptions;
 
-use crate::cmd::{non_negative, parse_number, positive};
+use crate::cmd::{non_negative, parse_number, positive, seconds, time_scale};
 
 /// `echelon fleet` subcommands.
 #[derive(Debug, Subcommand)]
@@ -189,10 +189,10 @@ pub(crate) struct AgentArgs {
 #[derive(Debug, Args)]
 pub(crate) struct ClockArgs {
     /// Stop at this fleet time, s [default: leader and up, the scenario's sim.duration; robot and base, at SIGINT/SIGTERM].
-    #[arg(long, value_name = "S", value_parser = positive)]
+    #[arg(long, value_name = "S", value_parser = seconds)]
     pub(super) duration: Option<f64>,
     /// Run the clock K times faster than real time.
-    #[arg(long, value_name = "K", value_parser = positive, default_value_t = 1.0)]
+    #[arg(long, value_name = "K", value_parser = time_scale, default_value_t = 1.0)]
     pub(super) time_scale: f64,
 }
 
@@ -238,7 +238,7 @@ pub(crate) struct LeaderArgs {
     #[arg(long, value_name = "ROLE")]
     pub(super) wait_for: Vec<String>,
     /// Longest wait for --wait-for, s of real time.
-    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    #[arg(long, value_name = "S", value_parser = seconds, default_value_t = 60.0)]
     pub(super) wait_timeout: f64,
     #[command(flatten)]
     pub(super) net: NetArgs,
@@ -412,7 +412,7 @@ pub(crate) struct BenchArgs {
     #[arg(long, value_name = "N,…", value_delimiter = ',', default_values_t = [10, 50, 100, 200])]
     pub(super) robots: Vec<usize>,
     /// Fleet seconds each size runs (real seconds: time scale 1).
-    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    #[arg(long, value_name = "S", value_parser = seconds, default_value_t = 60.0)]
     pub(super) duration: f64,
     /// The collector's state-log rate, states per robot per second (`fleet collector --log-rate`) [default: every state].
     #[arg(long, value_name = "HZ", value_parser = positive)]
@@ -431,7 +431,7 @@ pub(crate) struct CommandArgs {
     #[arg(long, value_name = "TEXT", default_value = "")]
     pub(super) reason: String,
     /// Longest wait for every robot alive to acknowledge, s of real time; exit status 1 if one did not.
-    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 5.0)]
+    #[arg(long, value_name = "S", value_parser = seconds, default_value_t = 5.0)]
     pub(super) timeout: f64,
     #[command(flatten)]
     pub(super) net: NetArgs,

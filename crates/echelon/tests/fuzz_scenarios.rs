@@ -742,6 +742,23 @@ fn a_new_users_bad_waypoints_and_safety_are_refused_at_their_place() {
             points("[0.0, 0.0, 0.0], [1.0, nan, 0.0]"),
             "reference.waypoints.points[2][2]: waypoint 2 (1-based): its x = NaN is not a finite number",
         ),
+        // A fourth number in a waypoint was dropped (so was a third in a
+        // lemniscate's centre): refused, in any row.
+        (
+            points("[0.0, 0.0, 0.0, 5.0], [1.0, 1.0, 0.0]"),
+            "reference.waypoints.points[1]: invalid length 4, expected an array of length 3",
+        ),
+        (
+            points("[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 1.0, 0.0, 0.0]"),
+            "reference.waypoints.points[3]: invalid length 5, expected an array of length 3",
+        ),
+        (
+            waypoint_scenario("points = [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]]\n").replace(
+                "[reference.waypoints]\npoints = [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]]",
+                "[reference.lemniscate]\na = 1.0\nc = 0.2\ncenter = [1.0, 2.0, 3.0]",
+            ),
+            "reference.lemniscate.center: invalid length 3, expected an array of length 2",
+        ),
         // An agent's safety without [safety].
         (
             points("[0.0, 0.0, 0.0], [10.0, 1.0, 0.0]")
@@ -765,8 +782,7 @@ fn a_new_users_bad_waypoints_and_safety_are_refused_at_their_place() {
         }));
     for (src, want) in cases {
         let e = Scenario::parse(&src, ORIGIN, None)
-            .unwrap()
-            .build(&Overrides::default())
+            .and_then(|s| s.build(&Overrides::default()).map(|_| ()))
             .unwrap_err()
             .to_string();
         located(&e).unwrap();

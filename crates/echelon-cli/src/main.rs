@@ -113,8 +113,27 @@ fn main() -> ExitCode {
             ExitCode::from(DIVERGED)
         }
         Err(e) => {
-            cmd::out::err_line(&format!("error: {e:#}"));
+            cmd::out::err_line(&format!("error: {}", chain(&e)));
             ExitCode::from(FAILURE)
         }
     }
+}
+
+/// `e` and its causes joined by `: ` (as `{e:#}`), a cause left out when
+/// the text so far already ends with it: the libraries' I/O errors name
+/// their source in their own message and also return it as their source,
+/// which printed `File exists (os error 17): File exists (os error 17)`.
+fn chain(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let cause = cause.to_string();
+        if text.ends_with(&cause) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&cause);
+    }
+    text
 }

@@ -329,3 +329,35 @@ fn a_huge_refused_value_is_written_short() {
         assert!(stderr(&o).len() < 200, "{}", stderr(&o));
     }
 }
+
+/// A malformed `--connect` or `--listen` endpoint is refused at its flag
+/// before any Zenoh session: Zenoh's own refusal was a JSON5 dump with a
+/// source path, and `tcp/1.2.3.4:99999` waited for a connection that could
+/// never open. Listening on port 0 (any free port) stays allowed.
+#[test]
+fn a_bad_fleet_endpoint_is_refused_at_its_flag() {
+    let bad = [
+        "nonsense",
+        "tcp/1.2.3.4:99999",
+        "tcp/1.2.3.4:0",
+        "tcp/1.2.3.4",
+        "udp/[::1",
+        "http/1.2.3.4:80",
+        "tcp/:7447",
+        "tcp/bad_host:7447",
+    ];
+    for e in bad {
+        for args in [
+            vec!["fleet", "leader", "circle-pentagon", "--connect", e],
+            vec!["fleet", "stop", "circle-pentagon", "--connect", e],
+        ] {
+            let o = echelon(&args);
+            assert_refused(&o, &["'--connect <ENDPOINT>'", e]);
+            assert!(!stderr(&o).contains("Json5Err"), "{}", stderr(&o));
+        }
+        if e != "tcp/1.2.3.4:0" {
+            let o = echelon(&["fleet", "router", "--listen", e]);
+            assert_refused(&o, &["'--listen <ENDPOINT>'", e]);
+        }
+    }
+}

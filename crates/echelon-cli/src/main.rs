@@ -60,7 +60,8 @@ enum Command {
 /// Exit code for every refused input or failed run.
 const FAILURE: u8 = 2;
 
-/// Exit code of a run that diverged (`echelon run`).
+/// Exit code of a run that diverged (`echelon run`), or of a command that
+/// ran without getting what it asked for (`fleet stop` not acknowledged).
 const DIVERGED: u8 = 1;
 
 fn main() -> ExitCode {
@@ -99,22 +100,82 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        // `echelon … | head`: the reader has what it wanted.
-        Err(e) if e.downcast_ref::<cmd::out::Closed>().is_some() => ExitCode::SUCCESS,
-        // A run that diverged: it says where, and fails with 1.
-        Err(e)
-            if e.downcast_ref::<cmd::out::Diverged>().is_some()
-                || matches!(
-                    e.downcast_ref::<echelon_fleet::FleetError>(),
-                    Some(echelon_fleet::FleetError::Diverged(_))
-                ) =>
-        {
-            cmd::out::err_line(&format!("error: {e}"));
-            ExitCode::from(DIVERGED)
-        }
         Err(e) => {
-            cmd::out::err_line(&format!("error: {e:#}"));
-            ExitCode::from(FAILURE)
+            let code = exit_code(&e);
+            match code {
+                // `echelon … | head`: the reader has what it wanted.
+                0 => {}
+                DIVERGED => cmd::out::err_line(&format!("error: {e}")),
+                _ => cmd::out::err_line(&format!("error: {}", chain(&e))),
+            }
+            ExitCode::from(code)
+        }
+    }
+}
+
+/// The exit code of a command that returned `e`: 0 when standard output
+/// was closed (the reader has what it wanted), [`DIVERGED`] for a run that
+/// diverged or a command that ran without getting what it asked for
+/// ([`cmd::out::Unfinished`]), else [`FAILURE`].
+fn exit_code(e: &anyhow::Error) -> u8 {
+    if e.downcast_ref::<cmd::out::Closed>().is_some() {
+        0
+    } else if e.downcast_ref::<cmd::out::Diverged>().is_some()
+        || e.downcast_ref::<cmd::out::Unfinished>().is_some()
+        || matches!(
+            e.downcast_ref::<echelon_fleet::FleetError>(),
+            Some(echelon_fleet::FleetError::Diverged(_))
+        )
+    {
+        DIVERGED
+    } else {
+        FAILURE
+    }
+}
+
+/// `e` and its causes joined by `: ` (as `{e:#}`), a cause left out when
+/// the text so far already ends with it: the libraries' I/O errors name
+/// their source in their own message and also return it as their source,
+/// which printed `File exists (os error 17): File exists (os error 17)`.
+fn chain(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let cause = cause.to_string();
+        if text.ends_with(&cause) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&cause);
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// docs/fleet.md and `fleet stop --help` say an unacknowledged stop
+    /// (and a failed `fleet bench` size) exits 1; it exited 2, as a refused
+    /// input does.
+    #[test]
+    fn each_outcome_has_its_exit_code() {
+        let cases: [(anyhow::Error, u8); 5] = [
+            (
+                cmd::out::Unfinished("fleet stop: robot/2 …".into()).into(),
+                1,
+            ),
+            (cmd::out::Diverged("run: diverged".into()).into(), 1),
+            (cmd::out::Closed.into(), 0),
+            (anyhow::anyhow!("bad input"), 2),
+            (
+                anyhow::Error::from(cmd::out::Unfinished("x".into())).context("more"),
+                1,
+            ),
+        ];
+        for (e, code) in cases {
+            assert_eq!(exit_code(&e), code, "{e:#}");
         }
     }
 }

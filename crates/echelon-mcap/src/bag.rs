@@ -364,6 +364,11 @@ fn hold_average(cmd: &[Sample], a: u64, b: u64) -> [f64; 2] {
 fn torque_log(states: &[serde_json::Value], origin: &str, agent: usize) -> Log {
     let mut rows: Vec<[f64; 7]> = states
         .iter()
+        // A fleet robot waiting for its leader publishes its state at t = 0
+        // with its clock stopped, over and over (`"link": "waiting"`): not
+        // samples of a run (the collector's trajectory.csv leaves them out
+        // too), and their repeated time refused the whole log.
+        .filter(|s| s.get("link").and_then(serde_json::Value::as_str) != Some("waiting"))
         .map(|s| {
             let f = |k: &str| {
                 s.get(k)
@@ -402,7 +407,7 @@ mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
-    use crate::{McapLog, Ros2Schema};
+    use crate::{McapLog, Ros2Schema, nanos};
     use echelon_ros2::definitions::definition;
     use echelon_ros2::msgs::{MessageType, Time};
 
@@ -478,6 +483,44 @@ mod tests {
         .unwrap();
         assert_eq!(log.t.len(), 3, "odometry from 0.1 to 0.3 s");
         assert_eq!(log.cmd.unwrap()[0], vec![1.0, 1.0, 0.5]);
+    }
+
+    /// A fleet.mcap's `/agent/K/state`: a robot waiting for its leader
+    /// repeats its state at t = 0 before its clock runs (`fleet up` of
+    /// identify-excitation gave `time does not increase at t = 0 s`). Those
+    /// records are left out, whatever their number; the running ones are
+    /// the log.
+    #[test]
+    fn a_fleet_robots_waiting_states_are_not_samples() {
+        for waiting in [0_u32, 1, 2, 7, 40] {
+            let mut log = McapLog::new(std::io::Cursor::new(Vec::new())).unwrap();
+            let ch = log.channel("/agent/1/state", &crate::AGENT_STATE).unwrap();
+            let state = |t: f64, link: &str| {
+                serde_json::json!({"t": t, "agent": 1, "v": 0.1 * t, "omega": 0.0, "u1": 1.0, "u2": 0.5,
+                    "tau_r": 0.1, "tau_l": 0.1, "link": link})
+            };
+            let mut seq = 0;
+            for _ in 0..waiting {
+                seq += 1;
+                log.write_json(ch, seq, 0, 0, &state(0.0, "waiting"))
+                    .unwrap();
+            }
+            for k in 0..50 {
+                seq += 1;
+                let t = 0.12 + 0.01 * f64::from(k);
+                log.write_json(ch, seq, nanos(t), nanos(t), &state(t, "ok"))
+                    .unwrap();
+            }
+            let bytes = log.finish().unwrap().into_inner();
+            let opts = BagOptions {
+                model: Some(Model::Torque),
+                agent: 1,
+                ..BagOptions::default()
+            };
+            let l = parse_log(&bytes, "fleet.mcap", &opts).unwrap();
+            assert_eq!(l.t.len(), 50, "{waiting} waiting");
+            assert!(l.t.windows(2).all(|w| w[1] > w[0]) && l.t[0] == 0.12);
+        }
     }
 
     #[test]

@@ -5,7 +5,7 @@ use std::fmt;
 
 /// `v` for a message: plain, or in exponent form when very large or small
 /// (`1e30`, not thirty-one digits).
-pub(crate) fn num(v: f64) -> String {
+pub fn num(v: f64) -> String {
     let a = v.abs();
     if a != 0.0 && !(1e-3..1e5).contains(&a) {
         format!("{v:e}")

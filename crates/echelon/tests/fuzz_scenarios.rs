@@ -742,6 +742,23 @@ fn a_new_users_bad_waypoints_and_safety_are_refused_at_their_place() {
             points("[0.0, 0.0, 0.0], [1.0, nan, 0.0]"),
             "reference.waypoints.points[2][2]: waypoint 2 (1-based): its x = NaN is not a finite number",
         ),
+        // A fourth number in a waypoint was dropped (so was a third in a
+        // lemniscate's centre): refused, in any row.
+        (
+            points("[0.0, 0.0, 0.0, 5.0], [1.0, 1.0, 0.0]"),
+            "reference.waypoints.points[1]: invalid length 4, expected an array of length 3",
+        ),
+        (
+            points("[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 1.0, 0.0, 0.0]"),
+            "reference.waypoints.points[3]: invalid length 5, expected an array of length 3",
+        ),
+        (
+            waypoint_scenario("points = [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]]\n").replace(
+                "[reference.waypoints]\npoints = [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]]",
+                "[reference.lemniscate]\na = 1.0\nc = 0.2\ncenter = [1.0, 2.0, 3.0]",
+            ),
+            "reference.lemniscate.center: invalid length 3, expected an array of length 2",
+        ),
         // An agent's safety without [safety].
         (
             points("[0.0, 0.0, 0.0], [10.0, 1.0, 0.0]")
@@ -765,8 +782,7 @@ fn a_new_users_bad_waypoints_and_safety_are_refused_at_their_place() {
         }));
     for (src, want) in cases {
         let e = Scenario::parse(&src, ORIGIN, None)
-            .unwrap()
-            .build(&Overrides::default())
+            .and_then(|s| s.build(&Overrides::default()).map(|_| ()))
             .unwrap_err()
             .to_string();
         located(&e).unwrap();
@@ -808,5 +824,60 @@ proptest! {
         if mutations.is_empty() {
             prop_assert!(from_toml.is_some() && from_csv.is_some(), "a valid table is refused: {}", context);
         }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Two robots starting closer than the safety radius (or a robot near
+    /// an obstacle): refused at the agent's `start` with the distance, in
+    /// m, then why. It read `start = 1.39: m from agent 1's point …`.
+    #[test]
+    fn robots_starting_inside_the_safety_radius_are_refused_with_the_distance(
+        gap in 0.001_f64..5.0,
+        more in 0.001_f64..10.0,
+        obstacle in any::<bool>(),
+    ) {
+        let radius = gap + more;
+        let second = if obstacle {
+            format!("[safety]\nradius = {radius}\nobstacles = [{{ x = {}, y = 0.0, r = 0.5 }}]\n", 0.05 + gap + 0.5)
+        } else {
+            format!("[[agents]]\nstart = {{ x = {}, y = 0.0, theta = 0.0 }}\nleader = \"reference\"\noffset = {{ x = 0.5, y = 0.0 }}\n\n[safety]\nradius = {radius}\n", gap)
+        };
+        let src = format!(
+            "[sim]\nduration = 0.1\ndt = 0.01\n\n[reference.line]\nspeed = 0.3\nstart = {{ x = 0.0, y = 0.0, theta = 0.0 }}\n\n[[agents]]\nstart = {{ x = 0.0, y = 0.0, theta = 0.0 }}\nleader = \"reference\"\noffset = {{ x = 0.5, y = 0.0 }}\n\n{second}"
+        );
+        let e = Scenario::parse(&src, ORIGIN, None)
+            .unwrap()
+            .build(&Overrides::default())
+            .unwrap_err()
+            .to_string();
+        located(&e).map_err(TestCaseError::fail)?;
+        let (agent, what) = if obstacle { (1, "obstacle 1's edge") } else { (2, "agent 1's point L ahead") };
+        let head = format!("agents[{agent}].start: ");
+        let rest = e.split_once(&head).map(|(_, r)| r);
+        prop_assert!(rest.is_some(), "{}", e);
+        let (d, tail) = rest.unwrap().split_once(" m from ").unwrap_or(("", ""));
+        let d: f64 = d.parse().map_err(|_| TestCaseError::fail(format!("no distance: {e}")))?;
+        prop_assert!((d - gap).abs() < 1e-9 * (1.0 + gap), "{} for a gap of {}", e, gap);
+        prop_assert!(tail.starts_with(what), "{}", e);
+    }
+}
+
+/// Every built-in without its agents (every line from the first
+/// `[[agents]]` on, which ends each of them but for sections the agents
+/// do not need) is refused at the field `agents`, not under the file's
+/// first key (`name.agents`).
+#[test]
+fn a_scenario_without_agents_is_refused_at_agents() {
+    for (name, src) in scenario::builtin() {
+        let cut = src.find("\n[[agents]]").unwrap();
+        let e = match Scenario::parse(&src[..=cut], ORIGIN, None) {
+            Err(e) => e,
+            Ok(_) => panic!("{name} without agents parsed"),
+        };
+        located(&e.to_string()).unwrap();
+        assert_eq!(e.field, "agents", "{name}: {e}");
     }
 }

@@ -6,6 +6,7 @@
 
 use anyhow::{Result, bail};
 
+use echelon::ParamError;
 use echelon::odometry::bound::{BoundReport, KinematicTheorem2, Theorem2};
 
 use super::out::outln;
@@ -60,17 +61,33 @@ pub(crate) enum Law {
     Kinematic,
 }
 
+/// Theorem 2's refusal of a value, at the flag that gave it (`--gamma 1:
+/// must be in (0, 1)`), not at the library's parameter (`gamma = 1`).
+fn at_flag(e: ParamError) -> anyhow::Error {
+    let flag = match e.field {
+        "ke" => "--ke",
+        "kz" => "--kz",
+        "zeta" => "--zeta",
+        "omega_max" => "--omega-max",
+        "gamma" => "--gamma",
+        "max_z" => "--max-z",
+        "max_e" => "--max-e",
+        _ => return e.into(),
+    };
+    anyhow::anyhow!("{flag} {}: {}", echelon::error::num(e.value), e.reason)
+}
+
 /// The kinematic law's Theorem 2: `N` for `--steps` or `--max-e`, with its
 /// bounds.
 fn kinematic(a: &BoundArgs) -> Result<()> {
-    let t = KinematicTheorem2::new(a.ke, a.zeta, a.gamma)?;
+    let t = KinematicTheorem2::new(a.ke, a.zeta, a.gamma).map_err(at_flag)?;
     let steps = match (a.steps, a.max_z, a.max_e) {
         (Some(0), ..) => bail!("--steps 0: N counts the samples between fixes and must be ≥ 1"),
         (Some(n), ..) => n,
         (None, Some(_), _) => {
             bail!("--law kinematic takes --max-e (its bound is on ‖e‖), not --max-z")
         }
-        (None, None, Some(e)) => t.max_steps(e)?,
+        (None, None, Some(e)) => t.max_steps(e).map_err(at_flag)?,
         (None, None, None) => bail!("give --steps or --max-e"),
     };
     let report = BoundReport {
@@ -121,12 +138,15 @@ pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
     let Some(omega_max) = a.omega_max else {
         bail!("the dynamic law's bound needs --omega-max (the largest angular speed, rad/s)");
     };
-    let t = Theorem2::new(a.ke, a.kz, a.zeta, omega_max, a.gamma)?;
+    let t = Theorem2::new(a.ke, a.kz, a.zeta, omega_max, a.gamma).map_err(at_flag)?;
     let report = match (a.steps, a.max_z, a.max_e) {
         (Some(0), ..) => bail!("--steps 0: N counts the samples between fixes and must be ≥ 1"),
         (Some(n), ..) => t.forward(n, a.ts),
-        (None, Some(z), _) => t.inverse(z, a.ts)?,
-        (None, None, Some(e)) => t.inverse(a.ke * e, a.ts)?,
+        (None, Some(z), _) => t.inverse(z, a.ts).map_err(at_flag)?,
+        // ‖e‖ ≤ ‖z‖/K_e: a refusal of the ‖z‖ it asks for is of --max-e.
+        (None, None, Some(e)) => t
+            .inverse(a.ke * e, a.ts)
+            .map_err(|err| at_flag(ParamError::new("max_e", e, err.reason)))?,
         (None, None, None) => bail!("give --steps, --max-z or --max-e"),
     };
     // ‖e‖ is ultimately within ‖z‖/K_e: V̇₁ = −K_e‖e‖² + eᵀz < 0 beyond it.

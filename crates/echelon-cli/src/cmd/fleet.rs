@@ -125,12 +125,13 @@ fn command_cmd(a: args::CommandArgs, order: Order) -> Result<()> {
         );
     }
     if !report.missing.is_empty() {
-        bail!(
+        return Err(crate::cmd::out::Unfinished(format!(
             "fleet {}: {} did not acknowledge within {} s",
             order.name(),
             report.missing.join(", "),
             a.timeout
-        );
+        ))
+        .into());
     }
     Ok(())
 }

@@ -21,6 +21,21 @@ impl fmt::Display for Diverged {
 
 impl std::error::Error for Diverged {}
 
+/// A command that ran but did not get what it was asked for: a `fleet
+/// stop` some robot alive did not acknowledge, a `fleet bench` size that
+/// failed. Exit code 1, as docs/fleet.md and their help say (a refused
+/// input is 2).
+#[derive(Debug)]
+pub(crate) struct Unfinished(pub(crate) String);
+
+impl fmt::Display for Unfinished {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Unfinished {}
+
 impl fmt::Display for Closed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("standard output was closed")

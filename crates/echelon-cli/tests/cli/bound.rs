@@ -134,3 +134,33 @@ fn bound_refuses_inputs_outside_the_theorem() {
         &["--steps 0"],
     );
 }
+
+/// A value Theorem 2 refuses is named by the flag that gave it, with the
+/// value given: `--max-e 1e300` was refused as `max_z = 1.5e300` (the ‖z‖
+/// it asks for), `--gamma 1` as `gamma = 1`. For both laws, at every
+/// magnitude the inverse cannot count.
+#[test]
+fn a_refused_bound_input_names_its_flag_and_value() {
+    let dynamic = ["bound", "--zeta", "1e-3", "--omega-max", "0.5"];
+    let kinematic = ["bound", "--zeta", "1e-3", "--law", "kinematic"];
+    for exp in [30, 100, 200, 300] {
+        let big = format!("1e{exp}");
+        for (base, flag) in [
+            (&dynamic, "--max-e"),
+            (&dynamic, "--max-z"),
+            (&kinematic, "--max-e"),
+        ] {
+            if base == &kinematic && flag == "--max-z" {
+                continue;
+            }
+            let o = echelon(&[&base[..], &[flag, &big]].concat());
+            assert_refused(&o, &[&format!("error: {flag} {big}: ")]);
+        }
+    }
+    for gamma in ["1", "1.5", "0", "-0.5"] {
+        for base in [&dynamic, &kinematic] {
+            let o = echelon(&[&base[..], &["--steps", "10", "--gamma", gamma]].concat());
+            assert_refused(&o, &[&format!("error: --gamma {gamma}: must be in (0, 1)")]);
+        }
+    }
+}

@@ -70,6 +70,17 @@ fn bad_waypoint_csv_files_are_refused_at_their_cell() {
     for (text, at, more) in [
         ("t,x,z\n0,0,0\n1,1,0\n", ":1:5: y: ", "no column `y`"),
         ("time,x,y\n0,0,0\n1,1,0\n", ":1:1: t: ", "no column `t`"),
+        // A column named twice was read from one of the two, silently.
+        (
+            "t,t,x,y\n0,9,0,0\n1,9,1,0\n",
+            ":1:3: t: ",
+            "column `t` twice",
+        ),
+        (
+            "t,x,y,x\n0,0,0,5\n1,1,0,5\n",
+            ":1:7: x: ",
+            "column `x` twice",
+        ),
         ("t,x,y\n0,0,0\n1e-9,1,0\n2,2,0\n", ":3:1: t: ", "t = 1e-9 s"),
         (
             "t,x,y\n0,0,0\n1, nan ,0\n",

@@ -277,3 +277,87 @@ fn fleet_times_beyond_any_duration_are_refused_at_their_flag() {
         }
     }
 }
+
+/// An I/O failure is said once: the libraries' errors carry their I/O
+/// cause in their message and as their source, and the line printed both
+/// (`afile: File exists (os error 17): File exists (os error 17)`). For
+/// each command that writes or reads a directory, given a file, a missing
+/// path or a path under a file.
+#[test]
+fn an_io_error_is_said_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("afile");
+    std::fs::write(&file, "x").unwrap();
+    let missing = dir.path().join("missing");
+    let under = file.join("sub");
+    for path in [&file, &missing, &under] {
+        let p = path.to_str().unwrap();
+        for args in [
+            vec!["run", "nonfeasible", "--duration", "0.05", "--out", p],
+            vec!["plot", p],
+            vec!["umbmark", "--from-log", p],
+            vec!["identify", p],
+        ] {
+            let o = echelon(&args);
+            let err = stderr(&o);
+            if o.status.success() {
+                continue;
+            }
+            assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+            assert!(err.matches("(os error").count() <= 1, "{args:?}: {err}");
+        }
+    }
+}
+
+/// A refused huge value is written in exponent form: `--duration 1e300`
+/// was printed with 301 digits.
+#[test]
+fn a_huge_refused_value_is_written_short() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    for exp in (20..=300).step_by(40) {
+        let big = format!("1e{exp}");
+        let o = echelon(&[
+            "run",
+            "circle-pentagon",
+            "--duration",
+            &big,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_refused(&o, &["--duration: ", &format!("{big} s at dt")]);
+        assert!(stderr(&o).len() < 200, "{}", stderr(&o));
+    }
+}
+
+/// A malformed `--connect` or `--listen` endpoint is refused at its flag
+/// before any Zenoh session: Zenoh's own refusal was a JSON5 dump with a
+/// source path, and `tcp/1.2.3.4:99999` waited for a connection that could
+/// never open. Listening on port 0 (any free port) stays allowed.
+#[test]
+fn a_bad_fleet_endpoint_is_refused_at_its_flag() {
+    let bad = [
+        "nonsense",
+        "tcp/1.2.3.4:99999",
+        "tcp/1.2.3.4:0",
+        "tcp/1.2.3.4",
+        "udp/[::1",
+        "http/1.2.3.4:80",
+        "tcp/:7447",
+        "tcp/bad_host:7447",
+    ];
+    for e in bad {
+        for args in [
+            vec!["fleet", "leader", "circle-pentagon", "--connect", e],
+            vec!["fleet", "stop", "circle-pentagon", "--connect", e],
+        ] {
+            let o = echelon(&args);
+            assert_refused(&o, &["'--connect <ENDPOINT>'", e]);
+            assert!(!stderr(&o).contains("Json5Err"), "{}", stderr(&o));
+        }
+        if e != "tcp/1.2.3.4:0" {
+            let o = echelon(&["fleet", "router", "--listen", e]);
+            assert_refused(&o, &["'--listen <ENDPOINT>'", e]);
+        }
+    }
+}

@@ -92,9 +92,9 @@ impl Builder<'_> {
             &step,
             format!(
                 "{} s does not fit {path} ({}): {} {}",
-                self.file.sim.dt,
+                crate::error::num(self.file.sim.dt),
                 self.at.place(path),
-                e.value,
+                crate::error::num(e.value),
                 e.reason
             ),
         )
@@ -367,7 +367,7 @@ impl Builder<'_> {
         if let Some((i, e)) = crate::safety::start_conflict(&points, &configs, &obstacles) {
             return Err(self
                 .at
-                .error(&FieldPath::from("agents").index(i).key("start"), e));
+                .param(&FieldPath::from("agents").index(i).key("start"), &e));
         }
         Ok(Some(SafetySpec {
             agents: configs,

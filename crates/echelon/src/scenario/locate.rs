@@ -156,7 +156,7 @@ impl<'a> Locator<'a> {
     }
 
     pub(crate) fn param(&self, path: &FieldPath, e: &ParamError) -> ScenarioError {
-        self.error(path, format!("{} {}", e.value, e.reason))
+        self.error(path, format!("{} {}", crate::error::num(e.value), e.reason))
     }
 
     /// A TOML syntax or type error, at the field it is in.
@@ -179,6 +179,11 @@ impl<'a> Locator<'a> {
             .strip_prefix("missing field `")
             .and_then(|m| m.strip_suffix('`'))
         {
+            // The error spans the table that lacks the field: the whole
+            // document for a top-level one (whose first key is not it).
+            if e.span().is_none_or(|s| spans.is_whole(&s)) {
+                field = FieldPath::default();
+            }
             field = field.key(missing);
         }
         let (line, column) = e.span().map_or((0, 0), |s| line_col(source, s.start));
@@ -248,6 +253,12 @@ impl<'a> Spans<'a> {
         Spans {
             root: Some(DeTable::parse_recoverable(src).0),
         }
+    }
+
+    /// Whether `span` is the whole document's (what an error in the
+    /// top-level table spans).
+    pub(crate) fn is_whole(&self, span: &Range<usize>) -> bool {
+        self.root.as_ref().is_some_and(|r| r.span() == *span)
     }
 
     /// The span of the value at `path` (or of the deepest part of it that exists).
@@ -350,5 +361,33 @@ mod tests {
         assert_eq!(s.path_at(span.start), p);
         assert_eq!(line_col(SRC, span.start), (10, 5));
         assert_eq!(s.path_at(14).to_string(), "r.circle.speed");
+    }
+
+    /// A top-level table that is missing is named alone, not under the
+    /// file's first key (`name.agents`, `sim.agents`), whatever comes first;
+    /// a missing field of a table is still under it.
+    #[test]
+    fn a_missing_top_level_field_is_named_alone() {
+        let sim = "[sim]\nduration = 1.0\ndt = 0.01\n";
+        let reference =
+            "[reference.line]\nspeed = 0.3\nstart = { x = 0.0, y = 0.0, theta = 0.0 }\n";
+        let agent = "[[agents]]\nstart = { x = -1.0, y = 0.0, theta = 0.0 }\nleader = \"reference\"\noffset = { x = 0.5, y = 0.0 }\n";
+        for head in ["", "name = \"n\"\n", "seed = 3\ndescription = \"d\"\n"] {
+            for (src, missing) in [
+                (format!("{head}{sim}{reference}"), "agents"),
+                (format!("{head}{sim}{agent}"), "reference"),
+                (format!("{head}{reference}{agent}"), "sim"),
+            ] {
+                let e = super::super::Scenario::parse(&src, "s.toml", None).unwrap_err();
+                assert_eq!(e.field, missing, "{e}\n{src}");
+            }
+        }
+        let e = super::super::Scenario::parse(
+            &format!("[sim]\ndt = 0.01\n{reference}{agent}"),
+            "s.toml",
+            None,
+        )
+        .unwrap_err();
+        assert_eq!(e.field, "sim.duration", "{e}");
     }
 }

@@ -299,7 +299,11 @@ pub enum ReferenceSection {
         /// Rate `c`, rad/s.
         c: f64,
         /// Centre `[x, y]`, m (default origin).
-        #[serde(default, skip_serializing_if = "Option::is_none")]
+        #[serde(
+            default,
+            skip_serializing_if = "Option::is_none",
+            deserialize_with = "exact_array"
+        )]
         center: Option<[f64; 2]>,
     },
     /// Eqs. 17/20: the non-feasible cubic.
@@ -313,7 +317,11 @@ pub enum ReferenceSection {
     /// waypoints), at rest at the first and last.
     Waypoints {
         /// `[[t, x, y], …]` in s and m.
-        #[serde(default, skip_serializing_if = "Option::is_none")]
+        #[serde(
+            default,
+            skip_serializing_if = "Option::is_none",
+            deserialize_with = "exact_rows"
+        )]
         points: Option<Vec<[f64; 3]>>,
         /// A CSV file with header `t,x,y`, relative to the scenario file.
         #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -436,4 +444,55 @@ impl<'de> Deserialize<'de> for LeaderSpec {
         }
         d.deserialize_any(V)
     }
+}
+
+/// `[f64; N]` from an array of exactly `N` numbers. Serde's own arrays read
+/// the first `N` elements and the TOML deserializer does not refuse the
+/// rest: `[0.0, 1.0, 2.0, 5.0]` was a waypoint, its `5.0` dropped.
+struct Exact<const N: usize>([f64; N]);
+
+impl<'de, const N: usize> Deserialize<'de> for Exact<N> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Numbers<const N: usize>;
+        impl<'de, const N: usize> Visitor<'de> for Numbers<N> {
+            type Value = Exact<N>;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                write!(f, "an array of length {N}")
+            }
+            fn visit_seq<A: de::SeqAccess<'de>>(self, mut seq: A) -> Result<Exact<N>, A::Error> {
+                let mut out = [0.0; N];
+                for (i, slot) in out.iter_mut().enumerate() {
+                    *slot = seq
+                        .next_element()?
+                        .ok_or_else(|| de::Error::invalid_length(i, &self))?;
+                }
+                let mut len = N;
+                while seq.next_element::<de::IgnoredAny>()?.is_some() {
+                    len += 1;
+                }
+                if len > N {
+                    return Err(de::Error::invalid_length(len, &self));
+                }
+                Ok(Exact(out))
+            }
+        }
+        d.deserialize_seq(Numbers::<N>)
+    }
+}
+
+/// An optional `[f64; N]`, its length exact ([`Exact`]).
+fn exact_array<'de, D: Deserializer<'de>, const N: usize>(
+    d: D,
+) -> Result<Option<[f64; N]>, D::Error> {
+    Ok(Option::<Exact<N>>::deserialize(d)?.map(|e| e.0))
+}
+
+/// Optional rows of `N` numbers, each row's length exact ([`Exact`]).
+fn exact_rows<'de, D: Deserializer<'de>, const N: usize>(
+    d: D,
+) -> Result<Option<Vec<[f64; N]>>, D::Error> {
+    Ok(
+        Option::<Vec<Exact<N>>>::deserialize(d)?
+            .map(|rows| rows.into_iter().map(|e| e.0).collect()),
+    )
 }

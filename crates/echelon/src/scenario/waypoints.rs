@@ -134,6 +134,22 @@ pub(super) fn read(full: &Path) -> Result<Table, ReadError> {
     let mut idx = [0; 3];
     for (k, name) in COLUMNS.into_iter().enumerate() {
         idx[k] = match headers.iter().position(|h| h == name) {
+            // Named twice: which one is meant is not for us to guess.
+            Some(c) if headers.iter().filter(|h| *h == name).count() > 1 => {
+                let again = headers
+                    .iter()
+                    .skip(c + 1)
+                    .position(|h| h == name)
+                    .unwrap_or(0)
+                    + c
+                    + 1;
+                return Err(at(
+                    header_line,
+                    header_columns.get(again).copied().unwrap_or(1),
+                    name,
+                    format!("the header names column `{name}` twice: name each of t, x and y once"),
+                ));
+            }
             Some(c) => c,
             None => {
                 // The first cell that is none of t, x, y; else just past the last.

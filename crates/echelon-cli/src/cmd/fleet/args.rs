@@ -56,10 +56,10 @@ pub(crate) struct NetArgs {
     #[arg(long, value_enum)]
     pub(super) mode: Option<ModeArg>,
     /// Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable) [default: tcp/127.0.0.1:0, quic/127.0.0.1:0 in secure mode].
-    #[arg(long, value_name = "ENDPOINT")]
+    #[arg(long, value_name = "ENDPOINT", value_parser = listen_endpoint)]
     pub(super) listen: Vec<String>,
     /// Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).
-    #[arg(long, value_name = "ENDPOINT")]
+    #[arg(long, value_name = "ENDPOINT", value_parser = connect_endpoint)]
     pub(super) connect: Vec<String>,
     /// A Zenoh configuration file (JSON5) to start from instead of the default (peer, no multicast).
     #[arg(long, value_name = "FILE")]
@@ -448,4 +448,25 @@ pub(crate) struct CertsArgs {
     /// Another host name or IP address the fleet's processes listen on (repeatable).
     #[arg(long, value_name = "HOST")]
     pub(super) host: Vec<String>,
+}
+
+/// An endpoint to connect to, `<protocol>/<host>:<port>` (clap value
+/// parser): Zenoh's own refusal was a JSON5 dump, and a port beyond 65535
+/// waited for a connection that could never open.
+fn connect_endpoint(s: &str) -> Result<String, String> {
+    echelon::scenario::check_endpoint(s).map(|()| s.to_owned())
+}
+
+/// An endpoint to listen on: as [`connect_endpoint`], and port 0 (any free
+/// port) too.
+fn listen_endpoint(s: &str) -> Result<String, String> {
+    let end = s.find(['?', '#']).unwrap_or(s.len());
+    let (locator, rest) = s.split_at(end);
+    match locator.strip_suffix(":0") {
+        // Port 0 is checked as a port that could be connected to.
+        Some(host) => echelon::scenario::check_endpoint(&format!("{host}:1{rest}"))
+            .map(|()| s.to_owned())
+            .map_err(|m| m.replacen(&format!("{host}:1"), locator, 1)),
+        None => connect_endpoint(s),
+    }
 }

@@ -56,7 +56,10 @@ pub(super) fn bench_cmd(a: BenchArgs) -> Result<()> {
         )?;
     }
     if report.rows.iter().any(|r| r.error.is_some()) {
-        bail!("some fleet sizes failed (see the table)");
+        return Err(crate::cmd::out::Unfinished(
+            "some fleet sizes failed (see the table)".to_owned(),
+        )
+        .into());
     }
     Ok(())
 }

@@ -116,12 +116,11 @@ fn main() -> ExitCode {
 /// The exit code of a command that returned `e`: 0 when standard output
 /// was closed (the reader has what it wanted), [`DIVERGED`] for a run that
 /// diverged or a command that ran without getting what it asked for
-/// ([`cmd::out::Unfinished`]), else [`FAILURE`].
+/// ([`cmd::out::Failed`]), else [`FAILURE`].
 fn exit_code(e: &anyhow::Error) -> u8 {
     if e.downcast_ref::<cmd::out::Closed>().is_some() {
         0
-    } else if e.downcast_ref::<cmd::out::Diverged>().is_some()
-        || e.downcast_ref::<cmd::out::Unfinished>().is_some()
+    } else if e.downcast_ref::<cmd::out::Failed>().is_some()
         || matches!(
             e.downcast_ref::<echelon_fleet::FleetError>(),
             Some(echelon_fleet::FleetError::Diverged(_))
@@ -162,15 +161,12 @@ mod tests {
     #[test]
     fn each_outcome_has_its_exit_code() {
         let cases: [(anyhow::Error, u8); 5] = [
-            (
-                cmd::out::Unfinished("fleet stop: robot/2 …".into()).into(),
-                1,
-            ),
-            (cmd::out::Diverged("run: diverged".into()).into(), 1),
+            (cmd::out::Failed("fleet stop: robot/2 …".into()).into(), 1),
+            (cmd::out::Failed("run: diverged".into()).into(), 1),
             (cmd::out::Closed.into(), 0),
             (anyhow::anyhow!("bad input"), 2),
             (
-                anyhow::Error::from(cmd::out::Unfinished("x".into())).context("more"),
+                anyhow::Error::from(cmd::out::Failed("x".into())).context("more"),
                 1,
             ),
         ];

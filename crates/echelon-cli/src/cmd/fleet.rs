@@ -125,7 +125,7 @@ fn command_cmd(a: args::CommandArgs, order: Order) -> Result<()> {
         );
     }
     if !report.missing.is_empty() {
-        return Err(crate::cmd::out::Unfinished(format!(
+        return Err(crate::cmd::out::Failed(format!(
             "fleet {}: {} did not acknowledge within {} s",
             order.name(),
             report.missing.join(", "),

@@ -8,33 +8,20 @@ use std::io::{self, Write};
 #[derive(Debug)]
 pub(crate) struct Closed;
 
-/// A run that diverged (`echelon run`): its one-line message; exit code 1
-/// (a refused input is 2).
+/// A command that ran but did not get what it was asked for: a run or a
+/// sweep that diverged, a `fleet stop` some robot alive did not
+/// acknowledge, a `fleet bench` size that failed. Its one-line message;
+/// exit code 1, as docs/fleet.md and their help say (a refused input is 2).
 #[derive(Debug)]
-pub(crate) struct Diverged(pub(crate) String);
+pub(crate) struct Failed(pub(crate) String);
 
-impl fmt::Display for Diverged {
+impl fmt::Display for Failed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.0)
     }
 }
 
-impl std::error::Error for Diverged {}
-
-/// A command that ran but did not get what it was asked for: a `fleet
-/// stop` some robot alive did not acknowledge, a `fleet bench` size that
-/// failed. Exit code 1, as docs/fleet.md and their help say (a refused
-/// input is 2).
-#[derive(Debug)]
-pub(crate) struct Unfinished(pub(crate) String);
-
-impl fmt::Display for Unfinished {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for Unfinished {}
+impl std::error::Error for Failed {}
 
 impl fmt::Display for Closed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

@@ -135,7 +135,7 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
                     }
                 }
             }
-            return Err(super::out::Diverged(format!("{}: {e}", run.name)).into());
+            return Err(super::out::Failed(format!("{}: {e}", run.name)).into());
         }
         Err(e) => {
             let _ = std::fs::remove_file(&mcap_part);

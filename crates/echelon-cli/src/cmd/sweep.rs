@@ -206,7 +206,7 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
     sweep::write_diverged_csv(BufWriter::new(file), &diverged, grid.spec().zeta_model)
         .with_context(|| format!("writing {}", diverged_path.display()))?;
     let first = &diverged[0];
-    Err(super::out::Diverged(format!(
+    Err(super::out::Failed(format!(
         "{} of {total} runs diverged, listed in {} (the first: ζ = {}, E_d = {}, E_b = {}, slip = {}, N = {}, seed {}: {}); the other {} rows are in {}",
         diverged.len(),
         diverged_path.display(),

@@ -56,10 +56,9 @@ pub(super) fn bench_cmd(a: BenchArgs) -> Result<()> {
         )?;
     }
     if report.rows.iter().any(|r| r.error.is_some()) {
-        return Err(crate::cmd::out::Unfinished(
-            "some fleet sizes failed (see the table)".to_owned(),
-        )
-        .into());
+        return Err(
+            crate::cmd::out::Failed("some fleet sizes failed (see the table)".to_owned()).into(),
+        );
     }
     Ok(())
 }

@@ -25,6 +25,42 @@ const SIGMA_V: f64 = 0.005;
 const SIGMA_OMEGA: f64 = 0.01;
 const LOG_DT: f64 = 0.01;
 
+/// The log of a base that follows `applied` through first-order lags
+/// `taus` (s) on each axis, measured with the noise of `SIGMA_V` and
+/// `SIGMA_OMEGA` (drawn from `seed`), `cmd` logged as commanded.
+fn lagged_base_log(
+    source: &str,
+    t: Vec<f64>,
+    cmd: [Vec<f64>; 2],
+    applied: [Vec<f64>; 2],
+    (tau_v, tau_w): (f64, f64),
+    seed: u64,
+) -> Log {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (nv, nw) = (
+        Normal::new(0.0, SIGMA_V).unwrap(),
+        Normal::new(0.0, SIGMA_OMEGA).unwrap(),
+    );
+    let v: Vec<f64> = identify::simulate_axis(&t, &applied[0], tau_v, 1.0, 0.0)
+        .into_iter()
+        .map(|x| x + nv.sample(&mut rng))
+        .collect();
+    let omega: Vec<f64> = identify::simulate_axis(&t, &applied[1], tau_w, 1.0, 0.0)
+        .into_iter()
+        .map(|x| x + nw.sample(&mut rng))
+        .collect();
+    Log {
+        source: source.into(),
+        agent: 1,
+        t,
+        v,
+        omega,
+        cmd: Some(cmd),
+        applied: Some(applied),
+        ..Log::default()
+    }
+}
+
 /// `cases` cases drawn from the fixed RNG seed `seed` (CI reruns the same
 /// sample), no failure persisted.
 fn fixed_sample(cases: u32, seed: u64) -> ProptestConfig {
@@ -189,29 +225,14 @@ fn velocity_base_lags_are_recovered_within_5_percent() {
         .iter()
         .map(|&t| 0.8 * (0.6 * t).sin() + 0.6 * (2.1 * t).sin().signum())
         .collect();
-    let mut rng = ChaCha8Rng::seed_from_u64(11);
-    let (nv, nw) = (
-        Normal::new(0.0, SIGMA_V).unwrap(),
-        Normal::new(0.0, SIGMA_OMEGA).unwrap(),
-    );
-    let v: Vec<f64> = identify::simulate_axis(&t, &cv, tau_v, 1.0, 0.0)
-        .into_iter()
-        .map(|x| x + nv.sample(&mut rng))
-        .collect();
-    let omega: Vec<f64> = identify::simulate_axis(&t, &cw, tau_w, 1.0, 0.0)
-        .into_iter()
-        .map(|x| x + nw.sample(&mut rng))
-        .collect();
-    let log = Log {
-        source: "synthetic base".into(),
-        agent: 1,
+    let log = lagged_base_log(
+        "synthetic base",
         t,
-        v,
-        omega,
-        cmd: Some([cv.clone(), cw.clone()]),
-        applied: Some([cv, cw]),
-        ..Log::default()
-    };
+        [cv.clone(), cw.clone()],
+        [cv, cw],
+        (tau_v, tau_w),
+        11,
+    );
     let id = identify::identify(&log, Model::Velocity).unwrap();
     for (field, want) in [("tau_v", tau_v), ("tau_omega", tau_w)] {
         let e = id.get(field).unwrap();
@@ -1181,29 +1202,14 @@ proptest! {
         };
         let (cv, cw) = (axis(|c| c.v, &cmd), axis(|c| c.omega, &cmd));
         let (av, aw) = (axis(|c| c.v, &applied), axis(|c| c.omega, &applied));
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let (nv, nw) = (
-            Normal::new(0.0, SIGMA_V).unwrap(),
-            Normal::new(0.0, SIGMA_OMEGA).unwrap(),
-        );
-        let v: Vec<f64> = identify::simulate_axis(&t, &av, tau_v, 1.0, 0.0)
-            .into_iter()
-            .map(|x| x + nv.sample(&mut rng))
-            .collect();
-        let omega: Vec<f64> = identify::simulate_axis(&t, &aw, tau_w, 1.0, 0.0)
-            .into_iter()
-            .map(|x| x + nw.sample(&mut rng))
-            .collect();
-        let log = Log {
-            source: "synthetic limited base".into(),
-            agent: 1,
+        let log = lagged_base_log(
+            "synthetic limited base",
             t,
-            v,
-            omega,
-            cmd: Some([cv, cw]),
-            applied: Some([av, aw]),
-            ..Log::default()
-        };
+            [cv, cw],
+            [av, aw],
+            (tau_v, tau_w),
+            seed,
+        );
         let Ok(id) = identify::identify(&log, Model::Velocity) else {
             return Ok(());
         };

@@ -140,6 +140,17 @@ pub const ENDPOINT_PROTOCOLS: [&str; 4] = ["tcp", "udp", "tls", "quic"];
 /// one), optionally followed by Zenoh's `?metadata` and `#config` parts,
 /// which are passed on unchecked.
 pub fn check_endpoint(e: &str) -> Result<(), String> {
+    check_endpoint_from(e, 1)
+}
+
+/// Checks an endpoint to listen on: as [`check_endpoint`], and port 0 (any
+/// free port) too.
+pub fn check_listen_endpoint(e: &str) -> Result<(), String> {
+    check_endpoint_from(e, 0)
+}
+
+/// Checks `e` as [`check_endpoint`] says, with ports from `lowest`.
+fn check_endpoint_from(e: &str, lowest: u16) -> Result<(), String> {
     let locator = e.split(['?', '#']).next().unwrap_or_default();
     let Some((proto, address)) = locator.split_once('/') else {
         return Err(format!(
@@ -156,8 +167,8 @@ pub fn check_endpoint(e: &str) -> Result<(), String> {
     let Some((host, port)) = address.rsplit_once(':') else {
         return bad("no port");
     };
-    if !matches!(port.parse::<u16>(), Ok(p) if p > 0) {
-        return bad(&format!("`{port}` is not a port (1 to 65535)"));
+    if !matches!(port.parse::<u16>(), Ok(p) if p >= lowest) {
+        return bad(&format!("`{port}` is not a port ({lowest} to 65535)"));
     }
     let host_ok = if let Some(v6) = host.strip_prefix('[').and_then(|h| h.strip_suffix(']')) {
         v6.parse::<std::net::Ipv6Addr>().is_ok()

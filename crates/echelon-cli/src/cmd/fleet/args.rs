@@ -460,13 +460,5 @@ fn connect_endpoint(s: &str) -> Result<String, String> {
 /// An endpoint to listen on: as [`connect_endpoint`], and port 0 (any free
 /// port) too.
 fn listen_endpoint(s: &str) -> Result<String, String> {
-    let end = s.find(['?', '#']).unwrap_or(s.len());
-    let (locator, rest) = s.split_at(end);
-    match locator.strip_suffix(":0") {
-        // Port 0 is checked as a port that could be connected to.
-        Some(host) => echelon::scenario::check_endpoint(&format!("{host}:1{rest}"))
-            .map(|()| s.to_owned())
-            .map_err(|m| m.replacen(&format!("{host}:1"), locator, 1)),
-        None => connect_endpoint(s),
-    }
+    echelon::scenario::check_listen_endpoint(s).map(|()| s.to_owned())
 }

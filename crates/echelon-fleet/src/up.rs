@@ -174,6 +174,21 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     if opts.real {
         check_real(opts, &fleet.ros2, n)?;
     }
+    let bases = if opts.ros2 && !opts.real { n } else { 0 };
+    if let Some(dir) = &opts.secure {
+        // Every process's certificates, before anything is written or starts.
+        let routers = (opts.topology == Topology::Router).then_some(Member::Router);
+        let robots = (1..=n as u32).map(Member::Robot);
+        let simulated = (1..=bases as u32).map(Member::Base);
+        for m in [Member::Collector, Member::Leader]
+            .into_iter()
+            .chain(routers)
+            .chain(robots)
+            .chain(simulated)
+        {
+            crate::net::secure_files(dir, &m.identity())?;
+        }
+    }
     let duration = opts.duration.unwrap_or(built.plan.config().duration);
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
@@ -182,7 +197,6 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // Start order: the routers (router topology), the collector, the ROS 2
     // bases (with --ros2), the robots, the leader; in a mesh also the order
     // of their ports.
-    let bases = if opts.ros2 && !opts.real { n } else { 0 };
     let robot_at = |k: usize| bases + k;
     let leader_at = bases + n + 1;
     let net = Links::new(opts, proto, leader_at + 1)?;

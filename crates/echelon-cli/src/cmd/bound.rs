@@ -19,9 +19,9 @@ pub(crate) struct BoundArgs {
     /// K_e > 0.
     #[arg(long, value_name = "KE", default_value_t = 1.5, value_parser = positive)]
     ke: f64,
-    /// K_z > 0.
-    #[arg(long, value_name = "KZ", default_value_t = 10.0, value_parser = positive)]
-    kz: f64,
+    /// K_z > 0 (the dynamic law) [default: 10].
+    #[arg(long, value_name = "KZ", value_parser = positive)]
+    kz: Option<f64>,
     /// ζ: the largest odometry error per axis per sample, m.
     #[arg(long, value_name = "M", value_parser = positive)]
     zeta: f64,
@@ -52,6 +52,9 @@ pub(crate) struct BoundArgs {
     json: bool,
 }
 
+/// `--kz` when not given (the dynamic law).
+const DEFAULT_KZ: f64 = 10.0;
+
 /// Which law's Theorem 2.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub(crate) enum Law {
@@ -80,6 +83,17 @@ fn at_flag(e: ParamError) -> anyhow::Error {
 /// The kinematic law's Theorem 2: `N` for `--steps` or `--max-e`, with its
 /// bounds.
 fn kinematic(a: &BoundArgs) -> Result<()> {
+    // Its bound has neither: a flag it would ignore is refused, not dropped.
+    for (given, flag) in [
+        (a.kz.is_some(), "--kz"),
+        (a.omega_max.is_some(), "--omega-max"),
+    ] {
+        if given {
+            bail!(
+                "{flag}: the kinematic law's bound does not depend on it (‖e‖ ≤ √2 N ζ / γ); drop it, or use --law dynamic"
+            );
+        }
+    }
     let t = KinematicTheorem2::new(a.ke, a.zeta, a.gamma).map_err(at_flag)?;
     let steps = match (a.steps, a.max_z, a.max_e) {
         (Some(0), ..) => bail!("--steps 0: N counts the samples between fixes and must be ≥ 1"),
@@ -138,7 +152,8 @@ pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
     let Some(omega_max) = a.omega_max else {
         bail!("the dynamic law's bound needs --omega-max (the largest angular speed, rad/s)");
     };
-    let t = Theorem2::new(a.ke, a.kz, a.zeta, omega_max, a.gamma).map_err(at_flag)?;
+    let kz = a.kz.unwrap_or(DEFAULT_KZ);
+    let t = Theorem2::new(a.ke, kz, a.zeta, omega_max, a.gamma).map_err(at_flag)?;
     let report = match (a.steps, a.max_z, a.max_e) {
         (Some(0), ..) => bail!("--steps 0: N counts the samples between fixes and must be ≥ 1"),
         (Some(n), ..) => t.forward(n, a.ts),
@@ -158,7 +173,7 @@ pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
     outln!(
         "  K_e = {}, K_z = {}, ζ = {} m, ω_M = {} rad/s, γ = {}",
         a.ke,
-        a.kz,
+        kz,
         a.zeta,
         omega_max,
         a.gamma

@@ -113,6 +113,23 @@ fn bound_for_the_kinematic_law() {
         &echelon(&["bound", "--zeta", "1e-4", "--steps", "10"]),
         &["--omega-max"],
     );
+    // The kinematic bound depends on neither K_z nor ω_M: given, each is
+    // refused at its flag rather than silently ignored.
+    for (flag, value) in [("--omega-max", "2.84"), ("--kz", "10")] {
+        let kinematic = [
+            "bound",
+            "--law",
+            "kinematic",
+            "--zeta",
+            "1e-4",
+            "--steps",
+            "10",
+        ];
+        assert_refused(
+            &echelon(&[&kinematic[..], &[flag, value]].concat()),
+            &[flag, "kinematic", "--law dynamic"],
+        );
+    }
 }
 
 #[test]

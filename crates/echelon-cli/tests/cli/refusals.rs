@@ -361,3 +361,39 @@ fn a_bad_fleet_endpoint_is_refused_at_its_flag() {
         }
     }
 }
+
+/// `fleet up --secure DIR` without every process's certificates is refused
+/// before anything starts or is written: a missing directory, and one made
+/// for fewer robots than the scenario has (the first robot without a
+/// certificate is named), in both topologies. It used to start the
+/// routers, the collector and the leader and leave `endpoints.json`,
+/// `fleet.mcap`, `logs/` in `--out` before a robot failed.
+#[test]
+fn fleet_up_without_every_certificate_is_refused_before_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let certs = dir.path().join("certs");
+    let c = certs.to_str().unwrap();
+    let made = echelon(&["fleet", "certs", c, "--robots", "2"]);
+    assert!(made.status.success(), "{}", stderr(&made));
+    let out = dir.path().join("never");
+    let out_s = out.to_str().unwrap();
+    let missing = dir.path().join("missing");
+    for topology in ["router", "mesh"] {
+        // circle-pentagon has four robots: robot-3 has none.
+        for (secure, needle) in [(missing.to_str().unwrap(), "ca.pem"), (c, "robot-3.pem")] {
+            let o = echelon(&[
+                "fleet",
+                "up",
+                "circle-pentagon",
+                "--topology",
+                topology,
+                "--secure",
+                secure,
+                "--out",
+                out_s,
+            ]);
+            assert_refused(&o, &["secure mode needs", needle, "fleet certs"]);
+            assert!(!out.exists(), "{topology} {secure}: wrote {out_s}");
+        }
+    }
+}

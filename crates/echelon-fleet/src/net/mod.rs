@@ -244,17 +244,7 @@ pub fn config(opts: &NetOptions) -> Result<Config, FleetError> {
 /// `s.identity`'s certificate on both sides of every link, the fleet CA as
 /// the only root, mutual authentication.
 fn tls(s: &Secure) -> Result<serde_json::Value, FleetError> {
-    let ca = s.dir.join("ca.pem");
-    let (cert, key) = identity_files(&s.dir, &s.identity);
-    for f in [&ca, &cert, &key] {
-        if !f.is_file() {
-            return Err(FleetError::Config(format!(
-                "secure mode needs {} (make the certificates with `echelon fleet certs {}`)",
-                f.display(),
-                s.dir.display()
-            )));
-        }
-    }
+    let [ca, cert, key] = secure_files(&s.dir, &s.identity)?;
     let path = |p: &PathBuf| json!(p.display().to_string());
     Ok(json!({
         "root_ca_certificate": path(&ca),
@@ -264,6 +254,23 @@ fn tls(s: &Secure) -> Result<serde_json::Value, FleetError> {
         "connect_private_key": path(&key),
         "enable_mtls": true,
     }))
+}
+
+/// The files `identity` needs in the secure mode, `[ca, certificate, key]`,
+/// or which one is missing from `dir`.
+pub fn secure_files(dir: &std::path::Path, identity: &str) -> Result<[PathBuf; 3], FleetError> {
+    let ca = dir.join("ca.pem");
+    let (cert, key) = identity_files(dir, identity);
+    for f in [&ca, &cert, &key] {
+        if !f.is_file() {
+            return Err(FleetError::Config(format!(
+                "secure mode needs {} (make the certificates with `echelon fleet certs {}`)",
+                f.display(),
+                dir.display()
+            )));
+        }
+    }
+    Ok([ca, cert, key])
 }
 
 /// Opens a session (blocks until every `connect` endpoint is reached, or fails).

@@ -362,13 +362,15 @@ impl SafetyFilter {
     /// The QP's answer for the desired `x0` and the rows gathered, the
     /// outcome and whether a deadlock is being broken; updates the monitor.
     /// `drift` is the part of the point's motion the command does not set
-    /// (zero for velocity bases), for the stuck test.
+    /// (zero for velocity bases), for the stuck test; `me` the robot's state
+    /// and `l` its point's distance ahead, for the still test.
     pub(super) fn decide(
         &mut self,
         t: f64,
         x0: [f64; 2],
         barriers: usize,
         drift: [f64; 2],
+        (me, l): (&State, f64),
     ) -> ([f64; 2], Outcome, bool) {
         let satisfied = |rows: &[Constraint], x: [f64; 2]| rows.iter().all(|c| c.slack(x) >= 0.0);
         if satisfied(&self.rows[..barriers], x0) {
@@ -386,7 +388,11 @@ impl SafetyFilter {
         let asked = [x0[0] + drift[0], x0[1] + drift[1]];
         let asked_sq = asked[0] * asked[0] + asked[1] * asked[1];
         let stuck = asked_sq >= 1e-4 && moved[0] * asked[0] + moved[1] * asked[1] < 0.5 * asked_sq;
-        self.deadlock.record(t, stuck);
+        // Still: the point stands (below 1 mm/s) and the filtered motion is
+        // next to nothing (1 %) of what is asked.
+        let speed = me.v.hypot(l * me.omega);
+        let still = speed < 1e-3 && moved[0] * moved[0] + moved[1] * moved[1] < 1e-4 * asked_sq;
+        self.deadlock.record(t, stuck, still);
         (x, outcome, breaking)
     }
 }

@@ -107,7 +107,7 @@ impl SafetyFilter {
                 }
             }
         }
-        let decision = self.decide(t, x0, barriers, f);
+        let decision = self.decide(t, x0, barriers, f, (me, l));
         let of = move |x: [f64; 2]| Input {
             u1: m * x[0],
             u2: j * x[1] / l,

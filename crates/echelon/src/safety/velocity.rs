@@ -81,7 +81,7 @@ impl SafetyFilter {
         });
         let barriers = self.rows.len();
         push_box(&mut self.rows, [base.v_max(), l * base.omega_max()]);
-        let decision = self.decide(t, x0, barriers, [0.0, 0.0]);
+        let decision = self.decide(t, x0, barriers, [0.0, 0.0], (me, l));
         let of = |x: [f64; 2]| VelocityCommand {
             v: x[0],
             omega: x[1] / l,
@@ -173,7 +173,7 @@ impl SafetyFilter {
                 l * reach(base.tau_omega(), base.alpha_max()),
             ],
         );
-        let decision = self.decide(t, x0, barriers, [0.0, 0.0]);
+        let decision = self.decide(t, x0, barriers, [0.0, 0.0], (me, l));
         let of = |x: [f64; 2]| VelocityCommand {
             v: x[0],
             omega: x[1] / l,

@@ -23,9 +23,11 @@
 #![allow(clippy::needless_range_loop)]
 
 mod integral;
+mod limited;
 mod linalg;
 mod residuals;
 pub(crate) use integral::{AxisIntegrals, fit_integral};
+pub(crate) use limited::{LimitedFit, fit_limited};
 pub(crate) use linalg::rcond;
 use linalg::{inverse_spd, least_squares, solve_spd};
 

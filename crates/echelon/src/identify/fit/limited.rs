@@ -25,8 +25,8 @@
 //! residuals under measurement noise (so `σ² (XᵀX)⁻¹` is the covariance).
 //!
 //! Which interval is which follows from the model itself: the lag's rate at
-//! the interval's ends (the fitted velocity, the logged applied command at
-//! the start and at the end), over the limit by more than [`MARGIN`] on
+//! the interval's ends (the fitted velocity at either end, under the logged
+//! applied command at the start or at the end), over the limit by more than [`MARGIN`] on
 //! both ends (and binding over the other axis by as much) is on the limit,
 //! under it by as much on both ends (on both axes) is free, anything else
 //! unknown. Classification and fit alternate until the classes repeat.
@@ -169,9 +169,10 @@ fn classify(
     let n = d[0].t.len();
     let mut out = [vec![Class::Unknown; n - 1], vec![Class::Unknown; n - 1]];
     for j in 0..n - 1 {
-        // The lag's rates at the interval's start, at its end under the
-        // same command, and at its end under the next command.
-        let points = [(j, j), (j, j + 1), (j + 1, j + 1)];
+        // The lag's rates at the interval's start and end, under the
+        // command logged at either (it may switch in between: the rate just
+        // after is between the last two).
+        let points = [(j, j), (j, j + 1), (j + 1, j), (j + 1, j + 1)];
         let ratio = |axis: usize, (ui, xi): (usize, usize)| {
             (d[axis].u[ui] - x[axis][xi]) / tau[axis] / limit[axis]
         };

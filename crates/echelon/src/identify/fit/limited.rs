@@ -151,6 +151,7 @@ fn solve(d: &AxisData<'_>, w: &AxisIntegrals<'_>, classes: &[Class], guess: f64)
             predicted,
             rcond: rc,
             between: None,
+            segments: Some(seg),
         },
         limit: with_limit.then_some((rate, sigma2 * inv[1][1])),
         limited,

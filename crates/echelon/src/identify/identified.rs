@@ -84,6 +84,8 @@ pub struct AxisSummary {
     /// simulated, noise-free log; the intervals are not meaningful.
     pub noise_free: bool,
     /// How the axis was fitted: `integrals` (exact, from `integrals.csv`),
+    /// `integrals, rate limit` (exact, with the acceleration limit in the
+    /// loop: the lag alone misfit),
     /// `command hold` (through the command messages of a ROS 2 bag),
     /// `held inputs` (the logged inputs held between samples: holding fitted
     /// significantly better) or `interpolated inputs` (linearly, the

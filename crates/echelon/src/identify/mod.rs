@@ -25,6 +25,12 @@
 //! (σ² the residual variance, X the regressors or the output's
 //! sensitivities), mapped to `m, η` (or `J, ψ`) by the delta method.
 //!
+//! A velocity base whose acceleration limit acted misfits the lag alone;
+//! with the integrals such an axis is refitted with the rate clamp in the
+//! loop (`fit::fit_limited`: the base's `VelocityBase::accelerations`
+//! integrated over each log interval, exact), which also identifies the
+//! limit that bound (`a_max`, `α_max`, [`Limit::estimate`]).
+//!
 //! A parameter is given no number, and the reason instead, when the input did
 //! not excite it (no input, a badly conditioned information matrix or an
 //! interval wider than ±[`MAX_REL_HALF_WIDTH`]) or when the model misfits the

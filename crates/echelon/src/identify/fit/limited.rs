@@ -29,7 +29,11 @@
 //! applied command at the start or at the end), over the limit by more than [`MARGIN`] on
 //! both ends (and binding over the other axis by as much) is on the limit,
 //! under it by as much on both ends (on both axes) is free, anything else
-//! unknown. Classification and fit alternate until the classes repeat.
+//! unknown; a free interval next to one that is not is left out too (a
+//! step between the samples may ride the limit for less than an interval).
+//! Classification and fit alternate until the classes repeat, from each
+//! axis's limit alone and from both (an axis without a limit would shadow
+//! the other's), and the start whose fit leaves the smallest residuals wins.
 
 use super::{AxisData, AxisFit, AxisIntegrals, cost, inverse_spd, rcond};
 

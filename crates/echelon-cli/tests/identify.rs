@@ -282,3 +282,57 @@ fn a_ros2_bag_of_a_lagged_base_gives_its_lags_within_5_percent() {
         ],
     );
 }
+
+#[test]
+fn a_run_whose_acceleration_limit_acted_prints_its_lags_and_limit_and_the_block_runs() {
+    // turtlebot-circle: the Burgers' joint acceleration limit (α_max =
+    // 3.2 rad/s²) cuts their turns while they catch up from rest. The lags
+    // come out with the limit in the loop, and the block carries both.
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let o = echelon(&[
+        "run",
+        "turtlebot-circle",
+        "--out",
+        run.to_str().unwrap(),
+        "--duration",
+        "10",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let o = echelon(&[
+        "identify",
+        run.to_str().unwrap(),
+        "--agent",
+        "1",
+        "--name",
+        "burger2",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    for line in [
+        "tau_v = 0.1    # τ_v, s: noise-free log",
+        "tau_omega = 0.1    # τ_ω, s: noise-free log",
+        "alpha_max = 3.2    # α_max, rad/s²: identified with the lag",
+        "warning: alpha_max = 3.2000 identified with the lag",
+    ] {
+        assert!(stdout.contains(line), "{line} not in {stdout}");
+    }
+    assert!(!stdout.contains("not identifiable"), "{stdout}");
+    let block = &stdout[stdout.find("# Identified by").unwrap()..];
+    let show = echelon(&["show", "turtlebot-circle"]);
+    let scenario =
+        text(&show.stdout).replace("robot = \"burger\"", "robot = \"burger2\"") + "\n" + block;
+    let file = dir.path().join("with-burger2.toml");
+    std::fs::write(&file, scenario).unwrap();
+    let o = echelon(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        dir.path().join("run2").to_str().unwrap(),
+        "--duration",
+        "2",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+}

@@ -100,8 +100,10 @@ pub struct ResidualChecks {
 impl ResidualChecks {
     pub(super) fn new(d: &AxisData<'_>, f: &AxisFit) -> ResidualChecks {
         let r: Vec<f64> = d.y.iter().zip(&f.predicted).map(|(y, p)| y - p).collect();
-        let (ljung_box_q, ljung_box_bound, lag1_autocorrelation) =
-            fit::ljung_box(&r, WHITENESS_LAGS);
+        let (ljung_box_q, ljung_box_bound, lag1_autocorrelation) = match &f.segments {
+            Some(seg) => fit::ljung_box_segmented(&r, seg, WHITENESS_LAGS),
+            None => fit::ljung_box(&r, WHITENESS_LAGS),
+        };
         let (scan_z, scan_bound, [a, b]) = fit::scan(&r);
         let gain = f.cov[1][1] > 0.0;
         let (transient_z, transient_bound, transient_rate) =

@@ -23,14 +23,18 @@
 #![allow(clippy::needless_range_loop)]
 
 mod integral;
+mod limited;
 mod linalg;
 mod residuals;
 pub(crate) use integral::{AxisIntegrals, fit_integral};
+pub(crate) use limited::{LimitedFit, fit_limited};
 pub(crate) use linalg::rcond;
 use linalg::{inverse_spd, least_squares, solve_spd};
 
 use crate::lm;
-pub(crate) use residuals::{ljung_box, noise_from_differences, scan, transients};
+pub(crate) use residuals::{
+    ljung_box, ljung_box_segmented, noise_from_differences, scan, transients,
+};
 
 /// Number of samples per window of the integrated equation (first guess).
 const WINDOW: usize = 10;
@@ -119,6 +123,10 @@ pub(crate) struct AxisFit {
     pub(crate) rcond: f64,
     /// Set when the inputs between samples were unknown ([`fit`]).
     pub(crate) between: Option<Between>,
+    /// The segment of each sample when the fit gave each segment its own
+    /// offset (the rate-limited fit, [`fit_limited`]); its residuals then
+    /// sum to zero over each segment.
+    pub(crate) segments: Option<Vec<usize>>,
 }
 
 /// Simulates the axis on `g` from `x0` for parameters `(tau, k)`, and the
@@ -440,6 +448,7 @@ fn fit_with(d: &AxisData<'_>, fixed_gain: bool, foh: bool) -> AxisFit {
         predicted: x,
         rcond: rc,
         between: None,
+        segments: None,
     }
 }
 

@@ -84,6 +84,8 @@ pub struct AxisSummary {
     /// simulated, noise-free log; the intervals are not meaningful.
     pub noise_free: bool,
     /// How the axis was fitted: `integrals` (exact, from `integrals.csv`),
+    /// `integrals, rate limit` (exact, with the acceleration limit in the
+    /// loop: the lag alone misfit),
     /// `command hold` (through the command messages of a ROS 2 bag),
     /// `held inputs` (the logged inputs held between samples: holding fitted
     /// significantly better) or `interpolated inputs` (linearly, the
@@ -101,8 +103,17 @@ pub struct Limit {
     /// Largest magnitude seen.
     pub observed: f64,
     /// Whether the log shows it is the limit (the command exceeded it and the
-    /// base cut it); otherwise it is only what the manoeuvre reached.
+    /// base cut it, or an acceleration limit identified with the lag);
+    /// otherwise it is only what the manoeuvre reached.
     pub reached: bool,
+    /// An acceleration limit identified with the lag (the lag with its rate
+    /// clamp fitted to the log): its estimate and 95 % interval.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub estimate: Option<Estimate>,
+    /// The log is noise-free on this limit's axis: its interval is not
+    /// meaningful.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub noise_free: bool,
 }
 
 /// Measured against model-predicted velocities, for the figure.
@@ -238,7 +249,29 @@ impl Identified {
             }
         }
         for l in &self.limits {
-            if l.reached {
+            let unit = match l.field {
+                "a_max" => "a_max, m/s²",
+                _ => "α_max, rad/s²",
+            };
+            if let Some(e) = l.estimate {
+                if l.noise_free {
+                    let _ = writeln!(
+                        s,
+                        "{} = {}    # {unit}: identified with the lag, noise-free log, interval not meaningful",
+                        l.field,
+                        sig(e.value)
+                    );
+                } else {
+                    let _ = writeln!(
+                        s,
+                        "{} = {}    # {unit}: identified with the lag, 95 % interval [{}, {}]",
+                        l.field,
+                        sig(e.value),
+                        sig(e.ci95[0]),
+                        sig(e.ci95[1])
+                    );
+                }
+            } else if l.reached {
                 let _ = writeln!(
                     s,
                     "{} = {}    # the log shows the base held here",

@@ -25,6 +25,12 @@
 //! (σ² the residual variance, X the regressors or the output's
 //! sensitivities), mapped to `m, η` (or `J, ψ`) by the delta method.
 //!
+//! A velocity base whose acceleration limit acted misfits the lag alone;
+//! with the integrals such an axis is refitted with the rate clamp in the
+//! loop (`fit::fit_limited`: the base's `VelocityBase::accelerations`
+//! integrated over each log interval, exact), which also identifies the
+//! limit that bound (`a_max`, `α_max`, [`Limit::estimate`]).
+//!
 //! A parameter is given no number, and the reason instead, when the input did
 //! not excite it (no input, a badly conditioned information matrix or an
 //! interval wider than ±[`MAX_REL_HALF_WIDTH`]) or when the model misfits the
@@ -118,29 +124,87 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
     // Whether an excited axis was withheld for misfit (then the log is
     // answered, with the reasons, rather than refused as unexcited).
     let mut misfits = false;
-    for axis in 0..2 {
-        let d = AxisData {
-            t: &log.t,
-            u: &inputs[axis],
-            y: measured[axis],
-            hold: log.hold.as_ref().map(|h| (&h.t[..], &h.u[axis][..])),
-        };
-        let integrals = log.integrals.as_ref().map(|w| fit::AxisIntegrals {
+    let data: [AxisData<'_>; 2] = std::array::from_fn(|axis| AxisData {
+        t: &log.t,
+        u: &inputs[axis],
+        y: measured[axis],
+        hold: log.hold.as_ref().map(|h| (&h.t[..], &h.u[axis][..])),
+    });
+    let integrals: [Option<fit::AxisIntegrals<'_>>; 2] = std::array::from_fn(|axis| {
+        log.integrals.as_ref().map(|w| fit::AxisIntegrals {
             s: [&w.s, &w.theta][axis],
             i: &w.input[axis],
-        });
-        // Samples farther apart than the plant's own input hold: the
-        // sampled values do not hold over the intervals.
-        let slower = log.input_period.is_some_and(|p| {
-            let n = log.t.len();
-            n > 1 && (log.t[n - 1] - log.t[0]) / (n - 1) as f64 > 1.5 * p
-        });
-        let f = match &integrals {
-            Some(w) => fit::fit_integral(&d, w, fixed_gain),
-            None => fit::fit(&d, fixed_gain, slower),
+        })
+    });
+    // Samples farther apart than the plant's own input hold: the
+    // sampled values do not hold over the intervals.
+    let slower = log.input_period.is_some_and(|p| {
+        let n = log.t.len();
+        n > 1 && (log.t[n - 1] - log.t[0]) / (n - 1) as f64 > 1.5 * p
+    });
+    let fits: [AxisFit; 2] = std::array::from_fn(|axis| match &integrals[axis] {
+        Some(w) => fit::fit_integral(&data[axis], w, fixed_gain),
+        None => fit::fit(&data[axis], fixed_gain, slower),
+    });
+    let no_lags: [Option<String>; 2] = std::array::from_fn(|axis| {
+        integrals[axis]
+            .as_ref()
+            .filter(|_| fixed_gain)
+            .and_then(|w| no_lag(w, input_names[axis]))
+    });
+    // A velocity base's acceleration limit: the lag with the rate clamp in
+    // the loop, fitted from the integrals (fit::fit_limited), for the axes
+    // whose lag alone misfits.
+    let limited = match (&integrals, fixed_gain) {
+        ([Some(wv), Some(ww)], true) if no_lags.iter().all(Option::is_none) => fit::fit_limited(
+            [&data[0], &data[1]],
+            [wv, ww],
+            [&fits[0], &fits[1]],
+            [0, 1].map(|a| largest_rate(&log.t, measured[a]).0),
+        ),
+        _ => None,
+    };
+    let mut rate_limits: [Option<RateLimit>; 2] = [None, None];
+    for axis in 0..2 {
+        let d = &data[axis];
+        let lag_only = Verdict::new(
+            model,
+            axis,
+            d,
+            fits[axis].clone(),
+            &integrals[axis],
+            no_lags[axis].clone(),
+            input_names[axis],
+        );
+        // Withheld for misfit, or for an interval the misfit widened.
+        let misfit_alone = no_lags[axis].is_none() && lag_only.why.is_some();
+        let (v, lim) = match &limited {
+            Some(l) if misfit_alone => {
+                let l = &l[axis];
+                let mut v = Verdict::new(
+                    model,
+                    axis,
+                    d,
+                    l.fit.clone(),
+                    &integrals[axis],
+                    None,
+                    input_names[axis],
+                );
+                v.method = "integrals, rate limit";
+                (v, Some(l))
+            }
+            _ => (lag_only, None),
         };
-        let y_rms = (d.y.iter().map(|y| y * y).sum::<f64>() / d.y.len() as f64).sqrt();
-        let noise_free = f.rms <= NOISE_FREE_RELATIVE_RMS * y_rms;
+        let Verdict {
+            fit: f,
+            noise_free,
+            checks,
+            estimates,
+            symbols,
+            unexcited,
+            why,
+            method,
+        } = v;
         if let Some(b) = f.between {
             let rel = |i: usize| (f.theta[i] - b.held[i]).abs() / f.theta[i].abs();
             warnings.push(format!(
@@ -156,13 +220,15 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
                 100.0 * rel(1)
             ));
         }
-        let checks = ResidualChecks::new(&d, &f);
-        let method = match (&integrals, d.hold.is_some(), f.between.is_some()) {
-            (Some(_), _, _) => "integrals",
-            (None, true, _) => "command hold",
-            (None, false, true) => "interpolated inputs",
-            (None, false, false) => "held inputs",
-        };
+        if let Some(l) = lim {
+            rate_limits[axis] = Some(RateLimit::new(l, noise_free, why.is_none()));
+            warnings.push(format!(
+                "the {} axis was fitted with its acceleration limit in the loop: {} intervals on the limit, {} left out (the limit took hold or let go between samples, or the other axis's limit scaled this one)",
+                ["linear", "angular"][axis],
+                l.limited,
+                l.unknown
+            ));
+        }
         let summary = |identifiable| AxisSummary {
             noise_free,
             method,
@@ -178,32 +244,6 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             rcond: f.rcond,
             identifiable,
         };
-        let (estimates, symbols) = axis_params(model, axis, &f);
-        // A velocity base without lag on this axis moves at its command:
-        // the integrals of both agree throughout and there is no τ.
-        let no_lag = match (&integrals, fixed_gain) {
-            (Some(w), true) => {
-                let top = w.i.iter().map(|x| (x - w.i[0]).abs()).fold(0.0, f64::max);
-                let gap =
-                    w.i.iter()
-                        .zip(w.s)
-                        .map(|(i, s)| ((i - w.i[0]) - (s - w.s[0])).abs())
-                        .fold(0.0, f64::max);
-                (top > 0.0 && gap <= 1e-9 * top).then(|| {
-                    format!(
-                        "the base moves at its {} throughout (∫ of the command equals ∫ of the velocity): no lag on this axis",
-                        input_names[axis]
-                    )
-                })
-            }
-            _ => None,
-        };
-        let unexcited = no_lag.or_else(|| excitation(&d, &f, &estimates, input_names[axis]));
-        let why = unexcited.clone().or_else(|| {
-            (!noise_free)
-                .then(|| misfit(&f, &checks, integrals.is_some() || d.hold.is_some()))
-                .flatten()
-        });
         misfits |= unexcited.is_none() && why.is_some();
         match &why {
             Some(reason) => {
@@ -251,7 +291,7 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
         _ => None,
     };
     let limits = if model == Model::Velocity {
-        velocity_limits(log, inputs, &mut warnings)
+        velocity_limits(log, inputs, &rate_limits, &mut warnings)
     } else {
         Vec::new()
     };
@@ -282,6 +322,134 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
 }
 
 type Symbol = (&'static str, &'static str, &'static str);
+
+/// One axis's fit and what it allows: the estimates, or why not.
+struct Verdict {
+    fit: AxisFit,
+    noise_free: bool,
+    checks: ResidualChecks,
+    estimates: Vec<Estimate>,
+    symbols: Vec<Symbol>,
+    /// Why the input did not excite the axis (or it has no lag).
+    unexcited: Option<String>,
+    /// Why there is no number: `unexcited`, or the model misfits the log.
+    why: Option<String>,
+    method: &'static str,
+}
+
+impl Verdict {
+    /// The verdict on fit `f` of `axis` (`no_lag`: the axis has none).
+    fn new(
+        model: Model,
+        axis: usize,
+        d: &AxisData<'_>,
+        f: AxisFit,
+        integrals: &Option<fit::AxisIntegrals<'_>>,
+        no_lag: Option<String>,
+        input: &str,
+    ) -> Verdict {
+        let y_rms = (d.y.iter().map(|y| y * y).sum::<f64>() / d.y.len() as f64).sqrt();
+        let noise_free = f.rms <= NOISE_FREE_RELATIVE_RMS * y_rms;
+        let checks = ResidualChecks::new(d, &f);
+        let method = match (integrals, d.hold.is_some(), f.between.is_some()) {
+            (Some(_), _, _) => "integrals",
+            (None, true, _) => "command hold",
+            (None, false, true) => "interpolated inputs",
+            (None, false, false) => "held inputs",
+        };
+        let (estimates, symbols) = axis_params(model, axis, &f);
+        let unexcited = no_lag.or_else(|| excitation(d, &f, &estimates, input));
+        let why = unexcited.clone().or_else(|| {
+            (!noise_free)
+                .then(|| misfit(&f, &checks, integrals.is_some() || d.hold.is_some()))
+                .flatten()
+        });
+        Verdict {
+            fit: f,
+            noise_free,
+            checks,
+            estimates,
+            symbols,
+            unexcited,
+            why,
+            method,
+        }
+    }
+}
+
+/// Whether a velocity base has no lag on this axis: it moves at its command
+/// (`input`), the integrals of both agree throughout.
+fn no_lag(w: &fit::AxisIntegrals<'_>, input: &str) -> Option<String> {
+    let top = w.i.iter().map(|x| (x - w.i[0]).abs()).fold(0.0, f64::max);
+    let gap =
+        w.i.iter()
+            .zip(w.s)
+            .map(|(i, s)| ((i - w.i[0]) - (s - w.s[0])).abs())
+            .fold(0.0, f64::max);
+    (top > 0.0 && gap <= 1e-9 * top).then(|| {
+        format!(
+            "the base moves at its {input} throughout (∫ of the command equals ∫ of the velocity): no lag on this axis"
+        )
+    })
+}
+
+/// The acceleration limit of one axis as the rate-limited fit found it.
+struct RateLimit {
+    /// The limit, when identified.
+    estimate: Option<Estimate>,
+    /// Why not, otherwise.
+    why: Option<String>,
+    noise_free: bool,
+    /// Intervals on the limit.
+    intervals: usize,
+}
+
+impl RateLimit {
+    /// From the axis's rate-limited fit `l`, whose residuals are at rounding
+    /// level (`noise_free`) or not, and whose lag was identified or not.
+    fn new(l: &fit::LimitedFit, noise_free: bool, lag_identified: bool) -> RateLimit {
+        let e = l.limit.map(|(value, var)| Estimate::new(value, var, value));
+        let why = match e {
+            _ if !lag_identified => Some("the lag fitted with it is not identifiable".to_owned()),
+            None => Some(if l.unknown > 0 {
+                "it never bound on its own (the other axis's limit scaled this one, or the intervals where it took hold were left out)".to_owned()
+            } else {
+                "it never bound".to_owned()
+            }),
+            Some(e) if !(e.value.is_finite() && e.value > 0.0 && e.std.is_finite()) => Some(
+                format!("the fit gave a non-physical value ({:.3e})", e.value),
+            ),
+            Some(e) if !noise_free && e.relative_half_width() > MAX_REL_HALF_WIDTH => {
+                Some(format!(
+                    "{} intervals on it are too few: 95 % interval ±{:.1} % of the value, more than ±{:.0} %",
+                    l.limited,
+                    100.0 * e.relative_half_width(),
+                    100.0 * MAX_REL_HALF_WIDTH
+                ))
+            }
+            Some(_) => None,
+        };
+        RateLimit {
+            estimate: e.filter(|_| why.is_none()),
+            why,
+            noise_free,
+            intervals: l.limited,
+        }
+    }
+}
+
+/// The largest rate of `y` over 5-sample spans (noise averaged) and how
+/// many spans come within 0.5 % of it: a lag's rate only touches its peak,
+/// a limited one rides it.
+fn largest_rate(t: &[f64], y: &[f64]) -> (f64, usize) {
+    let w = 5;
+    let rates: Vec<f64> = (0..t.len().saturating_sub(w))
+        .map(|i| ((y[i + w] - y[i]) / (t[i + w] - t[i])).abs())
+        .collect();
+    let acc = rates.iter().fold(0.0_f64, |m, r| m.max(*r));
+    let riding = rates.iter().filter(|r| **r >= 0.995 * acc).count();
+    (acc, riding)
+}
 
 /// The physical parameters of one axis from its `(τ, k)` fit, by the delta
 /// method: torque `m = τ/k, η = 1/k` (or `J, ψ`); velocity `τ`.
@@ -345,7 +513,12 @@ fn geometry(u: &[Vec<f64>; 2], tau: &[Vec<f64>; 2]) -> Option<[f64; 2]> {
 }
 
 /// Observed speed and acceleration limits of a velocity base, with warnings.
-fn velocity_limits(log: &Log, applied: &[Vec<f64>; 2], warnings: &mut Vec<String>) -> Vec<Limit> {
+fn velocity_limits(
+    log: &Log,
+    applied: &[Vec<f64>; 2],
+    rate_limits: &[Option<RateLimit>; 2],
+    warnings: &mut Vec<String>,
+) -> Vec<Limit> {
     let mut out = Vec::new();
     let measured = [&log.v, &log.omega];
     let tops = applied
@@ -377,6 +550,8 @@ fn velocity_limits(log: &Log, applied: &[Vec<f64>; 2], warnings: &mut Vec<String
             field: speed,
             observed,
             reached,
+            estimate: None,
+            noise_free: false,
         });
         if !reached {
             let cut = log.cmd.as_ref().is_some_and(|cmd| {
@@ -397,23 +572,56 @@ fn velocity_limits(log: &Log, applied: &[Vec<f64>; 2], warnings: &mut Vec<String
                 "{speed}: observed {observed:.4}, not necessarily the limit ({why})"
             ));
         }
-        // Acceleration: the largest |Δv/Δt| of the measurement over 5-sample
+        // Acceleration: the rate-limited fit's, when it was fitted with the
+        // lag; else the largest |Δv/Δt| of the measurement over 5-sample
         // spans (noise averaged). It is the limit when the rate sits on it
         // (within 0.5 %) for at least 10 samples: a lag's rate only touches
         // its peak, a limited one rides it.
-        let w = 5;
-        let rates: Vec<f64> = (0..log.t.len().saturating_sub(w))
-            .map(|i| {
-                ((measured[axis][i + w] - measured[axis][i]) / (log.t[i + w] - log.t[i])).abs()
-            })
-            .collect();
-        let acc = rates.iter().fold(0.0_f64, |m, r| m.max(*r));
-        let riding = rates.iter().filter(|r| **r >= 0.995 * acc).count();
+        let (acc, riding) = largest_rate(&log.t, measured[axis]);
+        if let Some(r) = &rate_limits[axis] {
+            match (&r.estimate, &r.why) {
+                (Some(e), _) => {
+                    out.push(Limit {
+                        field: accel,
+                        observed: e.value,
+                        reached: true,
+                        estimate: Some(*e),
+                        noise_free: r.noise_free,
+                    });
+                    warnings.push(format!(
+                        "{accel} = {:.4} identified with the lag ({} intervals on it){}",
+                        e.value,
+                        r.intervals,
+                        if r.noise_free {
+                            ": noise-free log, exact to rounding".to_owned()
+                        } else {
+                            format!(", 95 % interval ±{:.2} %", 100.0 * e.relative_half_width())
+                        }
+                    ));
+                }
+                (None, why) => {
+                    out.push(Limit {
+                        field: accel,
+                        observed: acc,
+                        reached: false,
+                        estimate: None,
+                        noise_free: false,
+                    });
+                    warnings.push(format!(
+                        "{accel}: observed {acc:.4}, not necessarily the limit (the rate-limited fit: {})",
+                        why.as_deref().unwrap_or("no estimate")
+                    ));
+                }
+            }
+            continue;
+        }
         let reached = acc > 0.0 && riding >= 10;
         out.push(Limit {
             field: accel,
             observed: acc,
             reached,
+            estimate: None,
+            noise_free: false,
         });
         if reached {
             warnings.push(format!(

@@ -72,5 +72,6 @@ pub(crate) fn fit_integral(d: &AxisData<'_>, w: &AxisIntegrals<'_>, fixed_gain: 
         predicted,
         rcond: rc,
         between: None,
+        segments: None,
     }
 }

@@ -23,12 +23,52 @@ pub(crate) fn ljung_box(r: &[f64], lags: usize) -> (f64, f64, f64) {
         * (1..=lags)
             .map(|j| rho(j).powi(2) / (nf - j as f64))
             .sum::<f64>();
+    (q, ljung_box_bound(lags), rho(1))
+}
+
+/// The 99.9 % critical value of χ² with `lags` degrees of freedom
+/// (Wilson–Hilferty).
+fn ljung_box_bound(lags: usize) -> f64 {
     let h = lags as f64;
     // z for a 0.1 % upper tail.
     let z = 3.090_232_306_167_813;
     let a = 2.0 / (9.0 * h);
-    let crit = h * (1.0 - a + z * a.sqrt()).powi(3);
-    (q, crit, rho(1))
+    h * (1.0 - a + z * a.sqrt()).powi(3)
+}
+
+/// [`ljung_box`] for residuals of a fit that gave each segment of samples
+/// its own offset (`seg`: each sample's segment, non-decreasing): their
+/// autocovariance is that of white noise less `σ²/L` between any two
+/// samples of a segment of `L`, which short segments make large; that
+/// expected part is added back before the statistic is formed.
+pub(crate) fn ljung_box_segmented(r: &[f64], seg: &[usize], lags: usize) -> (f64, f64, f64) {
+    let n = r.len().min(seg.len());
+    let segments = seg[..n].last().map_or(0, |s| s + 1);
+    let mut len = vec![0usize; segments];
+    for s in &seg[..n] {
+        len[*s] += 1;
+    }
+    let c0: f64 = r[..n].iter().map(|x| x * x).sum();
+    let sigma2 = c0 / n.saturating_sub(segments).max(1) as f64;
+    let rho = |j: usize| -> f64 {
+        if c0 <= 0.0 {
+            return 0.0;
+        }
+        let raw: f64 = (0..n - j).map(|k| r[k] * r[k + j]).sum();
+        let expected: f64 = -sigma2
+            * len
+                .iter()
+                .map(|l| l.saturating_sub(j) as f64 / (*l).max(1) as f64)
+                .sum::<f64>();
+        (raw - expected) / c0
+    };
+    let nf = n as f64;
+    let q = nf
+        * (nf + 2.0)
+        * (1..=lags.min(n.saturating_sub(1)))
+            .map(|j| rho(j).powi(2) / (nf - j as f64))
+            .sum::<f64>();
+    (q, ljung_box_bound(lags), rho(1))
 }
 
 /// A multi-scale scan of the residuals' local means: the largest

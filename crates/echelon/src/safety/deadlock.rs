@@ -112,7 +112,7 @@ const BIASES: u8 = 7;
 fn bias(k: u8) -> f64 {
     let size = f64::from(k / 2 + 1) * BIAS_ANGLE;
     let size = size.min(std::f64::consts::PI);
-    if k % 2 == 0 { -size } else { size }
+    if k.is_multiple_of(2) { -size } else { size }
 }
 
 /// `x` turned counter-clockwise by `angle` (the body frame and the world

@@ -58,6 +58,11 @@ def _arguments(
         raise TypeError(f"unknown grid key(s) {', '.join(unknown)}; the keys are {', '.join(g)}")
     g.update(grid or {})
     listed = lambda v: [v] if isinstance(v, (int, float)) else list(v)  # noqa: E731
+    if isinstance(seeds, int) and seeds < 1:
+        raise ValueError(
+            f"seeds: {seeds} seeds per combination: the number of runs of each combination "
+            "(seeds first_seed, first_seed + 1, …) must be ≥ 1, or give a list of seeds"
+        )
     seed_list = list(range(first_seed, first_seed + seeds)) if isinstance(seeds, int) else list(seeds)
     ov = scenario.overrides
     return {

@@ -85,3 +85,32 @@ def test_a_value_the_grid_refuses_names_its_grid_key_as_python_spells_it(key, va
     with pytest.raises(ValueError, match=f"^{key} = ") as raised:
         echelon.sweep(s, {key: [value]}, seeds=1)
     assert not isinstance(raised.value, echelon.ScenarioError)
+
+
+@pytest.mark.parametrize(
+    "key, values, twice",
+    [
+        ("zeta", [1e-4, 2e-4, 0.0001], "0.0001"),
+        ("ed", [1.0, 1.0], "1"),
+        ("eb", [0.99, 1.01, 0.99], "0.99"),
+        ("slip", [0.0, -0.0], "0"),
+        ("fix_every", [10, 20, 10], "10"),
+    ],
+)
+def test_a_grid_value_given_twice_is_refused_naming_its_key(key, values, twice):
+    s = echelon.Scenario.builtin("fix-study", duration=0.5)
+    with pytest.raises(ValueError, match=f"^{key} = {twice}: is given twice"):
+        echelon.sweep(s, {key: values}, seeds=1)
+
+
+def test_repeated_or_no_seeds_are_refused_naming_seeds():
+    s = echelon.Scenario.builtin("fix-study", duration=0.5)
+    with pytest.raises(ValueError, match="^seeds = 3: is given twice"):
+        echelon.sweep(s, {"fix_every": [10]}, seeds=[3, 4, 3])
+    for seeds in [0, -2]:
+        with pytest.raises(ValueError, match=f"^seeds: {seeds} seeds per combination: .* must be ≥ 1"):
+            echelon.sweep(s, {"fix_every": [10]}, seeds=seeds)
+    with pytest.raises(ValueError, match="^seeds: an empty list: needs at least one value"):
+        echelon.sweep(s, {"fix_every": [10]}, seeds=[])
+    with pytest.raises(ValueError, match="^zeta: an empty list"):
+        echelon.sweep(s, {"zeta": []}, seeds=1)

@@ -187,10 +187,15 @@ impl PyScenario {
         origin: &str,
         base_dir: Option<PathBuf>,
     ) -> PyResult<Self> {
-        let value = toml_value(document, &mut String::new(), 0)
-            .map_err(|(field, message)| {
-                errors::scenario(py, &echelon::ScenarioError { field, ..whole(origin, message) })
-            })?;
+        let value = toml_value(document, &mut String::new(), 0).map_err(|(field, message)| {
+            errors::scenario(
+                py,
+                &echelon::ScenarioError {
+                    field,
+                    ..whole(origin, message)
+                },
+            )
+        })?;
         if !value.is_table() {
             return Err(PyTypeError::new_err(format!(
                 "not a scenario document: a dict of the scenario's tables, not a {}",
@@ -440,7 +445,10 @@ fn toml_value(
     use pyo3::types::{PyBool, PyFloat, PyInt, PyList, PyString, PyTuple};
     let at = |path: &String, message: String| (path.clone(), message);
     if depth > MAX_DEPTH {
-        return Err(at(path, format!("nested deeper than {MAX_DEPTH} levels (a list or dict that holds itself?)")));
+        return Err(at(
+            path,
+            format!("nested deeper than {MAX_DEPTH} levels (a list or dict that holds itself?)"),
+        ));
     }
     let type_name = || {
         v.get_type()
@@ -448,11 +456,16 @@ fn toml_value(
             .map_or_else(|_| "?".to_owned(), |n| n.to_string())
     };
     if v.is_instance_of::<PyBool>() {
-        return Ok(toml::Value::Boolean(v.is_truthy().map_err(|e| at(path, e.to_string()))?));
+        return Ok(toml::Value::Boolean(
+            v.is_truthy().map_err(|e| at(path, e.to_string()))?,
+        ));
     }
     if v.is_instance_of::<PyInt>() {
         return v.extract::<i64>().map(toml::Value::Integer).map_err(|_| {
-            at(path, format!("{v} is beyond a TOML integer's range (64 bits)"))
+            at(
+                path,
+                format!("{v} is beyond a TOML integer's range (64 bits)"),
+            )
         });
     }
     if v.is_instance_of::<PyFloat>() {
@@ -491,7 +504,11 @@ fn toml_value(
     }
     if v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>() {
         let mut array = Vec::new();
-        for (i, item) in v.try_iter().map_err(|e| at(path, e.to_string()))?.enumerate() {
+        for (i, item) in v
+            .try_iter()
+            .map_err(|e| at(path, e.to_string()))?
+            .enumerate()
+        {
             let item = item.map_err(|e| at(path, e.to_string()))?;
             let len = path.len();
             path.push_str(&format!("[{}]", i + 1));

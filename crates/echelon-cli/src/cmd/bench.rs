@@ -156,7 +156,7 @@ fn chunk_steps(agents: usize) -> u64 {
 }
 
 /// The most agents `echelon bench` builds in all (≈ 11 GB of state).
-const MAX_AGENTS: u128 = 100_000_000;
+const MAX_AGENTS: u128 = BenchFormation::MAX_AGENTS as u128;
 
 /// A whole number ≥ 1 (clap value parser).
 fn at_least_one(s: &str) -> Result<usize, String> {

@@ -390,7 +390,7 @@ mod tests {
     fn chunks_are_whole_tiles_and_bounded() {
         for agents in [1, 2, 63, 64, 1000, 65_536, 1 << 22, 100_000_000] {
             let c = chunk_steps(agents);
-            assert!(c >= 64 && c % 64 == 0, "{agents}: {c}");
+            assert!(c >= 64 && c.is_multiple_of(64), "{agents}: {c}");
             assert!(
                 c as usize * agents <= CHUNK_AGENT_STEPS.max(64 * agents),
                 "{agents}: {c}"

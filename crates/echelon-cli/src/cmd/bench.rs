@@ -259,8 +259,12 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         )
     });
     let seconds = started.elapsed().as_secs_f64();
+    // A diverged formation ran without giving what was asked: exit 1, as
+    // `echelon run` and `sweep` do for a divergence (2 is for refused input).
     for r in results {
-        r.context("the formation diverged")?;
+        if let Err(e) = r {
+            return Err(super::out::Failed(format!("the formation diverged: {e}")).into());
+        }
     }
 
     let agent_steps = (args.agents * args.runs) as f64 * steps as f64;

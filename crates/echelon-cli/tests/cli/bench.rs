@@ -186,3 +186,19 @@ fn a_long_bench_shows_progress_on_a_terminal_only() {
     );
     assert!(succeeded(&piped).contains("4000 steps of 0.001 s"));
 }
+
+/// A bench whose formation diverges (a step far too long) says so and exits
+/// 1, as a diverged `echelon run` does, not 2 (the input was accepted).
+#[test]
+fn a_diverged_bench_says_so_and_exits_1() {
+    for dt in ["0.9", "0.5"] {
+        let o = echelon(&["bench", "--agents", "10", "--dt", dt, "--duration", "100"]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("the formation diverged") && !err.contains("panicked"),
+            "{err}"
+        );
+        assert_eq!(stdout(&o), "");
+    }
+}

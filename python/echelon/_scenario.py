@@ -94,14 +94,18 @@ class Scenario:
         :class:`echelon.ScenarioError` has ``file`` = ``origin``, ``line`` =
         ``column`` = 0, ``field`` the dict path with indices as in the dict
         (from 0: ``agents[1].offset.x`` is ``document["agents"][1]["offset"]["x"]``)
-        and ``path`` the same as a tuple of keys and indices."""
-        try:
-            text = json.dumps(document, allow_nan=False)
-        except (TypeError, ValueError) as e:
-            raise TypeError(f"not a scenario document: {e}") from None
+        and ``path`` the same as a tuple of keys and indices: a value out of
+        range, NaN or infinite where a finite number is needed, or one TOML
+        has no form for (None, a set, …). numpy scalars and arrays are taken
+        as their ``tolist()``. A ``document`` that is not a dict is a
+        ``TypeError``."""
+        if not isinstance(document, dict):
+            raise TypeError(
+                f"not a scenario document: a dict of the scenario's tables, not a {type(document).__name__}"
+            )
         base = None if base_dir is None else Path(base_dir)
         try:
-            return cls(_echelon.Scenario.from_json(text, origin, base), **overrides)
+            return cls(_echelon.Scenario.from_dict(document, origin, base), **overrides)
         except _echelon.ScenarioError as e:
             if e.file != origin:
                 raise  # not in the document: an override's, a waypoints file's

@@ -106,7 +106,15 @@ class Simulation:
         scenario's safety filter when it has one and ``filter`` (None: the
         simulation's :attr:`safety` switch) is true."""
         on = self.safety if filter is None else bool(filter)
-        self._sim.step(np.ascontiguousarray(commands, dtype=np.float64), on)
+        try:
+            a = np.ascontiguousarray(commands, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"commands: not an array of numbers ({e})") from None
+        if a.ndim != 2:
+            raise ValueError(
+                f"commands: shape {list(a.shape)}, expected ({self.n}, 2): (u1, u2) or (v, ω) per agent"
+            )
+        self._sim.step(a, on)
 
     def step_by(self, law: Callable[[int, float, np.ndarray, dict[str, Any]], Any]) -> None:
         """One RK4 step of a continuous-time controller: ``law(i, t, state,

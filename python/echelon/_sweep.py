@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import io
+import numbers
 import os
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -48,6 +49,41 @@ class Sweep:
         return f"Sweep({len(self.table)} runs)"
 
 
+def _listed(key: str, value: Any) -> list[Any]:
+    """A grid value as a list: one number, or a list, tuple, range or numpy
+    array of them (not text, which is no list of numbers)."""
+    if isinstance(value, numbers.Real):
+        return [value]
+    if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
+        raise TypeError(f"{key}: {value!r} is not a number or a list of numbers")
+    return list(value.tolist() if hasattr(value, "tolist") else value)
+
+
+def _numbers(key: str, value: Any) -> list[float]:
+    out = []
+    for x in _listed(key, value):
+        if not isinstance(x, numbers.Real):
+            raise TypeError(f"{key}: {x!r} is not a number")
+        out.append(float(x))
+    return out
+
+
+def _whole_numbers(key: str, value: Any) -> list[int]:
+    """Whole numbers in [0, 2**64) (``10.0`` is 10; ``10.7`` is refused, not cut)."""
+    out = []
+    for x in _listed(key, value):
+        if isinstance(x, numbers.Real) and not isinstance(x, numbers.Integral):
+            if not float(x).is_integer():
+                raise ValueError(f"{key}: {x!r} is not a whole number")
+            x = int(x)
+        if not isinstance(x, numbers.Integral):
+            raise TypeError(f"{key}: {x!r} is not a whole number")
+        if not 0 <= x < 2**64:
+            raise ValueError(f"{key}: {x} must be a whole number in [0, 2**64)")
+        out.append(int(x))
+    return out
+
+
 def _arguments(
     scenario: Scenario, grid: Mapping[str, Any] | None, seeds: int | Iterable[int], first_seed: int,
     gamma: float, transient: float | None,
@@ -57,17 +93,32 @@ def _arguments(
     if unknown:
         raise TypeError(f"unknown grid key(s) {', '.join(unknown)}; the keys are {', '.join(g)}")
     g.update(grid or {})
-    listed = lambda v: [v] if isinstance(v, (int, float)) else list(v)  # noqa: E731
-    seed_list = list(range(first_seed, first_seed + seeds)) if isinstance(seeds, int) else list(seeds)
+    if not isinstance(first_seed, numbers.Integral) or not 0 <= first_seed < 2**64:
+        raise ValueError(f"first_seed: {first_seed!r} must be a whole number in [0, 2**64)")
+    if isinstance(seeds, numbers.Integral) and not isinstance(seeds, bool):
+        if seeds < 1:
+            raise ValueError(
+                f"seeds: {seeds} seeds per combination: the number of runs of each combination "
+                "(seeds first_seed, first_seed + 1, …) must be ≥ 1, or give a list of seeds"
+            )
+        if first_seed + seeds > 2**64:
+            raise ValueError(
+                f"seeds: {seeds} seeds from first_seed = {first_seed} go past the last seed, 2**64 − 1"
+            )
+        seed_list = list(range(first_seed, first_seed + seeds))
+    else:
+        seed_list = _whole_numbers("seeds", seeds)
+    if not isinstance(g["zeta_model"], str):
+        raise TypeError(f"zeta_model: {g['zeta_model']!r} (\"wheels\" or \"worst-case\")")
     ov = scenario.overrides
     return {
-        "zeta": [float(x) for x in listed(g["zeta"])],
+        "zeta": _numbers("zeta", g["zeta"]),
         "zeta_model": g["zeta_model"],
-        "ed": [float(x) for x in listed(g["ed"])],
-        "eb": [float(x) for x in listed(g["eb"])],
-        "slip": [float(x) for x in listed(g["slip"])],
-        "fix_every": [int(x) for x in listed(g["fix_every"])],
-        "seeds": [int(s) for s in seed_list],
+        "ed": _numbers("ed", g["ed"]),
+        "eb": _numbers("eb", g["eb"]),
+        "slip": _numbers("slip", g["slip"]),
+        "fix_every": _whole_numbers("fix_every", g["fix_every"]),
+        "seeds": seed_list,
         "gamma": float(gamma),
         "transient": transient,
         "dt": ov.get("dt"),

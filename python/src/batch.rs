@@ -40,6 +40,19 @@ impl PyBatchEngine {
         if agents == 0 {
             return Err(errors::value("agents: must be ≥ 1"));
         }
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(errors::value(format!(
+                "dt: {dt} must be a finite number > 0"
+            )));
+        }
+        // Past it the allocation fails, which aborts the interpreter.
+        if agents > BenchFormation::MAX_AGENTS {
+            return Err(errors::value(format!(
+                "agents: {agents} is more than {} (≈ {} GB of state)",
+                BenchFormation::MAX_AGENTS,
+                BenchFormation::MAX_AGENTS * Engine::BLOCK_BYTES_PER_AGENT / 1_000_000_000
+            )));
+        }
         let topology = match topology {
             "star" => Topology::Star,
             "chain" => Topology::Chain,
@@ -57,9 +70,14 @@ impl PyBatchEngine {
         let engine = match drive {
             "torque" => Kind::Torque(f.engine(dt).map_err(errors::value)?),
             "velocity" => {
-                BenchFormation::BASE
-                    .check_step(dt)
-                    .map_err(|e| errors::value(format!("dt: the velocity base's {e}")))?;
+                BenchFormation::BASE.check_step(dt).map_err(|e| {
+                    errors::value(format!(
+                        "dt: {dt} s is longer than the velocity base's lag ({} = {} s, a \
+                             Clearpath Jackal's): a lag cannot be integrated with a step longer \
+                             than itself; use dt ≤ {}",
+                        e.field, e.value, e.value
+                    ))
+                })?;
                 Kind::Velocity(
                     f.velocity_engine(BenchFormation::BASE, dt)
                         .map_err(errors::value)?,

@@ -101,6 +101,9 @@ pub(crate) fn param(e: &echelon::ParamError) -> PyErr {
 /// (`eb = -1: …`: the keyword of its `echelon sweep` flag).
 pub(crate) fn grid_param(e: &echelon::ParamError) -> PyErr {
     match echelon::sweep::GridSpec::flag(e.field).and_then(keyword) {
+        Some(key) if e.reason == echelon::sweep::EMPTY_LIST => {
+            PyValueError::new_err(format!("{key}: {}", echelon::sweep::GridSpec::refusal(e)))
+        }
         Some(key) => PyValueError::new_err(format!("{key} = {}: {}", e.value, e.reason)),
         None => param(e),
     }

@@ -7,6 +7,7 @@
 
 use numpy::ndarray::{Array2, ArrayView2};
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
+use pyo3::exceptions::PyMemoryError;
 use pyo3::prelude::*;
 
 use echelon::State;
@@ -59,14 +60,27 @@ impl Filters {
                 obs.push(Obstacle::new(row[0], row[1], row[2]).map_err(|e| errors::param(&e))?);
             }
         }
+        // A count past memory is refused, not an abort of the interpreter.
+        let mut filters = Vec::new();
+        let mut states = Vec::new();
+        let mut neighbours = Vec::new();
+        filters
+            .try_reserve_exact(n)
+            .and_then(|()| states.try_reserve_exact(n))
+            .and_then(|()| neighbours.try_reserve_exact(n))
+            .map_err(|_| {
+                PyMemoryError::new_err(format!(
+                    "n: {n} robots' filters do not fit in memory ({} B each)",
+                    size_of::<SafetyFilter>() + size_of::<State>() + size_of::<Neighbour>()
+                ))
+            })?;
+        filters.extend((0..n).map(|_| SafetyFilter::new(config).with_period(period)));
         Ok(Filters {
-            filters: (0..n)
-                .map(|_| SafetyFilter::new(config).with_period(period))
-                .collect(),
+            filters,
             obstacles: obs,
             l,
-            states: Vec::with_capacity(n),
-            neighbours: Vec::with_capacity(n),
+            states,
+            neighbours,
         })
     }
 

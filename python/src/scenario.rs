@@ -173,19 +173,35 @@ impl PyScenario {
         Self::parse(source, origin, base_dir).map_err(|e| errors::scenario(py, &e))
     }
 
-    /// A document given as JSON text (a Python dict, `json.dumps`ed), turned
-    /// into TOML and parsed; errors locate fields in that TOML.
+    /// A document given as a Python dict (as `tomllib.load` gives it),
+    /// turned into TOML and parsed. Its values keep their meaning: a NaN or
+    /// an infinity reaches the scenario's own checks, which name its field;
+    /// a value TOML has no form for is refused naming its path (as the
+    /// file's fields are named, indices from 1). numpy scalars and arrays
+    /// are their `tolist()`.
     #[staticmethod]
-    #[pyo3(signature = (json, origin, base_dir=None))]
-    fn from_json(
+    #[pyo3(signature = (document, origin, base_dir=None))]
+    fn from_dict(
         py: Python<'_>,
-        json: &str,
+        document: &Bound<'_, PyAny>,
         origin: &str,
         base_dir: Option<PathBuf>,
     ) -> PyResult<Self> {
-        let value: toml::Value = serde_json::from_str(json).map_err(|e| {
-            errors::scenario(py, &whole(origin, format!("not a scenario document: {e}")))
+        let value = toml_value(document, &mut String::new(), 0).map_err(|(field, message)| {
+            errors::scenario(
+                py,
+                &echelon::ScenarioError {
+                    field,
+                    ..whole(origin, message)
+                },
+            )
         })?;
+        if !value.is_table() {
+            return Err(PyTypeError::new_err(format!(
+                "not a scenario document: a dict of the scenario's tables, not a {}",
+                document.get_type().name()?
+            )));
+        }
         let source = toml::to_string(&value).map_err(|e| {
             errors::scenario(py, &whole(origin, format!("not a scenario document: {e}")))
         })?;
@@ -412,6 +428,115 @@ impl PyScenario {
         .map_err(|e| errors::grid_param(&e))?;
         Ok((grid, ov.resolve()?))
     }
+}
+
+/// Deepest nesting of a dict document (a scenario's is 4 levels; a list
+/// that holds itself would otherwise recurse forever).
+const MAX_DEPTH: usize = 32;
+
+/// A Python value as TOML, or the path of the first value that has no TOML
+/// form (`agents[3].offset`, indices from 1 as in the file's field names)
+/// and why.
+fn toml_value(
+    v: &Bound<'_, PyAny>,
+    path: &mut String,
+    depth: usize,
+) -> Result<toml::Value, (String, String)> {
+    use pyo3::types::{PyBool, PyFloat, PyInt, PyList, PyString, PyTuple};
+    let at = |path: &String, message: String| (path.clone(), message);
+    if depth > MAX_DEPTH {
+        return Err(at(
+            path,
+            format!("nested deeper than {MAX_DEPTH} levels (a list or dict that holds itself?)"),
+        ));
+    }
+    let type_name = || {
+        v.get_type()
+            .name()
+            .map_or_else(|_| "?".to_owned(), |n| n.to_string())
+    };
+    if v.is_instance_of::<PyBool>() {
+        return Ok(toml::Value::Boolean(
+            v.is_truthy().map_err(|e| at(path, e.to_string()))?,
+        ));
+    }
+    if v.is_instance_of::<PyInt>() {
+        return v.extract::<i64>().map(toml::Value::Integer).map_err(|_| {
+            at(
+                path,
+                format!("{v} is beyond a TOML integer's range (64 bits)"),
+            )
+        });
+    }
+    if v.is_instance_of::<PyFloat>() {
+        return v
+            .extract::<f64>()
+            .map(toml::Value::Float)
+            .map_err(|e| at(path, e.to_string()));
+    }
+    if let Ok(text) = v.cast::<PyString>() {
+        return Ok(toml::Value::String(text.to_string()));
+    }
+    if let Ok(dict) = v.cast::<PyDict>() {
+        let mut table = toml::Table::new();
+        for (key, item) in dict.iter() {
+            let Ok(key) = key.cast::<PyString>().map(|k| k.to_string()) else {
+                return Err(at(
+                    path,
+                    format!(
+                        "the key {key} (of type {}) is not text (TOML keys are text)",
+                        key.get_type()
+                            .name()
+                            .map_or_else(|_| "?".to_owned(), |n| n.to_string())
+                    ),
+                ));
+            };
+            let len = path.len();
+            if !path.is_empty() {
+                path.push('.');
+            }
+            path.push_str(&key);
+            let item = toml_value(&item, path, depth + 1)?;
+            path.truncate(len);
+            table.insert(key, item);
+        }
+        return Ok(toml::Value::Table(table));
+    }
+    if v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>() {
+        let mut array = Vec::new();
+        for (i, item) in v
+            .try_iter()
+            .map_err(|e| at(path, e.to_string()))?
+            .enumerate()
+        {
+            let item = item.map_err(|e| at(path, e.to_string()))?;
+            let len = path.len();
+            path.push_str(&format!("[{}]", i + 1));
+            array.push(toml_value(&item, path, depth + 1)?);
+            path.truncate(len);
+        }
+        return Ok(toml::Value::Array(array));
+    }
+    if v.is_none() {
+        return Err(at(
+            path,
+            "None has no TOML form: leave the key out for its default".to_owned(),
+        ));
+    }
+    // numpy scalars and arrays: their Python values.
+    if let Ok(tolist) = v.getattr("tolist")
+        && let Ok(plain) = tolist.call0()
+        && !plain.is(v)
+    {
+        return toml_value(&plain, path, depth + 1);
+    }
+    Err(at(
+        path,
+        format!(
+            "a value of type {} has no TOML form (a scenario holds numbers, text, booleans, lists and dicts)",
+            type_name()
+        ),
+    ))
 }
 
 /// An error about a whole document (no line).

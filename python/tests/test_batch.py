@@ -127,3 +127,23 @@ def test_step_releases_the_gil():
     state = e.state()
     during = counts_while(lambda: e.step(state, 400))
     assert during > 10_000, during
+
+
+@pytest.mark.parametrize("drive", ["torque", "velocity"])
+@pytest.mark.parametrize("dt", [float("nan"), float("inf"), -1e-3, 0.0, -0.0])
+def test_a_bench_with_an_impossible_step_names_dt(drive, dt):
+    with pytest.raises(ValueError, match=r"^dt: .* must be a finite number > 0"):
+        echelon.BatchEngine.bench(3, drive=drive, dt=dt)
+
+
+@pytest.mark.parametrize("dt", [0.0500001, 0.3, 7.5])
+def test_a_velocity_bench_step_past_the_lag_names_dt_and_the_limit(dt):
+    with pytest.raises(ValueError, match=rf"^dt: {dt} s is longer than .* lag .* use dt ≤ 0.05"):
+        echelon.BatchEngine.bench(3, drive="velocity", dt=dt)
+
+
+@pytest.mark.parametrize("agents", [100_000_001, 2**40, 2**63])
+def test_a_bench_past_memory_is_a_valueerror_not_an_abort(agents):
+    # It used to abort the interpreter ("memory allocation of … failed").
+    with pytest.raises(ValueError, match=f"^agents: {agents} is more than 100000000"):
+        echelon.BatchEngine.bench(agents)

@@ -171,6 +171,14 @@ def test_the_torque_filter_refuses_bad_input():
         echelon.safety.TorqueFilter(2, 0.3, robot={"mass": 1.0})
 
 
+@pytest.mark.parametrize("n", [10**9, 2**50])
+def test_filters_for_more_robots_than_memory_holds_raise_memoryerror(n):
+    # They used to abort the interpreter ("memory allocation of … failed").
+    for make in [echelon.safety.Filter, echelon.safety.TorqueFilter]:
+        with pytest.raises(MemoryError, match=f"^n: {n} robots' filters do not fit in memory"):
+            make(n, 0.3)
+
+
 def test_torque_filter_brakes_toward_a_neighbour_and_passes_otherwise():
     # Two robots 0.5 m apart (points 0.3 m + margin), one driving at the other
     # at 1 m/s: full forward torque is cut; driving apart passes unchanged.

@@ -3,6 +3,7 @@ with their place in the file."""
 
 from __future__ import annotations
 
+import copy
 import json
 import pickle
 import subprocess
@@ -99,10 +100,82 @@ def test_scenario_errors_carry_file_line_column_and_field(tmp_path):
 
 
 def test_a_dict_error_is_a_type_error_when_not_a_document():
+    for document in [[], "[sim]\ndt = 0.01\n", None, 3.0]:
+        with pytest.raises(TypeError, match="not a scenario document"):
+            echelon.Scenario.from_dict(document)
+
+
+def _numbers(node, path=()):
+    """The path of every number in a document."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _numbers(v, path + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _numbers(v, path + (i,))
+    elif isinstance(node, (int, float)) and not isinstance(node, bool):
+        yield path
+
+
+@pytest.mark.parametrize("name", echelon.builtins())
+def test_a_nan_anywhere_in_a_dict_is_a_scenario_error_at_its_path(name):
+    # A NaN reaches the scenario's own checks (as `x = nan` in a file does),
+    # which name its place: no number of any built-in takes one.
+    base = builtin_document(name)
+    paths = list(_numbers(base))
+    assert len(paths) > 5
+    for where in paths:
+        doc = copy.deepcopy(base)
+        _set(doc, where, float("nan"))
+        with pytest.raises(echelon.ScenarioError) as info:
+            echelon.Scenario.from_dict(doc, origin="d")
+        e = info.value
+        assert e.path == where, (where, str(e))
+        # "NaN must be a finite number", or a NaN where a whole number goes.
+        assert "NaN" in e.message, str(e)
+        assert (e.file, e.line, e.column) == ("d", 0, 0)
+
+
+@pytest.mark.parametrize(
+    "value, needle",
+    [
+        (None, "None"),
+        ({1, 2}, "set"),
+        (object(), "object"),
+        (2**70, "64 bits"),
+        (b"0.5", "bytes"),
+    ],
+)
+@pytest.mark.parametrize("where", [("control", "ke"), ("agents", 2, "offset", "x"), ("sim", "extra", 1)])
+def test_a_value_toml_cannot_hold_is_a_scenario_error_at_its_path(value, needle, where):
     doc = builtin_document("circle-pentagon")
-    doc["agents"][2]["offset"]["x"] = float("nan")
-    with pytest.raises(TypeError):
+    doc["sim"]["extra"] = [1.0, 2.0]
+    _set(doc, where, value)
+    with pytest.raises(echelon.ScenarioError) as info:
         echelon.Scenario.from_dict(doc)
+    assert info.value.path == where, str(info.value)
+    assert needle in info.value.message
+
+
+def test_a_list_that_holds_itself_is_refused_not_recursed_forever():
+    doc = builtin_document("circle-pentagon")
+    loop: list = []
+    loop.append(loop)
+    doc["agents"][0]["offset"]["x"] = loop
+    with pytest.raises(echelon.ScenarioError, match="nested deeper"):
+        echelon.Scenario.from_dict(doc)
+
+
+def test_numpy_numbers_in_a_dict_are_their_values():
+    doc = builtin_document("circle-pentagon")
+    doc["control"]["ke"] = np.float64(doc["control"]["ke"])
+    doc["agents"][1]["offset"] = {k: np.float32(v) for k, v in doc["agents"][1]["offset"].items()}
+    doc["agents"][2]["offset"]["x"] = np.array(doc["agents"][2]["offset"]["x"])
+    a = echelon.Scenario.from_dict(doc, duration=0.5).run()
+    plain = builtin_document("circle-pentagon")
+    plain["agents"][1]["offset"] = {k: float(np.float32(v)) for k, v in plain["agents"][1]["offset"].items()}
+    b = echelon.Scenario.from_dict(plain, duration=0.5).run()
+    assert a.summary == b.summary
 
 
 def _set(doc: dict, path: tuple, value) -> None:

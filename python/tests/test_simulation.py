@@ -94,6 +94,23 @@ def test_bad_commands_are_refused():
         sim.leader(9)
 
 
+@pytest.mark.parametrize("commands", [np.zeros(8), np.zeros((2, 4, 1)), None, 3.0])
+def test_commands_of_the_wrong_dimension_name_commands_and_change_nothing(commands):
+    # They raised "dimensionality mismatch: from=1, to=2", naming nothing.
+    sim = echelon.Simulation("circle-pentagon")
+    before = sim.poses.copy()
+    with pytest.raises(ValueError, match=r"^commands: shape .*, expected \(4, 2\)"):
+        sim.step(commands)
+    assert sim.step_index == 0
+    np.testing.assert_array_equal(sim.poses, before)
+
+
+def test_commands_that_are_not_numbers_name_commands():
+    sim = echelon.Simulation("circle-pentagon")
+    with pytest.raises(TypeError, match="^commands: not an array of numbers"):
+        sim.step([["a", "b"]] * 4)
+
+
 def test_the_paper_law_on_a_robot_at_its_place_commands_friction_only():
     # A robot exactly at its point L ahead of the leader's target, moving with
     # it on a straight line: e = 0, z = 0, u balances friction (eq. 3): u1 = η v.

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 
+import numpy as np
 import pytest
 
 import echelon
@@ -85,3 +86,76 @@ def test_a_value_the_grid_refuses_names_its_grid_key_as_python_spells_it(key, va
     with pytest.raises(ValueError, match=f"^{key} = ") as raised:
         echelon.sweep(s, {key: [value]}, seeds=1)
     assert not isinstance(raised.value, echelon.ScenarioError)
+
+
+@pytest.mark.parametrize(
+    "key, values, twice",
+    [
+        ("zeta", [1e-4, 2e-4, 0.0001], "0.0001"),
+        ("ed", [1.0, 1.0], "1"),
+        ("eb", [0.99, 1.01, 0.99], "0.99"),
+        ("slip", [0.0, -0.0], "0"),
+        ("fix_every", [10, 20, 10], "10"),
+    ],
+)
+def test_a_grid_value_given_twice_is_refused_naming_its_key(key, values, twice):
+    s = echelon.Scenario.builtin("fix-study", duration=0.5)
+    with pytest.raises(ValueError, match=f"^{key} = {twice}: is given twice"):
+        echelon.sweep(s, {key: values}, seeds=1)
+
+
+def test_repeated_or_no_seeds_are_refused_naming_seeds():
+    s = echelon.Scenario.builtin("fix-study", duration=0.5)
+    with pytest.raises(ValueError, match="^seeds = 3: is given twice"):
+        echelon.sweep(s, {"fix_every": [10]}, seeds=[3, 4, 3])
+    for seeds in [0, -2]:
+        with pytest.raises(ValueError, match=f"^seeds: {seeds} seeds per combination: .* must be ≥ 1"):
+            echelon.sweep(s, {"fix_every": [10]}, seeds=seeds)
+    with pytest.raises(ValueError, match="^seeds: an empty list: needs at least one value"):
+        echelon.sweep(s, {"fix_every": [10]}, seeds=[])
+    with pytest.raises(ValueError, match="^zeta: an empty list"):
+        echelon.sweep(s, {"zeta": []}, seeds=1)
+
+
+@pytest.mark.parametrize(
+    "grid, kind, message",
+    [
+        ({"zeta": "1e-4"}, TypeError, "^zeta: '1e-4' is not a number or a list of numbers"),
+        ({"zeta": None}, TypeError, "^zeta: None is not a number"),
+        ({"ed": [1.0, "x"]}, TypeError, "^ed: 'x' is not a number"),
+        ({"fix_every": [10.7]}, ValueError, "^fix_every: 10.7 is not a whole number"),
+        ({"fix_every": [-1]}, ValueError, r"^fix_every: -1 must be a whole number in \[0, 2\*\*64\)"),
+        ({"fix_every": [2**64]}, ValueError, "^fix_every: 18446744073709551616 must be"),
+        ({"zeta_model": None}, TypeError, "^zeta_model: None"),
+    ],
+)
+def test_a_grid_value_of_the_wrong_kind_names_its_key(grid, kind, message):
+    # They were cut (10.7 ran as 10), split into characters, or named an
+    # internal field (`GridArgs.fix_every`).
+    s = echelon.Scenario.builtin("fix-study", duration=0.5)
+    with pytest.raises(kind, match=message):
+        echelon.sweep(s, grid, seeds=1)
+
+
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        ({"first_seed": -1}, "^first_seed: -1 must be a whole number"),
+        ({"first_seed": 2**64 - 1, "seeds": 2}, "^seeds: 2 seeds from first_seed = 18446744073709551615 go past"),
+        ({"seeds": [1.5]}, "^seeds: 1.5 is not a whole number"),
+        ({"seeds": [2**64]}, "^seeds: 18446744073709551616 must be"),
+    ],
+)
+def test_seeds_out_of_range_name_their_keyword(kw, message):
+    s = echelon.Scenario.builtin("fix-study", duration=0.5)
+    with pytest.raises(ValueError, match=message):
+        echelon.sweep(s, {"fix_every": [10]}, **{"seeds": 1, **kw})
+
+
+def test_numpy_arrays_and_ranges_are_grid_lists_and_the_last_seed_is_a_seed():
+    s = echelon.Scenario.builtin("fix-study", duration=0.5)
+    a = echelon.sweep(s, {"zeta": np.array([1e-4, 2e-4]), "fix_every": range(10, 30, 10)}, seeds=np.arange(2))
+    b = echelon.sweep(s, {"zeta": [1e-4, 2e-4], "fix_every": [10, 20]}, seeds=[0, 1])
+    assert a.csv == b.csv
+    last = echelon.sweep(s, {"fix_every": [10.0]}, seeds=1, first_seed=2**64 - 1)
+    assert list(last.table["seed"]) == [2**64 - 1]

@@ -44,12 +44,23 @@ pub const GAP_SPAN: f64 = 20.0;
 /// Number of `R_C` samples in [`refit`].
 pub const FIT_POINTS: usize = 600;
 
-/// Eq. 5 at radius `rc` (m) for `L_Xoff = lambda`.
+/// Eq. 5 at radius `rc` (m) for `L_Xoff = lambda`, computed as
+/// `λ h(R_C/λ)` (self-similar, see the module doc) so that no `λ²`
+/// overflows or underflows, whatever the finite `λ > 0`.
 pub fn eq5(rc: f64, lambda: f64) -> f64 {
     if rc == 0.0 {
         return 0.0;
     }
-    exact(1.0, 1.0 / rc, lambda)
+    lambda * exact(1.0, lambda / rc, 1.0)
+}
+
+/// `c` in units of `λ` (`c / λ`), or back (`c · λ` with `scale = λ`).
+fn scaled(c: &FitCoefficients, scale: f64) -> FitCoefficients {
+    FitCoefficients {
+        g: c.g * scale,
+        delta: c.delta * scale,
+        epsilon: c.epsilon * scale,
+    }
 }
 
 /// Where eq. 6 with `c` is farthest from eq. 5.
@@ -66,6 +77,19 @@ pub struct Gap {
 /// The largest gap between eq. 6 (`c`) and eq. 5 over `0 < |R_C| ≤ 20 λ` ([`GAP_SPAN`]),
 /// sampled every `λ/2000` (the curves are odd, so `R_C > 0` covers both signs).
 pub fn largest_gap(c: &FitCoefficients, lambda: f64) -> Gap {
+    // In units of λ (the curves are self-similar), then back to metres: no
+    // overflow for a huge λ, no underflow for a tiny one.
+    let g = unit_gap(&scaled(c, 1.0 / lambda));
+    Gap {
+        gap: g.gap * lambda,
+        at: g.at * lambda,
+        rms: g.rms * lambda,
+    }
+}
+
+/// [`largest_gap`] for `λ = 1`.
+fn unit_gap(c: &FitCoefficients) -> Gap {
+    let lambda = 1.0;
     let n = 40_000;
     let mut g = Gap {
         gap: 0.0,
@@ -175,10 +199,14 @@ pub fn refit_from(lambda: f64, start: FitCoefficients) -> Result<Refit, ReportEr
             "L_Xoff = {lambda} m: the fit needs a finite L_Xoff > 0"
         )));
     }
+    // Fitted in units of λ (the optimum scales with λ, see the module doc),
+    // then back to metres: the same fit for a λ whose square overflows or
+    // underflows.
+    let unit = scaled(&start, 1.0 / lambda);
     let mut problem = Eq6Fit {
-        pts: samples(lambda).collect(),
+        pts: samples(1.0).collect(),
     };
-    let p = [start.g, start.delta, start.epsilon];
+    let p = [unit.g, unit.delta, unit.epsilon];
     let cost = problem.cost(p);
     let lm::Minimum {
         p,
@@ -190,13 +218,27 @@ pub fn refit_from(lambda: f64, start: FitCoefficients) -> Result<Refit, ReportEr
             "the eq. 6 fit for L_Xoff = {lambda} m did not converge"
         )));
     }
-    Ok(Refit {
-        coefficients: FitCoefficients {
+    let coefficients = scaled(
+        &FitCoefficients {
             g: p[0],
             delta: p[1],
             epsilon: p[2],
         },
-        cost,
+        lambda,
+    );
+    if ![coefficients.g, coefficients.delta, coefficients.epsilon]
+        .iter()
+        .all(|v| v.is_finite())
+        || coefficients.delta <= 0.0
+    {
+        return Err(ReportError::Invalid(format!(
+            "L_Xoff = {lambda} m: the eq. 6 fit's G, δ, ε (≈ λ, 2λ, 3λ) do not fit in a number"
+        )));
+    }
+    Ok(Refit {
+        coefficients,
+        // The cost of squared metres.
+        cost: cost * lambda * lambda,
         iterations,
     })
 }

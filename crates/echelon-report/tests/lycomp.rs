@@ -135,3 +135,45 @@ fn impossible_offsets_are_refused() {
         assert!(refit(bad).is_err(), "{bad}");
     }
 }
+
+/// `echelon lycomp --lxoff 1e300` printed a "fit" after one iteration with
+/// an infinite gap (λ² overflowed), `1e-300` one of zeros (λ² underflowed):
+/// the refit and the gap are computed in units of λ, so for every finite
+/// λ > 0 they are the λ = 1 ones scaled by λ.
+#[test]
+fn the_refit_and_its_gap_hold_for_any_finite_lambda() {
+    let unit = refit(1.0).unwrap().coefficients;
+    let unit_gap = largest_gap(&unit, 1.0);
+    let mut lcg = 0x2545_f491_4f6c_dd1du64;
+    for _ in 0..40 {
+        lcg = lcg
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        // log10 λ uniform on [-300, 300].
+        let lambda = 10f64.powf(((lcg >> 11) as f64 / (1u64 << 53) as f64) * 600.0 - 300.0);
+        let r = refit(lambda).unwrap();
+        let c = r.coefficients;
+        for (got, want) in [
+            (c.g, unit.g),
+            (c.delta, unit.delta),
+            (c.epsilon, unit.epsilon),
+        ] {
+            assert!(
+                (got / lambda - want).abs() < 1e-9 * want,
+                "λ = {lambda:e}: {c:?} against λ · {unit:?}"
+            );
+        }
+        // The cost is in m²: past λ ≈ 1e154 that is infinite, never NaN.
+        assert!(
+            !r.cost.is_nan() && r.iterations > 1,
+            "λ = {lambda:e}: {r:?}"
+        );
+        let gap = largest_gap(&c, lambda);
+        assert!(
+            (gap.gap / lambda - unit_gap.gap).abs() < 1e-9 * unit_gap.gap
+                && (gap.at / lambda - unit_gap.at).abs() < 1e-9 * unit_gap.at,
+            "λ = {lambda:e}: {gap:?} against λ · {unit_gap:?}"
+        );
+        assert!(eq5(0.5 * lambda, lambda) == 0.5 * lambda && eq5(1e3 * lambda, lambda) > 0.0);
+    }
+}

@@ -11,6 +11,7 @@ use echelon::engine::{self, BenchFormation, Engine, Topology, VelocityEngine};
 
 use super::out::{err_line, outln};
 use super::positive;
+use super::progress::Progress;
 
 /// Arguments of `echelon bench`.
 #[derive(Debug, clap::Args)]
@@ -83,6 +84,27 @@ impl Runs {
         }
     }
 
+    /// `steps` steps as [`Runs::run`], in calls of at most `chunk` steps
+    /// (the same bits: the engines step the same either way), `progress`
+    /// told after each (time = steps × `dt`).
+    fn run_showing(
+        &mut self,
+        steps: u64,
+        chunk: u64,
+        progress: &mut Progress,
+        dt: f64,
+    ) -> Vec<Result<(), echelon::SimError>> {
+        let mut done = 0;
+        let mut results = Vec::new();
+        while done < steps {
+            let n = chunk.max(1).min(steps - done);
+            results = self.run(n);
+            done += n;
+            progress.at(done, done as f64 * dt);
+        }
+        results
+    }
+
     /// Every agent's `‖e‖` at the current state.
     fn errors(&self) -> Vec<f64> {
         let norm = |e: [f64; 2]| e[0].hypot(e[1]);
@@ -121,8 +143,20 @@ impl Runs {
     }
 }
 
+/// Agent-steps between two looks at the clock for the progress bar (well
+/// under a second at any speed the engines reach; a call's overhead is
+/// microseconds).
+const CHUNK_AGENT_STEPS: usize = 1 << 22;
+
+/// Steps per call for `agents` agents in all: [`CHUNK_AGENT_STEPS`] of
+/// them, in whole tiles of 64 steps (a star's engine steps its blocks 64 at
+/// a time).
+fn chunk_steps(agents: usize) -> u64 {
+    ((CHUNK_AGENT_STEPS / agents.max(1)) as u64 / 64).max(1) * 64
+}
+
 /// The most agents `echelon bench` builds in all (≈ 11 GB of state).
-const MAX_AGENTS: u128 = 100_000_000;
+const MAX_AGENTS: u128 = BenchFormation::MAX_AGENTS as u128;
 
 /// A whole number ≥ 1 (clap value parser).
 fn at_least_one(s: &str) -> Result<usize, String> {
@@ -169,7 +203,20 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
     if args.drive == DriveArg::Velocity
         && let Err(e) = BenchFormation::BASE.check_step(args.dt)
     {
-        bail!("--dt {} s: the velocity base's {e}", args.dt);
+        let axis = if e.field == "tau_omega" {
+            "turn-rate"
+        } else {
+            "speed"
+        };
+        bail!(
+            "--dt: {} s is longer than the velocity base's {axis} lag ({} = {} s, a Clearpath \
+             Jackal's, which `--drive velocity` simulates): a lag cannot be integrated with a \
+             step longer than itself; use --dt ≤ {} (or --drive torque)",
+            args.dt,
+            e.field,
+            e.value,
+            e.value
+        );
     }
     let formation = |r: usize| BenchFormation {
         agents: args.agents,
@@ -203,10 +250,21 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         ));
     }
     let started = Instant::now();
-    let results = pool.install(|| engines.run(steps));
+    let results = pool.install(|| {
+        engines.run_showing(
+            steps,
+            chunk_steps(args.agents * args.runs),
+            &mut Progress::new(steps, false),
+            args.dt,
+        )
+    });
     let seconds = started.elapsed().as_secs_f64();
+    // A diverged formation ran without giving what was asked: exit 1, as
+    // `echelon run` and `sweep` do for a divergence (2 is for refused input).
     for r in results {
-        r.context("the formation diverged")?;
+        if let Err(e) = r {
+            return Err(super::out::Failed(format!("the formation diverged: {e}")).into());
+        }
     }
 
     let agent_steps = (args.agents * args.runs) as f64 * steps as f64;
@@ -274,4 +332,73 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn runs(drive: DriveArg, topology: Topology, agents: usize, dt: f64) -> Runs {
+        let f = |r: u64| BenchFormation {
+            agents,
+            topology,
+            seed: 7 + r,
+        };
+        match drive {
+            DriveArg::Torque => Runs::Torque((0..2).map(|r| f(r).engine(dt).unwrap()).collect()),
+            DriveArg::Velocity => Runs::Velocity(
+                (0..2)
+                    .map(|r| f(r).velocity_engine(BenchFormation::BASE, dt).unwrap())
+                    .collect(),
+            ),
+        }
+    }
+
+    /// Stepping in chunks (for the progress bar) is the same computation
+    /// as one call: the same errors, bit for bit, for chunks of any size,
+    /// tile-aligned or not, on either drive and topology.
+    #[test]
+    fn chunked_stepping_is_the_same_bits_as_one_call() {
+        let mut lcg = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = |m: u64| {
+            lcg = lcg
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (lcg >> 33) % m
+        };
+        for drive in [DriveArg::Torque, DriveArg::Velocity] {
+            for topology in [Topology::Star, Topology::Chain] {
+                for _ in 0..3 {
+                    let agents = 1 + next(40) as usize;
+                    let steps = 1 + next(700);
+                    let chunk = 1 + next(steps + 100);
+                    let mut one = runs(drive, topology, agents, 0.004);
+                    let mut chunked = runs(drive, topology, agents, 0.004);
+                    one.run(steps);
+                    let mut progress = Progress::new(steps, true);
+                    let r = chunked.run_showing(steps, chunk, &mut progress, 0.004);
+                    assert_eq!(r.len(), 2);
+                    assert!(r.iter().all(Result::is_ok));
+                    let bits = |e: Vec<f64>| e.into_iter().map(f64::to_bits).collect::<Vec<_>>();
+                    assert_eq!(
+                        bits(one.errors()),
+                        bits(chunked.errors()),
+                        "{agents} agents, {steps} steps in chunks of {chunk}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn chunks_are_whole_tiles_and_bounded() {
+        for agents in [1, 2, 63, 64, 1000, 65_536, 1 << 22, 100_000_000] {
+            let c = chunk_steps(agents);
+            assert!(c >= 64 && c.is_multiple_of(64), "{agents}: {c}");
+            assert!(
+                c as usize * agents <= CHUNK_AGENT_STEPS.max(64 * agents),
+                "{agents}: {c}"
+            );
+        }
+    }
 }

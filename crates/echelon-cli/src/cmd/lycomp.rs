@@ -25,15 +25,26 @@ pub(crate) struct LycompArgs {
     out: Option<PathBuf>,
 }
 
+/// `v` with `places` decimals, or in exponent form when that would show
+/// no digit or too many (an `L_Xoff` of 1e-9 m or 1e9 m).
+fn shown(v: f64, places: usize) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-3..1e6).contains(&a) {
+        format!("{v:.4e}")
+    } else {
+        format!("{v:.places$}")
+    }
+}
+
 fn describe(name: &str, c: &FitCoefficients, gap: &Gap) -> anyhow::Result<()> {
     outln!(
-        "  {name:<22} G = {:<9.6} δ = {:<9.6} ε = {:<9.6} largest gap to eq. 5: {:.3} m at |R_C| = {:.3} m (RMS {:.4} m)",
-        c.g,
-        c.delta,
-        c.epsilon,
-        gap.gap,
-        gap.at,
-        gap.rms
+        "  {name:<22} G = {:<9} δ = {:<9} ε = {:<9} largest gap to eq. 5: {} m at |R_C| = {} m (RMS {} m)",
+        shown(c.g, 6),
+        shown(c.delta, 6),
+        shown(c.epsilon, 6),
+        shown(gap.gap, 3),
+        shown(gap.at, 3),
+        shown(gap.rms, 4)
     )?;
     Ok(())
 }
@@ -43,10 +54,23 @@ pub(crate) fn lycomp(args: &LycompArgs) -> Result<()> {
     let lambda = args.lxoff;
     let (lo, hi) = FitCoefficients::PAPER_RANGE;
     let in_range = (lo..=hi).contains(&lambda);
+    // The output directory first: a refused --out prints nothing else.
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out").join("lycomp"));
+    if out.exists() && !out.is_dir() {
+        anyhow::bail!(
+            "--out {}: is a file, not a directory (lycomp.svg and lycomp.png go in it)",
+            out.display()
+        );
+    }
+    std::fs::create_dir_all(&out).with_context(|| format!("--out: creating {}", out.display()))?;
     let mut fits: Vec<(&str, FitCoefficients)> = Vec::new();
     outln!(
-        "L_Ycomp for L_Xoff = {lambda} m, |R_C| ≤ {} m:",
-        lycomp::GAP_SPAN * lambda
+        "L_Ycomp for L_Xoff = {} m, |R_C| ≤ {} m:",
+        echelon::error::num(lambda),
+        echelon::error::num(lycomp::GAP_SPAN * lambda)
     )?;
     if in_range {
         let paper = FitCoefficients::paper(lambda);
@@ -73,11 +97,6 @@ pub(crate) fn lycomp(args: &LycompArgs) -> Result<()> {
         )?;
         fits.push(("eq. 6, least-squares refit", c));
     }
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("out").join("lycomp"));
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let saved = lycomp::figure(lambda, &fits).save(&out, "lycomp")?;
     outln!("wrote {}, {}", saved.svg.display(), saved.png.display())?;
     Ok(())

@@ -56,13 +56,16 @@ impl Drop for Progress {
     }
 }
 
-impl Observer for Progress {
-    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+impl Progress {
+    /// The run has taken `step` of its steps and is at time `t`, s: the bar
+    /// shows it, appearing once the run has taken [`Progress::DELAY`] (for
+    /// a caller that steps without frames, as `echelon bench` does).
+    pub(crate) fn at(&mut self, step: u64, t: f64) {
         if !self.enabled {
-            return Ok(());
+            return;
         }
         match &self.bar {
-            Some(bar) => bar.set_position(frame.step),
+            Some(bar) => bar.set_position(step),
             None if self.started.elapsed() >= self.delay => {
                 let bar =
                     ProgressBar::with_draw_target(Some(self.steps), ProgressDrawTarget::stderr());
@@ -72,15 +75,21 @@ impl Observer for Progress {
                     )
                     .unwrap_or_else(|_| ProgressStyle::default_bar()),
                 );
-                bar.set_message(format!("{:.1}", frame.t));
-                bar.set_position(frame.step);
+                bar.set_message(format!("{t:.1}"));
+                bar.set_position(step);
                 self.bar = Some(bar);
             }
             None => {}
         }
         if let Some(bar) = &self.bar {
-            bar.set_message(format!("{:.1}", frame.t));
+            bar.set_message(format!("{t:.1}"));
         }
+    }
+}
+
+impl Observer for Progress {
+    fn observe(&mut self, frame: &Frame<'_>) -> Result<(), ObserverError> {
+        self.at(frame.step, frame.t);
         Ok(())
     }
 

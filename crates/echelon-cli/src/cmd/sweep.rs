@@ -46,8 +46,8 @@ pub(crate) struct SweepArgs {
         default_value = "10,20,50,100,200,500"
     )]
     fix_every: Vec<u64>,
-    /// Seeds per combination.
-    #[arg(long, value_name = "K", default_value_t = 4)]
+    /// Seeds per combination (runs of each combination, seeds SEED, SEED + 1, …).
+    #[arg(long, value_name = "K", default_value_t = 4, value_parser = seed_count)]
     seeds: u64,
     /// First seed.
     #[arg(long, value_name = "N", default_value_t = 0)]
@@ -78,7 +78,19 @@ pub(crate) struct SweepArgs {
 /// A grid value refused, named by its flag as a scenario's value set by a
 /// flag is (`command line: --gamma: 2 must be in (0, 1) …`).
 fn flag_error(flag: &str, e: &ParamError) -> anyhow::Error {
-    ScenarioError::of_flag(flag, format_args!("{} {}", e.value, e.reason)).into()
+    ScenarioError::of_flag(flag, GridSpec::refusal(e)).into()
+}
+
+/// `--seeds`: how many seeds each combination runs with, at least one
+/// (clap value parser).
+fn seed_count(s: &str) -> Result<u64, String> {
+    match s.parse::<u64>() {
+        Ok(n) if n >= 1 => Ok(n),
+        Ok(_) => Err(format!(
+            "{s} seeds per combination: the number of runs of each combination (seeds SEED, SEED + 1, …) must be ≥ 1"
+        )),
+        Err(_) => Err(format!("`{s}` is not a whole number of seeds (≥ 1)")),
+    }
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -97,6 +109,19 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         duration: a.duration,
         ..Overrides::default()
     };
+    // The seeds SEED ..= SEED + K − 1 must all exist (K ≥ 1: `seed_count`).
+    let Some(last) = a.seed.checked_add(a.seeds - 1) else {
+        return Err(ScenarioError::of_flag(
+            "--seed",
+            format_args!(
+                "{} with --seeds {}: the last seed would be past {} (the largest seed)",
+                a.seed,
+                a.seeds,
+                u64::MAX
+            ),
+        )
+        .into());
+    };
     let probe = scenario.build(&overrides)?;
     let duration = probe.plan.steps() as f64 * probe.plan.config().dt;
     let grid = Grid::new(GridSpec {
@@ -109,7 +134,7 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         wheelbase_ratio: a.eb.clone(),
         slip: a.slip.clone(),
         fix_every: a.fix_every.clone(),
-        seeds: (a.seed..a.seed.saturating_add(a.seeds)).collect(),
+        seeds: (a.seed..=last).collect(),
         gamma: a.gamma,
         transient: a.transient.unwrap_or(0.5 * duration),
     })

@@ -136,6 +136,69 @@ fn velocity_bench_refuses_a_step_longer_than_the_lag() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("tau_v") && !err.contains("panicked"), "{err}");
+    // The message names the flag the user gave, its value and what would
+    // do, for any step past the lag.
+    for dt in ["0.0500001", "0.3", "2", "1000"] {
+        assert_refused(
+            &echelon(&["bench", "--drive", "velocity", "--dt", dt]),
+            &["--dt", dt, "lag", "--dt ≤ 0.05"],
+        );
+    }
     let o = echelon(&["bench", "--drive", "sideways"]);
     assert_eq!(o.status.code(), Some(2));
+}
+
+/// A bench on a terminal shows a progress bar on stderr once it is long (the
+/// delay shortened to 0 here); piped, stderr holds the one "stepping" line and
+/// stdout the same report as ever.
+#[test]
+fn a_long_bench_shows_progress_on_a_terminal_only() {
+    let args = [
+        "bench",
+        "--agents",
+        "64",
+        "--duration",
+        "4",
+        "--dt",
+        "0.001",
+    ];
+    let command = format!("{} {}", env!("CARGO_BIN_EXE_echelon"), args.join(" "));
+    let o = Command::new("script")
+        .args(["-qec", &command, "/dev/null"])
+        .env("ECHELON_PROGRESS_DELAY_MS", "0")
+        .output()
+        .expect("`script` (util-linux) runs");
+    let screen = succeeded(&o);
+    assert!(
+        screen.contains("% ") && screen.contains(" t = "),
+        "{screen}"
+    );
+    assert!(screen.contains("M agent-steps/s"), "{screen}");
+    let piped = Command::new(env!("CARGO_BIN_EXE_echelon"))
+        .args(args)
+        .env("ECHELON_PROGRESS_DELAY_MS", "0")
+        .output()
+        .unwrap();
+    let err = stderr(&piped);
+    assert!(
+        err.starts_with("stepping 1 × 64 agents for 4000 steps") && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(succeeded(&piped).contains("4000 steps of 0.001 s"));
+}
+
+/// A bench whose formation diverges (a step far too long) says so and exits
+/// 1, as a diverged `echelon run` does, not 2 (the input was accepted).
+#[test]
+fn a_diverged_bench_says_so_and_exits_1() {
+    for dt in ["0.9", "0.5"] {
+        let o = echelon(&["bench", "--agents", "10", "--dt", dt, "--duration", "100"]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("the formation diverged") && !err.contains("panicked"),
+            "{err}"
+        );
+        assert_eq!(stdout(&o), "");
+    }
 }

@@ -253,3 +253,39 @@ fn a_run_into_an_old_run_directory_leaves_only_its_own_files() {
         std::fs::remove_dir_all(&out).unwrap();
     }
 }
+
+/// `echelon lycomp` for an `L_Xoff` far from a robot's (1e-300 m, 1e300 m)
+/// printed a "fit" of zeros or an infinite gap after one iteration; now the
+/// same shape as any λ, scaled, in exponent form. An `--out` that is a file is
+/// refused before anything is printed.
+#[test]
+fn lycomp_fits_any_lxoff_and_refuses_a_file_as_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ly");
+    for lxoff in ["1e-300", "1e-9", "3e7", "1e300"] {
+        let o = echelon_into(&out, &["lycomp", "--lxoff", lxoff]);
+        let text = succeeded(&o);
+        assert!(
+            !text.contains("inf") && !text.contains("NaN"),
+            "{lxoff}: {text}"
+        );
+        assert!(!text.contains("0.000000"), "{lxoff}: {text}");
+        assert!(
+            text.contains("e-")
+                || text.contains("e2")
+                || text.contains("e3")
+                || text.contains("e7"),
+            "{lxoff}: {text}"
+        );
+        assert!(
+            text.contains("22 Levenberg–Marquardt iterations"),
+            "{lxoff}: {text}"
+        );
+    }
+    let file = dir.path().join("f.txt");
+    std::fs::write(&file, "mine").unwrap();
+    let o = echelon(&["lycomp", "--lxoff", "0.5", "--out", file.to_str().unwrap()]);
+    assert_refused(&o, &["--out", "is a file"]);
+    assert_eq!(stdout(&o), "");
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine");
+}

@@ -223,3 +223,54 @@ fn a_sweep_goes_on_past_divergent_cases_lists_them_and_fails() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!out.join("diverged.csv").exists(), "a stale diverged.csv");
 }
+
+/// A list value given twice (`--zeta 1,1`, also written another way,
+/// `1e-3,0.001`) is refused naming the flag and the value, before any run
+/// and without writing the output directory; so is `--seeds 0` (saying what
+/// the flag counts) and a seed range past the last seed.
+#[test]
+fn a_sweep_refuses_repeated_grid_values_and_no_seeds_naming_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sw");
+    let sweep = |extra: &[&str]| {
+        let mut args = vec!["sweep", "fix-study", "--duration", "0.5", "--seeds", "1"];
+        args.extend_from_slice(extra);
+        echelon_into(&out, &args)
+    };
+    for (flag, list, value) in [
+        ("--zeta", "1,1", "1"),
+        ("--zeta", "1e-3,2e-3,0.001", "0.001"),
+        ("--zeta", "0,-0", "0"),
+        ("--ed", "1,1.001,1", "1"),
+        ("--eb", "0.99,0.99", "0.99"),
+        ("--slip", "0,1e-6,0", "0"),
+        ("--fix-every", "10,20,50,20", "20"),
+    ] {
+        let o = sweep(&[flag, list]);
+        assert_refused(&o, &[flag, &format!(": {value} is given twice")]);
+        assert!(!out.exists(), "{flag} {list}: wrote {}", out.display());
+    }
+    for seeds in ["0", "-1", "many"] {
+        let o = echelon_into(&out, &["sweep", "fix-study", "--seeds", seeds]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains("--seeds") && err.contains("≥ 1"), "{err}");
+        assert!(!err.contains("needs at least one value"), "{err}");
+    }
+    let o = echelon_into(
+        &out,
+        &[
+            "sweep",
+            "fix-study",
+            "--seed",
+            "18446744073709551615",
+            "--seeds",
+            "2",
+        ],
+    );
+    assert_refused(&o, &["--seed", "18446744073709551615"]);
+    assert!(!out.exists());
+    // The last seed itself is a seed.
+    let o = sweep(&["--seed", "18446744073709551615", "--fix-every", "10", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}

@@ -38,6 +38,11 @@ pub struct BenchFormation {
 }
 
 impl BenchFormation {
+    /// The most agents a bench builds in all (`echelon bench`'s agents ×
+    /// runs, Python's `BatchEngine.bench`): ≈ 11 GB of state, past which the
+    /// allocation fails and aborts the process.
+    pub const MAX_AGENTS: usize = 100_000_000;
+
     /// The robot: Table I, agent 1.
     pub const ROBOT: RobotParams = RobotParams::AGENT1;
     /// `L`, m.

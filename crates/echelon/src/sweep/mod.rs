@@ -218,7 +218,37 @@ pub enum SweepError {
     Sim(#[from] SimError),
 }
 
+/// Why [`Grid::new`] refuses an empty list (the error's value is then 0, the
+/// list's length, not a value given: [`GridSpec::refusal`] words it).
+pub const EMPTY_LIST: &str = "needs at least one value";
+
+/// Why [`Grid::new`] refuses a list that holds a value twice (the error's
+/// value).
+pub const REPEATED: &str = "is given twice: each value of a list is one set of cases, give it once";
+
+/// A value of `values` that another one equals (`0.0 == -0.0`), if any; in
+/// O(n log n), for a list of a million seeds.
+fn repeated<T: PartialEq + Copy>(
+    values: &[T],
+    order: fn(&T, &T) -> std::cmp::Ordering,
+) -> Option<T> {
+    let mut sorted = values.to_vec();
+    sorted.sort_unstable_by(order);
+    sorted.windows(2).find(|w| w[0] == w[1]).map(|w| w[0])
+}
+
 impl GridSpec {
+    /// What is wrong with the list or value `e` refuses, after its flag or
+    /// key: `an empty list: needs at least one value`, else `VALUE REASON`
+    /// (`1 is given twice: …`, `-1 must be a finite number ≥ 0`).
+    pub fn refusal(e: &ParamError) -> String {
+        if e.reason == EMPTY_LIST {
+            format!("an empty list: {EMPTY_LIST}")
+        } else {
+            format!("{} {}", crate::error::num(e.value), e.reason)
+        }
+    }
+
     /// The `echelon sweep` flag that sets `field`, a field of this struct
     /// as a [`ParamError`] from [`Grid::new`] or a sweep names it (`None`
     /// for any other name). Python's keyword is the flag without `--`, `-`
@@ -251,7 +281,7 @@ impl Grid {
         ];
         for (field, n) in lists {
             if n == 0 {
-                return Err(ParamError::new(field, 0.0, "needs at least one value"));
+                return Err(ParamError::new(field, 0.0, EMPTY_LIST));
             }
         }
         for (field, values) in [("zeta", &spec.zeta), ("slip", &spec.slip)] {
@@ -275,6 +305,24 @@ impl Grid {
             ));
         }
         check::non_negative("transient", spec.transient)?;
+        // A value given twice would run its cases twice, into rows a reader
+        // takes for different cases (or averages twice as often).
+        for (field, values) in [
+            ("zeta", &spec.zeta),
+            ("wheel_diameter_ratio", &spec.wheel_diameter_ratio),
+            ("wheelbase_ratio", &spec.wheelbase_ratio),
+            ("slip", &spec.slip),
+        ] {
+            if let Some(v) = repeated(values, f64::total_cmp) {
+                // `+ 0.0`: `-0` and `0` are one value, shown as `0`.
+                return Err(ParamError::new(field, v + 0.0, REPEATED));
+            }
+        }
+        for (field, values) in [("fix_every", &spec.fix_every), ("seeds", &spec.seeds)] {
+            if let Some(n) = repeated(values, u64::cmp) {
+                return Err(ParamError::new(field, n as f64, REPEATED));
+            }
+        }
         Ok(Grid(spec))
     }
 
@@ -562,7 +610,7 @@ mod tests {
         /// `echelon sweep` flag (so the CLI and Python can name it as their
         /// user spelled it), never a name outside the table.
         #[test]
-        fn every_refused_grid_value_names_a_field_with_a_flag(which in 0usize..12, v in bad()) {
+        fn every_refused_grid_value_names_a_field_with_a_flag(which in 0usize..18, v in bad()) {
             let mut g = valid();
             match which {
                 0 => g.zeta.clear(),
@@ -576,13 +624,70 @@ mod tests {
                 8 => g.wheel_diameter_ratio.push(v),
                 9 => g.wheelbase_ratio.push(v),
                 10 => g.gamma = if v.is_nan() { v } else { 1.0 - v },
-                _ => g.transient = v,
+                11 => g.transient = v,
+                // A value given twice.
+                12 => g.zeta.push(g.zeta[1]),
+                13 => g.wheel_diameter_ratio.push(g.wheel_diameter_ratio[0]),
+                14 => g.wheelbase_ratio.insert(0, g.wheelbase_ratio[0]),
+                15 => g.slip.push(-0.0),
+                16 => g.fix_every.insert(1, g.fix_every[0]),
+                _ => g.seeds.push(g.seeds[0]),
             }
             let e = Grid::new(g).err();
             prop_assert!(e.is_some(), "case {which} with {v} accepted");
             let field = e.map_or("", |e| e.field);
             prop_assert!(GridSpec::flag(field).is_some(), "{field} has no flag");
         }
+    }
+
+    proptest! {
+        /// A list with a value twice is refused naming that value, wherever
+        /// the two copies are and whatever the others; the same values
+        /// once each are accepted.
+        #[test]
+        fn a_repeated_value_is_refused_and_named(
+            mut zeta in proptest::collection::vec(0.0..1.0f64, 1..40),
+            mut seeds in proptest::collection::vec(any::<u64>(), 1..40),
+            i in any::<prop::sample::Index>(),
+            j in any::<prop::sample::Index>(),
+        ) {
+            zeta.sort_by(f64::total_cmp);
+            zeta.dedup();
+            seeds.sort_unstable();
+            seeds.dedup();
+            let once = GridSpec { zeta: zeta.clone(), seeds: seeds.clone(), ..valid() };
+            prop_assert!(Grid::new(once).is_ok());
+            let (v, at) = (zeta[i.index(zeta.len())], j.index(zeta.len() + 1));
+            zeta.insert(at, v);
+            let e = Grid::new(GridSpec { zeta, ..valid() }).unwrap_err();
+            prop_assert_eq!((e.field, e.value, &*e.reason), ("zeta", v, REPEATED));
+            let (s, at) = (seeds[i.index(seeds.len())], j.index(seeds.len() + 1));
+            seeds.insert(at, s);
+            let e = Grid::new(GridSpec { seeds, ..valid() }).unwrap_err();
+            prop_assert_eq!((e.field, e.value, &*e.reason), ("seeds", s as f64, REPEATED));
+        }
+    }
+
+    #[test]
+    fn an_empty_list_is_worded_as_one_and_a_value_by_its_number() {
+        let e = Grid::new(GridSpec {
+            seeds: vec![],
+            ..valid()
+        })
+        .unwrap_err();
+        assert_eq!(
+            GridSpec::refusal(&e),
+            "an empty list: needs at least one value"
+        );
+        let e = Grid::new(GridSpec {
+            slip: vec![1e-7, 1e-7],
+            ..valid()
+        })
+        .unwrap_err();
+        assert!(
+            GridSpec::refusal(&e).starts_with("1e-7 is given twice"),
+            "{e}"
+        );
     }
 
     #[test]

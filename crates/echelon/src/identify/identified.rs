@@ -215,26 +215,15 @@ impl Identified {
         }
         for p in &self.params {
             match (&p.estimate, &p.not_identifiable) {
-                (Some(e), _) if p.noise_free => {
-                    let _ = writeln!(
-                        s,
-                        "{} = {}    # {}, {}: noise-free log, interval not meaningful",
-                        p.field,
-                        sig(e.value),
-                        p.symbol,
-                        p.unit
-                    );
-                }
                 (Some(e), _) => {
                     let _ = writeln!(
                         s,
-                        "{} = {}    # {}, {}: 95 % interval [{}, {}]",
+                        "{} = {}    # {}, {}: {}",
                         p.field,
                         sig(e.value),
                         p.symbol,
                         p.unit,
-                        sig(e.ci95[0]),
-                        sig(e.ci95[1])
+                        interval(e, p.noise_free)
                     );
                 }
                 (None, why) => {
@@ -254,23 +243,13 @@ impl Identified {
                 _ => "α_max, rad/s²",
             };
             if let Some(e) = l.estimate {
-                if l.noise_free {
-                    let _ = writeln!(
-                        s,
-                        "{} = {}    # {unit}: identified with the lag, noise-free log, interval not meaningful",
-                        l.field,
-                        sig(e.value)
-                    );
-                } else {
-                    let _ = writeln!(
-                        s,
-                        "{} = {}    # {unit}: identified with the lag, 95 % interval [{}, {}]",
-                        l.field,
-                        sig(e.value),
-                        sig(e.ci95[0]),
-                        sig(e.ci95[1])
-                    );
-                }
+                let _ = writeln!(
+                    s,
+                    "{} = {}    # {unit}: identified with the lag, {}",
+                    l.field,
+                    sig(e.value),
+                    interval(&e, l.noise_free)
+                );
             } else if l.reached {
                 let _ = writeln!(
                     s,
@@ -305,6 +284,16 @@ impl Identified {
 }
 
 /// A number to 6 significant digits, in TOML syntax.
+/// What a printed estimate's comment says of its interval: none on a
+/// noise-free log, else its 95 % interval.
+fn interval(e: &Estimate, noise_free: bool) -> String {
+    if noise_free {
+        "noise-free log, interval not meaningful".to_owned()
+    } else {
+        format!("95 % interval [{}, {}]", sig(e.ci95[0]), sig(e.ci95[1]))
+    }
+}
+
 fn sig(x: f64) -> String {
     let v: f64 = format!("{x:.5e}").parse().unwrap_or(x);
     let s = format!("{v}");

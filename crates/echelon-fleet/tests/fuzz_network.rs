@@ -836,6 +836,15 @@ fn every_mutation_of_a_latch_answer_can_only_stop() {
                 let counts = r.command_counts();
                 r.on_latch_answer(&m);
                 let decoded = Latched::decode(&m);
+                // What a latch answer carries is a command by the command
+                // key's rules (a sender named, a reason of bounded length).
+                if let Some(c) = decoded.as_ref().and_then(|l| l.command.as_ref())
+                    && let Err(e) = FleetCommand::decode(&c.encode())
+                {
+                    return Err(format!(
+                        "a latch answer accepted a command refused: {e}: {c:?}"
+                    ));
+                }
                 let stopping = decoded.as_ref().is_some_and(|l| l.stopped);
                 if r.is_stopped() != stopping {
                     return Err(format!("{decoded:?} left it stopped = {}", r.is_stopped()));

@@ -85,10 +85,13 @@ const F64S: [f64; 11] = [
 /// What an aligned u32 slot (a string length, a count, an agent) is set to.
 const U32S: [u32; 7] = [0, 1, 4096, 4097, 0x7fff_ffff, 0x8000_0000, u32::MAX];
 
+/// A mutated input and what was done to it.
+type Mutant = (String, Vec<u8>);
+
 /// Every single mutation of `valid`, named. Slots are aligned from byte
 /// `base` (0: the fleet wire, whose fields are aligned to their size; 4:
 /// CDR, aligned after its encapsulation header).
-fn single_mutations(valid: &[u8], base: usize) -> Vec<(String, Vec<u8>)> {
+fn single_mutations(valid: &[u8], base: usize) -> Vec<Mutant> {
     let mut out = Vec::new();
     for n in 0..valid.len() {
         out.push((format!("truncated to {n}"), valid[..n].to_vec()));
@@ -141,7 +144,7 @@ fn single_mutations(valid: &[u8], base: usize) -> Vec<(String, Vec<u8>)> {
 /// Every pair of aligned f64 slots (from `base`) set huge together: finite
 /// numbers whose sums and products overflow (a quaternion of two 1e308
 /// components has no yaw: `atan2` of `∞ − ∞`).
-fn pair_mutations(valid: &[u8], base: usize) -> Vec<(String, Vec<u8>)> {
+fn pair_mutations(valid: &[u8], base: usize) -> Vec<Mutant> {
     let slots: Vec<usize> = (base..valid.len().saturating_sub(7)).step_by(8).collect();
     let mut out = Vec::new();
     for (k, &a) in slots.iter().enumerate() {
@@ -263,7 +266,7 @@ fn every_mutation(
     what: &str,
     corpus: &[Vec<u8>],
     base: usize,
-    mutations: fn(&[u8], usize) -> Vec<(String, Vec<u8>)>,
+    mutations: fn(&[u8], usize) -> Vec<Mutant>,
     check: impl Fn(&[u8]) -> Result<(), String>,
 ) -> usize {
     let mut failures = Vec::new();
@@ -694,7 +697,7 @@ fn every_single_mutation_of_a_neighbour_state_is_counted_or_avoided_finitely() {
 }
 
 /// JSON texts with each scalar value replaced and bytes mutated.
-fn json_mutations(valid: &[u8]) -> Vec<(String, Vec<u8>)> {
+fn json_mutations(valid: &[u8]) -> Vec<Mutant> {
     const VALUES: &[&str] = &[
         "-1",
         "0",
@@ -1376,6 +1379,125 @@ fn every_single_mutation_of_odometry_is_counted_and_refused_or_finite() {
     let mut n = every_single_mutation("odometry", &odometry_corpus(), 4, check);
     n += every_mutation("odometry", &odometry_corpus(), 4, pair_mutations, check);
     eprintln!("{n} odometry mutations checked");
+}
+
+/// One lagged velocity base under the kinematic law, a ROS 2 robot.
+const ROS2_ROBOT: &str = r#"
+[sim]
+duration = 12.0
+dt = 0.001
+
+[control]
+law = "kinematic"
+ke = 1.5
+kz = 10.0
+l = 0.05
+
+[robots.lab]
+drive = "velocity"
+tau_v = 0.1
+tau_omega = 0.1
+v_max = 0.3
+omega_max = 2.0
+a_max = 1.0
+alpha_max = 5.0
+half_wheelbase = 0.15
+wheel_radius = 0.05
+
+[reference.circle]
+speed = 0.08
+turn_rate = 0.08
+start = { x = 0.0, y = 0.0, theta_deg = 0.0 }
+
+[fleet.ros2]
+
+[[agents]]
+robot = "lab"
+start = { x = 0.0, y = -0.6, theta_deg = 90.0 }
+leader = "reference"
+offset = { x = 0.0, y = -0.5 }
+"#;
+
+/// A ROS 2 robot fed mutated odometry: whatever its drive accepts, the
+/// law's commands on `cmd_vel` are finite (none replaced by zero for not
+/// being finite) and within the base's limits.
+#[test]
+fn a_ros2_robot_fed_mutated_odometry_commands_finite_values() {
+    let s = Scenario::parse(ROS2_ROBOT, "fuzz.toml", None).unwrap_or_else(|e| panic!("{e}"));
+    let config = robot_config(&s, 1);
+    let link = s.fleet().unwrap_or_else(|e| panic!("{e}")).ros2[0].clone();
+    let base = config
+        .spec
+        .velocity_robot()
+        .expect("a velocity robot")
+        .base();
+    let key = key_of(&link, &link.odom, &msgs::ODOMETRY);
+    let first = Odometry::planar(
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        Time::from_nanos(1),
+        "odom",
+        "base_link",
+    )
+    .to_cdr();
+    let cmd_ty = echelon_fleet::ros2::drive::cmd_vel_type(&link);
+    let diverged = std::cell::Cell::new(0);
+    let check = |b: &[u8]| -> Result<(), String> {
+        let drive = Ros2Drive::new(link.clone(), base, [9; 16], Sent::default());
+        let mut r = Robot::new(config.clone(), drive, 5);
+        r.on_message(&reference_at(1.0, 0), 0.0);
+        let t = r.fleet_time(0.0);
+        r.plant_mut()
+            .on_odom(&key, &first, t)
+            .map_err(|e| e.to_string())?;
+        r.tick(0.0);
+        let t = r.fleet_time(0.02);
+        let _ = r.plant_mut().on_odom(&key, b, t);
+        let period = r.config().period;
+        for k in 0..3 {
+            let now = 0.02 + f64::from(k) * period;
+            if r.is_due(now) {
+                r.tick(now);
+            }
+        }
+        diverged.set(diverged.get() + usize::from(r.diverged().is_some()));
+        let d = r.plant();
+        if d.counters().cmd_non_finite != 0 {
+            return Err(format!(
+                "the law asked for non-finite commands: {:?}",
+                d.counters()
+            ));
+        }
+        for payload in &d.sink().commands {
+            let (v, omega) = if cmd_ty == msgs::TWIST_STAMPED {
+                let c = TwistStamped::from_cdr_finite(payload).map_err(|e| e.to_string())?;
+                (c.twist.linear.x, c.twist.angular.z)
+            } else {
+                let c = Twist::from_cdr_finite(payload).map_err(|e| e.to_string())?;
+                (c.linear.x, c.angular.z)
+            };
+            if v.abs() > 0.3 || omega.abs() > 2.0 {
+                return Err(format!("sent ({v}, {omega}) beyond the limits"));
+            }
+        }
+        Ok(())
+    };
+    let corpus = odometry_corpus();
+    let mut n = every_single_mutation("a ROS 2 robot's odometry", &corpus, 4, check);
+    n += every_mutation(
+        "a ROS 2 robot's odometry",
+        &corpus[..1],
+        4,
+        pair_mutations,
+        check,
+    );
+    eprintln!(
+        "{n} odometry mutations through a ROS 2 robot checked; {} stopped it as diverged",
+        diverged.get()
+    );
 }
 
 fn fix_input(message: FixMessage) -> FixInput {

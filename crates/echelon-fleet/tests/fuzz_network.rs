@@ -908,16 +908,23 @@ fn rejected(c: &Collector) -> u64 {
 #[test]
 fn every_single_mutation_is_logged_once_by_the_collector() {
     let keys = Keys::new("fuzz");
-    let stats = br#"{"agent":1,"t":1.5,"link":"tracking"}"#.to_vec();
+    // A robot's own stats, as it publishes them.
+    let mut r = synced_robot(&fleet_scenario(false), 1, &reference_at(1.0, 0));
+    let stats = serde_json::to_vec(&r.finish()).expect("stats JSON");
     let command = FleetCommand::new(Order::Stop, 3, "operator", "test").encode();
+    let json = |b: &[u8], _: usize| json_mutations(b);
     let mut count = 0;
-    for (key, corpus) in [
-        (keys.reference(), wire_corpus()),
-        (keys.state(1), wire_corpus()),
-        (keys.stats(1), vec![stats]),
-        (keys.command(), vec![command]),
+    for (key, corpus, mutations) in [
+        (
+            keys.reference(),
+            wire_corpus(),
+            single_mutations as fn(&[u8], usize) -> Vec<Mutant>,
+        ),
+        (keys.state(1), wire_corpus(), single_mutations),
+        (keys.stats(1), vec![stats], json),
+        (keys.command(), vec![command], json),
     ] {
-        count += every_single_mutation(&format!("collector {key}"), &corpus, 0, |b| {
+        count += every_mutation(&format!("collector {key}"), &corpus, 0, mutations, |b| {
             let mut c = Collector::new(keys.clone());
             let mut sink = Counting::default();
             c.on_message(&key, b, 1_000, &mut sink)

@@ -1425,20 +1425,24 @@ leader = "reference"
 offset = { x = 0.0, y = -0.5 }
 "#;
 
-/// A ROS 2 robot fed mutated odometry: whatever its drive accepts, the
+/// Agent 1 of [`ROS2_ROBOT`] on a ROS 2 drive, synced on the reference
+/// and its first odometry, fed `b` as its next odometry and ticked: the
 /// law's commands on `cmd_vel` are finite (none replaced by zero for not
-/// being finite) and within the base's limits.
-#[test]
-fn a_ros2_robot_fed_mutated_odometry_commands_finite_values() {
-    let s = Scenario::parse(ROS2_ROBOT, "fuzz.toml", None).unwrap_or_else(|e| panic!("{e}"));
-    let config = robot_config(&s, 1);
-    let link = s.fleet().unwrap_or_else(|e| panic!("{e}")).ros2[0].clone();
+/// being finite) and within the base's limits. Counts in `diverged` a
+/// robot the odometry sent past its divergence guard.
+fn check_ros2_robot(b: &[u8], diverged: &mut usize) -> Result<(), String> {
+    static RIG: std::sync::OnceLock<(RobotConfig, Ros2Link)> = std::sync::OnceLock::new();
+    let (config, link) = RIG.get_or_init(|| {
+        let s = Scenario::parse(ROS2_ROBOT, "fuzz.toml", None).unwrap_or_else(|e| panic!("{e}"));
+        let link = s.fleet().unwrap_or_else(|e| panic!("{e}")).ros2[0].clone();
+        (robot_config(&s, 1), link)
+    });
     let base = config
         .spec
         .velocity_robot()
         .expect("a velocity robot")
         .base();
-    let key = key_of(&link, &link.odom, &msgs::ODOMETRY);
+    let key = key_of(link, &link.odom, &msgs::ODOMETRY);
     let first = Odometry::planar(
         0.0,
         0.0,
@@ -1450,47 +1454,57 @@ fn a_ros2_robot_fed_mutated_odometry_commands_finite_values() {
         "base_link",
     )
     .to_cdr();
-    let cmd_ty = echelon_fleet::ros2::drive::cmd_vel_type(&link);
+    let cmd_ty = echelon_fleet::ros2::drive::cmd_vel_type(link);
+    let drive = Ros2Drive::new(link.clone(), base, [9; 16], Sent::default());
+    let mut r = Robot::new(config.clone(), drive, 5);
+    r.on_message(&reference_at(1.0, 0), 0.0);
+    let t = r.fleet_time(0.0);
+    r.plant_mut()
+        .on_odom(&key, &first, t)
+        .map_err(|e| e.to_string())?;
+    r.tick(0.0);
+    let t = r.fleet_time(0.02);
+    let _ = r.plant_mut().on_odom(&key, b, t);
+    let period = r.config().period;
+    for k in 0..3 {
+        let now = 0.02 + f64::from(k) * period;
+        if r.is_due(now) {
+            r.tick(now);
+        }
+    }
+    *diverged += usize::from(r.diverged().is_some());
+    let d = r.plant();
+    if d.counters().cmd_non_finite != 0 {
+        return Err(format!(
+            "the law asked for non-finite commands: {:?}",
+            d.counters()
+        ));
+    }
+    for payload in &d.sink().commands {
+        let (v, omega) = if cmd_ty == msgs::TWIST_STAMPED {
+            let c = TwistStamped::from_cdr_finite(payload).map_err(|e| e.to_string())?;
+            (c.twist.linear.x, c.twist.angular.z)
+        } else {
+            let c = Twist::from_cdr_finite(payload).map_err(|e| e.to_string())?;
+            (c.linear.x, c.angular.z)
+        };
+        if v.abs() > 0.3 || omega.abs() > 2.0 {
+            return Err(format!("sent ({v}, {omega}) beyond the limits"));
+        }
+    }
+    Ok(())
+}
+
+/// A ROS 2 robot fed mutated odometry: whatever its drive accepts, the
+/// law's commands on `cmd_vel` are finite and within the base's limits.
+#[test]
+fn a_ros2_robot_fed_mutated_odometry_commands_finite_values() {
     let diverged = std::cell::Cell::new(0);
-    let check = |b: &[u8]| -> Result<(), String> {
-        let drive = Ros2Drive::new(link.clone(), base, [9; 16], Sent::default());
-        let mut r = Robot::new(config.clone(), drive, 5);
-        r.on_message(&reference_at(1.0, 0), 0.0);
-        let t = r.fleet_time(0.0);
-        r.plant_mut()
-            .on_odom(&key, &first, t)
-            .map_err(|e| e.to_string())?;
-        r.tick(0.0);
-        let t = r.fleet_time(0.02);
-        let _ = r.plant_mut().on_odom(&key, b, t);
-        let period = r.config().period;
-        for k in 0..3 {
-            let now = 0.02 + f64::from(k) * period;
-            if r.is_due(now) {
-                r.tick(now);
-            }
-        }
-        diverged.set(diverged.get() + usize::from(r.diverged().is_some()));
-        let d = r.plant();
-        if d.counters().cmd_non_finite != 0 {
-            return Err(format!(
-                "the law asked for non-finite commands: {:?}",
-                d.counters()
-            ));
-        }
-        for payload in &d.sink().commands {
-            let (v, omega) = if cmd_ty == msgs::TWIST_STAMPED {
-                let c = TwistStamped::from_cdr_finite(payload).map_err(|e| e.to_string())?;
-                (c.twist.linear.x, c.twist.angular.z)
-            } else {
-                let c = Twist::from_cdr_finite(payload).map_err(|e| e.to_string())?;
-                (c.linear.x, c.angular.z)
-            };
-            if v.abs() > 0.3 || omega.abs() > 2.0 {
-                return Err(format!("sent ({v}, {omega}) beyond the limits"));
-            }
-        }
-        Ok(())
+    let check = |b: &[u8]| {
+        let mut n = diverged.get();
+        let r = check_ros2_robot(b, &mut n);
+        diverged.set(n);
+        r
     };
     let corpus = odometry_corpus();
     let mut n = every_single_mutation("a ROS 2 robot's odometry", &corpus, 4, check);
@@ -1765,6 +1779,21 @@ fn a_reference_at_1e308_m_stops_the_robot_without_a_nan_command() {
 
 // ---------------------------------------------------------------------------
 // Random combinations, fixed seeds.
+
+proptest! {
+    #![proptest_config(fixed(300, 0xec_0004))]
+
+    /// One to four mutations of an odometry sample through a ROS 2 robot.
+    #[test]
+    fn a_ros2_robot_counts_or_follows_randomly_mutated_odometry(
+        which in 0..2usize,
+        ops in prop::collection::vec(op(), 1..=4),
+    ) {
+        let b = apply(&odometry_corpus()[which], &ops, 4);
+        let r = no_panic(&b, || check_ros2_robot(&b, &mut 0));
+        prop_assert!(r.is_ok(), "{ops:?} ({}): {r:?}", hex(&b));
+    }
+}
 
 proptest! {
     #![proptest_config(fixed(3000, 0xec_0001))]

@@ -120,13 +120,21 @@ impl FleetCommand {
         }
         let c: FleetCommand =
             serde_json::from_value(v).map_err(|_| CommandError::Malformed("not a command"))?;
-        if c.by.is_empty() || c.by.chars().count() > MAX_BY {
+        c.check()?;
+        Ok(c)
+    }
+
+    /// The rules of a decoded command beyond its JSON shape: a sender
+    /// named in at most `MAX_BY` characters, a reason of at most
+    /// [`MAX_REASON`]; one place for the command key and the latch answers.
+    fn check(&self) -> Result<(), CommandError> {
+        if self.by.is_empty() || self.by.chars().count() > MAX_BY {
             return Err(CommandError::Malformed("sender"));
         }
-        if c.reason.chars().count() > MAX_REASON {
+        if self.reason.chars().count() > MAX_REASON {
             return Err(CommandError::Malformed("reason too long"));
         }
-        Ok(c)
+        Ok(())
     }
 }
 
@@ -154,7 +162,11 @@ impl Latched {
         }
         let l: Latched = serde_json::from_slice(bytes).ok()?;
         let consistent = match &l.command {
-            Some(c) => (c.order == Order::Stop) == l.stopped && c.version == COMMAND_VERSION,
+            Some(c) => {
+                (c.order == Order::Stop) == l.stopped
+                    && c.version == COMMAND_VERSION
+                    && c.check().is_ok()
+            }
             None => !l.stopped,
         };
         consistent.then_some(l)
@@ -400,6 +412,42 @@ mod tests {
             (c.received, c.stops, c.resumes, c.refused, c.ignored),
             (1, 2, 1, 1, 1)
         );
+    }
+
+    /// A latch answer's command follows the command key's rules: an
+    /// unnamed sender or an overlong reason is not a latch answer (it was
+    /// taken, and a robot then served the unnamed stop on its own latch
+    /// key; the network fuzz corpus, `tests/fuzz_network.rs`).
+    #[test]
+    fn a_latch_answer_carries_only_a_valid_command() {
+        for bad in [
+            FleetCommand {
+                by: String::new(),
+                ..cmd(Order::Stop, 4)
+            },
+            FleetCommand {
+                by: "b".repeat(MAX_BY + 1),
+                ..cmd(Order::Stop, 4)
+            },
+            FleetCommand {
+                reason: "é".repeat(MAX_REASON + 1),
+                ..cmd(Order::Stop, 4)
+            },
+        ] {
+            let answer = Latched {
+                stopped: true,
+                command: Some(bad.clone()),
+            };
+            assert_eq!(Latched::decode(&answer.encode()), None, "{bad:?}");
+            let mut l = Latch::new();
+            assert_eq!(l.on_hearsay(&answer.encode()), Change::Unchanged);
+            assert!(!l.stopped());
+        }
+        let good = Latched {
+            stopped: true,
+            command: Some(cmd(Order::Stop, 4)),
+        };
+        assert_eq!(Latched::decode(&good.encode()), Some(good));
     }
 
     #[test]

@@ -400,7 +400,11 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
             ))
         }
         KIND_STATE => {
-            let flags = b[HEADER_LEN + 4];
+            // The flags decide the length: a message too short to hold
+            // them is malformed (it was an index out of bounds).
+            let Some(&flags) = b.get(HEADER_LEN + 4) else {
+                return Err(DecodeError::Malformed("wrong length for a state"));
+            };
             let with_odometry = flags & FLAG_ODOMETRY != 0;
             let len = if with_odometry {
                 STATE_ODOMETRY_LEN

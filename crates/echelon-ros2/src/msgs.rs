@@ -132,9 +132,19 @@ impl Quaternion {
 
     /// Yaw (rad, in `[-π, π]`) of the z-y'-x'' (REP 103) Euler decomposition:
     /// `atan2(2(wz + xy), w² + x² − y² − z²)`. The expression is homogeneous,
-    /// so a quaternion that is not normalised gives the same yaw.
+    /// so a quaternion that is not normalised gives the same yaw; one whose
+    /// squares would overflow or underflow (a component beyond ±1e150 or
+    /// all within ±1e-150) is scaled by its largest component first, so the
+    /// yaw of every finite quaternion is finite (off the wire, `x = y =
+    /// 1e200` gave `∞ − ∞`, a NaN heading).
     pub fn yaw(&self) -> f64 {
         let Quaternion { x, y, z, w } = *self;
+        let m = x.abs().max(y.abs()).max(z.abs()).max(w.abs());
+        let (x, y, z, w) = if m.is_finite() && (m > 1e150 || (m > 0.0 && m < 1e-150)) {
+            (x / m, y / m, z / m, w / m)
+        } else {
+            (x, y, z, w)
+        };
         (2.0 * (w * z + x * y)).atan2(w * w + x * x - y * y - z * z)
     }
 }
@@ -528,6 +538,44 @@ mod tests {
             };
             assert!((s.yaw() - q.yaw()).abs() < 1e-12);
         }
+    }
+
+    /// Finite quaternions whose squares overflow (or underflow) have the
+    /// yaw of their normalised rotation: a NaN before (the network fuzz
+    /// corpus, echelon-fleet's `tests/fuzz_network.rs`: an odometry with
+    /// two components of 1e200 gave the robot a NaN heading).
+    #[test]
+    fn the_yaw_of_a_huge_or_tiny_quaternion_is_finite_and_right() {
+        for k in -20..=20 {
+            let a = f64::from(k) * 0.37;
+            let q = Quaternion::from_yaw(a);
+            for scale in [1e300, 1e200, 1e151, 1e-151, 1e-300, 5e-310] {
+                let s = Quaternion {
+                    x: scale * q.x,
+                    y: scale * q.y,
+                    z: scale * q.z,
+                    w: scale * q.w,
+                };
+                assert!(
+                    wrap_angle(s.yaw() - a).abs() < 1e-9,
+                    "{a} × {scale}: {}",
+                    s.yaw()
+                );
+            }
+        }
+        let huge = Quaternion {
+            x: f64::MAX,
+            y: f64::MAX,
+            z: -f64::MAX,
+            w: f64::MAX,
+        };
+        assert!(huge.yaw().is_finite());
+        assert_eq!(Quaternion::default().yaw(), 0.0);
+        let zero = Quaternion {
+            w: 0.0,
+            ..Quaternion::default()
+        };
+        assert_eq!(zero.yaw(), 0.0);
     }
 
     #[test]

@@ -108,6 +108,26 @@ impl<P: Plant> Robot<P> {
                     Some(s) => s.act(&self.config, local, now, &state, sigma, nominal),
                     None => self.config.spec.act(now, &state, nominal, None).command,
                 };
+                if !cmd.values().iter().all(|v| v.is_finite()) {
+                    // A leader sample that is finite but far beyond any
+                    // robot (a position of 1e308 m off the wire) overflows
+                    // the law: the NaN never reaches the plant; the run has
+                    // diverged, and says so.
+                    self.halt(Halt::Diverged);
+                    self.diverged = Some(format!(
+                        "agent {} diverged at t = {now} s: the law's command {:?} is not finite (leader at {:?}, velocity {:?})",
+                        self.config.agent,
+                        cmd.values(),
+                        p.motion.p,
+                        p.motion.dp
+                    ));
+                    self.next_tick = f64::INFINITY;
+                    return RobotTick {
+                        publish: None,
+                        stats: None,
+                        done: true,
+                    };
+                }
                 let act = self.plant.command(cmd);
                 let (dv, domega) = self.plant.accelerations();
                 self.last = RobotState {

@@ -185,3 +185,23 @@ fn the_odometry_block_is_optional_and_checked() {
     bad[HEADER_LEN + 4] = FLAG_FIX_AGE;
     assert!(malformed(&bad), "a fix age flag without odometry");
 }
+
+/// A state cut before its drive flags (byte 28) is malformed: reading the
+/// flags to choose the length was an index out of bounds (the network fuzz
+/// corpus, `tests/fuzz_network.rs`).
+#[test]
+fn a_state_cut_before_its_flags_is_malformed_not_a_panic() {
+    let mut buf = Vec::new();
+    let s = RobotState {
+        agent: 1,
+        ..RobotState::default()
+    };
+    encode_state(&mut buf, Header { source: 7, seq: 3 }, &s);
+    for cut in HEADER_LEN..=HEADER_LEN + 5 {
+        assert_eq!(
+            decode(&buf[..cut]),
+            Err(DecodeError::Malformed("wrong length for a state")),
+            "{cut} bytes"
+        );
+    }
+}

@@ -5,6 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use echelon::control::LeaderMotion;
+use echelon::guard::Bounds;
 use echelon::scenario::{LinkLoss, LinkPolicy};
 
 use crate::wire::{Header, LinkStatus};
@@ -22,7 +23,8 @@ pub struct Counters {
     pub received: u64,
     /// Used by the controller.
     pub accepted: u64,
-    /// Undecodable: wrong length, magic, kind, non-finite number.
+    /// Undecodable: wrong length, magic, kind, non-finite number; or a
+    /// sample no robot could follow ([`LeaderSample::within`]).
     pub malformed: u64,
     /// Another format version.
     pub wrong_version: u64,
@@ -114,6 +116,38 @@ pub struct LeaderSample {
     pub speed: f64,
     /// `ω_d`, rad/s.
     pub turn_rate: f64,
+}
+
+/// The largest sender time a sample may carry, s (about 31 years): the
+/// first sample sets a robot's clock.
+pub const MAX_SAMPLE_TIME: f64 = 1e9;
+
+impl LeaderSample {
+    /// Whether this sample is one a robot could follow: its time within
+    /// [`MAX_SAMPLE_TIME`]; its position, speeds and turn rate within the
+    /// larger of the divergence guard's `bounds` (`[sim] bounds`) and their
+    /// defaults ([`Bounds::DEFAULT`]: a robot bounded tighter than its
+    /// leader moves diverges, as in the simulator, rather than losing it);
+    /// its acceleration within the centripetal one of the largest speed at
+    /// the largest turn rate. A finite sample beyond them (a leader 1e308 m
+    /// away) overflowed the law and stopped the robot as diverged, on one
+    /// message.
+    pub fn within(&self, bounds: &Bounds) -> bool {
+        let d = Bounds::DEFAULT;
+        let (speed, turn_rate, distance) = (
+            bounds.speed.max(d.speed),
+            bounds.turn_rate.max(d.turn_rate),
+            bounds.distance.max(d.distance),
+        );
+        let norm = |v: [f64; 2]| v[0].hypot(v[1]);
+        let m = &self.motion;
+        self.t.abs() <= MAX_SAMPLE_TIME
+            && norm(m.p) <= distance
+            && norm(m.dp) <= speed
+            && norm(m.ddp) <= speed * turn_rate
+            && self.speed.abs() <= speed
+            && self.turn_rate.abs() <= turn_rate
+    }
 }
 
 /// The leader motion the law should use now.

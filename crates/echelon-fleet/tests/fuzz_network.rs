@@ -44,7 +44,7 @@ use echelon_fleet::command::{FleetCommand, Latched, Order};
 use echelon_fleet::faults::FaultSpec;
 use echelon_fleet::keys::{KeyKind, Keys};
 use echelon_fleet::plant::{Plant, SimulatedDrive};
-use echelon_fleet::robot::{Robot, RobotConfig};
+use echelon_fleet::robot::{Robot, RobotConfig, sample_of};
 use echelon_fleet::ros2::drive::{CmdSink, Ros2Drive, encode_cmd_vel};
 use echelon_fleet::ros2::fixes::{FixInput, OdometryModel, fix_type};
 use echelon_fleet::ros2::record::RosTopic;
@@ -599,10 +599,14 @@ fn check_leader_stream(
             want.wrong_version += 1;
             true
         }
-        Ok(_) if r.pending() == pending => {
-            // Not of its leader's stream (another kind or agent, or a
-            // waiting robot's state).
-            want.foreign += 1;
+        Ok(m) if r.pending() == pending => {
+            match sample_of(&m, r.config().spec.leader()) {
+                // Of its stream, but no robot could follow it.
+                Some((_, s)) if !s.within(&r.config().bounds) => want.malformed += 1,
+                // Not of its leader's stream (another kind or agent, or a
+                // waiting robot's state).
+                _ => want.foreign += 1,
+            }
             true
         }
         Ok(_) => false,
@@ -1757,24 +1761,47 @@ fn every_single_mutation_of_a_recorded_ros2_sample_is_logged_once() {
 }
 
 /// A reference 1.8e308 m away is a finite, valid message, but the law
-/// overflows on it: the robot stops as diverged, saying so, and neither
-/// sends the NaN to its plant nor publishes it (it published a state with
-/// NaN errors and torques, which every receiver refused as malformed).
+/// overflowed on it and the robot stopped as diverged, on one message. A
+/// sample beyond the divergence guard's default bounds (position, speeds,
+/// turn rate, acceleration, or a time past `MAX_SAMPLE_TIME`) is refused and
+/// counted as malformed, and the robot goes on as if it had not come; one
+/// just within them is followed.
 #[test]
-fn a_reference_at_1e308_m_stops_the_robot_without_a_nan_command() {
+fn a_reference_beyond_the_guards_bounds_is_refused_and_counted() {
     let s = fleet_scenario(false);
-    let mut r = synced_robot(&s, 1, &reference_at(1.0, 0));
-    let mut far = reference_at(1.02, 1);
-    far[24..32].copy_from_slice(&f64::MAX.to_le_bytes());
-    assert!(matches!(wire::decode(&far), Ok(Message::Reference(..))));
-    r.on_message(&far, 0.02);
-    let commands = run_ticks(&mut r, 0.02, 3).unwrap_or_else(|e| panic!("{e}"));
-    assert!(
-        commands.iter().all(|c| c.values() == [0.0, 0.0]),
-        "{commands:?}"
-    );
-    let why = r.diverged().expect("stopped as diverged");
-    assert!(why.contains("is not finite"), "{why}");
+    let base = synced_robot(&s, 1, &reference_at(1.0, 0));
+    let expected = run_ticks(&mut base.clone(), 0.02, 3).unwrap_or_else(|e| panic!("{e}"));
+    // The scenario's bounds are the defaults: the larger of the two.
+    let bounds = base.config().bounds;
+    assert_eq!(bounds, echelon::guard::Bounds::DEFAULT);
+    // (byte offset of the f64, value just beyond its bound)
+    let beyond = [
+        (16, 1.01 * echelon_fleet::link::MAX_SAMPLE_TIME),
+        (24, 1.01 * bounds.distance),
+        (24, f64::MAX),
+        (40, 1.01 * bounds.speed),
+        (56, 1.01 * bounds.speed * bounds.turn_rate),
+        (72, -1.01 * bounds.speed),
+        (80, 1.01 * bounds.turn_rate),
+    ];
+    for (at, value) in beyond {
+        let mut far = reference_at(1.02, 1);
+        far[at..at + 8].copy_from_slice(&value.to_le_bytes());
+        assert!(matches!(wire::decode(&far), Ok(Message::Reference(..))));
+        let mut r = base.clone();
+        let before = r.counters().malformed;
+        r.on_message(&far, 0.02);
+        assert_eq!(r.counters().malformed, before + 1, "byte {at} = {value:e}");
+        let commands = run_ticks(&mut r, 0.02, 3).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(commands, expected, "byte {at} = {value:e}");
+        assert!(r.diverged().is_none(), "byte {at} = {value:e}");
+    }
+    // Within: followed (a reference 0.99 of the distance bound away).
+    let mut near = reference_at(1.02, 1);
+    near[24..32].copy_from_slice(&(0.99 * bounds.distance).to_le_bytes());
+    let mut r = base.clone();
+    r.on_message(&near, 0.02);
+    assert_eq!(r.counters().malformed, 0);
 }
 
 // ---------------------------------------------------------------------------

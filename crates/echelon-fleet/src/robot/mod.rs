@@ -87,7 +87,7 @@ pub struct RobotTick {
 
 /// A leader sample from a decoded message of the expected stream, or `None`
 /// (counted as foreign) for anything else.
-fn sample_of(msg: &Message, leader: Leader) -> Option<(Header, LeaderSample)> {
+pub fn sample_of(msg: &Message, leader: Leader) -> Option<(Header, LeaderSample)> {
     match (msg, leader) {
         (Message::Reference(h, r), Leader::Reference) => Some((
             *h,
@@ -360,6 +360,10 @@ impl<P: Plant> Robot<P> {
             self.tracker.counters.foreign += 1;
             return;
         };
+        if !s.within(&self.config.bounds) {
+            self.tracker.counters.malformed += 1;
+            return;
+        }
         let arrived = self.fleet_time(now);
         let resync = !self.synced
             || (self.tracker.is_new_source(&h) && (arrived - s.t).abs() > self.config.stale_after);

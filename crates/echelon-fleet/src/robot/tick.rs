@@ -11,6 +11,22 @@ use crate::wire::{LinkStatus, RobotState};
 use super::{Halt, Robot, RobotTick, WAITING_PERIOD};
 
 impl<P: Plant> Robot<P> {
+    /// Diverged at `now` for reason `why`: zero first, then say so and stop
+    /// for good (the guard's breach, or a law command that is not finite).
+    fn stop_diverged(&mut self, now: f64, why: &str) -> RobotTick {
+        self.halt(Halt::Diverged);
+        self.diverged = Some(format!(
+            "agent {} diverged at t = {now} s: {why}",
+            self.config.agent
+        ));
+        self.next_tick = f64::INFINITY;
+        RobotTick {
+            publish: None,
+            stats: None,
+            done: true,
+        }
+    }
+
     /// Runs one controller tick at local time `now` (call when [`is_due`]):
     /// delivers what is due, brings the plant to now, runs the law on the
     /// leader motion (fresh or the link-loss policy's) and commands the plant.
@@ -78,18 +94,7 @@ impl<P: Plant> Robot<P> {
         self.plant.advance(now);
         let state = self.plant.state();
         if let Some(breach) = state.and_then(|s| self.config.bounds.check(&s)) {
-            // Diverged: zero first, then say so and stop for good.
-            self.halt(Halt::Diverged);
-            self.diverged = Some(format!(
-                "agent {} diverged at t = {now} s: {breach}",
-                self.config.agent
-            ));
-            self.next_tick = f64::INFINITY;
-            return RobotTick {
-                publish: None,
-                stats: None,
-                done: true,
-            };
+            return self.stop_diverged(now, &breach.to_string());
         }
         let publish = match state {
             Some(state) => {
@@ -113,20 +118,15 @@ impl<P: Plant> Robot<P> {
                     // robot (a position of 1e308 m off the wire) overflows
                     // the law: the NaN never reaches the plant; the run has
                     // diverged, and says so.
-                    self.halt(Halt::Diverged);
-                    self.diverged = Some(format!(
-                        "agent {} diverged at t = {now} s: the law's command {:?} is not finite (leader at {:?}, velocity {:?})",
-                        self.config.agent,
-                        cmd.values(),
-                        p.motion.p,
-                        p.motion.dp
-                    ));
-                    self.next_tick = f64::INFINITY;
-                    return RobotTick {
-                        publish: None,
-                        stats: None,
-                        done: true,
-                    };
+                    return self.stop_diverged(
+                        now,
+                        &format!(
+                            "the law's command {:?} is not finite (leader at {:?}, velocity {:?})",
+                            cmd.values(),
+                            p.motion.p,
+                            p.motion.dp
+                        ),
+                    );
                 }
                 let act = self.plant.command(cmd);
                 let (dv, domega) = self.plant.accelerations();

@@ -86,7 +86,9 @@ impl Runs {
 
     /// `steps` steps as [`Runs::run`], in calls of at most `chunk` steps
     /// (the same bits: the engines step the same either way), `progress`
-    /// told after each (time = steps × `dt`).
+    /// told after each (time = steps × `dt`); the first call in which a
+    /// run diverged is the last (its error is not overwritten by a later
+    /// call's answer).
     fn run_showing(
         &mut self,
         steps: u64,
@@ -101,6 +103,9 @@ impl Runs {
             results = self.run(n);
             done += n;
             progress.at(done, done as f64 * dt);
+            if results.iter().any(Result::is_err) {
+                break;
+            }
         }
         results
     }

@@ -86,21 +86,7 @@ fn identify_writes_a_block_a_scenario_accepts_with_its_summary_and_figure() {
     assert_eq!(body(&from_mcap), body(&stdout), "{from_mcap}");
 
     // The block pasted into a scenario runs.
-    let show = echelon(&["show", "experiment-circle"]);
-    let scenario =
-        text(&show.stdout).replace("robot = \"agent2\"", "robot = \"lab2\"") + "\n" + &block;
-    let file = dir.path().join("with-lab2.toml");
-    std::fs::write(&file, scenario).unwrap();
-    let o = echelon(&[
-        "run",
-        file.to_str().unwrap(),
-        "--out",
-        dir.path().join("run2").to_str().unwrap(),
-        "--duration",
-        "2",
-        "-q",
-    ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
+    pasted_block_runs(dir.path(), "experiment-circle", ("agent2", "lab2"), &block);
 }
 
 #[test]
@@ -320,16 +306,25 @@ fn a_run_whose_acceleration_limit_acted_prints_its_lags_and_limit_and_the_block_
     }
     assert!(!stdout.contains("not identifiable"), "{stdout}");
     let block = &stdout[stdout.find("# Identified by").unwrap()..];
-    let show = echelon(&["show", "turtlebot-circle"]);
-    let scenario =
-        text(&show.stdout).replace("robot = \"burger\"", "robot = \"burger2\"") + "\n" + block;
-    let file = dir.path().join("with-burger2.toml");
-    std::fs::write(&file, scenario).unwrap();
+    pasted_block_runs(dir.path(), "turtlebot-circle", ("burger", "burger2"), block);
+}
+
+/// The identified `block`, pasted into the built-in `scenario` whose robot
+/// `robot.0` is renamed `robot.1` (the block's robot), runs.
+fn pasted_block_runs(dir: &std::path::Path, scenario: &str, robot: (&str, &str), block: &str) {
+    let show = echelon(&["show", scenario]);
+    let (from, to) = (
+        format!("robot = \"{}\"", robot.0),
+        format!("robot = \"{}\"", robot.1),
+    );
+    let text_with_block = text(&show.stdout).replace(&from, &to) + "\n" + block;
+    let file = dir.join(format!("with-{}.toml", robot.1));
+    std::fs::write(&file, text_with_block).unwrap();
     let o = echelon(&[
         "run",
         file.to_str().unwrap(),
         "--out",
-        dir.path().join("run2").to_str().unwrap(),
+        dir.join("run2").to_str().unwrap(),
         "--duration",
         "2",
         "-q",

@@ -4,8 +4,10 @@
 //! invalid document fails with the constructor's own message.
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
+mod common;
+
 use echelon::ParamError;
-use echelon::base::{AccelLimit, VelocityBase, VelocityBaseSpec, VelocityRobot};
+use echelon::base::{AccelLimit, VelocityBase, VelocityRobot};
 use echelon::control::Gains;
 use echelon::lycomp::{FitCoefficients, LyComp, LyDerivatives, Placement, PlacementSpec};
 use echelon::model::{RobotParams, RobotParamsSpec};
@@ -253,16 +255,7 @@ fn base_args() -> impl Strategy<Value = [f64; 6]> {
 }
 
 fn base(x: [f64; 6]) -> Result<VelocityBase, ParamError> {
-    let [tau_v, tau_omega, v_max, omega_max, a_max, alpha_max] = x;
-    VelocityBase::new(VelocityBaseSpec {
-        tau_v,
-        tau_omega,
-        v_max,
-        omega_max,
-        a_max,
-        alpha_max,
-        accel: AccelLimit::Joint,
-    })
+    common::velocity_base(x, AccelLimit::Joint)
 }
 
 const BASE_FIELDS: [&str; 6] = [

@@ -1356,20 +1356,13 @@ fn random_base() -> impl Strategy<Value = echelon::base::VelocityBase> {
                 // Speed limits 2–6 times the largest step the limit lets
                 // through uncut (or none), so that larger steps fit under them.
                 let (v_max, omega_max) = (v_top * a_max * tau_v, omega_top * alpha_max * tau_omega);
-                echelon::base::VelocityBase::new(echelon::base::VelocityBaseSpec {
-                    tau_v,
-                    tau_omega,
-                    v_max,
-                    omega_max,
-                    a_max,
-                    alpha_max,
-                    accel: if joint {
-                        echelon::base::AccelLimit::Joint
-                    } else {
-                        echelon::base::AccelLimit::PerAxis
-                    },
-                })
-                .unwrap()
+                let accel = if joint {
+                    echelon::base::AccelLimit::Joint
+                } else {
+                    echelon::base::AccelLimit::PerAxis
+                };
+                let limits = [tau_v, tau_omega, v_max, omega_max, a_max, alpha_max];
+                common::velocity_base(limits, accel).unwrap()
             },
         )
 }

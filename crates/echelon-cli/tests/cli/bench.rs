@@ -162,17 +162,7 @@ fn a_long_bench_shows_progress_on_a_terminal_only() {
         "--dt",
         "0.001",
     ];
-    let command = format!("{} {}", env!("CARGO_BIN_EXE_echelon"), args.join(" "));
-    let o = Command::new("script")
-        .args(["-qec", &command, "/dev/null"])
-        .env("ECHELON_PROGRESS_DELAY_MS", "0")
-        .output()
-        .expect("`script` (util-linux) runs");
-    let screen = succeeded(&o);
-    assert!(
-        screen.contains("% ") && screen.contains(" t = "),
-        "{screen}"
-    );
+    let screen = super::terminal::shows_progress(&super::terminal::on_terminal(&args, true));
     assert!(screen.contains("M agent-steps/s"), "{screen}");
     let piped = Command::new(env!("CARGO_BIN_EXE_echelon"))
         .args(args)

@@ -24,34 +24,37 @@ fn no_progress_bar_when_stderr_is_not_a_terminal() {
 fn progress_bar_on_a_terminal_for_long_runs() {
     // `script` (util-linux) runs the command on a pseudo-terminal.
     let dir = tempfile::tempdir().unwrap();
-    let command = format!(
-        "{} {} --out {}",
-        env!("CARGO_BIN_EXE_echelon"),
-        LONG_RUN.join(" "),
-        dir.path().display()
-    );
-    let o = Command::new("script")
-        .args(["-qec", &command, "/dev/null"])
-        .env(NO_DELAY.0, NO_DELAY.1)
-        .output()
-        .expect("`script` (util-linux) runs");
-    let screen = succeeded(&o);
+    let out = dir.path().to_str().unwrap();
+    let screen = shows_progress(&on_terminal(
+        &[&LONG_RUN[..], &["--out", out]].concat(),
+        true,
+    ));
+    assert!(screen.contains("circle-pentagon: 4 agents"));
+    // With the real delay (1 s), a short run shows none.
+    let o = on_terminal(&["run", "nonfeasible", "--out", out], false);
+    assert!(!stdout(&o).contains(" t = "), "{}", stdout(&o));
+}
+
+/// `echelon args` run on a pseudo-terminal by `script` (util-linux), with
+/// the bar's delay shortened (`no_delay`) or real; its output is the screen.
+pub(super) fn on_terminal(args: &[&str], no_delay: bool) -> Output {
+    let command = format!("{} {}", env!("CARGO_BIN_EXE_echelon"), args.join(" "));
+    let mut script = Command::new("script");
+    script.args(["-qec", &command, "/dev/null"]);
+    if no_delay {
+        script.env(NO_DELAY.0, NO_DELAY.1);
+    }
+    script.output().expect("`script` (util-linux) runs")
+}
+
+/// The screen of a successful run, which showed the progress bar.
+pub(super) fn shows_progress(o: &Output) -> String {
+    let screen = succeeded(o);
     assert!(
         screen.contains("% ") && screen.contains(" t = "),
         "{screen}"
     );
-    assert!(screen.contains("circle-pentagon: 4 agents"));
-    // With the real delay (1 s), a short run shows none.
-    let command = format!(
-        "{} run nonfeasible --out {}",
-        env!("CARGO_BIN_EXE_echelon"),
-        dir.path().display()
-    );
-    let o = Command::new("script")
-        .args(["-qec", &command, "/dev/null"])
-        .output()
-        .unwrap();
-    assert!(!stdout(&o).contains(" t = "), "{}", stdout(&o));
+    screen
 }
 
 #[test]

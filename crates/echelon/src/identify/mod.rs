@@ -197,18 +197,8 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             }
             _ => (lag_only, None),
         };
-        let Verdict {
-            fit: f,
-            noise_free,
-            checks,
-            estimates,
-            symbols,
-            unexcited,
-            why,
-            method,
-        } = v;
-        if let Some(b) = f.between {
-            let rel = |i: usize| (f.theta[i] - b.held[i]).abs() / f.theta[i].abs();
+        if let Some(b) = v.fit.between {
+            let rel = |i: usize| (v.fit.theta[i] - b.held[i]).abs() / v.fit.theta[i].abs();
             warnings.push(format!(
                 "the {} axis's inputs between samples are not in the log (no integrals.csv, and {}, cost ratio {:.3}): the fit interpolates them linearly and its intervals include the difference to holding them ({:.2} % on τ, {:.2} % on the gain)",
                 ["linear", "angular"][axis],
@@ -223,7 +213,7 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             ));
         }
         if let Some(l) = lim {
-            rate_limits[axis] = Some(RateLimit::new(l, noise_free, why.is_none()));
+            rate_limits[axis] = Some(RateLimit::new(l, v.noise_free, v.why.is_none()));
             warnings.push(format!(
                 "the {} axis was fitted with its acceleration limit in the loop: {} intervals on the limit, {} left out (the limit took hold or let go between samples, or the other axis's limit scaled this one)",
                 ["linear", "angular"][axis],
@@ -232,55 +222,55 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             ));
         }
         let summary = |identifiable| AxisSummary {
-            noise_free,
-            method,
-            checks,
+            noise_free: v.noise_free,
+            method: v.method,
+            checks: v.checks,
             axis: ["linear", "angular"][axis],
-            residual_rms: f.rms,
+            residual_rms: v.fit.rms,
             residual_max: d
                 .y
                 .iter()
-                .zip(&f.predicted)
+                .zip(&v.fit.predicted)
                 .map(|(y, p)| (y - p).abs())
                 .fold(0.0, f64::max),
-            rcond: f.rcond,
+            rcond: v.fit.rcond,
             identifiable,
         };
-        misfits |= unexcited.is_none() && why.is_some();
-        match &why {
+        misfits |= v.unexcited.is_none() && v.why.is_some();
+        match &v.why {
             Some(reason) => {
                 warnings.push(format!(
                     "{} not identifiable: {reason}",
-                    symbols.iter().map(|s| s.1).collect::<Vec<_>>().join(", ")
+                    v.symbols.iter().map(|s| s.1).collect::<Vec<_>>().join(", ")
                 ));
                 reasons.push(format!("{} axis: {reason}", ["linear", "angular"][axis]));
             }
             None => {
-                predicted[axis].clone_from(&f.predicted);
-                if noise_free {
+                predicted[axis].clone_from(&v.fit.predicted);
+                if v.noise_free {
                     warnings.push(format!(
                         "noise-free log on the {} axis (residual RMS {:.1e}): {} exact to rounding, intervals not meaningful",
                         ["linear", "angular"][axis],
-                        f.rms,
-                        symbols.iter().map(|s| s.1).collect::<Vec<_>>().join(", ")
+                        v.fit.rms,
+                        v.symbols.iter().map(|s| s.1).collect::<Vec<_>>().join(", ")
                     ));
                 }
             }
         }
-        for ((field, symbol, unit), e) in symbols.iter().zip(estimates) {
+        for ((field, symbol, unit), e) in v.symbols.iter().zip(v.estimates) {
             params.push(Param {
                 field,
                 symbol,
                 unit,
-                estimate: why.is_none().then_some(e),
-                not_identifiable: why.clone(),
-                noise_free: noise_free && why.is_none(),
+                estimate: v.why.is_none().then_some(e),
+                not_identifiable: v.why.clone(),
+                noise_free: v.noise_free && v.why.is_none(),
             });
         }
-        if why.is_some() {
+        if v.why.is_some() {
             predicted[axis] = vec![f64::NAN; log.t.len()];
         }
-        axes.push(summary(why.is_none()));
+        axes.push(summary(v.why.is_none()));
     }
     if axes.iter().all(|a| !a.identifiable) && !misfits {
         return Err(IdentifyError::NoExcitation {

@@ -202,3 +202,21 @@ pub fn expect_errors_in(base: &str, cases: &[(&str, &str, usize, &str, &str)]) {
         expect_error(&base.replace(from, to), line, field, message);
     }
 }
+
+/// The velocity base `[τ_v, τ_ω, v_max, ω_max, a_max, α_max]` with the
+/// given kind of acceleration limit, or why it cannot be.
+pub fn velocity_base(
+    x: [f64; 6],
+    accel: echelon::base::AccelLimit,
+) -> Result<echelon::base::VelocityBase, echelon::ParamError> {
+    let [tau_v, tau_omega, v_max, omega_max, a_max, alpha_max] = x;
+    echelon::base::VelocityBase::new(echelon::base::VelocityBaseSpec {
+        tau_v,
+        tau_omega,
+        v_max,
+        omega_max,
+        a_max,
+        alpha_max,
+        accel,
+    })
+}

@@ -65,9 +65,10 @@ pub(super) struct Deadlock {
     error: f64,
     /// The progress test's reference: ‖e‖ (m) and since when (s).
     progress: Option<(f64, f64)>,
-    /// How far (m) the point has moved, since the reference, relative to
-    /// the neighbour or obstacle nearest it at each call.
+    /// How far (m) the point has moved since the reference, relative to
+    /// the neighbour or obstacle nearest it at each call, and over ground.
     path: f64,
+    moved: f64,
     /// Windows in a row without progress (reset by progress): the turn a
     /// break the progress test starts takes, so that a robot whose break
     /// ended (its nominal free for an instant) and that fell back into the
@@ -88,6 +89,7 @@ impl Default for Deadlock {
             error: f64::NAN,
             progress: None,
             path: 0.0,
+            moved: 0.0,
             stalls: 0,
         }
     }
@@ -148,17 +150,19 @@ impl Deadlock {
     /// between its calls) and ‖e‖ is at least [`PROGRESS_FLOOR`], ‖e‖ must
     /// fall to `1 − `[`PROGRESS_FRACTION`] of its reference within
     /// [`PROGRESS_WINDOW`], or the point must move, relative to the
-    /// neighbour or obstacle nearest it (`relative`, m/s), by
+    /// neighbour or obstacle nearest it (`speeds[0]`, m/s), by
     /// [`PROGRESS_FRACTION`] of that reference (going round a post or past a
-    /// neighbour, ‖e‖ grows); if it does, a new window starts; if not,
-    /// the robot starts breaking a deadlock, or, breaking one, tries the next
+    /// neighbour, ‖e‖ grows), or stand (moving over ground, `speeds[1]`,
+    /// less than that: the still test's case, a jam); if so, a new window
+    /// starts; if it only moves along with what holds it, the robot starts
+    /// breaking a deadlock, or, breaking one, tries the next
     /// turn, and the window starts again. A break it starts takes the turn
     /// after the one the last window without progress tried (a break ends
     /// when the nominal is free for an instant, and the robot can fall back
     /// into the same ride). The rows are never relaxed: only
     /// the desired motion given to the QP turns.
-    pub(super) fn record(&mut self, t: f64, stuck: bool, still: bool, relative: f64) {
-        self.progress(t, relative);
+    pub(super) fn record(&mut self, t: f64, stuck: bool, still: bool, speeds: [f64; 2]) {
+        self.progress(t, speeds);
         if stuck {
             let since = *self.stuck_since.get_or_insert(t);
             if !self.breaking && t - since >= STUCK_TIME {
@@ -182,8 +186,8 @@ impl Deadlock {
 
     /// The progress test of [`Deadlock::record`] at an acting call at `t`,
     /// the point moving at `relative` (m/s) relative to the neighbour or
-    /// obstacle nearest it.
-    fn progress(&mut self, t: f64, relative: f64) {
+    /// obstacle nearest it and at `speed` (m/s) over ground.
+    fn progress(&mut self, t: f64, [relative, speed]: [f64; 2]) {
         let e = self.error;
         let held_on = self.last.filter(|&l| t - l <= STUCK_TIME);
         if !(e.is_finite() && e >= PROGRESS_FLOOR) {
@@ -196,16 +200,21 @@ impl Deadlock {
                 if relative.is_finite() {
                     self.path += relative * (t - last);
                 }
+                self.moved += speed * (t - last);
                 if e <= (1.0 - PROGRESS_FRACTION) * reference {
                     self.progress = Some((e, t));
                     self.path = 0.0;
                     self.stalls = 0;
-                } else if t - since >= PROGRESS_WINDOW && self.path >= PROGRESS_FRACTION * reference
+                } else if t - since >= PROGRESS_WINDOW
+                    && (self.path >= PROGRESS_FRACTION * reference
+                        || self.moved < PROGRESS_FRACTION * reference)
                 {
-                    // It moves round what holds it (a post, a neighbour
-                    // it passes): ‖e‖ may grow meanwhile. A new window.
+                    // It moves round what holds it (a post, a neighbour it
+                    // passes; ‖e‖ may grow meanwhile), or it stands (the
+                    // still test's case, a jam): a new window.
                     self.progress = Some((e, t));
                     self.path = 0.0;
+                    self.moved = 0.0;
                 } else if t - since >= PROGRESS_WINDOW {
                     if self.breaking {
                         self.turns = (self.turns + 1) % BIASES;
@@ -218,11 +227,13 @@ impl Deadlock {
                     self.stalls = (self.stalls + 1) % BIASES;
                     self.progress = Some((e, t));
                     self.path = 0.0;
+                    self.moved = 0.0;
                 }
             }
             _ => {
                 self.progress = Some((e, t));
                 self.path = 0.0;
+                self.moved = 0.0;
                 self.stalls = 0;
             }
         }

@@ -419,7 +419,8 @@ impl SafetyFilter {
         // next to nothing (1 %) of what is asked.
         let speed = me.v.hypot(l * me.omega);
         let still = speed < 1e-3 && moved[0] * moved[0] + moved[1] * moved[1] < 1e-4 * asked_sq;
-        self.deadlock.record(t, stuck, still, self.relative);
+        self.deadlock
+            .record(t, stuck, still, [self.relative, speed]);
         (x, outcome, breaking)
     }
 }

@@ -31,6 +31,9 @@
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 use echelon::stats::SafetyWatch;
+mod common;
+
+use common::env_or;
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 
@@ -261,14 +264,6 @@ fn check(case: &Case) -> Result<(), TestCaseError> {
     Ok(())
 }
 
-/// An unsigned setting from the environment, else `default`.
-fn env_or(name: &str, default: u64) -> u64 {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
 proptest! {
     // A fixed seed, so CI runs the same sample (LIVELOCK_CASES=N for more,
     // LIVELOCK_SEED=K for another).
@@ -327,22 +322,15 @@ fn the_crossing_ride_along_is_broken() {
 #[test]
 #[ignore = "a survey for development: many cases"]
 fn survey() {
-    use proptest::strategy::ValueTree;
-    let n = env_or("LIVELOCK_SURVEY", 200);
-    let mut runner = proptest::test_runner::TestRunner::deterministic();
-    let mut failed = 0;
-    for k in 0..n {
-        let case = cases(true).new_tree(&mut runner).unwrap().current();
-        if let Ok(dir) = std::env::var("LIVELOCK_DUMP") {
+    let dump = std::env::var("LIVELOCK_DUMP").ok();
+    common::survey(cases(true), env_or("LIVELOCK_SURVEY", 200), |k, case| {
+        match &dump {
             // The cases as scenario files, for `echelon run` of any build.
-            std::fs::write(format!("{dir}/livelock-{k}.toml"), case.toml()).unwrap();
-            continue;
+            Some(dir) => {
+                std::fs::write(format!("{dir}/livelock-{k}.toml"), case.toml()).unwrap();
+                Ok(())
+            }
+            None => check(case),
         }
-        if let Err(e) = check(&case) {
-            failed += 1;
-            let first = e.to_string();
-            println!("{k}: {case:?}: {}", first.lines().next().unwrap_or(""));
-        }
-    }
-    println!("failed {failed} of {n}");
+    });
 }

@@ -132,8 +132,8 @@
 //! ‖e‖ ([`SafetyFilter::set_tracking_error`]) the monitor also asks for
 //! progress, ‖e‖ down by [`PROGRESS_FRACTION`] within [`PROGRESS_WINDOW`]
 //! while the filter acts, or the point moving by that fraction of ‖e‖
-//! relative to the neighbour or obstacle nearest it, and starts breaking (or
-//! turns further) when neither comes.
+//! relative to the neighbour or obstacle nearest it; a robot that moves
+//! only along with what holds it starts breaking (or turns further).
 //!
 //! [`RobotParams::limit`]: crate::model::RobotParams::limit
 //! [`VelocityBase::limit`]: crate::base::VelocityBase::limit

@@ -452,6 +452,10 @@ pub struct Guard<'a> {
     pub sight: Sight<'a>,
     /// The static obstacles it knows.
     pub obstacles: &'a [Obstacle],
+    /// The law's tracking error ‖e‖ now, m, as the controller sees it: the
+    /// filter's progress measure ([`SafetyFilter::set_tracking_error`]);
+    /// `None`: unknown.
+    pub error: Option<f64>,
 }
 
 /// One act step's answer ([`AgentSpec::act`]).
@@ -491,6 +495,7 @@ impl AgentSpec {
             filter,
             sight,
             obstacles,
+            error,
         }) = guard
         else {
             return Act {
@@ -499,6 +504,7 @@ impl AgentSpec {
                 safety: None,
             };
         };
+        filter.set_tracking_error(error.unwrap_or(f64::NAN));
         let l = self.placement.l();
         let guarded = |outcome, deadlock, min_distance| Guarded {
             outcome,

@@ -15,6 +15,9 @@
 
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
+mod common;
+
+use common::env_or;
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 
@@ -199,14 +202,6 @@ fn check(case: &Post) -> Result<(), TestCaseError> {
     Ok(())
 }
 
-/// An unsigned setting from the environment, else `default`.
-fn env_or(name: &str, default: u64) -> u64 {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
 proptest! {
     // A fixed seed, so CI runs the same sample (POST_CASES=N for more,
     // POST_SEED=K for another).
@@ -253,17 +248,5 @@ fn the_fleets_obstacle_slalom_stand_still_is_broken() {
 #[test]
 #[ignore = "a survey for development: many cases"]
 fn survey() {
-    use proptest::strategy::ValueTree;
-    let n = env_or("POST_SURVEY", 200);
-    let mut runner = proptest::test_runner::TestRunner::deterministic();
-    let mut failed = 0;
-    for k in 0..n {
-        let case = posts().new_tree(&mut runner).unwrap().current();
-        if let Err(e) = check(&case) {
-            failed += 1;
-            let first = e.to_string();
-            println!("{k}: {case:?}: {}", first.lines().next().unwrap_or(""));
-        }
-    }
-    println!("failed {failed} of {n}");
+    common::survey(posts(), env_or("POST_SURVEY", 200), |_, case| check(case));
 }

@@ -12,6 +12,9 @@ use echelon::base::{AccelLimit, VelocityBaseSpec};
 use echelon::scenario::{Overrides, Scenario};
 use echelon::sim::{Frame, ObserverError};
 use echelon::stats::SafetyWatch;
+mod common;
+
+use common::env_or;
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 
@@ -341,14 +344,6 @@ fn columns(torque: bool) -> impl Strategy<Value = Case> {
                 }
             },
         )
-}
-
-/// An unsigned setting from the environment, else `default`.
-fn env_or(name: &str, default: u64) -> u64 {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
 }
 
 /// The properties every encounter must show.

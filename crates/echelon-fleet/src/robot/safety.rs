@@ -20,8 +20,10 @@ pub(super) struct Safety {
 impl Safety {
     /// The act step ([`AgentSpec::act`]) through this robot's filter at
     /// local time `local` (fleet time `t`) for a robot in state `me`, its
-    /// position estimate `sigma` uncertain: the command for its plant,
-    /// counted (`docs/safety.md`, "In the fleet").
+    /// position estimate `sigma` uncertain, its law's tracking error
+    /// `error` (‖e‖, m: the filter's progress measure): the command for its
+    /// plant, counted (`docs/safety.md`, "In the fleet").
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn act(
         &mut self,
         config: &RobotConfig,
@@ -29,6 +31,7 @@ impl Safety {
         t: f64,
         me: &State,
         sigma: f64,
+        error: f64,
         nominal: Command,
     ) -> Command {
         let Some(settings) = config.safety.as_ref() else {
@@ -42,6 +45,7 @@ impl Safety {
             filter: &mut self.filter,
             sight,
             obstacles: &settings.obstacles,
+            error: Some(error),
         };
         let act = config.spec.act(t, me, nominal, Some(guard));
         let c = &mut self.counts;

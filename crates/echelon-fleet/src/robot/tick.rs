@@ -110,7 +110,10 @@ impl<P: Plant> Robot<P> {
                 let nominal = out.command();
                 let sigma = self.plant.position_sigma();
                 let cmd = match self.safety.as_mut() {
-                    Some(s) => s.act(&self.config, local, now, &state, sigma, nominal),
+                    Some(s) => {
+                        let error = out.law.e[0].hypot(out.law.e[1]);
+                        s.act(&self.config, local, now, &state, sigma, error, nominal)
+                    }
                     None => self.config.spec.act(now, &state, nominal, None).command,
                 };
                 if !cmd.values().iter().all(|v| v.is_finite()) {

@@ -3,6 +3,20 @@
 //! module documentation of [`crate::safety`]). The filter asks it
 //! ([`super::SafetyFilter::decide`] in `filter.rs`); it knows nothing of the
 //! filter.
+//!
+//! Two tests, on two signals. *Motion* (every call): less than half of the
+//! point motion the nominal asks for survives ([`Deadlock::record`]'s
+//! `stuck`), or next to none of it and the point stands (`still`). *Progress*
+//! (over a window, when the caller gives the law's tracking error
+//! ‖e‖, [`super::SafetyFilter::set_tracking_error`]): the filter keeps acting,
+//! ‖e‖ does not fall by [`PROGRESS_FRACTION`] in [`PROGRESS_WINDOW`], and the
+//! point does not move relative to what holds it by that fraction of ‖e‖.
+//! The second catches what the first cannot: a robot whose slot lies across
+//! a neighbour that holds its own slot rides beside it at the formation's
+//! speed, the filter taking away only the push toward the slot (`e` along
+//! the pair's `d`): the feed-forward, most of what the nominal asks, survives,
+//! so the robot never counts as stuck, and ‖e‖ stays where it is for ever
+//! (an equilibrium of the filtered loop, not of the law).
 
 /// How long after its filter last changed its command a robot still counts
 /// as held by it ([`super::SafetyFilter::deadlocked`]), s.
@@ -15,8 +29,23 @@ pub const STUCK_TIME: f64 = 1.0;
 /// deadlock, rad.
 pub const BIAS_ANGLE: f64 = std::f64::consts::FRAC_PI_4;
 
+/// The window over which a robot its filter holds must bring its tracking
+/// error ‖e‖ down by [`PROGRESS_FRACTION`], s: five time constants of a
+/// law with `ke = 1/s` (a free robot's ‖e‖ falls by `e^{-5}` in it), and
+/// long enough to get round a neighbour (0.3 m radius half round at 0.2 m/s
+/// takes about 2.4 s, ‖e‖ rising meanwhile).
+pub const PROGRESS_WINDOW: f64 = 5.0;
+
+/// The fraction by which ‖e‖ must fall over [`PROGRESS_WINDOW`] while the
+/// filter holds a robot: 10 %.
+pub const PROGRESS_FRACTION: f64 = 0.1;
+
+/// Below this ‖e‖ (m) the robot is at its slot (the settling tolerance of
+/// `summary.json`) and no progress is asked of it.
+pub const PROGRESS_FLOOR: f64 = 0.01;
+
 /// Deadlock monitor state.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct Deadlock {
     stuck_since: Option<f64>,
     breaking: bool,
@@ -31,6 +60,39 @@ pub(super) struct Deadlock {
     last: Option<f64>,
     /// The time of the last call.
     now: f64,
+    /// The law's tracking error ‖e‖ at the coming call, m (NaN: not told,
+    /// no progress test).
+    error: f64,
+    /// The progress test's reference: ‖e‖ (m) and since when (s).
+    progress: Option<(f64, f64)>,
+    /// How far (m) the point has moved since the reference, relative to
+    /// the neighbour or obstacle nearest it at each call, and over ground.
+    path: f64,
+    moved: f64,
+    /// Windows in a row without progress (reset by progress): the turn a
+    /// break the progress test starts takes, so that a robot whose break
+    /// ended (its nominal free for an instant) and that fell back into the
+    /// same ride does not try the same turn again.
+    stalls: u8,
+}
+
+impl Default for Deadlock {
+    fn default() -> Deadlock {
+        Deadlock {
+            stuck_since: None,
+            breaking: false,
+            turns: 0,
+            still_since: None,
+            breaks: 0,
+            last: None,
+            now: 0.0,
+            error: f64::NAN,
+            progress: None,
+            path: 0.0,
+            moved: 0.0,
+            stalls: 0,
+        }
+    }
 }
 
 impl Deadlock {
@@ -43,6 +105,11 @@ impl Deadlock {
     /// How many deadlocks it has started breaking.
     pub(super) fn breaks(&self) -> u64 {
         self.breaks
+    }
+
+    /// The law's tracking error ‖e‖ (m) at the coming call (NaN: unknown).
+    pub(super) fn set_error(&mut self, error: f64) {
+        self.error = error;
     }
 
     /// A call at `t` where the nominal satisfied every constraint: not
@@ -78,7 +145,24 @@ impl Deadlock {
     /// heading past its left side, may not reverse, and its right-turned
     /// desire pointed into the post, so the QP answered zero for ever),
     /// while some turn always has a part the rows allow, which moves it.
-    pub(super) fn record(&mut self, t: f64, stuck: bool, still: bool) {
+    ///
+    /// Progress: while the filter keeps acting (no gap over [`STUCK_TIME`]
+    /// between its calls) and ‖e‖ is at least [`PROGRESS_FLOOR`], ‖e‖ must
+    /// fall to `1 − `[`PROGRESS_FRACTION`] of its reference within
+    /// [`PROGRESS_WINDOW`], or the point must move, relative to the
+    /// neighbour or obstacle nearest it (`speeds[0]`, m/s), by
+    /// [`PROGRESS_FRACTION`] of that reference (going round a post or past a
+    /// neighbour, ‖e‖ grows), or stand (moving over ground, `speeds[1]`,
+    /// less than that: the still test's case, a jam); if so, a new window
+    /// starts; if it only moves along with what holds it, the robot starts
+    /// breaking a deadlock, or, breaking one, tries the next
+    /// turn, and the window starts again. A break it starts takes the turn
+    /// after the one the last window without progress tried (a break ends
+    /// when the nominal is free for an instant, and the robot can fall back
+    /// into the same ride). The rows are never relaxed: only
+    /// the desired motion given to the QP turns.
+    pub(super) fn record(&mut self, t: f64, stuck: bool, still: bool, speeds: [f64; 2]) {
+        self.progress(t, speeds);
         if stuck {
             let since = *self.stuck_since.get_or_insert(t);
             if !self.breaking && t - since >= STUCK_TIME {
@@ -98,6 +182,61 @@ impl Deadlock {
             self.still_since = None;
         }
         self.last = Some(t);
+    }
+
+    /// The progress test of [`Deadlock::record`] at an acting call at `t`,
+    /// the point moving at `relative` (m/s) relative to the neighbour or
+    /// obstacle nearest it and at `speed` (m/s) over ground.
+    fn progress(&mut self, t: f64, [relative, speed]: [f64; 2]) {
+        let e = self.error;
+        let held_on = self.last.filter(|&l| t - l <= STUCK_TIME);
+        if !(e.is_finite() && e >= PROGRESS_FLOOR) {
+            self.progress = None;
+            self.stalls = 0;
+            return;
+        }
+        match (self.progress, held_on) {
+            (Some((reference, since)), Some(last)) => {
+                if relative.is_finite() {
+                    self.path += relative * (t - last);
+                }
+                self.moved += speed * (t - last);
+                if e <= (1.0 - PROGRESS_FRACTION) * reference {
+                    self.progress = Some((e, t));
+                    self.path = 0.0;
+                    self.stalls = 0;
+                } else if t - since >= PROGRESS_WINDOW
+                    && (self.path >= PROGRESS_FRACTION * reference
+                        || self.moved < PROGRESS_FRACTION * reference)
+                {
+                    // It moves round what holds it (a post, a neighbour it
+                    // passes; ‖e‖ may grow meanwhile), or it stands (the
+                    // still test's case, a jam): a new window.
+                    self.progress = Some((e, t));
+                    self.path = 0.0;
+                    self.moved = 0.0;
+                } else if t - since >= PROGRESS_WINDOW {
+                    if self.breaking {
+                        self.turns = (self.turns + 1) % BIASES;
+                        self.still_since = None;
+                    } else {
+                        self.breaking = true;
+                        self.breaks += 1;
+                        self.turns = self.stalls % BIASES;
+                    }
+                    self.stalls = (self.stalls + 1) % BIASES;
+                    self.progress = Some((e, t));
+                    self.path = 0.0;
+                    self.moved = 0.0;
+                }
+            }
+            _ => {
+                self.progress = Some((e, t));
+                self.path = 0.0;
+                self.moved = 0.0;
+                self.stalls = 0;
+            }
+        }
     }
 }
 

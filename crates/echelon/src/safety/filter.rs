@@ -109,6 +109,9 @@ pub struct SafetyFilter {
     pub(super) deadlock: Deadlock,
     /// How long each command is held, s (0: continuous).
     pub(super) period: f64,
+    /// The point's speed relative to the neighbour or obstacle whose
+    /// barrier it is nearest, at the last call, m/s (infinite: none).
+    pub(super) relative: f64,
 }
 
 /// The robot's own geometry at one instant.
@@ -128,6 +131,7 @@ impl SafetyFilter {
             rows: Vec::with_capacity(16),
             deadlock: Deadlock::default(),
             period: 0.0,
+            relative: f64::INFINITY,
         }
     }
 
@@ -172,6 +176,10 @@ impl SafetyFilter {
     ) -> f64 {
         let SafetyConfig { radius, range, .. } = self.config;
         let mut min_distance = f64::INFINITY;
+        // The nearest barrier (distance beyond it, m) and the point's speed
+        // relative to its owner.
+        let mut nearest = (f64::INFINITY, f64::INFINITY);
+        let speed = |v: [f64; 2]| (own.dp[0] - v[0]).hypot(own.dp[1] - v[1]);
         for n in neighbours {
             let d = [own.p[0] - n.p[0], own.p[1] - n.p[1]];
             let dist = d[0].hypot(d[1]);
@@ -181,14 +189,21 @@ impl SafetyFilter {
             min_distance = min_distance.min(dist);
             let r = radius + n.margin;
             let h = d[0] * d[0] + d[1] * d[1] - r * r;
+            if dist - r < nearest.0 {
+                nearest = (dist - r, speed(n.dp));
+            }
             self.rows.push(row(d, h, Some(n)));
         }
         for o in obstacles {
             let d = [own.p[0] - o.x, own.p[1] - o.y];
             let clear = o.r + radius;
             let h = d[0] * d[0] + d[1] * d[1] - clear * clear;
+            if d[0].hypot(d[1]) - clear < nearest.0 {
+                nearest = (d[0].hypot(d[1]) - clear, speed([0.0; 2]));
+            }
             self.rows.push(row(d, h, None));
         }
+        self.relative = nearest.1;
         min_distance
     }
 }
@@ -359,6 +374,18 @@ impl SafetyFilter {
         self.deadlock.breaks()
     }
 
+    /// The law's tracking error ‖e‖ (m, eq. 7) at the coming call of
+    /// [`velocity`](SafetyFilter::velocity) or [`torque`](SafetyFilter::torque):
+    /// the deadlock monitor's progress measure. While the filter keeps
+    /// acting, ‖e‖ must fall by [`super::PROGRESS_FRACTION`] within
+    /// [`super::PROGRESS_WINDOW`], else the robot starts breaking a deadlock
+    /// (or tries the next turn): a robot riding beside a neighbour that sits
+    /// between it and its slot moves, so the motion test alone never calls
+    /// it stuck. A filter never told (NaN) uses the motion test alone.
+    pub fn set_tracking_error(&mut self, error: f64) {
+        self.deadlock.set_error(error);
+    }
+
     /// The QP's answer for the desired `x0` and the rows gathered, the
     /// outcome and whether a deadlock is being broken; updates the monitor.
     /// `drift` is the part of the point's motion the command does not set
@@ -392,7 +419,8 @@ impl SafetyFilter {
         // next to nothing (1 %) of what is asked.
         let speed = me.v.hypot(l * me.omega);
         let still = speed < 1e-3 && moved[0] * moved[0] + moved[1] * moved[1] < 1e-4 * asked_sq;
-        self.deadlock.record(t, stuck, still);
+        self.deadlock
+            .record(t, stuck, still, [self.relative, speed]);
         (x, outcome, breaking)
     }
 }

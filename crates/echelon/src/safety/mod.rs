@@ -126,7 +126,14 @@
 //! velocity (or acceleration) is turned clockwise by [`BIAS_ANGLE`] before the
 //! QP (keep right: both robots turn the same way, so they slide past each
 //! other), until the unbiased nominal command satisfies every constraint again.
-//! Each start is counted ([`SafetyFilter::deadlock_breaks`]).
+//! Each start is counted ([`SafetyFilter::deadlock_breaks`]). A robot moving
+//! with a neighbour that sits between it and its slot keeps most of its
+//! nominal (the formation's speed) and never counts as stuck: with the law's
+//! ‖e‖ ([`SafetyFilter::set_tracking_error`]) the monitor also asks for
+//! progress, ‖e‖ down by [`PROGRESS_FRACTION`] within [`PROGRESS_WINDOW`]
+//! while the filter acts, or the point moving by that fraction of ‖e‖
+//! relative to the neighbour or obstacle nearest it; a robot that moves
+//! only along with what holds it starts breaking (or turns further).
 //!
 //! [`RobotParams::limit`]: crate::model::RobotParams::limit
 //! [`VelocityBase::limit`]: crate::base::VelocityBase::limit
@@ -143,7 +150,9 @@ mod torque;
 mod velocity;
 
 pub use config::SafetyConfig;
-pub use deadlock::{BIAS_ANGLE, DEADLOCK_MEMORY, STUCK_TIME};
+pub use deadlock::{
+    BIAS_ANGLE, DEADLOCK_MEMORY, PROGRESS_FLOOR, PROGRESS_FRACTION, PROGRESS_WINDOW, STUCK_TIME,
+};
 pub use filter::{EMERGENCY_ACCEL, Envelope, Filtered, INNER_RATE, Outcome, SafetyFilter};
 pub use neighbour::{
     Neighbour, Obstacle, UNCERTAINTY_SIGMAS, point, start_conflict, uncertainty_margin,

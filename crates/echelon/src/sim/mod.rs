@@ -297,6 +297,7 @@ impl Simulation {
                 filter,
                 sight: Sight::Neighbours(&safety.neighbours),
                 obstacles: &safety.obstacles,
+                error: Some(self.out[i].e_hat[0].hypot(self.out[i].e_hat[1])),
             };
             let act = self.sys.plan.agents()[i].act(t, &safety.seen[i], self.held[i], Some(guard));
             self.held[i] = act.command;

@@ -219,4 +219,33 @@ pub fn velocity_base(
         alpha_max,
         accel,
     })
+/// An unsigned setting from the environment, else `default` (the safety
+/// tests' case counts, seeds and survey sizes).
+pub fn env_or(name: &str, default: u64) -> u64 {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// A survey for development: `n` cases of `strategy` from proptest's
+/// deterministic runner, each given to `check` with its index; every
+/// failure is printed (its first line), then the count.
+pub fn survey<T: std::fmt::Debug>(
+    strategy: impl proptest::strategy::Strategy<Value = T>,
+    n: u64,
+    check: impl Fn(u64, &T) -> Result<(), proptest::test_runner::TestCaseError>,
+) {
+    use proptest::strategy::ValueTree;
+    let mut runner = proptest::test_runner::TestRunner::deterministic();
+    let mut failed = 0;
+    for k in 0..n {
+        let case = strategy.new_tree(&mut runner).unwrap().current();
+        if let Err(e) = check(k, &case) {
+            failed += 1;
+            let first = e.to_string();
+            println!("{k}: {case:?}: {}", first.lines().next().unwrap_or(""));
+        }
+    }
+    println!("failed {failed} of {n}");
 }

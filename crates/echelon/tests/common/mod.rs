@@ -219,6 +219,8 @@ pub fn velocity_base(
         alpha_max,
         accel,
     })
+}
+
 /// An unsigned setting from the environment, else `default` (the safety
 /// tests' case counts, seeds and survey sizes).
 pub fn env_or(name: &str, default: u64) -> u64 {

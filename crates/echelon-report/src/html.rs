@@ -426,6 +426,14 @@ pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
         s.steps,
         data.times.len()
     );
+    // A diverged run stopped early: say so before anything reads as a result.
+    if let Some(d) = &s.diverged {
+        let _ = writeln!(
+            html,
+            "<p class=\"diverged\" id=\"diverged\">This run diverged: {} (the logs, figures and replay stop at its last state within bounds)</p>",
+            escape(&d.message)
+        );
+    }
     html.push_str(
         "<section id=\"replay\">\n<h2>Replay</h2>\n<div class=\"controls\">\
          <button id=\"play\" type=\"button\" aria-label=\"play\">▶ Play</button>\

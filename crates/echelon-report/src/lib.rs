@@ -95,6 +95,10 @@ pub struct Written {
     pub figures: Vec<figure::Saved>,
     /// `DIR/report.html`.
     pub report: PathBuf,
+    /// The run diverged (`summary.json`'s `diverged`): its one-line message.
+    /// The figures and the report then stop at its last state within
+    /// bounds, and the report says so.
+    pub diverged: Option<String>,
 }
 
 impl Written {
@@ -129,5 +133,6 @@ pub fn write_all(dir: &Path) -> Result<Written, ReportError> {
     Ok(Written {
         figures: saved,
         report,
+        diverged: data.summary.diverged.as_ref().map(|d| d.message.clone()),
     })
 }

@@ -101,7 +101,10 @@ fn kinematic(a: &BoundArgs) -> Result<()> {
         (None, Some(_), _) => {
             bail!("--law kinematic takes --max-e (its bound is on ‖e‖), not --max-z")
         }
-        (None, None, Some(e)) => t.max_steps(e).map_err(at_flag)?,
+        (None, None, Some(e)) => match t.max_steps(e).map_err(at_flag)? {
+            0 => return Err(no_interval("--max-e", e, "‖e‖", "m", t.e_bound(1))),
+            n => n,
+        },
         (None, None, None) => bail!("give --steps or --max-e"),
     };
     let report = BoundReport {
@@ -117,12 +120,6 @@ fn kinematic(a: &BoundArgs) -> Result<()> {
     outln!("  K_e = {}, ζ = {} m, γ = {}", a.ke, a.zeta, a.gamma)?;
     match a.max_e {
         Some(e) if a.steps.is_none() => {
-            if steps == 0 {
-                outln!(
-                    "  no fix interval keeps ‖e‖ ≤ {e} m: one sample of dead reckoning already exceeds it"
-                )?;
-                return Ok(());
-            }
             outln!("  largest N keeping ‖e‖ ≤ {e} m: N = {steps} samples")?;
         }
         _ => outln!("  N = {steps} samples between fixes")?,
@@ -134,6 +131,20 @@ fn kinematic(a: &BoundArgs) -> Result<()> {
         _ => outln!("  (give --ts to turn N into a fix period)")?,
     }
     Ok(())
+}
+
+/// The answer to an inverse question that has none: even a fix every sample
+/// (`N = 1`) allows more than `target` (`flag`'s value) of `what`, up to
+/// `at_one`. The command did not get what it asked for: exit 1, in text and
+/// JSON alike (a JSON `N = 0` with bounds of 0 read as a bound that holds).
+fn no_interval(flag: &str, target: f64, what: &str, unit: &str, at_one: f64) -> anyhow::Error {
+    let num = echelon::error::num;
+    super::out::Failed(format!(
+        "{flag} {}: no fix interval keeps {what} ≤ {} {unit}: a fix every sample (N = 1) already allows {what} up to {at_one:.3e} {unit}",
+        num(target),
+        num(target),
+    ))
+    .into()
 }
 
 /// Prints `report` with `e_bound` as one JSON line.
@@ -164,6 +175,18 @@ pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
             .map_err(|err| at_flag(ParamError::new("max_e", e, err.reason)))?,
         (None, None, None) => bail!("give --steps, --max-z or --max-e"),
     };
+    if report.steps == 0 {
+        return Err(match (a.max_z, a.max_e) {
+            (Some(z), _) => no_interval("--max-z", z, "‖z‖", "m/s", t.z_bound(1)),
+            (_, e) => no_interval(
+                "--max-e",
+                e.unwrap_or_default(),
+                "‖e‖",
+                "m",
+                t.z_bound(1) / a.ke,
+            ),
+        });
+    }
     // ‖e‖ is ultimately within ‖z‖/K_e: V̇₁ = −K_e‖e‖² + eᵀz < 0 beyond it.
     let e_bound = report.z_bound / a.ke;
     if a.json {
@@ -183,12 +206,6 @@ pub(crate) fn bound(a: &BoundArgs) -> Result<()> {
             (Some(z), _) => ("‖z‖", format!("{z} m/s")),
             (_, e) => ("‖e‖", format!("{} m", e.unwrap_or_default())),
         };
-        if report.steps == 0 {
-            outln!(
-                "  no fix interval keeps {what} ≤ {target}: one sample of dead reckoning already exceeds it"
-            )?;
-            return Ok(());
-        }
         outln!(
             "  largest N keeping {what} ≤ {target}: N = {} samples",
             report.steps

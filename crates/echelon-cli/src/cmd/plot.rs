@@ -16,13 +16,22 @@ pub(crate) struct PlotArgs {
     quiet: bool,
 }
 
-/// Draws the figures of `dir` and writes its report.
+/// Draws the figures of `dir` and writes its report. A diverged run's
+/// figures are drawn too (up to its last state within bounds), and the
+/// command then fails as `echelon run` did: exit 1, naming the divergence.
 pub(crate) fn plot(args: &PlotArgs) -> Result<()> {
-    draw(&args.dir, args.quiet)
+    if let Some(message) = draw(&args.dir, args.quiet)?.diverged {
+        return Err(super::out::Failed(format!(
+            "{}: the run diverged: {message} (figures and report.html show it up to then)",
+            args.dir.display()
+        ))
+        .into());
+    }
+    Ok(())
 }
 
 /// Writes `dir`'s figures and `report.html`; lists them unless `quiet`.
-pub(crate) fn draw(dir: &Path, quiet: bool) -> Result<()> {
+pub(crate) fn draw(dir: &Path, quiet: bool) -> Result<echelon_report::Written> {
     let started = Instant::now();
     let written =
         echelon_report::write_all(dir).with_context(|| format!("plotting {}", dir.display()))?;
@@ -39,5 +48,5 @@ pub(crate) fn draw(dir: &Path, quiet: bool) -> Result<()> {
             started.elapsed().as_secs_f64()
         )?;
     }
-    Ok(())
+    Ok(written)
 }

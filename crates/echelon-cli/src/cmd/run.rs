@@ -135,6 +135,15 @@ pub(crate) fn run(args: RunArgs) -> Result<()> {
                     }
                 }
             }
+            // `--plot` asked for the figures: a diverged run's are the ones
+            // that show what went wrong (its report says it diverged).
+            // A failure to draw them is said, but the run's failure is the
+            // divergence (exit 1).
+            if args.plot
+                && let Err(draw) = super::plot::draw(&out, args.quiet)
+            {
+                super::out::err_line(&format!("warning: drawing the diverged run: {draw:#}"));
+            }
             return Err(super::out::Failed(format!("{}: {e}", run.name)).into());
         }
         Err(e) => {

@@ -181,3 +181,102 @@ fn a_refused_bound_input_names_its_flag_and_value() {
         }
     }
 }
+
+/// The inverse over random inputs of both laws, well beyond the examples
+/// (gains 0.05–50, ζ 1e-7–1e-2 m, ω_M 0–5 rad/s, any γ, targets from a
+/// hundredth to a thousand times one sample's bound): either the printed N
+/// is the largest whose closed-form bound stays within the target (exit 0),
+/// or no N is (exit 1, one error line naming the flag, nothing on standard
+/// output). A target below one sample's bound printed `{"steps": 0,
+/// "z_bound": 0.0, "e_bound": 0.0}` and exited 0: bounds of zero, read as
+/// holding, where no fix interval holds the target.
+#[test]
+fn the_inverse_gives_the_largest_n_or_says_there_is_none() {
+    // xorshift64*: a fixed stream, no dependency.
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut uniform = move || {
+        state ^= state >> 12;
+        state ^= state << 25;
+        state ^= state >> 27;
+        (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut none, mut some) = (0, 0);
+    let log_uniform = |lo: f64, hi: f64, u: f64| lo * (hi / lo).powf(u);
+    for case in 0..150 {
+        let (ke, kz, zeta) = (
+            log_uniform(0.05, 50.0, uniform()),
+            log_uniform(0.05, 50.0, uniform()),
+            log_uniform(1e-7, 1e-2, uniform()),
+        );
+        let omega = 5.0 * uniform();
+        let gamma = 0.05 + 0.94 * uniform();
+        let kinematic = case % 3 == 0;
+        let by_z = !kinematic && case % 2 == 1;
+        let sqrt2 = std::f64::consts::SQRT_2;
+        // One sample's bound on the quantity asked about.
+        let per_step = match (kinematic, by_z) {
+            (true, _) => sqrt2 * zeta / gamma,
+            (false, true) => sqrt2 * ke * zeta * kz.hypot(omega) / (kz * gamma),
+            (false, false) => sqrt2 * zeta * kz.hypot(omega) / (kz * gamma),
+        };
+        let target = per_step * log_uniform(1e-2, 1e3, uniform());
+        let ratio = target / per_step;
+        if (ratio - ratio.round()).abs() < 1e-9 * ratio {
+            continue; // on a boundary, rounding decides
+        }
+        let text = |v: f64| format!("{v:e}");
+        let (ke_s, kz_s, zeta_s, omega_s, gamma_s, target_s) = (
+            text(ke),
+            text(kz),
+            text(zeta),
+            text(omega),
+            text(gamma),
+            text(target),
+        );
+        let flag = if by_z { "--max-z" } else { "--max-e" };
+        let mut args = vec![
+            "bound", "--ke", &ke_s, "--zeta", &zeta_s, "--gamma", &gamma_s, flag, &target_s,
+            "--json",
+        ];
+        if kinematic {
+            args.extend(["--law", "kinematic"]);
+        } else {
+            args.extend(["--kz", &kz_s, "--omega-max", &omega_s]);
+        }
+        let o = echelon(&args);
+        let err = stderr(&o);
+        if ratio < 1.0 {
+            none += 1;
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+            assert!(stdout(&o).is_empty(), "{args:?}: {}", stdout(&o));
+            assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+            assert!(
+                err.starts_with(&format!("error: {flag} "))
+                    && err.contains("no fix interval keeps")
+                    && !err.contains("panicked"),
+                "{args:?}: {err}"
+            );
+        } else {
+            some += 1;
+            let v = json(&o);
+            let n = v["steps"]
+                .as_u64()
+                .unwrap_or_else(|| panic!("{args:?}: {v}"));
+            assert!(
+                n >= 1 && n == ratio.floor() as u64,
+                "{args:?}: N = {n} for {ratio} samples' worth"
+            );
+            let bound = if by_z { &v["z_bound"] } else { &v["e_bound"] };
+            let bound = bound.as_f64().unwrap();
+            assert!(
+                bound <= target * (1.0 + 1e-12)
+                    && (bound - n as f64 * per_step).abs() <= 1e-12 * bound,
+                "{args:?}: {v}"
+            );
+        }
+    }
+    assert!(
+        none > 10 && some > 10,
+        "both outcomes drawn: {none} none, {some} some"
+    );
+}

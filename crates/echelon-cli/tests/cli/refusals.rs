@@ -147,6 +147,67 @@ fn a_diverging_run_exits_1_naming_agent_time_and_quantity() {
     }
 }
 
+/// A diverged run says so wherever it is looked at: `run --plot` still draws
+/// its figures (they show what went wrong) and exits 1; its report.html
+/// names the divergence; `echelon plot` on its directory exits 1 naming it
+/// (it exited 0, and the report said nothing, as if the run had ended).
+/// For built-ins of both drives, blown up by each gain; a run that does not
+/// diverge, plotted into the same directory, exits 0 and its report is clean.
+#[test]
+fn a_diverged_run_says_so_in_its_report_and_plot_exits_1() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("nonfeasible", "ke = 1.5", "ke = 1e12"),
+        ("experiment-circle", "kz = 10.0", "kz = 1e12"),
+        ("circle-pentagon-velocity", "ke = 1.5", "ke = 1e9"),
+    ];
+    for (i, (name, from, to)) in cases.into_iter().enumerate() {
+        let source = echelon::scenario::Scenario::builtin(name)
+            .unwrap()
+            .source()
+            .to_owned();
+        assert!(source.contains(from), "{name} has `{from}`");
+        let file = dir.path().join(format!("{i}.toml"));
+        std::fs::write(&file, source.replace(from, to)).unwrap();
+        let out = dir.path().join(format!("out{i}"));
+        let o = run(file.to_str().unwrap(), &out, &["--plot", "--quiet"]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert!(!err.contains("panicked"), "{name}: {err}");
+        let message = summary(&out)["diverged"]["message"]
+            .as_str()
+            .expect("summary.json says it diverged")
+            .to_owned();
+        assert!(err.contains(&message), "{name}: `{message}` not in {err}");
+        let report = std::fs::read_to_string(out.join("report.html"))
+            .unwrap_or_else(|e| panic!("{name}: --plot drew no report: {e}"));
+        assert!(
+            report.contains("id=\"diverged\"") && report.contains(&message),
+            "{name}: the report does not say `{message}`"
+        );
+        for f in ["paths.svg", "errors.png", "signals.svg"] {
+            assert!(out.join(f).exists(), "{name}: {f} drawn");
+        }
+        let o = echelon(&["plot", out.to_str().unwrap(), "--quiet"]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{name}: plot: {err}");
+        assert!(
+            err.starts_with("error: ") && err.contains(&message) && err.lines().count() == 1,
+            "{name}: plot: {err}"
+        );
+        // The same directory, rewritten by a run that does not diverge.
+        let o = run(name, &out, &["--duration", "0.5", "--quiet"]);
+        assert_eq!(o.status.code(), Some(0), "{name}: {}", stderr(&o));
+        let o = echelon(&["plot", out.to_str().unwrap(), "--quiet"]);
+        assert_eq!(o.status.code(), Some(0), "{name}: plot: {}", stderr(&o));
+        let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+        assert!(
+            !report.contains("id=\"diverged\""),
+            "{name}: a clean run's report"
+        );
+    }
+}
+
 #[test]
 fn bad_velocity_base_input_exits_2() {
     let dir = tempfile::tempdir().unwrap();

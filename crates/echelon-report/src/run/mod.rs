@@ -27,7 +27,7 @@ use echelon::scenario::{Overrides, Scenario};
 use crate::ReportError;
 
 pub use column::{COLUMNS, Column, VELOCITY_COLUMNS};
-pub use summary::{AgentResult, AgentSafetySummary, SafetySummary, SummaryFile};
+pub use summary::{AgentResult, AgentSafetySummary, DivergedSummary, SafetySummary, SummaryFile};
 
 /// A velocity base's speed limits (`f64::INFINITY`: unlimited).
 #[derive(Debug, Clone, Copy, PartialEq)]

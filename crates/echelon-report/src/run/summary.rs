@@ -47,6 +47,20 @@ pub struct SummaryFile {
     /// The safety filter's statistics (`None`: no `[safety]`).
     #[serde(default)]
     pub safety: Option<SafetySummary>,
+    /// Present when the run diverged and stopped there (see
+    /// `echelon::stats::Divergence`): the logs end at its last state within
+    /// bounds.
+    #[serde(default)]
+    pub diverged: Option<DivergedSummary>,
+}
+
+/// `summary.json`'s `diverged` (fields this crate shows).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct DivergedSummary {
+    /// When, s.
+    pub t: f64,
+    /// The one-line message naming the agent, the time and the quantity.
+    pub message: String,
 }
 
 /// `summary.json`'s `safety` (see `echelon::stats::SafetyReport`).

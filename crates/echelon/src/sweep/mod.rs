@@ -21,7 +21,10 @@
 //! theorem's main bound. The kinematic form holds for an ideal base
 //! (control-law.md, "Theorem 2 for the kinematic law"): a base with a lag, or
 //! whose speed limits cut the command after the transient, gets no bound (its
-//! own `z` is outside the theorem), like any run outside Assumption 1.
+//! own `z` is outside the theorem), like any run outside Assumption 1. So
+//! does, for either law, an agent whose safety filter changed its command
+//! after the transient (filtered, braked or breaking a deadlock): the
+//! filter, not the law, then sets its `z`.
 //!
 //! This file holds the grid and the runs; `drift.rs` the drift curves
 //! without fixes (`drift.csv`); `csv.rs` the sweep's other CSV files.
@@ -34,6 +37,7 @@ use crate::control::Law;
 use crate::error::{ParamError, ScenarioError, SimError};
 use crate::odometry::ZetaModel;
 use crate::odometry::bound::{KinematicTheorem2, Theorem2};
+use crate::safety::Outcome as FilterOutcome;
 use crate::scenario::schema::{FixesSection, Fusion, OdometrySection};
 use crate::scenario::{OdometryOverrides, Overrides, Run, Scenario};
 use crate::sim::{Frame, ObserverError};
@@ -402,6 +406,9 @@ pub fn run_case(
     let mut omega_max = vec![0.0f64; n];
     // Whether a velocity base's speed limits cut its command after the transient.
     let mut saturated = vec![false; n];
+    // Whether a safety filter changed its command (or braked, or broke a
+    // deadlock) after the transient: that adds its own z, outside the theorem.
+    let mut filtered = vec![false; n];
     let transient = grid.0.transient;
     let mut observe = |f: &Frame<'_>| -> Result<(), ObserverError> {
         for (i, odometer) in f.odometers.iter().enumerate() {
@@ -415,6 +422,9 @@ pub fn run_case(
                 e_max[i] = e_max[i].max(o.e[0].hypot(o.e[1]));
                 omega_max[i] = omega_max[i].max(s.omega.abs());
                 saturated[i] |= o.velocity.is_some_and(|v| v.saturated);
+                filtered[i] |= f.safety.get(i).is_some_and(|s| {
+                    s.enabled && (s.outcome != FilterOutcome::Nominal || s.deadlock)
+                });
             }
             if f.last {
                 drift = drift.max(d);
@@ -437,7 +447,7 @@ pub fn run_case(
     let dead_reckoning = |i: usize| sim.odometers().get(i).is_some_and(Option::is_some);
     if theorem_applies {
         for (i, a) in sim.agents().iter().enumerate() {
-            if !dead_reckoning(i) {
+            if !dead_reckoning(i) || filtered[i] {
                 continue;
             }
             match a.velocity_robot() {

@@ -440,49 +440,13 @@ proptest! {
 #[test]
 fn for_agent_bounds_the_fixes_by_the_scenarios_guard() {
     use echelon::scenario::{Overrides, Scenario};
-    let src = r#"
-[sim]
-duration = 1.0
-dt = 0.001
-bounds = { distance = 30.0 }
-
-[control]
-law = "kinematic"
-ke = 1.5
-kz = 10.0
-l = 0.05
-
-[robots.lab]
-drive = "velocity"
-tau_v = 0.1
-tau_omega = 0.1
-v_max = 0.3
-omega_max = 2.0
-half_wheelbase = 0.15
-wheel_radius = 0.05
-
-[reference.circle]
-speed = 0.08
-turn_rate = 0.08
-start = { x = 0.0, y = 0.0, theta = 0.0 }
-
-[odometry]
-period = 0.02
-
-[fixes]
-source = "/mocap/robot1/pose"
-period = 0.1
-position_noise = 0.005
-
-[fleet.ros2]
-
-[[agents]]
-robot = "lab"
-start = { x = 0.0, y = -0.6, theta = 0.0 }
-leader = "reference"
-offset = { x = 0.0, y = -0.5 }
-"#;
-    let s = Scenario::parse(src, "bounded.toml", None).unwrap_or_else(|e| panic!("{e}"));
+    // The lab robots of the paper's experiment, taking fixes from ROS 2,
+    // with a 30 m guard.
+    let src = include_str!("../../../../../scenarios/experiment-circle-velocity.toml")
+        .replace("[sim]\n", "[sim]\nbounds = { distance = 30.0 }\n")
+        + "\n[odometry]\nperiod = 0.02\n\n[fixes]\nsource = \"/mocap/robot1/pose\"\nperiod = 0.1\nposition_noise = 0.005\n\n[fleet.ros2]\n";
+    assert!(src.contains("bounds = { distance = 30.0 }"));
+    let s = Scenario::parse(&src, "bounded.toml", None).unwrap_or_else(|e| panic!("{e}"));
     let plan = s
         .build(&Overrides::default())
         .unwrap_or_else(|e| panic!("{e}"))

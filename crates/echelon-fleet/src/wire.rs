@@ -14,9 +14,13 @@
 //!
 //! then the kind's payload (see [`Reference`] and [`RobotState`]; a state
 //! may end with an optional odometry block, [`OdometryState`]).
-//! All floats must be finite. A message whose length, magic, kind or floats
-//! are wrong is *malformed*; a well-formed header with another version is
-//! *wrong-version*. Neither ever panics the receiver.
+//! All floats must be finite. A message whose length, magic, kind, flags,
+//! reserved bytes or floats are wrong is *malformed*; a header with the
+//! magic and another version is *wrong-version* (nothing after the version
+//! byte is read: another version may lay it out otherwise). Neither ever
+//! panics the receiver, and nothing of the message is kept: an accepted
+//! message is exactly the encoding of what it decoded to, no bit ignored.
+//! (A field that must be zero must be `+0.0`: `-0.0` is another encoding.)
 
 use echelon::control::LeaderMotion;
 use echelon::model::{Input, State, Torques};
@@ -51,6 +55,11 @@ const FLAG_ODOMETRY: u8 = 4;
 const FLAG_FIX_AGE: u8 = 8;
 /// The drive flags that say what the velocity fields hold.
 const DRIVE_BITS: u8 = FLAG_VELOCITY | FLAG_SATURATED;
+/// Every drive flag this version defines: any other bit is from another
+/// version, or corruption.
+const KNOWN_FLAGS: u8 = DRIVE_BITS | FLAG_ODOMETRY | FLAG_FIX_AGE;
+/// The bytes of a state after its drive flags, reserved (zero).
+const STATE_RESERVED: std::ops::Range<usize> = HEADER_LEN + 5..HEADER_LEN + 8;
 
 const KIND_REFERENCE: u8 = 1;
 const KIND_STATE: u8 = 2;
@@ -150,7 +159,9 @@ pub struct OdometryState {
 /// ([`RobotState::sample`]) and what the wire adds (link status,
 /// accelerations, the leader motion used). Payload after the header:
 /// `agent: u32` (from 1), drive flags `u8` (bit 0: a velocity base, bit 1:
-/// its speed limits cut the command), 3 reserved bytes (0), then the f64s
+/// its speed limits cut the command; bits 4 to 7 are 0), 3 reserved bytes
+/// (0; a state with another flag bit or reserved byte is malformed: another
+/// version's, or corrupt), then the f64s
 /// `x, y, θ, v, ω, v̇, ω̇, e_x, e_y, z_x, z_y, u1, u2, τ_r, τ_l,
 /// p_d[2], ṗ_d[2], p̈_d[2], v*, ω*, v_applied, ω_applied, σ` (`v*` to
 /// `ω_applied` 0 for a torque-driven robot; `σ ≥ 0`). With drive flag bit 2
@@ -338,7 +349,7 @@ fn odometry_block(b: &[u8], flags: u8) -> Result<OdometryState, DecodeError> {
     }
     let fix_age = match flags & FLAG_FIX_AGE != 0 {
         true => Some(o[4]),
-        false if o[4] == 0.0 => None,
+        false if o[4].to_bits() == 0 => None,
         false => return Err(DecodeError::Malformed("a fix age without its flag")),
     };
     Ok(OdometryState {
@@ -405,6 +416,9 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
             let Some(&flags) = b.get(HEADER_LEN + 4) else {
                 return Err(DecodeError::Malformed("wrong length for a state"));
             };
+            if flags & !KNOWN_FLAGS != 0 {
+                return Err(DecodeError::Malformed("unknown drive flags"));
+            }
             let with_odometry = flags & FLAG_ODOMETRY != 0;
             let len = if with_odometry {
                 STATE_ODOMETRY_LEN
@@ -413,6 +427,9 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
             };
             if b.len() != len {
                 return Err(DecodeError::Malformed("wrong length for a state"));
+            }
+            if b[STATE_RESERVED] != [0; 3] {
+                return Err(DecodeError::Malformed("reserved bytes must be 0"));
             }
             let link =
                 LinkStatus::from_u8(b[3]).ok_or(DecodeError::Malformed("unknown link status"))?;
@@ -432,20 +449,24 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
                 true => Some(odometry_block(&b[STATE_LEN..], flags)?),
             };
             let velocity = match flags & !(FLAG_ODOMETRY | FLAG_FIX_AGE) {
-                0 if v[21..25] == [0.0; 4] => None,
+                0 if v[21..25].iter().all(|x| x.to_bits() == 0) => None,
                 0 => {
                     return Err(DecodeError::Malformed(
                         "a torque state with a velocity command",
                     ));
                 }
-                f if f & FLAG_VELOCITY != 0 && f & !DRIVE_BITS == 0 => Some(VelocitySample {
+                f if f & FLAG_VELOCITY != 0 => Some(VelocitySample {
                     v_cmd: v[21],
                     omega_cmd: v[22],
                     v_applied: v[23],
                     omega_applied: v[24],
                     sat: f & FLAG_SATURATED != 0,
                 }),
-                _ => return Err(DecodeError::Malformed("unknown drive flags")),
+                _ => {
+                    return Err(DecodeError::Malformed(
+                        "a saturation flag without a velocity base",
+                    ));
+                }
             };
             Ok(Message::State(
                 header,

@@ -15,7 +15,12 @@
 //!   counter of its reason, and nothing else changes (the robot's next
 //!   command is the one it would have sent without the input);
 //! - an accepted message holds finite values only, and its consumer still
-//!   commands and publishes finite values;
+//!   commands and publishes finite values; an accepted fleet wire message
+//!   is exactly the encoding of what it decoded to (no byte ignored: a
+//!   reserved byte or an unknown drive flag is refused); an accepted
+//!   odometry or fix has a unit quaternion (within tf2's tolerance; a zero
+//!   quaternion never becomes a heading), and an accepted fix leaves the
+//!   robot within its divergence guard's position bound;
 //! - valid messages round-trip exactly.
 //!
 //! Inputs: the fleet wire messages ([`wire::decode`]) as the robot takes
@@ -158,6 +163,48 @@ fn pair_mutations(valid: &[u8], base: usize) -> Vec<Mutant> {
         }
     }
     out
+}
+
+/// What a unit quaternion found in a message is scaled by: zero (an
+/// uninitialised message's), within tf2's tolerance of unit length (its
+/// squared norm within 10e-3 of 1) and beyond it, tiny and huge.
+const QUATERNION_SCALES: [f64; 11] = [
+    0.0, -0.0, 1e-200, 0.5, 0.99, 0.996, 1.004, 1.006, 2.0, 1e100, 1e200,
+];
+
+/// Every window of four aligned f64s (from `base`) holding a unit
+/// quaternion (a message's orientation, found by its norm) scaled by each
+/// of [`QUATERNION_SCALES`], and set to `(1, 1, 1, 1)` and `(0, 0, 0, 1e-3)`.
+fn quaternion_mutations(valid: &[u8], base: usize) -> Vec<Mutant> {
+    let f64_at = |b: &[u8], at: usize| f64::from_le_bytes(b[at..at + 8].try_into().expect("8"));
+    let mut out = Vec::new();
+    let mut at = base;
+    while at + 32 <= valid.len() {
+        let q: [f64; 4] = std::array::from_fn(|i| f64_at(valid, at + 8 * i));
+        if (q.iter().map(|c| c * c).sum::<f64>() - 1.0).abs() < 1e-12 {
+            let scaled = QUATERNION_SCALES.map(|s| q.map(|c| s * c));
+            for (k, v) in scaled
+                .into_iter()
+                .chain([[1.0; 4], [0.0, 0.0, 0.0, 1e-3]])
+                .enumerate()
+            {
+                let mut m = valid.to_vec();
+                for (i, c) in v.iter().enumerate() {
+                    m[at + 8 * i..at + 8 * i + 8].copy_from_slice(&c.to_le_bytes());
+                }
+                out.push((format!("quaternion at {at} #{k} = {v:?}"), m));
+            }
+        }
+        at += 8;
+    }
+    assert!(!out.is_empty(), "no unit quaternion in {}", hex(valid));
+    out
+}
+
+/// Whether `q` is a rotation by tf2's rule (`|x² + y² + z² + w² − 1| <
+/// 10e-3`), computed here apart from `checked_yaw`.
+fn tf2_takes(q: &msgs::Quaternion) -> bool {
+    ((q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w) - 1.0).abs() < 10e-3
 }
 
 /// One step of a random combination.
@@ -438,9 +485,18 @@ fn check_accepted_wire(m: &Message) -> Result<(), String> {
     }
 }
 
+/// What the decoder accepts is finite, in range and exactly the encoding
+/// of what it decoded to: every byte read, none ignored (a state's
+/// reserved bytes, its drive flags, a zero's sign).
 fn check_wire(b: &[u8]) -> Result<(), String> {
     match wire::decode(b) {
-        Ok(m) => check_accepted_wire(&m),
+        Ok(m) => {
+            check_accepted_wire(&m)?;
+            if encode(&m) != b {
+                return Err(format!("accepted {m:?}, which encodes otherwise"));
+            }
+            Ok(())
+        }
         Err(_) => Ok(()),
     }
 }
@@ -457,6 +513,58 @@ fn valid_wire_messages_round_trip_exactly() {
 fn every_single_mutation_of_a_wire_message_is_refused_or_finite() {
     let n = every_single_mutation("wire", &wire_corpus(), 0, check_wire);
     eprintln!("{n} wire mutations checked");
+}
+
+/// Every value of every reserved byte of a state, and every drive flag bit
+/// this version does not define: malformed to the decoder, counted as such
+/// by a robot on its leader stream and by a robot's safety filter, logged
+/// on `/rejected` by the collector; the robot's commands as without it.
+#[test]
+fn a_state_with_a_reserved_byte_or_an_unknown_flag_is_refused_everywhere() {
+    let s = fleet_scenario(true);
+    let base = synced_robot(&s, 2, &state_message(1, 1.0, 0, false, false));
+    let expected = run_ticks(&mut base.clone(), 0.02, 3).expect("the unmutated robot");
+    let keys = Keys::new("fuzz");
+    let mut mutants = Vec::new();
+    for (v, o) in [(false, false), (true, false), (true, true)] {
+        let valid = state_message(1, 1.02, 1, v, o);
+        for at in wire::HEADER_LEN + 5..wire::HEADER_LEN + 8 {
+            for byte in 1..=255u8 {
+                let mut m = valid.clone();
+                m[at] = byte;
+                mutants.push(m);
+            }
+        }
+        for bit in 4..8 {
+            let mut m = valid.clone();
+            m[wire::HEADER_LEN + 4] |= 1 << bit;
+            mutants.push(m);
+        }
+    }
+    for m in &mutants {
+        assert!(
+            matches!(wire::decode(m), Err(DecodeError::Malformed(_))),
+            "{}",
+            hex(m)
+        );
+        check_leader_stream(&base, &expected, m).unwrap_or_else(|e| panic!("{e}: {}", hex(m)));
+        let mut r = base.clone();
+        let before = r.counters().malformed;
+        r.on_message(m, 0.02);
+        assert_eq!(r.counters().malformed, before + 1, "{}", hex(m));
+        let refused = r.safety_counts().expect("a safety filter").refused;
+        r.on_neighbour(wire::decode(m), 0.02);
+        assert_eq!(
+            r.safety_counts().expect("a safety filter").refused,
+            refused + 1
+        );
+        let mut c = Collector::new(keys.clone());
+        let mut sink = Counting::default();
+        c.on_message(&keys.state(1), m, 1_000, &mut sink)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(rejected(&c), 1, "{}", hex(m));
+    }
+    assert_eq!(mutants.len(), 3 * (3 * 255 + 4));
 }
 
 // ---------------------------------------------------------------------------
@@ -1372,6 +1480,17 @@ fn every_single_mutation_of_odometry_is_counted_and_refused_or_finite() {
         if result.is_err() && d.state() != state {
             return Err(format!("refused ({result:?}) but the state changed"));
         }
+        // No orientation that is not a rotation (a zero quaternion was yaw
+        // 0) becomes the robot's heading.
+        if result.is_ok() {
+            let odom = Odometry::from_cdr_finite(b).map_err(|e| e.to_string())?;
+            if !tf2_takes(&odom.pose.pose.orientation) {
+                return Err(format!(
+                    "accepted the orientation {:?}",
+                    odom.pose.pose.orientation
+                ));
+            }
+        }
         d.advance(0.02);
         let s = d.state().ok_or("no state after an odometry sample")?;
         finite("the drive's state", &state_values(&s))?;
@@ -1389,6 +1508,13 @@ fn every_single_mutation_of_odometry_is_counted_and_refused_or_finite() {
     };
     let mut n = every_single_mutation("odometry", &odometry_corpus(), 4, check);
     n += every_mutation("odometry", &odometry_corpus(), 4, pair_mutations, check);
+    n += every_mutation(
+        "odometry",
+        &odometry_corpus(),
+        4,
+        quaternion_mutations,
+        check,
+    );
     eprintln!("{n} odometry mutations checked");
 }
 
@@ -1468,7 +1594,15 @@ fn check_ros2_robot(b: &[u8], diverged: &mut usize) -> Result<(), String> {
         .map_err(|e| e.to_string())?;
     r.tick(0.0);
     let t = r.fleet_time(0.02);
-    let _ = r.plant_mut().on_odom(&key, b, t);
+    if r.plant_mut().on_odom(&key, b, t).is_ok() {
+        let odom = Odometry::from_cdr_finite(b).map_err(|e| e.to_string())?;
+        if !tf2_takes(&odom.pose.pose.orientation) {
+            return Err(format!(
+                "the drive took the orientation {:?}",
+                odom.pose.pose.orientation
+            ));
+        }
+    }
     let period = r.config().period;
     for k in 0..3 {
         let now = 0.02 + f64::from(k) * period;
@@ -1519,11 +1653,30 @@ fn a_ros2_robot_fed_mutated_odometry_commands_finite_values() {
         pair_mutations,
         check,
     );
+    n += every_mutation(
+        "a ROS 2 robot's odometry",
+        &corpus,
+        4,
+        quaternion_mutations,
+        check,
+    );
     eprintln!(
         "{n} odometry mutations through a ROS 2 robot checked; {} stopped it as diverged",
         diverged.get()
     );
 }
+
+/// The divergence guard's position bound of [`fix_input`]'s robot, m (its
+/// `[sim] bounds`): no fix may put it farther from the world origin.
+const FIX_BOUND: f64 = 50.0;
+
+/// The last raw odometry [`fix_input`] fed: the pose of the robot in its
+/// odom frame now.
+const FIX_RAW_NOW: Pose = Pose {
+    x: 0.008,
+    y: 0.0,
+    theta: 0.0,
+};
 
 fn fix_input(message: FixMessage) -> FixInput {
     let source = FixSource {
@@ -1553,7 +1706,8 @@ fn fix_input(message: FixMessage) -> FixInput {
         Pose::default(),
         1.0,
     )
-    .unwrap_or_else(|e| panic!("{e}"));
+    .unwrap_or_else(|e| panic!("{e}"))
+    .with_bounds(echelon::guard::Bounds::new(100.0, 100.0, FIX_BOUND).expect("bounds"));
     for k in 0..5 {
         let t = f64::from(k) * 0.02;
         f.on_odom(
@@ -1567,6 +1721,19 @@ fn fix_input(message: FixMessage) -> FixInput {
         );
     }
     f
+}
+
+/// The orientation of a fix message `b` of type `message` (`None`: it does
+/// not decode finite).
+fn fix_orientation(message: FixMessage, b: &[u8]) -> Option<msgs::Quaternion> {
+    match message {
+        FixMessage::PoseStamped => PoseStamped::from_cdr_finite(b)
+            .ok()
+            .map(|m| m.pose.orientation),
+        FixMessage::PoseWithCovarianceStamped => PoseWithCovarianceStamped::from_cdr_finite(b)
+            .ok()
+            .map(|m| m.pose.pose.orientation),
+    }
 }
 
 fn pose_values(p: &Pose) -> [f64; 3] {
@@ -1633,6 +1800,7 @@ fn every_single_mutation_of_a_fix_is_counted_and_refused_or_finite() {
                         + c.malformed
                         + c.unmatched
                         + c.gated
+                        + c.beyond_bounds
                 };
                 match &result {
                     Err(e) => {
@@ -1649,6 +1817,16 @@ fn every_single_mutation_of_a_fix_is_counted_and_refused_or_finite() {
                         if after.applied != before.applied + 1 {
                             return Err(format!("accepted but counted {after:?}"));
                         }
+                        // First fix or not, it leaves the robot within its
+                        // guard's bound, with a heading from a rotation.
+                        let now = f.correction().compose(&FIX_RAW_NOW);
+                        if now.x.hypot(now.y) > FIX_BOUND {
+                            return Err(format!("accepted a fix that put the robot at {now:?}"));
+                        }
+                        match fix_orientation(message, b) {
+                            Some(q) if tf2_takes(&q) => {}
+                            q => return Err(format!("accepted the orientation {q:?}")),
+                        }
                     }
                 }
                 finite("the correction", &pose_values(&f.correction()))?;
@@ -1659,6 +1837,7 @@ fn every_single_mutation_of_a_fix_is_counted_and_refused_or_finite() {
             };
             count += every_single_mutation("fix", &corpus, 4, check);
             count += every_mutation("fix", &corpus[..1], 4, pair_mutations, check);
+            count += every_mutation("fix", &corpus, 4, quaternion_mutations, check);
         }
     }
     eprintln!("{count} fix mutations checked");

@@ -15,8 +15,9 @@
 //!
 //! Frames follow REP 103/105: the odometry pose is in `header.frame_id`
 //! (`odom`), its twist in `child_frame_id` (`base_link`), x forward, z up,
-//! yaw counter-clockwise. [`Quaternion::yaw`] and [`YawUnwrapper`] turn the
-//! orientation into the continuous heading the control law needs.
+//! yaw counter-clockwise. [`Quaternion::checked_yaw`] (tf2's normalisation
+//! rule) and [`YawUnwrapper`] turn the orientation into the continuous
+//! heading the control law needs.
 
 use std::f64::consts::{PI, TAU};
 
@@ -147,7 +148,32 @@ impl Quaternion {
         };
         (2.0 * (w * z + x * y)).atan2(w * w + x * x - y * y - z * z)
     }
+
+    /// Its yaw ([`Quaternion::yaw`]) if it is a rotation: every component
+    /// finite and its squared norm within [`QUATERNION_NORM_TOLERANCE`] of
+    /// 1; `None` otherwise (an all-zero quaternion, an uninitialised
+    /// message's, has no yaw; four arbitrary numbers are not an
+    /// orientation). The one conversion for every pose read from the
+    /// network: a ROS 2 robot's odometry and its fixes.
+    pub fn checked_yaw(&self) -> Option<f64> {
+        let Quaternion { x, y, z, w } = *self;
+        let norm_sq = x * x + y * y + z * z + w * w;
+        // A NaN (or an overflow to ∞) fails the comparison.
+        ((norm_sq - 1.0).abs() < QUATERNION_NORM_TOLERANCE).then(|| self.yaw())
+    }
 }
+
+/// How far a quaternion's squared norm `x² + y² + z² + w²` may be from 1
+/// for [`Quaternion::checked_yaw`] to take it as a rotation: tf2's own
+/// rule. `tf2::BufferCore::setTransform` (ros2/geometry2,
+/// `tf2/src/buffer_core.cpp`) ignores a transform whose rotation has
+/// `|x² + y² + z² + w² − 1| ≥ QUATERNION_NORMALIZATION_TOLERANCE = 10e-3`
+/// and logs `TF_DENORMALIZED_QUATERNION`; RViz validates message
+/// quaternions against the same tolerance ("same as in tf"). So a
+/// quaternion a little off unit length (float32 rounding, a renormalised
+/// filter state) is taken, its yaw that of the rotation it scales; one
+/// that tf2 would refuse is refused.
+pub const QUATERNION_NORM_TOLERANCE: f64 = 10e-3;
 
 /// Wraps an angle into `[-π, π)`.
 pub fn wrap_angle(a: f64) -> f64 {
@@ -576,6 +602,58 @@ mod tests {
             ..Quaternion::default()
         };
         assert_eq!(zero.yaw(), 0.0);
+    }
+
+    /// `checked_yaw` takes a quaternion exactly when tf2 would: a rotation
+    /// scaled by `s` has squared norm `s²`, taken iff `|s² − 1| < 10e-3`,
+    /// and then its yaw is the rotation's; zero, non-finite and overflowing
+    /// quaternions have none.
+    #[test]
+    fn checked_yaw_takes_what_tf2_takes() {
+        let mut taken = 0;
+        for k in -20..=20 {
+            let a = f64::from(k) * 0.37;
+            let q = Quaternion::from_yaw(a);
+            assert_eq!(q.checked_yaw(), Some(q.yaw()));
+            // Scales across [0, 2], densest near tf2's edges (s² = 1 ± 0.01).
+            let edges = [0.99f64.sqrt(), 1.01f64.sqrt()];
+            let scales = (0..=400)
+                .map(|n| f64::from(n) * 0.005)
+                .chain(edges.iter().flat_map(|e| [e - 1e-9, e + 1e-9]));
+            for scale in scales {
+                let s = Quaternion {
+                    x: scale * q.x,
+                    y: scale * q.y,
+                    z: scale * q.z,
+                    w: scale * q.w,
+                };
+                let norm_sq = s.x * s.x + s.y * s.y + s.z * s.z + s.w * s.w;
+                let want = (norm_sq - 1.0).abs() < QUATERNION_NORM_TOLERANCE;
+                match s.checked_yaw() {
+                    Some(yaw) => {
+                        assert!(want, "{a} × {scale}: taken");
+                        assert!(wrap_angle(yaw - a).abs() < 1e-9, "{a} × {scale}: {yaw}");
+                        taken += 1;
+                    }
+                    None => assert!(!want, "{a} × {scale}: refused"),
+                }
+            }
+        }
+        // Per yaw: 0.995 and 1 of the grid (1.005² = 1.010025 is out) and
+        // the two edges' inner sides.
+        assert_eq!(taken, 41 * 4);
+        let zero = Quaternion {
+            w: 0.0,
+            ..Quaternion::default()
+        };
+        assert_eq!(zero.checked_yaw(), None);
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e200, f64::MAX] {
+            let q = Quaternion {
+                x: bad,
+                ..Quaternion::default()
+            };
+            assert_eq!(q.checked_yaw(), None, "{bad}");
+        }
     }
 
     #[test]

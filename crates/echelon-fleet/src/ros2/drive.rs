@@ -17,8 +17,11 @@
 //!   covariance, else the dead-reckoning rule of [`Drift`] on its error
 //!   model;
 //! - odometry that is not CDR of `nav_msgs/msg/Odometry`, carries the wrong
-//!   type or hash on its key, holds a NaN or an infinity, or is in other
-//!   frames than configured is counted and refused, never a crash;
+//!   type or hash on its key, holds a NaN or an infinity, is in other
+//!   frames than configured, or whose orientation is not a rotation (all
+//!   zero, or a squared norm beyond tf2's tolerance of 1, as the fixes:
+//!   [`echelon_ros2::msgs::Quaternion::checked_yaw`]) is counted and
+//!   refused, never a crash, and never becomes the robot's state;
 //! - no command it sends is non-finite or beyond the base's speed limits
 //!   (scaled together, keeping the curvature, [`VelocityBase::limit`]);
 //! - [`Plant::stop`] sends a zero command at once (leader or odometry lost,
@@ -120,7 +123,9 @@ pub struct Ros2Counters {
     pub odom_accepted: u64,
     /// Refused: another type or hash on the key.
     pub odom_wrong_type: u64,
-    /// Refused: not CDR of `nav_msgs/msg/Odometry`.
+    /// Refused: not CDR of `nav_msgs/msg/Odometry`, or its orientation not
+    /// a rotation (a zero quaternion, or not normalised within tf2's
+    /// tolerance).
     pub odom_malformed: u64,
     /// Refused: a NaN or an infinity.
     pub odom_non_finite: u64,
@@ -261,12 +266,12 @@ impl<S: CmdSink> Ros2Drive<S> {
         self.counters.odom_received += 1;
         let checked = self.check_odom(key, payload);
         match &checked {
-            Ok(odom) => {
+            Ok((odom, yaw)) => {
                 let p = odom.pose.pose.position;
                 let raw = State {
                     x: p.x,
                     y: p.y,
-                    theta: self.yaw.unwrap(odom.yaw()),
+                    theta: self.yaw.unwrap(*yaw),
                     v: odom.twist.twist.linear.x,
                     omega: odom.twist.twist.angular.z,
                 };
@@ -284,6 +289,7 @@ impl<S: CmdSink> Ros2Drive<S> {
             Err(SampleRefusal::WrongFrames(..)) => self.counters.odom_wrong_frames += 1,
             Err(
                 SampleRefusal::Malformed(_)
+                | SampleRefusal::Orientation
                 | SampleRefusal::NoAttachment
                 | SampleRefusal::Stale { .. },
             ) => {
@@ -293,7 +299,8 @@ impl<S: CmdSink> Ros2Drive<S> {
         checked.map(|_| ())
     }
 
-    fn check_odom(&self, key: &str, payload: &[u8]) -> Result<Odometry, SampleRefusal> {
+    /// The odometry and its yaw (rad, `[-π, π]`), or why it is refused.
+    fn check_odom(&self, key: &str, payload: &[u8]) -> Result<(Odometry, f64), SampleRefusal> {
         check_topic_key(self.link.key_scheme, key, &ODOMETRY)
             .map_err(|e| SampleRefusal::WrongType(e.to_string()))?;
         let odom = Odometry::from_cdr_finite(payload).map_err(SampleRefusal::from)?;
@@ -305,7 +312,13 @@ impl<S: CmdSink> Ros2Drive<S> {
                 odom.child_frame_id,
             ));
         }
-        Ok(odom)
+        let yaw = odom
+            .pose
+            .pose
+            .orientation
+            .checked_yaw()
+            .ok_or(SampleRefusal::Orientation)?;
+        Ok((odom, yaw))
     }
 
     /// Sends `cmd` (already finite and within the limits); a stop's zero

@@ -13,19 +13,32 @@
 //! implementation):
 //!
 //! 1. checked (type and hash on the key, CDR, finite, its `frame_id`, a
-//!    usable orientation), else counted and refused;
+//!    usable orientation: a unit quaternion within tf2's tolerance, the
+//!    drive's rule for odometry,
+//!    [`echelon_ros2::msgs::Quaternion::checked_yaw`]), else counted and
+//!    refused;
 //! 2. mapped into the world (`frame_origin ⊕ pose`);
 //! 3. latency compensated from its stamp: the raw odometry at the stamp is
 //!    interpolated in the recent history (odometry stamps and fix stamps
 //!    must share a clock: chrony), and the fix carried to now by the motion
 //!    the odometry measured since (`fix ⊕ (then⁻¹ ⊕ now)`);
-//! 4. gated: its squared Mahalanobis distance from the estimate, with the
+//! 4. bounded: a fix that would put the robot farther from the world origin
+//!    than the divergence guard's position bound (`[sim] bounds`,
+//!    [`Bounds::distance`]) is refused and counted
+//!    ([`FixRefusal::BeyondBounds`]), first fix or not, gate or not: taken,
+//!    it would stop the robot as diverged on one message (a finite fix
+//!    1e300 m away did);
+//! 5. gated: its squared Mahalanobis distance from the estimate, with the
 //!    covariance the odometry's error model grew since the last fix, beyond
 //!    the chi-square 99.9 % quantile, is refused and counted. The first fix
-//!    is taken as it is (until then the world pose is only `odom_origin`'s
-//!    say-so); after [`RELOCALIZE_AFTER`] refusals in a row the fixes are
-//!    believed over the odometry (the robot relocalises: counted and said);
-//! 5. fused: the covariance is the message's when it has one
+//!    is not gated: until then the world pose is only `odom_origin`'s
+//!    say-so, which states no uncertainty (the covariance the odometry grew
+//!    since is its drift from `odom_origin`, not how wrong `odom_origin`
+//!    may be), and a robot switched on elsewhere than its `odom_origin`
+//!    says must take a genuine first fix metres away (relocalisation). After
+//!    [`RELOCALIZE_AFTER`] refusals in a row the fixes are believed over
+//!    the odometry (the robot relocalises: counted and said);
+//! 6. fused: the covariance is the message's when it has one
 //!    (`PoseWithCovarianceStamped`), else the scenario's `position_noise`
 //!    and `heading_noise` (no `heading_noise`: the heading is not fixed).
 //!
@@ -40,6 +53,7 @@
 use std::collections::VecDeque;
 
 use echelon::agent::AgentSpec;
+use echelon::guard::Bounds;
 use echelon::model::{Pose, wrap_angle};
 use echelon::odometry::fuse::{FixFusion, FixNoise, carry};
 use echelon::odometry::{ErrorModel, FixSpec, arc_motion};
@@ -50,7 +64,7 @@ use echelon_ros2::KeyScheme;
 use echelon_ros2::keys::check_topic_key;
 use echelon_ros2::msgs::{
     MessageType, POSE_STAMPED, POSE_WITH_COVARIANCE_STAMPED, PoseStamped,
-    PoseWithCovarianceStamped, Quaternion, RosMessage,
+    PoseWithCovarianceStamped, RosMessage,
 };
 
 use super::refusal::SampleRefusal;
@@ -84,9 +98,17 @@ pub enum FixRefusal {
     /// Another `frame_id` than configured.
     #[error("frame `{0}`, expected `{1}`")]
     Frame(String, String),
-    /// No usable orientation (a zero quaternion).
-    #[error("no usable orientation (a zero quaternion)")]
-    Orientation,
+    /// It would put the robot beyond the divergence guard's position
+    /// bound: `distance` m from the world origin, the bound `bound` m.
+    #[error(
+        "beyond the bounds: {distance:.3e} m from the world origin, the guard's bound {bound} m"
+    )]
+    BeyondBounds {
+        /// The distance of the pose it gives, m.
+        distance: f64,
+        /// `[sim] bounds` distance, m.
+        bound: f64,
+    },
     /// No odometry at its stamp.
     #[error("no odometry at the fix's stamp")]
     Unmatched,
@@ -125,6 +147,9 @@ pub struct FixInput {
     noise: FixNoise,
     fusion: FixFusion,
     model: OdometryModel,
+    /// The divergence guard's bounds (`[sim] bounds`): no fix may put the
+    /// robot beyond its position bound.
+    bounds: Bounds,
     timeout: f64,
     required: Option<FixRequirement>,
     /// The odom frame's pose in the world.
@@ -178,6 +203,7 @@ impl FixInput {
                 heading: spec.heading_noise(),
             },
             model,
+            bounds: Bounds::DEFAULT,
             required,
             correction: odom_origin,
             history: VecDeque::with_capacity(HISTORY),
@@ -191,6 +217,14 @@ impl FixInput {
             too_slow: false,
             counters: FixCounters::default(),
         })
+    }
+
+    /// The same fixes within the divergence guard's `bounds` (the robot's
+    /// `[sim] bounds`; without: [`Bounds::DEFAULT`]): a fix that would put
+    /// the robot farther from the world origin than `bounds.distance` is
+    /// refused ([`FixRefusal::BeyondBounds`]).
+    pub fn with_bounds(self, bounds: Bounds) -> Self {
+        FixInput { bounds, ..self }
     }
 
     /// The source.
@@ -288,8 +322,9 @@ impl FixInput {
                 FixRefusal::Sample(SampleRefusal::WrongType(_)) => c.wrong_type += 1,
                 FixRefusal::Sample(SampleRefusal::NonFinite(_)) => c.non_finite += 1,
                 FixRefusal::Frame(..) => c.wrong_frame += 1,
-                FixRefusal::Sample(_) | FixRefusal::Orientation => c.malformed += 1,
+                FixRefusal::Sample(_) => c.malformed += 1,
                 FixRefusal::Unmatched => c.unmatched += 1,
+                FixRefusal::BeyondBounds { .. } => c.beyond_bounds += 1,
                 FixRefusal::Gated { .. } => c.gated += 1,
             }
         }
@@ -308,9 +343,22 @@ impl FixInput {
         // The heading continuous with the estimate's (which is unwrapped).
         fix.theta = then.theta + wrap_angle(fix.theta - then.theta);
         let carried = carry(&fix, &then, &estimate);
+        // The position the fix gives the robot now (what `reset` makes the
+        // estimate; `ekf` moves it towards it), checked before the fusion
+        // counts or changes anything.
+        let distance = carried.x.hypot(carried.y);
+        // (A fix near f64::MAX overflows to ∞ or NaN on the way: beyond too.)
+        if !distance.is_finite() || distance > self.bounds.distance {
+            return Err(FixRefusal::BeyondBounds {
+                distance,
+                bound: self.bounds.distance,
+            });
+        }
         let fused = if self.last_fix.is_none() {
             // Until its first fix the world pose is only `odom_origin`'s
-            // say-so: the first fix is taken as it is.
+            // say-so, with no stated uncertainty: the first fix within the
+            // bounds is taken as it is (a robot switched on elsewhere than
+            // its `odom_origin` relocalises on it).
             Ok(self.fusion.reset(&estimate, &then, &fix, noise))
         } else {
             self.fusion.apply(&estimate, &then, &fix, noise)
@@ -415,14 +463,13 @@ impl FixInput {
                 self.source.frame.clone(),
             ));
         }
-        let q: Quaternion = pose.orientation;
-        if q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w < 1e-12 {
-            return Err(FixRefusal::Orientation);
-        }
         let fix = Pose {
             x: pose.position.x,
             y: pose.position.y,
-            theta: q.yaw(),
+            theta: pose
+                .orientation
+                .checked_yaw()
+                .ok_or(SampleRefusal::Orientation)?,
         };
         let noise = match covariance {
             None => self.noise,
@@ -512,7 +559,7 @@ pub fn for_agent(
         link.odom_origin,
         spec.gains().ke(),
     )
-    .map(Some)
+    .map(|f| Some(f.with_bounds(plan.config().bounds)))
     .map_err(refuse)
 }
 

@@ -15,6 +15,11 @@ pub enum SampleRefusal {
     /// A NaN or an infinity.
     #[error("non-finite {0}")]
     NonFinite(&'static str),
+    /// No usable orientation: a quaternion that is not a rotation (all
+    /// zero, or a squared norm beyond tf2's tolerance of 1:
+    /// [`echelon_ros2::msgs::Quaternion::checked_yaw`]).
+    #[error("no usable orientation: not a unit quaternion (tf2's tolerance)")]
+    Orientation,
     /// Frames other than configured.
     #[error("frames `{0}` → `{1}`, expected the configured ones")]
     WrongFrames(String, String),

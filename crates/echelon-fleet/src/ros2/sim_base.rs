@@ -355,7 +355,9 @@ impl SimBase {
                     SampleRefusal::NonFinite(_) => self.counters.cmd_non_finite += 1,
                     SampleRefusal::NoAttachment => self.counters.cmd_no_attachment += 1,
                     SampleRefusal::Stale { .. } => self.counters.cmd_stale += 1,
-                    SampleRefusal::Malformed(_) | SampleRefusal::WrongFrames(..) => {
+                    SampleRefusal::Malformed(_)
+                    | SampleRefusal::WrongFrames(..)
+                    | SampleRefusal::Orientation => {
                         self.counters.cmd_malformed += 1;
                     }
                 }

@@ -1,5 +1,6 @@
 use super::*;
 use echelon::base::VelocityBaseSpec;
+use echelon::model::wrap_angle;
 use echelon::scenario::Scenario;
 use echelon_ros2::KeyScheme;
 use echelon_ros2::keys::topic_key;
@@ -138,6 +139,49 @@ fn bad_odometry_is_counted_and_refused() {
         ..Ros2Counters::default()
     };
     assert_eq!(*d.counters(), counted);
+}
+
+proptest::proptest! {
+    /// One rule for the drive and the fixes: an odometry whose orientation
+    /// is a rotation scaled by `s` is the state iff tf2 would take it
+    /// (`|s² − 1| < 10e-3`), its heading the rotation's; otherwise (an
+    /// all-zero quaternion was yaw 0) it is counted as malformed and
+    /// changes nothing: the state, the raw odometry, the heading unwrapper.
+    #[test]
+    fn odometry_whose_orientation_is_no_rotation_is_refused(
+        yaw in -3.1..3.1f64, scale in 0.0..2.0f64, zero in proptest::bool::ANY,
+    ) {
+        let scale = if zero { 0.0 } else { scale };
+        let mut d = drive(VelocityBase::IDEAL);
+        let l = link();
+        let key = odom_key(&l);
+        d.on_odom(&key, &odom(1.0, 3.0, 0.2), 0.0).expect("valid");
+        let (state, raw) = (d.state(), Plant::odometry(&d));
+        let mut msg = Odometry::from_cdr(&odom(1.5, yaw, 0.2)).expect("valid");
+        let q = &mut msg.pose.pose.orientation;
+        (q.x, q.y, q.z, q.w) = (scale * q.x, scale * q.y, scale * q.z, scale * q.w);
+        let taken = (scale * scale - 1.0).abs() < 0.0099;
+        let refused = (scale * scale - 1.0).abs() > 0.0101;
+        let r = d.on_odom(&key, &msg.to_cdr(), 0.0);
+        if taken {
+            proptest::prop_assert!(r.is_ok(), "{scale}: {r:?}");
+            let s = d.state().expect("fresh");
+            // Unwrapped from 3.0: the same heading modulo 2π, within π of 3.
+            proptest::prop_assert!(wrap_angle(s.theta - yaw).abs() < 1e-9, "{s:?}");
+            proptest::prop_assert!((s.theta - 3.0).abs() <= std::f64::consts::PI + 1e-9);
+            proptest::prop_assert_eq!(s.x, 1.5);
+        }
+        if refused {
+            proptest::prop_assert_eq!(r, Err(SampleRefusal::Orientation));
+            proptest::prop_assert_eq!((d.state(), Plant::odometry(&d)), (state, raw));
+            let c = d.counters();
+            proptest::prop_assert_eq!((c.odom_received, c.odom_accepted, c.odom_malformed), (2, 1, 1));
+            // The unwrapper did not see it: a valid heading next follows 3.0.
+            d.on_odom(&key, &odom(1.5, -3.0, 0.2), 0.0).expect("valid");
+            let s = d.state().expect("fresh");
+            proptest::prop_assert!((s.theta - (std::f64::consts::TAU - 3.0)).abs() < 1e-12);
+        }
+    }
 }
 
 /// A drive whose odom frame is at a world pose `origin` (returned with

@@ -24,7 +24,8 @@ pub struct FixCounters {
     pub relocalized: u64,
     /// Refused: another type or hash on the key.
     pub wrong_type: u64,
-    /// Refused: not CDR of the message type, or no usable orientation.
+    /// Refused: not CDR of the message type, or no usable orientation (not
+    /// a unit quaternion within tf2's tolerance).
     pub malformed: u64,
     /// Refused: a NaN or an infinity.
     pub non_finite: u64,
@@ -33,6 +34,11 @@ pub struct FixCounters {
     /// Refused: no odometry at the fix's stamp (older than the history, or
     /// no odometry yet).
     pub unmatched: u64,
+    /// Refused: it would put the robot farther from the world origin than
+    /// the divergence guard's position bound (`[sim] bounds`). Absent from
+    /// the stats of earlier versions: 0.
+    #[serde(default)]
+    pub beyond_bounds: u64,
     /// Times fixes went missing for longer than the timeout.
     pub outages: u64,
 }

@@ -166,8 +166,25 @@ fn bad_fixes_are_counted_and_refused() {
     zero_q.pose.orientation.w = 0.0;
     assert_eq!(
         f.on_fix(&k, &zero_q.to_cdr(), 0.0),
-        Err(FixRefusal::Orientation)
+        Err(FixRefusal::Sample(SampleRefusal::Orientation))
     );
+    // Not normalised beyond tf2's tolerance: |1.1² − 1| = 0.21.
+    let mut long_q = PoseStamped::planar(here.x, here.y, 0.0, Time::from_nanos(1_000), "map");
+    long_q.pose.orientation.w = 1.1;
+    assert_eq!(
+        f.on_fix(&k, &long_q.to_cdr(), 0.0),
+        Err(FixRefusal::Sample(SampleRefusal::Orientation))
+    );
+    // 2 km away, beyond a 1 km guard (and the gate).
+    let mut bounded = f
+        .clone()
+        .with_bounds(Bounds::new(100.0, 100.0, 1e3).unwrap());
+    let beyond = Pose { x: 2e3, ..here };
+    assert!(matches!(
+        bounded.on_fix(&k, &pose_msg(&beyond, 1_000, "map"), 0.0),
+        Err(FixRefusal::BeyondBounds { bound: 1e3, .. })
+    ));
+    assert_eq!(bounded.counters().beyond_bounds, 1);
     // 5 m away with 5 mm noise.
     let far = Pose {
         x: here.x + 5.0,
@@ -196,8 +213,9 @@ fn bad_fixes_are_counted_and_refused() {
             c.gated,
             c.applied
         ),
-        (9, 2, 1, 2, 1, 1, 1, 1)
+        (10, 2, 1, 3, 1, 1, 1, 1)
     );
+    assert_eq!(c.beyond_bounds, 0);
     // 3 mm off: applied.
     let near = Pose {
         x: here.x + 0.003,
@@ -340,4 +358,114 @@ fn fix_intervals_are_held_against_theorem_2() {
     assert!(rep.too_slow);
     assert!((rep.interval_max.expect("intervals") - 1.1 * req.interval).abs() < 1e-9);
     assert_eq!(rep.age, Some(0.0));
+}
+
+/// A point `distance` m from the world origin in direction `angle`.
+fn at_distance(distance: f64, angle: f64, theta: f64) -> Pose {
+    Pose {
+        x: distance * angle.cos(),
+        y: distance * angle.sin(),
+        theta,
+    }
+}
+
+proptest! {
+    /// The first fix is plausible or refused: one beyond the guard's
+    /// position bound (any distance past it, up to 1e300 m) is refused
+    /// and counted in `beyond_bounds`, and nothing changes (the
+    /// correction, the covariance, no fix taken); a genuine first fix
+    /// anywhere within the bound, however far from where `odom_origin`
+    /// put the robot and however sure the odometry was, is taken as it is
+    /// (relocalisation), gate or not; after it, a fix beyond the bound is
+    /// refused the same way, gate or not (without the gate nothing else
+    /// would refuse it).
+    #[test]
+    fn a_fix_beyond_the_bounds_is_refused_and_a_far_first_fix_within_them_taken(
+        bound in 1.0..1e5f64,
+        origin in pose(),
+        inside in 0.0..1.0f64, inside_angle in -3.2..3.2f64, heading in -3.1..3.1f64,
+        past in 1e-6..300.0f64, past_angle in -3.2..3.2f64,
+        gate in any::<bool>(), ekf in any::<bool>(),
+    ) {
+        let (fusion, model) = if ekf {
+            let errors = ErrorModel::PERFECT.with_slip(1e-4).unwrap();
+            (Fusion::Ekf, OdometryModel { errors, ..MODEL })
+        } else {
+            (Fusion::Reset, MODEL)
+        };
+        let origin = Pose { x: origin.x.clamp(-bound, bound) / 2.0, y: origin.y.clamp(-bound, bound) / 2.0, ..origin };
+        let mut f = input(
+            source(FixMessage::PoseStamped, Pose::default(), gate),
+            spec(fusion, 0.005, Some(0.01)),
+            model,
+            origin,
+        )
+        .with_bounds(Bounds::new(100.0, 100.0, bound).unwrap());
+        let k = key(FixMessage::PoseStamped);
+        for i in 0..20 {
+            let raw = Pose { x: 0.01 * f64::from(i), ..Pose::default() };
+            f.on_odom(1_000 + i64::from(i), raw, 0.02 * f64::from(i));
+        }
+        let raw_now = Pose { x: 0.19, ..Pose::default() };
+        // Beyond: `bound · 10^past`, 1e-6 decades (a hair) to 300.
+        let far = at_distance(bound * 10f64.powf(past), past_angle, heading);
+        let fresh = f.clone();
+        let r = f.on_fix(&k, &pose_msg(&far, 0, "map"), 0.4);
+        prop_assert!(matches!(r, Err(FixRefusal::BeyondBounds { .. })), "{r:?}");
+        prop_assert_eq!(f.counters().beyond_bounds, 1);
+        prop_assert_eq!(f.counters().applied, 0);
+        prop_assert_eq!(f.correction(), fresh.correction());
+        prop_assert_eq!(f.covariance(), fresh.covariance());
+        prop_assert!(f.last_fix().is_none());
+        // Within, anywhere: taken as it is, the estimate now the fix.
+        let near = at_distance(inside * bound, inside_angle, heading);
+        prop_assert!(f.on_fix(&k, &pose_msg(&near, 0, "map"), 0.4).is_ok());
+        let est = f.correction().compose(&raw_now);
+        let tol = 1e-9 * bound.max(1.0);
+        prop_assert!((est.x - near.x).abs() < tol && (est.y - near.y).abs() < tol, "{est:?} vs {near:?}");
+        prop_assert!(wrap_angle(est.theta - near.theta).abs() < 1e-9);
+        // Beyond again, after a fix: refused as beyond, nothing moved.
+        let correction = f.correction();
+        let r = f.on_fix(&k, &pose_msg(&far, 0, "map"), 0.5);
+        prop_assert!(matches!(r, Err(FixRefusal::BeyondBounds { .. })), "{r:?}");
+        prop_assert_eq!(f.correction(), correction);
+        let c = f.counters();
+        prop_assert_eq!((c.received, c.applied, c.beyond_bounds, c.gated), (3, 1, 2, 0));
+    }
+}
+
+/// `for_agent` holds the fixes to the scenario's own `[sim] bounds`: with
+/// `distance = 30`, a fix 40 m away is refused as beyond them, one 20 m
+/// away (as far from `odom_origin`) taken.
+#[test]
+fn for_agent_bounds_the_fixes_by_the_scenarios_guard() {
+    use echelon::scenario::{Overrides, Scenario};
+    // The lab robots of the paper's experiment, taking fixes from ROS 2,
+    // with a 30 m guard.
+    let src = include_str!("../../../../../scenarios/experiment-circle-velocity.toml")
+        .replace("[sim]\n", "[sim]\nbounds = { distance = 30.0 }\n")
+        + "\n[odometry]\nperiod = 0.02\n\n[fixes]\nsource = \"/mocap/robot1/pose\"\nperiod = 0.1\nposition_noise = 0.005\n\n[fleet.ros2]\n";
+    assert!(src.contains("bounds = { distance = 30.0 }"));
+    let s = Scenario::parse(&src, "bounded.toml", None).unwrap_or_else(|e| panic!("{e}"));
+    let plan = s
+        .build(&Overrides::default())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .plan;
+    let link = s.fleet().unwrap_or_else(|e| panic!("{e}")).ros2[0].clone();
+    let spec = crate::robot::agent_spec(&plan, 1).unwrap_or_else(|e| panic!("{e}"));
+    let mut f = for_agent(1, &link, &plan, &spec)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .expect("fixes");
+    let k = key(FixMessage::PoseStamped);
+    f.on_odom(1_000, Pose::default(), 0.0);
+    let r = f.on_fix(&k, &pose_msg(&at_distance(40.0, 0.3, 0.0), 0, "map"), 0.0);
+    assert!(
+        matches!(r, Err(FixRefusal::BeyondBounds { distance, bound: 30.0 }) if (distance - 40.0).abs() < 1e-9),
+        "{r:?}"
+    );
+    let near = at_distance(20.0, 0.3, 0.0);
+    f.on_fix(&k, &pose_msg(&near, 0, "map"), 0.0)
+        .expect("a first fix 20 m away, within the bounds");
+    assert!((f.correction().x - near.x).abs() < 1e-12);
+    assert_eq!((f.counters().applied, f.counters().beyond_bounds), (1, 1));
 }

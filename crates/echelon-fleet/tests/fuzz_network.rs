@@ -50,10 +50,10 @@ use echelon_fleet::faults::FaultSpec;
 use echelon_fleet::keys::{KeyKind, Keys};
 use echelon_fleet::plant::{Plant, SimulatedDrive};
 use echelon_fleet::robot::{Robot, RobotConfig, sample_of};
-use echelon_fleet::ros2::drive::{CmdSink, Ros2Drive, encode_cmd_vel};
+use echelon_fleet::ros2::drive::{CmdSink, Ros2Counters, Ros2Drive, encode_cmd_vel};
 use echelon_fleet::ros2::fixes::{FixInput, OdometryModel, fix_type};
 use echelon_fleet::ros2::record::RosTopic;
-use echelon_fleet::ros2::sim_base::SimBase;
+use echelon_fleet::ros2::sim_base::{BaseCounters, SimBase};
 use echelon_fleet::wire::{
     self, DecodeError, Header, LinkStatus, Message, OdometryState, Reference, RobotState,
 };
@@ -116,23 +116,22 @@ fn single_mutations(valid: &[u8], base: usize) -> Vec<Mutant> {
             }
         }
     }
-    let mut at = base;
-    while at + 8 <= valid.len() {
-        for v in F64S {
+    // Every f64 and u32 word from `base` on, set to each special value.
+    let words = F64S
+        .iter()
+        .map(|v| (format!("f64 {v:e}"), v.to_le_bytes().to_vec()))
+        .chain(
+            U32S.iter()
+                .map(|v| (format!("u32 {v}"), v.to_le_bytes().to_vec())),
+        );
+    for (what, word) in words {
+        let mut at = base;
+        while at + word.len() <= valid.len() {
             let mut m = valid.to_vec();
-            m[at..at + 8].copy_from_slice(&v.to_le_bytes());
-            out.push((format!("f64 at {at} = {v:e}"), m));
+            m[at..at + word.len()].copy_from_slice(&word);
+            out.push((format!("{what} at {at}"), m));
+            at += word.len();
         }
-        at += 8;
-    }
-    let mut at = base;
-    while at + 4 <= valid.len() {
-        for v in U32S {
-            let mut m = valid.to_vec();
-            m[at..at + 4].copy_from_slice(&v.to_le_bytes());
-            out.push((format!("u32 at {at} = {v}"), m));
-        }
-        at += 4;
     }
     for (name, tail) in [
         ("a zero byte appended", vec![0u8]),
@@ -326,18 +325,18 @@ fn every_mutation(
             }
         }
     }
+    none_failed(&failures, &format!("{count} mutations of {what}"));
+    count
+}
+
+/// No failure among `of` (up to 12 of them shown).
+fn none_failed(failures: &[String], of: &str) {
     assert!(
         failures.is_empty(),
-        "{} of {count} mutations of {what} failed; the first:\n{}",
+        "{} of {of} failed; the first:\n{}",
         failures.len(),
-        failures
-            .iter()
-            .take(12)
-            .cloned()
-            .collect::<Vec<_>>()
-            .join("\n")
+        failures[..failures.len().min(12)].join("\n")
     );
-    count
 }
 
 /// Proptest with a fixed seed (CI runs the same sample) and no files.
@@ -909,17 +908,7 @@ fn every_mutation_of_a_fleet_command_is_counted_or_obeyed() {
             }
         }
     }
-    assert!(
-        failures.is_empty(),
-        "{} of {count} failed:\n{}",
-        failures.len(),
-        failures
-            .iter()
-            .take(12)
-            .cloned()
-            .collect::<Vec<_>>()
-            .join("\n")
-    );
+    none_failed(&failures, &count.to_string());
 }
 
 #[test]
@@ -1463,20 +1452,17 @@ fn every_single_mutation_of_odometry_is_counted_and_refused_or_finite() {
         let before = *d.counters();
         let state = d.state();
         let result = d.on_odom(&key, b, 0.01);
-        let after = *d.counters();
-        let moved = [
-            after.odom_accepted - before.odom_accepted,
-            after.odom_wrong_type - before.odom_wrong_type,
-            after.odom_malformed - before.odom_malformed,
-            after.odom_non_finite - before.odom_non_finite,
-            after.odom_wrong_frames - before.odom_wrong_frames,
-        ];
-        if after.odom_received != before.odom_received + 1 || moved.iter().sum::<u64>() != 1 {
-            return Err(format!("counted {after:?} from {before:?}"));
-        }
-        if result.is_ok() != (moved[0] == 1) {
-            return Err(format!("{result:?} counted {moved:?}"));
-        }
+        let outcomes = |c: &Ros2Counters| {
+            [
+                c.odom_received,
+                c.odom_accepted,
+                c.odom_wrong_type,
+                c.odom_malformed,
+                c.odom_non_finite,
+                c.odom_wrong_frames,
+            ]
+        };
+        counted_once(outcomes(&before), outcomes(d.counters()), &result)?;
         if result.is_err() && d.state() != state {
             return Err(format!("refused ({result:?}) but the state changed"));
         }
@@ -1518,44 +1504,32 @@ fn every_single_mutation_of_odometry_is_counted_and_refused_or_finite() {
     eprintln!("{n} odometry mutations checked");
 }
 
-/// One lagged velocity base under the kinematic law, a ROS 2 robot.
-const ROS2_ROBOT: &str = r#"
-[sim]
-duration = 12.0
-dt = 0.001
+/// One message, counted once: from counters `before` to `after` (received
+/// first, then the outcomes, accepted first), received moved by one and
+/// exactly one outcome by one, the one the handler's answer `result` names.
+fn counted_once<const N: usize, T: std::fmt::Debug, E: std::fmt::Debug>(
+    before: [u64; N],
+    after: [u64; N],
+    result: &Result<T, E>,
+) -> Result<(), String> {
+    let moved: Vec<u64> = after.iter().zip(before).map(|(a, b)| a - b).collect();
+    if moved[0] != 1 || moved[1..].iter().sum::<u64>() != 1 {
+        return Err(format!("counted {moved:?} (received first)"));
+    }
+    if result.is_ok() != (moved[1] == 1) {
+        return Err(format!("{result:?} counted {moved:?} (received first)"));
+    }
+    Ok(())
+}
 
-[control]
-law = "kinematic"
-ke = 1.5
-kz = 10.0
-l = 0.05
+/// The paper's experiment on lagged velocity bases under the kinematic law
+/// (`scenarios/experiment-circle-velocity.toml`), its robots on ROS 2.
+fn ros2_robots() -> String {
+    include_str!("../../../scenarios/experiment-circle-velocity.toml").to_owned()
+        + "\n[fleet.ros2]\n"
+}
 
-[robots.lab]
-drive = "velocity"
-tau_v = 0.1
-tau_omega = 0.1
-v_max = 0.3
-omega_max = 2.0
-a_max = 1.0
-alpha_max = 5.0
-half_wheelbase = 0.15
-wheel_radius = 0.05
-
-[reference.circle]
-speed = 0.08
-turn_rate = 0.08
-start = { x = 0.0, y = 0.0, theta_deg = 0.0 }
-
-[fleet.ros2]
-
-[[agents]]
-robot = "lab"
-start = { x = 0.0, y = -0.6, theta_deg = 90.0 }
-leader = "reference"
-offset = { x = 0.0, y = -0.5 }
-"#;
-
-/// Agent 1 of [`ROS2_ROBOT`] on a ROS 2 drive, synced on the reference
+/// Agent 1 of [`ros2_robots`] on a ROS 2 drive, synced on the reference
 /// and its first odometry, fed `b` as its next odometry and ticked: the
 /// law's commands on `cmd_vel` are finite (none replaced by zero for not
 /// being finite) and within the base's limits. Counts in `diverged` a
@@ -1563,7 +1537,8 @@ offset = { x = 0.0, y = -0.5 }
 fn check_ros2_robot(b: &[u8], diverged: &mut usize) -> Result<(), String> {
     static RIG: std::sync::OnceLock<(RobotConfig, Ros2Link)> = std::sync::OnceLock::new();
     let (config, link) = RIG.get_or_init(|| {
-        let s = Scenario::parse(ROS2_ROBOT, "fuzz.toml", None).unwrap_or_else(|e| panic!("{e}"));
+        let s =
+            Scenario::parse(&ros2_robots(), "fuzz.toml", None).unwrap_or_else(|e| panic!("{e}"));
         let link = s.fleet().unwrap_or_else(|e| panic!("{e}")).ros2[0].clone();
         (robot_config(&s, 1), link)
     });
@@ -1880,21 +1855,18 @@ fn every_single_mutation_of_a_cmd_vel_is_counted_and_refused_or_followed_within_
         let mut b = base();
         let before = *b.counters();
         let result = b.on_cmd(&key, payload, Some(attachment), 0.1, wall);
-        let after = *b.counters();
-        let moved = [
-            after.cmd_accepted - before.cmd_accepted,
-            after.cmd_wrong_type - before.cmd_wrong_type,
-            after.cmd_malformed - before.cmd_malformed,
-            after.cmd_non_finite - before.cmd_non_finite,
-            after.cmd_no_attachment - before.cmd_no_attachment,
-            after.cmd_stale - before.cmd_stale,
-        ];
-        if after.cmd_received != before.cmd_received + 1 || moved.iter().sum::<u64>() != 1 {
-            return Err(format!("counted {after:?}"));
-        }
-        if result.is_ok() != (moved[0] == 1) {
-            return Err(format!("{result:?} counted {moved:?}"));
-        }
+        let outcomes = |c: &BaseCounters| {
+            [
+                c.cmd_received,
+                c.cmd_accepted,
+                c.cmd_wrong_type,
+                c.cmd_malformed,
+                c.cmd_non_finite,
+                c.cmd_no_attachment,
+                c.cmd_stale,
+            ]
+        };
+        counted_once(outcomes(&before), outcomes(b.counters()), &result)?;
         let f = b.followed();
         finite("the followed command", &[f.v, f.omega])?;
         if f.v.abs() > 0.5 || f.omega.abs() > 2.0 {

@@ -101,7 +101,7 @@ mod tests {
             "0.025 s is not a whole multiple of dt = 0.01 s"
         );
         // A step far from 1 is in exponent form, not hundreds of digits.
-        let e = multiple_of("period", 0.025, 3e-300, "dt").unwrap_err();
+        let e = multiple_of("period", 1e-299, 3e-300, "dt").unwrap_err();
         assert_eq!(e.reason, "s is not a whole multiple of dt = 3e-300 s");
         assert!(multiple_of("period", -0.02, 0.01, "dt").is_err());
     }

@@ -101,7 +101,7 @@ fn checked<'py, D: Dimension>(
         return Err(refuse(format!("a read-only {}", got())));
     }
     a.cast::<PyArray<f64, D>>()
-        .map(|a| a.clone())
+        .cloned()
         .map_err(|e| refuse(format!("{} ({e})", got())))
 }
 

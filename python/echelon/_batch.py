@@ -6,8 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from . import _echelon
-from ._scenario import Scenario
+from . import _args, _echelon
+from ._scenario import Scenario, _checked, as_scenario
 
 
 class BatchEngine:
@@ -29,15 +29,22 @@ class BatchEngine:
         """``echelon bench``'s formation: ``agents`` robots at random poses
         (from ``seed``) behind a circle; ``torque`` (Table I, the paper's law)
         or ``velocity`` (Jackal bases, the kinematic law)."""
-        return cls(_echelon.BatchEngine.bench(agents, topology, drive, dt, seed))
+        return cls(
+            _echelon.BatchEngine.bench(
+                _args.integer("agents", agents),
+                _args.text("topology", topology),
+                _args.text("drive", drive),
+                _args.number("dt", dt),
+                _args.integer("seed", seed),
+            )
+        )
 
     @classmethod
     def from_scenario(cls, scenario: Scenario | str, **overrides: Any) -> BatchEngine:
         """The engine for a scenario whose agents share robot and law and
         form a star or a chain (continuous control, no odometry or safety)."""
-        if isinstance(scenario, str):
-            scenario = Scenario.builtin(scenario)
-        return cls(_echelon.BatchEngine.from_scenario(scenario._inner, {**scenario.overrides, **overrides}))
+        scenario = as_scenario("scenario", scenario)
+        return cls(_echelon.BatchEngine.from_scenario(scenario._inner, {**scenario.overrides, **_checked(overrides)}))
 
     @property
     def n(self) -> int:
@@ -57,8 +64,11 @@ class BatchEngine:
         writeable: as :meth:`state` makes it) ``steps`` RK4 steps in place,
         in Rust with the GIL released and no copy: the engine reads and writes
         your array. Returns it. A wrong array raises ``ValueError`` and
-        changes nothing."""
-        self._inner.step(state, steps)
+        changes nothing. The steps run in chunks with Python's signal
+        handlers between them: Ctrl-C raises ``KeyboardInterrupt`` promptly,
+        ``state`` (and :attr:`time`) then as of the last finished chunk, the
+        same bits as a call of that many steps."""
+        self._inner.step(state, _args.integer("steps", steps))
         return state
 
     def buffer(self) -> np.ndarray:
@@ -67,10 +77,15 @@ class BatchEngine:
 
     def run(self, steps: int, out: np.ndarray | None = None) -> None:
         """Steps ``steps`` RK4 steps (GIL released); then writes the states
-        into ``out`` if given (``(n, 5)`` float64, C-contiguous)."""
-        self._inner.run(steps, out)
+        into ``out`` if given (``(n, 5)`` float64, C-contiguous, writeable;
+        a wrong one raises ``ValueError`` before any step). The steps run in
+        chunks with Python's signal handlers between them: Ctrl-C raises
+        ``KeyboardInterrupt`` promptly, the engine's states then as of the
+        last finished chunk (``out`` not written)."""
+        self._inner.run(_args.integer("steps", steps), out)
 
     def states(self, out: np.ndarray) -> np.ndarray:
-        """Writes the states into ``out``; returns it."""
+        """Writes the states into ``out`` (``(n, 5)`` float64, C-contiguous,
+        writeable, as :meth:`buffer` makes it); returns it."""
         self._inner.states(out)
         return out

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from . import _echelon
+from . import _args, _echelon
 
 
 def bound(
@@ -35,8 +35,16 @@ def bound(
     ``fix_period_s = N T_s``. Returns a dict of ``z_bound``, ``e_bound``,
     ``steps`` and ``fix_period_s``."""
     z, n, period, e = _echelon.bound(
-        ke, zeta, kz=kz, omega_max=omega_max, gamma=gamma, steps=steps,
-        max_z=max_z, max_e=max_e, ts=ts, law=law,
+        _args.number("ke", ke),
+        _args.number("zeta", zeta),
+        kz=_args.optional_number("kz", kz),
+        omega_max=_args.optional_number("omega_max", omega_max),
+        gamma=_args.number("gamma", gamma),
+        steps=_args.optional_integer("steps", steps),
+        max_z=_args.optional_number("max_z", max_z),
+        max_e=_args.optional_number("max_e", max_e),
+        ts=_args.optional_number("ts", ts),
+        law=_args.text("law", law),
     )
     return {"z_bound": z, "e_bound": e, "steps": n, "fix_period_s": period}
 
@@ -53,6 +61,9 @@ def identify(
     ``[robots.NAME]`` block under ``"robot_toml"``."""
     from ._scenario import Run
 
+    agent = _args.integer("agent", agent, low=1)
+    model = None if model is None else _args.text("model", model)
+    name = _args.text("name", name)
     if isinstance(log, Run):
         log = log.dir
     if isinstance(log, (str, os.PathLike)):
@@ -61,7 +72,7 @@ def identify(
         csv = log.to_csv(index=False, float_format="%.17g")
         text, toml = _echelon.identify_log(csv=csv, agent=agent, model=model, name=name)
     else:
-        raise TypeError("log: a path, an echelon.Run or a pandas DataFrame")
+        raise TypeError(f"log must be a path, an echelon.Run or a pandas DataFrame, got {_args.describe(log)}")
     out = json.loads(text)
     out["robot_toml"] = toml
     return out

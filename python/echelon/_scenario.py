@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from . import _echelon
+from . import _args, _echelon
 
 #: The keyword arguments that override a scenario's settings, as
 #: ``echelon run``'s flags do: ``dt`` (RK4 step, s), ``duration`` (s),
@@ -38,7 +38,28 @@ def _checked(overrides: dict[str, Any]) -> dict[str, Any]:
         raise TypeError(
             f"unknown override(s) {', '.join(unknown)}; the overrides are {', '.join(OVERRIDES)}"
         )
-    return {k: v for k, v in overrides.items() if v is not None}
+    out: dict[str, Any] = {}
+    for k, v in overrides.items():
+        if v is None:
+            continue
+        if k == "law":
+            out[k] = _args.text(k, v)
+        elif k == "seed":
+            out[k] = _args.integer(k, v)
+        else:
+            out[k] = _args.number(k, v)
+    return out
+
+
+def as_scenario(name: str, scenario: Any) -> Scenario:
+    """``scenario``: a :class:`Scenario`, or a built-in scenario's name."""
+    if isinstance(scenario, str):
+        return Scenario.builtin(scenario)
+    if not isinstance(scenario, Scenario):
+        raise TypeError(
+            f"{name} must be an echelon.Scenario or a built-in scenario's name, got {_args.describe(scenario)}"
+        )
+    return scenario
 
 
 def builtins() -> list[str]:
@@ -62,12 +83,12 @@ class Scenario:
     @classmethod
     def builtin(cls, name: str, **overrides: Any) -> Scenario:
         """A built-in scenario by name (see :func:`echelon.builtins`)."""
-        return cls(_echelon.Scenario.builtin(name), **overrides)
+        return cls(_echelon.Scenario.builtin(_args.text("name", name)), **overrides)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], **overrides: Any) -> Scenario:
         """A scenario file."""
-        return cls(_echelon.Scenario.load(Path(path)), **overrides)
+        return cls(_echelon.Scenario.load(_args.path("path", path)), **overrides)
 
     @classmethod
     def from_toml(
@@ -78,8 +99,9 @@ class Scenario:
         **overrides: Any,
     ) -> Scenario:
         """A scenario from TOML text; ``origin`` names it in errors."""
-        base = None if base_dir is None else Path(base_dir)
-        return cls(_echelon.Scenario.from_source(text, origin, base), **overrides)
+        base = _args.optional_path("base_dir", base_dir)
+        source = _args.text("text", text)
+        return cls(_echelon.Scenario.from_source(source, _args.text("origin", origin), base), **overrides)
 
     @classmethod
     def from_dict(
@@ -101,9 +123,10 @@ class Scenario:
         ``TypeError``."""
         if not isinstance(document, dict):
             raise TypeError(
-                f"not a scenario document: a dict of the scenario's tables, not a {type(document).__name__}"
+                f"document: not a scenario document: a dict of the scenario's tables, not a {type(document).__name__}"
             )
-        base = None if base_dir is None else Path(base_dir)
+        base = _args.optional_path("base_dir", base_dir)
+        origin = _args.text("origin", origin)
         try:
             return cls(_echelon.Scenario.from_dict(document, origin, base), **overrides)
         except _echelon.ScenarioError as e:
@@ -146,7 +169,7 @@ class Scenario:
             directory = Path(tempfile.mkdtemp(prefix=f"echelon-{self.name}-"))
             temporary = True
         else:
-            directory = Path(out)
+            directory = _args.path("out", out)
             temporary = False
         try:
             summary = self._inner.run(directory, ov)
@@ -290,6 +313,7 @@ class Run:
         safety when filtered), written as SVG and PNG into the run's
         directory with ``report.html``. Returns them by name as matplotlib
         figures, or with ``files=True`` as their PNG paths."""
+        files = _args.flag("files", files)
         figures, _report = _echelon.plot_dir(self.dir)
         if files:
             return {name: Path(png) for name, _svg, png in figures}
@@ -311,8 +335,8 @@ class Run:
     def report(self, path: str | os.PathLike[str]) -> Path:
         """Writes the self-contained ``report.html`` (figures and replay) to
         ``path``; returns it."""
+        target = _args.path("path", path)
         _figures, report = _echelon.plot_dir(self.dir)
-        target = Path(path)
         if target.resolve() != Path(report).resolve():
             shutil.copyfile(report, target)
         return target

@@ -7,8 +7,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from . import _echelon
-from ._scenario import Scenario
+from . import _args, _echelon
+from ._scenario import Scenario, _checked, as_scenario
 
 
 class Simulation:
@@ -29,12 +29,11 @@ class Simulation:
     """
 
     def __init__(self, scenario: Scenario | str, *, safety: bool = True, **overrides: Any) -> None:
-        if isinstance(scenario, str):
-            scenario = Scenario.builtin(scenario)
-        ov = {**scenario.overrides, **overrides}
+        scenario = as_scenario("scenario", scenario)
+        ov = {**scenario.overrides, **_checked(overrides)}
         self.scenario = scenario
         #: Whether :meth:`step` applies the scenario's safety filter by default.
-        self.safety = bool(safety)
+        self.safety = _args.flag("safety", safety)
         self._sim = _echelon.Simulation(scenario._inner, ov)
         self.agents: list[dict[str, Any]] = []
         for a in self._sim.agents:
@@ -92,9 +91,10 @@ class Simulation:
         """What agent ``i``'s law is given now: ``p``, ``dp``, ``ddp`` (the
         leader's motion) and ``lx``, ``ly``, ``dly``, ``ddly`` (eqs. 4–6). A
         robot leader accelerates under its row of ``commands``."""
+        i = _args.integer("i", i)
         if commands is None:
             commands = np.zeros((self.n, 2))
-        return self._sim.leader(i, np.ascontiguousarray(commands, dtype=np.float64))
+        return self._sim.leader(i, _args.array("commands", commands, ndim=2, shape=f"({self.n}, 2)"))
 
     @property
     def has_safety(self) -> bool:
@@ -105,15 +105,8 @@ class Simulation:
         """One RK4 step under ``commands``, ``(n, 2)``, through the
         scenario's safety filter when it has one and ``filter`` (None: the
         simulation's :attr:`safety` switch) is true."""
-        on = self.safety if filter is None else bool(filter)
-        try:
-            a = np.ascontiguousarray(commands, dtype=np.float64)
-        except (TypeError, ValueError) as e:
-            raise TypeError(f"commands: not an array of numbers ({e})") from None
-        if a.ndim != 2:
-            raise ValueError(
-                f"commands: shape {list(a.shape)}, expected ({self.n}, 2): (u1, u2) or (v, ω) per agent"
-            )
+        on = self.safety if filter is None else _args.flag("filter", filter)
+        a = _args.array("commands", commands, ndim=2, shape=f"({self.n}, 2): (u1, u2) or (v, ω) per agent")
         self._sim.step(a, on)
 
     def step_by(self, law: Callable[[int, float, np.ndarray, dict[str, Any]], Any]) -> None:
@@ -128,6 +121,8 @@ class Simulation:
         continuous-time controller only (no ``controller_period``, no
         ``[safety]``, not stepped by :meth:`step`); an exception raised by
         ``law`` stops the step, nothing moved."""
+        if not callable(law):
+            raise TypeError(f"law must be callable as law(i, t, state, leader), got {_args.describe(law)}")
         self._sim.step_by(law)
 
     @property

@@ -11,8 +11,8 @@ from typing import Any, Iterable, Mapping
 
 import pandas as pd
 
-from . import _echelon
-from ._scenario import Scenario, read_csv
+from . import _args, _echelon
+from ._scenario import Scenario, as_scenario, read_csv
 
 #: A sweep grid's keys and ``echelon sweep``'s defaults.
 GRID_DEFAULTS: dict[str, Any] = {
@@ -41,7 +41,7 @@ class Sweep:
 
     def write(self, path: str | os.PathLike[str]) -> Path:
         """Writes ``sweep.csv``'s bytes to ``path``."""
-        p = Path(path)
+        p = _args.path("path", path)
         p.write_bytes(self.csv.encode())
         return p
 
@@ -88,12 +88,18 @@ def _arguments(
     scenario: Scenario, grid: Mapping[str, Any] | None, seeds: int | Iterable[int], first_seed: int,
     gamma: float, transient: float | None,
 ) -> dict[str, Any]:
+    if grid is not None and not isinstance(grid, Mapping):
+        raise TypeError(f"grid must be a dict of grid keys ({', '.join(GRID_DEFAULTS)}), got {_args.describe(grid)}")
     g = dict(GRID_DEFAULTS)
     unknown = sorted(set(grid or {}) - set(g))
     if unknown:
         raise TypeError(f"unknown grid key(s) {', '.join(unknown)}; the keys are {', '.join(g)}")
     g.update(grid or {})
-    if not isinstance(first_seed, numbers.Integral) or not 0 <= first_seed < 2**64:
+    if (
+        isinstance(first_seed, bool)
+        or not isinstance(first_seed, numbers.Integral)
+        or not 0 <= first_seed < 2**64
+    ):
         raise ValueError(f"first_seed: {first_seed!r} must be a whole number in [0, 2**64)")
     if isinstance(seeds, numbers.Integral) and not isinstance(seeds, bool):
         if seeds < 1:
@@ -119,8 +125,8 @@ def _arguments(
         "slip": _numbers("slip", g["slip"]),
         "fix_every": _whole_numbers("fix_every", g["fix_every"]),
         "seeds": seed_list,
-        "gamma": float(gamma),
-        "transient": transient,
+        "gamma": _args.number("gamma", gamma),
+        "transient": _args.optional_number("transient", transient),
         "dt": ov.get("dt"),
         "duration": ov.get("duration"),
     }
@@ -155,10 +161,11 @@ def sweep(
     ``executor="ray"`` runs the cases as Ray tasks (``tasks`` of them,
     default twice the cluster's CPUs) on the cluster ``ray.init`` connected
     to; the table is byte for byte the local one."""
-    if isinstance(scenario, str):
-        scenario = Scenario.builtin(scenario)
+    scenario = as_scenario("scenario", scenario)
     args = _arguments(scenario, grid, seeds, first_seed, gamma, transient)
     inner = scenario._inner
+    threads = _args.optional_integer("threads", threads, low=1)
+    tasks = _args.optional_integer("tasks", tasks, low=1)
     if executor is None:
         return Sweep(inner.sweep_csv(args, threads=threads))
     if executor != "ray":

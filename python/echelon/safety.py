@@ -17,14 +17,11 @@ each shared constraint:
 
 from __future__ import annotations
 
-from typing import Any
-
-import json
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from . import _echelon
+from . import _args, _echelon
 
 #: ``p``, 1/s: the inner pole of the torque barrier (``ψ̇₁ + p ψ₁ ≥ 0``,
 #: ``ψ₁ = ḣ + γ h``, ``p = max(γ, INNER_RATE)``).
@@ -56,8 +53,16 @@ class Filter:
         period: float = 0.01,
         base: str = "ideal",
     ) -> None:
-        obs = None if obstacles is None else np.ascontiguousarray(obstacles, dtype=np.float64).reshape(-1, 3)
-        self._inner = _echelon.SafetyFilters(n, radius, gain, range, l, obs, period, base)
+        self._inner = _echelon.SafetyFilters(
+            _args.integer("n", n),
+            _args.number("radius", radius),
+            _args.number("gain", gain),
+            _args.number("range", range),
+            _args.number("l", l),
+            _obstacles(obstacles),
+            _args.number("period", period),
+            _args.text("base", base),
+        )
         self.n = n
         self.l = l
         self.radius = radius
@@ -70,11 +75,19 @@ class Filter:
         ω) asking for ``commands`` ``(n, 2)`` at time ``t``. ``outcomes``
         and ``min_distance`` then hold what each robot's filter did."""
         out, self.outcomes, self.min_distance = self._inner.filter(
-            float(t),
-            np.ascontiguousarray(poses, dtype=np.float64),
-            np.ascontiguousarray(commands, dtype=np.float64),
+            _args.number("t", t, finite=True),
+            _args.array("poses", poses),
+            _args.array("commands", commands),
         )
         return out
+
+
+def _obstacles(obstacles: Any) -> np.ndarray | None:
+    """Rows of ``(x, y, r)`` (a flat list of them too), or None."""
+    if obstacles is None:
+        return None
+    a = _args.array("obstacles", obstacles)
+    return a.reshape(-1, 3) if a.ndim == 1 and a.size % 3 == 0 else a
 
 
 def filter(
@@ -91,15 +104,9 @@ def filter(
 ) -> np.ndarray:
     """One filtering of ``commands`` (``(n, 2)``: v, ω) for robots at
     ``poses`` (see :class:`Filter`, which keeps the filters between calls)."""
-    p = np.ascontiguousarray(poses, dtype=np.float64)
+    p = _args.array("poses", poses, ndim=2, shape="(n, 3) or (n, 5)")
     f = Filter(p.shape[0], radius, gain=gain, range=range, l=l, obstacles=obstacles, period=period, base=base)
     return f(p, commands)
-
-
-def _robot_json(robot: Mapping[str, Any] | str) -> str:
-    if isinstance(robot, str):
-        return _echelon.robot_preset(robot)
-    return json.dumps(dict(robot))
 
 
 class TorqueFilter:
@@ -123,10 +130,20 @@ class TorqueFilter:
         l: float = 0.1,
         obstacles: Any = None,
     ) -> None:
-        robots = [robot] if isinstance(robot, (str, Mapping)) else list(robot)
-        obs = None if obstacles is None else np.ascontiguousarray(obstacles, dtype=np.float64).reshape(-1, 3)
+        if isinstance(robot, (str, Mapping)):
+            robots = [_args.robot_json("robot", robot)]
+        elif isinstance(robot, Sequence):
+            robots = [_args.robot_json(f"robot[{i}]", r) for i, r in enumerate(robot)]
+        else:
+            robots = [_args.robot_json("robot", robot)]  # refused, naming robot
         self._inner = _echelon.TorqueSafetyFilters(
-            n, radius, [_robot_json(r) for r in robots], gain, range, l, obs
+            _args.integer("n", n),
+            _args.number("radius", radius),
+            robots,
+            _args.number("gain", gain),
+            _args.number("range", range),
+            _args.number("l", l),
+            _obstacles(obstacles),
         )
         self.n = n
         self.l = l
@@ -140,9 +157,9 @@ class TorqueFilter:
         ``(n, 2)`` at time ``t``. ``outcomes`` and ``min_distance`` then hold
         what each robot's filter did."""
         out, self.outcomes, self.min_distance = self._inner.filter(
-            float(t),
-            np.ascontiguousarray(states, dtype=np.float64),
-            np.ascontiguousarray(commands, dtype=np.float64),
+            _args.number("t", t, finite=True),
+            _args.array("states", states),
+            _args.array("commands", commands),
         )
         return out
 
@@ -161,12 +178,18 @@ def torque_filter(
     """One filtering of torque robots' ``commands`` (``(n, 2)``: u1, u2) in
     ``states`` (``(n, 5)``; see :class:`TorqueFilter`, which keeps the
     filters between calls)."""
-    s = np.ascontiguousarray(states, dtype=np.float64)
+    s = _args.array("states", states, ndim=2, shape="(n, 5)")
     f = TorqueFilter(s.shape[0], radius, robot=robot, gain=gain, range=range, l=l, obstacles=obstacles)
     return f(s, commands)
 
 
 def points(poses: Any, l: float = 0.1) -> np.ndarray:
-    """The points the filter keeps apart: ``l`` ahead of each robot, ``(n, 2)``."""
-    p = np.asarray(poses, dtype=np.float64)
+    """The points the filter keeps apart: ``l`` ahead of each robot, ``(n, 2)``
+    (``poses``: ``(n, 3)`` or ``(n, 5)``, x, y, θ first)."""
+    p = _args.array("poses", poses, ndim=2, shape="(n, 3) or (n, 5)")
+    if p.shape[1] not in (3, 5):
+        raise ValueError(f"poses must be an array of numbers of shape (n, 3) or (n, 5), got one of shape {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise ValueError("poses: not all finite")
+    l = _args.number("l", l, finite=True)
     return np.stack([p[:, 0] + l * np.cos(p[:, 2]), p[:, 1] + l * np.sin(p[:, 2])], axis=1)

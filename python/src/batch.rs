@@ -3,14 +3,14 @@
 //! array the caller owns (stepped in place: `step`), or with its states
 //! written into one (`run(steps, out)`).
 
-use numpy::{
-    PyArray1, PyArray2, PyArrayDescrMethods, PyArrayMethods, PyReadwriteArray2, PyUntypedArray,
-    PyUntypedArrayMethods,
-};
+use numpy::ndarray::Ix2;
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadwriteArray2};
 use pyo3::prelude::*;
 
 use echelon::engine::{BenchFormation, Engine, Topology, VelocityEngine};
+use echelon::error::num;
 
+use crate::arrays::{self, Dim};
 use crate::errors;
 use crate::scenario::{OverrideArgs, PyScenario};
 
@@ -42,7 +42,8 @@ impl PyBatchEngine {
         }
         if !(dt.is_finite() && dt > 0.0) {
             return Err(errors::value(format!(
-                "dt: {dt} must be a finite number > 0"
+                "dt: {} must be a finite number > 0",
+                num(dt)
             )));
         }
         // Past it the allocation fails, which aborts the interpreter.
@@ -72,10 +73,13 @@ impl PyBatchEngine {
             "velocity" => {
                 BenchFormation::BASE.check_step(dt).map_err(|e| {
                     errors::value(format!(
-                        "dt: {dt} s is longer than the velocity base's lag ({} = {} s, a \
+                        "dt: {} s is longer than the velocity base's lag ({} = {} s, a \
                              Clearpath Jackal's): a lag cannot be integrated with a step longer \
                              than itself; use dt ≤ {}",
-                        e.field, e.value, e.value
+                        num(dt),
+                        e.field,
+                        num(e.value),
+                        num(e.value)
                     ))
                 })?;
                 Kind::Velocity(
@@ -126,24 +130,26 @@ impl PyBatchEngine {
         }
     }
 
-    /// Steps `steps` RK4 steps with the GIL released; then, if `out` is
-    /// given (`(n, 5)` float64, C-contiguous, owned by the caller), writes
-    /// the states into it: x, y, θ, v, ω.
+    /// Steps `steps` RK4 steps with the GIL released (in chunks, Python's
+    /// signal handlers run between them: Ctrl-C raises `KeyboardInterrupt`
+    /// with the engine as of the last finished chunk); then, if `out` is
+    /// given (`(n, 5)` float64, C-contiguous, writeable, owned by the
+    /// caller), writes the states into it: x, y, θ, v, ω. A wrong `out` is
+    /// refused before any step.
     #[pyo3(signature = (steps, out=None))]
-    fn run(
-        &mut self,
-        py: Python<'_>,
-        steps: u64,
-        out: Option<PyReadwriteArray2<'_, f64>>,
-    ) -> PyResult<()> {
+    fn run(&mut self, py: Python<'_>, steps: u64, out: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+        let out = out.map(|o| self.out(o)).transpose()?;
+        let chunk = self.chunk();
         let engine = &mut self.engine;
-        let result = py.detach(|| match engine {
-            Kind::Torque(e) => e.run(steps),
-            Kind::Velocity(e) => e.run(steps),
-        });
-        result.map_err(|e| errors::sim(&e))?;
+        in_chunks(py, steps, chunk, |k| {
+            py.detach(|| match engine {
+                Kind::Torque(e) => e.run(k),
+                Kind::Velocity(e) => e.run(k),
+            })
+            .map_err(|e| errors::sim(&e))
+        })?;
         if let Some(out) = out {
-            self.states_into(py, out)?;
+            self.states_into(py, out);
         }
         Ok(())
     }
@@ -163,81 +169,96 @@ impl PyBatchEngine {
     /// steps in place: the engine reads and writes your memory, no copy, the
     /// GIL released. A wrong array (type, dtype, shape, layout, read-only, a
     /// value that is not finite) raises `ValueError` and changes nothing.
+    /// The steps run in chunks, Python's signal handlers between them: Ctrl-C
+    /// raises `KeyboardInterrupt` with `state` (and the engine's time) as of
+    /// the last finished chunk, the same bits as a call of that many steps.
     #[pyo3(signature = (state, steps=1))]
     fn step(&mut self, py: Python<'_>, state: &Bound<'_, PyAny>, steps: u64) -> PyResult<()> {
         let n = self.n();
-        let untyped = state.cast::<PyUntypedArray>().map_err(|_| {
-            errors::value(format!(
-                "state: a numpy array of shape (5, {n}) and dtype float64, not {}",
-                state.get_type()
-            ))
-        })?;
-        if !untyped.dtype().is_equiv_to(&numpy::dtype::<f64>(py)) {
-            return Err(errors::value(format!(
-                "state: dtype {}, expected float64",
-                untyped.dtype()
-            )));
-        }
-        if untyped.shape() != [5, n] {
-            return Err(errors::value(format!(
-                "state: shape {:?}, expected (5, {n}) (rows x, y, θ, v, ω)",
-                untyped.shape()
-            )));
-        }
-        if !untyped.is_c_contiguous() {
-            return Err(errors::value(
-                "state: must be C-contiguous (np.ascontiguousarray makes a copy the engine can step)",
-            ));
-        }
-        let array = state
-            .cast::<PyArray2<f64>>()
-            .map_err(|e| errors::value(format!("state: {e}")))?;
-        let mut rw = array
-            .try_readwrite()
-            .map_err(|e| errors::value(format!("state: not writeable ({e})")))?;
-        let buf = rw
-            .as_slice_mut()
-            .map_err(|_| errors::value("state: must be C-contiguous"))?;
+        let mut state = arrays::readwrite::<Ix2>("state", state, &[&[Dim::Is(5), Dim::Is(n)]])?;
+        let chunk = self.chunk();
         let engine = &mut self.engine;
-        let result = py.detach(|| match engine {
-            Kind::Torque(e) => e.run_on(buf, steps),
-            Kind::Velocity(e) => e.run_on(buf, steps),
-        });
-        result.map_err(|e| match e {
-            echelon::engine::EngineError::Sim(e) => errors::sim(&e),
-            other => errors::value(other),
+        in_chunks(py, steps, chunk, |k| {
+            // Borrowed for one chunk: the signal handlers between chunks
+            // may touch the array.
+            let buf = state
+                .as_slice_mut()
+                .map_err(|e| errors::value(format!("state: {e}")))?;
+            py.detach(|| match engine {
+                Kind::Torque(e) => e.run_on(buf, k),
+                Kind::Velocity(e) => e.run_on(buf, k),
+            })
+            .map_err(|e| match e {
+                echelon::engine::EngineError::Sim(e) => errors::sim(&e),
+                other => errors::value(format!("state: {other}")),
+            })
         })
     }
 
-    /// Writes the states into `out` (`(n, 5)` float64, C-contiguous).
-    fn states(&self, py: Python<'_>, out: PyReadwriteArray2<'_, f64>) -> PyResult<()> {
-        self.states_into(py, out)
+    /// Writes the states into `out` (`(n, 5)` float64, C-contiguous, writeable).
+    fn states(&self, py: Python<'_>, out: &Bound<'_, PyAny>) -> PyResult<()> {
+        let out = self.out(out)?;
+        self.states_into(py, out);
+        Ok(())
     }
 }
 
 impl PyBatchEngine {
-    fn states_into(&self, py: Python<'_>, mut out: PyReadwriteArray2<'_, f64>) -> PyResult<()> {
-        let n = self.n();
-        if out.as_array().shape() != [n, 5] {
-            return Err(errors::value(format!(
-                "out: shape {:?}, expected ({n}, 5)",
-                out.as_array().shape()
-            )));
-        }
-        let buf = out
-            .as_slice_mut()
-            .map_err(|_| errors::value("out: must be C-contiguous"))?;
+    /// Steps per chunk of [`in_chunks`] for this engine's `n` agents (a
+    /// step costs about as much for 1 agent as for a block of 8 lanes).
+    fn chunk(&self) -> u64 {
+        (CHUNK_AGENT_STEPS / self.n().max(8) as u64).max(1)
+    }
+
+    /// The buffer `out` (`(n, 5)`), checked.
+    fn out<'py>(&self, out: &Bound<'py, PyAny>) -> PyResult<PyReadwriteArray2<'py, f64>> {
+        arrays::readwrite::<Ix2>("out", out, &[&[Dim::Is(self.n()), Dim::Is(5)]])
+    }
+
+    /// Writes the states into `out`, checked by [`PyBatchEngine::out`].
+    fn states_into(&self, py: Python<'_>, mut out: PyReadwriteArray2<'_, f64>) {
+        let mut rows = out.as_array_mut();
         let engine = &self.engine;
         py.detach(|| {
-            for (i, row) in buf.chunks_exact_mut(5).enumerate() {
+            for (i, mut row) in rows.rows_mut().into_iter().enumerate() {
                 let s = match engine {
                     Kind::Torque(e) => e.state(i),
                     Kind::Velocity(e) => e.state(i),
                 };
-                row.copy_from_slice(&[s.x, s.y, s.theta, s.v, s.omega]);
+                for (dst, v) in row.iter_mut().zip([s.x, s.y, s.theta, s.v, s.omega]) {
+                    *dst = v;
+                }
             }
         });
-        Ok(())
+    }
+}
+
+/// Agent-steps between two looks at Python's signals: some milliseconds of
+/// the engine's work at any `n` (about 40 ms in the unoptimised test build),
+/// so Ctrl-C is prompt while a chunk's tens of microseconds of overhead
+/// (the GIL taken back, the rayon tasks started) stay near 1 %.
+const CHUNK_AGENT_STEPS: u64 = 1 << 18;
+
+/// `steps` steps as calls `run(k)` of at most `chunk` steps each (each
+/// releases the GIL while it steps); between two calls Python's signal
+/// handlers run, and a `KeyboardInterrupt` they raise is returned with the
+/// finished calls' steps kept. The first call that fails is the last. Zero
+/// steps is one call of zero (it still checks its input).
+fn in_chunks(
+    py: Python<'_>,
+    steps: u64,
+    chunk: u64,
+    mut run: impl FnMut(u64) -> PyResult<()>,
+) -> PyResult<()> {
+    let mut left = steps;
+    loop {
+        let k = left.min(chunk);
+        run(k)?;
+        left -= k;
+        if left == 0 {
+            return Ok(());
+        }
+        py.check_signals()?;
     }
 }
 

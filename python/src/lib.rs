@@ -8,8 +8,10 @@
 //! - `pieces`: the law, Theorem 2 and identification as functions on arrays;
 //! - `safety`: the safety filters (velocity and torque robots) on arrays;
 //! - `batch`: the batch engine on caller-owned buffers;
+//! - `arrays`: array arguments, each checked the same way;
 //! - `errors`: Rust errors as Python exceptions.
 
+mod arrays;
 mod batch;
 mod errors;
 mod pieces;

@@ -4,36 +4,49 @@
 
 use std::path::PathBuf;
 
-use numpy::PyReadonlyArray1;
+use numpy::ndarray::Ix1;
 use pyo3::prelude::*;
 
 use echelon::control::{self, Gains, LeaderMotion, Offset, Variant};
+use echelon::error::num;
 use echelon::identify::{self, Log, Model};
 use echelon::kinematic::kinematic_law;
-use echelon::model::RobotParams;
+use echelon::model::{RobotParams, State};
 use echelon::odometry::bound::{KinematicTheorem2, Theorem2};
 
+use crate::arrays::{self, Dim};
 use crate::errors;
 use crate::simulation::state_of;
 
-/// Exactly `N` numbers.
-fn fixed<const N: usize>(field: &str, a: &PyReadonlyArray1<'_, f64>) -> PyResult<[f64; N]> {
+/// The array argument `field`: exactly `N` finite numbers.
+fn fixed<const N: usize>(field: &str, a: &Bound<'_, PyAny>) -> PyResult<[f64; N]> {
+    let a = arrays::readonly::<Ix1>(field, a, &[&[Dim::Is(N)]])?;
     let s = a.as_slice().map_err(errors::value)?;
+    arrays::finite(field, s)?;
     s.try_into()
         .map_err(|_| errors::value(format!("{field}: {} numbers, expected {N}", s.len())))
 }
 
+/// The array argument `state`: `[x, y, θ]` or `[x, y, θ, v, ω]`, finite.
+fn state_arg(state: &Bound<'_, PyAny>) -> PyResult<State> {
+    let a = arrays::readonly::<Ix1>("state", state, &[&[Dim::Is(3)], &[Dim::Is(5)]])?;
+    let s = a.as_slice().map_err(errors::value)?;
+    arrays::finite("state", s)?;
+    state_of(s)
+}
+
 /// The leader motion and offsets from their arrays.
 fn leader(
-    p: &PyReadonlyArray1<'_, f64>,
-    dp: &PyReadonlyArray1<'_, f64>,
-    ddp: Option<&PyReadonlyArray1<'_, f64>>,
-    offset: &PyReadonlyArray1<'_, f64>,
+    p: &Bound<'_, PyAny>,
+    dp: &Bound<'_, PyAny>,
+    ddp: Option<&Bound<'_, PyAny>>,
+    offset: &Bound<'_, PyAny>,
 ) -> PyResult<(LeaderMotion, Offset)> {
     let [lx, ly, dly, ddly] = fixed::<4>("offset", offset)?;
     if !(lx > 0.0 && lx.is_finite()) {
         return Err(errors::value(format!(
-            "offset: L_X = {lx} must be > 0 (eq. 4)"
+            "offset: L_X = {} must be > 0 (eq. 4)",
+            num(lx)
         )));
     }
     let motion = LeaderMotion {
@@ -53,18 +66,18 @@ fn leader(
 #[pyo3(signature = (state, p, dp, ddp, offset, robot_json, ke, kz, variant="paper"))]
 #[allow(clippy::too_many_arguments)]
 fn law_paper(
-    state: PyReadonlyArray1<'_, f64>,
-    p: PyReadonlyArray1<'_, f64>,
-    dp: PyReadonlyArray1<'_, f64>,
-    ddp: PyReadonlyArray1<'_, f64>,
-    offset: PyReadonlyArray1<'_, f64>,
+    state: &Bound<'_, PyAny>,
+    p: &Bound<'_, PyAny>,
+    dp: &Bound<'_, PyAny>,
+    ddp: &Bound<'_, PyAny>,
+    offset: &Bound<'_, PyAny>,
     robot_json: &str,
     ke: f64,
     kz: f64,
     variant: &str,
 ) -> PyResult<([f64; 2], [f64; 2], [f64; 2])> {
-    let s = state_of(state.as_slice().map_err(errors::value)?)?;
-    let (motion, off) = leader(&p, &dp, Some(&ddp), &offset)?;
+    let s = state_arg(state)?;
+    let (motion, off) = leader(p, dp, Some(ddp), offset)?;
     let robot: RobotParams =
         serde_json::from_str(robot_json).map_err(|e| errors::value(format!("robot: {e}")))?;
     let gains = Gains::new(ke, kz).map_err(|e| errors::param(&e))?;
@@ -84,17 +97,18 @@ fn law_paper(
 /// The kinematic law for a velocity base: returns `((v*, ω*), e, z)`.
 #[pyfunction]
 fn law_kinematic(
-    state: PyReadonlyArray1<'_, f64>,
-    p: PyReadonlyArray1<'_, f64>,
-    dp: PyReadonlyArray1<'_, f64>,
-    offset: PyReadonlyArray1<'_, f64>,
+    state: &Bound<'_, PyAny>,
+    p: &Bound<'_, PyAny>,
+    dp: &Bound<'_, PyAny>,
+    offset: &Bound<'_, PyAny>,
     ke: f64,
 ) -> PyResult<([f64; 2], [f64; 2], [f64; 2])> {
-    let s = state_of(state.as_slice().map_err(errors::value)?)?;
-    let (motion, off) = leader(&p, &dp, None, &offset)?;
+    let s = state_arg(state)?;
+    let (motion, off) = leader(p, dp, None, offset)?;
     if !(ke > 0.0 && ke.is_finite()) {
         return Err(errors::value(format!(
-            "ke: {ke} must be a finite number > 0"
+            "ke: {} must be a finite number > 0",
+            num(ke)
         )));
     }
     let k = kinematic_law(&s, &motion, &off, ke);
@@ -124,6 +138,9 @@ fn bound(
         return Err(errors::value(
             "give exactly one of steps (forward), max_z or max_e (inverse)",
         ));
+    }
+    if let Some(t) = ts {
+        echelon::check::positive("ts", t).map_err(|e| errors::param(&e))?;
     }
     let period = |n: u64| ts.map(|t| t * n as f64);
     match law {

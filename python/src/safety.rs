@@ -5,18 +5,20 @@
 //! degree two on eq. 3's `(u1, u2)`, the speed envelope, the wheel torque
 //! limit). Every robot filters, so each takes half of each pair constraint.
 
-use numpy::ndarray::{Array2, ArrayView2};
+use numpy::ndarray::{Array2, Ix2};
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::exceptions::PyMemoryError;
 use pyo3::prelude::*;
 
 use echelon::State;
 use echelon::base::{VelocityBase, VelocityCommand, VelocityRobot};
+use echelon::error::num;
 use echelon::model::{Input, RobotParams};
 use echelon::safety::{
     Envelope, INNER_RATE, Neighbour, Obstacle, Outcome, SafetyConfig, SafetyFilter,
 };
 
+use crate::arrays::{self, Dim};
 use crate::errors;
 use crate::simulation::state_of;
 
@@ -43,19 +45,21 @@ impl Filters {
         gain: f64,
         range: f64,
         l: f64,
-        obstacles: Option<PyReadonlyArray2<'_, f64>>,
+        obstacles: Option<&Bound<'_, PyAny>>,
         period: f64,
     ) -> PyResult<Filters> {
         let config = SafetyConfig::new(radius, gain, range).map_err(|e| errors::param(&e))?;
         if !(l > 0.0 && l.is_finite()) {
-            return Err(errors::value(format!("l: {l} must be a finite number > 0")));
+            return Err(errors::value(format!(
+                "l: {} must be a finite number > 0",
+                num(l)
+            )));
         }
         let mut obs = Vec::new();
         if let Some(o) = obstacles {
+            let o = arrays::readonly::<Ix2>("obstacles", o, &[&[Dim::Any("m"), Dim::Is(3)]])?;
             let a = o.as_array();
-            if a.ncols() != 3 {
-                return Err(errors::value("obstacles: expected rows of (x, y, r)"));
-            }
+            arrays::finite("obstacles", a.iter())?;
             for row in a.rows() {
                 obs.push(Obstacle::new(row[0], row[1], row[2]).map_err(|e| errors::param(&e))?);
             }
@@ -84,47 +88,38 @@ impl Filters {
         })
     }
 
-    /// Checks `(n, cols)` poses (`cols` among `allowed`) and `(n, 2)`
-    /// commands, and reads the poses into `states` (a 3-column pose moves
-    /// at its command when `at_command`).
-    fn read(
+    /// Checks the array arguments `poses` (named `name`: `(n, 5)`; or
+    /// `(n, 3)` too when `at_command`) and `commands` (`(n, 2)`), and reads
+    /// the poses into `states` (a 3-column pose moves at its command when
+    /// `at_command`).
+    fn read<'py>(
         &mut self,
-        poses: &ArrayView2<'_, f64>,
-        commands: &ArrayView2<'_, f64>,
-        allowed: &[usize],
+        name: &str,
+        poses: &Bound<'py, PyAny>,
+        commands: &Bound<'py, PyAny>,
         at_command: bool,
-    ) -> PyResult<()> {
+    ) -> PyResult<PyReadonlyArray2<'py, f64>> {
         let n = self.filters.len();
-        if poses.nrows() != n || !allowed.contains(&poses.ncols()) {
-            let shapes: Vec<String> = allowed.iter().map(|c| format!("({n}, {c})")).collect();
-            return Err(errors::value(format!(
-                "poses: shape {:?}, expected {}",
-                poses.shape(),
-                shapes.join(" or ")
-            )));
-        }
-        if commands.shape() != [n, 2] {
-            return Err(errors::value(format!(
-                "commands: shape {:?}, expected ({n}, 2)",
-                commands.shape()
-            )));
-        }
-        if let Some(bad) = commands.iter().find(|c| !c.is_finite()) {
-            return Err(errors::value(format!("commands: {bad} is not finite")));
-        }
-        if let Some(bad) = poses.iter().find(|c| !c.is_finite()) {
-            return Err(errors::value(format!("poses: {bad} is not finite")));
-        }
+        let [three, five] = [[Dim::Is(n), Dim::Is(3)], [Dim::Is(n), Dim::Is(5)]];
+        let shapes: &[&[Dim]] = if at_command {
+            &[&three, &five]
+        } else {
+            &[&five]
+        };
+        let poses = arrays::readonly::<Ix2>(name, poses, shapes)?;
+        let commands = arrays::readonly::<Ix2>("commands", commands, &[&[Dim::Is(n), Dim::Is(2)]])?;
+        let (p, c) = (poses.as_array(), commands.as_array());
+        arrays::finite("commands", c.iter())?;
+        arrays::finite(name, p.iter())?;
         self.states.clear();
-        for (i, row) in poses.rows().into_iter().enumerate() {
-            let row: Vec<f64> = row.to_vec();
-            let mut s = state_of(&row)?;
+        for (i, row) in p.rows().into_iter().enumerate() {
+            let mut s = state_of(row.to_slice().unwrap_or_default())?;
             if at_command && row.len() == 3 {
-                (s.v, s.omega) = (commands[[i, 0]], commands[[i, 1]]);
+                (s.v, s.omega) = (c[[i, 0]], c[[i, 1]]);
             }
             self.states.push(s);
         }
-        Ok(())
+        Ok(commands)
     }
 
     /// The neighbours robot `i` sees: every other robot, cooperative, with
@@ -208,13 +203,14 @@ impl PySafetyFilters {
         gain: f64,
         range: f64,
         l: f64,
-        obstacles: Option<PyReadonlyArray2<'_, f64>>,
+        obstacles: Option<&Bound<'_, PyAny>>,
         period: f64,
         base: &str,
     ) -> PyResult<Self> {
         if !(period > 0.0 && period.is_finite()) {
             return Err(errors::value(format!(
-                "period: {period} must be a finite number > 0"
+                "period: {} must be a finite number > 0",
+                num(period)
             )));
         }
         let f = Filters::new(n, radius, gain, range, l, obstacles, period)?;
@@ -239,11 +235,11 @@ impl PySafetyFilters {
         &mut self,
         py: Python<'py>,
         t: f64,
-        poses: PyReadonlyArray2<'_, f64>,
-        commands: PyReadonlyArray2<'_, f64>,
+        poses: &Bound<'py, PyAny>,
+        commands: &Bound<'py, PyAny>,
     ) -> PyResult<Filtered<'py>> {
+        let commands = self.f.read("poses", poses, commands, true)?;
         let c = commands.as_array();
-        self.f.read(&poses.as_array(), &c, &[3, 5], true)?;
         let base = &self.base;
         Ok(self
             .f
@@ -283,7 +279,7 @@ impl PyTorqueSafetyFilters {
         gain: f64,
         range: f64,
         l: f64,
-        obstacles: Option<PyReadonlyArray2<'_, f64>>,
+        obstacles: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let f = Filters::new(n, radius, gain, range, l, obstacles, 0.0)?;
         if !(robots_json.len() == 1 || robots_json.len() == n) {
@@ -305,7 +301,7 @@ impl PyTorqueSafetyFilters {
         })
     }
 
-    /// Filters `commands` (`(n, 2)`: u1, u2 of eq. 3) of robots in `poses`
+    /// Filters `commands` (`(n, 2)`: u1, u2 of eq. 3) of robots in `states`
     /// (`(n, 5)`: x, y, θ, v, ω) at time `t`: returns the filtered commands
     /// `(n, 2)`, each robot's outcome (`nominal`, `filtered`, `braked`) and
     /// the smallest distance from its point to a neighbour's.
@@ -313,11 +309,11 @@ impl PyTorqueSafetyFilters {
         &mut self,
         py: Python<'py>,
         t: f64,
-        poses: PyReadonlyArray2<'_, f64>,
-        commands: PyReadonlyArray2<'_, f64>,
+        states: &Bound<'py, PyAny>,
+        commands: &Bound<'py, PyAny>,
     ) -> PyResult<Filtered<'py>> {
+        let commands = self.f.read("states", states, commands, false)?;
         let c = commands.as_array();
-        self.f.read(&poses.as_array(), &c, &[5], false)?;
         // What each robot's neighbours measure of it: its acceleration under
         // its nominal (as the simulator's filter sees its neighbours).
         for (i, (robot, s)) in self.robots.iter().zip(&self.f.states).enumerate() {

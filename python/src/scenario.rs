@@ -9,7 +9,7 @@ use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use echelon::error::Location;
+use echelon::error::{Location, num};
 use echelon::odometry::ZetaModel;
 use echelon::scenario::{self as sc, Overrides};
 use echelon::sweep::{self, Grid, GridSpec};
@@ -102,7 +102,8 @@ impl OverrideArgs {
             {
                 let want = if zero_ok { "≥ 0" } else { "> 0" };
                 return Err(errors::value(format!(
-                    "{field}: {v} must be a finite number {want}"
+                    "{field}: {} must be a finite number {want}",
+                    num(v)
                 )));
             }
         }

@@ -3,7 +3,8 @@
 //! the law, echelon's robots, limits and odometry.
 
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
+use numpy::ndarray::Ix2;
+use numpy::{IntoPyArray, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -16,6 +17,7 @@ use echelon::safety::Outcome;
 use echelon::sim::StepByError;
 use echelon::{SimError, Simulation};
 
+use crate::arrays::{self, Dim};
 use crate::errors;
 use crate::scenario::{OverrideArgs, PyScenario};
 
@@ -63,17 +65,12 @@ pub(crate) fn state_of(row: &[f64]) -> PyResult<State> {
 /// One command per agent in its drive's terms, from an `(n, 2)` array.
 fn commands_into(
     sim: &Simulation,
-    commands: &PyReadonlyArray2<'_, f64>,
+    commands: &Bound<'_, PyAny>,
     out: &mut Vec<Command>,
 ) -> PyResult<()> {
-    let a = commands.as_array();
     let n = sim.agents().len();
-    if a.shape() != [n, 2] {
-        return Err(errors::value(format!(
-            "commands: shape {:?}, expected ({n}, 2): (u1, u2) or (v, ω) per agent",
-            a.shape()
-        )));
-    }
+    let commands = arrays::readonly::<Ix2>("commands", commands, &[&[Dim::Is(n), Dim::Is(2)]])?;
+    let a = commands.as_array();
     out.clear();
     for (i, agent) in sim.agents().iter().enumerate() {
         let (c0, c1) = (a[[i, 0]], a[[i, 1]]);
@@ -214,14 +211,14 @@ impl PySimulation {
         &mut self,
         py: Python<'py>,
         i: usize,
-        commands: PyReadonlyArray2<'_, f64>,
+        commands: &Bound<'_, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let n = self.sim.agents().len();
         if i >= n {
             return Err(errors::value(format!("agent {i}: there are {n} (0-based)")));
         }
         let mut scratch = std::mem::take(&mut self.commands);
-        let result = commands_into(&self.sim, &commands, &mut scratch);
+        let result = commands_into(&self.sim, commands, &mut scratch);
         let view = result.map(|()| self.sim.leader_view(i, &scratch));
         self.commands = scratch;
         let (motion, offset) = view?;
@@ -233,14 +230,9 @@ impl PySimulation {
     /// agent's acceleration limit, the scenario's safety filter (when it has
     /// `[safety]` and `filter`), its torque limit or base limits, the plant
     /// and its odometry, as `echelon run` applies its law's.
-    fn step(
-        &mut self,
-        py: Python<'_>,
-        commands: PyReadonlyArray2<'_, f64>,
-        filter: bool,
-    ) -> PyResult<()> {
+    fn step(&mut self, py: Python<'_>, commands: &Bound<'_, PyAny>, filter: bool) -> PyResult<()> {
         let mut scratch = std::mem::take(&mut self.commands);
-        let result = commands_into(&self.sim, &commands, &mut scratch);
+        let result = commands_into(&self.sim, commands, &mut scratch);
         let sim = &mut self.sim;
         let stepped = result.and_then(|()| {
             let r = py.detach(|| sim.step_with(&scratch, filter));

@@ -4,6 +4,10 @@ steps)` steps it in place with the GIL released."""
 
 from __future__ import annotations
 
+import _thread
+import threading
+import time
+
 import numpy as np
 import pytest
 
@@ -147,3 +151,80 @@ def test_a_bench_past_memory_is_a_valueerror_not_an_abort(agents):
     # It used to abort the interpreter ("memory allocation of … failed").
     with pytest.raises(ValueError, match=f"^agents: {agents} is more than 100000000"):
         echelon.BatchEngine.bench(agents)
+
+
+@pytest.mark.parametrize("topology, drive", [(t, d) for t in ("star", "chain") for d in ("torque", "velocity")])
+def test_a_call_stepped_in_chunks_is_the_same_bits_as_one_step_at_a_time(topology, drive):
+    # 600 agents: 436 steps per chunk, so 1000 steps are three chunks
+    # (436, 436, 128) in one call; against 1000 calls of one step each.
+    n, steps = 600, 1000
+    whole = echelon.BatchEngine.bench(n, topology=topology, drive=drive, seed=8)
+    state = whole.state()
+    whole.step(state, steps)
+    single = echelon.BatchEngine.bench(n, topology=topology, drive=drive, seed=8)
+    one = single.state()
+    for _ in range(steps):
+        single.step(one, 1)
+    np.testing.assert_array_equal(state, one)
+    assert whole.time == single.time
+    # run() is chunked the same way.
+    kept = echelon.BatchEngine.bench(n, topology=topology, drive=drive, seed=8)
+    out = kept.buffer()
+    kept.run(steps, out=out)
+    np.testing.assert_array_equal(out.T, one)
+
+
+def _interrupt_inside(engine: echelon.BatchEngine, stop: threading.Event) -> threading.Thread:
+    """A thread that waits until ``engine`` is inside a call that holds it
+    (reading its time is then refused: it is borrowed), then interrupts the
+    main thread as Ctrl-C does: no clock decides when."""
+
+    def watch() -> None:
+        while not stop.is_set():
+            try:
+                engine._inner.time
+            except RuntimeError:  # already mutably borrowed: inside the call
+                _thread.interrupt_main()
+                return
+            time.sleep(0.0005)
+
+    t = threading.Thread(target=watch, daemon=True)
+    t.start()
+    return t
+
+
+@pytest.mark.parametrize("method", ["step", "run"])
+@pytest.mark.parametrize("drive", ["torque", "velocity"])
+def test_ctrl_c_interrupts_a_long_call_which_keeps_its_finished_chunks(method, drive):
+    # 64 agents: 4096 steps per chunk; the call asks for 300 chunks, far
+    # more than the interrupt lets it finish (a call that ignored signals
+    # would run them all, then fail the `k < total` below).
+    n, total, dt = 64, 300 * 4096, 0.001
+    e = echelon.BatchEngine.bench(n, drive=drive, dt=dt, seed=3)
+    state = e.state()
+    stop = threading.Event()
+    watcher = _interrupt_inside(e, stop)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            if method == "step":
+                e.step(state, total)
+            else:
+                e.run(total)
+    finally:
+        stop.set()
+        watcher.join()
+    k = round(e.time / dt)
+    assert 0 < k < total and k % 4096 == 0, k
+    # The states are those of k steps: as a fresh engine steps them.
+    ref = echelon.BatchEngine.bench(n, drive=drive, dt=dt, seed=3)
+    expected = ref.state()
+    ref.step(expected, k)
+    if method == "run":
+        state = e.buffer()
+        e.states(state)
+        state = state.T
+    np.testing.assert_array_equal(state, expected)
+    # And the engine goes on from there.
+    e.run(5)
+    ref.run(5)
+    np.testing.assert_array_equal(e.states(e.buffer()), ref.states(ref.buffer()))

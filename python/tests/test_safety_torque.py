@@ -151,13 +151,13 @@ def test_the_velocity_filter_is_the_simulators_too():
 
 def test_the_torque_filter_refuses_bad_input():
     f = echelon.safety.TorqueFilter(2, 0.3)
-    with pytest.raises(ValueError, match=r"expected \(2, 5\)"):
+    with pytest.raises(ValueError, match=r"^states must be a float64 array of shape \(2, 5\), .* got .* \(2, 3\)"):
         f(np.zeros((2, 3)), np.zeros((2, 2)))
-    with pytest.raises(ValueError, match=r"expected \(2, 2\)"):
+    with pytest.raises(ValueError, match=r"^commands must be a float64 array of shape \(2, 2\), .* got .* \(2, 3\)"):
         f(np.zeros((2, 5)), np.zeros((2, 3)))
     with pytest.raises(ValueError, match="not finite"):
         f(np.zeros((2, 5)), np.full((2, 2), np.inf))
-    with pytest.raises(ValueError, match="poses: NaN is not finite"):
+    with pytest.raises(ValueError, match="states: NaN is not finite"):
         f(np.full((2, 5), np.nan), np.zeros((2, 2)))
     with pytest.raises(ValueError, match="poses: NaN is not finite"):
         echelon.safety.Filter(2, 0.3)(np.full((2, 3), np.nan), np.zeros((2, 2)))

@@ -86,7 +86,7 @@ def test_limits_apply_to_python_commands():
 
 def test_bad_commands_are_refused():
     sim = echelon.Simulation("circle-pentagon")
-    with pytest.raises(ValueError, match=r"expected \(4, 2\)"):
+    with pytest.raises(ValueError, match=r"^commands must be .* of shape \(4, 2\)"):
         sim.step(np.zeros((3, 2)))
     with pytest.raises(ValueError, match="not finite"):
         sim.step(np.full((4, 2), np.nan))
@@ -94,21 +94,23 @@ def test_bad_commands_are_refused():
         sim.leader(9)
 
 
-@pytest.mark.parametrize("commands", [np.zeros(8), np.zeros((2, 4, 1)), None, 3.0])
+@pytest.mark.parametrize("commands", [np.zeros(8), np.zeros((2, 4, 1)), 3.0])
 def test_commands_of_the_wrong_dimension_name_commands_and_change_nothing(commands):
     # They raised "dimensionality mismatch: from=1, to=2", naming nothing.
     sim = echelon.Simulation("circle-pentagon")
     before = sim.poses.copy()
-    with pytest.raises(ValueError, match=r"^commands: shape .*, expected \(4, 2\)"):
+    with pytest.raises(ValueError, match=r"^commands must be an array of numbers of shape \(4, 2\).*, got one of shape"):
         sim.step(commands)
     assert sim.step_index == 0
     np.testing.assert_array_equal(sim.poses, before)
 
 
-def test_commands_that_are_not_numbers_name_commands():
+@pytest.mark.parametrize("commands", [[["a", "b"]] * 4, None, [[1.0, None]] * 4, [[1.0], [1.0, 2.0]]])
+def test_commands_that_are_not_numbers_name_commands(commands):
     sim = echelon.Simulation("circle-pentagon")
-    with pytest.raises(TypeError, match="^commands: not an array of numbers"):
-        sim.step([["a", "b"]] * 4)
+    with pytest.raises(TypeError, match="^commands must be an array of numbers"):
+        sim.step(commands)
+    assert sim.step_index == 0
 
 
 def test_the_paper_law_on_a_robot_at_its_place_commands_friction_only():

@@ -7,7 +7,7 @@
 
 use std::borrow::Cow;
 
-use crate::error::ParamError;
+use crate::error::{ParamError, num};
 
 /// `v` if `ok`, else an error saying `field = v` is refused because of `reason`.
 pub fn require(
@@ -58,7 +58,8 @@ pub fn at_least_one(field: &'static str, n: u64) -> Result<u64, ParamError> {
 }
 
 /// `period / dt` when `period` is a finite number > 0 and a whole multiple of
-/// `dt` (to 1e-9 relative); `what` names `dt` in the error (`dt = 0.01 s`).
+/// `dt` (to 1e-9 relative); `what` names `dt` in the error, which gives its
+/// value in short form (`dt = 0.01 s`, `dt = 1e-300 s`).
 pub fn multiple_of(
     field: &'static str,
     period: f64,
@@ -70,7 +71,7 @@ pub fn multiple_of(
         ParamError::new(
             field,
             period,
-            format!("s is not a whole multiple of {what}"),
+            format!("s is not a whole multiple of {what} = {} s", num(dt)),
         )
     })
 }
@@ -93,12 +94,15 @@ mod tests {
         assert!(non_negative("slip", 0.0).is_ok());
         assert!(non_negative("slip", -1e-12).is_err());
         assert_eq!(at_least_one("runs", 0).unwrap_err().field, "runs");
-        assert_eq!(multiple_of("period", 0.02, 0.01, "dt = 0.01 s"), Ok(2));
-        let e = multiple_of("period", 0.025, 0.01, "dt = 0.01 s").unwrap_err();
+        assert_eq!(multiple_of("period", 0.02, 0.01, "dt"), Ok(2));
+        let e = multiple_of("period", 0.025, 0.01, "dt").unwrap_err();
         assert_eq!(
             format!("{} {}", e.value, e.reason),
             "0.025 s is not a whole multiple of dt = 0.01 s"
         );
+        // A step far from 1 is in exponent form, not hundreds of digits.
+        let e = multiple_of("period", 1e-299, 3e-300, "dt").unwrap_err();
+        assert_eq!(e.reason, "s is not a whole multiple of dt = 3e-300 s");
         assert!(multiple_of("period", -0.02, 0.01, "dt").is_err());
     }
 }

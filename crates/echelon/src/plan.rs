@@ -9,8 +9,8 @@
 use crate::agent::AgentSpec;
 use crate::check;
 use crate::control::Variant;
-use crate::error::ParamError;
 use crate::error::{FormationError, SimError};
+use crate::error::{ParamError, num};
 use crate::formation::{Formation, Leader};
 use crate::guard::Bounds;
 use crate::lycomp::{FitCoefficients, LyComp};
@@ -62,10 +62,10 @@ impl SimConfig {
             "duration",
             duration,
             steps <= MAX_STEPS,
-            format!("s at dt {dt} s is {steps:e} steps: too many"),
+            format!("s at dt {} s is {steps:e} steps: too many", num(dt)),
         )?;
         if let Timing::Sampled { period } = timing {
-            check::multiple_of("controller_period", period, dt, &format!("dt = {dt} s"))?;
+            check::multiple_of("controller_period", period, dt, "dt")?;
         }
         Ok(SimConfig {
             dt,

@@ -131,12 +131,9 @@ impl FixSpec {
     pub fn samples_between(&self, period: f64) -> Result<u64, ParamError> {
         match self.schedule {
             FixSchedule::EverySamples(n) => check::at_least_one("every_steps", n),
-            FixSchedule::Period(p) => check::multiple_of(
-                "period",
-                p,
-                period,
-                &format!("the odometry period {period} s"),
-            ),
+            FixSchedule::Period(p) => {
+                check::multiple_of("period", p, period, "the odometry period")
+            }
         }
     }
 }

@@ -14,7 +14,7 @@ use super::{DEFAULT_LOG_DT, Run, Scenario};
 use crate::agent::{AgentSpec, Drive};
 use crate::check;
 use crate::control::{Gains, Law, Variant};
-use crate::error::{FormationError, ParamError, ReferenceError, ScenarioError};
+use crate::error::{FormationError, ParamError, ReferenceError, ScenarioError, num};
 use crate::formation::Leader;
 use crate::guard::Bounds;
 use crate::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
@@ -92,9 +92,9 @@ impl Builder<'_> {
             &step,
             format!(
                 "{} s does not fit {path} ({}): {} {}",
-                crate::error::num(self.file.sim.dt),
+                num(self.file.sim.dt),
                 self.at.place(path),
-                crate::error::num(e.value),
+                num(e.value),
                 e.reason
             ),
         )
@@ -108,14 +108,19 @@ impl Builder<'_> {
         let f = self.file;
         let (step, log) = (FieldPath::from("sim.dt"), FieldPath::from("log.dt"));
         let (dt_flag, log_flag) = (self.at.flag(&step), self.at.flag(&log));
-        let misfit =
-            |dt: f64| format!("s is not 0 (every step) or a whole multiple of dt = {dt} s");
+        let misfit = |dt: f64| {
+            format!(
+                "s is not 0 (every step) or a whole multiple of dt = {} s",
+                num(dt)
+            )
+        };
+        let (dt_text, log_text) = (num(dt), num(log_dt));
         if f.log.dt.is_none() {
             // The default period is nowhere in the file: the step is.
             return self.at.error(
                 &step,
                 format!(
-                    "{dt} s: the default logging period log.dt = {log_dt} s is not a whole multiple of it (set [log] dt = 0 to log every step, or a multiple of dt; on the command line: --log-dt)"
+                    "{dt_text} s: the default logging period log.dt = {log_text} s is not a whole multiple of it (set [log] dt = 0 to log every step, or a multiple of dt; on the command line: --log-dt)"
                 ),
             );
         }
@@ -124,7 +129,7 @@ impl Builder<'_> {
             (Some(_), None) => self.at.error(
                 &step,
                 format!(
-                    "{dt} s does not fit log.dt ({}): {log_dt} {} (change the logging period with --log-dt)",
+                    "{dt_text} s does not fit log.dt ({}): {log_text} {} (change the logging period with --log-dt)",
                     self.at.place(&log),
                     misfit(dt)
                 ),
@@ -134,9 +139,9 @@ impl Builder<'_> {
                 self.at.error(
                     &step,
                     format!(
-                        "{dt} s does not fit {log_flag} {log_dt} s: {log_dt} {} ({log_flag} fits the scenario's own dt = {} s)",
+                        "{dt_text} s does not fit {log_flag} {log_text} s: {log_text} {} ({log_flag} fits the scenario's own dt = {} s)",
                         misfit(dt),
-                        self.file_step
+                        num(self.file_step)
                     ),
                 )
             }
@@ -257,11 +262,12 @@ impl Builder<'_> {
             let e = self.at.error(
                 &self.control(i).path_of(key),
                 format!(
-                    "agent {}: {symbol} {step} = {} > 2: the step {h} s cannot follow the time scale 1/{symbol} = {} s and the run will oscillate and diverge (use {step} < {} s)",
+                    "agent {}: {symbol} {step} = {} > 2: the step {} s cannot follow the time scale 1/{symbol} = {} s and the run will oscillate and diverge (use {step} < {} s)",
                     i + 1,
-                    plausible::num(k * h),
-                    plausible::num(1.0 / k),
-                    plausible::num(2.0 / k),
+                    num(k * h),
+                    num(h),
+                    num(1.0 / k),
+                    num(2.0 / k),
                 ),
             );
             warnings.push(e.to_string());

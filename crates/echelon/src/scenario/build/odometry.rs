@@ -58,7 +58,7 @@ impl Builder<'_> {
                 Timing::Continuous => (dt, true),
             },
             Some((p, path)) => {
-                check::multiple_of("period", p, dt, &format!("dt = {dt} s"))
+                check::multiple_of("period", p, dt, "dt")
                     .map_err(|e| self.against_step(&path, &e))?;
                 (p, false)
             }

@@ -22,57 +22,78 @@ fn odometry() -> impl Strategy<Value = Option<OdometryState>> {
         })
 }
 
+/// `N` finite numbers.
+fn finites<const N: usize>() -> impl Strategy<Value = [f64; N]> {
+    proptest::array::uniform(finite())
+}
+
+/// A robot's state `[x, y, θ, v, ω]`.
+fn state() -> impl Strategy<Value = State> {
+    finites::<5>().prop_map(|[x, y, theta, v, omega]| State {
+        x,
+        y,
+        theta,
+        v,
+        omega,
+    })
+}
+
+/// A leader's motion `p, ṗ, p̈`.
+fn motion() -> impl Strategy<Value = LeaderMotion> {
+    (finites::<2>(), finites::<2>(), finites::<2>()).prop_map(|(p, dp, ddp)| LeaderMotion {
+        p,
+        dp,
+        ddp,
+    })
+}
+
+/// No velocity block (torque-driven), or a velocity base's, its limits
+/// cutting the command or not.
+fn velocity() -> impl Strategy<Value = Option<VelocitySample>> {
+    (0..3u8, finites::<4>()).prop_map(|(drive, [v_cmd, omega_cmd, v_applied, omega_applied])| {
+        (drive > 0).then_some(VelocitySample {
+            v_cmd,
+            omega_cmd,
+            v_applied,
+            omega_applied,
+            sat: drive == 2,
+        })
+    })
+}
+
 /// A robot state of any layout (torque-driven, a velocity base cutting its
 /// command or not; with or without the odometry block) and its header.
 fn robot_state() -> impl Strategy<Value = (Header, RobotState)> {
     (
-        (any::<u32>(), any::<u64>(), 1..1000u32, 0..5u8, 0..3u8),
-        proptest::collection::vec(finite(), 26),
-        0.0..10.0f64,
-        odometry(),
+        (any::<u32>(), any::<u64>(), 1..1000u32, 0..5u8, finite()),
+        (state(), finites::<2>(), finites::<4>(), finites::<4>()),
+        (motion(), velocity(), 0.0..10.0f64, odometry()),
     )
-        .prop_map(|((source, seq, agent, link, drive), v, sigma, odometry)| {
-            let s = RobotState {
-                t: v[21],
-                agent,
-                link: LinkStatus::from_u8(link).unwrap_or_default(),
-                state: State {
-                    x: v[0],
-                    y: v[1],
-                    theta: v[2],
-                    v: v[3],
-                    omega: v[4],
-                },
-                dv: v[5],
-                domega: v[6],
-                e: [v[7], v[8]],
-                z: [v[9], v[10]],
-                u: Input {
-                    u1: v[11],
-                    u2: v[12],
-                },
-                tau: Torques {
-                    right: v[13],
-                    left: v[14],
-                },
-                leader: LeaderMotion {
-                    p: [v[15], v[16]],
-                    dp: [v[17], v[18]],
-                    ddp: [v[19], v[20]],
-                },
-                // 0: torque-driven; 1, 2: a velocity base, its limits cutting or not.
-                velocity: (drive > 0).then_some(VelocitySample {
-                    v_cmd: v[22],
-                    omega_cmd: v[23],
-                    v_applied: v[24],
-                    omega_applied: v[25],
-                    sat: drive == 2,
-                }),
-                sigma,
-                odometry,
-            };
-            (Header { source, seq }, s)
-        })
+        .prop_map(
+            |(
+                (source, seq, agent, link, t),
+                (state, [dv, domega], [e0, e1, z0, z1], [u1, u2, right, left]),
+                (leader, velocity, sigma, odometry),
+            )| {
+                let s = RobotState {
+                    t,
+                    agent,
+                    link: LinkStatus::from_u8(link).unwrap_or_default(),
+                    state,
+                    dv,
+                    domega,
+                    e: [e0, e1],
+                    z: [z0, z1],
+                    u: Input { u1, u2 },
+                    tau: Torques { right, left },
+                    leader,
+                    velocity,
+                    sigma,
+                    odometry,
+                };
+                (Header { source, seq }, s)
+            },
+        )
 }
 
 proptest! {

@@ -198,8 +198,9 @@ impl SafetyFilter {
             let d = [own.p[0] - o.x, own.p[1] - o.y];
             let clear = o.r + radius;
             let h = d[0] * d[0] + d[1] * d[1] - clear * clear;
-            if d[0].hypot(d[1]) - clear < nearest.0 {
-                nearest = (d[0].hypot(d[1]) - clear, speed([0.0; 2]));
+            let beyond = d[0].hypot(d[1]) - clear;
+            if beyond < nearest.0 {
+                nearest = (beyond, speed([0.0; 2]));
             }
             self.rows.push(row(d, h, None));
         }

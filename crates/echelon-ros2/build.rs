@@ -15,7 +15,8 @@ mod msg;
 use std::path::PathBuf;
 
 /// The types a topic carries (`cmd_vel`, `odom`, a motion-capture pose, AMCL's
-/// `amcl_pose`), by `package/Type`: those with a full definition, which the
+/// `amcl_pose`, a Create 3's `hazard_detection`, an e-stop's `Bool`), by
+/// `package/Type`: those with a full definition, which the
 /// fleet records and `identify` reads.
 const TOPIC_TYPES: &[&str] = &[
     "geometry_msgs/Twist",
@@ -23,6 +24,8 @@ const TOPIC_TYPES: &[&str] = &[
     "nav_msgs/Odometry",
     "geometry_msgs/PoseStamped",
     "geometry_msgs/PoseWithCovarianceStamped",
+    "irobot_create_msgs/HazardDetectionVector",
+    "std_msgs/Bool",
 ];
 
 fn main() {

@@ -26,6 +26,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::ros2::hazard::HazardSet;
+
 /// The longest command payload accepted, bytes.
 pub const MAX_LEN: usize = 2048;
 /// The longest `reason`, characters.
@@ -138,8 +140,10 @@ impl FleetCommand {
     }
 }
 
-/// What a process answers on its latch key: whether it is stopped, and the
-/// command in force (the stop, or the last resume; `None`: none heard).
+/// What a process answers on its latch key: whether it is stopped, the
+/// command in force (the stop, or the last resume; `None`: none heard) and,
+/// from a robot, the stopping hazards its base reports (a fleet paused for
+/// them may not be resumed: `fleet resume` refuses, naming them).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Latched {
@@ -147,6 +151,9 @@ pub struct Latched {
     pub stopped: bool,
     /// The command in force.
     pub command: Option<FleetCommand>,
+    /// The stopping hazards its base reports (only while stopped).
+    #[serde(default, skip_serializing_if = "HazardSet::is_empty")]
+    pub hazards: HazardSet,
 }
 
 impl Latched {
@@ -168,7 +175,7 @@ impl Latched {
                     && c.check().is_ok()
             }
             None => !l.stopped,
-        };
+        } && (l.hazards.is_empty() || l.stopped);
         consistent.then_some(l)
     }
 
@@ -203,6 +210,10 @@ pub struct CommandCounts {
     /// Resumes ignored: not stopped, or numbered at or below the stop in
     /// force.
     pub ignored: u64,
+    /// Resumes refused because the robot's base still reported a stopping
+    /// hazard (it stopped the fleet again).
+    #[serde(default)]
+    pub refused_resumes: u64,
 }
 
 /// What a command did to a latch.
@@ -261,7 +272,14 @@ impl Latch {
         Latched {
             stopped: self.stopped(),
             command: self.stop.clone().or_else(|| self.resume.clone()),
+            hazards: HazardSet::EMPTY,
         }
+    }
+
+    /// Counts a resume its holder refused after the latch obeyed it (its
+    /// base reports a hazard; the holder stops again at once).
+    pub fn refuse_resume(&mut self) {
+        self.counts.refused_resumes += 1;
     }
 
     /// The highest command number it knows.
@@ -318,6 +336,7 @@ impl Latch {
             Some(Latched {
                 stopped: true,
                 command: Some(c),
+                ..
             }) => self.take_stop(c),
             _ => Change::Unchanged,
         }
@@ -389,7 +408,8 @@ mod tests {
             l.latched(),
             Latched {
                 stopped: false,
-                command: None
+                command: None,
+                hazards: HazardSet::EMPTY,
             }
         );
         assert_eq!(l.on_command(cmd(Order::Stop, 2)), Change::Stopped);
@@ -437,6 +457,7 @@ mod tests {
             let answer = Latched {
                 stopped: true,
                 command: Some(bad.clone()),
+                hazards: HazardSet::EMPTY,
             };
             assert_eq!(Latched::decode(&answer.encode()), None, "{bad:?}");
             let mut l = Latch::new();
@@ -446,6 +467,7 @@ mod tests {
         let good = Latched {
             stopped: true,
             command: Some(cmd(Order::Stop, 4)),
+            hazards: HazardSet::EMPTY,
         };
         assert_eq!(Latched::decode(&good.encode()), Some(good));
     }
@@ -456,12 +478,14 @@ mod tests {
         let resumed = Latched {
             stopped: false,
             command: Some(cmd(Order::Resume, 9)),
+            hazards: HazardSet::EMPTY,
         };
         assert_eq!(l.on_hearsay(&resumed.encode()), Change::Unchanged);
         assert_eq!(l.seq(), 0);
         let stopped = Latched {
             stopped: true,
             command: Some(cmd(Order::Stop, 4)),
+            hazards: HazardSet::EMPTY,
         };
         assert_eq!(l.on_hearsay(&stopped.encode()), Change::Stopped);
         assert_eq!(l.on_hearsay(&resumed.encode()), Change::Unchanged);
@@ -470,6 +494,7 @@ mod tests {
         let liar = Latched {
             stopped: false,
             command: Some(cmd(Order::Stop, 4)),
+            hazards: HazardSet::EMPTY,
         };
         assert_eq!(Latched::decode(&liar.encode()), None);
         assert_eq!(Latched::decode(b"[1,2]"), None);
@@ -495,7 +520,7 @@ mod tests {
                     1 => { l.on_payload(&c.encode()); }
                     2 => { l.on_payload(&c.encode()[1..]); }
                     _ => {
-                        let heard = Latched { stopped: stop, command: Some(c) };
+                        let heard = Latched { stopped: stop, command: Some(c), hazards: HazardSet::EMPTY };
                         l.on_hearsay(&heard.encode());
                     }
                 }

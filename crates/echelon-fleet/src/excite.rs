@@ -388,7 +388,7 @@ pub fn run(opts: ExciteOptions, stop: &StopFlag) -> Result<ExciteReport, FleetEr
                 counts: [0; 2],
                 signal,
                 agent,
-                odom_key: node.odom_key,
+                odom_key: node.input_keys[0].clone(),
                 period: 1.0 / opts.rate,
                 radius: opts.radius,
                 wait: opts.wait,

@@ -64,6 +64,10 @@ pub enum FleetError {
     /// A child process of `fleet up` failed.
     #[error("{0}")]
     Child(String),
+    /// An order the fleet refuses (a resume while a robot's base reports a
+    /// hazard): nothing was sent.
+    #[error("{0}")]
+    Refused(String),
     /// A robot's state stopped being finite or left its bounds
     /// ([`echelon::guard::Bounds`]): it commanded zero and stopped.
     #[error("{0}")]

@@ -104,6 +104,21 @@ pub fn tally(
     (robots, leader)
 }
 
+/// The robots whose latch answers in `answers` name stopping hazards their
+/// base still reports, as one line (`robot/2 reports BUMP; robot/3 reports
+/// EMERGENCY_STOP`), or `None`.
+pub fn hazards_in_force(keys: &Keys, answers: &[(String, Vec<u8>)]) -> Option<String> {
+    let reports: BTreeSet<String> = answers
+        .iter()
+        .filter_map(|(key, payload)| {
+            let holder = keys.latch_holder(key)?;
+            let l = Latched::decode(payload)?;
+            (!l.hazards.is_empty()).then(|| format!("{holder} reports {}", l.hazards.names()))
+        })
+        .collect();
+    (!reports.is_empty()).then(|| reports.into_iter().collect::<Vec<_>>().join("; "))
+}
+
 /// The highest command number in `answers` (0: none).
 pub fn highest_seq(answers: &[(String, Vec<u8>)]) -> u64 {
     answers
@@ -140,6 +155,14 @@ pub fn run(opts: &OperatorOptions, stop: &StopFlag) -> Result<OperatorReport, Fl
     let session = net::open(&opts.net)?;
     let alive = alive_robots(&session, &keys)?;
     let before = runtime::query_all(&session, &keys.latches(), ASK)?;
+    if opts.order == Order::Resume
+        && let Some(why) = hazards_in_force(&keys, &before)
+    {
+        let _ = session.close().wait();
+        return Err(FleetError::Refused(format!(
+            "fleet resume refused: {why}; the fleet stays stopped until the base clears it"
+        )));
+    }
     let identity = opts
         .net
         .secure

@@ -12,6 +12,7 @@ use echelon::base::VelocityCommand;
 use echelon::model::State;
 
 use crate::ros2::fixes::FixReport;
+use crate::ros2::hazard::{HazardReport, HazardSet};
 use crate::wire::OdometryState;
 
 /// A differential-drive robot under the fleet controller: what the robot's
@@ -52,6 +53,18 @@ pub trait Plant {
     /// none, as a simulated plant, which is never lost).
     fn fixes(&self, t: f64) -> Option<FixReport> {
         let _ = t;
+        None
+    }
+    /// The base's own stopping safety words in force at fleet time `t` (a
+    /// bump, a cliff, a stall, a wheel drop, an e-stop:
+    /// [`crate::ros2::hazard`]), its events brought up to `t`; none on a
+    /// plant that has no such sensors, as a simulated one.
+    fn hazards(&mut self, t: f64) -> HazardSet {
+        let _ = t;
+        HazardSet::EMPTY
+    }
+    /// What its base's safety words did (`None`: it listens to none).
+    fn hazard_report(&self) -> Option<HazardReport> {
         None
     }
 }

@@ -52,6 +52,7 @@ use echelon_fleet::plant::{Plant, SimulatedDrive};
 use echelon_fleet::robot::{Robot, RobotConfig, sample_of};
 use echelon_fleet::ros2::drive::{CmdSink, Ros2Counters, Ros2Drive, encode_cmd_vel};
 use echelon_fleet::ros2::fixes::{FixInput, OdometryModel, fix_type};
+use echelon_fleet::ros2::hazard::HazardSet;
 use echelon_fleet::ros2::record::RosTopic;
 use echelon_fleet::ros2::sim_base::{BaseCounters, SimBase};
 use echelon_fleet::wire::{
@@ -921,14 +922,17 @@ fn every_mutation_of_a_latch_answer_can_only_stop() {
         Latched {
             stopped: true,
             command: Some(stop),
+            hazards: HazardSet::EMPTY,
         },
         Latched {
             stopped: false,
             command: Some(resume),
+            hazards: HazardSet::EMPTY,
         },
         Latched {
             stopped: false,
             command: None,
+            hazards: HazardSet::EMPTY,
         },
     ];
     let mut failures = Vec::new();

@@ -3,7 +3,7 @@
 //! - the RIHS01 type hash (REP 2011; `rosidl_generator_type_description`):
 //!   SHA-256 of the JSON of the type description, the type's fields then
 //!   every type it nests (transitively, sorted by name), default values
-//!   left out, written as Python's `json.dumps(..., separators=(', ', ': '))`;
+//!   and constants left out, written as Python's `json.dumps(..., separators=(', ', ': '))`;
 //! - the full definition rosbag2 stores as an MCAP `ros2msg` schema
 //!   (`LocalMessageDefinitionSource::get_full_text`): the type's `.msg`,
 //!   then, depth first and each type once, every nested type's `.msg`
@@ -19,6 +19,8 @@ use crate::msg::{Base, Msg, full_name};
 const FIELD_TYPE_NESTED_TYPE: u8 = 1;
 /// Added to a scalar's id for a fixed-size array of it.
 const FIELD_TYPE_ARRAY_OFFSET: u8 = 48;
+/// Added to a scalar's id for an unbounded sequence of it.
+const FIELD_TYPE_UNBOUNDED_SEQUENCE_OFFSET: u8 = 144;
 
 /// `RIHS01_` and the 64 hex digits of the type hash of `msg`.
 pub(crate) fn type_hash(msg: &Msg, all: &BTreeMap<String, Msg>) -> String {
@@ -62,9 +64,10 @@ fn describe(msg: &Msg) -> String {
                 Base::Primitive(p) => (p.type_id(), String::new()),
                 Base::Nested(n) => (FIELD_TYPE_NESTED_TYPE, full_name(n)),
             };
-            let (type_id, capacity) = match f.array {
-                Some(n) => (scalar + FIELD_TYPE_ARRAY_OFFSET, n),
-                None => (scalar, 0),
+            let (type_id, capacity) = match (f.array, f.sequence) {
+                (Some(n), _) => (scalar + FIELD_TYPE_ARRAY_OFFSET, n),
+                (None, true) => (scalar + FIELD_TYPE_UNBOUNDED_SEQUENCE_OFFSET, 0),
+                (None, false) => (scalar, 0),
             };
             format!(
                 "{{\"name\": \"{}\", \"type\": {{\"type_id\": {type_id}, \"capacity\": {capacity}, \

@@ -16,14 +16,38 @@ use std::fmt::Write as _;
 use crate::describe::{full_definition, type_hash};
 use crate::msg::{Base, Field, Msg, Primitive};
 
-/// One primitive (or fixed-size array of primitives) of a flattened message.
+/// One primitive (or fixed-size array of primitives) of a flattened
+/// message, or one unbounded sequence of a nested message (written and read
+/// by that message's own codec, element by element).
 struct Slot {
     /// Path from the message, `pose.pose.position.x`.
     path: String,
-    prim: Primitive,
-    array: Option<usize>,
+    kind: SlotKind,
     /// The field name errors give.
     name: String,
+}
+
+enum SlotKind {
+    Prim(Primitive, Option<usize>),
+    /// A sequence of the nested message of this Rust name.
+    Sequence,
+}
+
+/// A field name as a Rust identifier: a keyword (`type`) raw (`r#type`).
+fn ident(name: &str) -> String {
+    const KEYWORDS: [&str; 10] = [
+        "type", "match", "loop", "move", "ref", "self", "struct", "enum", "fn", "impl",
+    ];
+    if KEYWORDS.contains(&name) {
+        format!("r#{name}")
+    } else {
+        name.to_owned()
+    }
+}
+
+/// A field path (`header.stamp`) as Rust accesses it, each name an [`ident`].
+fn access(path: &str) -> String {
+    path.split('.').map(ident).collect::<Vec<_>>().join(".")
 }
 
 /// `TwistStamped` → `TWIST_STAMPED`, `Vector3` → `VECTOR3`.
@@ -68,8 +92,12 @@ fn flatten(msg: &Msg, all: &BTreeMap<String, Msg>, prefix: &str, out: &mut Vec<S
                     path.clone()
                 },
                 path,
-                prim: *prim,
-                array: f.array,
+                kind: SlotKind::Prim(*prim, f.array),
+            }),
+            (Base::Nested(_), Some(_)) if f.sequence => out.push(Slot {
+                name: path.clone(),
+                path,
+                kind: SlotKind::Sequence,
             }),
             (Base::Nested(_), Some(inner)) => flatten(inner, all, &path, out),
             (Base::Nested(n), None) => panic!("{}: unknown type {n}", msg.ty),
@@ -92,6 +120,8 @@ fn read_expr(msg: &Msg, all: &BTreeMap<String, Msg>, prefix: &str, indent: &str)
             (Base::Primitive(prim), _) => {
                 let name = if whole { prefix } else { &path };
                 let read = match prim {
+                    Primitive::Bool => format!("r.read_bool({name:?})?"),
+                    Primitive::Uint8 => format!("r.read_u8({name:?})?"),
                     Primitive::Int32 => format!("r.read_i32({name:?})?"),
                     Primitive::Uint32 => format!("r.read_u32({name:?})?"),
                     Primitive::Float64 => format!("r.read_f64({name:?})?"),
@@ -105,10 +135,14 @@ fn read_expr(msg: &Msg, all: &BTreeMap<String, Msg>, prefix: &str, indent: &str)
                     None => read,
                 }
             }
+            (Base::Nested(_), Some(nested_msg)) if f.sequence => format!(
+                "{{\n{inner}    let n = r.read_sequence_len({path:?})?;\n{inner}    let mut v = Vec::with_capacity(n);\n{inner}    for _ in 0..n {{\n{inner}        v.push({}::read_cdr(r)?);\n{inner}    }}\n{inner}    v\n{inner}}}",
+                nested_msg.ty
+            ),
             (Base::Nested(_), Some(nested_msg)) => read_expr(nested_msg, all, &path, &inner),
             (Base::Nested(n), None) => panic!("{}: unknown type {n}", msg.ty),
         };
-        let _ = writeln!(out, "{inner}{}: {value},", f.name);
+        let _ = writeln!(out, "{inner}{}: {value},", ident(&f.name));
     }
     out.push_str(indent);
     out.push('}');
@@ -118,6 +152,7 @@ fn read_expr(msg: &Msg, all: &BTreeMap<String, Msg>, prefix: &str, indent: &str)
 /// Whether `msg` (and what it nests) has no `string`: the struct is `Copy`.
 fn is_copy(msg: &Msg, all: &BTreeMap<String, Msg>) -> bool {
     msg.fields.iter().all(|f| match nested(all, f) {
+        Some(_) if f.sequence => false,
         Some(inner) => is_copy(inner, all),
         None => f.base != Base::Primitive(Primitive::String),
     })
@@ -136,9 +171,10 @@ fn rust_type(f: &Field) -> String {
         Base::Primitive(p) => p.rust().to_owned(),
         Base::Nested(n) => n.rsplit('/').next().unwrap_or(n).to_owned(),
     };
-    match f.array {
-        Some(n) => format!("[{scalar}; {n}]"),
-        None => scalar,
+    match (f.array, f.sequence) {
+        (Some(n), _) => format!("[{scalar}; {n}]"),
+        (None, true) => format!("Vec<{scalar}>"),
+        (None, false) => scalar,
     }
 }
 
@@ -151,11 +187,18 @@ fn default_value(f: &Field) -> String {
                 .unwrap_or_else(|_| panic!("default `{d}` of {}", f.name));
             format!("{v:?}")
         }
-        (Base::Primitive(Primitive::Int32 | Primitive::Uint32), Some(d)) => d.clone(),
+        (Base::Primitive(Primitive::Int32 | Primitive::Uint32 | Primitive::Uint8), Some(d)) => {
+            d.clone()
+        }
+        (Base::Primitive(Primitive::Bool), Some(d)) => (d == "true" || d == "1").to_string(),
+        (Base::Primitive(Primitive::Bool), None) => "false".to_owned(),
         (Base::Primitive(Primitive::String), Some(d)) => format!("{d:?}.to_owned()"),
         (Base::Primitive(Primitive::Float64), None) => "0.0".to_owned(),
-        (Base::Primitive(Primitive::Int32 | Primitive::Uint32), None) => "0".to_owned(),
+        (Base::Primitive(Primitive::Int32 | Primitive::Uint32 | Primitive::Uint8), None) => {
+            "0".to_owned()
+        }
         (Base::Primitive(Primitive::String), None) => "String::new()".to_owned(),
+        (Base::Nested(_), _) if f.sequence => return "Vec::new()".to_owned(),
         (Base::Nested(_), _) => "Default::default()".to_owned(),
     };
     match f.array {
@@ -228,16 +271,34 @@ fn emit_struct(out: &mut String, msg: &Msg, all: &BTreeMap<String, Msg>) {
         } else {
             doc(out, "    ", &f.doc);
         }
-        let _ = writeln!(out, "    pub {}: {},", f.name, rust_type(f));
+        let _ = writeln!(out, "    pub {}: {},", ident(&f.name), rust_type(f));
     }
     out.push_str("}\n\n");
+    if !msg.constants.is_empty() {
+        let _ = writeln!(out, "impl {name} {{");
+        for c in &msg.constants {
+            if c.doc.is_empty() {
+                doc(out, "    ", &[format!("`{}`.", c.name)]);
+            } else {
+                doc(out, "    ", &c.doc);
+            }
+            let _ = writeln!(
+                out,
+                "    pub const {}: {} = {};",
+                c.name,
+                c.prim.rust(),
+                c.value
+            );
+        }
+        out.push_str("}\n\n");
+    }
     if !derive_default {
         let _ = writeln!(
             out,
             "impl Default for {name} {{\n    /// The `.msg`'s default values.\n    fn default() -> {name} {{\n        {name} {{"
         );
         for f in &msg.fields {
-            let _ = writeln!(out, "            {}: {},", f.name, default_value(f));
+            let _ = writeln!(out, "            {}: {},", ident(&f.name), default_value(f));
         }
         out.push_str("        }\n    }\n}\n\n");
     }
@@ -261,33 +322,46 @@ fn emit_message(out: &mut String, msg: &Msg, all: &BTreeMap<String, Msg>) {
     // Write.
     out.push_str("    fn write_cdr(&self, w: &mut CdrWriter<'_>) {\n");
     for s in &slots {
-        let call = match s.prim {
+        let (prim, array) = match s.kind {
+            SlotKind::Prim(p, a) => (p, a),
+            SlotKind::Sequence => {
+                let _ = writeln!(
+                    out,
+                    "        w.write_sequence_len(self.{p}.len());\n        for e in &self.{p} {{\n            e.write_cdr(w);\n        }}",
+                    p = access(&s.path)
+                );
+                continue;
+            }
+        };
+        let call = match prim {
+            Primitive::Bool => "w.write_bool(v)",
+            Primitive::Uint8 => "w.write_u8(v)",
             Primitive::Int32 => "w.write_i32(v)",
             Primitive::Uint32 => "w.write_u32(v)",
             Primitive::Float64 => "w.write_f64(v)",
             Primitive::String => "w.write_string(v)",
         };
-        let by_ref = s.prim == Primitive::String;
-        let _ = match s.array {
+        let by_ref = prim == Primitive::String;
+        let _ = match array {
             Some(_) if by_ref => writeln!(
                 out,
                 "        for v in &self.{} {{\n            {call};\n        }}",
-                s.path
+                access(&s.path)
             ),
             Some(_) => writeln!(
                 out,
                 "        for &v in &self.{} {{\n            {call};\n        }}",
-                s.path
+                access(&s.path)
             ),
             None if by_ref => writeln!(
                 out,
                 "        {};",
-                call.replace("(v)", &format!("(&self.{})", s.path))
+                call.replace("(v)", &format!("(&self.{})", access(&s.path)))
             ),
             None => writeln!(
                 out,
                 "        {};",
-                call.replace("(v)", &format!("(self.{})", s.path))
+                call.replace("(v)", &format!("(self.{})", access(&s.path)))
             ),
         };
     }
@@ -302,14 +376,16 @@ fn emit_message(out: &mut String, msg: &Msg, all: &BTreeMap<String, Msg>) {
     out.push_str("    fn first_non_finite(&self) -> Option<&'static str> {\n");
     let floats: Vec<&Slot> = slots
         .iter()
-        .filter(|s| s.prim == Primitive::Float64)
+        .filter(|s| matches!(s.kind, SlotKind::Prim(Primitive::Float64, _)))
         .collect();
     for group in floats.chunk_by(|a, b| a.name == b.name) {
         let checks: Vec<String> = group
             .iter()
-            .map(|s| match s.array {
-                Some(_) => format!("self.{}.iter().all(|v| v.is_finite())", s.path),
-                None => format!("self.{}.is_finite()", s.path),
+            .map(|s| match s.kind {
+                SlotKind::Prim(_, Some(_)) => {
+                    format!("self.{}.iter().all(|v| v.is_finite())", access(&s.path))
+                }
+                _ => format!("self.{}.is_finite()", access(&s.path)),
             })
             .collect();
         let test = match checks.as_slice() {
@@ -320,6 +396,16 @@ fn emit_message(out: &mut String, msg: &Msg, all: &BTreeMap<String, Msg>) {
             out,
             "        if {test} {{\n            return Some({:?});\n        }}",
             group[0].name
+        );
+    }
+    for s in slots
+        .iter()
+        .filter(|s| matches!(s.kind, SlotKind::Sequence))
+    {
+        let _ = writeln!(
+            out,
+            "        if let Some(f) = self.{}.iter().find_map(RosMessage::first_non_finite) {{\n            return Some(f);\n        }}",
+            access(&s.path)
         );
     }
     out.push_str("        None\n    }\n}\n\n");

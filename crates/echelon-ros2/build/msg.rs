@@ -1,8 +1,10 @@
 //! Reads the `.msg` files under `msg/<package>/<Type>.msg`: the subset of
-//! the ROS 2 interface language echelon's messages use (fields of `int32`,
-//! `uint32`, `float64`, `string` and nested messages, fixed-size arrays of
-//! the numbers, default values on scalars). Anything else stops the
-//! build with the file and line, rather than being guessed at.
+//! the ROS 2 interface language echelon's messages use (fields of `bool`,
+//! `uint8`, `int32`, `uint32`, `float64`, `string` and nested messages,
+//! fixed-size arrays of the numbers, unbounded sequences `T[]` of nested
+//! messages, default values on scalars, integer constants `uint8 NAME=1`).
+//! Anything else stops the build with the file and line, rather than being
+//! guessed at.
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -11,6 +13,8 @@ use std::path::Path;
 /// A primitive field type the CDR codec (`src/cdr.rs`) reads and writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Primitive {
+    Bool,
+    Uint8,
     Int32,
     Uint32,
     Float64,
@@ -20,6 +24,8 @@ pub(crate) enum Primitive {
 impl Primitive {
     fn parse(s: &str) -> Option<Primitive> {
         Some(match s {
+            "bool" => Primitive::Bool,
+            "uint8" => Primitive::Uint8,
             "int32" => Primitive::Int32,
             "uint32" => Primitive::Uint32,
             "float64" => Primitive::Float64,
@@ -31,9 +37,11 @@ impl Primitive {
     /// `type_description_interfaces/msg/FieldType` id of the scalar.
     pub(crate) fn type_id(self) -> u8 {
         match self {
+            Primitive::Uint8 => 3,
             Primitive::Int32 => 6,
             Primitive::Uint32 => 7,
             Primitive::Float64 => 11,
+            Primitive::Bool => 15,
             Primitive::String => 17,
         }
     }
@@ -41,6 +49,8 @@ impl Primitive {
     /// The Rust type.
     pub(crate) fn rust(self) -> &'static str {
         match self {
+            Primitive::Bool => "bool",
+            Primitive::Uint8 => "u8",
             Primitive::Int32 => "i32",
             Primitive::Uint32 => "u32",
             Primitive::Float64 => "f64",
@@ -64,6 +74,8 @@ pub(crate) struct Field {
     pub(crate) base: Base,
     /// `Some(n)` for a fixed-size array `T[n]`.
     pub(crate) array: Option<usize>,
+    /// An unbounded sequence `T[]` (of a nested message).
+    pub(crate) sequence: bool,
     /// The default value as written in the `.msg` (scalars only).
     pub(crate) default: Option<String>,
     /// The comment lines just above the field.
@@ -83,6 +95,19 @@ pub(crate) struct Msg {
     /// or field.
     pub(crate) doc: Vec<String>,
     pub(crate) fields: Vec<Field>,
+    /// Its constants (`uint8 BUMP=1`), which the type hash leaves out.
+    pub(crate) constants: Vec<Constant>,
+}
+
+/// One constant of a message: `uint8 BUMP=1`.
+#[derive(Debug, Clone)]
+pub(crate) struct Constant {
+    pub(crate) name: String,
+    pub(crate) prim: Primitive,
+    /// The value as written (an integer).
+    pub(crate) value: String,
+    /// The comment lines just above it.
+    pub(crate) doc: Vec<String>,
 }
 
 impl Msg {
@@ -170,6 +195,7 @@ fn file_name(path: &Path) -> String {
 /// Parses one `.msg` file of `package`.
 pub(crate) fn parse(package: &str, ty: &str, text: &str) -> Result<Msg, String> {
     let mut fields: Vec<Field> = Vec::new();
+    let mut constants: Vec<Constant> = Vec::new();
     // Comment lines not attached yet; the first block is the message's.
     let mut pending = Vec::new();
     let mut header_doc = None;
@@ -191,6 +217,13 @@ pub(crate) fn parse(package: &str, ty: &str, text: &str) -> Result<Msg, String> 
         if header_doc.is_none() {
             header_doc = Some(std::mem::take(&mut pending));
         }
+        if code.contains('=') {
+            let mut constant = parse_constant(code).map_err(|e| format!("line {}: {e}", i + 1))?;
+            constant.doc = std::mem::take(&mut pending);
+            constant.doc.extend(comment);
+            constants.push(constant);
+            continue;
+        }
         let mut field = parse_field(package, code).map_err(|e| format!("line {}: {e}", i + 1))?;
         field.doc = std::mem::take(&mut pending);
         field.doc.extend(comment);
@@ -205,14 +238,39 @@ pub(crate) fn parse(package: &str, ty: &str, text: &str) -> Result<Msg, String> 
         text: text.to_owned(),
         doc: header_doc.unwrap_or_default(),
         fields,
+        constants,
+    })
+}
+
+/// `type NAME=value`: an integer constant.
+fn parse_constant(code: &str) -> Result<Constant, String> {
+    let (decl, value) = code.split_once('=').unwrap_or((code, ""));
+    let mut parts = decl.split_whitespace();
+    let (Some(ty), Some(name), None) = (parts.next(), parts.next(), parts.next()) else {
+        return Err(format!("expected `type NAME=value`: `{code}`"));
+    };
+    let prim = Primitive::parse(ty)
+        .filter(|p| matches!(p, Primitive::Uint8 | Primitive::Int32 | Primitive::Uint32))
+        .ok_or_else(|| format!("constants are supported of integers only: `{code}`"))?;
+    let value = value.trim();
+    let fits = match prim {
+        Primitive::Uint8 => value.parse::<u8>().is_ok(),
+        Primitive::Int32 => value.parse::<i32>().is_ok(),
+        _ => value.parse::<u32>().is_ok(),
+    };
+    if !fits {
+        return Err(format!("`{value}` is not a {ty}: `{code}`"));
+    }
+    Ok(Constant {
+        name: name.to_owned(),
+        prim,
+        value: value.to_owned(),
+        doc: Vec::new(),
     })
 }
 
 /// `type name [default]`.
 fn parse_field(package: &str, code: &str) -> Result<Field, String> {
-    if code.contains('=') {
-        return Err(format!("constants are not supported: `{code}`"));
-    }
     let mut parts = code.split_whitespace();
     let (Some(ty), Some(name)) = (parts.next(), parts.next()) else {
         return Err(format!("expected `type name`: `{code}`"));
@@ -221,14 +279,19 @@ fn parse_field(package: &str, code: &str) -> Result<Field, String> {
     if parts.next().is_some() {
         return Err(format!("unexpected text after the default: `{code}`"));
     }
-    let (base, array) = match ty.split_once('[') {
-        None => (ty, None),
+    let (base, array, sequence) = match ty.split_once('[') {
+        None => (ty, None, false),
+        Some((base, "]")) => (base, None, true),
         Some((base, rest)) => {
             let n = rest
                 .strip_suffix(']')
                 .and_then(|n| n.parse::<usize>().ok())
-                .ok_or_else(|| format!("only fixed-size arrays `T[n]` are supported: `{ty}`"))?;
-            (base, Some(n))
+                .ok_or_else(|| {
+                    format!(
+                        "only fixed-size arrays `T[n]` and sequences `T[]` are supported: `{ty}`"
+                    )
+                })?;
+            (base, Some(n), false)
         }
     };
     let base = match Primitive::parse(base) {
@@ -240,7 +303,7 @@ fn parse_field(package: &str, code: &str) -> Result<Field, String> {
         None => {
             return Err(format!(
                 "type `{base}` is not supported (src/cdr.rs and build/msg.rs know \
-                 int32, uint32, float64, string and nested messages)"
+                 bool, uint8, int32, uint32, float64, string and nested messages)"
             ));
         }
     };
@@ -248,13 +311,19 @@ fn parse_field(package: &str, code: &str) -> Result<Field, String> {
     if array.is_some() && !numeric {
         return Err(format!("arrays are supported of numbers only: `{code}`"));
     }
-    if default.is_some() && (array.is_some() || matches!(base, Base::Nested(_))) {
+    if sequence && !matches!(base, Base::Nested(_)) {
+        return Err(format!(
+            "sequences are supported of nested messages only: `{code}`"
+        ));
+    }
+    if default.is_some() && (array.is_some() || sequence || matches!(base, Base::Nested(_))) {
         return Err(format!("defaults are supported on scalars only: `{code}`"));
     }
     Ok(Field {
         name: name.to_owned(),
         base,
         array,
+        sequence,
         default,
         doc: Vec::new(),
     })

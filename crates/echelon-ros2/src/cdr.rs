@@ -68,6 +68,25 @@ pub enum CdrError {
         /// The field.
         field: &'static str,
     },
+    /// A `bool` byte that is neither 0 nor 1 (Fast-CDR refuses it too).
+    #[error("{field}: byte {value} is not a bool (0 or 1)")]
+    NotBool {
+        /// The field.
+        field: &'static str,
+        /// The byte read.
+        value: u8,
+    },
+    /// A sequence longer than the bytes left could hold (every element
+    /// takes at least one byte): garbage, never allocated for.
+    #[error("{field}: sequence of {len} elements, only {available} bytes left")]
+    SequenceTooLong {
+        /// The field.
+        field: &'static str,
+        /// The length read.
+        len: u32,
+        /// Bytes left after it.
+        available: usize,
+    },
     /// A NaN or infinite number where the caller needs a finite one.
     #[error("{field} is not finite")]
     NonFinite {
@@ -95,6 +114,22 @@ impl<'a> CdrWriter<'a> {
         let pos = self.buf.len() - ENCAPSULATION_CDR_LE.len();
         let pad = (n - pos % n) % n;
         self.buf.resize(self.buf.len() + pad, 0);
+    }
+
+    /// A `bool` (one byte, 0 or 1).
+    pub fn write_bool(&mut self, v: bool) {
+        self.buf.push(u8::from(v));
+    }
+
+    /// A `uint8`.
+    pub fn write_u8(&mut self, v: u8) {
+        self.buf.push(v);
+    }
+
+    /// The length of an unbounded sequence (its elements follow).
+    pub fn write_sequence_len(&mut self, n: usize) {
+        // A sequence of more than u32::MAX elements cannot be in memory here.
+        self.write_u32(u32::try_from(n).unwrap_or(u32::MAX));
     }
 
     /// An `int32`.
@@ -176,6 +211,36 @@ impl<'a> CdrReader<'a> {
             })?;
         self.pos = start + N;
         Ok(bytes)
+    }
+
+    /// A `bool`: the byte 0 or 1, anything else refused.
+    pub fn read_bool(&mut self, field: &'static str) -> Result<bool, CdrError> {
+        match self.take::<1>(field)? {
+            [0] => Ok(false),
+            [1] => Ok(true),
+            [value] => Err(CdrError::NotBool { field, value }),
+        }
+    }
+
+    /// A `uint8`.
+    pub fn read_u8(&mut self, field: &'static str) -> Result<u8, CdrError> {
+        self.take::<1>(field).map(|[b]| b)
+    }
+
+    /// The length of an unbounded sequence, refused when the bytes left
+    /// could not hold that many elements (so a forged length never makes
+    /// the caller allocate).
+    pub fn read_sequence_len(&mut self, field: &'static str) -> Result<usize, CdrError> {
+        let len = self.read_u32(field)?;
+        let available = self.remaining();
+        if len as usize > available {
+            return Err(CdrError::SequenceTooLong {
+                field,
+                len,
+                available,
+            });
+        }
+        Ok(len as usize)
     }
 
     /// An `int32`.

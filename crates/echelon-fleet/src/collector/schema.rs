@@ -62,6 +62,11 @@ mod tests {
             overruns: 0,
             safety: Some(SafetyCounts::default()),
             fixes: Some(FixReport::default()),
+            hazards: Some(crate::ros2::hazard::HazardStats {
+                in_force: crate::ros2::hazard::HazardSet::EMPTY
+                    .with(crate::ros2::hazard::Hazard::Bump),
+                counts: Default::default(),
+            }),
             commands: Default::default(),
         };
         let rejected = Rejected {

@@ -39,19 +39,26 @@ pub struct RosAcl {
     /// Key expression of its fixes, any type (published by its simulated
     /// base's motion capture), when it takes fixes from ROS 2.
     pub fixes: Option<String>,
+    /// Key expressions of its base's safety words (hazards, e-stop), any
+    /// type, when it listens to them.
+    pub safety: Vec<String>,
 }
 
 impl RosAcl {
-    /// What its simulated base publishes: odometry, ground truth, fixes.
+    /// What its simulated base publishes: odometry, ground truth, fixes,
+    /// safety words.
     fn base_publishes(&self) -> impl Iterator<Item = String> + '_ {
         [self.odom.clone(), self.truth.clone()]
             .into_iter()
             .chain(self.fixes.clone())
+            .chain(self.safety.iter().cloned())
     }
 
-    /// What its robot reads: odometry and fixes.
+    /// What its robot reads: odometry, fixes and its base's safety words.
     fn robot_reads(&self) -> impl Iterator<Item = String> + '_ {
-        std::iter::once(self.odom.clone()).chain(self.fixes.clone())
+        std::iter::once(self.odom.clone())
+            .chain(self.fixes.clone())
+            .chain(self.safety.iter().cloned())
     }
 
     /// Every key of the link.
@@ -77,6 +84,12 @@ pub fn ros_acl(links: &[echelon::scenario::Ros2Link]) -> Vec<RosAcl> {
                 .fixes
                 .as_ref()
                 .map(|f| topic_key_any_type(l.key_scheme, l.domain_id, &f.topic)),
+            safety: l
+                .hazards
+                .iter()
+                .chain(&l.estop)
+                .map(|t| topic_key_any_type(l.key_scheme, l.domain_id, t))
+                .collect(),
         })
         .collect()
 }
@@ -103,7 +116,8 @@ pub fn publishes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
     match member {
         Member::Leader => vec![keys.reference(), keys.command()],
         Member::Operator => vec![keys.command()],
-        Member::Robot(k) => [keys.state(k), keys.stats(k)]
+        // A robot puts a fleet stop when its base reports a hazard.
+        Member::Robot(k) => [keys.state(k), keys.stats(k), keys.command()]
             .into_iter()
             .chain(ros_of(k).map(|r| r.cmd_vel.clone()))
             .collect(),
@@ -170,8 +184,8 @@ pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
 /// certificate, robot `k`'s state and stats only from robot `k`'s; with
 /// ROS 2 links, agent `k`'s `cmd_vel` only from robot `k` and its `odom` only
 /// from base `k`, and rmw_zenoh's liveliness tokens (`@ros2_lv/**`) from
-/// every member; the fleet command only from the `operator` and the
-/// `leader`. Queries, queryables and replies (the command latches) are
+/// every member; the fleet command only from the `operator`, the `leader`
+/// and the robots (a robot whose base reports a hazard puts a stop). Queries, queryables and replies (the command latches) are
 /// allowed to every member: what a process learns from a latch answer can
 /// only stop it ([`crate::command`]).
 ///

@@ -104,6 +104,7 @@ fn access_control_is_accepted_by_zenoh() {
         odom: "0/robot1/odom/*/*".into(),
         truth: "0/robot1/ground_truth/*/*".into(),
         fixes: Some("0/mocap/robot1/pose/*/*".into()),
+        safety: vec!["0/robot1/hazard_detection/*/*".into()],
     }];
     set(&mut c, "access_control", access_control(3, &ros)).unwrap_or_else(|e| panic!("{e}"));
     let acl = c.get_json("access_control").unwrap_or_default();
@@ -132,6 +133,14 @@ fn ros_links(n: u32) -> Vec<RosAcl> {
             odom: format!("0/robot{k}/odom/*/*"),
             truth: format!("0/robot{k}/ground_truth/*/*"),
             fixes: (k % 2 == 1).then(|| format!("0/robot{k}/pose/*/*")),
+            safety: match k % 3 {
+                0 => Vec::new(),
+                1 => vec![format!("0/robot{k}/hazard_detection/*/*")],
+                _ => vec![
+                    format!("0/robot{k}/hazard_detection/*/*"),
+                    format!("0/robot{k}/platform/emergency_stop/*/*"),
+                ],
+            },
         })
         .collect()
 }
@@ -215,13 +224,15 @@ fn each_identity_may_put_exactly_what_its_members_publish() {
             for key in &universe {
                 assert!(!allows(&acl, "echelon-robot-99", "ingress", "put", key));
             }
-            // The fleet command: from the operator and the leader only
-            // (and a router, which forwards everything of the fleet).
+            // The fleet command: from the operator, the leader and the
+            // robots (a robot whose base reports a hazard pauses the
+            // fleet), and a router, which forwards everything of the fleet.
             for keys in &fleets {
                 for id in identities(robots) {
                     assert_eq!(
                         allows(&acl, &common_name(&id), "ingress", "put", &keys.command()),
-                        ["operator", "leader", "router"].contains(&id.as_str()),
+                        ["operator", "leader", "router"].contains(&id.as_str())
+                            || id.starts_with("robot-"),
                         "{id} putting the command"
                     );
                 }
@@ -257,7 +268,8 @@ fn the_roles_declare_what_the_access_control_allows() {
         let robot = RobotTask::new(Robot::simulated(config, 1), keys.clone());
         let m = Member::Robot(k);
         let mut out = robot.outputs();
-        out.push(keys.stats(k));
+        // Its counters, and the fleet stop it puts when its base reports a hazard.
+        out.extend([keys.stats(k), keys.command()]);
         assert_eq!(out, publishes(m, &keys, &[]));
         within(&robot.inputs(), &subscribes(m, &keys, &[]), "robot");
         assert_eq!(robot.tokens(), vec![keys.alive(&m.liveliness())]);

@@ -102,9 +102,8 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
             }
             let robot = Robot::new(config, drive, net::rand_source());
             // Refusals are counted in the drive's report; the inputs are
-            // numbered as the drive's (odometry, then fixes).
-            let mut inputs = vec![node.odom_key];
-            inputs.extend(node.fix_key);
+            // numbered as the drive's (odometry, then fixes, hazards, e-stop).
+            let inputs = node.input_keys;
             let task = RobotTask::new(robot, keys)
                 .with_plant_inputs(inputs.clone(), |d, i, k, b, t| d.on_input(i, k, b, t));
             Ok((task, node.tokens, inputs))

@@ -23,6 +23,15 @@
 //! clock, its leader stream and its plant up to date meanwhile, and
 //! publishes its state with the link status `stopped`. On a resume the law
 //! runs again from the robot's state at its next tick.
+//!
+//! When its base reports a stopping hazard (a bump, a cliff, a stall, a
+//! wheel drop, an e-stop: [`Plant::hazards`]) the robot commands zero at
+//! that tick and pauses the whole fleet: it takes a fleet stop itself and
+//! hands it to its driver to put on the command key
+//! ([`Robot::take_outgoing`]), its reason naming the robot and the hazard.
+//! While the hazard is reported its latch answer names it (so `fleet
+//! resume` refuses, naming it), and a resume that reaches it anyway is
+//! refused: it stops the fleet again, numbered above that resume.
 
 use std::collections::VecDeque;
 
@@ -30,13 +39,14 @@ use echelon::control::LeaderMotion;
 use echelon::formation::Leader;
 use echelon::safety::SafetyFilter;
 
-use crate::command::{Change, CommandCounts, Latch, Latched};
+use crate::command::{Change, CommandCounts, FleetCommand, Latch, Latched, Order};
 use crate::faults::{FaultInjector, Verdict};
 use crate::latency::Latency;
 use crate::link::{Counters, LeaderSample, StreamTracker};
 use crate::neighbours::{LAG_PERIODS, NeighbourTable, STALE_HOLD};
 use crate::plant::{Plant, SimulatedDrive};
-use crate::role::Role;
+use crate::role::{Member, Role};
+use crate::ros2::hazard::HazardSet;
 use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
 
 mod config;
@@ -72,6 +82,9 @@ pub enum Halt {
     Diverged,
     /// A fleet stop is in force (`fleet stop`, or the leader interrupted).
     Stopped,
+    /// The robot's base reports a stopping hazard (bump, cliff, stall,
+    /// wheel drop, e-stop).
+    Hazard,
 }
 
 /// What one tick asks the driver to do.
@@ -148,6 +161,12 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     head: HeadFilter,
     /// The fleet command it is under.
     latch: Latch,
+    /// The stopping hazards its base reported at its last tick.
+    hazards: HazardSet,
+    /// Moves whenever `hazards` changes (part of [`Robot::latch_changes`]).
+    hazard_changes: u64,
+    /// A fleet stop it took and its driver has yet to put on the command key.
+    outgoing: Option<FleetCommand>,
 }
 
 impl Robot<SimulatedDrive> {
@@ -200,6 +219,9 @@ impl<P: Plant> Robot<P> {
             safety,
             diverged: None,
             latch: Latch::new(),
+            hazards: HazardSet::EMPTY,
+            hazard_changes: 0,
+            outgoing: None,
             head: HeadFilter::default(),
             // A driven head keeps the fleet's time: its own clock.
             synced: config.driven,
@@ -212,11 +234,66 @@ impl<P: Plant> Robot<P> {
     /// commands zero at once and on every tick until a resume numbered
     /// after it.
     pub fn on_command(&mut self, bytes: &[u8]) -> Change {
-        let change = self.latch.on_payload(bytes);
+        let mut change = self.latch.on_payload(bytes);
+        if change == Change::Resumed && !self.hazards.is_empty() {
+            // Its base still reports a hazard: the resume is refused, and
+            // the fleet stopped again, numbered above it.
+            self.latch.refuse_resume();
+            self.pause_fleet("refused a resume");
+            change = Change::Unchanged;
+        }
         if self.latch.stopped() {
             self.halt(Halt::Stopped);
         }
         change
+    }
+
+    /// The stopping hazards its base reported at its last tick.
+    pub fn hazards(&self) -> HazardSet {
+        self.hazards
+    }
+
+    /// The fleet stop it took (its base reported a hazard) for its driver
+    /// to put on the command key, once.
+    pub fn take_outgoing(&mut self) -> Option<FleetCommand> {
+        self.outgoing.take()
+    }
+
+    /// Takes a fleet stop of its own, named after its hazards, and keeps it
+    /// for its driver to put ([`Robot::take_outgoing`]).
+    fn pause_fleet(&mut self, what: &str) {
+        let agent = self.config.agent;
+        let reason = format!(
+            "agent {agent} ({}): its base reports {} ({what})",
+            self.config.spec.name(),
+            self.hazards.names()
+        );
+        let stop = FleetCommand::new(
+            Order::Stop,
+            self.latch.seq() + 1,
+            &Member::Robot(agent).identity(),
+            &reason,
+        );
+        self.latch.on_command(stop.clone());
+        self.outgoing = Some(stop);
+    }
+
+    /// Reads its base's safety words at fleet time `now`: a stopping
+    /// hazard commands zero now and, if the fleet is not stopped yet,
+    /// pauses it ([`Robot::pause_fleet`]).
+    fn check_hazards(&mut self, now: f64) {
+        let hazards = self.plant.hazards(now);
+        if hazards != self.hazards {
+            self.hazards = hazards;
+            self.hazard_changes += 1;
+        }
+        if hazards.is_empty() {
+            return;
+        }
+        self.halt(Halt::Hazard);
+        if !self.latch.stopped() {
+            self.pause_fleet(&format!("at t = {now:.3} s"));
+        }
     }
 
     /// Takes another process's latch answer (at start): it can only stop
@@ -234,14 +311,19 @@ impl<P: Plant> Robot<P> {
         self.latch.stopped()
     }
 
-    /// What it answers on its latch key.
+    /// What it answers on its latch key: the command in force, and the
+    /// stopping hazards its base reports.
     pub fn latched(&self) -> Latched {
-        self.latch.latched()
+        Latched {
+            hazards: self.hazards,
+            ..self.latch.latched()
+        }
     }
 
-    /// Moves whenever [`Robot::latched`] changes ([`Latch::changes`]).
+    /// Moves whenever [`Robot::latched`] changes ([`Latch::changes`], and
+    /// its hazards).
     pub fn latch_changes(&self) -> u64 {
-        self.latch.changes()
+        self.latch.changes() + self.hazard_changes
     }
 
     /// What the fleet commands did.
@@ -440,6 +522,7 @@ impl<P: Plant> Robot<P> {
             ros2: None,
             safety: self.safety_counts(),
             fixes: self.plant.fixes(self.last.t),
+            hazards: self.plant.hazard_report(),
             commands: self.latch.counts(),
             dropped: 0,
         }
@@ -464,6 +547,7 @@ impl<P: Plant> Robot<P> {
             overruns: self.overruns,
             safety: self.safety_counts(),
             fixes: self.plant.fixes(t),
+            hazards: self.plant.hazard_report().map(|r| r.stats()),
             commands: self.latch.counts(),
         }
     }

@@ -8,6 +8,7 @@ use crate::link::Counters;
 use crate::role::Role;
 use crate::ros2::drive::Ros2Counters;
 use crate::ros2::fixes::FixReport;
+use crate::ros2::hazard::{HazardReport, HazardStats};
 
 /// What a robot reports when it stops (one JSON line on stdout; `fleet
 /// up` reads it back as this type, so a renamed field is an error, never a 0).
@@ -57,6 +58,10 @@ pub struct RobotReport {
     /// With fixes from ROS 2: what they did, and Theorem 2's requirement.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fixes: Option<FixReport>,
+    /// With a base's safety words (`hazards`, `estop`): what they did,
+    /// every stopping episode with its onset and clearing time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hazards: Option<HazardReport>,
     /// What the fleet commands (`fleet stop`, `fleet resume`) did.
     pub commands: CommandCounts,
     /// Samples dropped before it took them: more than its input queue
@@ -140,6 +145,9 @@ pub struct RobotStats {
     /// against Theorem 2's).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fixes: Option<FixReport>,
+    /// With a base's safety words: the hazards in force and the counters.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hazards: Option<HazardStats>,
     /// What the fleet commands did so far.
     pub commands: CommandCounts,
 }

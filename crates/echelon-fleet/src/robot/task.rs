@@ -195,6 +195,10 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
             }
         }
         let tick = self.robot.tick(now);
+        if let Some(stop) = self.robot.take_outgoing() {
+            // Its base reported a hazard: the whole fleet pauses.
+            out.put(&self.keys.command(), &stop.encode());
+        }
         if let Some((h, state)) = tick.publish {
             wire::encode_state(&mut self.buf, h, &state);
             if let Err(e) = out.publish(STATE, &self.buf) {

@@ -47,6 +47,7 @@ impl<P: Plant> Robot<P> {
                 self.sample = Some(s);
             }
         }
+        self.check_hazards(now);
         if self.latch.stopped() {
             return self.stopped_tick(now);
         }

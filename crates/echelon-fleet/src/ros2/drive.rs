@@ -24,6 +24,10 @@
 //!   refused, never a crash, and never becomes the robot's state;
 //! - no command it sends is non-finite or beyond the base's speed limits
 //!   (scaled together, keeping the curvature, [`VelocityBase::limit`]);
+//! - its base's safety words (a Create 3's hazards, an e-stop:
+//!   [`BaseSafety`]) are read when the link names their topics, and
+//!   answered by [`Plant::hazards`], upon which the robot stops and pauses
+//!   the fleet;
 //! - [`Plant::stop`] sends a zero command at once (leader or odometry lost,
 //!   the process stopping), through [`CmdSink::send_stop`] (on Zenoh,
 //!   congestion control `Block` for the process's last words:
@@ -38,6 +42,7 @@ use echelon::scenario::schema::{CmdVelStamp, CmdVelType};
 
 use super::drift::Drift;
 use super::fixes::{FixInput, FixReport};
+use super::hazard::{BaseSafety, HazardReport, HazardSet};
 use super::refusal::SampleRefusal;
 use crate::plant::{Actuation, Command, Plant};
 use crate::wire::OdometryState;
@@ -50,8 +55,39 @@ use echelon_ros2::msgs::{
 
 /// The input number of a drive's odometry.
 pub const ODOM_INPUT: usize = 0;
-/// The input number of a drive's fixes.
+/// The input number of a drive's fixes, when it takes any.
 pub const FIX_INPUT: usize = 1;
+
+/// What one of a drive's inputs carries. The inputs are numbered in this
+/// order, each present or not by the link ([`DriveInput::of_link`]):
+/// odometry always, then fixes, hazards and the e-stop when configured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DriveInput {
+    /// `nav_msgs/msg/Odometry`.
+    Odometry,
+    /// Absolute fixes ([`FixInput`]).
+    Fixes,
+    /// A Create 3's `HazardDetectionVector` ([`BaseSafety`]).
+    Hazards,
+    /// An e-stop `Bool` ([`BaseSafety`]).
+    EStop,
+}
+
+impl DriveInput {
+    /// The inputs of a drive for `link`, in their numbering, with their
+    /// fully qualified topics.
+    pub fn of_link(link: &Ros2Link) -> Vec<(DriveInput, &str)> {
+        let mut inputs = vec![(DriveInput::Odometry, link.odom.as_str())];
+        inputs.extend(
+            link.fixes
+                .as_ref()
+                .map(|f| (DriveInput::Fixes, f.topic.as_str())),
+        );
+        inputs.extend(link.hazards.as_deref().map(|t| (DriveInput::Hazards, t)));
+        inputs.extend(link.estop.as_deref().map(|t| (DriveInput::EStop, t)));
+        inputs
+    }
+}
 
 /// The message type a link's `cmd_vel` carries.
 pub fn cmd_vel_type(link: &Ros2Link) -> MessageType {
@@ -160,6 +196,10 @@ pub struct Ros2Drive<S: CmdSink> {
     fixes: Option<FixInput>,
     /// Its dead-reckoning uncertainty, when its error model is known.
     drift: Option<Drift>,
+    /// What its inputs carry, in their numbering.
+    inputs: Vec<DriveInput>,
+    /// Its base's safety words, when it listens to any.
+    safety: Option<BaseSafety>,
     t: f64,
     last_sent: VelocityCommand,
     counters: Ros2Counters,
@@ -169,7 +209,17 @@ impl<S: CmdSink> Ros2Drive<S> {
     /// A drive for the robot at `link`, within the limits of `base`,
     /// publishing as the publisher `gid` through `sink`.
     pub fn new(link: Ros2Link, base: VelocityBase, gid: Gid, sink: S) -> Self {
+        let inputs: Vec<DriveInput> = DriveInput::of_link(&link)
+            .into_iter()
+            .map(|(i, _)| i)
+            .collect();
+        let safety = inputs
+            .iter()
+            .any(|i| matches!(i, DriveInput::Hazards | DriveInput::EStop))
+            .then(|| BaseSafety::new(link.key_scheme));
         Ros2Drive {
+            inputs,
+            safety,
             link,
             base,
             sink,
@@ -188,7 +238,10 @@ impl<S: CmdSink> Ros2Drive<S> {
 
     /// The same drive fusing absolute fixes from `fixes` (its
     /// `odom_origin` becomes the fixes' starting correction).
-    pub fn with_fixes(self, fixes: FixInput) -> Self {
+    pub fn with_fixes(mut self, fixes: FixInput) -> Self {
+        if !self.inputs.contains(&DriveInput::Fixes) {
+            self.inputs.insert(1, DriveInput::Fixes);
+        }
         Ros2Drive {
             fixes: Some(fixes),
             ..self
@@ -217,22 +270,38 @@ impl<S: CmdSink> Ros2Drive<S> {
             .map_or(self.link.odom_origin, FixInput::correction)
     }
 
-    /// A sample of input `input` ([`ODOM_INPUT`] or [`FIX_INPUT`]) on `key`
-    /// that arrived at fleet time `t`; refusals are counted.
+    /// A sample of input `input` (numbered as [`DriveInput::of_link`]) on
+    /// `key` that arrived at fleet time `t`; refusals are counted.
     pub fn on_input(&mut self, input: usize, key: &str, payload: &[u8], t: f64) {
-        match (input, self.fixes.as_mut()) {
-            (ODOM_INPUT, _) => {
+        match self.inputs.get(input) {
+            Some(DriveInput::Odometry) => {
                 let _ = self.on_odom(key, payload, t);
             }
-            (_, Some(f)) => {
-                if f.on_fix(key, payload, t).is_ok()
+            Some(DriveInput::Fixes) => {
+                if let Some(f) = self.fixes.as_mut()
+                    && f.on_fix(key, payload, t).is_ok()
                     && let (Some(d), Some((_, noise))) = (self.drift.as_mut(), f.last_fix())
                 {
                     d.reset(noise.position, noise.heading);
                 }
             }
-            (_, None) => {}
+            Some(DriveInput::Hazards) => {
+                if let Some(s) = self.safety.as_mut() {
+                    let _ = s.on_hazards(key, payload, t);
+                }
+            }
+            Some(DriveInput::EStop) => {
+                if let Some(s) = self.safety.as_mut() {
+                    let _ = s.on_estop(key, payload, t);
+                }
+            }
+            None => {}
         }
+    }
+
+    /// Its base's safety words, when it listens to any.
+    pub fn base_safety(&self) -> Option<&BaseSafety> {
+        self.safety.as_ref()
     }
 
     /// Its robot's link.
@@ -384,6 +453,16 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
         self.fixes.as_ref().map(|f| f.report(t))
     }
 
+    fn hazards(&mut self, t: f64) -> HazardSet {
+        self.safety
+            .as_mut()
+            .map_or(HazardSet::EMPTY, |s| s.update(t))
+    }
+
+    fn hazard_report(&self) -> Option<HazardReport> {
+        self.safety.as_ref().map(BaseSafety::report)
+    }
+
     fn command(&mut self, cmd: Command) -> Actuation {
         let wanted = match cmd {
             Command::Velocity(c) => c,
@@ -422,6 +501,9 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
         // odometry received before is on the old timeline; wait for the next.
         self.t = t;
         self.odom = None;
+        if let Some(s) = self.safety.as_mut() {
+            s.set_time(t);
+        }
     }
 }
 

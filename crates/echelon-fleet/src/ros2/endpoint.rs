@@ -10,12 +10,12 @@ use echelon::scenario::Ros2Link;
 
 use crate::FleetError;
 use crate::ros2::declare_tokens;
-use crate::ros2::drive::{CmdSink, cmd_vel_type};
+use crate::ros2::drive::{CmdSink, DriveInput, cmd_vel_type};
 use crate::ros2::fixes::fix_type;
 use echelon_ros2::attachment::{Gid, gid_from_token};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
 use echelon_ros2::liveliness::{Endpoint, NodeInfo, Qos};
-use echelon_ros2::msgs::{MessageType, ODOMETRY};
+use echelon_ros2::msgs::{BOOL, HAZARD_DETECTION_VECTOR, MessageType, ODOMETRY};
 use echelon_ros2::names::NameError;
 
 /// A ROS 2 node `<namespace>/<name>` of agent `link`'s with publishers and
@@ -59,17 +59,28 @@ pub(crate) fn declare_node(
 
 /// Agent `k`'s ROS 2 node `<namespace>/echelon_robot` as rmw_zenoh declares
 /// it (liveliness tokens: the node, a `cmd_vel` publisher, an `odom`
-/// subscription and, with fixes, their subscription) and its `cmd_vel`
-/// publisher; the subscriptions themselves are its user's.
+/// subscription and, when configured, its fixes', hazards' and e-stop's)
+/// and its `cmd_vel` publisher; the subscriptions themselves are its user's.
 pub(crate) struct Ros2Node {
     pub(crate) publisher: CmdPublisher,
     pub(crate) gid: Gid,
-    /// The key expression of its `odom`, any type (so that a publisher of
-    /// the wrong type is seen, counted and refused rather than never heard).
-    pub(crate) odom_key: String,
-    /// The key expression of its fixes (any type), when it takes any.
-    pub(crate) fix_key: Option<String>,
+    /// The key expressions of the drive's inputs, in their numbering
+    /// ([`DriveInput::of_link`]), each of any type (so that a publisher of
+    /// the wrong type is seen, counted and refused rather than never heard):
+    /// `odom` first.
+    pub(crate) input_keys: Vec<String>,
     pub(crate) tokens: Vec<zenoh::liveliness::LivelinessToken>,
+}
+
+/// The message type a drive's input carries on `link`.
+fn input_type(link: &Ros2Link, input: DriveInput) -> &'static MessageType {
+    match (input, &link.fixes) {
+        (DriveInput::Odometry, _) => &ODOMETRY,
+        (DriveInput::Fixes, Some(f)) => fix_type(f.message),
+        (DriveInput::Fixes, None) => &ODOMETRY,
+        (DriveInput::Hazards, _) => &HAZARD_DETECTION_VECTOR,
+        (DriveInput::EStop, _) => &BOOL,
+    }
 }
 
 impl Ros2Node {
@@ -79,10 +90,11 @@ impl Ros2Node {
         agent: u32,
     ) -> Result<Ros2Node, FleetError> {
         let cmd_type = cmd_vel_type(link);
-        let mut subscribes = vec![(link.odom.as_str(), &ODOMETRY)];
-        if let Some(f) = &link.fixes {
-            subscribes.push((f.topic.as_str(), fix_type(f.message)));
-        }
+        let inputs = DriveInput::of_link(link);
+        let subscribes: Vec<(&str, &MessageType)> = inputs
+            .iter()
+            .map(|&(input, topic)| (topic, input_type(link, input)))
+            .collect();
         let (tokens, gids) = declare_node(
             session,
             link,
@@ -96,11 +108,10 @@ impl Ros2Node {
         Ok(Ros2Node {
             publisher,
             gid: gids[0],
-            odom_key: topic_key_any_type(link.key_scheme, link.domain_id, &link.odom),
-            fix_key: link
-                .fixes
-                .as_ref()
-                .map(|f| topic_key_any_type(link.key_scheme, link.domain_id, &f.topic)),
+            input_keys: inputs
+                .iter()
+                .map(|(_, topic)| topic_key_any_type(link.key_scheme, link.domain_id, topic))
+                .collect(),
             tokens,
         })
     }

@@ -12,6 +12,8 @@
 //! - [`sim_base`]: a simulated ROS 2 velocity base (sans-IO), answering
 //!   `cmd_vel` with odometry; [`base`]: it as a process (`echelon fleet
 //!   base`).
+//! - [`hazard`]: the base's own safety words (a Create 3's hazards, an
+//!   e-stop), which stop the robot and pause the fleet.
 //! - [`record`]: the topics the fleet collector records into `fleet.mcap`
 //!   as ROS 2 channels, and the checks a sample passes first.
 //! - [`refusal`]: why a ROS 2 sample was refused, for all of them.
@@ -26,6 +28,7 @@ pub mod drift;
 pub mod drive;
 pub mod endpoint;
 pub mod fixes;
+pub mod hazard;
 pub mod record;
 pub mod refusal;
 pub mod sim_base;

@@ -123,6 +123,11 @@ pub struct Ros2Link {
     pub odom_origin: Pose,
     /// Where its absolute fixes come from (its `fixes.source`), if anywhere.
     pub fixes: Option<FixSource>,
+    /// The base's hazard topic (`HazardDetectionVector`), fully qualified,
+    /// if it has one the fleet listens to.
+    pub hazards: Option<String>,
+    /// The base's e-stop topic (`Bool`), fully qualified, if any.
+    pub estop: Option<String>,
     /// Driven by someone else (teleop, Nav2): the fleet robot only reads it
     /// and publishes its motion as the head of its followers.
     pub driven: bool,
@@ -369,6 +374,17 @@ impl Scenario {
         };
         let cmd_vel = topic(|r| r.cmd_vel.clone(), "cmd_vel", "cmd_vel")?;
         let odom = topic(|r| r.odom.clone(), "odom", "odom")?;
+        let optional_topic = |get: fn(&Ros2Section) -> Option<String>, key: &str| {
+            links
+                .get(get, key)
+                .map(|(name, path)| {
+                    ros_names::fully_qualified_topic(&namespace, &name)
+                        .map_err(|e| self.error(&path, e.to_string()))
+                })
+                .transpose()
+        };
+        let hazards = optional_topic(|r| r.hazards.clone(), "hazards")?;
+        let estop = optional_topic(|r| r.estop.clone(), "estop")?;
         let frame = |get: fn(&Ros2Section) -> Option<String>, key: &str, default: &str| {
             let (name, path) = named(get, key, default);
             if name.is_empty() || name.chars().any(|c| c.is_whitespace() || c.is_control()) {
@@ -416,6 +432,8 @@ impl Scenario {
             odom_rate: positive(|r| r.odom_rate, "odom_rate", DEFAULT_ODOM_RATE)?,
             odom_origin: self.odom_origin(i)?,
             fixes: self.fix_source(i, &namespace)?,
+            hazards,
+            estop,
             driven: links.get_or(|r| r.driven, "driven", false).0,
             namespace,
             connect: self.connect(i, &links)?,

@@ -104,6 +104,7 @@ fn a_stop_heard_before_start_latches() {
     let answer = Latched {
         stopped: true,
         command: Some(FleetCommand::new(Order::Stop, 4, "operator", "")),
+        hazards: HazardSet::EMPTY,
     };
     r.on_latch_answer(&answer.encode());
     assert!(r.is_stopped());

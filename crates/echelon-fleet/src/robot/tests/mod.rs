@@ -248,6 +248,7 @@ fn commanded_robot(s: &Scenario) -> Robot<Flaky> {
 }
 
 mod command;
+mod hazard;
 mod link;
 mod messages;
 mod plant;

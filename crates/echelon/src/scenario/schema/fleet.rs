@@ -94,6 +94,18 @@ pub struct Ros2Section {
     /// its odometry, as the head its followers follow (default false).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub driven: Option<bool>,
+    /// The base's hazard topic, `irobot_create_msgs/msg/HazardDetectionVector`
+    /// (an iRobot Create 3's `hazard_detection`; relative to the namespace
+    /// or absolute): a BUMP, CLIFF, STALL or WHEEL_DROP stops the robot and
+    /// pauses the fleet until it clears and an operator resumes
+    /// (docs/real-robots.md). Default: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hazards: Option<String>,
+    /// The base's e-stop topic, `std_msgs/msg/Bool`, `true` = stop (a
+    /// Jackal's `platform/emergency_stop`): stops the robot and pauses the
+    /// fleet like a hazard. Default: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estop: Option<String>,
     /// The robot's own Zenoh router (its `rmw_zenohd` or bridge), a Zenoh
     /// endpoint such as `tcp/192.168.1.21:7447` or a list of them (tried in
     /// order); `{k}` is replaced by the agent number. A robot process

@@ -64,6 +64,11 @@ pub enum FleetError {
     /// A child process of `fleet up` failed.
     #[error("{0}")]
     Child(String),
+    /// A robot's ROS 2 graph is not what the scenario says (its `cmd_vel`
+    /// takes another type, nothing under its namespace, no `odom`): one
+    /// line naming the robot and what was found.
+    #[error("{0}")]
+    Graph(String),
     /// An order the fleet refuses (a resume while a robot's base reports a
     /// hazard): nothing was sent.
     #[error("{0}")]

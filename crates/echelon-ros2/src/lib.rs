@@ -15,6 +15,9 @@
 //!   schemes.
 //! - [`liveliness`]: rmw_zenoh's liveliness tokens and QoS strings, so that
 //!   `ros2 node list` / `ros2 topic list` see echelon.
+//! - [`graph`]: a robot's publishers and subscriptions read from either
+//!   scheme's liveliness tokens, and the check that they are what the
+//!   scenario says (type, namespace), before anything moves.
 //! - [`attachment`]: the 33-byte attachment (sequence number, timestamp,
 //!   publisher GID) rmw_zenoh subscriptions require.
 //!
@@ -37,6 +40,7 @@
 pub mod attachment;
 pub mod cdr;
 pub mod definitions;
+pub mod graph;
 pub mod keys;
 pub mod liveliness;
 pub mod msgs;

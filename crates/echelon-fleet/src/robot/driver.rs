@@ -6,7 +6,7 @@ use crate::options::{ProcessOptions, Resolved};
 use crate::ros2::drift::Drift;
 use crate::ros2::drive::Ros2Drive;
 use crate::ros2::endpoint::{OwnedCmdSink, Ros2Node};
-use crate::ros2::fixes;
+use crate::ros2::{fixes, graph};
 use crate::runtime::{self, Task};
 use crate::{FleetError, StopFlag};
 
@@ -92,6 +92,9 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     });
     let task = runtime::run_split(
         |_fleet, robot| {
+            // The robot is the scenario's (its cmd_vel's type, its odom,
+            // its namespace) before anything is declared or sent.
+            graph::check_robot(robot, &link, agent, graph::GRAPH_WAIT, stop)?;
             let node = Ros2Node::declare(robot, &link, agent)?;
             let mut drive = Ros2Drive::new(link, base, node.gid, OwnedCmdSink(node.publisher));
             if let Some(f) = fixes {

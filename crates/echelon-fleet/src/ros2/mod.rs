@@ -12,6 +12,8 @@
 //! - [`sim_base`]: a simulated ROS 2 velocity base (sans-IO), answering
 //!   `cmd_vel` with odometry; [`base`]: it as a process (`echelon fleet
 //!   base`).
+//! - [`graph`]: the robot's ROS 2 graph (its `cmd_vel` subscriber's type,
+//!   its `odom` publisher) checked before anything moves.
 //! - [`hazard`]: the base's own safety words (a Create 3's hazards, an
 //!   e-stop), which stop the robot and pause the fleet.
 //! - [`record`]: the topics the fleet collector records into `fleet.mcap`
@@ -28,6 +30,7 @@ pub mod drift;
 pub mod drive;
 pub mod endpoint;
 pub mod fixes;
+pub mod graph;
 pub mod hazard;
 pub mod record;
 pub mod refusal;

@@ -17,7 +17,10 @@ code from echelon:
 - declares its own liveliness tokens (node, odom publisher, cmd_vel
   subscription) and records every `@ros2_lv/<domain>/**` token it sees;
 - under `--scheme bridge` uses zenoh-bridge-ros2dds's plain keys
-  (`<ns>/cmd_vel`, `<ns>/odom`) and no attachment or tokens;
+  (`<ns>/cmd_vel`, `<ns>/odom`), no attachment, and the bridge's route
+  tokens instead of rmw_zenoh's (`@/<zid>/@ros2_lv/MP|MS/<key>/<type>/<qos>`,
+  `/` written `§`, as the real bridge declares them:
+  crates/echelon-fleet/tests/fixtures/ros2dds/);
 - under `--scheme rmw_zenoh_humble` is a Humble robot: rmw_zenoh's humble
   branch writes `TypeHashNotSupported` where Jazzy writes the RIHS01 hash, in
   keys and liveliness tokens (Humble has no type hashes).
@@ -183,6 +186,14 @@ def main():
     publisher = session.declare_publisher(odom_key)
     tokens = []
     gid = bytes(range(0xB0, 0xC0))
+    if args.scheme == "bridge":
+        # The bridge's route tokens: odom published (MP), cmd_vel subscribed (MS).
+        ns_key = args.namespace.strip("/")
+        route = lambda kind, topic, pkg, name: (
+            f"@/{session.zid()}/@ros2_lv/{kind}/{(ns_key + '/' + topic).strip('/').replace('/', '§')}/"
+            f"{pkg}§msg§{name}/:1:::typehash={key_hash(args, pkg, name)};")
+        tokens.append(session.liveliness().declare_token(route("MP", "odom", "nav_msgs", "Odometry")))
+        tokens.append(session.liveliness().declare_token(route("MS", "cmd_vel", cmd_pkg, cmd_name)))
     if args.scheme != "bridge":
         session.liveliness().declare_subscriber(f"@ros2_lv/{args.domain}/**", on_token, history=True)
         ns = "/" + args.namespace.strip("/") if args.namespace.strip("/") else "/"

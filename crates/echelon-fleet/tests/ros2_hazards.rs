@@ -73,16 +73,19 @@ fn unhex(s: &str) -> Vec<u8> {
 
 #[test]
 fn type_hashes_are_rosbags() {
-    let r = rosbags(json!({"hash": [HAZARD_DETECTION_VECTOR.name, HAZARD_DETECTION.name, BOOL.name]}));
+    let r =
+        rosbags(json!({"hash": [HAZARD_DETECTION_VECTOR.name, HAZARD_DETECTION.name, BOOL.name]}));
     for ty in [HAZARD_DETECTION_VECTOR, HAZARD_DETECTION, BOOL] {
         assert_eq!(r["hashes"][ty.name], ty.hash, "{}", ty.name);
     }
 }
 
 fn header() -> impl Strategy<Value = Header> {
-    (any::<i32>(), 0u32..1_000_000_000, "[a-z_]{0,20}").prop_map(|(sec, nanosec, frame_id)| Header {
-        stamp: Time { sec, nanosec },
-        frame_id,
+    (any::<i32>(), 0u32..1_000_000_000, "[a-z_]{0,20}").prop_map(|(sec, nanosec, frame_id)| {
+        Header {
+            stamp: Time { sec, nanosec },
+            frame_id,
+        }
     })
 }
 

@@ -24,7 +24,10 @@ use echelon_ros2::names::KeyScheme;
 use serde_json::Value;
 
 fn capture(name: &str) -> Vec<Value> {
-    let path = format!("{}/tests/fixtures/ros2dds/{name}", env!("CARGO_MANIFEST_DIR"));
+    let path = format!(
+        "{}/tests/fixtures/ros2dds/{name}",
+        env!("CARGO_MANIFEST_DIR")
+    );
     std::fs::read_to_string(&path)
         .unwrap_or_else(|e| panic!("{path}: {e}"))
         .lines()
@@ -60,10 +63,30 @@ fn samples<'a>(c: &'a [Value], key: &'a str) -> impl Iterator<Item = Vec<u8>> + 
 /// `key_scheme = "bridge"` names them.
 fn expected<'a>(ns: &'a str, cmd: &'a MessageType, topics: &'a [String; 4]) -> Vec<Expected<'a>> {
     vec![
-        Expected { role: "cmd_vel", topic: &topics[0], ty: cmd, direction: Direction::Subscription },
-        Expected { role: "odom", topic: &topics[1], ty: &ODOMETRY, direction: Direction::Publisher },
-        Expected { role: "hazards", topic: &topics[2], ty: &HAZARD_DETECTION_VECTOR, direction: Direction::Publisher },
-        Expected { role: "estop", topic: &topics[3], ty: &BOOL, direction: Direction::Publisher },
+        Expected {
+            role: "cmd_vel",
+            topic: &topics[0],
+            ty: cmd,
+            direction: Direction::Subscription,
+        },
+        Expected {
+            role: "odom",
+            topic: &topics[1],
+            ty: &ODOMETRY,
+            direction: Direction::Publisher,
+        },
+        Expected {
+            role: "hazards",
+            topic: &topics[2],
+            ty: &HAZARD_DETECTION_VECTOR,
+            direction: Direction::Publisher,
+        },
+        Expected {
+            role: "estop",
+            topic: &topics[3],
+            ty: &BOOL,
+            direction: Direction::Publisher,
+        },
     ]
     .into_iter()
     .filter(|_| !ns.is_empty())
@@ -71,7 +94,13 @@ fn expected<'a>(ns: &'a str, cmd: &'a MessageType, topics: &'a [String; 4]) -> V
 }
 
 fn topics(ns: &str) -> [String; 4] {
-    ["cmd_vel", "odom", "hazard_detection", "platform/emergency_stop"].map(|t| format!("{ns}/{t}"))
+    [
+        "cmd_vel",
+        "odom",
+        "hazard_detection",
+        "platform/emergency_stop",
+    ]
+    .map(|t| format!("{ns}/{t}"))
 }
 
 #[test]
@@ -88,15 +117,25 @@ fn keys_are_the_bridge_scheme_and_payloads_decode() {
         let estop_key = key("/bot1/platform/emergency_stop", &BOOL);
         assert_eq!(
             (odom_key.as_str(), hazard_key.as_str(), estop_key.as_str()),
-            ("bot1/odom", "bot1/hazard_detection", "bot1/platform/emergency_stop")
+            (
+                "bot1/odom",
+                "bot1/hazard_detection",
+                "bot1/platform/emergency_stop"
+            )
         );
         let odoms: Vec<Odometry> = samples(&c, &odom_key)
             .map(|p| Odometry::from_cdr_finite(&p).unwrap_or_else(|e| panic!("{name}: {e}")))
             .collect();
         assert!(odoms.len() >= 3, "{name}");
         for o in &odoms {
-            assert_eq!((o.header.frame_id.as_str(), o.child_frame_id.as_str()), ("odom", "base_link"));
-            assert!(o.pose.pose.orientation.checked_yaw().is_some(), "{name}: {o:?}");
+            assert_eq!(
+                (o.header.frame_id.as_str(), o.child_frame_id.as_str()),
+                ("odom", "base_link")
+            );
+            assert!(
+                o.pose.pose.orientation.checked_yaw().is_some(),
+                "{name}: {o:?}"
+            );
         }
         // The hazard node reports nothing, then a BUMP: in force on the last vector.
         let mut safety = BaseSafety::new(KeyScheme::Bridge);
@@ -111,7 +150,11 @@ fn keys_are_the_bridge_scheme_and_payloads_decode() {
         assert!(in_force.contains(Hazard::Bump), "{name}: {in_force:?}");
         assert_eq!(safety.report().events.len(), 1, "{name}");
         let estops: Vec<bool> = samples(&c, &estop_key)
-            .map(|p| Bool::from_cdr(&p).unwrap_or_else(|e| panic!("{name}: {e}")).data)
+            .map(|p| {
+                Bool::from_cdr(&p)
+                    .unwrap_or_else(|e| panic!("{name}: {e}"))
+                    .data
+            })
             .collect();
         assert_eq!(estops.first(), Some(&false), "{name}");
         assert_eq!(estops.last(), Some(&true), "{name}");
@@ -144,16 +187,26 @@ fn the_graph_of_the_real_bridge_passes_the_check_and_the_usual_mistakes_are_name
         // echelon's (rclpy's Fast DDS node for Twist/TwistStamped/Odometry;
         // the Cyclone node for the irobot and std_msgs types). Humble: none.
         for e in &seen {
-            let ours = [TWIST, TWIST_STAMPED, ODOMETRY, HAZARD_DETECTION_VECTOR, BOOL]
-                .into_iter()
-                .find(|m| m.name == e.type_name)
-                .unwrap_or_else(|| panic!("{name}: {e:?}"));
+            let ours = [
+                TWIST,
+                TWIST_STAMPED,
+                ODOMETRY,
+                HAZARD_DETECTION_VECTOR,
+                BOOL,
+            ]
+            .into_iter()
+            .find(|m| m.name == e.type_name)
+            .unwrap_or_else(|| panic!("{name}: {e:?}"));
             match name {
                 "humble.jsonl" => assert_eq!(e.hash, None, "{e:?}"),
                 _ => assert_eq!(e.hash.as_deref(), Some(ours.hash), "{e:?}"),
             }
         }
-        assert_eq!(graph::check(&seen, ns, &expected(ns, &cmd, &t)), Ok(()), "{name}");
+        assert_eq!(
+            graph::check(&seen, ns, &expected(ns, &cmd, &t)),
+            Ok(()),
+            "{name}"
+        );
         let wrong = graph::check(&seen, ns, &expected(ns, &other, &t)).expect_err("wrong type");
         assert_eq!(
             wrong.to_string(),
@@ -165,9 +218,17 @@ fn the_graph_of_the_real_bridge_passes_the_check_and_the_usual_mistakes_are_name
             "{name}"
         );
         let red = topics("/tb4_red");
-        let e = graph::check(&seen, "/tb4_red", &expected("/tb4_red", &cmd, &red)).expect_err("namespace");
-        assert_eq!(e.to_string(), "nothing under /tb4_red: topics seen under /bot1");
-        let no_odom: Vec<GraphEndpoint> = seen.iter().filter(|e| e.topic != "/bot1/odom").cloned().collect();
+        let e = graph::check(&seen, "/tb4_red", &expected("/tb4_red", &cmd, &red))
+            .expect_err("namespace");
+        assert_eq!(
+            e.to_string(),
+            "nothing under /tb4_red: topics seen under /bot1"
+        );
+        let no_odom: Vec<GraphEndpoint> = seen
+            .iter()
+            .filter(|e| e.topic != "/bot1/odom")
+            .cloned()
+            .collect();
         let e = graph::check(&no_odom, ns, &expected(ns, &cmd, &t)).expect_err("odom");
         assert_eq!(
             e.to_string(),

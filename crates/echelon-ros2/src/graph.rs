@@ -101,16 +101,26 @@ pub fn parse_token(token: &str) -> Option<GraphEndpoint> {
             })
         }
         // rmw_zenoh: @ros2_lv/<domain>/<zid>/<nid>/<eid>/<kind>/<enclave>/<ns>/<node>/<topic>/<type>/<hash>/<qos>
-        [admin, _domain, _zid, _nid, _eid, kind, _enclave, _ns, _node, topic, ty, hash, _qos]
-            if *admin == ADMIN_SPACE =>
-        {
-            Some(GraphEndpoint {
-                direction: direction(kind)?,
-                topic: topic.replace('%', "/"),
-                type_name: ros_type_of_dds(&ty.replace('%', "/"))?,
-                hash: hash.starts_with("RIHS01_").then(|| (*hash).to_owned()),
-            })
-        }
+        [
+            admin,
+            _domain,
+            _zid,
+            _nid,
+            _eid,
+            kind,
+            _enclave,
+            _ns,
+            _node,
+            topic,
+            ty,
+            hash,
+            _qos,
+        ] if *admin == ADMIN_SPACE => Some(GraphEndpoint {
+            direction: direction(kind)?,
+            topic: topic.replace('%', "/"),
+            type_name: ros_type_of_dds(&ty.replace('%', "/"))?,
+            hash: hash.starts_with("RIHS01_").then(|| (*hash).to_owned()),
+        }),
         _ => None,
     }
 }
@@ -160,7 +170,9 @@ pub enum GraphProblem {
         expected: String,
     },
     /// The same type with another hash: another version of the message.
-    #[error("{role} ({topic}) has type {type_name} with hash {found}, echelon's is {expected}: another version of the message")]
+    #[error(
+        "{role} ({topic}) has type {type_name} with hash {found}, echelon's is {expected}: another version of the message"
+    )]
     WrongHash {
         /// `cmd_vel`, `odom`, …
         role: String,
@@ -233,7 +245,11 @@ pub fn check(
     if !seen.iter().any(|e| under(&e.topic)) {
         let seen: BTreeSet<String> = seen.iter().map(|e| first_name(&e.topic)).collect();
         return Err(GraphProblem::NothingUnder {
-            namespace: if ns.is_empty() { "/".to_owned() } else { ns.to_owned() },
+            namespace: if ns.is_empty() {
+                "/".to_owned()
+            } else {
+                ns.to_owned()
+            },
             seen: seen.into_iter().collect(),
         });
     }
@@ -255,8 +271,10 @@ pub fn check(
                 others: others.into_iter().collect(),
             });
         }
-        let right_type: Vec<&&GraphEndpoint> =
-            on_topic.iter().filter(|e| e.type_name == x.ty.name).collect();
+        let right_type: Vec<&&GraphEndpoint> = on_topic
+            .iter()
+            .filter(|e| e.type_name == x.ty.name)
+            .collect();
         let Some(first) = right_type.first() else {
             let found = on_topic[0].type_name.clone();
             return Err(match x.direction {
@@ -316,7 +334,13 @@ mod tests {
     #[test]
     fn rmw_zenoh_tokens_round_trip() {
         let node = NodeInfo::new(0, "c0ffee", 3, "/bot1", "base").expect("valid");
-        let sub = node.endpoint_token(Endpoint::Subscription, 4, "/bot1/cmd_vel", &TWIST, &Qos::default());
+        let sub = node.endpoint_token(
+            Endpoint::Subscription,
+            4,
+            "/bot1/cmd_vel",
+            &TWIST,
+            &Qos::default(),
+        );
         let p = parse_token(&sub).expect("an endpoint");
         assert_eq!(
             p,
@@ -329,14 +353,24 @@ mod tests {
         );
         assert_eq!(parse_token(&node.node_token()), None);
         let humble = node.clone().with_scheme(KeyScheme::RmwZenohHumble);
-        let pub_ = humble.endpoint_token(Endpoint::Publisher, 5, "/bot1/odom", &ODOMETRY, &Qos::default());
+        let pub_ = humble.endpoint_token(
+            Endpoint::Publisher,
+            5,
+            "/bot1/odom",
+            &ODOMETRY,
+            &Qos::default(),
+        );
         assert_eq!(parse_token(&pub_).and_then(|p| p.hash), None);
     }
 
     #[test]
     fn the_usual_mistakes_are_named() {
         let bridge = |kind: &str, key: &str, ty: &str| {
-            format!("@/9a/@ros2_lv/{kind}/{}/{}/:1:::typehash=RIHS01_x;", key.replace('/', "§"), ty.replace('/', "§"))
+            format!(
+                "@/9a/@ros2_lv/{kind}/{}/{}/:1:::typehash=RIHS01_x;",
+                key.replace('/', "§"),
+                ty.replace('/', "§")
+            )
         };
         let tokens = [
             bridge("MS", "bot1/cmd_vel", "geometry_msgs/msg/TwistStamped"),
@@ -353,12 +387,18 @@ mod tests {
         let e = check(&seen, "/bot1", &expected(&TWIST_STAMPED)).expect_err("hash");
         assert!(matches!(e, GraphProblem::WrongHash { .. }), "{e}");
         let e = check(&seen, "/tb4_red", &expected(&TWIST_STAMPED)).expect_err("namespace");
-        assert_eq!(e.to_string(), "nothing under /tb4_red: topics seen under /bot1");
+        assert_eq!(
+            e.to_string(),
+            "nothing under /tb4_red: topics seen under /bot1"
+        );
         let only_cmd = &seen[..1];
         let mut right = only_cmd.to_vec();
         right[0].hash = None;
         let e = check(&right, "/bot1", &expected(&TWIST_STAMPED)).expect_err("no odom");
         assert_eq!(e.to_string(), "no publisher of /bot1/odom (odom)");
-        assert_eq!(check(&[], "/bot1", &[]).map_err(|e| e.to_string()), Err("nothing under /bot1: no ROS 2 topic seen at all".to_owned()));
+        assert_eq!(
+            check(&[], "/bot1", &[]).map_err(|e| e.to_string()),
+            Err("nothing under /bot1: no ROS 2 topic seen at all".to_owned())
+        );
     }
 }

@@ -473,6 +473,10 @@ impl VelocityBase {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct VelocityRobot {
     base: VelocityBase,
+    /// How far the base may back up in one go, m (infinite: no limit):
+    /// [`crate::base::Backup`].
+    #[serde(skip_serializing_if = "f64_is_infinite")]
+    reverse_limit: f64,
     half_wheelbase: f64,
     wheel_radius: f64,
 }
@@ -482,6 +486,7 @@ impl VelocityRobot {
     /// the paper's robots with their motor loops closed.
     pub const IDEAL: VelocityRobot = VelocityRobot {
         base: VelocityBase::IDEAL,
+        reverse_limit: f64::INFINITY,
         half_wheelbase: crate::model::RobotParams::AGENT1.half_wheelbase(),
         wheel_radius: crate::model::RobotParams::AGENT1.wheel_radius(),
     };
@@ -491,6 +496,7 @@ impl VelocityRobot {
     /// the e-Manual's specifications agree).
     pub const TURTLEBOT3_BURGER: VelocityRobot = VelocityRobot {
         base: VelocityBase::TURTLEBOT3_BURGER,
+        reverse_limit: f64::INFINITY,
         half_wheelbase: 0.080,
         wheel_radius: 0.033,
     };
@@ -500,6 +506,7 @@ impl VelocityRobot {
     /// hardware overview; quoted, not re-measured).
     pub const TURTLEBOT4: VelocityRobot = VelocityRobot {
         base: VelocityBase::TURTLEBOT4,
+        reverse_limit: CREATE3_BACKUP_LIMIT,
         half_wheelbase: 0.1175,
         wheel_radius: 0.036,
     };
@@ -508,6 +515,7 @@ impl VelocityRobot {
     /// `wheel_separation = 0.375` of `jackal_control/config/control.yaml`).
     pub const JACKAL: VelocityRobot = VelocityRobot {
         base: VelocityBase::JACKAL,
+        reverse_limit: f64::INFINITY,
         half_wheelbase: 0.1875,
         wheel_radius: 0.098,
     };
@@ -543,9 +551,32 @@ impl VelocityRobot {
         }
         Ok(VelocityRobot {
             base,
+            reverse_limit: f64::INFINITY,
             half_wheelbase,
             wheel_radius,
         })
+    }
+
+    /// The same robot allowed to back up at most `limit` m in one go
+    /// ([`Backup`]): a number `> 0`, infinite for no limit.
+    pub fn with_reverse_limit(self, limit: f64) -> Result<VelocityRobot, ParamError> {
+        if limit.is_nan() || limit <= 0.0 {
+            return Err(ParamError::new(
+                "reverse_limit",
+                limit,
+                "must be > 0 (m; leave it out for no limit)",
+            ));
+        }
+        Ok(VelocityRobot {
+            reverse_limit: limit,
+            ..self
+        })
+    }
+
+    /// How far it may back up in one go, m (infinite: no limit).
+    #[inline]
+    pub const fn reverse_limit(&self) -> f64 {
+        self.reverse_limit
     }
 
     /// Lags and limits.
@@ -566,6 +597,19 @@ impl VelocityRobot {
         self.wheel_radius
     }
 }
+
+fn f64_is_infinite(x: &f64) -> bool {
+    x.is_infinite()
+}
+
+/// How far an iRobot Create 3 backs up without its safety override, m: it
+/// refuses to drive further backwards (reporting `BACKUP_LIMIT`), since it
+/// has no cliff sensor at the back (iRobot's `HazardDetection.msg`, "about
+/// 10 cm" in the Create 3 documentation).
+pub const CREATE3_BACKUP_LIMIT: f64 = 0.1;
+
+mod backup;
+pub use backup::Backup;
 
 #[cfg(test)]
 mod tests;

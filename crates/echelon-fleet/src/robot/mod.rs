@@ -35,6 +35,7 @@
 
 use std::collections::VecDeque;
 
+use echelon::base::Backup;
 use echelon::control::LeaderMotion;
 use echelon::formation::Leader;
 use echelon::safety::SafetyFilter;
@@ -167,6 +168,9 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     hazard_changes: u64,
     /// A fleet stop it took and its driver has yet to put on the command key.
     outgoing: Option<FleetCommand>,
+    /// Its base's backup budget (a `reverse_limit`), and where it was at
+    /// the last tick that measured it.
+    backup: Option<(Backup, Option<echelon::model::State>)>,
 }
 
 impl Robot<SimulatedDrive> {
@@ -222,6 +226,12 @@ impl<P: Plant> Robot<P> {
             hazards: HazardSet::EMPTY,
             hazard_changes: 0,
             outgoing: None,
+            backup: config
+                .spec
+                .velocity_robot()
+                .map(|r| r.reverse_limit())
+                .filter(|l| l.is_finite())
+                .map(|l| (Backup::new(l), None)),
             head: HeadFilter::default(),
             // A driven head keeps the fleet's time: its own clock.
             synced: config.driven,
@@ -278,20 +288,40 @@ impl<P: Plant> Robot<P> {
         self.outgoing = Some(stop);
     }
 
+    /// `cmd` for the robot in `state` within its base's backup limit
+    /// ([`Backup`]: how far it is behind its furthest point, measured from
+    /// its state tick by tick, and the command held for one period).
+    fn within_backup(
+        &mut self,
+        state: &echelon::model::State,
+        cmd: echelon::agent::Command,
+    ) -> echelon::agent::Command {
+        let (Some((backup, last)), Some(r), echelon::agent::Command::Velocity(c)) =
+            (self.backup.as_mut(), self.config.spec.velocity_robot(), cmd)
+        else {
+            return cmd;
+        };
+        if let Some(p) = last {
+            let (sin, cos) = p.theta.sin_cos();
+            backup.observe((state.x - p.x) * cos + (state.y - p.y) * sin);
+        }
+        *last = Some(*state);
+        let (c, _) = backup.hold(&r.base(), state, self.config.period, c);
+        echelon::agent::Command::Velocity(c)
+    }
+
     /// Reads its base's safety words at fleet time `now`: a stopping
-    /// hazard commands zero now and, if the fleet is not stopped yet,
-    /// pauses it ([`Robot::pause_fleet`]).
+    /// hazard pauses the fleet if it is not stopped yet
+    /// ([`Robot::pause_fleet`]), so that this tick is a stopped one, which
+    /// commands zero ([`Halt::Hazard`]).
     fn check_hazards(&mut self, now: f64) {
         let hazards = self.plant.hazards(now);
         if hazards != self.hazards {
             self.hazards = hazards;
             self.hazard_changes += 1;
         }
-        if hazards.is_empty() {
-            return;
-        }
-        self.halt(Halt::Hazard);
-        if !self.latch.stopped() {
+        if !hazards.is_empty() && !self.latch.stopped() {
+            // The stopped tick that follows commands zero, at this tick.
             self.pause_fleet(&format!("at t = {now:.3} s"));
         }
     }

@@ -197,6 +197,7 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         let tick = self.robot.tick(now);
         if let Some(stop) = self.robot.take_outgoing() {
             // Its base reported a hazard: the whole fleet pauses.
+            eprintln!("fleet stop put: {}", stop.reason);
             out.put(&self.keys.command(), &stop.encode());
         }
         if let Some((h, state)) = tick.publish {

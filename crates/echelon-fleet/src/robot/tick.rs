@@ -117,6 +117,7 @@ impl<P: Plant> Robot<P> {
                     }
                     None => self.config.spec.act(now, &state, nominal, None).command,
                 };
+                let cmd = self.within_backup(&state, cmd);
                 if !cmd.values().iter().all(|v| v.is_finite()) {
                     // A leader sample that is finite but far beyond any
                     // robot (a position of 1e308 m off the wire) overflows
@@ -189,7 +190,10 @@ impl<P: Plant> Robot<P> {
         if self.synced {
             self.plant.advance(now);
         }
-        self.halt(Halt::Stopped);
+        self.halt(match self.hazards.is_empty() {
+            true => Halt::Stopped,
+            false => Halt::Hazard,
+        });
         let (t, link) = if self.synced {
             (now, LinkStatus::Stopped)
         } else {

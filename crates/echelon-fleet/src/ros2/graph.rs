@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 use zenoh::Wait;
 
 use echelon::scenario::Ros2Link;
-use echelon_ros2::graph::{self, Direction, Expected, GraphEndpoint, GraphProblem};
 use echelon::scenario::schema::CmdVelType;
+use echelon_ros2::graph::{self, Direction, Expected, GraphEndpoint, GraphProblem};
 use echelon_ros2::msgs::{BOOL, HAZARD_DETECTION_VECTOR, ODOMETRY, TWIST, TWIST_STAMPED};
 
 use crate::FleetError;
@@ -101,10 +101,11 @@ pub fn check_robot(
     let started = Instant::now();
     let expected = expected(link);
     loop {
-        let problem: GraphProblem = match graph::check(&seen(session, link.domain_id)?, &link.namespace, &expected) {
-            Ok(()) => return Ok(()),
-            Err(p) => p,
-        };
+        let problem: GraphProblem =
+            match graph::check(&seen(session, link.domain_id)?, &link.namespace, &expected) {
+                Ok(()) => return Ok(()),
+                Err(p) => p,
+            };
         if started.elapsed() >= within || stop.is_raised() {
             return Err(FleetError::Graph(format!(
                 "agent {agent}: {problem} (after {:.1} s; checked from the liveliness tokens its rmw_zenoh or zenoh-bridge-ros2dds announces)",

@@ -226,6 +226,11 @@ pub struct RobotSection {
     /// `joint` (default: keeps the path) or `per-axis` acceleration limits.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub accel: Option<AccelLimit>,
+    /// Velocity base: how far it may back up in one go, m (the `turtlebot4`
+    /// preset: 0.1, the Create 3's backup limit); the law and the safety
+    /// filter never ask for more (docs/real-robots.md). Default: no limit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reverse_limit: Option<f64>,
     /// `m`, kg.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mass: Option<f64>,

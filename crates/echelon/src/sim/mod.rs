@@ -9,6 +9,7 @@
 
 use crate::agent::{Actuation, Command, Guard, Sight};
 use crate::agent::{AgentSpec, Drive};
+use crate::base::Backup;
 use crate::error::SimError;
 use crate::formation::{Formation, Leader};
 use crate::model::State;
@@ -84,6 +85,8 @@ pub struct Simulation {
     k2: Vec<State>,
     k3: Vec<State>,
     k4: Vec<State>,
+    /// How far each robot travelled along its heading in the last step, m.
+    moved: Vec<f64>,
 }
 
 impl Simulation {
@@ -131,12 +134,29 @@ impl Simulation {
                 neighbours: Vec::with_capacity(n),
             })
         });
-        Simulation {
+        let backup = agents
+            .iter()
+            .map(|a| {
+                a.velocity_robot()
+                    .map(|r| r.reverse_limit())
+                    .filter(|l| l.is_finite())
+                    .map(Backup::new)
+            })
+            .collect();
+        let backup_period = if hold_every > 0 {
+            hold_every as f64 * config.dt
+        } else {
+            config.dt
+        };
+        let mut sim = Simulation {
             sys: System {
                 plan: plan.clone(),
                 order,
                 uses_reference,
+                backup,
+                backup_period,
             },
+            moved: vec![0.0; n],
             config,
             steps: config.steps(),
             hold_every,
@@ -157,7 +177,9 @@ impl Simulation {
             k2: vec![State::default(); n],
             k3: vec![State::default(); n],
             k4: vec![State::default(); n],
-        }
+        };
+        sim.plan_backups(false);
+        sim
     }
 
     /// The plan it runs.
@@ -300,10 +322,10 @@ impl Simulation {
                 error: Some(self.out[i].e_hat[0].hypot(self.out[i].e_hat[1])),
             };
             let act = self.sys.plan.agents()[i].act(t, &safety.seen[i], self.held[i], Some(guard));
-            self.held[i] = act.command;
+            self.held[i] = self.sys.within_backup(i, &safety.seen[i], act.command);
             let o = &mut safety.out[i];
             o.nominal = act.nominal.values();
-            o.filtered = act.command.values();
+            o.filtered = self.held[i].values();
             if let Some(g) = act.safety {
                 (o.outcome, o.deadlock, o.min_distance) = (g.outcome, g.deadlock, g.min_distance);
             }
@@ -404,6 +426,7 @@ impl Simulation {
         let h6 = dt / 6.0;
         for (i, x) in self.state.iter_mut().enumerate() {
             let k = [&self.k1[i], &self.k2[i], &self.k3[i], &self.k4[i]];
+            let before = self.distance[i];
             // ṡ = v through the same RK4 stages: the stage speeds are
             // v, v + dt/2 v̇₁, v + dt/2 v̇₂, v + dt v̇₃.
             if let Drive::Velocity(_) = sys.plan.agents()[i].drive() {
@@ -418,7 +441,9 @@ impl Simulation {
                 *acc += h6 * (u(0) + 2.0 * u(1) + 2.0 * u(2) + u(3));
             }
             *x = x.rk4_combine(k, h6);
+            self.moved[i] = self.distance[i] - before;
         }
+        self.plan_backups(true);
         self.step += 1;
         self.fresh = false;
         let bounds = self.config.bounds;
@@ -441,6 +466,22 @@ impl Simulation {
             }
         }
         Ok(())
+    }
+
+    /// Brings each backup budget up to date with the last step's motion
+    /// (when `moved`) and plans the next step from the state now.
+    fn plan_backups(&mut self, moved: bool) {
+        let period = self.sys.backup_period;
+        let sys = &mut self.sys;
+        for (i, b) in sys.backup.iter_mut().enumerate() {
+            let (Some(b), Some(r)) = (b.as_mut(), sys.plan.agents()[i].velocity_robot()) else {
+                continue;
+            };
+            if moved {
+                b.observe(self.moved[i]);
+            }
+            b.plan(&r.base(), &self.state[i], period);
+        }
     }
 
     /// Makes each velocity base's state consistent with the command at the new

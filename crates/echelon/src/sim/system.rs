@@ -3,6 +3,7 @@
 
 use super::AgentOutput;
 use crate::agent::{Command, Drive};
+use crate::base::Backup;
 use crate::control::{LawOutput, LeaderMotion, Offset, errors};
 use crate::follow::{LeaderView, follow};
 use crate::formation::Leader;
@@ -69,9 +70,27 @@ pub(super) struct System {
     pub(super) plan: Plan,
     pub(super) order: Order,
     pub(super) uses_reference: bool,
+    /// Each velocity base's backward-travel budget, when it has a
+    /// `reverse_limit` ([`Backup`]): brought up to date and planned for the
+    /// next step after every step (one plan for the step's four stages).
+    pub(super) backup: Vec<Option<Backup>>,
+    /// How long a command is held: the sampling period, else the step.
+    pub(super) backup_period: f64,
 }
 
 impl System {
+    /// Agent `i`'s command `cmd` for it in `me` within its backup budget
+    /// ([`Backup::apply`]; unchanged without a `reverse_limit`).
+    #[inline]
+    pub(super) fn within_backup(&self, i: usize, me: &State, cmd: Command) -> Command {
+        match (&self.backup[i], self.plan.agents()[i].drive(), cmd) {
+            (Some(b), Drive::Velocity(r), Command::Velocity(c)) => {
+                Command::Velocity(b.apply(&r.base(), me, c).0)
+            }
+            _ => cmd,
+        }
+    }
+
     /// The reference's jet at `t`, to the order the laws need (zero when no
     /// agent follows the reference).
     #[inline]
@@ -180,9 +199,15 @@ impl System {
             // limits; a sampled controller's held command went through it
             // (and its filter) at the sample.
             let command = match &mut source {
-                Source::Law => a.act(t, &me, law.command(), None).command,
+                Source::Law => {
+                    self.within_backup(i, &me, a.act(t, &me, law.command(), None).command)
+                }
                 Source::Held(h) => h[i],
-                Source::Caller(f) => a.act(t, &me, f(i, t, &me, &motion, &offset), None).command,
+                Source::Caller(f) => self.within_backup(
+                    i,
+                    &me,
+                    a.act(t, &me, f(i, t, &me, &motion, &offset), None).command,
+                ),
             };
             let applied = a.drive().actuate(command);
             dx[i] = a.drive().derivative(&x[i], &applied);

@@ -196,6 +196,39 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             )?;
         }
     }
+    for r in &report.robots {
+        let Some(h) = &r.hazards else { continue };
+        let c = &h.counts;
+        let events: Vec<String> = h
+            .events
+            .iter()
+            .map(|e| match e.cleared {
+                Some(end) => format!(
+                    "{} at {:.2} s (cleared {:.2} s)",
+                    e.hazard.name(),
+                    e.at,
+                    end
+                ),
+                None => format!("{} at {:.2} s (still in force)", e.hazard.name(), e.at),
+            })
+            .collect();
+        outln!(
+            "  base safety, robot {}: {} hazard vectors ({} refused), {} e-stop samples ({} refused), {} object-proximity, {} backup-limit reports; stops: {}; resumes refused: {}",
+            r.agent,
+            c.hazard_received,
+            c.hazard_refused,
+            c.estop_received,
+            c.estop_refused,
+            c.object_proximity,
+            c.backup_limit,
+            if events.is_empty() {
+                "none".to_owned()
+            } else {
+                events.join(", ")
+            },
+            r.commands.refused_resumes,
+        )?;
+    }
     if let Some(c) = &report.approach {
         // The closest approach from the true states the collector received.
         let name = |k: usize| {

@@ -44,7 +44,8 @@ impl Builder<'_> {
         // A drive takes the fields its robots have: a field given that only
         // the other drive's robots have is refused.
         let torque = field_names(&RobotParams::AGENT1).unwrap_or_default();
-        let velocity = field_names(&VelocityRobot::IDEAL).unwrap_or_default();
+        // (the TurtleBot 4's: every field, its reverse_limit included)
+        let velocity = field_names(&VelocityRobot::TURTLEBOT4).unwrap_or_default();
         let (takes, foreign, why) = match drive {
             DriveName::Torque => (
                 torque,
@@ -145,6 +146,9 @@ impl Builder<'_> {
                 r.half_wheelbase.unwrap_or(from.half_wheelbase()),
                 r.wheel_radius.unwrap_or(from.wheel_radius()),
             )
+        })
+        .and_then(|robot| {
+            robot.with_reverse_limit(r.reverse_limit.unwrap_or(from.reverse_limit()))
         });
         let robot = self.within(at, robot)?;
         Ok(robot)

@@ -213,23 +213,32 @@ impl VelocityBase {
         },
     };
 
-    /// Clearpath TurtleBot 4 (iRobot Create 3 base).
+    /// Clearpath TurtleBot 4 (iRobot Create 3 base): the Create 3's own
+    /// limits (iRobot's Create 3 documentation, quoted, not re-measured).
     ///
-    /// - `v_max = 0.31 m/s` (the Create 3 in safe mode; 0.46 m/s with safe mode
-    ///   off), `ω_max = 1.90 rad/s`: the TurtleBot 4 User Manual, "Features",
-    ///   hardware specifications (quoted from the manual, not re-checked here).
-    /// - `a_max = 2.5 m/s²`, `α_max = 3.2 rad/s²`: `acc_lim_x`, `acc_lim_theta`
-    ///   of `turtlebot4_navigation/config/nav2.yaml` (the Nav2 planner's
-    ///   limits, not the base's).
-    /// - `τ_v = τ_ω = 0.1 s`: an estimate (no published time constant).
+    /// - `v_max = 0.306 m/s`: the Create 3's top speed in safe mode (0.46 m/s
+    ///   with `safety_override`, which also lifts its backup limit: set
+    ///   `v_max` and `reverse_limit` yourself for that); `ω_max = 1.90
+    ///   rad/s`: the TurtleBot 4 User Manual's hardware specifications.
+    /// - `a_max = 0.9 m/s²`: the Create 3's wheel acceleration limit;
+    ///   `α_max = 0.9 / l = 7.66 rad/s²`, the same wheel acceleration on its
+    ///   235 mm track (joint limits keep the path, so a combined manoeuvre
+    ///   never asks a wheel for more than it gives on one axis alone).
+    /// - `τ_v = τ_ω = 0.1 s`: an estimate (no published time constant;
+    ///   `echelon identify` measures it on a bag of the real base).
+    /// - The Create 3 stops its wheels 0.5 s after its last `cmd_vel`
+    ///   (the fleet's command period must be shorter: the scenario check
+    ///   refuses a control rate that leaves less than two commands per
+    ///   `cmd_vel_timeout`); it backs up at most ~10 cm without its safety
+    ///   override ([`CREATE3_BACKUP_LIMIT`], the preset's `reverse_limit`).
     pub const TURTLEBOT4: VelocityBase = VelocityBase {
         spec: VelocityBaseSpec {
             tau_v: 0.1,
             tau_omega: 0.1,
-            v_max: 0.31,
+            v_max: 0.306,
             omega_max: 1.90,
-            a_max: 2.5,
-            alpha_max: 3.2,
+            a_max: 0.9,
+            alpha_max: 0.9 / 0.1175,
             accel: AccelLimit::Joint,
         },
     };

@@ -52,7 +52,7 @@ impl Kind {
     fn v_max(&self) -> f64 {
         match self {
             Kind::Velocity("turtlebot3-burger", _) => 0.22,
-            Kind::Velocity("turtlebot4", _) => 0.31,
+            Kind::Velocity("turtlebot4", _) => 0.306,
             _ => 0.5,
         }
     }

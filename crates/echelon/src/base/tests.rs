@@ -5,13 +5,30 @@ fn presets_are_valid_and_named() {
     for (name, robot) in VelocityRobot::PRESETS {
         let base = robot.base;
         assert_eq!(VelocityBase::new(base.spec()), Ok(base), "{name}");
-        let rebuilt = VelocityRobot::new(base, robot.half_wheelbase, robot.wheel_radius);
+        let rebuilt = VelocityRobot::new(base, robot.half_wheelbase, robot.wheel_radius)
+            .and_then(|r| r.with_reverse_limit(robot.reverse_limit));
         assert_eq!(rebuilt, Ok(robot), "{name}");
         assert_eq!(VelocityRobot::preset(name), Some(robot));
     }
     assert!(VelocityBase::IDEAL.is_ideal());
     assert!(!VelocityBase::TURTLEBOT3_BURGER.is_ideal());
     assert_eq!(VelocityRobot::preset("husky"), None);
+    // The Create 3's own facts (iRobot's Create 3 documentation): its
+    // safe-mode top speed, its wheels' acceleration (and so the turn's,
+    // on its 235 mm track), its backup limit.
+    let c3 = VelocityRobot::TURTLEBOT4;
+    let spec = c3.base().spec();
+    assert_eq!((spec.v_max, spec.a_max), (0.306, 0.9));
+    assert!((spec.alpha_max - 0.9 / c3.half_wheelbase()).abs() < 1e-12);
+    assert_eq!(c3.reverse_limit(), CREATE3_BACKUP_LIMIT);
+    for r in [
+        VelocityRobot::IDEAL,
+        VelocityRobot::TURTLEBOT3_BURGER,
+        VelocityRobot::JACKAL,
+    ] {
+        assert!(r.reverse_limit().is_infinite());
+    }
+    assert!(c3.with_reverse_limit(0.0).is_err() && c3.with_reverse_limit(f64::NAN).is_err());
 }
 
 #[test]

@@ -326,6 +326,26 @@ impl Scenario {
                 ));
             }
         }
+        // A base that stops its wheels `cmd_vel_timeout` after its last
+        // command (a Create 3: 0.5 s; diff_drive_controller's default) must
+        // get at least two commands in that time, or one late command
+        // stutters it.
+        if let Some((i, a)) = ros2
+            .iter()
+            .enumerate()
+            .find(|(_, a)| 2.0 / control_rate > a.cmd_vel_timeout)
+        {
+            return Err(self.error(
+                &at.key("control_rate"),
+                format!(
+                    "{control_rate} Hz sends a command every {:.3} s, but agent {}'s base stops {} s after its last one (cmd_vel_timeout): give at least {} Hz",
+                    1.0 / control_rate,
+                    i + 1,
+                    a.cmd_vel_timeout,
+                    (2.0 / a.cmd_vel_timeout).ceil()
+                ),
+            ));
+        }
         // Each value passed its own rules; now its plausible range (the fleet
         // has no value that is only unusual: nothing to warn about).
         plausible::check(&self.file, &self.locator(), Part::Fleet)?;

@@ -313,3 +313,29 @@ fn assert_refused(cases: &[(&str, &str)]) {
         assert!(e.location.line > 0, "{e}");
     }
 }
+
+/// A command period that leaves a base less than two commands per
+/// `cmd_vel_timeout` (a Create 3 stops its wheels 0.5 s after the last)
+/// is refused, naming the rate needed; the hazard and e-stop topics are
+/// resolved in the namespace.
+#[test]
+fn the_command_period_fits_the_bases_wheel_timeout() {
+    let e = parse("\n[fleet]\ncontrol_rate = 3.0\n").expect_err("3 Hz");
+    let text = e.to_string();
+    assert!(
+        text.contains("cmd_vel_timeout") && text.contains("give at least 4 Hz"),
+        "{text}"
+    );
+    assert!(parse("\n[fleet]\ncontrol_rate = 4.0\n").is_ok());
+    let e = parse("\n[fleet]\ncontrol_rate = 10.0\nros2 = { cmd_vel_timeout = 0.15 }\n")
+        .expect_err("0.15 s");
+    assert!(e.to_string().contains("give at least 14 Hz"), "{e}");
+    let f = parse(
+        "\n[fleet]\nros2 = { namespace = \"/tb{k}\", hazards = \"hazard_detection\", estop = \"/estop\" }\n",
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(f.ros2[0].hazards.as_deref(), Some("/tb1/hazard_detection"));
+    assert_eq!(f.ros2[0].estop.as_deref(), Some("/estop"));
+    let e = parse("\n[fleet]\nros2 = { hazards = \"bad topic\" }\n").expect_err("a bad name");
+    assert!(e.to_string().contains("hazards"), "{e}");
+}

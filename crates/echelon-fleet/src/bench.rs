@@ -356,6 +356,7 @@ pub fn run(
                 foxglove: None,
                 dashboard: None,
                 log_rate: opts.log_rate,
+                hazards: Vec::new(),
             },
             stop,
         );

@@ -106,6 +106,9 @@ pub struct UpOptions {
     /// The collector's state-log rate, states per robot per second
     /// (`--log-rate`; `None`: every state).
     pub log_rate: Option<f64>,
+    /// With `ros2` (simulated bases): hazards base `k` reports, `(k,
+    /// window)` (`fleet base --hazard`).
+    pub hazards: Vec<(u32, crate::ros2::hazard::HazardWindow)>,
 }
 
 /// `fleet up --ros2 --real`'s refusals, before anything starts: real robots
@@ -175,6 +178,14 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         check_real(opts, &fleet.ros2, n)?;
     }
     let bases = if opts.ros2 && !opts.real { n } else { 0 };
+    if let Some((k, w)) = opts.hazards.iter().find(|(k, _)| *k as usize > bases) {
+        return Err(FleetError::Config(match bases {
+            0 => format!(
+                "--hazard {k}:{w}: hazards are reported by simulated bases: give --ros2 (without --real)"
+            ),
+            _ => format!("--hazard {k}:{w}: the fleet has {bases} robots"),
+        }));
+    }
     if let Some(dir) = &opts.secure {
         // Every process's certificates, before anything is written or starts.
         let routers = (opts.topology == Topology::Router).then_some(Member::Router);
@@ -337,6 +348,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             "--time-scale".to_owned(),
             scale.clone(),
         ];
+        for (_, w) in opts.hazards.iter().filter(|(j, _)| *j as usize == k) {
+            args.extend(["--hazard".to_owned(), w.to_string()]);
+        }
         args.extend(common(k, &Member::Base(k as u32).identity()));
         base_procs.push(spawn(
             &opts.exe,

@@ -191,6 +191,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     process,
                     agent,
                     clock_offset: a.clock_offset,
+                    hazards: a.hazard.clone(),
                 };
                 base::run(options, stop)
             })

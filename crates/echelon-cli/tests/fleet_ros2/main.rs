@@ -27,6 +27,7 @@ use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST, Time, TwistStamp
 #[path = "../common/mod.rs"]
 mod common;
 mod excite;
+mod hazards;
 mod python_base;
 mod real;
 mod refusals;

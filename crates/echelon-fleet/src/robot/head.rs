@@ -48,6 +48,9 @@ impl<P: Plant> Robot<P> {
     pub(super) fn tick_driven(&mut self, now: f64) -> RobotTick {
         let now = self.fleet_time(now);
         self.plant.advance(now);
+        // Its base's hazards pause the fleet (its followers stop); its
+        // driver owns its cmd_vel.
+        self.check_hazards(now);
         let publish = self.plant.state().map(|state| {
             let (dv, domega) = self.head.update(now, state.v, state.omega);
             self.last = RobotState {

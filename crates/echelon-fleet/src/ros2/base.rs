@@ -20,7 +20,12 @@ use crate::runtime::{self, Flow, Linger, Outputs, Sample, Task};
 use crate::{FleetError, StopFlag};
 use echelon_ros2::attachment::Gid;
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
-use echelon_ros2::msgs::ODOMETRY;
+use echelon_ros2::msgs::{
+    BOOL, Bool, HAZARD_DETECTION_VECTOR, HazardDetection, HazardDetectionVector, Header, ODOMETRY,
+    RosMessage, Time,
+};
+
+use super::hazard::{Hazard, HazardWindow};
 
 /// Options of `fleet base --ros2`.
 #[derive(Debug, Clone)]
@@ -34,6 +39,10 @@ pub struct BaseOptions {
     /// Its clock minus the wall clock, s: what it ages stamped `cmd_vel`
     /// by (`diff_drive_controller`'s `cmd_vel_timeout`).
     pub clock_offset: f64,
+    /// Hazards it reports, on its link's `hazards` topic (an e-stop on
+    /// its `estop` topic), each over its window; with those topics set it
+    /// publishes them at its odometry rate, empty (or `false`) otherwise.
+    pub hazards: Vec<HazardWindow>,
 }
 
 /// What a base reports when it stops.
@@ -70,6 +79,19 @@ pub struct BaseTask {
     duration: Option<f64>,
     /// The wall clock (UNIX ns), for the stamps.
     wall: fn() -> u64,
+    /// Its hazard and e-stop keys, when its link names them, and the
+    /// hazards it reports.
+    safety: BaseWords,
+}
+
+/// What a simulated base says of its own safety (a Create 3's hazards, an
+/// e-stop), at its odometry rate.
+#[derive(Debug, Default)]
+struct BaseWords {
+    hazard_key: Option<String>,
+    estop_key: Option<String>,
+    windows: Vec<HazardWindow>,
+    buf: Vec<u8>,
 }
 
 /// Its outputs: odometry, ground truth, then the simulated motion
@@ -88,6 +110,8 @@ impl Task for BaseTask {
     fn outputs(&self) -> Vec<String> {
         let mut keys = vec![self.odom_key.clone(), self.truth.0.clone()];
         keys.extend(self.fix_key.clone());
+        keys.extend(self.safety.hazard_key.clone());
+        keys.extend(self.safety.estop_key.clone());
         keys
     }
 
@@ -124,6 +148,8 @@ impl Task for BaseTask {
             let truth = self.base.ground_truth(wall, self.truth.1);
             out.publish_attached(TRUTH, &truth.payload, &truth.attachment)
                 .map_err(|e| FleetError::Zenoh(format!("publishing ground truth: {e}")))?;
+            let next = FIXES + usize::from(self.fix_key.is_some());
+            self.safety.publish(now, wall, next, out)?;
         }
         while let Some(fix) = self.base.take_fix(now, wall) {
             out.publish_attached(FIXES, &fix.payload, &fix.attachment)
@@ -144,6 +170,57 @@ impl Task for BaseTask {
             final_state: [s.x, s.y, s.theta, s.v, s.omega],
             last_command: [base.followed().v, base.followed().omega],
         })
+    }
+}
+
+impl BaseWords {
+    /// Publishes its hazard vector (the windows covering `now`) and e-stop
+    /// on outputs from `first` on.
+    fn publish(
+        &mut self,
+        now: f64,
+        wall: i64,
+        first: usize,
+        out: &mut dyn Outputs,
+    ) -> Result<(), FleetError> {
+        let stamp = Time::from_nanos(wall);
+        let header = |frame: &str| Header {
+            stamp,
+            frame_id: frame.to_owned(),
+        };
+        let mut output = first;
+        if self.hazard_key.is_some() {
+            let detections = self
+                .windows
+                .iter()
+                .filter(|w| w.covers(now) && w.hazard != Hazard::EmergencyStop)
+                .filter_map(|w| {
+                    let ty = (0..=5u8).find(|&t| Hazard::of_create3(t) == Some(w.hazard))?;
+                    Some(HazardDetection {
+                        header: header("bump_front_center"),
+                        r#type: ty,
+                    })
+                })
+                .collect();
+            HazardDetectionVector {
+                header: header("base_link"),
+                detections,
+            }
+            .encode_into(&mut self.buf);
+            out.publish(output, &self.buf)
+                .map_err(|e| FleetError::Zenoh(format!("publishing hazards: {e}")))?;
+            output += 1;
+        }
+        if self.estop_key.is_some() {
+            let data = self
+                .windows
+                .iter()
+                .any(|w| w.covers(now) && w.hazard == Hazard::EmergencyStop);
+            Bool { data }.encode_into(&mut self.buf);
+            out.publish(output, &self.buf)
+                .map_err(|e| FleetError::Zenoh(format!("publishing the e-stop: {e}")))?;
+        }
+        Ok(())
     }
 }
 
@@ -187,6 +264,12 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
             ];
             if let Some((source, ..)) = &mocap {
                 publishes.push((source.topic.as_str(), fix_type(source.message)));
+            }
+            if let Some(t) = &link.hazards {
+                publishes.push((t.as_str(), &HAZARD_DETECTION_VECTOR));
+            }
+            if let Some(t) = &link.estop {
+                publishes.push((t.as_str(), &BOOL));
             }
             let (tokens, gids) = declare_node(
                 session,
@@ -240,6 +323,17 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                 alive,
                 duration: opts.process.duration,
                 wall: crate::unix_nanos,
+                safety: BaseWords {
+                    hazard_key: link.hazards.as_ref().map(|t| {
+                        topic_key(link.key_scheme, link.domain_id, t, &HAZARD_DETECTION_VECTOR)
+                    }),
+                    estop_key: link
+                        .estop
+                        .as_ref()
+                        .map(|t| topic_key(link.key_scheme, link.domain_id, t, &BOOL)),
+                    windows: opts.hazards.clone(),
+                    buf: Vec::with_capacity(128),
+                },
             };
             Ok((task, tokens))
         },

@@ -281,6 +281,62 @@ impl HazardReport {
     }
 }
 
+/// A hazard a simulated base reports over `[from, from + duration)` of its
+/// own clock, s (scaled; it starts with the fleet, a moment before the
+/// leader) (`fleet base --hazard BUMP@12+3`, `fleet up --ros2 --hazard
+/// 2:BUMP@12+3`; `EMERGENCY_STOP` is an e-stop): the rehearsal of a bump
+/// before a real robot meets one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HazardWindow {
+    /// What.
+    pub hazard: Hazard,
+    /// From, fleet s.
+    pub from: f64,
+    /// For how long, s.
+    pub duration: f64,
+}
+
+impl HazardWindow {
+    /// Whether it is reported at time `t` of the base's clock.
+    pub fn covers(&self, t: f64) -> bool {
+        t >= self.from && t < self.from + self.duration
+    }
+}
+
+impl std::fmt::Display for HazardWindow {
+    /// As it is parsed: `BUMP@12+3`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}@{}+{}", self.hazard.name(), self.from, self.duration)
+    }
+}
+
+impl std::str::FromStr for HazardWindow {
+    type Err = String;
+
+    /// `NAME@FROM+DURATION` (`BUMP@12+3`, names as [`Hazard::name`], any
+    /// case), times in seconds of the base's clock, finite, `FROM ≥ 0`, `DURATION > 0`.
+    fn from_str(s: &str) -> Result<HazardWindow, String> {
+        let usage = || {
+            format!(
+                "`{s}`: give NAME@FROM+DURATION, e.g. BUMP@12+3 (names: {})",
+                Hazard::ALL.map(Hazard::name).join(", ")
+            )
+        };
+        let (name, times) = s.split_once('@').ok_or_else(usage)?;
+        let (from, duration) = times.split_once('+').ok_or_else(usage)?;
+        let hazard = Hazard::from_name(&name.to_ascii_uppercase()).ok_or_else(usage)?;
+        let number = |x: &str| x.trim().parse::<f64>().ok().filter(|v| v.is_finite());
+        match (number(from), number(duration)) {
+            (Some(from), Some(duration)) if from >= 0.0 && duration > 0.0 => Ok(HazardWindow {
+                hazard,
+                from,
+                duration,
+            }),
+            _ => Err(usage()),
+        }
+    }
+}
+
 /// A base's safety words as they arrive (see the module's rules).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct BaseSafety {

@@ -275,6 +275,9 @@ pub(crate) struct BaseArgs {
     /// as diff_drive_controller does (a zero stamp is "now").
     #[arg(long, value_name = "S", value_parser = parse_number, default_value_t = 0.0, allow_hyphen_values = true)]
     pub(super) clock_offset: f64,
+    /// Report a hazard over a window of its own clock (seconds since it started, scaled), NAME@FROM+DURATION (BUMP@12+3; EMERGENCY_STOP is an e-stop), on the agent's `hazards` (`estop`) topic (repeatable).
+    #[arg(long, value_name = "NAME@FROM+S")]
+    pub(super) hazard: Vec<echelon_fleet::ros2::hazard::HazardWindow>,
     #[command(flatten)]
     pub(super) net: NetArgs,
 }
@@ -385,6 +388,9 @@ pub(crate) struct UpArgs {
     /// Robots drive simulated ROS 2 bases (one `fleet base --ros2` each), all robot↔base traffic in ROS 2's format.
     #[arg(long)]
     pub(super) ros2: bool,
+    /// With --ros2 (simulated bases): base K reports a hazard over a window of its clock (started with the fleet, a moment before the leader), K:NAME@FROM+DURATION (2:BUMP@12+3; EMERGENCY_STOP is an e-stop) (repeatable).
+    #[arg(long, value_name = "K:NAME@FROM+S", value_parser = parse_agent_hazard)]
+    pub(super) hazard: Vec<(u32, echelon_fleet::ros2::hazard::HazardWindow)>,
     /// With --ros2: drive real robots, each at its own router (the agents' `ros2.connect`), instead of simulated bases; real time only.
     #[arg(long, requires = "ros2")]
     pub(super) real: bool,
@@ -461,4 +467,17 @@ fn connect_endpoint(s: &str) -> Result<String, String> {
 /// port) too.
 fn listen_endpoint(s: &str) -> Result<String, String> {
     echelon::scenario::check_listen_endpoint(s).map(|()| s.to_owned())
+}
+
+/// `K:NAME@FROM+DURATION`: agent K's simulated base reports a hazard.
+fn parse_agent_hazard(s: &str) -> Result<(u32, echelon_fleet::ros2::hazard::HazardWindow), String> {
+    let (k, window) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}`: give K:NAME@FROM+DURATION, e.g. 2:BUMP@12+3"))?;
+    let k: u32 = k
+        .parse()
+        .ok()
+        .filter(|k| *k >= 1)
+        .ok_or_else(|| format!("`{s}`: `{k}` is not an agent number (1, 2, …)"))?;
+    Ok((k, window.parse()?))
 }

@@ -85,6 +85,7 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             foxglove: a.live.foxglove,
             dashboard: a.live.dashboard,
             log_rate: a.live.log_rate,
+            hazards: a.hazard.clone(),
         },
         &stop,
     )?;

@@ -330,6 +330,23 @@ impl Latch {
         }
     }
 
+    /// Takes robot `k`'s own stop, put on its halt key
+    /// ([`crate::keys::Keys::halt`]): a stop sent by robot `k` is obeyed as
+    /// any stop; anything else there (a resume, another sender, garbage) is
+    /// refused and counted.
+    pub fn on_halt(&mut self, k: u32, bytes: &[u8]) -> Change {
+        self.counts.received += 1;
+        match FleetCommand::decode(bytes) {
+            Ok(c) if c.order == Order::Stop && c.by == crate::role::Member::Robot(k).identity() => {
+                self.take_stop(c)
+            }
+            _ => {
+                self.counts.refused += 1;
+                Change::Unchanged
+            }
+        }
+    }
+
     /// Takes another process's latch answer (hearsay): only a stop is taken.
     pub fn on_hearsay(&mut self, bytes: &[u8]) -> Change {
         match Latched::decode(bytes) {

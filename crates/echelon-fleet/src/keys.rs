@@ -30,6 +30,7 @@ const STATS: &str = "stats";
 const ALIVE: &str = "alive";
 const COMMAND: &str = "command";
 const LATCH: &str = "latch";
+const HALT: &str = "halt";
 
 /// The key expressions of one fleet.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -48,6 +49,8 @@ pub enum KeyKind {
     Stats(u32),
     /// The fleet command.
     Command,
+    /// Robot `k`'s own fleet stop (its base reported a hazard).
+    Halt(u32),
     /// Anything else under the fleet's root.
     Other,
 }
@@ -90,6 +93,18 @@ impl Keys {
     /// `echelon/<fleet>/robot/<k>/stats`.
     pub fn stats(&self, k: u32) -> String {
         format!("{ROOT}/{}/{ROBOT}/{k}/{STATS}", self.fleet)
+    }
+
+    /// `echelon/<fleet>/robot/<k>/halt`: robot `k`'s own fleet stop (its
+    /// base reported a hazard), stop-only: every robot and the leader obey
+    /// a stop put there by robot `k`, and nothing else ([`crate::command`]).
+    pub fn halt(&self, k: u32) -> String {
+        format!("{ROOT}/{}/{ROBOT}/{k}/{HALT}", self.fleet)
+    }
+
+    /// `echelon/<fleet>/robot/*/halt`: every robot's own stops.
+    pub fn halts(&self) -> String {
+        format!("{ROOT}/{}/{ROBOT}/*/{HALT}", self.fleet)
     }
 
     /// `echelon/<fleet>/alive/<role>`.
@@ -153,6 +168,7 @@ impl Keys {
             return match what {
                 STATE => KeyKind::State(k),
                 STATS => KeyKind::Stats(k),
+                HALT => KeyKind::Halt(k),
                 _ => KeyKind::Other,
             };
         }
@@ -176,6 +192,8 @@ mod tests {
         assert_eq!(k.classify("echelon/lab-1/alive/leader"), KeyKind::Other);
         assert_eq!(k.reference(), "echelon/lab-1/reference");
         assert_eq!(k.classify(&k.command()), KeyKind::Command);
+        assert_eq!(k.classify(&k.halt(4)), KeyKind::Halt(4));
+        assert_eq!(k.halts(), "echelon/lab-1/robot/*/halt");
         assert_eq!(k.command(), "echelon/lab-1/command");
         assert_eq!(k.latch_holder(&k.latch("robot/2")), Some("robot/2"));
         assert_eq!(k.latch_holder("echelon/lab-2/latch/robot/2"), None);

@@ -17,7 +17,7 @@ use echelon::control::LeaderMotion;
 use echelon::reference::{Order, Reference, Trajectory};
 
 use crate::command::{self, Change, CommandCounts, FleetCommand, Latch};
-use crate::keys::Keys;
+use crate::keys::{KeyKind, Keys};
 use crate::net;
 use crate::options::{ProcessOptions, Resolved};
 use crate::role::Member;
@@ -233,14 +233,16 @@ impl LeaderTask {
 /// Its outputs: the reference, the fleet command.
 const REFERENCE: usize = 0;
 const COMMAND: usize = 1;
-/// Its inputs: the fleet command (the latch answers: the next).
+/// Its inputs: the fleet command, the robots' own stops (the latch answers: the next).
 const COMMAND_IN: usize = 0;
+/// The input number of the robots' own stops (their halt keys).
+const HALTS_IN: usize = 1;
 
 impl Task for LeaderTask {
     type Report = LeaderReport;
 
     fn inputs(&self) -> Vec<String> {
-        vec![self.keys.command()]
+        vec![self.keys.command(), self.keys.halts()]
     }
 
     fn outputs(&self) -> Vec<String> {
@@ -275,10 +277,12 @@ impl Task for LeaderTask {
     }
 
     fn on_input(&mut self, input: usize, sample: &Sample<'_>) -> Result<(), FleetError> {
-        let change = if input == COMMAND_IN {
-            self.latch.on_payload(sample.payload)
-        } else {
-            self.latch.on_hearsay(sample.payload)
+        let change = match (input, self.keys.classify(sample.key)) {
+            (COMMAND_IN, _) => self.latch.on_payload(sample.payload),
+            // A robot's own stop (its base's hazard): stop-only.
+            (HALTS_IN, KeyKind::Halt(k)) => self.latch.on_halt(k, sample.payload),
+            (HALTS_IN, _) => Change::Unchanged,
+            _ => self.latch.on_hearsay(sample.payload),
         };
         self.follow_latch(change, sample.at.max(0.0));
         Ok(())

@@ -12,8 +12,12 @@
 //! brought to the robot's instant (its pose advanced along the arc of its
 //! `(v, ω)`, its speeds by its `(v̇, ω̇)`, over the age of its sample, at most
 //! `timeout`) and enters the filter with its measured motion, cooperative if
-//! the scenario gives it a filter **and its sample is at most `lag` old**
-//! (two control periods). The pair split (each robot takes half of the pair
+//! the scenario gives it a filter, **its sample is at most `lag` old** (two
+//! control periods) **and it is following** (its link `tracking`,
+//! `extrapolating` or `stopping`): a robot that says it is `stopped` (a
+//! fleet stop, its base's hazard) or `waiting` (no leader, no odometry)
+//! commands zero, takes no share of any barrier, and is avoided as a
+//! braking obstacle with its measured motion. The pair split (each robot takes half of the pair
 //! constraint) holds only if both act on the same situation at about the same
 //! instant; a neighbour whose last state is older than that has not acted on
 //! anything since (its process stalled, or its messages are late) while its
@@ -191,8 +195,11 @@ impl NeighbourTable {
                 let (s, dv) = advance(&e.state, dt);
                 let lagging = dt > self.lag;
                 self.lagging += u64::from(lagging && self.cooperative[i]);
+                // A robot that halts (stopped, waiting) commands zero: it
+                // takes no half of the pair constraint.
+                let acting = !matches!(e.state.link, LinkStatus::Stopped | LinkStatus::Waiting);
                 self.list.push(
-                    Neighbour::of_state(&s, l, Some(dv), self.cooperative[i] && !lagging)
+                    Neighbour::of_state(&s, l, Some(dv), self.cooperative[i] && !lagging && acting)
                         .with_margin(uncertainty_margin(sigma, e.state.sigma)),
                 );
                 continue;
@@ -339,6 +346,26 @@ mod tests {
         assert!(!got[0].cooperative && !got[1].cooperative);
         assert_eq!(n.lagging(), 1);
         assert_eq!(n.stale_events(), 0);
+    }
+
+    /// A neighbour that says it halts (a fleet stop, its base's hazard, no
+    /// leader or odometry) takes no share of the barrier; following again,
+    /// it does.
+    #[test]
+    fn a_halted_neighbour_is_not_cooperative() {
+        for (link, cooperates) in [
+            (LinkStatus::Tracking, true),
+            (LinkStatus::Extrapolating, true),
+            (LinkStatus::Stopping, true),
+            (LinkStatus::Stopped, false),
+            (LinkStatus::Waiting, false),
+        ] {
+            let mut n = table();
+            let (h, s) = msg(2, 0, 1.0, 1.0, 0.2);
+            n.on_state(h, &RobotState { link, ..s }, 10.0);
+            let got = list(n.build(10.01, 1.01, [0.0, 0.0], 5.0, 0.0));
+            assert_eq!(got[0].cooperative, cooperates, "{link:?}");
+        }
     }
 
     #[test]

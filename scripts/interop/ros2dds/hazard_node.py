@@ -185,42 +185,27 @@ class Odometry_(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
 
 
 # rmw_dds_common/msg: Gid is `char[16] data` from Iron on, `char[24] data` in Humble.
-@dataclass
-class Gid_(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
-    data: array[uint8, 16] = field(default_factory=lambda: [0] * 16)
+def discovery_types(gid_len):
+    """rmw_dds_common's Gid, NodeEntitiesInfo and ParticipantEntitiesInfo
+    with a Gid of `gid_len` bytes (16: Iron and later; 24: Humble)."""
 
+    @dataclass
+    class Gid_(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
+        data: array[uint8, gid_len] = field(default_factory=lambda: [0] * gid_len)
 
-@dataclass
-class NodeEntitiesInfo_(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
-    node_namespace: str = "/"
-    node_name: str = ""
-    reader_gid_seq: sequence[Gid_] = field(default_factory=list)
-    writer_gid_seq: sequence[Gid_] = field(default_factory=list)
+    @dataclass
+    class NodeEntitiesInfo_(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
+        node_namespace: str = "/"
+        node_name: str = ""
+        reader_gid_seq: sequence[Gid_] = field(default_factory=list)
+        writer_gid_seq: sequence[Gid_] = field(default_factory=list)
 
+    @dataclass
+    class ParticipantEntitiesInfo_(IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"):
+        gid: Gid_ = field(default_factory=Gid_)
+        node_entities_info_seq: sequence[NodeEntitiesInfo_] = field(default_factory=list)
 
-@dataclass
-class ParticipantEntitiesInfo_(IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"):
-    gid: Gid_ = field(default_factory=Gid_)
-    node_entities_info_seq: sequence[NodeEntitiesInfo_] = field(default_factory=list)
-
-
-@dataclass
-class GidHumble_(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
-    data: array[uint8, 24] = field(default_factory=lambda: [0] * 24)
-
-
-@dataclass
-class NodeEntitiesInfoHumble_(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
-    node_namespace: str = "/"
-    node_name: str = ""
-    reader_gid_seq: sequence[GidHumble_] = field(default_factory=list)
-    writer_gid_seq: sequence[GidHumble_] = field(default_factory=list)
-
-
-@dataclass
-class ParticipantEntitiesInfoHumble_(IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"):
-    gid: GidHumble_ = field(default_factory=GidHumble_)
-    node_entities_info_seq: sequence[NodeEntitiesInfoHumble_] = field(default_factory=list)
+    return Gid_, NodeEntitiesInfo_, ParticipantEntitiesInfo_
 
 
 def parse_schedule(text, parse_value):
@@ -340,11 +325,13 @@ def main():
         writers.append(odom_writer)
 
     # ros_discovery_info, as rmw publishes it.
+    Gid_, NodeEntitiesInfo_, ParticipantEntitiesInfo_ = discovery_types(24 if humble else 16)
+
     def gid_of(entity):
         raw = entity.guid.bytes  # dds_get_guid: 12-byte prefix + 4-byte entity id
-        return GidHumble_(data=list(raw + bytes(8))) if humble else Gid_(data=list(raw))
+        return Gid_(data=list(raw + bytes(8)) if humble else list(raw))
 
-    info_types = (ParticipantEntitiesInfoHumble_, NodeEntitiesInfoHumble_) if humble else (ParticipantEntitiesInfo_, NodeEntitiesInfo_)
+    info_types = (ParticipantEntitiesInfo_, NodeEntitiesInfo_)
     info_topic = Topic(dp, "ros_discovery_info", info_types[0])
     info_writer = DataWriter(dp, info_topic, qos=writer_qos(1, True, HASH_PARTICIPANT_ENTITIES_INFO))
     info = info_types[0](

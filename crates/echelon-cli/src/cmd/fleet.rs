@@ -118,11 +118,35 @@ fn command_cmd(a: args::CommandArgs, order: Order) -> Result<()> {
         &stop,
     )?;
     print_report(&report)?;
+    // An order that reached no robot, or fewer than the scenario has, did
+    // not do what the operator asked: say so, and fail (a stop typed
+    // without the hub's endpoint reached nobody and used to exit 0).
     if report.alive.is_empty() {
-        eprintln!(
-            "warning: no robot is alive in fleet `{fleet}`: the {} is held only by the leader, if any",
-            order.name()
-        );
+        return Err(crate::cmd::out::Failed(format!(
+            "fleet {}: no robot of fleet `{fleet}` is reachable from here (give the hub's endpoint with --connect, and --mode as the fleet runs); the {} reached {}",
+            order.name(),
+            order.name(),
+            if report.leader { "only the leader" } else { "no one" }
+        ))
+        .into());
+    }
+    if let Some(s) = &scenario {
+        let agents = s.file.agents.len();
+        let reached: std::collections::BTreeSet<&str> =
+            report.alive.iter().map(String::as_str).collect();
+        let absent: Vec<String> = (1..=agents as u32)
+            .map(|k| Member::Robot(k).liveliness())
+            .filter(|r| !reached.contains(r.as_str()))
+            .collect();
+        if !absent.is_empty() {
+            return Err(crate::cmd::out::Failed(format!(
+                "fleet {}: {} of the scenario's {agents} robots are not reachable from here: {}",
+                order.name(),
+                absent.len(),
+                absent.join(", ")
+            ))
+            .into());
+        }
     }
     if !report.missing.is_empty() {
         return Err(crate::cmd::out::Failed(format!(

@@ -458,3 +458,22 @@ fn fleet_up_without_every_certificate_is_refused_before_it_starts() {
         }
     }
 }
+
+/// A `fleet stop` (or `resume`) that reaches no robot did not stop
+/// anything: it exits 1 saying so, instead of 0 with a warning (typed
+/// without the hub's endpoint, it reached nobody). Nothing listens here.
+#[test]
+fn a_fleet_order_that_reaches_no_robot_fails() {
+    for order in ["stop", "resume"] {
+        let o = echelon(&["fleet", order, "circle-pentagon", "--timeout", "0.5"]);
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        let err = stderr(&o);
+        assert!(
+            err.contains(&format!(
+                "fleet {order}: no robot of fleet `circle-pentagon` is reachable"
+            )),
+            "{err}"
+        );
+        assert!(err.contains("--connect"), "{err}");
+    }
+}

@@ -284,6 +284,19 @@ impl Collector {
                 Err(_) => self.reject(sink, key, "malformed command", bytes, now),
             };
         }
+        if let KeyKind::Halt(k) = kind {
+            // A robot's own stop (its base's hazard): a fleet command too.
+            return match FleetCommand::decode(bytes) {
+                Ok(c)
+                    if c.order == crate::command::Order::Stop
+                        && c.by == crate::role::Member::Robot(k).identity() =>
+                {
+                    self.log(sink, COMMAND_TOPIC, &COMMAND, now, c.stamp_unix_ns, bytes)
+                }
+                Ok(_) => self.reject(sink, key, "a halt that is not its robot's stop", bytes, now),
+                Err(_) => self.reject(sink, key, "malformed command", bytes, now),
+            };
+        }
         let msg = match wire::decode(bytes) {
             Ok(m) => m,
             Err(DecodeError::Malformed(_)) => {

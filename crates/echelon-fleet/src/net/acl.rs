@@ -116,8 +116,8 @@ pub fn publishes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
     match member {
         Member::Leader => vec![keys.reference(), keys.command()],
         Member::Operator => vec![keys.command()],
-        // A robot puts a fleet stop when its base reports a hazard.
-        Member::Robot(k) => [keys.state(k), keys.stats(k), keys.command()]
+        // A robot puts its own fleet stop when its base reports a hazard.
+        Member::Robot(k) => [keys.state(k), keys.stats(k), keys.halt(k)]
             .into_iter()
             .chain(ros_of(k).map(|r| r.cmd_vel.clone()))
             .collect(),
@@ -140,12 +140,17 @@ pub fn publishes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
 pub fn subscribes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
     let ros_of = |k: u32| ros.get(k as usize - 1);
     match member {
-        Member::Leader => vec![keys.command()],
+        Member::Leader => vec![keys.command(), keys.halts()],
         Member::Operator => Vec::new(),
-        Member::Robot(k) => [keys.reference(), keys.states(), keys.command()]
-            .into_iter()
-            .chain(ros_of(k).into_iter().flat_map(RosAcl::robot_reads))
-            .collect(),
+        Member::Robot(k) => [
+            keys.reference(),
+            keys.states(),
+            keys.halts(),
+            keys.command(),
+        ]
+        .into_iter()
+        .chain(ros_of(k).into_iter().flat_map(RosAcl::robot_reads))
+        .collect(),
         Member::Base(k) => ros_of(k).map(|r| r.cmd_vel.clone()).into_iter().collect(),
         Member::Excite(k) => ros_of(k).map(|r| r.odom.clone()).into_iter().collect(),
         Member::Collector | Member::Router => std::iter::once(keys.everything())
@@ -184,8 +189,9 @@ pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
 /// certificate, robot `k`'s state and stats only from robot `k`'s; with
 /// ROS 2 links, agent `k`'s `cmd_vel` only from robot `k` and its `odom` only
 /// from base `k`, and rmw_zenoh's liveliness tokens (`@ros2_lv/**`) from
-/// every member; the fleet command only from the `operator`, the `leader`
-/// and the robots (a robot whose base reports a hazard puts a stop). Queries, queryables and replies (the command latches) are
+/// every member; the fleet command only from the `operator` and the
+/// `leader`; robot `k`'s halt key (its own stop-only fleet stop) only from
+/// robot `k`. Queries, queryables and replies (the command latches) are
 /// allowed to every member: what a process learns from a latch answer can
 /// only stop it ([`crate::command`]).
 ///

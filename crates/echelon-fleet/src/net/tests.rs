@@ -224,15 +224,19 @@ fn each_identity_may_put_exactly_what_its_members_publish() {
             for key in &universe {
                 assert!(!allows(&acl, "echelon-robot-99", "ingress", "put", key));
             }
-            // The fleet command: from the operator, the leader and the
-            // robots (a robot whose base reports a hazard pauses the
-            // fleet), and a router, which forwards everything of the fleet.
+            // The fleet command: from the operator and the leader only
+            // (and a router, which forwards everything of the fleet);
+            // robot 1's halt key from robot 1 only.
             for keys in &fleets {
                 for id in identities(robots) {
                     assert_eq!(
+                        allows(&acl, &common_name(&id), "ingress", "put", &keys.halt(1)),
+                        ["robot-1", "router"].contains(&id.as_str()),
+                        "{id} putting robot 1's halt"
+                    );
+                    assert_eq!(
                         allows(&acl, &common_name(&id), "ingress", "put", &keys.command()),
-                        ["operator", "leader", "router"].contains(&id.as_str())
-                            || id.starts_with("robot-"),
+                        ["operator", "leader", "router"].contains(&id.as_str()),
                         "{id} putting the command"
                     );
                 }
@@ -269,7 +273,7 @@ fn the_roles_declare_what_the_access_control_allows() {
         let m = Member::Robot(k);
         let mut out = robot.outputs();
         // Its counters, and the fleet stop it puts when its base reports a hazard.
-        out.extend([keys.stats(k), keys.command()]);
+        out.extend([keys.stats(k), keys.halt(k)]);
         assert_eq!(out, publishes(m, &keys, &[]));
         within(&robot.inputs(), &subscribes(m, &keys, &[]), "robot");
         assert_eq!(robot.tokens(), vec![keys.alive(&m.liveliness())]);

@@ -27,8 +27,9 @@
 //! When its base reports a stopping hazard (a bump, a cliff, a stall, a
 //! wheel drop, an e-stop: [`Plant::hazards`]) the robot commands zero at
 //! that tick and pauses the whole fleet: it takes a fleet stop itself and
-//! hands it to its driver to put on the command key
-//! ([`Robot::take_outgoing`]), its reason naming the robot and the hazard.
+//! hands it to its driver to put on its own halt key
+//! ([`Robot::take_outgoing`]; every robot and the leader obey a stop
+//! there, and only a stop), its reason naming the robot and the hazard.
 //! While the hazard is reported its latch answer names it (so `fleet
 //! resume` refuses, naming it), and a resume that reaches it anyway is
 //! refused: it stops the fleet again, numbered above that resume.
@@ -258,13 +259,24 @@ impl<P: Plant> Robot<P> {
         change
     }
 
+    /// Takes a payload that arrived on robot `k`'s halt key (its own stop,
+    /// its base having reported a hazard: [`Latch::on_halt`]); a stop
+    /// commands zero at once.
+    pub fn on_halt(&mut self, k: u32, bytes: &[u8]) -> Change {
+        let change = self.latch.on_halt(k, bytes);
+        if self.latch.stopped() {
+            self.halt(Halt::Stopped);
+        }
+        change
+    }
+
     /// The stopping hazards its base reported at its last tick.
     pub fn hazards(&self) -> HazardSet {
         self.hazards
     }
 
     /// The fleet stop it took (its base reported a hazard) for its driver
-    /// to put on the command key, once.
+    /// to put on its halt key ([`crate::keys::Keys::halt`]), once.
     pub fn take_outgoing(&mut self) -> Option<FleetCommand> {
         self.outgoing.take()
     }

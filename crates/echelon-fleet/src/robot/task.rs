@@ -6,7 +6,7 @@
 use echelon::formation::Leader;
 
 use crate::FleetError;
-use crate::keys::Keys;
+use crate::keys::{KeyKind, Keys};
 use crate::plant::{Plant, SimulatedDrive};
 use crate::role::Member;
 use crate::runtime::{Flow, Latching, Outputs, Sample, Task};
@@ -94,9 +94,10 @@ impl<P: Plant> RobotTask<P> {
         self.robot.config().agent
     }
 
-    /// The input number of the fleet command (the latch answers: the next).
+    /// The input number of the fleet command (the robots' halts: the one
+    /// before; the latch answers: the next).
     fn command_input(&self) -> usize {
-        1 + usize::from(self.robot.has_safety())
+        2 + usize::from(self.robot.has_safety())
             + self.plant_inputs.as_ref().map_or(0, |(keys, _)| keys.len())
     }
 
@@ -118,6 +119,7 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         if let Some((plant, _)) = &self.plant_inputs {
             keys.extend(plant.iter().cloned());
         }
+        keys.push(self.keys.halts());
         keys.push(self.keys.command());
         keys
     }
@@ -151,6 +153,11 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         if input == command {
             // Obeyed at once: a stop commands zero now, not at the next tick.
             self.robot.on_command(sample.payload);
+        } else if input == command - 1 {
+            // Another robot's own stop (its base's hazard), stop-only.
+            if let KeyKind::Halt(k) = self.keys.classify(sample.key) {
+                self.robot.on_halt(k, sample.payload);
+            }
         } else if input == command + 1 {
             self.robot.on_latch_answer(sample.payload);
         } else if input == LEADER {
@@ -198,7 +205,7 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         if let Some(stop) = self.robot.take_outgoing() {
             // Its base reported a hazard: the whole fleet pauses.
             eprintln!("fleet stop put: {}", stop.reason);
-            out.put(&self.keys.command(), &stop.encode());
+            out.put(&self.keys.halt(self.agent()), &stop.encode());
         }
         if let Some((h, state)) = tick.publish {
             wire::encode_state(&mut self.buf, h, &state);

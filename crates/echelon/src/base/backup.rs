@@ -250,9 +250,12 @@ mod tests {
         /// gets more than the limit behind its furthest point.
         #[test]
         fn never_more_than_the_limit_behind(
-            tau_v in 0.0f64..0.4,
+            // Lags of 0 (ideal) or at least 10 integration steps: RK4 on a
+            // lag shorter than its step is not the plant (it is unstable
+            // beyond dt/τ ≈ 2.8; the simulator wants dt ≤ τ).
+            tau_v in prop_oneof![Just(0.0), 0.01f64..0.4],
             a_max in prop_oneof![Just(f64::INFINITY), 0.2f64..5.0],
-            tau_omega in 0.0f64..0.3,
+            tau_omega in prop_oneof![Just(0.0), 0.01f64..0.3],
             alpha_max in prop_oneof![Just(f64::INFINITY), 0.5f64..10.0],
             joint in any::<bool>(),
             limit in 0.02f64..0.5,

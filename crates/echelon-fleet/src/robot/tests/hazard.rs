@@ -127,10 +127,10 @@ proptest! {
             }
         }
         prop_assert!(cmds.iter().any(|&(t, zero)| t > resumed_at + 0.5 && !zero), "it moves again after the resume");
-        // It put a fleet stop naming the robot and the hazard, then one
-        // refusing the resume.
+        // It put a fleet stop naming the robot and the hazard on its halt
+        // key, then one refusing the resume.
         let stops: Vec<FleetCommand> = bus
-            .published_by(me, &keys.command())
+            .published_by(me, &keys.halt(k))
             .filter_map(|p| FleetCommand::decode(&p.payload).ok())
             .collect();
         prop_assert_eq!(stops.len(), 2, "{:?}", stops);

@@ -94,7 +94,11 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         |_fleet, robot| {
             // The robot is the scenario's (its cmd_vel's type, its odom,
             // its namespace) before anything is declared or sent.
-            graph::check_robot(robot, &link, agent, graph::GRAPH_WAIT, stop)?;
+            let wait = match opts.own_router {
+                true => graph::GRAPH_WAIT,
+                false => graph::GRAPH_WAIT_SIMULATED,
+            };
+            graph::check_robot(robot, &link, agent, wait, stop)?;
             let node = Ros2Node::declare(robot, &link, agent)?;
             let mut drive = Ros2Drive::new(link, base, node.gid, OwnedCmdSink(node.publisher));
             if let Some(f) = fixes {

@@ -17,9 +17,12 @@ use echelon_ros2::msgs::{BOOL, HAZARD_DETECTION_VECTOR, ODOMETRY, TWIST, TWIST_S
 
 use crate::FleetError;
 
-/// How long the graph is awaited by default, real time: a bridge announces
+/// How long a real robot's graph is awaited, real time: a bridge announces
 /// a DDS node's topics within a second or two of discovering it.
 pub const GRAPH_WAIT: Duration = Duration::from_secs(5);
+/// How long a simulated base's graph is awaited (`fleet up --ros2`: the
+/// base starts beside the robot, on a machine that may be loaded).
+pub const GRAPH_WAIT_SIMULATED: Duration = Duration::from_secs(30);
 /// How often the tokens are asked again while waiting.
 const POLL: Duration = Duration::from_millis(250);
 

@@ -101,6 +101,10 @@ pub fn check_robot(
     within: Duration,
     stop: &crate::StopFlag,
 ) -> Result<(), FleetError> {
+    let at = match link.connect.as_slice() {
+        [] => String::new(),
+        c => format!(" (its router at {})", c.join(" or ")),
+    };
     let started = Instant::now();
     let expected = expected(link);
     loop {
@@ -111,7 +115,7 @@ pub fn check_robot(
             };
         if started.elapsed() >= within || stop.is_raised() {
             return Err(FleetError::Graph(format!(
-                "agent {agent}: {problem} (after {:.1} s; checked from the liveliness tokens its rmw_zenoh or zenoh-bridge-ros2dds announces)",
+                "agent {agent}: {problem} (after {:.1} s; checked from the liveliness tokens its rmw_zenoh or zenoh-bridge-ros2dds announces{at})",
                 started.elapsed().as_secs_f64()
             )));
         }

@@ -103,7 +103,7 @@ pub fn check_robot(
 ) -> Result<(), FleetError> {
     let at = match link.connect.as_slice() {
         [] => String::new(),
-        c => format!(" (its router at {})", c.join(" or ")),
+        c => format!("; its router at {}", c.join(" or ")),
     };
     let started = Instant::now();
     let expected = expected(link);

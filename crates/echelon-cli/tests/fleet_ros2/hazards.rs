@@ -20,18 +20,16 @@ fn a_bump_on_a_simulated_base_pauses_the_fleet() {
     let out = dir.path().join("fleet");
     let up = common::fleet_up(
         &[
-            scenario.to_str().unwrap(),
-            "--ros2",
-            "--time-scale",
-            "10",
-            "--duration",
-            "30",
-            "--quiet",
-            "--hazard",
-            "2:BUMP@10+3",
-            "--hazard",
-            "1:EMERGENCY_STOP@20+2",
-        ],
+            &[scenario.to_str().unwrap()],
+            &UP_ROS2[1..],
+            &[
+                "--hazard",
+                "2:BUMP@10+3",
+                "--hazard",
+                "1:EMERGENCY_STOP@20+2",
+            ],
+        ]
+        .concat(),
         &out,
     );
     let robots = up["robots"].as_array().unwrap();

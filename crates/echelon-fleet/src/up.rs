@@ -414,6 +414,10 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let mut interrupted = false;
     let mut leader_done: Option<Instant> = None;
     let mut robots_told = false;
+    // The leader died mid-run (killed, crashed): the robots hold under
+    // their link-loss policy and run to the end on their own clocks, as
+    // robots on other machines would; the run is reported, not torn down.
+    let mut leader_failure: Option<String> = None;
     // 1. Leader and robots run to the end (or a failure, or a signal).
     loop {
         let all_done = poll_all(std::iter::once(&mut leader).chain(&mut robots))?;
@@ -422,8 +426,17 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
                 .chain(&mut base_procs)
                 .chain(&mut routers),
         )?;
-        let failed = std::iter::once(&leader)
-            .chain(&robots)
+        if leader_failure.is_none()
+            && !interrupted
+            && let Some(f) = leader.failure()
+        {
+            eprintln!(
+                "fleet up: {f}; the robots hold under their link-loss policy and run to --duration without it"
+            );
+            leader_failure = Some(f);
+        }
+        let failed = robots
+            .iter()
             .chain(&base_procs)
             .chain(std::iter::once(&collector))
             .chain(&routers)
@@ -451,7 +464,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
                 r.terminate();
             }
         }
-        if leader.status.is_some() && !interrupted {
+        if leader.status.is_some() && !interrupted && leader_failure.is_none() {
             // Robots stop by themselves at --duration; one that never heard
             // the leader would not: give them a few seconds, then SIGTERM.
             let done_at = *leader_done.get_or_insert_with(Instant::now);
@@ -491,8 +504,13 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         return Err(FleetError::Child(f));
     }
     let wall = started.elapsed().as_secs_f64();
-    let leader_report: LeaderReport = report(&leader)?;
-    let startup = Some(leader_report.clock_start_unix_ns)
+    let leader_report: Option<LeaderReport> = match &leader_failure {
+        Some(_) => None,
+        None => Some(report(&leader)?),
+    };
+    let startup = leader_report
+        .as_ref()
+        .map(|l| l.clock_start_unix_ns)
         .filter(|&t| t > 0)
         .map(|t| t.saturating_sub(started_unix_ns) as f64 * 1e-9);
     let robot_reports: Vec<RobotReport> = robots.iter().map(report).collect::<Result<_, _>>()?;
@@ -520,6 +538,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             .map(|r| r.agent)
             .collect(),
         leader: leader_report,
+        leader_failure,
         robots: robot_reports,
         collector: collector_report,
         bases: base_procs.iter().map(report).collect::<Result<_, _>>()?,

@@ -50,8 +50,12 @@ pub struct UpReport {
     /// Robots (agent numbers) their filter kept from their slot at the end
     /// (each robot's `deadlocked_at_end`).
     pub deadlocked_at_end: Vec<u32>,
-    /// The leader's report.
-    pub leader: LeaderReport,
+    /// The leader's report (`null`: it died without one: `leader_failure`).
+    pub leader: Option<LeaderReport>,
+    /// How the leader died mid-run, if it did: the robots then held under
+    /// their link-loss policy and ran to the end without it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub leader_failure: Option<String>,
     /// Each robot's report, agent 1 first.
     pub robots: Vec<RobotReport>,
     /// The collector's report.

@@ -63,6 +63,19 @@ pub(super) fn bench_cmd(a: BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// A run whose leader died mid-run did not do what was asked: exit 1
+/// naming it, once the summary (and `fleet-summary.json`) says how the
+/// robots held.
+fn leader_died(report: &echelon_fleet::up::UpReport) -> Result<()> {
+    match &report.leader_failure {
+        Some(f) => Err(crate::cmd::out::Failed(format!(
+            "the leader died mid-run ({f}); the robots held under their link-loss policy"
+        ))
+        .into()),
+        None => Ok(()),
+    }
+}
+
 pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
     let stop = StopFlag::on_signals()?;
     let exe = std::env::current_exe().context("locating the echelon binary")?;
@@ -90,7 +103,7 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
         &stop,
     )?;
     if a.quiet {
-        return Ok(());
+        return leader_died(&report);
     }
     outln!(
         "{}: fleet \"{}\", {} robot{}, {} s of fleet time at ×{} in {:.1} s",
@@ -123,10 +136,13 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             r.uptime
         )?;
     }
-    outln!(
-        "  leader: {} reference samples published",
-        report.leader.published
-    )?;
+    match (&report.leader, &report.leader_failure) {
+        (Some(l), _) => outln!("  leader: {} reference samples published", l.published)?,
+        (None, Some(f)) => {
+            outln!("  leader: died mid-run ({f}); the robots held under their link-loss policy")?
+        }
+        (None, None) => outln!("  leader: no report")?,
+    }
     outln!(
         "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8} {:>8}",
         "agent",
@@ -352,5 +368,5 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
         a.out.join(SUMMARY_FILE).display(),
         a.out.join(UP_SUMMARY_FILE).display()
     )?;
-    Ok(())
+    leader_died(&report)
 }

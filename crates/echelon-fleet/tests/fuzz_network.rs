@@ -1563,7 +1563,7 @@ fn check_ros2_robot(b: &[u8], diverged: &mut usize) -> Result<(), String> {
         "base_link",
     )
     .to_cdr();
-    let cmd_ty = echelon_fleet::ros2::drive::cmd_vel_type(link);
+    let cmd_ty = *echelon_fleet::ros2::drive::cmd_vel_type(link);
     let drive = Ros2Drive::new(link.clone(), base, [9; 16], Sent::default());
     let mut r = Robot::new(config.clone(), drive, 5);
     r.on_message(&reference_at(1.0, 0), 0.0);
@@ -1827,7 +1827,7 @@ fn every_single_mutation_of_a_fix_is_counted_and_refused_or_finite() {
 #[test]
 fn every_single_mutation_of_a_cmd_vel_is_counted_and_refused_or_followed_within_limits() {
     let link = ros2_link();
-    let ty = echelon_fleet::ros2::drive::cmd_vel_type(&link);
+    let ty = *echelon_fleet::ros2::drive::cmd_vel_type(&link);
     let key = key_of(&link, &link.cmd_vel, &ty);
     let robot = VelocityRobot::new(limited_base(), 0.08, 0.033).expect("a robot");
     let base = || {

@@ -588,6 +588,14 @@ impl VelocityRobot {
         self.reverse_limit
     }
 
+    /// A fresh backup budget for it, nothing reversed yet (`None`: no
+    /// `reverse_limit`): what its simulator and its fleet robot keep.
+    pub fn backup(&self) -> Option<Backup> {
+        self.reverse_limit
+            .is_finite()
+            .then(|| Backup::new(self.reverse_limit))
+    }
+
     /// Lags and limits.
     #[inline]
     pub const fn base(&self) -> VelocityBase {

@@ -36,7 +36,7 @@
 
 use std::collections::VecDeque;
 
-use echelon::base::Backup;
+use echelon::base::{Backup, VelocityRobot};
 use echelon::control::LeaderMotion;
 use echelon::formation::Leader;
 use echelon::safety::SafetyFilter;
@@ -230,9 +230,8 @@ impl<P: Plant> Robot<P> {
             backup: config
                 .spec
                 .velocity_robot()
-                .map(|r| r.reverse_limit())
-                .filter(|l| l.is_finite())
-                .map(|l| (Backup::new(l), None)),
+                .and_then(VelocityRobot::backup)
+                .map(|b| (b, None)),
             head: HeadFilter::default(),
             // A driven head keeps the fleet's time: its own clock.
             synced: config.driven,

@@ -276,7 +276,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                 &link,
                 "echelon_base",
                 &publishes,
-                &[(&link.cmd_vel, &cmd_vel_type(&link))],
+                &[(&link.cmd_vel, cmd_vel_type(&link))],
                 |e| FleetError::Config(e.to_string()),
             )?;
             let model = SimulatedDrive::of(&spec, 0.0, PLANT_STEP);

@@ -49,8 +49,8 @@ use crate::wire::OdometryState;
 use echelon_ros2::attachment::{Attachment, Gid};
 use echelon_ros2::keys::check_topic_key;
 use echelon_ros2::msgs::{
-    MessageType, ODOMETRY, Odometry, RosMessage, TWIST, TWIST_STAMPED, Time, Twist, TwistStamped,
-    YawUnwrapper,
+    BOOL, HAZARD_DETECTION_VECTOR, MessageType, ODOMETRY, Odometry, RosMessage, TWIST,
+    TWIST_STAMPED, Time, Twist, TwistStamped, YawUnwrapper,
 };
 
 /// The input number of a drive's odometry.
@@ -74,6 +74,28 @@ pub enum DriveInput {
 }
 
 impl DriveInput {
+    /// The message type it carries on `link`.
+    pub fn message_type(self, link: &Ros2Link) -> &'static MessageType {
+        match (self, &link.fixes) {
+            (DriveInput::Odometry, _) => &ODOMETRY,
+            (DriveInput::Fixes, Some(f)) => super::fixes::fix_type(f.message),
+            (DriveInput::Fixes, None) => &ODOMETRY,
+            (DriveInput::Hazards, _) => &HAZARD_DETECTION_VECTOR,
+            (DriveInput::EStop, _) => &BOOL,
+        }
+    }
+
+    /// Its name in messages (`odom`, `fixes`, `hazards`, `estop`: the
+    /// scenario's field).
+    pub fn role(self) -> &'static str {
+        match self {
+            DriveInput::Odometry => "odom",
+            DriveInput::Fixes => "fixes",
+            DriveInput::Hazards => "hazards",
+            DriveInput::EStop => "estop",
+        }
+    }
+
     /// The inputs of a drive for `link`, in their numbering, with their
     /// fully qualified topics.
     pub fn of_link(link: &Ros2Link) -> Vec<(DriveInput, &str)> {
@@ -90,10 +112,10 @@ impl DriveInput {
 }
 
 /// The message type a link's `cmd_vel` carries.
-pub fn cmd_vel_type(link: &Ros2Link) -> MessageType {
+pub fn cmd_vel_type(link: &Ros2Link) -> &'static MessageType {
     match link.cmd_vel_type {
-        CmdVelType::TwistStamped => TWIST_STAMPED,
-        CmdVelType::Twist => TWIST,
+        CmdVelType::TwistStamped => &TWIST_STAMPED,
+        CmdVelType::Twist => &TWIST,
     }
 }
 
@@ -119,7 +141,7 @@ pub fn decode_cmd_vel(
     key: &str,
     payload: &[u8],
 ) -> Result<(VelocityCommand, Option<i64>), SampleRefusal> {
-    check_topic_key(link.key_scheme, key, &cmd_vel_type(link))
+    check_topic_key(link.key_scheme, key, cmd_vel_type(link))
         .map_err(|e| SampleRefusal::WrongType(e.to_string()))?;
     let (twist, stamp) = match link.cmd_vel_type {
         CmdVelType::TwistStamped => TwistStamped::from_cdr_finite(payload)

@@ -11,11 +11,10 @@ use echelon::scenario::Ros2Link;
 use crate::FleetError;
 use crate::ros2::declare_tokens;
 use crate::ros2::drive::{CmdSink, DriveInput, cmd_vel_type};
-use crate::ros2::fixes::fix_type;
 use echelon_ros2::attachment::{Gid, gid_from_token};
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
 use echelon_ros2::liveliness::{Endpoint, NodeInfo, Qos};
-use echelon_ros2::msgs::{BOOL, HAZARD_DETECTION_VECTOR, MessageType, ODOMETRY};
+use echelon_ros2::msgs::MessageType;
 use echelon_ros2::names::NameError;
 
 /// A ROS 2 node `<namespace>/<name>` of agent `link`'s with publishers and
@@ -72,17 +71,6 @@ pub(crate) struct Ros2Node {
     pub(crate) tokens: Vec<zenoh::liveliness::LivelinessToken>,
 }
 
-/// The message type a drive's input carries on `link`.
-fn input_type(link: &Ros2Link, input: DriveInput) -> &'static MessageType {
-    match (input, &link.fixes) {
-        (DriveInput::Odometry, _) => &ODOMETRY,
-        (DriveInput::Fixes, Some(f)) => fix_type(f.message),
-        (DriveInput::Fixes, None) => &ODOMETRY,
-        (DriveInput::Hazards, _) => &HAZARD_DETECTION_VECTOR,
-        (DriveInput::EStop, _) => &BOOL,
-    }
-}
-
 impl Ros2Node {
     pub(crate) fn declare(
         session: &zenoh::Session,
@@ -93,17 +81,17 @@ impl Ros2Node {
         let inputs = DriveInput::of_link(link);
         let subscribes: Vec<(&str, &MessageType)> = inputs
             .iter()
-            .map(|&(input, topic)| (topic, input_type(link, input)))
+            .map(|&(input, topic)| (topic, input.message_type(link)))
             .collect();
         let (tokens, gids) = declare_node(
             session,
             link,
             "echelon_robot",
-            &[(&link.cmd_vel, &cmd_type)],
+            &[(&link.cmd_vel, cmd_type)],
             &subscribes,
             |e| FleetError::Config(format!("agent {agent}: {e}")),
         )?;
-        let cmd_key = topic_key(link.key_scheme, link.domain_id, &link.cmd_vel, &cmd_type);
+        let cmd_key = topic_key(link.key_scheme, link.domain_id, &link.cmd_vel, cmd_type);
         let publisher = CmdPublisher::declare(session, cmd_key)?;
         Ok(Ros2Node {
             publisher,

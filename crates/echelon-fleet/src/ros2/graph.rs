@@ -11,11 +11,10 @@ use std::time::{Duration, Instant};
 use zenoh::Wait;
 
 use echelon::scenario::Ros2Link;
-use echelon::scenario::schema::CmdVelType;
 use echelon_ros2::graph::{self, Direction, Expected, GraphEndpoint, GraphProblem};
-use echelon_ros2::msgs::{BOOL, HAZARD_DETECTION_VECTOR, ODOMETRY, TWIST, TWIST_STAMPED};
 
 use crate::FleetError;
+use crate::ros2::drive::{DriveInput, cmd_vel_type};
 
 /// How long a real robot's graph is awaited, real time: a bridge announces
 /// a DDS node's topics within a second or two of discovering it.
@@ -30,42 +29,24 @@ const POLL: Duration = Duration::from_millis(250);
 /// type echelon sends (unless someone else drives it), `odom` published,
 /// its hazards and e-stop published when configured.
 pub fn expected(link: &Ros2Link) -> Vec<Expected<'_>> {
-    let cmd = match link.cmd_vel_type {
-        CmdVelType::Twist => &TWIST,
-        CmdVelType::TwistStamped => &TWIST_STAMPED,
-    };
-    let mut out = Vec::with_capacity(4);
-    if !link.driven {
-        out.push(Expected {
-            role: "cmd_vel",
-            topic: &link.cmd_vel,
-            ty: cmd,
-            direction: Direction::Subscription,
-        });
-    }
-    out.push(Expected {
-        role: "odom",
-        topic: &link.odom,
-        ty: &ODOMETRY,
-        direction: Direction::Publisher,
+    let command = (!link.driven).then(|| Expected {
+        role: "cmd_vel",
+        topic: &link.cmd_vel,
+        ty: cmd_vel_type(link),
+        direction: Direction::Subscription,
     });
-    if let Some(t) = &link.hazards {
-        out.push(Expected {
-            role: "hazards",
-            topic: t,
-            ty: &HAZARD_DETECTION_VECTOR,
+    // The drive's inputs but its fixes (a motion capture's, often another
+    // machine's and namespace's).
+    let read = DriveInput::of_link(link)
+        .into_iter()
+        .filter(|(input, _)| *input != DriveInput::Fixes)
+        .map(|(input, topic)| Expected {
+            role: input.role(),
+            topic,
+            ty: input.message_type(link),
             direction: Direction::Publisher,
         });
-    }
-    if let Some(t) = &link.estop {
-        out.push(Expected {
-            role: "estop",
-            topic: t,
-            ty: &BOOL,
-            direction: Direction::Publisher,
-        });
-    }
-    out
+    command.into_iter().chain(read).collect()
 }
 
 /// The publishers and subscriptions announced on `session` now.

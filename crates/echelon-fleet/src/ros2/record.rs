@@ -148,7 +148,7 @@ impl RosTopic {
             RosTopic::new(link.key_scheme, link.domain_id, &link.namespace, name, ty)
         };
         Ok([
-            topic(&link.cmd_vel, super::drive::cmd_vel_type(link))?,
+            topic(&link.cmd_vel, *super::drive::cmd_vel_type(link))?,
             topic(&link.odom, ODOMETRY)?,
         ])
     }

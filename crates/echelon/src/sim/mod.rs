@@ -9,7 +9,7 @@
 
 use crate::agent::{Actuation, Command, Guard, Sight};
 use crate::agent::{AgentSpec, Drive};
-use crate::base::Backup;
+use crate::base::VelocityRobot;
 use crate::error::SimError;
 use crate::formation::{Formation, Leader};
 use crate::model::State;
@@ -136,12 +136,7 @@ impl Simulation {
         });
         let backup = agents
             .iter()
-            .map(|a| {
-                a.velocity_robot()
-                    .map(|r| r.reverse_limit())
-                    .filter(|l| l.is_finite())
-                    .map(Backup::new)
-            })
+            .map(|a| a.velocity_robot().and_then(VelocityRobot::backup))
             .collect();
         let backup_period = if hold_every > 0 {
             hold_every as f64 * config.dt

@@ -477,3 +477,71 @@ fn a_fleet_order_that_reaches_no_robot_fails() {
         assert!(err.contains("--connect"), "{err}");
     }
 }
+
+/// The dds wave's scenario fields refused at their place, exit 2, nothing
+/// started: a `reverse_limit` that is not `> 0`, one on a torque-driven
+/// robot, a `hazards` topic that is no ROS name, a control rate that leaves
+/// a base fewer than two commands per `cmd_vel_timeout`; and a `--hazard`
+/// that is not NAME@FROM+DURATION.
+#[test]
+fn the_dds_fields_are_refused_at_their_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let robot = |section: &str| {
+        GOOD.replace(
+            "[[agents]]",
+            &format!("{section}\n[[agents]]\nrobot = \"tb\""),
+        )
+    };
+    let limited = robot("[robots.tb]\npreset = \"turtlebot4\"\nreverse_limit = 0.1\n");
+    let run_cases: [(String, &[&str]); 2] = [
+        (
+            robot("[robots.tb]\npreset = \"turtlebot4\"\nreverse_limit = 0.0\n"),
+            &["s.toml:11:17: robots.tb.reverse_limit", "must be > 0"],
+        ),
+        (
+            robot("[robots.tb]\npreset = \"agent1\"\nreverse_limit = 0.1\n"),
+            &[
+                "s.toml:11:17: robots.tb.reverse_limit",
+                "velocity base's field",
+            ],
+        ),
+    ];
+    let out = dir.path().join("never");
+    refuses_each(dir.path(), &out, run_cases);
+    for (tail, needles) in [
+        (
+            "\n[fleet.ros2]\nhazards = \"bad topic\"\n",
+            &["s.toml:", "fleet.ros2.hazards", "bad topic"][..],
+        ),
+        (
+            "\n[fleet]\ncontrol_rate = 3.0\n",
+            &[
+                "s.toml:",
+                "fleet.control_rate",
+                "cmd_vel_timeout",
+                "give at least 4 Hz",
+            ][..],
+        ),
+    ] {
+        let f = scenario_file(dir.path(), &format!("{limited}{tail}"));
+        assert_refused(
+            &echelon(&["fleet", "robot", &f, "--agent", "1", "--ros2"]),
+            needles,
+        );
+    }
+    let f = scenario_file(dir.path(), &limited);
+    let out_s = out.to_str().unwrap();
+    for bad in [
+        "BUMP",
+        "PUSH@1+2",
+        "BUMP@-1+2",
+        "BUMP@1+0",
+        "x:BUMP@1+2",
+        "1:BUMP@1",
+    ] {
+        let o = echelon(&["fleet", "up", &f, "--ros2", "--hazard", bad, "--out", out_s]);
+        assert_eq!(o.status.code(), Some(2), "{bad}: {}", stderr(&o));
+        assert!(stderr(&o).contains("--hazard"), "{bad}: {}", stderr(&o));
+        assert!(!out.exists(), "{bad}: nothing started");
+    }
+}

@@ -110,7 +110,6 @@ mod tests {
     use echelon::scenario::Scenario;
     use echelon_ros2::graph::{Direction, GraphEndpoint, GraphProblem, check, parse_token};
     use echelon_ros2::liveliness::{Endpoint, NodeInfo, Qos};
-    use echelon_ros2::names::KeyScheme;
     use proptest::prelude::*;
 
     /// Agent 1's link of a scenario with these `[fleet.ros2]` settings.

@@ -45,3 +45,22 @@ fn fleet_md_describes_every_fleet_subcommand() {
         "docs/fleet.md has no `echelon fleet <command> …` for {missing:?}"
     );
 }
+
+/// docs/faults.md is the table `echelon fleet faults` writes (`DIR/faults.md`):
+/// a measured line for every row of the matrix, each within its bound,
+/// with the machine named.
+#[test]
+fn faults_md_is_the_fault_matrix() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/faults.md");
+    let doc = std::fs::read_to_string(&path).unwrap();
+    assert!(doc.starts_with("# Fault matrix"), "{doc}");
+    assert!(doc.contains("Measured by `echelon fleet faults"), "{doc}");
+    for row in echelon_fleet::matrix::rows() {
+        let head = format!("| `{}` |", row.name);
+        let line = doc
+            .lines()
+            .find(|l| l.starts_with(&head))
+            .unwrap_or_else(|| panic!("docs/faults.md has no row {}", row.name));
+        assert!(line.ends_with("| yes |"), "{line}");
+    }
+}

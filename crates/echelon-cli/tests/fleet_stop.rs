@@ -2,7 +2,10 @@
 //! `fleet stop` puts the fleet command and returns once every robot has
 //! acknowledged it; within 50 ms of its publication the last `cmd_vel` of
 //! every base is zero and nothing else follows until `fleet resume`, after
-//! which every robot drives again.
+//! which every robot drives again. A resume needs the operator token `fleet
+//! up` wrote (`OUT/operator-token`): without it nothing is put, with
+//! another one the robots refuse it, in both cases exit 2 and every robot
+//! stays stopped.
 
 #![allow(clippy::unwrap_used)]
 
@@ -34,14 +37,19 @@ fn unix_ns() -> u64 {
         .as_nanos() as u64
 }
 
+/// The environment variable `fleet resume` reads the operator token from.
+const TOKEN_ENV: &str = "ECHELON_OPERATOR_TOKEN";
+
 /// Runs `fleet stop` or `fleet resume` for `scenario` through `router`
-/// with `more` arguments: whether it succeeded, its report, its stderr.
-fn run_command(what: &str, scenario: &str, router: &str, more: &[&str]) -> (bool, Value, String) {
+/// with `more` arguments (no operator token in its environment): its exit
+/// code, its report, its stderr.
+fn run_command(what: &str, scenario: &str, router: &str, more: &[&str]) -> (i32, Value, String) {
     let out = Command::new(EXE)
         .args(["fleet", what, scenario, "--mode", "client", "--connect"])
         .arg(router)
         .args(["--reason", "fleet_stop test"])
         .args(more)
+        .env_remove(TOKEN_ENV)
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
@@ -50,24 +58,61 @@ fn run_command(what: &str, scenario: &str, router: &str, more: &[&str]) -> (bool
         .rfind(|l| l.starts_with('{'))
         .map_or(Value::Null, |l| serde_json::from_str(l).unwrap());
     (
-        out.status.success(),
+        out.status.code().unwrap_or(-1),
         report,
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
 
-/// Runs `fleet stop` or `fleet resume` through `router`; its report.
-fn command(what: &str, router: &str) -> Value {
+/// Runs `fleet stop` or `fleet resume` through `router` with `more`
+/// arguments (no operator token in its environment); its report.
+fn command(what: &str, router: &str, more: &[&str]) -> Value {
     let out = Command::new(EXE)
         .args(["fleet", what, SCENARIO, "--mode", "client", "--connect"])
         .arg(router)
         .args(["--reason", "fleet_stop test", "--timeout", "5"])
+        .args(more)
+        .env_remove(TOKEN_ENV)
         .output()
         .unwrap();
     check(&out, &format!("fleet {what}"));
     let text = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(text.lines().rfind(|l| l.starts_with('{')).unwrap()).unwrap()
 }
+
+/// `fleet up`'s operator token file in `out`, as an argument.
+fn token_file(out: &Path) -> String {
+    out.join("operator-token").to_str().unwrap().to_owned()
+}
+
+/// A resume with `more` arguments refused (exit 2) for want of the right
+/// operator token: none given (`wrong` false: refused before anything is
+/// put, no report) or a wrong one (put, and refused by both robots, named
+/// with the reason).
+fn refused_resume(scenario: &str, router: &str, more: &[&str], wrong: bool) -> Value {
+    let (code, report, err) = run_command("resume", scenario, router, more);
+    assert_eq!(code, 2, "{report} {err}");
+    if !wrong {
+        assert!(
+            err.contains("fleet resume needs the operator token: give --token-file OUT/operator-token (written by fleet up), --token, or ECHELON_OPERATOR_TOKEN"),
+            "{err}"
+        );
+        assert_eq!(report, Value::Null, "nothing put: {report}");
+    } else {
+        for k in 1..=2 {
+            let why = format!("robot/{k} refused resume");
+            assert!(err.contains(&why), "{err}");
+        }
+        assert!(err.contains("no valid operator token"), "{err}");
+        assert_eq!(report["acknowledged"], serde_json::json!([]), "{report}");
+        assert_eq!(report["refused"].as_array().unwrap().len(), 2, "{report}");
+        assert_eq!(report["leader"], false, "{report}");
+    }
+    report
+}
+
+/// Another token than the fleet's.
+const WRONG_TOKEN: &str = "0123456789abcdef0123456789abcdef";
 
 /// Waits for `fleet up` to end successfully; its summary.
 fn up_summary(up: common::Guard, dir: &Path) -> Value {
@@ -174,7 +219,8 @@ fn fleet_stop_zeroes_every_cmd_vel_until_fleet_resume() {
     until_all_move(&heard, n, 0, "before the stop");
     std::thread::sleep(Duration::from_millis(500));
 
-    let stop = command("stop", &router);
+    // A stop needs no token.
+    let stop = command("stop", &router, &[]);
     let robots: Vec<String> = (1..=n).map(|k| format!("robot/{k}")).collect();
     assert_eq!(stop["command"]["order"], "stop", "{stop}");
     assert_eq!(stop["alive"], serde_json::json!(robots), "{stop}");
@@ -182,9 +228,19 @@ fn fleet_stop_zeroes_every_cmd_vel_until_fleet_resume() {
     assert_eq!(stop["acknowledged"].as_array().unwrap().len(), n, "{stop}");
     assert_eq!(stop["leader"], true, "{stop}");
     let stopped_at = stop["published_unix_ns"].as_u64().unwrap();
-    std::thread::sleep(Duration::from_millis(1500));
+    std::thread::sleep(Duration::from_millis(500));
+    // Resumes without the fleet's token: refused, every base still at
+    // zero (checked below: zero from the stop to the good resume).
+    refused_resume(SCENARIO, &router, &[], false);
+    let wrong = refused_resume(SCENARIO, &router, &["--token", WRONG_TOKEN], true);
+    assert!(wrong["command"]["proof"].is_string(), "{wrong}");
+    std::thread::sleep(Duration::from_millis(500));
 
-    let resume = command("resume", &router);
+    let resume = command(
+        "resume",
+        &router,
+        &["--token-file", &token_file(dir.path())],
+    );
     assert_eq!(resume["missing"], serde_json::json!([]), "{resume}");
     assert_eq!(resume["acknowledged"].as_array().unwrap().len(), n);
     let resumed_at = resume["published_unix_ns"].as_u64().unwrap();
@@ -228,13 +284,16 @@ fn fleet_stop_zeroes_every_cmd_vel_until_fleet_resume() {
         let c = &r["commands"];
         assert_eq!((f(c, &["stops"]), f(c, &["resumes"])), (1.0, 1.0), "{r}");
         assert_eq!(f(c, &["refused"]), 0.0, "{r}");
+        assert_eq!(f(c, &["unauthorized"]), 1.0, "{r}");
         assert_eq!(r["link"], "tracking", "{r}");
     }
     let leader = &up["leader"];
     assert!(f(leader, &["paused"]) > 2.0, "{leader}");
     assert_eq!(leader["stopped_the_fleet"], false, "{leader}");
+    assert_eq!(f(&leader["commands"], &["unauthorized"]), 1.0, "{leader}");
     let col = &up["collector"];
-    assert_eq!(col["logged_by_topic"]["/fleet/command"], 2, "{col}");
+    // The stop, the resume with the wrong token, the resume.
+    assert_eq!(col["logged_by_topic"]["/fleet/command"], 3, "{col}");
     assert_eq!(col["rejected"], serde_json::json!({}), "{col}");
 }
 
@@ -256,29 +315,37 @@ fn in_secure_mode_only_the_operator_stops_the_fleet() {
     let secure = |id: &'static str| ["--secure", certs, "--identity", id, "--timeout", "2"];
     // Wait until both robots have joined and hear their leader.
     let start = Instant::now();
-    let (ok, rogue, err) = loop {
-        let (ok, report, err) = run_command("stop", scenario, &router, &secure("robot-1"));
+    let (code, rogue, err) = loop {
+        let (code, report, err) = run_command("stop", scenario, &router, &secure("robot-1"));
         if report["alive"].as_array().is_some_and(|a| a.len() == 2) {
-            break (ok, report, err);
+            break (code, report, err);
         }
         assert!(start.elapsed() < Duration::from_secs(30), "{report} {err}");
         std::thread::sleep(Duration::from_millis(200));
     };
-    assert!(!ok, "{rogue}");
+    assert_eq!(code, 1, "{rogue}");
     assert!(err.contains("did not acknowledge"), "{err}");
     assert_eq!(rogue["acknowledged"], serde_json::json!([]), "{rogue}");
     assert_eq!(rogue["missing"], serde_json::json!(["robot/1", "robot/2"]));
 
-    let (ok, stop, err) = run_command("stop", scenario, &router, &secure("operator"));
-    assert!(ok, "{stop} {err}");
+    let (code, stop, err) = run_command("stop", scenario, &router, &secure("operator"));
+    assert_eq!(code, 0, "{stop} {err}");
     assert_eq!(stop["acknowledged"].as_array().unwrap().len(), 2, "{stop}");
     assert_eq!(stop["command"]["by"], "operator");
     std::thread::sleep(Duration::from_millis(500));
-    let (ok, resume, err) = run_command("resume", scenario, &router, &secure("operator"));
-    assert!(ok, "{resume} {err}");
+    // The `operator` certificate is not enough to resume: the token is
+    // needed too.
+    refused_resume(scenario, &router, &secure("operator"), false);
+    let wrong = [&secure("operator")[..], &["--token", WRONG_TOKEN]].concat();
+    refused_resume(scenario, &router, &wrong, true);
+    let token = token_file(&out);
+    let good = [&secure("operator")[..], &["--token-file", &token]].concat();
+    let (code, resume, err) = run_command("resume", scenario, &router, &good);
+    assert_eq!(code, 0, "{resume} {err}");
     let up = up_summary(up, &out);
     for r in up["robots"].as_array().unwrap() {
         let c = &r["commands"];
         assert_eq!((f(c, &["stops"]), f(c, &["resumes"])), (1.0, 1.0), "{r}");
+        assert_eq!(f(c, &["unauthorized"]), 1.0, "{r}");
     }
 }

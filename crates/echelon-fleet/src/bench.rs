@@ -357,6 +357,7 @@ pub fn run(
                 dashboard: None,
                 log_rate: opts.log_rate,
                 hazards: Vec::new(),
+                chaos: Default::default(),
             },
             stop,
         );

@@ -9,10 +9,15 @@
 //!
 //! - a **stop** is always obeyed, whatever its number (a stop is never
 //!   unsafe); the latch keeps the highest stop number heard;
-//! - a **resume** lifts the stop in force only when its number is higher
-//!   than that stop's (`fleet resume` numbers its command one past the
-//!   highest number the fleet answers, so it lifts every stop issued before
-//!   it, and a resume that crossed a newer stop on the way does not);
+//! - a **resume** is obeyed only when it carries a valid proof of the
+//!   operator token ([`crate::token`]) and the process holds that token
+//!   ([`Latch::with_token`]), in every mode; any other resume is refused,
+//!   counted (`unauthorized`) and named in the latch answer
+//!   ([`Latched::refused`]), and changes nothing;
+//! - an obeyed resume lifts the stop in force only when its number is
+//!   higher than that stop's (`fleet resume` numbers its command one past
+//!   the highest number the fleet answers, so it lifts every stop issued
+//!   before it, and a resume that crossed a newer stop on the way does not);
 //! - what a process learns second-hand (a latch answer, [`Latch::on_hearsay`])
 //!   can only stop it: in secure mode only the `operator` and the `leader`
 //!   may put on the command key, while any member may answer a query.
@@ -27,6 +32,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::ros2::hazard::HazardSet;
+use crate::token::{OperatorToken, PROOF_HEX_LEN};
 
 /// The longest command payload accepted, bytes.
 pub const MAX_LEN: usize = 2048;
@@ -75,6 +81,12 @@ pub struct FleetCommand {
     pub by: String,
     /// Why, in a few words (may be empty).
     pub reason: String,
+    /// The proof of the operator token ([`OperatorToken::proof`]), lowercase
+    /// hexadecimal: a resume is obeyed only with a valid one, a stop needs
+    /// none. Empty, and left out of the JSON, when the command is not
+    /// signed.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub proof: String,
 }
 
 /// Why a command payload was refused.
@@ -98,6 +110,16 @@ impl FleetCommand {
             stamp_unix_ns: crate::unix_nanos(),
             by: by.chars().take(MAX_BY).collect(),
             reason: reason.chars().take(MAX_REASON).collect(),
+            proof: String::new(),
+        }
+    }
+
+    /// The same command signed with `token` (its [`FleetCommand::proof`]
+    /// set).
+    pub fn signed(self, token: &OperatorToken) -> FleetCommand {
+        FleetCommand {
+            proof: token.proof(&self),
+            ..self
         }
     }
 
@@ -128,7 +150,9 @@ impl FleetCommand {
 
     /// The rules of a decoded command beyond its JSON shape: a sender
     /// named in at most `MAX_BY` characters, a reason of at most
-    /// [`MAX_REASON`]; one place for the command key and the latch answers.
+    /// [`MAX_REASON`], a proof of at most [`PROOF_HEX_LEN`] lowercase
+    /// hexadecimal characters; one place for the command key and the latch
+    /// answers.
     fn check(&self) -> Result<(), CommandError> {
         if self.by.is_empty() || self.by.chars().count() > MAX_BY {
             return Err(CommandError::Malformed("sender"));
@@ -136,14 +160,60 @@ impl FleetCommand {
         if self.reason.chars().count() > MAX_REASON {
             return Err(CommandError::Malformed("reason too long"));
         }
+        if self.proof.len() > PROOF_HEX_LEN
+            || !self
+                .proof
+                .bytes()
+                .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+        {
+            return Err(CommandError::Malformed("proof"));
+        }
         Ok(())
     }
 }
 
+/// A resume a latch refused: it carried no valid proof of the operator
+/// token, or the process has no token ([`Latch::last_refusal`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Refusal {
+    /// The resume's number.
+    pub seq: u64,
+    /// The resume's stamp (with `seq` and `by`, which resume it was).
+    pub stamp_unix_ns: u64,
+    /// The resume's sender.
+    pub by: String,
+    /// Why it was refused.
+    pub why: String,
+}
+
+/// Why a latch refuses a resume without a valid proof.
+pub const NO_VALID_PROOF: &str = "no valid operator token";
+/// Why a latch without a token refuses every resume.
+pub const NO_TOKEN_HERE: &str = "this process has no operator token";
+
+impl Refusal {
+    /// Whether it is the refusal of `c`.
+    pub fn is_of(&self, c: &FleetCommand) -> bool {
+        c.order == Order::Resume
+            && self.seq == c.seq
+            && self.stamp_unix_ns == c.stamp_unix_ns
+            && self.by == c.by
+    }
+}
+
+impl std::fmt::Display for Refusal {
+    /// `resume 7 by operator: no valid operator token`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "resume {} by {}: {}", self.seq, self.by, self.why)
+    }
+}
+
 /// What a process answers on its latch key: whether it is stopped, the
-/// command in force (the stop, or the last resume; `None`: none heard) and,
-/// from a robot, the stopping hazards its base reports (a fleet paused for
-/// them may not be resumed: `fleet resume` refuses, naming them).
+/// command in force (the stop, or the last resume; `None`: none heard),
+/// from a robot the stopping hazards its base reports (a fleet paused for
+/// them may not be resumed: `fleet resume` refuses, naming them), and the
+/// last resume it refused for want of a valid operator token.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Latched {
@@ -154,6 +224,10 @@ pub struct Latched {
     /// The stopping hazards its base reports (only while stopped).
     #[serde(default, skip_serializing_if = "HazardSet::is_empty")]
     pub hazards: HazardSet,
+    /// The last resume it refused (no valid operator token), since the
+    /// last one it obeyed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refused: Option<Refusal>,
 }
 
 impl Latched {
@@ -175,7 +249,12 @@ impl Latched {
                     && c.check().is_ok()
             }
             None => !l.stopped,
-        } && (l.hazards.is_empty() || l.stopped);
+        } && (l.hazards.is_empty() || l.stopped)
+            && l.refused.as_ref().is_none_or(|r| {
+                !r.by.is_empty()
+                    && r.by.chars().count() <= MAX_BY
+                    && r.why.chars().count() <= MAX_REASON
+            });
         consistent.then_some(l)
     }
 
@@ -214,6 +293,10 @@ pub struct CommandCounts {
     /// hazard (it stopped the fleet again).
     #[serde(default)]
     pub refused_resumes: u64,
+    /// Resumes refused for want of a valid operator token proof (or
+    /// because the process has no token).
+    #[serde(default)]
+    pub unauthorized: u64,
 }
 
 /// What a command did to a latch.
@@ -223,8 +306,35 @@ pub enum Change {
     Stopped,
     /// It was stopped and runs again.
     Resumed,
-    /// Nothing changed (a stop while stopped, a resume ignored or refused).
+    /// Nothing changed (a stop while stopped, a resume ignored or
+    /// refused; [`Latch::last_refusal`]).
     Unchanged,
+}
+
+/// A line for a process's log about a command it just took (`change`; its
+/// latch answer now, its counts `before` and `after`): the resume obeyed
+/// (its number, sender and reason), or the resume refused (the first ten
+/// refusals, then every power of two: a flood of resumes does not flood
+/// the log). `None`: nothing to say.
+pub fn resume_note(
+    change: Change,
+    now: &Latched,
+    before: CommandCounts,
+    after: CommandCounts,
+) -> Option<String> {
+    if change == Change::Resumed {
+        let r = now.command.as_ref().filter(|c| c.order == Order::Resume)?;
+        return Some(format!(
+            "fleet resume {} by {} obeyed (reason: {:?})",
+            r.seq, r.by, r.reason
+        ));
+    }
+    let n = after.unauthorized;
+    if n > before.unauthorized && (n <= 10 || n.is_power_of_two()) {
+        let r = now.refused.as_ref()?;
+        return Some(format!("fleet {r}: refused ({n} refused so far)"));
+    }
+    None
 }
 
 /// The fleet command a process is under (see the module's rules).
@@ -237,12 +347,35 @@ pub struct Latch {
     counts: CommandCounts,
     /// Moves whenever what [`Latch::latched`] answers changes.
     changes: u64,
+    /// The operator token a resume must prove (none: every resume is
+    /// refused).
+    token: Option<OperatorToken>,
+    /// The last resume refused for want of a valid proof, since the last
+    /// one obeyed.
+    refusal: Option<Refusal>,
 }
 
 impl Latch {
-    /// Running, nothing heard.
+    /// Running, nothing heard, no operator token: it obeys stops and
+    /// refuses every resume.
     pub fn new() -> Latch {
         Latch::default()
+    }
+
+    /// Running, nothing heard, obeying the resumes signed with `token`
+    /// (none: refusing every resume).
+    pub fn with_token(token: Option<OperatorToken>) -> Latch {
+        Latch {
+            token,
+            ..Latch::default()
+        }
+    }
+
+    /// The last resume it refused for want of a valid operator token
+    /// proof, since the last one it obeyed (its `Display`: `resume 7 by
+    /// operator: no valid operator token`).
+    pub fn last_refusal(&self) -> Option<&Refusal> {
+        self.refusal.as_ref()
     }
 
     /// Whether a stop is in force.
@@ -273,6 +406,7 @@ impl Latch {
             stopped: self.stopped(),
             command: self.stop.clone().or_else(|| self.resume.clone()),
             hazards: HazardSet::EMPTY,
+            refused: self.refusal.clone(),
         }
     }
 
@@ -305,29 +439,68 @@ impl Latch {
         }
     }
 
-    /// Obeys `c`: a stop always, a resume numbered above the stop in force.
+    /// Obeys `c`: a stop always; a resume with a valid proof of its
+    /// operator token ([`OperatorToken::verify`]) numbered above the stop
+    /// in force. A resume without a valid proof, or any resume when it has
+    /// no token, is refused: counted (`unauthorized`), kept as
+    /// [`Latch::last_refusal`], nothing else changed.
     pub fn on_command(&mut self, c: FleetCommand) -> Change {
         match c.order {
             Order::Stop => self.take_stop(c),
-            Order::Resume => match &self.stop {
-                Some(s) if c.seq > s.seq => {
-                    self.stop = None;
-                    self.resume = Some(c);
-                    self.changes += 1;
-                    self.counts.resumes += 1;
-                    Change::Resumed
+            Order::Resume => {
+                let why = match &self.token {
+                    None => Some(NO_TOKEN_HERE),
+                    Some(t) if !t.verify(&c) => Some(NO_VALID_PROOF),
+                    Some(_) => None,
+                };
+                if let Some(why) = why {
+                    return self.refuse(&c, why);
                 }
-                _ => {
-                    self.counts.ignored += 1;
-                    if self.stop.is_none() && self.resume.as_ref().is_none_or(|r| c.seq > r.seq) {
-                        // Running anyway: keep the newest number.
+                match &self.stop {
+                    Some(s) if c.seq > s.seq => {
+                        self.stop = None;
                         self.resume = Some(c);
+                        self.refusal = None;
                         self.changes += 1;
+                        self.counts.resumes += 1;
+                        Change::Resumed
                     }
-                    Change::Unchanged
+                    _ => {
+                        self.counts.ignored += 1;
+                        if self.stop.is_none() && self.resume.as_ref().is_none_or(|r| c.seq > r.seq)
+                        {
+                            // Running anyway: keep the newest number.
+                            self.resume = Some(c);
+                            self.refusal = None;
+                            self.changes += 1;
+                        }
+                        Change::Unchanged
+                    }
                 }
-            },
+            }
         }
+    }
+
+    /// A line for its holder's log about a resume it just took
+    /// ([`resume_note`]).
+    pub fn resume_note(&self, change: Change, before: CommandCounts) -> Option<String> {
+        resume_note(change, &self.latched(), before, self.counts)
+    }
+
+    /// Refuses resume `c` for `why`: counted and kept, nothing else changed.
+    fn refuse(&mut self, c: &FleetCommand, why: &str) -> Change {
+        self.counts.unauthorized += 1;
+        let refusal = Refusal {
+            seq: c.seq,
+            stamp_unix_ns: c.stamp_unix_ns,
+            by: c.by.clone(),
+            why: why.to_owned(),
+        };
+        if self.refusal.as_ref() != Some(&refusal) {
+            self.refusal = Some(refusal);
+            self.changes += 1;
+        }
+        Change::Unchanged
     }
 
     /// Takes robot `k`'s own stop, put on its halt key
@@ -378,8 +551,23 @@ impl Latch {
 mod tests {
     use super::*;
 
+    /// The operator token of these tests.
+    fn token() -> OperatorToken {
+        OperatorToken::parse("00112233445566778899aabbccddeeff").unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// A command from the operator, a resume signed with [`token`].
     fn cmd(order: Order, seq: u64) -> FleetCommand {
-        FleetCommand::new(order, seq, "operator", "test")
+        let c = FleetCommand::new(order, seq, "operator", "test");
+        match order {
+            Order::Stop => c,
+            Order::Resume => c.signed(&token()),
+        }
+    }
+
+    /// A latch holding [`token`].
+    fn latch() -> Latch {
+        Latch::with_token(Some(token()))
     }
 
     #[test]
@@ -388,7 +576,7 @@ mod tests {
         assert_eq!(FleetCommand::decode(&c.encode()), Ok(c.clone()));
         let json = String::from_utf8(c.encode()).unwrap_or_default();
         assert!(json.contains("\"order\":\"stop\""), "{json}");
-        let bad: [&[u8]; 7] = [
+        let bad: [&[u8]; 10] = [
             b"",
             b"garbage",
             b"{}",
@@ -396,6 +584,9 @@ mod tests {
             br#"{"version":1,"order":"stop","seq":-1,"stamp_unix_ns":0,"by":"x","reason":""}"#,
             br#"{"version":1,"order":"stop","seq":1,"stamp_unix_ns":0,"by":"","reason":""}"#,
             br#"{"version":1,"order":"stop","seq":1,"stamp_unix_ns":0,"by":"x","reason":"","x":1}"#,
+            br#"{"version":1,"order":"resume","seq":1,"stamp_unix_ns":0,"by":"x","reason":"","proof":"XY"}"#,
+            br#"{"version":1,"order":"resume","seq":1,"stamp_unix_ns":0,"by":"x","reason":"","proof":"AB"}"#,
+            br#"{"version":1,"order":"resume","seq":1,"stamp_unix_ns":0,"by":"x","reason":"","proof":7}"#,
         ];
         for b in bad {
             assert!(
@@ -415,11 +606,28 @@ mod tests {
         // `new` cuts a long reason to what is accepted.
         let cut = FleetCommand::new(Order::Stop, 1, "operator", &"y".repeat(1000));
         assert!(FleetCommand::decode(&cut.encode()).is_ok());
+        // A signed command round-trips with its proof; an unsigned one has
+        // none in its JSON.
+        let signed = cmd(Order::Resume, 4);
+        assert_eq!(signed.proof.len(), PROOF_HEX_LEN);
+        assert_eq!(FleetCommand::decode(&signed.encode()), Ok(signed.clone()));
+        assert!(!json.contains("proof"), "{json}");
+        let longest = FleetCommand {
+            by: "b".repeat(MAX_BY),
+            reason: "é".repeat(MAX_REASON),
+            ..signed.clone()
+        };
+        assert!(FleetCommand::decode(&longest.encode()).is_ok());
+        let too_long = FleetCommand {
+            proof: format!("{}0", signed.proof),
+            ..signed
+        };
+        assert!(FleetCommand::decode(&too_long.encode()).is_err());
     }
 
     #[test]
     fn a_stop_always_holds_and_only_a_later_resume_lifts_it() {
-        let mut l = Latch::new();
+        let mut l = latch();
         assert!(!l.stopped());
         assert_eq!(
             l.latched(),
@@ -427,6 +635,7 @@ mod tests {
                 stopped: false,
                 command: None,
                 hazards: HazardSet::EMPTY,
+                refused: None,
             }
         );
         assert_eq!(l.on_command(cmd(Order::Stop, 2)), Change::Stopped);
@@ -475,9 +684,10 @@ mod tests {
                 stopped: true,
                 command: Some(bad.clone()),
                 hazards: HazardSet::EMPTY,
+                refused: None,
             };
             assert_eq!(Latched::decode(&answer.encode()), None, "{bad:?}");
-            let mut l = Latch::new();
+            let mut l = latch();
             assert_eq!(l.on_hearsay(&answer.encode()), Change::Unchanged);
             assert!(!l.stopped());
         }
@@ -485,17 +695,50 @@ mod tests {
             stopped: true,
             command: Some(cmd(Order::Stop, 4)),
             hazards: HazardSet::EMPTY,
+            refused: None,
         };
-        assert_eq!(Latched::decode(&good.encode()), Some(good));
+        assert_eq!(Latched::decode(&good.encode()), Some(good.clone()));
+        // A refusal is named with a sender and a reason of bounded length.
+        let refusal = Refusal {
+            seq: 5,
+            stamp_unix_ns: 1,
+            by: "operator".into(),
+            why: NO_VALID_PROOF.into(),
+        };
+        let refused = Latched {
+            refused: Some(refusal.clone()),
+            ..good.clone()
+        };
+        assert_eq!(Latched::decode(&refused.encode()), Some(refused));
+        for bad in [
+            Refusal {
+                by: String::new(),
+                ..refusal.clone()
+            },
+            Refusal {
+                why: "w".repeat(MAX_REASON + 1),
+                ..refusal.clone()
+            },
+        ] {
+            let answer = Latched {
+                refused: Some(bad),
+                ..good.clone()
+            };
+            assert_eq!(Latched::decode(&answer.encode()), None);
+        }
+        // An answer without the field (an older process) still decodes.
+        let old = br#"{"stopped":true,"command":{"version":1,"order":"stop","seq":4,"stamp_unix_ns":0,"by":"operator","reason":""}}"#;
+        assert!(Latched::decode(old).is_some_and(|l| l.refused.is_none()));
     }
 
     #[test]
     fn hearsay_only_stops() {
-        let mut l = Latch::new();
+        let mut l = latch();
         let resumed = Latched {
             stopped: false,
             command: Some(cmd(Order::Resume, 9)),
             hazards: HazardSet::EMPTY,
+            refused: None,
         };
         assert_eq!(l.on_hearsay(&resumed.encode()), Change::Unchanged);
         assert_eq!(l.seq(), 0);
@@ -503,6 +746,7 @@ mod tests {
             stopped: true,
             command: Some(cmd(Order::Stop, 4)),
             hazards: HazardSet::EMPTY,
+            refused: None,
         };
         assert_eq!(l.on_hearsay(&stopped.encode()), Change::Stopped);
         assert_eq!(l.on_hearsay(&resumed.encode()), Change::Unchanged);
@@ -512,10 +756,81 @@ mod tests {
             stopped: false,
             command: Some(cmd(Order::Stop, 4)),
             hazards: HazardSet::EMPTY,
+            refused: None,
         };
         assert_eq!(Latched::decode(&liar.encode()), None);
         assert_eq!(Latched::decode(b"[1,2]"), None);
         assert_eq!(l.on_command(cmd(Order::Resume, 5)), Change::Resumed);
+    }
+
+    /// A resume without a valid proof of the token is refused whatever its
+    /// number, counted, and named in the latch answer until a resume is
+    /// obeyed; a latch without a token refuses every resume; a stop needs
+    /// no proof.
+    #[test]
+    fn a_resume_needs_a_valid_proof_of_the_token() {
+        let mut l = latch();
+        let stop = FleetCommand::new(Order::Stop, 3, "someone", "");
+        assert_eq!(l.on_command(stop.clone()), Change::Stopped);
+        let unsigned = FleetCommand::new(Order::Resume, 7, "operator", "go");
+        assert_eq!(l.on_payload(&unsigned.encode()), Change::Unchanged);
+        assert!(l.stopped());
+        let refusal = l
+            .last_refusal()
+            .cloned()
+            .unwrap_or_else(|| panic!("refused"));
+        assert!(refusal.is_of(&unsigned));
+        assert_eq!(
+            refusal.to_string(),
+            "resume 7 by operator: no valid operator token"
+        );
+        assert_eq!(l.latched().refused, Some(refusal.clone()));
+        assert_eq!(Latched::decode(&l.latched().encode()), Some(l.latched()));
+        let other = OperatorToken::parse("ffeeddccbbaa99887766554433221100")
+            .unwrap_or_else(|e| panic!("{e}"));
+        let wrong = FleetCommand::new(Order::Resume, 8, "operator", "go").signed(&other);
+        assert_eq!(l.on_command(wrong.clone()), Change::Unchanged);
+        assert!(l.last_refusal().is_some_and(|r| r.is_of(&wrong)));
+        // A valid proof of another command.
+        let copied = FleetCommand {
+            seq: 9,
+            ..cmd(Order::Resume, 8)
+        };
+        assert_eq!(l.on_command(copied), Change::Unchanged);
+        assert_eq!(l.seq(), 3, "a refused resume's number is not taken");
+        assert_eq!(l.counts().unauthorized, 3);
+        assert_eq!(
+            l.resume_note(Change::Unchanged, CommandCounts::default())
+                .as_deref(),
+            Some("fleet resume 9 by operator: no valid operator token: refused (3 refused so far)")
+        );
+        assert_eq!(l.resume_note(Change::Unchanged, l.counts()), None);
+        assert_eq!(l.on_command(cmd(Order::Resume, 4)), Change::Resumed);
+        assert_eq!(
+            l.resume_note(Change::Resumed, l.counts()).as_deref(),
+            Some("fleet resume 4 by operator obeyed (reason: \"test\")")
+        );
+        assert_eq!(l.last_refusal(), None);
+        assert_eq!(l.latched().refused, None);
+        let c = l.counts();
+        assert_eq!(
+            (c.stops, c.resumes, c.ignored, c.unauthorized),
+            (1, 1, 0, 3)
+        );
+
+        // Without a token: stops obeyed, every resume refused.
+        let mut alone = Latch::new();
+        assert_eq!(alone.on_command(cmd(Order::Stop, 1)), Change::Stopped);
+        assert_eq!(alone.on_command(cmd(Order::Resume, 2)), Change::Unchanged);
+        assert!(alone.stopped());
+        assert_eq!(
+            alone.last_refusal().map(ToString::to_string).as_deref(),
+            Some("resume 2 by operator: this process has no operator token")
+        );
+        // A signed stop is a stop.
+        let signed_stop = FleetCommand::new(Order::Stop, 5, "operator", "").signed(&token());
+        let mut l = latch();
+        assert_eq!(l.on_command(signed_stop), Change::Stopped);
     }
 
     proptest::proptest! {
@@ -525,24 +840,79 @@ mod tests {
         /// counter moved, never answers a stale latch.
         #[test]
         fn the_answer_changes_only_when_changes_moves(
-            ops in proptest::collection::vec((0u8..4, proptest::bool::ANY, 0u64..6, 0usize..3), 1..60),
+            ops in proptest::collection::vec((0u8..4, proptest::bool::ANY, 0u64..6, 0usize..3, proptest::bool::ANY), 1..60),
         ) {
-            let mut l = Latch::new();
-            for (kind, stop, seq, by) in ops {
+            let mut l = latch();
+            for (kind, stop, seq, by, sign) in ops {
                 let order = if stop { Order::Stop } else { Order::Resume };
                 let c = FleetCommand::new(order, seq, ["operator", "up", "leader"][by], "prop");
+                let c = if sign { c.signed(&token()) } else { c };
                 let (before, counted) = (l.latched(), l.changes());
                 match kind {
                     0 => { l.on_command(c); }
                     1 => { l.on_payload(&c.encode()); }
                     2 => { l.on_payload(&c.encode()[1..]); }
                     _ => {
-                        let heard = Latched { stopped: stop, command: Some(c), hazards: HazardSet::EMPTY };
+                        let heard = Latched { stopped: stop, command: Some(c), hazards: HazardSet::EMPTY, refused: None };
                         l.on_hearsay(&heard.encode());
                     }
                 }
                 proptest::prop_assert_eq!(l.changes() != counted, l.latched() != before);
                 proptest::prop_assert!(l.changes() >= counted);
+            }
+        }
+
+        /// Over any sequence of stops and resumes (signed with the token,
+        /// with another token, unsigned, or signed for another command),
+        /// on the command key or in hearsay, with or without a token held:
+        /// only a resume with a valid proof ever lifts a stop, and every
+        /// other resume is counted as unauthorized and named.
+        #[test]
+        fn a_resume_without_a_valid_proof_never_lifts_a_stop(
+            held in proptest::bool::ANY,
+            ops in proptest::collection::vec((0u8..3, proptest::bool::ANY, 0u64..8, 0u8..4), 1..60),
+        ) {
+            let other = OperatorToken::parse("0f0e0d0c0b0a09080706050403020100")
+                .unwrap_or_else(|e| panic!("{e}"));
+            let mut l = if held { latch() } else { Latch::new() };
+            for (kind, stop, seq, proof) in ops {
+                let order = if stop { Order::Stop } else { Order::Resume };
+                let unsigned = FleetCommand::new(order, seq, "operator", "prop");
+                let c = match proof {
+                    0 => unsigned.clone().signed(&token()),
+                    1 => unsigned.clone().signed(&other),
+                    2 => FleetCommand { seq: seq + 1, ..unsigned.clone().signed(&token()) },
+                    _ => unsigned.clone(),
+                };
+                let valid = held && proof == 0;
+                let (was_stopped, before) = (l.stopped(), l.counts());
+                let change = match kind {
+                    0 => l.on_command(c.clone()),
+                    1 => l.on_payload(&c.encode()),
+                    _ => {
+                        let heard = Latched {
+                            stopped: stop,
+                            command: Some(c.clone()),
+                            hazards: HazardSet::EMPTY,
+                            refused: None,
+                        };
+                        l.on_hearsay(&heard.encode())
+                    }
+                };
+                if stop {
+                    proptest::prop_assert!(l.stopped(), "a stop always stops");
+                } else if was_stopped && !l.stopped() {
+                    proptest::prop_assert!(valid && kind < 2, "{:?} lifted a stop", c);
+                    proptest::prop_assert_eq!(change, Change::Resumed);
+                }
+                let refused = l.counts().unauthorized - before.unauthorized;
+                let expected = u64::from(!stop && !valid && kind < 2);
+                proptest::prop_assert_eq!(refused, expected, "{:?}", c);
+                if expected == 1 {
+                    proptest::prop_assert!(l.last_refusal().is_some_and(|r| r.is_of(&c)));
+                    proptest::prop_assert_eq!(l.stopped(), was_stopped);
+                    proptest::prop_assert_eq!(change, Change::Unchanged);
+                }
             }
         }
     }

@@ -6,6 +6,7 @@
 //! | `echelon/<fleet>/robot/<k>/state` | robot `k` (from 1) | robot state ([`crate::wire`], binary); read by the collector, robot `k`'s followers and, with `[safety]`, every other robot |
 //! | `echelon/<fleet>/robot/<k>/stats` | robot `k` | its counters, JSON, once per fleet second and at exit |
 //! | `echelon/<fleet>/alive/<role>` | every process | liveliness token ([`crate::role::Member::liveliness`]: `leader`, `collector`, `robot/<k>`, `base/<k>`) |
+//! | `echelon/<fleet>/operator/heartbeat` | `fleet heartbeat` (the `operator`), with `[fleet] operator_heartbeat` | operator heartbeat ([`crate::heartbeat`], 12 bytes) |
 //! | `echelon/<fleet>/command` | `fleet stop` / `fleet resume` (the `operator`), the leader when interrupted | fleet command ([`crate::command::FleetCommand`], JSON) |
 //! | `echelon/<fleet>/latch/<role>` | every robot and the leader, as a queryable | the command in force ([`crate::command::Latched`], JSON), answered to queries on `latch/**` |
 //!
@@ -31,6 +32,8 @@ const ALIVE: &str = "alive";
 const COMMAND: &str = "command";
 const LATCH: &str = "latch";
 const HALT: &str = "halt";
+const OPERATOR: &str = "operator";
+const HEARTBEAT: &str = "heartbeat";
 
 /// The key expressions of one fleet.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -105,6 +108,12 @@ impl Keys {
     /// `echelon/<fleet>/robot/*/halt`: every robot's own stops.
     pub fn halts(&self) -> String {
         format!("{ROOT}/{}/{ROBOT}/*/{HALT}", self.fleet)
+    }
+
+    /// `echelon/<fleet>/operator/heartbeat`: the operator heartbeat
+    /// ([`crate::heartbeat`]), when the scenario asks for one.
+    pub fn heartbeat(&self) -> String {
+        format!("{ROOT}/{}/{OPERATOR}/{HEARTBEAT}", self.fleet)
     }
 
     /// `echelon/<fleet>/alive/<role>`.

@@ -7,7 +7,9 @@
 //! on from there, so the robots resume behind a leader that waited for them
 //! instead of chasing one that went on. Interrupted (SIGINT, SIGTERM) before
 //! its end, it first puts a fleet stop: robots stop within a control period
-//! instead of playing out their link-loss policy.
+//! instead of playing out their link-loss policy. It obeys a resume only
+//! with a valid proof of the operator token it was given
+//! ([`crate::token`]; [`TOKEN_ENV`] for the process).
 
 use std::time::Duration;
 
@@ -22,6 +24,7 @@ use crate::net;
 use crate::options::{ProcessOptions, Resolved};
 use crate::role::Member;
 use crate::runtime::{self, Flow, Latching, Outputs, Sample, Task, WaitFor};
+use crate::token::{OperatorToken, TOKEN_ENV};
 use crate::wire::{self, Header, Reference as WireReference};
 use crate::{FleetError, StopFlag};
 
@@ -187,6 +190,8 @@ pub struct LeaderTask {
     clock_start_unix_ns: u64,
     latch: Latch,
     stopped_the_fleet: bool,
+    /// `--die-at`: the process kills itself at this fleet time.
+    die_at: Option<f64>,
 }
 
 impl LeaderTask {
@@ -200,6 +205,22 @@ impl LeaderTask {
             clock_start_unix_ns: 0,
             latch: Latch::new(),
             stopped_the_fleet: false,
+            die_at: None,
+        }
+    }
+
+    /// The same, its process killing itself with SIGKILL at fleet time
+    /// `die_at` (`--die-at`, the fault matrix's `kill -9`).
+    pub fn dying_at(self, die_at: Option<f64>) -> LeaderTask {
+        LeaderTask { die_at, ..self }
+    }
+
+    /// The same, obeying the resumes signed with `token` (none: refusing
+    /// every resume).
+    pub fn with_operator_token(self, token: Option<OperatorToken>) -> LeaderTask {
+        LeaderTask {
+            latch: Latch::with_token(token),
+            ..self
         }
     }
 
@@ -277,6 +298,7 @@ impl Task for LeaderTask {
     }
 
     fn on_input(&mut self, input: usize, sample: &Sample<'_>) -> Result<(), FleetError> {
+        let before = self.latch.counts();
         let change = match (input, self.keys.classify(sample.key)) {
             (COMMAND_IN, _) => self.latch.on_payload(sample.payload),
             // A robot's own stop (its base's hazard): stop-only.
@@ -284,6 +306,9 @@ impl Task for LeaderTask {
             (HALTS_IN, _) => Change::Unchanged,
             _ => self.latch.on_hearsay(sample.payload),
         };
+        if let Some(note) = self.latch.resume_note(change, before) {
+            eprintln!("{note}");
+        }
         self.follow_latch(change, sample.at.max(0.0));
         Ok(())
     }
@@ -313,6 +338,7 @@ impl Task for LeaderTask {
     }
 
     fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        crate::faults::die_if_due(self.die_at, now, "fleet leader");
         if self.leader.next_due().is_none() {
             return Ok(Flow::Stop);
         }
@@ -345,11 +371,18 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
     let rate = opts.rate.unwrap_or(settings.reference_rate);
     let duration = opts.process.duration.unwrap_or(plan.config().duration);
     let leader = Leader::new(reference, rate, duration, net::rand_source());
-    let task = LeaderTask::new(leader, keys.clone()).waiting_for(WaitFor {
-        keys,
-        names: opts.wait_for,
-        timeout: opts.wait_timeout,
-    });
+    let token = OperatorToken::from_env()?;
+    if token.is_none() {
+        eprintln!("leader: no operator token ({TOKEN_ENV}): it will refuse every resume");
+    }
+    let task = LeaderTask::new(leader, keys.clone())
+        .dying_at(opts.process.die_at)
+        .with_operator_token(token)
+        .waiting_for(WaitFor {
+            keys,
+            names: opts.wait_for,
+            timeout: opts.wait_timeout,
+        });
     runtime::run(task, &opts.process.net, opts.process.clock(), stop)
 }
 

@@ -28,7 +28,9 @@ pub struct Counters {
     pub malformed: u64,
     /// Another format version.
     pub wrong_version: u64,
-    /// Well-formed but not of this stream (a state on the reference key, another agent's number…).
+    /// Well-formed but not of this stream (a state on the reference key,
+    /// another agent's number…), or a leader robot's state while it waits
+    /// or a watchdog holds it (not a pose to follow).
     pub foreign: u64,
     /// Dropped by `--loss`.
     pub injected_loss: u64,

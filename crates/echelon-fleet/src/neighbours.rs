@@ -192,14 +192,29 @@ impl NeighbourTable {
                 } else {
                     (t - e.state.t).clamp(0.0, self.timeout)
                 };
+                // A robot that halts (stopped, held by a watchdog, waiting)
+                // commands zero: it takes no half of the pair constraint,
+                // and it is an obstacle at rest where it says it is, not
+                // one moving on at the speed it reported (a held robot's
+                // odometry may be frozen at its cruising speed).
+                let acting = !matches!(
+                    e.state.link,
+                    LinkStatus::Stopped | LinkStatus::Held | LinkStatus::Waiting
+                );
+                if !acting {
+                    self.list.push(Neighbour {
+                        p: point(&e.state.state, l),
+                        cooperative: false,
+                        margin: uncertainty_margin(sigma, e.state.sigma),
+                        ..Neighbour::default()
+                    });
+                    continue;
+                }
                 let (s, dv) = advance(&e.state, dt);
                 let lagging = dt > self.lag;
                 self.lagging += u64::from(lagging && self.cooperative[i]);
-                // A robot that halts (stopped, waiting) commands zero: it
-                // takes no half of the pair constraint.
-                let acting = !matches!(e.state.link, LinkStatus::Stopped | LinkStatus::Waiting);
                 self.list.push(
-                    Neighbour::of_state(&s, l, Some(dv), self.cooperative[i] && !lagging && acting)
+                    Neighbour::of_state(&s, l, Some(dv), self.cooperative[i] && !lagging)
                         .with_margin(uncertainty_margin(sigma, e.state.sigma)),
                 );
                 continue;
@@ -358,6 +373,7 @@ mod tests {
             (LinkStatus::Extrapolating, true),
             (LinkStatus::Stopping, true),
             (LinkStatus::Stopped, false),
+            (LinkStatus::Held, false),
             (LinkStatus::Waiting, false),
         ] {
             let mut n = table();

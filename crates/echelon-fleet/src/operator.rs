@@ -10,6 +10,12 @@
 //! order at this number or later, or `timeout` passes. A robot
 //! acknowledges once it obeys: a stopped robot has commanded zero when it
 //! answers.
+//!
+//! A resume is signed with the operator token ([`crate::token`]) and is not
+//! put without one ([`NEEDS_TOKEN`]); a robot that refuses it (no valid
+//! proof of its own token, or no token at all) says so in its latch answer
+//! ([`Latched::refused`]), and the report names it ([`refusals`]). A stop
+//! needs no token.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
@@ -22,7 +28,11 @@ use crate::keys::Keys;
 use crate::net::{self, NetOptions};
 use crate::role::{Member, Role};
 use crate::runtime;
+use crate::token::OperatorToken;
 use crate::{FleetError, StopFlag};
+
+/// Why a resume is not put without the operator token.
+pub const NEEDS_TOKEN: &str = "fleet resume needs the operator token: give --token-file OUT/operator-token (written by fleet up), --token, or ECHELON_OPERATOR_TOKEN";
 
 /// How often the latches are asked for acknowledgements, real time.
 pub const POLL: Duration = Duration::from_millis(20);
@@ -45,6 +55,9 @@ pub struct OperatorOptions {
     pub timeout: Duration,
     /// Network.
     pub net: NetOptions,
+    /// The fleet's operator token, which signs a resume (a resume without
+    /// one is refused before anything is put; a stop needs none).
+    pub token: Option<OperatorToken>,
 }
 
 /// One robot's acknowledgement.
@@ -77,6 +90,10 @@ pub struct OperatorReport {
     /// Whether the leader acknowledged it (its reference pauses during a
     /// stop; `false` also when there is no leader).
     pub leader: bool,
+    /// The robots (of `missing`) that refused the resume, and why
+    /// (`robot/1 refused resume 7 by operator: no valid operator token`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub refused: Vec<String>,
 }
 
 /// The robots of `alive` that acknowledge `c` in `answers` (latch key,
@@ -119,6 +136,29 @@ pub fn hazards_in_force(keys: &Keys, answers: &[(String, Vec<u8>)]) -> Option<St
     (!reports.is_empty()).then(|| reports.into_iter().collect::<Vec<_>>().join("; "))
 }
 
+/// The robots whose latch answers in `answers` say they refused `c` (a
+/// resume without a valid proof of their operator token), each with one
+/// line: `robot/1 refused resume 7 by operator: no valid operator token`.
+pub fn refusals(
+    keys: &Keys,
+    c: &FleetCommand,
+    answers: &[(String, Vec<u8>)],
+) -> BTreeMap<String, String> {
+    let robot = format!("{}/", Role::Robot);
+    answers
+        .iter()
+        .filter_map(|(key, payload)| {
+            let holder = keys.latch_holder(key)?;
+            let l = Latched::decode(payload)?;
+            let acknowledged = l.acknowledges(c);
+            let r = l.refused.filter(|r| r.is_of(c) && !acknowledged)?;
+            holder
+                .starts_with(&robot)
+                .then(|| (holder.to_owned(), format!("{holder} refused {r}")))
+        })
+        .collect()
+}
+
 /// The highest command number in `answers` (0: none).
 pub fn highest_seq(answers: &[(String, Vec<u8>)]) -> u64 {
     answers
@@ -151,6 +191,9 @@ fn alive_robots(session: &zenoh::Session, keys: &Keys) -> Result<Vec<String>, Fl
 
 /// Puts the command and waits for the acknowledgements (or `stop`).
 pub fn run(opts: &OperatorOptions, stop: &StopFlag) -> Result<OperatorReport, FleetError> {
+    if opts.order == Order::Resume && opts.token.is_none() {
+        return Err(FleetError::Refused(NEEDS_TOKEN.to_owned()));
+    }
     let keys = Keys::new(&opts.fleet);
     let session = net::open(&opts.net)?;
     let alive = alive_robots(&session, &keys)?;
@@ -174,12 +217,17 @@ pub fn run(opts: &OperatorOptions, stop: &StopFlag) -> Result<OperatorReport, Fl
         &identity,
         &opts.reason,
     );
+    let command = match (&opts.token, opts.order) {
+        (Some(t), Order::Resume) => command.signed(t),
+        _ => command,
+    };
     net::put_stamped(&session, &keys.command(), command.encode());
     let published_unix_ns = crate::unix_nanos();
     let put = Instant::now();
     let mut acknowledged: Vec<Ack> = Vec::new();
     let mut leader = false;
     let mut seen: BTreeMap<String, f64> = BTreeMap::new();
+    let mut refused: BTreeMap<String, String> = BTreeMap::new();
     loop {
         let answers = runtime::query_all(&session, &keys.latches(), ASK)?;
         let after = put.elapsed().as_secs_f64();
@@ -194,7 +242,17 @@ pub fn run(opts: &OperatorOptions, stop: &StopFlag) -> Result<OperatorReport, Fl
                 after
             });
         }
-        let done = alive.iter().all(|r| seen.contains_key(r));
+        for (r, why) in refusals(&keys, &command, &answers) {
+            if !seen.contains_key(&r) {
+                refused.insert(r, why);
+            }
+        }
+        refused.retain(|r, _| !seen.contains_key(r));
+        // Every robot answered: it obeyed, or it refused (and will not
+        // change its mind: waiting on is pointless).
+        let done = alive
+            .iter()
+            .all(|r| seen.contains_key(r) || refused.contains_key(r));
         if (done && (leader || put.elapsed() > LEADER_GRACE)) || stop.is_raised() {
             break;
         }
@@ -217,6 +275,7 @@ pub fn run(opts: &OperatorOptions, stop: &StopFlag) -> Result<OperatorReport, Fl
         acknowledged,
         missing,
         leader,
+        refused: refused.into_values().collect(),
     })
 }
 
@@ -251,5 +310,66 @@ mod tests {
         assert_eq!(highest_seq(&[]), 0);
         let resume = FleetCommand::new(Order::Resume, 4, "operator", "");
         assert!(tally(&keys, &resume, &answers).0.is_empty());
+    }
+
+    /// The robots that refused a resume are those whose latch answer names
+    /// that very resume (not an earlier one of the same number).
+    #[test]
+    fn refusals_name_the_robots_that_refused_this_resume() {
+        let keys = Keys::new("lab");
+        let token = OperatorToken::random().unwrap_or_else(|e| panic!("{e}"));
+        let stop = FleetCommand::new(Order::Stop, 3, "operator", "");
+        let resume = FleetCommand::new(Order::Resume, 4, "operator", "").signed(&token);
+        let earlier = FleetCommand {
+            stamp_unix_ns: resume.stamp_unix_ns.wrapping_sub(1),
+            ..resume.clone()
+        };
+        let latch = |token: Option<OperatorToken>, heard: &[&FleetCommand]| {
+            let mut l = Latch::with_token(token);
+            l.on_command(stop.clone());
+            for c in heard {
+                l.on_command((*c).clone());
+            }
+            l.latched().encode()
+        };
+        let other = OperatorToken::random().unwrap_or_else(|e| panic!("{e}"));
+        let answers = vec![
+            (keys.latch("robot/1"), latch(None, &[&resume])),
+            (keys.latch("robot/2"), latch(Some(other), &[&resume])),
+            (
+                keys.latch("robot/3"),
+                latch(Some(token.clone()), &[&resume]),
+            ),
+            (keys.latch("robot/4"), latch(None, &[&earlier])),
+            (keys.latch("leader"), latch(None, &[&resume])),
+        ];
+        let refused = refusals(&keys, &resume, &answers);
+        assert_eq!(
+            refused.values().cloned().collect::<Vec<_>>(),
+            [
+                "robot/1 refused resume 4 by operator: this process has no operator token",
+                "robot/2 refused resume 4 by operator: no valid operator token",
+            ]
+        );
+        let (acks, _) = tally(&keys, &resume, &answers);
+        assert_eq!(acks.into_iter().collect::<Vec<_>>(), ["robot/3"]);
+    }
+
+    /// Without the token a resume is refused before anything is opened or
+    /// put.
+    #[test]
+    fn a_resume_without_the_token_is_refused_before_anything_is_put() {
+        let opts = OperatorOptions {
+            fleet: "lab".into(),
+            order: Order::Resume,
+            reason: String::new(),
+            timeout: Duration::from_millis(1),
+            net: NetOptions::default(),
+            token: None,
+        };
+        match run(&opts, &StopFlag::new()) {
+            Err(FleetError::Refused(why)) => assert_eq!(why, NEEDS_TOKEN),
+            other => panic!("{other:?}"),
+        }
     }
 }

@@ -25,6 +25,9 @@ pub struct ProcessOptions {
     pub net: NetOptions,
     /// Fleet name, the second chunk of every key (absent: the scenario's).
     pub fleet: Option<String>,
+    /// The process kills itself with SIGKILL at this fleet time (`--die-at`:
+    /// the fault matrix's `kill -9`, [`crate::faults::die_if_due`]).
+    pub die_at: Option<f64>,
 }
 
 /// [`ProcessOptions`]' scenario, built once.

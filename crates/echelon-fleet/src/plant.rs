@@ -11,6 +11,7 @@ use echelon::agent::{AgentSpec, Drive};
 use echelon::base::VelocityCommand;
 use echelon::model::State;
 
+use crate::faults::{Aftermath, AftermathReport, FaultSpec};
 use crate::ros2::fixes::FixReport;
 use crate::ros2::hazard::{HazardReport, HazardSet};
 use crate::wire::OdometryState;
@@ -43,6 +44,18 @@ pub trait Plant {
     /// uncertain axis, m (0: exact, as a simulated plant, or unknown).
     fn position_sigma(&self) -> f64 {
         0.0
+    }
+    /// The age of the measurement behind [`Plant::state`] at its time, s
+    /// (`None`: nothing measured yet). The robot's odometry watchdog
+    /// ([`crate::robot::Watchdog::Odometry`]) holds it when this exceeds
+    /// its `odom_timeout`. By default a plant's state is current whenever
+    /// it has one (0); a simulated plant's is 0 unless frozen.
+    fn odometry_age(&self) -> Option<f64> {
+        self.state().map(|_| 0.0)
+    }
+    /// What the robot did after an injected fault (`None`: not measured).
+    fn aftermath(&self) -> Option<AftermathReport> {
+        None
     }
     /// Its own odometry, raw (its odom frame), with its age and its last
     /// fix's, now (`None`: a simulated plant, or no odometry yet).
@@ -105,6 +118,11 @@ pub struct SimulatedDrive {
     applied: Actuation,
     t: f64,
     max_step: f64,
+    /// `--freeze-odometry`: the window, and the state and time it froze at.
+    freeze: Option<(f64, f64)>,
+    frozen: Option<(State, f64)>,
+    /// `--fault-at`: what it does from the fault on.
+    aftermath: Option<Aftermath>,
 }
 
 impl SimulatedDrive {
@@ -117,6 +135,41 @@ impl SimulatedDrive {
             applied: drive.actuate(drive.zero()),
             t: t0,
             max_step,
+            freeze: None,
+            frozen: None,
+            aftermath: None,
+        }
+    }
+
+    /// The same robot under the process's own faults: its odometry frozen
+    /// in `faults.freeze_odometry`, its aftermath measured from
+    /// `faults.fault_at`.
+    pub fn with_faults(self, faults: &FaultSpec) -> Self {
+        SimulatedDrive {
+            freeze: faults.freeze_odometry,
+            aftermath: faults
+                .fault_at
+                .map(|at| Aftermath::new(at, faults.fault_window)),
+            ..self
+        }
+    }
+
+    fn observe(&mut self) {
+        let (t, s, zero) = (
+            self.t,
+            self.state,
+            self.applied == self.drive.actuate(self.drive.zero()),
+        );
+        if let Some(m) = self.aftermath.as_mut() {
+            m.observe(t, [s.x, s.y], s.v.abs(), zero);
+        }
+        let frozen = self
+            .freeze
+            .is_some_and(|(start, len)| t >= start && t < start + len);
+        match (frozen, self.frozen) {
+            (true, None) => self.frozen = Some((s, t)),
+            (false, Some(_)) => self.frozen = None,
+            _ => {}
         }
     }
 
@@ -146,8 +199,9 @@ impl SimulatedDrive {
 }
 
 impl Plant for SimulatedDrive {
+    /// Its simulated state, or where it froze (`--freeze-odometry`).
     fn state(&self) -> Option<State> {
-        Some(self.state)
+        Some(self.frozen.map_or(self.state, |(s, _)| s))
     }
 
     fn advance(&mut self, t: f64) {
@@ -155,11 +209,21 @@ impl Plant for SimulatedDrive {
         self.t = integrate(&mut self.state, self.t, t, self.max_step, |s, h| {
             drive.rk4_step(s, &applied, h)
         });
+        self.observe();
+    }
+
+    fn odometry_age(&self) -> Option<f64> {
+        Some(self.frozen.map_or(0.0, |(_, at)| self.t - at))
+    }
+
+    fn aftermath(&self) -> Option<AftermathReport> {
+        self.aftermath.as_ref().map(Aftermath::report)
     }
 
     fn command(&mut self, cmd: Command) -> Actuation {
         self.applied = self.drive.actuate(cmd);
         self.state = self.drive.settle(&self.state, &self.applied);
+        self.observe();
         self.applied
     }
 

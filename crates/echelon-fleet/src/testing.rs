@@ -4,10 +4,24 @@ use echelon::reference::{Circle, Reference};
 use echelon::scenario::{FleetSettings, Overrides, Scenario};
 
 use crate::StopFlag;
+use crate::command::{FleetCommand, Order};
 use crate::faults::FaultSpec;
 use crate::net::NetOptions;
 use crate::robot::RobotConfig;
+use crate::token::OperatorToken;
 use crate::up::free_ports;
+
+/// The operator token of the unit tests: the robots of [`robot_config`]
+/// hold it, and [`resume`] signs with it.
+pub(crate) fn operator_token() -> OperatorToken {
+    OperatorToken::parse("5eed0000000000000000000000000001").unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// A resume numbered `seq` by `by` for `reason`, signed with
+/// [`operator_token`].
+pub(crate) fn resume(seq: u64, by: &str, reason: &str) -> FleetCommand {
+    FleetCommand::new(Order::Resume, seq, by, reason).signed(&operator_token())
+}
 
 /// The CLI's process-test fleet (`echelon-cli/tests/fleet/fast-circle.toml`):
 /// two robots in a chain behind a circle.
@@ -33,14 +47,19 @@ pub(crate) fn circle(start: [f64; 2], heading: f64, speed: f64, turn_rate: f64) 
 }
 
 /// Agent `agent`'s robot configuration in `s`, faults as given, running
-/// until stopped.
+/// until stopped, holding [`operator_token`].
 pub(crate) fn robot_config(s: &Scenario, agent: u32, faults: FaultSpec) -> RobotConfig {
     let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
     let plan = s
         .build(&Overrides::default())
         .unwrap_or_else(|e| panic!("{e}"))
         .plan;
-    RobotConfig::from_plan(&plan, &fleet, agent, faults, None).unwrap_or_else(|e| panic!("{e}"))
+    let config = RobotConfig::from_plan(&plan, &fleet, agent, faults, None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    RobotConfig {
+        operator_token: Some(operator_token()),
+        ..config
+    }
 }
 
 /// Runs `serve` on a thread with options that listen on a free loopback TCP

@@ -16,6 +16,12 @@
 //! `DIR/logs/<role>.log`; its last stdout line (kept in
 //! `DIR/logs/<role>.out`) is its JSON report.
 //!
+//! The fleet's operator token ([`crate::token`]: `ECHELON_OPERATOR_TOKEN`
+//! if set, else a new random one) is written to `DIR/operator-token` (mode
+//! 0600) and given to the robots, the leader and the collector in that
+//! variable: they obey only the resumes signed with it (`fleet resume
+//! --token-file DIR/operator-token`), and the dashboard's URL carries it.
+//!
 //! With `ros2`, one simulated ROS 2 base per robot (`fleet base --ros2`)
 //! starts before the robots, on the fleet's network. With `ros2` and `real`
 //! there are none: each robot process reaches its real robot at the agent's
@@ -30,11 +36,12 @@ use serde::Serialize;
 use echelon::scenario::{Overrides, Scenario};
 
 use crate::collector::CollectorReport;
-use crate::faults::FaultSpec;
+use crate::faults::{Chaos, FaultSpec};
 use crate::latency::FleetLatency;
 use crate::leader::LeaderReport;
 use crate::robot::RobotReport;
 use crate::role::{Member, Role};
+use crate::token::{OperatorToken, TOKEN_ENV, TOKEN_FILE};
 
 use crate::{FleetError, StopFlag};
 
@@ -109,6 +116,10 @@ pub struct UpOptions {
     /// With `ros2` (simulated bases): hazards base `k` reports, `(k,
     /// window)` (`fleet base --hazard`).
     pub hazards: Vec<(u32, crate::ros2::hazard::HazardWindow)>,
+    /// Faults injected into its own processes (the fault matrix's rows:
+    /// `--die-at`, `--freeze-odometry`, a robot's `--outage`,
+    /// `--fault-at`).
+    pub chaos: crate::faults::Chaos,
 }
 
 /// `fleet up --ros2 --real`'s refusals, before anything starts: real robots
@@ -189,11 +200,13 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     if let Some(dir) = &opts.secure {
         // Every process's certificates, before anything is written or starts.
         let routers = (opts.topology == Topology::Router).then_some(Member::Router);
+        let operator = fleet.operator_heartbeat.map(|_| Member::Operator);
         let robots = (1..=n as u32).map(Member::Robot);
         let simulated = (1..=bases as u32).map(Member::Base);
         for m in [Member::Collector, Member::Leader]
             .into_iter()
             .chain(routers)
+            .chain(operator)
             .chain(robots)
             .chain(simulated)
         {
@@ -203,6 +216,30 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let duration = opts.duration.unwrap_or(built.plan.config().duration);
     let logs = opts.out.join("logs");
     std::fs::create_dir_all(&logs).map_err(FleetError::io(&logs))?;
+    // The operator token: the caller's, else a new one; on file for `fleet
+    // resume`, and handed to the processes that obey or sign a resume.
+    let token_file = opts.out.join(TOKEN_FILE);
+    let token = match OperatorToken::from_env()? {
+        Some(t) => {
+            eprintln!(
+                "fleet up: operator token from {TOKEN_ENV} (also in {})",
+                token_file.display()
+            );
+            t
+        }
+        None => {
+            let t = OperatorToken::random()?;
+            eprintln!(
+                "fleet up: operator token {} (fleet resume --token-file {}, or {TOKEN_ENV})",
+                t.to_hex(),
+                token_file.display()
+            );
+            t
+        }
+    };
+    token.write_file(&token_file)?;
+    let token_hex = token.to_hex();
+    let token_env = [(TOKEN_ENV, token_hex.as_str())];
 
     let proto = crate::net::link_protocol(opts.secure.is_some());
     // Start order: the routers (router topology), the collector, the ROS 2
@@ -210,7 +247,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // of their ports.
     let robot_at = |k: usize| bases + k;
     let leader_at = bases + n + 1;
-    let net = Links::new(opts, proto, leader_at + 1)?;
+    // The operator's heartbeat last, when the scenario asks for one.
+    let net = Links::new(opts, proto, leader_at + 2)?;
     let secure_args = |identity: &str| -> Vec<String> {
         match &opts.secure {
             Some(dir) => vec![
@@ -228,7 +266,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // the collector and the leader on site 1.
     let site_of = |i: usize| match i {
         0 => 0,
-        i if i == leader_at => 0,
+        i if i >= leader_at => 0,
         i => ((i - 1) % n) % net.routers.len().max(1),
     };
     let common = |i: usize, identity: &str| -> Vec<String> {
@@ -293,7 +331,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             args.extend(["--connect".to_owned(), other.clone()]);
         }
         args.extend(secure_args(&Member::Router.identity()));
-        routers.push(spawn(&opts.exe, &router_role(s + 1), &args, &logs)?);
+        routers.push(spawn(&opts.exe, &router_role(s + 1), &args, &[], &logs)?);
     }
     let scale = opts.time_scale.to_string();
     let dur = duration.to_string();
@@ -334,7 +372,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         args.extend(["--log-rate".to_owned(), hz.to_string()]);
     }
     args.extend(common(0, &Member::Collector.identity()));
-    let mut collector = spawn(&opts.exe, Role::Collector.name(), &args, &logs)?;
+    let mut collector = spawn(&opts.exe, Role::Collector.name(), &args, &token_env, &logs)?;
 
     let mut base_procs = Vec::with_capacity(bases);
     for k in 1..=bases {
@@ -356,9 +394,29 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             &opts.exe,
             &Member::Base(k as u32).liveliness(),
             &args,
+            &[],
             &logs,
         )?);
     }
+
+    // A supervised run: the operator's heartbeat, on the hub (its death,
+    // or its machine asleep, holds the fleet within the deadline).
+    let operator_at = leader_at + 1;
+    let mut operator = match fleet.operator_heartbeat {
+        Some(_) => {
+            let mut args = vec![
+                "fleet".to_owned(),
+                "heartbeat".to_owned(),
+                opts.scenario.clone(),
+                "--time-scale".to_owned(),
+                scale.clone(),
+            ];
+            args.extend(chaos_args(&opts.chaos, Member::Operator));
+            args.extend(common(operator_at, &Member::Operator.identity()));
+            Some(spawn(&opts.exe, Role::Operator.name(), &args, &[], &logs)?)
+        }
+        None => None,
+    };
 
     let mut robots = Vec::with_capacity(n);
     for k in 1..=n {
@@ -375,9 +433,11 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         if opts.faults.delay > 0.0 {
             args.extend(["--delay".to_owned(), (opts.faults.delay * 1e3).to_string()]);
         }
-        if let Some((s, l)) = opts.faults.outage {
+        let own_outage = opts.chaos.outages.iter().find(|(j, _)| *j as usize == k);
+        if let Some((s, l)) = own_outage.map(|&(_, w)| w).or(opts.faults.outage) {
             args.extend(["--outage".to_owned(), format!("{s}:{l}")]);
         }
+        args.extend(chaos_args(&opts.chaos, Member::Robot(k as u32)));
         if opts.ros2 {
             args.push("--ros2".to_owned());
         }
@@ -390,12 +450,17 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             &opts.exe,
             &Member::Robot(k as u32).liveliness(),
             &args,
+            &token_env,
             &logs,
         )?);
     }
 
     let mut args = on_clock(Role::Leader);
+    args.extend(chaos_args(&opts.chaos, Member::Leader));
     args.extend(["--wait-for".to_owned(), Role::Collector.name().to_owned()]);
+    if operator.is_some() {
+        args.extend(["--wait-for".to_owned(), Member::Operator.liveliness()]);
+    }
     for k in 1..=n {
         args.extend([
             "--wait-for".to_owned(),
@@ -406,7 +471,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         args.extend(["--wait-for".to_owned(), Member::Base(k as u32).liveliness()]);
     }
     args.extend(common(leader_at, &Member::Leader.identity()));
-    let mut leader = spawn(&opts.exe, Role::Leader.name(), &args, &logs)?;
+    let mut leader = spawn(&opts.exe, Role::Leader.name(), &args, &token_env, &logs)?;
 
     // Generous: connection set-up, then the run in real time, then the wind-down.
     let deadline = Duration::from_secs_f64(60.0 + 2.0 * duration / opts.time_scale);
@@ -418,14 +483,37 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // their link-loss policy and run to the end on their own clocks, as
     // robots on other machines would; the run is reported, not torn down.
     let mut leader_failure: Option<String> = None;
+    let mut deaths: Vec<(String, String)> = Vec::new();
     // 1. Leader and robots run to the end (or a failure, or a signal).
     loop {
         let all_done = poll_all(std::iter::once(&mut leader).chain(&mut robots))?;
         poll_all(
             std::iter::once(&mut collector)
                 .chain(&mut base_procs)
+                .chain(operator.as_mut())
                 .chain(&mut routers),
         )?;
+        // Deaths the fault matrix asked for (`--die-at`): reported, not
+        // a failure of the run.
+        for (p, member) in robots
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (p, Member::Robot(i as u32 + 1)))
+            .chain(operator.iter().map(|p| (p, Member::Operator)))
+        {
+            if opts.chaos.death_of(member).is_some()
+                && let Some(f) = p.failure()
+                && !deaths.iter().any(|(m, _)| *m == member.liveliness())
+            {
+                eprintln!("fleet up: {f} (as asked: --die-at)");
+                deaths.push((member.liveliness(), f));
+            }
+        }
+        if let Some(f) = operator.as_ref().and_then(Proc::failure)
+            && opts.chaos.death_of(Member::Operator).is_none()
+        {
+            return Err(FleetError::Child(f));
+        }
         if leader_failure.is_none()
             && !interrupted
             && let Some(f) = leader.failure()
@@ -437,6 +525,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         }
         let failed = robots
             .iter()
+            .enumerate()
+            .filter(|(i, _)| opts.chaos.death_of(Member::Robot(*i as u32 + 1)).is_none())
+            .map(|(_, p)| p)
             .chain(&base_procs)
             .chain(std::iter::once(&collector))
             .chain(&routers)
@@ -491,6 +582,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // bases' last words), each until its inputs are quiet
     // (`runtime::Linger`, bounded), so the collector goes last.
     stop_all(&mut base_procs, nap, "a ROS 2 base")?;
+    if let Some(p) = operator.as_mut().filter(|p| p.status.is_none()) {
+        stop_all(std::slice::from_mut(p), nap, "the operator's heartbeat")?;
+    }
     stop_all(std::slice::from_mut(&mut collector), nap, "the collector")?;
     if let Some(f) = std::iter::once(&collector)
         .chain(&base_procs)
@@ -513,7 +607,15 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         .map(|l| l.clock_start_unix_ns)
         .filter(|&t| t > 0)
         .map(|t| t.saturating_sub(started_unix_ns) as f64 * 1e-9);
-    let robot_reports: Vec<RobotReport> = robots.iter().map(report).collect::<Result<_, _>>()?;
+    // A robot killed as asked has no report (its death is in `deaths`).
+    let robot_reports: Vec<RobotReport> = robots
+        .iter()
+        .enumerate()
+        .filter(|(i, p)| {
+            opts.chaos.death_of(Member::Robot(*i as u32 + 1)).is_none() || p.failure().is_none()
+        })
+        .map(|(_, p)| report(p))
+        .collect::<Result<_, _>>()?;
     let collector_report: CollectorReport = report(&collector)?;
     let up = UpReport {
         scenario: scenario.name().to_owned(),
@@ -539,6 +641,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             .collect(),
         leader: leader_report,
         leader_failure,
+        deaths: deaths.into_iter().map(|(_, f)| f).collect(),
         robots: robot_reports,
         collector: collector_report,
         bases: base_procs.iter().map(report).collect::<Result<_, _>>()?,
@@ -549,4 +652,26 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     };
     crate::write_json_file(&opts.out.join(UP_SUMMARY_FILE), &up)?;
     Ok(up)
+}
+
+/// The fault arguments `member`'s process takes from `chaos` (its
+/// `--die-at`; a robot's `--freeze-odometry`, `--fault-at` and
+/// `--fault-window`).
+fn chaos_args(chaos: &Chaos, member: Member) -> Vec<String> {
+    let mut a = Vec::new();
+    if let Some(t) = chaos.death_of(member) {
+        a.extend(["--die-at".to_owned(), t.to_string()]);
+    }
+    if let Member::Robot(k) = member {
+        if let Some((_, (s, l))) = chaos.freeze_odometry.iter().find(|(j, _)| *j == k) {
+            a.extend(["--freeze-odometry".to_owned(), format!("{s}:{l}")]);
+        }
+        if let Some(t) = chaos.fault_at {
+            a.extend(["--fault-at".to_owned(), t.to_string()]);
+            if let Some(w) = chaos.window {
+                a.extend(["--fault-window".to_owned(), w.to_string()]);
+            }
+        }
+    }
+    a
 }

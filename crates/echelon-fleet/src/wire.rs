@@ -100,6 +100,10 @@ pub enum LinkStatus {
     /// A fleet stop is in force (`fleet stop`): the robot commands zero
     /// until a resume, whatever its link.
     Stopped = 4,
+    /// A watchdog holds it ([`crate::robot::Watchdog`]): its odometry is
+    /// stale or the operator's heartbeat is lost; it commands zero until
+    /// the watchdog is satisfied again.
+    Held = 5,
 }
 
 impl LinkStatus {
@@ -111,6 +115,7 @@ impl LinkStatus {
             LinkStatus::Extrapolating => "extrapolating",
             LinkStatus::Stopping => "stopping",
             LinkStatus::Stopped => "stopped",
+            LinkStatus::Held => "held",
         }
     }
 
@@ -121,6 +126,7 @@ impl LinkStatus {
             2 => LinkStatus::Extrapolating,
             3 => LinkStatus::Stopping,
             4 => LinkStatus::Stopped,
+            5 => LinkStatus::Held,
             _ => return None,
         })
     }

@@ -633,11 +633,21 @@ fn robot_config(s: &Scenario, agent: u32) -> RobotConfig {
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// The operator token the fuzzed robots hold.
+fn operator_token() -> echelon_fleet::token::OperatorToken {
+    echelon_fleet::token::OperatorToken::parse("f0220000000000000000000000000002")
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
 fn robot(config: RobotConfig) -> Robot<Recorded> {
     let drive = SimulatedDrive::of(&config.spec, 0.0, echelon_fleet::robot::PLANT_STEP);
     let plant = Recorded {
         drive,
         commands: Vec::new(),
+    };
+    let config = RobotConfig {
+        operator_token: Some(operator_token()),
+        ..config
     };
     Robot::new(config, plant, 99)
 }
@@ -861,7 +871,9 @@ fn every_mutation_of_a_fleet_command_is_counted_or_obeyed() {
     let base = synced_robot(&s, 1, &reference_at(1.0, 0));
     let corpus = [
         FleetCommand::new(Order::Stop, 3, "operator", "test").encode(),
-        FleetCommand::new(Order::Resume, 7, "leader", "").encode(),
+        FleetCommand::new(Order::Resume, 7, "leader", "")
+            .signed(&operator_token())
+            .encode(),
     ];
     let mut failures = Vec::new();
     let mut count = 0;
@@ -895,6 +907,13 @@ fn every_mutation_of_a_fleet_command_is_counted_or_obeyed() {
                         if c.by.is_empty() {
                             return Err(format!("accepted {c:?} without a sender"));
                         }
+                        // A resume is obeyed only with a valid proof: any
+                        // other is counted as unauthorized, and only it.
+                        let refused = after.unauthorized - before.unauthorized;
+                        let forged = c.order == Order::Resume && !operator_token().verify(&c);
+                        if refused != u64::from(forged) {
+                            return Err(format!("{c:?}: {refused} counted unauthorized"));
+                        }
                     }
                 }
                 let stopped = r.is_stopped();
@@ -921,18 +940,32 @@ fn every_mutation_of_a_latch_answer_can_only_stop() {
     let corpus = [
         Latched {
             stopped: true,
-            command: Some(stop),
+            command: Some(stop.clone()),
             hazards: HazardSet::EMPTY,
+            refused: None,
         },
         Latched {
             stopped: false,
             command: Some(resume),
             hazards: HazardSet::EMPTY,
+            refused: None,
         },
         Latched {
             stopped: false,
             command: None,
             hazards: HazardSet::EMPTY,
+            refused: None,
+        },
+        Latched {
+            stopped: true,
+            command: Some(stop),
+            hazards: HazardSet::EMPTY,
+            refused: Some(echelon_fleet::command::Refusal {
+                seq: 6,
+                stamp_unix_ns: 1,
+                by: "operator".into(),
+                why: echelon_fleet::command::NO_VALID_PROOF.into(),
+            }),
         },
     ];
     let mut failures = Vec::new();

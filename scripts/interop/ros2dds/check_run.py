@@ -21,10 +21,12 @@ Subcommands:
       Runs CMD, records its monotonic start and end, exit status, stdout and
       stderr in FILE (JSON), echoes its output, and exits with its status.
 
-  put-resume --connect ROUTER --fleet NAME --record FILE
+  put-resume --connect ROUTER --fleet NAME --token-file FILE --record FILE
       Plays an operator that skips `fleet resume`'s hazard check: asks the
       fleet's latches (`echelon/<fleet>/latch/**`) for the highest command
-      number, puts a resume numbered one past it straight on
+      number, puts a resume numbered one past it, signed with the operator
+      token in --token-file (`fleet up`'s OUT/operator-token: HMAC-SHA256
+      as crates/echelon-fleet/src/token.rs makes it), straight on
       `echelon/<fleet>/command`, and 0.5 s later asks the latches again.
       Records both answers (and the times) in FILE: the robot itself must
       refuse it while its base reports a hazard.
@@ -35,6 +37,8 @@ Subcommands:
 """
 
 import argparse
+import hashlib
+import hmac
 import json
 import os
 import signal
@@ -234,6 +238,22 @@ def exec_(args):
 # put-resume
 
 
+def command_proof(token_hex, command):
+    """The operator token's proof of `command` (echelon-fleet's token.rs):
+    HMAC-SHA256, keyed by the token's 16 bytes, of a fixed prefix, the
+    version, order, seq, stamp, sender and reason (integers big-endian,
+    each text preceded by its length in bytes, 4 bytes big-endian)."""
+
+    def text(s):
+        b = s.encode()
+        return struct.pack(">I", len(b)) + b
+
+    data = (b"echelon.FleetCommand.proof.v1\0" + struct.pack(">I", command["version"])
+            + text(command["order"]) + struct.pack(">QQ", command["seq"], command["stamp_unix_ns"])
+            + text(command["by"]) + text(command["reason"]))
+    return hmac.new(bytes.fromhex(token_hex), data, hashlib.sha256).hexdigest()
+
+
 def put_resume(args):
     import zenoh
 
@@ -254,6 +274,8 @@ def put_resume(args):
     seq = max((a["command"]["seq"] for a in before.values() if a.get("command")), default=0) + 1
     command = {"version": 1, "order": "resume", "seq": seq, "stamp_unix_ns": time.time_ns(),
                "by": "operator", "reason": "interop: a resume that skips fleet resume's hazard check"}
+    with open(args.token_file, encoding="utf-8") as f:
+        command["proof"] = command_proof(f.read().strip(), command)
     put_at = time.monotonic()
     session.put(f"echelon/{args.fleet}/command", json.dumps(command).encode())
     time.sleep(0.5)
@@ -557,6 +579,7 @@ def main():
     r = sub.add_parser("put-resume")
     r.add_argument("--connect", required=True, help="the fleet's router")
     r.add_argument("--fleet", required=True)
+    r.add_argument("--token-file", required=True, help="fleet up's OUT/operator-token")
     r.add_argument("--record", required=True)
 
     args = p.parse_args()

@@ -10,7 +10,6 @@ use anyhow::{Result, bail};
 use echelon::output::TrajectoryRows;
 use echelon::scenario::{Overrides, Scenario};
 use echelon::stats::Approach;
-use echelon_fleet::StopFlag;
 use echelon_fleet::certs::{self, CertOptions};
 use echelon_fleet::collector::{self, ApproachWatch, CollectorOptions};
 use echelon_fleet::command::Order;
@@ -24,6 +23,8 @@ use echelon_fleet::role::Member;
 use echelon_fleet::ros2::RosTopic;
 use echelon_fleet::ros2::base::{self, BaseOptions};
 use echelon_fleet::router::{self, RouterOptions};
+use echelon_fleet::token::OperatorToken;
+use echelon_fleet::{FleetError, StopFlag};
 use echelon_mcap::scene::SceneSpec;
 
 use super::out::outln;
@@ -31,8 +32,8 @@ use super::out::outln;
 mod args;
 mod loopback;
 use args::TopologyArg;
-pub(crate) use args::{BenchArgs, FleetCommand, NetArgs, UpArgs};
-use loopback::{bench_cmd, up_cmd};
+pub(crate) use args::{BenchArgs, FaultsArgs, FleetCommand, NetArgs, UpArgs};
+use loopback::{bench_cmd, faults_cmd, up_cmd};
 
 fn agents_of(s: &Scenario) -> Result<u32> {
     Ok(s.build(&Overrides::default())?.plan.agents().len() as u32)
@@ -100,9 +101,14 @@ fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
     Ok(())
 }
 
-/// `fleet stop` / `fleet resume`: puts the command, prints the report,
-/// fails when a robot alive did not acknowledge it.
-fn command_cmd(a: args::CommandArgs, order: Order) -> Result<()> {
+/// `fleet stop` / `fleet resume`: puts the command (a resume signed with
+/// `token`, and refused before anything is put without one), prints the
+/// report, fails (exit 2) when a robot refused the resume, (exit 1) when a
+/// robot alive did not acknowledge it.
+fn command_cmd(a: args::CommandArgs, order: Order, token: Option<OperatorToken>) -> Result<()> {
+    if order == Order::Resume && token.is_none() {
+        return Err(FleetError::Refused(operator::NEEDS_TOKEN.to_owned()).into());
+    }
     let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
     let fleet = a.net.fleet_name(scenario.as_ref())?;
     let net = session(&a.net, Member::Operator, scenario.as_ref())?;
@@ -114,10 +120,20 @@ fn command_cmd(a: args::CommandArgs, order: Order) -> Result<()> {
             reason: a.reason,
             timeout: Duration::from_secs_f64(a.timeout),
             net,
+            token,
         },
         &stop,
     )?;
     print_report(&report)?;
+    // A robot that refused the resume (no valid operator token) stays
+    // stopped whatever the wait: a refused order, as a hazard's.
+    if !report.refused.is_empty() {
+        return Err(FleetError::Refused(format!(
+            "fleet resume refused: {}; those robots stay stopped (give the fleet's operator token: fleet up's OUT/operator-token, and ECHELON_OPERATOR_TOKEN on robots started by hand)",
+            report.refused.join("; ")
+        ))
+        .into());
+    }
     // An order that reached no robot, or fewer than the scenario has, did
     // not do what the operator asked: say so, and fail (a stop typed
     // without the hub's endpoint reached nobody and used to exit 0).
@@ -166,6 +182,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
     match &cmd {
         FleetCommand::Router(_) => echelon_fleet::net::exec_with_sized_runtime("router"),
         FleetCommand::Leader(_)
+        | FleetCommand::Heartbeat(_)
         | FleetCommand::Robot(_)
         | FleetCommand::Base(_)
         | FleetCommand::Collector(_) => echelon_fleet::net::exec_with_sized_runtime("client"),
@@ -306,8 +323,21 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             )?;
             print_report(&report)
         }
-        FleetCommand::Stop(a) => command_cmd(a, Order::Stop),
-        FleetCommand::Resume(a) => command_cmd(a, Order::Resume),
+        FleetCommand::Heartbeat(a) => scenario_process(
+            &a.scenario,
+            &a.net,
+            Member::Operator,
+            |scenario, net, stop| {
+                echelon_fleet::heartbeat::run(a.clock.process(scenario, net, &a.net), stop)
+            },
+        ),
+        FleetCommand::Faults(a) => faults_cmd(a),
+        // A stop needs no token: stopping is always allowed.
+        FleetCommand::Stop(a) => command_cmd(a, Order::Stop, None),
+        FleetCommand::Resume(a) => {
+            let token = a.operator_token()?;
+            command_cmd(a.command, Order::Resume, token)
+        }
         FleetCommand::Up(a) => up_cmd(a),
         FleetCommand::Bench(a) => bench_cmd(a),
         FleetCommand::Certs(a) => {

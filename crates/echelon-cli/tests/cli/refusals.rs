@@ -464,8 +464,14 @@ fn fleet_up_without_every_certificate_is_refused_before_it_starts() {
 /// without the hub's endpoint, it reached nobody). Nothing listens here.
 #[test]
 fn a_fleet_order_that_reaches_no_robot_fails() {
-    for order in ["stop", "resume"] {
-        let o = echelon(&["fleet", order, "circle-pentagon", "--timeout", "0.5"]);
+    let token = ["--token", "0123456789abcdef0123456789abcdef"];
+    for (order, more) in [("stop", &[][..]), ("resume", &token[..])] {
+        let o = Command::new(env!("CARGO_BIN_EXE_echelon"))
+            .args(["fleet", order, "circle-pentagon", "--timeout", "0.5"])
+            .args(more)
+            .env_remove("ECHELON_OPERATOR_TOKEN")
+            .output()
+            .unwrap();
         assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
         let err = stderr(&o);
         assert!(
@@ -544,4 +550,76 @@ fn the_dds_fields_are_refused_at_their_place() {
         assert!(stderr(&o).contains("--hazard"), "{bad}: {}", stderr(&o));
         assert!(!out.exists(), "{bad}: nothing started");
     }
+}
+
+/// `fleet resume` needs the operator token (`--token`, `--token-file` or
+/// ECHELON_OPERATOR_TOKEN): without one, or with one that is not 32
+/// hexadecimal characters, or a file that is missing, it exits 2 before
+/// anything is put; `fleet stop` takes no token (a stop is always
+/// allowed). Nothing listens here.
+#[test]
+fn fleet_resume_needs_the_operator_token() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad_file = dir.path().join("operator-token");
+    std::fs::write(&bad_file, "not a token\n").unwrap();
+    let bad_file = bad_file.to_str().unwrap();
+    let missing = dir.path().join("none");
+    let missing = missing.to_str().unwrap();
+    let resume = |more: &[&str], env: Option<&str>| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_echelon"));
+        c.args(["fleet", "resume", "circle-pentagon", "--timeout", "0.5"])
+            .args(more)
+            .env_remove("ECHELON_OPERATOR_TOKEN");
+        if let Some(v) = env {
+            c.env("ECHELON_OPERATOR_TOKEN", v);
+        }
+        c.output().unwrap()
+    };
+    let cases: [(&[&str], Option<&str>, &[&str]); 6] = [
+        (
+            &[],
+            None,
+            &[
+                "fleet resume needs the operator token: give --token-file OUT/operator-token (written by fleet up), --token, or ECHELON_OPERATOR_TOKEN",
+            ],
+        ),
+        (&[], Some(""), &["fleet resume needs the operator token"]),
+        (
+            &["--token", "abc"],
+            None,
+            &["--token", "32 hexadecimal characters"],
+        ),
+        (
+            &["--token-file", bad_file],
+            None,
+            &[
+                "--token-file",
+                "operator-token",
+                "32 hexadecimal characters",
+            ],
+        ),
+        (&["--token-file", missing], None, &["--token-file", "none"]),
+        (
+            &[],
+            Some("xyz"),
+            &["ECHELON_OPERATOR_TOKEN", "32 hexadecimal characters"],
+        ),
+    ];
+    for (more, env, needles) in cases {
+        let o = resume(more, env);
+        assert_eq!(o.status.code(), Some(2), "{more:?} {env:?}: {}", stderr(&o));
+        assert!(o.stdout.is_empty(), "nothing put: {}", stdout(&o));
+        let err = stderr(&o);
+        for n in needles {
+            assert!(err.contains(n), "{more:?} {env:?}: {n}: {err}");
+        }
+    }
+    // The token from the environment is taken (it then fails as a resume
+    // that reached no robot, exit 1).
+    let o = resume(&[], Some("0123456789ABCDEF0123456789abcdef"));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    // A stop takes no token.
+    let o = echelon(&["fleet", "stop", "circle-pentagon", "--token", "x"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--token"), "{}", stderr(&o));
 }

@@ -25,6 +25,7 @@ use echelon::scenario::{Overrides, Scenario};
 #[path = "../common/mod.rs"]
 mod common;
 mod converge;
+mod faults;
 mod leader_death;
 mod recording;
 mod reports;

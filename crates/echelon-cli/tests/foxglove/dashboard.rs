@@ -33,9 +33,10 @@ fn dashboard_check(addr: &str, token: &str, robots: usize, more: &[&str]) -> Val
     serde_json::from_slice(&page.stdout).unwrap()
 }
 
-/// `fleet stop` or `fleet resume` of `scenario` through `router`; its
-/// report (also when it exits 1: a robot alive did not acknowledge).
-fn fleet_command(what: &str, scenario: &str, router: &str) -> Value {
+/// `fleet stop` or `fleet resume` of `scenario` through `router` with
+/// `more` arguments; its report (also when it exits 1: a robot alive did
+/// not acknowledge).
+fn fleet_command(what: &str, scenario: &str, router: &str, more: &[&str]) -> Value {
     let out = Command::new(common::EXE)
         .args([
             "fleet",
@@ -47,6 +48,8 @@ fn fleet_command(what: &str, scenario: &str, router: &str) -> Value {
             router,
         ])
         .args(["--reason", "foxglove test", "--timeout", "2"])
+        .args(more)
+        .env_remove("ECHELON_OPERATOR_TOKEN")
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
@@ -154,7 +157,7 @@ fn the_dashboard_draws_the_fleet_and_its_stop_stops_every_robot() {
     let robots = 2;
     // Stop until both robots are in the fleet (and acknowledge), then resume.
     let started = std::time::Instant::now();
-    while fleet_command("stop", scenario, &router)["acknowledged"]
+    while fleet_command("stop", scenario, &router, &[])["acknowledged"]
         .as_array()
         .unwrap()
         .len()
@@ -163,7 +166,16 @@ fn the_dashboard_draws_the_fleet_and_its_stop_stops_every_robot() {
         assert!(started.elapsed().as_secs() < 30, "the robots did not join");
         std::thread::sleep(std::time::Duration::from_millis(200));
     }
-    let cli_resume = fleet_command("resume", scenario, &router);
+    // The dashboard's token is the fleet's operator token, which `fleet
+    // resume` reads from the file `fleet up` wrote.
+    let token_file = out.join("operator-token");
+    assert_eq!(
+        std::fs::read_to_string(&token_file).unwrap().trim(),
+        token,
+        "the dashboard's token is fleet up's"
+    );
+    let token_file = token_file.to_str().unwrap();
+    let cli_resume = fleet_command("resume", scenario, &router, &["--token-file", token_file]);
     assert_eq!(
         cli_resume["acknowledged"].as_array().unwrap().len(),
         robots,

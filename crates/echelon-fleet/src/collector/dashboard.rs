@@ -14,11 +14,14 @@
 //! `/stop` or `/resume` with the operator token, and the dashboard's
 //! operator asks the robots' latches for the command number, puts the
 //! command and waits for the acknowledgements, which the answer reports.
-//! The token is random, printed on stderr at start (the page's URL with
-//! `?token=…`); without it the page is read-only and the server refuses the
-//! POST (403). In secure mode without the `operator` certificate the
-//! buttons are not offered: the page says why and the server refuses the
-//! POST (503).
+//! The token is the fleet's operator token ([`crate::token`]: the
+//! collector's `ECHELON_OPERATOR_TOKEN`, which `fleet up` sets, else a
+//! random one), printed on stderr at start (the page's URL with
+//! `?token=…`); the resumes the page puts are signed with it, so the
+//! robots obey them. Without it the page is read-only and the server
+//! refuses the POST (403). In secure mode without the `operator`
+//! certificate the buttons are not offered: the page says why and the
+//! server refuses the POST (503).
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
@@ -30,6 +33,7 @@ use echelon_mcap::scene::SceneSpec;
 use crate::FleetError;
 use crate::command::Order;
 use crate::net::NetOptions;
+use crate::token::OperatorToken;
 
 mod operator;
 
@@ -44,16 +48,7 @@ const MAX_REQUEST: usize = 8192;
 #[derive(Debug)]
 pub struct Dashboard {
     addr: SocketAddr,
-    token: String,
-}
-
-/// A random operator token (128 bits from the OS, hexadecimal).
-fn random_token() -> Result<String, FleetError> {
-    let mut bytes = [0u8; 16];
-    std::fs::File::open("/dev/urandom")
-        .and_then(|mut f| f.read_exact(&mut bytes))
-        .map_err(FleetError::io(std::path::Path::new("/dev/urandom")))?;
-    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+    token: OperatorToken,
 }
 
 /// The page's configuration: the WebSocket's address, the scene in the
@@ -109,27 +104,28 @@ impl Dashboard {
     /// Serves the page on `addr` (port 0: any free port), fed from the
     /// Foxglove server at `ws` (`ws://HOST:PORT`), drawing `scene`; its
     /// buttons stop and resume fleet `fleet`, joined as the collector is
-    /// (`net`: `operator::operator_net`).
+    /// (`net`: `operator::operator_net`), for whoever gives `token` (the
+    /// fleet's operator token, which signs its resumes).
     pub fn start(
         addr: SocketAddr,
         ws: &str,
         scene: &SceneSpec,
         fleet: &str,
         net: &NetOptions,
+        token: OperatorToken,
     ) -> Result<Dashboard, FleetError> {
         let listener = TcpListener::bind(addr)
             .map_err(|e| FleetError::Config(format!("dashboard {addr}: {e}")))?;
         let bound = listener
             .local_addr()
             .map_err(|e| FleetError::Config(format!("dashboard {addr}: {e}")))?;
-        let token = random_token()?;
-        let mut operator = Operator::start(fleet, net);
+        let mut operator = Operator::start(fleet, net, token.clone());
         if let Err(Refused(why)) = &operator {
             eprintln!("dashboard: {why}");
         }
         let config = config(ws, scene, operator.as_ref().map(|o| o.identity()));
         let page = page(&config, scene.safety_radius.is_some());
-        let secret = token.clone();
+        let secret = token.to_hex();
         std::thread::Builder::new()
             .name("dashboard".into())
             .spawn(move || {
@@ -146,7 +142,7 @@ impl Dashboard {
 
     /// The page's URL with the operator token.
     pub fn operator_url(&self) -> String {
-        format!("http://{}/?token={}", self.addr, self.token)
+        format!("http://{}/?token={}", self.addr, self.token.to_hex())
     }
 }
 
@@ -294,7 +290,8 @@ mod tests {
             ..NetOptions::default()
         };
         let session = crate::net::open(&fleet_net).unwrap();
-        let latch = Arc::new(Mutex::new(Latch::new()));
+        let token = OperatorToken::random().unwrap();
+        let latch = Arc::new(Mutex::new(Latch::with_token(Some(token.clone()))));
         latch
             .lock()
             .unwrap()
@@ -302,7 +299,8 @@ mod tests {
         latch
             .lock()
             .unwrap()
-            .on_command(FleetCommand::new(Order::Resume, 7, "operator", "cli"));
+            .on_command(FleetCommand::new(Order::Resume, 7, "operator", "cli").signed(&token));
+        assert!(!latch.lock().unwrap().stopped());
         let heard = Arc::new(Mutex::new(Vec::new()));
         let (l, h) = (latch.clone(), heard.clone());
         let _sub = session
@@ -338,6 +336,7 @@ mod tests {
             &scene(),
             &fleet,
             &collector,
+            token.clone(),
         )
         .unwrap();
         let page = request(d.addr, "GET / HTTP/1.1\r\n\r\n");
@@ -362,7 +361,7 @@ mod tests {
             assert!(r.starts_with("HTTP/1.1 403"), "{r}");
         }
         assert!(heard.lock().unwrap().is_empty());
-        let good = format!("X-Echelon-Token: {}\r\n", d.token);
+        let good = format!("X-Echelon-Token: {}\r\n", d.token.to_hex());
         let order = |what: &str| {
             let started = std::time::Instant::now();
             loop {
@@ -389,9 +388,11 @@ mod tests {
             heard.iter().map(|c| (c.order, c.seq)).collect::<Vec<_>>(),
             [(Order::Stop, 8), (Order::Resume, 9)]
         );
+        // The page's resume is signed with the token.
+        assert!(token.verify(&heard[1]), "{:?}", heard[1]);
         assert!(request(d.addr, "GET /x HTTP/1.1\r\n\r\n").starts_with("HTTP/1.1 404"));
-        assert_eq!(d.token.len(), 32);
-        assert!(d.operator_url().ends_with(&d.token));
+        assert_eq!(d.token.to_hex().len(), 32);
+        assert!(d.operator_url().ends_with(&token.to_hex()));
     }
 
     /// Secure mode without the `operator` certificate: the page says why
@@ -415,6 +416,7 @@ mod tests {
             &scene(),
             "lab",
             &net,
+            OperatorToken::random().unwrap(),
         )
         .unwrap();
         let page = request(d.addr, "GET / HTTP/1.1\r\n\r\n");
@@ -425,7 +427,7 @@ mod tests {
             why.contains("operator.pem") && why.contains("fleet certs"),
             "{why}"
         );
-        let good = format!("X-Echelon-Token: {}\r\n", d.token);
+        let good = format!("X-Echelon-Token: {}\r\n", d.token.to_hex());
         let r = request(d.addr, &format!("POST /stop HTTP/1.1\r\n{good}\r\n"));
         assert!(r.starts_with("HTTP/1.1 503"), "{r}");
         assert_eq!(body(&r), why);

@@ -68,6 +68,7 @@ mod tests {
                 counts: Default::default(),
             }),
             commands: Default::default(),
+            watchdogs: Default::default(),
         };
         let rejected = Rejected {
             key: "echelon/f/x",
@@ -75,7 +76,9 @@ mod tests {
             size: 1,
             hex: "00".to_owned(),
         };
-        let command = FleetCommand::new(Order::Stop, 1, "operator", "test");
+        // Signed: its proof written too.
+        let command = FleetCommand::new(Order::Resume, 1, "operator", "test")
+            .signed(&crate::testing::operator_token());
         for (s, json) in [
             (&*REJECTED, serde_json::to_value(&rejected)),
             (&*STATS, serde_json::to_value(stats)),

@@ -268,7 +268,14 @@ pub fn run_with(
                 .scene
                 .as_ref()
                 .ok_or_else(|| FleetError::Config("--dashboard needs the scenario".into()))?;
-            let dashboard = Dashboard::start(at, live.address(), scene, &opts.fleet, &opts.net)?;
+            // The fleet's operator token (`fleet up` sets it), else one of
+            // its own: the page's resumes are signed with it.
+            let token = match crate::token::OperatorToken::from_env()? {
+                Some(t) => t,
+                None => crate::token::OperatorToken::random()?,
+            };
+            let dashboard =
+                Dashboard::start(at, live.address(), scene, &opts.fleet, &opts.net, token)?;
             eprintln!("dashboard (operator): {}", dashboard.operator_url());
         }
         task = task.with_live(live);

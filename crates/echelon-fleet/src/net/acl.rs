@@ -115,7 +115,7 @@ pub fn publishes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
     let ros_of = |k: u32| ros.get(k as usize - 1);
     match member {
         Member::Leader => vec![keys.reference(), keys.command()],
-        Member::Operator => vec![keys.command()],
+        Member::Operator => vec![keys.command(), keys.heartbeat()],
         // A robot puts its own fleet stop when its base reports a hazard.
         Member::Robot(k) => [keys.state(k), keys.stats(k), keys.halt(k)]
             .into_iter()
@@ -141,12 +141,14 @@ pub fn subscribes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
     let ros_of = |k: u32| ros.get(k as usize - 1);
     match member {
         Member::Leader => vec![keys.command(), keys.halts()],
-        Member::Operator => Vec::new(),
+        // The operator's heartbeat reads the reference for the fleet's time.
+        Member::Operator => vec![keys.reference()],
         Member::Robot(k) => [
             keys.reference(),
             keys.states(),
             keys.halts(),
             keys.command(),
+            keys.heartbeat(),
         ]
         .into_iter()
         .chain(ros_of(k).into_iter().flat_map(RosAcl::robot_reads))

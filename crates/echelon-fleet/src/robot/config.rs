@@ -8,6 +8,9 @@ use echelon::scenario::{FleetSettings, LinkLoss};
 
 use crate::FleetError;
 use crate::faults::FaultSpec;
+use crate::token::OperatorToken;
+
+use super::WatchdogSettings;
 
 /// A robot's safety settings, from the scenario's `[safety]`.
 #[derive(Debug, Clone, PartialEq)]
@@ -69,6 +72,11 @@ pub struct RobotConfig {
     /// Its robot is driven by someone else (`ros2 = { driven = true }`):
     /// it commands nothing and publishes the robot's motion as a head.
     pub driven: bool,
+    /// Its watchdogs' deadlines.
+    pub watchdogs: WatchdogSettings,
+    /// The operator token a resume must prove ([`crate::token`]; `None`:
+    /// the robot obeys stops and refuses every resume).
+    pub operator_token: Option<OperatorToken>,
 }
 
 /// Agent `agent`'s safety settings from the scenario's plan (`None`: it
@@ -97,10 +105,11 @@ impl RobotConfig {
         let spec = agent_spec(plan, agent)?;
         let loss = fleet.link_loss[agent as usize - 1];
         let safety = safety_in(plan, agent);
+        let period = 1.0 / fleet.control_rate;
         Ok(RobotConfig {
             agent,
             spec,
-            period: 1.0 / fleet.control_rate,
+            period,
             link_timeout: fleet.link_timeout,
             stale_after: fleet.stale_after,
             loss,
@@ -109,6 +118,12 @@ impl RobotConfig {
             safety,
             bounds: plan.config().bounds,
             driven: false,
+            watchdogs: WatchdogSettings {
+                // A simulated robot's state is measured every tick.
+                odom_timeout: 2.0 * period,
+                operator_heartbeat: fleet.operator_heartbeat,
+            },
+            operator_token: None,
         })
     }
 }

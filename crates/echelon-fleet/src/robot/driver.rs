@@ -52,11 +52,25 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         opts.faults,
         opts.process.duration,
     )?;
+    // It obeys a resume only with a valid proof of the operator token.
+    let operator_token = crate::token::OperatorToken::from_env()?;
+    if operator_token.is_none() {
+        eprintln!(
+            "robot {}: no operator token ({}): it will refuse every resume",
+            opts.agent,
+            crate::token::TOKEN_ENV
+        );
+    }
+    let config = RobotConfig {
+        operator_token,
+        ..config
+    };
     let net = &opts.process.net;
     let clock = opts.process.clock();
     if !opts.ros2 {
         let robot = Robot::simulated(config, net::rand_source());
-        return runtime::run(RobotTask::new(robot, keys), net, clock, stop);
+        let task = RobotTask::new(robot, keys).dying_at(opts.process.die_at);
+        return runtime::run(task, net, clock, stop);
     }
     let link = settings.ros2[opts.agent as usize - 1].clone();
     let Some(velocity) = config.spec.velocity_robot() else {
@@ -69,6 +83,10 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     let agent = opts.agent;
     let config = RobotConfig {
         driven: link.driven,
+        watchdogs: super::WatchdogSettings {
+            odom_timeout: link.odom_timeout,
+            ..config.watchdogs
+        },
         ..config
     };
     let fixes = fixes::for_agent(agent, &link, &plan, &config.spec)?;
@@ -112,6 +130,7 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
             // numbered as the drive's (odometry, then fixes, hazards, e-stop).
             let inputs = node.input_keys;
             let task = RobotTask::new(robot, keys)
+                .dying_at(opts.process.die_at)
                 .with_plant_inputs(inputs.clone(), |d, i, k, b, t| d.on_input(i, k, b, t));
             Ok((task, node.tokens, inputs))
         },

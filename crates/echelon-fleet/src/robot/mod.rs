@@ -58,12 +58,14 @@ mod report;
 mod safety;
 mod task;
 mod tick;
+mod watchdog;
 
 pub use config::{RobotConfig, RobotSafety, agent_spec};
 pub use driver::{RobotOptions, run};
 pub use head::{HEAD_FILTER, HeadFilter};
 pub use report::{RobotReport, RobotStats, SafetyCounts};
 pub use task::{PlantFeed, RobotTask};
+pub use watchdog::{Watchdog, WatchdogCounts, WatchdogSettings};
 
 /// Longest plant integration sub-step, fleet s (the simulator's default `dt`).
 pub const PLANT_STEP: f64 = 1e-3;
@@ -87,6 +89,9 @@ pub enum Halt {
     /// The robot's base reports a stopping hazard (bump, cliff, stall,
     /// wheel drop, e-stop).
     Hazard,
+    /// A watchdog holds it ([`Watchdog`]: stale odometry, the operator's
+    /// heartbeat lost).
+    Held(Watchdog),
 }
 
 /// What one tick asks the driver to do.
@@ -113,8 +118,12 @@ pub fn sample_of(msg: &Message, leader: Leader) -> Option<(Header, LeaderSample)
                 turn_rate: r.turn_rate,
             },
         )),
+        // A leader robot that waits, or that a watchdog holds (its odometry
+        // stale: its pose is not one to follow), is not followed: its
+        // follower's link goes stale and its link-loss policy acts.
         (Message::State(h, s), Leader::Agent(j))
-            if s.agent as usize == j + 1 && s.link != LinkStatus::Waiting =>
+            if s.agent as usize == j + 1
+                && !matches!(s.link, LinkStatus::Waiting | LinkStatus::Held) =>
         {
             Some((
                 *h,
@@ -172,13 +181,16 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     /// Its base's backup budget (a `reverse_limit`), and where it was at
     /// the last tick that measured it.
     backup: Option<(Backup, Option<echelon::model::State>)>,
+    /// Its watchdogs ([`watchdog`]).
+    watchdogs: watchdog::Watchdogs,
 }
 
 impl Robot<SimulatedDrive> {
     /// A robot on its simulated drive (eq. 3, or its velocity base) starting
-    /// at its spec's start.
+    /// at its spec's start, under its own faults (`--freeze-odometry`,
+    /// `--fault-at`: [`SimulatedDrive::with_faults`]).
     pub fn simulated(config: RobotConfig, source: u32) -> Self {
-        let plant = SimulatedDrive::of(&config.spec, 0.0, PLANT_STEP);
+        let plant = SimulatedDrive::of(&config.spec, 0.0, PLANT_STEP).with_faults(&config.faults);
         Robot::new(config, plant, source)
     }
 }
@@ -223,7 +235,7 @@ impl<P: Plant> Robot<P> {
             latency: Latency::new(),
             safety,
             diverged: None,
-            latch: Latch::new(),
+            latch: Latch::with_token(config.operator_token.clone()),
             hazards: HazardSet::EMPTY,
             hazard_changes: 0,
             outgoing: None,
@@ -233,6 +245,7 @@ impl<P: Plant> Robot<P> {
                 .and_then(VelocityRobot::backup)
                 .map(|b| (b, None)),
             head: HeadFilter::default(),
+            watchdogs: watchdog::Watchdogs::default(),
             // A driven head keeps the fleet's time: its own clock.
             synced: config.driven,
             config,
@@ -565,6 +578,8 @@ impl<P: Plant> Robot<P> {
             fixes: self.plant.fixes(self.last.t),
             hazards: self.plant.hazard_report(),
             commands: self.latch.counts(),
+            watchdogs: self.watchdogs.counts,
+            aftermath: self.plant.aftermath(),
             dropped: 0,
         }
     }
@@ -590,6 +605,7 @@ impl<P: Plant> Robot<P> {
             fixes: self.plant.fixes(t),
             hazards: self.plant.hazard_report().map(|r| r.stats()),
             commands: self.latch.counts(),
+            watchdogs: self.watchdogs.counts,
         }
     }
 

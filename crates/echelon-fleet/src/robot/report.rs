@@ -64,6 +64,12 @@ pub struct RobotReport {
     pub hazards: Option<HazardReport>,
     /// What the fleet commands (`fleet stop`, `fleet resume`) did.
     pub commands: CommandCounts,
+    /// What its watchdogs (odometry, operator heartbeat) did.
+    #[serde(default)]
+    pub watchdogs: super::WatchdogCounts,
+    /// With `--fault-at`: what its simulated robot did from the fault on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aftermath: Option<crate::faults::AftermathReport>,
     /// Samples dropped before it took them: more than its input queue
     /// holds ([`crate::runtime::DEFAULT_QUEUE`]) waited for one tick.
     pub dropped: u64,
@@ -150,4 +156,7 @@ pub struct RobotStats {
     pub hazards: Option<HazardStats>,
     /// What the fleet commands did so far.
     pub commands: CommandCounts,
+    /// What its watchdogs did so far.
+    #[serde(default)]
+    pub watchdogs: super::WatchdogCounts,
 }

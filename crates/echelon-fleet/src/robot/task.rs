@@ -15,8 +15,9 @@ use crate::wire::{self, DecodeError, Message};
 use super::{Robot, RobotReport, RobotStats};
 
 /// The input number of the leader stream (then every robot's state, with a
-/// safety filter, then the plant's inputs, if any, then the fleet command;
-/// the latch answers after them).
+/// safety filter, then the plant's inputs, if any, then the robots' halts,
+/// the fleet command and, in a supervised run, the operator heartbeat; the
+/// latch answers after them).
 const LEADER: usize = 0;
 /// The output number of its state.
 const STATE: usize = 0;
@@ -40,6 +41,8 @@ pub struct RobotTask<P: Plant = SimulatedDrive> {
     failed: bool,
     /// Samples dropped before it took them (the runtime's count).
     dropped: u64,
+    /// `--die-at`: the process kills itself at this fleet time.
+    die_at: Option<f64>,
 }
 
 impl<P: Plant> RobotTask<P> {
@@ -55,7 +58,14 @@ impl<P: Plant> RobotTask<P> {
             buf: Vec::with_capacity(wire::STATE_LEN),
             failed: false,
             dropped: 0,
+            die_at: None,
         }
+    }
+
+    /// The same, its process killing itself with SIGKILL at fleet time
+    /// `die_at` (`--die-at`, the fault matrix's `kill -9`).
+    pub fn dying_at(self, die_at: Option<f64>) -> Self {
+        RobotTask { die_at, ..self }
     }
 
     /// The same, its plant also reading `keys` (e.g. a ROS 2 base's
@@ -101,6 +111,11 @@ impl<P: Plant> RobotTask<P> {
             + self.plant_inputs.as_ref().map_or(0, |(keys, _)| keys.len())
     }
 
+    /// Whether the scenario asks for the operator heartbeat.
+    fn supervised(&self) -> bool {
+        self.robot.config().watchdogs.operator_heartbeat.is_some()
+    }
+
     fn publish_stats(&self, out: &mut dyn Outputs, stats: &RobotStats) {
         if let Ok(json) = serde_json::to_vec(stats) {
             out.put(&self.keys.stats(self.agent()), &json);
@@ -121,6 +136,9 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         }
         keys.push(self.keys.halts());
         keys.push(self.keys.command());
+        if self.supervised() {
+            keys.push(self.keys.heartbeat());
+        }
         keys
     }
 
@@ -152,13 +170,21 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         let command = self.command_input();
         if input == command {
             // Obeyed at once: a stop commands zero now, not at the next tick.
-            self.robot.on_command(sample.payload);
+            let before = self.robot.command_counts();
+            let change = self.robot.on_command(sample.payload);
+            let (now, after) = (self.robot.latched(), self.robot.command_counts());
+            if let Some(note) = crate::command::resume_note(change, &now, before, after) {
+                eprintln!("{note}");
+            }
         } else if input == command - 1 {
             // Another robot's own stop (its base's hazard), stop-only.
             if let KeyKind::Halt(k) = self.keys.classify(sample.key) {
                 self.robot.on_halt(k, sample.payload);
             }
-        } else if input == command + 1 {
+        } else if self.supervised() && input == command + 1 {
+            // Taken at once, with its arrival time: the deadman's clock.
+            self.robot.on_heartbeat(sample.payload, sample.at);
+        } else if input == command + 1 + usize::from(self.supervised()) {
             self.robot.on_latch_answer(sample.payload);
         } else if input == LEADER {
             self.leader
@@ -188,6 +214,9 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
     fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
         if !self.robot.is_due(now) {
             return Ok(Flow::Continue);
+        }
+        if self.robot.is_synced() {
+            crate::faults::die_if_due(self.die_at, self.robot.fleet_time(now), "fleet robot");
         }
         for (at, delay, bytes) in self.leader.drain(..) {
             self.robot.on_stamped_message(&bytes, at, delay);
@@ -270,7 +299,11 @@ mod tests {
         let keys = Keys::new("lab");
         let mut bus = Bus::new();
         let leader = Reference::new(reference, 50.0, duration, 1);
-        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        let l = bus.add(
+            LeaderTask::new(leader, keys.clone())
+                .with_operator_token(Some(crate::testing::operator_token())),
+            0.0,
+        );
         let r1 = bus.add(chain_robot(1, &keys), 0.0);
         let r2 = bus.add(chain_robot(2, &keys), 0.0);
         (bus, keys, [l, r1, r2])
@@ -362,11 +395,17 @@ mod tests {
         bus.run_until(25.0);
         // Robot 2 restarts during the stop.
         bus.replace(r2, chain_robot(2, &Keys::new("lab")), 25.0);
+        bus.run_until(28.0);
+        // A resume without the operator token's proof lifts nothing.
+        bus.put(
+            &keys.command(),
+            &FleetCommand::new(Order::Resume, 2, "operator", "unsigned").encode(),
+        );
         bus.run_until(30.0);
         let resume_at = bus.now();
         bus.put(
             &keys.command(),
-            &FleetCommand::new(Order::Resume, 2, "operator", "test").encode(),
+            &crate::testing::resume(2, "operator", "test").encode(),
         );
         bus.run_until(60.0);
         for (id, k) in [(r1, 1), (r2, 2)] {
@@ -392,12 +431,16 @@ mod tests {
             assert_eq!(rep.link, "tracking");
             assert!(rep.final_error < 1e-3, "agent {k}: {rep:?}");
             assert_eq!(
-                (rep.commands.stops, rep.commands.resumes),
-                (1, 1),
+                (
+                    rep.commands.stops,
+                    rep.commands.resumes,
+                    rep.commands.unauthorized
+                ),
+                (1, 1, 1),
                 "{rep:?}"
             );
             let answer = Latched::decode(&bus.latched(id).unwrap_or_default());
-            assert!(answer.is_some_and(|a| !a.stopped && a.seq() == 2));
+            assert!(answer.is_some_and(|a| !a.stopped && a.seq() == 2 && a.refused.is_none()));
         }
         let task: &RobotTask = bus.task(r1).unwrap_or_else(|| panic!("a robot"));
         assert_eq!(task.robot().command_counts().refused, 1);
@@ -460,7 +503,11 @@ mod tests {
         let mut bus = Bus::new();
         let (_, _, reference) = crate::testing::fast_circle();
         let leader = Reference::new(reference, 50.0, 1.0, 1);
-        let l = bus.add(LeaderTask::new(leader, keys.clone()), 0.0);
+        let l = bus.add(
+            LeaderTask::new(leader, keys.clone())
+                .with_operator_token(Some(crate::testing::operator_token())),
+            0.0,
+        );
         bus.run_until(2.0);
         assert!(!bus.is_running(l));
         assert_eq!(bus.published_by(l, &keys.command()).count(), 0);

@@ -1,6 +1,7 @@
 //! A robot's tick: the law on the leader motion (fresh or the link-loss
-//! policy's), the safety filter and the plant commanded; under a fleet stop,
-//! zero commanded and the state published.
+//! policy's), the safety filter and the plant commanded; under a fleet stop
+//! or held by a watchdog ([`super::watchdog`]), zero commanded and the
+//! state published.
 
 use echelon::follow::{LeaderView, follow};
 
@@ -8,7 +9,7 @@ use crate::link::predict;
 use crate::plant::Plant;
 use crate::wire::{LinkStatus, RobotState};
 
-use super::{Halt, Robot, RobotTick, WAITING_PERIOD};
+use super::{Halt, Robot, RobotTick, WAITING_PERIOD, Watchdog};
 
 impl<P: Plant> Robot<P> {
     /// Diverged at `now` for reason `why`: zero first, then say so and stop
@@ -49,7 +50,13 @@ impl<P: Plant> Robot<P> {
         }
         self.check_hazards(now);
         if self.latch.stopped() {
-            return self.stopped_tick(now);
+            return self.standstill_tick(now, None);
+        }
+        if self.synced {
+            self.plant.advance(now);
+            if let Some(w) = self.watchdog_holding(local) {
+                return self.standstill_tick(now, Some(w));
+            }
         }
         let prediction = match (self.synced, self.sample) {
             (true, Some(s)) => Some(predict(
@@ -182,22 +189,24 @@ impl<P: Plant> Robot<P> {
         }
     }
 
-    /// A tick under a fleet stop at fleet time `now`: zero commanded, the
-    /// state published (`stopped`; `waiting` while its clock is not the
-    /// leader's), the counters once per fleet second, ticks every control
-    /// period as when following.
-    fn stopped_tick(&mut self, now: f64) -> RobotTick {
+    /// A tick under a fleet stop, or held by watchdog `held`, at fleet
+    /// time `now`: zero commanded, the state published (`stopped` or
+    /// `held`; `waiting` while its clock is not the leader's), the counters
+    /// once per fleet second, ticks every control period as when
+    /// following.
+    fn standstill_tick(&mut self, now: f64, held: Option<Watchdog>) -> RobotTick {
         if self.synced {
             self.plant.advance(now);
         }
-        self.halt(match self.hazards.is_empty() {
-            true => Halt::Stopped,
-            false => Halt::Hazard,
+        self.halt(match (held, self.hazards.is_empty()) {
+            (Some(w), _) => Halt::Held(w),
+            (None, true) => Halt::Stopped,
+            (None, false) => Halt::Hazard,
         });
-        let (t, link) = if self.synced {
-            (now, LinkStatus::Stopped)
-        } else {
-            (0.0, LinkStatus::Waiting)
+        let (t, link) = match (self.synced, held) {
+            (false, _) => (0.0, LinkStatus::Waiting),
+            (true, Some(_)) => (now, LinkStatus::Held),
+            (true, None) => (now, LinkStatus::Stopped),
         };
         let publish = self.plant.state().map(|state| {
             let (dv, domega) = self.plant.accelerations();

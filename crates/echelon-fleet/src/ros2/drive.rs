@@ -443,6 +443,10 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
             .map(|(raw, _)| raw.carried_by(&self.odom_origin()))
     }
 
+    fn odometry_age(&self) -> Option<f64> {
+        self.odom.map(|(_, at)| (self.t - at).max(0.0))
+    }
+
     fn advance(&mut self, t: f64) {
         self.t = self.t.max(t);
         if let Some(f) = self.fixes.as_mut() {

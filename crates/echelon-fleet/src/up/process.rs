@@ -150,10 +150,14 @@ pub(super) fn stop_all(
     Ok(())
 }
 
+/// Starts `exe` with `args` as `role`, with the environment variables `env`
+/// on top of this process's, its stderr to `logs/<role>.log`, its stdout to
+/// `logs/<role>.out`.
 pub(super) fn spawn(
     exe: &Path,
     role: &str,
     args: &[String],
+    env: &[(&str, &str)],
     logs: &Path,
 ) -> Result<Proc, FleetError> {
     let log = logs.join(format!("{}.log", role.replace('/', "-")));
@@ -167,6 +171,7 @@ pub(super) fn spawn(
     if let Some(runtime) = crate::net::zenoh_runtime(role) {
         command.env(crate::net::ZENOH_RUNTIME_ENV, runtime);
     }
+    command.envs(env.iter().copied());
     let child = command
         .args(args)
         .stdin(Stdio::null())

@@ -56,6 +56,10 @@ pub struct UpReport {
     /// their link-loss policy and ran to the end without it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub leader_failure: Option<String>,
+    /// The processes killed as asked (`--die-at`, the fault matrix): how
+    /// each ended. Their reports are absent.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub deaths: Vec<String>,
     /// Each robot's report, agent 1 first.
     pub robots: Vec<RobotReport>,
     /// The collector's report.

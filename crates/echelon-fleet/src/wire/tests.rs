@@ -65,7 +65,7 @@ fn velocity() -> impl Strategy<Value = Option<VelocitySample>> {
 /// command or not; with or without the odometry block) and its header.
 fn robot_state() -> impl Strategy<Value = (Header, RobotState)> {
     (
-        (any::<u32>(), any::<u64>(), 1..1000u32, 0..5u8, finite()),
+        (any::<u32>(), any::<u64>(), 1..1000u32, 0..6u8, finite()),
         (state(), finites::<2>(), finites::<4>(), finites::<4>()),
         (motion(), velocity(), 0.0..10.0f64, odometry()),
     )

@@ -85,6 +85,9 @@ pub struct FleetSettings {
     pub link_timeout: f64,
     /// Staleness threshold on a message's age at arrival, s.
     pub stale_after: f64,
+    /// The operator heartbeat's deadline, s (`None`: none asked): a robot
+    /// with no heartbeat for this long holds.
+    pub operator_heartbeat: Option<f64>,
     /// Per agent (0-based), its link-loss policy.
     pub link_loss: Vec<LinkLoss>,
     /// Per agent (0-based), where its robot is when driven through ROS 2.
@@ -269,6 +272,10 @@ impl Scenario {
         let control_rate = positive(f.control_rate, "control_rate", DEFAULT_CONTROL_RATE)?;
         let link_timeout = positive(f.link_timeout, "link_timeout", DEFAULT_LINK_TIMEOUT)?;
         let stale_after = positive(f.stale_after, "stale_after", DEFAULT_STALE_AFTER)?;
+        let operator_heartbeat = f
+            .operator_heartbeat
+            .map(|v| positive(Some(v), "operator_heartbeat", v))
+            .transpose()?;
         let link_loss = self
             .file
             .agents
@@ -355,6 +362,7 @@ impl Scenario {
             control_rate,
             link_timeout,
             stale_after,
+            operator_heartbeat,
             link_loss,
             ros2,
         })

@@ -150,6 +150,7 @@ pub const PLAUSIBLE: &[Plausible] = &[
     row("fleet.control_rate", "Hz", 0.1, 1e4),
     row("fleet.link_timeout", "s", 1e-3, 3600.0),
     row("fleet.stale_after", "s", 1e-3, 3600.0),
+    row("fleet.operator_heartbeat", "s", 1e-2, 3600.0),
     row("link_loss.hold", "s", 0.0, 3600.0),
     row("link_loss.decel", "m/s²", 1e-3, 100.0),
     row("ros2.odom_timeout", "s", 1e-3, 3600.0),
@@ -429,6 +430,7 @@ reference_rate = 50.0
 control_rate = 100.0
 link_timeout = 0.2
 stale_after = 0.5
+operator_heartbeat = 1.0
 [fleet.link_loss]
 hold = 1.0
 decel = 0.1

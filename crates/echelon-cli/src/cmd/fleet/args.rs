@@ -8,6 +8,7 @@ use echelon::scenario::{Scenario, is_valid_fleet_name};
 use echelon_fleet::faults::FaultSpec;
 use echelon_fleet::net::{self, Mode, NetOptions, Secure};
 use echelon_fleet::options::ProcessOptions;
+use echelon_fleet::token::OperatorToken;
 
 use crate::cmd::{non_negative, parse_number, positive, seconds, time_scale};
 
@@ -31,8 +32,12 @@ pub(crate) enum FleetCommand {
     Up(UpArgs),
     /// Stop every robot of the fleet (latched: they command zero until `fleet resume`); exits 0 once every robot alive has acknowledged.
     Stop(CommandArgs),
-    /// Lift a `fleet stop`: the robots follow again from where they are, the leader's reference goes on from where it paused.
-    Resume(CommandArgs),
+    /// Lift a `fleet stop`: the robots follow again from where they are, the leader's reference goes on from where it paused. Needs the operator token (--token-file OUT/operator-token, --token or ECHELON_OPERATOR_TOKEN).
+    Resume(ResumeArgs),
+    /// The operator's heartbeat, a supervised run's deadman ([fleet] operator_heartbeat = T): robots hold while none arrived for T s; runs until --duration or SIGINT/SIGTERM.
+    Heartbeat(HeartbeatArgs),
+    /// Run the fault matrix (docs/faults.md): each fault on a simulated fleet over real Zenoh, the travel after it measured against its bound; writes DIR/faults.md and DIR/faults.json.
+    Faults(FaultsArgs),
     /// Make a development CA and certificates for the secure mode.
     Certs(CertsArgs),
     /// Run `fleet up` for several fleet sizes on loopback at time scale 1 and tabulate startup, CPU, messages/s, latency, losses and final error.
@@ -145,6 +150,15 @@ pub(crate) struct FaultArgs {
     /// Seed of the drop pattern.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub(super) seed: u64,
+    /// A simulated robot's odometry stops updating in [START, START+LEN) s of fleet time (the robot moves on).
+    #[arg(long, value_name = "START:LEN", value_parser = outage)]
+    pub(super) freeze_odometry: Option<(f64, f64)>,
+    /// Measure what the simulated robot does from fleet time S on (its report's `aftermath`).
+    #[arg(long, value_name = "S", value_parser = non_negative)]
+    pub(super) fault_at: Option<f64>,
+    /// With --fault-at: measure for LEN s only [default: to the end].
+    #[arg(long, value_name = "LEN", value_parser = positive, requires = "fault_at")]
+    pub(super) fault_window: Option<f64>,
 }
 
 impl FaultArgs {
@@ -154,6 +168,9 @@ impl FaultArgs {
             delay: self.delay * 1e-3,
             outage: self.outage,
             seed: self.seed,
+            freeze_odometry: self.freeze_odometry,
+            fault_at: self.fault_at,
+            fault_window: self.fault_window,
         }
     }
 }
@@ -194,6 +211,9 @@ pub(crate) struct ClockArgs {
     /// Run the clock K times faster than real time.
     #[arg(long, value_name = "K", value_parser = time_scale, default_value_t = 1.0)]
     pub(super) time_scale: f64,
+    /// Kill this process with SIGKILL at fleet time S (a rehearsed `kill -9`: the fault matrix, docs/faults.md).
+    #[arg(long, value_name = "S", value_parser = non_negative)]
+    pub(super) die_at: Option<f64>,
 }
 
 impl ClockArgs {
@@ -211,6 +231,7 @@ impl ClockArgs {
             duration: self.duration,
             net: options,
             fleet: net.fleet.clone(),
+            die_at: self.die_at,
         }
     }
 }
@@ -242,6 +263,31 @@ pub(crate) struct LeaderArgs {
     pub(super) wait_timeout: f64,
     #[command(flatten)]
     pub(super) net: NetArgs,
+}
+
+/// `echelon fleet heartbeat`.
+#[derive(Debug, Args)]
+pub(crate) struct HeartbeatArgs {
+    /// A built-in scenario name or a path to a .toml file (its [fleet] operator_heartbeat sets the rate).
+    pub(super) scenario: String,
+    #[command(flatten)]
+    pub(super) clock: ClockArgs,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
+/// `echelon fleet faults`.
+#[derive(Debug, Args)]
+pub(crate) struct FaultsArgs {
+    /// Where each row's fleet runs (DIR/<row>/) and the table goes (DIR/faults.md, DIR/faults.json).
+    #[arg(long, value_name = "DIR")]
+    pub(super) out: std::path::PathBuf,
+    /// Only the rows whose name contains this (repeatable) [default: every row].
+    #[arg(long, value_name = "NAME")]
+    pub(super) only: Vec<String>,
+    /// Run each row's clock K times faster than real time.
+    #[arg(long, value_name = "K", value_parser = time_scale, default_value_t = 1.0)]
+    pub(super) time_scale: f64,
 }
 
 /// `echelon fleet robot`.
@@ -441,6 +487,31 @@ pub(crate) struct CommandArgs {
     pub(super) timeout: f64,
     #[command(flatten)]
     pub(super) net: NetArgs,
+}
+
+/// `echelon fleet resume`: a command signed with the operator token.
+#[derive(Debug, Args)]
+pub(crate) struct ResumeArgs {
+    #[command(flatten)]
+    pub(super) command: CommandArgs,
+    /// The operator token, 32 hexadecimal characters (other users may see it in the process list: prefer --token-file or ECHELON_OPERATOR_TOKEN).
+    #[arg(long, value_name = "HEX", conflicts_with = "token_file")]
+    pub(super) token: Option<String>,
+    /// A file holding the operator token (`fleet up` writes OUT/operator-token) [default: ECHELON_OPERATOR_TOKEN].
+    #[arg(long, value_name = "PATH")]
+    pub(super) token_file: Option<PathBuf>,
+}
+
+impl ResumeArgs {
+    /// The operator token: --token, --token-file, else ECHELON_OPERATOR_TOKEN
+    /// (`None`: none given).
+    pub(super) fn operator_token(&self) -> Result<Option<OperatorToken>> {
+        Ok(match (&self.token, &self.token_file) {
+            (Some(hex), _) => Some(OperatorToken::parse(hex.trim()).context("--token")?),
+            (None, Some(path)) => Some(OperatorToken::from_file(path).context("--token-file")?),
+            (None, None) => OperatorToken::from_env()?,
+        })
+    }
 }
 
 /// `echelon fleet certs`.

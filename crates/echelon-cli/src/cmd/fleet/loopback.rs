@@ -99,6 +99,7 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             dashboard: a.live.dashboard,
             log_rate: a.live.log_rate,
             hazards: a.hazard.clone(),
+            chaos: Default::default(),
         },
         &stop,
     )?;
@@ -369,4 +370,35 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
         a.out.join(UP_SUMMARY_FILE).display()
     )?;
     leader_died(&report)
+}
+
+/// `fleet faults`: the fault matrix; exits 1 when a row does not hold.
+pub(super) fn faults_cmd(a: super::FaultsArgs) -> Result<()> {
+    let stop = StopFlag::on_signals()?;
+    let report = echelon_fleet::matrix::run(
+        &echelon_fleet::matrix::FaultsOptions {
+            out: a.out.clone(),
+            exe: std::env::current_exe()?,
+            only: a.only,
+            time_scale: a.time_scale,
+        },
+        &stop,
+    )?;
+    let md = a.out.join(echelon_fleet::matrix::FAULTS_MD);
+    outln!("{}", md.display())?;
+    if !report.pass() {
+        let failed: Vec<String> = report
+            .rows
+            .iter()
+            .filter(|r| !r.pass)
+            .map(|r| format!("{}: {}", r.name, r.problems.join("; ")))
+            .collect();
+        return Err(crate::cmd::out::Failed(format!(
+            "fleet faults: {} row(s) did not hold: {}",
+            failed.len(),
+            failed.join(" | ")
+        ))
+        .into());
+    }
+    Ok(())
 }

@@ -8,8 +8,10 @@
 //! resume lifts every stop issued before it, wherever it came from (a `fleet
 //! stop` / `fleet resume` from the command line included), and put on
 //! `echelon/<fleet>/command`; then the latches are asked every
-//! [`operator::POLL`] until every robot that answered acknowledges it, or
-//! [`ACK_WAIT`] passes.
+//! [`operator::POLL`] until every robot that answered acknowledges it (or
+//! refused it: a resume without a valid operator token), or [`ACK_WAIT`]
+//! passes. A resume is signed with the fleet's operator token
+//! ([`crate::token`]), the dashboard's own.
 //!
 //! In secure mode the session has the `operator` identity of the
 //! collector's certificate directory (`fleet certs` makes it): the only
@@ -29,6 +31,7 @@ use crate::net::{self, NetOptions, Secure, identity_files};
 use crate::operator::{self, POLL, tally};
 use crate::role::{Member, Role};
 use crate::runtime;
+use crate::token::OperatorToken;
 
 /// Longest wait for the latches' answers before an order is numbered.
 pub(super) const ASK: Duration = Duration::from_millis(250);
@@ -53,6 +56,9 @@ pub(super) struct Outcome {
     pub(super) robots: Vec<String>,
     /// Those that acknowledged it within [`ACK_WAIT`].
     pub(super) acknowledged: Vec<String>,
+    /// Those that refused it, and why (`robot/1 refused resume 7 by
+    /// operator: this process has no operator token`).
+    pub(super) refused: Vec<String>,
 }
 
 /// The session, once open.
@@ -71,6 +77,8 @@ pub(super) struct Operator {
     link: Arc<Mutex<Link>>,
     /// The highest command number this page put.
     last: u64,
+    /// Signs its resumes.
+    token: OperatorToken,
 }
 
 /// The session options of the operator beside a collector joined with
@@ -125,8 +133,12 @@ impl Operator {
     /// The operator of fleet `fleet` beside a collector joined with `net`:
     /// its session opens in the background (orders before then are refused
     /// as not yet connected); [`Refused`] in secure mode without the
-    /// `operator` identity.
-    pub(super) fn start(fleet: &str, net: &NetOptions) -> Result<Operator, Refused> {
+    /// `operator` identity. Its resumes are signed with `token`.
+    pub(super) fn start(
+        fleet: &str,
+        net: &NetOptions,
+        token: OperatorToken,
+    ) -> Result<Operator, Refused> {
         let opts = operator_net(net)?;
         let identity = opts
             .secure
@@ -153,6 +165,7 @@ impl Operator {
             identity,
             link,
             last: 0,
+            token,
         })
     }
 
@@ -178,6 +191,10 @@ impl Operator {
             runtime::query_all(&session, &self.keys.latches(), ASK).map_err(|e| e.to_string())?;
         let seq = operator::highest_seq(&before).max(self.last) + 1;
         let command = FleetCommand::new(order, seq, &self.identity, REASON);
+        let command = match order {
+            Order::Resume => command.signed(&self.token),
+            Order::Stop => command,
+        };
         net::put_stamped(&session, &self.keys.command(), command.encode());
         self.last = seq;
         let put = Instant::now();
@@ -190,15 +207,17 @@ impl Operator {
             .collect();
         robots.sort();
         robots.dedup();
-        let acknowledged = loop {
+        let (acknowledged, refused) = loop {
             let answers = runtime::query_all(&session, &self.keys.latches(), ASK)
                 .map_err(|e| e.to_string())?;
             let acks: Vec<String> = tally(&self.keys, &command, &answers)
                 .0
                 .into_iter()
                 .collect();
-            if robots.iter().all(|r| acks.contains(r)) || put.elapsed() > ACK_WAIT {
-                break acks;
+            let refused = operator::refusals(&self.keys, &command, &answers);
+            let answered = |r: &String| acks.contains(r) || refused.contains_key(r);
+            if robots.iter().all(answered) || put.elapsed() > ACK_WAIT {
+                break (acks, refused.into_values().collect());
             }
             std::thread::sleep(POLL);
         };
@@ -206,6 +225,7 @@ impl Operator {
             command,
             robots,
             acknowledged,
+            refused,
         })
     }
 }

@@ -3,8 +3,15 @@
 
 use super::*;
 
+/// A command from the operator, encoded; a resume signed with the tests'
+/// operator token, which the robots hold.
 fn command(order: crate::command::Order, seq: u64) -> Vec<u8> {
-    crate::command::FleetCommand::new(order, seq, "operator", "test").encode()
+    match order {
+        crate::command::Order::Resume => crate::testing::resume(seq, "operator", "test").encode(),
+        crate::command::Order::Stop => {
+            crate::command::FleetCommand::new(order, seq, "operator", "test").encode()
+        }
+    }
 }
 
 /// Drives `r` from local time `from` to `to`: the reference every 20 ms,
@@ -105,6 +112,7 @@ fn a_stop_heard_before_start_latches() {
         stopped: true,
         command: Some(FleetCommand::new(Order::Stop, 4, "operator", "")),
         hazards: HazardSet::EMPTY,
+        refused: None,
     };
     r.on_latch_answer(&answer.encode());
     assert!(r.is_stopped());
@@ -122,4 +130,62 @@ fn a_stop_heard_before_start_latches() {
     let moving = drive(&mut r, &reference, 2.0, 3.0);
     assert!(moving.iter().all(|(st, _)| st.link == LinkStatus::Tracking));
     assert!(dist(&r.last().state, &r.config().spec.start()) > 0.01);
+}
+
+/// A resume without a valid proof of the operator token (unsigned, signed
+/// with another token, or any resume to a robot without a token) leaves a
+/// stopped robot stopped, commanding zero; it is counted and named in the
+/// robot's latch answer, which `fleet resume` reports.
+#[test]
+fn a_resume_without_the_operator_token_leaves_the_robot_stopped() {
+    use crate::command::{FleetCommand, Order};
+    use crate::token::OperatorToken;
+    let s = scenario(EXTRAPOLATE);
+    let reference = reference(&s);
+    let other =
+        OperatorToken::parse("0123456789abcdef0123456789abcdef").unwrap_or_else(|e| panic!("{e}"));
+    let unsigned = FleetCommand::new(Order::Resume, 2, "operator", "go");
+    let forged = FleetCommand::new(Order::Resume, 3, "operator", "go").signed(&other);
+    for (token, resume, why) in [
+        (true, &unsigned, "no valid operator token"),
+        (true, &forged, "no valid operator token"),
+        (
+            false,
+            &crate::testing::resume(4, "operator", "go"),
+            "this process has no operator token",
+        ),
+    ] {
+        let config = crate::testing::robot_config(&s, 1, FaultSpec::default());
+        let config = RobotConfig {
+            operator_token: token.then(crate::testing::operator_token),
+            ..config
+        };
+        let plant = Flaky {
+            inner: SimulatedDrive::of(&config.spec, 0.0, PLANT_STEP),
+            lost: false,
+            commanded: Input::default(),
+        };
+        let mut r = Robot::new(config, plant, 1);
+        drive(&mut r, &reference, 0.0, 1.0);
+        r.on_command(&command(Order::Stop, 1));
+        assert!(r.is_stopped());
+        assert_eq!(
+            r.on_command(&resume.encode()),
+            crate::command::Change::Unchanged
+        );
+        assert!(r.is_stopped(), "{resume:?}");
+        let held = drive(&mut r, &reference, 1.0, 2.0);
+        assert!(
+            held.iter()
+                .all(|(st, cmd)| st.link == LinkStatus::Stopped && *cmd == Input::default())
+        );
+        assert_eq!(r.command_counts().unauthorized, 1);
+        let refused = r.latched().refused.unwrap_or_else(|| panic!("named"));
+        assert!(refused.is_of(resume));
+        assert_eq!(
+            refused.to_string(),
+            format!("resume {} by operator: {why}", resume.seq)
+        );
+        assert_eq!(r.report().commands.unauthorized, 1);
+    }
 }

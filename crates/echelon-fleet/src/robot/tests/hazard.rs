@@ -103,7 +103,7 @@ proptest! {
         // The first tick at or after the onset commands zero; the fleet
         // pauses when the stop is delivered (at once on the bus).
         bus.run_until(onset + length / 2.0);
-        let resume_during = FleetCommand::new(Order::Resume, 100, "operator", "try");
+        let resume_during = crate::testing::resume(100, "operator", "try");
         bus.put(&keys.command(), &resume_during.encode());
         let answer = bus.latched(me).and_then(|b| Latched::decode(&b));
         prop_assert!(answer.as_ref().is_some_and(|a| a.stopped && a.hazards.names() == "BUMP"), "{answer:?}");
@@ -111,7 +111,7 @@ proptest! {
         let why = crate::operator::hazards_in_force(&keys, &answers).unwrap_or_default();
         prop_assert_eq!(why, format!("robot/{k} reports BUMP"));
         bus.run_until(clear + 1.0);
-        let resume_after = FleetCommand::new(Order::Resume, 1000, "operator", "clear");
+        let resume_after = crate::testing::resume(1000, "operator", "clear");
         bus.put(&keys.command(), &resume_after.encode());
         let resumed_at = bus.now();
         bus.run_until(resumed_at + 1.0);

@@ -159,6 +159,7 @@ fn leader_task(s: &Scenario, source: u32, keys: &Keys) -> LeaderTask {
         ReferenceLeader::new(reference(s), 50.0, 1e9, source),
         keys.clone(),
     )
+    .with_operator_token(Some(crate::testing::operator_token()))
 }
 
 fn norm(v: [f64; 2]) -> f64 {
@@ -247,8 +248,10 @@ fn commanded_robot(s: &Scenario) -> Robot<Flaky> {
     Robot::new(config, plant, 1)
 }
 
+mod braking;
 mod command;
 mod hazard;
 mod link;
 mod messages;
 mod plant;
+mod watchdog;

@@ -27,6 +27,11 @@ pub struct FleetSection {
     /// Messages older than this on arrival are dropped as stale, s (default 0.5).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stale_after: Option<f64>,
+    /// A supervised run's deadman: robots hold when no operator heartbeat
+    /// (`echelon fleet heartbeat`) arrived for this long, s (default: none
+    /// asked).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub operator_heartbeat: Option<f64>,
     /// Link-loss policy for every agent (an agent's own `link_loss` overrides it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link_loss: Option<LinkLossSection>,

@@ -1,0 +1,648 @@
+//! `echelon fleet faults`: the fault matrix. Each row is one fault injected
+//! into a simulated fleet over real Zenoh ([`up::run`]: one OS process per
+//! role, a router, the collector): three TurtleBot 4s (velocity bases:
+//! lag 0.1 s, 0.9 m/s², 0.306 m/s) in a column behind a virtual leader on a
+//! circle at 0.15 m/s, started on their slots, the fault at fleet time
+//! [`FAULT_AT`]. Every simulated robot measures its own true motion from the
+//! fault on ([`crate::faults::Aftermath`]); the row compares the farthest
+//! any affected robot got from where the fault found it with the bound the
+//! policy implies,
+//!
+//! `d ≤ v·(t_detect + depth·(T + 10 ms)) + v·τ_v + d_brake`,
+//!
+//! `v` the robot's speed at the fault, `t_detect` the time the robot needs
+//! to notice (the link timeout, the odometry timeout, the heartbeat
+//! deadline, plus one control period `T`), `depth` the robots ahead of it
+//! in its chain that notice first (each adds a period and a state's
+//! delivery), `τ_v` the base's lag (a first-order
+//! lag delays any braking by at most `τ_v`) and `d_brake` the braking
+//! distance of the action taken: `v²/2a` for a zero command on a base that
+//! decelerates at `a`, and for `extrapolate` its hold and smooth stop,
+//! `v·hold + π v²/(4·decel)`.
+//!
+//! Rows: the leader killed (`kill -9`) under `stop` and under
+//! `extrapolate`; a robot killed (its followers lose their leader); a
+//! robot's leader stream cut for 0.3 s, 3 s and 30 s; a robot's odometry
+//! frozen; the operator's heartbeat killed in a supervised run. Each row's
+//! directory `DIR/<row>/` holds its scenario and everything `fleet up`
+//! wrote; `DIR/faults.json` and `DIR/faults.md` hold the table.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+use crate::bench::Machine;
+use crate::faults::{AftermathReport, Chaos, FaultSpec};
+use crate::role::Member;
+use crate::up::{self, UpOptions, UpReport};
+use crate::{FleetError, StopFlag};
+
+/// The table as JSON.
+pub const FAULTS_JSON: &str = "faults.json";
+/// The table as Markdown.
+pub const FAULTS_MD: &str = "faults.md";
+/// Fleet time of every fault, s (the robots cruise on their slots by then).
+pub const FAULT_AT: f64 = 6.0;
+/// Fleet seconds every row runs after its fault's measurement window.
+const TAIL: f64 = 2.0;
+/// The measurement window of a fault that lasts (a stop is over by then:
+/// the law settles a robot onto a point at rest within a few seconds).
+const WINDOW: f64 = 8.0;
+/// A window at least this long ends with the robots at rest, s; a shorter
+/// one (a fault that ends sooner) is judged on its bound alone.
+const SETTLE: f64 = 6.0;
+/// The operator heartbeat deadline of the supervised row, s.
+const HEARTBEAT: f64 = 1.0;
+/// The control rate of the matrix's fleet, Hz.
+const CONTROL_RATE: f64 = 50.0;
+/// The reference rate, Hz.
+const REFERENCE_RATE: f64 = 50.0;
+/// `[fleet] link_timeout`, s.
+const LINK_TIMEOUT: f64 = 0.2;
+/// `extrapolate`'s hold, s, and peak deceleration, m/s².
+const HOLD: f64 = 1.0;
+const DECEL: f64 = 0.1;
+/// What a follower adds per robot ahead of it in its chain to the time it
+/// needs to notice, besides one control period: its leader robot's state
+/// on its way, s.
+const HOP_DELIVERY: f64 = 0.01;
+/// The TurtleBot 4's base: lag τ_v, s, and linear acceleration limit, m/s².
+const TAU_V: f64 = 0.1;
+const A_MAX: f64 = 0.9;
+
+/// What a row expects its affected robots to do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Outcome {
+    /// Come to rest and stay there (until the run ends).
+    Stop,
+    /// Come to rest while the fault lasts, then follow again.
+    Hold,
+    /// Keep following (the fault is shorter than its detection).
+    Continue,
+}
+
+/// How a row's robots brake once they notice.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Brake {
+    /// A zero command (or the law toward a point at rest) on the base:
+    /// `v²/2a`.
+    Zero,
+    /// `extrapolate`: the last speed for `hold`, then the smooth stop.
+    Extrapolate,
+}
+
+/// One row of the matrix.
+#[derive(Debug, Clone)]
+pub struct Row {
+    /// Its name (its directory).
+    pub name: &'static str,
+    /// The fault, in words.
+    pub fault: &'static str,
+    /// What the robots do about it, in words.
+    pub action: &'static str,
+    /// What it expects.
+    pub outcome: Outcome,
+    /// The agents the bound applies to, each with its depth: how many
+    /// robots of its chain notice the fault before it does (0: it notices
+    /// it itself).
+    pub affected: Vec<(u32, u32)>,
+    /// `[fleet] link_loss.policy`.
+    policy: &'static str,
+    /// A supervised run (`[fleet] operator_heartbeat`).
+    supervised: bool,
+    /// Detection time, s (before one control period is added).
+    detect: f64,
+    brake: Brake,
+    chaos: Chaos,
+    /// Fleet seconds measured after the fault.
+    window: f64,
+}
+
+/// The matrix's rows, in order.
+pub fn rows() -> Vec<Row> {
+    let at = FAULT_AT;
+    let kill = |m: Member| Chaos {
+        kills: vec![(m, at)],
+        ..Chaos::default()
+    };
+    let cut = |len: f64| Chaos {
+        outages: vec![(1, (at, len))],
+        ..Chaos::default()
+    };
+    let mut rows = vec![
+        Row {
+            name: "leader-kill-stop",
+            fault: "the leader killed (`kill -9`), link_loss `stop`",
+            action: "the link times out; each robot converges to its slot behind the last reference received, at rest",
+            outcome: Outcome::Stop,
+            affected: vec![(1, 0), (2, 1), (3, 2)],
+            policy: "stop",
+            supervised: false,
+            detect: LINK_TIMEOUT + 1.0 / REFERENCE_RATE,
+            brake: Brake::Zero,
+            chaos: kill(Member::Leader),
+            window: WINDOW,
+        },
+        Row {
+            name: "leader-kill-extrapolate",
+            fault: "the leader killed (`kill -9`), link_loss `extrapolate` (hold 1 s, decel 0.1 m/s²)",
+            action: "the reference is carried on its arc for the hold, then slowed to rest",
+            outcome: Outcome::Stop,
+            affected: vec![(1, 0), (2, 1), (3, 2)],
+            policy: "extrapolate",
+            supervised: false,
+            detect: 1.0 / REFERENCE_RATE,
+            brake: Brake::Extrapolate,
+            chaos: kill(Member::Leader),
+            window: WINDOW,
+        },
+        Row {
+            name: "robot-kill",
+            fault: "robot 1's process killed (`kill -9`); its simulated base dies with it",
+            action: "robots 2 and 3 lose their leader (robot 1's state): link-loss policy `stop`",
+            outcome: Outcome::Stop,
+            affected: vec![(2, 0), (3, 1)],
+            policy: "stop",
+            supervised: false,
+            detect: LINK_TIMEOUT + 1.0 / CONTROL_RATE,
+            brake: Brake::Zero,
+            chaos: kill(Member::Robot(1)),
+            window: WINDOW,
+        },
+    ];
+    for (name, len, outcome) in [
+        ("partition-0.3s", 0.3, Outcome::Continue),
+        ("partition-3s", 3.0, Outcome::Hold),
+        ("partition-30s", 30.0, Outcome::Hold),
+    ] {
+        rows.push(Row {
+            name,
+            fault: match name {
+                "partition-0.3s" => "robot 1 cut from its leader stream for 0.3 s",
+                "partition-3s" => "robot 1 cut from its leader stream for 3 s",
+                _ => "robot 1 cut from its leader stream for 30 s",
+            },
+            action: "after the link timeout robot 1 converges to the last reference (policy `stop`), robots 2 and 3 follow it; all follow again when the stream returns",
+            outcome,
+            affected: vec![(1, 0), (2, 1), (3, 2)],
+            policy: "stop",
+            supervised: false,
+            detect: LINK_TIMEOUT + 1.0 / REFERENCE_RATE,
+            brake: Brake::Zero,
+            chaos: cut(len),
+            window: len,
+        });
+    }
+    rows.push(Row {
+        name: "odometry-freeze",
+        fault: "robot 2's odometry frozen for 3 s (the robot moves on)",
+        action: "robot 2's odometry watchdog holds it (zero command, link `held`) after two control periods; robot 3 stops following a held leader (its link-loss policy)",
+        outcome: Outcome::Hold,
+        affected: vec![(2, 0)],
+        policy: "stop",
+        supervised: false,
+        detect: 2.0 / CONTROL_RATE,
+        brake: Brake::Zero,
+        chaos: Chaos {
+            freeze_odometry: vec![(2, (at, 3.0))],
+            ..Chaos::default()
+        },
+        window: 3.0,
+    });
+    rows.push(Row {
+        name: "heartbeat-lost",
+        fault: "supervised run (operator_heartbeat = 1 s): the operator's heartbeat process killed (`kill -9`)",
+        action: "every robot's operator watchdog holds it (zero command, link `held`) once the last heartbeat is 1 s old",
+        outcome: Outcome::Stop,
+        // Each robot's own watchdog notices.
+        affected: vec![(1, 0), (2, 0), (3, 0)],
+        policy: "stop",
+        supervised: true,
+        detect: HEARTBEAT,
+        brake: Brake::Zero,
+        chaos: kill(Member::Operator),
+        window: WINDOW,
+    });
+    rows
+}
+
+impl Row {
+    /// The bound on the farthest a robot moving at `v`, `depth` robots
+    /// down its chain from the first to notice, gets from where the fault
+    /// found it, m: each robot ahead adds a control period and a state's
+    /// delivery to its detection.
+    pub fn bound(&self, v: f64, depth: u32) -> f64 {
+        let detect = self.detect
+            + 1.0 / CONTROL_RATE
+            + f64::from(depth) * (1.0 / CONTROL_RATE + HOP_DELIVERY);
+        let brake = match self.brake {
+            Brake::Zero => v * v / (2.0 * A_MAX),
+            Brake::Extrapolate => v * HOLD + std::f64::consts::PI * v * v / (4.0 * DECEL),
+        };
+        v * detect + v * TAU_V + brake
+    }
+
+    /// Its detection time, s (with the control period).
+    pub fn t_detect(&self) -> f64 {
+        self.detect + 1.0 / CONTROL_RATE
+    }
+
+    /// Fleet seconds it runs.
+    fn duration(&self) -> f64 {
+        FAULT_AT + self.window.max(1.0) + TAIL
+    }
+
+    /// Its scenario.
+    pub fn scenario_toml(&self) -> String {
+        let heartbeat = match self.supervised {
+            true => format!("operator_heartbeat = {HEARTBEAT}\n"),
+            false => String::new(),
+        };
+        format!(
+            r#"# The fault matrix's fleet (`echelon fleet faults`, row {name}).
+name = "faults-{name}"
+description = "Three TurtleBot 4s in a column at 0.15 m/s: {name}"
+
+[sim]
+duration = {duration}
+dt = 0.001
+
+[log]
+dt = 0.01
+
+[control]
+law = "kinematic"
+ke = 1.0
+l = 0.05
+ly_derivatives = "neglect"
+
+[robots.tb4]
+preset = "turtlebot4"
+
+[reference.circle]
+speed = 0.15
+turn_rate = 0.05
+start = {{ x = 0.0, y = 0.0, theta_deg = 0.0 }}
+
+[fleet]
+name = "faults-{name}"
+reference_rate = {REFERENCE_RATE}
+control_rate = {CONTROL_RATE}
+link_timeout = {LINK_TIMEOUT}
+{heartbeat}
+[fleet.link_loss]
+policy = "{policy}"
+hold = {HOLD}
+decel = {DECEL}
+
+[[agents]]
+name = "tb4 1"
+robot = "tb4"
+start = {{ x = -0.4, y = 0.0, theta_deg = 0.0 }}
+leader = "reference"
+offset = {{ x = 0.4, y = 0.0 }}
+
+[[agents]]
+name = "tb4 2"
+robot = "tb4"
+start = {{ x = -0.8, y = 0.0, theta_deg = 0.0 }}
+leader = 1
+offset = {{ x = 0.4, y = 0.0 }}
+
+[[agents]]
+name = "tb4 3"
+robot = "tb4"
+start = {{ x = -1.2, y = 0.0, theta_deg = 0.0 }}
+leader = 2
+offset = {{ x = 0.4, y = 0.0 }}
+"#,
+            name = self.name,
+            duration = self.duration(),
+            policy = self.policy,
+        )
+    }
+}
+
+/// One affected robot's measurement.
+#[derive(Debug, Clone, Serialize)]
+pub struct RobotOutcome {
+    /// Agent number.
+    pub agent: u32,
+    /// Robots ahead of it in its chain that notice the fault first.
+    pub depth: u32,
+    /// What it measured.
+    pub aftermath: AftermathReport,
+    /// The row's bound at its speed, m.
+    pub bound: f64,
+    /// Its link status at the end.
+    pub link: String,
+}
+
+/// One row's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct RowResult {
+    /// The row's name.
+    pub name: String,
+    /// The fault.
+    pub fault: String,
+    /// What the robots do.
+    pub action: String,
+    /// What it expects.
+    pub outcome: Outcome,
+    /// Detection time used in the bound, s.
+    pub t_detect: f64,
+    /// The affected robots.
+    pub robots: Vec<RobotOutcome>,
+    /// The farthest any affected robot got, m.
+    pub farthest: f64,
+    /// The bound for that robot, m.
+    pub bound: f64,
+    /// The longest time from the fault to a zero command, s (`None`: no
+    /// affected robot was commanded zero in the window).
+    pub time_to_zero: Option<f64>,
+    /// The longest an affected robot kept moving after the fault, s.
+    pub moving_for: f64,
+    /// Whether the outcome is the expected one and every travel within its bound.
+    pub pass: bool,
+    /// Why not, if not.
+    pub problems: Vec<String>,
+    /// Processes killed as asked.
+    pub deaths: Vec<String>,
+    /// Samples the collector logged.
+    pub logged: u64,
+}
+
+/// What `fleet faults` writes to `faults.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct FaultsReport {
+    /// The machine.
+    pub machine: Machine,
+    /// Time scale of every row.
+    pub time_scale: f64,
+    /// The rows.
+    pub rows: Vec<RowResult>,
+}
+
+impl FaultsReport {
+    /// Whether every row passed.
+    pub fn pass(&self) -> bool {
+        self.rows.iter().all(|r| r.pass)
+    }
+}
+
+/// Options of `fleet faults`.
+#[derive(Debug, Clone)]
+pub struct FaultsOptions {
+    /// Output directory.
+    pub out: PathBuf,
+    /// The `echelon` binary `fleet up` starts the processes with.
+    pub exe: PathBuf,
+    /// Only the rows whose name contains one of these (empty: all).
+    pub only: Vec<String>,
+    /// Clock speed-up of every row.
+    pub time_scale: f64,
+}
+
+/// Judges a row from `fleet up`'s report.
+pub fn judge(row: &Row, up: &UpReport) -> RowResult {
+    let mut problems = Vec::new();
+    let mut robots = Vec::new();
+    for &(k, depth) in &row.affected {
+        let Some(r) = up.robots.iter().find(|r| r.agent == k) else {
+            problems.push(format!("robot {k} has no report"));
+            continue;
+        };
+        let Some(a) = r.aftermath else {
+            problems.push(format!("robot {k} measured nothing"));
+            continue;
+        };
+        let v = a.speed_at_fault.unwrap_or(0.0);
+        let bound = row.bound(v, depth);
+        if a.farthest > bound {
+            problems.push(format!(
+                "robot {k} got {:.4} m from where the fault found it, above its bound {bound:.4} m",
+                a.farthest
+            ));
+        }
+        let at_rest = !a.moving_at_end;
+        match row.outcome {
+            Outcome::Stop | Outcome::Hold if !at_rest && row.window >= SETTLE => problems.push(
+                format!("robot {k} still moved {:.1} s after the fault", row.window),
+            ),
+            Outcome::Continue if at_rest => {
+                problems.push(format!("robot {k} stopped; it should have carried on"))
+            }
+            _ => {}
+        }
+        if matches!(row.outcome, Outcome::Hold | Outcome::Continue) && r.link != "tracking" {
+            problems.push(format!(
+                "robot {k} did not follow again: its link is {} at the end",
+                r.link
+            ));
+        }
+        robots.push(RobotOutcome {
+            agent: k,
+            depth,
+            aftermath: a,
+            bound,
+            link: r.link.clone(),
+        });
+    }
+    let worst = robots
+        .iter()
+        .max_by(|a, b| a.aftermath.farthest.total_cmp(&b.aftermath.farthest));
+    RowResult {
+        name: row.name.to_owned(),
+        fault: row.fault.to_owned(),
+        action: row.action.to_owned(),
+        outcome: row.outcome,
+        t_detect: row.t_detect(),
+        farthest: worst.map_or(0.0, |w| w.aftermath.farthest),
+        bound: worst.map_or(0.0, |w| w.bound),
+        time_to_zero: robots
+            .iter()
+            .filter_map(|r| r.aftermath.time_to_zero)
+            .max_by(f64::total_cmp),
+        moving_for: robots
+            .iter()
+            .map(|r| r.aftermath.moving_for)
+            .fold(0.0, f64::max),
+        pass: problems.is_empty(),
+        problems,
+        deaths: up.deaths.clone(),
+        logged: up.collector.logged,
+        robots,
+    }
+}
+
+/// Runs the matrix (the rows `opts.only` names), writes `faults.json` and
+/// `faults.md`, and returns the report (its [`FaultsReport::pass`] says
+/// whether every row held).
+pub fn run(opts: &FaultsOptions, stop: &StopFlag) -> Result<FaultsReport, FleetError> {
+    let selected: Vec<Row> = rows()
+        .into_iter()
+        .filter(|r| opts.only.is_empty() || opts.only.iter().any(|o| r.name.contains(o.as_str())))
+        .collect();
+    if selected.is_empty() {
+        let names: Vec<&str> = rows().iter().map(|r| r.name).collect();
+        return Err(FleetError::Config(format!(
+            "--only {}: no such row (rows: {})",
+            opts.only.join(", "),
+            names.join(", ")
+        )));
+    }
+    std::fs::create_dir_all(&opts.out).map_err(FleetError::io(&opts.out))?;
+    let mut results = Vec::with_capacity(selected.len());
+    for (i, row) in selected.iter().enumerate() {
+        let dir = opts.out.join(row.name);
+        std::fs::create_dir_all(&dir).map_err(FleetError::io(&dir))?;
+        let scenario = dir.join("scenario.toml");
+        std::fs::write(&scenario, row.scenario_toml()).map_err(FleetError::io(&scenario))?;
+        eprintln!(
+            "fleet faults: [{}/{}] {} ({:.0} s of fleet time)",
+            i + 1,
+            selected.len(),
+            row.name,
+            row.duration()
+        );
+        let chaos = Chaos {
+            fault_at: Some(FAULT_AT),
+            window: Some(row.window),
+            ..row.chaos.clone()
+        };
+        let report = up::run(
+            &UpOptions {
+                scenario: scenario.display().to_string(),
+                out: dir.clone(),
+                duration: None,
+                time_scale: opts.time_scale,
+                faults: FaultSpec::default(),
+                secure: None,
+                exe: opts.exe.clone(),
+                ros2: false,
+                real: false,
+                topology: up::Topology::Router,
+                sites: 1,
+                foxglove: None,
+                dashboard: None,
+                log_rate: None,
+                hazards: Vec::new(),
+                chaos,
+            },
+            stop,
+        )?;
+        let result = judge(row, &report);
+        eprintln!(
+            "fleet faults: {}: farthest {:.3} m (bound {:.3} m), {}",
+            row.name,
+            result.farthest,
+            result.bound,
+            if result.pass {
+                "ok".to_owned()
+            } else {
+                result.problems.join("; ")
+            }
+        );
+        results.push(result);
+    }
+    let report = FaultsReport {
+        machine: Machine::this(),
+        time_scale: opts.time_scale,
+        rows: results,
+    };
+    crate::write_json_file(&opts.out.join(FAULTS_JSON), &report)?;
+    let md = opts.out.join(FAULTS_MD);
+    std::fs::write(&md, markdown(&report)).map_err(FleetError::io(&md))?;
+    Ok(report)
+}
+
+/// The table as Markdown, with how it was made.
+pub fn markdown(r: &FaultsReport) -> String {
+    let mut s = String::new();
+    let m = &r.machine;
+    let _ = writeln!(s, "# Fault matrix\n");
+    let _ = writeln!(
+        s,
+        "What a fleet does when something fails mid-run, each row measured on a simulated fleet over real Zenoh: one process per role (router, collector, leader, a robot each, the operator's heartbeat in a supervised run), three TurtleBot 4s (velocity bases: lag {TAU_V} s, {A_MAX} m/s², 0.306 m/s) in a column behind a virtual leader on a circle at 0.15 m/s, control at {CONTROL_RATE} Hz, link timeout {LINK_TIMEOUT} s, the fault at fleet time {FAULT_AT} s. Every simulated robot measures its own true motion from the fault on. This file is written by `echelon fleet faults --out DIR` (as `DIR/faults.md`, with `DIR/faults.json` and each row's fleet in `DIR/<row>/`): rerun it on your machine, or with `--only ROW` for one row. CI runs every row (`crates/echelon-cli/tests/fleet/faults.rs`).\n"
+    );
+    let _ = writeln!(
+        s,
+        "Measured by `echelon fleet faults --time-scale {}` on {} ({} logical CPUs, Linux {}).\n",
+        r.time_scale,
+        if m.cpu.is_empty() {
+            "an unnamed CPU"
+        } else {
+            &m.cpu
+        },
+        m.cores,
+        m.kernel
+    );
+    let _ = writeln!(
+        s,
+        "| row | fault | outcome | t_detect (s) | farthest (m) | bound (m) | time to zero (s) | moving after (s) | held |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
+    for row in &r.rows {
+        let _ = writeln!(
+            s,
+            "| `{}` | {} | {} | {:.3} | {:.4} | {:.4} | {} | {:.2} | {} |",
+            row.name,
+            row.fault,
+            match row.outcome {
+                Outcome::Stop => "stop",
+                Outcome::Hold => "hold, then follow",
+                Outcome::Continue => "continue",
+            },
+            row.t_detect,
+            row.farthest,
+            row.bound,
+            row.time_to_zero
+                .map_or("—".to_owned(), |t| format!("{t:.3}")),
+            row.moving_for,
+            if row.pass {
+                "yes".to_owned()
+            } else {
+                format!("**no**: {}", row.problems.join("; "))
+            }
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n`farthest` is the largest distance any affected robot got from where the fault found it (its true pose, integrated at 1 ms); `bound` is that robot's `v·(t_detect + depth·(T + 10 ms)) + v·τ_v + d_brake` (T the control period, τ_v the base's lag, `depth` the robots ahead of it in its chain that notice first, d_brake = v²/2a for a zero command or the law settling onto a point at rest, v·hold + πv²/4·decel for `extrapolate`); `time to zero` the longest time from the fault to a zero command (— where the robots settle under the law instead: `stop` converges onto the last reference); `moving after` the longest time an affected robot kept moving faster than {} m/s after the fault, within the row's window.",
+        crate::faults::AT_REST
+    );
+    let _ = writeln!(s, "\nWhat the robots do, row by row:\n");
+    for row in &r.rows {
+        let _ = writeln!(s, "- `{}`: {}.", row.name, row.action);
+    }
+    let _ = writeln!(
+        s,
+        "\nNot yet in the matrix: the router killed and restarted, the collector killed (the robots do not depend on it), a robot's clock jumped, garbage and replayed messages on every key (covered on the fake clock and by `tests/fuzz_network.rs`, not as a row), a second `fleet up` of the same fleet name, and a robot process killed over a ROS 2 base (whose own `cmd_vel` timeout stops it: the Create 3's 0.5 s)."
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every row's scenario loads and runs as a fleet (its `[fleet]`
+    /// settings valid), and its bound grows with the speed.
+    #[test]
+    fn every_rows_scenario_is_valid_and_bounds_grow_with_speed() {
+        for row in rows() {
+            let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+            let p = dir.path().join("s.toml");
+            std::fs::write(&p, row.scenario_toml()).unwrap_or_else(|e| panic!("{e}"));
+            let s = echelon::scenario::Scenario::resolve(&p.display().to_string())
+                .unwrap_or_else(|e| panic!("{}: {e}", row.name));
+            let f = s.fleet().unwrap_or_else(|e| panic!("{}: {e}", row.name));
+            assert_eq!(f.operator_heartbeat.is_some(), row.supervised);
+            assert!(row.bound(0.0, 2) == 0.0);
+            assert!(row.bound(0.15, 0) < row.bound(0.3, 0), "{}", row.name);
+            assert!(row.bound(0.15, 0) < row.bound(0.15, 1), "{}", row.name);
+        }
+    }
+}

@@ -14,7 +14,6 @@ use std::path::PathBuf;
 
 use serde::Serialize;
 
-use crate::faults::FaultSpec;
 use crate::up::{self, UpOptions, UpReport};
 use crate::{FleetError, StopFlag};
 
@@ -342,22 +341,13 @@ pub fn run(
         std::fs::write(&scenario, scenario_toml(n)).map_err(FleetError::io(&scenario))?;
         let up = up::run(
             &UpOptions {
-                scenario: scenario.display().to_string(),
-                out: dir.clone(),
                 duration: Some(opts.duration),
-                time_scale: 1.0,
-                faults: FaultSpec::default(),
-                secure: None,
-                exe: opts.exe.clone(),
-                ros2: false,
-                real: false,
-                topology: up::Topology::Router,
-                sites: 1,
-                foxglove: None,
-                dashboard: None,
                 log_rate: opts.log_rate,
-                hazards: Vec::new(),
-                chaos: Default::default(),
+                ..UpOptions::simulated(
+                    scenario.display().to_string(),
+                    dir.clone(),
+                    opts.exe.clone(),
+                )
             },
             stop,
         );

@@ -33,7 +33,7 @@ use std::path::PathBuf;
 use serde::Serialize;
 
 use crate::bench::Machine;
-use crate::faults::{AftermathReport, Chaos, FaultSpec};
+use crate::faults::{AftermathReport, Chaos};
 use crate::role::Member;
 use crate::up::{self, UpOptions, UpReport};
 use crate::{FleetError, StopFlag};
@@ -514,22 +514,13 @@ pub fn run(opts: &FaultsOptions, stop: &StopFlag) -> Result<FaultsReport, FleetE
         };
         let report = up::run(
             &UpOptions {
-                scenario: scenario.display().to_string(),
-                out: dir.clone(),
-                duration: None,
                 time_scale: opts.time_scale,
-                faults: FaultSpec::default(),
-                secure: None,
-                exe: opts.exe.clone(),
-                ros2: false,
-                real: false,
-                topology: up::Topology::Router,
-                sites: 1,
-                foxglove: None,
-                dashboard: None,
-                log_rate: None,
-                hazards: Vec::new(),
                 chaos,
+                ..UpOptions::simulated(
+                    scenario.display().to_string(),
+                    dir.clone(),
+                    opts.exe.clone(),
+                )
             },
             stop,
         )?;

@@ -122,6 +122,33 @@ pub struct UpOptions {
     pub chaos: crate::faults::Chaos,
 }
 
+impl UpOptions {
+    /// A simulated fleet of `scenario` on loopback through one router, in
+    /// plain mode, at time scale 1 for the scenario's duration, no faults,
+    /// no live view, every state logged: the base of `fleet bench` and
+    /// `fleet faults`, each changing what it needs.
+    pub fn simulated(scenario: String, out: PathBuf, exe: PathBuf) -> UpOptions {
+        UpOptions {
+            scenario,
+            out,
+            duration: None,
+            time_scale: 1.0,
+            faults: FaultSpec::default(),
+            secure: None,
+            exe,
+            ros2: false,
+            real: false,
+            topology: Topology::Router,
+            sites: 1,
+            foxglove: None,
+            dashboard: None,
+            log_rate: None,
+            hazards: Vec::new(),
+            chaos: Chaos::default(),
+        }
+    }
+}
+
 /// `fleet up --ros2 --real`'s refusals, before anything starts: real robots
 /// run in real time, and each agent names its robot's router, reachable
 /// with the fleet's mode (plain, or secure with certificates).

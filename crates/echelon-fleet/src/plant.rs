@@ -154,6 +154,12 @@ impl SimulatedDrive {
         }
     }
 
+    /// Measures what it does from its time `at` on, for `window` s
+    /// ([`Aftermath`]), from now.
+    pub fn measure_from(&mut self, at: f64, window: Option<f64>) {
+        self.aftermath = Some(Aftermath::new(at, window));
+    }
+
     fn observe(&mut self) {
         let (t, s, zero) = (
             self.t,

@@ -416,6 +416,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         for (_, w) in opts.hazards.iter().filter(|(j, _)| *j as usize == k) {
             args.extend(["--hazard".to_owned(), w.to_string()]);
         }
+        args.extend(chaos_args(&opts.chaos, Member::Base(k as u32)));
         args.extend(common(k, &Member::Base(k as u32).identity()));
         base_procs.push(spawn(
             &opts.exe,
@@ -682,22 +683,24 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
 }
 
 /// The fault arguments `member`'s process takes from `chaos` (its
-/// `--die-at`; a robot's `--freeze-odometry`, `--fault-at` and
-/// `--fault-window`).
+/// `--die-at`; a robot's `--freeze-odometry`; a robot's or a simulated
+/// base's `--fault-at` and `--fault-window`).
 fn chaos_args(chaos: &Chaos, member: Member) -> Vec<String> {
     let mut a = Vec::new();
     if let Some(t) = chaos.death_of(member) {
         a.extend(["--die-at".to_owned(), t.to_string()]);
     }
-    if let Member::Robot(k) = member {
-        if let Some((_, (s, l))) = chaos.freeze_odometry.iter().find(|(j, _)| *j == k) {
-            a.extend(["--freeze-odometry".to_owned(), format!("{s}:{l}")]);
-        }
-        if let Some(t) = chaos.fault_at {
-            a.extend(["--fault-at".to_owned(), t.to_string()]);
-            if let Some(w) = chaos.window {
-                a.extend(["--fault-window".to_owned(), w.to_string()]);
-            }
+    if let Member::Robot(k) = member
+        && let Some((_, (s, l))) = chaos.freeze_odometry.iter().find(|(j, _)| *j == k)
+    {
+        a.extend(["--freeze-odometry".to_owned(), format!("{s}:{l}")]);
+    }
+    if matches!(member, Member::Robot(_) | Member::Base(_))
+        && let Some(t) = chaos.fault_at
+    {
+        a.extend(["--fault-at".to_owned(), t.to_string()]);
+        if let Some(w) = chaos.window {
+            a.extend(["--fault-window".to_owned(), w.to_string()]);
         }
     }
     a

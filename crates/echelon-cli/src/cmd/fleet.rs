@@ -233,6 +233,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     agent,
                     clock_offset: a.clock_offset,
                     hazards: a.hazard.clone(),
+                    fault_at: a.fault_at.map(|t| (t, a.fault_window)),
                 };
                 base::run(options, stop)
             })

@@ -75,6 +75,11 @@ fn robot_killed() {
 }
 
 #[test]
+fn robot_killed_over_a_ros2_base() {
+    row("robot-kill-ros2");
+}
+
+#[test]
 fn robot_partitioned_for_a_third_of_a_second() {
     row("partition-0.3s");
 }

@@ -153,7 +153,13 @@ pub fn subscribes(member: Member, keys: &Keys, ros: &[RosAcl]) -> Vec<String> {
         .into_iter()
         .chain(ros_of(k).into_iter().flat_map(RosAcl::robot_reads))
         .collect(),
-        Member::Base(k) => ros_of(k).map(|r| r.cmd_vel.clone()).into_iter().collect(),
+        // A simulated base reads the reference for the fleet's time
+        // (`--fault-at`).
+        Member::Base(k) => ros_of(k)
+            .map(|r| r.cmd_vel.clone())
+            .into_iter()
+            .chain(std::iter::once(keys.reference()))
+            .collect(),
         Member::Excite(k) => ros_of(k).map(|r| r.odom.clone()).into_iter().collect(),
         Member::Collector | Member::Router => std::iter::once(keys.everything())
             .chain(ros.iter().flat_map(RosAcl::all))

@@ -13,7 +13,7 @@ use super::fixes::fix_type;
 use super::ground_truth_topic;
 use super::sim_base::{BaseCounters, SimBase};
 use crate::options::{ProcessOptions, Resolved};
-use crate::plant::SimulatedDrive;
+use crate::plant::{Plant, SimulatedDrive};
 use crate::robot::{PLANT_STEP, agent_spec};
 use crate::role::Member;
 use crate::runtime::{self, Flow, Linger, Outputs, Sample, Task};
@@ -43,6 +43,10 @@ pub struct BaseOptions {
     /// its `estop` topic), each over its window; with those topics set it
     /// publishes them at its odometry rate, empty (or `false`) otherwise.
     pub hazards: Vec<HazardWindow>,
+    /// `--fault-at S [--fault-window LEN]`: it measures its true motion
+    /// from fleet time `S` on ([`crate::faults::Aftermath`]; its clock is
+    /// its own, so it learns the fleet's from the leader's reference).
+    pub fault_at: Option<(f64, Option<f64>)>,
 }
 
 /// What a base reports when it stops.
@@ -61,6 +65,10 @@ pub struct BaseReport {
     pub final_state: [f64; 5],
     /// The last command it followed `[v, ω]`.
     pub last_command: [f64; 2],
+    /// With `--fault-at`: what it did from the fault on (its `fault_at`
+    /// in fleet time).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aftermath: Option<crate::faults::AftermathReport>,
 }
 
 /// [`SimBase`] as a [`Task`] of the fleet runtime: `cmd_vel` in, odometry
@@ -82,6 +90,18 @@ pub struct BaseTask {
     /// Its hazard and e-stop keys, when its link names them, and the
     /// hazards it reports.
     safety: BaseWords,
+    /// `--fault-at` (fleet time, window), the fleet's reference key, and
+    /// fleet time − its clock once the reference was heard.
+    fault: Option<FaultWatch>,
+}
+
+/// A base measuring what it does after a fault at a fleet time.
+#[derive(Debug)]
+struct FaultWatch {
+    at: f64,
+    window: Option<f64>,
+    reference: String,
+    offset: Option<f64>,
 }
 
 /// What a simulated base says of its own safety (a Create 3's hazards, an
@@ -103,8 +123,11 @@ const FIXES: usize = 2;
 impl Task for BaseTask {
     type Report = BaseReport;
 
+    /// Its `cmd_vel`; with `--fault-at`, also the fleet's reference.
     fn inputs(&self) -> Vec<String> {
-        vec![self.cmd_key.clone()]
+        let mut keys = vec![self.cmd_key.clone()];
+        keys.extend(self.fault.as_ref().map(|f| f.reference.clone()));
+        keys
     }
 
     fn outputs(&self) -> Vec<String> {
@@ -119,7 +142,20 @@ impl Task for BaseTask {
         vec![self.alive.clone()]
     }
 
-    fn on_input(&mut self, _: usize, s: &Sample<'_>) -> Result<(), FleetError> {
+    fn on_input(&mut self, input: usize, s: &Sample<'_>) -> Result<(), FleetError> {
+        if input == 1 {
+            // The reference, for the fleet's time: the first sample arms
+            // the measurement at the fault's time on its own clock.
+            if let (Some(f), Ok(crate::wire::Message::Reference(_, r))) =
+                (self.fault.as_mut(), crate::wire::decode(s.payload))
+                && f.offset.is_none()
+            {
+                let offset = r.t - s.at;
+                f.offset = Some(offset);
+                self.base.measure_from(f.at - offset, f.window);
+            }
+            return Ok(());
+        }
         // Refusals are counted in the report.
         let wall = (self.wall)() as i64;
         let _ = self.base.on_cmd(s.key, s.payload, s.attachment, s.at, wall);
@@ -169,6 +205,13 @@ impl Task for BaseTask {
             counters: *base.counters(),
             final_state: [s.x, s.y, s.theta, s.v, s.omega],
             last_command: [base.followed().v, base.followed().omega],
+            aftermath: self.fault.as_ref().and_then(|f| {
+                let a = base.base().aftermath()?;
+                Some(crate::faults::AftermathReport {
+                    fault_at: f.at,
+                    ..a
+                })
+            }),
         })
     }
 }
@@ -334,6 +377,12 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                     windows: opts.hazards.clone(),
                     buf: Vec::with_capacity(128),
                 },
+                fault: opts.fault_at.map(|(at, window)| FaultWatch {
+                    at,
+                    window,
+                    reference: keys.reference(),
+                    offset: None,
+                }),
             };
             Ok((task, tokens))
         },

@@ -322,6 +322,12 @@ impl SimBase {
         &self.base
     }
 
+    /// Measures its true motion from its clock's `at` on, for `window` s
+    /// ([`SimulatedDrive::measure_from`]).
+    pub fn measure_from(&mut self, at: f64, window: Option<f64>) {
+        self.base.measure_from(at, window);
+    }
+
     /// The last command it followed.
     pub fn followed(&self) -> VelocityCommand {
         self.followed

@@ -324,6 +324,12 @@ pub(crate) struct BaseArgs {
     /// Report a hazard over a window of its own clock (seconds since it started, scaled), NAME@FROM+DURATION (BUMP@12+3; EMERGENCY_STOP is an e-stop), on the agent's `hazards` (`estop`) topic (repeatable).
     #[arg(long, value_name = "NAME@FROM+S")]
     pub(super) hazard: Vec<echelon_fleet::ros2::hazard::HazardWindow>,
+    /// Measure what the simulated base does from fleet time S on (its report's `aftermath`; it learns the fleet's time from the reference).
+    #[arg(long, value_name = "S", value_parser = non_negative)]
+    pub(super) fault_at: Option<f64>,
+    /// With --fault-at: measure for LEN s only [default: to the end].
+    #[arg(long, value_name = "LEN", value_parser = positive, requires = "fault_at")]
+    pub(super) fault_window: Option<f64>,
     #[command(flatten)]
     pub(super) net: NetArgs,
 }

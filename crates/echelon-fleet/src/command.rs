@@ -371,6 +371,11 @@ impl Latch {
         }
     }
 
+    /// Whether it holds an operator token (else it refuses every resume).
+    pub fn has_token(&self) -> bool {
+        self.token.is_some()
+    }
+
     /// The last resume it refused for want of a valid operator token
     /// proof, since the last one it obeyed (its `Display`: `resume 7 by
     /// operator: no valid operator token`).

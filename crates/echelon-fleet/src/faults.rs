@@ -48,6 +48,9 @@ pub struct Chaos {
     /// Robot `k`'s leader stream cut in `(start, length)`: the robot
     /// partitioned from its leader.
     pub outages: Vec<(u32, (f64, f64))>,
+    /// `(start, length)`: garbage, duplicates and replays on every key of
+    /// the fleet (`fleet garbage`, [`crate::garbage`]).
+    pub garbage: Option<(f64, f64)>,
 }
 
 impl Chaos {

@@ -192,6 +192,8 @@ pub struct LeaderTask {
     stopped_the_fleet: bool,
     /// `--die-at`: the process kills itself at this fleet time.
     die_at: Option<f64>,
+    /// Whether it has ticked (it says what it lacks at its first tick).
+    started: bool,
 }
 
 impl LeaderTask {
@@ -206,6 +208,7 @@ impl LeaderTask {
             latch: Latch::new(),
             stopped_the_fleet: false,
             die_at: None,
+            started: false,
         }
     }
 
@@ -339,6 +342,13 @@ impl Task for LeaderTask {
 
     fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
         crate::faults::die_if_due(self.die_at, now, "fleet leader");
+        if !self.started {
+            // Said here, not before its session opened: bad input is one line.
+            self.started = true;
+            if !self.latch.has_token() {
+                eprintln!("leader: no operator token ({TOKEN_ENV}): it will refuse every resume");
+            }
+        }
         if self.leader.next_due().is_none() {
             return Ok(Flow::Stop);
         }
@@ -372,9 +382,6 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
     let duration = opts.process.duration.unwrap_or(plan.config().duration);
     let leader = Leader::new(reference, rate, duration, net::rand_source());
     let token = OperatorToken::from_env()?;
-    if token.is_none() {
-        eprintln!("leader: no operator token ({TOKEN_ENV}): it will refuse every resume");
-    }
     let task = LeaderTask::new(leader, keys.clone())
         .dying_at(opts.process.die_at)
         .with_operator_token(token)

@@ -18,6 +18,7 @@ pub mod command;
 pub mod cost;
 pub mod excite;
 pub mod faults;
+pub mod garbage;
 pub mod heartbeat;
 pub mod keys;
 pub mod latency;

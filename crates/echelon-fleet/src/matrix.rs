@@ -24,7 +24,8 @@
 //! `extrapolate`; a robot killed (its followers lose their leader); a
 //! robot killed while it drives a simulated ROS 2 base (the base's own
 //! `cmd_vel` timeout stops it, measured by the base, which learns the
-//! fleet's time from the reference); a robot's leader stream cut for
+//! fleet's time from the reference); a robot's base killed (the robot's
+//! output watchdog holds it, its followers stop); a robot's leader stream cut for
 //! 0.3 s, 3 s and 30 s; a robot's odometry frozen; the operator's
 //! heartbeat killed in a supervised run. Each row's
 //! directory `DIR/<row>/` holds its scenario and everything `fleet up`
@@ -37,6 +38,7 @@ use serde::Serialize;
 
 use crate::bench::Machine;
 use crate::faults::{AftermathReport, Chaos};
+use crate::robot::Watchdog;
 use crate::role::Member;
 use crate::up::{self, UpOptions, UpReport};
 use crate::{FleetError, StopFlag};
@@ -88,6 +90,9 @@ pub enum Outcome {
     Hold,
     /// Keep following (the fault is shorter than its detection).
     Continue,
+    /// Follow on as if nothing happened: what arrives is counted and
+    /// refused (no travel bound: the robots never stop).
+    Unaffected,
 }
 
 /// How a row's robots brake once they notice.
@@ -122,6 +127,8 @@ pub struct Row {
     /// The robots drive simulated ROS 2 bases (`fleet up --ros2`): what a
     /// robot did is measured by its base.
     ros2: bool,
+    /// Robots a watchdog must have held, and which (its report's count).
+    held_by: Vec<(u32, Watchdog)>,
     /// Detection time, s (before one control period is added).
     detect: f64,
     brake: Brake,
@@ -151,6 +158,7 @@ pub fn rows() -> Vec<Row> {
             policy: "stop",
             supervised: false,
             ros2: false,
+            held_by: Vec::new(),
             detect: LINK_TIMEOUT + 1.0 / REFERENCE_RATE,
             brake: Brake::Zero,
             chaos: kill(Member::Leader),
@@ -165,6 +173,7 @@ pub fn rows() -> Vec<Row> {
             policy: "extrapolate",
             supervised: false,
             ros2: false,
+            held_by: Vec::new(),
             detect: 1.0 / REFERENCE_RATE,
             brake: Brake::Extrapolate,
             chaos: kill(Member::Leader),
@@ -179,6 +188,7 @@ pub fn rows() -> Vec<Row> {
             policy: "stop",
             supervised: false,
             ros2: false,
+            held_by: Vec::new(),
             detect: LINK_TIMEOUT + 1.0 / CONTROL_RATE,
             brake: Brake::Zero,
             chaos: kill(Member::Robot(1)),
@@ -194,11 +204,48 @@ pub fn rows() -> Vec<Row> {
         policy: "stop",
         supervised: false,
         ros2: true,
+        held_by: Vec::new(),
         // The base checks its timeout at its odometry rate.
         detect: CMD_VEL_TIMEOUT + 1.0 / ODOM_RATE,
         brake: Brake::Zero,
         chaos: kill(Member::Robot(1)),
         window: WINDOW,
+    });
+    rows.push(Row {
+        name: "base-kill-ros2",
+        fault: "robot 1's simulated ROS 2 base killed (`kill -9`): no odometry, no `cmd_vel` reader",
+        action: "robot 1's odometry watchdog holds it (zero command, link `held`, reported) once its odometry is `odom_timeout` old (its output watchdog cannot tell here: the collector, recording `cmd_vel`, is a reader too); robots 2 and 3 do not follow a held leader: link-loss policy `stop`",
+        outcome: Outcome::Stop,
+        affected: vec![(2, 0), (3, 1)],
+        policy: "stop",
+        supervised: false,
+        ros2: true,
+        held_by: vec![(1, Watchdog::Odometry)],
+        detect: echelon::scenario::DEFAULT_ODOM_TIMEOUT
+            + 1.0 / ODOM_RATE
+            + 1.0 / CONTROL_RATE
+            + LINK_TIMEOUT,
+        brake: Brake::Zero,
+        chaos: kill(Member::Base(1)),
+        window: WINDOW,
+    });
+    rows.push(Row {
+        name: "garbage",
+        fault: "garbage, duplicated and replayed (1 s old) messages on every key of the fleet, 20 times a second for 5 s",
+        action: "every robot counts and refuses what is not a newer sample of its streams (malformed, reordered) and follows on",
+        outcome: Outcome::Unaffected,
+        affected: vec![(1, 0), (2, 0), (3, 0)],
+        policy: "stop",
+        supervised: false,
+        ros2: false,
+        held_by: Vec::new(),
+        detect: 0.0,
+        brake: Brake::Zero,
+        chaos: Chaos {
+            garbage: Some((at, WINDOW - 3.0)),
+            ..Chaos::default()
+        },
+        window: WINDOW - 3.0,
     });
     for (name, len, outcome) in [
         ("partition-0.3s", 0.3, Outcome::Continue),
@@ -218,6 +265,7 @@ pub fn rows() -> Vec<Row> {
             policy: "stop",
             supervised: false,
         ros2: false,
+        held_by: Vec::new(),
             detect: LINK_TIMEOUT + 1.0 / REFERENCE_RATE,
             brake: Brake::Zero,
             chaos: cut(len),
@@ -233,6 +281,7 @@ pub fn rows() -> Vec<Row> {
         policy: "stop",
         supervised: false,
         ros2: false,
+        held_by: vec![(2, Watchdog::Odometry)],
         detect: 2.0 / CONTROL_RATE,
         brake: Brake::Zero,
         chaos: Chaos {
@@ -251,6 +300,7 @@ pub fn rows() -> Vec<Row> {
         policy: "stop",
         supervised: true,
         ros2: false,
+        held_by: vec![(1, Watchdog::Operator), (2, Watchdog::Operator), (3, Watchdog::Operator)],
         detect: HEARTBEAT,
         brake: Brake::Zero,
         chaos: kill(Member::Operator),
@@ -365,8 +415,11 @@ pub struct RobotOutcome {
     pub depth: u32,
     /// What it measured.
     pub aftermath: AftermathReport,
-    /// The row's bound at its speed, m.
-    pub bound: f64,
+    /// The row's bound at its speed, m (`None`: the row bounds no travel).
+    pub bound: Option<f64>,
+    /// Messages from the network it refused (malformed, another version,
+    /// foreign, stale, reordered).
+    pub refused: u64,
     /// Its link status at the end.
     pub link: String,
 }
@@ -388,8 +441,10 @@ pub struct RowResult {
     pub robots: Vec<RobotOutcome>,
     /// The farthest any affected robot got, m.
     pub farthest: f64,
-    /// The bound for that robot, m.
-    pub bound: f64,
+    /// The bound for that robot, m (`None`: the row bounds no travel).
+    pub bound: Option<f64>,
+    /// Messages the affected robots refused.
+    pub refused: u64,
     /// The longest time from the fault to a zero command, s (`None`: no
     /// affected robot was commanded zero in the window).
     pub time_to_zero: Option<f64>,
@@ -430,7 +485,7 @@ pub struct FaultsOptions {
     pub out: PathBuf,
     /// The `echelon` binary `fleet up` starts the processes with.
     pub exe: PathBuf,
-    /// Only the rows whose name contains one of these (empty: all).
+    /// Only the rows of these names (empty: all).
     pub only: Vec<String>,
     /// Clock speed-up of every row.
     pub time_scale: f64,
@@ -454,8 +509,10 @@ pub fn judge(row: &Row, up: &UpReport) -> RowResult {
         };
         let link = robot.map_or("killed", |r| r.link.as_str());
         let v = a.speed_at_fault.unwrap_or(0.0);
-        let bound = row.bound(v, depth);
-        if a.farthest > bound {
+        let bound = (row.outcome != Outcome::Unaffected).then(|| row.bound(v, depth));
+        if let Some(bound) = bound
+            && a.farthest > bound
+        {
             problems.push(format!(
                 "robot {k} got {:.4} m from where the fault found it, above its bound {bound:.4} m",
                 a.farthest
@@ -466,12 +523,32 @@ pub fn judge(row: &Row, up: &UpReport) -> RowResult {
             Outcome::Stop | Outcome::Hold if !at_rest && row.window >= SETTLE => problems.push(
                 format!("robot {k} still moved {:.1} s after the fault", row.window),
             ),
-            Outcome::Continue if at_rest => {
+            Outcome::Continue | Outcome::Unaffected if at_rest => {
                 problems.push(format!("robot {k} stopped; it should have carried on"))
             }
             _ => {}
         }
-        if matches!(row.outcome, Outcome::Hold | Outcome::Continue) && link != "tracking" {
+        if row.outcome == Outcome::Unaffected
+            && let Some(r) = robot
+        {
+            let c = r.counters;
+            if c.malformed == 0 || c.reordered == 0 {
+                problems.push(format!(
+                    "robot {k} refused no garbage or no replay ({c:?}): did it hear any?"
+                ));
+            }
+            if r.final_error > 0.01 || c.link_losses > 0 {
+                problems.push(format!(
+                    "robot {k} was disturbed: final error {:.4} m, {} link losses",
+                    r.final_error, c.link_losses
+                ));
+            }
+        }
+        if matches!(
+            row.outcome,
+            Outcome::Hold | Outcome::Continue | Outcome::Unaffected
+        ) && link != "tracking"
+        {
             problems.push(format!(
                 "robot {k} did not follow again: its link is {link} at the end"
             ));
@@ -481,8 +558,26 @@ pub fn judge(row: &Row, up: &UpReport) -> RowResult {
             depth,
             aftermath: a,
             bound,
+            refused: robot.map_or(0, |r| {
+                let c = r.counters;
+                c.malformed + c.wrong_version + c.foreign + c.stale + c.reordered
+            }),
             link: link.to_owned(),
         });
+    }
+    for &(k, w) in &row.held_by {
+        let counts = up.robots.iter().find(|r| r.agent == k).map(|r| r.watchdogs);
+        let trips = counts.map_or(0, |c| match w {
+            Watchdog::Odometry => c.odometry,
+            Watchdog::Operator => c.operator,
+            Watchdog::Output => c.output,
+        });
+        if trips == 0 {
+            problems.push(format!(
+                "robot {k}'s {} watchdog never held it ({counts:?})",
+                w.name()
+            ));
+        }
     }
     let worst = robots
         .iter()
@@ -494,7 +589,8 @@ pub fn judge(row: &Row, up: &UpReport) -> RowResult {
         outcome: row.outcome,
         t_detect: row.t_detect(),
         farthest: worst.map_or(0.0, |w| w.aftermath.farthest),
-        bound: worst.map_or(0.0, |w| w.bound),
+        bound: worst.and_then(|w| w.bound),
+        refused: robots.iter().map(|r| r.refused).sum(),
         time_to_zero: robots
             .iter()
             .filter_map(|r| r.aftermath.time_to_zero)
@@ -517,13 +613,16 @@ pub fn judge(row: &Row, up: &UpReport) -> RowResult {
 pub fn run(opts: &FaultsOptions, stop: &StopFlag) -> Result<FaultsReport, FleetError> {
     let selected: Vec<Row> = rows()
         .into_iter()
-        .filter(|r| opts.only.is_empty() || opts.only.iter().any(|o| r.name.contains(o.as_str())))
+        .filter(|r| opts.only.is_empty() || opts.only.iter().any(|o| o == r.name))
         .collect();
-    if selected.is_empty() {
+    if let Some(bad) = opts
+        .only
+        .iter()
+        .find(|o| !rows().iter().any(|r| r.name == o.as_str()))
+    {
         let names: Vec<&str> = rows().iter().map(|r| r.name).collect();
         return Err(FleetError::Config(format!(
-            "--only {}: no such row (rows: {})",
-            opts.only.join(", "),
+            "--only {bad}: no such row (rows: {})",
             names.join(", ")
         )));
     }
@@ -560,11 +659,13 @@ pub fn run(opts: &FaultsOptions, stop: &StopFlag) -> Result<FaultsReport, FleetE
             stop,
         )?;
         let result = judge(row, &report);
+        let measured = match result.bound {
+            Some(b) => format!("farthest {:.3} m (bound {b:.3} m)", result.farthest),
+            None => format!("{} messages refused", result.refused),
+        };
         eprintln!(
-            "fleet faults: {}: farthest {:.3} m (bound {:.3} m), {}",
+            "fleet faults: {}: {measured}, {}",
             row.name,
-            result.farthest,
-            result.bound,
             if result.pass {
                 "ok".to_owned()
             } else {
@@ -613,17 +714,24 @@ pub fn markdown(r: &FaultsReport) -> String {
     for row in &r.rows {
         let _ = writeln!(
             s,
-            "| `{}` | {} | {} | {:.3} | {:.4} | {:.4} | {} | {:.2} | {} |",
+            "| `{}` | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
             row.name,
             row.fault,
             match row.outcome {
                 Outcome::Stop => "stop",
                 Outcome::Hold => "hold, then follow",
                 Outcome::Continue => "continue",
+                Outcome::Unaffected => "unaffected",
             },
-            row.t_detect,
-            row.farthest,
-            row.bound,
+            match row.outcome {
+                Outcome::Unaffected => "—".to_owned(),
+                _ => format!("{:.3}", row.t_detect),
+            },
+            match row.bound {
+                Some(_) => format!("{:.4}", row.farthest),
+                None => "—".to_owned(),
+            },
+            row.bound.map_or("—".to_owned(), |b| format!("{b:.4}")),
             row.time_to_zero
                 .map_or("—".to_owned(), |t| format!("{t:.3}")),
             row.moving_for,
@@ -641,7 +749,11 @@ pub fn markdown(r: &FaultsReport) -> String {
     );
     let _ = writeln!(s, "\nWhat the robots do, row by row:\n");
     for row in &r.rows {
-        let _ = writeln!(s, "- `{}`: {}.", row.name, row.action);
+        let refused = match row.outcome {
+            Outcome::Unaffected => format!(" (here: {} messages refused)", row.refused),
+            _ => String::new(),
+        };
+        let _ = writeln!(s, "- `{}`: {}{refused}.", row.name, row.action);
     }
     let _ = writeln!(
         s,

@@ -53,6 +53,13 @@ pub trait Plant {
     fn odometry_age(&self) -> Option<f64> {
         self.state().map(|_| 0.0)
     }
+    /// Whether its commands have lost their reader (a ROS 2 base's
+    /// `cmd_vel` subscriber gone), which the robot's output watchdog holds
+    /// it for ([`crate::robot::Watchdog::Output`]); `false` (the default)
+    /// where it cannot tell or nothing else reads (a simulated plant).
+    fn command_reader_lost(&self) -> bool {
+        false
+    }
     /// What the robot did after an injected fault (`None`: not measured).
     fn aftermath(&self) -> Option<AftermathReport> {
         None

@@ -446,6 +446,27 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         None => None,
     };
 
+    // Hostile input on every key (`fleet garbage`), when asked.
+    let mut garbage = match opts.chaos.garbage {
+        Some((from, len)) => {
+            let mut args = vec![
+                "fleet".to_owned(),
+                "garbage".to_owned(),
+                opts.scenario.clone(),
+                "--from".to_owned(),
+                from.to_string(),
+                "--for".to_owned(),
+                len.to_string(),
+                "--time-scale".to_owned(),
+                scale.clone(),
+            ];
+            // A peer of the operator's site, as anyone reaching the router.
+            args.extend(common(operator_at, &Member::Operator.identity()));
+            Some(spawn(&opts.exe, "garbage", &args, &[], &logs)?)
+        }
+        None => None,
+    };
+
     let mut robots = Vec::with_capacity(n);
     for k in 1..=n {
         let mut args = on_clock(Role::Robot);
@@ -519,14 +540,24 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             std::iter::once(&mut collector)
                 .chain(&mut base_procs)
                 .chain(operator.as_mut())
+                .chain(garbage.as_mut())
                 .chain(&mut routers),
         )?;
+        if let Some(f) = garbage.as_ref().and_then(Proc::failure) {
+            return Err(FleetError::Child(f));
+        }
         // Deaths the fault matrix asked for (`--die-at`): reported, not
         // a failure of the run.
         for (p, member) in robots
             .iter()
             .enumerate()
             .map(|(i, p)| (p, Member::Robot(i as u32 + 1)))
+            .chain(
+                base_procs
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| (p, Member::Base(i as u32 + 1))),
+            )
             .chain(operator.iter().map(|p| (p, Member::Operator)))
         {
             if opts.chaos.death_of(member).is_some()
@@ -551,12 +582,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             );
             leader_failure = Some(f);
         }
-        let failed = robots
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| opts.chaos.death_of(Member::Robot(*i as u32 + 1)).is_none())
-            .map(|(_, p)| p)
-            .chain(&base_procs)
+        let failed = living(&robots, &opts.chaos, Member::Robot)
+            .chain(living(&base_procs, &opts.chaos, Member::Base))
             .chain(std::iter::once(&collector))
             .chain(&routers)
             .find_map(Proc::failure);
@@ -613,9 +640,12 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     if let Some(p) = operator.as_mut().filter(|p| p.status.is_none()) {
         stop_all(std::slice::from_mut(p), nap, "the operator's heartbeat")?;
     }
+    if let Some(p) = garbage.as_mut() {
+        stop_all(std::slice::from_mut(p), nap, "fleet garbage")?;
+    }
     stop_all(std::slice::from_mut(&mut collector), nap, "the collector")?;
     if let Some(f) = std::iter::once(&collector)
-        .chain(&base_procs)
+        .chain(living(&base_procs, &opts.chaos, Member::Base))
         .find_map(Proc::failure)
     {
         return Err(FleetError::Child(f));
@@ -636,13 +666,8 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         .filter(|&t| t > 0)
         .map(|t| t.saturating_sub(started_unix_ns) as f64 * 1e-9);
     // A robot killed as asked has no report (its death is in `deaths`).
-    let robot_reports: Vec<RobotReport> = robots
-        .iter()
-        .enumerate()
-        .filter(|(i, p)| {
-            opts.chaos.death_of(Member::Robot(*i as u32 + 1)).is_none() || p.failure().is_none()
-        })
-        .map(|(_, p)| report(p))
+    let robot_reports: Vec<RobotReport> = living(&robots, &opts.chaos, Member::Robot)
+        .map(report)
         .collect::<Result<_, _>>()?;
     let collector_report: CollectorReport = report(&collector)?;
     let up = UpReport {
@@ -672,7 +697,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         deaths: deaths.into_iter().map(|(_, f)| f).collect(),
         robots: robot_reports,
         collector: collector_report,
-        bases: base_procs.iter().map(report).collect::<Result<_, _>>()?,
+        bases: living(&base_procs, &opts.chaos, Member::Base)
+            .map(report)
+            .collect::<Result<_, _>>()?,
         topology: opts.topology,
         router_endpoints: net.routers.clone(),
         sites,
@@ -704,4 +731,18 @@ fn chaos_args(chaos: &Chaos, member: Member) -> Vec<String> {
         }
     }
     a
+}
+
+/// The processes of `member(k)` (the one of `k` at `k - 1`: robots,
+/// bases) but those killed as `chaos` asked (`--die-at`), whose ends are
+/// in the report's `deaths`.
+fn living<'a>(
+    procs: &'a [Proc],
+    chaos: &'a Chaos,
+    member: fn(u32) -> Member,
+) -> impl Iterator<Item = &'a Proc> + 'a {
+    procs.iter().enumerate().filter_map(move |(i, p)| {
+        let asked = chaos.death_of(member(i as u32 + 1)).is_some();
+        (!asked || p.failure().is_none()).then_some(p)
+    })
 }

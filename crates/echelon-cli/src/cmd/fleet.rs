@@ -183,6 +183,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
         FleetCommand::Router(_) => echelon_fleet::net::exec_with_sized_runtime("router"),
         FleetCommand::Leader(_)
         | FleetCommand::Heartbeat(_)
+        | FleetCommand::Garbage(_)
         | FleetCommand::Robot(_)
         | FleetCommand::Base(_)
         | FleetCommand::Collector(_) => echelon_fleet::net::exec_with_sized_runtime("client"),
@@ -330,6 +331,20 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             Member::Operator,
             |scenario, net, stop| {
                 echelon_fleet::heartbeat::run(a.clock.process(scenario, net, &a.net), stop)
+            },
+        ),
+        FleetCommand::Garbage(a) => scenario_process(
+            &a.scenario,
+            &a.net,
+            Member::Operator,
+            |scenario, net, stop| {
+                echelon_fleet::garbage::run(
+                    a.clock.process(scenario, net, &a.net),
+                    a.from,
+                    a.length,
+                    a.seed,
+                    stop,
+                )
             },
         ),
         FleetCommand::Faults(a) => faults_cmd(a),

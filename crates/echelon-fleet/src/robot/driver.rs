@@ -53,14 +53,8 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         opts.process.duration,
     )?;
     // It obeys a resume only with a valid proof of the operator token.
+    // (Without one it says so at its first tick: bad input is one line.)
     let operator_token = crate::token::OperatorToken::from_env()?;
-    if operator_token.is_none() {
-        eprintln!(
-            "robot {}: no operator token ({}): it will refuse every resume",
-            opts.agent,
-            crate::token::TOKEN_ENV
-        );
-    }
     let config = RobotConfig {
         operator_token,
         ..config

@@ -43,6 +43,8 @@ pub struct RobotTask<P: Plant = SimulatedDrive> {
     dropped: u64,
     /// `--die-at`: the process kills itself at this fleet time.
     die_at: Option<f64>,
+    /// Whether it has ticked (it says what it lacks at its first tick).
+    started: bool,
 }
 
 impl<P: Plant> RobotTask<P> {
@@ -59,6 +61,7 @@ impl<P: Plant> RobotTask<P> {
             failed: false,
             dropped: 0,
             die_at: None,
+            started: false,
         }
     }
 
@@ -217,6 +220,16 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         }
         if self.robot.is_synced() {
             crate::faults::die_if_due(self.die_at, self.robot.fleet_time(now), "fleet robot");
+        }
+        if !self.started {
+            self.started = true;
+            if self.robot.config().operator_token.is_none() {
+                eprintln!(
+                    "robot {}: no operator token ({}): it will refuse every resume",
+                    self.agent(),
+                    crate::token::TOKEN_ENV
+                );
+            }
         }
         for (at, delay, bytes) in self.leader.drain(..) {
             self.robot.on_stamped_message(&bytes, at, delay);

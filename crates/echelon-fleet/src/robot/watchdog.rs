@@ -1,6 +1,7 @@
 //! A robot's watchdogs: the odometry's age (every plant, simulated or a
-//! ROS 2 base) and, in a supervised run (`[fleet] operator_heartbeat`), the
-//! operator's heartbeat ([`crate::heartbeat`]). The leader stream's age is
+//! ROS 2 base), its commands' reader (a ROS 2 base's `cmd_vel` subscriber,
+//! [`Plant::command_reader_lost`]) and, in a supervised run (`[fleet]
+//! operator_heartbeat`), the operator's heartbeat ([`crate::heartbeat`]). The leader stream's age is
 //! the link-loss policy's ([`crate::link::predict`]).
 //!
 //! A watchdog that trips holds the robot: the tick is a standstill one,
@@ -36,6 +37,9 @@ pub enum Watchdog {
     Odometry,
     /// The operator's heartbeat is older than `operator_heartbeat`.
     Operator,
+    /// Its commands have no reader any more (a ROS 2 base's `cmd_vel`
+    /// subscriber gone: its driver crashed or was killed).
+    Output,
 }
 
 impl Watchdog {
@@ -44,6 +48,7 @@ impl Watchdog {
         match self {
             Watchdog::Odometry => "odometry",
             Watchdog::Operator => "operator",
+            Watchdog::Output => "output",
         }
     }
 }
@@ -58,6 +63,10 @@ pub struct WatchdogCounts {
     pub odometry: u64,
     /// Times a lost operator heartbeat held it.
     pub operator: u64,
+    /// Times its commands lost their reader (the base's `cmd_vel`
+    /// subscriber) and that held it.
+    #[serde(default)]
+    pub output: u64,
     /// Control ticks spent held by a watchdog.
     pub held_ticks: u64,
     /// Operator heartbeats accepted.
@@ -111,8 +120,11 @@ impl<P: Plant> Robot<P> {
                 .heartbeat
                 .is_none_or(|(_, at)| local - at > limit)
         });
+        let output_lost = self.plant.command_reader_lost();
         let holding = if odometry_stale {
             Some(Watchdog::Odometry)
+        } else if output_lost {
+            Some(Watchdog::Output)
         } else if operator_lost {
             Some(Watchdog::Operator)
         } else {
@@ -123,6 +135,13 @@ impl<P: Plant> Robot<P> {
             match holding {
                 Some(Watchdog::Odometry) => w.counts.odometry += 1,
                 Some(Watchdog::Operator) => w.counts.operator += 1,
+                Some(Watchdog::Output) => {
+                    w.counts.output += 1;
+                    eprintln!(
+                        "robot {}: its commands have no reader (the base's cmd_vel subscriber is gone): held",
+                        self.config.agent
+                    );
+                }
                 None => {}
             }
         }

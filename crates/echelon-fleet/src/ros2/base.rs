@@ -90,17 +90,22 @@ pub struct BaseTask {
     /// Its hazard and e-stop keys, when its link names them, and the
     /// hazards it reports.
     safety: BaseWords,
-    /// `--fault-at` (fleet time, window), the fleet's reference key, and
-    /// fleet time − its clock once the reference was heard.
+    /// With `--fault-at` or `--die-at`: the fleet's time, from its reference.
     fault: Option<FaultWatch>,
 }
 
-/// A base measuring what it does after a fault at a fleet time.
+/// A base that acts at fleet times (its clock is its own): it measures
+/// what it does after a fault (`--fault-at`), or kills itself
+/// (`--die-at`).
 #[derive(Debug)]
 struct FaultWatch {
-    at: f64,
-    window: Option<f64>,
+    /// `--fault-at`: the fault's fleet time and the measurement's window.
+    at: Option<(f64, Option<f64>)>,
+    /// `--die-at`, fleet time.
+    die_at: Option<f64>,
+    /// The fleet's reference key.
     reference: String,
+    /// Fleet time − its clock, once the reference was heard.
     offset: Option<f64>,
 }
 
@@ -123,7 +128,8 @@ const FIXES: usize = 2;
 impl Task for BaseTask {
     type Report = BaseReport;
 
-    /// Its `cmd_vel`; with `--fault-at`, also the fleet's reference.
+    /// Its `cmd_vel`; with `--fault-at` or `--die-at`, also the fleet's
+    /// reference.
     fn inputs(&self) -> Vec<String> {
         let mut keys = vec![self.cmd_key.clone()];
         keys.extend(self.fault.as_ref().map(|f| f.reference.clone()));
@@ -152,7 +158,9 @@ impl Task for BaseTask {
             {
                 let offset = r.t - s.at;
                 f.offset = Some(offset);
-                self.base.measure_from(f.at - offset, f.window);
+                if let Some((at, window)) = f.at {
+                    self.base.measure_from(at - offset, window);
+                }
             }
             return Ok(());
         }
@@ -174,6 +182,11 @@ impl Task for BaseTask {
     }
 
     fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
+        if let Some(f) = &self.fault
+            && let Some(offset) = f.offset
+        {
+            crate::faults::die_if_due(f.die_at, now + offset, "fleet base");
+        }
         if self.duration.is_some_and(|d| now >= d) {
             return Ok(Flow::Stop);
         }
@@ -208,7 +221,7 @@ impl Task for BaseTask {
             aftermath: self.fault.as_ref().and_then(|f| {
                 let a = base.base().aftermath()?;
                 Some(crate::faults::AftermathReport {
-                    fault_at: f.at,
+                    fault_at: f.at?.0,
                     ..a
                 })
             }),
@@ -377,11 +390,13 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                     windows: opts.hazards.clone(),
                     buf: Vec::with_capacity(128),
                 },
-                fault: opts.fault_at.map(|(at, window)| FaultWatch {
-                    at,
-                    window,
-                    reference: keys.reference(),
-                    offset: None,
+                fault: (opts.fault_at.is_some() || opts.process.die_at.is_some()).then(|| {
+                    FaultWatch {
+                        at: opts.fault_at,
+                        die_at: opts.process.die_at,
+                        reference: keys.reference(),
+                        offset: None,
+                    }
                 }),
             };
             Ok((task, tokens))

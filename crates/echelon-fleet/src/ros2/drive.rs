@@ -169,7 +169,20 @@ pub trait CmdSink {
     fn send_stop(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
         self.send(payload, attachment)
     }
+    /// Whether a reader of the commands is there now (Zenoh's matching
+    /// status of the `cmd_vel` publisher: the base's subscriber, through
+    /// the routers); `None` (the default): the sink cannot tell.
+    fn reader_present(&self) -> Option<bool> {
+        None
+    }
 }
+
+/// How long a `cmd_vel` without a reader is tolerated before the drive
+/// says so ([`Plant::command_reader_lost`]): a base that restarts, or a
+/// router's routes being rebuilt, is not lost at once. Fleet s.
+pub const READER_GRACE: f64 = 0.25;
+/// How often the reader is looked for, fleet s.
+pub const READER_CHECK: f64 = 0.05;
 
 /// What a ROS 2 drive counted.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
@@ -225,6 +238,8 @@ pub struct Ros2Drive<S: CmdSink> {
     t: f64,
     last_sent: VelocityCommand,
     counters: Ros2Counters,
+    /// When the reader was last looked for, and since when it is missing.
+    reader: (f64, Option<f64>),
 }
 
 impl<S: CmdSink> Ros2Drive<S> {
@@ -255,6 +270,7 @@ impl<S: CmdSink> Ros2Drive<S> {
             t: 0.0,
             last_sent: VelocityCommand::default(),
             counters: Ros2Counters::default(),
+            reader: (f64::NEG_INFINITY, None),
         }
     }
 
@@ -447,8 +463,23 @@ impl<S: CmdSink> Plant for Ros2Drive<S> {
         self.odom.map(|(_, at)| (self.t - at).max(0.0))
     }
 
+    /// Whether its `cmd_vel` has had no reader for [`READER_GRACE`] s
+    /// (the base's driver gone), as last looked for.
+    fn command_reader_lost(&self) -> bool {
+        self.reader
+            .1
+            .is_some_and(|since| self.t - since >= READER_GRACE)
+    }
+
     fn advance(&mut self, t: f64) {
         self.t = self.t.max(t);
+        if self.t - self.reader.0 >= READER_CHECK {
+            self.reader.0 = self.t;
+            self.reader.1 = match self.sink.reader_present() {
+                Some(false) => Some(self.reader.1.unwrap_or(self.t)),
+                _ => None,
+            };
+        }
         if let Some(f) = self.fixes.as_mut() {
             f.tick(self.t);
         }

@@ -164,6 +164,14 @@ impl CmdSink for OwnedCmdSink {
     fn now_ns(&self) -> i64 {
         crate::unix_nanos() as i64
     }
+    fn reader_present(&self) -> Option<bool> {
+        self.0
+            .each
+            .matching_status()
+            .wait()
+            .ok()
+            .map(|m| m.matching())
+    }
     fn send(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
         put(&self.0.each, payload, attachment)
     }

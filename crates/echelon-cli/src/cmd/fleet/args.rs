@@ -36,6 +36,8 @@ pub(crate) enum FleetCommand {
     Resume(ResumeArgs),
     /// The operator's heartbeat, a supervised run's deadman ([fleet] operator_heartbeat = T): robots hold while none arrived for T s; runs until --duration or SIGINT/SIGTERM.
     Heartbeat(HeartbeatArgs),
+    /// Put garbage, duplicates and replays on every key of the fleet from fleet time --from for --for seconds (a rehearsal of hostile input: the fleet must count and refuse it); runs until SIGINT/SIGTERM.
+    Garbage(GarbageArgs),
     /// Run the fault matrix (docs/faults.md): each fault on a simulated fleet over real Zenoh, the travel after it measured against its bound; writes DIR/faults.md and DIR/faults.json.
     Faults(FaultsArgs),
     /// Make a development CA and certificates for the secure mode.
@@ -276,13 +278,33 @@ pub(crate) struct HeartbeatArgs {
     pub(super) net: NetArgs,
 }
 
+/// `echelon fleet garbage`.
+#[derive(Debug, Args)]
+pub(crate) struct GarbageArgs {
+    /// A built-in scenario name or a path to a .toml file (its fleet).
+    pub(super) scenario: String,
+    /// Fleet time to start at, s.
+    #[arg(long, value_name = "S", value_parser = non_negative)]
+    pub(super) from: f64,
+    /// For how long, s.
+    #[arg(long = "for", value_name = "S", value_parser = positive)]
+    pub(super) length: f64,
+    /// Seed of the garbage (mixed with a random one).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub(super) seed: u64,
+    #[command(flatten)]
+    pub(super) clock: ClockArgs,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
 /// `echelon fleet faults`.
 #[derive(Debug, Args)]
 pub(crate) struct FaultsArgs {
     /// Where each row's fleet runs (DIR/<row>/) and the table goes (DIR/faults.md, DIR/faults.json).
     #[arg(long, value_name = "DIR")]
     pub(super) out: std::path::PathBuf,
-    /// Only the rows whose name contains this (repeatable) [default: every row].
+    /// Only the row of this name (repeatable) [default: every row].
     #[arg(long, value_name = "NAME")]
     pub(super) only: Vec<String>,
     /// Run each row's clock K times faster than real time.

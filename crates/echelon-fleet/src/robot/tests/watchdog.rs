@@ -135,3 +135,90 @@ fn heartbeats_returning_lift_the_hold_and_replays_do_not() {
     fleet.run_until(8.1);
     assert!(fleet.robot(0).watchdog_counts().heartbeats_refused > w.heartbeats_refused);
 }
+
+/// A simulated robot whose commands can lose their reader.
+#[derive(Debug)]
+struct Unread {
+    inner: SimulatedDrive,
+    lost: bool,
+}
+
+impl Plant for Unread {
+    fn state(&self) -> Option<State> {
+        self.inner.state()
+    }
+    fn advance(&mut self, t: f64) {
+        self.inner.advance(t);
+    }
+    fn command(&mut self, cmd: Command) -> crate::plant::Actuation {
+        self.inner.command(cmd)
+    }
+    fn stop(&mut self) {
+        self.inner.stop();
+    }
+    fn accelerations(&self) -> (f64, f64) {
+        self.inner.accelerations()
+    }
+    fn set_time(&mut self, t: f64) {
+        self.inner.set_time(t);
+    }
+    fn command_reader_lost(&self) -> bool {
+        self.lost
+    }
+}
+
+/// Robot 1 whose base's `cmd_vel` reader vanishes at 3 s and returns at
+/// 5 s, fed the reference by hand: held from its first tick after 3 s to
+/// its last before 5 s (link `held`, zero applied), following before and
+/// after; one output trip counted.
+#[test]
+fn a_robot_whose_commands_lose_their_reader_is_held_until_it_returns() {
+    let s = supervised(None);
+    let config = crate::testing::robot_config(&s, 1, FaultSpec::default());
+    let plant = Unread {
+        inner: SimulatedDrive::of(&config.spec, 0.0, PLANT_STEP),
+        lost: false,
+    };
+    let period = config.period;
+    let mut r = Robot::new(config, plant, 1);
+    let reference = reference(&s);
+    let mut buf = Vec::new();
+    let (mut seq, mut t) = (0, 0.0);
+    let mut links = Vec::new();
+    while t < 7.0 {
+        r.plant_mut().lost = (3.0..5.0).contains(&t);
+        reference_message(&mut buf, seq, t, &reference);
+        r.on_message(&buf, t);
+        seq += 1;
+        if r.is_due(t) {
+            let tick = r.tick(t);
+            if let Some((_, st)) = tick.publish {
+                links.push((t, st.link, r.plant().inner.applied()));
+            }
+        }
+        t += period / 2.0;
+    }
+    for (at, link, _) in &links {
+        let lost = (3.0..5.0).contains(at);
+        if *at > 1.0 && !lost {
+            assert_eq!(*link, LinkStatus::Tracking, "at {at}");
+        }
+        if lost && *at >= 3.0 + period {
+            assert_eq!(*link, LinkStatus::Held, "at {at}");
+        }
+    }
+    let held: Vec<_> = links
+        .iter()
+        .filter(|(_, l, _)| *l == LinkStatus::Held)
+        .collect();
+    assert!(
+        held.iter()
+            .all(|(at, _, a)| (3.0..5.0 + period).contains(at)
+                && a.velocity.is_none_or(|(v, _)| v.v == 0.0 && v.omega == 0.0)
+                && a.u.u1 == 0.0
+                && a.u.u2 == 0.0),
+        "{held:?}"
+    );
+    assert_eq!(r.watchdog_counts().output, 1);
+    assert_eq!(r.watchdog_counts().odometry, 0);
+}

@@ -14,6 +14,8 @@ pub(crate) struct Recorder {
     pub(crate) now: std::cell::Cell<i64>,
     /// The indices in `sent` of what went through `send_stop`.
     pub(crate) stops: Vec<usize>,
+    /// What it says of the commands' reader (`None`: cannot tell).
+    pub(crate) reader: Option<bool>,
 }
 
 impl CmdSink for Recorder {
@@ -28,6 +30,62 @@ impl CmdSink for Recorder {
     fn send_stop(&mut self, payload: &[u8], attachment: &[u8]) -> Result<(), String> {
         self.stops.push(self.sent.len());
         self.send(payload, attachment)
+    }
+    fn reader_present(&self) -> Option<bool> {
+        self.reader
+    }
+}
+
+proptest::proptest! {
+    /// The reader present or absent over random spans: the drive says it
+    /// is lost only when it has been absent for at least the grace (as
+    /// looked for every check), and always once absent for the grace and
+    /// one check; a sink that cannot tell is never lost.
+    #[test]
+    fn a_vanished_reader_is_lost_after_the_grace_and_only_then(
+        // Each span longer than two checks: a blip shorter than a check
+        // may pass unseen between two looks.
+        spans in proptest::collection::vec((proptest::bool::ANY, 0.1..1.0f64), 1..12),
+        can_tell in proptest::bool::ANY,
+    ) {
+        let mut d = drive(VelocityBase::IDEAL);
+        let mut t = 0.0;
+        let mut absent_since: Option<f64> = None;
+        // The last absence: how long it lasted, and when it ended.
+        let mut last_absence: Option<(f64, f64)> = None;
+        for (present, len) in spans {
+            d.sink_mut().reader = can_tell.then_some(present);
+            let end = t + len;
+            while t < end {
+                t += 0.01;
+                d.advance(t);
+                absent_since = match (can_tell, present, absent_since) {
+                    (true, false, since) => Some(since.unwrap_or(t)),
+                    (_, _, Some(since)) => {
+                        last_absence = Some((t - since, t));
+                        None
+                    }
+                    _ => None,
+                };
+                let lost = d.command_reader_lost();
+                let absent = absent_since.map_or(0.0, |s| t - s);
+                if lost {
+                    // Absent long enough now, or until a return the
+                    // drive has not looked for yet (within a check).
+                    let recent = last_absence.is_some_and(|(lasted, ended)| {
+                        lasted >= READER_GRACE - READER_CHECK - 0.011
+                            && t - ended <= READER_CHECK + 0.011
+                    });
+                    proptest::prop_assert!(
+                        absent >= READER_GRACE - READER_CHECK - 0.011 || recent,
+                        "lost after {absent} s absent ({last_absence:?})"
+                    );
+                }
+                if absent >= READER_GRACE + 2.0 * READER_CHECK + 0.02 {
+                    proptest::prop_assert!(lost, "not lost after {absent} s absent");
+                }
+            }
+        }
     }
 }
 

@@ -51,6 +51,9 @@ pub struct Chaos {
     /// `(start, length)`: garbage, duplicates and replays on every key of
     /// the fleet (`fleet garbage`, [`crate::garbage`]).
     pub garbage: Option<(f64, f64)>,
+    /// `(at, down)`: site 1's router killed with SIGKILL at fleet time
+    /// `at`, started again on its port `down` fleet s later.
+    pub router_restart: Option<(f64, f64)>,
 }
 
 impl Chaos {

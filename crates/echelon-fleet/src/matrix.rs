@@ -24,7 +24,8 @@
 //! `extrapolate`; a robot killed (its followers lose their leader); a
 //! robot killed while it drives a simulated ROS 2 base (the base's own
 //! `cmd_vel` timeout stops it, measured by the base, which learns the
-//! fleet's time from the reference); a robot's base killed (the robot's
+//! fleet's time from the reference); the router killed and started again
+//! 2 s later; garbage and replays on every key; a robot's base killed (the robot's
 //! output watchdog holds it, its followers stop); a robot's leader stream cut for
 //! 0.3 s, 3 s and 30 s; a robot's odometry frozen; the operator's
 //! heartbeat killed in a supervised run. Each row's
@@ -135,6 +136,8 @@ pub struct Row {
     chaos: Chaos,
     /// Fleet seconds measured after the fault.
     window: f64,
+    /// Fleet seconds it runs after the window (to follow again).
+    tail: f64,
 }
 
 /// The matrix's rows, in order.
@@ -163,6 +166,7 @@ pub fn rows() -> Vec<Row> {
             brake: Brake::Zero,
             chaos: kill(Member::Leader),
             window: WINDOW,
+            tail: TAIL,
         },
         Row {
             name: "leader-kill-extrapolate",
@@ -178,6 +182,7 @@ pub fn rows() -> Vec<Row> {
             brake: Brake::Extrapolate,
             chaos: kill(Member::Leader),
             window: WINDOW,
+            tail: TAIL,
         },
         Row {
             name: "robot-kill",
@@ -193,6 +198,7 @@ pub fn rows() -> Vec<Row> {
             brake: Brake::Zero,
             chaos: kill(Member::Robot(1)),
             window: WINDOW,
+            tail: TAIL,
         },
     ];
     rows.push(Row {
@@ -210,6 +216,7 @@ pub fn rows() -> Vec<Row> {
         brake: Brake::Zero,
         chaos: kill(Member::Robot(1)),
         window: WINDOW,
+        tail: TAIL,
     });
     rows.push(Row {
         name: "base-kill-ros2",
@@ -228,6 +235,28 @@ pub fn rows() -> Vec<Row> {
         brake: Brake::Zero,
         chaos: kill(Member::Base(1)),
         window: WINDOW,
+        tail: TAIL,
+    });
+    rows.push(Row {
+        name: "router-restart",
+        fault: "the router killed (`kill -9`) and started again on its port 2 s later",
+        action: "every process loses its link at once: each robot's leader stream goes stale (link-loss policy `stop`); the clients reconnect to the router when it is back and the robots follow again",
+        outcome: Outcome::Hold,
+        // Each robot's own stream is cut: each notices itself.
+        affected: vec![(1, 0), (2, 0), (3, 0)],
+        policy: "stop",
+        supervised: false,
+        ros2: false,
+        held_by: Vec::new(),
+        detect: LINK_TIMEOUT + 1.0 / REFERENCE_RATE,
+        brake: Brake::Zero,
+        chaos: Chaos {
+            router_restart: Some((at, 2.0)),
+            ..Chaos::default()
+        },
+        window: 2.0,
+        // Zenoh clients retry their router with a growing back-off.
+        tail: 10.0,
     });
     rows.push(Row {
         name: "garbage",
@@ -246,6 +275,7 @@ pub fn rows() -> Vec<Row> {
             ..Chaos::default()
         },
         window: WINDOW - 3.0,
+        tail: TAIL,
     });
     for (name, len, outcome) in [
         ("partition-0.3s", 0.3, Outcome::Continue),
@@ -270,6 +300,7 @@ pub fn rows() -> Vec<Row> {
             brake: Brake::Zero,
             chaos: cut(len),
             window: len,
+            tail: TAIL,
         });
     }
     rows.push(Row {
@@ -289,6 +320,7 @@ pub fn rows() -> Vec<Row> {
             ..Chaos::default()
         },
         window: 3.0,
+        tail: TAIL,
     });
     rows.push(Row {
         name: "heartbeat-lost",
@@ -305,6 +337,7 @@ pub fn rows() -> Vec<Row> {
         brake: Brake::Zero,
         chaos: kill(Member::Operator),
         window: WINDOW,
+        tail: TAIL,
     });
     rows
 }
@@ -332,7 +365,7 @@ impl Row {
 
     /// Fleet seconds it runs.
     fn duration(&self) -> f64 {
-        FAULT_AT + self.window.max(1.0) + TAIL
+        FAULT_AT + self.window.max(1.0) + self.tail
     }
 
     /// Its scenario.
@@ -757,7 +790,7 @@ pub fn markdown(r: &FaultsReport) -> String {
     }
     let _ = writeln!(
         s,
-        "\nNot yet in the matrix: the router killed and restarted, the collector killed (the robots do not depend on it), a robot's clock jumped, garbage and replayed messages on every key (covered on the fake clock and by `tests/fuzz_network.rs`, not as a row) and a second `fleet up` of the same fleet name (today each `fleet up` has a router of its own on loopback: two fleets of one name do not meet)."
+        "\nNot yet in the matrix: the collector killed (the robots do not depend on it; its log would end there), a robot's wall clock jumped (fleet time is monotonic, only the latency statistics see the wall clock) and a second `fleet up` of the same fleet name (today each `fleet up` has a router of its own on loopback: two fleets of one name do not meet)."
     );
     s
 }

@@ -41,6 +41,10 @@ pub struct RouterOptions {
     pub net: NetOptions,
     /// Stop after this much real time (tests); `None`: until the stop flag.
     pub max_wall: Option<Duration>,
+    /// Kill itself with SIGKILL once a reference it forwards reaches this
+    /// fleet time (`--die-at`: the fault matrix's router failure; it
+    /// learns the fleet's time from the references passing through).
+    pub die_at: Option<f64>,
 }
 
 /// What `fleet router` prints when it stops.
@@ -98,6 +102,23 @@ pub fn run(opts: &RouterOptions, stop: &StopFlag) -> Result<RouterReport, FleetE
         })
         .wait()
         .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
+    // The fleet's time, for `--die-at`, from any fleet's reference.
+    let _clock = match opts.die_at {
+        Some(at) => Some(
+            session
+                .declare_subscriber(crate::keys::Keys::any().reference())
+                .callback(move |s| {
+                    let payload = s.payload().to_bytes();
+                    if let Ok(crate::wire::Message::Reference(_, r)) = crate::wire::decode(&payload)
+                    {
+                        crate::faults::die_if_due(Some(at), r.t, "fleet router");
+                    }
+                })
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("the reference: {e}")))?,
+        ),
+        None => None,
+    };
     let listen = net.listen.clone();
     eprintln!("fleet router {} listening on {listen:?}", session.zid());
     while !stop.is_raised() && opts.max_wall.is_none_or(|m| started.elapsed() < m) {
@@ -136,6 +157,7 @@ mod tests {
                 &RouterOptions {
                     net: net.clone(),
                     max_wall,
+                    die_at: None,
                 },
                 stop,
             )

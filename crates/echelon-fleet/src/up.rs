@@ -348,6 +348,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         }
     }
     let mut routers = Vec::with_capacity(net.routers.len());
+    let mut router_args = Vec::with_capacity(net.routers.len());
     for (s, e) in net.routers.iter().enumerate() {
         let mut args = vec!["fleet".to_owned(), Role::Router.name().to_owned()];
         if opts.ros2 {
@@ -358,8 +359,19 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             args.extend(["--connect".to_owned(), other.clone()]);
         }
         args.extend(secure_args(&Member::Router.identity()));
-        routers.push(spawn(&opts.exe, &router_role(s + 1), &args, &[], &logs)?);
+        let mut first = args.clone();
+        if s == 0
+            && let Some((at, _)) = opts.chaos.router_restart
+        {
+            first.extend(["--die-at".to_owned(), at.to_string()]);
+        }
+        routers.push(spawn(&opts.exe, &router_role(s + 1), &first, &[], &logs)?);
+        router_args.push(args);
     }
+    // Site 1's router killed as asked (`router_restart`): when it died,
+    // and whether it was started again (its own arguments, on its port).
+    let mut router_down: Option<Instant> = None;
+    let mut router_restarted = false;
     let scale = opts.time_scale.to_string();
     let dur = duration.to_string();
     // `fleet ROLE SCENARIO` on the fleet's clock, to its end.
@@ -582,10 +594,31 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             );
             leader_failure = Some(f);
         }
+        // Site 1's router killed as asked: started again, on its port,
+        // once it has been down for the time asked.
+        if let Some((_, down)) = opts.chaos.router_restart
+            && !router_restarted
+            && routers[0].status.is_some()
+        {
+            let since = *router_down.get_or_insert_with(|| {
+                if let Some(f) = routers[0].failure() {
+                    eprintln!("fleet up: {f} (as asked: --die-at)");
+                    deaths.push((router_role(1), f));
+                }
+                Instant::now()
+            });
+            if since.elapsed().as_secs_f64() >= down / opts.time_scale {
+                let role = format!("{}-restarted", router_role(1));
+                routers[0] = spawn(&opts.exe, &role, &router_args[0], &[], &logs)?;
+                router_restarted = true;
+                eprintln!("fleet up: {} started again", router_role(1));
+            }
+        }
+        let awaited = router_down.is_some() && !router_restarted;
         let failed = living(&robots, &opts.chaos, Member::Robot)
             .chain(living(&base_procs, &opts.chaos, Member::Base))
             .chain(std::iter::once(&collector))
-            .chain(&routers)
+            .chain(routers.iter().skip(usize::from(awaited)))
             .find_map(Proc::failure);
         if let Some(f) = failed {
             for p in std::iter::once(&leader).chain(&robots).chain(&base_procs) {
@@ -594,7 +627,11 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             collector.terminate();
             return Err(FleetError::Child(f));
         }
-        if let Some(r) = routers.iter().find(|r| r.status.is_some()) {
+        if let Some(r) = routers
+            .iter()
+            .skip(usize::from(awaited))
+            .find(|r| r.status.is_some())
+        {
             return Err(FleetError::Child(format!("{} stopped early", r.role)));
         }
         if all_done {

@@ -320,6 +320,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                 &RouterOptions {
                     net,
                     max_wall: None,
+                    die_at: a.die_at,
                 },
                 &stop,
             )?;

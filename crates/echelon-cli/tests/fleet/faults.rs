@@ -104,6 +104,11 @@ fn robot_partitioned_for_30_s() {
 }
 
 #[test]
+fn router_killed_and_restarted() {
+    row("router-restart");
+}
+
+#[test]
 fn garbage_and_replays_on_every_key() {
     row("garbage");
 }

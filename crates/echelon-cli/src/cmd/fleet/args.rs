@@ -424,6 +424,9 @@ pub(crate) struct RouterArgs {
     /// `--listen` its endpoints, `--connect` other sites' routers (retried until they answer).
     #[command(flatten)]
     pub(super) net: NetArgs,
+    /// Kill itself with SIGKILL once a reference it forwards reaches fleet time S (a rehearsed router failure: docs/faults.md).
+    #[arg(long, value_name = "S", value_parser = non_negative)]
+    pub(super) die_at: Option<f64>,
 }
 
 /// How `fleet up` links its processes.

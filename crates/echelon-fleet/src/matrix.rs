@@ -140,6 +140,38 @@ pub struct Row {
     tail: f64,
 }
 
+/// A row under policy `stop` on simulated robots, unsupervised, braking
+/// with a zero command, measured for `window` s after the fault and run
+/// [`TAIL`] s more; each row states what differs.
+#[allow(clippy::too_many_arguments)]
+fn row(
+    name: &'static str,
+    fault: &'static str,
+    action: &'static str,
+    outcome: Outcome,
+    affected: Vec<(u32, u32)>,
+    detect: f64,
+    chaos: Chaos,
+    window: f64,
+) -> Row {
+    Row {
+        name,
+        fault,
+        action,
+        outcome,
+        affected,
+        policy: "stop",
+        supervised: false,
+        ros2: false,
+        held_by: Vec::new(),
+        detect,
+        brake: Brake::Zero,
+        chaos,
+        window,
+        tail: TAIL,
+    }
+}
+
 /// The matrix's rows, in order.
 pub fn rows() -> Vec<Row> {
     let at = FAULT_AT;
@@ -147,197 +179,174 @@ pub fn rows() -> Vec<Row> {
         kills: vec![(m, at)],
         ..Chaos::default()
     };
-    let cut = |len: f64| Chaos {
-        outages: vec![(1, (at, len))],
-        ..Chaos::default()
-    };
+    let chain = vec![(1, 0), (2, 1), (3, 2)];
+    // Each robot notices by itself.
+    let each = vec![(1, 0), (2, 0), (3, 0)];
+    let link_lost = LINK_TIMEOUT + 1.0 / REFERENCE_RATE;
     let mut rows = vec![
+        row(
+            "leader-kill-stop",
+            "the leader killed (`kill -9`), link_loss `stop`",
+            "the link times out; each robot converges to its slot behind the last reference received, at rest",
+            Outcome::Stop,
+            chain.clone(),
+            link_lost,
+            kill(Member::Leader),
+            WINDOW,
+        ),
         Row {
-            name: "leader-kill-stop",
-            fault: "the leader killed (`kill -9`), link_loss `stop`",
-            action: "the link times out; each robot converges to its slot behind the last reference received, at rest",
-            outcome: Outcome::Stop,
-            affected: vec![(1, 0), (2, 1), (3, 2)],
-            policy: "stop",
-            supervised: false,
-            ros2: false,
-            held_by: Vec::new(),
-            detect: LINK_TIMEOUT + 1.0 / REFERENCE_RATE,
-            brake: Brake::Zero,
-            chaos: kill(Member::Leader),
-            window: WINDOW,
-            tail: TAIL,
-        },
-        Row {
-            name: "leader-kill-extrapolate",
-            fault: "the leader killed (`kill -9`), link_loss `extrapolate` (hold 1 s, decel 0.1 m/s²)",
-            action: "the reference is carried on its arc for the hold, then slowed to rest",
-            outcome: Outcome::Stop,
-            affected: vec![(1, 0), (2, 1), (3, 2)],
             policy: "extrapolate",
-            supervised: false,
-            ros2: false,
-            held_by: Vec::new(),
-            detect: 1.0 / REFERENCE_RATE,
             brake: Brake::Extrapolate,
-            chaos: kill(Member::Leader),
-            window: WINDOW,
-            tail: TAIL,
+            ..row(
+                "leader-kill-extrapolate",
+                "the leader killed (`kill -9`), link_loss `extrapolate` (hold 1 s, decel 0.1 m/s²)",
+                "the reference is carried on its arc for the hold, then slowed to rest",
+                Outcome::Stop,
+                chain.clone(),
+                1.0 / REFERENCE_RATE,
+                kill(Member::Leader),
+                WINDOW,
+            )
+        },
+        row(
+            "robot-kill",
+            "robot 1's process killed (`kill -9`); its simulated base dies with it",
+            "robots 2 and 3 lose their leader (robot 1's state): link-loss policy `stop`",
+            Outcome::Stop,
+            vec![(2, 0), (3, 1)],
+            LINK_TIMEOUT + 1.0 / CONTROL_RATE,
+            kill(Member::Robot(1)),
+            WINDOW,
+        ),
+        Row {
+            ros2: true,
+            ..row(
+                "robot-kill-ros2",
+                "robot 1's process killed (`kill -9`) while it drives a simulated ROS 2 base (`cmd_vel_timeout` 0.5 s, as a Create 3)",
+                "robot 1's base stops on its own `cmd_vel` timeout, 0.5 s after the last command (robots 2 and 3 lose their leader, as in `robot-kill`)",
+                Outcome::Stop,
+                vec![(1, 0)],
+                // The base checks its timeout at its odometry rate.
+                CMD_VEL_TIMEOUT + 1.0 / ODOM_RATE,
+                kill(Member::Robot(1)),
+                WINDOW,
+            )
         },
         Row {
-            name: "robot-kill",
-            fault: "robot 1's process killed (`kill -9`); its simulated base dies with it",
-            action: "robots 2 and 3 lose their leader (robot 1's state): link-loss policy `stop`",
-            outcome: Outcome::Stop,
-            affected: vec![(2, 0), (3, 1)],
-            policy: "stop",
-            supervised: false,
-            ros2: false,
-            held_by: Vec::new(),
-            detect: LINK_TIMEOUT + 1.0 / CONTROL_RATE,
-            brake: Brake::Zero,
-            chaos: kill(Member::Robot(1)),
-            window: WINDOW,
-            tail: TAIL,
+            ros2: true,
+            held_by: vec![(1, Watchdog::Odometry)],
+            ..row(
+                "base-kill-ros2",
+                "robot 1's simulated ROS 2 base killed (`kill -9`): no odometry, no `cmd_vel` reader",
+                "robot 1's odometry watchdog holds it (zero command, link `held`, reported) once its odometry is `odom_timeout` old (its output watchdog cannot tell here: the collector, recording `cmd_vel`, is a reader too); robots 2 and 3 do not follow a held leader: link-loss policy `stop`",
+                Outcome::Stop,
+                vec![(2, 0), (3, 1)],
+                echelon::scenario::DEFAULT_ODOM_TIMEOUT
+                    + 1.0 / ODOM_RATE
+                    + 1.0 / CONTROL_RATE
+                    + LINK_TIMEOUT,
+                kill(Member::Base(1)),
+                WINDOW,
+            )
         },
-    ];
-    rows.push(Row {
-        name: "robot-kill-ros2",
-        fault: "robot 1's process killed (`kill -9`) while it drives a simulated ROS 2 base (`cmd_vel_timeout` 0.5 s, as a Create 3)",
-        action: "robot 1's base stops on its own `cmd_vel` timeout, 0.5 s after the last command (robots 2 and 3 lose their leader, as in `robot-kill`)",
-        outcome: Outcome::Stop,
-        affected: vec![(1, 0)],
-        policy: "stop",
-        supervised: false,
-        ros2: true,
-        held_by: Vec::new(),
-        // The base checks its timeout at its odometry rate.
-        detect: CMD_VEL_TIMEOUT + 1.0 / ODOM_RATE,
-        brake: Brake::Zero,
-        chaos: kill(Member::Robot(1)),
-        window: WINDOW,
-        tail: TAIL,
-    });
-    rows.push(Row {
-        name: "base-kill-ros2",
-        fault: "robot 1's simulated ROS 2 base killed (`kill -9`): no odometry, no `cmd_vel` reader",
-        action: "robot 1's odometry watchdog holds it (zero command, link `held`, reported) once its odometry is `odom_timeout` old (its output watchdog cannot tell here: the collector, recording `cmd_vel`, is a reader too); robots 2 and 3 do not follow a held leader: link-loss policy `stop`",
-        outcome: Outcome::Stop,
-        affected: vec![(2, 0), (3, 1)],
-        policy: "stop",
-        supervised: false,
-        ros2: true,
-        held_by: vec![(1, Watchdog::Odometry)],
-        detect: echelon::scenario::DEFAULT_ODOM_TIMEOUT
-            + 1.0 / ODOM_RATE
-            + 1.0 / CONTROL_RATE
-            + LINK_TIMEOUT,
-        brake: Brake::Zero,
-        chaos: kill(Member::Base(1)),
-        window: WINDOW,
-        tail: TAIL,
-    });
-    rows.push(Row {
-        name: "router-restart",
-        fault: "the router killed (`kill -9`) and started again on its port 2 s later",
-        action: "every process loses its link at once: each robot's leader stream goes stale (link-loss policy `stop`); the clients reconnect to the router when it is back and the robots follow again",
-        outcome: Outcome::Hold,
-        // Each robot's own stream is cut: each notices itself.
-        affected: vec![(1, 0), (2, 0), (3, 0)],
-        policy: "stop",
-        supervised: false,
-        ros2: false,
-        held_by: Vec::new(),
-        detect: LINK_TIMEOUT + 1.0 / REFERENCE_RATE,
-        brake: Brake::Zero,
-        chaos: Chaos {
-            router_restart: Some((at, 2.0)),
-            ..Chaos::default()
+        Row {
+            // Zenoh clients retry their router with a growing back-off.
+            tail: 10.0,
+            ..row(
+                "router-restart",
+                "the router killed (`kill -9`) and started again on its port 2 s later",
+                "every process loses its link at once: each robot's leader stream goes stale (link-loss policy `stop`); the clients reconnect to the router when it is back and the robots follow again",
+                Outcome::Hold,
+                each.clone(),
+                link_lost,
+                Chaos {
+                    router_restart: Some((at, 2.0)),
+                    ..Chaos::default()
+                },
+                2.0,
+            )
         },
-        window: 2.0,
-        // Zenoh clients retry their router with a growing back-off.
-        tail: 10.0,
-    });
-    rows.push(Row {
-        name: "garbage",
-        fault: "garbage, duplicated and replayed (1 s old) messages on every key of the fleet, 20 times a second for 5 s",
-        action: "every robot counts and refuses what is not a newer sample of its streams (malformed, reordered) and follows on",
-        outcome: Outcome::Unaffected,
-        affected: vec![(1, 0), (2, 0), (3, 0)],
-        policy: "stop",
-        supervised: false,
-        ros2: false,
-        held_by: Vec::new(),
-        detect: 0.0,
-        brake: Brake::Zero,
-        chaos: Chaos {
-            garbage: Some((at, WINDOW - 3.0)),
-            ..Chaos::default()
-        },
-        window: WINDOW - 3.0,
-        tail: TAIL,
-    });
-    for (name, len, outcome) in [
-        ("partition-0.3s", 0.3, Outcome::Continue),
-        ("partition-3s", 3.0, Outcome::Hold),
-        ("partition-30s", 30.0, Outcome::Hold),
-    ] {
-        rows.push(Row {
-            name,
-            fault: match name {
-                "partition-0.3s" => "robot 1 cut from its leader stream for 0.3 s",
-                "partition-3s" => "robot 1 cut from its leader stream for 3 s",
-                _ => "robot 1 cut from its leader stream for 30 s",
+        row(
+            "garbage",
+            "garbage, duplicated and replayed (1 s old) messages on every key of the fleet, 20 times a second for 5 s",
+            "every robot counts and refuses what is not a newer sample of its streams (malformed, reordered) and follows on",
+            Outcome::Unaffected,
+            each.clone(),
+            0.0,
+            Chaos {
+                garbage: Some((at, 5.0)),
+                ..Chaos::default()
             },
-            action: "after the link timeout robot 1 converges to the last reference (policy `stop`), robots 2 and 3 follow it; all follow again when the stream returns",
+            5.0,
+        ),
+    ];
+    for (name, fault, len, outcome) in [
+        (
+            "partition-0.3s",
+            "robot 1 cut from its leader stream for 0.3 s",
+            0.3,
+            Outcome::Continue,
+        ),
+        (
+            "partition-3s",
+            "robot 1 cut from its leader stream for 3 s",
+            3.0,
+            Outcome::Hold,
+        ),
+        (
+            "partition-30s",
+            "robot 1 cut from its leader stream for 30 s",
+            30.0,
+            Outcome::Hold,
+        ),
+    ] {
+        rows.push(row(
+            name,
+            fault,
+            "after the link timeout robot 1 converges to the last reference (policy `stop`), robots 2 and 3 follow it; all follow again when the stream returns",
             outcome,
-            affected: vec![(1, 0), (2, 1), (3, 2)],
-            policy: "stop",
-            supervised: false,
-        ros2: false,
-        held_by: Vec::new(),
-            detect: LINK_TIMEOUT + 1.0 / REFERENCE_RATE,
-            brake: Brake::Zero,
-            chaos: cut(len),
-            window: len,
-            tail: TAIL,
-        });
+            chain.clone(),
+            link_lost,
+            Chaos {
+                outages: vec![(1, (at, len))],
+                ..Chaos::default()
+            },
+            len,
+        ));
     }
     rows.push(Row {
-        name: "odometry-freeze",
-        fault: "robot 2's odometry frozen for 3 s (the robot moves on)",
-        action: "robot 2's odometry watchdog holds it (zero command, link `held`) after two control periods; robot 3 stops following a held leader (its link-loss policy)",
-        outcome: Outcome::Hold,
-        affected: vec![(2, 0)],
-        policy: "stop",
-        supervised: false,
-        ros2: false,
         held_by: vec![(2, Watchdog::Odometry)],
-        detect: 2.0 / CONTROL_RATE,
-        brake: Brake::Zero,
-        chaos: Chaos {
-            freeze_odometry: vec![(2, (at, 3.0))],
-            ..Chaos::default()
-        },
-        window: 3.0,
-        tail: TAIL,
+        ..row(
+            "odometry-freeze",
+            "robot 2's odometry frozen for 3 s (the robot moves on)",
+            "robot 2's odometry watchdog holds it (zero command, link `held`) after two control periods; robot 3 stops following a held leader (its link-loss policy)",
+            Outcome::Hold,
+            vec![(2, 0)],
+            2.0 / CONTROL_RATE,
+            Chaos {
+                freeze_odometry: vec![(2, (at, 3.0))],
+                ..Chaos::default()
+            },
+            3.0,
+        )
     });
     rows.push(Row {
-        name: "heartbeat-lost",
-        fault: "supervised run (operator_heartbeat = 1 s): the operator's heartbeat process killed (`kill -9`)",
-        action: "every robot's operator watchdog holds it (zero command, link `held`) once the last heartbeat is 1 s old",
-        outcome: Outcome::Stop,
-        // Each robot's own watchdog notices.
-        affected: vec![(1, 0), (2, 0), (3, 0)],
-        policy: "stop",
         supervised: true,
-        ros2: false,
-        held_by: vec![(1, Watchdog::Operator), (2, Watchdog::Operator), (3, Watchdog::Operator)],
-        detect: HEARTBEAT,
-        brake: Brake::Zero,
-        chaos: kill(Member::Operator),
-        window: WINDOW,
-        tail: TAIL,
+        held_by: vec![
+            (1, Watchdog::Operator),
+            (2, Watchdog::Operator),
+            (3, Watchdog::Operator),
+        ],
+        ..row(
+            "heartbeat-lost",
+            "supervised run (operator_heartbeat = 1 s): the operator's heartbeat process killed (`kill -9`)",
+            "every robot's operator watchdog holds it (zero command, link `held`) once the last heartbeat is 1 s old",
+            Outcome::Stop,
+            each,
+            HEARTBEAT,
+            kill(Member::Operator),
+            WINDOW,
+        )
     });
     rows
 }

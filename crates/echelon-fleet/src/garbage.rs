@@ -36,7 +36,7 @@ pub struct GarbageReport {
     pub garbage: u64,
     /// Newest payloads put again.
     pub duplicates: u64,
-    /// Payloads about [`REPLAY_AGE`] s old put again.
+    /// Payloads about a second old (`REPLAY_AGE`) put again.
     pub replays: u64,
     /// Keys it heard.
     pub keys: u64,

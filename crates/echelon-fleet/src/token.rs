@@ -84,7 +84,7 @@ fn unhex(s: &str) -> Option<Vec<u8>> {
         .collect()
 }
 
-/// The bytes a proof signs: [`DOMAIN`], then the command's version (4
+/// The bytes a proof signs: `DOMAIN`, then the command's version (4
 /// bytes), order name, sequence number (8 bytes), stamp (8 bytes), sender
 /// and reason, integers big-endian, each text preceded by its length in
 /// bytes (4 bytes big-endian), so that no two commands share them.

@@ -28,6 +28,9 @@ pub struct FaultSpec {
     pub fault_at: Option<f64>,
     /// For how long after `fault_at` it measures, s (`None`: to the end).
     pub fault_window: Option<f64>,
+    /// `(at, step)`: the process's wall clock steps by `step` s at fleet
+    /// time `at` (an NTP step; fleet time is monotonic).
+    pub wall_clock_jump: Option<(f64, f64)>,
 }
 
 /// Faults `fleet up` injects into its own processes at fleet times: the
@@ -54,6 +57,8 @@ pub struct Chaos {
     /// `(at, down)`: site 1's router killed with SIGKILL at fleet time
     /// `at`, started again on its port `down` fleet s later.
     pub router_restart: Option<(f64, f64)>,
+    /// Robot `k`'s wall clock stepped by `step` s at fleet time `at`.
+    pub wall_clock_jumps: Vec<(u32, (f64, f64))>,
 }
 
 impl Chaos {

@@ -135,7 +135,18 @@ impl StopFlag {
 
 /// The wall-clock time now in UNIX nanoseconds (MCAP `log_time` of the collector).
 pub(crate) fn unix_nanos() -> u64 {
-    std::time::SystemTime::now()
+    let now = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
+        .map_or(0, |d| d.as_nanos() as u64);
+    now.saturating_add_signed(WALL_CLOCK_JUMP.load(std::sync::atomic::Ordering::Relaxed))
+}
+
+/// What the process's wall clock was stepped by, ns (`--wall-clock-jump`:
+/// a rehearsed NTP step; fleet time is monotonic and does not see it).
+static WALL_CLOCK_JUMP: std::sync::atomic::AtomicI64 = std::sync::atomic::AtomicI64::new(0);
+
+/// Steps this process's wall clock (every stamp it writes and reads) by
+/// `ns`: the fault matrix's clock jump.
+pub(crate) fn jump_wall_clock(ns: i64) {
+    WALL_CLOCK_JUMP.fetch_add(ns, std::sync::atomic::Ordering::Relaxed);
 }

@@ -759,6 +759,11 @@ fn chaos_args(chaos: &Chaos, member: Member) -> Vec<String> {
     {
         a.extend(["--freeze-odometry".to_owned(), format!("{s}:{l}")]);
     }
+    if let Member::Robot(k) = member
+        && let Some((_, (at, step))) = chaos.wall_clock_jumps.iter().find(|(j, _)| *j == k)
+    {
+        a.push(format!("--wall-clock-jump={at}:{step}"));
+    }
     if matches!(member, Member::Robot(_) | Member::Base(_))
         && let Some(t) = chaos.fault_at
     {

@@ -45,6 +45,8 @@ pub struct RobotTask<P: Plant = SimulatedDrive> {
     die_at: Option<f64>,
     /// Whether it has ticked (it says what it lacks at its first tick).
     started: bool,
+    /// Whether its `--wall-clock-jump` happened.
+    jumped: bool,
 }
 
 impl<P: Plant> RobotTask<P> {
@@ -62,6 +64,7 @@ impl<P: Plant> RobotTask<P> {
             dropped: 0,
             die_at: None,
             started: false,
+            jumped: false,
         }
     }
 
@@ -220,6 +223,15 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         }
         if self.robot.is_synced() {
             crate::faults::die_if_due(self.die_at, self.robot.fleet_time(now), "fleet robot");
+        }
+        if let Some((at, step)) = self.robot.config().faults.wall_clock_jump
+            && !self.jumped
+            && self.robot.is_synced()
+            && self.robot.fleet_time(now) >= at
+        {
+            self.jumped = true;
+            eprintln!("fleet robot: --wall-clock-jump: the wall clock steps by {step} s");
+            crate::jump_wall_clock((step * 1e9) as i64);
         }
         if !self.started {
             self.started = true;

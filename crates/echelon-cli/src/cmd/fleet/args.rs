@@ -161,6 +161,16 @@ pub(crate) struct FaultArgs {
     /// With --fault-at: measure for LEN s only [default: to the end].
     #[arg(long, value_name = "LEN", value_parser = positive, requires = "fault_at")]
     pub(super) fault_window: Option<f64>,
+    /// Step this process's wall clock by STEP s (may be negative) at fleet time AT (a rehearsed NTP step; fleet time is monotonic).
+    #[arg(long, value_name = "AT:STEP", value_parser = clock_jump, allow_hyphen_values = true)]
+    pub(super) wall_clock_jump: Option<(f64, f64)>,
+}
+
+fn clock_jump(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(':')
+        .ok_or_else(|| format!("`{s}` is not AT:STEP (seconds)"))?;
+    Ok((non_negative(a)?, parse_number(b)?))
 }
 
 impl FaultArgs {
@@ -173,6 +183,7 @@ impl FaultArgs {
             freeze_odometry: self.freeze_odometry,
             fault_at: self.fault_at,
             fault_window: self.fault_window,
+            wall_clock_jump: self.wall_clock_jump,
         }
     }
 }

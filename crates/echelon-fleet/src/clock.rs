@@ -64,6 +64,48 @@ impl FleetClock {
     }
 }
 
+/// The fleet's time as a process that follows no one learns it: from the
+/// leader's reference samples it hears, each one's time less its arrival on
+/// the process's own clock. For the processes that act at fleet times
+/// (`--die-at`, `--fault-at`, `fleet garbage --from`) without a leader
+/// stream of their own: the operator's heartbeat, a simulated base, `fleet
+/// garbage`, a router.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ReferenceTime {
+    /// Fleet time − local time, from the newest reference heard.
+    offset: Option<f64>,
+}
+
+impl ReferenceTime {
+    /// The time of the reference sample `payload`, if it is one.
+    pub fn of(payload: &[u8]) -> Option<f64> {
+        match crate::wire::decode(payload) {
+            Ok(crate::wire::Message::Reference(_, r)) => Some(r.t),
+            _ => None,
+        }
+    }
+
+    /// Takes `payload`, arrived at local time `at`: a reference sample
+    /// sets the offset. Whether it was one.
+    pub fn hear(&mut self, payload: &[u8], at: f64) -> bool {
+        let Some(t) = Self::of(payload) else {
+            return false;
+        };
+        self.offset = Some(t - at);
+        true
+    }
+
+    /// Fleet time − local time (`None`: no reference heard yet).
+    pub fn offset(&self) -> Option<f64> {
+        self.offset
+    }
+
+    /// Fleet time at local time `local` (`None`: no reference heard yet).
+    pub fn at(&self, local: f64) -> Option<f64> {
+        self.offset.map(|o| local + o)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -15,6 +15,7 @@ use serde::Serialize;
 
 use echelon::rng::SplitMix64;
 
+use crate::clock::ReferenceTime;
 use crate::keys::Keys;
 use crate::options::{ProcessOptions, Resolved};
 use crate::runtime::{Flow, Outputs, Sample, Task};
@@ -58,8 +59,8 @@ pub struct GarbageTask {
     until: f64,
     rng: SplitMix64,
     heard: BTreeMap<String, Heard>,
-    /// Fleet time − its clock, from the reference.
-    offset: Option<f64>,
+    /// The fleet's time, from the reference.
+    fleet: ReferenceTime,
     next: f64,
     report: GarbageReport,
     /// Its garbage starts with these 8 random bytes: it hears its own
@@ -77,7 +78,7 @@ impl GarbageTask {
             until: from + length,
             rng: SplitMix64::new(seed),
             heard: BTreeMap::new(),
-            offset: None,
+            fleet: ReferenceTime::default(),
             next: 0.0,
             report: GarbageReport::default(),
             marker: SplitMix64::new(seed ^ 0x6761_7262_6167_6521)
@@ -113,15 +114,12 @@ impl Task for GarbageTask {
         if s.payload.starts_with(&self.marker) {
             return Ok(());
         }
-        if s.key == self.keys.reference()
-            && let Ok(crate::wire::Message::Reference(_, r)) = crate::wire::decode(s.payload)
-        {
-            self.offset = Some(r.t - s.at);
+        if s.key == self.keys.reference() {
+            self.fleet.hear(s.payload, s.at);
         }
-        let Some(offset) = self.offset else {
+        let Some(t) = self.fleet.at(s.at) else {
             return Ok(());
         };
-        let t = s.at + offset;
         if !self.heard.contains_key(s.key) && self.heard.len() >= MAX_KEYS {
             return Ok(());
         }
@@ -145,10 +143,9 @@ impl Task for GarbageTask {
 
     fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
         self.next = now + 1.0 / RATE;
-        let Some(offset) = self.offset else {
+        let Some(t) = self.fleet.at(now) else {
             return Ok(Flow::Continue);
         };
-        let t = now + offset;
         if t < self.from || t >= self.until {
             return Ok(Flow::Continue);
         }

@@ -11,6 +11,7 @@
 //! number (u64), little-endian. A robot accepts one numbered above the
 //! last of its source, or from a new source (a restarted sender).
 
+use crate::clock::ReferenceTime;
 use crate::keys::Keys;
 use crate::options::{ProcessOptions, Resolved};
 use crate::role::Member;
@@ -68,9 +69,9 @@ pub struct HeartbeatTask {
     die_at: Option<f64>,
     next: f64,
     seq: u64,
-    /// Fleet time − its clock, from the leader's reference (`None`: none
-    /// heard yet): `--die-at` is a fleet time.
-    offset: Option<f64>,
+    /// The fleet's time, from the leader's reference: `--die-at` is a
+    /// fleet time.
+    fleet: ReferenceTime,
 }
 
 impl HeartbeatTask {
@@ -92,7 +93,7 @@ impl HeartbeatTask {
             die_at,
             next: 0.0,
             seq: 0,
-            offset: None,
+            fleet: ReferenceTime::default(),
         }
     }
 
@@ -132,9 +133,7 @@ impl Task for HeartbeatTask {
         _input: usize,
         sample: &crate::runtime::Sample<'_>,
     ) -> Result<(), FleetError> {
-        if let Ok(crate::wire::Message::Reference(_, r)) = crate::wire::decode(sample.payload) {
-            self.offset = Some(r.t - sample.at);
-        }
+        self.fleet.hear(sample.payload, sample.at);
         Ok(())
     }
 
@@ -143,8 +142,8 @@ impl Task for HeartbeatTask {
     }
 
     fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
-        if let Some(offset) = self.offset {
-            crate::faults::die_if_due(self.die_at, now + offset, "fleet heartbeat");
+        if let Some(t) = self.fleet.at(now) {
+            crate::faults::die_if_due(self.die_at, t, "fleet heartbeat");
         }
         if self.duration.is_some_and(|d| now >= d) {
             return Ok(Flow::Stop);

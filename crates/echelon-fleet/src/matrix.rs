@@ -78,6 +78,8 @@ const HOP_DELIVERY: f64 = 0.01;
 /// defaults of `[fleet.ros2]`), s and Hz.
 const CMD_VEL_TIMEOUT: f64 = echelon::scenario::DEFAULT_CMD_VEL_TIMEOUT;
 const ODOM_RATE: f64 = echelon::scenario::DEFAULT_ODOM_RATE;
+/// How far apart the column's slots are, m.
+const SPACING: f64 = 0.4;
 /// The TurtleBot 4's base: lag τ_v, s, and linear acceleration limit, m/s².
 const TAU_V: f64 = 0.1;
 const A_MAX: f64 = 0.9;
@@ -446,33 +448,30 @@ link_timeout = {LINK_TIMEOUT}
 policy = "{policy}"
 hold = {HOLD}
 decel = {DECEL}
-
-[[agents]]
-name = "tb4 1"
-robot = "tb4"
-start = {{ x = -0.4, y = 0.0, theta_deg = 0.0 }}
-leader = "reference"
-offset = {{ x = 0.4, y = 0.0 }}
-
-[[agents]]
-name = "tb4 2"
-robot = "tb4"
-start = {{ x = -0.8, y = 0.0, theta_deg = 0.0 }}
-leader = 1
-offset = {{ x = 0.4, y = 0.0 }}
-
-[[agents]]
-name = "tb4 3"
-robot = "tb4"
-start = {{ x = -1.2, y = 0.0, theta_deg = 0.0 }}
-leader = 2
-offset = {{ x = 0.4, y = 0.0 }}
-"#,
+{agents}"#,
             name = self.name,
             duration = self.duration(),
             policy = self.policy,
+            agents = column(),
         )
     }
+}
+
+/// The column's agents: robot 1 [`SPACING`] behind the reference, each
+/// next one `SPACING` behind the one before, every one on its slot.
+fn column() -> String {
+    (1..=3u32)
+        .map(|k| {
+            let leader = match k {
+                1 => "\"reference\"".to_owned(),
+                k => (k - 1).to_string(),
+            };
+            format!(
+                "\n[[agents]]\nname = \"tb4 {k}\"\nrobot = \"tb4\"\nstart = {{ x = {:.1}, y = 0.0, theta_deg = 0.0 }}\nleader = {leader}\noffset = {{ x = {SPACING}, y = 0.0 }}\n",
+                -SPACING * f64::from(k)
+            )
+        })
+        .collect()
 }
 
 /// One affected robot's measurement.

@@ -202,12 +202,10 @@ impl NeighbourTable {
                     LinkStatus::Stopped | LinkStatus::Held | LinkStatus::Waiting
                 );
                 if !acting {
-                    self.list.push(Neighbour {
-                        p: point(&e.state.state, l),
-                        cooperative: false,
-                        margin: uncertainty_margin(sigma, e.state.sigma),
-                        ..Neighbour::default()
-                    });
+                    self.list.push(at_rest(
+                        point(&e.state.state, l),
+                        uncertainty_margin(sigma, e.state.sigma),
+                    ));
                     continue;
                 }
                 let (s, dv) = advance(&e.state, dt);
@@ -231,18 +229,26 @@ impl NeighbourTable {
             if age > self.timeout + self.hold {
                 brake = true;
             }
-            self.list.push(Neighbour {
-                p: q,
-                cooperative: false,
-                margin: uncertainty_margin(sigma, e.state.sigma),
-                ..Neighbour::default()
-            });
+            self.list
+                .push(at_rest(q, uncertainty_margin(sigma, e.state.sigma)));
         }
         if brake {
             Sight::Stale
         } else {
             Sight::Neighbours(&self.list)
         }
+    }
+}
+
+/// A neighbour taken as an obstacle at rest at its point `p`, with no
+/// share of the barrier, its radius widened by `margin`: a halted robot,
+/// or one whose stream went stale.
+fn at_rest(p: [f64; 2], margin: f64) -> Neighbour {
+    Neighbour {
+        p,
+        cooperative: false,
+        margin,
+        ..Neighbour::default()
     }
 }
 

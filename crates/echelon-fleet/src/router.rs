@@ -108,10 +108,8 @@ pub fn run(opts: &RouterOptions, stop: &StopFlag) -> Result<RouterReport, FleetE
             session
                 .declare_subscriber(crate::keys::Keys::any().reference())
                 .callback(move |s| {
-                    let payload = s.payload().to_bytes();
-                    if let Ok(crate::wire::Message::Reference(_, r)) = crate::wire::decode(&payload)
-                    {
-                        crate::faults::die_if_due(Some(at), r.t, "fleet router");
+                    if let Some(t) = crate::clock::ReferenceTime::of(&s.payload().to_bytes()) {
+                        crate::faults::die_if_due(Some(at), t, "fleet router");
                     }
                 })
                 .wait()

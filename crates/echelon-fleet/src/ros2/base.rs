@@ -105,8 +105,8 @@ struct FaultWatch {
     die_at: Option<f64>,
     /// The fleet's reference key.
     reference: String,
-    /// Fleet time − its clock, once the reference was heard.
-    offset: Option<f64>,
+    /// The fleet's time, from the first reference heard.
+    fleet: crate::clock::ReferenceTime,
 }
 
 /// What a simulated base says of its own safety (a Create 3's hazards, an
@@ -152,15 +152,12 @@ impl Task for BaseTask {
         if input == 1 {
             // The reference, for the fleet's time: the first sample arms
             // the measurement at the fault's time on its own clock.
-            if let (Some(f), Ok(crate::wire::Message::Reference(_, r))) =
-                (self.fault.as_mut(), crate::wire::decode(s.payload))
-                && f.offset.is_none()
+            if let Some(f) = self.fault.as_mut()
+                && f.fleet.offset().is_none()
+                && f.fleet.hear(s.payload, s.at)
+                && let (Some((at, window)), Some(offset)) = (f.at, f.fleet.offset())
             {
-                let offset = r.t - s.at;
-                f.offset = Some(offset);
-                if let Some((at, window)) = f.at {
-                    self.base.measure_from(at - offset, window);
-                }
+                self.base.measure_from(at - offset, window);
             }
             return Ok(());
         }
@@ -183,9 +180,9 @@ impl Task for BaseTask {
 
     fn tick(&mut self, now: f64, out: &mut dyn Outputs) -> Result<Flow, FleetError> {
         if let Some(f) = &self.fault
-            && let Some(offset) = f.offset
+            && let Some(t) = f.fleet.at(now)
         {
-            crate::faults::die_if_due(f.die_at, now + offset, "fleet base");
+            crate::faults::die_if_due(f.die_at, t, "fleet base");
         }
         if self.duration.is_some_and(|d| now >= d) {
             return Ok(Flow::Stop);
@@ -395,7 +392,7 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                         at: opts.fault_at,
                         die_at: opts.process.die_at,
                         reference: keys.reference(),
-                        offset: None,
+                        fleet: crate::clock::ReferenceTime::default(),
                     }
                 }),
             };

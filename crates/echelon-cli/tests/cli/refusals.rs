@@ -623,3 +623,46 @@ fn fleet_resume_needs_the_operator_token() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--token"), "{}", stderr(&o));
 }
+
+/// `[fleet] operator_heartbeat` is refused at its place (file, line,
+/// column, field; exit 2, nothing started) when it is not a positive
+/// number of seconds in its plausible range, by every process that reads
+/// it; `fleet heartbeat` on a scenario that asks for none says so (exit 2).
+#[test]
+fn the_operator_heartbeat_is_refused_at_its_place() {
+    let dir = tempfile::tempdir().unwrap();
+    for (value, needles) in [
+        (
+            "0.0",
+            &["s.toml:15:22: fleet.operator_heartbeat", "> 0"][..],
+        ),
+        (
+            "-1.0",
+            &["s.toml:15:22: fleet.operator_heartbeat", "> 0"][..],
+        ),
+        (
+            "1e5",
+            &["s.toml:15:22: fleet.operator_heartbeat", "0.01 to 3600 s"][..],
+        ),
+        (
+            "\"1 s\"",
+            &["s.toml:15:22: fleet.operator_heartbeat", "invalid type"][..],
+        ),
+    ] {
+        let f = scenario_file(
+            dir.path(),
+            &format!("{GOOD}\n[fleet]\noperator_heartbeat = {value}\n"),
+        );
+        for args in [
+            &["fleet", "robot", &f, "--agent", "1"][..],
+            &["fleet", "heartbeat", &f][..],
+        ] {
+            assert_refused(&echelon(args), needles);
+        }
+    }
+    let f = scenario_file(dir.path(), GOOD);
+    assert_refused(
+        &echelon(&["fleet", "heartbeat", &f]),
+        &["asks for no operator heartbeat", "operator_heartbeat"],
+    );
+}

@@ -64,11 +64,21 @@ const FAILURE: u8 = 2;
 /// ran without getting what it asked for (`fleet stop` not acknowledged).
 const DIVERGED: u8 = 1;
 
+/// Hidden: with this environment variable set the command line is only
+/// parsed (the docs test checks every `echelon …` line written in README.md
+/// and docs/ against the CLI): exit 0, printing nothing, when it parses
+/// (`--help` too), else 2 with one line on stderr, clap's error kind first
+/// (`UnknownArgument: error: unexpected argument …`).
+const PARSE_ONLY: &str = "ECHELON_PARSE_ONLY";
+
 fn main() -> ExitCode {
+    let parse_only = std::env::var_os(PARSE_ONLY).is_some();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
-            let _ = e.print();
+            if !parse_only {
+                let _ = e.print();
+            }
             return ExitCode::SUCCESS;
         }
         Err(e) => {
@@ -81,10 +91,18 @@ fn main() -> ExitCode {
                 .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information"))
                 .filter(|l| !l.is_empty())
                 .collect();
-            cmd::out::err_line(&format!("{} (see --help)", parts.join(" ")));
+            let kind = if parse_only {
+                format!("{:?}: ", e.kind())
+            } else {
+                String::new()
+            };
+            cmd::out::err_line(&format!("{kind}{} (see --help)", parts.join(" ")));
             return ExitCode::from(FAILURE);
         }
     };
+    if parse_only {
+        return ExitCode::SUCCESS;
+    }
     let result = match cli.command {
         Command::Run(args) => cmd::run::run(args),
         Command::Plot(args) => cmd::plot::plot(&args),
@@ -123,7 +141,7 @@ fn exit_code(e: &anyhow::Error) -> u8 {
     } else if e.downcast_ref::<cmd::out::Failed>().is_some()
         || matches!(
             e.downcast_ref::<echelon_fleet::FleetError>(),
-            Some(echelon_fleet::FleetError::Diverged(_))
+            Some(echelon_fleet::FleetError::Diverged(_) | echelon_fleet::FleetError::TimedOut(_))
         )
     {
         DIVERGED
@@ -160,7 +178,11 @@ mod tests {
     /// input does.
     #[test]
     fn each_outcome_has_its_exit_code() {
-        let cases: [(anyhow::Error, u8); 5] = [
+        let cases: [(anyhow::Error, u8); 6] = [
+            (
+                echelon_fleet::FleetError::TimedOut("robot/2 never joined".into()).into(),
+                1,
+            ),
             (cmd::out::Failed("fleet stop: robot/2 …".into()).into(), 1),
             (cmd::out::Failed("run: diverged".into()).into(), 1),
             (cmd::out::Closed.into(), 0),

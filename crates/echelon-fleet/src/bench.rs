@@ -190,7 +190,8 @@ pub fn scenario_toml(n: usize) -> String {
 pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
     let final_errors: Vec<f64> = up.robots.iter().map(|r| r.final_error).collect();
     let robots_received: u64 = up.robots.iter().map(|r| r.counters.received).sum();
-    let collector_received = up.collector.received;
+    let collector = up.collector.as_ref();
+    let collector_received = collector.map_or(0, |c| c.received);
     let delivered = collector_received + robots_received;
     let cpu_router = up.cost.routers.as_ref().map_or(0.0, |r| r.cpu);
     let per = |cpu: f64, n: u64| if n > 0 { cpu / n as f64 * 1e6 } else { 0.0 };
@@ -210,8 +211,8 @@ pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
         rss_per_robot: up.cost.robots.max_rss_mean,
         messages_per_s: delivered as f64 / up.duration,
         collector_received,
-        collector_decimated: up.collector.decimated,
-        collector_dropped: up.collector.dropped,
+        collector_decimated: collector.map_or(0, |c| c.decimated),
+        collector_dropped: collector.map_or(0, |c| c.dropped),
         latency_p50: up.latency.robots.p50,
         latency_p99: up.latency.robots.p99,
         latency_max: up.latency.robots.max,

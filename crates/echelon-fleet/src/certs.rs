@@ -39,7 +39,31 @@ fn write(path: &Path, text: &str) -> Result<(), FleetError> {
 }
 
 /// Writes the CA and every identity's certificate and key; returns the files.
+/// Every certificate is valid from 1975 to 4096 (rcgen's default).
 pub fn generate(opts: &CertOptions) -> Result<Vec<PathBuf>, FleetError> {
+    generate_with(opts, &[])
+}
+
+/// [`generate`], each identity of `expires` (`(identity, days)`) with a
+/// certificate that expires `days` days from now (negative: expired
+/// already), valid from a day before that at the latest: rehearsals of
+/// `fleet doctor`'s certificate findings (`fleet certs --expires ID=DAYS`).
+pub fn generate_with(
+    opts: &CertOptions,
+    expires: &[(String, f64)],
+) -> Result<Vec<PathBuf>, FleetError> {
+    if let Some((id, days)) = expires.iter().find(|(_, d)| !d.is_finite()) {
+        return Err(FleetError::Config(format!(
+            "{id}: {days} days is not a number of days"
+        )));
+    }
+    let ids = crate::net::identities(opts.robots);
+    if let Some((id, _)) = expires.iter().find(|(e, _)| !ids.contains(e)) {
+        return Err(FleetError::Config(format!(
+            "no identity {id} in a fleet of {} robots",
+            opts.robots
+        )));
+    }
     std::fs::create_dir_all(&opts.dir).map_err(FleetError::io(&opts.dir))?;
     let mut written = Vec::new();
 
@@ -64,7 +88,7 @@ pub fn generate(opts: &CertOptions) -> Result<Vec<PathBuf>, FleetError> {
         "::1".to_owned(),
     ];
     sans.extend(opts.hosts.iter().cloned());
-    for id in crate::net::identities(opts.robots) {
+    for id in ids {
         let key = KeyPair::generate().map_err(rc)?;
         let mut params = CertificateParams::new(sans.clone()).map_err(rc)?;
         params
@@ -78,6 +102,12 @@ pub fn generate(opts: &CertOptions) -> Result<Vec<PathBuf>, FleetError> {
             ExtendedKeyUsagePurpose::ServerAuth,
             ExtendedKeyUsagePurpose::ClientAuth,
         ];
+        if let Some((_, days)) = expires.iter().find(|(e, _)| *e == id) {
+            let until = time::OffsetDateTime::now_utc()
+                + time::Duration::seconds_f64((days * 86_400.0).clamp(-1e11, 1e11));
+            params.not_after = until;
+            params.not_before = params.not_before.min(until - time::Duration::days(1));
+        }
         let cert = params.signed_by(&key, &issuer).map_err(rc)?;
         let (cert_path, key_path) = identity_files(&opts.dir, &id);
         write(&cert_path, &cert.pem())?;

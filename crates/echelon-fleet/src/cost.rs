@@ -12,7 +12,7 @@
 
 use std::time::Duration;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// How often a running child's peak RSS is sampled.
 pub const MEMORY_PERIOD: Duration = Duration::from_millis(500);
@@ -48,6 +48,49 @@ pub fn cpu_seconds(pid: u32) -> Option<f64> {
 pub fn peak_rss(pid: u32) -> Option<u64> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
     parse_status_hwm(&status)
+}
+
+/// A process's own CPU use as it reports it (a robot's `cpu` in its stats,
+/// which `fleet status` shows).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CpuUse {
+    /// CPU seconds (user + system, every thread) since the process started.
+    pub seconds: f64,
+    /// Share of one core since its previous reading, real time (0.25: a
+    /// quarter of a core; above 1 on several cores); `None` at the first
+    /// reading.
+    pub share: Option<f64>,
+}
+
+/// Reads this process's CPU seconds, each reading with its share of one
+/// core since the previous one.
+#[derive(Debug, Clone, Default)]
+pub struct CpuMeter {
+    last: Option<(f64, std::time::Instant)>,
+}
+
+impl CpuMeter {
+    /// A meter with no reading yet.
+    pub fn new() -> CpuMeter {
+        CpuMeter::default()
+    }
+
+    /// This process's CPU use now (`None` where `/proc` cannot be read).
+    pub fn read(&mut self) -> Option<CpuUse> {
+        let seconds = cpu_seconds(std::process::id())?;
+        Some(self.reading(seconds, std::time::Instant::now()))
+    }
+
+    /// The reading of `seconds` CPU seconds at `at`.
+    fn reading(&mut self, seconds: f64, at: std::time::Instant) -> CpuUse {
+        let share = self.last.and_then(|(before, then)| {
+            let wall = at.saturating_duration_since(then).as_secs_f64();
+            (wall > 0.0).then(|| ((seconds - before) / wall).max(0.0))
+        });
+        self.last = Some((seconds, at));
+        CpuUse { seconds, share }
+    }
 }
 
 /// One process's cost.
@@ -130,6 +173,31 @@ mod tests {
         std::hint::black_box(x);
         assert!(cpu_seconds(pid).is_some_and(|c| c > 0.0));
         assert!(peak_rss(pid).is_some_and(|m| m > 1 << 20));
+    }
+
+    /// A meter's share is the CPU seconds between two readings over the
+    /// real time between them; none at the first reading, and none for a
+    /// second reading at the same instant.
+    #[test]
+    fn a_meter_shares_cpu_between_readings() {
+        let mut m = CpuMeter::new();
+        let t0 = std::time::Instant::now();
+        assert_eq!(m.reading(2.0, t0).share, None);
+        let r = m.reading(2.5, t0 + Duration::from_secs(2));
+        assert_eq!((r.seconds, r.share), (2.5, Some(0.25)));
+        assert_eq!(m.reading(2.5, t0 + Duration::from_secs(2)).share, None);
+        // The real process: a reading, then one after burning CPU.
+        let mut m = CpuMeter::new();
+        let first = m.read().unwrap();
+        let start = std::time::Instant::now();
+        let mut x = 0u64;
+        while start.elapsed() < Duration::from_millis(50) {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1);
+        }
+        std::hint::black_box(x);
+        let second = m.read().unwrap();
+        assert!(second.seconds >= first.seconds, "{first:?} {second:?}");
+        assert!(second.share.is_some_and(|s| s >= 0.0), "{second:?}");
     }
 
     #[test]

@@ -8,29 +8,47 @@
 
 use echelon::rng::SplitMix64;
 
-/// What the injector does.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// What the injector does (also a robot file's `[rehearsal]`,
+/// [`crate::robot::RobotFile`]: every field optional).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct FaultSpec {
     /// Probability in `[0, 1]` that a message is dropped.
+    #[serde(skip_serializing_if = "is_zero")]
     pub loss: f64,
     /// Extra delay added to every message, fleet s.
+    #[serde(skip_serializing_if = "is_zero")]
     pub delay: f64,
     /// `(start, length)`, fleet s: everything arriving in `[start, start + length)` is dropped.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub outage: Option<(f64, f64)>,
     /// Seed of the drop pattern.
+    #[serde(skip_serializing_if = "is_zero_seed")]
     pub seed: u64,
     /// `(start, length)`, fleet s: a simulated robot's odometry stops
     /// updating (its state stays where it was at `start`, its age grows)
     /// while the robot itself moves on.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub freeze_odometry: Option<(f64, f64)>,
     /// A simulated robot measures what it does from this fleet time on
     /// ([`Aftermath`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub fault_at: Option<f64>,
     /// For how long after `fault_at` it measures, s (`None`: to the end).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub fault_window: Option<f64>,
     /// `(at, step)`: the process's wall clock steps by `step` s at fleet
     /// time `at` (an NTP step; fleet time is monotonic).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub wall_clock_jump: Option<(f64, f64)>,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn is_zero_seed(v: &u64) -> bool {
+    *v == 0
 }
 
 /// Faults `fleet up` injects into its own processes at fleet times: the
@@ -59,6 +77,12 @@ pub struct Chaos {
     pub router_restart: Option<(f64, f64)>,
     /// Robot `k`'s wall clock stepped by `step` s at fleet time `at`.
     pub wall_clock_jumps: Vec<(u32, (f64, f64))>,
+    /// At about this fleet time (real time since the leader started, over
+    /// the time scale, plus a second for its start-up) a second leader and
+    /// a second robot 2 of the same fleet join the router: what a second
+    /// `fleet up` of the same fleet name reaching this router would start.
+    /// Each must be refused.
+    pub intruders: Option<f64>,
 }
 
 impl Chaos {

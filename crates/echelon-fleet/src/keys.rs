@@ -9,6 +9,7 @@
 //! | `echelon/<fleet>/operator/heartbeat` | `fleet heartbeat` (the `operator`), with `[fleet] operator_heartbeat` | operator heartbeat ([`crate::heartbeat`], 12 bytes) |
 //! | `echelon/<fleet>/command` | `fleet stop` / `fleet resume` (the `operator`), the leader when interrupted | fleet command ([`crate::command::FleetCommand`], JSON) |
 //! | `echelon/<fleet>/latch/<role>` | every robot and the leader, as a queryable | the command in force ([`crate::command::Latched`], JSON), answered to queries on `latch/**` |
+//! | `echelon/<fleet>/probe/<role>` | every robot and every router (for every fleet: `echelon/*/probe/router`), as a queryable | who answers and its wall clock ([`crate::probe::ProbeAnswer`], JSON): `fleet doctor`'s clock offsets and round trips |
 //!
 //! The collector subscribes to `echelon/<fleet>/**`.
 
@@ -34,6 +35,7 @@ const LATCH: &str = "latch";
 const HALT: &str = "halt";
 const OPERATOR: &str = "operator";
 const HEARTBEAT: &str = "heartbeat";
+const PROBE: &str = "probe";
 
 /// The key expressions of one fleet.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -132,6 +134,13 @@ impl Keys {
         format!("{ROOT}/{}/{LATCH}/{role}", self.fleet)
     }
 
+    /// `echelon/<fleet>/probe/<name>`: where the process of liveliness
+    /// name `name` (`robot/3`, `router`) answers `fleet doctor`'s probe
+    /// ([`crate::probe`]).
+    pub fn probe(&self, name: &str) -> String {
+        format!("{ROOT}/{}/{PROBE}/{name}", self.fleet)
+    }
+
     /// `echelon/<fleet>/latch/**`: every latch, to query.
     pub fn latches(&self) -> String {
         self.latch("**")
@@ -207,5 +216,8 @@ mod tests {
         assert_eq!(k.latch_holder(&k.latch("robot/2")), Some("robot/2"));
         assert_eq!(k.latch_holder("echelon/lab-2/latch/robot/2"), None);
         assert_eq!(k.classify(&k.latch("leader")), KeyKind::Other);
+        assert_eq!(k.probe("robot/2"), "echelon/lab-1/probe/robot/2");
+        assert_eq!(k.classify(&k.probe("router")), KeyKind::Other);
+        assert_eq!(Keys::any().probe("router"), "echelon/*/probe/router");
     }
 }

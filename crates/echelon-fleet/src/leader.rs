@@ -41,6 +41,10 @@ pub struct LeaderOptions {
     pub wait_for: Vec<String>,
     /// Longest wait for `wait_for`, real time.
     pub wait_timeout: Duration,
+    /// A rehearsed rogue (`--rogue`, the secure mode's tests): it joins
+    /// even though the fleet has a leader (a process that does not play
+    /// by the rules, which only the access control stops).
+    pub rogue: bool,
 }
 
 /// What the leader reports when it stops (one JSON line on stdout).
@@ -194,6 +198,8 @@ pub struct LeaderTask {
     die_at: Option<f64>,
     /// Whether it has ticked (it says what it lacks at its first tick).
     started: bool,
+    /// Refused while the fleet has a leader (false: a rehearsed rogue).
+    exclusive: bool,
 }
 
 impl LeaderTask {
@@ -209,6 +215,16 @@ impl LeaderTask {
             stopped_the_fleet: false,
             die_at: None,
             started: false,
+            exclusive: true,
+        }
+    }
+
+    /// The same, joining even though the fleet has a leader: a rehearsed
+    /// rogue publisher (`--rogue`), for the access control's tests.
+    pub fn rogue(self) -> LeaderTask {
+        LeaderTask {
+            exclusive: false,
+            ..self
         }
     }
 
@@ -290,6 +306,10 @@ impl Task for LeaderTask {
 
     fn tokens(&self) -> Vec<String> {
         vec![self.keys.alive(&Member::Leader.liveliness())]
+    }
+
+    fn exclusive(&self) -> bool {
+        self.exclusive
     }
 
     fn wait_for(&self) -> Option<WaitFor> {
@@ -382,7 +402,11 @@ pub fn run(opts: LeaderOptions, stop: &StopFlag) -> Result<LeaderReport, FleetEr
     let duration = opts.process.duration.unwrap_or(plan.config().duration);
     let leader = Leader::new(reference, rate, duration, net::rand_source());
     let token = OperatorToken::from_env()?;
-    let task = LeaderTask::new(leader, keys.clone())
+    let mut task = LeaderTask::new(leader, keys.clone());
+    if opts.rogue {
+        task = task.rogue();
+    }
+    let task = task
         .dying_at(opts.process.die_at)
         .with_operator_token(token)
         .waiting_for(WaitFor {

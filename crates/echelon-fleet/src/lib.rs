@@ -11,11 +11,13 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 pub mod bench;
+pub mod bundle;
 pub mod certs;
 pub mod clock;
 pub mod collector;
 pub mod command;
 pub mod cost;
+pub mod doctor;
 pub mod excite;
 pub mod faults;
 pub mod garbage;
@@ -30,11 +32,13 @@ pub mod net;
 pub mod operator;
 pub mod options;
 pub mod plant;
+pub mod probe;
 pub mod robot;
 pub mod role;
 pub mod ros2;
 pub mod router;
 pub mod runtime;
+pub mod status;
 pub mod token;
 pub mod up;
 pub mod wire;
@@ -77,6 +81,10 @@ pub enum FleetError {
     /// hazard): nothing was sent.
     #[error("{0}")]
     Refused(String),
+    /// A bounded wait ended without what it waited for (robots that never
+    /// joined the hub): one line naming what is missing.
+    #[error("{0}")]
+    TimedOut(String),
     /// A robot's state stopped being finite or left its bounds
     /// ([`echelon::guard::Bounds`]): it commanded zero and stopped.
     #[error("{0}")]

@@ -82,6 +82,13 @@ pub fn run(opts: &RouterOptions, stop: &StopFlag) -> Result<RouterReport, FleetE
         ..opts.net.clone()
     };
     let session = net::open(&net)?;
+    // `fleet doctor`'s probe, for every fleet (the hub's clock is its
+    // router's), first: clients may ask as soon as it listens.
+    let _probe = crate::probe::declare(
+        &session,
+        &crate::keys::Keys::any(),
+        crate::role::Member::Router,
+    )?;
     let members: Arc<Mutex<Members>> = Arc::default();
     let sink = members.clone();
     let _sub = session

@@ -33,7 +33,7 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use echelon::scenario::{Overrides, Scenario};
+use echelon::scenario::{Overrides, Placement, Scenario};
 
 use crate::collector::CollectorReport;
 use crate::faults::{Chaos, FaultSpec};
@@ -45,14 +45,17 @@ use crate::token::{OperatorToken, TOKEN_ENV, TOKEN_FILE};
 
 use crate::{FleetError, StopFlag};
 
+mod join;
 mod ports;
 mod process;
 mod report;
+mod robots;
 use ports::Links;
 pub use ports::{free_ports, free_ports_for};
 use process::{Proc, poll_all, spawn, stop_all};
-pub use report::{UpCost, UpReport};
+pub use report::{Intrusion, LogGap, UpCost, UpReport};
 use report::{report, up_cost};
+pub use robots::ROBOTS_DIR;
 
 /// The summary `fleet up` writes.
 pub const UP_SUMMARY_FILE: &str = "fleet-summary.json";
@@ -120,6 +123,21 @@ pub struct UpOptions {
     /// `--die-at`, `--freeze-odometry`, a robot's `--outage`,
     /// `--fault-at`).
     pub chaos: crate::faults::Chaos,
+    /// Hub mode: the router listens where told, the on-board robots join
+    /// by themselves, and the reference starts once every robot joined.
+    pub hub: Option<HubOptions>,
+    /// The operator token (`None`: `ECHELON_OPERATOR_TOKEN`, else a new one).
+    pub token: Option<OperatorToken>,
+}
+
+/// `fleet up --hub`: where the hub's router listens and how long it waits
+/// for the robots.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HubOptions {
+    /// The router's endpoints (`--listen`), each with a port of its own.
+    pub listen: Vec<String>,
+    /// The longest wait for every robot to join, real s (`--wait`).
+    pub wait: f64,
 }
 
 impl UpOptions {
@@ -145,6 +163,8 @@ impl UpOptions {
             log_rate: None,
             hazards: Vec::new(),
             chaos: Chaos::default(),
+            hub: None,
+            token: None,
         }
     }
 }
@@ -155,6 +175,7 @@ impl UpOptions {
 fn check_real(
     opts: &UpOptions,
     links: &[echelon::scenario::Ros2Link],
+    placement: &[Placement],
     n: usize,
 ) -> Result<(), FleetError> {
     if !opts.ros2 {
@@ -170,6 +191,10 @@ fn check_real(
     }
     for (i, link) in links.iter().enumerate() {
         let k = i as u32 + 1;
+        // An on-board robot reaches its robot from its own computer.
+        if placement[i] == Placement::Onboard {
+            continue;
+        }
         if link.connect.is_empty() {
             return Err(FleetError::Config(format!(
                 "agent {k} has no ros2.connect: `fleet up --real` reaches each robot at its own router; give agents[{k}].ros2.connect, or [fleet.ros2] connect for all (e.g. \"tcp/192.168.1.2{{k}}:7447\")"
@@ -185,6 +210,69 @@ fn check_real(
             ..crate::net::NetOptions::default()
         };
         crate::net::robot_router(k, &link.connect, &fleet_net)?;
+    }
+    Ok(())
+}
+
+/// `fleet up --hub`'s refusals, before anything starts: one router
+/// listening on known ports; on-board robots only in hub mode, and not on
+/// simulated bases (those rehearse the hub's own robots; an on-board
+/// rehearsal is `fleet bundle --simulated`).
+fn check_hub(opts: &UpOptions, placement: &[Placement]) -> Result<(), FleetError> {
+    let onboard: Vec<String> = placement
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| **p == Placement::Onboard)
+        .map(|(i, _)| (i + 1).to_string())
+        .collect();
+    let Some(hub) = &opts.hub else {
+        if !onboard.is_empty() {
+            return Err(FleetError::Config(format!(
+                "agents {} are on-board (placement = \"onboard\"): run the hub with `fleet up --hub --listen ENDPOINT` and start each on its computer (`fleet bundle`)",
+                onboard.join(", ")
+            )));
+        }
+        return Ok(());
+    };
+    if opts.topology != Topology::Router || opts.sites != 1 {
+        return Err(FleetError::Config(
+            "--hub runs one router (the hub's): no --topology mesh, no --sites".into(),
+        ));
+    }
+    if hub.listen.is_empty() {
+        return Err(FleetError::Config(
+            "--hub needs where its router listens: --listen tcp/0.0.0.0:7447 (quic/… in secure mode)".into(),
+        ));
+    }
+    for e in &hub.listen {
+        echelon::scenario::check_listen_endpoint(e).map_err(FleetError::Config)?;
+        let port = e
+            .split(['?', '#'])
+            .next()
+            .and_then(|l| l.rsplit_once(':'))
+            .map(|(_, p)| p);
+        if port == Some("0") {
+            return Err(FleetError::Config(format!(
+                "--listen {e}: the hub's robots need a known port (e.g. 7447), not 0"
+            )));
+        }
+        if let Some(why) = ports::taken(e) {
+            return Err(FleetError::Refused(format!(
+                "--listen {e}: {why}: another hub (a second `fleet up --hub`?) or router already listens there; see it with `echelon fleet status --hub {e}`, or stop it first"
+            )));
+        }
+    }
+    if !(hub.wait.is_finite() && hub.wait > 0.0) {
+        return Err(FleetError::Config(format!(
+            "--wait {}: must be > 0",
+            hub.wait
+        )));
+    }
+    if opts.ros2 && !opts.real && !onboard.is_empty() {
+        return Err(FleetError::Config(format!(
+            "agents {} are on-board: simulated bases (--ros2 without --real) rehearse the hub's own robots; rehearse on-board ones with `fleet bundle --simulated`",
+            onboard.join(", ")
+        )));
     }
     Ok(())
 }
@@ -212,8 +300,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         }
         _ => {}
     }
+    check_hub(opts, &fleet.placement)?;
     if opts.real {
-        check_real(opts, &fleet.ros2, n)?;
+        check_real(opts, &fleet.ros2, &fleet.placement, n)?;
     }
     let bases = if opts.ros2 && !opts.real { n } else { 0 };
     if let Some((k, w)) = opts.hazards.iter().find(|(k, _)| *k as usize > bases) {
@@ -246,10 +335,14 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     // The operator token: the caller's, else a new one; on file for `fleet
     // resume`, and handed to the processes that obey or sign a resume.
     let token_file = opts.out.join(TOKEN_FILE);
-    let token = match OperatorToken::from_env()? {
+    let token = match opts
+        .token
+        .clone()
+        .map_or_else(OperatorToken::from_env, |t| Ok(Some(t)))?
+    {
         Some(t) => {
             eprintln!(
-                "fleet up: operator token from {TOKEN_ENV} (also in {})",
+                "fleet up: operator token from --token-file or {TOKEN_ENV} (also in {})",
                 token_file.display()
             );
             t
@@ -313,6 +406,19 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             for (s, e) in net.routers.iter().enumerate() {
                 endpoints.insert(router_role(s + 1), e.clone().into());
             }
+            if let Some(hub) = &opts.hub {
+                for (i, e) in hub.listen.iter().enumerate() {
+                    let name = match i {
+                        0 => "hub".to_owned(),
+                        i => format!("hub/{}", i + 1),
+                    };
+                    endpoints.insert(name, e.clone().into());
+                    eprintln!(
+                        "fleet up: the hub listens on {e} (robots, fleet status/stop/resume: --hub {})",
+                        e.replacen("/0.0.0.0:", "/<this machine's address>:", 1)
+                    );
+                }
+            }
         }
         Topology::Mesh => {
             endpoints.insert(Role::Collector.name().into(), net.peer(0).into());
@@ -349,12 +455,14 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     }
     let mut routers = Vec::with_capacity(net.routers.len());
     let mut router_args = Vec::with_capacity(net.routers.len());
-    for (s, e) in net.routers.iter().enumerate() {
+    for s in 0..net.routers.len() {
         let mut args = vec!["fleet".to_owned(), Role::Router.name().to_owned()];
         if opts.ros2 {
             args.push(opts.scenario.clone());
         }
-        args.extend(["--listen".to_owned(), e.clone()]);
+        for l in &net.listen[s] {
+            args.extend(["--listen".to_owned(), l.clone()]);
+        }
         for other in &net.routers[..s] {
             args.extend(["--connect".to_owned(), other.clone()]);
         }
@@ -410,6 +518,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     if let Some(hz) = opts.log_rate {
         args.extend(["--log-rate".to_owned(), hz.to_string()]);
     }
+    args.extend(chaos_args(&opts.chaos, Member::Collector));
     args.extend(common(0, &Member::Collector.identity()));
     let mut collector = spawn(&opts.exe, Role::Collector.name(), &args, &token_env, &logs)?;
 
@@ -479,41 +588,95 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         None => None,
     };
 
-    let mut robots = Vec::with_capacity(n);
-    for k in 1..=n {
-        let mut args = on_clock(Role::Robot);
-        args.extend([
-            "--agent".to_owned(),
-            k.to_string(),
-            "--seed".to_owned(),
-            opts.faults.seed.to_string(),
-        ]);
-        if opts.faults.loss > 0.0 {
-            args.extend(["--loss".to_owned(), opts.faults.loss.to_string()]);
-        }
-        if opts.faults.delay > 0.0 {
-            args.extend(["--delay".to_owned(), (opts.faults.delay * 1e3).to_string()]);
-        }
-        let own_outage = opts.chaos.outages.iter().find(|(j, _)| *j as usize == k);
-        if let Some((s, l)) = own_outage.map(|&(_, w)| w).or(opts.faults.outage) {
-            args.extend(["--outage".to_owned(), format!("{s}:{l}")]);
-        }
-        args.extend(chaos_args(&opts.chaos, Member::Robot(k as u32)));
-        if opts.ros2 {
-            args.push("--ros2".to_owned());
-        }
-        if opts.ros2 && !opts.real {
-            // Its robot is the simulated base started above, on this clock.
-            args.push("--simulated-base".to_owned());
-        }
-        args.extend(common(robot_at(k), &Member::Robot(k as u32).identity()));
+    // The robots on the hub, each from its robot file (the type an
+    // on-board robot's bundle holds); the on-board ones join by themselves.
+    let on_hub: Vec<u32> = (1..=n as u32)
+        .filter(|&k| fleet.placement[k as usize - 1] == Placement::Hub || opts.hub.is_none())
+        .collect();
+    let mut robots = Vec::with_capacity(on_hub.len());
+    for &k in &on_hub {
+        let i = robot_at(k as usize);
+        let file = robots::write_robot_file(
+            opts,
+            &scenario,
+            k,
+            n as u32,
+            duration,
+            net.net_section(i, site_of(i)),
+            &token_file,
+        )?;
+        let args = vec![
+            "fleet".to_owned(),
+            Role::Robot.name().to_owned(),
+            "--config".to_owned(),
+            file.display().to_string(),
+        ];
         robots.push(spawn(
             &opts.exe,
-            &Member::Robot(k as u32).liveliness(),
+            &Member::Robot(k).liveliness(),
             &args,
-            &token_env,
+            &[],
             &logs,
         )?);
+    }
+    let robot_of = |i: usize| Member::Robot(on_hub[i]);
+
+    // Hub mode: the reference starts once every robot has joined.
+    if let Some(hub) = &opts.hub {
+        let awaited: join::Awaited = (1..=n as u32)
+            .map(|k| (k, fleet.placement[k as usize - 1]))
+            .collect();
+        let session = crate::net::NetOptions {
+            mode: Some(crate::net::Mode::Client),
+            connect: vec![net.routers[0].clone()],
+            secure: opts.secure.as_ref().map(|dir| crate::net::Secure {
+                dir: dir.clone(),
+                identity: Member::Leader.identity(),
+                robots: n as u32,
+                ros2: crate::net::ros_acl(&fleet.ros2),
+            }),
+            ..crate::net::NetOptions::default()
+        };
+        let keys = crate::keys::Keys::new(&fleet.name);
+        let waited = join::wait_for_robots(
+            &session,
+            &keys,
+            &awaited,
+            Duration::from_secs_f64(hub.wait),
+            stop,
+            &mut || {
+                poll_all(
+                    std::iter::once(&mut collector)
+                        .chain(&mut robots)
+                        .chain(&mut base_procs)
+                        .chain(operator.as_mut())
+                        .chain(&mut routers),
+                )?;
+                match std::iter::once(&collector)
+                    .chain(&robots)
+                    .chain(&base_procs)
+                    .chain(&routers)
+                    .find(|p| p.status.is_some())
+                {
+                    Some(p) => Err(FleetError::Child(
+                        p.failure()
+                            .unwrap_or_else(|| format!("{} stopped early", p.role)),
+                    )),
+                    None => Ok(()),
+                }
+            },
+        );
+        if let Err(e) = waited {
+            for p in std::iter::once(&collector)
+                .chain(&robots)
+                .chain(&base_procs)
+                .chain(operator.iter())
+                .chain(&routers)
+            {
+                p.terminate();
+            }
+            return Err(e);
+        }
     }
 
     let mut args = on_clock(Role::Leader);
@@ -533,6 +696,9 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     }
     args.extend(common(leader_at, &Member::Leader.identity()));
     let mut leader = spawn(&opts.exe, Role::Leader.name(), &args, &token_env, &logs)?;
+    let leader_spawned = Instant::now();
+    // A second fleet of the same name reaching the router, when asked.
+    let mut intruders: Vec<Proc> = Vec::new();
 
     // Generous: connection set-up, then the run in real time, then the wind-down.
     let deadline = Duration::from_secs_f64(60.0 + 2.0 * duration / opts.time_scale);
@@ -547,6 +713,24 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let mut deaths: Vec<(String, String)> = Vec::new();
     // 1. Leader and robots run to the end (or a failure, or a signal).
     loop {
+        if let Some(at) = opts.chaos.intruders
+            && intruders.is_empty()
+            && leader_spawned.elapsed().as_secs_f64() >= 1.0 + at / opts.time_scale
+        {
+            for (role, mut args) in [
+                ("intruder-leader", on_clock(Role::Leader)),
+                ("intruder-robot/2", {
+                    let mut a = on_clock(Role::Robot);
+                    a.extend(["--agent".to_owned(), "2".to_owned()]);
+                    a
+                }),
+            ] {
+                args.extend(common(leader_at, &Member::Leader.identity()));
+                intruders.push(spawn(&opts.exe, role, &args, &[], &logs)?);
+            }
+            eprintln!("fleet up: a second leader and robot 2 of this fleet joined (as asked)");
+        }
+        poll_all(&mut intruders)?;
         let all_done = poll_all(std::iter::once(&mut leader).chain(&mut robots))?;
         poll_all(
             std::iter::once(&mut collector)
@@ -563,7 +747,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         for (p, member) in robots
             .iter()
             .enumerate()
-            .map(|(i, p)| (p, Member::Robot(i as u32 + 1)))
+            .map(|(i, p)| (p, robot_of(i)))
             .chain(
                 base_procs
                     .iter()
@@ -571,6 +755,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
                     .map(|(i, p)| (p, Member::Base(i as u32 + 1))),
             )
             .chain(operator.iter().map(|p| (p, Member::Operator)))
+            .chain(std::iter::once((&collector, Member::Collector)))
         {
             if opts.chaos.death_of(member).is_some()
                 && let Some(f) = p.failure()
@@ -615,9 +800,15 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             }
         }
         let awaited = router_down.is_some() && !router_restarted;
-        let failed = living(&robots, &opts.chaos, Member::Robot)
-            .chain(living(&base_procs, &opts.chaos, Member::Base))
-            .chain(std::iter::once(&collector))
+        let failed = living(&robots, &opts.chaos, robot_of)
+            .chain(living(&base_procs, &opts.chaos, |i| {
+                Member::Base(i as u32 + 1)
+            }))
+            .chain(living(
+                std::slice::from_ref(&collector),
+                &opts.chaos,
+                |_| Member::Collector,
+            ))
             .chain(routers.iter().skip(usize::from(awaited)))
             .find_map(Proc::failure);
         if let Some(f) = failed {
@@ -637,7 +828,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         if all_done {
             break;
         }
-        if collector.status.is_some() {
+        if collector.status.is_some() && opts.chaos.death_of(Member::Collector).is_none() {
             return Err(FleetError::Child("the collector stopped early".into()));
         }
         if stop.is_raised() && !interrupted {
@@ -681,9 +872,13 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         stop_all(std::slice::from_mut(p), nap, "fleet garbage")?;
     }
     stop_all(std::slice::from_mut(&mut collector), nap, "the collector")?;
-    if let Some(f) = std::iter::once(&collector)
-        .chain(living(&base_procs, &opts.chaos, Member::Base))
-        .find_map(Proc::failure)
+    if let Some(f) = living(std::slice::from_ref(&collector), &opts.chaos, |_| {
+        Member::Collector
+    })
+    .chain(living(&base_procs, &opts.chaos, |i| {
+        Member::Base(i as u32 + 1)
+    }))
+    .find_map(Proc::failure)
     {
         return Err(FleetError::Child(f));
     }
@@ -692,6 +887,25 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     if let Some(f) = routers.iter().find_map(Proc::failure) {
         return Err(FleetError::Child(f));
     }
+    let intruders = intruders
+        .iter_mut()
+        .map(|p| {
+            if p.status.is_none() {
+                p.terminate();
+            }
+            Intrusion {
+                role: p.role.clone(),
+                exit: p.status.and_then(|s| s.code()),
+                said: std::fs::read_to_string(&p.log)
+                    .unwrap_or_default()
+                    .lines()
+                    .rev()
+                    .find(|l| !l.trim().is_empty())
+                    .unwrap_or("")
+                    .to_owned(),
+            }
+        })
+        .collect();
     let wall = started.elapsed().as_secs_f64();
     let leader_report: Option<LeaderReport> = match &leader_failure {
         Some(_) => None,
@@ -703,10 +917,24 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         .filter(|&t| t > 0)
         .map(|t| t.saturating_sub(started_unix_ns) as f64 * 1e-9);
     // A robot killed as asked has no report (its death is in `deaths`).
-    let robot_reports: Vec<RobotReport> = living(&robots, &opts.chaos, Member::Robot)
+    let robot_reports: Vec<RobotReport> = living(&robots, &opts.chaos, robot_of)
         .map(report)
         .collect::<Result<_, _>>()?;
-    let collector_report: CollectorReport = report(&collector)?;
+    // A collector killed as asked left no report: its log's gap is said.
+    let collector_report: Option<CollectorReport> =
+        match living(std::slice::from_ref(&collector), &opts.chaos, |_| {
+            Member::Collector
+        })
+        .next()
+        {
+            Some(c) => Some(report(c)?),
+            None => None,
+        };
+    let log_gap = match &collector_report {
+        Some(_) => None,
+        None => LogGap::of(&opts.out.join("trajectory.csv"), duration),
+    };
+    let no_latency = crate::latency::LatencyReport::default();
     let up = UpReport {
         scenario: scenario.name().to_owned(),
         fleet: fleet.name.clone(),
@@ -718,12 +946,14 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         cost: up_cost(&leader, &collector, &robots, &base_procs, &routers),
         latency: FleetLatency::of(
             robot_reports.iter().map(|r| (r.agent, &r.latency)),
-            &collector_report.latency,
+            collector_report
+                .as_ref()
+                .map_or(&no_latency, |c| &c.latency),
         ),
         safety: crate::robot::SafetyCounts::total(
             robot_reports.iter().filter_map(|r| r.safety.as_ref()),
         ),
-        approach: collector_report.approach.clone(),
+        approach: collector_report.as_ref().and_then(|c| c.approach.clone()),
         deadlocked_at_end: robot_reports
             .iter()
             .filter(|r| r.deadlocked_at_end)
@@ -733,8 +963,11 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
         leader_failure,
         deaths: deaths.into_iter().map(|(_, f)| f).collect(),
         robots: robot_reports,
+        onboard: (1..=n as u32).filter(|k| !on_hub.contains(k)).collect(),
         collector: collector_report,
-        bases: living(&base_procs, &opts.chaos, Member::Base)
+        intruders,
+        log_gap,
+        bases: living(&base_procs, &opts.chaos, |i| Member::Base(i as u32 + 1))
             .map(report)
             .collect::<Result<_, _>>()?,
         topology: opts.topology,
@@ -747,24 +980,14 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
 }
 
 /// The fault arguments `member`'s process takes from `chaos` (its
-/// `--die-at`; a robot's `--freeze-odometry`; a robot's or a simulated
-/// base's `--fault-at` and `--fault-window`).
+/// `--die-at`; a simulated base's `--fault-at` and `--fault-window`; a
+/// robot's are in its robot file).
 fn chaos_args(chaos: &Chaos, member: Member) -> Vec<String> {
     let mut a = Vec::new();
     if let Some(t) = chaos.death_of(member) {
         a.extend(["--die-at".to_owned(), t.to_string()]);
     }
-    if let Member::Robot(k) = member
-        && let Some((_, (s, l))) = chaos.freeze_odometry.iter().find(|(j, _)| *j == k)
-    {
-        a.extend(["--freeze-odometry".to_owned(), format!("{s}:{l}")]);
-    }
-    if let Member::Robot(k) = member
-        && let Some((_, (at, step))) = chaos.wall_clock_jumps.iter().find(|(j, _)| *j == k)
-    {
-        a.push(format!("--wall-clock-jump={at}:{step}"));
-    }
-    if matches!(member, Member::Robot(_) | Member::Base(_))
+    if matches!(member, Member::Base(_))
         && let Some(t) = chaos.fault_at
     {
         a.extend(["--fault-at".to_owned(), t.to_string()]);
@@ -775,16 +998,16 @@ fn chaos_args(chaos: &Chaos, member: Member) -> Vec<String> {
     a
 }
 
-/// The processes of `member(k)` (the one of `k` at `k - 1`: robots,
-/// bases) but those killed as `chaos` asked (`--die-at`), whose ends are
+/// The processes (the one at `i` of `member(i)`: robots, bases) but
+/// those killed as `chaos` asked (`--die-at`), whose ends are
 /// in the report's `deaths`.
 fn living<'a>(
     procs: &'a [Proc],
     chaos: &'a Chaos,
-    member: fn(u32) -> Member,
+    member: impl Fn(usize) -> Member + 'a,
 ) -> impl Iterator<Item = &'a Proc> + 'a {
     procs.iter().enumerate().filter_map(move |(i, p)| {
-        let asked = chaos.death_of(member(i as u32 + 1)).is_some();
+        let asked = chaos.death_of(member(i)).is_some();
         (!asked || p.failure().is_none()).then_some(p)
     })
 }

@@ -341,6 +341,7 @@ fn the_zenoh_driver_records_ros_topics_it_hears() {
             listen: vec![endpoint.clone()],
             ..NetOptions::default()
         },
+        die_at: None,
     };
     let collector = {
         let stop = stop.clone();

@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 
 use echelon::output::TrajectoryRows;
 use echelon::scenario::{Overrides, Scenario};
@@ -30,7 +30,9 @@ use echelon_mcap::scene::SceneSpec;
 use super::out::outln;
 
 mod args;
+mod doctor;
 mod loopback;
+mod status;
 use args::TopologyArg;
 pub(crate) use args::{BenchArgs, FaultsArgs, FleetCommand, NetArgs, UpArgs};
 use loopback::{bench_cmd, faults_cmd, up_cmd};
@@ -94,6 +96,56 @@ fn ros_topics(s: &Scenario) -> Result<Vec<RosTopic>> {
         topics.extend(RosTopic::all_of_link(&link)?);
     }
     Ok(topics)
+}
+
+/// `fleet robot`: from its robot.toml (`--config`, the hub given by
+/// `--hub` if at all), or from the command line.
+fn robot_cmd(a: args::RobotArgs) -> Result<()> {
+    let options = match &a.config {
+        Some(path) => {
+            if a.clock.is_given() || a.faults.spec() != Default::default() || a.net.beyond_hub() {
+                bail!(
+                    "fleet robot --config {}: the file holds the robot's whole configuration; only --hub may be given with it",
+                    path.display()
+                );
+            }
+            let mut loaded = robot::RobotFile::load(path)?;
+            if !a.net.hub.is_empty() {
+                loaded.file.net = robot::NetSection {
+                    mode: robot::NetMode::Client,
+                    connect: a.net.hub.clone(),
+                    listen: Vec::new(),
+                    zenoh_config: None,
+                };
+            }
+            loaded.options()?
+        }
+        None => {
+            let (Some(scenario), Some(agent)) = (&a.scenario, a.agent) else {
+                bail!("give SCENARIO --agent K, or --config robot.toml");
+            };
+            if a.ros2 && !a.simulated_base && a.clock.time_scale != 1.0 {
+                bail!(
+                    "fleet robot --ros2 drives a real robot, which runs in real time: \
+                     --time-scale {} is refused (give --simulated-base when the robot is \
+                     `fleet base`'s simulation, as `fleet up --ros2` does)",
+                    a.clock.time_scale
+                );
+            }
+            let scenario = Scenario::resolve(scenario)?;
+            let net = session(&a.net, Member::Robot(agent), Some(&scenario))?;
+            RobotOptions {
+                process: a.clock.process(scenario, net, &a.net),
+                agent,
+                faults: a.faults.spec(),
+                ros2: a.ros2,
+                own_router: !a.simulated_base,
+                operator_token: OperatorToken::from_env()?,
+            }
+        }
+    };
+    let stop = StopFlag::on_signals()?;
+    print_report(&robot::run(options, &stop)?)
 }
 
 fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
@@ -200,29 +252,43 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     rate: a.rate,
                     wait_for: a.wait_for,
                     wait_timeout: Duration::from_secs_f64(a.wait_timeout),
+                    rogue: a.rogue,
                 };
                 leader::run(options, stop)
             },
         ),
-        FleetCommand::Robot(a) => {
-            if a.ros2 && !a.simulated_base && a.agent.clock.time_scale != 1.0 {
-                bail!(
-                    "fleet robot --ros2 drives a real robot, which runs in real time: \
-                     --time-scale {} is refused (give --simulated-base when the robot is \
-                     `fleet base`'s simulation, as `fleet up --ros2` does)",
-                    a.agent.clock.time_scale
+        FleetCommand::Robot(a) => robot_cmd(a),
+        FleetCommand::Bundle(a) => {
+            if let Some(name) = &a.fleet
+                && !echelon::scenario::is_valid_fleet_name(name)
+            {
+                bail!("--fleet `{name}`: letters, digits, '-', '_' and '.' only");
+            }
+            let token = match &a.token_file {
+                Some(path) => Some(OperatorToken::from_file(path).context("--token-file")?),
+                None => OperatorToken::from_env()?,
+            };
+            let report = echelon_fleet::bundle::write(&echelon_fleet::bundle::BundleOptions {
+                scenario: a.scenario,
+                hub: a.hub,
+                out: a.out,
+                all: a.all,
+                simulated: a.simulated,
+                time_scale: a.time_scale,
+                duration: a.duration,
+                secure: a.secure,
+                token,
+                fleet: a.fleet,
+                install_dir: a.install_dir,
+            })?;
+            for (k, dir) in &report.robots {
+                eprintln!(
+                    "fleet bundle: robot {k}: {} (on its computer: {}/echelon-robot.sh)",
+                    dir.display(),
+                    dir.display()
                 );
             }
-            agent_process(&a.agent, &a.net, Member::Robot, |process, agent, stop| {
-                let options = RobotOptions {
-                    process,
-                    agent,
-                    faults: a.faults.spec(),
-                    ros2: a.ros2,
-                    own_router: !a.simulated_base,
-                };
-                robot::run(options, stop)
-            })
+            print_report(&report)
         }
         FleetCommand::Base(a) => {
             if !a.ros2 {
@@ -295,6 +361,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     fleet,
                     max_wall: None,
                     net,
+                    die_at: a.die_at,
                 },
                 collector::Recording {
                     ros,
@@ -355,17 +422,20 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
             let token = a.operator_token()?;
             command_cmd(a.command, Order::Resume, token)
         }
+        FleetCommand::Status(a) => status::status_cmd(a),
+        FleetCommand::Doctor(a) => doctor::doctor_cmd(a),
         FleetCommand::Up(a) => up_cmd(a),
         FleetCommand::Bench(a) => bench_cmd(a),
         FleetCommand::Certs(a) => {
             if a.robots == 0 {
                 bail!("--robots must be ≥ 1");
             }
-            let files = certs::generate(&CertOptions {
+            let options = CertOptions {
                 dir: a.dir.clone(),
                 robots: a.robots,
                 hosts: a.host,
-            })?;
+            };
+            let files = certs::generate_with(&options, &a.expires)?;
             outln!(
                 "wrote {} files to {} (CA, leader, collector, router, operator, robot-1…robot-{n}, base-1…base-{n}); development use only",
                 files.len(),

@@ -152,3 +152,13 @@ fn an_unknown_row_is_refused() {
     );
     assert!(!dir.path().join("f").exists());
 }
+
+#[test]
+fn collector_killed() {
+    row("collector-kill");
+}
+
+#[test]
+fn a_second_fleet_of_the_same_name() {
+    row("second-fleet");
+}

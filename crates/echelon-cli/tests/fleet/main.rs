@@ -26,11 +26,14 @@ use echelon::scenario::{Overrides, Scenario};
 mod common;
 mod converge;
 mod faults;
+mod hub;
 mod leader_death;
 mod recording;
 mod reports;
 mod routers;
 mod secure;
+mod status;
+mod twice;
 
 use common::{EXE, Guard, check, echelon_ok, endpoints_of, f, spawn};
 

@@ -27,6 +27,8 @@ fn rogue_leader(fake: &Path, config: &Path) -> Guard {
         "fleet",
         "leader",
         &fake,
+        // It ignores that the fleet has a leader: a rogue plays by no rule.
+        "--rogue",
         "--fleet",
         "fast-circle",
         "--time-scale",

@@ -26,6 +26,7 @@ use echelon_ros2::msgs::{ODOMETRY, Odometry, RosMessage, TWIST, Time, TwistStamp
 
 #[path = "../common/mod.rs"]
 mod common;
+mod doctor;
 mod excite;
 mod hazards;
 mod python_base;

@@ -43,6 +43,25 @@ pub struct Collector {
     approach: Option<ApproachWatch>,
 }
 
+/// The record of robot state `s`, number `seq` of its stream: what the
+/// collector logs on `/agent/K/state` and so what the live dashboard shows
+/// of it (its link, ‖e‖, odometry and fix ages), and what `fleet status`
+/// shows ([`crate::status`]).
+pub fn state_record(seq: u64, s: &RobotState) -> AgentStateRecord {
+    AgentStateRecord {
+        seq: Some(seq),
+        link: Some(s.link.name()),
+        leader: Some(LeaderRecord::from(&s.leader)),
+        odometry: s.odometry.map(|o| OdometryRecord {
+            raw: o.raw,
+            age: o.age,
+            fix_age: o.fix_age,
+        }),
+        sigma: Some(s.sigma),
+        ..AgentStateRecord::new(s.sample())
+    }
+}
+
 fn bump(counts: &mut BTreeMap<String, u64>, name: &str) {
     *counts.entry(name.to_owned()).or_insert(0) += 1;
 }
@@ -354,19 +373,8 @@ impl Collector {
             a.link = s.link.name().to_owned();
             return Ok(());
         }
-        let sample = s.sample();
-        let rec = AgentStateRecord {
-            seq: Some(seq),
-            link: Some(s.link.name()),
-            leader: Some(LeaderRecord::from(&s.leader)),
-            odometry: s.odometry.map(|o| OdometryRecord {
-                raw: o.raw,
-                age: o.age,
-                fix_age: o.fix_age,
-            }),
-            sigma: Some(s.sigma),
-            ..AgentStateRecord::new(sample)
-        };
+        let rec = state_record(seq, s);
+        let sample = rec.sample;
         let data = serde_json::to_vec(&rec).map_err(echelon_mcap::McapLogError::from)?;
         self.log(
             sink,

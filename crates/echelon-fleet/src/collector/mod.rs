@@ -32,7 +32,7 @@ mod tests;
 pub use approach::ApproachWatch;
 pub use dashboard::Dashboard;
 pub use live::{BACKLOG, DEFAULT_ADDR, DEFAULT_DASHBOARD, LiveFeed, LiveReport, QUEUE};
-pub use machine::Collector;
+pub use machine::{Collector, state_record};
 pub use report::{AgentRecord, CollectorReport};
 pub use schema::{COMMAND, REJECTED, STATS};
 pub use sink::{Channel, FileSink, RecordSink, Stamp};

@@ -66,9 +66,18 @@ mod tests {
                 in_force: crate::ros2::hazard::HazardSet::EMPTY
                     .with(crate::ros2::hazard::Hazard::Bump),
                 counts: Default::default(),
+                last: Some(crate::ros2::hazard::HazardEvent {
+                    hazard: crate::ros2::hazard::Hazard::Bump,
+                    at: 1.0,
+                    cleared: None,
+                }),
             }),
             commands: Default::default(),
             watchdogs: Default::default(),
+            cpu: Some(crate::cost::CpuUse {
+                seconds: 1.0,
+                share: Some(0.5),
+            }),
         };
         let rejected = Rejected {
             key: "echelon/f/x",

@@ -30,6 +30,10 @@ pub struct CollectorOptions {
     pub max_wall: Option<Duration>,
     /// Network.
     pub net: NetOptions,
+    /// Kill itself with SIGKILL once a reference it records reaches this
+    /// fleet time (`--die-at`: the fault matrix's collector failure; it
+    /// leaves its files as they were, `fleet.mcap` without its footer).
+    pub die_at: Option<f64>,
 }
 
 /// [`Collector`] as a [`Task`] of the fleet runtime: every fleet key (and
@@ -45,6 +49,8 @@ pub struct CollectorTask {
     out: PathBuf,
     /// Stop at this time of its clock (real time), s.
     until: f64,
+    /// `--die-at`: fleet time, from the references it records.
+    die_at: Option<f64>,
 }
 
 /// Its input number of the fleet's keys (then one per ROS 2 topic).
@@ -75,7 +81,14 @@ impl CollectorTask {
             live: None,
             out,
             until: max_wall.map_or(f64::INFINITY, |m| m.as_secs_f64()),
+            die_at: None,
         }
+    }
+
+    /// Kills itself once a reference it records reaches fleet time `at`.
+    pub fn dying_at(mut self, at: Option<f64>) -> CollectorTask {
+        self.die_at = at;
+        self
     }
 
     /// Also feeds everything it records to `live`.
@@ -130,6 +143,12 @@ impl Task for CollectorTask {
         // (up to BATCH later): the log time is the receipt time.
         let now = s.unix_ns;
         if input == FLEET {
+            if self.die_at.is_some()
+                && s.key.ends_with("/reference")
+                && let Some(t) = crate::clock::ReferenceTime::of(s.payload)
+            {
+                crate::faults::die_if_due(self.die_at, t, "fleet collector");
+            }
             self.collector.record_delay(s.key, s.delay);
             return match self.live.as_mut() {
                 Some(live) => {
@@ -256,7 +275,8 @@ pub fn run_with(
     if let Some(spec) = &recording.scene {
         sink = sink.with_scene(spec)?;
     }
-    let mut task = CollectorTask::new(collector, sink, opts.out, opts.max_wall);
+    let mut task =
+        CollectorTask::new(collector, sink, opts.out, opts.max_wall).dying_at(opts.die_at);
     let foxglove = recording
         .foxglove
         .or_else(|| recording.dashboard.map(|d| SocketAddr::new(d.ip(), 0)));

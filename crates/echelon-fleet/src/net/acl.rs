@@ -177,6 +177,18 @@ pub fn answers(member: Member, keys: &Keys) -> Option<String> {
     }
 }
 
+/// The key `member` answers `fleet doctor`'s probe on ([`crate::probe`]):
+/// `echelon/<fleet>/probe/<its liveliness name>`, a router's for every
+/// fleet. Every member may declare it, ask it (`fleet doctor` as the
+/// `operator`) and reply: an answer says who a process is and what its
+/// clock reads, and moves nothing.
+pub fn probe_key(member: Member, keys: &Keys) -> String {
+    match member {
+        Member::Router => Keys::any().probe(&member.liveliness()),
+        _ => keys.probe(&member.liveliness()),
+    }
+}
+
 /// The certificate common name of an identity: `echelon-<identity>`.
 pub fn common_name(identity: &str) -> String {
     format!("echelon-{identity}")
@@ -199,9 +211,10 @@ pub fn identity_files(dir: &Path, identity: &str) -> (PathBuf, PathBuf) {
 /// from base `k`, and rmw_zenoh's liveliness tokens (`@ros2_lv/**`) from
 /// every member; the fleet command only from the `operator` and the
 /// `leader`; robot `k`'s halt key (its own stop-only fleet stop) only from
-/// robot `k`. Queries, queryables and replies (the command latches) are
-/// allowed to every member: what a process learns from a latch answer can
-/// only stop it ([`crate::command`]).
+/// robot `k`. Queries, queryables and replies (the command latches, the
+/// probes of [`probe_key`]) are allowed to every member: what a process
+/// learns from a latch answer can only stop it ([`crate::command`]), from
+/// a probe only who answers and its clock.
 ///
 /// The subject of a message is the certificate of the link it arrives on, so
 /// the origin is known only at its first hop: a router enforces these rules

@@ -16,8 +16,8 @@ use crate::FleetError;
 
 mod acl;
 pub use acl::{
-    RosAcl, Secure, access_control, answers, common_name, identities, identity_files, publishes,
-    ros_acl, subscribes,
+    RosAcl, Secure, access_control, answers, common_name, identities, identity_files, probe_key,
+    publishes, ros_acl, subscribes,
 };
 
 /// The environment variable Zenoh sizes its runtime from (read once, when
@@ -130,16 +130,44 @@ pub struct NetOptions {
     pub secure: Option<Secure>,
 }
 
+/// Whether `e` is a `tcp/` or `udp/` endpoint on this machine's loopback
+/// (`127.0.0.0/8`, `[::1]`, `localhost`): traffic that never leaves it.
+pub fn is_loopback_endpoint(e: &str) -> bool {
+    let locator = e.split(['?', '#']).next().unwrap_or_default();
+    let Some((proto, address)) = locator.split_once('/') else {
+        return false;
+    };
+    let host = address.rsplit_once(':').map_or(address, |(h, _)| h);
+    matches!(proto, "tcp" | "udp")
+        && (host == "localhost"
+            || host == "[::1]"
+            || host
+                .parse::<std::net::Ipv4Addr>()
+                .is_ok_and(|ip| ip.is_loopback()))
+}
+
 /// The session options of agent `agent`'s robot's own router: a client of
 /// the first of `connect` that answers (one link; no gossip, so no
 /// link to the robot's own nodes), in secure mode with the process's
 /// identity (the robot's router must then be a `tls/` or `quic/` listener
-/// trusting the fleet's CA: docs/real-robots.md).
+/// trusting the fleet's CA: docs/real-robots.md) — unless every endpoint
+/// is on this machine's loopback (an on-board robot process next to its
+/// robot's router, docs/lab.md): plain TCP there, nothing leaves the
+/// machine.
 pub fn robot_router(
     agent: u32,
     connect: &[String],
     fleet: &NetOptions,
 ) -> Result<NetOptions, FleetError> {
+    if !connect.is_empty() && connect.iter().all(|e| is_loopback_endpoint(e)) {
+        return Ok(NetOptions {
+            mode: Some(Mode::Client),
+            listen: Vec::new(),
+            connect: connect.to_vec(),
+            zenoh_config: None,
+            secure: None,
+        });
+    }
     if let Some(s) = &fleet.secure
         && let Some(e) = connect
             .iter()
@@ -276,9 +304,18 @@ pub fn secure_files(dir: &std::path::Path, identity: &str) -> Result<[PathBuf; 3
 /// Opens a session (blocks until every `connect` endpoint is reached, or fails).
 pub fn open(opts: &NetOptions) -> Result<Session, FleetError> {
     let config = config(opts)?;
-    zenoh::open(config)
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("opening the session: {e}")))
+    zenoh::open(config).wait().map_err(|e| {
+        // Nothing answered at the endpoints it must reach (a client's
+        // router, a hub): a timeout, said in one line.
+        if e.to_string().starts_with("Unable to connect to any of") {
+            FleetError::TimedOut(format!(
+                "no answer from {}: nothing listens there or it cannot be reached (is the hub's `fleet up --hub` or the router running? a firewall?)",
+                opts.connect.join(" or ")
+            ))
+        } else {
+            FleetError::Zenoh(format!("opening the session: {e}"))
+        }
+    })
 }
 
 /// Publishes `payload` on `publisher`: without an attachment stamped with

@@ -94,6 +94,30 @@ fn a_robots_router_is_a_zenoh_endpoint_reached_as_a_client() {
         .err()
         .unwrap_or_else(|| panic!("tcp in secure mode"));
     assert!(e.to_string().contains("tls/ or quic/"), "{e}");
+    // An on-board robot next to its robot's router: loopback only, plain.
+    for local in [
+        vec!["tcp/127.0.0.1:7447".to_owned()],
+        vec!["tcp/localhost:7447".to_owned(), "tcp/[::1]:7447".to_owned()],
+    ] {
+        let robot = robot_router(3, &local, &secure).unwrap_or_else(|e| panic!("{e}"));
+        assert!(robot.secure.is_none(), "{local:?}");
+    }
+    // One endpoint off the machine: the secure rule again.
+    let mixed = [
+        "tcp/127.0.0.1:7447".to_owned(),
+        "tcp/10.0.0.2:7447".to_owned(),
+    ];
+    assert!(robot_router(3, &mixed, &secure).is_err());
+    for (e, local) in [
+        ("tcp/127.0.0.1:7447", true),
+        ("tcp/127.3.2.1:1", true),
+        ("udp/localhost:7447#iface=lo", true),
+        ("tls/127.0.0.1:7447", false),
+        ("tcp/128.0.0.1:7447", false),
+        ("tcp/[fe80::1]:7447", false),
+    ] {
+        assert_eq!(super::is_loopback_endpoint(e), local, "{e}");
+    }
 }
 
 #[test]
@@ -202,6 +226,16 @@ fn each_identity_may_put_exactly_what_its_members_publish() {
                     for msg in ["query", "reply"] {
                         assert!(allows(&acl, &cn, "egress", msg, &fleets[0].latches()));
                     }
+                    // `fleet doctor`'s probes: answered by every member, asked by all.
+                    let probe = concrete(&probe_key(*m, &fleets[0]));
+                    for msg in ["declare_queryable", "reply"] {
+                        assert!(
+                            allows(&acl, &cn, "egress", msg, &probe)
+                                && allows(&acl, &cn, "ingress", msg, &probe),
+                            "{m} answering its probe on {probe}"
+                        );
+                    }
+                    assert!(allows(&acl, &cn, "egress", "query", &probe));
                     if let Some(key) = answers(*m, &fleets[0]) {
                         for msg in ["declare_queryable", "reply"] {
                             assert!(

@@ -30,6 +30,9 @@ pub struct RobotOptions {
     /// `false`: the robot is on the fleet's network (`fleet base`'s
     /// simulation, as `fleet up --ros2` runs it).
     pub own_router: bool,
+    /// The operator token: it obeys only the resumes signed with it (none:
+    /// it obeys no resume, and says so at its first tick).
+    pub operator_token: Option<crate::token::OperatorToken>,
 }
 
 /// How long a robot process waits for its robot's first odometry before
@@ -54,17 +57,23 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
     )?;
     // It obeys a resume only with a valid proof of the operator token.
     // (Without one it says so at its first tick: bad input is one line.)
-    let operator_token = crate::token::OperatorToken::from_env()?;
     let config = RobotConfig {
-        operator_token,
+        operator_token: opts.operator_token.clone(),
         ..config
     };
     let net = &opts.process.net;
     let clock = opts.process.clock();
+    // Its probe (`fleet doctor`, the hub's join line): who it is, its
+    // clock, and the address it reaches the fleet from.
+    let member = crate::role::Member::Robot(opts.agent);
+    let address = crate::probe::local_address_towards(&net.connect);
+    let probe_keys = keys.clone();
+    let probe =
+        move |s: &zenoh::Session| crate::probe::declare_from(s, &probe_keys, member, address);
     if !opts.ros2 {
         let robot = Robot::simulated(config, net::rand_source());
         let task = RobotTask::new(robot, keys).dying_at(opts.process.die_at);
-        return runtime::run(task, net, clock, stop);
+        return runtime::run_on(|s| Ok((task, probe(s)?)), net, clock, stop)?.report();
     }
     let link = settings.ros2[opts.agent as usize - 1].clone();
     let Some(velocity) = config.spec.velocity_robot() else {
@@ -103,7 +112,8 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
         first_sample: Some(FIRST_ODOMETRY_TIMEOUT),
     });
     let task = runtime::run_split(
-        |_fleet, robot| {
+        |fleet, robot| {
+            let probe = probe(fleet)?;
             // The robot is the scenario's (its cmd_vel's type, its odom,
             // its namespace) before anything is declared or sent.
             let wait = match opts.own_router {
@@ -126,7 +136,7 @@ pub fn run(opts: RobotOptions, stop: &StopFlag) -> Result<RobotReport, FleetErro
             let task = RobotTask::new(robot, keys)
                 .dying_at(opts.process.die_at)
                 .with_plant_inputs(inputs.clone(), |d, i, k, b, t| d.on_input(i, k, b, t));
-            Ok((task, node.tokens, inputs))
+            Ok((task, (node.tokens, probe), inputs))
         },
         net,
         device,

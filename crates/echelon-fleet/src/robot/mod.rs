@@ -53,6 +53,7 @@ use crate::wire::{self, DecodeError, Header, LinkStatus, Message, RobotState};
 
 mod config;
 mod driver;
+mod file;
 mod head;
 mod report;
 mod safety;
@@ -62,6 +63,10 @@ mod watchdog;
 
 pub use config::{RobotConfig, RobotSafety, agent_spec};
 pub use driver::{RobotOptions, run};
+pub use file::{
+    ClockSection, Drive, LoadedRobotFile, NetMode, NetSection, ROBOT_FILE, ROBOT_FILE_VERSION,
+    RobotFile, SecureSection, sha256_hex,
+};
 pub use head::{HEAD_FILTER, HeadFilter};
 pub use report::{RobotReport, RobotStats, SafetyCounts};
 pub use task::{PlantFeed, RobotTask};
@@ -606,6 +611,7 @@ impl<P: Plant> Robot<P> {
             hazards: self.plant.hazard_report().map(|r| r.stats()),
             commands: self.latch.counts(),
             watchdogs: self.watchdogs.counts,
+            cpu: None,
         }
     }
 

@@ -159,4 +159,8 @@ pub struct RobotStats {
     /// What its watchdogs did so far.
     #[serde(default)]
     pub watchdogs: super::WatchdogCounts,
+    /// Its process's CPU use (the task reads it when it publishes; absent
+    /// where `/proc` cannot be read).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cpu: Option<crate::cost::CpuUse>,
 }

@@ -47,6 +47,8 @@ pub struct RobotTask<P: Plant = SimulatedDrive> {
     started: bool,
     /// Whether its `--wall-clock-jump` happened.
     jumped: bool,
+    /// Its process's CPU use, read into each stats message.
+    cpu: crate::cost::CpuMeter,
 }
 
 impl<P: Plant> RobotTask<P> {
@@ -65,6 +67,7 @@ impl<P: Plant> RobotTask<P> {
             die_at: None,
             started: false,
             jumped: false,
+            cpu: crate::cost::CpuMeter::new(),
         }
     }
 
@@ -122,8 +125,13 @@ impl<P: Plant> RobotTask<P> {
         self.robot.config().watchdogs.operator_heartbeat.is_some()
     }
 
-    fn publish_stats(&self, out: &mut dyn Outputs, stats: &RobotStats) {
-        if let Ok(json) = serde_json::to_vec(stats) {
+    /// Publishes `stats` with its process's CPU use now.
+    fn publish_stats(&mut self, out: &mut dyn Outputs, stats: RobotStats) {
+        let stats = RobotStats {
+            cpu: self.cpu.read(),
+            ..stats
+        };
+        if let Ok(json) = serde_json::to_vec(&stats) {
             out.put(&self.keys.stats(self.agent()), &json);
         }
     }
@@ -154,6 +162,10 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
 
     fn tokens(&self) -> Vec<String> {
         vec![self.keys.alive(&Member::Robot(self.agent()).liveliness())]
+    }
+
+    fn exclusive(&self) -> bool {
+        true
     }
 
     fn latching(&self) -> Option<Latching> {
@@ -226,8 +238,9 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         }
         if let Some((at, step)) = self.robot.config().faults.wall_clock_jump
             && !self.jumped
-            && self.robot.is_synced()
-            && self.robot.fleet_time(now) >= at
+            // At 0: at its first tick, before any leader sample (a robot
+            // whose clock is off before the run, for `fleet doctor`).
+            && (at <= 0.0 || (self.robot.is_synced() && self.robot.fleet_time(now) >= at))
         {
             self.jumped = true;
             eprintln!("fleet robot: --wall-clock-jump: the wall clock steps by {step} s");
@@ -269,7 +282,7 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
             }
         }
         if let Some(stats) = tick.stats {
-            self.publish_stats(out, &stats);
+            self.publish_stats(out, stats);
         }
         Ok(if tick.done {
             Flow::Stop
@@ -288,7 +301,7 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         if let Some(why) = self.robot.diverged() {
             return Err(FleetError::Diverged(why.to_owned()));
         }
-        self.publish_stats(out, &stats);
+        self.publish_stats(out, stats);
         Ok(())
     }
 

@@ -148,6 +148,10 @@ impl Task for BaseTask {
         vec![self.alive.clone()]
     }
 
+    fn exclusive(&self) -> bool {
+        true
+    }
+
     fn on_input(&mut self, input: usize, s: &Sample<'_>) -> Result<(), FleetError> {
         if input == 1 {
             // The reference, for the fleet's time: the first sample arms

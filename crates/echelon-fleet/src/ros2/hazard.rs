@@ -250,13 +250,17 @@ pub struct HazardCounts {
 }
 
 /// What [`BaseSafety`] says in a robot's stats, once per fleet second.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct HazardStats {
     /// The stopping hazards in force.
     pub in_force: HazardSet,
     /// Counters.
     pub counts: HazardCounts,
+    /// The latest onset, with its clearing time once it cleared (`None`:
+    /// none yet).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last: Option<HazardEvent>,
 }
 
 /// What [`BaseSafety`] reports (the robot's report).
@@ -269,6 +273,10 @@ pub struct HazardReport {
     pub counts: HazardCounts,
     /// The episodes, in order of onset (at most [`MAX_EVENTS`]).
     pub events: Vec<HazardEvent>,
+    /// The latest onset, with its clearing time once it cleared (kept
+    /// past [`MAX_EVENTS`]; `None`: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last: Option<HazardEvent>,
 }
 
 impl HazardReport {
@@ -277,6 +285,7 @@ impl HazardReport {
         HazardStats {
             in_force: self.in_force,
             counts: self.counts,
+            last: self.last,
         }
     }
 }
@@ -348,6 +357,8 @@ pub struct BaseSafety {
     /// The stopping hazards in force as last updated.
     in_force: HazardSet,
     events: Vec<HazardEvent>,
+    /// The latest onset (kept past [`MAX_EVENTS`]).
+    last: Option<HazardEvent>,
     counts: HazardCounts,
 }
 
@@ -432,17 +443,20 @@ impl BaseSafety {
         let now = self.in_force(t);
         for h in now.iter().filter(|h| !self.in_force.contains(*h)) {
             self.counts.onsets += 1;
+            let event = HazardEvent {
+                hazard: h,
+                at: t,
+                cleared: None,
+            };
             if self.events.len() < MAX_EVENTS {
-                self.events.push(HazardEvent {
-                    hazard: h,
-                    at: t,
-                    cleared: None,
-                });
+                self.events.push(event);
             }
+            self.last = Some(event);
         }
         for e in self
             .events
             .iter_mut()
+            .chain(self.last.as_mut())
             .filter(|e| e.cleared.is_none() && !now.contains(e.hazard))
         {
             e.cleared = Some(t);
@@ -462,6 +476,7 @@ impl BaseSafety {
             in_force: self.in_force,
             counts: self.counts,
             events: self.events.clone(),
+            last: self.last,
         }
     }
 

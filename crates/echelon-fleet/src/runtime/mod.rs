@@ -42,11 +42,15 @@ pub use task::{DEFAULT_QUEUE, Flow, Latching, Outgoing, Outputs, Sample, Task, W
 use drive::Engine;
 use inputs::{Queue, Spares, Worker};
 use outputs::ZenohOutputs;
-use presence::{ask_latches, declare_latch, wait_for};
+use presence::{ask_latches, declare_latch, refuse_if_held, wait_for};
 use task::declared;
 
 /// Longest sleep, real time, so that a stop request is seen.
 pub const NAP: Duration = Duration::from_millis(20);
+/// How long an exclusive task waits for another holder of its token to
+/// leave (a process restarted at once, whose old session the router has
+/// not yet seen close) before it refuses, real time.
+pub const EXCLUSIVE_WAIT: Duration = Duration::from_secs(3);
 /// Longest wait for the answers to a task's latch query, real time.
 pub const LATCH_QUERY_TIMEOUT: Duration = Duration::from_secs(1);
 
@@ -187,6 +191,9 @@ pub fn run_split<T: Task + Send + 'static, G>(
                 .wait()
                 .map_err(|e| FleetError::Zenoh(format!("declaring {key}: {e}")))?,
         );
+    }
+    if task.exclusive() {
+        refuse_if_held(&session, &task.tokens(), EXCLUSIVE_WAIT, stop)?;
     }
     let mut tokens = Vec::new();
     for key in task.tokens() {

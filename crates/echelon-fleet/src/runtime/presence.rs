@@ -126,3 +126,97 @@ pub(super) fn wait_for(
         std::thread::sleep(Duration::from_millis(20));
     }
 }
+
+/// How long the tokens already held take to arrive after a liveliness
+/// subscription is declared (its history), real time.
+const HISTORY_SETTLE: Duration = Duration::from_millis(500);
+
+/// Refuses ([`FleetError::Refused`]) when another process holds one of
+/// `tokens` (liveliness keys `echelon/<fleet>/alive/<name>`) and keeps it for
+/// `wait`: a member the fleet has only one of is already running. Who holds
+/// what is learnt twice over: a liveliness subscription with its history
+/// (kept up to date as tokens come and go) and a liveliness query per
+/// look; a token either one saw is held.
+pub(super) fn refuse_if_held(
+    session: &zenoh::Session,
+    tokens: &[String],
+    wait: Duration,
+    stop: &StopFlag,
+) -> Result<(), FleetError> {
+    let seen: Arc<Mutex<BTreeSet<String>>> = Arc::default();
+    let mut subs = Vec::with_capacity(tokens.len());
+    for key in tokens {
+        let sink = seen.clone();
+        subs.push(
+            session
+                .liveliness()
+                .declare_subscriber(key)
+                .history(true)
+                .callback(move |s| {
+                    if let Ok(mut set) = sink.lock() {
+                        let k = s.key_expr().as_str().to_owned();
+                        match s.kind() {
+                            SampleKind::Put => set.insert(k),
+                            SampleKind::Delete => set.remove(&k),
+                        };
+                    }
+                })
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?,
+        );
+    }
+    let started = Instant::now();
+    let mut said = false;
+    loop {
+        let mut held: BTreeSet<String> = seen
+            .lock()
+            .map_err(|_| FleetError::Config("poisoned".into()))?
+            .clone();
+        for key in tokens {
+            let replies = session
+                .liveliness()
+                .get(key)
+                .timeout(Duration::from_secs(1))
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
+            while let Ok(r) = replies.recv() {
+                if let Ok(s) = r.result() {
+                    held.insert(s.key_expr().as_str().to_owned());
+                }
+            }
+        }
+        if stop.is_raised() {
+            return Ok(());
+        }
+        if held.is_empty() {
+            if started.elapsed() >= HISTORY_SETTLE {
+                return Ok(());
+            }
+            std::thread::sleep(Duration::from_millis(50));
+            continue;
+        }
+        let names: Vec<String> = held
+            .iter()
+            .map(|k| {
+                let mut parts = k.splitn(4, '/');
+                let (_, fleet, _, name) = (parts.next(), parts.next(), parts.next(), parts.next());
+                format!("{} of fleet `{}`", name.unwrap_or(k), fleet.unwrap_or("?"))
+            })
+            .collect();
+        if started.elapsed() >= wait {
+            return Err(FleetError::Refused(format!(
+                "{} is already running (another process holds its liveliness token): a second one would drive it twice; stop the other first (a second `fleet up` of the same fleet, or the same robot started twice?)",
+                names.join(", ")
+            )));
+        }
+        if !said {
+            eprintln!(
+                "{} is already in the fleet: waiting up to {:.0} s for it to leave",
+                names.join(", "),
+                wait.as_secs_f64()
+            );
+            said = true;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}

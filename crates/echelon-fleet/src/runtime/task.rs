@@ -148,6 +148,14 @@ pub trait Task {
         Vec::new()
     }
 
+    /// Whether its tokens name a member the fleet has only one of (the
+    /// leader, robot K, base K): the runtime refuses to run it while
+    /// another process holds one of them (a second `fleet up`, a robot
+    /// started twice), before it publishes anything.
+    fn exclusive(&self) -> bool {
+        false
+    }
+
     /// The latch it holds and asks for (`None`: none).
     fn latching(&self) -> Option<Latching> {
         None

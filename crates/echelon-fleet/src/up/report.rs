@@ -60,10 +60,23 @@ pub struct UpReport {
     /// each ended. Their reports are absent.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub deaths: Vec<String>,
-    /// Each robot's report, agent 1 first.
+    /// Each robot's report, agent 1 first (the robots `fleet up` started:
+    /// not the on-board ones, whose reports stay on their computers).
     pub robots: Vec<RobotReport>,
-    /// The collector's report.
-    pub collector: CollectorReport,
+    /// Hub mode: the on-board robots, which joined from their computers.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub onboard: Vec<u32>,
+    /// The collector's report (`None`: it was killed as asked, and
+    /// `log_gap` says what its log misses).
+    pub collector: Option<CollectorReport>,
+    /// The second fleet's processes asked for ([`crate::faults::Chaos::intruders`]):
+    /// how each ended.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub intruders: Vec<Intrusion>,
+    /// Where the log stops short of the run (the collector killed): the
+    /// fleet time its `trajectory.csv` ends at, and the run's end.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log_gap: Option<LogGap>,
     /// With `--ros2`: each simulated base's report.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub bases: Vec<BaseReport>,
@@ -85,6 +98,43 @@ impl UpReport {
     /// full (each robot's `dropped`), summed.
     pub fn robots_dropped(&self) -> u64 {
         self.robots.iter().map(|r| r.dropped).sum()
+    }
+}
+
+/// A process of a second fleet of the same name that joined the router.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Intrusion {
+    /// Its role (`intruder-leader`, `intruder-robot/2`).
+    pub role: String,
+    /// Its exit code (`None`: still running at the end, then killed).
+    pub exit: Option<i32>,
+    /// The last line it wrote on stderr.
+    pub said: String,
+}
+
+/// A stretch of the run the collector's log does not hold.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LogGap {
+    /// The last fleet time `trajectory.csv` holds, s (0: none).
+    pub from: f64,
+    /// The run's end, fleet s.
+    pub to: f64,
+}
+
+impl LogGap {
+    /// The gap in a log whose `trajectory.csv` is at `path` (its last
+    /// complete row's time), for a run of `duration` fleet s; `None` when
+    /// the log reaches the end.
+    pub fn of(path: &std::path::Path, duration: f64) -> Option<LogGap> {
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        // The rows a killed writer finished (each ends with its newline).
+        let from = text
+            .split_inclusive('\n')
+            .filter(|l| l.ends_with('\n'))
+            .skip(1)
+            .filter_map(|l| l.split(',').next()?.trim().parse::<f64>().ok())
+            .fold(0.0, f64::max);
+        (from < duration - 1e-6).then_some(LogGap { from, to: duration })
     }
 }
 

@@ -51,6 +51,30 @@ pub enum LinkPolicy {
     Extrapolate,
 }
 
+/// Where an agent's robot process runs in a lab fleet (`placement = "hub"`
+/// or `"onboard"`, in `[fleet]` for every agent or in the agent; docs/lab.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Placement {
+    /// On the hub's computer, started by `fleet up` (off-board: it reaches
+    /// its robot over the network).
+    #[default]
+    Hub,
+    /// On the robot's own computer, started there (`fleet robot --config`,
+    /// from `fleet bundle`), joining the hub.
+    Onboard,
+}
+
+impl Placement {
+    /// Its name in a scenario.
+    pub fn name(self) -> &'static str {
+        match self {
+            Placement::Hub => "hub",
+            Placement::Onboard => "onboard",
+        }
+    }
+}
+
 /// A resolved link-loss policy.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LinkLoss {
@@ -90,6 +114,8 @@ pub struct FleetSettings {
     pub operator_heartbeat: Option<f64>,
     /// Per agent (0-based), its link-loss policy.
     pub link_loss: Vec<LinkLoss>,
+    /// Per agent (0-based), where its robot process runs.
+    pub placement: Vec<Placement>,
     /// Per agent (0-based), where its robot is when driven through ROS 2.
     pub ros2: Vec<Ros2Link>,
 }
@@ -306,6 +332,12 @@ impl Scenario {
                 })
             })
             .collect::<Result<Vec<_>, ScenarioError>>()?;
+        let placement = self
+            .file
+            .agents
+            .iter()
+            .map(|a| a.placement.or(f.placement).unwrap_or_default())
+            .collect();
         let ros2 = (0..self.file.agents.len())
             .map(|i| self.ros2_link(i))
             .collect::<Result<Vec<_>, ScenarioError>>()?;
@@ -364,6 +396,7 @@ impl Scenario {
             stale_after,
             operator_heartbeat,
             link_loss,
+            placement,
             ros2,
         })
     }

@@ -32,8 +32,8 @@ pub use fleet::{
     DEFAULT_CMD_VEL_TIMEOUT, DEFAULT_CONTROL_RATE, DEFAULT_DECEL, DEFAULT_HOLD,
     DEFAULT_LINK_TIMEOUT, DEFAULT_NAMESPACE, DEFAULT_ODOM_RATE, DEFAULT_ODOM_TIMEOUT,
     DEFAULT_REFERENCE_RATE, DEFAULT_STALE_AFTER, ENDPOINT_PROTOCOLS, FixSource, FleetSettings,
-    LinkLoss, LinkPolicy, MAX_DOMAIN_ID, Ros2Link, check_endpoint, check_listen_endpoint,
-    is_valid_fleet_name,
+    LinkLoss, LinkPolicy, MAX_DOMAIN_ID, Placement, Ros2Link, check_endpoint,
+    check_listen_endpoint, is_valid_fleet_name,
 };
 pub use overrides::{OdometryOverrides, Overrides};
 pub use plausible::{PLAUSIBLE, Plausible};

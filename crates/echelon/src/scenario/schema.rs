@@ -7,7 +7,7 @@ use std::fmt;
 use serde::de::{self, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-pub use super::fleet::LinkPolicy;
+pub use super::fleet::{LinkPolicy, Placement};
 pub use crate::base::AccelLimit;
 pub use crate::control::{Law, Variant};
 pub use crate::lycomp::{LyComp, LyDerivatives};
@@ -374,6 +374,11 @@ pub struct AgentSection {
     /// This agent's ROS 2 robot (overrides `[fleet.ros2]` field by field).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros2: Option<Ros2Section>,
+    /// Where its robot process runs in a lab fleet: `hub` (started by
+    /// `fleet up`) or `onboard` (on the robot's computer, joining the hub);
+    /// overrides `[fleet] placement`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub placement: Option<Placement>,
     /// Where its robot's odometry frame (`odom`, REP 105) lies in the world:
     /// the robot's world pose when its odometry started (power-on). Default:
     /// its `start` pose (a robot placed on its start mark at power-on).

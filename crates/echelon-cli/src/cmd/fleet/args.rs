@@ -34,12 +34,18 @@ pub(crate) enum FleetCommand {
     Stop(CommandArgs),
     /// Lift a `fleet stop`: the robots follow again from where they are, the leader's reference goes on from where it paused. Needs the operator token (--token-file OUT/operator-token, --token or ECHELON_OPERATOR_TOKEN).
     Resume(ResumeArgs),
+    /// The running fleet seen from here (any machine that reaches its hub): per robot its state (running, holding, stopped, lost), link age, ‖e‖, last hazard and CPU, and the leader and the collector; exits 1 when no robot is heard.
+    Status(StatusArgs),
+    /// Before a run, check the hub and every robot without moving any: reachable, clock offset to the hub, round trips, odometry and its rate, cmd_vel reader, fixes, certificates, versions; a table (or --json); exits 1 when a check fails.
+    Doctor(DoctorArgs),
     /// The operator's heartbeat, a supervised run's deadman ([fleet] operator_heartbeat = T): robots hold while none arrived for T s; runs until --duration or SIGINT/SIGTERM.
     Heartbeat(HeartbeatArgs),
     /// Put garbage, duplicates and replays on every key of the fleet from fleet time --from for --for seconds (a rehearsal of hostile input: the fleet must count and refuse it); runs until SIGINT/SIGTERM.
     Garbage(GarbageArgs),
     /// Run the fault matrix (docs/faults.md): each fault on a simulated fleet over real Zenoh, the travel after it measured against its bound; writes DIR/faults.md and DIR/faults.json.
     Faults(FaultsArgs),
+    /// Write each on-board robot's directory (robot.toml, the scenario, a launcher, a systemd unit, its certificates) for `fleet robot --config` on the robot's computer.
+    Bundle(BundleArgs),
     /// Make a development CA and certificates for the secure mode.
     Certs(CertsArgs),
     /// Run `fleet up` for several fleet sizes on loopback at time scale 1 and tabulate startup, CPU, messages/s, latency, losses and final error.
@@ -68,6 +74,9 @@ pub(crate) struct NetArgs {
     /// Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).
     #[arg(long, value_name = "ENDPOINT", value_parser = connect_endpoint)]
     pub(super) connect: Vec<String>,
+    /// The fleet's hub, as `fleet up --hub` printed it (repeatable: tried in order): joins as a client of its router (`--mode client --connect ENDPOINT`).
+    #[arg(long, value_name = "ENDPOINT", value_parser = connect_endpoint, conflicts_with_all = ["mode", "connect"])]
+    pub(super) hub: Vec<String>,
     /// A Zenoh configuration file (JSON5) to start from instead of the default (peer, no multicast).
     #[arg(long, value_name = "FILE")]
     pub(super) zenoh_config: Option<PathBuf>,
@@ -86,6 +95,18 @@ pub(crate) struct NetArgs {
 }
 
 impl NetArgs {
+    /// Whether anything but `--hub` was given.
+    pub(super) fn beyond_hub(&self) -> bool {
+        self.mode.is_some()
+            || !self.listen.is_empty()
+            || !self.connect.is_empty()
+            || self.zenoh_config.is_some()
+            || self.fleet.is_some()
+            || self.secure.is_some()
+            || self.identity.is_some()
+            || self.robots.is_some()
+    }
+
     /// The fleet's name: `--fleet`, else the scenario's.
     pub(super) fn fleet_name(&self, scenario: Option<&Scenario>) -> Result<String> {
         match (&self.fleet, scenario) {
@@ -124,6 +145,15 @@ impl NetArgs {
                 },
             }),
         };
+        if !self.hub.is_empty() {
+            return Ok(NetOptions {
+                mode: Some(Mode::Client),
+                listen: self.listen.clone(),
+                connect: self.hub.clone(),
+                zenoh_config: self.zenoh_config.clone(),
+                secure,
+            });
+        }
         Ok(NetOptions {
             mode: self.mode.map(|m| match m {
                 ModeArg::Peer => Mode::Peer,
@@ -230,6 +260,11 @@ pub(crate) struct ClockArgs {
 }
 
 impl ClockArgs {
+    /// Whether any of its flags was given a value of its own.
+    pub(super) fn is_given(&self) -> bool {
+        self.duration.is_some() || self.time_scale != 1.0 || self.die_at.is_some()
+    }
+
     /// A process of `scenario` on this clock, joining the fleet by `net`
     /// (its session options `options`, its fleet name).
     pub(super) fn process(
@@ -274,6 +309,9 @@ pub(crate) struct LeaderArgs {
     /// Longest wait for --wait-for, s of real time.
     #[arg(long, value_name = "S", value_parser = seconds, default_value_t = 60.0)]
     pub(super) wait_timeout: f64,
+    /// Rehearse a rogue publisher: join even though the fleet has a leader (only the access control of the secure mode stops it; the secure mode's tests).
+    #[arg(long, hide = true)]
+    pub(super) rogue: bool,
     #[command(flatten)]
     pub(super) net: NetArgs,
 }
@@ -326,8 +364,17 @@ pub(crate) struct FaultsArgs {
 /// `echelon fleet robot`.
 #[derive(Debug, Args)]
 pub(crate) struct RobotArgs {
+    /// The robot's whole configuration, a robot.toml (`fleet bundle` writes one per on-board robot); only --hub may be given with it.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["scenario", "agent", "ros2", "simulated_base"])]
+    pub(super) config: Option<PathBuf>,
+    /// A built-in scenario name or a path to a .toml file.
+    #[arg(required_unless_present = "config")]
+    pub(super) scenario: Option<String>,
+    /// Which agent of the scenario, from 1.
+    #[arg(long, value_name = "K", required_unless_present = "config")]
+    pub(super) agent: Option<u32>,
     #[command(flatten)]
-    pub(super) agent: AgentClockArgs,
+    pub(super) clock: ClockArgs,
     /// Drive the agent's ROS 2 robot ([fleet.ros2]): odom in, cmd_vel out over rmw_zenoh.
     #[arg(long)]
     pub(super) ros2: bool,
@@ -406,6 +453,9 @@ pub(crate) struct CollectorArgs {
     /// Also record every agent's ROS 2 cmd_vel and odom ([fleet.ros2]) as ROS 2 channels.
     #[arg(long, requires = "scenario")]
     pub(super) ros2: bool,
+    /// Kill this process with SIGKILL once a reference it records reaches fleet time S (a rehearsed `kill -9`: the fault matrix, docs/faults.md).
+    #[arg(long, value_name = "S", value_parser = non_negative)]
+    pub(super) die_at: Option<f64>,
     #[command(flatten)]
     pub(super) live: LiveArgs,
     #[command(flatten)]
@@ -491,6 +541,18 @@ pub(crate) struct UpArgs {
     /// The collector's, which `up` starts.
     #[command(flatten)]
     pub(super) live: LiveArgs,
+    /// Hub mode: router, leader and collector on this machine, the router listening on --listen; robots with placement = "onboard" join from their computers (`fleet bundle`), and the reference starts once every robot joined.
+    #[arg(long, requires = "listen")]
+    pub(super) hub: bool,
+    /// With --hub: where its router listens, e.g. tcp/0.0.0.0:7447 (quic/… in secure mode) (repeatable).
+    #[arg(long, value_name = "ENDPOINT", value_parser = listen_endpoint, requires = "hub")]
+    pub(super) listen: Vec<String>,
+    /// With --hub: the longest wait for every robot to join, s of real time; then exit 1 naming the missing ones.
+    #[arg(long, value_name = "S", value_parser = seconds, default_value_t = 120.0, requires = "hub")]
+    pub(super) wait: f64,
+    /// The operator token in this file (e.g. the one given to `fleet bundle`) [default: ECHELON_OPERATOR_TOKEN, else a new one].
+    #[arg(long, value_name = "PATH")]
+    pub(super) token_file: Option<PathBuf>,
     /// Print nothing but errors.
     #[arg(long, short)]
     pub(super) quiet: bool,
@@ -556,6 +618,43 @@ impl ResumeArgs {
     }
 }
 
+/// `echelon fleet bundle`.
+#[derive(Debug, Args)]
+pub(crate) struct BundleArgs {
+    /// A built-in scenario name or a path to a .toml file.
+    pub(super) scenario: String,
+    /// The hub's router endpoint, as `fleet up --hub --listen` listens (repeatable: tried in order), e.g. tcp/192.168.1.10:7447.
+    #[arg(long, value_name = "ENDPOINT", value_parser = connect_endpoint, required = true)]
+    pub(super) hub: Vec<String>,
+    /// Output directory: one robot-K/ per on-board robot.
+    #[arg(long, value_name = "DIR")]
+    pub(super) out: PathBuf,
+    /// Every agent, not only those with placement = "onboard".
+    #[arg(long)]
+    pub(super) all: bool,
+    /// The robots drive a simulated robot (a rehearsal without hardware), not their ROS 2 robot.
+    #[arg(long)]
+    pub(super) simulated: bool,
+    /// With --simulated: run the clock K times faster (the hub's `fleet up --time-scale`).
+    #[arg(long, value_name = "K", value_parser = time_scale, default_value_t = 1.0, requires = "simulated")]
+    pub(super) time_scale: f64,
+    /// The robots stop at this fleet time, s [default: at SIGTERM, as a service].
+    #[arg(long, value_name = "S", value_parser = seconds)]
+    pub(super) duration: Option<f64>,
+    /// Secure mode: copy the CA and each robot's own certificate and key from DIR (`echelon fleet certs`).
+    #[arg(long, value_name = "DIR")]
+    pub(super) secure: Option<PathBuf>,
+    /// Copy the operator token in this file (the hub's OUT/operator-token) into each robot's directory [default: ECHELON_OPERATOR_TOKEN, else none].
+    #[arg(long, value_name = "PATH")]
+    pub(super) token_file: Option<PathBuf>,
+    /// Fleet name [default: the scenario's].
+    #[arg(long, value_name = "NAME")]
+    pub(super) fleet: Option<String>,
+    /// Where the robots' directories go on their computers (the systemd unit's paths).
+    #[arg(long, value_name = "DIR", default_value = echelon_fleet::bundle::DEFAULT_INSTALL_DIR)]
+    pub(super) install_dir: String,
+}
+
 /// `echelon fleet certs`.
 #[derive(Debug, Args)]
 pub(crate) struct CertsArgs {
@@ -567,6 +666,35 @@ pub(crate) struct CertsArgs {
     /// Another host name or IP address the fleet's processes listen on (repeatable).
     #[arg(long, value_name = "HOST")]
     pub(super) host: Vec<String>,
+    /// Rehearsals of `fleet doctor`'s findings: identity ID's certificate expires DAYS days from now (negative: expired already) (repeatable).
+    #[arg(long, value_name = "ID=DAYS", value_parser = parse_expiry, allow_hyphen_values = true, hide = true)]
+    pub(super) expires: Vec<(String, f64)>,
+}
+
+/// `ID=DAYS` of `fleet certs --expires`.
+fn parse_expiry(s: &str) -> Result<(String, f64), String> {
+    let (id, days) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}`: give ID=DAYS, e.g. robot-1=-1"))?;
+    Ok((id.to_owned(), parse_number(days)?))
+}
+
+/// `echelon fleet doctor`.
+#[derive(Debug, Args)]
+pub(crate) struct DoctorArgs {
+    /// A built-in scenario name or a path to a .toml file: the fleet to check.
+    pub(super) scenario: String,
+    /// Listen to each robot's odometry and fixes, and probe each process, this long, s of real time.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 3.0)]
+    pub(super) listen_for: f64,
+    /// Longest wait to reach an endpoint (the hub, a robot's router) or for a probe's answer, s of real time.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 3.0)]
+    pub(super) timeout: f64,
+    /// Print the findings as one JSON document.
+    #[arg(long)]
+    pub(super) json: bool,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
 }
 
 /// An endpoint to connect to, `<protocol>/<host>:<port>` (clap value
@@ -593,4 +721,22 @@ fn parse_agent_hazard(s: &str) -> Result<(u32, echelon_fleet::ros2::hazard::Haza
         .filter(|k| *k >= 1)
         .ok_or_else(|| format!("`{s}`: `{k}` is not an agent number (1, 2, …)"))?;
     Ok((k, window.parse()?))
+}
+
+/// `echelon fleet status`.
+#[derive(Debug, Args)]
+pub(crate) struct StatusArgs {
+    /// The scenario, for the fleet name and its robots (each listed, heard or not), or give --fleet.
+    pub(super) scenario: Option<String>,
+    /// Redraw every second until SIGINT/SIGTERM.
+    #[arg(long)]
+    pub(super) watch: bool,
+    /// Print one JSON document (with --watch, one line per refresh).
+    #[arg(long)]
+    pub(super) json: bool,
+    /// How long to listen before answering (and to wait for the endpoints), s of real time.
+    #[arg(long, value_name = "S", value_parser = seconds, default_value_t = echelon_fleet::status::DEFAULT_LISTEN.as_secs_f64())]
+    pub(super) listen_for: f64,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
 }

@@ -100,6 +100,16 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             log_rate: a.live.log_rate,
             hazards: a.hazard.clone(),
             chaos: Default::default(),
+            hub: a.hub.then(|| echelon_fleet::up::HubOptions {
+                listen: a.listen.clone(),
+                wait: a.wait,
+            }),
+            token: a
+                .token_file
+                .as_deref()
+                .map(echelon_fleet::token::OperatorToken::from_file)
+                .transpose()
+                .context("--token-file")?,
         },
         &stop,
     )?;
@@ -116,6 +126,12 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
         report.time_scale,
         report.wall
     )?;
+    if !report.onboard.is_empty() {
+        outln!(
+            "  on-board (joined from their computers; their reports stay there, their states are in the log): robots {:?}",
+            report.onboard
+        )?;
+    }
     if let (Some(startup), Some(run)) = (report.startup, report.run) {
         outln!("  startup (all joined) {startup:.2} s, then run {run:.2} s")?;
     }
@@ -290,18 +306,29 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             )?;
         }
     }
-    let col = &report.collector;
-    outln!(
-        "  collector: {} messages received, {} logged, {} rejected",
-        col.received,
-        col.logged,
-        col.rejected.values().sum::<u64>()
-    )?;
-    if col.decimated > 0 || col.dropped > 0 {
+    match &report.collector {
+        Some(col) => {
+            outln!(
+                "  collector: {} messages received, {} logged, {} rejected",
+                col.received,
+                col.logged,
+                col.rejected.values().sum::<u64>()
+            )?;
+            if col.decimated > 0 || col.dropped > 0 {
+                outln!(
+                    "  collector: {} states decimated (--log-rate), {} samples dropped (queue full)",
+                    col.decimated,
+                    col.dropped
+                )?;
+            }
+        }
+        None => outln!("  collector: killed (no report)")?,
+    }
+    if let Some(gap) = &report.log_gap {
         outln!(
-            "  collector: {} states decimated (--log-rate), {} samples dropped (queue full)",
-            col.decimated,
-            col.dropped
+            "  log gap: the log ends at fleet time {:.2} s; the run went on to {:.2} s",
+            gap.from,
+            gap.to
         )?;
     }
     let robots_dropped = report.robots_dropped();

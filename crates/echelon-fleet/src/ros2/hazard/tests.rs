@@ -112,6 +112,40 @@ fn a_bump_is_in_force_until_a_vector_without_it_or_silence() {
         ),
         (4, 1, 2)
     );
+    // The latest onset, with its clearing, in the report and the stats.
+    assert_eq!(r.last, r.events.last().copied());
+    assert_eq!(r.stats().last, r.last);
+}
+
+/// Past [`MAX_EVENTS`] onsets the report keeps the first ones, and the
+/// latest onset still: `fleet status` shows it.
+#[test]
+fn the_latest_onset_is_kept_past_the_events_cap() {
+    let mut b = BaseSafety::new(KeyScheme::RmwZenoh);
+    let key = hazard_key();
+    let n = MAX_EVENTS + 10;
+    for i in 0..n {
+        let t = i as f64;
+        let _ = b.on_hazards(&key, &vector(&[1]), t);
+        let _ = b.on_hazards(&key, &vector(&[]), t + 0.5);
+    }
+    let _ = b.on_hazards(&key, &vector(&[2]), n as f64);
+    let r = b.report();
+    assert_eq!(r.events.len(), MAX_EVENTS);
+    assert_eq!(r.counts.onsets, n as u64 + 1);
+    assert_eq!(
+        r.stats().last,
+        Some(HazardEvent {
+            hazard: Hazard::Cliff,
+            at: n as f64,
+            cleared: None
+        })
+    );
+    let _ = b.on_hazards(&key, &vector(&[]), n as f64 + 0.25);
+    assert_eq!(
+        b.report().last.and_then(|e| e.cleared),
+        Some(n as f64 + 0.25)
+    );
 }
 
 #[test]
@@ -211,6 +245,9 @@ proptest! {
                 prop_assert_eq!(open, usize::from(expected.contains(h)), "{:?}", h);
             }
             prop_assert_eq!(r.counts.onsets as usize, r.events.len());
+            // The latest onset, cleared or not, as the stats carry it.
+            prop_assert_eq!(r.last, r.events.last().copied());
+            prop_assert_eq!(r.stats().last, r.last);
         }
     }
 }

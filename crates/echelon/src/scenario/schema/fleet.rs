@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{KeyScheme, LinkPolicy};
+use super::{KeyScheme, LinkPolicy, Placement};
 
 /// `[fleet]`: how the scenario runs as separate processes (`echelon fleet`).
 /// Every field is optional; the simulator ignores this section.
@@ -39,6 +39,11 @@ pub struct FleetSection {
     /// every agent (an agent's own `ros2` overrides it field by field).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros2: Option<Ros2Section>,
+    /// Where every agent's robot process runs in a lab fleet: `hub`
+    /// (default; started by `fleet up`) or `onboard` (an agent's own
+    /// `placement` overrides it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub placement: Option<Placement>,
 }
 
 impl FleetSection {

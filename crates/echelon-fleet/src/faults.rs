@@ -41,6 +41,10 @@ pub struct FaultSpec {
     /// time `at` (an NTP step; fleet time is monotonic).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub wall_clock_jump: Option<(f64, f64)>,
+    /// `(start, length)`, fleet s: the robot partitioned from the fleet
+    /// ([`FaultSpec::partitioned_at`]): nothing in, nothing out.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub partition: Option<(f64, f64)>,
 }
 
 fn is_zero(v: &f64) -> bool {
@@ -66,9 +70,12 @@ pub struct Chaos {
     pub kills: Vec<(crate::role::Member, f64)>,
     /// Robot `k`'s odometry frozen in `(start, length)`.
     pub freeze_odometry: Vec<(u32, (f64, f64))>,
-    /// Robot `k`'s leader stream cut in `(start, length)`: the robot
-    /// partitioned from its leader.
+    /// Robot `k`'s leader stream cut in `(start, length)`.
     pub outages: Vec<(u32, (f64, f64))>,
+    /// Robot `k` partitioned in `(start, length)`
+    /// ([`FaultSpec::partitioned_at`]): nothing in or out but the fleet's
+    /// stop and heartbeat keys.
+    pub partitions: Vec<(u32, (f64, f64))>,
     /// `(start, length)`: garbage, duplicates and replays on every key of
     /// the fleet (`fleet garbage`, [`crate::garbage`]).
     pub garbage: Option<(f64, f64)>,
@@ -96,9 +103,26 @@ impl Chaos {
 }
 
 impl FaultSpec {
+    /// Whether nothing of the leader stream arrives at fleet time `t` (an
+    /// `outage`, or a `partition`).
+    pub fn leader_cut_at(&self, t: f64) -> bool {
+        let within = |w: Option<(f64, f64)>| w.is_some_and(|(s, l)| t >= s && t < s + l);
+        within(self.outage) || within(self.partition)
+    }
+
+    /// Whether the robot is partitioned from the fleet at fleet time `t`:
+    /// nothing of its leader stream or its neighbours arrives, and its
+    /// state and counters do not leave (its followers lose it as they
+    /// would a robot behind a dead link); only the fleet's stop, resume and
+    /// heartbeat keys still pass.
+    pub fn partitioned_at(&self, t: f64) -> bool {
+        self.partition
+            .is_some_and(|(start, len)| t >= start && t < start + len)
+    }
+
     /// Whether it injects anything on what the robot receives.
     pub fn is_active(&self) -> bool {
-        self.loss > 0.0 || self.delay > 0.0 || self.outage.is_some()
+        self.loss > 0.0 || self.delay > 0.0 || self.outage.is_some() || self.partition.is_some()
     }
 
     /// Whether the odometry is frozen at fleet time `t`.
@@ -251,10 +275,7 @@ impl FaultInjector {
     /// seed and the arrival count.
     pub fn admit(&mut self, t: f64) -> Verdict {
         let draw = self.rng.next_f64();
-        if let Some((start, len)) = self.spec.outage
-            && t >= start
-            && t < start + len
-        {
+        if self.spec.leader_cut_at(t) {
             return Verdict::Outage;
         }
         if draw < self.spec.loss {

@@ -27,7 +27,7 @@
 //! fleet's time from the reference); the router killed and started again
 //! 2 s later; a robot's wall clock stepped ±1 s; garbage and replays on
 //! every key; a robot's base killed (the robot's
-//! output watchdog holds it, its followers stop); a robot's leader stream cut for
+//! output watchdog holds it, its followers stop); a robot partitioned (nothing in or out) for
 //! 0.3 s, 3 s and 30 s; a robot's odometry frozen; the operator's
 //! heartbeat killed in a supervised run. Each row's
 //! directory `DIR/<row>/` holds its scenario and everything `fleet up`
@@ -256,6 +256,20 @@ pub fn judge(row: &Row, up: &UpReport) -> RowResult {
             g => problems.push(format!(
                 "the collector's log gap was not reported from the fault on ({g:?})"
             )),
+        }
+    }
+    // A partition cuts both ways: robot 2, which follows robot 1, lost it
+    // (its state stopped leaving) when the partition outlasted its link
+    // timeout.
+    for &(k, (_, len)) in &row.chaos.partitions {
+        if len > LINK_TIMEOUT + 1.0 / CONTROL_RATE {
+            let follower = up.robots.iter().find(|r| r.agent == k + 1);
+            if follower.is_none_or(|r| r.counters.link_losses == 0) {
+                problems.push(format!(
+                    "robot {}, robot {k}'s follower, never lost it: did robot {k}'s state keep leaving?",
+                    k + 1
+                ));
+            }
         }
     }
     // A second fleet's processes: each refused, exit 2, naming why.

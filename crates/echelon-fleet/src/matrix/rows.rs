@@ -264,19 +264,19 @@ pub fn rows() -> Vec<Row> {
     for (name, fault, len, outcome) in [
         (
             "partition-0.3s",
-            "robot 1 cut from its leader stream for 0.3 s",
+            "robot 1 partitioned from the fleet for 0.3 s (nothing in or out but the fleet's stop and heartbeat keys)",
             0.3,
             Outcome::Continue,
         ),
         (
             "partition-3s",
-            "robot 1 cut from its leader stream for 3 s",
+            "robot 1 partitioned from the fleet for 3 s",
             3.0,
             Outcome::Hold,
         ),
         (
             "partition-30s",
-            "robot 1 cut from its leader stream for 30 s",
+            "robot 1 partitioned from the fleet for 30 s",
             30.0,
             Outcome::Hold,
         ),
@@ -284,12 +284,12 @@ pub fn rows() -> Vec<Row> {
         rows.push(row(
             name,
             fault,
-            "after the link timeout robot 1 converges to the last reference (policy `stop`), robots 2 and 3 follow it; all follow again when the stream returns",
+            "after the link timeout robot 1 converges to the last reference and robot 2, which hears no more of robot 1, to its slot behind robot 1's last state (policy `stop`); robot 3 follows robot 2; all follow again when the partition ends",
             outcome,
-            chain.clone(),
+            vec![(1, 0), (2, 0), (3, 1)],
             link_lost,
             Chaos {
-                outages: vec![(1, (at, len))],
+                partitions: vec![(1, (at, len))],
                 ..Chaos::default()
             },
             len,

@@ -415,8 +415,14 @@ impl<P: Plant> Robot<P> {
 
     /// Takes a message that arrived on another robot's state stream at local
     /// time `now` (decoded by the caller) for the safety filter; ignored
-    /// without one.
+    /// without one, and dropped (counted as `injected_outage`) while the
+    /// robot is partitioned.
     pub fn on_neighbour(&mut self, msg: Result<Message, DecodeError>, now: f64) {
+        if self.synced && self.config.faults.partitioned_at(self.fleet_time(now)) {
+            // Partitioned (`--outage`): nothing arrives.
+            self.tracker.counters.injected_outage += 1;
+            return;
+        }
         let Some(s) = self.safety.as_mut() else {
             return;
         };

@@ -274,14 +274,21 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
             eprintln!("fleet stop put: {}", stop.reason);
             out.put(&self.keys.halt(self.agent()), &stop.encode());
         }
-        if let Some((h, state)) = tick.publish {
+        // Partitioned (`--partition`): its state and counters do not leave.
+        let cut = self.robot.is_synced()
+            && self
+                .robot
+                .config()
+                .faults
+                .partitioned_at(self.robot.fleet_time(now));
+        if let Some((h, state)) = tick.publish.filter(|_| !cut) {
             wire::encode_state(&mut self.buf, h, &state);
             if let Err(e) = out.publish(STATE, &self.buf) {
                 self.failed = true;
                 return Err(e);
             }
         }
-        if let Some(stats) = tick.stats {
+        if let Some(stats) = tick.stats.filter(|_| !cut) {
             self.publish_stats(out, stats);
         }
         Ok(if tick.done {

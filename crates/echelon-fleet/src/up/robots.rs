@@ -39,6 +39,11 @@ fn rehearsal(opts: &UpOptions, k: u32) -> FaultSpec {
             .iter()
             .find(|(j, _)| *j == k)
             .map(|&(_, w)| w),
+        partition: chaos
+            .partitions
+            .iter()
+            .find(|(j, _)| *j == k)
+            .map(|&(_, w)| w),
         fault_at: chaos.fault_at,
         fault_window: chaos.fault_at.and(chaos.window),
         ..opts.faults

@@ -176,7 +176,7 @@ pub(crate) struct FaultArgs {
     /// Delay every received message by MS milliseconds of fleet time.
     #[arg(long, value_name = "MS", value_parser = non_negative, default_value_t = 0.0)]
     pub(super) delay: f64,
-    /// Drop everything received in [START, START+LEN) s of fleet time.
+    /// Drop everything received on the leader stream in [START, START+LEN) s of fleet time.
     #[arg(long, value_name = "START:LEN", value_parser = outage)]
     pub(super) outage: Option<(f64, f64)>,
     /// Seed of the drop pattern.
@@ -191,6 +191,9 @@ pub(crate) struct FaultArgs {
     /// With --fault-at: measure for LEN s only [default: to the end].
     #[arg(long, value_name = "LEN", value_parser = positive, requires = "fault_at")]
     pub(super) fault_window: Option<f64>,
+    /// Partition the robot in [START, START+LEN) s of fleet time: nothing of its leader stream or neighbours arrives, its state does not leave (stop, resume and heartbeat still pass).
+    #[arg(long, value_name = "START:LEN", value_parser = outage)]
+    pub(super) partition: Option<(f64, f64)>,
     /// Step this process's wall clock by STEP s (may be negative) at fleet time AT (a rehearsed NTP step; fleet time is monotonic).
     #[arg(long, value_name = "AT:STEP", value_parser = clock_jump, allow_hyphen_values = true)]
     pub(super) wall_clock_jump: Option<(f64, f64)>,
@@ -214,6 +217,7 @@ impl FaultArgs {
             fault_at: self.fault_at,
             fault_window: self.fault_window,
             wall_clock_jump: self.wall_clock_jump,
+            partition: self.partition,
         }
     }
 }

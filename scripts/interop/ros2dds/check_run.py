@@ -16,6 +16,18 @@ Subcommands:
       hazard_detection), `moving` at the first non-zero command, `bump` at the
       first hazard vector with a BUMP, `clear` at the first vector without a
       stopping hazard after that. Runs until SIGTERM/SIGINT.
+      With --no-cmd-vel it does not subscribe to `<ns>/cmd_vel` (a subscriber
+      there is a reader of echelon's commands: it would hide the bridge's
+      own from the robot's output watchdog); it declares a publisher on the
+      key instead, never putting anything, and logs its matching status
+      (`matching`: whether a subscriber, the bridge's route, is there, as
+      the robot's cmd_vel publisher sees it), and sets `moving` at the first
+      odometry with a non-zero speed. Every line also has `wall`,
+      time.time() (the clock of the collector's fleet.mcap log times).
+
+  kill --pid PID --record FILE [--signal KILL|TERM]
+      Sends SIGKILL (or SIGTERM) to PID and records the monotonic and wall
+      times just before it (JSON).
 
   exec --record FILE -- CMD...
       Runs CMD, records its monotonic start and end, exit status, stdout and
@@ -31,16 +43,19 @@ Subcommands:
       Records both answers (and the times) in FILE: the robot itself must
       refuse it while its base reports a hazard.
 
-  check-converge | check-hazard | check-graph  (see --help of each)
+  check-converge | check-hazard | check-graph | check-robot-kill |
+  check-base-kill  (see --help of each)
       Read the reports and logs of one phase, print the measured numbers,
       append them to --summary (JSON), and exit 1 naming every failed check.
 """
 
 import argparse
+import datetime
 import hashlib
 import hmac
 import json
 import os
+import re
 import signal
 import struct
 import subprocess
@@ -49,6 +64,10 @@ import threading
 import time
 
 STOPPING = {1: "BUMP", 2: "CLIFF", 3: "STALL", 4: "WHEEL_DROP"}
+# create3_base.py's Create 3: odometry rate, command timeout, wheel acceleration.
+ODOM_RATE = 20.0
+CMD_TIMEOUT = 0.5
+ACCEL = 0.9
 KINDS = {0: "BACKUP_LIMIT", 1: "BUMP", 2: "CLIFF", 3: "STALL", 4: "WHEEL_DROP", 5: "OBJECT_PROXIMITY"}
 
 
@@ -149,6 +168,7 @@ def watch(args):
         os.replace(os.path.join(args.flags, name + ".tmp"), os.path.join(args.flags, name))
 
     def write(line):
+        line["wall"] = time.time()
         with lock:
             out.write(json.dumps(line) + "\n")
             out.flush()
@@ -179,6 +199,9 @@ def watch(args):
             elif key == odom_key:
                 v, w = decode_odom_twist(payload)
                 write({"t": t, "topic": "odom", "v": v, "w": w})
+                if args.no_cmd_vel and (v != 0.0 or w != 0.0) and not state["moving"]:
+                    state["moving"] = True
+                    flag("moving", t)
         except (ValueError, IndexError, struct.error) as e:
             write({"t": t, "topic": "undecodable", "key": key, "error": str(e), "hex": payload.hex()})
 
@@ -201,7 +224,16 @@ def watch(args):
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("connect/endpoints", json.dumps([args.connect]))
     session = zenoh.open(conf)
-    subs = [session.declare_subscriber(k, on_sample) for k in (cmd_key, hazard_key, odom_key)]
+    keys = (hazard_key, odom_key) if args.no_cmd_vel else (cmd_key, hazard_key, odom_key)
+    subs = [session.declare_subscriber(k, on_sample) for k in keys]
+    publisher = listener = None
+    if args.no_cmd_vel:
+        def on_matching(status):
+            write({"t": time.monotonic(), "topic": "matching", "matching": status.matching})
+
+        publisher = session.declare_publisher(cmd_key)
+        listener = publisher.declare_matching_listener(on_matching)
+        write({"t": time.monotonic(), "topic": "matching", "matching": publisher.matching_status.matching, "initial": True})
     lv = session.liveliness().declare_subscriber("@/*/@ros2_lv/**", on_token, history=True)
 
     stop = threading.Event()
@@ -213,6 +245,9 @@ def watch(args):
     lv.undeclare()
     for s in subs:
         s.undeclare()
+    if listener is not None:
+        listener.undeclare()
+        publisher.undeclare()
     session.close()
     out.close()
 
@@ -232,6 +267,18 @@ def exec_(args):
     sys.stdout.write(p.stdout)
     sys.stderr.write(p.stderr)
     sys.exit(p.returncode)
+
+
+# --------------------------------------------------------------------------
+# kill
+
+
+def kill(args):
+    t = time.monotonic()
+    wall = time.time()
+    os.kill(args.pid, getattr(signal, "SIG" + args.signal))
+    with open(args.record, "w", encoding="utf-8") as f:
+        json.dump({"pid": args.pid, "signal": args.signal, "t": t, "wall": wall}, f, indent=1)
 
 
 # --------------------------------------------------------------------------
@@ -535,6 +582,284 @@ def check_graph(args):
     ch.finish(args.summary)
 
 
+def interpolate(samples, t, key):
+    """`key` of time-ordered `samples` (dicts with `t`) at time t, linear
+    between the two around it (clamped at the ends)."""
+    before = [x for x in samples if x["t"] <= t]
+    after = [x for x in samples if x["t"] > t]
+    if not before:
+        return after[0][key]
+    if not after:
+        return before[-1][key]
+    a, b = before[-1], after[0]
+    return a[key] + (b[key] - a[key]) * (t - a["t"]) / (b["t"] - a["t"])
+
+
+def check_robot_kill(args):
+    ch = Checks("robot-kill")
+    base = json.load(open(args.base, encoding="utf-8"))
+    robot = json.load(open(args.robot, encoding="utf-8"))
+    watched = read_jsonl(args.watch)
+    cmds = base["commands"]
+    odom = base["odom"]
+    period = 1.0 / args.control_rate
+    odom_period = 1.0 / ODOM_RATE
+    t_kill = robot["end"]
+    died = [line for line in robot["stderr"].splitlines() if "--die-at reached" in line]
+    delays, matched, _ = delivery(watched, cmds)
+    d_max = max(delays, default=0.0)
+    last = cmds[-1] if cmds else None
+    # The last command's own delivery delay (the watcher saw it on the
+    # bridge's router, the base received it over DDS; the watcher, a client
+    # of that router, may see it a little after the base: then it is < 0).
+    seen = [w for w in watched if w["topic"] == "cmd_vel"]
+    d_last = None
+    if last is not None:
+        same = [w for w in seen if w["value"] == last["value"]]
+        d_last = min((last["t"] - w["t"] for w in same), key=abs) if same else None
+    # The last command as it left echelon (the watcher's time): the kill came
+    # one control period later, at the robot's next tick.
+    sent_last = max((w["t"] for w in seen), default=None)
+    last_nonzero = next((c for c in reversed(cmds) if nonzero(c["value"])), None)
+    timeout = next((x for x in base["timeouts"] if last is not None and x["last_command_at"] == last["t"]), None)
+    v_kill = interpolate(odom, t_kill, "v") if odom else None
+    s_kill = interpolate(odom, t_kill, "s") if odom else None
+    travel = (base["odom"][-1]["s"] - s_kill) if odom else None
+    bound = None if v_kill is None else v_kill * (CMD_TIMEOUT + odom_period) + v_kill ** 2 / (2 * ACCEL)
+    stop_limit = CMD_TIMEOUT + odom_period + max(d_last or 0.0, 0.0)
+    stopped_after = None if timeout is None else timeout["stopped_at"] - t_kill
+    rest_after = None if timeout is None or timeout["rest_at"] is None else timeout["rest_at"] - t_kill
+    rest_limit = stop_limit + (abs(timeout["v"]) / ACCEL if timeout else 0.0)
+    # The base's odometry: first sample no longer driven, first at rest, and
+    # none moving after that.
+    undriven = next((o for o in odom if o["t"] > t_kill and not o["driving"]), None)
+    at_rest = next((o for o in odom if o["t"] > t_kill and o["v"] == 0.0 and o["omega"] == 0.0), None)
+    moving_late = [o for o in odom if at_rest and o["t"] > at_rest["t"] and (o["v"] != 0.0 or o["omega"] != 0.0)]
+    n = ch.numbers
+    n.update({
+        "die_at_line": died[0] if died else None,
+        "robot_rc": robot["rc"],
+        "robot_report_printed": any(line.strip().startswith("{") for line in robot["stdout"].splitlines()),
+        "control_period_s": period,
+        "odom_period_s": odom_period,
+        "cmd_received_by_base": len(cmds),
+        "nonzero_received": base["nonzero_commands"],
+        "delivery_zenoh_to_dds_s": {"p50": quantile(delays, 0.5), "max": d_max if delays else None, "matched": matched},
+        "last_command_delay_s": d_last,
+        "last_command_seen_before_kill_s": None if sent_last is None else t_kill - sent_last,
+        "last_command": last["value"] if last else None,
+        "last_command_after_kill_s": None if last is None else last["t"] - t_kill,
+        "last_nonzero_after_kill_s": None if last_nonzero is None else last_nonzero["t"] - t_kill,
+        "speed_at_kill_mps": v_kill,
+        "timeout": timeout,
+        "wheels_stopped_after_kill_s": stopped_after,
+        "wheels_stopped_after_last_command_s": None if timeout is None else timeout["stopped_at"] - timeout["last_command_at"],
+        "stop_limit_s": stop_limit,
+        "odom_undriven_after_kill_s": None if undriven is None else undriven["t"] - t_kill,
+        "at_rest_after_kill_s": rest_after,
+        "odom_at_rest_after_kill_s": None if at_rest is None else at_rest["t"] - t_kill,
+        "rest_limit_s": rest_limit,
+        "travel_after_kill_m": travel,
+        "travel_bound_m": bound,
+        "odom_moving_after_rest": len(moving_late),
+        "rest_of_run_s": None if not odom else odom[-1]["t"] - t_kill,
+    })
+    ms = lambda x: float("nan") if x is None else x * 1000
+    print(f"robot-kill: {died[0] if died else 'no --die-at line'} (exit {robot['rc']}); the base had received "
+          f"{len(cmds)} commands ({base['nonzero_commands']} non-zero), the last {ms(n['last_command_after_kill_s']):+.1f} ms "
+          f"after the kill, {fmt_cmd(last['value']) if last else 'none'} (bridge -> base {ms(d_last):+.2f} ms; the watcher "
+          f"saw it {ms(n['last_command_seen_before_kill_s']):.1f} ms before the kill); "
+          f"speed at the kill {v_kill or float('nan'):.4f} m/s")
+    print(f"robot-kill: the base's timeout stopped its wheels {ms(stopped_after):.1f} ms after the kill "
+          f"({ms(n['wheels_stopped_after_last_command_s']):.1f} ms after the last command; limit {ms(stop_limit):.1f} ms = "
+          f"0.5 s + odometry period {odom_period * 1000:.0f} ms + the last command's delay), seen in its odometry "
+          f"{ms(n['odom_undriven_after_kill_s']):.1f} ms after the kill; at rest {ms(rest_after):.1f} ms after the kill "
+          f"(odometry: {ms(n['odom_at_rest_after_kill_s']):.1f} ms; limit {ms(rest_limit):.1f} ms with the braking time); "
+          f"travelled {(travel or 0) * 1000:.2f} mm after the kill (bound {(bound or 0) * 1000:.2f} mm)")
+
+    ch.check(bool(died) and robot["rc"] == -signal.SIGKILL,
+             f"the robot killed itself with SIGKILL at --die-at (rc {robot['rc']}: {died[0] if died else 'no line'})")
+    ch.check(not n["robot_report_printed"], "a killed robot prints no report")
+    ch.check(base["nonzero_commands"] >= 2 * args.control_rate,
+             f"echelon drove the base before the kill ({base['nonzero_commands']} non-zero commands)")
+    ch.check(last is not None and nonzero(last["value"]),
+             "the last command the base received is non-zero (a killed robot sends no stop)")
+    ch.check(last is not None and last["t"] <= t_kill + d_max + args.slack,
+             f"nothing reached the base after the kill (last {ms(n['last_command_after_kill_s']):+.1f} ms after it, "
+             f"limit {ms(d_max + args.slack):.1f} ms)")
+    ch.check(v_kill is not None and v_kill > 0.05, f"the base was moving at the kill ({v_kill} m/s)")
+    ch.check(timeout is not None, "the base's own 0.5 s timeout took the last command out")
+    ch.check(stopped_after is not None and stopped_after <= stop_limit,
+             f"its wheels stopped driving {ms(stopped_after):.1f} ms after the kill <= {ms(stop_limit):.1f} ms")
+    ch.check(rest_after is not None and rest_after <= rest_limit,
+             f"the base was at rest {ms(rest_after):.1f} ms after the kill <= {ms(rest_limit):.1f} ms "
+             f"(+ braking {(abs(timeout['v']) / ACCEL if timeout else 0) * 1000:.1f} ms at {ACCEL} m/s^2)")
+    ch.check(travel is not None and bound is not None and travel <= bound,
+             f"travel after the kill {(travel or 0) * 1000:.2f} mm <= v*(0.5 s + 0.05 s) + v^2/(2*{ACCEL}) = "
+             f"{(bound or 0) * 1000:.2f} mm")
+    ch.check(at_rest is not None and not moving_late,
+             f"its odometry stayed at rest to the end ({n['rest_of_run_s'] or 0:.1f} s after the kill; "
+             f"{len(moving_late)} moving samples)")
+    ch.finish(args.summary)
+
+
+def mcap_records(path, topic):
+    """The collector's records on `topic` in fleet.mcap: (log time in UNIX
+    s, the JSON record), in log order."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        return [(msg.log_time / 1e9, json.loads(msg.data))
+                for _, _, msg in make_reader(f).iter_messages(topics=[topic], log_time_order=True)]
+
+
+def check_base_kill(args):
+    """The robot's hold, from what the collector logged: its states
+    (`/agent/1/state`, every tick it has a state to publish, with the fleet
+    time `t` and the collector's UNIX receive time) and its stats
+    (`/agent/1/stats`, once per fleet second: `link` and the `watchdogs`
+    counts). The kill's fleet time is its wall time less the states' offset
+    (receive time - fleet time, the median of those before the kill); the
+    first held tick is the first held stats' t less (held_ticks - 1) control
+    periods."""
+    ch = Checks("base-kill")
+    killed = json.load(open(args.kill, encoding="utf-8"))
+    robot = last_json_line(args.robot_report)
+    robot_log = open(args.robot_log, encoding="utf-8").read().splitlines()
+    watched = read_jsonl(args.watch)
+    states = mcap_records(args.mcap, "/agent/1/state")
+    stats = mcap_records(args.mcap, "/agent/1/stats")
+    period = 1.0 / args.control_rate
+    t_kill, wall_kill = killed["t"], killed["wall"]
+    ms = lambda x: float("nan") if x is None else x * 1000
+    sec = lambda x: "never" if x is None else f"{x:.2f} s"
+
+    before = [(w, st) for w, st in states if w < wall_kill and st["link"] != "waiting"]
+    offsets = [w - st["t"] for w, st in before[-40:]]
+    kill_fleet = wall_kill - quantile(offsets, 0.5) if offsets else None
+    # The stats in log order, while their t grows: the last one, sent at
+    # exit, is the report's, whose t and link may be older (its last state's).
+    ticking = []
+    for _, st in stats:
+        if not ticking or st["t"] > ticking[-1]["t"]:
+            ticking.append(st)
+    held_stats = [st for st in ticking if st["link"] == "held"]
+    first_held = held_stats[0] if held_stats else None
+    t_hold = None if first_held is None else first_held["t"] - (first_held["watchdogs"]["held_ticks"] - 1) * period
+    # Its last state before the hold (held, it publishes its last known
+    # state with the link `held`).
+    last_state_t = max((st["t"] for _, st in states if st["link"] != "held"), default=None)
+    hold_after = None if t_hold is None or kill_fleet is None else t_hold - kill_fleet
+    limit = args.odom_timeout + period + args.slack
+    not_held_after = [st for st in ticking if t_hold is not None and st["t"] > t_hold + period / 2
+                      and st["link"] != "held"]
+    states_after_hold = [st for _, st in states if t_hold is not None and st["t"] >= t_hold - 1e-6]
+    last_held = held_stats[-1] if held_stats else None
+    wd = robot["watchdogs"]
+    r2 = robot.get("ros2") or {}
+    # Every tick from the hold on commanded zero: the non-zero commands
+    # sent fit in the ticks before it.
+    nonzero_sent = r2.get("cmd_sent", 0) - r2.get("cmd_zero", 0)
+    ticks_before_hold = None if t_hold is None else t_hold / period
+    odom = [w for w in watched if w["topic"] == "odom"]
+    last_odom = max((o["t"] for o in odom if o["t"] <= t_kill), default=None)
+    odom_after = [o for o in odom if o["t"] > t_kill + args.slack]
+    # The bridge's routes for the dead node: its liveliness tokens (MS
+    # cmd_vel, MP odom) withdrawn, and the matching status of a publisher on
+    # the cmd_vel key (what the robot's publisher sees).
+    tokens = [w for w in watched if w["topic"] == "token" and w["kind"] == "delete" and w["t"] > t_kill]
+    cmd_token_gone = next((w["t"] - t_kill for w in tokens if "/MS/" in w["key"] and "cmd_vel" in w["key"]), None)
+    odom_token_gone = next((w["t"] - t_kill for w in tokens if "/MP/" in w["key"] and "odom" in w["key"]), None)
+    matching = [w for w in watched if w["topic"] == "matching"]
+    matched_at_kill = next((w["matching"] for w in reversed(matching) if w["t"] <= t_kill), None)
+    unmatched = next((w["t"] - t_kill for w in matching if w["t"] > t_kill and not w["matching"]), None)
+    end = max((w["t"] for w in watched), default=t_kill)
+    # The bridge's own word (its log, RUST_LOG info): when it undiscovered
+    # the base's node, on its UTC timestamps.
+    undiscovered = None
+    for line in open(args.bridge_log, encoding="utf-8", errors="replace").read().splitlines():
+        line = re.sub(r"\x1b\[[0-9;]*m", "", line)
+        if "Undiscovered ROS Node /create3_base" in line:
+            stamp = datetime.datetime.fromisoformat(line.split()[0].replace("Z", "+00:00")).timestamp()
+            undiscovered = {"line": line[line.index("Undiscovered"):], "after_kill_s": stamp - wall_kill}
+            break
+    no_reader = [line for line in robot_log if "no reader" in line]
+    n = ch.numbers
+    n.update({
+        "control_period_s": period,
+        "odom_timeout_s": args.odom_timeout,
+        "link_before_kill": before[-1][1]["link"] if before else None,
+        "kill_fleet_time_s": kill_fleet,
+        "last_odom_before_kill_s": None if last_odom is None else last_odom - t_kill,
+        "odom_after_kill": len(odom_after),
+        "held_at_fleet_time_s": t_hold,
+        "held_after_kill_s": hold_after,
+        "held_limit_s": limit,
+        "last_state_t_s": last_state_t,
+        "states_published_after_hold": len(states_after_hold),
+        "held_stats": len(held_stats),
+        "stats_not_held_after_hold": len(not_held_after),
+        "held_ticks": wd["held_ticks"],
+        "held_until_s": None if last_held is None else last_held["t"],
+        "nonzero_cmds_sent": nonzero_sent,
+        "ticks_before_hold": ticks_before_hold,
+        "watchdogs": wd,
+        "robot_ros2": r2,
+        "robot_report": {"t": robot["t"], "link": robot["link"], "ticks": robot["ticks"],
+                         "published": robot["published"], "final_error": robot["final_error"]},
+        "robot_no_reader_lines": no_reader,
+        "cmd_vel_matching_at_kill": matched_at_kill,
+        "cmd_vel_unmatched_after_kill_s": unmatched,
+        "cmd_vel_token_withdrawn_after_kill_s": cmd_token_gone,
+        "odom_token_withdrawn_after_kill_s": odom_token_gone,
+        "watched_after_kill_s": end - t_kill,
+        "bridge_undiscovered": undiscovered,
+    })
+    print(f"base-kill: the base killed at fleet time {kill_fleet or float('nan'):.3f} s; last odometry "
+          f"{ms(n['last_odom_before_kill_s']):+.1f} ms from the kill, {len(odom_after)} after it; robot/1 held from "
+          f"{t_hold or float('nan'):.3f} s, {ms(hold_after):.1f} ms after the kill (limit {ms(limit):.1f} ms = "
+          f"odom_timeout + period + {args.slack * 1000:.0f} ms), to {sec(n['held_until_s'])} "
+          f"({wd['held_ticks']} held ticks); its last state t = {last_state_t}, "
+          f"{len(states_after_hold)} states published after the hold")
+    print(f"base-kill: watchdogs {wd}; {nonzero_sent} non-zero commands sent in {ticks_before_hold or 0:.1f} ticks "
+          f"before the hold; robot stderr 'no reader' lines: {no_reader}; its report: {n['robot_report']}")
+    print(f"base-kill: the bridge's cmd_vel route: matched at the kill {matched_at_kill}; unmatched "
+          f"{sec(unmatched)} after the kill; its MS token withdrawn {sec(cmd_token_gone)}, the MP odom token "
+          f"{sec(odom_token_gone)} after it (watched for {end - t_kill:.1f} s); the bridge logged "
+          f"{undiscovered['line'] + ' ' + sec(undiscovered['after_kill_s']) + ' after it' if undiscovered else 'nothing'}")
+
+    ch.check(bool(before) and before[-1][1]["link"] == "tracking",
+             f"robot/1 was following before the kill (link {before[-1][1]['link'] if before else None})")
+    ch.check(not odom_after, f"no odometry came out of the bridge after the kill ({len(odom_after)})")
+    ch.check(hold_after is not None and args.odom_timeout - period <= hold_after <= limit,
+             f"robot/1 held {ms(hold_after):.1f} ms after the kill, within [odom_timeout - period, "
+             f"{ms(limit):.1f} ms]")
+    ch.check(t_hold is not None and last_state_t is not None and abs(t_hold - (last_state_t + period)) < period / 2,
+             f"its first held tick ({t_hold}) follows its last state ({last_state_t}) by one period")
+    ch.check(bool(states_after_hold) and all(st["link"] == "held" for st in states_after_hold),
+             f"the fleet sees it held: {len(states_after_hold)} states published from the hold on, every one "
+             f"`held` ({sum(st['link'] != 'held' for st in states_after_hold)} not)")
+    ch.check(first_held is not None and wd["odometry"] >= 1 and first_held["watchdogs"]["odometry"] >= 1,
+             f"held by the odometry watchdog, counted in its report (watchdogs.odometry {wd['odometry']})")
+    ch.check(last_held is not None and not not_held_after and last_held["t"] >= args.duration - 1.0
+             and abs(wd["held_ticks"] * period - (last_held["t"] - t_hold + period)) <= 2 * period,
+             f"held to the end: every stats after the hold says held ({len(not_held_after)} not), the last at "
+             f"{sec(n['held_until_s'])}, {wd['held_ticks']} held ticks")
+    ch.check(ticks_before_hold is not None and nonzero_sent <= ticks_before_hold + 1
+             and r2.get("cmd_zero", 0) >= wd["held_ticks"],
+             f"commanding zero from the hold on ({r2.get('cmd_zero')} zero commands >= {wd['held_ticks']} held ticks; "
+             f"{nonzero_sent} non-zero, all before it)")
+    # The output watchdog: what the real bridge did with the cmd_vel route.
+    ch.check(matched_at_kill is True, "the robot's cmd_vel publisher matched the bridge's subscriber at the kill")
+    ch.check(unmatched is None or unmatched > limit,
+             f"the bridge kept its cmd_vel subscriber past the odometry hold (unmatched {sec(unmatched)} after "
+             f"the kill: a SIGKILLed DDS reader is forgotten at its participant's lease expiry)")
+    ch.check(wd["output"] == 0 and not no_reader,
+             f"so the output watchdog never held robot/1 (watchdogs.output {wd['output']}): the odometry watchdog "
+             f"holds first, and a reader lost while held is not counted")
+    ch.finish(args.summary)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd_name", required=True)
@@ -544,6 +869,13 @@ def main():
     w.add_argument("--ns", default="bot1")
     w.add_argument("--log", required=True)
     w.add_argument("--flags", required=True)
+    w.add_argument("--no-cmd-vel", action="store_true",
+                   help="no cmd_vel subscriber: a publisher's matching status on the key instead")
+
+    k = sub.add_parser("kill")
+    k.add_argument("--pid", type=int, required=True)
+    k.add_argument("--record", required=True)
+    k.add_argument("--signal", choices=["KILL", "TERM"], default="KILL")
 
     e = sub.add_parser("exec")
     e.add_argument("--record", required=True)
@@ -576,6 +908,27 @@ def main():
     g.add_argument("--base", help="create3_base.py's report: nothing may have moved")
     g.add_argument("--summary")
 
+    rk = sub.add_parser("check-robot-kill")
+    rk.add_argument("--base", required=True, help="create3_base.py's report")
+    rk.add_argument("--robot", required=True, help="exec record of the fleet robot that killed itself")
+    rk.add_argument("--watch", required=True)
+    rk.add_argument("--control-rate", type=float, required=True)
+    rk.add_argument("--slack", type=float, default=0.010, help="s added to the measured delivery delay")
+    rk.add_argument("--summary")
+
+    bk = sub.add_parser("check-base-kill")
+    bk.add_argument("--kill", required=True, help="kill's record")
+    bk.add_argument("--robot-report", required=True, help="DIR/logs/robot-1.out of fleet up")
+    bk.add_argument("--robot-log", required=True, help="DIR/logs/robot-1.log of fleet up (its stderr)")
+    bk.add_argument("--mcap", required=True, help="DIR/fleet.mcap of fleet up")
+    bk.add_argument("--watch", required=True)
+    bk.add_argument("--bridge-log", required=True)
+    bk.add_argument("--odom-timeout", type=float, required=True)
+    bk.add_argument("--control-rate", type=float, required=True)
+    bk.add_argument("--duration", type=float, required=True, help="fleet up's --duration")
+    bk.add_argument("--slack", type=float, default=0.010, help="s added for the state's way to the collector")
+    bk.add_argument("--summary")
+
     r = sub.add_parser("put-resume")
     r.add_argument("--connect", required=True, help="the fleet's router")
     r.add_argument("--fleet", required=True)
@@ -583,8 +936,9 @@ def main():
     r.add_argument("--record", required=True)
 
     args = p.parse_args()
-    {"watch": watch, "exec": exec_, "put-resume": put_resume, "check-converge": check_converge, "check-hazard": check_hazard,
-     "check-graph": check_graph}[args.cmd_name](args)
+    {"watch": watch, "exec": exec_, "kill": kill, "put-resume": put_resume, "check-converge": check_converge,
+     "check-hazard": check_hazard, "check-graph": check_graph, "check-robot-kill": check_robot_kill,
+     "check-base-kill": check_base_kill}[args.cmd_name](args)
 
 
 if __name__ == "__main__":

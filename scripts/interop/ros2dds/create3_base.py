@@ -34,7 +34,12 @@ comes from ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (set it, or pass
 
 It runs for `--duration` s (or until SIGTERM/SIGINT) and then writes a JSON
 report to `--report`: every command (monotonic receive time, value), the count
-of non-zero commands, odometry messages published, the final pose.
+of non-zero commands, odometry messages published, the final pose; every
+odometry sample it published (`odom`: monotonic time, speeds, pose, the path
+length `s` travelled since start, and whether a fresh command drove the
+wheels); and every command timeout (`timeouts`: the last command's arrival,
+the moment 0.5 s later its wheels stopped driving, the speed then, and when
+the base came to rest), all from its own integration.
 
 Usage: create3_base.py [--namespace /] [--domain 42] [--localhost]
        [--cmd-type twist|twist-stamped] [--duration 10]
@@ -137,6 +142,13 @@ def main():
     pose = {"x": args.x, "y": args.y, "yaw": args.yaw}
     speed = {"v": 0.0, "omega": 0.0}
     last = {"t": time.monotonic()}
+    # Path length travelled, and the command timeouts (scripts/interop/ros2dds
+    # run's robot-kill phase reads them): while a fresh command drives the
+    # wheels `driving` is True; its going stale opens a timeout, closed when
+    # both speeds reach zero.
+    travel = {"s": 0.0, "driving": False}
+    state["odom"] = []
+    state["timeouts"] = []
 
     def integrate(now):
         while last["t"] + 1e-9 < now:
@@ -145,13 +157,23 @@ def main():
             fresh = target["at"] is not None and t - target["at"] <= CMD_TIMEOUT
             want_v = clamp(target["v"], MAX_SPEED) if fresh else 0.0
             want_w = clamp(target["omega"], MAX_OMEGA) if fresh else 0.0
+            if travel["driving"] and not fresh:
+                # Stale since exactly target["at"] + CMD_TIMEOUT (within this sub-step).
+                state["timeouts"].append({"last_command_at": target["at"], "stopped_at": target["at"] + CMD_TIMEOUT,
+                                          "v": speed["v"], "omega": speed["omega"], "rest_at": None})
+            travel["driving"] = fresh
             speed["v"] = slew(speed["v"], want_v, ACCEL, dt)
             speed["omega"] = slew(speed["omega"], want_w, ALPHA, dt)
             yaw_mid = pose["yaw"] + 0.5 * speed["omega"] * dt
             pose["x"] += speed["v"] * math.cos(yaw_mid) * dt
             pose["y"] += speed["v"] * math.sin(yaw_mid) * dt
             pose["yaw"] += speed["omega"] * dt
+            travel["s"] += abs(speed["v"]) * dt
             last["t"] = t
+            timeouts = state["timeouts"]
+            if (timeouts and timeouts[-1]["rest_at"] is None and not fresh
+                    and speed["v"] == 0.0 and speed["omega"] == 0.0):
+                timeouts[-1]["rest_at"] = t
 
     def on_tick():
         integrate(time.monotonic())
@@ -167,6 +189,8 @@ def main():
         odom.twist.twist.angular.z = speed["omega"]
         pub.publish(odom)
         state["odom_published"] += 1
+        state["odom"].append({"t": last["t"], "v": speed["v"], "omega": speed["omega"], "x": pose["x"],
+                              "y": pose["y"], "yaw": pose["yaw"], "s": travel["s"], "driving": travel["driving"]})
 
     node.create_timer(1.0 / ODOM_RATE, on_tick)
 

@@ -417,6 +417,10 @@ pub fn run(opts: &FaultsOptions, stop: &StopFlag) -> Result<FaultsReport, FleetE
     Ok(report)
 }
 
+/// What the rows measured through the real zenoh-bridge-ros2dds show
+/// (`scripts/interop/ros2dds/run`, by hand), as the table's text says it.
+const INTEROP: &str = "Through the real bridge, by hand (`scripts/interop/ros2dds/run`, phases `robot-kill` and `base-kill`: a real zenoh-bridge-ros2dds 1.10.2 in front of a Fast DDS base with the Create 3's timing; not in CI, the bridge takes minutes to build): with robot 1 killed, the base's own 0.5 s timeout stopped its wheels 0.45 s after the kill and it travelled 48.7–48.9 mm (bound 58.9 mm at 0.0975 m/s); with the base killed, robot 1's odometry watchdog held it 0.30–0.31 s after the kill (limit 0.36 s) and the fleet saw it `held`, while the bridge kept its `cmd_vel` subscriber until the dead participant's DDS lease expired 20 s later (so the output watchdog cannot see a SIGKILLed DDS base: the odometry watchdog is what holds it). scripts/interop/README.md has the numbers.";
+
 /// The table as Markdown, with how it was made.
 pub fn markdown(r: &FaultsReport) -> String {
     let mut s = String::new();
@@ -479,6 +483,7 @@ pub fn markdown(r: &FaultsReport) -> String {
         "\n`farthest` is the largest distance any affected robot got from where the fault found it (its true pose, integrated at 1 ms); `bound` is that robot's `v·(t_detect + depth·(T + 10 ms)) + v·τ_v + d_brake` (T the control period, τ_v the base's lag, `depth` the robots ahead of it in its chain that notice first, d_brake = v²/2a for a zero command or the law settling onto a point at rest, v·hold + πv²/4·decel for `extrapolate`); `time to zero` the longest time from the fault to a zero command (— where the robots settle under the law instead: `stop` converges onto the last reference); `moving after` the longest time an affected robot kept moving faster than {} m/s after the fault, within the row's window.",
         crate::faults::AT_REST
     );
+    let _ = writeln!(s, "\n{INTEROP}");
     let _ = writeln!(s, "\nWhat the robots do, row by row:\n");
     for row in &r.rows {
         let _ = writeln!(s, "- `{}`: {}.", row.name, row.action);

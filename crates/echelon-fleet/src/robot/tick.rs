@@ -208,8 +208,17 @@ impl<P: Plant> Robot<P> {
             (true, Some(_)) => (now, LinkStatus::Held),
             (true, None) => (now, LinkStatus::Stopped),
         };
-        let publish = self.plant.state().map(|state| {
-            let (dv, domega) = self.plant.accelerations();
+        // Held while its plant has no state now (a ROS 2 base's odometry
+        // gone): its last known state, so that the fleet sees it held where
+        // it was last seen — its followers stop following it, its
+        // neighbours take it at rest there — not a stream gone silent.
+        let known = (held.is_some() && self.seq > 0).then_some(self.last.state);
+        let current = self.plant.state();
+        let publish = current.or(known).map(|state| {
+            let (dv, domega) = match current {
+                Some(_) => self.plant.accelerations(),
+                None => (0.0, 0.0),
+            };
             self.last = RobotState {
                 t,
                 agent: self.config.agent,

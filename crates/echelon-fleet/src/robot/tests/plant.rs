@@ -48,8 +48,11 @@ fn the_scenarios_bounds_stop_the_fleet_robot() {
     );
 }
 
-/// Odometry lost, or the process stopping: the drive is commanded zero
-/// and nothing is published for a state it does not have.
+/// Odometry lost, or the process stopping: the drive is commanded zero;
+/// while the odometry is lost the robot is held by its odometry watchdog
+/// and publishes its last known state with the link `held` (so its
+/// followers and neighbours see it held where it was last seen, not a
+/// stream gone silent); it follows again when the odometry returns.
 #[test]
 fn losing_the_odometry_or_the_process_commands_zero() {
     let s = scenario(EXTRAPOLATE);
@@ -58,18 +61,20 @@ fn losing_the_odometry_or_the_process_commands_zero() {
     let mut buf = Vec::new();
     reference_message(&mut buf, 0, 0.0, &reference);
     r.on_message(&buf, 0.0);
-    assert!(r.tick(0.0).publish.is_some());
+    let (_, first) = r.tick(0.0).publish.unwrap_or_else(|| panic!("a state"));
     assert_ne!(r.plant().commanded, Input::default());
     r.plant_mut().lost = true;
-    let out = r.tick(0.01);
-    assert!(out.publish.is_none());
+    let (_, held) = r.tick(0.01).publish.unwrap_or_else(|| panic!("held"));
+    assert_eq!(held.link, LinkStatus::Held);
+    assert_eq!(held.state, first.state, "its last known state");
+    assert_eq!((held.dv, held.domega), (0.0, 0.0));
     assert_eq!(r.plant().commanded, Input::default());
     r.plant_mut().lost = false;
     assert!(r.tick(0.02).publish.is_some());
     assert_ne!(r.plant().commanded, Input::default());
     let stats = r.finish();
     assert_eq!(r.plant().commanded, Input::default());
-    assert_eq!((stats.published, stats.counters.accepted), (2, 1));
+    assert_eq!((stats.published, stats.counters.accepted), (3, 1));
     assert_eq!(stats.safety, None);
 }
 

@@ -131,7 +131,7 @@ class SafetyFilters:
         l: float = 0.1,
         obstacles: npt.NDArray[np.float64] | None = None,
         period: float = 0.01,
-        base: str = "ideal",
+        base: str | dict[str, float | str] | None = None,
     ) -> None: ...
     def filter(
         self, t: float, poses: npt.NDArray[np.float64], commands: npt.NDArray[np.float64]

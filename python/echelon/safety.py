@@ -38,8 +38,18 @@ ENVELOPE: dict[str, float] = dict(
 class Filter:
     """Filters for ``n`` robots, kept between calls (each robot's deadlock
     monitor remembers), at control period ``period`` s. ``obstacles`` are
-    rows of ``(x, y, r)``; ``base`` names a velocity base preset whose
-    limits bound the commands (``ideal``: none)."""
+    rows of ``(x, y, r)``. ``base`` is the velocity base whose lags and
+    limits bound the commands: a preset's name (``ideal``: none;
+    ``turtlebot3-burger``, ``turtlebot4``, ``jackal``) or a mapping spelled
+    as a scenario's ``[robots.NAME]`` velocity base: ``preset`` (default
+    ``ideal``) overridden by any of ``tau_v``, ``tau_omega`` (lags, s),
+    ``v_max`` (m/s), ``omega_max`` (rad/s), ``a_max`` (m/s²),
+    ``alpha_max`` (rad/s²) (``float("inf")``: no limit), ``accel``
+    (``"joint"`` or ``"per-axis"``); ``drive`` may say ``"velocity"``.
+    An unknown key (``reverse_limit`` too: the filter keeps no backup
+    budget), a value of the wrong type (``TypeError``) or out of its domain
+    (``ValueError``: a limit ≤ 0 or NaN, a negative lag, ``a_max`` without
+    ``tau_v``) is refused naming it (``base.v_max``)."""
 
     def __init__(
         self,
@@ -51,7 +61,7 @@ class Filter:
         l: float = 0.1,
         obstacles: Any = None,
         period: float = 0.01,
-        base: str = "ideal",
+        base: str | Mapping[str, Any] = "ideal",
     ) -> None:
         self._inner = _echelon.SafetyFilters(
             _args.integer("n", n),
@@ -61,7 +71,7 @@ class Filter:
             _args.number("l", l),
             _obstacles(obstacles),
             _args.number("period", period),
-            _args.text("base", base),
+            _base(base),
         )
         self.n = n
         self.l = l
@@ -82,6 +92,18 @@ class Filter:
         return out
 
 
+def _base(base: Any) -> str | dict[str, Any]:
+    """A velocity base for the extension: a preset's name, or a mapping's
+    items as a dict (the extension checks its keys and values)."""
+    if isinstance(base, str):
+        return base
+    if isinstance(base, Mapping):
+        return dict(base)
+    raise TypeError(
+        f"base must be a velocity base preset's name or a mapping of its lags and limits, got {_args.describe(base)}"
+    )
+
+
 def _obstacles(obstacles: Any) -> np.ndarray | None:
     """Rows of ``(x, y, r)`` (a flat list of them too), or None."""
     if obstacles is None:
@@ -100,7 +122,7 @@ def filter(
     range: float = float("inf"),
     l: float = 0.1,
     period: float = 0.01,
-    base: str = "ideal",
+    base: str | Mapping[str, Any] = "ideal",
 ) -> np.ndarray:
     """One filtering of ``commands`` (``(n, 2)``: v, ω) for robots at
     ``poses`` (see :class:`Filter`, which keeps the filters between calls)."""

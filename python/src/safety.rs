@@ -7,11 +7,12 @@
 
 use numpy::ndarray::{Array2, Ix2};
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
-use pyo3::exceptions::PyMemoryError;
+use pyo3::exceptions::{PyMemoryError, PyTypeError};
 use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyString};
 
 use echelon::State;
-use echelon::base::{VelocityBase, VelocityCommand, VelocityRobot};
+use echelon::base::{AccelLimit, VelocityBase, VelocityCommand, VelocityRobot};
 use echelon::error::num;
 use echelon::model::{Input, RobotParams};
 use echelon::safety::{
@@ -193,9 +194,10 @@ impl PySafetyFilters {
     /// `n` robots keeping their points `l` ahead `radius` apart and
     /// `radius` from obstacles' edges (`(m, 3)`: x, y, r); `gain` is the
     /// barrier's γ, `range` the sensing range, `period` the control
-    /// period, `base` a velocity base preset (`ideal`, `jackal`, …).
+    /// period, `base` a velocity base preset (`ideal`, `jackal`, …) or a
+    /// dict of its lags and limits ([`velocity_base`]).
     #[new]
-    #[pyo3(signature = (n, radius, gain=1.0, range=f64::INFINITY, l=0.1, obstacles=None, period=0.01, base="ideal"))]
+    #[pyo3(signature = (n, radius, gain=1.0, range=f64::INFINITY, l=0.1, obstacles=None, period=0.01, base=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         n: usize,
@@ -205,7 +207,7 @@ impl PySafetyFilters {
         l: f64,
         obstacles: Option<&Bound<'_, PyAny>>,
         period: f64,
-        base: &str,
+        base: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         if !(period > 0.0 && period.is_finite()) {
             return Err(errors::value(format!(
@@ -213,16 +215,11 @@ impl PySafetyFilters {
                 num(period)
             )));
         }
+        let base = match base {
+            Some(b) => velocity_base(b)?,
+            None => VelocityBase::IDEAL,
+        };
         let f = Filters::new(n, radius, gain, range, l, obstacles, period)?;
-        let base = VelocityRobot::preset(base)
-            .map(|r| r.base())
-            .ok_or_else(|| {
-                let names: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
-                errors::value(format!(
-                    "base: `{base}` is not a preset ({})",
-                    names.join(", ")
-                ))
-            })?;
         Ok(PySafetyFilters { f, base })
     }
 
@@ -252,6 +249,139 @@ impl PySafetyFilters {
                 ([r.command.v, r.command.omega], r.outcome, r.min_distance)
             }))
     }
+}
+
+/// The fields a velocity base's dict takes: those of a scenario's
+/// `[robots.NAME]` with `drive = "velocity"` that bound its commands.
+const BASE_FIELDS: [&str; 9] = [
+    "preset",
+    "drive",
+    "tau_v",
+    "tau_omega",
+    "v_max",
+    "omega_max",
+    "a_max",
+    "alpha_max",
+    "accel",
+];
+
+/// The velocity base preset `name` (`field` names the argument in the error).
+fn base_preset(field: &str, name: &str) -> PyResult<VelocityBase> {
+    VelocityRobot::preset(name)
+        .map(|r| r.base())
+        .ok_or_else(|| {
+            let names: Vec<&str> = VelocityRobot::PRESETS.iter().map(|(n, _)| *n).collect();
+            errors::value(format!(
+                "{field}: `{name}` is not a preset ({})",
+                names.join(", ")
+            ))
+        })
+}
+
+/// A str `value` of `base.key`.
+fn base_text(key: &str, value: &Bound<'_, PyAny>) -> PyResult<String> {
+    value
+        .cast::<PyString>()
+        .map(|s| s.to_string())
+        .map_err(|_| {
+            PyTypeError::new_err(format!(
+                "base.{key} must be a str, got {}",
+                type_name(value)
+            ))
+        })
+}
+
+/// The type name of `value`, for a message.
+fn type_name(value: &Bound<'_, PyAny>) -> String {
+    value
+        .get_type()
+        .name()
+        .map_or_else(|_| "?".to_owned(), |n| n.to_string())
+}
+
+/// `base` as a velocity base: a preset's name, or a dict spelled as a
+/// scenario's `[robots.NAME]` velocity base: `preset` (default `ideal`)
+/// overridden by `tau_v`, `tau_omega` (s), `v_max` (m/s), `omega_max`
+/// (rad/s), `a_max` (m/s²), `alpha_max` (rad/s²) (infinite: no limit) and
+/// `accel` (`joint`, `per-axis`); `drive` may say `velocity`. A key of
+/// another kind, a value of the wrong type or out of its domain is refused
+/// naming it (`base.v_max`).
+fn velocity_base(base: &Bound<'_, PyAny>) -> PyResult<VelocityBase> {
+    if let Ok(name) = base.cast::<PyString>() {
+        return base_preset("base", name.to_str()?);
+    }
+    let Ok(fields) = base.cast::<PyDict>() else {
+        return Err(PyTypeError::new_err(format!(
+            "base must be a velocity base preset's name or a dict of its lags and limits, got {}",
+            type_name(base)
+        )));
+    };
+    let from = match fields.get_item("preset")? {
+        Some(p) => base_preset("base.preset", &base_text("preset", &p)?)?,
+        None => VelocityBase::IDEAL,
+    };
+    let mut spec = from.spec();
+    for (key, value) in fields.iter() {
+        let Ok(key) = key.cast::<PyString>().map(|k| k.to_string()) else {
+            return Err(PyTypeError::new_err(format!(
+                "base: keys must be str, got {}",
+                type_name(&key)
+            )));
+        };
+        let slot = match key.as_str() {
+            "preset" => continue,
+            "drive" => match base_text("drive", &value)?.as_str() {
+                "velocity" => continue,
+                other => {
+                    return Err(errors::value(format!(
+                        "base.drive: `{other}` is not `velocity` (a torque-driven robot's filter is TorqueFilter)"
+                    )));
+                }
+            },
+            "accel" => {
+                spec.accel = match base_text("accel", &value)?.as_str() {
+                    "joint" => AccelLimit::Joint,
+                    "per-axis" => AccelLimit::PerAxis,
+                    other => {
+                        return Err(errors::value(format!(
+                            "base.accel: `{other}` is neither `joint` nor `per-axis`"
+                        )));
+                    }
+                };
+                continue;
+            }
+            "tau_v" => &mut spec.tau_v,
+            "tau_omega" => &mut spec.tau_omega,
+            "v_max" => &mut spec.v_max,
+            "omega_max" => &mut spec.omega_max,
+            "a_max" => &mut spec.a_max,
+            "alpha_max" => &mut spec.alpha_max,
+            "reverse_limit" => {
+                return Err(errors::value(
+                    "base.reverse_limit: not taken: the filter keeps no backup budget \
+                     (a Simulation of the scenario does); leave it out",
+                ));
+            }
+            other => {
+                return Err(errors::value(format!(
+                    "base.{other}: not a velocity base field (fields: {})",
+                    BASE_FIELDS.join(", ")
+                )));
+            }
+        };
+        if value.is_instance_of::<PyBool>() {
+            return Err(PyTypeError::new_err(format!(
+                "base.{key} must be a number, got bool"
+            )));
+        }
+        *slot = value.extract::<f64>().map_err(|_| {
+            PyTypeError::new_err(format!(
+                "base.{key} must be a number, got {}",
+                type_name(&value)
+            ))
+        })?;
+    }
+    VelocityBase::new(spec).map_err(|e| errors::value(format!("base.{e}")))
 }
 
 /// Safety filters for `n` torque-driven robots (eq. 3), one each.

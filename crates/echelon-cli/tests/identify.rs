@@ -179,6 +179,48 @@ fn bad_logs_exit_2_with_one_line_naming_the_file_and_what_is_missing() {
     );
 }
 
+/// A run directory whose integrals.csv was cut mid-write (a copy
+/// interrupted, a disk that filled): `identify` refuses it in one line
+/// naming the file and the row where it was cut (exit 2), instead of
+/// fitting on the part that is there or quietly without it; the same
+/// directory with the file whole identifies.
+#[test]
+fn a_truncated_integrals_csv_is_refused_naming_the_file_and_the_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    excitation_run(&run, "2");
+    let path = run.to_str().unwrap();
+    let integrals = run.join("integrals.csv");
+    let name = integrals.display().to_string();
+    let whole = std::fs::read_to_string(&integrals).unwrap();
+    let rows = whole.lines().count() - 1;
+
+    // The last line cut inside a number: no newline at its end.
+    std::fs::write(&integrals, &whole[..whole.len() - 7]).unwrap();
+    refused(
+        &echelon(&["identify", path]),
+        &[
+            &name,
+            "truncated",
+            &format!("row {rows} (line {})", rows + 1),
+        ],
+    );
+    // Whole rows missing at the end (agent 2's last rows).
+    let kept: String = whole
+        .lines()
+        .take(rows + 1 - 3)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&integrals, kept).unwrap();
+    refused(
+        &echelon(&["identify", path, "--agent", "2"]),
+        &[&name, "truncated", "agent 2's rows stop at t ="],
+    );
+    std::fs::write(&integrals, &whole).unwrap();
+    let o = echelon(&["identify", path, "--agent", "2"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+}
+
 /// `python3 scripts/ros2/lagged_base_bag.py OUT args…`: a ROS 2 bag of a
 /// lagged velocity base serialized by rclpy (ROS 2 Jazzy wheels, see
 /// scripts/requirements-test.txt; `ECHELON_PYTHON` picks the interpreter).

@@ -194,8 +194,11 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         File::create(&drift_path).with_context(|| format!("writing {}", drift_path.display()))?;
     sweep::write_drift_csv(BufWriter::new(file), &curves)
         .with_context(|| format!("writing {}", drift_path.display()))?;
+    // The figure plots the runs that ended (a diverged run has no maxima to
+    // plot); the table and sweep.csv show every run.
+    let ended: Vec<Row> = rows.iter().filter(|r| !r.is_diverged()).copied().collect();
     let figure =
-        echelon_report::odometry::sweep(scenario.name(), &rows, &curves).save(&out, "sweep")?;
+        echelon_report::odometry::sweep(scenario.name(), &ended, &curves).save(&out, "sweep")?;
     if !a.quiet {
         print_summary(
             &rows,
@@ -211,8 +214,9 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
             figure.png.display()
         )?;
     }
-    // A diverged case does not stop the sweep (the other rows are written
-    // above) but fails it: its cases go to diverged.csv and the exit code is 1.
+    // A diverged case does not stop the sweep (its row is written above,
+    // marked) but fails it: what left its bound goes to diverged.csv and the
+    // exit code is 1.
     let diverged_path = out.join("diverged.csv");
     if diverged.is_empty() {
         // A stale list from an earlier sweep into the same directory would
@@ -232,7 +236,7 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         .with_context(|| format!("writing {}", diverged_path.display()))?;
     let first = &diverged[0];
     Err(super::out::Failed(format!(
-        "{} of {total} runs diverged, listed in {} (the first: ζ = {}, E_d = {}, E_b = {}, slip = {}, N = {}, seed {}: {}); the other {} rows are in {}",
+        "{} of {total} runs diverged, listed in {} (the first: ζ = {}, E_d = {}, E_b = {}, slip = {}, N = {}, seed {}: {}); all {} runs are rows of {}, the diverged ones with their `diverged` time and `inf` statistics",
         diverged.len(),
         diverged_path.display(),
         first.case.zeta,
@@ -249,8 +253,14 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
 }
 
 fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) -> anyhow::Result<()> {
+    let diverged = rows.iter().filter(|r| r.is_diverged()).count();
+    let diverged_note = if diverged == 0 {
+        String::new()
+    } else {
+        format!(", {diverged} diverged (their maxima are inf)")
+    };
     outln!(
-        "{total} runs on {threads} threads in {seconds:.1} s; maxima over seeds, after the transient:"
+        "{total} runs on {threads} threads in {seconds:.1} s{diverged_note}; maxima over seeds, after the transient:"
     )?;
     // The ratio column is the theorem's main ratio for the runs' law
     // (echelon::sweep's module docs): ‖e‖/e_bound under the kinematic law.
@@ -262,7 +272,7 @@ fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) -> an
         "ratio"
     };
     outln!(
-        "  {:>8}  {:>6}  {:>6}  {:>8}  {:>6}  {:>10}  {:>10}  {:>9}  {:>10}  {:>10}",
+        "  {:>8}  {:>6}  {:>6}  {:>8}  {:>6}  {:>10}  {:>10}  {:>9}  {:>10}  {:>10}  {:>8}",
         "ζ (m)",
         "E_d",
         "E_b",
@@ -272,7 +282,8 @@ fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) -> an
         "bound",
         ratio,
         "‖e‖ (m)",
-        "drift (m)"
+        "drift (m)",
+        "diverged"
     )?;
     // Rows come in grid order with seeds varying fastest: group consecutive rows.
     let same =
@@ -294,7 +305,7 @@ fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) -> an
         let shown =
             |v: Option<f64>, p: usize| v.map_or_else(|| "–".to_owned(), |v| format!("{v:.p$e}"));
         outln!(
-            "  {:>8.1e}  {:>6}  {:>6}  {:>8.1e}  {:>6}  {:>10.3e}  {:>10}  {:>9}  {:>10.3e}  {:>10.3e}",
+            "  {:>8.1e}  {:>6}  {:>6}  {:>8.1e}  {:>6}  {:>10.3e}  {:>10}  {:>9}  {:>10.3e}  {:>10.3e}  {:>8}",
             c.zeta,
             c.wheel_diameter_ratio,
             c.wheelbase_ratio,
@@ -305,6 +316,13 @@ fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) -> an
             opt_max(|r| r.z_over_bound).map_or_else(|| "–".to_owned(), |v| format!("{v:.3}")),
             max(|r| r.e_max),
             max(|r| r.drift_max),
+            // How many of the group's seeds diverged: a maximum over them
+            // is inf, never one over the seeds that ended alone.
+            format!(
+                "{}/{}",
+                group.iter().filter(|r| r.is_diverged()).count(),
+                group.len()
+            ),
         )?;
         start = end;
     }

@@ -155,11 +155,14 @@ fn umbmark_estimates_and_writes_its_results() {
 }
 
 /// A sweep whose grid reaches an absurd error model (ζ = 0.5 m per sample,
-/// no fix for 1000 samples) does not stop at the first divergence: every
-/// case is either a row of sweep.csv or a line of diverged.csv, never both,
-/// the command fails with 1 (not 2: nothing was refused) naming the count,
-/// and a later sweep that does not diverge into the same directory removes
-/// the stale list.
+/// no fix for 1000 samples) does not stop at the first divergence, nor
+/// drop it from what it shows: every case is a row of sweep.csv, a diverged
+/// one with its `diverged` time and `inf` statistics (so a mean or maximum
+/// over its seeds is `inf`, not an average of the runs that ended), and a
+/// line of diverged.csv; the table marks how many of each combination's
+/// seeds diverged and the sweep how many in all; the command fails with 1
+/// (not 2: nothing was refused) naming the count, and a later sweep that
+/// does not diverge into the same directory removes the stale list.
 #[test]
 fn a_sweep_goes_on_past_divergent_cases_lists_them_and_fails() {
     let dir = tempfile::tempdir().unwrap();
@@ -194,18 +197,36 @@ fn a_sweep_goes_on_past_divergent_cases_lists_them_and_fails() {
         let c: Vec<String> = line.split(',').map(str::to_owned).collect();
         (c[0].clone(), c[5].clone(), c[6].clone())
     };
+    let header: Vec<&str> = echelon::sweep::SWEEP_HEADER.split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let ran: Vec<_> = rows.lines().skip(1).map(case).collect();
     let failed: Vec<_> = diverged.lines().skip(1).map(case).collect();
     assert!(!failed.is_empty(), "ζ = 0.5 m without fixes diverges");
-    assert_eq!(ran.len() + failed.len(), 2 * 2 * 2, "ζ × N × seeds");
-    for c in &failed {
-        assert!(!ran.contains(c), "{c:?} both ran and diverged");
-    }
+    assert_eq!(ran.len(), 2 * 2 * 2, "a row per case: ζ × N × seeds");
     for zeta in ["0.001", "0.5"] {
         for n in ["1", "1000"] {
             for seed in ["0", "1"] {
                 let c = (zeta.to_owned(), n.to_owned(), seed.to_owned());
-                assert!(ran.contains(&c) || failed.contains(&c), "{c:?} missing");
+                assert!(ran.contains(&c), "{c:?} missing");
+            }
+        }
+    }
+    // A row is marked diverged exactly when diverged.csv lists its case,
+    // at the same time, with statistics that no average can hide.
+    for (line, c) in rows.lines().skip(1).zip(&ran) {
+        let cells: Vec<&str> = line.split(',').collect();
+        let when = cells[column("diverged")];
+        match diverged.lines().skip(1).find(|l| case(l) == *c) {
+            Some(d) => {
+                assert_eq!(when, d.split(',').nth(8).unwrap(), "{line} / {d}");
+                for stat in ["z_max", "e_max", "drift_max"] {
+                    assert_eq!(cells[column(stat)], "inf", "{stat}: {line}");
+                }
+                assert!(cells[column("z_bound")].is_empty(), "{line}");
+            }
+            None => {
+                assert!(when.is_empty(), "{line}");
+                assert!(cells[column("e_max")].parse::<f64>().unwrap().is_finite());
             }
         }
     }
@@ -219,6 +240,28 @@ fn a_sweep_goes_on_past_divergent_cases_lists_them_and_fails() {
         err.contains(&format!("{} of 8 runs diverged", failed.len())),
         "{err}"
     );
+    // The table: the count in its first line, and per combination how many
+    // of its seeds diverged (ζ = 0.5 m without fixes: both).
+    let table = stdout(&o);
+    assert!(
+        table.contains(&format!("{} diverged", failed.len())),
+        "{table}"
+    );
+    let row_of = |zeta: &str, n: &str| {
+        table
+            .lines()
+            .find(|l| {
+                let w: Vec<&str> = l.split_whitespace().collect();
+                w.first() == Some(&zeta) && w.get(4) == Some(&n)
+            })
+            .unwrap_or_else(|| panic!("no row for ζ = {zeta}, N = {n}: {table}"))
+            .to_owned()
+    };
+    let both = row_of("5.0e-1", "1000");
+    assert!(both.trim_end().ends_with("2/2"), "{both}");
+    assert!(both.contains("inf"), "{both}");
+    let none = row_of("1.0e-3", "1");
+    assert!(none.trim_end().ends_with("0/2"), "{none}");
     let o = grid("0.001");
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!out.join("diverged.csv").exists(), "a stale diverged.csv");

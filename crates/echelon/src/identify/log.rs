@@ -72,6 +72,65 @@ pub struct Integrals {
     pub input: [Vec<f64>; 2],
 }
 
+/// How a truncated `integrals.csv` is refused: the start of the reason.
+const TRUNCATED: &str =
+    "truncated (cut before the run's end, identify does not fit on part of a run)";
+
+/// Why an `integrals.csv` was not attached.
+enum Attach {
+    /// The file was cut short: a hard error, naming the row.
+    Truncated(String),
+    /// Anything else: the fit falls back to the sampled inputs, with a note.
+    Unusable(String),
+}
+
+/// Whether `text`, an `integrals.csv`, was cut mid-write, and where. A
+/// complete file ends every row, its last included, with a newline and
+/// has as many fields in each as its header
+/// ([`crate::output::INTEGRALS_HEADER`]); a file cut before its end has a
+/// last line without its newline (or without some of its fields). Rows
+/// missing at the end are found against the log's sample times
+/// ([`Log::attach_integrals`]); the file itself carries no row count.
+pub fn integrals_truncation(text: &str) -> Option<String> {
+    if text.is_empty() {
+        return Some(format!(
+            "{TRUNCATED}: the file is empty, not even its header"
+        ));
+    }
+    let mut lines = text.split_inclusive('\n');
+    let header = lines.next().unwrap_or("");
+    let fields = header.trim_end().split(',').count();
+    if !header.ends_with('\n') {
+        return Some(format!(
+            "{TRUNCATED}: it ends in its header, without the header's newline"
+        ));
+    }
+    let (mut rows, mut last) = (0usize, None);
+    for line in lines {
+        rows += 1;
+        last = Some(line);
+    }
+    let Some(last) = last else {
+        return Some(format!("{TRUNCATED}: it has no row after its header"));
+    };
+    let n = last.trim_end().split(',').count();
+    if !last.ends_with('\n') {
+        Some(format!(
+            "{TRUNCATED}: row {rows} (line {}) is cut short, without its newline ({n} of {fields} fields: `{}`)",
+            rows + 1,
+            last.trim_end()
+        ))
+    } else if n < fields {
+        Some(format!(
+            "{TRUNCATED}: row {rows} (line {}) has {n} of {fields} fields: `{}`",
+            rows + 1,
+            last.trim_end()
+        ))
+    } else {
+        None
+    }
+}
+
 /// Reads a CSV column set into per-agent series.
 pub(super) fn column(header: &csv::StringRecord, name: &str) -> Option<usize> {
     header.iter().position(|h| h.trim() == name)
@@ -105,11 +164,19 @@ impl Log {
         let beside = file.parent().map(|d| d.join(crate::output::INTEGRALS_FILE));
         if let Some(path) = beside.filter(|p| p.is_file()) {
             match std::fs::read_to_string(&path)
-                .map_err(|e| e.to_string())
-                .and_then(|text| log.attach_integrals(&text))
+                .map_err(|e| Attach::Unusable(e.to_string()))
+                .and_then(|text| log.attach(&text))
             {
                 Ok(()) => {}
-                Err(why) => log.notes.push(format!(
+                // A file cut before the run's end: refused, never fitted on
+                // the part that is there nor silently replaced.
+                Err(Attach::Truncated(reason)) => {
+                    return Err(IdentifyError::Read {
+                        file: path.display().to_string(),
+                        reason,
+                    });
+                }
+                Err(Attach::Unusable(why)) => log.notes.push(format!(
                     "{} not used: {why}; the fit falls back to the sampled inputs",
                     path.display()
                 )),
@@ -120,8 +187,31 @@ impl Log {
 
     /// Attaches this agent's rows of an `integrals.csv` (header
     /// [`crate::output::INTEGRALS_HEADER`]); they must be at the log's
-    /// sample times.
+    /// sample times. A truncated file ([`integrals_truncation`]) is refused
+    /// with the row where it was cut.
     pub fn attach_integrals(&mut self, text: &str) -> Result<(), String> {
+        self.attach(text).map_err(|e| match e {
+            Attach::Truncated(why) | Attach::Unusable(why) => why,
+        })
+    }
+
+    /// [`Log::attach_integrals`], telling a truncated file from one that
+    /// is otherwise unusable.
+    fn attach(&mut self, text: &str) -> Result<(), Attach> {
+        if let Some(why) = integrals_truncation(text) {
+            return Err(Attach::Truncated(why));
+        }
+        self.attach_rows(text).map_err(|why| {
+            if why.starts_with(TRUNCATED) {
+                Attach::Truncated(why)
+            } else {
+                Attach::Unusable(why)
+            }
+        })
+    }
+
+    /// The rows of [`Log::attach_integrals`] once the file is known whole.
+    fn attach_rows(&mut self, text: &str) -> Result<(), String> {
         let mut rdr = csv::ReaderBuilder::new().from_reader(text.as_bytes());
         let header = rdr.headers().map_err(|e| e.to_string())?.clone();
         let names = ["t", "agent", "s", "theta", "int_1", "int_2"];
@@ -130,6 +220,9 @@ impl Log {
             .map(|c| column(&header, c).ok_or_else(|| format!("no column {c}")))
             .collect::<Result<_, _>>()?;
         let mut cols: [Vec<f64>; 5] = Default::default();
+        // The file's last row: its time and agent (frames are logged in
+        // time order, each agent in turn).
+        let mut last_row: Option<(f64, f64)> = None;
         for (line, rec) in rdr.records().enumerate() {
             let rec = rec.map_err(|e| format!("line {}: {e}", line + 2))?;
             let num = |k: usize| -> Result<f64, String> {
@@ -138,6 +231,7 @@ impl Log {
                     .parse::<f64>()
                     .map_err(|_| format!("line {}: {} = `{cell}`", line + 2, names[k]))
             };
+            last_row = Some((num(0)?, num(1)?));
             if num(1)? != self.agent as f64 {
                 continue;
             }
@@ -146,6 +240,35 @@ impl Log {
             }
         }
         let [t, s, theta, i1, i2] = cols;
+        // No row of this agent, and the file ends before its first one
+        // would come (at its first sample time, after the agents before
+        // it): cut there.
+        if t.is_empty()
+            && let (Some((t_last, a_last)), Some(&first)) = (last_row, self.t.first())
+            && (t_last < first - 1e-9
+                || ((t_last - first).abs() <= 1e-9 && a_last < self.agent as f64))
+        {
+            return Err(format!(
+                "{TRUNCATED}: the file ends at t = {t_last} s (agent {a_last}'s row), before agent {}'s first row (t = {first} s)",
+                self.agent
+            ));
+        }
+        if !t.is_empty()
+            && t.len() < self.t.len()
+            && t.iter().zip(&self.t).all(|(a, b)| (a - b).abs() <= 1e-9)
+        {
+            // The rows stop early but agree up to there: rows missing at the
+            // end, which a written file never has (every frame logs every
+            // agent, and the file is renamed into place only when complete).
+            return Err(format!(
+                "{TRUNCATED}: agent {}'s rows stop at t = {} s, its row {} of the {} the log's sample times (to t = {} s) ask for",
+                self.agent,
+                t[t.len() - 1],
+                t.len(),
+                self.t.len(),
+                self.t[self.t.len() - 1],
+            ));
+        }
         if t.len() != self.t.len() || t.iter().zip(&self.t).any(|(a, b)| (a - b).abs() > 1e-9) {
             return Err(format!(
                 "its {} rows of agent {} are not at the log's {} sample times",
@@ -343,5 +466,80 @@ impl Log {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod truncation_tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A complete `integrals.csv` of two agents at `n` sample times, as a
+    /// run writes it (`CsvWriter`: every row ends with its newline).
+    fn complete(n: usize) -> String {
+        let mut text = format!("{}\n", crate::output::INTEGRALS_HEADER);
+        for k in 0..n {
+            for agent in 1..=2 {
+                let t = k as f64 * 0.01;
+                text.push_str(&format!(
+                    "{t},{agent},{},{},{},{}\n",
+                    0.123456 * t,
+                    1.5 + 0.25 * t,
+                    -3.0625 * t,
+                    7.5 * t
+                ));
+            }
+        }
+        text
+    }
+
+    /// Agent `agent`'s log at the `n` sample times of [`complete`].
+    fn log(agent: usize, n: usize) -> Log {
+        Log {
+            agent,
+            t: (0..n).map(|k| k as f64 * 0.01).collect(),
+            ..Log::default()
+        }
+    }
+
+    #[test]
+    fn a_complete_file_attaches() {
+        let mut l = log(2, 60);
+        l.attach_integrals(&complete(60)).unwrap();
+        assert_eq!(l.integrals.unwrap().s.len(), 60);
+    }
+
+    #[test]
+    fn a_partial_last_line_names_its_row() {
+        let text = complete(60);
+        // The last row, `0.59,2,…`, cut inside its third field.
+        let cut = &text[..text.len() - 20];
+        let why = integrals_truncation(cut).unwrap();
+        assert!(why.starts_with(TRUNCATED), "{why}");
+        assert!(why.contains("row 120 (line 121)"), "{why}");
+        let mut l = log(1, 60);
+        let e = l.attach(cut).unwrap_err();
+        assert!(matches!(e, Attach::Truncated(_)));
+    }
+
+    proptest! {
+        /// Whatever byte a complete file is cut at, the last agent's
+        /// integrals are refused as truncated, never attached on the part
+        /// that is there nor taken as merely unusable (which would let the
+        /// fit go on with the sampled inputs): a partial last line by its
+        /// missing newline or fields, whole rows missing at the end by the
+        /// log's sample times.
+        #[test]
+        fn a_file_cut_anywhere_is_refused_as_truncated(n in 1usize..40, at in 0.0f64..1.0) {
+            let text = complete(n);
+            let k = ((text.len() as f64 * at) as usize).min(text.len() - 1);
+            let mut l = log(2, n);
+            match l.attach(&text[..k]) {
+                Err(Attach::Truncated(why)) => prop_assert!(why.starts_with(TRUNCATED)),
+                Err(Attach::Unusable(why)) => prop_assert!(false, "cut at {k}: only unusable: {why}"),
+                Ok(()) => prop_assert!(false, "cut at {k}: attached"),
+            }
+            prop_assert!(l.integrals.is_none());
+        }
     }
 }

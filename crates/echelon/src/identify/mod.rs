@@ -61,7 +61,7 @@ use checks::{excitation, misfit};
 pub use error::IdentifyError;
 pub use identified::{AxisSummary, Estimate, Identified, Limit, Param, Prediction};
 use limits::{RateLimit, largest_rate, velocity_limits};
-pub use log::{Hold, Integrals, Log};
+pub use log::{Hold, Integrals, Log, integrals_truncation};
 
 /// Fewest samples a log must have.
 pub const MIN_SAMPLES: usize = 50;

@@ -202,8 +202,7 @@ impl Deadlock {
                 }
                 self.moved += speed * (t - last);
                 if e <= (1.0 - PROGRESS_FRACTION) * reference {
-                    self.progress = Some((e, t));
-                    self.path = 0.0;
+                    self.restart(e, t);
                     self.stalls = 0;
                 } else if t - since >= PROGRESS_WINDOW
                     && (self.path >= PROGRESS_FRACTION * reference
@@ -212,9 +211,7 @@ impl Deadlock {
                     // It moves round what holds it (a post, a neighbour it
                     // passes; ‖e‖ may grow meanwhile), or it stands (the
                     // still test's case, a jam): a new window.
-                    self.progress = Some((e, t));
-                    self.path = 0.0;
-                    self.moved = 0.0;
+                    self.restart(e, t);
                 } else if t - since >= PROGRESS_WINDOW {
                     if self.breaking {
                         self.turns = (self.turns + 1) % BIASES;
@@ -225,18 +222,25 @@ impl Deadlock {
                         self.turns = self.stalls % BIASES;
                     }
                     self.stalls = (self.stalls + 1) % BIASES;
-                    self.progress = Some((e, t));
-                    self.path = 0.0;
-                    self.moved = 0.0;
+                    self.restart(e, t);
                 }
             }
             _ => {
-                self.progress = Some((e, t));
-                self.path = 0.0;
-                self.moved = 0.0;
+                self.restart(e, t);
                 self.stalls = 0;
             }
         }
+    }
+
+    /// Starts a new progress window at `t` with reference ‖e‖ = `e`: the
+    /// motion measured in the last one (`path` and `moved`) is forgotten, so
+    /// each window's verdict rests on its own motion only (a window that
+    /// ended on progress must not lend its ground motion to the next, where
+    /// a robot standing still would count as riding along).
+    fn restart(&mut self, e: f64, t: f64) {
+        self.progress = Some((e, t));
+        self.path = 0.0;
+        self.moved = 0.0;
     }
 }
 
@@ -259,4 +263,66 @@ fn bias(k: u8) -> f64 {
 fn turn(x: [f64; 2], angle: f64) -> [f64; 2] {
     let (s, c) = angle.sin_cos();
     [c * x[0] - s * x[1], s * x[0] + c * x[1]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Acting calls every 0.1 s from `t0` for `seconds`, the point moving at
+    /// `speed` over ground and not relative to what holds it, with ‖e‖ =
+    /// `error` (`stuck` and `still` false: only the progress test acts).
+    fn ride(d: &mut Deadlock, t0: f64, seconds: f64, error: f64, speed: f64) -> f64 {
+        let steps = (seconds / 0.1).round() as u64;
+        let mut t = t0;
+        for k in 1..=steps {
+            t = t0 + k as f64 * 0.1;
+            d.set_error(error);
+            d.record(t, false, false, [0.0, speed]);
+        }
+        t
+    }
+
+    /// The case of issue 46: a window that ends on progress (‖e‖ fell by
+    /// more than 10 %) after the point moved over ground, then a robot that
+    /// stands: the new window sees no motion (a jam, the still test's case)
+    /// and starts no break. Before the fix the first window's `moved`
+    /// carried over and the standing robot counted as riding along.
+    #[test]
+    fn a_window_that_ends_on_progress_lends_no_motion_to_the_next() {
+        let mut d = Deadlock::default();
+        let t = ride(&mut d, 0.0, 4.0, 1.0, 0.5);
+        // ‖e‖ falls by 20 %: progress, a new window.
+        let t = ride(&mut d, t, 0.1, 0.8, 0.0);
+        ride(&mut d, t, PROGRESS_WINDOW + 1.0, 0.8, 0.0);
+        assert_eq!(d.breaks(), 0, "{d:?}");
+        assert_eq!(d.moved, 0.0, "standing since the window began: {d:?}");
+    }
+
+    proptest! {
+        /// Whatever the point did before a window that ended on progress
+        /// (over-ground speed, how long), the next window starts from a
+        /// clean state: a robot standing in it starts no break, and what it
+        /// measured is only that window's motion.
+        #[test]
+        fn each_progress_window_starts_from_a_clean_state(
+            speed in 0.0f64..2.0,
+            before in 0.2f64..4.9,
+            error in 0.05f64..5.0,
+            drop in 0.11f64..0.9,
+            standing in 0.0f64..1.0,
+        ) {
+            let mut d = Deadlock::default();
+            let t = ride(&mut d, 0.0, before, error, speed);
+            let e = error * (1.0 - drop);
+            let t = ride(&mut d, t, 0.1, e, 0.0);
+            prop_assert_eq!(d.moved, 0.0, "a new window forgets the last one's motion");
+            // Standing (over-ground motion under the fraction of ‖e‖ that
+            // counts as moving) for a whole window: a jam, no break.
+            let slow = standing * PROGRESS_FRACTION * e / (PROGRESS_WINDOW + 1.0);
+            ride(&mut d, t, PROGRESS_WINDOW + 0.5, e, slow);
+            prop_assert_eq!(d.breaks(), 0, "{:?}", d);
+        }
+    }
 }

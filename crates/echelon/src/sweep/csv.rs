@@ -39,7 +39,8 @@ fn zeta_model_name(zeta_model: ZetaModel) -> &'static str {
     }
 }
 
-/// Writes `sweep.csv`.
+/// Writes `sweep.csv`: a row per run, a diverged one's included (its
+/// `diverged` column set, see the [module docs](super)).
 pub fn write_csv<W: Write>(w: W, rows: &[Row], zeta_model: ZetaModel) -> io::Result<()> {
     let mut csv = CsvWriter::new(w, SWEEP_HEADER)?;
     let model = zeta_model_name(zeta_model);
@@ -61,6 +62,12 @@ pub fn write_csv<W: Write>(w: W, rows: &[Row], zeta_model: ZetaModel) -> io::Res
             .opt(r.z_bound)
             .opt(r.z_over_bound)
             .opt(r.e_bound);
+        // When it diverged, as diverged.csv writes it; empty for a run
+        // that ended.
+        match r.diverged {
+            Some(t) => csv.time(t),
+            None => csv.opt(None),
+        };
         csv.end_row()?;
     }
     csv.flush()

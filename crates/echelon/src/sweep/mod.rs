@@ -26,6 +26,16 @@
 //! after the transient (filtered, braked or breaking a deadlock): the
 //! filter, not the law, then sets its `z`.
 //!
+//! # Runs that diverge
+//!
+//! A run that leaves its bounds ([`SimError::Diverged`]) is a row like any
+//! other, in its place in grid order, with `diverged` set to the time it
+//! diverged (s; empty for a run that ended) and its statistics `inf` (it
+//! has no maximum: it left its bounds), its bound columns empty; a mean or
+//! a maximum over seeds that takes it in is `inf`, never a quiet average of
+//! the runs that ended. [`run_all`] also lists what left its bound
+//! ([`DivergedCase`], `diverged.csv`).
+//!
 //! This file holds the grid and the runs; `drift.rs` the drift curves
 //! without fixes (`drift.csv`); `csv.rs` the sweep's other CSV files.
 
@@ -147,6 +157,17 @@ pub struct Row {
     /// bound columns hold (not written to `sweep.csv`).
     #[serde(skip)]
     pub laws: Laws,
+    /// When the run diverged, s (`None`: it ran to its end). A diverged
+    /// run's statistics are `inf` and its bounds `None` (see the
+    /// [module docs](self)).
+    pub diverged: Option<f64>,
+}
+
+impl Row {
+    /// Whether the run diverged.
+    pub fn is_diverged(&self) -> bool {
+        self.diverged.is_some()
+    }
 }
 
 /// The laws of a run's dead-reckoning agents, and so the form of Theorem 2 in
@@ -191,13 +212,14 @@ pub struct DivergedCase {
     pub divergence: Divergence,
 }
 
-/// What a sweep gives: a row per case that ran to its end, in grid order,
-/// and the cases that diverged, in grid order.
+/// What a sweep gives: a row per case, in grid order (a diverged run's
+/// with [`Row::diverged`] set), and what left its bound in each case that
+/// diverged, in grid order.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Sweep {
-    /// The runs that ended.
+    /// Every run, diverged or not.
     pub rows: Vec<Row>,
-    /// The runs that diverged.
+    /// The runs that diverged: what left its bound, where and when.
     pub diverged: Vec<DivergedCase>,
 }
 
@@ -206,7 +228,7 @@ pub struct Sweep {
 pub const DIVERGED_HEADER: &str = "zeta,zeta_model,wheel_diameter_ratio,wheelbase_ratio,slip,fix_every,seed,agent,t,quantity,value,bound";
 
 /// The header of `sweep.csv`.
-pub const SWEEP_HEADER: &str = "zeta,zeta_model,wheel_diameter_ratio,wheelbase_ratio,slip,fix_every,seed,omega_max,z_max,z_hat_max,e_max,final_drift,drift_max,z_bound,z_over_bound,e_bound";
+pub const SWEEP_HEADER: &str = "zeta,zeta_model,wheel_diameter_ratio,wheelbase_ratio,slip,fix_every,seed,omega_max,z_max,z_hat_max,e_max,final_drift,drift_max,z_bound,z_over_bound,e_bound,diverged";
 
 /// Why a sweep cannot run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -390,13 +412,24 @@ fn build_case(
     })?)
 }
 
-/// Runs one case and reduces it to a [`Row`].
+/// Runs one case and reduces it to a [`Row`]; a run that diverges gives
+/// its row too, with [`Row::diverged`] set (see the [module docs](self)).
 pub fn run_case(
     scenario: &Scenario,
     overrides: &Overrides,
     grid: &Grid,
     case: &Case,
 ) -> Result<Row, SweepError> {
+    Ok(run_case_with_divergence(scenario, overrides, grid, case)?.0)
+}
+
+/// [`run_case`], with what left its bound when the run diverged.
+fn run_case_with_divergence(
+    scenario: &Scenario,
+    overrides: &Overrides,
+    grid: &Grid,
+    case: &Case,
+) -> Result<(Row, Option<Divergence>), SweepError> {
     let run = build_case(scenario, overrides, grid, case)?;
     let sim = &mut run.simulation();
     let n = sim.agents().len();
@@ -432,7 +465,26 @@ pub fn run_case(
         }
         Ok(())
     };
-    sim.run(&mut observe)?;
+    if let Err(e) = sim.run(&mut observe) {
+        let Some(divergence) = Divergence::of(&e) else {
+            return Err(e.into());
+        };
+        let row = Row {
+            case: *case,
+            omega_max: f64::INFINITY,
+            z_max: f64::INFINITY,
+            z_hat_max: f64::INFINITY,
+            e_max: f64::INFINITY,
+            final_drift: f64::INFINITY,
+            drift_max: f64::INFINITY,
+            z_bound: None,
+            z_over_bound: None,
+            e_bound: None,
+            laws: Laws::default(),
+            diverged: Some(divergence.t),
+        };
+        return Ok((row, Some(divergence)));
+    }
     let theorem_applies = !case.outside_assumption_1()
         && case.zeta > 0.0
         && case.fix_every > 0
@@ -482,7 +534,7 @@ pub fn run_case(
             .filter(|&(i, _)| dead_reckoning(i))
             .map(|(_, a)| a.law()),
     );
-    Ok(Row {
+    let row = Row {
         case: *case,
         omega_max: omega_max.iter().copied().fold(0.0, f64::max),
         z_max: z_max.iter().copied().fold(0.0, f64::max),
@@ -494,7 +546,9 @@ pub fn run_case(
         z_over_bound: ratio,
         e_bound,
         laws,
-    })
+        diverged: None,
+    };
+    Ok((row, None))
 }
 
 /// Whether the file's other odometry settings keep Theorem 2's assumptions:
@@ -520,24 +574,21 @@ fn noise_free(s: &Scenario) -> bool {
 }
 
 /// Runs every case of `grid` in parallel on the current rayon pool; `progress`
-/// is called once per finished run. Rows are in grid order. Fails on the
-/// first case (in grid order) that fails, a divergence included; see
-/// [`run_all`] for a sweep that goes on past divergences.
+/// is called once per finished run. Rows are in grid order, one per case: a
+/// run that diverges is recorded in its row ([`Row::diverged`]), not
+/// dropped nor averaged in. Fails on the first case (in grid order) that
+/// fails otherwise; see [`run_all`] for what left its bound.
 pub fn run(
     scenario: &Scenario,
     overrides: &Overrides,
     grid: &Grid,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Vec<Row>, SweepError> {
-    outcomes(scenario, overrides, grid, progress)?
-        .into_iter()
-        .map(|(_, row)| row)
-        .collect()
+    Ok(run_all(scenario, overrides, grid, progress)?.rows)
 }
 
-/// As [`run`], but a case that diverges is reported in
-/// [`Sweep::diverged`] instead of stopping the sweep (`echelon sweep`);
-/// any other failure still fails it.
+/// As [`run`], with what left its bound in each case that diverged
+/// ([`Sweep::diverged`], `echelon sweep`'s `diverged.csv`).
 pub fn run_all(
     scenario: &Scenario,
     overrides: &Overrides,
@@ -546,20 +597,17 @@ pub fn run_all(
 ) -> Result<Sweep, SweepError> {
     let mut sweep = Sweep::default();
     for (case, outcome) in outcomes(scenario, overrides, grid, progress)? {
-        match outcome {
-            Ok(row) => sweep.rows.push(row),
-            Err(SweepError::Sim(e)) => match Divergence::of(&e) {
-                Some(divergence) => sweep.diverged.push(DivergedCase { case, divergence }),
-                None => return Err(e.into()),
-            },
-            Err(e) => return Err(e),
+        let (row, divergence) = outcome?;
+        sweep.rows.push(row);
+        if let Some(divergence) = divergence {
+            sweep.diverged.push(DivergedCase { case, divergence });
         }
     }
     Ok(sweep)
 }
 
 /// A case and what running it gave.
-type Outcome = (Case, Result<Row, SweepError>);
+type Outcome = (Case, Result<(Row, Option<Divergence>), SweepError>);
 
 /// Every case with its outcome, in grid order.
 fn outcomes(
@@ -578,7 +626,7 @@ fn outcomes(
     Ok(cases
         .into_par_iter()
         .map(|case| {
-            let row = run_case(scenario, overrides, grid, &case);
+            let row = run_case_with_divergence(scenario, overrides, grid, &case);
             progress();
             (case, row)
         })

@@ -175,11 +175,7 @@ pub fn write(opts: &BundleOptions) -> Result<BundleReport, FleetError> {
                 header.push(format!(
                     "It drives {} ({}) and reads {} in ROS domain {}, {}.",
                     link.cmd_vel,
-                    match link.cmd_vel_type {
-                        echelon::scenario::schema::CmdVelType::Twist => "geometry_msgs/msg/Twist",
-                        echelon::scenario::schema::CmdVelType::TwistStamped =>
-                            "geometry_msgs/msg/TwistStamped",
-                    },
+                    crate::ros2::drive::cmd_vel_type(link).name,
                     link.odom,
                     link.domain_id,
                     match link.connect.is_empty() {

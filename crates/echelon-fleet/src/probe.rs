@@ -119,8 +119,7 @@ pub fn local_address_towards(connect: &[String]) -> Option<String> {
         {
             return Some(at.ip().to_string());
         }
-        let locator = e.split(['?', '#']).next()?;
-        let (_, address) = locator.split_once('/')?;
+        let (_, address) = echelon::scenario::endpoint_address(e)?;
         let remote = address.to_socket_addrs().ok()?.next()?;
         let any = if remote.is_ipv4() {
             "0.0.0.0:0"

@@ -462,14 +462,7 @@ impl Listener {
     /// liveliness tokens (those already there included).
     pub fn join(opts: &StatusOptions) -> Result<Listener, FleetError> {
         let keys = Keys::new(&opts.fleet);
-        let mut config = net::config(&opts.net)?;
-        let ms = opts.connect_timeout.as_millis().max(1);
-        config
-            .insert_json5("connect/timeout_ms", &ms.to_string())
-            .map_err(|e| FleetError::Zenoh(format!("config connect/timeout_ms: {e}")))?;
-        let session = zenoh::open(config)
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("opening the session: {e}")))?;
+        let session = net::open_within(&opts.net, opts.connect_timeout)?;
         let view = Arc::new(Mutex::new(StatusView::new(
             keys.clone(),
             opts.robots,

@@ -246,12 +246,7 @@ fn check_hub(opts: &UpOptions, placement: &[Placement]) -> Result<(), FleetError
     }
     for e in &hub.listen {
         echelon::scenario::check_listen_endpoint(e).map_err(FleetError::Config)?;
-        let port = e
-            .split(['?', '#'])
-            .next()
-            .and_then(|l| l.rsplit_once(':'))
-            .map(|(_, p)| p);
-        if port == Some("0") {
+        if echelon::scenario::endpoint_port(e) == Some("0") {
             return Err(FleetError::Config(format!(
                 "--listen {e}: the hub's robots need a known port (e.g. 7447), not 0"
             )));
@@ -896,13 +891,7 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
             Intrusion {
                 role: p.role.clone(),
                 exit: p.status.and_then(|s| s.code()),
-                said: std::fs::read_to_string(&p.log)
-                    .unwrap_or_default()
-                    .lines()
-                    .rev()
-                    .find(|l| !l.trim().is_empty())
-                    .unwrap_or("")
-                    .to_owned(),
+                said: p.last_said(),
             }
         })
         .collect();

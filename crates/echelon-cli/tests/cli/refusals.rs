@@ -666,3 +666,39 @@ fn the_operator_heartbeat_is_refused_at_its_place() {
         &["asks for no operator heartbeat", "operator_heartbeat"],
     );
 }
+
+/// `placement` (in `[fleet]` or an agent) is refused at its place (file,
+/// line, column, field; exit 2, nothing written or started) when it is
+/// neither `"hub"` nor `"onboard"`, by the commands that read it.
+#[test]
+fn a_placement_that_is_not_one_is_refused_at_its_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    for (text, needles) in [
+        (
+            format!("{GOOD}\n[fleet]\nplacement = \"roof\"\n"),
+            &["s.toml:15:13: fleet.placement", "unknown variant `roof`"][..],
+        ),
+        (
+            GOOD.replacen("[[agents]]\n", "[[agents]]\nplacement = 1\n", 1),
+            &["s.toml:10:13: agents[1].placement", "wanted string"][..],
+        ),
+    ] {
+        let f = scenario_file(dir.path(), &text);
+        for args in [
+            &["fleet", "up", &f, "--out", out.to_str().unwrap()][..],
+            &[
+                "fleet",
+                "bundle",
+                &f,
+                "--hub",
+                "tcp/10.0.0.1:7447",
+                "--out",
+                out.to_str().unwrap(),
+            ][..],
+        ] {
+            assert_refused(&echelon(args), needles);
+            assert!(!out.exists(), "{args:?} wrote {out:?}");
+        }
+    }
+}

@@ -17,30 +17,7 @@ dt = 0.001
 [log]
 dt = 0.01
 
-[control]
-law = "kinematic"
-ke = 1.5
-kz = 10.0
-l = 0.05
-lycomp = "fit"
-ly_derivatives = "neglect"
-
-[robots.lab]
-drive = "velocity"
-tau_v = 0.1
-tau_omega = 0.1
-v_max = 0.3
-omega_max = 2.0
-a_max = 1.0
-alpha_max = 5.0
-half_wheelbase = 0.15
-wheel_radius = 0.05
-
-[reference.circle]
-speed = 0.08
-turn_rate = 0.08
-start = {{ x = 0.0, y = 0.0, theta_deg = 0.0 }}
-
+{LAB_LAW_AND_BASE}
 [fleet.ros2]
 connect = "{r3}"
 

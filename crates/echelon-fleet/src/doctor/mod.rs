@@ -87,13 +87,13 @@ pub struct DoctorOptions {
 /// Opens a session with `net`, waiting at most `timeout` for its `connect`
 /// endpoints.
 fn open_within(net: &NetOptions, timeout: Duration) -> Result<Session, FleetError> {
-    let mut config = net::config(net)?;
-    config
-        .insert_json5("connect/timeout_ms", &timeout.as_millis().to_string())
-        .map_err(|e| FleetError::Zenoh(format!("config connect/timeout_ms: {e}")))?;
-    zenoh::open(config)
-        .wait()
-        .map_err(|e| FleetError::Config(one_line(&e.to_string())))
+    net::open_within(net, timeout).map_err(|e| {
+        FleetError::Config(match e {
+            FleetError::TimedOut(_) => "nothing answered".to_owned(),
+            FleetError::Zenoh(why) => one_line(why.trim_start_matches("opening the session: ")),
+            other => one_line(&other.to_string()),
+        })
+    })
 }
 
 /// Zenoh's refusal to open, in one short line: "nothing answered" when

@@ -133,11 +133,10 @@ pub struct NetOptions {
 /// Whether `e` is a `tcp/` or `udp/` endpoint on this machine's loopback
 /// (`127.0.0.0/8`, `[::1]`, `localhost`): traffic that never leaves it.
 pub fn is_loopback_endpoint(e: &str) -> bool {
-    let locator = e.split(['?', '#']).next().unwrap_or_default();
-    let Some((proto, address)) = locator.split_once('/') else {
+    let Some((proto, address)) = echelon::scenario::endpoint_address(e) else {
         return false;
     };
-    let host = address.rsplit_once(':').map_or(address, |(h, _)| h);
+    let host = echelon::scenario::endpoint_host_port(address).map_or(address, |(h, _)| h);
     matches!(proto, "tcp" | "udp")
         && (host == "localhost"
             || host == "[::1]"
@@ -303,7 +302,25 @@ pub fn secure_files(dir: &std::path::Path, identity: &str) -> Result<[PathBuf; 3
 
 /// Opens a session (blocks until every `connect` endpoint is reached, or fails).
 pub fn open(opts: &NetOptions) -> Result<Session, FleetError> {
-    let config = config(opts)?;
+    open_config(config(opts)?, opts)
+}
+
+/// [`open`], waiting at most `timeout` for its `connect` endpoints (a
+/// check, a status: bounded by what the operator asked, not the fleet's
+/// connection timeout).
+pub fn open_within(opts: &NetOptions, timeout: std::time::Duration) -> Result<Session, FleetError> {
+    let mut config = config(opts)?;
+    set(
+        &mut config,
+        "connect/timeout_ms",
+        json!(timeout.as_millis().max(1) as u64),
+    )?;
+    open_config(config, opts)
+}
+
+/// Opens a session of `config` (made from `opts`): nothing answering at
+/// its endpoints is [`FleetError::TimedOut`], in one line.
+fn open_config(config: Config, opts: &NetOptions) -> Result<Session, FleetError> {
     zenoh::open(config).wait().map_err(|e| {
         // Nothing answered at the endpoints it must reach (a client's
         // router, a hub): a timeout, said in one line.

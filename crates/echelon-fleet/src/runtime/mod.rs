@@ -36,7 +36,7 @@ mod task;
 
 pub use drive::{COARSE, RETRY, STALL, WATCH};
 pub use linger::{Linger, Lingered};
-pub use presence::query_all;
+pub use presence::{Tokens, query_all};
 pub use task::{DEFAULT_QUEUE, Flow, Latching, Outgoing, Outputs, Sample, Task, WaitFor};
 
 use drive::Engine;

@@ -69,6 +69,74 @@ pub fn query_all(
     Ok(heard)
 }
 
+/// The liveliness tokens matching a key expression as they come and go
+/// (those already there included, a subscription with its history), by
+/// full key: which are present now, and which were ever seen.
+pub struct Tokens {
+    sets: Arc<Mutex<TokenSets>>,
+    _sub: zenoh::pubsub::Subscriber<()>,
+}
+
+#[derive(Debug, Default)]
+struct TokenSets {
+    present: BTreeSet<String>,
+    seen: BTreeSet<String>,
+}
+
+impl std::fmt::Debug for Tokens {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Tokens")
+            .field("sets", &self.sets)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Tokens {
+    /// Watches the tokens of `key_expr` on `session` while it lives.
+    pub fn watch(session: &zenoh::Session, key_expr: &str) -> Result<Tokens, FleetError> {
+        let sets: Arc<Mutex<TokenSets>> = Arc::default();
+        let sink = sets.clone();
+        let _sub = session
+            .liveliness()
+            .declare_subscriber(key_expr)
+            .history(true)
+            .callback(move |s| {
+                if let Ok(mut sets) = sink.lock() {
+                    let key = s.key_expr().as_str().to_owned();
+                    match s.kind() {
+                        SampleKind::Put => {
+                            sets.seen.insert(key.clone());
+                            sets.present.insert(key);
+                        }
+                        SampleKind::Delete => {
+                            sets.present.remove(&key);
+                        }
+                    }
+                }
+            })
+            .wait()
+            .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
+        Ok(Tokens { sets, _sub })
+    }
+
+    fn read<T>(&self, f: impl FnOnce(&TokenSets) -> T) -> Result<T, FleetError> {
+        self.sets
+            .lock()
+            .map(|s| f(&s))
+            .map_err(|_| FleetError::Config("poisoned".into()))
+    }
+
+    /// The keys whose tokens are there now.
+    pub fn present(&self) -> Result<BTreeSet<String>, FleetError> {
+        self.read(|s| s.present.clone())
+    }
+
+    /// The keys whose tokens were ever there.
+    pub fn seen(&self) -> Result<BTreeSet<String>, FleetError> {
+        self.read(|s| s.seen.clone())
+    }
+}
+
 /// Waits until every name of `w` has a liveliness token under
 /// `echelon/<fleet>/alive/`, or its timeout passes (or `stop` is raised).
 pub(super) fn wait_for(
@@ -79,35 +147,16 @@ pub(super) fn wait_for(
     if w.names.is_empty() {
         return Ok(());
     }
-    let seen: Arc<Mutex<BTreeSet<String>>> = Arc::default();
-    let sink = seen.clone();
-    let prefix = w.keys.alive("");
-    let _sub = session
-        .liveliness()
-        .declare_subscriber(w.keys.alive("**"))
-        .history(true)
-        .callback(move |s| {
-            if s.kind() == SampleKind::Put
-                && let Some(name) = s.key_expr().as_str().strip_prefix(&prefix)
-                && let Ok(mut set) = sink.lock()
-            {
-                set.insert(name.to_owned());
-            }
-        })
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
+    let tokens = Tokens::watch(session, &w.keys.alive("**"))?;
     let started = Instant::now();
     loop {
-        let missing: Vec<String> = {
-            let set = seen
-                .lock()
-                .map_err(|_| FleetError::Config("poisoned".into()))?;
-            w.names
-                .iter()
-                .filter(|r| !set.contains(*r))
-                .cloned()
-                .collect()
-        };
+        let seen = tokens.seen()?;
+        let missing: Vec<String> = w
+            .names
+            .iter()
+            .filter(|r| !seen.contains(&w.keys.alive(r)))
+            .cloned()
+            .collect();
         if missing.is_empty() {
             // Let the declarations that came with the tokens settle.
             std::thread::sleep(Duration::from_millis(100));
@@ -143,35 +192,17 @@ pub(super) fn refuse_if_held(
     wait: Duration,
     stop: &StopFlag,
 ) -> Result<(), FleetError> {
-    let seen: Arc<Mutex<BTreeSet<String>>> = Arc::default();
-    let mut subs = Vec::with_capacity(tokens.len());
-    for key in tokens {
-        let sink = seen.clone();
-        subs.push(
-            session
-                .liveliness()
-                .declare_subscriber(key)
-                .history(true)
-                .callback(move |s| {
-                    if let Ok(mut set) = sink.lock() {
-                        let k = s.key_expr().as_str().to_owned();
-                        match s.kind() {
-                            SampleKind::Put => set.insert(k),
-                            SampleKind::Delete => set.remove(&k),
-                        };
-                    }
-                })
-                .wait()
-                .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?,
-        );
-    }
+    let watched = tokens
+        .iter()
+        .map(|key| Tokens::watch(session, key))
+        .collect::<Result<Vec<_>, _>>()?;
     let started = Instant::now();
     let mut said = false;
     loop {
-        let mut held: BTreeSet<String> = seen
-            .lock()
-            .map_err(|_| FleetError::Config("poisoned".into()))?
-            .clone();
+        let mut held = BTreeSet::new();
+        for w in &watched {
+            held.extend(w.present()?);
+        }
         for key in tokens {
             let replies = session
                 .liveliness()

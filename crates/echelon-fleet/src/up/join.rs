@@ -6,12 +6,9 @@
 //! naming the missing robots.
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use echelon::scenario::Placement;
-use zenoh::Wait;
-use zenoh::sample::SampleKind;
 
 use crate::keys::Keys;
 use crate::net::NetOptions;
@@ -63,22 +60,7 @@ pub(super) fn wait_for_robots(
     check: &mut dyn FnMut() -> Result<(), FleetError>,
 ) -> Result<(), FleetError> {
     let session = crate::net::open(net)?;
-    let joined: Arc<Mutex<BTreeMap<String, bool>>> = Arc::default();
-    let sink = joined.clone();
-    let prefix = keys.alive("");
-    let _sub = session
-        .liveliness()
-        .declare_subscriber(keys.alive("robot/*"))
-        .history(true)
-        .callback(move |s| {
-            if let Some(name) = s.key_expr().as_str().strip_prefix(&prefix)
-                && let Ok(mut set) = sink.lock()
-            {
-                set.insert(name.to_owned(), s.kind() == SampleKind::Put);
-            }
-        })
-        .wait()
-        .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?;
+    let tokens = crate::runtime::Tokens::watch(&session, &keys.alive("robot/*"))?;
     let started = Instant::now();
     let mut announced: BTreeMap<u32, bool> = BTreeMap::new();
     let mut last_line = Instant::now();
@@ -94,20 +76,14 @@ pub(super) fn wait_for_robots(
     );
     loop {
         check()?;
-        let now: BTreeMap<String, bool> = joined
-            .lock()
-            .map_err(|_| FleetError::Config("poisoned".into()))?
-            .clone();
+        let present = tokens.present()?;
         let mut missing = Vec::new();
         for &(k, placement) in awaited {
-            let here = now
-                .get(&Member::Robot(k).liveliness())
-                .copied()
-                .unwrap_or(false);
+            let here = present.contains(&keys.alive(&Member::Robot(k).liveliness()));
             let was = announced.get(&k).copied().unwrap_or(false);
             if here && !was {
                 let who = ask_who(&session, keys, k);
-                let left = awaited.len() - now.values().filter(|v| **v).count().min(awaited.len());
+                let left = awaited.len() - present.len().min(awaited.len());
                 eprintln!(
                     "fleet up: {} joined after {:.1} s ({left} to go)",
                     describe(k, placement, who.as_ref()),

@@ -156,8 +156,7 @@ pub(super) fn local_endpoint(listen: &str) -> String {
 /// says why when it starts).
 pub(super) fn taken(listen: &str) -> Option<String> {
     use std::net::ToSocketAddrs;
-    let locator = listen.split(['?', '#']).next()?;
-    let (proto, address) = locator.split_once('/')?;
+    let (proto, address) = echelon::scenario::endpoint_address(listen)?;
     let at = address.to_socket_addrs().ok()?.next()?;
     let (kind, protocol) = match proto {
         "quic" | "udp" => (socket2::Type::DGRAM, socket2::Protocol::UDP),

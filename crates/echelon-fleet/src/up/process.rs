@@ -89,18 +89,23 @@ impl Proc {
         }
     }
 
-    pub(super) fn failure(&self) -> Option<String> {
-        let status = self.status?;
-        if status.success() {
-            return None;
-        }
-        let tail = std::fs::read_to_string(&self.log)
+    /// The last line it wrote on stderr (its log), `""` if none.
+    pub(super) fn last_said(&self) -> String {
+        std::fs::read_to_string(&self.log)
             .unwrap_or_default()
             .lines()
             .rev()
             .find(|l| !l.trim().is_empty())
             .unwrap_or("")
-            .to_owned();
+            .to_owned()
+    }
+
+    pub(super) fn failure(&self) -> Option<String> {
+        let status = self.status?;
+        if status.success() {
+            return None;
+        }
+        let tail = self.last_said();
         Some(format!(
             "{} exited with {status} ({}: {tail})",
             self.role,

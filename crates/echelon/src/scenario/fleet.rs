@@ -183,10 +183,32 @@ pub fn check_listen_endpoint(e: &str) -> Result<(), String> {
     check_endpoint_from(e, 0)
 }
 
+/// A Zenoh endpoint's protocol and address (`tcp`, `192.168.1.2:7447`),
+/// its `?metadata` and `#config` parts left out; `None` without a `/`. The
+/// one place that takes an endpoint apart; [`endpoint_port`] its port.
+pub fn endpoint_address(e: &str) -> Option<(&str, &str)> {
+    e.split(['?', '#'])
+        .next()
+        .unwrap_or_default()
+        .split_once('/')
+}
+
+/// An endpoint address's host and port as written (`192.168.1.2`, `7447`;
+/// a bracketed IPv6 host keeps its brackets); `None` without a `:`.
+pub fn endpoint_host_port(address: &str) -> Option<(&str, &str)> {
+    address.rsplit_once(':')
+}
+
+/// An endpoint's port as written (`None`: no address or no port).
+pub fn endpoint_port(e: &str) -> Option<&str> {
+    endpoint_address(e)
+        .and_then(|(_, a)| endpoint_host_port(a))
+        .map(|(_, p)| p)
+}
+
 /// Checks `e` as [`check_endpoint`] says, with ports from `lowest`.
 fn check_endpoint_from(e: &str, lowest: u16) -> Result<(), String> {
-    let locator = e.split(['?', '#']).next().unwrap_or_default();
-    let Some((proto, address)) = locator.split_once('/') else {
+    let Some((proto, address)) = endpoint_address(e) else {
         return Err(format!(
             "`{e}` is not a Zenoh endpoint: give <protocol>/<host>:<port>, e.g. tcp/192.168.1.21:7447"
         ));
@@ -198,7 +220,7 @@ fn check_endpoint_from(e: &str, lowest: u16) -> Result<(), String> {
         ));
     }
     let bad = |why: &str| Err(format!("`{e}`: {why}; give <protocol>/<host>:<port>"));
-    let Some((host, port)) = address.rsplit_once(':') else {
+    let Some((host, port)) = endpoint_host_port(address) else {
         return bad("no port");
     };
     if !matches!(port.parse::<u16>(), Ok(p) if p >= lowest) {

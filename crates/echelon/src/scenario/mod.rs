@@ -33,7 +33,8 @@ pub use fleet::{
     DEFAULT_LINK_TIMEOUT, DEFAULT_NAMESPACE, DEFAULT_ODOM_RATE, DEFAULT_ODOM_TIMEOUT,
     DEFAULT_REFERENCE_RATE, DEFAULT_STALE_AFTER, ENDPOINT_PROTOCOLS, FixSource, FleetSettings,
     LinkLoss, LinkPolicy, MAX_DOMAIN_ID, Placement, Ros2Link, check_endpoint,
-    check_listen_endpoint, is_valid_fleet_name,
+    check_listen_endpoint, endpoint_address, endpoint_host_port, endpoint_port,
+    is_valid_fleet_name,
 };
 pub use overrides::{OdometryOverrides, Overrides};
 pub use plausible::{PLAUSIBLE, Plausible};

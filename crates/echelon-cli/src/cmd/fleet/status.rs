@@ -71,9 +71,9 @@ pub(super) fn status_cmd(a: StatusArgs) -> Result<()> {
         connect_timeout: listen,
     }) {
         Ok(l) => l,
-        // The endpoints did not answer within the listening time (Zenoh's
-        // message without the source location it appends).
-        Err(FleetError::Zenoh(e)) => {
+        // The endpoints did not answer within the listening time, or Zenoh
+        // refused (its message without the source location it appends).
+        Err(FleetError::TimedOut(e) | FleetError::Zenoh(e)) => {
             let e = e.split(" at /").next().unwrap_or_default();
             return Err(nobody(&format!(": {e}")).into());
         }

@@ -1,21 +1,16 @@
 //! `echelon fleet excite --ros2`: an identification manoeuvre on one real
 //! ROS 2 robot, recorded to a bag that `echelon identify` reads.
 //!
-//! [`ExciteSignal`] (pure, deterministic) is the command: steps of `v` and
-//! `ω`, then a chirp of both, then a stop. It stays within the base's limits
-//! and keeps the robot in a small area:
-//!
-//! - `|v| ≤ 0.8 v_max`, `|ω| ≤ 0.8 ω_max` (and at most [`V_CAP`],
-//!   [`OMEGA_CAP`]: identification needs no speed);
-//! - every jump of the command is at most `0.8 a_max τ_v` (`0.8 α_max τ_ω`):
-//!   a first-order lag's fastest rate after a step `Δ` is `Δ/τ`, so the
-//!   acceleration limit never acts and the lag stays identifiable (a
-//!   limited rate would bias it); the chirp's rate `A 2π f` obeys the same
-//!   bound;
-//! - the steps come in pairs `(+A, +Ω)`, `(0, 0)`, `(−A, −Ω)`, `(0, 0)`
-//!   (with varied signs and sizes of `A`, `Ω`): the second arc retraces the
-//!   first backwards, so under an ideal base the robot is back at its start
-//!   pose every four steps; a lag only perturbs that slightly.
+//! [`ExciteSignal`] (pure, deterministic, in `echelon::identify::excite`
+//! where identification's tests use it too) is the command: a rest, steps
+//! of `v` and `ω` on four levels sized from the scenario's base (the prior)
+//! so that its acceleration limit never binds and a lower true limit still
+//! leaves steps free of it, limit probes when `--limits` asks (reversals at
+//! the base's safe speeds), then a chirp of both, then a stop. It stays
+//! within the base's safe speeds (`0.8 v_max`, `0.8 ω_max`, at most
+//! [`V_CAP`], [`OMEGA_CAP`]) and keeps the robot in a small area: the steps
+//! come in retraced pairs, back at the start pose every four steps under an
+//! ideal base.
 //!
 //! [`ExciteTask`] drives the robot's `cmd_vel` with it through a
 //! [`Ros2Drive`] (the robot's limits applied; rmw_zenoh keys, attachments
@@ -46,8 +41,9 @@ use crate::ros2::record::RosTopic;
 use crate::runtime::{self, Flow, Outputs, Sample, Task};
 use crate::{FleetError, StopFlag};
 
-mod signal;
-pub use signal::{ExciteSignal, MARGIN, OMEGA_CAP, V_CAP};
+pub use echelon::identify::excite::{
+    ExciteDesign, ExciteSignal, MARGIN, OMEGA_CAP, SLOWEST_ODOMETRY, V_CAP,
+};
 
 /// Options of `fleet excite --ros2`.
 #[derive(Debug, Clone)]
@@ -62,6 +58,9 @@ pub struct ExciteOptions {
     pub radius: f64,
     /// Command rate, Hz.
     pub rate: f64,
+    /// Add limit probes to the manoeuvre (`--limits`): reversals at the
+    /// base's safe speeds, steep enough to reach an acceleration limit.
+    pub limits: bool,
     /// How long to wait for the first odometry, s.
     pub wait: f64,
     /// The bag to write.
@@ -361,7 +360,16 @@ pub fn run(opts: ExciteOptions, stop: &StopFlag) -> Result<ExciteReport, FleetEr
         )));
     };
     let base = robot.base();
-    let signal = ExciteSignal::for_base(&base, opts.duration);
+    // The odometry rate is not known before the robot runs: the design
+    // assumes the slowest (10 Hz), which only lengthens the steps.
+    let signal = ExciteSignal::for_base(
+        &base,
+        opts.duration,
+        ExciteDesign {
+            odom_period: SLOWEST_ODOMETRY,
+            limits: opts.limits,
+        },
+    );
     let link = fleet.ros2[opts.agent as usize - 1].clone();
     let topics = RosTopic::of_link(&link).map_err(|e| FleetError::Config(e.to_string()))?;
     let mut log = McapLog::create(&opts.out)?;

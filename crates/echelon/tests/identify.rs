@@ -7,6 +7,7 @@
 #![allow(clippy::unwrap_used)] // tests fail loudly by design
 
 mod common;
+use common::fixed_sample;
 
 use echelon::RobotParams;
 use echelon::agent::AgentSpec;
@@ -58,17 +59,6 @@ fn lagged_base_log(
         cmd: Some(cmd),
         applied: Some(applied),
         ..Log::default()
-    }
-}
-
-/// `cases` cases drawn from the fixed RNG seed `seed` (CI reruns the same
-/// sample), no failure persisted.
-fn fixed_sample(cases: u32, seed: u64) -> ProptestConfig {
-    ProptestConfig {
-        cases,
-        rng_seed: proptest::test_runner::RngSeed::Fixed(seed),
-        failure_persistence: None,
-        ..ProptestConfig::default()
     }
 }
 
@@ -244,7 +234,10 @@ fn velocity_base_lags_are_recovered_within_5_percent() {
     assert!(id.limits.iter().all(|l| !l.reached));
     let block = id.robot_toml("base");
     assert!(block.contains("drive = \"velocity\"") && block.contains("tau_v = "));
-    assert!(block.contains("# v_max: observed"), "{block}");
+    assert!(
+        block.contains("# v_max: not reached (largest seen: "),
+        "{block}"
+    );
 }
 
 /// Runs `identify-excitation` (or a shorter part) into `dir`.
@@ -497,7 +490,10 @@ fn a_velocity_base_run_gives_its_lags_within_5_percent_and_the_speed_limit_it_hi
     assert!(!limit("a_max").reached && !limit("alpha_max").reached);
     let block = id.robot_toml("lab");
     assert!(block.contains("v_max = 0.6 "), "{block}");
-    assert!(block.contains("# omega_max: observed"), "{block}");
+    assert!(
+        block.contains("# omega_max: not reached (largest seen: "),
+        "{block}"
+    );
     // The block is a valid velocity robot.
     let reuse = src.replace("[robots.lab]", "[robots.old]") + &block;
     Scenario::parse(&reuse, "reuse.toml", None)
@@ -1114,13 +1110,12 @@ proptest! {
 }
 
 #[test]
-fn a_base_that_applies_its_commands_late_is_a_misfit_when_the_log_is_noise_free() {
-    // The base acts on each command 1–5 ms after its stamp: a delay the
-    // first-order lag does not have. Noise-free, the residuals are not
-    // rounding and not white: both lags are withheld, with the reason.
-    // (With the tests' noise a 1–2 ms delay goes unseen and shows as a lag
-    // longer by about the delay, docs/identify.md.)
-    for late in [1, 2, 5] {
+fn a_base_that_applies_its_commands_late_gets_its_dead_time_when_the_log_is_noise_free() {
+    // The base acts on each command 1–5 ms after its stamp: a dead time,
+    // which a bag's fit now has (it was a misfit, both lags withheld, before
+    // the dead time was identified). Noise-free, the lags and the dead time
+    // come out to the fit's convergence.
+    for late in [0, 1, 2, 5] {
         let log = bag_log(
             [0.1, 0.15],
             50,
@@ -1134,21 +1129,15 @@ fn a_base_that_applies_its_commands_late_is_a_misfit_when_the_log_is_noise_free(
             },
         );
         let id = identify::identify(&log, Model::Velocity).unwrap();
-        for p in &id.params {
-            assert!(p.estimate.is_none(), "late {late} ms: {p:?}");
-            let why = p.not_identifiable.as_deref().unwrap();
-            assert!(why.contains("misfits"), "late {late} ms: {why}");
-        }
+        assert!(id.axes.iter().all(|a| a.method == "command hold"));
+        let d = id.get("dead_time").unwrap();
+        assert!(
+            (d.value - late as f64 * 1e-3).abs() < 1e-6,
+            "late {late} ms: {d:?}"
+        );
+        assert!((id.get("tau_v").unwrap().value / 0.1 - 1.0).abs() < 1e-6);
+        assert!((id.get("tau_omega").unwrap().value / 0.15 - 1.0).abs() < 1e-6);
     }
-    // On time, the same log gives both lags exactly.
-    let id = identify::identify(
-        &bag_log([0.1, 0.15], 50, 20, 7, 1, None, Quirks::NONE),
-        Model::Velocity,
-    )
-    .unwrap();
-    assert!(id.axes.iter().all(|a| a.method == "command hold"));
-    assert!((id.get("tau_v").unwrap().value / 0.1 - 1.0).abs() < 1e-9);
-    assert!((id.get("tau_omega").unwrap().value / 0.15 - 1.0).abs() < 1e-9);
 }
 
 proptest! {
@@ -1605,4 +1594,50 @@ fn noisy_limited_bases_print_most_lags_and_limits_within_2_percent_and_covered()
         covered * 100 >= printed * 90,
         "covered {covered} of {printed}"
     );
+}
+
+/// A bag's command hold that cannot drive the fit is refused with what is
+/// wrong with it, never indexed out of bounds nor fitted.
+#[test]
+fn a_bad_command_hold_is_refused_naming_the_hold() {
+    let good = bag_log([0.1, 0.15], 50, 20, 7, 1, None, Quirks::NONE);
+    let hold = good.hold.clone().unwrap();
+    let cases: Vec<(identify::Hold, &str)> = vec![
+        (identify::Hold::default(), "has no switch"),
+        (
+            identify::Hold {
+                u: [hold.u[0][1..].to_vec(), hold.u[1].clone()],
+                ..hold.clone()
+            },
+            "switch times but",
+        ),
+        (
+            identify::Hold {
+                t: hold.t.iter().map(|t| t + 0.5).collect(),
+                ..hold.clone()
+            },
+            "after the first sample",
+        ),
+        (
+            identify::Hold {
+                t: hold.t.iter().rev().copied().collect(),
+                ..hold.clone()
+            },
+            "do not increase",
+        ),
+    ];
+    for (bad, want) in cases {
+        let log = Log {
+            hold: Some(bad),
+            ..good.clone()
+        };
+        let e = identify::identify(&log, Model::Velocity)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("in-memory bag: the command hold (Log::hold) ") && e.contains(want),
+            "{want}: {e}"
+        );
+    }
+    assert!(identify::identify(&good, Model::Velocity).is_ok());
 }

@@ -317,6 +317,7 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
                     duration: a.duration,
                     radius: a.radius,
                     rate: a.rate,
+                    limits: a.limits,
                     wait: a.wait,
                     out: a.out,
                     net,

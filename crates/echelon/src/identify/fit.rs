@@ -22,10 +22,12 @@
 // Small dense linear algebra (n ≤ 3) reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
+mod bag;
 mod integral;
 mod limited;
 mod linalg;
 mod residuals;
+pub(crate) use bag::{BagData, BagFit, fit_bag};
 pub(crate) use integral::{AxisIntegrals, fit_integral};
 pub(crate) use limited::{LimitedFit, fit_limited};
 pub(crate) use linalg::rcond;

@@ -56,8 +56,13 @@ pub struct Param {
     pub symbol: &'static str,
     /// SI unit.
     pub unit: &'static str,
-    /// The estimate, `None` if not identifiable.
+    /// The estimate, `None` if not identifiable (or only bounded).
     pub estimate: Option<Estimate>,
+    /// A 95 % upper bound instead of an estimate: the parameter is below
+    /// what the log resolves (a bag's lag shorter than one odometry period:
+    /// an ideal axis, written as 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub upper_bound: Option<f64>,
     /// Why it is not identifiable.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub not_identifiable: Option<String>,
@@ -100,11 +105,14 @@ pub struct AxisSummary {
 pub struct Limit {
     /// The `[robots.NAME]` field (`v_max`, …).
     pub field: &'static str,
-    /// Largest magnitude seen.
+    /// Largest magnitude seen (the limit itself when `reached`).
     pub observed: f64,
-    /// Whether the log shows it is the limit (the command exceeded it and the
-    /// base cut it, or an acceleration limit identified with the lag);
-    /// otherwise it is only what the manoeuvre reached.
+    /// Whether the log shows it is the limit: the command exceeded it and
+    /// the base cut it, or an acceleration limit identified with the lag
+    /// (a run's integrals, or a bag whose data show saturation: see
+    /// `docs/identify.md`). Otherwise the limit is "not reached (largest
+    /// seen: `observed`)": only what the manoeuvre reached, never presented
+    /// as the limit.
     pub reached: bool,
     /// An acceleration limit identified with the lag (the lag with its rate
     /// clamp fitted to the log): its estimate and 95 % interval.
@@ -214,6 +222,40 @@ impl Identified {
             let _ = writeln!(s, "drive = \"velocity\"");
         }
         for p in &self.params {
+            if !is_robot_field(p.field) {
+                // Not a `[robots.NAME]` field (the bag's dead time): said,
+                // never written as a value a scenario would refuse.
+                let _ = match (&p.estimate, &p.not_identifiable) {
+                    (Some(e), _) => writeln!(
+                        s,
+                        "# {} ({}) = {} {}: {} (echelon's base model has none; a controller's latency budget should hold it)",
+                        p.field,
+                        p.symbol,
+                        sig(e.value),
+                        p.unit,
+                        interval(e, p.noise_free)
+                    ),
+                    (None, why) => writeln!(
+                        s,
+                        "# {} ({}): not identifiable from this log: {}",
+                        p.field,
+                        p.symbol,
+                        why.as_deref().unwrap_or("no estimate")
+                    ),
+                };
+                continue;
+            }
+            if let Some(upper) = p.upper_bound {
+                let _ = writeln!(
+                    s,
+                    "{} = 0.0    # {}, {}: below what the odometry resolves, < {} at 95 %",
+                    p.field,
+                    p.symbol,
+                    p.unit,
+                    sig(upper)
+                );
+                continue;
+            }
             match (&p.estimate, &p.not_identifiable) {
                 (Some(e), _) => {
                     let _ = writeln!(
@@ -260,7 +302,7 @@ impl Identified {
             } else {
                 let _ = writeln!(
                     s,
-                    "# {}: observed {}, not necessarily the limit",
+                    "# {}: not reached (largest seen: {})",
                     l.field,
                     sig(l.observed)
                 );
@@ -281,6 +323,12 @@ impl Identified {
         }
         s
     }
+}
+
+/// Whether a parameter is a `[robots.NAME]` field (the bag's dead time is
+/// not: echelon's base model has none).
+fn is_robot_field(field: &str) -> bool {
+    field != "dead_time"
 }
 
 /// A number to 6 significant digits, in TOML syntax.

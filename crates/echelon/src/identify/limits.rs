@@ -49,6 +49,18 @@ impl RateLimit {
     }
 }
 
+impl RateLimit {
+    /// A limit the log gives no evidence of (`why`: the test's verdict).
+    pub(super) fn not_reached(why: String) -> RateLimit {
+        RateLimit {
+            estimate: None,
+            why: Some(why),
+            noise_free: false,
+            intervals: 0,
+        }
+    }
+}
+
 /// The largest rate of `y` over 5-sample spans (noise averaged) and how
 /// many spans come within 0.5 % of it: a lag's rate only touches its peak,
 /// a limited one rides it.
@@ -119,7 +131,7 @@ pub(super) fn velocity_limits(
                 "the command never exceeded it".to_owned()
             };
             warnings.push(format!(
-                "{speed}: observed {observed:.4}, not necessarily the limit ({why})"
+                "{speed}: not reached (largest seen: {observed:.4}): {why}"
             ));
         }
         // Acceleration: the rate-limited fit's, when it was fitted with the
@@ -158,30 +170,32 @@ pub(super) fn velocity_limits(
                         noise_free: false,
                     });
                     warnings.push(format!(
-                        "{accel}: observed {acc:.4}, not necessarily the limit (the rate-limited fit: {})",
+                        "{accel}: not reached (largest seen: {acc:.4}): {}",
                         why.as_deref().unwrap_or("no estimate")
                     ));
                 }
             }
             continue;
         }
-        let reached = acc > 0.0 && riding >= 10;
+        // Without integrals or a bag's command hold there is no fit with
+        // the limit in the loop, and so no evidence that tells a limit from
+        // a lag: a rate that rides its peak over many spans is what a
+        // limit does, but also what a lag does over repeated equal steps.
+        // Never presented as the limit.
         out.push(Limit {
             field: accel,
             observed: acc,
-            reached,
+            reached: false,
             estimate: None,
             noise_free: false,
         });
-        if reached {
+        if acc > 0.0 && riding >= 10 {
             warnings.push(format!(
-                "{accel} = {acc:.4} acted during the log ({riding} samples on it): the first-order lag ignores it, so {} is biased; log gentler steps to identify the lag",
+                "{accel}: not reached (largest seen: {acc:.4}): the rate rode it on {riding} spans, as a limit would (then the first-order lag ignores it and {} is biased) or a lag over repeated equal steps; a run's integrals.csv or a ROS 2 bag tells them apart",
                 ["tau_v", "tau_omega"][axis]
             ));
         } else {
-            warnings.push(format!(
-                "{accel}: observed {acc:.4}, not necessarily the limit"
-            ));
+            warnings.push(format!("{accel}: not reached (largest seen: {acc:.4})"));
         }
     }
     out

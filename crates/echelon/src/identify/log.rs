@@ -465,6 +465,50 @@ impl Log {
                 agent: self.agent,
             });
         }
+        if let Some(h) = &self.hold {
+            h.check(self.t[0]).map_err(|why| IdentifyError::Read {
+                file: file(),
+                reason: format!("the command hold (Log::hold) {why}"),
+            })?;
+        }
+        Ok(())
+    }
+}
+
+impl Hold {
+    /// Why this hold cannot drive a fit of a log starting at `t0`: no
+    /// switch, values not one per switch, a value or time not finite, times
+    /// that do not increase, or a first switch after `t0`.
+    fn check(&self, t0: f64) -> Result<(), String> {
+        let n = self.t.len();
+        if n == 0 {
+            return Err("has no switch".to_owned());
+        }
+        if self.u.iter().any(|u| u.len() != n) {
+            return Err(format!(
+                "has {n} switch times but {} and {} values",
+                self.u[0].len(),
+                self.u[1].len()
+            ));
+        }
+        let finite = |x: &f64| x.is_finite();
+        if let Some(i) =
+            (0..n).find(|&i| !(finite(&self.t[i]) && self.u.iter().all(|u| finite(&u[i]))))
+        {
+            return Err(format!("has a value that is not finite at switch {i}"));
+        }
+        if let Some(i) = self.t.windows(2).position(|w| w[1] <= w[0]) {
+            return Err(format!(
+                "switch times do not increase at t = {} s",
+                self.t[i + 1]
+            ));
+        }
+        if self.t[0] > t0 {
+            return Err(format!(
+                "starts at t = {} s, after the first sample (t = {t0} s): the input before it is unknown",
+                self.t[0]
+            ));
+        }
         Ok(())
     }
 }

@@ -31,6 +31,16 @@
 //! integrated over each log interval, exact), which also identifies the
 //! limit that bound (`a_max`, `α_max`, [`Limit::estimate`]).
 //!
+//! A ROS 2 bag (a velocity base, [`Log::hold`] without integrals) is fitted
+//! on its command messages' hold and its odometry grid with the base's
+//! model in the loop (`fit::fit_bag`): the lags, a dead time shared by both
+//! axes (command publication to odometry response) with its interval, and
+//! an acceleration limit per axis claimed only on evidence of saturation (a
+//! likelihood-ratio test of the clamp against the lag alone, and the clamp
+//! holding on enough odometry intervals); a limit without that evidence is
+//! "not reached (largest seen: X)". A lag far below the odometry period is
+//! answered with its bound ([`Param::upper_bound`]), an ideal axis.
+//!
 //! A parameter is given no number, and the reason instead, when the input did
 //! not excite it (no input, a badly conditioned information matrix or an
 //! interval wider than ±[`MAX_REL_HALF_WIDTH`]) or when the model misfits the
@@ -45,6 +55,7 @@
 
 mod checks;
 mod error;
+pub mod excite;
 mod fit;
 mod identified;
 mod limits;
@@ -126,9 +137,23 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
     // Whether an excited axis was withheld for misfit (then the log is
     // answered, with the reasons, rather than refused as unexcited).
     let mut misfits = false;
+    // A velocity base from a ROS 2 bag (the command messages' hold, no
+    // integrals): lags, limits and dead time together (fit::fit_bag).
+    let bag = match (model, &log.hold, &log.integrals) {
+        (Model::Velocity, Some(h), None) => Some(fit::fit_bag(&fit::BagData {
+            t: &log.t,
+            y: [&log.v, &log.omega],
+            hold_t: &h.t,
+            hold_u: [&h.u[0], &h.u[1]],
+        })),
+        _ => None,
+    };
     let data: [AxisData<'_>; 2] = std::array::from_fn(|axis| AxisData {
         t: &log.t,
-        u: &inputs[axis],
+        // The bag's input as the fit saw it: shifted by the dead time.
+        u: bag
+            .as_ref()
+            .map_or(&inputs[axis][..], |b| &b.axes[axis].u_shifted[..]),
         y: measured[axis],
         hold: log.hold.as_ref().map(|h| (&h.t[..], &h.u[axis][..])),
     });
@@ -144,9 +169,10 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
         let n = log.t.len();
         n > 1 && (log.t[n - 1] - log.t[0]) / (n - 1) as f64 > 1.5 * p
     });
-    let fits: [AxisFit; 2] = std::array::from_fn(|axis| match &integrals[axis] {
-        Some(w) => fit::fit_integral(&data[axis], w, fixed_gain),
-        None => fit::fit(&data[axis], fixed_gain, slower),
+    let fits: [AxisFit; 2] = std::array::from_fn(|axis| match (&integrals[axis], &bag) {
+        (Some(w), _) => fit::fit_integral(&data[axis], w, fixed_gain),
+        (None, Some(b)) => b.axes[axis].fit.clone(),
+        (None, None) => fit::fit(&data[axis], fixed_gain, slower),
     });
     let no_lags: [Option<String>; 2] = std::array::from_fn(|axis| {
         integrals[axis]
@@ -167,9 +193,22 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
         _ => None,
     };
     let mut rate_limits: [Option<RateLimit>; 2] = [None, None];
+    // A bag's axis whose lag is below what its odometry resolves: the
+    // bound, an answer (an ideal axis), instead of a withheld estimate.
+    let ideal: [Option<f64>; 2] = std::array::from_fn(|axis| {
+        let b = bag.as_ref()?;
+        if let Some(upper) = b.axes[axis].bound {
+            return (upper < b.period).then_some(upper);
+        }
+        let f = &b.axes[axis].fit;
+        let upper = f.theta[0] + fit::Z95 * f.cov[0][0].max(0.0).sqrt();
+        let rel = fit::Z95 * f.cov[0][0].max(0.0).sqrt() / f.theta[0].abs();
+        (upper.is_finite() && upper < b.period && (rel.is_nan() || rel > MAX_REL_HALF_WIDTH))
+            .then_some(upper)
+    });
     for axis in 0..2 {
         let d = &data[axis];
-        let lag_only = Verdict::new(
+        let mut lag_only = Verdict::new(
             model,
             axis,
             d,
@@ -177,7 +216,28 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             &integrals[axis],
             no_lags[axis].clone(),
             input_names[axis],
+            ideal[axis].is_some(),
         );
+        if let Some(b) = &bag {
+            let a = &b.axes[axis];
+            if a.limit.is_some() {
+                lag_only.method = "command hold, rate limit";
+            }
+            let lag_identified = lag_only.why.is_none();
+            rate_limits[axis] = Some(match &a.no_limit {
+                None => RateLimit::new(
+                    &fit::LimitedFit {
+                        fit: a.fit.clone(),
+                        limit: a.limit,
+                        limited: a.riding,
+                        unknown: 0,
+                    },
+                    lag_only.noise_free,
+                    lag_identified || ideal[axis].is_some(),
+                ),
+                Some(why) => RateLimit::not_reached(why.clone()),
+            });
+        }
         // Withheld for misfit, or for an interval the misfit widened.
         let misfit_alone = no_lags[axis].is_none() && lag_only.why.is_some();
         let (v, lim) = match &limited {
@@ -191,6 +251,7 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
                     &integrals[axis],
                     None,
                     input_names[axis],
+                    false,
                 );
                 v.method = "integrals, rate limit";
                 (v, Some(l))
@@ -257,12 +318,21 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
                 }
             }
         }
+        let bound = ideal[axis].filter(|_| v.why.is_none());
+        if let (Some(upper), Some(b)) = (bound, &bag) {
+            warnings.push(format!(
+                "{}: below one odometry period ({:.4} s): < {upper:.4} s at 95 %, an axis that follows its command at once as far as this odometry can tell",
+                v.symbols.iter().map(|s| s.1).collect::<Vec<_>>().join(", "),
+                b.period
+            ));
+        }
         for ((field, symbol, unit), e) in v.symbols.iter().zip(v.estimates) {
             params.push(Param {
                 field,
                 symbol,
                 unit,
-                estimate: v.why.is_none().then_some(e),
+                estimate: (v.why.is_none() && bound.is_none()).then_some(e),
+                upper_bound: bound,
                 not_identifiable: v.why.clone(),
                 noise_free: v.noise_free && v.why.is_none(),
             });
@@ -271,6 +341,9 @@ pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
             predicted[axis] = vec![f64::NAN; log.t.len()];
         }
         axes.push(summary(v.why.is_none()));
+    }
+    if let Some(b) = &bag {
+        params.push(dead_time(b, &axes));
     }
     if axes.iter().all(|a| !a.identifiable) && !misfits {
         return Err(IdentifyError::NoExcitation {
@@ -330,7 +403,11 @@ struct Verdict {
 }
 
 impl Verdict {
-    /// The verdict on fit `f` of `axis` (`no_lag`: the axis has none).
+    /// The verdict on fit `f` of `axis` (`no_lag`: the axis has none;
+    /// `ideal`: a bag's lag below what its odometry resolves, bounded
+    /// instead, so that its estimate's width and sign are not held against
+    /// it).
+    #[allow(clippy::too_many_arguments)]
     fn new(
         model: Model,
         axis: usize,
@@ -339,6 +416,7 @@ impl Verdict {
         integrals: &Option<fit::AxisIntegrals<'_>>,
         no_lag: Option<String>,
         input: &str,
+        ideal: bool,
     ) -> Verdict {
         let y_rms = (d.y.iter().map(|y| y * y).sum::<f64>() / d.y.len() as f64).sqrt();
         let noise_free = f.rms <= NOISE_FREE_RELATIVE_RMS * y_rms;
@@ -350,7 +428,10 @@ impl Verdict {
             (None, false, false) => "held inputs",
         };
         let (estimates, symbols) = axis_params(model, axis, &f);
-        let unexcited = no_lag.or_else(|| excitation(d, &f, &estimates, input));
+        // An ideal axis's estimate is a bound, not a value: its width and
+        // sign are not held against it.
+        let judged = if ideal { &[][..] } else { &estimates[..] };
+        let unexcited = no_lag.or_else(|| excitation(d, &f, judged, input));
         let why = unexcited.clone().or_else(|| {
             (!noise_free)
                 .then(|| misfit(&f, &checks, integrals.is_some() || d.hold.is_some()))
@@ -366,6 +447,37 @@ impl Verdict {
             why,
             method,
         }
+    }
+}
+
+/// A bag's dead time (command publication to odometry response) as a
+/// parameter: its estimate, or why not (no lag identified to carry it, or an
+/// interval wider than half an odometry period). Zero is an answer.
+fn dead_time(b: &fit::BagFit, axes: &[AxisSummary]) -> Param {
+    let (value, var) = b.dead_time;
+    let e = Estimate::new(value, var, value);
+    let half = fit::Z95 * e.std;
+    let why = if axes.iter().all(|a| !a.identifiable) {
+        Some("no axis was identified to carry it".to_owned())
+    } else if !(value.is_finite() && half.is_finite()) {
+        Some(format!("the fit gave a non-physical value ({value:.3e})"))
+    } else if half > 0.5 * b.period {
+        Some(format!(
+            "95 % interval ±{:.1} ms, wider than half an odometry period ({:.1} ms)",
+            1e3 * half,
+            0.5e3 * b.period
+        ))
+    } else {
+        None
+    };
+    Param {
+        field: "dead_time",
+        symbol: "d",
+        unit: "s",
+        estimate: why.is_none().then_some(e),
+        upper_bound: None,
+        not_identifiable: why,
+        noise_free: axes.iter().all(|a| a.noise_free),
     }
 }
 

@@ -251,3 +251,14 @@ pub fn survey<T: std::fmt::Debug>(
     }
     println!("failed {failed} of {n}");
 }
+
+/// `cases` proptest cases drawn from the fixed RNG seed `seed` (CI reruns
+/// the same sample), no failure persisted.
+pub fn fixed_sample(cases: u32, seed: u64) -> proptest::prelude::ProptestConfig {
+    proptest::prelude::ProptestConfig {
+        cases,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(seed),
+        failure_persistence: None,
+        ..proptest::prelude::ProptestConfig::default()
+    }
+}

@@ -439,6 +439,9 @@ pub(crate) struct ExciteArgs {
     /// Command rate, Hz.
     #[arg(long, value_name = "HZ", value_parser = positive, default_value_t = 20.0)]
     pub(super) rate: f64,
+    /// Add limit probes: reversals at the base's safe speeds (0.8 v_max, 0.8 ω_max, at most 0.3 m/s and 1 rad/s), steep enough to reach an acceleration limit, so that identify can claim it.
+    #[arg(long)]
+    pub(super) limits: bool,
     /// Seconds to wait for the first odometry.
     #[arg(long, value_name = "S", value_parser = positive, default_value_t = 10.0)]
     pub(super) wait: f64,

@@ -81,9 +81,11 @@ class Filter:
 
     def __call__(self, poses: Any, commands: Any, t: float = 0.0) -> np.ndarray:
         """The filtered commands ``(n, 2)`` for robots at ``poses`` (``(n,
-        3)``: x, y, θ, moving at their commands; or ``(n, 5)`` with their v,
-        ω) asking for ``commands`` ``(n, 2)`` at time ``t``. ``outcomes``
-        and ``min_distance`` then hold what each robot's filter did."""
+        3)``: x, y, θ, moving at the commands this filter returned for them
+        at the last call, which the caller sent them (at the first call, at
+        ``commands``); or ``(n, 5)`` with their v, ω) asking for
+        ``commands`` ``(n, 2)`` at time ``t``. ``outcomes`` and
+        ``min_distance`` then hold what each robot's filter did."""
         out, self.outcomes, self.min_distance = self._inner.filter(
             _args.number("t", t, finite=True),
             _args.array("poses", poses),

@@ -34,6 +34,9 @@ struct Filters {
     l: f64,
     states: Vec<State>,
     neighbours: Vec<Neighbour>,
+    /// The commands `(v, ω)` each robot's filter gave at the last call
+    /// (empty before the first): a 3-column pose moves at it.
+    last: Vec<[f64; 2]>,
 }
 
 impl Filters {
@@ -69,10 +72,12 @@ impl Filters {
         let mut filters = Vec::new();
         let mut states = Vec::new();
         let mut neighbours = Vec::new();
+        let mut last = Vec::new();
         filters
             .try_reserve_exact(n)
             .and_then(|()| states.try_reserve_exact(n))
             .and_then(|()| neighbours.try_reserve_exact(n))
+            .and_then(|()| last.try_reserve_exact(n))
             .map_err(|_| {
                 PyMemoryError::new_err(format!(
                     "n: {n} robots' filters do not fit in memory ({} B each)",
@@ -86,13 +91,18 @@ impl Filters {
             l,
             states,
             neighbours,
+            last,
         })
     }
 
     /// Checks the array arguments `poses` (named `name`: `(n, 5)`; or
     /// `(n, 3)` too when `at_command`) and `commands` (`(n, 2)`), and reads
-    /// the poses into `states` (a 3-column pose moves at its command when
-    /// `at_command`).
+    /// the poses into `states`. A 3-column pose (when `at_command`) moves at
+    /// the command its filter gave at the last call, what the caller sent
+    /// it (at the first call, at the command asked for now): taking the
+    /// commands asked for as every robot's motion made each robot's share
+    /// of a pair rest on motions the filters then refused, and robots in a
+    /// dense swap came up to 96 mm inside the radius (issue trust2, item 4).
     fn read<'py>(
         &mut self,
         name: &str,
@@ -116,7 +126,7 @@ impl Filters {
         for (i, row) in p.rows().into_iter().enumerate() {
             let mut s = state_of(row.to_slice().unwrap_or_default())?;
             if at_command && row.len() == 3 {
-                (s.v, s.omega) = (c[[i, 0]], c[[i, 1]]);
+                [s.v, s.omega] = self.last.get(i).copied().unwrap_or([c[[i, 0]], c[[i, 1]]]);
             }
             self.states.push(s);
         }
@@ -153,6 +163,7 @@ impl Filters {
     ) -> Filtered<'py> {
         let n = self.filters.len();
         let mut out = Array2::zeros((n, 2));
+        self.last.clear();
         let mut outcomes = Vec::with_capacity(n);
         let mut closest = Vec::with_capacity(n);
         for i in 0..n {
@@ -163,9 +174,11 @@ impl Filters {
                 l,
                 states,
                 neighbours,
+                ..
             } = self;
             let (c, outcome, d) = one(i, &mut filters[i], &states[i], *l, neighbours, obstacles);
             (out[[i, 0]], out[[i, 1]]) = (c[0], c[1]);
+            self.last.push(c);
             outcomes.push(outcome_name(outcome));
             closest.push(d);
         }
@@ -224,7 +237,8 @@ impl PySafetyFilters {
     }
 
     /// Filters `commands` (`(n, 2)`: v, ω) of robots in `poses` (`(n, 3)`:
-    /// x, y, θ, moving at their commands; or `(n, 5)` with v, ω) at time `t`:
+    /// x, y, θ, moving at the commands this filter gave them last, at the
+    /// first call at `commands`; or `(n, 5)` with v, ω) at time `t`:
     /// returns the filtered commands `(n, 2)`, each robot's outcome
     /// (`nominal`, `filtered`, `braked`) and the smallest distance from its
     /// point to a neighbour's.

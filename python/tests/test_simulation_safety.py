@@ -131,8 +131,12 @@ def test_velocity_bases_through_the_filter_stay_with_the_run():
     # crossing (velocity bases): `echelon run` settles a base's speeds at the
     # new state under the *next* sample's filtered command, which a stepped
     # simulation does not have yet (it settles under the command it ran); the
-    # filter's measured speeds differ by that, the paths by micrometres.
-    assert worst_gap(echelon.Scenario.builtin("crossing", duration=6.0)) <= 1e-4
+    # filter's measured speeds differ by that, the paths by micrometres until
+    # the column heads meet (t ≈ 1.7 s). There each robot keeps right at once
+    # (docs/safety.md, "Dense encounters": a threshold, ENCOUNTER_SHARE, with
+    # no wait), and the two loops' micrometres can put that decision one step
+    # apart: the paths then differ by millimetres (2.7 mm at most over 6 s).
+    assert worst_gap(echelon.Scenario.builtin("crossing", duration=6.0)) <= 5e-3
 
 
 def test_without_safety_there_is_nothing_to_report():

@@ -17,6 +17,11 @@
 //! the pair's `d`): the feed-forward, most of what the nominal asks, survives,
 //! so the robot never counts as stuck, and ‖e‖ stays where it is for ever
 //! (an equilibrium of the filtered loop, not of the law).
+//!
+//! In an *encounter* (the nominal closes on an oncoming neighbour faster
+//! than their barrier allows; the filter tells, it knows the rows) the
+//! motion test is stricter and acts at once ([`ENCOUNTER_SHARE`]): dense
+//! symmetric crowds keep right before they jam.
 
 /// How long after its filter last changed its command a robot still counts
 /// as held by it ([`super::SafetyFilter::deadlocked`]), s.
@@ -24,6 +29,18 @@ pub const DEADLOCK_MEMORY: f64 = 10.0;
 
 /// How long a robot must be stuck before it breaks a deadlock, s.
 pub const STUCK_TIME: f64 = 1.0;
+
+/// In an *encounter* (the nominal closes on a neighbour that comes toward
+/// the robot, its point at 1 cm/s or more, faster than their barrier
+/// allows: that neighbour's row broken by the nominal, with `a·x₀ < 0`),
+/// a robot counts as stuck while less than this share of the point motion
+/// its nominal asks for survives (elsewhere, half), and starts breaking at
+/// once (elsewhere after [`STUCK_TIME`]): the right-hand rule of dense
+/// symmetric encounters, applied while the robots still have room to
+/// slide past each other rather than after they have closed into a ring
+/// at the radius (issue trust2, item 4: 8 to 16 robots swapping across a
+/// circle, `docs/safety.md`).
+pub const ENCOUNTER_SHARE: f64 = 0.9;
 
 /// How far the desired point motion is turned clockwise while breaking a
 /// deadlock, rad.
@@ -135,11 +152,13 @@ impl Deadlock {
         (want, self.breaking)
     }
 
-    /// After the filter acted at `t`: whether the robot was `stuck`, and
-    /// whether it stood `still` (the filtered point motion next to nothing
-    /// of what the nominal asks); it starts breaking a deadlock after
-    /// [`STUCK_TIME`] stuck. Breaking, a robot that stands still for
-    /// [`STUCK_TIME`] tries the next turn of [`bias`] (left, then right and
+    /// After the filter acted at `t`: whether the robot was `stuck`, whether
+    /// it stood `still` (the filtered point motion next to nothing of what
+    /// the nominal asks), and whether it is in an `encounter` (its nominal
+    /// closes on an oncoming neighbour faster than the barrier allows,
+    /// [`ENCOUNTER_SHARE`]); it starts breaking a deadlock after
+    /// [`STUCK_TIME`] stuck, at once in an encounter. Breaking, a robot
+    /// that stands still for [`STUCK_TIME`] tries the next turn of [`bias`] (left, then right and
     /// left by more): the right turn can point the desired motion where
     /// nothing is allowed (a torque robot at rest on a post's barrier,
     /// heading past its left side, may not reverse, and its right-turned
@@ -161,11 +180,22 @@ impl Deadlock {
     /// when the nominal is free for an instant, and the robot can fall back
     /// into the same ride). The rows are never relaxed: only
     /// the desired motion given to the QP turns.
-    pub(super) fn record(&mut self, t: f64, stuck: bool, still: bool, speeds: [f64; 2]) {
+    pub(super) fn record(
+        &mut self,
+        t: f64,
+        stuck: bool,
+        still: bool,
+        encounter: bool,
+        speeds: [f64; 2],
+    ) {
         self.progress(t, speeds);
         if stuck {
             let since = *self.stuck_since.get_or_insert(t);
-            if !self.breaking && t - since >= STUCK_TIME {
+            // Keep right at once in an encounter: a robot that waits lets the
+            // crowd close into a ring at the radius, which a robot that may
+            // not reverse (a torque robot's envelope) cannot leave.
+            let wait = if encounter { 0.0 } else { STUCK_TIME };
+            if !self.breaking && t - since >= wait {
                 self.breaking = true;
                 self.breaks += 1;
             }
@@ -191,8 +221,14 @@ impl Deadlock {
         let e = self.error;
         let held_on = self.last.filter(|&l| t - l <= STUCK_TIME);
         if !(e.is_finite() && e >= PROGRESS_FLOOR) {
+            // No window (at the slot, or not told): nothing measured is kept
+            // (the next window starts clean; a window whose ‖e‖ fell below
+            // the floor kept its motion here, which the property test
+            // below found).
             self.progress = None;
             self.stalls = 0;
+            self.path = 0.0;
+            self.moved = 0.0;
             return;
         }
         match (self.progress, held_on) {
@@ -279,7 +315,7 @@ mod tests {
         for k in 1..=steps {
             t = t0 + k as f64 * 0.1;
             d.set_error(error);
-            d.record(t, false, false, [0.0, speed]);
+            d.record(t, false, false, false, [0.0, speed]);
         }
         t
     }

@@ -4,7 +4,7 @@
 //! envelope ([`Envelope`]) and the emergency box ([`EMERGENCY_ACCEL`]).
 
 use super::config::SafetyConfig;
-use super::deadlock::Deadlock;
+use super::deadlock::{Deadlock, ENCOUNTER_SHARE};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, solve};
 use crate::model::State;
@@ -112,6 +112,28 @@ pub struct SafetyFilter {
     /// The point's speed relative to the neighbour or obstacle whose
     /// barrier it is nearest, at the last call, m/s (infinite: none).
     pub(super) relative: f64,
+    /// For each neighbour's barrier row of the last call (they come first,
+    /// the obstacles' after), whether that neighbour's point comes toward
+    /// this robot's ([`ONCOMING`]).
+    pub(super) oncoming: Vec<bool>,
+}
+
+/// A neighbour whose point moves toward this robot's at least this fast,
+/// m/s, comes *toward* it: with a nominal that closes on it faster than
+/// their barrier allows, the two are in an encounter (the deadlock
+/// monitor's [`super::ENCOUNTER_SHARE`]). One that moves along with the
+/// robot (a neighbour it rides beside, `tests/safety_livelock.rs`) is not.
+const ONCOMING: f64 = 0.01;
+
+/// Where the deadlock monitor reads how fast the robot's point moves over
+/// ground ([`SafetyFilter::decide`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Speed<'a> {
+    /// From the robot's state and its point's distance ahead `L`, m.
+    State(&'a State, f64),
+    /// The filtered command in the QP's variables `x = (v, L ω)`: a
+    /// lag-free velocity base's point moves at it.
+    Command,
 }
 
 /// The robot's own geometry at one instant.
@@ -132,6 +154,7 @@ impl SafetyFilter {
             deadlock: Deadlock::default(),
             period: 0.0,
             relative: f64::INFINITY,
+            oncoming: Vec::with_capacity(16),
         }
     }
 
@@ -176,6 +199,7 @@ impl SafetyFilter {
     ) -> f64 {
         let SafetyConfig { radius, range, .. } = self.config;
         let mut min_distance = f64::INFINITY;
+        self.oncoming.clear();
         // The nearest barrier (distance beyond it, m) and the point's speed
         // relative to its owner.
         let mut nearest = (f64::INFINITY, f64::INFINITY);
@@ -193,6 +217,9 @@ impl SafetyFilter {
                 nearest = (dist - r, speed(n.dp));
             }
             self.rows.push(row(d, h, Some(n)));
+            // d̂ᵀṗ_j: how fast j's point comes toward this one's.
+            self.oncoming
+                .push(d[0] * n.dp[0] + d[1] * n.dp[1] >= ONCOMING * dist);
         }
         for o in obstacles {
             let d = [own.p[0] - o.x, own.p[1] - o.y];
@@ -390,15 +417,20 @@ impl SafetyFilter {
     /// The QP's answer for the desired `x0` and the rows gathered, the
     /// outcome and whether a deadlock is being broken; updates the monitor.
     /// `drift` is the part of the point's motion the command does not set
-    /// (zero for velocity bases), for the stuck test; `me` the robot's state
-    /// and `l` its point's distance ahead, for the still test.
+    /// (zero for velocity bases), for the stuck test; `speed` the point's
+    /// speed over ground (m/s) for the still test and the progress test's
+    /// ground motion: [`Speed::State`] from the robot's state (torques, a
+    /// lagged base: the command moves it only through its dynamics), or
+    /// [`Speed::Command`], the filtered point velocity itself (a lag-free
+    /// base moves at its command; its state may carry only the command it
+    /// was last asked for, as a caller that gives poses without speeds does).
     pub(super) fn decide(
         &mut self,
         t: f64,
         x0: [f64; 2],
         barriers: usize,
         drift: [f64; 2],
-        (me, l): (&State, f64),
+        speed: Speed<'_>,
     ) -> ([f64; 2], Outcome, bool) {
         let satisfied = |rows: &[Constraint], x: [f64; 2]| rows.iter().all(|c| c.slack(x) >= 0.0);
         if satisfied(&self.rows[..barriers], x0) {
@@ -411,17 +443,32 @@ impl SafetyFilter {
             None => ([0.0; 2], Outcome::Braked),
         };
         // Stuck: less than half of the motion the nominal asks for survives
-        // (the point stops, or slides alongside a neighbour it should pass).
+        // (the point stops, or slides alongside a neighbour it should pass);
+        // in an encounter, less than ENCOUNTER_SHARE.
         let moved = [x[0] + drift[0], x[1] + drift[1]];
         let asked = [x0[0] + drift[0], x0[1] + drift[1]];
         let asked_sq = asked[0] * asked[0] + asked[1] * asked[1];
-        let stuck = asked_sq >= 1e-4 && moved[0] * asked[0] + moved[1] * asked[1] < 0.5 * asked_sq;
+        // An encounter: the nominal closes on an oncoming neighbour
+        // (`a·x₀ < 0`: its point moves toward the neighbour's, which comes
+        // toward it) faster than that pair's row allows; then the robot
+        // keeps right early ([`ENCOUNTER_SHARE`]).
+        let encounter = self
+            .rows
+            .iter()
+            .zip(&self.oncoming)
+            .any(|(c, &on)| on && c.slack(x0) < 0.0 && c.a[0] * x0[0] + c.a[1] * x0[1] < 0.0);
+        let share = if encounter { ENCOUNTER_SHARE } else { 0.5 };
+        let stuck =
+            asked_sq >= 1e-4 && moved[0] * asked[0] + moved[1] * asked[1] < share * asked_sq;
         // Still: the point stands (below 1 mm/s) and the filtered motion is
         // next to nothing (1 %) of what is asked.
-        let speed = me.v.hypot(l * me.omega);
+        let speed = match speed {
+            Speed::State(me, l) => me.v.hypot(l * me.omega),
+            Speed::Command => x[0].hypot(x[1]),
+        };
         let still = speed < 1e-3 && moved[0] * moved[0] + moved[1] * moved[1] < 1e-4 * asked_sq;
         self.deadlock
-            .record(t, stuck, still, [self.relative, speed]);
+            .record(t, stuck, still, encounter, [self.relative, speed]);
         (x, outcome, breaking)
     }
 }

@@ -135,6 +135,23 @@
 //! relative to the neighbour or obstacle nearest it; a robot that moves
 //! only along with what holds it starts breaking (or turns further).
 //!
+//! **Dense encounters** (issue trust2, item 4: 8 to 16 robots swapping
+//! across a circle). Waiting [`STUCK_TIME`] let a crowd close into a ring
+//! at the radius round the centre, every robot wedged between its two
+//! neighbours; a torque robot, which may not reverse, could not leave it.
+//! So in an *encounter*, where the nominal closes on a neighbour that comes
+//! toward the robot (its point at 1 cm/s or more) faster than their barrier
+//! allows, the robot counts as stuck while less than [`ENCOUNTER_SHARE`]
+//! (90 %) of its nominal point motion survives, and starts breaking at once:
+//! the right-hand rule, applied while there is still room to slide past.
+//! Each robot decides from its own state and what it sees of its
+//! neighbours; nothing random, the same inputs give the same commands. A
+//! robot whose nominal is free, or that only rides beside a neighbour, is
+//! untouched; the rows are never relaxed. For a lag-free velocity base the
+//! still test reads the filtered command (its motion over the coming
+//! period), not the speeds in its state, which a caller may fill with the
+//! command it asked for.
+//!
 //! [`RobotParams::limit`]: crate::model::RobotParams::limit
 //! [`VelocityBase::limit`]: crate::base::VelocityBase::limit
 //! [`VelocityBase`]: crate::base::VelocityBase
@@ -151,7 +168,8 @@ mod velocity;
 
 pub use config::SafetyConfig;
 pub use deadlock::{
-    BIAS_ANGLE, DEADLOCK_MEMORY, PROGRESS_FLOOR, PROGRESS_FRACTION, PROGRESS_WINDOW, STUCK_TIME,
+    BIAS_ANGLE, DEADLOCK_MEMORY, ENCOUNTER_SHARE, PROGRESS_FLOOR, PROGRESS_FRACTION,
+    PROGRESS_WINDOW, STUCK_TIME,
 };
 pub use filter::{EMERGENCY_ACCEL, Envelope, Filtered, INNER_RATE, Outcome, SafetyFilter};
 pub use neighbour::{

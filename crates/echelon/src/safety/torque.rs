@@ -2,7 +2,7 @@
 //! relative degree two, the speed envelope ([`Envelope`]) and the wheel
 //! torque limit.
 
-use super::filter::{EMERGENCY_ACCEL, Envelope, Filtered, Own, SafetyFilter};
+use super::filter::{EMERGENCY_ACCEL, Envelope, Filtered, Own, SafetyFilter, Speed};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, push_band, solve_relaxed, solve_split};
 use crate::model::{Input, RobotParams, State};
@@ -107,7 +107,7 @@ impl SafetyFilter {
                 }
             }
         }
-        let decision = self.decide(t, x0, barriers, f, (me, l));
+        let decision = self.decide(t, x0, barriers, f, Speed::State(me, l));
         let of = move |x: [f64; 2]| Input {
             u1: m * x[0],
             u2: j * x[1] / l,

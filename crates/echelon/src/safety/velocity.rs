@@ -4,7 +4,7 @@
 //! on the lags' rates, the speed envelope ([`Envelope`]), and the base's
 //! speed and acceleration limits as hard rows.
 
-use super::filter::{EMERGENCY_ACCEL, Envelope, Filtered, Own, SafetyFilter};
+use super::filter::{EMERGENCY_ACCEL, Envelope, Filtered, Own, SafetyFilter, Speed};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, push_band, push_box, solve_relaxed};
 use crate::base::{VelocityBase, VelocityCommand};
@@ -81,7 +81,7 @@ impl SafetyFilter {
         });
         let barriers = self.rows.len();
         push_box(&mut self.rows, [base.v_max(), l * base.omega_max()]);
-        let decision = self.decide(t, x0, barriers, [0.0, 0.0], (me, l));
+        let decision = self.decide(t, x0, barriers, [0.0, 0.0], Speed::Command);
         let of = |x: [f64; 2]| VelocityCommand {
             v: x[0],
             omega: x[1] / l,
@@ -173,7 +173,7 @@ impl SafetyFilter {
                 l * reach(base.tau_omega(), base.alpha_max()),
             ],
         );
-        let decision = self.decide(t, x0, barriers, [0.0, 0.0], (me, l));
+        let decision = self.decide(t, x0, barriers, [0.0, 0.0], Speed::State(me, l));
         let of = |x: [f64; 2]| VelocityCommand {
             v: x[0],
             omega: x[1] / l,

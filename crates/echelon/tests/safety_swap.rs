@@ -9,10 +9,9 @@
 //! The filter is stepped by the caller, as `echelon.safety.Filter` is from
 //! Python ([`run_direct`]), on ideal velocity bases and on Table I's
 //! torque-driven robots (`python/tests/test_safety_swap.py` steps the
-//! Python `Filter` itself). (Not in the
-//! simulator: its followers hold a slot in the leader's frame, seen from
-//! their own heading, so a reference standing still defines no goal; the
-//! simulator's dense encounters are `crossing` and `tests/safety_livelock.rs`.)
+//! Python `Filter` itself). The same encounters under the formation laws,
+//! from a scenario behind a slow reference, are `tests/safety_swap_sim.rs`
+//! (open: not everyone gets home there yet).
 //!
 //! `cargo test -p echelon --release --test safety_swap -- --ignored
 //! --nocapture compare` prints BENCHMARKS.md's table: arrival times of the

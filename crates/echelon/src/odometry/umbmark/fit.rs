@@ -50,22 +50,35 @@ fn cost(geometry: &SquareTest, observed: &[f64; 4], p: [f64; 2]) -> f64 {
     })
 }
 
-/// Whether `p` is inside the searched ranges.
-fn inside([ed, eb]: [f64; 2]) -> bool {
-    (ED_RANGE[0]..=ED_RANGE[1]).contains(&ed) && (EB_RANGE[0]..=EB_RANGE[1]).contains(&eb)
+/// A box of errors searched: `[E_d range, E_b range]`.
+pub(super) type Ranges = [[f64; 2]; 2];
+
+/// The ranges the refined estimate is searched in.
+pub(super) const SEARCHED: Ranges = [ED_RANGE, EB_RANGE];
+
+/// The wider box searched for aliases beyond [`SEARCHED`]: errors a robot
+/// can hardly have (a wheel up to three times the other's size, a turn of a
+/// third to six times the commanded), where runs that the searched ranges
+/// also explain may come from (`super::estimate` says so).
+pub(super) const BEYOND: Ranges = [[0.35, 3.0], [0.3, 6.0]];
+
+/// Whether `p` is inside `r`.
+pub(super) fn inside(r: &Ranges, [ed, eb]: [f64; 2]) -> bool {
+    (r[0][0]..=r[0][1]).contains(&ed) && (r[1][0]..=r[1][1]).contains(&eb)
 }
 
-/// `p` moved into the searched ranges.
-fn clamp([ed, eb]: [f64; 2]) -> [f64; 2] {
-    [
-        ed.clamp(ED_RANGE[0], ED_RANGE[1]),
-        eb.clamp(EB_RANGE[0], EB_RANGE[1]),
-    ]
+/// `p` moved into `r`.
+fn clamp(r: &Ranges, [ed, eb]: [f64; 2]) -> [f64; 2] {
+    [ed.clamp(r[0][0], r[0][1]), eb.clamp(r[1][0], r[1][1])]
 }
 
-/// Levenberg–Marquardt from `p` within the ranges: the local minimum and
-/// its cost.
-fn descend(geometry: &SquareTest, observed: &[f64; 4], mut p: [f64; 2]) -> ([f64; 2], f64) {
+/// Levenberg–Marquardt from `p` within `within`: the local minimum and its cost.
+fn descend(
+    geometry: &SquareTest,
+    observed: &[f64; 4],
+    within: &Ranges,
+    mut p: [f64; 2],
+) -> ([f64; 2], f64) {
     let mut c = cost(geometry, observed, p);
     let mut lambda = 1e-3;
     for _ in 0..200 {
@@ -108,7 +121,7 @@ fn descend(geometry: &SquareTest, observed: &[f64; 4], mut p: [f64; 2]) -> ([f64
                 ];
                 // Projected onto the ranges: a minimum on their edge is
                 // reached along it.
-                let q = clamp([p[0] + d[0], p[1] + d[1]]);
+                let q = clamp(within, [p[0] + d[0], p[1] + d[1]]);
                 let cq = cost(geometry, observed, q);
                 if cq < c {
                     let small =
@@ -129,7 +142,7 @@ fn descend(geometry: &SquareTest, observed: &[f64; 4], mut p: [f64; 2]) -> ([f64
 }
 
 /// The least-squares fits of the exact square kinematics to the centres of
-/// gravity `observed` within [`ED_RANGE`] × [`EB_RANGE`], each with its
+/// gravity `observed` within `r` (`E_d` × `E_b`), each with its
 /// root-mean-square residual over the four coordinates (m), best first:
 /// from the lowest points of a grid and from `start` (Borenstein's
 /// estimate), each refined by Levenberg–Marquardt; distinct local minima
@@ -138,16 +151,16 @@ pub(super) fn fits(
     geometry: &SquareTest,
     observed: [f64; 4],
     start: Systematic,
+    r: &Ranges,
 ) -> Vec<(Systematic, f64)> {
     // Even steps of `w = (E_d − 1)/(E_d + 1)` and `u = 1/E_b`.
     let step = |lo: f64, hi: f64, i: usize| lo + (hi - lo) * i as f64 / (GRID - 1) as f64;
     let w = |ed: f64| (ed - 1.0) / (ed + 1.0);
     let eds: [f64; GRID] = std::array::from_fn(|i| {
-        let w = step(w(ED_RANGE[0]), w(ED_RANGE[1]), i);
+        let w = step(w(r[0][0]), w(r[0][1]), i);
         (1.0 + w) / (1.0 - w)
     });
-    let ebs: [f64; GRID] =
-        std::array::from_fn(|i| 1.0 / step(1.0 / EB_RANGE[1], 1.0 / EB_RANGE[0], i));
+    let ebs: [f64; GRID] = std::array::from_fn(|i| 1.0 / step(1.0 / r[1][1], 1.0 / r[1][0], i));
     let mut grid = [[0.0; GRID]; GRID];
     for (i, &ed) in eds.iter().enumerate() {
         for (k, &eb) in ebs.iter().enumerate() {
@@ -170,12 +183,12 @@ pub(super) fn fits(
     }
     minima.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut starts: Vec<[f64; 2]> = minima.iter().take(STARTS).map(|m| m.1).collect();
-    if inside([start.ed, start.eb]) {
+    if inside(r, [start.ed, start.eb]) {
         starts.push([start.ed, start.eb]);
     }
     let mut found: Vec<([f64; 2], f64)> = Vec::new();
     for s in starts {
-        let (p, c) = descend(geometry, &observed, s);
+        let (p, c) = descend(geometry, &observed, r, s);
         let same = |q: &[f64; 2]| (0..2).all(|k| (q[k] - p[k]).abs() <= SAME * p[k]);
         match found.iter_mut().find(|(q, _)| same(q)) {
             Some(f) if c < f.1 => *f = (p, c),

@@ -401,7 +401,22 @@ fn crossing_keeps_robots_apart_in_the_fleet() {
             .collect::<Vec<_>>())
     );
     assert!(u(safety, &["active"]) > 0, "{safety}");
-    assert_eq!(u(safety, &["stale_brakes"]), 0, "{safety}");
+    // A neighbour's state older than the filter allows brakes the robot
+    // (the safe answer; its logic is tested on the fake clock,
+    // echelon-fleet's robot::tests::plant). How often that happens here is
+    // the machine's timing, not the logic: none on an idle 2-core machine,
+    // 139 of 71 508 filter steps (0.2 %) with `stress-ng --cpu 2` beside
+    // the fleet. The bound, 2 % of the steps, is the stated margin: a fleet
+    // braking that often for stale states has fallen behind its clock.
+    let (stale, steps) = (u(safety, &["stale_brakes"]), u(safety, &["steps"]));
+    assert!(
+        50 * stale <= steps,
+        "stale brakes {stale} of {steps} steps: {safety}"
+    );
+    assert!(
+        stale == 0 || u(safety, &["stale_neighbours"]) > 0,
+        "{safety}"
+    );
     // The simulator's liveness property (docs/safety.md, "Deadlock"): every
     // robot reached its slot, or its filter held it and it says so.
     let deadlocked: Vec<u64> = report["deadlocked_at_end"]

@@ -114,15 +114,17 @@ pub struct SafetyFilter {
     pub(super) relative: f64,
     /// For each neighbour's barrier row of the last call (they come first,
     /// the obstacles' after), whether that neighbour's point comes toward
-    /// this robot's ([`ONCOMING`]).
+    /// this robot's head on ([`ONCOMING`]).
     pub(super) oncoming: Vec<bool>,
 }
 
-/// A neighbour whose point moves toward this robot's at least this fast,
-/// m/s, comes *toward* it: with a nominal that closes on it faster than
-/// their barrier allows, the two are in an encounter (the deadlock
-/// monitor's [`super::ENCOUNTER_SHARE`]). One that moves along with the
-/// robot (a neighbour it rides beside, `tests/safety_livelock.rs`) is not.
+/// Two points that move toward each other, each at least this fast (m/s)
+/// along the line between them, meet *head on*: with a nominal that closes
+/// on the neighbour faster than their barrier allows, the two are in an
+/// encounter (the deadlock monitor's [`super::ENCOUNTER_SHARE`]). One that
+/// moves along with the robot (a neighbour it rides beside,
+/// `tests/safety_livelock.rs`) or only catches up with it (the one behind
+/// in a column, while this robot brakes for one ahead) is not.
 const ONCOMING: f64 = 0.01;
 
 /// Where the deadlock monitor reads how fast the robot's point moves over
@@ -217,9 +219,14 @@ impl SafetyFilter {
                 nearest = (dist - r, speed(n.dp));
             }
             self.rows.push(row(d, h, Some(n)));
-            // d̂ᵀṗ_j: how fast j's point comes toward this one's.
+            // Head on: j's point comes toward this one's (d̂ᵀṗ_j) and this
+            // one's goes toward j's (−d̂ᵀṗ_i). A neighbour that only comes
+            // toward it (the one behind in a column, catching up while this
+            // robot brakes for one ahead) is not an encounter.
+            let toward = d[0] * n.dp[0] + d[1] * n.dp[1];
+            let going = -(d[0] * own.dp[0] + d[1] * own.dp[1]);
             self.oncoming
-                .push(d[0] * n.dp[0] + d[1] * n.dp[1] >= ONCOMING * dist);
+                .push(toward >= ONCOMING * dist && going >= -ONCOMING * dist);
         }
         for o in obstacles {
             let d = [own.p[0] - o.x, own.p[1] - o.y];

@@ -289,6 +289,8 @@ fn unknown_between(d: &AxisData<'_>, fixed_gain: bool, held: AxisFit) -> AxisFit
     f
 }
 
+/// The 95 % quantile of χ² with one degree of freedom.
+const CHI2_1_95: f64 = 3.841;
 /// The 99.9 % quantile of χ² with one degree of freedom.
 const CHI2_1_999: f64 = 10.828;
 

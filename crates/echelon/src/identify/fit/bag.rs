@@ -51,7 +51,7 @@
 // Small dense linear algebra reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
-use super::{AxisFit, equation_error};
+use super::{AxisFit, CHI2_1_95, CHI2_1_999, equation_error};
 use crate::lm;
 
 mod joint;
@@ -73,10 +73,6 @@ const SCORE_GATE: f64 = 2.0;
 /// A lag below this fraction of the odometry period is not resolved: its
 /// bound is given ([`lag_bound`]).
 pub(crate) const IDEAL_FRACTION: f64 = 0.1;
-/// The 95 % quantile of χ² with one degree of freedom.
-const CHI2_1_95: f64 = 3.841;
-/// The 99.9 % quantile of χ² with one degree of freedom.
-const CHI2_1_999: f64 = 10.828;
 /// Levenberg–Marquardt iterations per fit at most.
 const MAX_ITER: usize = 100;
 

@@ -28,12 +28,9 @@
 //! `sep`, the start along and across, and whether `j` filters.
 #![allow(clippy::unwrap_used)]
 
-use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::{Frame, ObserverError};
-use echelon::stats::SafetyWatch;
 mod common;
 
-use common::env_or;
+use common::{Watched, env_or};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 
@@ -155,52 +152,8 @@ impl Case {
     }
 }
 
-/// What a run showed.
-#[derive(Debug)]
-struct Seen {
-    /// The smallest distance between two robots' points, m.
-    closest: f64,
-    /// ‖e‖ at the end, per robot, m.
-    finals: Vec<f64>,
-    /// Whether each robot's filter held it at the end.
-    deadlocked: Vec<bool>,
-    /// Deadlocks the filters started breaking.
-    breaks: u64,
-    /// A state that was not finite, or a run error.
-    bad: Option<String>,
-}
-
-fn run(case: &Case) -> Seen {
-    let src = case.toml();
-    let scenario = Scenario::parse(&src, "livelock.toml", None).unwrap();
-    let run = scenario
-        .build(&Overrides::default())
-        .unwrap_or_else(|e| panic!("{e}\n{src}"));
-    let sim = &mut run.simulation();
-    let l = [L; 3];
-    let mut seen = Seen {
-        closest: f64::INFINITY,
-        finals: Vec::new(),
-        deadlocked: Vec::new(),
-        breaks: 0,
-        bad: None,
-    };
-    let mut every = |f: &Frame<'_>| -> Result<(), ObserverError> {
-        seen.closest = seen
-            .closest
-            .min(SafetyWatch::closest_pair(f.states, &l).unwrap().0);
-        if let Some(s) = f.states.iter().find(|s| !s.is_finite()) {
-            seen.bad.get_or_insert(format!("t = {} s: {s:?}", f.t));
-        }
-        seen.finals = f.outputs.iter().map(|o| o.e[0].hypot(o.e[1])).collect();
-        seen.deadlocked = f.safety.iter().map(|s| s.deadlocked).collect();
-        seen.breaks = f.safety.iter().map(|s| s.deadlock_breaks).sum();
-        Ok(())
-    };
-    if let Err(e) = sim.run(&mut every) {
-        seen.bad.get_or_insert(e.to_string());
-    }
-    seen
+fn run(case: &Case) -> Watched {
+    common::watch(&case.toml(), "livelock.toml", 0.01)
 }
 
 /// Random cases; `j` filters unless `either` (then it may not).

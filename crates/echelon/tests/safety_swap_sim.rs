@@ -21,11 +21,8 @@
 #![allow(clippy::unwrap_used)]
 
 mod common;
-use common::fixed_sample;
+use common::{Watched, fixed_sample};
 
-use echelon::scenario::{Overrides, Scenario};
-use echelon::sim::{Frame, ObserverError};
-use echelon::stats::SafetyWatch;
 use proptest::prelude::*;
 use std::f64::consts::PI;
 
@@ -151,50 +148,8 @@ fn bound(case: &Case) -> f64 {
         + 20.0
 }
 
-/// What a run showed.
-#[derive(Debug, Default)]
-struct Seen {
-    /// The smallest distance between two points at a logged instant, m.
-    closest: f64,
-    /// The last logged instant some robot's ‖e‖ was at least [`SETTLED`].
-    unsettled: f64,
-    /// ‖e‖ at the end, per robot.
-    finals: Vec<f64>,
-    /// Deadlock breaks, all robots.
-    breaks: u64,
-    bad: Option<String>,
-}
-
-fn run(case: &Case) -> Seen {
-    let src = case.toml();
-    let scenario = Scenario::parse(&src, "swap.toml", None).unwrap();
-    let run = scenario
-        .build(&Overrides::default())
-        .unwrap_or_else(|e| panic!("{e}\n{src}"));
-    let sim = &mut run.simulation();
-    let l = vec![L; case.n()];
-    let mut seen = Seen {
-        closest: f64::INFINITY,
-        ..Seen::default()
-    };
-    let mut every = |f: &Frame<'_>| -> Result<(), ObserverError> {
-        seen.closest = seen
-            .closest
-            .min(SafetyWatch::closest_pair(f.states, &l).unwrap().0);
-        if let Some(s) = f.states.iter().find(|s| !s.is_finite()) {
-            seen.bad.get_or_insert(format!("t = {} s: {s:?}", f.t));
-        }
-        seen.finals = f.outputs.iter().map(|o| o.e[0].hypot(o.e[1])).collect();
-        if seen.finals.iter().any(|e| *e >= SETTLED) {
-            seen.unsettled = f.t;
-        }
-        seen.breaks = f.safety.iter().map(|s| s.deadlock_breaks).sum();
-        Ok(())
-    };
-    if let Err(e) = sim.run(&mut every) {
-        seen.bad.get_or_insert(e.to_string());
-    }
-    seen
+fn run(case: &Case) -> Watched {
+    common::watch(&case.toml(), "swap.toml", SETTLED)
 }
 
 fn check(case: &Case) -> Result<(), TestCaseError> {

@@ -262,3 +262,59 @@ pub fn fixed_sample(cases: u32, seed: u64) -> proptest::prelude::ProptestConfig 
         ..proptest::prelude::ProptestConfig::default()
     }
 }
+
+/// What a scenario's run showed the safety tests ([`watch`]).
+#[derive(Debug, Default)]
+pub struct Watched {
+    /// The smallest distance between two robots' points at a logged
+    /// instant, m.
+    pub closest: f64,
+    /// ‖e‖ at the end, per robot, m.
+    pub finals: Vec<f64>,
+    /// Whether each robot's filter held it at the end.
+    pub deadlocked: Vec<bool>,
+    /// Deadlocks the filters started breaking.
+    pub breaks: u64,
+    /// The last logged instant some robot's ‖e‖ was at least the
+    /// `settled` given to [`watch`], s.
+    pub unsettled: f64,
+    /// A state that was not finite, or a run error.
+    pub bad: Option<String>,
+}
+
+/// Runs the scenario `src` (named `file`) and watches it at every logged
+/// instant: the closest pair of points (each robot's `L` ahead), ‖e‖,
+/// deadlocks, and when ‖e‖ last stood at `settled` or more.
+pub fn watch(src: &str, file: &str, settled: f64) -> Watched {
+    let scenario = echelon::scenario::Scenario::parse(src, file, None).unwrap();
+    let run = scenario
+        .build(&echelon::scenario::Overrides::default())
+        .unwrap_or_else(|e| panic!("{e}\n{src}"));
+    let sim = &mut run.simulation();
+    let l: Vec<f64> = sim.agents().iter().map(|a| a.placement().l()).collect();
+    let mut seen = Watched {
+        closest: f64::INFINITY,
+        ..Watched::default()
+    };
+    let mut every = |f: &Frame<'_>| -> Result<(), ObserverError> {
+        seen.closest = seen.closest.min(
+            echelon::stats::SafetyWatch::closest_pair(f.states, &l)
+                .unwrap()
+                .0,
+        );
+        if let Some(s) = f.states.iter().find(|s| !s.is_finite()) {
+            seen.bad.get_or_insert(format!("t = {} s: {s:?}", f.t));
+        }
+        seen.finals = f.outputs.iter().map(|o| o.e[0].hypot(o.e[1])).collect();
+        if seen.finals.iter().any(|e| *e >= settled) {
+            seen.unsettled = f.t;
+        }
+        seen.deadlocked = f.safety.iter().map(|s| s.deadlocked).collect();
+        seen.breaks = f.safety.iter().map(|s| s.deadlock_breaks).sum();
+        Ok(())
+    };
+    if let Err(e) = sim.run(&mut every) {
+        seen.bad.get_or_insert(e.to_string());
+    }
+    seen
+}

@@ -102,7 +102,7 @@ mod tests {
 
     use echelon::csv::CsvWriter;
     use echelon::output::{TRAJECTORY_HEADER_VELOCITY, Table};
-    use echelon::sample::{AgentSample, VelocitySample};
+    use echelon::sample::{AgentSample, SampleCsv, VelocitySample};
 
     use super::*;
 

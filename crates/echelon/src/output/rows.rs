@@ -8,7 +8,7 @@ use crate::csv::CsvWriter;
 use crate::model::wrap_angle;
 use crate::reference::{Order, Reference, Trajectory};
 use crate::safety::Outcome;
-use crate::sample::AgentSample;
+use crate::sample::{AgentSample, SampleCsv};
 use crate::sim::{Frame, Simulation};
 
 /// The header of `trajectory.csv`: one row per agent per logged sample

@@ -1,7 +1,10 @@
 //! The quadratic program: its rows ([`Constraint`]), their tolerance and
 //! their exact solution by enumeration of active sets (exact, or with the
-//! soft rows relaxed), with clarabel kept as the reference and as the
-//! fallback for problems of more than [`MAX_ROWS`] rows.
+//! soft rows relaxed), with clarabel (the `clarabel` feature, which
+//! `echelon` turns on) kept as the reference and as the fallback for
+//! problems of more than [`MAX_ROWS`] rows. Without the feature the
+//! enumeration answers every problem: exact, and without the heap, but its
+//! cost grows as `m³` (`m⁴` relaxed) beyond [`MAX_ROWS`].
 //!
 //! ## The exact solver
 //!
@@ -23,7 +26,9 @@
 //! within the caller's tolerance ([`TOLERANCE`], as clarabel's answers were
 //! held to) is taken, else the rows are infeasible (`None`).
 
+#[cfg(feature = "clarabel")]
 use clarabel::algebra::CscMatrix;
+#[cfg(feature = "clarabel")]
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus};
 
 /// How far (in the QP's units: m²/s for velocity bases, m²/s² for torques)
@@ -33,7 +38,8 @@ pub const TOLERANCE: f64 = 1e-6;
 /// Problems with more rows than this (barriers and limits; 24 neighbours in
 /// range with a torque robot's eight limit rows) go to clarabel, which
 /// allocates, instead of the enumeration, whose cost grows as `m³` (`m⁴`
-/// relaxed).
+/// relaxed): with the `clarabel` feature; without it the enumeration
+/// answers them too.
 pub const MAX_ROWS: usize = 32;
 
 /// Whether the filter uses the exact enumeration (else clarabel). On: its
@@ -76,7 +82,14 @@ pub(super) fn solve_relaxed(
     soft_end: usize,
     want: [f64; 2],
 ) -> Option<[f64; 2]> {
-    relaxed_with(rows, soft_end, want, USE_EXACT && rows.len() <= MAX_ROWS)
+    relaxed_with(rows, soft_end, want, exact_for(rows.len()))
+}
+
+/// Whether a problem of `rows` rows goes to the enumeration: all do without
+/// the `clarabel` feature.
+#[inline]
+fn exact_for(rows: usize) -> bool {
+    !cfg!(feature = "clarabel") || (USE_EXACT && rows <= MAX_ROWS)
 }
 
 /// [`solve_relaxed`] by the enumeration (`exact`) or by clarabel.
@@ -89,7 +102,7 @@ fn relaxed_with(
     let x = if exact {
         exact_relaxed(rows, soft_end, want, TOLERANCE)?
     } else {
-        reference::solve_relaxed(rows, soft_end, want)?
+        fallback::solve_relaxed(rows, soft_end, want)?
     };
     let hard_ok = rows[soft_end..]
         .iter()
@@ -133,12 +146,7 @@ pub(super) fn solve_split(
     second: &[Constraint],
     want: [f64; 2],
 ) -> Option<[f64; 2]> {
-    split_with(
-        first,
-        second,
-        want,
-        USE_EXACT && first.len() + second.len() <= MAX_ROWS,
-    )
+    split_with(first, second, want, exact_for(first.len() + second.len()))
 }
 
 /// [`solve_split`] by the enumeration (`exact`) or by clarabel.
@@ -152,7 +160,7 @@ fn split_with(
         self::exact(first, second, want, TOLERANCE)?
     } else {
         let rows: Vec<Constraint> = first.iter().chain(second).copied().collect();
-        reference::solve(&rows, want)?
+        fallback::solve(&rows, want)?
     };
     let ok = |c: &Constraint| c.slack(x) >= -TOLERANCE;
     (x.iter().all(|v| v.is_finite()) && first.iter().all(ok) && second.iter().all(ok)).then_some(x)
@@ -483,6 +491,7 @@ fn exact_relaxed(
 /// The same problems solved by clarabel (interior point, default tolerances
 /// 1e-8): the fallback beyond [`MAX_ROWS`] rows and the tests' reference.
 /// It builds its solver (and so allocates) on every call.
+#[cfg(feature = "clarabel")]
 pub(super) mod reference {
     use super::*;
 
@@ -568,5 +577,27 @@ pub(super) mod reference {
     }
 }
 
-#[cfg(test)]
+/// Beyond [`MAX_ROWS`]: clarabel with the `clarabel` feature, else the
+/// enumeration (never reached: [`exact_for`] sends every problem to it).
+mod fallback {
+    #[cfg(feature = "clarabel")]
+    pub(super) use super::reference::{solve, solve_relaxed};
+
+    #[cfg(not(feature = "clarabel"))]
+    pub(super) fn solve(rows: &[super::Constraint], want: [f64; 2]) -> Option<[f64; 2]> {
+        super::exact(rows, &[], want, super::TOLERANCE)
+    }
+
+    #[cfg(not(feature = "clarabel"))]
+    pub(super) fn solve_relaxed(
+        rows: &[super::Constraint],
+        soft_end: usize,
+        want: [f64; 2],
+    ) -> Option<[f64; 2]> {
+        super::exact_relaxed(rows, soft_end, want, super::TOLERANCE)
+    }
+}
+
+// The solver's tests hold the enumeration to clarabel's answers.
+#[cfg(all(test, feature = "clarabel"))]
 mod tests;

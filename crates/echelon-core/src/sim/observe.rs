@@ -159,7 +159,13 @@ mod observer_tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
-    use crate::scenario::{Overrides, Scenario};
+    use crate::agent::AgentSpec;
+    use crate::control::{Gains, Variant};
+    use crate::formation::Leader;
+    use crate::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
+    use crate::model::{RobotParams, State};
+    use crate::plan::{Plan, SimConfig, Timing};
+    use crate::reference::{Circle, Reference};
 
     /// Records which hooks it saw, in order.
     #[derive(Debug, Default)]
@@ -192,17 +198,30 @@ mod observer_tests {
         }
     }
 
-    /// A short run of the paper's circle: `steps` steps of 1 ms.
+    /// A short run of one Table I robot behind a circle: `steps` steps of
+    /// 1 ms.
     fn circle(steps: u64) -> Simulation {
-        Scenario::builtin("experiment-circle")
-            .unwrap()
-            .build(&Overrides {
-                dt: Some(0.001),
-                duration: Some(steps as f64 * 0.001),
-                ..Overrides::default()
-            })
-            .unwrap()
-            .simulation()
+        let placement = Placement::new(PlacementSpec {
+            lx_off: 0.3,
+            ly_off: 0.35,
+            l: 0.1,
+            comp: LyComp::Exact,
+            derivatives: LyDerivatives::Neglect,
+        })
+        .unwrap();
+        let agent = AgentSpec::new(
+            "a",
+            RobotParams::AGENT1,
+            Leader::Reference,
+            placement,
+            Gains::PAPER,
+            Variant::Complete,
+            State::at_rest(0.0, 0.0, 0.0),
+        )
+        .unwrap();
+        let reference = Reference::Circle(Circle::new([1.0, 0.0], 0.0, 0.2, 0.2).unwrap());
+        let config = SimConfig::new(0.001, steps as f64 * 0.001, Timing::Continuous).unwrap();
+        Simulation::new(&Plan::new(vec![agent], reference, config).unwrap())
     }
 
     #[test]

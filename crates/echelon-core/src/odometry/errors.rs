@@ -2,16 +2,17 @@
 //! eq. 23), Borenstein's systematic `E_d`, `E_b`, slip, tick quantization and
 //! the noise of the measured speeds.
 
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
-
 use crate::check;
 use crate::error::ParamError;
 
 /// How the paper's additive error `ζ` enters (`zeta_model = "wheels"` or
 /// `"worst-case"` in a scenario).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize, JsonSchema)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema)
+)]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum ZetaModel {
     /// Assumption 1, eq. 23: each wheel's true displacement exceeds the measured
     /// one by `ζ` every sample, so `Δ = Δ̂ + ζ`, `Θ = Θ̂` (eq. 24): the heading

@@ -1,7 +1,7 @@
 //! The plan of a run: a scenario resolved into plain, validated values
 //! (agents and their drives, the reference, timing, odometry, safety) that
 //! the simulator ([`crate::sim::Simulation::new`]), the batch engine and
-//! every fleet role read. Built by [`crate::scenario::Scenario::build`] or
+//! every fleet role read. Built by `echelon::scenario::Scenario::build` or
 //! by hand ([`Plan::new`], then [`Plan::with_odometry`],
 //! [`Plan::with_safety`]); each constructor refuses what cannot run, so a
 //! `Plan` always can.

@@ -100,7 +100,8 @@
 //! min ½‖x − x₀‖²   s.t.  a_kᵀ x ≥ b_k (every barrier),  the base's limits
 //! ```
 //!
-//! with `clarabel` (interior point, default tolerances 1e-8). The nominal is
+//! exactly, by enumerating active sets (`qp.rs`; clarabel beyond
+//! [`MAX_ROWS`] rows with the `clarabel` feature). The nominal is
 //! first limited by the base ([`VelocityBase::limit`]); if it satisfies every
 //! constraint it is returned unchanged (no solve). When the solver reports
 //! anything but a solution, or its answer breaks a constraint by more than

@@ -43,13 +43,12 @@
 //! `dt ≤ τ` to be resolved (RK4 on a lag stays monotone, no overshoot, up to
 //! `dt ≈ 2.7 τ` and is unstable beyond): [`VelocityBase::check_step`].
 
-use serde::{Deserialize, Serialize};
-
 use crate::error::ParamError;
 use crate::model::State;
 
 /// A velocity command to a base (a ROS `Twist`'s `linear.x`, `angular.z`).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct VelocityCommand {
     /// Linear speed `v`, m/s.
     pub v: f64,
@@ -58,10 +57,12 @@ pub struct VelocityCommand {
 }
 
 /// How the acceleration limits act on the two axes.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema)
 )]
-#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum AccelLimit {
     /// `(v̇, ω̇)` scaled together by the one factor that brings both within
     /// their limits: the velocity moves in the direction the lags ask for, so
@@ -79,7 +80,8 @@ pub enum AccelLimit {
 /// Start from a preset's (`VelocityBase::JACKAL.spec()`) or the ideal base's
 /// to change a few: `VelocityBaseSpec { v_max: 0.5, ..VelocityBase::IDEAL.spec() }`.
 /// The serialised form of a [`VelocityBase`] has these fields.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct VelocityBaseSpec {
     /// Lag of the linear speed `τ_v`, s: finite and `≥ 0` (0: ideal, `v`
     /// follows the command).
@@ -108,8 +110,12 @@ pub struct VelocityBaseSpec {
 /// Built through [`VelocityBase::new`] (or a preset), which checks every
 /// parameter (and so does deserialising), so a `VelocityBase` in hand is
 /// always a possible one.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "VelocityBaseSpec", into = "VelocityBaseSpec")]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(
+    feature = "serde",
+    serde(try_from = "VelocityBaseSpec", into = "VelocityBaseSpec")
+)]
 pub struct VelocityBase {
     spec: VelocityBaseSpec,
 }
@@ -479,12 +485,13 @@ impl VelocityBase {
 ///
 /// Built through [`VelocityRobot::new`] (or a preset), which checks the wheels.
 /// Serialises as its `base` and its wheels.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct VelocityRobot {
     base: VelocityBase,
     /// How far the base may back up in one go, m (infinite: no limit):
     /// [`crate::base::Backup`].
-    #[serde(skip_serializing_if = "f64_is_infinite")]
+    #[cfg_attr(feature = "serde", serde(skip_serializing_if = "f64_is_infinite"))]
     reverse_limit: f64,
     half_wheelbase: f64,
     wheel_radius: f64,
@@ -615,6 +622,7 @@ impl VelocityRobot {
     }
 }
 
+#[cfg(feature = "serde")]
 fn f64_is_infinite(x: &f64) -> bool {
     x.is_infinite()
 }

@@ -1,13 +1,12 @@
 //! A robot's state, pose and inputs: `(x, y, θ, v, ω)` in the world frame
 //! {U}, `(u1, u2)` and the wheel torques.
 
-use serde::{Deserialize, Serialize};
-
 use crate::error::ParamError;
 
 /// Robot state `(x, y, θ, v, ω)` in the world frame {U}: position of the wheel
 /// axle centre (m), heading (rad), linear speed (m/s) and angular speed (rad/s).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct State {
     /// x position, m.
     pub x: f64,
@@ -137,7 +136,8 @@ impl State {
 }
 
 /// A planar pose `(x, y, θ)`: m, m, rad.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Pose {
     /// x, m.
     pub x: f64,
@@ -171,7 +171,8 @@ impl Pose {
 }
 
 /// Generalised control inputs `u = [u1, u2]` of eq. 3: force (N) and torque (N m).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Input {
     /// `u1 = (τr + τl)/r`, N.
     pub u1: f64,
@@ -180,7 +181,8 @@ pub struct Input {
 }
 
 /// Wheel motor torques, N m.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Torques {
     /// Right wheel torque `τr`.
     pub right: f64,

@@ -62,8 +62,9 @@ impl Gains {
 }
 
 /// Which form of eq. 13 (`law = "paper"` or `"complete"` in a scenario).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize, serde::Serialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum Variant {
     /// The paper's `u = B⁻¹(−h − K_z z)`: leaves the cross term `eᵀz` in `V̇₂`, so
     /// Theorem 1 needs `K_e K_z > 1/4`.
@@ -76,10 +77,12 @@ pub enum Variant {
 
 /// A scenario's `law`: one of the two forms of eq. 13 for a torque-driven
 /// robot, or the kinematic law ([`crate::kinematic`]) for a velocity base.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema)
 )]
-#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum Law {
     /// [`Variant::Paper`].
     Paper,

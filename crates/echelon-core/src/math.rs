@@ -3,7 +3,7 @@
 
 /// `sin(x)/x`, accurate near 0 (where it uses its Taylor series).
 #[inline]
-pub(crate) fn sinc(x: f64) -> f64 {
+pub fn sinc(x: f64) -> f64 {
     if x.abs() < 1e-4 {
         1.0 - x * x / 6.0
     } else {
@@ -14,7 +14,7 @@ pub(crate) fn sinc(x: f64) -> f64 {
 /// Inverse of the leading `m × m` block of `a` (`m ≤ N`; the rest of the
 /// result is 0), by Gauss–Jordan elimination with partial pivoting: for small
 /// fixed matrices (a spline's derivative map, an EKF innovation covariance).
-pub(crate) fn invert<const N: usize>(a: &[[f64; N]; N], m: usize) -> [[f64; N]; N] {
+pub fn invert<const N: usize>(a: &[[f64; N]; N], m: usize) -> [[f64; N]; N] {
     // `[l | r]` starts as `[A | I]` and ends as `[I | A⁻¹]`.
     let mut l = [[0.0; N]; N];
     let mut r = [[0.0; N]; N];
@@ -49,7 +49,7 @@ pub(crate) fn invert<const N: usize>(a: &[[f64; N]; N], m: usize) -> [[f64; N]; 
 }
 
 /// `a / b` as a whole number ≥ 1 when it is one (to 1e-9 relative), else `None`.
-pub(crate) fn whole_ratio(a: f64, b: f64) -> Option<u64> {
+pub fn whole_ratio(a: f64, b: f64) -> Option<u64> {
     let r = (a / b).round();
     ((a - r * b).abs() <= 1e-9 * a.abs().max(b) && r >= 1.0).then_some(r as u64)
 }

@@ -11,8 +11,6 @@
 //! The factor `l` in `u2` comes from eq. 2b (eq. 3 drops it; see
 //! `docs/control-law.md`). All quantities are SI, angles in radians.
 
-use serde::{Deserialize, Serialize};
-
 use crate::error::ParamError;
 
 mod state;
@@ -26,7 +24,8 @@ pub(crate) fn find_preset<T: Copy>(presets: &[(&str, T)], name: &str) -> Option<
 /// Physical parameters of one robot (paper Table I), as written: unchecked.
 /// [`RobotParams::new`] checks them; a scenario's `[robots.NAME]` and the
 /// serialised form of a [`RobotParams`] have these fields.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct RobotParamsSpec {
     /// Mass `m`, kg (finite, `> 0`).
     pub mass: f64,
@@ -50,8 +49,12 @@ pub struct RobotParamsSpec {
 /// Every value is physical: it can only be built through [`RobotParams::new`]
 /// (and [`RobotParams::with_torque_limit`]), the presets, or deserialised
 /// (which runs the same checks), so a `RobotParams` in hand is always valid.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "RobotParamsSpec", into = "RobotParamsSpec")]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(
+    feature = "serde",
+    serde(try_from = "RobotParamsSpec", into = "RobotParamsSpec")
+)]
 pub struct RobotParams {
     spec: RobotParamsSpec,
 }

@@ -15,10 +15,12 @@ use crate::error::ParamError;
 use crate::reference::{Jet, STANDSTILL};
 
 /// How `L_Ycomp` is computed (`lycomp = "exact"`, `"fit"` or `"none"` in a scenario).
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema)
 )]
-#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum LyComp {
     /// Eq. 5 in curvature form: exact, smooth except where `|κ| L_Xoff = 1`.
     Exact,
@@ -30,10 +32,12 @@ pub enum LyComp {
 
 /// Whether `L̇_Y` and `L̈_Y` enter the law (`ly_derivatives = "neglect"` or
 /// `"exact"` in a scenario).
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize, schemars::JsonSchema,
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema)
 )]
-#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum LyDerivatives {
     /// Neglected (`L̇_Y = L̈_Y = 0`), as the paper's simulations and experiments do (Remark 3).
     Neglect,

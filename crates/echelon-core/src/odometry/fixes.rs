@@ -1,9 +1,6 @@
 //! Absolute position fixes: when they are taken, how noisy and late they
 //! are, and how they correct the estimate.
 
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
-
 use crate::check;
 use crate::error::ParamError;
 
@@ -17,8 +14,12 @@ pub enum FixSchedule {
 }
 
 /// How a fix corrects the estimate (`fusion = "reset"` or `"ekf"` in a scenario).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize, JsonSchema)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema)
+)]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum Fusion {
     /// Replace the estimate by the fix (the paper's "recalibration").
     #[default]

@@ -8,11 +8,13 @@
 //! - `pieces`: the law, Theorem 2 and identification as functions on arrays;
 //! - `safety`: the safety filters (velocity and torque robots) on arrays;
 //! - `batch`: the batch engine on caller-owned buffers;
+//! - `envs`: the learning environments (`echelon::learn`) on caller-owned buffers;
 //! - `arrays`: array arguments, each checked the same way;
 //! - `errors`: Rust errors as Python exceptions.
 
 mod arrays;
 mod batch;
+mod envs;
 mod errors;
 mod pieces;
 mod safety;
@@ -34,5 +36,6 @@ fn _echelon(m: &Bound<'_, PyModule>) -> PyResult<()> {
     pieces::register(m)?;
     safety::register(m)?;
     batch::register(m)?;
+    envs::register(m)?;
     Ok(())
 }

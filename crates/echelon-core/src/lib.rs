@@ -46,6 +46,7 @@ pub mod formation;
 pub mod guard;
 pub mod kinematic;
 pub mod lanes;
+pub mod learn;
 pub mod lycomp;
 pub mod math;
 pub mod model;

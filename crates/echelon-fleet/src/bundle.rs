@@ -16,7 +16,7 @@
 
 use std::path::{Path, PathBuf};
 
-use echelon::scenario::{Overrides, Placement, Scenario, check_endpoint};
+use echelon::scenario::{Overrides, Placement, Ros2Link, Scenario, check_endpoint};
 
 use crate::FleetError;
 use crate::faults::FaultSpec;
@@ -80,26 +80,7 @@ pub fn write(opts: &BundleOptions) -> Result<BundleReport, FleetError> {
     let scenario = Scenario::resolve(&opts.scenario)?;
     let settings = scenario.fleet()?;
     let n = scenario.build(&Overrides::default())?.plan.agents().len() as u32;
-    if opts.hub.is_empty() {
-        return Err(FleetError::Config(
-            "fleet bundle needs the hub's endpoint (--hub tcp/192.168.1.10:7447)".into(),
-        ));
-    }
-    for e in &opts.hub {
-        check_endpoint(e).map_err(|why| FleetError::Config(format!("--hub {why}")))?;
-    }
-    if opts.simulated && !(opts.time_scale.is_finite() && opts.time_scale > 0.0) {
-        return Err(FleetError::Config(format!(
-            "--time-scale {}: must be > 0",
-            opts.time_scale
-        )));
-    }
-    if !opts.simulated && opts.time_scale != 1.0 {
-        return Err(FleetError::Config(format!(
-            "--time-scale {}: real robots run in real time (give --simulated to rehearse faster)",
-            opts.time_scale
-        )));
-    }
+    check_options(opts)?;
     let agents: Vec<u32> = (1..=n)
         .filter(|&k| opts.all || settings.placement[k as usize - 1] == Placement::Onboard)
         .collect();
@@ -113,83 +94,23 @@ pub fn write(opts: &BundleOptions) -> Result<BundleReport, FleetError> {
     let hash = sha256_hex(source);
     let fleet_name = opts.fleet.clone().unwrap_or_else(|| settings.name.clone());
     // Every file in memory first: nothing is written when one is missing.
-    let mut files: Vec<(PathBuf, Vec<u8>, bool)> = Vec::new();
+    let mut files: Vec<BundleFile> = Vec::new();
     let mut robots = Vec::new();
     for &k in &agents {
         let dir = opts.out.join(format!("robot-{k}"));
-        let identity = Member::Robot(k).identity();
         let secure = match &opts.secure {
-            Some(certs) => {
-                let [ca, cert, key] = crate::net::secure_files(certs, &identity)?;
-                for (from, private) in [(ca, false), (cert, false), (key, true)] {
-                    let name = from.file_name().map(PathBuf::from).unwrap_or_default();
-                    let bytes = std::fs::read(&from).map_err(FleetError::io(&from))?;
-                    files.push((dir.join("certs").join(name), bytes, private));
-                }
-                Some(SecureSection {
-                    dir: "certs".into(),
-                    identity: identity.clone(),
-                    robots: n,
-                })
-            }
+            Some(certs) => Some(secure_section(certs, &dir, k, n, &mut files)?),
             None => None,
         };
-        let drive = match opts.simulated {
-            true => Drive::Simulated,
-            false => Drive::Ros2,
-        };
-        let file = RobotFile {
-            version: ROBOT_FILE_VERSION,
-            scenario: SCENARIO_FILE.into(),
-            scenario_sha256: hash.clone(),
-            agent: k,
-            fleet: opts.fleet.clone(),
-            drive,
-            clock: ClockSection {
-                time_scale: opts.time_scale,
-                duration: opts.duration,
-                die_at: None,
-            },
-            net: NetSection {
-                mode: NetMode::Client,
-                connect: opts.hub.clone(),
-                listen: Vec::new(),
-                zenoh_config: None,
-            },
-            secure,
-            operator_token: Some(TOKEN_FILE.into()),
-            rehearsal: FaultSpec::default(),
-        };
-        let link = &settings.ros2[k as usize - 1];
-        let mut header = vec![
-            format!(
-                "echelon robot {k} of fleet `{fleet_name}` (scenario {}), written by `echelon fleet bundle`.",
-                scenario.name()
-            ),
-            format!("Run it: ./{LAUNCHER_FILE}  (or: echelon fleet robot --config {ROBOT_FILE})"),
-            format!("It joins the hub at {}.", opts.hub.join(" or ")),
-        ];
-        match drive {
-            Drive::Simulated => header.push("It drives a simulated robot (a rehearsal).".into()),
-            _ => {
-                header.push(format!(
-                    "It drives {} ({}) and reads {} in ROS domain {}, {}.",
-                    link.cmd_vel,
-                    crate::ros2::drive::cmd_vel_type(link).name,
-                    link.odom,
-                    link.domain_id,
-                    match link.connect.is_empty() {
-                        true => "through the fleet's network".to_owned(),
-                        false => format!("at its robot's router {}", link.connect.join(" or ")),
-                    }
-                ));
-            }
-        }
-        if opts.token.is_none() {
-            header.push(format!(
-                "It obeys `fleet resume` only with the operator token: copy the hub's {TOKEN_FILE} beside this file."
-            ));
-        }
+        let file = robot_file(opts, k, &hash, secure);
+        let header = file_header(
+            opts,
+            k,
+            &fleet_name,
+            scenario.name(),
+            file.drive,
+            &settings.ros2[k as usize - 1],
+        );
         files.push((
             dir.join(ROBOT_FILE),
             file.to_toml(&header)?.into_bytes(),
@@ -222,6 +143,137 @@ pub fn write(opts: &BundleOptions) -> Result<BundleReport, FleetError> {
         scenario_sha256: hash,
         robots,
     })
+}
+
+/// A file of the bundle, held in memory until all are: its path, its
+/// bytes, and whether it is private (mode 0600).
+type BundleFile = (PathBuf, Vec<u8>, bool);
+
+/// `fleet bundle`'s refusals of its options: no hub endpoint or one that is
+/// not an endpoint, a time scale that is not > 0 (simulated) or not 1 (real
+/// robots).
+fn check_options(opts: &BundleOptions) -> Result<(), FleetError> {
+    if opts.hub.is_empty() {
+        return Err(FleetError::Config(
+            "fleet bundle needs the hub's endpoint (--hub tcp/192.168.1.10:7447)".into(),
+        ));
+    }
+    for e in &opts.hub {
+        check_endpoint(e).map_err(|why| FleetError::Config(format!("--hub {why}")))?;
+    }
+    if opts.simulated && !(opts.time_scale.is_finite() && opts.time_scale > 0.0) {
+        return Err(FleetError::Config(format!(
+            "--time-scale {}: must be > 0",
+            opts.time_scale
+        )));
+    }
+    if !opts.simulated && opts.time_scale != 1.0 {
+        return Err(FleetError::Config(format!(
+            "--time-scale {}: real robots run in real time (give --simulated to rehearse faster)",
+            opts.time_scale
+        )));
+    }
+    Ok(())
+}
+
+/// Robot `k`'s secure section (of `n` robots), its CA, certificate and key
+/// read from `certs` into `files` under `dir/certs` (the key private).
+fn secure_section(
+    certs: &Path,
+    dir: &Path,
+    k: u32,
+    n: u32,
+    files: &mut Vec<BundleFile>,
+) -> Result<SecureSection, FleetError> {
+    let identity = Member::Robot(k).identity();
+    let [ca, cert, key] = crate::net::secure_files(certs, &identity)?;
+    for (from, private) in [(ca, false), (cert, false), (key, true)] {
+        let name = from.file_name().map(PathBuf::from).unwrap_or_default();
+        let bytes = std::fs::read(&from).map_err(FleetError::io(&from))?;
+        files.push((dir.join("certs").join(name), bytes, private));
+    }
+    Ok(SecureSection {
+        dir: "certs".into(),
+        identity,
+        robots: n,
+    })
+}
+
+/// Robot `k`'s file: the scenario beside it (SHA-256 `hash`), a client of
+/// the hub, on the bundle's clock and drive.
+fn robot_file(
+    opts: &BundleOptions,
+    k: u32,
+    hash: &str,
+    secure: Option<SecureSection>,
+) -> RobotFile {
+    let drive = match opts.simulated {
+        true => Drive::Simulated,
+        false => Drive::Ros2,
+    };
+    RobotFile {
+        version: ROBOT_FILE_VERSION,
+        scenario: SCENARIO_FILE.into(),
+        scenario_sha256: hash.to_owned(),
+        agent: k,
+        fleet: opts.fleet.clone(),
+        drive,
+        clock: ClockSection {
+            time_scale: opts.time_scale,
+            duration: opts.duration,
+            die_at: None,
+        },
+        net: NetSection {
+            mode: NetMode::Client,
+            connect: opts.hub.clone(),
+            listen: Vec::new(),
+            zenoh_config: None,
+        },
+        secure,
+        operator_token: Some(TOKEN_FILE.into()),
+        rehearsal: FaultSpec::default(),
+    }
+}
+
+/// The comment heading robot `k`'s file: who it is, how to run it, where it
+/// joins, what it drives (its ROS 2 `link`), and the token it needs.
+fn file_header(
+    opts: &BundleOptions,
+    k: u32,
+    fleet_name: &str,
+    scenario: &str,
+    drive: Drive,
+    link: &Ros2Link,
+) -> Vec<String> {
+    let mut header = vec![
+        format!(
+            "echelon robot {k} of fleet `{fleet_name}` (scenario {scenario}), written by `echelon fleet bundle`."
+        ),
+        format!("Run it: ./{LAUNCHER_FILE}  (or: echelon fleet robot --config {ROBOT_FILE})"),
+        format!("It joins the hub at {}.", opts.hub.join(" or ")),
+    ];
+    match drive {
+        Drive::Simulated => header.push("It drives a simulated robot (a rehearsal).".into()),
+        _ => {
+            header.push(format!(
+                "It drives {} ({}) and reads {} in ROS domain {}, {}.",
+                link.cmd_vel,
+                crate::ros2::drive::cmd_vel_type(link).name,
+                link.odom,
+                link.domain_id,
+                match link.connect.is_empty() {
+                    true => "through the fleet's network".to_owned(),
+                    false => format!("at its robot's router {}", link.connect.join(" or ")),
+                }
+            ));
+        }
+    }
+    if opts.token.is_none() {
+        header.push(format!(
+            "It obeys `fleet resume` only with the operator token: copy the hub's {TOKEN_FILE} beside this file."
+        ));
+    }
+    header
 }
 
 /// The launcher: `fleet robot --config` on the file beside it.

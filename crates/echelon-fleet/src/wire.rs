@@ -394,123 +394,129 @@ pub fn decode(b: &[u8]) -> Result<Message, DecodeError> {
     };
     let [t] = f64s::<1>(&b[16..24])?;
     match b[2] {
-        KIND_REFERENCE => {
-            if b.len() != REFERENCE_LEN {
-                return Err(DecodeError::Malformed("wrong length for a reference"));
-            }
-            if b[3] != 0 {
-                return Err(DecodeError::Malformed("reference flags must be 0"));
-            }
-            let v = f64s::<8>(&b[HEADER_LEN..])?;
-            Ok(Message::Reference(
-                header,
-                Reference {
-                    t,
-                    motion: LeaderMotion {
-                        p: [v[0], v[1]],
-                        dp: [v[2], v[3]],
-                        ddp: [v[4], v[5]],
-                    },
-                    speed: v[6],
-                    turn_rate: v[7],
-                },
-            ))
-        }
-        KIND_STATE => {
-            // The flags decide the length: a message too short to hold
-            // them is malformed (it was an index out of bounds).
-            let Some(&flags) = b.get(HEADER_LEN + 4) else {
-                return Err(DecodeError::Malformed("wrong length for a state"));
-            };
-            if flags & !KNOWN_FLAGS != 0 {
-                return Err(DecodeError::Malformed("unknown drive flags"));
-            }
-            let with_odometry = flags & FLAG_ODOMETRY != 0;
-            let len = if with_odometry {
-                STATE_ODOMETRY_LEN
-            } else {
-                STATE_LEN
-            };
-            if b.len() != len {
-                return Err(DecodeError::Malformed("wrong length for a state"));
-            }
-            if b[STATE_RESERVED] != [0; 3] {
-                return Err(DecodeError::Malformed("reserved bytes must be 0"));
-            }
-            let link =
-                LinkStatus::from_u8(b[3]).ok_or(DecodeError::Malformed("unknown link status"))?;
-            let agent = u32_at(b, HEADER_LEN);
-            if agent == 0 {
-                return Err(DecodeError::Malformed("agent numbers start at 1"));
-            }
-            let v = f64s::<26>(&b[HEADER_LEN + 8..STATE_LEN])?;
-            if v[25] < 0.0 {
-                return Err(DecodeError::Malformed("a negative position uncertainty"));
-            }
-            let odometry = match with_odometry {
-                false if flags & FLAG_FIX_AGE != 0 => {
-                    return Err(DecodeError::Malformed("a fix age without odometry"));
-                }
-                false => None,
-                true => Some(odometry_block(&b[STATE_LEN..], flags)?),
-            };
-            let velocity = match flags & !(FLAG_ODOMETRY | FLAG_FIX_AGE) {
-                0 if v[21..25].iter().all(|x| x.to_bits() == 0) => None,
-                0 => {
-                    return Err(DecodeError::Malformed(
-                        "a torque state with a velocity command",
-                    ));
-                }
-                f if f & FLAG_VELOCITY != 0 => Some(VelocitySample {
-                    v_cmd: v[21],
-                    omega_cmd: v[22],
-                    v_applied: v[23],
-                    omega_applied: v[24],
-                    sat: f & FLAG_SATURATED != 0,
-                }),
-                _ => {
-                    return Err(DecodeError::Malformed(
-                        "a saturation flag without a velocity base",
-                    ));
-                }
-            };
-            Ok(Message::State(
-                header,
-                RobotState {
-                    t,
-                    agent,
-                    link,
-                    state: State {
-                        x: v[0],
-                        y: v[1],
-                        theta: v[2],
-                        v: v[3],
-                        omega: v[4],
-                    },
-                    dv: v[5],
-                    domega: v[6],
-                    e: [v[7], v[8]],
-                    z: [v[9], v[10]],
-                    u: Input {
-                        u1: v[11],
-                        u2: v[12],
-                    },
-                    tau: Torques {
-                        right: v[13],
-                        left: v[14],
-                    },
-                    leader: LeaderMotion {
-                        p: [v[15], v[16]],
-                        dp: [v[17], v[18]],
-                        ddp: [v[19], v[20]],
-                    },
-                    velocity,
-                    sigma: v[25],
-                    odometry,
-                },
-            ))
-        }
+        KIND_REFERENCE => decode_reference(b, t).map(|r| Message::Reference(header, r)),
+        KIND_STATE => decode_state(b, t).map(|s| Message::State(header, s)),
         _ => Err(DecodeError::Malformed("unknown kind")),
+    }
+}
+
+/// The body of a reference message `b` (its header already checked) at
+/// fleet time `t`.
+#[inline]
+fn decode_reference(b: &[u8], t: f64) -> Result<Reference, DecodeError> {
+    if b.len() != REFERENCE_LEN {
+        return Err(DecodeError::Malformed("wrong length for a reference"));
+    }
+    if b[3] != 0 {
+        return Err(DecodeError::Malformed("reference flags must be 0"));
+    }
+    let v = f64s::<8>(&b[HEADER_LEN..])?;
+    Ok(Reference {
+        t,
+        motion: LeaderMotion {
+            p: [v[0], v[1]],
+            dp: [v[2], v[3]],
+            ddp: [v[4], v[5]],
+        },
+        speed: v[6],
+        turn_rate: v[7],
+    })
+}
+
+/// The body of a state message `b` (its header already checked) at fleet
+/// time `t`: its drive flags decide its length and its optional blocks.
+#[inline]
+fn decode_state(b: &[u8], t: f64) -> Result<RobotState, DecodeError> {
+    // The flags decide the length: a message too short to hold
+    // them is malformed (it was an index out of bounds).
+    let Some(&flags) = b.get(HEADER_LEN + 4) else {
+        return Err(DecodeError::Malformed("wrong length for a state"));
+    };
+    if flags & !KNOWN_FLAGS != 0 {
+        return Err(DecodeError::Malformed("unknown drive flags"));
+    }
+    let with_odometry = flags & FLAG_ODOMETRY != 0;
+    let len = if with_odometry {
+        STATE_ODOMETRY_LEN
+    } else {
+        STATE_LEN
+    };
+    if b.len() != len {
+        return Err(DecodeError::Malformed("wrong length for a state"));
+    }
+    if b[STATE_RESERVED] != [0; 3] {
+        return Err(DecodeError::Malformed("reserved bytes must be 0"));
+    }
+    let link = LinkStatus::from_u8(b[3]).ok_or(DecodeError::Malformed("unknown link status"))?;
+    let agent = u32_at(b, HEADER_LEN);
+    if agent == 0 {
+        return Err(DecodeError::Malformed("agent numbers start at 1"));
+    }
+    let v = f64s::<26>(&b[HEADER_LEN + 8..STATE_LEN])?;
+    if v[25] < 0.0 {
+        return Err(DecodeError::Malformed("a negative position uncertainty"));
+    }
+    let odometry = match with_odometry {
+        false if flags & FLAG_FIX_AGE != 0 => {
+            return Err(DecodeError::Malformed("a fix age without odometry"));
+        }
+        false => None,
+        true => Some(odometry_block(&b[STATE_LEN..], flags)?),
+    };
+    let velocity = velocity_block(&v, flags)?;
+    Ok(RobotState {
+        t,
+        agent,
+        link,
+        state: State {
+            x: v[0],
+            y: v[1],
+            theta: v[2],
+            v: v[3],
+            omega: v[4],
+        },
+        dv: v[5],
+        domega: v[6],
+        e: [v[7], v[8]],
+        z: [v[9], v[10]],
+        u: Input {
+            u1: v[11],
+            u2: v[12],
+        },
+        tau: Torques {
+            right: v[13],
+            left: v[14],
+        },
+        leader: LeaderMotion {
+            p: [v[15], v[16]],
+            dp: [v[17], v[18]],
+            ddp: [v[19], v[20]],
+        },
+        velocity,
+        sigma: v[25],
+        odometry,
+    })
+}
+
+/// The velocity sample of a state with numbers `v` and drive flags `flags`:
+/// none on a torque base (whose velocity slots must be zero).
+#[inline]
+fn velocity_block(v: &[f64; 26], flags: u8) -> Result<Option<VelocitySample>, DecodeError> {
+    match flags & !(FLAG_ODOMETRY | FLAG_FIX_AGE) {
+        0 if v[21..25].iter().all(|x| x.to_bits() == 0) => Ok(None),
+        0 => Err(DecodeError::Malformed(
+            "a torque state with a velocity command",
+        )),
+        f if f & FLAG_VELOCITY != 0 => Ok(Some(VelocitySample {
+            v_cmd: v[21],
+            omega_cmd: v[22],
+            v_applied: v[23],
+            omega_applied: v[24],
+            sat: f & FLAG_SATURATED != 0,
+        })),
+        _ => Err(DecodeError::Malformed(
+            "a saturation flag without a velocity base",
+        )),
     }
 }
 

@@ -396,18 +396,10 @@ fn safety_section(data: &RunData) -> Option<String> {
     Some(html)
 }
 
-/// The whole page; `svgs` are the figures as `(stem, SVG document)`.
-pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
+/// The page's header: the scenario's name and description, the run's
+/// size and timing, and whether it diverged.
+fn write_header(html: &mut String, data: &RunData) {
     let s = &data.summary;
-    let title = format!("echelon — {}", s.scenario);
-    let mut html = String::with_capacity(1 << 20);
-    let _ = write!(
-        html,
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
-         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
-         <title>{}</title>\n<style>\n{STYLE}</style>\n</head>\n<body>\n<main>\n",
-        escape(&title)
-    );
     let _ = writeln!(html, "<header><h1>{}</h1>", escape(&s.scenario));
     if let Some(d) = &data.description {
         let _ = writeln!(html, "<p class=\"description\">{}</p>", escape(d));
@@ -434,6 +426,46 @@ pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
             escape(&d.message)
         );
     }
+}
+
+/// The summary section: the agents' table, the tolerance, saturation and
+/// the run's warnings.
+fn write_summary(html: &mut String, data: &RunData) {
+    let s = &data.summary;
+    html.push_str("<section id=\"summary\">\n<h2>Summary</h2>\n");
+    html.push_str(&summary_table(data));
+    let _ = writeln!(
+        html,
+        "<p class=\"note\">‖e‖ (eq. 7) is the distance between where the leader should be, seen from the follower, and where it is; the tolerance is {} m.</p>",
+        s.settle_tolerance
+    );
+    if let Some(note) = saturation_note(data) {
+        html.push_str(&note);
+        html.push('\n');
+    }
+    if !s.warnings.is_empty() {
+        html.push_str("<ul class=\"warnings\">");
+        for w in &s.warnings {
+            let _ = write!(html, "<li>warning: {}</li>", escape(w));
+        }
+        html.push_str("</ul>\n");
+    }
+    html.push_str("</section>\n");
+}
+
+/// The whole page; `svgs` are the figures as `(stem, SVG document)`.
+pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
+    let s = &data.summary;
+    let title = format!("echelon — {}", s.scenario);
+    let mut html = String::with_capacity(1 << 20);
+    let _ = write!(
+        html,
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
+         <title>{}</title>\n<style>\n{STYLE}</style>\n</head>\n<body>\n<main>\n",
+        escape(&title)
+    );
+    write_header(&mut html, data);
     html.push_str(
         "<section id=\"replay\">\n<h2>Replay</h2>\n<div class=\"controls\">\
          <button id=\"play\" type=\"button\" aria-label=\"play\">▶ Play</button>\
@@ -456,25 +488,7 @@ pub fn report(data: &RunData, svgs: &[(&str, String)]) -> String {
         html.push_str(&legend);
     }
     html.push_str("</section>\n");
-    html.push_str("<section id=\"summary\">\n<h2>Summary</h2>\n");
-    html.push_str(&summary_table(data));
-    let _ = writeln!(
-        html,
-        "<p class=\"note\">‖e‖ (eq. 7) is the distance between where the leader should be, seen from the follower, and where it is; the tolerance is {} m.</p>",
-        s.settle_tolerance
-    );
-    if let Some(note) = saturation_note(data) {
-        html.push_str(&note);
-        html.push('\n');
-    }
-    if !s.warnings.is_empty() {
-        html.push_str("<ul class=\"warnings\">");
-        for w in &s.warnings {
-            let _ = write!(html, "<li>warning: {}</li>", escape(w));
-        }
-        html.push_str("</ul>\n");
-    }
-    html.push_str("</section>\n");
+    write_summary(&mut html, data);
     if let Some(section) = safety_section(data) {
         html.push_str(&section);
     }

@@ -5,7 +5,7 @@
 //! command, braked (QP infeasible) or broke a deadlock.
 
 use crate::figure::{Axis, Dash, Figure, Marker, Panel, Stroke, palette};
-use crate::run::{RunData, SafetyData, spans_where};
+use crate::run::{RunData, SafetyData, SafetySummary, spans_where};
 
 /// At each logged instant, the smallest distance between two robots' points
 /// `L` ahead, m (`None`: no safety filter, `L` unknown, or fewer than two robots).
@@ -87,21 +87,15 @@ pub const BRAKED_LABEL: &str = "braked (QP infeasible)";
 /// See [`ACTED_LABEL`].
 pub const DEADLOCK_LABEL: &str = "breaking a deadlock";
 
-/// The `safety` figure, if the run had a safety filter.
-///
-/// Top: the smallest distance between two robots' points `L` ahead at every
-/// logged instant ([`min_distances`]), the `radius` (dashed), the summary's
-/// closest approach over every step (a dot), and per obstacle the smallest
-/// clearance of a point from its edge ([`obstacle_clearances`]), which the
-/// filter also keeps `≥ radius`. Bottom: per agent, bars where its filter
-/// changed the command, braked, or broke a deadlock ([`filter_spans`]).
-pub fn figure(data: &RunData) -> Option<Figure> {
-    let s = data.safety.as_ref()?;
-    let summary = data.summary.safety.as_ref()?;
-    let (t0, t1) = (
-        data.times.first().copied().unwrap_or(0.0),
-        data.times.last().copied().unwrap_or(1.0),
-    );
+/// The top panel of [`figure`]: the closest pair and each obstacle's
+/// clearance against time, the `radius`, and the closest approach over every
+/// step, over `[t0, t1]`.
+fn distances_panel(
+    data: &RunData,
+    s: &SafetyData,
+    summary: &SafetySummary,
+    (t0, t1): (f64, f64),
+) -> Panel {
     let mut distances = Panel::new(Axis::new("t", "s"), Axis::new("distance", "m")).titled(
         "closest pair of robots' points L ahead, and each obstacle's closest point (edge clearance)",
     );
@@ -145,7 +139,12 @@ pub fn figure(data: &RunData) -> Option<Figure> {
         vec![((summary.min_distance_t, summary.min_distance), Marker::Dot)],
         palette::INK,
     );
+    distances
+}
 
+/// The bottom panel of [`figure`]: per agent, bars where its filter changed
+/// the command, braked or broke a deadlock, over `[t0, t1]`.
+fn actions_panel(data: &RunData, s: &SafetyData, (t0, t1): (f64, f64)) -> Panel {
     let n = data.agents.len();
     let margin = 0.05 * (t1 - t0).max(1e-9);
     let mut actions = Panel::new(
@@ -205,6 +204,26 @@ pub fn figure(data: &RunData) -> Option<Figure> {
             dash: Dash::Solid,
         },
     );
+    actions
+}
+
+/// The `safety` figure, if the run had a safety filter.
+///
+/// Top: the smallest distance between two robots' points `L` ahead at every
+/// logged instant ([`min_distances`]), the `radius` (dashed), the summary's
+/// closest approach over every step (a dot), and per obstacle the smallest
+/// clearance of a point from its edge ([`obstacle_clearances`]), which the
+/// filter also keeps `≥ radius`. Bottom: per agent, bars where its filter
+/// changed the command, braked, or broke a deadlock ([`filter_spans`]).
+pub fn figure(data: &RunData) -> Option<Figure> {
+    let s = data.safety.as_ref()?;
+    let summary = data.summary.safety.as_ref()?;
+    let (t0, t1) = (
+        data.times.first().copied().unwrap_or(0.0),
+        data.times.last().copied().unwrap_or(1.0),
+    );
+    let distances = distances_panel(data, s, summary, (t0, t1));
+    let actions = actions_panel(data, s, (t0, t1));
     Some(
         Figure::new(
             &format!(

@@ -23,8 +23,8 @@
 //! Units are SI and angles radians throughout (ROS REP 103).
 
 pub use echelon_core::{
-    agent, base, check, control, engine, follow, formation, guard, kinematic, lanes, lycomp, math,
-    model, plan, reference, rng, safety, sim,
+    agent, base, check, control, engine, follow, formation, guard, kinematic, lanes, learn, lycomp,
+    math, model, plan, reference, rng, safety, sim,
 };
 
 pub mod csv;

@@ -170,19 +170,9 @@ pub fn part_path(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.part"))
 }
 
-/// Runs `run` to its end, writing `dir/trajectory.csv`, `dir/reference.csv`,
-/// `dir/integrals.csv`, `dir/summary.json` and `dir/scenario.toml`; `extra` sees every frame too
-/// (e.g. a progress bar). Files are written under temporary names and renamed
-/// only when the run succeeds, so a failed run leaves no half-written output;
-/// an `odometry.csv` or `safety.csv` of an earlier run that this one does not
-/// write is removed.
-pub fn run_to_dir(
-    run: &mut Run,
-    dir: &Path,
-    extra: &mut dyn Observer,
-) -> Result<RunSummary, OutputError> {
-    std::fs::create_dir_all(dir).map_err(io_error(dir))?;
-    let mut simulation = run.simulation();
+/// The files a run writes (`odometry.csv` and `safety.csv` only when the
+/// simulation has odometers or a safety filter), with the indices of those two.
+fn output_names(simulation: &Simulation) -> (Vec<&'static str>, Option<usize>, Option<usize>) {
     let mut names = vec![
         TRAJECTORY_FILE,
         REFERENCE_FILE,
@@ -198,8 +188,82 @@ pub fn run_to_dir(
         names.push(SAFETY_FILE);
         names.len() - 1
     });
-    let parts: Vec<PathBuf> = names.iter().map(|n| part_path(&dir.join(n))).collect();
+    (names, odometry_at, safety_at)
+}
+
+/// The summary of `sim` run to its end (or to its divergence, `diverged`).
+fn run_summary(
+    run: &Run,
+    sim: &Simulation,
+    summary: &Summary,
+    watch: &SafetyWatch,
+    diverged: Option<Divergence>,
+) -> RunSummary {
+    let config = *sim.config();
+    RunSummary {
+        scenario: run.name.clone(),
+        duration: sim.time(),
+        dt: config.dt,
+        steps: sim.steps(),
+        controller_period: match config.timing {
+            Timing::Continuous => None,
+            Timing::Sampled { period } => Some(period),
+        },
+        settle_tolerance: Summary::SETTLE_TOLERANCE,
+        warnings: run.warnings.iter().chain(sim.warnings()).cloned().collect(),
+        agents: summary.agents(sim.agents()),
+        safety: watch.report().cloned(),
+        diverged,
+    }
+}
+
+/// Writes the summary `report` and the scenario `record` to their parts and
+/// renames every part (`parts`, of the files `names`) into `dir`; removes the
+/// logs of an earlier run that this one does not write.
+fn commit(
+    dir: &Path,
+    parts: &[PathBuf],
+    names: &[&str],
+    report: &RunSummary,
+    record: &str,
+) -> Result<(), OutputError> {
     let (summary_part, scenario_part) = (&parts[2], &parts[3]);
+    let mut json = serde_json::to_string_pretty(report).map_err(|e| OutputError::Io {
+        path: summary_part.clone(),
+        source: e.into(),
+    })?;
+    json.push('\n');
+    std::fs::write(summary_part, json).map_err(io_error(summary_part))?;
+    std::fs::write(scenario_part, record).map_err(io_error(scenario_part))?;
+    for (from, to) in parts.iter().zip(names) {
+        let to = dir.join(to);
+        std::fs::rename(from, &to).map_err(io_error(&to))?;
+    }
+    // A log this run does not write, left by an earlier run into the same
+    // directory, would be read as this run's (`echelon plot`, `identify`).
+    for stale in [ODOMETRY_FILE, SAFETY_FILE] {
+        if !names.contains(&stale) {
+            remove_if_present(&dir.join(stale))?;
+        }
+    }
+    Ok(())
+}
+
+/// Runs `run` to its end, writing `dir/trajectory.csv`, `dir/reference.csv`,
+/// `dir/integrals.csv`, `dir/summary.json` and `dir/scenario.toml`; `extra` sees every frame too
+/// (e.g. a progress bar). Files are written under temporary names and renamed
+/// only when the run succeeds, so a failed run leaves no half-written output;
+/// an `odometry.csv` or `safety.csv` of an earlier run that this one does not
+/// write is removed.
+pub fn run_to_dir(
+    run: &mut Run,
+    dir: &Path,
+    extra: &mut dyn Observer,
+) -> Result<RunSummary, OutputError> {
+    std::fs::create_dir_all(dir).map_err(io_error(dir))?;
+    let mut simulation = run.simulation();
+    let (names, odometry_at, safety_at) = output_names(&simulation);
+    let parts: Vec<PathBuf> = names.iter().map(|n| part_path(&dir.join(n))).collect();
     let remove_parts = || {
         for p in &parts {
             let _ = std::fs::remove_file(p);
@@ -255,39 +319,14 @@ pub fn run_to_dir(
         },
     };
     let config = *sim.config();
-    let report = RunSummary {
-        scenario: run.name.clone(),
-        duration: sim.time(),
-        dt: config.dt,
-        steps: sim.steps(),
-        controller_period: match config.timing {
-            Timing::Continuous => None,
-            Timing::Sampled { period } => Some(period),
-        },
-        settle_tolerance: Summary::SETTLE_TOLERANCE,
-        warnings: run.warnings.iter().chain(sim.warnings()).cloned().collect(),
-        agents: summary.agents(sim.agents()),
-        safety: watch.report().cloned(),
-        diverged: diverged.as_ref().map(|(d, _)| d.clone()),
-    };
-    let mut json = serde_json::to_string_pretty(&report).map_err(|e| OutputError::Io {
-        path: summary_part.clone(),
-        source: e.into(),
-    })?;
-    json.push('\n');
-    std::fs::write(summary_part, json).map_err(io_error(summary_part))?;
-    std::fs::write(scenario_part, &run.record).map_err(io_error(scenario_part))?;
-    for (from, to) in parts.iter().zip(&names) {
-        let to = dir.join(to);
-        std::fs::rename(from, &to).map_err(io_error(&to))?;
-    }
-    // A log this run does not write, left by an earlier run into the same
-    // directory, would be read as this run's (`echelon plot`, `identify`).
-    for stale in [ODOMETRY_FILE, SAFETY_FILE] {
-        if !names.contains(&stale) {
-            remove_if_present(&dir.join(stale))?;
-        }
-    }
+    let report = run_summary(
+        run,
+        sim,
+        &summary,
+        &watch,
+        diverged.as_ref().map(|(d, _)| d.clone()),
+    );
+    commit(dir, &parts, &names, &report, &run.record)?;
     match diverged {
         None => Ok(report),
         Some((_, error)) => Err(OutputError::Diverged {

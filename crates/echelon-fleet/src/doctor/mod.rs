@@ -126,6 +126,52 @@ fn ms(s: f64) -> String {
     format!("{:.1} ms", s * 1e3)
 }
 
+/// The session to the hub (`--hub`), with the row saying whether it was
+/// reached (and how), pushed on `rows`; none when not given or not reached.
+fn open_hub(opts: &DoctorOptions, rows: &mut Vec<Row>) -> Option<Session> {
+    let Some(net) = &opts.hub else {
+        rows.push(Row::new(
+            "hub",
+            "reachable",
+            Status::Info,
+            "not given",
+            "give --hub ENDPOINT to check the hub and the robots' processes",
+        ));
+        return None;
+    };
+    let endpoints = net.connect.join(" or ");
+    let started = Instant::now();
+    match open_within(net, opts.timeout) {
+        Ok(s) => {
+            rows.push(Row::new(
+                "hub",
+                "reachable",
+                Status::Pass,
+                &endpoints,
+                format!(
+                    "transport {}, linked in {}",
+                    transport(&net.connect),
+                    ms(started.elapsed().as_secs_f64())
+                ),
+            ));
+            Some(s)
+        }
+        Err(e) => {
+            rows.push(Row::new(
+                "hub",
+                "reachable",
+                Status::Fail,
+                &endpoints,
+                format!(
+                    "not reached within {:.1} s: {e} (is the hub's router running there, the port open, the transport right?)",
+                    opts.timeout.as_secs_f64()
+                ),
+            ));
+            None
+        }
+    }
+}
+
 /// Runs every check; fails only on a scenario that cannot be built (what
 /// the network says is in the rows).
 pub fn run(opts: &DoctorOptions) -> Result<DoctorReport, FleetError> {
@@ -134,51 +180,7 @@ pub fn run(opts: &DoctorOptions) -> Result<DoctorReport, FleetError> {
     let keys = Keys::new(opts.fleet.as_deref().unwrap_or(&settings.name));
     let agents = plan.agents().len() as u32;
     let mut rows = Vec::new();
-    let hub = match &opts.hub {
-        None => {
-            rows.push(Row::new(
-                "hub",
-                "reachable",
-                Status::Info,
-                "not given",
-                "give --hub ENDPOINT to check the hub and the robots' processes",
-            ));
-            None
-        }
-        Some(net) => {
-            let endpoints = net.connect.join(" or ");
-            let started = Instant::now();
-            match open_within(net, opts.timeout) {
-                Ok(s) => {
-                    rows.push(Row::new(
-                        "hub",
-                        "reachable",
-                        Status::Pass,
-                        &endpoints,
-                        format!(
-                            "transport {}, linked in {}",
-                            transport(&net.connect),
-                            ms(started.elapsed().as_secs_f64())
-                        ),
-                    ));
-                    Some(s)
-                }
-                Err(e) => {
-                    rows.push(Row::new(
-                        "hub",
-                        "reachable",
-                        Status::Fail,
-                        &endpoints,
-                        format!(
-                            "not reached within {:.1} s: {e} (is the hub's router running there, the port open, the transport right?)",
-                            opts.timeout.as_secs_f64()
-                        ),
-                    ));
-                    None
-                }
-            }
-        }
-    };
+    let hub = open_hub(opts, &mut rows);
     let rounds = (opts.listen_for.as_secs_f64() / PROBE_INTERVAL.as_secs_f64()).ceil() as u32;
     let rounds = rounds.max(1);
     let ask = |name: &str| {

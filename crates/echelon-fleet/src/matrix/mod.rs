@@ -174,136 +174,16 @@ pub struct FaultsOptions {
 /// Judges a row from `fleet up`'s report.
 pub fn judge(row: &Row, up: &UpReport) -> RowResult {
     let mut problems = Vec::new();
-    let mut robots = Vec::new();
-    for &(k, depth) in &row.affected {
-        // A simulated robot measures itself; a ROS 2 robot's base
-        // measures it (and outlives a robot killed).
-        let robot = up.robots.iter().find(|r| r.agent == k);
-        let base = up.bases.iter().find(|b| b.agent == k);
-        let Some(a) = robot
-            .and_then(|r| r.aftermath)
-            .or_else(|| base.and_then(|b| b.aftermath))
-        else {
-            problems.push(format!("robot {k} measured nothing"));
-            continue;
-        };
-        let link = robot.map_or("killed", |r| r.link.as_str());
-        let v = a.speed_at_fault.unwrap_or(0.0);
-        let bound = (row.outcome != Outcome::Unaffected).then(|| row.bound(v, depth));
-        if let Some(bound) = bound
-            && a.farthest > bound
-        {
-            problems.push(format!(
-                "robot {k} got {:.4} m from where the fault found it, above its bound {bound:.4} m",
-                a.farthest
-            ));
-        }
-        let at_rest = !a.moving_at_end;
-        match row.outcome {
-            Outcome::Stop | Outcome::Hold if !at_rest && row.window >= SETTLE => problems.push(
-                format!("robot {k} still moved {:.1} s after the fault", row.window),
-            ),
-            Outcome::Continue | Outcome::Unaffected if at_rest => {
-                problems.push(format!("robot {k} stopped; it should have carried on"))
-            }
-            _ => {}
-        }
-        if row.outcome == Outcome::Unaffected
-            && let Some(r) = robot
-        {
-            let c = r.counters;
-            if row.chaos.garbage.is_some() && (c.malformed == 0 || c.reordered == 0) {
-                problems.push(format!(
-                    "robot {k} refused no garbage or no replay ({c:?}): did it hear any?"
-                ));
-            }
-            if r.final_error > 0.01 || c.link_losses > 0 {
-                problems.push(format!(
-                    "robot {k} was disturbed: final error {:.4} m, {} link losses",
-                    r.final_error, c.link_losses
-                ));
-            }
-        }
-        if matches!(
-            row.outcome,
-            Outcome::Hold | Outcome::Continue | Outcome::Unaffected
-        ) && link != "tracking"
-        {
-            problems.push(format!(
-                "robot {k} did not follow again: its link is {link} at the end"
-            ));
-        }
-        robots.push(RobotOutcome {
-            agent: k,
-            depth,
-            aftermath: a,
-            bound,
-            refused: robot.map_or(0, |r| {
-                let c = r.counters;
-                c.malformed + c.wrong_version + c.foreign + c.stale + c.reordered
-            }),
-            link: link.to_owned(),
-        });
-    }
-    // The collector killed: the gap in its log is reported, from about
-    // the fault on.
+    let robots: Vec<RobotOutcome> = row
+        .affected
+        .iter()
+        .filter_map(|&(k, depth)| judge_robot(row, up, k, depth, &mut problems))
+        .collect();
     let mut notes: Vec<String> = Vec::new();
-    if row.chaos.death_of(crate::role::Member::Collector).is_some() {
-        match up.log_gap {
-            Some(g) if (g.from - FAULT_AT).abs() <= 1.0 => {
-                notes.push(format!("the log ends at {:.2} s of {:.0}", g.from, g.to));
-            }
-            g => problems.push(format!(
-                "the collector's log gap was not reported from the fault on ({g:?})"
-            )),
-        }
-    }
-    // A partition cuts both ways: robot 2, which follows robot 1, lost it
-    // (its state stopped leaving) when the partition outlasted its link
-    // timeout.
-    for &(k, (_, len)) in &row.chaos.partitions {
-        if len > LINK_TIMEOUT + 1.0 / CONTROL_RATE {
-            let follower = up.robots.iter().find(|r| r.agent == k + 1);
-            if follower.is_none_or(|r| r.counters.link_losses == 0) {
-                problems.push(format!(
-                    "robot {}, robot {k}'s follower, never lost it: did robot {k}'s state keep leaving?",
-                    k + 1
-                ));
-            }
-        }
-    }
-    // A second fleet's processes: each refused, exit 2, naming why.
-    if row.chaos.intruders.is_some() {
-        if up.intruders.len() != 2 {
-            problems.push(format!("{} intruders ran, not 2", up.intruders.len()));
-        }
-        for i in &up.intruders {
-            if i.exit != Some(2) || !i.said.contains("already running") {
-                problems.push(format!(
-                    "{} was not refused (exit {:?}: {})",
-                    i.role, i.exit, i.said
-                ));
-            }
-        }
-        if let Some(i) = up.intruders.first() {
-            let said = i.said.trim_start_matches("error: ");
-            notes.push(said.split(": a second").next().unwrap_or(said).to_owned());
-        }
-    }
-    for &(k, w) in &row.held_by {
-        let counts = up.robots.iter().find(|r| r.agent == k).map(|r| r.watchdogs);
-        let trips = counts.map_or(0, |c| match w {
-            Watchdog::Odometry => c.odometry,
-            Watchdog::Operator => c.operator,
-            Watchdog::Output => c.output,
-        });
-        if trips == 0 {
-            problems.push(format!(
-                "robot {k}'s {} watchdog never held it ({counts:?})",
-                w.name()
-            ));
-        }
-    }
+    judge_collector(row, up, &mut problems, &mut notes);
+    judge_partitions(row, up, &mut problems);
+    judge_intruders(row, up, &mut problems, &mut notes);
+    judge_watchdogs(row, up, &mut problems);
     let refused: u64 = robots.iter().map(|r| r.refused).sum();
     if row.outcome == Outcome::Unaffected && refused > 0 {
         notes.push(format!("{refused} messages refused"));
@@ -336,6 +216,157 @@ pub fn judge(row: &Row, up: &UpReport) -> RowResult {
         deaths: up.deaths.clone(),
         logged: up.collector.as_ref().map_or(0, |c| c.logged),
         robots,
+    }
+}
+
+/// Affected robot `k`'s measurement (`depth` robots ahead of it in its
+/// chain), its problems pushed on `problems`; none when it measured nothing.
+fn judge_robot(
+    row: &Row,
+    up: &UpReport,
+    k: u32,
+    depth: u32,
+    problems: &mut Vec<String>,
+) -> Option<RobotOutcome> {
+    // A simulated robot measures itself; a ROS 2 robot's base
+    // measures it (and outlives a robot killed).
+    let robot = up.robots.iter().find(|r| r.agent == k);
+    let base = up.bases.iter().find(|b| b.agent == k);
+    let Some(a) = robot
+        .and_then(|r| r.aftermath)
+        .or_else(|| base.and_then(|b| b.aftermath))
+    else {
+        problems.push(format!("robot {k} measured nothing"));
+        return None;
+    };
+    let link = robot.map_or("killed", |r| r.link.as_str());
+    let v = a.speed_at_fault.unwrap_or(0.0);
+    let bound = (row.outcome != Outcome::Unaffected).then(|| row.bound(v, depth));
+    if let Some(bound) = bound
+        && a.farthest > bound
+    {
+        problems.push(format!(
+            "robot {k} got {:.4} m from where the fault found it, above its bound {bound:.4} m",
+            a.farthest
+        ));
+    }
+    let at_rest = !a.moving_at_end;
+    match row.outcome {
+        Outcome::Stop | Outcome::Hold if !at_rest && row.window >= SETTLE => problems.push(
+            format!("robot {k} still moved {:.1} s after the fault", row.window),
+        ),
+        Outcome::Continue | Outcome::Unaffected if at_rest => {
+            problems.push(format!("robot {k} stopped; it should have carried on"))
+        }
+        _ => {}
+    }
+    if row.outcome == Outcome::Unaffected
+        && let Some(r) = robot
+    {
+        let c = r.counters;
+        if row.chaos.garbage.is_some() && (c.malformed == 0 || c.reordered == 0) {
+            problems.push(format!(
+                "robot {k} refused no garbage or no replay ({c:?}): did it hear any?"
+            ));
+        }
+        if r.final_error > 0.01 || c.link_losses > 0 {
+            problems.push(format!(
+                "robot {k} was disturbed: final error {:.4} m, {} link losses",
+                r.final_error, c.link_losses
+            ));
+        }
+    }
+    if matches!(
+        row.outcome,
+        Outcome::Hold | Outcome::Continue | Outcome::Unaffected
+    ) && link != "tracking"
+    {
+        problems.push(format!(
+            "robot {k} did not follow again: its link is {link} at the end"
+        ));
+    }
+    Some(RobotOutcome {
+        agent: k,
+        depth,
+        aftermath: a,
+        bound,
+        refused: robot.map_or(0, |r| {
+            let c = r.counters;
+            c.malformed + c.wrong_version + c.foreign + c.stale + c.reordered
+        }),
+        link: link.to_owned(),
+    })
+}
+
+/// The collector killed: the gap in its log is reported, from about the
+/// fault on (a note), or a problem.
+fn judge_collector(row: &Row, up: &UpReport, problems: &mut Vec<String>, notes: &mut Vec<String>) {
+    if row.chaos.death_of(crate::role::Member::Collector).is_some() {
+        match up.log_gap {
+            Some(g) if (g.from - FAULT_AT).abs() <= 1.0 => {
+                notes.push(format!("the log ends at {:.2} s of {:.0}", g.from, g.to));
+            }
+            g => problems.push(format!(
+                "the collector's log gap was not reported from the fault on ({g:?})"
+            )),
+        }
+    }
+}
+
+/// A partition cuts both ways: robot 2, which follows robot 1, lost it
+/// (its state stopped leaving) when the partition outlasted its link
+/// timeout; a problem for each follower that never did.
+fn judge_partitions(row: &Row, up: &UpReport, problems: &mut Vec<String>) {
+    for &(k, (_, len)) in &row.chaos.partitions {
+        if len > LINK_TIMEOUT + 1.0 / CONTROL_RATE {
+            let follower = up.robots.iter().find(|r| r.agent == k + 1);
+            if follower.is_none_or(|r| r.counters.link_losses == 0) {
+                problems.push(format!(
+                    "robot {}, robot {k}'s follower, never lost it: did robot {k}'s state keep leaving?",
+                    k + 1
+                ));
+            }
+        }
+    }
+}
+
+/// A second fleet's processes: each refused, exit 2, naming why (the
+/// first's reason a note).
+fn judge_intruders(row: &Row, up: &UpReport, problems: &mut Vec<String>, notes: &mut Vec<String>) {
+    if row.chaos.intruders.is_some() {
+        if up.intruders.len() != 2 {
+            problems.push(format!("{} intruders ran, not 2", up.intruders.len()));
+        }
+        for i in &up.intruders {
+            if i.exit != Some(2) || !i.said.contains("already running") {
+                problems.push(format!(
+                    "{} was not refused (exit {:?}: {})",
+                    i.role, i.exit, i.said
+                ));
+            }
+        }
+        if let Some(i) = up.intruders.first() {
+            let said = i.said.trim_start_matches("error: ");
+            notes.push(said.split(": a second").next().unwrap_or(said).to_owned());
+        }
+    }
+}
+
+/// The robots a watchdog should have held: a problem for each it never did.
+fn judge_watchdogs(row: &Row, up: &UpReport, problems: &mut Vec<String>) {
+    for &(k, w) in &row.held_by {
+        let counts = up.robots.iter().find(|r| r.agent == k).map(|r| r.watchdogs);
+        let trips = counts.map_or(0, |c| match w {
+            Watchdog::Odometry => c.odometry,
+            Watchdog::Operator => c.operator,
+            Watchdog::Output => c.output,
+        });
+        if trips == 0 {
+            problems.push(format!(
+                "robot {k}'s {} watchdog never held it ({counts:?})",
+                w.name()
+            ));
+        }
     }
 }
 

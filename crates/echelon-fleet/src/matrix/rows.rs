@@ -106,23 +106,48 @@ fn row(
 
 /// The matrix's rows, in order.
 pub fn rows() -> Vec<Row> {
-    let at = FAULT_AT;
-    let kill = |m: Member| Chaos {
-        kills: vec![(m, at)],
+    let mut rows = kill_rows();
+    rows.extend(unaffected_rows());
+    rows.extend(clock_rows());
+    rows.extend(partition_rows());
+    rows.extend(watchdog_rows());
+    rows
+}
+
+/// Chaos killing `m`'s process (`kill -9`) at the fault.
+fn kill(m: Member) -> Chaos {
+    Chaos {
+        kills: vec![(m, FAULT_AT)],
         ..Chaos::default()
-    };
-    let chain = vec![(1, 0), (2, 1), (3, 2)];
-    // Each robot notices by itself.
-    let each = vec![(1, 0), (2, 0), (3, 0)];
-    let link_lost = LINK_TIMEOUT + 1.0 / REFERENCE_RATE;
-    let mut rows = vec![
+    }
+}
+
+/// The column's robots affected down their chain: robot 1 notices first.
+fn chain() -> Vec<(u32, u32)> {
+    vec![(1, 0), (2, 1), (3, 2)]
+}
+
+/// The column's robots affected each by itself: each notices by itself.
+fn each() -> Vec<(u32, u32)> {
+    vec![(1, 0), (2, 0), (3, 0)]
+}
+
+/// The time a robot needs to notice its leader's stream went stale, s.
+fn link_lost() -> f64 {
+    LINK_TIMEOUT + 1.0 / REFERENCE_RATE
+}
+
+/// The rows that kill a process (the leader, a robot, a base, the router)
+/// and expect the robots affected to stop, or hold until it is back.
+fn kill_rows() -> Vec<Row> {
+    vec![
         row(
             "leader-kill-stop",
             "the leader killed (`kill -9`), link_loss `stop`",
             "the link times out; each robot converges to its slot behind the last reference received, at rest",
             Outcome::Stop,
-            chain.clone(),
-            link_lost,
+            chain(),
+            link_lost(),
             kill(Member::Leader),
             WINDOW,
         ),
@@ -134,7 +159,7 @@ pub fn rows() -> Vec<Row> {
                 "the leader killed (`kill -9`), link_loss `extrapolate` (hold 1 s, decel 0.1 m/s²)",
                 "the reference is carried on its arc for the hold, then slowed to rest",
                 Outcome::Stop,
-                chain.clone(),
+                chain(),
                 1.0 / REFERENCE_RATE,
                 kill(Member::Leader),
                 WINDOW,
@@ -189,24 +214,31 @@ pub fn rows() -> Vec<Row> {
                 "the router killed (`kill -9`) and started again on its port 2 s later",
                 "every process loses its link at once: each robot's leader stream goes stale (link-loss policy `stop`); the clients reconnect to the router when it is back and the robots follow again",
                 Outcome::Hold,
-                each.clone(),
-                link_lost,
+                each(),
+                link_lost(),
                 Chaos {
-                    router_restart: Some((at, 2.0)),
+                    router_restart: Some((FAULT_AT, 2.0)),
                     ..Chaos::default()
                 },
                 2.0,
             )
         },
+    ]
+}
+
+/// The rows whose fault the robots must shrug off: garbage, the collector
+/// killed, a second fleet.
+fn unaffected_rows() -> Vec<Row> {
+    vec![
         row(
             "garbage",
             "garbage, duplicated and replayed (1 s old) messages on every key of the fleet, 20 times a second for 5 s",
             "every robot counts and refuses what is not a newer sample of its streams (malformed, reordered) and follows on",
             Outcome::Unaffected,
-            each.clone(),
+            each(),
             0.0,
             Chaos {
-                garbage: Some((at, 5.0)),
+                garbage: Some((FAULT_AT, 5.0)),
                 ..Chaos::default()
             },
             5.0,
@@ -216,7 +248,7 @@ pub fn rows() -> Vec<Row> {
             "the collector killed (`kill -9`)",
             "the robots do not depend on it and follow on; its log ends at the fault (`trajectory.csv` up to there, `fleet.mcap` without its footer) and `fleet up` reports the gap (`log_gap`)",
             Outcome::Unaffected,
-            each.clone(),
+            each(),
             0.0,
             kill(Member::Collector),
             5.0,
@@ -226,15 +258,20 @@ pub fn rows() -> Vec<Row> {
             "a second leader and a second robot 2 of the same fleet name join the router mid-run (what a second `fleet up` reaching this router would start)",
             "each is refused before it publishes anything (the fleet's leader and robot 2 already hold their liveliness tokens: exit 2, naming them); the running fleet is undisturbed",
             Outcome::Unaffected,
-            each.clone(),
+            each(),
             0.0,
             Chaos {
-                intruders: Some(at),
+                intruders: Some(FAULT_AT),
                 ..Chaos::default()
             },
             5.0,
         ),
-    ];
+    ]
+}
+
+/// The rows stepping robot 2's wall clock, forward and back.
+fn clock_rows() -> Vec<Row> {
+    let mut rows = Vec::new();
     for (name, fault, step) in [
         (
             "clock-jump-forward",
@@ -252,15 +289,22 @@ pub fn rows() -> Vec<Row> {
             fault,
             "fleet time is the leader's on a monotonic clock: control never reads the wall clock; only robot 2's latency statistics (delays against its wall clock) see the step",
             Outcome::Unaffected,
-            each.clone(),
+            each(),
             0.0,
             Chaos {
-                wall_clock_jumps: vec![(2, (at, step))],
+                wall_clock_jumps: vec![(2, (FAULT_AT, step))],
                 ..Chaos::default()
             },
             5.0,
         ));
     }
+    rows
+}
+
+/// The rows partitioning robot 1 from the fleet, shorter and longer than
+/// its link timeout.
+fn partition_rows() -> Vec<Row> {
+    let mut rows = Vec::new();
     for (name, fault, len, outcome) in [
         (
             "partition-0.3s",
@@ -287,49 +331,56 @@ pub fn rows() -> Vec<Row> {
             "after the link timeout robot 1 converges to the last reference and robot 2, which hears no more of robot 1, to its slot behind robot 1's last state (policy `stop`); robot 3 follows robot 2; all follow again when the partition ends",
             outcome,
             vec![(1, 0), (2, 0), (3, 1)],
-            link_lost,
+            link_lost(),
             Chaos {
-                partitions: vec![(1, (at, len))],
+                partitions: vec![(1, (FAULT_AT, len))],
                 ..Chaos::default()
             },
             len,
         ));
     }
-    rows.push(Row {
-        held_by: vec![(2, Watchdog::Odometry)],
-        ..row(
-            "odometry-freeze",
-            "robot 2's odometry frozen for 3 s (the robot moves on)",
-            "robot 2's odometry watchdog holds it (zero command, link `held`) after two control periods; robot 3 stops following a held leader (its link-loss policy)",
-            Outcome::Hold,
-            vec![(2, 0)],
-            2.0 / CONTROL_RATE,
-            Chaos {
-                freeze_odometry: vec![(2, (at, 3.0))],
-                ..Chaos::default()
-            },
-            3.0,
-        )
-    });
-    rows.push(Row {
-        supervised: true,
-        held_by: vec![
-            (1, Watchdog::Operator),
-            (2, Watchdog::Operator),
-            (3, Watchdog::Operator),
-        ],
-        ..row(
-            "heartbeat-lost",
-            "supervised run (operator_heartbeat = 1 s): the operator's heartbeat process killed (`kill -9`)",
-            "every robot's operator watchdog holds it (zero command, link `held`) once the last heartbeat is 1 s old",
-            Outcome::Stop,
-            each,
-            HEARTBEAT,
-            kill(Member::Operator),
-            WINDOW,
-        )
-    });
     rows
+}
+
+/// The rows a watchdog must hold: odometry frozen, the operator's
+/// heartbeat lost.
+fn watchdog_rows() -> Vec<Row> {
+    vec![
+        Row {
+            held_by: vec![(2, Watchdog::Odometry)],
+            ..row(
+                "odometry-freeze",
+                "robot 2's odometry frozen for 3 s (the robot moves on)",
+                "robot 2's odometry watchdog holds it (zero command, link `held`) after two control periods; robot 3 stops following a held leader (its link-loss policy)",
+                Outcome::Hold,
+                vec![(2, 0)],
+                2.0 / CONTROL_RATE,
+                Chaos {
+                    freeze_odometry: vec![(2, (FAULT_AT, 3.0))],
+                    ..Chaos::default()
+                },
+                3.0,
+            )
+        },
+        Row {
+            supervised: true,
+            held_by: vec![
+                (1, Watchdog::Operator),
+                (2, Watchdog::Operator),
+                (3, Watchdog::Operator),
+            ],
+            ..row(
+                "heartbeat-lost",
+                "supervised run (operator_heartbeat = 1 s): the operator's heartbeat process killed (`kill -9`)",
+                "every robot's operator watchdog holds it (zero command, link `held`) once the last heartbeat is 1 s old",
+                Outcome::Stop,
+                each(),
+                HEARTBEAT,
+                kill(Member::Operator),
+                WINDOW,
+            )
+        },
+    ]
 }
 
 impl Row {

@@ -4,10 +4,11 @@
 //! state published.
 
 use echelon::follow::{LeaderView, follow};
+use echelon::model::State;
 
-use crate::link::predict;
+use crate::link::{Predicted, predict};
 use crate::plant::Plant;
-use crate::wire::{LinkStatus, RobotState};
+use crate::wire::{Header, LinkStatus, RobotState};
 
 use super::{Halt, Robot, RobotTick, WAITING_PERIOD, Watchdog};
 
@@ -39,15 +40,7 @@ impl<P: Plant> Robot<P> {
         }
         let local = now;
         let now = self.fleet_time(now);
-        while let Some(&(at, h, s)) = self.delayed.front() {
-            if at > now {
-                break;
-            }
-            self.delayed.pop_front();
-            if self.tracker.check(h, s.t, at).is_ok() {
-                self.sample = Some(s);
-            }
-        }
+        self.deliver_due(now);
         self.check_hazards(now);
         if self.latch.stopped() {
             return self.standstill_tick(now, None);
@@ -68,36 +61,9 @@ impl<P: Plant> Robot<P> {
             _ => None,
         };
         let Some(p) = prediction else {
-            // Waiting for the leader: stand still, say so now and then.
-            if self.synced {
-                self.plant.advance(now);
-            }
-            self.halt(Halt::NoLeader);
-            let t = if self.synced { now } else { 0.0 };
-            let publish = self.plant.state().map(|state| {
-                self.last = RobotState {
-                    t,
-                    agent: self.config.agent,
-                    link: LinkStatus::Waiting,
-                    state,
-                    sigma: self.plant.position_sigma(),
-                    ..RobotState::default()
-                };
-                self.header_for(self.last)
-            });
-            self.next_tick = now + WAITING_PERIOD.min(self.config.period * 10.0);
-            return RobotTick {
-                publish,
-                stats: None,
-                done: false,
-            };
+            return self.waiting_tick(now);
         };
-        if p.status == LinkStatus::Tracking {
-            self.fresh = true;
-        } else if self.fresh {
-            self.fresh = false;
-            self.tracker.counters.link_losses += 1;
-        }
+        self.note_link(p.status);
 
         self.plant.advance(now);
         let state = self.plant.state();
@@ -105,62 +71,10 @@ impl<P: Plant> Robot<P> {
             return self.stop_diverged(now, &breach.to_string());
         }
         let publish = match state {
-            Some(state) => {
-                let out = follow(
-                    &self.config.spec,
-                    &state,
-                    LeaderView::Motion {
-                        motion: p.motion,
-                        speed: p.speed,
-                        turn_rate: p.turn_rate,
-                    },
-                );
-                let nominal = out.command();
-                let sigma = self.plant.position_sigma();
-                let cmd = match self.safety.as_mut() {
-                    Some(s) => {
-                        let error = out.law.e[0].hypot(out.law.e[1]);
-                        s.act(&self.config, local, now, &state, sigma, error, nominal)
-                    }
-                    None => self.config.spec.act(now, &state, nominal, None).command,
-                };
-                let cmd = self.within_backup(&state, cmd);
-                if !cmd.values().iter().all(|v| v.is_finite()) {
-                    // A leader sample that is finite but far beyond any
-                    // robot (a position of 1e308 m off the wire) overflows
-                    // the law: the NaN never reaches the plant; the run has
-                    // diverged, and says so.
-                    return self.stop_diverged(
-                        now,
-                        &format!(
-                            "the law's command {:?} is not finite (leader at {:?}, velocity {:?})",
-                            cmd.values(),
-                            p.motion.p,
-                            p.motion.dp
-                        ),
-                    );
-                }
-                let act = self.plant.command(cmd);
-                let (dv, domega) = self.plant.accelerations();
-                self.last = RobotState {
-                    t: now,
-                    agent: self.config.agent,
-                    link: p.status,
-                    state,
-                    dv,
-                    domega,
-                    e: out.law.e,
-                    z: out.law.z,
-                    u: act.u,
-                    tau: act.tau,
-                    leader: out.leader,
-                    velocity: act.velocity_sample(cmd),
-                    sigma,
-                    odometry: None,
-                };
-                self.ticks += 1;
-                Some(self.header_for(self.last))
-            }
+            Some(state) => match self.follow_step(local, now, state, &p) {
+                Ok(published) => Some(published),
+                Err(why) => return self.stop_diverged(now, &why),
+            },
             None => {
                 self.halt(Halt::NoOdometry);
                 None
@@ -173,19 +87,145 @@ impl<P: Plant> Robot<P> {
         });
         let done = self.config.duration.is_some_and(|d| now >= d);
         if !done {
-            let period = self.config.period;
-            self.next_tick += period;
-            if now - self.next_tick > period {
-                // Late by more than a period: the plant keeps moving in real
-                // time; the controller resumes on the next tick from now.
-                self.overruns += 1;
-                self.next_tick = now + period;
-            }
+            self.schedule_next(now);
         }
         RobotTick {
             publish,
             stats,
             done,
+        }
+    }
+
+    /// Delivers the delayed leader samples due by fleet time `now`, in
+    /// order: each accepted by the tracker becomes the sample.
+    #[inline]
+    fn deliver_due(&mut self, now: f64) {
+        while let Some(&(at, h, s)) = self.delayed.front() {
+            if at > now {
+                break;
+            }
+            self.delayed.pop_front();
+            if self.tracker.check(h, s.t, at).is_ok() {
+                self.sample = Some(s);
+            }
+        }
+    }
+
+    /// A tick while waiting for the leader, at fleet time `now`: stand
+    /// still, say so now and then.
+    #[inline]
+    fn waiting_tick(&mut self, now: f64) -> RobotTick {
+        if self.synced {
+            self.plant.advance(now);
+        }
+        self.halt(Halt::NoLeader);
+        let t = if self.synced { now } else { 0.0 };
+        let publish = self.plant.state().map(|state| {
+            self.last = RobotState {
+                t,
+                agent: self.config.agent,
+                link: LinkStatus::Waiting,
+                state,
+                sigma: self.plant.position_sigma(),
+                ..RobotState::default()
+            };
+            self.header_for(self.last)
+        });
+        self.next_tick = now + WAITING_PERIOD.min(self.config.period * 10.0);
+        RobotTick {
+            publish,
+            stats: None,
+            done: false,
+        }
+    }
+
+    /// Notes the link's status: back to tracking, or a new loss counted.
+    #[inline]
+    fn note_link(&mut self, status: LinkStatus) {
+        if status == LinkStatus::Tracking {
+            self.fresh = true;
+        } else if self.fresh {
+            self.fresh = false;
+            self.tracker.counters.link_losses += 1;
+        }
+    }
+
+    /// The law on leader motion `p` from `state` at fleet time `now` (local
+    /// time `local`), through the safety filter and the backup, commanded to
+    /// the plant: the state to publish, or why the run diverged when the
+    /// command is not finite (for `stop_diverged`).
+    #[inline]
+    fn follow_step(
+        &mut self,
+        local: f64,
+        now: f64,
+        state: State,
+        p: &Predicted,
+    ) -> Result<(Header, RobotState), String> {
+        let out = follow(
+            &self.config.spec,
+            &state,
+            LeaderView::Motion {
+                motion: p.motion,
+                speed: p.speed,
+                turn_rate: p.turn_rate,
+            },
+        );
+        let nominal = out.command();
+        let sigma = self.plant.position_sigma();
+        let cmd = match self.safety.as_mut() {
+            Some(s) => {
+                let error = out.law.e[0].hypot(out.law.e[1]);
+                s.act(&self.config, local, now, &state, sigma, error, nominal)
+            }
+            None => self.config.spec.act(now, &state, nominal, None).command,
+        };
+        let cmd = self.within_backup(&state, cmd);
+        if !cmd.values().iter().all(|v| v.is_finite()) {
+            // A leader sample that is finite but far beyond any
+            // robot (a position of 1e308 m off the wire) overflows
+            // the law: the NaN never reaches the plant; the run has
+            // diverged, and says so.
+            return Err(format!(
+                "the law's command {:?} is not finite (leader at {:?}, velocity {:?})",
+                cmd.values(),
+                p.motion.p,
+                p.motion.dp
+            ));
+        }
+        let act = self.plant.command(cmd);
+        let (dv, domega) = self.plant.accelerations();
+        self.last = RobotState {
+            t: now,
+            agent: self.config.agent,
+            link: p.status,
+            state,
+            dv,
+            domega,
+            e: out.law.e,
+            z: out.law.z,
+            u: act.u,
+            tau: act.tau,
+            leader: out.leader,
+            velocity: act.velocity_sample(cmd),
+            sigma,
+            odometry: None,
+        };
+        self.ticks += 1;
+        Ok(self.header_for(self.last))
+    }
+
+    /// The next tick one control period on; late by more than a period
+    /// (the plant keeps moving in real time), one period from `now`.
+    #[inline]
+    fn schedule_next(&mut self, now: f64) {
+        let period = self.config.period;
+        self.next_tick += period;
+        if now - self.next_tick > period {
+            // Late by more than a period: the plant keeps moving in real
+            // time; the controller resumes on the next tick from now.
+            self.overruns += 1;
+            self.next_tick = now + period;
         }
     }
 

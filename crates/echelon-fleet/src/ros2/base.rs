@@ -6,6 +6,7 @@
 use serde::Serialize;
 
 use echelon::agent::Drive;
+use echelon::scenario::{FixSource, Ros2Link};
 
 use super::drive::cmd_vel_type;
 use super::endpoint::declare_node;
@@ -21,8 +22,8 @@ use crate::{FleetError, StopFlag};
 use echelon_ros2::attachment::Gid;
 use echelon_ros2::keys::{topic_key, topic_key_any_type};
 use echelon_ros2::msgs::{
-    BOOL, Bool, HAZARD_DETECTION_VECTOR, HazardDetection, HazardDetectionVector, Header, ODOMETRY,
-    RosMessage, Time,
+    BOOL, Bool, HAZARD_DETECTION_VECTOR, HazardDetection, HazardDetectionVector, Header,
+    MessageType, ODOMETRY, RosMessage, Time,
 };
 
 use super::hazard::{Hazard, HazardWindow};
@@ -107,6 +108,19 @@ struct FaultWatch {
     reference: String,
     /// The fleet's time, from the first reference heard.
     fleet: crate::clock::ReferenceTime,
+}
+
+impl FaultWatch {
+    /// The watch `opts` ask for (`--fault-at`, `--die-at`; none without
+    /// either), on the fleet's reference from `keys`.
+    fn of(opts: &BaseOptions, keys: &crate::keys::Keys) -> Option<FaultWatch> {
+        (opts.fault_at.is_some() || opts.process.die_at.is_some()).then(|| FaultWatch {
+            at: opts.fault_at,
+            die_at: opts.process.die_at,
+            reference: keys.reference(),
+            fleet: crate::clock::ReferenceTime::default(),
+        })
+    }
 }
 
 /// What a simulated base says of its own safety (a Create 3's hazards, an
@@ -231,6 +245,22 @@ impl Task for BaseTask {
 }
 
 impl BaseWords {
+    /// The hazards and e-stop `link` names topics for, reporting `windows`.
+    fn of(link: &Ros2Link, windows: &[HazardWindow]) -> BaseWords {
+        BaseWords {
+            hazard_key: link
+                .hazards
+                .as_ref()
+                .map(|t| topic_key(link.key_scheme, link.domain_id, t, &HAZARD_DETECTION_VECTOR)),
+            estop_key: link
+                .estop
+                .as_ref()
+                .map(|t| topic_key(link.key_scheme, link.domain_id, t, &BOOL)),
+            windows: windows.to_vec(),
+            buf: Vec::with_capacity(128),
+        }
+    }
+
     /// Publishes its hazard vector (the windows covering `now`) and e-stop
     /// on outputs from `first` on.
     fn publish(
@@ -315,19 +345,11 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
     runtime::run_on(
         |session| {
             let truth_topic = ground_truth_topic(&link);
-            let mut publishes = vec![
-                (link.odom.as_str(), &ODOMETRY),
-                (truth_topic.as_str(), &ODOMETRY),
-            ];
-            if let Some((source, ..)) = &mocap {
-                publishes.push((source.topic.as_str(), fix_type(source.message)));
-            }
-            if let Some(t) = &link.hazards {
-                publishes.push((t.as_str(), &HAZARD_DETECTION_VECTOR));
-            }
-            if let Some(t) = &link.estop {
-                publishes.push((t.as_str(), &BOOL));
-            }
+            let publishes = publishes(
+                &link,
+                &truth_topic,
+                mocap.as_ref().map(|(source, ..)| source),
+            );
             let (tokens, gids) = declare_node(
                 session,
                 &link,
@@ -380,25 +402,8 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
                 alive,
                 duration: opts.process.duration,
                 wall: crate::unix_nanos,
-                safety: BaseWords {
-                    hazard_key: link.hazards.as_ref().map(|t| {
-                        topic_key(link.key_scheme, link.domain_id, t, &HAZARD_DETECTION_VECTOR)
-                    }),
-                    estop_key: link
-                        .estop
-                        .as_ref()
-                        .map(|t| topic_key(link.key_scheme, link.domain_id, t, &BOOL)),
-                    windows: opts.hazards.clone(),
-                    buf: Vec::with_capacity(128),
-                },
-                fault: (opts.fault_at.is_some() || opts.process.die_at.is_some()).then(|| {
-                    FaultWatch {
-                        at: opts.fault_at,
-                        die_at: opts.process.die_at,
-                        reference: keys.reference(),
-                        fleet: crate::clock::ReferenceTime::default(),
-                    }
-                }),
+                safety: BaseWords::of(&link, &opts.hazards),
+                fault: FaultWatch::of(&opts, &keys),
             };
             Ok((task, tokens))
         },
@@ -407,4 +412,25 @@ pub fn run(opts: BaseOptions, stop: &StopFlag) -> Result<BaseReport, FleetError>
         stop,
     )?
     .report()
+}
+
+/// The topics the base publishes, each with its type: its odometry, its
+/// ground truth (on `truth_topic`), its motion capture's fixes (`mocap`),
+/// hazards and e-stop, as `link` names them.
+fn publishes<'a>(
+    link: &'a Ros2Link,
+    truth_topic: &'a str,
+    mocap: Option<&'a FixSource>,
+) -> Vec<(&'a str, &'static MessageType)> {
+    let mut publishes = vec![(link.odom.as_str(), &ODOMETRY), (truth_topic, &ODOMETRY)];
+    if let Some(source) = mocap {
+        publishes.push((source.topic.as_str(), fix_type(source.message)));
+    }
+    if let Some(t) = &link.hazards {
+        publishes.push((t.as_str(), &HAZARD_DETECTION_VECTOR));
+    }
+    if let Some(t) = &link.estop {
+        publishes.push((t.as_str(), &BOOL));
+    }
+    publishes
 }

@@ -124,87 +124,23 @@ pub fn run_split<T: Task + Send + 'static, G>(
     let dropped = queue.dropped.clone();
     let spares = Spares::default();
     let worker = Worker::default();
-    let mut subscribers = Vec::new();
-    let mut from_device = Vec::new();
-    // Keys each session may query (net::flush): its first token, else its
-    // first subscription.
-    let mut flush_keys = (task.tokens().into_iter().next(), None);
-    for (input, key) in task.inputs().into_iter().enumerate() {
-        let queue = queue.clone();
-        let spares = spares.clone();
-        let worker = worker.clone();
-        let on = if device_inputs.contains(&key) {
-            from_device.push(input);
-            flush_keys.1.get_or_insert_with(|| key.clone());
-            dev
-        } else {
-            flush_keys.0.get_or_insert_with(|| key.clone());
-            &session
-        };
-        let sub = on
-            .declare_subscriber(&key)
-            .callback(move |sample| {
-                worker.note();
-                queue.offer(spares.arrival(input, &sample));
-            })
-            .wait()
-            .map_err(|e| FleetError::Zenoh(format!("subscribing to {key}: {e}")))?;
-        subscribers.push(sub);
-    }
+    let inputs = subscribe(
+        &task,
+        &session,
+        dev,
+        &device_inputs,
+        &queue,
+        &spares,
+        &worker,
+    )?;
     drop(queue);
     // Samples that arrived before the clock started, handed once it has.
-    let mut early = Vec::new();
-    if let Some(d) = &device
-        && let Some(timeout) = d.first_sample
-        && !from_device.is_empty()
-    {
-        let started = Instant::now();
-        loop {
-            if stop.is_raised() {
-                break;
-            }
-            if started.elapsed() > timeout {
-                return Err(FleetError::Config(format!(
-                    "nothing arrived from {} within {:.0} s (is its driver running, and are the namespace, domain and key scheme right?)",
-                    d.name,
-                    timeout.as_secs_f64()
-                )));
-            }
-            match rx.recv_timeout(NAP) {
-                Ok(a) => {
-                    let first = from_device.contains(&a.input);
-                    early.push(a);
-                    if first {
-                        break;
-                    }
-                }
-                Err(mpsc::RecvTimeoutError::Timeout) => {}
-                Err(mpsc::RecvTimeoutError::Disconnected) => break,
-            }
-        }
-    }
-    let mut publishers = Vec::new();
-    for key in task.outputs() {
-        publishers.push(
-            session
-                .declare_publisher(key.clone())
-                .wait()
-                .map_err(|e| FleetError::Zenoh(format!("declaring {key}: {e}")))?,
-        );
-    }
+    let early = first_samples(device.as_ref(), &inputs.from_device, &rx, stop)?;
+    let publishers = declare_publishers(&session, &task)?;
     if task.exclusive() {
         refuse_if_held(&session, &task.tokens(), EXCLUSIVE_WAIT, stop)?;
     }
-    let mut tokens = Vec::new();
-    for key in task.tokens() {
-        tokens.push(
-            session
-                .liveliness()
-                .declare_token(key)
-                .wait()
-                .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?,
-        );
-    }
+    let tokens = declare_tokens(&session, &task)?;
     // The latch: answer queries with what the task says after each call;
     // ask once (after `wait_for`, so the awaited are asked too).
     let latching = task.latching();
@@ -222,20 +158,7 @@ pub fn run_split<T: Task + Send + 'static, G>(
     };
     clock.sync(0.0, Instant::now());
     task.started(crate::unix_nanos());
-    let latch_input = task.inputs().len();
-    for (key, payload) in &heard {
-        task.on_input(
-            latch_input,
-            &Sample {
-                key,
-                payload,
-                attachment: None,
-                at: clock.now(),
-                unix_ns: crate::unix_nanos(),
-                delay: None,
-            },
-        )?;
-    }
+    hand_latched(&mut task, &heard, &clock)?;
     let mut engine = Engine {
         task,
         clock,
@@ -271,11 +194,190 @@ pub fn run_split<T: Task + Send + 'static, G>(
         (ran, _) => ran,
     };
     let stopped = engine.task.stop(&mut engine.out);
-    // Its last words on their way before the sessions close (the fleet's,
-    // then the device's: a robot's final zero goes to its robot).
+    close(
+        &session,
+        device_session,
+        inputs,
+        &mut engine.out,
+        tokens,
+        guard,
+    );
+    ran?;
+    stopped?;
+    finish(engine)
+}
+
+/// A task's subscriptions, each on the fleet's session or the device's.
+struct Subscribed {
+    /// Every input's subscriber, in the task's order.
+    subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    /// The inputs subscribed to on the device's session.
+    from_device: Vec<usize>,
+    /// Keys each session (the fleet's, the device's) may query
+    /// (`net::flush`): its first token, else its first subscription.
+    flush_keys: (Option<String>, Option<String>),
+}
+
+/// Subscribes to every input of `task`, on `dev` those named in
+/// `device_inputs`, on `session` the others; each sample offered to
+/// `queue` (its buffer from `spares`), `worker` noting Zenoh's thread.
+fn subscribe<T: Task>(
+    task: &T,
+    session: &zenoh::Session,
+    dev: &zenoh::Session,
+    device_inputs: &[String],
+    queue: &Queue<inputs::Arrival>,
+    spares: &Spares,
+    worker: &Worker,
+) -> Result<Subscribed, FleetError> {
+    let mut subscribers = Vec::new();
+    let mut from_device = Vec::new();
+    let mut flush_keys = (task.tokens().into_iter().next(), None);
+    for (input, key) in task.inputs().into_iter().enumerate() {
+        let queue = queue.clone();
+        let spares = spares.clone();
+        let worker = worker.clone();
+        let on = if device_inputs.contains(&key) {
+            from_device.push(input);
+            flush_keys.1.get_or_insert_with(|| key.clone());
+            dev
+        } else {
+            flush_keys.0.get_or_insert_with(|| key.clone());
+            session
+        };
+        let sub = on
+            .declare_subscriber(&key)
+            .callback(move |sample| {
+                worker.note();
+                queue.offer(spares.arrival(input, &sample));
+            })
+            .wait()
+            .map_err(|e| FleetError::Zenoh(format!("subscribing to {key}: {e}")))?;
+        subscribers.push(sub);
+    }
+    Ok(Subscribed {
+        subscribers,
+        from_device,
+        flush_keys,
+    })
+}
+
+/// With a device that asks for it ([`Device::first_sample`]) and inputs on
+/// it: what arrives on `rx` until the first sample from the device (inputs
+/// `from_device`), or a stop request; refused when none arrives in time.
+fn first_samples(
+    device: Option<&Device<'_>>,
+    from_device: &[usize],
+    rx: &mpsc::Receiver<inputs::Arrival>,
+    stop: &StopFlag,
+) -> Result<Vec<inputs::Arrival>, FleetError> {
+    let mut early = Vec::new();
+    if let Some(d) = device
+        && let Some(timeout) = d.first_sample
+        && !from_device.is_empty()
+    {
+        let started = Instant::now();
+        loop {
+            if stop.is_raised() {
+                break;
+            }
+            if started.elapsed() > timeout {
+                return Err(FleetError::Config(format!(
+                    "nothing arrived from {} within {:.0} s (is its driver running, and are the namespace, domain and key scheme right?)",
+                    d.name,
+                    timeout.as_secs_f64()
+                )));
+            }
+            match rx.recv_timeout(NAP) {
+                Ok(a) => {
+                    let first = from_device.contains(&a.input);
+                    early.push(a);
+                    if first {
+                        break;
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            }
+        }
+    }
+    Ok(early)
+}
+
+/// A publisher on `session` for each of `task`'s outputs, in order.
+fn declare_publishers<T: Task>(
+    session: &zenoh::Session,
+    task: &T,
+) -> Result<Vec<zenoh::pubsub::Publisher<'static>>, FleetError> {
+    let mut publishers = Vec::new();
+    for key in task.outputs() {
+        publishers.push(
+            session
+                .declare_publisher(key.clone())
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("declaring {key}: {e}")))?,
+        );
+    }
+    Ok(publishers)
+}
+
+/// `task`'s liveliness tokens, declared on `session`.
+fn declare_tokens<T: Task>(
+    session: &zenoh::Session,
+    task: &T,
+) -> Result<Vec<zenoh::liveliness::LivelinessToken>, FleetError> {
+    let mut tokens = Vec::new();
+    for key in task.tokens() {
+        tokens.push(
+            session
+                .liveliness()
+                .declare_token(key)
+                .wait()
+                .map_err(|e| FleetError::Zenoh(format!("liveliness: {e}")))?,
+        );
+    }
+    Ok(tokens)
+}
+
+/// Hands `task` the latches `heard` (key, payload), on the input after its
+/// own, stamped now on `clock`.
+fn hand_latched<T: Task>(
+    task: &mut T,
+    heard: &[(String, Vec<u8>)],
+    clock: &FleetClock,
+) -> Result<(), FleetError> {
+    let latch_input = task.inputs().len();
+    for (key, payload) in heard {
+        task.on_input(
+            latch_input,
+            &Sample {
+                key,
+                payload,
+                attachment: None,
+                at: clock.now(),
+                unix_ns: crate::unix_nanos(),
+                delay: None,
+            },
+        )?;
+    }
+    Ok(())
+}
+
+/// The task stopped: its last words on their way before the sessions
+/// close (the fleet's, then the device's: a robot's final zero goes to its
+/// robot), then its publishers, `tokens`, `guard` and subscriptions gone,
+/// and both sessions closed.
+fn close<G>(
+    session: &zenoh::Session,
+    device_session: Option<zenoh::Session>,
+    inputs: Subscribed,
+    out: &mut ZenohOutputs,
+    tokens: Vec<zenoh::liveliness::LivelinessToken>,
+    guard: G,
+) {
     let sessions = [
-        (Some(&session), flush_keys.0),
-        (device_session.as_ref(), flush_keys.1),
+        (Some(session), inputs.flush_keys.0),
+        (device_session.as_ref(), inputs.flush_keys.1),
     ];
     for (s, key) in sessions {
         if let (Some(s), Some(key)) = (s, key)
@@ -284,18 +386,22 @@ pub fn run_split<T: Task + Send + 'static, G>(
             eprintln!("{e}: its last messages may not have arrived");
         }
     }
-    engine.out.publishers.clear();
+    out.publishers.clear();
     drop(tokens);
     drop(guard);
-    for sub in subscribers {
+    for sub in inputs.subscribers {
         let _ = sub.undeclare().wait();
     }
     let _ = session.close().wait();
     if let Some(d) = device_session {
         let _ = d.close().wait();
     }
-    ran?;
-    stopped?;
+}
+
+/// The task's end, once its sessions are closed: what had arrived before
+/// its inputs closed handed (a task that wakes on input), the samples
+/// dropped told and said.
+fn finish<T: Task>(mut engine: Engine<T>) -> Result<T, FleetError> {
     if engine.task.wakes_on_input() {
         // What had arrived before the inputs closed.
         engine.drain()?;

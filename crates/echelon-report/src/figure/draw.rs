@@ -15,7 +15,7 @@ use super::Figure;
 use super::axis::{Coord, format_tick};
 use super::panel::{Item, LEGEND_MAX, Panel};
 use super::simplify::simplify;
-use super::style::{Marker, Stroke, palette, register_fonts, text};
+use super::style::{Color, Marker, Stroke, palette, register_fonts, text};
 use crate::ReportError;
 
 const TITLE_PX: f64 = 22.0;
@@ -227,6 +227,134 @@ fn robot_triangle(heading: f64, size: f64) -> Vec<(i32, i32)> {
         .collect()
 }
 
+/// The legend's sample of a line drawn with `stroke`.
+fn legend_line(stroke: Stroke) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    let style = stroke.style();
+    move |(x, y): (i32, i32)| PathElement::new(vec![(x, y), (x + 22, y)], style)
+}
+
+/// Draws a polyline of `points`, split at non-finite points, each run
+/// thinned to a quarter pixel (`px`, `py`: a pixel in chart units).
+fn draw_line<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Chart<'a, DB>,
+    panel: &Panel,
+    points: &[(f64, f64)],
+    stroke: Stroke,
+    label: Option<&str>,
+    (px, py): (f64, f64),
+) -> Result<(), ReportError>
+where
+    DB::ErrorType: 'static,
+{
+    let map = |(x, y): (f64, f64)| (panel.x.map(x), panel.y.map(y));
+    // Split at non-finite points, thin each run to a quarter pixel.
+    let mapped: Vec<(f64, f64)> = points.iter().map(|&p| map(p)).collect();
+    let mut runs: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut run = Vec::new();
+    for p in mapped {
+        if p.0.is_finite() && p.1.is_finite() {
+            run.push(p);
+        } else if !run.is_empty() {
+            runs.push(std::mem::take(&mut run));
+        }
+    }
+    if !run.is_empty() {
+        runs.push(run);
+    }
+    let mut first = true;
+    for run in &runs {
+        let scaled: Vec<(f64, f64)> = run.iter().map(|&(x, y)| (x / px, y / py)).collect();
+        let kept: Vec<(f64, f64)> = simplify(&scaled, 0.25)
+            .into_iter()
+            .map(|i| run[i])
+            .collect();
+        let anno = match stroke.dash.pattern() {
+            None => chart
+                .draw_series(LineSeries::new(kept, stroke.style()))
+                .map_err(draw_err)?,
+            Some((size, gap)) => chart
+                .draw_series(DashedLineSeries::new(kept, size, gap, stroke.style()))
+                .map_err(draw_err)?,
+        };
+        if first && let Some(l) = label {
+            anno.label(l).legend(legend_line(stroke));
+        }
+        first = false;
+    }
+    if runs.is_empty()
+        && let Some(l) = label
+    {
+        chart
+            .draw_series(std::iter::empty::<Circle<(f64, f64), u32>>())
+            .map_err(draw_err)?
+            .label(l)
+            .legend(legend_line(stroke));
+    }
+    Ok(())
+}
+
+/// Draws the markers `at` in `color`: dots and robots (triangles at their
+/// headings), the legend showing the panel's shape.
+fn draw_markers<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Chart<'a, DB>,
+    panel: &Panel,
+    at: &[((f64, f64), Marker)],
+    color: Color,
+    label: Option<&str>,
+) -> Result<(), ReportError>
+where
+    DB::ErrorType: 'static,
+{
+    let map = |(x, y): (f64, f64)| (panel.x.map(x), panel.y.map(y));
+    let rgb = color.rgb();
+    let ink = palette::INK.rgb();
+    let finite = |p: (f64, f64)| {
+        let p = map(p);
+        (p.0.is_finite() && p.1.is_finite()).then_some(p)
+    };
+    chart
+        .draw_series(at.iter().filter_map(|&(p, marker)| {
+            (marker == Marker::Dot)
+                .then(|| finite(p))
+                .flatten()
+                .map(|p| Circle::new(p, 4, rgb.filled()))
+        }))
+        .map_err(draw_err)?;
+    let anno = chart
+        .draw_series(at.iter().filter_map(|&(p, marker)| {
+            let Marker::Robot { heading, filled } = marker else {
+                return None;
+            };
+            let tri = robot_triangle(heading, 9.0);
+            let (fill, outline) = if filled {
+                (rgb.filled(), ink.stroke_width(1))
+            } else {
+                (palette::PAPER.rgb().filled(), rgb.stroke_width(2))
+            };
+            let closed: Vec<(i32, i32)> = tri.iter().chain(tri.first()).copied().collect();
+            Some(
+                EmptyElement::at(finite(p)?)
+                    + Polygon::new(tri, fill)
+                    + PathElement::new(closed, outline),
+            )
+        }))
+        .map_err(draw_err)?;
+    if let Some(l) = label {
+        // The legend shows the shape the panel draws: dots or robots.
+        if at.iter().all(|(_, m)| *m == Marker::Dot) {
+            anno.label(l).legend(move |(x, y)| {
+                EmptyElement::at((x + 11, y)) + Circle::new((0, 0), 4, color.rgb().filled())
+            });
+        } else {
+            anno.label(l).legend(move |(x, y)| {
+                EmptyElement::at((x + 11, y))
+                    + Polygon::new(robot_triangle(0.0, 8.0), color.rgb().filled())
+            });
+        }
+    }
+    Ok(())
+}
+
 fn draw_item<'a, DB: DrawingBackend + 'a>(
     chart: &mut Chart<'a, DB>,
     panel: &Panel,
@@ -238,55 +366,9 @@ where
     DB::ErrorType: 'static,
 {
     let map = |(x, y): (f64, f64)| (panel.x.map(x), panel.y.map(y));
-    let legend_line = |stroke: Stroke| {
-        let style = stroke.style();
-        move |(x, y): (i32, i32)| PathElement::new(vec![(x, y), (x + 22, y)], style)
-    };
     match item {
         Item::Line { points, stroke, .. } => {
-            // Split at non-finite points, thin each run to a quarter pixel.
-            let mapped: Vec<(f64, f64)> = points.iter().map(|&p| map(p)).collect();
-            let mut runs: Vec<Vec<(f64, f64)>> = Vec::new();
-            let mut run = Vec::new();
-            for p in mapped {
-                if p.0.is_finite() && p.1.is_finite() {
-                    run.push(p);
-                } else if !run.is_empty() {
-                    runs.push(std::mem::take(&mut run));
-                }
-            }
-            if !run.is_empty() {
-                runs.push(run);
-            }
-            let mut first = true;
-            for run in &runs {
-                let scaled: Vec<(f64, f64)> = run.iter().map(|&(x, y)| (x / px, y / py)).collect();
-                let kept: Vec<(f64, f64)> = simplify(&scaled, 0.25)
-                    .into_iter()
-                    .map(|i| run[i])
-                    .collect();
-                let anno = match stroke.dash.pattern() {
-                    None => chart
-                        .draw_series(LineSeries::new(kept, stroke.style()))
-                        .map_err(draw_err)?,
-                    Some((size, gap)) => chart
-                        .draw_series(DashedLineSeries::new(kept, size, gap, stroke.style()))
-                        .map_err(draw_err)?,
-                };
-                if first && let Some(l) = label {
-                    anno.label(l).legend(legend_line(*stroke));
-                }
-                first = false;
-            }
-            if runs.is_empty()
-                && let Some(l) = label
-            {
-                chart
-                    .draw_series(std::iter::empty::<Circle<(f64, f64), u32>>())
-                    .map_err(draw_err)?
-                    .label(l)
-                    .legend(legend_line(*stroke));
-            }
+            draw_line(chart, panel, points, *stroke, label, (px, py))?;
         }
         Item::Segments {
             segments, stroke, ..
@@ -317,53 +399,7 @@ where
             }
         }
         Item::Markers { at, color, .. } => {
-            let rgb = color.rgb();
-            let ink = palette::INK.rgb();
-            let finite = |p: (f64, f64)| {
-                let p = map(p);
-                (p.0.is_finite() && p.1.is_finite()).then_some(p)
-            };
-            chart
-                .draw_series(at.iter().filter_map(|&(p, marker)| {
-                    (marker == Marker::Dot)
-                        .then(|| finite(p))
-                        .flatten()
-                        .map(|p| Circle::new(p, 4, rgb.filled()))
-                }))
-                .map_err(draw_err)?;
-            let anno = chart
-                .draw_series(at.iter().filter_map(|&(p, marker)| {
-                    let Marker::Robot { heading, filled } = marker else {
-                        return None;
-                    };
-                    let tri = robot_triangle(heading, 9.0);
-                    let (fill, outline) = if filled {
-                        (rgb.filled(), ink.stroke_width(1))
-                    } else {
-                        (palette::PAPER.rgb().filled(), rgb.stroke_width(2))
-                    };
-                    let closed: Vec<(i32, i32)> = tri.iter().chain(tri.first()).copied().collect();
-                    Some(
-                        EmptyElement::at(finite(p)?)
-                            + Polygon::new(tri, fill)
-                            + PathElement::new(closed, outline),
-                    )
-                }))
-                .map_err(draw_err)?;
-            if let Some(l) = label {
-                // The legend shows the shape the panel draws: dots or robots.
-                let color = *color;
-                if at.iter().all(|(_, m)| *m == Marker::Dot) {
-                    anno.label(l).legend(move |(x, y)| {
-                        EmptyElement::at((x + 11, y)) + Circle::new((0, 0), 4, color.rgb().filled())
-                    });
-                } else {
-                    anno.label(l).legend(move |(x, y)| {
-                        EmptyElement::at((x + 11, y))
-                            + Polygon::new(robot_triangle(0.0, 8.0), color.rgb().filled())
-                    });
-                }
-            }
+            draw_markers(chart, panel, at, *color, label)?;
         }
     }
     Ok(())

@@ -357,6 +357,96 @@ fn built(scenario: &Scenario, dt: f64) -> Built {
     )
 }
 
+/// The agents' tracks and the times of `dir`'s trajectory, checked against
+/// the `summary`'s agents (rows go agent 1..n at each instant).
+fn trajectory(
+    dir: &Path,
+    summary: &SummaryFile,
+) -> Result<(Vec<AgentTrack>, Vec<f64>), ReportError> {
+    let n = summary.agents.len();
+    let traj_path = dir.join(TRAJECTORY_FILE);
+    // A run with velocity bases has five more columns after the torque
+    // ones (commands and saturation, [`VELOCITY_COLUMNS`]); the first
+    // ones are the same.
+    let text = read(&traj_path)?;
+    let header = if text.starts_with(&format!("{TRAJECTORY_HEADER_VELOCITY}\n")) {
+        TRAJECTORY_HEADER_VELOCITY
+    } else {
+        TRAJECTORY_HEADER
+    };
+    let rows = numbers(&traj_path, &text, header)?;
+    let mut agents: Vec<AgentTrack> = summary
+        .agents
+        .iter()
+        .map(|a| AgentTrack {
+            name: a.name.clone(),
+            leader: None,
+            offset: None,
+            limits: None,
+            columns: Default::default(),
+        })
+        .collect();
+    let mut times = Vec::new();
+    for (i, row) in rows.iter().enumerate() {
+        let bad = |message: String| ReportError::Format {
+            path: traj_path.clone(),
+            message: format!("line {}: {message}", i + 2),
+        };
+        let agent = row[1] as usize;
+        if row[1] != agent as f64 || agent == 0 || agent > n {
+            return Err(bad(format!(
+                "agent {} is not one of the {n} agents of {SUMMARY_FILE}",
+                row[1]
+            )));
+        }
+        if agent != i % n + 1 {
+            return Err(bad(format!(
+                "agent {agent} out of order (rows go agent 1..{n} at each instant)"
+            )));
+        }
+        if agent == 1 {
+            times.push(row[0]);
+        } else if times.last() != Some(&row[0]) {
+            return Err(bad(format!("time {} differs from agent 1's", row[0])));
+        }
+        for (c, v) in agents[agent - 1].columns.iter_mut().zip(&row[2..]) {
+            c.push(*v);
+        }
+    }
+    if rows.len() % n.max(1) != 0 || times.is_empty() {
+        return Err(ReportError::Format {
+            path: traj_path,
+            message: format!(
+                "{} rows is not a whole number of instants of {n} agents",
+                rows.len()
+            ),
+        });
+    }
+    Ok((agents, times))
+}
+
+/// The reference of `dir`, if it has one, at the trajectory's `times`.
+fn reference_track(dir: &Path, times: &[f64]) -> Result<Option<ReferenceTrack>, ReportError> {
+    let ref_path = dir.join(REFERENCE_FILE);
+    Ok(match read_optional(&ref_path)? {
+        None => None,
+        Some(text) => {
+            let rows = numbers(&ref_path, &text, REFERENCE_HEADER)?;
+            if rows.len() != times.len() || rows.iter().zip(times).any(|(r, t)| r[0] != *t) {
+                return Err(ReportError::Format {
+                    path: ref_path,
+                    message: format!("its times are not those of {TRAJECTORY_FILE}"),
+                });
+            }
+            Some(ReferenceTrack {
+                x: rows.iter().map(|r| r[1]).collect(),
+                y: rows.iter().map(|r| r[2]).collect(),
+                theta: rows.iter().map(|r| r[3]).collect(),
+            })
+        }
+    })
+}
+
 impl RunData {
     /// Reads `dir`.
     pub fn load(dir: &Path) -> Result<RunData, ReportError> {
@@ -367,82 +457,8 @@ impl RunData {
                 message: e.to_string(),
             })?;
         let n = summary.agents.len();
-        let traj_path = dir.join(TRAJECTORY_FILE);
-        // A run with velocity bases has five more columns after the torque
-        // ones (commands and saturation, [`VELOCITY_COLUMNS`]); the first
-        // ones are the same.
-        let text = read(&traj_path)?;
-        let header = if text.starts_with(&format!("{TRAJECTORY_HEADER_VELOCITY}\n")) {
-            TRAJECTORY_HEADER_VELOCITY
-        } else {
-            TRAJECTORY_HEADER
-        };
-        let rows = numbers(&traj_path, &text, header)?;
-        let mut agents: Vec<AgentTrack> = summary
-            .agents
-            .iter()
-            .map(|a| AgentTrack {
-                name: a.name.clone(),
-                leader: None,
-                offset: None,
-                limits: None,
-                columns: Default::default(),
-            })
-            .collect();
-        let mut times = Vec::new();
-        for (i, row) in rows.iter().enumerate() {
-            let bad = |message: String| ReportError::Format {
-                path: traj_path.clone(),
-                message: format!("line {}: {message}", i + 2),
-            };
-            let agent = row[1] as usize;
-            if row[1] != agent as f64 || agent == 0 || agent > n {
-                return Err(bad(format!(
-                    "agent {} is not one of the {n} agents of {SUMMARY_FILE}",
-                    row[1]
-                )));
-            }
-            if agent != i % n + 1 {
-                return Err(bad(format!(
-                    "agent {agent} out of order (rows go agent 1..{n} at each instant)"
-                )));
-            }
-            if agent == 1 {
-                times.push(row[0]);
-            } else if times.last() != Some(&row[0]) {
-                return Err(bad(format!("time {} differs from agent 1's", row[0])));
-            }
-            for (c, v) in agents[agent - 1].columns.iter_mut().zip(&row[2..]) {
-                c.push(*v);
-            }
-        }
-        if rows.len() % n.max(1) != 0 || times.is_empty() {
-            return Err(ReportError::Format {
-                path: traj_path,
-                message: format!(
-                    "{} rows is not a whole number of instants of {n} agents",
-                    rows.len()
-                ),
-            });
-        }
-        let ref_path = dir.join(REFERENCE_FILE);
-        let reference = match read_optional(&ref_path)? {
-            None => None,
-            Some(text) => {
-                let rows = numbers(&ref_path, &text, REFERENCE_HEADER)?;
-                if rows.len() != times.len() || rows.iter().zip(&times).any(|(r, t)| r[0] != *t) {
-                    return Err(ReportError::Format {
-                        path: ref_path,
-                        message: format!("its times are not those of {TRAJECTORY_FILE}"),
-                    });
-                }
-                Some(ReferenceTrack {
-                    x: rows.iter().map(|r| r[1]).collect(),
-                    y: rows.iter().map(|r| r[2]).collect(),
-                    theta: rows.iter().map(|r| r[3]).collect(),
-                })
-            }
-        };
+        let (mut agents, times) = trajectory(dir, &summary)?;
+        let reference = reference_track(dir, &times)?;
         let odometry_path = dir.join(ODOMETRY_FILE);
         let odometry = match read_optional(&odometry_path)? {
             None => Vec::new(),

@@ -208,105 +208,16 @@ impl Identified {
             "# Identified by `echelon identify` from {} (agent {}, {} samples, {:.3} s), {} model.",
             self.source, self.agent, self.samples, self.duration, self.model
         );
-        let key = if name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-            && !name.is_empty()
-        {
-            name.to_owned()
-        } else {
-            format!("{name:?}")
-        };
+        let key = toml_key(name);
         let _ = writeln!(s, "[robots.{key}]");
         if self.model == Model::Velocity {
             let _ = writeln!(s, "drive = \"velocity\"");
         }
         for p in &self.params {
-            if !is_robot_field(p.field) {
-                // Not a `[robots.NAME]` field (the bag's dead time): said,
-                // never written as a value a scenario would refuse.
-                let _ = match (&p.estimate, &p.not_identifiable) {
-                    (Some(e), _) => writeln!(
-                        s,
-                        "# {} ({}) = {} {}: {} (echelon's base model has none; a controller's latency budget should hold it)",
-                        p.field,
-                        p.symbol,
-                        sig(e.value),
-                        p.unit,
-                        interval(e, p.noise_free)
-                    ),
-                    (None, why) => writeln!(
-                        s,
-                        "# {} ({}): not identifiable from this log: {}",
-                        p.field,
-                        p.symbol,
-                        why.as_deref().unwrap_or("no estimate")
-                    ),
-                };
-                continue;
-            }
-            if let Some(upper) = p.upper_bound {
-                let _ = writeln!(
-                    s,
-                    "{} = 0.0    # {}, {}: below what the odometry resolves, < {} at 95 %",
-                    p.field,
-                    p.symbol,
-                    p.unit,
-                    sig(upper)
-                );
-                continue;
-            }
-            match (&p.estimate, &p.not_identifiable) {
-                (Some(e), _) => {
-                    let _ = writeln!(
-                        s,
-                        "{} = {}    # {}, {}: {}",
-                        p.field,
-                        sig(e.value),
-                        p.symbol,
-                        p.unit,
-                        interval(e, p.noise_free)
-                    );
-                }
-                (None, why) => {
-                    let _ = writeln!(
-                        s,
-                        "# {} ({}): not identifiable from this log: {}",
-                        p.field,
-                        p.symbol,
-                        why.as_deref().unwrap_or("no estimate")
-                    );
-                }
-            }
+            write_param(&mut s, p);
         }
         for l in &self.limits {
-            let unit = match l.field {
-                "a_max" => "a_max, m/s²",
-                _ => "α_max, rad/s²",
-            };
-            if let Some(e) = l.estimate {
-                let _ = writeln!(
-                    s,
-                    "{} = {}    # {unit}: identified with the lag, {}",
-                    l.field,
-                    sig(e.value),
-                    interval(&e, l.noise_free)
-                );
-            } else if l.reached {
-                let _ = writeln!(
-                    s,
-                    "{} = {}    # the log shows the base held here",
-                    l.field,
-                    sig(l.observed)
-                );
-            } else {
-                let _ = writeln!(
-                    s,
-                    "# {}: not reached (largest seen: {})",
-                    l.field,
-                    sig(l.observed)
-                );
-            }
+            write_limit(&mut s, l);
         }
         match (self.geometry, self.model) {
             (Some([l, r]), _) => {
@@ -322,6 +233,112 @@ impl Identified {
             (None, Model::Velocity) => {}
         }
         s
+    }
+}
+
+/// `name` as a TOML key: bare when it may be, quoted otherwise.
+fn toml_key(name: &str) -> String {
+    if name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        && !name.is_empty()
+    {
+        name.to_owned()
+    } else {
+        format!("{name:?}")
+    }
+}
+
+/// One parameter's line of the `[robots.NAME]` block: its value with its
+/// interval, its bound, or why it has none (as a comment).
+fn write_param(s: &mut String, p: &Param) {
+    if !is_robot_field(p.field) {
+        // Not a `[robots.NAME]` field (the bag's dead time): said,
+        // never written as a value a scenario would refuse.
+        let _ = match (&p.estimate, &p.not_identifiable) {
+            (Some(e), _) => writeln!(
+                s,
+                "# {} ({}) = {} {}: {} (echelon's base model has none; a controller's latency budget should hold it)",
+                p.field,
+                p.symbol,
+                sig(e.value),
+                p.unit,
+                interval(e, p.noise_free)
+            ),
+            (None, why) => writeln!(
+                s,
+                "# {} ({}): not identifiable from this log: {}",
+                p.field,
+                p.symbol,
+                why.as_deref().unwrap_or("no estimate")
+            ),
+        };
+        return;
+    }
+    if let Some(upper) = p.upper_bound {
+        let _ = writeln!(
+            s,
+            "{} = 0.0    # {}, {}: below what the odometry resolves, < {} at 95 %",
+            p.field,
+            p.symbol,
+            p.unit,
+            sig(upper)
+        );
+        return;
+    }
+    match (&p.estimate, &p.not_identifiable) {
+        (Some(e), _) => {
+            let _ = writeln!(
+                s,
+                "{} = {}    # {}, {}: {}",
+                p.field,
+                sig(e.value),
+                p.symbol,
+                p.unit,
+                interval(e, p.noise_free)
+            );
+        }
+        (None, why) => {
+            let _ = writeln!(
+                s,
+                "# {} ({}): not identifiable from this log: {}",
+                p.field,
+                p.symbol,
+                why.as_deref().unwrap_or("no estimate")
+            );
+        }
+    }
+}
+
+/// One limit's line of the `[robots.NAME]` block: identified, observed as
+/// held, or not reached (as a comment).
+fn write_limit(s: &mut String, l: &Limit) {
+    let unit = match l.field {
+        "a_max" => "a_max, m/s²",
+        _ => "α_max, rad/s²",
+    };
+    if let Some(e) = l.estimate {
+        let _ = writeln!(
+            s,
+            "{} = {}    # {unit}: identified with the lag, {}",
+            l.field,
+            sig(e.value),
+            interval(&e, l.noise_free)
+        );
+    } else if l.reached {
+        let _ = writeln!(
+            s,
+            "{} = {}    # the log shows the base held here",
+            l.field,
+            sig(l.observed)
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "# {}: not reached (largest seen: {})",
+            l.field,
+            sig(l.observed)
+        );
     }
 }
 

@@ -88,7 +88,7 @@ pub(super) fn velocity_limits(
         .map(|a| a.iter().fold(0.0_f64, |m, x| m.max(x.abs())));
     let at_top = |axis: usize, i: usize| applied[axis][i].abs() >= tops[axis] * (1.0 - 1e-6);
     for axis in 0..2 {
-        let (speed, accel) = [("v_max", "a_max"), ("omega_max", "alpha_max")][axis];
+        let speed = ["v_max", "omega_max"][axis];
         let (a, top) = (&applied[axis], tops[axis]);
         // The base cut the command on this axis, at its largest applied
         // value, and this axis's limit did it. The limit scales `v` and `ω`
@@ -134,69 +134,81 @@ pub(super) fn velocity_limits(
                 "{speed}: not reached (largest seen: {observed:.4}): {why}"
             ));
         }
-        // Acceleration: the rate-limited fit's, when it was fitted with the
-        // lag; else the largest |Δv/Δt| of the measurement over 5-sample
-        // spans (noise averaged). It is the limit when the rate sits on it
-        // (within 0.5 %) for at least 10 samples: a lag's rate only touches
-        // its peak, a limited one rides it.
-        let (acc, riding) = largest_rate(&log.t, measured[axis]);
-        if let Some(r) = &rate_limits[axis] {
-            match (&r.estimate, &r.why) {
-                (Some(e), _) => {
-                    out.push(Limit {
-                        field: accel,
-                        observed: e.value,
-                        reached: true,
-                        estimate: Some(*e),
-                        noise_free: r.noise_free,
-                    });
-                    warnings.push(format!(
-                        "{accel} = {:.4} identified with the lag ({} intervals on it){}",
-                        e.value,
-                        r.intervals,
-                        if r.noise_free {
-                            ": noise-free log, exact to rounding".to_owned()
-                        } else {
-                            format!(", 95 % interval ±{:.2} %", 100.0 * e.relative_half_width())
-                        }
-                    ));
-                }
-                (None, why) => {
-                    out.push(Limit {
-                        field: accel,
-                        observed: acc,
-                        reached: false,
-                        estimate: None,
-                        noise_free: false,
-                    });
-                    warnings.push(format!(
-                        "{accel}: not reached (largest seen: {acc:.4}): {}",
-                        why.as_deref().unwrap_or("no estimate")
-                    ));
-                }
-            }
-            continue;
-        }
-        // Without integrals or a bag's command hold there is no fit with
-        // the limit in the loop, and so no evidence that tells a limit from
-        // a lag: a rate that rides its peak over many spans is what a
-        // limit does, but also what a lag does over repeated equal steps.
-        // Never presented as the limit.
-        out.push(Limit {
-            field: accel,
-            observed: acc,
-            reached: false,
-            estimate: None,
-            noise_free: false,
-        });
-        if acc > 0.0 && riding >= 10 {
-            warnings.push(format!(
-                "{accel}: not reached (largest seen: {acc:.4}): the rate rode it on {riding} spans, as a limit would (then the first-order lag ignores it and {} is biased) or a lag over repeated equal steps; a run's integrals.csv or a ROS 2 bag tells them apart",
-                ["tau_v", "tau_omega"][axis]
-            ));
-        } else {
-            warnings.push(format!("{accel}: not reached (largest seen: {acc:.4})"));
-        }
+        out.push(acceleration_limit(
+            log,
+            axis,
+            rate_limits[axis].as_ref(),
+            warnings,
+        ));
     }
     out
+}
+
+/// The acceleration limit of `axis` as a [`Limit`], with its warning.
+///
+/// Acceleration: the rate-limited fit's, when it was fitted with the
+/// lag; else the largest |Δv/Δt| of the measurement over 5-sample
+/// spans (noise averaged). It is the limit when the rate sits on it
+/// (within 0.5 %) for at least 10 samples: a lag's rate only touches
+/// its peak, a limited one rides it.
+fn acceleration_limit(
+    log: &Log,
+    axis: usize,
+    rate_limit: Option<&RateLimit>,
+    warnings: &mut Vec<String>,
+) -> Limit {
+    let accel = ["a_max", "alpha_max"][axis];
+    let measured = [&log.v, &log.omega];
+    let (acc, riding) = largest_rate(&log.t, measured[axis]);
+    let not_reached = Limit {
+        field: accel,
+        observed: acc,
+        reached: false,
+        estimate: None,
+        noise_free: false,
+    };
+    if let Some(r) = rate_limit {
+        return match (&r.estimate, &r.why) {
+            (Some(e), _) => {
+                warnings.push(format!(
+                    "{accel} = {:.4} identified with the lag ({} intervals on it){}",
+                    e.value,
+                    r.intervals,
+                    if r.noise_free {
+                        ": noise-free log, exact to rounding".to_owned()
+                    } else {
+                        format!(", 95 % interval ±{:.2} %", 100.0 * e.relative_half_width())
+                    }
+                ));
+                Limit {
+                    field: accel,
+                    observed: e.value,
+                    reached: true,
+                    estimate: Some(*e),
+                    noise_free: r.noise_free,
+                }
+            }
+            (None, why) => {
+                warnings.push(format!(
+                    "{accel}: not reached (largest seen: {acc:.4}): {}",
+                    why.as_deref().unwrap_or("no estimate")
+                ));
+                not_reached
+            }
+        };
+    }
+    // Without integrals or a bag's command hold there is no fit with
+    // the limit in the loop, and so no evidence that tells a limit from
+    // a lag: a rate that rides its peak over many spans is what a
+    // limit does, but also what a lag does over repeated equal steps.
+    // Never presented as the limit.
+    if acc > 0.0 && riding >= 10 {
+        warnings.push(format!(
+            "{accel}: not reached (largest seen: {acc:.4}): the rate rode it on {riding} spans, as a limit would (then the first-order lag ignores it and {} is biased) or a lag over repeated equal steps; a run's integrals.csv or a ROS 2 bag tells them apart",
+            ["tau_v", "tau_omega"][axis]
+        ));
+    } else {
+        warnings.push(format!("{accel}: not reached (largest seen: {acc:.4})"));
+    }
+    not_reached
 }

@@ -60,6 +60,7 @@ mod fit;
 mod identified;
 mod limits;
 mod log;
+mod pipeline;
 
 use serde::Serialize;
 
@@ -71,7 +72,6 @@ pub use checks::{MAX_RESIDUAL_OVER_NOISE, ResidualChecks, WHITENESS_LAGS};
 use checks::{excitation, misfit};
 pub use error::IdentifyError;
 pub use identified::{AxisSummary, Estimate, Identified, Limit, Param, Prediction};
-use limits::{RateLimit, largest_rate, velocity_limits};
 pub use log::{Hold, Integrals, Log, integrals_truncation};
 
 /// Fewest samples a log must have.
@@ -115,275 +115,14 @@ impl std::fmt::Display for Model {
 /// values, times that do not increase, or no axis excited at all.
 pub fn identify(log: &Log, model: Model) -> Result<Identified, IdentifyError> {
     log.check(model)?;
-    let inputs = match model {
-        Model::Torque => log.u.as_ref(),
-        Model::Velocity => log.applied.as_ref().or(log.cmd.as_ref()),
-    }
-    .ok_or_else(|| IdentifyError::Read {
-        file: log.source.clone(),
-        reason: "no inputs".to_owned(),
-    })?;
-    let fixed_gain = model == Model::Velocity;
-    let measured = [&log.v, &log.omega];
-    let input_names = match model {
-        Model::Torque => ["u1", "u2"],
-        Model::Velocity => ["v_applied", "omega_applied"],
-    };
-    let mut params = Vec::new();
-    let mut warnings = log.notes.clone();
-    let mut axes = Vec::new();
-    let mut predicted: [Vec<f64>; 2] = Default::default();
-    let mut reasons = Vec::new();
-    // Whether an excited axis was withheld for misfit (then the log is
-    // answered, with the reasons, rather than refused as unexcited).
-    let mut misfits = false;
-    // A velocity base from a ROS 2 bag (the command messages' hold, no
-    // integrals): lags, limits and dead time together (fit::fit_bag).
-    let bag = match (model, &log.hold, &log.integrals) {
-        (Model::Velocity, Some(h), None) => Some(fit::fit_bag(&fit::BagData {
-            t: &log.t,
-            y: [&log.v, &log.omega],
-            hold_t: &h.t,
-            hold_u: [&h.u[0], &h.u[1]],
-        })),
-        _ => None,
-    };
-    let data: [AxisData<'_>; 2] = std::array::from_fn(|axis| AxisData {
-        t: &log.t,
-        // The bag's input as the fit saw it: shifted by the dead time.
-        u: bag
-            .as_ref()
-            .map_or(&inputs[axis][..], |b| &b.axes[axis].u_shifted[..]),
-        y: measured[axis],
-        hold: log.hold.as_ref().map(|h| (&h.t[..], &h.u[axis][..])),
-    });
-    let integrals: [Option<fit::AxisIntegrals<'_>>; 2] = std::array::from_fn(|axis| {
-        log.integrals.as_ref().map(|w| fit::AxisIntegrals {
-            s: [&w.s, &w.theta][axis],
-            i: &w.input[axis],
-        })
-    });
-    // Samples farther apart than the plant's own input hold: the
-    // sampled values do not hold over the intervals.
-    let slower = log.input_period.is_some_and(|p| {
-        let n = log.t.len();
-        n > 1 && (log.t[n - 1] - log.t[0]) / (n - 1) as f64 > 1.5 * p
-    });
-    let fits: [AxisFit; 2] = std::array::from_fn(|axis| match (&integrals[axis], &bag) {
-        (Some(w), _) => fit::fit_integral(&data[axis], w, fixed_gain),
-        (None, Some(b)) => b.axes[axis].fit.clone(),
-        (None, None) => fit::fit(&data[axis], fixed_gain, slower),
-    });
-    let no_lags: [Option<String>; 2] = std::array::from_fn(|axis| {
-        integrals[axis]
-            .as_ref()
-            .filter(|_| fixed_gain)
-            .and_then(|w| no_lag(w, input_names[axis]))
-    });
-    // A velocity base's acceleration limit: the lag with the rate clamp in
-    // the loop, fitted from the integrals (fit::fit_limited), for the axes
-    // whose lag alone misfits.
-    let limited = match (&integrals, fixed_gain) {
-        ([Some(wv), Some(ww)], true) if no_lags.iter().all(Option::is_none) => fit::fit_limited(
-            [&data[0], &data[1]],
-            [wv, ww],
-            [&fits[0], &fits[1]],
-            [0, 1].map(|a| largest_rate(&log.t, measured[a]).0),
-        ),
-        _ => None,
-    };
-    let mut rate_limits: [Option<RateLimit>; 2] = [None, None];
-    // A bag's axis whose lag is below what its odometry resolves: the
-    // bound, an answer (an ideal axis), instead of a withheld estimate.
-    let ideal: [Option<f64>; 2] = std::array::from_fn(|axis| {
-        let b = bag.as_ref()?;
-        if let Some(upper) = b.axes[axis].bound {
-            return (upper < b.period).then_some(upper);
-        }
-        let f = &b.axes[axis].fit;
-        let upper = f.theta[0] + fit::Z95 * f.cov[0][0].max(0.0).sqrt();
-        let rel = fit::Z95 * f.cov[0][0].max(0.0).sqrt() / f.theta[0].abs();
-        (upper.is_finite() && upper < b.period && (rel.is_nan() || rel > MAX_REL_HALF_WIDTH))
-            .then_some(upper)
-    });
+    let inputs = pipeline::model_inputs(log, model)?;
+    let bag = pipeline::bag_fit(log, model);
+    let fits = pipeline::Fits::new(log, model, inputs, bag.as_ref());
+    let mut outcome = pipeline::Outcome::new(log);
     for axis in 0..2 {
-        let d = &data[axis];
-        let mut lag_only = Verdict::new(
-            model,
-            axis,
-            d,
-            fits[axis].clone(),
-            &integrals[axis],
-            no_lags[axis].clone(),
-            input_names[axis],
-            ideal[axis].is_some(),
-        );
-        if let Some(b) = &bag {
-            let a = &b.axes[axis];
-            if a.limit.is_some() {
-                lag_only.method = "command hold, rate limit";
-            }
-            let lag_identified = lag_only.why.is_none();
-            rate_limits[axis] = Some(match &a.no_limit {
-                None => RateLimit::new(
-                    &fit::LimitedFit {
-                        fit: a.fit.clone(),
-                        limit: a.limit,
-                        limited: a.riding,
-                        unknown: 0,
-                    },
-                    lag_only.noise_free,
-                    lag_identified || ideal[axis].is_some(),
-                ),
-                Some(why) => RateLimit::not_reached(why.clone()),
-            });
-        }
-        // Withheld for misfit, or for an interval the misfit widened.
-        let misfit_alone = no_lags[axis].is_none() && lag_only.why.is_some();
-        let (v, lim) = match &limited {
-            Some(l) if misfit_alone => {
-                let l = &l[axis];
-                let mut v = Verdict::new(
-                    model,
-                    axis,
-                    d,
-                    l.fit.clone(),
-                    &integrals[axis],
-                    None,
-                    input_names[axis],
-                    false,
-                );
-                v.method = "integrals, rate limit";
-                (v, Some(l))
-            }
-            _ => (lag_only, None),
-        };
-        if let Some(b) = v.fit.between {
-            let rel = |i: usize| (v.fit.theta[i] - b.held[i]).abs() / v.fit.theta[i].abs();
-            warnings.push(format!(
-                "the {} axis's inputs between samples are not in the log (no integrals.csv, and {}, cost ratio {:.3}): the fit interpolates them linearly and its intervals include the difference to holding them ({:.2} % on τ, {:.2} % on the gain)",
-                ["linear", "angular"][axis],
-                if slower {
-                    "the samples are farther apart than the plant's input hold in summary.json"
-                } else {
-                    "holding the logged values does not fit better than interpolating them"
-                },
-                b.cost_ratio,
-                100.0 * rel(0),
-                100.0 * rel(1)
-            ));
-        }
-        if let Some(l) = lim {
-            rate_limits[axis] = Some(RateLimit::new(l, v.noise_free, v.why.is_none()));
-            warnings.push(format!(
-                "the {} axis was fitted with its acceleration limit in the loop: {} intervals on the limit, {} left out (the limit took hold or let go between samples, or the other axis's limit scaled this one)",
-                ["linear", "angular"][axis],
-                l.limited,
-                l.unknown
-            ));
-        }
-        let summary = |identifiable| AxisSummary {
-            noise_free: v.noise_free,
-            method: v.method,
-            checks: v.checks,
-            axis: ["linear", "angular"][axis],
-            residual_rms: v.fit.rms,
-            residual_max: d
-                .y
-                .iter()
-                .zip(&v.fit.predicted)
-                .map(|(y, p)| (y - p).abs())
-                .fold(0.0, f64::max),
-            rcond: v.fit.rcond,
-            identifiable,
-        };
-        misfits |= v.unexcited.is_none() && v.why.is_some();
-        match &v.why {
-            Some(reason) => {
-                warnings.push(format!(
-                    "{} not identifiable: {reason}",
-                    v.symbols.iter().map(|s| s.1).collect::<Vec<_>>().join(", ")
-                ));
-                reasons.push(format!("{} axis: {reason}", ["linear", "angular"][axis]));
-            }
-            None => {
-                predicted[axis].clone_from(&v.fit.predicted);
-                if v.noise_free {
-                    warnings.push(format!(
-                        "noise-free log on the {} axis (residual RMS {:.1e}): {} exact to rounding, intervals not meaningful",
-                        ["linear", "angular"][axis],
-                        v.fit.rms,
-                        v.symbols.iter().map(|s| s.1).collect::<Vec<_>>().join(", ")
-                    ));
-                }
-            }
-        }
-        let bound = ideal[axis].filter(|_| v.why.is_none());
-        if let (Some(upper), Some(b)) = (bound, &bag) {
-            warnings.push(format!(
-                "{}: below one odometry period ({:.4} s): < {upper:.4} s at 95 %, an axis that follows its command at once as far as this odometry can tell",
-                v.symbols.iter().map(|s| s.1).collect::<Vec<_>>().join(", "),
-                b.period
-            ));
-        }
-        for ((field, symbol, unit), e) in v.symbols.iter().zip(v.estimates) {
-            params.push(Param {
-                field,
-                symbol,
-                unit,
-                estimate: (v.why.is_none() && bound.is_none()).then_some(e),
-                upper_bound: bound,
-                not_identifiable: v.why.clone(),
-                noise_free: v.noise_free && v.why.is_none(),
-            });
-        }
-        if v.why.is_some() {
-            predicted[axis] = vec![f64::NAN; log.t.len()];
-        }
-        axes.push(summary(v.why.is_none()));
+        outcome.axis(&fits, axis);
     }
-    if let Some(b) = &bag {
-        params.push(dead_time(b, &axes));
-    }
-    if axes.iter().all(|a| !a.identifiable) && !misfits {
-        return Err(IdentifyError::NoExcitation {
-            file: log.source.clone(),
-            reason: reasons.join("; "),
-        });
-    }
-    let geometry = match (model, &log.u, &log.tau) {
-        (Model::Torque, Some(u), Some(tau)) => geometry(u, tau),
-        _ => None,
-    };
-    let limits = if model == Model::Velocity {
-        velocity_limits(log, inputs, &rate_limits, &mut warnings)
-    } else {
-        Vec::new()
-    };
-    let [axis0, axis1]: [AxisSummary; 2] = axes.try_into().map_err(|_| IdentifyError::Read {
-        file: log.source.clone(),
-        reason: "internal: two axes".to_owned(),
-    })?;
-    let [v_model, omega_model] = predicted;
-    Ok(Identified {
-        model,
-        source: log.source.clone(),
-        agent: log.agent,
-        samples: log.t.len(),
-        duration: log.t[log.t.len() - 1] - log.t[0],
-        params,
-        axes: [axis0, axis1],
-        geometry,
-        limits,
-        warnings,
-        prediction: Prediction {
-            t: log.t.clone(),
-            v: log.v.clone(),
-            v_model,
-            omega: log.omega.clone(),
-            omega_model,
-        },
-    })
+    outcome.finish(&fits)
 }
 
 type Symbol = (&'static str, &'static str, &'static str);

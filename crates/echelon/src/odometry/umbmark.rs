@@ -300,14 +300,9 @@ fn off_nominal(s: Systematic) -> f64 {
     s.ed.ln().abs().max(s.eb.ln().abs())
 }
 
-/// Estimates `E_d`, `E_b` and the corrections from the return errors of runs on
-/// the square of `geometry` (its side and the robot's nominal wheel radius and
-/// half wheelbase; its error fields are ignored).
-pub fn estimate(
-    errors: &[ReturnError],
-    geometry: &SquareTest,
-) -> Result<Calibration, UmbmarkError> {
-    let clean = geometry.one_run(ErrorModel::PERFECT);
+/// The centres of gravity of the CW and CCW return errors and the standard
+/// error of each centre's coordinates, from the runs' spread.
+fn centres(errors: &[ReturnError]) -> Result<([f64; 2], [f64; 2], f64), UmbmarkError> {
     let centroid = |d: Direction| -> (usize, [f64; 2]) {
         let (n, sum) = errors
             .iter()
@@ -322,7 +317,6 @@ pub fn estimate(
     if ncw == 0 || nccw == 0 {
         return Err(UmbmarkError::OneDirection { cw: ncw, ccw: nccw });
     }
-    // The standard error of each centre's coordinates, from the runs' spread.
     let variance = |d: Direction, n: usize, mean: [f64; 2]| -> f64 {
         if n < 2 {
             return 0.0;
@@ -336,6 +330,49 @@ pub fn estimate(
     };
     let scatter =
         (0.25 * (variance(Direction::Cw, ncw, cw) + variance(Direction::Ccw, nccw, ccw))).sqrt();
+    Ok((cw, ccw, scatter))
+}
+
+/// A warning when errors beyond the searched ranges reproduce the centres
+/// `observed` within `tolerance` and are about as near a perfect robot
+/// (`near`): the runs may come from one of them (a robot far out of its
+/// geometry drives return errors an in-range robot nearly drives too:
+/// E_d = 0.599 and 1.353 at E_b = 0.888 on a 4 m square, 2.4 mm apart on
+/// 3.4 m return errors).
+fn alias_beyond(
+    clean: &SquareTest,
+    observed: [f64; 4],
+    first: Systematic,
+    tolerance: f64,
+    near: f64,
+) -> Option<String> {
+    let beyond = fit::fits(clean, observed, first, &fit::BEYOND);
+    let (other, rms) = beyond.iter().find(|(o, rms)| {
+        !fit::inside(&fit::SEARCHED, [o.ed, o.eb]) && *rms <= tolerance && off_nominal(*o) <= near
+    })?;
+    Some(format!(
+        "E_d = {:.6}, E_b = {:.6}, beyond the ranges the test tells apart (E_d in \
+         [{}, {}], E_b in [{}, {}]), reproduces the centres of gravity as well ({} m \
+         rms): the test cannot tell it from the refined estimate",
+        other.ed,
+        other.eb,
+        ED_RANGE[0],
+        ED_RANGE[1],
+        EB_RANGE[0],
+        EB_RANGE[1],
+        crate::error::num(*rms),
+    ))
+}
+
+/// Estimates `E_d`, `E_b` and the corrections from the return errors of runs on
+/// the square of `geometry` (its side and the robot's nominal wheel radius and
+/// half wheelbase; its error fields are ignored).
+pub fn estimate(
+    errors: &[ReturnError],
+    geometry: &SquareTest,
+) -> Result<Calibration, UmbmarkError> {
+    let clean = geometry.one_run(ErrorModel::PERFECT);
+    let (cw, ccw, scatter) = centres(errors)?;
     let wheelbase = 2.0 * geometry.half_wheelbase;
     let (alpha, beta, first) = borenstein(cw, ccw, geometry.side, wheelbase)?;
     let observed = [cw[0], cw[1], ccw[0], ccw[1]];
@@ -393,26 +430,7 @@ pub fn estimate(
     // an in-range robot nearly drives too: E_d = 0.599 and 1.353 at
     // E_b = 0.888 on a 4 m square, 2.4 mm apart on 3.4 m return errors).
     if warnings.is_empty() {
-        let beyond = fit::fits(&clean, observed, first, &fit::BEYOND);
-        let alias = beyond.iter().find(|(o, rms)| {
-            !fit::inside(&fit::SEARCHED, [o.ed, o.eb])
-                && *rms <= tolerance
-                && off_nominal(*o) <= near
-        });
-        if let Some((other, rms)) = alias {
-            warnings.push(format!(
-                "E_d = {:.6}, E_b = {:.6}, beyond the ranges the test tells apart (E_d in \
-                 [{}, {}], E_b in [{}, {}]), reproduces the centres of gravity as well ({} m \
-                 rms): the test cannot tell it from the refined estimate",
-                other.ed,
-                other.eb,
-                ED_RANGE[0],
-                ED_RANGE[1],
-                EB_RANGE[0],
-                EB_RANGE[1],
-                crate::error::num(*rms),
-            ));
-        }
+        warnings.extend(alias_beyond(&clean, observed, first, tolerance, near));
     }
     Ok(Calibration {
         cg_cw: cw,

@@ -478,35 +478,19 @@ impl Builder<'_> {
         })
     }
 
-    fn agent(&self, i: usize, a: &AgentSection, dt: f64) -> Result<AgentSpec, ScenarioError> {
-        let at = FieldPath::from("agents").index(i);
-        let n = self.file.agents.len();
-        let name = a.name.clone().unwrap_or_else(|| format!("agent {}", i + 1));
-        let robot_name = a.robot.as_deref().unwrap_or("agent1");
-        let robot = self.robot(robot_name, &at.key("robot"))?;
-        let start = self.at.pose(&a.start, &at.key("start"), true)?;
-        let leader = match a.leader {
-            LeaderSpec::Reference => Leader::Reference,
-            LeaderSpec::Agent(k) if k >= 1 && (k as usize) <= n => Leader::Agent(k as usize - 1),
-            LeaderSpec::Agent(k) => {
-                return Err(self.at.error(
-                    &at.key("leader"),
-                    format!(
-                        "agent {} follows agent {k}, which does not exist (agents are numbered 1..={n}, or \"reference\")",
-                        i + 1
-                    ),
-                ));
-            }
-        };
-        // Each control setting: the agent's own, else [control], else the paper's.
-        let control = self.control(i);
-        let (ke, _) = control.get_or(|c| c.ke, "ke", Gains::PAPER.ke());
-        let (kz, _) = control.get_or(|c| c.kz, "kz", Gains::PAPER.kz());
-        let gains = Gains::new(ke, kz).map_err(|e| self.at.param(&control.path_of(e.field), &e))?;
-        let (l, l_path) = control.get_or(|c| c.l, "l", DEFAULT_L);
-        self.at(&l_path, check::positive("l", l))?;
-        let law = control.get(|c| c.law, "law");
-        let drive = match (robot, law) {
+    /// Agent `i`'s drive: its robot `robot` (named `robot_name`) under the
+    /// control law `law` (unset: the robot's default), checked against the
+    /// step `dt` for a velocity base.
+    fn drive(
+        &self,
+        i: usize,
+        at: &FieldPath,
+        robot_name: &str,
+        robot: Body,
+        law: Option<(Law, FieldPath)>,
+        dt: f64,
+    ) -> Result<Drive, ScenarioError> {
+        Ok(match (robot, law) {
             (Body::Torque(robot), None) => Drive::Torque {
                 robot,
                 variant: Variant::Paper,
@@ -545,7 +529,38 @@ impl Builder<'_> {
                     ),
                 ));
             }
+        })
+    }
+
+    fn agent(&self, i: usize, a: &AgentSection, dt: f64) -> Result<AgentSpec, ScenarioError> {
+        let at = FieldPath::from("agents").index(i);
+        let n = self.file.agents.len();
+        let name = a.name.clone().unwrap_or_else(|| format!("agent {}", i + 1));
+        let robot_name = a.robot.as_deref().unwrap_or("agent1");
+        let robot = self.robot(robot_name, &at.key("robot"))?;
+        let start = self.at.pose(&a.start, &at.key("start"), true)?;
+        let leader = match a.leader {
+            LeaderSpec::Reference => Leader::Reference,
+            LeaderSpec::Agent(k) if k >= 1 && (k as usize) <= n => Leader::Agent(k as usize - 1),
+            LeaderSpec::Agent(k) => {
+                return Err(self.at.error(
+                    &at.key("leader"),
+                    format!(
+                        "agent {} follows agent {k}, which does not exist (agents are numbered 1..={n}, or \"reference\")",
+                        i + 1
+                    ),
+                ));
+            }
         };
+        // Each control setting: the agent's own, else [control], else the paper's.
+        let control = self.control(i);
+        let (ke, _) = control.get_or(|c| c.ke, "ke", Gains::PAPER.ke());
+        let (kz, _) = control.get_or(|c| c.kz, "kz", Gains::PAPER.kz());
+        let gains = Gains::new(ke, kz).map_err(|e| self.at.param(&control.path_of(e.field), &e))?;
+        let (l, l_path) = control.get_or(|c| c.l, "l", DEFAULT_L);
+        self.at(&l_path, check::positive("l", l))?;
+        let law = control.get(|c| c.law, "law");
+        let drive = self.drive(i, &at, robot_name, robot, law, dt)?;
         let (comp, _) = control.get_or(|c| c.lycomp, "lycomp", LyComp::Fit);
         let (derivatives, _) = control.get_or(
             |c| c.ly_derivatives,

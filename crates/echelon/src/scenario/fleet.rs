@@ -279,11 +279,12 @@ pub fn is_valid_fleet_name(s: &str) -> bool {
 }
 
 impl Scenario {
-    /// Resolves and checks the `[fleet]` section and every agent's `link_loss`.
-    pub fn fleet(&self) -> Result<FleetSettings, ScenarioError> {
+    /// The fleet's name: `[fleet] name`, checked, else the scenario's name
+    /// with every character a key expression chunk refuses as `-`.
+    fn fleet_name(&self) -> Result<String, ScenarioError> {
         let f = &self.file.fleet;
         let at = FieldPath::from("fleet");
-        let name = match &f.name {
+        Ok(match &f.name {
             Some(n) => {
                 if !is_valid_fleet_name(n) {
                     return Err(self.error(
@@ -311,21 +312,15 @@ impl Scenario {
                     cleaned
                 }
             }
-        };
-        let positive = |v: Option<f64>, key: &str, default: f64| -> Result<f64, ScenarioError> {
-            check::positive("", v.unwrap_or(default))
-                .map_err(|e| self.locator().param(&at.key(key), &e))
-        };
-        let reference_rate = positive(f.reference_rate, "reference_rate", DEFAULT_REFERENCE_RATE)?;
-        let control_rate = positive(f.control_rate, "control_rate", DEFAULT_CONTROL_RATE)?;
-        let link_timeout = positive(f.link_timeout, "link_timeout", DEFAULT_LINK_TIMEOUT)?;
-        let stale_after = positive(f.stale_after, "stale_after", DEFAULT_STALE_AFTER)?;
-        let operator_heartbeat = f
-            .operator_heartbeat
-            .map(|v| positive(Some(v), "operator_heartbeat", v))
-            .transpose()?;
-        let link_loss = self
-            .file
+        })
+    }
+
+    /// Every agent's `link_loss`: its own, else `[fleet.link_loss]`, else
+    /// the defaults; checked.
+    fn link_losses(&self) -> Result<Vec<LinkLoss>, ScenarioError> {
+        let f = &self.file.fleet;
+        let at = FieldPath::from("fleet");
+        self.file
             .agents
             .iter()
             .enumerate()
@@ -353,7 +348,27 @@ impl Scenario {
                     decel,
                 })
             })
-            .collect::<Result<Vec<_>, ScenarioError>>()?;
+            .collect::<Result<Vec<_>, ScenarioError>>()
+    }
+
+    /// Resolves and checks the `[fleet]` section and every agent's `link_loss`.
+    pub fn fleet(&self) -> Result<FleetSettings, ScenarioError> {
+        let f = &self.file.fleet;
+        let at = FieldPath::from("fleet");
+        let name = self.fleet_name()?;
+        let positive = |v: Option<f64>, key: &str, default: f64| -> Result<f64, ScenarioError> {
+            check::positive("", v.unwrap_or(default))
+                .map_err(|e| self.locator().param(&at.key(key), &e))
+        };
+        let reference_rate = positive(f.reference_rate, "reference_rate", DEFAULT_REFERENCE_RATE)?;
+        let control_rate = positive(f.control_rate, "control_rate", DEFAULT_CONTROL_RATE)?;
+        let link_timeout = positive(f.link_timeout, "link_timeout", DEFAULT_LINK_TIMEOUT)?;
+        let stale_after = positive(f.stale_after, "stale_after", DEFAULT_STALE_AFTER)?;
+        let operator_heartbeat = f
+            .operator_heartbeat
+            .map(|v| positive(Some(v), "operator_heartbeat", v))
+            .transpose()?;
+        let link_loss = self.link_losses()?;
         let placement = self
             .file
             .agents

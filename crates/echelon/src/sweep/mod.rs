@@ -36,8 +36,12 @@
 //! the runs that ended. [`run_all`] also lists what left its bound
 //! ([`DivergedCase`], `diverged.csv`).
 //!
-//! This file holds the grid and the runs; `drift.rs` the drift curves
-//! without fixes (`drift.csv`); `csv.rs` the sweep's other CSV files.
+//! This file holds the grid and the runs; `peaks.rs` a run's maxima and
+//! their bounds; `drift.rs` the drift curves without fixes (`drift.csv`);
+//! `csv.rs` the sweep's other CSV files.
+//!
+//! [`Theorem2`]: crate::odometry::bound::Theorem2
+//! [`KinematicTheorem2`]: crate::odometry::bound::KinematicTheorem2
 
 use rayon::prelude::*;
 use serde::Serialize;
@@ -46,8 +50,6 @@ use crate::check;
 use crate::control::Law;
 use crate::error::{ParamError, ScenarioError, SimError};
 use crate::odometry::ZetaModel;
-use crate::odometry::bound::{KinematicTheorem2, Theorem2};
-use crate::safety::Outcome as FilterOutcome;
 use crate::scenario::schema::{FixesSection, Fusion, OdometrySection};
 use crate::scenario::{OdometryOverrides, Overrides, Run, Scenario};
 use crate::sim::{Frame, ObserverError};
@@ -55,6 +57,9 @@ use crate::stats::Divergence;
 
 mod csv;
 mod drift;
+mod peaks;
+
+use peaks::{Peaks, dead_reckoning, theorem_bounds};
 
 pub use csv::{write_csv, write_diverged_csv};
 pub use drift::{DRIFT_HEADER, DriftCurve, drift_curves, write_drift_csv};
@@ -423,6 +428,24 @@ pub fn run_case(
     Ok(run_case_with_divergence(scenario, overrides, grid, case)?.0)
 }
 
+/// The row of a case whose run diverged at `divergence`.
+fn diverged_row(case: &Case, divergence: &Divergence) -> Row {
+    Row {
+        case: *case,
+        omega_max: f64::INFINITY,
+        z_max: f64::INFINITY,
+        z_hat_max: f64::INFINITY,
+        e_max: f64::INFINITY,
+        final_drift: f64::INFINITY,
+        drift_max: f64::INFINITY,
+        z_bound: None,
+        z_over_bound: None,
+        e_bound: None,
+        laws: Laws::default(),
+        diverged: Some(divergence.t),
+    }
+}
+
 /// [`run_case`], with what left its bound when the run diverged.
 fn run_case_with_divergence(
     scenario: &Scenario,
@@ -432,116 +455,34 @@ fn run_case_with_divergence(
 ) -> Result<(Row, Option<Divergence>), SweepError> {
     let run = build_case(scenario, overrides, grid, case)?;
     let sim = &mut run.simulation();
-    let n = sim.agents().len();
-    let mut z_max = vec![0.0f64; n];
-    let (mut z_hat_max, mut drift, mut drift_max) = (0.0f64, 0.0f64, 0.0f64);
-    let mut e_max = vec![0.0f64; n];
-    let mut omega_max = vec![0.0f64; n];
-    // Whether a velocity base's speed limits cut its command after the transient.
-    let mut saturated = vec![false; n];
-    // Whether a safety filter changed its command (or braked, or broke a
-    // deadlock) after the transient: that adds its own z, outside the theorem.
-    let mut filtered = vec![false; n];
+    let mut peaks = Peaks::new(sim.agents().len());
     let transient = grid.0.transient;
     let mut observe = |f: &Frame<'_>| -> Result<(), ObserverError> {
-        for (i, odometer) in f.odometers.iter().enumerate() {
-            let Some(odometer) = odometer else { continue };
-            let (s, o) = (&f.states[i], &f.outputs[i]);
-            let d = odometer.drift(s);
-            if f.t >= transient {
-                drift_max = drift_max.max(d);
-                z_max[i] = z_max[i].max(o.z[0].hypot(o.z[1]));
-                z_hat_max = z_hat_max.max(o.z_hat[0].hypot(o.z_hat[1]));
-                e_max[i] = e_max[i].max(o.e[0].hypot(o.e[1]));
-                omega_max[i] = omega_max[i].max(s.omega.abs());
-                saturated[i] |= o.velocity.is_some_and(|v| v.saturated);
-                filtered[i] |= f.safety.get(i).is_some_and(|s| {
-                    s.enabled && (s.outcome != FilterOutcome::Nominal || s.deadlock)
-                });
-            }
-            if f.last {
-                drift = drift.max(d);
-            }
-        }
+        peaks.observe(f, transient);
         Ok(())
     };
     if let Err(e) = sim.run(&mut observe) {
         let Some(divergence) = Divergence::of(&e) else {
             return Err(e.into());
         };
-        let row = Row {
-            case: *case,
-            omega_max: f64::INFINITY,
-            z_max: f64::INFINITY,
-            z_hat_max: f64::INFINITY,
-            e_max: f64::INFINITY,
-            final_drift: f64::INFINITY,
-            drift_max: f64::INFINITY,
-            z_bound: None,
-            z_over_bound: None,
-            e_bound: None,
-            laws: Laws::default(),
-            diverged: Some(divergence.t),
-        };
-        return Ok((row, Some(divergence)));
+        return Ok((diverged_row(case, &divergence), Some(divergence)));
     }
-    let theorem_applies = !case.outside_assumption_1()
-        && case.zeta > 0.0
-        && case.fix_every > 0
-        // `apply` keeps the noise settings, so the file's are the case's.
-        && noise_free(scenario);
-    let (mut z_bound, mut ratio, mut e_bound) = (None, None, None);
-    let mut widen = |z: f64, r: f64, e: f64| {
-        z_bound = Some(z_bound.map_or(z, |x: f64| x.max(z)));
-        ratio = Some(ratio.map_or(r, |x: f64| x.max(r)));
-        e_bound = Some(e_bound.map_or(e, |x: f64| x.max(e)));
-    };
-    let dead_reckoning = |i: usize| sim.odometers().get(i).is_some_and(Option::is_some);
-    if theorem_applies {
-        for (i, a) in sim.agents().iter().enumerate() {
-            if !dead_reckoning(i) || filtered[i] {
-                continue;
-            }
-            match a.velocity_robot() {
-                None => {
-                    let t = Theorem2::new(
-                        a.gains().ke(),
-                        a.gains().kz(),
-                        case.zeta,
-                        omega_max[i],
-                        grid.0.gamma,
-                    )?;
-                    let b = t.z_bound(case.fix_every);
-                    widen(b, z_max[i] / b, b / a.gains().ke());
-                }
-                // The kinematic form is for an ideal base: no lag, and no
-                // speed limit cutting the command once the transient is over.
-                Some(r)
-                    if r.base().tau_v() == 0.0 && r.base().tau_omega() == 0.0 && !saturated[i] =>
-                {
-                    let t = KinematicTheorem2::new(a.gains().ke(), case.zeta, grid.0.gamma)?;
-                    let e = t.e_bound(case.fix_every);
-                    widen(t.z_bound(case.fix_every), e_max[i] / e, e);
-                }
-                Some(_) => {}
-            }
-        }
-    }
+    let [z_bound, ratio, e_bound] = theorem_bounds(scenario, grid, case, sim, &peaks)?;
     let laws = Laws::of(
         sim.agents()
             .iter()
             .enumerate()
-            .filter(|&(i, _)| dead_reckoning(i))
+            .filter(|&(i, _)| dead_reckoning(sim, i))
             .map(|(_, a)| a.law()),
     );
     let row = Row {
         case: *case,
-        omega_max: omega_max.iter().copied().fold(0.0, f64::max),
-        z_max: z_max.iter().copied().fold(0.0, f64::max),
-        z_hat_max,
-        e_max: e_max.iter().copied().fold(0.0, f64::max),
-        final_drift: drift,
-        drift_max,
+        omega_max: peaks.omega_max.iter().copied().fold(0.0, f64::max),
+        z_max: peaks.z_max.iter().copied().fold(0.0, f64::max),
+        z_hat_max: peaks.z_hat_max,
+        e_max: peaks.e_max.iter().copied().fold(0.0, f64::max),
+        final_drift: peaks.drift,
+        drift_max: peaks.drift_max,
         z_bound,
         z_over_bound: ratio,
         e_bound,

@@ -348,13 +348,17 @@ fn shifted_average(d: &BagData<'_>, axis: usize, delay: f64) -> Vec<f64> {
     out
 }
 
-/// Fits a velocity base to a bag (module docs).
-pub(crate) fn fit_bag(d: &BagData<'_>) -> BagFit {
-    let n = d.t.len();
-    let mut periods: Vec<f64> = d.t.windows(2).map(|w| w[1] - w[0]).collect();
+/// The median odometry period, s.
+fn median_period(t: &[f64]) -> f64 {
+    let mut periods: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
     periods.sort_by(f64::total_cmp);
-    let period = periods.get(periods.len() / 2).copied().unwrap_or(f64::NAN);
-    // Stage 1: the dead time on a grid, the lag alone.
+    periods.get(periods.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// The first guess of the joint vector at no dead time: each axis's lag by
+/// equation error (0.1 s when that gives nothing plausible), its first
+/// sample as `x₀`, no limit.
+fn first_guess(d: &BagData<'_>) -> [f64; P] {
     let mut p = [0.0; P];
     for a in 0..2 {
         let guess = equation_error(
@@ -374,6 +378,13 @@ pub(crate) fn fit_bag(d: &BagData<'_>) -> BagFit {
         };
         p[tau_at(a) + 2] = d.y[a][0];
     }
+    p
+}
+
+/// Stage 1: the dead time on the [`DELAY_STEP`] grid, the lags alone fitted
+/// at each delay warm-started from the previous one; the vector that
+/// minimises the profile likelihood `Σ_axis ln(cost)`.
+fn delay_grid(d: &BagData<'_>, mut p: [f64; P]) -> [f64; P] {
     let mut best: Option<([f64; P], f64)> = None;
     let steps = (MAX_DELAY / DELAY_STEP).round() as usize;
     for k in 0..=steps {
@@ -388,9 +399,174 @@ pub(crate) fn fit_bag(d: &BagData<'_>) -> BagFit {
             best = Some((p, score));
         }
     }
-    let Some((mut p, _)) = best else {
+    let Some((p, _)) = best else {
         unreachable!("the grid has at least one point")
     };
+    p
+}
+
+/// Stage 2's answer for one axis: whether the limit was kept, the odometry
+/// intervals the clamp held on, and why no limit was kept.
+struct LimitChoice {
+    kept: bool,
+    riding: usize,
+    no_limit: Option<String>,
+}
+
+/// The best of the limited fits of axis `a` from eight starts around the
+/// lag-only fit `lag` and the largest rate `top` seen, when there is one.
+fn best_limited(d: &BagData<'_>, a: usize, lag: [f64; P], top: f64) -> Option<([f64; P], f64)> {
+    let i = tau_at(a);
+    let mut limited: Option<([f64; P], f64)> = None;
+    if top > 0.0 && top.is_finite() {
+        // From limits at and below the largest rate seen (noise raises
+        // it), and shorter lags than the lag alone took (a lag fitted
+        // through clamped transients stretches): a clamp that never acts
+        // from its start has no gradient to find it by.
+        let starts = [1.0, 0.6, 0.35, 0.2]
+            .into_iter()
+            .flat_map(|f| [1.0, 0.5].map(|g| (f, g)));
+        for (f, g) in starts {
+            let mut start = lag;
+            start[i + 1] = 1.0 / (f * top);
+            start[i] = g * lag[i];
+            let (q, c) = fit_axis(d, a, start, true);
+            if limited.as_ref().is_none_or(|(_, s)| c < *s) {
+                limited = Some((q, c));
+            }
+        }
+    }
+    limited
+}
+
+/// Stage 2 for one excited, resolved axis `a`: the lag alone against the lag
+/// with the rate clamp (module docs), the kept parameters written into `p`
+/// (`x`: scratch for a simulation).
+fn limit_or_lag(d: &BagData<'_>, a: usize, p: &mut [f64; P], x: &mut [f64]) -> LimitChoice {
+    let n = d.t.len();
+    let i = tau_at(a);
+    let (lag, c_lag) = fit_axis(d, a, *p, false);
+    // The score test of the lag against a rate limit gates the search:
+    // residuals with no sign of a clamp on the fastest transients need
+    // no limited fit (most bases; it is the costly part).
+    simulate(d, a, &lag, x);
+    let r: Vec<f64> = d.y[a].iter().zip(&*x).map(|(y, x)| y - x).collect();
+    let u = shifted_average(d, a, lag[0]);
+    let (z, _, _) = super::transients(d.t, (&u, &*x, &r), (lag[i], 1.0), false);
+    if z.abs() < SCORE_GATE {
+        p[i..i + 3].copy_from_slice(&lag[i..i + 3]);
+        return LimitChoice {
+            kept: false,
+            riding: 0,
+            no_limit: Some(format!(
+                "the lag's residuals show no sign of a rate limit on its fastest transients (score {z:.1} standard errors, below {SCORE_GATE})"
+            )),
+        };
+    }
+    let top = largest_rate(d.t, d.y[a]);
+    let (q, c_lim) = best_limited(d, a, lag, top).unwrap_or((lag, c_lag));
+    let lr = n as f64 * (c_lag / c_lim.max(f64::MIN_POSITIVE)).ln();
+    let rides = if q[i + 1] > 0.0 {
+        simulate(d, a, &q, x)
+    } else {
+        0
+    };
+    if lr > CHI2_1_999 && rides >= MIN_RIDING {
+        p[i..i + 3].copy_from_slice(&q[i..i + 3]);
+        return LimitChoice {
+            kept: true,
+            riding: rides,
+            no_limit: None,
+        };
+    }
+    p[i..i + 3].copy_from_slice(&lag[i..i + 3]);
+    LimitChoice {
+        kept: false,
+        riding: rides,
+        no_limit: Some(if lr <= CHI2_1_999 {
+            format!(
+                "a lag alone fits as well as a lag with a rate limit (likelihood ratio {:.1}, 99.9 % bound {CHI2_1_999:.1})",
+                lr.max(0.0)
+            )
+        } else {
+            format!(
+                "the rate limit that fits best holds on {rides} odometry intervals, fewer than {MIN_RIDING}"
+            )
+        }),
+    }
+}
+
+/// The joint fit of stage 3: the parameters, the covariance of the free
+/// ones, the reciprocal condition number, the free parameters' indices.
+struct Joint {
+    p: [f64; P],
+    cov: Vec<Vec<f64>>,
+    rcond: f64,
+    free: Vec<usize>,
+}
+
+impl Joint {
+    /// The variance of joint parameter `k` (infinite when held).
+    fn var(&self, k: usize) -> f64 {
+        self.free
+            .iter()
+            .position(|f| *f == k)
+            .map_or(f64::INFINITY, |q| self.cov[q][q])
+    }
+
+    /// Axis `a` of the joint fit (`bound`: its lag's bound, when unresolved;
+    /// `choice`: stage 2's answer for it).
+    fn axis(&self, d: &BagData<'_>, a: usize, bound: Option<f64>, choice: &LimitChoice) -> BagAxis {
+        let (n, p) = (d.t.len(), &self.p);
+        let i = tau_at(a);
+        let mut predicted = vec![0.0; n];
+        let rides = simulate(d, a, p, &mut predicted);
+        let c: f64 = d.y[a]
+            .iter()
+            .zip(&predicted)
+            .map(|(y, x)| (y - x).powi(2))
+            .sum();
+        // A held (unresolved) lag has no variance of its own: its bound
+        // answers for it, or nothing does.
+        let (tau, var_tau) = (
+            p[i],
+            if bound.is_some() {
+                f64::INFINITY
+            } else {
+                self.var(i)
+            },
+        );
+        let limit = choice.kept.then(|| {
+            // a = 1/b: var a = var b / b⁴.
+            let b = p[i + 1];
+            (1.0 / b, self.var(i + 1) / b.powi(4))
+        });
+        BagAxis {
+            fit: AxisFit {
+                theta: [tau, 1.0],
+                cov: [[var_tau, 0.0], [0.0, 0.0]],
+                x0: p[i + 2],
+                first_guess: [tau, 1.0],
+                rms: (c / n as f64).sqrt(),
+                predicted,
+                rcond: self.rcond,
+                between: None,
+                segments: None,
+            },
+            limit,
+            riding: if choice.kept { rides } else { choice.riding },
+            no_limit: choice.no_limit.clone(),
+            bound,
+            u_shifted: shifted_average(d, a, p[0]),
+        }
+    }
+}
+
+/// Fits a velocity base to a bag (module docs).
+pub(crate) fn fit_bag(d: &BagData<'_>) -> BagFit {
+    let period = median_period(d.t);
+    // Stage 1: the dead time on a grid, the lag alone.
+    let mut p = delay_grid(d, first_guess(d));
     // An axis whose command never changes has no lag to fit (and would
     // make the information singular): only its offset.
     let excited: [bool; 2] = std::array::from_fn(|a| {
@@ -401,130 +577,29 @@ pub(crate) fn fit_bag(d: &BagData<'_>) -> BagFit {
     let mut bound: [Option<f64>; 2] = [None, None];
     p = refine(d, p, [false; 2], &mut bound, excited, period).0;
     // Stage 2: limit or lag, per axis.
-    let mut kept = [false; 2];
-    let mut no_limit: [Option<String>; 2] = [None, None];
-    let mut riding = [0usize; 2];
-    let mut x = vec![0.0; n];
-    for a in 0..2 {
+    let mut x = vec![0.0; d.t.len()];
+    let choices: [LimitChoice; 2] = std::array::from_fn(|a| {
         if !excited[a] || bound[a].is_some() {
-            no_limit[a] = Some("no lag resolved to fit it with".to_owned());
-            continue;
+            return LimitChoice {
+                kept: false,
+                riding: 0,
+                no_limit: Some("no lag resolved to fit it with".to_owned()),
+            };
         }
-        let i = tau_at(a);
-        let (lag, c_lag) = fit_axis(d, a, p, false);
-        // The score test of the lag against a rate limit gates the search:
-        // residuals with no sign of a clamp on the fastest transients need
-        // no limited fit (most bases; it is the costly part).
-        simulate(d, a, &lag, &mut x);
-        let r: Vec<f64> = d.y[a].iter().zip(&x).map(|(y, x)| y - x).collect();
-        let u = shifted_average(d, a, lag[0]);
-        let (z, _, _) = super::transients(d.t, (&u, &x, &r), (lag[i], 1.0), false);
-        if z.abs() < SCORE_GATE {
-            p[i..i + 3].copy_from_slice(&lag[i..i + 3]);
-            no_limit[a] = Some(format!(
-                "the lag's residuals show no sign of a rate limit on its fastest transients (score {z:.1} standard errors, below {SCORE_GATE})"
-            ));
-            continue;
-        }
-        let top = largest_rate(d.t, d.y[a]);
-        let mut limited: Option<([f64; P], f64)> = None;
-        if top > 0.0 && top.is_finite() {
-            // From limits at and below the largest rate seen (noise raises
-            // it), and shorter lags than the lag alone took (a lag fitted
-            // through clamped transients stretches): a clamp that never acts
-            // from its start has no gradient to find it by.
-            let starts = [1.0, 0.6, 0.35, 0.2]
-                .into_iter()
-                .flat_map(|f| [1.0, 0.5].map(|g| (f, g)));
-            for (f, g) in starts {
-                let mut start = lag;
-                start[i + 1] = 1.0 / (f * top);
-                start[i] = g * lag[i];
-                let (q, c) = fit_axis(d, a, start, true);
-                if limited.as_ref().is_none_or(|(_, s)| c < *s) {
-                    limited = Some((q, c));
-                }
-            }
-        }
-        let (q, c_lim) = limited.unwrap_or((lag, c_lag));
-        let lr = n as f64 * (c_lag / c_lim.max(f64::MIN_POSITIVE)).ln();
-        let rides = if q[i + 1] > 0.0 {
-            simulate(d, a, &q, &mut x)
-        } else {
-            0
-        };
-        riding[a] = rides;
-        if lr > CHI2_1_999 && rides >= MIN_RIDING {
-            kept[a] = true;
-            p[i..i + 3].copy_from_slice(&q[i..i + 3]);
-        } else {
-            p[i..i + 3].copy_from_slice(&lag[i..i + 3]);
-            no_limit[a] = Some(if lr <= CHI2_1_999 {
-                format!(
-                    "a lag alone fits as well as a lag with a rate limit (likelihood ratio {:.1}, 99.9 % bound {CHI2_1_999:.1})",
-                    lr.max(0.0)
-                )
-            } else {
-                format!(
-                    "the rate limit that fits best holds on {rides} odometry intervals, fewer than {MIN_RIDING}"
-                )
-            });
-        }
-    }
-    // Stage 3: all together, each axis weighed by its noise.
-    let (p, cov, rc, free) = refine(d, p, kept, &mut bound, excited, period);
-    let axes = std::array::from_fn(|a| {
-        let i = tau_at(a);
-        let mut predicted = vec![0.0; n];
-        let rides = simulate(d, a, &p, &mut predicted);
-        let c: f64 = d.y[a]
-            .iter()
-            .zip(&predicted)
-            .map(|(y, x)| (y - x).powi(2))
-            .sum();
-        let at = |k: usize| free.iter().position(|f| *f == k);
-        let var = |k: usize| at(k).map_or(f64::INFINITY, |q| cov[q][q]);
-        // A held (unresolved) lag has no variance of its own: its bound
-        // answers for it, or nothing does.
-        let (tau, var_tau) = (
-            p[i],
-            if bound[a].is_some() {
-                f64::INFINITY
-            } else {
-                var(i)
-            },
-        );
-        let limit = kept[a].then(|| {
-            // a = 1/b: var a = var b / b⁴.
-            let b = p[i + 1];
-            (1.0 / b, var(i + 1) / b.powi(4))
-        });
-        BagAxis {
-            fit: AxisFit {
-                theta: [tau, 1.0],
-                cov: [[var_tau, 0.0], [0.0, 0.0]],
-                x0: p[i + 2],
-                first_guess: [tau, 1.0],
-                rms: (c / n as f64).sqrt(),
-                predicted,
-                rcond: rc,
-                between: None,
-                segments: None,
-            },
-            limit,
-            riding: if kept[a] { rides } else { riding[a] },
-            no_limit: no_limit[a].clone(),
-            bound: bound[a],
-            u_shifted: shifted_average(d, a, p[0]),
-        }
+        limit_or_lag(d, a, &mut p, &mut x)
     });
-    let var_d = free
-        .iter()
-        .position(|f| *f == 0)
-        .map_or(f64::INFINITY, |q| cov[q][q]);
+    // Stage 3: all together, each axis weighed by its noise.
+    let kept = [choices[0].kept, choices[1].kept];
+    let (p, cov, rcond, free) = refine(d, p, kept, &mut bound, excited, period);
+    let joint = Joint {
+        p,
+        cov,
+        rcond,
+        free,
+    };
     BagFit {
-        axes,
-        dead_time: (p[0], var_d),
+        axes: std::array::from_fn(|a| joint.axis(d, a, bound[a], &choices[a])),
+        dead_time: (joint.p[0], joint.var(0)),
         period,
     }
 }

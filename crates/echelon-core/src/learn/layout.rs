@@ -1,0 +1,44 @@
+//! What a robot's observation holds, in order (`obs_dim = 8 + 3 K` values,
+//! `K` the listed neighbours), SI units, the robot's body frame
+//! (`x` ahead, `y` left):
+//!
+//! | index | value |
+//! |---|---|
+//! | 0, 1 | `e` (eq. 7), m: the tracking error of its slot |
+//! | 2, 3 | `v`, m/s, and `ω`, rad/s: its own velocities |
+//! | 4, 5 | `R ṗ_d`, m/s: its leader's velocity in its frame |
+//! | 6, 7 | `L_X`, `L_Y`, m: where it holds its leader (eq. 7's offsets) |
+//! | 8 + 3k, 9 + 3k | neighbour `k`'s point (`L` ahead) relative to its own point, m |
+//! | 10 + 3k | 1 if neighbour `k` is listed, 0 for padding |
+//!
+//! Neighbours are listed nearest first, those within `sense` metres only;
+//! the rest of the `K` entries are zeros.
+
+use crate::base::{VelocityBase, VelocityBaseSpec};
+
+/// Index of `e_x` (then `e_y`).
+pub const E: usize = 0;
+/// Index of `v` (then `ω`).
+pub const SPEEDS: usize = 2;
+/// Index of `(R ṗ_d)_x` (then `_y`).
+pub const LEADER_VELOCITY: usize = 4;
+/// Index of `L_X` (then `L_Y`).
+pub const OFFSETS: usize = 6;
+/// Index of the first neighbour's `dx` (then `dy`, `listed`; 3 values each).
+pub const NEIGHBOURS: usize = 8;
+
+/// Values per observation with `k` neighbours listed.
+pub const fn obs_dim(k: usize) -> usize {
+    NEIGHBOURS + 3 * k
+}
+
+/// The environments' default base: no lag, 0.5 m/s, 2 rad/s (a small
+/// research robot's limits).
+pub fn default_base() -> VelocityBase {
+    VelocityBase::new(VelocityBaseSpec {
+        v_max: 0.5,
+        omega_max: 2.0,
+        ..VelocityBase::IDEAL.spec()
+    })
+    .unwrap_or_else(|_| unreachable!("finite positive limits"))
+}

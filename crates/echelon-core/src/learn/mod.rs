@@ -1,0 +1,454 @@
+//! Formation control as a vectorised multi-agent environment: `E`
+//! environments of `N` velocity-base robots each, stepped under actions
+//! from outside (a learned policy), with observations and rewards out —
+//! what `echelon.envs` (Gymnasium, PettingZoo) wraps.
+//!
+//! Each environment is a formation behind a virtual leader, a reference of
+//! constant speed and turn rate ([`crate::reference::Circle`]): robot `i`
+//! holds its leader `L_X` ahead and `L_Y` to the left in its own frame
+//! (eq. 7), slots on a lattice `spacing` metres apart behind the leader,
+//! jittered and shuffled per episode. A robot's action is a velocity command
+//! `(v, ω)`, clipped to the base's limits, applied through the base model
+//! ([`VelocityBase::rk4_step`]: lags, limits) for one step `dt`; with a
+//! safety radius set it goes through the robot's own barrier-certificate
+//! filter first ([`SafetyFilter::velocity`]), every robot seeing the others
+//! as cooperative neighbours, as in the fleet.
+//!
+//! Observations ([`layout`]) carry what the kinematic law needs, so the
+//! paper's law is a policy of observations alone ([`baseline`]).
+//!
+//! Everything is plain data on caller-owned buffers: [`VecFormation::step`]
+//! reads `E·N·2` actions and writes observations, rewards and the step's
+//! facts; it allocates nothing once built and runs its environments on all
+//! cores (rayon).
+
+mod episode;
+pub mod layout;
+mod observe;
+
+use rayon::prelude::*;
+
+use crate::base::{VelocityBase, VelocityCommand};
+use crate::error::ParamError;
+use crate::model::State;
+use crate::safety::{Neighbour, SafetyConfig, SafetyFilter};
+
+pub use episode::Slots;
+pub use observe::{MAX_NEIGHBOURS, baseline};
+
+/// A number an environment's buffers hold (`f64`, or `f32` on request).
+pub trait Scalar: Copy + Send + Sync + 'static {
+    /// `v` in this type (rounded for `f32`).
+    fn of(v: f64) -> Self;
+    /// This value as `f64`.
+    fn get(self) -> f64;
+}
+
+impl Scalar for f64 {
+    #[inline]
+    fn of(v: f64) -> Self {
+        v
+    }
+    #[inline]
+    fn get(self) -> f64 {
+        self
+    }
+}
+
+impl Scalar for f32 {
+    #[inline]
+    fn of(v: f64) -> Self {
+        v as f32
+    }
+    #[inline]
+    fn get(self) -> f64 {
+        f64::from(self)
+    }
+}
+
+/// The weights of a robot's reward (per step):
+/// `r = −tracking ‖e‖² − effort ‖a‖² − collision · [a neighbour's point
+/// within the radius]`, with `a = (v, L ω)` the clipped action.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Weights {
+    /// Per m² of tracking error.
+    pub tracking: f64,
+    /// Per (m/s)² of action.
+    pub effort: f64,
+    /// Per step spent within the radius of another robot.
+    pub collision: f64,
+}
+
+impl Default for Weights {
+    fn default() -> Self {
+        Weights {
+            tracking: 1.0,
+            effort: 0.01,
+            collision: 10.0,
+        }
+    }
+}
+
+/// Everything that makes a set of environments, checked by
+/// [`VecFormation::new`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EnvConfig {
+    /// `E`, ≥ 1.
+    pub num_envs: usize,
+    /// `N`, ≥ 1.
+    pub num_agents: usize,
+    /// Step, s (> 0).
+    pub dt: f64,
+    /// Distance between neighbouring slots, m (> 0).
+    pub spacing: f64,
+    /// The point ahead of the axle that the safety filter keeps apart, m (> 0).
+    pub l: f64,
+    /// The distance between two robots' points counted as a collision (and
+    /// kept by the filter when `safety`), m (> 0).
+    pub radius: f64,
+    /// Whether every action goes through the safety filter.
+    pub safety: bool,
+    /// The filter's `γ`, 1/s.
+    pub gain: f64,
+    /// The robots' base (speed limits bound the actions; lags, if any).
+    pub base: VelocityBase,
+    /// How many neighbours each observation lists (nearest first).
+    pub neighbours: usize,
+    /// Neighbours farther than this (point to point) are not listed, m.
+    pub sense: f64,
+    /// Reward weights.
+    pub weights: Weights,
+    /// Steps before an episode is truncated (≥ 1).
+    pub max_steps: u64,
+    /// The leader's speed is drawn in `[speed.0, speed.1]` m/s per episode.
+    pub speed: (f64, f64),
+    /// Its turn rate in `[−turn, turn]` rad/s.
+    pub turn: f64,
+}
+
+impl EnvConfig {
+    /// `num_envs × num_agents` robots on an ideal base limited to 0.5 m/s and
+    /// 2 rad/s, 1 m apart, 20 ms steps, no filter.
+    pub fn new(num_envs: usize, num_agents: usize) -> EnvConfig {
+        EnvConfig {
+            num_envs,
+            num_agents,
+            dt: 0.05,
+            spacing: 1.0,
+            l: 0.1,
+            radius: 0.4,
+            safety: false,
+            gain: 1.0,
+            base: layout::default_base(),
+            neighbours: 4,
+            sense: 3.0,
+            weights: Weights::default(),
+            max_steps: 500,
+            speed: (0.05, 0.2),
+            turn: 0.1,
+        }
+    }
+
+    fn check(&self) -> Result<(), ParamError> {
+        let count = |field, n: usize| {
+            if n == 0 {
+                Err(ParamError::new(field, 0.0, "must be ≥ 1"))
+            } else {
+                Ok(())
+            }
+        };
+        count("num_envs", self.num_envs)?;
+        count("num_agents", self.num_agents)?;
+        crate::check::positive("dt", self.dt)?;
+        crate::check::positive("spacing", self.spacing)?;
+        crate::check::positive("l", self.l)?;
+        crate::check::positive("radius", self.radius)?;
+        crate::check::positive("gain", self.gain)?;
+        crate::check::positive("sense", self.sense)?;
+        if self.max_steps == 0 {
+            return Err(ParamError::new("max_steps", 0.0, "must be ≥ 1"));
+        }
+        let (lo, hi) = self.speed;
+        if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi) {
+            return Err(ParamError::new(
+                "speed",
+                lo,
+                "must be 0 ≤ low ≤ high, finite",
+            ));
+        }
+        if !(self.turn.is_finite() && self.turn >= 0.0) {
+            return Err(ParamError::new("turn", self.turn, "must be finite and ≥ 0"));
+        }
+        let w = self.weights;
+        for (f, v) in [
+            ("weights.tracking", w.tracking),
+            ("weights.effort", w.effort),
+            ("weights.collision", w.collision),
+        ] {
+            if !v.is_finite() {
+                return Err(ParamError::new(f, v, "must be finite"));
+            }
+        }
+        if self.base.v_max().is_infinite() || self.base.omega_max().is_infinite() {
+            return Err(ParamError::new(
+                "base",
+                f64::INFINITY,
+                "needs finite v_max and omega_max (they bound the actions)",
+            ));
+        }
+        if self.neighbours > observe::MAX_NEIGHBOURS {
+            return Err(ParamError::new(
+                "neighbours",
+                self.neighbours as f64,
+                "must be ≤ 16",
+            ));
+        }
+        if self.safety {
+            SafetyConfig::new(self.radius, self.gain, f64::INFINITY)?;
+        }
+        self.base.check_step(self.dt)
+    }
+}
+
+/// One environment: its robots, its leader and its episode.
+#[derive(Debug, Clone)]
+struct Env {
+    states: Vec<State>,
+    slots: Slots,
+    filters: Vec<SafetyFilter>,
+    neighbours: Vec<Neighbour>,
+    /// The clipped (and filtered) commands of the last step.
+    applied: Vec<VelocityCommand>,
+    t: f64,
+    steps: u64,
+    episode_seed: u64,
+}
+
+/// What one step of one environment says beyond its observations.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EnvFacts {
+    /// The mean of its robots' rewards.
+    pub reward: f64,
+    /// The episode reached `max_steps`.
+    pub truncated: bool,
+    /// The smallest distance between two robots' points after the step, m
+    /// (infinite with one robot).
+    pub min_distance: f64,
+}
+
+/// `E` environments of `N` robots (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct VecFormation {
+    config: EnvConfig,
+    envs: Vec<Env>,
+}
+
+impl VecFormation {
+    /// The environments of `config`, reset with `seed` (environment `k`'s
+    /// episodes drawn from `seed` and `k`).
+    pub fn new(config: EnvConfig, seed: u64) -> Result<VecFormation, ParamError> {
+        config.check()?;
+        let filter = SafetyFilter::new(SafetyConfig::new(
+            config.radius,
+            config.gain,
+            f64::INFINITY,
+        )?)
+        .with_period(config.dt);
+        let n = config.num_agents;
+        let env = Env {
+            states: vec![State::default(); n],
+            slots: Slots::default(),
+            filters: vec![filter; if config.safety { n } else { 0 }],
+            neighbours: Vec::with_capacity(n),
+            applied: vec![VelocityCommand::default(); n],
+            t: 0.0,
+            steps: 0,
+            episode_seed: 0,
+        };
+        let mut me = VecFormation {
+            config,
+            envs: vec![env; config.num_envs],
+        };
+        me.reset(seed, None);
+        Ok(me)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &EnvConfig {
+        &self.config
+    }
+
+    /// Values per robot observation ([`layout::obs_dim`]).
+    pub fn obs_dim(&self) -> usize {
+        layout::obs_dim(self.config.neighbours)
+    }
+
+    /// Reseeds every environment from `seed` and resets those `mask` selects
+    /// (all when `None`); the others keep their state and their episode.
+    pub fn reset(&mut self, seed: u64, mask: Option<&[bool]>) {
+        let config = self.config;
+        for (k, env) in self.envs.iter_mut().enumerate() {
+            env.episode_seed = episode::mix(seed, k as u64);
+            if mask.is_none_or(|m| m[k]) {
+                env.start(&config);
+            }
+        }
+    }
+
+    /// Resets the environments `mask` selects, each with its next episode
+    /// from its own stream (what autoreset does).
+    pub fn reset_next(&mut self, mask: &[bool]) {
+        let config = self.config;
+        for (env, &on) in self.envs.iter_mut().zip(mask) {
+            if on {
+                env.start(&config);
+            }
+        }
+    }
+
+    /// Writes every robot's observation into `obs` (`E·N·obs_dim`).
+    pub fn observe<T: Scalar>(&self, obs: &mut [T]) {
+        let per = self.config.num_agents * self.obs_dim();
+        assert_eq!(obs.len(), self.envs.len() * per, "obs length");
+        let config = &self.config;
+        obs.par_chunks_mut(per)
+            .zip(self.envs.par_iter())
+            .for_each(|(o, env)| observe::write(config, &env.states, &env.slots, env.t, o));
+    }
+
+    /// One step of every environment under `actions` (`E·N·2`, `(v, ω)` per
+    /// robot; clipped to the base's limits): observations into `obs`,
+    /// each robot's reward into `rewards` (`E·N`), how much the filter
+    /// changed each action (`‖Δ(v, Lω)‖`, m/s) into `changed` (`E·N`), and
+    /// each environment's facts into `facts` (`E`). Actions must be finite
+    /// (checked by the caller: [`first_not_finite`]).
+    pub fn step<T: Scalar>(
+        &mut self,
+        actions: &[T],
+        obs: &mut [T],
+        rewards: &mut [T],
+        changed: &mut [T],
+        facts: &mut [EnvFacts],
+    ) {
+        let (e, n, d) = (self.envs.len(), self.config.num_agents, self.obs_dim());
+        assert!(
+            actions.len() == e * n * 2
+                && obs.len() == e * n * d
+                && rewards.len() == e * n
+                && changed.len() == e * n
+                && facts.len() == e,
+            "buffer lengths"
+        );
+        let config = &self.config;
+        self.envs
+            .par_iter_mut()
+            .zip(actions.par_chunks(n * 2))
+            .zip(obs.par_chunks_mut(n * d))
+            .zip(rewards.par_chunks_mut(n))
+            .zip(changed.par_chunks_mut(n))
+            .zip(facts.par_iter_mut())
+            .for_each(|(((((env, a), o), r), c), f)| {
+                *f = env.step(config, a, c);
+                observe::write(config, &env.states, &env.slots, env.t, o);
+                f.reward =
+                    observe::rewards(config, &env.states, &env.slots, env.t, &env.applied, r);
+            });
+    }
+
+    /// Every robot's state, environment by environment.
+    pub fn states(&self) -> impl Iterator<Item = &State> {
+        self.envs.iter().flat_map(|e| e.states.iter())
+    }
+
+    /// Environment `k`'s slots and leader.
+    pub fn slots(&self, k: usize) -> &Slots {
+        &self.envs[k].slots
+    }
+
+    /// Environment `k`'s time in its episode, s.
+    pub fn time(&self, k: usize) -> f64 {
+        self.envs[k].t
+    }
+}
+
+/// The index of the first value of `values` that is not finite.
+pub fn first_not_finite<T: Scalar>(values: &[T]) -> Option<usize> {
+    values.iter().position(|v| !v.get().is_finite())
+}
+
+impl Env {
+    /// A new episode from this environment's stream.
+    fn start(&mut self, config: &EnvConfig) {
+        self.episode_seed = episode::mix(self.episode_seed, 0x5eed);
+        episode::draw(config, self.episode_seed, &mut self.slots, &mut self.states);
+        for f in &mut self.filters {
+            *f = SafetyFilter::new(
+                SafetyConfig::new(config.radius, config.gain, f64::INFINITY)
+                    .unwrap_or_else(|_| unreachable!("checked by EnvConfig::check")),
+            )
+            .with_period(config.dt);
+        }
+        self.applied.fill(VelocityCommand::default());
+        self.t = 0.0;
+        self.steps = 0;
+    }
+
+    /// Clip, filter, integrate.
+    fn step<T: Scalar>(
+        &mut self,
+        config: &EnvConfig,
+        actions: &[T],
+        changed: &mut [T],
+    ) -> EnvFacts {
+        let base = &config.base;
+        for (i, cmd) in self.applied.iter_mut().enumerate() {
+            *cmd = VelocityCommand {
+                v: actions[2 * i].get().clamp(-base.v_max(), base.v_max()),
+                omega: actions[2 * i + 1]
+                    .get()
+                    .clamp(-base.omega_max(), base.omega_max()),
+            };
+        }
+        if config.safety {
+            for (i, change) in changed.iter_mut().enumerate() {
+                self.neighbours.clear();
+                for (j, s) in self.states.iter().enumerate() {
+                    if j != i {
+                        self.neighbours
+                            .push(Neighbour::of_state(s, config.l, None, true));
+                    }
+                }
+                let nominal = self.applied[i];
+                let out = self.filters[i].velocity(
+                    self.t,
+                    &self.states[i],
+                    config.l,
+                    nominal,
+                    base,
+                    &self.neighbours,
+                    &[],
+                );
+                self.applied[i] = out.command;
+                *change = T::of(
+                    (out.command.v - nominal.v)
+                        .hypot(config.l * (out.command.omega - nominal.omega)),
+                );
+            }
+        } else {
+            changed.fill(T::of(0.0));
+        }
+        for (s, cmd) in self.states.iter_mut().zip(&self.applied) {
+            *s = base.rk4_step(s, base.limit(*cmd).0, config.dt);
+        }
+        self.t += config.dt;
+        self.steps += 1;
+        EnvFacts {
+            reward: 0.0,
+            truncated: self.steps >= config.max_steps,
+            min_distance: observe::closest(&self.states, config.l),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

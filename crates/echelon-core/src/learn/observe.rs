@@ -1,0 +1,140 @@
+//! Observations ([`super::layout`]), rewards and the baseline policy.
+
+use super::layout::{E, LEADER_VELOCITY, NEIGHBOURS, OFFSETS, SPEEDS, obs_dim};
+use super::{EnvConfig, Scalar, Slots};
+use crate::base::VelocityCommand;
+use crate::model::State;
+use crate::safety::point;
+
+/// The most neighbours an observation lists.
+pub const MAX_NEIGHBOURS: usize = 16;
+
+/// Robot `i`'s `e` (eq. 7) and `R ṗ_d` in its frame.
+#[inline]
+fn errors(s: &State, pd: [f64; 2], dpd: [f64; 2], lx: f64, ly: f64) -> ([f64; 2], [f64; 2]) {
+    let (sin, cos) = s.theta.sin_cos();
+    let (dx, dy) = (s.x - pd[0], s.y - pd[1]);
+    let e = [cos * dx + sin * dy + lx, -sin * dx + cos * dy + ly];
+    let q = [cos * dpd[0] + sin * dpd[1], -sin * dpd[0] + cos * dpd[1]];
+    (e, q)
+}
+
+/// Writes one environment's observations (`N · obs_dim`) at time `t`.
+pub(super) fn write<T: Scalar>(
+    config: &EnvConfig,
+    states: &[State],
+    slots: &Slots,
+    t: f64,
+    out: &mut [T],
+) {
+    let d = obs_dim(config.neighbours);
+    let jet = slots.leader_at(t);
+    let k = config.neighbours.min(MAX_NEIGHBOURS);
+    for (i, (s, o)) in states.iter().zip(out.chunks_exact_mut(d)).enumerate() {
+        let (e, q) = errors(s, jet.p, jet.dp, slots.lx[i], slots.ly[i]);
+        let head = [
+            e[0],
+            e[1],
+            s.v,
+            s.omega,
+            q[0],
+            q[1],
+            slots.lx[i],
+            slots.ly[i],
+        ];
+        for (slot, v) in o[..NEIGHBOURS].iter_mut().zip(head) {
+            *slot = T::of(v);
+        }
+        debug_assert_eq!((E, SPEEDS, LEADER_VELOCITY, OFFSETS), (0, 2, 4, 6));
+        // The k nearest points within `sense`, by insertion into a fixed array.
+        let me = point(s, config.l);
+        let mut best = [(f64::INFINITY, 0usize); MAX_NEIGHBOURS];
+        for (j, other) in states.iter().enumerate() {
+            if j == i {
+                continue;
+            }
+            let p = point(other, config.l);
+            let dist = (p[0] - me[0]).hypot(p[1] - me[1]);
+            if dist > config.sense || k == 0 || dist >= best[k - 1].0 {
+                continue;
+            }
+            let mut at = k - 1;
+            while at > 0 && best[at - 1].0 > dist {
+                best[at] = best[at - 1];
+                at -= 1;
+            }
+            best[at] = (dist, j);
+        }
+        let (sin, cos) = s.theta.sin_cos();
+        let rest = &mut o[NEIGHBOURS..];
+        rest.fill(T::of(0.0));
+        for (m, &(dist, j)) in best[..k].iter().enumerate() {
+            if dist.is_finite() {
+                let p = point(&states[j], config.l);
+                let (dx, dy) = (p[0] - me[0], p[1] - me[1]);
+                rest[3 * m] = T::of(cos * dx + sin * dy);
+                rest[3 * m + 1] = T::of(-sin * dx + cos * dy);
+                rest[3 * m + 2] = T::of(1.0);
+            }
+        }
+    }
+}
+
+/// Writes each robot's reward ([`super::Weights`]) after a step under
+/// `applied`, and returns their mean.
+pub(super) fn rewards<T: Scalar>(
+    config: &EnvConfig,
+    states: &[State],
+    slots: &Slots,
+    t: f64,
+    applied: &[VelocityCommand],
+    out: &mut [T],
+) -> f64 {
+    let w = config.weights;
+    let jet = slots.leader_at(t);
+    let mut sum = 0.0;
+    for (i, (s, r)) in states.iter().zip(out.iter_mut()).enumerate() {
+        let (e, _) = errors(s, jet.p, jet.dp, slots.lx[i], slots.ly[i]);
+        let a = applied[i];
+        let me = point(s, config.l);
+        let hit = states.iter().enumerate().any(|(j, o)| {
+            let p = point(o, config.l);
+            j != i && (p[0] - me[0]).hypot(p[1] - me[1]) < config.radius
+        });
+        let value = -w.tracking * (e[0] * e[0] + e[1] * e[1])
+            - w.effort * (a.v * a.v + (config.l * a.omega).powi(2))
+            - if hit { w.collision } else { 0.0 };
+        *r = T::of(value);
+        sum += value;
+    }
+    sum / states.len() as f64
+}
+
+/// The smallest distance between two robots' points `l` ahead, m.
+pub(super) fn closest(states: &[State], l: f64) -> f64 {
+    let mut best = f64::INFINITY;
+    for (i, a) in states.iter().enumerate() {
+        let p = point(a, l);
+        for b in &states[i + 1..] {
+            let q = point(b, l);
+            best = best.min((p[0] - q[0]).hypot(p[1] - q[1]));
+        }
+    }
+    best
+}
+
+/// The kinematic law ([`crate::kinematic`]) from an observation alone:
+/// `ξ* = R ṗ_d − K_e e`, `ω* = ξ*₂ / L_X`, `v* = ξ*₁ + ω* L_Y` (`L̇_Y = 0`:
+/// the environments hold fixed offsets). `obs` holds whole observations of
+/// `obs_dim` values, `actions` receives `(v*, ω*)` for each.
+pub fn baseline<T: Scalar>(obs: &[T], obs_dim: usize, ke: f64, actions: &mut [T]) {
+    for (o, a) in obs.chunks_exact(obs_dim).zip(actions.chunks_exact_mut(2)) {
+        let xi = [
+            o[LEADER_VELOCITY].get() - ke * o[E].get(),
+            o[LEADER_VELOCITY + 1].get() - ke * o[E + 1].get(),
+        ];
+        let omega = xi[1] / o[OFFSETS].get();
+        a[0] = T::of(xi[0] + omega * o[OFFSETS + 1].get());
+        a[1] = T::of(omega);
+    }
+}

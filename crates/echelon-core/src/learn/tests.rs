@@ -1,0 +1,211 @@
+#![allow(clippy::unwrap_used)]
+
+use proptest::prelude::*;
+
+use super::*;
+use crate::control::{LeaderMotion, Offset};
+use crate::kinematic::kinematic_law;
+use crate::reference::Trajectory;
+
+#[allow(clippy::type_complexity)]
+fn buffers(env: &VecFormation) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<EnvFacts>) {
+    let c = env.config();
+    let (e, n) = (c.num_envs, c.num_agents);
+    (
+        vec![0.0; e * n * 2],
+        vec![0.0; e * n * env.obs_dim()],
+        vec![0.0; e * n],
+        vec![0.0; e * n],
+        vec![EnvFacts::default(); e],
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    /// The observation's `e` and the baseline from it are the kernel's
+    /// kinematic law at the same state (eq. 7, eq. 10's `ξ*`): the
+    /// layout carries what the law needs, nothing is lost.
+    #[test]
+    fn the_baseline_from_observations_is_the_kinematic_law(
+        n in 1usize..9, k in 0usize..6, seed in any::<u64>(), ke in 0.2..3.0f64,
+        jitter in proptest::collection::vec((-0.5..0.5f64, -0.5..0.5f64, -3.0..3.0f64, -0.4..0.4f64, -1.5..1.5f64), 8),
+    ) {
+        let mut config = EnvConfig::new(2, n);
+        config.neighbours = k;
+        let mut env = VecFormation::new(config, seed).unwrap();
+        // Move the robots off their starts and give them speeds.
+        for (i, s) in env.envs[1].states.iter_mut().enumerate() {
+            let (dx, dy, th, v, w) = jitter[i];
+            s.x += dx; s.y += dy; s.theta = th; s.v = v; s.omega = w;
+        }
+        env.envs[1].t = 0.7;
+        let d = env.obs_dim();
+        let mut obs = vec![0.0; 2 * n * d];
+        env.observe(&mut obs);
+        let mut actions = vec![0.0; 2 * n * 2];
+        baseline(&obs, d, ke, &mut actions);
+        let slots = env.slots(1);
+        let jet = slots.leader_at(0.7);
+        let leader = LeaderMotion::of_jet(&jet);
+        for i in 0..n {
+            let off = Offset { lx: slots.lx[i], ly: slots.ly[i], dly: 0.0, ddly: 0.0 };
+            let law = kinematic_law(&env.envs[1].states[i], &leader, &off, ke);
+            let o = &obs[(n + i) * d..(n + i + 1) * d];
+            let a = &actions[(n + i) * 2..(n + i + 1) * 2];
+            prop_assert!((o[0] - law.e[0]).abs() < 1e-12 && (o[1] - law.e[1]).abs() < 1e-12, "{o:?} {law:?}");
+            prop_assert!((a[0] - law.cmd.v).abs() < 1e-9 * (1.0 + law.cmd.v.abs()), "{a:?} {law:?}");
+            prop_assert!((a[1] - law.cmd.omega).abs() < 1e-9 * (1.0 + law.cmd.omega.abs()), "{a:?} {law:?}");
+            // Neighbours: listed ones within `sense`, nearest first, padding zero.
+            let mut last = 0.0;
+            for m in 0..k {
+                let nb = &o[8 + 3 * m..11 + 3 * m];
+                if nb[2] == 1.0 {
+                    let dist = nb[0].hypot(nb[1]);
+                    prop_assert!(dist >= last - 1e-12 && dist <= config.sense);
+                    last = dist;
+                } else {
+                    prop_assert!(nb == [0.0; 3]);
+                }
+            }
+            let listed = (0..k).filter(|m| o[10 + 3 * m] == 1.0).count();
+            let me = crate::safety::point(&env.envs[1].states[i], config.l);
+            let within = env.envs[1].states.iter().enumerate().filter(|&(j, s)| {
+                let p = crate::safety::point(s, config.l);
+                j != i && (p[0] - me[0]).hypot(p[1] - me[1]) <= config.sense
+            }).count();
+            prop_assert_eq!(listed, k.min(within));
+        }
+    }
+
+    /// Under the baseline, every robot of every environment reaches its
+    /// slot: ‖e‖ below 1 cm after 40 s, whatever the draw (leader speed up
+    /// to 0.2 m/s, turn rate up to 0.1 rad/s, starts up to 0.2 spacings off
+    /// and 0.5 rad turned).
+    #[test]
+    fn the_baseline_brings_everyone_to_their_slots(n in 1usize..10, seed in any::<u64>(), spacing in 0.8..3.0f64) {
+        let mut config = EnvConfig::new(3, n);
+        config.spacing = spacing;
+        config.max_steps = 100_000;
+        let mut env = VecFormation::new(config, seed).unwrap();
+        let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
+        let d = env.obs_dim();
+        env.observe(&mut obs);
+        for _ in 0..800 {
+            baseline(&obs, d, 1.0, &mut actions);
+            env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+        }
+        for (i, o) in obs.chunks_exact(d).enumerate() {
+            prop_assert!(o[0].hypot(o[1]) < 0.01, "robot {i}: e = ({}, {})", o[0], o[1]);
+        }
+        // The rewards are the documented formula of what was observed:
+        // −‖e‖² − 0.01 ‖(v, Lω)‖² − 10 [nearest point within the radius].
+        for (i, o) in obs.chunks_exact(d).enumerate() {
+            let (v, w) = (actions[2 * i].clamp(-0.5, 0.5), actions[2 * i + 1].clamp(-2.0, 2.0));
+            let hit = o[10] == 1.0 && o[8].hypot(o[9]) < config.radius;
+            let want = -(o[0] * o[0] + o[1] * o[1])
+                - 0.01 * (v * v + (config.l * w).powi(2))
+                - if hit { 10.0 } else { 0.0 };
+            prop_assert!((rewards[i] - want).abs() < 1e-12, "robot {i}: {} vs {want}", rewards[i]);
+        }
+    }
+
+    /// With the filter, random actions in a crowd never bring two points
+    /// closer than the radius (less 1 mm); the same actions without it do
+    /// (the test is not vacuous).
+    #[test]
+    fn the_filter_keeps_the_radius_under_random_actions(seed in any::<u64>(), n in 4usize..9) {
+        let mut config = EnvConfig::new(4, n);
+        config.spacing = 0.5;
+        config.radius = 0.3;
+        let mut rng = crate::rng::SplitMix64::new(seed);
+        let mut closest = [f64::INFINITY; 2];
+        for (pass, safety) in [true, false].into_iter().enumerate() {
+            config.safety = safety;
+            let mut env = VecFormation::new(config, seed).unwrap();
+            let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
+            let mut draws = crate::rng::SplitMix64::new(seed ^ 1);
+            for _ in 0..300 {
+                for a in actions.chunks_exact_mut(2) {
+                    a[0] = draws.uniform(-0.5, 0.5);
+                    a[1] = draws.uniform(-2.0, 2.0);
+                }
+                env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+                for f in &facts {
+                    closest[pass] = closest[pass].min(f.min_distance);
+                }
+            }
+            let _ = rng.next_u64();
+        }
+        prop_assert!(closest[0] >= config.radius - 1e-3, "with the filter: {}", closest[0]);
+        prop_assert!(closest[1] < config.radius, "without it: {}", closest[1]);
+    }
+}
+
+/// A reset with a mask changes the selected environments only; the same
+/// seed gives the same episodes, another seed others.
+#[test]
+fn a_masked_reset_leaves_the_others_untouched() {
+    let config = EnvConfig::new(5, 3);
+    let mut a = VecFormation::new(config, 7).unwrap();
+    let b = VecFormation::new(config, 7).unwrap();
+    let c = VecFormation::new(config, 8).unwrap();
+    let states = |v: &VecFormation| v.states().copied().collect::<Vec<_>>();
+    assert_eq!(states(&a), states(&b));
+    assert_ne!(states(&a), states(&c));
+    let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&a);
+    actions.fill(0.3);
+    a.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+    let before = states(&a);
+    a.reset(9, Some(&[false, true, false, false, true]));
+    let after = states(&a);
+    for k in 0..5 {
+        let same = before[3 * k..3 * k + 3] == after[3 * k..3 * k + 3];
+        assert_eq!(same, ![1, 4].contains(&k), "env {k}");
+    }
+    assert!(a.time(0) > 0.0 && a.time(1) == 0.0);
+    // Environments draw different episodes from one seed.
+    assert_ne!(a.slots(0).lx, a.slots(2).lx);
+    assert!((a.slots(0).leader.eval(0.0, crate::reference::Order::Two).p[0]).abs() < 1e-12);
+}
+
+/// Truncation comes at `max_steps`, actions are clipped to the base's
+/// limits, and a bad configuration is refused.
+#[test]
+fn truncation_clipping_and_refusals() {
+    let mut config = EnvConfig::new(1, 2);
+    config.max_steps = 3;
+    let mut env = VecFormation::new(config, 1).unwrap();
+    let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
+    actions.copy_from_slice(&[9.0, -9.0, -9.0, 9.0]);
+    for step in 1..=3 {
+        env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+        assert_eq!(facts[0].truncated, step == 3);
+    }
+    let d = env.obs_dim();
+    assert!((obs[2] - 0.5).abs() < 1e-12 && (obs[3] + 2.0).abs() < 1e-12);
+    assert!((obs[d + 2] + 0.5).abs() < 1e-12 && (obs[d + 3] - 2.0).abs() < 1e-12);
+    for bad in [
+        EnvConfig {
+            num_envs: 0,
+            ..config
+        },
+        EnvConfig { dt: 0.0, ..config },
+        EnvConfig {
+            neighbours: 17,
+            ..config
+        },
+        EnvConfig {
+            speed: (0.3, 0.1),
+            ..config
+        },
+        EnvConfig {
+            base: crate::base::VelocityBase::IDEAL,
+            ..config
+        },
+    ] {
+        assert!(VecFormation::new(bad, 1).is_err(), "{bad:?}");
+    }
+    assert_eq!(first_not_finite(&[0.0, 1.0, f64::NAN]), Some(2));
+    assert_eq!(first_not_finite(&[0.0f32, 1.0]), None);
+}

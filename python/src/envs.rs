@@ -1,0 +1,352 @@
+//! `echelon.envs`' engine: the kernel's vectorised formation environments
+//! ([`echelon::learn::VecFormation`]) stepped on caller-owned numpy arrays
+//! (float64, or float32 when made so), the GIL released. The Python classes
+//! (`python/echelon/envs.py`) check shapes and convert dtypes; this layer
+//! checks again what it reads (shape, dtype, layout, finite actions) and
+//! changes nothing when one is wrong.
+
+use echelon::base::{VelocityBase, VelocityBaseSpec};
+use echelon::learn::{EnvConfig, EnvFacts, Scalar, VecFormation, Weights, baseline};
+use numpy::{
+    Element, PyArray1, PyArray3, PyArrayMethods, PyReadonlyArrayDyn, PyReadwriteArrayDyn,
+    PyUntypedArrayMethods,
+};
+use pyo3::prelude::*;
+
+use crate::errors;
+
+/// The environments and their dtype.
+#[pyclass(module = "echelon._echelon", name = "VecFormation")]
+pub(crate) struct PyVecFormation {
+    inner: VecFormation,
+    float32: bool,
+    facts: Vec<EnvFacts>,
+}
+
+/// A caller's array of `T` of exactly `shape`, C-contiguous, read.
+fn input<'py, T: Element>(
+    name: &str,
+    obj: &Bound<'py, PyAny>,
+    shape: &[usize],
+) -> PyResult<PyReadonlyArrayDyn<'py, T>> {
+    let a = obj.extract::<PyReadonlyArrayDyn<'py, T>>().map_err(|_| {
+        errors::value(format!(
+            "{name} must be a {} array of shape {shape:?}",
+            dtype::<T>()
+        ))
+    })?;
+    if a.shape() != shape || !a.is_c_contiguous() {
+        return Err(errors::value(format!(
+            "{name} must be a C-contiguous {} array of shape {shape:?}, got shape {:?}",
+            dtype::<T>(),
+            a.shape()
+        )));
+    }
+    Ok(a)
+}
+
+/// A caller's array of `T` of exactly `shape`, C-contiguous, written.
+fn output<'py, T: Element>(
+    name: &str,
+    obj: &Bound<'py, PyAny>,
+    shape: &[usize],
+) -> PyResult<PyReadwriteArrayDyn<'py, T>> {
+    let a = obj.extract::<PyReadwriteArrayDyn<'py, T>>().map_err(|_| {
+        errors::value(format!(
+            "{name} must be a writeable {} array of shape {shape:?}",
+            dtype::<T>()
+        ))
+    })?;
+    if a.shape() != shape || !a.is_c_contiguous() {
+        return Err(errors::value(format!(
+            "{name} must be a C-contiguous {} array of shape {shape:?}, got shape {:?}",
+            dtype::<T>(),
+            a.shape()
+        )));
+    }
+    Ok(a)
+}
+
+fn dtype<T>() -> &'static str {
+    if std::mem::size_of::<T>() == 4 {
+        "float32"
+    } else {
+        "float64"
+    }
+}
+
+impl PyVecFormation {
+    fn shape(&self) -> (usize, usize, usize) {
+        let c = self.inner.config();
+        (c.num_envs, c.num_agents, self.inner.obs_dim())
+    }
+
+    fn observe_as<T: Element + Scalar>(
+        &self,
+        py: Python<'_>,
+        out: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let (e, n, d) = self.shape();
+        let mut out = output::<T>("obs", out, &[e, n, d])?;
+        let buf = out.as_slice_mut().map_err(errors::value)?;
+        let inner = &self.inner;
+        py.detach(|| inner.observe(buf));
+        Ok(())
+    }
+
+    fn step_as<T: Element + Scalar>(
+        &mut self,
+        py: Python<'_>,
+        actions: &Bound<'_, PyAny>,
+        obs: &Bound<'_, PyAny>,
+        rewards: &Bound<'_, PyAny>,
+        changed: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let (e, n, d) = self.shape();
+        let actions = input::<T>("actions", actions, &[e, n, 2])?;
+        let mut obs = output::<T>("obs", obs, &[e, n, d])?;
+        let mut rewards = output::<T>("rewards", rewards, &[e, n])?;
+        let mut changed = output::<T>("changed", changed, &[e, n])?;
+        let a = actions.as_slice().map_err(errors::value)?;
+        if let Some(k) = echelon::learn::first_not_finite(a) {
+            return Err(errors::value(format!(
+                "actions[{}, {}, {}] = {} is not finite: nothing was stepped",
+                k / (2 * n),
+                (k / 2) % n,
+                k % 2,
+                a[k].get()
+            )));
+        }
+        let (o, r, c) = (
+            obs.as_slice_mut().map_err(errors::value)?,
+            rewards.as_slice_mut().map_err(errors::value)?,
+            changed.as_slice_mut().map_err(errors::value)?,
+        );
+        let (inner, facts) = (&mut self.inner, &mut self.facts);
+        py.detach(|| inner.step(a, o, r, c, facts));
+        Ok(())
+    }
+}
+
+#[pymethods]
+impl PyVecFormation {
+    #[new]
+    #[pyo3(signature = (num_envs, num_agents, *, dt, spacing, l, radius, safety, gain, v_max,
+        omega_max, tau_v, tau_omega, neighbours, sense, weights, max_steps, speed, turn, seed, float32))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        num_envs: usize,
+        num_agents: usize,
+        dt: f64,
+        spacing: f64,
+        l: f64,
+        radius: f64,
+        safety: bool,
+        gain: f64,
+        v_max: f64,
+        omega_max: f64,
+        tau_v: f64,
+        tau_omega: f64,
+        neighbours: usize,
+        sense: f64,
+        weights: (f64, f64, f64),
+        max_steps: u64,
+        speed: (f64, f64),
+        turn: f64,
+        seed: u64,
+        float32: bool,
+    ) -> PyResult<Self> {
+        let base = VelocityBase::new(VelocityBaseSpec {
+            v_max,
+            omega_max,
+            tau_v,
+            tau_omega,
+            ..VelocityBase::IDEAL.spec()
+        })
+        .map_err(|e| errors::param(&e))?;
+        let config = EnvConfig {
+            num_envs,
+            num_agents,
+            dt,
+            spacing,
+            l,
+            radius,
+            safety,
+            gain,
+            base,
+            neighbours,
+            sense,
+            weights: Weights {
+                tracking: weights.0,
+                effort: weights.1,
+                collision: weights.2,
+            },
+            max_steps,
+            speed,
+            turn,
+        };
+        let inner = VecFormation::new(config, seed).map_err(|e| errors::param(&e))?;
+        Ok(PyVecFormation {
+            inner,
+            float32,
+            facts: vec![EnvFacts::default(); num_envs],
+        })
+    }
+
+    /// Values per robot observation.
+    #[getter]
+    fn obs_dim(&self) -> usize {
+        self.inner.obs_dim()
+    }
+
+    /// Reseeds every environment from `seed` and resets those `mask` selects
+    /// (all when `None`).
+    #[pyo3(signature = (seed, mask=None))]
+    fn reset(&mut self, seed: u64, mask: Option<Vec<bool>>) -> PyResult<()> {
+        let e = self.shape().0;
+        if let Some(m) = mask.as_ref().filter(|m| m.len() != e) {
+            return Err(errors::value(format!(
+                "reset_mask must have {e} entries, got {}",
+                m.len()
+            )));
+        }
+        self.inner.reset(seed, mask.as_deref());
+        Ok(())
+    }
+
+    /// Resets the environments `mask` selects with their next episodes.
+    fn reset_next(&mut self, mask: Vec<bool>) -> PyResult<()> {
+        let e = self.shape().0;
+        if mask.len() != e {
+            return Err(errors::value(format!(
+                "mask must have {e} entries, got {}",
+                mask.len()
+            )));
+        }
+        self.inner.reset_next(&mask);
+        Ok(())
+    }
+
+    /// Writes the observations into `out` (`(E, N, obs_dim)`).
+    fn observe(&self, py: Python<'_>, out: &Bound<'_, PyAny>) -> PyResult<()> {
+        if self.float32 {
+            self.observe_as::<f32>(py, out)
+        } else {
+            self.observe_as::<f64>(py, out)
+        }
+    }
+
+    /// One step under `actions` (`(E, N, 2)`): observations, per-robot
+    /// rewards and filter changes into the arrays given; returns the
+    /// environments' mean rewards, truncations and closest distances.
+    #[allow(clippy::type_complexity)]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        actions: &Bound<'py, PyAny>,
+        obs: &Bound<'py, PyAny>,
+        rewards: &Bound<'py, PyAny>,
+        changed: &Bound<'py, PyAny>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyArray1<f64>>,
+    )> {
+        if self.float32 {
+            self.step_as::<f32>(py, actions, obs, rewards, changed)?;
+        } else {
+            self.step_as::<f64>(py, actions, obs, rewards, changed)?;
+        }
+        let f = &self.facts;
+        Ok((
+            PyArray1::from_iter(py, f.iter().map(|x| x.reward)),
+            PyArray1::from_iter(py, f.iter().map(|x| x.truncated)),
+            PyArray1::from_iter(py, f.iter().map(|x| x.min_distance)),
+        ))
+    }
+
+    /// A new `(E, N, 3)` float64 array of the robots' x, y, θ.
+    fn poses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let (e, n, _) = self.shape();
+        let flat: Vec<f64> = self
+            .inner
+            .states()
+            .flat_map(|s| [s.x, s.y, s.theta])
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([e, n, 3])
+    }
+
+    /// The robots' slots: `(E, N, 2)` of `L_X`, `L_Y`.
+    fn offsets<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let (e, n, _) = self.shape();
+        let flat: Vec<f64> = (0..e)
+            .flat_map(|k| {
+                let s = self.inner.slots(k);
+                s.lx.iter()
+                    .zip(&s.ly)
+                    .flat_map(|(a, b)| [*a, *b])
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([e, n, 2])
+    }
+
+    /// Each environment's leader: `(E, 3)` of its heading (rad), speed
+    /// (m/s) and turn rate (rad/s); it starts at the origin.
+    fn leaders<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
+        let e = self.shape().0;
+        let flat: Vec<f64> = (0..e)
+            .flat_map(|k| {
+                let c = &self.inner.slots(k).leader;
+                [c.heading(), c.speed(), c.turn_rate()]
+            })
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([e, 3])
+    }
+
+    /// The kinematic law from observations (`(..., obs_dim)`) into actions
+    /// (`(..., 2)`), both of the environments' dtype.
+    fn baseline(
+        &self,
+        py: Python<'_>,
+        obs: &Bound<'_, PyAny>,
+        ke: f64,
+        out: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        if self.float32 {
+            baseline_as::<f32>(py, obs, ke, out, self.inner.obs_dim())
+        } else {
+            baseline_as::<f64>(py, obs, ke, out, self.inner.obs_dim())
+        }
+    }
+}
+
+fn baseline_as<T: Element + Scalar>(
+    py: Python<'_>,
+    obs: &Bound<'_, PyAny>,
+    ke: f64,
+    out: &Bound<'_, PyAny>,
+    d: usize,
+) -> PyResult<()> {
+    let o = obs
+        .extract::<PyReadonlyArrayDyn<'_, T>>()
+        .map_err(|_| errors::value(format!("obs must be a {} array", dtype::<T>())))?;
+    let mut a = out
+        .extract::<PyReadwriteArrayDyn<'_, T>>()
+        .map_err(|_| errors::value(format!("out must be a writeable {} array", dtype::<T>())))?;
+    let (os, as_) = (o.shape().to_vec(), a.shape().to_vec());
+    if os.last() != Some(&d) || as_.last() != Some(&2) || os[..os.len() - 1] != as_[..as_.len() - 1]
+    {
+        return Err(errors::value(format!(
+            "obs (…, {d}) and out (…, 2) must agree, got {os:?} and {as_:?}"
+        )));
+    }
+    let src = o.as_slice().map_err(errors::value)?;
+    let dst = a.as_slice_mut().map_err(errors::value)?;
+    py.detach(|| baseline(src, d, ke, dst));
+    Ok(())
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyVecFormation>()
+}

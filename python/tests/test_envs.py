@@ -1,0 +1,184 @@
+"""echelon.envs (issue learn): Gymnasium and PettingZoo contracts, the
+baseline against `echelon run`, the filter's radius under random actions,
+and bad input refused with nothing changed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+gymnasium = pytest.importorskip("gymnasium")
+pettingzoo = pytest.importorskip("pettingzoo")
+
+from gymnasium.utils.env_checker import check_env  # noqa: E402
+from pettingzoo.test import parallel_api_test, parallel_seed_test  # noqa: E402
+
+import echelon  # noqa: E402
+from echelon import envs  # noqa: E402
+
+
+def test_the_single_environment_passes_gymnasiums_check_env():
+    check_env(envs.FormationEnv(4, seed=1), skip_render_check=True)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_vector_spaces_shapes_and_dtypes(dtype):
+    env = envs.FormationVecEnv(3, 4, dtype=dtype, neighbours=2, seed=5)
+    d = 8 + 3 * 2
+    assert env.single_observation_space.shape == (4, d)
+    assert env.observation_space.shape == (3, 4, d)
+    assert env.action_space.shape == (3, 4, 2)
+    assert env.metadata["autoreset_mode"] == gymnasium.vector.AutoresetMode.NEXT_STEP
+    obs, info = env.reset(seed=2)
+    assert obs.dtype == dtype and obs.shape == (3, 4, d) and env.observation_space.contains(obs)
+    # Actions of another float dtype are converted.
+    other = np.float32 if dtype == np.float64 else np.float64
+    obs, r, term, trunc, info = env.step(env.action_space.sample().astype(other))
+    assert obs.dtype == dtype and r.shape == (3,) and r.dtype == dtype
+    assert term.shape == trunc.shape == (3,) and term.dtype == trunc.dtype == np.bool_
+    assert info["agent_rewards"].shape == (3, 4) and info["min_distance"].shape == (3,)
+    assert env.poses.shape == (3, 4, 3)
+
+
+def test_seeding_is_deterministic_and_a_masked_reset_leaves_the_others_untouched():
+    def rollout(seed):
+        env = envs.FormationVecEnv(4, 3, seed=0)
+        env.action_space.seed(seed)
+        out = [env.reset(seed=seed)[0]]
+        for _ in range(5):
+            out.append(env.step(env.action_space.sample())[0])
+        return np.stack(out), env
+
+    a, env = rollout(11)
+    b, _ = rollout(11)
+    c, _ = rollout(12)
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
+    before = env.poses
+    obs_before = env.step(np.zeros((4, 3, 2)))[0].copy()
+    poses = env.poses
+    mask = np.array([False, True, False, True])
+    obs, _ = env.reset(options={"reset_mask": mask})
+    after = env.poses
+    assert np.array_equal(after[~mask], poses[~mask]) and np.array_equal(obs[~mask], obs_before[~mask])
+    assert not np.array_equal(after[mask], poses[mask])
+    assert before.shape == after.shape
+
+
+def test_autoreset_is_next_step():
+    env = envs.FormationVecEnv(2, 3, max_steps=3, seed=4)
+    env.reset(seed=4)
+    zero = np.zeros((2, 3, 2))
+    for k in range(1, 4):
+        obs, r, term, trunc, _ = env.step(zero)
+        assert list(trunc) == [k == 3, k == 3] and not term.any()
+    obs, r, term, trunc, _ = env.step(np.full((2, 3, 2), 0.3))
+    assert not trunc.any() and np.all(r == 0.0)
+    # A fresh episode: at rest, where its start is.
+    assert np.all(obs[..., 2:4] == 0.0)
+
+
+def test_pettingzoo_api_and_seed_tests_pass():
+    parallel_api_test(envs.FormationParallelEnv(4, max_steps=30, seed=3), num_cycles=40)
+    parallel_seed_test(lambda: envs.FormationParallelEnv(4, max_steps=30))
+    env = envs.FormationParallelEnv(3, seed=1)
+    env.reset(options={"something_else": 1})  # ignored, as PettingZoo's test does
+    with pytest.raises(ValueError, match="reset_mask"):
+        env.reset(options={"reset_mask": "yes"})
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
+def test_the_baseline_brings_every_robot_to_its_slot(seed):
+    rng = np.random.default_rng(seed)
+    env = envs.FormationVecEnv(
+        int(rng.integers(1, 6)), int(rng.integers(1, 9)), spacing=float(rng.uniform(0.8, 3.0)), max_steps=10_000, seed=seed
+    )
+    policy = envs.baseline_policy(env)
+    obs, _ = env.reset(seed=seed)
+    for _ in range(800):
+        obs = env.step(policy(obs))[0]
+    assert np.hypot(obs[..., 0], obs[..., 1]).max() < 0.01
+
+
+def test_the_baseline_through_the_env_reproduces_echelon_run():
+    """The same formation as a scenario (a circle reference, the kinematic
+    law held for one step, the same base): `echelon run`'s poses and the
+    environment's under the baseline agree to 1e-9 m over 10 s."""
+    dt, n, ke, l = 0.01, 4, 1.0, 0.1
+    env = envs.FormationVecEnv(1, n, dt=dt, seed=21, max_steps=100_000, l=l)
+    obs, _ = env.reset(seed=21)
+    heading, speed, turn = env.leaders[0]
+    offsets, starts = env.offsets[0], env.poses[0]
+    doc = {
+        "name": "env",
+        "sim": {"duration": 10.0, "dt": dt, "controller_period": dt},
+        "log": {"dt": 0.0},
+        "control": {"law": "kinematic", "ke": ke, "l": l, "lycomp": "none"},
+        "robots": {"r": {"drive": "velocity", "preset": "ideal", "v_max": 0.5, "omega_max": 2.0}},
+        "reference": {"circle": {"speed": float(speed), "turn_rate": float(turn), "start": {"x": 0.0, "y": 0.0, "theta": float(heading)}}},
+        "agents": [
+            {
+                "robot": "r",
+                "leader": "reference",
+                "start": {"x": float(s[0]), "y": float(s[1]), "theta": float(s[2])},
+                "offset": {"x": float(o[0] - l), "y": float(o[1])},
+            }
+            for s, o in zip(starts, offsets)
+        ],
+    }
+    run = echelon.Scenario.from_dict(doc).run()
+    traj = run.trajectory
+    policy = envs.baseline_policy(env, ke=ke)
+    for _ in range(1000):
+        obs = env.step(policy(obs))[0]
+    last = traj[np.isclose(traj["t"], 10.0)].sort_values("agent")
+    got = env.poses[0]
+    assert len(last) == n
+    assert np.abs(last["x"].to_numpy() - got[:, 0]).max() < 1e-9
+    assert np.abs(last["y"].to_numpy() - got[:, 1]).max() < 1e-9
+
+
+def test_the_filter_keeps_the_radius_under_random_actions_and_without_it_not():
+    closest = {}
+    for safety in (True, False):
+        env = envs.FormationVecEnv(8, 6, spacing=0.5, radius=0.3, safety=safety, seed=9)
+        assert env.safety_radius == 0.3
+        env.reset(seed=9)
+        env.action_space.seed(9)
+        low = np.inf
+        for _ in range(300):
+            _, _, _, _, info = env.step(env.action_space.sample())
+            low = min(low, info["min_distance"].min())
+            if safety:
+                assert info["safety"].shape == (8, 6) and (info["safety"] >= 0).all()
+        closest[safety] = low
+    assert closest[True] >= 0.3 - 1e-3, closest
+    assert closest[False] < 0.3, closest
+
+
+def test_bad_input_raises_and_changes_nothing():
+    env = envs.FormationVecEnv(2, 3, seed=1)
+    env.reset(seed=1)
+    poses = env.poses
+    bad = np.zeros((2, 3, 2))
+    bad[1, 2, 0] = np.nan
+    for actions, error in [
+        (np.zeros((2, 3)), ValueError),
+        (np.zeros((3, 3, 2)), ValueError),
+        (bad, ValueError),
+        (np.full((2, 3, 2), "a"), TypeError),
+    ]:
+        with pytest.raises(error):
+            env.step(actions)
+        assert np.array_equal(env.poses, poses)
+    for options in ({"reset_mask": np.array([True])}, {"reset_mask": [1, 0]}, {"mask": np.array([True, True])}):
+        with pytest.raises(ValueError):
+            env.reset(options=options)
+        assert np.array_equal(env.poses, poses)
+    with pytest.raises(ValueError, match="model"):
+        envs.FormationVecEnv(1, 2, model="quadrotor")
+    with pytest.raises(Exception, match="dt"):
+        envs.FormationVecEnv(1, 2, dt=-1.0)
+
+
+def test_bench_measures_agent_steps_per_second():
+    assert envs.bench(10, 3, steps=5) > 0.0

@@ -5,6 +5,8 @@
 //! and `src/definitions.rs` include. Adding a message is adding its `.msg`
 //! (and those it nests) under `msg/`.
 
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
+
 #[path = "build/describe.rs"]
 mod describe;
 #[path = "build/emit.rs"]

@@ -190,3 +190,44 @@ class BatchEngine:
     def state(self) -> npt.NDArray[np.float64]: ...
     def step(self, state: npt.NDArray[np.float64], steps: int = 1) -> None: ...
     def states(self, out: npt.NDArray[np.float64]) -> None: ...
+
+class VecFormation:
+    def __init__(
+        self,
+        num_envs: int,
+        num_agents: int,
+        *,
+        dt: float,
+        spacing: float,
+        l: float,
+        radius: float,
+        safety: bool,
+        gain: float,
+        v_max: float,
+        omega_max: float,
+        tau_v: float,
+        tau_omega: float,
+        neighbours: int,
+        sense: float,
+        weights: tuple[float, float, float],
+        max_steps: int,
+        speed: tuple[float, float],
+        turn: float,
+        seed: int,
+        float32: bool,
+    ) -> None: ...
+    obs_dim: int
+    def reset(self, seed: int, mask: list[bool] | None = None) -> None: ...
+    def reset_next(self, mask: list[bool]) -> None: ...
+    def observe(self, out: npt.NDArray[np.floating]) -> None: ...
+    def step(
+        self,
+        actions: npt.NDArray[np.floating],
+        obs: npt.NDArray[np.floating],
+        rewards: npt.NDArray[np.floating],
+        changed: npt.NDArray[np.floating],
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], npt.NDArray[np.float64]]: ...
+    def poses(self) -> npt.NDArray[np.float64]: ...
+    def offsets(self) -> npt.NDArray[np.float64]: ...
+    def leaders(self) -> npt.NDArray[np.float64]: ...
+    def baseline(self, obs: npt.NDArray[np.floating], ke: float, out: npt.NDArray[np.floating]) -> None: ...

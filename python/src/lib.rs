@@ -12,6 +12,8 @@
 //! - `arrays`: array arguments, each checked the same way;
 //! - `errors`: Rust errors as Python exceptions.
 
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
+
 mod arrays;
 mod batch;
 mod envs;

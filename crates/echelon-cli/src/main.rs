@@ -2,6 +2,8 @@
 //! from the command line. A thin layer over the `echelon` library: each
 //! command lives in its own module under `cmd/`.
 
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
+
 mod cmd;
 
 use std::process::ExitCode;

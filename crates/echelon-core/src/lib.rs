@@ -35,6 +35,8 @@
 //!
 //! Units are SI and angles radians throughout (ROS REP 103).
 
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
+
 pub mod agent;
 pub mod base;
 pub mod check;

@@ -7,6 +7,8 @@
 //! loopback. See `docs/fleet.md` for key expressions, the wire format,
 //! counters and the link-loss policies.
 
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
+
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 

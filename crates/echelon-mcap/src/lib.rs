@@ -25,6 +25,8 @@
 //! message encoding `cdr`, channel metadata `offered_qos_profiles` and
 //! `topic_type_hash`), so ROS 2 tools and Foxglove decode them.
 
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
+
 pub mod bag;
 mod observer;
 mod records;

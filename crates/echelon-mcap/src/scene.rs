@@ -205,122 +205,156 @@ fn entity(id: String, metadata: Vec<foxglove::messages::KeyValuePair>) -> SceneE
     }
 }
 
+/// Robot `k`'s colour: hues spread by the golden ratio.
+fn palette(k: usize) -> Color {
+    let h = (k as f64 * 0.618_034).fract() * std::f64::consts::TAU;
+    rgba(
+        0.5 + 0.4 * h.cos(),
+        0.5 + 0.4 * (h + 2.094).cos(),
+        0.5 + 0.4 * (h + 4.189).cos(),
+        1.0,
+    )
+}
+
+/// Robot `k`'s (from 1) transform `world` → `robotK/base_link`, at the origin.
+fn robot_tf(k: u32) -> FrameTransforms {
+    FrameTransforms {
+        transforms: vec![FrameTransform {
+            timestamp: Some(timestamp(0.0)),
+            parent_frame_id: WORLD_FRAME.to_owned(),
+            child_frame_id: base_link(k),
+            translation: Some(Vector3::default()),
+            rotation: Some(yaw(0.0)),
+        }],
+    }
+}
+
+/// Robot `k`'s (from 1) body: a cylinder, a heading arrow and its number,
+/// with its agent and leader as metadata.
+fn robot_body(k: usize, leader: Leader, color: Color) -> SceneEntity {
+    let kv = |key: &str, value: String| foxglove::messages::KeyValuePair {
+        key: key.to_owned(),
+        value,
+    };
+    let leader = match leader {
+        Leader::Reference => "reference".to_owned(),
+        Leader::Agent(j) => format!("robot{}", j + 1),
+    };
+    let mut body = entity(
+        format!("robot{k}"),
+        vec![kv("agent", k.to_string()), kv("leader", leader)],
+    );
+    body.cylinders = vec![cylinder(0.0, 0.0, 0.025, 2.0 * BODY_RADIUS, 0.05, color)];
+    body.arrows = vec![ArrowPrimitive {
+        pose: Some(pose(0.0, 0.0, 0.06, 0.0)),
+        shaft_length: 1.5 * BODY_RADIUS,
+        shaft_diameter: 0.02,
+        head_length: 0.06,
+        head_diameter: 0.05,
+        color: Some(rgba(0.1, 0.1, 0.1, 1.0)),
+    }];
+    body.texts = vec![TextPrimitive {
+        pose: Some(pose(0.0, 0.0, 0.2, 0.0)),
+        billboard: true,
+        font_size: 14.0,
+        scale_invariant: true,
+        color: Some(rgba(0.1, 0.1, 0.1, 1.0)),
+        text: k.to_string(),
+    }];
+    body
+}
+
+/// Robot `k`'s (from 1) slot: a small translucent sphere of its colour.
+fn robot_slot(k: usize, color: Color) -> SceneEntity {
+    let mut slot = entity(format!("robot{k}/slot"), Vec::new());
+    slot.spheres = vec![SpherePrimitive {
+        pose: Some(pose(0.0, 0.0, 0.0, 0.0)),
+        size: Some(Vector3 {
+            x: 0.05,
+            y: 0.05,
+            z: 0.05,
+        }),
+        color: Some(Color { a: 0.5, ..color }),
+    }];
+    slot
+}
+
+/// Robot `k`'s (from 1) link to its leader: one grey segment.
+fn robot_link(k: usize) -> SceneEntity {
+    let mut link = entity(format!("robot{k}/link"), Vec::new());
+    link.lines = vec![LinePrimitive {
+        r#type: line_primitive::Type::LineList as i32,
+        pose: Some(pose(0.0, 0.0, 0.0, 0.0)),
+        thickness: 2.0,
+        scale_invariant: true,
+        points: vec![Point3::default(), Point3::default()],
+        color: Some(rgba(0.4, 0.4, 0.4, 0.8)),
+        ..LinePrimitive::default()
+    }];
+    link
+}
+
+/// Robot `k`'s (from 1) update: body, slot, link, and its safety circle of
+/// radius `safety_radius` if any.
+fn robot_update(k: usize, leader: Leader, safety_radius: Option<f64>) -> SceneUpdate {
+    let color = palette(k);
+    let mut entities = vec![
+        robot_body(k, leader, color),
+        robot_slot(k, color),
+        robot_link(k),
+    ];
+    if let Some(r) = safety_radius {
+        let mut safety = entity(format!("robot{k}/safety"), Vec::new());
+        let red = rgba(0.9, 0.2, 0.2, 0.15);
+        safety.cylinders = vec![cylinder(0.0, 0.0, 0.001, 2.0 * r, 0.002, red)];
+        entities.push(safety);
+    }
+    SceneUpdate {
+        deletions: Vec::new(),
+        entities,
+    }
+}
+
+/// The fixed scene of `spec`: the reference path, then the obstacles.
+fn fixed_update(spec: &SceneSpec) -> SceneUpdate {
+    let mut path = entity("reference".to_owned(), Vec::new());
+    path.lines = vec![LinePrimitive {
+        r#type: line_primitive::Type::LineStrip as i32,
+        pose: Some(pose(0.0, 0.0, 0.0, 0.0)),
+        thickness: 1.5,
+        scale_invariant: true,
+        points: spec
+            .path
+            .iter()
+            .map(|&[x, y]| Point3 { x, y, z: 0.0 })
+            .collect(),
+        color: Some(rgba(0.2, 0.4, 0.9, 0.8)),
+        ..LinePrimitive::default()
+    }];
+    let mut fixed = vec![path];
+    for (i, &[x, y, r]) in spec.obstacles.iter().enumerate() {
+        let mut o = entity(format!("obstacle/{}", i + 1), Vec::new());
+        o.cylinders = vec![cylinder(x, y, 0.1, 2.0 * r, 0.2, rgba(0.3, 0.3, 0.3, 0.9))];
+        fixed.push(o);
+    }
+    SceneUpdate {
+        deletions: Vec::new(),
+        entities: fixed,
+    }
+}
+
 impl Scene {
     /// The scene of `spec`'s robots (none moved yet: all at the origin).
     pub fn new(spec: &SceneSpec) -> Scene {
         let n = spec.leaders.len();
-        let palette = |k: usize| {
-            let h = (k as f64 * 0.618_034).fract() * std::f64::consts::TAU;
-            rgba(
-                0.5 + 0.4 * h.cos(),
-                0.5 + 0.4 * (h + 2.094).cos(),
-                0.5 + 0.4 * (h + 4.189).cos(),
-                1.0,
-            )
-        };
-        let tf = (1..=n as u32)
-            .map(|k| FrameTransforms {
-                transforms: vec![FrameTransform {
-                    timestamp: Some(timestamp(0.0)),
-                    parent_frame_id: WORLD_FRAME.to_owned(),
-                    child_frame_id: base_link(k),
-                    translation: Some(Vector3::default()),
-                    rotation: Some(yaw(0.0)),
-                }],
-            })
-            .collect();
+        let tf = (1..=n as u32).map(robot_tf).collect();
         let robots = (1..=n)
-            .map(|k| {
-                let color = palette(k);
-                let kv = |key: &str, value: String| foxglove::messages::KeyValuePair {
-                    key: key.to_owned(),
-                    value,
-                };
-                let leader = match spec.leaders[k - 1] {
-                    Leader::Reference => "reference".to_owned(),
-                    Leader::Agent(j) => format!("robot{}", j + 1),
-                };
-                let mut body = entity(
-                    format!("robot{k}"),
-                    vec![kv("agent", k.to_string()), kv("leader", leader)],
-                );
-                body.cylinders = vec![cylinder(0.0, 0.0, 0.025, 2.0 * BODY_RADIUS, 0.05, color)];
-                body.arrows = vec![ArrowPrimitive {
-                    pose: Some(pose(0.0, 0.0, 0.06, 0.0)),
-                    shaft_length: 1.5 * BODY_RADIUS,
-                    shaft_diameter: 0.02,
-                    head_length: 0.06,
-                    head_diameter: 0.05,
-                    color: Some(rgba(0.1, 0.1, 0.1, 1.0)),
-                }];
-                body.texts = vec![TextPrimitive {
-                    pose: Some(pose(0.0, 0.0, 0.2, 0.0)),
-                    billboard: true,
-                    font_size: 14.0,
-                    scale_invariant: true,
-                    color: Some(rgba(0.1, 0.1, 0.1, 1.0)),
-                    text: k.to_string(),
-                }];
-                let mut slot = entity(format!("robot{k}/slot"), Vec::new());
-                slot.spheres = vec![SpherePrimitive {
-                    pose: Some(pose(0.0, 0.0, 0.0, 0.0)),
-                    size: Some(Vector3 {
-                        x: 0.05,
-                        y: 0.05,
-                        z: 0.05,
-                    }),
-                    color: Some(Color { a: 0.5, ..color }),
-                }];
-                let mut link = entity(format!("robot{k}/link"), Vec::new());
-                link.lines = vec![LinePrimitive {
-                    r#type: line_primitive::Type::LineList as i32,
-                    pose: Some(pose(0.0, 0.0, 0.0, 0.0)),
-                    thickness: 2.0,
-                    scale_invariant: true,
-                    points: vec![Point3::default(), Point3::default()],
-                    color: Some(rgba(0.4, 0.4, 0.4, 0.8)),
-                    ..LinePrimitive::default()
-                }];
-                let mut entities = vec![body, slot, link];
-                if let Some(r) = spec.safety_radius {
-                    let mut safety = entity(format!("robot{k}/safety"), Vec::new());
-                    let red = rgba(0.9, 0.2, 0.2, 0.15);
-                    safety.cylinders = vec![cylinder(0.0, 0.0, 0.001, 2.0 * r, 0.002, red)];
-                    entities.push(safety);
-                }
-                SceneUpdate {
-                    deletions: Vec::new(),
-                    entities,
-                }
-            })
+            .map(|k| robot_update(k, spec.leaders[k - 1], spec.safety_radius))
             .collect();
-        let mut path = entity("reference".to_owned(), Vec::new());
-        path.lines = vec![LinePrimitive {
-            r#type: line_primitive::Type::LineStrip as i32,
-            pose: Some(pose(0.0, 0.0, 0.0, 0.0)),
-            thickness: 1.5,
-            scale_invariant: true,
-            points: spec
-                .path
-                .iter()
-                .map(|&[x, y]| Point3 { x, y, z: 0.0 })
-                .collect(),
-            color: Some(rgba(0.2, 0.4, 0.9, 0.8)),
-            ..LinePrimitive::default()
-        }];
-        let mut fixed = vec![path];
-        for (i, &[x, y, r]) in spec.obstacles.iter().enumerate() {
-            let mut o = entity(format!("obstacle/{}", i + 1), Vec::new());
-            o.cylinders = vec![cylinder(x, y, 0.1, 2.0 * r, 0.2, rgba(0.3, 0.3, 0.3, 0.9))];
-            fixed.push(o);
-        }
         Scene {
             tf,
             robots,
-            fixed: SceneUpdate {
-                deletions: Vec::new(),
-                entities: fixed,
-            },
+            fixed: fixed_update(spec),
             leaders: spec.leaders.clone(),
         }
     }

@@ -14,6 +14,8 @@
 //! - [`replay`]: the replay's drawing, shared with the fleet's live dashboard;
 //! - [`lycomp`]: eq. 5 against eq. 6 (Fig. 5), and refitting eq. 6 for any `L_Xoff`.
 
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
+
 pub mod figure;
 pub mod html;
 pub mod lycomp;

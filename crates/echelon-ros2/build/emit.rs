@@ -304,6 +304,7 @@ fn emit_struct(out: &mut String, msg: &Msg, all: &BTreeMap<String, Msg>) {
     }
 }
 
+/// The `MessageType` constant of `msg` and its `RosMessage` implementation.
 fn emit_message(out: &mut String, msg: &Msg, all: &BTreeMap<String, Msg>) {
     let name = &msg.ty;
     let konst = screaming(name);
@@ -319,9 +320,21 @@ fn emit_message(out: &mut String, msg: &Msg, all: &BTreeMap<String, Msg>) {
         out,
         "impl RosMessage for {name} {{\n    const TYPE: MessageType = {konst};\n"
     );
-    // Write.
+    emit_write_cdr(out, &slots);
+    // Read: a struct expression, whose fields Rust evaluates in order.
+    let _ = writeln!(
+        out,
+        "    fn read_cdr(r: &mut CdrReader<'_>) -> Result<{name}, CdrError> {{\n        Ok({})\n    }}\n",
+        read_expr(msg, all, "", "        ")
+    );
+    emit_first_non_finite(out, &slots);
+    out.push_str("}\n\n");
+}
+
+/// The `write_cdr` method: every slot written in order.
+fn emit_write_cdr(out: &mut String, slots: &[Slot]) {
     out.push_str("    fn write_cdr(&self, w: &mut CdrWriter<'_>) {\n");
-    for s in &slots {
+    for s in slots {
         let (prim, array) = match s.kind {
             SlotKind::Prim(p, a) => (p, a),
             SlotKind::Sequence => {
@@ -333,46 +346,49 @@ fn emit_message(out: &mut String, msg: &Msg, all: &BTreeMap<String, Msg>) {
                 continue;
             }
         };
-        let call = match prim {
-            Primitive::Bool => "w.write_bool(v)",
-            Primitive::Uint8 => "w.write_u8(v)",
-            Primitive::Int32 => "w.write_i32(v)",
-            Primitive::Uint32 => "w.write_u32(v)",
-            Primitive::Float64 => "w.write_f64(v)",
-            Primitive::String => "w.write_string(v)",
-        };
-        let by_ref = prim == Primitive::String;
-        let _ = match array {
-            Some(_) if by_ref => writeln!(
-                out,
-                "        for v in &self.{} {{\n            {call};\n        }}",
-                access(&s.path)
-            ),
-            Some(_) => writeln!(
-                out,
-                "        for &v in &self.{} {{\n            {call};\n        }}",
-                access(&s.path)
-            ),
-            None if by_ref => writeln!(
-                out,
-                "        {};",
-                call.replace("(v)", &format!("(&self.{})", access(&s.path)))
-            ),
-            None => writeln!(
-                out,
-                "        {};",
-                call.replace("(v)", &format!("(self.{})", access(&s.path)))
-            ),
-        };
+        emit_write_prim(out, &s.path, prim, array);
     }
     out.push_str("    }\n\n");
-    // Read: a struct expression, whose fields Rust evaluates in order.
-    let _ = writeln!(
-        out,
-        "    fn read_cdr(r: &mut CdrReader<'_>) -> Result<{name}, CdrError> {{\n        Ok({})\n    }}\n",
-        read_expr(msg, all, "", "        ")
-    );
-    // Non-finite: float slots grouped by the name errors give.
+}
+
+/// The statement writing the primitive (or fixed-size array) at `path`.
+fn emit_write_prim(out: &mut String, path: &str, prim: Primitive, array: Option<usize>) {
+    let call = match prim {
+        Primitive::Bool => "w.write_bool(v)",
+        Primitive::Uint8 => "w.write_u8(v)",
+        Primitive::Int32 => "w.write_i32(v)",
+        Primitive::Uint32 => "w.write_u32(v)",
+        Primitive::Float64 => "w.write_f64(v)",
+        Primitive::String => "w.write_string(v)",
+    };
+    let by_ref = prim == Primitive::String;
+    let _ = match array {
+        Some(_) if by_ref => writeln!(
+            out,
+            "        for v in &self.{} {{\n            {call};\n        }}",
+            access(path)
+        ),
+        Some(_) => writeln!(
+            out,
+            "        for &v in &self.{} {{\n            {call};\n        }}",
+            access(path)
+        ),
+        None if by_ref => writeln!(
+            out,
+            "        {};",
+            call.replace("(v)", &format!("(&self.{})", access(path)))
+        ),
+        None => writeln!(
+            out,
+            "        {};",
+            call.replace("(v)", &format!("(self.{})", access(path)))
+        ),
+    };
+}
+
+/// The `first_non_finite` method: float slots grouped by the name errors
+/// give, then each sequence's elements.
+fn emit_first_non_finite(out: &mut String, slots: &[Slot]) {
     out.push_str("    fn first_non_finite(&self) -> Option<&'static str> {\n");
     let floats: Vec<&Slot> = slots
         .iter()
@@ -408,7 +424,7 @@ fn emit_message(out: &mut String, msg: &Msg, all: &BTreeMap<String, Msg>) {
             access(&s.path)
         );
     }
-    out.push_str("        None\n    }\n}\n\n");
+    out.push_str("        None\n    }\n");
 }
 
 /// The generated `definitions` items: a full definition per topic type and

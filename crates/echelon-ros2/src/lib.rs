@@ -37,6 +37,8 @@
 //! Interoperability with real ROS 2 is proven by echelon-fleet's
 //! `tests/ros2_*.rs` against the ROS 2 Jazzy Python wheels.
 
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
+
 pub mod attachment;
 pub mod cdr;
 pub mod definitions;

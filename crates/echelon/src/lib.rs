@@ -22,6 +22,8 @@
 //!
 //! Units are SI and angles radians throughout (ROS REP 103).
 
+#![cfg_attr(not(test), warn(clippy::too_many_lines))]
+
 pub use echelon_core::{
     agent, base, check, control, engine, follow, formation, guard, kinematic, lanes, learn, lycomp,
     math, model, plan, reference, rng, safety, sim,

@@ -178,26 +178,8 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         TopologyArg::Star => Topology::Star,
         TopologyArg::Chain => Topology::Chain,
     };
-    let steps = (args.duration / args.dt - 1e-9).ceil().max(1.0);
-    if steps > 1e12 {
-        bail!(
-            "duration {} s at dt {} s is {steps:e} steps: too many",
-            args.duration,
-            args.dt
-        );
-    }
-    let steps = steps as u64;
-    let total = args.agents as u128 * args.runs as u128;
-    if total > MAX_AGENTS {
-        bail!(
-            "{} agents × {} runs is {total} agents (≈ {} GB): at most {MAX_AGENTS} in all",
-            args.agents,
-            args.runs,
-            total
-                * Engine::BLOCK_BYTES_PER_AGENT.max(VelocityEngine::BLOCK_BYTES_PER_AGENT) as u128
-                / 1_000_000_000
-        );
-    }
+    let steps = step_count(args)?;
+    check_total(args)?;
     let threads = args
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
@@ -205,45 +187,8 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         .num_threads(threads)
         .build()
         .context("starting the worker threads")?;
-    if args.drive == DriveArg::Velocity
-        && let Err(e) = BenchFormation::BASE.check_step(args.dt)
-    {
-        let axis = if e.field == "tau_omega" {
-            "turn-rate"
-        } else {
-            "speed"
-        };
-        bail!(
-            "--dt: {} s is longer than the velocity base's {axis} lag ({} = {} s, a Clearpath \
-             Jackal's, which `--drive velocity` simulates): a lag cannot be integrated with a \
-             step longer than itself; use --dt ≤ {} (or --drive torque)",
-            args.dt,
-            e.field,
-            e.value,
-            e.value
-        );
-    }
-    let formation = |r: usize| BenchFormation {
-        agents: args.agents,
-        topology,
-        seed: args.seed.wrapping_add(r as u64),
-    };
-    let mut engines = match args.drive {
-        DriveArg::Torque => Runs::Torque(
-            (0..args.runs)
-                .map(|r| formation(r).engine(args.dt))
-                .collect::<Result<_, _>>()?,
-        ),
-        DriveArg::Velocity => Runs::Velocity(
-            (0..args.runs)
-                .map(|r| formation(r).velocity_engine(BenchFormation::BASE, args.dt))
-                .collect::<Result<_, _>>()?,
-        ),
-    };
-    let block_bytes = match args.drive {
-        DriveArg::Torque => Engine::BLOCK_BYTES_PER_AGENT,
-        DriveArg::Velocity => VelocityEngine::BLOCK_BYTES_PER_AGENT,
-    };
+    check_velocity_step(args)?;
+    let mut engines = build_runs(args, topology)?;
 
     if !args.json {
         // Before the clock starts: long runs say what they are doing.
@@ -272,42 +217,180 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         }
     }
 
-    let agent_steps = (args.agents * args.runs) as f64 * steps as f64;
-    let rate = agent_steps / seconds;
-    let errors = engines.errors();
-    let max_error = errors.iter().copied().fold(0.0, f64::max);
-    let mean_error = errors.iter().sum::<f64>() / errors.len() as f64;
-    let bytes = engines.bytes_per_agent();
-    let saturated = engines.saturated_ticks();
-    let drive = match args.drive {
-        DriveArg::Torque => "torque",
-        DriveArg::Velocity => "velocity",
-    };
-    let name = match topology {
-        Topology::Star => "star",
-        Topology::Chain => "chain",
-    };
+    let summary = Summary::of(args, topology, &engines, steps, seconds, threads);
     if args.json {
+        summary.print_json(args)
+    } else {
+        summary.print_text(args)
+    }
+}
+
+/// The number of RK4 steps of `--duration` at `--dt`, refused beyond 10¹².
+fn step_count(args: &BenchArgs) -> Result<u64> {
+    let steps = (args.duration / args.dt - 1e-9).ceil().max(1.0);
+    if steps > 1e12 {
+        bail!(
+            "duration {} s at dt {} s is {steps:e} steps: too many",
+            args.duration,
+            args.dt
+        );
+    }
+    Ok(steps as u64)
+}
+
+/// Refuses more than [`MAX_AGENTS`] agents over all the runs.
+fn check_total(args: &BenchArgs) -> Result<()> {
+    let total = args.agents as u128 * args.runs as u128;
+    if total > MAX_AGENTS {
+        bail!(
+            "{} agents × {} runs is {total} agents (≈ {} GB): at most {MAX_AGENTS} in all",
+            args.agents,
+            args.runs,
+            total
+                * Engine::BLOCK_BYTES_PER_AGENT.max(VelocityEngine::BLOCK_BYTES_PER_AGENT) as u128
+                / 1_000_000_000
+        );
+    }
+    Ok(())
+}
+
+/// With `--drive velocity`: refuses a `--dt` longer than the base's lags.
+fn check_velocity_step(args: &BenchArgs) -> Result<()> {
+    if args.drive == DriveArg::Velocity
+        && let Err(e) = BenchFormation::BASE.check_step(args.dt)
+    {
+        let axis = if e.field == "tau_omega" {
+            "turn-rate"
+        } else {
+            "speed"
+        };
+        bail!(
+            "--dt: {} s is longer than the velocity base's {axis} lag ({} = {} s, a Clearpath \
+             Jackal's, which `--drive velocity` simulates): a lag cannot be integrated with a \
+             step longer than itself; use --dt ≤ {} (or --drive torque)",
+            args.dt,
+            e.field,
+            e.value,
+            e.value
+        );
+    }
+    Ok(())
+}
+
+/// The engines of the `--runs` runs (seeds SEED, SEED + 1, …) of the drive.
+fn build_runs(args: &BenchArgs, topology: Topology) -> Result<Runs> {
+    let formation = |r: usize| BenchFormation {
+        agents: args.agents,
+        topology,
+        seed: args.seed.wrapping_add(r as u64),
+    };
+    Ok(match args.drive {
+        DriveArg::Torque => Runs::Torque(
+            (0..args.runs)
+                .map(|r| formation(r).engine(args.dt))
+                .collect::<Result<_, _>>()?,
+        ),
+        DriveArg::Velocity => Runs::Velocity(
+            (0..args.runs)
+                .map(|r| formation(r).velocity_engine(BenchFormation::BASE, args.dt))
+                .collect::<Result<_, _>>()?,
+        ),
+    })
+}
+
+/// What a bench measured, as its report gives it.
+struct Summary {
+    name: &'static str,
+    drive: &'static str,
+    steps: u64,
+    seconds: f64,
+    threads: usize,
+    agent_steps: f64,
+    rate: f64,
+    max_error: f64,
+    mean_error: f64,
+    bytes: f64,
+    saturated: Option<u64>,
+    block_bytes: usize,
+}
+
+impl Summary {
+    /// The summary of `engines` having stepped `steps` steps in `seconds`.
+    fn of(
+        args: &BenchArgs,
+        topology: Topology,
+        engines: &Runs,
+        steps: u64,
+        seconds: f64,
+        threads: usize,
+    ) -> Summary {
+        let agent_steps = (args.agents * args.runs) as f64 * steps as f64;
+        let errors = engines.errors();
+        Summary {
+            name: match topology {
+                Topology::Star => "star",
+                Topology::Chain => "chain",
+            },
+            drive: match args.drive {
+                DriveArg::Torque => "torque",
+                DriveArg::Velocity => "velocity",
+            },
+            steps,
+            seconds,
+            threads,
+            agent_steps,
+            rate: agent_steps / seconds,
+            max_error: errors.iter().copied().fold(0.0, f64::max),
+            mean_error: errors.iter().sum::<f64>() / errors.len() as f64,
+            bytes: engines.bytes_per_agent(),
+            saturated: engines.saturated_ticks(),
+            block_bytes: match args.drive {
+                DriveArg::Torque => Engine::BLOCK_BYTES_PER_AGENT,
+                DriveArg::Velocity => VelocityEngine::BLOCK_BYTES_PER_AGENT,
+            },
+        }
+    }
+
+    /// The summary as one JSON object (`--json`).
+    fn print_json(&self, args: &BenchArgs) -> Result<()> {
         let mut out = serde_json::json!({
             "agents": args.agents,
-            "steps": steps,
-            "seconds": seconds,
-            "agent_steps_per_s": rate,
-            "topology": name,
-            "drive": drive,
+            "steps": self.steps,
+            "seconds": self.seconds,
+            "agent_steps_per_s": self.rate,
+            "topology": self.name,
+            "drive": self.drive,
             "runs": args.runs,
-            "threads": threads,
+            "threads": self.threads,
             "dt": args.dt,
             "seed": args.seed,
-            "ns_per_agent_step": 1e9 / rate,
-            "bytes_per_agent": bytes,
-            "max_error": max_error,
+            "ns_per_agent_step": 1e9 / self.rate,
+            "bytes_per_agent": self.bytes,
+            "max_error": self.max_error,
         });
-        if let (Some(n), Some(map)) = (saturated, out.as_object_mut()) {
+        if let (Some(n), Some(map)) = (self.saturated, out.as_object_mut()) {
             map.insert("saturated_ticks".into(), n.into());
         }
         outln!("{out}")?;
-    } else {
+        Ok(())
+    }
+
+    /// The summary as text.
+    fn print_text(&self, args: &BenchArgs) -> Result<()> {
+        let Summary {
+            name,
+            drive,
+            steps,
+            seconds,
+            threads,
+            agent_steps,
+            rate,
+            max_error,
+            mean_error,
+            bytes,
+            saturated,
+            block_bytes,
+        } = *self;
         outln!(
             "{name} ({drive} drive): {} agents{}, {steps} steps of {} s ({} s), {threads} thread{}",
             args.agents,
@@ -335,8 +418,8 @@ pub(crate) fn bench(args: &BenchArgs) -> Result<()> {
         if let Some(n) = saturated {
             outln!("  saturated ticks (command beyond a speed limit): {n} of {agent_steps:.3e}")?;
         }
+        Ok(())
     }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -32,10 +32,12 @@ use super::out::outln;
 mod args;
 mod doctor;
 mod loopback;
+mod operator_args;
 mod status;
-use args::TopologyArg;
-pub(crate) use args::{BenchArgs, FaultsArgs, FleetCommand, NetArgs, UpArgs};
+pub(crate) use args::{FleetCommand, NetArgs};
 use loopback::{bench_cmd, faults_cmd, up_cmd};
+use operator_args::TopologyArg;
+pub(crate) use operator_args::{BenchArgs, FaultsArgs, UpArgs};
 
 fn agents_of(s: &Scenario) -> Result<u32> {
     Ok(s.build(&Overrides::default())?.plan.agents().len() as u32)
@@ -157,7 +159,11 @@ fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
 /// `token`, and refused before anything is put without one), prints the
 /// report, fails (exit 2) when a robot refused the resume, (exit 1) when a
 /// robot alive did not acknowledge it.
-fn command_cmd(a: args::CommandArgs, order: Order, token: Option<OperatorToken>) -> Result<()> {
+fn command_cmd(
+    a: operator_args::CommandArgs,
+    order: Order,
+    token: Option<OperatorToken>,
+) -> Result<()> {
     if order == Order::Resume && token.is_none() {
         return Err(FleetError::Refused(operator::NEEDS_TOKEN.to_owned()).into());
     }
@@ -230,192 +236,17 @@ fn command_cmd(a: args::CommandArgs, order: Order, token: Option<OperatorToken>)
 
 /// Runs a fleet subcommand.
 pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
-    // A fleet process's Zenoh runtime sized for it (overridable).
-    match &cmd {
-        FleetCommand::Router(_) => echelon_fleet::net::exec_with_sized_runtime("router"),
-        FleetCommand::Leader(_)
-        | FleetCommand::Heartbeat(_)
-        | FleetCommand::Garbage(_)
-        | FleetCommand::Robot(_)
-        | FleetCommand::Base(_)
-        | FleetCommand::Collector(_) => echelon_fleet::net::exec_with_sized_runtime("client"),
-        _ => {}
-    }
+    size_runtime(&cmd);
     match cmd {
-        FleetCommand::Leader(a) => scenario_process(
-            &a.scenario,
-            &a.net,
-            Member::Leader,
-            |scenario, net, stop| {
-                let options = LeaderOptions {
-                    process: a.clock.process(scenario, net, &a.net),
-                    rate: a.rate,
-                    wait_for: a.wait_for,
-                    wait_timeout: Duration::from_secs_f64(a.wait_timeout),
-                    rogue: a.rogue,
-                };
-                leader::run(options, stop)
-            },
-        ),
+        FleetCommand::Leader(a) => leader_cmd(a),
         FleetCommand::Robot(a) => robot_cmd(a),
-        FleetCommand::Bundle(a) => {
-            if let Some(name) = &a.fleet
-                && !echelon::scenario::is_valid_fleet_name(name)
-            {
-                bail!("--fleet `{name}`: letters, digits, '-', '_' and '.' only");
-            }
-            let token = match &a.token_file {
-                Some(path) => Some(OperatorToken::from_file(path).context("--token-file")?),
-                None => OperatorToken::from_env()?,
-            };
-            let report = echelon_fleet::bundle::write(&echelon_fleet::bundle::BundleOptions {
-                scenario: a.scenario,
-                hub: a.hub,
-                out: a.out,
-                all: a.all,
-                simulated: a.simulated,
-                time_scale: a.time_scale,
-                duration: a.duration,
-                secure: a.secure,
-                token,
-                fleet: a.fleet,
-                install_dir: a.install_dir,
-            })?;
-            for (k, dir) in &report.robots {
-                eprintln!(
-                    "fleet bundle: robot {k}: {} (on its computer: {}/echelon-robot.sh)",
-                    dir.display(),
-                    dir.display()
-                );
-            }
-            print_report(&report)
-        }
-        FleetCommand::Base(a) => {
-            if !a.ros2 {
-                bail!("fleet base simulates a ROS 2 base: give --ros2");
-            }
-            agent_process(&a.agent, &a.net, Member::Base, |process, agent, stop| {
-                let options = BaseOptions {
-                    process,
-                    agent,
-                    clock_offset: a.clock_offset,
-                    hazards: a.hazard.clone(),
-                    fault_at: a.fault_at.map(|t| (t, a.fault_window)),
-                };
-                base::run(options, stop)
-            })
-        }
-        FleetCommand::Excite(a) => {
-            if !a.ros2 {
-                bail!("fleet excite drives a ROS 2 robot: give --ros2");
-            }
-            let member = Member::Robot(a.agent.agent);
-            scenario_process(&a.agent.scenario, &a.net, member, |scenario, net, stop| {
-                let options = ExciteOptions {
-                    scenario,
-                    agent: a.agent.agent,
-                    duration: a.duration,
-                    radius: a.radius,
-                    rate: a.rate,
-                    limits: a.limits,
-                    wait: a.wait,
-                    out: a.out,
-                    net,
-                };
-                excite::run(options, stop)
-            })
-        }
-        FleetCommand::Collector(a) => {
-            let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
-            let fleet = a.net.fleet_name(scenario.as_ref())?;
-            let run = scenario
-                .as_ref()
-                .map(|s| s.build(&Overrides::default()))
-                .transpose()?;
-            let robots = run.as_ref().map(|r| r.plan.agents().len() as u32);
-            let net = a
-                .net
-                .options(&Member::Collector.identity(), robots, scenario.as_ref())?;
-            let stop = StopFlag::on_signals()?;
-            let ros = match (&scenario, a.ros2) {
-                (Some(s), true) => ros_topics(s)?,
-                _ => Vec::new(),
-            };
-            // The columns `echelon run` writes for the same scenario.
-            let trajectory = run.as_ref().map_or_else(TrajectoryRows::default, |r| {
-                TrajectoryRows::for_agents(r.plan.agents())
-            });
-            // With the scenario, fleet.mcap also carries the 3D channels.
-            let scene = run.as_ref().map(|r| SceneSpec::of(&r.plan));
-            // With `[safety]`: the closest approach from the true states.
-            let approach = match (&scenario, &run) {
-                (Some(s), Some(r)) => Approach::of(&r.plan)
-                    .map(|a| {
-                        Ok::<_, anyhow::Error>(ApproachWatch::new(a, 1.0 / s.fleet()?.control_rate))
-                    })
-                    .transpose()?,
-                _ => None,
-            };
-            let report = collector::run_with(
-                CollectorOptions {
-                    out: a.out,
-                    fleet,
-                    max_wall: None,
-                    net,
-                    die_at: a.die_at,
-                },
-                collector::Recording {
-                    ros,
-                    trajectory,
-                    scene,
-                    foxglove: a.live.foxglove,
-                    dashboard: a.live.dashboard,
-                    log_rate: a.live.log_rate,
-                    approach,
-                },
-                &stop,
-            )?;
-            print_report(&report)
-        }
-        FleetCommand::Router(a) => {
-            if a.net.mode.is_some() || a.net.fleet.is_some() {
-                bail!("fleet router is always a router, for every fleet: no --mode or --fleet");
-            }
-            let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
-            let net = session(&a.net, Member::Router, scenario.as_ref())?;
-            let stop = StopFlag::on_signals()?;
-            let report = router::run(
-                &RouterOptions {
-                    net,
-                    max_wall: None,
-                    die_at: a.die_at,
-                },
-                &stop,
-            )?;
-            print_report(&report)
-        }
-        FleetCommand::Heartbeat(a) => scenario_process(
-            &a.scenario,
-            &a.net,
-            Member::Operator,
-            |scenario, net, stop| {
-                echelon_fleet::heartbeat::run(a.clock.process(scenario, net, &a.net), stop)
-            },
-        ),
-        FleetCommand::Garbage(a) => scenario_process(
-            &a.scenario,
-            &a.net,
-            Member::Operator,
-            |scenario, net, stop| {
-                echelon_fleet::garbage::run(
-                    a.clock.process(scenario, net, &a.net),
-                    a.from,
-                    a.length,
-                    a.seed,
-                    stop,
-                )
-            },
-        ),
+        FleetCommand::Bundle(a) => bundle_cmd(a),
+        FleetCommand::Base(a) => base_cmd(a),
+        FleetCommand::Excite(a) => excite_cmd(a),
+        FleetCommand::Collector(a) => collector_cmd(a),
+        FleetCommand::Router(a) => router_cmd(a),
+        FleetCommand::Heartbeat(a) => heartbeat_cmd(a),
+        FleetCommand::Garbage(a) => garbage_cmd(a),
         FleetCommand::Faults(a) => faults_cmd(a),
         // A stop needs no token: stopping is always allowed.
         FleetCommand::Stop(a) => command_cmd(a, Order::Stop, None),
@@ -427,23 +258,234 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
         FleetCommand::Doctor(a) => doctor::doctor_cmd(a),
         FleetCommand::Up(a) => up_cmd(a),
         FleetCommand::Bench(a) => bench_cmd(a),
-        FleetCommand::Certs(a) => {
-            if a.robots == 0 {
-                bail!("--robots must be ≥ 1");
-            }
-            let options = CertOptions {
-                dir: a.dir.clone(),
-                robots: a.robots,
-                hosts: a.host,
-            };
-            let files = certs::generate_with(&options, &a.expires)?;
-            outln!(
-                "wrote {} files to {} (CA, leader, collector, router, operator, robot-1…robot-{n}, base-1…base-{n}); development use only",
-                files.len(),
-                a.dir.display(),
-                n = a.robots
-            )?;
-            Ok(())
-        }
+        FleetCommand::Certs(a) => certs_cmd(a),
     }
+}
+
+/// A fleet process's Zenoh runtime sized for it (overridable).
+fn size_runtime(cmd: &FleetCommand) {
+    match cmd {
+        FleetCommand::Router(_) => echelon_fleet::net::exec_with_sized_runtime("router"),
+        FleetCommand::Leader(_)
+        | FleetCommand::Heartbeat(_)
+        | FleetCommand::Garbage(_)
+        | FleetCommand::Robot(_)
+        | FleetCommand::Base(_)
+        | FleetCommand::Collector(_) => echelon_fleet::net::exec_with_sized_runtime("client"),
+        _ => {}
+    }
+}
+
+/// `fleet leader`: publishes the scenario's reference.
+fn leader_cmd(a: args::LeaderArgs) -> Result<()> {
+    scenario_process(
+        &a.scenario,
+        &a.net,
+        Member::Leader,
+        |scenario, net, stop| {
+            let options = LeaderOptions {
+                process: a.clock.process(scenario, net, &a.net),
+                rate: a.rate,
+                wait_for: a.wait_for,
+                wait_timeout: Duration::from_secs_f64(a.wait_timeout),
+                rogue: a.rogue,
+            };
+            leader::run(options, stop)
+        },
+    )
+}
+
+/// `fleet bundle`: writes each on-board robot's directory.
+fn bundle_cmd(a: operator_args::BundleArgs) -> Result<()> {
+    if let Some(name) = &a.fleet
+        && !echelon::scenario::is_valid_fleet_name(name)
+    {
+        bail!("--fleet `{name}`: letters, digits, '-', '_' and '.' only");
+    }
+    let token = match &a.token_file {
+        Some(path) => Some(OperatorToken::from_file(path).context("--token-file")?),
+        None => OperatorToken::from_env()?,
+    };
+    let report = echelon_fleet::bundle::write(&echelon_fleet::bundle::BundleOptions {
+        scenario: a.scenario,
+        hub: a.hub,
+        out: a.out,
+        all: a.all,
+        simulated: a.simulated,
+        time_scale: a.time_scale,
+        duration: a.duration,
+        secure: a.secure,
+        token,
+        fleet: a.fleet,
+        install_dir: a.install_dir,
+    })?;
+    for (k, dir) in &report.robots {
+        eprintln!(
+            "fleet bundle: robot {k}: {} (on its computer: {}/echelon-robot.sh)",
+            dir.display(),
+            dir.display()
+        );
+    }
+    print_report(&report)
+}
+
+/// `fleet base --ros2`: a simulated ROS 2 base.
+fn base_cmd(a: args::BaseArgs) -> Result<()> {
+    if !a.ros2 {
+        bail!("fleet base simulates a ROS 2 base: give --ros2");
+    }
+    agent_process(&a.agent, &a.net, Member::Base, |process, agent, stop| {
+        let options = BaseOptions {
+            process,
+            agent,
+            clock_offset: a.clock_offset,
+            hazards: a.hazard.clone(),
+            fault_at: a.fault_at.map(|t| (t, a.fault_window)),
+        };
+        base::run(options, stop)
+    })
+}
+
+/// `fleet excite --ros2`: drives one ROS 2 robot and records a bag.
+fn excite_cmd(a: args::ExciteArgs) -> Result<()> {
+    if !a.ros2 {
+        bail!("fleet excite drives a ROS 2 robot: give --ros2");
+    }
+    let member = Member::Robot(a.agent.agent);
+    scenario_process(&a.agent.scenario, &a.net, member, |scenario, net, stop| {
+        let options = ExciteOptions {
+            scenario,
+            agent: a.agent.agent,
+            duration: a.duration,
+            radius: a.radius,
+            rate: a.rate,
+            limits: a.limits,
+            wait: a.wait,
+            out: a.out,
+            net,
+        };
+        excite::run(options, stop)
+    })
+}
+
+/// `fleet collector`: records the fleet (with the scenario, its 3D scene,
+/// ROS 2 channels and closest approach too).
+fn collector_cmd(a: args::CollectorArgs) -> Result<()> {
+    let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
+    let fleet = a.net.fleet_name(scenario.as_ref())?;
+    let run = scenario
+        .as_ref()
+        .map(|s| s.build(&Overrides::default()))
+        .transpose()?;
+    let robots = run.as_ref().map(|r| r.plan.agents().len() as u32);
+    let net = a
+        .net
+        .options(&Member::Collector.identity(), robots, scenario.as_ref())?;
+    let stop = StopFlag::on_signals()?;
+    let ros = match (&scenario, a.ros2) {
+        (Some(s), true) => ros_topics(s)?,
+        _ => Vec::new(),
+    };
+    // The columns `echelon run` writes for the same scenario.
+    let trajectory = run.as_ref().map_or_else(TrajectoryRows::default, |r| {
+        TrajectoryRows::for_agents(r.plan.agents())
+    });
+    // With the scenario, fleet.mcap also carries the 3D channels.
+    let scene = run.as_ref().map(|r| SceneSpec::of(&r.plan));
+    // With `[safety]`: the closest approach from the true states.
+    let approach = match (&scenario, &run) {
+        (Some(s), Some(r)) => Approach::of(&r.plan)
+            .map(|a| Ok::<_, anyhow::Error>(ApproachWatch::new(a, 1.0 / s.fleet()?.control_rate)))
+            .transpose()?,
+        _ => None,
+    };
+    let report = collector::run_with(
+        CollectorOptions {
+            out: a.out,
+            fleet,
+            max_wall: None,
+            net,
+            die_at: a.die_at,
+        },
+        collector::Recording {
+            ros,
+            trajectory,
+            scene,
+            foxglove: a.live.foxglove,
+            dashboard: a.live.dashboard,
+            log_rate: a.live.log_rate,
+            approach,
+        },
+        &stop,
+    )?;
+    print_report(&report)
+}
+
+/// `fleet router`: a Zenoh router for every fleet.
+fn router_cmd(a: args::RouterArgs) -> Result<()> {
+    if a.net.mode.is_some() || a.net.fleet.is_some() {
+        bail!("fleet router is always a router, for every fleet: no --mode or --fleet");
+    }
+    let scenario = a.scenario.as_deref().map(Scenario::resolve).transpose()?;
+    let net = session(&a.net, Member::Router, scenario.as_ref())?;
+    let stop = StopFlag::on_signals()?;
+    let report = router::run(
+        &RouterOptions {
+            net,
+            max_wall: None,
+            die_at: a.die_at,
+        },
+        &stop,
+    )?;
+    print_report(&report)
+}
+
+/// `fleet heartbeat`: the operator's deadman heartbeat.
+fn heartbeat_cmd(a: args::HeartbeatArgs) -> Result<()> {
+    scenario_process(
+        &a.scenario,
+        &a.net,
+        Member::Operator,
+        |scenario, net, stop| {
+            echelon_fleet::heartbeat::run(a.clock.process(scenario, net, &a.net), stop)
+        },
+    )
+}
+
+/// `fleet garbage`: hostile input on every key of the fleet.
+fn garbage_cmd(a: args::GarbageArgs) -> Result<()> {
+    scenario_process(
+        &a.scenario,
+        &a.net,
+        Member::Operator,
+        |scenario, net, stop| {
+            echelon_fleet::garbage::run(
+                a.clock.process(scenario, net, &a.net),
+                a.from,
+                a.length,
+                a.seed,
+                stop,
+            )
+        },
+    )
+}
+
+/// `fleet certs`: a development CA and certificates.
+fn certs_cmd(a: operator_args::CertsArgs) -> Result<()> {
+    if a.robots == 0 {
+        bail!("--robots must be ≥ 1");
+    }
+    let options = CertOptions {
+        dir: a.dir.clone(),
+        robots: a.robots,
+        hosts: a.host,
+    };
+    let files = certs::generate_with(&options, &a.expires)?;
+    outln!(
+        "wrote {} files to {} (CA, leader, collector, router, operator, robot-1…robot-{n}, base-1…base-{n}); development use only",
+        files.len(),
+        a.dir.display(),
+        n = a.robots
+    )?;
+    Ok(())
 }

@@ -3,7 +3,7 @@
 
 use std::fs::File;
 use std::io::BufWriter;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -109,75 +109,13 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         duration: a.duration,
         ..Overrides::default()
     };
-    // The seeds SEED ..= SEED + K − 1 must all exist (K ≥ 1: `seed_count`).
-    let Some(last) = a.seed.checked_add(a.seeds - 1) else {
-        return Err(ScenarioError::of_flag(
-            "--seed",
-            format_args!(
-                "{} with --seeds {}: the last seed would be past {} (the largest seed)",
-                a.seed,
-                a.seeds,
-                u64::MAX
-            ),
-        )
-        .into());
-    };
-    let probe = scenario.build(&overrides)?;
-    let duration = probe.plan.steps() as f64 * probe.plan.config().dt;
-    let grid = Grid::new(GridSpec {
-        zeta: a.zeta.clone(),
-        zeta_model: match a.zeta_model {
-            ZetaArg::Wheels => ZetaModel::Wheels,
-            ZetaArg::WorstCase => ZetaModel::WorstCase,
-        },
-        wheel_diameter_ratio: a.ed.clone(),
-        wheelbase_ratio: a.eb.clone(),
-        slip: a.slip.clone(),
-        fix_every: a.fix_every.clone(),
-        seeds: (a.seed..=last).collect(),
-        gamma: a.gamma,
-        transient: a.transient.unwrap_or(0.5 * duration),
-    })
-    .map_err(|e| match GridSpec::flag(e.field) {
-        Some(flag) => flag_error(flag, &e),
-        None => e.into(),
-    })?;
+    let last = last_seed(a)?;
+    let grid = grid_of(a, &scenario, &overrides, last)?;
     let total = grid.cases().len();
-    let pool = {
-        let mut b = rayon::ThreadPoolBuilder::new();
-        if let Some(k) = a.threads {
-            anyhow::ensure!(k >= 1, "--threads must be ≥ 1");
-            b = b.num_threads(k);
-        }
-        b.build()?
-    };
-    let bar = if a.quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(total as u64)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} runs, {eta} left")
-            .map_or_else(
-                |_| ProgressStyle::default_bar(),
-                |s| s.progress_chars("=> "),
-            ),
-    );
-    bar.set_prefix(scenario.name().to_owned());
+    let pool = thread_pool(a.threads)?;
+    let bar = progress_bar(a.quiet, total, scenario.name());
     let started = Instant::now();
-    let (rows, curves) = pool
-        .install(|| {
-            let rows = sweep::run_all(&scenario, &overrides, &grid, &|| bar.inc(1))?;
-            let curves = sweep::drift_curves(&scenario, &overrides, &grid, 300)?;
-            Ok::<_, sweep::SweepError>((rows, curves))
-        })
-        .map_err(|e| match e {
-            sweep::SweepError::Param(p) => match GridSpec::flag(p.field) {
-                Some(flag) => flag_error(flag, &p),
-                None => sweep::SweepError::Param(p).into(),
-            },
-            e => e.into(),
-        })?;
+    let (rows, curves) = run_grid(&pool, &scenario, &overrides, &grid, &bar)?;
     let sweep::Sweep { rows, diverged } = rows;
     bar.finish_and_clear();
     let out = a
@@ -186,14 +124,11 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         .unwrap_or_else(|| PathBuf::from("out").join(format!("{}-sweep", scenario.name())));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join("sweep.csv");
-    let file = File::create(&path).with_context(|| format!("writing {}", path.display()))?;
-    sweep::write_csv(BufWriter::new(file), &rows, grid.spec().zeta_model)
-        .with_context(|| format!("writing {}", path.display()))?;
+    write_file(&path, |w| {
+        sweep::write_csv(w, &rows, grid.spec().zeta_model)
+    })?;
     let drift_path = out.join("drift.csv");
-    let file =
-        File::create(&drift_path).with_context(|| format!("writing {}", drift_path.display()))?;
-    sweep::write_drift_csv(BufWriter::new(file), &curves)
-        .with_context(|| format!("writing {}", drift_path.display()))?;
+    write_file(&drift_path, |w| sweep::write_drift_csv(w, &curves))?;
     // The figure plots the runs that ended (a diverged run has no maxima to
     // plot); the table and sweep.csv show every run.
     let ended: Vec<Row> = rows.iter().filter(|r| !r.is_diverged()).copied().collect();
@@ -219,21 +154,11 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
     // exit code is 1.
     let diverged_path = out.join("diverged.csv");
     if diverged.is_empty() {
-        // A stale list from an earlier sweep into the same directory would
-        // be read as this one's.
-        match std::fs::remove_file(&diverged_path) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => {
-                return Err(e).with_context(|| format!("removing {}", diverged_path.display()));
-            }
-        }
-        return Ok(());
+        return remove_stale(&diverged_path);
     }
-    let file = File::create(&diverged_path)
-        .with_context(|| format!("writing {}", diverged_path.display()))?;
-    sweep::write_diverged_csv(BufWriter::new(file), &diverged, grid.spec().zeta_model)
-        .with_context(|| format!("writing {}", diverged_path.display()))?;
+    write_file(&diverged_path, |w| {
+        sweep::write_diverged_csv(w, &diverged, grid.spec().zeta_model)
+    })?;
     let first = &diverged[0];
     Err(super::out::Failed(format!(
         "{} of {total} runs diverged, listed in {} (the first: ζ = {}, E_d = {}, E_b = {}, slip = {}, N = {}, seed {}: {}); all {} runs are rows of {}, the diverged ones with their `diverged` time and `inf` statistics",
@@ -250,6 +175,119 @@ pub(crate) fn sweep(a: &SweepArgs) -> Result<()> {
         path.display(),
     ))
     .into())
+}
+
+/// The last seed, SEED + K − 1, refused past `u64::MAX` (the seeds
+/// SEED ..= SEED + K − 1 must all exist; K ≥ 1: `seed_count`).
+fn last_seed(a: &SweepArgs) -> Result<u64> {
+    a.seed.checked_add(a.seeds - 1).ok_or_else(|| {
+        ScenarioError::of_flag(
+            "--seed",
+            format_args!(
+                "{} with --seeds {}: the last seed would be past {} (the largest seed)",
+                a.seed,
+                a.seeds,
+                u64::MAX
+            ),
+        )
+        .into()
+    })
+}
+
+/// The grid of the flags' values with the seeds up to `last` (the
+/// transient by default half the run's duration), a value refused named by
+/// its flag.
+fn grid_of(a: &SweepArgs, scenario: &Scenario, overrides: &Overrides, last: u64) -> Result<Grid> {
+    let probe = scenario.build(overrides)?;
+    let duration = probe.plan.steps() as f64 * probe.plan.config().dt;
+    Grid::new(GridSpec {
+        zeta: a.zeta.clone(),
+        zeta_model: match a.zeta_model {
+            ZetaArg::Wheels => ZetaModel::Wheels,
+            ZetaArg::WorstCase => ZetaModel::WorstCase,
+        },
+        wheel_diameter_ratio: a.ed.clone(),
+        wheelbase_ratio: a.eb.clone(),
+        slip: a.slip.clone(),
+        fix_every: a.fix_every.clone(),
+        seeds: (a.seed..=last).collect(),
+        gamma: a.gamma,
+        transient: a.transient.unwrap_or(0.5 * duration),
+    })
+    .map_err(|e| match GridSpec::flag(e.field) {
+        Some(flag) => flag_error(flag, &e),
+        None => e.into(),
+    })
+}
+
+/// The worker threads: `--threads` of them, else one per core.
+fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    let mut b = rayon::ThreadPoolBuilder::new();
+    if let Some(k) = threads {
+        anyhow::ensure!(k >= 1, "--threads must be ≥ 1");
+        b = b.num_threads(k);
+    }
+    Ok(b.build()?)
+}
+
+/// The progress bar of `total` runs, named `name` (hidden with `--quiet`).
+fn progress_bar(quiet: bool, total: usize, name: &str) -> ProgressBar {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(total as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} runs, {eta} left")
+            .map_or_else(
+                |_| ProgressStyle::default_bar(),
+                |s| s.progress_chars("=> "),
+            ),
+    );
+    bar.set_prefix(name.to_owned());
+    bar
+}
+
+/// Every run of `grid` on `pool` (`bar` told of each), then the drift
+/// curves; a value refused is named by its flag.
+fn run_grid(
+    pool: &rayon::ThreadPool,
+    scenario: &Scenario,
+    overrides: &Overrides,
+    grid: &Grid,
+    bar: &ProgressBar,
+) -> Result<(sweep::Sweep, Vec<sweep::DriftCurve>)> {
+    pool.install(|| {
+        let rows = sweep::run_all(scenario, overrides, grid, &|| bar.inc(1))?;
+        let curves = sweep::drift_curves(scenario, overrides, grid, 300)?;
+        Ok::<_, sweep::SweepError>((rows, curves))
+    })
+    .map_err(|e| match e {
+        sweep::SweepError::Param(p) => match GridSpec::flag(p.field) {
+            Some(flag) => flag_error(flag, &p),
+            None => sweep::SweepError::Param(p).into(),
+        },
+        e => e.into(),
+    })
+}
+
+/// Creates `path` and writes it with `write`, either failure naming it.
+fn write_file(
+    path: &Path,
+    write: impl FnOnce(BufWriter<File>) -> std::io::Result<()>,
+) -> Result<()> {
+    let file = File::create(path).with_context(|| format!("writing {}", path.display()))?;
+    write(BufWriter::new(file)).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Removes a `diverged.csv` an earlier sweep into the same directory left,
+/// which would be read as this one's.
+fn remove_stale(diverged_path: &Path) -> Result<()> {
+    match std::fs::remove_file(diverged_path) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(e).with_context(|| format!("removing {}", diverged_path.display())),
+    }
 }
 
 fn print_summary(rows: &[Row], total: usize, threads: usize, seconds: f64) -> anyhow::Result<()> {

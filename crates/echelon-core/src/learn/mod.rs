@@ -214,6 +214,8 @@ impl EnvConfig {
 #[derive(Debug, Clone)]
 struct Env {
     states: Vec<State>,
+    /// The robots' points `l` ahead, as of `states`.
+    points: Vec<[f64; 2]>,
     slots: Slots,
     filters: Vec<SafetyFilter>,
     neighbours: Vec<Neighbour>,
@@ -257,6 +259,7 @@ impl VecFormation {
         let n = config.num_agents;
         let env = Env {
             states: vec![State::default(); n],
+            points: vec![[0.0; 2]; n],
             slots: Slots::default(),
             filters: vec![filter; if config.safety { n } else { 0 }],
             neighbours: Vec::with_capacity(n),
@@ -313,7 +316,9 @@ impl VecFormation {
         let config = &self.config;
         obs.par_chunks_mut(per)
             .zip(self.envs.par_iter())
-            .for_each(|(o, env)| observe::write(config, &env.states, &env.slots, env.t, o));
+            .for_each(|(o, env)| {
+                observe::write(config, &env.states, &env.points, &env.slots, env.t, o)
+            });
     }
 
     /// One step of every environment under `actions` (`E·N·2`, `(v, ω)` per
@@ -349,9 +354,16 @@ impl VecFormation {
             .zip(facts.par_iter_mut())
             .for_each(|(((((env, a), o), r), c), f)| {
                 *f = env.step(config, a, c);
-                observe::write(config, &env.states, &env.slots, env.t, o);
-                f.reward =
-                    observe::rewards(config, &env.states, &env.slots, env.t, &env.applied, r);
+                observe::write(config, &env.states, &env.points, &env.slots, env.t, o);
+                f.reward = observe::rewards(
+                    config,
+                    &env.states,
+                    &env.points,
+                    &env.slots,
+                    env.t,
+                    &env.applied,
+                    r,
+                );
             });
     }
 
@@ -381,6 +393,7 @@ impl Env {
     fn start(&mut self, config: &EnvConfig) {
         self.episode_seed = episode::mix(self.episode_seed, 0x5eed);
         episode::draw(config, self.episode_seed, &mut self.slots, &mut self.states);
+        observe::points(&self.states, config.l, &mut self.points);
         for f in &mut self.filters {
             *f = SafetyFilter::new(
                 SafetyConfig::new(config.radius, config.gain, f64::INFINITY)
@@ -442,10 +455,11 @@ impl Env {
         }
         self.t += config.dt;
         self.steps += 1;
+        observe::points(&self.states, config.l, &mut self.points);
         EnvFacts {
             reward: 0.0,
             truncated: self.steps >= config.max_steps,
-            min_distance: observe::closest(&self.states, config.l),
+            min_distance: observe::closest(&self.points),
         }
     }
 }

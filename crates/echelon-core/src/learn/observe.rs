@@ -23,6 +23,7 @@ fn errors(s: &State, pd: [f64; 2], dpd: [f64; 2], lx: f64, ly: f64) -> ([f64; 2]
 pub(super) fn write<T: Scalar>(
     config: &EnvConfig,
     states: &[State],
+    points: &[[f64; 2]],
     slots: &Slots,
     t: f64,
     out: &mut [T],
@@ -47,13 +48,12 @@ pub(super) fn write<T: Scalar>(
         }
         debug_assert_eq!((E, SPEEDS, LEADER_VELOCITY, OFFSETS), (0, 2, 4, 6));
         // The k nearest points within `sense`, by insertion into a fixed array.
-        let me = point(s, config.l);
+        let me = points[i];
         let mut best = [(f64::INFINITY, 0usize); MAX_NEIGHBOURS];
-        for (j, other) in states.iter().enumerate() {
+        for (j, p) in points.iter().enumerate() {
             if j == i {
                 continue;
             }
-            let p = point(other, config.l);
             let dist = (p[0] - me[0]).hypot(p[1] - me[1]);
             if dist > config.sense || k == 0 || dist >= best[k - 1].0 {
                 continue;
@@ -70,7 +70,7 @@ pub(super) fn write<T: Scalar>(
         rest.fill(T::of(0.0));
         for (m, &(dist, j)) in best[..k].iter().enumerate() {
             if dist.is_finite() {
-                let p = point(&states[j], config.l);
+                let p = points[j];
                 let (dx, dy) = (p[0] - me[0], p[1] - me[1]);
                 rest[3 * m] = T::of(cos * dx + sin * dy);
                 rest[3 * m + 1] = T::of(-sin * dx + cos * dy);
@@ -85,6 +85,7 @@ pub(super) fn write<T: Scalar>(
 pub(super) fn rewards<T: Scalar>(
     config: &EnvConfig,
     states: &[State],
+    points: &[[f64; 2]],
     slots: &Slots,
     t: f64,
     applied: &[VelocityCommand],
@@ -96,11 +97,11 @@ pub(super) fn rewards<T: Scalar>(
     for (i, (s, r)) in states.iter().zip(out.iter_mut()).enumerate() {
         let (e, _) = errors(s, jet.p, jet.dp, slots.lx[i], slots.ly[i]);
         let a = applied[i];
-        let me = point(s, config.l);
-        let hit = states.iter().enumerate().any(|(j, o)| {
-            let p = point(o, config.l);
-            j != i && (p[0] - me[0]).hypot(p[1] - me[1]) < config.radius
-        });
+        let me = points[i];
+        let hit = points
+            .iter()
+            .enumerate()
+            .any(|(j, p)| j != i && (p[0] - me[0]).hypot(p[1] - me[1]) < config.radius);
         let value = -w.tracking * (e[0] * e[0] + e[1] * e[1])
             - w.effort * (a.v * a.v + (config.l * a.omega).powi(2))
             - if hit { w.collision } else { 0.0 };
@@ -110,13 +111,18 @@ pub(super) fn rewards<T: Scalar>(
     sum / states.len() as f64
 }
 
-/// The smallest distance between two robots' points `l` ahead, m.
-pub(super) fn closest(states: &[State], l: f64) -> f64 {
+/// The robots' points `l` ahead ([`point`]) into `out`.
+pub(super) fn points(states: &[State], l: f64, out: &mut [[f64; 2]]) {
+    for (s, p) in states.iter().zip(out) {
+        *p = point(s, l);
+    }
+}
+
+/// The smallest distance between two of `points`, m.
+pub(super) fn closest(points: &[[f64; 2]]) -> f64 {
     let mut best = f64::INFINITY;
-    for (i, a) in states.iter().enumerate() {
-        let p = point(a, l);
-        for b in &states[i + 1..] {
-            let q = point(b, l);
+    for (i, p) in points.iter().enumerate() {
+        for q in &points[i + 1..] {
             best = best.min((p[0] - q[0]).hypot(p[1] - q[1]));
         }
     }

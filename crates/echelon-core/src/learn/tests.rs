@@ -40,6 +40,8 @@ proptest! {
             s.x += dx; s.y += dy; s.theta = th; s.v = v; s.omega = w;
         }
         env.envs[1].t = 0.7;
+        let moved = &mut env.envs[1];
+        super::observe::points(&moved.states, config.l, &mut moved.points);
         let d = env.obs_dim();
         let mut obs = vec![0.0; 2 * n * d];
         env.observe(&mut obs);

@@ -9,7 +9,7 @@ use echelon::scenario::Scenario;
 use echelon_fleet::doctor::{self, DoctorOptions};
 use echelon_fleet::role::Member;
 
-use super::args::DoctorArgs;
+use super::operator_args::DoctorArgs;
 use crate::cmd::out::{Failed, out, outln};
 
 /// `fleet doctor`: reaches the hub (`--hub`, or `--connect`) as the

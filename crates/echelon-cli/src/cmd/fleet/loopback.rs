@@ -5,7 +5,7 @@ use anyhow::{Context, Result, bail};
 use echelon_fleet::bench::{self, BenchOptions, Progress};
 use echelon_fleet::collector::MCAP_FILE;
 use echelon_fleet::latency::LatencyReport;
-use echelon_fleet::up::{self, Topology, UP_SUMMARY_FILE, UpOptions};
+use echelon_fleet::up::{self, Topology, UP_SUMMARY_FILE, UpCost, UpOptions, UpReport};
 use echelon_fleet::{StopFlag, collector::SUMMARY_FILE};
 
 use crate::cmd::out::outln;
@@ -66,7 +66,7 @@ pub(super) fn bench_cmd(a: BenchArgs) -> Result<()> {
 /// A run whose leader died mid-run did not do what was asked: exit 1
 /// naming it, once the summary (and `fleet-summary.json`) says how the
 /// robots held.
-fn leader_died(report: &echelon_fleet::up::UpReport) -> Result<()> {
+fn leader_died(report: &UpReport) -> Result<()> {
     match &report.leader_failure {
         Some(f) => Err(crate::cmd::out::Failed(format!(
             "the leader died mid-run ({f}); the robots held under their link-loss policy"
@@ -76,46 +76,72 @@ fn leader_died(report: &echelon_fleet::up::UpReport) -> Result<()> {
     }
 }
 
+/// `fleet up`: the whole fleet on loopback, then its summary (unless `--quiet`).
 pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
     let stop = StopFlag::on_signals()?;
     let exe = std::env::current_exe().context("locating the echelon binary")?;
-    let report = up::run(
-        &UpOptions {
-            scenario: a.scenario,
-            out: a.out.clone(),
-            duration: a.clock.duration,
-            time_scale: a.clock.time_scale,
-            faults: a.faults.spec(),
-            secure: a.secure,
-            exe,
-            ros2: a.ros2,
-            real: a.real,
-            topology: match a.topology {
-                TopologyArg::Router => Topology::Router,
-                TopologyArg::Mesh => Topology::Mesh,
-            },
-            sites: a.sites,
-            foxglove: a.live.foxglove,
-            dashboard: a.live.dashboard,
-            log_rate: a.live.log_rate,
-            hazards: a.hazard.clone(),
-            chaos: Default::default(),
-            hub: a.hub.then(|| echelon_fleet::up::HubOptions {
-                listen: a.listen.clone(),
-                wait: a.wait,
-            }),
-            token: a
-                .token_file
-                .as_deref()
-                .map(echelon_fleet::token::OperatorToken::from_file)
-                .transpose()
-                .context("--token-file")?,
-        },
-        &stop,
-    )?;
-    if a.quiet {
+    let (quiet, out) = (a.quiet, a.out.clone());
+    let report = up::run(&up_options(a, exe)?, &stop)?;
+    if quiet {
         return leader_died(&report);
     }
+    print_run(&report)?;
+    print_robots(&report)?;
+    print_ros2(&report)?;
+    print_hazards(&report)?;
+    print_safety(&report)?;
+    print_collector(&report)?;
+    print_latency(&report)?;
+    print_cost(&report.cost)?;
+    outln!(
+        "wrote {}, {}, {}, {}",
+        out.join(MCAP_FILE).display(),
+        out.join(echelon::output::TRAJECTORY_FILE).display(),
+        out.join(SUMMARY_FILE).display(),
+        out.join(UP_SUMMARY_FILE).display()
+    )?;
+    leader_died(&report)
+}
+
+/// `fleet up`'s options from its arguments, the processes started from `exe`
+/// (reads `--token-file`).
+fn up_options(a: UpArgs, exe: std::path::PathBuf) -> Result<UpOptions> {
+    Ok(UpOptions {
+        scenario: a.scenario,
+        out: a.out,
+        duration: a.clock.duration,
+        time_scale: a.clock.time_scale,
+        faults: a.faults.spec(),
+        secure: a.secure,
+        exe,
+        ros2: a.ros2,
+        real: a.real,
+        topology: match a.topology {
+            TopologyArg::Router => Topology::Router,
+            TopologyArg::Mesh => Topology::Mesh,
+        },
+        sites: a.sites,
+        foxglove: a.live.foxglove,
+        dashboard: a.live.dashboard,
+        log_rate: a.live.log_rate,
+        hazards: a.hazard,
+        chaos: Default::default(),
+        hub: a.hub.then_some(echelon_fleet::up::HubOptions {
+            listen: a.listen,
+            wait: a.wait,
+        }),
+        token: a
+            .token_file
+            .as_deref()
+            .map(echelon_fleet::token::OperatorToken::from_file)
+            .transpose()
+            .context("--token-file")?,
+    })
+}
+
+/// The summary's head: the run, on-board robots, startup, topology,
+/// routers and the leader.
+fn print_run(report: &UpReport) -> Result<()> {
     outln!(
         "{}: fleet \"{}\", {} robot{}, {} s of fleet time at ×{} in {:.1} s",
         report.scenario,
@@ -160,6 +186,11 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
         }
         (None, None) => outln!("  leader: no report")?,
     }
+    Ok(())
+}
+
+/// The per-robot table: final error, counters and latency.
+fn print_robots(report: &UpReport) -> Result<()> {
     outln!(
         "  {:<8} {:>11} {:>9} {:>9} {:>9} {:>6} {:>7} {:>9} {:>6} {:>9} {:>6} {:>8} {:>8}",
         "agent",
@@ -195,6 +226,11 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             r.latency.p99 * 1e3,
         )?;
     }
+    Ok(())
+}
+
+/// What the ROS 2 bases (or, with `--real`, the robot processes) saw.
+fn print_ros2(report: &UpReport) -> Result<()> {
     for (b, r) in report.bases.iter().zip(&report.robots) {
         let c = &b.counters;
         let refused = c.cmd_wrong_type + c.cmd_malformed + c.cmd_non_finite + c.cmd_no_attachment;
@@ -230,6 +266,11 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             )?;
         }
     }
+    Ok(())
+}
+
+/// Each robot's base-safety counts and the hazard stops it saw.
+fn print_hazards(report: &UpReport) -> Result<()> {
     for r in &report.robots {
         let Some(h) = &r.hazards else { continue };
         let c = &h.counts;
@@ -263,6 +304,11 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             r.commands.refused_resumes,
         )?;
     }
+    Ok(())
+}
+
+/// The closest approach and the safety filters' work, with `[safety]`.
+fn print_safety(report: &UpReport) -> Result<()> {
     if let Some(c) = &report.approach {
         // The closest approach from the true states the collector received.
         let name = |k: usize| {
@@ -306,6 +352,11 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             )?;
         }
     }
+    Ok(())
+}
+
+/// The collector's counts, a gap in the log, and samples the robots dropped.
+fn print_collector(report: &UpReport) -> Result<()> {
     match &report.collector {
         Some(col) => {
             outln!(
@@ -337,6 +388,11 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             "  robots: {robots_dropped} samples dropped (input queue full; each robot's `dropped`)"
         )?;
     }
+    Ok(())
+}
+
+/// The latencies, leader → robot and → collector.
+fn print_latency(report: &UpReport) -> Result<()> {
     let lat = |l: &LatencyReport| {
         format!(
             "{} samples, p50 {:.3} ms, p95 {:.3} ms, p99 {:.3} ms, max {:.3} ms",
@@ -363,8 +419,12 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
         lat(&report.latency.robots)
     )?;
     outln!("  latency, → collector: {}", lat(&report.latency.collector))?;
+    Ok(())
+}
+
+/// The processes' CPU time and peak memory.
+fn print_cost(c: &UpCost) -> Result<()> {
     let mb = |b: u64| b as f64 / (1u64 << 20) as f64;
-    let c = &report.cost;
     outln!(
         "  CPU: robots {:.2} s ({:.3} s per robot, max {:.3}), leader {:.2} s, collector {:.2} s, total {:.2} s",
         c.robots.cpu,
@@ -389,14 +449,7 @@ pub(super) fn up_cmd(a: UpArgs) -> Result<()> {
             mb(r.max_rss_max)
         )?;
     }
-    outln!(
-        "wrote {}, {}, {}, {}",
-        a.out.join(MCAP_FILE).display(),
-        a.out.join(echelon::output::TRAJECTORY_FILE).display(),
-        a.out.join(SUMMARY_FILE).display(),
-        a.out.join(UP_SUMMARY_FILE).display()
-    )?;
-    leader_died(&report)
+    Ok(())
 }
 
 /// `fleet faults`: the fault matrix; exits 1 when a row does not hold.

@@ -12,7 +12,7 @@ use echelon_fleet::role::Member;
 use echelon_fleet::status::{FleetStatus, Listener, StatusOptions};
 use echelon_fleet::{FleetError, StopFlag};
 
-use super::args::StatusArgs;
+use super::operator_args::StatusArgs;
 use crate::cmd::out::{Failed, out, outln};
 
 /// How often `--watch` redraws.

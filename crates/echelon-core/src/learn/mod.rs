@@ -317,7 +317,7 @@ impl VecFormation {
         obs.par_chunks_mut(per)
             .zip(self.envs.par_iter())
             .for_each(|(o, env)| {
-                observe::write(config, &env.states, &env.points, &env.slots, env.t, o)
+                observe::write(config, env.seen(), o, None);
             });
     }
 
@@ -354,16 +354,7 @@ impl VecFormation {
             .zip(facts.par_iter_mut())
             .for_each(|(((((env, a), o), r), c), f)| {
                 *f = env.step(config, a, c);
-                observe::write(config, &env.states, &env.points, &env.slots, env.t, o);
-                f.reward = observe::rewards(
-                    config,
-                    &env.states,
-                    &env.points,
-                    &env.slots,
-                    env.t,
-                    &env.applied,
-                    r,
-                );
+                f.reward = observe::write(config, env.seen(), o, Some((&env.applied, r)));
             });
     }
 
@@ -389,6 +380,16 @@ pub fn first_not_finite<T: Scalar>(values: &[T]) -> Option<usize> {
 }
 
 impl Env {
+    /// What its observations see now.
+    fn seen(&self) -> observe::Seen<'_> {
+        observe::Seen {
+            states: &self.states,
+            points: &self.points,
+            slots: &self.slots,
+            t: self.t,
+        }
+    }
+
     /// A new episode from this environment's stream.
     fn start(&mut self, config: &EnvConfig) {
         self.episode_seed = episode::mix(self.episode_seed, 0x5eed);

@@ -9,53 +9,77 @@ use crate::safety::point;
 /// The most neighbours an observation lists.
 pub const MAX_NEIGHBOURS: usize = 16;
 
-/// Robot `i`'s `e` (eq. 7) and `R ṗ_d` in its frame.
+/// Robot `i`'s `e` (eq. 7) and `R ṗ_d` in its frame, from its heading's
+/// `(sin, cos)`.
 #[inline]
-fn errors(s: &State, pd: [f64; 2], dpd: [f64; 2], lx: f64, ly: f64) -> ([f64; 2], [f64; 2]) {
-    let (sin, cos) = s.theta.sin_cos();
+fn errors(
+    s: &State,
+    (sin, cos): (f64, f64),
+    pd: [f64; 2],
+    dpd: [f64; 2],
+    lx: f64,
+    ly: f64,
+) -> ([f64; 2], [f64; 2]) {
     let (dx, dy) = (s.x - pd[0], s.y - pd[1]);
     let e = [cos * dx + sin * dy + lx, -sin * dx + cos * dy + ly];
     let q = [cos * dpd[0] + sin * dpd[1], -sin * dpd[0] + cos * dpd[1]];
     (e, q)
 }
 
-/// Writes one environment's observations (`N · obs_dim`) at time `t`.
+/// One environment at one instant, as the observations see it.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Seen<'a> {
+    pub(super) states: &'a [State],
+    /// The robots' points `l` ahead ([`points`]).
+    pub(super) points: &'a [[f64; 2]],
+    pub(super) slots: &'a Slots,
+    pub(super) t: f64,
+}
+
+/// Writes one environment's observations (`N · obs_dim`) and, with
+/// `rewards = Some((applied, out))`, each robot's reward
+/// ([`super::Weights`]) for the step that ended under `applied`; returns
+/// their mean (0 without). One pass over the pairs serves both.
 pub(super) fn write<T: Scalar>(
     config: &EnvConfig,
-    states: &[State],
-    points: &[[f64; 2]],
-    slots: &Slots,
-    t: f64,
+    seen: Seen<'_>,
     out: &mut [T],
-) {
+    mut rewards: Option<(&[VelocityCommand], &mut [T])>,
+) -> f64 {
+    let Seen {
+        states,
+        points,
+        slots,
+        t,
+    } = seen;
     let d = obs_dim(config.neighbours);
     let jet = slots.leader_at(t);
     let k = config.neighbours.min(MAX_NEIGHBOURS);
+    let sense2 = config.sense * config.sense;
+    let radius2 = config.radius * config.radius;
+    let mut sum = 0.0;
     for (i, (s, o)) in states.iter().zip(out.chunks_exact_mut(d)).enumerate() {
-        let (e, q) = errors(s, jet.p, jet.dp, slots.lx[i], slots.ly[i]);
-        let head = [
-            e[0],
-            e[1],
-            s.v,
-            s.omega,
-            q[0],
-            q[1],
-            slots.lx[i],
-            slots.ly[i],
-        ];
+        let (sin, cos) = s.theta.sin_cos();
+        let (lx, ly) = (slots.lx[i], slots.ly[i]);
+        let (e, q) = errors(s, (sin, cos), jet.p, jet.dp, lx, ly);
+        let head = [e[0], e[1], s.v, s.omega, q[0], q[1], lx, ly];
         for (slot, v) in o[..NEIGHBOURS].iter_mut().zip(head) {
             *slot = T::of(v);
         }
         debug_assert_eq!((E, SPEEDS, LEADER_VELOCITY, OFFSETS), (0, 2, 4, 6));
-        // The k nearest points within `sense`, by insertion into a fixed array.
+        // The k nearest points within `sense`, by insertion into a fixed
+        // array, on squared distances (the same order, no square root).
         let me = points[i];
         let mut best = [(f64::INFINITY, 0usize); MAX_NEIGHBOURS];
+        let mut nearest = f64::INFINITY;
         for (j, p) in points.iter().enumerate() {
             if j == i {
                 continue;
             }
-            let dist = (p[0] - me[0]).hypot(p[1] - me[1]);
-            if dist > config.sense || k == 0 || dist >= best[k - 1].0 {
+            let (dx, dy) = (p[0] - me[0], p[1] - me[1]);
+            let dist = dx * dx + dy * dy;
+            nearest = nearest.min(dist);
+            if dist > sense2 || k == 0 || dist >= best[k - 1].0 {
                 continue;
             }
             let mut at = k - 1;
@@ -65,7 +89,6 @@ pub(super) fn write<T: Scalar>(
             }
             best[at] = (dist, j);
         }
-        let (sin, cos) = s.theta.sin_cos();
         let rest = &mut o[NEIGHBOURS..];
         rest.fill(T::of(0.0));
         for (m, &(dist, j)) in best[..k].iter().enumerate() {
@@ -77,36 +100,14 @@ pub(super) fn write<T: Scalar>(
                 rest[3 * m + 2] = T::of(1.0);
             }
         }
-    }
-}
-
-/// Writes each robot's reward ([`super::Weights`]) after a step under
-/// `applied`, and returns their mean.
-pub(super) fn rewards<T: Scalar>(
-    config: &EnvConfig,
-    states: &[State],
-    points: &[[f64; 2]],
-    slots: &Slots,
-    t: f64,
-    applied: &[VelocityCommand],
-    out: &mut [T],
-) -> f64 {
-    let w = config.weights;
-    let jet = slots.leader_at(t);
-    let mut sum = 0.0;
-    for (i, (s, r)) in states.iter().zip(out.iter_mut()).enumerate() {
-        let (e, _) = errors(s, jet.p, jet.dp, slots.lx[i], slots.ly[i]);
-        let a = applied[i];
-        let me = points[i];
-        let hit = points
-            .iter()
-            .enumerate()
-            .any(|(j, p)| j != i && (p[0] - me[0]).hypot(p[1] - me[1]) < config.radius);
-        let value = -w.tracking * (e[0] * e[0] + e[1] * e[1])
-            - w.effort * (a.v * a.v + (config.l * a.omega).powi(2))
-            - if hit { w.collision } else { 0.0 };
-        *r = T::of(value);
-        sum += value;
+        if let Some((applied, r)) = rewards.as_mut() {
+            let (w, a) = (config.weights, applied[i]);
+            let value = -w.tracking * (e[0] * e[0] + e[1] * e[1])
+                - w.effort * (a.v * a.v + (config.l * a.omega).powi(2))
+                - if nearest < radius2 { w.collision } else { 0.0 };
+            r[i] = T::of(value);
+            sum += value;
+        }
     }
     sum / states.len() as f64
 }
@@ -123,10 +124,10 @@ pub(super) fn closest(points: &[[f64; 2]]) -> f64 {
     let mut best = f64::INFINITY;
     for (i, p) in points.iter().enumerate() {
         for q in &points[i + 1..] {
-            best = best.min((p[0] - q[0]).hypot(p[1] - q[1]));
+            best = best.min((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2));
         }
     }
-    best
+    best.sqrt()
 }
 
 /// The kinematic law ([`crate::kinematic`]) from an observation alone:

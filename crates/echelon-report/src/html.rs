@@ -251,7 +251,7 @@ fn summary_table(data: &RunData) -> String {
             .offset
             .map_or_else(|| "tracking".to_owned(), |(x, y)| format!("({x} m, {y} m)"));
         // A velocity base has no wheel torques to show.
-        let peak = r.peak_torque.filter(|_| r.saturated_ticks.is_none());
+        let peak = finite(r.peak_torque).filter(|_| r.saturated_ticks.is_none());
         let _ = write!(
             t,
             "<tr><td><span class=\"swatch\" style=\"background:{}\"></span>{}</td><td>{}</td><td>{}</td>\
@@ -260,8 +260,8 @@ fn summary_table(data: &RunData) -> String {
             escape(&a.name),
             escape(&data.leader_name(i)),
             escape(&offset),
-            opt(r.final_error, |v| format!("{v:.2e} m")),
-            opt(r.rms_error, |v| format!("{v:.3} m")),
+            opt(finite(r.final_error), |v| format!("{v:.2e} m")),
+            opt(finite(r.rms_error), |v| format!("{v:.3} m")),
             opt(peak, |v| format!("{v:.2} N·m")),
             opt(r.settle_time, |v| format!("{v:.2} s")),
         );
@@ -277,6 +277,12 @@ fn summary_table(data: &RunData) -> String {
     }
     t.push_str("</tbody></table>\n");
     t
+}
+
+/// `v` when finite (`summary.json` writes a value that is not as `null`,
+/// read back as NaN).
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
 }
 
 /// One sentence per velocity agent: how many steps its base's speed limits

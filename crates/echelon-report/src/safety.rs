@@ -5,7 +5,7 @@
 //! command, braked (QP infeasible) or broke a deadlock.
 
 use crate::figure::{Axis, Dash, Figure, Marker, Panel, Stroke, palette};
-use crate::run::{RunData, SafetyData, SafetySummary, spans_where};
+use crate::run::{RunData, SafetyData, SafetyReport, spans_where};
 
 /// At each logged instant, the smallest distance between two robots' points
 /// `L` ahead, m (`None`: no safety filter, `L` unknown, or fewer than two robots).
@@ -93,7 +93,7 @@ pub const DEADLOCK_LABEL: &str = "breaking a deadlock";
 fn distances_panel(
     data: &RunData,
     s: &SafetyData,
-    summary: &SafetySummary,
+    summary: &SafetyReport,
     (t0, t1): (f64, f64),
 ) -> Panel {
     let mut distances = Panel::new(Axis::new("t", "s"), Axis::new("distance", "m")).titled(

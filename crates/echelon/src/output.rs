@@ -103,8 +103,9 @@ impl<W: Write, R: FrameRows> Observer for CsvLog<W, R> {
     }
 }
 
-/// Everything `summary.json` holds.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// Everything `summary.json` holds: written by [`run_to_dir`], read back by
+/// the report (`echelon-report`) as the same type.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct RunSummary {
     /// Scenario name.
     pub scenario: String,
@@ -115,19 +116,21 @@ pub struct RunSummary {
     /// Number of steps.
     pub steps: u64,
     /// Controller sampling period, s (`None`: continuous-time).
+    #[serde(default)]
     pub controller_period: Option<f64>,
     /// Tolerance on ‖e‖ for `settle_time`, m.
     pub settle_tolerance: f64,
     /// Warnings raised when the scenario was built.
+    #[serde(default)]
     pub warnings: Vec<String>,
     /// Per-agent results.
     pub agents: Vec<AgentSummary>,
     /// The safety filter's statistics (absent without `[safety]`).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetyReport>,
     /// Present when the run diverged: it stopped there, and `agents` hold
     /// statistics up to the last state within bounds, not results.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diverged: Option<Divergence>,
 }
 

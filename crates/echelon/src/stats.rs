@@ -11,8 +11,14 @@ use crate::safety::{Obstacle, Outcome};
 use crate::sample::AgentSample;
 use crate::sim::{Frame, Observer, ObserverError, Simulation};
 
-/// Per-agent statistics of a run (what `summary.json` reports).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+/// `null` (how JSON writes a value that is not finite) read back as NaN.
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(<Option<f64> as serde::Deserialize>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// Per-agent statistics of a run (what `summary.json` reports; read back by
+/// the report).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AgentSummary {
     /// 1-based agent number.
     pub agent: usize,
@@ -21,21 +27,24 @@ pub struct AgentSummary {
     /// Final pose `{x, y, theta}` (θ wrapped to (−π, π]).
     pub final_pose: Pose,
     /// Final ‖e‖, m.
+    #[serde(deserialize_with = "nan_if_null")]
     pub final_error: f64,
     /// RMS of ‖e‖ over every step of the run, m.
+    #[serde(deserialize_with = "nan_if_null")]
     pub rms_error: f64,
     /// Largest wheel torque magnitude applied at any step, N m.
+    #[serde(deserialize_with = "nan_if_null")]
     pub peak_torque: f64,
     /// Time after which ‖e‖ stays below the settling tolerance, s (`None`: never).
     pub settle_time: Option<f64>,
     /// Steps at which a velocity base's speed limits cut the command (only
     /// for velocity agents; absent for torque-driven ones).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub saturated_ticks: Option<u64>,
 }
 
 /// Where and how a run diverged (`summary.json`'s `diverged`).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Divergence {
     /// 1-based agent number.
     pub agent: usize,
@@ -214,7 +223,7 @@ impl Observer for Summary {
 }
 
 /// One agent's safety statistics over a run.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct AgentSafety {
     /// 1-based agent number.
     pub agent: usize,
@@ -234,7 +243,7 @@ pub struct AgentSafety {
 
 /// Safety statistics of a run (`summary.json`'s `safety`), from the true
 /// states of every frame it is shown (every step in `run_to_dir`).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SafetyReport {
     /// The smallest `radius` among the agents that filter, m.
     pub radius: f64,
@@ -246,7 +255,7 @@ pub struct SafetyReport {
     pub min_distance_agents: [usize; 2],
     /// Smallest distance from a robot's point to an obstacle's edge, m
     /// (absent without obstacles).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_obstacle_clearance: Option<f64>,
     /// Sum over agents of [`AgentSafety::active`].
     pub active: u64,

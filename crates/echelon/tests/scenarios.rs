@@ -892,3 +892,39 @@ fn sim_bounds_set_the_divergence_guard() {
         "",
     );
 }
+
+/// `summary.json` is one type, written and read (issue house): read back
+/// as [`output::RunSummary`] it is what the run returned (a torque
+/// formation, a velocity one with `saturated_ticks`, the crossing with
+/// `safety`), and written again it is the same bytes.
+#[test]
+fn the_summary_reads_back_as_the_type_it_was_written_from() {
+    for name in ["circle-pentagon", "circle-pentagon-velocity", "crossing"] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenarios")
+            .join(format!("{name}.toml"));
+        let scenario = Scenario::load(&path).unwrap();
+        let overrides = Overrides {
+            duration: Some(3.0),
+            ..Overrides::default()
+        };
+        let written = common::run_to_dir(&scenario, &overrides, dir.path());
+        let text = std::fs::read_to_string(dir.path().join(SUMMARY_FILE)).unwrap();
+        let read: output::RunSummary = serde_json::from_str(&text).unwrap();
+        assert_eq!(read, written, "{name}");
+        assert_eq!(
+            serde_json::to_string_pretty(&read).unwrap(),
+            serde_json::to_string_pretty(&written).unwrap(),
+            "{name}"
+        );
+        assert_eq!(read.safety.is_some(), name == "crossing", "{name}");
+        if name.starts_with("circle") {
+            assert_eq!(
+                read.agents[0].saturated_ticks.is_some(),
+                name.ends_with("velocity"),
+                "{name}"
+            );
+        }
+    }
+}

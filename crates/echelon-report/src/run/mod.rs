@@ -7,7 +7,7 @@
 //! reference path and the leader links.
 //!
 //! The columns of `trajectory.csv` are in `column` ([`Column`]), the shape of
-//! `summary.json` in `summary` ([`SummaryFile`]); both are re-exported here.
+//! `summary.json` in `summary` ([`RunSummary`]); both are re-exported here.
 
 mod column;
 mod summary;
@@ -27,7 +27,7 @@ use echelon::scenario::{Overrides, Scenario};
 use crate::ReportError;
 
 pub use column::{COLUMNS, Column, VELOCITY_COLUMNS};
-pub use summary::{AgentResult, AgentSafetySummary, DivergedSummary, SafetySummary, SummaryFile};
+pub use summary::{AgentSafety, AgentSummary, Divergence, RunSummary, SafetyReport};
 
 /// A velocity base's speed limits (`f64::INFINITY`: unlimited).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -122,7 +122,7 @@ pub struct SafetyTrack {
 /// A run's safety settings and what its filters did.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct SafetyData {
-    /// Smallest distance between two robots' points, m ([`SafetySummary::radius`]).
+    /// Smallest distance between two robots' points, m ([`SafetyReport::radius`]).
     pub radius: f64,
     /// `L` of each agent: the point kept apart is `L` ahead of the axle, m
     /// (empty when the scenario does not build here).
@@ -155,7 +155,7 @@ pub struct RunData {
     /// The directory.
     pub dir: PathBuf,
     /// `summary.json`.
-    pub summary: SummaryFile,
+    pub summary: RunSummary,
     /// The scenario's description, from `scenario.toml`.
     pub description: Option<String>,
     /// `scenario.toml` as written by the run (header and source).
@@ -361,7 +361,7 @@ fn built(scenario: &Scenario, dt: f64) -> Built {
 /// the `summary`'s agents (rows go agent 1..n at each instant).
 fn trajectory(
     dir: &Path,
-    summary: &SummaryFile,
+    summary: &RunSummary,
 ) -> Result<(Vec<AgentTrack>, Vec<f64>), ReportError> {
     let n = summary.agents.len();
     let traj_path = dir.join(TRAJECTORY_FILE);
@@ -451,7 +451,7 @@ impl RunData {
     /// Reads `dir`.
     pub fn load(dir: &Path) -> Result<RunData, ReportError> {
         let summary_path = dir.join(SUMMARY_FILE);
-        let summary: SummaryFile =
+        let summary: RunSummary =
             serde_json::from_str(&read(&summary_path)?).map_err(|e| ReportError::Format {
                 path: summary_path.clone(),
                 message: e.to_string(),

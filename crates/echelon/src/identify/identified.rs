@@ -348,7 +348,6 @@ fn is_robot_field(field: &str) -> bool {
     field != "dead_time"
 }
 
-/// A number to 6 significant digits, in TOML syntax.
 /// What a printed estimate's comment says of its interval: none on a
 /// noise-free log, else its 95 % interval.
 fn interval(e: &Estimate, noise_free: bool) -> String {
@@ -359,6 +358,7 @@ fn interval(e: &Estimate, noise_free: bool) -> String {
     }
 }
 
+/// A number to 6 significant digits, in TOML syntax.
 fn sig(x: f64) -> String {
     let v: f64 = format!("{x:.5e}").parse().unwrap_or(x);
     let s = format!("{v}");

@@ -14,19 +14,26 @@
 Each environment is a formation behind a virtual leader moving at constant
 speed and turn rate; robot ``i`` holds the leader ``L_X`` ahead and ``L_Y``
 to its left in its own frame (the paper's eq. 7), its slot on a lattice
-``spacing`` metres apart, drawn per episode. An action is a velocity
-command ``(v, ω)`` (m/s, rad/s), clipped to the base's limits and applied
-through the base model for ``dt`` seconds; with ``safety=True`` it first
-goes through the robot's barrier-certificate filter, which keeps every two
-robots' points ``l`` ahead at least ``radius`` apart.
+``spacing`` metres apart, drawn per episode. With ``model="unicycle"`` an
+action is a velocity command ``(v, ω)`` (m/s, rad/s), clipped to
+``v_max``, ``omega_max`` and applied through the base model (lags
+``tau_v``, ``tau_omega``) for ``dt`` seconds; with ``model="torque"`` the
+robots are Table I's (``robot="agent1"`` or ``"agent2"``, eq. 3) and an
+action is the wheel torques ``(τ_r, τ_l)`` (N m), clipped to
+``±torque_limit`` (prefer ``dt ≤ 0.01`` there: the law's ``K_z = 10``).
+With ``safety=True`` the action first goes through the robot's
+barrier-certificate filter, which keeps every two robots' points ``l``
+ahead at least ``radius`` apart.
 
-An observation is ``8 + 3 K`` values (``K = neighbours``), body frame:
+An observation is ``10 + 3 K`` values (``K = neighbours``), body frame:
 ``e_x, e_y`` (the tracking error, eq. 7), ``v, ω``, the leader's velocity
-``(R ṗ_d)_x, (R ṗ_d)_y``, ``L_X, L_Y``, then for the ``K`` nearest robots
-within ``sense`` metres their point relative to the robot's point
-``dx, dy`` and ``1`` (listed) — zeros for padding.
+``(R ṗ_d)_x, (R ṗ_d)_y`` and acceleration ``(R p̈_d)_x, (R p̈_d)_y``,
+``L_X, L_Y``, then for the ``K`` nearest robots within ``sense`` metres
+their point relative to the robot's point ``dx, dy`` and ``1`` (listed) —
+zeros for padding.
 
-A robot's reward per step is ``−w_t ‖e‖² − w_e ‖(v, l ω)‖² − w_c`` when
+A robot's reward per step is ``−w_t ‖e‖² − w_e ‖a‖² − w_c`` (``a = (v, l
+ω)`` on velocity bases, ``(τ_r, τ_l)`` on torque robots) when
 another robot's point is within ``radius`` of its own (``weights = (w_t,
 w_e, w_c)``, default ``(1, 0.01, 10)``); an environment's reward is the
 mean over its robots. Episodes are truncated after ``max_steps`` steps and
@@ -52,7 +59,7 @@ from . import _echelon
 
 __all__ = ["FormationEnv", "FormationParallelEnv", "FormationVecEnv", "baseline_policy", "bench"]
 
-_MODELS = ("unicycle",)
+_MODELS = ("unicycle", "torque")
 
 
 class _Core:
@@ -82,6 +89,8 @@ class _Core:
         max_steps: int = 500,
         speed: tuple[float, float] = (0.05, 0.2),
         turn: float = 0.1,
+        robot: str = "agent1",
+        torque_limit: float = 10.0,
     ) -> None:
         if model not in _MODELS:
             raise ValueError(f"model must be one of {_MODELS}, got {model!r}")
@@ -98,7 +107,11 @@ class _Core:
         if self.seed < 0:
             raise ValueError(f"seed must be ≥ 0, got {self.seed}")
         self.num_envs, self.num_agents, self.safety = int(num_envs), int(num_agents), bool(safety)
-        self.v_max, self.omega_max, self.l = float(v_max), float(omega_max), float(l)
+        self.model, self.l = model, float(l)
+        if model == "torque":
+            self.bounds = (float(torque_limit), float(torque_limit))
+        else:
+            self.bounds = (float(v_max), float(omega_max))
         self.inner = _echelon.VecFormation(
             self.num_envs,
             self.num_agents,
@@ -108,8 +121,8 @@ class _Core:
             radius=self.radius,
             safety=self.safety,
             gain=float(gain),
-            v_max=self.v_max,
-            omega_max=self.omega_max,
+            v_max=float(v_max),
+            omega_max=float(omega_max),
             tau_v=float(tau_v),
             tau_omega=float(tau_omega),
             neighbours=int(neighbours),
@@ -120,6 +133,8 @@ class _Core:
             turn=float(turn),
             seed=self.seed,
             float32=self.dtype == np.float32,
+            robot=str(robot) if model == "torque" else None,
+            torque_limit=float(torque_limit),
         )
         self.obs_dim = self.inner.obs_dim
         e, n = self.num_envs, self.num_agents
@@ -154,7 +169,7 @@ def _mask(value: Any, n: int) -> np.ndarray:
 
 
 def _action_bounds(core: _Core, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-    high = np.broadcast_to(np.array([core.v_max, core.omega_max], core.dtype), shape).copy()
+    high = np.broadcast_to(np.array(core.bounds, core.dtype), shape).copy()
     return -high, high
 
 
@@ -402,21 +417,25 @@ class FormationParallelEnv(_parallel_base()):  # type: ignore[misc]
         return obs, rewards, terms, truncs, infos
 
 
-def baseline_policy(env: Any, ke: float = 1.0) -> Callable[[Any], Any]:
-    """The kinematic law (the first step of the paper's backstepping, eqs.
-    7–10, as a velocity command) from observations alone, with gain
-    ``ke``: ``ξ* = R ṗ_d − ke e``, ``ω* = ξ*₂ / L_X``, ``v* = ξ*₁ + ω* L_Y``.
+def baseline_policy(env: Any, ke: float | None = None, kz: float = 10.0) -> Callable[[Any], Any]:
+    """The paper's law from observations alone. On velocity bases the
+    kinematic law (the first step of the backstepping, eqs. 7–10, as a
+    velocity command) with gain ``ke`` (default 1): ``ξ* = R ṗ_d − ke e``,
+    ``ω* = ξ*₂ / L_X``, ``v* = ξ*₁ + ω* L_Y``. On torque robots the complete
+    law (eqs. 9–13, the cross term cancelled; ``ke`` default 1.5, ``kz``
+    10: the paper's gains) as wheel torques.
     For a :class:`FormationVecEnv` or :class:`FormationEnv` it maps an
     observation array ``(..., obs_dim)`` to actions ``(..., 2)``; for a
     :class:`FormationParallelEnv` a dict of observations to a dict of
     actions. The actions are not clipped (the environment clips them)."""
     core = env._vec._core if isinstance(env, FormationEnv) else env._core
-    ke = float(ke)
+    ke = float((1.5 if core.model == "torque" else 1.0) if ke is None else ke)
+    kz = float(kz)
 
     def arrays(obs: Any) -> np.ndarray:
         o = np.ascontiguousarray(obs, dtype=core.dtype)
         out = np.empty(o.shape[:-1] + (2,), core.dtype)
-        core.inner.baseline(o, ke, out)
+        core.inner.baseline(o, ke, out, kz)
         return out
 
     if isinstance(env, FormationParallelEnv):

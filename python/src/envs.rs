@@ -6,7 +6,11 @@
 //! changes nothing when one is wrong.
 
 use echelon::base::{VelocityBase, VelocityBaseSpec};
-use echelon::learn::{EnvConfig, EnvFacts, Scalar, VecFormation, Weights, baseline};
+use echelon::control::Gains;
+use echelon::learn::{
+    EnvConfig, EnvFacts, Scalar, VecFormation, Weights, baseline, baseline_torque,
+};
+use echelon::model::RobotParams;
 use numpy::{
     Element, PyArray1, PyArray3, PyArrayMethods, PyReadonlyArrayDyn, PyReadwriteArrayDyn,
     PyUntypedArrayMethods,
@@ -132,7 +136,8 @@ impl PyVecFormation {
 impl PyVecFormation {
     #[new]
     #[pyo3(signature = (num_envs, num_agents, *, dt, spacing, l, radius, safety, gain, v_max,
-        omega_max, tau_v, tau_omega, neighbours, sense, weights, max_steps, speed, turn, seed, float32))]
+        omega_max, tau_v, tau_omega, neighbours, sense, weights, max_steps, speed, turn, seed, float32,
+        robot=None, torque_limit=10.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         num_envs: usize,
@@ -155,7 +160,21 @@ impl PyVecFormation {
         turn: f64,
         seed: u64,
         float32: bool,
+        robot: Option<&str>,
+        torque_limit: f64,
     ) -> PyResult<Self> {
+        let robot = robot
+            .map(|name| {
+                RobotParams::preset(name)
+                    .ok_or_else(|| {
+                        errors::value(format!(
+                            "robot must be \"agent1\" or \"agent2\" (Table I), got {name:?}"
+                        ))
+                    })?
+                    .with_torque_limit(Some(torque_limit))
+                    .map_err(|e| errors::param(&e))
+            })
+            .transpose()?;
         let base = VelocityBase::new(VelocityBaseSpec {
             v_max,
             omega_max,
@@ -174,6 +193,7 @@ impl PyVecFormation {
             safety,
             gain,
             base,
+            robot,
             neighbours,
             sense,
             weights: Weights {
@@ -304,27 +324,42 @@ impl PyVecFormation {
         PyArray1::from_vec(py, flat).reshape([e, 3])
     }
 
-    /// The kinematic law from observations (`(..., obs_dim)`) into actions
-    /// (`(..., 2)`), both of the environments' dtype.
+    /// The baseline from observations (`(..., obs_dim)`) into actions
+    /// (`(..., 2)`), both of the environments' dtype: the kinematic law
+    /// (gain `ke`) on velocity bases, the complete law (`ke`, `kz`) as wheel
+    /// torques on torque-driven robots.
+    #[pyo3(signature = (obs, ke, out, kz=10.0))]
     fn baseline(
         &self,
         py: Python<'_>,
         obs: &Bound<'_, PyAny>,
         ke: f64,
         out: &Bound<'_, PyAny>,
+        kz: f64,
     ) -> PyResult<()> {
+        let law = match self.inner.config().robot {
+            None => Law::Kinematic(ke),
+            Some(robot) => Law::Complete(robot, Gains::new(ke, kz).map_err(|e| errors::param(&e))?),
+        };
         if self.float32 {
-            baseline_as::<f32>(py, obs, ke, out, self.inner.obs_dim())
+            baseline_as::<f32>(py, obs, law, out, self.inner.obs_dim())
         } else {
-            baseline_as::<f64>(py, obs, ke, out, self.inner.obs_dim())
+            baseline_as::<f64>(py, obs, law, out, self.inner.obs_dim())
         }
     }
+}
+
+/// The baseline: the kinematic law (gain `K_e`) or the complete law.
+#[derive(Debug, Clone, Copy)]
+enum Law {
+    Kinematic(f64),
+    Complete(RobotParams, Gains),
 }
 
 fn baseline_as<T: Element + Scalar>(
     py: Python<'_>,
     obs: &Bound<'_, PyAny>,
-    ke: f64,
+    law: Law,
     out: &Bound<'_, PyAny>,
     d: usize,
 ) -> PyResult<()> {
@@ -343,7 +378,10 @@ fn baseline_as<T: Element + Scalar>(
     }
     let src = o.as_slice().map_err(errors::value)?;
     let dst = a.as_slice_mut().map_err(errors::value)?;
-    py.detach(|| baseline(src, d, ke, dst));
+    py.detach(|| match law {
+        Law::Kinematic(ke) => baseline(src, d, ke, dst),
+        Law::Complete(robot, gains) => baseline_torque(src, d, &robot, gains, dst),
+    });
     Ok(())
 }
 

@@ -24,7 +24,7 @@ def test_the_single_environment_passes_gymnasiums_check_env():
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_vector_spaces_shapes_and_dtypes(dtype):
     env = envs.FormationVecEnv(3, 4, dtype=dtype, neighbours=2, seed=5)
-    d = 8 + 3 * 2
+    d = 10 + 3 * 2
     assert env.single_observation_space.shape == (4, d)
     assert env.observation_space.shape == (3, 4, d)
     assert env.action_space.shape == (3, 4, 2)
@@ -182,3 +182,28 @@ def test_bad_input_raises_and_changes_nothing():
 
 def test_bench_measures_agent_steps_per_second():
     assert envs.bench(10, 3, steps=5) > 0.0
+
+
+@pytest.mark.parametrize("dt", [0.01, 0.05])
+def test_torque_robots_under_the_baseline_reach_their_slots(dt):
+    env = envs.FormationVecEnv(3, 5, model="torque", dt=dt, max_steps=10_000, seed=6)
+    assert env.single_action_space.high.tolist() == [[10.0, 10.0]] * 5
+    policy = envs.baseline_policy(env)
+    obs, _ = env.reset(seed=6)
+    for _ in range(int(round(30.0 / dt))):
+        obs = env.step(policy(obs))[0]
+    assert np.hypot(obs[..., 0], obs[..., 1]).max() < 0.01
+
+
+def test_torque_robots_keep_the_radius_under_random_torques():
+    env = envs.FormationVecEnv(6, 5, model="torque", dt=0.01, spacing=0.5, radius=0.3, safety=True, seed=2)
+    env.reset(seed=2)
+    env.action_space.seed(2)
+    low = np.inf
+    for _ in range(400):
+        low = min(low, env.step(env.action_space.sample())[4]["min_distance"].min())
+    assert low >= 0.3 - 1e-3
+
+
+def test_the_parallel_env_on_torque_robots_passes_the_api_test():
+    parallel_api_test(envs.FormationParallelEnv(3, model="torque", dt=0.01, max_steps=20, seed=1), num_cycles=30)

@@ -1,4 +1,4 @@
-//! What a robot's observation holds, in order (`obs_dim = 8 + 3 K` values,
+//! What a robot's observation holds, in order (`obs_dim = 10 + 3 K` values,
 //! `K` the listed neighbours), SI units, the robot's body frame
 //! (`x` ahead, `y` left):
 //!
@@ -7,9 +7,10 @@
 //! | 0, 1 | `e` (eq. 7), m: the tracking error of its slot |
 //! | 2, 3 | `v`, m/s, and `ω`, rad/s: its own velocities |
 //! | 4, 5 | `R ṗ_d`, m/s: its leader's velocity in its frame |
-//! | 6, 7 | `L_X`, `L_Y`, m: where it holds its leader (eq. 7's offsets) |
-//! | 8 + 3k, 9 + 3k | neighbour `k`'s point (`L` ahead) relative to its own point, m |
-//! | 10 + 3k | 1 if neighbour `k` is listed, 0 for padding |
+//! | 6, 7 | `R p̈_d`, m/s²: its leader's acceleration in its frame |
+//! | 8, 9 | `L_X`, `L_Y`, m: where it holds its leader (eq. 7's offsets) |
+//! | 10 + 3k, 11 + 3k | neighbour `k`'s point (`L` ahead) relative to its own point, m |
+//! | 12 + 3k | 1 if neighbour `k` is listed, 0 for padding |
 //!
 //! Neighbours are listed nearest first, those within `sense` metres only;
 //! the rest of the `K` entries are zeros.
@@ -22,10 +23,12 @@ pub const E: usize = 0;
 pub const SPEEDS: usize = 2;
 /// Index of `(R ṗ_d)_x` (then `_y`).
 pub const LEADER_VELOCITY: usize = 4;
+/// Index of `(R p̈_d)_x` (then `_y`).
+pub const LEADER_ACCELERATION: usize = 6;
 /// Index of `L_X` (then `L_Y`).
-pub const OFFSETS: usize = 6;
+pub const OFFSETS: usize = 8;
 /// Index of the first neighbour's `dx` (then `dy`, `listed`; 3 values each).
-pub const NEIGHBOURS: usize = 8;
+pub const NEIGHBOURS: usize = 10;
 
 /// Values per observation with `k` neighbours listed.
 pub const fn obs_dim(k: usize) -> usize {

@@ -30,11 +30,11 @@ use rayon::prelude::*;
 
 use crate::base::{VelocityBase, VelocityCommand};
 use crate::error::ParamError;
-use crate::model::State;
+use crate::model::{RobotParams, State, Torques};
 use crate::safety::{Neighbour, SafetyConfig, SafetyFilter};
 
 pub use episode::Slots;
-pub use observe::{MAX_NEIGHBOURS, baseline};
+pub use observe::{MAX_NEIGHBOURS, baseline, baseline_torque};
 
 /// A number an environment's buffers hold (`f64`, or `f32` on request).
 pub trait Scalar: Copy + Send + Sync + 'static {
@@ -110,8 +110,13 @@ pub struct EnvConfig {
     pub safety: bool,
     /// The filter's `γ`, 1/s.
     pub gain: f64,
-    /// The robots' base (speed limits bound the actions; lags, if any).
+    /// The robots' base (speed limits bound the actions; lags, if any)
+    /// when `robot` is `None`.
     pub base: VelocityBase,
+    /// Torque-driven robots (eq. 3) instead of velocity bases: the actions
+    /// are wheel torques `(τ_r, τ_l)`, N m, bounded by its `torque_limit`
+    /// (which must be set).
+    pub robot: Option<RobotParams>,
     /// How many neighbours each observation lists (nearest first).
     pub neighbours: usize,
     /// Neighbours farther than this (point to point) are not listed, m.
@@ -127,6 +132,15 @@ pub struct EnvConfig {
 }
 
 impl EnvConfig {
+    /// The bound on each action component: `(v_max, ω_max)`, or the torque
+    /// limit on both wheels.
+    pub fn action_bound(&self) -> [f64; 2] {
+        match &self.robot {
+            None => [self.base.v_max(), self.base.omega_max()],
+            Some(r) => [r.torque_limit().unwrap_or(f64::INFINITY); 2],
+        }
+    }
+
     /// `num_envs × num_agents` robots on an ideal base limited to 0.5 m/s and
     /// 2 rad/s, 1 m apart, 20 ms steps, no filter.
     pub fn new(num_envs: usize, num_agents: usize) -> EnvConfig {
@@ -140,6 +154,7 @@ impl EnvConfig {
             safety: false,
             gain: 1.0,
             base: layout::default_base(),
+            robot: None,
             neighbours: 4,
             sense: 3.0,
             weights: Weights::default(),
@@ -189,7 +204,15 @@ impl EnvConfig {
                 return Err(ParamError::new(f, v, "must be finite"));
             }
         }
-        if self.base.v_max().is_infinite() || self.base.omega_max().is_infinite() {
+        if let Some(robot) = &self.robot {
+            if robot.torque_limit().is_none() {
+                return Err(ParamError::new(
+                    "robot.torque_limit",
+                    f64::INFINITY,
+                    "must be set (it bounds the actions)",
+                ));
+            }
+        } else if self.base.v_max().is_infinite() || self.base.omega_max().is_infinite() {
             return Err(ParamError::new(
                 "base",
                 f64::INFINITY,
@@ -219,8 +242,9 @@ struct Env {
     slots: Slots,
     filters: Vec<SafetyFilter>,
     neighbours: Vec<Neighbour>,
-    /// The clipped (and filtered) commands of the last step.
-    applied: Vec<VelocityCommand>,
+    /// The clipped (and filtered) actions of the last step: `(v, ω)` or
+    /// `(τ_r, τ_l)`.
+    applied: Vec<[f64; 2]>,
     t: f64,
     steps: u64,
     episode_seed: u64,
@@ -263,7 +287,7 @@ impl VecFormation {
             slots: Slots::default(),
             filters: vec![filter; if config.safety { n } else { 0 }],
             neighbours: Vec::with_capacity(n),
-            applied: vec![VelocityCommand::default(); n],
+            applied: vec![[0.0; 2]; n],
             t: 0.0,
             steps: 0,
             episode_seed: 0,
@@ -402,7 +426,7 @@ impl Env {
             )
             .with_period(config.dt);
         }
-        self.applied.fill(VelocityCommand::default());
+        self.applied.fill([0.0; 2]);
         self.t = 0.0;
         self.steps = 0;
     }
@@ -414,45 +438,75 @@ impl Env {
         actions: &[T],
         changed: &mut [T],
     ) -> EnvFacts {
-        let base = &config.base;
-        for (i, cmd) in self.applied.iter_mut().enumerate() {
-            *cmd = VelocityCommand {
-                v: actions[2 * i].get().clamp(-base.v_max(), base.v_max()),
-                omega: actions[2 * i + 1]
-                    .get()
-                    .clamp(-base.omega_max(), base.omega_max()),
-            };
+        let bound = config.action_bound();
+        for (i, a) in self.applied.iter_mut().enumerate() {
+            *a = [0, 1].map(|k| actions[2 * i + k].get().clamp(-bound[k], bound[k]));
         }
-        if config.safety {
-            for (i, change) in changed.iter_mut().enumerate() {
-                self.neighbours.clear();
-                for (j, s) in self.states.iter().enumerate() {
-                    if j != i {
-                        self.neighbours
-                            .push(Neighbour::of_state(s, config.l, None, true));
-                    }
-                }
-                let nominal = self.applied[i];
-                let out = self.filters[i].velocity(
-                    self.t,
-                    &self.states[i],
-                    config.l,
-                    nominal,
-                    base,
-                    &self.neighbours,
-                    &[],
-                );
-                self.applied[i] = out.command;
-                *change = T::of(
-                    (out.command.v - nominal.v)
-                        .hypot(config.l * (out.command.omega - nominal.omega)),
-                );
+        for (i, change) in changed.iter_mut().enumerate() {
+            if !config.safety {
+                *change = T::of(0.0);
+                continue;
             }
-        } else {
-            changed.fill(T::of(0.0));
+            self.neighbours.clear();
+            for (j, s) in self.states.iter().enumerate() {
+                if j != i {
+                    self.neighbours
+                        .push(Neighbour::of_state(s, config.l, None, true));
+                }
+            }
+            let nominal = self.applied[i];
+            let (me, filter) = (&self.states[i], &mut self.filters[i]);
+            self.applied[i] = match &config.robot {
+                None => {
+                    let cmd = VelocityCommand {
+                        v: nominal[0],
+                        omega: nominal[1],
+                    };
+                    let out = filter.velocity(
+                        self.t,
+                        me,
+                        config.l,
+                        cmd,
+                        &config.base,
+                        &self.neighbours,
+                        &[],
+                    );
+                    [out.command.v, out.command.omega]
+                }
+                Some(robot) => {
+                    let u = robot.inputs(Torques {
+                        right: nominal[0],
+                        left: nominal[1],
+                    });
+                    let out = filter.torque(self.t, me, config.l, robot, u, &self.neighbours, &[]);
+                    let tau = robot.torques(out.command);
+                    [tau.right, tau.left]
+                }
+            };
+            let a = self.applied[i];
+            *change = T::of(match config.robot {
+                None => (a[0] - nominal[0]).hypot(config.l * (a[1] - nominal[1])),
+                Some(_) => (a[0] - nominal[0]).hypot(a[1] - nominal[1]),
+            });
         }
-        for (s, cmd) in self.states.iter_mut().zip(&self.applied) {
-            *s = base.rk4_step(s, base.limit(*cmd).0, config.dt);
+        for (s, a) in self.states.iter_mut().zip(&self.applied) {
+            *s = match &config.robot {
+                None => {
+                    let base = &config.base;
+                    let cmd = VelocityCommand {
+                        v: a[0],
+                        omega: a[1],
+                    };
+                    base.rk4_step(s, base.limit(cmd).0, config.dt)
+                }
+                Some(robot) => {
+                    let u = robot.inputs(Torques {
+                        right: a[0],
+                        left: a[1],
+                    });
+                    robot.rk4_step(s, robot.actuate(u).0, config.dt)
+                }
+            };
         }
         self.t += config.dt;
         self.steps += 1;

@@ -1,8 +1,11 @@
 //! Observations ([`super::layout`]), rewards and the baseline policy.
 
-use super::layout::{E, LEADER_VELOCITY, NEIGHBOURS, OFFSETS, SPEEDS, obs_dim};
+use super::layout::{
+    E, LEADER_ACCELERATION, LEADER_VELOCITY, NEIGHBOURS, OFFSETS, SPEEDS, obs_dim,
+};
 use super::{EnvConfig, Scalar, Slots};
-use crate::base::VelocityCommand;
+use crate::control::{Gains, LeaderMotion, Offset, Variant, law};
+use crate::model::RobotParams;
 use crate::model::State;
 use crate::safety::point;
 
@@ -44,7 +47,7 @@ pub(super) fn write<T: Scalar>(
     config: &EnvConfig,
     seen: Seen<'_>,
     out: &mut [T],
-    mut rewards: Option<(&[VelocityCommand], &mut [T])>,
+    mut rewards: Option<(&[[f64; 2]], &mut [T])>,
 ) -> f64 {
     let Seen {
         states,
@@ -62,11 +65,18 @@ pub(super) fn write<T: Scalar>(
         let (sin, cos) = s.theta.sin_cos();
         let (lx, ly) = (slots.lx[i], slots.ly[i]);
         let (e, q) = errors(s, (sin, cos), jet.p, jet.dp, lx, ly);
-        let head = [e[0], e[1], s.v, s.omega, q[0], q[1], lx, ly];
+        let acc = [
+            cos * jet.ddp[0] + sin * jet.ddp[1],
+            -sin * jet.ddp[0] + cos * jet.ddp[1],
+        ];
+        let head = [e[0], e[1], s.v, s.omega, q[0], q[1], acc[0], acc[1], lx, ly];
         for (slot, v) in o[..NEIGHBOURS].iter_mut().zip(head) {
             *slot = T::of(v);
         }
-        debug_assert_eq!((E, SPEEDS, LEADER_VELOCITY, OFFSETS), (0, 2, 4, 6));
+        debug_assert_eq!(
+            (E, LEADER_VELOCITY, LEADER_ACCELERATION, OFFSETS),
+            (0, 4, 6, 8)
+        );
         // The k nearest points within `sense`, by insertion into a fixed
         // array, on squared distances (the same order, no square root).
         let me = points[i];
@@ -102,8 +112,12 @@ pub(super) fn write<T: Scalar>(
         }
         if let Some((applied, r)) = rewards.as_mut() {
             let (w, a) = (config.weights, applied[i]);
+            let effort = match config.robot {
+                None => a[0] * a[0] + (config.l * a[1]).powi(2),
+                Some(_) => a[0] * a[0] + a[1] * a[1],
+            };
             let value = -w.tracking * (e[0] * e[0] + e[1] * e[1])
-                - w.effort * (a.v * a.v + (config.l * a.omega).powi(2))
+                - w.effort * effort
                 - if nearest < radius2 { w.collision } else { 0.0 };
             r[i] = T::of(value);
             sum += value;
@@ -143,5 +157,45 @@ pub fn baseline<T: Scalar>(obs: &[T], obs_dim: usize, ke: f64, actions: &mut [T]
         let omega = xi[1] / o[OFFSETS].get();
         a[0] = T::of(xi[0] + omega * o[OFFSETS + 1].get());
         a[1] = T::of(omega);
+    }
+}
+
+/// The complete law (eqs. 9–13 with the cross term cancelled,
+/// [`crate::control::law`]) from an observation alone, as wheel torques
+/// `(τ_r, τ_l)` for `robot`: the robot put at the origin facing `x` (the law
+/// is the same in any frame), its leader at `(L_X, L_Y) − e` with the
+/// observed `R ṗ_d`, `R p̈_d`, `L̇_Y = L̈_Y = 0`.
+pub fn baseline_torque<T: Scalar>(
+    obs: &[T],
+    obs_dim: usize,
+    robot: &RobotParams,
+    gains: Gains,
+    actions: &mut [T],
+) {
+    for (o, a) in obs.chunks_exact(obs_dim).zip(actions.chunks_exact_mut(2)) {
+        let g = |k: usize| o[k].get();
+        let me = State {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            v: g(SPEEDS),
+            omega: g(SPEEDS + 1),
+        };
+        let (lx, ly) = (g(OFFSETS), g(OFFSETS + 1));
+        let leader = LeaderMotion {
+            p: [lx - g(E), ly - g(E + 1)],
+            dp: [g(LEADER_VELOCITY), g(LEADER_VELOCITY + 1)],
+            ddp: [g(LEADER_ACCELERATION), g(LEADER_ACCELERATION + 1)],
+        };
+        let off = Offset {
+            lx,
+            ly,
+            dly: 0.0,
+            ddly: 0.0,
+        };
+        let u = law(robot, &me, &leader, &off, gains, Variant::Complete).u;
+        let tau = robot.torques(u);
+        a[0] = T::of(tau.right);
+        a[1] = T::of(tau.left);
     }
 }

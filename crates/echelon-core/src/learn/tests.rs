@@ -61,7 +61,7 @@ proptest! {
             // Neighbours: listed ones within `sense`, nearest first, padding zero.
             let mut last = 0.0;
             for m in 0..k {
-                let nb = &o[8 + 3 * m..11 + 3 * m];
+                let nb = &o[10 + 3 * m..13 + 3 * m];
                 if nb[2] == 1.0 {
                     let dist = nb[0].hypot(nb[1]);
                     prop_assert!(dist >= last - 1e-12 && dist <= config.sense);
@@ -70,7 +70,7 @@ proptest! {
                     prop_assert!(nb == [0.0; 3]);
                 }
             }
-            let listed = (0..k).filter(|m| o[10 + 3 * m] == 1.0).count();
+            let listed = (0..k).filter(|m| o[12 + 3 * m] == 1.0).count();
             let me = crate::safety::point(&env.envs[1].states[i], config.l);
             let within = env.envs[1].states.iter().enumerate().filter(|&(j, s)| {
                 let p = crate::safety::point(s, config.l);
@@ -104,7 +104,7 @@ proptest! {
         // −‖e‖² − 0.01 ‖(v, Lω)‖² − 10 [nearest point within the radius].
         for (i, o) in obs.chunks_exact(d).enumerate() {
             let (v, w) = (actions[2 * i].clamp(-0.5, 0.5), actions[2 * i + 1].clamp(-2.0, 2.0));
-            let hit = o[10] == 1.0 && o[8].hypot(o[9]) < config.radius;
+            let hit = o[12] == 1.0 && o[10].hypot(o[11]) < config.radius;
             let want = -(o[0] * o[0] + o[1] * o[1])
                 - 0.01 * (v * v + (config.l * w).powi(2))
                 - if hit { 10.0 } else { 0.0 };
@@ -210,4 +210,89 @@ fn truncation_clipping_and_refusals() {
     }
     assert_eq!(first_not_finite(&[0.0, 1.0, f64::NAN]), Some(2));
     assert_eq!(first_not_finite(&[0.0f32, 1.0]), None);
+}
+
+/// Table I's agent 1 with a 10 N m wheel limit.
+fn torque_config(e: usize, n: usize) -> EnvConfig {
+    EnvConfig {
+        robot: Some(
+            crate::model::RobotParams::AGENT1
+                .with_torque_limit(Some(10.0))
+                .unwrap(),
+        ),
+        dt: 0.01,
+        ..EnvConfig::new(e, n)
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(16))]
+
+    /// On torque-driven robots the observation carries what the complete
+    /// law needs: the baseline from observations is the kernel's law at the
+    /// robot's true pose (the law does not depend on the frame) to 1e-9,
+    /// as wheel torques.
+    #[test]
+    fn the_torque_baseline_from_observations_is_the_complete_law(
+        n in 1usize..6, seed in any::<u64>(),
+        jitter in proptest::collection::vec((-0.4..0.4f64, -0.4..0.4f64, -3.0..3.0f64, -0.4..0.4f64, -1.5..1.5f64), 6),
+    ) {
+        let config = torque_config(1, n);
+        let robot = config.robot.unwrap();
+        let mut env = VecFormation::new(config, seed).unwrap();
+        for (i, s) in env.envs[0].states.iter_mut().enumerate() {
+            let (dx, dy, th, v, w) = jitter[i];
+            s.x += dx; s.y += dy; s.theta = th; s.v = v; s.omega = w;
+        }
+        env.envs[0].t = 1.3;
+        let d = env.obs_dim();
+        let mut obs = vec![0.0; n * d];
+        env.observe(&mut obs);
+        let mut actions = vec![0.0; n * 2];
+        let gains = crate::control::Gains::PAPER;
+        baseline_torque(&obs, d, &robot, gains, &mut actions);
+        let slots = env.slots(0);
+        let leader = LeaderMotion::of_jet(&slots.leader_at(1.3));
+        for i in 0..n {
+            let off = Offset { lx: slots.lx[i], ly: slots.ly[i], dly: 0.0, ddly: 0.0 };
+            let u = crate::control::law(&robot, &env.envs[0].states[i], &leader, &off, gains, crate::control::Variant::Complete).u;
+            let tau = robot.torques(u);
+            let a = &actions[2 * i..2 * i + 2];
+            prop_assert!((a[0] - tau.right).abs() < 1e-9 * (1.0 + tau.right.abs()), "{a:?} {tau:?}");
+            prop_assert!((a[1] - tau.left).abs() < 1e-9 * (1.0 + tau.left.abs()), "{a:?} {tau:?}");
+        }
+    }
+
+    /// Torque-driven robots under the baseline reach their slots (‖e‖ < 1 cm
+    /// after 30 s), and the filter keeps the radius under random torques in
+    /// a crowd.
+    #[test]
+    fn torque_robots_get_home_and_keep_the_radius(n in 1usize..7, seed in any::<u64>()) {
+        let config = torque_config(2, n);
+        let robot = config.robot.unwrap();
+        let mut env = VecFormation::new(config, seed).unwrap();
+        let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
+        let d = env.obs_dim();
+        env.observe(&mut obs);
+        for _ in 0..3000 {
+            baseline_torque(&obs, d, &robot, crate::control::Gains::PAPER, &mut actions);
+            env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+        }
+        for (i, o) in obs.chunks_exact(d).enumerate() {
+            prop_assert!(o[0].hypot(o[1]) < 0.01, "robot {i}: e = ({}, {})", o[0], o[1]);
+        }
+        let crowd = EnvConfig { spacing: 0.5, radius: 0.3, safety: true, ..torque_config(2, n.max(3)) };
+        let mut env = VecFormation::new(crowd, seed).unwrap();
+        let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
+        let mut draws = crate::rng::SplitMix64::new(seed);
+        let mut closest = f64::INFINITY;
+        for _ in 0..500 {
+            for a in &mut actions {
+                *a = draws.uniform(-10.0, 10.0);
+            }
+            env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+            closest = facts.iter().map(|f| f.min_distance).fold(closest, f64::min);
+        }
+        prop_assert!(closest >= 0.3 - 1e-3, "closest {closest}");
+    }
 }

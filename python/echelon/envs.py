@@ -71,7 +71,9 @@ class _Core:
         num_agents: int,
         *,
         model: str = "unicycle",
-        dt: float = 0.05,
+        scenario: Any = None,
+        overrides: dict[str, Any] | None = None,
+        dt: float | None = None,
         spacing: float = 1.0,
         safety: bool = False,
         radius: float | None = None,
@@ -107,17 +109,21 @@ class _Core:
         if self.seed < 0:
             raise ValueError(f"seed must be ≥ 0, got {self.seed}")
         self.num_envs, self.num_agents, self.safety = int(num_envs), int(num_agents), bool(safety)
-        self.model, self.l = model, float(l)
-        if model == "torque":
-            self.bounds = (float(torque_limit), float(torque_limit))
-        else:
-            self.bounds = (float(v_max), float(omega_max))
+        inner_scenario, scenario_overrides = None, None
+        if scenario is not None:
+            from ._scenario import _checked, as_scenario
+
+            sc = as_scenario("scenario", scenario)
+            inner_scenario = sc._inner
+            scenario_overrides = {**sc.overrides, **_checked(dict(overrides or {}))}
+        elif overrides:
+            raise ValueError("overrides need a scenario")
         self.inner = _echelon.VecFormation(
             self.num_envs,
             self.num_agents,
-            dt=float(dt),
+            dt=None if dt is None else float(dt),
             spacing=float(spacing),
-            l=self.l,
+            l=float(l),
             radius=self.radius,
             safety=self.safety,
             gain=float(gain),
@@ -133,9 +139,16 @@ class _Core:
             turn=float(turn),
             seed=self.seed,
             float32=self.dtype == np.float32,
-            robot=str(robot) if model == "torque" else None,
+            robot=str(robot) if model == "torque" and scenario is None else None,
             torque_limit=float(torque_limit),
+            scenario=inner_scenario,
+            overrides=scenario_overrides,
         )
+        self.model = self.inner.model
+        if scenario is not None and model != "unicycle" and model != self.model:
+            raise ValueError(f"model={model!r}, but the scenario's robots make it {self.model!r}")
+        self.bounds = self.inner.action_bound
+        self.dt, self.l = self.inner.dt_l
         self.obs_dim = self.inner.obs_dim
         e, n = self.num_envs, self.num_agents
         self.obs = np.zeros((e, n, self.obs_dim), self.dtype)

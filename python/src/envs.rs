@@ -8,9 +8,11 @@
 use echelon::base::{VelocityBase, VelocityBaseSpec};
 use echelon::control::Gains;
 use echelon::learn::{
-    EnvConfig, EnvFacts, Scalar, VecFormation, Weights, baseline, baseline_torque,
+    EnvConfig, EnvFacts, FixedEpisode, PlanRobots, Scalar, VecFormation, Weights, baseline,
+    baseline_torque,
 };
 use echelon::model::RobotParams;
+use echelon::reference::Reference;
 use numpy::{
     Element, PyArray1, PyArray3, PyArrayMethods, PyReadonlyArrayDyn, PyReadwriteArrayDyn,
     PyUntypedArrayMethods,
@@ -18,6 +20,7 @@ use numpy::{
 use pyo3::prelude::*;
 
 use crate::errors;
+use crate::scenario::{OverrideArgs, PyScenario};
 
 /// The environments and their dtype.
 #[pyclass(module = "echelon._echelon", name = "VecFormation")]
@@ -137,12 +140,12 @@ impl PyVecFormation {
     #[new]
     #[pyo3(signature = (num_envs, num_agents, *, dt, spacing, l, radius, safety, gain, v_max,
         omega_max, tau_v, tau_omega, neighbours, sense, weights, max_steps, speed, turn, seed, float32,
-        robot=None, torque_limit=10.0))]
+        robot=None, torque_limit=10.0, scenario=None, overrides=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         num_envs: usize,
         num_agents: usize,
-        dt: f64,
+        dt: Option<f64>,
         spacing: f64,
         l: f64,
         radius: f64,
@@ -162,6 +165,8 @@ impl PyVecFormation {
         float32: bool,
         robot: Option<&str>,
         torque_limit: f64,
+        scenario: Option<PyRef<'_, PyScenario>>,
+        overrides: Option<OverrideArgs>,
     ) -> PyResult<Self> {
         let robot = robot
             .map(|name| {
@@ -183,10 +188,10 @@ impl PyVecFormation {
             ..VelocityBase::IDEAL.spec()
         })
         .map_err(|e| errors::param(&e))?;
-        let config = EnvConfig {
+        let mut config = EnvConfig {
             num_envs,
             num_agents,
-            dt,
+            dt: dt.unwrap_or(0.05),
             spacing,
             l,
             radius,
@@ -205,7 +210,27 @@ impl PyVecFormation {
             speed,
             turn,
         };
-        let inner = VecFormation::new(config, seed).map_err(|e| errors::param(&e))?;
+        let inner = match scenario {
+            None => VecFormation::new(config, seed),
+            Some(sc) => {
+                let run = sc.build(sc.py(), overrides.as_ref())?;
+                let (fixed, robots, l) =
+                    FixedEpisode::of_plan(&run.plan).map_err(|e| errors::param(&e))?;
+                config.dt = dt.unwrap_or(run.plan.config().dt);
+                config.l = l;
+                match robots {
+                    PlanRobots::Velocity(b) => config.base = b,
+                    PlanRobots::Torque(r) => {
+                        config.robot = Some(
+                            r.with_torque_limit(Some(r.torque_limit().unwrap_or(torque_limit)))
+                                .map_err(|e| errors::param(&e))?,
+                        );
+                    }
+                }
+                VecFormation::fixed(config, fixed, seed)
+            }
+        }
+        .map_err(|e| errors::param(&e))?;
         Ok(PyVecFormation {
             inner,
             float32,
@@ -217,6 +242,30 @@ impl PyVecFormation {
     #[getter]
     fn obs_dim(&self) -> usize {
         self.inner.obs_dim()
+    }
+
+    /// The bound on each action component: `(v_max, ω_max)` or the torque
+    /// limit on both wheels.
+    #[getter]
+    fn action_bound(&self) -> (f64, f64) {
+        let [a, b] = self.inner.config().action_bound();
+        (a, b)
+    }
+
+    /// `"unicycle"` (velocity bases) or `"torque"`.
+    #[getter]
+    fn model(&self) -> &'static str {
+        if self.inner.config().robot.is_some() {
+            "torque"
+        } else {
+            "unicycle"
+        }
+    }
+
+    /// The step, s, and the point ahead kept apart, m.
+    #[getter]
+    fn dt_l(&self) -> (f64, f64) {
+        (self.inner.config().dt, self.inner.config().l)
     }
 
     /// Reseeds every environment from `seed` and resets those `mask` selects
@@ -312,13 +361,14 @@ impl PyVecFormation {
     }
 
     /// Each environment's leader: `(E, 3)` of its heading (rad), speed
-    /// (m/s) and turn rate (rad/s); it starts at the origin.
+    /// (m/s) and turn rate (rad/s); it starts at the origin (NaN for a
+    /// scenario's reference that is not a circle or line).
     fn leaders<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
         let e = self.shape().0;
         let flat: Vec<f64> = (0..e)
-            .flat_map(|k| {
-                let c = &self.inner.slots(k).leader;
-                [c.heading(), c.speed(), c.turn_rate()]
+            .flat_map(|k| match &self.inner.slots(k).leader {
+                Reference::Circle(c) => [c.heading(), c.speed(), c.turn_rate()],
+                _ => [f64::NAN; 3],
             })
             .collect();
         PyArray1::from_vec(py, flat).reshape([e, 3])

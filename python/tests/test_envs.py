@@ -207,3 +207,62 @@ def test_torque_robots_keep_the_radius_under_random_torques():
 
 def test_the_parallel_env_on_torque_robots_passes_the_api_test():
     parallel_api_test(envs.FormationParallelEnv(3, model="torque", dt=0.01, max_steps=20, seed=1), num_cycles=30)
+
+
+def _doc(n=4, dt=0.01, law="kinematic"):
+    robots = (
+        {"r": {"drive": "velocity", "preset": "ideal", "v_max": 0.5, "omega_max": 2.0}}
+        if law == "kinematic"
+        else {"r": {"preset": "agent1", "torque_limit": 10.0}}
+    )
+    control = {"law": law, "ke": 1.0 if law == "kinematic" else 1.5, "l": 0.1, "lycomp": "none"}
+    if law != "kinematic":
+        control["kz"] = 10.0
+    return {
+        "name": "from-scenario",
+        "sim": {"duration": 8.0, "dt": dt, "controller_period": dt},
+        "log": {"dt": 0.0},
+        "control": control,
+        "robots": robots,
+        "reference": {"circle": {"speed": 0.15, "turn_rate": 0.05, "start": {"x": 0.0, "y": 0.0, "theta": 0.3}}},
+        "agents": [
+            {
+                "robot": "r",
+                "leader": "reference",
+                "start": {"x": -1.0 - 0.8 * i, "y": 0.5 * (-1) ** i, "theta": 0.1 * i},
+                "offset": {"x": 0.9 + 0.8 * i, "y": 0.4 * (-1) ** i},
+            }
+            for i in range(n)
+        ],
+    }
+
+
+@pytest.mark.parametrize("law", ["kinematic", "complete"])
+def test_an_environment_from_a_scenario_under_the_baseline_is_echelon_run(law):
+    """`scenario=`: every episode is the scenario's formation, and the
+    baseline through the environment is `echelon run` of it (1e-9 m for the
+    kinematic law; the complete law's torques make a round trip through the
+    wheels, 1e-7 m)."""
+    doc = _doc(law=law)
+    sc = echelon.Scenario.from_dict(doc)
+    env = envs.FormationVecEnv(2, 4, scenario=sc, max_steps=100_000, seed=1)
+    assert env.dtype == np.float64 and env._core.dt == 0.01
+    assert env._core.model == ("unicycle" if law == "kinematic" else "torque")
+    policy = envs.baseline_policy(env, ke=doc["control"]["ke"])
+    obs, _ = env.reset(seed=1)
+    assert np.array_equal(env.poses[0], env.poses[1])
+    for _ in range(800):
+        obs = env.step(policy(obs))[0]
+    traj = sc.run().trajectory
+    last = traj[np.isclose(traj["t"], 8.0)].sort_values("agent")
+    tol = 1e-9 if law == "kinematic" else 1e-7
+    for k in range(2):
+        assert np.abs(last["x"].to_numpy() - env.poses[k][:, 0]).max() < tol
+        assert np.abs(last["y"].to_numpy() - env.poses[k][:, 1]).max() < tol
+
+
+def test_a_scenario_the_environments_do_not_model_is_refused():
+    with pytest.raises(ValueError, match="L_Ycomp|lycomp"):
+        envs.FormationVecEnv(1, 5, scenario="lemniscate-wedge")
+    with pytest.raises(ValueError, match="number of agents"):
+        envs.FormationVecEnv(1, 3, scenario=echelon.Scenario.from_dict(_doc(n=4)))

@@ -3,8 +3,12 @@
 use std::f64::consts::PI;
 
 use super::EnvConfig;
+use crate::error::ParamError;
+use crate::formation::Leader;
+use crate::lycomp::LyComp;
 use crate::model::State;
-use crate::reference::{Circle, Jet, Order, Trajectory};
+use crate::plan::Plan;
+use crate::reference::{Circle, Jet, Order, Reference, Trajectory};
 use crate::rng::SplitMix64;
 use crate::safety::point;
 
@@ -12,8 +16,9 @@ use crate::safety::point;
 /// constant speed and turn rate) and each robot's `L_X`, `L_Y` (eq. 7).
 #[derive(Debug, Clone)]
 pub struct Slots {
-    /// The virtual leader.
-    pub leader: Circle,
+    /// The virtual leader (a [`Circle`] in a drawn episode, a scenario's
+    /// reference in a fixed one).
+    pub leader: Reference,
     /// Robot `i`'s `L_X`, m (> 0: the leader ahead).
     pub lx: Vec<f64>,
     /// Robot `i`'s `L_Y`, m (the leader to its left when > 0).
@@ -23,8 +28,10 @@ pub struct Slots {
 impl Default for Slots {
     fn default() -> Self {
         Slots {
-            leader: Circle::new([0.0; 2], 0.0, 0.0, 0.0)
-                .unwrap_or_else(|_| unreachable!("a circle at rest")),
+            leader: Reference::Circle(
+                Circle::new([0.0; 2], 0.0, 0.0, 0.0)
+                    .unwrap_or_else(|_| unreachable!("a circle at rest")),
+            ),
             lx: Vec::new(),
             ly: Vec::new(),
         }
@@ -62,8 +69,10 @@ pub(super) fn draw(config: &EnvConfig, seed: u64, slots: &mut Slots, starts: &mu
     let heading = rng.uniform(-PI, PI);
     let speed = rng.uniform(config.speed.0, config.speed.1);
     let turn = rng.uniform(-config.turn, config.turn);
-    slots.leader = Circle::new([0.0; 2], heading, speed, turn)
-        .unwrap_or_else(|_| unreachable!("finite, speed ≥ 0"));
+    slots.leader = Reference::Circle(
+        Circle::new([0.0; 2], heading, speed, turn)
+            .unwrap_or_else(|_| unreachable!("finite, speed ≥ 0")),
+    );
     let width = (n as f64).sqrt().ceil() as usize;
     slots.lx.clear();
     slots.ly.clear();
@@ -115,4 +124,91 @@ fn apart(states: &[State], l: f64, radius: f64) -> bool {
             (p[0] - q[0]).hypot(p[1] - q[1]) >= radius
         })
     })
+}
+
+/// A scenario's formation as every episode's: its reference, each agent's
+/// `L_X = L_Xoff + L`, `L_Y = L_Yoff`, and its start.
+#[derive(Debug, Clone)]
+pub struct FixedEpisode {
+    /// The reference.
+    pub leader: Reference,
+    /// Each agent's `L_X`, m.
+    pub lx: Vec<f64>,
+    /// Each agent's `L_Y`, m.
+    pub ly: Vec<f64>,
+    /// Each agent's start.
+    pub starts: Vec<State>,
+}
+
+/// What a scenario's robots are, for [`super::EnvConfig`]: all velocity
+/// bases of one kind, or all torque robots of one kind.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PlanRobots {
+    /// Velocity bases.
+    Velocity(crate::base::VelocityBase),
+    /// Torque-driven robots (eq. 3).
+    Torque(crate::model::RobotParams),
+}
+
+impl FixedEpisode {
+    /// The episode of `plan`, its robots and its agents' `L` (the same for
+    /// all), refusing what the environments do not model: an agent that
+    /// follows another agent or tracks purely, an `L_Ycomp` (the slot would
+    /// move with the leader's turn), robots of different kinds.
+    pub fn of_plan(plan: &Plan) -> Result<(FixedEpisode, PlanRobots, f64), ParamError> {
+        let agents = plan.agents();
+        let refuse = |i: usize, what: &str| {
+            ParamError::new(
+                "scenario",
+                (i + 1) as f64,
+                format!("agent {}: {what}", i + 1),
+            )
+        };
+        let mut robots = None;
+        let mut l = None;
+        let mut episode = FixedEpisode {
+            leader: plan.reference().clone(),
+            lx: Vec::with_capacity(agents.len()),
+            ly: Vec::with_capacity(agents.len()),
+            starts: Vec::with_capacity(agents.len()),
+        };
+        for (i, a) in agents.iter().enumerate() {
+            if a.leader() != Leader::Reference {
+                return Err(refuse(
+                    i,
+                    "follows another agent; the environments put every robot behind the reference",
+                ));
+            }
+            let p = a.placement();
+            if p.lycomp() != LyComp::None {
+                return Err(refuse(
+                    i,
+                    "has an L_Ycomp; the environments hold fixed offsets (lycomp = \"none\")",
+                ));
+            }
+            let kind = match (a.velocity_robot(), a.torque_robot()) {
+                (Some(v), _) => PlanRobots::Velocity(v.base()),
+                (None, Some(r)) => PlanRobots::Torque(*r),
+                (None, None) => return Err(refuse(i, "has no robot the environments model")),
+            };
+            if robots.is_some_and(|r| r != kind) {
+                return Err(refuse(
+                    i,
+                    "is another kind of robot than agent 1; the environments hold one kind",
+                ));
+            }
+            if l.is_some_and(|l| l != p.l()) {
+                return Err(refuse(i, "has another L than agent 1"));
+            }
+            robots = Some(kind);
+            l = Some(p.l());
+            episode.lx.push(p.lx());
+            episode.ly.push(p.ly_off());
+            episode.starts.push(a.start());
+        }
+        match (robots, l) {
+            (Some(r), Some(l)) => Ok((episode, r, l)),
+            _ => Err(ParamError::new("scenario", 0.0, "has no agents")),
+        }
+    }
 }

@@ -33,7 +33,7 @@ use crate::error::ParamError;
 use crate::model::{RobotParams, State, Torques};
 use crate::safety::{Neighbour, SafetyConfig, SafetyFilter};
 
-pub use episode::Slots;
+pub use episode::{FixedEpisode, PlanRobots, Slots};
 pub use observe::{MAX_NEIGHBOURS, baseline, baseline_torque};
 
 /// A number an environment's buffers hold (`f64`, or `f32` on request).
@@ -267,6 +267,8 @@ pub struct EnvFacts {
 pub struct VecFormation {
     config: EnvConfig,
     envs: Vec<Env>,
+    /// Every episode's formation, when it is a scenario's.
+    fixed: Option<std::sync::Arc<FixedEpisode>>,
 }
 
 impl VecFormation {
@@ -295,7 +297,30 @@ impl VecFormation {
         let mut me = VecFormation {
             config,
             envs: vec![env; config.num_envs],
+            fixed: None,
         };
+        me.reset(seed, None);
+        Ok(me)
+    }
+
+    /// Environments whose every episode is `fixed` (a scenario's formation,
+    /// [`FixedEpisode::of_plan`]); `config.num_agents` must be its number of
+    /// agents.
+    pub fn fixed(
+        config: EnvConfig,
+        fixed: FixedEpisode,
+        seed: u64,
+    ) -> Result<VecFormation, ParamError> {
+        let n = fixed.starts.len();
+        if n != config.num_agents || fixed.lx.len() != n || fixed.ly.len() != n {
+            return Err(ParamError::new(
+                "num_agents",
+                config.num_agents as f64,
+                format!("must be the scenario's number of agents, {n}"),
+            ));
+        }
+        let mut me = VecFormation::new(config, seed)?;
+        me.fixed = Some(std::sync::Arc::new(fixed));
         me.reset(seed, None);
         Ok(me)
     }
@@ -317,7 +342,7 @@ impl VecFormation {
         for (k, env) in self.envs.iter_mut().enumerate() {
             env.episode_seed = episode::mix(seed, k as u64);
             if mask.is_none_or(|m| m[k]) {
-                env.start(&config);
+                env.start(&config, self.fixed.as_deref());
             }
         }
     }
@@ -328,7 +353,7 @@ impl VecFormation {
         let config = self.config;
         for (env, &on) in self.envs.iter_mut().zip(mask) {
             if on {
-                env.start(&config);
+                env.start(&config, self.fixed.as_deref());
             }
         }
     }
@@ -415,9 +440,17 @@ impl Env {
     }
 
     /// A new episode from this environment's stream.
-    fn start(&mut self, config: &EnvConfig) {
+    fn start(&mut self, config: &EnvConfig, fixed: Option<&FixedEpisode>) {
         self.episode_seed = episode::mix(self.episode_seed, 0x5eed);
-        episode::draw(config, self.episode_seed, &mut self.slots, &mut self.states);
+        match fixed {
+            None => episode::draw(config, self.episode_seed, &mut self.slots, &mut self.states),
+            Some(f) => {
+                self.slots.leader = f.leader.clone();
+                self.slots.lx.clone_from(&f.lx);
+                self.slots.ly.clone_from(&f.ly);
+                self.states.copy_from_slice(&f.starts);
+            }
+        }
         observe::points(&self.states, config.l, &mut self.points);
         for f in &mut self.filters {
             *f = SafetyFilter::new(

@@ -197,7 +197,7 @@ class VecFormation:
         num_envs: int,
         num_agents: int,
         *,
-        dt: float,
+        dt: float | None,
         spacing: float,
         l: float,
         radius: float,
@@ -217,8 +217,13 @@ class VecFormation:
         float32: bool,
         robot: str | None = None,
         torque_limit: float = 10.0,
+        scenario: Scenario | None = None,
+        overrides: Overrides | None = None,
     ) -> None: ...
     obs_dim: int
+    action_bound: tuple[float, float]
+    model: str
+    dt_l: tuple[float, float]
     def reset(self, seed: int, mask: list[bool] | None = None) -> None: ...
     def reset_next(self, mask: list[bool]) -> None: ...
     def observe(self, out: npt.NDArray[np.floating]) -> None: ...

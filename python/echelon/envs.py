@@ -60,6 +60,8 @@ from . import _echelon
 __all__ = ["FormationEnv", "FormationParallelEnv", "FormationVecEnv", "baseline_policy", "bench"]
 
 _MODELS = ("unicycle", "torque")
+#: Index of the first neighbour's values in an observation (``echelon_core::learn::layout``).
+_NEIGHBOURS = 10
 
 
 class _Core:
@@ -181,6 +183,17 @@ def _mask(value: Any, n: int) -> np.ndarray:
     return m
 
 
+def _obs_box(core: _Core, shape: tuple[int, ...]) -> spaces.Box:
+    """The observation space: unbounded values, each neighbour's ``listed``
+    flag in ``[0, 1]``."""
+    low = np.full(core.obs_dim, -np.inf)
+    high = np.full(core.obs_dim, np.inf)
+    low[_NEIGHBOURS + 2 :: 3] = 0.0
+    high[_NEIGHBOURS + 2 :: 3] = 1.0
+    low, high = (np.broadcast_to(b, shape + (core.obs_dim,)).astype(core.dtype) for b in (low, high))
+    return spaces.Box(low, high, dtype=core.dtype)
+
+
 def _action_bounds(core: _Core, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
     high = np.broadcast_to(np.array(core.bounds, core.dtype), shape).copy()
     return -high, high
@@ -207,7 +220,7 @@ class FormationVecEnv(VectorEnv):
         c = self._core
         self.num_envs = c.num_envs
         self.dtype = c.dtype
-        self.single_observation_space = spaces.Box(-np.inf, np.inf, (c.num_agents, c.obs_dim), c.dtype)
+        self.single_observation_space = _obs_box(c, (c.num_agents,))
         low, high = _action_bounds(c, (c.num_agents, 2))
         self.single_action_space = spaces.Box(low, high, dtype=c.dtype)
         self.observation_space = batch_space(self.single_observation_space, c.num_envs)
@@ -361,7 +374,10 @@ class FormationParallelEnv(_parallel_base()):  # type: ignore[misc]
         self.possible_agents = [f"robot_{i}" for i in range(c.num_agents)]
         self.agents: list[str] = []
         low, high = _action_bounds(c, (2,))
-        self._obs_spaces = {a: spaces.Box(-np.inf, np.inf, (c.obs_dim,), c.dtype) for a in self.possible_agents}
+        self._obs_spaces = {a: _obs_box(c, ()) for a in self.possible_agents}
+        # The global state (for centralised critics, MAPPO): every robot's
+        # observation, robot after robot.
+        self.state_space = spaces.Box(-np.inf, np.inf, (c.num_agents * c.obs_dim,), c.dtype)
         self._act_spaces = {a: spaces.Box(low, high, dtype=c.dtype) for a in self.possible_agents}
         self.render_mode = None
         self._seeded = False
@@ -378,6 +394,11 @@ class FormationParallelEnv(_parallel_base()):  # type: ignore[misc]
 
     def observation_space(self, agent: str) -> spaces.Box:
         return self._obs_spaces[agent]
+
+    def state(self) -> np.ndarray:
+        """Every robot's current observation, robot after robot
+        (``state_space``)."""
+        return self._core.obs[0].reshape(-1).copy()
 
     def action_space(self, agent: str) -> spaces.Box:
         return self._act_spaces[agent]

@@ -266,3 +266,15 @@ def test_a_scenario_the_environments_do_not_model_is_refused():
         envs.FormationVecEnv(1, 5, scenario="lemniscate-wedge")
     with pytest.raises(ValueError, match="number of agents"):
         envs.FormationVecEnv(1, 3, scenario=echelon.Scenario.from_dict(_doc(n=4)))
+
+
+def test_observation_spaces_bound_the_listed_flags_and_the_parallel_env_has_a_state():
+    env = envs.FormationVecEnv(2, 3, neighbours=2, seed=0)
+    space = env.single_observation_space
+    assert space.low[0, 12] == 0.0 and space.high[0, 12] == 1.0 and space.high[0, 15] == 1.0
+    assert np.isinf(space.low[0, 0]) and np.isinf(space.high[0, 11])
+    par = envs.FormationParallelEnv(3, neighbours=2, seed=0)
+    obs, _ = par.reset(seed=0)
+    state = par.state()
+    assert par.state_space.contains(state)
+    assert np.array_equal(state, np.concatenate([obs[a] for a in par.possible_agents]))

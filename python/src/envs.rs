@@ -30,26 +30,30 @@ pub(crate) struct PyVecFormation {
     facts: Vec<EnvFacts>,
 }
 
+/// `name` refused: not a (`writeable`) array of `T` of exactly `shape`,
+/// C-contiguous (`got`: the shape it has, when it is an array of `T`).
+fn refused<T>(name: &str, writeable: &str, shape: &[usize], got: Option<&[usize]>) -> PyErr {
+    let got = got.map_or_else(String::new, |g| format!(", got shape {g:?}"));
+    errors::value(format!(
+        "{name} must be a C-contiguous {writeable}{} array of shape {shape:?}{got}",
+        dtype::<T>()
+    ))
+}
+
 /// A caller's array of `T` of exactly `shape`, C-contiguous, read.
 fn input<'py, T: Element>(
     name: &str,
     obj: &Bound<'py, PyAny>,
     shape: &[usize],
 ) -> PyResult<PyReadonlyArrayDyn<'py, T>> {
-    let a = obj.extract::<PyReadonlyArrayDyn<'py, T>>().map_err(|_| {
-        errors::value(format!(
-            "{name} must be a {} array of shape {shape:?}",
-            dtype::<T>()
-        ))
-    })?;
-    if a.shape() != shape || !a.is_c_contiguous() {
-        return Err(errors::value(format!(
-            "{name} must be a C-contiguous {} array of shape {shape:?}, got shape {:?}",
-            dtype::<T>(),
-            a.shape()
-        )));
+    let a = obj
+        .extract::<PyReadonlyArrayDyn<'py, T>>()
+        .map_err(|_| refused::<T>(name, "", shape, None))?;
+    if a.shape() == shape && a.is_c_contiguous() {
+        Ok(a)
+    } else {
+        Err(refused::<T>(name, "", shape, Some(a.shape())))
     }
-    Ok(a)
 }
 
 /// A caller's array of `T` of exactly `shape`, C-contiguous, written.
@@ -58,20 +62,14 @@ fn output<'py, T: Element>(
     obj: &Bound<'py, PyAny>,
     shape: &[usize],
 ) -> PyResult<PyReadwriteArrayDyn<'py, T>> {
-    let a = obj.extract::<PyReadwriteArrayDyn<'py, T>>().map_err(|_| {
-        errors::value(format!(
-            "{name} must be a writeable {} array of shape {shape:?}",
-            dtype::<T>()
-        ))
-    })?;
-    if a.shape() != shape || !a.is_c_contiguous() {
-        return Err(errors::value(format!(
-            "{name} must be a C-contiguous {} array of shape {shape:?}, got shape {:?}",
-            dtype::<T>(),
-            a.shape()
-        )));
+    let a = obj
+        .extract::<PyReadwriteArrayDyn<'py, T>>()
+        .map_err(|_| refused::<T>(name, "writeable ", shape, None))?;
+    if a.shape() == shape && a.is_c_contiguous() {
+        Ok(a)
+    } else {
+        Err(refused::<T>(name, "writeable ", shape, Some(a.shape())))
     }
-    Ok(a)
 }
 
 fn dtype<T>() -> &'static str {

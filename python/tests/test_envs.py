@@ -7,14 +7,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-gymnasium = pytest.importorskip("gymnasium")
-pettingzoo = pytest.importorskip("pettingzoo")
+# Not importorskip: scripts/test installs both (scripts/requirements-python.txt),
+# and a missing one must fail the suite, not skip what it checks.
+import gymnasium
+from gymnasium.utils.env_checker import check_env
+from pettingzoo.test import parallel_api_test, parallel_seed_test
 
-from gymnasium.utils.env_checker import check_env  # noqa: E402
-from pettingzoo.test import parallel_api_test, parallel_seed_test  # noqa: E402
-
-import echelon  # noqa: E402
-from echelon import envs  # noqa: E402
+import echelon
+from echelon import envs
 
 
 def test_the_single_environment_passes_gymnasiums_check_env():

@@ -38,6 +38,29 @@ pub struct BenchOptions {
     /// The collector's state-log rate (`fleet up --log-rate`; `None`:
     /// every state).
     pub log_rate: Option<f64>,
+    /// Robots per robot process (`fleet up --robots-per-process`; `None`:
+    /// its default).
+    pub robots_per_process: Option<usize>,
+    /// Host sizes K whose CPU is measured (a fleet of K robots, all in one
+    /// process): the marginal CPU of a robot in a host is the slope between
+    /// the first and the last (empty: not measured).
+    pub hosts: Vec<usize>,
+}
+
+/// One host of K robots (`fleet bench --hosts`).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct HostRow {
+    /// Robots in the host.
+    pub robots: usize,
+    /// Why the run failed (the other fields are then empty).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// The host process's CPU seconds per 60 s of fleet time.
+    pub cpu_per_min: f64,
+    /// The same per robot.
+    pub cpu_per_robot_per_min: f64,
+    /// Robots whose final ‖e‖ is below 1 cm.
+    pub converged: usize,
 }
 
 /// One row: one fleet size.
@@ -52,12 +75,17 @@ pub struct BenchRow {
     pub startup: Option<f64>,
     /// Wall-clock time of the whole `fleet up`, s.
     pub wall: f64,
-    /// CPU seconds per robot process (mean), user + system of every
-    /// thread (`/proc/<pid>/stat` of the exited child).
+    /// Robot processes (fewer than robots when hosts ran several each).
+    pub robot_processes: usize,
+    /// CPU seconds per robot: its processes' CPU (user + system of every
+    /// thread, `/proc/<pid>/stat` of the exited child) over the robots.
     pub cpu_per_robot: f64,
     /// The same per minute of fleet time (at time scale 1, real time):
     /// the issue's measure, ≤ 0.12 s aimed for (0.2 % of a core).
     pub cpu_per_robot_per_min: f64,
+    /// `cpu_per_robot_per_min` over the floor's (a bare process waking at
+    /// the control rate; `None`: the floor not measured).
+    pub cpu_over_floor: Option<f64>,
     /// CPU seconds of the costliest robot process.
     pub cpu_robot_max: f64,
     /// CPU seconds of the collector.
@@ -70,7 +98,8 @@ pub struct BenchRow {
     pub cpu_total: f64,
     /// CPU seconds of the router(s) (zero in the mesh).
     pub cpu_router: f64,
-    /// Peak RSS per robot process (mean), bytes.
+    /// Peak RSS per robot: its processes' peaks summed over the robots,
+    /// bytes.
     pub rss_per_robot: u64,
     /// Samples delivered (collector and robots received) per second of
     /// fleet time.
@@ -152,6 +181,16 @@ pub struct BenchReport {
     pub machine: Machine,
     /// One row per size.
     pub rows: Vec<BenchRow>,
+    /// The machine's floor, measured in the same run before the fleets: a
+    /// bare process that only wakes at the control rate (`fleet idle`).
+    pub floor: Option<crate::cost::IdleReport>,
+    /// The floor's CPU seconds per 60 s.
+    pub floor_per_min: Option<f64>,
+    /// One host per `--hosts` size.
+    pub hosts: Vec<HostRow>,
+    /// The marginal CPU of one more robot in a host, s per 60 s: the slope
+    /// of the host's CPU between the first and last of `hosts`.
+    pub marginal_per_robot_per_min: Option<f64>,
 }
 
 /// The generated scenario of `n` robots (see the module doc).
@@ -200,15 +239,17 @@ pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
         error: None,
         startup: up.startup,
         wall: up.wall,
-        cpu_per_robot: up.cost.robots.cpu_mean,
-        cpu_per_robot_per_min: up.cost.robots.cpu_mean / up.duration * 60.0,
+        robot_processes: up.cost.robots.processes,
+        cpu_per_robot: up.cost.cpu_per_robot,
+        cpu_per_robot_per_min: up.cost.cpu_per_robot / up.duration * 60.0,
+        cpu_over_floor: None,
         cpu_robot_max: up.cost.robots.cpu_max,
         cpu_collector: up.cost.collector.cpu,
         collector_us_per_message: per(up.cost.collector.cpu, collector_received),
         router_us_per_message: per(cpu_router, delivered),
         cpu_total: up.cost.total.cpu,
         cpu_router,
-        rss_per_robot: up.cost.robots.max_rss_mean,
+        rss_per_robot: up.cost.robots.max_rss_sum / up.cost.robot_count.max(1) as u64,
         messages_per_s: delivered as f64 / up.duration,
         collector_received,
         collector_decimated: collector.map_or(0, |c| c.decimated),
@@ -228,18 +269,19 @@ pub fn row_of(n: usize, up: &UpReport) -> BenchRow {
 /// The table in Markdown (one line per size, then the machine).
 pub fn markdown(report: &BenchReport) -> String {
     let mut s = String::from(
-        "| N | startup s | CPU/robot s per 60 s | max | router CPU s | µs/msg | collector CPU s | µs/msg | dropped | RSS/robot MiB | msg/s | latency p50 ms | p99 ms | max ms | stale | link losses | robot drops | final max ‖e‖ m | converged |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| N | robot procs | startup s | CPU/robot s per 60 s | max proc | router CPU s | µs/msg | collector CPU s | µs/msg | dropped | RSS/robot MiB | msg/s | latency p50 ms | p99 ms | max ms | stale | link losses | robot drops | final max ‖e‖ m | converged |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in &report.rows {
         if let Some(e) = &r.error {
-            let _ = writeln!(s, "| {} | failed: {} ||||||||||||||||||", r.robots, e);
+            let _ = writeln!(s, "| {} | failed: {} |||||||||||||||||||", r.robots, e);
             continue;
         }
         let _ = writeln!(
             s,
-            "| {} | {} | {:.3} | {:.3} | {:.2} | {:.1} | {:.2} | {:.1} | {} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {:.2e} | {}/{} |",
+            "| {} | {} | {} | {:.3} | {:.3} | {:.2} | {:.1} | {:.2} | {:.1} | {} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {:.2e} | {}/{} |",
             r.robots,
+            r.robot_processes,
             r.startup.map_or("—".to_owned(), |v| format!("{v:.2}")),
             r.cpu_per_robot_per_min,
             r.cpu_robot_max / report.duration * 60.0,
@@ -281,7 +323,55 @@ pub fn markdown(report: &BenchReport) -> String {
         m.memory as f64 / (1u64 << 30) as f64,
         m.kernel
     );
+    hosts_markdown(&mut s, report);
     s
+}
+
+/// The floor and the hosts' lines under the table.
+fn hosts_markdown(s: &mut String, report: &BenchReport) {
+    if let (Some(f), Some(per_min)) = (&report.floor, report.floor_per_min) {
+        let _ = writeln!(
+            s,
+            "\nFloor (a bare process waking at {} Hz, measured first in the same run): {per_min:.3} s CPU per 60 s ({} wakes in {:.1} s); CPU/robot over the floor: {}.",
+            f.rate,
+            f.wakes,
+            f.duration,
+            (report.rows.iter())
+                .filter_map(|r| Some(format!("{} robots {:.2}×", r.robots, r.cpu_over_floor?)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    if report.hosts.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "\n| robots in one host | host CPU s per 60 s | per robot | converged |\n|---|---|---|---|"
+    );
+    for h in &report.hosts {
+        match &h.error {
+            Some(e) => {
+                let _ = writeln!(s, "| {} | failed: {e} |||", h.robots);
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "| {} | {:.3} | {:.4} | {}/{} |",
+                    h.robots, h.cpu_per_min, h.cpu_per_robot_per_min, h.converged, h.robots
+                );
+            }
+        }
+    }
+    if let Some(m) = report.marginal_per_robot_per_min {
+        let _ = writeln!(
+            s,
+            "\nMarginal CPU of one more robot in a host (slope between the first and last host): {m:.4} s per 60 s{}.",
+            report
+                .floor_per_min
+                .map_or(String::new(), |f| format!(", the floor {f:.3} s"))
+        );
+    }
 }
 
 /// What the bench tells as it goes.
@@ -298,6 +388,10 @@ pub enum Progress<'a> {
     },
     /// A size finished (or failed).
     Done(&'a BenchRow),
+    /// The floor is being measured.
+    Floor,
+    /// A host of this many robots starts.
+    Host(usize),
 }
 
 /// Runs every size in order (a failed size is a row with its error; the
@@ -326,7 +420,19 @@ pub fn run(
         log_rate: opts.log_rate,
         machine: Machine::this(),
         rows: Vec::with_capacity(opts.robots.len()),
+        floor: None,
+        floor_per_min: None,
+        hosts: Vec::new(),
+        marginal_per_robot_per_min: None,
     };
+    progress(Progress::Floor);
+    match floor(opts) {
+        Ok(f) => {
+            report.floor_per_min = Some(f.cpu / f.duration * 60.0);
+            report.floor = Some(f);
+        }
+        Err(e) => eprintln!("fleet bench: the floor was not measured: {e}"),
+    }
     for (i, &n) in opts.robots.iter().enumerate() {
         if stop.is_raised() {
             break;
@@ -336,23 +442,7 @@ pub fn run(
             index: i + 1,
             of: opts.robots.len(),
         });
-        let dir = opts.out.join(format!("n{n:03}"));
-        std::fs::create_dir_all(&dir).map_err(FleetError::io(&dir))?;
-        let scenario = dir.join("scenario.toml");
-        std::fs::write(&scenario, scenario_toml(n)).map_err(FleetError::io(&scenario))?;
-        let up = up::run(
-            &UpOptions {
-                duration: Some(opts.duration),
-                log_rate: opts.log_rate,
-                ..UpOptions::simulated(
-                    scenario.display().to_string(),
-                    dir.clone(),
-                    opts.exe.clone(),
-                )
-            },
-            stop,
-        );
-        let row = match up {
+        let mut row = match run_size(opts, n, opts.robots_per_process, stop) {
             Ok(up) => row_of(n, &up),
             Err(e) => BenchRow {
                 robots: n,
@@ -360,13 +450,108 @@ pub fn run(
                 ..BenchRow::default()
             },
         };
+        row.cpu_over_floor = report.floor_per_min.map(|f| row.cpu_per_robot_per_min / f);
         progress(Progress::Done(&row));
         report.rows.push(row);
         crate::write_json_file(&opts.out.join(BENCH_JSON), &report)?;
     }
+    for &k in &opts.hosts {
+        if stop.is_raised() {
+            break;
+        }
+        progress(Progress::Host(k));
+        report.hosts.push(host_row(opts, k, stop));
+        crate::write_json_file(&opts.out.join(BENCH_JSON), &report)?;
+    }
+    report.marginal_per_robot_per_min = marginal(&report.hosts);
+    crate::write_json_file(&opts.out.join(BENCH_JSON), &report)?;
     let md = opts.out.join(BENCH_MD);
     std::fs::write(&md, markdown(&report)).map_err(FleetError::io(&md))?;
     Ok(report)
+}
+
+/// The machine's floor: `fleet idle` at the generated scenario's control
+/// rate for the bench's duration, alone.
+fn floor(opts: &BenchOptions) -> Result<crate::cost::IdleReport, FleetError> {
+    let text = scenario_toml(1);
+    let scenario = echelon::scenario::Scenario::parse(&text, "bench", None)?;
+    let rate = scenario.fleet()?.control_rate;
+    let out = std::process::Command::new(&opts.exe)
+        .args(["fleet", "idle", "--rate", &rate.to_string()])
+        .args(["--duration", &opts.duration.to_string()])
+        .output()
+        .map_err(|e| FleetError::Child(format!("fleet idle: {e}")))?;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let line = stdout.lines().last().unwrap_or_default();
+    serde_json::from_str(line).map_err(|e| {
+        FleetError::Child(format!(
+            "fleet idle printed no report ({e}): {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        ))
+    })
+}
+
+/// A fleet of `k` robots all in one host: the host's CPU.
+fn host_row(opts: &BenchOptions, k: usize, stop: &StopFlag) -> HostRow {
+    match run_size(opts, k, Some(k), stop) {
+        Ok(up) => {
+            let per_min = up.cost.robots.cpu / up.duration * 60.0;
+            HostRow {
+                robots: k,
+                error: None,
+                cpu_per_min: per_min,
+                cpu_per_robot_per_min: per_min / k as f64,
+                converged: row_of(k, &up).converged,
+            }
+        }
+        Err(e) => HostRow {
+            robots: k,
+            error: Some(e.to_string()),
+            ..HostRow::default()
+        },
+    }
+}
+
+/// The slope of a host's CPU per 60 s between the first and last of
+/// `hosts` that ran, per robot (`None`: fewer than two sizes ran).
+fn marginal(hosts: &[HostRow]) -> Option<f64> {
+    let ran: Vec<&HostRow> = hosts.iter().filter(|h| h.error.is_none()).collect();
+    let (first, last) = (ran.first()?, ran.last()?);
+    (last.robots != first.robots).then(|| {
+        (last.cpu_per_min - first.cpu_per_min) / (last.robots as f64 - first.robots as f64)
+    })
+}
+
+/// `fleet up` of the generated scenario of `n` robots, `per_process` to
+/// a process (`None`: `fleet up`'s default), in `DIR/nNNN` (`DIR/nNNN-kK`
+/// given `per_process`).
+fn run_size(
+    opts: &BenchOptions,
+    n: usize,
+    per_process: Option<usize>,
+    stop: &StopFlag,
+) -> Result<UpReport, FleetError> {
+    let name = match per_process {
+        Some(k) => format!("n{n:03}-k{k}"),
+        None => format!("n{n:03}"),
+    };
+    let dir = opts.out.join(name);
+    std::fs::create_dir_all(&dir).map_err(FleetError::io(&dir))?;
+    let scenario = dir.join("scenario.toml");
+    std::fs::write(&scenario, scenario_toml(n)).map_err(FleetError::io(&scenario))?;
+    up::run(
+        &UpOptions {
+            duration: Some(opts.duration),
+            log_rate: opts.log_rate,
+            robots_per_process: per_process,
+            ..UpOptions::simulated(
+                scenario.display().to_string(),
+                dir.clone(),
+                opts.exe.clone(),
+            )
+        },
+        stop,
+    )
 }
 
 #[cfg(test)]
@@ -407,6 +592,8 @@ mod tests {
             out: PathBuf::from("/nonexistent/never-created"),
             exe: PathBuf::from("echelon"),
             log_rate: None,
+            robots_per_process: None,
+            hosts: Vec::new(),
         };
         let err = run(&opts, &StopFlag::new(), |_| {}).err();
         assert!(matches!(err, Some(FleetError::Config(_))), "{err:?}");

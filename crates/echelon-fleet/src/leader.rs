@@ -291,12 +291,12 @@ impl Task for LeaderTask {
 
     fn latching(&self) -> Option<Latching> {
         Some(Latching {
-            answer_on: self.keys.latch(&Member::Leader.liveliness()),
+            answer_on: vec![self.keys.latch(&Member::Leader.liveliness())],
             ask: self.keys.latches(),
         })
     }
 
-    fn latched(&self) -> Option<Vec<u8>> {
+    fn latched(&self, _: usize) -> Option<Vec<u8>> {
         Some(self.latch.latched().encode())
     }
 

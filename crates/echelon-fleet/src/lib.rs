@@ -24,6 +24,7 @@ pub mod excite;
 pub mod faults;
 pub mod garbage;
 pub mod heartbeat;
+pub mod host;
 pub mod keys;
 pub mod latency;
 pub mod leader;

@@ -41,6 +41,7 @@ use crate::token::{OperatorToken, TOKEN_ENV, TOKEN_FILE};
 
 use crate::{FleetError, StopFlag};
 
+mod hosts;
 mod join;
 mod ports;
 mod process;
@@ -48,6 +49,7 @@ mod report;
 mod robots;
 mod spawn;
 mod supervise;
+pub use hosts::{ONE_EACH_UP_TO, PROCESSES_PER_CORE};
 pub use ports::{free_ports, free_ports_for};
 use process::Proc;
 pub use report::{Intrusion, LogGap, UpCost, UpReport};
@@ -126,6 +128,11 @@ pub struct UpOptions {
     pub hub: Option<HubOptions>,
     /// The operator token (`None`: `ECHELON_OPERATOR_TOKEN`, else a new one).
     pub token: Option<OperatorToken>,
+    /// How many simulated robots each robot process runs (`fleet host`;
+    /// `None`: one each up to [`ONE_EACH_UP_TO`] robots, else a few
+    /// processes per core; always one each on ROS 2 bases, in the secure
+    /// mode, in a mesh, or with a robot's rehearsed kill or clock step).
+    pub robots_per_process: Option<usize>,
 }
 
 /// `fleet up --hub`: where the hub's router listens and how long it waits
@@ -163,6 +170,7 @@ impl UpOptions {
             chaos: Chaos::default(),
             hub: None,
             token: None,
+            robots_per_process: None,
         }
     }
 }
@@ -325,12 +333,14 @@ fn plan(opts: &UpOptions) -> Result<Planned, FleetError> {
         }
     }
     let duration = opts.duration.unwrap_or(built.plan.config().duration);
+    let per_process = hosts::per_process(opts, n)?;
     Ok(Planned {
         scenario,
         fleet,
         n,
         bases,
         duration,
+        per_process,
     })
 }
 
@@ -384,9 +394,10 @@ pub fn run(opts: &UpOptions, stop: &StopFlag) -> Result<UpReport, FleetError> {
     let bases = up.spawn_bases()?;
     let operator = up.spawn_operator()?;
     let garbage = up.spawn_garbage()?;
-    let (robots, on_hub) = up.spawn_robots(&token_file)?;
+    let (robots, on_hub, hosted) = up.spawn_robots(&token_file)?;
     let mut procs = Procs {
         robots,
+        hosted,
         garbage,
         operator,
         bases,

@@ -111,16 +111,9 @@ fn robot_cmd(a: args::RobotArgs) -> Result<()> {
                     path.display()
                 );
             }
-            let mut loaded = robot::RobotFile::load(path)?;
-            if !a.net.hub.is_empty() {
-                loaded.file.net = robot::NetSection {
-                    mode: robot::NetMode::Client,
-                    connect: a.net.hub.clone(),
-                    listen: Vec::new(),
-                    zenoh_config: None,
-                };
-            }
-            loaded.options()?
+            robot::RobotFile::load(path)?
+                .with_hub(&a.net.hub)
+                .options()?
         }
         None => {
             let (Some(scenario), Some(agent)) = (&a.scenario, a.agent) else {
@@ -148,6 +141,53 @@ fn robot_cmd(a: args::RobotArgs) -> Result<()> {
     };
     let stop = StopFlag::on_signals()?;
     print_report(&robot::run(options, &stop)?)
+}
+
+/// `fleet host`: the robots of its robot files (`--config`, the hub given
+/// by `--hub` if at all), or the scenario's `--robots`; prints each
+/// robot's report (one JSON array) and fails when one of them failed.
+fn host_cmd(a: args::HostArgs) -> Result<()> {
+    let robots = match (&a.scenario, &a.agents) {
+        (Some(scenario), Some(args::AgentList(agents))) => {
+            let scenario = Scenario::resolve(scenario)?;
+            let first = Member::Robot(agents[0]);
+            let net = session(&a.net, first, Some(&scenario))?;
+            let token = OperatorToken::from_env()?;
+            agents
+                .iter()
+                .map(|&agent| RobotOptions {
+                    process: a.clock.process(scenario.clone(), net.clone(), &a.net),
+                    agent,
+                    faults: a.faults.spec(),
+                    ros2: false,
+                    own_router: false,
+                    operator_token: token.clone(),
+                })
+                .collect()
+        }
+        _ => {
+            if a.clock.is_given() || a.faults.spec() != Default::default() || a.net.beyond_hub() {
+                bail!(
+                    "fleet host --config: the files hold the robots' whole configuration; only --hub may be given with them"
+                );
+            }
+            a.config
+                .iter()
+                .map(|path| robot::RobotFile::load(path)?.with_hub(&a.net.hub).options())
+                .collect::<Result<Vec<_>, _>>()?
+        }
+    };
+    let stop = StopFlag::on_signals()?;
+    let report = echelon_fleet::host::run(&echelon_fleet::host::HostOptions { robots }, &stop)?;
+    print_report(&report)?;
+    let failed: Vec<String> = report
+        .iter()
+        .filter_map(|r| Some(format!("{}: {}", r.name, r.error.as_ref()?)))
+        .collect();
+    if !failed.is_empty() {
+        return Err(crate::cmd::out::Failed(failed.join("; ")).into());
+    }
+    Ok(())
 }
 
 fn print_report<T: serde::Serialize>(report: &T) -> Result<()> {
@@ -240,6 +280,12 @@ pub(crate) fn run(cmd: FleetCommand) -> Result<()> {
     match cmd {
         FleetCommand::Leader(a) => leader_cmd(a),
         FleetCommand::Robot(a) => robot_cmd(a),
+        FleetCommand::Host(a) => host_cmd(a),
+        FleetCommand::Idle(a) => print_report(&echelon_fleet::cost::idle(
+            a.rate,
+            a.duration,
+            &StopFlag::on_signals()?,
+        )?),
         FleetCommand::Bundle(a) => bundle_cmd(a),
         FleetCommand::Base(a) => base_cmd(a),
         FleetCommand::Excite(a) => excite_cmd(a),
@@ -270,6 +316,7 @@ fn size_runtime(cmd: &FleetCommand) {
         | FleetCommand::Heartbeat(_)
         | FleetCommand::Garbage(_)
         | FleetCommand::Robot(_)
+        | FleetCommand::Host(_)
         | FleetCommand::Base(_)
         | FleetCommand::Collector(_) => echelon_fleet::net::exec_with_sized_runtime("client"),
         _ => {}

@@ -26,6 +26,7 @@ use echelon::scenario::{Overrides, Scenario};
 mod common;
 mod converge;
 mod faults;
+mod hosts;
 mod hub;
 mod leader_death;
 mod recording;

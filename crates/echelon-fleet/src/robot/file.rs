@@ -367,6 +367,20 @@ impl LoadedRobotFile {
         OperatorToken::from_env()
     }
 
+    /// The same, reaching the fleet as a client of `hub` instead of its
+    /// file's network (`--hub`; empty: its file's network).
+    pub fn with_hub(mut self, hub: &[String]) -> LoadedRobotFile {
+        if !hub.is_empty() {
+            self.file.net = NetSection {
+                mode: NetMode::Client,
+                connect: hub.to_vec(),
+                listen: Vec::new(),
+                zenoh_config: None,
+            };
+        }
+        self
+    }
+
     /// The robot process's options: the scenario checked, the session
     /// (its access control with the scenario's ROS 2 topics), the token.
     pub fn options(&self) -> Result<RobotOptions, FleetError> {

@@ -170,12 +170,12 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
 
     fn latching(&self) -> Option<Latching> {
         Some(Latching {
-            answer_on: self.keys.latch(&Member::Robot(self.agent()).liveliness()),
+            answer_on: vec![self.keys.latch(&Member::Robot(self.agent()).liveliness())],
             ask: self.keys.latches(),
         })
     }
 
-    fn latched(&self) -> Option<Vec<u8>> {
+    fn latched(&self, _: usize) -> Option<Vec<u8>> {
         Some(self.robot.latched().encode())
     }
 

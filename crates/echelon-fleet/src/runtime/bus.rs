@@ -53,7 +53,7 @@ trait Node: Any {
     fn stop(&mut self, out: &mut dyn Outputs) -> Result<(), FleetError>;
     fn started(&mut self);
     fn latching(&self) -> Option<Latching>;
-    fn latched(&self) -> Option<Vec<u8>>;
+    fn latched(&self, i: usize) -> Option<Vec<u8>>;
     fn as_any(&self) -> &dyn Any;
     fn as_any_mut(&mut self) -> &mut dyn Any;
 }
@@ -83,8 +83,8 @@ impl<T: Task + 'static> Node for T {
     fn latching(&self) -> Option<Latching> {
         Task::latching(self)
     }
-    fn latched(&self) -> Option<Vec<u8>> {
-        Task::latched(self)
+    fn latched(&self, i: usize) -> Option<Vec<u8>> {
+        Task::latched(self, i)
     }
     fn as_any(&self) -> &dyn Any {
         self
@@ -257,10 +257,13 @@ impl Bus {
             .iter()
             .enumerate()
             .filter(|(j, e)| *j != id && e.running)
-            .filter_map(|(_, e)| {
-                let theirs = e.node.latching()?;
-                let payload = e.node.latched()?;
-                includes(&l.ask, &theirs.answer_on).then_some((theirs.answer_on, payload))
+            .filter_map(|(_, e)| Some((e, e.node.latching()?)))
+            .flat_map(|(e, theirs)| {
+                let ask = &l.ask;
+                (theirs.answer_on.into_iter().enumerate()).filter_map(move |(i, key)| {
+                    let payload = e.node.latched(i)?;
+                    includes(ask, &key).then_some((key, payload))
+                })
             })
             .collect();
         let e = &mut self.entries[id];
@@ -342,7 +345,7 @@ impl Bus {
     /// What task `id`'s latch answers now (`None`: it holds none, or says
     /// nothing).
     pub fn latched(&self, id: TaskId) -> Option<Vec<u8>> {
-        self.entries.get(id)?.node.latched()
+        self.entries.get(id)?.node.latched(0)
     }
 
     /// Stops task `id` as the runtime does (its last words are sent).

@@ -43,6 +43,9 @@ pub const STALL: Duration = Duration::from_millis(100);
 /// Zenoh thread, real time.
 pub const RETRY: Duration = Duration::from_secs(1);
 
+/// What one of a task's latch keys answers, shared with its queryable.
+pub(super) type Answer = Arc<Mutex<Option<Vec<u8>>>>;
+
 /// A task with what ticking it needs: its clock, its inputs' queue, its
 /// outputs and latch.
 pub(super) struct Engine<T> {
@@ -55,8 +58,9 @@ pub(super) struct Engine<T> {
     pub(super) dropped: Arc<AtomicU64>,
     /// Drops the task was told of.
     pub(super) told: u64,
-    /// What its latch answers (`None`: it holds none).
-    pub(super) answer: Option<Arc<Mutex<Option<Vec<u8>>>>>,
+    /// What its latch answers, one per key it answers on (none: it holds
+    /// none).
+    pub(super) answers: Vec<Answer>,
     /// The task's [`Task::latch_changes`] when `answer` was last set.
     pub(super) answered: Option<u64>,
     /// Ticks in a row that moved its next wake by less than [`COARSE`].
@@ -120,12 +124,12 @@ impl<T: Task> Engine<T> {
         if changes.is_some() && changes == self.answered {
             return;
         }
-        if let Some(answer) = &self.answer
-            && let Ok(mut a) = answer.lock()
-        {
-            *a = self.task.latched();
-            self.answered = changes;
+        for (i, answer) in self.answers.iter().enumerate() {
+            if let Ok(mut a) = answer.lock() {
+                *a = self.task.latched(i);
+            }
         }
+        self.answered = changes;
     }
 
     /// What waits, then a tick now.

@@ -39,7 +39,7 @@ pub use linger::{Linger, Lingered};
 pub use presence::{Tokens, query_all};
 pub use task::{DEFAULT_QUEUE, Flow, Latching, Outgoing, Outputs, Sample, Task, WaitFor};
 
-use drive::Engine;
+use drive::{Answer, Engine};
 use inputs::{Queue, Spares, Worker};
 use outputs::ZenohOutputs;
 use presence::{ask_latches, declare_latch, refuse_if_held, wait_for};
@@ -144,10 +144,17 @@ pub fn run_split<T: Task + Send + 'static, G>(
     // The latch: answer queries with what the task says after each call;
     // ask once (after `wait_for`, so the awaited are asked too).
     let latching = task.latching();
-    let answer: Arc<Mutex<Option<Vec<u8>>>> = Arc::new(Mutex::new(task.latched()));
-    let _queryable = match &latching {
-        Some(l) => Some(declare_latch(&session, &l.answer_on, answer.clone())?),
-        None => None,
+    let answers: Vec<Answer> = match &latching {
+        Some(l) => (0..l.answer_on.len())
+            .map(|i| Arc::new(Mutex::new(task.latched(i))))
+            .collect(),
+        None => Vec::new(),
+    };
+    let _queryables = match &latching {
+        Some(l) => (l.answer_on.iter().zip(&answers))
+            .map(|(key, answer)| declare_latch(&session, key, answer.clone()))
+            .collect::<Result<Vec<_>, _>>()?,
+        None => Vec::new(),
     };
     if let Some(w) = task.wait_for() {
         wait_for(&session, &w, stop)?;
@@ -170,7 +177,7 @@ pub fn run_split<T: Task + Send + 'static, G>(
         spares,
         dropped,
         told: 0,
-        answer: latching.is_some().then_some(answer),
+        answers,
         answered: None,
         fine: 0,
         coarse: false,

@@ -39,7 +39,7 @@ pub(super) fn ask_latches(
     l: &Latching,
 ) -> Result<Vec<(String, Vec<u8>)>, FleetError> {
     let mut heard = query_all(session, &l.ask, LATCH_QUERY_TIMEOUT)?;
-    heard.retain(|(key, _)| *key != l.answer_on);
+    heard.retain(|(key, _)| !l.answer_on.contains(key));
     Ok(heard)
 }
 

@@ -112,8 +112,10 @@ pub struct WaitFor {
 /// [`crate::command`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Latching {
-    /// The key it answers queries on, with [`Task::latched`].
-    pub answer_on: String,
+    /// The keys it answers queries on, the `i`-th with
+    /// [`Task::latched`]`(i)`: one, or one per member of a
+    /// [host](crate::host).
+    pub answer_on: Vec<String>,
     /// The key expression it queries once, before its clock starts; each
     /// answer (but its own) is handed to [`Task::on_input`] as input number
     /// `inputs().len()`, once its clock reads 0.
@@ -161,8 +163,10 @@ pub trait Task {
         None
     }
 
-    /// What it answers on its latch key now (`None`: nothing).
-    fn latched(&self) -> Option<Vec<u8>> {
+    /// What it answers on its latch key number `i` now
+    /// ([`Latching::answer_on`]; `None`: nothing).
+    fn latched(&self, i: usize) -> Option<Vec<u8>> {
+        let _ = i;
         None
     }
 

@@ -15,7 +15,8 @@ pub(super) struct Proc {
     pub(super) role: String,
     pub(super) child: Child,
     pub(super) log: PathBuf,
-    /// Where its stdout goes; its last JSON line is its report.
+    /// Where its stdout goes; its last JSON line (an object, or a host's
+    /// array) is its report.
     pub(super) stdout: PathBuf,
     pub(super) report: Option<serde_json::Value>,
     pub(super) status: Option<std::process::ExitStatus>,
@@ -78,7 +79,7 @@ impl Proc {
                     BufReader::new(out)
                         .lines()
                         .map_while(Result::ok)
-                        .filter(|l| l.trim_start().starts_with('{'))
+                        .filter(|l| l.trim_start().starts_with(['{', '[']))
                         .last()
                 });
                 self.report = last.and_then(|l| serde_json::from_str(&l).ok());

@@ -145,8 +145,15 @@ pub struct UpCost {
     pub leader: RoleCost,
     /// The collector.
     pub collector: RoleCost,
-    /// The robots (`cpu_mean`: CPU seconds per robot).
+    /// The robots' processes (`cpu_mean`: CPU seconds per process: per
+    /// robot when each runs one).
     pub robots: RoleCost,
+    /// Robots those processes ran (more than `robots.processes` when hosts
+    /// ran several each, `fleet up --robots-per-process`).
+    pub robot_count: usize,
+    /// CPU seconds per robot: the robots' processes' CPU over
+    /// `robot_count`.
+    pub cpu_per_robot: f64,
     /// With `--ros2`: the simulated bases.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bases: Option<RoleCost>,
@@ -163,7 +170,7 @@ pub struct UpCost {
 pub(super) fn up_cost(
     leader: &Proc,
     collector: &Proc,
-    robots: &[Proc],
+    (robots, robot_count): (&[Proc], usize),
     bases: &[Proc],
     routers: &[Proc],
 ) -> UpCost {
@@ -178,10 +185,13 @@ pub(super) fn up_cost(
         .chain(&leader)
         .cloned()
         .collect();
+    let robots = RoleCost::of(&robots);
     UpCost {
         leader: RoleCost::of(&leader),
         collector: RoleCost::of(&collector),
-        robots: RoleCost::of(&robots),
+        cpu_per_robot: robots.cpu / robot_count.max(1) as f64,
+        robot_count,
+        robots,
         bases: (!bases.is_empty()).then(|| RoleCost::of(&bases)),
         routers: (!routers.is_empty()).then(|| RoleCost::of(&routers)),
         total: RoleCost::of(&processes),

@@ -10,7 +10,9 @@ use echelon::scenario::{FleetSettings, Placement, Scenario};
 use super::join;
 use super::ports::Links;
 use super::process::{Proc, poll_all, spawn};
-use super::{ENDPOINTS_FILE, HubOptions, Topology, UpOptions, chaos_args, robots, router_role};
+use super::{
+    ENDPOINTS_FILE, HubOptions, Topology, UpOptions, chaos_args, hosts, robots, router_role,
+};
 use crate::FleetError;
 use crate::StopFlag;
 use crate::role::{Member, Role};
@@ -29,6 +31,8 @@ pub(super) struct Planned {
     pub(super) bases: usize,
     /// Fleet time to run, s.
     pub(super) duration: f64,
+    /// Robots per robot process ([`hosts::per_process`]).
+    pub(super) per_process: usize,
 }
 
 /// The fleet's layout: the plan, the processes' links, and where their logs
@@ -53,8 +57,11 @@ pub(super) struct Layout<'a> {
 /// order they are dropped (each killed if still running): the reverse of
 /// their start's.
 pub(super) struct Procs {
-    /// The robots on the hub, in agent order.
+    /// The robots' processes on the hub, in agent order: one robot each
+    /// (`fleet robot`), or a host of several (`fleet host`).
     pub(super) robots: Vec<Proc>,
+    /// The agents each of `robots` runs.
+    pub(super) hosted: hosts::Groups,
     /// `fleet garbage`, when asked.
     pub(super) garbage: Option<Proc>,
     /// The operator's heartbeat, in a supervised run.
@@ -355,39 +362,48 @@ impl<'a> Layout<'a> {
     }
 
     /// Starts the robots on the hub, each from its robot file (the type an
-    /// on-board robot's bundle holds, its operator token at `token_file`);
-    /// the on-board ones join by themselves. Returns them and their agents.
+    /// on-board robot's bundle holds, its operator token at `token_file`),
+    /// one process each (`fleet robot --config`) or a few per process
+    /// (`fleet host --config …`, [`hosts::per_process`]); the on-board ones
+    /// join by themselves. Returns the processes, the agents on the hub and
+    /// each process's agents.
     pub(super) fn spawn_robots(
         &self,
         token_file: &Path,
-    ) -> Result<(Vec<Proc>, Vec<u32>), FleetError> {
+    ) -> Result<(Vec<Proc>, Vec<u32>, hosts::Groups), FleetError> {
         let (opts, n) = (self.opts, self.plan.n);
         let on_hub: Vec<u32> = (1..=n as u32)
             .filter(|&k| {
                 self.plan.fleet.placement[k as usize - 1] == Placement::Hub || opts.hub.is_none()
             })
             .collect();
-        let mut robots = Vec::with_capacity(on_hub.len());
-        for &k in &on_hub {
-            let i = self.robot_at(k as usize);
-            let file = robots::write_robot_file(
-                opts,
-                &self.plan.scenario,
-                k,
-                n as u32,
-                self.plan.duration,
-                self.net.net_section(i, self.site_of(i)),
-                token_file,
-            )?;
-            let args = vec![
-                "fleet".to_owned(),
-                Role::Robot.name().to_owned(),
-                "--config".to_owned(),
-                file.display().to_string(),
-            ];
-            robots.push(self.spawn(&Member::Robot(k).liveliness(), &args, &[])?);
+        let groups = hosts::group(&on_hub, self.plan.per_process, |k| {
+            self.site_of(self.robot_at(k as usize))
+        });
+        let mut robots = Vec::with_capacity(groups.len());
+        for group in &groups {
+            // `fleet robot`, or `fleet host` of several.
+            let command = match group.len() {
+                1 => Role::Robot.name(),
+                _ => "host",
+            };
+            let mut args = vec!["fleet".to_owned(), command.to_owned()];
+            for &k in group {
+                let i = self.robot_at(k as usize);
+                let file = robots::write_robot_file(
+                    opts,
+                    &self.plan.scenario,
+                    k,
+                    n as u32,
+                    self.plan.duration,
+                    self.net.net_section(i, self.site_of(i)),
+                    token_file,
+                )?;
+                args.extend(["--config".to_owned(), file.display().to_string()]);
+            }
+            robots.push(self.spawn(&hosts::role_of(group), &args, &[])?);
         }
-        Ok((robots, on_hub))
+        Ok((robots, on_hub, groups))
     }
 
     /// Hub mode: waits until every robot has joined (the reference starts

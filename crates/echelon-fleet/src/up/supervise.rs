@@ -66,9 +66,10 @@ impl Running {
         }
     }
 
-    /// Robot process `i`'s member.
+    /// Robot process `i`'s member (a host's: its first robot; a host is
+    /// never asked to die, [`super::hosts`]).
     fn robot_of(&self, i: usize) -> Member {
-        Member::Robot(self.procs.on_hub[i])
+        Member::Robot(self.procs.hosted[i][0])
     }
 
     /// Phase 1: the leader and robots run to the end (or a failure, or a
@@ -165,12 +166,12 @@ impl Running {
     /// failure of the run; each noted once.
     fn note_deaths(&mut self, chaos: &Chaos) {
         let p = &self.procs;
-        let on_hub = &p.on_hub;
+        let hosted = &p.hosted;
         for (proc, member) in p
             .robots
             .iter()
             .enumerate()
-            .map(|(i, proc)| (proc, Member::Robot(on_hub[i])))
+            .map(|(i, proc)| (proc, Member::Robot(hosted[i][0])))
             .chain(
                 p.bases
                     .iter()
@@ -347,10 +348,7 @@ impl Running {
             .filter(|&t| t > 0)
             .map(|t| t.saturating_sub(started_unix_ns) as f64 * 1e-9);
         let p = &self.procs;
-        // A robot killed as asked has no report (its death is in `deaths`).
-        let robot_reports: Vec<RobotReport> = living(&p.robots, chaos, |i| self.robot_of(i))
-            .map(report)
-            .collect::<Result<_, _>>()?;
+        let robot_reports = robot_reports(p, chaos, |i| self.robot_of(i))?;
         // A collector killed as asked left no report: its log's gap is said.
         let collector_report: Option<CollectorReport> =
             match living(std::slice::from_ref(&p.collector), chaos, |_| {
@@ -374,7 +372,13 @@ impl Running {
             wall,
             startup,
             run: startup.map(|s| wall - s),
-            cost: up_cost(&self.leader, &p.collector, &p.robots, &p.bases, &p.routers),
+            cost: up_cost(
+                &self.leader,
+                &p.collector,
+                (&p.robots, p.hosted.iter().map(Vec::len).sum()),
+                &p.bases,
+                &p.routers,
+            ),
             latency: FleetLatency::of(
                 robot_reports.iter().map(|r| (r.agent, &r.latency)),
                 collector_report
@@ -409,4 +413,30 @@ impl Running {
             routers: p.routers.iter().map(report).collect::<Result<_, _>>()?,
         })
     }
+}
+
+/// The robots' reports, in agent order: each robot process's, each host's
+/// robots' ([`crate::host::HostReport`]; a robot that failed in a host
+/// failed its host, which [`Running::check_failures`] refused). A robot
+/// killed as asked has no report (its death is in `deaths`).
+fn robot_reports(
+    p: &Procs,
+    chaos: &Chaos,
+    member: impl Fn(usize) -> Member,
+) -> Result<Vec<RobotReport>, FleetError> {
+    let mut reports = Vec::new();
+    for (i, proc) in p.robots.iter().enumerate() {
+        if !living(std::slice::from_ref(proc), chaos, |_| member(i)).any(|_| true) {
+            continue;
+        }
+        match p.hosted[i].len() {
+            1 => reports.push(report(proc)?),
+            _ => {
+                let hosted: crate::host::HostReport = report(proc)?;
+                reports.extend(hosted.into_iter().filter_map(|h| h.report));
+            }
+        }
+    }
+    reports.sort_by_key(|r| r.agent);
+    Ok(reports)
 }

@@ -25,6 +25,11 @@ pub(crate) enum FleetCommand {
     Leader(LeaderArgs),
     /// Run one agent of the scenario: control law on a simulated plant paced in real time, or on a ROS 2 robot (--ros2).
     Robot(RobotArgs),
+    /// Run many simulated robots in one process (one Zenoh session, one timer): each keeps its own keys, tokens, counters and report, as `fleet robot` alone; one robot's failure stops it only.
+    Host(HostArgs),
+    /// The machine's floor for `fleet bench`: a bare process that only wakes at --rate Hz for --duration s, then prints its CPU seconds.
+    #[command(hide = true)]
+    Idle(IdleArgs),
     /// A simulated ROS 2 base (--ros2): cmd_vel in, odom out over rmw_zenoh, as diff_drive_controller on a robot.
     Base(BaseArgs),
     /// Drive one ROS 2 robot's cmd_vel with steps and chirps within its limits (--ros2) and record cmd_vel and odom to a bag for `echelon identify`.
@@ -382,6 +387,73 @@ pub(crate) struct RobotArgs {
     pub(super) faults: FaultArgs,
     #[command(flatten)]
     pub(super) net: NetArgs,
+}
+
+/// `echelon fleet idle`.
+#[derive(Debug, Args)]
+pub(crate) struct IdleArgs {
+    /// Wake rate, Hz.
+    #[arg(long, value_name = "HZ", value_parser = positive, default_value_t = 100.0)]
+    pub(super) rate: f64,
+    /// How long, s of real time.
+    #[arg(long, value_name = "S", value_parser = positive, default_value_t = 60.0)]
+    pub(super) duration: f64,
+}
+
+/// `echelon fleet host`. (Its `--robots` lists the agents it runs; the
+/// secure mode's robot count, which a host never needs since it refuses
+/// the secure mode, is renamed and hidden.)
+#[derive(Debug, Args)]
+#[command(mut_arg("robots", |a| a.long("acl-robots").hide(true)))]
+pub(crate) struct HostArgs {
+    /// The robots' files, one per robot (`fleet up --robots-per-process` writes them); only --hub may be given with them.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["scenario", "agents"])]
+    pub(super) config: Vec<PathBuf>,
+    /// A built-in scenario name or a path to a .toml file.
+    #[arg(required_unless_present = "config")]
+    pub(super) scenario: Option<String>,
+    /// Which agents of the scenario: K, K-L, or a comma-separated list of both (1-250, 1,3,5-9).
+    #[arg(id = "agents", long = "robots", value_name = "LIST", value_parser = agent_list, required_unless_present = "config")]
+    pub(super) agents: Option<AgentList>,
+    #[command(flatten)]
+    pub(super) clock: ClockArgs,
+    #[command(flatten)]
+    pub(super) faults: FaultArgs,
+    #[command(flatten)]
+    pub(super) net: NetArgs,
+}
+
+/// Agents, each from 1, none twice, in the order given ([`agent_list`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct AgentList(pub(crate) Vec<u32>);
+
+/// Agents as `K`, `K-L` or a comma-separated list of both, each from 1,
+/// none twice, in the order given.
+pub(crate) fn agent_list(s: &str) -> Result<AgentList, String> {
+    let mut agents = Vec::new();
+    for part in s.split(',') {
+        let number = |t: &str| {
+            t.trim()
+                .parse::<u32>()
+                .ok()
+                .filter(|&k| k >= 1)
+                .ok_or_else(|| format!("`{t}` is not an agent number (from 1)"))
+        };
+        let (from, to) = match part.split_once('-') {
+            Some((a, b)) => (number(a)?, number(b)?),
+            None => (number(part)?, number(part)?),
+        };
+        if to < from {
+            return Err(format!("`{part}`: the range runs backwards"));
+        }
+        for k in from..=to {
+            if agents.contains(&k) {
+                return Err(format!("agent {k} is given twice"));
+            }
+            agents.push(k);
+        }
+    }
+    Ok(AgentList(agents))
 }
 
 /// `echelon fleet base`.

@@ -27,6 +27,8 @@ pub(super) fn bench_cmd(a: BenchArgs) -> Result<()> {
             out: a.out.clone(),
             exe,
             log_rate: a.log_rate,
+            robots_per_process: a.robots_per_process,
+            hosts: a.hosts,
         },
         &stop,
         |p| {
@@ -44,6 +46,12 @@ pub(super) fn bench_cmd(a: BenchArgs) -> Result<()> {
                         row.wall, row.converged, row.robots
                     ),
                 },
+                Progress::Floor => eprintln!(
+                    "the floor: a bare process waking at the control rate for {duration} s…"
+                ),
+                Progress::Host(k) => {
+                    eprintln!("{k} robots in one host for {duration} s of fleet time…")
+                }
             }
         },
     )?;
@@ -136,6 +144,7 @@ fn up_options(a: UpArgs, exe: std::path::PathBuf) -> Result<UpOptions> {
             .map(echelon_fleet::token::OperatorToken::from_file)
             .transpose()
             .context("--token-file")?,
+        robots_per_process: a.robots_per_process,
     })
 }
 
@@ -426,16 +435,18 @@ fn print_latency(report: &UpReport) -> Result<()> {
 fn print_cost(c: &UpCost) -> Result<()> {
     let mb = |b: u64| b as f64 / (1u64 << 20) as f64;
     outln!(
-        "  CPU: robots {:.2} s ({:.3} s per robot, max {:.3}), leader {:.2} s, collector {:.2} s, total {:.2} s",
+        "  CPU: robots {:.2} s ({:.3} s per robot; {} robots in {} processes, max {:.3} s), leader {:.2} s, collector {:.2} s, total {:.2} s",
         c.robots.cpu,
-        c.robots.cpu_mean,
+        c.cpu_per_robot,
+        c.robot_count,
+        c.robots.processes,
         c.robots.cpu_max,
         c.leader.cpu,
         c.collector.cpu,
         c.total.cpu
     )?;
     outln!(
-        "  peak RSS: robot {:.1} MiB (mean; max {:.1}), leader {:.1} MiB, collector {:.1} MiB, sum {:.1} MiB",
+        "  peak RSS: robot process {:.1} MiB (mean; max {:.1}), leader {:.1} MiB, collector {:.1} MiB, sum {:.1} MiB",
         mb(c.robots.max_rss_mean),
         mb(c.robots.max_rss_max),
         mb(c.leader.max_rss_max),

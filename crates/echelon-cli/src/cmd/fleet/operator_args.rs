@@ -89,6 +89,9 @@ pub(crate) struct UpArgs {
     /// The operator token in this file (e.g. the one given to `fleet bundle`) [default: ECHELON_OPERATOR_TOKEN, else a new one].
     #[arg(long, value_name = "PATH")]
     pub(super) token_file: Option<PathBuf>,
+    /// Simulated robots per robot process (`fleet host`) [default: 1 up to 16 robots, else a few processes per core; always 1 with --ros2, --secure or --topology mesh].
+    #[arg(long, value_name = "K")]
+    pub(super) robots_per_process: Option<usize>,
     /// Print nothing but errors.
     #[arg(long, short)]
     pub(super) quiet: bool,
@@ -109,6 +112,12 @@ pub(crate) struct BenchArgs {
     /// The collector's state-log rate, states per robot per second (`fleet collector --log-rate`) [default: every state].
     #[arg(long, value_name = "HZ", value_parser = positive)]
     pub(super) log_rate: Option<f64>,
+    /// Simulated robots per robot process (`fleet up --robots-per-process`) [default: fleet up's].
+    #[arg(long, value_name = "K")]
+    pub(super) robots_per_process: Option<usize>,
+    /// Also run fleets of K robots all in one host (`fleet host`), for each K given: the marginal CPU of one more robot in a host is the slope between the first and the last (empty: none).
+    #[arg(long, value_name = "K,…", value_delimiter = ',', default_values_t = [10, 250])]
+    pub(super) hosts: Vec<usize>,
     /// Print only the table.
     #[arg(long, short)]
     pub(super) quiet: bool,

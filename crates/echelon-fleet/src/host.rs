@@ -41,6 +41,8 @@ struct Member<T> {
     running: bool,
     /// Its own inputs' count (the number of its latch answers' input).
     inputs: usize,
+    /// Whether it holds a latch (asked once: a task builds its keys).
+    latches: bool,
     /// Its first output's number among the host's.
     first_output: usize,
     /// Its failure, if it failed; kept for its report.
@@ -107,7 +109,9 @@ impl<T: Task> Host<T> {
                 };
                 host.routes[at].push((m, own));
             }
-            host.add_latching(m, &name, task.latching())?;
+            let latching = task.latching();
+            let latches = latching.is_some();
+            host.add_latching(m, &name, latching)?;
             let first_output = host.outputs.len();
             host.outputs.extend(task.outputs());
             host.members.push(Member {
@@ -115,6 +119,7 @@ impl<T: Task> Host<T> {
                 task,
                 running: true,
                 inputs: keys.len(),
+                latches,
                 first_output,
                 error: None,
                 failed_input: false,
@@ -269,10 +274,8 @@ impl<T: Task> Task for Host<T> {
     /// one member's is.
     fn latch_changes(&self) -> Option<u64> {
         let mut sum = 0u64;
-        for m in &self.members {
-            if m.task.latching().is_some() {
-                sum = sum.wrapping_add(m.task.latch_changes()?);
-            }
+        for m in self.members.iter().filter(|m| m.latches) {
+            sum = sum.wrapping_add(m.task.latch_changes()?);
         }
         Some(sum)
     }

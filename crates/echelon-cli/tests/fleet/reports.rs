@@ -141,6 +141,8 @@ fn bench_smoke() {
             "2",
             "--duration",
             "4",
+            "--hosts",
+            "1,3",
             "--out",
         ])
         .arg(dir.path())
@@ -148,12 +150,32 @@ fn bench_smoke() {
         .unwrap();
     check(&out, "fleet bench");
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("| N | startup s |"), "{stdout}");
+    assert!(
+        stdout.contains("| N | robot procs | startup s |"),
+        "{stdout}"
+    );
     let bench: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
             .unwrap();
     let row = &bench["rows"][0];
     assert!(row.get("error").is_none(), "{row}");
+    assert_eq!(u(row, &["robot_processes"]), 2);
+    // The floor (a bare 100 Hz process, 4 s), and the row against it.
+    let floor = f(&bench, &["floor_per_min"]);
+    assert!(
+        floor > 0.0 && u(&bench, &["floor", "wakes"]) > 300,
+        "{bench}"
+    );
+    let over = f(row, &["cpu_over_floor"]);
+    assert!((over - f(row, &["cpu_per_robot_per_min"]) / floor).abs() < 1e-9);
+    // Hosts of 1 and 3 robots: the slope between them.
+    let hosts = bench["hosts"].as_array().unwrap();
+    assert_eq!(hosts.len(), 2);
+    for h in hosts {
+        assert_eq!(u(h, &["converged"]), u(h, &["robots"]), "{h}");
+    }
+    let slope = (f(&hosts[1], &["cpu_per_min"]) - f(&hosts[0], &["cpu_per_min"])) / 2.0;
+    assert!((f(&bench, &["marginal_per_robot_per_min"]) - slope).abs() < 1e-9);
     assert_eq!(u(row, &["robots"]), 2);
     assert_eq!(u(row, &["converged"]), 2);
     assert_eq!(u(row, &["stale"]) + u(row, &["link_losses"]), 0);

@@ -34,6 +34,9 @@ pub struct RobotTask<P: Plant = SimulatedDrive> {
     robot: Robot<P>,
     keys: Keys,
     leader: Vec<(f64, Option<i64>, Vec<u8>)>,
+    /// The leader samples' buffers, taken back after each tick (no
+    /// allocation per sample once warm).
+    spare: Vec<Vec<u8>>,
     neighbours: Vec<(f64, Result<Message, DecodeError>)>,
     plant_inputs: Option<(Vec<String>, PlantFeed<P>)>,
     plant: Vec<(f64, usize, String, Vec<u8>)>,
@@ -58,6 +61,7 @@ impl<P: Plant> RobotTask<P> {
             robot,
             keys,
             leader: Vec::new(),
+            spare: Vec::new(),
             neighbours: Vec::new(),
             plant_inputs: None,
             plant: Vec::new(),
@@ -205,8 +209,10 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         } else if input == command + 1 + usize::from(self.supervised()) {
             self.robot.on_latch_answer(sample.payload);
         } else if input == LEADER {
-            self.leader
-                .push((sample.at, sample.delay, sample.payload.to_vec()));
+            let mut bytes = self.spare.pop().unwrap_or_default();
+            bytes.clear();
+            bytes.extend_from_slice(sample.payload);
+            self.leader.push((sample.at, sample.delay, bytes));
         } else if input == neighbours {
             self.neighbours
                 .push((sample.at, wire::decode(sample.payload)));
@@ -258,6 +264,7 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
         }
         for (at, delay, bytes) in self.leader.drain(..) {
             self.robot.on_stamped_message(&bytes, at, delay);
+            self.spare.push(bytes);
         }
         for (at, msg) in self.neighbours.drain(..) {
             self.robot.on_neighbour(msg, at);

@@ -115,8 +115,8 @@ pub(crate) struct BenchArgs {
     /// Simulated robots per robot process (`fleet up --robots-per-process`) [default: fleet up's].
     #[arg(long, value_name = "K")]
     pub(super) robots_per_process: Option<usize>,
-    /// Also run fleets of K robots all in one host (`fleet host`), for each K given: the marginal CPU of one more robot in a host is the slope between the first and the last (empty: none).
-    #[arg(long, value_name = "K,…", value_delimiter = ',', default_values_t = [10, 250])]
+    /// Also run fleets of K robots all in one host (`fleet host`), for each K given: the marginal CPU of one more robot in a host is the slope between the first and the last (`--hosts` with no value: none).
+    #[arg(long, value_name = "K,…", value_delimiter = ',', num_args = 0.., default_values_t = [10, 250])]
     pub(super) hosts: Vec<usize>,
     /// Print only the table.
     #[arg(long, short)]

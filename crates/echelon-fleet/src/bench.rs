@@ -427,8 +427,9 @@ pub fn run(
     };
     progress(Progress::Floor);
     match floor(opts) {
+        // A floor too small to measure is none (no ratio to zero).
         Ok(f) => {
-            report.floor_per_min = Some(f.cpu / f.duration * 60.0);
+            report.floor_per_min = Some(f.cpu / f.duration * 60.0).filter(|&c| c > 0.0);
             report.floor = Some(f);
         }
         Err(e) => eprintln!("fleet bench: the floor was not measured: {e}"),

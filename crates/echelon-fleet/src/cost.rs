@@ -230,7 +230,8 @@ pub struct IdleReport {
     pub duration: f64,
     /// Times it woke.
     pub wakes: u64,
-    /// Its CPU seconds (user + system, every thread), whole life.
+    /// Its CPU seconds (user + system, every thread), whole life, to the
+    /// nanosecond.
     pub cpu: f64,
 }
 
@@ -263,6 +264,14 @@ pub fn idle(
         rate,
         duration: start.elapsed().as_secs_f64(),
         wakes,
-        cpu: cpu_seconds(std::process::id()).unwrap_or(f64::NAN),
+        cpu: own_cpu_seconds(),
     })
+}
+
+/// This process's CPU seconds, every thread, to the nanosecond
+/// (`CLOCK_PROCESS_CPUTIME_ID`): `/proc`'s clock ticks (10 ms) would read
+/// a few seconds of a bare timer as 0.
+fn own_cpu_seconds() -> f64 {
+    let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }

@@ -31,13 +31,39 @@ pub(crate) const FAST_CIRCLE: &str = include_str!("../../echelon-cli/tests/fleet
 pub(crate) fn fast_circle() -> (Scenario, FleetSettings, Reference) {
     let s = Scenario::parse(FAST_CIRCLE, "test", None).unwrap_or_else(|e| panic!("{e}"));
     let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
-    let reference = s
-        .build(&Overrides::default())
+    let reference = reference_of(&s);
+    (s, fleet, reference)
+}
+
+/// The reference of `s`'s plan.
+pub(crate) fn reference_of(s: &Scenario) -> Reference {
+    s.build(&Overrides::default())
         .unwrap_or_else(|e| panic!("{e}"))
         .plan
         .reference()
-        .clone();
-    (s, fleet, reference)
+        .clone()
+}
+
+/// The head of a test scenario of TurtleBot 4s (`[robots.tb4]`) under the
+/// kinematic law with its point `l` ahead, named `name`, 30 s at 1 ms:
+/// the reference, `[fleet]`, `[safety]` and agents follow.
+pub(crate) fn tb4_kinematic(name: &str, l: f64) -> String {
+    format!(
+        r#"name = "{name}"
+description = "{name}"
+[sim]
+duration = 30.0
+dt = 0.001
+[control]
+law = "kinematic"
+ke = 1.0
+l = {l}
+lycomp = "none"
+ly_derivatives = "neglect"
+[robots.tb4]
+preset = "turtlebot4"
+"#
+    )
 }
 
 /// The circle through `start` at heading `heading`, driven at `speed` (m/s)

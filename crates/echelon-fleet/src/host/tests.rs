@@ -11,28 +11,15 @@ use crate::keys::Keys;
 use crate::leader::{Leader, LeaderTask};
 use crate::runtime::bus::{Bus, Link, TaskId};
 use crate::wire::{self, Message};
-use echelon::scenario::{Overrides, Scenario};
+use echelon::scenario::Scenario;
 
 /// `n` robots behind a circle, robot `i` at `offsets[i]` behind its leader:
 /// the reference, or (`chain[i]`) the robot before it; with `safety`, each
 /// filters against the others.
 /// Robot `i` starts at `(-0.6 i, 0)`, heading along the circle's start.
 fn scenario(offsets: &[(f64, f64)], chain: &[bool], safety: bool) -> Scenario {
-    let mut text = String::from(
-        r#"name = "hosted"
-description = "robots in one host"
-[sim]
-duration = 30.0
-dt = 0.001
-[control]
-law = "kinematic"
-ke = 1.0
-l = 0.05
-lycomp = "none"
-ly_derivatives = "neglect"
-[robots.tb4]
-preset = "turtlebot4"
-[reference.circle]
+    let mut text = crate::testing::tb4_kinematic("hosted", 0.05);
+    text += r#"[reference.circle]
 speed = 0.15
 turn_rate = 0.1
 start = { x = 0.0, y = 0.0, theta = 0.0 }
@@ -40,8 +27,7 @@ start = { x = 0.0, y = 0.0, theta = 0.0 }
 control_rate = 50.0
 link_timeout = 0.2
 link_loss = { policy = "extrapolate", hold = 1.0, decel = 0.2 }
-"#,
-    );
+"#;
     if safety {
         text += "[safety]\nradius = 0.25\ngain = 1.0\nrange = 1.5\n";
     }
@@ -84,12 +70,7 @@ fn link(keys: &Keys, seed: u64, cut: f64) -> Link {
 
 /// The leader of `s` for `duration` on a bus with `link`.
 fn bus_with_leader(s: &Scenario, keys: &Keys, duration: f64, link: Link) -> Bus {
-    let reference = s
-        .build(&Overrides::default())
-        .unwrap_or_else(|e| panic!("{e}"))
-        .plan
-        .reference()
-        .clone();
+    let reference = crate::testing::reference_of(s);
     let mut bus = Bus::new();
     bus.link = link;
     let leader = LeaderTask::new(Leader::new(reference, 50.0, duration, 1), keys.clone())

@@ -22,21 +22,9 @@ const L: f64 = 0.05;
 /// `n` TurtleBot 4s behind a straight line at 0.15 m/s, robot `i` at
 /// offset `offsets[i]` (behind, right of the reference), on its slot.
 fn formation(offsets: &[(f64, f64)]) -> Scenario {
-    let mut text = format!(
-        r#"name = "braking"
-description = "cooperative braking"
-[sim]
-duration = 30.0
-dt = 0.001
-[control]
-law = "kinematic"
-ke = 1.0
-l = {L}
-lycomp = "none"
-ly_derivatives = "neglect"
-[robots.tb4]
-preset = "turtlebot4"
-[reference.line]
+    let mut text = crate::testing::tb4_kinematic("braking", L);
+    text += &format!(
+        r#"[reference.line]
 speed = 0.15
 start = {{ x = 0.0, y = 0.0, theta = 0.0 }}
 [safety]

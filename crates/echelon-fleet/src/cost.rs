@@ -145,6 +145,62 @@ impl RoleCost {
     }
 }
 
+/// What the machine's floor cost ([`idle`]): a bare process that only
+/// wakes at a rate.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct IdleReport {
+    /// Its wake rate, Hz.
+    pub rate: f64,
+    /// How long it ran, s of real time.
+    pub duration: f64,
+    /// Times it woke.
+    pub wakes: u64,
+    /// Its CPU seconds (user + system, every thread), whole life, to the
+    /// nanosecond.
+    pub cpu: f64,
+}
+
+/// The floor of a periodic process on this machine: wakes at `rate` Hz
+/// (absolute deadlines, as a robot's timer) for `duration` s of real time
+/// doing nothing else, then reads its own CPU seconds (`fleet idle`, which
+/// `fleet bench` measures robots against).
+pub fn idle(
+    rate: f64,
+    duration: f64,
+    stop: &crate::StopFlag,
+) -> Result<IdleReport, crate::FleetError> {
+    if !(rate.is_finite() && rate > 0.0 && duration.is_finite() && duration > 0.0) {
+        return Err(crate::FleetError::Config(format!(
+            "fleet idle: rate {rate} Hz and duration {duration} s must be > 0"
+        )));
+    }
+    let period = std::time::Duration::from_secs_f64(1.0 / rate);
+    let start = std::time::Instant::now();
+    let mut next = start;
+    let mut wakes = 0u64;
+    while start.elapsed().as_secs_f64() < duration && !stop.is_raised() {
+        next += period;
+        if let Some(wait) = next.checked_duration_since(std::time::Instant::now()) {
+            std::thread::sleep(wait);
+        }
+        wakes += 1;
+    }
+    Ok(IdleReport {
+        rate,
+        duration: start.elapsed().as_secs_f64(),
+        wakes,
+        cpu: own_cpu_seconds(),
+    })
+}
+
+/// This process's CPU seconds, every thread, to the nanosecond
+/// (`CLOCK_PROCESS_CPUTIME_ID`): `/proc`'s clock ticks (10 ms) would read
+/// a few seconds of a bare timer as 0.
+fn own_cpu_seconds() -> f64 {
+    let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -218,60 +274,4 @@ mod tests {
         );
         assert_eq!(RoleCost::of(&[]), RoleCost::default());
     }
-}
-
-/// What the machine's floor cost ([`idle`]): a bare process that only
-/// wakes at a rate.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
-pub struct IdleReport {
-    /// Its wake rate, Hz.
-    pub rate: f64,
-    /// How long it ran, s of real time.
-    pub duration: f64,
-    /// Times it woke.
-    pub wakes: u64,
-    /// Its CPU seconds (user + system, every thread), whole life, to the
-    /// nanosecond.
-    pub cpu: f64,
-}
-
-/// The floor of a periodic process on this machine: wakes at `rate` Hz
-/// (absolute deadlines, as a robot's timer) for `duration` s of real time
-/// doing nothing else, then reads its own CPU seconds (`fleet idle`, which
-/// `fleet bench` measures robots against).
-pub fn idle(
-    rate: f64,
-    duration: f64,
-    stop: &crate::StopFlag,
-) -> Result<IdleReport, crate::FleetError> {
-    if !(rate.is_finite() && rate > 0.0 && duration.is_finite() && duration > 0.0) {
-        return Err(crate::FleetError::Config(format!(
-            "fleet idle: rate {rate} Hz and duration {duration} s must be > 0"
-        )));
-    }
-    let period = std::time::Duration::from_secs_f64(1.0 / rate);
-    let start = std::time::Instant::now();
-    let mut next = start;
-    let mut wakes = 0u64;
-    while start.elapsed().as_secs_f64() < duration && !stop.is_raised() {
-        next += period;
-        if let Some(wait) = next.checked_duration_since(std::time::Instant::now()) {
-            std::thread::sleep(wait);
-        }
-        wakes += 1;
-    }
-    Ok(IdleReport {
-        rate,
-        duration: start.elapsed().as_secs_f64(),
-        wakes,
-        cpu: own_cpu_seconds(),
-    })
-}
-
-/// This process's CPU seconds, every thread, to the nanosecond
-/// (`CLOCK_PROCESS_CPUTIME_ID`): `/proc`'s clock ticks (10 ms) would read
-/// a few seconds of a bare timer as 0.
-fn own_cpu_seconds() -> f64 {
-    let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
-    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }

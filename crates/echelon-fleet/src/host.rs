@@ -450,7 +450,7 @@ fn check_shared(robots: &[RobotOptions]) -> Result<(), FleetError> {
             Some("its scenario or fleet differs from the first robot's")
         } else if q.time_scale != p.time_scale || q.duration != p.duration || q.die_at != p.die_at {
             Some("its clock (time scale, duration, die-at) differs from the first robot's")
-        } else if format!("{:?}", q.net) != format!("{:?}", p.net) {
+        } else if q.net != p.net {
             Some("its network differs from the first robot's")
         } else if !seen.insert(r.agent) {
             Some("it is given twice")

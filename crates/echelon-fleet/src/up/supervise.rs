@@ -66,10 +66,9 @@ impl Running {
         }
     }
 
-    /// Robot process `i`'s member (a host's: its first robot; a host is
-    /// never asked to die, [`super::hosts`]).
+    /// Robot process `i`'s member ([`robot_member`]).
     fn robot_of(&self, i: usize) -> Member {
-        Member::Robot(self.procs.hosted[i][0])
+        robot_member(&self.procs, i)
     }
 
     /// Phase 1: the leader and robots run to the end (or a failure, or a
@@ -166,12 +165,11 @@ impl Running {
     /// failure of the run; each noted once.
     fn note_deaths(&mut self, chaos: &Chaos) {
         let p = &self.procs;
-        let hosted = &p.hosted;
         for (proc, member) in p
             .robots
             .iter()
             .enumerate()
-            .map(|(i, proc)| (proc, Member::Robot(hosted[i][0])))
+            .map(|(i, proc)| (proc, robot_member(p, i)))
             .chain(
                 p.bases
                     .iter()
@@ -413,6 +411,12 @@ impl Running {
             routers: p.routers.iter().map(report).collect::<Result<_, _>>()?,
         })
     }
+}
+
+/// Robot process `i`'s member: its robot, or a host's first (a host is
+/// never asked to die, [`super::hosts`]).
+fn robot_member(p: &Procs, i: usize) -> Member {
+    Member::Robot(p.hosted[i][0])
 }
 
 /// The robots' reports, in agent order: each robot process's, each host's

@@ -456,6 +456,10 @@ pub struct Guard<'a> {
     /// filter's progress measure ([`SafetyFilter::set_tracking_error`]);
     /// `None`: unknown.
     pub error: Option<f64>,
+    /// The backward speed a velocity base accepts this period, m/s
+    /// ([`crate::base::Backup::cap`]; infinite: no limit): the filter's
+    /// reverse cap ([`SafetyFilter::set_reverse_cap`]).
+    pub reverse: f64,
 }
 
 /// One act step's answer ([`AgentSpec::act`]).
@@ -496,6 +500,7 @@ impl AgentSpec {
             sight,
             obstacles,
             error,
+            reverse,
         }) = guard
         else {
             return Act {
@@ -505,6 +510,7 @@ impl AgentSpec {
             };
         };
         filter.set_tracking_error(error.unwrap_or(f64::NAN));
+        filter.set_reverse_cap(reverse);
         let l = self.placement.l();
         let guarded = |outcome, deadlock, min_distance| Guarded {
             outcome,

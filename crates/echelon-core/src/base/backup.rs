@@ -66,6 +66,15 @@ impl Backup {
         self.reversed
     }
 
+    /// The backward speed the coming period allows ([`Backup::plan`]), m/s
+    /// (infinite: no limit): what a safety filter may command
+    /// ([`crate::safety::SafetyFilter::set_reverse_cap`]), so that the
+    /// command it certifies is the one the base will carry out.
+    #[inline]
+    pub fn cap(&self) -> f64 {
+        self.cap
+    }
+
     /// The robot travelled `ds` m along its heading (negative: backwards).
     #[inline]
     pub fn observe(&mut self, ds: f64) {

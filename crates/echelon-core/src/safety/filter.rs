@@ -116,6 +116,9 @@ pub struct SafetyFilter {
     /// the obstacles' after), whether that neighbour's point comes toward
     /// this robot's head on ([`ONCOMING`]).
     pub(super) oncoming: Vec<bool>,
+    /// The backward speed the base accepts this period, m/s (infinite: no
+    /// limit; [`SafetyFilter::set_reverse_cap`]).
+    pub(super) reverse: f64,
 }
 
 /// Two points that move toward each other, each at least this fast (m/s)
@@ -157,6 +160,7 @@ impl SafetyFilter {
             period: 0.0,
             relative: f64::INFINITY,
             oncoming: Vec::with_capacity(16),
+            reverse: f64::INFINITY,
         }
     }
 
@@ -419,6 +423,18 @@ impl SafetyFilter {
     /// it stuck. A filter never told (NaN) uses the motion test alone.
     pub fn set_tracking_error(&mut self, error: f64) {
         self.deadlock.set_error(error);
+    }
+
+    /// The backward speed `cap` (m/s, `≥ 0`; infinite: no limit) a velocity
+    /// base accepts until told otherwise: a Create 3's backup budget
+    /// ([`crate::base::Backup::cap`]). The filter then certifies only
+    /// commands with `v ≥ −cap` (a hard row, and the nominal is held to it
+    /// first), so that what it hands on is what the base carries out: a
+    /// command cut after the filter (its reverse refused, its turn kept)
+    /// would move the robot's point as no barrier allowed. NaN or negative:
+    /// no reverse.
+    pub fn set_reverse_cap(&mut self, cap: f64) {
+        self.reverse = if cap >= 0.0 { cap } else { 0.0 };
     }
 
     /// The QP's answer for the desired `x0` and the rows gathered, the

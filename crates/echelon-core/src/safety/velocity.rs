@@ -63,7 +63,7 @@ impl SafetyFilter {
             });
         }
         let own = Own::ahead(me, l, 0.5 * self.period);
-        let limited = base.limit(nominal).0;
+        let limited = self.reversing(base.limit(nominal).0);
         let x0 = [limited.v, l * limited.omega];
         let gamma = self.config.gain;
         self.rows.clear();
@@ -81,6 +81,7 @@ impl SafetyFilter {
         });
         let barriers = self.rows.len();
         push_box(&mut self.rows, [base.v_max(), l * base.omega_max()]);
+        self.push_reverse();
         let decision = self.decide(t, x0, barriers, [0.0, 0.0], Speed::Command);
         let of = |x: [f64; 2]| VelocityCommand {
             v: x[0],
@@ -93,6 +94,27 @@ impl SafetyFilter {
         let braked =
             || solve_relaxed(&self.rows, barriers, x0).map_or(VelocityCommand::default(), of);
         Filtered::decided(decision, nominal, limited, min_distance, of, braked)
+    }
+
+    /// `cmd` with its backward speed within the base's reverse cap
+    /// ([`SafetyFilter::set_reverse_cap`]).
+    #[inline]
+    fn reversing(&self, cmd: VelocityCommand) -> VelocityCommand {
+        VelocityCommand {
+            v: cmd.v.max(-self.reverse),
+            ..cmd
+        }
+    }
+
+    /// The hard row `v ≥ −cap` of a finite reverse cap.
+    #[inline]
+    fn push_reverse(&mut self) {
+        if self.reverse.is_finite() {
+            self.rows.push(Constraint {
+                a: [1.0, 0.0],
+                b: -self.reverse,
+            });
+        }
     }
 
     /// The lag `τ` (s, 0: none) as the filter sees it when the command is
@@ -147,7 +169,7 @@ impl SafetyFilter {
             along * own.cos - across * own.sin,
             along * own.sin + across * own.cos,
         ];
-        let limited = base.limit(nominal).0;
+        let limited = self.reversing(base.limit(nominal).0);
         let x0 = [limited.v, l * limited.omega];
         self.rows.clear();
         let min_distance =
@@ -164,6 +186,7 @@ impl SafetyFilter {
         // The hard rows: the speed limits on the command, the acceleration
         // limits on the lags' response.
         push_box(&mut self.rows, [base.v_max(), l * base.omega_max()]);
+        self.push_reverse();
         let reach = |tau: f64, max: f64| if max.is_finite() { tau * max } else { max };
         push_band(
             &mut self.rows,
@@ -360,6 +383,38 @@ mod tests {
                 }
                 if nominal_ok {
                     prop_assert_eq!(out.outcome, Outcome::Nominal);
+                }
+            }
+
+            /// Under a reverse cap (a Create 3's backup budget), on a base
+            /// without lag and on a lagged one, whatever the scene: the
+            /// command never backs up faster than the cap — so a backup
+            /// budget applied after the filter ([`crate::base::Backup`])
+            /// has nothing left to cut, and the command the filter
+            /// certified is the one the base carries out — and a filtered
+            /// command still satisfies every row.
+            #[test]
+            fn a_reverse_cap_is_kept(
+                Scene { me, ns, config } in scene(),
+                v in -0.8..0.8f64,
+                omega in -3.0..3.0f64,
+                cap in prop_oneof![Just(0.0), 0.0..0.3f64],
+                lagged in any::<bool>(),
+            ) {
+                let base = if lagged { VelocityBase::TURTLEBOT4 } else { ideal() };
+                let mut f = SafetyFilter::new(config);
+                f.set_reverse_cap(cap);
+                let nominal = VelocityCommand { v, omega };
+                let out = f.velocity(0.0, &me, L, nominal, &base, &ns, &[]);
+                prop_assert!(out.command.v >= -cap - TOLERANCE, "{out:?} under {cap}");
+                if out.outcome == Outcome::Filtered {
+                    let x = x_of(out.command, L);
+                    for c in f.constraints() {
+                        prop_assert!(c.slack(x) >= -TOLERANCE, "{c:?} at {x:?}");
+                    }
+                }
+                if out.outcome == Outcome::Nominal {
+                    prop_assert_eq!(out.command.v, base.limit(nominal).0.v.max(-cap));
                 }
             }
         }

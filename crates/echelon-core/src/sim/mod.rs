@@ -315,6 +315,7 @@ impl Simulation {
                 sight: Sight::Neighbours(&safety.neighbours),
                 obstacles: &safety.obstacles,
                 error: Some(self.out[i].e_hat[0].hypot(self.out[i].e_hat[1])),
+                reverse: self.sys.backup[i].map_or(f64::INFINITY, |b| b.cap()),
             };
             let act = self.sys.plan.agents()[i].act(t, &safety.seen[i], self.held[i], Some(guard));
             self.held[i] = self.sys.within_backup(i, &safety.seen[i], act.command);

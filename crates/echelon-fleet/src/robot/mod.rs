@@ -317,26 +317,40 @@ impl<P: Plant> Robot<P> {
         self.outgoing = Some(stop);
     }
 
-    /// `cmd` for the robot in `state` within its base's backup limit
-    /// ([`Backup`]: how far it is behind its furthest point, measured from
-    /// its state tick by tick, and the command held for one period).
-    fn within_backup(
-        &mut self,
-        state: &echelon::model::State,
-        cmd: echelon::agent::Command,
-    ) -> echelon::agent::Command {
-        let (Some((backup, last)), Some(r), echelon::agent::Command::Velocity(c)) =
-            (self.backup.as_mut(), self.config.spec.velocity_robot(), cmd)
+    /// Brings the backup budget ([`Backup`]: how far the robot is behind
+    /// its furthest point, measured from its state tick by tick) up to the
+    /// robot in `state` and plans the coming period: the backward speed it
+    /// allows, m/s (infinite: no limit), for the safety filter to respect
+    /// ([`echelon::agent::Guard::reverse`]).
+    fn plan_backup(&mut self, state: &echelon::model::State) -> f64 {
+        let (Some((backup, last)), Some(r)) =
+            (self.backup.as_mut(), self.config.spec.velocity_robot())
         else {
-            return cmd;
+            return f64::INFINITY;
         };
         if let Some(p) = last {
             let (sin, cos) = p.theta.sin_cos();
             backup.observe((state.x - p.x) * cos + (state.y - p.y) * sin);
         }
         *last = Some(*state);
-        let (c, _) = backup.hold(&r.base(), state, self.config.period, c);
-        echelon::agent::Command::Velocity(c)
+        backup.plan(&r.base(), state, self.config.period);
+        backup.cap()
+    }
+
+    /// `cmd` for the robot in `state` within the period's backup plan
+    /// ([`Robot::plan_backup`], [`Backup::apply`]; the command held for one
+    /// period).
+    fn within_backup(
+        &self,
+        state: &echelon::model::State,
+        cmd: echelon::agent::Command,
+    ) -> echelon::agent::Command {
+        let (Some((backup, _)), Some(r), echelon::agent::Command::Velocity(c)) =
+            (self.backup.as_ref(), self.config.spec.velocity_robot(), cmd)
+        else {
+            return cmd;
+        };
+        echelon::agent::Command::Velocity(backup.apply(&r.base(), state, c).0)
     }
 
     /// Reads its base's safety words at fleet time `now`: a stopping

@@ -17,23 +17,38 @@ pub(super) struct Safety {
     pub(super) counts: SafetyCounts,
 }
 
+/// What a robot's filter step knows of the robot itself.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Seen<'a> {
+    /// Its state.
+    pub(super) me: &'a State,
+    /// How uncertain its position estimate is, m.
+    pub(super) sigma: f64,
+    /// Its law's tracking error ‖e‖, m (the filter's progress measure).
+    pub(super) error: f64,
+    /// The backward speed its base accepts this period, m/s
+    /// ([`Guard::reverse`]).
+    pub(super) reverse: f64,
+}
+
 impl Safety {
     /// The act step ([`AgentSpec::act`]) through this robot's filter at
-    /// local time `local` (fleet time `t`) for a robot in state `me`, its
-    /// position estimate `sigma` uncertain, its law's tracking error
-    /// `error` (‖e‖, m: the filter's progress measure): the command for its
-    /// plant, counted (`docs/safety.md`, "In the fleet").
-    #[allow(clippy::too_many_arguments)]
+    /// local time `local` (fleet time `t`) for a robot as `seen`: the
+    /// command for its plant, counted (`docs/safety.md`, "In the fleet").
     pub(super) fn act(
         &mut self,
         config: &RobotConfig,
         local: f64,
         t: f64,
-        me: &State,
-        sigma: f64,
-        error: f64,
+        seen: Seen<'_>,
         nominal: Command,
     ) -> Command {
+        let Seen {
+            me,
+            sigma,
+            error,
+            reverse,
+        } = seen;
         let Some(settings) = config.safety.as_ref() else {
             return config.spec.act(t, me, nominal, None).command;
         };
@@ -46,6 +61,7 @@ impl Safety {
             sight,
             obstacles: &settings.obstacles,
             error: Some(error),
+            reverse,
         };
         let act = config.spec.act(t, me, nominal, Some(guard));
         let c = &mut self.counts;

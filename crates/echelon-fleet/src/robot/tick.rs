@@ -173,10 +173,17 @@ impl<P: Plant> Robot<P> {
         );
         let nominal = out.command();
         let sigma = self.plant.position_sigma();
+        let reverse = self.plan_backup(&state);
         let cmd = match self.safety.as_mut() {
             Some(s) => {
                 let error = out.law.e[0].hypot(out.law.e[1]);
-                s.act(&self.config, local, now, &state, sigma, error, nominal)
+                let seen = super::safety::Seen {
+                    me: &state,
+                    sigma,
+                    error,
+                    reverse,
+                };
+                s.act(&self.config, local, now, seen, nominal)
             }
             None => self.config.spec.act(now, &state, nominal, None).command,
         };

@@ -75,6 +75,35 @@ fn grid() -> impl Strategy<Value = Vec<(f64, f64)>> {
         })
 }
 
+/// The formation of `offsets` with robot `k` under `fault`, run to `end`
+/// on the fake clock: the closest approach of any two robots' points `l`
+/// ahead, from their true states every 10 ms, and the fleet at the end.
+fn closest_approach(offsets: &[(f64, f64)], k: usize, fault: FaultSpec, end: f64) -> (f64, Fleet) {
+    let s = formation(offsets);
+    let n = offsets.len();
+    let faults: Vec<FaultSpec> = (0..n)
+        .map(|i| if i == k { fault } else { FaultSpec::default() })
+        .collect();
+    let mut fleet = Fleet::of(&s, &faults);
+    let mut closest = f64::INFINITY;
+    let mut t = 0.0;
+    while t < end {
+        t += 0.01;
+        fleet.run_until(t);
+        let points: Vec<[f64; 2]> = fleet
+            .robots()
+            .map(|r| ahead(&r.plant().true_state()))
+            .collect();
+        for i in 0..n {
+            for j in i + 1..n {
+                let d = (points[i][0] - points[j][0]).hypot(points[i][1] - points[j][1]);
+                closest = closest.min(d);
+            }
+        }
+    }
+    (closest, fleet)
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
@@ -82,35 +111,18 @@ proptest! {
     fn nobody_drives_into_a_robot_that_stops(
         offsets in grid(), pick in 0usize..6, at in 2.0..6.0f64, freeze in any::<bool>(),
     ) {
-        let s = formation(&offsets);
         let n = offsets.len();
         let k = pick % n;
         let fault = match freeze {
             true => FaultSpec { freeze_odometry: Some((at, 100.0)), ..FaultSpec::default() },
             false => FaultSpec { outage: Some((at, 100.0)), ..FaultSpec::default() },
         };
-        let faults: Vec<FaultSpec> =
-            (0..n).map(|i| if i == k { fault } else { FaultSpec::default() }).collect();
-        let mut fleet = Fleet::of(&s, &faults);
         let (v, tau, a, period) = (0.15, 0.1, 0.9, 0.02);
         let unseen = match freeze {
             true => v * (2.0 * period + period + tau) + v * v / (2.0 * a),
             false => 0.0,
         };
-        let mut closest = f64::INFINITY;
-        let mut t = 0.0;
-        while t < at + 8.0 {
-            t += 0.01;
-            fleet.run_until(t);
-            let points: Vec<[f64; 2]> =
-                fleet.robots().map(|r| ahead(&r.plant().true_state())).collect();
-            for i in 0..n {
-                for j in i + 1..n {
-                    let d = (points[i][0] - points[j][0]).hypot(points[i][1] - points[j][1]);
-                    closest = closest.min(d);
-                }
-            }
-        }
+        let (closest, fleet) = closest_approach(&offsets, k, fault, at + 8.0);
         prop_assert!(
             closest >= RADIUS - 1e-3 - unseen,
             "closest {closest} (robot {} of {n}, at {at}, freeze {freeze}, {offsets:?})", k + 1
@@ -123,5 +135,57 @@ proptest! {
             prop_assert!(speed < 1e-3, "robot {} still at {speed} m/s", k + 1);
             prop_assert_eq!(fleet.robot(k).last().link, LinkStatus::Held);
         }
+    }
+}
+
+/// Two formations found by the property above where a robot whose leader
+/// was cut, settling onto its last reference behind where it stood, had
+/// used its 10 cm backup budget: the budget cut its filter's reverse
+/// after the filter, its turn was kept, and it spun its point into the
+/// robot behind it. The filter now certifies only what the budget allows
+/// ([`echelon::agent::Guard::reverse`]).
+#[test]
+fn a_robot_out_of_backup_budget_keeps_its_share() {
+    let cases: [(&[(f64, f64)], usize, f64); 2] = [
+        (
+            &[
+                (0.3309, -0.3779),
+                (0.3, 0.3945),
+                (1.0581, -0.4011),
+                (1.0890, 0.3945),
+            ],
+            0,
+            3.6805,
+        ),
+        (
+            &[
+                (0.3, -0.3747),
+                (0.3, 0.3747),
+                (1.0240, -0.3747),
+                (1.0495, 0.3747),
+                (1.7571, -0.3747),
+                (1.7989, 0.3747),
+            ],
+            2,
+            5.8374,
+        ),
+    ];
+    for (offsets, k, at) in cases {
+        let closest = closest_approach(
+            offsets,
+            k,
+            FaultSpec {
+                outage: Some((at, 100.0)),
+                ..FaultSpec::default()
+            },
+            at + 8.0,
+        )
+        .0;
+        assert!(
+            closest >= RADIUS - 1e-3,
+            "closest {closest} (robot {} of {})",
+            k + 1,
+            offsets.len()
+        );
     }
 }

@@ -2,9 +2,13 @@
 //! thread) and peak memory (peak resident set, `VmHWM`), read from Linux's
 //! `/proc/<pid>/` by the parent.
 //!
-//! The CPU time is read once the child has exited but before it is reaped
-//! (`waitid(WNOWAIT)`): the zombie's `/proc/<pid>/stat` still holds its final
-//! `utime + stime`, all threads included. The peak RSS is gone by then (the
+//! The CPU time is what reaping the child adds to this process's
+//! `RUSAGE_CHILDREN` (`getrusage`: user + system of every thread, in
+//! microseconds; [`children_cpu_seconds`]), read just before and after the
+//! one `wait` that reaps it. `/proc/<pid>/stat`'s `utime + stime`, read
+//! once it has exited but before it is reaped (`waitid(WNOWAIT)`), is the
+//! fallback: it counts whole clock ticks (10 ms), so a child that used 8 ms
+//! read as 0. The peak RSS is gone by then (the
 //! kernel frees the memory map on exit), so `VmHWM` (a high-water mark) is
 //! sampled while the child runs, at most every [`MEMORY_PERIOD`]: growth in
 //! its last period before exit would be missed. Elsewhere than Linux both read
@@ -42,6 +46,18 @@ pub fn cpu_seconds(pid: u32) -> Option<f64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     let ticks = parse_stat_ticks(&stat)?;
     Some(ticks as f64 / rustix::param::clock_ticks_per_second() as f64)
+}
+
+/// CPU seconds (user + system) of this process's children that have been
+/// waited for (and of their waited-for descendants), to the microsecond:
+/// `getrusage(RUSAGE_CHILDREN)`. The difference across the `wait` that
+/// reaps one child is that child's CPU time, as long as no other thread
+/// reaps a child meanwhile.
+pub fn children_cpu_seconds() -> Option<f64> {
+    let usage =
+        nix::sys::resource::getrusage(nix::sys::resource::UsageWho::RUSAGE_CHILDREN).ok()?;
+    let seconds = |t: nix::sys::time::TimeVal| t.tv_sec() as f64 + t.tv_usec() as f64 * 1e-6;
+    Some(seconds(usage.user_time()) + seconds(usage.system_time()))
 }
 
 /// Peak resident set of the running process `pid` so far, bytes.
@@ -204,6 +220,24 @@ fn own_cpu_seconds() -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A child that runs for a few milliseconds used CPU: reaping it adds
+    /// more than zero to the children's usage, where `/proc`'s 10 ms ticks
+    /// may read 0. (No upper bound: another test thread may reap a child
+    /// of its own meanwhile.)
+    #[test]
+    fn a_short_child_costs_more_than_nothing() {
+        for _ in 0..3 {
+            let before = children_cpu_seconds().expect("getrusage");
+            let status = std::process::Command::new("sh")
+                .args(["-c", "i=0; while [ $i -lt 3000 ]; do i=$((i+1)); done"])
+                .status()
+                .expect("sh");
+            assert!(status.success());
+            let used = children_cpu_seconds().expect("getrusage") - before;
+            assert!(used > 0.0, "{used} s of CPU");
+        }
+    }
 
     #[test]
     fn stat_and_status_are_parsed() {

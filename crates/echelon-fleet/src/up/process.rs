@@ -20,7 +20,9 @@ pub(super) struct Proc {
     pub(super) stdout: PathBuf,
     pub(super) report: Option<serde_json::Value>,
     pub(super) status: Option<std::process::ExitStatus>,
-    /// CPU seconds, read when it exited (before it was reaped).
+    /// CPU seconds: what reaping it added to this process's children's
+    /// usage ([`cost::children_cpu_seconds`]), else `/proc`'s ticks read
+    /// when it exited (before it was reaped).
     pub(super) cpu: Option<f64>,
     /// Peak RSS so far, bytes, and when it was last sampled.
     pub(super) max_rss: Option<u64>,
@@ -72,8 +74,13 @@ impl Proc {
         if self.cpu.is_none() {
             self.cpu = cost::cpu_seconds(self.child.id());
         }
+        let before = cost::children_cpu_seconds();
         match self.child.try_wait() {
             Ok(Some(status)) => {
+                if let (Some(b), Some(a)) = (before, cost::children_cpu_seconds()) {
+                    // To the microsecond (`/proc` counts 10 ms ticks).
+                    self.cpu = Some((a - b).max(0.0));
+                }
                 self.status = Some(status);
                 let last = std::fs::File::open(&self.stdout).ok().and_then(|out| {
                     BufReader::new(out)

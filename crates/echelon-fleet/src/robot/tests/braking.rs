@@ -146,7 +146,8 @@ proptest! {
 /// ([`echelon::agent::Guard::reverse`]).
 #[test]
 fn a_robot_out_of_backup_budget_keeps_its_share() {
-    let cases: [(&[(f64, f64)], usize, f64); 2] = [
+    type Case<'a> = (&'a [(f64, f64)], usize, f64);
+    let cases: [Case<'_>; 2] = [
         (
             &[
                 (0.3309, -0.3779),

@@ -8,6 +8,10 @@ Python package when it is installed, and the largest ‖e‖ against
 `echelon bench` (a release build, its own process) followed by the peer on
 the same workload, and prints both medians, their ratio and the machine.
 
+The peer is `numba_star` (tiled, vectorised: the strongest we have);
+`--peers numba_star,numba_star_plain` also times the plain version (libm,
+one agent at a time) in the same pairs.
+
     python3 -m venv --system-site-packages .venv-peers
     .venv-peers/bin/pip install -r benches/peers/requirements.txt
     cargo build --release -p echelon-cli
@@ -21,6 +25,7 @@ excludes building it and compiling, and includes evaluating the reference).
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import platform
@@ -102,39 +107,56 @@ def main() -> None:
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--pairs", type=int, default=5)
     p.add_argument("--echelon", help="the echelon binary [default: $CARGO_TARGET_DIR or target, release]")
+    p.add_argument("--peers", default="numba_star",
+                   help="comma-separated peer modules in benches/peers, each timed in every pair [default: numba_star]")
     a = p.parse_args()
 
     os.environ["NUMBA_NUM_THREADS"] = str(a.threads)
     sys.path.insert(0, str(HERE))
     import numba  # noqa: PLC0415
 
-    import numba_star as peer  # noqa: PLC0415
+    names = [n.strip() for n in a.peers.split(",") if n.strip()]
+    # numba_star first: it sets Numba's CPU features before anything compiles.
+    peers = {n: importlib.import_module(n) for n in sorted(names, key=lambda n: n != "numba_star")}
 
     exe = echelon_bin(a.echelon)
     steps = max(1, round(a.duration / a.dt))
-    print(f"machine: {machine()}; numba {numba.__version__} on {numba.get_num_threads()} threads")
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    # Compile the peer (not timed), then check it.
-    peer.Star(16, a.dt).run(2)
-    check(peer, exe, a.threads)
+    for name in names:
+        # Compile the peer (not timed), then check it.
+        peers[name].Star(16, a.dt).run(2)
+        print(f"{name}:")
+        check(peers[name], exe, a.threads)
+    from numba.core.registry import cpu_target  # noqa: PLC0415
 
-    ours, theirs = [], []
+    # What the compiler was given (numba_star asks for 512-bit vectors unless
+    # NUMBA_CPU_FEATURES says otherwise).
+    wide = "-prefer-256-bit" in cpu_target.target_context.codegen()._tm_features.split(",")
+    vectors = "512-bit vectors preferred" if wide else "LLVM's default vector width"
+    print(f"machine: {machine()}; numba {numba.__version__} on {numba.get_num_threads()} threads "
+          f"({numba.threading_layer()}), {vectors}")
+
+    ours, theirs = [], {n: [] for n in names}
     for i in range(a.pairs):
         r = echelon_bench(exe, a.agents, a.duration, a.dt, a.threads)
         ours.append(r["agent_steps_per_s"])
-        star = peer.Star(a.agents, a.dt)
-        t0 = time.perf_counter()
-        star.run(steps)
-        theirs.append(a.agents * steps / (time.perf_counter() - t0))
-        print(f"pair {i + 1}: echelon {ours[-1] / 1e6:.1f} M agent-steps/s, "
-              f"numba {theirs[-1] / 1e6:.1f} M agent-steps/s")
-    mo, mt = statistics.median(ours), statistics.median(theirs)
+        line = f"pair {i + 1}: echelon {ours[-1] / 1e6:.1f}"
+        for name in names:
+            star = peers[name].Star(a.agents, a.dt)
+            t0 = time.perf_counter()
+            star.run(steps)
+            theirs[name].append(a.agents * steps / (time.perf_counter() - t0))
+            line += f", {name} {theirs[name][-1] / 1e6:.1f}"
+        print(line + " M agent-steps/s")
+    mo = statistics.median(ours)
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print(f"star, torque, N = {a.agents}, {steps} steps of {a.dt} s, {a.threads} threads, "
           f"median of {a.pairs} interleaved pairs:")
     print(f"  echelon bench: {mo / 1e6:.1f} M agent-steps/s ({1e9 / mo:.2f} ns per agent-step)")
-    print(f"  numba peer:    {mt / 1e6:.1f} M agent-steps/s ({1e9 / mt:.2f} ns per agent-step)")
-    print(f"  ratio: {mo / mt:.2f}x")
+    for name in names:
+        mt = statistics.median(theirs[name])
+        print(f"  {name + ':':17s}{mt / 1e6:.1f} M agent-steps/s ({1e9 / mt:.2f} ns per agent-step), "
+              f"ratio {mo / mt:.2f}x")
 
 
 if __name__ == "__main__":

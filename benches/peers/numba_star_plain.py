@@ -27,58 +27,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-# Table I, agent 1 (RobotParams::AGENT1).
-MASS, ETA, INERTIA, PSI = 27.0, 180.0, 1.42, 9.47
-KE, KZ, L = 1.5, 10.0, 0.05
-# The circle (BenchFormation::reference).
-V_D, W_D = 0.5, 0.1
-
-MASK64 = (1 << 64) - 1
-
-
-class SplitMix64:
-    """`echelon::rng::SplitMix64`, bit for bit."""
-
-    def __init__(self, seed: int) -> None:
-        self.state = seed & MASK64
-
-    def next_u64(self) -> int:
-        self.state = (self.state + 0x9E3779B97F4A7C15) & MASK64
-        z = self.state
-        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & MASK64
-        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & MASK64
-        return z ^ (z >> 31)
-
-    def uniform(self, lo: float, hi: float) -> float:
-        return lo + (hi - lo) * ((self.next_u64() >> 11) * (1.0 / (1 << 53)))
-
-
-def formation(agents: int, seed: int = 1) -> dict[str, np.ndarray]:
-    """`BenchFormation { agents, topology: Star, seed }.members()` as arrays:
-    the state columns and each agent's constants."""
-    rng = SplitMix64(seed)
-    cols = {k: np.empty(agents) for k in ("x", "y", "theta", "lx", "ly_off", "g2", "delta", "eps")}
-    for i in range(agents):
-        cols["x"][i] = rng.uniform(-2.0, 2.0)
-        cols["y"][i] = rng.uniform(-2.0, 2.0)
-        cols["theta"][i] = rng.uniform(-math.pi, math.pi)
-        lam = rng.uniform(0.2, 0.8)
-        cols["ly_off"][i] = rng.uniform(-1.0, 1.0)
-        cols["lx"][i] = lam + L
-
-        # FitCoefficients::paper(λ): Horner from the highest power.
-        def poly(c: list[float]) -> float:
-            acc = 0.0
-            for k in c:
-                acc = acc * lam + k
-            return acc
-
-        cols["g2"][i] = 2.0 * poly([-4.0501, 9.8511, -6.2869, 1.6154, -0.0772])
-        cols["eps"][i] = poly([6.9639, -14.778, 8.7458, -0.0207, 0.1361])
-        cols["delta"][i] = poly([-8.3333, 15.37, -7.8889, 1.7657, -0.0311])
-    cols["v"] = np.zeros(agents)
-    cols["omega"] = np.zeros(agents)
-    return cols
+from formation import ETA, INERTIA, KE, KZ, MASS, PSI, V_D, W_D, L, formation  # noqa: F401
 
 
 @njit(fastmath=True, cache=True)

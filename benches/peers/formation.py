@@ -61,3 +61,32 @@ def formation(agents: int, seed: int = 1) -> dict[str, np.ndarray]:
     cols["v"] = np.zeros(agents)
     cols["omega"] = np.zeros(agents)
     return cols
+
+
+def star_class(run, reference_table, errors):
+    """A peer's `Star`: the formation and its state, stepped by the peer's
+    `run` over its `reference_table`, its `‖e‖` by its `errors`."""
+
+    class Star:
+        def __init__(self, agents: int, dt: float = 0.001, seed: int = 1) -> None:
+            self.dt = dt
+            self.f = formation(agents, seed)
+            self.steps = 0
+
+        def states(self) -> np.ndarray:
+            f = self.f
+            return np.stack([f["x"], f["y"], f["theta"], f["v"], f["omega"]], axis=1)
+
+        def run(self, steps: int) -> None:
+            f = self.f
+            ref = reference_table(self.steps + steps, self.dt)[self.steps :]
+            run(f["x"], f["y"], f["theta"], f["v"], f["omega"], f["lx"], f["ly_off"], f["g2"], f["delta"],
+                f["eps"], ref, self.dt)
+            self.steps += steps
+
+        def errors(self) -> np.ndarray:
+            f = self.f
+            r = reference_table(self.steps + 1, self.dt)[self.steps, 0]
+            return errors(f["x"], f["y"], f["theta"], f["lx"], f["ly_off"], f["g2"], f["delta"], f["eps"], r)
+
+    return Star

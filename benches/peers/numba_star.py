@@ -65,7 +65,7 @@ def _prefer_512_bit_vectors() -> None:
 
 _prefer_512_bit_vectors()
 
-from formation import ETA, INERTIA, KE, KZ, MASS, PSI, V_D, W_D, L, formation  # noqa: E402,F401
+from formation import ETA, INERTIA, KE, KZ, MASS, PSI, V_D, W_D, L, formation, star_class  # noqa: E402,F401
 
 # Agents per tile (tiles of 64-256 ran alike; 32 slower).
 TILE = 128
@@ -355,26 +355,4 @@ def errors(x, y, th, lx, ly_off, g2, delta, eps, r):
     return out
 
 
-class Star:
-    """The formation and its state, stepped by :func:`run`."""
-
-    def __init__(self, agents: int, dt: float = 0.001, seed: int = 1) -> None:
-        self.dt = dt
-        self.f = formation(agents, seed)
-        self.steps = 0
-
-    def states(self) -> np.ndarray:
-        f = self.f
-        return np.stack([f["x"], f["y"], f["theta"], f["v"], f["omega"]], axis=1)
-
-    def run(self, steps: int) -> None:
-        f = self.f
-        ref = reference_table(self.steps + steps, self.dt)[self.steps :]
-        run(f["x"], f["y"], f["theta"], f["v"], f["omega"], f["lx"], f["ly_off"], f["g2"], f["delta"], f["eps"],
-            ref, self.dt)
-        self.steps += steps
-
-    def errors(self) -> np.ndarray:
-        f = self.f
-        r = reference_table(self.steps + 1, self.dt)[self.steps, 0]
-        return errors(f["x"], f["y"], f["theta"], f["lx"], f["ly_off"], f["g2"], f["delta"], f["eps"], r)
+Star = star_class(run, reference_table, errors)

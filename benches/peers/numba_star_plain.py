@@ -27,41 +27,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from formation import ETA, INERTIA, KE, KZ, MASS, PSI, V_D, W_D, L, formation, star_class  # noqa: F401
-
-
-@njit(fastmath=True, cache=True)
-def _sinc(x):
-    if abs(x) < 1e-4:
-        return 1.0 - x * x / 6.0
-    return math.sin(x) / x
-
-
-@njit(fastmath=True, cache=True)
-def reference_table(steps, dt):
-    """The circle at `t_n`, `t_n + dt/2` and `t_{n+1}` for every step:
-    `[px, py, dpx, dpy, ddpx, ddpy, V_d, ω_d]` per instant (`Circle::eval`,
-    `Jet::speed`, `Jet::turn_rate`)."""
-    out = np.empty((steps, 3, 8))
-    for n in range(steps):
-        for k in range(3):
-            t = n * dt if k == 0 else (n * dt + 0.5 * dt if k == 1 else (n + 1) * dt)
-            half = 0.5 * W_D * t
-            chord = V_D * t * _sinc(half)
-            sm, cm = math.sin(half), math.cos(half)
-            s, c = math.sin(W_D * t), math.cos(W_D * t)
-            dpx, dpy = V_D * c, V_D * s
-            ddpx, ddpy = -V_D * W_D * s, V_D * W_D * c
-            v2 = dpx * dpx + dpy * dpy
-            out[n, k, 0] = chord * cm
-            out[n, k, 1] = chord * sm
-            out[n, k, 2] = dpx
-            out[n, k, 3] = dpy
-            out[n, k, 4] = ddpx
-            out[n, k, 5] = ddpy
-            out[n, k, 6] = math.sqrt(v2)
-            out[n, k, 7] = 0.0 if v2 <= 1e-24 else (dpx * ddpy - dpy * ddpx) / v2
-    return out
+from formation import ETA, INERTIA, KE, KZ, MASS, PSI, V_D, W_D, L, formation, reference_table, star_class  # noqa: F401
 
 
 @njit(fastmath=True, cache=True)

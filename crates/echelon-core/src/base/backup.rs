@@ -169,19 +169,6 @@ impl Backup {
         )
     }
 
-    /// [`Backup::plan`] then [`Backup::apply`]: one command held for
-    /// `period` s (a fleet robot's tick).
-    pub fn hold(
-        &mut self,
-        base: &VelocityBase,
-        me: &State,
-        period: f64,
-        cmd: VelocityCommand,
-    ) -> (VelocityCommand, bool) {
-        self.plan(base, me, period);
-        self.apply(base, me, cmd)
-    }
-
     /// `cmd` with its turn kept within `α_max τ_ω` of the turn rate now on
     /// a base whose accelerations are limited jointly, so that turning
     /// never slows the linear braking (the joint limit scales both).
@@ -281,7 +268,8 @@ mod tests {
             let steps = ((period / dt).round() as usize).max(1);
             for k in 0..400 {
                 let (v, w) = wants[k % wants.len()];
-                let (cmd, _) = backup.hold(&b, &st, steps as f64 * dt, VelocityCommand { v, omega: w });
+                backup.plan(&b, &st, steps as f64 * dt);
+                let (cmd, _) = backup.apply(&b, &st, VelocityCommand { v, omega: w });
                 let (cmd, _) = b.limit(cmd);
                 for _ in 0..steps {
                     let next = b.rk4_step(&st, cmd, dt);

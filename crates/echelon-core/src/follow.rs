@@ -7,10 +7,10 @@ use crate::agent::{AgentSpec, Command, Drive};
 use crate::base::VelocityCommand;
 use crate::control::{LawOutput, LeaderMotion, Offset, law};
 use crate::kinematic::kinematic_law;
-use crate::lycomp::Placement;
+use crate::lycomp::{OffsetFrame, Placement};
 use crate::model::Input;
 use crate::model::State;
-use crate::reference::Jet;
+use crate::reference::{Jet, STANDSTILL, rest_heading};
 
 /// What a follower knows of its leader at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,8 +41,39 @@ pub enum LeaderView<'a> {
 impl LeaderView<'_> {
     /// The leader motion and the offsets `L_X, L_Y, L̇_Y, L̈_Y` (eqs. 4–6) a
     /// follower with `placement` holds it at.
+    ///
+    /// A slot in the leader's frame ([`crate::lycomp::OffsetFrame::Leader`])
+    /// turns with the leader's heading: the reference's path heading, turn
+    /// rate and angular acceleration ([`Jet::frame`]); a leader robot's `θ`
+    /// and `ω` (its `ω̇` neglected, as `L̇_Y` is for robot leaders); a
+    /// leader known by its motion: the heading of `ṗ_d` and `ω_d` (`ω̇`
+    /// neglected: exact on the circle and the line the fleet predicts along).
     #[inline]
     pub fn resolve(&self, placement: &Placement) -> (LeaderMotion, Offset) {
+        let (motion, offset) = self.resolve_follower(placement);
+        if placement.frame() == OffsetFrame::Follower {
+            return (motion, offset);
+        }
+        let (theta, omega, domega) = match *self {
+            LeaderView::Reference(jet) => jet.frame(),
+            LeaderView::Robot { state, .. } => (state.theta, state.omega, 0.0),
+            LeaderView::Motion {
+                motion, turn_rate, ..
+            } => {
+                let theta = if motion.dp[0].hypot(motion.dp[1]) > STANDSTILL {
+                    motion.dp[1].atan2(motion.dp[0])
+                } else {
+                    rest_heading(&[motion.ddp])
+                };
+                (theta, turn_rate, 0.0)
+            }
+        };
+        (placement.slot(&motion, theta, omega, domega), offset)
+    }
+
+    /// [`LeaderView::resolve`] in the follower's frame (eq. 7).
+    #[inline]
+    fn resolve_follower(&self, placement: &Placement) -> (LeaderMotion, Offset) {
         match *self {
             LeaderView::Reference(jet) => (
                 LeaderMotion::of_jet(jet),
@@ -208,5 +239,99 @@ mod tests {
                 Variant::Complete
             )
         );
+    }
+
+    /// A slot in the leader's frame moves as its formula says: along a
+    /// lemniscate (heading, turn rate and angular acceleration all varying)
+    /// and a circle, at random offsets and instants, the slot's `q̇` and
+    /// `q̈` from [`LeaderView::resolve`] match central differences of its `q`
+    /// and `q̇`, the law is pure tracking (`L_X = L`, `L_Y = 0`), and on
+    /// the reference itself (zero offset) the slot is the reference.
+    mod leader_frame {
+        use super::*;
+        use crate::reference::{Lemniscate, Reference};
+        use proptest::prelude::*;
+
+        fn slot(r: &Reference, p: &Placement, t: f64) -> LeaderMotion {
+            LeaderView::Reference(&r.eval(t, Order::Four)).resolve(p).0
+        }
+
+        proptest! {
+            #[test]
+            fn the_slot_moves_as_its_formula_says(
+                x in -3.0..3.0f64, y in -3.0..3.0f64, t in 1.0..60.0f64,
+                lemniscate in any::<bool>(), c in 0.05..0.3f64, a in 0.5..3.0f64,
+            ) {
+                let r = if lemniscate {
+                    Reference::Lemniscate(Lemniscate::new(a, c, [0.3, -0.2]).unwrap())
+                } else {
+                    Reference::Circle(Circle::new([0.1, 0.2], 0.4, a * c, c).unwrap())
+                };
+                let p = Placement::leader_frame(x, y, 0.05).unwrap();
+                let (motion, offset) = LeaderView::Reference(&r.eval(t, Order::Four)).resolve(&p);
+                prop_assert_eq!((offset.lx, offset.ly, offset.dly), (0.05, 0.0, 0.0));
+                let h = 1e-4;
+                let (before, after) = (slot(&r, &p, t - h), slot(&r, &p, t + h));
+                for k in 0..2 {
+                    let dq = (after.p[k] - before.p[k]) / (2.0 * h);
+                    let ddq = (after.dp[k] - before.dp[k]) / (2.0 * h);
+                    let scale = 1.0 + motion.dp[k].abs() + motion.ddp[k].abs();
+                    prop_assert!((dq - motion.dp[k]).abs() < 1e-6 * scale, "q̇ {k}: {dq} vs {}", motion.dp[k]);
+                    prop_assert!((ddq - motion.ddp[k]).abs() < 1e-5 * scale, "q̈ {k}: {ddq} vs {}", motion.ddp[k]);
+                }
+                // The slot is `o` behind and to the right of the leader, in
+                // its frame.
+                let jet = r.eval(t, Order::Four);
+                let (theta, _, _) = jet.frame();
+                let (sn, cs) = theta.sin_cos();
+                let back = [jet.p[0] - motion.p[0], jet.p[1] - motion.p[1]];
+                prop_assert!((cs * back[0] + sn * back[1] - x).abs() < 1e-9);
+                prop_assert!((-sn * back[0] + cs * back[1] - y).abs() < 1e-9);
+            }
+        }
+
+        /// A leader robot's frame is its heading; a leader known by its
+        /// motion, the heading of its velocity (of its acceleration at
+        /// rest). In the follower's frame nothing moves.
+        #[test]
+        fn robot_and_motion_leaders_give_their_heading() {
+            let p = Placement::leader_frame(1.0, 0.0, 0.05).unwrap();
+            let state = State {
+                x: 2.0,
+                y: 1.0,
+                theta: std::f64::consts::FRAC_PI_2,
+                v: 0.0,
+                omega: 0.0,
+            };
+            let q = LeaderView::Robot { state, dv: 0.0 }.resolve(&p).0;
+            assert!(
+                (q.p[0] - 2.0).abs() < 1e-12 && (q.p[1] - 0.0).abs() < 1e-12,
+                "{q:?}"
+            );
+            let motion = LeaderMotion {
+                p: [0.0, 0.0],
+                dp: [0.0, 0.0],
+                ddp: [0.0, -0.3],
+            };
+            let view = LeaderView::Motion {
+                motion,
+                speed: 0.0,
+                turn_rate: 0.0,
+            };
+            let q = view.resolve(&p).0;
+            assert!(
+                (q.p[0]).abs() < 1e-12 && (q.p[1] - 1.0).abs() < 1e-12,
+                "{q:?}"
+            );
+            let follower = Placement::new(PlacementSpec {
+                lx_off: 1.0,
+                ly_off: 0.0,
+                l: 0.05,
+                comp: LyComp::None,
+                derivatives: LyDerivatives::Neglect,
+            })
+            .unwrap();
+            assert_eq!(view.resolve(&follower).0, motion);
+        }
     }
 }

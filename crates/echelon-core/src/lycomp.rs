@@ -10,7 +10,7 @@
 use num_dual::{Dual2, DualNum};
 
 use crate::check;
-use crate::control::Offset;
+use crate::control::{LeaderMotion, Offset};
 use crate::error::ParamError;
 use crate::reference::{Jet, STANDSTILL};
 
@@ -137,15 +137,35 @@ pub struct PlacementSpec {
     pub derivatives: LyDerivatives,
 }
 
+/// The frame an offset is written in (`offset.frame` in a scenario).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum OffsetFrame {
+    /// The paper's (Definition 1, eq. 7): the leader at `[L_X, L_Y]` in the
+    /// follower's frame. The follower's heading places its slot: a robot
+    /// turned away from its leader's heading holds a slot turned with it,
+    /// and realigns through the internal dynamics
+    /// `θ̇ = V_d sin(θ_d − θ) / L_X` (docs/control-law.md, "Offsets in the
+    /// leader's frame").
+    #[default]
+    Follower,
+    /// A rigid formation: the slot `q = p_d − R(θ_d)ᵀ [L_Xoff, L_Yoff]` is
+    /// fixed in the leader's frame (heading `θ_d`), whatever the follower's
+    /// heading, and the point `L` ahead of the follower tracks it (pure
+    /// tracking, eqs. 14–16, of `q`). `L_Ycomp` does not apply.
+    Leader,
+}
+
 /// A follower's desired placement of its leader: offsets, `L`, and how `L_Y`
 /// follows the leader's curvature.
 ///
-/// Built through [`Placement::new`] or [`Placement::tracking`], which check
-/// it, so a `Placement` in hand always has `L_X > 0`.
+/// Built through [`Placement::new`], [`Placement::tracking`] or
+/// [`Placement::leader_frame`], which check it, so a `Placement` in hand
+/// always has `L_X > 0` (`L_X = L` in the leader's frame).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
     spec: PlacementSpec,
     fit: FitCoefficients,
+    frame: OffsetFrame,
 }
 
 impl TryFrom<PlacementSpec> for Placement {
@@ -171,12 +191,51 @@ impl Placement {
         let p = Placement {
             spec,
             fit: FitCoefficients::paper(spec.lx_off),
+            frame: OffsetFrame::Follower,
         };
         p.check()?;
         Ok(p)
     }
 
-    /// The placement as written (what [`Placement::new`] takes back).
+    /// A slot fixed in the leader's frame ([`OffsetFrame::Leader`]): the
+    /// point `l` ahead of the follower tracks `p_d − R(θ_d)ᵀ [lx_off,
+    /// ly_off]`. The slot may lie anywhere (ahead of the leader too); the law
+    /// is pure tracking, so `L_X = L`. Refuses non-finite offsets and `l`
+    /// that is not a finite number `> 0`; errors name `offset.x`, `offset.y`
+    /// or `l`.
+    pub fn leader_frame(lx_off: f64, ly_off: f64, l: f64) -> Result<Placement, ParamError> {
+        check::positive("l", l)?;
+        check::finite("offset.x", lx_off)?;
+        check::finite("offset.y", ly_off)?;
+        Ok(Placement {
+            spec: PlacementSpec {
+                lx_off,
+                ly_off,
+                l,
+                comp: LyComp::None,
+                derivatives: LyDerivatives::Neglect,
+            },
+            fit: FitCoefficients::paper(lx_off),
+            frame: OffsetFrame::Leader,
+        })
+    }
+
+    /// The frame the offset is written in.
+    #[inline]
+    pub const fn frame(&self) -> OffsetFrame {
+        self.frame
+    }
+
+    /// Whether the law needs the reference's jerk `p⃛_d` (and snap): exact
+    /// `L̇_Y`, `L̈_Y`, or a slot in the leader's frame, whose acceleration
+    /// holds the leader's angular acceleration `ω̇_d`.
+    #[inline]
+    pub fn needs_jerk(&self) -> bool {
+        self.uses_exact_derivatives() || self.frame == OffsetFrame::Leader
+    }
+
+    /// The placement as written (what [`Placement::new`] takes back for the
+    /// follower's frame; [`Placement::frame`] says which).
     #[inline]
     pub const fn spec(&self) -> PlacementSpec {
         self.spec
@@ -255,10 +314,13 @@ impl Placement {
         })
     }
 
-    /// `L_X = L_Xoff + L`.
+    /// `L_X = L_Xoff + L` (`L` in the leader's frame: pure tracking).
     #[inline]
     pub fn lx(&self) -> f64 {
-        self.spec.lx_off + self.spec.l
+        match self.frame {
+            OffsetFrame::Follower => self.spec.lx_off + self.spec.l,
+            OffsetFrame::Leader => self.spec.l,
+        }
     }
 
     /// `L_Ycomp` for the leader's speed and turn rate (either type: `f64` or dual).
@@ -305,11 +367,45 @@ impl Placement {
 
     #[inline]
     fn offset(&self, comp: f64, dly: f64, ddly: f64) -> Offset {
-        Offset {
-            lx: self.lx(),
-            ly: self.spec.ly_off + comp,
-            dly,
-            ddly,
+        match self.frame {
+            OffsetFrame::Follower => Offset {
+                lx: self.lx(),
+                ly: self.spec.ly_off + comp,
+                dly,
+                ddly,
+            },
+            OffsetFrame::Leader => Offset {
+                lx: self.spec.l,
+                ly: 0.0,
+                dly: 0.0,
+                ddly: 0.0,
+            },
+        }
+    }
+
+    /// The slot's motion for a leader moving as `m`, heading `theta`, turning
+    /// at `omega` and `domega`: `m` itself in the follower's frame; in the
+    /// leader's frame `q = p − R o`, `q̇ = ṗ − ω J R o`,
+    /// `q̈ = p̈ − ω̇ J R o + ω² R o`, with `o = [L_Xoff, L_Yoff]`, `R` the
+    /// rotation by `theta` and `J` the rotation by a quarter turn.
+    #[inline]
+    pub fn slot(&self, m: &LeaderMotion, theta: f64, omega: f64, domega: f64) -> LeaderMotion {
+        if self.frame == OffsetFrame::Follower {
+            return *m;
+        }
+        let (s, c) = theta.sin_cos();
+        let (x, y) = (self.spec.lx_off, self.spec.ly_off);
+        // R o, and J R o (a quarter turn to the left).
+        let ro = [c * x - s * y, s * x + c * y];
+        let jro = [-ro[1], ro[0]];
+        let w2 = omega * omega;
+        LeaderMotion {
+            p: [m.p[0] - ro[0], m.p[1] - ro[1]],
+            dp: [m.dp[0] - omega * jro[0], m.dp[1] - omega * jro[1]],
+            ddp: [
+                m.ddp[0] - domega * jro[0] + w2 * ro[0],
+                m.ddp[1] - domega * jro[1] + w2 * ro[1],
+            ],
         }
     }
 }

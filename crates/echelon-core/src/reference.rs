@@ -64,6 +64,24 @@ impl Jet {
         }
     }
 
+    /// The path's heading `θ_d`, turn rate `ω_d` and angular acceleration
+    /// `ω̇_d = (ẋ y⃛ − ẏ x⃛)/V_d² − 2 ω_d (ṗ·p̈)/V_d²` (`p⃛` is zero unless the
+    /// jet was evaluated with [`Order::Four`]). Standing still, the heading
+    /// is that of the first derivative that is not zero (`p̈`, then `p⃛`: the
+    /// direction a path at rest leaves in), or zero, and both rates zero.
+    pub fn frame(&self) -> (f64, f64, f64) {
+        let [dx, dy] = self.dp;
+        let v2 = dx * dx + dy * dy;
+        if v2 <= STANDSTILL * STANDSTILL {
+            return (rest_heading(&[self.ddp, self.d3p]), 0.0, 0.0);
+        }
+        let [ddx, ddy] = self.ddp;
+        let [d3x, d3y] = self.d3p;
+        let omega = (dx * ddy - dy * ddx) / v2;
+        let domega = (dx * d3y - dy * d3x) / v2 - 2.0 * omega * (dx * ddx + dy * ddy) / v2;
+        (dy.atan2(dx), omega, domega)
+    }
+
     /// Heading of the velocity, `atan2(ẏ, ẋ)` (zero when standing still).
     pub fn heading(&self) -> f64 {
         if self.speed() <= STANDSTILL {
@@ -72,6 +90,15 @@ impl Jet {
             self.dp[1].atan2(self.dp[0])
         }
     }
+}
+
+/// The heading of a point at rest: that of the first of `derivatives` that
+/// is not zero, or zero.
+pub fn rest_heading(derivatives: &[[f64; 2]]) -> f64 {
+    derivatives
+        .iter()
+        .find(|d| d[0].hypot(d[1]) > STANDSTILL)
+        .map_or(0.0, |d| d[1].atan2(d[0]))
 }
 
 /// How many derivatives a caller needs.

@@ -30,6 +30,7 @@ pub use echelon_core::{
 };
 
 pub mod csv;
+pub mod encounter;
 pub mod error;
 pub mod identify;
 pub mod lm;

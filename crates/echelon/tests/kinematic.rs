@@ -13,6 +13,7 @@ use common::placement;
 
 use echelon::base::{AccelLimit, VelocityBase, VelocityBaseSpec, VelocityCommand};
 use echelon::control::{LeaderMotion, errors};
+use echelon::follow::LeaderView;
 use echelon::kinematic::{KinematicOutput, kinematic_law, lyapunov, lyapunov_rate};
 use echelon::lycomp::{LyComp, LyDerivatives, Placement};
 use echelon::odometry::bound::KinematicTheorem2;
@@ -43,21 +44,16 @@ fn evaluate(
     let mut cmds: Vec<VelocityCommand> = Vec::with_capacity(agents.len());
     for (i, a) in agents.iter().enumerate() {
         let (leader, off) = match a.leader {
-            None => {
-                let jet = reference.eval(t, Order::Four);
-                (
-                    LeaderMotion::of_jet(&jet),
-                    a.placement.offset_for_reference(&jet),
-                )
-            }
+            None => LeaderView::Reference(&reference.eval(t, Order::Four)).resolve(&a.placement),
             Some(j) => {
                 // The leader's base moves at the speeds it is commanded.
                 let (v, omega) = base.speeds(&xs[j], cmds[j]);
                 let moving = State { v, omega, ..xs[j] };
-                (
-                    LeaderMotion::of_robot(&moving, 0.0),
-                    a.placement.offset_for_robot(v, omega),
-                )
+                LeaderView::Robot {
+                    state: moving,
+                    dv: 0.0,
+                }
+                .resolve(&a.placement)
             }
         };
         let seen = State {
@@ -202,6 +198,51 @@ fn ideal_base_closed_form_along_a_circle_with_a_chained_follower() {
         assert!(rate < 1e-6, "agent {}: V̇₁ off −K_e‖e‖² by {rate:e}", a + 1);
         // z = 0: the ideal base moves at the command.
         assert!(samples.iter().all(|s| norm(s.outs[a].z) < 1e-12));
+    }
+}
+
+/// Slots in the leader's frame (docs/control-law.md, "Offsets in the
+/// leader's frame"): the slot's `q̇` is exact, so on an ideal base
+/// `‖e(t)‖ = ‖e(0)‖ e^{−K_e t}` holds as for the paper's frame — along a
+/// lemniscate (the leader's heading, turn rate and angular acceleration all
+/// varying) and a circle, slots behind, beside and ahead of the leader,
+/// robots starting turned away from their slots.
+#[test]
+fn ideal_base_closed_form_with_slots_in_the_leaders_frame() {
+    let references = [
+        Reference::Lemniscate(Lemniscate::new(2.4, 0.1, [0.0, 0.0]).unwrap()),
+        Reference::Circle(Circle::new([0.0, 0.0], 0.3, 0.5, -0.2).unwrap()),
+    ];
+    for reference in &references {
+        let agents =
+            [(1.0, 0.5, 1.5), (-0.8, -0.6, 0.8), (0.0, 2.0, 1.2)].map(|(x, y, ke)| Follower {
+                leader: None,
+                placement: Placement::leader_frame(x, y, 0.05).unwrap(),
+                ke,
+            });
+        let start = [
+            State::at_rest(1.0, -1.5, 2.0),
+            State::at_rest(3.2, 1.6, -2.5),
+            State::at_rest(2.0, 0.5, 3.0),
+        ];
+        let samples = run(
+            &VelocityBase::IDEAL,
+            reference,
+            &agents,
+            &start,
+            5e-4,
+            6.0,
+            |_| [0.0, 0.0],
+        );
+        for (a, f) in agents.iter().enumerate() {
+            let (closed, rate) = gaps(&samples, a, f.ke);
+            assert!(
+                closed < 1e-6,
+                "{reference:?} agent {}: ‖e‖ off its closed form by {closed:e}",
+                a + 1
+            );
+            assert!(rate < 1e-6, "agent {}: V̇₁ off −K_e‖e‖² by {rate:e}", a + 1);
+        }
     }
 }
 

@@ -98,6 +98,13 @@ fn syntax_and_type_errors_name_line_column_and_field() {
                 "agents[2].leader",
                 "\"reference\" or the number",
             ),
+            (
+                "offset = { x = 0.5, y = 0.8 }",
+                "offset = { x = 0.5, y = 0.8, frame = \"leaders\" }",
+                14,
+                "agents[1].offset.frame",
+                "unknown variant",
+            ),
         ],
     );
 }

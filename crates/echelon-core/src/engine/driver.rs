@@ -9,7 +9,7 @@ use crate::error::Breach;
 use crate::error::SimError;
 use crate::guard::Bounds;
 use crate::lanes::{Lanes, Mask};
-use crate::lycomp::LyComp;
+use crate::lycomp::{LyComp, OffsetFrame};
 use crate::model::State;
 use crate::reference::{Order, Reference, Trajectory};
 
@@ -461,6 +461,11 @@ pub(super) fn pack(
         if m.placement.uses_exact_derivatives() {
             return Err(EngineError::Unsupported(format!(
                 "exact L_Y derivatives (agent {n}; use ly_derivatives = \"neglect\")"
+            )));
+        }
+        if m.placement.frame() == OffsetFrame::Leader {
+            return Err(EngineError::Unsupported(format!(
+                "offsets in the leader's frame (agent {n}; the kernels hold the paper's, eq. 7)"
             )));
         }
         match comp {

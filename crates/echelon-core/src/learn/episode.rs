@@ -5,7 +5,7 @@ use std::f64::consts::PI;
 use super::EnvConfig;
 use crate::error::ParamError;
 use crate::formation::Leader;
-use crate::lycomp::LyComp;
+use crate::lycomp::{LyComp, OffsetFrame};
 use crate::model::State;
 use crate::plan::Plan;
 use crate::reference::{Circle, Jet, Order, Reference, Trajectory};
@@ -180,6 +180,12 @@ impl FixedEpisode {
                 ));
             }
             let p = a.placement();
+            if p.frame() != OffsetFrame::Follower {
+                return Err(refuse(
+                    i,
+                    "holds its offset in the leader's frame; the environments hold the paper's (eq. 7)",
+                ));
+            }
             if p.lycomp() != LyComp::None {
                 return Err(refuse(
                     i,

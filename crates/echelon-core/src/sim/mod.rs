@@ -94,10 +94,7 @@ impl Simulation {
     pub fn new(plan: &Plan) -> Simulation {
         let agents = plan.agents();
         let config = *plan.config();
-        let order = if agents
-            .iter()
-            .any(|a| a.placement().uses_exact_derivatives())
-        {
+        let order = if agents.iter().any(|a| a.placement().needs_jerk()) {
             Order::Four
         } else {
             Order::Two

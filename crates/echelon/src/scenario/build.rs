@@ -8,7 +8,9 @@ use super::locate::{FieldPath, Locator};
 use super::merge::Merge;
 use super::overrides::Overrides;
 use super::plausible::{self, Part};
-use super::schema::{AgentSection, LeaderSpec, ModeName, ReferenceSection, ScenarioFile};
+use super::schema::{
+    AgentSection, FrameName, LeaderSpec, ModeName, OffsetSpec, ReferenceSection, ScenarioFile,
+};
 use super::waypoints::{self, ReadError};
 use super::{DEFAULT_LOG_DT, Run, Scenario};
 use crate::agent::{AgentSpec, Drive};
@@ -581,6 +583,15 @@ impl Builder<'_> {
                     "missing field `offset` = { x = L_Xoff, y = L_Yoff } (or mode = \"tracking\")",
                 ));
             }
+            (
+                ModeName::Formation,
+                Some(
+                    o @ OffsetSpec {
+                        frame: Some(FrameName::Leader),
+                        ..
+                    },
+                ),
+            ) => Placement::leader_frame(o.x, o.y, l),
             (ModeName::Formation, Some(o)) => Placement::new(PlacementSpec {
                 lx_off: o.x,
                 ly_off: o.y,

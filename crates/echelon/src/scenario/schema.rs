@@ -400,7 +400,10 @@ pub enum ModeName {
 }
 
 /// `(L_Xoff, L_Yoff)`: the leader is `L_Xoff + L` ahead and `L_Yoff + L_Ycomp`
-/// to the left of the follower, in the follower's frame.
+/// to the left of the follower, in the follower's frame (the paper's
+/// Definition 1); with `frame = "leader"`, the follower's point `L` ahead
+/// sits `L_Xoff` behind and `L_Yoff` to the right of the leader in the
+/// leader's frame (a rigid formation).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct OffsetSpec {
@@ -408,6 +411,20 @@ pub struct OffsetSpec {
     pub x: f64,
     /// `L_Yoff`, m.
     pub y: f64,
+    /// The frame the offset is written in (default `"follower"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<FrameName>,
+}
+
+/// The frame an offset is written in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum FrameName {
+    /// The follower's (the paper's eq. 7): its slot turns with its heading.
+    Follower,
+    /// The leader's: the slot is fixed in the leader's frame, the point `L`
+    /// ahead of the follower tracks it (eqs. 14–16); no `L_Ycomp`.
+    Leader,
 }
 
 /// An agent's leader: `"reference"` or an agent number (from 1).

@@ -254,4 +254,5 @@ mod hazard;
 mod link;
 mod messages;
 mod plant;
+mod swap;
 mod watchdog;

@@ -10,7 +10,11 @@ v in [-0.5, 0.5] m/s and of omega in [-1.2, 1.2] rad/s, each held 0.3-1.5 s,
 with a chirp of omega in the middle third. Odometry (`nav_msgs/msg/Odometry`,
 body twist, pose integrated) is published on /robot1/odom at --odom-rate,
 offset by 7 ms from the commands, with Gaussian noise of --noise-v (m/s) and
---noise-omega (rad/s) on the twist.
+--noise-omega (rad/s) on the twist. With --a-max / --alpha-max the base's
+rates are also limited (`dv/dt = clamp((v_cmd - v)/tau_v, +-a_max)`, as
+diff_drive_controller's acceleration limits act; integrated exactly), and with
+--dead-time a command takes effect that long after it is published (a
+transport delay: the base's driver, its bus, its motor controller).
 
 Messages are serialized by rclpy's `serialize_message` (the ROS 2 Jazzy
 wheels, Fast-CDR) and written with foxglove's `mcap` writer as rosbag2 writes
@@ -20,6 +24,7 @@ clock); each message's log time is its stamp plus 2 ms.
 
 Usage: lagged_base_bag.py OUT.mcap [--tau-v S] [--tau-omega S] [--noise-v X]
        [--noise-omega X] [--seed N] [--duration S] [--twist]
+       [--a-max A] [--alpha-max A] [--dead-time S] [--odom-rate HZ]
 Prints {"messages": N, "cmd": n, "odom": n}. Exit status 3 when rclpy or mcap
 is missing.
 """
@@ -76,6 +81,24 @@ def command_profile(rng, duration_ms):
     return v, w
 
 
+def lag_step(x, u, tau, limit, h):
+    """x after h s of `dx/dt = clamp((u - x)/tau, +-limit)` (u constant): at
+    the limit until |u - x| = limit*tau, then the lag's exponential. A zero
+    lag is an ideal axis: at u at once (through the limit, if any)."""
+    if tau <= 0.0:
+        if limit is None or abs(u - x) <= limit * h:
+            return u
+        return x + math.copysign(limit * h, u - x)
+    if limit is not None and abs(u - x) > limit * tau:
+        sign = 1.0 if u > x else -1.0
+        t_sat = (abs(u - x) - limit * tau) / limit
+        if t_sat >= h:
+            return x + sign * limit * h
+        x += sign * limit * t_sat
+        h -= t_sat
+    return u - (u - x) * math.exp(-h / tau)
+
+
 def stamp(msg_header, ns):
     msg_header.stamp.sec = ns // 10**9
     msg_header.stamp.nanosec = ns % 10**9
@@ -93,7 +116,11 @@ def main():
     p.add_argument("--cmd-rate", type=float, default=20.0)
     p.add_argument("--odom-rate", type=float, default=50.0)
     p.add_argument("--twist", action="store_true")
+    p.add_argument("--a-max", type=float, default=None)
+    p.add_argument("--alpha-max", type=float, default=None)
+    p.add_argument("--dead-time", type=float, default=0.0)
     a = p.parse_args()
+    dead_ms = int(round(a.dead_time * 1000))
 
     rng = random.Random(a.seed)
     duration_ms = int(a.duration * 1000)
@@ -122,16 +149,17 @@ def main():
         v = omega = 0.0
         x = y = theta = 0.0
         held = (0.0, 0.0)
+        # Commands published, each applied dead_ms after: (apply at ms, cmd).
+        pending = []
         counts = {"cmd": 0, "odom": 0}
-        av = math.exp(-0.001 / a.tau_v)
-        aw = math.exp(-0.001 / a.tau_omega)
         for k in range(duration_ms):
             ns = EPOCH_NS + k * 10**6
             if k % cmd_every == 0:
-                held = (profile[0][k], profile[1][k])
+                cmd = (profile[0][k], profile[1][k])
+                pending.append((k + dead_ms, cmd))
                 tw = Twist()
-                tw.linear.x = held[0]
-                tw.angular.z = held[1]
+                tw.linear.x = cmd[0]
+                tw.angular.z = cmd[1]
                 if a.twist:
                     msg = tw
                 else:
@@ -154,9 +182,11 @@ def main():
                 o.twist.twist.angular.z = omega + rng.gauss(0.0, a.noise_omega)
                 write("/robot1/odom", ns, o)
                 counts["odom"] += 1
-            # One exact step of the lags over the next millisecond.
-            v = av * v + (1 - av) * held[0]
-            omega = aw * omega + (1 - aw) * held[1]
+            while pending and pending[0][0] <= k:
+                held = pending.pop(0)[1]
+            # One exact step of the lags (and limits) over the next millisecond.
+            v = lag_step(v, held[0], a.tau_v, a.a_max, 0.001)
+            omega = lag_step(omega, held[1], a.tau_omega, a.alpha_max, 0.001)
             x += 0.001 * v * math.cos(theta)
             y += 0.001 * v * math.sin(theta)
             theta += 0.001 * omega

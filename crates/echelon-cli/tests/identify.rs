@@ -311,6 +311,141 @@ fn a_ros2_bag_of_a_lagged_base_gives_its_lags_within_5_percent() {
     );
 }
 
+/// `identify.json` of `echelon identify BAG --out DIR`.
+fn identified_json(bag: &Path, out: &Path) -> serde_json::Value {
+    let o = echelon(&[
+        "identify",
+        bag.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    serde_json::from_str(&std::fs::read_to_string(out.join("identify.json")).unwrap()).unwrap()
+}
+
+/// The estimate of parameter or limit `field` in `identify.json`, and
+/// whether a limit was `reached`.
+fn estimate_of(json: &serde_json::Value, field: &str) -> (Option<f64>, bool) {
+    for list in ["params", "limits"] {
+        if let Some(p) = json[list]
+            .as_array()
+            .and_then(|a| a.iter().find(|p| p["field"] == field))
+        {
+            return (
+                p["estimate"]["value"].as_f64(),
+                p["reached"].as_bool().unwrap_or(true),
+            );
+        }
+    }
+    panic!("no {field} in {json}")
+}
+
+/// Bags written with the ROS 2 serializer (rclpy, Fast-CDR) of bases with
+/// a transport delay and acceleration limits, the way rosbag2 writes them
+/// (TwistStamped commands at 20 Hz, odometry at 50 or 20 Hz, noisy twist):
+/// a base with lags 0.2/0.12 s, limits 0.6 m/s² and 2.0 rad/s² and a 40 ms
+/// dead time gets all five (lags and limits within 5 %, the dead time
+/// within 5 ms); the same base without limits gets its lags and dead time,
+/// and both limits "not reached".
+#[test]
+fn a_ros2_bag_of_a_base_with_dead_time_and_limits_gives_all_of_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = [
+        "--tau-v",
+        "0.2",
+        "--tau-omega",
+        "0.12",
+        "--dead-time",
+        "0.04",
+        "--duration",
+        "60",
+        "--noise-v",
+        "0.002",
+        "--noise-omega",
+        "0.004",
+    ];
+    for (name, limits, rate) in [("limited", true, "20"), ("free", false, "50")] {
+        let bag = dir.path().join(format!("{name}.mcap"));
+        let mut args = base.to_vec();
+        args.extend(["--odom-rate", rate, "--seed", "5"]);
+        if limits {
+            args.extend(["--a-max", "0.6", "--alpha-max", "2.0"]);
+        }
+        lagged_base_bag(&bag, &args);
+        let json = identified_json(&bag, &dir.path().join(name));
+        for (field, truth) in [("tau_v", 0.2), ("tau_omega", 0.12)] {
+            let (e, _) = estimate_of(&json, field);
+            let e = e.unwrap_or_else(|| panic!("{name}: {field} withheld: {json}"));
+            assert!(
+                (e / truth - 1.0).abs() < 0.05,
+                "{name}: {field} {e}: {json}"
+            );
+        }
+        let (d, _) = estimate_of(&json, "dead_time");
+        let d = d.unwrap_or_else(|| panic!("{name}: dead time withheld: {json}"));
+        assert!((d - 0.04).abs() < 0.005, "{name}: dead time {d}: {json}");
+        for (field, truth) in [("a_max", 0.6), ("alpha_max", 2.0)] {
+            let (e, reached) = estimate_of(&json, field);
+            if limits {
+                let e = e.unwrap_or_else(|| panic!("{name}: {field} withheld: {json}"));
+                assert!(
+                    reached && (e / truth - 1.0).abs() < 0.05,
+                    "{name}: {field} {e}: {json}"
+                );
+            } else {
+                assert!(!reached && e.is_none(), "{name}: {field} claimed: {json}");
+            }
+        }
+    }
+}
+
+/// An ideal base (no lag, no limit, 10 ms dead time) in a bag written with
+/// the ROS 2 serializer: both lags are answered — "below one odometry
+/// period", a 95 % upper bound under the 20 ms period, written as 0 in the
+/// block — not withheld, and no limit is claimed.
+#[test]
+fn a_ros2_bag_of_an_ideal_base_answers_its_lags_as_below_a_period() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = dir.path().join("ideal.mcap");
+    lagged_base_bag(
+        &bag,
+        &[
+            "--tau-v",
+            "0",
+            "--tau-omega",
+            "0",
+            "--dead-time",
+            "0.01",
+            "--seed",
+            "4",
+        ],
+    );
+    let out = dir.path().join("ideal");
+    let json = identified_json(&bag, &out);
+    for field in ["tau_v", "tau_omega"] {
+        let p = json["params"]
+            .as_array()
+            .and_then(|a| a.iter().find(|p| p["field"] == field))
+            .unwrap_or_else(|| panic!("no {field}: {json}"));
+        let bound = p["upper_bound"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{field} has no upper bound: {json}"));
+        assert!(bound > 0.0 && bound < 0.02, "{field} < {bound}: {json}");
+        assert!(p["not_identifiable"].is_null(), "{field} withheld: {json}");
+    }
+    for field in ["a_max", "alpha_max"] {
+        let (e, reached) = estimate_of(&json, field);
+        assert!(!reached && e.is_none(), "{field} claimed: {json}");
+    }
+    let o = echelon(&["identify", bag.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    assert!(
+        stdout.contains("\ntau_v = 0.0    # τ_v, s: below what the odometry resolves"),
+        "{stdout}"
+    );
+}
+
 #[test]
 fn a_run_whose_acceleration_limit_acted_prints_its_lags_and_limit_and_the_block_runs() {
     // turtlebot-circle: the Burgers' joint acceleration limit (α_max =

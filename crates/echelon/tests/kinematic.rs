@@ -187,16 +187,28 @@ fn ideal_base_closed_form_along_a_circle_with_a_chained_follower() {
         6.0,
         |_| [0.0, 0.0],
     );
+    closed_form_holds(&samples, &agents, "circle");
+}
+
+/// Every agent of an ideal-base run on its closed form and `V̇₁` identity
+/// to 1e-6, with `z = 0` (the ideal base moves at the command).
+fn closed_form_holds(samples: &[Sample], agents: &[Follower], what: &str) {
     for (a, f) in agents.iter().enumerate() {
-        let (closed, rate) = gaps(&samples, a, f.ke);
-        eprintln!("agent {}: closed form {closed:e}, V̇₁ {rate:e}", a + 1);
-        assert!(
-            closed < 1e-6,
-            "agent {}: ‖e‖ off its closed form by {closed:e}",
+        let (closed, rate) = gaps(samples, a, f.ke);
+        eprintln!(
+            "{what} agent {}: closed form {closed:e}, V̇₁ {rate:e}",
             a + 1
         );
-        assert!(rate < 1e-6, "agent {}: V̇₁ off −K_e‖e‖² by {rate:e}", a + 1);
-        // z = 0: the ideal base moves at the command.
+        assert!(
+            closed < 1e-6,
+            "{what} agent {}: ‖e‖ off its closed form by {closed:e}",
+            a + 1
+        );
+        assert!(
+            rate < 1e-6,
+            "{what} agent {}: V̇₁ off −K_e‖e‖² by {rate:e}",
+            a + 1
+        );
         assert!(samples.iter().all(|s| norm(s.outs[a].z) < 1e-12));
     }
 }
@@ -234,15 +246,7 @@ fn ideal_base_closed_form_with_slots_in_the_leaders_frame() {
             6.0,
             |_| [0.0, 0.0],
         );
-        for (a, f) in agents.iter().enumerate() {
-            let (closed, rate) = gaps(&samples, a, f.ke);
-            assert!(
-                closed < 1e-6,
-                "{reference:?} agent {}: ‖e‖ off its closed form by {closed:e}",
-                a + 1
-            );
-            assert!(rate < 1e-6, "agent {}: V̇₁ off −K_e‖e‖² by {rate:e}", a + 1);
-        }
+        closed_form_holds(&samples, &agents, &format!("{reference:?}"));
     }
 }
 

@@ -96,6 +96,13 @@ fn the_reported_swap_in_the_simulator() {
         for n in [8, 12] {
             let case = Swap::antipodal(drive, n, 0.8, 0.22, 0.05);
             let seen = run(&case);
+            eprintln!(
+                "{drive:?} N = {n}: home at {:.1} s (bound {:.1} s), closest {:.4} m, {} breaks",
+                seen.unsettled,
+                case.bound(),
+                seen.closest,
+                seen.breaks
+            );
             assert!(seen.bad.is_none(), "{case:?}: {seen:?}");
             assert!(seen.closest >= case.radius - 1e-3, "{case:?}: {seen:?}");
             assert!(seen.unsettled <= case.bound(), "{case:?}: {seen:?}");

@@ -46,11 +46,6 @@ link_loss = {{ policy = "stop" }}
     Scenario::parse(&text, "braking", None).unwrap_or_else(|e| panic!("{e}\n{text}"))
 }
 
-/// The point `l` ahead of `s`.
-fn ahead(s: &State) -> [f64; 2] {
-    [s.x + L * s.theta.cos(), s.y + L * s.theta.sin()]
-}
-
 /// Offsets on a grid `rows × cols`, `spacing` apart, each jittered.
 fn grid() -> impl Strategy<Value = Vec<(f64, f64)>> {
     (2usize..=3, 1usize..=2, 0.45..0.8f64)
@@ -90,16 +85,7 @@ fn closest_approach(offsets: &[(f64, f64)], k: usize, fault: FaultSpec, end: f64
     while t < end {
         t += 0.01;
         fleet.run_until(t);
-        let points: Vec<[f64; 2]> = fleet
-            .robots()
-            .map(|r| ahead(&r.plant().true_state()))
-            .collect();
-        for i in 0..n {
-            for j in i + 1..n {
-                let d = (points[i][0] - points[j][0]).hypot(points[i][1] - points[j][1]);
-                closest = closest.min(d);
-            }
-        }
+        closest = closest.min(fleet.closest(L));
     }
     (closest, fleet)
 }

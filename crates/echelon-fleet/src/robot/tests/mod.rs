@@ -131,6 +131,25 @@ impl Fleet {
         (0..self.robots.len()).map(|i| self.robot(i))
     }
 
+    /// The smallest distance between two robots' points `l` ahead, from
+    /// their true states now, m.
+    fn closest(&self, l: f64) -> f64 {
+        let points: Vec<[f64; 2]> = self
+            .robots()
+            .map(|r| {
+                let s = r.plant().true_state();
+                [s.x + l * s.theta.cos(), s.y + l * s.theta.sin()]
+            })
+            .collect();
+        let mut closest = f64::INFINITY;
+        for (i, a) in points.iter().enumerate() {
+            for b in &points[i + 1..] {
+                closest = closest.min((a[0] - b[0]).hypot(a[1] - b[1]));
+            }
+        }
+        closest
+    }
+
     /// Agent `i + 1`'s states, in the order it published them.
     fn log(&self, i: usize) -> Vec<Published> {
         let key = self.keys.state(i as u32 + 1);

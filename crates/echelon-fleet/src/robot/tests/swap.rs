@@ -42,18 +42,7 @@ fn run(swap: &Swap) -> Seen {
     while t < end {
         t += 0.01;
         fleet.run_until(t);
-        let points: Vec<[f64; 2]> = fleet
-            .robots()
-            .map(|r| {
-                let s = r.plant().true_state();
-                [s.x + L * s.theta.cos(), s.y + L * s.theta.sin()]
-            })
-            .collect();
-        for i in 0..n {
-            for j in i + 1..n {
-                closest = closest.min(dist2(points[i], points[j]));
-            }
-        }
+        closest = closest.min(fleet.closest(L));
     }
     let mut unsettled = 0.0f64;
     let mut finals = vec![f64::INFINITY; n];
@@ -73,13 +62,16 @@ fn run(swap: &Swap) -> Seen {
     }
 }
 
-fn dist2(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
-}
-
 fn check(swap: &Swap) -> Result<(), TestCaseError> {
     let seen = run(swap);
     let limit = swap.bound();
+    eprintln!(
+        "{:?} N = {}: home at {:.1} s (bound {limit:.1} s), closest {:.4} m",
+        swap.drive,
+        swap.n(),
+        seen.unsettled,
+        seen.closest
+    );
     let what = format!("{swap:?}: {seen:?}, bound {limit:.1} s");
     prop_assert!(seen.closest >= swap.radius - 1e-3, "radius: {what}");
     prop_assert!(seen.unsettled <= limit, "not home within the bound: {what}");

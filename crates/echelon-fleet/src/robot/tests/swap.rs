@@ -4,7 +4,8 @@
 //! held in the reference's frame across a circle) run as robot tasks on the
 //! fake clock — each robot's law and filter from what reaches it over the
 //! bus (the leader's samples at 50 Hz, its neighbours' published states),
-//! decentralised as on real robots. Every robot's published `‖e‖` is below
+//! decentralised as on real robots; ideal velocity bases and Table I torque
+//! robots. Every robot's published `‖e‖` is below
 //! 1 cm from the bound on, and no two robots' points (their true states,
 //! every 10 ms) come closer than the radius less 1 mm.
 
@@ -83,12 +84,13 @@ fn check(swap: &Swap) -> Result<(), TestCaseError> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(6))]
+    #![proptest_config(ProptestConfig::with_cases(8))]
 
-    /// Velocity bases, 4–10 robots, antipodal or permuted, any radius and
-    /// heading.
+    /// Velocity bases or Table I torque robots, 4–10 robots, antipodal or
+    /// permuted, any radius and heading.
     #[test]
     fn everyone_gets_home_in_the_fleet(
+        torque in any::<bool>(),
         n in 4usize..=10,
         radius in 0.15..0.3f64,
         k in 1.0..2.0f64,
@@ -103,7 +105,7 @@ proptest! {
             perm.into_iter().filter(|&i| i < n).collect()
         };
         check(&Swap {
-            drive: SwapDrive::Velocity,
+            drive: if torque { SwapDrive::Torque } else { SwapDrive::Velocity },
             to,
             circle: k * Swap::smallest_circle(n, radius),
             radius,

@@ -185,6 +185,15 @@ pub enum FormationError {
         /// Its robot leader (1-based).
         leader: usize,
     },
+    /// A slot in the leader's frame turns with the leader's heading, which
+    /// a reference standing still does not have.
+    #[error(
+        "agent {agent} holds its offset in the leader's frame (offset.frame = \"leader\") behind a reference that stands still at times (cubic, waypoints, or speed 0), where it has no heading; use a circle, line or lemniscate that keeps moving, or the follower's frame"
+    )]
+    LeaderFrameNeedsHeading {
+        /// The follower (1-based).
+        agent: usize,
+    },
 }
 
 fn fmt_cycle(c: &[usize]) -> String {

@@ -10,7 +10,7 @@ use crate::kinematic::kinematic_law;
 use crate::lycomp::{OffsetFrame, Placement};
 use crate::model::Input;
 use crate::model::State;
-use crate::reference::{Jet, STANDSTILL, rest_heading};
+use crate::reference::Jet;
 
 /// What a follower knows of its leader at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -35,6 +35,10 @@ pub enum LeaderView<'a> {
         speed: f64,
         /// `ω_d`, rad/s.
         turn_rate: f64,
+        /// `θ_d`, rad: the direction of `ṗ_d`, kept by whoever advanced
+        /// the sample when it comes to rest (a leader stopped by a link-loss
+        /// policy keeps the heading it had).
+        heading: f64,
     },
 }
 
@@ -46,8 +50,8 @@ impl LeaderView<'_> {
     /// turns with the leader's heading: the reference's path heading, turn
     /// rate and angular acceleration ([`Jet::frame`]); a leader robot's `θ`
     /// and `ω` (its `ω̇` neglected, as `L̇_Y` is for robot leaders); a
-    /// leader known by its motion: the heading of `ṗ_d` and `ω_d` (`ω̇`
-    /// neglected: exact on the circle and the line the fleet predicts along).
+    /// leader known by its motion: its `θ_d` and `ω_d` (`ω̇` neglected:
+    /// exact on the circle and the line the fleet predicts along).
     #[inline]
     pub fn resolve(&self, placement: &Placement) -> (LeaderMotion, Offset) {
         let (motion, offset) = self.resolve_follower(placement);
@@ -58,15 +62,8 @@ impl LeaderView<'_> {
             LeaderView::Reference(jet) => jet.frame(),
             LeaderView::Robot { state, .. } => (state.theta, state.omega, 0.0),
             LeaderView::Motion {
-                motion, turn_rate, ..
-            } => {
-                let theta = if motion.dp[0].hypot(motion.dp[1]) > STANDSTILL {
-                    motion.dp[1].atan2(motion.dp[0])
-                } else {
-                    rest_heading(&[motion.ddp])
-                };
-                (theta, turn_rate, 0.0)
-            }
+                turn_rate, heading, ..
+            } => (heading, turn_rate, 0.0),
         };
         (placement.slot(&motion, theta, omega, domega), offset)
     }
@@ -87,6 +84,7 @@ impl LeaderView<'_> {
                 motion,
                 speed,
                 turn_rate,
+                ..
             } => (motion, placement.offset_for_robot(speed, turn_rate)),
         }
     }
@@ -203,6 +201,7 @@ mod tests {
                 motion: LeaderMotion::of_robot(&leader, 0.05),
                 speed: 0.3,
                 turn_rate: 0.2,
+                heading: leader.theta,
             },
         );
         assert_eq!(a, b);
@@ -225,6 +224,7 @@ mod tests {
                 motion: LeaderMotion::of_jet(&jet),
                 speed: jet.speed(),
                 turn_rate: jet.turn_rate(),
+                heading: jet.heading(),
             },
         );
         assert_eq!(a, b);
@@ -291,8 +291,8 @@ mod tests {
         }
 
         /// A leader robot's frame is its heading; a leader known by its
-        /// motion, the heading of its velocity (of its acceleration at
-        /// rest). In the follower's frame nothing moves.
+        /// motion, the heading it comes with (also at rest). In the
+        /// follower's frame nothing moves.
         #[test]
         fn robot_and_motion_leaders_give_their_heading() {
             let p = Placement::leader_frame(1.0, 0.0, 0.05).unwrap();
@@ -308,15 +308,17 @@ mod tests {
                 (q.p[0] - 2.0).abs() < 1e-12 && (q.p[1] - 0.0).abs() < 1e-12,
                 "{q:?}"
             );
+            // At rest, the heading it was given.
             let motion = LeaderMotion {
                 p: [0.0, 0.0],
                 dp: [0.0, 0.0],
-                ddp: [0.0, -0.3],
+                ddp: [0.0, 0.0],
             };
             let view = LeaderView::Motion {
                 motion,
                 speed: 0.0,
                 turn_rate: 0.0,
+                heading: -std::f64::consts::FRAC_PI_2,
             };
             let q = view.resolve(&p).0;
             assert!(

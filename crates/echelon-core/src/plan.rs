@@ -13,7 +13,7 @@ use crate::error::{FormationError, SimError};
 use crate::error::{ParamError, num};
 use crate::formation::{Formation, Leader};
 use crate::guard::Bounds;
-use crate::lycomp::{FitCoefficients, LyComp};
+use crate::lycomp::{FitCoefficients, LyComp, OffsetFrame};
 use crate::math::whole_ratio;
 use crate::odometry::{Odometer, OdometrySpec};
 use crate::reference::Reference;
@@ -119,6 +119,20 @@ pub struct Agents {
 }
 
 impl Agents {
+    /// Refuses what the agents cannot do behind `reference`: a slot in the
+    /// leader's frame behind a reference that stands still at times (it
+    /// has no heading there).
+    pub fn behind(&self, reference: &Reference) -> Result<(), FormationError> {
+        match self.specs.iter().position(|a| {
+            a.leader() == Leader::Reference
+                && a.placement().frame() == OffsetFrame::Leader
+                && !reference.keeps_moving()
+        }) {
+            Some(i) => Err(FormationError::LeaderFrameNeedsHeading { agent: i + 1 }),
+            None => Ok(()),
+        }
+    }
+
     /// Checks the agents together (each is valid by [`AgentSpec::new`]).
     pub fn new(specs: Vec<AgentSpec>) -> Result<Agents, FormationError> {
         let formation = Formation::new(specs.iter().map(|a| a.leader()).collect())?;
@@ -194,7 +208,9 @@ impl Plan {
                     })?;
             }
         }
-        Ok(Plan::of(Agents::new(agents)?, reference, config))
+        let agents = Agents::new(agents)?;
+        agents.behind(&reference)?;
+        Ok(Plan::of(agents, reference, config))
     }
 
     /// [`Plan::new`] for agents already checked together: checks nothing

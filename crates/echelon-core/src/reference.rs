@@ -399,6 +399,20 @@ pub enum Reference {
     Custom(Arc<dyn Trajectory>),
 }
 
+impl Reference {
+    /// Whether the path keeps moving at every instant, so its heading is
+    /// defined at every instant: a circle or line with a speed, a
+    /// lemniscate. Cubics and waypoints stand still at times (and a custom
+    /// trajectory is not known to move).
+    pub fn keeps_moving(&self) -> bool {
+        match self {
+            Reference::Circle(r) => r.speed() > STANDSTILL,
+            Reference::Lemniscate(_) => true,
+            Reference::Cubic(_) | Reference::Waypoints(_) | Reference::Custom(_) => false,
+        }
+    }
+}
+
 impl Trajectory for Reference {
     #[inline]
     fn eval(&self, t: f64, order: Order) -> Jet {

@@ -53,7 +53,8 @@ pub struct Swap {
     pub circle: f64,
     /// The safety radius between the robots' points, m.
     pub radius: f64,
-    /// The reference's speed, m/s (> 0).
+    /// The reference's speed, m/s (> 0: a slot in the leader's frame needs
+    /// a leader that keeps moving).
     pub speed: f64,
     /// The reference's heading, rad.
     pub heading: f64,
@@ -238,5 +239,25 @@ mod tests {
                 .to_string();
             assert!(e.contains("leader's frame"), "{drive:?}: {e}");
         }
+    }
+
+    /// A slot in the leader's frame behind a reference that stands still
+    /// at times (here a line at speed 0) is refused at the agent's
+    /// `offset.frame`: it would have no heading there.
+    #[test]
+    fn a_reference_at_rest_gives_no_frame() {
+        let mut swap = Swap::antipodal(SwapDrive::Velocity, 4, 1.0, 0.2, 0.05);
+        swap.speed = 0.0;
+        let e = Scenario::parse(&swap.toml(), "swap.toml", None)
+            .unwrap()
+            .build(&Overrides::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("swap.toml") && e.contains("agents[1].offset.frame"),
+            "{e}"
+        );
+        assert!(e.contains("stands still"), "{e}");
     }
 }

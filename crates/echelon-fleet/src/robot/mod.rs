@@ -163,6 +163,10 @@ pub struct Robot<P: Plant = SimulatedDrive> {
     delayed: VecDeque<(f64, Header, LeaderSample)>,
     sample: Option<LeaderSample>,
     fresh: bool,
+    /// The leader's last heading while it moved (`θ_d` of a slot in the
+    /// leader's frame: a leader stopped by a link-loss policy, or paused,
+    /// keeps it), rad.
+    heading: f64,
     next_tick: f64,
     next_stats: f64,
     seq: u64,
@@ -231,6 +235,7 @@ impl<P: Plant> Robot<P> {
             delayed: VecDeque::with_capacity(64),
             sample: None,
             fresh: false,
+            heading: 0.0,
             next_tick: 0.0,
             next_stats: 0.0,
             seq: 0,

@@ -5,6 +5,7 @@
 
 use echelon::follow::{LeaderView, follow};
 use echelon::model::State;
+use echelon::reference::STANDSTILL;
 
 use crate::link::{Predicted, predict};
 use crate::plant::Plant;
@@ -162,6 +163,10 @@ impl<P: Plant> Robot<P> {
         state: State,
         p: &Predicted,
     ) -> Result<(Header, RobotState), String> {
+        let dp = p.motion.dp;
+        if dp[0].hypot(dp[1]) > STANDSTILL {
+            self.heading = dp[1].atan2(dp[0]);
+        }
         let out = follow(
             &self.config.spec,
             &state,
@@ -169,6 +174,7 @@ impl<P: Plant> Robot<P> {
                 motion: p.motion,
                 speed: p.speed,
                 turn_rate: p.turn_rate,
+                heading: self.heading,
             },
         );
         let nominal = out.command();

@@ -222,6 +222,9 @@ impl Builder<'_> {
             .collect::<Result<Vec<_>, _>>()?;
         let seed = f.seed.unwrap_or(0);
         let safety = self.safety(&agents)?;
+        agents
+            .behind(&reference)
+            .map_err(|e| self.formation_error(&e))?;
         let plan = Plan::of(agents, reference, config)
             .with_odometry(odometry, seed)
             .map_err(|e| self.at.error(&FieldPath::from("odometry"), e))?;
@@ -290,6 +293,9 @@ impl Builder<'_> {
                 self.control(*a - 1).path_of("ly_derivatives")
             }
             FormationError::NoLeaderAcceleration { agent: a, .. } => agent(*a).key("leader"),
+            FormationError::LeaderFrameNeedsHeading { agent: a } => {
+                agent(*a).key("offset").key("frame")
+            }
         };
         self.at.error(&path, e)
     }

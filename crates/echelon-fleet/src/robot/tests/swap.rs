@@ -125,3 +125,29 @@ fn the_reported_swap_in_the_fleet() {
         check(&swap).unwrap_or_else(|e| panic!("{drive:?}: {e}"));
     }
 }
+
+/// A robot whose slot is in the leader's frame keeps the leader's last
+/// heading when the leader's stream is cut and its link-loss policy
+/// (`stop`) brings the leader to rest: the slots stay where they were (a
+/// leader at rest has no heading of its own; the world's axes would swing
+/// every slot about it, here by 2 rad, metres away).
+#[test]
+fn a_stopped_leader_keeps_its_heading() {
+    let mut swap = Swap::antipodal(SwapDrive::Velocity, 4, 1.0, 0.2, 0.05);
+    swap.heading = 2.0;
+    let (_, mut fleet) = fleet_of(&swap);
+    fleet.run_until(30.0);
+    let at_cut: Vec<State> = fleet.robots().map(|r| r.plant().true_state()).collect();
+    fleet.cut(30.0, 1e9);
+    fleet.run_until(45.0);
+    for (i, (r, before)) in fleet.robots().zip(&at_cut).enumerate() {
+        let s = r.plant().true_state();
+        let moved = (s.x - before.x).hypot(s.y - before.y);
+        assert!(
+            moved < 0.05,
+            "robot {} moved {moved} m after the cut",
+            i + 1
+        );
+        assert_eq!(r.last().link, LinkStatus::Stopping, "robot {}", i + 1);
+    }
+}

@@ -80,13 +80,7 @@ fn closest_approach(offsets: &[(f64, f64)], k: usize, fault: FaultSpec, end: f64
         .map(|i| if i == k { fault } else { FaultSpec::default() })
         .collect();
     let mut fleet = Fleet::of(&s, &faults);
-    let mut closest = f64::INFINITY;
-    let mut t = 0.0;
-    while t < end {
-        t += 0.01;
-        fleet.run_until(t);
-        closest = closest.min(fleet.closest(L));
-    }
+    let closest = fleet.closest_until(end, L);
     (closest, fleet)
 }
 

@@ -131,6 +131,19 @@ impl Fleet {
         (0..self.robots.len()).map(|i| self.robot(i))
     }
 
+    /// Runs to bus time `end` in 10 ms steps: the smallest distance two
+    /// robots' points `l` ahead came at those instants, m.
+    fn closest_until(&mut self, end: f64, l: f64) -> f64 {
+        let mut closest = f64::INFINITY;
+        let mut t = self.bus.now();
+        while t < end {
+            t += 0.01;
+            self.run_until(t);
+            closest = closest.min(self.closest(l));
+        }
+        closest
+    }
+
     /// The smallest distance between two robots' points `l` ahead, from
     /// their true states now, m.
     fn closest(&self, l: f64) -> f64 {

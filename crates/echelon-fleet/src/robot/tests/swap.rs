@@ -38,13 +38,7 @@ fn run(swap: &Swap) -> Seen {
     let (_, mut fleet) = fleet_of(swap);
     let n = swap.n();
     let end = swap.duration();
-    let mut closest = f64::INFINITY;
-    let mut t = 0.0;
-    while t < end {
-        t += 0.01;
-        fleet.run_until(t);
-        closest = closest.min(fleet.closest(L));
-    }
+    let closest = fleet.closest_until(end, L);
     let mut unsettled = 0.0f64;
     let mut finals = vec![f64::INFINITY; n];
     for (i, last) in finals.iter_mut().enumerate() {

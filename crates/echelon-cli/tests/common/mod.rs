@@ -92,16 +92,27 @@ pub(crate) fn f(v: &Value, path: &[&str]) -> f64 {
         .unwrap_or_else(|| panic!("{path:?} in {v}"))
 }
 
-/// Holds the test binary's one fleet slot: a test that runs fleet
-/// processes takes it first, so fleets run one at a time. Each fleet is a
+/// Holds the one fleet slot of the machine's test run: a test that runs
+/// fleet processes takes it first, so fleets run one at a time, whichever
+/// test binary or process they are in (`cargo test` runs one binary at a
+/// time, but a runner with a process per test, such as cargo-nextest, or two
+/// `cargo test` at once would not). Each fleet is a
 /// handful of real-time processes at ×10 whose convergence, latency and
 /// sample counts depend on getting the CPU when their ticks come; two fleets
-/// at once on a 2-core machine starve each other (the test threads default
-/// to the core count).
-pub(crate) fn one_fleet_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    static SLOT: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    SLOT.lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
+/// at once on a 2-core machine starve each other. The slot is an exclusive
+/// lock on a file in the target directory (`flock`), released when the
+/// returned file is dropped, also when the test panics or its process dies.
+pub(crate) fn one_fleet_at_a_time() -> std::fs::File {
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("one-fleet-at-a-time.lock");
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    file.lock()
+        .unwrap_or_else(|e| panic!("locking {}: {e}", path.display()));
+    file
 }
 
 /// Kills the child if the test ends first.

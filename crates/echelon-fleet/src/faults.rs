@@ -158,6 +158,7 @@ pub struct Aftermath {
     farthest: f64,
     zero_at: Option<f64>,
     moving_until: f64,
+    slowest_tick: f64,
 }
 
 /// Below this speed a robot is at rest, m/s (a law settling onto a point
@@ -185,6 +186,13 @@ pub struct AftermathReport {
     pub moving_for: f64,
     /// Whether it moved at the end of the measurement.
     pub moving_at_end: bool,
+    /// The longest interval between two of its observations (its control
+    /// ticks) from the fault to its first zero command, s: the tick that
+    /// notices the fault comes at most this long after it could have (a
+    /// loaded machine starts a tick late; the fault matrix's bound takes
+    /// it in place of one control period when it is longer).
+    #[serde(default)]
+    pub slowest_tick: f64,
 }
 
 impl Aftermath {
@@ -200,6 +208,7 @@ impl Aftermath {
             farthest: 0.0,
             zero_at: None,
             moving_until: at,
+            slowest_tick: 0.0,
         }
     }
 
@@ -211,8 +220,12 @@ impl Aftermath {
         }
         let from = *self.displacement_from.get_or_insert(position);
         self.speed_at_fault.get_or_insert(speed);
-        if let Some((_, p)) = self.last {
+        if let Some((tl, p)) = self.last {
             self.travel += (position[0] - p[0]).hypot(position[1] - p[1]);
+            if self.zero_at.is_none() {
+                // Detecting: the tick that notices comes at most this late.
+                self.slowest_tick = self.slowest_tick.max(t - tl);
+            }
         }
         self.farthest = self
             .farthest
@@ -238,6 +251,7 @@ impl Aftermath {
             moving_at_end: self
                 .last
                 .is_some_and(|(t, _)| t <= self.moving_until && t > self.at),
+            slowest_tick: self.slowest_tick,
         }
     }
 }

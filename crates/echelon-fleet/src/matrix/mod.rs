@@ -12,7 +12,9 @@
 //!
 //! `v` the robot's speed at the fault, `t_detect` the time the robot needs
 //! to notice (the link timeout, the odometry timeout, the heartbeat
-//! deadline, plus one control period `T`), `depth` the robots ahead of it
+//! deadline, plus one control period `T`, or the longest interval between
+//! its ticks up to its first zero command when a loaded machine made that
+//! longer: measured, never assumed), `depth` the robots ahead of it
 //! in its chain that notice first (each adds a period and a state's
 //! delivery), `τ_v` the base's lag (a first-order
 //! lag delays any braking by at most `τ_v`) and `d_brake` the braking
@@ -241,7 +243,7 @@ fn judge_robot(
     };
     let link = robot.map_or("killed", |r| r.link.as_str());
     let v = a.speed_at_fault.unwrap_or(0.0);
-    let bound = (row.outcome != Outcome::Unaffected).then(|| row.bound(v, depth));
+    let bound = (row.outcome != Outcome::Unaffected).then(|| row.bound(v, depth, a.slowest_tick));
     if let Some(bound) = bound
         && a.farthest > bound
     {
@@ -511,7 +513,7 @@ pub fn markdown(r: &FaultsReport) -> String {
     }
     let _ = writeln!(
         s,
-        "\n`farthest` is the largest distance any affected robot got from where the fault found it (its true pose, integrated at 1 ms); `bound` is that robot's `v·(t_detect + depth·(T + 10 ms)) + v·τ_v + d_brake` (T the control period, τ_v the base's lag, `depth` the robots ahead of it in its chain that notice first, d_brake = v²/2a for a zero command or the law settling onto a point at rest, v·hold + πv²/4·decel for `extrapolate`); `time to zero` the longest time from the fault to a zero command (— where the robots settle under the law instead: `stop` converges onto the last reference); `moving after` the longest time an affected robot kept moving faster than {} m/s after the fault, within the row's window.",
+        "\n`farthest` is the largest distance any affected robot got from where the fault found it (its true pose, integrated at 1 ms); `bound` is that robot's `v·(t_detect + depth·(T + 10 ms)) + v·τ_v + d_brake` (T the control period, which `t_detect` holds once: the robot's slowest tick up to its first zero command instead when that was longer, τ_v the base's lag, `depth` the robots ahead of it in its chain that notice first, d_brake = v²/2a for a zero command or the law settling onto a point at rest, v·hold + πv²/4·decel for `extrapolate`); `time to zero` the longest time from the fault to a zero command (— where the robots settle under the law instead: `stop` converges onto the last reference); `moving after` the longest time an affected robot kept moving faster than {} m/s after the fault, within the row's window.",
         crate::faults::AT_REST
     );
     let _ = writeln!(s, "\n{INTEROP}");
@@ -538,9 +540,23 @@ mod tests {
                 .unwrap_or_else(|e| panic!("{}: {e}", row.name));
             let f = s.fleet().unwrap_or_else(|e| panic!("{}: {e}", row.name));
             assert_eq!(f.operator_heartbeat.is_some(), row.supervised);
-            assert!(row.bound(0.0, 2) == 0.0);
-            assert!(row.bound(0.15, 0) < row.bound(0.3, 0), "{}", row.name);
-            assert!(row.bound(0.15, 0) < row.bound(0.15, 1), "{}", row.name);
+            assert!(row.bound(0.0, 2, 0.0) == 0.0);
+            assert!(
+                row.bound(0.15, 0, 0.0) < row.bound(0.3, 0, 0.0),
+                "{}",
+                row.name
+            );
+            assert!(
+                row.bound(0.15, 0, 0.0) < row.bound(0.15, 1, 0.0),
+                "{}",
+                row.name
+            );
+            // A tick no later than a control period changes nothing; a
+            // later one widens the bound by v times what it exceeds.
+            let period = 1.0 / CONTROL_RATE;
+            assert_eq!(row.bound(0.15, 0, period), row.bound(0.15, 0, 0.0));
+            let late = row.bound(0.15, 0, period + 0.02) - row.bound(0.15, 0, period);
+            assert!((late - 0.15 * 0.02).abs() < 1e-12, "{}: {late}", row.name);
         }
     }
 }

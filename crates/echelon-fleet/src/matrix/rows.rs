@@ -386,11 +386,14 @@ fn watchdog_rows() -> Vec<Row> {
 impl Row {
     /// The bound on the farthest a robot moving at `v`, `depth` robots
     /// down its chain from the first to notice, gets from where the fault
-    /// found it, m: each robot ahead adds a control period and a state's
-    /// delivery to its detection.
-    pub fn bound(&self, v: f64, depth: u32) -> f64 {
+    /// found it, m: its detection comes at its first tick after the fault's
+    /// timeout, one control period on, or `slowest_tick` s on when its
+    /// ticks came further apart than that (a loaded machine; measured,
+    /// [`crate::faults::AftermathReport::slowest_tick`]); each robot ahead
+    /// adds a control period and a state's delivery.
+    pub fn bound(&self, v: f64, depth: u32, slowest_tick: f64) -> f64 {
         let detect = self.detect
-            + 1.0 / CONTROL_RATE
+            + slowest_tick.max(1.0 / CONTROL_RATE)
             + f64::from(depth) * (1.0 / CONTROL_RATE + HOP_DELIVERY);
         let brake = match self.brake {
             Brake::Zero => v * v / (2.0 * A_MAX),

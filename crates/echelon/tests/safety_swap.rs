@@ -395,6 +395,66 @@ proptest! {
     }
 }
 
+/// Counterexamples the proptests above found on seeds other than theirs
+/// (12 seeds × 40 cases each, by hand, shrunk by proptest). OPEN (issue
+/// trust2, item 4):
+/// - velocity bases, two rows of 7 swapping (seed 10): robots 1, 4, 9 and
+///   12, whose goals lie between robots already parked, arrive at 56–57 s,
+///   bound 42 s: robot 1 overshoots through the row, then crawls back
+///   beside the parked robots at about 1 mm/s for 30 s — above the still
+///   test's 1 mm/s, so its break never tries the next turn, and the
+///   harness gives no tracking error for the progress test;
+/// - torque robots, a 14-robot permutation (seed 2): two points 10.7 mm
+///   inside the radius (the fixed sample's test checks 5 mm; its OPEN
+///   comment);
+/// - torque robots, two rows of 3 (seed 10): last home 0.14 s after the bound.
+///
+/// A larger still threshold (3–5 mm/s) fixed none of these. A reciprocal
+/// split of the torque barrier on measured accelerations removed the
+/// clearance failures over 12 × 40 cases (the closing note of this stop).
+#[test]
+#[ignore = "open: counterexamples found on other seeds (see above)"]
+fn counterexamples_on_other_seeds() {
+    let cases = [
+        (
+            Drive::Velocity,
+            14,
+            Layout::Rows(0.301_265_908_675_088_1, 1.825_097_361_618_223_3),
+            0.238_436_692_483_956_08,
+            0.287_673_019_246_045_8,
+        ),
+        (
+            Drive::Torque,
+            14,
+            Layout::Permuted(
+                1.580_223_343_503_799,
+                vec![4, 7, 2, 9, 11, 8, 0, 13, 12, 6, 3, 5, 1, 10],
+            ),
+            0.266_867_045_361_130_76,
+            0.185_500_500_263_872_94,
+        ),
+        (
+            Drive::Torque,
+            7,
+            Layout::Rows(0.215_810_843_645_254_66, 2.755_290_462_273_997_8),
+            0.196_191_676_041_140_57,
+            0.295_982_129_366_195_2,
+        ),
+    ];
+    let failed: Vec<String> = cases
+        .into_iter()
+        .filter_map(|(drive, n, layout, radius, speed)| {
+            let e = encounter(n, &layout, radius, speed);
+            let limit = bound(n, e.farthest(), radius, speed);
+            let seen = run_direct(&e, drive, limit + 5.0);
+            check(&e, &seen, &format!("{n} robots, {drive:?}"), 1e-3)
+                .err()
+                .map(|f| f.to_string().chars().take(200).collect())
+        })
+        .collect();
+    assert!(failed.is_empty(), "{failed:#?}");
+}
+
 /// The user's report: unicycles at 0.15 m/s, radius 0.22 m between points
 /// 5 cm ahead, the antipodal swap on a 0.8 m circle: 8 and 12 robots never
 /// arrived in 60 s from Python, where a centralised QP gets them home in

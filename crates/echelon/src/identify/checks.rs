@@ -8,13 +8,24 @@ use super::fit;
 use super::fit::{AxisData, AxisFit};
 use super::{Estimate, MAX_REL_HALF_WIDTH, MIN_RCOND};
 
-/// Why an axis's parameters are not identifiable, or `None` if they are.
+/// Why an axis's parameters are not identifiable, or `None` if they are;
+/// with it, whether the input drove the axis and only the intervals came
+/// out wider than [`MAX_REL_HALF_WIDTH`] (`true`: a model that misfits the
+/// log widens them too, and then the misfit is the reason, not the input).
 pub(super) fn excitation(
     d: &AxisData<'_>,
     f: &AxisFit,
     estimates: &[Estimate],
     input: &str,
-) -> Option<String> {
+) -> Option<(String, bool)> {
+    unexcited(d, f, input)
+        .map(|why| (why, false))
+        .or_else(|| too_wide(f, estimates).map(|why| (why, true)))
+}
+
+/// Why the input could not identify the axis at all: zero, constant, a badly
+/// conditioned regressor.
+fn unexcited(d: &AxisData<'_>, f: &AxisFit, input: &str) -> Option<String> {
     let u_max = d.u.iter().fold(0.0_f64, |m, u| m.max(u.abs()));
     let u_min = d.u.iter().fold(f64::INFINITY, |m, u| m.min(*u));
     let u_top = d.u.iter().fold(f64::NEG_INFINITY, |m, u| m.max(*u));
@@ -34,6 +45,12 @@ pub(super) fn excitation(
             f.rcond
         ));
     }
+    None
+}
+
+/// Why the estimates get no number although the input drove the axis: a
+/// non-physical value, or a 95 % interval wider than [`MAX_REL_HALF_WIDTH`].
+fn too_wide(f: &AxisFit, estimates: &[Estimate]) -> Option<String> {
     for e in estimates {
         if !e.value.is_finite() || e.value <= 0.0 || !e.std.is_finite() {
             return Some(format!(

@@ -170,12 +170,26 @@ impl Verdict {
         // An ideal axis's estimate is a bound, not a value: its width and
         // sign are not held against it.
         let judged = if ideal { &[][..] } else { &estimates[..] };
-        let unexcited = no_lag.or_else(|| excitation(d, &f, judged, input));
-        let why = unexcited.clone().or_else(|| {
+        let misfits = || {
             (!noise_free)
                 .then(|| misfit(&f, &checks, integrals.is_some() || d.hold.is_some()))
                 .flatten()
-        });
+        };
+        // An input that drove the axis but left intervals too wide, on a
+        // model that misfits the log: the misfit is why (it widens them),
+        // not the input (a real base's bag, its timing jitter the residual,
+        // was refused as "no excitation").
+        let (unexcited, why) = match no_lag
+            .map(|w| (w, false))
+            .or_else(|| excitation(d, &f, judged, input))
+        {
+            Some((wide, true)) => match misfits() {
+                Some(m) => (None, Some(m)),
+                None => (Some(wide.clone()), Some(wide)),
+            },
+            Some((u, false)) => (Some(u.clone()), Some(u)),
+            None => (None, misfits()),
+        };
         Verdict {
             fit: f,
             noise_free,

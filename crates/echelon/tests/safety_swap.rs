@@ -322,6 +322,22 @@ fn check(e: &Encounter, seen: &Seen, what: &str, inside: f64) -> Result<(), Test
     Ok(())
 }
 
+/// One case run on `drive` for its bound and 5 s more, checked against the
+/// bound and the radius less `inside` m ([`check`]).
+fn gets_home(
+    drive: Drive,
+    n: usize,
+    layout: &Layout,
+    radius: f64,
+    speed: f64,
+    inside: f64,
+) -> Result<(), TestCaseError> {
+    let e = encounter(n, layout, radius, speed);
+    let limit = bound(n, e.farthest(), radius, speed);
+    let seen = run_direct(&e, drive, limit + 5.0);
+    check(&e, &seen, &format!("{n} robots, {drive:?}"), inside)
+}
+
 /// The layouts a case draws.
 #[derive(Debug, Clone)]
 enum Layout {
@@ -366,10 +382,7 @@ proptest! {
     /// velocity bases, filters stepped by the caller.
     #[test]
     fn everyone_gets_home_on_velocity_bases((n, layout, radius, speed) in cases()) {
-        let e = encounter(n, &layout, radius, speed);
-        let limit = bound(n, e.farthest(), radius, speed);
-        let seen = run_direct(&e, Drive::Velocity, limit + 5.0);
-        check(&e, &seen, "velocity", 1e-3)?;
+        gets_home(Drive::Velocity, n, &layout, radius, speed, 1e-3)?;
     }
 }
 
@@ -388,10 +401,7 @@ proptest! {
     // rule).
     #[test]
     fn everyone_gets_home_on_torque_robots((n, layout, radius, speed) in cases()) {
-        let e = encounter(n, &layout, radius, speed);
-        let limit = bound(n, e.farthest(), radius, speed);
-        let seen = run_direct(&e, Drive::Torque, limit + 5.0);
-        check(&e, &seen, "torque", 5e-3)?;
+        gets_home(Drive::Torque, n, &layout, radius, speed, 5e-3)?;
     }
 }
 
@@ -444,10 +454,7 @@ fn counterexamples_on_other_seeds() {
     let failed: Vec<String> = cases
         .into_iter()
         .filter_map(|(drive, n, layout, radius, speed)| {
-            let e = encounter(n, &layout, radius, speed);
-            let limit = bound(n, e.farthest(), radius, speed);
-            let seen = run_direct(&e, drive, limit + 5.0);
-            check(&e, &seen, &format!("{n} robots, {drive:?}"), 1e-3)
+            gets_home(drive, n, &layout, radius, speed, 1e-3)
                 .err()
                 .map(|f| f.to_string().chars().take(200).collect())
         })

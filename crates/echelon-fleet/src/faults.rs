@@ -380,6 +380,32 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        /// `slowest_tick` is the longest gap between two observations from
+        /// the fault to the first zero command, whatever the gaps before
+        /// the fault and after it (ticks at random intervals, the zero at a
+        /// random tick).
+        #[test]
+        fn the_slowest_tick_is_the_longest_gap_until_the_first_zero(
+            gaps in proptest::collection::vec(1e-3..0.2f64, 2..60),
+            at in 0.0..1.0f64,
+            zero in 0usize..60,
+        ) {
+            let mut m = Aftermath::new(at, None);
+            let mut t = 0.0;
+            let mut seen: Vec<f64> = Vec::new();
+            for (k, g) in gaps.iter().enumerate() {
+                t += g;
+                m.observe(t, [t, 0.0], 0.1, k >= zero);
+                if t >= at && (k <= zero || seen.is_empty()) {
+                    seen.push(t);
+                }
+            }
+            let want = seen.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+            proptest::prop_assert_eq!(m.report().slowest_tick, want);
+        }
+    }
+
     #[test]
     fn uniform_draws_are_in_range() {
         let mut r = SplitMix64::new(7);

@@ -34,8 +34,10 @@ struct Filters {
     l: f64,
     states: Vec<State>,
     neighbours: Vec<Neighbour>,
-    /// The commands `(v, ω)` each robot's filter gave at the last call
-    /// (empty before the first): a 3-column pose moves at it.
+    /// The commands (`(v, ω)`, or a torque robot's `(u1, u2)`) each robot's
+    /// filter gave at the last call (empty before the first): a 3-column
+    /// pose moves at it; a torque robot's acceleration under it is what its
+    /// neighbours' filters take.
     last: Vec<[f64; 2]>,
 }
 
@@ -133,14 +135,15 @@ impl Filters {
         Ok(commands)
     }
 
-    /// The neighbours robot `i` sees: every other robot, cooperative, with
-    /// `dv[j] = (v̇, ω̇)` when known.
+    /// The neighbours robot `i` sees: every other robot, cooperative; with
+    /// `dv[j] = (v̇, ω̇)` under the command robot j's filter gave last (torque
+    /// robots), shared ([`Neighbour::sharing`]).
     fn neighbours_of(&mut self, i: usize, dv: Option<&[[f64; 2]]>) {
         self.neighbours.clear();
         for (j, s) in self.states.iter().enumerate().filter(|&(j, _)| j != i) {
             let dv = dv.map(|d| d[j]);
             self.neighbours
-                .push(Neighbour::of_state(s, self.l, dv, true));
+                .push(Neighbour::of_state(s, self.l, dv, true).sharing(dv.is_some()));
         }
     }
 
@@ -404,7 +407,8 @@ fn velocity_base(base: &Bound<'_, PyAny>) -> PyResult<VelocityBase> {
 struct PyTorqueSafetyFilters {
     f: Filters,
     robots: Vec<RobotParams>,
-    /// Scratch: each robot's `(v̇, ω̇)` under its nominal command.
+    /// Scratch: each robot's `(v̇, ω̇)` under the command its filter gave at
+    /// the last call (zero before the first).
     dv: Vec<[f64; 2]>,
 }
 
@@ -458,16 +462,12 @@ impl PyTorqueSafetyFilters {
     ) -> PyResult<Filtered<'py>> {
         let commands = self.f.read("states", states, commands, false)?;
         let c = commands.as_array();
-        // What each robot's neighbours measure of it: its acceleration under
-        // its nominal (as the simulator's filter sees its neighbours).
+        // What each robot's neighbours take as its acceleration: the one
+        // under the command its filter gave last, what it carries out now
+        // (they take over what it fell short of, `Neighbour::sharing`).
         for (i, (robot, s)) in self.robots.iter().zip(&self.f.states).enumerate() {
-            let u = robot
-                .limit(Input {
-                    u1: c[[i, 0]],
-                    u2: c[[i, 1]],
-                })
-                .0;
-            let d = robot.derivative(s, u);
+            let [u1, u2] = self.f.last.get(i).copied().unwrap_or([0.0; 2]);
+            let d = robot.derivative(s, Input { u1, u2 });
             self.dv[i] = [d.v, d.omega];
         }
         let robots = &self.robots;

@@ -1,5 +1,6 @@
 """Liveness from Python (issue trust2, item 4): ``echelon.safety.Filter``
-stepped by the caller, one filter per robot, on dense symmetric encounters
+(velocity bases) and ``echelon.safety.TorqueFilter`` (Table I's torque
+robots) stepped by the caller, one filter per robot, on dense symmetric encounters
 (robots on a circle swapping to the antipodes or to a random permutation of
 the starts). Every robot's point reaches its goal within the bound of
 ``crates/echelon/tests/safety_swap.rs`` (docs/safety.md, "Dense
@@ -114,5 +115,84 @@ def test_everyone_gets_home_from_python(n, size, radius, speed, antipodal, five,
     if antipodal and n % 2:
         goals = -starts
     arrival, closest, limit = swap(starts, goals, radius, speed, five=five)
+    assert np.all(arrival <= limit), (arrival, limit)
+    assert closest >= radius - 1e-3, closest
+
+
+def torque_swap(starts, goals, radius, speed, *, dt=0.005):
+    """The same encounter on Table I's torque-driven robots (eq. 3) with a
+    :class:`echelon.safety.TorqueFilter` stepped every ``dt``: the point's
+    velocity brought to the capped point-to-goal one at 5/s (the torques
+    solved from eq. 3), the filter given the states ``(n, 5)``, the plant
+    stepped by RK4. Each robot's arrival time, the smallest distance between
+    two points, and the bound."""
+    import json
+
+    robot = json.loads(echelon._echelon.robot_preset("agent1"))
+    m, j = robot["mass"], robot["inertia"]
+    eta, psi = robot["linear_friction"], robot["angular_friction"]
+    n = len(starts)
+    farthest = float(np.max(np.linalg.norm(goals - starts, axis=1)))
+    limit = bound(n, farthest, radius, speed)
+    d = goals - starts
+    heading = np.where(np.linalg.norm(d, axis=1) > 1e-9, np.arctan2(d[:, 1], d[:, 0]), np.arctan2(-starts[:, 1], -starts[:, 0]))
+    states = np.column_stack([starts - L * np.column_stack([np.cos(heading), np.sin(heading)]), heading, np.zeros((n, 2))])
+    f = echelon.safety.TorqueFilter(n, radius, robot="agent1", gain=1.0, l=L)
+
+    def deriv(s, u):
+        th, v, w = s[:, 2], s[:, 3], s[:, 4]
+        return np.column_stack([v * np.cos(th), v * np.sin(th), w, (u[:, 0] - eta * v) / m, (u[:, 1] - psi * w) / j])
+
+    arrival = np.full(n, math.inf)
+    closest = math.inf
+    for k in range(int(round((limit + 5.0) / dt)) + 1):
+        t = k * dt
+        pts = echelon.safety.points(states, L)
+        gaps = pts[:, None, :] - pts[None, :, :]
+        closest = min(closest, np.hypot(gaps[..., 0], gaps[..., 1])[~np.eye(n, dtype=bool)].min())
+        home = np.linalg.norm(goals - pts, axis=1) < ARRIVE
+        arrival = np.where(home & np.isinf(arrival), t, arrival)
+        if np.all(np.isfinite(arrival)):
+            break
+        want = goals - pts
+        norm = np.linalg.norm(want, axis=1, keepdims=True)
+        want = want * np.minimum(1.0, speed / np.maximum(norm, 1e-12))
+        th, v, w = states[:, 2], states[:, 3], states[:, 4]
+        c, s = np.cos(th), np.sin(th)
+        now = np.column_stack([v * c - L * w * s, v * s + L * w * c])
+        acc = 5.0 * (want - now)
+        along = -eta * v / m - L * w * w
+        across = v * w - L * psi * w / j
+        r = acc - np.column_stack([along * c - across * s, along * s + across * c])
+        x = np.column_stack([c * r[:, 0] + s * r[:, 1], -s * r[:, 0] + c * r[:, 1]])
+        u = f(states, np.column_stack([m * x[:, 0], j * x[:, 1] / L]), t=t)
+        k1 = deriv(states, u)
+        k2 = deriv(states + 0.5 * dt * k1, u)
+        k3 = deriv(states + 0.5 * dt * k2, u)
+        k4 = deriv(states + dt * k3, u)
+        states = states + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return arrival, closest, limit
+
+
+@settings(max_examples=6, deadline=None, derandomize=True)
+@given(
+    n=st.integers(4, 16),
+    size=st.floats(1.0, 2.0),
+    radius=st.floats(0.15, 0.3),
+    speed=st.floats(0.1, 0.3),
+    antipodal=st.booleans(),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_torque_robots_get_home_from_python(n, size, radius, speed, antipodal, seed):
+    # The same encounters on torque-driven robots, the TorqueFilter stepped
+    # from Python: every robot home within the bound, the radius kept to 1 mm
+    # (each robot's neighbours take what it could not of its half of their
+    # barrier, from its acceleration under what its filter last answered).
+    circle = size * 1.1 * n * 2 * radius / (2 * math.pi)
+    to = [(i + n // 2) % n for i in range(n)] if antipodal else list(np.random.default_rng(seed).permutation(n))
+    starts, goals = encounter(n, circle, to)
+    if antipodal and n % 2:
+        goals = -starts
+    arrival, closest, limit = torque_swap(starts, goals, radius, speed)
     assert np.all(arrival <= limit), (arrival, limit)
     assert closest >= radius - 1e-3, closest

@@ -211,8 +211,14 @@ impl NeighbourTable {
                 let (s, dv) = advance(&e.state, dt);
                 let lagging = dt > self.lag;
                 self.lagging += u64::from(lagging && self.cooperative[i]);
+                // A torque robot's `dv` is its acceleration under the
+                // command it applied at that tick: a torque robot takes over
+                // what it fell short of its half (`Neighbour::sharing`).
+                let cooperative = self.cooperative[i] && !lagging;
+                let torque = e.state.velocity.is_none();
                 self.list.push(
-                    Neighbour::of_state(&s, l, Some(dv), self.cooperative[i] && !lagging)
+                    Neighbour::of_state(&s, l, Some(dv), cooperative)
+                        .sharing(cooperative && torque)
                         .with_margin(uncertainty_margin(sigma, e.state.sigma)),
                 );
                 continue;

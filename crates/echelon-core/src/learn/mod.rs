@@ -245,6 +245,10 @@ struct Env {
     /// The clipped (and filtered) actions of the last step: `(v, ω)` or
     /// `(τ_r, τ_l)`.
     applied: Vec<[f64; 2]>,
+    /// Scratch: each torque robot's `(v̇, ω̇)` under the torques its filter
+    /// gave at the last step, for its neighbours' filters
+    /// ([`Neighbour::sharing`]).
+    shared: Vec<[f64; 2]>,
     t: f64,
     steps: u64,
     episode_seed: u64,
@@ -290,6 +294,7 @@ impl VecFormation {
             filters: vec![filter; if config.safety { n } else { 0 }],
             neighbours: Vec::with_capacity(n),
             applied: vec![[0.0; 2]; n],
+            shared: vec![[0.0; 2]; n],
             t: 0.0,
             steps: 0,
             episode_seed: 0,
@@ -472,6 +477,12 @@ impl Env {
         changed: &mut [T],
     ) -> EnvFacts {
         let bound = config.action_bound();
+        if let (true, Some(robot)) = (config.safety, &config.robot) {
+            for ((dv, s), f) in self.shared.iter_mut().zip(&self.states).zip(&self.filters) {
+                let d = robot.derivative(s, f.last_torques());
+                *dv = [d.v, d.omega];
+            }
+        }
         for (i, a) in self.applied.iter_mut().enumerate() {
             *a = [0, 1].map(|k| actions[2 * i + k].get().clamp(-bound[k], bound[k]));
         }
@@ -481,10 +492,12 @@ impl Env {
                 continue;
             }
             self.neighbours.clear();
+            let torque = config.robot.is_some();
             for (j, s) in self.states.iter().enumerate() {
                 if j != i {
+                    let dv = torque.then_some(self.shared[j]);
                     self.neighbours
-                        .push(Neighbour::of_state(s, config.l, None, true));
+                        .push(Neighbour::of_state(s, config.l, dv, true).sharing(torque));
                 }
             }
             let nominal = self.applied[i];

@@ -91,6 +91,8 @@ pub(super) struct Deadlock {
     /// ended (its nominal free for an instant) and that fell back into the
     /// same ride does not try the same turn again.
     stalls: u8,
+    /// Whether the break was started by the progress test.
+    by_progress: bool,
 }
 
 impl Default for Deadlock {
@@ -108,6 +110,7 @@ impl Default for Deadlock {
             path: 0.0,
             moved: 0.0,
             stalls: 0,
+            by_progress: false,
         }
     }
 }
@@ -117,6 +120,11 @@ impl Deadlock {
     /// last call or at any call within [`DEADLOCK_MEMORY`] before it.
     pub(super) fn held(&self) -> bool {
         self.last.is_some_and(|t| self.now - t <= DEADLOCK_MEMORY)
+    }
+
+    /// Whether the break under way was started by the progress test.
+    pub(super) fn by_progress(&self) -> bool {
+        self.by_progress
     }
 
     /// How many deadlocks it has started breaking.
@@ -134,6 +142,15 @@ impl Deadlock {
     pub(super) fn free(&mut self, t: f64) {
         self.now = t;
         self.stuck_since = None;
+        self.breaking = false;
+        self.turns = 0;
+        self.still_since = None;
+    }
+
+    /// The robot, breaking, is clear of what held it (its unturned nominal
+    /// keeps nearly all of its motion): the break ends, as when the nominal
+    /// is free.
+    pub(super) fn end_break(&mut self) {
         self.breaking = false;
         self.turns = 0;
         self.still_since = None;
@@ -198,6 +215,7 @@ impl Deadlock {
             if !self.breaking && t - since >= wait {
                 self.breaking = true;
                 self.breaks += 1;
+                self.by_progress = false;
             }
         } else {
             self.stuck_since = None;
@@ -255,6 +273,7 @@ impl Deadlock {
                     } else {
                         self.breaking = true;
                         self.breaks += 1;
+                        self.by_progress = true;
                         self.turns = self.stalls % BIASES;
                     }
                     self.stalls = (self.stalls + 1) % BIASES;

@@ -7,7 +7,7 @@ use super::config::SafetyConfig;
 use super::deadlock::{Deadlock, ENCOUNTER_SHARE};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, solve};
-use crate::model::State;
+use crate::model::{Input, State};
 
 /// `p`, 1/s: the inner pole of the torque barrier, `ψ̇₁ + p ψ₁ ≥ 0` with
 /// `ψ₁ = ḣ + γ h` (`p = max(γ, INNER_RATE)`). With both poles at `−γ` (the
@@ -119,6 +119,10 @@ pub struct SafetyFilter {
     /// The backward speed the base accepts this period, m/s (infinite: no
     /// limit; [`SafetyFilter::set_reverse_cap`]).
     pub(super) reverse: f64,
+    /// The torques this filter answered last (zero before its first
+    /// answer: a robot at rest with no command;
+    /// [`SafetyFilter::last_torques`]).
+    pub(super) last: Input,
 }
 
 /// Two points that move toward each other, each at least this fast (m/s)
@@ -161,6 +165,7 @@ impl SafetyFilter {
             relative: f64::INFINITY,
             oncoming: Vec::with_capacity(16),
             reverse: f64::INFINITY,
+            last: Input { u1: 0.0, u2: 0.0 },
         }
     }
 
@@ -347,9 +352,21 @@ impl SafetyFilter {
     /// neighbour in range and every obstacle, for a robot whose point moves
     /// as `p̈ = f + R(θ) diag(scale) x` in the QP's variables `x` (torques:
     /// `scale = (1, 1)`; a velocity base with lags: `(1/τ_v, 1/τ_ω)`). A
-    /// cooperative neighbour takes half of the pair (the shared term zero),
-    /// a non-cooperative one's measured `p̈_j` enters; returns the smallest
-    /// distance to a neighbour's point in range.
+    /// cooperative neighbour takes half of the pair; a non-cooperative
+    /// one's measured `p̈_j` enters. A torque robot (`share`) whose
+    /// neighbour is a torque robot running this filter too
+    /// ([`Neighbour::sharing`]) also takes what that neighbour fell short
+    /// of its own half at its acceleration now: robot i's row
+    /// `2dᵀp̈_i ≥ −½D + max(0, −½D + 2dᵀp̈_j⁰)` with
+    /// `D = 2‖Δṗ‖² + (γ+p)ḣ + γph`. The extra term is never negative, so the
+    /// pair's rows still sum to at least the barrier whatever either robot
+    /// measured of the other; and it is zero whenever the neighbour took its
+    /// half, so a robot that pushes on its neighbour cannot drag it along.
+    /// A robot squeezed between two neighbours that both close on it cannot
+    /// take its half of both pairs (its QP is infeasible); the shortfall
+    /// shows in its acceleration, and its partners take it over at their
+    /// next call. Returns the smallest distance to a neighbour's point in
+    /// range.
     pub(super) fn second_order_barriers(
         &mut self,
         own: &Own,
@@ -357,6 +374,7 @@ impl SafetyFilter {
         obstacles: &[Obstacle],
         f: [f64; 2],
         scale: [f64; 2],
+        share: bool,
     ) -> f64 {
         let gamma = self.config.gain;
         self.barriers(own, neighbours, obstacles, |d, h, n| {
@@ -372,6 +390,13 @@ impl SafetyFilter {
                 2.0 * (rel[0] * rel[0] + rel[1] * rel[1]) + (gamma + p) * dh + gamma * p * h;
             let df = 2.0 * (d[0] * f[0] + d[1] * f[1]);
             let b = match n {
+                // A torque robot running this filter too: it takes its half,
+                // and what its neighbour fell short of its own half at its
+                // acceleration now (squeezed, it could not take it).
+                Some(n) if n.cooperative && share && n.shares => {
+                    let short = -0.5 * drift + 2.0 * (d[0] * n.ddp[0] + d[1] * n.ddp[1]);
+                    -df - 0.5 * drift + short.max(0.0)
+                }
                 Some(n) if n.cooperative => -df - 0.5 * drift,
                 _ => -df + 2.0 * (d[0] * ddpj[0] + d[1] * ddpj[1]) - drift,
             };
@@ -460,17 +485,15 @@ impl SafetyFilter {
             self.deadlock.free(t);
             return (x0, Outcome::Nominal, false);
         }
-        let (want, breaking) = self.deadlock.want(t, x0);
-        let (x, outcome) = match solve(&self.rows, want) {
-            Some(x) => (x, Outcome::Filtered),
-            None => ([0.0; 2], Outcome::Braked),
-        };
         // Stuck: less than half of the motion the nominal asks for survives
         // (the point stops, or slides alongside a neighbour it should pass);
         // in an encounter, less than ENCOUNTER_SHARE.
-        let moved = [x[0] + drift[0], x[1] + drift[1]];
         let asked = [x0[0] + drift[0], x0[1] + drift[1]];
         let asked_sq = asked[0] * asked[0] + asked[1] * asked[1];
+        let kept = |x: [f64; 2], share: f64| {
+            let moved = [x[0] + drift[0], x[1] + drift[1]];
+            asked_sq < 1e-4 || moved[0] * asked[0] + moved[1] * asked[1] >= share * asked_sq
+        };
         // An encounter: the nominal closes on an oncoming neighbour
         // (`a·x₀ < 0`: its point moves toward the neighbour's, which comes
         // toward it) faster than that pair's row allows; then the robot
@@ -481,14 +504,39 @@ impl SafetyFilter {
             .zip(&self.oncoming)
             .any(|(c, &on)| on && c.slack(x0) < 0.0 && c.a[0] * x0[0] + c.a[1] * x0[1] < 0.0);
         let share = if encounter { ENCOUNTER_SHARE } else { 0.5 };
-        let stuck =
-            asked_sq >= 1e-4 && moved[0] * asked[0] + moved[1] * asked[1] < share * asked_sq;
+        let (want, mut breaking) = self.deadlock.want(t, x0);
+        // Breaking, but the nominal itself, unturned, would keep nearly all
+        // of its motion (ENCOUNTER_SHARE): the robot is clear of what held
+        // it (its nominal only asks more than a barrier allows, say a
+        // torque robot's hard turn beside neighbours 0.6 m off), and the
+        // break ends, or its turned desire carries it on round a circle
+        // away from its goal (issue trust2, item 4). Not a break the
+        // progress test started: a robot riding beside a neighbour in its
+        // way keeps most of its nominal too, and that break is what moves
+        // it on.
+        let clear = (breaking && !self.deadlock.by_progress())
+            .then(|| solve(&self.rows, x0))
+            .flatten()
+            .filter(|&x| kept(x, ENCOUNTER_SHARE));
+        let (x, outcome) = match clear {
+            Some(x) => {
+                self.deadlock.end_break();
+                breaking = false;
+                (x, Outcome::Filtered)
+            }
+            None => match solve(&self.rows, want) {
+                Some(x) => (x, Outcome::Filtered),
+                None => ([0.0; 2], Outcome::Braked),
+            },
+        };
+        let stuck = !kept(x, share);
         // Still: the point stands (below 1 mm/s) and the filtered motion is
         // next to nothing (1 %) of what is asked.
         let speed = match speed {
             Speed::State(me, l) => me.v.hypot(l * me.omega),
             Speed::Command => x[0].hypot(x[1]),
         };
+        let moved = [x[0] + drift[0], x[1] + drift[1]];
         let still = speed < 1e-3 && moved[0] * moved[0] + moved[1] * moved[1] < 1e-4 * asked_sq;
         self.deadlock
             .record(t, stuck, still, encounter, [self.relative, speed]);

@@ -151,7 +151,9 @@
 //! untouched; the rows are never relaxed. For a lag-free velocity base the
 //! still test reads the filtered command (its motion over the coming
 //! period), not the speeds in its state, which a caller may fill with the
-//! command it asked for.
+//! command it asked for. A break ends when the nominal is free, or when,
+//! unturned, it keeps nearly all of its motion ([`ENCOUNTER_SHARE`]: the
+//! robot is clear; not a break the progress test started).
 //!
 //! [`RobotParams::limit`]: crate::model::RobotParams::limit
 //! [`VelocityBase::limit`]: crate::base::VelocityBase::limit

@@ -57,6 +57,12 @@ pub struct Neighbour {
     /// `p̈_j`, m/s² (only for a non-cooperative neighbour of a torque-driven
     /// robot; zero when unknown).
     pub ddp: [f64; 2],
+    /// Whether the neighbour is a torque-driven robot running this filter
+    /// whose `ddp` is its point's acceleration under the command its filter
+    /// answered last ([`Neighbour::sharing`]): a torque robot then also
+    /// takes what the neighbour fell short of its half of their barrier
+    /// (`docs/safety.md`, "Torque robots in a crowd").
+    pub shares: bool,
     /// Whether the neighbour runs this filter too and so takes half of each
     /// pair constraint.
     pub cooperative: bool,
@@ -81,9 +87,21 @@ impl Neighbour {
             p: point(s, l),
             dp,
             ddp,
+            shares: false,
             cooperative,
             margin: 0.0,
         }
+    }
+
+    /// The same neighbour, when `shares`, a torque-driven robot running
+    /// this filter, its `dv` given to [`Neighbour::of_state`] the
+    /// acceleration under the command its filter answered last
+    /// ([`super::SafetyFilter::last_torques`]): a torque robot's filter then
+    /// takes over what that neighbour fell short of its half of their
+    /// barrier (squeezed between two, it could not take it). Safe whatever
+    /// the measurement: the extra is never negative.
+    pub fn sharing(self, shares: bool) -> Neighbour {
+        Neighbour { shares, ..self }
     }
 
     /// The same neighbour with the pair's radius widened by `margin` m.

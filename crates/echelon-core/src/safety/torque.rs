@@ -84,7 +84,8 @@ impl SafetyFilter {
         let limited = Envelope::DEFAULT.hold(robot, l, me, nominal);
         let x0 = [limited.u1 / m, l * limited.u2 / j];
         self.rows.clear();
-        let min_distance = self.second_order_barriers(&own, neighbours, obstacles, f, [1.0, 1.0]);
+        let min_distance =
+            self.second_order_barriers(&own, neighbours, obstacles, f, [1.0, 1.0], true);
         // The speed envelope ([`Envelope`]) bounds what the QP may answer; a
         // nominal that satisfies every barrier passes as it is.
         let barriers = self.rows.len();
@@ -122,7 +123,19 @@ impl SafetyFilter {
             self.emergency(barriers, soft_end, x0, [[0.0; 2], bound])
                 .map_or(brake, of)
         };
-        Filtered::decided(decision, nominal, limited, min_distance, of, braked)
+        let out = Filtered::decided(decision, nominal, limited, min_distance, of, braked);
+        self.last = out.command;
+        out
+    }
+
+    /// The torques this filter answered last (zero before its first call):
+    /// the command its robot carries out until the next call. A neighbour's
+    /// filter takes this robot's acceleration under it (its `(v̇, ω̇)`,
+    /// [`RobotParams::derivative`], as [`Neighbour::of_state`]'s `dv`,
+    /// [`Neighbour::sharing`]) to see whether this robot took its half of
+    /// their barrier.
+    pub fn last_torques(&self) -> Input {
+        self.last
     }
 }
 

@@ -173,7 +173,7 @@ impl SafetyFilter {
         let x0 = [limited.v, l * limited.omega];
         self.rows.clear();
         let min_distance =
-            self.second_order_barriers(&own, neighbours, obstacles, f, [1.0 / tv, 1.0 / tw]);
+            self.second_order_barriers(&own, neighbours, obstacles, f, [1.0 / tv, 1.0 / tw], false);
         let barriers = self.rows.len();
         Envelope::lagged(base).push_rows(
             &mut self.rows,

@@ -47,6 +47,10 @@ struct SafetyState {
     l: Vec<f64>,
     out: Vec<SafetyOutput>,
     seen: Vec<State>,
+    /// Each torque robot's `(v̇, ω̇)` under the torques its filter gave at
+    /// the last sample (at its state as seen), for its neighbours' filters
+    /// ([`Neighbour::sharing`]); `None` for other agents.
+    shared: Vec<Option<[f64; 2]>>,
     neighbours: Vec<Neighbour>,
 }
 
@@ -128,6 +132,7 @@ impl Simulation {
                     })
                     .collect(),
                 seen: vec![State::default(); n],
+                shared: vec![None; n],
                 neighbours: Vec::with_capacity(n),
             })
         });
@@ -290,19 +295,35 @@ impl Simulation {
         for (j, seen) in safety.seen.iter_mut().enumerate() {
             *seen = system::sensed(&self.odometers, &self.state, j);
         }
+        // Before any filter answers anew: every torque robot's acceleration
+        // under its filter's last answer, what it is doing now (its
+        // neighbours take over what it falls short of, `Neighbour::sharing`).
+        for (j, agent) in self.sys.plan.agents().iter().enumerate() {
+            safety.shared[j] = match (&safety.filters[j], agent.drive()) {
+                (Some(f), Drive::Torque { robot, .. }) => {
+                    let d = robot.derivative(&safety.seen[j], f.last_torques());
+                    Some([d.v, d.omega])
+                }
+                _ => None,
+            };
+        }
         for i in 0..n {
             if safety.filters[i].is_none() {
                 continue;
             }
             safety.neighbours.clear();
             for j in (0..n).filter(|&j| j != i) {
-                let dv = [self.k1[j].v, self.k1[j].omega];
-                safety.neighbours.push(Neighbour::of_state(
-                    &safety.seen[j],
-                    safety.l[j],
-                    Some(dv),
-                    safety.filters[j].is_some(),
-                ));
+                let shared = safety.shared[j];
+                let dv = shared.unwrap_or([self.k1[j].v, self.k1[j].omega]);
+                safety.neighbours.push(
+                    Neighbour::of_state(
+                        &safety.seen[j],
+                        safety.l[j],
+                        Some(dv),
+                        safety.filters[j].is_some(),
+                    )
+                    .sharing(shared.is_some()),
+                );
             }
             let Some(filter) = safety.filters[i].as_mut() else {
                 continue;

@@ -510,11 +510,11 @@ impl SafetyFilter {
         // it (its nominal only asks more than a barrier allows, say a
         // torque robot's hard turn beside neighbours 0.6 m off), and the
         // break ends, or its turned desire carries it on round a circle
-        // away from its goal (issue trust2, item 4). Not a break the
-        // progress test started: a robot riding beside a neighbour in its
-        // way keeps most of its nominal too, and that break is what moves
-        // it on.
-        let clear = (breaking && !self.deadlock.by_progress())
+        // away from its goal (issue trust2, item 4). Not in an encounter
+        // (keeping right is what gets it past), nor a break the progress
+        // test started: a robot riding beside a neighbour in its way keeps
+        // most of its nominal too, and that break is what moves it on.
+        let clear = (breaking && !encounter && !self.deadlock.by_progress())
             .then(|| solve(&self.rows, x0))
             .flatten()
             .filter(|&x| kept(x, ENCOUNTER_SHARE));

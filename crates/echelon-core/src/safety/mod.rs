@@ -153,7 +153,8 @@
 //! period), not the speeds in its state, which a caller may fill with the
 //! command it asked for. A break ends when the nominal is free, or when,
 //! unturned, it keeps nearly all of its motion ([`ENCOUNTER_SHARE`]: the
-//! robot is clear; not a break the progress test started).
+//! robot is clear; not in an encounter, nor a break the progress test
+//! started).
 //!
 //! [`RobotParams::limit`]: crate::model::RobotParams::limit
 //! [`VelocityBase::limit`]: crate::base::VelocityBase::limit

@@ -47,6 +47,25 @@ def encounter(n: int, circle: float, to: list[int]) -> tuple[np.ndarray, np.ndar
     return starts, starts[to]
 
 
+def observe(t, pts, goals, arrival, closest):
+    """Each robot's arrival time so far (its point within ARRIVE of its goal
+    at ``t`` for the first time) and the smallest distance between two
+    points so far."""
+    n = len(pts)
+    gaps = pts[:, None, :] - pts[None, :, :]
+    closest = min(closest, np.hypot(gaps[..., 0], gaps[..., 1])[~np.eye(n, dtype=bool)].min())
+    home = np.linalg.norm(goals - pts, axis=1) < ARRIVE
+    return np.where(home & np.isinf(arrival), t, arrival), closest
+
+
+def toward(pts, goals, speed):
+    """The point velocity each robot asks for: toward its goal at 1/s, at
+    most ``speed`` (Robotarium's single-integrator position controller)."""
+    want = goals - pts
+    norm = np.linalg.norm(want, axis=1, keepdims=True)
+    return want * np.minimum(1.0, speed / np.maximum(norm, 1e-12))
+
+
 def swap(starts, goals, radius, speed, *, dt=0.02, five=False, duration=None):
     """Runs the encounter with a Filter stepped every ``dt`` (poses ``(n,
     3)``, or ``(n, 5)`` with the commands last sent when ``five``): each
@@ -65,17 +84,12 @@ def swap(starts, goals, radius, speed, *, dt=0.02, five=False, duration=None):
     for k in range(int(round(duration / dt)) + 1):
         t = k * dt
         pts = echelon.safety.points(poses, L)
-        gaps = pts[:, None, :] - pts[None, :, :]
-        closest = min(closest, np.hypot(gaps[..., 0], gaps[..., 1])[~np.eye(n, dtype=bool)].min())
-        home = np.linalg.norm(goals - pts, axis=1) < ARRIVE
-        arrival = np.where(home & np.isinf(arrival), t, arrival)
+        arrival, closest = observe(t, pts, goals, arrival, closest)
         if np.all(np.isfinite(arrival)):
             break
         # Robotarium's single-integrator position controller on the points,
         # mapped to unicycles (si_to_uni for the point L ahead).
-        want = goals - pts
-        norm = np.linalg.norm(want, axis=1, keepdims=True)
-        want = want * np.minimum(1.0, speed / np.maximum(norm, 1e-12))
+        want = toward(pts, goals, speed)
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         nominal = np.column_stack([c * want[:, 0] + s * want[:, 1], (-s * want[:, 0] + c * want[:, 1]) / L])
         seen = np.hstack([poses, sent]) if five else poses
@@ -95,25 +109,35 @@ def test_the_reported_swap_gets_everyone_home():
         assert closest >= 0.22 - 1e-3, (n, closest)
 
 
-@settings(max_examples=40, deadline=None, derandomize=True)
-@given(
+#: The dense encounters drawn: N 4–16 robots on a circle `size` times the
+#: smallest they fit on, to the antipodes or to a random permutation.
+ENCOUNTERS = dict(
     n=st.integers(4, 16),
     size=st.floats(1.0, 2.0),
     radius=st.floats(0.15, 0.3),
     speed=st.floats(0.1, 0.3),
     antipodal=st.booleans(),
-    five=st.booleans(),
     seed=st.integers(0, 2**32 - 1),
 )
-def test_everyone_gets_home_from_python(n, size, radius, speed, antipodal, five, seed):
-    # N 4–16 robots on a circle `size` times the smallest they fit on
-    # (circumference N · 2 radius, 10 % to spare), to the antipodes or to a
-    # random permutation of the starts; poses (n, 3) or (n, 5).
+
+
+def drawn(n, size, radius, antipodal, seed):
+    """The starts and goals of a drawn encounter: N robots on a circle
+    `size` times the smallest they fit on (circumference N · 2 radius, 10 %
+    to spare), to the antipodes or to a random permutation of the starts."""
     circle = size * 1.1 * n * 2 * radius / (2 * math.pi)
     to = [(i + n // 2) % n for i in range(n)] if antipodal else list(np.random.default_rng(seed).permutation(n))
     starts, goals = encounter(n, circle, to)
     if antipodal and n % 2:
         goals = -starts
+    return starts, goals
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(five=st.booleans(), **ENCOUNTERS)
+def test_everyone_gets_home_from_python(n, size, radius, speed, antipodal, five, seed):
+    # Poses (n, 3) or (n, 5).
+    starts, goals = drawn(n, size, radius, antipodal, seed)
     arrival, closest, limit = swap(starts, goals, radius, speed, five=five)
     assert np.all(arrival <= limit), (arrival, limit)
     assert closest >= radius - 1e-3, closest
@@ -148,15 +172,10 @@ def torque_swap(starts, goals, radius, speed, *, dt=0.005):
     for k in range(int(round((limit + 5.0) / dt)) + 1):
         t = k * dt
         pts = echelon.safety.points(states, L)
-        gaps = pts[:, None, :] - pts[None, :, :]
-        closest = min(closest, np.hypot(gaps[..., 0], gaps[..., 1])[~np.eye(n, dtype=bool)].min())
-        home = np.linalg.norm(goals - pts, axis=1) < ARRIVE
-        arrival = np.where(home & np.isinf(arrival), t, arrival)
+        arrival, closest = observe(t, pts, goals, arrival, closest)
         if np.all(np.isfinite(arrival)):
             break
-        want = goals - pts
-        norm = np.linalg.norm(want, axis=1, keepdims=True)
-        want = want * np.minimum(1.0, speed / np.maximum(norm, 1e-12))
+        want = toward(pts, goals, speed)
         th, v, w = states[:, 2], states[:, 3], states[:, 4]
         c, s = np.cos(th), np.sin(th)
         now = np.column_stack([v * c - L * w * s, v * s + L * w * c])
@@ -175,24 +194,13 @@ def torque_swap(starts, goals, radius, speed, *, dt=0.005):
 
 
 @settings(max_examples=6, deadline=None, derandomize=True)
-@given(
-    n=st.integers(4, 16),
-    size=st.floats(1.0, 2.0),
-    radius=st.floats(0.15, 0.3),
-    speed=st.floats(0.1, 0.3),
-    antipodal=st.booleans(),
-    seed=st.integers(0, 2**32 - 1),
-)
+@given(**ENCOUNTERS)
 def test_torque_robots_get_home_from_python(n, size, radius, speed, antipodal, seed):
     # The same encounters on torque-driven robots, the TorqueFilter stepped
     # from Python: every robot home within the bound, the radius kept to 1 mm
     # (each robot's neighbours take what it could not of its half of their
     # barrier, from its acceleration under what its filter last answered).
-    circle = size * 1.1 * n * 2 * radius / (2 * math.pi)
-    to = [(i + n // 2) % n for i in range(n)] if antipodal else list(np.random.default_rng(seed).permutation(n))
-    starts, goals = encounter(n, circle, to)
-    if antipodal and n % 2:
-        goals = -starts
+    starts, goals = drawn(n, size, radius, antipodal, seed)
     arrival, closest, limit = torque_swap(starts, goals, radius, speed)
     assert np.all(arrival <= limit), (arrival, limit)
     assert closest >= radius - 1e-3, closest

@@ -36,8 +36,7 @@ struct Filters {
     neighbours: Vec<Neighbour>,
     /// The commands (`(v, ω)`, or a torque robot's `(u1, u2)`) each robot's
     /// filter gave at the last call (empty before the first): a 3-column
-    /// pose moves at it; a torque robot's acceleration under it is what its
-    /// neighbours' filters take.
+    /// pose moves at it.
     last: Vec<[f64; 2]>,
 }
 
@@ -465,10 +464,14 @@ impl PyTorqueSafetyFilters {
         // What each robot's neighbours take as its acceleration: the one
         // under the command its filter gave last, what it carries out now
         // (they take over what it fell short of, `Neighbour::sharing`).
-        for (i, (robot, s)) in self.robots.iter().zip(&self.f.states).enumerate() {
-            let [u1, u2] = self.f.last.get(i).copied().unwrap_or([0.0; 2]);
-            let d = robot.derivative(s, Input { u1, u2 });
-            self.dv[i] = [d.v, d.omega];
+        for (((dv, robot), s), f) in self
+            .dv
+            .iter_mut()
+            .zip(&self.robots)
+            .zip(&self.f.states)
+            .zip(&self.f.filters)
+        {
+            *dv = f.last_acceleration(s, robot);
         }
         let robots = &self.robots;
         Ok(self.f.each(

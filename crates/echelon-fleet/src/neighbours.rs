@@ -218,7 +218,7 @@ impl NeighbourTable {
                 let torque = e.state.velocity.is_none();
                 self.list.push(
                     Neighbour::of_state(&s, l, Some(dv), cooperative)
-                        .sharing(cooperative && torque)
+                        .sharing(torque)
                         .with_margin(uncertainty_margin(sigma, e.state.sigma)),
                 );
                 continue;

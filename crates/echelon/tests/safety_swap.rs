@@ -264,8 +264,7 @@ fn run_direct(e: &Encounter, drive: Drive, duration: f64) -> Seen {
     let mut next = states.clone();
     let mut neighbours = Vec::with_capacity(n);
     let mut points = vec![[0.0; 2]; n];
-    let mut applied = vec![Input { u1: 0.0, u2: 0.0 }; n];
-    let mut sending = applied.clone();
+    let mut dv = vec![[0.0; 2]; n];
     let mut seen = Seen::new(n);
     let steps = (duration / dt).round() as usize;
     for k in 0..=steps {
@@ -276,17 +275,18 @@ fn run_direct(e: &Encounter, drive: Drive, duration: f64) -> Seen {
         if seen.record(t, &points, &e.goals) || k == steps {
             break;
         }
+        // Before any filter answers anew: each torque robot's acceleration
+        // under what its filter answered at the last step, what it carries
+        // out now.
+        let torque = drive == Drive::Torque;
+        for ((a, s), f) in dv.iter_mut().zip(&states).zip(&filters) {
+            *a = f.last_acceleration(s, &robot);
+        }
         for i in 0..n {
             neighbours.clear();
             for (j, s) in states.iter().enumerate() {
                 if j != i {
-                    // A torque robot's acceleration under what its filter
-                    // answered at the last step, what it carries out now.
-                    let torque = drive == Drive::Torque;
-                    let dv = torque.then(|| {
-                        let d = robot.derivative(s, applied[j]);
-                        [d.v, d.omega]
-                    });
+                    let dv = torque.then_some(dv[j]);
                     neighbours.push(Neighbour::of_state(s, L, dv, true).sharing(torque));
                 }
             }
@@ -303,13 +303,11 @@ fn run_direct(e: &Encounter, drive: Drive, duration: f64) -> Seen {
                     let nominal = torque_law(&robot, me, dp);
                     let out = filters[i].torque(t, me, L, &robot, nominal, &neighbours, &[]);
                     seen.braked += u64::from(out.outcome == Outcome::Braked);
-                    sending[i] = out.command;
                     robot.rk4_step(&states[i], out.command, dt)
                 }
             };
         }
         std::mem::swap(&mut states, &mut next);
-        applied.copy_from_slice(&sending);
     }
     seen.breaks = filters.iter().map(|f| f.deadlock_breaks()).sum();
     seen

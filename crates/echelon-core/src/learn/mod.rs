@@ -479,8 +479,7 @@ impl Env {
         let bound = config.action_bound();
         if let (true, Some(robot)) = (config.safety, &config.robot) {
             for ((dv, s), f) in self.shared.iter_mut().zip(&self.states).zip(&self.filters) {
-                let d = robot.derivative(s, f.last_torques());
-                *dv = [d.v, d.omega];
+                *dv = f.last_acceleration(s, robot);
             }
         }
         for (i, a) in self.applied.iter_mut().enumerate() {

@@ -142,9 +142,7 @@ impl Deadlock {
     pub(super) fn free(&mut self, t: f64) {
         self.now = t;
         self.stuck_since = None;
-        self.breaking = false;
-        self.turns = 0;
-        self.still_since = None;
+        self.end_break();
     }
 
     /// The robot, breaking, is clear of what held it (its unturned nominal

@@ -121,7 +121,7 @@ pub struct SafetyFilter {
     pub(super) reverse: f64,
     /// The torques this filter answered last (zero before its first
     /// answer: a robot at rest with no command;
-    /// [`SafetyFilter::last_torques`]).
+    /// [`SafetyFilter::last_acceleration`]).
     pub(super) last: Input,
 }
 

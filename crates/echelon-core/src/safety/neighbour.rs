@@ -96,7 +96,7 @@ impl Neighbour {
     /// The same neighbour, when `shares`, a torque-driven robot running
     /// this filter, its `dv` given to [`Neighbour::of_state`] the
     /// acceleration under the command its filter answered last
-    /// ([`super::SafetyFilter::last_torques`]): a torque robot's filter then
+    /// ([`super::SafetyFilter::last_acceleration`]): a torque robot's filter then
     /// takes over what that neighbour fell short of its half of their
     /// barrier (squeezed between two, it could not take it). Safe whatever
     /// the measurement: the extra is never negative.

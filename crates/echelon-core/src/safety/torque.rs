@@ -128,14 +128,15 @@ impl SafetyFilter {
         out
     }
 
-    /// The torques this filter answered last (zero before its first call):
-    /// the command its robot carries out until the next call. A neighbour's
-    /// filter takes this robot's acceleration under it (its `(v̇, ω̇)`,
-    /// [`RobotParams::derivative`], as [`Neighbour::of_state`]'s `dv`,
-    /// [`Neighbour::sharing`]) to see whether this robot took its half of
-    /// their barrier.
-    pub fn last_torques(&self) -> Input {
-        self.last
+    /// `(v̇, ω̇)` of its robot (`robot`, at `me`) under the torques this
+    /// filter answered last (zero before its first call), the command it
+    /// carries out until the next call: what a neighbour's filter takes as
+    /// this robot's acceleration ([`Neighbour::of_state`]'s `dv`,
+    /// [`Neighbour::sharing`]) to see whether it took its half of their
+    /// barrier.
+    pub fn last_acceleration(&self, me: &State, robot: &RobotParams) -> [f64; 2] {
+        let d = robot.derivative(me, self.last);
+        [d.v, d.omega]
     }
 }
 

@@ -301,8 +301,7 @@ impl Simulation {
         for (j, agent) in self.sys.plan.agents().iter().enumerate() {
             safety.shared[j] = match (&safety.filters[j], agent.drive()) {
                 (Some(f), Drive::Torque { robot, .. }) => {
-                    let d = robot.derivative(&safety.seen[j], f.last_torques());
-                    Some([d.v, d.omega])
+                    Some(f.last_acceleration(&safety.seen[j], robot))
                 }
                 _ => None,
             };

@@ -14,7 +14,7 @@ import echelon
 
 INF = float("inf")
 
-#: The presets' lags and limits as written in crates/echelon-core/src/base.rs.
+#: The presets' lags and limits as written in crates/echelon-core/src/model/base.rs.
 PRESETS = {
     "ideal": dict(tau_v=0.0, tau_omega=0.0, v_max=INF, omega_max=INF, a_max=INF, alpha_max=INF),
     "turtlebot3-burger": dict(tau_v=0.1, tau_omega=0.1, v_max=0.22, omega_max=2.84, a_max=2.5, alpha_max=3.2),

@@ -1,6 +1,6 @@
 //! The rules every parameter is checked against, each written once. The
 //! validating constructors ([`crate::RobotParams::new`],
-//! [`crate::Gains::new`], [`crate::lycomp::Placement::new`],
+//! [`crate::Gains::new`], [`crate::law::lycomp::Placement::new`],
 //! [`crate::AgentSpec::new`], [`crate::SimConfig::new`], the references, the
 //! odometry specs, …) are built from these; each returns a [`ParamError`]
 //! naming the field, which the scenario builder attaches to its path in the file.

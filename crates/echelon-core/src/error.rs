@@ -225,7 +225,7 @@ pub enum SimError {
     #[error("{0}")]
     Timing(String),
     /// An agent's state stopped being finite or left its physical bounds
-    /// ([`crate::guard::Bounds`]): the run is stopped there.
+    /// ([`crate::sim::guard::Bounds`]): the run is stopped there.
     #[error("agent {agent} ({name}) diverged at t = {t} s: {breach}")]
     Diverged {
         /// The agent (1-based).
@@ -251,7 +251,7 @@ impl SimError {
     }
 }
 
-/// What left its bound ([`crate::guard::Bounds::check`]).
+/// What left its bound ([`crate::sim::guard::Bounds::check`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Breach {
     /// The quantity: `x`, `y`, `theta`, `v`, `omega` (not finite), `|v|`,

@@ -7,6 +7,9 @@
 
 use crate::error::FormationError;
 
+pub mod agent;
+pub mod follow;
+
 /// An agent's leader. Agents are indexed from 0 here; errors and files count from 1.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Leader {

@@ -1,6 +1,9 @@
 //! Small numerical helpers shared by the references, the odometry and the
 //! simulator.
 
+pub mod lanes;
+pub mod rng;
+
 /// `sin(x)/x`, accurate near 0 (where it uses its Taylor series).
 #[inline]
 pub fn sinc(x: f64) -> f64 {

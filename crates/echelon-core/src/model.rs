@@ -13,6 +13,7 @@
 
 use crate::error::ParamError;
 
+pub mod base;
 mod state;
 pub use state::{Input, Pose, State, Torques, wrap_angle};
 
@@ -255,7 +256,7 @@ impl RobotParams {
     /// that saturates both wheels the same way, and a robot driving away from
     /// its goal at full torque never turns back; the safety filter limits its
     /// nominal command with this first (as a velocity base's nominal goes
-    /// through [`crate::base::VelocityBase::limit`]). Returns the command and
+    /// through [`crate::model::base::VelocityBase::limit`]). Returns the command and
     /// whether it was cut.
     pub fn limit(&self, u: Input) -> (Input, bool) {
         let Some(limit) = self.spec.torque_limit else {

@@ -3,7 +3,7 @@
 //! Derivatives come from closed forms (circle, line, cubic, spline) or from
 //! automatic differentiation with dual numbers (lemniscate), never from finite
 //! differences. The law needs `p_d, ṗ_d, p̈_d`; exact `L̇_Y, L̈_Y` also need
-//! `p⃛_d` and `p⁗_d` (see [`crate::lycomp`]).
+//! `p⃛_d` and `p⁗_d` (see [`crate::law::lycomp`]).
 
 use std::fmt;
 use std::sync::Arc;
@@ -13,7 +13,9 @@ use num_dual::{Dual2, DualNum};
 use crate::check::{finite, require};
 use crate::error::ReferenceError;
 use crate::math::sinc;
-use crate::spline::{Septic, check_waypoints};
+
+mod spline;
+use spline::{Septic, check_waypoints};
 
 /// A planar position and its first four time derivatives.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -321,11 +323,11 @@ pub struct Waypoints {
 impl Waypoints {
     /// Shortest time between consecutive waypoints, s: closer ones ask the
     /// spline for absurd speeds and its derivatives for absurd values.
-    pub const MIN_GAP: f64 = crate::spline::MIN_GAP;
+    pub const MIN_GAP: f64 = crate::reference::spline::MIN_GAP;
     /// Largest speed of the spline, and so of the average between
     /// consecutive waypoints, m/s: the plausible speed of a reference (the
     /// scenario's `reference.*.speed`).
-    pub const MAX_SPEED: f64 = crate::spline::MAX_SPEED;
+    pub const MAX_SPEED: f64 = crate::reference::spline::MAX_SPEED;
     /// Times per segment the spline's speed is checked against [`Self::MAX_SPEED`].
     pub const SPEED_SAMPLES: usize = 16;
 

@@ -24,10 +24,14 @@
 
 #![cfg_attr(not(test), warn(clippy::too_many_lines))]
 
-pub use echelon_core::{
-    agent, base, check, control, engine, follow, formation, guard, kinematic, lanes, learn, lycomp,
-    math, model, plan, reference, rng, safety, sim,
-};
+pub use echelon_core::{check, engine, formation, law, learn, math, model, reference, safety, sim};
+// The kernel's modules under their own names here too (`echelon::control` is
+// `echelon_core::law::control`): what users of `echelon` have always written.
+pub use echelon_core::formation::{agent, follow};
+pub use echelon_core::law::{control, kinematic, lycomp};
+pub use echelon_core::math::{lanes, rng};
+pub use echelon_core::model::base;
+pub use echelon_core::sim::{guard, plan};
 
 pub mod csv;
 pub mod encounter;

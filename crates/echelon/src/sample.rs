@@ -4,7 +4,7 @@
 use std::io::{self, Write};
 
 use crate::csv::CsvWriter;
-pub use echelon_core::sample::*;
+pub use echelon_core::sim::sample::*;
 
 /// An [`AgentSample`] as a `trajectory.csv` row.
 pub trait SampleCsv {

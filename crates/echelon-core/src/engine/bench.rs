@@ -1,14 +1,14 @@
 //! The benchmark formation of `echelon bench`: seeded, random, reproducible.
 
 use super::{Batch, Engine, EngineError, Member, Topology, VelocityBatch, VelocityEngine};
-use crate::agent::AgentSpec;
-use crate::base::VelocityBase;
-use crate::control::{Gains, Variant};
 use crate::formation::Leader;
-use crate::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
+use crate::formation::agent::AgentSpec;
+use crate::law::control::{Gains, Variant};
+use crate::law::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
+use crate::math::rng::SplitMix64;
+use crate::model::base::VelocityBase;
 use crate::model::{RobotParams, State};
 use crate::reference::{Circle, Reference};
-use crate::rng::SplitMix64;
 
 /// `echelon bench`'s formation: `agents` robots of Table I (agent 1), paper
 /// law with `K_e = 1.5`, `K_z = 10`, `L = 0.05 m` and `L_Ycomp` by eq. 6, behind a

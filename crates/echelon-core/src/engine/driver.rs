@@ -7,11 +7,11 @@ use rayon::prelude::*;
 
 use crate::error::Breach;
 use crate::error::SimError;
-use crate::guard::Bounds;
-use crate::lanes::{Lanes, Mask};
-use crate::lycomp::{LyComp, OffsetFrame};
+use crate::law::lycomp::{LyComp, OffsetFrame};
+use crate::math::lanes::{Lanes, Mask};
 use crate::model::State;
 use crate::reference::{Order, Reference, Trajectory};
+use crate::sim::guard::Bounds;
 
 use super::kernel::{Block, Carry, V, W};
 use super::{BatchEngine, EngineError, Kernel, Member, PAR_BLOCKS, SEGMENT, TILE, Topology};

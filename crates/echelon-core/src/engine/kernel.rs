@@ -2,17 +2,17 @@
 //! stage, as [`crate::sim::Simulation`] does it, in lanes.
 //!
 //! Every formula comes from the scalar code: eqs. 7–13 from
-//! [`crate::control::law_partial`]/[`crate::control::law_finish`] (the same
+//! [`crate::law::control::law_partial`]/[`crate::law::control::law_finish`] (the same
 //! generic functions `control::law` calls), a robot leader's motion from
-//! [`crate::control::robot_leader`], eq. 5 and eq. 6 as in [`crate::lycomp`]
+//! [`crate::law::control::robot_leader`], eq. 5 and eq. 6 as in [`crate::law::lycomp`]
 //! (eq. 6 as one angle instead of three, see [`fit`]), eq. 3 as in
 //! [`crate::model`] with `1/m` and `1/J` precomputed.
 
 use std::ops::{Add, Mul, Neg, Sub};
 
-use crate::control::{Hold, LawRobot, Variant};
-use crate::lanes::{Lanes, Mask};
-use crate::lycomp::LyComp;
+use crate::law::control::{Hold, LawRobot, Variant};
+use crate::law::lycomp::LyComp;
+use crate::math::lanes::{Lanes, Mask};
 use crate::reference::Jet;
 
 mod chain;
@@ -162,7 +162,7 @@ impl Neg for Aff {
 }
 
 /// Eq. 6 per lane with `R_C = V_d/ω_d` (0 where `ω_d = 0`, like
-/// [`crate::lycomp::fit`]), `c = [2G, 1/δ, (ε/δ)²]`.
+/// [`crate::law::lycomp::fit`]), `c = [2G, 1/δ, (ε/δ)²]`.
 ///
 /// With `a = R_C/δ`, `k = ε/δ`, eq. 6's `2 atan a − atan(a − k) − atan(a + k)`
 /// is the argument of `(1 + ia)² / ((1 + i(a − k))(1 + i(a + k)))`, i.e.
@@ -184,7 +184,7 @@ pub(crate) fn fit<const N: usize>(vd: Lanes<N>, wd: Lanes<N>, c: &[Lanes<N>; 3])
     Lanes::select(straight, zero, angle * c[0])
 }
 
-/// Eq. 5 per lane, exactly [`crate::lycomp::exact`] in `f64`:
+/// Eq. 5 per lane, exactly [`crate::law::lycomp::exact`] in `f64`:
 /// `κλ²/(1 + √(1 − κ²λ²))` with `κ = ω_d/V_d`, `R_C` where `|κ|λ ≥ 1`, 0 where
 /// `ω_d = 0`; `c = [λ, λ², 0]`.
 #[inline(always)]
@@ -332,11 +332,11 @@ pub(crate) fn combine<const N: usize>(
 }
 
 /// Lanes whose state is no longer finite or has left the divergence guard's
-/// default bounds ([`crate::guard::Bounds::DEFAULT`]: `|v|`, `|ω|`,
+/// default bounds ([`crate::sim::guard::Bounds::DEFAULT`]: `|v|`, `|ω|`,
 /// `‖(x, y)‖`); a NaN fails every comparison, so it is caught too.
 #[inline(always)]
 pub(crate) fn broken<const N: usize>(x: &[Lanes<N>; 5], live: Mask<N>) -> Mask<N> {
-    let b = crate::guard::Bounds::DEFAULT;
+    let b = crate::sim::guard::Bounds::DEFAULT;
     let r2 = x[0] * x[0] + x[1] * x[1];
     let ok = r2.compare(Lanes::splat(b.distance * b.distance), |a, c| a <= c)
         & x[2].finite()
@@ -353,8 +353,8 @@ pub(crate) fn first_lane<const N: usize>(m: Mask<N>) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::{Body, law_finish, law_partial};
-    use crate::lycomp::{self, FitCoefficients};
+    use crate::law::control::{Body, law_finish, law_partial};
+    use crate::law::lycomp::{self, FitCoefficients};
     use proptest::prelude::*;
 
     fn lanes(v: &[f64]) -> V {
@@ -424,7 +424,7 @@ mod tests {
             gains in w_of((0.1..5.0f64, 0.1..20.0f64)),
             complete in any::<bool>(),
         ) {
-            use crate::control::{Gains, LeaderMotion, Offset, law};
+            use crate::law::control::{Gains, LeaderMotion, Offset, law};
             let variant = if complete { Variant::Complete } else { Variant::Paper };
             let robot = crate::model::RobotParams::AGENT2;
             let lr = LawRobot::new(&robot);
@@ -489,7 +489,7 @@ mod tests {
                 omega: x[4].0[i],
             };
             let dv = 0.37;
-            let m = crate::control::LeaderMotion::of_robot(&s, dv);
+            let m = crate::law::control::LeaderMotion::of_robot(&s, dv);
             assert_eq!(m.p, [l.p[0].0[i], l.p[1].0[i]]);
             assert_eq!(m.dp, [l.dp[0].0[i], l.dp[1].0[i]]);
             let ddp = [

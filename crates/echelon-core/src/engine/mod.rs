@@ -17,7 +17,7 @@
 //! ulp apart (the same test file).
 //!
 //! Where the two differ: sines, cosines and `atan2` come from branch-free
-//! polynomials ([`crate::lanes`]), eq. 6 is evaluated as one angle
+//! polynomials ([`crate::math::lanes`]), eq. 6 is evaluated as one angle
 //! (an exact identity, `engine/kernel.rs`), a star's RK4 stages 2–4 turn
 //! stage 1's `sin θ`, `cos θ` by their small `δθ` (angle-sum formulas) and
 //! take stage 4's reference at `t_{n+1}` rather than `t_n + dt` (so that its
@@ -28,8 +28,8 @@
 //! limits in a chain ([`EngineError::Unsupported`]).
 //!
 //! [`VelocityEngine`] does the same for velocity-controlled bases
-//! ([`crate::base::VelocityBase`]) under the kinematic law
-//! ([`crate::kinematic`]), built from a [`VelocityBatch`] and the same
+//! ([`crate::model::base::VelocityBase`]) under the kinematic law
+//! ([`crate::law::kinematic`]), built from a [`VelocityBatch`] and the same
 //! [`Member`]s (`K_z` unused): the speed limiter, lags, acceleration limits
 //! and `settle` of `base.rs` in lanes, saturated ticks counted per agent, a
 //! robot leader's `ṗ_d` from the speeds its base moves at (`engine/velocity.rs`).
@@ -58,15 +58,15 @@ use std::fmt::Debug;
 
 use pulp::Arch;
 
-use crate::agent::AgentSpec;
 use crate::check;
-use crate::control::{Gains, LawRobot, Variant};
 use crate::error::{ParamError, SimError};
 use crate::formation::Leader;
-use crate::lycomp::Placement;
+use crate::formation::agent::AgentSpec;
+use crate::law::control::{Gains, LawRobot, Variant};
+use crate::law::lycomp::Placement;
 use crate::model::{RobotParams, State};
-use crate::plan::{Plan, Timing};
 use crate::reference::Reference;
+use crate::sim::plan::{Plan, Timing};
 
 pub use bench::BenchFormation;
 pub use driver::sweep;
@@ -348,8 +348,8 @@ impl Engine {
             }
         };
         let torque = |i: usize, a: &AgentSpec| match a.drive() {
-            crate::agent::Drive::Torque { robot, variant } => Ok((*robot, *variant)),
-            crate::agent::Drive::Velocity(_) => Err(EngineError::Unsupported(format!(
+            crate::formation::agent::Drive::Torque { robot, variant } => Ok((*robot, *variant)),
+            crate::formation::agent::Drive::Velocity(_) => Err(EngineError::Unsupported(format!(
                 "velocity bases (agent {} is one)",
                 i + 1
             ))),

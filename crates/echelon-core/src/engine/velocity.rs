@@ -1,15 +1,15 @@
 //! The velocity-base kernel: blocks of [`W`] agents on velocity-controlled
-//! bases ([`crate::base::VelocityBase`]) driven by the kinematic law
-//! ([`crate::kinematic`]), RK4 with the law in every stage, stepped by the
+//! bases ([`crate::model::base::VelocityBase`]) driven by the kinematic law
+//! ([`crate::law::kinematic`]), RK4 with the law in every stage, stepped by the
 //! same driver as the torque kernel ([`super::BatchEngine`]).
 //!
 //! Every formula comes from the scalar code: the command from
-//! [`crate::kinematic::kinematic_of`] (the generic function
+//! [`crate::law::kinematic::kinematic_of`] (the generic function
 //! `kinematic_law` calls), `L_Ycomp` as in the torque kernel
 //! ([`super::kernel::compensation`]), the speed limiter, lags and acceleration
-//! limits of [`crate::base::VelocityBase::limit`] and
-//! [`crate::base::VelocityBase::derivative`] in lanes, and
-//! [`crate::base::VelocityBase::settle`] after each step. The limiters decide
+//! limits of [`crate::model::base::VelocityBase::limit`] and
+//! [`crate::model::base::VelocityBase::derivative`] in lanes, and
+//! [`crate::model::base::VelocityBase::settle`] after each step. The limiters decide
 //! per lane exactly as the scalar code does (`|v| > v_max`, `|v̇| > a_max`, …)
 //! and act through selects, min and max; the scaled values (one division for
 //! the common scale factor, `1/τ`, `1/v_max`, … precomputed) are computed only
@@ -36,12 +36,12 @@ use std::marker::PhantomData;
 
 use pulp::Arch;
 
-use crate::base::{AccelLimit, VelocityBase, VelocityCommand};
 use crate::check;
 use crate::error::SimError;
-use crate::lanes::{Lanes, Mask};
-use crate::lycomp::LyComp;
+use crate::law::lycomp::LyComp;
+use crate::math::lanes::{Lanes, Mask};
 use crate::model::State;
+use crate::model::base::{AccelLimit, VelocityBase, VelocityCommand};
 use crate::reference::{Jet, Order, Reference, Trajectory};
 
 use super::kernel::{Block, W, shift_from, state_of};

@@ -5,12 +5,12 @@ use std::f64::consts::PI;
 use super::EnvConfig;
 use crate::error::ParamError;
 use crate::formation::Leader;
-use crate::lycomp::{LyComp, OffsetFrame};
+use crate::law::lycomp::{LyComp, OffsetFrame};
+use crate::math::rng::SplitMix64;
 use crate::model::State;
-use crate::plan::Plan;
 use crate::reference::{Circle, Jet, Order, Reference, Trajectory};
-use crate::rng::SplitMix64;
 use crate::safety::point;
+use crate::sim::plan::Plan;
 
 /// An environment's formation for one episode: the leader (a reference of
 /// constant speed and turn rate) and each robot's `L_X`, `L_Y` (eq. 7).
@@ -145,7 +145,7 @@ pub struct FixedEpisode {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PlanRobots {
     /// Velocity bases.
-    Velocity(crate::base::VelocityBase),
+    Velocity(crate::model::base::VelocityBase),
     /// Torque-driven robots (eq. 3).
     Torque(crate::model::RobotParams),
 }

@@ -15,7 +15,7 @@
 //! Neighbours are listed nearest first, those within `sense` metres only;
 //! the rest of the `K` entries are zeros.
 
-use crate::base::{VelocityBase, VelocityBaseSpec};
+use crate::model::base::{VelocityBase, VelocityBaseSpec};
 
 /// Index of `e_x` (then `e_y`).
 pub const E: usize = 0;

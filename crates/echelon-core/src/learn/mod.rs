@@ -28,8 +28,8 @@ mod observe;
 
 use rayon::prelude::*;
 
-use crate::base::{VelocityBase, VelocityCommand};
 use crate::error::ParamError;
+use crate::model::base::{VelocityBase, VelocityCommand};
 use crate::model::{RobotParams, State, Torques};
 use crate::safety::{Neighbour, SafetyConfig, SafetyFilter};
 

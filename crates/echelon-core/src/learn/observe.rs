@@ -4,7 +4,7 @@ use super::layout::{
     E, LEADER_ACCELERATION, LEADER_VELOCITY, NEIGHBOURS, OFFSETS, SPEEDS, obs_dim,
 };
 use super::{EnvConfig, Scalar, Slots};
-use crate::control::{Gains, LeaderMotion, Offset, Variant, law};
+use crate::law::control::{Gains, LeaderMotion, Offset, Variant, law};
 use crate::model::RobotParams;
 use crate::model::State;
 use crate::safety::point;
@@ -144,7 +144,7 @@ pub(super) fn closest(points: &[[f64; 2]]) -> f64 {
     best.sqrt()
 }
 
-/// The kinematic law ([`crate::kinematic`]) from an observation alone:
+/// The kinematic law ([`crate::law::kinematic`]) from an observation alone:
 /// `ξ* = R ṗ_d − K_e e`, `ω* = ξ*₂ / L_X`, `v* = ξ*₁ + ω* L_Y` (`L̇_Y = 0`:
 /// the environments hold fixed offsets). `obs` holds whole observations of
 /// `obs_dim` values, `actions` receives `(v*, ω*)` for each.
@@ -161,7 +161,7 @@ pub fn baseline<T: Scalar>(obs: &[T], obs_dim: usize, ke: f64, actions: &mut [T]
 }
 
 /// The complete law (eqs. 9–13 with the cross term cancelled,
-/// [`crate::control::law`]) from an observation alone, as wheel torques
+/// [`crate::law::control::law`]) from an observation alone, as wheel torques
 /// `(τ_r, τ_l)` for `robot`: the robot put at the origin facing `x` (the law
 /// is the same in any frame), its leader at `(L_X, L_Y) − e` with the
 /// observed `R ṗ_d`, `R p̈_d`, `L̇_Y = L̈_Y = 0`.

@@ -3,8 +3,8 @@
 use proptest::prelude::*;
 
 use super::*;
-use crate::control::{LeaderMotion, Offset};
-use crate::kinematic::kinematic_law;
+use crate::law::control::{LeaderMotion, Offset};
+use crate::law::kinematic::kinematic_law;
 use crate::reference::Trajectory;
 
 #[allow(clippy::type_complexity)]
@@ -120,13 +120,13 @@ proptest! {
         let mut config = EnvConfig::new(4, n);
         config.spacing = 0.5;
         config.radius = 0.3;
-        let mut rng = crate::rng::SplitMix64::new(seed);
+        let mut rng = crate::math::rng::SplitMix64::new(seed);
         let mut closest = [f64::INFINITY; 2];
         for (pass, safety) in [true, false].into_iter().enumerate() {
             config.safety = safety;
             let mut env = VecFormation::new(config, seed).unwrap();
             let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
-            let mut draws = crate::rng::SplitMix64::new(seed ^ 1);
+            let mut draws = crate::math::rng::SplitMix64::new(seed ^ 1);
             for _ in 0..300 {
                 for a in actions.chunks_exact_mut(2) {
                     a[0] = draws.uniform(-0.5, 0.5);
@@ -202,7 +202,7 @@ fn truncation_clipping_and_refusals() {
             ..config
         },
         EnvConfig {
-            base: crate::base::VelocityBase::IDEAL,
+            base: crate::model::base::VelocityBase::IDEAL,
             ..config
         },
     ] {
@@ -249,13 +249,13 @@ proptest! {
         let mut obs = vec![0.0; n * d];
         env.observe(&mut obs);
         let mut actions = vec![0.0; n * 2];
-        let gains = crate::control::Gains::PAPER;
+        let gains = crate::law::control::Gains::PAPER;
         baseline_torque(&obs, d, &robot, gains, &mut actions);
         let slots = env.slots(0);
         let leader = LeaderMotion::of_jet(&slots.leader_at(1.3));
         for i in 0..n {
             let off = Offset { lx: slots.lx[i], ly: slots.ly[i], dly: 0.0, ddly: 0.0 };
-            let u = crate::control::law(&robot, &env.envs[0].states[i], &leader, &off, gains, crate::control::Variant::Complete).u;
+            let u = crate::law::control::law(&robot, &env.envs[0].states[i], &leader, &off, gains, crate::law::control::Variant::Complete).u;
             let tau = robot.torques(u);
             let a = &actions[2 * i..2 * i + 2];
             prop_assert!((a[0] - tau.right).abs() < 1e-9 * (1.0 + tau.right.abs()), "{a:?} {tau:?}");
@@ -275,7 +275,7 @@ proptest! {
         let d = env.obs_dim();
         env.observe(&mut obs);
         for _ in 0..3000 {
-            baseline_torque(&obs, d, &robot, crate::control::Gains::PAPER, &mut actions);
+            baseline_torque(&obs, d, &robot, crate::law::control::Gains::PAPER, &mut actions);
             env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
         }
         for (i, o) in obs.chunks_exact(d).enumerate() {
@@ -284,7 +284,7 @@ proptest! {
         let crowd = EnvConfig { spacing: 0.5, radius: 0.3, safety: true, ..torque_config(2, n.max(3)) };
         let mut env = VecFormation::new(crowd, seed).unwrap();
         let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
-        let mut draws = crate::rng::SplitMix64::new(seed);
+        let mut draws = crate::math::rng::SplitMix64::new(seed);
         let mut closest = f64::INFINITY;
         for _ in 0..500 {
             for a in &mut actions {

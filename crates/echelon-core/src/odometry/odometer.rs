@@ -75,7 +75,7 @@ impl Odometer {
 
     /// [`Odometer::new`] for any robot with half wheel separation
     /// `half_wheelbase` and wheel radius `wheel_radius` (m), e.g. a velocity
-    /// base ([`crate::base::VelocityRobot`]).
+    /// base ([`crate::model::base::VelocityRobot`]).
     pub fn with_wheels(
         spec: OdometrySpec,
         half_wheelbase: f64,

@@ -301,7 +301,7 @@ impl Envelope {
 
     /// The envelope of a velocity base with lags: its own speed limits (the
     /// default's where it has none), no reverse, the default's rate.
-    pub(super) fn lagged(base: &crate::base::VelocityBase) -> Envelope {
+    pub(super) fn lagged(base: &crate::model::base::VelocityBase) -> Envelope {
         let finite = |x: f64, default: f64| if x.is_finite() { x } else { default };
         Envelope {
             v_max: finite(base.v_max(), Envelope::DEFAULT.v_max),
@@ -452,7 +452,7 @@ impl SafetyFilter {
 
     /// The backward speed `cap` (m/s, `≥ 0`; infinite: no limit) a velocity
     /// base accepts until told otherwise: a Create 3's backup budget
-    /// ([`crate::base::Backup::cap`]). The filter then certifies only
+    /// ([`crate::model::base::Backup::cap`]). The filter then certifies only
     /// commands with `v ≥ −cap` (a hard row, and the nominal is held to it
     /// first), so that what it hands on is what the base carries out: a
     /// command cut after the filter (its reverse refused, its turn kept)

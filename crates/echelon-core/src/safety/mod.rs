@@ -87,7 +87,7 @@
 //! (`docs/safety.md`, "Velocity bases with lag").
 //!
 //! A state or nominal that is not finite is passed on unchanged, for the
-//! divergence guard ([`crate::guard`]) to report.
+//! divergence guard ([`crate::sim::guard`]) to report.
 //!
 //! ## The quadratic program
 //!
@@ -157,8 +157,8 @@
 //! started).
 //!
 //! [`RobotParams::limit`]: crate::model::RobotParams::limit
-//! [`VelocityBase::limit`]: crate::base::VelocityBase::limit
-//! [`VelocityBase`]: crate::base::VelocityBase
+//! [`VelocityBase::limit`]: crate::model::base::VelocityBase::limit
+//! [`VelocityBase`]: crate::model::base::VelocityBase
 
 mod config;
 mod deadlock;

@@ -62,7 +62,7 @@ impl SafetyFilter {
     ) -> Filtered<Input> {
         if !(me.is_finite() && nominal.u1.is_finite() && nominal.u2.is_finite()) {
             // Diverged: the non-finite value goes on for the divergence
-            // guard to report (`crate::guard`), no QP on it.
+            // guard to report (`crate::sim::guard`), no QP on it.
             return Filtered::passed(nominal);
         }
         let own = Own::ahead(me, l, 0.0);

@@ -7,8 +7,8 @@
 use super::filter::{EMERGENCY_ACCEL, Envelope, Filtered, Own, SafetyFilter, Speed};
 use super::neighbour::{Neighbour, Obstacle};
 use super::qp::{Constraint, push_band, push_box, solve_relaxed};
-use crate::base::{VelocityBase, VelocityCommand};
 use crate::model::State;
+use crate::model::base::{VelocityBase, VelocityCommand};
 
 /// The lag, s, a velocity base's lag-free axis is taken to have when the
 /// other axis lags and the filter runs continuously (no period): its speed
@@ -48,7 +48,7 @@ impl SafetyFilter {
     ) -> Filtered<VelocityCommand> {
         if !(me.is_finite() && nominal.v.is_finite() && nominal.omega.is_finite()) {
             // Diverged: the non-finite value goes on for the divergence
-            // guard to report (`crate::guard`), no QP on it.
+            // guard to report (`crate::sim::guard`), no QP on it.
             return Filtered::passed(nominal);
         }
         if base.tau_v() > 0.0 || base.tau_omega() > 0.0 {
@@ -219,7 +219,7 @@ mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
-    use crate::base::VelocityBaseSpec;
+    use crate::model::base::VelocityBaseSpec;
     use crate::safety::Outcome;
     use crate::safety::SafetyConfig;
 
@@ -389,7 +389,7 @@ mod tests {
             /// Under a reverse cap (a Create 3's backup budget), on a base
             /// without lag and on a lagged one, whatever the scene: the
             /// command never backs up faster than the cap — so a backup
-            /// budget applied after the filter ([`crate::base::Backup`])
+            /// budget applied after the filter ([`crate::model::base::Backup`])
             /// has nothing left to cut, and the command the filter
             /// certified is the one the base carries out — and a filtered
             /// command still satisfies every row.

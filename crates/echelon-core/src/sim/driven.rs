@@ -14,17 +14,17 @@
 //! [`Simulation::sensed`] and [`Simulation::leader_view`] give the caller
 //! what the simulator's own law is given (the pose its odometry estimates,
 //! the leader motion and offsets of eqs. 4–6), so that a controller written
-//! outside with [`crate::control::law`] reproduces a sampled run's bits.
+//! outside with [`crate::law::control::law`] reproduces a sampled run's bits.
 
 use std::cell::RefCell;
 
 use super::system::Source;
 use super::{Now, SafetyOutput, Simulation, system};
-use crate::agent::Command;
-use crate::control::{LeaderMotion, Offset};
 use crate::error::{ParamError, SimError};
-use crate::follow::LeaderView;
 use crate::formation::Leader;
+use crate::formation::agent::Command;
+use crate::formation::follow::LeaderView;
+use crate::law::control::{LeaderMotion, Offset};
 use crate::model::{Input, State};
 use crate::safety::Outcome;
 

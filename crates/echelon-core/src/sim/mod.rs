@@ -7,20 +7,23 @@
 //! in between. Stepping is explicit ([`Simulation::step`]) over plain data; the
 //! same inputs give the same bits.
 
-use crate::agent::{Actuation, Command, Guard, Sight};
-use crate::agent::{AgentSpec, Drive};
-use crate::base::VelocityRobot;
 use crate::error::SimError;
+use crate::formation::agent::{Actuation, Command, Guard, Sight};
+use crate::formation::agent::{AgentSpec, Drive};
 use crate::formation::{Formation, Leader};
 use crate::model::State;
+use crate::model::base::VelocityRobot;
 use crate::odometry::Odometer;
-use crate::plan::{Plan, SimConfig};
 use crate::reference::{Order, Reference};
 use crate::safety::{Neighbour, Obstacle, SafetyFilter};
+use crate::sim::plan::{Plan, SimConfig};
 
 mod driven;
+pub mod guard;
 mod observe;
 mod outputs;
+pub mod plan;
+pub mod sample;
 mod system;
 
 pub use driven::StepByError;
@@ -394,7 +397,7 @@ impl Simulation {
 
     /// Advances one RK4 step; the law is evaluated in each of the four stages.
     /// Fails ([`SimError::Diverged`]) if a state stops being finite or leaves
-    /// the configuration's [`crate::guard::Bounds`]; the simulation then stays at that state.
+    /// the configuration's [`crate::sim::guard::Bounds`]; the simulation then stays at that state.
     pub fn step(&mut self) -> Result<(), SimError> {
         self.refresh();
         let hold = self.hold_every > 0;

@@ -159,13 +159,13 @@ mod observer_tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
-    use crate::agent::AgentSpec;
-    use crate::control::{Gains, Variant};
     use crate::formation::Leader;
-    use crate::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
+    use crate::formation::agent::AgentSpec;
+    use crate::law::control::{Gains, Variant};
+    use crate::law::lycomp::{LyComp, LyDerivatives, Placement, PlacementSpec};
     use crate::model::{RobotParams, State};
-    use crate::plan::{Plan, SimConfig, Timing};
     use crate::reference::{Circle, Reference};
+    use crate::sim::plan::{Plan, SimConfig, Timing};
 
     /// Records which hooks it saw, in order.
     #[derive(Debug, Default)]

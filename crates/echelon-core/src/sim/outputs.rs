@@ -1,11 +1,11 @@
 //! What each agent is doing at one instant, as observers see it.
 
 use super::Frame;
-use crate::agent::{Actuation, Command};
-use crate::base::VelocityCommand;
+use crate::formation::agent::{Actuation, Command};
+use crate::model::base::VelocityCommand;
 use crate::model::{Input, State, Torques, wrap_angle};
 use crate::safety::Outcome;
-use crate::sample::{AgentSample, VelocitySample};
+use crate::sim::sample::{AgentSample, VelocitySample};
 
 /// What one agent's controller and motors are doing at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -86,7 +86,7 @@ impl AgentOutput {
 pub struct VelocityOutput {
     /// The kinematic law's `(v*, ω*)` (held value in sampled mode).
     pub command: VelocityCommand,
-    /// The command after the base's speed limits ([`crate::base::VelocityBase::limit`]).
+    /// The command after the base's speed limits ([`crate::model::base::VelocityBase::limit`]).
     pub applied: VelocityCommand,
     /// Whether the speed limits cut the command.
     pub saturated: bool,

@@ -2,16 +2,16 @@
 //! order, and its plant's derivative under the command.
 
 use super::AgentOutput;
-use crate::agent::{Command, Drive};
-use crate::base::Backup;
-use crate::control::{LawOutput, LeaderMotion, Offset, errors};
-use crate::follow::{LeaderView, follow};
 use crate::formation::Leader;
-use crate::kinematic::kinematic_law;
+use crate::formation::agent::{Command, Drive};
+use crate::formation::follow::{LeaderView, follow};
+use crate::law::control::{LawOutput, LeaderMotion, Offset, errors};
+use crate::law::kinematic::kinematic_law;
 use crate::model::State;
+use crate::model::base::Backup;
 use crate::odometry::Odometer;
-use crate::plan::Plan;
 use crate::reference::{Jet, Order, Trajectory};
+use crate::sim::plan::Plan;
 
 /// What agent `j`'s controller senses of itself in states `x`: its odometry
 /// estimate when it dead-reckons (eqs. 32–35), else its true state.
@@ -108,7 +108,7 @@ impl System {
     /// into it. With `held`, the commands are held values (sampled controller)
     /// instead of fresh law outputs. With odometers, the law acts on what they
     /// measure (eqs. 32–35) while `e`, `z` in `out` are those of the true state.
-    /// A velocity base's command is limited ([`crate::base::VelocityBase::limit`])
+    /// A velocity base's command is limited ([`crate::model::base::VelocityBase::limit`])
     /// before it drives the base.
     #[inline]
     #[allow(clippy::too_many_arguments)]

@@ -2,8 +2,8 @@
 //! accelerations solved as a recurrence `v̇ᵢ = αᵢ + βᵢ v̇ᵢ₋₁` (the law is affine
 //! in the leader's acceleration).
 
-use crate::control::{Body, law_finish, law_partial, robot_leader};
-use crate::lanes::Lanes;
+use crate::law::control::{Body, law_finish, law_partial, robot_leader};
+use crate::math::lanes::Lanes;
 
 use super::{
     Aff, Block, Carry, Consts, V, W, add_scaled, broken, combine, each, first_lane, hold,

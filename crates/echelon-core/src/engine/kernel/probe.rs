@@ -1,8 +1,8 @@
 //! The law's outputs of a block at its current state (what the engine
 //! reports at a probe), star and chain.
 
-use crate::control::{Body, law_finish, law_partial};
-use crate::lanes::Lanes;
+use crate::law::control::{Body, law_finish, law_partial};
+use crate::math::lanes::Lanes;
 
 use super::{
     Block, Carry, Consts, Leaders, Scratch, V, W, chain_stage, hold, shift_in, star_ly, star_stage,

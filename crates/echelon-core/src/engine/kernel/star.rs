@@ -1,6 +1,6 @@
 //! A star block's stage and tile: every agent follows the reference.
 
-use crate::control::{Body, law_finish, law_partial};
+use crate::law::control::{Body, law_finish, law_partial};
 
 use super::{
     Block, Carry, Consts, V, W, actuate, broken, combine, each, first_lane, hold_ly, star_ly,

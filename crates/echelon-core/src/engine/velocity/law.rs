@@ -1,11 +1,11 @@
 //! The kinematic law and the velocity base in lanes: the command, the
 //! speed limiter, lags and acceleration limits, and the plant's derivative.
 
-use crate::base::AccelLimit;
-use crate::control::Hold;
 use crate::engine::kernel::compensation;
-use crate::kinematic::kinematic_of;
-use crate::lanes::Lanes;
+use crate::law::control::Hold;
+use crate::law::kinematic::kinematic_of;
+use crate::math::lanes::Lanes;
+use crate::model::base::AccelLimit;
 
 use super::{Cmd, Leads, Own, V4, VConsts};
 
@@ -21,7 +21,7 @@ fn clamp<const N: usize>(a: Lanes<N>, m: Lanes<N>) -> Lanes<N> {
     a.max(-m).min(m)
 }
 
-/// The kinematic law and the speed limiter ([`crate::base::VelocityBase::limit`]:
+/// The kinematic law and the speed limiter ([`crate::model::base::VelocityBase::limit`]:
 /// where `|v| > v_max` or `|ω| > ω_max`, `(v, ω)` scaled by
 /// `1 / max(|v|/v_max, |ω|/ω_max)`, then clamped against the last bit of
 /// rounding; the scaling computed only when some lane needs it).
@@ -62,7 +62,7 @@ pub(super) fn command<const N: usize>(
     }
 }
 
-/// The velocities the base moves at ([`crate::base::VelocityBase::speeds`]).
+/// The velocities the base moves at ([`crate::model::base::VelocityBase::speeds`]).
 #[inline(always)]
 pub(super) fn speeds<const N: usize>(
     c: &VConsts,
@@ -75,7 +75,7 @@ pub(super) fn speeds<const N: usize>(
     ]
 }
 
-/// The state derivative ([`crate::base::VelocityBase::derivative`]): eq. 1
+/// The state derivative ([`crate::model::base::VelocityBase::derivative`]): eq. 1
 /// at the base's speeds, the lags' accelerations after their limits (where
 /// `|v̇| > a_max` or `|ω̇| > α_max`; computed only when some lane needs it).
 #[inline(always)]
@@ -111,7 +111,7 @@ pub(super) fn derivative(c: &VConsts, x: &[V4; 5], (sin, cos): (V4, V4), cmd: &[
     [v * cos, v * sin, w, dv, dw]
 }
 
-/// The state after a step ([`crate::base::VelocityBase::settle`]), given the
+/// The state after a step ([`crate::model::base::VelocityBase::settle`]), given the
 /// command at its end.
 #[inline(always)]
 pub(super) fn settle(c: &VConsts, x: &mut [V4; 5], cmd: &[V4; 2]) {

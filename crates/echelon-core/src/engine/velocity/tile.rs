@@ -6,7 +6,7 @@ use std::marker::PhantomData;
 use pulp::{Simd, WithSimd};
 
 use crate::engine::kernel::{broken, first_lane, turned_state};
-use crate::lanes::{Lanes, Mask};
+use crate::math::lanes::{Lanes, Mask};
 
 use super::{
     Cmd, Lead, Leads, Own, V4, VBlock, VConsts, VW, command, derivative, ly_of, settle, speeds,

@@ -6,18 +6,18 @@
 //! [`Plan::with_safety`]); each constructor refuses what cannot run, so a
 //! `Plan` always can.
 
-use crate::agent::AgentSpec;
 use crate::check;
-use crate::control::Variant;
 use crate::error::{FormationError, SimError};
 use crate::error::{ParamError, num};
+use crate::formation::agent::AgentSpec;
 use crate::formation::{Formation, Leader};
-use crate::guard::Bounds;
-use crate::lycomp::{FitCoefficients, LyComp, OffsetFrame};
+use crate::law::control::Variant;
+use crate::law::lycomp::{FitCoefficients, LyComp, OffsetFrame};
 use crate::math::whole_ratio;
 use crate::odometry::{Odometer, OdometrySpec};
 use crate::reference::Reference;
 use crate::safety::{Obstacle, SafetyConfig};
+use crate::sim::guard::Bounds;
 
 /// When the controller runs.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -192,7 +192,7 @@ impl Plan {
     /// ([`AgentSpec::new`], [`SimConfig::new`]), refusing what only exists
     /// at the level of the formation ([`Agents::new`]) and a velocity base's
     /// lag the step cannot resolve
-    /// ([`crate::base::VelocityBase::check_step`]).
+    /// ([`crate::model::base::VelocityBase::check_step`]).
     pub fn new(
         agents: Vec<AgentSpec>,
         reference: Reference,

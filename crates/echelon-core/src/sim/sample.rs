@@ -7,8 +7,8 @@
 //! [`VELOCITY_COLUMNS`]); serialised (serde, JSON Schema through schemars)
 //! they are the MCAP record's fields. SI units, radians.
 
-use crate::base::VelocityCommand;
 use crate::model::State;
+use crate::model::base::VelocityCommand;
 
 /// One agent at one instant: true state, tracking error `e` (eq. 7) and
 /// backstepping error `z` (eq. 10) of the true state in the robot's body

@@ -10,15 +10,15 @@
 //!   ─▶ Drive::derivative: the plant (eq. 3, or the velocity base)
 //! ```
 
-use crate::base::{VelocityCommand, VelocityRobot};
 use crate::check;
-use crate::control::{Gains, Law, Variant};
 use crate::error::ParamError;
 use crate::formation::Leader;
-use crate::lycomp::Placement;
+use crate::law::control::{Gains, Law, Variant};
+use crate::law::lycomp::Placement;
+use crate::model::base::{VelocityCommand, VelocityRobot};
 use crate::model::{Input, RobotParams, State, Torques};
 use crate::safety::{Neighbour, Obstacle, Outcome, SafetyFilter};
-use crate::sample::VelocitySample;
+use crate::sim::sample::VelocitySample;
 
 /// How a robot is driven, and so which law drives it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -30,7 +30,7 @@ pub enum Drive {
         /// Paper or complete law.
         variant: Variant,
     },
-    /// A velocity-controlled base under the kinematic law ([`crate::kinematic`]).
+    /// A velocity-controlled base under the kinematic law ([`crate::law::kinematic`]).
     Velocity(VelocityRobot),
 }
 
@@ -89,7 +89,7 @@ impl AgentSpec {
     /// A torque-driven agent (its robot is valid by construction,
     /// [`RobotParams::new`]), refusing impossible gains ([`Gains::new`]), placement
     /// ([`Placement::new`]) or a start state that is not finite. Whether its
-    /// leader exists is the formation's business ([`crate::plan::Plan::new`]).
+    /// leader exists is the formation's business ([`crate::sim::plan::Plan::new`]).
     pub fn new(
         name: impl Into<String>,
         robot: RobotParams,
@@ -199,7 +199,7 @@ impl AgentSpec {
     /// What this agent's act step does beyond its law, when it does anything
     /// (the setting's name, e.g. `max_accel`): what a runner of the bare law,
     /// as the batch engine, must refuse. The safety filter is the plan's
-    /// ([`crate::plan::Plan::safety`]), not the agent's.
+    /// ([`crate::sim::plan::Plan::safety`]), not the agent's.
     pub fn beyond_law(&self) -> Option<&'static str> {
         self.max_accel.map(|_| "max_accel")
     }
@@ -320,7 +320,7 @@ pub struct Actuation {
     /// Applied wheel torques; zero on a velocity base.
     pub tau: Torques,
     /// On a velocity base, the command after its speed limits
-    /// ([`crate::base::VelocityBase::limit`]) and whether they cut it.
+    /// ([`crate::model::base::VelocityBase::limit`]) and whether they cut it.
     pub velocity: Option<(VelocityCommand, bool)>,
 }
 
@@ -335,7 +335,7 @@ impl Drive {
 
     /// What the motors apply for `command`: each wheel torque within the
     /// torque limit ([`RobotParams::actuate`]), or the velocity command within
-    /// the base's speed limits ([`crate::base::VelocityBase::limit`]). A
+    /// the base's speed limits ([`crate::model::base::VelocityBase::limit`]). A
     /// command of the other drive's kind applies as zero.
     #[inline]
     pub fn actuate(&self, command: Command) -> Actuation {
@@ -357,7 +357,7 @@ impl Drive {
     }
 
     /// The plant's state derivative in `s` under `applied` (eq. 3, or the
-    /// velocity base's [`crate::base::VelocityBase::derivative`]).
+    /// velocity base's [`crate::model::base::VelocityBase::derivative`]).
     #[inline]
     pub fn derivative(&self, s: &State, applied: &Actuation) -> State {
         match self {
@@ -367,7 +367,7 @@ impl Drive {
     }
 
     /// `s` made consistent with `applied` (a velocity base's
-    /// [`crate::base::VelocityBase::settle`]: an axis without lag takes the
+    /// [`crate::model::base::VelocityBase::settle`]: an axis without lag takes the
     /// applied command's velocity, a lagged one stays within the speed
     /// limits); a torque-driven robot's state is `s` as it is (eq. 3 has
     /// nothing to settle).
@@ -383,7 +383,7 @@ impl Drive {
     /// [`State::rk4_step`] over [`Drive::derivative`], then
     /// [settled](Drive::settle). Eq. 3's
     /// [`RobotParams::rk4_step`] on a torque-driven robot,
-    /// [`crate::base::VelocityBase::rk4_step`] on a velocity base, bit for bit.
+    /// [`crate::model::base::VelocityBase::rk4_step`] on a velocity base, bit for bit.
     #[inline]
     pub fn rk4_step(&self, s: &State, applied: &Actuation, h: f64) -> State {
         self.settle(&s.rk4_step(h, |x| self.derivative(x, applied)), applied)
@@ -457,7 +457,7 @@ pub struct Guard<'a> {
     /// `None`: unknown.
     pub error: Option<f64>,
     /// The backward speed a velocity base accepts this period, m/s
-    /// ([`crate::base::Backup::cap`]; infinite: no limit): the filter's
+    /// ([`crate::model::base::Backup::cap`]; infinite: no limit): the filter's
     /// reverse cap ([`SafetyFilter::set_reverse_cap`]).
     pub reverse: f64,
 }

@@ -3,13 +3,13 @@
 //! agent knows of its leader to the leader motion `p_d, ṗ_d, p̈_d`, the offsets
 //! `L_X, L_Y` (eqs. 4–6) and the law's output (eq. 13).
 
-use crate::agent::{AgentSpec, Command, Drive};
-use crate::base::VelocityCommand;
-use crate::control::{LawOutput, LeaderMotion, Offset, law};
-use crate::kinematic::kinematic_law;
-use crate::lycomp::{OffsetFrame, Placement};
+use crate::formation::agent::{AgentSpec, Command, Drive};
+use crate::law::control::{LawOutput, LeaderMotion, Offset, law};
+use crate::law::kinematic::kinematic_law;
+use crate::law::lycomp::{OffsetFrame, Placement};
 use crate::model::Input;
 use crate::model::State;
+use crate::model::base::VelocityCommand;
 use crate::reference::Jet;
 
 /// What a follower knows of its leader at one instant.
@@ -46,7 +46,7 @@ impl LeaderView<'_> {
     /// The leader motion and the offsets `L_X, L_Y, L̇_Y, L̈_Y` (eqs. 4–6) a
     /// follower with `placement` holds it at.
     ///
-    /// A slot in the leader's frame ([`crate::lycomp::OffsetFrame::Leader`])
+    /// A slot in the leader's frame ([`crate::law::lycomp::OffsetFrame::Leader`])
     /// turns with the leader's heading: the reference's path heading, turn
     /// rate and angular acceleration ([`Jet::frame`]); a leader robot's `θ`
     /// and `ω` (its `ω̇` neglected, as `L̇_Y` is for robot leaders); a
@@ -101,7 +101,7 @@ pub struct Follow {
     pub offset: Offset,
     /// For a velocity base, the kinematic law's `(v*, ω*)` before the base's
     /// limits; `law.u` is then zero and `law.e`, `law.z` are the kinematic
-    /// law's ([`crate::kinematic::KinematicOutput`]).
+    /// law's ([`crate::law::kinematic::KinematicOutput`]).
     pub velocity: Option<VelocityCommand>,
 }
 
@@ -119,7 +119,7 @@ impl Follow {
 /// The law of agent `spec` in `sensed` state behind `leader`: eqs. 7–13 for a
 /// torque-driven robot, the kinematic law for a velocity base. A robot leader
 /// on a velocity base is seen at the speeds its base moves at
-/// ([`crate::base::VelocityBase::speeds`]): the caller puts them in its state.
+/// ([`crate::model::base::VelocityBase::speeds`]): the caller puts them in its state.
 #[inline]
 pub fn follow(spec: &AgentSpec, sensed: &State, leader: LeaderView<'_>) -> Follow {
     let (motion, offset) = leader.resolve(&spec.placement());
@@ -149,9 +149,9 @@ pub fn follow(spec: &AgentSpec, sensed: &State, leader: LeaderView<'_>) -> Follo
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::{Gains, Variant};
     use crate::formation::Leader;
-    use crate::lycomp::{LyComp, LyDerivatives, PlacementSpec};
+    use crate::law::control::{Gains, Variant};
+    use crate::law::lycomp::{LyComp, LyDerivatives, PlacementSpec};
     use crate::model::RobotParams;
     use crate::reference::{Circle, Order, Trajectory};
 

@@ -17,7 +17,7 @@
 //!
 //! Along the closed loop `V₂ = ½‖e‖² + ½‖z‖²` obeys
 //! `V̇₂ = −K_e‖e‖² + eᵀz − K_z‖z‖²` (paper) or `−K_e‖e‖² − K_z‖z‖²` (complete).
-//! Pure tracking is the same law with `L_X = L`, `L_Y = 0` ([`crate::lycomp::Placement::tracking`]).
+//! Pure tracking is the same law with `L_X = L`, `L_Y = 0` ([`crate::law::lycomp::Placement::tracking`]).
 
 use std::ops::{Add, Mul, Neg, Sub};
 
@@ -25,7 +25,7 @@ use num_dual::DualNum;
 
 use crate::check;
 use crate::error::ParamError;
-use crate::lanes::Real;
+use crate::math::lanes::Real;
 use crate::model::{Input, RobotParams, State};
 use crate::reference::Jet;
 
@@ -76,7 +76,7 @@ pub enum Variant {
 }
 
 /// A scenario's `law`: one of the two forms of eq. 13 for a torque-driven
-/// robot, or the kinematic law ([`crate::kinematic`]) for a velocity base.
+/// robot, or the kinematic law ([`crate::law::kinematic`]) for a velocity base.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(
     feature = "serde",
@@ -465,7 +465,7 @@ pub fn lyapunov_rate(e: [f64; 2], z: [f64; 2], gains: Gains, variant: Variant) -
 
 /// Eqs. 7 and 10 in any number type (`f64`, duals, SIMD lanes): `e` and `z`
 /// of a body holding its leader at `hold` (`1/L_X` and `L̈_Y` do not enter).
-/// The one place of these formulas: [`errors`], [`law`], [`crate::kinematic`]
+/// The one place of these formulas: [`errors`], [`law`], [`crate::law::kinematic`]
 /// and the SIMD kernels all come here.
 #[inline(always)]
 pub(crate) fn errors_at<V: Real>(

@@ -190,7 +190,7 @@ impl Backup {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::base::VelocityBaseSpec;
+    use crate::model::base::VelocityBaseSpec;
     use proptest::prelude::*;
 
     fn base(tau_v: f64, a_max: f64, tau_omega: f64, alpha_max: f64, joint: bool) -> VelocityBase {

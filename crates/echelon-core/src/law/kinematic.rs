@@ -1,6 +1,6 @@
 //! The kinematic leader-follower law: the first backstepping step of the
 //! paper (eqs. 7–10) used as the command of a velocity-controlled base
-//! ([`crate::base`]), as derived in `docs/control-law.md`, "Kinematic law".
+//! ([`crate::model::base`]), as derived in `docs/control-law.md`, "Kinematic law".
 //!
 //! With the same `e` (eq. 7), `ξ = [v − ω L_Y, ω L_X]ᵀ` and the virtual control
 //! of eq. 10 as the command:
@@ -16,14 +16,14 @@
 //! with the base's actual velocities) measures how far the base is from the
 //! command and `V̇₁ = −K_e‖e‖² + eᵀz` ([`lyapunov_rate`]).
 //!
-//! `L_X`, `L_Y`, `L̇_Y` come from [`crate::lycomp::Placement`] exactly as for the
+//! `L_X`, `L_Y`, `L̇_Y` come from [`crate::law::lycomp::Placement`] exactly as for the
 //! dynamic law (`L_Ycomp`, chained leaders, pure tracking with `L_X = L`,
 //! `L_Y = 0`); `p̈_d` and `L̈_Y` are not needed.
 
-use crate::base::VelocityCommand;
-use crate::control::{Body, Hold, LeaderMotion, Offset, errors_at};
-use crate::lanes::Real;
+use crate::law::control::{Body, Hold, LeaderMotion, Offset, errors_at};
+use crate::math::lanes::Real;
 use crate::model::State;
+use crate::model::base::VelocityCommand;
 
 /// The kinematic law's output at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -34,7 +34,7 @@ pub struct KinematicOutput {
     pub e: [f64; 2],
     /// `z = ξ(v, ω) − ξ*` (eq. 10) at the state's velocities, m/s: zero when
     /// the base moves at the command (an ideal base, after
-    /// [`crate::base::VelocityBase::settle`]).
+    /// [`crate::model::base::VelocityBase::settle`]).
     pub z: [f64; 2],
 }
 
@@ -74,7 +74,7 @@ pub(crate) fn kinematic_of<V: Real>(
 /// used.
 ///
 /// For a robot leader, build `leader` from the velocities the leader's base
-/// actually moves at ([`crate::base::VelocityBase::speeds`]), not a stale
+/// actually moves at ([`crate::model::base::VelocityBase::speeds`]), not a stale
 /// state: `LeaderMotion::of_robot(&State { v, omega, ..s }, dv)`.
 #[inline]
 pub fn kinematic_law(me: &State, leader: &LeaderMotion, off: &Offset, ke: f64) -> KinematicOutput {

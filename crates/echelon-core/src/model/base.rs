@@ -490,7 +490,7 @@ impl VelocityBase {
 pub struct VelocityRobot {
     base: VelocityBase,
     /// How far the base may back up in one go, m (infinite: no limit):
-    /// [`crate::base::Backup`].
+    /// [`crate::model::base::Backup`].
     #[cfg_attr(feature = "serde", serde(skip_serializing_if = "f64_is_infinite"))]
     reverse_limit: f64,
     half_wheelbase: f64,

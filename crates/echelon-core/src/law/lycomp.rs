@@ -10,8 +10,8 @@
 use num_dual::{Dual2, DualNum};
 
 use crate::check;
-use crate::control::{LeaderMotion, Offset};
 use crate::error::ParamError;
+use crate::law::control::{LeaderMotion, Offset};
 use crate::reference::{Jet, STANDSTILL};
 
 /// How `L_Ycomp` is computed (`lycomp = "exact"`, `"fit"` or `"none"` in a scenario).

@@ -2,8 +2,8 @@
 //!
 //! A stop is always obeyed (stopping is never unsafe), but a resume sets
 //! robots moving, so it is obeyed only when it carries a proof made with
-//! the fleet's operator token ([`OperatorToken::proof`], in
-//! [`FleetCommand::proof`]), in every mode. The token is 128 random bits
+//! the fleet's operator token ([`OperatorToken::sign`] over the command's
+//! bytes, in `FleetCommand::proof`), in every mode. The token is 128 random bits
 //! from the operating system, written as 32 lowercase hexadecimal
 //! characters. `fleet up` makes one (or takes [`TOKEN_ENV`]), writes it to
 //! `OUT/operator-token` ([`TOKEN_FILE`], mode 0600) and hands it to every
@@ -11,8 +11,8 @@
 //! from the same variable. The live dashboard's URL carries the same token.
 //!
 //! The proof is HMAC-SHA256 keyed by the token's 16 bytes over the
-//! command's fields (everything but the proof; [`signed_bytes`]), in
-//! lowercase hexadecimal: whoever sees a resume on the network learns
+//! command's fields (everything but the proof; `FleetCommand::signed_bytes`
+//! lays them out), in lowercase hexadecimal: whoever sees a resume on the network learns
 //! nothing of the token and cannot make a resume of another number, order,
 //! sender or reason.
 
@@ -23,7 +23,6 @@ use ring::hmac;
 use ring::rand::SecureRandom;
 
 use crate::FleetError;
-use crate::command::FleetCommand;
 
 /// The environment variable a process reads its operator token from.
 pub const TOKEN_ENV: &str = "ECHELON_OPERATOR_TOKEN";
@@ -33,10 +32,6 @@ pub const TOKEN_FILE: &str = "operator-token";
 pub const TOKEN_HEX_LEN: usize = 32;
 /// The length of a proof, hexadecimal characters (HMAC-SHA256).
 pub const PROOF_HEX_LEN: usize = 64;
-/// What the signed bytes start with (so that a proof is of a fleet
-/// command, and of this layout, nothing else).
-const DOMAIN: &[u8] = b"echelon.FleetCommand.proof.v1\0";
-
 /// The fleet's operator token (its `Debug` does not show it).
 #[derive(Clone)]
 pub struct OperatorToken([u8; TOKEN_HEX_LEN / 2]);
@@ -82,26 +77,6 @@ fn unhex(s: &str) -> Option<Vec<u8>> {
     s.chunks(2)
         .map(|p| Some((digit(p[0])? << 4) | digit(p[1])?))
         .collect()
-}
-
-/// The bytes a proof signs: `DOMAIN`, then the command's version (4
-/// bytes), order name, sequence number (8 bytes), stamp (8 bytes), sender
-/// and reason, integers big-endian, each text preceded by its length in
-/// bytes (4 bytes big-endian), so that no two commands share them.
-pub fn signed_bytes(c: &FleetCommand) -> Vec<u8> {
-    let text = |out: &mut Vec<u8>, s: &str| {
-        out.extend_from_slice(&(s.len() as u32).to_be_bytes());
-        out.extend_from_slice(s.as_bytes());
-    };
-    let mut out = Vec::with_capacity(DOMAIN.len() + 40 + c.by.len() + c.reason.len());
-    out.extend_from_slice(DOMAIN);
-    out.extend_from_slice(&c.version.to_be_bytes());
-    text(&mut out, c.order.name());
-    out.extend_from_slice(&c.seq.to_be_bytes());
-    out.extend_from_slice(&c.stamp_unix_ns.to_be_bytes());
-    text(&mut out, &c.by);
-    text(&mut out, &c.reason);
-    out
 }
 
 impl OperatorToken {
@@ -189,22 +164,22 @@ impl OperatorToken {
         hmac::Key::new(hmac::HMAC_SHA256, &self.0)
     }
 
-    /// The proof of `c` made with this token: HMAC-SHA256 of
-    /// [`signed_bytes`], 64 lowercase hexadecimal characters.
-    pub fn proof(&self, c: &FleetCommand) -> String {
-        hex(hmac::sign(&self.key(), &signed_bytes(c)).as_ref())
+    /// The proof of `bytes` made with this token: HMAC-SHA256, 64
+    /// lowercase hexadecimal characters.
+    pub fn sign(&self, bytes: &[u8]) -> String {
+        hex(hmac::sign(&self.key(), bytes).as_ref())
     }
 
-    /// Whether `c` carries a proof made with this token (compared in
+    /// Whether `proof` is this token's proof of `bytes` (compared in
     /// constant time).
-    pub fn verify(&self, c: &FleetCommand) -> bool {
-        if c.proof.len() != PROOF_HEX_LEN {
+    pub fn verify(&self, bytes: &[u8], proof: &str) -> bool {
+        if proof.len() != PROOF_HEX_LEN {
             return false;
         }
-        let Some(tag) = unhex(&c.proof) else {
+        let Some(tag) = unhex(proof) else {
             return false;
         };
-        hmac::verify(&self.key(), &signed_bytes(c), &tag).is_ok()
+        hmac::verify(&self.key(), bytes, &tag).is_ok()
     }
 }
 
@@ -215,28 +190,6 @@ mod tests {
     use proptest::prelude::*;
 
     use super::*;
-    use crate::command::Order;
-
-    fn token(bytes: [u8; 16]) -> OperatorToken {
-        OperatorToken(bytes)
-    }
-
-    fn command() -> impl Strategy<Value = FleetCommand> {
-        (
-            any::<bool>(),
-            any::<u64>(),
-            any::<u64>(),
-            "[a-z0-9-]{1,64}",
-            "\\PC{0,40}",
-        )
-            .prop_map(|(stop, seq, stamp, by, reason)| {
-                let order = if stop { Order::Stop } else { Order::Resume };
-                FleetCommand {
-                    stamp_unix_ns: stamp,
-                    ..FleetCommand::new(order, seq, &by, &reason)
-                }
-            })
-    }
 
     #[test]
     fn a_random_token_is_32_lowercase_hex_digits_and_parses_back() {
@@ -297,84 +250,7 @@ mod tests {
         assert!(OperatorToken::from_file(&dir.path().join("none")).is_err());
     }
 
-    /// The proof's bytes are fixed (scripts that sign a resume themselves,
-    /// `scripts/interop/ros2dds/check_run.py`, make the same).
-    #[test]
-    fn the_proof_is_hmac_sha256_of_the_fields_length_prefixed() {
-        let t = OperatorToken::parse("000102030405060708090a0b0c0d0e0f").unwrap();
-        let c = FleetCommand {
-            stamp_unix_ns: 5,
-            ..FleetCommand::new(Order::Resume, 7, "operator", "ok")
-        };
-        let mut expected = DOMAIN.to_vec();
-        expected.extend([0, 0, 0, 1]);
-        expected.extend([0, 0, 0, 6]);
-        expected.extend(b"resume");
-        expected.extend([0, 0, 0, 0, 0, 0, 0, 7]);
-        expected.extend([0, 0, 0, 0, 0, 0, 0, 5]);
-        expected.extend([0, 0, 0, 8]);
-        expected.extend(b"operator");
-        expected.extend([0, 0, 0, 2]);
-        expected.extend(b"ok");
-        assert_eq!(signed_bytes(&c), expected);
-        let p = t.proof(&c);
-        assert_eq!(p.len(), PROOF_HEX_LEN);
-        let key = hmac::Key::new(hmac::HMAC_SHA256, &t.0);
-        assert_eq!(p, hex(hmac::sign(&key, &expected).as_ref()));
-        // As check_run.py's `command_proof` makes it.
-        assert_eq!(
-            p,
-            "9b27d875f2fafd01c231a8de3679dd23c6e439e123c1b52205198e3851e05dde"
-        );
-        // The proof itself is not signed: a signed command verifies.
-        assert!(t.verify(&c.clone().signed(&t)));
-        assert!(!t.verify(&c));
-    }
-
     proptest! {
-        /// A signed command verifies with its token, and no longer once
-        /// any field changes, with another token, or with a mangled proof.
-        #[test]
-        fn only_the_signed_command_with_its_token_verifies(
-            c in command(),
-            key in any::<[u8; 16]>(),
-            other in any::<[u8; 16]>(),
-            seq in any::<u64>(),
-            stamp in any::<u64>(),
-            by in "[a-z0-9-]{1,64}",
-            reason in "\\PC{0,40}",
-            at in 0usize..PROOF_HEX_LEN,
-        ) {
-            let t = token(key);
-            let signed = c.clone().signed(&t);
-            prop_assert!(t.verify(&signed));
-            prop_assert_eq!(FleetCommand::decode(&signed.encode()), Ok(signed.clone()));
-            prop_assert!(t.verify(&FleetCommand::decode(&signed.encode()).unwrap()));
-            // The text of the token round-trips.
-            prop_assert_eq!(OperatorToken::parse(&t.to_hex()).unwrap(), t.clone());
-            let changed = [
-                FleetCommand { seq, ..signed.clone() },
-                FleetCommand { stamp_unix_ns: stamp, ..signed.clone() },
-                FleetCommand { by: by.clone(), ..signed.clone() },
-                FleetCommand { reason: reason.clone(), ..signed.clone() },
-                FleetCommand {
-                    order: if signed.order == Order::Stop { Order::Resume } else { Order::Stop },
-                    ..signed.clone()
-                },
-                FleetCommand { version: signed.version + 1, ..signed.clone() },
-            ];
-            for x in changed {
-                prop_assert_eq!(t.verify(&x), x == signed, "{:?}", x);
-            }
-            prop_assert_eq!(token(other).verify(&signed), other == key);
-            let mut mangled = signed.proof.clone().into_bytes();
-            mangled[at] = if mangled[at] == b'0' { b'1' } else { b'0' };
-            let mangled = FleetCommand { proof: String::from_utf8(mangled).unwrap(), ..signed.clone() };
-            prop_assert!(!t.verify(&mangled));
-            let short = FleetCommand { proof: signed.proof[..at].to_owned(), ..signed.clone() };
-            prop_assert!(!t.verify(&short));
-        }
-
         /// Anything but 32 hexadecimal characters is refused.
         #[test]
         fn parse_takes_exactly_32_hex_digits(s in "\\PC{0,40}") {

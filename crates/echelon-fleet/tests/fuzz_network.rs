@@ -910,7 +910,7 @@ fn every_mutation_of_a_fleet_command_is_counted_or_obeyed() {
                         // A resume is obeyed only with a valid proof: any
                         // other is counted as unauthorized, and only it.
                         let refused = after.unauthorized - before.unauthorized;
-                        let forged = c.order == Order::Resume && !operator_token().verify(&c);
+                        let forged = c.order == Order::Resume && !c.verified_by(&operator_token());
                         if refused != u64::from(forged) {
                             return Err(format!("{c:?}: {refused} counted unauthorized"));
                         }

@@ -38,7 +38,7 @@ Subcommands:
       fleet's latches (`echelon/<fleet>/latch/**`) for the highest command
       number, puts a resume numbered one past it, signed with the operator
       token in --token-file (`fleet up`'s OUT/operator-token: HMAC-SHA256
-      as crates/echelon-fleet/src/token.rs makes it), straight on
+      as crates/echelon-fleet/src/command.rs makes it), straight on
       `echelon/<fleet>/command`, and 0.5 s later asks the latches again.
       Records both answers (and the times) in FILE: the robot itself must
       refuse it while its base reports a hazard.
@@ -286,7 +286,7 @@ def kill(args):
 
 
 def command_proof(token_hex, command):
-    """The operator token's proof of `command` (echelon-fleet's token.rs):
+    """The operator token's proof of `command` (echelon-fleet's command.rs):
     HMAC-SHA256, keyed by the token's 16 bytes, of a fixed prefix, the
     version, order, seq, stamp, sender and reason (integers big-endian,
     each text preceded by its length in bytes, 4 bytes big-endian)."""

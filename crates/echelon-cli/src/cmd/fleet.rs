@@ -34,10 +34,12 @@ mod doctor;
 mod loopback;
 mod operator_args;
 mod status;
-pub(crate) use args::{FleetCommand, NetArgs};
+mod subcommand;
+pub(crate) use args::NetArgs;
 use loopback::{bench_cmd, faults_cmd, up_cmd};
 use operator_args::TopologyArg;
 pub(crate) use operator_args::{BenchArgs, FaultsArgs, UpArgs};
+pub(crate) use subcommand::FleetCommand;
 
 fn agents_of(s: &Scenario) -> Result<u32> {
     Ok(s.build(&Overrides::default())?.plan.agents().len() as u32)

@@ -389,7 +389,7 @@ mod tests {
             [(Order::Stop, 8), (Order::Resume, 9)]
         );
         // The page's resume is signed with the token.
-        assert!(token.verify(&heard[1]), "{:?}", heard[1]);
+        assert!(heard[1].verified_by(&token), "{:?}", heard[1]);
         assert!(request(d.addr, "GET /x HTTP/1.1\r\n\r\n").starts_with("HTTP/1.1 404"));
         assert_eq!(d.token.to_hex().len(), 32);
         assert!(d.operator_url().ends_with(&token.to_hex()));

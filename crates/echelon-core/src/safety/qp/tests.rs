@@ -1,6 +1,7 @@
 #![allow(clippy::unwrap_used)]
 
 use super::*;
+use clarabel::solver::SolverStatus;
 use proptest::prelude::*;
 
 /// `½‖x − want‖²`.

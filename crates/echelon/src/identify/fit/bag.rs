@@ -54,9 +54,11 @@
 use super::{AxisFit, CHI2_1_95, CHI2_1_999, equation_error};
 use crate::lm;
 
+mod guess;
 mod joint;
 mod scan;
 
+use guess::{delay_grid, first_guess, largest_rate, median_period, shifted_average};
 use joint::refine;
 use scan::{delay_scan, lag_bound};
 
@@ -313,98 +315,6 @@ fn fit_axis(d: &BagData<'_>, axis: usize, base: [f64; P], limit: bool) -> ([f64;
     }
 }
 
-/// The largest rate of `y` over 5-sample spans, the start of the limit.
-fn largest_rate(t: &[f64], y: &[f64]) -> f64 {
-    super::super::limits::largest_rate(t, y).0
-}
-
-/// The hold shifted by `delay`, averaged over each odometry interval (the
-/// last sample: the value in force there).
-fn shifted_average(d: &BagData<'_>, axis: usize, delay: f64) -> Vec<f64> {
-    let (ht, hu, t) = (d.hold_t, d.hold_u[axis], d.t);
-    let in_force = |s: f64| ht.partition_point(|h| *h + delay <= s).saturating_sub(1);
-    let mut out = Vec::with_capacity(t.len());
-    for k in 0..t.len() {
-        let Some(&end) = t.get(k + 1) else {
-            out.push(hu[in_force(t[k])]);
-            break;
-        };
-        let mut j = in_force(t[k]);
-        let (mut from, mut acc) = (t[k], 0.0);
-        loop {
-            let to = match ht.get(j + 1) {
-                Some(h) if h + delay < end => (h + delay).max(from),
-                _ => end,
-            };
-            acc += (to - from) * hu[j];
-            from = to;
-            if to >= end {
-                break;
-            }
-            j += 1;
-        }
-        out.push(acc / (end - t[k]));
-    }
-    out
-}
-
-/// The median odometry period, s.
-fn median_period(t: &[f64]) -> f64 {
-    let mut periods: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    periods.sort_by(f64::total_cmp);
-    periods.get(periods.len() / 2).copied().unwrap_or(f64::NAN)
-}
-
-/// The first guess of the joint vector at no dead time: each axis's lag by
-/// equation error (0.1 s when that gives nothing plausible), its first
-/// sample as `x₀`, no limit.
-fn first_guess(d: &BagData<'_>) -> [f64; P] {
-    let mut p = [0.0; P];
-    for a in 0..2 {
-        let guess = equation_error(
-            &super::AxisData {
-                t: d.t,
-                u: &shifted_average(d, a, 0.0),
-                y: d.y[a],
-                hold: None,
-            },
-            true,
-        )
-        .0[0];
-        p[tau_at(a)] = if guess.is_finite() && guess > 0.0 && guess < 5.0 {
-            guess
-        } else {
-            0.1
-        };
-        p[tau_at(a) + 2] = d.y[a][0];
-    }
-    p
-}
-
-/// Stage 1: the dead time on the [`DELAY_STEP`] grid, the lags alone fitted
-/// at each delay warm-started from the previous one; the vector that
-/// minimises the profile likelihood `Σ_axis ln(cost)`.
-fn delay_grid(d: &BagData<'_>, mut p: [f64; P]) -> [f64; P] {
-    let mut best: Option<([f64; P], f64)> = None;
-    let steps = (MAX_DELAY / DELAY_STEP).round() as usize;
-    for k in 0..=steps {
-        p[0] = k as f64 * DELAY_STEP;
-        let mut score = 0.0;
-        for a in 0..2 {
-            let (q, c) = fit_axis(d, a, p, false);
-            p = q;
-            score += c.max(f64::MIN_POSITIVE).ln();
-        }
-        if best.as_ref().is_none_or(|(_, s)| score < *s) {
-            best = Some((p, score));
-        }
-    }
-    let Some((p, _)) = best else {
-        unreachable!("the grid has at least one point")
-    };
-    p
-}
-
 /// Stage 2's answer for one axis: whether the limit was kept, the odometry
 /// intervals the clamp held on, and why no limit was kept.
 struct LimitChoice {
@@ -605,24 +515,4 @@ pub(crate) fn fit_bag(d: &BagData<'_>) -> BagFit {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_step_rides_the_limit_then_lags() {
-        // From 0 to 1 with τ = 0.1, a = 2: rides until the error is aτ = 0.2,
-        // i.e. 0.4 s, then decays as the lag.
-        let (x, ride) = step(0.0, 1.0, 0.3, 0.1, 0.5);
-        assert!((x - 0.6).abs() < 1e-12 && (ride - 0.3).abs() < 1e-12);
-        let (x, ride) = step(0.0, 1.0, 0.5, 0.1, 0.5);
-        assert!((x - (1.0 - 0.2 * (-1.0_f64).exp())).abs() < 1e-12, "{x}");
-        assert!((ride - 0.4).abs() < 1e-12);
-        // Without a limit: the lag; without a lag: the command.
-        let (x, _) = step(0.0, 1.0, 0.1, 0.1, 0.0);
-        assert!((x - (1.0 - (-1.0_f64).exp())).abs() < 1e-12);
-        assert_eq!(step(0.3, -1.0, 0.01, 0.0, 0.0).0, -1.0);
-        // A pure rate limiter reaches the command and stays.
-        let (x, ride) = step(0.0, -1.0, 1.0, 0.0, 0.5);
-        assert!((x + 1.0).abs() < 1e-12 && (ride - 0.5).abs() < 1e-12);
-    }
-}
+mod tests;

@@ -333,22 +333,34 @@ fn centres(errors: &[ReturnError]) -> Result<([f64; 2], [f64; 2], f64), UmbmarkE
     Ok((cw, ccw, scatter))
 }
 
+/// How much better an alias beyond the ranges must reproduce the centres
+/// than the refined estimate does to be reported however far it is from a
+/// perfect robot: an in-range robot's runs are reproduced exactly (to
+/// rounding) or to their scatter, which no other robot beats a hundredfold.
+const BETTER_BEYOND: f64 = 100.0;
+
 /// A warning when errors beyond the searched ranges reproduce the centres
 /// `observed` within `tolerance` and are about as near a perfect robot
-/// (`near`): the runs may come from one of them (a robot far out of its
-/// geometry drives return errors an in-range robot nearly drives too:
-/// E_d = 0.599 and 1.353 at E_b = 0.888 on a 4 m square, 2.4 mm apart on
-/// 3.4 m return errors).
+/// (`near`), or reproduce them [`BETTER_BEYOND`] times better than the
+/// refined estimate (`refined_rms`): the runs may come from one of them (a
+/// robot far out of its geometry drives return errors an in-range robot
+/// nearly drives too: E_d = 0.599 and 1.353 at E_b = 0.888 on a 4 m
+/// square, 2.4 mm apart on 3.4 m return errors; E_d = 0.544 at
+/// E_b = 1.011 on a 7.4 m square drives whole circles on each leg and
+/// returns within 0.1 m, as a robot of E_d = 1.0002 nearly does).
 fn alias_beyond(
     clean: &SquareTest,
     observed: [f64; 4],
     first: Systematic,
     tolerance: f64,
     near: f64,
+    refined_rms: f64,
 ) -> Option<String> {
     let beyond = fit::fits(clean, observed, first, &fit::BEYOND);
     let (other, rms) = beyond.iter().find(|(o, rms)| {
-        !fit::inside(&fit::SEARCHED, [o.ed, o.eb]) && *rms <= tolerance && off_nominal(*o) <= near
+        !fit::inside(&fit::SEARCHED, [o.ed, o.eb])
+            && *rms <= tolerance
+            && (off_nominal(*o) <= near || *rms * BETTER_BEYOND < refined_rms)
     })?;
     Some(format!(
         "E_d = {:.6}, E_b = {:.6}, beyond the ranges the test tells apart (E_d in \
@@ -430,7 +442,9 @@ pub fn estimate(
     // an in-range robot nearly drives too: E_d = 0.599 and 1.353 at
     // E_b = 0.888 on a 4 m square, 2.4 mm apart on 3.4 m return errors).
     if warnings.is_empty() {
-        warnings.extend(alias_beyond(&clean, observed, first, tolerance, near));
+        warnings.extend(alias_beyond(
+            &clean, observed, first, tolerance, near, fit_rms,
+        ));
     }
     Ok(Calibration {
         cg_cw: cw,

@@ -72,6 +72,34 @@ fn clamp(r: &Ranges, [ed, eb]: [f64; 2]) -> [f64; 2] {
     [ed.clamp(r[0][0], r[0][1]), eb.clamp(r[1][0], r[1][1])]
 }
 
+/// Points of the fine line scan in `E_d`.
+const LINE: usize = 4001;
+
+/// The local minima of the cost along `E_d` at `E_b = eb` (clamped into
+/// `r`), on a scan [`LINE`] points fine, lowest first ([`STARTS`] of them):
+/// a robot whose wheels differ much drives whole circles on each leg, and
+/// the basins of those runs narrow with the square's side (about 0.05 in
+/// `E_d` on an 8 m square) below the grid's spacing, so a grid start can
+/// miss them (E_d = 0.544, E_b = 1.011 on a 7.4 m square).
+fn line_minima(geometry: &SquareTest, observed: &[f64; 4], r: &Ranges, eb: f64) -> Vec<[f64; 2]> {
+    let eb = eb.clamp(r[1][0], r[1][1]);
+    let w = |ed: f64| (ed - 1.0) / (ed + 1.0);
+    let (lo, hi) = (w(r[0][0]), w(r[0][1]));
+    let ed_at = |i: usize| {
+        let w = lo + (hi - lo) * i as f64 / (LINE - 1) as f64;
+        (1.0 + w) / (1.0 - w)
+    };
+    let costs: Vec<f64> = (0..LINE)
+        .map(|i| cost(geometry, observed, [ed_at(i), eb]))
+        .collect();
+    let mut minima: Vec<(f64, [f64; 2])> = (1..LINE - 1)
+        .filter(|&i| costs[i].is_finite() && costs[i] <= costs[i - 1] && costs[i] < costs[i + 1])
+        .map(|i| (costs[i], [ed_at(i), eb]))
+        .collect();
+    minima.sort_by(|a, b| a.0.total_cmp(&b.0));
+    minima.into_iter().take(STARTS).map(|m| m.1).collect()
+}
+
 /// Levenberg–Marquardt from `p` within `within`: the local minimum and its cost.
 fn descend(
     geometry: &SquareTest,
@@ -186,6 +214,7 @@ pub(super) fn fits(
     if inside(r, [start.ed, start.eb]) {
         starts.push([start.ed, start.eb]);
     }
+    starts.extend(line_minima(geometry, &observed, r, start.eb));
     let mut found: Vec<([f64; 2], f64)> = Vec::new();
     for s in starts {
         let (p, c) = descend(geometry, &observed, r, s);

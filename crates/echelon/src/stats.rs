@@ -7,7 +7,7 @@ use crate::agent::AgentSpec;
 use crate::error::SimError;
 use crate::model::{Pose, State};
 use crate::plan::Plan;
-use crate::safety::{Obstacle, Outcome};
+use crate::safety::{Obstacle, Tally};
 use crate::sample::AgentSample;
 use crate::sim::{Frame, Observer, ObserverError, Simulation};
 
@@ -431,6 +431,8 @@ impl SafetyReport {
 pub struct SafetyWatch {
     approach: Option<Approach>,
     report: Option<SafetyReport>,
+    /// Each agent's filter answers at its controller's samples.
+    tallies: Vec<Tally>,
 }
 
 impl SafetyWatch {
@@ -479,6 +481,7 @@ impl Observer for SafetyWatch {
                 })
                 .collect(),
         });
+        self.tallies = vec![Tally::default(); approach.agents()];
         self.approach = Some(approach);
         Ok(())
     }
@@ -489,10 +492,11 @@ impl Observer for SafetyWatch {
         };
         approach.record(frame.t, frame.states);
         r.set_approach(approach.closest());
-        for ((a, o), out) in r.agents.iter_mut().zip(frame.safety).zip(frame.outputs) {
+        let agents = r.agents.iter_mut().zip(&mut self.tallies);
+        for (((a, tally), o), out) in agents.zip(frame.safety).zip(frame.outputs) {
             if o.sampled {
-                a.active += u64::from(o.outcome != Outcome::Nominal);
-                a.infeasible += u64::from(o.outcome == Outcome::Braked);
+                tally.record(o.outcome, false, f64::INFINITY);
+                (a.active, a.infeasible) = (tally.active, tally.infeasible);
             }
             a.deadlock_breaks = o.deadlock_breaks;
             let e = out.e[0].hypot(out.e[1]);

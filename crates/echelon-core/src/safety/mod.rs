@@ -167,6 +167,7 @@ mod neighbour;
 mod qp;
 #[cfg(test)]
 mod strategies;
+mod tally;
 mod torque;
 mod velocity;
 
@@ -180,4 +181,5 @@ pub use neighbour::{
     Neighbour, Obstacle, UNCERTAINTY_SIGMAS, point, start_conflict, uncertainty_margin,
 };
 pub use qp::{Constraint, MAX_ROWS, TOLERANCE};
+pub use tally::Tally;
 pub use velocity::STEP_LAG;

@@ -39,7 +39,7 @@ use std::collections::VecDeque;
 use echelon::base::{Backup, VelocityRobot};
 use echelon::control::LeaderMotion;
 use echelon::formation::Leader;
-use echelon::safety::SafetyFilter;
+use echelon::safety::{SafetyFilter, Tally};
 
 use crate::command::{Change, CommandCounts, FleetCommand, Latch, Latched, Order};
 use crate::faults::{FaultInjector, Verdict};
@@ -225,7 +225,7 @@ impl<P: Plant> Robot<P> {
                 STALE_HOLD,
                 LAG_PERIODS * config.period,
             ),
-            counts: SafetyCounts::default(),
+            tally: Tally::default(),
         });
         Robot {
             plant,
@@ -343,11 +343,15 @@ impl<P: Plant> Robot<P> {
     /// What its safety filter did so far (`None`: it has none).
     pub fn safety_counts(&self) -> Option<SafetyCounts> {
         self.safety.as_ref().map(|s| SafetyCounts {
+            steps: s.tally.steps,
+            active: s.tally.active,
+            infeasible: s.tally.infeasible,
+            stale_brakes: s.tally.stale_brakes,
+            min_distance: s.tally.closest(),
             refused: s.table.refused(),
             stale_neighbours: s.table.stale_events(),
             lagging: s.table.lagging(),
             deadlock_breaks: s.filter.deadlock_breaks(),
-            ..s.counts
         })
     }
 

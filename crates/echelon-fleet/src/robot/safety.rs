@@ -3,18 +3,18 @@
 
 use echelon::agent::{Command, Guard};
 use echelon::model::State;
-use echelon::safety::{Outcome, SafetyFilter, point};
+use echelon::safety::{SafetyFilter, Tally, point};
 
 use crate::neighbours::NeighbourTable;
 
-use super::{RobotConfig, SafetyCounts};
+use super::RobotConfig;
 
 /// A robot's safety filter and what it knows of its neighbours.
 #[derive(Debug, Clone)]
 pub(super) struct Safety {
     pub(super) filter: SafetyFilter,
     pub(super) table: NeighbourTable,
-    pub(super) counts: SafetyCounts,
+    pub(super) tally: Tally,
 }
 
 /// What a robot's filter step knows of the robot itself.
@@ -64,21 +64,9 @@ impl Safety {
             reverse,
         };
         let act = config.spec.act(t, me, nominal, Some(guard));
-        let c = &mut self.counts;
-        c.steps += 1;
-        if let Some(g) = act.safety {
-            if g.outcome != Outcome::Nominal {
-                c.active += 1;
-            }
-            if g.stale {
-                c.stale_brakes += 1;
-            } else if g.outcome == Outcome::Braked {
-                c.infeasible += 1;
-            }
-            if g.min_distance.is_finite() {
-                let d = g.min_distance;
-                c.min_distance = Some(c.min_distance.map_or(d, |m| m.min(d)));
-            }
+        match act.safety {
+            Some(g) => self.tally.record(g.outcome, g.stale, g.min_distance),
+            None => self.tally.steps += 1,
         }
         act.command
     }

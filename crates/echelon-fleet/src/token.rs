@@ -3,8 +3,8 @@
 //! A stop is always obeyed (stopping is never unsafe), but a resume sets
 //! robots moving, so it is obeyed only when it carries a proof made with
 //! the fleet's operator token ([`OperatorToken::sign`] over the command's
-//! bytes, in `FleetCommand::proof`), in every mode. The token is 128 random bits
-//! from the operating system, written as 32 lowercase hexadecimal
+//! bytes, in `FleetCommand::proof`), in every mode. The token is 128 random
+//! bits from the operating system, written as 32 lowercase hexadecimal
 //! characters. `fleet up` makes one (or takes [`TOKEN_ENV`]), writes it to
 //! `OUT/operator-token` ([`TOKEN_FILE`], mode 0600) and hands it to every
 //! process it starts in [`TOKEN_ENV`]; a process started by hand reads it
@@ -12,9 +12,9 @@
 //!
 //! The proof is HMAC-SHA256 keyed by the token's 16 bytes over the
 //! command's fields (everything but the proof; `FleetCommand::signed_bytes`
-//! lays them out), in lowercase hexadecimal: whoever sees a resume on the network learns
-//! nothing of the token and cannot make a resume of another number, order,
-//! sender or reason.
+//! lays them out), in lowercase hexadecimal: whoever sees a resume on the
+//! network learns nothing of the token and cannot make a resume of another
+//! number, order, sender or reason.
 
 use std::fmt;
 use std::path::Path;

@@ -72,6 +72,15 @@ fn clamp(r: &Ranges, [ed, eb]: [f64; 2]) -> [f64; 2] {
     [ed.clamp(r[0][0], r[0][1]), eb.clamp(r[1][0], r[1][1])]
 }
 
+/// Step `i` of `n` over `r`'s `E_d` range, even in the curvature on a leg
+/// `w = (E_d − 1)/(E_d + 1)` (the grid's and the line scan's spacing).
+fn ed_step(r: &Ranges, n: usize, i: usize) -> f64 {
+    let w = |ed: f64| (ed - 1.0) / (ed + 1.0);
+    let (lo, hi) = (w(r[0][0]), w(r[0][1]));
+    let w = lo + (hi - lo) * i as f64 / (n - 1) as f64;
+    (1.0 + w) / (1.0 - w)
+}
+
 /// Points of the fine line scan in `E_d`.
 const LINE: usize = 4001;
 
@@ -83,12 +92,7 @@ const LINE: usize = 4001;
 /// miss them (E_d = 0.544, E_b = 1.011 on a 7.4 m square).
 fn line_minima(geometry: &SquareTest, observed: &[f64; 4], r: &Ranges, eb: f64) -> Vec<[f64; 2]> {
     let eb = eb.clamp(r[1][0], r[1][1]);
-    let w = |ed: f64| (ed - 1.0) / (ed + 1.0);
-    let (lo, hi) = (w(r[0][0]), w(r[0][1]));
-    let ed_at = |i: usize| {
-        let w = lo + (hi - lo) * i as f64 / (LINE - 1) as f64;
-        (1.0 + w) / (1.0 - w)
-    };
+    let ed_at = |i: usize| ed_step(r, LINE, i);
     let costs: Vec<f64> = (0..LINE)
         .map(|i| cost(geometry, observed, [ed_at(i), eb]))
         .collect();
@@ -183,11 +187,7 @@ pub(super) fn fits(
 ) -> Vec<(Systematic, f64)> {
     // Even steps of `w = (E_d − 1)/(E_d + 1)` and `u = 1/E_b`.
     let step = |lo: f64, hi: f64, i: usize| lo + (hi - lo) * i as f64 / (GRID - 1) as f64;
-    let w = |ed: f64| (ed - 1.0) / (ed + 1.0);
-    let eds: [f64; GRID] = std::array::from_fn(|i| {
-        let w = step(w(r[0][0]), w(r[0][1]), i);
-        (1.0 + w) / (1.0 - w)
-    });
+    let eds: [f64; GRID] = std::array::from_fn(|i| ed_step(r, GRID, i));
     let ebs: [f64; GRID] = std::array::from_fn(|i| 1.0 / step(1.0 / r[1][1], 1.0 / r[1][0], i));
     let mut grid = [[0.0; GRID]; GRID];
     for (i, &ed) in eds.iter().enumerate() {

@@ -155,19 +155,11 @@ class TorqueSafetyFilters:
 TORQUE_INNER_RATE: float
 TORQUE_ENVELOPE: tuple[float, float, float, float]
 
+# Positional; echelon.bound (_pieces.py) checks the types, holds the defaults.
 def bound(
-    ke: float,
-    zeta: float,
-    *,
-    kz: float | None = None,
-    omega_max: float | None = None,
-    gamma: float = 0.99,
-    steps: int | None = None,
-    max_z: float | None = None,
-    max_e: float | None = None,
-    ts: float | None = None,
-    law: str = "paper",
-) -> tuple[float, int, float | None, float]: ...
+    ke: float, zeta: float, kz: float | None, omega_max: float | None, gamma: float,
+    steps: int | None, max_z: float | None, max_e: float | None, ts: float | None, law: str, /
+) -> dict[str, Any]: ...
 def identify_log(
     *,
     path: str | PathLike[str] | None = None,

@@ -34,19 +34,18 @@ def bound(
     ``e_bound = √2 N ζ / γ``. ``ts`` (the sample period, s) adds
     ``fix_period_s = N T_s``. Returns a dict of ``z_bound``, ``e_bound``,
     ``steps`` and ``fix_period_s``."""
-    z, n, period, e = _echelon.bound(
+    return _echelon.bound(
         _args.number("ke", ke),
         _args.number("zeta", zeta),
-        kz=_args.optional_number("kz", kz),
-        omega_max=_args.optional_number("omega_max", omega_max),
-        gamma=_args.number("gamma", gamma),
-        steps=_args.optional_integer("steps", steps),
-        max_z=_args.optional_number("max_z", max_z),
-        max_e=_args.optional_number("max_e", max_e),
-        ts=_args.optional_number("ts", ts),
-        law=_args.text("law", law),
+        _args.optional_number("kz", kz),
+        _args.optional_number("omega_max", omega_max),
+        _args.number("gamma", gamma),
+        _args.optional_integer("steps", steps),
+        _args.optional_number("max_z", max_z),
+        _args.optional_number("max_e", max_e),
+        _args.optional_number("ts", ts),
+        _args.text("law", law),
     )
-    return {"z_bound": z, "e_bound": e, "steps": n, "fix_period_s": period}
 
 
 def identify(

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use numpy::ndarray::Ix1;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use echelon::control::{self, Gains, LeaderMotion, Offset, Variant};
 use echelon::error::num;
@@ -117,11 +118,13 @@ fn law_kinematic(
 
 /// Theorem 2 forward (`steps` given: the bound) or inverse (`max_z` given:
 /// the largest `N`), for the paper's law or the kinematic law; returns
-/// `(z_bound, steps, fix_period_s, e_bound)`.
+/// `{z_bound, e_bound, steps, fix_period_s}`. Positional: `echelon.bound`
+/// checks the arguments' types and holds the defaults.
 #[pyfunction]
-#[pyo3(signature = (ke, zeta, *, kz=None, omega_max=None, gamma=0.99, steps=None, max_z=None, max_e=None, ts=None, law="paper"))]
+#[pyo3(signature = (ke, zeta, kz, omega_max, gamma, steps, max_z, max_e, ts, law, /))]
 #[allow(clippy::too_many_arguments)]
-fn bound(
+fn bound<'py>(
+    py: Python<'py>,
     ke: f64,
     zeta: f64,
     kz: Option<f64>,
@@ -132,7 +135,7 @@ fn bound(
     max_e: Option<f64>,
     ts: Option<f64>,
     law: &str,
-) -> PyResult<(f64, u64, Option<f64>, f64)> {
+) -> PyResult<Bound<'py, PyDict>> {
     let given = [steps.is_some(), max_z.is_some(), max_e.is_some()];
     if given.iter().filter(|&&g| g).count() != 1 {
         return Err(errors::value(
@@ -143,7 +146,7 @@ fn bound(
         echelon::check::positive("ts", t).map_err(|e| errors::param(&e))?;
     }
     let period = |n: u64| ts.map(|t| t * n as f64);
-    match law {
+    let (z_bound, steps, fix_period_s, e_bound) = match law {
         "paper" | "complete" | "dynamic" => {
             let (Some(kz), Some(omega_max)) = (kz, omega_max) else {
                 return Err(errors::value(
@@ -162,7 +165,7 @@ fn bound(
                 (_, Some(z)) => th.inverse(z, ts).map_err(|e| errors::param(&e))?,
                 _ => unreachable!("exactly one is given"),
             };
-            Ok((r.z_bound, r.steps, r.fix_period_s, r.z_bound / ke))
+            (r.z_bound, r.steps, r.fix_period_s, r.z_bound / ke)
         }
         "kinematic" => {
             let th = KinematicTheorem2::new(ke, zeta, gamma).map_err(|e| errors::param(&e))?;
@@ -175,12 +178,20 @@ fn bound(
                     ));
                 }
             };
-            Ok((th.z_bound(n), n, period(n), th.e_bound(n)))
+            (th.z_bound(n), n, period(n), th.e_bound(n))
         }
-        other => Err(errors::value(format!(
-            "law: `{other}` (paper, complete or kinematic)"
-        ))),
-    }
+        other => {
+            return Err(errors::value(format!(
+                "law: `{other}` (paper, complete or kinematic)"
+            )));
+        }
+    };
+    let d = PyDict::new(py);
+    d.set_item("z_bound", z_bound)?;
+    d.set_item("e_bound", e_bound)?;
+    d.set_item("steps", steps)?;
+    d.set_item("fix_period_s", fix_period_s)?;
+    Ok(d)
 }
 
 /// The model to identify, by name or from the log's columns.

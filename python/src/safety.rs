@@ -449,9 +449,8 @@ impl PyTorqueSafetyFilters {
     }
 
     /// Filters `commands` (`(n, 2)`: u1, u2 of eq. 3) of robots in `states`
-    /// (`(n, 5)`: x, y, θ, v, ω) at time `t`: returns the filtered commands
-    /// `(n, 2)`, each robot's outcome (`nominal`, `filtered`, `braked`) and
-    /// the smallest distance from its point to a neighbour's.
+    /// (`(n, 5)`: x, y, θ, v, ω) at time `t`; returns what
+    /// `SafetyFilters.filter` does, torques for commands.
     fn filter<'py>(
         &mut self,
         py: Python<'py>,

@@ -65,25 +65,21 @@ pub struct ScenarioFile {
 
 /// `[safety]` or an agent's `safety = { … }`: keep each robot's point `L`
 /// ahead at least `radius` from the others' and from obstacles' edges.
+#[serde_with::skip_serializing_none]
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct SafetySection {
     /// `false` turns the filter off (for one agent, under `[safety]`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub enabled: Option<bool>,
     /// Smallest distance between two robots' points `L` ahead, and a
     /// point's clearance from an obstacle's edge, m (`[safety]` only; required).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radius: Option<f64>,
     /// `γ`, 1/s (default 1).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gain: Option<f64>,
     /// Sensing range: robots whose point is farther are ignored, m (default:
     /// every robot).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub range: Option<f64>,
     /// Static disc obstacles (`[safety]` only).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub obstacles: Option<Vec<ObstacleSpec>>,
 }
 
@@ -119,26 +115,24 @@ pub struct SimSection {
 
 /// `[sim] bounds = { speed, turn_rate, distance }`: the divergence guard
 /// ([`crate::guard::Bounds`]); each field optional.
+#[serde_with::skip_serializing_none]
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct BoundsSpec {
     /// Largest `|v|`, m/s.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub speed: Option<f64>,
     /// Largest `|ω|`, rad/s.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub turn_rate: Option<f64>,
     /// Largest distance from the world origin, m.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distance: Option<f64>,
 }
 
 /// `[log]`: what goes to `trajectory.csv`.
+#[serde_with::skip_serializing_none]
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct LogSection {
     /// Logging period, s (0: every step; default 0.01).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dt: Option<f64>,
 }
 
@@ -151,27 +145,22 @@ impl LogSection {
 /// `[control]` (defaults for all agents) or an agent's `control` (overrides).
 /// Every field is optional; unset fields fall back to `[control]`, then to the
 /// paper's values.
+#[serde_with::skip_serializing_none]
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct ControlSection {
     /// `paper` (default for torque-driven robots), `complete`, or `kinematic`
     /// (the only law of a velocity base, and its default).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub law: Option<Law>,
     /// `K_e` (default 1.5).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ke: Option<f64>,
     /// `K_z` (default 10).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kz: Option<f64>,
     /// `L`, m (default 0.05).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub l: Option<f64>,
     /// `exact`, `fit` (default) or `none`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lycomp: Option<LyComp>,
     /// `neglect` (default) or `exact`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ly_derivatives: Option<LyDerivatives>,
 }
 
@@ -195,62 +184,46 @@ pub enum DriveName {
 /// A torque-driven robot (the default) takes the fields from `mass` to
 /// `torque_limit`; a velocity base (`drive = "velocity"`) takes `tau_v` to
 /// `accel`; both take the wheel geometry.
+#[serde_with::skip_serializing_none]
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct RobotSection {
     /// `torque` (default; `velocity` when `preset` names a velocity base).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drive: Option<DriveName>,
     /// Start from this preset (`agent1`, `agent2`; velocity bases: `ideal`,
     /// `turtlebot3-burger`, `turtlebot4`, `jackal`) and override the fields given.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preset: Option<String>,
     /// Speed lag `τ_v`, s (velocity base; 0: ideal).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tau_v: Option<f64>,
     /// Turn-rate lag `τ_ω`, s (velocity base; 0: ideal).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tau_omega: Option<f64>,
     /// Largest `|v|`, m/s (velocity base; absent: unlimited).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub v_max: Option<f64>,
     /// Largest `|ω|`, rad/s (velocity base; absent: unlimited).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub omega_max: Option<f64>,
     /// Largest `|v̇|`, m/s² (velocity base with `tau_v > 0`; absent: unlimited).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub a_max: Option<f64>,
     /// Largest `|ω̇|`, rad/s² (velocity base with `tau_omega > 0`; absent: unlimited).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alpha_max: Option<f64>,
     /// `joint` (default: keeps the path) or `per-axis` acceleration limits.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub accel: Option<AccelLimit>,
     /// Velocity base: how far it may back up in one go, m (the `turtlebot4`
     /// preset: 0.1, the Create 3's backup limit); the law and the safety
     /// filter never ask for more (docs/real-robots.md). Default: no limit.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reverse_limit: Option<f64>,
     /// `m`, kg.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mass: Option<f64>,
     /// `η`, kg/s.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub linear_friction: Option<f64>,
     /// `J`, kg m².
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inertia: Option<f64>,
     /// `ψ`, kg m²/s.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub angular_friction: Option<f64>,
     /// `l` (half the wheel separation), m.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub half_wheelbase: Option<f64>,
     /// `r`, m.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wheel_radius: Option<f64>,
     /// Per-wheel torque limit, N m (absent: unlimited).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub torque_limit: Option<f64>,
 }
 

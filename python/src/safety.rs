@@ -40,19 +40,42 @@ struct Filters {
     last: Vec<[f64; 2]>,
 }
 
+/// What every filter of a set keeps: points `l` ahead `radius` apart, with
+/// the barrier's `gain` γ and the sensing `range` (the Python arguments).
+#[derive(Clone, Copy)]
+struct Keep {
+    radius: f64,
+    gain: f64,
+    range: f64,
+    l: f64,
+}
+
+impl Keep {
+    const fn new(radius: f64, gain: f64, range: f64, l: f64) -> Keep {
+        Keep {
+            radius,
+            gain,
+            range,
+            l,
+        }
+    }
+}
+
 impl Filters {
-    /// `n` filters keeping points `l` ahead `radius` apart (`gain` γ,
-    /// sensing `range`), obstacles as `(m, 3)` rows `x, y, r`, commands held
-    /// `period` s (0: continuous).
+    /// `n` filters keeping `keep`, obstacles as `(m, 3)` rows `x, y, r`,
+    /// commands held `period` s (0: continuous).
     fn new(
         n: usize,
-        radius: f64,
-        gain: f64,
-        range: f64,
-        l: f64,
+        keep: Keep,
         obstacles: Option<&Bound<'_, PyAny>>,
         period: f64,
     ) -> PyResult<Filters> {
+        let Keep {
+            radius,
+            gain,
+            range,
+            l,
+        } = keep;
         let config = SafetyConfig::new(radius, gain, range).map_err(|e| errors::param(&e))?;
         if !(l > 0.0 && l.is_finite()) {
             return Err(errors::value(format!(
@@ -234,7 +257,7 @@ impl PySafetyFilters {
             Some(b) => velocity_base(b)?,
             None => VelocityBase::IDEAL,
         };
-        let f = Filters::new(n, radius, gain, range, l, obstacles, period)?;
+        let f = Filters::new(n, Keep::new(radius, gain, range, l), obstacles, period)?;
         Ok(PySafetyFilters { f, base })
     }
 
@@ -252,8 +275,7 @@ impl PySafetyFilters {
         commands: &Bound<'py, PyAny>,
     ) -> PyResult<Filtered<'py>> {
         let commands = self.f.read("poses", poses, commands, true)?;
-        let c = commands.as_array();
-        let base = &self.base;
+        let (c, base) = (commands.as_array(), &self.base);
         Ok(self
             .f
             .each(py, None, |i, filter, me, l, neighbours, obstacles| {
@@ -428,7 +450,7 @@ impl PyTorqueSafetyFilters {
         l: f64,
         obstacles: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        let f = Filters::new(n, radius, gain, range, l, obstacles, 0.0)?;
+        let f = Filters::new(n, Keep::new(radius, gain, range, l), obstacles, 0.0)?;
         if !(robots_json.len() == 1 || robots_json.len() == n) {
             return Err(errors::value(format!(
                 "robot: {} robots given for {n} (one for all, or one each)",

@@ -333,7 +333,8 @@ fn metres(v: f64) -> String {
 
 /// The safety section: the filter's settings and `summary.json`'s `safety`.
 fn safety_section(data: &RunData) -> Option<String> {
-    let r = data.summary.safety.as_ref()?;
+    let report = data.summary.safety.as_ref()?;
+    let r = &report.closest;
     let s = data.safety.as_ref()?;
     let name = |k: usize| {
         data.agents
@@ -366,16 +367,16 @@ fn safety_section(data: &RunData) -> Option<String> {
     let _ = writeln!(
         html,
         ". Filters changed the command at {} controller samples, braked at {}, broke {} deadlock{}.</p>",
-        r.active,
-        r.infeasible,
-        r.deadlock_breaks,
-        if r.deadlock_breaks == 1 { "" } else { "s" }
+        report.active,
+        report.infeasible,
+        report.deadlock_breaks,
+        if report.deadlock_breaks == 1 { "" } else { "s" }
     );
     html.push_str(
         "<table class=\"summary\"><thead><tr><th>agent</th><th>gain γ</th><th>range</th>\
          <th>command changed</th><th>braked</th><th>deadlock breaks</th></tr></thead><tbody>\n",
     );
-    for a in &r.agents {
+    for a in &report.agents {
         let i = a.agent.wrapping_sub(1);
         let setting = s.settings.get(i).copied().flatten();
         let filters = s.tracks.get(i).is_some_and(Option::is_some) || setting.is_some();

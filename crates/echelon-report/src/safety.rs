@@ -122,6 +122,7 @@ fn distances_panel(
         vec![[(t0, s.radius), (t1, s.radius)]],
         Stroke::reference(),
     );
+    let summary = &summary.closest;
     let [a, b] = summary.min_distance_agents;
     let name = |k: usize| {
         data.agents

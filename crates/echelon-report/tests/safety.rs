@@ -55,13 +55,13 @@ fn crossing_gets_a_safety_figure_whose_closest_pair_is_the_runs() {
     // The summary watches every step, the figure the logged instants: its
     // minimum can only be larger, and by little (the closest approach is slow).
     let plotted = d.iter().copied().fold(f64::INFINITY, f64::min);
-    assert!(plotted >= summary.min_distance - 1e-12);
+    assert!(plotted >= summary.closest.min_distance - 1e-12);
     assert!(
-        plotted - summary.min_distance < 5e-3,
+        plotted - summary.closest.min_distance < 5e-3,
         "{plotted} against {}",
-        summary.min_distance
+        summary.closest.min_distance
     );
-    assert!(summary.min_distance >= summary.radius - 1e-3);
+    assert!(summary.closest.min_distance >= summary.closest.radius - 1e-3);
 
     // The bars: agent i's "acted" spans cover exactly its logged instants
     // with a non-nominal outcome.
@@ -91,7 +91,7 @@ fn crossing_gets_a_safety_figure_whose_closest_pair_is_the_runs() {
     assert!(std::fs::metadata(&saved.svg).unwrap().len() > 1000);
     assert!(std::fs::metadata(&saved.png).unwrap().len() > 1000);
     let svg = std::fs::read_to_string(&saved.svg).unwrap();
-    assert!(svg.contains(&format!("radius = {} m", summary.radius)));
+    assert!(svg.contains(&format!("radius = {} m", summary.closest.radius)));
     assert!(svg.contains(safety::DEADLOCK_LABEL));
 
     // report.html: the section with the summary's numbers, and the replay's
@@ -99,9 +99,12 @@ fn crossing_gets_a_safety_figure_whose_closest_pair_is_the_runs() {
     let page = std::fs::read_to_string(&written.report).unwrap();
     let section = &page[page.find("<section id=\"safety\">").unwrap()..];
     let section = &section[..section.find("</section>").unwrap()];
-    assert!(section.contains(&format!("radius = {} m", summary.radius)));
-    assert!(section.contains(&format!("<strong>{:.4} m</strong>", summary.min_distance)));
-    assert!(section.contains(&format!("at t = {} s", summary.min_distance_t)));
+    assert!(section.contains(&format!("radius = {} m", summary.closest.radius)));
+    assert!(section.contains(&format!(
+        "<strong>{:.4} m</strong>",
+        summary.closest.min_distance
+    )));
+    assert!(section.contains(&format!("at t = {} s", summary.closest.min_distance_t)));
     assert!(section.contains(&format!(
         "changed the command at {} controller samples, braked at {}, broke {} deadlock",
         summary.active, summary.infeasible, summary.deadlock_breaks
@@ -117,7 +120,7 @@ fn crossing_gets_a_safety_figure_whose_closest_pair_is_the_runs() {
     assert!(page.contains("function drawSafety("));
     let replay = html::replay_data(&data);
     let rs = replay.safety.unwrap();
-    assert_eq!(rs.radius, summary.radius);
+    assert_eq!(rs.radius, summary.closest.radius);
     assert_eq!(rs.actions.len(), replay.rows.len() * n);
     for (j, &k) in replay.rows.iter().enumerate() {
         for (i, out) in outcomes.iter().enumerate() {
@@ -140,7 +143,7 @@ fn obstacle_clearance_is_plotted_per_obstacle() {
         .flatten()
         .copied()
         .fold(f64::INFINITY, f64::min);
-    let every_step = summary.min_obstacle_clearance.unwrap();
+    let every_step = summary.closest.min_obstacle_clearance.unwrap();
     assert!(plotted >= every_step - 1e-12);
     assert!(
         plotted - every_step < 5e-3,

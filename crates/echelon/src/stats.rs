@@ -245,18 +245,11 @@ pub struct AgentSafety {
 /// states of every frame it is shown (every step in `run_to_dir`).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SafetyReport {
-    /// The smallest `radius` among the agents that filter, m.
-    pub radius: f64,
-    /// Smallest distance between two robots' points `L` ahead, m.
-    pub min_distance: f64,
-    /// When it happened, s.
-    pub min_distance_t: f64,
-    /// Between which agents (1-based).
-    pub min_distance_agents: [usize; 2],
-    /// Smallest distance from a robot's point to an obstacle's edge, m
-    /// (absent without obstacles).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub min_obstacle_clearance: Option<f64>,
+    /// The closest approach (`radius`, `min_distance`, `min_distance_t`,
+    /// `min_distance_agents`, `min_obstacle_clearance`: the same keys at
+    /// the top of `summary.json`'s `safety`).
+    #[serde(flatten)]
+    pub closest: ClosestApproach,
     /// Sum over agents of [`AgentSafety::active`].
     pub active: u64,
     /// Sum over agents of [`AgentSafety::infeasible`].
@@ -405,27 +398,6 @@ impl Approach {
     }
 }
 
-impl SafetyReport {
-    /// Its geometric part.
-    pub fn approach(&self) -> ClosestApproach {
-        ClosestApproach {
-            radius: self.radius,
-            min_distance: self.min_distance,
-            min_distance_t: self.min_distance_t,
-            min_distance_agents: self.min_distance_agents,
-            min_obstacle_clearance: self.min_obstacle_clearance,
-        }
-    }
-
-    fn set_approach(&mut self, c: &ClosestApproach) {
-        self.radius = c.radius;
-        self.min_distance = c.min_distance;
-        self.min_distance_t = c.min_distance_t;
-        self.min_distance_agents = c.min_distance_agents;
-        self.min_obstacle_clearance = c.min_obstacle_clearance;
-    }
-}
-
 /// Gathers a [`SafetyReport`] over a run (nothing without a safety filter).
 #[derive(Debug, Clone, Default)]
 pub struct SafetyWatch {
@@ -460,13 +432,8 @@ impl Observer for SafetyWatch {
         let l: Vec<f64> = sim.agents().iter().map(|a| a.placement().l()).collect();
         let radius = sim.safety_radius().unwrap_or(f64::INFINITY);
         let approach = Approach::new(l, radius, sim.obstacles().to_vec());
-        let c = approach.closest().clone();
         self.report = Some(SafetyReport {
-            radius: c.radius,
-            min_distance: c.min_distance,
-            min_distance_t: c.min_distance_t,
-            min_distance_agents: c.min_distance_agents,
-            min_obstacle_clearance: c.min_obstacle_clearance,
+            closest: approach.closest().clone(),
             active: 0,
             infeasible: 0,
             deadlock_breaks: 0,
@@ -491,7 +458,7 @@ impl Observer for SafetyWatch {
             return Ok(());
         };
         approach.record(frame.t, frame.states);
-        r.set_approach(approach.closest());
+        r.closest.clone_from(approach.closest());
         let agents = r.agents.iter_mut().zip(&mut self.tallies);
         for (((a, tally), o), out) in agents.zip(frame.safety).zip(frame.outputs) {
             if o.sampled {

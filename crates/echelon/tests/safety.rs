@@ -64,7 +64,7 @@ fn crossing_keeps_every_pair_apart_and_the_formation_still_converges() {
     let report = report.unwrap();
     // Every step, true states: at least radius − 1 mm (0.3000528 m measured).
     assert!(closest >= 0.3 - 1e-3, "closest {closest}");
-    assert_eq!(report.min_distance, closest);
+    assert_eq!(report.closest.min_distance, closest);
     assert_eq!(report.infeasible, 0);
     assert!(report.active > 0);
     // The columns' heads meet in perfect symmetry: the deadlock rule acts.
@@ -85,8 +85,8 @@ fn the_torque_column_goes_around_the_posts() {
     let report = report.unwrap();
     // Exponential barrier on (u1, u2): clearance ≥ radius − 1 mm (0.15002 m measured).
     assert!(clearance >= 0.15 - 1e-3, "clearance {clearance}");
-    assert_eq!(report.min_obstacle_clearance, Some(clearance));
-    assert!(report.min_distance >= 0.15 - 1e-3);
+    assert_eq!(report.closest.min_obstacle_clearance, Some(clearance));
+    assert!(report.closest.min_distance >= 0.15 - 1e-3);
     assert_eq!(report.infeasible, 0);
     for (i, e) in finals.iter().enumerate() {
         assert!(*e < 1e-3, "agent {}: final ‖e‖ = {e}", i + 1);

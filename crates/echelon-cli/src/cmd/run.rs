@@ -301,7 +301,7 @@ fn print_safety(s: &RunSummary, safety: &SafetyReport) -> anyhow::Result<()> {
             .get(k.wrapping_sub(1))
             .map_or("?", |a| a.name.as_str())
     };
-    print_approach(&safety.approach(), |k| name(k).to_owned())?;
+    print_approach(&safety.closest, |k| name(k).to_owned())?;
     outln!(
         "          filter acted on {} agent-steps, braked {} (infeasible), {} deadlock breaks",
         safety.active,

@@ -473,7 +473,7 @@ impl RunData {
                     Some(text) => safety_tracks(&path, &text, &times, n)?,
                 };
                 Some(SafetyData {
-                    radius: report.radius,
+                    radius: report.closest.radius,
                     tracks,
                     ..SafetyData::default()
                 })

@@ -140,7 +140,7 @@ fn fed_a_runs_frames_it_is_the_watchs_report() {
         let mut watch = SafetyWatch::default();
         sim.run(&mut [&mut every as &mut dyn Observer, &mut watch])
             .unwrap();
-        let report: ClosestApproach = watch.report().unwrap().approach();
+        let report: ClosestApproach = watch.report().unwrap().closest.clone();
         assert_eq!(&report, approach.closest(), "{name}");
         assert!(report.min_distance.is_finite());
         assert_eq!(

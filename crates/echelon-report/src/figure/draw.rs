@@ -180,7 +180,7 @@ fn legend_corner(
     ];
     let mut counts = [0usize; 4];
     let mut count = |(x, y): (f64, f64)| {
-        let (x, y) = (panel.x.map(x), panel.y.map(y));
+        let (x, y) = panel.map((x, y));
         if !(x.is_finite() && y.is_finite()) {
             return;
         }
@@ -246,7 +246,7 @@ fn draw_line<'a, DB: DrawingBackend + 'a>(
 where
     DB::ErrorType: 'static,
 {
-    let map = |(x, y): (f64, f64)| (panel.x.map(x), panel.y.map(y));
+    let map = |p| panel.map(p);
     // Split at non-finite points, thin each run to a quarter pixel.
     let mapped: Vec<(f64, f64)> = points.iter().map(|&p| map(p)).collect();
     let mut runs: Vec<Vec<(f64, f64)>> = Vec::new();
@@ -305,7 +305,7 @@ fn draw_markers<'a, DB: DrawingBackend + 'a>(
 where
     DB::ErrorType: 'static,
 {
-    let map = |(x, y): (f64, f64)| (panel.x.map(x), panel.y.map(y));
+    let map = |p| panel.map(p);
     let rgb = color.rgb();
     let ink = palette::INK.rgb();
     let finite = |p: (f64, f64)| {
@@ -365,7 +365,7 @@ fn draw_item<'a, DB: DrawingBackend + 'a>(
 where
     DB::ErrorType: 'static,
 {
-    let map = |(x, y): (f64, f64)| (panel.x.map(x), panel.y.map(y));
+    let map = |p| panel.map(p);
     match item {
         Item::Line { points, stroke, .. } => {
             draw_line(chart, panel, points, *stroke, label, (px, py))?;

@@ -73,6 +73,11 @@ pub struct Panel {
 pub const LEGEND_MAX: usize = 12;
 
 impl Panel {
+    /// A point in data units on the chart's axes (each axis's scale).
+    pub(crate) fn map(&self, (x, y): (f64, f64)) -> (f64, f64) {
+        (self.x.map(x), self.y.map(y))
+    }
+
     /// An empty panel with a legend.
     pub fn new(x: Axis, y: Axis) -> Panel {
         Panel {

@@ -5,10 +5,10 @@ use echelon::scenario::{Overrides, Scenario};
 /// reference with distinct offsets, and is accepted by the fleet.
 #[test]
 fn generated_scenarios_are_valid_fleets() {
-    for n in [1, 2, 10, 13] {
+    for (n, state_rate) in [(1, None), (2, Some(10.0)), (10, None), (13, Some(25.0))] {
         let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
         let path = dir.path().join("s.toml");
-        std::fs::write(&path, scenario_toml(n)).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::write(&path, scenario_toml(n, state_rate)).unwrap_or_else(|e| panic!("{e}"));
         let s = Scenario::resolve(&path.display().to_string()).unwrap_or_else(|e| panic!("{e}"));
         let built = s
             .build(&Overrides::default())
@@ -18,10 +18,9 @@ fn generated_scenarios_are_valid_fleets() {
         for k in 1..=n as u32 {
             crate::robot::agent_spec(&built.plan, k).unwrap_or_else(|e| panic!("{e}"));
         }
-        assert_eq!(
-            s.fleet().unwrap_or_else(|e| panic!("{e}")).name,
-            format!("bench-n{n}")
-        );
+        let fleet = s.fleet().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(fleet.name, format!("bench-n{n}"));
+        assert_eq!(fleet.state_rate, state_rate);
     }
 }
 

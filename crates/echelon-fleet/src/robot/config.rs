@@ -1,6 +1,7 @@
 //! A robot's fixed configuration, from the scenario's plan and `[fleet]`.
 
 use echelon::agent::AgentSpec;
+use echelon::formation::Leader;
 use echelon::guard::Bounds;
 use echelon::plan::Plan;
 use echelon::safety::{Obstacle, SafetyConfig};
@@ -55,6 +56,9 @@ pub struct RobotConfig {
     pub spec: AgentSpec,
     /// Controller period `1 / control_rate`, fleet s.
     pub period: f64,
+    /// It publishes its state on every this many ticks while it follows
+    /// (1: every tick; `[fleet] state_rate`, [`state_every`]).
+    pub state_every: u64,
     /// A sample older than this is no longer fresh, fleet s.
     pub link_timeout: f64,
     /// A sample older (or as far in the future) on delivery is refused, fleet s.
@@ -92,6 +96,24 @@ fn safety_in(plan: &Plan, agent: u32) -> Option<RobotSafety> {
     })
 }
 
+/// On every how many controller ticks agent `agent` publishes its state
+/// while it follows: every tick when another robot reads it (it is some
+/// agent's leader, or any agent filters for safety and takes its
+/// neighbours' states), else `control_rate / state_rate` rounded (1
+/// without a `state_rate`).
+pub(super) fn state_every(plan: &Plan, fleet: &FleetSettings, agent: u32) -> u64 {
+    let n = plan.agents().len();
+    let read = plan
+        .agents()
+        .iter()
+        .any(|a| a.leader() == Leader::Agent(agent as usize - 1))
+        || (0..n).any(|i| plan.safety_of(i).is_some());
+    match fleet.state_rate {
+        Some(rate) if !read => (fleet.control_rate / rate).round().max(1.0) as u64,
+        _ => 1,
+    }
+}
+
 impl RobotConfig {
     /// Agent `agent`'s configuration from the scenario's plan and its
     /// `[fleet]` settings.
@@ -110,6 +132,7 @@ impl RobotConfig {
             agent,
             spec,
             period,
+            state_every: state_every(plan, fleet, agent),
             link_timeout: fleet.link_timeout,
             stale_after: fleet.stale_after,
             loss,

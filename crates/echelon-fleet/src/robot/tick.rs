@@ -72,8 +72,10 @@ impl<P: Plant> Robot<P> {
             return self.stop_diverged(now, &breach.to_string());
         }
         let publish = match state {
+            // Every `state_every`-th tick's state leaves (the first too).
             Some(state) => match self.follow_step(local, now, state, &p) {
-                Ok(published) => Some(published),
+                Ok(published) => Some(published)
+                    .filter(|_| (self.ticks - 1).is_multiple_of(self.config.state_every)),
                 Err(why) => return self.stop_diverged(now, &why),
             },
             None => {

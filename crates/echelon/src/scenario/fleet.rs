@@ -105,6 +105,9 @@ pub struct FleetSettings {
     pub reference_rate: f64,
     /// Robot controller rate, Hz.
     pub control_rate: f64,
+    /// A state nobody reads at the control rate is published at this rate,
+    /// Hz (`None`: every tick; never above `control_rate`).
+    pub state_rate: Option<f64>,
     /// Link-loss detection time, s.
     pub link_timeout: f64,
     /// Staleness threshold on a message's age at arrival, s.
@@ -283,6 +286,16 @@ impl Scenario {
         let control_rate = positive(f.control_rate, "control_rate", DEFAULT_CONTROL_RATE)?;
         let link_timeout = positive(f.link_timeout, "link_timeout", DEFAULT_LINK_TIMEOUT)?;
         let stale_after = positive(f.stale_after, "stale_after", DEFAULT_STALE_AFTER)?;
+        let state_rate = f
+            .state_rate
+            .map(|v| positive(Some(v), "state_rate", v))
+            .transpose()?;
+        if let Some(r) = state_rate.filter(|&r| r > control_rate) {
+            return Err(self.error(
+                &at.key("state_rate"),
+                format!("{r} Hz is above control_rate ({control_rate} Hz): a robot publishes at most once a tick"),
+            ));
+        }
         let operator_heartbeat = f
             .operator_heartbeat
             .map(|v| positive(Some(v), "operator_heartbeat", v))
@@ -348,6 +361,7 @@ impl Scenario {
             name,
             reference_rate,
             control_rate,
+            state_rate,
             link_timeout,
             stale_after,
             operator_heartbeat,

@@ -148,6 +148,7 @@ pub const PLAUSIBLE: &[Plausible] = &[
     // [fleet] and an agent's link_loss, ros2 (checked by `Scenario::fleet`)
     row("fleet.reference_rate", "Hz", 0.1, 1e4),
     row("fleet.control_rate", "Hz", 0.1, 1e4),
+    row("fleet.state_rate", "Hz", 0.1, 1e4),
     row("fleet.link_timeout", "s", 1e-3, 3600.0),
     row("fleet.stale_after", "s", 1e-3, 3600.0),
     row("fleet.operator_heartbeat", "s", 1e-2, 3600.0),
@@ -427,6 +428,7 @@ range = 2.0
 obstacles = [{ x = 5.0, y = 5.0, r = 0.2 }]
 [fleet]
 reference_rate = 50.0
+state_rate = 10.0
 control_rate = 100.0
 link_timeout = 0.2
 stale_after = 0.5

@@ -286,5 +286,6 @@ mod hazard;
 mod link;
 mod messages;
 mod plant;
+mod state_rate;
 mod swap;
 mod watchdog;

@@ -18,6 +18,11 @@ pub struct FleetSection {
     pub reference_rate: Option<f64>,
     /// Robot controller rate, Hz (default 100).
     pub control_rate: Option<f64>,
+    /// How often a robot publishes its state when no other robot reads it
+    /// (it is no agent's leader and no agent filters for safety), Hz: for
+    /// the log and the live view, which need no more (default: every
+    /// controller tick; at most `control_rate`).
+    pub state_rate: Option<f64>,
     /// A leader stream is lost when no fresh message arrived for this long, s
     /// (default 0.2).
     pub link_timeout: Option<f64>,

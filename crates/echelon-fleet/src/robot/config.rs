@@ -57,7 +57,8 @@ pub struct RobotConfig {
     /// Controller period `1 / control_rate`, fleet s.
     pub period: f64,
     /// It publishes its state on every this many ticks while it follows
-    /// (1: every tick; `[fleet] state_rate`, [`state_every`]).
+    /// (1: every tick; `[fleet] state_rate`: every tick when another robot
+    /// reads it, else `control_rate / state_rate` rounded).
     pub state_every: u64,
     /// A sample older than this is no longer fresh, fleet s.
     pub link_timeout: f64,

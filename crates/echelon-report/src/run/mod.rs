@@ -122,7 +122,7 @@ pub struct SafetyTrack {
 /// A run's safety settings and what its filters did.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct SafetyData {
-    /// Smallest distance between two robots' points, m ([`SafetyReport::radius`]).
+    /// Smallest distance between two robots' points, m ([`ClosestApproach::radius`](echelon::stats::ClosestApproach::radius)).
     pub radius: f64,
     /// `L` of each agent: the point kept apart is `L` ahead of the axle, m
     /// (empty when the scenario does not build here).

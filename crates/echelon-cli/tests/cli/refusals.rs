@@ -667,6 +667,49 @@ fn the_operator_heartbeat_is_refused_at_its_place() {
     );
 }
 
+/// `[fleet] state_rate` is refused at its place (file, line, column,
+/// field; exit 2, nothing started) when it is not a positive number of
+/// hertz, is above the control rate or outside its plausible range.
+#[test]
+fn the_state_rate_is_refused_at_its_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never");
+    for (value, needles) in [
+        ("0.0", &["s.toml:15:14: fleet.state_rate", "> 0"][..]),
+        ("-5.0", &["s.toml:15:14: fleet.state_rate", "> 0"][..]),
+        (
+            "150.0",
+            &[
+                "s.toml:15:14: fleet.state_rate",
+                "above control_rate (100 Hz)",
+            ][..],
+        ),
+        (
+            "0.01",
+            &[
+                "s.toml:15:14: fleet.state_rate",
+                "plausible range 0.1 to 10000 Hz",
+            ][..],
+        ),
+        (
+            "\"10 Hz\"",
+            &["s.toml:15:14: fleet.state_rate", "invalid type"][..],
+        ),
+    ] {
+        let f = scenario_file(
+            dir.path(),
+            &format!("{GOOD}\n[fleet]\nstate_rate = {value}\n"),
+        );
+        for args in [
+            &["fleet", "robot", &f, "--agent", "1"][..],
+            &["fleet", "up", &f, "--out", out.to_str().unwrap()][..],
+        ] {
+            assert_refused(&echelon(args), needles);
+        }
+        assert!(!out.exists(), "nothing written for {value}");
+    }
+}
+
 /// `placement` (in `[fleet]` or an agent) is refused at its place (file,
 /// line, column, field; exit 2, nothing written or started) when it is
 /// neither `"hub"` nor `"onboard"`, by the commands that read it.

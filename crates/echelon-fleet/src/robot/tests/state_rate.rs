@@ -73,15 +73,3 @@ proptest! {
         prop_assert_eq!(report.counters, full.counters);
     }
 }
-
-/// A state rate above the control rate is refused, naming the field.
-#[test]
-fn a_state_rate_above_the_control_rate_is_refused() {
-    let text = FAST_CIRCLE.replace("[fleet]\n", "[fleet]\nstate_rate = 200.0\n");
-    let s = Scenario::parse(&text, "fast.toml", None).unwrap_or_else(|e| panic!("{e}"));
-    let e = s.fleet().expect_err("refused").to_string();
-    assert!(
-        e.contains("fleet.state_rate") && e.contains("control_rate"),
-        "{e}"
-    );
-}

@@ -346,15 +346,7 @@ impl PyVecFormation {
     /// The robots' slots: `(E, N, 2)` of `L_X`, `L_Y`.
     fn offsets<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
         let (e, n, _) = self.shape();
-        let flat: Vec<f64> = (0..e)
-            .flat_map(|k| {
-                let s = self.inner.slots(k);
-                s.lx.iter()
-                    .zip(&s.ly)
-                    .flat_map(|(a, b)| [*a, *b])
-                    .collect::<Vec<_>>()
-            })
-            .collect();
+        let flat: Vec<f64> = (0..e).flat_map(|k| self.inner.slots(k)).flatten().collect();
         PyArray1::from_vec(py, flat).reshape([e, n, 2])
     }
 
@@ -364,7 +356,7 @@ impl PyVecFormation {
     fn leaders<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
         let e = self.shape().0;
         let flat: Vec<f64> = (0..e)
-            .flat_map(|k| match &self.inner.slots(k).leader {
+            .flat_map(|k| match self.inner.leader(k) {
                 Reference::Circle(c) => [c.heading(), c.speed(), c.turn_rate()],
                 _ => [f64::NAN; 3],
             })

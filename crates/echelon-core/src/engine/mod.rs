@@ -74,6 +74,7 @@ use driver::{fill_reference, pack};
 pub use kernel::Probe;
 use kernel::{Consts, Limit};
 pub use torque::Torque;
+pub(crate) use velocity::{V4, VConsts, VW, held_step};
 pub use velocity::{Velocity, VelocityBatch, VelocityProbe};
 
 /// Steps each block runs in registers before the next block's turn.

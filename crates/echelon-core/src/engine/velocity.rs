@@ -57,6 +57,7 @@ use super::{BatchEngine, EngineError, Kernel, Member, Topology, VelocityEngine, 
 mod law;
 mod tile;
 use super::kernel::vectors;
+pub(crate) use law::held_step;
 use law::{command, derivative, ly_of, settle, speeds};
 use tile::Run;
 pub(crate) use tile::Tile;
@@ -79,6 +80,25 @@ pub struct VConsts {
     pub(crate) acc: [f64; 2],
     pub(crate) inv_acc: [f64; 2],
     pub(crate) accel: AccelLimit,
+}
+
+impl VConsts {
+    /// The constants of `base` stepped by `dt`, `L_Ycomp` by `comp`.
+    pub(crate) fn new(base: &VelocityBase, dt: f64, comp: LyComp) -> VConsts {
+        let b = base;
+        let inv = |m: f64| if m.is_finite() { 1.0 / m } else { 0.0 };
+        VConsts {
+            comp,
+            dt,
+            lag: [b.tau_v() > 0.0, b.tau_omega() > 0.0],
+            inv_tau: [b.tau_v(), b.tau_omega()].map(|t| if t > 0.0 { 1.0 / t } else { 0.0 }),
+            max: [b.v_max(), b.omega_max()],
+            inv_max: [inv(b.v_max()), inv(b.omega_max())],
+            acc: [b.a_max(), b.alpha_max()],
+            inv_acc: [inv(b.a_max()), inv(b.alpha_max())],
+            accel: b.accel(),
+        }
+    }
 }
 
 /// `W` agents on velocity bases: states, constants and saturated-tick counts.
@@ -415,19 +435,7 @@ impl VelocityEngine {
         members: impl IntoIterator<Item = Member>,
     ) -> Result<VelocityEngine, EngineError> {
         let (blocks, comp, n) = pack(members)?;
-        let b = batch.base;
-        let inv = |m: f64| if m.is_finite() { 1.0 / m } else { 0.0 };
-        let c = VConsts {
-            comp,
-            dt: batch.dt,
-            lag: [b.tau_v() > 0.0, b.tau_omega() > 0.0],
-            inv_tau: [b.tau_v(), b.tau_omega()].map(|t| if t > 0.0 { 1.0 / t } else { 0.0 }),
-            max: [b.v_max(), b.omega_max()],
-            inv_max: [inv(b.v_max()), inv(b.omega_max())],
-            acc: [b.a_max(), b.alpha_max()],
-            inv_acc: [inv(b.a_max()), inv(b.alpha_max())],
-            accel: b.accel(),
-        };
+        let c = VConsts::new(&batch.base, batch.dt, comp);
         let blocks = blocks.iter().flat_map(VBlock::of).collect();
         Ok(BatchEngine::assemble(
             c,

@@ -3,48 +3,15 @@
 use std::f64::consts::PI;
 
 use super::EnvConfig;
+use super::env::Robot;
 use crate::error::ParamError;
 use crate::formation::Leader;
 use crate::law::lycomp::{LyComp, OffsetFrame};
 use crate::math::rng::SplitMix64;
 use crate::model::State;
-use crate::reference::{Circle, Jet, Order, Reference, Trajectory};
+use crate::reference::{Circle, Reference};
 use crate::safety::point;
 use crate::sim::plan::Plan;
-
-/// An environment's formation for one episode: the leader (a reference of
-/// constant speed and turn rate) and each robot's `L_X`, `L_Y` (eq. 7).
-#[derive(Debug, Clone)]
-pub struct Slots {
-    /// The virtual leader (a [`Circle`] in a drawn episode, a scenario's
-    /// reference in a fixed one).
-    pub leader: Reference,
-    /// Robot `i`'s `L_X`, m (> 0: the leader ahead).
-    pub lx: Vec<f64>,
-    /// Robot `i`'s `L_Y`, m (the leader to its left when > 0).
-    pub ly: Vec<f64>,
-}
-
-impl Default for Slots {
-    fn default() -> Self {
-        Slots {
-            leader: Reference::Circle(
-                Circle::new([0.0; 2], 0.0, 0.0, 0.0)
-                    .unwrap_or_else(|_| unreachable!("a circle at rest")),
-            ),
-            lx: Vec::new(),
-            ly: Vec::new(),
-        }
-    }
-}
-
-impl Slots {
-    /// The leader's `p_d`, `ṗ_d` at `t`.
-    #[inline]
-    pub fn leader_at(&self, t: f64) -> Jet {
-        self.leader.eval(t, Order::Two)
-    }
-}
 
 /// A seed for stream `k` of `seed`.
 pub(super) fn mix(seed: u64, k: u64) -> u64 {
@@ -58,69 +25,66 @@ const SLOT_JITTER: f64 = 0.15;
 /// How far a start's heading may differ from the leader's, rad.
 const HEADING_SPREAD: f64 = 0.5;
 
-/// Draws an episode into `slots` and `starts` from `seed`: slots on a
-/// lattice `spacing` apart behind the leader (`⌈√N⌉` wide), jittered and
+/// Draws an episode into `leader` and `robots` (slots and starts) from
+/// `seed`: the leader a reference of constant speed and turn rate; slots on
+/// a lattice `spacing` apart behind the leader (`⌈√N⌉` wide), jittered and
 /// shuffled; starts near the slots, at rest, their points at least the
 /// radius apart when the draw allows it (20 tries, else the slots).
-pub(super) fn draw(config: &EnvConfig, seed: u64, slots: &mut Slots, starts: &mut [State]) {
+pub(super) fn draw(config: &EnvConfig, seed: u64, leader: &mut Reference, robots: &mut [Robot]) {
     let mut rng = SplitMix64::new(seed);
-    let n = starts.len();
+    let n = robots.len();
     let s = config.spacing;
     let heading = rng.uniform(-PI, PI);
     let speed = rng.uniform(config.speed.0, config.speed.1);
     let turn = rng.uniform(-config.turn, config.turn);
-    slots.leader = Reference::Circle(
+    *leader = Reference::Circle(
         Circle::new([0.0; 2], heading, speed, turn)
             .unwrap_or_else(|_| unreachable!("finite, speed ≥ 0")),
     );
     let width = (n as f64).sqrt().ceil() as usize;
-    slots.lx.clear();
-    slots.ly.clear();
-    for m in 0..n {
+    for (m, r) in robots.iter_mut().enumerate() {
         let (row, col) = (m / width, m % width);
         let behind = (row as f64 + 1.0) * s + SLOT_JITTER * s * rng.uniform(-1.0, 1.0);
         let lateral = (col as f64 - 0.5 * (width as f64 - 1.0)) * s
             + SLOT_JITTER * s * rng.uniform(-1.0, 1.0);
-        slots.lx.push(behind);
-        slots.ly.push(-lateral);
+        r.slot = [behind, -lateral];
     }
     // Fisher–Yates: robot i takes slot i after the shuffle.
     for i in (1..n).rev() {
         let j = (rng.next_u64() % (i as u64 + 1)) as usize;
-        slots.lx.swap(i, j);
-        slots.ly.swap(i, j);
+        let (a, b) = (robots[i].slot, robots[j].slot);
+        (robots[i].slot, robots[j].slot) = (b, a);
     }
     let (sin, cos) = heading.sin_cos();
-    let at_slot = |i: usize| {
-        let (lx, ly) = (slots.lx[i], slots.ly[i]);
+    let at_slot = |[lx, ly]: [f64; 2]| {
         State::at_rest(-(lx * cos - ly * sin), -(lx * sin + ly * cos), heading)
     };
     for _ in 0..20 {
-        for (i, st) in starts.iter_mut().enumerate() {
-            let r = START_SPREAD * s * rng.next_f64().sqrt();
+        for r in robots.iter_mut() {
+            let radius = START_SPREAD * s * rng.next_f64().sqrt();
             let a = rng.uniform(-PI, PI);
-            let slot = at_slot(i);
-            *st = State::at_rest(
-                slot.x + r * a.cos(),
-                slot.y + r * a.sin(),
+            let slot = at_slot(r.slot);
+            r.state = State::at_rest(
+                slot.x + radius * a.cos(),
+                slot.y + radius * a.sin(),
                 heading + rng.uniform(-HEADING_SPREAD, HEADING_SPREAD),
             );
         }
-        if apart(starts, config.l, config.radius) {
+        if apart(robots, config.l, config.radius) {
             return;
         }
     }
-    for (i, st) in starts.iter_mut().enumerate() {
-        *st = at_slot(i);
+    for r in robots.iter_mut() {
+        r.state = at_slot(r.slot);
     }
 }
 
 /// Whether every two robots' points are at least `radius` apart.
-fn apart(states: &[State], l: f64, radius: f64) -> bool {
-    states.iter().enumerate().all(|(i, a)| {
-        let p = point(a, l);
-        states[i + 1..].iter().all(|b| {
-            let q = point(b, l);
+fn apart(robots: &[Robot], l: f64, radius: f64) -> bool {
+    robots.iter().enumerate().all(|(i, a)| {
+        let p = point(&a.state, l);
+        robots[i + 1..].iter().all(|b| {
+            let q = point(&b.state, l);
             (p[0] - q[0]).hypot(p[1] - q[1]) >= radius
         })
     })

@@ -11,7 +11,7 @@
 //! `(v, ω)`, clipped to the base's limits, applied through the base model
 //! ([`VelocityBase::rk4_step`]: lags, limits) for one step `dt`; with a
 //! safety radius set it goes through the robot's own barrier-certificate
-//! filter first ([`SafetyFilter::velocity`]), every robot seeing the others
+//! filter first ([`crate::safety::SafetyFilter::velocity`]), every robot seeing the others
 //! as cooperative neighbours, as in the fleet.
 //!
 //! Observations ([`layout`]) carry what the kinematic law needs, so the
@@ -22,18 +22,25 @@
 //! facts; it allocates nothing once built and runs its environments on all
 //! cores (rayon).
 
+mod env;
 mod episode;
 pub mod layout;
 mod observe;
+mod plant;
 
+use pulp::Arch;
 use rayon::prelude::*;
 
+use crate::engine::VConsts;
 use crate::error::ParamError;
-use crate::model::base::{VelocityBase, VelocityCommand};
-use crate::model::{RobotParams, State, Torques};
-use crate::safety::{Neighbour, SafetyConfig, SafetyFilter};
+use crate::law::lycomp::LyComp;
+use crate::model::base::VelocityBase;
+use crate::model::{RobotParams, State};
+use crate::reference::Reference;
+use crate::safety::SafetyConfig;
 
-pub use episode::{FixedEpisode, PlanRobots, Slots};
+use env::{Env, Robot};
+pub use episode::{FixedEpisode, PlanRobots};
 pub use observe::{MAX_NEIGHBOURS, baseline, baseline_torque};
 
 /// A number an environment's buffers hold (`f64`, or `f32` on request).
@@ -233,27 +240,6 @@ impl EnvConfig {
     }
 }
 
-/// One environment: its robots, its leader and its episode.
-#[derive(Debug, Clone)]
-struct Env {
-    states: Vec<State>,
-    /// The robots' points `l` ahead, as of `states`.
-    points: Vec<[f64; 2]>,
-    slots: Slots,
-    filters: Vec<SafetyFilter>,
-    neighbours: Vec<Neighbour>,
-    /// The clipped (and filtered) actions of the last step: `(v, ω)` or
-    /// `(τ_r, τ_l)`.
-    applied: Vec<[f64; 2]>,
-    /// Scratch: each torque robot's `(v̇, ω̇)` under the torques its filter
-    /// gave at the last step, for its neighbours' filters
-    /// ([`Neighbour::sharing`]).
-    shared: Vec<[f64; 2]>,
-    t: f64,
-    steps: u64,
-    episode_seed: u64,
-}
-
 /// What one step of one environment says beyond its observations.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct EnvFacts {
@@ -270,6 +256,12 @@ pub struct EnvFacts {
 #[derive(Debug, Clone)]
 pub struct VecFormation {
     config: EnvConfig,
+    /// The base in lanes ([`plant`]).
+    consts: VConsts,
+    /// The best instruction set of this CPU, for [`plant`].
+    arch: Arch,
+    /// Every robot, environment after environment (`E·N`).
+    robots: Vec<Robot>,
     envs: Vec<Env>,
     /// Every episode's formation, when it is a scenario's.
     fixed: Option<std::sync::Arc<FixedEpisode>>,
@@ -280,28 +272,13 @@ impl VecFormation {
     /// episodes drawn from `seed` and `k`).
     pub fn new(config: EnvConfig, seed: u64) -> Result<VecFormation, ParamError> {
         config.check()?;
-        let filter = SafetyFilter::new(SafetyConfig::new(
-            config.radius,
-            config.gain,
-            f64::INFINITY,
-        )?)
-        .with_period(config.dt);
         let n = config.num_agents;
-        let env = Env {
-            states: vec![State::default(); n],
-            points: vec![[0.0; 2]; n],
-            slots: Slots::default(),
-            filters: vec![filter; if config.safety { n } else { 0 }],
-            neighbours: Vec::with_capacity(n),
-            applied: vec![[0.0; 2]; n],
-            shared: vec![[0.0; 2]; n],
-            t: 0.0,
-            steps: 0,
-            episode_seed: 0,
-        };
         let mut me = VecFormation {
             config,
-            envs: vec![env; config.num_envs],
+            consts: VConsts::new(&config.base, config.dt, LyComp::None),
+            arch: Arch::new(),
+            robots: vec![Robot::default(); config.num_envs * n],
+            envs: vec![Env::new(&config, n); config.num_envs],
             fixed: None,
         };
         me.reset(seed, None);
@@ -343,11 +320,12 @@ impl VecFormation {
     /// Reseeds every environment from `seed` and resets those `mask` selects
     /// (all when `None`); the others keep their state and their episode.
     pub fn reset(&mut self, seed: u64, mask: Option<&[bool]>) {
-        let config = self.config;
-        for (k, env) in self.envs.iter_mut().enumerate() {
+        let (config, n) = (self.config, self.config.num_agents);
+        let robots = self.robots.chunks_mut(n);
+        for (k, (env, robots)) in self.envs.iter_mut().zip(robots).enumerate() {
             env.episode_seed = episode::mix(seed, k as u64);
             if mask.is_none_or(|m| m[k]) {
-                env.start(&config, self.fixed.as_deref());
+                env.start(&config, self.fixed.as_deref(), robots);
             }
         }
     }
@@ -355,23 +333,26 @@ impl VecFormation {
     /// Resets the environments `mask` selects, each with its next episode
     /// from its own stream (what autoreset does).
     pub fn reset_next(&mut self, mask: &[bool]) {
-        let config = self.config;
-        for (env, &on) in self.envs.iter_mut().zip(mask) {
+        let (config, n) = (self.config, self.config.num_agents);
+        let robots = self.robots.chunks_mut(n);
+        for ((env, robots), &on) in self.envs.iter_mut().zip(robots).zip(mask) {
             if on {
-                env.start(&config, self.fixed.as_deref());
+                env.start(&config, self.fixed.as_deref(), robots);
             }
         }
     }
 
     /// Writes every robot's observation into `obs` (`E·N·obs_dim`).
     pub fn observe<T: Scalar>(&self, obs: &mut [T]) {
-        let per = self.config.num_agents * self.obs_dim();
+        let n = self.config.num_agents;
+        let per = n * self.obs_dim();
         assert_eq!(obs.len(), self.envs.len() * per, "obs length");
         let config = &self.config;
         obs.par_chunks_mut(per)
             .zip(self.envs.par_iter())
-            .for_each(|(o, env)| {
-                observe::write(config, env.seen(), o, None);
+            .zip(self.robots.par_chunks(n))
+            .for_each(|((o, env), robots)| {
+                observe::write(config, env.seen(robots), o, None);
             });
     }
 
@@ -398,28 +379,57 @@ impl VecFormation {
                 && facts.len() == e,
             "buffer lengths"
         );
-        let config = &self.config;
+        let (config, consts, arch) = (&self.config, &self.consts, self.arch);
+        // Groups of environments, their robots stepped together in lanes.
+        let g = GROUP_ROBOTS.div_ceil(n);
         self.envs
-            .par_iter_mut()
-            .zip(actions.par_chunks(n * 2))
-            .zip(obs.par_chunks_mut(n * d))
-            .zip(rewards.par_chunks_mut(n))
-            .zip(changed.par_chunks_mut(n))
-            .zip(facts.par_iter_mut())
-            .for_each(|(((((env, a), o), r), c), f)| {
-                *f = env.step(config, a, c);
-                f.reward = observe::write(config, env.seen(), o, Some((&env.applied, r)));
+            .par_chunks_mut(g)
+            .zip(self.robots.par_chunks_mut(g * n))
+            .zip(actions.par_chunks(g * n * 2))
+            .zip(obs.par_chunks_mut(g * n * d))
+            .zip(rewards.par_chunks_mut(g * n))
+            .zip(changed.par_chunks_mut(g * n))
+            .zip(facts.par_chunks_mut(g))
+            .for_each(|((((((envs, robots), a), o), r), c), f)| {
+                let each = robots
+                    .chunks_mut(n)
+                    .zip(a.chunks(n * 2))
+                    .zip(c.chunks_mut(n));
+                for (env, ((robots, a), c)) in envs.iter_mut().zip(each) {
+                    env.command(config, robots, a, c);
+                }
+                plant::advance(config, consts, arch, robots);
+                let outs = robots
+                    .chunks(n)
+                    .zip(o.chunks_mut(n * d))
+                    .zip(r.chunks_mut(n));
+                for (env, (((robots, o), r), f)) in envs.iter_mut().zip(outs.zip(f)) {
+                    env.t += config.dt;
+                    env.steps += 1;
+                    let (reward, nearest) = observe::write(config, env.seen(robots), o, Some(r));
+                    *f = EnvFacts {
+                        reward,
+                        truncated: env.steps >= config.max_steps,
+                        min_distance: nearest.sqrt(),
+                    };
+                }
             });
     }
 
     /// Every robot's state, environment by environment.
     pub fn states(&self) -> impl Iterator<Item = &State> {
-        self.envs.iter().flat_map(|e| e.states.iter())
+        self.robots.iter().map(|r| &r.state)
     }
 
-    /// Environment `k`'s slots and leader.
-    pub fn slots(&self, k: usize) -> &Slots {
-        &self.envs[k].slots
+    /// Environment `k`'s leader.
+    pub fn leader(&self, k: usize) -> &Reference {
+        &self.envs[k].leader
+    }
+
+    /// Environment `k`'s slots: each robot's `L_X`, `L_Y` (eq. 7), m.
+    pub fn slots(&self, k: usize) -> impl Iterator<Item = [f64; 2]> + '_ {
+        let n = self.config.num_agents;
+        self.robots[k * n..(k + 1) * n].iter().map(|r| r.slot)
     }
 
     /// Environment `k`'s time in its episode, s.
@@ -428,140 +438,13 @@ impl VecFormation {
     }
 }
 
+/// Robots per group of environments stepped together ([`plant`]): whole
+/// blocks of lanes, few enough groups' worth of work to share the cores.
+const GROUP_ROBOTS: usize = 64;
+
 /// The index of the first value of `values` that is not finite.
 pub fn first_not_finite<T: Scalar>(values: &[T]) -> Option<usize> {
     values.iter().position(|v| !v.get().is_finite())
-}
-
-impl Env {
-    /// What its observations see now.
-    fn seen(&self) -> observe::Seen<'_> {
-        observe::Seen {
-            states: &self.states,
-            points: &self.points,
-            slots: &self.slots,
-            t: self.t,
-        }
-    }
-
-    /// A new episode from this environment's stream.
-    fn start(&mut self, config: &EnvConfig, fixed: Option<&FixedEpisode>) {
-        self.episode_seed = episode::mix(self.episode_seed, 0x5eed);
-        match fixed {
-            None => episode::draw(config, self.episode_seed, &mut self.slots, &mut self.states),
-            Some(f) => {
-                self.slots.leader = f.leader.clone();
-                self.slots.lx.clone_from(&f.lx);
-                self.slots.ly.clone_from(&f.ly);
-                self.states.copy_from_slice(&f.starts);
-            }
-        }
-        observe::points(&self.states, config.l, &mut self.points);
-        for f in &mut self.filters {
-            *f = SafetyFilter::new(
-                SafetyConfig::new(config.radius, config.gain, f64::INFINITY)
-                    .unwrap_or_else(|_| unreachable!("checked by EnvConfig::check")),
-            )
-            .with_period(config.dt);
-        }
-        self.applied.fill([0.0; 2]);
-        self.t = 0.0;
-        self.steps = 0;
-    }
-
-    /// Clip, filter, integrate.
-    fn step<T: Scalar>(
-        &mut self,
-        config: &EnvConfig,
-        actions: &[T],
-        changed: &mut [T],
-    ) -> EnvFacts {
-        let bound = config.action_bound();
-        if let (true, Some(robot)) = (config.safety, &config.robot) {
-            for ((dv, s), f) in self.shared.iter_mut().zip(&self.states).zip(&self.filters) {
-                *dv = f.last_acceleration(s, robot);
-            }
-        }
-        for (i, a) in self.applied.iter_mut().enumerate() {
-            *a = [0, 1].map(|k| actions[2 * i + k].get().clamp(-bound[k], bound[k]));
-        }
-        for (i, change) in changed.iter_mut().enumerate() {
-            if !config.safety {
-                *change = T::of(0.0);
-                continue;
-            }
-            self.neighbours.clear();
-            let torque = config.robot.is_some();
-            for (j, s) in self.states.iter().enumerate() {
-                if j != i {
-                    let dv = torque.then_some(self.shared[j]);
-                    self.neighbours
-                        .push(Neighbour::of_state(s, config.l, dv, true).sharing(torque));
-                }
-            }
-            let nominal = self.applied[i];
-            let (me, filter) = (&self.states[i], &mut self.filters[i]);
-            self.applied[i] = match &config.robot {
-                None => {
-                    let cmd = VelocityCommand {
-                        v: nominal[0],
-                        omega: nominal[1],
-                    };
-                    let out = filter.velocity(
-                        self.t,
-                        me,
-                        config.l,
-                        cmd,
-                        &config.base,
-                        &self.neighbours,
-                        &[],
-                    );
-                    [out.command.v, out.command.omega]
-                }
-                Some(robot) => {
-                    let u = robot.inputs(Torques {
-                        right: nominal[0],
-                        left: nominal[1],
-                    });
-                    let out = filter.torque(self.t, me, config.l, robot, u, &self.neighbours, &[]);
-                    let tau = robot.torques(out.command);
-                    [tau.right, tau.left]
-                }
-            };
-            let a = self.applied[i];
-            *change = T::of(match config.robot {
-                None => (a[0] - nominal[0]).hypot(config.l * (a[1] - nominal[1])),
-                Some(_) => (a[0] - nominal[0]).hypot(a[1] - nominal[1]),
-            });
-        }
-        for (s, a) in self.states.iter_mut().zip(&self.applied) {
-            *s = match &config.robot {
-                None => {
-                    let base = &config.base;
-                    let cmd = VelocityCommand {
-                        v: a[0],
-                        omega: a[1],
-                    };
-                    base.rk4_step(s, base.limit(cmd).0, config.dt)
-                }
-                Some(robot) => {
-                    let u = robot.inputs(Torques {
-                        right: a[0],
-                        left: a[1],
-                    });
-                    robot.rk4_step(s, robot.actuate(u).0, config.dt)
-                }
-            };
-        }
-        self.t += config.dt;
-        self.steps += 1;
-        observe::points(&self.states, config.l, &mut self.points);
-        EnvFacts {
-            reward: 0.0,
-            truncated: self.steps >= config.max_steps,
-            min_distance: observe::closest(&self.points),
-        }
-    }
 }
 
 #[cfg(test)]

@@ -1,13 +1,14 @@
 //! Observations ([`super::layout`]), rewards and the baseline policy.
 
+use super::env::Robot;
 use super::layout::{
     E, LEADER_ACCELERATION, LEADER_VELOCITY, NEIGHBOURS, OFFSETS, SPEEDS, obs_dim,
 };
-use super::{EnvConfig, Scalar, Slots};
+use super::{EnvConfig, Scalar};
 use crate::law::control::{Gains, LeaderMotion, Offset, Variant, law};
 use crate::model::RobotParams;
 use crate::model::State;
-use crate::safety::point;
+use crate::reference::{Order, Reference, Trajectory};
 
 /// The most neighbours an observation lists.
 pub const MAX_NEIGHBOURS: usize = 16;
@@ -32,38 +33,87 @@ fn errors(
 /// One environment at one instant, as the observations see it.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Seen<'a> {
-    pub(super) states: &'a [State],
-    /// The robots' points `l` ahead ([`points`]).
-    pub(super) points: &'a [[f64; 2]],
-    pub(super) slots: &'a Slots,
+    /// Its robots, their headings and points as of their states
+    /// ([`super::plant::sense`]).
+    pub(super) robots: &'a [Robot],
+    pub(super) leader: &'a Reference,
     pub(super) t: f64,
 }
 
+/// Points compared at a time in the neighbour search: their squared
+/// distances computed together (in vectors), then looked at only when one
+/// is a candidate.
+const CHUNK: usize = 8;
+
+/// The `best.len()` robots' points nearest to robot `me`'s within
+/// `sqrt(sense2)`, nearest first as `(squared distance, index)` into `best`
+/// (the rest infinite); returns the squared distance to the nearest of all
+/// (infinite alone). Ties keep the lower index first.
+#[inline]
+fn nearest(robots: &[Robot], me: usize, sense2: f64, best: &mut [(f64, usize)]) -> f64 {
+    let p = robots[me].point;
+    best.fill((f64::INFINITY, 0));
+    let mut closest = f64::INFINITY;
+    // A point is listed when within `sense` and nearer than the last
+    // listed so far (none with no room).
+    let mut kth = best.last().map_or(f64::NEG_INFINITY, |b| b.0);
+    for (c, chunk) in robots.chunks(CHUNK).enumerate() {
+        let mut d = [f64::INFINITY; CHUNK];
+        for (d, q) in d.iter_mut().zip(chunk) {
+            let (dx, dy) = (q.point[0] - p[0], q.point[1] - p[1]);
+            *d = dx * dx + dy * dy;
+        }
+        let base = c * CHUNK;
+        if (base..base + CHUNK).contains(&me) {
+            d[me - base] = f64::INFINITY;
+        }
+        let mut low = f64::INFINITY;
+        for &x in &d {
+            low = if x < low { x } else { low };
+        }
+        closest = if low < closest { low } else { closest };
+        if !(low <= sense2 && low < kth) {
+            continue;
+        }
+        for (m, &dist) in d.iter().enumerate() {
+            if !(dist <= sense2 && dist < kth) {
+                continue;
+            }
+            // Insert, moving the farther ones down one place (branch-free:
+            // where it goes is as unpredictable as the robots).
+            let mut item = (dist, base + m);
+            for slot in best.iter_mut() {
+                let here = item.0 < slot.0;
+                let (keep, carry) = if here { (item, *slot) } else { (*slot, item) };
+                (*slot, item) = (keep, carry);
+            }
+            kth = best.last().map_or(kth, |b| b.0);
+        }
+    }
+    closest
+}
+
 /// Writes one environment's observations (`N · obs_dim`) and, with
-/// `rewards = Some((applied, out))`, each robot's reward
-/// ([`super::Weights`]) for the step that ended under `applied`; returns
-/// their mean (0 without). One pass over the pairs serves both.
+/// `rewards = Some(out)`, each robot's reward ([`super::Weights`]) for the
+/// step that ended under its `applied` action; returns
+/// their mean (0 without) and the smallest squared distance between two
+/// robots' points (infinite with one robot). One pass over the pairs serves
+/// all three.
 pub(super) fn write<T: Scalar>(
     config: &EnvConfig,
     seen: Seen<'_>,
     out: &mut [T],
-    mut rewards: Option<(&[[f64; 2]], &mut [T])>,
-) -> f64 {
-    let Seen {
-        states,
-        points,
-        slots,
-        t,
-    } = seen;
+    mut rewards: Option<&mut [T]>,
+) -> (f64, f64) {
+    let Seen { robots, leader, t } = seen;
     let d = obs_dim(config.neighbours);
-    let jet = slots.leader_at(t);
+    let jet = leader.eval(t, Order::Two);
     let k = config.neighbours.min(MAX_NEIGHBOURS);
     let sense2 = config.sense * config.sense;
     let radius2 = config.radius * config.radius;
-    let mut sum = 0.0;
-    for (i, (s, o)) in states.iter().zip(out.chunks_exact_mut(d)).enumerate() {
-        let (sin, cos) = s.theta.sin_cos();
-        let (lx, ly) = (slots.lx[i], slots.ly[i]);
+    let (mut sum, mut closest) = (0.0, f64::INFINITY);
+    for (i, (robot, o)) in robots.iter().zip(out.chunks_exact_mut(d)).enumerate() {
+        let (s, [sin, cos], [lx, ly]) = (&robot.state, robot.heading, robot.slot);
         let (e, q) = errors(s, (sin, cos), jet.p, jet.dp, lx, ly);
         let acc = [
             cos * jet.ddp[0] + sin * jet.ddp[1],
@@ -77,71 +127,35 @@ pub(super) fn write<T: Scalar>(
             (E, LEADER_VELOCITY, LEADER_ACCELERATION, OFFSETS),
             (0, 4, 6, 8)
         );
-        // The k nearest points within `sense`, by insertion into a fixed
-        // array, on squared distances (the same order, no square root).
-        let me = points[i];
         let mut best = [(f64::INFINITY, 0usize); MAX_NEIGHBOURS];
-        let mut nearest = f64::INFINITY;
-        for (j, p) in points.iter().enumerate() {
-            if j == i {
-                continue;
-            }
-            let (dx, dy) = (p[0] - me[0], p[1] - me[1]);
-            let dist = dx * dx + dy * dy;
-            nearest = nearest.min(dist);
-            if dist > sense2 || k == 0 || dist >= best[k - 1].0 {
-                continue;
-            }
-            let mut at = k - 1;
-            while at > 0 && best[at - 1].0 > dist {
-                best[at] = best[at - 1];
-                at -= 1;
-            }
-            best[at] = (dist, j);
-        }
+        let near = nearest(robots, i, sense2, &mut best[..k]);
+        closest = closest.min(near);
+        let me = robot.point;
         let rest = &mut o[NEIGHBOURS..];
         rest.fill(T::of(0.0));
         for (m, &(dist, j)) in best[..k].iter().enumerate() {
             if dist.is_finite() {
-                let p = points[j];
+                let p = robots[j].point;
                 let (dx, dy) = (p[0] - me[0], p[1] - me[1]);
                 rest[3 * m] = T::of(cos * dx + sin * dy);
                 rest[3 * m + 1] = T::of(-sin * dx + cos * dy);
                 rest[3 * m + 2] = T::of(1.0);
             }
         }
-        if let Some((applied, r)) = rewards.as_mut() {
-            let (w, a) = (config.weights, applied[i]);
+        if let Some(r) = rewards.as_mut() {
+            let (w, a) = (config.weights, robot.applied);
             let effort = match config.robot {
                 None => a[0] * a[0] + (config.l * a[1]).powi(2),
                 Some(_) => a[0] * a[0] + a[1] * a[1],
             };
             let value = -w.tracking * (e[0] * e[0] + e[1] * e[1])
                 - w.effort * effort
-                - if nearest < radius2 { w.collision } else { 0.0 };
+                - if near < radius2 { w.collision } else { 0.0 };
             r[i] = T::of(value);
             sum += value;
         }
     }
-    sum / states.len() as f64
-}
-
-/// The robots' points `l` ahead ([`point`]) into `out`.
-pub(super) fn points(states: &[State], l: f64, out: &mut [[f64; 2]]) {
-    for (s, p) in states.iter().zip(out) {
-        *p = point(s, l);
-    }
-}
-
-/// The smallest distance between two of `points`, m.
-pub(super) fn closest(points: &[[f64; 2]]) -> f64 {
-    let mut best = f64::INFINITY;
-    for (i, p) in points.iter().enumerate() {
-        for q in &points[i + 1..] {
-            best = best.min((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2));
-        }
-    }
-    best.sqrt()
+    (sum / robots.len() as f64, closest)
 }
 
 /// The kinematic law ([`crate::law::kinematic`]) from an observation alone:

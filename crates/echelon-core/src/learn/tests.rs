@@ -35,24 +35,25 @@ proptest! {
         config.neighbours = k;
         let mut env = VecFormation::new(config, seed).unwrap();
         // Move the robots off their starts and give them speeds.
-        for (i, s) in env.envs[1].states.iter_mut().enumerate() {
+        let n_ = n;
+        for (i, r) in env.robots[n_..2 * n_].iter_mut().enumerate() {
+            let s = &mut r.state;
             let (dx, dy, th, v, w) = jitter[i];
             s.x += dx; s.y += dy; s.theta = th; s.v = v; s.omega = w;
         }
         env.envs[1].t = 0.7;
-        let moved = &mut env.envs[1];
-        super::observe::points(&moved.states, config.l, &mut moved.points);
+        super::plant::sense(&mut env.robots[n..2 * n], config.l);
         let d = env.obs_dim();
         let mut obs = vec![0.0; 2 * n * d];
         env.observe(&mut obs);
         let mut actions = vec![0.0; 2 * n * 2];
         baseline(&obs, d, ke, &mut actions);
-        let slots = env.slots(1);
-        let jet = slots.leader_at(0.7);
+        let slots: Vec<[f64; 2]> = env.slots(1).collect();
+        let jet = env.leader(1).eval(0.7, crate::reference::Order::Two);
         let leader = LeaderMotion::of_jet(&jet);
         for i in 0..n {
-            let off = Offset { lx: slots.lx[i], ly: slots.ly[i], dly: 0.0, ddly: 0.0 };
-            let law = kinematic_law(&env.envs[1].states[i], &leader, &off, ke);
+            let off = Offset { lx: slots[i][0], ly: slots[i][1], dly: 0.0, ddly: 0.0 };
+            let law = kinematic_law(&env.robots[n + i].state, &leader, &off, ke);
             let o = &obs[(n + i) * d..(n + i + 1) * d];
             let a = &actions[(n + i) * 2..(n + i + 1) * 2];
             prop_assert!((o[0] - law.e[0]).abs() < 1e-12 && (o[1] - law.e[1]).abs() < 1e-12, "{o:?} {law:?}");
@@ -71,9 +72,9 @@ proptest! {
                 }
             }
             let listed = (0..k).filter(|m| o[12 + 3 * m] == 1.0).count();
-            let me = crate::safety::point(&env.envs[1].states[i], config.l);
-            let within = env.envs[1].states.iter().enumerate().filter(|&(j, s)| {
-                let p = crate::safety::point(s, config.l);
+            let me = crate::safety::point(&env.robots[n + i].state, config.l);
+            let within = env.robots[n..2 * n].iter().enumerate().filter(|&(j, r)| {
+                let p = crate::safety::point(&r.state, config.l);
                 j != i && (p[0] - me[0]).hypot(p[1] - me[1]) <= config.sense
             }).count();
             prop_assert_eq!(listed, k.min(within));
@@ -167,8 +168,11 @@ fn a_masked_reset_leaves_the_others_untouched() {
     }
     assert!(a.time(0) > 0.0 && a.time(1) == 0.0);
     // Environments draw different episodes from one seed.
-    assert_ne!(a.slots(0).lx, a.slots(2).lx);
-    assert!((a.slots(0).leader.eval(0.0, crate::reference::Order::Two).p[0]).abs() < 1e-12);
+    assert_ne!(
+        a.slots(0).collect::<Vec<_>>(),
+        a.slots(2).collect::<Vec<_>>()
+    );
+    assert!((a.leader(0).eval(0.0, crate::reference::Order::Two).p[0]).abs() < 1e-12);
 }
 
 /// Truncation comes at `max_steps`, actions are clipped to the base's
@@ -240,22 +244,24 @@ proptest! {
         let config = torque_config(1, n);
         let robot = config.robot.unwrap();
         let mut env = VecFormation::new(config, seed).unwrap();
-        for (i, s) in env.envs[0].states.iter_mut().enumerate() {
+        for (i, r) in env.robots[..n].iter_mut().enumerate() {
+            let s = &mut r.state;
             let (dx, dy, th, v, w) = jitter[i];
             s.x += dx; s.y += dy; s.theta = th; s.v = v; s.omega = w;
         }
         env.envs[0].t = 1.3;
+        super::plant::sense(&mut env.robots[..n], config.l);
         let d = env.obs_dim();
         let mut obs = vec![0.0; n * d];
         env.observe(&mut obs);
         let mut actions = vec![0.0; n * 2];
         let gains = crate::law::control::Gains::PAPER;
         baseline_torque(&obs, d, &robot, gains, &mut actions);
-        let slots = env.slots(0);
-        let leader = LeaderMotion::of_jet(&slots.leader_at(1.3));
+        let slots: Vec<[f64; 2]> = env.slots(0).collect();
+        let leader = LeaderMotion::of_jet(&env.leader(0).eval(1.3, crate::reference::Order::Two));
         for i in 0..n {
-            let off = Offset { lx: slots.lx[i], ly: slots.ly[i], dly: 0.0, ddly: 0.0 };
-            let u = crate::law::control::law(&robot, &env.envs[0].states[i], &leader, &off, gains, crate::law::control::Variant::Complete).u;
+            let off = Offset { lx: slots[i][0], ly: slots[i][1], dly: 0.0, ddly: 0.0 };
+            let u = crate::law::control::law(&robot, &env.robots[i].state, &leader, &off, gains, crate::law::control::Variant::Complete).u;
             let tau = robot.torques(u);
             let a = &actions[2 * i..2 * i + 2];
             prop_assert!((a[0] - tau.right).abs() < 1e-9 * (1.0 + tau.right.abs()), "{a:?} {tau:?}");
@@ -294,5 +300,99 @@ proptest! {
             closest = facts.iter().map(|f| f.min_distance).fold(closest, f64::min);
         }
         prop_assert!(closest >= 0.3 - 1e-3, "closest {closest}");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// The step in lanes across environments ([`plant`]) is the base model
+    /// robot by robot: each state after a step is
+    /// [`VelocityBase::rk4_step`] under the clipped, limited action to
+    /// 1e-12 (the polynomial sines and cosines are within a few ulp of the
+    /// platform's), on bases with and without lags and acceleration limits,
+    /// whatever the grouping of robots into lanes and environments; the
+    /// headings' sines and cosines and the points are the state's.
+    #[test]
+    fn the_step_in_lanes_is_the_base_model_robot_by_robot(
+        e in 1usize..6, n in 1usize..13, seed in any::<u64>(),
+        tau in (prop_oneof![Just(0.0), 0.02..0.5f64], prop_oneof![Just(0.0), 0.02..0.5f64]),
+        acc in (prop_oneof![Just(f64::INFINITY), 0.2..3.0f64], prop_oneof![Just(f64::INFINITY), 0.5..6.0f64]),
+        joint in any::<bool>(), limits in (0.1..1.5f64, 0.3..4.0f64),
+        raw in proptest::collection::vec(-3.0..3.0f64, 2 * 5 * 12 * 6),
+    ) {
+        use crate::model::base::{AccelLimit, VelocityBaseSpec, VelocityCommand};
+        let base = VelocityBase::new(VelocityBaseSpec {
+            tau_v: tau.0, tau_omega: tau.1, v_max: limits.0, omega_max: limits.1,
+            // An axis without lag has no acceleration to limit.
+            a_max: if tau.0 > 0.0 { acc.0 } else { f64::INFINITY },
+            alpha_max: if tau.1 > 0.0 { acc.1 } else { f64::INFINITY },
+            accel: if joint { AccelLimit::Joint } else { AccelLimit::PerAxis },
+        }).unwrap();
+        let config = EnvConfig { base, dt: 0.02, ..EnvConfig::new(e, n) };
+        let mut env = VecFormation::new(config, seed).unwrap();
+        let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
+        for step in 0..5 {
+            let per = 2 * e * n;
+            actions.copy_from_slice(&raw[step * per..(step + 1) * per]);
+            let before: Vec<State> = env.states().copied().collect();
+            env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+            for (r, (s, was)) in env.states().zip(&before).enumerate() {
+                let a = [actions[2 * r].clamp(-limits.0, limits.0), actions[2 * r + 1].clamp(-limits.1, limits.1)];
+                let cmd = base.limit(VelocityCommand { v: a[0], omega: a[1] }).0;
+                let want = base.rk4_step(was, cmd, config.dt);
+                for (got, want) in [(s.x, want.x), (s.y, want.y), (s.theta, want.theta), (s.v, want.v), (s.omega, want.omega)] {
+                    prop_assert!((got - want).abs() <= 1e-12 * (1.0 + want.abs()), "robot {r} step {step}: {s:?} vs {want:?}");
+                }
+            }
+            for r in &env.robots {
+                let (s, h, p) = (&r.state, r.heading, r.point);
+                {
+                    let (sin, cos) = s.theta.sin_cos();
+                    let q = crate::safety::point(s, config.l);
+                    prop_assert!((h[0] - sin).abs() < 1e-15 && (h[1] - cos).abs() < 1e-15, "{h:?} vs {sin}, {cos}");
+                    prop_assert!((p[0] - q[0]).abs() < 1e-14 && (p[1] - q[1]).abs() < 1e-14, "{p:?} vs {q:?}");
+                }
+            }
+        }
+    }
+
+    /// The neighbours an observation lists are the `K` nearest points within
+    /// `sense` (ties to the lower index), by a brute-force sort, in the
+    /// robot's frame; the facts' closest distance is the smallest pair's.
+    #[test]
+    fn the_listed_neighbours_are_the_nearest_by_brute_force(
+        n in 1usize..40, k in 0usize..17, seed in any::<u64>(), sense in 0.2..6.0f64, spacing in 0.2..2.0f64,
+    ) {
+        let config = EnvConfig { neighbours: k, sense, spacing, ..EnvConfig::new(1, n) };
+        let mut env = VecFormation::new(config, seed).unwrap();
+        let (actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
+        env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+        let d = env.obs_dim();
+        let states: Vec<State> = env.states().copied().collect();
+        let points: Vec<[f64; 2]> = states.iter().map(|s| crate::safety::point(s, config.l)).collect();
+        let mut closest = f64::INFINITY;
+        for (i, me) in points.iter().enumerate() {
+            let mut others: Vec<(f64, usize)> = points.iter().enumerate().filter(|&(j, _)| j != i)
+                .map(|(j, p)| ((p[0] - me[0]).powi(2) + (p[1] - me[1]).powi(2), j)).collect();
+            others.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            closest = others.first().map_or(closest, |o| closest.min(o.0.sqrt()));
+            let listed: Vec<usize> = others.iter().filter(|o| o.0 <= sense * sense).take(k).map(|o| o.1).collect();
+            let o = &obs[i * d..(i + 1) * d];
+            let (sin, cos) = states[i].theta.sin_cos();
+            for m in 0..k {
+                let nb = &o[10 + 3 * m..13 + 3 * m];
+                match listed.get(m) {
+                    Some(&j) => {
+                        let (dx, dy) = (points[j][0] - me[0], points[j][1] - me[1]);
+                        let want = [cos * dx + sin * dy, -sin * dx + cos * dy];
+                        prop_assert!(nb[2] == 1.0 && (nb[0] - want[0]).abs() < 1e-12 && (nb[1] - want[1]).abs() < 1e-12,
+                            "robot {i} slot {m}: {nb:?}, want {want:?} (robot {j})");
+                    }
+                    None => prop_assert!(nb == [0.0; 3], "robot {i} slot {m}: {nb:?}"),
+                }
+            }
+        }
+        prop_assert!((facts[0].min_distance - closest).abs() < 1e-12 || closest.is_infinite() && facts[0].min_distance.is_infinite());
     }
 }

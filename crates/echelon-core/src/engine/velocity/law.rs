@@ -1,7 +1,7 @@
 //! The kinematic law and the velocity base in lanes: the command, the
 //! speed limiter, lags and acceleration limits, and the plant's derivative.
 
-use crate::engine::kernel::compensation;
+use crate::engine::kernel::{compensation, turned_state, vectors};
 use crate::law::control::Hold;
 use crate::law::kinematic::kinematic_of;
 use crate::math::lanes::Lanes;
@@ -118,4 +118,25 @@ pub(super) fn settle(c: &VConsts, x: &mut [V4; 5], cmd: &[V4; 2]) {
     let [v, w] = speeds(c, x, cmd);
     x[3] = clamp(v, V4::splat(c.max[0]));
     x[4] = clamp(w, V4::splat(c.max[1]));
+}
+
+/// One RK4 step of the base over `c.dt` under `cmd` held (zero-order hold;
+/// [`crate::model::base::VelocityBase::rk4_step`] in lanes, `cmd` already
+/// limited), from `x` whose heading's sines and cosines are `sc`: stages 2–4
+/// turned from `sc` ([`turned_state`]), then [`settle`]d.
+#[inline(always)]
+pub(crate) fn held_step(c: &VConsts, x: &mut [V4; 5], sc: (V4, V4), cmd: &[V4; 2]) {
+    let (dt, h) = (c.dt, 0.5 * c.dt);
+    let k1 = derivative(c, x, sc, cmd);
+    let (x2, sc2) = turned_state(x, sc, &k1, h);
+    let k2 = derivative(c, &x2, sc2, cmd);
+    let (x3, sc3) = turned_state(x, sc, &k2, h);
+    let k3 = derivative(c, &x3, sc3, cmd);
+    let (x4, sc4) = turned_state(x, sc, &k3, dt);
+    let k4 = derivative(c, &x4, sc4, cmd);
+    let h6 = dt / 6.0;
+    let rk = |i: usize| x[i] + (k1[i] + (k2[i] + k3[i]) * 2.0 + k4[i]) * h6;
+    *x = [rk(0), rk(1), rk(2), rk(3), rk(4)];
+    vectors(x);
+    settle(c, x, cmd);
 }

@@ -462,7 +462,7 @@ impl<P: Plant> Robot<P> {
             self.offset = s.t - now;
             self.plant.set_time(s.t);
             self.next_tick = s.t;
-            self.next_stats = s.t;
+            self.next_stats = s.t + tick::stats_phase(self.config.agent);
             // The old leader's samples are on the old timeline: at the new
             // clock they would look fresh, even from the future. Refused as
             // stale (every message lands in one counter).

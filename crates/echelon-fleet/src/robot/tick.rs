@@ -313,3 +313,15 @@ impl<P: Plant> Robot<P> {
         }
     }
 }
+
+/// Where in each fleet second robot `agent` publishes its counters (s, in
+/// `[0, 1)`): spread over the second by the golden ratio, so that the
+/// robots that set their clocks on the same reference sample (a host's, a
+/// fleet's) do not all publish in the same tick. At one instant, a host's
+/// hundreds of stats fill its Zenoh queue, and each put then waits up to
+/// `wait_before_drop` (1 ms) before its sample is dropped: 125 robots held
+/// their host 125 ms once a second (the reference → robot p99 of a
+/// thousand-robot fleet, BENCHMARKS.md).
+pub(crate) fn stats_phase(agent: u32) -> f64 {
+    (f64::from(agent) * 0.618_033_988_749_895).fract()
+}

@@ -287,5 +287,6 @@ mod link;
 mod messages;
 mod plant;
 mod state_rate;
+mod stats;
 mod swap;
 mod watchdog;

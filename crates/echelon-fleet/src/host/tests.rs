@@ -218,7 +218,9 @@ fn a_host_subscribes_once_per_key() {
     assert!(inputs.len() < all.len());
     assert_eq!(
         host.outputs(),
-        (1..=4).map(|k| keys.state(k)).collect::<Vec<_>>()
+        (1..=4)
+            .flat_map(|k| [keys.state(k), keys.stats(k)])
+            .collect::<Vec<_>>()
     );
     assert_eq!(host.tokens().len(), 4);
     let latching = host.latching().unwrap_or_else(|| panic!("a latch"));

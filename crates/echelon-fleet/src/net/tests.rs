@@ -305,9 +305,10 @@ fn the_roles_declare_what_the_access_control_allows() {
         let config = crate::testing::robot_config(&s, k, FaultSpec::default());
         let robot = RobotTask::new(Robot::simulated(config, 1), keys.clone());
         let m = Member::Robot(k);
+        // Its state and counters, and the fleet stop it puts when its base
+        // reports a hazard.
         let mut out = robot.outputs();
-        // Its counters, and the fleet stop it puts when its base reports a hazard.
-        out.extend([keys.stats(k), keys.halt(k)]);
+        out.push(keys.halt(k));
         assert_eq!(out, publishes(m, &keys, &[]));
         within(&robot.inputs(), &subscribes(m, &keys, &[]), "robot");
         assert_eq!(robot.tokens(), vec![keys.alive(&m.liveliness())]);

@@ -21,6 +21,8 @@ use super::{Robot, RobotReport, RobotStats};
 const LEADER: usize = 0;
 /// The output number of its state.
 const STATE: usize = 0;
+/// The output number of its counters (`robot/<k>/stats`).
+const STATS_OUTPUT: usize = 1;
 
 /// What a plant does with a sample of its own inputs (the input's number
 /// among them, key, bytes, fleet time).
@@ -136,7 +138,8 @@ impl<P: Plant> RobotTask<P> {
             ..stats
         };
         if let Ok(json) = serde_json::to_vec(&stats) {
-            out.put(&self.keys.stats(self.agent()), &json);
+            // Best effort, as the counters are: a refusal is not the robot's.
+            let _ = out.publish(STATS_OUTPUT, &json);
         }
     }
 }
@@ -161,7 +164,10 @@ impl<P: Plant + 'static> Task for RobotTask<P> {
     }
 
     fn outputs(&self) -> Vec<String> {
-        vec![self.keys.state(self.agent())]
+        // The counters through a declared publisher too: its route is
+        // resolved once, not at every put (Zenoh matches an undeclared
+        // key against every resource it knows, hundreds in a host).
+        vec![self.keys.state(self.agent()), self.keys.stats(self.agent())]
     }
 
     fn tokens(&self) -> Vec<String> {

@@ -1,0 +1,135 @@
+#!/usr/bin/env python3
+"""How fresh the live view of a running fleet is: what the dashboard's page
+(and any Foxglove client) receives from the collector's Foxglove server.
+
+A client of the Foxglove WebSocket protocol (as ws_client.py, written from
+the protocol's specification) subscribes to `/reference` and every
+`/agent/K/state` (the JSON channels the dashboard draws from) for S seconds
+and measures, for each state frame, its **lag**: when it arrived, in fleet
+time, less the state's own fleet time `t` (how far behind the fleet's
+present the robot drawn is), and per robot how many states arrived. Fleet
+time on this client's clock is the reference's, from the reference sample
+that arrived soonest after its time (the smallest arrival − `t`: the
+offset with the least delay in it), so a lag is measured against the
+fastest the reference itself came, and is ≥ 0 but for rounding. It also times the
+dashboard page's HTTP answer (time to the last byte) when given --page.
+
+Usage:
+  live_lag.py WS_URL --seconds S [--page HTTP_URL] [--wait W]
+
+Prints one JSON object: messages/s, robots seen, states per robot (min,
+median), the lag's p50/p99/max (ms), the page's answer time (ms).
+"""
+
+import argparse
+import asyncio
+import json
+import struct
+import time
+import urllib.request
+
+import websockets
+
+SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+
+
+def quantile(xs, q):
+    """The nearest-rank quantile `q` of `xs` (sorted here); NaN if empty."""
+    if not xs:
+        return float("nan")
+    xs = sorted(xs)
+    return xs[min(len(xs) - 1, max(0, int(round(q * len(xs) + 0.5)) - 1))]
+
+
+async def connect(url, wait):
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            return await websockets.connect(url, subprotocols=SUBPROTOCOLS, max_size=None)
+        except (OSError, websockets.exceptions.InvalidHandshake):
+            if time.monotonic() > deadline:
+                raise
+            await asyncio.sleep(0.2)
+
+
+async def run(url, seconds, wait):
+    ws = await connect(url, wait)
+    subscribed = {}  # subscription id -> topic
+    offset = float("inf")  # min over references of arrival − t (client clock)
+    arrivals, per_robot = [], {}  # (arrival, t) of each state
+    messages, start, deadline = 0, None, None
+    while True:
+        timeout = 30 if deadline is None else deadline - time.monotonic()
+        if timeout <= 0:
+            break
+        try:
+            frame = await asyncio.wait_for(ws.recv(), timeout=timeout)
+        except asyncio.TimeoutError:
+            break
+        if isinstance(frame, str):
+            msg = json.loads(frame)
+            if msg.get("op") == "advertise":
+                subs = []
+                for ch in msg["channels"]:
+                    topic = ch["topic"]
+                    if topic == "/reference" or (topic.startswith("/agent/") and topic.endswith("/state")):
+                        sid = len(subscribed) + 1
+                        subscribed[sid] = topic
+                        subs.append({"id": sid, "channelId": ch["id"]})
+                if subs:
+                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                if start is None:
+                    start = time.monotonic()
+                    deadline = start + seconds
+            continue
+        if frame[0] != 0x01:
+            continue
+        sid, _stamp = struct.unpack_from("<IQ", frame, 1)
+        topic = subscribed.get(sid)
+        if topic is None:
+            continue
+        messages += 1
+        t = json.loads(frame[13:])["t"]
+        at = time.monotonic()
+        if topic == "/reference":
+            offset = min(offset, at - t)
+        else:
+            per_robot[topic] = per_robot.get(topic, 0) + 1
+            arrivals.append((at, t))
+    await ws.close()
+    lags = [at - offset - t for at, t in arrivals]
+    counts = sorted(per_robot.values())
+    return {
+        "seconds": seconds,
+        "messages_per_s": messages / seconds,
+        "robots": len(per_robot),
+        "states_per_robot_min": counts[0] if counts else 0,
+        "states_per_robot_median": counts[len(counts) // 2] if counts else 0,
+        "lag_ms_p50": 1e3 * quantile(lags, 0.5),
+        "lag_ms_p99": 1e3 * quantile(lags, 0.99),
+        "lag_ms_max": 1e3 * max(lags) if lags else float("nan"),
+    }
+
+
+def page_ms(url):
+    start = time.monotonic()
+    with urllib.request.urlopen(url, timeout=30) as r:
+        r.read()
+    return 1e3 * (time.monotonic() - start)
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("url")
+    p.add_argument("--seconds", type=float, required=True)
+    p.add_argument("--page")
+    p.add_argument("--wait", type=float, default=10.0)
+    a = p.parse_args()
+    out = asyncio.run(run(a.url, a.seconds, a.wait))
+    if a.page:
+        out["page_ms"] = page_ms(a.page)
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()

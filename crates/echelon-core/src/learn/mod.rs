@@ -399,20 +399,14 @@ impl VecFormation {
                     env.command(config, robots, a, c);
                 }
                 plant::advance(config, consts, arch, robots);
-                let outs = robots
-                    .chunks(n)
-                    .zip(o.chunks_mut(n * d))
-                    .zip(r.chunks_mut(n));
-                for (env, (((robots, o), r), f)) in envs.iter_mut().zip(outs.zip(f)) {
-                    env.t += config.dt;
-                    env.steps += 1;
-                    let (reward, nearest) = observe::write(config, env.seen(robots), o, Some(r));
-                    *f = EnvFacts {
-                        reward,
-                        truncated: env.steps >= config.max_steps,
-                        min_distance: nearest.sqrt(),
-                    };
-                }
+                arch.dispatch(observe::Group {
+                    config,
+                    envs,
+                    robots,
+                    obs: o,
+                    rewards: r,
+                    facts: f,
+                });
             });
     }
 

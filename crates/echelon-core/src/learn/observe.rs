@@ -49,7 +49,7 @@ const CHUNK: usize = 8;
 /// `sqrt(sense2)`, nearest first as `(squared distance, index)` into `best`
 /// (the rest infinite); returns the squared distance to the nearest of all
 /// (infinite alone). Ties keep the lower index first.
-#[inline]
+#[inline(always)]
 fn nearest(robots: &[Robot], me: usize, sense2: f64, best: &mut [(f64, usize)]) -> f64 {
     let p = robots[me].point;
     best.fill((f64::INFINITY, 0));
@@ -99,6 +99,7 @@ fn nearest(robots: &[Robot], me: usize, sense2: f64, best: &mut [(f64, usize)]) 
 /// their mean (0 without) and the smallest squared distance between two
 /// robots' points (infinite with one robot). One pass over the pairs serves
 /// all three.
+#[inline(always)]
 pub(super) fn write<T: Scalar>(
     config: &EnvConfig,
     seen: Seen<'_>,
@@ -211,5 +212,48 @@ pub fn baseline_torque<T: Scalar>(
         let tau = robot.torques(u);
         a[0] = T::of(tau.right);
         a[1] = T::of(tau.left);
+    }
+}
+
+/// A group of environments' observations, rewards and facts after their
+/// step ([`write`] for each), compiled for the best instruction set this
+/// CPU has ([`pulp::Arch::dispatch`]).
+pub(super) struct Group<'a, T> {
+    pub(super) config: &'a EnvConfig,
+    pub(super) envs: &'a mut [super::env::Env],
+    pub(super) robots: &'a [Robot],
+    pub(super) obs: &'a mut [T],
+    pub(super) rewards: &'a mut [T],
+    pub(super) facts: &'a mut [super::EnvFacts],
+}
+
+impl<T: Scalar> pulp::WithSimd for Group<'_, T> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        let Group {
+            config,
+            envs,
+            robots,
+            obs,
+            rewards,
+            facts,
+        } = self;
+        let n = config.num_agents;
+        let d = obs_dim(config.neighbours);
+        let outs = robots
+            .chunks(n)
+            .zip(obs.chunks_mut(n * d))
+            .zip(rewards.chunks_mut(n));
+        for (env, (((robots, o), r), f)) in envs.iter_mut().zip(outs.zip(facts)) {
+            env.t += config.dt;
+            env.steps += 1;
+            let (reward, nearest) = write(config, env.seen(robots), o, Some(r));
+            *f = super::EnvFacts {
+                reward,
+                truncated: env.steps >= config.max_steps,
+                min_distance: nearest.sqrt(),
+            };
+        }
     }
 }

@@ -28,9 +28,13 @@ import struct
 import time
 import urllib.request
 
-import websockets
+from ws_client import connect, subscribe
 
-SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+
+def drawn(ch):
+    """The channels the dashboard draws from."""
+    topic = ch["topic"]
+    return topic == "/reference" or (topic.startswith("/agent/") and topic.endswith("/state"))
 
 
 def quantile(xs, q):
@@ -41,20 +45,9 @@ def quantile(xs, q):
     return xs[min(len(xs) - 1, max(0, int(round(q * len(xs) + 0.5)) - 1))]
 
 
-async def connect(url, wait):
-    deadline = time.monotonic() + wait
-    while True:
-        try:
-            return await websockets.connect(url, subprotocols=SUBPROTOCOLS, max_size=None)
-        except (OSError, websockets.exceptions.InvalidHandshake):
-            if time.monotonic() > deadline:
-                raise
-            await asyncio.sleep(0.2)
-
-
 async def run(url, seconds, wait):
-    ws = await connect(url, wait)
-    subscribed = {}  # subscription id -> topic
+    ws = await connect(url, wait, max_size=None)
+    subscribed = {}  # subscription id -> channel
     offset = float("inf")  # min over references of arrival − t (client clock)
     arrivals, per_robot = [], {}  # (arrival, t) of each state
     messages, start, deadline = 0, None, None
@@ -69,15 +62,7 @@ async def run(url, seconds, wait):
         if isinstance(frame, str):
             msg = json.loads(frame)
             if msg.get("op") == "advertise":
-                subs = []
-                for ch in msg["channels"]:
-                    topic = ch["topic"]
-                    if topic == "/reference" or (topic.startswith("/agent/") and topic.endswith("/state")):
-                        sid = len(subscribed) + 1
-                        subscribed[sid] = topic
-                        subs.append({"id": sid, "channelId": ch["id"]})
-                if subs:
-                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                await subscribe(ws, msg, subscribed, drawn)
                 if start is None:
                     start = time.monotonic()
                     deadline = start + seconds
@@ -85,9 +70,10 @@ async def run(url, seconds, wait):
         if frame[0] != 0x01:
             continue
         sid, _stamp = struct.unpack_from("<IQ", frame, 1)
-        topic = subscribed.get(sid)
-        if topic is None:
+        ch = subscribed.get(sid)
+        if ch is None:
             continue
+        topic = ch["topic"]
         messages += 1
         t = json.loads(frame[13:])["t"]
         at = time.monotonic()

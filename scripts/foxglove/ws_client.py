@@ -64,6 +64,20 @@ class Rate:
         return {"count": n, "rate": (n - 1) / span if span > 0 else 0.0}
 
 
+async def subscribe(ws, advertised, subscribed, want=lambda ch: True):
+    """Subscribes to the channels of an `advertise` message that `want`
+    accepts, numbering the subscriptions after those of `subscribed`
+    (subscription id -> channel, updated)."""
+    subs = []
+    for ch in advertised["channels"]:
+        if want(ch):
+            sid = len(subscribed) + 1
+            subscribed[sid] = ch
+            subs.append({"id": sid, "channelId": ch["id"]})
+    if subs:
+        await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+
+
 async def connect(url, wait, **kwargs):
     deadline = time.monotonic() + wait
     while True:
@@ -96,13 +110,9 @@ async def run(url, seconds, stall, wait):
         if isinstance(frame, str):
             msg = json.loads(frame)
             if msg.get("op") == "advertise":
-                subs = []
                 for ch in msg["channels"]:
                     channels[ch["id"]] = ch
-                    sid = len(subscribed) + 1
-                    subscribed[sid] = ch
-                    subs.append({"id": sid, "channelId": ch["id"]})
-                await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                await subscribe(ws, msg, subscribed)
                 if stall:
                     # Subscribed to everything: now never read again.
                     await asyncio.sleep(seconds)

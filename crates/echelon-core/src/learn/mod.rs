@@ -399,6 +399,10 @@ impl VecFormation {
                     env.command(config, robots, a, c);
                 }
                 plant::advance(config, consts, arch, robots);
+                for env in envs.iter_mut() {
+                    env.t += config.dt;
+                    env.steps += 1;
+                }
                 arch.dispatch(observe::Group {
                     config,
                     envs,

@@ -216,11 +216,12 @@ pub fn baseline_torque<T: Scalar>(
 }
 
 /// A group of environments' observations, rewards and facts after their
-/// step ([`write`] for each), compiled for the best instruction set this
-/// CPU has ([`pulp::Arch::dispatch`]).
+/// step (their robots moved, their clocks on: [`write`] for each),
+/// compiled for the best instruction set this CPU has
+/// ([`pulp::Arch::dispatch`]).
 pub(super) struct Group<'a, T> {
     pub(super) config: &'a EnvConfig,
-    pub(super) envs: &'a mut [super::env::Env],
+    pub(super) envs: &'a [super::env::Env],
     pub(super) robots: &'a [Robot],
     pub(super) obs: &'a mut [T],
     pub(super) rewards: &'a mut [T],
@@ -245,9 +246,7 @@ impl<T: Scalar> pulp::WithSimd for Group<'_, T> {
             .chunks(n)
             .zip(obs.chunks_mut(n * d))
             .zip(rewards.chunks_mut(n));
-        for (env, (((robots, o), r), f)) in envs.iter_mut().zip(outs.zip(facts)) {
-            env.t += config.dt;
-            env.steps += 1;
+        for (env, (((robots, o), r), f)) in envs.iter().zip(outs.zip(facts)) {
             let (reward, nearest) = write(config, env.seen(robots), o, Some(r));
             *f = super::EnvFacts {
                 reward,

@@ -17,17 +17,21 @@ dashboard page's HTTP answer (time to the last byte) when given --page.
 Usage:
   live_lag.py WS_URL --seconds S [--page HTTP_URL] [--wait W]
 
-Prints one JSON object: messages/s, robots seen, states per robot (min,
-median), the lag's p50/p99/max (ms), the page's answer time (ms).
+Prints one JSON object: messages/s, references and robots seen, states per
+robot (min, median), the lag's p50/p99/max (ms), the page's answer time
+(ms). Exits 1, saying so on stderr, when no reference or no robot's state
+arrived: a lag measured on nothing is no measurement.
 """
 
 import argparse
 import asyncio
 import json
 import struct
+import sys
 import time
 import urllib.request
 
+import websockets
 from ws_client import connect, subscribe
 
 
@@ -50,7 +54,7 @@ async def run(url, seconds, wait):
     subscribed = {}  # subscription id -> channel
     offset = float("inf")  # min over references of arrival − t (client clock)
     arrivals, per_robot = [], {}  # (arrival, t) of each state
-    messages, start, deadline = 0, None, None
+    messages, references, start, deadline = 0, 0, None, None
     while True:
         timeout = 30 if deadline is None else deadline - time.monotonic()
         if timeout <= 0:
@@ -78,6 +82,7 @@ async def run(url, seconds, wait):
         t = json.loads(frame[13:])["t"]
         at = time.monotonic()
         if topic == "/reference":
+            references += 1
             offset = min(offset, at - t)
         else:
             per_robot[topic] = per_robot.get(topic, 0) + 1
@@ -88,6 +93,7 @@ async def run(url, seconds, wait):
     return {
         "seconds": seconds,
         "messages_per_s": messages / seconds,
+        "references": references,
         "robots": len(per_robot),
         "states_per_robot_min": counts[0] if counts else 0,
         "states_per_robot_median": counts[len(counts) // 2] if counts else 0,
@@ -111,10 +117,24 @@ def main():
     p.add_argument("--page")
     p.add_argument("--wait", type=float, default=10.0)
     a = p.parse_args()
-    out = asyncio.run(run(a.url, a.seconds, a.wait))
+    try:
+        out = asyncio.run(run(a.url, a.seconds, a.wait))
+    except (OSError, websockets.exceptions.InvalidHandshake) as e:
+        print(f"live_lag: nobody answered at {a.url} within {a.wait} s: {e}", file=sys.stderr)
+        sys.exit(1)
     if a.page:
-        out["page_ms"] = page_ms(a.page)
+        try:
+            out["page_ms"] = page_ms(a.page)
+        except OSError as e:
+            print(f"live_lag: the page {a.page} did not answer: {e}", file=sys.stderr)
+            sys.exit(1)
     print(json.dumps(out))
+    if out["references"] == 0 or out["robots"] == 0:
+        print(
+            f"live_lag: {out['references']} references and {out['robots']} robots' states in {a.seconds} s from {a.url}",
+            file=sys.stderr,
+        )
+        sys.exit(1)
 
 
 if __name__ == "__main__":

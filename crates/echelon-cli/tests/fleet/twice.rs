@@ -56,10 +56,17 @@ fn a_second_leader_or_robot_of_a_running_fleet_is_refused_and_the_fleet_runs_on(
     let o = fleet.join().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary = crate::common::fleet_summary(&out);
-    // Undisturbed: every robot tracked to the end without a loss, and
-    // heard only one timeline.
+    // Undisturbed: every robot heard one timeline from one source (a second
+    // leader or robot that published anything would show as a restart — a
+    // new source —, or a reordered sample) and tracked to the end.
+    // Not asserted: `link_losses`. The link times out after 0.2 s of fleet
+    // time, 0.1 s of wall time at time scale 2, and a loaded 2-core machine
+    // (CI runs the other lane beside this one) can stall a process that
+    // long without any second member; a loss the second member caused
+    // would need it to publish (counted above) or to stop the first leader
+    // (the last two checks).
     for r in summary["robots"].as_array().unwrap() {
-        assert_eq!(r["counters"]["link_losses"], 0, "{r}");
+        assert_eq!(r["counters"]["restarts"], 0, "{r}");
         assert_eq!(r["counters"]["reordered"], 0, "{r}");
         assert_eq!(r["link"], "tracking", "{r}");
         assert!(f(r, &["final_error"]) < 0.05, "{r}");

@@ -12,6 +12,7 @@ use num_dual::{Dual2, DualNum};
 
 use crate::check::{finite, require};
 use crate::error::ReferenceError;
+use crate::math::lanes::Lanes;
 use crate::math::sinc;
 
 mod spline;
@@ -203,6 +204,49 @@ impl Trajectory for Circle {
             jet.d4p = [v * w2 * w * s, -v * w2 * w * c];
         }
         jet
+    }
+}
+
+impl Circle {
+    /// [`Circle::eval`] to [`Order::Two`] of `W` circles at once, circle
+    /// `k` at `t.0[k]`: `(p, ṗ, p̈)` per lane, the sines and cosines by the
+    /// branch-free [`Lanes::sin_cos`] (within 2 ulp of the platform's, so
+    /// within a few ulp of [`Circle::eval`]), the chord's `sinc` as
+    /// [`sinc`] puts it. What a batch of environments behind circles
+    /// evaluates each step (`learn`).
+    #[inline(always)]
+    pub fn jets<const W: usize>(
+        circles: [&Circle; W],
+        t: Lanes<W>,
+    ) -> ([Lanes<W>; 2], [Lanes<W>; 2], [Lanes<W>; 2]) {
+        let lane = |f: fn(&Circle) -> f64| Lanes(circles.map(f));
+        let (v, w, heading) = (
+            lane(|c| c.speed),
+            lane(|c| c.turn_rate),
+            lane(|c| c.heading),
+        );
+        let half = w * t * 0.5;
+        let (sh, _) = half.sin_cos();
+        // sinc(half), as `math::sinc`: its series below 1e-4.
+        let small = half.abs().lt(Lanes::splat(1e-4));
+        let series = -(half * half / 6.0) + 1.0;
+        let sinc = Lanes::select(
+            small,
+            series,
+            sh / Lanes::select(small, Lanes::splat(1.0), half),
+        );
+        let chord = v * t * sinc;
+        let (sm, cm) = (heading + half).sin_cos();
+        let (s, c) = (heading + w * t).sin_cos();
+        let vw = v * w;
+        (
+            [
+                lane(|c| c.start[0]) + chord * cm,
+                lane(|c| c.start[1]) + chord * sm,
+            ],
+            [v * c, v * s],
+            [-(vw * s), vw * c],
+        )
     }
 }
 
@@ -501,5 +545,36 @@ mod tests {
         assert!(Circle::new([0.0, 0.0], 0.0, -1.0, 0.1).is_err());
         assert!(Circle::new([0.0, 0.0], 0.0, 1.0, f64::NAN).is_err());
         assert!(Cubic::new(f64::INFINITY, 1.0).is_err());
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+
+        /// Eight circles in lanes are the eight circles one by one, to a few
+        /// ulp of the position's scale: turn rates from exactly zero (a line)
+        /// through the series' edge to fast turns, times to an hour.
+        #[test]
+        fn circles_in_lanes_are_the_circles(
+            raw in proptest::collection::vec(
+                (-50.0..50.0f64, -50.0..50.0f64, -10.0..10.0f64, 0.0..3.0f64,
+                 proptest::prop_oneof![proptest::strategy::Just(0.0), -1e-3..1e-3f64, -3.0..3.0f64],
+                 0.0..3600.0f64),
+                8),
+        ) {
+            let circles: Vec<Circle> = raw.iter().map(|&(x, y, h, v, w, _)| Circle::new([x, y], h, v, w).unwrap()).collect();
+            let t = Lanes(std::array::from_fn::<f64, 8, _>(|k| raw[k].5));
+            let (p, dp, ddp) = Circle::jets(std::array::from_fn(|k| &circles[k]), t);
+            for (k, c) in circles.iter().enumerate() {
+                let j = c.eval(t.0[k], Order::Two);
+                let scale = 1.0 + j.p[0].abs().max(j.p[1].abs()) + c.speed() * t.0[k];
+                for (got, want, tol) in [
+                    (p[0].0[k], j.p[0], 1e-14 * scale), (p[1].0[k], j.p[1], 1e-14 * scale),
+                    (dp[0].0[k], j.dp[0], 1e-14), (dp[1].0[k], j.dp[1], 1e-14),
+                    (ddp[0].0[k], j.ddp[0], 1e-14), (ddp[1].0[k], j.ddp[1], 1e-14),
+                ] {
+                    proptest::prop_assert!((got - want).abs() <= tol, "circle {k}: {got} vs {want}");
+                }
+            }
+        }
     }
 }

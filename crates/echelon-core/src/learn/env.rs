@@ -2,7 +2,7 @@
 //! the environments' robots (contiguous across environments, so that a
 //! step walks memory in order however few robots an environment has).
 
-use super::{EnvConfig, FixedEpisode, Scalar, episode, observe, plant};
+use super::{EnvConfig, FixedEpisode, Scalar, episode, plant};
 use crate::model::State;
 use crate::model::Torques;
 use crate::model::base::VelocityCommand;
@@ -14,10 +14,9 @@ use crate::safety::{Neighbour, SafetyConfig, SafetyFilter};
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Robot {
     pub(super) state: State,
-    /// `(sin θ, cos θ)`, as of `state` ([`plant::sense`]).
+    /// `(sin θ, cos θ)`, as of `state` ([`plant::sense`]); its point `l`
+    /// ahead is in the environments' points ([`plant::place`]).
     pub(super) heading: [f64; 2],
-    /// Its point `l` ahead, as of `state` ([`plant::sense`]).
-    pub(super) point: [f64; 2],
     /// Its slot: `L_X`, `L_Y` (eq. 7), m.
     pub(super) slot: [f64; 2],
     /// The clipped (and filtered) action of the last step: `(v, ω)` or
@@ -34,7 +33,6 @@ impl Default for Robot {
         Robot {
             state: State::default(),
             heading: [0.0, 1.0],
-            point: [0.0; 2],
             slot: [0.0; 2],
             applied: [0.0; 2],
             shared: [0.0; 2],
@@ -73,21 +71,14 @@ impl Env {
         }
     }
 
-    /// What its observations see now, of its `robots`.
-    pub(super) fn seen<'a>(&'a self, robots: &'a [Robot]) -> observe::Seen<'a> {
-        observe::Seen {
-            robots,
-            leader: &self.leader,
-            t: self.t,
-        }
-    }
-
-    /// A new episode of its `robots` from this environment's stream.
+    /// A new episode of its `robots` (their `points` placed) from this
+    /// environment's stream.
     pub(super) fn start(
         &mut self,
         config: &EnvConfig,
         fixed: Option<&FixedEpisode>,
         robots: &mut [Robot],
+        points: &mut [f64],
     ) {
         self.episode_seed = episode::mix(self.episode_seed, 0x5eed);
         match fixed {
@@ -100,7 +91,8 @@ impl Env {
                 }
             }
         }
-        plant::sense(robots, config.l);
+        plant::sense(robots);
+        plant::place(robots, config.l, points);
         for f in &mut self.filters {
             *f = filter(config);
         }

@@ -262,6 +262,9 @@ pub struct VecFormation {
     arch: Arch,
     /// Every robot, environment after environment (`E·N`).
     robots: Vec<Robot>,
+    /// Every robot's point `l` ahead (`2·E·N`), environment after
+    /// environment: its robots' `x`, then their `y` ([`plant::place`]).
+    points: Vec<f64>,
     envs: Vec<Env>,
     /// Every episode's formation, when it is a scenario's.
     fixed: Option<std::sync::Arc<FixedEpisode>>,
@@ -278,6 +281,7 @@ impl VecFormation {
             consts: VConsts::new(&config.base, config.dt, LyComp::None),
             arch: Arch::new(),
             robots: vec![Robot::default(); config.num_envs * n],
+            points: vec![0.0; 2 * config.num_envs * n],
             envs: vec![Env::new(&config, n); config.num_envs],
             fixed: None,
         };
@@ -321,11 +325,11 @@ impl VecFormation {
     /// (all when `None`); the others keep their state and their episode.
     pub fn reset(&mut self, seed: u64, mask: Option<&[bool]>) {
         let (config, n) = (self.config, self.config.num_agents);
-        let robots = self.robots.chunks_mut(n);
-        for (k, (env, robots)) in self.envs.iter_mut().zip(robots).enumerate() {
+        let robots = self.robots.chunks_mut(n).zip(self.points.chunks_mut(2 * n));
+        for (k, (env, (robots, points))) in self.envs.iter_mut().zip(robots).enumerate() {
             env.episode_seed = episode::mix(seed, k as u64);
             if mask.is_none_or(|m| m[k]) {
-                env.start(&config, self.fixed.as_deref(), robots);
+                env.start(&config, self.fixed.as_deref(), robots, points);
             }
         }
     }
@@ -334,10 +338,10 @@ impl VecFormation {
     /// from its own stream (what autoreset does).
     pub fn reset_next(&mut self, mask: &[bool]) {
         let (config, n) = (self.config, self.config.num_agents);
-        let robots = self.robots.chunks_mut(n);
-        for ((env, robots), &on) in self.envs.iter_mut().zip(robots).zip(mask) {
+        let robots = self.robots.chunks_mut(n).zip(self.points.chunks_mut(2 * n));
+        for ((env, (robots, points)), &on) in self.envs.iter_mut().zip(robots).zip(mask) {
             if on {
-                env.start(&config, self.fixed.as_deref(), robots);
+                env.start(&config, self.fixed.as_deref(), robots, points);
             }
         }
     }
@@ -347,12 +351,20 @@ impl VecFormation {
         let n = self.config.num_agents;
         let per = n * self.obs_dim();
         assert_eq!(obs.len(), self.envs.len() * per, "obs length");
-        let config = &self.config;
-        obs.par_chunks_mut(per)
-            .zip(self.envs.par_iter())
-            .zip(self.robots.par_chunks(n))
-            .for_each(|((o, env), robots)| {
-                observe::write(config, env.seen(robots), o, None);
+        let (config, arch, g) = (&self.config, self.arch, group_envs(n));
+        obs.par_chunks_mut(g * per)
+            .zip(self.envs.par_chunks(g))
+            .zip(self.robots.par_chunks(g * n))
+            .zip(self.points.par_chunks(g * 2 * n))
+            .for_each(|(((obs, envs), robots), points)| {
+                arch.dispatch(observe::Group {
+                    config,
+                    envs,
+                    robots,
+                    points,
+                    obs,
+                    step: None,
+                });
             });
     }
 
@@ -381,16 +393,17 @@ impl VecFormation {
         );
         let (config, consts, arch) = (&self.config, &self.consts, self.arch);
         // Groups of environments, their robots stepped together in lanes.
-        let g = GROUP_ROBOTS.div_ceil(n);
+        let g = group_envs(n);
         self.envs
             .par_chunks_mut(g)
             .zip(self.robots.par_chunks_mut(g * n))
+            .zip(self.points.par_chunks_mut(g * 2 * n))
             .zip(actions.par_chunks(g * n * 2))
             .zip(obs.par_chunks_mut(g * n * d))
             .zip(rewards.par_chunks_mut(g * n))
             .zip(changed.par_chunks_mut(g * n))
             .zip(facts.par_chunks_mut(g))
-            .for_each(|((((((envs, robots), a), o), r), c), f)| {
+            .for_each(|(((((((envs, robots), points), a), o), r), c), f)| {
                 let each = robots
                     .chunks_mut(n)
                     .zip(a.chunks(n * 2))
@@ -399,17 +412,22 @@ impl VecFormation {
                     env.command(config, robots, a, c);
                 }
                 plant::advance(config, consts, arch, robots);
-                for env in envs.iter_mut() {
+                for ((env, robots), points) in envs
+                    .iter_mut()
+                    .zip(robots.chunks(n))
+                    .zip(points.chunks_mut(2 * n))
+                {
                     env.t += config.dt;
                     env.steps += 1;
+                    plant::place(robots, config.l, points);
                 }
                 arch.dispatch(observe::Group {
                     config,
                     envs,
                     robots,
+                    points,
                     obs: o,
-                    rewards: r,
-                    facts: f,
+                    step: Some((r, f)),
                 });
             });
     }
@@ -439,6 +457,12 @@ impl VecFormation {
 /// Robots per group of environments stepped together ([`plant`]): whole
 /// blocks of lanes, few enough groups' worth of work to share the cores.
 const GROUP_ROBOTS: usize = 64;
+
+/// Environments of `n` robots per group: [`GROUP_ROBOTS`]' worth (at
+/// least one environment; at most [`observe::GROUP_ENVS`]).
+fn group_envs(n: usize) -> usize {
+    GROUP_ROBOTS.div_ceil(n).min(observe::GROUP_ENVS)
+}
 
 /// The index of the first value of `values` that is not finite.
 pub fn first_not_finite<T: Scalar>(values: &[T]) -> Option<usize> {

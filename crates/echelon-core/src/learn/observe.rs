@@ -1,14 +1,15 @@
 //! Observations ([`super::layout`]), rewards and the baseline policy.
 
-use super::env::Robot;
+use super::env::{Env, Robot};
 use super::layout::{
     E, LEADER_ACCELERATION, LEADER_VELOCITY, NEIGHBOURS, OFFSETS, SPEEDS, obs_dim,
 };
 use super::{EnvConfig, Scalar};
 use crate::law::control::{Gains, LeaderMotion, Offset, Variant, law};
+use crate::math::lanes::Lanes;
 use crate::model::RobotParams;
 use crate::model::State;
-use crate::reference::{Order, Reference, Trajectory};
+use crate::reference::{Circle, Order, Reference, Trajectory};
 
 /// The most neighbours an observation lists.
 pub const MAX_NEIGHBOURS: usize = 16;
@@ -30,53 +31,118 @@ fn errors(
     (e, q)
 }
 
+/// The leader's `p_d, ṗ_d, p̈_d` at one instant.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct LeaderJet {
+    pub(super) p: [f64; 2],
+    pub(super) dp: [f64; 2],
+    pub(super) ddp: [f64; 2],
+}
+
+/// Environments per block of leaders evaluated together in lanes.
+const JW: usize = 8;
+
+/// Each environment's leader now into `jets` (one per environment): the
+/// circles of a block of [`JW`] environments together
+/// ([`crate::reference::Circle::jets`], branch-free sines and cosines), any
+/// other reference alone ([`Trajectory::eval`]).
+#[inline(always)]
+pub(super) fn leader_jets(envs: &[Env], jets: &mut [LeaderJet]) {
+    for (envs, jets) in envs.chunks(JW).zip(jets.chunks_mut(JW)) {
+        let mut all = [None; JW];
+        for (c, env) in all.iter_mut().zip(envs) {
+            if let Reference::Circle(circle) = &env.leader {
+                *c = Some(circle);
+            }
+        }
+        if envs.len() == JW && all.iter().all(Option::is_some) {
+            let circles = all.map(|c| c.unwrap_or_else(|| unreachable!("all circles")));
+            let t = Lanes(std::array::from_fn(|k| envs[k].t));
+            let (p, dp, ddp) = Circle::jets(circles, t);
+            for (k, j) in jets.iter_mut().enumerate() {
+                *j = LeaderJet {
+                    p: [p[0].0[k], p[1].0[k]],
+                    dp: [dp[0].0[k], dp[1].0[k]],
+                    ddp: [ddp[0].0[k], ddp[1].0[k]],
+                };
+            }
+        } else {
+            for (j, env) in jets.iter_mut().zip(envs) {
+                let jet = env.leader.eval(env.t, Order::Two);
+                *j = LeaderJet {
+                    p: jet.p,
+                    dp: jet.dp,
+                    ddp: jet.ddp,
+                };
+            }
+        }
+    }
+}
+
 /// One environment at one instant, as the observations see it.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Seen<'a> {
-    /// Its robots, their headings and points as of their states
+    /// Its robots, their headings as of their states
     /// ([`super::plant::sense`]).
     pub(super) robots: &'a [Robot],
-    pub(super) leader: &'a Reference,
-    pub(super) t: f64,
+    /// Their points `l` ahead: every `x`, then every `y`
+    /// ([`super::plant::place`]).
+    pub(super) points: &'a [f64],
+    /// Its leader now.
+    pub(super) jet: LeaderJet,
 }
 
 /// Points compared at a time in the neighbour search: their squared
-/// distances computed together (in vectors), then looked at only when one
-/// is a candidate.
+/// distances computed together (in vectors, from the points' `x` and `y`
+/// each contiguous), then looked at only when one is a candidate.
 const CHUNK: usize = 8;
 
-/// The `best.len()` robots' points nearest to robot `me`'s within
+/// The `best.len()` points of `(xs, ys)` nearest to point `me` within
 /// `sqrt(sense2)`, nearest first as `(squared distance, index)` into `best`
 /// (the rest infinite); returns the squared distance to the nearest of all
 /// (infinite alone). Ties keep the lower index first.
 #[inline(always)]
-fn nearest(robots: &[Robot], me: usize, sense2: f64, best: &mut [(f64, usize)]) -> f64 {
-    let p = robots[me].point;
+fn nearest(xs: &[f64], ys: &[f64], me: usize, sense2: f64, best: &mut [(f64, usize)]) -> f64 {
     best.fill((f64::INFINITY, 0));
-    let mut closest = f64::INFINITY;
+    if xs.len() < 2 {
+        return f64::INFINITY;
+    }
+    let (px, py) = (xs[me], ys[me]);
     // A point is listed when within `sense` and nearer than the last
     // listed so far (none with no room).
     let mut kth = best.last().map_or(f64::NEG_INFINITY, |b| b.0);
-    for (c, chunk) in robots.chunks(CHUNK).enumerate() {
+    // The nearest of all, lane by lane (folded at the end).
+    let mut low = [f64::INFINITY; CHUNK];
+    for (c, (cx, cy)) in xs.chunks(CHUNK).zip(ys.chunks(CHUNK)).enumerate() {
         let mut d = [f64::INFINITY; CHUNK];
-        for (d, q) in d.iter_mut().zip(chunk) {
-            let (dx, dy) = (q.point[0] - p[0], q.point[1] - p[1]);
-            *d = dx * dx + dy * dy;
+        if let (Ok(cx), Ok(cy)) = (<&[f64; CHUNK]>::try_from(cx), <&[f64; CHUNK]>::try_from(cy)) {
+            for m in 0..CHUNK {
+                let (dx, dy) = (cx[m] - px, cy[m] - py);
+                d[m] = dx * dx + dy * dy;
+            }
+        } else {
+            for ((d, x), y) in d.iter_mut().zip(cx).zip(cy) {
+                let (dx, dy) = (x - px, y - py);
+                *d = dx * dx + dy * dy;
+            }
         }
         let base = c * CHUNK;
         if (base..base + CHUNK).contains(&me) {
             d[me - base] = f64::INFINITY;
         }
-        let mut low = f64::INFINITY;
-        for &x in &d {
-            low = if x < low { x } else { low };
+        for (low, &d) in low.iter_mut().zip(&d) {
+            *low = if d < *low { d } else { *low };
         }
-        closest = if low < closest { low } else { closest };
-        if !(low <= sense2 && low < kth) {
-            continue;
-        }
+        // The candidates as bits, looked at in index order.
+        let mut candidates = 0u32;
         for (m, &dist) in d.iter().enumerate() {
-            if !(dist <= sense2 && dist < kth) {
+            candidates |= u32::from(dist <= sense2 && dist < kth) << m;
+        }
+        while candidates != 0 {
+            let m = candidates.trailing_zeros() as usize;
+            candidates &= candidates - 1;
+            let dist = d[m];
+            if dist >= kth {
                 continue;
             }
             // Insert, moving the farther ones down one place (branch-free:
@@ -90,7 +156,18 @@ fn nearest(robots: &[Robot], me: usize, sense2: f64, best: &mut [(f64, usize)]) 
             kth = best.last().map_or(kth, |b| b.0);
         }
     }
-    closest
+    let mut w = CHUNK;
+    while w > 1 {
+        w /= 2;
+        for m in 0..w {
+            low[m] = if low[m + w] < low[m] {
+                low[m + w]
+            } else {
+                low[m]
+            };
+        }
+    }
+    low[0]
 }
 
 /// Writes one environment's observations (`N · obs_dim`) and, with
@@ -106,13 +183,18 @@ pub(super) fn write<T: Scalar>(
     out: &mut [T],
     mut rewards: Option<&mut [T]>,
 ) -> (f64, f64) {
-    let Seen { robots, leader, t } = seen;
+    let Seen {
+        robots,
+        points,
+        jet,
+    } = seen;
+    let (xs, ys) = points.split_at(robots.len());
     let d = obs_dim(config.neighbours);
-    let jet = leader.eval(t, Order::Two);
     let k = config.neighbours.min(MAX_NEIGHBOURS);
     let sense2 = config.sense * config.sense;
     let radius2 = config.radius * config.radius;
     let (mut sum, mut closest) = (0.0, f64::INFINITY);
+    let mut best = [(f64::INFINITY, 0usize); MAX_NEIGHBOURS];
     for (i, (robot, o)) in robots.iter().zip(out.chunks_exact_mut(d)).enumerate() {
         let (s, [sin, cos], [lx, ly]) = (&robot.state, robot.heading, robot.slot);
         let (e, q) = errors(s, (sin, cos), jet.p, jet.dp, lx, ly);
@@ -128,19 +210,18 @@ pub(super) fn write<T: Scalar>(
             (E, LEADER_VELOCITY, LEADER_ACCELERATION, OFFSETS),
             (0, 4, 6, 8)
         );
-        let mut best = [(f64::INFINITY, 0usize); MAX_NEIGHBOURS];
-        let near = nearest(robots, i, sense2, &mut best[..k]);
+        let near = nearest(xs, ys, i, sense2, &mut best[..k]);
         closest = closest.min(near);
-        let me = robot.point;
+        let me = [xs[i], ys[i]];
         let rest = &mut o[NEIGHBOURS..];
-        rest.fill(T::of(0.0));
-        for (m, &(dist, j)) in best[..k].iter().enumerate() {
+        for (&(dist, j), nb) in best[..k].iter().zip(rest.chunks_exact_mut(3)) {
             if dist.is_finite() {
-                let p = robots[j].point;
-                let (dx, dy) = (p[0] - me[0], p[1] - me[1]);
-                rest[3 * m] = T::of(cos * dx + sin * dy);
-                rest[3 * m + 1] = T::of(-sin * dx + cos * dy);
-                rest[3 * m + 2] = T::of(1.0);
+                let (dx, dy) = (xs[j] - me[0], ys[j] - me[1]);
+                nb[0] = T::of(cos * dx + sin * dy);
+                nb[1] = T::of(-sin * dx + cos * dy);
+                nb[2] = T::of(1.0);
+            } else {
+                nb.fill(T::of(0.0));
             }
         }
         if let Some(r) = rewards.as_mut() {
@@ -215,17 +296,22 @@ pub fn baseline_torque<T: Scalar>(
     }
 }
 
-/// A group of environments' observations, rewards and facts after their
-/// step (their robots moved, their clocks on: [`write`] for each),
-/// compiled for the best instruction set this CPU has
-/// ([`pulp::Arch::dispatch`]).
+/// Environments at most in a [`Group`] (its leaders' jets on the stack).
+pub(super) const GROUP_ENVS: usize = 64;
+
+/// A group of (at most [`GROUP_ENVS`]) environments' observations and,
+/// after their step (their robots moved and placed, their clocks on),
+/// their rewards and facts ([`write`] for each), compiled for the best
+/// instruction set this CPU has ([`pulp::Arch::dispatch`]).
 pub(super) struct Group<'a, T> {
     pub(super) config: &'a EnvConfig,
-    pub(super) envs: &'a [super::env::Env],
+    pub(super) envs: &'a [Env],
     pub(super) robots: &'a [Robot],
+    /// Their points ([`Seen::points`]), environment after environment.
+    pub(super) points: &'a [f64],
     pub(super) obs: &'a mut [T],
-    pub(super) rewards: &'a mut [T],
-    pub(super) facts: &'a mut [super::EnvFacts],
+    /// With the facts: after a step.
+    pub(super) step: Option<(&'a mut [T], &'a mut [super::EnvFacts])>,
 }
 
 impl<T: Scalar> pulp::WithSimd for Group<'_, T> {
@@ -236,23 +322,49 @@ impl<T: Scalar> pulp::WithSimd for Group<'_, T> {
             config,
             envs,
             robots,
+            points,
             obs,
-            rewards,
-            facts,
+            step,
         } = self;
         let n = config.num_agents;
         let d = obs_dim(config.neighbours);
-        let outs = robots
+        let mut jets = [LeaderJet::default(); GROUP_ENVS];
+        let jets = &mut jets[..envs.len()];
+        leader_jets(envs, jets);
+        let each = robots
             .chunks(n)
+            .zip(points.chunks(2 * n))
             .zip(obs.chunks_mut(n * d))
-            .zip(rewards.chunks_mut(n));
-        for (env, (((robots, o), r), f)) in envs.iter().zip(outs.zip(facts)) {
-            let (reward, nearest) = write(config, env.seen(robots), o, Some(r));
-            *f = super::EnvFacts {
-                reward,
-                truncated: env.steps >= config.max_steps,
-                min_distance: nearest.sqrt(),
-            };
+            .zip(jets.iter());
+        match step {
+            None => {
+                for (((robots, points), o), &jet) in each {
+                    let seen = Seen {
+                        robots,
+                        points,
+                        jet,
+                    };
+                    write(config, seen, o, None);
+                }
+            }
+            Some((rewards, facts)) => {
+                let outs = rewards.chunks_mut(n).zip(facts.iter_mut());
+                for ((env, (((robots, points), o), &jet)), (r, f)) in
+                    envs.iter().zip(each).zip(outs)
+                {
+                    let seen = Seen {
+                        robots,
+                        points,
+                        jet,
+                    };
+                    let (reward, nearest) = write(config, seen, o, Some(r));
+                    *f = super::EnvFacts {
+                        reward,
+                        truncated: env.steps >= config.max_steps,
+                        min_distance: nearest.sqrt(),
+                    };
+                }
+            }
         }
     }
 }

@@ -3,9 +3,9 @@
 //! (the batch engine's base model, [`held_step`]: one RK4 step under the
 //! held command, lags and limits), torque robots one by one (eq. 3,
 //! [`RobotParams::rk4_step`](crate::model::RobotParams::rk4_step)); then
-//! every robot's heading's sine and cosine and its point `l` ahead, in lanes
-//! ([`sense`]), which the next step's first stage, the observations and the
-//! neighbour search read.
+//! every robot's heading's sine and cosine, in lanes ([`sense`]), which the
+//! next step's first stage and the observations read, and its point `l`
+//! ahead ([`place`]), which the neighbour search reads.
 
 use pulp::{Arch, Simd, WithSimd};
 
@@ -28,15 +28,13 @@ fn gather(chunk: &[Robot], get: impl Fn(&Robot) -> f64) -> V4 {
     Lanes(out)
 }
 
-/// A chunk's headings' `(sin θ, cos θ)` ([`Lanes::sin_cos`]) and points `l`
-/// ahead (as [`crate::safety::point`] puts them), from their states.
+/// A chunk's headings' `(sin θ, cos θ)` ([`Lanes::sin_cos`]), from their
+/// states.
 #[inline(always)]
-fn sense_chunk(chunk: &mut [Robot], l: f64) {
+fn sense_chunk(chunk: &mut [Robot]) {
     let (sin, cos) = gather(chunk, |r| r.state.theta).sin_cos();
     for (k, r) in chunk.iter_mut().enumerate() {
-        let s = &r.state;
         r.heading = [sin.0[k], cos.0[k]];
-        r.point = [s.x + l * cos.0[k], s.y + l * sin.0[k]];
     }
 }
 
@@ -88,7 +86,7 @@ impl WithSimd for VelocityStep<'_> {
                     omega: x[4].0[l],
                 };
             }
-            sense_chunk(chunk, self.config.l);
+            sense_chunk(chunk);
         }
     }
 }
@@ -106,15 +104,28 @@ pub(super) fn advance(config: &EnvConfig, c: &VConsts, arch: Arch, robots: &mut 
                 });
                 r.state = robot.rk4_step(&r.state, robot.actuate(u).0, config.dt);
             }
-            sense(robots, config.l);
+            sense(robots);
         }
     }
 }
 
-/// Every robot's `(sin θ, cos θ)` ([`Lanes::sin_cos`]) and its point `l`
-/// ahead (as [`crate::safety::point`] puts it), from its state.
-pub(super) fn sense(robots: &mut [Robot], l: f64) {
+/// Every robot's `(sin θ, cos θ)` ([`Lanes::sin_cos`]), from its state.
+pub(super) fn sense(robots: &mut [Robot]) {
     for chunk in robots.chunks_mut(VW) {
-        sense_chunk(chunk, l);
+        sense_chunk(chunk);
+    }
+}
+
+/// One environment's robots' points `l` ahead (as [`crate::safety::point`]
+/// puts them, from their states and [`sense`]d headings) into `points`:
+/// every `x`, then every `y`, so that the neighbour search reads each in
+/// vectors.
+#[inline(always)]
+pub(super) fn place(robots: &[Robot], l: f64, points: &mut [f64]) {
+    let (xs, ys) = points.split_at_mut(robots.len());
+    for ((r, x), y) in robots.iter().zip(xs).zip(ys) {
+        let [sin, cos] = r.heading;
+        *x = r.state.x + l * cos;
+        *y = r.state.y + l * sin;
     }
 }

@@ -20,6 +20,15 @@ fn buffers(env: &VecFormation) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<E
     )
 }
 
+/// Environment `k`'s robots sensed and placed again after a test moved
+/// them by hand.
+fn moved(env: &mut VecFormation, k: usize) {
+    let (n, l) = (env.config.num_agents, env.config.l);
+    let robots = &mut env.robots[k * n..(k + 1) * n];
+    super::plant::sense(robots);
+    super::plant::place(robots, l, &mut env.points[2 * n * k..2 * n * (k + 1)]);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(32))]
 
@@ -42,7 +51,7 @@ proptest! {
             s.x += dx; s.y += dy; s.theta = th; s.v = v; s.omega = w;
         }
         env.envs[1].t = 0.7;
-        super::plant::sense(&mut env.robots[n..2 * n], config.l);
+        moved(&mut env, 1);
         let d = env.obs_dim();
         let mut obs = vec![0.0; 2 * n * d];
         env.observe(&mut obs);
@@ -250,7 +259,7 @@ proptest! {
             s.x += dx; s.y += dy; s.theta = th; s.v = v; s.omega = w;
         }
         env.envs[0].t = 1.3;
-        super::plant::sense(&mut env.robots[..n], config.l);
+        moved(&mut env, 0);
         let d = env.obs_dim();
         let mut obs = vec![0.0; n * d];
         env.observe(&mut obs);
@@ -345,8 +354,10 @@ proptest! {
                     prop_assert!((got - want).abs() <= 1e-12 * (1.0 + want.abs()), "robot {r} step {step}: {s:?} vs {want:?}");
                 }
             }
-            for r in &env.robots {
-                let (s, h, p) = (&r.state, r.heading, r.point);
+            for (g, r) in env.robots.iter().enumerate() {
+                let (k, i) = (g / n, g % n);
+                let (s, h) = (&r.state, r.heading);
+                let p = [env.points[2 * n * k + i], env.points[2 * n * k + n + i]];
                 {
                     let (sin, cos) = s.theta.sin_cos();
                     let q = crate::safety::point(s, config.l);
@@ -357,42 +368,67 @@ proptest! {
         }
     }
 
-    /// The neighbours an observation lists are the `K` nearest points within
-    /// `sense` (ties to the lower index), by a brute-force sort, in the
-    /// robot's frame; the facts' closest distance is the smallest pair's.
+    /// Each observation is its robot's world seen from its frame, computed
+    /// here one robot at a time with the platform's `sin_cos` and the
+    /// leader's own `eval`: the tracking error (eq. 7), the leader's
+    /// velocity and acceleration, and the `K` nearest points within `sense`
+    /// (ties to the lower index) by a brute-force sort; the facts' closest
+    /// distance is the smallest pair's. Over several environments, so that
+    /// groups of them (and leaders evaluated together in lanes) are met.
     #[test]
-    fn the_listed_neighbours_are_the_nearest_by_brute_force(
-        n in 1usize..40, k in 0usize..17, seed in any::<u64>(), sense in 0.2..6.0f64, spacing in 0.2..2.0f64,
+    fn the_observations_are_each_robots_world_by_brute_force(
+        e in 1usize..24, n in 1usize..40, k in 0usize..17, seed in any::<u64>(), sense in 0.2..6.0f64,
+        spacing in 0.2..2.0f64, steps in 1usize..4,
     ) {
-        let config = EnvConfig { neighbours: k, sense, spacing, ..EnvConfig::new(1, n) };
+        let config = EnvConfig { neighbours: k, sense, spacing, turn: 1.0, ..EnvConfig::new(e, n) };
         let mut env = VecFormation::new(config, seed).unwrap();
-        let (actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
-        env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+        let (mut actions, mut obs, mut rewards, mut changed, mut facts) = buffers(&env);
+        for (i, a) in actions.iter_mut().enumerate() {
+            *a = 0.3 * ((i as f64) * 0.77).sin();
+        }
+        for _ in 0..steps {
+            env.step(&actions, &mut obs, &mut rewards, &mut changed, &mut facts);
+        }
         let d = env.obs_dim();
-        let states: Vec<State> = env.states().copied().collect();
-        let points: Vec<[f64; 2]> = states.iter().map(|s| crate::safety::point(s, config.l)).collect();
-        let mut closest = f64::INFINITY;
-        for (i, me) in points.iter().enumerate() {
-            let mut others: Vec<(f64, usize)> = points.iter().enumerate().filter(|&(j, _)| j != i)
-                .map(|(j, p)| ((p[0] - me[0]).powi(2) + (p[1] - me[1]).powi(2), j)).collect();
-            others.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            closest = others.first().map_or(closest, |o| closest.min(o.0.sqrt()));
-            let listed: Vec<usize> = others.iter().filter(|o| o.0 <= sense * sense).take(k).map(|o| o.1).collect();
-            let o = &obs[i * d..(i + 1) * d];
-            let (sin, cos) = states[i].theta.sin_cos();
-            for m in 0..k {
-                let nb = &o[10 + 3 * m..13 + 3 * m];
-                match listed.get(m) {
-                    Some(&j) => {
-                        let (dx, dy) = (points[j][0] - me[0], points[j][1] - me[1]);
-                        let want = [cos * dx + sin * dy, -sin * dx + cos * dy];
-                        prop_assert!(nb[2] == 1.0 && (nb[0] - want[0]).abs() < 1e-12 && (nb[1] - want[1]).abs() < 1e-12,
-                            "robot {i} slot {m}: {nb:?}, want {want:?} (robot {j})");
+        for env_k in 0..e {
+            let states: Vec<State> = env.states().skip(env_k * n).take(n).copied().collect();
+            let slots: Vec<[f64; 2]> = env.slots(env_k).collect();
+            let jet = env.leader(env_k).eval(env.time(env_k), crate::reference::Order::Two);
+            let points: Vec<[f64; 2]> = states.iter().map(|s| crate::safety::point(s, config.l)).collect();
+            let mut closest = f64::INFINITY;
+            for (i, me) in points.iter().enumerate() {
+                let mut others: Vec<(f64, usize)> = points.iter().enumerate().filter(|&(j, _)| j != i)
+                    .map(|(j, p)| ((p[0] - me[0]).powi(2) + (p[1] - me[1]).powi(2), j)).collect();
+                others.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                closest = others.first().map_or(closest, |o| closest.min(o.0.sqrt()));
+                let listed: Vec<usize> = others.iter().filter(|o| o.0 <= sense * sense).take(k).map(|o| o.1).collect();
+                let o = &obs[(env_k * n + i) * d..(env_k * n + i + 1) * d];
+                let s = &states[i];
+                let (sin, cos) = s.theta.sin_cos();
+                let frame = |v: [f64; 2]| [cos * v[0] + sin * v[1], -sin * v[0] + cos * v[1]];
+                let err = frame([s.x - jet.p[0], s.y - jet.p[1]]);
+                let want_head = [
+                    err[0] + slots[i][0], err[1] + slots[i][1], s.v, s.omega,
+                    frame(jet.dp)[0], frame(jet.dp)[1], frame(jet.ddp)[0], frame(jet.ddp)[1],
+                    slots[i][0], slots[i][1],
+                ];
+                for (m, (got, want)) in o[..10].iter().zip(want_head).enumerate() {
+                    prop_assert!((got - want).abs() < 1e-12 * (1.0 + want.abs()), "env {env_k} robot {i} value {m}: {got} vs {want}");
+                }
+                for m in 0..k {
+                    let nb = &o[10 + 3 * m..13 + 3 * m];
+                    match listed.get(m) {
+                        Some(&j) => {
+                            let want = frame([points[j][0] - me[0], points[j][1] - me[1]]);
+                            prop_assert!(nb[2] == 1.0 && (nb[0] - want[0]).abs() < 1e-12 && (nb[1] - want[1]).abs() < 1e-12,
+                                "env {env_k} robot {i} slot {m}: {nb:?}, want {want:?} (robot {j})");
+                        }
+                        None => prop_assert!(nb == [0.0; 3], "env {env_k} robot {i} slot {m}: {nb:?}"),
                     }
-                    None => prop_assert!(nb == [0.0; 3], "robot {i} slot {m}: {nb:?}"),
                 }
             }
+            let got = facts[env_k].min_distance;
+            prop_assert!((got - closest).abs() < 1e-12 || closest.is_infinite() && got.is_infinite(), "env {env_k}: {got} vs {closest}");
         }
-        prop_assert!((facts[0].min_distance - closest).abs() < 1e-12 || closest.is_infinite() && facts[0].min_distance.is_infinite());
     }
 }

@@ -103,28 +103,16 @@ impl Env {
         self.steps = 0;
     }
 
-    /// The step's commands into its `robots`' `applied`: the actions
-    /// clipped to their bounds, then filtered (with `config.safety`); how
-    /// much the filter changed each into `changed`. The robots move in
-    /// [`plant::advance`].
-    pub(super) fn command<T: Scalar>(
+    /// Its robots' clipped actions ([`clip`]) through their filters into
+    /// their `applied` (with `config.safety`: without, the clipped actions
+    /// are applied); how much the filter changed each into `changed`. The
+    /// robots move in [`plant::advance`].
+    pub(super) fn filter<T: Scalar>(
         &mut self,
         config: &EnvConfig,
         robots: &mut [Robot],
-        actions: &[T],
         changed: &mut [T],
     ) {
-        let bound = config.action_bound();
-        for (r, a) in robots.iter_mut().zip(actions.chunks_exact(2)) {
-            r.applied = [
-                a[0].get().clamp(-bound[0], bound[0]),
-                a[1].get().clamp(-bound[1], bound[1]),
-            ];
-        }
-        if !config.safety {
-            changed.fill(T::of(0.0));
-            return;
-        }
         if let Some(robot) = &config.robot {
             for (r, f) in robots.iter_mut().zip(&self.filters) {
                 r.shared = f.last_acceleration(&r.state, robot);
@@ -175,6 +163,18 @@ impl Env {
                 Some(_) => (a[0] - nominal[0]).hypot(a[1] - nominal[1]),
             });
         }
+    }
+}
+
+/// The step's actions clipped to their bounds into `robots`' `applied`
+/// (any number of environments' robots at once).
+pub(super) fn clip<T: Scalar>(config: &EnvConfig, robots: &mut [Robot], actions: &[T]) {
+    let bound = config.action_bound();
+    for (r, a) in robots.iter_mut().zip(actions.chunks_exact(2)) {
+        r.applied = [
+            a[0].get().clamp(-bound[0], bound[0]),
+            a[1].get().clamp(-bound[1], bound[1]),
+        ];
     }
 }
 

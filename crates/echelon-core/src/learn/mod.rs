@@ -404,12 +404,14 @@ impl VecFormation {
             .zip(changed.par_chunks_mut(g * n))
             .zip(facts.par_chunks_mut(g))
             .for_each(|(((((((envs, robots), points), a), o), r), c), f)| {
-                let each = robots
-                    .chunks_mut(n)
-                    .zip(a.chunks(n * 2))
-                    .zip(c.chunks_mut(n));
-                for (env, ((robots, a), c)) in envs.iter_mut().zip(each) {
-                    env.command(config, robots, a, c);
+                env::clip(config, robots, a);
+                if config.safety {
+                    let each = robots.chunks_mut(n).zip(c.chunks_mut(n));
+                    for (env, (robots, c)) in envs.iter_mut().zip(each) {
+                        env.filter(config, robots, c);
+                    }
+                } else {
+                    c.fill(T::of(0.0));
                 }
                 plant::advance(config, consts, arch, robots);
                 for ((env, robots), points) in envs

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import importlib.util
+import json
+import sys
 from pathlib import Path
 
 import nbformat
@@ -21,6 +23,14 @@ def test_there_are_notebooks():
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_runs_and_saves_its_figures(path: Path, tmp_path, monkeypatch):
     figures = tmp_path / "figures"
+    # The notebook runs in this interpreter, whatever kernel named python3
+    # a user installed elsewhere (`ipykernel install --user` in another
+    # venv would otherwise take it there, with another echelon).
+    spec = tmp_path / "jupyter" / "kernels" / "echelon-tests"
+    spec.mkdir(parents=True)
+    argv = [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"]
+    (spec / "kernel.json").write_text(json.dumps({"argv": argv, "display_name": "echelon tests", "language": "python"}))
+    monkeypatch.setenv("JUPYTER_PATH", str(tmp_path / "jupyter"))
     monkeypatch.setenv("ECHELON_FIGURES", str(figures))
     monkeypatch.setenv("ECHELON_QUICK", "1")
     nb = nbformat.read(path, as_version=4)
@@ -29,7 +39,7 @@ def test_notebook_runs_and_saves_its_figures(path: Path, tmp_path, monkeypatch):
     missing = [m for m in nb.metadata.get("echelon", {}).get("requires", []) if importlib.util.find_spec(m) is None]
     if missing:
         pytest.skip(f"{path.name} needs {', '.join(missing)} (pip install {' '.join(missing)})")
-    NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
+    NotebookClient(nb, timeout=600, kernel_name="echelon-tests", resources={"metadata": {"path": str(tmp_path)}}).execute()
     saved = sorted(p.name for p in figures.glob("*.png"))
     assert saved, "the notebook saved no figure"
     for p in figures.glob("*.png"):

@@ -26,13 +26,12 @@ arrived: a lag measured on nothing is no measurement.
 import argparse
 import asyncio
 import json
-import struct
 import sys
 import time
 import urllib.request
 
 import websockets
-from ws_client import connect, subscribe
+from ws_client import connect, message, subscribe
 
 
 def drawn(ch):
@@ -71,15 +70,13 @@ async def run(url, seconds, wait):
                     start = time.monotonic()
                     deadline = start + seconds
             continue
-        if frame[0] != 0x01:
+        got = message(frame, subscribed)
+        if got is None:
             continue
-        sid, _stamp = struct.unpack_from("<IQ", frame, 1)
-        ch = subscribed.get(sid)
-        if ch is None:
-            continue
+        ch, payload = got
         topic = ch["topic"]
         messages += 1
-        t = json.loads(frame[13:])["t"]
+        t = json.loads(payload)["t"]
         at = time.monotonic()
         if topic == "/reference":
             references += 1

@@ -40,6 +40,18 @@ TYPES = {"foxglove.FrameTransforms": FrameTransforms, "foxglove.SceneUpdate": Sc
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 
 
+def message(frame, subscribed):
+    """A binary Message Data frame (opcode 0x01: uint32 subscription id,
+    uint64 receive timestamp, payload) of one of the `subscribed` channels
+    (subscription id → channel): that channel and the payload; None for any
+    other frame."""
+    if frame[0] != 0x01:
+        return None
+    sid, _stamp = struct.unpack_from("<IQ", frame, 1)
+    ch = subscribed.get(sid)
+    return None if ch is None else (ch, frame[13:])
+
+
 def same_definition(schema_b64, cls):
     fds = descriptor_pb2.FileDescriptorSet()
     fds.ParseFromString(base64.b64decode(schema_b64))
@@ -121,13 +133,10 @@ async def run(url, seconds, stall, wait):
                     start = time.monotonic()
                     deadline = start + seconds
             continue
-        if frame[0] != 0x01:
+        got = message(frame, subscribed)
+        if got is None:
             continue
-        sid, _stamp = struct.unpack_from("<IQ", frame, 1)
-        payload = frame[13:]
-        ch = subscribed.get(sid)
-        if ch is None:
-            continue
+        ch, payload = got
         messages += 1
         cls = TYPES.get(ch.get("schemaName"))
         if cls is None or ch.get("encoding") != "protobuf":

@@ -9,7 +9,7 @@ use crate::law::control::{Gains, LeaderMotion, Offset, Variant, law};
 use crate::math::lanes::Lanes;
 use crate::model::RobotParams;
 use crate::model::State;
-use crate::reference::{Circle, Order, Reference, Trajectory};
+use crate::reference::{Circle, Jet, Order, Reference, Trajectory};
 
 /// The most neighbours an observation lists.
 pub const MAX_NEIGHBOURS: usize = 16;
@@ -31,23 +31,15 @@ fn errors(
     (e, q)
 }
 
-/// The leader's `p_d, ṗ_d, p̈_d` at one instant.
-#[derive(Debug, Clone, Copy, Default)]
-pub(super) struct LeaderJet {
-    pub(super) p: [f64; 2],
-    pub(super) dp: [f64; 2],
-    pub(super) ddp: [f64; 2],
-}
-
 /// Environments per block of leaders evaluated together in lanes.
 const JW: usize = 8;
 
-/// Each environment's leader now into `jets` (one per environment): the
-/// circles of a block of [`JW`] environments together
+/// Each environment's leader now to [`Order::Two`] into `jets` (one per
+/// environment): the circles of a block of [`JW`] environments together
 /// ([`crate::reference::Circle::jets`], branch-free sines and cosines), any
 /// other reference alone ([`Trajectory::eval`]).
 #[inline(always)]
-pub(super) fn leader_jets(envs: &[Env], jets: &mut [LeaderJet]) {
+pub(super) fn leader_jets(envs: &[Env], jets: &mut [Jet]) {
     for (envs, jets) in envs.chunks(JW).zip(jets.chunks_mut(JW)) {
         let mut all = [None; JW];
         for (c, env) in all.iter_mut().zip(envs) {
@@ -60,20 +52,16 @@ pub(super) fn leader_jets(envs: &[Env], jets: &mut [LeaderJet]) {
             let t = Lanes(std::array::from_fn(|k| envs[k].t));
             let (p, dp, ddp) = Circle::jets(circles, t);
             for (k, j) in jets.iter_mut().enumerate() {
-                *j = LeaderJet {
+                *j = Jet {
                     p: [p[0].0[k], p[1].0[k]],
                     dp: [dp[0].0[k], dp[1].0[k]],
                     ddp: [ddp[0].0[k], ddp[1].0[k]],
+                    ..Jet::default()
                 };
             }
         } else {
             for (j, env) in jets.iter_mut().zip(envs) {
-                let jet = env.leader.eval(env.t, Order::Two);
-                *j = LeaderJet {
-                    p: jet.p,
-                    dp: jet.dp,
-                    ddp: jet.ddp,
-                };
+                *j = env.leader.eval(env.t, Order::Two);
             }
         }
     }
@@ -88,8 +76,8 @@ pub(super) struct Seen<'a> {
     /// Their points `l` ahead: every `x`, then every `y`
     /// ([`super::plant::place`]).
     pub(super) points: &'a [f64],
-    /// Its leader now.
-    pub(super) jet: LeaderJet,
+    /// Its leader now (to [`Order::Two`]).
+    pub(super) jet: Jet,
 }
 
 /// Points compared at a time in the neighbour search: their squared
@@ -328,7 +316,7 @@ impl<T: Scalar> pulp::WithSimd for Group<'_, T> {
         } = self;
         let n = config.num_agents;
         let d = obs_dim(config.neighbours);
-        let mut jets = [LeaderJet::default(); GROUP_ENVS];
+        let mut jets = [Jet::default(); GROUP_ENVS];
         let jets = &mut jets[..envs.len()];
         leader_jets(envs, jets);
         let each = robots

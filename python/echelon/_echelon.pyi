@@ -211,8 +211,12 @@ class VecFormation:
         torque_limit: float = 10.0,
         scenario: Scenario | None = None,
         overrides: Overrides | None = None,
+        obstacles: int = 0,
+        obstacle_radius: tuple[float, float] = (0.1, 0.3),
+        seen_obstacles: int | None = None,
     ) -> None: ...
     obs_dim: int
+    listed: tuple[int, int]
     action_bound: tuple[float, float]
     model: str
     dt_l: tuple[float, float]
@@ -225,8 +229,9 @@ class VecFormation:
         obs: npt.NDArray[np.floating],
         rewards: npt.NDArray[np.floating],
         changed: npt.NDArray[np.floating],
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], npt.NDArray[np.float64]]: ...
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
     def poses(self) -> npt.NDArray[np.float64]: ...
+    def obstacles(self) -> npt.NDArray[np.float64]: ...
     def offsets(self) -> npt.NDArray[np.float64]: ...
     def leaders(self) -> npt.NDArray[np.float64]: ...
     def baseline(

@@ -14,7 +14,10 @@
 Each environment is a formation behind a virtual leader moving at constant
 speed and turn rate; robot ``i`` holds the leader ``L_X`` ahead and ``L_Y``
 to its left in its own frame (the paper's eq. 7), its slot on a lattice
-``spacing`` metres apart, drawn per episode. With ``model="unicycle"`` an
+``spacing`` metres apart, drawn per episode; ``obstacles`` static discs
+(radii drawn in ``obstacle_radius``) lie on the leader's path, across the
+formation's width, clear of the robots' starts (a scenario's episodes hold
+the scenario's obstacles instead). With ``model="unicycle"`` an
 action is a velocity command ``(v, ω)`` (m/s, rad/s), clipped to
 ``v_max``, ``omega_max`` and applied through the base model (lags
 ``tau_v``, ``tau_omega``) for ``dt`` seconds; with ``model="torque"`` the
@@ -23,21 +26,29 @@ action is the wheel torques ``(τ_r, τ_l)`` (N m), clipped to
 ``±torque_limit`` (prefer ``dt ≤ 0.01`` there: the law's ``K_z = 10``).
 With ``safety=True`` the action first goes through the robot's
 barrier-certificate filter, which keeps every two robots' points ``l``
-ahead at least ``radius`` apart.
+ahead at least ``radius`` apart and every point at least ``radius`` from
+every obstacle's edge.
 
-An observation is ``10 + 3 K`` values (``K = neighbours``), body frame:
+An observation is ``10 + 3 K + 4 M`` values (``K = neighbours``, ``M =
+seen_obstacles``, by default all obstacles up to 4), body frame:
 ``e_x, e_y`` (the tracking error, eq. 7), ``v, ω``, the leader's velocity
 ``(R ṗ_d)_x, (R ṗ_d)_y`` and acceleration ``(R p̈_d)_x, (R p̈_d)_y``,
 ``L_X, L_Y``, then for the ``K`` nearest robots within ``sense`` metres
-their point relative to the robot's point ``dx, dy`` and ``1`` (listed) —
-zeros for padding.
+their point relative to the robot's point ``dx, dy`` and ``1`` (listed),
+then for the ``M`` obstacles whose edge is nearest and within ``sense``
+their centre relative to the robot's point ``dx, dy``, their radius and
+``1`` (listed) — zeros for padding.
 
-A robot's reward per step is ``−w_t ‖e‖² − w_e ‖a‖² − w_c`` (``a = (v, l
-ω)`` on velocity bases, ``(τ_r, τ_l)`` on torque robots) when
-another robot's point is within ``radius`` of its own (``weights = (w_t,
-w_e, w_c)``, default ``(1, 0.01, 10)``); an environment's reward is the
-mean over its robots. Episodes are truncated after ``max_steps`` steps and
-never terminate otherwise.
+A robot's reward per step is ``−w_t ‖e‖² − w_e ‖a‖² − w_c (c_r + c_o)``
+(``a = (v, l ω)`` on velocity bases, ``(τ_r, τ_l)`` on torque robots;
+``c_r = 1`` when another robot's point is within ``radius`` of its own,
+``c_o = 1`` when an obstacle's edge is; ``weights = (w_t, w_e, w_c)``,
+default ``(1, 0.01, 10)``); an environment's reward is the mean over its
+robots. Episodes are truncated after ``max_steps`` steps and never
+terminate otherwise. ``infos["min_distance"]`` is each environment's
+smallest distance between two points, ``infos["obstacle_distance"]`` its
+smallest distance from a point to an obstacle's edge (``inf`` without
+obstacles).
 """
 
 from __future__ import annotations
@@ -62,6 +73,8 @@ __all__ = ["FormationEnv", "FormationParallelEnv", "FormationVecEnv", "baseline_
 _MODELS = ("unicycle", "torque")
 #: Index of the first neighbour's values in an observation (``echelon_core::learn::layout``).
 _NEIGHBOURS = 10
+#: Values per listed neighbour and per listed obstacle.
+_PER_NEIGHBOUR, _PER_OBSTACLE = 3, 4
 
 
 class _Core:
@@ -95,15 +108,23 @@ class _Core:
         turn: float = 0.1,
         robot: str = "agent1",
         torque_limit: float = 10.0,
+        obstacles: int = 0,
+        obstacle_radius: tuple[float, float] = (0.1, 0.3),
+        seen_obstacles: int | None = None,
     ) -> None:
         if model not in _MODELS:
             raise ValueError(f"model must be one of {_MODELS}, got {model!r}")
         self.dtype = np.dtype(dtype)
         if self.dtype not in (np.dtype(np.float64), np.dtype(np.float32)):
             raise ValueError(f"dtype must be float64 or float32, got {self.dtype}")
-        for name, v in (("num_envs", num_envs), ("num_agents", num_agents), ("neighbours", neighbours), ("max_steps", max_steps)):
+        counts = (("num_envs", num_envs), ("num_agents", num_agents), ("neighbours", neighbours), ("max_steps", max_steps), ("obstacles", obstacles))
+        if seen_obstacles is not None:
+            counts += (("seen_obstacles", seen_obstacles),)
+        for name, v in counts:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
                 raise TypeError(f"{name} must be an integer, got {type(v).__name__}")
+            if v < 0:
+                raise ValueError(f"{name} must be ≥ 0, got {v}")
         if num_envs < 1 or num_agents < 1:
             raise ValueError(f"num_envs and num_agents must be ≥ 1, got {num_envs}, {num_agents}")
         self.radius = float(0.4 * spacing if radius is None else radius)
@@ -145,6 +166,9 @@ class _Core:
             torque_limit=float(torque_limit),
             scenario=inner_scenario,
             overrides=scenario_overrides,
+            obstacles=int(obstacles),
+            obstacle_radius=(float(obstacle_radius[0]), float(obstacle_radius[1])),
+            seen_obstacles=None if seen_obstacles is None else int(seen_obstacles),
         )
         self.model = self.inner.model
         if scenario is not None and model != "unicycle" and model != self.model:
@@ -152,6 +176,7 @@ class _Core:
         self.bounds = self.inner.action_bound
         self.dt, self.l = self.inner.dt_l
         self.obs_dim = self.inner.obs_dim
+        self.listed = self.inner.listed
         e, n = self.num_envs, self.num_agents
         self.obs = np.zeros((e, n, self.obs_dim), self.dtype)
         self.rewards = np.zeros((e, n), self.dtype)
@@ -172,7 +197,7 @@ class _Core:
             raise ValueError(f"actions must have shape {want}, got {a.shape}")
         return np.ascontiguousarray(a, dtype=self.dtype)
 
-    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         return self.inner.step(actions, self.obs, self.rewards, self.changed)
 
 
@@ -184,12 +209,17 @@ def _mask(value: Any, n: int) -> np.ndarray:
 
 
 def _obs_box(core: _Core, shape: tuple[int, ...]) -> spaces.Box:
-    """The observation space: unbounded values, each neighbour's ``listed``
-    flag in ``[0, 1]``."""
+    """The observation space: unbounded values, each listed entry's flag in
+    ``[0, 1]``, each obstacle's radius ``≥ 0``."""
+    k, m = core.listed
     low = np.full(core.obs_dim, -np.inf)
     high = np.full(core.obs_dim, np.inf)
-    low[_NEIGHBOURS + 2 :: 3] = 0.0
-    high[_NEIGHBOURS + 2 :: 3] = 1.0
+    at = _NEIGHBOURS + _PER_NEIGHBOUR * k
+    low[_NEIGHBOURS + 2 : at : _PER_NEIGHBOUR] = 0.0
+    high[_NEIGHBOURS + 2 : at : _PER_NEIGHBOUR] = 1.0
+    low[at + 2 :: _PER_OBSTACLE] = 0.0
+    low[at + 3 :: _PER_OBSTACLE] = 0.0
+    high[at + 3 :: _PER_OBSTACLE] = 1.0
     low, high = (np.broadcast_to(b, shape + (core.obs_dim,)).astype(core.dtype) for b in (low, high))
     return spaces.Box(low, high, dtype=core.dtype)
 
@@ -251,6 +281,12 @@ class FormationVecEnv(VectorEnv):
         return self._core.inner.leaders()
 
     @property
+    def obstacles(self) -> np.ndarray:
+        """A new ``(num_envs, M, 3)`` array of each environment's obstacles:
+        centre x, y and radius (m)."""
+        return self._core.inner.obstacles()
+
+    @property
     def obs_dim(self) -> int:
         """Values per robot observation."""
         return self._core.obs_dim
@@ -286,7 +322,7 @@ class FormationVecEnv(VectorEnv):
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         c = self._core
         a = c.actions(actions)
-        rewards, truncated, closest = c.step(a)
+        rewards, truncated, closest, clearance = c.step(a)
         terminated = np.zeros(c.num_envs, np.bool_)
         if self._autoreset.any():
             done = self._autoreset.copy()
@@ -298,20 +334,38 @@ class FormationVecEnv(VectorEnv):
             c.rewards[done] = 0.0
             c.changed[done] = 0.0
             truncated[done] = False
-            closest[done] = _closest(c.inner.poses()[done], c.l)
+            poses = c.inner.poses()[done]
+            closest[done] = _closest(poses, c.l)
+            clearance[done] = _clearance(poses, c.inner.obstacles()[done], c.l)
         self._autoreset = truncated | terminated
         infos: dict[str, Any] = {
             "agent_rewards": self._out(c.rewards),
             "min_distance": closest,
+            "obstacle_distance": clearance,
         }
         if c.safety:
             infos["safety"] = self._out(c.changed)
         return self._out(c.obs), rewards.astype(c.dtype, copy=False), terminated, truncated, infos
 
 
+def _points(poses: np.ndarray, l: float) -> np.ndarray:
+    """Each robot's point ``l`` ahead, ``(..., 2)``."""
+    return poses[..., :2] + l * np.stack([np.cos(poses[..., 2]), np.sin(poses[..., 2])], axis=-1)
+
+
+def _clearance(poses: np.ndarray, obstacles: np.ndarray, l: float) -> np.ndarray:
+    """The smallest distance from a point ``l`` ahead to an obstacle's
+    edge, per environment (``inf`` without obstacles)."""
+    if obstacles.shape[1] == 0:
+        return np.full(poses.shape[0], np.inf)
+    p = _points(poses, l)
+    d = np.linalg.norm(p[:, :, None, :] - obstacles[:, None, :, :2], axis=-1) - obstacles[:, None, :, 2]
+    return d.min(axis=(1, 2))
+
+
 def _closest(poses: np.ndarray, l: float) -> np.ndarray:
     """The smallest distance between two points ``l`` ahead, per environment."""
-    p = poses[..., :2] + l * np.stack([np.cos(poses[..., 2]), np.sin(poses[..., 2])], axis=-1)
+    p = _points(poses, l)
     d = np.linalg.norm(p[:, :, None, :] - p[:, None, :, :], axis=-1)
     n = p.shape[1]
     d[:, np.arange(n), np.arange(n)] = np.inf
@@ -334,6 +388,11 @@ class FormationEnv(gymnasium.Env):
     def poses(self) -> np.ndarray:
         """A new ``(num_agents, 3)`` array of x, y, θ."""
         return self._vec.poses[0]
+
+    @property
+    def obstacles(self) -> np.ndarray:
+        """A new ``(M, 3)`` array of the obstacles' centre x, y and radius."""
+        return self._vec.obstacles[0]
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
@@ -392,6 +451,11 @@ class FormationParallelEnv(_parallel_base()):  # type: ignore[misc]
         """A new ``(num_agents, 3)`` array of x, y, θ."""
         return self._core.inner.poses()[0]
 
+    @property
+    def obstacles(self) -> np.ndarray:
+        """A new ``(M, 3)`` array of the obstacles' centre x, y and radius."""
+        return self._core.inner.obstacles()[0]
+
     def observation_space(self, agent: str) -> spaces.Box:
         return self._obs_spaces[agent]
 
@@ -435,13 +499,13 @@ class FormationParallelEnv(_parallel_base()):  # type: ignore[misc]
                     raise ValueError(f"{name}'s action must have shape (2,), got {v.shape}")
                 a[0, i] = v
         a = c.actions(a)
-        _, truncated, closest = c.step(a)
+        _, truncated, closest, clearance = c.step(a)
         live = list(self.agents)
         obs = {n: c.obs[0, i].copy() for i, n in enumerate(self.possible_agents) if n in live}
         rewards = {n: float(c.rewards[0, i]) for i, n in enumerate(self.possible_agents) if n in live}
         terms = {n: False for n in live}
         truncs = {n: bool(truncated[0]) for n in live}
-        infos = {n: {"min_distance": float(closest[0])} for n in live}
+        infos = {n: {"min_distance": float(closest[0]), "obstacle_distance": float(clearance[0])} for n in live}
         if c.safety:
             for i, n in enumerate(self.possible_agents):
                 if n in live:

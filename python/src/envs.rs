@@ -22,6 +22,9 @@ use pyo3::prelude::*;
 use crate::errors;
 use crate::scenario::{OverrideArgs, PyScenario};
 
+/// Obstacles an observation lists unless told: all of them up to this many.
+const DEFAULT_SEEN_OBSTACLES: usize = 4;
+
 /// The environments and their dtype.
 #[pyclass(module = "echelon._echelon", name = "VecFormation")]
 pub(crate) struct PyVecFormation {
@@ -138,7 +141,8 @@ impl PyVecFormation {
     #[new]
     #[pyo3(signature = (num_envs, num_agents, *, dt, spacing, l, radius, safety, gain, v_max,
         omega_max, tau_v, tau_omega, neighbours, sense, weights, max_steps, speed, turn, seed, float32,
-        robot=None, torque_limit=10.0, scenario=None, overrides=None))]
+        robot=None, torque_limit=10.0, scenario=None, overrides=None, obstacles=0,
+        obstacle_radius=(0.1, 0.3), seen_obstacles=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         num_envs: usize,
@@ -165,6 +169,9 @@ impl PyVecFormation {
         torque_limit: f64,
         scenario: Option<PyRef<'_, PyScenario>>,
         overrides: Option<OverrideArgs>,
+        obstacles: usize,
+        obstacle_radius: (f64, f64),
+        seen_obstacles: Option<usize>,
     ) -> PyResult<Self> {
         let robot = robot
             .map(|name| {
@@ -199,6 +206,9 @@ impl PyVecFormation {
             robot,
             neighbours,
             sense,
+            obstacles,
+            obstacle_radius,
+            seen_obstacles: seen_obstacles.unwrap_or(obstacles.min(DEFAULT_SEEN_OBSTACLES)),
             weights: Weights {
                 tracking: weights.0,
                 effort: weights.1,
@@ -214,6 +224,8 @@ impl PyVecFormation {
                 let run = sc.build(sc.py(), overrides.as_ref())?;
                 let (fixed, robots, l) =
                     FixedEpisode::of_plan(&run.plan).map_err(|e| errors::param(&e))?;
+                config.seen_obstacles =
+                    seen_obstacles.unwrap_or(fixed.obstacles.len().min(DEFAULT_SEEN_OBSTACLES));
                 config.dt = dt.unwrap_or(run.plan.config().dt);
                 config.l = l;
                 match robots {
@@ -305,7 +317,8 @@ impl PyVecFormation {
 
     /// One step under `actions` (`(E, N, 2)`): observations, per-robot
     /// rewards and filter changes into the arrays given; returns the
-    /// environments' mean rewards, truncations and closest distances.
+    /// environments' mean rewards, truncations, closest distances between
+    /// points and from a point to an obstacle's edge.
     #[allow(clippy::type_complexity)]
     fn step<'py>(
         &mut self,
@@ -318,6 +331,7 @@ impl PyVecFormation {
         Bound<'py, PyArray1<f64>>,
         Bound<'py, PyArray1<bool>>,
         Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<f64>>,
     )> {
         if self.float32 {
             self.step_as::<f32>(py, actions, obs, rewards, changed)?;
@@ -329,7 +343,31 @@ impl PyVecFormation {
             PyArray1::from_iter(py, f.iter().map(|x| x.reward)),
             PyArray1::from_iter(py, f.iter().map(|x| x.truncated)),
             PyArray1::from_iter(py, f.iter().map(|x| x.min_distance)),
+            PyArray1::from_iter(py, f.iter().map(|x| x.obstacle_distance)),
         ))
+    }
+
+    /// A new `(E, M, 3)` float64 array of each environment's obstacles: x,
+    /// y of the centre and the radius, m.
+    fn obstacles<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let e = self.shape().0;
+        let m = self.inner.config().obstacles;
+        let flat: Vec<f64> = (0..e)
+            .flat_map(|k| {
+                self.inner
+                    .obstacles(k)
+                    .iter()
+                    .flat_map(|o| [o.x(), o.y(), o.r()])
+            })
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([e, m, 3])
+    }
+
+    /// `(neighbours, seen_obstacles)`: entries per observation.
+    #[getter]
+    fn listed(&self) -> (usize, usize) {
+        let c = self.inner.config();
+        (c.neighbours, c.seen_obstacles)
     }
 
     /// A new `(E, N, 3)` float64 array of the robots' x, y, θ.

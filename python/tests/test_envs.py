@@ -278,3 +278,109 @@ def test_observation_spaces_bound_the_listed_flags_and_the_parallel_env_has_a_st
     state = par.state()
     assert par.state_space.contains(state)
     assert np.array_equal(state, np.concatenate([obs[a] for a in par.possible_agents]))
+
+
+def _edges(env, k):
+    """Environment ``k``'s distances from each robot's point to each
+    obstacle's edge, ``(N, M)``, from its poses and obstacles."""
+    p = envs._points(env.poses[k], env._core.l)
+    o = env.obstacles[k]
+    return np.linalg.norm(p[:, None, :] - o[None, :, :2], axis=-1) - o[None, :, 2]
+
+
+@pytest.mark.parametrize("seed", [0, 7, 123])
+def test_obstacles_are_drawn_clear_of_the_starts_and_observed_nearest_first(seed):
+    m, k = 6, 2
+    env = envs.FormationVecEnv(5, 7, spacing=0.7, obstacles=m, obstacle_radius=(0.1, 0.5), neighbours=k, seed=seed)
+    obs, _ = env.reset(seed=seed)
+    assert env.obs_dim == 10 + 3 * k + 4 * 4  # all obstacles up to 4 listed by default
+    obstacles = env.obstacles
+    assert obstacles.shape == (5, m, 3)
+    assert ((0.1 <= obstacles[..., 2]) & (obstacles[..., 2] <= 0.5)).all()
+    plain = envs.FormationVecEnv(5, 7, spacing=0.7, neighbours=k, seed=seed)
+    plain.reset(seed=seed)
+    assert np.array_equal(plain.poses, env.poses), "obstacles leave the formation's draw as it was"
+    for _ in range(20):
+        obs, _, _, _, info = env.step(env.action_space.sample())
+    for e in range(5):
+        edges = _edges(env, e)
+        assert np.isclose(info["obstacle_distance"][e], edges.min(), rtol=0, atol=1e-12)
+        p = envs._points(env.poses[e], env._core.l)
+        for i in range(7):
+            order = [j for j in np.argsort(edges[i], kind="stable") if edges[i, j] <= 3.0 * 0.7][:4]
+            theta = env.poses[e, i, 2]
+            rot = np.array([[np.cos(theta), np.sin(theta)], [-np.sin(theta), np.cos(theta)]])
+            at = 10 + 3 * k
+            for slot in range(4):
+                got = obs[e, i, at + 4 * slot : at + 4 * slot + 4]
+                if slot < len(order):
+                    j = order[slot]
+                    want = rot @ (obstacles[e, j, :2] - p[i])
+                    assert got[3] == 1.0 and got[2] == obstacles[e, j, 2]
+                    assert np.allclose(got[:2], want, rtol=0, atol=1e-9)
+                else:
+                    assert (got == 0).all()
+    assert env.observation_space.contains(obs)
+
+
+def test_the_filter_keeps_the_obstacles_clear_and_without_it_the_formation_hits_them():
+    clearance = {}
+    for safety in (True, False):
+        env = envs.FormationVecEnv(
+            6, 5, spacing=0.6, radius=0.25, obstacles=6, obstacle_radius=(0.15, 0.4), speed=(0.15, 0.2),
+            max_steps=300, safety=safety, seed=3, copy=False,
+        )
+        policy = envs.baseline_policy(env)
+        obs, _ = env.reset(seed=3)
+        rng = np.random.default_rng(3)
+        low = np.inf
+        for _ in range(300):
+            a = policy(obs) + rng.uniform([-0.1, -0.5], [0.1, 0.5], (6, 5, 2))
+            obs, rewards, _, _, info = env.step(a)
+            low = min(low, info["obstacle_distance"].min())
+            hit = info["obstacle_distance"] < 0.25
+            if hit.any() and not safety:
+                # The collision term counts the obstacle.
+                assert (info["agent_rewards"][hit].min(axis=-1) <= -10.0).all()
+        clearance[safety] = low
+    assert clearance[True] >= 0.25 - 1e-3, clearance
+    assert clearance[False] < 0.25, clearance
+
+
+def test_a_scenarios_obstacles_are_every_episodes():
+    doc = _doc()
+    doc["safety"] = {"radius": 0.2, "obstacles": [{"x": 2.0, "y": 0.6, "r": 0.3}, {"x": 3.0, "y": -0.5, "r": 0.2}]}
+    sc = echelon.Scenario.from_dict(doc)
+    env = envs.FormationVecEnv(2, 4, scenario=sc, seed=1)
+    want = np.array([[2.0, 0.6, 0.3], [3.0, -0.5, 0.2]])
+    assert env.obstacles.shape == (2, 2, 3)
+    assert np.array_equal(env.obstacles[0], want) and np.array_equal(env.obstacles[1], want)
+    assert env.obs_dim == 10 + 3 * 4 + 4 * 2
+    with pytest.raises(ValueError, match="obstacles"):
+        envs.FormationVecEnv(2, 4, scenario=sc, obstacles=3, seed=1)
+
+
+@pytest.mark.parametrize(
+    "kwargs, error",
+    [
+        ({"obstacles": -1}, ValueError),
+        ({"obstacles": 2.5}, TypeError),
+        ({"obstacles": 2, "obstacle_radius": (0.0, 0.3)}, ValueError),
+        ({"obstacles": 2, "obstacle_radius": (0.4, 0.3)}, ValueError),
+        ({"obstacles": 2, "seen_obstacles": 17}, ValueError),
+        ({"seen_obstacles": -2}, ValueError),
+    ],
+)
+def test_bad_obstacle_settings_are_refused(kwargs, error):
+    with pytest.raises(error):
+        envs.FormationVecEnv(2, 3, seed=0, **kwargs)
+
+
+def test_obstacles_pass_gymnasiums_and_pettingzoos_checks():
+    check_env(envs.FormationEnv(4, obstacles=3, max_steps=50, seed=0).unwrapped, skip_render_check=True)
+    parallel_api_test(envs.FormationParallelEnv(4, obstacles=3, max_steps=20, seed=1), num_cycles=30)
+    par = envs.FormationParallelEnv(4, obstacles=3, seen_obstacles=1, seed=1)
+    obs, _ = par.reset(seed=1)
+    assert par.observation_space("robot_0").shape == (10 + 3 * 4 + 4,)
+    _, _, _, _, infos = par.step({a: np.zeros(2) for a in par.agents})
+    assert np.isfinite(infos["robot_0"]["obstacle_distance"])

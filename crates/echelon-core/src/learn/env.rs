@@ -7,7 +7,7 @@ use crate::model::State;
 use crate::model::Torques;
 use crate::model::base::VelocityCommand;
 use crate::reference::Reference;
-use crate::safety::{Neighbour, SafetyConfig, SafetyFilter};
+use crate::safety::{Neighbour, Obstacle, SafetyConfig, SafetyFilter};
 
 /// One robot of one environment: what a step and the observations read and
 /// write of it.
@@ -46,6 +46,9 @@ pub(super) struct Env {
     /// The virtual leader (a [`crate::reference::Circle`] in a drawn
     /// episode, a scenario's reference in a fixed one).
     pub(super) leader: Reference,
+    /// Its episode's static obstacles (room for `config.obstacles`, made
+    /// once).
+    pub(super) obstacles: Vec<Obstacle>,
     /// One per robot with `safety`, else none.
     pub(super) filters: Vec<SafetyFilter>,
     /// Scratch for the filters.
@@ -63,6 +66,7 @@ impl Env {
                 crate::reference::Circle::new([0.0; 2], 0.0, 0.0, 0.0)
                     .unwrap_or_else(|_| unreachable!("a circle at rest")),
             ),
+            obstacles: Vec::with_capacity(config.obstacles),
             filters: vec![filter(config); if config.safety { n } else { 0 }],
             neighbours: Vec::with_capacity(if config.safety { n } else { 0 }),
             t: 0.0,
@@ -82,13 +86,21 @@ impl Env {
     ) {
         self.episode_seed = episode::mix(self.episode_seed, 0x5eed);
         match fixed {
-            None => episode::draw(config, self.episode_seed, &mut self.leader, robots),
+            None => episode::draw(
+                config,
+                self.episode_seed,
+                &mut self.leader,
+                robots,
+                &mut self.obstacles,
+            ),
             Some(f) => {
                 self.leader = f.leader.clone();
                 for (i, r) in robots.iter_mut().enumerate() {
                     r.slot = [f.lx[i], f.ly[i]];
                     r.state = f.starts[i];
                 }
+                self.obstacles.clear();
+                self.obstacles.extend_from_slice(&f.obstacles);
             }
         }
         plant::sense(robots);
@@ -143,7 +155,7 @@ impl Env {
                         cmd,
                         &config.base,
                         &self.neighbours,
-                        &[],
+                        &self.obstacles,
                     );
                     [out.command.v, out.command.omega]
                 }
@@ -152,7 +164,15 @@ impl Env {
                         right: nominal[0],
                         left: nominal[1],
                     });
-                    let out = filter.torque(self.t, me, config.l, robot, u, &self.neighbours, &[]);
+                    let out = filter.torque(
+                        self.t,
+                        me,
+                        config.l,
+                        robot,
+                        u,
+                        &self.neighbours,
+                        &self.obstacles,
+                    );
                     let tau = robot.torques(out.command);
                     [tau.right, tau.left]
                 }

@@ -1,4 +1,5 @@
-//! An episode's draw: the leader's path, the slots and the robots' starts.
+//! An episode's draw: the leader's path, the slots, the robots' starts and
+//! the obstacles.
 
 use std::f64::consts::PI;
 
@@ -9,8 +10,8 @@ use crate::formation::Leader;
 use crate::law::lycomp::{LyComp, OffsetFrame};
 use crate::math::rng::SplitMix64;
 use crate::model::State;
-use crate::reference::{Circle, Reference};
-use crate::safety::point;
+use crate::reference::{Circle, Order, Reference, Trajectory};
+use crate::safety::{Obstacle, point};
 use crate::sim::plan::Plan;
 
 /// A seed for stream `k` of `seed`.
@@ -25,22 +26,37 @@ const SLOT_JITTER: f64 = 0.15;
 /// How far a start's heading may differ from the leader's, rad.
 const HEADING_SPREAD: f64 = 0.5;
 
-/// Draws an episode into `leader` and `robots` (slots and starts) from
-/// `seed`: the leader a reference of constant speed and turn rate; slots on
-/// a lattice `spacing` apart behind the leader (`⌈√N⌉` wide), jittered and
-/// shuffled; starts near the slots, at rest, their points at least the
-/// radius apart when the draw allows it (20 tries, else the slots).
-pub(super) fn draw(config: &EnvConfig, seed: u64, leader: &mut Reference, robots: &mut [Robot]) {
+/// Draws an episode into `leader`, `robots` (slots and starts) and
+/// `obstacles` from `seed`: the leader a reference of constant speed and
+/// turn rate; slots on a lattice `spacing` apart behind the leader (`⌈√N⌉`
+/// wide), jittered and shuffled; starts near the slots, at rest, their
+/// points at least the radius apart when the draw allows it (20 tries, else
+/// the slots); then `config.obstacles` obstacles ([`obstacles`]). The
+/// obstacles are drawn last, so that an episode with them has the same
+/// leader, slots and starts as the one without.
+pub(super) fn draw(
+    config: &EnvConfig,
+    seed: u64,
+    leader: &mut Reference,
+    robots: &mut [Robot],
+    obstacles: &mut Vec<Obstacle>,
+) {
     let mut rng = SplitMix64::new(seed);
-    let n = robots.len();
-    let s = config.spacing;
     let heading = rng.uniform(-PI, PI);
     let speed = rng.uniform(config.speed.0, config.speed.1);
     let turn = rng.uniform(-config.turn, config.turn);
-    *leader = Reference::Circle(
-        Circle::new([0.0; 2], heading, speed, turn)
-            .unwrap_or_else(|_| unreachable!("finite, speed ≥ 0")),
-    );
+    let circle = Circle::new([0.0; 2], heading, speed, turn)
+        .unwrap_or_else(|_| unreachable!("finite, speed ≥ 0"));
+    *leader = Reference::Circle(circle);
+    formation(config, &mut rng, heading, robots);
+    self::obstacles(config, &mut rng, &circle, robots, obstacles);
+}
+
+/// The slots and starts of `robots` behind a leader that starts at the
+/// origin facing `heading` (see [`draw`]).
+fn formation(config: &EnvConfig, rng: &mut SplitMix64, heading: f64, robots: &mut [Robot]) {
+    let n = robots.len();
+    let s = config.spacing;
     let width = (n as f64).sqrt().ceil() as usize;
     for (m, r) in robots.iter_mut().enumerate() {
         let (row, col) = (m / width, m % width);
@@ -79,6 +95,67 @@ pub(super) fn draw(config: &EnvConfig, seed: u64, leader: &mut Reference, robots
     }
 }
 
+/// Tries at drawing a place for an obstacle clear of the robots.
+const OBSTACLE_TRIES: usize = 20;
+
+/// `config.obstacles` discs into `out` (cleared), radii drawn in
+/// `config.obstacle_radius`, each on the leader's path: at the leader's
+/// place at a time drawn over the episode (`max_steps · dt`), moved across
+/// the path by up to the formation's half-width and a spacing, so that the
+/// formation meets them. Each edge is at least the radius from every
+/// robot's start point (the filter's constraint holds at the start): a
+/// place that is not is drawn again ([`OBSTACLE_TRIES`] tries), then the
+/// obstacle goes ahead of the leader's start, beyond every robot.
+fn obstacles(
+    config: &EnvConfig,
+    rng: &mut SplitMix64,
+    leader: &Circle,
+    robots: &[Robot],
+    out: &mut Vec<Obstacle>,
+) {
+    out.clear();
+    if config.obstacles == 0 {
+        return;
+    }
+    let s = config.spacing;
+    let width = (robots.len() as f64).sqrt().ceil();
+    let half = 0.5 * (width - 1.0) * s + (SLOT_JITTER + 1.0) * s;
+    let horizon = config.max_steps as f64 * config.dt;
+    let clear = |c: [f64; 2], r: f64| {
+        robots.iter().all(|b| {
+            let p = point(&b.state, config.l);
+            (p[0] - c[0]).hypot(p[1] - c[1]) >= r + config.radius
+        })
+    };
+    // Every start point lies within `far` of the origin.
+    let far = robots.iter().fold(0.0f64, |m, b| {
+        let p = point(&b.state, config.l);
+        m.max(p[0].hypot(p[1]))
+    });
+    let (lo, hi) = config.obstacle_radius;
+    for _ in 0..config.obstacles {
+        let r = rng.uniform(lo, hi);
+        let mut centre = None;
+        for _ in 0..OBSTACLE_TRIES {
+            let t = rng.uniform(0.0, horizon);
+            let p = leader.eval(t, Order::Two).p;
+            let (sin, cos) = (leader.heading() + leader.turn_rate() * t).sin_cos();
+            let across = rng.uniform(-half, half);
+            let c = [p[0] - across * sin, p[1] + across * cos];
+            if clear(c, r) {
+                centre = Some(c);
+                break;
+            }
+        }
+        let [x, y] = centre.unwrap_or_else(|| {
+            let d = far + r + config.radius + s;
+            let (sin, cos) = leader.heading().sin_cos();
+            [d * cos, d * sin]
+        });
+        out.push(Obstacle::new(x, y, r).unwrap_or_else(|_| unreachable!("finite, r > 0")));
+    }
+}
+
 /// Whether every two robots' points are at least `radius` apart.
 fn apart(robots: &[Robot], l: f64, radius: f64) -> bool {
     robots.iter().enumerate().all(|(i, a)| {
@@ -91,7 +168,8 @@ fn apart(robots: &[Robot], l: f64, radius: f64) -> bool {
 }
 
 /// A scenario's formation as every episode's: its reference, each agent's
-/// `L_X = L_Xoff + L`, `L_Y = L_Yoff`, and its start.
+/// `L_X = L_Xoff + L`, `L_Y = L_Yoff`, its start, and the scenario's
+/// obstacles.
 #[derive(Debug, Clone)]
 pub struct FixedEpisode {
     /// The reference.
@@ -102,6 +180,8 @@ pub struct FixedEpisode {
     pub ly: Vec<f64>,
     /// Each agent's start.
     pub starts: Vec<State>,
+    /// The obstacles every agent knows (the scenario's `[safety]`).
+    pub obstacles: Vec<Obstacle>,
 }
 
 /// What a scenario's robots are, for [`super::EnvConfig`]: all velocity
@@ -135,6 +215,7 @@ impl FixedEpisode {
             lx: Vec::with_capacity(agents.len()),
             ly: Vec::with_capacity(agents.len()),
             starts: Vec::with_capacity(agents.len()),
+            obstacles: plan.obstacles().to_vec(),
         };
         for (i, a) in agents.iter().enumerate() {
             if a.leader() != Leader::Reference {

@@ -14,6 +14,12 @@
 //! filter first ([`crate::safety::SafetyFilter::velocity`]), every robot seeing the others
 //! as cooperative neighbours, as in the fleet.
 //!
+//! An episode may hold static disc obstacles ([`Obstacle`]): drawn on the
+//! leader's path (`obstacles` of them per episode), or a scenario's. The
+//! observations list the nearest, the rewards count coming within the
+//! radius of one's edge as a collision, and the filter keeps every robot's
+//! point at least the radius clear of every edge.
+//!
 //! Observations ([`layout`]) carry what the kinematic law needs, so the
 //! paper's law is a policy of observations alone ([`baseline`]).
 //!
@@ -37,11 +43,11 @@ use crate::law::lycomp::LyComp;
 use crate::model::base::VelocityBase;
 use crate::model::{RobotParams, State};
 use crate::reference::Reference;
-use crate::safety::SafetyConfig;
+use crate::safety::{Obstacle, SafetyConfig};
 
 use env::{Env, Robot};
 pub use episode::{FixedEpisode, PlanRobots};
-pub use observe::{MAX_NEIGHBOURS, baseline, baseline_torque};
+pub use observe::{MAX_NEIGHBOURS, MAX_OBSTACLES, baseline, baseline_torque};
 
 /// A number an environment's buffers hold (`f64`, or `f32` on request).
 pub trait Scalar: Copy + Send + Sync + 'static {
@@ -74,15 +80,17 @@ impl Scalar for f32 {
 }
 
 /// The weights of a robot's reward (per step):
-/// `r = −tracking ‖e‖² − effort ‖a‖² − collision · [a neighbour's point
-/// within the radius]`, with `a = (v, L ω)` the clipped action.
+/// `r = −tracking ‖e‖² − effort ‖a‖² − collision · ([a neighbour's point
+/// within the radius] + [an obstacle's edge within the radius])`, with
+/// `a = (v, l ω)` the clipped action (`(τ_r, τ_l)` on torque robots).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Weights {
     /// Per m² of tracking error.
     pub tracking: f64,
     /// Per (m/s)² of action.
     pub effort: f64,
-    /// Per step spent within the radius of another robot.
+    /// Per step spent within the radius of another robot's point (and
+    /// again per step within the radius of an obstacle's edge).
     pub collision: f64,
 }
 
@@ -126,8 +134,15 @@ pub struct EnvConfig {
     pub robot: Option<RobotParams>,
     /// How many neighbours each observation lists (nearest first).
     pub neighbours: usize,
-    /// Neighbours farther than this (point to point) are not listed, m.
+    /// Neighbours farther than this (point to point) are not listed, nor
+    /// obstacles whose edge is farther, m.
     pub sense: f64,
+    /// Obstacles drawn per episode (a scenario's episodes hold its own).
+    pub obstacles: usize,
+    /// Their radii are drawn in `[obstacle_radius.0, obstacle_radius.1]`, m.
+    pub obstacle_radius: (f64, f64),
+    /// How many obstacles each observation lists (nearest edge first).
+    pub seen_obstacles: usize,
     /// Reward weights.
     pub weights: Weights,
     /// Steps before an episode is truncated (≥ 1).
@@ -148,8 +163,13 @@ impl EnvConfig {
         }
     }
 
+    /// Values per robot observation ([`layout::obs_dim`]).
+    pub fn obs_dim(&self) -> usize {
+        layout::obs_dim(self.neighbours, self.seen_obstacles)
+    }
+
     /// `num_envs × num_agents` robots on an ideal base limited to 0.5 m/s and
-    /// 2 rad/s, 1 m apart, 20 ms steps, no filter.
+    /// 2 rad/s, 1 m apart, 50 ms steps, no filter, no obstacles.
     pub fn new(num_envs: usize, num_agents: usize) -> EnvConfig {
         EnvConfig {
             num_envs,
@@ -164,6 +184,9 @@ impl EnvConfig {
             robot: None,
             neighbours: 4,
             sense: 3.0,
+            obstacles: 0,
+            obstacle_radius: (0.1, 0.3),
+            seen_obstacles: 0,
             weights: Weights::default(),
             max_steps: 500,
             speed: (0.05, 0.2),
@@ -233,6 +256,21 @@ impl EnvConfig {
                 "must be ≤ 16",
             ));
         }
+        if self.seen_obstacles > observe::MAX_OBSTACLES {
+            return Err(ParamError::new(
+                "seen_obstacles",
+                self.seen_obstacles as f64,
+                "must be ≤ 16",
+            ));
+        }
+        let (lo, hi) = self.obstacle_radius;
+        if !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo <= hi) {
+            return Err(ParamError::new(
+                "obstacle_radius",
+                lo,
+                "must be 0 < low ≤ high, finite",
+            ));
+        }
         if self.safety {
             SafetyConfig::new(self.radius, self.gain, f64::INFINITY)?;
         }
@@ -250,6 +288,9 @@ pub struct EnvFacts {
     /// The smallest distance between two robots' points after the step, m
     /// (infinite with one robot).
     pub min_distance: f64,
+    /// The smallest distance from a robot's point to an obstacle's edge
+    /// after the step, m (infinite without obstacles).
+    pub obstacle_distance: f64,
 }
 
 /// `E` environments of `N` robots (see the module documentation).
@@ -305,6 +346,17 @@ impl VecFormation {
                 format!("must be the scenario's number of agents, {n}"),
             ));
         }
+        if config.obstacles != 0 {
+            return Err(ParamError::new(
+                "obstacles",
+                config.obstacles as f64,
+                "must be 0 with a scenario (its episodes hold the scenario's obstacles)",
+            ));
+        }
+        let config = EnvConfig {
+            obstacles: fixed.obstacles.len(),
+            ..config
+        };
         let mut me = VecFormation::new(config, seed)?;
         me.fixed = Some(std::sync::Arc::new(fixed));
         me.reset(seed, None);
@@ -318,7 +370,7 @@ impl VecFormation {
 
     /// Values per robot observation ([`layout::obs_dim`]).
     pub fn obs_dim(&self) -> usize {
-        layout::obs_dim(self.config.neighbours)
+        self.config.obs_dim()
     }
 
     /// Reseeds every environment from `seed` and resets those `mask` selects
@@ -448,6 +500,11 @@ impl VecFormation {
     pub fn slots(&self, k: usize) -> impl Iterator<Item = [f64; 2]> + '_ {
         let n = self.config.num_agents;
         self.robots[k * n..(k + 1) * n].iter().map(|r| r.slot)
+    }
+
+    /// Environment `k`'s obstacles (its episode's).
+    pub fn obstacles(&self, k: usize) -> &[Obstacle] {
+        &self.envs[k].obstacles
     }
 
     /// Environment `k`'s time in its episode, s.

@@ -2,7 +2,8 @@
 
 use super::env::{Env, Robot};
 use super::layout::{
-    E, LEADER_ACCELERATION, LEADER_VELOCITY, NEIGHBOURS, OFFSETS, SPEEDS, obs_dim,
+    E, LEADER_ACCELERATION, LEADER_VELOCITY, NEIGHBOURS, OFFSETS, PER_NEIGHBOUR, PER_OBSTACLE,
+    SPEEDS,
 };
 use super::{EnvConfig, Scalar};
 use crate::law::control::{Gains, LeaderMotion, Offset, Variant, law};
@@ -10,9 +11,12 @@ use crate::math::lanes::Lanes;
 use crate::model::RobotParams;
 use crate::model::State;
 use crate::reference::{Circle, Jet, Order, Reference, Trajectory};
+use crate::safety::Obstacle;
 
 /// The most neighbours an observation lists.
 pub const MAX_NEIGHBOURS: usize = 16;
+/// The most obstacles an observation lists.
+pub const MAX_OBSTACLES: usize = 16;
 
 /// Robot `i`'s `e` (eq. 7) and `R ṗ_d` in its frame, from its heading's
 /// `(sin, cos)`.
@@ -78,6 +82,8 @@ pub(super) struct Seen<'a> {
     pub(super) points: &'a [f64],
     /// Its leader now (to [`Order::Two`]).
     pub(super) jet: Jet,
+    /// Its obstacles.
+    pub(super) obstacles: &'a [Obstacle],
 }
 
 /// Points compared at a time in the neighbour search: their squared
@@ -158,31 +164,73 @@ fn nearest(xs: &[f64], ys: &[f64], me: usize, sense2: f64, best: &mut [(f64, usi
     low[0]
 }
 
+/// The `best.len()` obstacles whose edge is nearest to point `me` and
+/// within `sense`, nearest first as `(edge distance, index)` into `best`
+/// (the rest infinite); returns the distance from `me` to the nearest edge
+/// of all (infinite without obstacles). Ties keep the lower index first.
+#[inline(always)]
+fn nearest_obstacles(
+    obstacles: &[Obstacle],
+    me: [f64; 2],
+    sense: f64,
+    best: &mut [(f64, usize)],
+) -> f64 {
+    best.fill((f64::INFINITY, 0));
+    let mut low = f64::INFINITY;
+    for (m, o) in obstacles.iter().enumerate() {
+        let edge = (o.x() - me[0]).hypot(o.y() - me[1]) - o.r();
+        low = low.min(edge);
+        if edge <= sense && best.last().is_some_and(|b| edge < b.0) {
+            let mut item = (edge, m);
+            for slot in best.iter_mut() {
+                if item.0 < slot.0 {
+                    std::mem::swap(slot, &mut item);
+                }
+            }
+        }
+    }
+    low
+}
+
+/// What [`write`] found beyond the observations.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Found {
+    /// The mean of the robots' rewards (0 without rewards).
+    pub(super) reward: f64,
+    /// The smallest squared distance between two robots' points (infinite
+    /// with one robot).
+    pub(super) closest2: f64,
+    /// The smallest distance from a robot's point to an obstacle's edge
+    /// (infinite without obstacles).
+    pub(super) obstacle: f64,
+}
+
 /// Writes one environment's observations (`N · obs_dim`) and, with
 /// `rewards = Some(out)`, each robot's reward ([`super::Weights`]) for the
-/// step that ended under its `applied` action; returns
-/// their mean (0 without) and the smallest squared distance between two
-/// robots' points (infinite with one robot). One pass over the pairs serves
-/// all three.
+/// step that ended under its `applied` action; returns their mean and the
+/// closest distances ([`Found`]). One pass over the pairs serves all.
 #[inline(always)]
 pub(super) fn write<T: Scalar>(
     config: &EnvConfig,
     seen: Seen<'_>,
     out: &mut [T],
     mut rewards: Option<&mut [T]>,
-) -> (f64, f64) {
+) -> Found {
     let Seen {
         robots,
         points,
         jet,
+        obstacles,
     } = seen;
     let (xs, ys) = points.split_at(robots.len());
-    let d = obs_dim(config.neighbours);
+    let d = config.obs_dim();
     let k = config.neighbours.min(MAX_NEIGHBOURS);
+    let ko = config.seen_obstacles.min(MAX_OBSTACLES);
     let sense2 = config.sense * config.sense;
     let radius2 = config.radius * config.radius;
-    let (mut sum, mut closest) = (0.0, f64::INFINITY);
+    let (mut sum, mut closest, mut clearance) = (0.0, f64::INFINITY, f64::INFINITY);
     let mut best = [(f64::INFINITY, 0usize); MAX_NEIGHBOURS];
+    let mut seen_obstacles = [(f64::INFINITY, 0usize); MAX_OBSTACLES];
     for (i, (robot, o)) in robots.iter().zip(out.chunks_exact_mut(d)).enumerate() {
         let (s, [sin, cos], [lx, ly]) = (&robot.state, robot.heading, robot.slot);
         let (e, q) = errors(s, (sin, cos), jet.p, jet.dp, lx, ly);
@@ -201,8 +249,8 @@ pub(super) fn write<T: Scalar>(
         let near = nearest(xs, ys, i, sense2, &mut best[..k]);
         closest = closest.min(near);
         let me = [xs[i], ys[i]];
-        let rest = &mut o[NEIGHBOURS..];
-        for (&(dist, j), nb) in best[..k].iter().zip(rest.chunks_exact_mut(3)) {
+        let (listed, rest) = o[NEIGHBOURS..].split_at_mut(PER_NEIGHBOUR * k);
+        for (&(dist, j), nb) in best[..k].iter().zip(listed.chunks_exact_mut(PER_NEIGHBOUR)) {
             if dist.is_finite() {
                 let (dx, dy) = (xs[j] - me[0], ys[j] - me[1]);
                 nb[0] = T::of(cos * dx + sin * dy);
@@ -212,20 +260,41 @@ pub(super) fn write<T: Scalar>(
                 nb.fill(T::of(0.0));
             }
         }
+        let edge = nearest_obstacles(obstacles, me, config.sense, &mut seen_obstacles[..ko]);
+        clearance = clearance.min(edge);
+        for (&(dist, m), ob) in seen_obstacles[..ko]
+            .iter()
+            .zip(rest.chunks_exact_mut(PER_OBSTACLE))
+        {
+            if dist.is_finite() {
+                let c = &obstacles[m];
+                let (dx, dy) = (c.x() - me[0], c.y() - me[1]);
+                ob[0] = T::of(cos * dx + sin * dy);
+                ob[1] = T::of(-sin * dx + cos * dy);
+                ob[2] = T::of(c.r());
+                ob[3] = T::of(1.0);
+            } else {
+                ob.fill(T::of(0.0));
+            }
+        }
         if let Some(r) = rewards.as_mut() {
             let (w, a) = (config.weights, robot.applied);
             let effort = match config.robot {
                 None => a[0] * a[0] + (config.l * a[1]).powi(2),
                 Some(_) => a[0] * a[0] + a[1] * a[1],
             };
-            let value = -w.tracking * (e[0] * e[0] + e[1] * e[1])
-                - w.effort * effort
-                - if near < radius2 { w.collision } else { 0.0 };
+            let hits = f64::from(u8::from(near < radius2) + u8::from(edge < config.radius));
+            let value =
+                -w.tracking * (e[0] * e[0] + e[1] * e[1]) - w.effort * effort - w.collision * hits;
             r[i] = T::of(value);
             sum += value;
         }
     }
-    (sum / robots.len() as f64, closest)
+    Found {
+        reward: sum / robots.len() as f64,
+        closest2: closest,
+        obstacle: clearance,
+    }
 }
 
 /// The kinematic law ([`crate::law::kinematic`]) from an observation alone:
@@ -315,7 +384,7 @@ impl<T: Scalar> pulp::WithSimd for Group<'_, T> {
             step,
         } = self;
         let n = config.num_agents;
-        let d = obs_dim(config.neighbours);
+        let d = config.obs_dim();
         let mut jets = [Jet::default(); GROUP_ENVS];
         let jets = &mut jets[..envs.len()];
         leader_jets(envs, jets);
@@ -326,11 +395,12 @@ impl<T: Scalar> pulp::WithSimd for Group<'_, T> {
             .zip(jets.iter());
         match step {
             None => {
-                for (((robots, points), o), &jet) in each {
+                for (env, (((robots, points), o), &jet)) in envs.iter().zip(each) {
                     let seen = Seen {
                         robots,
                         points,
                         jet,
+                        obstacles: &env.obstacles,
                     };
                     write(config, seen, o, None);
                 }
@@ -344,12 +414,14 @@ impl<T: Scalar> pulp::WithSimd for Group<'_, T> {
                         robots,
                         points,
                         jet,
+                        obstacles: &env.obstacles,
                     };
-                    let (reward, nearest) = write(config, seen, o, Some(r));
+                    let found = write(config, seen, o, Some(r));
                     *f = super::EnvFacts {
-                        reward,
+                        reward: found.reward,
                         truncated: env.steps >= config.max_steps,
-                        min_distance: nearest.sqrt(),
+                        min_distance: found.closest2.sqrt(),
+                        obstacle_distance: found.obstacle,
                     };
                 }
             }

@@ -120,7 +120,7 @@ impl SafetyFilter {
             let brake = robot.brake(me);
             let xb = [brake.u1 / m, l * brake.u2 / j];
             let bound = [0, 1].map(|k| EMERGENCY_ACCEL.max(x0[k].abs()).max(xb[k].abs()));
-            self.emergency(barriers, soft_end, x0, [[0.0; 2], bound])
+            self.emergency(barriers, obstacles.len(), soft_end, x0, [[0.0; 2], bound])
                 .map_or(brake, of)
         };
         let out = Filtered::decided(decision, nominal, limited, min_distance, of, braked);
@@ -142,10 +142,14 @@ impl SafetyFilter {
 
 impl SafetyFilter {
     /// The emergency action when no command satisfies every row (barriers
-    /// `..barriers`, the envelope `..soft_end`, the hard rows after): the
-    /// barriers alone, the envelope given up, within the hard rows; else the
-    /// command that breaks the barriers and the envelope least (one shared
-    /// slack) within them. The hard rows are the robot's own limits (wheel
+    /// `..barriers`, the last `obstacles` of them an obstacle's each, the
+    /// envelope `..soft_end`, the hard rows after): the barriers alone, the
+    /// envelope given up, within the hard rows; else the command that breaks
+    /// the neighbours' rows and the envelope least (one shared slack) within
+    /// the hard rows and clear of every obstacle (which cannot move out of
+    /// the way, as a neighbour takes over its partner's shortfall); else the
+    /// one that breaks every barrier and the envelope least within the hard
+    /// rows. The hard rows are the robot's own limits (wheel
     /// torques; a velocity base's speeds and accelerations), or for a robot
     /// without any the band `|x_k − centre_k| ≤ bound_k` of `fallback =
     /// [centre, bound]` (pushed here; a torque-driven robot's is `|x_k| ≤
@@ -157,6 +161,7 @@ impl SafetyFilter {
     pub(super) fn emergency(
         &mut self,
         barriers: usize,
+        obstacles: usize,
         soft_end: usize,
         x0: [f64; 2],
         [centre, bound]: [[f64; 2]; 2],
@@ -164,8 +169,21 @@ impl SafetyFilter {
         if self.rows.len() == soft_end {
             push_band(&mut self.rows, centre, bound);
         }
-        solve_split(&self.rows[..barriers], &self.rows[soft_end..], x0)
-            .or_else(|| solve_relaxed(&self.rows, soft_end, x0))
+        if let Some(x) = solve_split(&self.rows[..barriers], &self.rows[soft_end..], x0) {
+            return Some(x);
+        }
+        if obstacles > 0 {
+            // The obstacles' rows moved among the hard ones for the solve
+            // (neighbours, envelope | obstacles, hard), then back.
+            let first = barriers - obstacles;
+            self.rows[first..soft_end].rotate_left(obstacles);
+            let clear = solve_relaxed(&self.rows, soft_end - obstacles, x0);
+            self.rows[first..soft_end].rotate_right(obstacles);
+            if clear.is_some() {
+                return clear;
+            }
+        }
+        solve_relaxed(&self.rows, soft_end, x0)
     }
 }
 

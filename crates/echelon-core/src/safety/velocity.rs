@@ -216,7 +216,7 @@ impl SafetyFilter {
         // fails.
         let braked = || {
             let fallback = [[v, l * w], [tv * EMERGENCY_ACCEL, tw * EMERGENCY_ACCEL]];
-            self.emergency(barriers, soft_end, x0, fallback)
+            self.emergency(barriers, obstacles.len(), soft_end, x0, fallback)
                 .map_or(VelocityCommand::default(), of)
         };
         Filtered::decided(decision, nominal, limited, min_distance, of, braked)
@@ -427,5 +427,68 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Boxed in between a neighbour that closes on its point and an obstacle
+    /// just behind it (both outside the radius, at random headings, gains
+    /// and speeds), a velocity base without lag never answers a command
+    /// that breaks an obstacle's row: standing still keeps those, so the
+    /// least violation of the neighbours' rows is sought among the commands
+    /// that do (the pair's shortfall is its partner's to take over). Most
+    /// of these cases are infeasible (braked): the test is not vacuous.
+    #[test]
+    fn boxed_in_a_robot_never_breaks_an_obstacles_row() {
+        let mut rng = crate::math::rng::SplitMix64::new(20261208);
+        let (l, radius) = (0.05, 0.3);
+        let mut braked = 0;
+        let cases = 400;
+        for case in 0..cases {
+            let gain = rng.uniform(0.2, 5.0);
+            let config = SafetyConfig::new(radius, gain, 2.0).unwrap();
+            let me = State {
+                theta: rng.uniform(-3.2, 3.2),
+                v: rng.uniform(0.0, 0.5),
+                omega: rng.uniform(-2.0, 2.0),
+                ..State::at_rest(0.0, 0.0, 0.0)
+            };
+            let p = crate::safety::point(&me, l);
+            // The neighbour's point just outside the radius in direction
+            // `a`, coming straight at this robot's point.
+            let a = rng.uniform(-3.2, 3.2);
+            let dist = radius + rng.uniform(1e-4, 0.03);
+            let q = [p[0] + dist * a.cos(), p[1] + dist * a.sin()];
+            let heading = a + std::f64::consts::PI;
+            let other = State {
+                x: q[0] - l * heading.cos(),
+                y: q[1] - l * heading.sin(),
+                theta: heading,
+                v: rng.uniform(0.1, 0.5),
+                omega: 0.0,
+            };
+            let cooperative = rng.next_u64() % 2 == 0;
+            let n = Neighbour::of_state(&other, l, None, cooperative);
+            // The obstacle on the other side, its edge just beyond the radius.
+            let b = a + std::f64::consts::PI + rng.uniform(-0.6, 0.6);
+            let r = rng.uniform(0.05, 0.5);
+            let c = radius + r + rng.uniform(1e-4, 0.03);
+            let obstacle = Obstacle::new(p[0] + c * b.cos(), p[1] + c * b.sin(), r).unwrap();
+            let nominal = VelocityCommand {
+                v: rng.uniform(-0.5, 0.5),
+                omega: rng.uniform(-4.0, 4.0),
+            };
+            let mut f = SafetyFilter::new(config);
+            let out = f.velocity(0.0, &me, l, nominal, &ideal(), &[n], &[obstacle]);
+            braked += usize::from(out.outcome == Outcome::Braked);
+            let rows = f.constraints();
+            // Rows: the neighbour's (in range), the obstacle's, the box.
+            let row = rows[1];
+            let x = [out.command.v, l * out.command.omega];
+            assert!(
+                row.slack(x) >= -crate::safety::TOLERANCE,
+                "case {case}: {out:?} breaks the obstacle's row {row:?} by {}",
+                -row.slack(x)
+            );
+        }
+        assert!(braked > cases / 4, "only {braked} of {cases} braked");
     }
 }

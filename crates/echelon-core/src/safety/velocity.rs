@@ -465,7 +465,7 @@ mod tests {
                 v: rng.uniform(0.1, 0.5),
                 omega: 0.0,
             };
-            let cooperative = rng.next_u64() % 2 == 0;
+            let cooperative = rng.next_u64().is_multiple_of(2);
             let n = Neighbour::of_state(&other, l, None, cooperative);
             // The obstacle on the other side, its edge just beyond the radius.
             let b = a + std::f64::consts::PI + rng.uniform(-0.6, 0.6);

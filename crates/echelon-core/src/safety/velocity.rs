@@ -93,12 +93,21 @@ impl SafetyFilter {
         // shares are missed as little as possible and nothing is pushed
         // into what cannot move out of the way (a robot squeezed between a
         // neighbour and an obstacle crept into the obstacle by 9 mm at 50 ms
-        // steps when its rows shared the slack); else the one that breaks
-        // every barrier least; zero if even that fails. The obstacles' rows
-        // come after the neighbours' ([`SafetyFilter::barriers`]).
+        // steps when its rows shared the slack) — if it breaks no barrier
+        // more than standing still would (it may, from inside an obstacle's
+        // radius); else the one that breaks every barrier least; zero if
+        // even that fails. The obstacles' rows come after the neighbours'
+        // ([`SafetyFilter::barriers`]).
         let neighbour_rows = barriers - obstacles.len();
         let braked = || {
+            let worst = |x: [f64; 2]| {
+                self.rows[..barriers]
+                    .iter()
+                    .map(|c| -c.slack(x))
+                    .fold(0.0f64, f64::max)
+            };
             solve_relaxed(&self.rows, neighbour_rows, x0)
+                .filter(|&x| worst(x) <= worst([0.0; 2]))
                 .or_else(|| solve_relaxed(&self.rows, barriers, x0))
                 .map_or(VelocityCommand::default(), of)
         };

@@ -300,6 +300,9 @@ def test_obstacles_are_drawn_clear_of_the_starts_and_observed_nearest_first(seed
     plain = envs.FormationVecEnv(5, 7, spacing=0.7, neighbours=k, seed=seed)
     plain.reset(seed=seed)
     assert np.array_equal(plain.poses, env.poses), "obstacles leave the formation's draw as it was"
+    for e in range(5):
+        assert _edges(env, e).min() >= env.safety_radius - 1e-12, f"env {e}: an edge within the radius of a start"
+    env.action_space.seed(seed)
     for _ in range(20):
         obs, _, _, _, info = env.step(env.action_space.sample())
     for e in range(5):
